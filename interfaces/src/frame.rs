@@ -1,0 +1,126 @@
+//! `BusFrame`: a tap of every frame on the bus, both directions.
+
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use serde::Serialize;
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
+
+/// [`BusFrame::direction`].
+#[derive(Debug, Clone, Copy)]
+pub struct FrameDirection;
+impl FrameDirection {
+    /// Received from the chassis.
+    pub const RX: u8 = 0;
+    /// Sent to the chassis.
+    pub const TX: u8 = 1;
+}
+
+/// [`BusFrame::kind`].
+#[derive(Debug, Clone, Copy)]
+pub struct FrameKind;
+impl FrameKind {
+    /// A CAN frame: `can_id` and up to 8 data bytes.
+    pub const CAN: u8 = 0;
+    /// A chunk of the serial byte stream (XBot), as read or written.
+    pub const SERIAL: u8 = 1;
+    /// A chunk of the GPS receiver's NMEA stream.
+    pub const GPS: u8 = 2;
+}
+
+/// One CAN frame or one chunk of a serial stream.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::BusFrame.v1")]
+pub struct BusFrame {
+    /// `CLOCK_MONOTONIC` time the frame was read from or written to the bus, ns.
+    pub stamp_ns: u64,
+    /// Incremented for every frame published on the tap (gaps mean the tap dropped frames).
+    pub seq: u64,
+    /// CAN identifier (11-bit standard or 29-bit extended); 0 for serial chunks.
+    pub can_id: u32,
+    /// [`FrameDirection`].
+    pub direction: u8,
+    /// [`FrameKind`].
+    pub kind: u8,
+    /// Number of valid bytes in `data`.
+    pub len: u8,
+    /// [`BusFrame::EXTENDED_ID`], [`BusFrame::REMOTE`].
+    pub flags: u8,
+    #[serde(skip)]
+    pub data: [u8; BusFrame::DATA_LEN],
+}
+
+impl Default for BusFrame {
+    fn default() -> Self {
+        Self {
+            stamp_ns: 0,
+            seq: 0,
+            can_id: 0,
+            direction: FrameDirection::RX,
+            kind: FrameKind::CAN,
+            len: 0,
+            flags: 0,
+            data: [0; Self::DATA_LEN],
+        }
+    }
+}
+
+impl BusFrame {
+    /// Room for a whole XBot sensor frame (75 bytes) in one chunk.
+    pub const DATA_LEN: usize = 80;
+    pub const EXTENDED_ID: u8 = 1 << 0;
+    pub const REMOTE: u8 = 1 << 1;
+
+    /// The valid bytes.
+    pub fn payload(&self) -> &[u8] {
+        &self.data[..usize::from(self.len).min(Self::DATA_LEN)]
+    }
+
+    /// Copies `bytes` into `data` (at most [`BusFrame::DATA_LEN`]; returns how many were taken).
+    pub fn set_payload(&mut self, bytes: &[u8]) -> usize {
+        let n = bytes.len().min(Self::DATA_LEN);
+        self.data[..n].copy_from_slice(&bytes[..n]);
+        self.data[n..].fill(0);
+        // n <= DATA_LEN (80) always fits a u8.
+        self.len = n as u8;
+        n
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::mem::{align_of, offset_of, size_of};
+
+    #[test]
+    fn bus_frame_layout_is_pinned() {
+        assert_eq!(size_of::<BusFrame>(), 104);
+        assert_eq!(align_of::<BusFrame>(), 8);
+        assert_eq!(offset_of!(BusFrame, can_id), 16);
+        assert_eq!(offset_of!(BusFrame, direction), 20);
+        assert_eq!(offset_of!(BusFrame, kind), 21);
+        assert_eq!(offset_of!(BusFrame, len), 22);
+        assert_eq!(offset_of!(BusFrame, flags), 23);
+        assert_eq!(offset_of!(BusFrame, data), 24);
+    }
+
+    #[test]
+    fn payload_is_cut_to_the_buffer() {
+        let mut frame = BusFrame::default();
+        assert_eq!(frame.set_payload(&[7u8; 100]), BusFrame::DATA_LEN);
+        assert_eq!(frame.payload().len(), BusFrame::DATA_LEN);
+        frame.set_payload(&[1, 2, 3]);
+        assert_eq!(frame.payload(), &[1, 2, 3]);
+    }
+}

@@ -1,0 +1,42 @@
+//! Fixed-layout types shared by `chassisd` and every client process.
+//!
+//! Every type here crosses a process boundary through iceoryx2 shared memory, so each one is
+//! `#[repr(C)]`, holds no pointer and no heap memory, uses fixed-width integers and floats only
+//! (enumerations are a `u8` plus named constants), and names its unit in every field name
+//! (`linear_mps`, `steer_rad`, `voltage_v`, `stamp_ns`). The iceoryx2 type name carries a layout
+//! version (`"chassis::ChassisState.v1"`): iceoryx2 itself compares only name, size and alignment,
+//! so any layout change must bump the version. Layout tests in each module pin size, alignment and
+//! field offsets so such a change is always deliberate.
+//!
+//! Axes follow ISO 8855 / REP 103 for every robot: x forward, y left, z up, counter-clockwise
+//! (left turn) positive. Timestamps are `CLOCK_MONOTONIC` nanoseconds, system-wide, so a reader in
+//! another process can compute one-way latencies without clock synchronisation.
+
+mod control;
+mod frame;
+mod mux;
+mod names;
+mod request;
+mod state;
+mod text;
+
+pub use control::{
+    ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, LightMode,
+};
+pub use frame::{BusFrame, FrameDirection, FrameKind};
+pub use mux::{ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Twist, ZeroReason};
+pub use names::{ServiceKind, service_name, valid_robot_name};
+pub use request::{RequestFlags, VelocityRequest};
+pub use state::{
+    BmsState, ChassisState, CommandEcho, ControlMode, DriverStatus, FaultFlags, GpsFix, Group,
+    ImuState, LiftState, LightsState, LinkFlags, LinkStats, MotionState, MotorState, OdometryState,
+    PanTiltState, RangesState, RcState, RobotKind, SystemState,
+};
+pub use text::{read_fixed_str, write_fixed_str};
+
+/// Size of a fixed-length, NUL-padded UTF-8 name (source and lock names).
+pub const NAME_LEN: usize = 16;
+/// Most velocity sources a mux can be configured with.
+pub const MAX_SOURCES: usize = 8;
+/// Most locks a mux can be configured with.
+pub const MAX_LOCKS: usize = 4;

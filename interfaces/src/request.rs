@@ -1,0 +1,143 @@
+//! `VelocityRequest`: what a client asks the mux for, on its own `cmd/<source>` service.
+
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use serde::Serialize;
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
+
+/// Bits of [`VelocityRequest::flags`] (and of `Twist::flags`).
+#[derive(Debug, Clone, Copy)]
+pub struct RequestFlags;
+impl RequestFlags {
+    /// `steer_rad` holds the steering angle to use (Ackermann robots); `angular_z_radps` is
+    /// ignored.
+    pub const STEER: u32 = 1 << 0;
+    /// A heartbeat: the source is alive but asks for nothing (it does not compete in the mux).
+    /// The safety monitor sends these while all is well.
+    pub const HEARTBEAT: u32 = 1 << 1;
+}
+
+/// A velocity request from one source. Its priority and timeout come from the service's
+/// configuration, never from the request.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::VelocityRequest.v1")]
+pub struct VelocityRequest {
+    /// `CLOCK_MONOTONIC` time the request was created, ns.
+    pub stamp_ns: u64,
+    /// Incremented by the client for every request.
+    pub seq: u64,
+    /// Forward speed, m/s.
+    pub linear_x_mps: f32,
+    /// Lateral speed, m/s, left positive (omni robots only).
+    pub linear_y_mps: f32,
+    /// Yaw rate, rad/s, left turn positive.
+    pub angular_z_radps: f32,
+    /// Steering angle, rad, left turn positive; used when `flags` has [`RequestFlags::STEER`].
+    pub steer_rad: f32,
+    /// [`RequestFlags`].
+    pub flags: u32,
+    /// Lock bits this source engages (bit i = lock i of the mux's configuration, as listed in
+    /// `MuxStatus::locks`).
+    pub lock_engage: u32,
+    /// Lock bits this source releases (only locks it holds itself).
+    pub lock_release: u32,
+    #[serde(skip)]
+    pub _reserved: u32,
+}
+
+impl VelocityRequest {
+    /// A twist request (v, ω).
+    pub fn twist(linear_x_mps: f32, angular_z_radps: f32) -> Self {
+        Self {
+            linear_x_mps,
+            angular_z_radps,
+            ..Self::default()
+        }
+    }
+
+    /// A speed with a steering angle (Ackermann robots).
+    pub fn steer(linear_x_mps: f32, steer_rad: f32) -> Self {
+        Self {
+            linear_x_mps,
+            steer_rad,
+            flags: RequestFlags::STEER,
+            ..Self::default()
+        }
+    }
+
+    /// A heartbeat that asks for nothing.
+    pub fn heartbeat() -> Self {
+        Self {
+            flags: RequestFlags::HEARTBEAT,
+            ..Self::default()
+        }
+    }
+
+    pub fn is_heartbeat(&self) -> bool {
+        self.flags & RequestFlags::HEARTBEAT != 0
+    }
+
+    pub fn uses_steer(&self) -> bool {
+        self.flags & RequestFlags::STEER != 0
+    }
+
+    /// True when every number in the request is finite (NaN and ±inf are rejected by the mux).
+    pub fn is_finite(&self) -> bool {
+        [
+            self.linear_x_mps,
+            self.linear_y_mps,
+            self.angular_z_radps,
+            self.steer_rad,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::mem::{align_of, offset_of, size_of};
+
+    #[test]
+    fn velocity_request_layout_is_pinned() {
+        assert_eq!(size_of::<VelocityRequest>(), 48);
+        assert_eq!(align_of::<VelocityRequest>(), 8);
+        assert_eq!(offset_of!(VelocityRequest, stamp_ns), 0);
+        assert_eq!(offset_of!(VelocityRequest, seq), 8);
+        assert_eq!(offset_of!(VelocityRequest, linear_x_mps), 16);
+        assert_eq!(offset_of!(VelocityRequest, linear_y_mps), 20);
+        assert_eq!(offset_of!(VelocityRequest, angular_z_radps), 24);
+        assert_eq!(offset_of!(VelocityRequest, steer_rad), 28);
+        assert_eq!(offset_of!(VelocityRequest, flags), 32);
+        assert_eq!(offset_of!(VelocityRequest, lock_engage), 36);
+        assert_eq!(offset_of!(VelocityRequest, lock_release), 40);
+    }
+
+    #[test]
+    fn non_finite_requests_are_recognised() {
+        assert!(VelocityRequest::twist(0.3, -0.2).is_finite());
+        assert!(!VelocityRequest::twist(f32::NAN, 0.0).is_finite());
+        assert!(!VelocityRequest::steer(0.0, f32::INFINITY).is_finite());
+    }
+
+    #[test]
+    fn constructors_set_their_flags() {
+        assert!(VelocityRequest::heartbeat().is_heartbeat());
+        assert!(VelocityRequest::steer(1.0, 0.1).uses_steer());
+        assert!(!VelocityRequest::twist(1.0, 0.1).uses_steer());
+    }
+}

@@ -1,0 +1,991 @@
+//! `ChassisState`: one snapshot holding everything any of the three robots reports.
+//!
+//! A signal the robot has never reported reads as zero *and* has its group bit clear in
+//! [`ChassisState::valid_mask`]; a signal that stopped arriving keeps its last value and an old
+//! [`ChassisState::group_stamp_ns`] entry. Readers decide staleness against their own clock
+//! (`CLOCK_MONOTONIC`), so a zero is never mistaken for a reading.
+
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use serde::Serialize;
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
+
+/// Which robot produced a sample (`ChassisState::robot`).
+#[derive(Debug, Clone, Copy)]
+pub struct RobotKind;
+impl RobotKind {
+    pub const UNKNOWN: u8 = 0;
+    pub const TITAN: u8 = 1;
+    pub const SCOUT_MINI: u8 = 2;
+    pub const XBOT: u8 = 3;
+
+    /// The command-line spelling of a robot kind (`titan`, `scout-mini`, `xbot`).
+    pub fn name(kind: u8) -> &'static str {
+        match kind {
+            Self::TITAN => "titan",
+            Self::SCOUT_MINI => "scout-mini",
+            Self::XBOT => "xbot",
+            _ => "unknown",
+        }
+    }
+}
+
+/// Signal groups: the index into [`ChassisState::group_stamp_ns`] and the bit in
+/// [`ChassisState::valid_mask`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum Group {
+    /// Linear, angular and lateral speed and the body steering angle.
+    Motion = 0,
+    /// Front and rear steering angles.
+    Steering = 1,
+    /// Axle and wheel speeds.
+    WheelSpeed = 2,
+    /// Odometer distances reported by the chassis (or counted from its encoders).
+    Odometry = 3,
+    /// The pose integrated by the driver.
+    Pose = 4,
+    /// Body status, control mode, faults, battery voltage.
+    System = 5,
+    /// Motor speed, current and encoder position.
+    MotorDrive = 6,
+    /// Motor driver voltage, temperatures and status bits.
+    MotorDriver = 7,
+    /// BMS group 0: the pack as a whole.
+    BmsPack = 8,
+    /// BMS group 1: battery 1.
+    Bms1 = 9,
+    /// BMS group 2: battery 2.
+    Bms2 = 10,
+    /// RC transmitter.
+    Rc = 11,
+    /// Light state.
+    Lights = 12,
+    /// Parking brake and off-road mode (as commanded; TITAN reports neither).
+    Body = 13,
+    /// IR and ultrasonic ranges.
+    Ranges = 14,
+    /// Inertial measurement unit.
+    Imu = 15,
+    /// Lift platform.
+    Lift = 16,
+    /// Pan and tilt servos (as commanded; the XBot reports neither).
+    PanTilt = 17,
+    /// GPS fix from the NMEA stream.
+    Gps = 18,
+    /// The motion command actually sent on the wire.
+    Command = 19,
+}
+
+impl Group {
+    /// Number of groups in use; [`ChassisState::group_stamp_ns`] has room for [`GROUP_SLOTS`].
+    pub const COUNT: usize = 20;
+    /// Every group, in index order.
+    pub const ALL: [Group; Self::COUNT] = [
+        Group::Motion,
+        Group::Steering,
+        Group::WheelSpeed,
+        Group::Odometry,
+        Group::Pose,
+        Group::System,
+        Group::MotorDrive,
+        Group::MotorDriver,
+        Group::BmsPack,
+        Group::Bms1,
+        Group::Bms2,
+        Group::Rc,
+        Group::Lights,
+        Group::Body,
+        Group::Ranges,
+        Group::Imu,
+        Group::Lift,
+        Group::PanTilt,
+        Group::Gps,
+        Group::Command,
+    ];
+
+    /// The bit of this group in [`ChassisState::valid_mask`].
+    pub const fn bit(self) -> u32 {
+        1 << self as u32
+    }
+
+    /// Index into [`ChassisState::group_stamp_ns`].
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Lower-case name used in logs and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Group::Motion => "motion",
+            Group::Steering => "steering",
+            Group::WheelSpeed => "wheel_speed",
+            Group::Odometry => "odometry",
+            Group::Pose => "pose",
+            Group::System => "system",
+            Group::MotorDrive => "motor_drive",
+            Group::MotorDriver => "motor_driver",
+            Group::BmsPack => "bms_pack",
+            Group::Bms1 => "bms_1",
+            Group::Bms2 => "bms_2",
+            Group::Rc => "rc",
+            Group::Lights => "lights",
+            Group::Body => "body",
+            Group::Ranges => "ranges",
+            Group::Imu => "imu",
+            Group::Lift => "lift",
+            Group::PanTilt => "pan_tilt",
+            Group::Gps => "gps",
+            Group::Command => "command",
+        }
+    }
+}
+
+/// Slots reserved for group stamps (room to add groups without a layout change).
+pub const GROUP_SLOTS: usize = 24;
+
+/// Link and authority flags (`ChassisState::link_flags`).
+#[derive(Debug, Clone, Copy)]
+pub struct LinkFlags;
+impl LinkFlags {
+    /// No feedback frame from the chassis for longer than the configured silence limit.
+    pub const CHASSIS_SILENT: u32 = 1 << 0;
+    /// The bus itself is gone (interface down, serial port unplugged); the service retries.
+    pub const BUS_DOWN: u32 = 1 << 1;
+    /// The chassis reports it obeys our motion commands.
+    pub const COMMAND_MODE: u32 = 1 << 2;
+    /// An RC transmitter holds authority; our commands are not obeyed (reported, not fought).
+    pub const RC_AUTHORITY: u32 = 1 << 3;
+    /// A steering-zero calibration was sent and its acknowledgement has not arrived yet.
+    pub const STEERING_ZERO_PENDING: u32 = 1 << 4;
+    /// The GPS receiver's stream is gone.
+    pub const GPS_DOWN: u32 = 1 << 5;
+    /// The chassis was told to stop transmitting (CAN-upgrade silent mode).
+    pub const SILENT_MODE: u32 = 1 << 6;
+
+    /// Names of the set bits, for logs and JSON.
+    pub fn names(bits: u32) -> Vec<&'static str> {
+        const NAMES: [(u32, &str); 7] = [
+            (LinkFlags::CHASSIS_SILENT, "chassis_silent"),
+            (LinkFlags::BUS_DOWN, "bus_down"),
+            (LinkFlags::COMMAND_MODE, "command_mode"),
+            (LinkFlags::RC_AUTHORITY, "rc_authority"),
+            (LinkFlags::STEERING_ZERO_PENDING, "steering_zero_pending"),
+            (LinkFlags::GPS_DOWN, "gps_down"),
+            (LinkFlags::SILENT_MODE, "silent_mode"),
+        ];
+        NAMES
+            .iter()
+            .filter(|(bit, _)| bits & bit != 0)
+            .map(|(_, name)| *name)
+            .collect()
+    }
+}
+
+/// Normalized control mode (`SystemState::control_mode`), the same for every robot.
+#[derive(Debug, Clone, Copy)]
+pub struct ControlMode;
+impl ControlMode {
+    pub const UNKNOWN: u8 = 0;
+    /// Powered up, reacting only to the mode frame (TITAN).
+    pub const STANDBY: u8 = 1;
+    /// Obeying commands from this computer (CAN or serial command mode).
+    pub const COMMAND: u8 = 2;
+    /// An RC transmitter is in control.
+    pub const REMOTE: u8 = 3;
+    /// SCOUT MINI's serial command mode (commands on another port; CAN commands ignored).
+    pub const SERIAL: u8 = 4;
+
+    pub fn name(mode: u8) -> &'static str {
+        match mode {
+            Self::STANDBY => "standby",
+            Self::COMMAND => "command",
+            Self::REMOTE => "remote",
+            Self::SERIAL => "serial",
+            _ => "unknown",
+        }
+    }
+}
+
+/// Normalized fault flags (`SystemState::fault_flags`); the vendor's own word is kept beside it in
+/// `SystemState::vendor_fault_word`.
+#[derive(Debug, Clone, Copy)]
+pub struct FaultFlags;
+impl FaultFlags {
+    /// The chassis lost our heartbeat (TITAN "upper-computer communication lost").
+    pub const HEARTBEAT_LOST: u64 = 1 << 0;
+    /// Battery under-voltage failure: drive power cut.
+    pub const BATTERY_UNDER_VOLTAGE: u64 = 1 << 1;
+    /// Battery under-voltage alarm (warning level).
+    pub const BATTERY_UNDER_VOLTAGE_WARNING: u64 = 1 << 2;
+    /// Battery over-voltage failure.
+    pub const BATTERY_OVER_VOLTAGE: u64 = 1 << 3;
+    /// A motor driver reports an error.
+    pub const MOTOR_DRIVER_ERROR: u64 = 1 << 4;
+    /// Motor 1 driver communication lost (motor 2-4: the next three bits).
+    pub const MOTOR_1_COMM_LOST: u64 = 1 << 5;
+    pub const MOTOR_2_COMM_LOST: u64 = 1 << 6;
+    pub const MOTOR_3_COMM_LOST: u64 = 1 << 7;
+    pub const MOTOR_4_COMM_LOST: u64 = 1 << 8;
+    /// Over-temperature protection (drive limited until cleared).
+    pub const OVER_TEMPERATURE: u64 = 1 << 9;
+    /// Over-temperature alarm (clears itself).
+    pub const OVER_TEMPERATURE_WARNING: u64 = 1 << 10;
+    /// Over-current protection (until cleared).
+    pub const OVER_CURRENT: u64 = 1 << 11;
+    /// Over-current alarm (clears itself).
+    pub const OVER_CURRENT_WARNING: u64 = 1 << 12;
+    pub const FRONT_STEERING_ENCODER: u64 = 1 << 13;
+    pub const REAR_STEERING_ENCODER: u64 = 1 << 14;
+    /// The bumper (touch edge) stopped the robot.
+    pub const BUMPER: u64 = 1 << 15;
+    /// The RC transmitter link is lost / the transmitter is off.
+    pub const RC_LINK_LOST: u64 = 1 << 16;
+    /// The chassis received a command frame with a wrong checksum (SCOUT MINI).
+    pub const COMMAND_CHECKSUM: u64 = 1 << 17;
+    /// The chassis reports an emergency stop.
+    pub const EMERGENCY_STOP: u64 = 1 << 18;
+    /// The chassis reports an exception body state.
+    pub const BODY_EXCEPTION: u64 = 1 << 19;
+    /// State of charge below the low-battery warning level.
+    pub const BATTERY_LOW: u64 = 1 << 20;
+    /// Any BMS alarm bit is set.
+    pub const BMS_ALARM: u64 = 1 << 21;
+
+    /// Every flag with its name, in bit order.
+    pub const ALL: [(u64, &'static str); 22] = [
+        (Self::HEARTBEAT_LOST, "heartbeat_lost"),
+        (Self::BATTERY_UNDER_VOLTAGE, "battery_under_voltage"),
+        (
+            Self::BATTERY_UNDER_VOLTAGE_WARNING,
+            "battery_under_voltage_warning",
+        ),
+        (Self::BATTERY_OVER_VOLTAGE, "battery_over_voltage"),
+        (Self::MOTOR_DRIVER_ERROR, "motor_driver_error"),
+        (Self::MOTOR_1_COMM_LOST, "motor_1_comm_lost"),
+        (Self::MOTOR_2_COMM_LOST, "motor_2_comm_lost"),
+        (Self::MOTOR_3_COMM_LOST, "motor_3_comm_lost"),
+        (Self::MOTOR_4_COMM_LOST, "motor_4_comm_lost"),
+        (Self::OVER_TEMPERATURE, "over_temperature"),
+        (Self::OVER_TEMPERATURE_WARNING, "over_temperature_warning"),
+        (Self::OVER_CURRENT, "over_current"),
+        (Self::OVER_CURRENT_WARNING, "over_current_warning"),
+        (Self::FRONT_STEERING_ENCODER, "front_steering_encoder"),
+        (Self::REAR_STEERING_ENCODER, "rear_steering_encoder"),
+        (Self::BUMPER, "bumper"),
+        (Self::RC_LINK_LOST, "rc_link_lost"),
+        (Self::COMMAND_CHECKSUM, "command_checksum"),
+        (Self::EMERGENCY_STOP, "emergency_stop"),
+        (Self::BODY_EXCEPTION, "body_exception"),
+        (Self::BATTERY_LOW, "battery_low"),
+        (Self::BMS_ALARM, "bms_alarm"),
+    ];
+
+    /// Flags that only warn: the chassis still drives.
+    pub const WARNINGS: u64 = Self::BATTERY_UNDER_VOLTAGE_WARNING
+        | Self::OVER_TEMPERATURE_WARNING
+        | Self::OVER_CURRENT_WARNING
+        | Self::BATTERY_LOW
+        | Self::RC_LINK_LOST
+        | Self::BMS_ALARM;
+
+    /// Names of the set bits.
+    pub fn names(bits: u64) -> Vec<&'static str> {
+        Self::ALL
+            .iter()
+            .filter(|(bit, _)| bits & bit != 0)
+            .map(|(_, name)| *name)
+            .collect()
+    }
+
+    /// The bit with this name, if any.
+    pub fn from_name(name: &str) -> Option<u64> {
+        Self::ALL
+            .iter()
+            .find(|(_, n)| *n == name)
+            .map(|(bit, _)| *bit)
+    }
+}
+
+/// Motor driver status bits (`MotorState::driver_status`), as TITAN's 0x261-0x264 byte 5.
+#[derive(Debug, Clone, Copy)]
+pub struct DriverStatus;
+impl DriverStatus {
+    pub const SUPPLY_UNDER_VOLTAGE: u8 = 1 << 0;
+    pub const MOTOR_OVER_TEMPERATURE: u8 = 1 << 1;
+    pub const DRIVER_OVER_CURRENT: u8 = 1 << 2;
+    pub const DRIVER_OVER_TEMPERATURE: u8 = 1 << 3;
+    pub const SENSOR_FAULT: u8 = 1 << 4;
+    pub const DRIVER_ERROR: u8 = 1 << 5;
+    pub const ENABLED: u8 = 1 << 6;
+}
+
+/// Speeds and steering.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::MotionState.v1")]
+pub struct MotionState {
+    /// Forward speed of the body, m/s.
+    pub linear_mps: f32,
+    /// Yaw rate, rad/s, left turn positive.
+    pub angular_radps: f32,
+    /// Lateral speed, m/s, left positive (omni robots).
+    pub lateral_mps: f32,
+    /// Body steering angle (TITAN: inner wheel angle), rad, left turn positive.
+    pub steer_rad: f32,
+    /// Front axle inner steering angle, rad, left turn positive.
+    pub front_steer_rad: f32,
+    /// Rear axle inner steering angle, rad (rear steers opposite the front on TITAN).
+    pub rear_steer_rad: f32,
+    /// Front axle speed (mean of its wheels), m/s.
+    pub front_axle_mps: f32,
+    /// Rear axle speed (mean of its wheels), m/s.
+    pub rear_axle_mps: f32,
+    /// Wheel speeds front-left, front-right, rear-left, rear-right, m/s.
+    pub wheel_mps: [f32; 4],
+}
+
+/// Distances and the integrated pose.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::OdometryState.v1")]
+pub struct OdometryState {
+    /// Front axle odometer, m (TITAN 0x311).
+    pub front_distance_m: f64,
+    /// Rear axle odometer, m.
+    pub rear_distance_m: f64,
+    /// Left side distance, m (from wheel encoders where the robot has them).
+    pub left_distance_m: f64,
+    /// Right side distance, m.
+    pub right_distance_m: f64,
+    /// Pose integrated from the reported speeds, in the frame the robot started in: x, m.
+    pub x_m: f64,
+    /// y, m.
+    pub y_m: f64,
+    /// Heading, rad, wrapped to (-π, π].
+    pub yaw_rad: f64,
+}
+
+/// Body status, mode, faults and battery.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::SystemState.v1")]
+pub struct SystemState {
+    /// Normalized [`FaultFlags`].
+    pub fault_flags: u64,
+    /// The vendor's raw fault word (TITAN 0x211 b4-7, SCOUT MINI 0x151 b4-5).
+    pub vendor_fault_word: u32,
+    /// Battery voltage, V.
+    pub battery_voltage_v: f32,
+    /// Battery state of charge, %, from the BMS where there is one.
+    pub battery_soc_pct: f32,
+    /// Battery current, A, from the BMS where there is one (positive = discharge).
+    pub battery_current_a: f32,
+    /// [`SystemState::BODY_NORMAL`], [`SystemState::BODY_EMERGENCY_STOP`] or
+    /// [`SystemState::BODY_EXCEPTION`].
+    pub body_status: u8,
+    /// [`ControlMode`].
+    pub control_mode: u8,
+    /// 1 when the parking brake is engaged (TITAN, as last commanded).
+    pub parking_brake_engaged: u8,
+    /// 1 when off-road mode is on (TITAN, as last commanded and accepted).
+    pub off_road: u8,
+    /// 1 when the chassis was told to enter CAN-upgrade silent mode.
+    pub silent_mode: u8,
+    /// 1 when the steering zero position was set and acknowledged since start.
+    pub steering_zero_done: u8,
+    /// 1 when drive power is enabled (XBot power command; others: always 1 once reported).
+    pub power_enabled: u8,
+    #[serde(skip)]
+    pub _reserved: u8,
+}
+
+impl SystemState {
+    pub const BODY_NORMAL: u8 = 0;
+    pub const BODY_EMERGENCY_STOP: u8 = 1;
+    pub const BODY_EXCEPTION: u8 = 2;
+}
+
+/// One drive motor and its driver.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::MotorState.v1")]
+pub struct MotorState {
+    /// Encoder position, counts (unwrapped where the wire value wraps).
+    pub position_counts: i64,
+    /// Shaft speed, rpm.
+    pub rpm: f32,
+    /// Motor current, A.
+    pub current_a: f32,
+    /// Driver supply voltage, V.
+    pub driver_voltage_v: f32,
+    /// Driver temperature, °C.
+    pub driver_temp_c: f32,
+    /// Motor temperature, °C.
+    pub motor_temp_c: f32,
+    /// [`DriverStatus`] bits.
+    pub driver_status: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 3],
+}
+
+/// One BMS group (0 = pack, 1 = battery 1, 2 = battery 2).
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::BmsState.v1")]
+pub struct BmsState {
+    pub soc_pct: f32,
+    pub soh_pct: f32,
+    pub voltage_v: f32,
+    /// Current, A (positive = discharge).
+    pub current_a: f32,
+    pub temperature_c: f32,
+    /// Raw alarm bytes: alarm 1 (bits 0-7), alarm 2 (8-15), warning 1 (16-23), warning 2 (24-31).
+    pub alarm_flags: u32,
+}
+
+/// RC transmitter.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::RcState.v1")]
+pub struct RcState {
+    /// Switch positions as the wire has them: 1 middle, 2 up, 3 down.
+    pub switch_a: u8,
+    pub switch_b: u8,
+    pub switch_c: u8,
+    pub switch_d: u8,
+    /// Stick positions, % of full deflection, [-100, 100].
+    pub right_x_pct: i8,
+    pub right_y_pct: i8,
+    pub left_y_pct: i8,
+    pub left_x_pct: i8,
+    /// Knob VRA, %.
+    pub knob_a_pct: i8,
+    /// Rolling counter of the RC frame.
+    pub counter: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 2],
+}
+
+/// Lights.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::LightsState.v1")]
+pub struct LightsState {
+    /// 1 when light control by command is enabled.
+    pub control_enabled: u8,
+    /// [`crate::LightMode`] of the front light.
+    pub front_mode: u8,
+    /// Custom brightness, % (valid in custom mode).
+    pub front_brightness_pct: u8,
+    #[serde(skip)]
+    pub _reserved: u8,
+}
+
+/// Range sensors (XBot).
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::RangesState.v1")]
+pub struct RangesState {
+    /// IR cliff/range sensors rear-left, rear-centre, rear-right, m.
+    pub ir_m: [f32; 3],
+    /// Ultrasonic rangers front-left, front-centre, front-right, m.
+    pub ultrasonic_m: [f32; 3],
+}
+
+/// Inertial measurement unit, in the sensor's axes.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::ImuState.v1")]
+pub struct ImuState {
+    pub accel_mps2: [f32; 3],
+    pub gyro_radps: [f32; 3],
+    pub mag_gauss: [f32; 3],
+    pub roll_rad: f32,
+    pub pitch_rad: f32,
+    pub yaw_rad: f32,
+    pub temperature_c: f32,
+    /// The sensor board's own timestamp, µs (wraps at 65536 on the XBot).
+    pub sensor_stamp_us: u32,
+}
+
+/// Lift platform (XBot).
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::LiftState.v1")]
+pub struct LiftState {
+    /// Lift encoder, counts (unwrapped).
+    pub encoder_counts: i64,
+    /// Commanded position, % of travel (0 bottom, 100 top).
+    pub target_pct: f32,
+    /// Lift motor current, A.
+    pub current_a: f32,
+    /// 1 when the lift is enabled (as commanded).
+    pub enabled: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 7],
+}
+
+/// Pan and tilt servos (XBot), as commanded.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::PanTiltState.v1")]
+pub struct PanTiltState {
+    /// Pan, rad: 0 ahead, left positive.
+    pub pan_rad: f32,
+    /// Tilt, rad: 0 ahead, up positive.
+    pub tilt_rad: f32,
+}
+
+/// GPS fix from the NMEA 0183 stream.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::GpsFix.v1")]
+pub struct GpsFix {
+    /// Latitude, degrees, north positive (0 when there is no fix: check `fix_quality`).
+    pub latitude_deg: f64,
+    /// Longitude, degrees, east positive.
+    pub longitude_deg: f64,
+    /// UTC time of day of the fix, s.
+    pub utc_time_s: f64,
+    /// Altitude above mean sea level, m.
+    pub altitude_m: f32,
+    /// Horizontal dilution of precision.
+    pub hdop: f32,
+    /// Speed over ground, m/s.
+    pub speed_mps: f32,
+    /// Course over ground, rad, clockwise from true north (as NMEA gives it).
+    pub course_rad: f32,
+    /// UTC date as `yyyymmdd`, 0 when unknown.
+    pub utc_date: u32,
+    /// GGA fix quality: 0 = no fix, 1 = GPS, 2 = DGPS, 4 = RTK fixed, 5 = RTK float, …
+    pub fix_quality: u8,
+    /// Satellites used in the fix.
+    pub satellites: u8,
+    /// GSA fix type: 1 = none, 2 = 2D, 3 = 3D, 0 = unknown.
+    pub fix_type: u8,
+    #[serde(skip)]
+    pub _reserved: u8,
+}
+
+impl GpsFix {
+    /// True when the receiver reports a usable position.
+    pub fn has_fix(&self) -> bool {
+        self.fix_quality != 0
+    }
+}
+
+/// The motion command the driver actually put on the wire, after quantisation and clamping.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::CommandEcho.v1")]
+pub struct CommandEcho {
+    pub linear_mps: f32,
+    pub lateral_mps: f32,
+    pub angular_radps: f32,
+    pub steer_rad: f32,
+    /// [`crate::ClampFlags`] applied by the driver (robot limits, unachievable requests).
+    pub clamp_flags: u32,
+    #[serde(skip)]
+    pub _reserved: u32,
+}
+
+/// Counters of the bus link.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::LinkStats.v1")]
+pub struct LinkStats {
+    /// Frames received and decoded.
+    pub rx_frames: u64,
+    /// Frames sent.
+    pub tx_frames: u64,
+    /// Received frames dropped for a bad checksum.
+    pub rx_bad_checksum: u64,
+    /// Received frames dropped because they could not be decoded (length, values).
+    pub rx_decode_errors: u64,
+    /// Received frames with an id this robot does not use (ignored).
+    pub rx_unknown_id: u64,
+    /// Serial bytes discarded while resynchronising.
+    pub rx_bytes_discarded: u64,
+    /// Frames that could not be written to the bus.
+    pub tx_errors: u64,
+    /// Times the bus was lost and reopened.
+    pub bus_reconnects: u64,
+}
+
+/// One snapshot of everything the chassis reports.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::ChassisState.v1")]
+pub struct ChassisState {
+    /// Incremented for every published sample.
+    pub seq: u64,
+    /// `CLOCK_MONOTONIC` receive time of the frame that produced this sample, ns.
+    pub stamp_ns: u64,
+    /// [`Group`] bits that have been reported at least once.
+    pub valid_mask: u32,
+    /// [`LinkFlags`].
+    pub link_flags: u32,
+    /// [`RobotKind`].
+    pub robot: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 7],
+    /// Last update of each [`Group`], `CLOCK_MONOTONIC` ns, 0 = never.
+    pub group_stamp_ns: [u64; GROUP_SLOTS],
+    pub motion: MotionState,
+    pub odometry: OdometryState,
+    pub system: SystemState,
+    /// Motors 1-4 (TITAN, SCOUT MINI: as numbered by the vendor; XBot: front-left, front-right,
+    /// rear-left, rear-right).
+    pub motors: [MotorState; 4],
+    /// BMS groups: 0 = pack, 1 = battery 1, 2 = battery 2.
+    pub bms: [BmsState; 3],
+    pub rc: RcState,
+    pub lights: LightsState,
+    pub ranges: RangesState,
+    pub imu: ImuState,
+    pub lift: LiftState,
+    pub pan_tilt: PanTiltState,
+    pub gps: GpsFix,
+    pub command: CommandEcho,
+    pub link: LinkStats,
+}
+
+impl ChassisState {
+    /// Marks `group` as updated at `now_ns`.
+    pub fn touch(&mut self, group: Group, now_ns: u64) {
+        self.valid_mask |= group.bit();
+        self.group_stamp_ns[group.index()] = now_ns;
+    }
+
+    /// True when `group` has been reported at least once.
+    pub fn is_valid(&self, group: Group) -> bool {
+        self.valid_mask & group.bit() != 0
+    }
+
+    /// Age of `group` at `now_ns`, ns; `None` when it was never reported.
+    pub fn age_ns(&self, group: Group, now_ns: u64) -> Option<u64> {
+        self.is_valid(group)
+            .then(|| now_ns.saturating_sub(self.group_stamp_ns[group.index()]))
+    }
+
+    /// True when the link flag `flag` ([`LinkFlags`]) is set.
+    pub fn has_link_flag(&self, flag: u32) -> bool {
+        self.link_flags & flag != 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::mem::{align_of, offset_of, size_of};
+
+    #[test]
+    fn chassis_state_layout_is_pinned() {
+        assert_eq!(size_of::<ChassisState>(), 824);
+        assert_eq!(align_of::<ChassisState>(), 8);
+        assert_eq!(offset_of!(ChassisState, seq), 0);
+        assert_eq!(offset_of!(ChassisState, stamp_ns), 8);
+        assert_eq!(offset_of!(ChassisState, valid_mask), 16);
+        assert_eq!(offset_of!(ChassisState, link_flags), 20);
+        assert_eq!(offset_of!(ChassisState, robot), 24);
+        assert_eq!(offset_of!(ChassisState, group_stamp_ns), 32);
+        assert_eq!(offset_of!(ChassisState, motion), 224);
+        assert_eq!(offset_of!(ChassisState, odometry), 272);
+        assert_eq!(offset_of!(ChassisState, system), 328);
+        assert_eq!(offset_of!(ChassisState, motors), 360);
+        assert_eq!(offset_of!(ChassisState, bms), 488);
+        assert_eq!(offset_of!(ChassisState, rc), 560);
+        assert_eq!(offset_of!(ChassisState, lights), 572);
+        assert_eq!(offset_of!(ChassisState, ranges), 576);
+        assert_eq!(offset_of!(ChassisState, imu), 600);
+        assert_eq!(offset_of!(ChassisState, lift), 656);
+        assert_eq!(offset_of!(ChassisState, pan_tilt), 680);
+        assert_eq!(offset_of!(ChassisState, gps), 688);
+        assert_eq!(offset_of!(ChassisState, command), 736);
+        assert_eq!(offset_of!(ChassisState, link), 760);
+    }
+
+    #[test]
+    fn nested_state_layouts_are_pinned() {
+        assert_eq!(
+            (size_of::<MotionState>(), align_of::<MotionState>()),
+            (48, 4)
+        );
+        assert_eq!(offset_of!(MotionState, wheel_mps), 32);
+        assert_eq!(
+            (size_of::<OdometryState>(), align_of::<OdometryState>()),
+            (56, 8)
+        );
+        assert_eq!(offset_of!(OdometryState, yaw_rad), 48);
+        assert_eq!(
+            (size_of::<SystemState>(), align_of::<SystemState>()),
+            (32, 8)
+        );
+        assert_eq!(offset_of!(SystemState, battery_voltage_v), 12);
+        assert_eq!(offset_of!(SystemState, body_status), 24);
+        assert_eq!(offset_of!(SystemState, power_enabled), 30);
+        assert_eq!((size_of::<MotorState>(), align_of::<MotorState>()), (32, 8));
+        assert_eq!(offset_of!(MotorState, driver_status), 28);
+        assert_eq!((size_of::<BmsState>(), align_of::<BmsState>()), (24, 4));
+        assert_eq!(offset_of!(BmsState, alarm_flags), 20);
+        assert_eq!((size_of::<RcState>(), align_of::<RcState>()), (12, 1));
+        assert_eq!(offset_of!(RcState, counter), 9);
+        assert_eq!(
+            (size_of::<LightsState>(), align_of::<LightsState>()),
+            (4, 1)
+        );
+        assert_eq!(
+            (size_of::<RangesState>(), align_of::<RangesState>()),
+            (24, 4)
+        );
+        assert_eq!(offset_of!(RangesState, ultrasonic_m), 12);
+        assert_eq!((size_of::<ImuState>(), align_of::<ImuState>()), (56, 4));
+        assert_eq!(offset_of!(ImuState, roll_rad), 36);
+        assert_eq!(offset_of!(ImuState, sensor_stamp_us), 52);
+        assert_eq!((size_of::<LiftState>(), align_of::<LiftState>()), (24, 8));
+        assert_eq!(offset_of!(LiftState, enabled), 16);
+        assert_eq!(
+            (size_of::<PanTiltState>(), align_of::<PanTiltState>()),
+            (8, 4)
+        );
+        assert_eq!((size_of::<GpsFix>(), align_of::<GpsFix>()), (48, 8));
+        assert_eq!(offset_of!(GpsFix, utc_date), 40);
+        assert_eq!(offset_of!(GpsFix, fix_quality), 44);
+        assert_eq!(
+            (size_of::<CommandEcho>(), align_of::<CommandEcho>()),
+            (24, 4)
+        );
+        assert_eq!((size_of::<LinkStats>(), align_of::<LinkStats>()), (64, 8));
+        assert_eq!(offset_of!(LinkStats, bus_reconnects), 56);
+    }
+
+    #[test]
+    fn type_names_carry_a_layout_version() {
+        // SAFETY: type_name only returns the string given to the derive.
+        let name = unsafe { <ChassisState as ZeroCopySend>::type_name() };
+        assert_eq!(name, "chassis::ChassisState.v1");
+    }
+
+    #[test]
+    fn group_bits_and_stamps_tell_never_reported_from_zero() {
+        let mut state = ChassisState::default();
+        assert!(!state.is_valid(Group::Imu));
+        assert_eq!(state.age_ns(Group::Imu, 1_000), None);
+        state.touch(Group::Imu, 400);
+        assert!(state.is_valid(Group::Imu));
+        assert_eq!(state.age_ns(Group::Imu, 1_000), Some(600));
+        assert!(!state.is_valid(Group::Gps));
+    }
+
+    #[test]
+    fn group_list_matches_indices() {
+        for (i, group) in Group::ALL.iter().enumerate() {
+            assert_eq!(group.index(), i);
+        }
+        assert!(Group::COUNT <= GROUP_SLOTS);
+    }
+
+    #[test]
+    fn fault_flags_have_unique_bits_and_names() {
+        let mut seen = 0u64;
+        for (bit, name) in FaultFlags::ALL {
+            assert_eq!(bit.count_ones(), 1, "{name}");
+            assert_eq!(seen & bit, 0, "{name} reuses a bit");
+            seen |= bit;
+            assert_eq!(FaultFlags::from_name(name), Some(bit));
+        }
+        assert_eq!(
+            FaultFlags::names(FaultFlags::BUMPER | FaultFlags::HEARTBEAT_LOST),
+            vec!["heartbeat_lost", "bumper"]
+        );
+    }
+
+    #[test]
+    fn state_serializes_with_unit_names_and_without_padding() {
+        let json = serde_json::to_value(ChassisState::default()).unwrap();
+        assert!(json["motion"]["linear_mps"].is_number());
+        assert!(json["system"]["battery_voltage_v"].is_number());
+        assert!(json.get("_reserved").is_none());
+    }
+}

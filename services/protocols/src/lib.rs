@@ -1,0 +1,35 @@
+//! Sans-IO wire protocols of the AgileX TITAN, the AgileX SCOUT MINI and the XBot.
+//!
+//! Everything here is pure: frames go in as values, frames come out as values, and time is a
+//! parameter. No socket, serial port, IPC or clock is touched, so the same code runs on a real
+//! bus, against the simulated firmware and in unit tests (the `Cargo.toml` carries no I/O crate).
+//!
+//! * [`titan`], [`scout_mini`], [`xbot`]: one module per robot, each with its wire layouts (zerocopy
+//!   structs with big- or little-endian fields), a typed frame enum, and `decode`/`encode` for
+//!   every frame of the manual in both directions.
+//! * [`nmea`]: the NMEA 0183 sentences of the XBot's GPS receiver.
+//! * [`profile`]: every physical constant and every doubtful (⚠) choice of the manuals.
+//! * [`can`]: the CAN frame type and the can-utils text forms.
+//!
+//! Frame structs hold SI values in ISO 8855 axes (x forward, y left, left turn positive); each
+//! codec is the only place that knows its vendor's units and signs.
+
+pub mod can;
+mod error;
+pub mod profile;
+pub mod titan;
+mod wire;
+
+pub use can::{CanFrame, CanFrameError, CandumpLine};
+pub use error::{DecodeError, EncodeError};
+pub use profile::{Profile, Robot};
+
+/// Who sends a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Direction {
+    /// Computer → chassis (commands).
+    ToChassis,
+    /// Chassis → computer (feedback).
+    FromChassis,
+}

@@ -1,0 +1,292 @@
+//! Robot profiles: every physical constant of each chassis and every choice where its manual
+//! contradicts itself (the ⚠ entries of `PROTOCOLS.md`), with the manuals' values as defaults.
+//!
+//! Profiles deserialize from the `[profile]` table of the service's TOML config, so a user with a
+//! real robot can flip a doubtful parameter without a rebuild. Unknown keys are rejected.
+
+use serde::{Deserialize, Serialize};
+
+/// Which robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Robot {
+    Titan,
+    ScoutMini,
+    Xbot,
+}
+
+impl Robot {
+    pub const ALL: [Robot; 3] = [Robot::Titan, Robot::ScoutMini, Robot::Xbot];
+
+    /// The command-line spelling (`titan`, `scout-mini`, `xbot`), also the default robot name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Robot::Titan => "titan",
+            Robot::ScoutMini => "scout-mini",
+            Robot::Xbot => "xbot",
+        }
+    }
+
+    /// `chassis_interfaces::RobotKind` value.
+    pub fn kind(self) -> u8 {
+        use chassis_interfaces::RobotKind;
+        match self {
+            Robot::Titan => RobotKind::TITAN,
+            Robot::ScoutMini => RobotKind::SCOUT_MINI,
+            Robot::Xbot => RobotKind::XBOT,
+        }
+    }
+
+    /// True for the robots on a CAN bus (TITAN, SCOUT MINI); the XBot speaks RS232.
+    pub fn is_can(self) -> bool {
+        matches!(self, Robot::Titan | Robot::ScoutMini)
+    }
+}
+
+impl std::str::FromStr for Robot {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Robot::ALL
+            .into_iter()
+            .find(|r| r.name() == s)
+            .ok_or_else(|| format!("unknown robot '{s}' (expected titan, scout-mini or xbot)"))
+    }
+}
+
+impl std::fmt::Display for Robot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// AgileX TITAN: front/rear dual Ackermann, CAN 500 kbit/s.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TitanProfile {
+    /// Wheelbase L, m.
+    pub wheelbase_m: f64,
+    /// Track W, m.
+    pub track_m: f64,
+    /// Top speed, m/s (0x111 valid ±3000 mm/s).
+    pub max_linear_mps: f64,
+    /// Top speed while |steer| exceeds `steer_speed_limit_above_rad`, m/s.
+    pub max_linear_steering_mps: f64,
+    /// Steering angle above which the lower speed limit applies, rad.
+    pub steer_speed_limit_above_rad: f64,
+    /// Largest inner steering angle, rad (0x111 valid ±367 mrad).
+    pub max_steer_rad: f64,
+    /// ⚠ 0x221/0x271 steering sign. The 0x111 table says left turn is positive; the text of
+    /// 0x221 says a left turn reports negative. `false` (default) trusts the text and negates
+    /// the reported angles.
+    pub steering_feedback_left_positive: bool,
+    /// The chassis' command timeout, ms: without 0x111 for this long it faults to standby.
+    pub command_timeout_ms: u64,
+    /// Heartbeat (0x111) period, ms.
+    pub heartbeat_period_ms: u64,
+    /// State of charge below which the tail lights warn, %.
+    pub low_battery_warning_soc_pct: f64,
+    /// State of charge below which the chassis cuts drive power, %.
+    pub low_battery_cutoff_soc_pct: f64,
+}
+
+impl Default for TitanProfile {
+    fn default() -> Self {
+        Self {
+            wheelbase_m: 0.845,
+            track_m: 0.860,
+            max_linear_mps: 3.0,
+            max_linear_steering_mps: 1.5,
+            steer_speed_limit_above_rad: 0.087,
+            max_steer_rad: 0.367,
+            steering_feedback_left_positive: false,
+            command_timeout_ms: 500,
+            heartbeat_period_ms: 20,
+            low_battery_warning_soc_pct: 15.0,
+            low_battery_cutoff_soc_pct: 10.0,
+        }
+    }
+}
+
+/// AgileX SCOUT MINI: four-wheel skid steer, CAN 500 kbit/s, count + checksum in every frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScoutMiniProfile {
+    /// Wheelbase, m.
+    pub wheelbase_m: f64,
+    /// Track, m.
+    pub track_m: f64,
+    /// Linear speed at 100 % in 0x130, m/s (table: 5.0; AgileX's SDK: 3.0).
+    pub linear_full_scale_mps: f64,
+    /// ⚠ Angular speed at 100 % in 0x130, rad/s. The table says 0.5235; the manual's example
+    /// (10 % = 0.07853 rad/s) implies 0.7853; AgileX's SDK uses 2.5235. Default: the table.
+    pub angular_full_scale_rad_s: f64,
+    /// Top speed the driver will command, m/s (the robot's top speed is 20 km/h ≈ 5.56 m/s; the
+    /// command's full scale caps it).
+    pub max_linear_mps: f64,
+    /// Largest yaw rate the driver will command, rad/s.
+    pub max_angular_rad_s: f64,
+    /// The chassis' command timeout, ms.
+    pub command_timeout_ms: u64,
+    /// Heartbeat (0x130) period, ms.
+    pub heartbeat_period_ms: u64,
+    /// Battery under-voltage alarm level, V.
+    pub under_voltage_alarm_v: f64,
+    /// Battery under-voltage failure level, V.
+    pub under_voltage_failure_v: f64,
+}
+
+impl Default for ScoutMiniProfile {
+    // 0.5235 is the manual's table value as printed, not an approximation of π/6.
+    #[allow(clippy::approx_constant)]
+    fn default() -> Self {
+        Self {
+            wheelbase_m: 0.452,
+            track_m: 0.450,
+            linear_full_scale_mps: 5.0,
+            angular_full_scale_rad_s: 0.5235,
+            max_linear_mps: 5.0,
+            max_angular_rad_s: 0.5235,
+            command_timeout_ms: 500,
+            heartbeat_period_ms: 20,
+            under_voltage_alarm_v: 22.5,
+            under_voltage_failure_v: 22.0,
+        }
+    }
+}
+
+/// XBot: differential (optionally omni) drive, RS232, little-endian.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct XbotProfile {
+    /// Baud rate of the control link (not in the manual), 8N1.
+    pub baud: u32,
+    /// Baud rate of the GPS receiver's NMEA stream, 8N1.
+    pub gps_baud: u32,
+    /// Drive wheel diameter, m.
+    pub wheel_diameter_m: f64,
+    /// ⚠ Encoder counts per wheel turn: the protocol note says 8000; the spec sheet's 1000-line
+    /// encoder behind 1:16 and "0.019 mm per count" disagree.
+    pub encoder_counts_per_rev: f64,
+    /// Distance between the drive wheels, m. Not in the manual: odometry from the encoders is
+    /// only published once this is set.
+    pub wheel_separation_m: Option<f64>,
+    /// Top speed, m/s.
+    pub max_linear_mps: f64,
+    /// Smallest speed the board executes, m/s (smaller requests are sent as 0).
+    pub min_linear_mps: f64,
+    /// Largest yaw rate the driver will command, rad/s.
+    pub max_angular_rad_s: f64,
+    /// True for omni variants that accept a lateral speed.
+    pub omni: bool,
+    /// ⚠ Yaw-rate sign on the wire. Note 1 says positive is a left turn (default); the examples
+    /// label +20 °/s "turn right".
+    pub yaw_rate_left_positive: bool,
+    /// ⚠ Lateral-speed sign on the wire. The examples label +vy "move right" (default false).
+    pub lateral_left_positive: bool,
+    /// ⚠ Decode motor currents and ultrasonic ranges as BCD (the vendor's 2017 driver) instead
+    /// of plain binary (the manual, default).
+    pub bcd_currents_and_ranges: bool,
+    /// Heartbeat (0x03) rate, Hz: the manual wants more than 5 and less than 10.
+    pub heartbeat_hz: f64,
+    /// The board's command timeout, ms.
+    pub command_timeout_ms: u64,
+}
+
+impl Default for XbotProfile {
+    fn default() -> Self {
+        Self {
+            baud: 115_200,
+            gps_baud: 4800,
+            wheel_diameter_m: 0.2,
+            encoder_counts_per_rev: 8000.0,
+            wheel_separation_m: None,
+            max_linear_mps: 1.5,
+            min_linear_mps: 0.01,
+            max_angular_rad_s: std::f64::consts::PI,
+            omni: false,
+            yaw_rate_left_positive: true,
+            lateral_left_positive: false,
+            bcd_currents_and_ranges: false,
+            heartbeat_hz: 8.0,
+            command_timeout_ms: 500,
+        }
+    }
+}
+
+impl XbotProfile {
+    /// Wheel travel per encoder count, m.
+    pub fn metres_per_count(&self) -> f64 {
+        std::f64::consts::PI * self.wheel_diameter_m / self.encoder_counts_per_rev
+    }
+}
+
+/// One robot's profile.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Profile {
+    Titan(TitanProfile),
+    ScoutMini(ScoutMiniProfile),
+    Xbot(XbotProfile),
+}
+
+impl Profile {
+    /// The manuals' defaults for `robot`.
+    pub fn default_for(robot: Robot) -> Self {
+        match robot {
+            Robot::Titan => Profile::Titan(TitanProfile::default()),
+            Robot::ScoutMini => Profile::ScoutMini(ScoutMiniProfile::default()),
+            Robot::Xbot => Profile::Xbot(XbotProfile::default()),
+        }
+    }
+
+    pub fn robot(&self) -> Robot {
+        match self {
+            Profile::Titan(_) => Robot::Titan,
+            Profile::ScoutMini(_) => Robot::ScoutMini,
+            Profile::Xbot(_) => Robot::Xbot,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_the_manuals_choices() {
+        let t = TitanProfile::default();
+        assert!(!t.steering_feedback_left_positive);
+        assert_eq!((t.max_linear_mps, t.max_steer_rad), (3.0, 0.367));
+        let s = ScoutMiniProfile::default();
+        assert_eq!(s.angular_full_scale_rad_s, 0.5235);
+        assert_eq!(s.linear_full_scale_mps, 5.0);
+        let x = XbotProfile::default();
+        assert!(x.yaw_rate_left_positive && !x.lateral_left_positive);
+        assert!(!x.bcd_currents_and_ranges);
+        assert_eq!(x.encoder_counts_per_rev, 8000.0);
+        assert_eq!(x.wheel_separation_m, None);
+        assert!(x.heartbeat_hz > 5.0 && x.heartbeat_hz < 10.0);
+    }
+
+    #[test]
+    fn a_profile_flips_one_parameter_from_toml() {
+        let t: TitanProfile = toml::from_str("steering_feedback_left_positive = true").unwrap();
+        assert!(t.steering_feedback_left_positive);
+        assert_eq!(t.max_linear_mps, 3.0);
+        let err = toml::from_str::<TitanProfile>("max_speed = 4").unwrap_err();
+        assert!(err.to_string().contains("unknown field"), "{err}");
+    }
+
+    #[test]
+    fn robot_names_parse() {
+        for r in Robot::ALL {
+            assert_eq!(r.name().parse::<Robot>(), Ok(r));
+        }
+        assert!("husky".parse::<Robot>().is_err());
+    }
+
+    #[test]
+    fn xbot_travel_per_count_follows_the_profile() {
+        let x = XbotProfile::default();
+        assert!((x.metres_per_count() - std::f64::consts::PI * 0.2 / 8000.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,48 @@
+//! Helpers shared by the codecs: reading a zerocopy wire layout out of a frame's bytes.
+
+use zerocopy::{FromBytes, Immutable, KnownLayout};
+
+use crate::DecodeError;
+
+/// Reads wire layout `W` from the start of `data`. Extra bytes are ignored (some firmware pads
+/// every frame to 8 bytes); too few is [`DecodeError::TooShort`].
+pub(crate) fn read_prefix<W: FromBytes + KnownLayout + Immutable>(
+    id: u32,
+    data: &[u8],
+) -> Result<W, DecodeError> {
+    W::read_from_prefix(data)
+        .map(|(wire, _rest)| wire)
+        .map_err(|_| DecodeError::TooShort {
+            id,
+            len: data.len(),
+            need: size_of::<W>(),
+        })
+}
+
+/// A boolean command byte: 0x00 or 0x01, anything else is undefined.
+pub(crate) fn read_bool(id: u32, field: &'static str, byte: u8) -> Result<bool, DecodeError> {
+    match byte {
+        0x00 => Ok(false),
+        0x01 => Ok(true),
+        value => Err(DecodeError::InvalidValue {
+            id,
+            field,
+            value: value.into(),
+        }),
+    }
+}
+
+/// Decodes `raw / scale` for display and state (`scale` = wire units per SI unit).
+pub(crate) fn si(raw: impl Into<f64>, scale: f64) -> f64 {
+    raw.into() / scale
+}
+
+/// The bytes of a wire layout as an array of its documented length (`N` = the frame's DLC).
+/// A layout shorter than `N` is zero-padded; the layout tests pin every size to its DLC.
+pub(crate) fn wire_bytes<const N: usize, W: zerocopy::IntoBytes + Immutable>(wire: W) -> [u8; N] {
+    let mut out = [0u8; N];
+    let bytes = wire.as_bytes();
+    let n = bytes.len().min(N);
+    out[..n].copy_from_slice(&bytes[..n]);
+    out
+}
