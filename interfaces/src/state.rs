@@ -143,6 +143,7 @@ impl Group {
 
 /// Slots reserved for group stamps (room to add groups without a layout change).
 pub const GROUP_SLOTS: usize = 24;
+const _: () = assert!(Group::COUNT <= GROUP_SLOTS);
 
 /// Link and authority flags (`ChassisState::link_flags`).
 #[derive(Debug, Clone, Copy)]
@@ -963,7 +964,6 @@ mod tests {
         for (i, group) in Group::ALL.iter().enumerate() {
             assert_eq!(group.index(), i);
         }
-        assert!(Group::COUNT <= GROUP_SLOTS);
     }
 
     #[test]

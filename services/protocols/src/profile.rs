@@ -252,6 +252,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[allow(clippy::approx_constant)] // 0.5235 is the manual's value
     fn defaults_are_the_manuals_choices() {
         let t = TitanProfile::default();
         assert!(!t.steering_feedback_left_positive);
