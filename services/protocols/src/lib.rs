@@ -16,9 +16,12 @@
 
 pub mod can;
 mod error;
+pub mod nmea;
 pub mod profile;
+pub mod scout_mini;
 pub mod titan;
 mod wire;
+pub mod xbot;
 
 pub use can::{CanFrame, CanFrameError, CandumpLine};
 pub use error::{DecodeError, EncodeError};

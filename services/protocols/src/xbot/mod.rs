@@ -1,0 +1,1 @@
+//! XBot: differential (optionally omni) drive, RS232, little-endian, `AA 55 len payload xor`.
