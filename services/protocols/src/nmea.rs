@@ -1,1 +1,0 @@
-//! NMEA 0183 sentences of the XBot's GPS receiver.
