@@ -15,17 +15,26 @@
 //! codec is the only place that knows its vendor's units and signs.
 
 pub mod can;
+pub mod command;
+pub mod driver;
 mod error;
+pub mod firmware;
 pub mod nmea;
+pub mod pair;
 pub mod profile;
 pub mod scout_mini;
+pub mod time;
 pub mod titan;
 mod wire;
 pub mod xbot;
 
 pub use can::{CanFrame, CanFrameError, CandumpLine};
+pub use command::{Command, CommandError, Planned, Turn};
+pub use driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
 pub use error::{DecodeError, EncodeError};
+pub use firmware::{Firmware, Injection, SimTruth};
 pub use profile::{Profile, Robot};
+pub use time::Timestamp;
 
 /// Who sends a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]

@@ -1,0 +1,233 @@
+//! `chassis decode`: frames from arguments or stdin → one JSON object per decoded frame.
+
+use std::io::{BufRead, Write};
+
+use chassis_protocols::{CandumpLine, Profile};
+
+use crate::codec::RobotCodec;
+
+/// What a decode run saw.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Summary {
+    pub decoded: usize,
+    pub failed: usize,
+}
+
+/// Decodes `args` (or, when there are none, every line of `input`) and writes JSON lines to
+/// `out` and one reason per failed frame to `err`. Decoding goes on after a failure.
+pub fn run(
+    profile: Profile,
+    args: &[String],
+    input: impl BufRead,
+    out: &mut impl Write,
+    err: &mut impl Write,
+) -> std::io::Result<Summary> {
+    let mut codec = RobotCodec::new(profile);
+    let mut summary = Summary::default();
+    let mut hex = HexStream::default();
+    let mut handle = |text: &str, out: &mut dyn Write, err: &mut dyn Write| {
+        if codec.robot().is_can() {
+            decode_can_line(&codec, text, out, err, &mut summary)
+        } else {
+            decode_serial_text(&mut codec, &mut hex, text, out, err, &mut summary)
+        }
+    };
+    if args.is_empty() {
+        for line in input.lines() {
+            handle(&line?, out, err)?;
+        }
+    } else {
+        for arg in args {
+            handle(arg, out, err)?;
+        }
+    }
+    if !codec.robot().is_can() {
+        if hex.pending_nibble.is_some() {
+            writeln!(err, "serial input ends with half a byte")?;
+            summary.failed += 1;
+        }
+        let discarded = codec.serial_bytes_discarded();
+        if discarded > 0 {
+            writeln!(err, "{discarded} bytes discarded while looking for AA 55")?;
+            summary.failed += 1;
+        }
+    }
+    Ok(summary)
+}
+
+fn decode_can_line(
+    codec: &RobotCodec,
+    text: &str,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+    summary: &mut Summary,
+) -> std::io::Result<()> {
+    let text = text.trim();
+    if text.is_empty() || text.starts_with('#') {
+        return Ok(());
+    }
+    let result = CandumpLine::parse(text)
+        .map_err(|e| e.to_string())
+        .and_then(|line| codec.decode_can(&line.frame).map_err(|e| e.to_string()));
+    match result {
+        Ok(json) => {
+            summary.decoded += 1;
+            writeln!(out, "{}", serde_json::Value::Object(json))
+        }
+        Err(reason) => {
+            summary.failed += 1;
+            let shown = CandumpLine::parse(text)
+                .map(|l| l.frame.to_candump())
+                .unwrap_or_else(|_| text.to_string());
+            writeln!(err, "{shown}: {reason}")
+        }
+    }
+}
+
+fn decode_serial_text(
+    codec: &mut RobotCodec,
+    hex: &mut HexStream,
+    text: &str,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+    summary: &mut Summary,
+) -> std::io::Result<()> {
+    let bytes = match hex.push(text) {
+        Ok(bytes) => bytes,
+        Err(reason) => {
+            summary.failed += 1;
+            return writeln!(err, "{reason}");
+        }
+    };
+    for item in codec.push_serial(&bytes) {
+        match item {
+            Ok(json) => {
+                summary.decoded += 1;
+                writeln!(out, "{}", serde_json::Value::Object(json))?;
+            }
+            Err(reason) => {
+                summary.failed += 1;
+                writeln!(err, "{reason}")?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Hex text in any chunking (`AA 55 02`, `AA5502`, `aa55` + `02`) → bytes. `0x` prefixes, spaces,
+/// commas and colons are ignored; a byte may even be split across chunks.
+#[derive(Debug, Default)]
+pub struct HexStream {
+    pending_nibble: Option<u8>,
+}
+
+impl HexStream {
+    pub fn push(&mut self, text: &str) -> Result<Vec<u8>, String> {
+        let cleaned = text.replace("0x", "").replace("0X", "");
+        let mut bytes = Vec::with_capacity(cleaned.len() / 2);
+        for c in cleaned.chars() {
+            if c.is_whitespace() || c == ',' || c == ':' {
+                continue;
+            }
+            let Some(nibble) = c.to_digit(16) else {
+                return Err(format!("'{}': '{c}' is not a hex digit", text.trim()));
+            };
+            // to_digit(16) < 16 fits a u8.
+            let nibble = nibble as u8;
+            match self.pending_nibble.take() {
+                Some(high) => bytes.push(high << 4 | nibble),
+                None => self.pending_nibble = Some(nibble),
+            }
+        }
+        Ok(bytes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassis_protocols::Robot;
+
+    fn decode(
+        robot: Robot,
+        args: &[&str],
+        stdin: &str,
+    ) -> (Vec<serde_json::Value>, String, Summary) {
+        let args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+        let mut out = Vec::new();
+        let mut err = Vec::new();
+        let summary = run(
+            Profile::default_for(robot),
+            &args,
+            stdin.as_bytes(),
+            &mut out,
+            &mut err,
+        )
+        .unwrap();
+        let json = String::from_utf8(out)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        (json, String::from_utf8(err).unwrap(), summary)
+    }
+
+    #[test]
+    fn titan_frames_from_arguments_become_json_with_si_fields() {
+        let (json, err, summary) = decode(Robot::Titan, &["111#0096000000000000"], "");
+        assert_eq!(err, "");
+        assert_eq!(
+            summary,
+            Summary {
+                decoded: 1,
+                failed: 0
+            }
+        );
+        assert_eq!(json[0]["robot"], "titan");
+        assert_eq!(json[0]["id"], "0x111");
+        assert_eq!(json[0]["frame"], "motion_command");
+        assert_eq!(json[0]["direction"], "to_chassis");
+        assert_eq!(json[0]["linear_mps"], 0.15);
+        assert_eq!(json[0]["steer_rad"], 0.0);
+    }
+
+    #[test]
+    fn candump_log_lines_from_stdin_decode_and_failures_go_on() {
+        let stdin = "(1700000000.000000) can0 211#000101E000000200\n\
+                     garbage\n\
+                     \n\
+                     (1700000000.020000) can0 43A#EE\n";
+        let (json, err, summary) = decode(Robot::Titan, &[], stdin);
+        assert_eq!(
+            summary,
+            Summary {
+                decoded: 2,
+                failed: 1
+            }
+        );
+        assert_eq!(json[0]["battery_voltage_v"], 48.0);
+        assert_eq!(json[1]["frame"], "steering_zero_ack");
+        assert!(
+            err.starts_with("garbage: 'garbage' is not a CAN frame"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn unknown_ids_are_reported_by_frame() {
+        let (_, err, summary) = decode(Robot::Titan, &["7FF#00"], "");
+        assert_eq!(summary.failed, 1);
+        assert_eq!(err.trim(), "7FF#00: unknown frame id 0x7FF");
+    }
+
+    #[test]
+    fn hex_stream_accepts_any_chunking() {
+        let mut h = HexStream::default();
+        assert_eq!(h.push("AA 55 0").unwrap(), vec![0xAA, 0x55]);
+        assert_eq!(
+            h.push("2 0x01,01:02").unwrap(),
+            vec![0x02, 0x01, 0x01, 0x02]
+        );
+        assert!(h.push("zz").is_err());
+    }
+}

@@ -1,0 +1,143 @@
+//! `chassis`: the command-line tool of chassisd.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context;
+use chassis_interfaces::ClampFlags;
+use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
+use chassis_protocols::{Profile, Robot};
+use clap::{Parser, Subcommand};
+
+mod action;
+mod codec;
+mod decode;
+mod encode;
+
+use action::{Action, VelocityArgs};
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "chassis",
+    version,
+    about = "Decode, encode and talk to robot chassis run by chassisd"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// Decode frames to JSON: CAN frames as candump writes them (`123#DEADBEEF` or whole
+    /// `candump -l` lines), XBot as hex bytes of the serial stream. Reads stdin when no FRAME is
+    /// given. Exits 1 if any frame failed.
+    Decode {
+        #[arg(long, value_parser = parse_robot)]
+        robot: Robot,
+        /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
+        #[arg(long)]
+        profile: Option<PathBuf>,
+        /// Frames (CAN) or hex chunks (XBot).
+        frames: Vec<String>,
+    },
+    /// Print the frame(s) the service would send for a command (CAN as `ID#HEX`, XBot as hex).
+    Encode {
+        #[arg(long, value_parser = parse_robot)]
+        robot: Robot,
+        /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
+        #[arg(long)]
+        profile: Option<PathBuf>,
+        #[command(subcommand)]
+        what: EncodeWhat,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum EncodeWhat {
+    /// Motion: forward speed plus a yaw rate (--wz) or a steering angle (--steer).
+    Velocity(VelocityArgs),
+    #[command(flatten)]
+    Action(Action),
+}
+
+fn parse_robot(text: &str) -> Result<Robot, String> {
+    text.parse()
+}
+
+/// The robot's profile: the manual's defaults, overridden by a TOML file when one is given.
+fn load_profile(robot: Robot, path: Option<&Path>) -> anyhow::Result<Profile> {
+    let Some(path) = path else {
+        return Ok(Profile::default_for(robot));
+    };
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading profile {}", path.display()))?;
+    let context = || format!("parsing {} profile {}", robot, path.display());
+    Ok(match robot {
+        Robot::Titan => {
+            Profile::Titan(toml::from_str::<TitanProfile>(&text).with_context(context)?)
+        }
+        Robot::ScoutMini => {
+            Profile::ScoutMini(toml::from_str::<ScoutMiniProfile>(&text).with_context(context)?)
+        }
+        Robot::Xbot => Profile::Xbot(toml::from_str::<XbotProfile>(&text).with_context(context)?),
+    })
+}
+
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Cmd::Decode {
+            robot,
+            profile,
+            frames,
+        } => {
+            let profile = load_profile(robot, profile.as_deref())?;
+            let stdin = std::io::stdin().lock();
+            let summary = decode::run(
+                profile,
+                &frames,
+                stdin,
+                &mut std::io::stdout().lock(),
+                &mut std::io::stderr().lock(),
+            )?;
+            Ok(if summary.failed > 0 {
+                ExitCode::FAILURE
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
+        Cmd::Encode {
+            robot,
+            profile,
+            what,
+        } => {
+            let profile = load_profile(robot, profile.as_deref())?;
+            let command = match &what {
+                EncodeWhat::Velocity(v) => v.to_command(),
+                EncodeWhat::Action(a) => a.to_command().map_err(anyhow::Error::msg)?,
+            };
+            let (lines, clamp_flags) = encode::encode(&profile, &command)?;
+            for line in lines {
+                println!("{line}");
+            }
+            if clamp_flags != 0 {
+                eprintln!(
+                    "note: clamped: {}",
+                    ClampFlags::names(clamp_flags).join(", ")
+                );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(code) => code,
+        Err(err) => {
+            eprintln!("chassis: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

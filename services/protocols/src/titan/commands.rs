@@ -1,0 +1,154 @@
+//! The TITAN frames for each robot-independent [`Command`].
+
+use chassis_interfaces::{ClampFlags, FaultClear};
+
+use super::codec::{
+    ClearFault, Frame, ModeCommand, MotionCommand, ParkingBrake, Switch, clear_code, mode,
+};
+use super::kinematics::{steer_command, twist_to_command};
+use crate::Robot;
+use crate::command::{Command, CommandError, Planned, Turn};
+use crate::profile::TitanProfile;
+
+/// The TITAN 0x441 code for a normalized [`FaultClear`] code.
+pub fn clear_code_for(which: u8) -> Option<u8> {
+    Some(match which {
+        FaultClear::ALL => clear_code::ALL_NON_SEVERE,
+        FaultClear::MOTOR_1_COMM..=FaultClear::MOTOR_4_COMM => {
+            clear_code::MOTOR_1_COMM + (which - FaultClear::MOTOR_1_COMM)
+        }
+        FaultClear::BATTERY_UNDER_VOLTAGE => clear_code::BATTERY_UNDER_VOLTAGE,
+        FaultClear::RC_LINK => clear_code::RC_LINK_LOST,
+        FaultClear::FRONT_STEERING_ENCODER => clear_code::FRONT_STEERING_ENCODER,
+        FaultClear::REAR_STEERING_ENCODER => clear_code::REAR_STEERING_ENCODER,
+        FaultClear::OVER_CURRENT => clear_code::OVER_CURRENT,
+        FaultClear::OVER_TEMPERATURE => clear_code::OVER_TEMPERATURE,
+        _ => return None,
+    })
+}
+
+/// The 0x111 motion command for a velocity, within the profile's limits. Lateral speed is
+/// dropped and flagged (TITAN cannot move sideways).
+pub fn motion_command(
+    linear_x_mps: f64,
+    linear_y_mps: f64,
+    turn: Turn,
+    profile: &TitanProfile,
+) -> Result<(MotionCommand, u32), CommandError> {
+    let turn_value = match turn {
+        Turn::YawRate(w) | Turn::Steer(w) => w,
+    };
+    if !(linear_x_mps.is_finite() && linear_y_mps.is_finite() && turn_value.is_finite()) {
+        return Err(CommandError::Invalid(format!(
+            "velocity must be finite (vx={linear_x_mps}, vy={linear_y_mps}, turn={turn_value})"
+        )));
+    }
+    let planned = match turn {
+        Turn::YawRate(w) => twist_to_command(linear_x_mps, w, profile),
+        Turn::Steer(s) => steer_command(linear_x_mps, s, profile),
+    };
+    let mut flags = planned.clamp_flags;
+    if linear_y_mps != 0.0 {
+        flags |= ClampFlags::LATERAL_UNSUPPORTED;
+    }
+    Ok((
+        MotionCommand {
+            linear_mps: planned.linear_mps,
+            steer_rad: planned.steer_rad,
+        },
+        flags,
+    ))
+}
+
+/// The frames TITAN needs for `command`.
+pub fn frames_for(
+    command: &Command,
+    profile: &TitanProfile,
+) -> Result<Planned<Frame>, CommandError> {
+    let robot = Robot::Titan;
+    Ok(match *command {
+        Command::Velocity {
+            linear_x_mps,
+            linear_y_mps,
+            turn,
+        } => {
+            let (motion, clamp_flags) = motion_command(linear_x_mps, linear_y_mps, turn, profile)?;
+            Planned {
+                frames: vec![Frame::MotionCommand(motion)],
+                clamp_flags,
+            }
+        }
+        Command::Mode { take_control } => Planned::one(Frame::Mode(ModeCommand {
+            mode: if take_control {
+                mode::CAN_COMMAND
+            } else {
+                mode::STANDBY
+            },
+        })),
+        Command::Brake { engage } => Planned::one(Frame::ParkingBrake(ParkingBrake { engage })),
+        Command::ClearFaults { which } => {
+            let code = clear_code_for(which).ok_or_else(|| {
+                CommandError::unsupported(
+                    robot,
+                    format!("fault to clear called {}", FaultClear::name(which)),
+                )
+            })?;
+            Planned::one(Frame::ClearFault(ClearFault { code }))
+        }
+        Command::OffRoad { enter } => Planned::one(Frame::OffRoad(Switch { enter })),
+        Command::SteeringZero => Planned::one(Frame::SteeringZero),
+        Command::Silent { enter } => Planned::one(Frame::SilentMode(Switch { enter })),
+        Command::Lights { .. } => {
+            return Err(CommandError::unsupported(robot, "light control on the bus"));
+        }
+        Command::Lift { .. } => return Err(CommandError::unsupported(robot, "lift")),
+        Command::Servos { .. } => return Err(CommandError::unsupported(robot, "servos")),
+        Command::Power { .. } => {
+            return Err(CommandError::unsupported(
+                robot,
+                "drive power switch on the bus",
+            ));
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_normalized_clear_code_but_over_voltage_maps_to_a_defined_titan_code() {
+        for (code, name) in FaultClear::NAMES {
+            match clear_code_for(code) {
+                Some(titan) => assert!(clear_code::is_defined(titan), "{name}"),
+                None => assert_eq!(code, FaultClear::BATTERY_OVER_VOLTAGE, "{name}"),
+            }
+        }
+        assert_eq!(clear_code_for(FaultClear::MOTOR_3_COMM), Some(0x03));
+    }
+
+    #[test]
+    fn lateral_speed_is_flagged_not_sent() {
+        let (m, flags) =
+            motion_command(0.5, 0.2, Turn::YawRate(0.0), &TitanProfile::default()).unwrap();
+        assert_eq!(m.linear_mps, 0.5);
+        assert_ne!(flags & ClampFlags::LATERAL_UNSUPPORTED, 0);
+    }
+
+    #[test]
+    fn non_finite_velocities_are_refused() {
+        let p = TitanProfile::default();
+        assert!(motion_command(f64::NAN, 0.0, Turn::YawRate(0.0), &p).is_err());
+        assert!(motion_command(0.0, 0.0, Turn::Steer(f64::INFINITY), &p).is_err());
+    }
+
+    #[test]
+    fn functions_titan_lacks_are_clear_errors() {
+        let err =
+            frames_for(&Command::Power { enable: true }, &TitanProfile::default()).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "titan has no drive power switch on the bus"
+        );
+    }
+}
