@@ -1,0 +1,498 @@
+//! The sans-IO driver contract, and the pieces every robot driver shares.
+//!
+//! A driver is a value in the quinn-proto shape: frames go in with their time
+//! ([`Driver::handle_rx`]), commands and control actions queue work ([`Driver::set_command`],
+//! [`Driver::control`]), frames to send come out ([`Driver::poll_transmit`]), and
+//! [`Driver::poll_timeout`] names the next deadline, at which the owner calls
+//! [`Driver::handle_timeout`]. The state snapshot can be read at any time. A driver never sleeps,
+//! reads a clock or touches a socket, so the same code runs on a real bus, against the simulated
+//! firmware and in unit tests on simulated time.
+
+use std::time::Duration;
+
+use chassis_interfaces::{ChassisState, ControlStatus, OdometryState, Twist};
+use serde::{Deserialize, Serialize};
+
+use crate::can::CanFrame;
+use crate::command::Command;
+use crate::profile::Robot;
+use crate::time::Timestamp;
+
+/// What arrived from the bus.
+#[derive(Debug, Clone, Copy)]
+pub enum Rx<'a> {
+    /// One CAN frame (TITAN, SCOUT MINI).
+    Can(&'a CanFrame),
+    /// A chunk of the serial byte stream, in any chunking (XBot).
+    Bytes(&'a [u8]),
+}
+
+/// Something to put on the bus.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Transmit {
+    Can(CanFrame),
+    Bytes(Vec<u8>),
+}
+
+impl Transmit {
+    /// The CAN frame, if this is one.
+    pub fn as_can(&self) -> Option<&CanFrame> {
+        match self {
+            Transmit::Can(frame) => Some(frame),
+            Transmit::Bytes(_) => None,
+        }
+    }
+
+    /// As a received item for the other side of the wire.
+    pub fn as_rx(&self) -> Rx<'_> {
+        match self {
+            Transmit::Can(frame) => Rx::Can(frame),
+            Transmit::Bytes(bytes) => Rx::Bytes(bytes),
+        }
+    }
+}
+
+/// The immediate answer to a control action.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ControlOutcome {
+    /// Done: the frames are queued.
+    Done(String),
+    /// Accepted; the answer comes later as [`DriverEvent::ControlDone`] with this token
+    /// (e.g. steering zero waits for the chassis' acknowledgement).
+    Pending(u64),
+    /// Understood but not now (e.g. off-road mode while moving).
+    Refused(String),
+    /// This robot has no such function.
+    Unsupported(String),
+    /// An argument is out of range.
+    Invalid(String),
+}
+
+impl ControlOutcome {
+    /// The `chassis_interfaces::ControlStatus` of a finished outcome (`Pending` reads as OK).
+    pub fn status(&self) -> u8 {
+        match self {
+            ControlOutcome::Done(_) | ControlOutcome::Pending(_) => ControlStatus::OK,
+            ControlOutcome::Refused(_) => ControlStatus::REFUSED,
+            ControlOutcome::Unsupported(_) => ControlStatus::UNSUPPORTED,
+            ControlOutcome::Invalid(_) => ControlStatus::INVALID,
+        }
+    }
+
+    pub fn message(&self) -> String {
+        match self {
+            ControlOutcome::Done(m)
+            | ControlOutcome::Refused(m)
+            | ControlOutcome::Unsupported(m)
+            | ControlOutcome::Invalid(m) => m.clone(),
+            ControlOutcome::Pending(token) => format!("pending ({token})"),
+        }
+    }
+}
+
+impl From<crate::command::CommandError> for ControlOutcome {
+    fn from(err: crate::command::CommandError) -> Self {
+        match err {
+            crate::command::CommandError::Unsupported { .. } => {
+                ControlOutcome::Unsupported(err.to_string())
+            }
+            _ => ControlOutcome::Invalid(err.to_string()),
+        }
+    }
+}
+
+/// How loud a [`DriverEvent::Notice`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Level {
+    Info,
+    Warn,
+    Error,
+}
+
+/// Things that happened inside the driver that its owner may want to log or answer.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DriverEvent {
+    /// A `Pending` control action finished.
+    ControlDone {
+        token: u64,
+        /// `chassis_interfaces::ControlStatus`.
+        status: u8,
+        message: String,
+    },
+    /// A received frame was dropped (bad checksum, undecodable, unknown id); counted in
+    /// `ChassisState::link`. The owner rate-limits the log lines.
+    RxDropped { reason: String },
+    /// A change worth a log line (mode change, RC takeover, fault set or cleared, …).
+    Notice { level: Level, message: String },
+}
+
+/// The contract every robot driver fulfils.
+pub trait Driver {
+    fn robot(&self) -> Robot;
+
+    /// Feeds what arrived from the bus at `now`.
+    fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>);
+
+    /// The mux's output: the motion to command from now on (SI units, ISO axes). A changed command
+    /// is sent at once (subject to [`DriverConfig::min_command_interval_ms`]); the heartbeat
+    /// repeats the latest one.
+    fn set_command(&mut self, now: Timestamp, command: &Twist);
+
+    /// A control action (mode, brake, lights, …). Motion commands go through
+    /// [`Driver::set_command`]; a [`Command::Velocity`] here is `Invalid`.
+    fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome;
+
+    /// Processes deadlines that have passed (heartbeat, silence, idle brake, control timeouts).
+    fn handle_timeout(&mut self, now: Timestamp);
+
+    /// The next frame to send, if any.
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit>;
+
+    /// When [`Driver::handle_timeout`] must be called next.
+    fn poll_timeout(&self) -> Option<Timestamp>;
+
+    /// The next event, if any.
+    fn poll_event(&mut self) -> Option<DriverEvent>;
+
+    /// Everything the chassis reported, plus link health.
+    fn state(&self) -> &ChassisState;
+
+    /// The bus went away (`true`) or came back (`false`). While it is down nothing is sent; when it
+    /// returns the driver re-establishes control (mode frames, brake) as after power-up.
+    fn set_bus_down(&mut self, now: Timestamp, down: bool);
+
+    /// Orderly stop: command zero and, where the robot has one, engage the parking brake. The
+    /// owner drains [`Driver::poll_transmit`] afterwards.
+    fn shutdown(&mut self, now: Timestamp);
+}
+
+/// Settings every driver shares (the `[driver]` table of the service's config).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DriverConfig {
+    /// No feedback for this long sets `LinkFlags::CHASSIS_SILENT`, ms.
+    pub silence_timeout_ms: u64,
+    /// Smallest spacing between two motion frames when the command changes faster, ms. The
+    /// heartbeat keeps its own period regardless; a stop is never delayed.
+    pub min_command_interval_ms: u64,
+    /// Take control at start (TITAN: CAN command mode) and take it back after a chassis reboot.
+    pub take_control: bool,
+    /// Engage the parking brake after the command has been zero this long, ms (TITAN); 0 never.
+    pub brake_idle_engage_ms: u64,
+    /// How long to wait for an acknowledgement (steering zero), ms.
+    pub control_timeout_ms: u64,
+}
+
+impl Default for DriverConfig {
+    fn default() -> Self {
+        Self {
+            silence_timeout_ms: 100,
+            min_command_interval_ms: 2,
+            take_control: true,
+            brake_idle_engage_ms: 5000,
+            control_timeout_ms: 1000,
+        }
+    }
+}
+
+/// The heartbeat and the "send a changed command at once" rule.
+///
+/// The heartbeat runs on a fixed grid (`start + k·period`), so a late wake-up never shifts later
+/// heartbeats and command changes in between never disturb it. A changed command is due at once,
+/// but no sooner than `min_interval` after the previous motion frame — except a stop, which is
+/// always due at once.
+#[derive(Debug, Clone)]
+pub struct CommandSchedule {
+    period: Duration,
+    min_interval: Duration,
+    next_heartbeat: Timestamp,
+    last_sent: Option<Timestamp>,
+    pending: bool,
+    urgent: bool,
+}
+
+impl CommandSchedule {
+    /// The first heartbeat is due at `now`.
+    pub fn new(period: Duration, min_interval: Duration, now: Timestamp) -> Self {
+        Self {
+            period: period.max(Duration::from_millis(1)),
+            min_interval,
+            next_heartbeat: now,
+            last_sent: None,
+            pending: false,
+            urgent: false,
+        }
+    }
+
+    /// The command changed: send it soon. `urgent` (a stop) ignores the minimum interval.
+    pub fn command_changed(&mut self, urgent: bool) {
+        self.pending = true;
+        self.urgent |= urgent;
+    }
+
+    /// True when a motion frame should go out now.
+    pub fn is_due(&self, now: Timestamp) -> bool {
+        now >= self.next_heartbeat || self.pending_due().is_some_and(|t| now >= t)
+    }
+
+    fn pending_due(&self) -> Option<Timestamp> {
+        if !self.pending {
+            return None;
+        }
+        match self.last_sent {
+            Some(last) if !self.urgent => Some(last + self.min_interval),
+            _ => Some(Timestamp::ZERO),
+        }
+    }
+
+    /// A motion frame went out at `now`.
+    pub fn sent(&mut self, now: Timestamp) {
+        self.last_sent = Some(now);
+        self.pending = false;
+        self.urgent = false;
+        if now >= self.next_heartbeat {
+            self.next_heartbeat += self.period;
+            if self.next_heartbeat <= now {
+                // We were late by more than a period: rejoin the grid after `now`.
+                let behind = now.saturating_since(self.next_heartbeat).as_nanos();
+                let period = self.period.as_nanos().max(1);
+                let skip = u32::try_from(behind / period + 1).unwrap_or(u32::MAX);
+                self.next_heartbeat += self.period.saturating_mul(skip);
+            }
+        }
+    }
+
+    /// When the next motion frame is due.
+    pub fn deadline(&self) -> Timestamp {
+        match self.pending_due() {
+            Some(t) => t.min(self.next_heartbeat),
+            None => self.next_heartbeat,
+        }
+    }
+
+    /// Restart the grid at `now` (after the bus came back).
+    pub fn restart(&mut self, now: Timestamp) {
+        self.next_heartbeat = now;
+        self.pending = false;
+        self.urgent = false;
+    }
+
+    pub fn period(&self) -> Duration {
+        self.period
+    }
+}
+
+/// "Chassis silent": no feedback for longer than a timeout.
+#[derive(Debug, Clone)]
+pub struct LinkMonitor {
+    timeout: Duration,
+    last_rx: Timestamp,
+}
+
+impl LinkMonitor {
+    /// Counting starts at `now` (a chassis that never answers turns silent after `timeout`).
+    pub fn new(timeout: Duration, now: Timestamp) -> Self {
+        Self {
+            timeout,
+            last_rx: now,
+        }
+    }
+
+    pub fn received(&mut self, now: Timestamp) {
+        self.last_rx = self.last_rx.max(now);
+    }
+
+    pub fn is_silent(&self, now: Timestamp) -> bool {
+        now.saturating_since(self.last_rx) > self.timeout
+    }
+
+    /// When the link turns silent if nothing arrives before (just after the timeout).
+    pub fn deadline(&self) -> Timestamp {
+        self.last_rx + self.timeout + Duration::from_nanos(1)
+    }
+
+    /// Restart counting at `now` (after the bus came back).
+    pub fn reset(&mut self, now: Timestamp) {
+        self.last_rx = now;
+    }
+}
+
+/// Integrates the pose from body speeds (midpoint rule), in the frame the robot started in.
+#[derive(Debug, Clone, Default)]
+pub struct PoseIntegrator {
+    last: Option<(Timestamp, f64, f64, f64)>,
+}
+
+impl PoseIntegrator {
+    /// Longest gap integrated in one step; a longer silence is not bridged by extrapolation.
+    pub const MAX_STEP: Duration = Duration::from_millis(200);
+
+    /// Adds the motion since the previous sample, then remembers (v, vy, ω) at `now`.
+    pub fn update(
+        &mut self,
+        now: Timestamp,
+        linear_mps: f64,
+        lateral_mps: f64,
+        angular_radps: f64,
+        odometry: &mut OdometryState,
+    ) {
+        if let Some((last, v0, vy0, w0)) = self.last {
+            let dt = now.saturating_since(last).min(Self::MAX_STEP).as_secs_f64();
+            let v = 0.5 * (v0 + linear_mps);
+            let vy = 0.5 * (vy0 + lateral_mps);
+            let w = 0.5 * (w0 + angular_radps);
+            let mid_yaw = odometry.yaw_rad + 0.5 * w * dt;
+            let (sin, cos) = mid_yaw.sin_cos();
+            odometry.x_m += (v * cos - vy * sin) * dt;
+            odometry.y_m += (v * sin + vy * cos) * dt;
+            odometry.yaw_rad = wrap_angle(odometry.yaw_rad + w * dt);
+        }
+        self.last = Some((now, linear_mps, lateral_mps, angular_radps));
+    }
+
+    /// Forget the previous sample (after a gap or a chassis reboot).
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+}
+
+/// Wraps an angle to (-π, π].
+pub fn wrap_angle(angle: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    if !angle.is_finite() {
+        return 0.0;
+    }
+    let mut a = angle % TAU;
+    if a <= -PI {
+        a += TAU;
+    } else if a > PI {
+        a -= TAU;
+    }
+    a
+}
+
+/// Unwraps a wrapping 16-bit counter (encoders) into a running 64-bit count.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Unwrap16 {
+    last: Option<u16>,
+    total: i64,
+}
+
+impl Unwrap16 {
+    /// Takes the next raw reading; returns the running count (the first reading is the origin
+    /// offset, so counting starts at the raw value).
+    pub fn update(&mut self, raw: u16) -> i64 {
+        match self.last {
+            None => self.total = i64::from(raw),
+            Some(prev) => self.total += i64::from(raw.wrapping_sub(prev) as i16),
+        }
+        self.last = Some(raw);
+        self.total
+    }
+
+    /// The running count.
+    pub fn total(&self) -> i64 {
+        self.total
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ms(v: u64) -> Timestamp {
+        Timestamp::from_millis(v)
+    }
+
+    #[test]
+    fn heartbeat_keeps_its_grid_through_command_changes() {
+        let mut s =
+            CommandSchedule::new(Duration::from_millis(20), Duration::from_millis(2), ms(0));
+        assert!(s.is_due(ms(0)));
+        s.sent(ms(0));
+        assert_eq!(s.deadline(), ms(20));
+        s.command_changed(false);
+        assert!(s.is_due(ms(5)));
+        s.sent(ms(5));
+        assert_eq!(
+            s.deadline(),
+            ms(20),
+            "a command change does not move the heartbeat"
+        );
+        s.command_changed(false);
+        assert!(!s.is_due(ms(6)), "min interval");
+        assert_eq!(s.deadline(), ms(7));
+        s.sent(ms(7));
+        assert!(s.is_due(ms(20)));
+        s.sent(ms(21)); // a late wake-up
+        assert_eq!(s.deadline(), ms(40), "the grid does not shift");
+    }
+
+    #[test]
+    fn a_stop_is_never_delayed() {
+        let mut s =
+            CommandSchedule::new(Duration::from_millis(20), Duration::from_millis(5), ms(0));
+        s.sent(ms(0));
+        s.command_changed(false);
+        s.sent(ms(1));
+        s.command_changed(true);
+        assert!(s.is_due(ms(1)));
+    }
+
+    #[test]
+    fn a_long_stall_rejoins_the_grid() {
+        let mut s =
+            CommandSchedule::new(Duration::from_millis(20), Duration::from_millis(2), ms(0));
+        s.sent(ms(0));
+        s.sent(ms(95));
+        assert_eq!(s.deadline(), ms(100));
+    }
+
+    #[test]
+    fn link_turns_silent_only_after_the_timeout() {
+        let mut l = LinkMonitor::new(Duration::from_millis(100), ms(0));
+        assert!(!l.is_silent(ms(100)));
+        assert!(l.is_silent(ms(101)));
+        l.received(ms(150));
+        assert!(!l.is_silent(ms(200)));
+        assert!(l.deadline() > ms(250));
+    }
+
+    #[test]
+    fn pose_integrates_a_half_circle() {
+        let mut p = PoseIntegrator::default();
+        let mut odo = OdometryState::default();
+        // 1 m/s at 0.5 rad/s for 2π seconds: a half circle of radius 2.
+        let steps = 10_000;
+        let dt = std::f64::consts::TAU / f64::from(steps);
+        for i in 0..=steps {
+            let t = Timestamp::from_nanos((f64::from(i) * dt * 1e9) as u64);
+            p.update(t, 1.0, 0.0, 0.5, &mut odo);
+        }
+        assert!(odo.x_m.abs() < 1e-3, "{odo:?}");
+        assert!((odo.y_m - 4.0).abs() < 1e-3, "{odo:?}");
+        assert!((odo.yaw_rad.abs() - std::f64::consts::PI).abs() < 1e-3);
+    }
+
+    #[test]
+    fn angles_wrap_into_minus_pi_to_pi() {
+        use std::f64::consts::PI;
+        assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(-3.0 * PI) - PI).abs() < 1e-12);
+        assert_eq!(wrap_angle(0.5), 0.5);
+        assert_eq!(wrap_angle(f64::NAN), 0.0);
+    }
+
+    #[test]
+    fn sixteen_bit_counters_unwrap_both_ways() {
+        let mut u = Unwrap16::default();
+        assert_eq!(u.update(65_530), 65_530);
+        assert_eq!(u.update(4), 65_540);
+        assert_eq!(
+            u.update(65_000),
+            65_000,
+            "540 counts backwards across the wrap"
+        );
+        assert_eq!(u.total(), 65_000);
+    }
+}
