@@ -1,0 +1,319 @@
+//! Bus backends behind two small traits: one for CAN ([`CanBus`]) and one for byte streams
+//! ([`ByteBus`]). A backend knows nothing about robots; it moves frames or bytes and says when the
+//! bus is gone. Every backend is non-blocking and exposes a file descriptor, so one event loop
+//! can wait on the bus and on everything else at once.
+//!
+//! | spec | backend |
+//! | --- | --- |
+//! | `sim` | the robot's simulated firmware in a thread, over a socket pair |
+//! | `can:IFACE` | SocketCAN ([`socketcan`]) |
+//! | `serial:PATH[@BAUD]` | a serial port or pty ([`serialport`]), 8N1 |
+//! | `slcan:PATH[@BAUD]` | a Lawicel slcan adapter on a serial port (CAN without kernel CAN) |
+//!
+//! `chassisd sim` (the firmware as its own process) also accepts `pty:LINK` and
+//! `slcan-pty:LINK`: it creates a pseudo-terminal, links its device path to LINK, and speaks the
+//! raw link or an slcan adapter's side of it.
+
+use std::fmt;
+use std::io;
+use std::os::fd::RawFd;
+use std::str::FromStr;
+
+use chassis_protocols::{CanFrame, Rx, Transmit};
+use thiserror::Error;
+
+pub mod datagram;
+pub mod serial;
+pub mod slcan;
+pub mod socketcan;
+
+/// Why a bus operation failed.
+#[derive(Debug, Error)]
+pub enum BusError {
+    /// The bus is gone (interface down, port unplugged, pty closed): reopen it.
+    #[error("{name} is gone: {source}")]
+    Disconnected {
+        name: String,
+        #[source]
+        source: io::Error,
+    },
+    /// One frame could not be sent (transmit queue full); the bus is still there.
+    #[error("{name}: frame dropped: {source}")]
+    TxDropped {
+        name: String,
+        #[source]
+        source: io::Error,
+    },
+    /// Opening the bus failed.
+    #[error("cannot open {name}: {reason}")]
+    Open { name: String, reason: String },
+    /// The peer broke the link protocol (an slcan adapter refusing a command).
+    #[error("{name}: {reason}")]
+    Protocol { name: String, reason: String },
+}
+
+impl BusError {
+    pub fn is_disconnect(&self) -> bool {
+        matches!(self, BusError::Disconnected { .. })
+    }
+}
+
+/// Maps an I/O error of `name` to "nothing to do now" (`Ok(())`), a dropped frame, or a lost bus.
+pub(crate) fn classify(name: &str, err: io::Error, sending: bool) -> Result<(), BusError> {
+    use nix::errno::Errno;
+    match err.kind() {
+        io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted | io::ErrorKind::TimedOut => {
+            return Ok(());
+        }
+        _ => {}
+    }
+    let errno = err.raw_os_error().map(Errno::from_raw);
+    if sending && errno == Some(Errno::ENOBUFS) {
+        return Err(BusError::TxDropped {
+            name: name.to_string(),
+            source: err,
+        });
+    }
+    Err(BusError::Disconnected {
+        name: name.to_string(),
+        source: err,
+    })
+}
+
+/// A CAN bus: classic frames in and out, non-blocking.
+pub trait CanBus: Send + fmt::Debug {
+    /// The next received frame, `Ok(None)` when nothing is pending.
+    fn recv(&mut self) -> Result<Option<CanFrame>, BusError>;
+    /// Sends one frame.
+    fn send(&mut self, frame: &CanFrame) -> Result<(), BusError>;
+    /// The descriptor that turns readable when a frame is pending.
+    fn raw_fd(&self) -> RawFd;
+    /// For logs: `can:vcan0`, `slcan:/dev/ttyACM0`, …
+    fn name(&self) -> &str;
+}
+
+/// A byte stream (serial port, pty), non-blocking.
+pub trait ByteBus: Send + fmt::Debug {
+    /// Reads what is there into `buf`; `Ok(0)` when nothing is pending.
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, BusError>;
+    /// Writes all of `bytes`.
+    fn write_all(&mut self, bytes: &[u8]) -> Result<(), BusError>;
+    /// The descriptor that turns readable when bytes are pending.
+    fn raw_fd(&self) -> RawFd;
+    /// For logs: `serial:/dev/ttyUSB0@115200`, …
+    fn name(&self) -> &str;
+}
+
+/// An open bus of either kind.
+#[derive(Debug)]
+pub enum Bus {
+    Can(Box<dyn CanBus>),
+    Bytes(Box<dyn ByteBus>),
+}
+
+/// Most items drained from the bus per wake-up, so a flooding bus cannot starve the rest of the
+/// loop (the descriptor stays readable and the loop comes back at once).
+pub const MAX_RX_BATCH: usize = 256;
+
+impl Bus {
+    pub fn raw_fd(&self) -> RawFd {
+        match self {
+            Bus::Can(bus) => bus.raw_fd(),
+            Bus::Bytes(bus) => bus.raw_fd(),
+        }
+    }
+
+    pub fn name(&self) -> &str {
+        match self {
+            Bus::Can(bus) => bus.name(),
+            Bus::Bytes(bus) => bus.name(),
+        }
+    }
+
+    /// Reads what is pending (at most [`MAX_RX_BATCH`] items) and hands each to `sink`. Returns
+    /// how many items were read.
+    pub fn receive(&mut self, mut sink: impl FnMut(Rx<'_>)) -> Result<usize, BusError> {
+        let mut count = 0;
+        match self {
+            Bus::Can(bus) => {
+                while count < MAX_RX_BATCH {
+                    match bus.recv()? {
+                        Some(frame) => {
+                            sink(Rx::Can(&frame));
+                            count += 1;
+                        }
+                        None => break,
+                    }
+                }
+            }
+            Bus::Bytes(bus) => {
+                let mut buf = [0u8; 4096];
+                while count < MAX_RX_BATCH {
+                    let n = bus.read(&mut buf)?;
+                    if n == 0 {
+                        break;
+                    }
+                    sink(Rx::Bytes(&buf[..n]));
+                    count += 1;
+                }
+            }
+        }
+        Ok(count)
+    }
+
+    /// Sends one item. A CAN frame on a byte bus (or bytes on a CAN bus) is a bug in the caller
+    /// and is reported as a protocol error.
+    pub fn transmit(&mut self, item: &Transmit) -> Result<(), BusError> {
+        match (self, item) {
+            (Bus::Can(bus), Transmit::Can(frame)) => bus.send(frame),
+            (Bus::Bytes(bus), Transmit::Bytes(bytes)) => bus.write_all(bytes),
+            (bus, _) => Err(BusError::Protocol {
+                name: bus.name().to_string(),
+                reason: "frame kind does not match the bus kind".into(),
+            }),
+        }
+    }
+
+    pub fn is_can(&self) -> bool {
+        matches!(self, Bus::Can(_))
+    }
+}
+
+/// A bus named on the command line.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum BusSpec {
+    /// The embedded simulated chassis.
+    Sim,
+    /// SocketCAN interface.
+    Can { iface: String },
+    /// Serial port or pty slave.
+    Serial { path: String, baud: Option<u32> },
+    /// Lawicel slcan adapter on a serial port.
+    Slcan { path: String, baud: Option<u32> },
+    /// (`chassisd sim` only) a new pty linked at `link`, raw bytes.
+    Pty { link: String },
+    /// (`chassisd sim` only) a new pty linked at `link`, speaking an slcan adapter's side.
+    SlcanPty { link: String },
+}
+
+fn path_and_baud(rest: &str) -> Result<(String, Option<u32>), String> {
+    match rest.rsplit_once('@') {
+        Some((path, baud)) => {
+            let baud: u32 = baud
+                .parse()
+                .map_err(|_| format!("'{baud}' is not a baud rate"))?;
+            if path.is_empty() {
+                return Err("missing path before '@'".into());
+            }
+            Ok((path.to_string(), Some(baud)))
+        }
+        None if rest.is_empty() => Err("missing path".into()),
+        None => Ok((rest.to_string(), None)),
+    }
+}
+
+impl FromStr for BusSpec {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let usage = "expected sim, can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD], pty:LINK or slcan-pty:LINK";
+        if text == "sim" {
+            return Ok(BusSpec::Sim);
+        }
+        let (kind, rest) = text
+            .split_once(':')
+            .ok_or_else(|| format!("'{text}': {usage}"))?;
+        let with = |e: String| format!("'{text}': {e}");
+        match kind {
+            "can" if !rest.is_empty() => Ok(BusSpec::Can {
+                iface: rest.to_string(),
+            }),
+            "serial" => {
+                let (path, baud) = path_and_baud(rest).map_err(with)?;
+                Ok(BusSpec::Serial { path, baud })
+            }
+            "slcan" => {
+                let (path, baud) = path_and_baud(rest).map_err(with)?;
+                Ok(BusSpec::Slcan { path, baud })
+            }
+            "pty" if !rest.is_empty() => Ok(BusSpec::Pty {
+                link: rest.to_string(),
+            }),
+            "slcan-pty" if !rest.is_empty() => Ok(BusSpec::SlcanPty {
+                link: rest.to_string(),
+            }),
+            _ => Err(format!("'{text}': {usage}")),
+        }
+    }
+}
+
+impl fmt::Display for BusSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            BusSpec::Sim => f.write_str("sim"),
+            BusSpec::Can { iface } => write!(f, "can:{iface}"),
+            BusSpec::Serial { path, baud: None } => write!(f, "serial:{path}"),
+            BusSpec::Serial {
+                path,
+                baud: Some(b),
+            } => write!(f, "serial:{path}@{b}"),
+            BusSpec::Slcan { path, baud: None } => write!(f, "slcan:{path}"),
+            BusSpec::Slcan {
+                path,
+                baud: Some(b),
+            } => write!(f, "slcan:{path}@{b}"),
+            BusSpec::Pty { link } => write!(f, "pty:{link}"),
+            BusSpec::SlcanPty { link } => write!(f, "slcan-pty:{link}"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bus_specs_parse_and_print_back() {
+        for text in [
+            "sim",
+            "can:vcan0",
+            "serial:/dev/ttyUSB0",
+            "serial:/dev/ttyUSB0@115200",
+            "slcan:/dev/ttyACM0@921600",
+            "pty:/tmp/xbot-link",
+            "slcan-pty:/tmp/titan-slcan",
+        ] {
+            let spec: BusSpec = text.parse().unwrap();
+            assert_eq!(spec.to_string(), text);
+        }
+    }
+
+    #[test]
+    fn bad_bus_specs_say_what_is_expected() {
+        for bad in [
+            "",
+            "can:",
+            "serial:",
+            "serial:/dev/x@fast",
+            "usb:1",
+            "serial:@9600",
+        ] {
+            let err = bad.parse::<BusSpec>().unwrap_err();
+            assert!(err.contains(bad) || bad.is_empty(), "{bad}: {err}");
+        }
+        assert!(
+            "bogus"
+                .parse::<BusSpec>()
+                .unwrap_err()
+                .contains("expected sim")
+        );
+    }
+
+    #[test]
+    fn would_block_is_not_an_error_and_eio_is_a_disconnect() {
+        assert!(classify("x", io::ErrorKind::WouldBlock.into(), false).is_ok());
+        let eio = io::Error::from_raw_os_error(nix::libc::EIO);
+        assert!(classify("x", eio, false).unwrap_err().is_disconnect());
+        let nobufs = io::Error::from_raw_os_error(nix::libc::ENOBUFS);
+        assert!(!classify("x", nobufs, true).unwrap_err().is_disconnect());
+    }
+}

@@ -1,0 +1,8 @@
+//! chassisd: the hardware service of one robot.
+//!
+//! One process owns the robot's bus and is the only way to its motors. It decodes every frame
+//! into a fixed-layout [`chassis_interfaces::ChassisState`] published over iceoryx2 shared
+//! memory, and it drives the chassis from a priority mux over the velocity requests of the
+//! configured sources.
+
+pub mod bus;

@@ -1,0 +1,3 @@
+//! `chassisd`: the chassis hardware service.
+
+fn main() {}
