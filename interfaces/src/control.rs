@@ -329,3 +329,98 @@ mod tests {
         assert_eq!(r.name(), "estop");
     }
 }
+
+/// [`SimRequest::kind`]: faults and events a simulated chassis can be given
+/// (`chassis/<name>/sim`, offered only when the bus is the simulator).
+#[derive(Debug, Clone, Copy)]
+pub struct SimKind;
+impl SimKind {
+    /// Motor driver `index` (1-4) lost (`flag` 1) or back (0).
+    pub const MOTOR_DRIVER_LOSS: u8 = 1;
+    /// Battery state of charge = `value` %.
+    pub const BATTERY: u8 = 2;
+    /// Bumper pressed (`flag` 1) or released.
+    pub const BUMPER: u8 = 3;
+    /// RC transmitter takes over (`flag` 1) or is switched off.
+    pub const RC_TAKEOVER: u8 = 4;
+    /// Power-cycle the chassis.
+    pub const REBOOT: u8 = 5;
+    /// Stop transmitting for `value` seconds.
+    pub const SILENCE: u8 = 6;
+    /// `value` garbage bytes on the wire now.
+    pub const GARBAGE: u8 = 7;
+    /// Corrupt the checksum of the next `value` frames.
+    pub const BAD_CHECKSUMS: u8 = 8;
+    /// Obstacle ahead at `value` m (`flag` 0 clears it).
+    pub const OBSTACLE_AHEAD: u8 = 9;
+    /// Obstacle behind at `value` m (`flag` 0 clears it).
+    pub const OBSTACLE_BEHIND: u8 = 10;
+    /// `value` extra feedback frames per second (0 stops).
+    pub const FLOOD: u8 = 11;
+
+    pub const NAMES: [(u8, &'static str); 11] = [
+        (Self::MOTOR_DRIVER_LOSS, "motor-driver-loss"),
+        (Self::BATTERY, "battery"),
+        (Self::BUMPER, "bumper"),
+        (Self::RC_TAKEOVER, "rc-takeover"),
+        (Self::REBOOT, "reboot"),
+        (Self::SILENCE, "silence"),
+        (Self::GARBAGE, "garbage"),
+        (Self::BAD_CHECKSUMS, "bad-checksums"),
+        (Self::OBSTACLE_AHEAD, "obstacle-ahead"),
+        (Self::OBSTACLE_BEHIND, "obstacle-behind"),
+        (Self::FLOOD, "flood"),
+    ];
+
+    pub fn name(kind: u8) -> &'static str {
+        Self::NAMES
+            .iter()
+            .find(|(k, _)| *k == kind)
+            .map_or("unknown", |(_, n)| n)
+    }
+}
+
+/// A fault to inject into a simulated chassis; answered with a [`ControlResponse`].
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::SimRequest.v1")]
+pub struct SimRequest {
+    pub stamp_ns: u64,
+    pub seq: u64,
+    /// [`SimKind`].
+    pub kind: u8,
+    /// On/off for the kinds that switch something.
+    pub flag: u8,
+    /// Motor number for [`SimKind::MOTOR_DRIVER_LOSS`].
+    pub index: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 5],
+    /// Amount for the kinds that take one (%, s, m, bytes, frames).
+    pub value: f64,
+}
+
+#[cfg(test)]
+mod sim_tests {
+    use super::*;
+    use core::mem::{align_of, offset_of, size_of};
+
+    #[test]
+    fn sim_request_layout_is_pinned() {
+        assert_eq!((size_of::<SimRequest>(), align_of::<SimRequest>()), (32, 8));
+        assert_eq!(offset_of!(SimRequest, kind), 16);
+        assert_eq!(offset_of!(SimRequest, index), 18);
+        assert_eq!(offset_of!(SimRequest, value), 24);
+    }
+}

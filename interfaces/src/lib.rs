@@ -21,16 +21,17 @@ mod state;
 mod text;
 
 pub use control::{
-    ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, LightMode,
+    ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, LightMode, SimKind,
+    SimRequest,
 };
 pub use frame::{BusFrame, FrameDirection, FrameKind};
 pub use mux::{ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Twist, ZeroReason};
 pub use names::{ServiceKind, service_name, valid_robot_name};
 pub use request::{RequestFlags, VelocityRequest};
 pub use state::{
-    BmsState, ChassisState, CommandEcho, ControlMode, DriverStatus, FaultFlags, GpsFix, Group,
-    ImuState, LiftState, LightsState, LinkFlags, LinkStats, MotionState, MotorState, OdometryState,
-    PanTiltState, RangesState, RcState, RobotKind, SystemState,
+    BmsState, ChassisState, CommandEcho, ControlMode, DriverStatus, FaultFlags, GROUP_SLOTS,
+    GpsFix, Group, ImuState, LiftState, LightsState, LinkFlags, LinkStats, MotionState, MotorState,
+    OdometryState, PanTiltState, RangesState, RcState, RobotKind, SystemState,
 };
 pub use text::{read_fixed_str, write_fixed_str};
 

@@ -11,6 +11,8 @@ pub enum ServiceKind<'a> {
     Mux,
     /// `ControlRequest` → `ControlResponse`, request-response.
     Control,
+    /// `SimRequest` → `ControlResponse`: fault injection into a simulated chassis.
+    Sim,
     /// `VelocityRequest` from one configured source.
     Cmd(&'a str),
 }
@@ -24,6 +26,7 @@ pub fn service_name(robot: &str, kind: ServiceKind<'_>) -> String {
         ServiceKind::Frames => format!("chassis/{robot}/frames"),
         ServiceKind::Mux => format!("chassis/{robot}/mux"),
         ServiceKind::Control => format!("chassis/{robot}/control"),
+        ServiceKind::Sim => format!("chassis/{robot}/sim"),
         ServiceKind::Cmd(source) => format!("chassis/{robot}/cmd/{source}"),
     }
 }

@@ -13,6 +13,7 @@ mod action;
 mod codec;
 mod decode;
 mod encode;
+mod live;
 
 use action::{Action, VelocityArgs};
 
@@ -51,6 +52,41 @@ enum Cmd {
         #[command(subcommand)]
         what: EncodeWhat,
     },
+    /// Print a robot's state, bus frames or mux decisions as they are published.
+    Echo(live::EchoArgs),
+    /// Publish requests to a running chassisd.
+    Pub {
+        #[command(subcommand)]
+        what: PubWhat,
+    },
+    /// A human summary: mode, faults, battery, speeds, active source, bus health.
+    Status {
+        #[arg(long, default_value = "titan")]
+        name: String,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Ask the running chassisd for a control action.
+    Control {
+        #[arg(long, default_value = "titan")]
+        name: String,
+        #[command(subcommand)]
+        command: live::ControlCmd,
+    },
+    /// Inject a fault into the simulated chassis of a running chassisd (bus sim) or of
+    /// `chassisd sim`.
+    Sim {
+        #[arg(long, default_value = "titan")]
+        name: String,
+        #[command(subcommand)]
+        command: live::SimCmd,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum PubWhat {
+    /// Publish velocity requests as a configured source.
+    Velocity(live::PubArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -128,6 +164,15 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        Cmd::Echo(args) => live::echo(&args).map(|()| ExitCode::SUCCESS),
+        Cmd::Pub {
+            what: PubWhat::Velocity(args),
+        } => live::publish(&args).map(|()| ExitCode::SUCCESS),
+        Cmd::Status { name, json } => live::status(&name, json).map(|()| ExitCode::SUCCESS),
+        Cmd::Control { name, command } => {
+            live::control(&name, &command).map(|()| ExitCode::SUCCESS)
+        }
+        Cmd::Sim { name, command } => live::sim(&name, &command).map(|()| ExitCode::SUCCESS),
     }
 }
 

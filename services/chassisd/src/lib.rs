@@ -6,3 +6,10 @@
 //! configured sources.
 
 pub mod bus;
+pub mod clock;
+pub mod config;
+pub mod ipc;
+pub mod mux;
+pub mod service;
+pub mod sim;
+pub mod standalone;

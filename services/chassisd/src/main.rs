@@ -1,3 +1,130 @@
 //! `chassisd`: the chassis hardware service.
 
-fn main() {}
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use chassis_protocols::Robot;
+use chassisd::bus::BusSpec;
+use chassisd::config::{Config, Overrides, RawConfig};
+use clap::{Args, Parser, Subcommand};
+use tracing::error;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "chassisd",
+    version,
+    about = "The chassis hardware service: owns the robot's bus, publishes its state over \
+             iceoryx2 and drives it from a priority mux",
+    args_conflicts_with_subcommands = true
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Cmd>,
+    #[command(flatten)]
+    service: ServiceArgs,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// Run the simulated chassis as its own process on a real bus: pty:LINK (XBot),
+    /// slcan-pty:LINK (CAN robots over an emulated slcan adapter), serial:PATH, slcan:PATH or
+    /// can:IFACE.
+    Sim(ServiceArgs),
+}
+
+#[derive(Debug, Args)]
+struct ServiceArgs {
+    /// titan, scout-mini or xbot.
+    #[arg(long, value_parser = parse_robot)]
+    robot: Option<Robot>,
+    /// sim (default), can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD].
+    #[arg(long, value_parser = parse_bus)]
+    bus: Option<BusSpec>,
+    /// Namespace of the robot's services, chassis/<NAME>/… (default: the robot).
+    #[arg(long)]
+    name: Option<String>,
+    /// A TOML configuration file (see --print-config).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// The XBot's GPS receiver: serial:PATH[@BAUD] (NMEA 0183, default 4800 8N1).
+    #[arg(long, value_parser = parse_bus)]
+    gps: Option<BusSpec>,
+    /// Drive without a safety monitor: lift the rule that the required source must be alive.
+    #[arg(long)]
+    no_safety_monitor: bool,
+    /// Print the effective configuration (TOML, with every default) and exit.
+    #[arg(long)]
+    print_config: bool,
+}
+
+fn parse_robot(text: &str) -> Result<Robot, String> {
+    text.parse()
+}
+
+fn parse_bus(text: &str) -> Result<BusSpec, String> {
+    text.parse()
+}
+
+fn load(args: ServiceArgs) -> Result<(Config, bool), String> {
+    let raw = match &args.config {
+        Some(path) => RawConfig::load(path).map_err(|e| e.to_string())?,
+        None => RawConfig::default(),
+    };
+    let config = raw
+        .validate(Overrides {
+            robot: args.robot,
+            name: args.name,
+            bus: args.bus,
+            gps: args.gps,
+            no_safety_monitor: args.no_safety_monitor,
+        })
+        .map_err(|e| e.to_string())?;
+    Ok((config, args.print_config))
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    let cli = Cli::parse();
+    let (is_sim, args) = match cli.command {
+        Some(Cmd::Sim(args)) => (true, args),
+        None => (false, cli.service),
+    };
+    let (config, print) = match load(args) {
+        Ok(loaded) => loaded,
+        Err(err) => {
+            eprintln!("chassisd: {err}");
+            return ExitCode::from(2);
+        }
+    };
+    if print {
+        return match config.to_toml() {
+            Ok(text) => {
+                print!("{text}");
+                ExitCode::SUCCESS
+            }
+            Err(err) => {
+                eprintln!("chassisd: {err}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    let result = if is_sim {
+        chassisd::standalone::run(&config)
+    } else {
+        chassisd::service::run(config).map_err(|e| e.to_string())
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            error!("{err}");
+            eprintln!("chassisd: {err}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -108,3 +108,212 @@ impl CommandError {
         }
     }
 }
+
+/// A control request as it crosses the IPC boundary, turned back into a command — or the lock
+/// action it names. Velocity never travels as a control request.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ControlAction {
+    Chassis(Command),
+    /// Release the named lock (operator).
+    LockRelease(String),
+    /// Engage the named lock (operator).
+    LockEngage(String),
+}
+
+/// The control request for a chassis command. `None` for a velocity (motion goes through the
+/// mux).
+pub fn command_to_request(command: &Command) -> Option<chassis_interfaces::ControlRequest> {
+    use chassis_interfaces::{ControlKind, ControlMode, ControlRequest};
+    let on = |b: bool| u8::from(b);
+    Some(match *command {
+        Command::Velocity { .. } => return None,
+        Command::Mode { take_control } => ControlRequest::new(ControlKind::MODE).with_arg(
+            0,
+            if take_control {
+                ControlMode::COMMAND
+            } else {
+                ControlMode::STANDBY
+            },
+        ),
+        Command::Brake { engage } => {
+            ControlRequest::new(ControlKind::BRAKE).with_arg(0, on(engage))
+        }
+        Command::ClearFaults { which } => {
+            ControlRequest::new(ControlKind::CLEAR_FAULTS).with_arg(0, which)
+        }
+        Command::Lights {
+            enable,
+            mode,
+            brightness_pct,
+        } => ControlRequest::new(ControlKind::LIGHTS)
+            .with_arg(0, mode)
+            .with_arg(1, brightness_pct)
+            .with_arg(2, on(enable)),
+        Command::OffRoad { enter } => {
+            ControlRequest::new(ControlKind::OFF_ROAD).with_arg(0, on(enter))
+        }
+        Command::Lift {
+            enable,
+            position_pct,
+        } => ControlRequest::new(ControlKind::LIFT)
+            .with_arg(0, on(enable))
+            .with_value(0, position_pct as f32),
+        Command::Servos { pan_rad, tilt_rad } => ControlRequest::new(ControlKind::SERVOS)
+            .with_value(0, pan_rad as f32)
+            .with_value(1, tilt_rad as f32),
+        Command::Power { enable } => {
+            ControlRequest::new(ControlKind::POWER).with_arg(0, on(enable))
+        }
+        Command::SteeringZero => ControlRequest::new(ControlKind::STEERING_ZERO),
+        Command::Silent { enter } => {
+            ControlRequest::new(ControlKind::SILENT).with_arg(0, on(enter))
+        }
+    })
+}
+
+/// What a received control request asks for, or why it makes no sense.
+pub fn request_to_action(
+    request: &chassis_interfaces::ControlRequest,
+) -> Result<ControlAction, String> {
+    use chassis_interfaces::{ControlKind, ControlMode};
+    let flag = |i: usize, what: &str| match request.arg[i] {
+        0 => Ok(false),
+        1 => Ok(true),
+        other => Err(format!("{what}: {other} is neither 0 nor 1")),
+    };
+    let value = |i: usize, what: &str| {
+        let v = f64::from(request.value[i]);
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(format!("{what} is not a finite number"))
+        }
+    };
+    let lock_name = || match request.name() {
+        "" => "estop".to_string(),
+        name => name.to_string(),
+    };
+    Ok(ControlAction::Chassis(match request.kind {
+        ControlKind::MODE => Command::Mode {
+            take_control: match request.arg[0] {
+                ControlMode::COMMAND => true,
+                ControlMode::STANDBY => false,
+                other => return Err(format!("mode {other} is neither command nor standby")),
+            },
+        },
+        ControlKind::BRAKE => Command::Brake {
+            engage: flag(0, "brake")?,
+        },
+        ControlKind::CLEAR_FAULTS => Command::ClearFaults {
+            which: request.arg[0],
+        },
+        ControlKind::LIGHTS => Command::Lights {
+            mode: request.arg[0],
+            brightness_pct: request.arg[1],
+            enable: flag(2, "light control")?,
+        },
+        ControlKind::OFF_ROAD => Command::OffRoad {
+            enter: flag(0, "off-road")?,
+        },
+        ControlKind::LIFT => Command::Lift {
+            enable: flag(0, "lift enable")?,
+            position_pct: value(0, "lift position")?,
+        },
+        ControlKind::SERVOS => Command::Servos {
+            pan_rad: value(0, "pan")?,
+            tilt_rad: value(1, "tilt")?,
+        },
+        ControlKind::POWER => Command::Power {
+            enable: flag(0, "power")?,
+        },
+        ControlKind::STEERING_ZERO => Command::SteeringZero,
+        ControlKind::SILENT => Command::Silent {
+            enter: flag(0, "silent mode")?,
+        },
+        ControlKind::LOCK_RELEASE => return Ok(ControlAction::LockRelease(lock_name())),
+        ControlKind::LOCK_ENGAGE => return Ok(ControlAction::LockEngage(lock_name())),
+        other => return Err(format!("unknown control request kind {other}")),
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_chassis_command_survives_the_ipc_boundary() {
+        let commands = [
+            Command::Mode { take_control: true },
+            Command::Mode {
+                take_control: false,
+            },
+            Command::Brake { engage: true },
+            Command::ClearFaults { which: 3 },
+            Command::Lights {
+                enable: true,
+                mode: 3,
+                brightness_pct: 40,
+            },
+            Command::OffRoad { enter: true },
+            Command::Lift {
+                enable: true,
+                position_pct: 25.0,
+            },
+            Command::Servos {
+                pan_rad: 0.5,
+                tilt_rad: -0.25,
+            },
+            Command::Power { enable: false },
+            Command::SteeringZero,
+            Command::Silent { enter: true },
+        ];
+        for command in commands {
+            let request = command_to_request(&command).unwrap();
+            assert_eq!(
+                request_to_action(&request),
+                Ok(ControlAction::Chassis(command)),
+                "{command:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn velocity_is_not_a_control_request() {
+        let v = Command::Velocity {
+            linear_x_mps: 1.0,
+            linear_y_mps: 0.0,
+            turn: Turn::YawRate(0.0),
+        };
+        assert_eq!(command_to_request(&v), None);
+    }
+
+    #[test]
+    fn lock_requests_default_to_the_estop_lock() {
+        use chassis_interfaces::{ControlKind, ControlRequest};
+        let r = ControlRequest::new(ControlKind::LOCK_RELEASE);
+        assert_eq!(
+            request_to_action(&r),
+            Ok(ControlAction::LockRelease("estop".into()))
+        );
+        let r = ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("dock");
+        assert_eq!(
+            request_to_action(&r),
+            Ok(ControlAction::LockEngage("dock".into()))
+        );
+    }
+
+    #[test]
+    fn malformed_requests_are_explained() {
+        use chassis_interfaces::{ControlKind, ControlRequest};
+        let r = ControlRequest::new(ControlKind::BRAKE).with_arg(0, 7);
+        assert_eq!(
+            request_to_action(&r),
+            Err("brake: 7 is neither 0 nor 1".into())
+        );
+        let r = ControlRequest::new(ControlKind::LIFT)
+            .with_arg(0, 1)
+            .with_value(0, f32::NAN);
+        assert!(request_to_action(&r).is_err());
+        assert!(request_to_action(&ControlRequest::new(200)).is_err());
+    }
+}

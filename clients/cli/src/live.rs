@@ -1,0 +1,599 @@
+//! The commands that talk to a running `chassisd`: echo, pub, status, control, sim.
+
+use std::io::Write;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use chassis_client::{
+    BusFrame, ChassisState, ClampFlags, ControlKind, ControlMode, ControlRequest, ControlStatus,
+    FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus, Robot, SimKind,
+    SimRequest, SourceFlags, Ticker, VelocityRequest, ZeroReason, install_signal_handlers, now_ns,
+    termination_requested,
+};
+use chassis_protocols::command_to_request;
+use clap::{Args, Subcommand, ValueEnum};
+
+use crate::action::{Action, OnOff, VelocityArgs};
+
+/// How long a request may wait for the service's answer.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Topic {
+    /// ChassisState samples.
+    State,
+    /// Bus frames, both directions.
+    Frames,
+    /// Mux decisions.
+    Mux,
+}
+
+#[derive(Debug, Args)]
+pub struct EchoArgs {
+    #[arg(value_enum)]
+    pub topic: Topic,
+    /// The robot's name (chassisd --name).
+    #[arg(long, default_value = "titan")]
+    pub name: String,
+    /// One JSON object per line.
+    #[arg(long)]
+    pub json: bool,
+    /// Stop after this many samples.
+    #[arg(long)]
+    pub count: Option<u64>,
+}
+
+#[derive(Debug, Args)]
+pub struct PubArgs {
+    /// The configured source to publish as (safety, teleop, planner, …).
+    #[arg(long)]
+    pub source: String,
+    #[command(flatten)]
+    pub velocity: VelocityArgs,
+    /// Requests per second.
+    #[arg(long, default_value_t = 20.0)]
+    pub rate: f64,
+    /// Seconds to publish for; 0 = until Ctrl-C. A stop follows.
+    #[arg(long, default_value_t = 0.0)]
+    pub duration: f64,
+    /// Send heartbeats ("alive, asking for nothing") instead of a velocity.
+    #[arg(long)]
+    pub heartbeat: bool,
+    #[arg(long, default_value = "titan")]
+    pub name: String,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ControlCmd {
+    #[command(flatten)]
+    Action(Action),
+    /// Release the e-stop lock (after a safety latch or an operator e-stop).
+    EstopRelease,
+    /// Engage the e-stop lock as the operator: nothing below its priority moves.
+    Estop,
+    /// Release a named lock.
+    LockRelease { lock: String },
+    /// Engage a named lock as the operator.
+    LockEngage { lock: String },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum SimCmd {
+    /// Obstacle ahead at RANGE m (XBot ultrasonic); --clear removes it.
+    ObstacleAhead {
+        range: Option<f64>,
+        #[arg(long)]
+        clear: bool,
+    },
+    /// Obstacle behind at RANGE m (XBot IR); --clear removes it.
+    ObstacleBehind {
+        range: Option<f64>,
+        #[arg(long)]
+        clear: bool,
+    },
+    /// Power-cycle the chassis.
+    Reboot,
+    /// Battery state of charge, %.
+    Battery { soc_pct: f64 },
+    /// Press or release the bumper.
+    Bumper {
+        #[arg(value_enum)]
+        state: OnOff,
+    },
+    /// An RC transmitter takes over (on) or is switched off.
+    Rc {
+        #[arg(value_enum)]
+        state: OnOff,
+    },
+    /// Motor driver N lost (on) or back (off).
+    MotorLoss {
+        motor: u8,
+        #[arg(value_enum)]
+        state: OnOff,
+    },
+    /// The chassis stops transmitting for SECONDS.
+    Silence { seconds: f64 },
+    /// BYTES of garbage on the wire.
+    Garbage { bytes: u32 },
+    /// Corrupt the checksum of the next FRAMES frames.
+    BadChecksums { frames: u32 },
+    /// FRAMES_PER_S extra feedback frames (0 stops).
+    Flood { frames_per_s: u32 },
+}
+
+fn connect(name: &str) -> anyhow::Result<Robot> {
+    Ok(Robot::connect(name)?)
+}
+
+/// `chassis echo`.
+pub fn echo(args: &EchoArgs) -> anyhow::Result<()> {
+    install_signal_handlers();
+    let mut robot = connect(&args.name)?;
+    let mut out = std::io::stdout().lock();
+    let mut printed = 0u64;
+    let mut quiet_since = now_ns();
+    let tap = match args.topic {
+        Topic::Frames => Some(robot.frames(1024)?),
+        _ => None,
+    };
+    let mut last_frame_seq = 0u64;
+    let mut lost = 0u64;
+    while args.count.is_none_or(|c| printed < c) && !termination_requested() {
+        let mut got = 0;
+        match args.topic {
+            Topic::State => {
+                if let Some(state) = robot.wait_state(Duration::from_millis(500))? {
+                    got = 1;
+                    if args.json {
+                        writeln!(out, "{}", serde_json::to_string(&state)?)?;
+                    } else {
+                        writeln!(out, "{}", state_line(&state))?;
+                    }
+                }
+            }
+            Topic::Mux => {
+                if let Some(mux) = robot.wait_mux(Duration::from_millis(500))? {
+                    got = 1;
+                    if args.json {
+                        writeln!(out, "{}", serde_json::to_string(&mux)?)?;
+                    } else {
+                        writeln!(out, "{}", mux_line(&mux))?;
+                    }
+                }
+            }
+            Topic::Frames => {
+                let Some(tap) = &tap else { break };
+                let mut lines = Vec::new();
+                let limit = args.count.map_or(u64::MAX, |c| c - printed);
+                tap.wait(Duration::from_millis(500), |frame| {
+                    if last_frame_seq != 0 && frame.seq > last_frame_seq + 1 {
+                        lost += frame.seq - last_frame_seq - 1;
+                    }
+                    last_frame_seq = frame.seq;
+                    if (lines.len() as u64) < limit {
+                        lines.push(if args.json {
+                            frame_json(frame).to_string()
+                        } else {
+                            frame_line(frame)
+                        });
+                    }
+                })?;
+                got = lines.len();
+                for line in lines {
+                    writeln!(out, "{line}")?;
+                }
+            }
+        }
+        out.flush()?;
+        printed += got as u64;
+        if got > 0 {
+            quiet_since = now_ns();
+        } else if now_ns().saturating_sub(quiet_since) > 2_000_000_000 {
+            if !robot.is_served() {
+                bail!("chassis/{} is gone — is chassisd still running?", args.name);
+            }
+            quiet_since = now_ns();
+        }
+    }
+    if lost > 0 {
+        eprintln!("{lost} frames were lost between reads (sequence gaps)");
+    }
+    Ok(())
+}
+
+fn age_text(stamp_ns: u64) -> String {
+    if stamp_ns == 0 {
+        return "never".into();
+    }
+    format!("{:.0} ms", now_ns().saturating_sub(stamp_ns) as f64 / 1e6)
+}
+
+/// One line per state sample.
+pub fn state_line(s: &ChassisState) -> String {
+    let faults = FaultFlags::names(s.system.fault_flags);
+    format!(
+        "#{:<6} {:>7.3} m/s {:>7.3} rad/s steer {:>6.3}  pose ({:.2}, {:.2}, {:.1}°)  {}  {:.1} V  faults {}{}",
+        s.seq,
+        s.motion.linear_mps,
+        s.motion.angular_radps,
+        s.motion.steer_rad,
+        s.odometry.x_m,
+        s.odometry.y_m,
+        s.odometry.yaw_rad.to_degrees(),
+        ControlMode::name(s.system.control_mode),
+        s.system.battery_voltage_v,
+        if faults.is_empty() {
+            "-".to_string()
+        } else {
+            faults.join(",")
+        },
+        if s.link_flags & (LinkFlags::CHASSIS_SILENT | LinkFlags::BUS_DOWN) != 0 {
+            format!("  [{}]", LinkFlags::names(s.link_flags).join(","))
+        } else {
+            String::new()
+        }
+    )
+}
+
+/// One line per mux decision.
+pub fn mux_line(m: &MuxStatus) -> String {
+    let active = m.active().map_or("none".to_string(), |s| {
+        format!("{} ({})", s.name(), s.priority)
+    });
+    format!(
+        "#{:<5} active {:<16} out vx {:>6.3} vy {:>6.3} wz {:>6.3}  reason {}  clamped {}  locks {}",
+        m.seq,
+        active,
+        m.output.linear_x_mps,
+        m.output.linear_y_mps,
+        m.output.angular_z_radps,
+        ZeroReason::name(m.zero_reason),
+        if m.clamp_flags == 0 {
+            "-".to_string()
+        } else {
+            ClampFlags::names(m.clamp_flags).join(",")
+        },
+        locks_text(m)
+    )
+}
+
+fn locks_text(m: &MuxStatus) -> String {
+    if m.locks().is_empty() {
+        return "-".into();
+    }
+    m.locks()
+        .iter()
+        .map(|l| {
+            if l.held == 0 {
+                format!("{} free", l.name())
+            } else {
+                let holder = match l.holder {
+                    LockStatus::HOLDER_OPERATOR => "operator".to_string(),
+                    i => m
+                        .sources()
+                        .get(usize::from(i))
+                        .map_or("?".to_string(), |s| s.name().to_string()),
+                };
+                format!("{} HELD by {holder}", l.name())
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn direction(frame: &BusFrame) -> &'static str {
+    if frame.direction == FrameDirection::TX {
+        "TX"
+    } else {
+        "RX"
+    }
+}
+
+/// `  12.345678 RX 111#0096000000000000` (CAN) or `RX AA 55 02 01 01 02` (serial).
+pub fn frame_line(frame: &BusFrame) -> String {
+    let t = frame.stamp_ns as f64 / 1e9;
+    let hex = |bytes: &[u8], sep: &str| {
+        bytes
+            .iter()
+            .map(|b| format!("{b:02X}"))
+            .collect::<Vec<_>>()
+            .join(sep)
+    };
+    match frame.kind {
+        FrameKind::CAN => {
+            let id = if frame.flags & BusFrame::EXTENDED_ID != 0 {
+                format!("{:08X}", frame.can_id)
+            } else {
+                format!("{:03X}", frame.can_id)
+            };
+            format!(
+                "{t:>14.6} {} {id}#{}",
+                direction(frame),
+                hex(frame.payload(), "")
+            )
+        }
+        FrameKind::GPS => format!(
+            "{t:>14.6} GPS {}",
+            String::from_utf8_lossy(frame.payload()).trim_end()
+        ),
+        _ => format!(
+            "{t:>14.6} {} {}",
+            direction(frame),
+            hex(frame.payload(), " ")
+        ),
+    }
+}
+
+fn frame_json(frame: &BusFrame) -> serde_json::Value {
+    let mut value = serde_json::to_value(frame).unwrap_or(serde_json::Value::Null);
+    if let Some(obj) = value.as_object_mut() {
+        let hex: String = frame.payload().iter().map(|b| format!("{b:02X}")).collect();
+        obj.insert("data".into(), hex.into());
+    }
+    value
+}
+
+/// `chassis pub velocity`.
+pub fn publish(args: &PubArgs) -> anyhow::Result<()> {
+    install_signal_handlers();
+    if !(args.rate > 0.0 && args.rate <= 10_000.0) {
+        bail!("--rate must be above 0 and at most 10000 Hz");
+    }
+    let mut robot = connect(&args.name)?;
+    let mut source = robot.source(&args.source)?;
+    let request = if args.heartbeat {
+        VelocityRequest::heartbeat()
+    } else {
+        let v = args.velocity;
+        let mut r = VelocityRequest::twist(v.vx as f32, v.wz.unwrap_or(0.0) as f32);
+        r.linear_y_mps = v.vy as f32;
+        if let Some(steer) = v.steer {
+            r = VelocityRequest {
+                linear_y_mps: v.vy as f32,
+                ..VelocityRequest::steer(v.vx as f32, steer as f32)
+            };
+        }
+        r
+    };
+    let start = now_ns();
+    let end = (args.duration > 0.0).then(|| start + (args.duration * 1e9) as u64);
+    let mut ticker = Ticker::new(Duration::from_secs_f64(1.0 / args.rate));
+    let mut sent = 0u64;
+    while !termination_requested() && end.is_none_or(|e| now_ns() < e) {
+        source.send(request)?;
+        sent += 1;
+        ticker.wait();
+    }
+    if !args.heartbeat {
+        source.stop()?;
+    }
+    eprintln!(
+        "sent {sent} requests as {} over {:.1} s{}",
+        args.source,
+        now_ns().saturating_sub(start) as f64 / 1e9,
+        if args.heartbeat { "" } else { ", then a stop" }
+    );
+    Ok(())
+}
+
+/// `chassis status`: a human summary.
+pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
+    let mut robot = connect(name)?;
+    let state = match robot.latest_state()? {
+        Some(s) => Some(s),
+        None => robot.wait_state(Duration::from_secs(1))?,
+    };
+    let mux = match robot.latest_mux()? {
+        Some(m) => Some(m),
+        None => robot.wait_mux(Duration::from_secs(1))?,
+    };
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({ "name": name, "state": state, "mux": mux })
+        );
+        return Ok(());
+    }
+    let Some(s) = state else {
+        bail!("chassis/{name} published no state within 1 s");
+    };
+    println!(
+        "robot      {} (chassis/{name})   state #{}, {} old",
+        chassis_client::RobotKind::name(s.robot),
+        s.seq,
+        age_text(s.stamp_ns)
+    );
+    let link = &s.link;
+    let health = if s.has_link_flag(LinkFlags::BUS_DOWN) {
+        "DOWN"
+    } else if s.has_link_flag(LinkFlags::CHASSIS_SILENT) {
+        "chassis silent"
+    } else {
+        "ok"
+    };
+    println!(
+        "bus        {health}: rx {} frames, tx {}, bad checksums {}, decode errors {}, unknown ids {}, discarded bytes {}, reconnects {}",
+        link.rx_frames,
+        link.tx_frames,
+        link.rx_bad_checksum,
+        link.rx_decode_errors,
+        link.rx_unknown_id,
+        link.rx_bytes_discarded,
+        link.bus_reconnects
+    );
+    println!(
+        "mode       {}   flags {}",
+        ControlMode::name(s.system.control_mode),
+        LinkFlags::names(s.link_flags).join(", ")
+    );
+    println!(
+        "motion     {:.3} m/s  {:.3} rad/s  steer {:.3} rad   pose x {:.2} m  y {:.2} m  yaw {:.1}°",
+        s.motion.linear_mps,
+        s.motion.angular_radps,
+        s.motion.steer_rad,
+        s.odometry.x_m,
+        s.odometry.y_m,
+        s.odometry.yaw_rad.to_degrees()
+    );
+    println!(
+        "command    {:.3} m/s  {:.3} rad/s  steer {:.3} rad  clamped {}",
+        s.command.linear_mps,
+        s.command.angular_radps,
+        s.command.steer_rad,
+        ClampFlags::names(s.command.clamp_flags).join(", ")
+    );
+    println!(
+        "battery    {:.1} V{}",
+        s.system.battery_voltage_v,
+        if s.is_valid(chassis_client::Group::BmsPack) {
+            format!("  {:.0} %", s.system.battery_soc_pct)
+        } else {
+            String::new()
+        }
+    );
+    let faults = FaultFlags::names(s.system.fault_flags);
+    println!(
+        "faults     {}",
+        if faults.is_empty() {
+            "none".to_string()
+        } else {
+            faults.join(", ")
+        }
+    );
+    if let Some(m) = mux {
+        println!("{}", mux_summary(&m));
+    }
+    Ok(())
+}
+
+fn mux_summary(m: &MuxStatus) -> String {
+    let mut out = String::new();
+    let active = match m.active() {
+        Some(s) => format!(
+            "{} (priority {}, {} ms old)",
+            s.name(),
+            s.priority,
+            m.active_age_ms
+        ),
+        None => format!("none — zero because {}", ZeroReason::name(m.zero_reason)),
+    };
+    out.push_str(&format!(
+        "mux        active {active}   output vx {:.3} vy {:.3} wz {:.3}\n",
+        m.output.linear_x_mps, m.output.linear_y_mps, m.output.angular_z_radps
+    ));
+    let sources: Vec<String> = m
+        .sources()
+        .iter()
+        .map(|s| {
+            let mut words = vec![format!("{} {}", s.name(), s.priority)];
+            if s.has(SourceFlags::REQUIRED) {
+                words.push("required".into());
+            }
+            words.push(if s.age_ms == u32::MAX {
+                "never".into()
+            } else if s.has(SourceFlags::FRESH) {
+                format!("fresh {} ms", s.age_ms)
+            } else {
+                format!("stale {} ms", s.age_ms)
+            });
+            if s.has(SourceFlags::HEARTBEAT) {
+                words.push("heartbeat".into());
+            }
+            if s.has(SourceFlags::ACTIVE) {
+                words.push("ACTIVE".into());
+            }
+            if s.has(SourceFlags::BLOCKED) {
+                words.push("blocked".into());
+            }
+            if s.rejected > 0 {
+                words.push(format!("{} rejected", s.rejected));
+            }
+            words.join(" ")
+        })
+        .collect();
+    out.push_str(&format!("sources    {}\n", sources.join(" | ")));
+    out.push_str(&format!("locks      {}", locks_text(m)));
+    out
+}
+
+fn print_answer(response: &chassis_client::ControlResponse) -> anyhow::Result<()> {
+    if response.is_ok() {
+        println!("ok: {}", response.message());
+        Ok(())
+    } else {
+        bail!(
+            "{}: {}",
+            ControlStatus::name(response.status),
+            response.message()
+        )
+    }
+}
+
+/// `chassis control …`.
+pub fn control(name: &str, command: &ControlCmd) -> anyhow::Result<()> {
+    let request = match command {
+        ControlCmd::Action(action) => {
+            let command = action.to_command().map_err(anyhow::Error::msg)?;
+            command_to_request(&command).context("motion is not a control request")?
+        }
+        ControlCmd::EstopRelease => {
+            ControlRequest::new(ControlKind::LOCK_RELEASE).with_name("estop")
+        }
+        ControlCmd::Estop => ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("estop"),
+        ControlCmd::LockRelease { lock } => {
+            ControlRequest::new(ControlKind::LOCK_RELEASE).with_name(lock)
+        }
+        ControlCmd::LockEngage { lock } => {
+            ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name(lock)
+        }
+    };
+    let mut robot = connect(name)?;
+    let response = robot.control(request, ANSWER_TIMEOUT)?;
+    print_answer(&response)
+}
+
+/// `chassis sim …`.
+pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
+    let request = |kind: u8, flag: bool, index: u8, value: f64| SimRequest {
+        kind,
+        flag: u8::from(flag),
+        index,
+        value,
+        ..SimRequest::default()
+    };
+    let range = |range: &Option<f64>, clear: bool| -> anyhow::Result<(bool, f64)> {
+        match (range, clear) {
+            (_, true) => Ok((false, 0.0)),
+            (Some(r), false) if r.is_finite() && *r >= 0.0 => Ok((true, *r)),
+            _ => bail!("give a range in metres, or --clear"),
+        }
+    };
+    let r = match command {
+        SimCmd::ObstacleAhead { range: d, clear } => {
+            let (on, d) = range(d, *clear)?;
+            request(SimKind::OBSTACLE_AHEAD, on, 0, d)
+        }
+        SimCmd::ObstacleBehind { range: d, clear } => {
+            let (on, d) = range(d, *clear)?;
+            request(SimKind::OBSTACLE_BEHIND, on, 0, d)
+        }
+        SimCmd::Reboot => request(SimKind::REBOOT, true, 0, 0.0),
+        SimCmd::Battery { soc_pct } => request(SimKind::BATTERY, true, 0, *soc_pct),
+        SimCmd::Bumper { state } => request(SimKind::BUMPER, state.is_on(), 0, 0.0),
+        SimCmd::Rc { state } => request(SimKind::RC_TAKEOVER, state.is_on(), 0, 0.0),
+        SimCmd::MotorLoss { motor, state } => {
+            request(SimKind::MOTOR_DRIVER_LOSS, state.is_on(), *motor, 0.0)
+        }
+        SimCmd::Silence { seconds } => request(SimKind::SILENCE, true, 0, *seconds),
+        SimCmd::Garbage { bytes } => request(SimKind::GARBAGE, true, 0, f64::from(*bytes)),
+        SimCmd::BadChecksums { frames } => {
+            request(SimKind::BAD_CHECKSUMS, true, 0, f64::from(*frames))
+        }
+        SimCmd::Flood { frames_per_s } => {
+            request(SimKind::FLOOD, true, 0, f64::from(*frames_per_s))
+        }
+    };
+    let mut robot = connect(name)?;
+    let response = robot.sim(r, ANSWER_TIMEOUT)?;
+    print_answer(&response)
+}

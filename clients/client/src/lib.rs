@@ -1,0 +1,664 @@
+//! `chassis-client`: talk to a robot served by `chassisd`.
+//!
+//! Every client process — teleop, planner, safety monitor, the CLI, third-party programs — uses
+//! this crate and nothing else to reach a robot:
+//!
+//! * [`Robot::connect`] by name (`titan`, or whatever `chassisd --name` says);
+//! * [`Robot::latest_state`] / [`Robot::wait_state`]: the [`ChassisState`], read zero-copy from
+//!   shared memory, with a deadline;
+//! * [`Robot::source`]: publish [`VelocityRequest`]s as one of the service's configured sources
+//!   (`safety`, `teleop`, `planner` by default). The source's priority and timeout are the
+//!   service's: a client cannot raise its own priority. One process per source;
+//! * [`Robot::control`]: mode, brake, lights, lift, … answered with success or a reason;
+//! * [`Robot::latest_mux`]: which source the mux chose and why.
+//!
+//! ```no_run
+//! use std::time::Duration;
+//! use chassis_client::{Robot, VelocityRequest};
+//!
+//! let mut robot = Robot::connect("titan")?;
+//! let mut teleop = robot.source("teleop")?;
+//! for _ in 0..50 {
+//!     teleop.send(VelocityRequest::twist(0.3, 0.0))?;
+//!     if let Some(state) = robot.wait_state(Duration::from_millis(100))? {
+//!         println!("{:.2} m/s", state.motion.linear_mps);
+//!     }
+//! }
+//! teleop.send(VelocityRequest::twist(0.0, 0.0))?;
+//! # Ok::<(), chassis_client::ClientError>(())
+//! ```
+//!
+//! iceoryx2 ports are not `Send`: keep a [`Robot`] and its [`Source`]s on one thread.
+
+use std::time::Duration;
+
+pub use chassis_interfaces::*;
+use iceoryx2::pending_response::PendingResponse;
+use iceoryx2::port::client::Client;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
+use iceoryx2::service::port_factory::PortFactory;
+use thiserror::Error;
+
+/// Environment variable naming the iceoryx2 file prefix; must match the service's.
+pub const IPC_PREFIX_ENV: &str = "CHASSIS_IPC_PREFIX";
+
+/// What went wrong talking to a robot.
+#[derive(Debug, Error)]
+pub enum ClientError {
+    #[error(
+        "no service chassis/{name} — is chassisd running? (start it with `chassisd --robot …`)"
+    )]
+    NotRunning { name: String },
+    #[error(
+        "robot '{name}' has no source called '{source_name}' (configured: {configured}); \
+         sources are set in chassisd's config"
+    )]
+    UnknownSource {
+        name: String,
+        source_name: String,
+        configured: String,
+    },
+    #[error("source '{source_name}' of robot '{name}' is already held by another process")]
+    SourceTaken { name: String, source_name: String },
+    #[error("no answer from chassis/{name}/{what} within {timeout:?}")]
+    Timeout {
+        name: String,
+        what: &'static str,
+        timeout: Duration,
+    },
+    #[error("'{0}' is not a valid robot or source name (1-16 of a-z 0-9 - _)")]
+    BadName(String),
+    #[error("iceoryx2: {0}")]
+    Ipc(String),
+}
+
+fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> ClientError + '_ {
+    move |e| ClientError::Ipc(format!("{what}: {e:?}"))
+}
+
+/// `CLOCK_MONOTONIC` now, ns: the clock of every stamp in the system.
+pub fn now_ns() -> u64 {
+    use nix::time::{ClockId, clock_gettime};
+    clock_gettime(ClockId::CLOCK_MONOTONIC).map_or(0, |t| {
+        let ns = i128::from(t.tv_sec()) * 1_000_000_000 + i128::from(t.tv_nsec());
+        u64::try_from(ns).unwrap_or(0)
+    })
+}
+
+fn iceoryx_config() -> Result<Config, ClientError> {
+    let mut config = Config::default();
+    if let Ok(prefix) = std::env::var(IPC_PREFIX_ENV) {
+        config.global.prefix = FileName::new(prefix.as_bytes())
+            .map_err(|e| ClientError::Ipc(format!("{IPC_PREFIX_ENV}={prefix}: {e:?}")))?;
+    }
+    Ok(config)
+}
+
+fn service(name: &str) -> Result<ServiceName, ClientError> {
+    name.try_into().map_err(ipc("service name"))
+}
+
+type ControlClient = Client<ipc::Service, ControlRequest, (), ControlResponse, ()>;
+type SimClient = Client<ipc::Service, SimRequest, (), ControlResponse, ()>;
+
+/// A request-response client with its paired events.
+#[derive(Debug)]
+struct Counter<C> {
+    client: C,
+    notifier: Notifier<ipc::Service>,
+    replies: Listener<ipc::Service>,
+}
+
+/// A connection to one robot.
+#[derive(Debug)]
+pub struct Robot {
+    name: String,
+    node: Node<ipc::Service>,
+    state: Subscriber<ipc::Service, ChassisState, ()>,
+    state_events: Listener<ipc::Service>,
+    mux: Option<Subscriber<ipc::Service, MuxStatus, ()>>,
+    mux_events: Option<Listener<ipc::Service>>,
+    latest_state: Option<ChassisState>,
+    latest_mux: Option<MuxStatus>,
+    control: Option<Counter<ControlClient>>,
+    sim: Option<Counter<SimClient>>,
+    control_seq: u64,
+}
+
+impl Robot {
+    /// Connects to the robot served as `chassis/<name>/`.
+    pub fn connect(name: &str) -> Result<Self, ClientError> {
+        if !valid_robot_name(name) {
+            return Err(ClientError::BadName(name.to_string()));
+        }
+        let node = NodeBuilder::new()
+            .config(&iceoryx_config()?)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(ipc("creating the node"))?;
+        let state_name = service_name(name, ServiceKind::State);
+        let state_service = match node
+            .service_builder(&service(&state_name)?)
+            .publish_subscribe::<ChassisState>()
+            .open()
+        {
+            Ok(s) => s,
+            Err(PublishSubscribeOpenError::DoesNotExist) => {
+                return Err(ClientError::NotRunning {
+                    name: name.to_string(),
+                });
+            }
+            Err(e) => return Err(ipc("opening the state service")(e)),
+        };
+        if state_service.dynamic_config().number_of_publishers() == 0 {
+            return Err(ClientError::NotRunning {
+                name: name.to_string(),
+            });
+        }
+        let state = state_service
+            .subscriber_builder()
+            .buffer_size(4)
+            .create()
+            .map_err(ipc("state subscriber"))?;
+        let state_events = node
+            .service_builder(&service(&state_name)?)
+            .event()
+            .open()
+            .map_err(ipc("state event"))?
+            .listener_builder()
+            .create()
+            .map_err(ipc("state listener"))?;
+        Ok(Self {
+            name: name.to_string(),
+            node,
+            state,
+            state_events,
+            mux: None,
+            mux_events: None,
+            latest_state: None,
+            latest_mux: None,
+            control: None,
+            sim: None,
+            control_seq: 0,
+        })
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// True while `chassisd` still publishes this robot's state.
+    pub fn is_served(&self) -> bool {
+        let Ok(name) = service(&service_name(&self.name, ServiceKind::State)) else {
+            return false;
+        };
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<ChassisState>()
+            .open()
+            .is_ok_and(|s| s.dynamic_config().number_of_publishers() > 0)
+    }
+
+    /// Takes every pending state sample; true if there was one.
+    fn drain_state(&mut self) -> Result<bool, ClientError> {
+        let mut any = false;
+        while let Some(sample) = self.state.receive().map_err(ipc("receiving state"))? {
+            self.latest_state = Some(*sample);
+            any = true;
+        }
+        Ok(any)
+    }
+
+    /// The newest state sample (a late joiner gets the last one published).
+    pub fn latest_state(&mut self) -> Result<Option<ChassisState>, ClientError> {
+        self.drain_state()?;
+        Ok(self.latest_state)
+    }
+
+    /// Waits at most `timeout` for a state sample newer than the ones seen so far.
+    pub fn wait_state(&mut self, timeout: Duration) -> Result<Option<ChassisState>, ClientError> {
+        if self.drain_state()? {
+            return Ok(self.latest_state);
+        }
+        let deadline =
+            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+        loop {
+            let left = deadline.saturating_sub(now_ns());
+            if left == 0 {
+                return Ok(None);
+            }
+            self.state_events
+                .timed_wait(|_| {}, Duration::from_nanos(left))
+                .map_err(ipc("waiting for state"))?;
+            if self.drain_state()? {
+                return Ok(self.latest_state);
+            }
+        }
+    }
+
+    fn open_mux(&mut self) -> Result<(), ClientError> {
+        if self.mux.is_some() {
+            return Ok(());
+        }
+        let name = service_name(&self.name, ServiceKind::Mux);
+        let mux = self
+            .node
+            .service_builder(&service(&name)?)
+            .publish_subscribe::<MuxStatus>()
+            .open()
+            .map_err(ipc("opening the mux status"))?
+            .subscriber_builder()
+            .buffer_size(4)
+            .create()
+            .map_err(ipc("mux subscriber"))?;
+        let events = self
+            .node
+            .service_builder(&service(&name)?)
+            .event()
+            .open()
+            .map_err(ipc("mux event"))?
+            .listener_builder()
+            .create()
+            .map_err(ipc("mux listener"))?;
+        self.mux = Some(mux);
+        self.mux_events = Some(events);
+        Ok(())
+    }
+
+    fn drain_mux(&mut self) -> Result<bool, ClientError> {
+        self.open_mux()?;
+        let mut any = false;
+        if let Some(mux) = &self.mux {
+            while let Some(sample) = mux.receive().map_err(ipc("receiving mux status"))? {
+                self.latest_mux = Some(*sample);
+                any = true;
+            }
+        }
+        Ok(any)
+    }
+
+    /// The newest mux decision.
+    pub fn latest_mux(&mut self) -> Result<Option<MuxStatus>, ClientError> {
+        self.drain_mux()?;
+        Ok(self.latest_mux)
+    }
+
+    /// Waits at most `timeout` for a newer mux decision.
+    pub fn wait_mux(&mut self, timeout: Duration) -> Result<Option<MuxStatus>, ClientError> {
+        if self.drain_mux()? {
+            return Ok(self.latest_mux);
+        }
+        if let Some(events) = &self.mux_events {
+            events
+                .timed_wait(|_| {}, timeout)
+                .map_err(ipc("waiting for mux status"))?;
+        }
+        self.drain_mux()?;
+        Ok(self.latest_mux)
+    }
+
+    /// Publishes velocity requests as the configured source `name`. Fails if the service has no
+    /// such source, or if another process already holds it.
+    pub fn source(&mut self, name: &str) -> Result<Source, ClientError> {
+        if !valid_robot_name(name) {
+            return Err(ClientError::BadName(name.to_string()));
+        }
+        let service_text = service_name(&self.name, ServiceKind::Cmd(name));
+        let factory = match self
+            .node
+            .service_builder(&service(&service_text)?)
+            .publish_subscribe::<VelocityRequest>()
+            .open()
+        {
+            Ok(f) => f,
+            Err(PublishSubscribeOpenError::DoesNotExist) => {
+                let configured = self
+                    .latest_mux()
+                    .ok()
+                    .flatten()
+                    .map(|m| {
+                        m.sources()
+                            .iter()
+                            .map(|s| s.name().to_string())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    })
+                    .unwrap_or_else(|| "unknown".into());
+                return Err(ClientError::UnknownSource {
+                    name: self.name.clone(),
+                    source_name: name.to_string(),
+                    configured,
+                });
+            }
+            Err(e) => return Err(ipc("opening the source")(e)),
+        };
+        let publisher = factory.publisher_builder().create().map_err(|e| match e {
+            iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers => {
+                ClientError::SourceTaken {
+                    name: self.name.clone(),
+                    source_name: name.to_string(),
+                }
+            }
+            other => ClientError::Ipc(format!("source publisher: {other:?}")),
+        })?;
+        let notifier = self
+            .node
+            .service_builder(&service(&service_text)?)
+            .event()
+            .open()
+            .map_err(ipc("source event"))?
+            .notifier_builder()
+            .create()
+            .map_err(|e| match e {
+                iceoryx2::port::notifier::NotifierCreateError::ExceedsMaxSupportedNotifiers => {
+                    ClientError::SourceTaken {
+                        name: self.name.clone(),
+                        source_name: name.to_string(),
+                    }
+                }
+                other => ClientError::Ipc(format!("source notifier: {other:?}")),
+            })?;
+        Ok(Source {
+            name: name.to_string(),
+            publisher,
+            notifier,
+            seq: 0,
+        })
+    }
+
+    fn counter<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
+        &self,
+        kind: ServiceKind<'_>,
+    ) -> Result<Counter<Client<ipc::Service, Req, (), ControlResponse, ()>>, ClientError> {
+        let name = service_name(&self.name, kind);
+        let client = match self
+            .node
+            .service_builder(&service(&name)?)
+            .request_response::<Req, ControlResponse>()
+            .open()
+        {
+            Ok(f) => f,
+            Err(iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist) => {
+                return Err(ClientError::NotRunning {
+                    name: format!("{}/{}", self.name, name.rsplit('/').next().unwrap_or("")),
+                });
+            }
+            Err(e) => return Err(ipc("opening the request service")(e)),
+        }
+        .client_builder()
+        .create()
+        .map_err(ipc("request client"))?;
+        let notifier = self
+            .node
+            .service_builder(&service(&name)?)
+            .event()
+            .open()
+            .map_err(ipc("request event"))?
+            .notifier_builder()
+            .create()
+            .map_err(ipc("request notifier"))?;
+        let replies = self
+            .node
+            .service_builder(&service(&format!("{name}/reply"))?)
+            .event()
+            .open()
+            .map_err(ipc("reply event"))?
+            .listener_builder()
+            .create()
+            .map_err(ipc("reply listener"))?;
+        Ok(Counter {
+            client,
+            notifier,
+            replies,
+        })
+    }
+
+    /// Asks for a control action and waits at most `timeout` for the answer.
+    pub fn control(
+        &mut self,
+        mut request: ControlRequest,
+        timeout: Duration,
+    ) -> Result<ControlResponse, ClientError> {
+        if self.control.is_none() {
+            self.control = Some(self.counter::<ControlRequest>(ServiceKind::Control)?);
+        }
+        self.control_seq += 1;
+        request.seq = self.control_seq;
+        request.stamp_ns = now_ns();
+        let name = self.name.clone();
+        let counter = self
+            .control
+            .as_ref()
+            .ok_or_else(|| ClientError::Ipc("no control client".into()))?;
+        ask(&name, "control", counter, request, request.seq, timeout)
+    }
+
+    /// Injects a fault into the robot's simulated chassis (only when its bus is the simulator).
+    pub fn sim(
+        &mut self,
+        mut request: SimRequest,
+        timeout: Duration,
+    ) -> Result<ControlResponse, ClientError> {
+        if self.sim.is_none() {
+            self.sim = Some(self.counter::<SimRequest>(ServiceKind::Sim)?);
+        }
+        self.control_seq += 1;
+        request.seq = self.control_seq;
+        request.stamp_ns = now_ns();
+        let name = self.name.clone();
+        let counter = self
+            .sim
+            .as_ref()
+            .ok_or_else(|| ClientError::Ipc("no sim client".into()))?;
+        ask(&name, "sim", counter, request, request.seq, timeout)
+    }
+
+    /// A tap of every frame on the bus, both directions. `buffer` frames may queue between two
+    /// reads before the oldest are lost (gaps show in `BusFrame::seq`).
+    pub fn frames(&self, buffer: usize) -> Result<FrameTap, ClientError> {
+        let name = service_name(&self.name, ServiceKind::Frames);
+        let subscriber = self
+            .node
+            .service_builder(&service(&name)?)
+            .publish_subscribe::<BusFrame>()
+            .open()
+            .map_err(ipc("opening the frame tap"))?
+            .subscriber_builder()
+            .buffer_size(buffer.max(1))
+            .create()
+            .map_err(ipc("frame subscriber"))?;
+        let events = self
+            .node
+            .service_builder(&service(&name)?)
+            .event()
+            .open()
+            .map_err(ipc("frames event"))?
+            .listener_builder()
+            .create()
+            .map_err(ipc("frames listener"))?;
+        Ok(FrameTap { subscriber, events })
+    }
+}
+
+fn ask<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
+    name: &str,
+    what: &'static str,
+    counter: &Counter<Client<ipc::Service, Req, (), ControlResponse, ()>>,
+    request: Req,
+    seq: u64,
+    timeout: Duration,
+) -> Result<ControlResponse, ClientError> {
+    let pending: PendingResponse<ipc::Service, Req, (), ControlResponse, ()> = counter
+        .client
+        .send_copy(request)
+        .map_err(ipc("sending the request"))?;
+    counter
+        .notifier
+        .notify()
+        .map_err(ipc("notifying the service"))?;
+    let deadline = now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+    loop {
+        while let Some(response) = pending.receive().map_err(ipc("receiving the answer"))? {
+            if response.payload().request_seq == seq {
+                return Ok(*response.payload());
+            }
+        }
+        let left = deadline.saturating_sub(now_ns());
+        if left == 0 {
+            return Err(ClientError::Timeout {
+                name: name.to_string(),
+                what,
+                timeout,
+            });
+        }
+        counter
+            .replies
+            .timed_wait(
+                |_| {},
+                Duration::from_nanos(left).min(Duration::from_millis(50)),
+            )
+            .map_err(ipc("waiting for the answer"))?;
+    }
+}
+
+/// Publishes velocity requests as one configured source.
+#[derive(Debug)]
+pub struct Source {
+    name: String,
+    publisher: Publisher<ipc::Service, VelocityRequest, ()>,
+    notifier: Notifier<ipc::Service>,
+    seq: u64,
+}
+
+impl Source {
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Sends a request now: stamps it with the current `CLOCK_MONOTONIC` time (unless a stamp is
+    /// set) and the next sequence number, and wakes the service.
+    pub fn send(&mut self, mut request: VelocityRequest) -> Result<(), ClientError> {
+        self.seq += 1;
+        request.seq = self.seq;
+        if request.stamp_ns == 0 {
+            request.stamp_ns = now_ns();
+        }
+        self.publisher
+            .send_copy(request)
+            .map_err(ipc("sending the request"))?;
+        self.notifier.notify().map_err(ipc("waking the service"))?;
+        Ok(())
+    }
+
+    /// "Alive, asking for nothing" — the safety monitor's heartbeat.
+    pub fn heartbeat(&mut self) -> Result<(), ClientError> {
+        self.send(VelocityRequest::heartbeat())
+    }
+
+    /// An explicit stop (wins by this source's priority).
+    pub fn stop(&mut self) -> Result<(), ClientError> {
+        self.send(VelocityRequest::twist(0.0, 0.0))
+    }
+
+    /// A stop that also engages the locks in `mask` (bit i = lock i of `MuxStatus::locks`).
+    pub fn stop_and_lock(&mut self, mask: u32) -> Result<(), ClientError> {
+        self.send(VelocityRequest {
+            lock_engage: mask,
+            ..VelocityRequest::twist(0.0, 0.0)
+        })
+    }
+}
+
+/// A tap of the bus frames.
+#[derive(Debug)]
+pub struct FrameTap {
+    subscriber: Subscriber<ipc::Service, BusFrame, ()>,
+    events: Listener<ipc::Service>,
+}
+
+impl FrameTap {
+    /// Every frame received since the last call.
+    pub fn drain(&self, mut each: impl FnMut(&BusFrame)) -> Result<usize, ClientError> {
+        let mut n = 0;
+        while let Some(sample) = self.subscriber.receive().map_err(ipc("receiving frames"))? {
+            each(&sample);
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Waits at most `timeout` for frames, then drains them.
+    pub fn wait(
+        &self,
+        timeout: Duration,
+        each: impl FnMut(&BusFrame),
+    ) -> Result<usize, ClientError> {
+        let _ = self.events.try_wait(|_| {});
+        let n = self.drain(each)?;
+        if n > 0 {
+            return Ok(n);
+        }
+        self.events
+            .timed_wait(|_| {}, timeout)
+            .map_err(ipc("waiting for frames"))?;
+        Ok(0)
+    }
+}
+
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Installs handlers for SIGINT and SIGTERM (idempotent); [`termination_requested`] then tells
+/// when one arrived. Call it once at start.
+pub fn install_signal_handlers() {
+    let _ = termination_requested();
+}
+
+/// True once SIGINT or SIGTERM arrived (and from then on).
+pub fn termination_requested() -> bool {
+    use std::sync::atomic::Ordering;
+    if iceoryx2_bb_posix::signal::SignalHandler::termination_requested() {
+        STOP.store(true, Ordering::Relaxed);
+    }
+    STOP.load(Ordering::Relaxed)
+}
+
+/// A periodic timer on `CLOCK_MONOTONIC` with absolute deadlines: periods never drift, and a
+/// late wake-up skips the missed ones instead of bunching up. A signal ends the wait early.
+#[derive(Debug)]
+pub struct Ticker {
+    period_ns: u64,
+    next_ns: u64,
+}
+
+impl Ticker {
+    /// The first tick is due now.
+    pub fn new(period: Duration) -> Self {
+        Self {
+            period_ns: u64::try_from(period.as_nanos()).unwrap_or(u64::MAX).max(1),
+            next_ns: now_ns(),
+        }
+    }
+
+    /// Waits for the next tick.
+    pub fn wait(&mut self) {
+        use nix::sys::time::TimeSpec;
+        use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
+        let deadline = TimeSpec::from_duration(Duration::from_nanos(self.next_ns));
+        let _ = clock_nanosleep(
+            ClockId::CLOCK_MONOTONIC,
+            ClockNanosleepFlags::TIMER_ABSTIME,
+            &deadline,
+        );
+        let now = now_ns();
+        self.next_ns = self.next_ns.saturating_add(self.period_ns);
+        if self.next_ns <= now {
+            let behind = now - self.next_ns;
+            self.next_ns += (behind / self.period_ns + 1) * self.period_ns;
+        }
+    }
+}

@@ -1,0 +1,27 @@
+//! The one clock of the process: `CLOCK_MONOTONIC`, system-wide, in nanoseconds.
+//!
+//! Only the event loops (the service loop, the simulator's runner) call [`now`]; everything else
+//! takes time as a parameter. Every sample the service publishes carries this clock, so another
+//! process on the machine computes one-way latency by reading the same clock.
+
+use chassis_protocols::Timestamp;
+use nix::time::{ClockId, clock_gettime};
+
+/// The current `CLOCK_MONOTONIC` time.
+pub fn now() -> Timestamp {
+    // CLOCK_MONOTONIC cannot fail on Linux; a zero keeps the caller going if it ever did.
+    clock_gettime(ClockId::CLOCK_MONOTONIC).map_or(Timestamp::ZERO, |t| {
+        let ns = i128::from(t.tv_sec()) * 1_000_000_000 + i128::from(t.tv_nsec());
+        Timestamp::from_nanos(u64::try_from(ns).unwrap_or(0))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_clock_moves_forward() {
+        let a = super::now();
+        let b = super::now();
+        assert!(a.as_nanos() > 0 && b >= a);
+    }
+}

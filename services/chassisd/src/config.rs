@@ -1,0 +1,367 @@
+//! The service's configuration: TOML → raw serde structs → one validated [`Config`].
+//!
+//! Every key has a default, so an empty file (or none) is a working configuration; unknown keys
+//! are errors. Command-line options override the file. `chassisd --print-config` prints the
+//! effective configuration in this format.
+
+use std::path::Path;
+
+use chassis_interfaces::valid_robot_name;
+use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
+use chassis_protocols::{DriverConfig, Profile, Robot};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::bus::BusSpec;
+use crate::mux::{MuxConfig, MuxConfigError};
+
+/// `[service]`: what this process is and how its loop runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServiceConfig {
+    /// Robot: `titan`, `scout-mini` or `xbot` (`--robot`).
+    pub robot: Option<Robot>,
+    /// Namespace of every iceoryx2 service, `chassis/<name>/…` (`--name`; default: the robot).
+    pub name: Option<String>,
+    /// The bus (`--bus`): `sim`, `can:IFACE`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`.
+    pub bus: Option<String>,
+    /// The XBot's GPS receiver (`--gps`): `serial:PATH[@BAUD]`.
+    pub gps: Option<String>,
+    /// Period of the loop's tick (mux re-evaluation, smoothing, state refresh), ms.
+    pub tick_ms: u64,
+    /// Rate at which `MuxStatus` is published when nothing changes, Hz.
+    pub mux_status_hz: f64,
+}
+
+impl Default for ServiceConfig {
+    fn default() -> Self {
+        Self {
+            robot: None,
+            name: None,
+            bus: None,
+            gps: None,
+            tick_ms: 20,
+            mux_status_hz: 10.0,
+        }
+    }
+}
+
+/// `[bus]`: settings of the bus backends.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BusConfig {
+    /// CAN bit rate an slcan adapter is set to, bit/s.
+    pub can_bitrate: u32,
+    /// First wait before reopening a lost bus, ms; doubles up to `reconnect_max_ms`.
+    pub reconnect_initial_ms: u64,
+    pub reconnect_max_ms: u64,
+}
+
+impl Default for BusConfig {
+    fn default() -> Self {
+        Self {
+            can_bitrate: 500_000,
+            reconnect_initial_ms: 100,
+            reconnect_max_ms: 2000,
+        }
+    }
+}
+
+/// The file as written.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RawConfig {
+    pub service: ServiceConfig,
+    pub bus: BusConfig,
+    pub driver: DriverConfig,
+    pub mux: MuxConfig,
+    /// The robot profile's parameters (see `chassis_protocols::profile`).
+    pub profile: toml::Table,
+}
+
+/// Command-line choices that override the file.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    pub robot: Option<Robot>,
+    pub name: Option<String>,
+    pub bus: Option<BusSpec>,
+    pub gps: Option<BusSpec>,
+    pub no_safety_monitor: bool,
+}
+
+/// Why a configuration is not usable.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    #[error("reading {path}: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: {source}")]
+    Parse {
+        path: String,
+        source: toml::de::Error,
+    },
+    #[error("no robot given: pass --robot titan|scout-mini|xbot (or set service.robot)")]
+    NoRobot,
+    #[error("'{0}' is not a valid robot name (1-16 of a-z 0-9 - _)")]
+    BadName(String),
+    #[error("service.{key}: {reason}")]
+    Bad { key: &'static str, reason: String },
+    #[error("[profile] for {robot}: {source}")]
+    Profile {
+        robot: Robot,
+        source: toml::de::Error,
+    },
+    #[error("[mux]: {0}")]
+    Mux(#[from] MuxConfigError),
+}
+
+/// The validated configuration.
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub robot: Robot,
+    pub name: String,
+    pub bus: BusSpec,
+    pub gps: Option<BusSpec>,
+    pub profile: Profile,
+    pub driver: DriverConfig,
+    pub mux: MuxConfig,
+    pub bus_settings: BusConfig,
+    pub tick_ms: u64,
+    pub mux_status_hz: f64,
+    /// The required-source rule was lifted on the command line.
+    pub no_safety_monitor: bool,
+}
+
+impl RawConfig {
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
+        toml::from_str(&text).map_err(|source| ConfigError::Parse {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+
+    /// Applies the overrides and checks everything.
+    pub fn validate(self, overrides: Overrides) -> Result<Config, ConfigError> {
+        let robot = overrides
+            .robot
+            .or(self.service.robot)
+            .ok_or(ConfigError::NoRobot)?;
+        let name = overrides
+            .name
+            .or(self.service.name)
+            .unwrap_or_else(|| robot.name().to_string());
+        if !valid_robot_name(&name) {
+            return Err(ConfigError::BadName(name));
+        }
+        let parse_bus = |key: &'static str, text: &str| {
+            text.parse::<BusSpec>()
+                .map_err(|reason| ConfigError::Bad { key, reason })
+        };
+        let bus = match overrides.bus {
+            Some(bus) => bus,
+            None => match &self.service.bus {
+                Some(text) => parse_bus("bus", text)?,
+                None => BusSpec::Sim,
+            },
+        };
+        if matches!(bus, BusSpec::Pty { .. } | BusSpec::SlcanPty { .. }) {
+            return Err(ConfigError::Bad {
+                key: "bus",
+                reason: format!(
+                    "{bus} is for `chassisd sim` (the simulated chassis), not the service"
+                ),
+            });
+        }
+        let gps = match overrides.gps {
+            Some(gps) => Some(gps),
+            None => self
+                .service
+                .gps
+                .as_deref()
+                .map(|t| parse_bus("gps", t))
+                .transpose()?,
+        };
+        if let Some(gps) = &gps
+            && !matches!(gps, BusSpec::Serial { .. })
+        {
+            return Err(ConfigError::Bad {
+                key: "gps",
+                reason: format!("{gps}: the GPS receiver is a serial port (serial:PATH[@BAUD])"),
+            });
+        }
+        let profile = parse_profile(robot, self.profile)?;
+        if self.service.tick_ms == 0 || self.service.tick_ms > 100 {
+            return Err(ConfigError::Bad {
+                key: "tick_ms",
+                reason: "must be 1 to 100 ms".into(),
+            });
+        }
+        if !(self.service.mux_status_hz > 0.0 && self.service.mux_status_hz <= 1000.0) {
+            return Err(ConfigError::Bad {
+                key: "mux_status_hz",
+                reason: "must be above 0 and at most 1000 Hz".into(),
+            });
+        }
+        let mux = if overrides.no_safety_monitor {
+            self.mux.without_required_sources()
+        } else {
+            self.mux
+        };
+        mux.validate()?;
+        Ok(Config {
+            robot,
+            name,
+            bus,
+            gps,
+            profile,
+            driver: self.driver,
+            mux,
+            bus_settings: self.bus,
+            tick_ms: self.service.tick_ms,
+            mux_status_hz: self.service.mux_status_hz,
+            no_safety_monitor: overrides.no_safety_monitor,
+        })
+    }
+}
+
+fn parse_profile(robot: Robot, table: toml::Table) -> Result<Profile, ConfigError> {
+    let err = |source| ConfigError::Profile { robot, source };
+    let value = toml::Value::Table(table);
+    Ok(match robot {
+        Robot::Titan => Profile::Titan(TitanProfile::deserialize(value).map_err(err)?),
+        Robot::ScoutMini => Profile::ScoutMini(ScoutMiniProfile::deserialize(value).map_err(err)?),
+        Robot::Xbot => Profile::Xbot(XbotProfile::deserialize(value).map_err(err)?),
+    })
+}
+
+impl Config {
+    /// The configuration with everything filled in, in the file's format.
+    pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
+        let profile = match &self.profile {
+            Profile::Titan(p) => toml::Table::try_from(p)?,
+            Profile::ScoutMini(p) => toml::Table::try_from(p)?,
+            Profile::Xbot(p) => toml::Table::try_from(p)?,
+        };
+        let raw = RawConfig {
+            service: ServiceConfig {
+                robot: Some(self.robot),
+                name: Some(self.name.clone()),
+                bus: Some(self.bus.to_string()),
+                gps: self.gps.as_ref().map(ToString::to_string),
+                tick_ms: self.tick_ms,
+                mux_status_hz: self.mux_status_hz,
+            },
+            bus: self.bus_settings.clone(),
+            driver: self.driver.clone(),
+            mux: self.mux.clone(),
+            profile,
+        };
+        toml::to_string_pretty(&raw)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn titan() -> Overrides {
+        Overrides {
+            robot: Some(Robot::Titan),
+            ..Overrides::default()
+        }
+    }
+
+    #[test]
+    fn an_empty_file_is_a_working_configuration() {
+        let c = RawConfig::default().validate(titan()).unwrap();
+        assert_eq!(c.name, "titan");
+        assert_eq!(c.bus, BusSpec::Sim);
+        assert_eq!(c.mux.sources.len(), 3);
+        assert!(c.mux.sources[0].required);
+        assert_eq!(c.profile, Profile::default_for(Robot::Titan));
+    }
+
+    #[test]
+    fn the_printed_configuration_reads_back_to_the_same() {
+        let c = RawConfig::default().validate(titan()).unwrap();
+        let text = c.to_toml().unwrap();
+        assert!(text.contains("[[mux.source]]"), "{text}");
+        assert!(
+            text.contains("steering_feedback_left_positive = false"),
+            "{text}"
+        );
+        let again: RawConfig = toml::from_str(&text).unwrap();
+        let c2 = again.validate(Overrides::default()).unwrap();
+        assert_eq!(c2.to_toml().unwrap(), text);
+    }
+
+    #[test]
+    fn command_line_choices_override_the_file() {
+        let raw: RawConfig = toml::from_str(
+            "[service]\nrobot = \"xbot\"\nname = \"left\"\nbus = \"serial:/dev/ttyS1\"\n",
+        )
+        .unwrap();
+        let c = raw
+            .clone()
+            .validate(Overrides {
+                name: Some("right".into()),
+                ..Overrides::default()
+            })
+            .unwrap();
+        assert_eq!((c.robot, c.name.as_str()), (Robot::Xbot, "right"));
+        assert_eq!(c.bus.to_string(), "serial:/dev/ttyS1");
+    }
+
+    #[test]
+    fn no_safety_monitor_lifts_the_required_rule() {
+        let c = RawConfig::default()
+            .validate(Overrides {
+                no_safety_monitor: true,
+                ..titan()
+            })
+            .unwrap();
+        assert!(c.mux.sources.iter().all(|s| !s.required));
+    }
+
+    #[test]
+    fn mistakes_are_reported_with_their_place() {
+        let err = toml::from_str::<RawConfig>("[service]\ntick = 5\n").unwrap_err();
+        assert!(err.to_string().contains("unknown field"), "{err}");
+        let raw: RawConfig = toml::from_str("[profile]\nmax_speed = 9\n").unwrap();
+        let err = raw.validate(titan()).unwrap_err();
+        assert!(err.to_string().starts_with("[profile] for titan"), "{err}");
+        let raw: RawConfig = toml::from_str("[service]\nname = \"Bad Name\"\n").unwrap();
+        assert!(matches!(
+            raw.validate(titan()),
+            Err(ConfigError::BadName(_))
+        ));
+        assert!(matches!(
+            RawConfig::default().validate(Overrides::default()),
+            Err(ConfigError::NoRobot)
+        ));
+        let raw: RawConfig = toml::from_str("[service]\ngps = \"can:vcan0\"\n").unwrap();
+        assert!(raw.validate(titan()).is_err());
+    }
+
+    #[test]
+    fn a_profile_parameter_can_be_flipped_from_the_file() {
+        let raw: RawConfig =
+            toml::from_str("[profile]\nangular_full_scale_rad_s = 0.7853\n").unwrap();
+        let c = raw
+            .validate(Overrides {
+                robot: Some(Robot::ScoutMini),
+                ..Overrides::default()
+            })
+            .unwrap();
+        let Profile::ScoutMini(p) = c.profile else {
+            panic!()
+        };
+        assert_eq!(p.angular_full_scale_rad_s, 0.7853);
+    }
+}

@@ -1,0 +1,954 @@
+//! The priority mux: configured sources × priorities × timeouts × locks × limits → one command.
+//!
+//! * Active source = the highest priority whose latest request is younger than its timeout;
+//!   equal priority → the newer request. Nothing active → zero.
+//! * A request's age counts from the earlier of its own stamp and its arrival, so a stale
+//!   request is never fresh and a stamp from the future buys nothing.
+//! * A lock held by a source blocks every source of lower priority than the lock until the same
+//!   source (or the operator) releases it; it survives the holder's death.
+//! * A required source (the safety monitor) must be fresh — a heartbeat is enough — or the output
+//!   is zero.
+//! * Configured speed limits, then acceleration smoothing; a stop from a safety-priority source,
+//!   a stale required source and a lock are never smoothed.
+//!
+//! Pure: time is a parameter. The service calls [`Mux::evaluate`] when a request arrives, on its
+//! tick, and at [`Mux::next_deadline`].
+
+use std::time::Duration;
+
+use chassis_interfaces::{
+    ClampFlags, LockStatus, MAX_LOCKS, MAX_SOURCES, MuxStatus, RequestFlags, SourceFlags,
+    SourceStatus, Twist, VelocityRequest, ZeroReason, valid_robot_name,
+};
+use chassis_protocols::Timestamp;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// One configured velocity source.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SourceConfig {
+    pub name: String,
+    pub priority: u8,
+    pub timeout_ms: u64,
+    #[serde(default)]
+    pub required: bool,
+}
+
+/// One configured lock.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LockConfig {
+    pub name: String,
+    /// Sources below this priority are blocked while the lock is held.
+    pub priority: u8,
+}
+
+/// Speed and acceleration limits of the service (on top of the robot's own).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LimitsConfig {
+    /// |vx| limit, m/s (0: only the robot's own limit).
+    pub max_linear_mps: f64,
+    /// |vy| limit, m/s (0: only the robot's own limit).
+    pub max_lateral_mps: f64,
+    /// |ω| limit, rad/s (0: only the robot's own limit).
+    pub max_angular_radps: f64,
+    /// Smoothing: largest change of vx and vy per second, m/s² (0: none).
+    pub linear_accel_mps2: f64,
+    /// Smoothing: largest change of ω per second, rad/s² (0: none).
+    pub angular_accel_radps2: f64,
+    /// Stops from sources at or above this priority are never smoothed.
+    pub safety_priority: u8,
+}
+
+impl Default for LimitsConfig {
+    fn default() -> Self {
+        Self {
+            max_linear_mps: 0.0,
+            max_lateral_mps: 0.0,
+            max_angular_radps: 0.0,
+            linear_accel_mps2: 2.0,
+            angular_accel_radps2: 4.0,
+            safety_priority: 255,
+        }
+    }
+}
+
+/// The mux's configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MuxConfig {
+    #[serde(rename = "source")]
+    pub sources: Vec<SourceConfig>,
+    #[serde(rename = "lock")]
+    pub locks: Vec<LockConfig>,
+    pub limits: LimitsConfig,
+}
+
+impl Default for MuxConfig {
+    /// `safety` (255, 200 ms, required), `teleop` (100, 300 ms), `planner` (10, 500 ms); lock
+    /// `estop` at 255.
+    fn default() -> Self {
+        let source = |name: &str, priority, timeout_ms, required| SourceConfig {
+            name: name.into(),
+            priority,
+            timeout_ms,
+            required,
+        };
+        Self {
+            sources: vec![
+                source("safety", 255, 200, true),
+                source("teleop", 100, 300, false),
+                source("planner", 10, 500, false),
+            ],
+            locks: vec![LockConfig {
+                name: "estop".into(),
+                priority: 255,
+            }],
+            limits: LimitsConfig::default(),
+        }
+    }
+}
+
+/// Why a mux configuration is not usable.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum MuxConfigError {
+    #[error("no velocity source is configured")]
+    NoSources,
+    #[error("{count} sources configured; at most {MAX_SOURCES}")]
+    TooManySources { count: usize },
+    #[error("{count} locks configured; at most {MAX_LOCKS}")]
+    TooManyLocks { count: usize },
+    #[error("'{0}' is not a valid source or lock name (1-16 of a-z 0-9 - _)")]
+    BadName(String),
+    #[error("'{0}' is configured twice")]
+    Duplicate(String),
+    #[error("source '{0}' needs a timeout above 0 ms")]
+    ZeroTimeout(String),
+}
+
+impl MuxConfig {
+    /// Checks names, counts and timeouts.
+    pub fn validate(&self) -> Result<(), MuxConfigError> {
+        if self.sources.is_empty() {
+            return Err(MuxConfigError::NoSources);
+        }
+        if self.sources.len() > MAX_SOURCES {
+            return Err(MuxConfigError::TooManySources {
+                count: self.sources.len(),
+            });
+        }
+        if self.locks.len() > MAX_LOCKS {
+            return Err(MuxConfigError::TooManyLocks {
+                count: self.locks.len(),
+            });
+        }
+        let mut seen = std::collections::HashSet::new();
+        for name in self
+            .sources
+            .iter()
+            .map(|s| &s.name)
+            .chain(self.locks.iter().map(|l| &l.name))
+        {
+            if !valid_robot_name(name) {
+                return Err(MuxConfigError::BadName(name.clone()));
+            }
+            if !seen.insert(name) {
+                return Err(MuxConfigError::Duplicate(name.clone()));
+            }
+        }
+        if let Some(s) = self.sources.iter().find(|s| s.timeout_ms == 0) {
+            return Err(MuxConfigError::ZeroTimeout(s.name.clone()));
+        }
+        Ok(())
+    }
+
+    /// Lifts the "required" rule from every source (`--no-safety-monitor`).
+    pub fn without_required_sources(mut self) -> Self {
+        for s in &mut self.sources {
+            s.required = false;
+        }
+        self
+    }
+}
+
+/// Why a request was not taken.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum Rejection {
+    #[error("non-finite value in the request (NaN or infinity)")]
+    NonFinite,
+    #[error("unknown lock bits 0x{0:X}")]
+    UnknownLock(u32),
+}
+
+#[derive(Debug, Clone)]
+struct Source {
+    config: SourceConfig,
+    timeout: Duration,
+    /// Latest request and the time its age counts from.
+    latest: Option<(Timestamp, VelocityRequest)>,
+    rejected: u32,
+}
+
+impl Source {
+    fn is_fresh(&self, now: Timestamp) -> bool {
+        self.latest
+            .is_some_and(|(t, _)| now.saturating_since(t) < self.timeout)
+    }
+
+    fn expiry(&self) -> Option<Timestamp> {
+        self.latest.map(|(t, _)| t + self.timeout)
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Lock {
+    config: LockConfig,
+    /// Holder (source index or [`LockStatus::HOLDER_OPERATOR`]) and since when.
+    held: Option<(u8, Timestamp)>,
+}
+
+/// The outcome of one evaluation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    /// What to command.
+    pub output: Twist,
+    /// The status changed in a way worth publishing at once (winner, reason, output, locks).
+    pub changed: bool,
+}
+
+/// The mux.
+#[derive(Debug, Clone)]
+pub struct Mux {
+    sources: Vec<Source>,
+    locks: Vec<Lock>,
+    limits: LimitsConfig,
+    output: Twist,
+    last_evaluation: Option<Timestamp>,
+    status: MuxStatus,
+    rejected: u64,
+}
+
+impl Mux {
+    pub fn new(config: &MuxConfig) -> Result<Self, MuxConfigError> {
+        config.validate()?;
+        let sources: Vec<Source> = config
+            .sources
+            .iter()
+            .map(|c| Source {
+                timeout: Duration::from_millis(c.timeout_ms),
+                config: c.clone(),
+                latest: None,
+                rejected: 0,
+            })
+            .collect();
+        let locks: Vec<Lock> = config
+            .locks
+            .iter()
+            .map(|c| Lock {
+                config: c.clone(),
+                held: None,
+            })
+            .collect();
+        let mut status = MuxStatus {
+            // Counts were validated against MAX_SOURCES / MAX_LOCKS (8 and 4).
+            source_count: sources.len() as u8,
+            lock_count: locks.len() as u8,
+            active_source: MuxStatus::NO_SOURCE,
+            zero_reason: ZeroReason::STARTING,
+            active_age_ms: u32::MAX,
+            ..MuxStatus::default()
+        };
+        for (slot, source) in status.sources.iter_mut().zip(&sources) {
+            slot.set_name(&source.config.name);
+            slot.priority = source.config.priority;
+            slot.timeout_ms = u32::try_from(source.config.timeout_ms).unwrap_or(u32::MAX);
+            slot.age_ms = u32::MAX;
+            if source.config.required {
+                slot.flags |= SourceFlags::REQUIRED;
+            }
+        }
+        for (slot, lock) in status.locks.iter_mut().zip(&locks) {
+            slot.set_name(&lock.config.name);
+            slot.priority = lock.config.priority;
+            slot.holder = LockStatus::HOLDER_NONE;
+        }
+        Ok(Self {
+            sources,
+            locks,
+            limits: config.limits.clone(),
+            output: Twist::ZERO,
+            last_evaluation: None,
+            status,
+            rejected: 0,
+        })
+    }
+
+    /// Index of the source called `name`.
+    pub fn source_index(&self, name: &str) -> Option<usize> {
+        self.sources.iter().position(|s| s.config.name == name)
+    }
+
+    pub fn source_names(&self) -> impl Iterator<Item = &str> {
+        self.sources.iter().map(|s| s.config.name.as_str())
+    }
+
+    /// Takes a request from source `index` received at `now`. Non-finite values and unknown lock
+    /// bits are rejected (counted; the source's previous request stands).
+    pub fn on_request(
+        &mut self,
+        now: Timestamp,
+        index: usize,
+        request: &VelocityRequest,
+    ) -> Result<(), Rejection> {
+        let lock_count = self.locks.len();
+        let Some(source) = self.sources.get_mut(index) else {
+            return Ok(());
+        };
+        let known_locks = if lock_count >= 32 {
+            u32::MAX
+        } else {
+            (1u32 << lock_count) - 1
+        };
+        let rejection = if !request.is_finite() {
+            Some(Rejection::NonFinite)
+        } else if (request.lock_engage | request.lock_release) & !known_locks != 0 {
+            Some(Rejection::UnknownLock(
+                (request.lock_engage | request.lock_release) & !known_locks,
+            ))
+        } else {
+            None
+        };
+        if let Some(rejection) = rejection {
+            source.rejected = source.rejected.saturating_add(1);
+            self.rejected += 1;
+            return Err(rejection);
+        }
+        let arrival = Timestamp::from_nanos(request.stamp_ns).min(now);
+        source.latest = Some((arrival, *request));
+        // Index < MAX_SOURCES (8) fits a u8.
+        let holder = index as u8;
+        for (bit, lock) in self.locks.iter_mut().enumerate() {
+            if request.lock_engage & (1 << bit) != 0 && lock.held.is_none() {
+                lock.held = Some((holder, now));
+            }
+            if request.lock_release & (1 << bit) != 0 && lock.held.is_some_and(|(h, _)| h == holder)
+            {
+                lock.held = None;
+            }
+        }
+        Ok(())
+    }
+
+    /// Releases the lock `name` whoever holds it (operator). Returns whether it was held.
+    pub fn release_lock(&mut self, name: &str) -> Result<bool, String> {
+        let lock = self.lock_mut(name)?;
+        Ok(lock.held.take().is_some())
+    }
+
+    /// Engages the lock `name` on behalf of the operator. Returns whether it was free.
+    pub fn engage_lock(&mut self, now: Timestamp, name: &str) -> Result<bool, String> {
+        let lock = self.lock_mut(name)?;
+        if lock.held.is_some() {
+            return Ok(false);
+        }
+        lock.held = Some((LockStatus::HOLDER_OPERATOR, now));
+        Ok(true)
+    }
+
+    fn lock_mut(&mut self, name: &str) -> Result<&mut Lock, String> {
+        let names: Vec<String> = self.locks.iter().map(|l| l.config.name.clone()).collect();
+        self.locks
+            .iter_mut()
+            .find(|l| l.config.name == name)
+            .ok_or_else(|| format!("no lock called '{name}' (configured: {})", names.join(", ")))
+    }
+
+    /// Decides the command at `now`.
+    pub fn evaluate(&mut self, now: Timestamp) -> Decision {
+        let dt = self
+            .last_evaluation
+            .map_or(0.0, |t| now.secs_since(t).min(0.5));
+        self.last_evaluation = Some(now);
+
+        let blocking_priority = self
+            .locks
+            .iter()
+            .filter(|l| l.held.is_some())
+            .map(|l| l.config.priority)
+            .max();
+        let required_stale = self
+            .sources
+            .iter()
+            .any(|s| s.config.required && !s.is_fresh(now));
+
+        // The winner: fresh, asking for something, not blocked; highest priority, then newest.
+        let mut winner: Option<usize> = None;
+        let mut any_fresh_request = false;
+        for (i, s) in self.sources.iter().enumerate() {
+            let Some((arrival, request)) = s.latest else {
+                continue;
+            };
+            if !s.is_fresh(now) || request.is_heartbeat() {
+                continue;
+            }
+            any_fresh_request = true;
+            if blocking_priority.is_some_and(|p| s.config.priority < p) {
+                continue;
+            }
+            let better = match winner {
+                None => true,
+                Some(w) => {
+                    let ws = &self.sources[w];
+                    let w_arrival = ws.latest.map_or(Timestamp::ZERO, |(t, _)| t);
+                    s.config.priority > ws.config.priority
+                        || (s.config.priority == ws.config.priority && arrival > w_arrival)
+                }
+            };
+            if better {
+                winner = Some(i);
+            }
+        }
+
+        let (requested, reason, winner) = if required_stale {
+            (Twist::ZERO, ZeroReason::REQUIRED_SOURCE_STALE, None)
+        } else if let Some(w) = winner {
+            let request = self.sources[w].latest.map(|(_, r)| r).unwrap_or_default();
+            (twist_of(&request), ZeroReason::NONE, Some(w))
+        } else if any_fresh_request {
+            (Twist::ZERO, ZeroReason::LOCKED, None)
+        } else {
+            (Twist::ZERO, ZeroReason::NO_ACTIVE_SOURCE, None)
+        };
+
+        let (limited, mut clamp_flags) = self.apply_speed_limits(requested);
+        let safety_stop = winner.is_some_and(|w| {
+            self.sources[w].config.priority >= self.limits.safety_priority && limited.is_zero()
+        });
+        let unsmoothed = safety_stop
+            || matches!(
+                reason,
+                ZeroReason::REQUIRED_SOURCE_STALE | ZeroReason::LOCKED
+            );
+        let output = if unsmoothed {
+            limited
+        } else {
+            let (smoothed, smoothing_flags) = self.smooth(limited, dt);
+            clamp_flags |= smoothing_flags;
+            smoothed
+        };
+        self.output = output;
+
+        let previous = self.status;
+        self.fill_status(now, winner, reason, requested, output, clamp_flags);
+        let changed = previous.active_source != self.status.active_source
+            || previous.zero_reason != self.status.zero_reason
+            || previous.output != self.status.output
+            || previous.clamp_flags != self.status.clamp_flags
+            || previous.locks != self.status.locks;
+        Decision { output, changed }
+    }
+
+    fn apply_speed_limits(&self, mut t: Twist) -> (Twist, u32) {
+        let mut flags = 0;
+        let mut clamp = |v: &mut f32, max: f64| {
+            if max > 0.0 && f64::from(v.abs()) > max {
+                *v = v.signum() * max as f32;
+                flags |= ClampFlags::CONFIG_SPEED_LIMIT;
+            }
+        };
+        clamp(&mut t.linear_x_mps, self.limits.max_linear_mps);
+        clamp(&mut t.linear_y_mps, self.limits.max_lateral_mps);
+        clamp(&mut t.angular_z_radps, self.limits.max_angular_radps);
+        (t, flags)
+    }
+
+    fn smooth(&self, target: Twist, dt: f64) -> (Twist, u32) {
+        let mut flags = 0;
+        let mut step = |from: f32, to: f32, rate: f64| -> f32 {
+            if rate <= 0.0 {
+                return to;
+            }
+            let max_step = (rate * dt) as f32;
+            let delta = to - from;
+            if delta.abs() > max_step {
+                flags |= ClampFlags::ACCELERATION_LIMIT;
+                from + delta.signum() * max_step
+            } else {
+                to
+            }
+        };
+        let out = Twist {
+            linear_x_mps: step(
+                self.output.linear_x_mps,
+                target.linear_x_mps,
+                self.limits.linear_accel_mps2,
+            ),
+            linear_y_mps: step(
+                self.output.linear_y_mps,
+                target.linear_y_mps,
+                self.limits.linear_accel_mps2,
+            ),
+            angular_z_radps: step(
+                self.output.angular_z_radps,
+                target.angular_z_radps,
+                self.limits.angular_accel_radps2,
+            ),
+            steer_rad: target.steer_rad,
+            flags: target.flags,
+        };
+        (out, flags)
+    }
+
+    fn fill_status(
+        &mut self,
+        now: Timestamp,
+        winner: Option<usize>,
+        reason: u8,
+        requested: Twist,
+        output: Twist,
+        clamp_flags: u32,
+    ) {
+        let status = &mut self.status;
+        status.stamp_ns = now.as_nanos();
+        status.requested = requested;
+        status.output = output;
+        status.clamp_flags = clamp_flags;
+        status.zero_reason = reason;
+        status.rejected_requests = self.rejected;
+        // Indices < MAX_SOURCES fit a u8.
+        status.active_source = winner.map_or(MuxStatus::NO_SOURCE, |w| w as u8);
+        status.active_priority = winner.map_or(0, |w| self.sources[w].config.priority);
+        status.active_age_ms = winner
+            .and_then(|w| self.sources[w].latest)
+            .map_or(u32::MAX, |(t, _)| age_ms(now, t));
+        let blocking_priority = self
+            .locks
+            .iter()
+            .filter(|l| l.held.is_some())
+            .map(|l| l.config.priority)
+            .max();
+        for (i, (slot, source)) in status.sources.iter_mut().zip(&self.sources).enumerate() {
+            let mut flags = if source.config.required {
+                SourceFlags::REQUIRED
+            } else {
+                0
+            };
+            if source.is_fresh(now) {
+                flags |= SourceFlags::FRESH;
+            }
+            if Some(i) == winner {
+                flags |= SourceFlags::ACTIVE;
+            }
+            if source.latest.is_some_and(|(_, r)| r.is_heartbeat()) {
+                flags |= SourceFlags::HEARTBEAT;
+            }
+            if blocking_priority.is_some_and(|p| source.config.priority < p) {
+                flags |= SourceFlags::BLOCKED;
+            }
+            slot.flags = flags;
+            slot.age_ms = source.latest.map_or(u32::MAX, |(t, _)| age_ms(now, t));
+            slot.rejected = source.rejected;
+            slot.last_seq = source.latest.map_or(0, |(_, r)| r.seq);
+        }
+        for (slot, lock) in status.locks.iter_mut().zip(&self.locks) {
+            match lock.held {
+                Some((holder, since)) => {
+                    slot.held = 1;
+                    slot.holder = holder;
+                    slot.since_ns = since.as_nanos();
+                }
+                None => {
+                    slot.held = 0;
+                    slot.holder = LockStatus::HOLDER_NONE;
+                    slot.since_ns = 0;
+                }
+            }
+        }
+    }
+
+    /// The latest decision.
+    pub fn status(&self) -> &MuxStatus {
+        &self.status
+    }
+
+    /// The latest output.
+    pub fn output(&self) -> Twist {
+        self.output
+    }
+
+    /// When the decision may change without a new request: the next expiry of a fresh source.
+    pub fn next_deadline(&self, now: Timestamp) -> Option<Timestamp> {
+        self.sources
+            .iter()
+            .filter_map(Source::expiry)
+            .filter(|&t| t > now)
+            .min()
+    }
+
+    /// True while the output is still ramping towards the winner's request.
+    pub fn is_ramping(&self) -> bool {
+        self.status.clamp_flags & ClampFlags::ACCELERATION_LIMIT != 0
+    }
+
+    /// The status entry of source `index`.
+    pub fn source_status(&self, index: usize) -> Option<&SourceStatus> {
+        self.status.sources.get(index)
+    }
+}
+
+fn twist_of(request: &VelocityRequest) -> Twist {
+    Twist {
+        linear_x_mps: request.linear_x_mps,
+        linear_y_mps: request.linear_y_mps,
+        angular_z_radps: request.angular_z_radps,
+        steer_rad: request.steer_rad,
+        flags: request.flags & RequestFlags::STEER,
+    }
+}
+
+fn age_ms(now: Timestamp, since: Timestamp) -> u32 {
+    u32::try_from(now.saturating_since(since).as_millis()).unwrap_or(u32::MAX - 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ms(v: u64) -> Timestamp {
+        Timestamp::from_millis(v)
+    }
+
+    fn request(now: Timestamp, vx: f32) -> VelocityRequest {
+        VelocityRequest {
+            stamp_ns: now.as_nanos(),
+            ..VelocityRequest::twist(vx, 0.0)
+        }
+    }
+
+    fn heartbeat(now: Timestamp) -> VelocityRequest {
+        VelocityRequest {
+            stamp_ns: now.as_nanos(),
+            ..VelocityRequest::heartbeat()
+        }
+    }
+
+    /// Default sources, no smoothing, so outputs equal requests.
+    fn mux() -> Mux {
+        let mut config = MuxConfig::default();
+        config.limits.linear_accel_mps2 = 0.0;
+        config.limits.angular_accel_radps2 = 0.0;
+        Mux::new(&config).unwrap()
+    }
+
+    /// Like [`mux`] but without the required safety monitor.
+    fn mux_unrequired() -> Mux {
+        let mut config = MuxConfig::default().without_required_sources();
+        config.limits.linear_accel_mps2 = 0.0;
+        config.limits.angular_accel_radps2 = 0.0;
+        Mux::new(&config).unwrap()
+    }
+
+    const SAFETY: usize = 0;
+    const TELEOP: usize = 1;
+    const PLANNER: usize = 2;
+
+    #[test]
+    fn mux_outputs_zero_and_says_why_when_the_required_safety_monitor_is_silent() {
+        let mut m = mux();
+        m.on_request(ms(0), PLANNER, &request(ms(0), 0.5)).unwrap();
+        let d = m.evaluate(ms(1));
+        assert_eq!(d.output, Twist::ZERO);
+        assert_eq!(m.status().zero_reason, ZeroReason::REQUIRED_SOURCE_STALE);
+    }
+
+    #[test]
+    fn a_safety_heartbeat_lets_the_planner_drive_without_winning_itself() {
+        let mut m = mux();
+        m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
+        m.on_request(ms(0), PLANNER, &request(ms(0), 0.5)).unwrap();
+        let d = m.evaluate(ms(1));
+        assert_eq!(d.output.linear_x_mps, 0.5);
+        assert_eq!(m.status().active_source, PLANNER as u8);
+        assert_ne!(m.status().sources[SAFETY].flags & SourceFlags::HEARTBEAT, 0);
+    }
+
+    #[test]
+    fn teleop_preempts_the_planner_and_hands_back_when_it_times_out() {
+        let mut m = mux();
+        m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
+        m.on_request(ms(0), PLANNER, &request(ms(0), 0.5)).unwrap();
+        m.on_request(ms(10), TELEOP, &request(ms(10), -0.2))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(10)).output.linear_x_mps, -0.2);
+        assert_eq!(m.status().active_source, TELEOP as u8);
+        // Keep the planner and safety fresh; teleop stops sending.
+        for t in (100..=400).step_by(100) {
+            m.on_request(ms(t), SAFETY, &heartbeat(ms(t))).unwrap();
+            m.on_request(ms(t), PLANNER, &request(ms(t), 0.5)).unwrap();
+        }
+        // Teleop's 300 ms timeout has passed at 310 ms.
+        assert_eq!(m.evaluate(ms(400)).output.linear_x_mps, 0.5);
+        assert_eq!(m.status().active_source, PLANNER as u8);
+    }
+
+    #[test]
+    fn mux_falls_back_to_zero_when_teleop_times_out() {
+        let mut m = mux_unrequired();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.0)).unwrap();
+        m.evaluate(ms(0));
+        let d = m.evaluate(ms(301));
+        assert_eq!(d.output, Twist::ZERO);
+        assert_eq!(m.status().zero_reason, ZeroReason::NO_ACTIVE_SOURCE);
+        assert_eq!(m.next_deadline(ms(301)), None);
+    }
+
+    #[test]
+    fn the_next_deadline_is_the_earliest_source_expiry() {
+        let mut m = mux();
+        m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
+        m.on_request(ms(50), TELEOP, &request(ms(50), 0.1)).unwrap();
+        assert_eq!(m.next_deadline(ms(60)), Some(ms(200)));
+        assert_eq!(m.next_deadline(ms(200)), Some(ms(350)));
+    }
+
+    #[test]
+    fn equal_priorities_are_won_by_the_newer_request() {
+        let config = MuxConfig {
+            sources: vec![
+                SourceConfig {
+                    name: "a".into(),
+                    priority: 50,
+                    timeout_ms: 500,
+                    required: false,
+                },
+                SourceConfig {
+                    name: "b".into(),
+                    priority: 50,
+                    timeout_ms: 500,
+                    required: false,
+                },
+            ],
+            locks: vec![],
+            limits: LimitsConfig {
+                linear_accel_mps2: 0.0,
+                ..LimitsConfig::default()
+            },
+        };
+        let mut m = Mux::new(&config).unwrap();
+        m.on_request(ms(0), 0, &request(ms(0), 0.1)).unwrap();
+        m.on_request(ms(5), 1, &request(ms(5), 0.2)).unwrap();
+        assert_eq!(m.evaluate(ms(6)).output.linear_x_mps, 0.2);
+        m.on_request(ms(7), 0, &request(ms(7), 0.3)).unwrap();
+        assert_eq!(m.evaluate(ms(8)).output.linear_x_mps, 0.3);
+    }
+
+    #[test]
+    fn a_stale_stamp_is_never_fresh_and_a_future_stamp_buys_nothing() {
+        let mut m = mux_unrequired();
+        // Created 400 ms ago: older than teleop's 300 ms timeout on arrival.
+        m.on_request(ms(1000), TELEOP, &request(ms(600), 0.4))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(1000)).output, Twist::ZERO);
+        // Stamped an hour ahead: counts from its arrival.
+        m.on_request(ms(2000), TELEOP, &request(ms(3_602_000), 0.4))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(2100)).output.linear_x_mps, 0.4);
+        assert_eq!(m.evaluate(ms(2301)).output, Twist::ZERO);
+    }
+
+    #[test]
+    fn non_finite_requests_are_rejected_counted_and_the_previous_one_stands() {
+        let mut m = mux_unrequired();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.3)).unwrap();
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            assert_eq!(
+                m.on_request(ms(1), TELEOP, &request(ms(1), bad)),
+                Err(Rejection::NonFinite)
+            );
+        }
+        assert_eq!(m.evaluate(ms(2)).output.linear_x_mps, 0.3);
+        assert_eq!(m.status().rejected_requests, 3);
+        assert_eq!(m.status().sources[TELEOP].rejected, 3);
+    }
+
+    #[test]
+    fn a_lock_blocks_lower_priorities_until_its_holder_releases_it() {
+        let mut m = mux();
+        let estop = VelocityRequest {
+            lock_engage: 1,
+            ..request(ms(0), 0.0)
+        };
+        m.on_request(ms(0), SAFETY, &estop).unwrap();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.4)).unwrap();
+        // Safety's own zero request wins first; then it sends heartbeats only.
+        m.on_request(ms(10), SAFETY, &heartbeat(ms(10))).unwrap();
+        m.on_request(ms(10), TELEOP, &request(ms(10), 0.4)).unwrap();
+        assert_eq!(m.evaluate(ms(10)).output, Twist::ZERO);
+        assert_eq!(m.status().zero_reason, ZeroReason::LOCKED);
+        assert_eq!(m.status().locks[0].held, 1);
+        assert_eq!(m.status().locks[0].holder, SAFETY as u8);
+        assert_ne!(m.status().sources[TELEOP].flags & SourceFlags::BLOCKED, 0);
+        // Teleop cannot release a lock it does not hold.
+        let sneaky = VelocityRequest {
+            lock_release: 1,
+            ..request(ms(20), 0.4)
+        };
+        m.on_request(ms(20), TELEOP, &sneaky).unwrap();
+        m.on_request(ms(20), SAFETY, &heartbeat(ms(20))).unwrap();
+        assert_eq!(m.evaluate(ms(20)).output, Twist::ZERO);
+        let release = VelocityRequest {
+            lock_release: 1,
+            ..heartbeat(ms(30))
+        };
+        m.on_request(ms(30), SAFETY, &release).unwrap();
+        m.on_request(ms(30), TELEOP, &request(ms(30), 0.4)).unwrap();
+        assert_eq!(m.evaluate(ms(30)).output.linear_x_mps, 0.4);
+    }
+
+    #[test]
+    fn a_lock_survives_its_holder_and_only_the_operator_can_release_it() {
+        let mut m = mux_unrequired();
+        let latch = VelocityRequest {
+            lock_engage: 1,
+            ..request(ms(0), 0.0)
+        };
+        m.on_request(ms(0), TELEOP, &latch).unwrap();
+        // Teleop dies: it never sends again. The planner is below the lock's priority.
+        for t in (1000..=5000).step_by(500) {
+            m.on_request(ms(t), PLANNER, &request(ms(t), 0.3)).unwrap();
+            assert_eq!(m.evaluate(ms(t)).output, Twist::ZERO, "at {t} ms");
+        }
+        assert_eq!(m.release_lock("estop"), Ok(true));
+        assert_eq!(m.evaluate(ms(5001)).output.linear_x_mps, 0.3);
+        assert!(m.release_lock("nope").is_err());
+    }
+
+    #[test]
+    fn the_operator_can_engage_a_lock() {
+        let mut m = mux_unrequired();
+        assert_eq!(m.engage_lock(ms(0), "estop"), Ok(true));
+        assert_eq!(m.engage_lock(ms(1), "estop"), Ok(false));
+        m.on_request(ms(2), TELEOP, &request(ms(2), 0.3)).unwrap();
+        assert_eq!(m.evaluate(ms(2)).output, Twist::ZERO);
+        assert_eq!(m.status().locks[0].holder, LockStatus::HOLDER_OPERATOR);
+    }
+
+    #[test]
+    fn unknown_lock_bits_are_rejected() {
+        let mut m = mux();
+        let bad = VelocityRequest {
+            lock_engage: 0b100,
+            ..request(ms(0), 0.0)
+        };
+        assert_eq!(
+            m.on_request(ms(0), TELEOP, &bad),
+            Err(Rejection::UnknownLock(0b100))
+        );
+    }
+
+    #[test]
+    fn acceleration_is_smoothed_but_a_safety_stop_is_not() {
+        let mut config = MuxConfig::default();
+        config.limits.linear_accel_mps2 = 1.0;
+        let mut m = Mux::new(&config).unwrap();
+        m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 1.0)).unwrap();
+        m.evaluate(ms(0));
+        let d = m.evaluate(ms(100));
+        assert!((d.output.linear_x_mps - 0.1).abs() < 1e-6, "{:?}", d.output);
+        assert!(m.is_ramping());
+        for t in (120..=1200).step_by(20) {
+            m.on_request(ms(t), SAFETY, &heartbeat(ms(t))).unwrap();
+            m.on_request(ms(t), TELEOP, &request(ms(t), 1.0)).unwrap();
+            m.evaluate(ms(t));
+        }
+        assert_eq!(m.output().linear_x_mps, 1.0);
+        // Safety asks for a stop: zero at once.
+        m.on_request(ms(1210), SAFETY, &request(ms(1210), 0.0))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(1210)).output, Twist::ZERO);
+        assert_eq!(m.status().active_source, SAFETY as u8);
+    }
+
+    #[test]
+    fn a_stale_safety_monitor_stops_at_once_without_smoothing() {
+        let mut config = MuxConfig::default();
+        config.limits.linear_accel_mps2 = 0.5;
+        let mut m = Mux::new(&config).unwrap();
+        m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.0)).unwrap();
+        m.evaluate(ms(0));
+        // Ramp up to 0.5 m/s over a second, with safety fresh.
+        for t in (20..=1000).step_by(20) {
+            m.on_request(ms(t), SAFETY, &heartbeat(ms(t))).unwrap();
+            m.on_request(ms(t), TELEOP, &request(ms(t), 0.5)).unwrap();
+            m.evaluate(ms(t));
+        }
+        assert!(m.output().linear_x_mps > 0.4);
+        m.on_request(ms(1100), TELEOP, &request(ms(1100), 0.5))
+            .unwrap();
+        // Safety's last heartbeat was at 1000 ms; its timeout is 200 ms.
+        assert_eq!(m.evaluate(ms(1201)).output, Twist::ZERO);
+    }
+
+    #[test]
+    fn configured_speed_limits_clamp_and_say_so() {
+        let mut config = MuxConfig::default().without_required_sources();
+        config.limits = LimitsConfig {
+            max_linear_mps: 0.5,
+            max_angular_radps: 0.3,
+            linear_accel_mps2: 0.0,
+            angular_accel_radps2: 0.0,
+            ..LimitsConfig::default()
+        };
+        let mut m = Mux::new(&config).unwrap();
+        let fast = VelocityRequest {
+            stamp_ns: 0,
+            ..VelocityRequest::twist(-2.0, 1.0)
+        };
+        m.on_request(ms(0), TELEOP, &fast).unwrap();
+        let d = m.evaluate(ms(0));
+        assert_eq!(
+            (d.output.linear_x_mps, d.output.angular_z_radps),
+            (-0.5, 0.3)
+        );
+        assert_ne!(m.status().clamp_flags & ClampFlags::CONFIG_SPEED_LIMIT, 0);
+        assert_eq!(m.status().requested.linear_x_mps, -2.0);
+    }
+
+    #[test]
+    fn bad_configurations_are_refused_with_a_reason() {
+        let mut c = MuxConfig::default();
+        c.sources.push(c.sources[0].clone());
+        assert_eq!(
+            c.validate(),
+            Err(MuxConfigError::Duplicate("safety".into()))
+        );
+        let mut c = MuxConfig::default();
+        c.sources[1].name = "Tele Op".into();
+        assert!(matches!(c.validate(), Err(MuxConfigError::BadName(_))));
+        let mut c = MuxConfig::default();
+        c.sources[2].timeout_ms = 0;
+        assert!(matches!(c.validate(), Err(MuxConfigError::ZeroTimeout(_))));
+        let c = MuxConfig {
+            sources: vec![],
+            ..MuxConfig::default()
+        };
+        assert_eq!(c.validate(), Err(MuxConfigError::NoSources));
+    }
+
+    #[test]
+    fn the_status_names_sources_locks_and_changes() {
+        let mut m = mux();
+        let first = m.evaluate(ms(0));
+        assert!(first.changed, "starting → required stale is a change");
+        assert!(!m.evaluate(ms(1)).changed);
+        let s = m.status();
+        assert_eq!(s.sources()[0].name(), "safety");
+        assert_eq!(s.sources()[2].name(), "planner");
+        assert_eq!(s.locks()[0].name(), "estop");
+        assert_eq!(s.sources()[0].timeout_ms, 200);
+    }
+}

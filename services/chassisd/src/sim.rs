@@ -1,0 +1,279 @@
+//! The simulated chassis at the far end of a bus: a robot's firmware driven by the real clock.
+//!
+//! [`SimHandle::spawn`] runs a firmware in its own thread on any [`Bus`]: the chassis side of a
+//! socket pair for the service's default `sim` bus, or a pty, an slcan pty, a serial port or a
+//! CAN interface for `chassisd sim`. Faults reach it through [`SimHandle::inject`].
+
+use std::os::fd::{AsFd, AsRawFd};
+use std::os::unix::net::UnixDatagram;
+use std::sync::mpsc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use chassis_interfaces::{SimKind, SimRequest};
+use chassis_protocols::profile::Robot;
+use chassis_protocols::{Firmware, Injection, Profile, Timestamp, titan};
+use nix::poll::{PollFd, PollFlags};
+use nix::sys::time::TimeSpec;
+use tracing::{debug, error, warn};
+
+use crate::bus::{Bus, BusError};
+use crate::clock;
+
+/// A simulated firmware that can move to its own thread.
+pub type BoxedFirmware = Box<dyn Firmware + Send>;
+
+/// The simulated firmware of `profile`'s robot, powered up at `now`.
+pub fn firmware_for(profile: &Profile, now: Timestamp) -> Result<BoxedFirmware, String> {
+    match profile {
+        Profile::Titan(p) => Ok(Box::new(titan::TitanSim::new(p.clone(), now))),
+        Profile::ScoutMini(_) | Profile::Xbot(_) => {
+            Err(format!("no simulated firmware for {} yet", profile.robot()))
+        }
+    }
+}
+
+/// The injection a [`SimRequest`] asks for.
+pub fn injection_of(request: &SimRequest) -> Result<Injection, String> {
+    let value = request.value;
+    let finite = |what: &str| {
+        if value.is_finite() && value >= 0.0 {
+            Ok(value)
+        } else {
+            Err(format!("{what} must be a finite, non-negative number"))
+        }
+    };
+    let on = request.flag != 0;
+    Ok(match request.kind {
+        SimKind::MOTOR_DRIVER_LOSS => Injection::MotorDriverLoss {
+            motor: request.index,
+            lost: on,
+        },
+        SimKind::BATTERY => Injection::Battery {
+            soc_pct: finite("state of charge")?.min(100.0),
+        },
+        SimKind::BUMPER => Injection::Bumper(on),
+        SimKind::RC_TAKEOVER => Injection::RcTakeover(on),
+        SimKind::REBOOT => Injection::Reboot,
+        SimKind::SILENCE => {
+            Injection::Silence(Duration::from_secs_f64(finite("silence")?.min(3600.0)))
+        }
+        SimKind::GARBAGE => {
+            // A fixed pseudo-random pattern: reproducible, and never a valid frame header run.
+            let n = finite("garbage length")?.min(65_536.0) as usize;
+            Injection::Garbage(
+                (0..n)
+                    .map(|i| (i as u8).wrapping_mul(37).wrapping_add(11))
+                    .collect(),
+            )
+        }
+        SimKind::BAD_CHECKSUMS => {
+            Injection::BadChecksums(finite("frame count")?.min(f64::from(u32::MAX)) as u32)
+        }
+        SimKind::OBSTACLE_AHEAD => Injection::ObstacleAhead(on.then_some(finite("range")?)),
+        SimKind::OBSTACLE_BEHIND => Injection::ObstacleBehind(on.then_some(finite("range")?)),
+        SimKind::FLOOD => Injection::Flood {
+            frames_per_s: finite("frame rate")?.min(1e6) as u32,
+        },
+        other => return Err(format!("unknown simulator request kind {other}")),
+    })
+}
+
+enum SimCommand {
+    Inject(Injection, mpsc::Sender<bool>),
+    Stop,
+}
+
+/// A running simulated chassis.
+#[derive(Debug)]
+pub struct SimHandle {
+    commands: mpsc::Sender<SimCommandBox>,
+    doorbell: UnixDatagram,
+    thread: Option<JoinHandle<Result<(), BusError>>>,
+    robot: Robot,
+}
+
+/// `SimCommand` with a `Debug` face for the handle.
+struct SimCommandBox(SimCommand);
+
+impl std::fmt::Debug for SimCommandBox {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.0 {
+            SimCommand::Inject(i, _) => write!(f, "Inject({})", i.name()),
+            SimCommand::Stop => f.write_str("Stop"),
+        }
+    }
+}
+
+impl SimHandle {
+    /// Runs `firmware` on `bus` in a new thread.
+    pub fn spawn(firmware: BoxedFirmware, bus: Bus) -> std::io::Result<Self> {
+        let (doorbell, wake) = UnixDatagram::pair()?;
+        doorbell.set_nonblocking(true)?;
+        wake.set_nonblocking(true)?;
+        let (commands, inbox) = mpsc::channel();
+        let robot = firmware.robot();
+        let thread = std::thread::Builder::new()
+            .name(format!("sim-{}", robot.name()))
+            .spawn(move || run(firmware, bus, &inbox, &wake))?;
+        Ok(Self {
+            commands,
+            doorbell,
+            thread: Some(thread),
+            robot,
+        })
+    }
+
+    pub fn robot(&self) -> Robot {
+        self.robot
+    }
+
+    /// Injects a fault; returns whether this robot has such a thing. Waits at most 200 ms for the
+    /// simulator's answer.
+    pub fn inject(&self, injection: Injection) -> Result<bool, String> {
+        let (reply, answer) = mpsc::channel();
+        self.commands
+            .send(SimCommandBox(SimCommand::Inject(injection, reply)))
+            .map_err(|_| "the simulated chassis has stopped".to_string())?;
+        let _ = self.doorbell.send(&[1]);
+        answer
+            .recv_timeout(Duration::from_millis(200))
+            .map_err(|_| "the simulated chassis did not answer".to_string())
+    }
+
+    /// True while the simulator thread runs.
+    pub fn is_running(&self) -> bool {
+        self.thread.as_ref().is_some_and(|t| !t.is_finished())
+    }
+
+    /// Stops the simulator and returns how it ended.
+    pub fn stop(mut self) -> Result<(), BusError> {
+        self.shutdown()
+    }
+
+    fn shutdown(&mut self) -> Result<(), BusError> {
+        let _ = self.commands.send(SimCommandBox(SimCommand::Stop));
+        let _ = self.doorbell.send(&[0]);
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(result)) => result,
+            Some(Err(_)) => Err(BusError::Protocol {
+                name: "sim".into(),
+                reason: "the simulator thread panicked".into(),
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for SimHandle {
+    fn drop(&mut self) {
+        if self.thread.is_some()
+            && let Err(err) = self.shutdown()
+        {
+            warn!("simulated chassis ended with: {err}");
+        }
+    }
+}
+
+/// The simulator's event loop: bus readiness, injections and the firmware's own deadlines.
+fn run(
+    mut firmware: BoxedFirmware,
+    mut bus: Bus,
+    inbox: &mpsc::Receiver<SimCommandBox>,
+    wake: &UnixDatagram,
+) -> Result<(), BusError> {
+    let mut dropped: u64 = 0;
+    loop {
+        let now = clock::now();
+        while let Ok(SimCommandBox(command)) = inbox.try_recv() {
+            match command {
+                SimCommand::Stop => return Ok(()),
+                SimCommand::Inject(injection, reply) => {
+                    debug!(injection = injection.name(), "injecting");
+                    let _ = reply.send(firmware.inject(now, injection));
+                }
+            }
+        }
+        let mut scratch = [0u8; 64];
+        while wake.recv(&mut scratch).is_ok() {}
+
+        let received = bus.receive(|rx| firmware.handle_rx(clock::now(), rx));
+        if let Err(err) = received {
+            error!("simulated chassis lost its bus: {err}");
+            return Err(err);
+        }
+        let now = clock::now();
+        if firmware.poll_timeout().is_some_and(|t| t <= now) {
+            firmware.handle_timeout(now);
+        }
+        while let Some(item) = firmware.poll_transmit(now) {
+            match bus.transmit(&item) {
+                Ok(()) => {}
+                Err(err) if err.is_disconnect() => {
+                    error!("simulated chassis lost its bus: {err}");
+                    return Err(err);
+                }
+                Err(err) => {
+                    dropped += 1;
+                    if dropped.is_power_of_two() {
+                        warn!(dropped, "simulated chassis dropped a frame: {err}");
+                    }
+                }
+            }
+        }
+
+        let timeout = firmware
+            .poll_timeout()
+            .map(|t| t.saturating_since(clock::now()));
+        wait(&bus, wake, timeout);
+    }
+}
+
+/// Waits until the bus or the doorbell is readable, or `timeout` passes.
+fn wait(bus: &Bus, wake: &UnixDatagram, timeout: Option<Duration>) {
+    // The bus descriptor stays open for the whole call: `bus` is borrowed.
+    let bus_fd = unsafe { std::os::fd::BorrowedFd::borrow_raw(bus.raw_fd()) };
+    let mut fds = [
+        PollFd::new(bus_fd, PollFlags::POLLIN),
+        PollFd::new(wake.as_fd(), PollFlags::POLLIN),
+    ];
+    let spec = timeout.map(TimeSpec::from_duration);
+    if let Err(err) = nix::poll::ppoll(&mut fds, spec, None)
+        && err != nix::errno::Errno::EINTR
+    {
+        warn!(fd = wake.as_raw_fd(), "simulator wait failed: {err}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_sim_request_kind_maps_to_an_injection() {
+        for (kind, name) in SimKind::NAMES {
+            let request = SimRequest {
+                kind,
+                flag: 1,
+                index: 1,
+                value: 0.5,
+                ..SimRequest::default()
+            };
+            let injection = injection_of(&request).unwrap();
+            assert_eq!(injection.name(), name);
+        }
+        assert!(
+            injection_of(&SimRequest {
+                kind: 99,
+                ..SimRequest::default()
+            })
+            .is_err()
+        );
+        let nan = SimRequest {
+            kind: SimKind::BATTERY,
+            value: f64::NAN,
+            ..SimRequest::default()
+        };
+        assert!(injection_of(&nan).is_err());
+    }
+}

@@ -1,0 +1,143 @@
+//! `chassisd sim`: the simulated firmware as its own process on a real bus.
+//!
+//! The chassis side of a pty (`pty:LINK`, XBot), of an slcan adapter on a pty
+//! (`slcan-pty:LINK`, CAN robots), of a serial port, or of a CAN interface. Faults are injected
+//! through `chassis/<name>/sim`, as with the service's embedded simulator.
+
+use std::path::Path;
+use std::time::Duration;
+
+use chassis_interfaces::{ControlResponse, ControlStatus, ServiceKind, service_name};
+use chassis_protocols::Profile;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use tracing::{error, info, warn};
+
+use crate::bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
+use crate::clock;
+use crate::config::Config;
+use crate::ipc::{IpcError, iceoryx_config, open_desk};
+use crate::sim::{SimHandle, firmware_for, injection_of};
+
+/// Opens the chassis side of `spec`.
+pub fn open_chassis_side(spec: &BusSpec, config: &Config) -> Result<Bus, BusError> {
+    let robot = config.robot;
+    let baud = |b: Option<u32>| {
+        b.unwrap_or(match &config.profile {
+            Profile::Xbot(p) => p.baud,
+            _ => 115_200,
+        })
+    };
+    let wrong = |reason: String| BusError::Open {
+        name: spec.to_string(),
+        reason,
+    };
+    Ok(match spec {
+        BusSpec::Sim => return Err(wrong("`chassisd sim` needs a real bus, not sim".into())),
+        BusSpec::Can { iface } if robot.is_can() => {
+            Bus::Can(Box::new(socketcan::SocketCan::open(iface)?))
+        }
+        BusSpec::SlcanPty { link } if robot.is_can() => Bus::Can(Box::new(
+            slcan::SlcanAdapter::new(serial::PtyLink::create(Path::new(link))?.into_bus()),
+        )),
+        BusSpec::Slcan { path, baud: b } if robot.is_can() => Bus::Can(Box::new(
+            slcan::SlcanAdapter::new(serial::SerialBus::open(path, baud(*b))?),
+        )),
+        BusSpec::Pty { link } if !robot.is_can() => Bus::Bytes(Box::new(
+            serial::PtyLink::create(Path::new(link))?.into_bus(),
+        )),
+        BusSpec::Serial { path, baud: b } if !robot.is_can() => {
+            Bus::Bytes(Box::new(serial::SerialBus::open(path, baud(*b))?))
+        }
+        _ if robot.is_can() => {
+            return Err(wrong(format!(
+                "{robot} is a CAN robot: use can:IFACE, slcan:PATH or slcan-pty:LINK"
+            )));
+        }
+        _ => {
+            return Err(wrong(format!(
+                "{robot} speaks RS232: use serial:PATH or pty:LINK"
+            )));
+        }
+    })
+}
+
+/// Runs the simulated chassis until SIGINT/SIGTERM or until its bus is lost.
+pub fn run(config: &Config) -> Result<(), String> {
+    let bus = open_chassis_side(&config.bus, config).map_err(|e| e.to_string())?;
+    info!(
+        robot = config.robot.name(),
+        bus = bus.name(),
+        "simulated chassis up (faults: chassis/{}/sim)",
+        config.name
+    );
+    let firmware = firmware_for(&config.profile, clock::now())?;
+    let sim = SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?;
+
+    let node = NodeBuilder::new()
+        .config(&iceoryx_config().map_err(|e| e.to_string())?)
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<ipc::Service>()
+        .map_err(|e| format!("iceoryx2 node: {e:?}"))?;
+    let desk = open_desk::<chassis_interfaces::SimRequest>(
+        &node,
+        &service_name(&config.name, ServiceKind::Sim),
+    )
+    .map_err(|e| match e {
+        IpcError::AlreadyServed { .. } => format!(
+            "another simulated chassis already answers chassis/{}/sim; pick another --name",
+            config.name
+        ),
+        other => other.to_string(),
+    })?;
+    let waitset = WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<ipc::Service>()
+        .map_err(|e| format!("wait set: {e:?}"))?;
+    let guard = waitset
+        .attach_notification(&desk.listener)
+        .map_err(|e| format!("wait set: {e:?}"))?;
+    loop {
+        let result = waitset.wait_and_process_once_with_timeout(
+            |_| CallbackProgression::Continue,
+            Duration::from_millis(200),
+        );
+        let _ = &guard;
+        match result {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                info!("stopping the simulated chassis");
+                return sim.stop().map_err(|e| e.to_string());
+            }
+            Ok(_) => {}
+            Err(e) => return Err(format!("wait set: {e:?}")),
+        }
+        if !sim.is_running() {
+            let ended = sim.stop();
+            error!("the simulated chassis stopped: {ended:?}");
+            return Err("the simulated chassis lost its bus".into());
+        }
+        let _ = desk.listener.try_wait(|_| {});
+        while let Ok(Some(active)) = desk.server.receive() {
+            let request = *active.payload();
+            let (status, message) = match injection_of(&request) {
+                Err(reason) => (ControlStatus::INVALID, reason),
+                Ok(injection) => {
+                    let name = injection.name();
+                    match sim.inject(injection) {
+                        Ok(true) => (ControlStatus::OK, format!("{name} injected")),
+                        Ok(false) => (
+                            ControlStatus::UNSUPPORTED,
+                            format!("the simulated {} has no {name}", sim.robot()),
+                        ),
+                        Err(reason) => (ControlStatus::REFUSED, reason),
+                    }
+                }
+            };
+            info!(status = ControlStatus::name(status), "{message}");
+            if let Err(e) = active.send_copy(ControlResponse::new(request.seq, status, &message)) {
+                warn!("cannot answer: {e:?}");
+            }
+            let _ = desk.notifier.notify();
+        }
+    }
+}
