@@ -90,9 +90,12 @@ pub fn now_ns() -> u64 {
     })
 }
 
-fn iceoryx_config() -> Result<Config, ClientError> {
+fn iceoryx_config(prefix: Option<&str>) -> Result<Config, ClientError> {
     let mut config = Config::default();
-    if let Ok(prefix) = std::env::var(IPC_PREFIX_ENV) {
+    let prefix = prefix
+        .map(str::to_string)
+        .or_else(|| std::env::var(IPC_PREFIX_ENV).ok());
+    if let Some(prefix) = prefix {
         config.global.prefix = FileName::new(prefix.as_bytes())
             .map_err(|e| ClientError::Ipc(format!("{IPC_PREFIX_ENV}={prefix}: {e:?}")))?;
     }
@@ -103,8 +106,10 @@ fn service(name: &str) -> Result<ServiceName, ClientError> {
     name.try_into().map_err(ipc("service name"))
 }
 
-type ControlClient = Client<ipc::Service, ControlRequest, (), ControlResponse, ()>;
-type SimClient = Client<ipc::Service, SimRequest, (), ControlResponse, ()>;
+/// A request-response client answered with `ControlResponse`.
+type Asker<Req> = Client<ipc::Service, Req, (), ControlResponse, ()>;
+type ControlClient = Asker<ControlRequest>;
+type SimClient = Asker<SimRequest>;
 
 /// A request-response client with its paired events.
 #[derive(Debug)]
@@ -133,11 +138,17 @@ pub struct Robot {
 impl Robot {
     /// Connects to the robot served as `chassis/<name>/`.
     pub fn connect(name: &str) -> Result<Self, ClientError> {
+        Self::connect_with_prefix(name, None)
+    }
+
+    /// Like [`Robot::connect`], with an explicit iceoryx2 file prefix instead of the one in
+    /// [`IPC_PREFIX_ENV`] (tests isolating themselves from each other).
+    pub fn connect_with_prefix(name: &str, prefix: Option<&str>) -> Result<Self, ClientError> {
         if !valid_robot_name(name) {
             return Err(ClientError::BadName(name.to_string()));
         }
         let node = NodeBuilder::new()
-            .config(&iceoryx_config()?)
+            .config(&iceoryx_config(prefix)?)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(ipc("creating the node"))?;
@@ -374,7 +385,7 @@ impl Robot {
     fn counter<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
         &self,
         kind: ServiceKind<'_>,
-    ) -> Result<Counter<Client<ipc::Service, Req, (), ControlResponse, ()>>, ClientError> {
+    ) -> Result<Counter<Asker<Req>>, ClientError> {
         let name = service_name(&self.name, kind);
         let client = match self
             .node
@@ -488,7 +499,7 @@ impl Robot {
 fn ask<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
     name: &str,
     what: &'static str,
-    counter: &Counter<Client<ipc::Service, Req, (), ControlResponse, ()>>,
+    counter: &Counter<Asker<Req>>,
     request: Req,
     seq: u64,
     timeout: Duration,

@@ -87,6 +87,8 @@ pub struct Overrides {
     pub bus: Option<BusSpec>,
     pub gps: Option<BusSpec>,
     pub no_safety_monitor: bool,
+    /// The configuration is for `chassisd sim` (the chassis side of a bus).
+    pub simulator: bool,
 }
 
 /// Why a configuration is not usable.
@@ -170,7 +172,7 @@ impl RawConfig {
                 None => BusSpec::Sim,
             },
         };
-        if matches!(bus, BusSpec::Pty { .. } | BusSpec::SlcanPty { .. }) {
+        if !overrides.simulator && matches!(bus, BusSpec::Pty { .. } | BusSpec::SlcanPty { .. }) {
             return Err(ConfigError::Bad {
                 key: "bus",
                 reason: format!(

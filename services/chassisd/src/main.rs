@@ -65,7 +65,7 @@ fn parse_bus(text: &str) -> Result<BusSpec, String> {
     text.parse()
 }
 
-fn load(args: ServiceArgs) -> Result<(Config, bool), String> {
+fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), String> {
     let raw = match &args.config {
         Some(path) => RawConfig::load(path).map_err(|e| e.to_string())?,
         None => RawConfig::default(),
@@ -77,6 +77,7 @@ fn load(args: ServiceArgs) -> Result<(Config, bool), String> {
             bus: args.bus,
             gps: args.gps,
             no_safety_monitor: args.no_safety_monitor,
+            simulator,
         })
         .map_err(|e| e.to_string())?;
     Ok((config, args.print_config))
@@ -95,7 +96,7 @@ fn main() -> ExitCode {
         Some(Cmd::Sim(args)) => (true, args),
         None => (false, cli.service),
     };
-    let (config, print) = match load(args) {
+    let (config, print) = match load(args, is_sim) {
         Ok(loaded) => loaded,
         Err(err) => {
             eprintln!("chassisd: {err}");

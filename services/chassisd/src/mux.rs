@@ -9,7 +9,8 @@
 //! * A required source (the safety monitor) must be fresh — a heartbeat is enough — or the output
 //!   is zero.
 //! * Configured speed limits, then acceleration smoothing; a stop from a safety-priority source,
-//!   a stale required source and a lock are never smoothed.
+//!   a stale required source, a lock and the timeout of the last active source are never
+//!   smoothed: motion never outlives a dead source's timeout.
 //!
 //! Pure: time is a parameter. The service calls [`Mux::evaluate`] when a request arrives, on its
 //! tick, and at [`Mux::next_deadline`].
@@ -426,10 +427,13 @@ impl Mux {
         let safety_stop = winner.is_some_and(|w| {
             self.sources[w].config.priority >= self.limits.safety_priority && limited.is_zero()
         });
+        // A source that falls silent gets no grace period: its motion ends with its timeout.
         let unsmoothed = safety_stop
             || matches!(
                 reason,
-                ZeroReason::REQUIRED_SOURCE_STALE | ZeroReason::LOCKED
+                ZeroReason::REQUIRED_SOURCE_STALE
+                    | ZeroReason::LOCKED
+                    | ZeroReason::NO_ACTIVE_SOURCE
             );
         let output = if unsmoothed {
             limited
@@ -870,6 +874,22 @@ mod tests {
             .unwrap();
         assert_eq!(m.evaluate(ms(1210)).output, Twist::ZERO);
         assert_eq!(m.status().active_source, SAFETY as u8);
+    }
+
+    #[test]
+    fn motion_ends_with_the_timeout_of_a_silent_source_without_a_ramp() {
+        let mut config = MuxConfig::default().without_required_sources();
+        config.limits.linear_accel_mps2 = 0.5;
+        let mut m = Mux::new(&config).unwrap();
+        m.evaluate(ms(0));
+        for t in (0..=2000).step_by(20) {
+            m.on_request(ms(t), TELEOP, &request(ms(t), 0.5)).unwrap();
+            m.evaluate(ms(t));
+        }
+        assert_eq!(m.output().linear_x_mps, 0.5);
+        // Teleop's last request was at 2000 ms: still moving at 2299 ms, zero at 2300 ms.
+        assert_eq!(m.evaluate(ms(2299)).output.linear_x_mps, 0.5);
+        assert_eq!(m.evaluate(ms(2300)).output, Twist::ZERO);
     }
 
     #[test]
