@@ -2,10 +2,16 @@
 
 mod codec;
 mod commands;
+mod driver;
 pub mod kinematics;
+mod sim;
 
 pub use codec::*;
 pub use commands::{clear_codes_for, frames_for, velocity_command};
+pub use driver::{ScoutMiniDriver, normalize_faults};
+pub use sim::ScoutMiniSim;
 
+#[cfg(test)]
+mod scenarios;
 #[cfg(test)]
 mod tests;

@@ -4,9 +4,9 @@
 //! * Command mode: 0x421 at start and again whenever the chassis reports standby while we want
 //!   control (a rebooted or timed-out chassis is taken back); an RC transmitter holding authority
 //!   is reported, never fought.
-//! * Parking brake: released once before motion, engaged after an idle time and on shutdown;
-//!   never a brake frame per velocity command. A brake engaged by request holds until released
-//!   by request.
+//! * Parking brake: released once before motion, in CAN command mode (the only mode that obeys
+//!   0x131); engaged after an idle time and on shutdown; never a brake frame per velocity
+//!   command. A brake engaged by request holds until released by request.
 //! * Limits and twist → inner steering angle from [`super::kinematics`].
 
 use std::collections::VecDeque;
@@ -618,9 +618,13 @@ impl Driver for TitanDriver {
         } else if self.schedule.is_due(now)
             && self.motion.linear_mps != 0.0
             && self.brake != Brake::Released
+            && self.state.system.control_mode == ControlMode::COMMAND
         {
             // Release before motion: after power-up, a chassis reboot or an idle engagement the
-            // brake goes first, then this same deadline sends the motion frame.
+            // brake goes first, then this same deadline sends the motion frame. Only in CAN
+            // command mode: standby and RC authority ignore 0x131, and a release sent then would
+            // be believed while the brake stays engaged. Until command mode is reported the
+            // heartbeat carries the command alone (a braked chassis does not move on it).
             self.brake = Brake::Released;
             self.update_body(now);
             Frame::ParkingBrake(ParkingBrake { engage: false })

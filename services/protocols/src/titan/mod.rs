@@ -12,4 +12,6 @@ pub use driver::{TitanDriver, normalize_faults};
 pub use sim::TitanSim;
 
 #[cfg(test)]
+mod scenarios;
+#[cfg(test)]
 mod tests;

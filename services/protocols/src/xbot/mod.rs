@@ -7,11 +7,17 @@
 
 mod codec;
 mod commands;
+mod driver;
+mod sim;
 mod stream;
 
 pub use codec::*;
 pub use commands::{frames_for, velocity_command};
+pub use driver::{MAX_VELOCITY_FRAMES_PER_S, XbotDriver};
+pub use sim::XbotSim;
 pub use stream::*;
 
+#[cfg(test)]
+mod scenarios;
 #[cfg(test)]
 mod tests;
