@@ -1,0 +1,27 @@
+//! Any CAN frame into the TITAN decoder (both profile sign choices): no panic, and whatever
+//! decodes re-encodes and decodes to the same frame.
+#![no_main]
+
+use chassis_protocols::profile::TitanProfile;
+use chassis_protocols::{CanFrame, titan};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let Some((head, payload)) = data.split_first_chunk::<2>() else {
+        return;
+    };
+    let id = u32::from(u16::from_le_bytes(*head)) & 0x7FF;
+    let Ok(frame) = CanFrame::new(id, &payload[..payload.len().min(8)]) else {
+        return;
+    };
+    for left_positive in [false, true] {
+        let profile = TitanProfile {
+            steering_feedback_left_positive: left_positive,
+            ..TitanProfile::default()
+        };
+        if let Ok(decoded) = titan::decode(&frame, &profile) {
+            let encoded = decoded.encode(&profile).expect("a decoded frame encodes");
+            assert_eq!(titan::decode(&encoded, &profile).expect("re-decodes"), decoded);
+        }
+    }
+});
