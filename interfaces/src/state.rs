@@ -288,7 +288,8 @@ impl FaultFlags {
         | Self::OVER_CURRENT_WARNING
         | Self::BATTERY_LOW
         | Self::RC_LINK_LOST
-        | Self::BMS_ALARM;
+        | Self::BMS_ALARM
+        | Self::COMMAND_CHECKSUM;
 
     /// Names of the set bits.
     pub fn names(bits: u64) -> Vec<&'static str> {

@@ -4,6 +4,10 @@
 //! Every [`Env`] has its own iceoryx2 file prefix, so tests run in parallel without seeing each
 //! other, and its own scratch directory for logs and pty links. When a test fails, the logs of
 //! every process it started are printed.
+//!
+//! This crate only serves tests: a failed expectation here is a failed test, so it may panic,
+//! and it waits on the wall clock.
+#![allow(clippy::panic, clippy::disallowed_methods)]
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -51,7 +55,11 @@ pub fn bin_dir() -> &'static Path {
 /// The path of the workspace binary `name`.
 pub fn bin(name: &str) -> PathBuf {
     let path = bin_dir().join(name);
-    assert!(path.exists(), "{} is missing: run `cargo build --workspace --bins`", path.display());
+    assert!(
+        path.exists(),
+        "{} is missing: run `cargo build --workspace --bins`",
+        path.display()
+    );
     path
 }
 
@@ -129,7 +137,10 @@ impl Env {
         let mut cmd = Command::new(bin(binary));
         cmd.args(args)
             .env(IPC_PREFIX_ENV, &self.prefix)
-            .env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()))
+            .env(
+                "RUST_LOG",
+                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+            )
             .stdin(Stdio::null());
         cmd
     }
@@ -138,7 +149,9 @@ impl Env {
     pub fn spawn(&mut self, label: &str, binary: &str, args: &[&str]) -> usize {
         let log = self.dir.join(format!("{label}.log"));
         let file = File::create(&log).unwrap_or_else(|e| panic!("{}: {e}", log.display()));
-        let err = file.try_clone().unwrap_or_else(|e| panic!("{}: {e}", log.display()));
+        let err = file
+            .try_clone()
+            .unwrap_or_else(|e| panic!("{}: {e}", log.display()));
         let child = self
             .command(binary, args)
             .stdout(file)
@@ -176,13 +189,25 @@ impl Env {
         loop {
             match Robot::connect_with_prefix(name, Some(&self.prefix)) {
                 Ok(mut robot) => {
-                    if robot.wait_state(Duration::from_millis(200)).ok().flatten().is_some() {
+                    if robot
+                        .wait_state(Duration::from_millis(200))
+                        .ok()
+                        .flatten()
+                        .is_some()
+                    {
                         return robot;
                     }
-                    assert!(Instant::now() < end, "chassis/{name} published no state\n{}", self.logs());
+                    assert!(
+                        Instant::now() < end,
+                        "chassis/{name} published no state\n{}",
+                        self.logs()
+                    );
                 }
                 Err(err) if Instant::now() >= end => {
-                    panic!("chassis/{name} did not come up within {timeout:?}: {err}\n{}", self.logs())
+                    panic!(
+                        "chassis/{name} did not come up within {timeout:?}: {err}\n{}",
+                        self.logs()
+                    )
                 }
                 Err(_) => pause(Duration::from_millis(50)),
             }
@@ -193,7 +218,12 @@ impl Env {
     pub fn logs(&self) -> String {
         let mut out = String::new();
         for p in &self.procs {
-            out.push_str(&format!("----- {} ({}) -----\n{}\n", p.name, p.log.display(), p.log_text()));
+            out.push_str(&format!(
+                "----- {} ({}) -----\n{}\n",
+                p.name,
+                p.log.display(),
+                p.log_text()
+            ));
         }
         out
     }
@@ -216,10 +246,19 @@ impl Drop for Env {
             eprintln!("{}", self.logs());
         }
         // Shared-memory files of this test's prefix.
-        for dir in ["/dev/shm", "/tmp/iceoryx2", "/tmp/iceoryx2/services", "/tmp/iceoryx2/nodes"] {
+        for dir in [
+            "/dev/shm",
+            "/tmp/iceoryx2",
+            "/tmp/iceoryx2/services",
+            "/tmp/iceoryx2/nodes",
+        ] {
             if let Ok(entries) = std::fs::read_dir(dir) {
                 for entry in entries.flatten() {
-                    if entry.file_name().to_string_lossy().starts_with(&self.prefix) {
+                    if entry
+                        .file_name()
+                        .to_string_lossy()
+                        .starts_with(&self.prefix)
+                    {
                         let path = entry.path();
                         if path.is_dir() {
                             let _ = std::fs::remove_dir_all(path);

@@ -1,5 +1,7 @@
 //! chassisd with real processes: drive through the mux, preemption, timeouts, the required
 //! safety source, locks, crashes and restarts, slcan and serial links over ptys.
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::time::{Duration, Instant};
 
@@ -45,20 +47,41 @@ fn drive_for(
 fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
     let mut env = Env::new("pub-drive");
     let n = name("pub");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let mut robot = env.robot(&n, UP);
     let publisher = env.spawn(
         "pub",
         "chassis",
-        &["pub", "velocity", "--source", "teleop", "--vx", "0.3", "--duration", "2", "--name", &n],
+        &[
+            "pub",
+            "velocity",
+            "--source",
+            "teleop",
+            "--vx",
+            "0.3",
+            "--duration",
+            "2",
+            "--name",
+            &n,
+        ],
     );
     let moving = max_speed(&mut robot, Duration::from_millis(2200));
     assert!(moving > 0.25, "peak speed {moving} m/s");
-    assert_eq!(env.proc(publisher).wait_exit(Duration::from_secs(5)), Some(0));
+    assert_eq!(
+        env.proc(publisher).wait_exit(Duration::from_secs(5)),
+        Some(0)
+    );
     let stopped = wait_for(Duration::from_secs(3), || {
         state(&mut robot).motion.linear_mps.abs() < 0.01
     });
-    assert!(stopped.is_some(), "still moving after the publisher stopped\n{}", env.logs());
+    assert!(
+        stopped.is_some(),
+        "still moving after the publisher stopped\n{}",
+        env.logs()
+    );
     let s = state(&mut robot);
     assert!(s.odometry.x_m > 0.3, "travelled {} m", s.odometry.x_m);
     assert_eq!(s.command.linear_mps, 0.0);
@@ -72,16 +95,41 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let request = VelocityRequest::twist(0.4, 0.0);
-    let peak = drive_for(&mut robot, &mut teleop, None, request, Duration::from_millis(800));
+    let peak = drive_for(
+        &mut robot,
+        &mut teleop,
+        None,
+        request,
+        Duration::from_millis(800),
+    );
     assert!(peak < 0.01, "moved to {peak} m/s without a safety monitor");
-    assert_eq!(mux(&mut robot).zero_reason, ZeroReason::REQUIRED_SOURCE_STALE);
+    assert_eq!(
+        mux(&mut robot).zero_reason,
+        ZeroReason::REQUIRED_SOURCE_STALE
+    );
 
     let heartbeat = env.spawn(
         "safety",
         "chassis",
-        &["pub", "velocity", "--source", "safety", "--heartbeat", "--rate", "20", "--name", &n],
+        &[
+            "pub",
+            "velocity",
+            "--source",
+            "safety",
+            "--heartbeat",
+            "--rate",
+            "20",
+            "--name",
+            &n,
+        ],
     );
-    let peak = drive_for(&mut robot, &mut teleop, None, request, Duration::from_millis(1500));
+    let peak = drive_for(
+        &mut robot,
+        &mut teleop,
+        None,
+        request,
+        Duration::from_millis(1500),
+    );
     assert!(peak > 0.3, "peak {peak} m/s with the monitor alive");
 
     // SIGKILL the monitor: the mux stops within its 200 ms timeout.
@@ -93,10 +141,17 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
         if m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE {
             break killed.elapsed();
         }
-        assert!(killed.elapsed() < Duration::from_secs(2), "no safe stop\n{}", env.logs());
+        assert!(
+            killed.elapsed() < Duration::from_secs(2),
+            "no safe stop\n{}",
+            env.logs()
+        );
         pause(Duration::from_millis(5));
     };
-    assert!(stopped < Duration::from_millis(350), "safe stop after {stopped:?}");
+    assert!(
+        stopped < Duration::from_millis(350),
+        "safe stop after {stopped:?}"
+    );
     assert_eq!(mux(&mut robot).output, Twist::ZERO);
     eprintln!("required source killed → zero command after {stopped:?}");
 }
@@ -105,28 +160,38 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
 fn teleop_preempts_the_planner_and_hands_back_when_it_goes_quiet() {
     let mut env = Env::new("preempt");
     let n = name("pre");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let mut robot = env.robot(&n, UP);
     let mut planner = source(&mut robot, "planner");
     let mut teleop = source(&mut robot, "teleop");
-    let until = |robot: &mut Robot, planner: &mut Source, teleop: Option<&mut Source>, want: &str| {
-        let mut teleop = teleop;
-        wait_for(Duration::from_secs(2), || {
-            planner.send(VelocityRequest::twist(0.2, 0.0)).unwrap();
-            if let Some(t) = teleop.as_deref_mut() {
-                t.send(VelocityRequest::twist(-0.1, 0.0)).unwrap();
-            }
-            mux(robot).active().map(|s| s.name().to_string()).as_deref() == Some(want)
-        })
-    };
+    let until =
+        |robot: &mut Robot, planner: &mut Source, teleop: Option<&mut Source>, want: &str| {
+            let mut teleop = teleop;
+            wait_for(Duration::from_secs(2), || {
+                planner.send(VelocityRequest::twist(0.2, 0.0)).unwrap();
+                if let Some(t) = teleop.as_deref_mut() {
+                    t.send(VelocityRequest::twist(-0.1, 0.0)).unwrap();
+                }
+                mux(robot).active().map(|s| s.name().to_string()).as_deref() == Some(want)
+            })
+        };
     assert!(until(&mut robot, &mut planner, None, "planner").is_some());
     assert!(until(&mut robot, &mut planner, Some(&mut teleop), "teleop").is_some());
     let m = mux(&mut robot);
     assert_eq!(m.requested.linear_x_mps, -0.1);
     // Teleop stops sending: after its 300 ms timeout the planner wins again.
     let handed_back = until(&mut robot, &mut planner, None, "planner").unwrap();
-    assert!(handed_back >= Duration::from_millis(200), "handed back after {handed_back:?}");
-    assert!(handed_back < Duration::from_millis(800), "handed back after {handed_back:?}");
+    assert!(
+        handed_back >= Duration::from_millis(200),
+        "handed back after {handed_back:?}"
+    );
+    assert!(
+        handed_back < Duration::from_millis(800),
+        "handed back after {handed_back:?}"
+    );
 }
 
 #[test]
@@ -138,7 +203,13 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
     let mut safety = source(&mut robot, "safety");
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
-    let peak = drive_for(&mut robot, &mut teleop, Some(&mut safety), go, Duration::from_secs(1));
+    let peak = drive_for(
+        &mut robot,
+        &mut teleop,
+        Some(&mut safety),
+        go,
+        Duration::from_secs(1),
+    );
     assert!(peak > 0.2, "peak {peak}");
     let estop = mux(&mut robot).lock_index("estop").unwrap();
     safety.stop_and_lock(1 << estop).unwrap();
@@ -152,16 +223,30 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
         assert_eq!(m.output, Twist::ZERO, "commanded motion under the e-stop");
     }
     let s = state(&mut robot);
-    assert!(s.motion.linear_mps.abs() < 0.01, "still rolling at {}", s.motion.linear_mps);
+    assert!(
+        s.motion.linear_mps.abs() < 0.01,
+        "still rolling at {}",
+        s.motion.linear_mps
+    );
     safety.heartbeat().unwrap();
     let m = mux(&mut robot);
     assert_eq!(m.zero_reason, ZeroReason::LOCKED);
     assert_eq!(m.locks()[estop].held, 1);
     assert_eq!(m.locks()[estop].holder, 0, "held by the safety source");
     let out = env.chassis(&["control", "--name", &n, "estop-release"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(String::from_utf8_lossy(&out.stdout).contains("estop released"));
-    let peak = drive_for(&mut robot, &mut teleop, Some(&mut safety), go, Duration::from_secs(1));
+    let peak = drive_for(
+        &mut robot,
+        &mut teleop,
+        Some(&mut safety),
+        go,
+        Duration::from_secs(1),
+    );
     assert!(peak > 0.2, "no motion after the release: {peak}");
 }
 
@@ -169,14 +254,21 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
 fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
     let mut env = Env::new("client-kill");
     let n = name("ck");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let mut robot = env.robot(&n, UP);
-    let args = ["pub", "velocity", "--source", "teleop", "--vx", "0.3", "--name", &n];
+    let args = [
+        "pub", "velocity", "--source", "teleop", "--vx", "0.3", "--name", &n,
+    ];
     let first = env.spawn("pub1", "chassis", &args);
     assert!(max_speed(&mut robot, Duration::from_millis(1200)) > 0.2);
     env.proc(first).signal(Signal::SIGKILL);
     let killed = Instant::now();
-    let zero = wait_for(Duration::from_secs(2), || mux(&mut robot).output == Twist::ZERO);
+    let zero = wait_for(Duration::from_secs(2), || {
+        mux(&mut robot).output == Twist::ZERO
+    });
     let zero = zero.unwrap_or_else(|| panic!("still commanding after the kill\n{}", env.logs()));
     assert!(killed.elapsed() < Duration::from_secs(1));
     eprintln!("teleop SIGKILLed → zero command after {zero:?} (timeout 300 ms)");
@@ -194,36 +286,58 @@ fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
 fn a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed() {
     let mut env = Env::new("second");
     let n = name("sec");
-    let first = env.chassisd("first", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    let first = env.chassisd(
+        "first",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let mut robot = env.robot(&n, UP);
-    let second = env.chassisd("second", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    let second = env.chassisd(
+        "second",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let code = env.proc(second).wait_exit(Duration::from_secs(10));
     assert_eq!(code, Some(1), "{}", env.logs());
     assert!(
-        env.proc(second).log_text().contains("another chassisd already serves the robot"),
+        env.proc(second)
+            .log_text()
+            .contains("another chassisd already serves the robot"),
         "{}",
         env.logs()
     );
     assert!(env.proc(first).is_running());
     let before = state(&mut robot).seq;
     pause(Duration::from_millis(200));
-    assert!(state(&mut robot).seq > before, "the first one stopped publishing");
+    assert!(
+        state(&mut robot).seq > before,
+        "the first one stopped publishing"
+    );
 }
 
 #[test]
 fn a_service_killed_with_sigkill_restarts_cleanly_and_clients_reconnect() {
     let mut env = Env::new("restart");
     let n = name("rs");
-    let first = env.chassisd("first", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    let first = env.chassisd(
+        "first",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     assert!(
-        drive_for(&mut robot, &mut teleop, None, VelocityRequest::twist(0.3, 0.0), Duration::from_secs(1))
-            > 0.2
+        drive_for(
+            &mut robot,
+            &mut teleop,
+            None,
+            VelocityRequest::twist(0.3, 0.0),
+            Duration::from_secs(1)
+        ) > 0.2
     );
     env.proc(first).signal(Signal::SIGKILL);
     env.proc(first).wait_exit(Duration::from_secs(3));
-    let again = env.chassisd("again", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    let again = env.chassisd(
+        "again",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let started = Instant::now();
     // The old client keeps its source; the new service reads it.
     let peak = loop {
@@ -246,10 +360,19 @@ fn a_service_killed_with_sigkill_restarts_cleanly_and_clients_reconnect() {
 fn sigterm_commands_zero_and_exits_zero() {
     let mut env = Env::new("sigterm");
     let n = name("term");
-    let service = env.chassisd("chassisd", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    let service = env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
-    drive_for(&mut robot, &mut teleop, None, VelocityRequest::twist(0.3, 0.0), Duration::from_millis(600));
+    drive_for(
+        &mut robot,
+        &mut teleop,
+        None,
+        VelocityRequest::twist(0.3, 0.0),
+        Duration::from_millis(600),
+    );
     let tap = robot.frames(512).unwrap();
     env.proc(service).signal(Signal::SIGTERM);
     assert_eq!(env.proc(service).wait_exit(Duration::from_secs(5)), Some(0));
@@ -264,26 +387,56 @@ fn sigterm_commands_zero_and_exits_zero() {
         }
     })
     .unwrap();
-    assert_eq!(last_motion.as_deref(), Some(&[0u8; 8][..]), "last 0x111 is not a stop");
-    assert!(brake_engaged, "the parking brake was not engaged on the way out");
-    assert!(env.proc(service).log_text().contains("stopping: commanding zero"));
+    assert_eq!(
+        last_motion.as_deref(),
+        Some(&[0u8; 8][..]),
+        "last 0x111 is not a stop"
+    );
+    assert!(
+        brake_engaged,
+        "the parking brake was not engaged on the way out"
+    );
+    assert!(
+        env.proc(service)
+            .log_text()
+            .contains("stopping: commanding zero")
+    );
 }
 
 #[test]
 fn control_requests_are_answered_with_success_or_a_reason() {
     let mut env = Env::new("control");
     let n = name("ctl");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n, "--no-safety-monitor"]);
+    env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
     let _robot = env.robot(&n, UP);
     let ok = env.chassis(&["control", "--name", &n, "off-road", "on"]);
-    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
-    assert_eq!(String::from_utf8_lossy(&ok.stdout).trim(), "ok: off-road mode on");
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    assert_eq!(
+        String::from_utf8_lossy(&ok.stdout).trim(),
+        "ok: off-road mode on"
+    );
     let unsupported = env.chassis(&["control", "--name", &n, "lift", "--position", "50"]);
     assert_eq!(unsupported.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&unsupported.stderr).contains("unsupported: titan has no lift"));
+    assert!(
+        String::from_utf8_lossy(&unsupported.stderr).contains("unsupported: titan has no lift")
+    );
     let zero = env.chassis(&["control", "--name", &n, "steering-zero"]);
-    assert!(zero.status.success(), "{}", String::from_utf8_lossy(&zero.stderr));
-    assert_eq!(String::from_utf8_lossy(&zero.stdout).trim(), "ok: steering zero set");
+    assert!(
+        zero.status.success(),
+        "{}",
+        String::from_utf8_lossy(&zero.stderr)
+    );
+    assert_eq!(
+        String::from_utf8_lossy(&zero.stdout).trim(),
+        "ok: steering zero set"
+    );
     let missing = env.chassis(&["status", "--name", "nobody"]);
     assert_eq!(missing.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&missing.stderr).contains("is chassisd running?"));
@@ -295,10 +448,28 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
     let n = name("sl");
     let link = env.dir.join("titan-slcan");
     let link_arg = format!("slcan-pty:{}", link.display());
-    let sim = env.chassisd("sim", &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg]);
-    assert!(wait_for(UP, || link.exists()).is_some(), "no link\n{}", env.logs());
+    let sim = env.chassisd(
+        "sim",
+        &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg],
+    );
+    assert!(
+        wait_for(UP, || link.exists()).is_some(),
+        "no link\n{}",
+        env.logs()
+    );
     let bus = format!("slcan:{}", link.display());
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n, "--bus", &bus, "--no-safety-monitor"]);
+    env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "titan",
+            "--name",
+            &n,
+            "--bus",
+            &bus,
+            "--no-safety-monitor",
+        ],
+    );
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
@@ -312,13 +483,24 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
     });
     assert!(lost.is_some(), "the loss was not reported\n{}", env.logs());
     let _ = std::fs::remove_file(&link);
-    env.chassisd("sim2", &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg]);
+    env.chassisd(
+        "sim2",
+        &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg],
+    );
     let back = wait_for(Duration::from_secs(10), || {
         teleop.send(go).unwrap();
         let s = state(&mut robot);
         s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > 0.1
     });
-    assert!(back.is_some(), "no motion after reconnecting\n{}", env.logs());
+    assert!(
+        back.is_some(),
+        "no motion after reconnecting\n{}",
+        env.logs()
+    );
     let s = state(&mut robot);
-    assert!(s.link.bus_reconnects >= 1, "reconnects {}", s.link.bus_reconnects);
+    assert!(
+        s.link.bus_reconnects >= 1,
+        "reconnects {}",
+        s.link.bus_reconnects
+    );
 }

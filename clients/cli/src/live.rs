@@ -379,14 +379,17 @@ pub fn publish(args: &PubArgs) -> anyhow::Result<()> {
 /// `chassis status`: a human summary.
 pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     let mut robot = connect(name)?;
-    let state = match robot.latest_state()? {
-        Some(s) => Some(s),
-        None => robot.wait_state(Duration::from_secs(1))?,
-    };
     let mux = match robot.latest_mux()? {
         Some(m) => Some(m),
         None => robot.wait_mux(Duration::from_secs(1))?,
     };
+    // A fresh sample, not the one the subscription inherited (it is as old as our start-up).
+    let inherited = robot.latest_state()?;
+    let state = match robot.wait_state(Duration::from_millis(500))? {
+        Some(s) => Some(s),
+        None => inherited,
+    };
+    let age = state.map_or(String::new(), |s| age_text(s.stamp_ns));
     if json {
         println!(
             "{}",
@@ -398,10 +401,9 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         bail!("chassis/{name} published no state within 1 s");
     };
     println!(
-        "robot      {} (chassis/{name})   state #{}, {} old",
+        "robot      {} (chassis/{name})   state #{}, {age} old",
         chassis_client::RobotKind::name(s.robot),
         s.seq,
-        age_text(s.stamp_ns)
     );
     let link = &s.link;
     let health = if s.has_link_flag(LinkFlags::BUS_DOWN) {
@@ -451,14 +453,21 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
             String::new()
         }
     );
-    let faults = FaultFlags::names(s.system.fault_flags);
-    println!(
-        "faults     {}",
-        if faults.is_empty() {
+    let listed = |bits: u64| {
+        let names = FaultFlags::names(bits);
+        if names.is_empty() {
             "none".to_string()
         } else {
-            faults.join(", ")
+            names.join(", ")
         }
+    };
+    println!(
+        "faults     {}",
+        listed(s.system.fault_flags & !FaultFlags::WARNINGS)
+    );
+    println!(
+        "warnings   {}",
+        listed(s.system.fault_flags & FaultFlags::WARNINGS)
     );
     if let Some(m) = mux {
         println!("{}", mux_summary(&m));

@@ -97,6 +97,15 @@ enum EncodeWhat {
     Action(Action),
 }
 
+/// Output into a closed pipe (`chassis echo state | head`) ends the process quietly, as for any
+/// Unix tool, instead of failing every write.
+fn restore_sigpipe() {
+    use nix::sys::signal::{SigHandler, Signal, signal};
+    // SAFETY: called first thing in main, before any thread exists; SIG_DFL installs no handler
+    // code of ours.
+    let _ = unsafe { signal(Signal::SIGPIPE, SigHandler::SigDfl) };
+}
+
 fn parse_robot(text: &str) -> Result<Robot, String> {
     text.parse()
 }
@@ -177,6 +186,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
 }
 
 fn main() -> ExitCode {
+    restore_sigpipe();
     let cli = Cli::parse();
     match run(cli) {
         Ok(code) => code,

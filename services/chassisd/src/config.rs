@@ -108,7 +108,7 @@ pub enum ConfigError {
     NoRobot,
     #[error("'{0}' is not a valid robot name (1-16 of a-z 0-9 - _)")]
     BadName(String),
-    #[error("service.{key}: {reason}")]
+    #[error("{key}: {reason}")]
     Bad { key: &'static str, reason: String },
     #[error("[profile] for {robot}: {source}")]
     Profile {
@@ -168,13 +168,13 @@ impl RawConfig {
         let bus = match overrides.bus {
             Some(bus) => bus,
             None => match &self.service.bus {
-                Some(text) => parse_bus("bus", text)?,
+                Some(text) => parse_bus("service.bus", text)?,
                 None => BusSpec::Sim,
             },
         };
         if !overrides.simulator && matches!(bus, BusSpec::Pty { .. } | BusSpec::SlcanPty { .. }) {
             return Err(ConfigError::Bad {
-                key: "bus",
+                key: "service.bus",
                 reason: format!(
                     "{bus} is for `chassisd sim` (the simulated chassis), not the service"
                 ),
@@ -186,27 +186,38 @@ impl RawConfig {
                 .service
                 .gps
                 .as_deref()
-                .map(|t| parse_bus("gps", t))
+                .map(|t| parse_bus("service.gps", t))
                 .transpose()?,
         };
         if let Some(gps) = &gps
             && !matches!(gps, BusSpec::Serial { .. })
         {
             return Err(ConfigError::Bad {
-                key: "gps",
+                key: "service.gps",
                 reason: format!("{gps}: the GPS receiver is a serial port (serial:PATH[@BAUD])"),
             });
         }
-        let profile = parse_profile(robot, self.profile)?;
+        let mut profile = parse_profile(robot, self.profile)?;
+        profile.validate().map_err(|reason| ConfigError::Bad {
+            key: "profile",
+            reason,
+        })?;
+        // The simulated XBot's wheel separation is known; a real one's must be measured.
+        if let (Profile::Xbot(p), BusSpec::Sim) = (&mut profile, &bus)
+            && p.wheel_separation_m.is_none()
+        {
+            p.wheel_separation_m =
+                Some(chassis_protocols::xbot::XbotSim::DEFAULT_WHEEL_SEPARATION_M);
+        }
         if self.service.tick_ms == 0 || self.service.tick_ms > 100 {
             return Err(ConfigError::Bad {
-                key: "tick_ms",
+                key: "service.tick_ms",
                 reason: "must be 1 to 100 ms".into(),
             });
         }
         if !(self.service.mux_status_hz > 0.0 && self.service.mux_status_hz <= 1000.0) {
             return Err(ConfigError::Bad {
-                key: "mux_status_hz",
+                key: "service.mux_status_hz",
                 reason: "must be above 0 and at most 1000 Hz".into(),
             });
         }
@@ -352,6 +363,52 @@ mod tests {
     }
 
     #[test]
+    fn an_undrivable_profile_is_refused_at_load() {
+        let raw: RawConfig = toml::from_str("[profile]\nlinear_full_scale_mps = 0\n").unwrap();
+        let err = raw
+            .validate(Overrides {
+                robot: Some(Robot::ScoutMini),
+                ..Overrides::default()
+            })
+            .unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("profile: linear_full_scale_mps"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_simulated_xbot_gets_its_known_wheel_separation() {
+        let xbot = |bus| {
+            RawConfig::default()
+                .validate(Overrides {
+                    robot: Some(Robot::Xbot),
+                    bus,
+                    ..Overrides::default()
+                })
+                .unwrap()
+                .profile
+        };
+        let Profile::Xbot(sim) = xbot(None) else {
+            panic!()
+        };
+        assert!(sim.wheel_separation_m.is_some());
+        let real = Some(BusSpec::Serial {
+            path: "/dev/ttyUSB0".into(),
+            baud: None,
+        });
+        let Profile::Xbot(real) = xbot(real) else {
+            panic!()
+        };
+        assert_eq!(
+            real.wheel_separation_m, None,
+            "a real robot's must be measured"
+        );
+    }
+
+    #[test]
+    #[allow(clippy::approx_constant)] // 0.7853 is the reading of the manual's example
     fn a_profile_parameter_can_be_flipped_from_the_file() {
         let raw: RawConfig =
             toml::from_str("[profile]\nangular_full_scale_rad_s = 0.7853\n").unwrap();

@@ -43,6 +43,8 @@ pub type MuxPublisher = Publisher<ipc::Service, MuxStatus, ()>;
 pub type CmdSubscriber = Subscriber<ipc::Service, VelocityRequest, ()>;
 pub type ControlServer = Server<ipc::Service, ControlRequest, (), ControlResponse, ()>;
 pub type SimServer = Server<ipc::Service, SimRequest, (), ControlResponse, ()>;
+/// A server answered with `ControlResponse`.
+pub type Answering<Request> = Server<ipc::Service, Request, (), ControlResponse, ()>;
 
 /// Why the service's ports could not be set up.
 #[derive(Debug, Error)]
@@ -284,7 +286,7 @@ impl Ports {
 pub fn open_desk<Request>(
     node: &Node<ipc::Service>,
     name: &str,
-) -> Result<Desk<Server<ipc::Service, Request, (), ControlResponse, ()>>, IpcError>
+) -> Result<Desk<Answering<Request>>, IpcError>
 where
     Request: std::fmt::Debug + ZeroCopySend + Copy + 'static,
 {

@@ -14,7 +14,7 @@ use chassis_interfaces::{
 };
 use chassis_protocols::{
     ControlAction, ControlOutcome, Driver, DriverConfig, DriverEvent, Profile, Rx, Timestamp,
-    Transmit, nmea, request_to_action, titan,
+    Transmit, nmea, request_to_action, scout_mini, time::Grid, titan, xbot,
 };
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::prelude::*;
@@ -35,20 +35,15 @@ use crate::sim::{SimHandle, firmware_for, injection_of};
 pub type BoxedDriver = Box<dyn Driver>;
 
 /// The driver of `profile`'s robot.
-pub fn driver_for(
-    profile: &Profile,
-    config: &DriverConfig,
-    now: Timestamp,
-) -> Result<BoxedDriver, String> {
+pub fn driver_for(profile: &Profile, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
     match profile {
-        Profile::Titan(p) => Ok(Box::new(titan::TitanDriver::new(
+        Profile::Titan(p) => Box::new(titan::TitanDriver::new(p.clone(), config.clone(), now)),
+        Profile::ScoutMini(p) => Box::new(scout_mini::ScoutMiniDriver::new(
             p.clone(),
             config.clone(),
             now,
-        ))),
-        Profile::ScoutMini(_) | Profile::Xbot(_) => {
-            Err(format!("no driver for {} yet", profile.robot()))
-        }
+        )),
+        Profile::Xbot(p) => Box::new(xbot::XbotDriver::new(p.clone(), config.clone(), now)),
     }
 }
 
@@ -93,10 +88,7 @@ pub fn open_bus(spec: &BusSpec, config: &Config) -> Result<(Bus, Option<SimHandl
     Ok(match spec {
         BusSpec::Sim => {
             let now = clock::now();
-            let firmware = firmware_for(&config.profile, now).map_err(|reason| BusError::Open {
-                name: "sim".into(),
-                reason,
-            })?;
+            let firmware = firmware_for(&config.profile, now);
             let io = |e: std::io::Error| BusError::Open {
                 name: "sim".into(),
                 reason: e.to_string(),
@@ -214,6 +206,8 @@ struct Core {
     throttle_rejected: Throttle,
     throttle_tx: Throttle,
     throttle_publish: Throttle,
+    /// The loop's own tick: mux re-evaluation, smoothing, state refresh.
+    tick: Grid,
 }
 
 /// The part of a state sample that changes only when the chassis reports something new.
@@ -239,6 +233,7 @@ impl Core {
         }
         self.state_seq += 1;
         state.seq = self.state_seq;
+        self.last_rx_frames = state.link.rx_frames;
         self.last_state_body = Some(state_body(&state));
         self.last_state_publish = now;
         let sent = ports
@@ -481,14 +476,14 @@ impl Core {
                 match inlet.subscriber.receive() {
                     Ok(Some(sample)) => {
                         any = true;
-                        if let Err(rejection) = self.mux.on_request(now, index, &sample) {
-                            if let Some(held) = self.throttle_rejected.allow(now) {
-                                warn!(
-                                    source = inlet.name,
-                                    held_back = held,
-                                    "request rejected: {rejection}"
-                                );
-                            }
+                        if let Err(rejection) = self.mux.on_request(now, index, &sample)
+                            && let Some(held) = self.throttle_rejected.allow(now)
+                        {
+                            warn!(
+                                source = inlet.name,
+                                held_back = held,
+                                "request rejected: {rejection}"
+                            );
                         }
                     }
                     Ok(None) => break,
@@ -710,12 +705,17 @@ impl Core {
     }
 
     /// One pass after a wake-up.
-    fn iteration(&mut self, ports: &Ports, fired: Fired) -> Next {
+    fn iteration(&mut self, ports: &Ports, mut fired: Fired) -> Next {
         let mut next = Next::Continue;
-        if fired.bus || self.bus.is_some() && fired.tick {
-            if let Next::Rewire = self.handle_bus(ports) {
-                next = Next::Rewire;
-            }
+        let woke = clock::now();
+        if self.tick.is_due(woke) {
+            self.tick.served(woke);
+            fired.tick = true;
+        }
+        if (fired.bus || self.bus.is_some() && fired.tick)
+            && let Next::Rewire = self.handle_bus(ports)
+        {
+            next = Next::Rewire;
         }
         let now = clock::now();
         if fired.gps
@@ -751,17 +751,18 @@ impl Core {
         {
             self.publish_mux(ports, now);
         }
-        // Refresh the stamps readers judge staleness by, and publish flag changes.
-        let rx_frames = self.driver.state().link.rx_frames;
-        if fired.tick
-            && (rx_frames != self.last_rx_frames
-                || now.saturating_since(self.last_state_publish) >= Duration::from_millis(100))
-        {
-            self.publish_state(ports, now);
-        } else if fired.tick {
-            self.publish_state_if_changed(ports, now);
+        // On the tick, refresh the stamps readers judge staleness by (frames arrived whose
+        // content did not change the sample), and publish flag changes; at least every 100 ms.
+        if fired.tick {
+            let rx_frames = self.driver.state().link.rx_frames;
+            if rx_frames != self.last_rx_frames
+                || now.saturating_since(self.last_state_publish) >= Duration::from_millis(100)
+            {
+                self.publish_state(ports, now);
+            } else {
+                self.publish_state_if_changed(ports, now);
+            }
         }
-        self.last_rx_frames = rx_frames;
 
         if let Next::Rewire = self.try_reopen_bus(now) {
             next = Next::Rewire;
@@ -775,6 +776,7 @@ impl Core {
     /// How long the loop may wait.
     fn timeout(&self, now: Timestamp) -> Duration {
         let deadlines = [
+            Some(self.tick.next()),
             self.driver.poll_timeout(),
             self.mux.next_deadline(now),
             self.bus_retry_at,
@@ -787,7 +789,6 @@ impl Core {
             .map_or(Duration::from_millis(self.config.tick_ms), |t| {
                 t.saturating_since(now)
             })
-            .min(Duration::from_millis(self.config.tick_ms))
     }
 
     fn shutdown(&mut self, ports: &Ports) {
@@ -823,7 +824,7 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
     let with_sim = config.bus == BusSpec::Sim;
     let ports = Ports::open(&config.name, &sources, with_sim)?;
     let now = clock::now();
-    let driver = driver_for(&config.profile, &config.driver, now).map_err(ServiceError::Setup)?;
+    let driver = driver_for(&config.profile, &config.driver, now);
     let mux = Mux::new(&config.mux).map_err(|e| ServiceError::Setup(e.to_string()))?;
     let (bus, sim, retry) = match open_bus(&config.bus, &config) {
         Ok((bus, sim)) => (Some(bus), sim, None),
@@ -864,6 +865,7 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
         throttle_rejected: Throttle::default(),
         throttle_tx: Throttle::default(),
         throttle_publish: Throttle::default(),
+        tick: Grid::new(Duration::from_millis(config.tick_ms), now),
         config,
     };
     if core.bus.is_none() {
@@ -912,9 +914,6 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
             .map(|desk| waitset.attach_notification(&desk.listener))
             .transpose()
             .map_err(attach_err)?;
-        let tick_guard = waitset
-            .attach_interval(Duration::from_millis(core.config.tick_ms))
-            .map_err(attach_err)?;
 
         loop {
             let timeout = core.timeout(clock::now());
@@ -935,9 +934,6 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
                     }
                     if sim_guard.as_ref().is_some_and(|g| id.has_event_from(g)) {
                         fired.sim = true;
-                    }
-                    if id.has_event_from(&tick_guard) {
-                        fired.tick = true;
                     }
                     CallbackProgression::Continue
                 },

@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use chassis_interfaces::{SimKind, SimRequest};
 use chassis_protocols::profile::Robot;
-use chassis_protocols::{Firmware, Injection, Profile, Timestamp, titan};
+use chassis_protocols::{Firmware, Injection, Profile, Timestamp, scout_mini, titan, xbot};
 use nix::poll::{PollFd, PollFlags};
 use nix::sys::time::TimeSpec;
 use tracing::{debug, error, warn};
@@ -24,12 +24,11 @@ use crate::clock;
 pub type BoxedFirmware = Box<dyn Firmware + Send>;
 
 /// The simulated firmware of `profile`'s robot, powered up at `now`.
-pub fn firmware_for(profile: &Profile, now: Timestamp) -> Result<BoxedFirmware, String> {
+pub fn firmware_for(profile: &Profile, now: Timestamp) -> BoxedFirmware {
     match profile {
-        Profile::Titan(p) => Ok(Box::new(titan::TitanSim::new(p.clone(), now))),
-        Profile::ScoutMini(_) | Profile::Xbot(_) => {
-            Err(format!("no simulated firmware for {} yet", profile.robot()))
-        }
+        Profile::Titan(p) => Box::new(titan::TitanSim::new(p.clone(), now)),
+        Profile::ScoutMini(p) => Box::new(scout_mini::ScoutMiniSim::new(p.clone(), now)),
+        Profile::Xbot(p) => Box::new(xbot::XbotSim::new(p.clone(), now)),
     }
 }
 

@@ -71,7 +71,7 @@ pub fn run(config: &Config) -> Result<(), String> {
         "simulated chassis up (faults: chassis/{}/sim)",
         config.name
     );
-    let firmware = firmware_for(&config.profile, clock::now())?;
+    let firmware = firmware_for(&config.profile, clock::now());
     let sim = SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?;
 
     let node = NodeBuilder::new()

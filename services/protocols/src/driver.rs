@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::can::CanFrame;
 use crate::command::Command;
 use crate::profile::Robot;
-use crate::time::Timestamp;
+use crate::time::{Grid, Timestamp};
 
 /// What arrived from the bus.
 #[derive(Debug, Clone, Copy)]
@@ -203,9 +203,8 @@ impl Default for DriverConfig {
 /// always due at once.
 #[derive(Debug, Clone)]
 pub struct CommandSchedule {
-    period: Duration,
+    heartbeat: Grid,
     min_interval: Duration,
-    next_heartbeat: Timestamp,
     last_sent: Option<Timestamp>,
     pending: bool,
     urgent: bool,
@@ -215,9 +214,8 @@ impl CommandSchedule {
     /// The first heartbeat is due at `now`.
     pub fn new(period: Duration, min_interval: Duration, now: Timestamp) -> Self {
         Self {
-            period: period.max(Duration::from_millis(1)),
+            heartbeat: Grid::new(period.max(Duration::from_millis(1)), now),
             min_interval,
-            next_heartbeat: now,
             last_sent: None,
             pending: false,
             urgent: false,
@@ -232,7 +230,7 @@ impl CommandSchedule {
 
     /// True when a motion frame should go out now.
     pub fn is_due(&self, now: Timestamp) -> bool {
-        now >= self.next_heartbeat || self.pending_due().is_some_and(|t| now >= t)
+        self.heartbeat.is_due(now) || self.pending_due().is_some_and(|t| now >= t)
     }
 
     fn pending_due(&self) -> Option<Timestamp> {
@@ -250,35 +248,28 @@ impl CommandSchedule {
         self.last_sent = Some(now);
         self.pending = false;
         self.urgent = false;
-        if now >= self.next_heartbeat {
-            self.next_heartbeat += self.period;
-            if self.next_heartbeat <= now {
-                // We were late by more than a period: rejoin the grid after `now`.
-                let behind = now.saturating_since(self.next_heartbeat).as_nanos();
-                let period = self.period.as_nanos().max(1);
-                let skip = u32::try_from(behind / period + 1).unwrap_or(u32::MAX);
-                self.next_heartbeat += self.period.saturating_mul(skip);
-            }
+        if self.heartbeat.is_due(now) {
+            self.heartbeat.served(now);
         }
     }
 
     /// When the next motion frame is due.
     pub fn deadline(&self) -> Timestamp {
         match self.pending_due() {
-            Some(t) => t.min(self.next_heartbeat),
-            None => self.next_heartbeat,
+            Some(t) => t.min(self.heartbeat.next()),
+            None => self.heartbeat.next(),
         }
     }
 
     /// Restart the grid at `now` (after the bus came back).
     pub fn restart(&mut self, now: Timestamp) {
-        self.next_heartbeat = now;
+        self.heartbeat.restart(now);
         self.pending = false;
         self.urgent = false;
     }
 
     pub fn period(&self) -> Duration {
-        self.period
+        self.heartbeat.period()
     }
 }
 

@@ -23,6 +23,8 @@ pub struct Record {
     pub at: Timestamp,
     pub direction: Direction,
     pub item: Transmit,
+    /// Sent while the wire was cut: it never arrived.
+    pub lost: bool,
 }
 
 /// A driver and a firmware connected by a simulated wire.
@@ -69,10 +71,30 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
 
     /// Runs both sides until `until`.
     pub fn run_until(&mut self, until: Timestamp) {
+        self.run_until_true_at(until, |_| false);
+        self.flush();
+    }
+
+    /// Steps until `condition` holds (checked after every step) or `until`. A side that keeps
+    /// asking for a deadline in the past is counted in [`Pair::stalls`] and time moves on by 1 µs,
+    /// so a buggy side cannot hang a test.
+    fn run_until_true_at(
+        &mut self,
+        until: Timestamp,
+        mut condition: impl FnMut(&Self) -> bool,
+    ) -> Option<Timestamp> {
+        self.flush();
+        if condition(self) {
+            return Some(self.now);
+        }
         let mut same_instant = 0u32;
         while self.now < until {
             let before = self.now;
             self.step(until);
+            self.flush();
+            if condition(self) {
+                return Some(self.now);
+            }
             if self.now == before {
                 same_instant += 1;
                 if same_instant > 10_000 {
@@ -84,7 +106,7 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
                 same_instant = 0;
             }
         }
-        self.flush();
+        None
     }
 
     /// Runs both sides for `duration`.
@@ -98,21 +120,10 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
     pub fn run_until_true(
         &mut self,
         limit: Duration,
-        mut condition: impl FnMut(&Self) -> bool,
+        condition: impl FnMut(&Self) -> bool,
     ) -> Option<Timestamp> {
         let until = self.now + limit;
-        self.flush();
-        if condition(self) {
-            return Some(self.now);
-        }
-        while self.now < until {
-            self.step(until);
-            self.flush();
-            if condition(self) {
-                return Some(self.now);
-            }
-        }
-        None
+        self.run_until_true_at(until, condition)
     }
 
     fn step(&mut self, until: Timestamp) {
@@ -168,6 +179,7 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
                 at: self.now,
                 direction,
                 item: item.clone(),
+                lost: self.cut,
             });
         }
         if self.cut {
@@ -206,6 +218,12 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
     /// Puts something on the wire towards the driver, as if the chassis had sent it.
     pub fn send_to_driver(&mut self, item: Transmit) {
         self.send(Direction::FromChassis, item);
+    }
+
+    /// Puts something on the wire towards the chassis, as if the driver had sent it (a rogue
+    /// node, a corrupted frame).
+    pub fn send_to_firmware(&mut self, item: Transmit) {
+        self.send(Direction::ToChassis, item);
     }
 
     /// Everything recorded while [`Pair::record`] was on.

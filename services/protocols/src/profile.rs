@@ -220,6 +220,89 @@ impl XbotProfile {
     }
 }
 
+/// Checks `value` is finite and above zero.
+fn positive(name: &str, value: f64) -> Result<(), String> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{name} must be above zero (is {value})"))
+    }
+}
+
+fn timeouts(heartbeat_ms: u64, timeout_ms: u64) -> Result<(), String> {
+    if heartbeat_ms == 0 || heartbeat_ms >= timeout_ms {
+        return Err(format!(
+            "heartbeat_period_ms ({heartbeat_ms}) must be above 0 and below command_timeout_ms \
+             ({timeout_ms})"
+        ));
+    }
+    Ok(())
+}
+
+impl TitanProfile {
+    /// Checks the values make a drivable robot.
+    pub fn validate(&self) -> Result<(), String> {
+        positive("wheelbase_m", self.wheelbase_m)?;
+        positive("track_m", self.track_m)?;
+        positive("max_linear_mps", self.max_linear_mps)?;
+        positive("max_linear_steering_mps", self.max_linear_steering_mps)?;
+        positive("max_steer_rad", self.max_steer_rad)?;
+        if self.max_steer_rad >= std::f64::consts::FRAC_PI_2 {
+            return Err("max_steer_rad must be below π/2".into());
+        }
+        if self.steer_speed_limit_above_rad.is_nan() || self.steer_speed_limit_above_rad < 0.0 {
+            return Err("steer_speed_limit_above_rad must not be negative".into());
+        }
+        timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
+    }
+}
+
+impl ScoutMiniProfile {
+    /// Checks the values make a drivable robot (a zero full scale would make every command
+    /// unencodable).
+    pub fn validate(&self) -> Result<(), String> {
+        positive("wheelbase_m", self.wheelbase_m)?;
+        positive("track_m", self.track_m)?;
+        positive("linear_full_scale_mps", self.linear_full_scale_mps)?;
+        positive("angular_full_scale_rad_s", self.angular_full_scale_rad_s)?;
+        positive("max_linear_mps", self.max_linear_mps)?;
+        positive("max_angular_rad_s", self.max_angular_rad_s)?;
+        timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
+    }
+}
+
+impl XbotProfile {
+    /// Checks the values make a drivable robot, and the heartbeat rate the manual asks for.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.baud == 0 || self.gps_baud == 0 {
+            return Err("baud rates must be above zero".into());
+        }
+        positive("wheel_diameter_m", self.wheel_diameter_m)?;
+        positive("encoder_counts_per_rev", self.encoder_counts_per_rev)?;
+        if let Some(separation) = self.wheel_separation_m {
+            positive("wheel_separation_m", separation)?;
+        }
+        positive("max_linear_mps", self.max_linear_mps)?;
+        positive("max_angular_rad_s", self.max_angular_rad_s)?;
+        if self.min_linear_mps.is_nan()
+            || self.min_linear_mps < 0.0
+            || self.min_linear_mps >= self.max_linear_mps
+        {
+            return Err("min_linear_mps must be at least 0 and below max_linear_mps".into());
+        }
+        if self.heartbeat_hz.is_nan() || self.heartbeat_hz <= 5.0 || self.heartbeat_hz >= 10.0 {
+            return Err(format!(
+                "heartbeat_hz must be above 5 and below 10 Hz (the manual's bounds), is {}",
+                self.heartbeat_hz
+            ));
+        }
+        if self.command_timeout_ms == 0 {
+            return Err("command_timeout_ms must be above zero".into());
+        }
+        Ok(())
+    }
+}
+
 /// One robot's profile.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Profile {
@@ -235,6 +318,15 @@ impl Profile {
             Robot::Titan => Profile::Titan(TitanProfile::default()),
             Robot::ScoutMini => Profile::ScoutMini(ScoutMiniProfile::default()),
             Robot::Xbot => Profile::Xbot(XbotProfile::default()),
+        }
+    }
+
+    /// Checks the values make a drivable robot.
+    pub fn validate(&self) -> Result<(), String> {
+        match self {
+            Profile::Titan(p) => p.validate(),
+            Profile::ScoutMini(p) => p.validate(),
+            Profile::Xbot(p) => p.validate(),
         }
     }
 
@@ -275,6 +367,37 @@ mod tests {
         assert_eq!(t.max_linear_mps, 3.0);
         let err = toml::from_str::<TitanProfile>("max_speed = 4").unwrap_err();
         assert!(err.to_string().contains("unknown field"), "{err}");
+    }
+
+    #[test]
+    fn the_defaults_validate_and_nonsense_does_not() {
+        for r in Robot::ALL {
+            assert_eq!(Profile::default_for(r).validate(), Ok(()), "{r}");
+        }
+        let zero = ScoutMiniProfile {
+            angular_full_scale_rad_s: 0.0,
+            ..ScoutMiniProfile::default()
+        };
+        assert!(
+            zero.validate()
+                .unwrap_err()
+                .contains("angular_full_scale_rad_s")
+        );
+        let fast = XbotProfile {
+            heartbeat_hz: 12.0,
+            ..XbotProfile::default()
+        };
+        assert!(fast.validate().unwrap_err().contains("heartbeat_hz"));
+        let nan = TitanProfile {
+            track_m: f64::NAN,
+            ..TitanProfile::default()
+        };
+        assert!(nan.validate().is_err());
+        let slow = TitanProfile {
+            heartbeat_period_ms: 600,
+            ..TitanProfile::default()
+        };
+        assert!(slow.validate().unwrap_err().contains("heartbeat_period_ms"));
     }
 
     #[test]

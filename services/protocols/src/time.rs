@@ -58,6 +58,54 @@ impl Sub<Duration> for Timestamp {
     }
 }
 
+/// A fixed grid of instants `start + k·period`: periodic work that never drifts. A late
+/// service skips the missed slots instead of bunching them up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Grid {
+    period: Duration,
+    next: Timestamp,
+}
+
+impl Grid {
+    /// The first slot is at `start`.
+    pub fn new(period: Duration, start: Timestamp) -> Self {
+        Self {
+            period: period.max(Duration::from_nanos(1)),
+            next: start,
+        }
+    }
+
+    /// True when the next slot has come.
+    pub fn is_due(&self, now: Timestamp) -> bool {
+        now >= self.next
+    }
+
+    /// The next slot.
+    pub fn next(&self) -> Timestamp {
+        self.next
+    }
+
+    pub fn period(&self) -> Duration {
+        self.period
+    }
+
+    /// The slot at [`Grid::next`] was served at `now`: move to the first slot after `now`.
+    pub fn served(&mut self, now: Timestamp) {
+        self.next += self.period;
+        if self.next <= now {
+            let behind = now.saturating_since(self.next).as_nanos();
+            let period = self.period.as_nanos().max(1);
+            let skip = u32::try_from(behind / period + 1).unwrap_or(u32::MAX);
+            self.next += self.period.saturating_mul(skip);
+        }
+    }
+
+    /// Restart the grid at `start`.
+    pub fn restart(&mut self, start: Timestamp) {
+        self.next = start;
+    }
+}
+
 /// The earlier of two optional deadlines.
 pub fn earliest(a: Option<Timestamp>, b: Option<Timestamp>) -> Option<Timestamp> {
     match (a, b) {
@@ -85,6 +133,17 @@ mod tests {
             (Timestamp::from_millis(1500).secs_since(Timestamp::from_millis(500)) - 1.0).abs()
                 < 1e-12
         );
+    }
+
+    #[test]
+    fn a_grid_never_drifts_and_skips_missed_slots() {
+        let mut g = Grid::new(Duration::from_millis(20), Timestamp::from_millis(0));
+        assert!(g.is_due(Timestamp::from_millis(0)));
+        g.served(Timestamp::from_millis(3));
+        assert_eq!(g.next(), Timestamp::from_millis(20));
+        g.served(Timestamp::from_millis(75));
+        assert_eq!(g.next(), Timestamp::from_millis(80));
+        assert!(!g.is_due(Timestamp::from_millis(79)));
     }
 
     #[test]

@@ -15,7 +15,7 @@ use super::{Frame, Lights, MotionCommand, ScoutMiniDriver, ScoutMiniSim, decode,
 use crate::Direction;
 use crate::can::CanFrame;
 use crate::command::Command;
-use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
+use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Transmit};
 use crate::firmware::{Firmware, Injection};
 use crate::pair::Pair;
 use crate::profile::ScoutMiniProfile;
@@ -55,11 +55,6 @@ fn twist(linear_x_mps: f32, angular_z_radps: f32) -> Twist {
 
 /// The harness has `send_to_driver` but no way to put a frame on the wire towards the firmware:
 /// this hands it to the firmware at the pair's present time (no latency).
-fn send_to_firmware(p: &mut ScoutPair, frame: &CanFrame) {
-    let now = p.now();
-    p.firmware.handle_rx(now, Rx::Can(frame));
-}
-
 /// The same frame with its checksum byte off by one.
 fn corrupted(frame: &CanFrame) -> CanFrame {
     let mut data = frame.data().to_vec();
@@ -423,8 +418,10 @@ fn corrupt_frames_from_the_computer_are_dropped_and_raise_the_chassis_checksum_f
         let frame = Frame::MotionCommand(MotionCommand::drive(2.0, 0.0))
             .encode(200 + count, &profile)
             .unwrap();
-        send_to_firmware(&mut p, &corrupted(&frame));
+        p.send_to_firmware(Transmit::Can(corrupted(&frame)));
     }
+    // They cross the wire (250 µs) before the chassis sees them.
+    p.run_for(ms(1));
     let last_bad = p.now();
     assert_eq!(p.firmware.truth().bad_checksums_received, 10);
     let seen = p

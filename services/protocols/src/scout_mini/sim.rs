@@ -18,38 +18,7 @@ use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit, wrap_angle};
 use crate::firmware::{Firmware, Injection, SimTruth};
 use crate::profile::{Robot, ScoutMiniProfile};
-use crate::time::{Timestamp, earliest};
-
-/// A fixed grid `start + k·period`.
-#[derive(Debug, Clone, Copy)]
-struct Grid {
-    period: Duration,
-    next: Timestamp,
-}
-
-impl Grid {
-    fn new(period: Duration, start: Timestamp) -> Self {
-        Self {
-            period: period.max(Duration::from_nanos(1)),
-            next: start,
-        }
-    }
-
-    fn is_due(&self, now: Timestamp) -> bool {
-        now >= self.next
-    }
-
-    /// The slot at `self.next` was served at `now`: move to the first slot after `now`.
-    fn served(&mut self, now: Timestamp) {
-        self.next += self.period;
-        if self.next <= now {
-            let behind = now.saturating_since(self.next).as_nanos();
-            let period = self.period.as_nanos().max(1);
-            let skip = u32::try_from(behind / period + 1).unwrap_or(u32::MAX);
-            self.next += self.period.saturating_mul(skip);
-        }
-    }
-}
+use crate::time::{Grid, Timestamp, earliest};
 
 /// The last obeyed motion command.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -875,10 +844,10 @@ impl Firmware for ScoutMiniSim {
             self.command_until,
             self.booting_until,
             self.silent_until,
-            self.flood.map(|f| f.grid.next),
+            self.flood.map(|f| f.grid.next()),
         ]
         .into_iter()
-        .fold(Some(self.fast.next), earliest)
+        .fold(Some(self.fast.next()), earliest)
     }
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {

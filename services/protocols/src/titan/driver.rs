@@ -334,7 +334,8 @@ impl TitanDriver {
         self.set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
 
         if new_mode != old_mode {
-            let level = if new_mode == ControlMode::COMMAND {
+            // Losing command mode is worth a warning; finding out the mode at power-up is not.
+            let level = if new_mode == ControlMode::COMMAND || old_mode == ControlMode::UNKNOWN {
                 Level::Info
             } else {
                 Level::Warn

@@ -16,7 +16,7 @@ use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit, wrap_angle};
 use crate::firmware::{Firmware, Injection, SimTruth};
 use crate::profile::{Robot, TitanProfile};
-use crate::time::{Timestamp, earliest};
+use crate::time::{Grid, Timestamp, earliest};
 
 /// Who holds authority over the chassis.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -24,37 +24,6 @@ enum Mode {
     Standby,
     Command,
     Remote,
-}
-
-/// A fixed grid `start + k·period`.
-#[derive(Debug, Clone, Copy)]
-struct Grid {
-    period: Duration,
-    next: Timestamp,
-}
-
-impl Grid {
-    fn new(period: Duration, start: Timestamp) -> Self {
-        Self {
-            period: period.max(Duration::from_nanos(1)),
-            next: start,
-        }
-    }
-
-    fn is_due(&self, now: Timestamp) -> bool {
-        now >= self.next
-    }
-
-    /// The slot at `self.next` was served at `now`: move to the first slot after `now`.
-    fn served(&mut self, now: Timestamp) {
-        self.next += self.period;
-        if self.next <= now {
-            let behind = now.saturating_since(self.next).as_nanos();
-            let period = self.period.as_nanos().max(1);
-            let skip = u32::try_from(behind / period + 1).unwrap_or(u32::MAX);
-            self.next += self.period.saturating_mul(skip);
-        }
-    }
 }
 
 /// The last accepted motion command.
@@ -1122,13 +1091,13 @@ impl Firmware for TitanSim {
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        let grids = self.fast.next.min(self.slow.next).min(self.bms.next);
+        let grids = self.fast.next().min(self.slow.next()).min(self.bms.next());
         [
             self.heartbeat_deadline(),
             self.zero_replies.front().copied(),
             self.booting_until,
             self.silent_until,
-            self.flood.map(|f| f.grid.next),
+            self.flood.map(|f| f.grid.next()),
         ]
         .into_iter()
         .fold(Some(grids), earliest)

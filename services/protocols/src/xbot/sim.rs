@@ -13,38 +13,7 @@ use crate::DecodeError;
 use crate::driver::{Rx, Transmit, wrap_angle};
 use crate::firmware::{Firmware, Injection, SimTruth};
 use crate::profile::{Robot, XbotProfile};
-use crate::time::{Timestamp, earliest};
-
-/// A fixed grid `start + k·period`.
-#[derive(Debug, Clone, Copy)]
-struct Grid {
-    period: Duration,
-    next: Timestamp,
-}
-
-impl Grid {
-    fn new(period: Duration, start: Timestamp) -> Self {
-        Self {
-            period: period.max(Duration::from_micros(1)),
-            next: start,
-        }
-    }
-
-    fn is_due(&self, now: Timestamp) -> bool {
-        now >= self.next
-    }
-
-    /// The slot at `self.next` was served at `now`: move to the first slot after `now`.
-    fn served(&mut self, now: Timestamp) {
-        self.next += self.period;
-        if self.next <= now {
-            let behind = now.saturating_since(self.next).as_nanos();
-            let period = self.period.as_nanos().max(1);
-            let skip = u32::try_from(behind / period + 1).unwrap_or(u32::MAX);
-            self.next += self.period.saturating_mul(skip);
-        }
-    }
-}
+use crate::time::{Grid, Timestamp, earliest};
 
 /// The simulated XBot board: the chassis side of the RS232 link, built on the XBot codec.
 ///
@@ -840,12 +809,12 @@ impl Firmware for XbotSim {
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        let reports = self.booting_until.is_none().then_some(self.reports.next);
+        let reports = self.booting_until.is_none().then_some(self.reports.next());
         [
             self.heartbeat_deadline(),
             self.booting_until,
             self.silent_until,
-            self.flood.map(|f| f.next),
+            self.flood.map(|f| f.next()),
         ]
         .into_iter()
         .fold(reports, earliest)
