@@ -1,0 +1,3 @@
+//! chassis-bench.
+
+fn main() {}

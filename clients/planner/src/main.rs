@@ -1,0 +1,3 @@
+//! chassis-planner.
+
+fn main() {}

@@ -1,0 +1,3 @@
+//! chassis-safety.
+
+fn main() {}

@@ -1,0 +1,3 @@
+//! chassis-teleop.
+
+fn main() {}
