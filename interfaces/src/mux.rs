@@ -78,8 +78,10 @@ impl ClampFlags {
     pub const QUANTISED: u32 = 1 << 9;
     /// The chassis cannot move now (standby, brake, RC authority, fault): zero was sent.
     pub const CHASSIS_NOT_READY: u32 = 1 << 10;
+    /// A limiting source (the safety monitor) clamped the winner's request.
+    pub const SAFETY_LIMIT: u32 = 1 << 11;
 
-    pub const ALL: [(u32, &'static str); 11] = [
+    pub const ALL: [(u32, &'static str); 12] = [
         (Self::LINEAR_LIMIT, "linear_limit"),
         (Self::LINEAR_LIMIT_STEERING, "linear_limit_steering"),
         (Self::STEER_LIMIT, "steer_limit"),
@@ -94,6 +96,7 @@ impl ClampFlags {
         (Self::CONFIG_SPEED_LIMIT, "config_speed_limit"),
         (Self::QUANTISED, "quantised"),
         (Self::CHASSIS_NOT_READY, "chassis_not_ready"),
+        (Self::SAFETY_LIMIT, "safety_limit"),
     ];
 
     pub fn names(bits: u32) -> Vec<&'static str> {
@@ -146,6 +149,8 @@ impl SourceFlags {
     pub const HEARTBEAT: u8 = 1 << 3;
     /// A lock of higher priority blocks it.
     pub const BLOCKED: u8 = 1 << 4;
+    /// Its latest request is a speed envelope that currently limits the output.
+    pub const LIMITING: u8 = 1 << 5;
 }
 
 /// One configured velocity source, as the mux sees it.

@@ -15,6 +15,10 @@ impl RequestFlags {
     /// A heartbeat: the source is alive but asks for nothing (it does not compete in the mux).
     /// The safety monitor sends these while all is well.
     pub const HEARTBEAT: u32 = 1 << 1;
+    /// The `limit_*` fields hold a speed envelope: the source does not compete, but clamps the
+    /// output of every source of its priority or lower, per direction (the safety monitor
+    /// slowing down, or blocking only the motion towards an obstacle). Implies a heartbeat.
+    pub const LIMIT: u32 = 1 << 2;
 }
 
 /// A velocity request from one source. Its priority and timeout come from the service's
@@ -33,7 +37,7 @@ impl RequestFlags {
     ZeroCopySend,
     Serialize,
 )]
-#[type_name("chassis::VelocityRequest.v1")]
+#[type_name("chassis::VelocityRequest.v2")]
 pub struct VelocityRequest {
     /// `CLOCK_MONOTONIC` time the request was created, ns.
     pub stamp_ns: u64,
@@ -56,6 +60,14 @@ pub struct VelocityRequest {
     pub lock_release: u32,
     #[serde(skip)]
     pub _reserved: u32,
+    /// With [`RequestFlags::LIMIT`]: largest forward speed, m/s (≥ 0; 0 blocks forward motion).
+    pub limit_forward_mps: f32,
+    /// With [`RequestFlags::LIMIT`]: largest reverse speed, m/s (≥ 0; 0 blocks reversing).
+    pub limit_reverse_mps: f32,
+    /// With [`RequestFlags::LIMIT`]: largest |lateral speed|, m/s (≥ 0).
+    pub limit_lateral_mps: f32,
+    /// With [`RequestFlags::LIMIT`]: largest |yaw rate|, rad/s (≥ 0).
+    pub limit_angular_radps: f32,
 }
 
 impl VelocityRequest {
@@ -78,6 +90,18 @@ impl VelocityRequest {
         }
     }
 
+    /// A speed envelope imposed on every source of this source's priority or lower.
+    pub fn limit(forward_mps: f32, reverse_mps: f32, lateral_mps: f32, angular_radps: f32) -> Self {
+        Self {
+            flags: RequestFlags::LIMIT,
+            limit_forward_mps: forward_mps,
+            limit_reverse_mps: reverse_mps,
+            limit_lateral_mps: lateral_mps,
+            limit_angular_radps: angular_radps,
+            ..Self::default()
+        }
+    }
+
     /// A heartbeat that asks for nothing.
     pub fn heartbeat() -> Self {
         Self {
@@ -86,16 +110,28 @@ impl VelocityRequest {
         }
     }
 
+    /// True when the request asks for no motion of its own (a heartbeat or a limit).
     pub fn is_heartbeat(&self) -> bool {
-        self.flags & RequestFlags::HEARTBEAT != 0
+        self.flags & (RequestFlags::HEARTBEAT | RequestFlags::LIMIT) != 0
+    }
+
+    pub fn is_limit(&self) -> bool {
+        self.flags & RequestFlags::LIMIT != 0
     }
 
     pub fn uses_steer(&self) -> bool {
         self.flags & RequestFlags::STEER != 0
     }
 
-    /// True when every number in the request is finite (NaN and ±inf are rejected by the mux).
+    /// True when every number in the request is finite (NaN and ±inf are rejected by the mux),
+    /// and a limit's envelope is not negative.
     pub fn is_finite(&self) -> bool {
+        let limits = [
+            self.limit_forward_mps,
+            self.limit_reverse_mps,
+            self.limit_lateral_mps,
+            self.limit_angular_radps,
+        ];
         [
             self.linear_x_mps,
             self.linear_y_mps,
@@ -103,7 +139,9 @@ impl VelocityRequest {
             self.steer_rad,
         ]
         .iter()
+        .chain(&limits)
         .all(|v| v.is_finite())
+            && (!self.is_limit() || limits.iter().all(|v| *v >= 0.0))
     }
 }
 
@@ -114,7 +152,7 @@ mod tests {
 
     #[test]
     fn velocity_request_layout_is_pinned() {
-        assert_eq!(size_of::<VelocityRequest>(), 48);
+        assert_eq!(size_of::<VelocityRequest>(), 64);
         assert_eq!(align_of::<VelocityRequest>(), 8);
         assert_eq!(offset_of!(VelocityRequest, stamp_ns), 0);
         assert_eq!(offset_of!(VelocityRequest, seq), 8);
@@ -125,6 +163,16 @@ mod tests {
         assert_eq!(offset_of!(VelocityRequest, flags), 32);
         assert_eq!(offset_of!(VelocityRequest, lock_engage), 36);
         assert_eq!(offset_of!(VelocityRequest, lock_release), 40);
+        assert_eq!(offset_of!(VelocityRequest, limit_forward_mps), 48);
+        assert_eq!(offset_of!(VelocityRequest, limit_angular_radps), 60);
+    }
+
+    #[test]
+    fn a_limit_is_alive_but_asks_for_nothing_and_must_not_be_negative() {
+        let l = VelocityRequest::limit(0.0, 0.5, 0.0, 1.0);
+        assert!(l.is_heartbeat() && l.is_limit() && l.is_finite());
+        assert!(!VelocityRequest::limit(-0.1, 0.5, 0.0, 1.0).is_finite());
+        assert!(!VelocityRequest::limit(f32::INFINITY, 0.5, 0.0, 1.0).is_finite());
     }
 
     #[test]

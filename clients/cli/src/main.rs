@@ -14,6 +14,8 @@ mod codec;
 mod decode;
 mod encode;
 mod live;
+mod record;
+mod top;
 
 use action::{Action, VelocityArgs};
 
@@ -73,6 +75,14 @@ enum Cmd {
         #[command(subcommand)]
         command: live::ControlCmd,
     },
+    /// A live dashboard: state, mux decisions, bus statistics (frames/s per id, errors, drops)
+    /// and end-to-end latency.
+    Top(top::TopArgs),
+    /// Record a robot's frames, state and mux decisions (MCAP, opens in Foxglove), or its CAN
+    /// frames as a can-utils log (--candump).
+    Record(record::RecordArgs),
+    /// Play a recording back through the simulated bus, at recorded speed or --max-speed.
+    Replay(record::ReplayArgs),
     /// Inject a fault into the simulated chassis of a running chassisd (bus sim) or of
     /// `chassisd sim`.
     Sim {
@@ -182,6 +192,9 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             live::control(&name, &command).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Sim { name, command } => live::sim(&name, &command).map(|()| ExitCode::SUCCESS),
+        Cmd::Top(args) => top::run(&args).map(|()| ExitCode::SUCCESS),
+        Cmd::Record(args) => record::record(&args).map(|()| ExitCode::SUCCESS),
+        Cmd::Replay(args) => record::replay(&args).map(|()| ExitCode::SUCCESS),
     }
 }
 

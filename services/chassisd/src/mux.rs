@@ -8,6 +8,9 @@
 //!   source (or the operator) releases it; it survives the holder's death.
 //! * A required source (the safety monitor) must be fresh — a heartbeat is enough — or the output
 //!   is zero.
+//! * A source may send a speed envelope instead of a request (`RequestFlags::LIMIT`): it does not
+//!   compete, but clamps the output of every source of its priority or lower, per direction —
+//!   how the safety monitor slows the robot or blocks only the motion towards an obstacle.
 //! * Configured speed limits, then acceleration smoothing; a stop from a safety-priority source,
 //!   a stale required source, a lock and the timeout of the last active source are never
 //!   smoothed: motion never outlives a dead source's timeout.
@@ -424,11 +427,22 @@ impl Mux {
         };
 
         let (limited, mut clamp_flags) = self.apply_speed_limits(requested);
+        let (limited, limited_by) = match winner {
+            Some(w) => self.apply_envelopes(now, self.sources[w].config.priority, limited),
+            None => (limited, Vec::new()),
+        };
+        let safety_limited = limited_by
+            .iter()
+            .any(|&i| self.sources[i].config.priority >= self.limits.safety_priority);
+        if !limited_by.is_empty() {
+            clamp_flags |= ClampFlags::SAFETY_LIMIT;
+        }
         let safety_stop = winner.is_some_and(|w| {
             self.sources[w].config.priority >= self.limits.safety_priority && limited.is_zero()
         });
         // A source that falls silent gets no grace period: its motion ends with its timeout.
         let unsmoothed = safety_stop
+            || safety_limited
             || matches!(
                 reason,
                 ZeroReason::REQUIRED_SOURCE_STALE
@@ -446,6 +460,11 @@ impl Mux {
 
         let previous = self.status;
         self.fill_status(now, winner, reason, requested, output, clamp_flags);
+        for &i in &limited_by {
+            if let Some(slot) = self.status.sources.get_mut(i) {
+                slot.flags |= SourceFlags::LIMITING;
+            }
+        }
         let changed = previous.active_source != self.status.active_source
             || previous.zero_reason != self.status.zero_reason
             || previous.output != self.status.output
@@ -466,6 +485,34 @@ impl Mux {
         clamp(&mut t.linear_y_mps, self.limits.max_lateral_mps);
         clamp(&mut t.angular_z_radps, self.limits.max_angular_radps);
         (t, flags)
+    }
+
+    /// Clamps `t` to the envelopes of the fresh limiting sources at or above `priority`;
+    /// returns the sources whose envelope changed it.
+    fn apply_envelopes(&self, now: Timestamp, priority: u8, mut t: Twist) -> (Twist, Vec<usize>) {
+        let mut by = Vec::new();
+        for (i, s) in self.sources.iter().enumerate() {
+            let Some((_, r)) = s.latest else { continue };
+            if !r.is_limit() || !s.is_fresh(now) || s.config.priority < priority {
+                continue;
+            }
+            let before = t;
+            t.linear_x_mps = t
+                .linear_x_mps
+                .clamp(-r.limit_reverse_mps, r.limit_forward_mps);
+            t.linear_y_mps = t
+                .linear_y_mps
+                .clamp(-r.limit_lateral_mps, r.limit_lateral_mps);
+            if t.flags & RequestFlags::STEER == 0 {
+                t.angular_z_radps = t
+                    .angular_z_radps
+                    .clamp(-r.limit_angular_radps, r.limit_angular_radps);
+            }
+            if t != before {
+                by.push(i);
+            }
+        }
+        (t, by)
     }
 
     fn smooth(&self, target: Twist, dt: f64) -> (Twist, u32) {
@@ -911,6 +958,59 @@ mod tests {
             .unwrap();
         // Safety's last heartbeat was at 1000 ms; its timeout is 200 ms.
         assert_eq!(m.evaluate(ms(1201)).output, Twist::ZERO);
+    }
+
+    #[test]
+    fn a_safety_envelope_blocks_only_the_direction_towards_the_obstacle_at_once() {
+        let mut config = MuxConfig::default();
+        config.limits.linear_accel_mps2 = 0.5;
+        let mut m = Mux::new(&config).unwrap();
+        let ahead_blocked = |t: u64| VelocityRequest {
+            stamp_ns: ms(t).as_nanos(),
+            ..VelocityRequest::limit(0.0, 1.0, 1.0, 2.0)
+        };
+        m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.0)).unwrap();
+        m.evaluate(ms(0));
+        for t in (20..=2000).step_by(20) {
+            m.on_request(ms(t), SAFETY, &heartbeat(ms(t))).unwrap();
+            m.on_request(ms(t), TELEOP, &request(ms(t), 0.6)).unwrap();
+            m.evaluate(ms(t));
+        }
+        assert_eq!(m.output().linear_x_mps, 0.6);
+        // An obstacle ahead: forward blocked at once, no ramp.
+        m.on_request(ms(2010), SAFETY, &ahead_blocked(2010))
+            .unwrap();
+        let d = m.evaluate(ms(2010));
+        assert_eq!(d.output.linear_x_mps, 0.0);
+        assert_eq!(
+            m.status().active_source,
+            TELEOP as u8,
+            "teleop still wins; it is limited"
+        );
+        assert_ne!(m.status().clamp_flags & ClampFlags::SAFETY_LIMIT, 0);
+        assert_ne!(m.status().sources[SAFETY].flags & SourceFlags::LIMITING, 0);
+        // Reversing away is allowed (ramped as usual).
+        for t in (2030..=3000).step_by(20) {
+            m.on_request(ms(t), SAFETY, &ahead_blocked(t)).unwrap();
+            m.on_request(ms(t), TELEOP, &request(ms(t), -0.3)).unwrap();
+            m.evaluate(ms(t));
+        }
+        assert_eq!(m.output().linear_x_mps, -0.3);
+        // The limit keeps the safety monitor alive for the required rule.
+        assert_ne!(m.status().zero_reason, ZeroReason::REQUIRED_SOURCE_STALE);
+    }
+
+    #[test]
+    fn a_limit_from_a_lower_priority_source_does_not_bind_a_higher_one() {
+        let mut m = mux_unrequired();
+        let slow = VelocityRequest {
+            stamp_ns: 0,
+            ..VelocityRequest::limit(0.1, 0.1, 0.1, 0.1)
+        };
+        m.on_request(ms(0), PLANNER, &slow).unwrap();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.5)).unwrap();
+        assert_eq!(m.evaluate(ms(0)).output.linear_x_mps, 0.5);
     }
 
     #[test]
