@@ -17,6 +17,7 @@ mod frame;
 mod mux;
 mod names;
 mod request;
+mod safety;
 mod state;
 mod text;
 
@@ -28,6 +29,7 @@ pub use frame::{BusFrame, FrameDirection, FrameKind};
 pub use mux::{ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Twist, ZeroReason};
 pub use names::{ServiceKind, service_name, valid_robot_name};
 pub use request::{RequestFlags, VelocityRequest};
+pub use safety::{EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus};
 pub use state::{
     BmsState, ChassisState, CommandEcho, ControlMode, DriverStatus, FaultFlags, GROUP_SLOTS,
     GpsFix, Group, ImuState, LiftState, LightsState, LinkFlags, LinkStats, MotionState, MotorState,

@@ -673,3 +673,170 @@ impl Ticker {
         }
     }
 }
+
+/// Most readers of a service made with [`Robot::publisher`].
+const PUBLICATION_READERS: usize = 40;
+/// Most processes attached to a service made with [`Robot::publisher`].
+const PUBLICATION_NODES: usize = 64;
+
+/// A client's own publish-subscribe service beside the robot's, `chassis/<name>/<suffix>` (the
+/// safety monitor's `SafetyStatus` on `chassis/<name>/safety`), made by [`Robot::publisher`]:
+/// history 1 (a late reader gets the latest sample), one publisher, safe overflow, and a paired
+/// event service that wakes the readers.
+#[derive(Debug)]
+pub struct Publication<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> {
+    publisher: Publisher<ipc::Service, T, ()>,
+    notifier: Notifier<ipc::Service>,
+}
+
+impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Publication<T> {
+    /// Publishes `sample` and wakes the readers.
+    pub fn send(&self, sample: T) -> Result<(), ClientError> {
+        self.publisher
+            .send_copy(sample)
+            .map_err(ipc("publishing"))?;
+        self.notifier.notify().map_err(ipc("waking the readers"))?;
+        Ok(())
+    }
+}
+
+/// A reader of a service made with [`Robot::publisher`], opened by [`Robot::subscriber`].
+#[derive(Debug)]
+pub struct Subscription<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> {
+    subscriber: Subscriber<ipc::Service, T, ()>,
+    events: Listener<ipc::Service>,
+    latest: Option<T>,
+}
+
+impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Subscription<T> {
+    fn drain(&mut self) -> Result<bool, ClientError> {
+        let mut any = false;
+        while let Some(sample) = self.subscriber.receive().map_err(ipc("receiving"))? {
+            self.latest = Some(*sample);
+            any = true;
+        }
+        Ok(any)
+    }
+
+    /// The newest sample received so far.
+    pub fn latest(&mut self) -> Result<Option<T>, ClientError> {
+        self.drain()?;
+        Ok(self.latest)
+    }
+
+    /// Waits at most `timeout` for a sample newer than the ones seen so far. A new reader gets
+    /// the publisher's latest sample with its next publication.
+    pub fn wait(&mut self, timeout: Duration) -> Result<Option<T>, ClientError> {
+        if self.drain()? {
+            return Ok(self.latest);
+        }
+        let deadline =
+            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+        loop {
+            let left = deadline.saturating_sub(now_ns());
+            if left == 0 {
+                return Ok(None);
+            }
+            self.events
+                .timed_wait(|_| {}, Duration::from_nanos(left))
+                .map_err(ipc("waiting for a sample"))?;
+            if self.drain()? {
+                return Ok(self.latest);
+            }
+        }
+    }
+}
+
+impl Robot {
+    fn publication_name(&self, suffix: &str) -> Result<ServiceName, ClientError> {
+        if !valid_robot_name(suffix) {
+            return Err(ClientError::BadName(suffix.to_string()));
+        }
+        service(&format!("chassis/{}/{suffix}", self.name))
+    }
+
+    /// Creates (or opens) the service `chassis/<name>/<suffix>` and becomes its one publisher.
+    /// `suffix` is 1-16 of a-z 0-9 - _ and must not be one of the robot's own services.
+    pub fn publisher<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
+        &self,
+        suffix: &str,
+    ) -> Result<Publication<T>, ClientError> {
+        let name = self.publication_name(suffix)?;
+        let publisher = self
+            .node
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .history_size(1)
+            .subscriber_max_buffer_size(4)
+            .max_publishers(1)
+            .max_subscribers(PUBLICATION_READERS)
+            .max_nodes(PUBLICATION_NODES)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(ipc("creating the service"))?
+            .publisher_builder()
+            .create()
+            .map_err(|e| match e {
+                iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers => {
+                    ClientError::Ipc(format!(
+                        "chassis/{}/{suffix} already has its publisher (another process)",
+                        self.name
+                    ))
+                }
+                other => ClientError::Ipc(format!("publisher: {other:?}")),
+            })?;
+        let notifier = self
+            .node
+            .service_builder(&name)
+            .event()
+            .max_nodes(PUBLICATION_NODES)
+            .max_notifiers(2)
+            .max_listeners(PUBLICATION_READERS)
+            .open_or_create()
+            .map_err(ipc("creating the event service"))?
+            .notifier_builder()
+            .create()
+            .map_err(ipc("notifier"))?;
+        Ok(Publication {
+            publisher,
+            notifier,
+        })
+    }
+
+    /// Opens the service `chassis/<name>/<suffix>` made by [`Robot::publisher`]; `None` when
+    /// nobody has made it.
+    pub fn subscriber<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
+        &self,
+        suffix: &str,
+    ) -> Result<Option<Subscription<T>>, ClientError> {
+        let name = self.publication_name(suffix)?;
+        let subscriber = match self
+            .node
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .open()
+        {
+            Ok(s) => s,
+            Err(PublishSubscribeOpenError::DoesNotExist) => return Ok(None),
+            Err(e) => return Err(ipc("opening the service")(e)),
+        }
+        .subscriber_builder()
+        .buffer_size(4)
+        .create()
+        .map_err(ipc("subscriber"))?;
+        let events = self
+            .node
+            .service_builder(&name)
+            .event()
+            .open()
+            .map_err(ipc("opening the event service"))?
+            .listener_builder()
+            .create()
+            .map_err(ipc("listener"))?;
+        Ok(Some(Subscription {
+            subscriber,
+            events,
+            latest: None,
+        }))
+    }
+}

@@ -1,0 +1,521 @@
+//! The safety monitor (`chassis-safety`) with the real processes: chassisd on the simulated
+//! chassis with its `safety` source required, the monitor, the CLI, and the test as the teleop
+//! and planner clients.
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::disallowed_methods
+)]
+
+use std::time::{Duration, Instant};
+
+use chassis_tests::*;
+use nix::sys::signal::Signal;
+
+const UP: Duration = Duration::from_secs(10);
+
+fn name(tag: &str) -> String {
+    // Robot names are at most 16 characters.
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+fn source(robot: &mut Robot, name: &str) -> Source {
+    robot
+        .source(name)
+        .unwrap_or_else(|e| panic!("source {name}: {e}"))
+}
+
+/// Starts chassisd on the simulated `robot` (safety source required) and the monitor; returns
+/// the connection once the monitor's heartbeats reach the mux, and the monitor's index.
+fn start(env: &mut Env, robot: &str, n: &str) -> (Robot, usize) {
+    env.chassisd("chassisd", &["--robot", robot, "--name", n]);
+    let mut r = env.robot(n, UP);
+    let monitor = env.spawn("safety", "chassis-safety", &["--name", n]);
+    let alive = wait_for(UP, || {
+        mux(&mut r)
+            .sources()
+            .iter()
+            .any(|s| s.name() == "safety" && s.has(SourceFlags::FRESH))
+    });
+    assert!(
+        alive.is_some(),
+        "the monitor never reached the mux\n{}",
+        env.logs()
+    );
+    (r, monitor)
+}
+
+/// Sends every request every 20 ms for `duration`; returns the lowest and highest forward speed
+/// seen.
+fn drive(
+    robot: &mut Robot,
+    sources: &mut [(&mut Source, VelocityRequest)],
+    duration: Duration,
+) -> (f32, f32) {
+    let end = Instant::now() + duration;
+    let (mut low, mut high) = (f32::MAX, f32::MIN);
+    while Instant::now() < end {
+        for (s, r) in sources.iter_mut() {
+            s.send(*r).unwrap();
+        }
+        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(20)) {
+            low = low.min(state.motion.linear_mps);
+            high = high.max(state.motion.linear_mps);
+        }
+    }
+    (low, high)
+}
+
+/// Keeps sending while waiting for `condition` on the mux status; returns the time it took.
+fn drive_until(
+    robot: &mut Robot,
+    sources: &mut [(&mut Source, VelocityRequest)],
+    timeout: Duration,
+    mut condition: impl FnMut(&MuxStatus, &ChassisState) -> bool,
+) -> Option<Duration> {
+    let start = Instant::now();
+    let mut last_sent = Instant::now() - Duration::from_secs(1);
+    while start.elapsed() < timeout {
+        if last_sent.elapsed() >= Duration::from_millis(20) {
+            for (s, r) in sources.iter_mut() {
+                s.send(*r).unwrap();
+            }
+            last_sent = Instant::now();
+        }
+        let _ = robot.wait_mux(Duration::from_millis(5));
+        let (Some(m), Some(s)) = (robot.latest_mux().unwrap(), robot.latest_state().unwrap())
+        else {
+            continue;
+        };
+        if condition(&m, &s) {
+            return Some(start.elapsed());
+        }
+    }
+    None
+}
+
+/// The monitor's latest `SafetyStatus`.
+fn safety(robot: &Robot) -> SafetyStatus {
+    let mut sub = robot
+        .subscriber::<SafetyStatus>(SafetyStatus::SERVICE)
+        .unwrap()
+        .expect("the monitor made chassis/<name>/safety");
+    sub.wait(Duration::from_secs(1))
+        .unwrap()
+        .expect("a safety status within 1 s")
+}
+
+/// Injects a fault into the simulated chassis; returns the service's answer stamp (the
+/// injection happened just before it).
+fn inject(robot: &mut Robot, kind: u8, on: bool, value: f64) -> u64 {
+    let answer = robot
+        .sim(
+            SimRequest {
+                kind,
+                flag: u8::from(on),
+                value,
+                ..SimRequest::default()
+            },
+            Duration::from_secs(3),
+        )
+        .unwrap();
+    assert!(answer.is_ok(), "{}", answer.message());
+    answer.stamp_ns
+}
+
+fn run_ok(env: &Env, args: &[&str]) -> String {
+    let out = env.chassis(args);
+    assert!(
+        out.status.success(),
+        "chassis {args:?}: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.logs()
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+#[test]
+fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_lets_it_reverse() {
+    let mut env = Env::new("safety-obstacle");
+    let n = name("sob");
+    let (mut robot, _) = start(&mut env, "xbot", &n);
+    let mut planner = source(&mut robot, "planner");
+    let mut teleop = source(&mut robot, "teleop");
+    let ahead = VelocityRequest::twist(0.3, 0.0);
+
+    // The planner drives.
+    let moving = drive_until(
+        &mut robot,
+        &mut [(&mut planner, ahead)],
+        Duration::from_secs(5),
+        |_, s| s.motion.linear_mps > 0.25,
+    );
+    assert!(moving.is_some(), "the planner cannot drive\n{}", env.logs());
+
+    // An obstacle 0.3 m ahead: inside the 0.35 m stop zone.
+    let injected = inject(&mut robot, SimKind::OBSTACLE_AHEAD, true, 0.3);
+    let mut blocked_ns = 0;
+    let blocked = drive_until(
+        &mut robot,
+        &mut [(&mut planner, ahead)],
+        Duration::from_secs(3),
+        |m, _| {
+            blocked_ns = m.stamp_ns;
+            m.output.linear_x_mps <= 0.0
+        },
+    );
+    assert!(
+        blocked.is_some(),
+        "the planner still drives into the obstacle\n{}",
+        env.logs()
+    );
+    let still = drive_until(
+        &mut robot,
+        &mut [(&mut planner, ahead)],
+        Duration::from_secs(3),
+        |_, s| s.motion.linear_mps.abs() < 0.01,
+    )
+    .unwrap();
+    let s = safety(&robot);
+    let decided_ns = s.last_trigger_ns[usize::from(SafetyRule::ULTRASONIC)];
+    let ms = |ns: u64| ns.saturating_sub(injected) as f64 / 1e6;
+    eprintln!(
+        "obstacle injected → monitor decided after {:.1} ms (incl. the next 20 ms sensor \
+         report) → mux output vx ≤ 0 after {:.1} ms → robot still {still:?} later",
+        ms(decided_ns),
+        ms(blocked_ns)
+    );
+    assert!(ms(blocked_ns) < 150.0, "{} ms", ms(blocked_ns));
+    assert!(blocked_ns >= decided_ns);
+    assert!(s.is_active(SafetyRule::ULTRASONIC), "{s:?}");
+    assert_eq!(s.action, SafetyAction::SLOW);
+    assert_eq!(s.limit_forward_mps, 0.0);
+    assert_eq!(s.limit_reverse_mps, SafetyStatus::UNLIMITED);
+    assert!(s.last_text().contains("stop zone"), "{}", s.last_text());
+    let m = mux(&mut robot);
+    assert_ne!(m.clamp_flags & ClampFlags::SAFETY_LIMIT, 0);
+    let status = run_ok(&env, &["status", "--name", &n]);
+    assert!(status.contains("SLOW by ultrasonic"), "{status}");
+
+    // Teleop (higher priority) cannot push through either.
+    let (_, high) = drive(
+        &mut robot,
+        &mut [(&mut planner, ahead), (&mut teleop, ahead)],
+        Duration::from_millis(800),
+    );
+    assert!(
+        high < 0.02,
+        "teleop moved towards the obstacle at {high} m/s"
+    );
+    assert_eq!(mux(&mut robot).active().unwrap().name(), "teleop");
+    assert!(mux(&mut robot).output.linear_x_mps <= 0.0);
+
+    // Reversing away is allowed.
+    let x0 = state(&mut robot).odometry.x_m;
+    let (low, _) = drive(
+        &mut robot,
+        &mut [(&mut teleop, VelocityRequest::twist(-0.2, 0.0))],
+        Duration::from_millis(1500),
+    );
+    let x1 = state(&mut robot).odometry.x_m;
+    assert!(low < -0.15, "reversed at {low} m/s");
+    assert!(x1 < x0 - 0.1, "moved from {x0} m to {x1} m");
+
+    // The obstacle goes: forward again (after the 300 ms release time).
+    run_ok(&env, &["sim", "--name", &n, "obstacle-ahead", "--clear"]);
+    let (_, high) = drive(
+        &mut robot,
+        &mut [(&mut teleop, ahead)],
+        Duration::from_millis(1500),
+    );
+    assert!(
+        high > 0.25,
+        "no forward motion after the obstacle left: {high}"
+    );
+    assert_eq!(safety(&robot).action, SafetyAction::NONE);
+}
+
+#[test]
+fn sigkill_of_the_safety_monitor_stops_the_robot_within_the_source_timeout() {
+    let mut env = Env::new("safety-kill");
+    let n = name("skl");
+    let (mut robot, monitor) = start(&mut env, "titan", &n);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.4, 0.0);
+    let (_, high) = drive(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_millis(1500),
+    );
+    assert!(high > 0.3, "peak {high} m/s with the monitor alive");
+
+    env.proc(monitor).signal(Signal::SIGKILL);
+    let stopped = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(2),
+        |m, _| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == Twist::ZERO,
+    )
+    .unwrap_or_else(|| panic!("no safe stop after the kill\n{}", env.logs()));
+    eprintln!("safety monitor SIGKILLed → mux output zero after {stopped:?} (timeout 200 ms)");
+    assert!(
+        stopped <= Duration::from_millis(250),
+        "safe stop after {stopped:?}"
+    );
+    let (_, high) = drive(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_millis(1500),
+    );
+    let still = state(&mut robot).motion.linear_mps.abs();
+    assert!(still < 0.01, "still rolling at {still} (peak {high})");
+}
+
+#[test]
+fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
+    let mut env = Env::new("safety-latch");
+    let n = name("slt");
+    let (mut robot, _) = start(&mut env, "titan", &n);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.3, 0.0);
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    assert!(high > 0.2, "peak {high}");
+
+    let estop = mux(&mut robot).lock_index("estop").unwrap();
+    let pressed = inject(&mut robot, SimKind::BUMPER, true, 0.0);
+    let latched = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(3),
+        |m, _| m.locks()[estop].held == 1,
+    );
+    assert!(latched.is_some(), "no latch\n{}", env.logs());
+    let m = mux(&mut robot);
+    assert_eq!(m.locks()[estop].holder, 0, "held by the safety source");
+    eprintln!(
+        "bumper pressed → estop lock engaged after {:.1} ms",
+        m.locks()[estop].since_ns.saturating_sub(pressed) as f64 / 1e6
+    );
+    run_ok(&env, &["sim", "--name", &n, "bumper", "off"]);
+
+    // Teleop keeps asking; the lock holds after the bumper is released.
+    let end = Instant::now() + Duration::from_millis(2000);
+    while Instant::now() < end {
+        teleop.send(go).unwrap();
+        let m = mux(&mut robot);
+        assert_eq!(m.output, Twist::ZERO, "commanded motion under the latch");
+    }
+    let s = state(&mut robot);
+    assert_eq!(
+        s.system.fault_flags & FaultFlags::BUMPER,
+        0,
+        "bumper still on"
+    );
+    assert!(
+        s.motion.linear_mps.abs() < 0.01,
+        "rolling at {}",
+        s.motion.linear_mps
+    );
+    let status = safety(&robot);
+    assert_eq!(status.action, SafetyAction::LATCH);
+    assert!(status.is_active(SafetyRule::BUMPER));
+    assert_eq!(status.estop, EstopState::HELD_BY_MONITOR);
+    assert_eq!(status.trigger_count(SafetyRule::BUMPER), 1);
+    let text = run_ok(&env, &["status", "--name", &n]);
+    assert!(text.contains("LATCH by bumper"), "{text}");
+
+    let out = run_ok(&env, &["control", "--name", &n, "estop-release"]);
+    assert!(out.contains("estop released"), "{out}");
+    let (_, high) = drive(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_millis(1500),
+    );
+    assert!(
+        high > 0.2,
+        "no motion after the release: {high}\n{}",
+        env.logs()
+    );
+    let status = safety(&robot);
+    assert_eq!(status.action, SafetyAction::NONE);
+    assert_eq!(status.estop, EstopState::FREE);
+    assert!(env.proc(0).is_running(), "chassisd died\n{}", env.logs());
+}
+
+#[test]
+fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
+    let mut env = Env::new("safety-usr1");
+    let n = name("sus");
+    let (mut robot, monitor) = start(&mut env, "xbot", &n);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.3, 0.0);
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    assert!(high > 0.2, "peak {high}");
+    env.proc(monitor).signal(Signal::SIGUSR1);
+    let estop = mux(&mut robot).lock_index("estop").unwrap();
+    let latched = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(2),
+        |m, _| m.locks()[estop].held == 1 && m.output == Twist::ZERO,
+    );
+    assert!(latched.is_some(), "no latch\n{}", env.logs());
+    eprintln!(
+        "SIGUSR1 → estop held, output zero after {:?}",
+        latched.unwrap()
+    );
+    let status = safety(&robot);
+    assert!(status.is_active(SafetyRule::OPERATOR), "{status:?}");
+    assert_eq!(status.action, SafetyAction::LATCH);
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    assert!(
+        state(&mut robot).motion.linear_mps.abs() < 0.01,
+        "peak {high}"
+    );
+    run_ok(&env, &["control", "--name", &n, "estop-release"]);
+    let (_, high) = drive(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_millis(1500),
+    );
+    assert!(
+        high > 0.2,
+        "no motion after the release: {high}\n{}",
+        env.logs()
+    );
+    assert!(env.proc(monitor).is_running());
+}
+
+#[test]
+fn a_low_battery_stops_the_robot_and_a_charged_one_lets_it_drive_again() {
+    let mut env = Env::new("safety-battery");
+    let n = name("sbt");
+    let (mut robot, _) = start(&mut env, "titan", &n);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.3, 0.0);
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    assert!(high > 0.2, "peak {high}");
+
+    // 12 %: below the monitor's 15 %, above the 10 % at which the TITAN cuts power itself.
+    run_ok(&env, &["sim", "--name", &n, "battery", "12"]);
+    let stopped = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(5),
+        |m, _| m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
+    )
+    .unwrap_or_else(|| panic!("no stop for a low battery\n{}", env.logs()));
+    eprintln!("battery 12 % → safety stop after {stopped:?} (1 s trigger time)");
+    let status = safety(&robot);
+    assert!(status.is_active(SafetyRule::BATTERY), "{status:?}");
+    assert_eq!(status.action, SafetyAction::STOP);
+    assert!(
+        status.last_text().contains("% < 15 %"),
+        "{}",
+        status.last_text()
+    );
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    let still = state(&mut robot).motion.linear_mps.abs();
+    assert!(still < 0.01, "rolling at {still} (peak {high})");
+
+    run_ok(&env, &["sim", "--name", &n, "battery", "60"]);
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(3));
+    assert!(
+        high > 0.2,
+        "no motion with a charged battery: {high}\n{}",
+        env.logs()
+    );
+}
+
+#[test]
+fn a_silent_chassis_stops_the_robot_until_it_talks_again() {
+    let mut env = Env::new("safety-silent");
+    let n = name("ssl");
+    let (mut robot, _) = start(&mut env, "titan", &n);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.3, 0.0);
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    assert!(high > 0.2, "peak {high}");
+
+    run_ok(&env, &["sim", "--name", &n, "silence", "1.5"]);
+    let stopped = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(2),
+        |m, _| m.output == Twist::ZERO,
+    )
+    .unwrap_or_else(|| panic!("no stop while the chassis is silent\n{}", env.logs()));
+    eprintln!("chassis silent → safety stop after {stopped:?}");
+    assert!(safety(&robot).is_active(SafetyRule::STALE));
+    // The chassis talks again after 1.5 s; motion 0.5 s after that.
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(3));
+    assert!(
+        high > 0.2,
+        "no motion after the silence: {high}\n{}",
+        env.logs()
+    );
+    assert!(!safety(&robot).is_active(SafetyRule::STALE));
+}
+
+#[test]
+fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
+    let mut env = Env::new("safety-restart");
+    let n = name("srs");
+    // The monitor first: no service yet. It says so and keeps trying.
+    let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
+    let first = env.chassisd("first", &["--robot", "titan", "--name", &n]);
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.3, 0.0);
+    let moving = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(5),
+        |_, s| s.motion.linear_mps > 0.2,
+    );
+    assert!(moving.is_some(), "no motion\n{}", env.logs());
+
+    env.proc(first).signal(Signal::SIGKILL);
+    env.proc(first).wait_exit(Duration::from_secs(3));
+    assert!(env.proc(monitor).is_running(), "{}", env.logs());
+    let restarted = now_ns();
+    env.chassisd("again", &["--robot", "titan", "--name", &n]);
+    // Only samples of the new service count (the last ones of the first are still cached).
+    let moving = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(10),
+        |m, s| {
+            m.stamp_ns > restarted
+                && s.stamp_ns > restarted
+                && m.sources()
+                    .iter()
+                    .any(|s| s.name() == "safety" && s.has(SourceFlags::FRESH))
+                && s.motion.linear_mps > 0.2
+        },
+    );
+    assert!(
+        moving.is_some(),
+        "no motion after the restart\n{}",
+        env.logs()
+    );
+    assert!(env.proc(monitor).is_running(), "{}", env.logs());
+
+    // SIGTERM: a last stop, exit code 0.
+    env.proc(monitor).signal(Signal::SIGTERM);
+    let stopped = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(2),
+        |m, _| m.output == Twist::ZERO,
+    );
+    assert!(
+        stopped.is_some_and(|t| t < Duration::from_millis(200)),
+        "{stopped:?}\n{}",
+        env.logs()
+    );
+    assert_eq!(env.proc(monitor).wait_exit(Duration::from_secs(3)), Some(0));
+    eprintln!("monitor SIGTERMed → zero after {:?}", stopped.unwrap());
+}
