@@ -1,0 +1,654 @@
+//! The dashboard's arithmetic, pure: frames, states and mux decisions go in with the time they
+//! were seen; rates, drops and latency percentiles come out. Tests feed hand-made samples.
+//!
+//! Every stamp is `CLOCK_MONOTONIC` ns, the clock of chassisd's stamps, so each latency below is
+//! one subtraction of two readings of the same clock:
+//!
+//! * **frame→state**: a state sample that a frame changed carries that frame's read time
+//!   (`ChassisState::stamp_ns`); its age when this process wakes up with it is bus read → decode
+//!   → publish → shared memory → this subscriber awake. Only samples whose content differs
+//!   from the previous one seen and whose stamp is newer count: chassisd publishes those the
+//!   moment the frame is decoded. The others are its refreshes on the 20 ms tick (frames came
+//!   but changed nothing), published up to a tick after their stamp. (A subscriber sees only
+//!   the newest of a burst of samples — one per frame of a 50 Hz burst of ten — so consecutive
+//!   `seq` cannot be required.)
+//! * **state age**: the same age for every sample, refreshes included — how old the newest
+//!   state is when a subscriber gets it.
+//! * **decision→wire**: a mux decision that changed the output (`MuxStatus::stamp_ns`, its
+//!   predecessor `seq - 1` had another output) → the first motion frame written to the bus at or
+//!   after it (its `BusFrame::stamp_ns` on the tap). Both stamps are chassisd's.
+//! * **request→decision**: for those decisions that took in a new request of the winner (its
+//!   `last_seq` moved), that request's age (`active_age_ms`: the client's stamp, or its arrival
+//!   if earlier, to the decision), whole milliseconds as the mux reports them. Smoothing steps
+//!   between two requests are left out: their age is only the time since the last request.
+//!   request→wire is the sum of the two.
+
+use std::collections::{HashMap, VecDeque};
+
+use chassis_client::{
+    BusFrame, ChassisState, FrameDirection, FrameKind, GROUP_SLOTS, LinkStats, MuxStatus, RobotKind,
+};
+use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
+use chassis_protocols::{CanFrame, scout_mini, titan, xbot};
+
+/// Frame rates are counted over this sliding window.
+pub const WINDOW_NS: u64 = 1_000_000_000;
+/// Latency percentiles are over this many latest samples.
+pub const SAMPLES: usize = 1000;
+/// TX stamps kept for matching decisions.
+const TX_KEEP_NS: u64 = 2_000_000_000;
+/// A decision with no motion frame this long after it is given up.
+const MATCH_GIVE_UP_NS: u64 = 500_000_000;
+
+/// What a rate is counted per.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum FrameKey {
+    /// A CAN id (the standard and extended spaces apart).
+    Can { id: u32, extended: bool },
+    /// An XBot frame found in the serial stream, by command id.
+    Xbot { command: u8 },
+    /// A chunk of the GPS receiver's NMEA stream.
+    Gps,
+}
+
+impl FrameKey {
+    /// `0x211`, `0x18FF0001`, `xbot 0x10`, `gps`.
+    pub fn text(&self) -> String {
+        match self {
+            FrameKey::Can {
+                id,
+                extended: false,
+            } => format!("0x{id:03X}"),
+            FrameKey::Can { id, extended: true } => format!("0x{id:08X}"),
+            FrameKey::Xbot { command } => format!("0x{command:02X}"),
+            FrameKey::Gps => "gps".into(),
+        }
+    }
+}
+
+/// The counts of one key in one direction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeyStats {
+    pub direction: u8,
+    pub key: FrameKey,
+    /// The frame's name in the robot's protocol, when it decodes.
+    pub name: Option<&'static str>,
+    /// Frames in the window.
+    pub in_window: u64,
+    /// Frames since the dashboard started.
+    pub total: u64,
+}
+
+impl KeyStats {
+    /// Frames per second over the window.
+    pub fn rate_hz(&self) -> f64 {
+        self.in_window as f64 * 1e9 / WINDOW_NS as f64
+    }
+}
+
+/// Names frames by decoding them with the robot's default profile.
+#[derive(Debug)]
+struct Namer {
+    robot: u8,
+    titan: TitanProfile,
+    scout: ScoutMiniProfile,
+    xbot: XbotProfile,
+}
+
+impl Namer {
+    fn can(&self, frame: &BusFrame) -> Option<&'static str> {
+        let can = if frame.flags & BusFrame::EXTENDED_ID != 0 {
+            CanFrame::new_extended(frame.can_id, frame.payload())
+        } else {
+            CanFrame::new(frame.can_id, frame.payload())
+        }
+        .ok()?;
+        match self.robot {
+            RobotKind::TITAN => titan::decode(&can, &self.titan).ok().map(|f| f.name()),
+            RobotKind::SCOUT_MINI => scout_mini::decode(&can, &self.scout)
+                .ok()
+                .map(|d| d.frame.name()),
+            _ => None,
+        }
+    }
+}
+
+/// Frame rates per key and direction, tap drops, and the recent motion frames written.
+#[derive(Debug)]
+pub struct BusStats {
+    namer: Namer,
+    keys: Vec<KeyStats>,
+    index: HashMap<(u8, FrameKey), usize>,
+    /// (stamp, index into `keys`) of every counted frame in the window, oldest first.
+    window: VecDeque<(u64, usize)>,
+    xbot_rx: xbot::StreamParser,
+    xbot_tx: xbot::StreamParser,
+    last_seq: Option<u64>,
+    /// Frames the tap lost between two reads (gaps in `BusFrame::seq`).
+    pub dropped: u64,
+    /// Frames read from the tap.
+    pub frames: u64,
+    /// Candidate XBot frames the dashboard's own stream parsers rejected.
+    pub serial_rejects: u64,
+    /// Stamps of motion frames written (TX), oldest first.
+    motion_tx: VecDeque<u64>,
+}
+
+impl BusStats {
+    /// `robot` is a [`RobotKind`]; it only names the CAN ids.
+    pub fn new(robot: u8) -> Self {
+        Self {
+            namer: Namer {
+                robot,
+                titan: TitanProfile::default(),
+                scout: ScoutMiniProfile::default(),
+                xbot: XbotProfile::default(),
+            },
+            keys: Vec::new(),
+            index: HashMap::new(),
+            window: VecDeque::new(),
+            xbot_rx: xbot::StreamParser::new(),
+            xbot_tx: xbot::StreamParser::new(),
+            last_seq: None,
+            dropped: 0,
+            frames: 0,
+            serial_rejects: 0,
+            motion_tx: VecDeque::new(),
+        }
+    }
+
+    /// Counts one frame of the tap.
+    pub fn on_frame(&mut self, frame: &BusFrame) {
+        self.frames += 1;
+        if let Some(last) = self.last_seq
+            && frame.seq > last + 1
+        {
+            self.dropped += frame.seq - last - 1;
+        }
+        if self.last_seq.is_none_or(|last| frame.seq > last) {
+            self.last_seq = Some(frame.seq);
+        }
+        match frame.kind {
+            FrameKind::CAN => {
+                let key = FrameKey::Can {
+                    id: frame.can_id,
+                    extended: frame.flags & BusFrame::EXTENDED_ID != 0,
+                };
+                let slot = self.slot(frame.direction, key);
+                if self.keys[slot].name.is_none() {
+                    self.keys[slot].name = self.namer.can(frame);
+                }
+                self.count(slot, frame.stamp_ns, frame.direction);
+            }
+            FrameKind::GPS => {
+                let slot = self.slot(frame.direction, FrameKey::Gps);
+                self.keys[slot].name = Some("nmea");
+                self.count(slot, frame.stamp_ns, frame.direction);
+            }
+            _ => {
+                let parser = if frame.direction == FrameDirection::TX {
+                    &mut self.xbot_tx
+                } else {
+                    &mut self.xbot_rx
+                };
+                parser.push(frame.payload());
+                let mut found = Vec::new();
+                while let Some(item) = parser.next_frame(&self.namer.xbot) {
+                    match item {
+                        Ok(f) => found.push((f.command_id(), f.name())),
+                        Err(_) => self.serial_rejects += 1,
+                    }
+                }
+                for (command, name) in found {
+                    let slot = self.slot(frame.direction, FrameKey::Xbot { command });
+                    self.keys[slot].name = Some(name);
+                    self.count(slot, frame.stamp_ns, frame.direction);
+                }
+            }
+        }
+    }
+
+    fn slot(&mut self, direction: u8, key: FrameKey) -> usize {
+        if let Some(&i) = self.index.get(&(direction, key)) {
+            return i;
+        }
+        self.keys.push(KeyStats {
+            direction,
+            key,
+            name: None,
+            in_window: 0,
+            total: 0,
+        });
+        let i = self.keys.len() - 1;
+        self.index.insert((direction, key), i);
+        i
+    }
+
+    fn count(&mut self, slot: usize, stamp_ns: u64, direction: u8) {
+        let stats = &mut self.keys[slot];
+        stats.total += 1;
+        stats.in_window += 1;
+        let motion = matches!(stats.name, Some("motion_command" | "velocity"));
+        self.window.push_back((stamp_ns, slot));
+        if direction == FrameDirection::TX && motion {
+            self.motion_tx.push_back(stamp_ns);
+            while self
+                .motion_tx
+                .front()
+                .is_some_and(|&t| t.saturating_add(TX_KEEP_NS) < stamp_ns)
+            {
+                self.motion_tx.pop_front();
+            }
+        }
+    }
+
+    /// Drops frames older than the window before `now_ns`.
+    pub fn expire(&mut self, now_ns: u64) {
+        let start = now_ns.saturating_sub(WINDOW_NS);
+        while let Some(&(stamp, slot)) = self.window.front() {
+            if stamp > start {
+                break;
+            }
+            self.window.pop_front();
+            if let Some(k) = self.keys.get_mut(slot) {
+                k.in_window = k.in_window.saturating_sub(1);
+            }
+        }
+    }
+
+    /// Every key seen, RX first, then by key.
+    pub fn keys(&self) -> Vec<KeyStats> {
+        let mut keys = self.keys.clone();
+        keys.sort_by_key(|k| (k.direction, k.key));
+        keys
+    }
+
+    /// The first motion frame written at or after `stamp_ns`.
+    fn first_motion_tx_after(&self, stamp_ns: u64) -> Option<u64> {
+        self.motion_tx.iter().copied().find(|&t| t >= stamp_ns)
+    }
+}
+
+/// Percentiles of one measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Summary {
+    pub count: usize,
+    pub p50_ns: u64,
+    pub p99_ns: u64,
+    pub max_ns: u64,
+}
+
+/// The latest [`SAMPLES`] values of one measurement, ns.
+#[derive(Debug, Clone, Default)]
+pub struct Samples {
+    values: VecDeque<u64>,
+    /// Samples since start (the window holds the latest).
+    pub seen: u64,
+}
+
+impl Samples {
+    pub fn push(&mut self, value_ns: u64) {
+        if self.values.len() == SAMPLES {
+            self.values.pop_front();
+        }
+        self.values.push_back(value_ns);
+        self.seen += 1;
+    }
+
+    /// Nearest-rank p50 and p99 and the largest value; `None` before the first sample.
+    pub fn summary(&self) -> Option<Summary> {
+        if self.values.is_empty() {
+            return None;
+        }
+        let mut sorted: Vec<u64> = self.values.iter().copied().collect();
+        sorted.sort_unstable();
+        let rank = |p: f64| {
+            let n = sorted.len();
+            // Nearest rank: ceil(p·n), 1-based.
+            let r = ((p * n as f64).ceil() as usize).clamp(1, n);
+            sorted[r - 1]
+        };
+        Some(Summary {
+            count: sorted.len(),
+            p50_ns: rank(0.50),
+            p99_ns: rank(0.99),
+            max_ns: sorted[sorted.len() - 1],
+        })
+    }
+}
+
+/// The content of a state sample, without what changes on every publish.
+fn body(state: &ChassisState) -> ChassisState {
+    ChassisState {
+        seq: 0,
+        stamp_ns: 0,
+        group_stamp_ns: [0; GROUP_SLOTS],
+        link: LinkStats::default(),
+        ..*state
+    }
+}
+
+/// A mux decision that changed the output, waiting for its motion frame.
+#[derive(Debug, Clone, Copy)]
+struct Decision {
+    stamp_ns: u64,
+    /// The winner's request age, when this decision took in a new request from it.
+    request_age_ms: Option<u32>,
+}
+
+/// The latency measurements; see the module docs for what each one means.
+#[derive(Debug, Default)]
+pub struct Latency {
+    pub frame_to_state: Samples,
+    pub state_age: Samples,
+    pub decision_to_wire: Samples,
+    pub request_to_decision: Samples,
+    /// Output changes for which no motion frame followed within 500 ms.
+    pub unmatched: u64,
+    last_state: Option<ChassisState>,
+    last_mux: Option<MuxStatus>,
+    pending: VecDeque<Decision>,
+}
+
+impl Latency {
+    /// A state sample this process woke up with at `now_ns`. `measure` is false for samples
+    /// found waiting while the dashboard was busy (their age would include its own delay).
+    pub fn on_state(&mut self, now_ns: u64, state: &ChassisState, measure: bool) {
+        if let Some(last) = &self.last_state
+            && state.seq <= last.seq
+        {
+            return;
+        }
+        if measure && state.stamp_ns != 0 {
+            let age = now_ns.saturating_sub(state.stamp_ns);
+            self.state_age.push(age);
+            let frame_made_it = self
+                .last_state
+                .as_ref()
+                .is_some_and(|last| state.stamp_ns > last.stamp_ns && body(state) != body(last));
+            if frame_made_it {
+                self.frame_to_state.push(age);
+            }
+        }
+        self.last_state = Some(*state);
+    }
+
+    /// A mux status, in the order published.
+    pub fn on_mux(&mut self, mux: &MuxStatus) {
+        if let Some(last) = &self.last_mux {
+            if mux.seq <= last.seq {
+                return;
+            }
+            if mux.seq == last.seq + 1 && mux.output != last.output {
+                // A decision that took in a new request of the winner (not a smoothing step
+                // between two of its requests, whose age is only the time since the last one).
+                let new_request = mux.active().is_some_and(|winner| {
+                    last.sources()
+                        .get(usize::from(mux.active_source))
+                        .is_none_or(|before| before.last_seq != winner.last_seq)
+                });
+                self.pending.push_back(Decision {
+                    stamp_ns: mux.stamp_ns,
+                    request_age_ms: (new_request && mux.active_age_ms != u32::MAX)
+                        .then_some(mux.active_age_ms),
+                });
+            }
+        }
+        self.last_mux = Some(*mux);
+    }
+
+    /// Pairs waiting decisions with the motion frames written after them.
+    pub fn resolve(&mut self, now_ns: u64, bus: &BusStats) {
+        while let Some(decision) = self.pending.front().copied() {
+            match bus.first_motion_tx_after(decision.stamp_ns) {
+                Some(tx) => {
+                    self.decision_to_wire.push(tx - decision.stamp_ns);
+                    if let Some(age_ms) = decision.request_age_ms {
+                        self.request_to_decision.push(u64::from(age_ms) * 1_000_000);
+                    }
+                }
+                None if now_ns.saturating_sub(decision.stamp_ns) > MATCH_GIVE_UP_NS => {
+                    self.unmatched += 1;
+                }
+                None => break,
+            }
+            self.pending.pop_front();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    fn can(seq: u64, stamp_ms: u64, id: u32, direction: u8) -> BusFrame {
+        let mut f = BusFrame {
+            seq,
+            stamp_ns: stamp_ms * MS,
+            can_id: id,
+            direction,
+            kind: FrameKind::CAN,
+            ..BusFrame::default()
+        };
+        f.set_payload(&[0; 8]);
+        f
+    }
+
+    fn rate(stats: &BusStats, direction: u8, text: &str) -> f64 {
+        stats
+            .keys()
+            .iter()
+            .find(|k| k.direction == direction && k.key.text() == text)
+            .map_or(0.0, KeyStats::rate_hz)
+    }
+
+    #[test]
+    fn rates_per_id_and_direction_count_the_last_second() {
+        let mut stats = BusStats::new(RobotKind::TITAN);
+        let mut seq = 0;
+        // 0x211 at 50 Hz and 0x221 at 100 Hz received, 0x111 at 50 Hz sent, for 2 s.
+        for ms in 0..2000u64 {
+            if ms % 20 == 0 {
+                seq += 1;
+                stats.on_frame(&can(seq, ms, 0x211, FrameDirection::RX));
+                seq += 1;
+                stats.on_frame(&can(seq, ms, 0x111, FrameDirection::TX));
+            }
+            if ms % 10 == 0 {
+                seq += 1;
+                stats.on_frame(&can(seq, ms, 0x221, FrameDirection::RX));
+            }
+        }
+        // The window is (now - 1 s, now].
+        stats.expire(1990 * MS);
+        assert_eq!(rate(&stats, FrameDirection::RX, "0x211"), 50.0);
+        assert_eq!(rate(&stats, FrameDirection::RX, "0x221"), 100.0);
+        assert_eq!(rate(&stats, FrameDirection::TX, "0x111"), 50.0);
+        assert_eq!(rate(&stats, FrameDirection::RX, "0x111"), 0.0);
+        let keys = stats.keys();
+        assert_eq!(keys.len(), 3);
+        assert_eq!(keys[0].direction, FrameDirection::RX, "RX first");
+        assert_eq!(keys[0].total, 100);
+        assert_eq!(stats.dropped, 0);
+        // Half a second later with nothing new: half the window is left.
+        stats.expire(2490 * MS);
+        assert_eq!(rate(&stats, FrameDirection::RX, "0x211"), 25.0);
+        stats.expire(3000 * MS);
+        assert_eq!(rate(&stats, FrameDirection::RX, "0x221"), 0.0);
+    }
+
+    #[test]
+    fn sequence_gaps_count_as_tap_drops() {
+        let mut stats = BusStats::new(RobotKind::TITAN);
+        for seq in [5, 6, 7, 10, 11, 20] {
+            stats.on_frame(&can(seq, seq, 0x211, FrameDirection::RX));
+        }
+        assert_eq!(stats.dropped, 2 + 8);
+        assert_eq!(stats.frames, 6);
+    }
+
+    #[test]
+    fn titan_frames_are_named_by_decoding_them() {
+        let mut stats = BusStats::new(RobotKind::TITAN);
+        stats.on_frame(&can(1, 0, 0x111, FrameDirection::TX));
+        stats.on_frame(&can(2, 0, 0x7AB, FrameDirection::RX));
+        let keys = stats.keys();
+        let name = |text: &str| {
+            keys.iter()
+                .find(|k| k.key.text() == text)
+                .and_then(|k| k.name)
+        };
+        assert_eq!(name("0x111"), Some("motion_command"));
+        assert_eq!(name("0x7AB"), None);
+    }
+
+    #[test]
+    fn xbot_frames_are_found_across_serial_chunks() {
+        let profile = XbotProfile::default();
+        let frame = xbot::Frame::Velocity(xbot::VelocityCommand::default())
+            .encode(&profile)
+            .unwrap();
+        let mut stats = BusStats::new(RobotKind::XBOT);
+        let mut bytes = frame.clone();
+        bytes.extend_from_slice(&frame);
+        let (a, b) = bytes.split_at(frame.len() + 2);
+        for (seq, chunk) in [a, b].into_iter().enumerate() {
+            let mut f = BusFrame {
+                seq: seq as u64 + 1,
+                stamp_ns: seq as u64 * MS,
+                direction: FrameDirection::TX,
+                kind: FrameKind::SERIAL,
+                ..BusFrame::default()
+            };
+            f.set_payload(chunk);
+            stats.on_frame(&f);
+        }
+        let keys = stats.keys();
+        assert_eq!(keys.len(), 1);
+        assert_eq!(keys[0].key, FrameKey::Xbot { command: 0x03 });
+        assert_eq!(keys[0].name, Some("velocity"));
+        assert_eq!(keys[0].total, 2);
+        assert_eq!(stats.first_motion_tx_after(0), Some(0));
+        assert_eq!(stats.first_motion_tx_after(1), Some(MS));
+    }
+
+    #[test]
+    fn percentiles_are_nearest_rank_over_the_latest_samples() {
+        let mut s = Samples::default();
+        assert_eq!(s.summary(), None);
+        for v in 1..=100 {
+            s.push(v);
+        }
+        assert_eq!(
+            s.summary(),
+            Some(Summary {
+                count: 100,
+                p50_ns: 50,
+                p99_ns: 99,
+                max_ns: 100
+            })
+        );
+        s.push(7);
+        assert_eq!(s.summary().map(|x| x.count), Some(101));
+        for _ in 0..SAMPLES {
+            s.push(3);
+        }
+        let full = s.summary().unwrap();
+        assert_eq!((full.count, full.p99_ns, full.max_ns), (SAMPLES, 3, 3));
+        assert_eq!(s.seen, 101 + SAMPLES as u64);
+    }
+
+    fn state(seq: u64, stamp_ms: u64, speed: f32) -> ChassisState {
+        let mut s = ChassisState {
+            seq,
+            stamp_ns: stamp_ms * MS,
+            ..ChassisState::default()
+        };
+        s.motion.linear_mps = speed;
+        s
+    }
+
+    #[test]
+    fn frame_to_state_counts_only_samples_a_new_frame_changed() {
+        let mut l = Latency::default();
+        l.on_state(100 * MS, &state(1, 99, 0.0), true);
+        // Changed by a new frame: counted.
+        l.on_state(201 * MS, &state(2, 200, 0.1), true);
+        // A refresh (same content, same stamp, on the tick): state age only.
+        l.on_state(218 * MS, &state(3, 200, 0.1), true);
+        // A refresh after frames that changed nothing (same content, newer stamp).
+        l.on_state(240 * MS, &state(4, 222, 0.1), true);
+        // Changed by a new frame, after samples this subscriber never saw: counted.
+        l.on_state(303 * MS, &state(9, 300, 0.2), true);
+        // Found waiting while busy: nothing measured.
+        l.on_state(450 * MS, &state(10, 400, 0.3), false);
+        // Old or repeated samples are ignored.
+        l.on_state(460 * MS, &state(10, 400, 0.3), true);
+        let f = l.frame_to_state.summary().unwrap();
+        assert_eq!((f.count, f.p50_ns, f.max_ns), (2, MS, 3 * MS));
+        let a = l.state_age.summary().unwrap();
+        assert_eq!((a.count, a.max_ns), (5, 18 * MS));
+    }
+
+    #[test]
+    fn a_changed_decision_is_matched_with_the_next_motion_frame() {
+        let mut bus = BusStats::new(RobotKind::TITAN);
+        let mut l = Latency::default();
+        let mut mux = MuxStatus {
+            seq: 1,
+            stamp_ns: 100 * MS,
+            ..MuxStatus::default()
+        };
+        mux.source_count = 1;
+        mux.active_source = 0;
+        mux.sources[0].last_seq = 1;
+        l.on_mux(&mux);
+        // Output changes at 120 ms with the winner's new request, 2 ms old.
+        mux.seq = 2;
+        mux.stamp_ns = 120 * MS;
+        mux.output.linear_x_mps = 0.2;
+        mux.active_age_ms = 2;
+        mux.sources[0].last_seq = 2;
+        l.on_mux(&mux);
+        // A periodic status without a change.
+        mux.seq = 3;
+        mux.stamp_ns = 220 * MS;
+        l.on_mux(&mux);
+        // The tap shows motion frames at 100 ms (before) and at 120.4 ms (after).
+        bus.on_frame(&can(1, 100, 0x111, FrameDirection::TX));
+        l.resolve(121 * MS, &bus);
+        assert_eq!(l.decision_to_wire.seen, 0, "waits for its frame");
+        let mut f = can(2, 0, 0x111, FrameDirection::TX);
+        f.stamp_ns = 120 * MS + 400_000;
+        bus.on_frame(&f);
+        // Sent, but not a motion frame: ignored.
+        bus.on_frame(&can(3, 120, 0x421, FrameDirection::TX));
+        l.resolve(125 * MS, &bus);
+        let d = l.decision_to_wire.summary().unwrap();
+        assert_eq!((d.count, d.max_ns), (1, 400_000));
+        let r = l.request_to_decision.summary().unwrap();
+        assert_eq!((r.count, r.max_ns), (1, 2 * MS));
+        // A smoothing step with no new request: decision→wire only.
+        mux.seq = 4;
+        mux.stamp_ns = 240 * MS;
+        mux.output.linear_x_mps = 0.3;
+        mux.active_age_ms = 38;
+        l.on_mux(&mux);
+        let mut f = can(4, 0, 0x111, FrameDirection::TX);
+        f.stamp_ns = 240 * MS + 200_000;
+        bus.on_frame(&f);
+        l.resolve(245 * MS, &bus);
+        assert_eq!(l.decision_to_wire.seen, 2);
+        assert_eq!(l.request_to_decision.seen, 1);
+        // A change that no frame follows is given up.
+        mux.seq = 5;
+        mux.stamp_ns = 300 * MS;
+        mux.output.linear_x_mps = 0.0;
+        l.on_mux(&mux);
+        l.resolve(900 * MS, &bus);
+        assert_eq!(l.unmatched, 1);
+        assert_eq!(l.decision_to_wire.seen, 2);
+    }
+}

@@ -1,0 +1,630 @@
+//! The dashboard's panels, built once from a [`Snapshot`] and shown either as ratatui blocks
+//! or as plain text (`--once`).
+
+use chassis_client::{
+    ChassisState, ClampFlags, ControlMode, FaultFlags, FrameDirection, Group, LinkFlags,
+    LockStatus, MuxStatus, RobotKind, SourceFlags, ZeroReason,
+};
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Layout};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Block, Paragraph};
+
+use super::stats::{BusStats, Latency, Samples, WINDOW_NS};
+
+/// Everything one screen shows.
+#[derive(Debug)]
+pub struct Snapshot<'a> {
+    pub name: &'a str,
+    pub now_ns: u64,
+    /// How long the dashboard has been collecting, ns.
+    pub running_ns: u64,
+    pub state: Option<&'a ChassisState>,
+    pub mux: Option<&'a MuxStatus>,
+    pub bus: &'a BusStats,
+    pub latency: &'a Latency,
+}
+
+/// A titled block of lines.
+#[derive(Debug)]
+pub struct Panel {
+    pub title: &'static str,
+    pub lines: Vec<Line<'static>>,
+}
+
+fn bold(color: Color) -> Style {
+    Style::default().fg(color).add_modifier(Modifier::BOLD)
+}
+
+fn dim(text: String) -> Span<'static> {
+    Span::styled(text, Style::default().fg(Color::DarkGray))
+}
+
+fn label(text: &str) -> Span<'static> {
+    dim(format!("{text:<10}"))
+}
+
+/// `850 µs`, `12.3 ms`, `1.20 s`.
+pub fn duration_text(ns: u64) -> String {
+    if ns < 1_000_000 {
+        format!("{} µs", ns / 1_000)
+    } else if ns < 1_000_000_000 {
+        format!("{:.1} ms", ns as f64 / 1e6)
+    } else {
+        format!("{:.2} s", ns as f64 / 1e9)
+    }
+}
+
+/// The four panels: robot, mux, bus, latency.
+pub fn panels(s: &Snapshot) -> [Panel; 4] {
+    [robot_panel(s), mux_panel(s), bus_panel(s), latency_panel(s)]
+}
+
+fn robot_panel(s: &Snapshot) -> Panel {
+    let mut lines = Vec::new();
+    let Some(st) = s.state else {
+        lines.push(Line::from(format!("no state from chassis/{} yet", s.name)));
+        return Panel {
+            title: "robot",
+            lines,
+        };
+    };
+    let age = s.now_ns.saturating_sub(st.stamp_ns);
+    lines.push(Line::from(vec![
+        label("robot"),
+        Span::styled(
+            format!("{} (chassis/{})", RobotKind::name(st.robot), s.name),
+            bold(Color::White),
+        ),
+        Span::raw(format!("  state #{}, {} old", st.seq, duration_text(age))),
+    ]));
+    let mut flags = vec![Span::raw(
+        ControlMode::name(st.system.control_mode).to_string(),
+    )];
+    let bad_link =
+        st.link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT | LinkFlags::RC_AUTHORITY);
+    if bad_link != 0 {
+        flags.push(Span::raw("  "));
+        flags.push(Span::styled(
+            LinkFlags::names(bad_link).join(", "),
+            bold(Color::Red),
+        ));
+    }
+    lines.push(Line::from([vec![label("mode")], flags].concat()));
+    let faults = FaultFlags::names(st.system.fault_flags & !FaultFlags::WARNINGS);
+    let warnings = FaultFlags::names(st.system.fault_flags & FaultFlags::WARNINGS);
+    lines.push(Line::from(vec![
+        label("faults"),
+        if faults.is_empty() {
+            Span::styled("none", Style::default().fg(Color::Green))
+        } else {
+            Span::styled(faults.join(", "), bold(Color::Red))
+        },
+        if warnings.is_empty() {
+            Span::raw("")
+        } else {
+            Span::styled(
+                format!("  warnings: {}", warnings.join(", ")),
+                bold(Color::Yellow),
+            )
+        },
+    ]));
+    lines.push(Line::from(vec![
+        label("battery"),
+        Span::raw(format!(
+            "{:.1} V{}",
+            st.system.battery_voltage_v,
+            if st.is_valid(Group::BmsPack) {
+                format!(
+                    "  {:.0} %  {:+.1} A",
+                    st.system.battery_soc_pct, st.system.battery_current_a
+                )
+            } else {
+                String::new()
+            }
+        )),
+    ]));
+    lines.push(Line::from(vec![
+        label("speeds"),
+        Span::raw(format!(
+            "{:+.3} m/s  {:+.3} rad/s  lateral {:+.3} m/s  steer {:+.1}°",
+            st.motion.linear_mps,
+            st.motion.angular_radps,
+            st.motion.lateral_mps,
+            st.motion.steer_rad.to_degrees()
+        )),
+    ]));
+    lines.push(Line::from(vec![
+        label("command"),
+        Span::raw(format!(
+            "{:+.3} m/s  {:+.3} rad/s  steer {:+.1}° (on the wire)",
+            st.command.linear_mps,
+            st.command.angular_radps,
+            st.command.steer_rad.to_degrees()
+        )),
+    ]));
+    lines.push(Line::from(vec![
+        label("pose"),
+        Span::raw(format!(
+            "x {:.2} m  y {:.2} m  yaw {:.1}°",
+            st.odometry.x_m,
+            st.odometry.y_m,
+            st.odometry.yaw_rad.to_degrees()
+        )),
+    ]));
+    Panel {
+        title: "robot",
+        lines,
+    }
+}
+
+fn holder(mux: &MuxStatus, lock: &LockStatus) -> String {
+    match lock.holder {
+        LockStatus::HOLDER_OPERATOR => "operator".into(),
+        LockStatus::HOLDER_NONE => "nobody".into(),
+        i => mux
+            .sources()
+            .get(usize::from(i))
+            .map_or_else(|| format!("source {i}"), |x| x.name().to_string()),
+    }
+}
+
+fn mux_panel(s: &Snapshot) -> Panel {
+    let mut lines = Vec::new();
+    let Some(m) = s.mux else {
+        lines.push(Line::from("no mux status yet"));
+        return Panel {
+            title: "mux",
+            lines,
+        };
+    };
+    let active = match m.active() {
+        Some(a) => Span::styled(
+            format!(
+                "active {} (priority {}, request {} ms old)",
+                a.name(),
+                a.priority,
+                m.active_age_ms
+            ),
+            bold(Color::Green),
+        ),
+        None => Span::styled(
+            format!("active none — zero: {}", ZeroReason::name(m.zero_reason)),
+            bold(Color::Yellow),
+        ),
+    };
+    lines.push(Line::from(vec![label("decision"), active]));
+    lines.push(Line::from(vec![
+        label("output"),
+        Span::raw(format!(
+            "vx {:+.3}  vy {:+.3}  wz {:+.3}   requested vx {:+.3}  wz {:+.3}",
+            m.output.linear_x_mps,
+            m.output.linear_y_mps,
+            m.output.angular_z_radps,
+            m.requested.linear_x_mps,
+            m.requested.angular_z_radps
+        )),
+    ]));
+    let clamps = ClampFlags::names(m.clamp_flags);
+    lines.push(Line::from(vec![
+        label("clamped"),
+        if clamps.is_empty() {
+            Span::raw("-")
+        } else {
+            Span::styled(clamps.join(", "), bold(Color::Yellow))
+        },
+        Span::raw(format!("   rejected requests {}", m.rejected_requests)),
+    ]));
+    lines.push(Line::from(dim(format!(
+        "{:<10}{:<10}{:>4} {:>9}  flags",
+        "", "source", "prio", "age"
+    ))));
+    for src in m.sources() {
+        let age = if src.age_ms == u32::MAX {
+            "never".to_string()
+        } else {
+            format!("{} ms", src.age_ms)
+        };
+        let mut flags = Vec::new();
+        for (flag, word) in [
+            (SourceFlags::ACTIVE, "ACTIVE"),
+            (SourceFlags::REQUIRED, "required"),
+            (SourceFlags::FRESH, "fresh"),
+            (SourceFlags::HEARTBEAT, "heartbeat"),
+            (SourceFlags::LIMITING, "limiting"),
+            (SourceFlags::BLOCKED, "blocked"),
+        ] {
+            if src.has(flag) {
+                flags.push(word);
+            }
+        }
+        if !src.has(SourceFlags::FRESH) && src.age_ms != u32::MAX {
+            flags.push("stale");
+        }
+        if src.rejected > 0 {
+            flags.push("rejecting");
+        }
+        let style = if src.has(SourceFlags::ACTIVE) {
+            bold(Color::Green)
+        } else if src.has(SourceFlags::BLOCKED) || src.has(SourceFlags::LIMITING) {
+            bold(Color::Yellow)
+        } else {
+            Style::default()
+        };
+        lines.push(Line::from(vec![
+            label(""),
+            Span::styled(
+                format!(
+                    "{:<10}{:>4} {:>9}  {}",
+                    src.name(),
+                    src.priority,
+                    age,
+                    flags.join(" ")
+                ),
+                style,
+            ),
+        ]));
+    }
+    for lock in m.locks() {
+        let (text, style) = if lock.held != 0 {
+            (
+                format!(
+                    "{} HELD by {} (blocks below {})",
+                    lock.name(),
+                    holder(m, lock),
+                    lock.priority
+                ),
+                bold(Color::Red),
+            )
+        } else {
+            (format!("{} free", lock.name()), Style::default())
+        };
+        lines.push(Line::from(vec![label("lock"), Span::styled(text, style)]));
+    }
+    Panel {
+        title: "mux",
+        lines,
+    }
+}
+
+fn bus_panel(s: &Snapshot) -> Panel {
+    let mut lines = Vec::new();
+    if let Some(st) = s.state {
+        let l = &st.link;
+        let errors = l.rx_bad_checksum + l.rx_decode_errors + l.tx_errors;
+        lines.push(Line::from(vec![
+            label("link"),
+            Span::raw(format!(
+                "rx {} frames  tx {}  reconnects {}",
+                l.rx_frames, l.tx_frames, l.bus_reconnects
+            )),
+        ]));
+        lines.push(Line::from(vec![
+            label("errors"),
+            Span::styled(
+                format!(
+                    "bad checksums {}  decode errors {}  unknown ids {}  discarded bytes {}  tx errors {}",
+                    l.rx_bad_checksum,
+                    l.rx_decode_errors,
+                    l.rx_unknown_id,
+                    l.rx_bytes_discarded,
+                    l.tx_errors
+                ),
+                if errors > 0 {
+                    bold(Color::Yellow)
+                } else {
+                    Style::default()
+                },
+            ),
+        ]));
+    }
+    lines.push(Line::from(vec![
+        label("tap"),
+        Span::styled(
+            format!(
+                "{} frames read, {} dropped (seq gaps)",
+                s.bus.frames, s.bus.dropped
+            ),
+            if s.bus.dropped > 0 {
+                bold(Color::Yellow)
+            } else {
+                Style::default()
+            },
+        ),
+        if s.bus.serial_rejects > 0 {
+            Span::raw(format!(
+                ", {} serial candidates rejected",
+                s.bus.serial_rejects
+            ))
+        } else {
+            Span::raw("")
+        },
+    ]));
+    let warming = s.running_ns < WINDOW_NS;
+    lines.push(Line::from(dim(format!(
+        "{:<4}{:<12}{:<20}{:>10}{:>10}{}",
+        "",
+        "id",
+        "frame",
+        "frames/s",
+        "total",
+        if warming {
+            "   (first second: rates still filling)"
+        } else {
+            ""
+        }
+    ))));
+    for k in s.bus.keys() {
+        let dir = if k.direction == FrameDirection::TX {
+            "TX"
+        } else {
+            "RX"
+        };
+        lines.push(Line::from(vec![
+            Span::styled(
+                format!("{dir:<4}"),
+                if k.direction == FrameDirection::TX {
+                    bold(Color::Magenta)
+                } else {
+                    bold(Color::Cyan)
+                },
+            ),
+            Span::raw(format!(
+                "{:<12}{:<20}{:>10.0}{:>10}",
+                k.key.text(),
+                k.name.unwrap_or("?"),
+                k.rate_hz(),
+                k.total
+            )),
+        ]));
+    }
+    Panel {
+        title: "bus",
+        lines,
+    }
+}
+
+/// A row of percentiles; values below `resolution_ns` (the figure's resolution) read `<1 ms`.
+fn latency_row(
+    name: &str,
+    samples: &Samples,
+    resolution_ns: u64,
+    meaning: &str,
+) -> Vec<Line<'static>> {
+    let show = |ns: u64| {
+        if ns < resolution_ns {
+            format!("<{}", duration_text(resolution_ns))
+        } else {
+            duration_text(ns)
+        }
+    };
+    let figures = match samples.summary() {
+        Some(x) => format!(
+            "{:>10}{:>10}{:>10}{:>8}",
+            show(x.p50_ns),
+            show(x.p99_ns),
+            show(x.max_ns),
+            x.count
+        ),
+        None => format!("{:>38}", "no samples yet"),
+    };
+    vec![
+        Line::from(vec![
+            Span::styled(format!("{name:<18}"), bold(Color::White)),
+            Span::raw(figures),
+        ]),
+        Line::from(dim(format!("  {meaning}"))),
+    ]
+}
+
+fn latency_panel(s: &Snapshot) -> Panel {
+    let l = s.latency;
+    let mut lines = vec![Line::from(dim(format!(
+        "{:<18}{:>10}{:>10}{:>10}{:>8}",
+        "", "p50", "p99", "max", "n"
+    )))];
+    lines.extend(latency_row(
+        "frame→state",
+        &l.frame_to_state,
+        0,
+        "chassisd read a frame → this process woke with the state it changed",
+    ));
+    lines.extend(latency_row(
+        "state age",
+        &l.state_age,
+        0,
+        "age of every state sample on arrival (refreshes: up to a 20 ms tick more)",
+    ));
+    lines.extend(latency_row(
+        "decision→wire",
+        &l.decision_to_wire,
+        0,
+        "mux output changed → first motion frame written (chassisd's stamps)",
+    ));
+    lines.extend(latency_row(
+        "request→decision",
+        &l.request_to_decision,
+        1_000_000,
+        "winner's new request (stamp) → the decision taking it in (whole ms, from the mux)",
+    ));
+    if l.unmatched > 0 {
+        lines.push(Line::from(dim(format!(
+            "  {} output changes had no motion frame within 500 ms (tap drops?)",
+            l.unmatched
+        ))));
+    }
+    lines.push(Line::from(dim(format!(
+        "all CLOCK_MONOTONIC; percentiles over the last {} samples",
+        super::stats::SAMPLES
+    ))));
+    Panel {
+        title: "latency",
+        lines,
+    }
+}
+
+fn plain(line: &Line) -> String {
+    line.spans.iter().map(|s| s.content.as_ref()).collect()
+}
+
+/// The snapshot as plain text, one panel after another.
+pub fn text(s: &Snapshot) -> String {
+    let mut out = String::new();
+    for panel in panels(s) {
+        out.push_str(&format!("== {} ==\n", panel.title));
+        for line in &panel.lines {
+            out.push_str(plain(line).trim_end());
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// Draws the dashboard.
+pub fn render(frame: &mut Frame, s: &Snapshot) {
+    let [robot, mux, bus, latency] = panels(s);
+    let height = |p: &Panel| {
+        u16::try_from(p.lines.len())
+            .unwrap_or(u16::MAX)
+            .saturating_add(2)
+    };
+    let top_height = height(&robot).max(height(&mux));
+    let [top, bottom, help] = Layout::vertical([
+        Constraint::Length(top_height),
+        Constraint::Min(6),
+        Constraint::Length(1),
+    ])
+    .areas(frame.area());
+    let [left, right] =
+        Layout::horizontal([Constraint::Percentage(45), Constraint::Percentage(55)]).areas(top);
+    let [bus_area, latency_area] =
+        Layout::horizontal([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(bottom);
+    for (panel, area) in [
+        (robot, left),
+        (mux, right),
+        (bus, bus_area),
+        (latency, latency_area),
+    ] {
+        frame.render_widget(
+            Paragraph::new(panel.lines)
+                .block(Block::bordered().title(format!(" {} ", panel.title))),
+            area,
+        );
+    }
+    frame.render_widget(
+        Paragraph::new(Line::from(vec![
+            Span::styled(
+                format!(" chassis top — chassis/{} ", s.name),
+                bold(Color::White),
+            ),
+            dim("q quit".into()),
+        ])),
+        help,
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassis_client::{BusFrame, FrameKind};
+    use ratatui::Terminal;
+    use ratatui::backend::TestBackend;
+
+    fn snapshot_parts() -> (ChassisState, MuxStatus, BusStats, Latency) {
+        let mut state = ChassisState {
+            robot: RobotKind::TITAN,
+            seq: 7,
+            stamp_ns: 5_000_000_000,
+            ..ChassisState::default()
+        };
+        state.system.battery_voltage_v = 51.9;
+        state.link.rx_bad_checksum = 3;
+        let mut mux = MuxStatus {
+            source_count: 2,
+            lock_count: 1,
+            active_source: 1,
+            active_age_ms: 4,
+            ..MuxStatus::default()
+        };
+        mux.sources[0].set_name("safety");
+        mux.sources[0].priority = 255;
+        mux.sources[0].age_ms = u32::MAX;
+        mux.sources[1].set_name("teleop");
+        mux.sources[1].priority = 100;
+        mux.sources[1].flags = SourceFlags::ACTIVE | SourceFlags::FRESH;
+        mux.locks[0].set_name("estop");
+        let mut bus = BusStats::new(RobotKind::TITAN);
+        for i in 0..50u64 {
+            let mut f = BusFrame {
+                seq: i + 1,
+                stamp_ns: 4_010_000_000 + i * 20_000_000,
+                can_id: 0x211,
+                kind: FrameKind::CAN,
+                ..BusFrame::default()
+            };
+            f.set_payload(&[0; 8]);
+            bus.on_frame(&f);
+        }
+        bus.expire(5_000_000_000);
+        let mut latency = Latency::default();
+        latency.on_state(5_000_300_000, &state, true);
+        (state, mux, bus, latency)
+    }
+
+    #[test]
+    fn the_text_snapshot_shows_rates_per_id_the_active_source_and_latency() {
+        let (state, mux, bus, latency) = snapshot_parts();
+        let s = Snapshot {
+            name: "titan",
+            now_ns: 5_000_000_000,
+            running_ns: 2_000_000_000,
+            state: Some(&state),
+            mux: Some(&mux),
+            bus: &bus,
+            latency: &latency,
+        };
+        let text = text(&s);
+        assert!(text.contains("RX  0x211"), "{text}");
+        assert!(text.contains("system_status"), "{text}");
+        assert!(text.contains("active teleop (priority 100"), "{text}");
+        assert!(text.contains("bad checksums 3"), "{text}");
+        assert!(text.contains("estop free"), "{text}");
+        assert!(text.contains("state age"), "{text}");
+        assert!(text.contains("300 µs"), "{text}");
+        let rate_line = text.lines().find(|l| l.contains("0x211")).unwrap();
+        assert!(rate_line.contains(" 50 "), "{rate_line}");
+    }
+
+    #[test]
+    fn the_dashboard_renders_every_panel() {
+        let (state, mux, bus, latency) = snapshot_parts();
+        let s = Snapshot {
+            name: "titan",
+            now_ns: 5_000_000_000,
+            running_ns: 2_000_000_000,
+            state: Some(&state),
+            mux: Some(&mux),
+            bus: &bus,
+            latency: &latency,
+        };
+        let mut terminal = Terminal::new(TestBackend::new(160, 40)).unwrap();
+        terminal.draw(|f| render(f, &s)).unwrap();
+        let buffer = terminal.backend().buffer();
+        let screen: String = buffer.content.iter().map(|c| c.symbol()).collect();
+        for needle in [" robot ", " mux ", " bus ", " latency ", "0x211", "teleop"] {
+            assert!(screen.contains(needle), "{needle} missing");
+        }
+    }
+
+    #[test]
+    fn durations_are_shown_in_a_readable_unit() {
+        assert_eq!(duration_text(850_000), "850 µs");
+        assert_eq!(duration_text(12_345_678), "12.3 ms");
+        assert_eq!(duration_text(1_200_000_000), "1.20 s");
+        let mut s = Samples::default();
+        s.push(0);
+        let row = plain(&latency_row("x", &s, 1_000_000, "")[0]);
+        assert!(row.contains("<1.0 ms"), "{row}");
+    }
+}

@@ -1,0 +1,279 @@
+//! The operator's tools against a running chassisd: `chassis-teleop` in a real terminal (tmux:
+//! keys sent with `send-keys`, the screen read with `capture-pane`), and `chassis top --once`.
+//! The teleop test is skipped, with a notice, where `tmux` is not installed.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+use chassis_tests::*;
+
+const UP: Duration = Duration::from_secs(10);
+
+fn name(tag: &str) -> String {
+    // Robot names are at most 16 characters.
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+fn tmux_available() -> bool {
+    Command::new("tmux")
+        .arg("-V")
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+/// A private tmux server (its own socket in the test's directory) running one session.
+struct Tmux {
+    socket: PathBuf,
+}
+
+impl Tmux {
+    /// Starts `command` (a shell command line) in a detached 120×40 session.
+    fn start(env: &Env, command: &str) -> Self {
+        let tmux = Self {
+            socket: env.dir.join("tmux.sock"),
+        };
+        let out = tmux.run(&[
+            "new-session",
+            "-d",
+            "-x",
+            "120",
+            "-y",
+            "40",
+            "-s",
+            "ops",
+            command,
+        ]);
+        assert!(
+            out.status.success(),
+            "tmux new-session: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        tmux
+    }
+
+    fn run(&self, args: &[&str]) -> Output {
+        Command::new("tmux")
+            .arg("-S")
+            .arg(&self.socket)
+            .args(args)
+            .output()
+            .unwrap_or_else(|e| panic!("running tmux: {e}"))
+    }
+
+    fn send(&self, key: &str) {
+        let out = self.run(&["send-keys", "-t", "ops", key]);
+        assert!(
+            out.status.success(),
+            "tmux send-keys: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    fn screen(&self) -> String {
+        String::from_utf8_lossy(&self.run(&["capture-pane", "-p", "-t", "ops"]).stdout).into_owned()
+    }
+
+    /// Waits until the screen contains `text`.
+    fn wait_for_text(&self, text: &str, timeout: Duration) -> String {
+        let mut screen = String::new();
+        let found = wait_for(timeout, || {
+            screen = self.screen();
+            screen.contains(text)
+        });
+        assert!(found.is_some(), "'{text}' never appeared:\n{screen}");
+        screen
+    }
+}
+
+impl Drop for Tmux {
+    fn drop(&mut self) {
+        let _ = self.run(&["kill-server"]);
+    }
+}
+
+fn quote(text: &str) -> String {
+    format!("'{}'", text.replace('\'', r"'\''"))
+}
+
+#[test]
+fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop() {
+    if !tmux_available() {
+        eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
+        return;
+    }
+    let mut env = Env::new("teleop-tmux");
+    let n = name("tel");
+    env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
+    let mut robot = env.robot(&n, UP);
+    let log = env.dir.join("teleop.log");
+    let command = format!(
+        "env {}={} RUST_LOG=info {} --name {n} 2>{}; echo chassis-teleop exited $?; sleep 60",
+        IPC_PREFIX_ENV,
+        quote(&env.prefix),
+        quote(&bin("chassis-teleop").to_string_lossy()),
+        quote(&log.to_string_lossy()),
+    );
+    let tmux = Tmux::start(&env, &command);
+    tmux.wait_for_text("idle — publishing nothing", UP);
+
+    // Hold `w`: a terminal's auto-repeat, as tmux delivers it, every 30 ms for 1.5 s.
+    let start = Instant::now();
+    let mut peak = 0.0f32;
+    let mut teleop_won = false;
+    while start.elapsed() < Duration::from_millis(1500) {
+        tmux.send("w");
+        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(30)) {
+            peak = peak.max(state.motion.linear_mps);
+        }
+        if let Ok(Some(m)) = robot.latest_mux() {
+            teleop_won |= m.active().is_some_and(|s| s.name() == "teleop");
+        }
+    }
+    let screen = tmux.screen();
+    let last_key = Instant::now();
+    assert!(teleop_won, "the mux never chose teleop\n{screen}");
+    assert!(
+        peak > 0.05,
+        "peak speed {peak} m/s while w was held\n{screen}"
+    );
+    assert!(screen.contains("DRIVING"), "{screen}");
+    assert!(screen.contains("active     teleop"), "{screen}");
+
+    // Let go: the hold lapses (200 ms after the last repeat), one stop goes out, the command
+    // on the wire is zero at once and the simulated TITAN coasts to a halt (a first-order lag
+    // of about 0.3 s).
+    let commanded_zero = wait_for(Duration::from_secs(2), || {
+        let m = mux(&mut robot);
+        m.output.linear_x_mps == 0.0 && m.requested.linear_x_mps == 0.0
+    });
+    let zero_after = last_key.elapsed();
+    let stopped = wait_for(Duration::from_secs(3), || {
+        state(&mut robot).motion.linear_mps.abs() < 0.01
+    });
+    let stopped_after = last_key.elapsed();
+    eprintln!(
+        "peak {peak:.3} m/s while w was held; after the last key: commanded zero in \
+         {zero_after:?}, stopped in {stopped_after:?}"
+    );
+    assert!(commanded_zero.is_some(), "teleop never sent its stop");
+    assert!(
+        zero_after < Duration::from_millis(600),
+        "the stop took {zero_after:?} after the last key"
+    );
+    assert!(
+        stopped.is_some(),
+        "the robot kept moving after w was let go"
+    );
+    assert!(
+        stopped_after < Duration::from_millis(1500),
+        "stopped {stopped_after:?} after the last key"
+    );
+    // Then nothing more is sent: teleop goes stale and the mux has no winner.
+    let quiet = wait_for(Duration::from_secs(2), || {
+        let m = mux(&mut robot);
+        m.sources()
+            .iter()
+            .find(|s| s.name() == "teleop")
+            .is_some_and(|s| !s.has(SourceFlags::FRESH))
+            && m.active().is_none()
+    });
+    assert!(quiet.is_some(), "teleop kept publishing\n{}", tmux.screen());
+    tmux.wait_for_text("idle — publishing nothing", Duration::from_secs(2));
+
+    // `e` latches the e-stop lock, held by teleop.
+    tmux.send("e");
+    let latched = wait_for(Duration::from_secs(3), || {
+        let m = mux(&mut robot);
+        let teleop = m.sources().iter().position(|s| s.name() == "teleop");
+        m.lock_index("estop")
+            .map(|i| m.locks()[i])
+            .is_some_and(|l| l.held != 0 && teleop.is_some_and(|t| usize::from(l.holder) == t))
+    });
+    assert!(latched.is_some(), "no e-stop lock\n{}", tmux.screen());
+    let screen = tmux.wait_for_text("E-STOP LATCHED", Duration::from_secs(2));
+    assert!(
+        screen.contains("release with `chassis control estop-release`"),
+        "{screen}"
+    );
+    assert!(screen.contains("SAFETY OVERRIDE: lock estop"), "{screen}");
+    let out = env.chassis(&["control", "--name", &n, "estop-release"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    // `q` quits cleanly and hands the terminal back.
+    tmux.send("q");
+    let screen = tmux.wait_for_text("chassis-teleop exited", Duration::from_secs(5));
+    assert!(
+        screen.contains("chassis-teleop exited 0"),
+        "{screen}\n{}",
+        std::fs::read_to_string(&log).unwrap_or_default()
+    );
+}
+
+#[test]
+fn top_once_prints_rates_per_can_id_and_the_active_source() {
+    let mut env = Env::new("top-once");
+    let n = name("top");
+    env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
+    let mut robot = env.robot(&n, UP);
+    env.spawn(
+        "pub",
+        "chassis",
+        &[
+            "pub",
+            "velocity",
+            "--source",
+            "teleop",
+            "--vx",
+            "0.2",
+            "--duration",
+            "6",
+            "--name",
+            &n,
+        ],
+    );
+    let driving = wait_for(UP, || {
+        mux(&mut robot)
+            .active()
+            .is_some_and(|s| s.name() == "teleop")
+    });
+    assert!(driving.is_some(), "teleop never won\n{}", env.logs());
+    let out = env.chassis(&["top", "--once", "--name", &n]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("active teleop (priority 100"), "{text}");
+    // TITAN's system status arrives at 50 Hz, its motion command goes out at 50 Hz.
+    let rate = |prefix: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(prefix))
+            .unwrap_or_else(|| panic!("no '{prefix}' line:\n{text}"));
+        line.split_whitespace()
+            .nth(3)
+            .and_then(|r| r.parse().ok())
+            .unwrap_or_else(|| panic!("no rate in '{line}'"))
+    };
+    let rx = rate("RX  0x211");
+    let tx = rate("TX  0x111");
+    assert!((30.0..=70.0).contains(&rx), "0x211 at {rx}/s\n{text}");
+    assert!((30.0..=70.0).contains(&tx), "0x111 at {tx}/s\n{text}");
+    assert!(text.contains("system_status"), "{text}");
+    assert!(text.contains("motion_command"), "{text}");
+    assert!(text.contains("0 dropped (seq gaps)"), "{text}");
+    assert!(text.contains("state age"), "{text}");
+}
