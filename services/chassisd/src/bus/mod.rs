@@ -9,6 +9,7 @@
 //! | `can:IFACE` | SocketCAN ([`socketcan`]) |
 //! | `serial:PATH[@BAUD]` | a serial port or pty ([`serialport`]), 8N1 |
 //! | `slcan:PATH[@BAUD]` | a Lawicel slcan adapter on a serial port (CAN without kernel CAN) |
+//! | `replay:FILE[@SPEED\|@max]` | a recording (MCAP or candump log) played back in a thread, over a socket pair ([`replay`]) |
 //!
 //! `chassisd sim` (the firmware as its own process) also accepts `pty:LINK` and
 //! `slcan-pty:LINK`: it creates a pseudo-terminal, links its device path to LINK, and speaks the
@@ -22,7 +23,9 @@ use std::str::FromStr;
 use chassis_protocols::{CanFrame, Rx, Transmit};
 use thiserror::Error;
 
+pub mod conformance;
 pub mod datagram;
+pub mod replay;
 pub mod serial;
 pub mod slcan;
 pub mod socketcan;
@@ -194,6 +197,11 @@ pub enum BusSpec {
     Pty { link: String },
     /// (`chassisd sim` only) a new pty linked at `link`, speaking an slcan adapter's side.
     SlcanPty { link: String },
+    /// A recording played back at the far end of a socket pair ([`replay`]).
+    Replay {
+        path: String,
+        speed: replay::ReplaySpeed,
+    },
 }
 
 fn path_and_baud(rest: &str) -> Result<(String, Option<u32>), String> {
@@ -215,7 +223,8 @@ fn path_and_baud(rest: &str) -> Result<(String, Option<u32>), String> {
 impl FromStr for BusSpec {
     type Err = String;
     fn from_str(text: &str) -> Result<Self, Self::Err> {
-        let usage = "expected sim, can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD], pty:LINK or slcan-pty:LINK";
+        let usage = "expected sim, can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD], \
+                     replay:FILE[@SPEED|@max], pty:LINK or slcan-pty:LINK";
         if text == "sim" {
             return Ok(BusSpec::Sim);
         }
@@ -241,6 +250,10 @@ impl FromStr for BusSpec {
             "slcan-pty" if !rest.is_empty() => Ok(BusSpec::SlcanPty {
                 link: rest.to_string(),
             }),
+            "replay" => {
+                let (path, speed) = replay::parse_spec(rest).map_err(with)?;
+                Ok(BusSpec::Replay { path, speed })
+            }
             _ => Err(format!("'{text}': {usage}")),
         }
     }
@@ -263,6 +276,10 @@ impl fmt::Display for BusSpec {
             } => write!(f, "slcan:{path}@{b}"),
             BusSpec::Pty { link } => write!(f, "pty:{link}"),
             BusSpec::SlcanPty { link } => write!(f, "slcan-pty:{link}"),
+            BusSpec::Replay { path, speed } if *speed == replay::ReplaySpeed::RECORDED => {
+                write!(f, "replay:{path}")
+            }
+            BusSpec::Replay { path, speed } => write!(f, "replay:{path}@{speed}"),
         }
     }
 }
@@ -306,6 +323,38 @@ mod tests {
                 .unwrap_err()
                 .contains("expected sim")
         );
+    }
+
+    #[test]
+    fn replay_specs_parse_and_print_back() {
+        for text in [
+            "replay:/tmp/run.mcap",
+            "replay:run.log@max",
+            "replay:/tmp/run.mcap@0.5",
+            "replay:/tmp/run.mcap@2",
+        ] {
+            let spec: BusSpec = text.parse().unwrap();
+            assert!(matches!(spec, BusSpec::Replay { .. }), "{text}");
+            assert_eq!(spec.to_string(), text);
+        }
+        assert_eq!(
+            "replay:/tmp/a.log@max".parse::<BusSpec>().unwrap(),
+            BusSpec::Replay {
+                path: "/tmp/a.log".into(),
+                speed: replay::ReplaySpeed::Max
+            }
+        );
+        assert_eq!(
+            "replay:/tmp/a.log@1"
+                .parse::<BusSpec>()
+                .unwrap()
+                .to_string(),
+            "replay:/tmp/a.log"
+        );
+        for bad in ["replay:", "replay:@2", "replay:/x@fast", "replay:/x@0"] {
+            let err = bad.parse::<BusSpec>().unwrap_err();
+            assert!(err.contains(bad), "{bad}: {err}");
+        }
     }
 
     #[test]
