@@ -390,10 +390,18 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         None => inherited,
     };
     let age = state.map_or(String::new(), |s| age_text(s.stamp_ns));
+    // The safety monitor's status, when one has made its service (a new reader gets the latest
+    // sample with the monitor's next publication, at least every 100 ms).
+    let safety = match robot
+        .subscriber::<chassis_client::SafetyStatus>(chassis_client::SafetyStatus::SERVICE)?
+    {
+        Some(mut subscription) => Some(subscription.wait(Duration::from_millis(300))?),
+        None => None,
+    };
     if json {
         println!(
             "{}",
-            serde_json::json!({ "name": name, "state": state, "mux": mux })
+            serde_json::json!({ "name": name, "state": state, "mux": mux, "safety": safety.flatten() })
         );
         return Ok(());
     }
@@ -472,7 +480,73 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     if let Some(m) = mux {
         println!("{}", mux_summary(&m));
     }
+    if let Some(safety) = safety {
+        println!("{}", safety_summary(safety.as_ref()));
+    }
     Ok(())
+}
+
+/// The safety monitor's `SafetyStatus` (`None`: its service exists but nothing was published).
+fn safety_summary(status: Option<&chassis_client::SafetyStatus>) -> String {
+    use chassis_client::{EstopState, SafetyAction, SafetyRule, SafetyStatus};
+    let Some(s) = status else {
+        return "safety     no monitor publishing (its service exists, no status within 300 ms)"
+            .into();
+    };
+    let age_ms = now_ns().saturating_sub(s.stamp_ns) / 1_000_000;
+    let alive = if age_ms < 500 {
+        format!("alive, {age_ms} ms old")
+    } else {
+        format!("SILENT for {age_ms} ms")
+    };
+    let limit = |v: f32, unit: &str| {
+        if v >= SafetyStatus::UNLIMITED {
+            "free".to_string()
+        } else {
+            format!("≤ {v:.2} {unit}")
+        }
+    };
+    let action = match s.action {
+        SafetyAction::NONE => "all clear".to_string(),
+        SafetyAction::SLOW => format!(
+            "SLOW by {} (forward {}, reverse {}, lateral {}, yaw {})",
+            SafetyRule::names(s.active_rules).join(", "),
+            limit(s.limit_forward_mps, "m/s"),
+            limit(s.limit_reverse_mps, "m/s"),
+            limit(s.limit_lateral_mps, "m/s"),
+            limit(s.limit_angular_radps, "rad/s")
+        ),
+        a => format!(
+            "{} by {}",
+            SafetyAction::name(a).to_uppercase(),
+            SafetyRule::names(s.active_rules).join(", ")
+        ),
+    };
+    let mut out = format!(
+        "safety     {alive} · {action} · estop {}",
+        EstopState::name(s.estop)
+    );
+    if s.acknowledged_rules != 0 {
+        out.push_str(&format!(
+            " · acknowledged {}",
+            SafetyRule::names(s.acknowledged_rules).join(", ")
+        ));
+    }
+    let counts: Vec<String> = (0..SafetyRule::COUNT as u8)
+        .filter(|&r| s.trigger_count(r) > 0)
+        .map(|r| format!("{} {}", SafetyRule::name(r), s.trigger_count(r)))
+        .collect();
+    if s.last_event_ns != 0 {
+        out.push_str(&format!(
+            "\n           last {} ago: {}",
+            age_text(s.last_event_ns),
+            s.last_text()
+        ));
+    }
+    if !counts.is_empty() {
+        out.push_str(&format!(" · triggers {}", counts.join(", ")));
+    }
+    out
 }
 
 fn mux_summary(m: &MuxStatus) -> String {
