@@ -23,6 +23,15 @@ impl SocketCan {
             reason: e.to_string(),
         };
         let socket = CanSocket::open(iface).map_err(open_err)?;
+        // Binding to an interface that is down succeeds, with ENETDOWN left pending on the
+        // socket: the first read would report the bus lost again at once, and the service would
+        // "reopen" it every 100 ms, clearing BUS_DOWN each time. A down interface is not open.
+        if let Some(err) = socket.as_raw_socket().take_error().map_err(open_err)? {
+            return Err(BusError::Open {
+                reason: format!("{iface} is down ({err})"),
+                name,
+            });
+        }
         socket.set_nonblocking(true).map_err(open_err)?;
         Ok(Self { socket, name })
     }
@@ -70,6 +79,12 @@ impl CanBus for SocketCan {
         };
         match self.socket.write_frame(&frame) {
             Ok(()) => Ok(()),
+            // The socket's send buffer is full: this frame is not sent (`classify` would call a
+            // would-block "nothing to do", and the frame would count as sent).
+            Err(err) if err.kind() == std::io::ErrorKind::WouldBlock => Err(BusError::TxDropped {
+                name: self.name.clone(),
+                source: err,
+            }),
             Err(err) => classify(&self.name, err, true),
         }
     }
