@@ -34,7 +34,13 @@ pub fn bin_dir() -> &'static Path {
             .and_then(Path::parent)
             .map(Path::to_path_buf)
             .unwrap_or_default();
-        let wanted = ["chassisd", "chassis"];
+        let wanted = [
+            "chassisd",
+            "chassis",
+            "chassis-safety",
+            "chassis-teleop",
+            "chassis-planner",
+        ];
         if wanted.iter().any(|b| !dir.join(b).exists()) {
             let release = dir.ends_with("release");
             let mut cargo = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));

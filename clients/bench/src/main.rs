@@ -1,3 +1,442 @@
-//! chassis-bench.
+//! `chassis-bench`: end-to-end latency of chassisd's real paths against raw-transport baselines,
+//! measured in one run so every figure is a ratio that holds on any machine.
 
-fn main() {}
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use chassis_protocols::Robot as RobotKind;
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+mod baseline;
+mod fanout;
+mod paths;
+mod placement;
+mod report;
+mod stats;
+
+use baseline::Transport;
+use paths::{BusKind, LoopMode};
+use placement::Placement;
+use report::{Report, Row};
+use stats::Latencies;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "chassis-bench",
+    version,
+    about = "Latency of chassisd's command, state, preemption and fan-out paths beside raw \
+             iceoryx2, Unix-socket and UDP baselines, in one run"
+)]
+struct Cli {
+    #[command(subcommand)]
+    role: Option<RoleCmd>,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+#[derive(Debug, Subcommand)]
+enum RoleCmd {
+    /// (internal) the far end of a measurement.
+    #[command(hide = true)]
+    Role {
+        #[command(subcommand)]
+        role: Role,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum Role {
+    Pong(baseline::PongArgs),
+    Subscribe(fanout::SubscribeArgs),
+}
+
+#[derive(Debug, Args)]
+struct RunArgs {
+    /// A short run (under 30 s): fewer samples, the TITAN on the simulated bus only.
+    #[arg(long)]
+    quick: bool,
+    /// Write every figure as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write latency CDFs of every path as SVG.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Robots for the service paths (full run).
+    #[arg(long, value_delimiter = ',', default_values_t = ["titan".to_string(), "scout-mini".to_string(), "xbot".to_string()])]
+    robots: Vec<String>,
+    /// Skip parts: baselines, paths, fanout, cost.
+    #[arg(long, value_delimiter = ',')]
+    skip: Vec<String>,
+    /// Scratch directory for logs and sockets (default: a new one under /tmp).
+    #[arg(long)]
+    dir: Option<PathBuf>,
+}
+
+/// The sizes of a run.
+struct Plan {
+    baseline_rounds: u64,
+    commands: u64,
+    xbot_commands: u64,
+    states: u64,
+    preemptions: u64,
+    fanout: Vec<usize>,
+    fanout_seconds: f64,
+    cost_seconds: f64,
+}
+
+impl Plan {
+    fn new(quick: bool) -> Self {
+        if quick {
+            Self {
+                baseline_rounds: 2000,
+                commands: 300,
+                xbot_commands: 0,
+                states: 1000,
+                preemptions: 40,
+                fanout: vec![1, 4],
+                fanout_seconds: 1.5,
+                cost_seconds: 1.5,
+            }
+        } else {
+            Self {
+                baseline_rounds: 20_000,
+                commands: 3000,
+                xbot_commands: 60,
+                states: 10_000,
+                preemptions: 300,
+                fanout: vec![1, 4, 16],
+                fanout_seconds: 5.0,
+                cost_seconds: 5.0,
+            }
+        }
+    }
+}
+
+/// One service configuration to measure.
+struct PathRun {
+    robot: RobotKind,
+    bus: BusKind,
+    mode: LoopMode,
+    placement: Placement,
+}
+
+fn path_runs(quick: bool, robots: &[RobotKind]) -> Vec<PathRun> {
+    let run = |robot, bus, mode, placement| PathRun {
+        robot,
+        bus,
+        mode,
+        placement,
+    };
+    if quick {
+        return vec![
+            run(
+                RobotKind::Titan,
+                BusKind::Sim,
+                LoopMode::Event,
+                Placement::SameCpu,
+            ),
+            run(
+                RobotKind::Titan,
+                BusKind::Sim,
+                LoopMode::Event,
+                Placement::CrossCpu,
+            ),
+            run(
+                RobotKind::Titan,
+                BusKind::Sim,
+                LoopMode::Spin,
+                Placement::CrossCpu,
+            ),
+        ];
+    }
+    let mut runs = vec![
+        run(
+            RobotKind::Titan,
+            BusKind::Sim,
+            LoopMode::Event,
+            Placement::SameCpu,
+        ),
+        run(
+            RobotKind::Titan,
+            BusKind::Sim,
+            LoopMode::Spin,
+            Placement::CrossCpu,
+        ),
+        run(
+            RobotKind::Titan,
+            BusKind::Sim,
+            LoopMode::Hybrid,
+            Placement::CrossCpu,
+        ),
+    ];
+    for &robot in robots {
+        runs.push(run(
+            robot,
+            BusKind::Sim,
+            LoopMode::Event,
+            Placement::CrossCpu,
+        ));
+        runs.push(run(
+            robot,
+            BusKind::Pty,
+            LoopMode::Event,
+            Placement::CrossCpu,
+        ));
+    }
+    runs
+}
+
+fn row(
+    path: &str,
+    what: String,
+    mode: &str,
+    placement: &str,
+    latencies: Latencies,
+    missed: u64,
+) -> Row {
+    Row {
+        path: path.into(),
+        what,
+        mode: mode.into(),
+        placement: placement.into(),
+        summary: latencies.summary(),
+        missed,
+        baseline: None,
+        ratio_p99: None,
+        latencies,
+    }
+}
+
+fn bus_label(robot: RobotKind, bus: BusKind) -> String {
+    let bus = match (bus, robot.is_can()) {
+        (BusKind::Sim, _) => "sim",
+        (BusKind::Pty, true) => "slcan pty",
+        (BusKind::Pty, false) => "serial pty",
+    };
+    format!("{robot} {bus}")
+}
+
+fn run(args: &RunArgs) -> anyhow::Result<Report> {
+    let plan = Plan::new(args.quick);
+    let skip = |part: &str| args.skip.iter().any(|s| s == part);
+    let dir = match &args.dir {
+        Some(d) => d.clone(),
+        None => std::env::temp_dir().join(format!("chassis-bench-{}", std::process::id())),
+    };
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let prefix = format!("cb{}_", std::process::id());
+    let robots: Vec<RobotKind> = args
+        .robots
+        .iter()
+        .map(|r| r.parse::<RobotKind>().map_err(anyhow::Error::msg))
+        .collect::<anyhow::Result<_>>()?;
+    let mut report = Report {
+        machine: report::Machine::probe(),
+        ..Report::default()
+    };
+    if report.machine.cpus < 2 {
+        report
+            .notes
+            .push("one CPU only: cross-CPU runs share it".into());
+    }
+
+    let baselines: Vec<(Transport, Placement)> = [Placement::SameCpu, Placement::CrossCpu]
+        .into_iter()
+        .flat_map(|p| {
+            let mut t = vec![
+                (Transport::IceoryxEvent, p),
+                (Transport::Uds, p),
+                (Transport::Udp, p),
+            ];
+            if p == Placement::CrossCpu {
+                t.insert(1, (Transport::IceoryxSpin, p));
+            }
+            t
+        })
+        .collect();
+    let runs = path_runs(args.quick, &robots);
+    let steps = (if skip("baselines") {
+        0
+    } else {
+        baselines.len()
+    }) + (if skip("paths") { 0 } else { runs.len() })
+        + (if skip("fanout") { 0 } else { plan.fanout.len() })
+        + usize::from(!skip("cost"));
+    let bar = ProgressBar::new(steps as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed:>4} [{bar:30}] {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+
+    if !skip("baselines") {
+        for (transport, placement) in baselines {
+            bar.set_message(format!(
+                "baseline {} ({})",
+                transport.label(),
+                placement.label()
+            ));
+            let l = baseline::run(transport, placement, plan.baseline_rounds, &prefix, &dir)?;
+            report.rows.push(row(
+                "baseline",
+                transport.label().into(),
+                "-",
+                placement.label(),
+                l,
+                0,
+            ));
+            bar.inc(1);
+        }
+    }
+
+    if !skip("paths") {
+        for r in &runs {
+            let label = bus_label(r.robot, r.bus);
+            bar.set_message(format!(
+                "{label}, {} loop, {}",
+                r.mode.arg(),
+                r.placement.label()
+            ));
+            let (client_cpu, service_cpu) = r.placement.cpus();
+            let (_service, mut robot) =
+                paths::start(r.robot, r.bus, r.mode, service_cpu, &prefix, &dir)?;
+            let spin = r.mode == LoopMode::Spin;
+            let (count, interval) = if r.robot == RobotKind::Xbot {
+                // The XBot's manual caps the command rate below 10 Hz: a change goes out at once
+                // only while the last second holds a free slot.
+                (plan.xbot_commands, Duration::from_millis(600))
+            } else {
+                (plan.commands, Duration::from_millis(4))
+            };
+            let result = paths::pinned(client_cpu, || -> anyhow::Result<_> {
+                let command = if count > 0 {
+                    Some(paths::command_path(
+                        &mut robot, r.robot, count, interval, spin,
+                    )?)
+                } else {
+                    None
+                };
+                let state = paths::state_path(&mut robot, plan.states, spin)?;
+                let preemptions = if r.robot == RobotKind::Xbot {
+                    plan.preemptions / 10
+                } else {
+                    plan.preemptions
+                };
+                let preempt = paths::preemption(&mut robot, r.robot, preemptions, spin)?;
+                Ok((command, state, preempt))
+            })??;
+            let (command, state, (preempt, preempt_missed)) = result;
+            let placement = r.placement.label();
+            if let Some((l, missed)) = command {
+                report.rows.push(row(
+                    "command",
+                    label.clone(),
+                    r.mode.arg(),
+                    placement,
+                    l,
+                    missed,
+                ));
+            }
+            report.rows.push(row(
+                "state",
+                label.clone(),
+                r.mode.arg(),
+                placement,
+                state,
+                0,
+            ));
+            report.rows.push(row(
+                "preemption",
+                label,
+                r.mode.arg(),
+                placement,
+                preempt,
+                preempt_missed,
+            ));
+            bar.inc(1);
+        }
+    }
+
+    if !skip("fanout") {
+        for &n in &plan.fanout {
+            bar.set_message(format!("fan-out to {n} subscriber processes"));
+            let (service, mut robot) = paths::start(
+                RobotKind::Titan,
+                BusKind::Sim,
+                LoopMode::Event,
+                None,
+                &prefix,
+                &dir,
+            )?;
+            let l = fanout::run(&mut robot, &service.name, &prefix, n, plan.fanout_seconds)?;
+            report.rows.push(row(
+                "fan-out",
+                format!("titan sim → {n} processes"),
+                "event",
+                "unpinned",
+                l,
+                0,
+            ));
+            bar.inc(1);
+        }
+    }
+
+    if !skip("cost") {
+        bar.set_message("service cost at 100 % bus load");
+        let (service, mut robot) = paths::start(
+            RobotKind::Titan,
+            BusKind::Sim,
+            LoopMode::Event,
+            None,
+            &prefix,
+            &dir,
+        )?;
+        for bitrate in [500_000, 1_000_000] {
+            report.cost.push(paths::cost_at(
+                &mut robot,
+                service.pid,
+                bitrate,
+                plan.cost_seconds,
+            )?);
+        }
+        drop(service);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    report.compute_ratios();
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(report)
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.role {
+        Some(RoleCmd::Role {
+            role: Role::Pong(args),
+        }) => baseline::pong(&args),
+        Some(RoleCmd::Role {
+            role: Role::Subscribe(args),
+        }) => fanout::subscribe(&args),
+        None => run(&cli.run).and_then(|report| {
+            print!("{}", report.table());
+            if let Some(path) = &cli.run.json {
+                std::fs::write(path, serde_json::to_string_pretty(&report)?)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
+            if let Some(path) = &cli.run.plot {
+                report.plot(path)?;
+            }
+            Ok(())
+        }),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("chassis-bench: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -15,6 +15,19 @@ use thiserror::Error;
 use crate::bus::BusSpec;
 use crate::mux::{MuxConfig, MuxConfigError};
 
+/// How the event loop waits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum LoopMode {
+    /// Block until something happens (lowest CPU use; a wake-up costs the kernel's latency).
+    #[default]
+    Event,
+    /// Never block: poll everything continuously (one core at 100 %, lowest latency).
+    Spin,
+    /// Poll for `spin_us` after each activity, then block.
+    Hybrid,
+}
+
 /// `[service]`: what this process is and how its loop runs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -31,6 +44,13 @@ pub struct ServiceConfig {
     pub tick_ms: u64,
     /// Rate at which `MuxStatus` is published when nothing changes, Hz.
     pub mux_status_hz: f64,
+    /// How the loop waits (`--loop`).
+    #[serde(rename = "loop")]
+    pub loop_mode: LoopMode,
+    /// Hybrid mode: how long to keep polling after each activity, µs (`--spin-us`).
+    pub spin_us: u64,
+    /// Pin the loop's thread to this CPU (`--cpu`).
+    pub cpu: Option<usize>,
 }
 
 impl Default for ServiceConfig {
@@ -42,6 +62,9 @@ impl Default for ServiceConfig {
             gps: None,
             tick_ms: 20,
             mux_status_hz: 10.0,
+            loop_mode: LoopMode::Event,
+            spin_us: 200,
+            cpu: None,
         }
     }
 }
@@ -89,6 +112,9 @@ pub struct Overrides {
     pub no_safety_monitor: bool,
     /// The configuration is for `chassisd sim` (the chassis side of a bus).
     pub simulator: bool,
+    pub loop_mode: Option<LoopMode>,
+    pub spin_us: Option<u64>,
+    pub cpu: Option<usize>,
 }
 
 /// Why a configuration is not usable.
@@ -132,6 +158,9 @@ pub struct Config {
     pub bus_settings: BusConfig,
     pub tick_ms: u64,
     pub mux_status_hz: f64,
+    pub loop_mode: LoopMode,
+    pub spin_us: u64,
+    pub cpu: Option<usize>,
     /// The required-source rule was lifted on the command line.
     pub no_safety_monitor: bool,
 }
@@ -238,6 +267,9 @@ impl RawConfig {
             bus_settings: self.bus,
             tick_ms: self.service.tick_ms,
             mux_status_hz: self.service.mux_status_hz,
+            loop_mode: overrides.loop_mode.unwrap_or(self.service.loop_mode),
+            spin_us: overrides.spin_us.unwrap_or(self.service.spin_us),
+            cpu: overrides.cpu.or(self.service.cpu),
             no_safety_monitor: overrides.no_safety_monitor,
         })
     }
@@ -269,6 +301,9 @@ impl Config {
                 gps: self.gps.as_ref().map(ToString::to_string),
                 tick_ms: self.tick_ms,
                 mux_status_hz: self.mux_status_hz,
+                loop_mode: self.loop_mode,
+                spin_us: self.spin_us,
+                cpu: self.cpu,
             },
             bus: self.bus_settings.clone(),
             driver: self.driver.clone(),

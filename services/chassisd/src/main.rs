@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use chassis_protocols::Robot;
 use chassisd::bus::BusSpec;
-use chassisd::config::{Config, Overrides, RawConfig};
+use chassisd::config::{Config, LoopMode, Overrides, RawConfig};
 use clap::{Args, Parser, Subcommand};
 use tracing::error;
 
@@ -55,6 +55,16 @@ struct ServiceArgs {
     /// Print the effective configuration (TOML, with every default) and exit.
     #[arg(long)]
     print_config: bool,
+    /// How the loop waits: event (block; default), spin (poll continuously), hybrid (poll
+    /// for --spin-us after each activity, then block).
+    #[arg(long = "loop", value_enum)]
+    loop_mode: Option<LoopMode>,
+    /// Hybrid loop: microseconds to keep polling after each activity.
+    #[arg(long)]
+    spin_us: Option<u64>,
+    /// Pin the loop's thread to this CPU.
+    #[arg(long)]
+    cpu: Option<usize>,
 }
 
 fn parse_robot(text: &str) -> Result<Robot, String> {
@@ -78,6 +88,9 @@ fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), String> {
             gps: args.gps,
             no_safety_monitor: args.no_safety_monitor,
             simulator,
+            loop_mode: args.loop_mode,
+            spin_us: args.spin_us,
+            cpu: args.cpu,
         })
         .map_err(|e| e.to_string())?;
     Ok((config, args.print_config))

@@ -26,7 +26,7 @@ use zerocopy::IntoBytes;
 
 use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use crate::clock;
-use crate::config::Config;
+use crate::config::{Config, LoopMode};
 use crate::ipc::{IpcError, Ports};
 use crate::mux::Mux;
 use crate::sim::{SimHandle, firmware_for, injection_of};
@@ -100,7 +100,14 @@ pub fn open_bus(spec: &BusSpec, config: &Config) -> Result<(Bus, Option<SimHandl
                 let (a, b) = datagram::StreamBytes::pair("sim").map_err(io)?;
                 (Bus::Bytes(Box::new(a)), Bus::Bytes(Box::new(b)))
             };
-            let handle = SimHandle::spawn(firmware, theirs).map_err(io)?;
+            // A pinned loop leaves the other CPUs to its simulated chassis.
+            let others: Vec<usize> = match config.cpu {
+                Some(cpu) => (0..std::thread::available_parallelism().map_or(1, |n| n.get()))
+                    .filter(|&c| c != cpu)
+                    .collect(),
+                None => Vec::new(),
+            };
+            let handle = SimHandle::spawn_on(firmware, theirs, &others).map_err(io)?;
             (ours, Some(handle))
         }
         BusSpec::Can { iface } => (Bus::Can(Box::new(socketcan::SocketCan::open(iface)?)), None),
@@ -125,6 +132,7 @@ pub fn open_bus(spec: &BusSpec, config: &Config) -> Result<(Bus, Option<SimHandl
             let bus = slcan::SlcanBus::open(port, config.bus_settings.can_bitrate)?;
             (Bus::Can(Box::new(bus)), None)
         }
+        BusSpec::Replay { path, speed } => (crate::bus::replay::open(path, *speed, robot)?, None),
         BusSpec::Pty { .. } | BusSpec::SlcanPty { .. } => {
             return Err(BusError::Open {
                 name: spec.to_string(),
@@ -208,6 +216,11 @@ struct Core {
     throttle_publish: Throttle,
     /// The loop's own tick: mux re-evaluation, smoothing, state refresh.
     tick: Grid,
+    /// When something last woke the loop (hybrid mode keeps polling for a while after it).
+    last_activity: Timestamp,
+    /// Buses (and GPS ports) that failed: their descriptors stay open until the wait set that
+    /// watches them is gone.
+    retired: Vec<Bus>,
 }
 
 /// The part of a state sample that changes only when the chassis reports something new.
@@ -328,7 +341,7 @@ impl Core {
 
     fn bus_lost(&mut self, now: Timestamp, err: &BusError) {
         error!("{err}; commanding nothing until it is back, retrying");
-        self.bus = None;
+        self.retired.extend(self.bus.take());
         self.driver.set_bus_down(now, true);
         self.bus_retry_at = Some(now + self.bus_backoff);
     }
@@ -461,7 +474,7 @@ impl Core {
             Ok(_) => Next::Continue,
             Err(err) => {
                 error!("GPS receiver lost: {err}; retrying");
-                self.gps = None;
+                self.retired.extend(self.gps.take());
                 self.gps_retry_at = Some(now + Duration::from_secs(1));
                 Next::Rewire
             }
@@ -708,6 +721,9 @@ impl Core {
     fn iteration(&mut self, ports: &Ports, mut fired: Fired) -> Next {
         let mut next = Next::Continue;
         let woke = clock::now();
+        if fired.bus || fired.gps || fired.sources || fired.control || fired.sim {
+            self.last_activity = woke;
+        }
         if self.tick.is_due(woke) {
             self.tick.served(woke);
             fired.tick = true;
@@ -773,7 +789,25 @@ impl Core {
         next
     }
 
-    /// How long the loop may wait.
+    /// How long the loop waits, by its mode: event-driven blocks until the next deadline, spin
+    /// never blocks, hybrid polls for `spin_us` after each activity and then blocks.
+    fn wait_time(&self, now: Timestamp) -> Duration {
+        match self.config.loop_mode {
+            LoopMode::Event => self.timeout(now),
+            LoopMode::Spin => Duration::ZERO,
+            LoopMode::Hybrid => {
+                if now.saturating_since(self.last_activity)
+                    < Duration::from_micros(self.config.spin_us)
+                {
+                    Duration::ZERO
+                } else {
+                    self.timeout(now)
+                }
+            }
+        }
+    }
+
+    /// How long the loop may block before its next deadline.
     fn timeout(&self, now: Timestamp) -> Duration {
         let deadlines = [
             Some(self.tick.next()),
@@ -806,6 +840,15 @@ impl Core {
     }
 }
 
+/// Pins the calling thread to `cpu`.
+pub fn pin_to_cpu(cpu: usize) -> Result<(), String> {
+    use nix::sched::{CpuSet, sched_setaffinity};
+    let mut set = CpuSet::new();
+    set.set(cpu).map_err(|e| format!("CPU {cpu}: {e}"))?;
+    sched_setaffinity(nix::unistd::Pid::from_raw(0), &set)
+        .map_err(|e| format!("pinning to CPU {cpu}: {e}"))
+}
+
 /// Runs the service until SIGINT or SIGTERM. Returns after commanding zero.
 pub fn run(config: Config) -> Result<(), ServiceError> {
     let span = info_span!(
@@ -819,6 +862,13 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
             "--no-safety-monitor: the robot moves without a safety monitor; no required source \
              guards it"
         );
+    }
+    if let Some(cpu) = config.cpu {
+        pin_to_cpu(cpu).map_err(ServiceError::Setup)?;
+        info!(cpu, "loop pinned");
+    }
+    if config.loop_mode != LoopMode::Event {
+        info!(mode = ?config.loop_mode, spin_us = config.spin_us, "loop polls instead of blocking");
     }
     let sources: Vec<String> = config.mux.sources.iter().map(|s| s.name.clone()).collect();
     let with_sim = config.bus == BusSpec::Sim;
@@ -866,6 +916,8 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
         throttle_tx: Throttle::default(),
         throttle_publish: Throttle::default(),
         tick: Grid::new(Duration::from_millis(config.tick_ms), now),
+        last_activity: now,
+        retired: Vec::new(),
         config,
     };
     if core.bus.is_none() {
@@ -875,6 +927,8 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
     core.publish_state(&ports, now);
 
     loop {
+        // The previous session's wait set is gone: failed buses can close now.
+        core.retired.clear();
         // One wait set per bus session: the bus descriptor changes when the bus is reopened.
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
@@ -916,7 +970,7 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
             .map_err(attach_err)?;
 
         loop {
-            let timeout = core.timeout(clock::now());
+            let timeout = core.wait_time(clock::now());
             let mut fired = Fired::default();
             let result = waitset.wait_and_process_once_with_timeout(
                 |id| {

@@ -107,6 +107,12 @@ impl std::fmt::Debug for SimCommandBox {
 impl SimHandle {
     /// Runs `firmware` on `bus` in a new thread.
     pub fn spawn(firmware: BoxedFirmware, bus: Bus) -> std::io::Result<Self> {
+        Self::spawn_on(firmware, bus, &[])
+    }
+
+    /// Like [`SimHandle::spawn`], with the thread confined to `cpus` (all CPUs when empty), so a
+    /// pinned, spinning service loop does not starve its simulated chassis.
+    pub fn spawn_on(firmware: BoxedFirmware, bus: Bus, cpus: &[usize]) -> std::io::Result<Self> {
         let (doorbell, wake) = UnixDatagram::pair()?;
         doorbell.set_nonblocking(true)?;
         wake.set_nonblocking(true)?;
@@ -114,7 +120,15 @@ impl SimHandle {
         let robot = firmware.robot();
         let thread = std::thread::Builder::new()
             .name(format!("sim-{}", robot.name()))
-            .spawn(move || run(firmware, bus, &inbox, &wake))?;
+            .spawn({
+                let cpus = cpus.to_vec();
+                move || {
+                    if !cpus.is_empty() {
+                        confine(&cpus);
+                    }
+                    run(firmware, bus, &inbox, &wake)
+                }
+            })?;
         Ok(Self {
             commands,
             doorbell,
@@ -171,6 +185,18 @@ impl Drop for SimHandle {
         {
             warn!("simulated chassis ended with: {err}");
         }
+    }
+}
+
+/// Confines the calling thread to `cpus`.
+fn confine(cpus: &[usize]) {
+    use nix::sched::{CpuSet, sched_setaffinity};
+    let mut set = CpuSet::new();
+    for &cpu in cpus {
+        let _ = set.set(cpu);
+    }
+    if let Err(err) = sched_setaffinity(nix::unistd::Pid::from_raw(0), &set) {
+        warn!("simulated chassis: cannot confine to CPUs {cpus:?}: {err}");
     }
 }
 

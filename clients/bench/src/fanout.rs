@@ -1,0 +1,92 @@
+//! State fan-out: the same state path measured in 1, 4 or 16 subscriber processes at once.
+
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use chassis_client::{Robot, VelocityRequest, now_ns};
+
+use crate::paths::StateRecorder;
+use crate::stats::Latencies;
+
+/// Arguments of a subscriber process (a hidden role of this binary).
+#[derive(Debug, Clone, clap::Args)]
+pub struct SubscribeArgs {
+    #[arg(long)]
+    pub name: String,
+    #[arg(long)]
+    pub prefix: String,
+    #[arg(long)]
+    pub seconds: f64,
+}
+
+/// The subscriber role: records state latencies for `seconds`, then prints its histogram (hex
+/// of the HdrHistogram V2 encoding) on stdout.
+pub fn subscribe(args: &SubscribeArgs) -> anyhow::Result<()> {
+    let mut robot = Robot::connect_with_prefix(&args.name, Some(&args.prefix))?;
+    let mut recorder = StateRecorder::default();
+    let end = now_ns() + (args.seconds * 1e9) as u64;
+    while now_ns() < end {
+        if let Some(state) = robot.wait_state(Duration::from_millis(20))? {
+            recorder.sample(&state, now_ns());
+        }
+    }
+    let hex: String = recorder
+        .latencies
+        .to_bytes()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    println!("{hex}");
+    Ok(())
+}
+
+fn from_hex(text: &str) -> Option<Vec<u8>> {
+    let text = text.trim();
+    (0..text.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(text.get(i..i + 2)?, 16).ok())
+        .collect()
+}
+
+/// Runs `subscribers` subscriber processes for `seconds` while this process drives the robot,
+/// and merges their latencies.
+pub fn run(
+    robot: &mut Robot,
+    name: &str,
+    prefix: &str,
+    subscribers: usize,
+    seconds: f64,
+) -> anyhow::Result<Latencies> {
+    let exe = std::env::current_exe()?;
+    let mut children = Vec::new();
+    for _ in 0..subscribers {
+        children.push(
+            Command::new(&exe)
+                .args(["role", "subscribe", "--name", name, "--prefix", prefix])
+                .args(["--seconds", &seconds.to_string()])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::inherit())
+                .spawn()
+                .context("starting a subscriber")?,
+        );
+    }
+    let mut teleop = robot.source("teleop")?;
+    let end = now_ns() + ((seconds + 0.5) * 1e9) as u64;
+    while now_ns() < end {
+        teleop.send(VelocityRequest::twist(0.6, 0.3))?;
+        robot.wait_state(Duration::from_millis(50))?;
+    }
+    teleop.stop()?;
+    let mut merged = Latencies::new();
+    for child in children {
+        let out = child.wait_with_output()?;
+        if !out.status.success() {
+            bail!("a subscriber failed");
+        }
+        let text = String::from_utf8_lossy(&out.stdout);
+        let bytes = from_hex(&text).context("a subscriber's histogram is not hex")?;
+        merged.merge(&Latencies::from_bytes(&bytes).context("a subscriber's histogram")?);
+    }
+    Ok(merged)
+}

@@ -1,0 +1,609 @@
+//! The real paths through a running `chassisd`:
+//!
+//! * **command**: a `VelocityRequest` created in this process → the motion frame written to the
+//!   bus by the service (the frame tap's TX stamp, taken right after the write);
+//! * **state**: a frame read from the bus (the service stamps it right after the read) → the
+//!   `ChassisState` it changed, received here;
+//! * **preemption**: the `safety` source publishes a stop while `teleop` drives → the zero
+//!   frame written.
+//!
+//! Every figure is one-way, from `CLOCK_MONOTONIC` stamps taken in two processes.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use chassis_client::{
+    BusFrame, ChassisState, FrameDirection, FrameKind, Robot, SimKind, SimRequest, Source, Ticker,
+    VelocityRequest, now_ns,
+};
+use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
+use chassis_protocols::{CanFrame, Robot as RobotKind, scout_mini, titan, xbot};
+use serde::Serialize;
+
+use zerocopy::IntoBytes;
+
+use crate::placement::{pause, pin_current_thread, unique, unpin_current_thread};
+use crate::stats::Latencies;
+
+/// How the service's loop waits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum LoopMode {
+    Event,
+    Spin,
+    Hybrid,
+}
+
+impl LoopMode {
+    pub fn arg(self) -> &'static str {
+        match self {
+            LoopMode::Event => "event",
+            LoopMode::Spin => "spin",
+            LoopMode::Hybrid => "hybrid",
+        }
+    }
+}
+
+/// Which bus the service uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BusKind {
+    /// The embedded simulator (a socket pair).
+    Sim,
+    /// `chassisd sim` on a pty: raw serial (XBot) or an slcan adapter (CAN robots).
+    Pty,
+}
+
+/// The service under test, stopped on drop.
+pub struct Service {
+    pub name: String,
+    children: Vec<Child>,
+    pub pid: u32,
+}
+
+impl Drop for Service {
+    fn drop(&mut self) {
+        for child in self.children.iter_mut().rev() {
+            if let Ok(pid) = i32::try_from(child.id()) {
+                let _ = nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(pid),
+                    nix::sys::signal::Signal::SIGTERM,
+                );
+            }
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Where the workspace's binaries are (next to this one).
+pub fn sibling(binary: &str) -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let path = exe.with_file_name(binary);
+    if !path.exists() {
+        bail!(
+            "{} not found next to chassis-bench: build the workspace (`cargo build --release`)",
+            path.display()
+        );
+    }
+    Ok(path)
+}
+
+/// A service configuration for latency runs: no acceleration smoothing, no minimum spacing
+/// between command frames, no idle brake.
+pub fn write_config(dir: &Path) -> anyhow::Result<PathBuf> {
+    let path = dir.join("bench.toml");
+    std::fs::write(
+        &path,
+        "[driver]\nmin_command_interval_ms = 0\nbrake_idle_engage_ms = 0\n\n\
+         [mux.limits]\nlinear_accel_mps2 = 0.0\nangular_accel_radps2 = 0.0\n",
+    )?;
+    Ok(path)
+}
+
+/// Starts `chassisd` (and, for a pty bus, `chassisd sim`) and waits until it publishes.
+pub fn start(
+    robot: RobotKind,
+    bus: BusKind,
+    mode: LoopMode,
+    service_cpu: Option<usize>,
+    prefix: &str,
+    dir: &Path,
+) -> anyhow::Result<(Service, Robot)> {
+    let name = format!("bn{}", unique());
+    let chassisd = sibling("chassisd")?;
+    let config = write_config(dir)?;
+    let mut children = Vec::new();
+    let log = |label: &str| -> anyhow::Result<Stdio> {
+        Ok(Stdio::from(std::fs::File::create(
+            dir.join(format!("{name}-{label}.log")),
+        )?))
+    };
+    let bus_arg = match bus {
+        BusKind::Sim => "sim".to_string(),
+        BusKind::Pty => {
+            let link = dir.join(format!("{name}-link"));
+            let (sim_bus, service_bus) = if robot.is_can() {
+                (
+                    format!("slcan-pty:{}", link.display()),
+                    format!("slcan:{}", link.display()),
+                )
+            } else {
+                (
+                    format!("pty:{}", link.display()),
+                    format!("serial:{}", link.display()),
+                )
+            };
+            let sim = Command::new(&chassisd)
+                .args([
+                    "sim",
+                    "--robot",
+                    robot.name(),
+                    "--name",
+                    &name,
+                    "--bus",
+                    &sim_bus,
+                ])
+                .env("CHASSIS_IPC_PREFIX", prefix)
+                .env("RUST_LOG", "warn")
+                .stdout(log("sim")?)
+                .stderr(log("sim-err")?)
+                .spawn()
+                .context("starting chassisd sim")?;
+            children.push(sim);
+            let deadline = now_ns() + 10_000_000_000;
+            while !link.exists() {
+                if now_ns() > deadline {
+                    bail!("chassisd sim made no pty link");
+                }
+                pause(Duration::from_millis(20));
+            }
+            service_bus
+        }
+    };
+    let mut args = vec![
+        "--robot".to_string(),
+        robot.name().to_string(),
+        "--name".into(),
+        name.clone(),
+        "--bus".into(),
+        bus_arg,
+        "--no-safety-monitor".into(),
+        "--config".into(),
+        config.display().to_string(),
+        "--loop".into(),
+        mode.arg().into(),
+    ];
+    if robot == RobotKind::Xbot {
+        // The benchmark's simulated board has a known wheel separation.
+        std::fs::write(
+            &config,
+            format!(
+                "{}\n[profile]\nwheel_separation_m = 0.45\n",
+                std::fs::read_to_string(&config)?
+            ),
+        )?;
+    }
+    if let Some(cpu) = service_cpu {
+        args.push("--cpu".into());
+        args.push(cpu.to_string());
+    }
+    let service = Command::new(&chassisd)
+        .args(&args)
+        .env("CHASSIS_IPC_PREFIX", prefix)
+        .env("RUST_LOG", "warn")
+        .stdout(log("chassisd")?)
+        .stderr(log("chassisd-err")?)
+        .spawn()
+        .context("starting chassisd")?;
+    let pid = service.id();
+    children.push(service);
+    let service = Service {
+        name: name.clone(),
+        children,
+        pid,
+    };
+    let deadline = now_ns() + 15_000_000_000;
+    let mut robot_conn = loop {
+        if let Ok(mut r) = Robot::connect_with_prefix(&name, Some(prefix))
+            && r.wait_state(Duration::from_millis(200))?.is_some()
+        {
+            break r;
+        }
+        if now_ns() > deadline {
+            bail!(
+                "chassisd for {robot} did not come up (logs in {})",
+                dir.display()
+            );
+        }
+        pause(Duration::from_millis(50));
+    };
+    // Let the chassis reach command mode.
+    let ready_by = now_ns() + 5_000_000_000;
+    while now_ns() < ready_by {
+        if let Some(s) = robot_conn.wait_state(Duration::from_millis(100))?
+            && s.system.control_mode == chassis_client::ControlMode::COMMAND
+        {
+            break;
+        }
+    }
+    Ok((service, robot_conn))
+}
+
+/// The linear speed a transmitted motion frame commands, if the frame is one.
+struct MotionDecoder {
+    robot: RobotKind,
+    xbot: xbot::StreamParser,
+}
+
+impl MotionDecoder {
+    fn new(robot: RobotKind) -> Self {
+        Self {
+            robot,
+            xbot: xbot::StreamParser::new(),
+        }
+    }
+
+    fn linear(&mut self, frame: &BusFrame) -> Option<f64> {
+        if frame.direction != FrameDirection::TX {
+            return None;
+        }
+        match self.robot {
+            RobotKind::Titan | RobotKind::ScoutMini => {
+                if frame.kind != FrameKind::CAN {
+                    return None;
+                }
+                let can = CanFrame::new(frame.can_id, frame.payload()).ok()?;
+                if self.robot == RobotKind::Titan {
+                    match titan::decode(&can, &TitanProfile::default()).ok()? {
+                        titan::Frame::MotionCommand(m) => Some(m.linear_mps),
+                        _ => None,
+                    }
+                } else {
+                    match scout_mini::decode(&can, &ScoutMiniProfile::default())
+                        .ok()?
+                        .frame
+                    {
+                        scout_mini::Frame::MotionCommand(m) => Some(m.linear_mps),
+                        _ => None,
+                    }
+                }
+            }
+            RobotKind::Xbot => {
+                self.xbot.push(frame.payload());
+                let mut found = None;
+                while let Some(item) = self.xbot.next_frame(&XbotProfile::default()) {
+                    if let Ok(xbot::Frame::Velocity(v)) = item {
+                        found = Some(v.linear_x_mps);
+                    }
+                }
+                found
+            }
+        }
+    }
+}
+
+/// Drains the tap until a TX motion frame commanding `speed`, stamped at or after `since`,
+/// appears; returns its stamp.
+fn wait_for_motion(
+    tap: &chassis_client::FrameTap,
+    decoder: &mut MotionDecoder,
+    speed: f64,
+    since: u64,
+    spin: bool,
+    timeout: Duration,
+) -> anyhow::Result<Option<u64>> {
+    let deadline = since + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
+    loop {
+        let mut found = None;
+        let each = |frame: &BusFrame| {
+            if found.is_none()
+                && frame.stamp_ns >= since
+                && decoder
+                    .linear(frame)
+                    .is_some_and(|v| (v - speed).abs() < 1e-6)
+            {
+                found = Some(frame.stamp_ns);
+            }
+        };
+        if spin {
+            tap.drain(each)?;
+        } else {
+            tap.wait(Duration::from_millis(5), each)?;
+        }
+        if found.is_some() {
+            return Ok(found);
+        }
+        if now_ns() > deadline {
+            return Ok(None);
+        }
+    }
+}
+
+/// Command-path latencies: `count` requests alternating between two speeds, one every
+/// `interval`.
+pub fn command_path(
+    robot: &mut Robot,
+    kind: RobotKind,
+    count: u64,
+    interval: Duration,
+    spin: bool,
+) -> anyhow::Result<(Latencies, u64)> {
+    let tap = robot.frames(2048)?;
+    let mut teleop = robot.source("teleop")?;
+    let mut decoder = MotionDecoder::new(kind);
+    // Exact on every wire: whole mm/s, whole percent of 5 m/s, exact in f32.
+    let speeds = [0.25, 0.5];
+    // Warm up: the first motion releases TITAN's brake and waits for command mode.
+    teleop.send(VelocityRequest::twist(0.25, 0.0))?;
+    wait_for_motion(
+        &tap,
+        &mut decoder,
+        0.25,
+        now_ns(),
+        spin,
+        Duration::from_secs(3),
+    )?;
+    let mut latencies = Latencies::new();
+    let mut missed = 0;
+    let mut ticker = Ticker::new(interval);
+    for i in 0..count {
+        ticker.wait();
+        tap.drain(|_| {})?;
+        let speed = speeds[usize::from(i % 2 == 1)];
+        let stamp = now_ns();
+        teleop.send(VelocityRequest {
+            stamp_ns: stamp,
+            ..VelocityRequest::twist(speed as f32, 0.0)
+        })?;
+        match wait_for_motion(
+            &tap,
+            &mut decoder,
+            speed,
+            stamp,
+            spin,
+            Duration::from_millis(500),
+        )? {
+            Some(written) => latencies.record_between(stamp, written),
+            None => missed += 1,
+        }
+    }
+    teleop.stop()?;
+    Ok((latencies, missed))
+}
+
+/// The part of a sample that changes only with what the chassis reports.
+fn body(s: &ChassisState) -> ChassisState {
+    ChassisState {
+        seq: 0,
+        stamp_ns: 0,
+        group_stamp_ns: [0; chassis_client::GROUP_SLOTS],
+        link: Default::default(),
+        ..*s
+    }
+}
+
+/// Records state-path latencies from consecutive samples: only samples whose content changed
+/// (those are published the moment the frame is read; a sample that merely refreshes stamps
+/// carries an older frame's read time).
+#[derive(Debug, Default)]
+pub struct StateRecorder {
+    previous: Option<ChassisState>,
+    pub latencies: Latencies,
+}
+
+impl StateRecorder {
+    pub fn sample(&mut self, state: &ChassisState, received: u64) {
+        if self.previous.is_some_and(|p| p.seq == state.seq) {
+            return;
+        }
+        let follows = self.previous.is_some_and(|p| state.seq == p.seq + 1);
+        let changed = self
+            .previous
+            .is_none_or(|p| body(&p).as_bytes() != body(state).as_bytes());
+        if follows && changed {
+            self.latencies.record_between(state.stamp_ns, received);
+        }
+        self.previous = Some(*state);
+    }
+}
+
+/// State-path latencies while the robot drives (so frames keep changing the state).
+pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result<Latencies> {
+    let mut teleop = robot.source("teleop")?;
+    let mut recorder = StateRecorder::default();
+    let mut last_request = 0u64;
+    let deadline = now_ns() + 120_000_000_000;
+    while recorder.latencies.count() < samples && now_ns() < deadline {
+        if now_ns().saturating_sub(last_request) > 50_000_000 {
+            teleop.send(VelocityRequest::twist(0.6, 0.3))?;
+            last_request = now_ns();
+        }
+        let state = if spin {
+            robot.latest_state()?
+        } else {
+            robot.wait_state(Duration::from_millis(20))?
+        };
+        if let Some(state) = state {
+            recorder.sample(&state, now_ns());
+        }
+    }
+    teleop.stop()?;
+    Ok(recorder.latencies)
+}
+
+/// Preemption latencies: teleop drives; `safety` publishes a stop → the zero frame written.
+pub fn preemption(
+    robot: &mut Robot,
+    kind: RobotKind,
+    count: u64,
+    spin: bool,
+) -> anyhow::Result<(Latencies, u64)> {
+    let tap = robot.frames(2048)?;
+    let mut teleop = robot.source("teleop")?;
+    let mut safety: Source = robot.source("safety")?;
+    let mut decoder = MotionDecoder::new(kind);
+    let mut latencies = Latencies::new();
+    let mut missed = 0;
+    for _ in 0..count {
+        // Drive: teleop wins.
+        safety.heartbeat()?;
+        let start = now_ns();
+        let mut driving = false;
+        while now_ns() - start < 2_000_000_000 {
+            teleop.send(VelocityRequest::twist(0.5, 0.0))?;
+            safety.heartbeat()?;
+            if wait_for_motion(
+                &tap,
+                &mut decoder,
+                0.5,
+                start,
+                spin,
+                Duration::from_millis(20),
+            )?
+            .is_some()
+            {
+                driving = true;
+                break;
+            }
+        }
+        if !driving {
+            missed += 1;
+            continue;
+        }
+        teleop.send(VelocityRequest::twist(0.5, 0.0))?;
+        tap.drain(|_| {})?;
+        let stamp = now_ns();
+        safety.send(VelocityRequest {
+            stamp_ns: stamp,
+            ..VelocityRequest::twist(0.0, 0.0)
+        })?;
+        match wait_for_motion(
+            &tap,
+            &mut decoder,
+            0.0,
+            stamp,
+            spin,
+            Duration::from_millis(500),
+        )? {
+            Some(written) => latencies.record_between(stamp, written),
+            None => missed += 1,
+        }
+    }
+    safety.heartbeat()?;
+    teleop.stop()?;
+    Ok((latencies, missed))
+}
+
+/// Runs `f` with the calling thread pinned to `cpu` (if any).
+pub fn pinned<T>(cpu: Option<usize>, f: impl FnOnce() -> T) -> anyhow::Result<T> {
+    if let Some(cpu) = cpu {
+        pin_current_thread(cpu)?;
+    }
+    let out = f();
+    unpin_current_thread();
+    Ok(out)
+}
+
+/// CPU time (user + system) a process has used, s.
+pub fn cpu_seconds(pid: u32) -> anyhow::Result<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))?;
+    // Fields after the command name (which may contain spaces) start after the last ')'.
+    let rest = stat
+        .rsplit_once(')')
+        .map(|(_, r)| r)
+        .context("malformed stat")?;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = fields.get(11).context("no utime")?.parse()?;
+    let stime: f64 = fields.get(12).context("no stime")?.parse()?;
+    let ticks = nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK)
+        .ok()
+        .flatten()
+        .unwrap_or(100) as f64;
+    Ok((utime + stime) / ticks)
+}
+
+/// Resident memory of a process, MiB.
+pub fn rss_mib(pid: u32) -> anyhow::Result<f64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
+    let kib: f64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.split_whitespace().next())
+        .context("no VmRSS")?
+        .parse()?;
+    Ok(kib / 1024.0)
+}
+
+/// CPU use and memory of the service at a given bus load.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Cost {
+    pub bitrate: u32,
+    pub frames_per_s: f64,
+    pub cpu_pct: f64,
+    pub rss_mib: f64,
+}
+
+/// Loads the simulated bus to `bitrate`'s capacity (8-byte standard frames, no stuffing:
+/// 111 bits each) with the simulator's flood, and measures the service for `seconds`.
+pub fn cost_at(robot: &mut Robot, pid: u32, bitrate: u32, seconds: f64) -> anyhow::Result<Cost> {
+    let capacity = f64::from(bitrate) / 111.0;
+    // The feedback the chassis sends anyway.
+    let before = robot
+        .wait_state(Duration::from_secs(1))?
+        .context("no state")?;
+    let t0 = now_ns();
+    pause(Duration::from_secs(1));
+    let after = robot
+        .wait_state(Duration::from_secs(1))?
+        .context("no state")?;
+    let normal =
+        (after.link.rx_frames - before.link.rx_frames) as f64 / ((now_ns() - t0) as f64 / 1e9);
+    let flood = (capacity - normal).max(0.0);
+    robot.sim(
+        SimRequest {
+            kind: SimKind::FLOOD,
+            flag: 1,
+            value: flood,
+            ..SimRequest::default()
+        },
+        Duration::from_secs(3),
+    )?;
+    // Settle, then measure.
+    robot.wait_state(Duration::from_millis(500))?;
+    let start_frames = robot
+        .wait_state(Duration::from_secs(1))?
+        .context("no state")?
+        .link
+        .rx_frames;
+    let start_cpu = cpu_seconds(pid)?;
+    let start = now_ns();
+    let end = start + (seconds * 1e9) as u64;
+    while now_ns() < end {
+        robot.wait_state(Duration::from_millis(100))?;
+    }
+    let elapsed = (now_ns() - start) as f64 / 1e9;
+    let cpu = cpu_seconds(pid)? - start_cpu;
+    let frames = robot
+        .wait_state(Duration::from_secs(1))?
+        .context("no state")?
+        .link
+        .rx_frames;
+    let rss = rss_mib(pid)?;
+    robot.sim(
+        SimRequest {
+            kind: SimKind::FLOOD,
+            flag: 1,
+            value: 0.0,
+            ..SimRequest::default()
+        },
+        Duration::from_secs(3),
+    )?;
+    Ok(Cost {
+        bitrate,
+        frames_per_s: (frames - start_frames) as f64 / elapsed,
+        cpu_pct: 100.0 * cpu / elapsed,
+        rss_mib: rss,
+    })
+}

@@ -1,0 +1,84 @@
+//! Where the two ends of a measurement run: the same CPU or two CPUs. On a virtual machine a
+//! wake-up across CPUs costs tens of microseconds and one on the same CPU a few, so every figure
+//! is reported with its placement and compared only with a baseline of the same placement.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use serde::Serialize;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Placement {
+    /// Both ends pinned to CPU 0.
+    SameCpu,
+    /// The service (or the pong side) on CPU 0, the client on CPU 1.
+    CrossCpu,
+}
+
+impl Placement {
+    pub fn label(self) -> &'static str {
+        match self {
+            Placement::SameCpu => "same CPU",
+            Placement::CrossCpu => "cross CPU",
+        }
+    }
+
+    /// (client / ping side, service / pong side).
+    pub fn cpus(self) -> (Option<usize>, Option<usize>) {
+        match self {
+            Placement::SameCpu => (Some(0), Some(0)),
+            Placement::CrossCpu => (Some(1), Some(0)),
+        }
+    }
+}
+
+/// Pins the calling thread to `cpu`.
+pub fn pin_current_thread(cpu: usize) -> anyhow::Result<()> {
+    if core_affinity::set_for_current(core_affinity::CoreId { id: cpu }) {
+        Ok(())
+    } else {
+        anyhow::bail!("cannot pin to CPU {cpu}")
+    }
+}
+
+/// Lets the calling thread run on every CPU again.
+pub fn unpin_current_thread() {
+    if let Some(cores) = core_affinity::get_core_ids() {
+        use nix::sched::{CpuSet, sched_setaffinity};
+        let mut set = CpuSet::new();
+        for core in cores {
+            let _ = set.set(core.id);
+        }
+        let _ = sched_setaffinity(nix::unistd::Pid::from_raw(0), &set);
+    }
+}
+
+/// Number of CPUs available.
+pub fn cpu_count() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// A number unique within this process.
+pub fn unique() -> u64 {
+    COUNTER.fetch_add(1, Ordering::Relaxed)
+}
+
+/// A small stable hash (FNV-1a) of `text`.
+pub fn hash(text: &str) -> u64 {
+    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// Waits `d` (the benchmark's orchestration between measurements; never inside one).
+pub fn pause(d: std::time::Duration) {
+    use nix::sys::time::TimeSpec;
+    use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
+    let _ = clock_nanosleep(
+        ClockId::CLOCK_MONOTONIC,
+        ClockNanosleepFlags::empty(),
+        &TimeSpec::from_duration(d),
+    );
+}

@@ -1,0 +1,164 @@
+//! Latency histograms (HDR, nanoseconds) and their summaries.
+
+use hdrhistogram::Histogram;
+use hdrhistogram::serialization::{Deserializer, Serializer, V2Serializer};
+use serde::Serialize;
+
+/// One-way latencies of one path, ns.
+#[derive(Debug, Clone)]
+pub struct Latencies {
+    histogram: Histogram<u64>,
+    /// Samples outside the histogram's range (negative or above 60 s): counted, not recorded.
+    pub out_of_range: u64,
+}
+
+impl Default for Latencies {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Latencies {
+    /// 1 ns to 60 s with 3 significant digits.
+    pub fn new() -> Self {
+        let histogram = Histogram::new_with_bounds(1, 60_000_000_000, 3)
+            .unwrap_or_else(|_| Histogram::new(3).unwrap_or_else(|_| unreachable_histogram()));
+        Self {
+            histogram,
+            out_of_range: 0,
+        }
+    }
+
+    /// Records `later − earlier` (both `CLOCK_MONOTONIC` ns).
+    pub fn record_between(&mut self, earlier: u64, later: u64) {
+        match later.checked_sub(earlier) {
+            Some(ns) => self.record(ns),
+            None => self.out_of_range += 1,
+        }
+    }
+
+    pub fn record(&mut self, ns: u64) {
+        if self.histogram.record(ns.max(1)).is_err() {
+            self.out_of_range += 1;
+        }
+    }
+
+    pub fn count(&self) -> u64 {
+        self.histogram.len()
+    }
+
+    pub fn merge(&mut self, other: &Latencies) {
+        let _ = self.histogram.add(&other.histogram);
+        self.out_of_range += other.out_of_range;
+    }
+
+    pub fn summary(&self) -> Summary {
+        let h = &self.histogram;
+        let q = |q: f64| h.value_at_quantile(q) as f64 / 1000.0;
+        Summary {
+            count: h.len(),
+            mean_us: h.mean() / 1000.0,
+            p50_us: q(0.50),
+            p90_us: q(0.90),
+            p99_us: q(0.99),
+            p999_us: q(0.999),
+            max_us: h.max() as f64 / 1000.0,
+            out_of_range: self.out_of_range,
+        }
+    }
+
+    /// (latency µs, cumulative fraction) points of the distribution, for plots.
+    pub fn cdf(&self) -> Vec<(f64, f64)> {
+        let total = self.histogram.len().max(1) as f64;
+        let mut points = Vec::new();
+        let mut seen = 0u64;
+        for v in self.histogram.iter_recorded() {
+            seen += v.count_since_last_iteration();
+            points.push((
+                self.histogram.highest_equivalent(v.value_iterated_to()) as f64 / 1000.0,
+                seen as f64 / total,
+            ));
+        }
+        points
+    }
+
+    /// The histogram in HdrHistogram's V2 format (how fan-out subscribers report back).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        let _ = V2Serializer::new().serialize(&self.histogram, &mut out);
+        out
+    }
+
+    pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
+        let histogram: Histogram<u64> = Deserializer::new()
+            .deserialize(&mut std::io::Cursor::new(bytes))
+            .ok()?;
+        Some(Self {
+            histogram,
+            out_of_range: 0,
+        })
+    }
+}
+
+/// A histogram that cannot fail to exist (3 significant digits are always valid).
+fn unreachable_histogram() -> Histogram<u64> {
+    // `Histogram::new(3)` only fails for more than 5 significant digits.
+    match Histogram::new(2) {
+        Ok(h) => h,
+        Err(_) => std::process::abort(),
+    }
+}
+
+/// Percentiles of one path, µs.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Summary {
+    pub count: u64,
+    pub mean_us: f64,
+    pub p50_us: f64,
+    pub p90_us: f64,
+    pub p99_us: f64,
+    pub p999_us: f64,
+    pub max_us: f64,
+    pub out_of_range: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_of_a_known_distribution() {
+        let mut l = Latencies::new();
+        for us in 1..=1000u64 {
+            l.record(us * 1000);
+        }
+        let s = l.summary();
+        assert_eq!(s.count, 1000);
+        assert!((s.p50_us - 500.0).abs() < 1.0, "{s:?}");
+        assert!((s.p99_us - 990.0).abs() < 1.5, "{s:?}");
+        assert!((s.max_us - 1000.0).abs() < 1.0, "{s:?}");
+    }
+
+    #[test]
+    fn histograms_survive_serialization_and_merge() {
+        let mut a = Latencies::new();
+        a.record(5_000);
+        let mut b = Latencies::from_bytes(&a.to_bytes()).unwrap();
+        b.record(7_000);
+        assert_eq!(b.count(), 2);
+        a.merge(&b);
+        assert_eq!(a.count(), 3);
+    }
+
+    #[test]
+    fn a_clock_going_backwards_is_counted_not_recorded() {
+        let mut l = Latencies::new();
+        l.record_between(10, 5);
+        assert_eq!((l.count(), l.out_of_range), (0, 1));
+        let cdf = {
+            l.record_between(5, 10);
+            l.cdf()
+        };
+        assert_eq!(cdf.last().map(|p| p.1), Some(1.0));
+    }
+}
