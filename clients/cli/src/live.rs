@@ -210,9 +210,10 @@ fn age_text(stamp_ns: u64) -> String {
 
 /// One line per state sample.
 pub fn state_line(s: &ChassisState) -> String {
-    let faults = FaultFlags::names(s.system.fault_flags);
+    let faults = FaultFlags::names(s.system.fault_flags & !FaultFlags::WARNINGS);
+    let warnings = FaultFlags::names(s.system.fault_flags & FaultFlags::WARNINGS);
     format!(
-        "#{:<6} {:>7.3} m/s {:>7.3} rad/s steer {:>6.3}  pose ({:.2}, {:.2}, {:.1}°)  {}  {:.1} V  faults {}{}",
+        "#{:<6} {:>7.3} m/s {:>7.3} rad/s steer {:>6.3}  pose ({:.2}, {:.2}, {:.1}°)  {}  {:.1} V  faults {}{}{}",
         s.seq,
         s.motion.linear_mps,
         s.motion.angular_radps,
@@ -226,6 +227,11 @@ pub fn state_line(s: &ChassisState) -> String {
             "-".to_string()
         } else {
             faults.join(",")
+        },
+        if warnings.is_empty() {
+            String::new()
+        } else {
+            format!("  warnings {}", warnings.join(","))
         },
         if s.link_flags & (LinkFlags::CHASSIS_SILENT | LinkFlags::BUS_DOWN) != 0 {
             format!("  [{}]", LinkFlags::names(s.link_flags).join(","))

@@ -12,8 +12,10 @@ use clap::{Parser, Subcommand};
 mod action;
 mod codec;
 mod decode;
+mod demo;
 mod encode;
 mod live;
+mod procs;
 mod record;
 mod top;
 
@@ -78,6 +80,9 @@ enum Cmd {
     /// A live dashboard: state, mux decisions, bus statistics (frames/s per id, errors, drops)
     /// and end-to-end latency.
     Top(top::TopArgs),
+    /// The whole system on a simulated robot: chassisd, the safety monitor, the planner driving
+    /// figure-eights, and the dashboard. Ctrl-C stops every process cleanly.
+    Demo(demo::DemoArgs),
     /// Record a robot's frames, state and mux decisions (MCAP, opens in Foxglove), or its CAN
     /// frames as a can-utils log (--candump).
     Record(record::RecordArgs),
@@ -116,7 +121,7 @@ fn restore_sigpipe() {
     let _ = unsafe { signal(Signal::SIGPIPE, SigHandler::SigDfl) };
 }
 
-fn parse_robot(text: &str) -> Result<Robot, String> {
+pub(crate) fn parse_robot(text: &str) -> Result<Robot, String> {
     text.parse()
 }
 
@@ -193,6 +198,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Cmd::Sim { name, command } => live::sim(&name, &command).map(|()| ExitCode::SUCCESS),
         Cmd::Top(args) => top::run(&args).map(|()| ExitCode::SUCCESS),
+        Cmd::Demo(args) => demo::run(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Record(args) => record::record(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Replay(args) => record::replay(&args).map(|()| ExitCode::SUCCESS),
     }

@@ -923,15 +923,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
             args.name
         );
     }
-    let chassisd = std::env::current_exe()
-        .context("finding this executable")?
-        .with_file_name("chassisd");
-    if !chassisd.exists() {
-        bail!(
-            "{} is missing: chassis replay starts the chassisd next to it (cargo build --bins)",
-            chassisd.display()
-        );
-    }
+    let chassisd = crate::procs::sibling("chassisd")?;
     let mut command = Command::new(&chassisd);
     command
         .args(["--robot", robot.name(), "--name", &args.name])
@@ -946,18 +938,8 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     if let Ok(fd) = std::os::fd::AsFd::as_fd(&std::io::stderr()).try_clone_to_owned() {
         command.stdout(Stdio::from(fd));
     }
-    {
-        use std::os::unix::process::CommandExt;
-        // SAFETY: between fork and exec the closure only makes one async-signal-safe system
-        // call (prctl).
-        unsafe {
-            command.pre_exec(|| {
-                // chassisd must not outlive us.
-                nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
-                    .map_err(std::io::Error::from)
-            });
-        }
-    }
+    // chassisd must not outlive us.
+    crate::procs::die_with_parent(&mut command);
     let mut service = Service {
         child: command
             .spawn()

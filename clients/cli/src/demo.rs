@@ -1,0 +1,159 @@
+//! `chassis demo`: the whole system on a simulated robot in one command — `chassisd` on the
+//! simulated chassis, the safety monitor, the planner driving figure-eights, and the dashboard.
+//! Ctrl-C (or `q` in the dashboard) stops every process cleanly.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use chassis_client::{Robot, Ticker, install_signal_handlers, now_ns, termination_requested};
+use chassis_protocols::Robot as RobotKind;
+use clap::Args;
+
+use crate::procs::{Children, sibling};
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// The simulated robot: titan, scout-mini or xbot.
+    #[arg(long, default_value = "titan", value_parser = crate::parse_robot)]
+    pub robot: RobotKind,
+    /// Name of the demo robot's services (default: demo-<robot>).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Stop after this many seconds (default: until Ctrl-C or `q`).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Print a status line every second instead of the live dashboard (the default when stdout
+    /// is not a terminal).
+    #[arg(long)]
+    pub no_dashboard: bool,
+    /// Figure-eight size, m (default: the planner's, which fits the robot's turning radius).
+    #[arg(long)]
+    pub size: Option<f64>,
+}
+
+fn log_file(dir: &std::path::Path, label: &str) -> anyhow::Result<Stdio> {
+    let path = dir.join(format!("{label}.log"));
+    Ok(Stdio::from(
+        std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?,
+    ))
+}
+
+pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
+    install_signal_handlers();
+    let name = args
+        .name
+        .clone()
+        .unwrap_or_else(|| format!("demo-{}", args.robot.name()));
+    let dir: PathBuf = std::env::temp_dir().join(format!("chassis-demo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut children = Children::default();
+
+    let mut service = Command::new(sibling("chassisd")?);
+    service
+        .args(["--robot", args.robot.name(), "--name", &name])
+        .stdin(Stdio::null())
+        .stdout(log_file(&dir, "chassisd")?)
+        .stderr(log_file(&dir, "chassisd")?);
+    children.spawn("chassisd", service)?;
+    eprintln!(
+        "chassisd: simulated {} as chassis/{name} (logs in {})",
+        args.robot,
+        dir.display()
+    );
+    let mut robot = connect(&name, &mut children)?;
+
+    let mut safety = Command::new(sibling("chassis-safety")?);
+    safety
+        .args(["--name", &name])
+        .stdin(Stdio::null())
+        .stdout(log_file(&dir, "chassis-safety")?)
+        .stderr(log_file(&dir, "chassis-safety")?);
+    children.spawn("chassis-safety", safety)?;
+    eprintln!("chassis-safety: watching faults, battery, staleness, bumper, ranges, speed");
+
+    let mut planner = Command::new(sibling("chassis-planner")?);
+    planner
+        .args(["--name", &name, "--shape", "figure-eight", "--repeat"])
+        .stdin(Stdio::null())
+        .stdout(log_file(&dir, "chassis-planner")?)
+        .stderr(log_file(&dir, "chassis-planner")?);
+    if let Some(size) = args.size {
+        planner.args(["--size", &size.to_string()]);
+    }
+    children.spawn("chassis-planner", planner)?;
+    eprintln!("chassis-planner: figure-eights, over and over");
+
+    let dashboard =
+        !args.no_dashboard && std::io::stdout().is_terminal() && args.duration.is_none();
+    let result = if dashboard {
+        crate::top::run(&crate::top::TopArgs {
+            name: name.clone(),
+            once: false,
+            collect: 1.5,
+            interval_ms: 250,
+        })
+    } else {
+        status_lines(&mut robot, &mut children, args.duration)
+    };
+    eprintln!("stopping the planner, the safety monitor and chassisd");
+    children.stop_all(Duration::from_secs(5));
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+/// Connects once chassisd publishes its first state.
+fn connect(name: &str, children: &mut Children) -> anyhow::Result<Robot> {
+    let started = now_ns();
+    let mut ticker = Ticker::new(Duration::from_millis(50));
+    loop {
+        if termination_requested() {
+            bail!("interrupted while starting");
+        }
+        if let Some((label, status)) = children.exited() {
+            bail!("{label} exited at start ({status})");
+        }
+        if let Ok(mut robot) = Robot::connect(name)
+            && robot.wait_state(Duration::from_millis(200))?.is_some()
+        {
+            return Ok(robot);
+        }
+        if now_ns().saturating_sub(started) > 15_000_000_000 {
+            bail!("chassis/{name} did not come up within 15 s");
+        }
+        ticker.wait();
+    }
+}
+
+/// One status line a second until `duration`, Ctrl-C, or a process of the demo ending.
+fn status_lines(
+    robot: &mut Robot,
+    children: &mut Children,
+    duration: Option<f64>,
+) -> anyhow::Result<()> {
+    let start = now_ns();
+    let end = duration.map(|d| start + (d * 1e9) as u64);
+    let mut ticker = Ticker::new(Duration::from_secs(1));
+    ticker.wait();
+    while !termination_requested() && end.is_none_or(|e| now_ns() < e) {
+        ticker.wait();
+        if let Some((label, status)) = children.exited() {
+            bail!("{label} stopped ({status})");
+        }
+        let state = robot.latest_state()?;
+        let mux = robot.latest_mux()?;
+        if let (Some(state), Some(mux)) = (state, mux) {
+            let active = mux
+                .active()
+                .map_or("none".to_string(), |s| s.name().to_string());
+            println!(
+                "{:>5.1} s  {}  | active {active}",
+                (now_ns() - start) as f64 / 1e9,
+                crate::live::state_line(&state)
+            );
+        }
+    }
+    Ok(())
+}

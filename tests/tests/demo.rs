@@ -1,0 +1,71 @@
+//! `chassis demo`: the whole system in one command, and Ctrl-C stopping all of it.
+
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::time::{Duration, Instant};
+
+use chassis_tests::*;
+use nix::sys::signal::Signal;
+
+/// Processes whose command line names the robot `name`.
+fn processes_named(name: &str) -> Vec<String> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        if let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) {
+            let text = String::from_utf8_lossy(&cmdline).replace('\0', " ");
+            if text.contains(&format!("--name {name}")) && !text.contains("chassis demo") {
+                found.push(text);
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn chassis_demo_drives_figure_eights_under_the_safety_monitor_and_ctrl_c_stops_everything() {
+    let mut env = Env::new("demo");
+    let name = format!("dm{}", std::process::id() % 100_000);
+    let demo = env.spawn(
+        "demo",
+        "chassis",
+        &["demo", "--robot", "xbot", "--name", &name, "--no-dashboard"],
+    );
+    let mut robot = env.robot(&name, Duration::from_secs(15));
+    // The planner drives, the required safety monitor is alive.
+    let driving = wait_for(Duration::from_secs(15), || {
+        let m = mux(&mut robot);
+        m.active().map(SourceStatus::name) == Some("planner")
+            && m.zero_reason == ZeroReason::NONE
+            && state(&mut robot).motion.linear_mps.abs() > 0.2
+    });
+    assert!(driving.is_some(), "the demo is not driving\n{}", env.logs());
+    let safety = mux(&mut robot).sources()[0];
+    assert_eq!(safety.name(), "safety");
+    assert!(safety.has(SourceFlags::FRESH | SourceFlags::REQUIRED));
+    assert_eq!(
+        processes_named(&name).len(),
+        3,
+        "{:?}",
+        processes_named(&name)
+    );
+    let reported = wait_for(Duration::from_secs(5), || {
+        env.proc(demo).log_text().contains("active planner")
+    });
+    assert!(reported.is_some(), "no status line\n{}", env.logs());
+
+    env.proc(demo).signal(Signal::SIGINT);
+    let stopped = Instant::now();
+    assert_eq!(
+        env.proc(demo).wait_exit(Duration::from_secs(10)),
+        Some(0),
+        "{}",
+        env.logs()
+    );
+    let gone = wait_for(Duration::from_secs(5), || processes_named(&name).is_empty());
+    assert!(gone.is_some(), "left behind: {:?}", processes_named(&name));
+    eprintln!(
+        "Ctrl-C → every demo process gone after {:?}",
+        stopped.elapsed()
+    );
+}
