@@ -177,11 +177,35 @@ impl MuxConfig {
     }
 }
 
+/// Fastest speed (and envelope) a request may ask for, m/s: far beyond any of these robots; a
+/// larger value is a client bug, rejected rather than clamped.
+pub const MAX_SANE_SPEED: f32 = 50.0;
+/// Largest yaw rate a request may ask for, rad/s.
+pub const MAX_SANE_YAW_RATE: f32 = 50.0;
+
+fn is_absurd(r: &VelocityRequest) -> bool {
+    let speeds = [
+        r.linear_x_mps,
+        r.linear_y_mps,
+        r.limit_forward_mps,
+        r.limit_reverse_mps,
+        r.limit_lateral_mps,
+    ];
+    let rates = [r.angular_z_radps, r.limit_angular_radps];
+    speeds.iter().any(|v| v.abs() > MAX_SANE_SPEED)
+        || rates.iter().any(|v| v.abs() > MAX_SANE_YAW_RATE)
+        || r.steer_rad.abs() > std::f32::consts::FRAC_PI_2
+}
+
 /// Why a request was not taken.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum Rejection {
     #[error("non-finite value in the request (NaN or infinity)")]
     NonFinite,
+    #[error(
+        "absurd value in the request (beyond {MAX_SANE_SPEED} m/s, {MAX_SANE_YAW_RATE} rad/s or ±π/2 steering)"
+    )]
+    Absurd,
     #[error("unknown lock bits 0x{0:X}")]
     UnknownLock(u32),
 }
@@ -317,6 +341,8 @@ impl Mux {
         };
         let rejection = if !request.is_finite() {
             Some(Rejection::NonFinite)
+        } else if is_absurd(request) {
+            Some(Rejection::Absurd)
         } else if (request.lock_engage | request.lock_release) & !known_locks != 0 {
             Some(Rejection::UnknownLock(
                 (request.lock_engage | request.lock_release) & !known_locks,
@@ -822,6 +848,28 @@ mod tests {
         assert_eq!(m.evaluate(ms(2)).output.linear_x_mps, 0.3);
         assert_eq!(m.status().rejected_requests, 3);
         assert_eq!(m.status().sources[TELEOP].rejected, 3);
+    }
+
+    #[test]
+    fn absurd_requests_are_rejected_like_non_finite_ones() {
+        let mut m = mux_unrequired();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.3)).unwrap();
+        for bad in [
+            VelocityRequest::twist(1e30, 0.0),
+            VelocityRequest::twist(0.0, -1e6),
+            VelocityRequest::steer(1.0, 3.0),
+            VelocityRequest::limit(0.0, 1e9, 0.0, 0.0),
+        ] {
+            let bad = VelocityRequest {
+                stamp_ns: ms(1).as_nanos(),
+                ..bad
+            };
+            assert_eq!(m.on_request(ms(1), TELEOP, &bad), Err(Rejection::Absurd));
+        }
+        assert_eq!(m.evaluate(ms(2)).output.linear_x_mps, 0.3);
+        assert_eq!(m.status().rejected_requests, 4);
+        // Fast but possible is not absurd: the robot's limits clamp it.
+        assert!(m.on_request(ms(3), TELEOP, &request(ms(3), 9.0)).is_ok());
     }
 
     #[test]
