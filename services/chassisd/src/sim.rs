@@ -15,7 +15,7 @@ use chassis_protocols::profile::Robot;
 use chassis_protocols::{Firmware, Injection, Profile, Timestamp, scout_mini, titan, xbot};
 use nix::poll::{PollFd, PollFlags};
 use nix::sys::time::TimeSpec;
-use tracing::{debug, error, warn};
+use tracing::{debug, warn};
 
 use crate::bus::{Bus, BusError};
 use crate::clock;
@@ -78,6 +78,13 @@ pub fn injection_of(request: &SimRequest) -> Result<Injection, String> {
     })
 }
 
+/// How the simulator's thread ended: the firmware comes back, with the bus error if the bus was
+/// lost (the chassis keeps its state across a reconnection).
+struct Ended {
+    firmware: BoxedFirmware,
+    lost: Option<BusError>,
+}
+
 enum SimCommand {
     Inject(Injection, mpsc::Sender<bool>),
     Stop,
@@ -88,7 +95,7 @@ enum SimCommand {
 pub struct SimHandle {
     commands: mpsc::Sender<SimCommandBox>,
     doorbell: UnixDatagram,
-    thread: Option<JoinHandle<Result<(), BusError>>>,
+    thread: Option<JoinHandle<Ended>>,
     robot: Robot,
 }
 
@@ -168,12 +175,28 @@ impl SimHandle {
         let _ = self.commands.send(SimCommandBox(SimCommand::Stop));
         let _ = self.doorbell.send(&[0]);
         match self.thread.take().map(JoinHandle::join) {
-            Some(Ok(result)) => result,
+            Some(Ok(Ended {
+                lost: Some(err), ..
+            })) => Err(err),
+            Some(Ok(Ended { lost: None, .. })) | None => Ok(()),
             Some(Err(_)) => Err(BusError::Protocol {
                 name: "sim".into(),
                 reason: "the simulator thread panicked".into(),
             }),
-            None => Ok(()),
+        }
+    }
+
+    /// After the thread ended on a lost bus: the firmware, to run again on a reopened bus.
+    pub fn recover(mut self) -> Option<(BoxedFirmware, BusError)> {
+        if !self.thread.as_ref().is_some_and(|t| t.is_finished()) {
+            return None;
+        }
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(Ended {
+                firmware,
+                lost: Some(err),
+            })) => Some((firmware, err)),
+            _ => None,
         }
     }
 }
@@ -206,6 +229,16 @@ fn run(
     mut bus: Bus,
     inbox: &mpsc::Receiver<SimCommandBox>,
     wake: &UnixDatagram,
+) -> Ended {
+    let lost = drive(&mut firmware, &mut bus, inbox, wake).err();
+    Ended { firmware, lost }
+}
+
+fn drive(
+    firmware: &mut BoxedFirmware,
+    bus: &mut Bus,
+    inbox: &mpsc::Receiver<SimCommandBox>,
+    wake: &UnixDatagram,
 ) -> Result<(), BusError> {
     let mut dropped: u64 = 0;
     loop {
@@ -224,7 +257,7 @@ fn run(
 
         let received = bus.receive(|rx| firmware.handle_rx(clock::now(), rx));
         if let Err(err) = received {
-            error!("simulated chassis lost its bus: {err}");
+            warn!("simulated chassis lost its bus: {err}");
             return Err(err);
         }
         let now = clock::now();
@@ -235,7 +268,7 @@ fn run(
             match bus.transmit(&item) {
                 Ok(()) => {}
                 Err(err) if err.is_disconnect() => {
-                    error!("simulated chassis lost its bus: {err}");
+                    warn!("simulated chassis lost its bus: {err}");
                     return Err(err);
                 }
                 Err(err) => {
@@ -250,7 +283,7 @@ fn run(
         let timeout = firmware
             .poll_timeout()
             .map(|t| t.saturating_since(clock::now()));
-        wait(&bus, wake, timeout);
+        wait(bus, wake, timeout);
     }
 }
 
@@ -273,6 +306,44 @@ fn wait(bus: &Bus, wake: &UnixDatagram, timeout: Option<Duration>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bus::datagram::DatagramCan;
+
+    /// Waits (test only) until `condition` holds, at most 5 s.
+    #[allow(clippy::disallowed_methods)]
+    fn eventually(mut condition: impl FnMut() -> bool) -> bool {
+        for _ in 0..500 {
+            if condition() {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        false
+    }
+
+    #[test]
+    fn a_simulator_that_loses_its_bus_hands_back_its_firmware_to_run_again() {
+        let profile = Profile::default_for(chassis_protocols::Robot::Titan);
+        let firmware = firmware_for(&profile, clock::now());
+        let (service_end, chassis_end) = DatagramCan::pair("sim").unwrap();
+        let sim = SimHandle::spawn(firmware, Bus::Can(Box::new(chassis_end))).unwrap();
+        let mut service_end = Bus::Can(Box::new(service_end));
+        assert!(
+            eventually(|| service_end.receive(|_| {}).unwrap() > 0),
+            "no feedback"
+        );
+        drop(service_end);
+        assert!(eventually(|| !sim.is_running()), "the loss went unnoticed");
+        let (firmware, err) = sim.recover().expect("the firmware comes back");
+        assert!(err.is_disconnect(), "{err}");
+        let (service_end, chassis_end) = DatagramCan::pair("sim").unwrap();
+        let sim = SimHandle::spawn(firmware, Bus::Can(Box::new(chassis_end))).unwrap();
+        let mut service_end = Bus::Can(Box::new(service_end));
+        assert!(
+            eventually(|| service_end.receive(|_| {}).unwrap() > 0),
+            "no feedback after"
+        );
+        assert!(sim.stop().is_ok());
+    }
 
     #[test]
     fn every_sim_request_kind_maps_to_an_injection() {

@@ -62,7 +62,21 @@ pub fn open_chassis_side(spec: &BusSpec, config: &Config) -> Result<Bus, BusErro
     })
 }
 
-/// Runs the simulated chassis until SIGINT/SIGTERM or until its bus is lost.
+/// The simulated chassis: running on its bus, or waiting for the bus to come back with the same
+/// firmware (a real chassis keeps running while its cable is out).
+enum Chassis {
+    Running(SimHandle),
+    Down {
+        firmware: crate::sim::BoxedFirmware,
+        retry_at: chassis_protocols::Timestamp,
+        backoff: Duration,
+    },
+}
+
+const FIRST_RETRY: Duration = Duration::from_millis(100);
+const LAST_RETRY: Duration = Duration::from_secs(2);
+
+/// Runs the simulated chassis until SIGINT/SIGTERM. A lost bus is reopened with backoff.
 pub fn run(config: &Config) -> Result<(), String> {
     let bus = open_chassis_side(&config.bus, config).map_err(|e| e.to_string())?;
     info!(
@@ -72,7 +86,7 @@ pub fn run(config: &Config) -> Result<(), String> {
         config.name
     );
     let firmware = firmware_for(&config.profile, clock::now());
-    let sim = SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?;
+    let mut chassis = Chassis::Running(SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?);
 
     let node = NodeBuilder::new()
         .config(&iceoryx_config().map_err(|e| e.to_string())?)
@@ -100,28 +114,31 @@ pub fn run(config: &Config) -> Result<(), String> {
     loop {
         let result = waitset.wait_and_process_once_with_timeout(
             |_| CallbackProgression::Continue,
-            Duration::from_millis(200),
+            Duration::from_millis(100),
         );
         let _ = &guard;
         match result {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
                 info!("stopping the simulated chassis");
-                return sim.stop().map_err(|e| e.to_string());
+                return match chassis {
+                    Chassis::Running(sim) => sim.stop().map_err(|e| e.to_string()),
+                    Chassis::Down { .. } => Ok(()),
+                };
             }
             Ok(_) => {}
             Err(e) => return Err(format!("wait set: {e:?}")),
         }
-        if !sim.is_running() {
-            let ended = sim.stop();
-            error!("the simulated chassis stopped: {ended:?}");
-            return Err("the simulated chassis lost its bus".into());
-        }
+        chassis = keep_running(chassis, config)?;
         let _ = desk.listener.try_wait(|_| {});
         while let Ok(Some(active)) = desk.server.receive() {
             let request = *active.payload();
-            let (status, message) = match injection_of(&request) {
-                Err(reason) => (ControlStatus::INVALID, reason),
-                Ok(injection) => {
+            let (status, message) = match (injection_of(&request), &chassis) {
+                (Err(reason), _) => (ControlStatus::INVALID, reason),
+                (Ok(_), Chassis::Down { .. }) => (
+                    ControlStatus::REFUSED,
+                    "the simulated chassis has lost its bus".to_string(),
+                ),
+                (Ok(injection), Chassis::Running(sim)) => {
                     let name = injection.name();
                     match sim.inject(injection) {
                         Ok(true) => (ControlStatus::OK, format!("{name} injected")),
@@ -139,5 +156,44 @@ pub fn run(config: &Config) -> Result<(), String> {
             }
             let _ = desk.notifier.notify();
         }
+    }
+}
+
+/// Notices a lost bus and reopens it with backoff, keeping the same firmware.
+fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, String> {
+    match chassis {
+        Chassis::Running(sim) if !sim.is_running() => match sim.recover() {
+            Some((firmware, err)) => {
+                error!("the simulated chassis lost its bus ({err}); reopening it");
+                Ok(Chassis::Down {
+                    firmware,
+                    retry_at: clock::now() + FIRST_RETRY,
+                    backoff: FIRST_RETRY,
+                })
+            }
+            None => Err("the simulated chassis stopped".into()),
+        },
+        Chassis::Down {
+            firmware,
+            retry_at,
+            backoff,
+        } if clock::now() >= retry_at => match open_chassis_side(&config.bus, config) {
+            Ok(bus) => {
+                info!(bus = bus.name(), "the simulated chassis has its bus back");
+                Ok(Chassis::Running(
+                    SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?,
+                ))
+            }
+            Err(err) => {
+                let backoff = (backoff * 2).min(LAST_RETRY);
+                tracing::debug!("reopening the bus: {err}");
+                Ok(Chassis::Down {
+                    firmware,
+                    retry_at: clock::now() + backoff,
+                    backoff,
+                })
+            }
+        },
+        other => Ok(other),
     }
 }
