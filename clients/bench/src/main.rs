@@ -16,6 +16,7 @@ mod paths;
 mod placement;
 mod report;
 mod stats;
+mod throughput;
 
 use baseline::Transport;
 use paths::{BusKind, LoopMode};
@@ -51,6 +52,14 @@ enum RoleCmd {
 enum Role {
     Pong(baseline::PongArgs),
     Subscribe(fanout::SubscribeArgs),
+    /// Write the candump log the throughput run replays (for profiling the service by hand).
+    RecordTitan {
+        #[arg(long)]
+        out: PathBuf,
+        /// Simulated seconds (about 650 frames each).
+        #[arg(long, default_value_t = 1500)]
+        seconds: u64,
+    },
 }
 
 #[derive(Debug, Args)]
@@ -67,7 +76,7 @@ struct RunArgs {
     /// Robots for the service paths (full run).
     #[arg(long, value_delimiter = ',', default_values_t = ["titan".to_string(), "scout-mini".to_string(), "xbot".to_string()])]
     robots: Vec<String>,
-    /// Skip parts: baselines, paths, fanout, cost.
+    /// Skip parts: baselines, paths, fanout, cost, throughput.
     #[arg(long, value_delimiter = ',')]
     skip: Vec<String>,
     /// Scratch directory for logs and sockets (default: a new one under /tmp).
@@ -264,7 +273,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         baselines.len()
     }) + (if skip("paths") { 0 } else { runs.len() })
         + (if skip("fanout") { 0 } else { plan.fanout.len() })
-        + usize::from(!skip("cost"));
+        + usize::from(!skip("cost"))
+        + usize::from(!skip("throughput"));
     let bar = ProgressBar::new(steps as u64);
     bar.set_style(
         ProgressStyle::with_template("{elapsed:>4} [{bar:30}] {pos}/{len} {msg}")
@@ -405,6 +415,14 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         drop(service);
         bar.inc(1);
     }
+    if !skip("throughput") {
+        bar.set_message("replaying a recorded bus at full speed");
+        let file = dir.join("titan.log");
+        let seconds = if args.quick { 300 } else { 1500 };
+        let frames = throughput::record_titan(&file, seconds)?;
+        report.throughput = Some(throughput::replay(&file, frames, &prefix, &dir)?);
+        bar.inc(1);
+    }
     bar.finish_and_clear();
     report.compute_ratios();
     let _ = std::fs::remove_dir_all(&dir);
@@ -420,6 +438,11 @@ fn main() -> ExitCode {
         Some(RoleCmd::Role {
             role: Role::Subscribe(args),
         }) => fanout::subscribe(&args),
+        Some(RoleCmd::Role {
+            role: Role::RecordTitan { out, seconds },
+        }) => throughput::record_titan(&out, seconds).map(|frames| {
+            eprintln!("{frames} frames written to {}", out.display());
+        }),
         None => run(&cli.run).and_then(|report| {
             print!("{}", report.table());
             if let Some(path) = &cli.run.json {

@@ -508,7 +508,16 @@ pub fn pinned<T>(cpu: Option<usize>, f: impl FnOnce() -> T) -> anyhow::Result<T>
 
 /// CPU time (user + system) a process has used, s.
 pub fn cpu_seconds(pid: u32) -> anyhow::Result<f64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))?;
+    stat_cpu_seconds(&format!("/proc/{pid}/stat"))
+}
+
+/// CPU time (user + system) one thread of a process has used, s.
+pub fn cpu_seconds_of_thread(pid: u32, tid: u32) -> anyhow::Result<f64> {
+    stat_cpu_seconds(&format!("/proc/{pid}/task/{tid}/stat"))
+}
+
+fn stat_cpu_seconds(path: &str) -> anyhow::Result<f64> {
+    let stat = std::fs::read_to_string(path)?;
     // Fields after the command name (which may contain spaces) start after the last ')'.
     let rest = stat
         .rsplit_once(')')

@@ -94,7 +94,7 @@ pub fn open_bus(spec: &BusSpec, config: &Config) -> Result<(Bus, Option<SimHandl
                 reason: e.to_string(),
             };
             let (ours, theirs) = if robot.is_can() {
-                let (a, b) = datagram::DatagramCan::pair("sim").map_err(io)?;
+                let (a, b) = datagram::PairCan::pair("sim").map_err(io)?;
                 (Bus::Can(Box::new(a)), Bus::Can(Box::new(b)))
             } else {
                 let (a, b) = datagram::StreamBytes::pair("sim").map_err(io)?;
@@ -221,6 +221,9 @@ struct Core {
     /// Buses (and GPS ports) that failed: their descriptors stay open until the wait set that
     /// watches them is gone.
     retired: Vec<Bus>,
+    /// Samples were published since readers were last woken.
+    wake_state_readers: bool,
+    wake_frame_readers: bool,
 }
 
 /// The part of a state sample that changes only when the chassis reports something new.
@@ -257,9 +260,7 @@ impl Core {
             .map_err(|e| format!("{e:?}"))
             .and_then(|sample| sample.send().map_err(|e| format!("{e:?}")));
         match sent {
-            Ok(_) => {
-                let _ = ports.state.notifier.notify();
-            }
+            Ok(_) => self.wake_state_readers = true,
             Err(reason) => {
                 if let Some(held) = self.throttle_publish.allow(now) {
                     warn!(held_back = held, "cannot publish state: {reason}");
@@ -324,7 +325,18 @@ impl Core {
                 }
             }
         }
-        let _ = ports.frames.notifier.notify();
+        self.wake_frame_readers = true;
+    }
+
+    /// Wakes the readers of what was published since the last call: one notification per batch
+    /// of frames, not one per frame (every sample is already in shared memory).
+    fn wake_readers(&mut self, ports: &Ports) {
+        if std::mem::take(&mut self.wake_state_readers) {
+            let _ = ports.state.notifier.notify();
+        }
+        if std::mem::take(&mut self.wake_frame_readers) {
+            let _ = ports.frames.notifier.notify();
+        }
     }
 
     fn publish_mux(&mut self, ports: &Ports, now: Timestamp) {
@@ -428,6 +440,7 @@ impl Core {
             self.driver.handle_rx(*stamp, item.as_rx());
             self.publish_state_if_changed(ports, *stamp);
         }
+        self.wake_readers(ports);
         match result {
             Ok(_) => Next::Continue,
             Err(err) => {
@@ -669,6 +682,15 @@ impl Core {
                 }
             }
         }
+        if failure.is_none()
+            && let Err(err) = bus.flush()
+        {
+            if err.is_disconnect() {
+                failure = Some(err);
+            } else if let Some(held) = self.throttle_tx.allow(now) {
+                warn!(held_back = held, "{err}");
+            }
+        }
         for (stamp, item) in &sent {
             self.publish_frame(ports, *stamp, FrameDirection::TX, kind, item.as_rx());
         }
@@ -786,6 +808,7 @@ impl Core {
         if let Next::Rewire = self.try_reopen_gps(now) {
             next = Next::Rewire;
         }
+        self.wake_readers(ports);
         next
     }
 
@@ -832,6 +855,7 @@ impl Core {
         let _ = self.transmit(ports, now);
         self.publish_state(ports, now);
         self.publish_mux(ports, now);
+        self.wake_readers(ports);
         for (_, (active, seq)) in self.pending_controls.drain() {
             let response =
                 ControlResponse::new(seq, ControlStatus::REFUSED, "the service is stopping");
@@ -918,6 +942,8 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
         tick: Grid::new(Duration::from_millis(config.tick_ms), now),
         last_activity: now,
         retired: Vec::new(),
+        wake_state_readers: false,
+        wake_frame_readers: false,
         config,
     };
     if core.bus.is_none() {
@@ -925,6 +951,7 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
     }
     let _ = core.try_reopen_gps(now);
     core.publish_state(&ports, now);
+    core.wake_readers(&ports);
 
     loop {
         // The previous session's wait set is gone: failed buses can close now.

@@ -279,6 +279,12 @@ fn drive(
                 }
             }
         }
+        if let Err(err) = bus.flush()
+            && err.is_disconnect()
+        {
+            warn!("simulated chassis lost its bus: {err}");
+            return Err(err);
+        }
 
         let timeout = firmware
             .poll_timeout()
@@ -306,7 +312,7 @@ fn wait(bus: &Bus, wake: &UnixDatagram, timeout: Option<Duration>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bus::datagram::DatagramCan;
+    use crate::bus::datagram::PairCan;
 
     /// Waits (test only) until `condition` holds, at most 5 s.
     #[allow(clippy::disallowed_methods)]
@@ -324,7 +330,7 @@ mod tests {
     fn a_simulator_that_loses_its_bus_hands_back_its_firmware_to_run_again() {
         let profile = Profile::default_for(chassis_protocols::Robot::Titan);
         let firmware = firmware_for(&profile, clock::now());
-        let (service_end, chassis_end) = DatagramCan::pair("sim").unwrap();
+        let (service_end, chassis_end) = PairCan::pair("sim").unwrap();
         let sim = SimHandle::spawn(firmware, Bus::Can(Box::new(chassis_end))).unwrap();
         let mut service_end = Bus::Can(Box::new(service_end));
         assert!(
@@ -335,7 +341,7 @@ mod tests {
         assert!(eventually(|| !sim.is_running()), "the loss went unnoticed");
         let (firmware, err) = sim.recover().expect("the firmware comes back");
         assert!(err.is_disconnect(), "{err}");
-        let (service_end, chassis_end) = DatagramCan::pair("sim").unwrap();
+        let (service_end, chassis_end) = PairCan::pair("sim").unwrap();
         let sim = SimHandle::spawn(firmware, Bus::Can(Box::new(chassis_end))).unwrap();
         let mut service_end = Bus::Can(Box::new(service_end));
         assert!(

@@ -179,8 +179,10 @@ fn settle(check: &'static str, bus: &mut dyn CanBus) -> Result<(), Violation> {
     Ok(())
 }
 
+/// Sends one frame and flushes it (a backend may buffer sends until `flush`).
 fn send(check: &'static str, bus: &mut dyn CanBus, frame: &CanFrame) -> Result<(), Violation> {
     bus.send(frame)
+        .and_then(|()| bus.flush())
         .map_err(|e| violation(check, format!("{} could not send {frame}: {e}", bus.name())))
 }
 
@@ -198,7 +200,7 @@ fn send_all(
     for frame in frames {
         let mut refused_since = None;
         loop {
-            match from.send(frame) {
+            match from.send(frame).and_then(|()| from.flush()) {
                 Ok(()) => break,
                 Err(BusError::TxDropped { .. }) => {
                     retries += 1;
@@ -494,7 +496,7 @@ pub fn a_lost_link_is_a_disconnect(
             }
             Ok(None) => {}
         }
-        match survivor.send(&probe) {
+        match survivor.send(&probe).and_then(|()| survivor.flush()) {
             Err(err) if err.is_disconnect() => return Ok(elapsed(start)),
             Ok(()) | Err(BusError::TxDropped { .. }) => {}
             Err(err) => {
@@ -548,12 +550,12 @@ mod tests {
     //! slcan (host side against the emulated adapter) over a pty.
 
     use super::*;
-    use crate::bus::datagram::DatagramCan;
+    use crate::bus::datagram::PairCan;
     use crate::bus::serial::{SerialBus, pty_pair};
     use crate::bus::slcan::{SlcanAdapter, SlcanBus};
 
-    fn datagram() -> (DatagramCan, DatagramCan) {
-        DatagramCan::pair("sim").unwrap()
+    fn socket_pair() -> (PairCan, PairCan) {
+        PairCan::pair("sim").unwrap()
     }
 
     /// The service's slcan host on the slave side of a pty (as on a USB adapter's tty), the
@@ -591,15 +593,15 @@ mod tests {
     }
 
     #[test]
-    fn datagram_pair_conforms() {
-        let (mut a, mut b) = datagram();
+    fn socket_pair_conforms() {
+        let (mut a, mut b) = socket_pair();
         let figures = check_link(&mut a, &mut b).unwrap();
-        eprintln!("datagram pair: {figures}");
+        eprintln!("socket pair: {figures}");
     }
 
     #[test]
-    fn datagram_pair_reports_a_closed_peer_as_a_disconnect() {
-        let (mut a, b) = datagram();
+    fn socket_pair_reports_a_closed_peer_as_a_disconnect() {
+        let (mut a, b) = socket_pair();
         a_lost_link_is_a_disconnect(&mut a, || {
             drop(b);
             Ok(())
@@ -637,7 +639,7 @@ mod tests {
     /// A backend that swallows frames must fail the suite: the suite itself is tested.
     #[derive(Debug)]
     struct Lossy {
-        inner: DatagramCan,
+        inner: PairCan,
         sent: usize,
     }
 
@@ -652,6 +654,9 @@ mod tests {
             }
             self.inner.send(frame)
         }
+        fn flush(&mut self) -> Result<(), BusError> {
+            self.inner.flush()
+        }
         fn raw_fd(&self) -> RawFd {
             self.inner.raw_fd()
         }
@@ -662,11 +667,11 @@ mod tests {
 
     #[test]
     fn a_backend_that_loses_frames_fails_the_suite() {
-        let (a, mut b) = datagram();
+        let (a, mut b) = socket_pair();
         let mut lossy = Lossy { inner: a, sent: 0 };
         let err = frames_arrive_unchanged_and_in_order(&mut lossy, &mut b).unwrap_err();
         assert_eq!(err.check, "frames_arrive_unchanged_and_in_order");
-        let (a, mut b) = datagram();
+        let (a, mut b) = socket_pair();
         let mut lossy = Lossy { inner: a, sent: 0 };
         let err = a_burst_arrives_whole_and_in_order(&mut lossy, &mut b, 64).unwrap_err();
         assert!(err.detail.contains("lost"), "{err}");
@@ -674,7 +679,7 @@ mod tests {
 
     #[test]
     fn a_link_that_never_breaks_fails_the_disconnect_check() {
-        let (mut a, _b) = datagram();
+        let (mut a, _b) = socket_pair();
         let start = clock::now();
         let err = a_lost_link_is_a_disconnect(&mut a, || Ok(())).unwrap_err();
         assert!(elapsed(start) >= DELIVERY_TIMEOUT);

@@ -1,22 +1,30 @@
-//! Socket-pair transports: CAN frames as Unix datagrams and byte streams as a Unix stream.
+//! Socket-pair transports: CAN frames as fixed records on a Unix stream, and byte streams as a
+//! Unix stream.
 //!
-//! The in-process simulated chassis sits at the other end of one of these, so the service talks
-//! to the simulator through a real file descriptor, exactly as it talks to a real bus.
+//! The in-process simulated chassis (and the replay of a recording) sits at the other end of one
+//! of these, so the service talks to it through a real file descriptor, exactly as it talks to a
+//! real bus.
 
 use std::io::{self, Read, Write};
 use std::os::fd::{AsRawFd, RawFd};
-use std::os::unix::net::{UnixDatagram, UnixStream};
+use std::os::unix::net::UnixStream;
 
 use chassis_protocols::CanFrame;
 
 use super::{BusError, ByteBus, CanBus, classify};
 
-/// Wire form of one CAN frame in a datagram: id (u32 LE), length, flags (bit 0: extended id),
-/// two spare bytes, eight data bytes.
-const DATAGRAM_LEN: usize = 16;
+/// Wire form of one CAN frame on the pair: id (u32 LE), length, flags (bit 0: extended id), two
+/// spare bytes, eight data bytes.
+const RECORD: usize = 16;
+/// Bytes read per system call: up to 256 frames.
+const READ_CHUNK: usize = 256 * RECORD;
+/// Buffered sends are written once this much is waiting (or on `flush`).
+const WRITE_AT: usize = 64 * RECORD;
+/// Most bytes a sender buffers while its peer does not read; beyond, frames are dropped.
+const TX_CAP: usize = 4096 * RECORD;
 
-fn to_datagram(frame: &CanFrame) -> [u8; DATAGRAM_LEN] {
-    let mut buf = [0u8; DATAGRAM_LEN];
+fn to_record(frame: &CanFrame) -> [u8; RECORD] {
+    let mut buf = [0u8; RECORD];
     buf[..4].copy_from_slice(&frame.id().to_le_bytes());
     // A classic frame holds at most 8 bytes.
     buf[4] = frame.len() as u8;
@@ -25,8 +33,8 @@ fn to_datagram(frame: &CanFrame) -> [u8; DATAGRAM_LEN] {
     buf
 }
 
-fn from_datagram(buf: &[u8]) -> Option<CanFrame> {
-    if buf.len() != DATAGRAM_LEN {
+fn from_record(buf: &[u8]) -> Option<CanFrame> {
+    if buf.len() != RECORD {
         return None;
     }
     let id = u32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]);
@@ -39,60 +47,116 @@ fn from_datagram(buf: &[u8]) -> Option<CanFrame> {
     }
 }
 
-/// One end of a CAN link over a Unix datagram socket pair.
+/// One end of a CAN link over a Unix stream socket pair, carrying fixed 16-byte records.
+///
+/// Reads take up to 256 frames per system call; sends are buffered until [`CanBus::flush`] (or
+/// until 64 frames wait), so a burst costs one write and one read instead of one per frame.
 #[derive(Debug)]
-pub struct DatagramCan {
-    socket: UnixDatagram,
+pub struct PairCan {
+    stream: UnixStream,
+    rx: Vec<u8>,
+    rx_pos: usize,
+    tx: Vec<u8>,
     name: String,
 }
 
-impl DatagramCan {
+impl PairCan {
     /// Two connected ends.
     pub fn pair(name: &str) -> io::Result<(Self, Self)> {
-        let (a, b) = UnixDatagram::pair()?;
+        let (a, b) = UnixStream::pair()?;
         a.set_nonblocking(true)?;
         b.set_nonblocking(true)?;
+        let end = |stream, name: String| Self {
+            stream,
+            rx: Vec::with_capacity(READ_CHUNK),
+            rx_pos: 0,
+            tx: Vec::with_capacity(WRITE_AT),
+            name,
+        };
         Ok((
-            Self {
-                socket: a,
-                name: name.to_string(),
-            },
-            Self {
-                socket: b,
-                name: format!("{name} (chassis side)"),
-            },
+            end(a, name.to_string()),
+            end(b, format!("{name} (chassis side)")),
         ))
+    }
+
+    fn write_pending(&mut self) -> Result<(), BusError> {
+        while !self.tx.is_empty() {
+            match self.stream.write(&self.tx) {
+                Ok(n) => {
+                    self.tx.drain(..n);
+                }
+                // The peer is slow: what is left goes with the next flush.
+                Err(err) if err.kind() == io::ErrorKind::WouldBlock => return Ok(()),
+                Err(err) if err.kind() == io::ErrorKind::Interrupted => {}
+                Err(err) => return classify(&self.name, err, true),
+            }
+        }
+        Ok(())
     }
 }
 
-impl CanBus for DatagramCan {
+impl CanBus for PairCan {
     fn recv(&mut self) -> Result<Option<CanFrame>, BusError> {
-        let mut buf = [0u8; 64];
         loop {
-            match self.socket.recv(&mut buf) {
-                // A datagram of the wrong shape cannot come from our own peer; skip it.
-                Ok(n) => match from_datagram(&buf[..n]) {
+            if self.rx.len() - self.rx_pos >= RECORD {
+                let at = self.rx_pos;
+                self.rx_pos += RECORD;
+                match from_record(&self.rx[at..at + RECORD]) {
                     Some(frame) => return Ok(Some(frame)),
+                    // A malformed record cannot come from our own peer; skip it.
                     None => continue,
-                },
-                Err(err) => return classify(&self.name, err, false).map(|()| None),
+                }
+            }
+            // Keep a partial record, drop what was consumed, read more.
+            self.rx.drain(..self.rx_pos);
+            self.rx_pos = 0;
+            let have = self.rx.len();
+            self.rx.resize(have + READ_CHUNK, 0);
+            let read = self.stream.read(&mut self.rx[have..]);
+            match read {
+                Ok(0) => {
+                    self.rx.truncate(have);
+                    return Err(BusError::Disconnected {
+                        name: self.name.clone(),
+                        source: io::ErrorKind::UnexpectedEof.into(),
+                    });
+                }
+                Ok(n) => self.rx.truncate(have + n),
+                Err(err) => {
+                    self.rx.truncate(have);
+                    return classify(&self.name, err, false).map(|()| None);
+                }
             }
         }
     }
 
     fn send(&mut self, frame: &CanFrame) -> Result<(), BusError> {
-        match self.socket.send(&to_datagram(frame)) {
-            Ok(_) => Ok(()),
-            Err(err) if err.kind() == io::ErrorKind::WouldBlock => Err(BusError::TxDropped {
-                name: self.name.clone(),
-                source: err,
-            }),
-            Err(err) => classify(&self.name, err, true),
+        if self.tx.len() + RECORD > TX_CAP {
+            self.write_pending()?;
+            if self.tx.len() + RECORD > TX_CAP {
+                return Err(BusError::TxDropped {
+                    name: self.name.clone(),
+                    source: io::ErrorKind::WouldBlock.into(),
+                });
+            }
         }
+        self.tx.extend_from_slice(&to_record(frame));
+        if self.tx.len() >= WRITE_AT {
+            self.write_pending()?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), BusError> {
+        self.write_pending()
+    }
+
+    fn unflushed(&self) -> usize {
+        self.tx.len().div_ceil(RECORD)
     }
 
     fn raw_fd(&self) -> RawFd {
-        self.socket.as_raw_fd()
+        self.stream.as_raw_fd()
     }
 
     fn name(&self) -> &str {
@@ -168,16 +232,49 @@ mod tests {
     use super::*;
 
     #[test]
-    fn can_frames_cross_a_datagram_pair_unchanged() {
-        let (mut a, mut b) = DatagramCan::pair("sim").unwrap();
+    fn can_frames_cross_a_pair_unchanged_once_flushed() {
+        let (mut a, mut b) = PairCan::pair("sim").unwrap();
         assert_eq!(b.recv().unwrap(), None);
         let frame = CanFrame::from_candump("111#0096000000000000").unwrap();
         let ext = CanFrame::from_candump("18FF0001#0102").unwrap();
         a.send(&frame).unwrap();
         a.send(&ext).unwrap();
+        assert_eq!(b.recv().unwrap(), None, "buffered until flushed");
+        assert_eq!(a.unflushed(), 2);
+        a.flush().unwrap();
         assert_eq!(b.recv().unwrap(), Some(frame));
         assert_eq!(b.recv().unwrap(), Some(ext));
         assert_eq!(b.recv().unwrap(), None);
+    }
+
+    #[test]
+    fn a_burst_crosses_in_few_system_calls_and_partial_records_wait_for_the_rest() {
+        let (mut a, mut b) = PairCan::pair("sim").unwrap();
+        let frames: Vec<CanFrame> = (0..1000u32)
+            .map(|i| CanFrame::new(i % 0x800, &i.to_le_bytes()).unwrap())
+            .collect();
+        for f in &frames {
+            a.send(f).unwrap();
+        }
+        a.flush().unwrap();
+        let mut got = Vec::new();
+        while let Some(f) = b.recv().unwrap() {
+            got.push(f);
+        }
+        assert_eq!(got, frames);
+        // Half a record, then the rest.
+        let record = to_record(&frames[1]);
+        a.stream.write_all(&record[..7]).unwrap();
+        assert_eq!(b.recv().unwrap(), None);
+        a.stream.write_all(&record[7..]).unwrap();
+        assert_eq!(b.recv().unwrap(), Some(frames[1]));
+    }
+
+    #[test]
+    fn a_closed_can_peer_is_a_disconnect() {
+        let (mut a, b) = PairCan::pair("sim").unwrap();
+        drop(b);
+        assert!(a.recv().unwrap_err().is_disconnect());
     }
 
     #[test]

@@ -87,8 +87,16 @@ pub(crate) fn classify(name: &str, err: io::Error, sending: bool) -> Result<(), 
 pub trait CanBus: Send + fmt::Debug {
     /// The next received frame, `Ok(None)` when nothing is pending.
     fn recv(&mut self) -> Result<Option<CanFrame>, BusError>;
-    /// Sends one frame.
+    /// Sends one frame. A backend may buffer it until [`CanBus::flush`].
     fn send(&mut self, frame: &CanFrame) -> Result<(), BusError>;
+    /// Writes whatever [`CanBus::send`] buffered. Callers flush after each batch of sends.
+    fn flush(&mut self) -> Result<(), BusError> {
+        Ok(())
+    }
+    /// Frames buffered by `send` that `flush` could not write yet (the peer is slow).
+    fn unflushed(&self) -> usize {
+        0
+    }
     /// The descriptor that turns readable when a frame is pending.
     fn raw_fd(&self) -> RawFd;
     /// For logs: `can:vcan0`, `slcan:/dev/ttyACM0`, …
@@ -179,6 +187,22 @@ impl Bus {
 
     pub fn is_can(&self) -> bool {
         matches!(self, Bus::Can(_))
+    }
+
+    /// Writes what the backend buffered (see [`CanBus::flush`]).
+    pub fn flush(&mut self) -> Result<(), BusError> {
+        match self {
+            Bus::Can(bus) => bus.flush(),
+            Bus::Bytes(_) => Ok(()),
+        }
+    }
+
+    /// Frames still buffered after the last flush.
+    pub fn unflushed(&self) -> usize {
+        match self {
+            Bus::Can(bus) => bus.unflushed(),
+            Bus::Bytes(_) => 0,
+        }
     }
 }
 

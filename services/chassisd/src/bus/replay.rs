@@ -2,7 +2,7 @@
 //! a socket pair, so a field recording reproduces a bug at the desk.
 //!
 //! Like the embedded simulator, a thread sits at the chassis side of a socket pair — datagrams
-//! ([`DatagramCan`]) for the CAN robots, a stream ([`StreamBytes`]) for the XBot — and the
+//! ([`PairCan`]) for the CAN robots, a stream ([`StreamBytes`]) for the XBot — and the
 //! service talks to it exactly as to a real bus. The thread writes the *received* frames of the
 //! recording into the pair and reads and discards (counting them) whatever the service
 //! transmits: the service's commands reach no chassis, and the recorded chassis goes on as it
@@ -59,7 +59,7 @@ use nix::sys::time::TimeSpec;
 use serde::Deserialize;
 use tracing::{debug, error, info, info_span, warn};
 
-use super::datagram::{DatagramCan, StreamBytes};
+use super::datagram::{PairCan, StreamBytes};
 use super::{Bus, BusError};
 use crate::clock;
 
@@ -477,7 +477,7 @@ pub fn open(path: &str, speed: ReplaySpeed, robot: Robot) -> Result<Bus, BusErro
     let name = format!("replay:{path}");
     let io = |e: std::io::Error| open_error(path, e);
     let (ours, theirs) = if robot.is_can() {
-        let (a, b) = DatagramCan::pair(&name).map_err(io)?;
+        let (a, b) = PairCan::pair(&name).map_err(io)?;
         (Bus::Can(Box::new(a)), Bus::Can(Box::new(b)))
     } else {
         let (a, b) = StreamBytes::pair(&name).map_err(io)?;
@@ -714,6 +714,12 @@ fn play(
                 }
             }
         }
+        if let Err(err) = bus.flush()
+            && err.is_disconnect()
+        {
+            info!(?stats, "the service closed the replay bus: {err}");
+            return;
+        }
         if finished {
             break;
         }
@@ -726,11 +732,13 @@ fn play(
         wait(bus.raw_fd(), full, timeout);
     }
 
-    // Let the service read the tail: closing a datagram pair drops what its peer has not read.
+    // Let the service read the tail: what is buffered here or unread in the socket is lost when
+    // the pair closes.
     let drain_start = clock::now();
-    while unread(bus.raw_fd()).is_some_and(|n| n > 0)
+    while (bus.unflushed() > 0 || unread(bus.raw_fd()).is_some_and(|n| n > 0))
         && clock::now().saturating_since(drain_start) < DRAIN_LIMIT
     {
+        let _ = bus.flush();
         wait(bus.raw_fd(), false, Some(Duration::from_millis(1)));
         stats.discarded += discard(&mut bus).unwrap_or(0);
     }
