@@ -14,6 +14,9 @@
 //! * Configured speed limits, then acceleration smoothing; a stop from a safety-priority source,
 //!   a stale required source, a lock and the timeout of the last active source are never
 //!   smoothed: motion never outlives a dead source's timeout.
+//! * A request with a NaN or infinite number, a negative envelope, or a speed no chassis could
+//!   reach (over [`MAX_SANE_SPEED`] or [`MAX_SANE_YAW_RATE`], steering past ±90°) is rejected
+//!   and counted against its source; the source's previous request stands.
 //!
 //! Pure: time is a parameter. The service calls [`Mux::evaluate`] when a request arrives, on its
 //! tick, and at [`Mux::next_deadline`].
@@ -177,23 +180,19 @@ impl MuxConfig {
     }
 }
 
-/// Fastest speed (and envelope) a request may ask for, m/s: far beyond any of these robots; a
-/// larger value is a client bug, rejected rather than clamped.
+/// Fastest speed a request may ask for, m/s: far beyond any of these robots; a larger value is
+/// a client bug, rejected rather than clamped.
 pub const MAX_SANE_SPEED: f32 = 50.0;
 /// Largest yaw rate a request may ask for, rad/s.
 pub const MAX_SANE_YAW_RATE: f32 = 50.0;
 
+/// A motion beyond [`MAX_SANE_SPEED`], [`MAX_SANE_YAW_RATE`] or ±π/2 steering. Envelope bounds
+/// are not judged here: one beyond any speed limits nothing (`SafetyStatus::UNLIMITED` is
+/// `f32::MAX`), and a negative one is rejected as invalid by `VelocityRequest::is_finite`.
 fn is_absurd(r: &VelocityRequest) -> bool {
-    let speeds = [
-        r.linear_x_mps,
-        r.linear_y_mps,
-        r.limit_forward_mps,
-        r.limit_reverse_mps,
-        r.limit_lateral_mps,
-    ];
-    let rates = [r.angular_z_radps, r.limit_angular_radps];
-    speeds.iter().any(|v| v.abs() > MAX_SANE_SPEED)
-        || rates.iter().any(|v| v.abs() > MAX_SANE_YAW_RATE)
+    r.linear_x_mps.abs() > MAX_SANE_SPEED
+        || r.linear_y_mps.abs() > MAX_SANE_SPEED
+        || r.angular_z_radps.abs() > MAX_SANE_YAW_RATE
         || r.steer_rad.abs() > std::f32::consts::FRAC_PI_2
 }
 
@@ -858,7 +857,10 @@ mod tests {
             VelocityRequest::twist(1e30, 0.0),
             VelocityRequest::twist(0.0, -1e6),
             VelocityRequest::steer(1.0, 3.0),
-            VelocityRequest::limit(0.0, 1e9, 0.0, 0.0),
+            VelocityRequest {
+                linear_y_mps: 80.0,
+                ..VelocityRequest::twist(0.0, 0.0)
+            },
         ] {
             let bad = VelocityRequest {
                 stamp_ns: ms(1).as_nanos(),
@@ -870,6 +872,42 @@ mod tests {
         assert_eq!(m.status().rejected_requests, 4);
         // Fast but possible is not absurd: the robot's limits clamp it.
         assert!(m.on_request(ms(3), TELEOP, &request(ms(3), 9.0)).is_ok());
+    }
+
+    #[test]
+    fn an_unlimited_envelope_bound_is_taken_and_limits_nothing() {
+        // The safety monitor blocks forward motion only: reverse, lateral and yaw unlimited.
+        let mut m = mux();
+        let unlimited = f32::MAX;
+        let envelope = VelocityRequest {
+            stamp_ns: ms(0).as_nanos(),
+            ..VelocityRequest::limit(0.0, unlimited, unlimited, unlimited)
+        };
+        assert_eq!(m.on_request(ms(0), SAFETY, &envelope), Ok(()));
+        m.on_request(ms(0), TELEOP, &request(ms(0), -0.4)).unwrap();
+        assert_eq!(m.evaluate(ms(1)).output.linear_x_mps, -0.4);
+        m.on_request(ms(2), TELEOP, &request(ms(2), 0.4)).unwrap();
+        assert_eq!(m.evaluate(ms(3)).output.linear_x_mps, 0.0);
+        assert_eq!(m.status().rejected_requests, 0);
+    }
+
+    #[test]
+    fn an_envelope_with_a_negative_bound_is_rejected() {
+        let mut m = mux();
+        m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.3)).unwrap();
+        for bad in [
+            VelocityRequest::limit(-1.0, 1.0, 1.0, 1.0),
+            VelocityRequest::limit(1.0, 1.0, -0.5, 1.0),
+        ] {
+            let bad = VelocityRequest {
+                stamp_ns: ms(1).as_nanos(),
+                ..bad
+            };
+            assert!(m.on_request(ms(1), SAFETY, &bad).is_err());
+            assert_eq!(m.evaluate(ms(2)).output.linear_x_mps, 0.3);
+        }
+        assert_eq!(m.status().sources[SAFETY].rejected, 2);
     }
 
     #[test]
