@@ -217,12 +217,56 @@ impl Robot {
 
     /// Takes every pending state sample; true if there was one.
     fn drain_state(&mut self) -> Result<bool, ClientError> {
-        let mut any = false;
+        Ok(self.drain_state_each(|_| {})? > 0)
+    }
+
+    /// Takes every pending state sample, oldest first, handing each to `each`.
+    fn drain_state_each(
+        &mut self,
+        mut each: impl FnMut(&ChassisState),
+    ) -> Result<usize, ClientError> {
+        let mut n = 0;
         while let Some(sample) = self.state.receive().map_err(ipc("receiving state"))? {
+            each(&sample);
             self.latest_state = Some(*sample);
-            any = true;
+            n += 1;
         }
-        Ok(any)
+        Ok(n)
+    }
+
+    /// Waits at most `timeout` for new state samples and hands every one of them to `each`,
+    /// oldest first (the service publishes one per frame that changes the state; a reader woken
+    /// once may find several). Returns how many there were. The subscriber keeps the last 4
+    /// samples: a reader slower than that loses the oldest.
+    pub fn wait_states(
+        &mut self,
+        timeout: Duration,
+        mut each: impl FnMut(&ChassisState),
+    ) -> Result<usize, ClientError> {
+        let n = self.drain_state_each(&mut each)?;
+        if n > 0 {
+            return Ok(n);
+        }
+        let deadline =
+            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+        loop {
+            let left = deadline.saturating_sub(now_ns());
+            if left == 0 {
+                return Ok(0);
+            }
+            self.state_events
+                .timed_wait(|_| {}, Duration::from_nanos(left))
+                .map_err(ipc("waiting for state"))?;
+            let n = self.drain_state_each(&mut each)?;
+            if n > 0 {
+                return Ok(n);
+            }
+        }
+    }
+
+    /// Hands every pending state sample to `each` without waiting (a busy-polling reader).
+    pub fn poll_states(&mut self, each: impl FnMut(&ChassisState)) -> Result<usize, ClientError> {
+        self.drain_state_each(each)
     }
 
     /// The newest state sample (a late joiner gets the last one published).

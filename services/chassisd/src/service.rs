@@ -27,7 +27,7 @@ use zerocopy::IntoBytes;
 use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use crate::clock;
 use crate::config::{Config, LoopMode};
-use crate::ipc::{IpcError, Ports};
+use crate::ipc::{Inlet, IpcError, Ports};
 use crate::mux::Mux;
 use crate::sim::{SimHandle, firmware_for, injection_of};
 
@@ -173,10 +173,14 @@ type PendingControl =
 struct Fired {
     bus: bool,
     gps: bool,
-    sources: bool,
+    /// One bit per source inlet whose listener fired (at most `MAX_SOURCES`, 8).
+    sources: u32,
     control: bool,
     sim: bool,
     tick: bool,
+    /// The loop polled instead of blocking (spin, or hybrid while hot): read every source's
+    /// shared memory, without waiting for its notification to come through the kernel.
+    polled: bool,
 }
 
 /// How an iteration ended.
@@ -214,6 +218,7 @@ struct Core {
     throttle_rejected: Throttle,
     throttle_tx: Throttle,
     throttle_publish: Throttle,
+    throttle_flood: Throttle,
     /// The loop's own tick: mux re-evaluation, smoothing, state refresh.
     tick: Grid,
     /// When something last woke the loop (hybrid mode keeps polling for a while after it).
@@ -494,33 +499,72 @@ impl Core {
         }
     }
 
-    fn handle_sources(&mut self, ports: &Ports, now: Timestamp) -> bool {
+    /// Feeds the mux every pending request of the sources that notified — of all of them on the
+    /// tick (which also catches a publisher that never notifies) and when the loop polls.
+    /// Samples are read before the notification is consumed (a sample is in shared memory
+    /// before its notification is sent): the system call waits until the command is out, in
+    /// [`Core::acknowledge_sources`].
+    fn handle_sources(&mut self, ports: &Ports, now: Timestamp, fired: Fired) -> bool {
         let mut any = false;
         for (index, inlet) in ports.sources.iter().enumerate() {
-            let _ = inlet.listener.try_wait(|_| {});
-            loop {
-                match inlet.subscriber.receive() {
-                    Ok(Some(sample)) => {
-                        any = true;
-                        if let Err(rejection) = self.mux.on_request(now, index, &sample)
-                            && let Some(held) = self.throttle_rejected.allow(now)
-                        {
-                            warn!(
-                                source = inlet.name,
-                                held_back = held,
-                                "request rejected: {rejection}"
-                            );
-                        }
-                    }
-                    Ok(None) => break,
-                    Err(e) => {
-                        debug!(source = inlet.name, "receive: {e:?}");
-                        break;
-                    }
-                }
+            if fired.sources & (1 << index) != 0 || fired.tick || fired.polled {
+                any |= self.drain_source(index, inlet, now);
             }
         }
         any
+    }
+
+    /// Consumes the notifications that woke the loop (only a listener that fired is read: an
+    /// idle one would cost a system call for nothing), then reads those sources once more: a
+    /// request that arrived in between had its notification consumed here.
+    fn acknowledge_sources(&mut self, ports: &Ports, now: Timestamp, fired: Fired) -> bool {
+        let mut any = false;
+        for (index, inlet) in ports.sources.iter().enumerate() {
+            if fired.sources & (1 << index) != 0 {
+                let _ = inlet.listener.try_wait(|_| {});
+                any |= self.drain_source(index, inlet, now);
+            }
+        }
+        any
+    }
+
+    fn drain_source(&mut self, index: usize, inlet: &Inlet, now: Timestamp) -> bool {
+        let mut any = false;
+        loop {
+            match inlet.subscriber.receive() {
+                Ok(Some(sample)) => {
+                    any = true;
+                    if let Err(rejection) = self.mux.on_request(now, index, &sample)
+                        && let Some(held) = self.throttle_rejected.allow(now)
+                    {
+                        warn!(
+                            source = inlet.name,
+                            held_back = held,
+                            "request rejected: {rejection}"
+                        );
+                    }
+                }
+                Ok(None) => return any,
+                Err(e) => {
+                    debug!(source = inlet.name, "receive: {e:?}");
+                    return any;
+                }
+            }
+        }
+    }
+
+    /// Runs the mux and hands its output to the driver; sends what is due. True when the
+    /// mux's decision changed.
+    fn decide(&mut self, ports: &Ports, now: Timestamp, next: &mut Next) -> bool {
+        let decision = self.mux.evaluate(now);
+        self.driver.set_command(now, &decision.output);
+        if let Next::Rewire = self.transmit(ports, now) {
+            *next = Next::Rewire;
+        }
+        if decision.changed {
+            self.log_mux_change();
+        }
+        decision.changed
     }
 
     fn respond(ports: &Ports, request: &PendingControl, response: ControlResponse) {
@@ -739,17 +783,32 @@ impl Core {
         self.last_active = status.active_source;
     }
 
-    /// One pass after a wake-up.
+    /// One pass after a wake-up. Requests go first and reach the bus before anything else is
+    /// read: the command path is the one whose latency matters, and waking the readers of
+    /// received frames could hand the CPU to them before the command is out.
     fn iteration(&mut self, ports: &Ports, mut fired: Fired) -> Next {
         let mut next = Next::Continue;
         let woke = clock::now();
-        if fired.bus || fired.gps || fired.sources || fired.control || fired.sim {
+        if fired.bus || fired.gps || fired.sources != 0 || fired.control || fired.sim {
             self.last_activity = woke;
         }
         if self.tick.is_due(woke) {
             self.tick.served(woke);
             fired.tick = true;
         }
+        let mut requests = self.handle_sources(ports, woke, fired);
+        if fired.control || fired.tick {
+            self.handle_control(ports, woke);
+        }
+        if fired.sim || fired.tick {
+            self.handle_sim(ports, woke);
+        }
+        let mut changed = self.decide(ports, woke, &mut next);
+        if self.acknowledge_sources(ports, woke, fired) {
+            requests = true;
+            changed |= self.decide(ports, clock::now(), &mut next);
+        }
+
         if (fired.bus || self.bus.is_some() && fired.tick)
             && let Next::Rewire = self.handle_bus(ports)
         {
@@ -761,29 +820,17 @@ impl Core {
         {
             next = Next::Rewire;
         }
-        let requests = self.handle_sources(ports, now);
-        if fired.control || fired.tick {
-            self.handle_control(ports, now);
-        }
-        if fired.sim || fired.tick {
-            self.handle_sim(ports, now);
-        }
-
-        let decision = self.mux.evaluate(now);
-        self.driver.set_command(now, &decision.output);
-        if decision.changed {
-            self.log_mux_change();
-        }
         if self.driver.poll_timeout().is_some_and(|t| t <= now) {
             self.driver.handle_timeout(now);
         }
+        // What the received frames and the driver's timers asked to send.
         if let Next::Rewire = self.transmit(ports, now) {
             next = Next::Rewire;
         }
         self.drain_driver_events(ports, now);
 
         let mux_period = Duration::from_secs_f64(1.0 / self.config.mux_status_hz);
-        if decision.changed
+        if changed
             || requests && self.mux.is_ramping()
             || now.saturating_since(self.last_mux_publish) >= mux_period
         {
@@ -939,6 +986,7 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
         throttle_rejected: Throttle::default(),
         throttle_tx: Throttle::default(),
         throttle_publish: Throttle::default(),
+        throttle_flood: Throttle::default(),
         tick: Grid::new(Duration::from_millis(config.tick_ms), now),
         last_activity: now,
         retired: Vec::new(),
@@ -980,12 +1028,13 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
             .map(|fd| waitset.attach_notification(fd))
             .transpose()
             .map_err(attach_err)?;
-        let source_guards = ports
+        let mut source_guards = ports
             .sources
             .iter()
-            .map(|inlet| waitset.attach_notification(&inlet.listener))
+            .map(|inlet| waitset.attach_notification(&inlet.listener).map(Some))
             .collect::<Result<Vec<_>, _>>()
             .map_err(attach_err)?;
+        let mut budget = WakeBudget::new(ports.sources.len(), core.tick.next());
         let control_guard = waitset
             .attach_notification(&ports.control.listener)
             .map_err(attach_err)?;
@@ -998,7 +1047,10 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
 
         loop {
             let timeout = core.wait_time(clock::now());
-            let mut fired = Fired::default();
+            let mut fired = Fired {
+                polled: timeout.is_zero(),
+                ..Fired::default()
+            };
             let result = waitset.wait_and_process_once_with_timeout(
                 |id| {
                     if bus_guard.as_ref().is_some_and(|g| id.has_event_from(g)) {
@@ -1007,8 +1059,10 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
                     if gps_guard.as_ref().is_some_and(|g| id.has_event_from(g)) {
                         fired.gps = true;
                     }
-                    if source_guards.iter().any(|g| id.has_event_from(g)) {
-                        fired.sources = true;
+                    for (index, guard) in source_guards.iter().enumerate() {
+                        if guard.as_ref().is_some_and(|g| id.has_event_from(g)) {
+                            fired.sources |= 1 << index;
+                        }
                     }
                     if id.has_event_from(&control_guard) {
                         fired.control = true;
@@ -1031,6 +1085,114 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
             if let Next::Rewire = core.iteration(&ports, fired) {
                 break;
             }
+            // A source that wakes the loop too often is read on the tick only, until the next.
+            for index in budget.spend(fired.sources, core.tick.next()) {
+                let (Some(guard), Some(inlet)) =
+                    (source_guards.get_mut(index), ports.sources.get(index))
+                else {
+                    continue;
+                };
+                if guard.take().is_some() {
+                    if let Some(held) = core.throttle_flood.allow(clock::now()) {
+                        warn!(
+                            source = inlet.name,
+                            held_back = held,
+                            "the source woke the loop more than {} times in one tick: read on \
+                             the tick only until the next",
+                            WakeBudget::PER_TICK
+                        );
+                    }
+                } else {
+                    *guard = Some(
+                        waitset
+                            .attach_notification(&inlet.listener)
+                            .map_err(attach_err)?,
+                    );
+                }
+            }
         }
+    }
+}
+
+/// Wake-ups per source and tick. A client publishing far faster than any controller needs (a
+/// runaway or rogue process, 100k requests a second) would wake the loop from one notification
+/// to the next: a CPU hog that the kernel then schedules in time slices, late for its deadlines
+/// (the heartbeat), with every core it shares busy. Past [`WakeBudget::PER_TICK`] wake-ups in
+/// one tick the source's listener is detached until the next tick: its requests are still read
+/// on every tick (its newest 16 wait in its queue, and iceoryx2 coalesces its notifications), so
+/// it keeps its place in the mux, while every other source still wakes the loop at once.
+#[derive(Debug)]
+struct WakeBudget {
+    spent: Vec<u32>,
+    /// One bit per detached source.
+    detached: u32,
+    /// The tick the counts belong to (its deadline).
+    tick: Timestamp,
+}
+
+impl WakeBudget {
+    /// 1 kHz at the 20 ms tick: more than any client needs.
+    const PER_TICK: u32 = 20;
+
+    fn new(sources: usize, tick: Timestamp) -> Self {
+        Self {
+            spent: vec![0; sources],
+            detached: 0,
+            tick,
+        }
+    }
+
+    /// Counts the wake-ups of `fired` (one bit per source) in the tick whose deadline is `tick`;
+    /// returns the sources whose listener must change: detached (over budget) or attached
+    /// again (a new tick began).
+    fn spend(&mut self, fired: u32, tick: Timestamp) -> Vec<usize> {
+        let mut toggle = Vec::new();
+        if tick != self.tick {
+            self.tick = tick;
+            self.spent.iter_mut().for_each(|n| *n = 0);
+            toggle.extend((0..self.spent.len()).filter(|i| self.detached & (1 << i) != 0));
+            self.detached = 0;
+        }
+        for (index, spent) in self.spent.iter_mut().enumerate() {
+            if fired & (1 << index) != 0 && self.detached & (1 << index) == 0 {
+                *spent += 1;
+                if *spent > Self::PER_TICK {
+                    self.detached |= 1 << index;
+                    toggle.push(index);
+                }
+            }
+        }
+        toggle
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_source_waking_the_loop_past_its_budget_is_detached_until_the_next_tick() {
+        let tick = Timestamp::from_millis(20);
+        let mut budget = WakeBudget::new(3, tick);
+        // Source 1 floods, source 0 wakes now and then.
+        for _ in 0..WakeBudget::PER_TICK {
+            assert!(budget.spend(0b010, tick).is_empty());
+        }
+        assert_eq!(budget.spend(0b011, tick), vec![1], "over budget: detached");
+        assert!(
+            budget.spend(0b001, tick).is_empty(),
+            "the others are untouched"
+        );
+        assert!(
+            budget.spend(0b010, tick).is_empty(),
+            "detached: no longer counted"
+        );
+        // The next tick attaches it again, with a fresh budget.
+        let next = Timestamp::from_millis(40);
+        assert_eq!(budget.spend(0, next), vec![1]);
+        for _ in 0..WakeBudget::PER_TICK {
+            assert!(budget.spend(0b010, next).is_empty());
+        }
+        assert_eq!(budget.spend(0b010, next), vec![1]);
     }
 }

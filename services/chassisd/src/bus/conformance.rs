@@ -13,7 +13,7 @@
 //! | [`frames_arrive_unchanged_and_in_order`] | standard and extended ids, 0 to 8 data bytes, the extreme ids: the same frames, in order, once; the sender does not hear itself |
 //! | [`frames_cross_both_ways_at_once`] | both ends send before either reads: each gets the other's frame only |
 //! | [`the_descriptor_turns_readable_when_a_frame_is_pending`] | the event loop may sleep on the descriptor: it turns readable when a frame is pending, not before, and not after the last one is read |
-//! | [`a_burst_arrives_whole_and_in_order`] | a burst of one drain batch ([`MAX_RX_BATCH`](super::MAX_RX_BATCH)) arrives whole and in order; a full queue is reported as [`BusError::TxDropped`], never as a silent loss |
+//! | [`a_burst_arrives_whole_and_in_order`] | a burst of one drain batch ([`MAX_RX_BATCH`]) arrives whole and in order; a full queue is reported as [`BusError::TxDropped`], never as a silent loss |
 //! | [`a_lost_link_is_a_disconnect`] | a closed peer, a pty hung up, an interface down or removed: [`BusError::Disconnected`] from `recv` or `send`, never silence |
 //!
 //! [`check_link`] runs every check but the last (which ends the link) in both directions and
@@ -349,7 +349,7 @@ fn expect_frame(
 
 /// The descriptor of `to` is not readable while nothing is pending, turns readable when `from`
 /// sends, and is quiet again once `recv` returned `Ok(None)`. Returns the send → readable
-/// latency of each of [`LATENCY_SAMPLES`] frames.
+/// latency of each of `LATENCY_SAMPLES` (25) frames.
 pub fn the_descriptor_turns_readable_when_a_frame_is_pending(
     from: &mut dyn CanBus,
     to: &mut dyn CanBus,
