@@ -1,7 +1,8 @@
 //! Raw-transport baselines: ping-pong between two processes with the payload of a
 //! `ChassisState` (824 bytes) over iceoryx2 (event-driven and busy-polling), a Unix datagram
 //! socket and UDP on loopback. One-way latency comes from `CLOCK_MONOTONIC` stamps (one clock for
-//! the whole machine), in both directions of every round trip.
+//! the whole machine), in both directions of every round trip — or, paced like the service paths'
+//! requests, the first hop after each pause only.
 
 use std::io::{BufRead, BufReader};
 use std::net::UdpSocket;
@@ -338,11 +339,14 @@ fn wait_ready(child: &mut Child) -> anyhow::Result<BufReader<ChildStdout>> {
 }
 
 /// Runs `rounds` ping-pongs (after a warm-up) and returns the one-way latencies of both
-/// directions.
+/// directions — back to back, or, with `pace`, one ping per period and only the ping's hop: what
+/// a request meets when it comes after a pause, as a controller's requests do (the receiver is
+/// blocked and its CPU may be idle).
 pub fn run(
     transport: Transport,
     placement: Placement,
     rounds: u64,
+    pace: Option<Duration>,
     prefix: &str,
     dir: &std::path::Path,
 ) -> anyhow::Result<Latencies> {
@@ -378,8 +382,12 @@ pub fn run(
     }
     let mut endpoint = open_endpoint(&args, "ping", "pong")?;
     let mut latencies = Latencies::new();
-    let warmup = 200;
+    let warmup = if pace.is_some() { 20 } else { 200 };
+    let mut ticker = pace.map(chassis_client::Ticker::new);
     for seq in 0..warmup + rounds {
+        if let Some(ticker) = ticker.as_mut() {
+            ticker.wait();
+        }
         let sent = now_ns();
         endpoint.send(Ping {
             stamp_ns: sent,
@@ -391,7 +399,10 @@ pub fn run(
         };
         if seq >= warmup {
             latencies.record(pong.measured_ns);
-            latencies.record_between(pong.stamp_ns, arrived);
+            // Paced, only the hop after the pause counts: the answer finds both ends awake.
+            if pace.is_none() {
+                latencies.record_between(pong.stamp_ns, arrived);
+            }
         }
     }
     let _ = endpoint.send(Ping {

@@ -27,9 +27,7 @@ pub fn subscribe(args: &SubscribeArgs) -> anyhow::Result<()> {
     let mut recorder = StateRecorder::default();
     let end = now_ns() + (args.seconds * 1e9) as u64;
     while now_ns() < end {
-        if let Some(state) = robot.wait_state(Duration::from_millis(20))? {
-            recorder.sample(&state, now_ns());
-        }
+        robot.wait_states(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
     }
     let hex: String = recorder
         .latencies

@@ -79,7 +79,8 @@ struct RunArgs {
     /// Skip parts: baselines, paths, fanout, cost, throughput.
     #[arg(long, value_delimiter = ',')]
     skip: Vec<String>,
-    /// Scratch directory for logs and sockets (default: a new one under /tmp).
+    /// Scratch directory for logs and sockets, kept afterwards (default: a new one under /tmp,
+    /// removed at the end)
     #[arg(long)]
     dir: Option<PathBuf>,
 }
@@ -87,6 +88,7 @@ struct RunArgs {
 /// The sizes of a run.
 struct Plan {
     baseline_rounds: u64,
+    paced_rounds: u64,
     commands: u64,
     xbot_commands: u64,
     states: u64,
@@ -101,6 +103,7 @@ impl Plan {
         if quick {
             Self {
                 baseline_rounds: 2000,
+                paced_rounds: 500,
                 commands: 300,
                 xbot_commands: 0,
                 states: 1000,
@@ -112,6 +115,7 @@ impl Plan {
         } else {
             Self {
                 baseline_rounds: 20_000,
+                paced_rounds: 2500,
                 commands: 3000,
                 xbot_commands: 60,
                 states: 10_000,
@@ -214,6 +218,7 @@ fn row(
         summary: latencies.summary(),
         missed,
         baseline: None,
+        ratio_p50: None,
         ratio_p99: None,
         latencies,
     }
@@ -252,20 +257,29 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             .push("one CPU only: cross-CPU runs share it".into());
     }
 
-    let baselines: Vec<(Transport, Placement)> = [Placement::SameCpu, Placement::CrossCpu]
-        .into_iter()
-        .flat_map(|p| {
-            let mut t = vec![
-                (Transport::IceoryxEvent, p),
-                (Transport::Uds, p),
-                (Transport::Udp, p),
-            ];
-            if p == Placement::CrossCpu {
-                t.insert(1, (Transport::IceoryxSpin, p));
-            }
-            t
-        })
-        .collect();
+    // Back to back (each transport at its best), then paced like the command path: what a
+    // request after a pause meets, the service paths' reference.
+    let paced = Some(paths::COMMAND_INTERVAL);
+    let mut baselines: Vec<(Transport, Placement, Option<Duration>)> =
+        [Placement::SameCpu, Placement::CrossCpu]
+            .into_iter()
+            .flat_map(|p| {
+                let mut t = vec![
+                    (Transport::IceoryxEvent, p, None),
+                    (Transport::Uds, p, None),
+                    (Transport::Udp, p, None),
+                ];
+                if p == Placement::CrossCpu {
+                    t.insert(1, (Transport::IceoryxSpin, p, None));
+                }
+                t
+            })
+            .collect();
+    baselines.extend([
+        (Transport::IceoryxEvent, Placement::SameCpu, paced),
+        (Transport::IceoryxEvent, Placement::CrossCpu, paced),
+        (Transport::IceoryxSpin, Placement::CrossCpu, paced),
+    ]);
     let runs = path_runs(args.quick, &robots);
     let steps = (if skip("baselines") {
         0
@@ -283,21 +297,21 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     );
 
     if !skip("baselines") {
-        for (transport, placement) in baselines {
-            bar.set_message(format!(
-                "baseline {} ({})",
-                transport.label(),
-                placement.label()
-            ));
-            let l = baseline::run(transport, placement, plan.baseline_rounds, &prefix, &dir)?;
-            report.rows.push(row(
-                "baseline",
-                transport.label().into(),
-                "-",
-                placement.label(),
-                l,
-                0,
-            ));
+        for (transport, placement, pace) in baselines {
+            let what = match pace {
+                Some(_) => format!("{} {}", transport.label(), report::PACED),
+                None => transport.label().to_string(),
+            };
+            bar.set_message(format!("baseline {what} ({})", placement.label()));
+            let rounds = if pace.is_some() {
+                plan.paced_rounds
+            } else {
+                plan.baseline_rounds
+            };
+            let l = baseline::run(transport, placement, rounds, pace, &prefix, &dir)?;
+            report
+                .rows
+                .push(row("baseline", what, "-", placement.label(), l, 0));
             bar.inc(1);
         }
     }
@@ -319,7 +333,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 // only while the last second holds a free slot.
                 (plan.xbot_commands, Duration::from_millis(600))
             } else {
-                (plan.commands, Duration::from_millis(4))
+                (plan.commands, paths::COMMAND_INTERVAL)
             };
             let result = paths::pinned(client_cpu, || -> anyhow::Result<_> {
                 let command = if count > 0 {
@@ -425,7 +439,10 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     }
     bar.finish_and_clear();
     report.compute_ratios();
-    let _ = std::fs::remove_dir_all(&dir);
+    // A directory named on the command line keeps its logs.
+    if args.dir.is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
     Ok(report)
 }
 

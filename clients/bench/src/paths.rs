@@ -321,6 +321,10 @@ fn wait_for_motion(
     }
 }
 
+/// How often the command path sends a request (a 250 Hz controller); the paced baselines use
+/// the same period.
+pub const COMMAND_INTERVAL: Duration = Duration::from_millis(4);
+
 /// Command-path latencies: `count` requests alternating between two speeds, one every
 /// `interval`.
 pub fn command_path(
@@ -420,13 +424,10 @@ pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result
             teleop.send(VelocityRequest::twist(0.6, 0.3))?;
             last_request = now_ns();
         }
-        let state = if spin {
-            robot.latest_state()?
+        if spin {
+            robot.poll_states(|s| recorder.sample(s, now_ns()))?;
         } else {
-            robot.wait_state(Duration::from_millis(20))?
-        };
-        if let Some(state) = state {
-            recorder.sample(&state, now_ns());
+            robot.wait_states(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
         }
     }
     teleop.stop()?;

@@ -22,8 +22,9 @@ pub struct Row {
     pub summary: Summary,
     /// Requests that produced no frame within the wait (0 expected).
     pub missed: u64,
-    /// The baseline this row is compared with, and p99 / baseline p99.
+    /// The baseline this row is compared with, p50 / baseline p50 and p99 / baseline p99.
     pub baseline: Option<String>,
+    pub ratio_p50: Option<f64>,
     pub ratio_p99: Option<f64>,
     #[serde(skip)]
     pub latencies: Latencies,
@@ -78,15 +79,26 @@ impl Machine {
     }
 }
 
+/// How a paced baseline is labelled: one ping per command period, the hop after the pause only.
+pub const PACED: &str = "paced";
+
 impl Report {
-    /// Fills in each service row's ratio to the raw iceoryx2 baseline of the same placement:
-    /// event-driven and hybrid loops against iceoryx2 event, spin against iceoryx2 busy-poll.
+    /// Fills in each service row's ratios to the paced raw iceoryx2 baseline of the same
+    /// placement (a service path's request also comes after a pause): event-driven and hybrid
+    /// loops against iceoryx2 event, spin against iceoryx2 busy-poll.
     pub fn compute_ratios(&mut self) {
-        let baselines: Vec<(String, String, f64)> = self
+        let baselines: Vec<(String, String, f64, f64)> = self
             .rows
             .iter()
             .filter(|r| r.path == "baseline")
-            .map(|r| (r.what.clone(), r.placement.clone(), r.summary.p99_us))
+            .map(|r| {
+                (
+                    r.what.clone(),
+                    r.placement.clone(),
+                    r.summary.p50_us,
+                    r.summary.p99_us,
+                )
+            })
             .collect();
         for row in self.rows.iter_mut().filter(|r| r.path != "baseline") {
             let transport = if row.mode == "spin" {
@@ -94,11 +106,13 @@ impl Report {
             } else {
                 "iceoryx2 event"
             };
-            if let Some((what, placement, p99)) = baselines
+            let wanted = format!("{transport} {PACED}");
+            if let Some((what, placement, p50, p99)) = baselines
                 .iter()
-                .find(|(w, p, _)| w == transport && *p == row.placement)
+                .find(|(w, p, _, _)| *w == wanted && *p == row.placement)
             {
                 row.baseline = Some(format!("{what}, {placement}"));
+                row.ratio_p50 = (*p50 > 0.0).then(|| row.summary.p50_us / p50);
                 row.ratio_p99 = (*p99 > 0.0).then(|| row.summary.p99_us / p99);
             }
         }
@@ -123,12 +137,12 @@ impl Report {
             "p99 µs",
             "p99.9 µs",
             "max µs",
-            "p99 / baseline p99"
+            "÷ baseline p50, p99"
         ));
         for r in &self.rows {
             let s = &r.summary;
-            let ratio = match (r.ratio_p99, &r.baseline) {
-                (Some(x), Some(b)) => format!("{x:.2} × ({b})"),
+            let ratio = match (r.ratio_p50, r.ratio_p99, &r.baseline) {
+                (Some(x), Some(y), Some(b)) => format!("{x:.1}, {y:.1} ({b})"),
                 _ => String::new(),
             };
             let missed = if r.missed > 0 {
