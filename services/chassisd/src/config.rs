@@ -78,6 +78,11 @@ pub struct BusConfig {
     /// First wait before reopening a lost bus, ms; doubles up to `reconnect_max_ms`.
     pub reconnect_initial_ms: u64,
     pub reconnect_max_ms: u64,
+    /// While the bus is saturated, read it once per this many µs (everything pending at once)
+    /// instead of waking per frame; ordinary feedback is always read the moment it arrives.
+    /// 0 wakes for every frame whatever the load, as `loop = "spin"` does. See
+    /// `chassisd::moderation`.
+    pub rx_moderation_us: u64,
 }
 
 impl Default for BusConfig {
@@ -86,6 +91,7 @@ impl Default for BusConfig {
             can_bitrate: 500_000,
             reconnect_initial_ms: 100,
             reconnect_max_ms: 2000,
+            rx_moderation_us: 4000,
         }
     }
 }

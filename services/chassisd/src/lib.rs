@@ -9,6 +9,7 @@ pub mod bus;
 pub mod clock;
 pub mod config;
 pub mod ipc;
+pub mod moderation;
 pub mod mux;
 pub mod service;
 pub mod sim;

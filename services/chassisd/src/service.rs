@@ -28,6 +28,7 @@ use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use crate::clock;
 use crate::config::{Config, LoopMode};
 use crate::ipc::{Inlet, IpcError, Ports};
+use crate::moderation::{RxGate, RxModeration};
 use crate::mux::Mux;
 use crate::sim::{SimHandle, firmware_for, injection_of};
 
@@ -226,6 +227,10 @@ struct Core {
     /// Buses (and GPS ports) that failed: their descriptors stay open until the wait set that
     /// watches them is gone.
     retired: Vec<Bus>,
+    /// Frames between the bus and their publication, kept to spare an allocation per batch.
+    scratch: Vec<(Timestamp, Transmit)>,
+    /// Whether the bus descriptor is watched (see [`RxModeration`]).
+    rx_moderation: RxModeration,
     /// Samples were published since readers were last woken.
     wake_state_readers: bool,
     wake_frame_readers: bool,
@@ -375,6 +380,7 @@ impl Core {
                 self.bus = Some(bus);
                 self.sim = sim;
                 self.bus_retry_at = None;
+                self.rx_moderation.reset(now);
                 self.bus_backoff =
                     Duration::from_millis(self.config.bus_settings.reconnect_initial_ms);
                 self.driver.set_bus_down(now, false);
@@ -429,9 +435,15 @@ impl Core {
         } else {
             FrameKind::SERIAL
         };
-        let mut received: Vec<(Timestamp, Transmit)> = Vec::new();
+        let mut received = std::mem::take(&mut self.scratch);
+        received.clear();
+        let mut items = 0;
         let result = bus.receive(|rx| {
             let stamp = clock::now();
+            items += match rx {
+                Rx::Can(_) => 1,
+                Rx::Bytes(bytes) => bytes.len().div_ceil(8),
+            };
             received.push((
                 stamp,
                 match rx {
@@ -445,9 +457,14 @@ impl Core {
             self.driver.handle_rx(*stamp, item.as_rx());
             self.publish_state_if_changed(ports, *stamp);
         }
+        self.scratch = received;
         self.wake_readers(ports);
         match result {
-            Ok(_) => Next::Continue,
+            Ok(count) => {
+                let backlog = count >= crate::bus::MAX_RX_BATCH;
+                self.rx_moderation.on_read(clock::now(), items, backlog);
+                Next::Continue
+            }
             Err(err) => {
                 self.bus_lost(clock::now(), &err);
                 Next::Rewire
@@ -710,7 +727,8 @@ impl Core {
         } else {
             FrameKind::SERIAL
         };
-        let mut sent: Vec<(Timestamp, Transmit)> = Vec::new();
+        let mut sent = std::mem::take(&mut self.scratch);
+        sent.clear();
         let mut failure = None;
         while let Some(item) = self.driver.poll_transmit(now) {
             match bus.transmit(&item) {
@@ -738,6 +756,7 @@ impl Core {
         for (stamp, item) in &sent {
             self.publish_frame(ports, *stamp, FrameDirection::TX, kind, item.as_rx());
         }
+        self.scratch = sent;
         match failure {
             Some(err) => {
                 self.bus_lost(now, &err);
@@ -881,6 +900,7 @@ impl Core {
     fn timeout(&self, now: Timestamp) -> Duration {
         let deadlines = [
             Some(self.tick.next()),
+            self.rx_moderation.paused_until(),
             self.driver.poll_timeout(),
             self.mux.next_deadline(now),
             self.bus_retry_at,
@@ -908,6 +928,12 @@ impl Core {
                 ControlResponse::new(seq, ControlStatus::REFUSED, "the service is stopping");
             let _ = active.send_copy(response);
         }
+    }
+}
+
+fn set_gate(gate: &mut RxGate, open: bool) {
+    if let Err(e) = gate.set_open(open) {
+        warn!("bus gate: {e}");
     }
 }
 
@@ -992,6 +1018,15 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
         retired: Vec::new(),
         wake_state_readers: false,
         wake_frame_readers: false,
+        scratch: Vec::with_capacity(crate::bus::MAX_RX_BATCH),
+        // A spinning loop spends its core anyway: it reads every frame the moment it arrives.
+        rx_moderation: RxModeration::new(
+            match config.loop_mode {
+                LoopMode::Spin => Duration::ZERO,
+                _ => Duration::from_micros(config.bus_settings.rx_moderation_us),
+            },
+            now,
+        ),
         config,
     };
     if core.bus.is_none() {
@@ -1001,6 +1036,7 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
     core.publish_state(&ports, now);
     core.wake_readers(&ports);
 
+    let mut gate = RxGate::new().map_err(|e| ServiceError::Setup(format!("bus gate: {e}")))?;
     loop {
         // The previous session's wait set is gone: failed buses can close now.
         core.retired.clear();
@@ -1010,15 +1046,18 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
             .create::<ipc::Service>()
             .map_err(|e| ServiceError::WaitSet(format!("{e:?}")))?;
         let attach_err = |e| ServiceError::WaitSet(format!("{e:?}"));
-        let bus_fd = core
-            .bus
-            .as_ref()
-            .and_then(|b| FdAttachment::new(b.raw_fd()));
         let gps_fd = core
             .gps
             .as_ref()
             .and_then(|b| FdAttachment::new(b.raw_fd()));
-        let bus_guard = bus_fd
+        // The bus is watched through the gate receive moderation closes while it pauses.
+        gate.watch(core.bus.as_ref().map(Bus::raw_fd))
+            .map_err(|e| ServiceError::Setup(format!("bus gate: {e}")))?;
+        let gate_fd = core
+            .bus
+            .as_ref()
+            .and_then(|_| FdAttachment::new(gate.raw_fd()));
+        let bus_guard = gate_fd
             .as_ref()
             .map(|fd| waitset.attach_notification(fd))
             .transpose()
@@ -1082,8 +1121,18 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
                 Ok(_) => {}
                 Err(e) => return Err(ServiceError::WaitSet(format!("{e:?}"))),
             }
+            // A moderation pause that ended: read what queued meanwhile, watch the bus again.
+            if !gate.is_open() && !core.rx_moderation.is_paused(clock::now()) {
+                set_gate(&mut gate, true);
+                fired.bus = true;
+            }
             if let Next::Rewire = core.iteration(&ports, fired) {
                 break;
+            }
+            // Close the gate for a pause that began, open it when polling ended.
+            let paused = core.rx_moderation.is_paused(clock::now());
+            if gate.is_open() == paused {
+                set_gate(&mut gate, !paused);
             }
             // A source that wakes the loop too often is read on the tick only, until the next.
             for index in budget.spend(fired.sources, core.tick.next()) {

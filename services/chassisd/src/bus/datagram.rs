@@ -56,6 +56,10 @@ pub struct PairCan {
     stream: UnixStream,
     rx: Vec<u8>,
     rx_pos: usize,
+    /// The last read came back short: the socket was empty then. The next call that finds the
+    /// buffer empty reports nothing pending instead of asking the kernel again (the descriptor
+    /// stays readable if more came meanwhile, so nothing waits unseen).
+    drained: bool,
     tx: Vec<u8>,
     name: String,
 }
@@ -70,6 +74,7 @@ impl PairCan {
             stream,
             rx: Vec::with_capacity(READ_CHUNK),
             rx_pos: 0,
+            drained: false,
             tx: Vec::with_capacity(WRITE_AT),
             name,
         };
@@ -107,6 +112,9 @@ impl CanBus for PairCan {
                     None => continue,
                 }
             }
+            if std::mem::take(&mut self.drained) {
+                return Ok(None);
+            }
             // Keep a partial record, drop what was consumed, read more.
             self.rx.drain(..self.rx_pos);
             self.rx_pos = 0;
@@ -121,7 +129,10 @@ impl CanBus for PairCan {
                         source: io::ErrorKind::UnexpectedEof.into(),
                     });
                 }
-                Ok(n) => self.rx.truncate(have + n),
+                Ok(n) => {
+                    self.rx.truncate(have + n);
+                    self.drained = n < READ_CHUNK;
+                }
                 Err(err) => {
                     self.rx.truncate(have);
                     return classify(&self.name, err, false).map(|()| None);
