@@ -325,3 +325,167 @@ pub fn mux(robot: &mut Robot) -> MuxStatus {
         .flatten()
         .unwrap_or_else(|| panic!("no mux status from chassis/{}", robot.name()))
 }
+
+// ----- Reliability figures (docs/RELIABILITY.md) -----
+
+/// Environment variable naming the directory the fault tests record their figures in
+/// (`faults.jsonl`, one [`Figure`] a line); unset, [`record_figure`] does nothing.
+pub const RELIABILITY_DIR_ENV: &str = "CHASSIS_RELIABILITY_DIR";
+
+/// One row of the reliability table: a fault, how the test injected it, what the system did,
+/// and the figure measured. `rank` orders the table (the order of faults); `suite` and
+/// `test` name the test that reproduces it (`cargo test -p chassis-tests --test SUITE TEST`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Figure {
+    pub rank: u32,
+    pub fault: String,
+    pub injection: String,
+    pub behaviour: String,
+    /// The figure in words, number and unit: `stopped 212 ms after the kill (timeout 300 ms)`.
+    pub figure: String,
+    /// The figure's main number (in the unit the text gives).
+    pub value: f64,
+    pub pass: bool,
+    pub suite: String,
+    pub test: String,
+}
+
+/// Appends `row` to `$CHASSIS_RELIABILITY_DIR/faults.jsonl` (or to `file` under that directory
+/// with [`record_figure_in`]) and prints it; without the variable it is only printed.
+pub fn record_figure(row: &Figure) {
+    record_figure_in("faults.jsonl", row);
+}
+
+/// Like [`record_figure`], into `$CHASSIS_RELIABILITY_DIR/<file>`.
+pub fn record_figure_in(file: &str, row: &Figure) {
+    use std::io::Write;
+    eprintln!(
+        "FIGURE [{}] {}: {} — {}",
+        if row.pass { "pass" } else { "FAIL" },
+        row.fault,
+        row.figure,
+        row.behaviour
+    );
+    let Some(dir) = std::env::var_os(RELIABILITY_DIR_ENV) else {
+        return;
+    };
+    let dir = PathBuf::from(dir);
+    let _ = std::fs::create_dir_all(&dir);
+    let path = dir.join(file);
+    let line = match serde_json::to_string(row) {
+        Ok(json) => json + "\n",
+        Err(e) => panic!("figure as JSON: {e}"),
+    };
+    // One write of one line with O_APPEND: tests running in parallel never interleave.
+    let written = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .and_then(|mut f| f.write_all(line.as_bytes()));
+    if let Err(e) = written {
+        panic!("recording a figure in {}: {e}", path.display());
+    }
+}
+
+/// A small seeded random number generator (SplitMix64): fault moments that a seed reproduces.
+#[derive(Debug, Clone)]
+pub struct Rng(u64);
+
+impl Rng {
+    /// The seed from `CHASSIS_FAULT_SEED` if set, else from the clock; printed either way so a
+    /// failing run can be repeated.
+    pub fn from_env(what: &str) -> Self {
+        let seed = std::env::var("CHASSIS_FAULT_SEED")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| now_ns() ^ u64::from(std::process::id()).rotate_left(32));
+        eprintln!("{what}: random fault moments with CHASSIS_FAULT_SEED={seed}");
+        Self::new(seed)
+    }
+
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// A duration drawn uniformly from `[low, high)`.
+    pub fn between(&mut self, low: Duration, high: Duration) -> Duration {
+        let span = u64::try_from(high.saturating_sub(low).as_micros())
+            .unwrap_or(u64::MAX)
+            .max(1);
+        low + Duration::from_micros(self.next_u64() % span)
+    }
+}
+
+/// Summary of a set of intervals (heartbeat periods), ms.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Spread {
+    pub count: usize,
+    pub min_ms: f64,
+    pub max_ms: f64,
+    pub mean_ms: f64,
+    pub p1_ms: f64,
+    pub p50_ms: f64,
+    pub p99_ms: f64,
+}
+
+impl Spread {
+    /// The spread of the gaps between consecutive `stamps_ns` (sorted or not).
+    pub fn of_gaps(stamps_ns: &[u64]) -> Self {
+        let mut sorted = stamps_ns.to_vec();
+        sorted.sort_unstable();
+        let gaps: Vec<f64> = sorted
+            .windows(2)
+            .map(|w| (w[1] - w[0]) as f64 / 1e6)
+            .collect();
+        Self::of(&gaps)
+    }
+
+    /// The spread of `values_ms`.
+    pub fn of(values_ms: &[f64]) -> Self {
+        if values_ms.is_empty() {
+            return Self::default();
+        }
+        let mut v = values_ms.to_vec();
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        Self {
+            count: v.len(),
+            min_ms: v[0],
+            max_ms: v[v.len() - 1],
+            mean_ms: v.iter().sum::<f64>() / v.len() as f64,
+            p1_ms: at(0.01),
+            p50_ms: at(0.5),
+            p99_ms: at(0.99),
+        }
+    }
+
+    /// Largest deviation from `period_ms`, ms.
+    pub fn worst_deviation_ms(&self, period_ms: f64) -> f64 {
+        (self.max_ms - period_ms).max(period_ms - self.min_ms)
+    }
+}
+
+/// Resident memory of process `pid`, KiB (`VmRSS` in `/proc/PID/status`).
+pub fn rss_kib(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+}
+
+/// Open file descriptors of process `pid` (entries of `/proc/PID/fd`).
+pub fn open_fds(pid: u32) -> Option<usize> {
+    std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .ok()
+        .map(Iterator::count)
+}

@@ -291,11 +291,43 @@ fn a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed() {
         &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
     );
     let mut robot = env.robot(&n, UP);
+    let started = Instant::now();
     let second = env.chassisd(
         "second",
         &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
     );
     let code = env.proc(second).wait_exit(Duration::from_secs(10));
+    let refused_in = started.elapsed();
+    let seq = state(&mut robot).seq;
+    pause(Duration::from_millis(200));
+    let unharmed = env.proc(first).is_running() && state(&mut robot).seq > seq;
+    let message = env.proc(second).log_text();
+    let message = message
+        .lines()
+        .find(|l| l.contains("another chassisd"))
+        .unwrap_or("")
+        .trim();
+    record_figure(&Figure {
+        rank: 700,
+        fault: "a second chassisd for the same robot name".into(),
+        injection: "`chassisd --robot titan --name N` while one already serves N".into(),
+        behaviour: format!(
+            "refused at start with exit code {code:?} and \"{}\"; the first one kept \
+             publishing",
+            message
+                .split("another chassisd")
+                .nth(1)
+                .map_or(String::new(), |rest| format!("another chassisd{rest}"))
+        ),
+        figure: format!(
+            "refused {:.0} ms after its start; first instance unharmed: {unharmed}",
+            refused_in.as_secs_f64() * 1e3
+        ),
+        value: refused_in.as_secs_f64() * 1e3,
+        pass: code == Some(1) && unharmed,
+        suite: "service".into(),
+        test: "a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed".into(),
+    });
     assert_eq!(code, Some(1), "{}", env.logs());
     assert!(
         env.proc(second)
@@ -478,11 +510,13 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
 
     // Hang-up: the simulated chassis (and its pty) vanish.
     env.proc(sim).signal(Signal::SIGKILL);
+    let killed = Instant::now();
     let lost = wait_for(Duration::from_secs(3), || {
         state(&mut robot).link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) != 0
     });
     assert!(lost.is_some(), "the loss was not reported\n{}", env.logs());
     let _ = std::fs::remove_file(&link);
+    let down_for = killed.elapsed();
     env.chassisd(
         "sim2",
         &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg],
@@ -491,6 +525,26 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
         teleop.send(go).unwrap();
         let s = state(&mut robot);
         s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > 0.1
+    });
+    let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+    record_figure(&Figure {
+        rank: 200,
+        fault: "slcan adapter hang-up (TITAN over an slcan pty)".into(),
+        injection: "SIGKILL of `chassisd sim --bus slcan-pty:…` mid-drive, restarted".into(),
+        behaviour: "the loss was reported (`bus_down` / `chassis_silent`), the port reopened \
+                    with backoff, and the robot drove again on the same client connection"
+            .into(),
+        figure: format!(
+            "loss reported {:.0} ms after the hang-up; driving again {:.0} ms after the \
+             adapter came back (restarted {:.0} ms after the hang-up)",
+            ms(lost),
+            ms(back),
+            down_for.as_secs_f64() * 1e3
+        ),
+        value: ms(back),
+        pass: lost.is_some() && back.is_some(),
+        suite: "service".into(),
+        test: "titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up".into(),
     });
     assert!(
         back.is_some(),
