@@ -243,6 +243,12 @@ impl CommandSchedule {
         }
     }
 
+    /// The heartbeat slot a motion frame sent at `now` serves (its grid time, at or before
+    /// `now`), if one is due.
+    pub fn heartbeat_slot(&self, now: Timestamp) -> Option<Timestamp> {
+        self.heartbeat.is_due(now).then(|| self.heartbeat.next())
+    }
+
     /// A motion frame went out at `now`.
     pub fn sent(&mut self, now: Timestamp) {
         self.last_sent = Some(now);

@@ -26,6 +26,9 @@ use crate::time::{Timestamp, earliest};
 /// The manual's bound on the 0x03 rate ("more than 5 Hz and less than 10 Hz"): at most this many
 /// velocity frames in any one-second window, heartbeats and command changes together.
 pub const MAX_VELOCITY_FRAMES_PER_S: usize = 10;
+/// How late a heartbeat may go out and still count at its slot in the rate bound's window.
+const HEARTBEAT_JITTER: Duration = Duration::from_millis(5);
+
 /// Heartbeat rate used when the profile's `heartbeat_hz` is not a usable rate (positive, finite,
 /// at most 1 kHz).
 const FALLBACK_HEARTBEAT_HZ: f64 = 8.0;
@@ -129,6 +132,10 @@ struct SpeedRef {
 ///   second), and keeps `config.min_command_interval_ms` after the previous frame;
 /// * a change that may not go out yet rides the next heartbeat (at most 125 ms later), which always
 ///   carries the latest command, or goes out as soon as a slot frees, whichever is first.
+///
+/// A heartbeat counts at its slot on the grid even when the service's wake-up sent it a little
+/// late (up to 5 ms): counted at its send time, it would share a one-second window with the
+/// heartbeat eight slots on, and no change could ever go out between heartbeats.
 ///
 /// So a steady command gives exactly one frame per 125 ms, a command flood gives at most
 /// 10 frames in any second, and a stop after a flood of other changes still goes out at once.
@@ -496,13 +503,20 @@ impl XbotDriver {
 
     fn velocity_sent(&mut self, now: Timestamp) {
         self.prune(now);
+        // A heartbeat counts at its slot on the grid: sent a little late (the service's
+        // wake-up), it would otherwise share a one-second window with the heartbeat eight slots
+        // on, and no change could ever go out between heartbeats.
+        let logged = match self.schedule.heartbeat_slot(now) {
+            Some(slot) if now.saturating_since(slot) <= HEARTBEAT_JITTER => slot,
+            _ => now,
+        };
         self.schedule.sent(now);
         // No change is pending in the schedule now, so its deadline is the next heartbeat.
         self.next_heartbeat = self.schedule.deadline();
         self.on_wire = Some(self.desired);
         self.change_released = false;
         self.release_at = None;
-        self.sent_log.push_back(now);
+        self.sent_log.push_back(logged);
         let echo = &mut self.state.command;
         echo.linear_mps = self.desired.linear_x_mps as f32;
         echo.lateral_mps = self.desired.linear_y_mps as f32;

@@ -1073,3 +1073,40 @@ proptest! {
         prop_assert_eq!(link.rx_frames + link.rx_unknown_id, b.d.parser.frames());
     }
 }
+
+#[test]
+fn on_a_steady_heartbeat_one_change_a_second_goes_out_at_once() {
+    let mut b = Bench::new();
+    b.run_for(ms(5010));
+    for k in 0..5u64 {
+        let before = b.velocities().len();
+        b.set(twist(0.25 + 0.25 * (k % 2) as f32, 0.0, 0.0));
+        assert_eq!(b.velocities().len(), before + 1, "change {k} waited");
+        b.run_for(ms(1100));
+    }
+}
+
+#[test]
+fn heartbeats_sent_a_little_late_still_leave_room_for_one_change_a_second() {
+    let mut b = Bench::new();
+    // The service wakes up 300 µs after each deadline.
+    let late = Duration::from_micros(300);
+    let step = |b: &mut Bench, until: Timestamp| {
+        while let Some(next) = b.d.poll_timeout().filter(|&t| t + late <= until) {
+            b.now = next + late;
+            b.d.handle_timeout(b.now);
+            b.drain();
+        }
+        b.now = until;
+    };
+    step(&mut b, T0 + ms(5010));
+    for k in 0..5u64 {
+        let before = b.velocities().len();
+        b.set(twist(0.25 + 0.25 * (k % 2) as f32, 0.0, 0.0));
+        assert_eq!(b.velocities().len(), before + 1, "change {k} waited");
+        let until = b.now + ms(1100);
+        step(&mut b, until);
+    }
+    let times: Vec<_> = b.velocities().iter().map(|(t, _)| *t).collect();
+    assert!(max_per_second(&times) <= MAX_VELOCITY_FRAMES_PER_S);
+}
