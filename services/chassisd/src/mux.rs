@@ -258,6 +258,13 @@ pub struct Mux {
 }
 
 impl Mux {
+    /// True for a source of safety priority: its stop is never smoothed, and never waits.
+    pub fn is_safety_source(&self, index: usize) -> bool {
+        self.sources
+            .get(index)
+            .is_some_and(|s| s.config.priority >= self.limits.safety_priority)
+    }
+
     pub fn new(config: &MuxConfig) -> Result<Self, MuxConfigError> {
         config.validate()?;
         let sources: Vec<Source> = config

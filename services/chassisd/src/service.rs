@@ -1073,7 +1073,10 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
             .map(|inlet| waitset.attach_notification(&inlet.listener).map(Some))
             .collect::<Result<Vec<_>, _>>()
             .map_err(attach_err)?;
-        let mut budget = WakeBudget::new(ports.sources.len(), core.tick.next());
+        let safety_sources = (0..ports.sources.len())
+            .filter(|&i| core.mux.is_safety_source(i))
+            .fold(0u32, |mask, i| mask | 1 << i);
+        let mut budget = WakeBudget::new(ports.sources.len(), core.tick.next(), safety_sources);
         let control_guard = waitset
             .attach_notification(&ports.control.listener)
             .map_err(attach_err)?;
@@ -1170,11 +1173,15 @@ pub fn run(config: Config) -> Result<(), ServiceError> {
 /// one tick the source's listener is detached until the next tick: its requests are still read
 /// on every tick (its newest 16 wait in its queue, and iceoryx2 coalesces its notifications), so
 /// it keeps its place in the mux, while every other source still wakes the loop at once.
+/// Safety-priority sources are exempt: a stop from the safety monitor never waits for a tick
+/// (the monitor holds its source alone: no rogue process can publish on it).
 #[derive(Debug)]
 struct WakeBudget {
     spent: Vec<u32>,
     /// One bit per detached source.
     detached: u32,
+    /// One bit per source never detached.
+    exempt: u32,
     /// The tick the counts belong to (its deadline).
     tick: Timestamp,
 }
@@ -1183,10 +1190,11 @@ impl WakeBudget {
     /// 1 kHz at the 20 ms tick: more than any client needs.
     const PER_TICK: u32 = 20;
 
-    fn new(sources: usize, tick: Timestamp) -> Self {
+    fn new(sources: usize, tick: Timestamp, exempt: u32) -> Self {
         Self {
             spent: vec![0; sources],
             detached: 0,
+            exempt,
             tick,
         }
     }
@@ -1203,7 +1211,7 @@ impl WakeBudget {
             self.detached = 0;
         }
         for (index, spent) in self.spent.iter_mut().enumerate() {
-            if fired & (1 << index) != 0 && self.detached & (1 << index) == 0 {
+            if fired & !self.exempt & (1 << index) != 0 && self.detached & (1 << index) == 0 {
                 *spent += 1;
                 if *spent > Self::PER_TICK {
                     self.detached |= 1 << index;
@@ -1222,7 +1230,7 @@ mod tests {
     #[test]
     fn a_source_waking_the_loop_past_its_budget_is_detached_until_the_next_tick() {
         let tick = Timestamp::from_millis(20);
-        let mut budget = WakeBudget::new(3, tick);
+        let mut budget = WakeBudget::new(3, tick, 0);
         // Source 1 floods, source 0 wakes now and then.
         for _ in 0..WakeBudget::PER_TICK {
             assert!(budget.spend(0b010, tick).is_empty());
@@ -1243,5 +1251,20 @@ mod tests {
             assert!(budget.spend(0b010, next).is_empty());
         }
         assert_eq!(budget.spend(0b010, next), vec![1]);
+    }
+
+    #[test]
+    fn a_safety_source_is_never_detached() {
+        let tick = Timestamp::from_millis(20);
+        // Source 2 has safety priority.
+        let mut budget = WakeBudget::new(3, tick, 0b100);
+        for _ in 0..10 * WakeBudget::PER_TICK {
+            assert!(budget.spend(0b100, tick).is_empty());
+        }
+        // The others still have their budget.
+        for _ in 0..WakeBudget::PER_TICK {
+            assert!(budget.spend(0b101, tick).is_empty());
+        }
+        assert_eq!(budget.spend(0b101, tick), vec![0]);
     }
 }
