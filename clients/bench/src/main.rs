@@ -117,7 +117,7 @@ impl Plan {
                 baseline_rounds: 20_000,
                 paced_rounds: 2500,
                 commands: 3000,
-                xbot_commands: 60,
+                xbot_commands: 40,
                 states: 10_000,
                 preemptions: 300,
                 fanout: vec![1, 4, 16],
@@ -331,7 +331,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let (count, interval) = if r.robot == RobotKind::Xbot {
                 // The XBot's manual caps the command rate below 10 Hz: a change goes out at once
                 // only while the last second holds a free slot.
-                (plan.xbot_commands, Duration::from_millis(600))
+                (plan.xbot_commands, paths::XBOT_COMMAND_INTERVAL)
             } else {
                 (plan.commands, paths::COMMAND_INTERVAL)
             };
@@ -345,11 +345,11 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 };
                 let state = paths::state_path(&mut robot, plan.states, spin)?;
                 let preemptions = if r.robot == RobotKind::Xbot {
-                    plan.preemptions / 10
+                    plan.preemptions / 15
                 } else {
                     plan.preemptions
                 };
-                let preempt = paths::preemption(&mut robot, r.robot, preemptions, spin)?;
+                let preempt = paths::preemption(&mut robot, r.robot, preemptions, interval, spin)?;
                 Ok((command, state, preempt))
             })??;
             let (command, state, (preempt, preempt_missed)) = result;

@@ -325,6 +325,16 @@ fn wait_for_motion(
 /// the same period.
 pub const COMMAND_INTERVAL: Duration = Duration::from_millis(4);
 
+/// How often a request is repeated between two command-path samples further apart (the
+/// `teleop` source's timeout is 300 ms).
+const KEEP_ALIVE: Duration = Duration::from_millis(100);
+
+/// The XBot's manual caps its velocity frames below 10 Hz; with the 8 Hz heartbeat the driver
+/// sends one change a second at once (and keeps a slot for a stop), so the command path and the
+/// preemption rounds measure one change per 1.1 s: faster, a change rides the next heartbeat
+/// and the figure is the manual's rate bound, not the service's latency.
+pub const XBOT_COMMAND_INTERVAL: Duration = Duration::from_millis(1100);
+
 /// Command-path latencies: `count` requests alternating between two speeds, one every
 /// `interval`.
 pub fn command_path(
@@ -351,11 +361,22 @@ pub fn command_path(
     )?;
     let mut latencies = Latencies::new();
     let mut missed = 0;
-    let mut ticker = Ticker::new(interval);
+    // Between two samples further apart than the source's timeout, the current request is
+    // repeated as a controller would: the mux output stays, no frame is sent for it.
+    let period = interval.min(KEEP_ALIVE);
+    let periods = (interval.as_nanos() / period.as_nanos().max(1)).max(1);
+    let mut ticker = Ticker::new(period);
+    let mut current = 0.25;
     for i in 0..count {
-        ticker.wait();
+        for k in 1..=periods {
+            ticker.wait();
+            if k < periods {
+                teleop.send(VelocityRequest::twist(current, 0.0))?;
+            }
+        }
         tap.drain(|_| {})?;
         let speed = speeds[usize::from(i % 2 == 1)];
+        current = speed as f32;
         let stamp = now_ns();
         teleop.send(VelocityRequest {
             stamp_ns: stamp,
@@ -435,10 +456,12 @@ pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result
 }
 
 /// Preemption latencies: teleop drives; `safety` publishes a stop → the zero frame written.
+/// One round per `interval` at most.
 pub fn preemption(
     robot: &mut Robot,
     kind: RobotKind,
     count: u64,
+    interval: Duration,
     spin: bool,
 ) -> anyhow::Result<(Latencies, u64)> {
     let tap = robot.frames(2048)?;
@@ -447,14 +470,23 @@ pub fn preemption(
     let mut decoder = MotionDecoder::new(kind);
     let mut latencies = Latencies::new();
     let mut missed = 0;
+    // Rounds and requests at a controller's pace: a client waking the service more than 1,000
+    // times a second is read on the service's tick only (and a round takes well under 1 ms).
+    let pace = COMMAND_INTERVAL.as_nanos() as u64;
+    let mut ticker = Ticker::new(interval.max(COMMAND_INTERVAL));
+    let mut sent = 0;
     for _ in 0..count {
+        ticker.wait();
         // Drive: teleop wins.
         safety.heartbeat()?;
         let start = now_ns();
         let mut driving = false;
         while now_ns() - start < 2_000_000_000 {
-            teleop.send(VelocityRequest::twist(0.5, 0.0))?;
-            safety.heartbeat()?;
+            if now_ns() - sent >= pace {
+                sent = now_ns();
+                teleop.send(VelocityRequest::twist(0.5, 0.0))?;
+                safety.heartbeat()?;
+            }
             if wait_for_motion(
                 &tap,
                 &mut decoder,
