@@ -301,6 +301,18 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
     let muxes = &rec.messages["mux"];
     assert!(states.len() >= 30, "{} states", states.len());
     assert!(muxes.len() >= 20, "{} mux decisions", muxes.len());
+    // Every state sample published while recording is in the file, in order.
+    let summary = &rec.metadata["chassis.summary"];
+    assert_eq!(summary["lost_states"], "0");
+    assert_eq!(summary["states"], states.len().to_string());
+    let seqs: Vec<u64> = states
+        .iter()
+        .map(|(_, s)| s["seq"].as_u64().unwrap())
+        .collect();
+    assert!(
+        seqs.windows(2).all(|w| w[1] == w[0] + 1),
+        "state seq gaps: {seqs:?}"
+    );
     let (_, last_state) = states.last().unwrap();
     assert!((json_f64(last_state, &["odometry", "x_m"]) - recorded.odometry.x_m).abs() < 0.01);
     let frame = &rec.frames()[0].1;

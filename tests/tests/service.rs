@@ -436,6 +436,103 @@ fn sigterm_commands_zero_and_exits_zero() {
 }
 
 #[test]
+fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_loses() {
+    let mut env = Env::new("stream");
+    let n = name("strm");
+    env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    );
+    let mut robot = env.robot(&n, UP);
+    // The buffer asked for is clamped to 1..=the service's maximum.
+    assert_eq!(robot.state_stream(0).unwrap().buffer(), 1);
+    let stream = robot.state_stream(usize::MAX).unwrap();
+    assert_eq!(stream.buffer(), STATE_BUFFER);
+    // Beside it, a reader with a `Robot`'s own latest-value subscriber.
+    let mut latest = Robot::connect_with_prefix(&n, Some(&env.prefix)).unwrap();
+
+    // 2000 frames/s on top of the chassis' feedback: past the saturation of the receive
+    // moderation, so the service reads the bus once per 4 ms and publishes the state in bursts.
+    // The extra frames are copies of the motion and motor feedback, so each one changes the
+    // state (odometry, motor positions) only while the robot moves: it drives throughout.
+    let mut teleop = source(&mut robot, "teleop");
+    let drive = VelocityRequest::twist(0.3, 0.0);
+    let answer = robot
+        .sim(
+            SimRequest {
+                kind: SimKind::FLOOD,
+                flag: 1,
+                value: 2000.0,
+                ..SimRequest::default()
+            },
+            Duration::from_secs(3),
+        )
+        .unwrap();
+    assert!(answer.is_ok(), "{}", answer.message());
+    let moving = drive_for(
+        &mut robot,
+        &mut teleop,
+        None,
+        drive,
+        Duration::from_millis(800),
+    );
+    assert!(moving > 0.1, "peak speed {moving} m/s\n{}", env.logs());
+    stream.drain(|_| {}).unwrap();
+    latest.poll_states(|_| {}).unwrap();
+
+    // A reader busy for 6 ms between reads: one or two bursts are waiting each time.
+    let (mut received, mut gaps, mut lost, mut largest) = (0u64, 0u64, 0u64, 0usize);
+    let mut last: Option<u64> = None;
+    let (mut latest_received, mut latest_lost) = (0u64, 0u64);
+    let mut latest_last: Option<u64> = None;
+    let started = Instant::now();
+    while started.elapsed() < Duration::from_secs(2) {
+        teleop.send(drive).unwrap();
+        pause(Duration::from_millis(6));
+        let batch = stream
+            .wait(Duration::from_millis(100), |s| {
+                received += 1;
+                if let Some(seq) = last
+                    && s.seq != seq + 1
+                {
+                    gaps += 1;
+                    lost += s.seq.saturating_sub(seq + 1);
+                }
+                last = Some(s.seq);
+            })
+            .unwrap();
+        largest = largest.max(batch);
+        latest
+            .poll_states(|s| {
+                latest_received += 1;
+                if let Some(seq) = latest_last {
+                    latest_lost += s.seq.saturating_sub(seq + 1);
+                }
+                latest_last = Some(s.seq);
+            })
+            .unwrap();
+    }
+    eprintln!(
+        "stream: {received} samples, {gaps} gaps ({lost} lost), up to {largest} per read; \
+         latest-value reader: {latest_received} received, {latest_lost} lost"
+    );
+    assert_eq!(
+        (gaps, lost),
+        (0, 0),
+        "the stream lost {lost} samples in {gaps} gaps\n{}",
+        env.logs()
+    );
+    // The flood flowed, and a read found more samples than a latest-value subscriber keeps:
+    // the reader above would have lost samples without the stream's buffer.
+    assert!(received >= 3000, "only {received} samples in 2 s");
+    assert!(largest > 4, "at most {largest} samples per read");
+    assert!(
+        latest_lost > 0,
+        "the latest-value reader lost nothing ({latest_received} received)"
+    );
+}
+
+#[test]
 fn control_requests_are_answered_with_success_or_a_reason() {
     let mut env = Env::new("control");
     let n = name("ctl");

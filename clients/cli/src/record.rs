@@ -8,7 +8,7 @@
 //! | topic | schema | one message per |
 //! | --- | --- | --- |
 //! | `/chassis/<name>/frames` | `chassis.BusFrame` | frame on the bus, both directions: `stamp_ns`, `seq`, `direction` (`rx`/`tx`), `kind` (`can`/`serial`/`gps`), `can_id`, `extended`, `len`, `data` (the payload as hex) |
-//! | `/chassis/<name>/state` | `chassis.ChassisState` | state sample seen (the newest at each wake-up, ≤ 50 ms apart; `seq` shows the ones in between) |
+//! | `/chassis/<name>/state` | `chassis.ChassisState` | state sample published: every one, in order (`seq` numbers them; gaps are counted) |
 //! | `/chassis/<name>/mux` | `chassis.MuxStatus` | mux decision seen (on change and at 10 Hz) |
 //!
 //! Every message's `log_time` and `publish_time` are the sample's own `stamp_ns`: the
@@ -17,7 +17,7 @@
 //! (add it to a stamp for Unix-epoch ns), `start_wall_ns`, `start_monotonic_ns`, and the
 //! `robot` (`titan`, `scout-mini`, `xbot`) and `name` recorded — `chassis replay` reads the robot
 //! from it. The metadata record `chassis.summary`, written at the end, holds the counts: frames,
-//! lost frames and sequence gaps, states, mux decisions, duration.
+//! lost frames and sequence gaps, states, lost states and their gaps, mux decisions, duration.
 //!
 //! # `chassis record --candump FILE` — can-utils log
 //!
@@ -33,9 +33,13 @@
 //! A thread of its own drains the frame tap (`Robot::frames`, 2048 frames of buffer) as soon as
 //! the service's event says there is something, and hands batches to the writer; a full
 //! 500 kbit/s CAN bus (≈ 4000 frames/s) leaves the buffer nearly empty. Every `BusFrame::seq`
-//! gap is counted and reported at the end. Reading is from shared memory: the recorder never
-//! slows the service. SIGINT / SIGTERM (or `--duration`) end the recording cleanly: the MCAP
-//! summary is written, the summary printed on stderr.
+//! gap is counted and reported at the end. The writer drains a state stream
+//! (`Robot::state_stream`, `STATE_BUFFER` = 256 samples) whenever a batch of frames arrives, at
+//! least every 50 ms: every state sample published is recorded (a saturated bus publishes one
+//! per frame that changes the state, in bursts of ≈ 18 every 4 ms), and `ChassisState::seq`
+//! gaps are counted too. Reading is from shared memory: the recorder never slows the service.
+//! SIGINT / SIGTERM (or `--duration`) end the recording cleanly: the MCAP summary is written,
+//! the summary printed on stderr.
 //!
 //! # `chassis replay FILE`
 //!
@@ -60,7 +64,8 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, LinkFlags, MuxStatus, Robot, RobotKind,
-    install_signal_handlers, now_ns, termination_requested, valid_robot_name,
+    STATE_BUFFER, StateStream, install_signal_handlers, now_ns, termination_requested,
+    valid_robot_name,
 };
 use chassis_protocols::{CanFrame, Robot as RobotModel};
 use clap::Args;
@@ -321,6 +326,8 @@ pub struct Counts {
     pub states: u64,
     pub mux: u64,
     pub gaps: GapCounter,
+    /// `ChassisState::seq` gaps: state samples lost between two drains.
+    pub state_gaps: GapCounter,
 }
 
 /// Where a recording goes.
@@ -456,6 +463,8 @@ impl Sink for McapSink {
             ("sequence_gaps", counts.gaps.gaps.to_string()),
             ("sequence_restarts", counts.gaps.restarts.to_string()),
             ("states", counts.states.to_string()),
+            ("lost_states", counts.state_gaps.lost.to_string()),
+            ("state_gaps", counts.state_gaps.gaps.to_string()),
             ("mux", counts.mux.to_string()),
             ("duration_s", format!("{seconds:.3}")),
             ("end_monotonic_ns", now_ns().to_string()),
@@ -598,11 +607,10 @@ fn drain_tap(
 struct Recorder {
     sink: Box<dyn Sink>,
     counts: Counts,
-    last_state: Option<u64>,
     last_mux: Option<u64>,
     quiet_since: u64,
-    /// Record state and mux samples (MCAP) too.
-    samples: bool,
+    /// Every state sample, when state and mux samples are recorded too (MCAP).
+    states: Option<StateStream>,
 }
 
 impl Recorder {
@@ -613,6 +621,28 @@ impl Recorder {
             if self.sink.frame(frame)? {
                 self.counts.written += 1;
             }
+        }
+        Ok(())
+    }
+
+    /// Writes every state sample received since the last call (MCAP only).
+    fn states(&mut self) -> anyhow::Result<()> {
+        let Some(states) = &self.states else {
+            return Ok(());
+        };
+        let mut written = Ok(());
+        let mut newest = None;
+        states.drain(|state| {
+            self.counts.states += 1;
+            self.counts.state_gaps.see(state.seq);
+            newest = Some(state.stamp_ns);
+            if written.is_ok() {
+                written = self.sink.state(state);
+            }
+        })?;
+        written?;
+        if let Some(stamp) = newest {
+            self.quiet_since = self.quiet_since.max(stamp);
         }
         Ok(())
     }
@@ -631,15 +661,8 @@ impl Recorder {
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the frame tap stopped"),
         }
-        if self.samples {
-            if let Some(state) = robot.latest_state()?
-                && self.last_state != Some(state.seq)
-            {
-                self.last_state = Some(state.seq);
-                self.sink.state(&state)?;
-                self.counts.states += 1;
-                self.quiet_since = self.quiet_since.max(state.stamp_ns);
-            }
+        if self.states.is_some() {
+            self.states()?;
             if let Some(mux) = robot.latest_mux()?
                 && self.last_mux != Some(mux.seq)
             {
@@ -722,13 +745,21 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
         if args.candump { " (candump)" } else { "" }
     );
 
+    let states = if args.candump {
+        None
+    } else {
+        Some(
+            robot
+                .state_stream(STATE_BUFFER)
+                .with_context(|| format!("opening the state stream of chassis/{}", args.name))?,
+        )
+    };
     let mut recorder = Recorder {
         sink,
         counts: Counts::default(),
-        last_state: None,
         last_mux: None,
         quiet_since: now_ns(),
-        samples: !args.candump,
+        states,
     };
     let end = args
         .duration
@@ -759,6 +790,11 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
             failure = Some(err);
         }
     }
+    if failure.is_none()
+        && let Err(err) = recorder.states()
+    {
+        failure = Some(err);
+    }
     let Recorder { sink, counts, .. } = recorder;
     let seconds = now_ns().saturating_sub(start.monotonic_ns) as f64 / 1e9;
     let finished = sink.finish(&counts, seconds);
@@ -785,6 +821,13 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
         eprintln!(
             "WARNING: {} frames lost in {} sequence gaps (the recorder fell more than {TAP_BUFFER} frames behind)",
             counts.gaps.lost, counts.gaps.gaps
+        );
+    }
+    if counts.state_gaps.lost > 0 {
+        eprintln!(
+            "WARNING: {} state samples lost in {} sequence gaps (the recorder fell more than \
+             {STATE_BUFFER} samples behind)",
+            counts.state_gaps.lost, counts.state_gaps.gaps
         );
     }
     if counts.gaps.restarts > 0 {

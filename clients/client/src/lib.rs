@@ -5,7 +5,9 @@
 //!
 //! * [`Robot::connect`] by name (`titan`, or whatever `chassisd --name` says);
 //! * [`Robot::latest_state`] / [`Robot::wait_state`]: the [`ChassisState`], read zero-copy from
-//!   shared memory, with a deadline;
+//!   shared memory, with a deadline. The state topic is a latest-value topic: the `Robot` keeps
+//!   the newest sample, and a reader that wants every sample (a logger, a gap counter) opens a
+//!   [`Robot::state_stream`];
 //! * [`Robot::source`]: publish [`VelocityRequest`]s as one of the service's configured sources
 //!   (`safety`, `teleop`, `planner` by default). The source's priority and timeout are the
 //!   service's: a client cannot raise its own priority. One process per source;
@@ -119,7 +121,16 @@ struct Counter<C> {
     replies: Listener<ipc::Service>,
 }
 
+/// State samples a [`Robot`]'s own subscriber keeps: the newest, and a few before it for
+/// [`Robot::wait_states`].
+const LATEST_STATE_BUFFER: usize = 4;
+
 /// A connection to one robot.
+///
+/// Its own state subscriber reads `chassis/<name>/state` as a latest-value topic: it keeps the
+/// newest [`ChassisState`] (and the few before it), so a reader that is slower than the service
+/// loses the oldest and never falls behind. A reader that needs every sample opens a
+/// [`StateStream`] with [`Robot::state_stream`].
 #[derive(Debug)]
 pub struct Robot {
     name: String,
@@ -173,7 +184,7 @@ impl Robot {
         }
         let state = state_service
             .subscriber_builder()
-            .buffer_size(4)
+            .buffer_size(LATEST_STATE_BUFFER)
             .create()
             .map_err(ipc("state subscriber"))?;
         let state_events = node
@@ -237,7 +248,8 @@ impl Robot {
     /// Waits at most `timeout` for new state samples and hands every one of them to `each`,
     /// oldest first (the service publishes one per frame that changes the state; a reader woken
     /// once may find several). Returns how many there were. The subscriber keeps the last 4
-    /// samples: a reader slower than that loses the oldest.
+    /// samples: a reader woken after more were published loses the oldest (on a saturated bus
+    /// the service publishes bursts of ≈ 18 at once). [`Robot::state_stream`] loses none.
     pub fn wait_states(
         &mut self,
         timeout: Duration,
@@ -264,7 +276,8 @@ impl Robot {
         }
     }
 
-    /// Hands every pending state sample to `each` without waiting (a busy-polling reader).
+    /// Hands every pending state sample to `each` without waiting (a busy-polling reader). Like
+    /// [`Robot::wait_states`], it sees at most the last 4 samples published since its last call.
     pub fn poll_states(&mut self, each: impl FnMut(&ChassisState)) -> Result<usize, ClientError> {
         self.drain_state_each(each)
     }
@@ -513,6 +526,81 @@ impl Robot {
         ask(&name, "sim", counter, request, request.seq, timeout)
     }
 
+    /// A stream of every state sample the service publishes, with its own subscriber and its own
+    /// listener: it does not disturb this `Robot`'s latest-value reading, and holds one of the
+    /// state service's reader slots (40 with `chassisd`) while it lives.
+    ///
+    /// `buffer` samples may queue between two reads before the oldest are lost; it is clamped to
+    /// 1..=the service's maximum ([`STATE_BUFFER`] with `chassisd`), and
+    /// [`StateStream::buffer`] tells what it became. The service publishes one sample per frame
+    /// that changes the state and wakes the readers once per read of the bus: ≈ 4300 samples a
+    /// second on a saturated 500 kbit/s bus, in bursts of ≈ 18 every 4 ms, and after the service
+    /// was held up, its backlog at once (up to 256). The full buffer holds such a backlog, and
+    /// lets a reader of the moderated bus wake ≈ 55 ms late without losing a sample. Gaps show in
+    /// `ChassisState::seq`, which numbers every sample published.
+    ///
+    /// The first sample is the newest one published before the stream opened (the topic keeps
+    /// one); every sample after it follows in order.
+    ///
+    /// ```no_run
+    /// use std::time::Duration;
+    /// use chassis_client::{Robot, STATE_BUFFER};
+    ///
+    /// let robot = Robot::connect("titan")?;
+    /// let states = robot.state_stream(STATE_BUFFER)?;
+    /// let mut last = None;
+    /// loop {
+    ///     states.wait(Duration::from_millis(100), |s| {
+    ///         if let Some(seq) = last.filter(|&seq| s.seq != seq + 1) {
+    ///             eprintln!("lost {} samples after #{seq}", s.seq.saturating_sub(seq + 1));
+    ///         }
+    ///         last = Some(s.seq);
+    ///     })?;
+    /// }
+    /// # Ok::<(), chassis_client::ClientError>(())
+    /// ```
+    pub fn state_stream(&self, buffer: usize) -> Result<StateStream, ClientError> {
+        let name = service_name(&self.name, ServiceKind::State);
+        let factory = match self
+            .node
+            .service_builder(&service(&name)?)
+            .publish_subscribe::<ChassisState>()
+            .open()
+        {
+            Ok(f) => f,
+            Err(PublishSubscribeOpenError::DoesNotExist) => {
+                return Err(ClientError::NotRunning {
+                    name: self.name.clone(),
+                });
+            }
+            Err(e) => return Err(ipc("opening the state service")(e)),
+        };
+        // A service made with other limits (another version of chassisd) sets its own maximum.
+        let buffer = buffer.clamp(
+            1,
+            factory.static_config().subscriber_max_buffer_size().max(1),
+        );
+        let subscriber = factory
+            .subscriber_builder()
+            .buffer_size(buffer)
+            .create()
+            .map_err(ipc("state stream subscriber"))?;
+        let events = self
+            .node
+            .service_builder(&service(&name)?)
+            .event()
+            .open()
+            .map_err(ipc("state event"))?
+            .listener_builder()
+            .create()
+            .map_err(ipc("state stream listener"))?;
+        Ok(StateStream {
+            subscriber,
+            events,
+            buffer,
+        })
+    }
+
     /// A tap of every frame on the bus, both directions. `buffer` frames may queue between two
     /// reads before the oldest are lost (gaps show in `BusFrame::seq`).
     pub fn frames(&self, buffer: usize) -> Result<FrameTap, ClientError> {
@@ -662,6 +750,67 @@ impl FrameTap {
             .timed_wait(|_| {}, timeout)
             .map_err(ipc("waiting for frames"))?;
         Ok(0)
+    }
+}
+
+/// Every state sample the service publishes, in order: see [`Robot::state_stream`].
+///
+/// Like every iceoryx2 port it is not `Send`: read it on the thread that opened it.
+#[derive(Debug)]
+pub struct StateStream {
+    subscriber: Subscriber<ipc::Service, ChassisState, ()>,
+    events: Listener<ipc::Service>,
+    buffer: usize,
+}
+
+impl StateStream {
+    /// The samples that may queue between two reads (the buffer asked for, clamped).
+    pub fn buffer(&self) -> usize {
+        self.buffer
+    }
+
+    /// Every sample received since the last call, oldest first, without waiting. Returns how
+    /// many there were.
+    pub fn drain(&self, mut each: impl FnMut(&ChassisState)) -> Result<usize, ClientError> {
+        let mut n = 0;
+        while let Some(sample) = self.subscriber.receive().map_err(ipc("receiving state"))? {
+            each(&sample);
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Hands the pending samples to `each`, oldest first; with none pending, waits at most
+    /// `timeout` for the service's next publication and hands those over. Returns how many there
+    /// were (0: none within `timeout`).
+    pub fn wait(
+        &self,
+        timeout: Duration,
+        mut each: impl FnMut(&ChassisState),
+    ) -> Result<usize, ClientError> {
+        // The notifications pending now belong to the samples drained next: spend them, so that
+        // the wait below is for later ones.
+        let _ = self.events.try_wait(|_| {});
+        let n = self.drain(&mut each)?;
+        if n > 0 {
+            return Ok(n);
+        }
+        let deadline =
+            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+        loop {
+            let left = deadline.saturating_sub(now_ns());
+            if left == 0 {
+                return Ok(0);
+            }
+            // A notification may belong to samples the drain above already took: wait again.
+            self.events
+                .timed_wait(|_| {}, Duration::from_nanos(left))
+                .map_err(ipc("waiting for state"))?;
+            let n = self.drain(&mut each)?;
+            if n > 0 {
+                return Ok(n);
+            }
+        }
     }
 }
 

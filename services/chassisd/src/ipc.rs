@@ -13,8 +13,8 @@
 //! after sending, so readers wait on a listener instead of polling.
 
 use chassis_interfaces::{
-    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, ServiceKind, SimRequest,
-    VelocityRequest, service_name,
+    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, STATE_BUFFER, ServiceKind,
+    SimRequest, VelocityRequest, service_name,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -36,6 +36,11 @@ pub const MAX_NODES: usize = 64;
 pub const FRAMES_BUFFER: usize = 2048;
 /// Most subscribers of `frames`.
 pub const MAX_FRAME_READERS: usize = 8;
+
+// The readers of `state` and `frames` are woken once per read of the bus: a reader must find
+// room for a whole read.
+const _: () = assert!(STATE_BUFFER >= crate::bus::MAX_RX_BATCH);
+const _: () = assert!(FRAMES_BUFFER >= crate::bus::MAX_RX_BATCH);
 
 pub type StatePublisher = Publisher<ipc::Service, ChassisState, ()>;
 pub type FramePublisher = Publisher<ipc::Service, BusFrame, ()>;
@@ -157,7 +162,13 @@ impl Ports {
             .service_builder(&service(&state_name)?)
             .publish_subscribe::<ChassisState>()
             .history_size(1)
-            .subscriber_max_buffer_size(16)
+            // A state stream (`Robot::state_stream`) buffers a whole read of the bus.
+            // The publisher's data segment holds a sample for every buffer slot of every
+            // possible reader: MAX_READERS × (STATE_BUFFER + 2 borrowed) + 1 history + 2 loaned
+            // = 10323 samples of 876 bytes (824 + iceoryx2's header): 8.6 MiB of shared memory.
+            // Freed samples are reused first, so only the pages of the samples in flight become
+            // resident: those the readers' queues hold.
+            .subscriber_max_buffer_size(STATE_BUFFER)
             .max_publishers(1)
             .max_subscribers(MAX_READERS)
             .max_nodes(MAX_NODES)

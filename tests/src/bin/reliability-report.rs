@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
 use anyhow::{Context, bail};
-use chassis_tests::Figure;
+use chassis_tests::{Figure, STATE_BUFFER};
 use serde::{Deserialize, Serialize};
 
 /// When, where and how a set of figures was measured.
@@ -215,18 +215,23 @@ fn render(dir: &Path, out_path: &Path) -> anyhow::Result<()> {
             ));
         }
         out.push('\n');
-        out.push_str(
+        out.push_str(&format!(
             "What \"zero gaps\" is measured on: frames — `BusFrame::seq` numbers every frame \
              the service read or wrote, and two readers draining the tap from their own \
              threads (the soak's and `chassis record`'s, 2048 frames deep each) must see every \
              number. State — `ChassisState::seq` numbers every sample the service publishes (a \
-             sample per frame that changes the state); a failed publication is logged, and \
-             none may happen. A client subscriber keeps the newest 4 samples of this \
-             latest-value topic, so a reader descheduled for longer loses the oldest: the soak \
-             reports that too, with the longest wait for a sample, and the safety monitor's \
-             stale-state rule must never fire. `chassis echo state` prints the newest sample \
-             per wake-up by design and is no gap counter.\n\n",
-        );
+             sample per frame that changes the state, in bursts of ≈ 18 while the saturated \
+             bus is read once per 4 ms, and up to a whole read of 256 frames at once after the \
+             service was held up); a failed publication is logged, and none may happen. \
+             Two readers drain a state stream each (`Robot::state_stream`, {STATE_BUFFER} \
+             samples deep): the soak's, from its own thread, must see every number published \
+             from its start to the end of the run, with the longest wait for a sample \
+             reported, and `chassis record`, which records every sample, must lose none; the \
+             safety monitor's stale-state rule must never fire. A `Robot`'s own state reading is \
+             latest-value (the newest samples, for control loops and displays), and `chassis \
+             echo state` prints the newest sample per wake-up by design: neither is a gap \
+             counter.\n\n"
+        ));
     }
     out.push_str(NOTES);
     std::fs::write(out_path, out).with_context(|| format!("writing {}", out_path.display()))?;
