@@ -190,46 +190,68 @@ impl Report {
         out
     }
 
-    /// Latency CDFs of every row, log latency axis.
+    /// Latency CDFs of every row, log latency axis: one panel per kind of path (baselines,
+    /// command, state, preemption, fan-out), all on the same axes so panels compare.
     pub fn plot(&self, path: &Path) -> anyhow::Result<()> {
-        let root = SVGBackend::new(path, (1200, 800)).into_drawing_area();
+        const PANELS: [(&str, &str); 5] = [
+            ("baseline", "raw transports (ping-pong, one way)"),
+            ("command", "command: request created → frame written"),
+            ("state", "state: frame read → state received"),
+            ("preemption", "preemption: safety stop → zero frame written"),
+            ("fan-out", "fan-out: state to 1, 4, 16 processes"),
+        ];
+        let root = SVGBackend::new(path, (1600, 1500)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let root = root
+            .titled("one-way latency, CDF (log latency axis)", ("sans-serif", 26))
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
         let max_us = self
             .rows
             .iter()
             .map(|r| r.summary.max_us)
             .fold(10.0f64, f64::max)
             .min(1e6);
-        let mut chart = ChartBuilder::on(&root)
-            .caption("one-way latency, CDF", ("sans-serif", 24))
-            .margin(20)
-            .x_label_area_size(40)
-            .y_label_area_size(50)
-            .build_cartesian_2d((0.5f64..max_us * 1.2).log_scale(), 0.0f64..1.0)
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
-        chart
-            .configure_mesh()
-            .x_desc("latency, µs (log)")
-            .y_desc("fraction of samples")
-            .draw()
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
-        for (i, row) in self.rows.iter().enumerate() {
-            let color = Palette99::pick(i).to_rgba();
-            let label = format!("{} {} {} {}", row.path, row.what, row.mode, row.placement);
+        for (area, (kind, title)) in root.split_evenly((3, 2)).iter().zip(PANELS) {
+            let rows: Vec<&Row> = self.rows.iter().filter(|r| r.path == kind).collect();
+            if rows.is_empty() {
+                continue;
+            }
+            let mut chart = ChartBuilder::on(area)
+                .caption(title, ("sans-serif", 18))
+                .margin(12)
+                .x_label_area_size(35)
+                .y_label_area_size(45)
+                .build_cartesian_2d((0.5f64..max_us * 1.2).log_scale(), 0.0f64..1.0)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
             chart
-                .draw_series(LineSeries::new(row.latencies.cdf(), color.stroke_width(2)))
-                .map_err(|e| anyhow::anyhow!("{e}"))?
-                .label(label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+                .configure_mesh()
+                .x_desc("latency, µs")
+                .y_desc("fraction of samples")
+                .draw()
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            for (i, row) in rows.iter().enumerate() {
+                let color = Palette99::pick(i).to_rgba();
+                let label = match row.mode.as_str() {
+                    "-" => format!("{}, {}", row.what, row.placement),
+                    mode => format!("{}, {mode}, {}", row.what, row.placement),
+                };
+                chart
+                    .draw_series(LineSeries::new(row.latencies.cdf(), color.stroke_width(2)))
+                    .map_err(|e| anyhow::anyhow!("{e}"))?
+                    .label(label)
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                    });
+            }
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::LowerRight)
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 12))
+                .draw()
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 11))
-            .draw()
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
         root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
         Ok(())
     }
