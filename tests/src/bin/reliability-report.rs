@@ -152,6 +152,9 @@ const NOTES: &str = "\
   sleep loop at normal priority on the same VM wakes up to 2-5 ms late now and then, with or
   without a CPU hog beside it, so the flood test compares its window with a quiet window
   measured just before, and holds the bulk of the periods (not every one) within 20 ± 2 ms.
+  The soak is stricter: it fails on any 0x111 gap of two periods (40 ms) or more. Such a gap
+  means the service's loop did not run for that long, and the state readers' longest wait for
+  a sample shows the same stall. The TITAN itself stops only after 500 ms without a command.
 ";
 
 fn render(dir: &Path, out_path: &Path) -> anyhow::Result<()> {
