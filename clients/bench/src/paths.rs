@@ -375,7 +375,8 @@ pub fn command_path(
             }
         }
         tap.drain(|_| {})?;
-        let speed = speeds[usize::from(i % 2 == 1)];
+        // The first sample differs from the warm-up's 0.25: every sample is a change.
+        let speed = speeds[usize::from(i % 2 == 0)];
         current = speed as f32;
         let stamp = now_ns();
         teleop.send(VelocityRequest {

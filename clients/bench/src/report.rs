@@ -203,7 +203,10 @@ impl Report {
         let root = SVGBackend::new(path, (1600, 1500)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
         let root = root
-            .titled("one-way latency, CDF (log latency axis)", ("sans-serif", 26))
+            .titled(
+                "one-way latency, CDF (log latency axis)",
+                ("sans-serif", 26),
+            )
             .map_err(|e| anyhow::anyhow!("{e}"))?;
         let max_us = self
             .rows
