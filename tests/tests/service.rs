@@ -52,6 +52,13 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
         &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
     );
     let mut robot = env.robot(&n, UP);
+    // What a user watches: `chassis echo state`, one JSON object per sample printed.
+    let echo = env.spawn(
+        "echo",
+        "chassis",
+        &["echo", "state", "--json", "--name", &n],
+    );
+    pause(Duration::from_millis(300));
     let publisher = env.spawn(
         "pub",
         "chassis",
@@ -85,6 +92,28 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
     let s = state(&mut robot);
     assert!(s.odometry.x_m > 0.3, "travelled {} m", s.odometry.x_m);
     assert_eq!(s.command.linear_mps, 0.0);
+
+    // `chassis echo state` showed the robot standing, moving, then standing again.
+    pause(Duration::from_millis(300));
+    env.proc(echo).signal(Signal::SIGINT);
+    env.proc(echo).wait_exit(Duration::from_secs(3));
+    let speeds: Vec<f64> = env
+        .proc(echo)
+        .log_text()
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|v| v["motion"]["linear_mps"].as_f64())
+        .collect();
+    let peak = speeds.iter().position(|v| *v > 0.25);
+    assert!(
+        speeds.first().is_some_and(|v| v.abs() < 0.01) && peak.is_some(),
+        "chassis echo state: {speeds:?}\n{}",
+        env.logs()
+    );
+    assert!(
+        peak.is_some_and(|p| speeds[p..].iter().any(|v| v.abs() < 0.01)),
+        "chassis echo state never showed the stop: {speeds:?}"
+    );
 }
 
 #[test]
