@@ -865,9 +865,7 @@ fn a_flood_and_garbage_on_the_bus_are_absorbed_and_counted() {
 }
 
 #[test]
-fn two_thousand_simulated_seconds_of_a_driving_pattern_run_fast_and_stay_consistent() {
-    #[allow(clippy::disallowed_methods)] // Printed only, never asserted.
-    let cpu = std::time::Instant::now();
+fn two_thousand_simulated_seconds_of_a_driving_pattern_stay_consistent() {
     let mut p = pair();
     // Figure eights: 10 s curving left, 10 s curving right, and a 10 s stop every 100 s. 1 m/s
     // and 17 % of the yaw-rate full scale, 88.995 mrad/s, which 0x131's 1 mrad/s steps carry
@@ -888,15 +886,13 @@ fn two_thousand_simulated_seconds_of_a_driving_pattern_run_fast_and_stay_consist
         p.run_for(secs(10));
     }
     assert_eq!(curves, 180, "90 left, 90 right");
-    #[allow(clippy::disallowed_methods)]
-    let elapsed = cpu.elapsed();
     let truth = p.firmware.truth();
     let s = *p.driver.state();
     let dx = s.odometry.x_m - truth.x_m;
     let dy = s.odometry.y_m - truth.y_m;
     let dyaw = crate::driver::wrap_angle(s.odometry.yaw_rad - truth.yaw_rad);
     println!(
-        "2000 simulated s in {elapsed:?} of CPU; pose error {:.3} m, {:.4} rad; SOC {:.1} %",
+        "2000 simulated s: pose error {:.3} m, {:.4} rad; SOC {:.1} %",
         dx.hypot(dy),
         dyaw,
         truth.soc_pct

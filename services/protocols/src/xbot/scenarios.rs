@@ -647,10 +647,8 @@ fn power_disabled_on_request_stays_off_through_a_reboot() {
 }
 
 #[test]
-fn a_long_run_of_2000_simulated_seconds_stays_consistent_and_fast() {
+fn a_long_run_of_2000_simulated_seconds_stays_consistent() {
     let mut pair = pair_of(with_separation(), |s| s);
-    #[allow(clippy::disallowed_methods)] // Printed, never asserted.
-    let started = std::time::Instant::now();
     for k in 0..200u32 {
         let vx = 0.2 + 0.1 * (k % 8) as f32;
         let wz = if k % 3 == 0 { 0.3 } else { -0.1 };
@@ -658,12 +656,6 @@ fn a_long_run_of_2000_simulated_seconds_stays_consistent_and_fast() {
         pair.run_for(ms(10_000));
     }
     pair.run_for(ms(1));
-    let cpu = started.elapsed();
-    println!(
-        "2000 simulated seconds of XBot driver + board: {:.3} s of CPU ({} reports)",
-        cpu.as_secs_f64(),
-        pair.firmware.reports_sent()
-    );
     let link = pair.driver.state().link;
     assert_eq!(pair.firmware.reports_sent(), 100_001);
     assert_eq!(link.rx_frames, 100_001);
