@@ -236,13 +236,11 @@ impl Robot {
         &mut self,
         mut each: impl FnMut(&ChassisState),
     ) -> Result<usize, ClientError> {
-        let mut n = 0;
-        while let Some(sample) = self.state.receive().map_err(ipc("receiving state"))? {
-            each(&sample);
-            self.latest_state = Some(*sample);
-            n += 1;
-        }
-        Ok(n)
+        let latest = &mut self.latest_state;
+        receive_all(&self.state, "receiving state", |s| {
+            each(s);
+            *latest = Some(*s);
+        })
     }
 
     /// Waits at most `timeout` for new state samples and hands every one of them to `each`,
@@ -255,25 +253,13 @@ impl Robot {
         timeout: Duration,
         mut each: impl FnMut(&ChassisState),
     ) -> Result<usize, ClientError> {
-        let n = self.drain_state_each(&mut each)?;
-        if n > 0 {
-            return Ok(n);
-        }
-        let deadline =
-            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
-        loop {
-            let left = deadline.saturating_sub(now_ns());
-            if left == 0 {
-                return Ok(0);
-            }
-            self.state_events
-                .timed_wait(|_| {}, Duration::from_nanos(left))
-                .map_err(ipc("waiting for state"))?;
-            let n = self.drain_state_each(&mut each)?;
-            if n > 0 {
-                return Ok(n);
-            }
-        }
+        let (state, latest) = (&self.state, &mut self.latest_state);
+        drain_or_wait(&self.state_events, timeout, "waiting for state", || {
+            receive_all(state, "receiving state", |s| {
+                each(s);
+                *latest = Some(*s);
+            })
+        })
     }
 
     /// Hands every pending state sample to `each` without waiting (a busy-polling reader). Like
@@ -290,23 +276,8 @@ impl Robot {
 
     /// Waits at most `timeout` for a state sample newer than the ones seen so far.
     pub fn wait_state(&mut self, timeout: Duration) -> Result<Option<ChassisState>, ClientError> {
-        if self.drain_state()? {
-            return Ok(self.latest_state);
-        }
-        let deadline =
-            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
-        loop {
-            let left = deadline.saturating_sub(now_ns());
-            if left == 0 {
-                return Ok(None);
-            }
-            self.state_events
-                .timed_wait(|_| {}, Duration::from_nanos(left))
-                .map_err(ipc("waiting for state"))?;
-            if self.drain_state()? {
-                return Ok(self.latest_state);
-            }
-        }
+        let n = self.wait_states(timeout, |_| {})?;
+        Ok(if n > 0 { self.latest_state } else { None })
     }
 
     fn open_mux(&mut self) -> Result<(), ClientError> {
@@ -340,14 +311,11 @@ impl Robot {
 
     fn drain_mux(&mut self) -> Result<bool, ClientError> {
         self.open_mux()?;
-        let mut any = false;
-        if let Some(mux) = &self.mux {
-            while let Some(sample) = mux.receive().map_err(ipc("receiving mux status"))? {
-                self.latest_mux = Some(*sample);
-                any = true;
-            }
-        }
-        Ok(any)
+        let Some(mux) = &self.mux else {
+            return Ok(false);
+        };
+        let latest = &mut self.latest_mux;
+        Ok(receive_all(mux, "receiving mux status", |m| *latest = Some(*m))? > 0)
     }
 
     /// The newest mux decision.
@@ -726,13 +694,8 @@ pub struct FrameTap {
 
 impl FrameTap {
     /// Every frame received since the last call.
-    pub fn drain(&self, mut each: impl FnMut(&BusFrame)) -> Result<usize, ClientError> {
-        let mut n = 0;
-        while let Some(sample) = self.subscriber.receive().map_err(ipc("receiving frames"))? {
-            each(&sample);
-            n += 1;
-        }
-        Ok(n)
+    pub fn drain(&self, each: impl FnMut(&BusFrame)) -> Result<usize, ClientError> {
+        receive_all(&self.subscriber, "receiving frames", each)
     }
 
     /// Waits at most `timeout` for frames, then drains them.
@@ -771,13 +734,8 @@ impl StateStream {
 
     /// Every sample received since the last call, oldest first, without waiting. Returns how
     /// many there were.
-    pub fn drain(&self, mut each: impl FnMut(&ChassisState)) -> Result<usize, ClientError> {
-        let mut n = 0;
-        while let Some(sample) = self.subscriber.receive().map_err(ipc("receiving state"))? {
-            each(&sample);
-            n += 1;
-        }
-        Ok(n)
+    pub fn drain(&self, each: impl FnMut(&ChassisState)) -> Result<usize, ClientError> {
+        receive_all(&self.subscriber, "receiving state", each)
     }
 
     /// Hands the pending samples to `each`, oldest first; with none pending, waits at most
@@ -791,26 +749,10 @@ impl StateStream {
         // The notifications pending now belong to the samples drained next: spend them, so that
         // the wait below is for later ones.
         let _ = self.events.try_wait(|_| {});
-        let n = self.drain(&mut each)?;
-        if n > 0 {
-            return Ok(n);
-        }
-        let deadline =
-            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
-        loop {
-            let left = deadline.saturating_sub(now_ns());
-            if left == 0 {
-                return Ok(0);
-            }
-            // A notification may belong to samples the drain above already took: wait again.
-            self.events
-                .timed_wait(|_| {}, Duration::from_nanos(left))
-                .map_err(ipc("waiting for state"))?;
-            let n = self.drain(&mut each)?;
-            if n > 0 {
-                return Ok(n);
-            }
-        }
+        // A notification may belong to samples an earlier drain already took: the wait goes on.
+        drain_or_wait(&self.events, timeout, "waiting for state", || {
+            self.drain(&mut each)
+        })
     }
 }
 
@@ -903,12 +845,8 @@ pub struct Subscription<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> {
 
 impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Subscription<T> {
     fn drain(&mut self) -> Result<bool, ClientError> {
-        let mut any = false;
-        while let Some(sample) = self.subscriber.receive().map_err(ipc("receiving"))? {
-            self.latest = Some(*sample);
-            any = true;
-        }
-        Ok(any)
+        let latest = &mut self.latest;
+        Ok(receive_all(&self.subscriber, "receiving", |s| *latest = Some(*s))? > 0)
     }
 
     /// The newest sample received so far.
@@ -920,22 +858,53 @@ impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Subscription<T> {
     /// Waits at most `timeout` for a sample newer than the ones seen so far. A new reader gets
     /// the publisher's latest sample with its next publication.
     pub fn wait(&mut self, timeout: Duration) -> Result<Option<T>, ClientError> {
-        if self.drain()? {
-            return Ok(self.latest);
+        let (subscriber, latest) = (&self.subscriber, &mut self.latest);
+        let n = drain_or_wait(&self.events, timeout, "waiting for a sample", || {
+            receive_all(subscriber, "receiving", |s| *latest = Some(*s))
+        })?;
+        Ok(if n > 0 { self.latest } else { None })
+    }
+}
+
+/// Hands every pending sample of `subscriber` to `each`, oldest first; returns how many.
+fn receive_all<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
+    subscriber: &Subscriber<ipc::Service, T, ()>,
+    what: &'static str,
+    mut each: impl FnMut(&T),
+) -> Result<usize, ClientError> {
+    let mut n = 0;
+    while let Some(sample) = subscriber.receive().map_err(ipc(what))? {
+        each(&sample);
+        n += 1;
+    }
+    Ok(n)
+}
+
+/// Runs `drain` (it returns how many samples it took); while it takes none, waits on `events`
+/// until `timeout` has passed and drains again after every wake-up. Returns the count of the
+/// drain that took something (0: nothing within `timeout`).
+fn drain_or_wait(
+    events: &Listener<ipc::Service>,
+    timeout: Duration,
+    what: &'static str,
+    mut drain: impl FnMut() -> Result<usize, ClientError>,
+) -> Result<usize, ClientError> {
+    let n = drain()?;
+    if n > 0 {
+        return Ok(n);
+    }
+    let deadline = now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+    loop {
+        let left = deadline.saturating_sub(now_ns());
+        if left == 0 {
+            return Ok(0);
         }
-        let deadline =
-            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
-        loop {
-            let left = deadline.saturating_sub(now_ns());
-            if left == 0 {
-                return Ok(None);
-            }
-            self.events
-                .timed_wait(|_| {}, Duration::from_nanos(left))
-                .map_err(ipc("waiting for a sample"))?;
-            if self.drain()? {
-                return Ok(self.latest);
-            }
+        events
+            .timed_wait(|_| {}, Duration::from_nanos(left))
+            .map_err(ipc(what))?;
+        let n = drain()?;
+        if n > 0 {
+            return Ok(n);
         }
     }
 }
