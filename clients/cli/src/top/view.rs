@@ -45,6 +45,11 @@ fn label(text: &str) -> Span<'static> {
     dim(format!("{text:<10}"))
 }
 
+/// A line of a panel: its label, then `text`.
+fn row(name: &str, text: impl Into<String>) -> Line<'static> {
+    Line::from(vec![label(name), Span::raw(text.into())])
+}
+
 /// `850 µs`, `12.3 ms`, `1.20 s`.
 pub fn duration_text(ns: u64) -> String {
     if ns < 1_000_000 {
@@ -110,9 +115,9 @@ fn robot_panel(s: &Snapshot) -> Panel {
             )
         },
     ]));
-    lines.push(Line::from(vec![
-        label("battery"),
-        Span::raw(format!(
+    lines.push(row(
+        "battery",
+        format!(
             "{:.1} V{}",
             st.system.battery_voltage_v,
             if st.is_valid(Group::BmsPack) {
@@ -123,36 +128,36 @@ fn robot_panel(s: &Snapshot) -> Panel {
             } else {
                 String::new()
             }
-        )),
-    ]));
-    lines.push(Line::from(vec![
-        label("speeds"),
-        Span::raw(format!(
+        ),
+    ));
+    lines.push(row(
+        "speeds",
+        format!(
             "{:+.3} m/s  {:+.3} rad/s  lateral {:+.3} m/s  steer {:+.1}°",
             st.motion.linear_mps,
             st.motion.angular_radps,
             st.motion.lateral_mps,
             st.motion.steer_rad.to_degrees()
-        )),
-    ]));
-    lines.push(Line::from(vec![
-        label("command"),
-        Span::raw(format!(
+        ),
+    ));
+    lines.push(row(
+        "command",
+        format!(
             "{:+.3} m/s  {:+.3} rad/s  steer {:+.1}° (on the wire)",
             st.command.linear_mps,
             st.command.angular_radps,
             st.command.steer_rad.to_degrees()
-        )),
-    ]));
-    lines.push(Line::from(vec![
-        label("pose"),
-        Span::raw(format!(
+        ),
+    ));
+    lines.push(row(
+        "pose",
+        format!(
             "x {:.2} m  y {:.2} m  yaw {:.1}°",
             st.odometry.x_m,
             st.odometry.y_m,
             st.odometry.yaw_rad.to_degrees()
-        )),
-    ]));
+        ),
+    ));
     Panel {
         title: "robot",
         lines,
@@ -195,17 +200,17 @@ fn mux_panel(s: &Snapshot) -> Panel {
         ),
     };
     lines.push(Line::from(vec![label("decision"), active]));
-    lines.push(Line::from(vec![
-        label("output"),
-        Span::raw(format!(
+    lines.push(row(
+        "output",
+        format!(
             "vx {:+.3}  vy {:+.3}  wz {:+.3}   requested vx {:+.3}  wz {:+.3}",
             m.output.linear_x_mps,
             m.output.linear_y_mps,
             m.output.angular_z_radps,
             m.requested.linear_x_mps,
             m.requested.angular_z_radps
-        )),
-    ]));
+        ),
+    ));
     let clamps = ClampFlags::names(m.clamp_flags);
     lines.push(Line::from(vec![
         label("clamped"),
