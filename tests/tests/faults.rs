@@ -145,7 +145,17 @@ struct Pump<'a> {
     last: Instant,
 }
 
-impl Pump<'_> {
+impl<'a> Pump<'a> {
+    /// Sends `request` as `teleop` every 20 ms (the first at once) while it waits.
+    fn new(teleop: &'a mut Source, request: VelocityRequest, wire: &'a mut Wire) -> Self {
+        Self {
+            teleop: Some((teleop, request)),
+            tmux: None,
+            wire,
+            last: Instant::now() - Duration::from_secs(1),
+        }
+    }
+
     fn tick(&mut self) {
         if self.last.elapsed() >= Duration::from_millis(20) {
             if let Some((source, request)) = self.teleop.as_mut() {
@@ -306,13 +316,7 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
     let mut teleop = robot.source("teleop").unwrap();
     let go = VelocityRequest::twist(0.4, 0.0);
     let mut wire = Wire::new(&robot);
-    let driving = Pump {
-        teleop: Some((&mut teleop, go)),
-        tmux: None,
-        wire: &mut wire,
-        last: Instant::now() - Duration::from_secs(1),
-    }
-    .until(&mut robot, UP, |m, s| {
+    let driving = Pump::new(&mut teleop, go, &mut wire).until(&mut robot, UP, |m, s| {
         source_status(m, "safety").has(SourceFlags::FRESH) && s.motion.linear_mps > 0.3
     });
     assert!(driving.is_some(), "no drive at the start\n{}", env.logs());
@@ -333,12 +337,7 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
             pause(delay);
             delay
         } else {
-            let mut pump = Pump {
-                teleop: Some((&mut teleop, go)),
-                tmux: None,
-                wire: &mut wire,
-                last: Instant::now() - Duration::from_secs(1),
-            };
+            let mut pump = Pump::new(&mut teleop, go, &mut wire);
             if cycle > 1 {
                 let spawned = now_ns();
                 let served = pump.until(&mut robot, UP, |_, s| {
@@ -373,18 +372,13 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
     }
     // The last instance: it must serve, the monitor must reconnect and the robot drive.
     let restarted = now_ns();
-    let back = Pump {
-        teleop: Some((&mut teleop, go)),
-        tmux: None,
-        wire: &mut wire,
-        last: Instant::now() - Duration::from_secs(1),
-    }
-    .until(&mut robot, Duration::from_secs(15), |m, s| {
-        m.stamp_ns > restarted
-            && s.stamp_ns > restarted
-            && source_status(m, "safety").has(SourceFlags::FRESH)
-            && s.motion.linear_mps > 0.3
-    });
+    let back =
+        Pump::new(&mut teleop, go, &mut wire).until(&mut robot, Duration::from_secs(15), |m, s| {
+            m.stamp_ns > restarted
+                && s.stamp_ns > restarted
+                && source_status(m, "safety").has(SourceFlags::FRESH)
+                && s.motion.linear_mps > 0.3
+        });
     let files_after = ipc_files(&env.prefix);
     let pass = back.is_some() && env.proc(service).is_running();
     let back_ms = back.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
@@ -465,12 +459,7 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
     let mut faults_seen = 0;
     let mut failure = None;
     for cycle in 1..=3 {
-        let mut pump = Pump {
-            teleop: Some((&mut teleop, go)),
-            tmux: None,
-            wire: &mut wire,
-            last: Instant::now() - Duration::from_secs(1),
-        };
+        let mut pump = Pump::new(&mut teleop, go, &mut wire);
         let since = now_ns();
         let driving = pump.until(&mut robot, UP, |_, s| {
             s.stamp_ns > since && s.motion.linear_mps > 0.45 && s.is_valid(Group::Odometry)
@@ -561,13 +550,8 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
         "coasted {worst_ms:.0} ms\n{}",
         env.logs()
     );
-    let again = Pump {
-        teleop: Some((&mut teleop, go)),
-        tmux: None,
-        wire: &mut wire,
-        last: Instant::now() - Duration::from_secs(1),
-    }
-    .until(&mut robot, UP, |_, s| s.motion.linear_mps > 0.4);
+    let again = Pump::new(&mut teleop, go, &mut wire)
+        .until(&mut robot, UP, |_, s| s.motion.linear_mps > 0.4);
     assert!(
         again.is_some(),
         "no drive after the last restart\n{}",
@@ -625,12 +609,7 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
     let mut tx_while_down = 0usize;
     let mut failure = None;
     for cycle in 1..=3 {
-        let mut pump = Pump {
-            teleop: Some((&mut teleop, go)),
-            tmux: None,
-            wire: &mut wire,
-            last: Instant::now() - Duration::from_secs(1),
-        };
+        let mut pump = Pump::new(&mut teleop, go, &mut wire);
         let driving = pump.until(&mut robot, UP, |_, s| {
             s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > 0.3
         });
@@ -1280,13 +1259,7 @@ fn a_rogue_client_flooding_requests_neither_wins_nor_shakes_the_heartbeat() {
     let go = VelocityRequest::twist(0.4, 0.0);
     let mut wire = Wire::new(&robot);
     // Teleop drives at a constant speed: no command changes, only heartbeats on the grid.
-    let steady = Pump {
-        teleop: Some((&mut teleop, go)),
-        tmux: None,
-        wire: &mut wire,
-        last: Instant::now() - Duration::from_secs(1),
-    }
-    .until(&mut robot, UP, |m, s| {
+    let steady = Pump::new(&mut teleop, go, &mut wire).until(&mut robot, UP, |m, s| {
         source_status(m, "safety").has(SourceFlags::FRESH)
             && m.output.linear_x_mps == 0.4
             && s.motion.linear_mps > 0.38
@@ -1294,12 +1267,7 @@ fn a_rogue_client_flooding_requests_neither_wins_nor_shakes_the_heartbeat() {
     assert!(steady.is_some(), "no steady drive\n{}", env.logs());
 
     // Five quiet seconds first: the heartbeat of this machine without the flood.
-    let mut pump = Pump {
-        teleop: Some((&mut teleop, go)),
-        tmux: None,
-        wire: &mut wire,
-        last: Instant::now() - Duration::from_secs(1),
-    };
+    let mut pump = Pump::new(&mut teleop, go, &mut wire);
     pump.wire.clear();
     pump.run(&mut robot, WINDOW);
     pump.wire.pump();
@@ -1498,13 +1466,7 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
     let mut teleop = robot.source("teleop").unwrap();
     let go = VelocityRequest::twist(0.3, 0.0);
     let mut wire = Wire::new(&robot);
-    let moving = Pump {
-        teleop: Some((&mut teleop, go)),
-        tmux: None,
-        wire: &mut wire,
-        last: Instant::now() - Duration::from_secs(1),
-    }
-    .until(&mut robot, UP, |m, s| {
+    let moving = Pump::new(&mut teleop, go, &mut wire).until(&mut robot, UP, |m, s| {
         m.output.linear_x_mps == 0.3 && s.motion.linear_mps > 0.25
     });
     assert!(moving.is_some(), "no drive\n{}", env.logs());
