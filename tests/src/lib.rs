@@ -489,3 +489,102 @@ pub fn open_fds(pid: u32) -> Option<usize> {
         .ok()
         .map(Iterator::count)
 }
+
+// ----- A program in a terminal (tmux) -----
+
+/// True when `tmux` runs here (the terminal tests skip, saying so, without it).
+pub fn tmux_available() -> bool {
+    Command::new("tmux")
+        .arg("-V")
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+/// A private tmux server (its own socket in the test's directory) running one program in a
+/// detached 120×40 session, killed when dropped.
+#[derive(Debug)]
+pub struct Tmux {
+    socket: PathBuf,
+}
+
+impl Tmux {
+    /// Starts `command` (a shell command line) with the server's socket `dir/label.tmux`.
+    pub fn start(dir: &Path, label: &str, command: &str) -> Self {
+        let tmux = Self {
+            socket: dir.join(format!("{label}.tmux")),
+        };
+        let out = tmux.run(&[
+            "new-session",
+            "-d",
+            "-x",
+            "120",
+            "-y",
+            "40",
+            "-s",
+            "ops",
+            command,
+        ]);
+        assert!(
+            out.status.success(),
+            "tmux new-session: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        tmux
+    }
+
+    pub fn run(&self, args: &[&str]) -> Output {
+        Command::new("tmux")
+            .arg("-S")
+            .arg(&self.socket)
+            .args(args)
+            .output()
+            .unwrap_or_else(|e| panic!("running tmux: {e}"))
+    }
+
+    /// Types `key`; the session must still be there.
+    pub fn send(&self, key: &str) {
+        let out = self.run(&["send-keys", "-t", "ops", key]);
+        assert!(
+            out.status.success(),
+            "tmux send-keys: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    /// Types `key` if the session is still there (its program may have been killed).
+    pub fn try_send(&self, key: &str) -> bool {
+        self.run(&["send-keys", "-t", "ops", key]).status.success()
+    }
+
+    /// The pane's process (the program itself when it was started with `exec`).
+    pub fn pid(&self) -> Option<i32> {
+        let out = self.run(&["list-panes", "-t", "ops", "-F", "#{pane_pid}"]);
+        String::from_utf8_lossy(&out.stdout).trim().parse().ok()
+    }
+
+    pub fn screen(&self) -> String {
+        String::from_utf8_lossy(&self.run(&["capture-pane", "-p", "-t", "ops"]).stdout).into_owned()
+    }
+
+    /// Waits until the screen contains `text`; returns the screen.
+    pub fn wait_for_text(&self, text: &str, timeout: Duration) -> String {
+        let mut screen = String::new();
+        let found = wait_for(timeout, || {
+            screen = self.screen();
+            screen.contains(text)
+        });
+        assert!(found.is_some(), "'{text}' never appeared:\n{screen}");
+        screen
+    }
+}
+
+impl Drop for Tmux {
+    fn drop(&mut self) {
+        let _ = self.run(&["kill-server"]);
+    }
+}
+
+/// `text` quoted for a POSIX shell command line.
+pub fn quote(text: &str) -> String {
+    format!("'{}'", text.replace('\'', r"'\''"))
+}

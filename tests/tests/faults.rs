@@ -11,8 +11,6 @@
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::time::{Duration, Instant};
@@ -163,7 +161,7 @@ impl<'a> Pump<'a> {
             }
             if let Some(tmux) = self.tmux {
                 // A terminal's auto-repeat of a held key.
-                tmux.send("w");
+                tmux.try_send("w");
             }
             self.last = Instant::now();
         }
@@ -205,78 +203,6 @@ fn source_status<'m>(m: &'m MuxStatus, name: &str) -> &'m SourceStatus {
         .iter()
         .find(|s| s.name() == name)
         .unwrap_or_else(|| panic!("no source {name}"))
-}
-
-// ----- chassis-teleop in a terminal -----
-
-fn tmux_available() -> bool {
-    Command::new("tmux")
-        .arg("-V")
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-/// A private tmux server running one program in a detached session.
-struct Tmux {
-    socket: PathBuf,
-}
-
-impl Tmux {
-    fn start(dir: &Path, label: &str, command: &str) -> Self {
-        let tmux = Self {
-            socket: dir.join(format!("{label}.tmux")),
-        };
-        let out = tmux.run(&[
-            "new-session",
-            "-d",
-            "-x",
-            "120",
-            "-y",
-            "40",
-            "-s",
-            "ops",
-            command,
-        ]);
-        assert!(
-            out.status.success(),
-            "tmux new-session: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        tmux
-    }
-
-    fn run(&self, args: &[&str]) -> std::process::Output {
-        Command::new("tmux")
-            .arg("-S")
-            .arg(&self.socket)
-            .args(args)
-            .output()
-            .unwrap_or_else(|e| panic!("running tmux: {e}"))
-    }
-
-    fn send(&self, key: &str) {
-        let _ = self.run(&["send-keys", "-t", "ops", key]);
-    }
-
-    /// The pane's process (the program itself: it was started with `exec`).
-    fn pid(&self) -> Option<i32> {
-        let out = self.run(&["list-panes", "-t", "ops", "-F", "#{pane_pid}"]);
-        String::from_utf8_lossy(&out.stdout).trim().parse().ok()
-    }
-
-    fn screen(&self) -> String {
-        String::from_utf8_lossy(&self.run(&["capture-pane", "-p", "-t", "ops"]).stdout).into_owned()
-    }
-}
-
-impl Drop for Tmux {
-    fn drop(&mut self) {
-        let _ = self.run(&["kill-server"]);
-    }
-}
-
-fn quote(text: &str) -> String {
-    format!("'{}'", text.replace('\'', r"'\''"))
 }
 
 // ----- SIGKILL of the service -----

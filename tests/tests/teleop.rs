@@ -3,8 +3,6 @@
 //! The teleop test is skipped, with a notice, where `tmux` is not installed.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use chassis_tests::*;
@@ -14,87 +12,6 @@ const UP: Duration = Duration::from_secs(10);
 fn name(tag: &str) -> String {
     // Robot names are at most 16 characters.
     format!("{tag}{}", std::process::id() % 100_000)
-}
-
-fn tmux_available() -> bool {
-    Command::new("tmux")
-        .arg("-V")
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-/// A private tmux server (its own socket in the test's directory) running one session.
-struct Tmux {
-    socket: PathBuf,
-}
-
-impl Tmux {
-    /// Starts `command` (a shell command line) in a detached 120×40 session.
-    fn start(env: &Env, command: &str) -> Self {
-        let tmux = Self {
-            socket: env.dir.join("tmux.sock"),
-        };
-        let out = tmux.run(&[
-            "new-session",
-            "-d",
-            "-x",
-            "120",
-            "-y",
-            "40",
-            "-s",
-            "ops",
-            command,
-        ]);
-        assert!(
-            out.status.success(),
-            "tmux new-session: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        tmux
-    }
-
-    fn run(&self, args: &[&str]) -> Output {
-        Command::new("tmux")
-            .arg("-S")
-            .arg(&self.socket)
-            .args(args)
-            .output()
-            .unwrap_or_else(|e| panic!("running tmux: {e}"))
-    }
-
-    fn send(&self, key: &str) {
-        let out = self.run(&["send-keys", "-t", "ops", key]);
-        assert!(
-            out.status.success(),
-            "tmux send-keys: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-
-    fn screen(&self) -> String {
-        String::from_utf8_lossy(&self.run(&["capture-pane", "-p", "-t", "ops"]).stdout).into_owned()
-    }
-
-    /// Waits until the screen contains `text`.
-    fn wait_for_text(&self, text: &str, timeout: Duration) -> String {
-        let mut screen = String::new();
-        let found = wait_for(timeout, || {
-            screen = self.screen();
-            screen.contains(text)
-        });
-        assert!(found.is_some(), "'{text}' never appeared:\n{screen}");
-        screen
-    }
-}
-
-impl Drop for Tmux {
-    fn drop(&mut self) {
-        let _ = self.run(&["kill-server"]);
-    }
-}
-
-fn quote(text: &str) -> String {
-    format!("'{}'", text.replace('\'', r"'\''"))
 }
 
 #[test]
@@ -118,7 +35,7 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
         quote(&bin("chassis-teleop").to_string_lossy()),
         quote(&log.to_string_lossy()),
     );
-    let tmux = Tmux::start(&env, &command);
+    let tmux = Tmux::start(&env.dir, "tmux", &command);
     tmux.wait_for_text("idle — publishing nothing", UP);
 
     // Hold `w`: a terminal's auto-repeat, as tmux delivers it, every 30 ms for 1.5 s.
