@@ -8,9 +8,11 @@
 pub mod bus;
 pub mod clock;
 pub mod config;
+pub mod engine;
 pub mod ipc;
 pub mod moderation;
 pub mod mux;
 pub mod service;
+pub mod setup;
 pub mod sim;
 pub mod standalone;

@@ -209,6 +209,14 @@ pub enum Rejection {
     UnknownLock(u32),
 }
 
+/// A lock name the configuration does not have.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("no lock called '{name}' (configured: {configured})")]
+pub struct NoSuchLock {
+    pub name: String,
+    pub configured: String,
+}
+
 #[derive(Debug, Clone)]
 struct Source {
     config: SourceConfig,
@@ -319,15 +327,6 @@ impl Mux {
         })
     }
 
-    /// Index of the source called `name`.
-    pub fn source_index(&self, name: &str) -> Option<usize> {
-        self.sources.iter().position(|s| s.config.name == name)
-    }
-
-    pub fn source_names(&self) -> impl Iterator<Item = &str> {
-        self.sources.iter().map(|s| s.config.name.as_str())
-    }
-
     /// Takes a request from source `index` received at `now`. Non-finite values and unknown lock
     /// bits are rejected (counted; the source's previous request stands).
     pub fn on_request(
@@ -378,13 +377,13 @@ impl Mux {
     }
 
     /// Releases the lock `name` whoever holds it (operator). Returns whether it was held.
-    pub fn release_lock(&mut self, name: &str) -> Result<bool, String> {
+    pub fn release_lock(&mut self, name: &str) -> Result<bool, NoSuchLock> {
         let lock = self.lock_mut(name)?;
         Ok(lock.held.take().is_some())
     }
 
     /// Engages the lock `name` on behalf of the operator. Returns whether it was free.
-    pub fn engage_lock(&mut self, now: Timestamp, name: &str) -> Result<bool, String> {
+    pub fn engage_lock(&mut self, now: Timestamp, name: &str) -> Result<bool, NoSuchLock> {
         let lock = self.lock_mut(name)?;
         if lock.held.is_some() {
             return Ok(false);
@@ -393,12 +392,16 @@ impl Mux {
         Ok(true)
     }
 
-    fn lock_mut(&mut self, name: &str) -> Result<&mut Lock, String> {
-        let names: Vec<String> = self.locks.iter().map(|l| l.config.name.clone()).collect();
+    fn lock_mut(&mut self, name: &str) -> Result<&mut Lock, NoSuchLock> {
+        let configured: Vec<&str> = self.locks.iter().map(|l| l.config.name.as_str()).collect();
+        let error = NoSuchLock {
+            name: name.to_string(),
+            configured: configured.join(", "),
+        };
         self.locks
             .iter_mut()
             .find(|l| l.config.name == name)
-            .ok_or_else(|| format!("no lock called '{name}' (configured: {})", names.join(", ")))
+            .ok_or(error)
     }
 
     /// Decides the command at `now`.

@@ -1,0 +1,857 @@
+//! The service's decisions as a sans-IO state machine, in the shape of the drivers (and of
+//! quinn-proto's `Connection`): inputs arrive with their time, outputs are polled.
+//!
+//! The engine owns the robot's driver, the mux and its locks, receive moderation, the wake
+//! budget's bookkeeping, the bus and GPS reconnection timers, the GPS sentence reader and the
+//! numbering of everything published. It imports no iceoryx2 and no bus backend, and it never
+//! reads the clock: the shell (`crate::service`) owns the wait set, the ports, the descriptors
+//! and the clock, feeds the engine, and carries out what it polls. The same engine runs against a
+//! simulated chassis on simulated time in the scenarios of `engine::scenarios`.
+//!
+//! # One pass
+//!
+//! The shell runs one pass per wake-up, in this order — the command path first:
+//!
+//! 1. [`Engine::begin_pass`] with what woke the loop; it serves the tick and says what to read
+//!    ([`Reads`]: every source, control and the bus on the tick).
+//! 2. [`Engine::handle_request`] for every pending request of those sources,
+//!    [`Engine::handle_control`] for every control request.
+//! 3. [`Engine::poll_transmit`] until `None`: the mux decides at the first poll after new input,
+//!    and a changed command is out before anything else is read. Every item written is reported
+//!    with [`Engine::handle_sent`] (the tap numbers it).
+//! 4. Requests that arrived meanwhile (the shell consumes the listeners' notifications, then
+//!    reads those sources again) are handled and polled again: decided again at once.
+//! 5. The bus is drained: [`Engine::handle_rx`] per item, then [`Engine::handle_bus_read`]
+//!    (moderation), or [`Engine::handle_bus_lost`]; GPS bytes with [`Engine::handle_gps`].
+//! 6. [`Engine::handle_timeout`] (driver deadlines: the heartbeat, the chassis' silence), and
+//!    transmit again.
+//! 7. [`Engine::end_pass`]: mux status on change and at its rate, the tick's state refresh.
+//! 8. [`Engine::poll_publication`] until `None`; [`Engine::poll_open`] names a device to
+//!    (re)open, reported back with [`Engine::handle_opened`] / [`Engine::handle_open_failed`].
+//!
+//! The engine keeps its own rules whatever the order of its inputs: a request handled before a
+//! frame is decided before that frame reaches the driver ([`Engine::handle_rx`] decides first), so
+//! a command is never queued behind the bus.
+
+mod budget;
+#[cfg(test)]
+mod rig;
+#[cfg(test)]
+mod scenarios;
+
+use std::collections::{HashMap, VecDeque};
+use std::fmt::Display;
+use std::time::Duration;
+
+use chassis_interfaces::{
+    BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
+    FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags, MuxStatus, SourceFlags,
+    SourceStatus, VelocityRequest, ZeroReason,
+};
+use chassis_protocols::driver::Level;
+use chassis_protocols::{
+    ControlAction, ControlOutcome, Driver, DriverEvent, Rx, Timestamp, Transmit, nmea,
+    request_to_action, time::Grid,
+};
+use tracing::{debug, error, info, warn};
+use zerocopy::IntoBytes;
+
+pub use budget::{ListenerChange, WakeBudget};
+
+use crate::config::{Config, LoopMode};
+use crate::mux::{Mux, Rejection};
+
+/// The robot's driver behind the common contract.
+pub type BoxedDriver = Box<dyn Driver>;
+
+/// The shell's handle of a control request waiting for its answer.
+pub type Ticket = u64;
+
+/// The engine's settings, taken from the service's [`Config`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct EngineConfig {
+    /// The loop's tick: mux re-evaluation, smoothing, state refresh, reading every input.
+    pub tick: Duration,
+    /// `MuxStatus` is published at least this often.
+    pub mux_status_period: Duration,
+    /// First wait before reopening a lost bus; doubles up to `reconnect_max`.
+    pub reconnect_initial: Duration,
+    pub reconnect_max: Duration,
+    /// Receive moderation's interval; zero reads every frame the moment it arrives.
+    pub rx_moderation: Duration,
+    /// A GPS receiver is configured.
+    pub gps: bool,
+}
+
+impl EngineConfig {
+    /// Wait between two attempts to open a GPS receiver.
+    pub const GPS_RETRY: Duration = Duration::from_secs(1);
+    /// The state is published at least this often, on the tick.
+    pub const STATE_REFRESH: Duration = Duration::from_millis(100);
+
+    pub fn from_config(config: &Config) -> Self {
+        Self {
+            tick: Duration::from_millis(config.tick_ms),
+            mux_status_period: Duration::from_secs_f64(1.0 / config.mux_status_hz),
+            reconnect_initial: Duration::from_millis(config.bus_settings.reconnect_initial_ms),
+            reconnect_max: Duration::from_millis(config.bus_settings.reconnect_max_ms),
+            // A spinning loop spends its core anyway: it reads every frame the moment it arrives.
+            rx_moderation: match config.loop_mode {
+                LoopMode::Spin => Duration::ZERO,
+                _ => Duration::from_micros(config.bus_settings.rx_moderation_us),
+            },
+            gps: config.gps.is_some(),
+        }
+    }
+}
+
+/// Something for the shell to publish.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Publication {
+    /// On `chassis/<name>/state`.
+    State(Box<ChassisState>),
+    /// On the frame tap `chassis/<name>/frames`.
+    Frame(BusFrame),
+    /// On `chassis/<name>/mux`.
+    Mux(Box<MuxStatus>),
+    /// The answer to the control request the shell handed in with `ticket`.
+    Response {
+        ticket: Ticket,
+        response: ControlResponse,
+    },
+}
+
+/// What woke the loop.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Wake {
+    pub bus: bool,
+    pub gps: bool,
+    /// One bit per source whose listener fired.
+    pub sources: u32,
+    pub control: bool,
+    pub sim: bool,
+    /// The loop polled instead of blocking (spin, or hybrid while hot).
+    pub polled: bool,
+}
+
+impl Wake {
+    /// Anything but the timeout woke the loop.
+    pub fn is_activity(&self) -> bool {
+        self.bus || self.gps || self.sources != 0 || self.control || self.sim
+    }
+}
+
+/// What the shell reads in this pass.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Reads {
+    /// One bit per source to drain: those that fired, every one on the tick and when polling
+    /// (a publisher that never notifies is still read).
+    pub sources: u32,
+    pub control: bool,
+    pub sim: bool,
+    pub bus: bool,
+    pub gps: bool,
+    /// The tick was served in this pass.
+    pub tick: bool,
+}
+
+/// A device the engine wants opened.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Device {
+    Bus,
+    Gps,
+}
+
+/// At most one log line per second per kind, with the number held back.
+#[derive(Debug, Default)]
+struct Throttle {
+    last: Option<Timestamp>,
+    held_back: u64,
+}
+
+impl Throttle {
+    /// `Some(n)` when a line may be written now (`n` = lines held back since the last one).
+    fn allow(&mut self, now: Timestamp) -> Option<u64> {
+        match self.last {
+            Some(t) if now.saturating_since(t) < Duration::from_secs(1) => {
+                self.held_back += 1;
+                None
+            }
+            _ => {
+                self.last = Some(now);
+                Some(std::mem::take(&mut self.held_back))
+            }
+        }
+    }
+}
+
+/// A device that is open, or closed and due to be opened again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Link {
+    Up,
+    Down { retry_at: Timestamp },
+}
+
+/// Failures counted instead of dropped silently, with their rate-limited logs.
+#[derive(Debug, Default)]
+struct Throttles {
+    rx: Throttle,
+    rejected: Throttle,
+    tx: Throttle,
+    flood: Throttle,
+    publish: Throttle,
+}
+
+/// The part of a state sample that changes only when the chassis reports something new.
+fn state_body(state: &ChassisState) -> ChassisState {
+    ChassisState {
+        seq: 0,
+        stamp_ns: 0,
+        group_stamp_ns: [0; GROUP_SLOTS],
+        link: Default::default(),
+        ..*state
+    }
+}
+
+/// The service's decisions: see the module documentation.
+pub struct Engine {
+    config: EngineConfig,
+    driver: BoxedDriver,
+    mux: Mux,
+    bus: Link,
+    bus_backoff: Duration,
+    gps: Option<Link>,
+    gps_reader: nmea::LineReader,
+    gps_fix: GpsFix,
+    gps_stamp_ns: u64,
+    tick: Grid,
+    rx_moderation: crate::moderation::RxModeration,
+    budget: WakeBudget,
+    /// The mux must decide before the next transmit (new input since the last decision).
+    undecided: bool,
+    /// When the mux last decided (a source expiring after it is a pending deadline).
+    decided_at: Timestamp,
+    /// In this pass: the decision changed; requests arrived; the tick was served.
+    mux_changed: bool,
+    requests: bool,
+    on_tick: bool,
+    state_seq: u64,
+    frame_seq: u64,
+    mux_seq: u64,
+    last_state_body: Option<ChassisState>,
+    last_state_publish: Timestamp,
+    last_mux_publish: Option<Timestamp>,
+    last_rx_frames: u64,
+    /// Control requests waiting for the chassis: driver token → (ticket, request seq).
+    pending_controls: HashMap<u64, (Ticket, u64)>,
+    last_zero_reason: u8,
+    last_active: u8,
+    throttles: Throttles,
+    /// Samples, answers and wake-ups the shell could not publish.
+    ipc_failures: u64,
+    publications: VecDeque<Publication>,
+}
+
+impl std::fmt::Debug for Engine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Engine")
+            .field("robot", &self.driver.robot())
+            .field("bus", &self.bus)
+            .field("gps", &self.gps)
+            .field("state_seq", &self.state_seq)
+            .field("mux_seq", &self.mux_seq)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Engine {
+    /// An engine at `now` around `driver` and `mux`, with the bus open (a shell that could not
+    /// open it reports it lost at once: [`Engine::handle_bus_lost`]).
+    pub fn new(config: EngineConfig, driver: BoxedDriver, mux: Mux, now: Timestamp) -> Self {
+        let sources = mux.status().sources().len();
+        let safety = (0..sources)
+            .filter(|&i| mux.is_safety_source(i))
+            .fold(0u32, |mask, i| mask | 1 << i);
+        let tick = Grid::new(config.tick, now);
+        Self {
+            bus: Link::Up,
+            bus_backoff: config.reconnect_initial,
+            gps: config.gps.then_some(Link::Down { retry_at: now }),
+            gps_reader: nmea::LineReader::new(),
+            gps_fix: GpsFix::default(),
+            gps_stamp_ns: 0,
+            budget: WakeBudget::new(sources, tick.next(), safety),
+            tick,
+            rx_moderation: crate::moderation::RxModeration::new(config.rx_moderation, now),
+            undecided: true,
+            decided_at: now,
+            mux_changed: false,
+            requests: false,
+            on_tick: false,
+            state_seq: 0,
+            frame_seq: 0,
+            mux_seq: 0,
+            last_state_body: None,
+            last_state_publish: now,
+            last_mux_publish: None,
+            last_rx_frames: 0,
+            pending_controls: HashMap::new(),
+            last_zero_reason: ZeroReason::STARTING,
+            last_active: MuxStatus::NO_SOURCE,
+            throttles: Throttles::default(),
+            ipc_failures: 0,
+            publications: VecDeque::new(),
+            config,
+            driver,
+            mux,
+        }
+    }
+
+    // ---- inputs -------------------------------------------------------------------------
+
+    /// Starts a pass at `now` woken by `wake`: serves the tick when it is due and says what to
+    /// read. The mux decides again at the next transmit, whatever woke the loop.
+    pub fn begin_pass(&mut self, now: Timestamp, wake: Wake) -> Reads {
+        let tick = self.tick.is_due(now);
+        if tick {
+            self.tick.served(now);
+        }
+        self.on_tick |= tick;
+        self.undecided = true;
+        self.requests = false;
+        let all = (1u32 << self.mux.status().sources().len()) - 1;
+        Reads {
+            sources: if tick || wake.polled {
+                all
+            } else {
+                wake.sources & all
+            },
+            control: wake.control || tick,
+            sim: wake.sim || tick,
+            bus: self.bus == Link::Up && (wake.bus || tick),
+            gps: self.gps == Some(Link::Up) && wake.gps,
+            tick,
+        }
+    }
+
+    /// A request of source `source` (its index in the configuration), read at `now`. A
+    /// rejected one (non-finite, absurd, unknown lock bits) is counted against its source and
+    /// logged at most once a second; the source's previous request stands.
+    pub fn handle_request(
+        &mut self,
+        now: Timestamp,
+        source: usize,
+        request: &VelocityRequest,
+    ) -> Result<(), Rejection> {
+        self.requests = true;
+        self.undecided = true;
+        let result = self.mux.on_request(now, source, request);
+        if let Err(rejection) = &result
+            && let Some(held) = self.throttles.rejected.allow(now)
+        {
+            let name = self
+                .mux
+                .source_status(source)
+                .map_or("?", SourceStatus::name);
+            warn!(
+                source = name,
+                held_back = held,
+                "request rejected: {rejection}"
+            );
+        }
+        result
+    }
+
+    /// A control request, answered now or once the chassis has answered (a
+    /// [`Publication::Response`] with `ticket`).
+    pub fn handle_control(&mut self, now: Timestamp, ticket: Ticket, request: &ControlRequest) {
+        let seq = request.seq;
+        let (status, message) = match request_to_action(request) {
+            Err(reason) => (ControlStatus::INVALID, reason),
+            Ok(ControlAction::LockRelease(name)) => {
+                self.undecided = true;
+                match self.mux.release_lock(&name) {
+                    Ok(true) => (ControlStatus::OK, format!("{name} released")),
+                    Ok(false) => (ControlStatus::OK, format!("{name} was not held")),
+                    Err(err) => (ControlStatus::INVALID, err.to_string()),
+                }
+            }
+            Ok(ControlAction::LockEngage(name)) => {
+                self.undecided = true;
+                match self.mux.engage_lock(now, &name) {
+                    Ok(true) => (ControlStatus::OK, format!("{name} engaged by the operator")),
+                    Ok(false) => (ControlStatus::OK, format!("{name} was already held")),
+                    Err(err) => (ControlStatus::INVALID, err.to_string()),
+                }
+            }
+            Ok(ControlAction::Chassis(command)) => match self.driver.control(now, &command) {
+                ControlOutcome::Pending(token) => {
+                    info!(
+                        request = command.name(),
+                        "control request waiting for the chassis"
+                    );
+                    self.pending_controls.insert(token, (ticket, seq));
+                    return;
+                }
+                outcome => (outcome.status(), outcome.message()),
+            },
+        };
+        let kind = ControlKind::name(request.kind);
+        if status == ControlStatus::OK {
+            info!(kind, "control: {message}");
+        } else {
+            warn!(
+                kind,
+                status = ControlStatus::name(status),
+                "control refused: {message}"
+            );
+        }
+        self.respond(now, ticket, seq, status, &message);
+    }
+
+    /// A frame (or serial chunk) read from the bus at `stamp`: tapped, handed to the driver,
+    /// and the state published if it changed. A request not yet decided is decided first.
+    pub fn handle_rx(&mut self, stamp: Timestamp, rx: Rx<'_>) {
+        if self.undecided {
+            self.decide(stamp);
+        }
+        self.tap(stamp, FrameDirection::RX, FrameKind::SERIAL, rx);
+        self.driver.handle_rx(stamp, rx);
+        self.publish_state_if_changed(stamp);
+    }
+
+    /// A read of the bus at `now` gave `items` frames (a byte stream: one per 8 bytes);
+    /// `backlog`: it stopped at its batch limit with more pending. Feeds receive moderation.
+    pub fn handle_bus_read(&mut self, now: Timestamp, items: usize, backlog: bool) {
+        self.rx_moderation.on_read(now, items, backlog);
+    }
+
+    /// True while receive moderation pauses the bus: the shell stops watching its descriptor
+    /// (the frames wait in the kernel) until [`Engine::poll_timeout`].
+    pub fn is_rx_paused(&mut self, now: Timestamp) -> bool {
+        self.rx_moderation.is_paused(now)
+    }
+
+    /// Bytes from the GPS receiver at `now`.
+    pub fn handle_gps(&mut self, now: Timestamp, bytes: &[u8]) {
+        self.tap(now, FrameDirection::RX, FrameKind::GPS, Rx::Bytes(bytes));
+        self.gps_reader.push(bytes);
+        while let Some(line) = self.gps_reader.next_line() {
+            match nmea::parse_sentence(&line) {
+                Ok(sentence) => {
+                    nmea::apply(&sentence, &mut self.gps_fix);
+                    self.gps_stamp_ns = now.as_nanos();
+                }
+                Err(err) => {
+                    if let Some(held) = self.throttles.rx.allow(now) {
+                        warn!(held_back = held, "GPS sentence dropped: {err}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// An item the shell wrote to the bus; `stamp` is when the write returned.
+    pub fn handle_sent(&mut self, stamp: Timestamp, item: &Transmit) {
+        self.tap(stamp, FrameDirection::TX, FrameKind::SERIAL, item.as_rx());
+    }
+
+    /// One item could not be sent (transmit queue full); the bus is still there.
+    pub fn handle_tx_dropped(&mut self, now: Timestamp, error: &dyn Display) {
+        if let Some(held) = self.throttles.tx.allow(now) {
+            warn!(held_back = held, "{error}");
+        }
+    }
+
+    /// The shell could not publish `what` (a sample, an answer, a wake-up of readers): counted,
+    /// logged at most once a second.
+    pub fn handle_publish_failed(&mut self, now: Timestamp, what: &str, error: &dyn Display) {
+        self.ipc_failures += 1;
+        if let Some(held) = self.throttles.publish.allow(now) {
+            warn!(
+                held_back = held,
+                failures = self.ipc_failures,
+                "cannot publish {what}: {error}"
+            );
+        }
+    }
+
+    /// Publications and wake-ups that failed since start.
+    pub fn ipc_failures(&self) -> u64 {
+        self.ipc_failures
+    }
+
+    /// The bus is gone (or could not be opened at start): nothing is commanded until it is
+    /// back; it is reopened after a backoff.
+    pub fn handle_bus_lost(&mut self, now: Timestamp, error: &dyn Display) {
+        error!("{error}; commanding nothing until it is back, retrying");
+        self.driver.set_bus_down(now, true);
+        self.bus = Link::Down {
+            retry_at: now + self.bus_backoff,
+        };
+    }
+
+    /// The GPS receiver is gone: it is reopened after a second.
+    pub fn handle_gps_lost(&mut self, now: Timestamp, error: &dyn Display) {
+        error!("GPS receiver lost: {error}; retrying");
+        self.gps = Some(Link::Down {
+            retry_at: now + EngineConfig::GPS_RETRY,
+        });
+    }
+
+    /// `device` was opened as [`Engine::poll_open`] asked.
+    pub fn handle_opened(&mut self, now: Timestamp, device: Device, name: &str) {
+        match device {
+            Device::Bus => {
+                info!(bus = name, "bus open again");
+                self.bus = Link::Up;
+                self.bus_backoff = self.config.reconnect_initial;
+                self.rx_moderation.reset(now);
+                self.driver.set_bus_down(now, false);
+            }
+            Device::Gps => {
+                info!(gps = name, "GPS receiver open");
+                self.gps = Some(Link::Up);
+            }
+        }
+    }
+
+    /// Opening `device` failed: the next attempt waits longer (the bus: doubling up to the
+    /// configured maximum).
+    pub fn handle_open_failed(&mut self, now: Timestamp, device: Device, error: &dyn Display) {
+        match device {
+            Device::Bus => {
+                debug!("reopening the bus: {error}");
+                self.bus_backoff = (self.bus_backoff * 2).min(self.config.reconnect_max);
+                self.bus = Link::Down {
+                    retry_at: now + self.bus_backoff,
+                };
+            }
+            Device::Gps => {
+                debug!("opening the GPS receiver: {error}");
+                self.gps = Some(Link::Down {
+                    retry_at: now + EngineConfig::GPS_RETRY,
+                });
+            }
+        }
+    }
+
+    /// Processes what is due at `now`: a decision not yet made, then the driver's deadlines
+    /// (the heartbeat, the chassis' silence, control timeouts).
+    pub fn handle_timeout(&mut self, now: Timestamp) {
+        if self.undecided {
+            self.decide(now);
+        }
+        if self.driver.poll_timeout().is_some_and(|t| t <= now) {
+            self.driver.handle_timeout(now);
+        }
+    }
+
+    /// Ends a pass: answers finished control requests, logs the driver's notices, publishes
+    /// the mux status (on a change, while ramping after requests, and at its rate) and on the
+    /// tick refreshes the state (frames arrived that did not change it, and at least every
+    /// 100 ms).
+    pub fn end_pass(&mut self, now: Timestamp) {
+        self.drain_driver_events(now);
+        let period_over = self
+            .last_mux_publish
+            .is_none_or(|t| now.saturating_since(t) >= self.config.mux_status_period);
+        if std::mem::take(&mut self.mux_changed)
+            || self.requests && self.mux.is_ramping()
+            || period_over
+        {
+            self.publish_mux(now);
+        }
+        if std::mem::take(&mut self.on_tick) {
+            let rx_frames = self.driver.state().link.rx_frames;
+            if rx_frames != self.last_rx_frames
+                || now.saturating_since(self.last_state_publish) >= EngineConfig::STATE_REFRESH
+            {
+                self.publish_state(now);
+            } else {
+                self.publish_state_if_changed(now);
+            }
+        }
+    }
+
+    /// Counts the wake-ups of the sources in `fired` (one bit each) against their budget;
+    /// returns the listeners the shell must detach (over budget) or attach again (a new tick).
+    pub fn spend_wakeups(&mut self, now: Timestamp, fired: u32) -> Vec<ListenerChange> {
+        let changes = self.budget.spend(fired, self.tick.next());
+        for change in &changes {
+            if let ListenerChange::Detach(index) = change
+                && let Some(held) = self.throttles.flood.allow(now)
+            {
+                let name = self
+                    .mux
+                    .source_status(*index)
+                    .map_or("?", SourceStatus::name);
+                warn!(
+                    source = name,
+                    held_back = held,
+                    "the source woke the loop more than {} times in one tick: read on the tick \
+                     only until the next",
+                    WakeBudget::PER_TICK
+                );
+            }
+        }
+        changes
+    }
+
+    /// Every listener is attached again (the shell made a new wait set).
+    pub fn reset_wakeups(&mut self) {
+        self.budget.reset(self.tick.next());
+    }
+
+    /// Orderly stop: command zero (and the brake where there is one), refuse the control
+    /// requests still waiting. The shell transmits what follows, then [`Engine::publish_all`].
+    pub fn shutdown(&mut self, now: Timestamp) {
+        info!("stopping: commanding zero and engaging the brake where there is one");
+        self.undecided = false;
+        self.driver.shutdown(now);
+        let pending: Vec<(Ticket, u64)> = self.pending_controls.drain().map(|(_, v)| v).collect();
+        for (ticket, seq) in pending {
+            self.respond(
+                now,
+                ticket,
+                seq,
+                ControlStatus::REFUSED,
+                "the service is stopping",
+            );
+        }
+    }
+
+    /// Publishes the state and the mux status now (at start and at the end).
+    pub fn publish_all(&mut self, now: Timestamp) {
+        self.drain_driver_events(now);
+        self.publish_state(now);
+        self.publish_mux(now);
+    }
+
+    // ---- outputs ------------------------------------------------------------------------
+
+    /// The next item to write to the bus. The mux decides first when something changed since
+    /// its last decision. While the bus is down nothing is sent (the driver does not queue).
+    pub fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+        if self.undecided {
+            self.decide(now);
+        }
+        if self.bus != Link::Up {
+            // Nothing can be sent; the driver does not queue while the bus is down.
+            while self.driver.poll_transmit(now).is_some() {}
+            return None;
+        }
+        self.driver.poll_transmit(now)
+    }
+
+    /// The next thing to publish.
+    pub fn poll_publication(&mut self) -> Option<Publication> {
+        self.publications.pop_front()
+    }
+
+    /// When the shell must start a pass at the latest: the tick, the end of a moderation pause,
+    /// the driver's deadline, the next expiry of a source, a pending reopen.
+    pub fn poll_timeout(&self) -> Timestamp {
+        let retry = |link: Option<Link>| match link {
+            Some(Link::Down { retry_at }) => Some(retry_at),
+            _ => None,
+        };
+        [
+            self.rx_moderation.paused_until(),
+            self.driver.poll_timeout(),
+            self.mux.next_deadline(self.decided_at),
+            retry(Some(self.bus)),
+            retry(self.gps),
+        ]
+        .into_iter()
+        .flatten()
+        .fold(self.tick.next(), Timestamp::min)
+    }
+
+    /// A device due to be (re)opened at `now`.
+    pub fn poll_open(&self, now: Timestamp) -> Option<Device> {
+        let due =
+            |link: Option<Link>| matches!(link, Some(Link::Down { retry_at }) if retry_at <= now);
+        if due(Some(self.bus)) {
+            Some(Device::Bus)
+        } else if due(self.gps) {
+            Some(Device::Gps)
+        } else {
+            None
+        }
+    }
+
+    /// True while the bus is open.
+    pub fn is_bus_up(&self) -> bool {
+        self.bus == Link::Up
+    }
+
+    /// The mux (read-only: its status, its sources).
+    pub fn mux(&self) -> &Mux {
+        &self.mux
+    }
+
+    /// What the driver believes.
+    pub fn state(&self) -> &ChassisState {
+        self.driver.state()
+    }
+
+    // ---- inside -------------------------------------------------------------------------
+
+    fn decide(&mut self, now: Timestamp) {
+        self.undecided = false;
+        self.decided_at = now;
+        let decision = self.mux.evaluate(now);
+        self.driver.set_command(now, &decision.output);
+        if decision.changed {
+            self.mux_changed = true;
+            self.log_mux_change();
+        }
+    }
+
+    fn respond(&mut self, now: Timestamp, ticket: Ticket, seq: u64, status: u8, message: &str) {
+        let mut response = ControlResponse::new(seq, status, message);
+        response.stamp_ns = now.as_nanos();
+        self.publications
+            .push_back(Publication::Response { ticket, response });
+    }
+
+    fn publish_state(&mut self, now: Timestamp) {
+        let mut state = *self.driver.state();
+        if self.gps_stamp_ns != 0 {
+            state.gps = self.gps_fix;
+            state.touch(Group::Gps, self.gps_stamp_ns);
+        }
+        if self.config.gps && self.gps != Some(Link::Up) {
+            state.link_flags |= LinkFlags::GPS_DOWN;
+        }
+        self.state_seq += 1;
+        state.seq = self.state_seq;
+        self.last_rx_frames = state.link.rx_frames;
+        self.last_state_body = Some(state_body(&state));
+        self.last_state_publish = now;
+        self.publications
+            .push_back(Publication::State(Box::new(state)));
+    }
+
+    fn publish_state_if_changed(&mut self, now: Timestamp) {
+        let body = state_body(self.driver.state());
+        if self
+            .last_state_body
+            .is_none_or(|last| last.as_bytes() != body.as_bytes())
+        {
+            self.publish_state(now);
+        }
+    }
+
+    fn publish_mux(&mut self, now: Timestamp) {
+        let mut status = *self.mux.status();
+        // The robot's own limits (applied by the driver) are clamps too.
+        status.clamp_flags |= self.driver.state().command.clamp_flags;
+        self.mux_seq += 1;
+        status.seq = self.mux_seq;
+        self.last_mux_publish = Some(now);
+        self.publications
+            .push_back(Publication::Mux(Box::new(status)));
+    }
+
+    /// Puts `item` on the tap. `bytes_kind` is the kind of a byte chunk (serial or GPS).
+    fn tap(&mut self, stamp: Timestamp, direction: u8, bytes_kind: u8, item: Rx<'_>) {
+        match item {
+            Rx::Can(can) => {
+                self.frame_seq += 1;
+                let mut frame = BusFrame {
+                    stamp_ns: stamp.as_nanos(),
+                    seq: self.frame_seq,
+                    can_id: can.id(),
+                    direction,
+                    kind: FrameKind::CAN,
+                    flags: if can.is_extended() {
+                        BusFrame::EXTENDED_ID
+                    } else {
+                        0
+                    },
+                    ..BusFrame::default()
+                };
+                frame.set_payload(can.data());
+                self.publications.push_back(Publication::Frame(frame));
+            }
+            Rx::Bytes(bytes) => {
+                for chunk in bytes.chunks(BusFrame::DATA_LEN) {
+                    self.frame_seq += 1;
+                    let mut frame = BusFrame {
+                        stamp_ns: stamp.as_nanos(),
+                        seq: self.frame_seq,
+                        direction,
+                        kind: bytes_kind,
+                        ..BusFrame::default()
+                    };
+                    frame.set_payload(chunk);
+                    self.publications.push_back(Publication::Frame(frame));
+                }
+            }
+        }
+    }
+
+    fn drain_driver_events(&mut self, now: Timestamp) {
+        while let Some(event) = self.driver.poll_event() {
+            match event {
+                DriverEvent::ControlDone {
+                    token,
+                    status,
+                    message,
+                } => {
+                    if let Some((ticket, seq)) = self.pending_controls.remove(&token) {
+                        info!(status = ControlStatus::name(status), "control: {message}");
+                        self.respond(now, ticket, seq, status, &message);
+                    }
+                }
+                DriverEvent::RxDropped { reason } => {
+                    if let Some(held) = self.throttles.rx.allow(now) {
+                        warn!(held_back = held, "frame dropped: {reason}");
+                    }
+                }
+                DriverEvent::Notice { level, message } => match level {
+                    Level::Info => info!("{message}"),
+                    Level::Warn => warn!("{message}"),
+                    Level::Error => error!("{message}"),
+                },
+            }
+        }
+    }
+
+    fn log_mux_change(&mut self) {
+        let status = *self.mux.status();
+        if status.zero_reason != self.last_zero_reason {
+            let required: Vec<&str> = status
+                .sources()
+                .iter()
+                .filter(|s| s.has(SourceFlags::REQUIRED) && !s.has(SourceFlags::FRESH))
+                .map(SourceStatus::name)
+                .collect();
+            match status.zero_reason {
+                ZeroReason::REQUIRED_SOURCE_STALE => error!(
+                    "safe stop: required source {} is silent",
+                    required.join(", ")
+                ),
+                ZeroReason::LOCKED => warn!("stopped: a lock blocks every source"),
+                ZeroReason::NO_ACTIVE_SOURCE if self.last_zero_reason != ZeroReason::STARTING => {
+                    info!("no active source: commanding zero")
+                }
+                _ => {}
+            }
+        }
+        if status.active_source != self.last_active {
+            match status.active() {
+                Some(source) => info!(
+                    source = source.name(),
+                    priority = source.priority,
+                    "active source"
+                ),
+                None => debug!("no active source"),
+            }
+        }
+        self.last_zero_reason = status.zero_reason;
+        self.last_active = status.active_source;
+    }
+}

@@ -1,0 +1,807 @@
+//! The service's rules as scenarios: the engine, the TITAN driver (SCOUT MINI and XBot where
+//! said) and the simulated chassis, on simulated time (see [`super::rig`]).
+//!
+//! Every rig starts at [`T0`] with the loop's 20 ms tick and the driver's heartbeat both anchored
+//! there, so the instants below are exact. The safety monitor (the required source) sends a
+//! heartbeat every 50 ms unless a scenario says otherwise, and the mux does not smooth unless a
+//! scenario says so: a frame's speed is then the request's.
+
+use std::time::Duration;
+
+use chassis_interfaces::{
+    ControlKind, ControlRequest, ControlStatus, LinkFlags, LockStatus, VelocityRequest, ZeroReason,
+};
+use chassis_protocols::{Injection, Robot, Timestamp, Transmit, titan};
+
+use super::rig::{LATENCY, Rig, T0};
+use super::{Device, ListenerChange, Wake, WakeBudget};
+use crate::mux::MuxConfig;
+
+fn ms(v: u64) -> Duration {
+    Duration::from_millis(v)
+}
+
+fn at(offset_ms: u64) -> Timestamp {
+    T0 + ms(offset_ms)
+}
+
+/// The default sources and lock, without acceleration smoothing.
+fn unsmoothed() -> MuxConfig {
+    let mut mux = MuxConfig::default();
+    mux.limits.linear_accel_mps2 = 0.0;
+    mux.limits.angular_accel_radps2 = 0.0;
+    mux
+}
+
+/// A TITAN rig whose safety monitor beats every 50 ms for `seconds`, run 200 ms: the chassis is
+/// in CAN command mode and nothing asks for motion.
+fn ready_for(robot: Robot, mux: MuxConfig, seconds: u64) -> Rig {
+    let mut rig = Rig::with(robot, mux, |_| {});
+    rig.publish_every(
+        "safety",
+        VelocityRequest::heartbeat(),
+        ms(50),
+        T0 + Duration::from_secs(seconds),
+    );
+    rig.run_until(at(200));
+    rig
+}
+
+fn ready() -> Rig {
+    ready_for(Robot::Titan, unsmoothed(), 60)
+}
+
+fn twist(v: f32) -> VelocityRequest {
+    VelocityRequest::twist(v, 0.0)
+}
+
+/// The speed of the first motion frame the engine hands out at `t` (rounded to the wire's mm/s).
+fn first_motion_polled(rig: &mut Rig, t: Timestamp) -> Option<f64> {
+    while let Some(item) = rig.engine.poll_transmit(t) {
+        if let Some(v) = rig.commanded_speed(&item) {
+            return Some((v * 1000.0).round() / 1000.0);
+        }
+    }
+    None
+}
+
+/// `request` as a client sends it at `t`.
+fn stamped(request: VelocityRequest, t: Timestamp) -> VelocityRequest {
+    VelocityRequest {
+        stamp_ns: t.as_nanos(),
+        ..request
+    }
+}
+
+/// The speed of the last motion frame written at or before `t`.
+fn speed_at(rig: &Rig, t: Timestamp) -> f64 {
+    rig.motion()
+        .into_iter()
+        .take_while(|&(when, _)| when <= t)
+        .last()
+        .map_or(0.0, |(_, v)| v)
+}
+
+fn control(kind: u8) -> ControlRequest {
+    ControlRequest::new(kind)
+}
+
+#[test]
+fn a_request_is_on_the_wire_the_instant_it_is_read() {
+    let mut rig = ready();
+    let t = at(207);
+    rig.request_at(t, "teleop", twist(0.5));
+    rig.run_until(at(260));
+    assert_eq!(rig.first_motion(at(200), |v| v > 0.0), Some(t));
+    assert!((speed_at(&rig, t) - 0.5).abs() < 1e-3);
+}
+
+#[test]
+fn the_heartbeat_repeats_the_command_on_its_20_ms_grid() {
+    let mut rig = ready();
+    rig.request_at(at(207), "teleop", twist(0.5));
+    rig.publish_every("teleop", twist(0.5), ms(100), at(600));
+    rig.run_until(at(400));
+    let times: Vec<Timestamp> = rig
+        .motion()
+        .into_iter()
+        .filter(|&(when, v)| when > at(207) && v > 0.0)
+        .map(|(when, _)| when)
+        .collect();
+    // The grid of the driver's heartbeat (anchored at T0), whatever the request times.
+    assert_eq!(times[..5], [at(220), at(240), at(260), at(280), at(300)]);
+}
+
+#[test]
+fn a_command_is_decided_before_the_bus_is_drained() {
+    let mut rig = ready();
+    let t = at(231);
+    let titan_profile = chassis_protocols::profile::TitanProfile::default();
+    let feedback = Transmit::Can(
+        titan::Frame::MotionFeedback(titan::MotionFeedback::default())
+            .encode(&titan_profile)
+            .unwrap(),
+    );
+    // A request and a feedback frame are read at the same instant, in the shell's order or not:
+    // the driver has the new command before it sees the frame.
+    rig.engine.begin_pass(t, Wake::default());
+    rig.engine
+        .handle_request(t, rig.source("teleop"), &stamped(twist(0.7), t))
+        .unwrap();
+    rig.engine.handle_rx(t, feedback.as_rx());
+    assert!((rig.engine.mux().output().linear_x_mps - 0.7).abs() < 1e-6);
+    assert_eq!(rig.engine.mux().status().stamp_ns, t.as_nanos());
+    assert_eq!(first_motion_polled(&mut rig, t), Some(0.7));
+}
+
+#[test]
+fn a_request_that_arrives_during_a_pass_is_decided_again() {
+    let mut rig = ready();
+    let t = at(231);
+    let teleop = rig.source("teleop");
+    rig.engine.begin_pass(t, Wake::default());
+    rig.engine
+        .handle_request(t, teleop, &stamped(twist(0.5), t))
+        .unwrap();
+    assert_eq!(first_motion_polled(&mut rig, t), Some(0.5));
+    while rig.engine.poll_transmit(t).is_some() {}
+    // Another request, read later in the same pass: a stop goes out at once.
+    let later = t + Duration::from_micros(40);
+    rig.engine
+        .handle_request(later, teleop, &stamped(twist(0.0), later))
+        .unwrap();
+    assert_eq!(first_motion_polled(&mut rig, later), Some(0.0));
+}
+
+#[test]
+fn a_changed_command_waits_for_the_drivers_minimum_interval_but_a_stop_does_not() {
+    let mut rig = ready();
+    rig.request_at(at(207), "teleop", twist(0.5));
+    rig.request_at(at(207) + Duration::from_micros(500), "teleop", twist(0.6));
+    rig.request_at(at(208), "teleop", twist(0.0));
+    rig.run_until(at(215));
+    let motion = rig.motion();
+    let after: Vec<(Timestamp, f64)> = motion.into_iter().filter(|&(t, _)| t >= at(207)).collect();
+    assert_eq!(after[0].0, at(207));
+    // 0.6 would be due 2 ms after the 0.5 frame; the stop at 208 replaces it and is not delayed.
+    assert_eq!(after[1].0, at(208));
+    assert_eq!(after[1].1, 0.0);
+    assert_eq!(after.len(), 2, "{after:?}");
+}
+
+#[test]
+fn a_dead_source_motion_ends_exactly_at_its_timeout() {
+    let mut rig = ready();
+    let last = at(307);
+    rig.request_at(at(207), "teleop", twist(0.5));
+    rig.request_at(last, "teleop", twist(0.5));
+    rig.run_until(at(1200));
+    let stop = rig.first_motion(last, |v| v == 0.0);
+    assert_eq!(stop, Some(last + ms(300)), "teleop's timeout is 300 ms");
+    assert_eq!(
+        speed_at(&rig, last + ms(300) - Duration::from_nanos(1)),
+        0.5
+    );
+    assert!(
+        rig.motion()
+            .iter()
+            .all(|&(t, v)| t < last + ms(300) || v == 0.0)
+    );
+    assert_eq!(rig.mux().zero_reason, ZeroReason::NO_ACTIVE_SOURCE);
+}
+
+#[test]
+fn the_planner_times_out_at_its_own_500_ms() {
+    let mut rig = ready();
+    rig.request_at(at(213), "planner", twist(0.3));
+    rig.run_until(at(1000));
+    assert_eq!(rig.first_motion(at(214), |v| v == 0.0), Some(at(713)));
+}
+
+#[test]
+fn a_higher_priority_source_preempts_and_hands_back_at_its_timeout() {
+    let mut rig = ready();
+    rig.publish_every("planner", twist(0.3), ms(40), at(2000));
+    rig.request_at(at(405), "teleop", twist(0.8));
+    rig.request_at(at(505), "teleop", twist(0.8));
+    rig.run_until(at(1000));
+    // The heartbeat went out at 200: a changed command waits the driver's 2 ms minimum interval.
+    assert_eq!(
+        rig.first_motion(at(200), |v| (v - 0.3).abs() < 1e-3),
+        Some(at(202))
+    );
+    assert_eq!(
+        rig.first_motion(at(201), |v| (v - 0.8).abs() < 1e-3),
+        Some(at(405))
+    );
+    assert_eq!(
+        rig.first_motion(at(406), |v| (v - 0.3).abs() < 1e-3),
+        Some(at(805)),
+        "handed back when teleop's last request is 300 ms old"
+    );
+}
+
+#[test]
+fn nothing_moves_before_the_safety_monitor_speaks() {
+    let mut rig = Rig::with(Robot::Titan, unsmoothed(), |_| {});
+    rig.publish_every("teleop", twist(0.5), ms(50), at(1000));
+    rig.request_at(at(600), "safety", VelocityRequest::heartbeat());
+    rig.run_until(at(650));
+    assert_eq!(rig.first_motion(T0, |v| v != 0.0), Some(at(600)));
+    assert!(
+        rig.muxes
+            .iter()
+            .any(|m| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE)
+    );
+}
+
+#[test]
+fn the_required_source_going_silent_stops_the_robot_at_its_timeout() {
+    let mut rig = Rig::with(Robot::Titan, unsmoothed(), |_| {});
+    rig.publish_every("safety", VelocityRequest::heartbeat(), ms(50), at(550));
+    rig.publish_every("teleop", twist(0.5), ms(50), at(2000));
+    rig.run_until(at(1000));
+    // The last heartbeat came at 500: stale at 700, whatever teleop asks.
+    assert_eq!(rig.first_motion(at(500), |v| v == 0.0), Some(at(700)));
+    assert!(rig.motion().iter().all(|&(t, v)| t < at(700) || v == 0.0));
+    let stale = rig
+        .muxes
+        .iter()
+        .find(|m| {
+            m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.stamp_ns >= at(500).as_nanos()
+        })
+        .expect("the mux says why");
+    assert_eq!(
+        stale.stamp_ns,
+        at(700).as_nanos(),
+        "published the instant it changed"
+    );
+}
+
+#[test]
+fn an_operator_lock_blocks_every_lower_source_until_released() {
+    let mut rig = ready();
+    rig.publish_every("teleop", twist(0.5), ms(50), at(3000));
+    let engage = rig.control_at(
+        at(433),
+        control(ControlKind::LOCK_ENGAGE).with_name("estop"),
+    );
+    let release = rig.control_at(
+        at(1233),
+        control(ControlKind::LOCK_RELEASE).with_name("estop"),
+    );
+    rig.run_until(at(1400));
+    assert_eq!(rig.first_motion(at(201), |v| v == 0.0), Some(at(433)));
+    assert!(
+        rig.motion()
+            .iter()
+            .all(|&(t, v)| !(at(433)..at(1233)).contains(&t) || v == 0.0)
+    );
+    assert_eq!(rig.first_motion(at(434), |v| v > 0.0), Some(at(1233)));
+    let (engaged, when) = rig.response(engage).unwrap();
+    assert!(engaged.is_ok(), "{}", engaged.message());
+    assert_eq!(when, at(433));
+    assert_eq!(rig.response(release).unwrap().0.message(), "estop released");
+}
+
+#[test]
+fn a_lock_held_by_a_source_survives_its_holder_going_silent() {
+    let mut mux = unsmoothed().without_required_sources();
+    mux.sources[0].required = false;
+    let mut rig = Rig::with(Robot::Titan, mux, |_| {});
+    rig.run_until(at(200));
+    rig.request_at(
+        at(210),
+        "safety",
+        VelocityRequest {
+            lock_engage: 1,
+            ..twist(0.0)
+        },
+    );
+    rig.publish_every("teleop", twist(0.5), ms(50), at(3000));
+    rig.run_until(at(2000));
+    assert!(rig.motion().iter().all(|&(t, v)| t < at(210) || v == 0.0));
+    let lock = rig.mux().locks()[0];
+    assert_eq!(
+        (lock.held, lock.holder),
+        (1, 0),
+        "held by the safety source"
+    );
+    assert_eq!(rig.mux().zero_reason, ZeroReason::LOCKED);
+    let release = rig.control_at(
+        at(2005),
+        control(ControlKind::LOCK_RELEASE).with_name("estop"),
+    );
+    rig.run_until(at(2100));
+    assert!(rig.response(release).unwrap().0.is_ok());
+    assert_eq!(rig.first_motion(at(2000), |v| v > 0.0), Some(at(2005)));
+    assert_eq!(rig.mux().locks()[0].holder, LockStatus::HOLDER_NONE);
+}
+
+#[test]
+fn a_request_naming_an_unknown_lock_is_rejected_and_the_previous_one_stands() {
+    let mut rig = ready();
+    rig.request_at(at(207), "teleop", twist(0.5));
+    rig.request_at(
+        at(227),
+        "teleop",
+        VelocityRequest {
+            lock_engage: 1 << 3,
+            ..twist(0.9)
+        },
+    );
+    rig.request_at(at(247), "teleop", twist(f32::NAN));
+    rig.run_until(at(300));
+    assert!(rig.motion().iter().all(|&(t, v)| t < at(207) || v == 0.5));
+    let status = rig.engine.mux().status();
+    assert_eq!(status.rejected_requests, 2);
+    assert_eq!(status.sources()[rig.source("teleop")].rejected, 2);
+}
+
+#[test]
+fn an_unknown_lock_name_is_answered_invalid_at_once() {
+    let mut rig = ready();
+    let ticket = rig.control_at(at(255), control(ControlKind::LOCK_ENGAGE).with_name("dock"));
+    rig.run_until(at(300));
+    let (answer, when) = rig.response(ticket).unwrap();
+    assert_eq!(answer.status, ControlStatus::INVALID);
+    assert_eq!(
+        answer.message(),
+        "no lock called 'dock' (configured: estop)"
+    );
+    assert_eq!(when, at(255));
+}
+
+#[test]
+fn a_control_request_waiting_for_the_chassis_is_answered_when_it_answers() {
+    let mut rig = ready();
+    let ticket = rig.control_at(at(255), control(ControlKind::STEERING_ZERO));
+    rig.run_until(at(400));
+    let (answer, when) = rig.response(ticket).unwrap();
+    assert!(answer.is_ok(), "{}", answer.message());
+    // 0x431 out at 255, the chassis acknowledges 50 ms after it arrived, 0x43A back.
+    assert_eq!(
+        when,
+        at(255) + LATENCY + titan::TitanSim::DEFAULT_STEERING_ZERO_DELAY + LATENCY
+    );
+}
+
+#[test]
+fn shutdown_commands_zero_and_refuses_the_requests_still_waiting() {
+    let mut rig = ready();
+    let ticket = rig.control_at(at(255), control(ControlKind::STEERING_ZERO));
+    rig.run_until(at(260));
+    assert!(rig.response(ticket).is_none(), "waiting for the chassis");
+    rig.engine.shutdown(at(260));
+    let mut last = None;
+    while let Some(item) = rig.engine.poll_transmit(at(260)) {
+        last = rig.commanded_speed(&item).or(last);
+    }
+    assert_eq!(last, Some(0.0));
+    rig.engine.publish_all(at(260));
+    rig.run_for(Duration::ZERO);
+    let mut answers = Vec::new();
+    while let Some(p) = rig.engine.poll_publication() {
+        if let super::Publication::Response { ticket, response } = p {
+            answers.push((ticket, response));
+        }
+    }
+    assert!(
+        answers
+            .iter()
+            .any(|(t, r)| *t == ticket && r.status == ControlStatus::REFUSED),
+        "{answers:?}"
+    );
+}
+
+#[test]
+fn the_state_is_published_on_change_and_refreshed_on_the_tick() {
+    let mut rig = ready();
+    rig.run_until(at(1000));
+    // Every feedback frame that changes the state is published the instant it is read.
+    let changes = rig
+        .states
+        .iter()
+        .filter(|s| (at(400).as_nanos()..at(1000).as_nanos()).contains(&s.stamp_ns))
+        .count();
+    assert!(changes > 0);
+    // A silent chassis: the state is still refreshed on the tick, every 100 ms.
+    rig.inject(Injection::Silence(ms(500)));
+    let silent_from = rig.now();
+    let before = rig.states.len();
+    rig.run_until(at(1400));
+    let refreshed: Vec<u64> = rig.states[before..].iter().map(|s| s.seq).collect();
+    assert!(!refreshed.is_empty());
+    let stamps: Vec<Timestamp> = rig
+        .passes
+        .iter()
+        .copied()
+        .filter(|&t| t > silent_from)
+        .collect();
+    assert!(!stamps.is_empty());
+    let published_at: Vec<Timestamp> = rig.states[before..]
+        .iter()
+        .filter_map(|s| rig_publication_time(&rig, s.seq))
+        .collect();
+    for pair in published_at.windows(2) {
+        assert!(
+            pair[1].saturating_since(pair[0]) <= ms(100),
+            "{published_at:?}"
+        );
+    }
+    assert!(rig.state().link_flags & LinkFlags::CHASSIS_SILENT != 0);
+}
+
+/// When the state numbered `seq` was published (the rig keeps the instants of its passes; a
+/// refreshed state carries its frames' stamps, not the publication's).
+fn rig_publication_time(rig: &Rig, seq: u64) -> Option<Timestamp> {
+    rig.state_times
+        .iter()
+        .find(|(s, _)| *s == seq)
+        .map(|(_, t)| *t)
+}
+
+#[test]
+fn the_mux_status_is_published_on_change_and_every_100_ms() {
+    let mut rig = ready();
+    rig.run_until(at(800));
+    let before = rig.muxes.len();
+    let quiet: Vec<u64> = rig.muxes[..before]
+        .windows(2)
+        .filter(|w| w[0].stamp_ns >= at(300).as_nanos())
+        .map(|w| w[1].stamp_ns - w[0].stamp_ns)
+        .collect();
+    assert!(
+        quiet.iter().all(|&gap| gap == ms(100).as_nanos() as u64),
+        "{quiet:?}"
+    );
+    rig.request_at(at(813), "teleop", twist(0.4));
+    rig.run_until(at(830));
+    assert!(
+        rig.muxes[before..]
+            .iter()
+            .any(|m| m.stamp_ns == at(813).as_nanos() && m.active().is_some()),
+        "a change is published at once"
+    );
+}
+
+#[test]
+fn a_lost_bus_is_reopened_with_doubling_backoff_and_nothing_is_written_meanwhile() {
+    let mut rig = ready();
+    rig.publish_every("teleop", twist(0.5), ms(50), at(10_000));
+    rig.run_until(at(305));
+    rig.cut_bus();
+    rig.run_until(at(4000));
+    let lost_at = rig.passes.iter().copied().find(|&t| t >= at(305)).unwrap();
+    let attempts: Vec<Timestamp> = rig.opens.iter().map(|(t, _)| *t).collect();
+    let gaps: Vec<u64> = std::iter::once(lost_at)
+        .chain(attempts.iter().copied())
+        .collect::<Vec<_>>()
+        .windows(2)
+        .map(|w| w[1].saturating_since(w[0]).as_millis() as u64)
+        .collect();
+    assert_eq!(gaps[..5], [100, 200, 400, 800, 1600]);
+    assert!(gaps[5..].iter().all(|&g| g == 2000), "{gaps:?}");
+    assert!(rig.wire.iter().all(|s| s.at <= lost_at));
+    assert!(rig.state().link_flags & LinkFlags::BUS_DOWN != 0);
+    // Back: the next attempt opens it and the robot is driven again.
+    rig.restore_bus();
+    // Attempts at +100, +300, +700, +1500, +3100, +5100 ms: the first after the restore at
+    // +4695 ms opens it.
+    let next_attempt = lost_at + ms(100 + 200 + 400 + 800 + 1600 + 2000);
+    rig.run_until(next_attempt + ms(300));
+    assert_eq!(rig.opens.last().map(|(t, _)| *t), Some(next_attempt));
+    assert_eq!(
+        rig.wire.iter().find(|s| s.at > lost_at).map(|s| s.at),
+        Some(next_attempt)
+    );
+    assert!(rig.first_motion(next_attempt, |v| v > 0.0).is_some());
+    // A second loss starts from the first backoff again.
+    rig.cut_bus();
+    let second_loss = rig.now();
+    rig.run_for(ms(150));
+    let retry = rig.opens.last().map(|(t, _)| *t).unwrap();
+    assert!(retry > second_loss && retry.saturating_since(second_loss) <= ms(100));
+}
+
+#[test]
+fn a_flooding_source_is_read_on_the_tick_only_and_keeps_its_place() {
+    let mut rig = ready();
+    rig.publish_every("teleop", twist(0.5), Duration::from_micros(200), at(600));
+    rig.run_until(at(600));
+    let teleop = rig.source("teleop");
+    let detached: Vec<Timestamp> = rig
+        .listener_changes
+        .iter()
+        .filter(|(_, c)| *c == ListenerChange::Detach(teleop))
+        .map(|(t, _)| *t)
+        .collect();
+    let attached: Vec<Timestamp> = rig
+        .listener_changes
+        .iter()
+        .filter(|(_, c)| *c == ListenerChange::Attach(teleop))
+        .map(|(t, _)| *t)
+        .collect();
+    // The 21st wake-up of the tick that began at 200 (one every 200 µs) detaches it …
+    assert_eq!(
+        detached[0],
+        at(200) + Duration::from_micros(200 * u64::from(WakeBudget::PER_TICK))
+    );
+    // … and the tick at 220 attaches it again.
+    assert_eq!(attached[0], at(220));
+    assert_eq!(detached.len(), attached.len());
+    // Its requests still win: the robot drives.
+    assert!((speed_at(&rig, at(590)) - 0.5).abs() < 1e-3);
+}
+
+#[test]
+fn the_safety_source_is_never_detached() {
+    let mut rig = ready();
+    rig.publish_every(
+        "safety",
+        VelocityRequest::heartbeat(),
+        Duration::from_micros(100),
+        at(400),
+    );
+    rig.run_until(at(400));
+    let safety = rig.source("safety");
+    assert!(
+        rig.listener_changes
+            .iter()
+            .all(|(_, c)| *c != ListenerChange::Detach(safety))
+    );
+}
+
+#[test]
+fn ordinary_feedback_is_read_the_moment_it_arrives() {
+    let mut rig = ready();
+    rig.run_until(at(2000));
+    assert_eq!(rig.worst_rx_wait, Duration::ZERO);
+}
+
+#[test]
+fn a_saturated_bus_is_read_once_per_moderation_interval_and_loses_nothing() {
+    let mut rig = ready();
+    rig.inject(Injection::Flood { frames_per_s: 4000 });
+    rig.run_until(at(1200));
+    let reads_before = rig.bus_reads;
+    let read_frames = rig.frames_read;
+    rig.run_until(at(2200));
+    let reads = rig.bus_reads - reads_before;
+    // One read per 4 ms and one per 20 ms tick at most, instead of one per frame (≈ 4,500).
+    assert!(reads <= 250 + 50 + 5, "{reads} reads in one second");
+    assert!(
+        rig.worst_rx_wait <= Duration::from_micros(4000),
+        "{:?}",
+        rig.worst_rx_wait
+    );
+    assert!(rig.frames_read - read_frames > 4000);
+    assert_eq!(rig.frames_lost(), 0);
+}
+
+#[test]
+fn acceleration_smoothing_ramps_but_a_timeout_cuts_at_once() {
+    let mut rig = ready_for(Robot::Titan, MuxConfig::default(), 60);
+    rig.request_at(at(220), "teleop", twist(1.0));
+    rig.publish_every("teleop", twist(1.0), ms(50), at(1020));
+    rig.run_until(at(1500));
+    // 2 m/s² from the decision before the request (at most one 20 ms tick earlier): 1 m/s is
+    // reached 0.5 s later.
+    let first = speed_at(&rig, at(220));
+    assert!(first > 0.0 && first <= 0.04 + 1e-3, "{first}");
+    assert!((speed_at(&rig, at(420)) - 0.4).abs() <= 0.04 + 1e-3);
+    assert!(speed_at(&rig, at(699)) < 1.0);
+    assert!((speed_at(&rig, at(720)) - 1.0).abs() < 1e-3);
+    // The last request at 1000: at 1300 the output is zero at once, not ramped down.
+    assert_eq!(rig.first_motion(at(1001), |v| v < 0.99), Some(at(1300)));
+    assert_eq!(speed_at(&rig, at(1300)), 0.0);
+}
+
+#[test]
+fn the_gps_receiver_is_opened_at_start_and_retried_every_second() {
+    let mut rig = Rig::with(Robot::Xbot, unsmoothed(), |c| c.gps = true);
+    rig.run_until(at(3500));
+    let gps: Vec<Timestamp> = rig
+        .opens
+        .iter()
+        .filter(|(_, d)| *d == Device::Gps)
+        .map(|(t, _)| *t)
+        .collect();
+    assert_eq!(gps, [T0, at(1000), at(2000), at(3000)]);
+    assert!(rig.state().link_flags & LinkFlags::GPS_DOWN != 0);
+}
+
+#[test]
+fn a_scout_mini_drives_and_stops_through_the_engine() {
+    let mut rig = ready_for(Robot::ScoutMini, unsmoothed(), 60);
+    rig.request_at(at(300), "teleop", twist(0.5));
+    rig.run_until(at(1000));
+    assert_eq!(rig.first_motion(at(300), |v| v > 0.4), Some(at(300)));
+    assert_eq!(rig.first_motion(at(301), |v| v == 0.0), Some(at(600)));
+}
+
+#[test]
+fn an_xbot_drives_and_stops_through_the_engine() {
+    let mut rig = ready_for(Robot::Xbot, unsmoothed(), 60);
+    rig.publish_every("teleop", twist(0.3), ms(50), at(1500));
+    rig.run_until(at(1500));
+    assert!(
+        rig.firmware.truth().linear_mps > 0.2,
+        "{:?}",
+        rig.firmware.truth()
+    );
+    rig.run_until(at(3000));
+    assert!(rig.firmware.truth().linear_mps.abs() < 1e-3);
+    assert_eq!(rig.mux().zero_reason, ZeroReason::NO_ACTIVE_SOURCE);
+}
+
+#[test]
+fn the_engine_waits_for_its_next_deadline() {
+    let rig = ready();
+    let t = rig.engine.poll_timeout();
+    // Nothing but the tick and the heartbeat (both on the 20 ms grid) is pending.
+    assert!(t > rig.now() && t <= rig.now() + ms(20), "{t:?}");
+    assert_eq!(rig.stalls, 0);
+}
+
+/// Simulated seconds of the long run.
+const LONG_RUN_S: u64 = 1000;
+
+/// A small deterministic generator (xorshift64*).
+struct Dice(u64);
+
+impl Dice {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+
+    fn chance(&mut self, percent: u64) -> bool {
+        self.below(100) < percent
+    }
+}
+
+/// What the rig knows of a source, to judge the wire independently of the mux.
+#[derive(Debug, Clone, Copy, Default)]
+struct Seen {
+    /// Arrival of the latest request that asks for something (not a heartbeat).
+    asking: Option<Timestamp>,
+    /// Arrival of the latest request of any kind.
+    any: Option<Timestamp>,
+}
+
+#[test]
+fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_rule() {
+    let mut rig = Rig::with(Robot::Titan, MuxConfig::default(), |_| {});
+    let mut dice = Dice(0x5EED_CAFE_F00D_D00D);
+    let (safety, teleop, planner) = (
+        rig.source("safety"),
+        rig.source("teleop"),
+        rig.source("planner"),
+    );
+    let timeouts = [ms(200), ms(300), ms(500)];
+    let mut seen = [Seen::default(); 3];
+    let mut held = false;
+    // When the e-stop was engaged and released, as the clients did it.
+    let mut locks: Vec<(Timestamp, Timestamp)> = Vec::new();
+    let mut moving = 0u64;
+    let mut steps = 0u64;
+    let end = T0 + Duration::from_secs(LONG_RUN_S);
+    let step = ms(10);
+    let mut zero_checked = 0u64;
+    // The speed the last motion frame commanded (`None` after the bus was cut).
+    let mut wire: Option<f64> = None;
+    while rig.now() < end {
+        let now = rig.now();
+        // Clients act at the start of each 10 ms step.
+        let safety_alive = (now.as_nanos() / 7_000_000_000) % 5 != 4;
+        if safety_alive && dice.chance(25) {
+            let engage = !held && dice.chance(2);
+            let request = if engage {
+                VelocityRequest {
+                    lock_engage: 1,
+                    ..twist(0.0)
+                }
+            } else {
+                VelocityRequest::heartbeat()
+            };
+            rig.request("safety", request);
+            if engage {
+                held = true;
+                locks.push((now, end + ms(1)));
+            }
+            seen[safety].any = Some(now);
+        }
+        for (index, name, percent) in [(teleop, "teleop", 8), (planner, "planner", 12)] {
+            if dice.chance(percent) {
+                let v = (dice.below(21) as f32 - 10.0) / 10.0;
+                let request = if dice.chance(10) {
+                    twist(f32::NAN)
+                } else {
+                    twist(v)
+                };
+                rig.request(name, request);
+                if request.is_finite() {
+                    seen[index] = Seen {
+                        asking: Some(now),
+                        any: Some(now),
+                    };
+                }
+            }
+        }
+        if held && dice.chance(1) {
+            rig.control_at(now, control(ControlKind::LOCK_RELEASE).with_name("estop"));
+            held = false;
+            if let Some(last) = locks.last_mut() {
+                last.1 = now;
+            }
+        }
+        if dice.below(3000) == 0 {
+            rig.inject(Injection::Reboot);
+        }
+        if dice.below(4000) == 0 {
+            rig.cut_bus();
+            // What the chassis was last told no longer stands for the wire: it stops on its
+            // own command timeout.
+            wire = None;
+        }
+        if dice.below(300) == 0 {
+            rig.restore_bus();
+        }
+        rig.run_for(step);
+        steps += 1;
+        // The rules hold at every frame written and at every millisecond in between: the
+        // command on the wire is the last frame's until the next one.
+        let frames: Vec<(Timestamp, f64)> = rig.motion();
+        let samples = (1..=10).map(|k| (now + ms(k), None));
+        let mut events: Vec<(Timestamp, Option<f64>)> = frames
+            .iter()
+            .map(|&(t, v)| (t, Some(v)))
+            .chain(samples)
+            .collect();
+        events.sort_by_key(|&(t, frame)| (t, frame.is_none()));
+        for (t, frame) in events {
+            if let Some(v) = frame {
+                wire = Some(v);
+                if v == 0.0 {
+                    zero_checked += 1;
+                } else {
+                    moving += 1;
+                }
+            }
+            let Some(v) = wire.filter(|&v| v != 0.0) else {
+                continue;
+            };
+            let fresh = |s: usize, last: Option<Timestamp>| {
+                last.is_some_and(|a| t.saturating_since(a) < timeouts[s])
+            };
+            assert!(
+                fresh(safety, seen[safety].any),
+                "motion {v} at {t:?} while the safety monitor is silent"
+            );
+            assert!(
+                [teleop, planner]
+                    .into_iter()
+                    .any(|s| fresh(s, seen[s].asking)),
+                "motion {v} at {t:?} outlives every source"
+            );
+            assert!(
+                !locks.iter().any(|(from, to)| (*from..*to).contains(&t)),
+                "motion {v} at {t:?} while the e-stop is held"
+            );
+        }
+        rig.forget();
+    }
+    assert_eq!(rig.stalls, 0);
+    assert_eq!(steps, LONG_RUN_S * 100);
+    assert!(moving > 10_000, "the robot drove ({moving} motion frames)");
+    assert!(zero_checked > 10_000);
+    assert!(rig.opens.len() > 5, "buses were lost and reopened");
+    assert!(rig.state().seq > 100_000, "{} states", rig.state().seq);
+}

@@ -1,0 +1,344 @@
+//! One pass of the shell: reading what the engine asks for, writing what it polls, publishing
+//! what it produced. Every item is stamped with the clock when it was read or written.
+
+use std::fmt::Display;
+
+use chassis_interfaces::{ControlResponse, ControlStatus};
+use chassis_protocols::{Rx, Timestamp, Transmit};
+use tracing::{debug, info, warn};
+
+use super::{Next, Shell};
+use crate::bus::{BusError, MAX_RX_BATCH};
+use crate::clock;
+use crate::engine::{Device, Engine, Publication, Wake};
+use crate::ipc::Ports;
+use crate::setup::Devices;
+use crate::sim::injection_of;
+
+impl<D: Devices> Shell<D> {
+    /// One pass after a wake-up (see the engine's documentation for the order). Requests go
+    /// first and reach the bus before anything else is read: the command path is the one whose
+    /// latency matters, and waking the readers of received frames could hand the CPU to them
+    /// before the command is out.
+    pub(super) fn pass(&mut self, ports: &Ports, engine: &mut Engine, wake: Wake) -> Next {
+        let mut next = Next::Continue;
+        let woke = clock::now();
+        if wake.is_activity() {
+            self.last_activity = woke;
+        }
+        let reads = engine.begin_pass(woke, wake);
+        self.read_sources(ports, engine, woke, reads.sources);
+        if reads.control {
+            self.read_control(ports, engine, woke);
+        }
+        if reads.sim {
+            self.handle_sim(ports, woke);
+        }
+        next |= self.transmit(engine, woke);
+        if self.acknowledge_sources(ports, engine, wake.sources) {
+            next |= self.transmit(engine, clock::now());
+        }
+        if reads.bus {
+            next |= self.read_bus(ports, engine);
+        }
+        let now = clock::now();
+        if reads.gps {
+            next |= self.read_gps(engine, now);
+        }
+        engine.handle_timeout(now);
+        next |= self.transmit(engine, now);
+        engine.end_pass(now);
+        next |= self.open_due(engine, now);
+        self.publish(ports, engine, now);
+        next
+    }
+
+    /// Hands every pending request of the sources in `mask` to the engine. Samples are read
+    /// before the notification is consumed (a sample is in shared memory before its
+    /// notification is sent): the system call waits until the command is out, in
+    /// [`Shell::acknowledge_sources`].
+    fn read_sources(
+        &mut self,
+        ports: &Ports,
+        engine: &mut Engine,
+        now: Timestamp,
+        mask: u32,
+    ) -> bool {
+        let mut any = false;
+        for (index, inlet) in ports.sources.iter().enumerate() {
+            if mask & (1 << index) == 0 {
+                continue;
+            }
+            loop {
+                match inlet.subscriber.receive() {
+                    Ok(Some(sample)) => {
+                        any = true;
+                        // A rejected request is counted and logged by the engine.
+                        engine.handle_request(now, index, &sample).ok();
+                    }
+                    Ok(None) => break,
+                    Err(e) => {
+                        debug!(source = inlet.name, "receive: {e}");
+                        break;
+                    }
+                }
+            }
+        }
+        any
+    }
+
+    /// Consumes the notifications that woke the loop (only a listener that fired is read: an
+    /// idle one would cost a system call for nothing), then reads those sources once more: a
+    /// request that arrived in between had its notification consumed here.
+    fn acknowledge_sources(&mut self, ports: &Ports, engine: &mut Engine, fired: u32) -> bool {
+        for (index, inlet) in ports.sources.iter().enumerate() {
+            if fired & (1 << index) != 0
+                && let Err(e) = inlet.listener.try_wait(|_| {})
+            {
+                debug!(source = inlet.name, "consuming notifications: {e}");
+            }
+        }
+        fired != 0 && self.read_sources(ports, engine, clock::now(), fired)
+    }
+
+    fn read_control(&mut self, ports: &Ports, engine: &mut Engine, now: Timestamp) {
+        if let Err(e) = ports.control.listener.try_wait(|_| {}) {
+            debug!("consuming control notifications: {e}");
+        }
+        loop {
+            let active = match ports.control.server.receive() {
+                Ok(Some(active)) => active,
+                Ok(None) => break,
+                Err(e) => {
+                    debug!("control receive: {e}");
+                    break;
+                }
+            };
+            self.next_ticket += 1;
+            let ticket = self.next_ticket;
+            let request = *active.payload();
+            self.pending.insert(ticket, active);
+            engine.handle_control(now, ticket, &request);
+        }
+    }
+
+    /// Fault injection into the simulated chassis: the simulator's business, not the engine's.
+    fn handle_sim(&mut self, ports: &Ports, now: Timestamp) {
+        let Some(desk) = &ports.sim else {
+            return;
+        };
+        if let Err(e) = desk.listener.try_wait(|_| {}) {
+            debug!("consuming simulator notifications: {e}");
+        }
+        while let Ok(Some(active)) = desk.server.receive() {
+            let request = *active.payload();
+            let (status, message) = match (injection_of(&request), &self.sim) {
+                (Err(reason), _) => (ControlStatus::INVALID, reason),
+                (Ok(_), None) => (
+                    ControlStatus::UNSUPPORTED,
+                    "the bus is not the simulator".to_string(),
+                ),
+                (Ok(injection), Some(sim)) => {
+                    let name = injection.name();
+                    match sim.inject(injection) {
+                        Ok(true) => (ControlStatus::OK, format!("{name} injected")),
+                        Ok(false) => (
+                            ControlStatus::UNSUPPORTED,
+                            format!("the simulated {} has no {name}", sim.robot()),
+                        ),
+                        Err(reason) => (ControlStatus::REFUSED, reason),
+                    }
+                }
+            };
+            info!(status = ControlStatus::name(status), "simulator: {message}");
+            let mut response = ControlResponse::new(request.seq, status, &message);
+            response.stamp_ns = now.as_nanos();
+            if let Err(e) = active.send_copy(response) {
+                warn!("cannot answer a simulator request: {e}");
+            }
+            if let Err(e) = desk.notifier.notify() {
+                warn!("cannot wake the simulator's clients: {e}");
+            }
+        }
+    }
+
+    /// Writes what the engine polls; each item is stamped when its write returned.
+    pub(super) fn transmit(&mut self, engine: &mut Engine, now: Timestamp) -> Next {
+        let mut sent = std::mem::take(&mut self.scratch);
+        sent.clear();
+        let mut lost = None;
+        while let Some(item) = engine.poll_transmit(now) {
+            let Some(bus) = self.bus.as_mut() else {
+                break;
+            };
+            match bus.transmit(&item) {
+                Ok(()) => sent.push((clock::now(), item)),
+                Err(err) if err.is_disconnect() => {
+                    lost = Some(err);
+                    break;
+                }
+                Err(err) => engine.handle_tx_dropped(now, &err),
+            }
+        }
+        if lost.is_none()
+            && let Some(bus) = self.bus.as_mut()
+            && let Err(err) = bus.flush()
+        {
+            if err.is_disconnect() {
+                lost = Some(err);
+            } else {
+                engine.handle_tx_dropped(now, &err);
+            }
+        }
+        for (stamp, item) in &sent {
+            engine.handle_sent(*stamp, item);
+        }
+        self.scratch = sent;
+        match lost {
+            Some(err) => self.lose_bus(engine, now, &err),
+            None => Next::Continue,
+        }
+    }
+
+    fn lose_bus(&mut self, engine: &mut Engine, now: Timestamp, err: &BusError) -> Next {
+        self.retired.extend(self.bus.take());
+        engine.handle_bus_lost(now, err);
+        Next::Rewire
+    }
+
+    /// Drains the bus (at most one batch): every item is stamped when read and handed to the
+    /// engine; the readers of what it published are woken at once.
+    fn read_bus(&mut self, ports: &Ports, engine: &mut Engine) -> Next {
+        let Some(bus) = self.bus.as_mut() else {
+            return Next::Continue;
+        };
+        let mut received = std::mem::take(&mut self.scratch);
+        received.clear();
+        let mut items = 0;
+        let result = bus.receive(|rx| {
+            let stamp = clock::now();
+            items += match rx {
+                Rx::Can(_) => 1,
+                Rx::Bytes(bytes) => bytes.len().div_ceil(8),
+            };
+            received.push((
+                stamp,
+                match rx {
+                    Rx::Can(frame) => Transmit::Can(*frame),
+                    Rx::Bytes(bytes) => Transmit::Bytes(bytes.to_vec()),
+                },
+            ));
+        });
+        for (stamp, item) in &received {
+            engine.handle_rx(*stamp, item.as_rx());
+        }
+        self.scratch = received;
+        let now = clock::now();
+        self.publish(ports, engine, now);
+        match result {
+            Ok(count) => {
+                engine.handle_bus_read(now, items, count >= MAX_RX_BATCH);
+                Next::Continue
+            }
+            Err(err) => self.lose_bus(engine, now, &err),
+        }
+    }
+
+    fn read_gps(&mut self, engine: &mut Engine, now: Timestamp) -> Next {
+        let Some(gps) = self.gps.as_mut() else {
+            return Next::Continue;
+        };
+        let result = gps.receive(|rx| {
+            if let Rx::Bytes(bytes) = rx {
+                engine.handle_gps(now, bytes);
+            }
+        });
+        match result {
+            Ok(_) => Next::Continue,
+            Err(err) => {
+                self.retired.extend(self.gps.take());
+                engine.handle_gps_lost(now, &err);
+                Next::Rewire
+            }
+        }
+    }
+
+    /// Opens what the engine asks for.
+    pub(super) fn open_due(&mut self, engine: &mut Engine, now: Timestamp) -> Next {
+        let mut next = Next::Continue;
+        while let Some(device) = engine.poll_open(now) {
+            match device {
+                Device::Bus => {
+                    // A simulator thread that ended is replaced by a fresh (power-up) one.
+                    self.sim = None;
+                    match self.devices.open_bus(now) {
+                        Ok((bus, sim)) => {
+                            engine.handle_opened(now, device, bus.name());
+                            self.bus = Some(bus);
+                            self.sim = sim;
+                            next = Next::Rewire;
+                        }
+                        Err(err) => engine.handle_open_failed(now, device, &err),
+                    }
+                }
+                Device::Gps => match self.devices.open_gps() {
+                    Ok(gps) => {
+                        engine.handle_opened(now, device, gps.name());
+                        self.gps = Some(gps);
+                        next = Next::Rewire;
+                    }
+                    Err(err) => engine.handle_open_failed(now, device, &err),
+                },
+            }
+        }
+        next
+    }
+
+    /// Publishes what the engine produced and wakes the readers: one notification per kind and
+    /// batch, not one per sample (every sample is already in shared memory). A failure is
+    /// counted by the engine and logged at most once a second.
+    pub(super) fn publish(&mut self, ports: &Ports, engine: &mut Engine, now: Timestamp) {
+        let (mut state, mut frames, mut mux, mut answered) = (false, false, false, false);
+        let failed = |engine: &mut Engine, what: &'static str, error: &dyn Display| {
+            engine.handle_publish_failed(now, what, error);
+        };
+        while let Some(publication) = engine.poll_publication() {
+            match publication {
+                Publication::State(sample) => match ports.state.publisher.loan_uninit() {
+                    Ok(slot) => match slot.write_payload(*sample).send() {
+                        Ok(_) => state = true,
+                        Err(e) => failed(engine, "state", &e),
+                    },
+                    Err(e) => failed(engine, "state", &e),
+                },
+                Publication::Frame(frame) => match ports.frames.publisher.send_copy(frame) {
+                    Ok(_) => frames = true,
+                    Err(e) => failed(engine, "frame", &e),
+                },
+                Publication::Mux(status) => match ports.mux.publisher.send_copy(*status) {
+                    Ok(_) => mux = true,
+                    Err(e) => failed(engine, "mux status", &e),
+                },
+                Publication::Response { ticket, response } => {
+                    if let Some(active) = self.pending.remove(&ticket) {
+                        match active.send_copy(response) {
+                            Ok(()) => answered = true,
+                            Err(e) => failed(engine, "control response", &e),
+                        }
+                    }
+                }
+            }
+        }
+        let wake = [
+            (state, &ports.state.notifier, "state readers"),
+            (frames, &ports.frames.notifier, "frame readers"),
+            (mux, &ports.mux.notifier, "mux readers"),
+            (answered, &ports.control.notifier, "control clients"),
+        ];
+        for (_, notifier, what) in wake.into_iter().filter(|(any, _, _)| *any) {
+            if let Err(e) = notifier.notify() {
+                failed(engine, what, &e);
+            }
+        }
+    }
+}

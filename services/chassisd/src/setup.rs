@@ -1,0 +1,159 @@
+//! What the service opens: the robot's driver, its bus and its GPS receiver.
+//!
+//! The shell (`crate::service`) asks a [`Devices`] for its bus and GPS port, at start and each
+//! time the engine wants one reopened; [`Hardware`] opens the real ones named in the
+//! configuration (and runs the simulated chassis for the `sim` bus). A test hands the shell its
+//! own [`Devices`].
+
+use chassis_protocols::{DriverConfig, Profile, Timestamp, scout_mini, titan, xbot};
+
+use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
+use crate::config::Config;
+use crate::engine::BoxedDriver;
+use crate::sim::{SimHandle, firmware_for};
+
+/// The driver of `profile`'s robot.
+pub fn driver_for(profile: &Profile, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
+    match profile {
+        Profile::Titan(p) => Box::new(titan::TitanDriver::new(p.clone(), config.clone(), now)),
+        Profile::ScoutMini(p) => Box::new(scout_mini::ScoutMiniDriver::new(
+            p.clone(),
+            config.clone(),
+            now,
+        )),
+        Profile::Xbot(p) => Box::new(xbot::XbotDriver::new(p.clone(), config.clone(), now)),
+    }
+}
+
+/// Where the shell gets its devices.
+pub trait Devices {
+    /// Opens the robot's bus at `now`; the simulated bus comes with its running chassis.
+    fn open_bus(&mut self, now: Timestamp) -> Result<(Bus, Option<SimHandle>), BusError>;
+    /// Opens the GPS receiver (only called when one is configured).
+    fn open_gps(&mut self) -> Result<Bus, BusError>;
+}
+
+/// The devices named in the configuration.
+#[derive(Debug, Clone)]
+pub struct Hardware {
+    config: Config,
+}
+
+impl Hardware {
+    pub fn new(config: &Config) -> Self {
+        Self {
+            config: config.clone(),
+        }
+    }
+}
+
+impl Devices for Hardware {
+    fn open_bus(&mut self, now: Timestamp) -> Result<(Bus, Option<SimHandle>), BusError> {
+        open_bus(&self.config.bus, &self.config, now)
+    }
+
+    fn open_gps(&mut self) -> Result<Bus, BusError> {
+        let Some(BusSpec::Serial { path, baud }) = &self.config.gps else {
+            return Err(BusError::Open {
+                name: "gps".into(),
+                reason: "the GPS receiver is a serial port (serial:PATH[@BAUD])".into(),
+            });
+        };
+        let gps_baud = match &self.config.profile {
+            Profile::Xbot(p) => p.gps_baud,
+            _ => 4800,
+        };
+        Ok(Bus::Bytes(Box::new(serial::SerialBus::open(
+            path,
+            baud.unwrap_or(gps_baud),
+        )?)))
+    }
+}
+
+/// Opens the bus named by `spec` for the service (the simulator gets its own thread, powered
+/// up at `now`).
+pub fn open_bus(
+    spec: &BusSpec,
+    config: &Config,
+    now: Timestamp,
+) -> Result<(Bus, Option<SimHandle>), BusError> {
+    let robot = config.robot;
+    let serial_baud = |baud: Option<u32>| {
+        baud.unwrap_or(match &config.profile {
+            Profile::Xbot(p) => p.baud,
+            _ => 115_200,
+        })
+    };
+    Ok(match spec {
+        BusSpec::Sim => {
+            let firmware = firmware_for(&config.profile, now);
+            let io = |e: std::io::Error| BusError::Open {
+                name: "sim".into(),
+                reason: e.to_string(),
+            };
+            let (ours, theirs) = if robot.is_can() {
+                let (a, b) = datagram::PairCan::pair("sim").map_err(io)?;
+                (Bus::Can(Box::new(a)), Bus::Can(Box::new(b)))
+            } else {
+                let (a, b) = datagram::StreamBytes::pair("sim").map_err(io)?;
+                (Bus::Bytes(Box::new(a)), Bus::Bytes(Box::new(b)))
+            };
+            // A pinned loop leaves the other CPUs to its simulated chassis.
+            let others: Vec<usize> = match config.cpu {
+                Some(cpu) => (0..std::thread::available_parallelism().map_or(1, |n| n.get()))
+                    .filter(|&c| c != cpu)
+                    .collect(),
+                None => Vec::new(),
+            };
+            let handle = SimHandle::spawn_on(firmware, theirs, &others).map_err(io)?;
+            (ours, Some(handle))
+        }
+        BusSpec::Can { iface } => (Bus::Can(Box::new(socketcan::SocketCan::open(iface)?)), None),
+        BusSpec::Serial { path, baud } => {
+            if robot.is_can() {
+                return Err(BusError::Open {
+                    name: spec.to_string(),
+                    reason: format!("{robot} is a CAN robot: use can:IFACE or slcan:PATH"),
+                });
+            }
+            let port = serial::SerialBus::open(path, serial_baud(*baud))?;
+            (Bus::Bytes(Box::new(port)), None)
+        }
+        BusSpec::Slcan { path, baud } => {
+            if !robot.is_can() {
+                return Err(BusError::Open {
+                    name: spec.to_string(),
+                    reason: format!("{robot} speaks RS232: use serial:PATH"),
+                });
+            }
+            let port = serial::SerialBus::open(path, serial_baud(*baud))?;
+            let bus = slcan::SlcanBus::open(port, config.bus_settings.can_bitrate)?;
+            (Bus::Can(Box::new(bus)), None)
+        }
+        BusSpec::Replay { path, speed } => (crate::bus::replay::open(path, *speed, robot)?, None),
+        BusSpec::Pty { .. } | BusSpec::SlcanPty { .. } => {
+            return Err(BusError::Open {
+                name: spec.to_string(),
+                reason: "pty links are made by `chassisd sim`, not opened by the service".into(),
+            });
+        }
+    })
+}
+
+/// Why the loop's thread could not be pinned.
+#[derive(Debug, thiserror::Error)]
+#[error("pinning the loop to CPU {cpu}: {source}")]
+pub struct PinError {
+    pub cpu: usize,
+    #[source]
+    pub source: nix::Error,
+}
+
+/// Pins the calling thread to `cpu`.
+pub fn pin_to_cpu(cpu: usize) -> Result<(), PinError> {
+    use nix::sched::{CpuSet, sched_setaffinity};
+    let error = |source| PinError { cpu, source };
+    let mut set = CpuSet::new();
+    set.set(cpu).map_err(error)?;
+    sched_setaffinity(nix::unistd::Pid::from_raw(0), &set).map_err(error)
+}
