@@ -8,12 +8,16 @@
 //! so any layout change must bump the version. Layout tests in each module pin size, alignment and
 //! field offsets so such a change is always deliberate.
 //!
+//! Each type also describes itself field by field ([`layout::Layout`]): the machine-readable
+//! contract (`chassis interfaces --json`) that programs in other languages mirror.
+//!
 //! Axes follow ISO 8855 / REP 103 for every robot: x forward, y left, z up, counter-clockwise
 //! (left turn) positive. Timestamps are `CLOCK_MONOTONIC` nanoseconds, system-wide, so a reader in
 //! another process can compute one-way latencies without clock synchronisation.
 
 mod control;
 mod frame;
+pub mod layout;
 mod mux;
 mod names;
 mod request;
@@ -27,7 +31,7 @@ pub use control::{
 };
 pub use frame::{BusFrame, FrameDirection, FrameKind};
 pub use mux::{ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Twist, ZeroReason};
-pub use names::{ServiceKind, service_name, valid_robot_name};
+pub use names::valid_robot_name;
 pub use request::{RequestFlags, VelocityRequest};
 pub use safety::{EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus};
 pub use state::{
