@@ -213,7 +213,6 @@ macro_rules! describe_constants {
         )
     };
 }
-pub(crate) use describe_constants;
 
 impl ConstantGroup {
     pub(crate) fn new(
