@@ -12,14 +12,14 @@ pub struct InterfacesArgs {
 }
 
 pub fn run(args: &InterfacesArgs) -> anyhow::Result<()> {
-    print!("{}", render(args.json));
+    print!("{}", render(args.json)?);
     Ok(())
 }
 
 /// The text `chassis interfaces` prints.
-pub fn render(json: bool) -> String {
+pub fn render(json: bool) -> anyhow::Result<String> {
     if json {
-        return contract::json();
+        return Ok(contract::json()?);
     }
     let doc = contract::document();
     let mut lines = vec![
@@ -71,7 +71,7 @@ pub fn render(json: bool) -> String {
         ));
     }
     lines.push(String::new());
-    lines.join("\n")
+    Ok(lines.join("\n"))
 }
 
 #[cfg(test)]
@@ -80,7 +80,7 @@ mod tests {
 
     #[test]
     fn the_json_describes_chassis_state_byte_for_byte() {
-        let v: serde_json::Value = serde_json::from_str(&render(true)).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&render(true).unwrap()).unwrap();
         let state = &v["types"]["ChassisState"];
         assert_eq!(state["type_name"], "chassis::ChassisState.v1");
         assert_eq!(state["size"], 824);
@@ -115,7 +115,7 @@ mod tests {
 
     #[test]
     fn the_table_names_every_service_and_type() {
-        let table = render(false);
+        let table = render(false).unwrap();
         assert!(table.contains("chassis/{robot}/cmd/{source}"));
         assert!(table.contains("chassis::ChassisState.v1"));
         assert!(table.contains("CHASSIS_IPC_PREFIX"));

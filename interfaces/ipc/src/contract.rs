@@ -167,11 +167,10 @@ pub fn document() -> Document {
 
 /// [`document`] as pretty-printed JSON, with a final newline: the content of
 /// `interfaces/contract.json`.
-pub fn json() -> String {
-    // A document of strings, integers, booleans and maps with string keys always serializes.
-    let mut text = serde_json::to_string_pretty(&document()).unwrap_or_default();
+pub fn json() -> Result<String, serde_json::Error> {
+    let mut text = serde_json::to_string_pretty(&document())?;
     text.push('\n');
-    text
+    Ok(text)
 }
 
 #[cfg(test)]
@@ -179,7 +178,7 @@ mod tests {
     use super::*;
 
     fn value() -> serde_json::Value {
-        serde_json::from_str(&json()).unwrap()
+        serde_json::from_str(&json().unwrap()).unwrap()
     }
 
     #[test]
@@ -187,7 +186,7 @@ mod tests {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../contract.json");
         let committed = std::fs::read_to_string(path).unwrap_or_default();
         assert!(
-            committed == json(),
+            committed == json().unwrap(),
             "interfaces/contract.json differs from the contract the code describes; regenerate \
              it with `cargo run -q -p chassis-cli --bin chassis -- interfaces --json > \
              interfaces/contract.json` and review the difference"

@@ -32,7 +32,7 @@ pub const MAX_CLIENTS: usize = 16;
 /// Notifiers of a publish-subscribe service's event: its publisher's, and room for the one of a
 /// restarted publisher while iceoryx2 has not yet cleaned up after the dead one.
 const PUBLISHER_NOTIFIERS: usize = 2;
-/// Samples a subscriber of `mux`, of a source or of a client's publication may buffer.
+/// Samples a subscriber of `mux` or of a source may buffer.
 const STATUS_BUFFER: usize = 16;
 /// Buffer of a client's publication: its readers want the latest sample.
 const PUBLICATION_BUFFER: usize = 4;

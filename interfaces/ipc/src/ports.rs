@@ -364,3 +364,106 @@ impl<Req: Debug + ZeroCopySend + 'static> Exchange<Req> {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{CONTROL, STATE, ServiceKind, config, service_name};
+
+    /// Removes the iceoryx2 files of a test's own prefix once its node is gone (declare it
+    /// before the node: it is dropped after it).
+    struct Scratch(String);
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            for dir in [
+                "/dev/shm",
+                "/tmp/iceoryx2",
+                "/tmp/iceoryx2/services",
+                "/tmp/iceoryx2/nodes",
+            ] {
+                for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+                    if entry.file_name().to_string_lossy().starts_with(&self.0) {
+                        let path = entry.path();
+                        let removed = if path.is_dir() {
+                            std::fs::remove_dir_all(&path)
+                        } else {
+                            std::fs::remove_file(&path)
+                        };
+                        if let Err(e) = removed {
+                            eprintln!("cannot remove {}: {e}", path.display());
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    fn test_node(test: &str) -> (Scratch, Node<ipc::Service>) {
+        let prefix = format!("chassis_ipc_{test}_{}_", std::process::id());
+        let node = node(
+            None,
+            &config(Some(&prefix)).unwrap(),
+            SignalHandlingMode::Disabled,
+        )
+        .unwrap();
+        (Scratch(prefix), node)
+    }
+
+    #[test]
+    fn a_reader_started_before_the_owner_finds_nothing_and_creates_nothing() {
+        let (_scratch, node) = test_node("before");
+        let name = service_name("early", ServiceKind::State);
+        let err = STATE.open(&node, &name).unwrap_err();
+        assert!(matches!(err, IpcError::NotFound { .. }), "{err}");
+        assert_eq!(err.to_string(), "no service chassis/early/state");
+        assert!(matches!(
+            STATE.publishers(&node, &name),
+            Err(IpcError::NotFound { .. })
+        ));
+        let control = service_name("early", ServiceKind::Control);
+        assert!(matches!(
+            CONTROL.open(&node, &control),
+            Err(IpcError::NotFound { .. })
+        ));
+    }
+
+    #[test]
+    fn the_owner_fixes_the_limits_and_holds_the_one_publisher_and_server() {
+        let (_scratch, node) = test_node("owner");
+        let name = service_name("owned", ServiceKind::State);
+        let owned = STATE.create(&node, &name).unwrap();
+        let _writer = owned.publisher().unwrap();
+        let opened = STATE.open(&node, &name).unwrap();
+        assert_eq!(opened.publishers(), 1);
+        assert_eq!(
+            opened.subscriber_max_buffer_size(),
+            STATE.limits.subscriber_max_buffer_size
+        );
+        let err = opened.publisher().unwrap_err();
+        assert!(
+            matches!(
+                err,
+                IpcError::Taken {
+                    port: "publisher",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        let reader = opened
+            .subscriber(STATE.limits.subscriber_max_buffer_size)
+            .unwrap();
+        drop(reader);
+
+        let control = service_name("owned", ServiceKind::Control);
+        let _server = CONTROL.create(&node, &control).unwrap().server().unwrap();
+        let exchange = CONTROL.open(&node, &control).unwrap();
+        let _client = exchange.client().unwrap();
+        let err = exchange.server().unwrap_err();
+        assert!(
+            matches!(err, IpcError::Taken { port: "server", .. }),
+            "{err}"
+        );
+    }
+}

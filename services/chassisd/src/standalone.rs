@@ -80,11 +80,11 @@ const LAST_RETRY: Duration = Duration::from_secs(2);
 /// Runs the simulated chassis until SIGINT/SIGTERM. A lost bus is reopened with backoff.
 pub fn run(config: &Config) -> Result<(), String> {
     let bus = open_chassis_side(&config.bus, config).map_err(|e| e.to_string())?;
+    let sim_name = service_name(&config.name, ServiceKind::Sim);
     info!(
         robot = config.robot.name(),
         bus = bus.name(),
-        "simulated chassis up (faults: chassis/{}/sim)",
-        config.name
+        "simulated chassis up (faults: {sim_name})"
     );
     let firmware = firmware_for(&config.profile, clock::now());
     let mut chassis = Chassis::Running(SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?);
@@ -95,15 +95,12 @@ pub fn run(config: &Config) -> Result<(), String> {
         SignalHandlingMode::HandleTerminationRequests,
     )
     .map_err(|e| e.to_string())?;
-    let desk = open_desk(&node, &SIM, &service_name(&config.name, ServiceKind::Sim)).map_err(
-        |e| match e {
-            IpcError::AlreadyServed { .. } => format!(
-                "another simulated chassis already answers chassis/{}/sim; pick another --name",
-                config.name
-            ),
-            other => other.to_string(),
-        },
-    )?;
+    let desk = open_desk(&node, &SIM, &sim_name).map_err(|e| match e {
+        IpcError::AlreadyServed { .. } => {
+            format!("another simulated chassis already answers {sim_name}; pick another --name")
+        }
+        other => other.to_string(),
+    })?;
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
