@@ -2,7 +2,7 @@
 //!
 //! Programs in other languages (Python `ctypes` mirrors, ROS 2, Foxglove and Zenoh bridges) read
 //! the layouts from here instead of from the Rust source. Each `#[repr(C)]` type lists its fields
-//! once, by name, in [`describe_layout!`]: offsets come from `core::mem::offset_of!` and each
+//! once, by name, in `describe_layout!`: offsets come from `core::mem::offset_of!` and each
 //! field's type and size from the Rust field itself, so only a forgotten or misordered field can
 //! be wrong — and the test each type gets checks that the fields cover every byte, in order
 //! (the types have no padding: zerocopy's `IntoBytes` proves it).
@@ -120,7 +120,7 @@ impl TypeLayout {
     }
 }
 
-/// A `#[repr(C)]` IPC type described field by field (implemented by [`describe_layout!`]).
+/// A `#[repr(C)]` IPC type described field by field (implemented by the crate's `describe_layout!`).
 pub trait Layout: FieldKind {
     /// The Rust name, e.g. `ChassisState`.
     const NAME: &'static str;
