@@ -5,6 +5,8 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
+use crate::layout::describe_layout;
+
 use crate::NAME_LEN;
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 
@@ -160,6 +162,18 @@ pub struct ControlRequest {
     pub name: [u8; NAME_LEN],
 }
 
+describe_layout!(
+    ControlRequest,
+    control_request_description_covers_every_byte {
+        stamp_ns,
+        seq,
+        kind,
+        arg,
+        value,
+        name,
+    }
+);
+
 impl ControlRequest {
     pub fn new(kind: u8) -> Self {
         Self {
@@ -246,6 +260,17 @@ pub struct ControlResponse {
     #[serde(serialize_with = "serialize_fixed_str")]
     pub message: [u8; ControlResponse::MESSAGE_LEN],
 }
+
+describe_layout!(
+    ControlResponse,
+    control_response_description_covers_every_byte {
+        stamp_ns,
+        request_seq,
+        status,
+        _reserved,
+        message,
+    }
+);
 
 impl Default for ControlResponse {
     fn default() -> Self {
@@ -410,6 +435,19 @@ pub struct SimRequest {
     /// Amount for the kinds that take one (%, s, m, bytes, frames).
     pub value: f64,
 }
+
+describe_layout!(
+    SimRequest,
+    sim_request_description_covers_every_byte {
+        stamp_ns,
+        seq,
+        kind,
+        flag,
+        index,
+        _reserved,
+        value,
+    }
+);
 
 #[cfg(test)]
 mod sim_tests {

@@ -5,6 +5,8 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
+use crate::layout::describe_layout;
+
 /// [`BusFrame::direction`].
 #[derive(Debug, Clone, Copy)]
 pub struct FrameDirection;
@@ -60,6 +62,20 @@ pub struct BusFrame {
     #[serde(skip)]
     pub data: [u8; BusFrame::DATA_LEN],
 }
+
+describe_layout!(
+    BusFrame,
+    bus_frame_description_covers_every_byte {
+        stamp_ns,
+        seq,
+        can_id,
+        direction,
+        kind,
+        len,
+        flags,
+        data,
+    }
+);
 
 impl Default for BusFrame {
     fn default() -> Self {

@@ -8,12 +8,16 @@
 //! so any layout change must bump the version. Layout tests in each module pin size, alignment and
 //! field offsets so such a change is always deliberate.
 //!
+//! Each type also describes itself field by field ([`layout::Layout`]): the machine-readable
+//! contract (`chassis interfaces --json`) that programs in other languages mirror.
+//!
 //! Axes follow ISO 8855 / REP 103 for every robot: x forward, y left, z up, counter-clockwise
 //! (left turn) positive. Timestamps are `CLOCK_MONOTONIC` nanoseconds, system-wide, so a reader in
 //! another process can compute one-way latencies without clock synchronisation.
 
 mod control;
 mod frame;
+pub mod layout;
 mod mux;
 mod names;
 mod request;
@@ -27,7 +31,7 @@ pub use control::{
 };
 pub use frame::{BusFrame, FrameDirection, FrameKind};
 pub use mux::{ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Twist, ZeroReason};
-pub use names::{ServiceKind, service_name, valid_robot_name};
+pub use names::valid_robot_name;
 pub use request::{RequestFlags, VelocityRequest};
 pub use safety::{EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus};
 pub use state::{
@@ -43,14 +47,3 @@ pub const NAME_LEN: usize = 16;
 pub const MAX_SOURCES: usize = 8;
 /// Most locks a mux can be configured with.
 pub const MAX_LOCKS: usize = 4;
-/// Most `ChassisState` samples a subscriber of `chassis/<name>/state` may buffer: the state
-/// service's `subscriber_max_buffer_size`, and the most a client's state stream can ask for.
-///
-/// The service publishes one sample per bus frame that changes the state and wakes the readers
-/// once per read of the bus. On a saturated bus it reads once per 4 ms: ≈ 18 samples per read at
-/// 500 kbit/s, ≈ 36 at 1 Mbit/s (8-byte standard frames, 111 bits each). A read takes at most
-/// 256 frames (`chassisd`'s `MAX_RX_BATCH`), the backlog of a service held up for ≈ 57 ms at
-/// 500 kbit/s (≈ 28 ms at 1 Mbit/s): a reader needs room for one whole read before it is even
-/// woken. 256 holds it; a reader woken at every read of a moderated 500 kbit/s bus may be ≈ 55 ms
-/// late before it loses a sample.
-pub const STATE_BUFFER: usize = 256;

@@ -5,6 +5,8 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
+use crate::layout::describe_layout;
+
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 use crate::{MAX_LOCKS, MAX_SOURCES, NAME_LEN};
 
@@ -32,6 +34,17 @@ pub struct Twist {
     /// `RequestFlags::STEER` when `steer_rad` is the command instead of `angular_z_radps`.
     pub flags: u32,
 }
+
+describe_layout!(
+    Twist,
+    twist_description_covers_every_byte {
+        linear_x_mps,
+        linear_y_mps,
+        angular_z_radps,
+        steer_rad,
+        flags,
+    }
+);
 
 impl Twist {
     pub const ZERO: Twist = Twist {
@@ -187,6 +200,20 @@ pub struct SourceStatus {
     pub last_seq: u64,
 }
 
+describe_layout!(
+    SourceStatus,
+    source_status_description_covers_every_byte {
+        name,
+        timeout_ms,
+        age_ms,
+        rejected,
+        priority,
+        flags,
+        _reserved,
+        last_seq,
+    }
+);
+
 impl SourceStatus {
     pub fn name(&self) -> &str {
         read_fixed_str(&self.name)
@@ -231,6 +258,18 @@ pub struct LockStatus {
     #[serde(skip)]
     pub _reserved: [u8; 5],
 }
+
+describe_layout!(
+    LockStatus,
+    lock_status_description_covers_every_byte {
+        name,
+        since_ns,
+        priority,
+        held,
+        holder,
+        _reserved,
+    }
+);
 
 impl LockStatus {
     pub const HOLDER_NONE: u8 = 0xFF;
@@ -286,6 +325,27 @@ pub struct MuxStatus {
     pub sources: [SourceStatus; MAX_SOURCES],
     pub locks: [LockStatus; MAX_LOCKS],
 }
+
+describe_layout!(
+    MuxStatus,
+    mux_status_description_covers_every_byte {
+        stamp_ns,
+        seq,
+        requested,
+        output,
+        clamp_flags,
+        active_age_ms,
+        rejected_requests,
+        active_source,
+        active_priority,
+        zero_reason,
+        source_count,
+        lock_count,
+        _reserved,
+        sources,
+        locks,
+    }
+);
 
 impl MuxStatus {
     pub const NO_SOURCE: u8 = 0xFF;

@@ -5,6 +5,8 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
+use crate::layout::describe_layout;
+
 /// Bits of [`VelocityRequest::flags`] (and of `Twist::flags`).
 #[derive(Debug, Clone, Copy)]
 pub struct RequestFlags;
@@ -69,6 +71,26 @@ pub struct VelocityRequest {
     /// With [`RequestFlags::LIMIT`]: largest |yaw rate|, rad/s (≥ 0).
     pub limit_angular_radps: f32,
 }
+
+describe_layout!(
+    VelocityRequest,
+    velocity_request_description_covers_every_byte {
+        stamp_ns,
+        seq,
+        linear_x_mps,
+        linear_y_mps,
+        angular_z_radps,
+        steer_rad,
+        flags,
+        lock_engage,
+        lock_release,
+        _reserved,
+        limit_forward_mps,
+        limit_reverse_mps,
+        limit_lateral_mps,
+        limit_angular_radps,
+    }
+);
 
 impl VelocityRequest {
     /// A twist request (v, ω).

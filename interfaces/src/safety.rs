@@ -7,6 +7,8 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
+use crate::layout::describe_layout;
+
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 
 /// The monitor's rules: the index into the per-rule arrays of [`SafetyStatus`] and the bit in its
@@ -203,6 +205,33 @@ pub struct SafetyStatus {
     #[serde(serialize_with = "serialize_fixed_str")]
     pub last_text: [u8; SafetyStatus::TEXT_LEN],
 }
+
+describe_layout!(
+    SafetyStatus,
+    safety_status_description_covers_every_byte {
+        stamp_ns,
+        seq,
+        started_ns,
+        state_seq,
+        state_age_ms,
+        active_rules,
+        acknowledged_rules,
+        enabled_rules,
+        limit_forward_mps,
+        limit_reverse_mps,
+        limit_lateral_mps,
+        limit_angular_radps,
+        action,
+        estop,
+        last_rule,
+        last_event,
+        _reserved,
+        trigger_counts,
+        last_trigger_ns,
+        last_event_ns,
+        last_text,
+    }
+);
 
 impl Default for SafetyStatus {
     fn default() -> Self {

@@ -10,6 +10,8 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
+use crate::layout::describe_layout;
+
 /// Which robot produced a sample (`ChassisState::robot`).
 #[derive(Debug, Clone, Copy)]
 pub struct RobotKind;
@@ -359,6 +361,21 @@ pub struct MotionState {
     pub wheel_mps: [f32; 4],
 }
 
+describe_layout!(
+    MotionState,
+    motion_state_description_covers_every_byte {
+        linear_mps,
+        angular_radps,
+        lateral_mps,
+        steer_rad,
+        front_steer_rad,
+        rear_steer_rad,
+        front_axle_mps,
+        rear_axle_mps,
+        wheel_mps,
+    }
+);
+
 /// Distances and the integrated pose.
 #[repr(C)]
 #[derive(
@@ -391,6 +408,19 @@ pub struct OdometryState {
     /// Heading, rad, wrapped to (-π, π].
     pub yaw_rad: f64,
 }
+
+describe_layout!(
+    OdometryState,
+    odometry_state_description_covers_every_byte {
+        front_distance_m,
+        rear_distance_m,
+        left_distance_m,
+        right_distance_m,
+        x_m,
+        y_m,
+        yaw_rad,
+    }
+);
 
 /// Body status, mode, faults and battery.
 #[repr(C)]
@@ -438,6 +468,25 @@ pub struct SystemState {
     pub _reserved: u8,
 }
 
+describe_layout!(
+    SystemState,
+    system_state_description_covers_every_byte {
+        fault_flags,
+        vendor_fault_word,
+        battery_voltage_v,
+        battery_soc_pct,
+        battery_current_a,
+        body_status,
+        control_mode,
+        parking_brake_engaged,
+        off_road,
+        silent_mode,
+        steering_zero_done,
+        power_enabled,
+        _reserved,
+    }
+);
+
 impl SystemState {
     pub const BODY_NORMAL: u8 = 0;
     pub const BODY_EMERGENCY_STOP: u8 = 1;
@@ -479,6 +528,20 @@ pub struct MotorState {
     pub _reserved: [u8; 3],
 }
 
+describe_layout!(
+    MotorState,
+    motor_state_description_covers_every_byte {
+        position_counts,
+        rpm,
+        current_a,
+        driver_voltage_v,
+        driver_temp_c,
+        motor_temp_c,
+        driver_status,
+        _reserved,
+    }
+);
+
 /// One BMS group (0 = pack, 1 = battery 1, 2 = battery 2).
 #[repr(C)]
 #[derive(
@@ -505,6 +568,18 @@ pub struct BmsState {
     /// Raw alarm bytes: alarm 1 (bits 0-7), alarm 2 (8-15), warning 1 (16-23), warning 2 (24-31).
     pub alarm_flags: u32,
 }
+
+describe_layout!(
+    BmsState,
+    bms_state_description_covers_every_byte {
+        soc_pct,
+        soh_pct,
+        voltage_v,
+        current_a,
+        temperature_c,
+        alarm_flags,
+    }
+);
 
 /// RC transmitter.
 #[repr(C)]
@@ -541,6 +616,23 @@ pub struct RcState {
     pub _reserved: [u8; 2],
 }
 
+describe_layout!(
+    RcState,
+    rc_state_description_covers_every_byte {
+        switch_a,
+        switch_b,
+        switch_c,
+        switch_d,
+        right_x_pct,
+        right_y_pct,
+        left_y_pct,
+        left_x_pct,
+        knob_a_pct,
+        counter,
+        _reserved,
+    }
+);
+
 /// Lights.
 #[repr(C)]
 #[derive(
@@ -568,6 +660,16 @@ pub struct LightsState {
     pub _reserved: u8,
 }
 
+describe_layout!(
+    LightsState,
+    lights_state_description_covers_every_byte {
+        control_enabled,
+        front_mode,
+        front_brightness_pct,
+        _reserved,
+    }
+);
+
 /// Range sensors (XBot).
 #[repr(C)]
 #[derive(
@@ -590,6 +692,11 @@ pub struct RangesState {
     /// Ultrasonic rangers front-left, front-centre, front-right, m.
     pub ultrasonic_m: [f32; 3],
 }
+
+describe_layout!(
+    RangesState,
+    ranges_state_description_covers_every_byte { ir_m, ultrasonic_m }
+);
 
 /// Inertial measurement unit, in the sensor's axes.
 #[repr(C)]
@@ -618,6 +725,20 @@ pub struct ImuState {
     /// The sensor board's own timestamp, µs (wraps at 65536 on the XBot).
     pub sensor_stamp_us: u32,
 }
+
+describe_layout!(
+    ImuState,
+    imu_state_description_covers_every_byte {
+        accel_mps2,
+        gyro_radps,
+        mag_gauss,
+        roll_rad,
+        pitch_rad,
+        yaw_rad,
+        temperature_c,
+        sensor_stamp_us,
+    }
+);
 
 /// Lift platform (XBot).
 #[repr(C)]
@@ -648,6 +769,17 @@ pub struct LiftState {
     pub _reserved: [u8; 7],
 }
 
+describe_layout!(
+    LiftState,
+    lift_state_description_covers_every_byte {
+        encoder_counts,
+        target_pct,
+        current_a,
+        enabled,
+        _reserved,
+    }
+);
+
 /// Pan and tilt servos (XBot), as commanded.
 #[repr(C)]
 #[derive(
@@ -670,6 +802,11 @@ pub struct PanTiltState {
     /// Tilt, rad: 0 ahead, up positive.
     pub tilt_rad: f32,
 }
+
+describe_layout!(
+    PanTiltState,
+    pan_tilt_state_description_covers_every_byte { pan_rad, tilt_rad }
+);
 
 /// GPS fix from the NMEA 0183 stream.
 #[repr(C)]
@@ -714,6 +851,24 @@ pub struct GpsFix {
     pub _reserved: u8,
 }
 
+describe_layout!(
+    GpsFix,
+    gps_fix_description_covers_every_byte {
+        latitude_deg,
+        longitude_deg,
+        utc_time_s,
+        altitude_m,
+        hdop,
+        speed_mps,
+        course_rad,
+        utc_date,
+        fix_quality,
+        satellites,
+        fix_type,
+        _reserved,
+    }
+);
+
 impl GpsFix {
     /// True when the receiver reports a usable position.
     pub fn has_fix(&self) -> bool {
@@ -747,6 +902,18 @@ pub struct CommandEcho {
     #[serde(skip)]
     pub _reserved: u32,
 }
+
+describe_layout!(
+    CommandEcho,
+    command_echo_description_covers_every_byte {
+        linear_mps,
+        lateral_mps,
+        angular_radps,
+        steer_rad,
+        clamp_flags,
+        _reserved,
+    }
+);
 
 /// Counters of the bus link.
 #[repr(C)]
@@ -782,6 +949,20 @@ pub struct LinkStats {
     /// Times the bus was lost and reopened.
     pub bus_reconnects: u64,
 }
+
+describe_layout!(
+    LinkStats,
+    link_stats_description_covers_every_byte {
+        rx_frames,
+        tx_frames,
+        rx_bad_checksum,
+        rx_decode_errors,
+        rx_unknown_id,
+        rx_bytes_discarded,
+        tx_errors,
+        bus_reconnects,
+    }
+);
 
 /// One snapshot of everything the chassis reports.
 #[repr(C)]
@@ -832,6 +1013,33 @@ pub struct ChassisState {
     pub command: CommandEcho,
     pub link: LinkStats,
 }
+
+describe_layout!(
+    ChassisState,
+    chassis_state_description_covers_every_byte {
+        seq,
+        stamp_ns,
+        valid_mask,
+        link_flags,
+        robot,
+        _reserved,
+        group_stamp_ns,
+        motion,
+        odometry,
+        system,
+        motors,
+        bms,
+        rc,
+        lights,
+        ranges,
+        imu,
+        lift,
+        pan_tilt,
+        gps,
+        command,
+        link,
+    }
+);
 
 impl ChassisState {
     /// Marks `group` as updated at `now_ns`.

@@ -14,6 +14,7 @@ mod codec;
 mod decode;
 mod demo;
 mod encode;
+mod interfaces;
 mod live;
 mod procs;
 mod record;
@@ -96,6 +97,8 @@ enum Cmd {
         #[command(subcommand)]
         command: live::SimCmd,
     },
+    /// The IPC contract: services, limits and payload layouts (--json: the whole document).
+    Interfaces(interfaces::InterfacesArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -201,6 +204,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Cmd::Demo(args) => demo::run(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Record(args) => record::record(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Replay(args) => record::replay(&args).map(|()| ExitCode::SUCCESS),
+        Cmd::Interfaces(args) => interfaces::run(&args).map(|()| ExitCode::SUCCESS),
     }
 }
 

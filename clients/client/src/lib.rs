@@ -35,19 +35,18 @@
 use std::time::Duration;
 
 pub use chassis_interfaces::*;
+use chassis_ipc::{
+    CMD, CONTROL, ClientPorts, FRAMES, IpcError, MUX, PUBLICATION, Reader, RequestResponse, SIM,
+    STATE, Writer, publication,
+};
+pub use chassis_ipc::{IPC_PREFIX_ENV, STATE_BUFFER, ServiceKind, service_name};
 use iceoryx2::pending_response::PendingResponse;
-use iceoryx2::port::client::Client;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
-use iceoryx2::service::port_factory::PortFactory;
 use thiserror::Error;
-
-/// Environment variable naming the iceoryx2 file prefix; must match the service's.
-pub const IPC_PREFIX_ENV: &str = "CHASSIS_IPC_PREFIX";
 
 /// What went wrong talking to a robot.
 #[derive(Debug, Error)]
@@ -79,8 +78,14 @@ pub enum ClientError {
     Ipc(String),
 }
 
-fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> ClientError + '_ {
-    move |e| ClientError::Ipc(format!("{what}: {e:?}"))
+fn ipc<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> ClientError + '_ {
+    move |e| ClientError::Ipc(format!("{what}: {e}"))
+}
+
+impl From<IpcError> for ClientError {
+    fn from(e: IpcError) -> Self {
+        ClientError::Ipc(e.to_string())
+    }
 }
 
 /// `CLOCK_MONOTONIC` now, ns: the clock of every stamp in the system.
@@ -92,38 +97,14 @@ pub fn now_ns() -> u64 {
     })
 }
 
-fn iceoryx_config(prefix: Option<&str>) -> Result<Config, ClientError> {
-    let mut config = Config::default();
-    let prefix = prefix
-        .map(str::to_string)
-        .or_else(|| std::env::var(IPC_PREFIX_ENV).ok());
-    if let Some(prefix) = prefix {
-        config.global.prefix = FileName::new(prefix.as_bytes())
-            .map_err(|e| ClientError::Ipc(format!("{IPC_PREFIX_ENV}={prefix}: {e:?}")))?;
-    }
-    Ok(config)
-}
-
-fn service(name: &str) -> Result<ServiceName, ClientError> {
-    name.try_into().map_err(ipc("service name"))
-}
-
-/// A request-response client answered with `ControlResponse`.
-type Asker<Req> = Client<ipc::Service, Req, (), ControlResponse, ()>;
-type ControlClient = Asker<ControlRequest>;
-type SimClient = Asker<SimRequest>;
-
-/// A request-response client with its paired events.
-#[derive(Debug)]
-struct Counter<C> {
-    client: C,
-    notifier: Notifier<ipc::Service>,
-    replies: Listener<ipc::Service>,
-}
+/// A request-response client answered with `ControlResponse`, with its paired events.
+type Counter<Req> = ClientPorts<Req>;
 
 /// State samples a [`Robot`]'s own subscriber keeps: the newest, and a few before it for
 /// [`Robot::wait_states`].
 const LATEST_STATE_BUFFER: usize = 4;
+/// Mux decisions a [`Robot`]'s own subscriber keeps (it wants the newest).
+const LATEST_MUX_BUFFER: usize = 4;
 
 /// A connection to one robot.
 ///
@@ -141,8 +122,8 @@ pub struct Robot {
     mux_events: Option<Listener<ipc::Service>>,
     latest_state: Option<ChassisState>,
     latest_mux: Option<MuxStatus>,
-    control: Option<Counter<ControlClient>>,
-    sim: Option<Counter<SimClient>>,
+    control: Option<Counter<ControlRequest>>,
+    sim: Option<Counter<SimRequest>>,
     control_seq: u64,
 }
 
@@ -158,43 +139,26 @@ impl Robot {
         if !valid_robot_name(name) {
             return Err(ClientError::BadName(name.to_string()));
         }
-        let node = NodeBuilder::new()
-            .config(&iceoryx_config(prefix)?)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .map_err(ipc("creating the node"))?;
-        let state_name = service_name(name, ServiceKind::State);
-        let state_service = match node
-            .service_builder(&service(&state_name)?)
-            .publish_subscribe::<ChassisState>()
-            .open()
-        {
-            Ok(s) => s,
-            Err(PublishSubscribeOpenError::DoesNotExist) => {
-                return Err(ClientError::NotRunning {
-                    name: name.to_string(),
-                });
-            }
-            Err(e) => return Err(ipc("opening the state service")(e)),
+        let node = chassis_ipc::node(
+            None,
+            &chassis_ipc::config(prefix)?,
+            SignalHandlingMode::Disabled,
+        )?;
+        let not_running = || ClientError::NotRunning {
+            name: name.to_string(),
         };
-        if state_service.dynamic_config().number_of_publishers() == 0 {
-            return Err(ClientError::NotRunning {
-                name: name.to_string(),
-            });
+        let topic = match STATE.open(&node, &service_name(name, ServiceKind::State)) {
+            Ok(topic) => topic,
+            Err(IpcError::NotFound { .. }) => return Err(not_running()),
+            Err(e) => return Err(e.into()),
+        };
+        if topic.publishers() == 0 {
+            return Err(not_running());
         }
-        let state = state_service
-            .subscriber_builder()
-            .buffer_size(LATEST_STATE_BUFFER)
-            .create()
-            .map_err(ipc("state subscriber"))?;
-        let state_events = node
-            .service_builder(&service(&state_name)?)
-            .event()
-            .open()
-            .map_err(ipc("state event"))?
-            .listener_builder()
-            .create()
-            .map_err(ipc("state listener"))?;
+        let Reader {
+            subscriber: state,
+            listener: state_events,
+        } = topic.subscriber(LATEST_STATE_BUFFER)?;
         Ok(Self {
             name: name.to_string(),
             node,
@@ -216,14 +180,9 @@ impl Robot {
 
     /// True while `chassisd` still publishes this robot's state.
     pub fn is_served(&self) -> bool {
-        let Ok(name) = service(&service_name(&self.name, ServiceKind::State)) else {
-            return false;
-        };
-        self.node
-            .service_builder(&name)
-            .publish_subscribe::<ChassisState>()
-            .open()
-            .is_ok_and(|s| s.dynamic_config().number_of_publishers() > 0)
+        STATE
+            .publishers(&self.node, &service_name(&self.name, ServiceKind::State))
+            .is_ok_and(|n| n > 0)
     }
 
     /// Takes every pending state sample; true if there was one.
@@ -284,28 +243,11 @@ impl Robot {
         if self.mux.is_some() {
             return Ok(());
         }
-        let name = service_name(&self.name, ServiceKind::Mux);
-        let mux = self
-            .node
-            .service_builder(&service(&name)?)
-            .publish_subscribe::<MuxStatus>()
-            .open()
-            .map_err(ipc("opening the mux status"))?
-            .subscriber_builder()
-            .buffer_size(4)
-            .create()
-            .map_err(ipc("mux subscriber"))?;
-        let events = self
-            .node
-            .service_builder(&service(&name)?)
-            .event()
-            .open()
-            .map_err(ipc("mux event"))?
-            .listener_builder()
-            .create()
-            .map_err(ipc("mux listener"))?;
-        self.mux = Some(mux);
-        self.mux_events = Some(events);
+        let reader = MUX
+            .open(&self.node, &service_name(&self.name, ServiceKind::Mux))?
+            .subscriber(LATEST_MUX_BUFFER)?;
+        self.mux = Some(reader.subscriber);
+        self.mux_events = Some(reader.listener);
         Ok(())
     }
 
@@ -344,15 +286,12 @@ impl Robot {
         if !valid_robot_name(name) {
             return Err(ClientError::BadName(name.to_string()));
         }
-        let service_text = service_name(&self.name, ServiceKind::Cmd(name));
-        let factory = match self
-            .node
-            .service_builder(&service(&service_text)?)
-            .publish_subscribe::<VelocityRequest>()
-            .open()
-        {
-            Ok(f) => f,
-            Err(PublishSubscribeOpenError::DoesNotExist) => {
+        let topic = match CMD.open(
+            &self.node,
+            &service_name(&self.name, ServiceKind::Cmd(name)),
+        ) {
+            Ok(topic) => topic,
+            Err(IpcError::NotFound { .. }) => {
                 let configured = self
                     .latest_mux()
                     .ok()
@@ -371,34 +310,18 @@ impl Robot {
                     configured,
                 });
             }
-            Err(e) => return Err(ipc("opening the source")(e)),
+            Err(e) => return Err(e.into()),
         };
-        let publisher = factory.publisher_builder().create().map_err(|e| match e {
-            iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers => {
-                ClientError::SourceTaken {
-                    name: self.name.clone(),
-                    source_name: name.to_string(),
-                }
-            }
-            other => ClientError::Ipc(format!("source publisher: {other:?}")),
+        let Writer {
+            publisher,
+            notifier,
+        } = topic.publisher().map_err(|e| match e {
+            IpcError::Taken { .. } => ClientError::SourceTaken {
+                name: self.name.clone(),
+                source_name: name.to_string(),
+            },
+            other => other.into(),
         })?;
-        let notifier = self
-            .node
-            .service_builder(&service(&service_text)?)
-            .event()
-            .open()
-            .map_err(ipc("source event"))?
-            .notifier_builder()
-            .create()
-            .map_err(|e| match e {
-                iceoryx2::port::notifier::NotifierCreateError::ExceedsMaxSupportedNotifiers => {
-                    ClientError::SourceTaken {
-                        name: self.name.clone(),
-                        source_name: name.to_string(),
-                    }
-                }
-                other => ClientError::Ipc(format!("source notifier: {other:?}")),
-            })?;
         Ok(Source {
             name: name.to_string(),
             publisher,
@@ -409,49 +332,17 @@ impl Robot {
 
     fn counter<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
         &self,
+        spec: &RequestResponse<Req>,
         kind: ServiceKind<'_>,
-    ) -> Result<Counter<Asker<Req>>, ClientError> {
+    ) -> Result<Counter<Req>, ClientError> {
         let name = service_name(&self.name, kind);
-        let client = match self
-            .node
-            .service_builder(&service(&name)?)
-            .request_response::<Req, ControlResponse>()
-            .open()
-        {
-            Ok(f) => f,
-            Err(iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist) => {
-                return Err(ClientError::NotRunning {
-                    name: format!("{}/{}", self.name, name.rsplit('/').next().unwrap_or("")),
-                });
-            }
-            Err(e) => return Err(ipc("opening the request service")(e)),
+        match spec.open(&self.node, &name) {
+            Ok(exchange) => Ok(exchange.client()?),
+            Err(IpcError::NotFound { .. }) => Err(ClientError::NotRunning {
+                name: format!("{}/{}", self.name, name.rsplit('/').next().unwrap_or("")),
+            }),
+            Err(e) => Err(e.into()),
         }
-        .client_builder()
-        .create()
-        .map_err(ipc("request client"))?;
-        let notifier = self
-            .node
-            .service_builder(&service(&name)?)
-            .event()
-            .open()
-            .map_err(ipc("request event"))?
-            .notifier_builder()
-            .create()
-            .map_err(ipc("request notifier"))?;
-        let replies = self
-            .node
-            .service_builder(&service(&format!("{name}/reply"))?)
-            .event()
-            .open()
-            .map_err(ipc("reply event"))?
-            .listener_builder()
-            .create()
-            .map_err(ipc("reply listener"))?;
-        Ok(Counter {
-            client,
-            notifier,
-            replies,
-        })
     }
 
     /// Asks for a control action and waits at most `timeout` for the answer.
@@ -461,7 +352,7 @@ impl Robot {
         timeout: Duration,
     ) -> Result<ControlResponse, ClientError> {
         if self.control.is_none() {
-            self.control = Some(self.counter::<ControlRequest>(ServiceKind::Control)?);
+            self.control = Some(self.counter(&CONTROL, ServiceKind::Control)?);
         }
         self.control_seq += 1;
         request.seq = self.control_seq;
@@ -481,7 +372,7 @@ impl Robot {
         timeout: Duration,
     ) -> Result<ControlResponse, ClientError> {
         if self.sim.is_none() {
-            self.sim = Some(self.counter::<SimRequest>(ServiceKind::Sim)?);
+            self.sim = Some(self.counter(&SIM, ServiceKind::Sim)?);
         }
         self.control_seq += 1;
         request.seq = self.control_seq;
@@ -496,7 +387,7 @@ impl Robot {
 
     /// A stream of every state sample the service publishes, with its own subscriber and its own
     /// listener: it does not disturb this `Robot`'s latest-value reading, and holds one of the
-    /// state service's reader slots (40 with `chassisd`) while it lives.
+    /// state service's reader slots ([`chassis_ipc::MAX_READERS`]) while it lives.
     ///
     /// `buffer` samples may queue between two reads before the oldest are lost; it is clamped to
     /// 1..=the service's maximum ([`STATE_BUFFER`] with `chassisd`), and
@@ -528,40 +419,21 @@ impl Robot {
     /// # Ok::<(), chassis_client::ClientError>(())
     /// ```
     pub fn state_stream(&self, buffer: usize) -> Result<StateStream, ClientError> {
-        let name = service_name(&self.name, ServiceKind::State);
-        let factory = match self
-            .node
-            .service_builder(&service(&name)?)
-            .publish_subscribe::<ChassisState>()
-            .open()
-        {
-            Ok(f) => f,
-            Err(PublishSubscribeOpenError::DoesNotExist) => {
+        let topic = match STATE.open(&self.node, &service_name(&self.name, ServiceKind::State)) {
+            Ok(topic) => topic,
+            Err(IpcError::NotFound { .. }) => {
                 return Err(ClientError::NotRunning {
                     name: self.name.clone(),
                 });
             }
-            Err(e) => return Err(ipc("opening the state service")(e)),
+            Err(e) => return Err(e.into()),
         };
         // A service made with other limits (another version of chassisd) sets its own maximum.
-        let buffer = buffer.clamp(
-            1,
-            factory.static_config().subscriber_max_buffer_size().max(1),
-        );
-        let subscriber = factory
-            .subscriber_builder()
-            .buffer_size(buffer)
-            .create()
-            .map_err(ipc("state stream subscriber"))?;
-        let events = self
-            .node
-            .service_builder(&service(&name)?)
-            .event()
-            .open()
-            .map_err(ipc("state event"))?
-            .listener_builder()
-            .create()
-            .map_err(ipc("state stream listener"))?;
+        let buffer = buffer.clamp(1, topic.subscriber_max_buffer_size().max(1));
+        let Reader {
+            subscriber,
+            listener: events,
+        } = topic.subscriber(buffer)?;
         Ok(StateStream {
             subscriber,
             events,
@@ -572,26 +444,12 @@ impl Robot {
     /// A tap of every frame on the bus, both directions. `buffer` frames may queue between two
     /// reads before the oldest are lost (gaps show in `BusFrame::seq`).
     pub fn frames(&self, buffer: usize) -> Result<FrameTap, ClientError> {
-        let name = service_name(&self.name, ServiceKind::Frames);
-        let subscriber = self
-            .node
-            .service_builder(&service(&name)?)
-            .publish_subscribe::<BusFrame>()
-            .open()
-            .map_err(ipc("opening the frame tap"))?
-            .subscriber_builder()
-            .buffer_size(buffer.max(1))
-            .create()
-            .map_err(ipc("frame subscriber"))?;
-        let events = self
-            .node
-            .service_builder(&service(&name)?)
-            .event()
-            .open()
-            .map_err(ipc("frames event"))?
-            .listener_builder()
-            .create()
-            .map_err(ipc("frames listener"))?;
+        let Reader {
+            subscriber,
+            listener: events,
+        } = FRAMES
+            .open(&self.node, &service_name(&self.name, ServiceKind::Frames))?
+            .subscriber(buffer.max(1))?;
         Ok(FrameTap { subscriber, events })
     }
 }
@@ -599,7 +457,7 @@ impl Robot {
 fn ask<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
     name: &str,
     what: &'static str,
-    counter: &Counter<Asker<Req>>,
+    counter: &Counter<Req>,
     request: Req,
     seq: u64,
     timeout: Duration,
@@ -609,7 +467,7 @@ fn ask<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
         .send_copy(request)
         .map_err(ipc("sending the request"))?;
     counter
-        .notifier
+        .requests
         .notify()
         .map_err(ipc("notifying the service"))?;
     let deadline = now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
@@ -704,7 +562,10 @@ impl FrameTap {
         timeout: Duration,
         each: impl FnMut(&BusFrame),
     ) -> Result<usize, ClientError> {
-        let _ = self.events.try_wait(|_| {});
+        // Spend the notifications of the frames drained now, so that the wait is for later ones.
+        self.events
+            .try_wait(|_| {})
+            .map_err(ipc("taking the frames' notifications"))?;
         let n = self.drain(each)?;
         if n > 0 {
             return Ok(n);
@@ -748,7 +609,9 @@ impl StateStream {
     ) -> Result<usize, ClientError> {
         // The notifications pending now belong to the samples drained next: spend them, so that
         // the wait below is for later ones.
-        let _ = self.events.try_wait(|_| {});
+        self.events
+            .try_wait(|_| {})
+            .map_err(ipc("taking the state's notifications"))?;
         // A notification may belong to samples an earlier drain already took: the wait goes on.
         drain_or_wait(&self.events, timeout, "waiting for state", || {
             self.drain(&mut each)
@@ -808,11 +671,6 @@ impl Ticker {
         }
     }
 }
-
-/// Most readers of a service made with [`Robot::publisher`].
-const PUBLICATION_READERS: usize = 40;
-/// Most processes attached to a service made with [`Robot::publisher`].
-const PUBLICATION_NODES: usize = 64;
 
 /// A client's own publish-subscribe service beside the robot's, `chassis/<name>/<suffix>` (the
 /// safety monitor's `SafetyStatus` on `chassis/<name>/safety`), made by [`Robot::publisher`]:
@@ -910,11 +768,11 @@ fn drain_or_wait(
 }
 
 impl Robot {
-    fn publication_name(&self, suffix: &str) -> Result<ServiceName, ClientError> {
+    fn publication_name(&self, suffix: &str) -> Result<String, ClientError> {
         if !valid_robot_name(suffix) {
             return Err(ClientError::BadName(suffix.to_string()));
         }
-        service(&format!("chassis/{}/{suffix}", self.name))
+        Ok(service_name(&self.name, ServiceKind::Publication(suffix)))
     }
 
     /// Creates (or opens) the service `chassis/<name>/<suffix>` and becomes its one publisher.
@@ -923,42 +781,12 @@ impl Robot {
         &self,
         suffix: &str,
     ) -> Result<Publication<T>, ClientError> {
-        let name = self.publication_name(suffix)?;
-        let publisher = self
-            .node
-            .service_builder(&name)
-            .publish_subscribe::<T>()
-            .history_size(1)
-            .subscriber_max_buffer_size(4)
-            .max_publishers(1)
-            .max_subscribers(PUBLICATION_READERS)
-            .max_nodes(PUBLICATION_NODES)
-            .enable_safe_overflow(true)
-            .open_or_create()
-            .map_err(ipc("creating the service"))?
-            .publisher_builder()
-            .create()
-            .map_err(|e| match e {
-                iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers => {
-                    ClientError::Ipc(format!(
-                        "chassis/{}/{suffix} already has its publisher (another process)",
-                        self.name
-                    ))
-                }
-                other => ClientError::Ipc(format!("publisher: {other:?}")),
-            })?;
-        let notifier = self
-            .node
-            .service_builder(&name)
-            .event()
-            .max_nodes(PUBLICATION_NODES)
-            .max_notifiers(2)
-            .max_listeners(PUBLICATION_READERS)
-            .open_or_create()
-            .map_err(ipc("creating the event service"))?
-            .notifier_builder()
-            .create()
-            .map_err(ipc("notifier"))?;
+        let Writer {
+            publisher,
+            notifier,
+        } = publication::<T>()
+            .create(&self.node, &self.publication_name(suffix)?)?
+            .publisher()?;
         Ok(Publication {
             publisher,
             notifier,
@@ -971,30 +799,15 @@ impl Robot {
         &self,
         suffix: &str,
     ) -> Result<Option<Subscription<T>>, ClientError> {
-        let name = self.publication_name(suffix)?;
-        let subscriber = match self
-            .node
-            .service_builder(&name)
-            .publish_subscribe::<T>()
-            .open()
-        {
-            Ok(s) => s,
-            Err(PublishSubscribeOpenError::DoesNotExist) => return Ok(None),
-            Err(e) => return Err(ipc("opening the service")(e)),
-        }
-        .subscriber_builder()
-        .buffer_size(4)
-        .create()
-        .map_err(ipc("subscriber"))?;
-        let events = self
-            .node
-            .service_builder(&name)
-            .event()
-            .open()
-            .map_err(ipc("opening the event service"))?
-            .listener_builder()
-            .create()
-            .map_err(ipc("listener"))?;
+        let topic = match publication::<T>().open(&self.node, &self.publication_name(suffix)?) {
+            Ok(topic) => topic,
+            Err(IpcError::NotFound { .. }) => return Ok(None),
+            Err(e) => return Err(e.into()),
+        };
+        let Reader {
+            subscriber,
+            listener: events,
+        } = topic.subscriber(PUBLICATION.subscriber_max_buffer_size)?;
         Ok(Some(Subscription {
             subscriber,
             events,

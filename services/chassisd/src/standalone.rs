@@ -7,7 +7,8 @@
 use std::path::Path;
 use std::time::Duration;
 
-use chassis_interfaces::{ControlResponse, ControlStatus, ServiceKind, service_name};
+use chassis_interfaces::{ControlResponse, ControlStatus};
+use chassis_ipc::{SIM, ServiceKind, service_name};
 use chassis_protocols::Profile;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -79,38 +80,34 @@ const LAST_RETRY: Duration = Duration::from_secs(2);
 /// Runs the simulated chassis until SIGINT/SIGTERM. A lost bus is reopened with backoff.
 pub fn run(config: &Config) -> Result<(), String> {
     let bus = open_chassis_side(&config.bus, config).map_err(|e| e.to_string())?;
+    let sim_name = service_name(&config.name, ServiceKind::Sim);
     info!(
         robot = config.robot.name(),
         bus = bus.name(),
-        "simulated chassis up (faults: chassis/{}/sim)",
-        config.name
+        "simulated chassis up (faults: {sim_name})"
     );
     let firmware = firmware_for(&config.profile, clock::now());
     let mut chassis = Chassis::Running(SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?);
 
-    let node = NodeBuilder::new()
-        .config(&iceoryx_config().map_err(|e| e.to_string())?)
-        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-        .create::<ipc::Service>()
-        .map_err(|e| format!("iceoryx2 node: {e:?}"))?;
-    let desk = open_desk::<chassis_interfaces::SimRequest>(
-        &node,
-        &service_name(&config.name, ServiceKind::Sim),
+    let node = chassis_ipc::node(
+        None,
+        &iceoryx_config().map_err(|e| e.to_string())?,
+        SignalHandlingMode::HandleTerminationRequests,
     )
-    .map_err(|e| match e {
-        IpcError::AlreadyServed { .. } => format!(
-            "another simulated chassis already answers chassis/{}/sim; pick another --name",
-            config.name
-        ),
+    .map_err(|e| e.to_string())?;
+    let desk = open_desk(&node, &SIM, &sim_name).map_err(|e| match e {
+        IpcError::AlreadyServed { .. } => {
+            format!("another simulated chassis already answers {sim_name}; pick another --name")
+        }
         other => other.to_string(),
     })?;
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(|e| format!("wait set: {e:?}"))?;
+        .map_err(|e| format!("wait set: {e}"))?;
     let guard = waitset
         .attach_notification(&desk.listener)
-        .map_err(|e| format!("wait set: {e:?}"))?;
+        .map_err(|e| format!("wait set: {e}"))?;
     loop {
         let result = waitset.wait_and_process_once_with_timeout(
             |_| CallbackProgression::Continue,
@@ -126,10 +123,12 @@ pub fn run(config: &Config) -> Result<(), String> {
                 };
             }
             Ok(_) => {}
-            Err(e) => return Err(format!("wait set: {e:?}")),
+            Err(e) => return Err(format!("wait set: {e}")),
         }
         chassis = keep_running(chassis, config)?;
-        let _ = desk.listener.try_wait(|_| {});
+        if let Err(e) = desk.listener.try_wait(|_| {}) {
+            warn!("taking the requests' notifications: {e}");
+        }
         while let Ok(Some(active)) = desk.server.receive() {
             let request = *active.payload();
             let (status, message) = match (injection_of(&request), &chassis) {
@@ -152,9 +151,11 @@ pub fn run(config: &Config) -> Result<(), String> {
             };
             info!(status = ControlStatus::name(status), "{message}");
             if let Err(e) = active.send_copy(ControlResponse::new(request.seq, status, &message)) {
-                warn!("cannot answer: {e:?}");
+                warn!("cannot answer: {e}");
             }
-            let _ = desk.notifier.notify();
+            if let Err(e) = desk.notifier.notify() {
+                warn!("cannot tell the client its answer is ready: {e}");
+            }
         }
     }
 }

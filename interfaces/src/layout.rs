@@ -1,0 +1,445 @@
+//! Machine-readable descriptions of every IPC type and of its constant groups.
+//!
+//! Programs in other languages (Python `ctypes` mirrors, ROS 2, Foxglove and Zenoh bridges) read
+//! the layouts from here instead of from the Rust source. Each `#[repr(C)]` type lists its fields
+//! once, by name, in `describe_layout!`: offsets come from `core::mem::offset_of!` and each
+//! field's type and size from the Rust field itself, so only a forgotten or misordered field can
+//! be wrong — and the test each type gets checks that the fields cover every byte, in order
+//! (the types have no padding: zerocopy's `IntoBytes` proves it).
+
+use serde::Serialize;
+
+/// The type of one field.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum FieldType {
+    /// `u8` … `u64`, `i8` … `i64`, `f32`, `f64`.
+    Primitive { primitive: &'static str },
+    /// A fixed-length array of `len` elements of `element`.
+    Array { element: Box<FieldType>, len: usize },
+    /// A described struct, by its Rust name (a key of the contract's types).
+    Struct {
+        #[serde(rename = "struct")]
+        name: &'static str,
+    },
+}
+
+impl FieldType {
+    /// The Rust spelling: `u64`, `[f32; 4]`, `MotionState`.
+    pub fn rust(&self) -> String {
+        match self {
+            FieldType::Primitive { primitive } => (*primitive).to_string(),
+            FieldType::Array { element, len } => format!("[{}; {len}]", element.rust()),
+            FieldType::Struct { name } => (*name).to_string(),
+        }
+    }
+}
+
+/// Types that may appear as a field of a described type.
+pub trait FieldKind {
+    fn field_type() -> FieldType;
+}
+
+macro_rules! primitive {
+    ($($t:ty),+) => {
+        $(impl FieldKind for $t {
+            fn field_type() -> FieldType {
+                FieldType::Primitive { primitive: stringify!($t) }
+            }
+        })+
+    };
+}
+primitive!(u8, u16, u32, u64, i8, i16, i32, i64, f32, f64);
+
+impl<T: FieldKind, const N: usize> FieldKind for [T; N] {
+    fn field_type() -> FieldType {
+        FieldType::Array {
+            element: Box::new(T::field_type()),
+            len: N,
+        }
+    }
+}
+
+/// One field of a described type.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Field {
+    pub name: &'static str,
+    /// Bytes from the start of the type.
+    pub offset: usize,
+    pub size: usize,
+    #[serde(rename = "type")]
+    pub ty: FieldType,
+}
+
+impl Field {
+    /// The field `name` at `offset`, of the type `select` returns (a closure naming the field:
+    /// its type and size come from the struct itself).
+    pub fn of<S, T: FieldKind>(name: &'static str, offset: usize, _select: fn(&S) -> &T) -> Self {
+        Self {
+            name,
+            offset,
+            size: core::mem::size_of::<T>(),
+            ty: T::field_type(),
+        }
+    }
+}
+
+/// A described type: its Rust name, iceoryx2 type name, size, alignment and fields.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct TypeLayout {
+    /// The Rust name (`ChassisState`): how fields and services refer to it.
+    #[serde(skip)]
+    pub name: &'static str,
+    /// The iceoryx2 type name, with its layout version (`chassis::ChassisState.v1`).
+    pub type_name: &'static str,
+    pub size: usize,
+    pub align: usize,
+    /// Every field, in memory order.
+    pub fields: Vec<Field>,
+}
+
+impl TypeLayout {
+    /// Why the fields do not cover the type exactly once, in order (`None`: they do).
+    pub fn gap(&self) -> Option<String> {
+        let mut end = 0;
+        for field in &self.fields {
+            if field.offset != end {
+                return Some(format!(
+                    "{}: field {} starts at byte {} but the previous one ends at {end}",
+                    self.name, field.name, field.offset
+                ));
+            }
+            end = field.offset + field.size;
+        }
+        (end != self.size).then(|| {
+            format!(
+                "{}: the described fields end at byte {end}, the type is {} bytes long",
+                self.name, self.size
+            )
+        })
+    }
+}
+
+/// A `#[repr(C)]` IPC type described field by field (implemented by the crate's `describe_layout!`).
+pub trait Layout: FieldKind {
+    /// The Rust name, e.g. `ChassisState`.
+    const NAME: &'static str;
+    fn layout() -> TypeLayout;
+}
+
+/// Describes a `#[repr(C)]`, `ZeroCopySend` type by listing its fields in order, and adds the
+/// test (named by the caller) that the list covers every byte.
+macro_rules! describe_layout {
+    ($ty:ident, $test:ident { $($field:ident),+ $(,)? }) => {
+        impl $crate::layout::FieldKind for $ty {
+            fn field_type() -> $crate::layout::FieldType {
+                $crate::layout::FieldType::Struct { name: stringify!($ty) }
+            }
+        }
+
+        impl $crate::layout::Layout for $ty {
+            const NAME: &'static str = stringify!($ty);
+
+            fn layout() -> $crate::layout::TypeLayout {
+                $crate::layout::TypeLayout {
+                    name: stringify!($ty),
+                    // SAFETY: `type_name` returns the string given to the `ZeroCopySend` derive;
+                    // the layout it promises is the one described here and pinned by tests.
+                    type_name: unsafe {
+                        <$ty as iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend>
+                            ::type_name()
+                    },
+                    size: core::mem::size_of::<$ty>(),
+                    align: core::mem::align_of::<$ty>(),
+                    fields: vec![$(
+                        $crate::layout::Field::of(
+                            stringify!($field),
+                            core::mem::offset_of!($ty, $field),
+                            |s: &$ty| &s.$field,
+                        )
+                    ),+],
+                }
+            }
+        }
+
+        #[cfg(test)]
+        #[test]
+        fn $test() {
+            let layout = <$ty as $crate::layout::Layout>::layout();
+            assert_eq!(layout.gap(), None);
+            assert!(layout.type_name.starts_with(concat!("chassis::", stringify!($ty), ".v")));
+        }
+    };
+}
+pub(crate) use describe_layout;
+
+/// Named constants of one flag or enumeration field.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct ConstantGroup {
+    #[serde(skip)]
+    pub name: &'static str,
+    /// `flags` (bits, combined with `|`) or `enum` (one value at a time).
+    pub kind: &'static str,
+    /// The primitive type of the field that holds them.
+    #[serde(rename = "type")]
+    pub ty: &'static str,
+    /// Every constant, by value.
+    pub values: Vec<Constant>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Constant {
+    pub name: String,
+    pub value: u64,
+}
+
+/// Describes a group of named constants: `describe_constants!(flags FaultFlags: u64 { … })`.
+macro_rules! describe_constants {
+    (flags $group:ident : $t:ident { $($name:ident),+ $(,)? }) => {
+        describe_constants!(@ "flags", $group, $t, $($name),+)
+    };
+    (enum $group:ident : $t:ident { $($name:ident),+ $(,)? }) => {
+        describe_constants!(@ "enum", $group, $t, $($name),+)
+    };
+    (@ $kind:literal, $group:ident, $t:ident, $($name:ident),+) => {
+        $crate::layout::ConstantGroup::new(
+            stringify!($group),
+            $kind,
+            stringify!($t),
+            vec![$((stringify!($name).to_string(), {
+                let value: $t = $group::$name;
+                u64::from(value)
+            })),+],
+        )
+    };
+}
+
+impl ConstantGroup {
+    pub(crate) fn new(
+        name: &'static str,
+        kind: &'static str,
+        ty: &'static str,
+        values: Vec<(String, u64)>,
+    ) -> Self {
+        let mut values: Vec<Constant> = values
+            .into_iter()
+            .map(|(name, value)| Constant { name, value })
+            .collect();
+        values.sort_by(|a, b| a.value.cmp(&b.value).then_with(|| a.name.cmp(&b.name)));
+        Self {
+            name,
+            kind,
+            ty,
+            values,
+        }
+    }
+}
+
+/// Every IPC type, by Rust name.
+pub fn types() -> Vec<TypeLayout> {
+    use crate::*;
+    let mut all = vec![
+        ChassisState::layout(),
+        MotionState::layout(),
+        OdometryState::layout(),
+        SystemState::layout(),
+        MotorState::layout(),
+        BmsState::layout(),
+        RcState::layout(),
+        LightsState::layout(),
+        RangesState::layout(),
+        ImuState::layout(),
+        LiftState::layout(),
+        PanTiltState::layout(),
+        GpsFix::layout(),
+        CommandEcho::layout(),
+        LinkStats::layout(),
+        VelocityRequest::layout(),
+        Twist::layout(),
+        SourceStatus::layout(),
+        LockStatus::layout(),
+        MuxStatus::layout(),
+        BusFrame::layout(),
+        ControlRequest::layout(),
+        ControlResponse::layout(),
+        SimRequest::layout(),
+        SafetyStatus::layout(),
+    ];
+    all.sort_by_key(|t| t.name);
+    all
+}
+
+/// Every group of flag and enumeration constants, by name.
+pub fn constants() -> Vec<ConstantGroup> {
+    use crate::*;
+    let mut all = vec![
+        describe_constants!(enum RobotKind: u8 { UNKNOWN, TITAN, SCOUT_MINI, XBOT }),
+        describe_constants!(flags LinkFlags: u32 {
+            CHASSIS_SILENT, BUS_DOWN, COMMAND_MODE, RC_AUTHORITY, STEERING_ZERO_PENDING,
+            GPS_DOWN, SILENT_MODE,
+        }),
+        describe_constants!(enum ControlMode: u8 { UNKNOWN, STANDBY, COMMAND, REMOTE, SERIAL }),
+        describe_constants!(flags DriverStatus: u8 {
+            SUPPLY_UNDER_VOLTAGE, MOTOR_OVER_TEMPERATURE, DRIVER_OVER_CURRENT,
+            DRIVER_OVER_TEMPERATURE, SENSOR_FAULT, DRIVER_ERROR, ENABLED,
+        }),
+        describe_constants!(flags ClampFlags: u32 {
+            LINEAR_LIMIT, LINEAR_LIMIT_STEERING, STEER_LIMIT, ANGULAR_LIMIT, LATERAL_UNSUPPORTED,
+            TURN_IN_PLACE_UNACHIEVABLE, TURN_RADIUS_LIMIT, ACCELERATION_LIMIT,
+            CONFIG_SPEED_LIMIT, QUANTISED, CHASSIS_NOT_READY, SAFETY_LIMIT,
+        }),
+        describe_constants!(enum ZeroReason: u8 {
+            NONE, NO_ACTIVE_SOURCE, REQUIRED_SOURCE_STALE, LOCKED, STARTING,
+        }),
+        describe_constants!(flags SourceFlags: u8 {
+            REQUIRED, FRESH, ACTIVE, HEARTBEAT, BLOCKED, LIMITING,
+        }),
+        describe_constants!(flags RequestFlags: u32 { STEER, HEARTBEAT, LIMIT }),
+        describe_constants!(enum ControlKind: u8 {
+            MODE, BRAKE, CLEAR_FAULTS, LIGHTS, OFF_ROAD, LIFT, SERVOS, POWER, STEERING_ZERO,
+            LOCK_RELEASE, SILENT, LOCK_ENGAGE,
+        }),
+        describe_constants!(enum FaultClear: u8 {
+            ALL, MOTOR_1_COMM, MOTOR_2_COMM, MOTOR_3_COMM, MOTOR_4_COMM, BATTERY_UNDER_VOLTAGE,
+            BATTERY_OVER_VOLTAGE, RC_LINK, FRONT_STEERING_ENCODER, REAR_STEERING_ENCODER,
+            OVER_CURRENT, OVER_TEMPERATURE,
+        }),
+        describe_constants!(enum LightMode: u8 { OFF, ON, BREATHING, CUSTOM }),
+        describe_constants!(enum ControlStatus: u8 { OK, REFUSED, UNSUPPORTED, INVALID, TIMEOUT }),
+        describe_constants!(enum SimKind: u8 {
+            MOTOR_DRIVER_LOSS, BATTERY, BUMPER, RC_TAKEOVER, REBOOT, SILENCE, GARBAGE,
+            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD,
+        }),
+        describe_constants!(enum FrameDirection: u8 { RX, TX }),
+        describe_constants!(enum FrameKind: u8 { CAN, SERIAL, GPS }),
+        describe_constants!(enum SafetyRule: u8 {
+            FAULT, BATTERY, STALE, BUMPER, ULTRASONIC, IR, SPEED, OPERATOR,
+        }),
+        describe_constants!(enum SafetyAction: u8 { NONE, SLOW, STOP, LATCH }),
+        describe_constants!(enum EstopState: u8 {
+            UNKNOWN, FREE, HELD_BY_MONITOR, HELD_BY_OPERATOR, HELD_BY_OTHER,
+        }),
+        describe_constants!(enum SafetyEvent: u8 { NONE, TRIGGER, RELEASE, UNLATCH }),
+        // Constants of one struct's fields, named after the struct.
+        describe_constants!(enum SystemState: u8 { BODY_NORMAL, BODY_EMERGENCY_STOP, BODY_EXCEPTION }),
+        describe_constants!(enum LockStatus: u8 { HOLDER_NONE, HOLDER_OPERATOR }),
+        describe_constants!(enum MuxStatus: u8 { NO_SOURCE }),
+        describe_constants!(flags BusFrame: u8 { EXTENDED_ID, REMOTE }),
+        describe_constants!(enum SafetyStatus: u8 { NO_RULE }),
+        ConstantGroup::new(
+            "FaultFlags",
+            "flags",
+            "u64",
+            FaultFlags::ALL
+                .iter()
+                .map(|&(bit, name)| (name.to_ascii_uppercase(), bit))
+                .collect(),
+        ),
+        // `Group`: the index into `ChassisState::group_stamp_ns`; its bit in `valid_mask` is
+        // `1 << index`.
+        ConstantGroup::new(
+            "Group",
+            "enum",
+            "u8",
+            Group::ALL
+                .iter()
+                .map(|&g| (g.name().to_ascii_uppercase(), u64::from(g as u8)))
+                .collect(),
+        ),
+    ];
+    all.sort_by_key(|g| g.name);
+    all
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_zero_copy_type_is_described() {
+        let sources = [
+            include_str!("state.rs"),
+            include_str!("mux.rs"),
+            include_str!("request.rs"),
+            include_str!("frame.rs"),
+            include_str!("control.rs"),
+            include_str!("safety.rs"),
+        ];
+        let declared: usize = sources
+            .iter()
+            .map(|s| s.matches("#[type_name(").count())
+            .sum();
+        assert_eq!(types().len(), declared);
+    }
+
+    #[test]
+    fn every_nested_struct_is_described() {
+        let all = types();
+        fn structs(ty: &FieldType, out: &mut Vec<&'static str>) {
+            match ty {
+                FieldType::Struct { name } => out.push(name),
+                FieldType::Array { element, .. } => structs(element, out),
+                FieldType::Primitive { .. } => {}
+            }
+        }
+        let mut nested = Vec::new();
+        for t in &all {
+            for f in &t.fields {
+                structs(&f.ty, &mut nested);
+            }
+        }
+        assert!(nested.contains(&"MotionState"));
+        for name in nested {
+            assert!(
+                all.iter().any(|t| t.name == name),
+                "{name} is not described"
+            );
+        }
+    }
+
+    #[test]
+    fn a_missing_field_is_caught() {
+        let mut layout = crate::Twist::layout();
+        assert_eq!(layout.gap(), None);
+        layout.fields.remove(2);
+        assert!(layout.gap().is_some_and(|g| g.contains("steer_rad")));
+        let mut layout = crate::Twist::layout();
+        layout.fields.pop();
+        assert!(layout.gap().is_some_and(|g| g.contains("20 bytes long")));
+    }
+
+    #[test]
+    fn fields_carry_their_types_and_lengths() {
+        let state = crate::ChassisState::layout();
+        let stamps = state
+            .fields
+            .iter()
+            .find(|f| f.name == "group_stamp_ns")
+            .unwrap();
+        assert_eq!((stamps.offset, stamps.size), (32, 8 * crate::GROUP_SLOTS));
+        assert_eq!(stamps.ty.rust(), "[u64; 24]");
+        let motors = state.fields.iter().find(|f| f.name == "motors").unwrap();
+        assert_eq!(motors.ty.rust(), "[MotorState; 4]");
+    }
+
+    #[test]
+    fn constant_groups_have_unique_names_and_flags_single_bits() {
+        for group in constants() {
+            let mut names: Vec<_> = group.values.iter().map(|c| c.name.as_str()).collect();
+            names.sort_unstable();
+            names.dedup();
+            assert_eq!(names.len(), group.values.len(), "{}", group.name);
+            if group.kind == "flags" {
+                for c in &group.values {
+                    assert_eq!(c.value.count_ones(), 1, "{}::{}", group.name, c.name);
+                }
+            }
+        }
+        let faults = constants()
+            .into_iter()
+            .find(|g| g.name == "FaultFlags")
+            .unwrap();
+        assert_eq!(faults.values.len(), crate::FaultFlags::ALL.len());
+        assert_eq!(faults.values[0].name, "HEARTBEAT_LOST");
+    }
+}
