@@ -239,13 +239,4 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
     pub fn take_events(&mut self) -> Vec<DriverEvent> {
         std::mem::take(&mut self.events)
     }
-
-    /// Times at which items matching `filter` were sent.
-    pub fn sent_times(&self, mut filter: impl FnMut(&Record) -> bool) -> Vec<Timestamp> {
-        self.log
-            .iter()
-            .filter(|r| filter(r))
-            .map(|r| r.at)
-            .collect()
-    }
 }
