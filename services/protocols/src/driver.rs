@@ -226,6 +226,16 @@ impl CommandSchedule {
         }
     }
 
+    /// Takes `next` as the command the motion frames carry: when it differs from `*current` it
+    /// replaces it and goes out soon ([`Self::command_changed`]; `stop` ignores the minimum
+    /// interval).
+    pub fn update<M: PartialEq>(&mut self, current: &mut M, next: M, stop: bool) {
+        if *current != next {
+            *current = next;
+            self.command_changed(stop);
+        }
+    }
+
     /// The command changed: send it soon. `urgent` (a stop) ignores the minimum interval.
     pub fn command_changed(&mut self, urgent: bool) {
         self.pending = true;
@@ -477,20 +487,25 @@ impl DriverCore {
         }
     }
 
-    /// The answer to a control action no driver takes now: anything while the bus is down, and
-    /// motion (which goes through [`Driver::set_command`]).
-    pub(crate) fn refuse_control(&self, command: &Command) -> Option<ControlOutcome> {
+    /// Admits a control action and plans its frames with `plan`, or says why not: nothing is
+    /// taken while the bus is down, motion goes through [`Driver::set_command`], and a command
+    /// `plan` refuses answers with its [`CommandError`](crate::command::CommandError).
+    pub(crate) fn admit_control<P>(
+        &self,
+        command: &Command,
+        plan: impl FnOnce(&Command) -> Result<P, crate::command::CommandError>,
+    ) -> Result<P, ControlOutcome> {
         if self.bus_down {
-            return Some(ControlOutcome::Refused(
+            return Err(ControlOutcome::Refused(
                 "the bus is down; nothing can be sent".into(),
             ));
         }
         if let Command::Velocity { .. } = command {
-            return Some(ControlOutcome::Invalid(
+            return Err(ControlOutcome::Invalid(
                 "motion goes through the mux, not a control request".into(),
             ));
         }
-        None
+        plan(command).map_err(ControlOutcome::from)
     }
 
     /// Queues the notices of a change of the normalized fault flags: the faults set (an error
@@ -519,6 +534,32 @@ impl DriverCore {
             );
         }
     }
+}
+
+/// The [`Driver`] methods that only hand out what the embedded [`DriverCore`] (a field named
+/// `core`) holds: the next event and the state snapshot.
+macro_rules! core_accessors {
+    () => {
+        fn poll_event(&mut self) -> Option<$crate::driver::DriverEvent> {
+            self.core.events.pop_front()
+        }
+
+        fn state(&self) -> &chassis_interfaces::ChassisState {
+            &self.core.state
+        }
+    };
+}
+pub(crate) use core_accessors;
+
+/// The normalized flags (`chassis_interfaces::FaultFlags`) of a vendor fault word: the union of
+/// the flags in `map` whose vendor bit is set in `word`.
+pub(crate) fn flags_of<W>(word: W, map: &[(W, u64)]) -> u64
+where
+    W: Copy + Default + PartialEq + std::ops::BitAnd<Output = W>,
+{
+    map.iter()
+        .filter(|(bit, _)| word & *bit != W::default())
+        .fold(0, |acc, (_, flag)| acc | flag)
 }
 
 /// How a twist asks to turn: a steering angle when it carries `RequestFlags::STEER`, else a

@@ -6,8 +6,8 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, RobotKind,
-    SystemState, Twist,
+    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, RobotKind, SystemState,
+    Twist,
 };
 
 use super::codec::{self, Frame, Lights, MotionCommand, body, clear_code, fault, mode};
@@ -15,8 +15,8 @@ use super::commands::{frames_for, velocity_command};
 use super::kinematics::SkidCommand;
 use crate::command::Command;
 use crate::driver::{
-    CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverCore, DriverEvent, Level,
-    PoseIntegrator, Rx, Transmit, requested_turn,
+    CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx,
+    Transmit, flags_of, requested_turn,
 };
 use crate::profile::{Robot, ScoutMiniProfile};
 use crate::time::{Timestamp, earliest};
@@ -34,7 +34,7 @@ enum LightRequest {
 }
 
 /// The SCOUT MINI driver: heartbeat, authority, limits and quantisation, feedback into
-/// [`ChassisState`].
+/// [`ChassisState`](chassis_interfaces::ChassisState).
 ///
 /// # On the wire
 ///
@@ -79,7 +79,7 @@ enum LightRequest {
 /// Every frame's checksum is checked by [`codec::decode`]: a bad one is dropped and counted in
 /// `link.rx_bad_checksum`, other undecodable frames in `link.rx_decode_errors`, ids the SCOUT
 /// MINI does not use (and extended ids) in `link.rx_unknown_id`; each drop is also a
-/// [`DriverEvent::RxDropped`]. Dropped frames change nothing else, and in particular do not count
+/// [`DriverEvent::RxDropped`](crate::driver::DriverEvent::RxDropped). Dropped frames change nothing else, and in particular do not count
 /// as signs of life for [`LinkFlags::CHASSIS_SILENT`]: a chassis whose every frame is corrupt
 /// leaves the state as stale as a silent one.
 ///
@@ -92,7 +92,7 @@ enum LightRequest {
 ///
 /// Commands seen on the bus (0x130, 0x140 from another node) are valid frames but not state:
 /// they are counted in `link.rx_frames` and otherwise ignored. Notices
-/// ([`DriverEvent::Notice`]) report control-mode changes (RC takeover and hand-back included),
+/// ([`DriverEvent::Notice`](crate::driver::DriverEvent::Notice)) report control-mode changes (RC takeover and hand-back included),
 /// faults set and cleared, the chassis turning silent and talking again, and the bus going down
 /// and coming back.
 #[derive(Debug)]
@@ -194,11 +194,8 @@ impl ScoutMiniDriver {
         {
             flags |= ClampFlags::CHASSIS_NOT_READY;
         }
-        if motion != self.motion {
-            let stop = motion.linear_mps == 0.0 && motion.angular_radps == 0.0;
-            self.motion = motion;
-            self.core.schedule.command_changed(stop);
-        }
+        let stop = motion.linear_mps == 0.0 && motion.angular_radps == 0.0;
+        self.core.schedule.update(&mut self.motion, motion, stop);
         self.motion_clamp_flags = flags;
     }
 
@@ -428,15 +425,15 @@ pub fn normalize_faults(word: u16) -> u64 {
             FaultFlags::OVER_CURRENT,
         ),
     ];
-    MAP.iter()
-        .filter(|(bit, _)| word & bit != 0)
-        .fold(0, |acc, (_, flag)| acc | flag)
+    flags_of(word, &MAP)
 }
 
 impl Driver for ScoutMiniDriver {
     fn robot(&self) -> Robot {
         Robot::ScoutMini
     }
+
+    crate::driver::core_accessors!();
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         let profile = &self.profile;
@@ -450,12 +447,12 @@ impl Driver for ScoutMiniDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        if let Some(refused) = self.core.refuse_control(command) {
-            return refused;
-        }
-        let planned = match frames_for(command, &self.profile) {
+        let planned = match self
+            .core
+            .admit_control(command, |c| frames_for(c, &self.profile))
+        {
             Ok(planned) => planned,
-            Err(err) => return err.into(),
+            Err(outcome) => return outcome,
         };
         match *command {
             Command::Mode { take_control } => {
@@ -553,14 +550,6 @@ impl Driver for ScoutMiniDriver {
             next = earliest(next, Some(self.light_schedule.deadline()));
         }
         next
-    }
-
-    fn poll_event(&mut self) -> Option<DriverEvent> {
-        self.core.events.pop_front()
-    }
-
-    fn state(&self) -> &ChassisState {
-        &self.core.state
     }
 
     fn set_bus_down(&mut self, now: Timestamp, down: bool) {

@@ -13,8 +13,8 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ClampFlags, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags, RobotKind,
-    SystemState, Twist,
+    ClampFlags, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags, RobotKind, SystemState,
+    Twist,
 };
 
 use super::codec::{self, Frame, MotionCommand, ParkingBrake, fault, mode};
@@ -23,7 +23,7 @@ use super::kinematics::yaw_rate;
 use crate::command::Command;
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, DriverEvent, Level, PoseIntegrator, Rx,
-    Transmit, requested_turn,
+    Transmit, flags_of, requested_turn,
 };
 use crate::profile::{Robot, TitanProfile};
 use crate::time::{Timestamp, earliest};
@@ -138,11 +138,7 @@ impl TitanDriver {
         } else if self.idle_since.is_none() {
             self.idle_since = Some(now);
         }
-        if motion != self.motion {
-            let stop = !moving;
-            self.motion = motion;
-            self.core.schedule.command_changed(stop);
-        }
+        self.core.schedule.update(&mut self.motion, motion, !moving);
         self.motion_clamp_flags = flags;
     }
 
@@ -266,14 +262,9 @@ impl TitanDriver {
                 }
                 self.core.notice(Level::Info, "steering zero position set");
             }
-            // Commands on the bus from another node: not ours to decode into state.
-            Frame::MotionCommand(_)
-            | Frame::ParkingBrake(_)
-            | Frame::Mode(_)
-            | Frame::SilentMode(_)
-            | Frame::OffRoad(_)
-            | Frame::SteeringZero
-            | Frame::ClearFault(_) => {}
+            // Commands on the bus from another node ([`Frame::direction`] `ToChassis`): not ours
+            // to decode into state.
+            _ => {}
         }
     }
 
@@ -393,15 +384,15 @@ pub fn normalize_faults(word: u32) -> u64 {
         (fault::MOTOR_3_COMM_LOST, FaultFlags::MOTOR_3_COMM_LOST),
         (fault::MOTOR_4_COMM_LOST, FaultFlags::MOTOR_4_COMM_LOST),
     ];
-    MAP.iter()
-        .filter(|(bit, _)| word & bit != 0)
-        .fold(0, |acc, (_, flag)| acc | flag)
+    flags_of(word, &MAP)
 }
 
 impl Driver for TitanDriver {
     fn robot(&self) -> Robot {
         Robot::Titan
     }
+
+    crate::driver::core_accessors!();
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         let profile = &self.profile;
@@ -415,12 +406,12 @@ impl Driver for TitanDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        if let Some(refused) = self.core.refuse_control(command) {
-            return refused;
-        }
-        let planned = match frames_for(command, &self.profile) {
+        let planned = match self
+            .core
+            .admit_control(command, |c| frames_for(c, &self.profile))
+        {
             Ok(planned) => planned,
-            Err(err) => return err.into(),
+            Err(outcome) => return outcome,
         };
         let t = now.as_nanos();
         let outcome = match *command {
@@ -588,14 +579,6 @@ impl Driver for TitanDriver {
             next = earliest(next, Some(deadline));
         }
         next
-    }
-
-    fn poll_event(&mut self) -> Option<DriverEvent> {
-        self.core.events.pop_front()
-    }
-
-    fn state(&self) -> &ChassisState {
-        &self.core.state
     }
 
     fn set_bus_down(&mut self, now: Timestamp, down: bool) {

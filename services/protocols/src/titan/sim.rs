@@ -13,6 +13,7 @@ use super::codec::{
 };
 use super::driver::normalize_faults;
 use super::kinematics::{steer_command, yaw_rate};
+use crate::Direction;
 use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
@@ -972,25 +973,10 @@ impl Firmware for TitanSim {
                 return;
             }
         };
-        match decoded {
-            Frame::MotionCommand(_)
-            | Frame::ParkingBrake(_)
-            | Frame::Mode(_)
-            | Frame::SilentMode(_)
-            | Frame::OffRoad(_)
-            | Frame::SteeringZero
-            | Frame::ClearFault(_) => self.on_command(now, decoded),
-            Frame::SteeringZeroAck
-            | Frame::SystemStatus(_)
-            | Frame::MotionFeedback(_)
-            | Frame::Rc(_)
-            | Frame::MotorFast(_)
-            | Frame::MotorSlow(_)
-            | Frame::SteeringFeedback(_)
-            | Frame::AxleSpeed(_)
-            | Frame::Odometer(_)
-            | Frame::BmsData(_)
-            | Frame::BmsAlarm(_) => self.frames_ignored += 1,
+        match decoded.direction() {
+            Direction::ToChassis => self.on_command(now, decoded),
+            // Feedback ids put on the bus by another node.
+            Direction::FromChassis => self.frames_ignored += 1,
         }
     }
 

@@ -6,7 +6,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, RobotKind, Twist,
+    ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, RobotKind, Twist,
 };
 
 use super::codec::{
@@ -17,8 +17,7 @@ use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::command::{Command, Turn};
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, DriverEvent, Level, Rx, Transmit, Unwrap16,
-    wrap_angle,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, Rx, Transmit, Unwrap16, wrap_angle,
 };
 use crate::profile::{Robot, XbotProfile};
 use crate::time::{Timestamp, earliest};
@@ -107,7 +106,7 @@ struct SpeedRef {
 /// * **Receive.** The bytes feed a [`StreamParser`]; every good frame is applied. A rejected
 ///   candidate counts in `state.link.rx_bad_checksum` (bad checksum) or
 ///   `state.link.rx_decode_errors` (anything else: zero or wrong length, unknown id, wrong marker,
-///   undecodable value) and emits [`DriverEvent::RxDropped`]; `state.link.rx_bytes_discarded`
+///   undecodable value) and emits [`DriverEvent::RxDropped`](crate::driver::DriverEvent::RxDropped); `state.link.rx_bytes_discarded`
 ///   always equals the parser's discarded-byte count. A CAN frame counts as a decode error. A
 ///   command frame (0x01, 0x03, 0x04, 0x05) arriving from the chassis side is a loopback, not
 ///   feedback: it is dropped and counted in `rx_unknown_id`, and it does not keep the link alive.
@@ -674,6 +673,8 @@ impl Driver for XbotDriver {
         Robot::Xbot
     }
 
+    crate::driver::core_accessors!();
+
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         let Rx::Bytes(bytes) = rx else {
             self.core
@@ -699,12 +700,12 @@ impl Driver for XbotDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        if let Some(refused) = self.core.refuse_control(command) {
-            return refused;
-        }
-        let planned = match frames_for(command, &self.profile) {
+        let planned = match self
+            .core
+            .admit_control(command, |c| frames_for(c, &self.profile))
+        {
             Ok(planned) => planned,
-            Err(err) => return err.into(),
+            Err(outcome) => return outcome,
         };
         let t = now.as_nanos();
         let mut outcome = ControlOutcome::Done(format!("{} sent", command.name()));
@@ -787,14 +788,6 @@ impl Driver for XbotDriver {
 
     fn poll_timeout(&self) -> Option<Timestamp> {
         earliest(Some(self.core.poll_timeout()?), self.release_at)
-    }
-
-    fn poll_event(&mut self) -> Option<DriverEvent> {
-        self.core.events.pop_front()
-    }
-
-    fn state(&self) -> &ChassisState {
-        &self.core.state
     }
 
     fn set_bus_down(&mut self, now: Timestamp, down: bool) {
