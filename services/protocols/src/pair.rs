@@ -12,7 +12,7 @@ use chassis_interfaces::Twist;
 
 use crate::Direction;
 use crate::command::Command;
-use crate::driver::{ControlOutcome, Driver, DriverEvent, Transmit};
+use crate::driver::{ControlOutcome, Driver, DriverEvent, Level, Transmit};
 use crate::firmware::{Firmware, Injection};
 use crate::time::{Timestamp, earliest};
 
@@ -239,4 +239,15 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
     pub fn take_events(&mut self) -> Vec<DriverEvent> {
         std::mem::take(&mut self.events)
     }
+}
+
+/// The notices among `events`, with their level.
+pub fn notices(events: &[DriverEvent]) -> Vec<(Level, String)> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            DriverEvent::Notice { level, message } => Some((*level, message.clone())),
+            _ => None,
+        })
+        .collect()
 }

@@ -9,9 +9,7 @@ use chassis_interfaces::{
     ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, RobotKind, Twist,
 };
 
-use super::codec::{
-    Frame, LiftCommand, MAX_FRAME_LEN, PowerCommand, SensorReport, ServoCommand, VelocityCommand,
-};
+use super::codec::{Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, VelocityCommand};
 use super::commands::{frames_for, velocity_command};
 use super::stream::StreamParser;
 use crate::DecodeError;
@@ -681,14 +679,12 @@ impl Driver for XbotDriver {
                 .wrong_medium("a CAN frame on the XBot's serial link");
             return;
         };
-        // A frame's worth at a time, drained after each push: the parser never overflows.
-        for chunk in bytes.chunks(MAX_FRAME_LEN) {
-            self.parser.push(chunk);
-            while let Some(item) = self.parser.next_frame(&self.profile) {
-                match item {
-                    Ok(frame) => self.on_frame(now, frame),
-                    Err(err) => self.on_error(&err.error, err.to_string()),
-                }
+        // Collected first: applying a frame needs the whole driver, the parser included.
+        let items: Vec<_> = self.parser.feed(bytes, &self.profile).collect();
+        for item in items {
+            match item {
+                Ok(frame) => self.on_frame(now, frame),
+                Err(err) => self.on_error(&err.error, err.to_string()),
             }
         }
         self.core.state.link.rx_bytes_discarded = self.parser.bytes_discarded();

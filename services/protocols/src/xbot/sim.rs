@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use chassis_interfaces::ControlMode;
 
-use super::codec::{Frame, MAX_FRAME_LEN, SensorReport, VelocityCommand, scale};
+use super::codec::{Frame, SensorReport, VelocityCommand, scale};
 use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::driver::{Rx, Transmit};
@@ -740,13 +740,12 @@ impl Firmware for XbotSim {
             return;
         };
         // A booting board obeys nothing: `on_frame` counts what it ignores.
-        for chunk in bytes.chunks(MAX_FRAME_LEN) {
-            self.parser.push(chunk);
-            while let Some(item) = self.parser.next_frame(&self.profile) {
-                match item {
-                    Ok(frame) => self.on_frame(now, frame),
-                    Err(err) => self.on_error(&err.error),
-                }
+        // Collected first: obeying a frame needs the whole board, the parser included.
+        let items: Vec<_> = self.parser.feed(bytes, &self.profile).collect();
+        for item in items {
+            match item {
+                Ok(frame) => self.on_frame(now, frame),
+                Err(err) => self.on_error(&err.error),
             }
         }
     }
