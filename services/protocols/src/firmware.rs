@@ -194,25 +194,27 @@ impl Pose {
 
 /// A simulated battery: open-circuit voltage linear in the state of charge, one internal
 /// resistance, charge drawn by the pack current.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct BatteryModel {
-    pub(crate) capacity_ah: f64,
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatteryModel {
+    /// Capacity of one battery, Ah.
+    pub capacity_ah: f64,
     /// Open-circuit voltage at 100 % SOC, V.
-    pub(crate) full_v: f64,
+    pub full_v: f64,
     /// Open-circuit voltage at 0 % SOC, V.
-    pub(crate) empty_v: f64,
-    pub(crate) resistance_ohm: f64,
+    pub empty_v: f64,
+    /// Internal resistance of the pack, Ω.
+    pub resistance_ohm: f64,
 }
 
 impl BatteryModel {
     /// Terminal voltage at `soc_pct` under `current_a` (positive = discharging), V.
-    pub(crate) fn voltage_v(&self, soc_pct: f64, current_a: f64) -> f64 {
+    pub fn voltage_v(&self, soc_pct: f64, current_a: f64) -> f64 {
         let ocv = self.empty_v + (self.full_v - self.empty_v) * soc_pct / 100.0;
         (ocv - self.resistance_ohm * current_a).max(0.0)
     }
 
     /// The state of charge after drawing `current_a` for `dt` seconds from `packs` batteries.
-    pub(crate) fn drain(&self, soc_pct: f64, current_a: f64, dt: f64, packs: f64) -> f64 {
+    pub fn drain(&self, soc_pct: f64, current_a: f64, dt: f64, packs: f64) -> f64 {
         let used_pct = current_a * dt / 3600.0 / (self.capacity_ah * packs) * 100.0;
         (soc_pct - used_pct).max(0.0)
     }
@@ -334,6 +336,16 @@ pub(crate) fn garbage_frames(id: u16, bytes: &[u8]) -> impl Iterator<Item = CanF
     bytes
         .chunks(8)
         .filter_map(move |chunk| CanFrame::new(u32::from(id), chunk).ok())
+}
+
+/// An injected or configured state of charge, % (clamped to 0-100); `None` when not a number.
+pub(crate) fn state_of_charge(soc_pct: f64) -> Option<f64> {
+    soc_pct.is_finite().then(|| soc_pct.clamp(0.0, 100.0))
+}
+
+/// The index of motor driver `motor` (numbered from 1) among `count`, if there is one.
+pub(crate) fn motor_index(motor: u8, count: usize) -> Option<usize> {
+    usize::from(motor).checked_sub(1).filter(|i| *i < count)
 }
 
 /// A setting that must be a finite non-negative number (anything else is 0).

@@ -17,7 +17,7 @@ use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
     BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
-    garbage_frames, non_negative, substeps,
+    garbage_frames, motor_index, non_negative, state_of_charge, substeps,
 };
 use crate::profile::{Robot, ScoutMiniProfile};
 use crate::time::{Grid, Timestamp, earliest};
@@ -233,14 +233,13 @@ impl ScoutMiniSim {
     pub const DEFAULT_CHECKSUM_FAULT_HOLD: Duration = Duration::from_millis(500);
     /// CAN id of injected garbage frames (unused by SCOUT MINI).
     pub const GARBAGE_ID: u16 = 0x7F0;
-    /// Battery capacity, Ah.
-    pub const BATTERY_CAPACITY_AH: f64 = 15.0;
-    /// Open-circuit voltage at 100 % SOC, V.
-    pub const BATTERY_FULL_V: f64 = 29.2;
-    /// Open-circuit voltage at 0 % SOC, V.
-    pub const BATTERY_EMPTY_V: f64 = 21.0;
-    /// Internal resistance of the pack, Ω.
-    pub const BATTERY_RESISTANCE_OHM: f64 = 0.03;
+    /// The battery.
+    pub const BATTERY: BatteryModel = BatteryModel {
+        capacity_ah: 15.0,
+        full_v: 29.2,
+        empty_v: 21.0,
+        resistance_ohm: 0.03,
+    };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 0.8;
     /// Motor current per m/s of wheel speed, A.
@@ -269,12 +268,6 @@ impl ScoutMiniSim {
     pub const MAX_FLOOD_FRAMES_PER_S: u32 = 100_000;
     /// Longest time integrated at once; a longer gap between calls is not bridged.
     pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
-    const BATTERY: BatteryModel = BatteryModel {
-        capacity_ah: Self::BATTERY_CAPACITY_AH,
-        full_v: Self::BATTERY_FULL_V,
-        empty_v: Self::BATTERY_EMPTY_V,
-        resistance_ohm: Self::BATTERY_RESISTANCE_OHM,
-    };
 
     /// A chassis that has just finished booting at `now`: command mode (no RC transmitter),
     /// standing, SOC 100 %.
@@ -344,8 +337,8 @@ impl ScoutMiniSim {
 
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
-        if soc_pct.is_finite() {
-            self.soc_pct = soc_pct.clamp(0.0, 100.0);
+        if let Some(soc_pct) = state_of_charge(soc_pct) {
+            self.soc_pct = soc_pct;
             self.refresh_conditions();
         }
         self
@@ -505,7 +498,9 @@ impl ScoutMiniSim {
 
     /// Physics and the deadlines that change what the chassis does (boot end, command timeout).
     fn expire(&mut self, now: Timestamp) {
-        self.advance(now);
+        for dt in substeps(&mut self.last_update, now) {
+            self.step(dt);
+        }
         if self.booting_until.is_some_and(|t| now >= t) {
             self.booting_until = None;
             self.refresh_conditions();
@@ -590,13 +585,6 @@ impl ScoutMiniSim {
     // -----------------------------------------------------------------------------------------
     // Physics.
 
-    /// Integrates from the last update to `now` (at most [`Self::MAX_STEP`]).
-    fn advance(&mut self, now: Timestamp) {
-        for dt in substeps(&mut self.last_update, now) {
-            self.step(dt);
-        }
-    }
-
     /// Target speeds and the time constant toward them.
     fn target(&self) -> (Motion, f64) {
         if self.booting_until.is_some() || self.latched & POWER_FAULTS != 0 {
@@ -611,10 +599,8 @@ impl ScoutMiniSim {
         }
     }
 
+    /// Integrates `dt` seconds (one sub-step of [`substeps`], never zero).
     fn step(&mut self, dt: f64) {
-        if dt <= 0.0 {
-            return;
-        }
         self.refresh_conditions();
         let (target, tau) = self.target();
         let lag = |from: f64, to: f64| first_order_lag(from, to, tau, dt);
@@ -806,17 +792,17 @@ impl Firmware for ScoutMiniSim {
         self.expire(now);
         match injection {
             Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = usize::from(motor).checked_sub(1).filter(|i| *i < 4) else {
+                let Some(index) = motor_index(motor, 4) else {
                     return false;
                 };
                 self.motor_lost[index] = lost;
                 self.refresh_conditions();
             }
             Injection::Battery { soc_pct } => {
-                if !soc_pct.is_finite() {
+                let Some(soc_pct) = state_of_charge(soc_pct) else {
                     return false;
-                }
-                self.soc_pct = soc_pct.clamp(0.0, 100.0);
+                };
+                self.soc_pct = soc_pct;
                 self.refresh_conditions();
             }
             Injection::RcTakeover(on) => {

@@ -18,7 +18,7 @@ use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
     BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
-    garbage_frames, non_negative, substeps,
+    garbage_frames, motor_index, non_negative, state_of_charge, substeps,
 };
 use crate::profile::{Robot, TitanProfile};
 use crate::time::{Grid, Timestamp, earliest};
@@ -266,14 +266,13 @@ impl TitanSim {
     pub const STANDING_STILL_MPS: f64 = 0.01;
     /// CAN id of injected garbage frames (unused by TITAN).
     pub const GARBAGE_ID: u16 = 0x7F0;
-    /// Capacity of one battery, Ah.
-    pub const BATTERY_CAPACITY_AH: f64 = 24.0;
-    /// Open-circuit voltage at 100 % SOC, V.
-    pub const BATTERY_FULL_V: f64 = 52.0;
-    /// Open-circuit voltage at 0 % SOC, V.
-    pub const BATTERY_EMPTY_V: f64 = 44.0;
-    /// Internal resistance of the pack, Ω.
-    pub const BATTERY_RESISTANCE_OHM: f64 = 0.05;
+    /// The pack (one battery; [`Self::with_batteries`] doubles the capacity).
+    pub const BATTERY: BatteryModel = BatteryModel {
+        capacity_ah: 24.0,
+        full_v: 52.0,
+        empty_v: 44.0,
+        resistance_ohm: 0.05,
+    };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 1.0;
     /// Motor current per m/s of wheel speed, A.
@@ -286,12 +285,6 @@ impl TitanSim {
     pub const MAX_FLOOD_FRAMES_PER_S: u32 = 100_000;
     /// Longest time integrated at once; a longer gap between calls is not bridged.
     pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
-    const BATTERY: BatteryModel = BatteryModel {
-        capacity_ah: Self::BATTERY_CAPACITY_AH,
-        full_v: Self::BATTERY_FULL_V,
-        empty_v: Self::BATTERY_EMPTY_V,
-        resistance_ohm: Self::BATTERY_RESISTANCE_OHM,
-    };
     const AMBIENT_C: f64 = 25.0;
 
     /// A chassis that has just finished booting at `now`: standby, brake engaged, SOC 100 %.
@@ -386,8 +379,8 @@ impl TitanSim {
 
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
-        if soc_pct.is_finite() {
-            self.soc_pct = soc_pct.clamp(0.0, 100.0);
+        if let Some(soc_pct) = state_of_charge(soc_pct) {
+            self.soc_pct = soc_pct;
             self.refresh_conditions();
         }
         self
@@ -514,7 +507,9 @@ impl TitanSim {
 
     /// Physics and the deadlines that change what the chassis obeys (boot end, heartbeat).
     fn expire(&mut self, now: Timestamp) {
-        self.advance(now);
+        for dt in substeps(&mut self.last_update, now) {
+            self.step(dt);
+        }
         if self.booting_until.is_some_and(|t| now >= t) {
             self.booting_until = None;
             self.refresh_conditions();
@@ -665,17 +660,8 @@ impl TitanSim {
     // -----------------------------------------------------------------------------------------
     // Physics.
 
-    /// Integrates from the last update to `now` (at most [`Self::MAX_STEP`]).
-    fn advance(&mut self, now: Timestamp) {
-        for dt in substeps(&mut self.last_update, now) {
-            self.step(dt);
-        }
-    }
-
+    /// Integrates `dt` seconds (one sub-step of [`substeps`], never zero).
     fn step(&mut self, dt: f64) {
-        if dt <= 0.0 {
-            return;
-        }
         self.refresh_conditions();
         let blocked = self.drive_blocked();
         let (target, tau) = if blocked {
@@ -1022,17 +1008,17 @@ impl Firmware for TitanSim {
         self.expire(now);
         match injection {
             Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = usize::from(motor).checked_sub(1).filter(|i| *i < 4) else {
+                let Some(index) = motor_index(motor, 4) else {
                     return false;
                 };
                 self.motor_lost[index] = lost;
                 self.refresh_conditions();
             }
             Injection::Battery { soc_pct } => {
-                if !soc_pct.is_finite() {
+                let Some(soc_pct) = state_of_charge(soc_pct) else {
                     return false;
-                }
-                self.soc_pct = soc_pct.clamp(0.0, 100.0);
+                };
+                self.soc_pct = soc_pct;
                 self.refresh_conditions();
             }
             Injection::Bumper(pressed) => {

@@ -11,8 +11,8 @@ use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
-    BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, first_order_lag,
-    non_negative, substeps,
+    BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, first_order_lag, motor_index,
+    non_negative, state_of_charge, substeps,
 };
 use crate::profile::{Robot, XbotProfile};
 use crate::time::{Grid, Timestamp, earliest};
@@ -171,14 +171,13 @@ impl XbotSim {
     pub const LIFT_PCT_PER_S: f64 = 10.0;
     /// Lift encoder counts per % of travel.
     pub const LIFT_COUNTS_PER_PCT: f64 = 100.0;
-    /// Battery capacity, Ah.
-    pub const BATTERY_CAPACITY_AH: f64 = 26.0;
-    /// Open-circuit voltage at 100 % SOC, V.
-    pub const BATTERY_FULL_V: f64 = 26.0;
-    /// Open-circuit voltage at 0 % SOC, V.
-    pub const BATTERY_EMPTY_V: f64 = 23.0;
-    /// Internal resistance of the pack, Ω.
-    pub const BATTERY_RESISTANCE_OHM: f64 = 0.05;
+    /// The battery.
+    pub const BATTERY: BatteryModel = BatteryModel {
+        capacity_ah: 26.0,
+        full_v: 26.0,
+        empty_v: 23.0,
+        resistance_ohm: 0.05,
+    };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 1.0;
     /// Motor current per m/s of wheel speed, A.
@@ -200,12 +199,6 @@ impl XbotSim {
     const MAG_VERTICAL_GAUSS: f64 = -0.4;
     /// Longest time integrated at once; a longer gap between calls is not bridged.
     pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
-    const BATTERY: BatteryModel = BatteryModel {
-        capacity_ah: Self::BATTERY_CAPACITY_AH,
-        full_v: Self::BATTERY_FULL_V,
-        empty_v: Self::BATTERY_EMPTY_V,
-        resistance_ohm: Self::BATTERY_RESISTANCE_OHM,
-    };
     /// Bytes of one sensor report on the wire.
     const REPORT_LEN: u32 = 75;
 
@@ -284,8 +277,8 @@ impl XbotSim {
 
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
-        if soc_pct.is_finite() {
-            self.soc_pct = soc_pct.clamp(0.0, 100.0);
+        if let Some(soc_pct) = state_of_charge(soc_pct) {
+            self.soc_pct = soc_pct;
         }
         self
     }
@@ -404,7 +397,9 @@ impl XbotSim {
 
     /// Physics and the deadlines that change what the board does (boot end, silence, heartbeat).
     fn expire(&mut self, now: Timestamp) {
-        self.advance(now);
+        for dt in substeps(&mut self.last_update, now) {
+            self.step(dt);
+        }
         if let Some(until) = self.booting_until
             && now >= until
         {
@@ -507,13 +502,6 @@ impl XbotSim {
     // -----------------------------------------------------------------------------------------
     // Physics.
 
-    /// Integrates from the last update to `now` (at most [`Self::MAX_STEP`]).
-    fn advance(&mut self, now: Timestamp) {
-        for dt in substeps(&mut self.last_update, now) {
-            self.step(dt);
-        }
-    }
-
     /// Wheel speed targets FL, FR, RL, RR for a body velocity, scaled into the top speed.
     fn wheel_targets(&self, v: &VelocityCommand) -> [f64; 4] {
         let k = 0.5 * self.wheel_separation_m;
@@ -552,10 +540,8 @@ impl XbotSim {
         }
     }
 
+    /// Integrates `dt` seconds (one sub-step of [`substeps`], never zero).
     fn step(&mut self, dt: f64) {
-        if dt <= 0.0 {
-            return;
-        }
         let blocked = self.drive_blocked();
         let (targets, tau) = if blocked {
             ([0.0; 4], self.stop_time_constant_s)
@@ -787,19 +773,16 @@ impl Firmware for XbotSim {
         self.expire(now);
         match injection {
             Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = usize::from(motor)
-                    .checked_sub(1)
-                    .filter(|i| *i < self.wheels())
-                else {
+                let Some(index) = motor_index(motor, self.wheels()) else {
                     return false;
                 };
                 self.motor_lost[index] = lost;
             }
             Injection::Battery { soc_pct } => {
-                if !soc_pct.is_finite() {
+                let Some(soc_pct) = state_of_charge(soc_pct) else {
                     return false;
-                }
-                self.soc_pct = soc_pct.clamp(0.0, 100.0);
+                };
+                self.soc_pct = soc_pct;
             }
             Injection::Bumper(_) | Injection::RcTakeover(_) => return false,
             Injection::Reboot => self.reboot(now),
