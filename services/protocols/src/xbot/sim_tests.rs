@@ -10,19 +10,12 @@ use crate::driver::{Rx, Transmit};
 use crate::firmware::{Firmware, Injection};
 use crate::profile::XbotProfile;
 use crate::time::{Timestamp, earliest};
+use crate::xbot::test_support::{close, ms, p, pieces};
 use crate::xbot::{
     Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, StreamParser, VelocityCommand,
 };
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
-
-fn ms(v: u64) -> Duration {
-    Duration::from_millis(v)
-}
-
-fn p() -> XbotProfile {
-    XbotProfile::default()
-}
 
 fn velocity(vx: f64, vy: f64, wz: f64) -> VelocityCommand {
     VelocityCommand {
@@ -30,10 +23,6 @@ fn velocity(vx: f64, vy: f64, wz: f64) -> VelocityCommand {
         linear_y_mps: vy,
         angular_z_radps: wz,
     }
-}
-
-fn close(a: f64, b: f64, tolerance: f64) -> bool {
-    (a - b).abs() <= tolerance
 }
 
 /// The board on simulated time, with an optional 125 ms 0x03 heartbeat from "the computer".
@@ -733,12 +722,8 @@ proptest! {
         cuts in proptest::collection::vec(1usize..300, 1..20),
     ) {
         let mut b = Bench::new();
-        let mut rest = data.as_slice();
-        let mut cut = cuts.iter().cycle();
-        while !rest.is_empty() {
-            let n = (*cut.next().unwrap()).min(rest.len());
-            b.send_raw(&rest[..n]);
-            rest = &rest[n..];
+        for piece in pieces(&data, &cuts) {
+            b.send_raw(piece);
             b.run_for(ms(3));
         }
         let t = b.sim.truth();
