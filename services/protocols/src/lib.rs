@@ -23,6 +23,8 @@ pub mod nmea;
 pub mod pair;
 pub mod profile;
 pub mod scout_mini;
+#[cfg(test)]
+mod sim_bench;
 pub mod time;
 pub mod titan;
 mod wire;
