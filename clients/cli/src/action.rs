@@ -4,6 +4,7 @@
 use chassis_interfaces::{FaultClear, LightMode};
 use chassis_protocols::{Command, Turn};
 use clap::{Args, Subcommand, ValueEnum};
+use thiserror::Error;
 
 /// on / off.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -140,17 +141,33 @@ pub enum Action {
     },
 }
 
+/// Why a control action on the command line is not a command.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ActionError {
+    /// A fault name `FaultClear` does not know.
+    #[error("unknown fault '{name}' (one of: {})", fault_names().join(", "))]
+    UnknownFault { name: String },
+    #[error("brightness {0} % is above 100 %")]
+    Brightness(u8),
+    #[error("lift position {0} % is outside 0..100 %")]
+    LiftPosition(f64),
+    /// A pan or tilt angle beyond ±90°.
+    #[error("{axis} {degrees}° is outside -90..90°")]
+    ServoAngle { axis: &'static str, degrees: f64 },
+}
+
+fn fault_names() -> Vec<&'static str> {
+    FaultClear::NAMES.iter().map(|(_, n)| *n).collect()
+}
+
 /// The normalized fault-clear code for a name.
-pub fn fault_clear_code(name: &str) -> Result<u8, String> {
-    FaultClear::from_name(name).ok_or_else(|| {
-        let names: Vec<&str> = FaultClear::NAMES.iter().map(|(_, n)| *n).collect();
-        format!("unknown fault '{name}' (one of: {})", names.join(", "))
-    })
+pub fn fault_clear_code(name: &str) -> Result<u8, ActionError> {
+    FaultClear::from_name(name).ok_or_else(|| ActionError::UnknownFault { name: name.into() })
 }
 
 impl Action {
     /// The robot-independent command.
-    pub fn to_command(&self) -> Result<Command, String> {
+    pub fn to_command(&self) -> Result<Command, ActionError> {
         Ok(match self {
             Action::Mode { mode } => Command::Mode {
                 take_control: *mode == ModeArg::Command,
@@ -163,7 +180,7 @@ impl Action {
             },
             Action::Lights { mode, brightness } => {
                 if *brightness > 100 {
-                    return Err(format!("brightness {brightness} % is above 100 %"));
+                    return Err(ActionError::Brightness(*brightness));
                 }
                 let (enable, mode) = match mode {
                     LightArg::Off => (true, LightMode::OFF),
@@ -183,7 +200,7 @@ impl Action {
             },
             Action::Lift { position, disable } => {
                 if !(0.0..=100.0).contains(position) {
-                    return Err(format!("lift position {position} % is outside 0..100 %"));
+                    return Err(ActionError::LiftPosition(*position));
                 }
                 Command::Lift {
                     enable: !disable,
@@ -191,9 +208,9 @@ impl Action {
                 }
             }
             Action::Servos { pan, tilt } => {
-                for (name, v) in [("pan", pan), ("tilt", tilt)] {
+                for (axis, v) in [("pan", pan), ("tilt", tilt)] {
                     if !(-90.0..=90.0).contains(v) {
-                        return Err(format!("{name} {v}° is outside -90..90°"));
+                        return Err(ActionError::ServoAngle { axis, degrees: *v });
                     }
                 }
                 Command::Servos {

@@ -9,6 +9,17 @@ use serde_json::{Map, Value};
 /// fields in SI units under the names the interfaces use.
 pub type FrameJson = Map<String, Value>;
 
+/// Why serial bytes did not decode into a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum SerialError {
+    /// The robot is on a CAN bus: its frames are given as `ID#HEX`.
+    #[error("{robot} speaks CAN: give frames as ID#HEX")]
+    NotSerial { robot: Robot },
+    /// The XBot stream parser rejected a candidate frame (its bytes are in the message).
+    #[error("{0}")]
+    Rejected(xbot::StreamError),
+}
+
 /// The codec of one robot, with its profile.
 #[derive(Debug)]
 pub enum RobotCodec {
@@ -69,12 +80,11 @@ impl RobotCodec {
 
     /// Feeds serial bytes (XBot) and returns every frame or error they complete, in order.
     /// Errors carry the bytes of the rejected candidate frame when there is one.
-    pub fn push_serial(&mut self, bytes: &[u8]) -> Vec<Result<FrameJson, String>> {
+    pub fn push_serial(&mut self, bytes: &[u8]) -> Vec<Result<FrameJson, SerialError>> {
         let RobotCodec::Xbot { profile, parser } = self else {
-            return vec![Err(format!(
-                "{} speaks CAN: give frames as ID#HEX",
-                self.robot()
-            ))];
+            return vec![Err(SerialError::NotSerial {
+                robot: self.robot(),
+            })];
         };
         parser.push(bytes);
         let mut out = Vec::new();
@@ -87,7 +97,7 @@ impl RobotCodec {
                     None,
                     &frame,
                 )),
-                Err(err) => Err(err.to_string()),
+                Err(err) => Err(SerialError::Rejected(err)),
             });
         }
         out

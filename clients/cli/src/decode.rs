@@ -121,8 +121,17 @@ pub struct HexStream {
     pending_nibble: Option<u8>,
 }
 
+/// A character in hex text that is neither a hex digit nor an accepted separator.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("'{text}': '{digit}' is not a hex digit")]
+pub struct NotHex {
+    /// The chunk it was found in, trimmed.
+    pub text: String,
+    pub digit: char,
+}
+
 impl HexStream {
-    pub fn push(&mut self, text: &str) -> Result<Vec<u8>, String> {
+    pub fn push(&mut self, text: &str) -> Result<Vec<u8>, NotHex> {
         let cleaned = text.replace("0x", "").replace("0X", "");
         let mut bytes = Vec::with_capacity(cleaned.len() / 2);
         for c in cleaned.chars() {
@@ -130,7 +139,10 @@ impl HexStream {
                 continue;
             }
             let Some(nibble) = c.to_digit(16) else {
-                return Err(format!("'{}': '{c}' is not a hex digit", text.trim()));
+                return Err(NotHex {
+                    text: text.trim().into(),
+                    digit: c,
+                });
             };
             // to_digit(16) < 16 fits a u8.
             let nibble = nibble as u8;

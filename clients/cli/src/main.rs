@@ -124,7 +124,7 @@ fn restore_sigpipe() {
     let _ = unsafe { signal(Signal::SIGPIPE, SigHandler::SigDfl) };
 }
 
-pub(crate) fn parse_robot(text: &str) -> Result<Robot, String> {
+pub(crate) fn parse_robot(text: &str) -> Result<Robot, chassis_protocols::UnknownRobot> {
     text.parse()
 }
 

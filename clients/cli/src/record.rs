@@ -129,7 +129,7 @@ pub struct ReplayArgs {
     pub quiet: bool,
 }
 
-fn parse_model(text: &str) -> Result<RobotModel, String> {
+fn parse_model(text: &str) -> Result<RobotModel, chassis_protocols::UnknownRobot> {
     text.parse()
 }
 
@@ -570,18 +570,20 @@ fn drain_tap(
     name: &str,
     stop: &AtomicBool,
     out: &mpsc::Sender<Vec<BusFrame>>,
-    ready: &mpsc::Sender<Result<(), String>>,
+    ready: &mpsc::Sender<Result<(), chassis_client::ClientError>>,
 ) {
     let tap =
         match Robot::connect(name).and_then(|robot| robot.frames(TAP_BUFFER).map(|t| (robot, t))) {
             Ok(tap) => tap,
             Err(err) => {
-                let _ = ready.send(Err(err.to_string()));
+                // The receiver gives up after 5 s and reports that instead.
+                ready.send(Err(err)).ok();
                 return;
             }
         };
     let (_robot, tap) = tap;
-    let _ = ready.send(Ok(()));
+    // The receiver gives up after 5 s and reports that instead.
+    ready.send(Ok(())).ok();
     let mut batch = Vec::with_capacity(TAP_BUFFER);
     loop {
         let stopping = stop.load(Ordering::Relaxed);

@@ -32,17 +32,17 @@ struct Args {
     source: String,
 }
 
-fn load(args: &Args) -> Result<Config, String> {
+fn load(args: &Args) -> anyhow::Result<Config> {
     for (what, name) in [("--name", &args.name), ("--source", &args.source)] {
         if !valid_robot_name(name) {
-            return Err(format!("{what} '{name}': 1-16 of a-z 0-9 - _"));
+            anyhow::bail!("{what} '{name}': 1-16 of a-z 0-9 - _");
         }
     }
     let raw = match &args.config {
-        Some(path) => RawConfig::load(path).map_err(|e| e.to_string())?,
+        Some(path) => RawConfig::load(path)?,
         None => RawConfig::default(),
     };
-    raw.validate().map_err(|e| e.to_string())
+    Ok(raw.validate()?)
 }
 
 fn main() -> ExitCode {

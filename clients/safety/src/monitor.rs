@@ -38,6 +38,20 @@ pub enum MonitorError {
     Signal(std::io::Error),
 }
 
+/// Why one connection to the service ended (the monitor then reconnects).
+#[derive(Debug, Error)]
+enum LinkLost {
+    /// Waiting for state failed and the service is no longer there.
+    #[error("{0}")]
+    Waiting(ClientError),
+    /// The velocity request could not be published.
+    #[error("publishing on the safety source: {0}")]
+    Publishing(ClientError),
+    /// The state went stale and the service no longer serves it.
+    #[error("chassisd no longer publishes its state")]
+    NotServed,
+}
+
 /// How often the source may be found taken before the monitor gives up: a monitor killed a
 /// moment ago may still hold it until iceoryx2 cleans up after it.
 const SOURCE_TAKEN_ATTEMPTS: u32 = 5;
@@ -161,7 +175,7 @@ fn serve(
     mut link: Link,
     operator: &AtomicBool,
     status: &mut SafetyStatus,
-) -> Result<(), String> {
+) -> Result<(), LinkLost> {
     let evaluate_period = Duration::from_nanos(engine.config().evaluate_period_ns);
     let publish_period_ns = engine.config().publish_period_ns;
     let status_period_ns = engine.config().status_period_ns;
@@ -198,7 +212,7 @@ fn serve(
                 debug!("waiting for state: {e}");
                 if !link.robot.is_served() {
                     let _ = link.source.stop();
-                    return Err(e.to_string());
+                    return Err(LinkLost::Waiting(e));
                 }
             }
         }
@@ -222,7 +236,7 @@ fn serve(
         {
             link.source
                 .send(decision.command.request())
-                .map_err(|e| format!("publishing on the safety source: {e}"))?;
+                .map_err(LinkLost::Publishing)?;
             last_sent_ns = now;
             last_command = Some(decision.command);
         }
@@ -253,7 +267,7 @@ fn serve(
         {
             last_served_check_ns = now;
             if !link.robot.is_served() {
-                return Err("chassisd no longer publishes its state".into());
+                return Err(LinkLost::NotServed);
             }
         }
     }

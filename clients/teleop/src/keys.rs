@@ -31,6 +31,7 @@
 //! nothing, so the mux's timeout hands the robot back to lower-priority sources (the planner).
 
 use crossterm::event::{Event, KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
+use thiserror::Error;
 
 /// A motion key.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -169,14 +170,30 @@ impl Default for Settings {
     }
 }
 
+/// Why the teleop settings are not usable.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SettingsError {
+    /// A speed or step that is zero, negative or not a number.
+    #[error("{option} must be a positive number, not {value}")]
+    NotPositive { option: &'static str, value: f32 },
+    #[error("--linear-step is above --max-linear")]
+    LinearStepAboveMax,
+    #[error("--angular-step is above --max-angular")]
+    AngularStepAboveMax,
+    #[error("the repeat hold must be above 0 and at most the first-press hold")]
+    RepeatHold,
+    #[error("the publishing period must be above 0")]
+    ZeroPeriod,
+}
+
 impl Settings {
     /// Checks the speeds are positive and finite and the steps fit under the maxima.
-    pub fn validate(&self) -> Result<(), String> {
-        let positive = |value: f32, what: &str| {
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        let positive = |value: f32, option: &'static str| {
             if value.is_finite() && value > 0.0 {
                 Ok(())
             } else {
-                Err(format!("{what} must be a positive number, not {value}"))
+                Err(SettingsError::NotPositive { option, value })
             }
         };
         positive(self.linear_step_mps, "--linear-step")?;
@@ -184,16 +201,16 @@ impl Settings {
         positive(self.max_linear_mps, "--max-linear")?;
         positive(self.max_angular_radps, "--max-angular")?;
         if self.linear_step_mps > self.max_linear_mps {
-            return Err("--linear-step is above --max-linear".into());
+            return Err(SettingsError::LinearStepAboveMax);
         }
         if self.angular_step_radps > self.max_angular_radps {
-            return Err("--angular-step is above --max-angular".into());
+            return Err(SettingsError::AngularStepAboveMax);
         }
         if self.repeat_hold_ns == 0 || self.first_hold_ns < self.repeat_hold_ns {
-            return Err("the repeat hold must be above 0 and at most the first-press hold".into());
+            return Err(SettingsError::RepeatHold);
         }
         if self.period_ns == 0 {
-            return Err("the publishing period must be above 0".into());
+            return Err(SettingsError::ZeroPeriod);
         }
         Ok(())
     }

@@ -8,11 +8,11 @@ use std::path::Path;
 
 use chassis_interfaces::valid_robot_name;
 use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{DriverConfig, Profile, Robot};
+use chassis_protocols::{DriverConfig, Profile, ProfileError, Robot};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::bus::BusSpec;
+use crate::bus::{BusSpec, BusSpecError};
 use crate::mux::{MuxConfig, MuxConfigError};
 
 /// How the event loop waits.
@@ -142,6 +142,15 @@ pub enum ConfigError {
     BadName(String),
     #[error("{key}: {reason}")]
     Bad { key: &'static str, reason: String },
+    /// A bus spec (`service.bus`, `service.gps`) that does not parse.
+    #[error("{key}: {source}")]
+    Bus {
+        key: &'static str,
+        source: BusSpecError,
+    },
+    /// A `[profile]` whose values do not make a drivable robot.
+    #[error("profile: {0}")]
+    BadProfile(#[from] ProfileError),
     #[error("[profile] for {robot}: {source}")]
     Profile {
         robot: Robot,
@@ -198,7 +207,7 @@ impl RawConfig {
         }
         let parse_bus = |key: &'static str, text: &str| {
             text.parse::<BusSpec>()
-                .map_err(|reason| ConfigError::Bad { key, reason })
+                .map_err(|source| ConfigError::Bus { key, source })
         };
         let bus = match overrides.bus {
             Some(bus) => bus,
@@ -233,10 +242,7 @@ impl RawConfig {
             });
         }
         let mut profile = parse_profile(robot, self.profile)?;
-        profile.validate().map_err(|reason| ConfigError::Bad {
-            key: "profile",
-            reason,
-        })?;
+        profile.validate()?;
         // The simulated XBot's wheel separation is known; a real one's must be measured.
         if let (Profile::Xbot(p), BusSpec::Sim) = (&mut profile, &bus)
             && p.wheel_separation_m.is_none()

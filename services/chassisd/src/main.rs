@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chassis_protocols::Robot;
-use chassisd::bus::BusSpec;
-use chassisd::config::{Config, LoopMode, Overrides, RawConfig};
+use chassis_protocols::{Robot, UnknownRobot};
+use chassisd::bus::{BusSpec, BusSpecError};
+use chassisd::config::{Config, ConfigError, LoopMode, Overrides, RawConfig};
 use clap::{Args, Parser, Subcommand};
 use tracing::error;
 
@@ -67,32 +67,30 @@ struct ServiceArgs {
     cpu: Option<usize>,
 }
 
-fn parse_robot(text: &str) -> Result<Robot, String> {
+fn parse_robot(text: &str) -> Result<Robot, UnknownRobot> {
     text.parse()
 }
 
-fn parse_bus(text: &str) -> Result<BusSpec, String> {
+fn parse_bus(text: &str) -> Result<BusSpec, BusSpecError> {
     text.parse()
 }
 
-fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), String> {
+fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), ConfigError> {
     let raw = match &args.config {
-        Some(path) => RawConfig::load(path).map_err(|e| e.to_string())?,
+        Some(path) => RawConfig::load(path)?,
         None => RawConfig::default(),
     };
-    let config = raw
-        .validate(Overrides {
-            robot: args.robot,
-            name: args.name,
-            bus: args.bus,
-            gps: args.gps,
-            no_safety_monitor: args.no_safety_monitor,
-            simulator,
-            loop_mode: args.loop_mode,
-            spin_us: args.spin_us,
-            cpu: args.cpu,
-        })
-        .map_err(|e| e.to_string())?;
+    let config = raw.validate(Overrides {
+        robot: args.robot,
+        name: args.name,
+        bus: args.bus,
+        gps: args.gps,
+        no_safety_monitor: args.no_safety_monitor,
+        simulator,
+        loop_mode: args.loop_mode,
+        spin_us: args.spin_us,
+        cpu: args.cpu,
+    })?;
     Ok((config, args.print_config))
 }
 
@@ -129,7 +127,7 @@ fn main() -> ExitCode {
         };
     }
     let result = if is_sim {
-        chassisd::standalone::run(&config)
+        chassisd::standalone::run(&config).map_err(|e| e.to_string())
     } else {
         chassisd::service::run(config).map_err(|e| e.to_string())
     };

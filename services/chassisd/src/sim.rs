@@ -155,7 +155,9 @@ impl SimHandle {
         self.commands
             .send(SimCommandBox(SimCommand::Inject(injection, reply)))
             .map_err(|_| "the simulated chassis has stopped".to_string())?;
-        let _ = self.doorbell.send(&[1]);
+        // The doorbell only wakes the thread early: a full or closed socket means it is awake
+        // already or has ended, and the answer (or its absence) below says which.
+        self.doorbell.send(&[1]).ok();
         answer
             .recv_timeout(Duration::from_millis(200))
             .map_err(|_| "the simulated chassis did not answer".to_string())
@@ -172,8 +174,10 @@ impl SimHandle {
     }
 
     fn shutdown(&mut self) -> Result<(), BusError> {
-        let _ = self.commands.send(SimCommandBox(SimCommand::Stop));
-        let _ = self.doorbell.send(&[0]);
+        // Best effort: a thread that has ended already has dropped its inbox and its end of the
+        // doorbell, and the join below reports how it ended either way.
+        self.commands.send(SimCommandBox(SimCommand::Stop)).ok();
+        self.doorbell.send(&[0]).ok();
         match self.thread.take().map(JoinHandle::join) {
             Some(Ok(Ended {
                 lost: Some(err), ..
@@ -216,7 +220,9 @@ fn confine(cpus: &[usize]) {
     use nix::sched::{CpuSet, sched_setaffinity};
     let mut set = CpuSet::new();
     for &cpu in cpus {
-        let _ = set.set(cpu);
+        if let Err(err) = set.set(cpu) {
+            warn!("simulated chassis: CPU {cpu} is not one this machine can name: {err}");
+        }
     }
     if let Err(err) = sched_setaffinity(nix::unistd::Pid::from_raw(0), &set) {
         warn!("simulated chassis: cannot confine to CPUs {cpus:?}: {err}");
@@ -248,7 +254,9 @@ fn drive(
                 SimCommand::Stop => return Ok(()),
                 SimCommand::Inject(injection, reply) => {
                     debug!(injection = injection.name(), "injecting");
-                    let _ = reply.send(firmware.inject(now, injection));
+                    // The asker waits 200 ms at most: an answer nobody waits for any more is
+                    // dropped on purpose (the injection took effect all the same).
+                    reply.send(firmware.inject(now, injection)).ok();
                 }
             }
         }

@@ -11,7 +11,10 @@ use chassis_interfaces::{ControlResponse, ControlStatus};
 use chassis_ipc::{SIM, ServiceKind, service_name};
 use chassis_protocols::Profile;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2::waitset::{
+    WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError, WaitSetRunResult,
+};
+use thiserror::Error;
 use tracing::{error, info, warn};
 
 use crate::bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
@@ -19,6 +22,32 @@ use crate::clock;
 use crate::config::Config;
 use crate::ipc::{IpcError, iceoryx_config, open_desk};
 use crate::sim::{SimHandle, firmware_for, injection_of};
+
+/// Why the simulated chassis stopped (or never started).
+#[derive(Debug, Error)]
+pub enum StandaloneError {
+    /// The bus could not be opened, or ended in a failure when stopping.
+    #[error(transparent)]
+    Bus(#[from] BusError),
+    /// The simulator's thread could not be started.
+    #[error(transparent)]
+    Spawn(#[from] std::io::Error),
+    /// The iceoryx2 setup (prefix, fault desk) failed.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// Another process answers this robot's fault injections.
+    #[error("another simulated chassis already answers chassis/{name}/sim; pick another --name")]
+    AlreadyServed { name: String },
+    #[error("wait set: {0}")]
+    WaitSetCreate(#[source] WaitSetCreateError),
+    #[error("wait set: {0}")]
+    WaitSetAttach(#[source] WaitSetAttachmentError),
+    #[error("wait set: {0}")]
+    WaitSetRun(#[source] WaitSetRunError),
+    /// The simulator's thread ended without losing its bus.
+    #[error("the simulated chassis stopped")]
+    Stopped,
+}
 
 /// Opens the chassis side of `spec`.
 pub fn open_chassis_side(spec: &BusSpec, config: &Config) -> Result<Bus, BusError> {
@@ -78,8 +107,8 @@ const FIRST_RETRY: Duration = Duration::from_millis(100);
 const LAST_RETRY: Duration = Duration::from_secs(2);
 
 /// Runs the simulated chassis until SIGINT/SIGTERM. A lost bus is reopened with backoff.
-pub fn run(config: &Config) -> Result<(), String> {
-    let bus = open_chassis_side(&config.bus, config).map_err(|e| e.to_string())?;
+pub fn run(config: &Config) -> Result<(), StandaloneError> {
+    let bus = open_chassis_side(&config.bus, config)?;
     let sim_name = service_name(&config.name, ServiceKind::Sim);
     info!(
         robot = config.robot.name(),
@@ -87,48 +116,49 @@ pub fn run(config: &Config) -> Result<(), String> {
         "simulated chassis up (faults: {sim_name})"
     );
     let firmware = firmware_for(&config.profile, clock::now());
-    let mut chassis = Chassis::Running(SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?);
+    let mut chassis = Chassis::Running(SimHandle::spawn(firmware, bus)?);
 
     let node = chassis_ipc::node(
         None,
-        &iceoryx_config().map_err(|e| e.to_string())?,
+        &iceoryx_config()?,
         SignalHandlingMode::HandleTerminationRequests,
     )
-    .map_err(|e| e.to_string())?;
+    .map_err(IpcError::from)?;
     let desk = open_desk(&node, &SIM, &sim_name).map_err(|e| match e {
-        IpcError::AlreadyServed { .. } => {
-            format!("another simulated chassis already answers {sim_name}; pick another --name")
-        }
-        other => other.to_string(),
+        IpcError::AlreadyServed { .. } => StandaloneError::AlreadyServed {
+            name: config.name.clone(),
+        },
+        other => other.into(),
     })?;
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(|e| format!("wait set: {e}"))?;
-    let guard = waitset
+        .map_err(StandaloneError::WaitSetCreate)?;
+    // Attached for as long as the loop runs.
+    let _attached = waitset
         .attach_notification(&desk.listener)
-        .map_err(|e| format!("wait set: {e}"))?;
+        .map_err(StandaloneError::WaitSetAttach)?;
+    let mut notify_failures: u64 = 0;
     loop {
         let result = waitset.wait_and_process_once_with_timeout(
             |_| CallbackProgression::Continue,
             Duration::from_millis(100),
         );
-        let _ = &guard;
         match result {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
                 info!("stopping the simulated chassis");
                 return match chassis {
-                    Chassis::Running(sim) => sim.stop().map_err(|e| e.to_string()),
+                    Chassis::Running(sim) => sim.stop().map_err(StandaloneError::from),
                     Chassis::Down { .. } => Ok(()),
                 };
             }
             Ok(_) => {}
-            Err(e) => return Err(format!("wait set: {e}")),
+            Err(e) => return Err(StandaloneError::WaitSetRun(e)),
         }
         chassis = keep_running(chassis, config)?;
-        if let Err(e) = desk.listener.try_wait(|_| {}) {
-            warn!("taking the requests' notifications: {e}");
-        }
+        // The notifications only wake the wait set; every request is read below whether or not
+        // they could be drained.
+        desk.listener.try_wait(|_| {}).ok();
         while let Ok(Some(active)) = desk.server.receive() {
             let request = *active.payload();
             let (status, message) = match (injection_of(&request), &chassis) {
@@ -153,15 +183,20 @@ pub fn run(config: &Config) -> Result<(), String> {
             if let Err(e) = active.send_copy(ControlResponse::new(request.seq, status, &message)) {
                 warn!("cannot answer: {e}");
             }
+            // The answer is in place even when the wake-up fails: the asker finds it when it
+            // looks again. Counted, and logged at the 1st, 2nd, 4th, … failure.
             if let Err(e) = desk.notifier.notify() {
-                warn!("cannot tell the client its answer is ready: {e}");
+                notify_failures += 1;
+                if notify_failures.is_power_of_two() {
+                    warn!(failures = notify_failures, "cannot wake the asker: {e}");
+                }
             }
         }
     }
 }
 
 /// Notices a lost bus and reopens it with backoff, keeping the same firmware.
-fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, String> {
+fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, StandaloneError> {
     match chassis {
         Chassis::Running(sim) if !sim.is_running() => match sim.recover() {
             Some((firmware, err)) => {
@@ -172,7 +207,7 @@ fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, String> {
                     backoff: FIRST_RETRY,
                 })
             }
-            None => Err("the simulated chassis stopped".into()),
+            None => Err(StandaloneError::Stopped),
         },
         Chassis::Down {
             firmware,
@@ -181,9 +216,7 @@ fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, String> {
         } if clock::now() >= retry_at => match open_chassis_side(&config.bus, config) {
             Ok(bus) => {
                 info!(bus = bus.name(), "the simulated chassis has its bus back");
-                Ok(Chassis::Running(
-                    SimHandle::spawn(firmware, bus).map_err(|e| e.to_string())?,
-                ))
+                Ok(Chassis::Running(SimHandle::spawn(firmware, bus)?))
             }
             Err(err) => {
                 let backoff = (backoff * 2).min(LAST_RETRY);

@@ -8,15 +8,19 @@
 //! reads a clock or touches a socket, so the same code runs on a real bus, against the simulated
 //! firmware and in unit tests on simulated time.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ChassisState, ControlStatus, OdometryState, Twist};
+use chassis_interfaces::{
+    ChassisState, ControlStatus, FaultFlags, LinkFlags, OdometryState, RequestFlags, Twist,
+};
 use serde::{Deserialize, Serialize};
 
+use crate::DecodeError;
 use crate::can::CanFrame;
-use crate::command::Command;
+use crate::command::{Command, Turn};
 use crate::profile::Robot;
-use crate::time::{Grid, Timestamp};
+use crate::time::{Grid, Timestamp, earliest};
 
 /// What arrived from the bus.
 #[derive(Debug, Clone, Copy)]
@@ -222,6 +226,16 @@ impl CommandSchedule {
         }
     }
 
+    /// Takes `next` as the command the motion frames carry: when it differs from `*current` it
+    /// replaces it and goes out soon ([`Self::command_changed`]; `stop` ignores the minimum
+    /// interval).
+    pub fn update<M: PartialEq>(&mut self, current: &mut M, next: M, stop: bool) {
+        if *current != next {
+            *current = next;
+            self.command_changed(stop);
+        }
+    }
+
     /// The command changed: send it soon. `urgent` (a stop) ignores the minimum interval.
     pub fn command_changed(&mut self, urgent: bool) {
         self.pending = true;
@@ -276,6 +290,285 @@ impl CommandSchedule {
 
     pub fn period(&self) -> Duration {
         self.heartbeat.period()
+    }
+}
+
+/// The bookkeeping every driver shares: the state snapshot, the event queue, the heartbeat
+/// schedule, the silence monitor and the bus-down switch.
+///
+/// A robot's driver embeds one and keeps only what is its own (codec, authority, brake, lights,
+/// power); the link-health rules — what counts as a sign of life, when the chassis turns silent,
+/// what the bus going down and coming back resets, how transmit and receive failures are counted —
+/// live here once.
+#[derive(Debug)]
+pub(crate) struct DriverCore {
+    pub(crate) state: ChassisState,
+    pub(crate) events: VecDeque<DriverEvent>,
+    /// The motion frame's heartbeat and the "changed command at once" rule.
+    pub(crate) schedule: CommandSchedule,
+    pub(crate) link: LinkMonitor,
+    pub(crate) bus_down: bool,
+    pub(crate) was_silent: bool,
+    silence_timeout_ms: u64,
+}
+
+impl DriverCore {
+    /// A core starting at `now` for a robot whose motion frame repeats every `heartbeat`; the
+    /// first heartbeat is due at once and silence is counted from `now`.
+    pub(crate) fn new(
+        robot: u8,
+        heartbeat: Duration,
+        config: &DriverConfig,
+        now: Timestamp,
+    ) -> Self {
+        Self {
+            state: ChassisState {
+                robot,
+                ..ChassisState::default()
+            },
+            events: VecDeque::new(),
+            schedule: CommandSchedule::new(
+                heartbeat,
+                Duration::from_millis(config.min_command_interval_ms),
+                now,
+            ),
+            link: LinkMonitor::new(Duration::from_millis(config.silence_timeout_ms), now),
+            bus_down: false,
+            was_silent: false,
+            silence_timeout_ms: config.silence_timeout_ms,
+        }
+    }
+
+    pub(crate) fn notice(&mut self, level: Level, message: impl Into<String>) {
+        self.events.push_back(DriverEvent::Notice {
+            level,
+            message: message.into(),
+        });
+    }
+
+    pub(crate) fn dropped(&mut self, reason: String) {
+        self.events.push_back(DriverEvent::RxDropped { reason });
+    }
+
+    /// Sets or clears one of `state.link_flags`.
+    pub(crate) fn set_flag(&mut self, flag: u32, on: bool) {
+        if on {
+            self.state.link_flags |= flag;
+        } else {
+            self.state.link_flags &= !flag;
+        }
+    }
+
+    /// Something arrived on the wrong kind of bus (serial bytes on CAN, a CAN frame on serial).
+    pub(crate) fn wrong_medium(&mut self, reason: &str) {
+        self.state.link.rx_decode_errors += 1;
+        self.dropped(reason.into());
+    }
+
+    /// A valid feedback frame arrived at `now`: a sign of life. Returns true when the chassis
+    /// had been silent until now (the "talking again" notice is already queued).
+    pub(crate) fn feedback(&mut self, now: Timestamp) -> bool {
+        self.link.received(now);
+        self.state.link.rx_frames += 1;
+        self.state.stamp_ns = now.as_nanos();
+        if !self.was_silent {
+            return false;
+        }
+        self.was_silent = false;
+        self.set_flag(LinkFlags::CHASSIS_SILENT, false);
+        self.notice(Level::Info, "chassis is talking again");
+        true
+    }
+
+    /// Decodes a CAN robot's received item: a valid frame is a sign of life ([`Self::feedback`])
+    /// and is returned; anything else is counted by kind (bad checksum, unknown or extended id,
+    /// undecodable) and reported as [`DriverEvent::RxDropped`].
+    pub(crate) fn can_rx<T>(
+        &mut self,
+        now: Timestamp,
+        rx: Rx<'_>,
+        decode: impl FnOnce(&CanFrame) -> Result<T, DecodeError>,
+    ) -> Option<T> {
+        let Rx::Can(frame) = rx else {
+            self.wrong_medium("serial bytes on a CAN robot's bus");
+            return None;
+        };
+        match decode(frame) {
+            Ok(decoded) => {
+                self.feedback(now);
+                Some(decoded)
+            }
+            Err(err) => {
+                match err {
+                    DecodeError::BadChecksum { .. } => self.state.link.rx_bad_checksum += 1,
+                    DecodeError::UnknownId { .. } | DecodeError::ExtendedId { .. } => {
+                        self.state.link.rx_unknown_id += 1;
+                    }
+                    _ => self.state.link.rx_decode_errors += 1,
+                }
+                self.dropped(format!("{frame}: {err}"));
+                None
+            }
+        }
+    }
+
+    /// Turns the link silent when no feedback arrived for the timeout: sets
+    /// `LinkFlags::CHASSIS_SILENT` with a notice ("no `what` for N ms"). Returns true when it
+    /// turned silent just now.
+    pub(crate) fn check_silence(&mut self, now: Timestamp, what: &str) -> bool {
+        if self.was_silent || !self.link.is_silent(now) {
+            return false;
+        }
+        self.was_silent = true;
+        self.set_flag(LinkFlags::CHASSIS_SILENT, true);
+        self.notice(
+            Level::Warn,
+            format!(
+                "chassis silent: no {what} for {} ms",
+                self.silence_timeout_ms
+            ),
+        );
+        true
+    }
+
+    /// The deadlines every driver has: the next motion frame and, while the chassis talks, the
+    /// moment it would turn silent. `None` while the bus is down.
+    pub(crate) fn poll_timeout(&self) -> Option<Timestamp> {
+        if self.bus_down {
+            return None;
+        }
+        let next = Some(self.schedule.deadline());
+        if self.was_silent {
+            next
+        } else {
+            earliest(next, Some(self.link.deadline()))
+        }
+    }
+
+    /// The bus went down or came back. Returns false when nothing changed. Going down raises
+    /// `LinkFlags::BUS_DOWN` with an error notice; coming back counts a reconnect and restarts
+    /// the silence count and the heartbeat grid at `now`. The robot's own resynchronisation
+    /// follows in its driver.
+    pub(crate) fn set_bus_down(&mut self, now: Timestamp, down: bool) -> bool {
+        if down == self.bus_down {
+            return false;
+        }
+        self.bus_down = down;
+        self.set_flag(LinkFlags::BUS_DOWN, down);
+        if down {
+            self.notice(Level::Error, "bus down: nothing reaches the chassis");
+        } else {
+            self.state.link.bus_reconnects += 1;
+            self.link.reset(now);
+            self.schedule.restart(now);
+        }
+        true
+    }
+
+    /// Counts an encoded frame on its way out. An encoding failure is a bug guard (limits keep
+    /// every planned value on the wire's range): it is counted in `link.tx_errors` with an error
+    /// notice naming the frame, and nothing is sent.
+    pub(crate) fn transmit<T, E: std::fmt::Display>(
+        &mut self,
+        name: &str,
+        encoded: Result<T, E>,
+        wrap: impl FnOnce(T) -> Transmit,
+    ) -> Option<Transmit> {
+        match encoded {
+            Ok(item) => {
+                self.state.link.tx_frames += 1;
+                Some(wrap(item))
+            }
+            Err(err) => {
+                self.state.link.tx_errors += 1;
+                self.notice(Level::Error, format!("cannot encode {name}: {err}"));
+                None
+            }
+        }
+    }
+
+    /// Admits a control action and plans its frames with `plan`, or says why not: nothing is
+    /// taken while the bus is down, motion goes through [`Driver::set_command`], and a command
+    /// `plan` refuses answers with its [`CommandError`](crate::command::CommandError).
+    pub(crate) fn admit_control<P>(
+        &self,
+        command: &Command,
+        plan: impl FnOnce(&Command) -> Result<P, crate::command::CommandError>,
+    ) -> Result<P, ControlOutcome> {
+        if self.bus_down {
+            return Err(ControlOutcome::Refused(
+                "the bus is down; nothing can be sent".into(),
+            ));
+        }
+        if let Command::Velocity { .. } = command {
+            return Err(ControlOutcome::Invalid(
+                "motion goes through the mux, not a control request".into(),
+            ));
+        }
+        plan(command).map_err(ControlOutcome::from)
+    }
+
+    /// Queues the notices of a change of the normalized fault flags: the faults set (an error
+    /// when any of them is outside `warnings`, else a warning) and the faults cleared.
+    pub(crate) fn fault_notices(&mut self, old: u64, new: u64, warnings: u64) {
+        let set = new & !old;
+        let cleared = old & !new;
+        if set != 0 {
+            let level = if set & !warnings != 0 {
+                Level::Error
+            } else {
+                Level::Warn
+            };
+            self.notice(
+                level,
+                format!("chassis faults set: {}", FaultFlags::names(set).join(", ")),
+            );
+        }
+        if cleared != 0 {
+            self.notice(
+                Level::Info,
+                format!(
+                    "chassis faults cleared: {}",
+                    FaultFlags::names(cleared).join(", ")
+                ),
+            );
+        }
+    }
+}
+
+/// The [`Driver`] methods that only hand out what the embedded [`DriverCore`] (a field named
+/// `core`) holds: the next event and the state snapshot.
+macro_rules! core_accessors {
+    () => {
+        fn poll_event(&mut self) -> Option<$crate::driver::DriverEvent> {
+            self.core.events.pop_front()
+        }
+
+        fn state(&self) -> &chassis_interfaces::ChassisState {
+            &self.core.state
+        }
+    };
+}
+pub(crate) use core_accessors;
+
+/// The normalized flags (`chassis_interfaces::FaultFlags`) of a vendor fault word: the union of
+/// the flags in `map` whose vendor bit is set in `word`.
+pub(crate) fn flags_of<W>(word: W, map: &[(W, u64)]) -> u64
+where
+    W: Copy + Default + PartialEq + std::ops::BitAnd<Output = W>,
+{
+    map.iter()
+        .filter(|(bit, _)| word & *bit != W::default())
+        .fold(0, |acc, (_, flag)| acc | flag)
+}
+
+/// How a twist asks to turn: a steering angle when it carries `RequestFlags::STEER`, else a
+/// yaw rate.
+pub(crate) fn requested_turn(command: &Twist) -> Turn {
+    if command.flags & RequestFlags::STEER != 0 {
+        Turn::Steer(command.steer_rad.into())
+    } else {
+        Turn::YawRate(command.angular_z_radps.into())
     }
 }
 

@@ -5,14 +5,20 @@
 //! 500 ms command timeout, the parking brake, RC authority, checksums). Faults are injected by
 //! value. `chassisd` runs one in-process as its default bus, and `chassisd sim` runs one as its
 //! own process on a real bus.
+//!
+//! Below the contract are the pieces every simulated chassis shares: the sub-stepped physics
+//! clock, the first-order speed lag, the true pose, the battery model, the bounded transmit queue
+//! with its silence window, and the feedback flood of load tests.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use serde::Serialize;
 
-use crate::driver::{Rx, Transmit};
+use crate::can::CanFrame;
+use crate::driver::{Rx, Transmit, wrap_angle};
 use crate::profile::Robot;
-use crate::time::Timestamp;
+use crate::time::{Grid, Timestamp};
 
 /// A fault or event to inject into a simulated chassis.
 #[derive(Debug, Clone, PartialEq)]
@@ -109,4 +115,254 @@ pub trait Firmware {
 
     /// What the chassis really does.
     fn truth(&self) -> SimTruth;
+}
+
+/// Longest time a simulated chassis integrates at once; a longer gap between calls is not
+/// bridged.
+pub(crate) const MAX_STEP: Duration = Duration::from_millis(100);
+/// Integration sub-step of the simulated physics.
+const SUBSTEP: Duration = Duration::from_millis(5);
+/// Frames (or serial chunks) a simulated chassis keeps for transmission when nobody polls.
+const TX_QUEUE_LIMIT: usize = 4096;
+
+/// The integration steps, s, from `*last_update` to `now` (at most [`MAX_STEP`] in all, in
+/// sub-steps of 5 ms); `*last_update` moves to `now`. Nothing when `now` is not later.
+pub(crate) fn substeps(last_update: &mut Timestamp, now: Timestamp) -> Substeps {
+    let mut remaining = Duration::ZERO;
+    if now > *last_update {
+        remaining = now.saturating_since(*last_update).min(MAX_STEP);
+        *last_update = now;
+    }
+    Substeps { remaining }
+}
+
+/// The integration steps of [`substeps`], s.
+#[derive(Debug)]
+pub(crate) struct Substeps {
+    remaining: Duration,
+}
+
+impl Iterator for Substeps {
+    type Item = f64;
+
+    fn next(&mut self) -> Option<f64> {
+        if self.remaining.is_zero() {
+            return None;
+        }
+        let dt = self.remaining.min(SUBSTEP);
+        self.remaining = self.remaining.saturating_sub(dt);
+        Some(dt.as_secs_f64())
+    }
+}
+
+/// One step of a first-order lag from `from` toward `to` with time constant `tau_s` (0:
+/// instantaneous); within 1e-9 of the target it snaps onto it.
+pub(crate) fn first_order_lag(from: f64, to: f64, tau_s: f64, dt: f64) -> f64 {
+    let next = if tau_s > 0.0 {
+        to + (from - to) * (-dt / tau_s).exp()
+    } else {
+        to
+    };
+    if (next - to).abs() < 1e-9 { to } else { next }
+}
+
+/// The true pose of a simulated chassis, in the frame it started in.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Pose {
+    pub(crate) x_m: f64,
+    pub(crate) y_m: f64,
+    pub(crate) yaw_rad: f64,
+}
+
+impl Pose {
+    /// Moves by the body speeds (forward, lateral, yaw rate) held for `dt` seconds, at the
+    /// heading of the step's midpoint.
+    pub(crate) fn advance(
+        &mut self,
+        linear_mps: f64,
+        lateral_mps: f64,
+        angular_radps: f64,
+        dt: f64,
+    ) {
+        let heading = self.yaw_rad + 0.5 * angular_radps * dt;
+        let (sin, cos) = heading.sin_cos();
+        self.x_m += (linear_mps * cos - lateral_mps * sin) * dt;
+        self.y_m += (linear_mps * sin + lateral_mps * cos) * dt;
+        self.yaw_rad = wrap_angle(self.yaw_rad + angular_radps * dt);
+    }
+}
+
+/// A simulated battery: open-circuit voltage linear in the state of charge, one internal
+/// resistance, charge drawn by the pack current.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatteryModel {
+    /// Capacity of one battery, Ah.
+    pub capacity_ah: f64,
+    /// Open-circuit voltage at 100 % SOC, V.
+    pub full_v: f64,
+    /// Open-circuit voltage at 0 % SOC, V.
+    pub empty_v: f64,
+    /// Internal resistance of the pack, Ω.
+    pub resistance_ohm: f64,
+}
+
+impl BatteryModel {
+    /// Terminal voltage at `soc_pct` under `current_a` (positive = discharging), V.
+    pub fn voltage_v(&self, soc_pct: f64, current_a: f64) -> f64 {
+        let ocv = self.empty_v + (self.full_v - self.empty_v) * soc_pct / 100.0;
+        (ocv - self.resistance_ohm * current_a).max(0.0)
+    }
+
+    /// The state of charge after drawing `current_a` for `dt` seconds from `packs` batteries.
+    pub fn drain(&self, soc_pct: f64, current_a: f64, dt: f64, packs: f64) -> f64 {
+        let used_pct = current_a * dt / 3600.0 / (self.capacity_ah * packs) * 100.0;
+        (soc_pct - used_pct).max(0.0)
+    }
+}
+
+/// What a simulated chassis has for transmission: a bounded queue (the oldest item goes first
+/// when nobody polls) and the window of an injected silence.
+#[derive(Debug, Clone)]
+pub(crate) struct Outbox<T> {
+    queue: VecDeque<T>,
+    silent_until: Option<Timestamp>,
+    dropped: u64,
+}
+
+impl<T> Outbox<T> {
+    pub(crate) fn new() -> Self {
+        Self {
+            queue: VecDeque::new(),
+            silent_until: None,
+            dropped: 0,
+        }
+    }
+
+    pub(crate) fn push(&mut self, item: T) {
+        if self.queue.len() >= TX_QUEUE_LIMIT {
+            self.queue.pop_front();
+            self.dropped += 1;
+        }
+        self.queue.push_back(item);
+    }
+
+    pub(crate) fn pop(&mut self) -> Option<T> {
+        self.queue.pop_front()
+    }
+
+    pub(crate) fn clear(&mut self) {
+        self.queue.clear();
+    }
+
+    /// Counts an item that was never queued (it did not fit its wire format).
+    pub(crate) fn count_dropped(&mut self) {
+        self.dropped += 1;
+    }
+
+    /// Items dropped: pushed out of a full queue or never queued.
+    pub(crate) fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
+    /// [`Injection::Silence`]: nothing is sent for `duration` from `now` (overlapping silences
+    /// extend each other); a non-zero silence also drops what is queued.
+    pub(crate) fn silence(&mut self, now: Timestamp, duration: Duration) {
+        let until = now + duration;
+        self.silent_until = Some(self.silent_until.map_or(until, |t| t.max(until)));
+        if !duration.is_zero() {
+            self.queue.clear();
+        }
+    }
+
+    /// True while an injected silence lasts.
+    pub(crate) fn is_silenced(&self, now: Timestamp) -> bool {
+        self.silent_until.is_some_and(|t| now < t)
+    }
+
+    /// When the injected silence ends, if one is pending.
+    pub(crate) fn silent_until(&self) -> Option<Timestamp> {
+        self.silent_until
+    }
+
+    /// Forgets a silence that has ended by `now`.
+    pub(crate) fn expire(&mut self, now: Timestamp) {
+        if self.silent_until.is_some_and(|t| now >= t) {
+            self.silent_until = None;
+        }
+    }
+}
+
+/// [`Injection::Flood`]: extra feedback frames on their own grid, alternating between two kinds.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Flood {
+    grid: Grid,
+    /// The next frame is the second kind.
+    toggle: bool,
+}
+
+impl Flood {
+    /// `frames_per_s` extra frames a second (at most `max`), the first one interval after `now`;
+    /// `None` for 0 (no flood).
+    pub(crate) fn new(now: Timestamp, frames_per_s: u32, max: u32) -> Option<Self> {
+        (frames_per_s > 0).then(|| {
+            let interval = Duration::from_secs(1) / frames_per_s.min(max).max(1);
+            Self {
+                grid: Grid::new(interval, now + interval),
+                toggle: false,
+            }
+        })
+    }
+
+    /// When the next flood frame is due.
+    pub(crate) fn next(&self) -> Timestamp {
+        self.grid.next()
+    }
+
+    /// When a flood frame is due at `now`: serves it and says whether it is the second kind.
+    pub(crate) fn due(&mut self, now: Timestamp) -> Option<bool> {
+        if !self.grid.is_due(now) {
+            return None;
+        }
+        let second = self.toggle;
+        self.toggle = !self.toggle;
+        self.grid.served(now);
+        Some(second)
+    }
+}
+
+/// [`Injection::Garbage`] on a CAN bus: the bytes, 8 at a time, as frames with an id the robot
+/// does not use.
+pub(crate) fn garbage_frames(id: u16, bytes: &[u8]) -> impl Iterator<Item = CanFrame> + '_ {
+    bytes
+        .chunks(8)
+        .filter_map(move |chunk| CanFrame::new(u32::from(id), chunk).ok())
+}
+
+/// An injected or configured state of charge, % (clamped to 0-100); `None` when not a number.
+pub(crate) fn state_of_charge(soc_pct: f64) -> Option<f64> {
+    soc_pct.is_finite().then(|| soc_pct.clamp(0.0, 100.0))
+}
+
+/// The index of motor driver `motor` (numbered from 1) among `count`, if there is one.
+pub(crate) fn motor_index(motor: u8, count: usize) -> Option<usize> {
+    usize::from(motor).checked_sub(1).filter(|i| *i < count)
+}
+
+/// A setting that must be a finite non-negative number (anything else is 0).
+pub(crate) fn non_negative(value: f64) -> f64 {
+    if value.is_finite() && value > 0.0 {
+        value
+    } else {
+        0.0
+    }
+}
+
+/// Keeps an SI value inside a signed 16-bit wire field of `scale` units per SI unit.
+pub(crate) fn clamp_i16(value: f64, scale: f64) -> f64 {
+    let limit = f64::from(i16::MAX) / scale;
+    if value.is_finite() {
+        value.clamp(-limit, limit)
+    } else {
+        0.0
+    }
 }

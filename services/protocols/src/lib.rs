@@ -23,6 +23,8 @@ pub mod nmea;
 pub mod pair;
 pub mod profile;
 pub mod scout_mini;
+#[cfg(test)]
+mod sim_bench;
 pub mod time;
 pub mod titan;
 mod wire;
@@ -35,7 +37,7 @@ pub use command::{
 pub use driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
 pub use error::{DecodeError, EncodeError};
 pub use firmware::{Firmware, Injection, SimTruth};
-pub use profile::{Profile, Robot};
+pub use profile::{Profile, ProfileError, Robot, UnknownRobot};
 pub use time::Timestamp;
 
 /// Who sends a frame.

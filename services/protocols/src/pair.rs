@@ -12,7 +12,7 @@ use chassis_interfaces::Twist;
 
 use crate::Direction;
 use crate::command::Command;
-use crate::driver::{ControlOutcome, Driver, DriverEvent, Transmit};
+use crate::driver::{ControlOutcome, Driver, DriverEvent, Level, Transmit};
 use crate::firmware::{Firmware, Injection};
 use crate::time::{Timestamp, earliest};
 
@@ -239,13 +239,15 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
     pub fn take_events(&mut self) -> Vec<DriverEvent> {
         std::mem::take(&mut self.events)
     }
+}
 
-    /// Times at which items matching `filter` were sent.
-    pub fn sent_times(&self, mut filter: impl FnMut(&Record) -> bool) -> Vec<Timestamp> {
-        self.log
-            .iter()
-            .filter(|r| filter(r))
-            .map(|r| r.at)
-            .collect()
-    }
+/// The notices among `events`, with their level.
+pub fn notices(events: &[DriverEvent]) -> Vec<(Level, String)> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            DriverEvent::Notice { level, message } => Some((*level, message.clone())),
+            _ => None,
+        })
+        .collect()
 }

@@ -5,6 +5,7 @@
 //! real robot can flip a doubtful parameter without a rebuild. Unknown keys are rejected.
 
 use serde::{Deserialize, Serialize};
+use thiserror::Error;
 
 /// Which robot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -43,13 +44,20 @@ impl Robot {
     }
 }
 
+/// A robot name that is none of `titan`, `scout-mini`, `xbot`.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("unknown robot '{name}' (expected titan, scout-mini or xbot)")]
+pub struct UnknownRobot {
+    pub name: String,
+}
+
 impl std::str::FromStr for Robot {
-    type Err = String;
+    type Err = UnknownRobot;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         Robot::ALL
             .into_iter()
             .find(|r| r.name() == s)
-            .ok_or_else(|| format!("unknown robot '{s}' (expected titan, scout-mini or xbot)"))
+            .ok_or_else(|| UnknownRobot { name: s.into() })
     }
 }
 
@@ -220,38 +228,70 @@ impl XbotProfile {
     }
 }
 
+/// Why a profile does not make a drivable robot.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ProfileError {
+    /// A length, speed, scale or rate that must be finite and above zero.
+    #[error("{name} must be above zero (is {value})")]
+    NotPositive { name: &'static str, value: f64 },
+    /// The heartbeat does not fit inside the chassis' command timeout.
+    #[error(
+        "heartbeat_period_ms ({heartbeat_ms}) must be above 0 and below command_timeout_ms \
+         ({timeout_ms})"
+    )]
+    Heartbeat { heartbeat_ms: u64, timeout_ms: u64 },
+    /// A steering limit at or beyond a right angle (TITAN).
+    #[error("max_steer_rad must be below π/2")]
+    SteerBeyondRightAngle,
+    /// A negative (or NaN) steering angle above which speed is limited (TITAN).
+    #[error("steer_speed_limit_above_rad must not be negative")]
+    NegativeSteerSpeedLimit,
+    /// A serial line at 0 baud (XBot).
+    #[error("baud rates must be above zero")]
+    ZeroBaud,
+    /// A dead band below zero or reaching the top speed (XBot).
+    #[error("min_linear_mps must be at least 0 and below max_linear_mps")]
+    MinLinear,
+    /// A heartbeat rate outside the manual's bounds (XBot).
+    #[error("heartbeat_hz must be above 5 and below 10 Hz (the manual's bounds), is {hz}")]
+    HeartbeatRate { hz: f64 },
+    /// No command timeout (XBot).
+    #[error("command_timeout_ms must be above zero")]
+    ZeroCommandTimeout,
+}
+
 /// Checks `value` is finite and above zero.
-fn positive(name: &str, value: f64) -> Result<(), String> {
+fn positive(name: &'static str, value: f64) -> Result<(), ProfileError> {
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(format!("{name} must be above zero (is {value})"))
+        Err(ProfileError::NotPositive { name, value })
     }
 }
 
-fn timeouts(heartbeat_ms: u64, timeout_ms: u64) -> Result<(), String> {
+fn timeouts(heartbeat_ms: u64, timeout_ms: u64) -> Result<(), ProfileError> {
     if heartbeat_ms == 0 || heartbeat_ms >= timeout_ms {
-        return Err(format!(
-            "heartbeat_period_ms ({heartbeat_ms}) must be above 0 and below command_timeout_ms \
-             ({timeout_ms})"
-        ));
+        return Err(ProfileError::Heartbeat {
+            heartbeat_ms,
+            timeout_ms,
+        });
     }
     Ok(())
 }
 
 impl TitanProfile {
     /// Checks the values make a drivable robot.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ProfileError> {
         positive("wheelbase_m", self.wheelbase_m)?;
         positive("track_m", self.track_m)?;
         positive("max_linear_mps", self.max_linear_mps)?;
         positive("max_linear_steering_mps", self.max_linear_steering_mps)?;
         positive("max_steer_rad", self.max_steer_rad)?;
         if self.max_steer_rad >= std::f64::consts::FRAC_PI_2 {
-            return Err("max_steer_rad must be below π/2".into());
+            return Err(ProfileError::SteerBeyondRightAngle);
         }
         if self.steer_speed_limit_above_rad.is_nan() || self.steer_speed_limit_above_rad < 0.0 {
-            return Err("steer_speed_limit_above_rad must not be negative".into());
+            return Err(ProfileError::NegativeSteerSpeedLimit);
         }
         timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
     }
@@ -260,7 +300,7 @@ impl TitanProfile {
 impl ScoutMiniProfile {
     /// Checks the values make a drivable robot (a zero full scale would make every command
     /// unencodable).
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ProfileError> {
         positive("wheelbase_m", self.wheelbase_m)?;
         positive("track_m", self.track_m)?;
         positive("linear_full_scale_mps", self.linear_full_scale_mps)?;
@@ -273,9 +313,9 @@ impl ScoutMiniProfile {
 
 impl XbotProfile {
     /// Checks the values make a drivable robot, and the heartbeat rate the manual asks for.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ProfileError> {
         if self.baud == 0 || self.gps_baud == 0 {
-            return Err("baud rates must be above zero".into());
+            return Err(ProfileError::ZeroBaud);
         }
         positive("wheel_diameter_m", self.wheel_diameter_m)?;
         positive("encoder_counts_per_rev", self.encoder_counts_per_rev)?;
@@ -288,16 +328,15 @@ impl XbotProfile {
             || self.min_linear_mps < 0.0
             || self.min_linear_mps >= self.max_linear_mps
         {
-            return Err("min_linear_mps must be at least 0 and below max_linear_mps".into());
+            return Err(ProfileError::MinLinear);
         }
         if self.heartbeat_hz.is_nan() || self.heartbeat_hz <= 5.0 || self.heartbeat_hz >= 10.0 {
-            return Err(format!(
-                "heartbeat_hz must be above 5 and below 10 Hz (the manual's bounds), is {}",
-                self.heartbeat_hz
-            ));
+            return Err(ProfileError::HeartbeatRate {
+                hz: self.heartbeat_hz,
+            });
         }
         if self.command_timeout_ms == 0 {
-            return Err("command_timeout_ms must be above zero".into());
+            return Err(ProfileError::ZeroCommandTimeout);
         }
         Ok(())
     }
@@ -322,7 +361,7 @@ impl Profile {
     }
 
     /// Checks the values make a drivable robot.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ProfileError> {
         match self {
             Profile::Titan(p) => p.validate(),
             Profile::ScoutMini(p) => p.validate(),
@@ -378,16 +417,27 @@ mod tests {
             angular_full_scale_rad_s: 0.0,
             ..ScoutMiniProfile::default()
         };
-        assert!(
-            zero.validate()
-                .unwrap_err()
-                .contains("angular_full_scale_rad_s")
+        assert_eq!(
+            zero.validate(),
+            Err(ProfileError::NotPositive {
+                name: "angular_full_scale_rad_s",
+                value: 0.0
+            })
+        );
+        assert_eq!(
+            zero.validate().unwrap_err().to_string(),
+            "angular_full_scale_rad_s must be above zero (is 0)"
         );
         let fast = XbotProfile {
             heartbeat_hz: 12.0,
             ..XbotProfile::default()
         };
-        assert!(fast.validate().unwrap_err().contains("heartbeat_hz"));
+        assert!(
+            fast.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("heartbeat_hz")
+        );
         let nan = TitanProfile {
             track_m: f64::NAN,
             ..TitanProfile::default()
@@ -397,7 +447,12 @@ mod tests {
             heartbeat_period_ms: 600,
             ..TitanProfile::default()
         };
-        assert!(slow.validate().unwrap_err().contains("heartbeat_period_ms"));
+        assert!(
+            slow.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("heartbeat_period_ms")
+        );
     }
 
     #[test]

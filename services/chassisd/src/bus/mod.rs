@@ -228,34 +228,64 @@ pub enum BusSpec {
     },
 }
 
-fn path_and_baud(rest: &str) -> Result<(String, Option<u32>), String> {
+/// Why a bus spec does not parse.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum BusSpecError {
+    /// Not a kind of bus this service knows, or a kind without its argument.
+    #[error(
+        "'{text}': expected sim, can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD], \
+         replay:FILE[@SPEED|@max], pty:LINK or slcan-pty:LINK"
+    )]
+    Unknown { text: String },
+    /// A known kind whose argument does not parse.
+    #[error("'{text}': {reason}")]
+    Argument {
+        text: String,
+        reason: BusArgumentError,
+    },
+}
+
+/// Why the argument of a bus spec (after the colon) does not parse.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum BusArgumentError {
+    #[error("'{0}' is not a baud rate")]
+    BadBaud(String),
+    #[error("missing path before '@'")]
+    MissingPathBeforeBaud,
+    #[error("missing path")]
+    MissingPath,
+    #[error(transparent)]
+    Replay(#[from] replay::ReplaySpecError),
+}
+
+fn path_and_baud(rest: &str) -> Result<(String, Option<u32>), BusArgumentError> {
     match rest.rsplit_once('@') {
         Some((path, baud)) => {
             let baud: u32 = baud
                 .parse()
-                .map_err(|_| format!("'{baud}' is not a baud rate"))?;
+                .map_err(|_| BusArgumentError::BadBaud(baud.into()))?;
             if path.is_empty() {
-                return Err("missing path before '@'".into());
+                return Err(BusArgumentError::MissingPathBeforeBaud);
             }
             Ok((path.to_string(), Some(baud)))
         }
-        None if rest.is_empty() => Err("missing path".into()),
+        None if rest.is_empty() => Err(BusArgumentError::MissingPath),
         None => Ok((rest.to_string(), None)),
     }
 }
 
 impl FromStr for BusSpec {
-    type Err = String;
+    type Err = BusSpecError;
     fn from_str(text: &str) -> Result<Self, Self::Err> {
-        let usage = "expected sim, can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD], \
-                     replay:FILE[@SPEED|@max], pty:LINK or slcan-pty:LINK";
         if text == "sim" {
             return Ok(BusSpec::Sim);
         }
-        let (kind, rest) = text
-            .split_once(':')
-            .ok_or_else(|| format!("'{text}': {usage}"))?;
-        let with = |e: String| format!("'{text}': {e}");
+        let unknown = || BusSpecError::Unknown { text: text.into() };
+        let (kind, rest) = text.split_once(':').ok_or_else(unknown)?;
+        let with = |reason: BusArgumentError| BusSpecError::Argument {
+            text: text.into(),
+            reason,
+        };
         match kind {
             "can" if !rest.is_empty() => Ok(BusSpec::Can {
                 iface: rest.to_string(),
@@ -275,10 +305,11 @@ impl FromStr for BusSpec {
                 link: rest.to_string(),
             }),
             "replay" => {
-                let (path, speed) = replay::parse_spec(rest).map_err(with)?;
+                let (path, speed) =
+                    replay::parse_spec(rest).map_err(|e| with(BusArgumentError::Replay(e)))?;
                 Ok(BusSpec::Replay { path, speed })
             }
-            _ => Err(format!("'{text}': {usage}")),
+            _ => Err(unknown()),
         }
     }
 }
@@ -338,13 +369,14 @@ mod tests {
             "usb:1",
             "serial:@9600",
         ] {
-            let err = bad.parse::<BusSpec>().unwrap_err();
+            let err = bad.parse::<BusSpec>().unwrap_err().to_string();
             assert!(err.contains(bad) || bad.is_empty(), "{bad}: {err}");
         }
         assert!(
             "bogus"
                 .parse::<BusSpec>()
                 .unwrap_err()
+                .to_string()
                 .contains("expected sim")
         );
     }
@@ -376,7 +408,7 @@ mod tests {
             "replay:/tmp/a.log"
         );
         for bad in ["replay:", "replay:@2", "replay:/x@fast", "replay:/x@0"] {
-            let err = bad.parse::<BusSpec>().unwrap_err();
+            let err = bad.parse::<BusSpec>().unwrap_err().to_string();
             assert!(err.contains(bad), "{bad}: {err}");
         }
     }

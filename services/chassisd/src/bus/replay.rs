@@ -86,16 +86,31 @@ impl Default for ReplaySpeed {
     }
 }
 
+/// A replay speed that is neither `max` nor a factor in (0, 1000].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("'{text}' is not a replay speed (a factor such as 1, 2 or 0.5, or max)")]
+pub struct ReplaySpeedError {
+    pub text: String,
+}
+
+/// Why the part of a `replay:` bus spec after the colon does not parse.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ReplaySpecError {
+    #[error(transparent)]
+    Speed(#[from] ReplaySpeedError),
+    #[error("missing the recording's path")]
+    MissingPath,
+}
+
 impl FromStr for ReplaySpeed {
-    type Err = String;
+    type Err = ReplaySpeedError;
     /// `max`, or a factor: `1`, `2`, `0.5`, `2x`.
     fn from_str(text: &str) -> Result<Self, Self::Err> {
         if text == "max" {
             return Ok(ReplaySpeed::Max);
         }
         let number = text.strip_suffix('x').unwrap_or(text);
-        let bad =
-            || format!("'{text}' is not a replay speed (a factor such as 1, 2 or 0.5, or max)");
+        let bad = || ReplaySpeedError { text: text.into() };
         let factor: f64 = number.parse().map_err(|_| bad())?;
         if !(factor.is_finite() && factor > 0.0 && factor <= Self::MAX_FACTOR) {
             return Err(bad());
@@ -131,13 +146,13 @@ impl fmt::Display for ReplaySpeed {
 
 /// Splits the part of a `replay:` bus spec after the colon into the file and the speed
 /// (`FILE`, `FILE@2`, `FILE@0.5`, `FILE@max`; the last `@` separates them).
-pub fn parse_spec(rest: &str) -> Result<(String, ReplaySpeed), String> {
+pub fn parse_spec(rest: &str) -> Result<(String, ReplaySpeed), ReplaySpecError> {
     let (path, speed) = match rest.rsplit_once('@') {
         Some((path, speed)) => (path, speed.parse()?),
         None => (rest, ReplaySpeed::RECORDED),
     };
     if path.is_empty() {
-        return Err("missing the recording's path".into());
+        return Err(ReplaySpecError::MissingPath);
     }
     Ok((path.to_string(), speed))
 }
@@ -738,7 +753,12 @@ fn play(
     while (bus.unflushed() > 0 || unread(bus.raw_fd()).is_some_and(|n| n > 0))
         && clock::now().saturating_since(drain_start) < DRAIN_LIMIT
     {
-        let _ = bus.flush();
+        if let Err(err) = bus.flush()
+            && err.is_disconnect()
+        {
+            debug!("the service closed the replay bus before the tail was read: {err}");
+            break;
+        }
         wait(bus.raw_fd(), false, Some(Duration::from_millis(1)));
         stats.discarded += discard(&mut bus).unwrap_or(0);
     }
@@ -800,7 +820,12 @@ mod tests {
         );
         assert!(parse_spec("").is_err());
         assert!(parse_spec("@2").is_err());
-        assert!(parse_spec("/tmp/a@b.mcap").unwrap_err().contains("b.mcap"));
+        assert!(
+            parse_spec("/tmp/a@b.mcap")
+                .unwrap_err()
+                .to_string()
+                .contains("b.mcap")
+        );
     }
 
     #[test]

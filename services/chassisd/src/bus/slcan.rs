@@ -241,8 +241,11 @@ impl<B: ByteBus> CanBus for SlcanBus<B> {
 
 impl<B: ByteBus> Drop for SlcanBus<B> {
     fn drop(&mut self) {
-        // Close the channel so the adapter stops forwarding; the port may already be gone.
-        let _ = self.port.write_all(b"C\r");
+        // Close the channel so the adapter stops forwarding. Best effort: the port may already
+        // be gone, and a dropped bus has nobody left to report to.
+        if let Err(err) = self.port.write_all(b"C\r") {
+            tracing::debug!(bus = %self.name, "closing the slcan channel: {err}");
+        }
     }
 }
 

@@ -6,17 +6,17 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, RequestFlags,
-    RobotKind, SystemState, Twist,
+    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, RobotKind, SystemState,
+    Twist,
 };
 
 use super::codec::{self, Frame, Lights, MotionCommand, body, clear_code, fault, mode};
 use super::commands::{frames_for, velocity_command};
 use super::kinematics::SkidCommand;
-use crate::command::{Command, Turn};
+use crate::command::Command;
 use crate::driver::{
-    CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverEvent, Level, LinkMonitor,
-    PoseIntegrator, Rx, Transmit,
+    CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx,
+    Transmit, flags_of, requested_turn,
 };
 use crate::profile::{Robot, ScoutMiniProfile};
 use crate::time::{Timestamp, earliest};
@@ -34,7 +34,7 @@ enum LightRequest {
 }
 
 /// The SCOUT MINI driver: heartbeat, authority, limits and quantisation, feedback into
-/// [`ChassisState`].
+/// [`ChassisState`](chassis_interfaces::ChassisState).
 ///
 /// # On the wire
 ///
@@ -79,7 +79,7 @@ enum LightRequest {
 /// Every frame's checksum is checked by [`codec::decode`]: a bad one is dropped and counted in
 /// `link.rx_bad_checksum`, other undecodable frames in `link.rx_decode_errors`, ids the SCOUT
 /// MINI does not use (and extended ids) in `link.rx_unknown_id`; each drop is also a
-/// [`DriverEvent::RxDropped`]. Dropped frames change nothing else, and in particular do not count
+/// [`DriverEvent::RxDropped`](crate::driver::DriverEvent::RxDropped). Dropped frames change nothing else, and in particular do not count
 /// as signs of life for [`LinkFlags::CHASSIS_SILENT`]: a chassis whose every frame is corrupt
 /// leaves the state as stale as a silent one.
 ///
@@ -92,17 +92,13 @@ enum LightRequest {
 ///
 /// Commands seen on the bus (0x130, 0x140 from another node) are valid frames but not state:
 /// they are counted in `link.rx_frames` and otherwise ignored. Notices
-/// ([`DriverEvent::Notice`]) report control-mode changes (RC takeover and hand-back included),
+/// ([`DriverEvent::Notice`](crate::driver::DriverEvent::Notice)) report control-mode changes (RC takeover and hand-back included),
 /// faults set and cleared, the chassis turning silent and talking again, and the bus going down
 /// and coming back.
 #[derive(Debug)]
 pub struct ScoutMiniDriver {
     profile: ScoutMiniProfile,
-    config: DriverConfig,
-    state: ChassisState,
-    events: VecDeque<DriverEvent>,
-    schedule: CommandSchedule,
-    link: LinkMonitor,
+    core: DriverCore,
     pose: PoseIntegrator,
     /// The latest request, limited and quantised.
     requested: SkidCommand,
@@ -117,8 +113,6 @@ pub struct ScoutMiniDriver {
     light_schedule: CommandSchedule,
     motion_count: u8,
     light_count: u8,
-    bus_down: bool,
-    was_silent: bool,
 }
 
 /// A request for no motion.
@@ -137,25 +131,17 @@ impl ScoutMiniDriver {
     /// A driver starting at `now`: the first 0x130 is due at once (mode 0x01 with
     /// `config.take_control`, else 0x00).
     pub fn new(profile: ScoutMiniProfile, config: DriverConfig, now: Timestamp) -> Self {
-        let mut state = ChassisState {
-            robot: RobotKind::SCOUT_MINI,
-            ..ChassisState::default()
-        };
-        state.system.control_mode = ControlMode::UNKNOWN;
-        let schedule = CommandSchedule::new(
+        let mut core = DriverCore::new(
+            RobotKind::SCOUT_MINI,
             Duration::from_millis(profile.heartbeat_period_ms),
-            Duration::from_millis(config.min_command_interval_ms),
+            &config,
             now,
         );
-        let link = LinkMonitor::new(Duration::from_millis(config.silence_timeout_ms), now);
+        core.state.system.control_mode = ControlMode::UNKNOWN;
         let want_control = config.take_control;
         Self {
             profile,
-            config,
-            state,
-            events: VecDeque::new(),
-            schedule,
-            link,
+            core,
             pose: PoseIntegrator::default(),
             requested: STANDING,
             motion: wire_motion(want_control, &STANDING),
@@ -167,8 +153,6 @@ impl ScoutMiniDriver {
             light_schedule: CommandSchedule::new(Self::LIGHT_PERIOD, Duration::ZERO, now),
             motion_count: 0,
             light_count: 0,
-            bus_down: false,
-            was_silent: false,
         }
     }
 
@@ -186,32 +170,12 @@ impl ScoutMiniDriver {
         self.clear_codes.len()
     }
 
-    fn notice(&mut self, level: Level, message: impl Into<String>) {
-        self.events.push_back(DriverEvent::Notice {
-            level,
-            message: message.into(),
-        });
-    }
-
-    fn set_flag(&mut self, flag: u32, on: bool) {
-        if on {
-            self.state.link_flags |= flag;
-        } else {
-            self.state.link_flags &= !flag;
-        }
-    }
-
     /// Recomputes the request from a twist.
     fn plan(&mut self, command: &Twist) {
-        let turn = if command.flags & RequestFlags::STEER != 0 {
-            Turn::Steer(command.steer_rad.into())
-        } else {
-            Turn::YawRate(command.angular_z_radps.into())
-        };
         self.requested = velocity_command(
             command.linear_x_mps.into(),
             command.linear_y_mps.into(),
-            turn,
+            requested_turn(command),
             &self.profile,
         )
         // Non-finite input: the mux rejects it first; a stop is the only safe answer here.
@@ -230,11 +194,8 @@ impl ScoutMiniDriver {
         {
             flags |= ClampFlags::CHASSIS_NOT_READY;
         }
-        if motion != self.motion {
-            let stop = motion.linear_mps == 0.0 && motion.angular_radps == 0.0;
-            self.motion = motion;
-            self.schedule.command_changed(stop);
-        }
+        let stop = motion.linear_mps == 0.0 && motion.angular_radps == 0.0;
+        self.core.schedule.update(&mut self.motion, motion, stop);
         self.motion_clamp_flags = flags;
     }
 
@@ -242,7 +203,7 @@ impl ScoutMiniDriver {
         match self.lights {
             LightRequest::Untouched => false,
             LightRequest::Hold(_) => true,
-            LightRequest::Release { sent } => !sent || self.state.lights.control_enabled != 0,
+            LightRequest::Release { sent } => !sent || self.core.state.lights.control_enabled != 0,
         }
     }
 
@@ -252,27 +213,17 @@ impl ScoutMiniDriver {
             Frame::LightCommand(_) => &mut self.light_count,
             _ => &mut self.motion_count,
         };
-        match frame.encode(*count, &self.profile) {
-            Ok(can) => {
-                *count = count.wrapping_add(1);
-                self.state.link.tx_frames += 1;
-                Some(Transmit::Can(can))
-            }
-            Err(err) => {
-                // Quantisation keeps every planned value on the wire's range; this is a bug
-                // guard (or a profile with a full scale that is not positive).
-                self.state.link.tx_errors += 1;
-                self.notice(
-                    Level::Error,
-                    format!("cannot encode {}: {err}", frame.name()),
-                );
-                None
-            }
+        let encoded = frame.encode(*count, &self.profile);
+        if encoded.is_ok() {
+            *count = count.wrapping_add(1);
         }
+        // Quantisation keeps every planned value on the wire's range; a failure is a bug guard
+        // (or a profile with a full scale that is not positive).
+        self.core.transmit(frame.name(), encoded, Transmit::Can)
     }
 
     fn motion_frame(&mut self, now: Timestamp) -> Frame {
-        self.schedule.sent(now);
+        self.core.schedule.sent(now);
         let mut motion = self.motion;
         if self.release_stop {
             self.release_stop = false;
@@ -281,15 +232,15 @@ impl ScoutMiniDriver {
         }
         motion.fault_clear = self.clear_codes.pop_front().unwrap_or(clear_code::NONE);
         if !self.clear_codes.is_empty() {
-            self.schedule.command_changed(false);
+            self.core.schedule.command_changed(false);
         }
-        let echo = &mut self.state.command;
+        let echo = &mut self.core.state.command;
         echo.linear_mps = motion.linear_mps as f32;
         echo.angular_radps = motion.angular_radps as f32;
         echo.lateral_mps = 0.0;
         echo.steer_rad = 0.0;
         echo.clamp_flags = self.motion_clamp_flags;
-        self.state.touch(Group::Command, now.as_nanos());
+        self.core.state.touch(Group::Command, now.as_nanos());
         Frame::MotionCommand(motion)
     }
 
@@ -310,21 +261,22 @@ impl ScoutMiniDriver {
         match frame {
             Frame::SystemStatus(s) => self.apply_system(now, s),
             Frame::MotionFeedback(m) => {
-                self.state.motion.linear_mps = m.linear_mps as f32;
-                self.state.motion.angular_radps = m.angular_radps as f32;
-                self.state.motion.lateral_mps = 0.0;
-                self.state.touch(Group::Motion, t);
+                self.core.state.motion.linear_mps = m.linear_mps as f32;
+                self.core.state.motion.angular_radps = m.angular_radps as f32;
+                self.core.state.motion.lateral_mps = 0.0;
+                self.core.state.touch(Group::Motion, t);
                 self.pose.update(
                     now,
                     m.linear_mps,
                     0.0,
                     m.angular_radps,
-                    &mut self.state.odometry,
+                    &mut self.core.state.odometry,
                 );
-                self.state.touch(Group::Pose, t);
+                self.core.state.touch(Group::Pose, t);
             }
             Frame::Motor(m) => {
                 if let Some(motor) = self
+                    .core
                     .state
                     .motors
                     .get_mut(usize::from(m.motor.clamp(1, 4) - 1))
@@ -334,15 +286,15 @@ impl ScoutMiniDriver {
                     motor.driver_temp_c = m.driver_temp_c as f32;
                     motor.motor_temp_c = m.motor_temp_c as f32;
                 }
-                self.state.touch(Group::MotorDrive, t);
-                self.state.touch(Group::MotorDriver, t);
+                self.core.state.touch(Group::MotorDrive, t);
+                self.core.state.touch(Group::MotorDriver, t);
             }
             Frame::LightState(l) => {
-                let lights = &mut self.state.lights;
+                let lights = &mut self.core.state.lights;
                 lights.control_enabled = u8::from(l.control_enabled);
                 lights.front_mode = l.front_mode;
                 lights.front_brightness_pct = l.front_brightness_pct;
-                self.state.touch(Group::Lights, t);
+                self.core.state.touch(Group::Lights, t);
                 if !l.control_enabled && self.lights == (LightRequest::Release { sent: true }) {
                     self.lights = LightRequest::Untouched;
                 }
@@ -353,11 +305,11 @@ impl ScoutMiniDriver {
     }
 
     fn apply_system(&mut self, now: Timestamp, s: codec::SystemStatus) {
-        let old_mode = self.state.system.control_mode;
+        let old_mode = self.core.state.system.control_mode;
         let new_mode = normalize_mode(s.mode);
-        let old_faults = self.state.system.fault_flags;
+        let old_faults = self.core.state.system.fault_flags;
         let new_faults = normalize_faults(s.vendor_fault_word) | body_flags(s.body_status);
-        let sys = &mut self.state.system;
+        let sys = &mut self.core.state.system;
         sys.body_status = match s.body_status {
             body::NORMAL => SystemState::BODY_NORMAL,
             body::EMERGENCY_STOP => SystemState::BODY_EMERGENCY_STOP,
@@ -368,12 +320,13 @@ impl ScoutMiniDriver {
         sys.vendor_fault_word = s.vendor_fault_word.into();
         sys.fault_flags = new_faults;
         sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
-        self.state.touch(Group::System, now.as_nanos());
-        self.set_flag(
+        self.core.state.touch(Group::System, now.as_nanos());
+        self.core.set_flag(
             LinkFlags::COMMAND_MODE,
             new_mode == ControlMode::COMMAND && self.want_control,
         );
-        self.set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
+        self.core
+            .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
 
         if new_mode != old_mode {
             let level = if new_mode == ControlMode::COMMAND {
@@ -386,7 +339,7 @@ impl ScoutMiniDriver {
                 ControlMode::SERIAL => ": commands are taken from the serial port, not CAN",
                 _ => "",
             };
-            self.notice(
+            self.core.notice(
                 level,
                 format!(
                     "chassis mode {} -> {}{why}",
@@ -395,30 +348,11 @@ impl ScoutMiniDriver {
                 ),
             );
         }
-        if new_faults != old_faults {
-            let set = new_faults & !old_faults;
-            let cleared = old_faults & !new_faults;
-            if set != 0 {
-                let level = if set & !(FaultFlags::WARNINGS | FaultFlags::COMMAND_CHECKSUM) != 0 {
-                    Level::Error
-                } else {
-                    Level::Warn
-                };
-                self.notice(
-                    level,
-                    format!("chassis faults set: {}", FaultFlags::names(set).join(", ")),
-                );
-            }
-            if cleared != 0 {
-                self.notice(
-                    Level::Info,
-                    format!(
-                        "chassis faults cleared: {}",
-                        FaultFlags::names(cleared).join(", ")
-                    ),
-                );
-            }
-        }
+        self.core.fault_notices(
+            old_faults,
+            new_faults,
+            FaultFlags::WARNINGS | FaultFlags::COMMAND_CHECKSUM,
+        );
     }
 }
 
@@ -491,9 +425,7 @@ pub fn normalize_faults(word: u16) -> u64 {
             FaultFlags::OVER_CURRENT,
         ),
     ];
-    MAP.iter()
-        .filter(|(bit, _)| word & bit != 0)
-        .fold(0, |acc, (_, flag)| acc | flag)
+    flags_of(word, &MAP)
 }
 
 impl Driver for ScoutMiniDriver {
@@ -501,37 +433,12 @@ impl Driver for ScoutMiniDriver {
         Robot::ScoutMini
     }
 
+    crate::driver::core_accessors!();
+
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
-        let Rx::Can(frame) = rx else {
-            self.state.link.rx_decode_errors += 1;
-            self.events.push_back(DriverEvent::RxDropped {
-                reason: "serial bytes on a CAN robot's bus".into(),
-            });
-            return;
-        };
-        match codec::decode(frame, &self.profile) {
-            Ok(decoded) => {
-                self.link.received(now);
-                self.state.link.rx_frames += 1;
-                self.state.stamp_ns = now.as_nanos();
-                if self.was_silent {
-                    self.was_silent = false;
-                    self.set_flag(LinkFlags::CHASSIS_SILENT, false);
-                    self.notice(Level::Info, "chassis is talking again");
-                }
-                self.apply(now, decoded.frame);
-            }
-            Err(err) => {
-                match err {
-                    crate::DecodeError::BadChecksum { .. } => self.state.link.rx_bad_checksum += 1,
-                    crate::DecodeError::UnknownId { .. }
-                    | crate::DecodeError::ExtendedId { .. } => self.state.link.rx_unknown_id += 1,
-                    _ => self.state.link.rx_decode_errors += 1,
-                }
-                self.events.push_back(DriverEvent::RxDropped {
-                    reason: format!("{frame}: {err}"),
-                });
-            }
+        let profile = &self.profile;
+        if let Some(decoded) = self.core.can_rx(now, rx, |f| codec::decode(f, profile)) {
+            self.apply(now, decoded.frame);
         }
     }
 
@@ -540,17 +447,12 @@ impl Driver for ScoutMiniDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        if self.bus_down {
-            return ControlOutcome::Refused("the bus is down; nothing can be sent".into());
-        }
-        if let Command::Velocity { .. } = command {
-            return ControlOutcome::Invalid(
-                "motion goes through the mux, not a control request".into(),
-            );
-        }
-        let planned = match frames_for(command, &self.profile) {
+        let planned = match self
+            .core
+            .admit_control(command, |c| frames_for(c, &self.profile))
+        {
             Ok(planned) => planned,
-            Err(err) => return err.into(),
+            Err(outcome) => return outcome,
         };
         match *command {
             Command::Mode { take_control } => {
@@ -560,10 +462,11 @@ impl Driver for ScoutMiniDriver {
                 // A stop not yet sent stays due until control is taken back.
                 self.release_stop = releasing || (self.release_stop && !take_control);
                 if releasing {
-                    self.schedule.command_changed(true);
+                    self.core.schedule.command_changed(true);
                 }
-                let obeyed = self.state.system.control_mode == ControlMode::COMMAND && take_control;
-                self.set_flag(LinkFlags::COMMAND_MODE, obeyed);
+                let obeyed =
+                    self.core.state.system.control_mode == ControlMode::COMMAND && take_control;
+                self.core.set_flag(LinkFlags::COMMAND_MODE, obeyed);
                 ControlOutcome::Done(if take_control {
                     "CAN command mode: every 0x130 carries mode 0x01".into()
                 } else {
@@ -585,7 +488,7 @@ impl Driver for ScoutMiniDriver {
                     .collect();
                 let n = codes.len();
                 self.clear_codes.extend(codes);
-                self.schedule.command_changed(false);
+                self.core.schedule.command_changed(false);
                 ControlOutcome::Done(format!(
                     "clear-fault {} sent ({n} code{} in 0x130 b1)",
                     FaultClear::name(which),
@@ -621,25 +524,16 @@ impl Driver for ScoutMiniDriver {
     }
 
     fn handle_timeout(&mut self, now: Timestamp) {
-        if !self.was_silent && self.link.is_silent(now) {
-            self.was_silent = true;
-            self.set_flag(LinkFlags::CHASSIS_SILENT, true);
+        if self.core.check_silence(now, "valid feedback") {
             self.pose.reset();
-            self.notice(
-                Level::Warn,
-                format!(
-                    "chassis silent: no valid feedback for {} ms",
-                    self.config.silence_timeout_ms
-                ),
-            );
         }
     }
 
     fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
-        if self.bus_down {
+        if self.core.bus_down {
             return None;
         }
-        if self.schedule.is_due(now) {
+        if self.core.schedule.is_due(now) {
             let frame = self.motion_frame(now);
             return self.transmit(frame);
         }
@@ -651,44 +545,23 @@ impl Driver for ScoutMiniDriver {
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        if self.bus_down {
-            return None;
-        }
-        let mut next = Some(self.schedule.deadline());
-        if !self.was_silent {
-            next = earliest(next, Some(self.link.deadline()));
-        }
+        let mut next = Some(self.core.poll_timeout()?);
         if self.light_wanted() {
             next = earliest(next, Some(self.light_schedule.deadline()));
         }
         next
     }
 
-    fn poll_event(&mut self) -> Option<DriverEvent> {
-        self.events.pop_front()
-    }
-
-    fn state(&self) -> &ChassisState {
-        &self.state
-    }
-
     fn set_bus_down(&mut self, now: Timestamp, down: bool) {
-        if down == self.bus_down {
+        if !self.core.set_bus_down(now, down) {
             return;
         }
-        self.bus_down = down;
-        self.set_flag(LinkFlags::BUS_DOWN, down);
         self.clear_codes.clear();
         self.release_stop = false;
-        if down {
-            self.notice(Level::Error, "bus down: nothing reaches the chassis");
-        } else {
-            self.state.link.bus_reconnects += 1;
-            self.link.reset(now);
-            self.schedule.restart(now);
+        if !down {
             self.light_schedule.restart(now);
             self.pose.reset();
-            self.notice(
+            self.core.notice(
                 Level::Info,
                 if self.want_control {
                     "bus back: heartbeat restarted in CAN command mode"
@@ -702,7 +575,7 @@ impl Driver for ScoutMiniDriver {
     fn shutdown(&mut self, _now: Timestamp) {
         self.plan(&Twist::ZERO);
         // Due at once even when the command was already zero.
-        self.schedule.command_changed(true);
+        self.core.schedule.command_changed(true);
     }
 }
 

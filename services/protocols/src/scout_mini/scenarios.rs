@@ -17,7 +17,7 @@ use crate::can::CanFrame;
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Transmit};
 use crate::firmware::{Firmware, Injection};
-use crate::pair::Pair;
+use crate::pair::{Pair, notices};
 use crate::profile::ScoutMiniProfile;
 use crate::time::Timestamp;
 
@@ -84,16 +84,6 @@ fn commands_sent(p: &ScoutPair, since: Timestamp) -> Vec<(Timestamp, [u8; 4])> {
     logged(p, Direction::ToChassis, 0x130, since)
         .into_iter()
         .map(|(t, f)| (t, [f.data()[0], f.data()[1], f.data()[2], f.data()[3]]))
-        .collect()
-}
-
-fn notices(events: &[DriverEvent]) -> Vec<(Level, String)> {
-    events
-        .iter()
-        .filter_map(|e| match e {
-            DriverEvent::Notice { level, message } => Some((*level, message.clone())),
-            _ => None,
-        })
         .collect()
 }
 

@@ -2,7 +2,6 @@
 //!
 //! Everything about its behaviour is documented on [`ScoutMiniSim`].
 
-use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::ControlMode;
@@ -15,8 +14,11 @@ use super::driver::{body_flags, normalize_faults};
 use super::kinematics::side_speeds;
 use crate::DecodeError;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit, wrap_angle};
-use crate::firmware::{Firmware, Injection, SimTruth};
+use crate::driver::{Rx, Transmit};
+use crate::firmware::{
+    BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
+    garbage_frames, motor_index, non_negative, state_of_charge, substeps,
+};
 use crate::profile::{Robot, ScoutMiniProfile};
 use crate::time::{Grid, Timestamp, earliest};
 
@@ -25,14 +27,6 @@ use crate::time::{Grid, Timestamp, earliest};
 struct Motion {
     linear_mps: f64,
     angular_radps: f64,
-}
-
-/// Extra feedback for load tests.
-#[derive(Debug, Clone, Copy)]
-struct Flood {
-    grid: Grid,
-    /// Alternates the copied frame.
-    toggle: bool,
 }
 
 const MOTOR_COMM: [u16; 4] = [
@@ -186,7 +180,6 @@ pub struct ScoutMiniSim {
     /// The command is dropped (timeout) at this time.
     command_until: Option<Timestamp>,
     booting_until: Option<Timestamp>,
-    silent_until: Option<Timestamp>,
     checksum_fault_until: Option<Timestamp>,
     motor_lost: [bool; 4],
     extra_load_a: f64,
@@ -198,9 +191,7 @@ pub struct ScoutMiniSim {
     last_update: Timestamp,
     linear_mps: f64,
     angular_radps: f64,
-    x_m: f64,
-    y_m: f64,
-    yaw_rad: f64,
+    pose: Pose,
     wheel_mps: [f64; 4],
     motor_current_a: [f64; 4],
     /// Moving mean of the squared motor currents, A².
@@ -214,7 +205,7 @@ pub struct ScoutMiniSim {
     flood: Option<Flood>,
     counts: [u8; FEEDBACK_IDS.len()],
     corrupt_next: u32,
-    queue: VecDeque<CanFrame>,
+    outbox: Outbox<CanFrame>,
 
     // Counters.
     boots: u32,
@@ -223,7 +214,6 @@ pub struct ScoutMiniSim {
     decode_errors: u64,
     bad_checksums: u64,
     frames_ignored: u64,
-    frames_dropped: u64,
 }
 
 impl ScoutMiniSim {
@@ -243,14 +233,13 @@ impl ScoutMiniSim {
     pub const DEFAULT_CHECKSUM_FAULT_HOLD: Duration = Duration::from_millis(500);
     /// CAN id of injected garbage frames (unused by SCOUT MINI).
     pub const GARBAGE_ID: u16 = 0x7F0;
-    /// Battery capacity, Ah.
-    pub const BATTERY_CAPACITY_AH: f64 = 15.0;
-    /// Open-circuit voltage at 100 % SOC, V.
-    pub const BATTERY_FULL_V: f64 = 29.2;
-    /// Open-circuit voltage at 0 % SOC, V.
-    pub const BATTERY_EMPTY_V: f64 = 21.0;
-    /// Internal resistance of the pack, Ω.
-    pub const BATTERY_RESISTANCE_OHM: f64 = 0.03;
+    /// The battery.
+    pub const BATTERY: BatteryModel = BatteryModel {
+        capacity_ah: 15.0,
+        full_v: 29.2,
+        empty_v: 21.0,
+        resistance_ohm: 0.03,
+    };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 0.8;
     /// Motor current per m/s of wheel speed, A.
@@ -278,11 +267,7 @@ impl ScoutMiniSim {
     /// Most extra frames per second [`Injection::Flood`] adds.
     pub const MAX_FLOOD_FRAMES_PER_S: u32 = 100_000;
     /// Longest time integrated at once; a longer gap between calls is not bridged.
-    pub const MAX_STEP: Duration = Duration::from_millis(100);
-    /// Integration sub-step.
-    const SUBSTEP: Duration = Duration::from_millis(5);
-    /// Frames kept for transmission when nobody polls (oldest dropped first).
-    const TX_QUEUE_LIMIT: usize = 4096;
+    pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
 
     /// A chassis that has just finished booting at `now`: command mode (no RC transmitter),
     /// standing, SOC 100 %.
@@ -297,7 +282,6 @@ impl ScoutMiniSim {
             command: Motion::default(),
             command_until: None,
             booting_until: None,
-            silent_until: None,
             checksum_fault_until: None,
             motor_lost: [false; 4],
             extra_load_a: 0.0,
@@ -306,9 +290,7 @@ impl ScoutMiniSim {
             last_update: now,
             linear_mps: 0.0,
             angular_radps: 0.0,
-            x_m: 0.0,
-            y_m: 0.0,
-            yaw_rad: 0.0,
+            pose: Pose::default(),
             wheel_mps: [0.0; 4],
             motor_current_a: [0.0; 4],
             current_sq_a2: [0.0; 4],
@@ -319,14 +301,13 @@ impl ScoutMiniSim {
             flood: None,
             counts: [0; FEEDBACK_IDS.len()],
             corrupt_next: 0,
-            queue: VecDeque::new(),
+            outbox: Outbox::new(),
             boots: 0,
             commands_received: 0,
             commands_ignored: 0,
             decode_errors: 0,
             bad_checksums: 0,
             frames_ignored: 0,
-            frames_dropped: 0,
         }
     }
 
@@ -356,8 +337,8 @@ impl ScoutMiniSim {
 
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
-        if soc_pct.is_finite() {
-            self.soc_pct = soc_pct.clamp(0.0, 100.0);
+        if let Some(soc_pct) = state_of_charge(soc_pct) {
+            self.soc_pct = soc_pct;
             self.refresh_conditions();
         }
         self
@@ -379,7 +360,7 @@ impl ScoutMiniSim {
 
     /// Frames dropped because nobody polled the transmit queue.
     pub fn frames_dropped(&self) -> u64 {
-        self.frames_dropped
+        self.outbox.dropped()
     }
 
     /// The 0x151 fault word the chassis reports at its latest time.
@@ -399,9 +380,7 @@ impl ScoutMiniSim {
 
     /// Battery voltage under the present load, V (what 0x151 reports).
     pub fn battery_voltage_v(&self) -> f64 {
-        let ocv = Self::BATTERY_EMPTY_V
-            + (Self::BATTERY_FULL_V - Self::BATTERY_EMPTY_V) * self.soc_pct / 100.0;
-        (ocv - Self::BATTERY_RESISTANCE_OHM * self.pack_current_a).max(0.0)
+        Self::BATTERY.voltage_v(self.soc_pct, self.pack_current_a)
     }
 
     /// Pack current, A (positive = discharging).
@@ -519,14 +498,14 @@ impl ScoutMiniSim {
 
     /// Physics and the deadlines that change what the chassis does (boot end, command timeout).
     fn expire(&mut self, now: Timestamp) {
-        self.advance(now);
+        for dt in substeps(&mut self.last_update, now) {
+            self.step(dt);
+        }
         if self.booting_until.is_some_and(|t| now >= t) {
             self.booting_until = None;
             self.refresh_conditions();
         }
-        if self.silent_until.is_some_and(|t| now >= t) {
-            self.silent_until = None;
-        }
+        self.outbox.expire(now);
         if self.command_until.is_some_and(|t| now >= t) {
             self.command_until = None;
             self.command = Motion::default();
@@ -594,7 +573,7 @@ impl ScoutMiniSim {
         self.latched = 0;
         self.lights = Lights::default();
         self.counts = [0; FEEDBACK_IDS.len()];
-        self.queue.clear();
+        self.outbox.clear();
         if self.boot_time.is_zero() {
             self.booting_until = None;
             self.refresh_conditions();
@@ -605,20 +584,6 @@ impl ScoutMiniSim {
 
     // -----------------------------------------------------------------------------------------
     // Physics.
-
-    /// Integrates from the last update to `now` (at most [`Self::MAX_STEP`]).
-    fn advance(&mut self, now: Timestamp) {
-        if now <= self.last_update {
-            return;
-        }
-        let mut remaining = now.saturating_since(self.last_update).min(Self::MAX_STEP);
-        self.last_update = now;
-        while !remaining.is_zero() {
-            let dt = remaining.min(Self::SUBSTEP);
-            remaining = remaining.saturating_sub(dt);
-            self.step(dt.as_secs_f64());
-        }
-    }
 
     /// Target speeds and the time constant toward them.
     fn target(&self) -> (Motion, f64) {
@@ -634,20 +599,11 @@ impl ScoutMiniSim {
         }
     }
 
+    /// Integrates `dt` seconds (one sub-step of [`substeps`], never zero).
     fn step(&mut self, dt: f64) {
-        if dt <= 0.0 {
-            return;
-        }
         self.refresh_conditions();
         let (target, tau) = self.target();
-        let lag = |from: f64, to: f64| {
-            let next = if tau > 0.0 {
-                to + (from - to) * (-dt / tau).exp()
-            } else {
-                to
-            };
-            if (next - to).abs() < 1e-9 { to } else { next }
-        };
+        let lag = |from: f64, to: f64| first_order_lag(from, to, tau, dt);
         let (v0, w0) = (self.linear_mps, self.angular_radps);
         let v1 = lag(v0, target.linear_mps);
         let w1 = lag(w0, target.angular_radps);
@@ -655,10 +611,7 @@ impl ScoutMiniSim {
         // Midpoint rule for the pose.
         let v_mid = 0.5 * (v0 + v1);
         let w_mid = 0.5 * (w0 + w1);
-        let heading = self.yaw_rad + 0.5 * w_mid * dt;
-        self.x_m += v_mid * heading.cos() * dt;
-        self.y_m += v_mid * heading.sin() * dt;
-        self.yaw_rad = wrap_angle(self.yaw_rad + w_mid * dt);
+        self.pose.advance(v_mid, 0.0, w_mid, dt);
         self.linear_mps = v1;
         self.angular_radps = w1;
 
@@ -692,23 +645,14 @@ impl ScoutMiniSim {
             *temp = steady + (*temp - steady) * heat_keep;
         }
         self.pack_current_a = Self::IDLE_CURRENT_A + self.motor_current_a.iter().sum::<f64>();
-        let used_pct = self.pack_current_a * dt / 3600.0 / Self::BATTERY_CAPACITY_AH * 100.0;
-        self.soc_pct = (self.soc_pct - used_pct).max(0.0);
+        self.soc_pct = Self::BATTERY.drain(self.soc_pct, self.pack_current_a, dt, 1.0);
     }
 
     // -----------------------------------------------------------------------------------------
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.booting_until.is_some() || self.silent_until.is_some_and(|t| now < t)
-    }
-
-    fn enqueue(&mut self, frame: CanFrame) {
-        if self.queue.len() >= Self::TX_QUEUE_LIMIT {
-            self.queue.pop_front();
-            self.frames_dropped += 1;
-        }
-        self.queue.push_back(frame);
+        self.booting_until.is_some() || self.outbox.is_silenced(now)
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
@@ -717,13 +661,13 @@ impl ScoutMiniSim {
         }
         let Some(index) = FEEDBACK_IDS.iter().position(|i| *i == frame.id()) else {
             // Only feedback ids are sent by the chassis.
-            self.frames_dropped += 1;
+            self.outbox.count_dropped();
             return;
         };
         let count = self.counts[index];
         // Every value is kept inside its wire range; a frame that still does not fit is dropped.
         let Ok(mut can) = frame.encode(count, &self.profile) else {
-            self.frames_dropped += 1;
+            self.outbox.count_dropped();
             return;
         };
         self.counts[index] = count.wrapping_add(1);
@@ -731,7 +675,7 @@ impl ScoutMiniSim {
             self.corrupt_next -= 1;
             can = corrupt_checksum(&can);
         }
-        self.enqueue(can);
+        self.outbox.push(can);
     }
 
     fn motion_feedback(&self) -> Frame {
@@ -776,20 +720,14 @@ impl ScoutMiniSim {
     }
 
     fn send_flood(&mut self, now: Timestamp) {
-        let Some(mut flood) = self.flood else {
+        let Some(second) = self.flood.as_mut().and_then(|flood| flood.due(now)) else {
             return;
         };
-        if !flood.grid.is_due(now) {
-            return;
-        }
-        let frame = if flood.toggle && !self.motor_lost[0] {
+        let frame = if second && !self.motor_lost[0] {
             self.motor_feedback(0)
         } else {
             self.motion_feedback()
         };
-        flood.toggle = !flood.toggle;
-        flood.grid.served(now);
-        self.flood = Some(flood);
         self.send(now, frame);
     }
 }
@@ -836,15 +774,15 @@ impl Firmware for ScoutMiniSim {
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.queue.pop_front().map(Transmit::Can)
+        self.outbox.pop().map(Transmit::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
         [
             self.command_until,
             self.booting_until,
-            self.silent_until,
-            self.flood.map(|f| f.grid.next()),
+            self.outbox.silent_until(),
+            self.flood.map(|f| f.next()),
         ]
         .into_iter()
         .fold(Some(self.fast.next()), earliest)
@@ -854,17 +792,17 @@ impl Firmware for ScoutMiniSim {
         self.expire(now);
         match injection {
             Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = usize::from(motor).checked_sub(1).filter(|i| *i < 4) else {
+                let Some(index) = motor_index(motor, 4) else {
                     return false;
                 };
                 self.motor_lost[index] = lost;
                 self.refresh_conditions();
             }
             Injection::Battery { soc_pct } => {
-                if !soc_pct.is_finite() {
+                let Some(soc_pct) = state_of_charge(soc_pct) else {
                     return false;
-                }
-                self.soc_pct = soc_pct.clamp(0.0, 100.0);
+                };
+                self.soc_pct = soc_pct;
                 self.refresh_conditions();
             }
             Injection::RcTakeover(on) => {
@@ -875,30 +813,15 @@ impl Firmware for ScoutMiniSim {
                 }
             }
             Injection::Reboot => self.reboot(now),
-            Injection::Silence(duration) => {
-                let until = now + duration;
-                self.silent_until = Some(self.silent_until.map_or(until, |t| t.max(until)));
-                if !duration.is_zero() {
-                    self.queue.clear();
-                }
-            }
+            Injection::Silence(duration) => self.outbox.silence(now, duration),
             Injection::Garbage(bytes) => {
-                for chunk in bytes.chunks(8) {
-                    if let Ok(frame) = CanFrame::new(u32::from(Self::GARBAGE_ID), chunk) {
-                        self.enqueue(frame);
-                    }
+                for frame in garbage_frames(Self::GARBAGE_ID, &bytes) {
+                    self.outbox.push(frame);
                 }
             }
             Injection::BadChecksums(n) => self.corrupt_next = n,
             Injection::Flood { frames_per_s } => {
-                self.flood = (frames_per_s > 0).then(|| {
-                    let fps = frames_per_s.min(Self::MAX_FLOOD_FRAMES_PER_S);
-                    let interval = Duration::from_secs(1) / fps;
-                    Flood {
-                        grid: Grid::new(interval, now + interval),
-                        toggle: false,
-                    }
-                });
+                self.flood = Flood::new(now, frames_per_s, Self::MAX_FLOOD_FRAMES_PER_S);
             }
             Injection::Bumper(_) | Injection::ObstacleAhead(_) | Injection::ObstacleBehind(_) => {
                 return false;
@@ -913,9 +836,9 @@ impl Firmware for ScoutMiniSim {
             lateral_mps: 0.0,
             angular_radps: self.angular_radps,
             steer_rad: 0.0,
-            x_m: self.x_m,
-            y_m: self.y_m,
-            yaw_rad: self.yaw_rad,
+            x_m: self.pose.x_m,
+            y_m: self.pose.y_m,
+            yaw_rad: self.pose.yaw_rad,
             control_mode: if self.rc_on {
                 ControlMode::REMOTE
             } else {
@@ -942,24 +865,6 @@ fn corrupt_checksum(frame: &CanFrame) -> CanFrame {
         *last = !*last;
     }
     CanFrame::new(frame.id(), &data[..len]).unwrap_or(*frame)
-}
-
-fn non_negative(value: f64) -> f64 {
-    if value.is_finite() && value > 0.0 {
-        value
-    } else {
-        0.0
-    }
-}
-
-/// Keeps an SI value inside a signed 16-bit wire field of `scale` units per SI unit.
-fn clamp_i16(value: f64, scale: f64) -> f64 {
-    let limit = f64::from(i16::MAX) / scale;
-    if value.is_finite() {
-        value.clamp(-limit, limit)
-    } else {
-        0.0
-    }
 }
 
 #[cfg(test)]

@@ -12,14 +12,15 @@ use proptest::prelude::*;
 use super::ScoutMiniSim;
 use crate::DecodeError;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit};
+use crate::driver::Rx;
 use crate::firmware::{Firmware, Injection};
 use crate::profile::ScoutMiniProfile;
 use crate::scout_mini::{
     Decoded, Frame, Lights, MotionCommand, MotionFeedback, MotorFeedback, SystemStatus, body,
     checksum, clear_code, decode, fault, id, light_mode, mode,
 };
-use crate::time::{Timestamp, earliest};
+use crate::sim_bench::{Parts, SimBench};
+use crate::time::Timestamp;
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
 
@@ -57,6 +58,32 @@ struct Bench {
     last_heartbeat: Option<Timestamp>,
     /// The computer's rolling count of 0x130 and 0x140.
     count: u8,
+}
+
+impl SimBench for Bench {
+    type Firmware = ScoutMiniSim;
+    type Item = CanFrame;
+    type Command = MotionCommand;
+    const HEARTBEAT_PERIOD: Duration = Duration::from_millis(20);
+
+    fn parts(&mut self) -> Parts<'_, ScoutMiniSim, CanFrame, MotionCommand> {
+        Parts {
+            sim: &mut self.sim,
+            now: &mut self.now,
+            sent: &mut self.sent,
+            heartbeat: &mut self.heartbeat,
+            next_heartbeat: &mut self.next_heartbeat,
+            last_heartbeat: &mut self.last_heartbeat,
+        }
+    }
+
+    fn sent(&self) -> &[(Timestamp, CanFrame)] {
+        &self.sent
+    }
+
+    fn send_heartbeat(&mut self, command: MotionCommand) {
+        self.send(Frame::MotionCommand(command));
+    }
 }
 
 impl Bench {
@@ -103,75 +130,12 @@ impl Bench {
         self.drain();
     }
 
-    fn inject(&mut self, injection: Injection) -> bool {
-        let ok = self.sim.inject(self.now, injection);
-        self.drain();
-        ok
-    }
-
-    /// Sends `command` every 20 ms from now on (`None` stops it).
-    fn heartbeat(&mut self, command: Option<MotionCommand>) {
-        if self.heartbeat.is_none() {
-            self.next_heartbeat = self.now;
-        }
-        self.heartbeat = command;
-    }
-
-    fn drain(&mut self) {
-        while let Some(item) = self.sim.poll_transmit(self.now) {
-            let Transmit::Can(frame) = item else {
-                panic!("SCOUT MINI sent serial bytes");
-            };
-            self.sent.push((self.now, frame));
-        }
-    }
-
-    fn run_for(&mut self, duration: Duration) {
-        let until = self.now + duration;
-        loop {
-            let heartbeat = self.heartbeat.map(|_| self.next_heartbeat);
-            let next = earliest(self.sim.poll_timeout(), heartbeat).unwrap_or(until);
-            assert!(
-                next >= self.now,
-                "deadline {next:?} before now {:?}",
-                self.now
-            );
-            if next > until {
-                self.now = until;
-                break;
-            }
-            self.now = next;
-            if let Some(command) = self.heartbeat
-                && self.next_heartbeat <= self.now
-            {
-                self.send(Frame::MotionCommand(command));
-                self.last_heartbeat = Some(self.now);
-                self.next_heartbeat += ms(20);
-            }
-            if self.sim.poll_timeout().is_some_and(|t| t <= self.now) {
-                self.sim.handle_timeout(self.now);
-                let after = self.sim.poll_timeout().unwrap();
-                assert!(
-                    after > self.now,
-                    "stall: {after:?} after handle_timeout at {:?}",
-                    self.now
-                );
-            }
-            self.drain();
-        }
-    }
-
     fn decoded(&self, frame_id: u16) -> Vec<(Timestamp, Decoded)> {
         self.sent
             .iter()
             .filter(|(_, f)| f.id() == u32::from(frame_id))
             .map(|(t, f)| (*t, decode(f, &self.profile).unwrap()))
             .collect()
-    }
-
-    /// Frames sent strictly after `since`.
-    fn sent_since(&self, since: Timestamp) -> usize {
-        self.sent.iter().filter(|(t, _)| *t > since).count()
     }
 
     fn last(&self, frame_id: u16) -> Frame {

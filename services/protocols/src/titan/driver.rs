@@ -13,17 +13,17 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ClampFlags, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags,
-    RequestFlags, RobotKind, SystemState, Twist,
+    ClampFlags, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags, RobotKind, SystemState,
+    Twist,
 };
 
 use super::codec::{self, Frame, MotionCommand, ParkingBrake, fault, mode};
 use super::commands::{frames_for, motion_command};
 use super::kinematics::yaw_rate;
-use crate::command::{Command, Turn};
+use crate::command::Command;
 use crate::driver::{
-    CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverEvent, Level, LinkMonitor,
-    PoseIntegrator, Rx, Transmit,
+    ControlOutcome, Driver, DriverConfig, DriverCore, DriverEvent, Level, PoseIntegrator, Rx,
+    Transmit, flags_of, requested_turn,
 };
 use crate::profile::{Robot, TitanProfile};
 use crate::time::{Timestamp, earliest};
@@ -47,11 +47,8 @@ enum Brake {
 pub struct TitanDriver {
     profile: TitanProfile,
     config: DriverConfig,
-    state: ChassisState,
+    core: DriverCore,
     queue: VecDeque<Frame>,
-    events: VecDeque<DriverEvent>,
-    schedule: CommandSchedule,
-    link: LinkMonitor,
     pose: PoseIntegrator,
     /// The motion the next 0x111 carries.
     motion: MotionCommand,
@@ -64,34 +61,25 @@ pub struct TitanDriver {
     idle_since: Option<Timestamp>,
     steering_zero: Option<(u64, Timestamp)>,
     next_token: u64,
-    bus_down: bool,
-    was_silent: bool,
     other_faults: u64,
 }
 
 impl TitanDriver {
     /// A driver starting at `now`. With `config.take_control` it asks for CAN command mode at once.
     pub fn new(profile: TitanProfile, config: DriverConfig, now: Timestamp) -> Self {
-        let mut state = ChassisState {
-            robot: RobotKind::TITAN,
-            ..ChassisState::default()
-        };
-        state.system.control_mode = ControlMode::UNKNOWN;
-        let schedule = CommandSchedule::new(
+        let mut core = DriverCore::new(
+            RobotKind::TITAN,
             Duration::from_millis(profile.heartbeat_period_ms),
-            Duration::from_millis(config.min_command_interval_ms),
+            &config,
             now,
         );
-        let link = LinkMonitor::new(Duration::from_millis(config.silence_timeout_ms), now);
+        core.state.system.control_mode = ControlMode::UNKNOWN;
         let mut driver = Self {
             want_control: config.take_control,
             profile,
             config,
-            state,
+            core,
             queue: VecDeque::new(),
-            events: VecDeque::new(),
-            schedule,
-            link,
             pose: PoseIntegrator::default(),
             motion: MotionCommand::default(),
             motion_clamp_flags: 0,
@@ -101,8 +89,6 @@ impl TitanDriver {
             idle_since: Some(now),
             steering_zero: None,
             next_token: 1,
-            bus_down: false,
-            was_silent: false,
             other_faults: 0,
         };
         if driver.want_control {
@@ -115,13 +101,6 @@ impl TitanDriver {
         &self.profile
     }
 
-    fn notice(&mut self, level: Level, message: impl Into<String>) {
-        self.events.push_back(DriverEvent::Notice {
-            level,
-            message: message.into(),
-        });
-    }
-
     fn request_mode(&mut self, now: Timestamp) {
         self.queue.push_back(Frame::Mode(codec::ModeCommand {
             mode: mode::CAN_COMMAND,
@@ -130,20 +109,16 @@ impl TitanDriver {
     }
 
     fn is_moving(&self) -> bool {
-        self.state.motion.linear_mps.abs() as f64 > STANDING_MPS || self.motion.linear_mps != 0.0
+        self.core.state.motion.linear_mps.abs() as f64 > STANDING_MPS
+            || self.motion.linear_mps != 0.0
     }
 
     /// Recomputes the motion to send from the latest command.
     fn plan(&mut self, now: Timestamp, command: &Twist) {
-        let turn = if command.flags & RequestFlags::STEER != 0 {
-            Turn::Steer(command.steer_rad.into())
-        } else {
-            Turn::YawRate(command.angular_z_radps.into())
-        };
         let (mut motion, mut flags) = match motion_command(
             command.linear_x_mps.into(),
             command.linear_y_mps.into(),
-            turn,
+            requested_turn(command),
             &self.profile,
         ) {
             Ok(planned) => planned,
@@ -163,25 +138,13 @@ impl TitanDriver {
         } else if self.idle_since.is_none() {
             self.idle_since = Some(now);
         }
-        if motion != self.motion {
-            let stop = !moving;
-            self.motion = motion;
-            self.schedule.command_changed(stop);
-        }
+        self.core.schedule.update(&mut self.motion, motion, !moving);
         self.motion_clamp_flags = flags;
     }
 
     fn update_body(&mut self, now: Timestamp) {
-        self.state.system.parking_brake_engaged = u8::from(self.brake != Brake::Released);
-        self.state.touch(Group::Body, now.as_nanos());
-    }
-
-    fn set_flag(&mut self, flag: u32, on: bool) {
-        if on {
-            self.state.link_flags |= flag;
-        } else {
-            self.state.link_flags &= !flag;
-        }
+        self.core.state.system.parking_brake_engaged = u8::from(self.brake != Brake::Released);
+        self.core.state.touch(Group::Body, now.as_nanos());
     }
 
     fn apply(&mut self, now: Timestamp, frame: Frame) {
@@ -190,49 +153,59 @@ impl TitanDriver {
             Frame::SystemStatus(s) => self.apply_system(now, s),
             Frame::MotionFeedback(m) => {
                 let w = yaw_rate(m.linear_mps, m.steer_rad, &self.profile);
-                self.state.motion.linear_mps = m.linear_mps as f32;
-                self.state.motion.steer_rad = m.steer_rad as f32;
-                self.state.motion.angular_radps = w as f32;
-                self.state.motion.lateral_mps = 0.0;
-                self.state.touch(Group::Motion, t);
+                self.core.state.motion.linear_mps = m.linear_mps as f32;
+                self.core.state.motion.steer_rad = m.steer_rad as f32;
+                self.core.state.motion.angular_radps = w as f32;
+                self.core.state.motion.lateral_mps = 0.0;
+                self.core.state.touch(Group::Motion, t);
                 self.pose
-                    .update(now, m.linear_mps, 0.0, w, &mut self.state.odometry);
-                self.state.touch(Group::Pose, t);
+                    .update(now, m.linear_mps, 0.0, w, &mut self.core.state.odometry);
+                self.core.state.touch(Group::Pose, t);
             }
             Frame::SteeringFeedback(s) => {
-                self.state.motion.front_steer_rad = s.front_steer_rad as f32;
-                self.state.motion.rear_steer_rad = s.rear_steer_rad as f32;
-                self.state.touch(Group::Steering, t);
+                self.core.state.motion.front_steer_rad = s.front_steer_rad as f32;
+                self.core.state.motion.rear_steer_rad = s.rear_steer_rad as f32;
+                self.core.state.touch(Group::Steering, t);
             }
             Frame::AxleSpeed(a) => {
-                self.state.motion.front_axle_mps = a.front_axle_mps as f32;
-                self.state.motion.rear_axle_mps = a.rear_axle_mps as f32;
-                self.state.touch(Group::WheelSpeed, t);
+                self.core.state.motion.front_axle_mps = a.front_axle_mps as f32;
+                self.core.state.motion.rear_axle_mps = a.rear_axle_mps as f32;
+                self.core.state.touch(Group::WheelSpeed, t);
             }
             Frame::Odometer(o) => {
-                self.state.odometry.front_distance_m = o.front_distance_m;
-                self.state.odometry.rear_distance_m = o.rear_distance_m;
-                self.state.touch(Group::Odometry, t);
+                self.core.state.odometry.front_distance_m = o.front_distance_m;
+                self.core.state.odometry.rear_distance_m = o.rear_distance_m;
+                self.core.state.touch(Group::Odometry, t);
             }
             Frame::MotorFast(m) => {
-                if let Some(motor) = self.state.motors.get_mut(usize::from(m.motor.max(1) - 1)) {
+                if let Some(motor) = self
+                    .core
+                    .state
+                    .motors
+                    .get_mut(usize::from(m.motor.max(1) - 1))
+                {
                     motor.rpm = m.rpm as f32;
                     motor.current_a = m.current_a as f32;
                     motor.position_counts = m.position_counts.into();
                 }
-                self.state.touch(Group::MotorDrive, t);
+                self.core.state.touch(Group::MotorDrive, t);
             }
             Frame::MotorSlow(m) => {
-                if let Some(motor) = self.state.motors.get_mut(usize::from(m.motor.max(1) - 1)) {
+                if let Some(motor) = self
+                    .core
+                    .state
+                    .motors
+                    .get_mut(usize::from(m.motor.max(1) - 1))
+                {
                     motor.driver_voltage_v = m.driver_voltage_v as f32;
                     motor.driver_temp_c = m.driver_temp_c as f32;
                     motor.motor_temp_c = m.motor_temp_c as f32;
                     motor.driver_status = m.driver_status;
                 }
-                self.state.touch(Group::MotorDriver, t);
+                self.core.state.touch(Group::MotorDriver, t);
             }
             Frame::Rc(r) => {
-                let rc = &mut self.state.rc;
+                let rc = &mut self.core.state.rc;
                 rc.switch_a = r.switch_a;
                 rc.switch_b = r.switch_b;
                 rc.switch_c = r.switch_c;
@@ -243,11 +216,11 @@ impl TitanDriver {
                 rc.left_x_pct = r.left_x_pct;
                 rc.knob_a_pct = r.knob_a_pct;
                 rc.counter = r.counter;
-                self.state.touch(Group::Rc, t);
+                self.core.state.touch(Group::Rc, t);
             }
             Frame::BmsData(b) => {
                 let group = usize::from(b.group.min(2));
-                if let Some(bms) = self.state.bms.get_mut(group) {
+                if let Some(bms) = self.core.state.bms.get_mut(group) {
                     bms.soc_pct = b.soc_pct as f32;
                     bms.soh_pct = b.soh_pct as f32;
                     bms.voltage_v = b.voltage_v as f32;
@@ -255,43 +228,43 @@ impl TitanDriver {
                     bms.temperature_c = b.temperature_c as f32;
                 }
                 if group == 0 {
-                    self.state.system.battery_soc_pct = b.soc_pct as f32;
-                    self.state.system.battery_current_a = b.current_a as f32;
+                    self.core.state.system.battery_soc_pct = b.soc_pct as f32;
+                    self.core.state.system.battery_current_a = b.current_a as f32;
                     let low = b.soc_pct < self.profile.low_battery_warning_soc_pct;
                     self.set_other_fault(FaultFlags::BATTERY_LOW, low);
                 }
-                self.state.touch(bms_group(group), t);
+                self.core.state.touch(bms_group(group), t);
             }
             Frame::BmsAlarm(b) => {
                 let group = usize::from(b.group.min(2));
-                if let Some(bms) = self.state.bms.get_mut(group) {
+                if let Some(bms) = self.core.state.bms.get_mut(group) {
                     bms.alarm_flags = b.alarm_flags();
                 }
-                let any_alarm = self.state.bms.iter().any(|b| b.alarm_flags & 0xFFFF != 0);
+                let any_alarm = self
+                    .core
+                    .state
+                    .bms
+                    .iter()
+                    .any(|b| b.alarm_flags & 0xFFFF != 0);
                 self.set_other_fault(FaultFlags::BMS_ALARM, any_alarm);
-                self.state.touch(bms_group(group), t);
+                self.core.state.touch(bms_group(group), t);
             }
             Frame::SteeringZeroAck => {
-                self.state.system.steering_zero_done = 1;
-                self.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
-                self.state.touch(Group::Body, t);
+                self.core.state.system.steering_zero_done = 1;
+                self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
+                self.core.state.touch(Group::Body, t);
                 if let Some((token, _)) = self.steering_zero.take() {
-                    self.events.push_back(DriverEvent::ControlDone {
+                    self.core.events.push_back(DriverEvent::ControlDone {
                         token,
                         status: ControlStatus::OK,
                         message: "steering zero set".into(),
                     });
                 }
-                self.notice(Level::Info, "steering zero position set");
+                self.core.notice(Level::Info, "steering zero position set");
             }
-            // Commands on the bus from another node: not ours to decode into state.
-            Frame::MotionCommand(_)
-            | Frame::ParkingBrake(_)
-            | Frame::Mode(_)
-            | Frame::SilentMode(_)
-            | Frame::OffRoad(_)
-            | Frame::SteeringZero
-            | Frame::ClearFault(_) => {}
+            // Commands on the bus from another node ([`Frame::direction`] `ToChassis`): not ours
+            // to decode into state.
+            _ => {}
         }
     }
 
@@ -304,14 +277,14 @@ impl TitanDriver {
     }
 
     fn apply_system(&mut self, now: Timestamp, s: codec::SystemStatus) {
-        let old_mode = self.state.system.control_mode;
+        let old_mode = self.core.state.system.control_mode;
         let new_mode = match s.mode {
             mode::STANDBY => ControlMode::STANDBY,
             mode::CAN_COMMAND => ControlMode::COMMAND,
             mode::REMOTE => ControlMode::REMOTE,
             _ => ControlMode::UNKNOWN,
         };
-        let old_faults = self.state.system.fault_flags;
+        let old_faults = self.core.state.system.fault_flags;
         let new_faults = normalize_faults(s.vendor_fault_word)
             | self.other_faults
             | if s.body_status == codec::body::EXCEPTION {
@@ -319,7 +292,7 @@ impl TitanDriver {
             } else {
                 0
             };
-        let sys = &mut self.state.system;
+        let sys = &mut self.core.state.system;
         sys.body_status = match s.body_status {
             codec::body::NORMAL => SystemState::BODY_NORMAL,
             _ => SystemState::BODY_EXCEPTION,
@@ -329,9 +302,11 @@ impl TitanDriver {
         sys.vendor_fault_word = s.vendor_fault_word;
         sys.fault_flags = new_faults;
         sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
-        self.state.touch(Group::System, now.as_nanos());
-        self.set_flag(LinkFlags::COMMAND_MODE, new_mode == ControlMode::COMMAND);
-        self.set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
+        self.core.state.touch(Group::System, now.as_nanos());
+        self.core
+            .set_flag(LinkFlags::COMMAND_MODE, new_mode == ControlMode::COMMAND);
+        self.core
+            .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
 
         if new_mode != old_mode {
             // Losing command mode is worth a warning; finding out the mode at power-up is not.
@@ -340,7 +315,7 @@ impl TitanDriver {
             } else {
                 Level::Warn
             };
-            self.notice(
+            self.core.notice(
                 level,
                 format!(
                     "chassis mode {} -> {}",
@@ -354,28 +329,12 @@ impl TitanDriver {
                 self.update_body(now);
             }
         }
-        if new_faults != old_faults {
-            let set = FaultFlags::names(new_faults & !old_faults);
-            let cleared = FaultFlags::names(old_faults & !new_faults);
-            if !set.is_empty() {
-                let level = if new_faults & !old_faults & !FaultFlags::WARNINGS != 0 {
-                    Level::Error
-                } else {
-                    Level::Warn
-                };
-                self.notice(level, format!("chassis faults set: {}", set.join(", ")));
-            }
-            if !cleared.is_empty() {
-                self.notice(
-                    Level::Info,
-                    format!("chassis faults cleared: {}", cleared.join(", ")),
-                );
-            }
-        }
+        self.core
+            .fault_notices(old_faults, new_faults, FaultFlags::WARNINGS);
         // Power-cycle recovery: a chassis in standby while we want control is asked again.
         if new_mode == ControlMode::STANDBY
             && self.want_control
-            && !self.bus_down
+            && !self.core.bus_down
             && self
                 .last_mode_request
                 .is_none_or(|t| now.saturating_since(t) >= MODE_RETRY)
@@ -425,9 +384,7 @@ pub fn normalize_faults(word: u32) -> u64 {
         (fault::MOTOR_3_COMM_LOST, FaultFlags::MOTOR_3_COMM_LOST),
         (fault::MOTOR_4_COMM_LOST, FaultFlags::MOTOR_4_COMM_LOST),
     ];
-    MAP.iter()
-        .filter(|(bit, _)| word & bit != 0)
-        .fold(0, |acc, (_, flag)| acc | flag)
+    flags_of(word, &MAP)
 }
 
 impl Driver for TitanDriver {
@@ -435,36 +392,12 @@ impl Driver for TitanDriver {
         Robot::Titan
     }
 
+    crate::driver::core_accessors!();
+
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
-        let Rx::Can(frame) = rx else {
-            self.state.link.rx_decode_errors += 1;
-            self.events.push_back(DriverEvent::RxDropped {
-                reason: "serial bytes on a CAN robot's bus".into(),
-            });
-            return;
-        };
-        match codec::decode(frame, &self.profile) {
-            Ok(decoded) => {
-                self.link.received(now);
-                self.state.link.rx_frames += 1;
-                self.state.stamp_ns = now.as_nanos();
-                if self.was_silent {
-                    self.was_silent = false;
-                    self.set_flag(LinkFlags::CHASSIS_SILENT, false);
-                    self.notice(Level::Info, "chassis is talking again");
-                }
-                self.apply(now, decoded);
-            }
-            Err(err) => {
-                match err {
-                    crate::DecodeError::UnknownId { .. }
-                    | crate::DecodeError::ExtendedId { .. } => self.state.link.rx_unknown_id += 1,
-                    _ => self.state.link.rx_decode_errors += 1,
-                }
-                self.events.push_back(DriverEvent::RxDropped {
-                    reason: format!("{frame}: {err}"),
-                });
-            }
+        let profile = &self.profile;
+        if let Some(frame) = self.core.can_rx(now, rx, |f| codec::decode(f, profile)) {
+            self.apply(now, frame);
         }
     }
 
@@ -473,19 +406,12 @@ impl Driver for TitanDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        if self.bus_down {
-            return ControlOutcome::Refused("the bus is down; nothing can be sent".into());
-        }
-        let planned = match command {
-            Command::Velocity { .. } => {
-                return ControlOutcome::Invalid(
-                    "motion goes through the mux, not a control request".into(),
-                );
-            }
-            _ => match frames_for(command, &self.profile) {
-                Ok(planned) => planned,
-                Err(err) => return err.into(),
-            },
+        let planned = match self
+            .core
+            .admit_control(command, |c| frames_for(c, &self.profile))
+        {
+            Ok(planned) => planned,
+            Err(outcome) => return outcome,
         };
         let t = now.as_nanos();
         let outcome = match *command {
@@ -501,7 +427,7 @@ impl Driver for TitanDriver {
                 if engage && self.is_moving() {
                     return ControlOutcome::Refused(format!(
                         "robot is moving ({:.2} m/s): stop before engaging the parking brake",
-                        self.state.motion.linear_mps
+                        self.core.state.motion.linear_mps
                     ));
                 }
                 self.brake_held = engage;
@@ -521,11 +447,11 @@ impl Driver for TitanDriver {
                 if self.is_moving() {
                     return ControlOutcome::Refused(format!(
                         "off-road mode switches only while standing still (moving at {:.2} m/s)",
-                        self.state.motion.linear_mps
+                        self.core.state.motion.linear_mps
                     ));
                 }
-                self.state.system.off_road = u8::from(enter);
-                self.state.touch(Group::Body, t);
+                self.core.state.system.off_road = u8::from(enter);
+                self.core.state.touch(Group::Body, t);
                 ControlOutcome::Done(format!(
                     "off-road mode {}",
                     if enter { "on" } else { "off" }
@@ -546,13 +472,13 @@ impl Driver for TitanDriver {
                 let token = self.next_token();
                 let deadline = now + Duration::from_millis(self.config.control_timeout_ms);
                 self.steering_zero = Some((token, deadline));
-                self.set_flag(LinkFlags::STEERING_ZERO_PENDING, true);
+                self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, true);
                 ControlOutcome::Pending(token)
             }
             Command::Silent { enter } => {
-                self.state.system.silent_mode = u8::from(enter);
-                self.set_flag(LinkFlags::SILENT_MODE, enter);
-                self.state.touch(Group::Body, t);
+                self.core.state.system.silent_mode = u8::from(enter);
+                self.core.set_flag(LinkFlags::SILENT_MODE, enter);
+                self.core.state.touch(Group::Body, t);
                 ControlOutcome::Done(format!("silent mode {}", if enter { "on" } else { "off" }))
             }
             Command::ClearFaults { which } => ControlOutcome::Done(format!(
@@ -566,18 +492,8 @@ impl Driver for TitanDriver {
     }
 
     fn handle_timeout(&mut self, now: Timestamp) {
-        let silent = self.link.is_silent(now);
-        if silent && !self.was_silent {
-            self.was_silent = true;
-            self.set_flag(LinkFlags::CHASSIS_SILENT, true);
+        if self.core.check_silence(now, "feedback") {
             self.pose.reset();
-            self.notice(
-                Level::Warn,
-                format!(
-                    "chassis silent: no feedback for {} ms",
-                    self.config.silence_timeout_ms
-                ),
-            );
         }
         if self.config.brake_idle_engage_ms > 0
             && self.brake == Brake::Released
@@ -586,7 +502,7 @@ impl Driver for TitanDriver {
                 now.saturating_since(since)
                     >= Duration::from_millis(self.config.brake_idle_engage_ms)
             })
-            && !self.bus_down
+            && !self.core.bus_down
         {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
@@ -597,8 +513,8 @@ impl Driver for TitanDriver {
             && now >= deadline
         {
             self.steering_zero = None;
-            self.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
-            self.events.push_back(DriverEvent::ControlDone {
+            self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
+            self.core.events.push_back(DriverEvent::ControlDone {
                 token,
                 status: ControlStatus::TIMEOUT,
                 message: format!(
@@ -610,16 +526,16 @@ impl Driver for TitanDriver {
     }
 
     fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
-        if self.bus_down {
+        if self.core.bus_down {
             self.queue.clear();
             return None;
         }
         let frame = if let Some(frame) = self.queue.pop_front() {
             frame
-        } else if self.schedule.is_due(now)
+        } else if self.core.schedule.is_due(now)
             && self.motion.linear_mps != 0.0
             && self.brake != Brake::Released
-            && self.state.system.control_mode == ControlMode::COMMAND
+            && self.core.state.system.control_mode == ControlMode::COMMAND
         {
             // Release before motion: after power-up, a chassis reboot or an idle engagement the
             // brake goes first, then this same deadline sends the motion frame. Only in CAN
@@ -629,45 +545,26 @@ impl Driver for TitanDriver {
             self.brake = Brake::Released;
             self.update_body(now);
             Frame::ParkingBrake(ParkingBrake { engage: false })
-        } else if self.schedule.is_due(now) {
-            self.schedule.sent(now);
-            let echo = &mut self.state.command;
+        } else if self.core.schedule.is_due(now) {
+            self.core.schedule.sent(now);
+            let echo = &mut self.core.state.command;
             echo.linear_mps = self.motion.linear_mps as f32;
             echo.steer_rad = self.motion.steer_rad as f32;
             echo.angular_radps =
                 yaw_rate(self.motion.linear_mps, self.motion.steer_rad, &self.profile) as f32;
             echo.lateral_mps = 0.0;
             echo.clamp_flags = self.motion_clamp_flags;
-            self.state.touch(Group::Command, now.as_nanos());
+            self.core.state.touch(Group::Command, now.as_nanos());
             Frame::MotionCommand(self.motion)
         } else {
             return None;
         };
-        match frame.encode(&self.profile) {
-            Ok(can) => {
-                self.state.link.tx_frames += 1;
-                Some(Transmit::Can(can))
-            }
-            Err(err) => {
-                // Limits keep every planned value on the wire's range; this is a bug guard.
-                self.state.link.tx_errors += 1;
-                self.notice(
-                    Level::Error,
-                    format!("cannot encode {}: {err}", frame.name()),
-                );
-                None
-            }
-        }
+        self.core
+            .transmit(frame.name(), frame.encode(&self.profile), Transmit::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        if self.bus_down {
-            return None;
-        }
-        let mut next = Some(self.schedule.deadline());
-        if !self.was_silent {
-            next = earliest(next, Some(self.link.deadline()));
-        }
+        let mut next = Some(self.core.poll_timeout()?);
         if self.config.brake_idle_engage_ms > 0
             && self.brake == Brake::Released
             && !self.brake_held
@@ -684,33 +581,19 @@ impl Driver for TitanDriver {
         next
     }
 
-    fn poll_event(&mut self) -> Option<DriverEvent> {
-        self.events.pop_front()
-    }
-
-    fn state(&self) -> &ChassisState {
-        &self.state
-    }
-
     fn set_bus_down(&mut self, now: Timestamp, down: bool) {
-        if down == self.bus_down {
+        if !self.core.set_bus_down(now, down) {
             return;
         }
-        self.bus_down = down;
-        self.set_flag(LinkFlags::BUS_DOWN, down);
         self.queue.clear();
-        if down {
-            self.notice(Level::Error, "bus down: nothing reaches the chassis");
-        } else {
-            self.state.link.bus_reconnects += 1;
-            self.link.reset(now);
-            self.schedule.restart(now);
+        if !down {
             self.brake = Brake::Unknown;
             self.pose.reset();
             if self.want_control {
                 self.request_mode(now);
             }
-            self.notice(Level::Info, "bus back: taking control again");
+            self.core
+                .notice(Level::Info, "bus back: taking control again");
         }
     }
 

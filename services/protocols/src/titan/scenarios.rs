@@ -19,7 +19,7 @@ use crate::can::CanFrame;
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, wrap_angle};
 use crate::firmware::{Firmware, Injection, SimTruth};
-use crate::pair::Pair;
+use crate::pair::{Pair, notices};
 use crate::profile::TitanProfile;
 use crate::time::Timestamp;
 
@@ -168,16 +168,6 @@ fn time_to_speed(p: &mut TitanPair, target: f64, tolerance: f64, limit: Duration
             )
         });
     at.saturating_since(start)
-}
-
-fn notices(events: &[DriverEvent]) -> Vec<(Level, String)> {
-    events
-        .iter()
-        .filter_map(|e| match e {
-            DriverEvent::Notice { level, message } => Some((*level, message.clone())),
-            _ => None,
-        })
-        .collect()
 }
 
 fn control_done(events: &[DriverEvent]) -> Vec<(u64, u8, String)> {

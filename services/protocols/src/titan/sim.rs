@@ -11,10 +11,15 @@ use super::codec::{
     AxleSpeed, BmsAlarm, BmsData, Frame, MotionFeedback, MotorFast, MotorSlow, Odometer,
     RcFeedback, SteeringFeedback, SystemStatus, body, clear_code, decode, fault, id, mode,
 };
+use super::driver::normalize_faults;
 use super::kinematics::{steer_command, yaw_rate};
+use crate::Direction;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit, wrap_angle};
-use crate::firmware::{Firmware, Injection, SimTruth};
+use crate::driver::{Rx, Transmit};
+use crate::firmware::{
+    BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
+    garbage_frames, motor_index, non_negative, state_of_charge, substeps,
+};
 use crate::profile::{Robot, TitanProfile};
 use crate::time::{Grid, Timestamp, earliest};
 
@@ -31,14 +36,6 @@ enum Mode {
 struct Motion {
     linear_mps: f64,
     steer_rad: f64,
-}
-
-/// Extra feedback for load tests.
-#[derive(Debug, Clone, Copy)]
-struct Flood {
-    grid: Grid,
-    /// Alternates the copied frame.
-    toggle: bool,
 }
 
 /// 0x211 bits that stop drive: everything but the RC link (a warning).
@@ -202,7 +199,6 @@ pub struct TitanSim {
     brake_engaged: bool,
     off_road: bool,
     silent_mode: bool,
-    silent_until: Option<Timestamp>,
     booting_until: Option<Timestamp>,
     rc_on: bool,
     rc_counter: u8,
@@ -216,9 +212,7 @@ pub struct TitanSim {
     linear_mps: f64,
     accel_mps2: f64,
     front_steer_rad: f64,
-    x_m: f64,
-    y_m: f64,
-    yaw_rad: f64,
+    pose: Pose,
     front_odometer_m: f64,
     rear_odometer_m: f64,
     wheel_mps: [f64; 4],
@@ -234,7 +228,7 @@ pub struct TitanSim {
     bms: Grid,
     flood: Option<Flood>,
     zero_replies: VecDeque<Timestamp>,
-    queue: VecDeque<CanFrame>,
+    outbox: Outbox<CanFrame>,
 
     // Counters.
     boots: u32,
@@ -243,7 +237,6 @@ pub struct TitanSim {
     commands_clamped: u64,
     decode_errors: u64,
     frames_ignored: u64,
-    frames_dropped: u64,
 }
 
 impl TitanSim {
@@ -273,14 +266,13 @@ impl TitanSim {
     pub const STANDING_STILL_MPS: f64 = 0.01;
     /// CAN id of injected garbage frames (unused by TITAN).
     pub const GARBAGE_ID: u16 = 0x7F0;
-    /// Capacity of one battery, Ah.
-    pub const BATTERY_CAPACITY_AH: f64 = 24.0;
-    /// Open-circuit voltage at 100 % SOC, V.
-    pub const BATTERY_FULL_V: f64 = 52.0;
-    /// Open-circuit voltage at 0 % SOC, V.
-    pub const BATTERY_EMPTY_V: f64 = 44.0;
-    /// Internal resistance of the pack, Ω.
-    pub const BATTERY_RESISTANCE_OHM: f64 = 0.05;
+    /// The pack (one battery; [`Self::with_batteries`] doubles the capacity).
+    pub const BATTERY: BatteryModel = BatteryModel {
+        capacity_ah: 24.0,
+        full_v: 52.0,
+        empty_v: 44.0,
+        resistance_ohm: 0.05,
+    };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 1.0;
     /// Motor current per m/s of wheel speed, A.
@@ -292,11 +284,7 @@ impl TitanSim {
     /// Most extra frames per second [`Injection::Flood`] adds.
     pub const MAX_FLOOD_FRAMES_PER_S: u32 = 100_000;
     /// Longest time integrated at once; a longer gap between calls is not bridged.
-    pub const MAX_STEP: Duration = Duration::from_millis(100);
-    /// Integration sub-step.
-    const SUBSTEP: Duration = Duration::from_millis(5);
-    /// Frames kept for transmission when nobody polls (oldest dropped first).
-    const TX_QUEUE_LIMIT: usize = 4096;
+    pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
     const AMBIENT_C: f64 = 25.0;
 
     /// A chassis that has just finished booting at `now`: standby, brake engaged, SOC 100 %.
@@ -316,7 +304,6 @@ impl TitanSim {
             brake_engaged: true,
             off_road: false,
             silent_mode: false,
-            silent_until: None,
             booting_until: None,
             rc_on: false,
             rc_counter: 0,
@@ -327,9 +314,7 @@ impl TitanSim {
             linear_mps: 0.0,
             accel_mps2: 0.0,
             front_steer_rad: 0.0,
-            x_m: 0.0,
-            y_m: 0.0,
-            yaw_rad: 0.0,
+            pose: Pose::default(),
             front_odometer_m: 0.0,
             rear_odometer_m: 0.0,
             wheel_mps: [0.0; 4],
@@ -342,14 +327,13 @@ impl TitanSim {
             bms: Grid::new(Self::BMS_PERIOD, now),
             flood: None,
             zero_replies: VecDeque::new(),
-            queue: VecDeque::new(),
+            outbox: Outbox::new(),
             boots: 0,
             commands_received: 0,
             commands_ignored: 0,
             commands_clamped: 0,
             decode_errors: 0,
             frames_ignored: 0,
-            frames_dropped: 0,
         }
     }
 
@@ -395,8 +379,8 @@ impl TitanSim {
 
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
-        if soc_pct.is_finite() {
-            self.soc_pct = soc_pct.clamp(0.0, 100.0);
+        if let Some(soc_pct) = state_of_charge(soc_pct) {
+            self.soc_pct = soc_pct;
             self.refresh_conditions();
         }
         self
@@ -423,7 +407,7 @@ impl TitanSim {
 
     /// Frames dropped because nobody polled the transmit queue.
     pub fn frames_dropped(&self) -> u64 {
-        self.frames_dropped
+        self.outbox.dropped()
     }
 
     /// The 0x211 fault word the chassis reports.
@@ -451,9 +435,7 @@ impl TitanSim {
 
     /// Pack voltage under the present load, V.
     pub fn battery_voltage_v(&self) -> f64 {
-        let ocv = Self::BATTERY_EMPTY_V
-            + (Self::BATTERY_FULL_V - Self::BATTERY_EMPTY_V) * self.soc_pct / 100.0;
-        (ocv - Self::BATTERY_RESISTANCE_OHM * self.pack_current_a).max(0.0)
+        Self::BATTERY.voltage_v(self.soc_pct, self.pack_current_a)
     }
 
     /// Pack current, A (positive = discharging).
@@ -525,14 +507,14 @@ impl TitanSim {
 
     /// Physics and the deadlines that change what the chassis obeys (boot end, heartbeat).
     fn expire(&mut self, now: Timestamp) {
-        self.advance(now);
+        for dt in substeps(&mut self.last_update, now) {
+            self.step(dt);
+        }
         if self.booting_until.is_some_and(|t| now >= t) {
             self.booting_until = None;
             self.refresh_conditions();
         }
-        if self.silent_until.is_some_and(|t| now >= t) {
-            self.silent_until = None;
-        }
+        self.outbox.expire(now);
         if self.heartbeat_deadline().is_some_and(|t| now >= t) {
             self.faults |= fault::HEARTBEAT_LOST;
             self.enter_standby();
@@ -592,7 +574,7 @@ impl TitanSim {
             Frame::SilentMode(s) => {
                 self.silent_mode = s.enter;
                 if s.enter {
-                    self.queue.clear();
+                    self.outbox.clear();
                 }
             }
             Frame::OffRoad(s) => {
@@ -665,7 +647,7 @@ impl TitanSim {
         self.encoder_counts = [0.0; 4];
         self.rc_counter = 0;
         self.zero_replies.clear();
-        self.queue.clear();
+        self.outbox.clear();
         self.last_motion_rx = now;
         if self.boot_time.is_zero() {
             self.booting_until = None;
@@ -678,24 +660,8 @@ impl TitanSim {
     // -----------------------------------------------------------------------------------------
     // Physics.
 
-    /// Integrates from the last update to `now` (at most [`Self::MAX_STEP`]).
-    fn advance(&mut self, now: Timestamp) {
-        if now <= self.last_update {
-            return;
-        }
-        let mut remaining = now.saturating_since(self.last_update).min(Self::MAX_STEP);
-        self.last_update = now;
-        while !remaining.is_zero() {
-            let dt = remaining.min(Self::SUBSTEP);
-            remaining = remaining.saturating_sub(dt);
-            self.step(dt.as_secs_f64());
-        }
-    }
-
+    /// Integrates `dt` seconds (one sub-step of [`substeps`], never zero).
     fn step(&mut self, dt: f64) {
-        if dt <= 0.0 {
-            return;
-        }
         self.refresh_conditions();
         let blocked = self.drive_blocked();
         let (target, tau) = if blocked {
@@ -704,14 +670,7 @@ impl TitanSim {
             (self.command.linear_mps, self.speed_time_constant_s)
         };
         let v0 = self.linear_mps;
-        let mut v1 = if tau > 0.0 {
-            target + (v0 - target) * (-dt / tau).exp()
-        } else {
-            target
-        };
-        if (v1 - target).abs() < 1e-9 {
-            v1 = target;
-        }
+        let v1 = first_order_lag(v0, target, tau, dt);
         let steer_target = match self.mode {
             _ if !self.is_powered() => self.front_steer_rad,
             Mode::Command => self.command.steer_rad,
@@ -726,10 +685,7 @@ impl TitanSim {
         let v_mid = 0.5 * (v0 + v1);
         let s_mid = 0.5 * (s0 + s1);
         let w_mid = yaw_rate(v_mid, s_mid, &self.profile);
-        let heading = self.yaw_rad + 0.5 * w_mid * dt;
-        self.x_m += v_mid * heading.cos() * dt;
-        self.y_m += v_mid * heading.sin() * dt;
-        self.yaw_rad = wrap_angle(self.yaw_rad + w_mid * dt);
+        self.pose.advance(v_mid, 0.0, w_mid, dt);
         if self.booting_until.is_none() {
             self.front_odometer_m += v_mid * dt;
             self.rear_odometer_m += v_mid * dt;
@@ -752,9 +708,12 @@ impl TitanSim {
         }
         self.pack_current_a =
             Self::IDLE_CURRENT_A + self.motor_current_a.iter().map(|c| c.abs()).sum::<f64>();
-        let capacity_ah = Self::BATTERY_CAPACITY_AH * f64::from(self.batteries);
-        let used_pct = self.pack_current_a * dt / 3600.0 / capacity_ah * 100.0;
-        self.soc_pct = (self.soc_pct - used_pct).max(0.0);
+        self.soc_pct = Self::BATTERY.drain(
+            self.soc_pct,
+            self.pack_current_a,
+            dt,
+            f64::from(self.batteries),
+        );
     }
 
     /// Wheel speeds front-left, front-right, rear-left, rear-right, m/s, for body-centre speed `v`
@@ -781,17 +740,7 @@ impl TitanSim {
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.booting_until.is_some()
-            || self.silent_mode
-            || self.silent_until.is_some_and(|t| now < t)
-    }
-
-    fn enqueue(&mut self, frame: CanFrame) {
-        if self.queue.len() >= Self::TX_QUEUE_LIMIT {
-            self.queue.pop_front();
-            self.frames_dropped += 1;
-        }
-        self.queue.push_back(frame);
+        self.booting_until.is_some() || self.silent_mode || self.outbox.is_silenced(now)
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
@@ -800,9 +749,9 @@ impl TitanSim {
         }
         // Every value is kept inside its wire range; a frame that still does not fit is dropped.
         if let Ok(can) = frame.encode(&self.profile) {
-            self.enqueue(can);
+            self.outbox.push(can);
         } else {
-            self.frames_dropped += 1;
+            self.outbox.count_dropped();
         }
     }
 
@@ -965,53 +914,20 @@ impl TitanSim {
     }
 
     fn send_flood(&mut self, now: Timestamp) {
-        let Some(mut flood) = self.flood else {
+        let Some(second) = self.flood.as_mut().and_then(|flood| flood.due(now)) else {
             return;
         };
-        if !flood.grid.is_due(now) {
-            return;
-        }
-        let frame = if flood.toggle && !self.motor_lost[0] {
+        let frame = if second && !self.motor_lost[0] {
             self.motor_fast(0)
         } else {
             self.motion_feedback()
         };
-        flood.toggle = !flood.toggle;
-        flood.grid.served(now);
-        self.flood = Some(flood);
         self.send(now, frame);
     }
 
     /// The normalized flags of what the chassis reports (0x211 word, body state, BMS).
     fn fault_flags(&self) -> u64 {
-        const MAP: [(u32, u64); 13] = [
-            (
-                fault::FRONT_STEERING_ENCODER,
-                FaultFlags::FRONT_STEERING_ENCODER,
-            ),
-            (
-                fault::REAR_STEERING_ENCODER,
-                FaultFlags::REAR_STEERING_ENCODER,
-            ),
-            (fault::BUMPER, FaultFlags::BUMPER),
-            (fault::MOTOR_DRIVER_ERROR, FaultFlags::MOTOR_DRIVER_ERROR),
-            (fault::HEARTBEAT_LOST, FaultFlags::HEARTBEAT_LOST),
-            (fault::OVER_TEMPERATURE, FaultFlags::OVER_TEMPERATURE),
-            (fault::OVER_CURRENT, FaultFlags::OVER_CURRENT),
-            (
-                fault::BATTERY_UNDER_VOLTAGE,
-                FaultFlags::BATTERY_UNDER_VOLTAGE,
-            ),
-            (fault::RC_LINK_LOST, FaultFlags::RC_LINK_LOST),
-            (fault::MOTOR_1_COMM_LOST, FaultFlags::MOTOR_1_COMM_LOST),
-            (fault::MOTOR_2_COMM_LOST, FaultFlags::MOTOR_2_COMM_LOST),
-            (fault::MOTOR_3_COMM_LOST, FaultFlags::MOTOR_3_COMM_LOST),
-            (fault::MOTOR_4_COMM_LOST, FaultFlags::MOTOR_4_COMM_LOST),
-        ];
-        let mut flags = MAP
-            .iter()
-            .filter(|(bit, _)| self.faults & bit != 0)
-            .fold(0, |acc, (_, flag)| acc | flag);
+        let mut flags = normalize_faults(self.faults);
         if self.faults != 0 {
             flags |= FaultFlags::BODY_EXCEPTION;
         }
@@ -1043,25 +959,10 @@ impl Firmware for TitanSim {
                 return;
             }
         };
-        match decoded {
-            Frame::MotionCommand(_)
-            | Frame::ParkingBrake(_)
-            | Frame::Mode(_)
-            | Frame::SilentMode(_)
-            | Frame::OffRoad(_)
-            | Frame::SteeringZero
-            | Frame::ClearFault(_) => self.on_command(now, decoded),
-            Frame::SteeringZeroAck
-            | Frame::SystemStatus(_)
-            | Frame::MotionFeedback(_)
-            | Frame::Rc(_)
-            | Frame::MotorFast(_)
-            | Frame::MotorSlow(_)
-            | Frame::SteeringFeedback(_)
-            | Frame::AxleSpeed(_)
-            | Frame::Odometer(_)
-            | Frame::BmsData(_)
-            | Frame::BmsAlarm(_) => self.frames_ignored += 1,
+        match decoded.direction() {
+            Direction::ToChassis => self.on_command(now, decoded),
+            // Feedback ids put on the bus by another node.
+            Direction::FromChassis => self.frames_ignored += 1,
         }
     }
 
@@ -1087,7 +988,7 @@ impl Firmware for TitanSim {
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.queue.pop_front().map(Transmit::Can)
+        self.outbox.pop().map(Transmit::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
@@ -1096,8 +997,8 @@ impl Firmware for TitanSim {
             self.heartbeat_deadline(),
             self.zero_replies.front().copied(),
             self.booting_until,
-            self.silent_until,
-            self.flood.map(|f| f.grid.next()),
+            self.outbox.silent_until(),
+            self.flood.map(|f| f.next()),
         ]
         .into_iter()
         .fold(Some(grids), earliest)
@@ -1107,17 +1008,17 @@ impl Firmware for TitanSim {
         self.expire(now);
         match injection {
             Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = usize::from(motor).checked_sub(1).filter(|i| *i < 4) else {
+                let Some(index) = motor_index(motor, 4) else {
                     return false;
                 };
                 self.motor_lost[index] = lost;
                 self.refresh_conditions();
             }
             Injection::Battery { soc_pct } => {
-                if !soc_pct.is_finite() {
+                let Some(soc_pct) = state_of_charge(soc_pct) else {
                     return false;
-                }
-                self.soc_pct = soc_pct.clamp(0.0, 100.0);
+                };
+                self.soc_pct = soc_pct;
                 self.refresh_conditions();
             }
             Injection::Bumper(pressed) => {
@@ -1136,29 +1037,14 @@ impl Firmware for TitanSim {
                 }
             }
             Injection::Reboot => self.reboot(now),
-            Injection::Silence(duration) => {
-                let until = now + duration;
-                self.silent_until = Some(self.silent_until.map_or(until, |t| t.max(until)));
-                if !duration.is_zero() {
-                    self.queue.clear();
-                }
-            }
+            Injection::Silence(duration) => self.outbox.silence(now, duration),
             Injection::Garbage(bytes) => {
-                for chunk in bytes.chunks(8) {
-                    if let Ok(frame) = CanFrame::new(u32::from(Self::GARBAGE_ID), chunk) {
-                        self.enqueue(frame);
-                    }
+                for frame in garbage_frames(Self::GARBAGE_ID, &bytes) {
+                    self.outbox.push(frame);
                 }
             }
             Injection::Flood { frames_per_s } => {
-                self.flood = (frames_per_s > 0).then(|| {
-                    let fps = frames_per_s.min(Self::MAX_FLOOD_FRAMES_PER_S);
-                    let interval = Duration::from_secs(1) / fps;
-                    Flood {
-                        grid: Grid::new(interval, now + interval),
-                        toggle: false,
-                    }
-                });
+                self.flood = Flood::new(now, frames_per_s, Self::MAX_FLOOD_FRAMES_PER_S);
             }
             Injection::BadChecksums(_)
             | Injection::ObstacleAhead(_)
@@ -1173,9 +1059,9 @@ impl Firmware for TitanSim {
             lateral_mps: 0.0,
             angular_radps: yaw_rate(self.linear_mps, self.front_steer_rad, &self.profile),
             steer_rad: self.front_steer_rad,
-            x_m: self.x_m,
-            y_m: self.y_m,
-            yaw_rad: self.yaw_rad,
+            x_m: self.pose.x_m,
+            y_m: self.pose.y_m,
+            yaw_rad: self.pose.yaw_rad,
             control_mode: match self.mode {
                 Mode::Standby => ControlMode::STANDBY,
                 Mode::Command => ControlMode::COMMAND,
@@ -1192,28 +1078,10 @@ impl Firmware for TitanSim {
     }
 }
 
-fn non_negative(value: f64) -> f64 {
-    if value.is_finite() && value > 0.0 {
-        value
-    } else {
-        0.0
-    }
-}
-
 /// 1-4 from an index 0-3.
 fn motor_number(index: usize) -> u8 {
     // index < 4.
     (index.min(3) + 1) as u8
-}
-
-/// Keeps an SI value inside a signed 16-bit wire field of `scale` units per SI unit.
-fn clamp_i16(value: f64, scale: f64) -> f64 {
-    let limit = f64::from(i16::MAX) / scale;
-    if value.is_finite() {
-        value.clamp(-limit, limit)
-    } else {
-        0.0
-    }
 }
 
 /// A distance in m as the `s32` mm counter reports it (wrapping), back in m.

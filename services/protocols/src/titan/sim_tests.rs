@@ -8,10 +8,11 @@ use proptest::prelude::*;
 
 use super::TitanSim;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit};
+use crate::driver::Rx;
 use crate::firmware::{Firmware, Injection};
 use crate::profile::TitanProfile;
-use crate::time::{Timestamp, earliest};
+use crate::sim_bench::{Parts, SimBench};
+use crate::time::Timestamp;
 use crate::titan::BmsData;
 use crate::titan::{
     ClearFault, Frame, ModeCommand, MotionCommand, ParkingBrake, Switch, SystemStatus, clear_code,
@@ -41,6 +42,32 @@ struct Bench {
     heartbeat: Option<MotionCommand>,
     next_heartbeat: Timestamp,
     last_heartbeat: Option<Timestamp>,
+}
+
+impl SimBench for Bench {
+    type Firmware = TitanSim;
+    type Item = CanFrame;
+    type Command = MotionCommand;
+    const HEARTBEAT_PERIOD: Duration = Duration::from_millis(20);
+
+    fn parts(&mut self) -> Parts<'_, TitanSim, CanFrame, MotionCommand> {
+        Parts {
+            sim: &mut self.sim,
+            now: &mut self.now,
+            sent: &mut self.sent,
+            heartbeat: &mut self.heartbeat,
+            next_heartbeat: &mut self.next_heartbeat,
+            last_heartbeat: &mut self.last_heartbeat,
+        }
+    }
+
+    fn sent(&self) -> &[(Timestamp, CanFrame)] {
+        &self.sent
+    }
+
+    fn send_heartbeat(&mut self, command: MotionCommand) {
+        self.send(Frame::MotionCommand(command));
+    }
 }
 
 impl Bench {
@@ -82,75 +109,12 @@ impl Bench {
         self.drain();
     }
 
-    fn inject(&mut self, injection: Injection) -> bool {
-        let ok = self.sim.inject(self.now, injection);
-        self.drain();
-        ok
-    }
-
-    /// Sends `command` every 20 ms from now on (`None` stops it).
-    fn heartbeat(&mut self, command: Option<MotionCommand>) {
-        if self.heartbeat.is_none() {
-            self.next_heartbeat = self.now;
-        }
-        self.heartbeat = command;
-    }
-
-    fn drain(&mut self) {
-        while let Some(item) = self.sim.poll_transmit(self.now) {
-            let Transmit::Can(frame) = item else {
-                panic!("TITAN sent serial bytes");
-            };
-            self.sent.push((self.now, frame));
-        }
-    }
-
-    fn run_for(&mut self, duration: Duration) {
-        let until = self.now + duration;
-        loop {
-            let heartbeat = self.heartbeat.map(|_| self.next_heartbeat);
-            let next = earliest(self.sim.poll_timeout(), heartbeat).unwrap_or(until);
-            assert!(
-                next >= self.now,
-                "deadline {next:?} before now {:?}",
-                self.now
-            );
-            if next > until {
-                self.now = until;
-                break;
-            }
-            self.now = next;
-            if let Some(command) = self.heartbeat
-                && self.next_heartbeat <= self.now
-            {
-                self.send(Frame::MotionCommand(command));
-                self.last_heartbeat = Some(self.now);
-                self.next_heartbeat += ms(20);
-            }
-            if self.sim.poll_timeout().is_some_and(|t| t <= self.now) {
-                self.sim.handle_timeout(self.now);
-                let after = self.sim.poll_timeout().unwrap();
-                assert!(
-                    after > self.now,
-                    "stall: {after:?} after handle_timeout at {:?}",
-                    self.now
-                );
-            }
-            self.drain();
-        }
-    }
-
     fn decoded(&self, frame_id: u16) -> Vec<(Timestamp, Frame)> {
         self.sent
             .iter()
             .filter(|(_, f)| f.id() == u32::from(frame_id))
             .map(|(t, f)| (*t, decode(f, &self.profile).unwrap()))
             .collect()
-    }
-
-    /// Frames sent strictly after `since`.
-    fn sent_since(&self, since: Timestamp) -> usize {
-        self.sent.iter().filter(|(t, _)| *t > since).count()
     }
 
     fn last(&self, frame_id: u16) -> Frame {

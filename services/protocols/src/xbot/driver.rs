@@ -6,19 +6,16 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, RobotKind, Twist,
+    ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, RobotKind, Twist,
 };
 
-use super::codec::{
-    Frame, LiftCommand, MAX_FRAME_LEN, PowerCommand, SensorReport, ServoCommand, VelocityCommand,
-};
+use super::codec::{Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, VelocityCommand};
 use super::commands::{frames_for, velocity_command};
 use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::command::{Command, Turn};
 use crate::driver::{
-    CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverEvent, Level, LinkMonitor, Rx,
-    Transmit, Unwrap16, wrap_angle,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, Rx, Transmit, Unwrap16, wrap_angle,
 };
 use crate::profile::{Robot, XbotProfile};
 use crate::time::{Timestamp, earliest};
@@ -107,7 +104,7 @@ struct SpeedRef {
 /// * **Receive.** The bytes feed a [`StreamParser`]; every good frame is applied. A rejected
 ///   candidate counts in `state.link.rx_bad_checksum` (bad checksum) or
 ///   `state.link.rx_decode_errors` (anything else: zero or wrong length, unknown id, wrong marker,
-///   undecodable value) and emits [`DriverEvent::RxDropped`]; `state.link.rx_bytes_discarded`
+///   undecodable value) and emits [`DriverEvent::RxDropped`](crate::driver::DriverEvent::RxDropped); `state.link.rx_bytes_discarded`
 ///   always equals the parser's discarded-byte count. A CAN frame counts as a decode error. A
 ///   command frame (0x01, 0x03, 0x04, 0x05) arriving from the chassis side is a loopback, not
 ///   feedback: it is dropped and counted in `rx_unknown_id`, and it does not keep the link alive.
@@ -220,12 +217,9 @@ struct SpeedRef {
 pub struct XbotDriver {
     profile: XbotProfile,
     config: DriverConfig,
-    state: ChassisState,
+    core: DriverCore,
     parser: StreamParser,
     queue: VecDeque<Frame>,
-    events: VecDeque<DriverEvent>,
-    schedule: CommandSchedule,
-    link: LinkMonitor,
 
     // Velocity.
     /// The latest command from the mux.
@@ -258,8 +252,6 @@ pub struct XbotDriver {
     speed_ref: Option<SpeedRef>,
     /// The next report is a new origin (after a silence or the bus returning).
     resync_pending: bool,
-    bus_down: bool,
-    was_silent: bool,
 }
 
 impl XbotDriver {
@@ -271,22 +263,10 @@ impl XbotDriver {
             }
             _ => (FALLBACK_HEARTBEAT_HZ, Duration::from_millis(125)),
         };
-        let schedule = CommandSchedule::new(
-            period,
-            Duration::from_millis(config.min_command_interval_ms),
-            now,
-        );
-        let link = LinkMonitor::new(Duration::from_millis(config.silence_timeout_ms), now);
         let mut driver = Self {
-            state: ChassisState {
-                robot: RobotKind::XBOT,
-                ..ChassisState::default()
-            },
+            core: DriverCore::new(RobotKind::XBOT, period, &config, now),
             parser: StreamParser::new(),
             queue: VecDeque::new(),
-            events: VecDeque::new(),
-            schedule,
-            link,
             twist: Twist::ZERO,
             desired: VelocityCommand::default(),
             desired_flags: 0,
@@ -304,14 +284,12 @@ impl XbotDriver {
             last_sample: None,
             speed_ref: None,
             resync_pending: false,
-            bus_down: false,
-            was_silent: false,
             profile,
             config,
         };
         let asked = driver.profile.heartbeat_hz;
         if !(asked > 5.0 && asked < 10.0) {
-            driver.notice(
+            driver.core.notice(
                 Level::Warn,
                 format!(
                     "heartbeat_hz = {asked} is outside the manual's 5-10 Hz; sending at {hz} Hz"
@@ -328,25 +306,6 @@ impl XbotDriver {
 
     pub fn profile(&self) -> &XbotProfile {
         &self.profile
-    }
-
-    fn notice(&mut self, level: Level, message: impl Into<String>) {
-        self.events.push_back(DriverEvent::Notice {
-            level,
-            message: message.into(),
-        });
-    }
-
-    fn dropped(&mut self, reason: String) {
-        self.events.push_back(DriverEvent::RxDropped { reason });
-    }
-
-    fn set_flag(&mut self, flag: u32, on: bool) {
-        if on {
-            self.state.link_flags |= flag;
-        } else {
-            self.state.link_flags &= !flag;
-        }
     }
 
     // -----------------------------------------------------------------------------------------
@@ -367,13 +326,14 @@ impl XbotDriver {
             Some(false) => ControlMode::STANDBY,
             None => ControlMode::UNKNOWN,
         };
-        let sys = &mut self.state.system;
+        let sys = &mut self.core.state.system;
         sys.power_enabled = u8::from(self.power == Some(true));
         sys.control_mode = mode;
-        self.set_flag(LinkFlags::COMMAND_MODE, mode == ControlMode::COMMAND);
+        self.core
+            .set_flag(LinkFlags::COMMAND_MODE, mode == ControlMode::COMMAND);
         // The group also holds the battery voltage: it turns valid with the first report.
-        if self.state.is_valid(Group::System) {
-            self.state.touch(Group::System, now.as_nanos());
+        if self.core.state.is_valid(Group::System) {
+            self.core.state.touch(Group::System, now.as_nanos());
         }
     }
 
@@ -386,12 +346,12 @@ impl XbotDriver {
             {
                 self.send_power(now, true);
             }
-            self.notice(
+            self.core.notice(
                 Level::Warn,
                 format!("{why}: the board may have rebooted; drive power re-enabled"),
             );
         } else {
-            self.notice(
+            self.core.notice(
                 Level::Warn,
                 format!("{why}: the board may have rebooted; drive power left as requested"),
             );
@@ -461,7 +421,7 @@ impl XbotDriver {
         // The window starting just after `now - 1 s`.
         let mut worst = recent_after(now) + 1;
         // The windows ending just after each heartbeat still due within a second.
-        let period = self.schedule.period();
+        let period = self.core.schedule.period();
         let mut heartbeat = self.next_heartbeat.max(now + Duration::from_nanos(1));
         let mut due = 0;
         while heartbeat < now + WINDOW {
@@ -475,7 +435,7 @@ impl XbotDriver {
     /// Lets a pending change go out now if the rate bound allows, else notes when to look again.
     fn try_release(&mut self, now: Timestamp) {
         self.release_at = None;
-        if self.bus_down || self.change_released || !self.change_pending() {
+        if self.core.bus_down || self.change_released || !self.change_pending() {
             return;
         }
         self.prune(now);
@@ -493,7 +453,7 @@ impl XbotDriver {
             MAX_VELOCITY_FRAMES_PER_S.saturating_sub(1)
         };
         if self.extra_fits(now, limit) {
-            self.schedule.command_changed(stop);
+            self.core.schedule.command_changed(stop);
             self.change_released = true;
         } else {
             // A slot frees when the oldest frame leaves the window; the heartbeat may come first.
@@ -506,24 +466,24 @@ impl XbotDriver {
         // A heartbeat counts at its slot on the grid: sent a little late (the service's
         // wake-up), it would otherwise share a one-second window with the heartbeat eight slots
         // on, and no change could ever go out between heartbeats.
-        let logged = match self.schedule.heartbeat_slot(now) {
+        let logged = match self.core.schedule.heartbeat_slot(now) {
             Some(slot) if now.saturating_since(slot) <= HEARTBEAT_JITTER => slot,
             _ => now,
         };
-        self.schedule.sent(now);
+        self.core.schedule.sent(now);
         // No change is pending in the schedule now, so its deadline is the next heartbeat.
-        self.next_heartbeat = self.schedule.deadline();
+        self.next_heartbeat = self.core.schedule.deadline();
         self.on_wire = Some(self.desired);
         self.change_released = false;
         self.release_at = None;
         self.sent_log.push_back(logged);
-        let echo = &mut self.state.command;
+        let echo = &mut self.core.state.command;
         echo.linear_mps = self.desired.linear_x_mps as f32;
         echo.lateral_mps = self.desired.linear_y_mps as f32;
         echo.angular_radps = self.desired.angular_z_radps as f32;
         echo.steer_rad = 0.0;
         echo.clamp_flags = self.desired_flags;
-        self.state.touch(Group::Command, now.as_nanos());
+        self.core.state.touch(Group::Command, now.as_nanos());
     }
 
     // -----------------------------------------------------------------------------------------
@@ -531,21 +491,15 @@ impl XbotDriver {
 
     fn on_frame(&mut self, now: Timestamp, frame: Frame) {
         let Frame::Sensor(report) = frame else {
-            self.state.link.rx_unknown_id += 1;
-            self.dropped(format!(
+            self.core.state.link.rx_unknown_id += 1;
+            self.core.dropped(format!(
                 "a {} command (0x{:02X}) from the chassis side: loopback?",
                 frame.name(),
                 frame.command_id()
             ));
             return;
         };
-        self.link.received(now);
-        self.state.link.rx_frames += 1;
-        self.state.stamp_ns = now.as_nanos();
-        if self.was_silent {
-            self.was_silent = false;
-            self.set_flag(LinkFlags::CHASSIS_SILENT, false);
-            self.notice(Level::Info, "chassis is talking again");
+        if self.core.feedback(now) {
             self.resync(now, "sensor reports are back after a silence");
         }
         self.apply_sensor(now, &report);
@@ -553,10 +507,10 @@ impl XbotDriver {
 
     fn on_error(&mut self, error: &DecodeError, what: String) {
         match error {
-            DecodeError::BadChecksum { .. } => self.state.link.rx_bad_checksum += 1,
-            _ => self.state.link.rx_decode_errors += 1,
+            DecodeError::BadChecksum { .. } => self.core.state.link.rx_bad_checksum += 1,
+            _ => self.core.state.link.rx_decode_errors += 1,
         }
-        self.dropped(what);
+        self.core.dropped(what);
     }
 
     /// True when a wheel moved further since the previous report than it physically can.
@@ -572,15 +526,15 @@ impl XbotDriver {
 
     fn apply_sensor(&mut self, now: Timestamp, s: &SensorReport) {
         let t = now.as_nanos();
-        self.state.system.battery_voltage_v = s.battery_voltage_v as f32;
-        self.state.touch(Group::System, t);
+        self.core.state.system.battery_voltage_v = s.battery_voltage_v as f32;
+        self.core.state.touch(Group::System, t);
 
-        let ranges = &mut self.state.ranges;
+        let ranges = &mut self.core.state.ranges;
         ranges.ir_m = s.ir_m.map(|r| r as f32);
         ranges.ultrasonic_m = s.ultrasonic_m.map(|r| r as f32);
-        self.state.touch(Group::Ranges, t);
+        self.core.state.touch(Group::Ranges, t);
 
-        let imu = &mut self.state.imu;
+        let imu = &mut self.core.state.imu;
         imu.accel_mps2 = s.accel_mps2.map(|v| v as f32);
         imu.gyro_radps = s.gyro_radps.map(|v| v as f32);
         imu.mag_gauss = s.mag_gauss.map(|v| v as f32);
@@ -589,7 +543,7 @@ impl XbotDriver {
         imu.yaw_rad = s.yaw_rad as f32;
         imu.temperature_c = s.temperature_c as f32;
         imu.sensor_stamp_us = s.sensor_stamp_us.into();
-        self.state.touch(Group::Imu, t);
+        self.core.state.touch(Group::Imu, t);
 
         // Encoders: continuity, reboot evidence, running counts.
         let wheels = s.encoder_counts;
@@ -607,22 +561,22 @@ impl XbotDriver {
         let delta = self
             .counters
             .update([fl, fr, rl, rr, s.lift_encoder_counts], continuous);
-        for (i, motor) in self.state.motors.iter_mut().enumerate() {
+        for (i, motor) in self.core.state.motors.iter_mut().enumerate() {
             motor.position_counts = self.counters.position[i];
             motor.current_a = s.motor_current_a[i] as f32;
         }
-        self.state.touch(Group::MotorDrive, t);
-        let lift = &mut self.state.lift;
+        self.core.state.touch(Group::MotorDrive, t);
+        let lift = &mut self.core.state.lift;
         lift.encoder_counts = self.counters.position[4];
         lift.current_a = s.lift_current_a as f32;
-        self.state.touch(Group::Lift, t);
+        self.core.state.touch(Group::Lift, t);
 
         let metres = self.profile.metres_per_count();
         let travel = [0, 1, 2, 3].map(|i| delta[i] as f64 * metres);
-        let odometry = &mut self.state.odometry;
+        let odometry = &mut self.core.state.odometry;
         odometry.left_distance_m += travel[0];
         odometry.right_distance_m += travel[1];
-        self.state.touch(Group::Odometry, t);
+        self.core.state.touch(Group::Odometry, t);
 
         let position = [0, 1, 2, 3].map(|i| self.counters.position[i]);
         let here = SpeedRef {
@@ -643,10 +597,15 @@ impl XbotDriver {
             None => self.speed_ref = Some(here),
         }
         if continuous && let Some(separation) = self.separation() {
-            integrate_arc(travel[0], travel[1], separation, &mut self.state.odometry);
+            integrate_arc(
+                travel[0],
+                travel[1],
+                separation,
+                &mut self.core.state.odometry,
+            );
         }
         if self.separation().is_some() {
-            self.state.touch(Group::Pose, t);
+            self.core.state.touch(Group::Pose, t);
         }
         self.last_sample = Some(Sample { at: now, wheels });
     }
@@ -661,21 +620,21 @@ impl XbotDriver {
     fn apply_speeds(&mut self, now: Timestamp, wheel_mps: [f64; 4], gyro_z_radps: f64) {
         let t = now.as_nanos();
         let [fl, fr, rl, rr] = wheel_mps;
-        let motion = &mut self.state.motion;
+        let motion = &mut self.core.state.motion;
         motion.wheel_mps = wheel_mps.map(|v| v as f32);
         motion.front_axle_mps = (0.5 * (fl + fr)) as f32;
         motion.rear_axle_mps = (0.5 * (rl + rr)) as f32;
-        self.state.touch(Group::WheelSpeed, t);
+        self.core.state.touch(Group::WheelSpeed, t);
         let angular = match self.separation() {
             Some(separation) => (fr - fl) / separation,
             None => gyro_z_radps,
         };
-        let motion = &mut self.state.motion;
+        let motion = &mut self.core.state.motion;
         motion.linear_mps = (0.5 * (fl + fr)) as f32;
         motion.angular_radps = angular as f32;
         motion.lateral_mps = 0.0;
         motion.steer_rad = 0.0;
-        self.state.touch(Group::Motion, t);
+        self.core.state.touch(Group::Motion, t);
     }
 }
 
@@ -712,23 +671,23 @@ impl Driver for XbotDriver {
         Robot::Xbot
     }
 
+    crate::driver::core_accessors!();
+
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         let Rx::Bytes(bytes) = rx else {
-            self.state.link.rx_decode_errors += 1;
-            self.dropped("a CAN frame on the XBot's serial link".into());
+            self.core
+                .wrong_medium("a CAN frame on the XBot's serial link");
             return;
         };
-        // A frame's worth at a time, drained after each push: the parser never overflows.
-        for chunk in bytes.chunks(MAX_FRAME_LEN) {
-            self.parser.push(chunk);
-            while let Some(item) = self.parser.next_frame(&self.profile) {
-                match item {
-                    Ok(frame) => self.on_frame(now, frame),
-                    Err(err) => self.on_error(&err.error, err.to_string()),
-                }
+        // Collected first: applying a frame needs the whole driver, the parser included.
+        let items: Vec<_> = self.parser.feed(bytes, &self.profile).collect();
+        for item in items {
+            match item {
+                Ok(frame) => self.on_frame(now, frame),
+                Err(err) => self.on_error(&err.error, err.to_string()),
             }
         }
-        self.state.link.rx_bytes_discarded = self.parser.bytes_discarded();
+        self.core.state.link.rx_bytes_discarded = self.parser.bytes_discarded();
     }
 
     fn set_command(&mut self, now: Timestamp, command: &Twist) {
@@ -737,17 +696,12 @@ impl Driver for XbotDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        if self.bus_down {
-            return ControlOutcome::Refused("the bus is down; nothing can be sent".into());
-        }
-        if let Command::Velocity { .. } = command {
-            return ControlOutcome::Invalid(
-                "motion goes through the mux, not a control request".into(),
-            );
-        }
-        let planned = match frames_for(command, &self.profile) {
+        let planned = match self
+            .core
+            .admit_control(command, |c| frames_for(c, &self.profile))
+        {
             Ok(planned) => planned,
-            Err(err) => return err.into(),
+            Err(outcome) => return outcome,
         };
         let t = now.as_nanos();
         let mut outcome = ControlOutcome::Done(format!("{} sent", command.name()));
@@ -769,10 +723,10 @@ impl Driver for XbotDriver {
                 }
                 Frame::Lift(l) => {
                     self.last_lift = Some(l);
-                    let lift = &mut self.state.lift;
+                    let lift = &mut self.core.state.lift;
                     lift.enabled = u8::from(l.enable);
                     lift.target_pct = l.position_pct as f32;
-                    self.state.touch(Group::Lift, t);
+                    self.core.state.touch(Group::Lift, t);
                     self.queue.push_back(frame);
                     outcome = ControlOutcome::Done(format!(
                         "lift {} to {:.0} %",
@@ -785,9 +739,9 @@ impl Driver for XbotDriver {
                     let pan = (90.0 - (90.0 - s.pan_rad.to_degrees()).round()).to_radians();
                     let tilt = ((90.0 + s.tilt_rad.to_degrees()).round() - 90.0).to_radians();
                     self.last_servos = Some(s);
-                    self.state.pan_tilt.pan_rad = pan as f32;
-                    self.state.pan_tilt.tilt_rad = tilt as f32;
-                    self.state.touch(Group::PanTilt, t);
+                    self.core.state.pan_tilt.pan_rad = pan as f32;
+                    self.core.state.pan_tilt.tilt_rad = tilt as f32;
+                    self.core.state.touch(Group::PanTilt, t);
                     self.queue.push_back(frame);
                     outcome = ControlOutcome::Done(format!(
                         "pan {:.0}°, tilt {:.0}°",
@@ -803,18 +757,8 @@ impl Driver for XbotDriver {
     }
 
     fn handle_timeout(&mut self, now: Timestamp) {
-        let silent = self.link.is_silent(now);
-        if silent && !self.was_silent {
-            self.was_silent = true;
+        if self.core.check_silence(now, "sensor report") {
             self.resync_pending = true;
-            self.set_flag(LinkFlags::CHASSIS_SILENT, true);
-            self.notice(
-                Level::Warn,
-                format!(
-                    "chassis silent: no sensor report for {} ms",
-                    self.config.silence_timeout_ms
-                ),
-            );
         }
         if self.release_at.is_some_and(|t| now >= t) {
             self.try_release(now);
@@ -822,71 +766,37 @@ impl Driver for XbotDriver {
     }
 
     fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
-        if self.bus_down {
+        if self.core.bus_down {
             self.queue.clear();
             return None;
         }
         let frame = if let Some(frame) = self.queue.pop_front() {
             frame
-        } else if self.schedule.is_due(now) {
+        } else if self.core.schedule.is_due(now) {
             self.velocity_sent(now);
             Frame::Velocity(self.desired)
         } else {
             return None;
         };
-        match frame.encode(&self.profile) {
-            Ok(bytes) => {
-                self.state.link.tx_frames += 1;
-                Some(Transmit::Bytes(bytes))
-            }
-            Err(err) => {
-                // Limits keep every planned value on the wire's range; this is a bug guard.
-                self.state.link.tx_errors += 1;
-                self.notice(
-                    Level::Error,
-                    format!("cannot encode {}: {err}", frame.name()),
-                );
-                None
-            }
-        }
+        self.core
+            .transmit(frame.name(), frame.encode(&self.profile), Transmit::Bytes)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        if self.bus_down {
-            return None;
-        }
-        let mut next = earliest(Some(self.schedule.deadline()), self.release_at);
-        if !self.was_silent {
-            next = earliest(next, Some(self.link.deadline()));
-        }
-        next
-    }
-
-    fn poll_event(&mut self) -> Option<DriverEvent> {
-        self.events.pop_front()
-    }
-
-    fn state(&self) -> &ChassisState {
-        &self.state
+        earliest(Some(self.core.poll_timeout()?), self.release_at)
     }
 
     fn set_bus_down(&mut self, now: Timestamp, down: bool) {
-        if down == self.bus_down {
+        if !self.core.set_bus_down(now, down) {
             return;
         }
-        self.bus_down = down;
-        self.set_flag(LinkFlags::BUS_DOWN, down);
         self.queue.clear();
         if down {
             self.release_at = None;
             self.change_released = false;
-            self.notice(Level::Error, "bus down: nothing reaches the chassis");
         } else {
-            self.state.link.bus_reconnects += 1;
             self.parser.clear();
-            self.state.link.rx_bytes_discarded = self.parser.bytes_discarded();
-            self.link.reset(now);
-            self.schedule.restart(now);
+            self.core.state.link.rx_bytes_discarded = self.parser.bytes_discarded();
             self.next_heartbeat = now;
             self.resync_pending = true;
             self.last_power_enable = None;
@@ -899,7 +809,7 @@ impl Driver for XbotDriver {
         self.plan(now);
         self.queue.clear();
         // The one frame exempt from the rate bound: a final stop is never held back.
-        self.schedule.command_changed(true);
+        self.core.schedule.command_changed(true);
         self.change_released = true;
         self.release_at = None;
     }

@@ -11,32 +11,10 @@ use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
 use crate::profile::XbotProfile;
 use crate::time::Timestamp;
+use crate::xbot::test_support::{close, hex, max_per_second, ms, p, pieces, twist};
 use crate::xbot::{Frame, SensorReport, StreamParser, VelocityCommand, checksum};
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
-
-fn ms(v: u64) -> Duration {
-    Duration::from_millis(v)
-}
-
-fn p() -> XbotProfile {
-    XbotProfile::default()
-}
-
-fn twist(vx: f32, vy: f32, wz: f32) -> Twist {
-    Twist {
-        linear_x_mps: vx,
-        linear_y_mps: vy,
-        angular_z_radps: wz,
-        ..Twist::ZERO
-    }
-}
-
-fn hex(text: &str) -> Vec<u8> {
-    text.split_whitespace()
-        .map(|b| u8::from_str_radix(b, 16).unwrap())
-        .collect()
-}
 
 /// A plausible report: level, nothing in view, wheels at `wheels`, board stamp `stamp_us`.
 fn report(wheels: [u16; 4], stamp_us: u16) -> SensorReport {
@@ -204,24 +182,6 @@ impl Bench {
     fn state(&self) -> &chassis_interfaces::ChassisState {
         self.d.state()
     }
-}
-
-/// The largest number of `times` inside any one-second window `[t, t + 1 s)`.
-fn max_per_second(times: &[Timestamp]) -> usize {
-    times
-        .iter()
-        .map(|&start| {
-            times
-                .iter()
-                .filter(|&&t| t >= start && t < start + ms(1000))
-                .count()
-        })
-        .max()
-        .unwrap_or(0)
-}
-
-fn close(a: f64, b: f64, tolerance: f64) -> bool {
-    (a - b).abs() <= tolerance
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1059,12 +1019,8 @@ proptest! {
         cuts in proptest::collection::vec(1usize..300, 1..20),
     ) {
         let mut b = Bench::new();
-        let mut rest = data.as_slice();
-        let mut cut = cuts.iter().cycle();
-        while !rest.is_empty() {
-            let n = (*cut.next().unwrap()).min(rest.len());
-            b.bytes(&rest[..n]);
-            rest = &rest[n..];
+        for piece in pieces(&data, &cuts) {
+            b.bytes(piece);
             b.run_for(ms(3));
         }
         let link = b.state().link;

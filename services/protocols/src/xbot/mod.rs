@@ -20,4 +20,6 @@ pub use stream::*;
 #[cfg(test)]
 mod scenarios;
 #[cfg(test)]
+mod test_support;
+#[cfg(test)]
 mod tests;

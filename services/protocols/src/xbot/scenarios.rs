@@ -16,19 +16,12 @@ use crate::firmware::{Firmware, Injection};
 use crate::pair::Pair;
 use crate::profile::XbotProfile;
 use crate::time::Timestamp;
+use crate::xbot::test_support::{close, max_per_second, ms, p, twist};
 
 type XbotPair = Pair<XbotDriver, XbotSim>;
 
 const T0: Timestamp = Timestamp::from_millis(10_000);
 const LATENCY: Duration = Duration::from_micros(250);
-
-fn ms(v: u64) -> Duration {
-    Duration::from_millis(v)
-}
-
-fn p() -> XbotProfile {
-    XbotProfile::default()
-}
 
 fn with_separation() -> XbotProfile {
     XbotProfile {
@@ -47,19 +40,6 @@ fn pair_of(profile: XbotProfile, sim: impl FnOnce(XbotSim) -> XbotSim) -> XbotPa
 
 fn pair() -> XbotPair {
     pair_of(p(), |s| s)
-}
-
-fn twist(vx: f32, vy: f32, wz: f32) -> Twist {
-    Twist {
-        linear_x_mps: vx,
-        linear_y_mps: vy,
-        angular_z_radps: wz,
-        ..Twist::ZERO
-    }
-}
-
-fn close(a: f64, b: f64, tolerance: f64) -> bool {
-    (a - b).abs() <= tolerance
 }
 
 /// Every frame the driver put on the wire while recording, decoded.
@@ -98,20 +78,6 @@ fn motion_resumes(pair: &mut XbotPair, limit: Duration) -> Option<Timestamp> {
         lowest = lowest.min(v);
         p.firmware.is_powered() && v > lowest + 0.01
     })
-}
-
-/// The largest number of `times` in any window `[t, t + 1 s)`.
-fn max_per_second(times: &[Timestamp]) -> usize {
-    times
-        .iter()
-        .map(|&start| {
-            times
-                .iter()
-                .filter(|&&t| t >= start && t < start + ms(1000))
-                .count()
-        })
-        .max()
-        .unwrap_or(0)
 }
 
 /// A fixed-seed byte generator (xorshift), for garbage.

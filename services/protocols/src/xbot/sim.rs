@@ -2,16 +2,18 @@
 //!
 //! Everything about its behaviour is documented on [`XbotSim`].
 
-use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::ControlMode;
 
-use super::codec::{Frame, MAX_FRAME_LEN, SensorReport, VelocityCommand, scale};
+use super::codec::{Frame, SensorReport, VelocityCommand, scale};
 use super::stream::StreamParser;
 use crate::DecodeError;
-use crate::driver::{Rx, Transmit, wrap_angle};
-use crate::firmware::{Firmware, Injection, SimTruth};
+use crate::driver::{Rx, Transmit};
+use crate::firmware::{
+    BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, first_order_lag, motor_index,
+    non_negative, state_of_charge, substeps,
+};
 use crate::profile::{Robot, XbotProfile};
 use crate::time::{Grid, Timestamp, earliest};
 
@@ -104,7 +106,6 @@ pub struct XbotSim {
     booting_until: Option<Timestamp>,
     /// Origin of the board's µs timestamp and of the encoder counts: the end of the last boot.
     booted_at: Timestamp,
-    silent_until: Option<Timestamp>,
     motor_lost: [bool; 4],
     obstacle_ahead_m: Option<f64>,
     obstacle_behind_m: Option<f64>,
@@ -119,9 +120,7 @@ pub struct XbotSim {
     /// Wheel speeds FL, FR, RL, RR, m/s (two-wheel robots: only FL, FR).
     wheel_mps: [f64; 4],
     forward_accel_mps2: f64,
-    x_m: f64,
-    y_m: f64,
-    yaw_rad: f64,
+    pose: Pose,
     /// Wheel travel since the last boot, m.
     wheel_travel_m: [f64; 4],
     lift_pct: f64,
@@ -134,8 +133,8 @@ pub struct XbotSim {
 
     // Output.
     reports: Grid,
-    flood: Option<Grid>,
-    queue: VecDeque<Vec<u8>>,
+    flood: Option<Flood>,
+    outbox: Outbox<Vec<u8>>,
 
     // Counters.
     boots: u32,
@@ -144,7 +143,6 @@ pub struct XbotSim {
     bad_checksums_received: u64,
     decode_errors: u64,
     frames_ignored: u64,
-    frames_dropped: u64,
     reports_sent: u64,
     reports_corrupted: u64,
     heartbeat_timeouts: u64,
@@ -173,14 +171,13 @@ impl XbotSim {
     pub const LIFT_PCT_PER_S: f64 = 10.0;
     /// Lift encoder counts per % of travel.
     pub const LIFT_COUNTS_PER_PCT: f64 = 100.0;
-    /// Battery capacity, Ah.
-    pub const BATTERY_CAPACITY_AH: f64 = 26.0;
-    /// Open-circuit voltage at 100 % SOC, V.
-    pub const BATTERY_FULL_V: f64 = 26.0;
-    /// Open-circuit voltage at 0 % SOC, V.
-    pub const BATTERY_EMPTY_V: f64 = 23.0;
-    /// Internal resistance of the pack, Ω.
-    pub const BATTERY_RESISTANCE_OHM: f64 = 0.05;
+    /// The battery.
+    pub const BATTERY: BatteryModel = BatteryModel {
+        capacity_ah: 26.0,
+        full_v: 26.0,
+        empty_v: 23.0,
+        resistance_ohm: 0.05,
+    };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 1.0;
     /// Motor current per m/s of wheel speed, A.
@@ -201,11 +198,7 @@ impl XbotSim {
     const MAG_HORIZONTAL_GAUSS: f64 = 0.3;
     const MAG_VERTICAL_GAUSS: f64 = -0.4;
     /// Longest time integrated at once; a longer gap between calls is not bridged.
-    pub const MAX_STEP: Duration = Duration::from_millis(100);
-    /// Integration sub-step.
-    const SUBSTEP: Duration = Duration::from_millis(5);
-    /// Chunks kept for transmission when nobody polls (oldest dropped first).
-    const TX_QUEUE_LIMIT: usize = 4096;
+    pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
     /// Bytes of one sensor report on the wire.
     const REPORT_LEN: u32 = 75;
 
@@ -229,7 +222,6 @@ impl XbotSim {
             last_velocity_rx: now,
             booting_until: None,
             booted_at: now,
-            silent_until: None,
             motor_lost: [false; 4],
             obstacle_ahead_m: None,
             obstacle_behind_m: None,
@@ -241,9 +233,7 @@ impl XbotSim {
             last_update: now,
             wheel_mps: [0.0; 4],
             forward_accel_mps2: 0.0,
-            x_m: 0.0,
-            y_m: 0.0,
-            yaw_rad: 0.0,
+            pose: Pose::default(),
             wheel_travel_m: [0.0; 4],
             lift_pct: 0.0,
             lift_pct_at_boot: 0.0,
@@ -254,14 +244,13 @@ impl XbotSim {
             pack_current_a: Self::IDLE_CURRENT_A,
             reports: Grid::new(Self::REPORT_PERIOD, now),
             flood: None,
-            queue: VecDeque::new(),
+            outbox: Outbox::new(),
             boots: 0,
             commands_received: 0,
             commands_ignored: 0,
             bad_checksums_received: 0,
             decode_errors: 0,
             frames_ignored: 0,
-            frames_dropped: 0,
             reports_sent: 0,
             reports_corrupted: 0,
             heartbeat_timeouts: 0,
@@ -288,8 +277,8 @@ impl XbotSim {
 
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
-        if soc_pct.is_finite() {
-            self.soc_pct = soc_pct.clamp(0.0, 100.0);
+        if let Some(soc_pct) = state_of_charge(soc_pct) {
+            self.soc_pct = soc_pct;
         }
         self
     }
@@ -371,7 +360,7 @@ impl XbotSim {
 
     /// Chunks dropped because nobody polled the transmit queue (or a report did not encode).
     pub fn frames_dropped(&self) -> u64 {
-        self.frames_dropped
+        self.outbox.dropped()
     }
 
     /// Times the 500 ms heartbeat timeout set the speed to 0.
@@ -381,9 +370,7 @@ impl XbotSim {
 
     /// Pack voltage under the present load, V.
     pub fn battery_voltage_v(&self) -> f64 {
-        let ocv = Self::BATTERY_EMPTY_V
-            + (Self::BATTERY_FULL_V - Self::BATTERY_EMPTY_V) * self.soc_pct / 100.0;
-        (ocv - Self::BATTERY_RESISTANCE_OHM * self.pack_current_a).max(0.0)
+        Self::BATTERY.voltage_v(self.soc_pct, self.pack_current_a)
     }
 
     // -----------------------------------------------------------------------------------------
@@ -410,7 +397,9 @@ impl XbotSim {
 
     /// Physics and the deadlines that change what the board does (boot end, silence, heartbeat).
     fn expire(&mut self, now: Timestamp) {
-        self.advance(now);
+        for dt in substeps(&mut self.last_update, now) {
+            self.step(dt);
+        }
         if let Some(until) = self.booting_until
             && now >= until
         {
@@ -418,9 +407,7 @@ impl XbotSim {
             self.booted_at = until;
             self.reports = Grid::new(Self::REPORT_PERIOD, until);
         }
-        if self.silent_until.is_some_and(|t| now >= t) {
-            self.silent_until = None;
-        }
+        self.outbox.expire(now);
         if self.heartbeat_deadline().is_some_and(|t| now >= t) {
             self.heartbeat_alive = false;
             self.command = VelocityCommand::default();
@@ -500,7 +487,7 @@ impl XbotSim {
         self.pan_rad = 0.0;
         self.tilt_rad = 0.0;
         self.parser.clear();
-        self.queue.clear();
+        self.outbox.clear();
         if self.boot_time.is_zero() {
             self.booting_until = None;
             self.booted_at = now;
@@ -514,20 +501,6 @@ impl XbotSim {
 
     // -----------------------------------------------------------------------------------------
     // Physics.
-
-    /// Integrates from the last update to `now` (at most [`Self::MAX_STEP`]).
-    fn advance(&mut self, now: Timestamp) {
-        if now <= self.last_update {
-            return;
-        }
-        let mut remaining = now.saturating_since(self.last_update).min(Self::MAX_STEP);
-        self.last_update = now;
-        while !remaining.is_zero() {
-            let dt = remaining.min(Self::SUBSTEP);
-            remaining = remaining.saturating_sub(dt);
-            self.step(dt.as_secs_f64());
-        }
-    }
 
     /// Wheel speed targets FL, FR, RL, RR for a body velocity, scaled into the top speed.
     fn wheel_targets(&self, v: &VelocityCommand) -> [f64; 4] {
@@ -567,10 +540,8 @@ impl XbotSim {
         }
     }
 
+    /// Integrates `dt` seconds (one sub-step of [`substeps`], never zero).
     fn step(&mut self, dt: f64) {
-        if dt <= 0.0 {
-            return;
-        }
         let blocked = self.drive_blocked();
         let (targets, tau) = if blocked {
             ([0.0; 4], self.stop_time_constant_s)
@@ -581,26 +552,10 @@ impl XbotSim {
             )
         };
         let w0 = self.wheel_mps;
-        let mut w1 = [0.0; 4];
-        for i in 0..4 {
-            let target = targets[i];
-            let mut v = if tau > 0.0 {
-                target + (w0[i] - target) * (-dt / tau).exp()
-            } else {
-                target
-            };
-            if (v - target).abs() < 1e-9 {
-                v = target;
-            }
-            w1[i] = v;
-        }
+        let w1: [f64; 4] = std::array::from_fn(|i| first_order_lag(w0[i], targets[i], tau, dt));
         let mid = [0, 1, 2, 3].map(|i| 0.5 * (w0[i] + w1[i]));
         let (v, vy, w) = self.body(&mid);
-        let heading = self.yaw_rad + 0.5 * w * dt;
-        let (sin, cos) = heading.sin_cos();
-        self.x_m += (v * cos - vy * sin) * dt;
-        self.y_m += (v * sin + vy * cos) * dt;
-        self.yaw_rad = wrap_angle(self.yaw_rad + w * dt);
+        self.pose.advance(v, vy, w, dt);
         if self.booting_until.is_none() {
             for (travel, speed) in self.wheel_travel_m.iter_mut().zip(mid) {
                 *travel += speed * dt;
@@ -646,15 +601,14 @@ impl XbotSim {
         // Battery.
         self.pack_current_a =
             Self::IDLE_CURRENT_A + self.motor_current_a.iter().sum::<f64>() + self.lift_current_a;
-        let used_pct = self.pack_current_a * dt / 3600.0 / Self::BATTERY_CAPACITY_AH * 100.0;
-        self.soc_pct = (self.soc_pct - used_pct).max(0.0);
+        self.soc_pct = Self::BATTERY.drain(self.soc_pct, self.pack_current_a, dt, 1.0);
     }
 
     // -----------------------------------------------------------------------------------------
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.booting_until.is_some() || self.silent_until.is_some_and(|t| now < t)
+        self.booting_until.is_some() || self.outbox.is_silenced(now)
     }
 
     fn enqueue(&mut self, bytes: Vec<u8>) {
@@ -667,11 +621,7 @@ impl XbotSim {
                 .collect()
         };
         for chunk in chunks {
-            if self.queue.len() >= Self::TX_QUEUE_LIMIT {
-                self.queue.pop_front();
-                self.frames_dropped += 1;
-            }
-            self.queue.push_back(chunk);
+            self.outbox.push(chunk);
         }
     }
 
@@ -725,14 +675,14 @@ impl XbotSim {
             ],
             gyro_radps: [0.0, 0.0, w.clamp(-gyro_limit, gyro_limit)],
             mag_gauss: [
-                Self::MAG_HORIZONTAL_GAUSS * self.yaw_rad.cos(),
-                -Self::MAG_HORIZONTAL_GAUSS * self.yaw_rad.sin(),
+                Self::MAG_HORIZONTAL_GAUSS * self.pose.yaw_rad.cos(),
+                -Self::MAG_HORIZONTAL_GAUSS * self.pose.yaw_rad.sin(),
                 Self::MAG_VERTICAL_GAUSS,
             ],
             temperature_c: Self::IMU_TEMPERATURE_C,
             roll_rad: 0.0,
             pitch_rad: 0.0,
-            yaw_rad: self.yaw_rad,
+            yaw_rad: self.pose.yaw_rad,
             // Below 65536: the cast is exact.
             sensor_stamp_us: stamp_us as u16,
         }
@@ -744,7 +694,7 @@ impl XbotSim {
         }
         let Ok(mut bytes) = Frame::Sensor(self.report(now)).encode(&self.profile) else {
             // Every value is kept inside its wire range; this is a bug guard.
-            self.frames_dropped += 1;
+            self.outbox.count_dropped();
             return;
         };
         if self.corrupt_next > 0 {
@@ -776,13 +726,12 @@ impl Firmware for XbotSim {
             return;
         };
         // A booting board obeys nothing: `on_frame` counts what it ignores.
-        for chunk in bytes.chunks(MAX_FRAME_LEN) {
-            self.parser.push(chunk);
-            while let Some(item) = self.parser.next_frame(&self.profile) {
-                match item {
-                    Ok(frame) => self.on_frame(now, frame),
-                    Err(err) => self.on_error(&err.error),
-                }
+        // Collected first: obeying a frame needs the whole board, the parser included.
+        let items: Vec<_> = self.parser.feed(bytes, &self.profile).collect();
+        for item in items {
+            match item {
+                Ok(frame) => self.on_frame(now, frame),
+                Err(err) => self.on_error(&err.error),
             }
         }
     }
@@ -793,19 +742,19 @@ impl Firmware for XbotSim {
             self.reports.served(now);
             self.send_report(now);
         }
-        if let Some(mut flood) = self.flood
-            && flood.is_due(now)
+        if self
+            .flood
+            .as_mut()
+            .and_then(|flood| flood.due(now))
+            .is_some()
+            && self.booting_until.is_none()
         {
-            flood.served(now);
-            self.flood = Some(flood);
-            if self.booting_until.is_none() {
-                self.send_report(now);
-            }
+            self.send_report(now);
         }
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.queue.pop_front().map(Transmit::Bytes)
+        self.outbox.pop().map(Transmit::Bytes)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
@@ -813,7 +762,7 @@ impl Firmware for XbotSim {
         [
             self.heartbeat_deadline(),
             self.booting_until,
-            self.silent_until,
+            self.outbox.silent_until(),
             self.flood.map(|f| f.next()),
         ]
         .into_iter()
@@ -824,36 +773,23 @@ impl Firmware for XbotSim {
         self.expire(now);
         match injection {
             Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = usize::from(motor)
-                    .checked_sub(1)
-                    .filter(|i| *i < self.wheels())
-                else {
+                let Some(index) = motor_index(motor, self.wheels()) else {
                     return false;
                 };
                 self.motor_lost[index] = lost;
             }
             Injection::Battery { soc_pct } => {
-                if !soc_pct.is_finite() {
+                let Some(soc_pct) = state_of_charge(soc_pct) else {
                     return false;
-                }
-                self.soc_pct = soc_pct.clamp(0.0, 100.0);
+                };
+                self.soc_pct = soc_pct;
             }
             Injection::Bumper(_) | Injection::RcTakeover(_) => return false,
             Injection::Reboot => self.reboot(now),
-            Injection::Silence(duration) => {
-                let until = now + duration;
-                self.silent_until = Some(self.silent_until.map_or(until, |t| t.max(until)));
-                if !duration.is_zero() {
-                    self.queue.clear();
-                }
-            }
+            Injection::Silence(duration) => self.outbox.silence(now, duration),
             Injection::Garbage(bytes) => {
                 if !bytes.is_empty() {
-                    if self.queue.len() >= Self::TX_QUEUE_LIMIT {
-                        self.queue.pop_front();
-                        self.frames_dropped += 1;
-                    }
-                    self.queue.push_back(bytes);
+                    self.outbox.push(bytes);
                 }
             }
             Injection::BadChecksums(n) => self.corrupt_next = self.corrupt_next.saturating_add(n),
@@ -868,11 +804,7 @@ impl Firmware for XbotSim {
                 }
             }
             Injection::Flood { frames_per_s } => {
-                self.flood = (frames_per_s > 0).then(|| {
-                    let fps = frames_per_s.min(self.line_reports_per_s());
-                    let interval = Duration::from_secs(1) / fps;
-                    Grid::new(interval, now + interval)
-                });
+                self.flood = Flood::new(now, frames_per_s, self.line_reports_per_s());
             }
         }
         true
@@ -885,9 +817,9 @@ impl Firmware for XbotSim {
             lateral_mps: lateral,
             angular_radps: angular,
             steer_rad: 0.0,
-            x_m: self.x_m,
-            y_m: self.y_m,
-            yaw_rad: self.yaw_rad,
+            x_m: self.pose.x_m,
+            y_m: self.pose.y_m,
+            yaw_rad: self.pose.yaw_rad,
             control_mode: if self.powered && self.booting_until.is_none() {
                 ControlMode::COMMAND
             } else {
@@ -901,14 +833,6 @@ impl Firmware for XbotSim {
             decode_errors: self.decode_errors,
             boots: self.boots,
         }
-    }
-}
-
-fn non_negative(value: f64) -> f64 {
-    if value.is_finite() && value > 0.0 {
-        value
-    } else {
-        0.0
     }
 }
 

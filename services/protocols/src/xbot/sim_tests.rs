@@ -6,23 +6,17 @@ use chassis_interfaces::ControlMode;
 use proptest::prelude::*;
 
 use super::XbotSim;
-use crate::driver::{Rx, Transmit};
+use crate::driver::Rx;
 use crate::firmware::{Firmware, Injection};
 use crate::profile::XbotProfile;
-use crate::time::{Timestamp, earliest};
+use crate::sim_bench::{Parts, SimBench};
+use crate::time::Timestamp;
+use crate::xbot::test_support::{close, ms, p, pieces};
 use crate::xbot::{
     Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, StreamParser, VelocityCommand,
 };
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
-
-fn ms(v: u64) -> Duration {
-    Duration::from_millis(v)
-}
-
-fn p() -> XbotProfile {
-    XbotProfile::default()
-}
 
 fn velocity(vx: f64, vy: f64, wz: f64) -> VelocityCommand {
     VelocityCommand {
@@ -30,10 +24,6 @@ fn velocity(vx: f64, vy: f64, wz: f64) -> VelocityCommand {
         linear_y_mps: vy,
         angular_z_radps: wz,
     }
-}
-
-fn close(a: f64, b: f64, tolerance: f64) -> bool {
-    (a - b).abs() <= tolerance
 }
 
 /// The board on simulated time, with an optional 125 ms 0x03 heartbeat from "the computer".
@@ -46,6 +36,32 @@ struct Bench {
     heartbeat: Option<VelocityCommand>,
     next_heartbeat: Timestamp,
     last_heartbeat: Option<Timestamp>,
+}
+
+impl SimBench for Bench {
+    type Firmware = XbotSim;
+    type Item = Vec<u8>;
+    type Command = VelocityCommand;
+    const HEARTBEAT_PERIOD: Duration = Duration::from_millis(125);
+
+    fn parts(&mut self) -> Parts<'_, XbotSim, Vec<u8>, VelocityCommand> {
+        Parts {
+            sim: &mut self.sim,
+            now: &mut self.now,
+            sent: &mut self.sent,
+            heartbeat: &mut self.heartbeat,
+            next_heartbeat: &mut self.next_heartbeat,
+            last_heartbeat: &mut self.last_heartbeat,
+        }
+    }
+
+    fn sent(&self) -> &[(Timestamp, Vec<u8>)] {
+        &self.sent
+    }
+
+    fn send_heartbeat(&mut self, command: VelocityCommand) {
+        self.send(Frame::Velocity(command));
+    }
 }
 
 impl Bench {
@@ -84,56 +100,6 @@ impl Bench {
         self.drain();
     }
 
-    fn inject(&mut self, injection: Injection) -> bool {
-        let ok = self.sim.inject(self.now, injection);
-        self.drain();
-        ok
-    }
-
-    /// Sends `command` every 125 ms from now on (`None` stops it).
-    fn heartbeat(&mut self, command: Option<VelocityCommand>) {
-        if self.heartbeat.is_none() {
-            self.next_heartbeat = self.now;
-        }
-        self.heartbeat = command;
-    }
-
-    fn drain(&mut self) {
-        while let Some(item) = self.sim.poll_transmit(self.now) {
-            let Transmit::Bytes(bytes) = item else {
-                panic!("the XBot sent a CAN frame");
-            };
-            self.sent.push((self.now, bytes));
-        }
-    }
-
-    fn run_for(&mut self, duration: Duration) {
-        let until = self.now + duration;
-        loop {
-            let heartbeat = self.heartbeat.map(|_| self.next_heartbeat);
-            let next = earliest(self.sim.poll_timeout(), heartbeat).unwrap_or(until);
-            assert!(next >= self.now, "deadline {next:?} before {:?}", self.now);
-            if next > until {
-                self.now = until;
-                break;
-            }
-            self.now = next;
-            if let Some(command) = self.heartbeat
-                && self.next_heartbeat <= self.now
-            {
-                self.send(Frame::Velocity(command));
-                self.last_heartbeat = Some(self.now);
-                self.next_heartbeat += ms(125);
-            }
-            if self.sim.poll_timeout().is_some_and(|t| t <= self.now) {
-                self.sim.handle_timeout(self.now);
-                let after = self.sim.poll_timeout().unwrap();
-                assert!(after > self.now, "stall at {:?}", self.now);
-            }
-            self.drain();
-        }
-    }
-
     /// Every report decoded from the byte stream, with the time its last byte was sent, and the
     /// number of rejected candidates.
     fn decoded(&self) -> (Vec<(Timestamp, SensorReport)>, u64) {
@@ -156,10 +122,6 @@ impl Bench {
 
     fn last(&self) -> SensorReport {
         self.reports().last().unwrap().1
-    }
-
-    fn sent_since(&self, since: Timestamp) -> usize {
-        self.sent.iter().filter(|(t, _)| *t > since).count()
     }
 
     fn v(&self) -> f64 {
@@ -733,12 +695,8 @@ proptest! {
         cuts in proptest::collection::vec(1usize..300, 1..20),
     ) {
         let mut b = Bench::new();
-        let mut rest = data.as_slice();
-        let mut cut = cuts.iter().cycle();
-        while !rest.is_empty() {
-            let n = (*cut.next().unwrap()).min(rest.len());
-            b.send_raw(&rest[..n]);
-            rest = &rest[n..];
+        for piece in pieces(&data, &cuts) {
+            b.send_raw(piece);
             b.run_for(ms(3));
         }
         let t = b.sim.truth();

@@ -7,18 +7,8 @@ use proptest::prelude::*;
 
 use super::*;
 use crate::profile::XbotProfile;
+use crate::xbot::test_support::{hex, p};
 use crate::{DecodeError, Direction, EncodeError};
-
-fn p() -> XbotProfile {
-    XbotProfile::default()
-}
-
-/// `"AA 55 02 01 01 02"` → bytes.
-fn hex(text: &str) -> Vec<u8> {
-    text.split_whitespace()
-        .map(|b| u8::from_str_radix(b, 16).unwrap())
-        .collect()
-}
 
 /// Decodes a whole frame (header, length and checksum checked) with `profile`.
 fn decode_frame(bytes: &[u8], profile: &XbotProfile) -> Result<Frame, DecodeError> {
