@@ -930,7 +930,7 @@ describe_layout!(
     ZeroCopySend,
     Serialize,
 )]
-#[type_name("chassis::LinkStats.v1")]
+#[type_name("chassis::LinkStats.v2")]
 pub struct LinkStats {
     /// Frames received and decoded.
     pub rx_frames: u64,
@@ -948,6 +948,8 @@ pub struct LinkStats {
     pub tx_errors: u64,
     /// Times the bus was lost and reopened.
     pub bus_reconnects: u64,
+    /// Samples, answers and reader wake-ups chassisd could not publish over iceoryx2.
+    pub ipc_failures: u64,
 }
 
 describe_layout!(
@@ -961,6 +963,7 @@ describe_layout!(
         rx_bytes_discarded,
         tx_errors,
         bus_reconnects,
+        ipc_failures,
     }
 );
 
@@ -979,7 +982,7 @@ describe_layout!(
     ZeroCopySend,
     Serialize,
 )]
-#[type_name("chassis::ChassisState.v1")]
+#[type_name("chassis::ChassisState.v2")]
 pub struct ChassisState {
     /// Incremented for every published sample.
     pub seq: u64,
@@ -1072,7 +1075,7 @@ mod tests {
 
     #[test]
     fn chassis_state_layout_is_pinned() {
-        assert_eq!(size_of::<ChassisState>(), 824);
+        assert_eq!(size_of::<ChassisState>(), 832);
         assert_eq!(align_of::<ChassisState>(), 8);
         assert_eq!(offset_of!(ChassisState, seq), 0);
         assert_eq!(offset_of!(ChassisState, stamp_ns), 8);
@@ -1146,7 +1149,8 @@ mod tests {
             (size_of::<CommandEcho>(), align_of::<CommandEcho>()),
             (24, 4)
         );
-        assert_eq!((size_of::<LinkStats>(), align_of::<LinkStats>()), (64, 8));
+        assert_eq!((size_of::<LinkStats>(), align_of::<LinkStats>()), (72, 8));
+        assert_eq!(offset_of!(LinkStats, ipc_failures), 64);
         assert_eq!(offset_of!(LinkStats, bus_reconnects), 56);
     }
 
@@ -1154,7 +1158,7 @@ mod tests {
     fn type_names_carry_a_layout_version() {
         // SAFETY: type_name only returns the string given to the derive.
         let name = unsafe { <ChassisState as ZeroCopySend>::type_name() };
-        assert_eq!(name, "chassis::ChassisState.v1");
+        assert_eq!(name, "chassis::ChassisState.v2");
     }
 
     #[test]

@@ -397,7 +397,7 @@ impl McapSink {
                  *_stamp_ns are CLOCK_MONOTONIC ns",
             ),
             &format!("{prefix}/state"),
-            "chassis::ChassisState.v1",
+            "chassis::ChassisState.v2",
         )?;
         let mux = channel(
             "chassis.MuxStatus",

@@ -250,8 +250,8 @@ mod tests {
     fn types_and_constants_are_listed_with_their_layouts() {
         let v = value();
         let state = &v["types"]["ChassisState"];
-        assert_eq!(state["type_name"], "chassis::ChassisState.v1");
-        assert_eq!(state["size"], 824);
+        assert_eq!(state["type_name"], "chassis::ChassisState.v2");
+        assert_eq!(state["size"], 832);
         assert_eq!(state["align"], 8);
         let motion = &state["fields"][7];
         assert_eq!(motion["name"], "motion");

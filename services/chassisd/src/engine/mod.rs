@@ -725,6 +725,7 @@ impl Engine {
         if self.config.gps && self.gps != Some(Link::Up) {
             state.link_flags |= LinkFlags::GPS_DOWN;
         }
+        state.link.ipc_failures = self.ipc_failures;
         self.state_seq += 1;
         state.seq = self.state_seq;
         self.last_rx_frames = state.link.rx_frames;
