@@ -1015,6 +1015,9 @@ pub struct ChassisState {
     pub gps: GpsFix,
     pub command: CommandEcho,
     pub link: LinkStats,
+    /// `CLOCK_MONOTONIC` time `chassisd` handed this sample to iceoryx2, ns: with `stamp_ns`, the
+    /// service's own part of the state path.
+    pub published_ns: u64,
 }
 
 describe_layout!(
@@ -1041,6 +1044,7 @@ describe_layout!(
         gps,
         command,
         link,
+        published_ns,
     }
 );
 
@@ -1075,7 +1079,8 @@ mod tests {
 
     #[test]
     fn chassis_state_layout_is_pinned() {
-        assert_eq!(size_of::<ChassisState>(), 832);
+        assert_eq!(size_of::<ChassisState>(), 840);
+        assert_eq!(offset_of!(ChassisState, published_ns), 832);
         assert_eq!(align_of::<ChassisState>(), 8);
         assert_eq!(offset_of!(ChassisState, seq), 0);
         assert_eq!(offset_of!(ChassisState, stamp_ns), 8);

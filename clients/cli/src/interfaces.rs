@@ -83,7 +83,7 @@ mod tests {
         let v: serde_json::Value = serde_json::from_str(&render(true).unwrap()).unwrap();
         let state = &v["types"]["ChassisState"];
         assert_eq!(state["type_name"], "chassis::ChassisState.v2");
-        assert_eq!(state["size"], 832);
+        assert_eq!(state["size"], 840);
         let field = |name: &str| {
             state["fields"]
                 .as_array()

@@ -251,7 +251,7 @@ mod tests {
         let v = value();
         let state = &v["types"]["ChassisState"];
         assert_eq!(state["type_name"], "chassis::ChassisState.v2");
-        assert_eq!(state["size"], 832);
+        assert_eq!(state["size"], 840);
         assert_eq!(state["align"], 8);
         let motion = &state["fields"][7];
         assert_eq!(motion["name"], "motion");

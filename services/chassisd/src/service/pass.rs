@@ -162,17 +162,28 @@ impl<D: Devices> Shell<D> {
         }
     }
 
-    /// Writes what the engine polls; each item is stamped when its write returned.
+    /// Writes what the engine polls; each item is stamped when its write returned (an item a
+    /// backend buffered, when the write that carried it returned).
     pub(super) fn transmit(&mut self, engine: &mut Engine, now: Timestamp) -> Next {
         let mut sent = std::mem::take(&mut self.scratch);
         sent.clear();
+        // The first of the items the backend still holds.
+        let mut buffered_from = None;
         let mut lost = None;
         while let Some(item) = engine.poll_transmit(now) {
             let Some(bus) = self.bus.as_mut() else {
                 break;
             };
             match bus.transmit(&item) {
-                Ok(()) => sent.push((clock::now(), item)),
+                Ok(()) => {
+                    let written = clock::now();
+                    sent.push((written, item));
+                    if bus.unflushed() == 0 {
+                        restamp(&mut sent, buffered_from.take(), written);
+                    } else {
+                        buffered_from.get_or_insert(sent.len() - 1);
+                    }
+                }
                 Err(err) if err.is_disconnect() => {
                     lost = Some(err);
                     break;
@@ -182,12 +193,11 @@ impl<D: Devices> Shell<D> {
         }
         if lost.is_none()
             && let Some(bus) = self.bus.as_mut()
-            && let Err(err) = bus.flush()
         {
-            if err.is_disconnect() {
-                lost = Some(err);
-            } else {
-                engine.handle_tx_dropped(now, &err);
+            match bus.flush() {
+                Ok(()) => restamp(&mut sent, buffered_from, clock::now()),
+                Err(err) if err.is_disconnect() => lost = Some(err),
+                Err(err) => engine.handle_tx_dropped(now, &err),
             }
         }
         for (stamp, item) in &sent {
@@ -304,11 +314,14 @@ impl<D: Devices> Shell<D> {
         };
         while let Some(publication) = engine.poll_publication() {
             match publication {
-                Publication::State(sample) => match ports.state.publisher.loan_uninit() {
-                    Ok(slot) => match slot.write_payload(*sample).send() {
-                        Ok(_) => state = true,
-                        Err(e) => failed(engine, "state", &e),
-                    },
+                Publication::State(mut sample) => match ports.state.publisher.loan_uninit() {
+                    Ok(slot) => {
+                        sample.published_ns = clock::now().as_nanos();
+                        match slot.write_payload(*sample).send() {
+                            Ok(_) => state = true,
+                            Err(e) => failed(engine, "state", &e),
+                        }
+                    }
                     Err(e) => failed(engine, "state", &e),
                 },
                 Publication::Frame(frame) => match ports.frames.publisher.send_copy(frame) {
@@ -339,6 +352,15 @@ impl<D: Devices> Shell<D> {
             if let Err(e) = notifier.notify() {
                 failed(engine, what, &e);
             }
+        }
+    }
+}
+
+/// The items from `from` on were written by the write that returned at `written`.
+fn restamp(sent: &mut [(Timestamp, Transmit)], from: Option<usize>, written: Timestamp) {
+    if let Some(from) = from {
+        for (stamp, _) in sent.iter_mut().skip(from) {
+            *stamp = written;
         }
     }
 }
