@@ -10,7 +10,7 @@ use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use chassis_interfaces::{SimKind, SimRequest};
+use chassis_interfaces::{ControlStatus, SimKind, SimRequest};
 use chassis_protocols::profile::Robot;
 use chassis_protocols::{Firmware, Injection, Profile, Timestamp, scout_mini, titan, xbot};
 use nix::poll::{PollFd, PollFlags};
@@ -32,14 +32,56 @@ pub fn firmware_for(profile: &Profile, now: Timestamp) -> BoxedFirmware {
     }
 }
 
+/// Why a [`SimRequest`] asks for nothing the simulator can do.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum BadSimRequest {
+    #[error("{0} must be a finite, non-negative number")]
+    NotFinite(&'static str),
+    #[error("unknown simulator request kind {0}")]
+    UnknownKind(u8),
+}
+
+/// Why an injection did not reach the simulated chassis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SimError {
+    #[error("the simulated chassis has stopped")]
+    Stopped,
+    #[error("the simulated chassis did not answer")]
+    NoAnswer,
+}
+
+/// Carries out `request` on the simulated chassis `sim`: the status and message to answer with.
+/// Without a chassis the answer is `absent` (why there is none).
+pub fn carry_out(
+    request: &SimRequest,
+    sim: Option<&SimHandle>,
+    absent: (u8, &str),
+) -> (u8, String) {
+    match (injection_of(request), sim) {
+        (Err(reason), _) => (ControlStatus::INVALID, reason.to_string()),
+        (Ok(_), None) => (absent.0, absent.1.to_string()),
+        (Ok(injection), Some(sim)) => {
+            let name = injection.name();
+            match sim.inject(injection) {
+                Ok(true) => (ControlStatus::OK, format!("{name} injected")),
+                Ok(false) => (
+                    ControlStatus::UNSUPPORTED,
+                    format!("the simulated {} has no {name}", sim.robot()),
+                ),
+                Err(reason) => (ControlStatus::REFUSED, reason.to_string()),
+            }
+        }
+    }
+}
+
 /// The injection a [`SimRequest`] asks for.
-pub fn injection_of(request: &SimRequest) -> Result<Injection, String> {
+pub fn injection_of(request: &SimRequest) -> Result<Injection, BadSimRequest> {
     let value = request.value;
-    let finite = |what: &str| {
+    let finite = |what: &'static str| {
         if value.is_finite() && value >= 0.0 {
             Ok(value)
         } else {
-            Err(format!("{what} must be a finite, non-negative number"))
+            Err(BadSimRequest::NotFinite(what))
         }
     };
     let on = request.flag != 0;
@@ -74,7 +116,7 @@ pub fn injection_of(request: &SimRequest) -> Result<Injection, String> {
         SimKind::FLOOD => Injection::Flood {
             frames_per_s: finite("frame rate")?.min(1e6) as u32,
         },
-        other => return Err(format!("unknown simulator request kind {other}")),
+        other => return Err(BadSimRequest::UnknownKind(other)),
     })
 }
 
@@ -150,17 +192,17 @@ impl SimHandle {
 
     /// Injects a fault; returns whether this robot has such a thing. Waits at most 200 ms for the
     /// simulator's answer.
-    pub fn inject(&self, injection: Injection) -> Result<bool, String> {
+    pub fn inject(&self, injection: Injection) -> Result<bool, SimError> {
         let (reply, answer) = mpsc::channel();
         self.commands
             .send(SimCommandBox(SimCommand::Inject(injection, reply)))
-            .map_err(|_| "the simulated chassis has stopped".to_string())?;
+            .map_err(|_| SimError::Stopped)?;
         // The doorbell only wakes the thread early: a full or closed socket means it is awake
         // already or has ended, and the answer (or its absence) below says which.
         self.doorbell.send(&[1]).ok();
         answer
             .recv_timeout(Duration::from_millis(200))
-            .map_err(|_| "the simulated chassis did not answer".to_string())
+            .map_err(|_| SimError::NoAnswer)
     }
 
     /// True while the simulator thread runs.

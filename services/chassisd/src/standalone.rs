@@ -21,7 +21,7 @@ use crate::bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
 use crate::clock;
 use crate::config::Config;
 use crate::ipc::{IpcError, iceoryx_config, open_desk};
-use crate::sim::{SimHandle, firmware_for, injection_of};
+use crate::sim::{SimHandle, carry_out, firmware_for};
 
 /// Why the simulated chassis stopped (or never started).
 #[derive(Debug, Error)]
@@ -161,24 +161,18 @@ pub fn run(config: &Config) -> Result<(), StandaloneError> {
         desk.listener.try_wait(|_| {}).ok();
         while let Ok(Some(active)) = desk.server.receive() {
             let request = *active.payload();
-            let (status, message) = match (injection_of(&request), &chassis) {
-                (Err(reason), _) => (ControlStatus::INVALID, reason),
-                (Ok(_), Chassis::Down { .. }) => (
-                    ControlStatus::REFUSED,
-                    "the simulated chassis has lost its bus".to_string(),
-                ),
-                (Ok(injection), Chassis::Running(sim)) => {
-                    let name = injection.name();
-                    match sim.inject(injection) {
-                        Ok(true) => (ControlStatus::OK, format!("{name} injected")),
-                        Ok(false) => (
-                            ControlStatus::UNSUPPORTED,
-                            format!("the simulated {} has no {name}", sim.robot()),
-                        ),
-                        Err(reason) => (ControlStatus::REFUSED, reason),
-                    }
-                }
+            let running = match &chassis {
+                Chassis::Running(sim) => Some(sim),
+                Chassis::Down { .. } => None,
             };
+            let (status, message) = carry_out(
+                &request,
+                running,
+                (
+                    ControlStatus::REFUSED,
+                    "the simulated chassis has lost its bus",
+                ),
+            );
             info!(status = ControlStatus::name(status), "{message}");
             if let Err(e) = active.send_copy(ControlResponse::new(request.seq, status, &message)) {
                 warn!("cannot answer: {e}");

@@ -171,22 +171,35 @@ pub fn command_to_request(command: &Command) -> Option<chassis_interfaces::Contr
     })
 }
 
+/// Why a received control request makes no sense.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum BadControlRequest {
+    #[error("{what}: {value} is neither 0 nor 1")]
+    NotAFlag { what: &'static str, value: u8 },
+    #[error("{what} is not a finite number")]
+    NotFinite { what: &'static str },
+    #[error("mode {0} is neither command nor standby")]
+    UnknownMode(u8),
+    #[error("unknown control request kind {0}")]
+    UnknownKind(u8),
+}
+
 /// What a received control request asks for, or why it makes no sense.
 pub fn request_to_action(
     request: &chassis_interfaces::ControlRequest,
-) -> Result<ControlAction, String> {
+) -> Result<ControlAction, BadControlRequest> {
     use chassis_interfaces::{ControlKind, ControlMode};
-    let flag = |i: usize, what: &str| match request.arg[i] {
+    let flag = |i: usize, what: &'static str| match request.arg[i] {
         0 => Ok(false),
         1 => Ok(true),
-        other => Err(format!("{what}: {other} is neither 0 nor 1")),
+        value => Err(BadControlRequest::NotAFlag { what, value }),
     };
-    let value = |i: usize, what: &str| {
+    let value = |i: usize, what: &'static str| {
         let v = f64::from(request.value[i]);
         if v.is_finite() {
             Ok(v)
         } else {
-            Err(format!("{what} is not a finite number"))
+            Err(BadControlRequest::NotFinite { what })
         }
     };
     let lock_name = || match request.name() {
@@ -198,7 +211,7 @@ pub fn request_to_action(
             take_control: match request.arg[0] {
                 ControlMode::COMMAND => true,
                 ControlMode::STANDBY => false,
-                other => return Err(format!("mode {other} is neither command nor standby")),
+                other => return Err(BadControlRequest::UnknownMode(other)),
             },
         },
         ControlKind::BRAKE => Command::Brake {
@@ -232,7 +245,7 @@ pub fn request_to_action(
         },
         ControlKind::LOCK_RELEASE => return Ok(ControlAction::LockRelease(lock_name())),
         ControlKind::LOCK_ENGAGE => return Ok(ControlAction::LockEngage(lock_name())),
-        other => return Err(format!("unknown control request kind {other}")),
+        other => return Err(BadControlRequest::UnknownKind(other)),
     }))
 }
 
@@ -307,7 +320,7 @@ mod tests {
         use chassis_interfaces::{ControlKind, ControlRequest};
         let r = ControlRequest::new(ControlKind::BRAKE).with_arg(0, 7);
         assert_eq!(
-            request_to_action(&r),
+            request_to_action(&r).map_err(|e| e.to_string()),
             Err("brake: 7 is neither 0 nor 1".into())
         );
         let r = ControlRequest::new(ControlKind::LIFT)

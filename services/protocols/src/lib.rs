@@ -32,7 +32,8 @@ pub mod xbot;
 
 pub use can::{CanFrame, CanFrameError, CandumpLine};
 pub use command::{
-    Command, CommandError, ControlAction, Planned, Turn, command_to_request, request_to_action,
+    BadControlRequest, Command, CommandError, ControlAction, Planned, Turn, command_to_request,
+    request_to_action,
 };
 pub use driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
 pub use error::{DecodeError, EncodeError};

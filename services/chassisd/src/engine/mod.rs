@@ -367,7 +367,7 @@ impl Engine {
     pub fn handle_control(&mut self, now: Timestamp, ticket: Ticket, request: &ControlRequest) {
         let seq = request.seq;
         let (status, message) = match request_to_action(request) {
-            Err(reason) => (ControlStatus::INVALID, reason),
+            Err(reason) => (ControlStatus::INVALID, reason.to_string()),
             Ok(ControlAction::LockRelease(name)) => {
                 self.undecided = true;
                 match self.mux.release_lock(&name) {

@@ -13,7 +13,7 @@ use crate::clock;
 use crate::engine::{Device, Engine, Publication, Wake};
 use crate::ipc::Ports;
 use crate::setup::Devices;
-use crate::sim::injection_of;
+use crate::sim::carry_out;
 
 impl<D: Devices> Shell<D> {
     /// One pass after a wake-up (see the engine's documentation for the order). Requests go
@@ -132,24 +132,11 @@ impl<D: Devices> Shell<D> {
         }
         while let Ok(Some(active)) = desk.server.receive() {
             let request = *active.payload();
-            let (status, message) = match (injection_of(&request), &self.sim) {
-                (Err(reason), _) => (ControlStatus::INVALID, reason),
-                (Ok(_), None) => (
-                    ControlStatus::UNSUPPORTED,
-                    "the bus is not the simulator".to_string(),
-                ),
-                (Ok(injection), Some(sim)) => {
-                    let name = injection.name();
-                    match sim.inject(injection) {
-                        Ok(true) => (ControlStatus::OK, format!("{name} injected")),
-                        Ok(false) => (
-                            ControlStatus::UNSUPPORTED,
-                            format!("the simulated {} has no {name}", sim.robot()),
-                        ),
-                        Err(reason) => (ControlStatus::REFUSED, reason),
-                    }
-                }
-            };
+            let (status, message) = carry_out(
+                &request,
+                self.sim.as_ref(),
+                (ControlStatus::UNSUPPORTED, "the bus is not the simulator"),
+            );
             info!(status = ControlStatus::name(status), "simulator: {message}");
             let mut response = ControlResponse::new(request.seq, status, &message);
             response.stamp_ns = now.as_nanos();
