@@ -295,6 +295,54 @@ pub fn wait_for(timeout: Duration, mut condition: impl FnMut() -> bool) -> Optio
     }
 }
 
+/// The service's tick: the heartbeat grid and the period of its mux status, 20 ms.
+pub const TICK: Duration = Duration::from_millis(20);
+
+/// How late a mux decision a timing test observes may be, on top of the rule it checks: two
+/// [`TICK`]s. The service decides at the dead source's expiry (`Mux::next_deadline` in chassisd),
+/// but on a loaded machine its loop wakes late (one tick of allowance), and the test reads the
+/// newest status, so a test thread that wakes late sees the decision in the status of a later
+/// tick (the second). Measured on a 2-core machine shared with other builds (load average 4-6):
+/// at most 15 ms past the rule in ten runs of the service suite.
+pub const DECISION_ALLOWANCE: Duration = Duration::from_millis(2 * 20);
+
+/// Calls `between` (the test's own sends) and reads the newest mux status until one stamped after
+/// `since_ns` satisfies `condition`, for at most `timeout`. Returns that status's stamp minus
+/// `since_ns`: when the service decided, not when the test happened to look.
+///
+/// [`MuxStatus`] samples are read newest-first, so a decision can be seen one status late
+/// ([`DECISION_ALLOWANCE`]).
+pub fn decided_after(
+    robot: &mut Robot,
+    since_ns: u64,
+    timeout: Duration,
+    mut between: impl FnMut(),
+    mut condition: impl FnMut(&MuxStatus) -> bool,
+) -> Option<Duration> {
+    let end = Instant::now() + timeout;
+    while Instant::now() < end {
+        between();
+        let _ = robot.wait_mux(Duration::from_millis(5));
+        if let Ok(Some(m)) = robot.latest_mux()
+            && m.stamp_ns > since_ns
+            && condition(&m)
+        {
+            return Some(Duration::from_nanos(m.stamp_ns - since_ns));
+        }
+    }
+    None
+}
+
+/// The timeout of source `name` as the running mux reports it.
+pub fn source_timeout(m: &MuxStatus, name: &str) -> Duration {
+    let source = m
+        .sources()
+        .iter()
+        .find(|s| s.name() == name)
+        .unwrap_or_else(|| panic!("the mux has no source {name}"));
+    Duration::from_millis(u64::from(source.timeout_ms))
+}
+
 /// Reads states for `duration` and returns the largest |linear speed| seen.
 pub fn max_speed(robot: &mut Robot, duration: Duration) -> f32 {
     let end = Instant::now() + duration;
