@@ -1,11 +1,15 @@
 //! Renders docs/RELIABILITY.md from the figures the fault tests and the soak recorded.
 //!
 //! ```text
-//! reliability-report run-info DIR NAME COMMAND   # DIR/NAME-run.json: date, commit, machine
-//! reliability-report render DIR OUT              # faults.jsonl + soak.jsonl → OUT (markdown)
+//! reliability-report begin DIR NAME COMMAND [--allow-dirty]
+//!                           # DIR/NAME-run.json: date, commit, machine, /proc/stat now
+//! reliability-report end DIR NAME   # adds the host's steal time since `begin`
+//! reliability-report render DIR OUT # faults.jsonl + soak.jsonl → OUT (markdown)
 //! ```
 //!
-//! `scripts/reliability` and `scripts/soak` call it; see their headers.
+//! `begin` refuses a git tree with uncommitted changes: the figures must belong to a commit.
+//! `--allow-dirty` lets a local run through; its section then says DIRTY. `scripts/reliability`
+//! and `scripts/soak` call it; see their headers.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -17,11 +21,84 @@ use serde::{Deserialize, Serialize};
 
 /// When, where and how a set of figures was measured.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(default)]
 struct RunInfo {
     date: String,
     commit: String,
+    /// The tree had uncommitted changes (allowed with `--allow-dirty`).
+    dirty: bool,
     machine: String,
     command: String,
+    /// `/proc/stat`'s total CPU time and steal time at `begin`, clock ticks.
+    cpu_start: Option<CpuTimes>,
+    /// The host's steal time between `begin` and `end`.
+    steal: Option<Steal>,
+}
+
+/// The first line of `/proc/stat`: CPU time of every CPU together, clock ticks.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+struct CpuTimes {
+    total: u64,
+    steal: u64,
+}
+
+impl CpuTimes {
+    fn read() -> anyhow::Result<Self> {
+        let stat = std::fs::read_to_string("/proc/stat").context("reading /proc/stat")?;
+        let line = stat
+            .lines()
+            .find(|l| l.starts_with("cpu "))
+            .context("/proc/stat has no cpu line")?;
+        let fields: Vec<u64> = line
+            .split_whitespace()
+            .skip(1)
+            .map(|v| v.parse().context("a field of /proc/stat's cpu line"))
+            .collect::<anyhow::Result<_>>()?;
+        // user nice system idle iowait irq softirq steal guest guest_nice; guest time is
+        // already counted in user and nice.
+        let steal = *fields.get(7).context("/proc/stat has no steal column")?;
+        Ok(Self {
+            total: fields.iter().take(8).sum(),
+            steal,
+        })
+    }
+}
+
+/// Steal time over a run: time the host ran something else while this machine's CPUs wanted
+/// to run.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct Steal {
+    steal_s: f64,
+    cpu_time_s: f64,
+}
+
+impl Steal {
+    fn between(start: CpuTimes, end: CpuTimes) -> Self {
+        let hz = ticks_per_second();
+        Self {
+            steal_s: end.steal.saturating_sub(start.steal) as f64 / hz,
+            cpu_time_s: end.total.saturating_sub(start.total) as f64 / hz,
+        }
+    }
+
+    fn text(&self) -> String {
+        let share = if self.cpu_time_s > 0.0 {
+            100.0 * self.steal_s / self.cpu_time_s
+        } else {
+            0.0
+        };
+        format!(
+            "{:.2} s of {:.0} s of CPU time ({share:.2} %)",
+            self.steal_s, self.cpu_time_s
+        )
+    }
+}
+
+fn ticks_per_second() -> f64 {
+    nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK)
+        .ok()
+        .flatten()
+        .map_or(100.0, |t| t as f64)
 }
 
 fn output(program: &str, args: &[&str]) -> String {
@@ -57,29 +134,72 @@ fn machine() -> String {
         format!(" (systemd-detect-virt: {virt})")
     };
     format!(
-        "{cpus} × {model}{memory}, Linux {}{virt}",
+        "{model}, {cpus} cores{memory}, Linux {}{virt}",
         output("uname", &["-r"])
     )
 }
 
-fn run_info(dir: &Path, name: &str, command: &str) -> anyhow::Result<()> {
+/// The commit checked out, and the files changed since (tracked files only).
+fn git_state() -> anyhow::Result<(String, Vec<String>)> {
     let commit = output("git", &["rev-parse", "--short", "HEAD"]);
-    let dirty = !output("git", &["status", "--porcelain", "--untracked-files=no"]).is_empty();
+    if commit.is_empty() {
+        bail!("not a git checkout (or git is missing): the figures would belong to no commit");
+    }
+    let changed = output("git", &["status", "--porcelain", "--untracked-files=no"])
+        .lines()
+        .map(|l| l.trim().to_string())
+        .collect();
+    Ok((commit, changed))
+}
+
+fn info_path(dir: &Path, name: &str) -> PathBuf {
+    dir.join(format!("{name}-run.json"))
+}
+
+fn write_info(path: &Path, info: &RunInfo) -> anyhow::Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(info)? + "\n")
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+fn begin(dir: &Path, name: &str, command: &str, allow_dirty: bool) -> anyhow::Result<()> {
+    let (commit, changed) = git_state()?;
+    if !changed.is_empty() && !allow_dirty {
+        bail!(
+            "the git tree has uncommitted changes ({}): figures for the docs must come from a \
+             commit. Commit them, or pass --allow-dirty for a local run (its section then says \
+             DIRTY)",
+            changed.join(", ")
+        );
+    }
     let info = RunInfo {
         date: output("date", &["-u", "+%Y-%m-%d %H:%M UTC"]),
-        commit: if dirty {
-            format!("{commit} (with uncommitted changes)")
-        } else {
-            commit
-        },
+        commit,
+        dirty: !changed.is_empty(),
         machine: machine(),
         command: command.to_string(),
+        cpu_start: Some(CpuTimes::read()?),
+        steal: None,
     };
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let path = dir.join(format!("{name}-run.json"));
-    std::fs::write(&path, serde_json::to_string_pretty(&info)? + "\n")
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    // The figures of an earlier run are not this run's.
+    let _ = std::fs::remove_file(dir.join(format!("{name}.jsonl")));
+    write_info(&info_path(dir, name), &info)
+}
+
+fn end(dir: &Path, name: &str) -> anyhow::Result<()> {
+    let path = info_path(dir, name);
+    let mut info = read_info(&path)
+        .with_context(|| format!("{} is missing: `begin` did not run", path.display()))?;
+    let start = info
+        .cpu_start
+        .with_context(|| format!("{} has no start figures", path.display()))?;
+    info.steal = Some(Steal::between(start, CpuTimes::read()?));
+    // The tree must still be the commit the run began on.
+    let (commit, changed) = git_state()?;
+    if commit != info.commit || !changed.is_empty() {
+        info.dirty = true;
+    }
+    write_info(&path, &info)
 }
 
 fn read_figures(path: &Path) -> anyhow::Result<Vec<Figure>> {
@@ -111,9 +231,19 @@ fn verdict(pass: bool) -> &'static str {
 fn provenance(out: &mut String, info: Option<&RunInfo>) {
     match info {
         Some(info) => {
+            let commit = if info.dirty {
+                format!("`{}` — DIRTY: uncommitted changes", info.commit)
+            } else {
+                format!("`{}`", info.commit)
+            };
+            let steal = info.steal.as_ref().map_or_else(
+                || "not measured (the run did not finish)".to_string(),
+                Steal::text,
+            );
             out.push_str(&format!(
-                "Measured {} on commit `{}`; machine: {}.\nReproduce: `{}`\n\n",
-                info.date, info.commit, info.machine, info.command
+                "Measured {} on commit {commit}; machine: {}; the host's steal time over the \
+                 run: {steal}.\nReproduce: `{}`\n\n",
+                info.date, info.machine, info.command
             ));
         }
         None => out.push_str("(no run information recorded)\n\n"),
@@ -338,7 +468,11 @@ fn main() -> ExitCode {
         .collect::<Vec<_>>()
         .as_slice()
     {
-        ["run-info", dir, name, command] => run_info(Path::new(dir), name, command),
+        ["begin", dir, name, command] => begin(Path::new(dir), name, command, false),
+        ["begin", dir, name, command, "--allow-dirty"] => {
+            begin(Path::new(dir), name, command, true)
+        }
+        ["end", dir, name] => end(Path::new(dir), name),
         ["render", dir, out] => match render(Path::new(dir), &PathBuf::from(out)) {
             Ok(0) => Ok(()),
             Ok(failures) => Err(anyhow::anyhow!(
@@ -348,7 +482,8 @@ fn main() -> ExitCode {
         },
         _ => {
             eprintln!(
-                "usage: reliability-report run-info DIR NAME COMMAND\n       \
+                "usage: reliability-report begin DIR NAME COMMAND [--allow-dirty]\n       \
+                 reliability-report end DIR NAME\n       \
                  reliability-report render DIR OUT"
             );
             return ExitCode::from(2);
