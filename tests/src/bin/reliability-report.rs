@@ -448,7 +448,7 @@ fn render(dir: &Path, out_path: &Path) -> anyhow::Result<usize> {
     out.push_str(NOTES);
     std::fs::write(out_path, out).with_context(|| format!("writing {}", out_path.display()))?;
     println!(
-        "{}: fault matrix: {}; soak: {}",
+        "{}\n  fault matrix: {}\n  soak: {}",
         out_path.display(),
         summary(&fault_rows),
         if soak_rows.is_empty() {
