@@ -295,6 +295,54 @@ pub fn wait_for(timeout: Duration, mut condition: impl FnMut() -> bool) -> Optio
     }
 }
 
+/// The service's tick: the heartbeat grid and the period of its mux status, 20 ms.
+pub const TICK: Duration = Duration::from_millis(20);
+
+/// How late a mux decision a timing test observes may be, on top of the rule it checks: two
+/// [`TICK`]s. The service decides at the dead source's expiry (`Mux::next_deadline` in chassisd),
+/// but on a loaded machine its loop wakes late (one tick of allowance), and the test reads the
+/// newest status, so a test thread that wakes late sees the decision in the status of a later
+/// tick (the second). Measured on a 2-core machine shared with other builds (load average 4-6):
+/// at most 15 ms past the rule in ten runs of the service suite.
+pub const DECISION_ALLOWANCE: Duration = Duration::from_millis(2 * 20);
+
+/// Calls `between` (the test's own sends) and reads the newest mux status until one stamped after
+/// `since_ns` satisfies `condition`, for at most `timeout`. Returns that status's stamp minus
+/// `since_ns`: when the service decided, not when the test happened to look.
+///
+/// [`MuxStatus`] samples are read newest-first, so a decision can be seen one status late
+/// ([`DECISION_ALLOWANCE`]).
+pub fn decided_after(
+    robot: &mut Robot,
+    since_ns: u64,
+    timeout: Duration,
+    mut between: impl FnMut(),
+    mut condition: impl FnMut(&MuxStatus) -> bool,
+) -> Option<Duration> {
+    let end = Instant::now() + timeout;
+    while Instant::now() < end {
+        between();
+        let _ = robot.wait_mux(Duration::from_millis(5));
+        if let Ok(Some(m)) = robot.latest_mux()
+            && m.stamp_ns > since_ns
+            && condition(&m)
+        {
+            return Some(Duration::from_nanos(m.stamp_ns - since_ns));
+        }
+    }
+    None
+}
+
+/// The timeout of source `name` as the running mux reports it.
+pub fn source_timeout(m: &MuxStatus, name: &str) -> Duration {
+    let source = m
+        .sources()
+        .iter()
+        .find(|s| s.name() == name)
+        .unwrap_or_else(|| panic!("the mux has no source {name}"));
+    Duration::from_millis(u64::from(source.timeout_ms))
+}
+
 /// Reads states for `duration` and returns the largest |linear speed| seen.
 pub fn max_speed(robot: &mut Robot, duration: Duration) -> f32 {
     let end = Instant::now() + duration;
@@ -333,8 +381,9 @@ pub fn mux(robot: &mut Robot) -> MuxStatus {
 pub const RELIABILITY_DIR_ENV: &str = "CHASSIS_RELIABILITY_DIR";
 
 /// One row of the reliability table: a fault, how the test injected it, what the system did,
-/// and the figure measured. `rank` orders the table (the issue's order of faults); `suite` and
-/// `test` name the test that reproduces it (`cargo test -p chassis-tests --test SUITE TEST`).
+/// and the figure measured. `rank` groups the rows in the JSON lines (the table's order is
+/// [`FAULT_ROWS`]'s); `suite` and `test` name the test that reproduces it
+/// (`cargo test -p chassis-tests --test SUITE TEST`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Figure {
     pub rank: u32,
@@ -350,6 +399,197 @@ pub struct Figure {
     pub test: String,
 }
 
+/// A row the reliability report expects: the test that records it and the fault it names. The
+/// report is rendered from this list, not from the rows that happened to be recorded: a test
+/// that failed before recording its figure shows as a failed row naming the test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ExpectedRow {
+    pub suite: &'static str,
+    pub test: &'static str,
+    pub fault: &'static str,
+}
+
+impl ExpectedRow {
+    /// True when `figure` is this row's.
+    pub fn matches(&self, figure: &Figure) -> bool {
+        figure.suite == self.suite && figure.test == self.test && figure.fault == self.fault
+    }
+
+    /// The command that reproduces the row.
+    pub fn command(&self) -> String {
+        format!(
+            "cargo test -p chassis-tests --test {} {}",
+            self.suite, self.test
+        )
+    }
+}
+
+/// Every row of the fault matrix (`faults.jsonl`), in the order of the table.
+pub const FAULT_ROWS: &[ExpectedRow] = &[
+    ExpectedRow {
+        suite: "faults",
+        test: "sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_reconnect",
+        fault: "SIGKILL of chassisd (simulated bus)",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeout",
+        fault: "SIGKILL of chassisd (slcan over a pty to `chassisd sim`)",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived",
+        fault: "SIGKILL of `chassisd sim` (the XBot's serial link over a pty hangs up)",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "sigkill_of_the_safety_monitor_at_random_moments_stops_the_robot_within_its_timeout",
+        fault: "SIGKILL of chassis-safety (the required source)",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "sigkill_of_the_planner_at_random_moments_ends_its_motion_with_its_timeout",
+        fault: "SIGKILL of chassis-planner (figure-eights)",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "sigkill_of_chassis_pub_at_random_moments_ends_its_motion_with_its_timeout",
+        fault: "SIGKILL of `chassis pub` (as teleop)",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "sigkill_of_chassis_teleop_in_a_terminal_ends_its_motion_with_its_timeout",
+        fault: "SIGKILL of chassis-teleop (a key held in a terminal)",
+    },
+    ExpectedRow {
+        suite: "service",
+        test: "titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up",
+        fault: "slcan adapter hang-up (TITAN over an slcan pty)",
+    },
+    ExpectedRow {
+        suite: "serial",
+        test: "xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_hang_up",
+        fault: "serial line hang-up (XBot over a pty)",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the TITAN's bus, 10 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the TITAN's bus, 100 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the TITAN's bus, 1000 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
+        fault: "bad checksums on the SCOUT MINI's CAN frames, 10 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
+        fault: "bad checksums on the SCOUT MINI's CAN frames, 100 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
+        fault: "bad checksums on the SCOUT MINI's CAN frames, 250 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
+        fault: "garbage bytes on the XBot's serial line, 100 bytes/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
+        fault: "garbage bytes on the XBot's serial line, 1000 bytes/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
+        fault: "garbage bytes on the XBot's serial line, 10000 bytes/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
+        fault: "bad checksums on the XBot's serial reports, 5 reports/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
+        fault: "bad checksums on the XBot's serial reports, 20 reports/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "a_rogue_client_flooding_requests_neither_wins_nor_shakes_the_heartbeat",
+        fault: "a rogue client flooding the `planner` source",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second",
+        fault: "NaN, ±inf and absurd requests (1000 m/s, -100 rad/s, 3 rad steering)",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "a_second_publisher_on_the_safety_source_is_refused_and_the_monitor_unharmed",
+        fault: "a second publisher on the `safety` source while chassis-safety holds it",
+    },
+    ExpectedRow {
+        suite: "service",
+        test: "a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed",
+        fault: "a second chassisd for the same robot name",
+    },
+];
+
+/// Every row of the soak's table (`soak.jsonl`), in the order of the table.
+pub const SOAK_ROWS: &[ExpectedRow] = &[
+    ExpectedRow {
+        suite: "soak",
+        test: "a_titan_on_a_full_bus_with_every_client_runs_for_minutes_without_gaps_or_growth",
+        fault: "frames: sequence gaps",
+    },
+    ExpectedRow {
+        suite: "soak",
+        test: "a_titan_on_a_full_bus_with_every_client_runs_for_minutes_without_gaps_or_growth",
+        fault: "state: sequence gaps",
+    },
+    ExpectedRow {
+        suite: "soak",
+        test: "a_titan_on_a_full_bus_with_every_client_runs_for_minutes_without_gaps_or_growth",
+        fault: "resident memory of chassisd",
+    },
+    ExpectedRow {
+        suite: "soak",
+        test: "a_titan_on_a_full_bus_with_every_client_runs_for_minutes_without_gaps_or_growth",
+        fault: "open file descriptors of chassisd",
+    },
+    ExpectedRow {
+        suite: "soak",
+        test: "a_titan_on_a_full_bus_with_every_client_runs_for_minutes_without_gaps_or_growth",
+        fault: "heartbeat (0x111) jitter",
+    },
+    ExpectedRow {
+        suite: "soak",
+        test: "a_titan_on_a_full_bus_with_every_client_runs_for_minutes_without_gaps_or_growth",
+        fault: "safety and drive",
+    },
+];
+
+/// The expected rows of the figures file `file` (`faults.jsonl` or `soak.jsonl`).
+pub fn expected_rows(file: &str) -> &'static [ExpectedRow] {
+    match file {
+        "soak.jsonl" => SOAK_ROWS,
+        _ => FAULT_ROWS,
+    }
+}
+
 /// Appends `row` to `$CHASSIS_RELIABILITY_DIR/faults.jsonl` (or to `file` under that directory
 /// with [`record_figure_in`]) and prints it; without the variable it is only printed.
 pub fn record_figure(row: &Figure) {
@@ -359,6 +599,18 @@ pub fn record_figure(row: &Figure) {
 /// Like [`record_figure`], into `$CHASSIS_RELIABILITY_DIR/<file>`.
 pub fn record_figure_in(file: &str, row: &Figure) {
     use std::io::Write;
+    assert!(
+        expected_rows(file).iter().any(|e| e.matches(row)),
+        "the figure of '{}' ({} {}) is not in the report's list of rows ({}): add it there",
+        row.fault,
+        row.suite,
+        row.test,
+        if file == "soak.jsonl" {
+            "SOAK_ROWS"
+        } else {
+            "FAULT_ROWS"
+        }
+    );
     eprintln!(
         "FIGURE [{}] {}: {} — {}",
         if row.pass { "pass" } else { "FAIL" },
@@ -587,4 +839,31 @@ impl Drop for Tmux {
 /// `text` quoted for a POSIX shell command line.
 pub fn quote(text: &str) -> String {
     format!("'{}'", text.replace('\'', r"'\''"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every row the report expects names a test that exists in its suite, and no row twice.
+    #[test]
+    fn every_expected_reliability_row_names_an_existing_test() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
+        for (i, row) in FAULT_ROWS.iter().chain(SOAK_ROWS).enumerate() {
+            let source = std::fs::read_to_string(dir.join(format!("{}.rs", row.suite)))
+                .unwrap_or_else(|e| panic!("{}: {e}", row.suite));
+            assert!(
+                source.contains(&format!("fn {}()", row.test)),
+                "{} has no test {}",
+                row.suite,
+                row.test
+            );
+            let again = FAULT_ROWS
+                .iter()
+                .chain(SOAK_ROWS)
+                .skip(i + 1)
+                .any(|other| other == row);
+            assert!(!again, "{row:?} listed twice");
+        }
+    }
 }

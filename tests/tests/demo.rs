@@ -42,7 +42,9 @@ fn chassis_demo_drives_figure_eights_under_the_safety_monitor_and_ctrl_c_stops_e
     assert!(driving.is_some(), "the demo is not driving\n{}", env.logs());
     let safety = mux(&mut robot).sources()[0];
     assert_eq!(safety.name(), "safety");
-    assert!(safety.has(SourceFlags::FRESH | SourceFlags::REQUIRED));
+    // `has` is true if any of the flags given is set: each flag is asserted on its own.
+    assert!(safety.has(SourceFlags::REQUIRED), "{safety:?}");
+    assert!(safety.has(SourceFlags::FRESH), "{safety:?}");
     assert_eq!(
         processes_named(&name).len(),
         3,

@@ -28,6 +28,64 @@ fn drive(robot: &mut Robot, source: &mut Source, request: VelocityRequest, for_:
     peak
 }
 
+/// The length of one XBot status report on the line, bytes.
+const XBOT_REPORT_BYTES: u64 = 75;
+
+/// The bytes the service read, from its frame tap, with the tap's sequence gaps.
+#[derive(Debug, Default)]
+struct TapBytes {
+    rx_bytes: u64,
+    last_seq: u64,
+    lost: u64,
+}
+
+impl TapBytes {
+    fn drain(&mut self, tap: &FrameTap) {
+        tap.drain(|f| {
+            if self.last_seq != 0 && f.seq > self.last_seq + 1 {
+                self.lost += f.seq - self.last_seq - 1;
+            }
+            self.last_seq = f.seq;
+            if f.direction == FrameDirection::RX {
+                self.rx_bytes += u64::from(f.len);
+            }
+        })
+        .unwrap();
+    }
+}
+
+/// Asks the chassis for 0.3 s of silence and waits until the service has handled everything
+/// read before it (a state sample is out at least every 100 ms); returns that state, the tap
+/// drained to the same point.
+fn quiet_moment(
+    robot: &mut Robot,
+    teleop: &mut Source,
+    go: VelocityRequest,
+    tap: &FrameTap,
+    wire: &mut TapBytes,
+) -> ChassisState {
+    let answer = robot
+        .sim(
+            SimRequest {
+                kind: SimKind::SILENCE,
+                value: 0.3,
+                ..SimRequest::default()
+            },
+            Duration::from_secs(3),
+        )
+        .unwrap();
+    assert!(answer.is_ok(), "{}", answer.message());
+    let end = Instant::now() + Duration::from_millis(200);
+    while Instant::now() < end {
+        teleop.send(go).unwrap();
+        wire.drain(tap);
+        pause(Duration::from_millis(20));
+    }
+    let s = state(robot);
+    wire.drain(tap);
+    s
+}
+
 #[test]
 fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_hang_up() {
     let mut env = Env::new("xbot-pty");
@@ -76,21 +134,50 @@ fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_han
     assert!(s.is_valid(Group::Imu) && s.is_valid(Group::Ranges));
     assert_eq!(s.link.rx_bad_checksum + s.link.rx_decode_errors, 0);
 
-    // Garbage on the line: counted, no good frame lost, still driving.
-    let out = env.chassis(&["sim", "--name", &n, "garbage", "3000"]);
+    // Garbage on the line: every byte of it counted, every good report on the wire decoded,
+    // still driving. The reports on the wire and the service's counters are compared at quiet
+    // moments (a short injected silence of the chassis), like the storms of the fault matrix.
+    let tap = robot.frames(2048).unwrap();
+    let go = VelocityRequest::twist(0.4, 0.0);
+    let mut wire = TapBytes::default();
+    let before = quiet_moment(&mut robot, &mut teleop, go, &tap, &mut wire);
+    wire.rx_bytes = 0;
+    const GARBAGE: u64 = 3000;
+    let out = env.chassis(&["sim", "--name", &n, "garbage", &GARBAGE.to_string()]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let peak = drive(
-        &mut robot,
-        &mut teleop,
-        VelocityRequest::twist(0.4, 0.0),
-        Duration::from_secs(1),
+    let end = Instant::now() + Duration::from_secs(1);
+    let mut peak = 0.0f32;
+    while Instant::now() < end {
+        teleop.send(go).unwrap();
+        wire.drain(&tap);
+        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(20)) {
+            peak = peak.max(s.motion.linear_mps.abs());
+        }
+    }
+    let after = quiet_moment(&mut robot, &mut teleop, go, &tap, &mut wire);
+    let discarded = after.link.rx_bytes_discarded - before.link.rx_bytes_discarded;
+    let decoded = after.link.rx_frames - before.link.rx_frames;
+    // Every byte read is on the tap: what was not discarded is whole 75-byte reports.
+    let good_bytes = wire.rx_bytes - discarded;
+    eprintln!(
+        "garbage {GARBAGE} bytes: {} bytes read, {discarded} discarded, {decoded} reports \
+         decoded of {} good bytes; tap gaps {}; peak {peak:.2} m/s",
+        wire.rx_bytes, good_bytes, wire.lost
     );
-    assert!(peak > 0.3);
-    assert!(state(&mut robot).link.rx_bytes_discarded >= 3000);
+    assert_eq!(wire.lost, 0, "the tap lost frames");
+    assert_eq!(discarded, GARBAGE, "garbage bytes counted");
+    assert_eq!(good_bytes % XBOT_REPORT_BYTES, 0, "a report was cut");
+    assert!(decoded > 0, "no report during the garbage");
+    assert_eq!(
+        decoded,
+        good_bytes / XBOT_REPORT_BYTES,
+        "good reports on the wire vs decoded"
+    );
+    assert!(peak > 0.3, "peak {peak} m/s during the garbage");
 
     env.proc(sim).signal(Signal::SIGKILL);
     let killed = Instant::now();

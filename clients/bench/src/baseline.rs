@@ -2,7 +2,9 @@
 //! `ChassisState` (840 bytes) over iceoryx2 (event-driven and busy-polling), a Unix datagram
 //! socket and UDP on loopback. One-way latency comes from `CLOCK_MONOTONIC` stamps (one clock for
 //! the whole machine), in both directions of every round trip — or, paced like the service paths'
-//! requests, the first hop after each pause only.
+//! requests, the first hop after each pause only. A paced run can give the receiving side the
+//! life chassisd's loop has on a robot ([`Load`]): another process waking it at the chassis'
+//! feedback rate, and a periodic tick of its own; those wake-ups' own hops are measured too.
 
 use std::io::{BufRead, BufReader};
 use std::net::UdpSocket;
@@ -28,6 +30,9 @@ pub enum Transport {
     IceoryxEvent,
     /// iceoryx2 publish-subscribe, the receiver polling continuously.
     IceoryxSpin,
+    /// iceoryx2 publish-subscribe, the receiver polling for [`HYBRID_SPIN`] after each
+    /// activity, then blocked on an event listener (chassisd's `--loop hybrid`).
+    IceoryxHybrid,
     /// A Unix datagram socket, blocking receive.
     Uds,
     /// UDP on 127.0.0.1, blocking receive.
@@ -39,10 +44,33 @@ impl Transport {
         match self {
             Transport::IceoryxEvent => "iceoryx2 event",
             Transport::IceoryxSpin => "iceoryx2 busy-poll",
+            Transport::IceoryxHybrid => "iceoryx2 poll-then-block",
             Transport::Uds => "unix socket",
             Transport::Udp => "udp loopback",
         }
     }
+}
+
+/// How long a hybrid receiver keeps polling after each activity: chassisd's `--spin-us` in the
+/// benchmark's hybrid runs, and the poll-then-block baseline's window.
+pub const HYBRID_SPIN: Duration = Duration::from_micros(200);
+
+/// What the receiving side lives with besides the measured pings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Load {
+    /// Wake-ups a second from a third process (the simulated chassis' feedback frames).
+    pub feed_per_s: f64,
+    /// The receiver's own periodic wake-up (the service's tick).
+    pub tick: Duration,
+}
+
+/// What the transport waits like.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Waiting {
+    Block,
+    Spin,
+    /// Poll for this long after each activity, then block.
+    Hybrid(Duration),
 }
 
 /// What travels: the size of a `ChassisState`, with the sender's stamp and the latency the
@@ -93,6 +121,10 @@ trait Endpoint {
     fn send(&mut self, ping: Ping) -> anyhow::Result<()>;
     /// Waits (at most `timeout`) for the next ping; stamps its arrival.
     fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>>;
+    /// The one-way latencies of a loaded receiver's feed so far, ns.
+    fn feed_latencies(&self) -> &[u64] {
+        &[]
+    }
 }
 
 struct IceoryxEndpoint {
@@ -100,7 +132,14 @@ struct IceoryxEndpoint {
     subscriber: Subscriber<ipc::Service, Ping, ()>,
     notifier: Notifier<ipc::Service>,
     listener: Listener<ipc::Service>,
-    spin: bool,
+    waiting: Waiting,
+    /// The feed of a loaded receiver: its samples wake the same listener as the pings.
+    feed: Option<Subscriber<ipc::Service, Ping, ()>>,
+    /// The feed's one-way latencies, ns.
+    feed_ns: Vec<u64>,
+    /// The receiver's own tick and when it is next due.
+    tick: Option<(Duration, u64)>,
+    last_activity: u64,
     _node: Node<ipc::Service>,
 }
 
@@ -109,63 +148,122 @@ fn service(name: &str) -> anyhow::Result<ServiceName> {
         .map_err(|e| anyhow::anyhow!("service name {name}: {e:?}"))
 }
 
+fn node(prefix: &str) -> anyhow::Result<Node<ipc::Service>> {
+    let mut config = Config::default();
+    config.global.prefix =
+        FileName::new(prefix.as_bytes()).map_err(|e| anyhow::anyhow!("prefix: {e:?}"))?;
+    NodeBuilder::new()
+        .config(&config)
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow::anyhow!("node: {e:?}"))
+}
+
+fn pubsub(
+    node: &Node<ipc::Service>,
+    name: &str,
+) -> anyhow::Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, Ping, ()>,
+> {
+    node.service_builder(&service(name)?)
+        .publish_subscribe::<Ping>()
+        .max_publishers(1)
+        .max_subscribers(1)
+        .history_size(0)
+        .subscriber_max_buffer_size(16)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("{name}: {e:?}"))
+}
+
+fn event(
+    node: &Node<ipc::Service>,
+    name: &str,
+) -> anyhow::Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>> {
+    node.service_builder(&service(name)?)
+        .event()
+        .max_notifiers(4)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("{name} event: {e:?}"))
+}
+
 impl IceoryxEndpoint {
-    fn open(prefix: &str, tag: &str, me: &str, peer: &str, spin: bool) -> anyhow::Result<Self> {
-        let mut config = Config::default();
-        config.global.prefix =
-            FileName::new(prefix.as_bytes()).map_err(|e| anyhow::anyhow!("prefix: {e:?}"))?;
-        let node = NodeBuilder::new()
-            .config(&config)
-            .create::<ipc::Service>()
-            .map_err(|e| anyhow::anyhow!("node: {e:?}"))?;
-        let pubsub = |name: &str| {
-            node.service_builder(&service(name)?)
-                .publish_subscribe::<Ping>()
-                .max_publishers(1)
-                .max_subscribers(1)
-                .history_size(0)
-                .subscriber_max_buffer_size(4)
-                .enable_safe_overflow(true)
-                .open_or_create()
-                .map_err(|e| anyhow::anyhow!("{name}: {e:?}"))
-        };
-        let event = |name: &str| {
-            node.service_builder(&service(name)?)
-                .event()
-                .open_or_create()
-                .map_err(|e| anyhow::anyhow!("{name} event: {e:?}"))
-        };
+    fn open(
+        prefix: &str,
+        tag: &str,
+        me: &str,
+        peer: &str,
+        waiting: Waiting,
+        load: Option<Load>,
+    ) -> anyhow::Result<Self> {
+        let node = node(prefix)?;
         let mine = format!("bench/{tag}/{me}");
         let theirs = format!("bench/{tag}/{peer}");
+        let feed = match load {
+            Some(_) => Some(
+                pubsub(&node, &format!("bench/{tag}/feed"))?
+                    .subscriber_builder()
+                    .create()
+                    .map_err(|e| anyhow::anyhow!("feed subscriber: {e:?}"))?,
+            ),
+            None => None,
+        };
         Ok(Self {
-            publisher: pubsub(&mine)?
+            publisher: pubsub(&node, &mine)?
                 .publisher_builder()
                 .create()
                 .map_err(|e| anyhow::anyhow!("publisher: {e:?}"))?,
-            subscriber: pubsub(&theirs)?
+            subscriber: pubsub(&node, &theirs)?
                 .subscriber_builder()
                 .create()
                 .map_err(|e| anyhow::anyhow!("subscriber: {e:?}"))?,
-            notifier: event(&mine)?
+            notifier: event(&node, &mine)?
                 .notifier_builder()
                 .create()
                 .map_err(|e| anyhow::anyhow!("notifier: {e:?}"))?,
-            listener: event(&theirs)?
+            listener: event(&node, &theirs)?
                 .listener_builder()
                 .create()
                 .map_err(|e| anyhow::anyhow!("listener: {e:?}"))?,
-            spin,
+            waiting,
+            feed,
+            feed_ns: Vec::new(),
+            tick: load.map(|l| (l.tick, now_ns() + nanos(l.tick))),
+            last_activity: now_ns(),
             _node: node,
         })
     }
+
+    /// Takes the feed's samples; true if there were any.
+    fn drain_feed(&mut self) -> anyhow::Result<bool> {
+        let Some(feed) = &self.feed else {
+            return Ok(false);
+        };
+        let mut any = false;
+        while let Some(sample) = feed
+            .receive()
+            .map_err(|e| anyhow::anyhow!("feed receive: {e:?}"))?
+        {
+            self.feed_ns.push(now_ns().saturating_sub(sample.stamp_ns));
+            any = true;
+        }
+        Ok(any)
+    }
+}
+
+fn nanos(d: Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX / 2)
 }
 
 impl Endpoint for IceoryxEndpoint {
+    fn feed_latencies(&self) -> &[u64] {
+        &self.feed_ns
+    }
+
     fn send(&mut self, ping: Ping) -> anyhow::Result<()> {
         self.publisher
             .send_copy(ping)
             .map_err(|e| anyhow::anyhow!("send: {e:?}"))?;
-        if !self.spin {
+        if self.waiting != Waiting::Spin {
             self.notifier
                 .notify()
                 .map_err(|e| anyhow::anyhow!("notify: {e:?}"))?;
@@ -174,7 +272,7 @@ impl Endpoint for IceoryxEndpoint {
     }
 
     fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>> {
-        let deadline = now_ns() + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
+        let deadline = now_ns() + nanos(timeout);
         loop {
             if let Some(sample) = self
                 .subscriber
@@ -182,15 +280,33 @@ impl Endpoint for IceoryxEndpoint {
                 .map_err(|e| anyhow::anyhow!("receive: {e:?}"))?
             {
                 let at = now_ns();
+                self.last_activity = at;
                 return Ok(Some((*sample, at)));
             }
-            let now = now_ns();
+            let mut now = now_ns();
+            if self.drain_feed()? {
+                self.last_activity = now;
+            }
+            if let Some((period, due)) = self.tick.as_mut()
+                && now >= *due
+            {
+                // The tick's work is the wake-up itself.
+                *due += nanos(*period);
+                self.last_activity = now;
+            }
+            now = now_ns();
             if now >= deadline {
                 return Ok(None);
             }
-            if !self.spin {
+            let block = match self.waiting {
+                Waiting::Spin => false,
+                Waiting::Block => true,
+                Waiting::Hybrid(window) => now.saturating_sub(self.last_activity) >= nanos(window),
+            };
+            if block {
+                let until = self.tick.map_or(deadline, |(_, due)| due.min(deadline));
                 self.listener
-                    .timed_wait(|_| {}, Duration::from_nanos(deadline - now))
+                    .timed_wait(|_| {}, Duration::from_nanos(until.saturating_sub(now)))
                     .map_err(|e| anyhow::anyhow!("wait: {e:?}"))?;
             }
         }
@@ -268,17 +384,95 @@ pub struct PongArgs {
     /// Scratch directory for Unix socket paths.
     #[arg(long)]
     pub dir: std::path::PathBuf,
+    /// A loaded receiver: the feed's rate a second (another process wakes it).
+    #[arg(long)]
+    pub feed_per_s: Option<f64>,
+    /// A loaded receiver: its own tick, µs.
+    #[arg(long)]
+    pub tick_us: Option<u64>,
+}
+
+impl PongArgs {
+    fn load(&self) -> Option<Load> {
+        Some(Load {
+            feed_per_s: self.feed_per_s?,
+            tick: Duration::from_micros(self.tick_us?),
+        })
+    }
+
+    fn feed_file(&self) -> std::path::PathBuf {
+        self.dir.join(format!("{}-feed.txt", self.tag))
+    }
+}
+
+/// Arguments of the feed process: another process waking a loaded receiver.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FeedArgs {
+    #[arg(long)]
+    pub tag: String,
+    #[arg(long)]
+    pub prefix: String,
+    #[arg(long)]
+    pub cpu: Option<usize>,
+    /// Samples a second.
+    #[arg(long)]
+    pub rate: f64,
+}
+
+/// The feed role: a stamped sample and a wake-up of the receiver's listener `rate` times a
+/// second, until killed.
+pub fn feed(args: &FeedArgs) -> anyhow::Result<()> {
+    if let Some(cpu) = args.cpu {
+        pin_current_thread(cpu)?;
+    }
+    if !(args.rate.is_finite() && args.rate > 0.0) {
+        bail!("feed rate {} is not a rate", args.rate);
+    }
+    let node = node(&args.prefix)?;
+    let publisher = pubsub(&node, &format!("bench/{}/feed", args.tag))?
+        .publisher_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("feed publisher: {e:?}"))?;
+    // The pings' event: the receiver waits on one listener for both, like chassisd's loop.
+    let notifier = event(&node, &format!("bench/{}/ping", args.tag))?
+        .notifier_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("feed notifier: {e:?}"))?;
+    let mut ticker = chassis_client::Ticker::new(Duration::from_secs_f64(1.0 / args.rate));
+    println!("ready");
+    loop {
+        ticker.wait();
+        publisher
+            .send_copy(Ping {
+                stamp_ns: now_ns(),
+                ..Ping::default()
+            })
+            .map_err(|e| anyhow::anyhow!("feed send: {e:?}"))?;
+        notifier
+            .notify()
+            .map_err(|e| anyhow::anyhow!("feed notify: {e:?}"))?;
+    }
 }
 
 fn open_endpoint(args: &PongArgs, me: &str, peer: &str) -> anyhow::Result<Box<dyn Endpoint>> {
     Ok(match args.transport {
-        Transport::IceoryxEvent | Transport::IceoryxSpin => Box::new(IceoryxEndpoint::open(
-            &args.prefix,
-            &args.tag,
-            me,
-            peer,
-            args.transport == Transport::IceoryxSpin,
-        )?),
+        Transport::IceoryxEvent | Transport::IceoryxSpin | Transport::IceoryxHybrid => {
+            let waiting = match args.transport {
+                Transport::IceoryxSpin => Waiting::Spin,
+                Transport::IceoryxHybrid => Waiting::Hybrid(HYBRID_SPIN),
+                _ => Waiting::Block,
+            };
+            // Only the pong side lives with the load.
+            let load = if me == "pong" { args.load() } else { None };
+            Box::new(IceoryxEndpoint::open(
+                &args.prefix,
+                &args.tag,
+                me,
+                peer,
+                waiting,
+                load,
+            )?)
+        }
         Transport::Uds => {
             let mine = args.dir.join(format!("{}-{me}.sock", args.tag));
             let _ = std::fs::remove_file(&mine);
@@ -313,6 +507,16 @@ pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
         match endpoint.receive(Duration::from_secs(5))? {
             Some((ping, arrived)) => {
                 if ping.seq == u64::MAX {
+                    if args.load().is_some() {
+                        let text: String = endpoint
+                            .feed_latencies()
+                            .iter()
+                            .map(|ns| format!("{ns}\n"))
+                            .collect();
+                        std::fs::write(args.feed_file(), text)
+                            .with_context(|| format!("writing {}", args.feed_file().display()))?;
+                    }
+                    println!("done");
                     return Ok(());
                 }
                 endpoint.send(Ping {
@@ -338,18 +542,27 @@ fn wait_ready(child: &mut Child) -> anyhow::Result<BufReader<ChildStdout>> {
     Ok(reader)
 }
 
+/// What a baseline run measured: the pings' hops, and a loaded receiver's feed hops.
+pub struct Measured {
+    pub pings: Latencies,
+    pub feed: Option<Latencies>,
+}
+
 /// Runs `rounds` ping-pongs (after a warm-up) and returns the one-way latencies of both
 /// directions — back to back, or, with `pace`, one ping per period and only the ping's hop: what
 /// a request meets when it comes after a pause, as a controller's requests do (the receiver is
-/// blocked and its CPU may be idle).
+/// blocked and its CPU may be idle). With `load` (iceoryx2 only), the receiver also lives with a
+/// feed from a third process and a tick of its own, and the feed's hops are measured.
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     transport: Transport,
     placement: Placement,
     rounds: u64,
     pace: Option<Duration>,
+    load: Option<Load>,
     prefix: &str,
     dir: &std::path::Path,
-) -> anyhow::Result<Latencies> {
+) -> anyhow::Result<Measured> {
     let tag = format!("{}-{}", std::process::id(), crate::placement::unique());
     let (ping_cpu, pong_cpu) = placement.cpus();
     let args = PongArgs {
@@ -358,9 +571,11 @@ pub fn run(
         prefix: prefix.to_string(),
         cpu: pong_cpu,
         dir: dir.to_path_buf(),
+        feed_per_s: load.map(|l| l.feed_per_s),
+        tick_us: load.map(|l| u64::try_from(l.tick.as_micros()).unwrap_or(u64::MAX)),
     };
     let exe = std::env::current_exe()?;
-    let mut command = Command::new(exe);
+    let mut command = Command::new(&exe);
     command
         .args(["role", "pong", "--transport"])
         .arg(
@@ -375,12 +590,76 @@ pub fn run(
     if let Some(cpu) = pong_cpu {
         command.args(["--cpu", &cpu.to_string()]);
     }
+    if let Some(load) = load {
+        command
+            .arg("--feed-per-s")
+            .arg(load.feed_per_s.to_string())
+            .arg("--tick-us")
+            .arg(load.tick.as_micros().to_string());
+    }
     let mut child = command.spawn().context("starting the pong process")?;
-    let _reader = wait_ready(&mut child)?;
+    let mut reader = wait_ready(&mut child)?;
+    // The feed runs on the ping side's CPU: the other end of the receiver's wake-ups.
+    let mut feeder = match load {
+        Some(load) => {
+            let mut feed = Command::new(&exe);
+            feed.args(["role", "feed", "--tag", &tag, "--prefix", prefix, "--rate"])
+                .arg(load.feed_per_s.to_string())
+                .stdout(Stdio::piped())
+                .stderr(Stdio::inherit());
+            if let Some(cpu) = ping_cpu {
+                feed.args(["--cpu", &cpu.to_string()]);
+            }
+            let mut feeder = feed.spawn().context("starting the feed process")?;
+            wait_ready(&mut feeder)?;
+            Some(feeder)
+        }
+        None => None,
+    };
     if let Some(cpu) = ping_cpu {
         pin_current_thread(cpu)?;
     }
-    let mut endpoint = open_endpoint(&args, "ping", "pong")?;
+    let result = open_endpoint(&args, "ping", "pong").and_then(|mut endpoint| {
+        let result = ping_rounds(endpoint.as_mut(), transport, rounds, pace);
+        // Tells the pong to stop (and to write its feed figures).
+        let _ = endpoint.send(Ping {
+            seq: u64::MAX,
+            ..Ping::default()
+        });
+        result
+    });
+    crate::placement::unpin_current_thread();
+    if let Some(feeder) = feeder.as_mut() {
+        let _ = feeder.kill();
+        let _ = feeder.wait();
+    }
+    let pings = result?;
+    // The pong writes its feed figures before it says "done".
+    let mut line = String::new();
+    let _ = reader.read_line(&mut line);
+    let _ = child.wait();
+    let feed = match load {
+        Some(_) => {
+            let path = args.feed_file();
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let mut latencies = Latencies::new();
+            for ns in text.lines().filter_map(|l| l.parse::<u64>().ok()) {
+                latencies.record(ns);
+            }
+            Some(latencies)
+        }
+        None => None,
+    };
+    Ok(Measured { pings, feed })
+}
+
+fn ping_rounds(
+    endpoint: &mut dyn Endpoint,
+    transport: Transport,
+    rounds: u64,
+    pace: Option<Duration>,
+) -> anyhow::Result<Latencies> {
     let mut latencies = Latencies::new();
     let warmup = if pace.is_some() { 20 } else { 200 };
     let mut ticker = pace.map(chassis_client::Ticker::new);
@@ -405,11 +684,5 @@ pub fn run(
             }
         }
     }
-    let _ = endpoint.send(Ping {
-        seq: u64::MAX,
-        ..Ping::default()
-    });
-    crate::placement::unpin_current_thread();
-    let _ = child.wait();
     Ok(latencies)
 }

@@ -14,11 +14,12 @@ mod baseline;
 mod fanout;
 mod paths;
 mod placement;
+mod provenance;
 mod report;
 mod stats;
 mod throughput;
 
-use baseline::Transport;
+use baseline::{Load, Transport};
 use paths::{BusKind, LoopMode};
 use placement::Placement;
 use report::{Report, Row};
@@ -51,6 +52,7 @@ enum RoleCmd {
 #[derive(Debug, Subcommand)]
 enum Role {
     Pong(baseline::PongArgs),
+    Feed(baseline::FeedArgs),
     Subscribe(fanout::SubscribeArgs),
     /// Write the candump log the throughput run replays (for profiling the service by hand).
     RecordTitan {
@@ -73,6 +75,13 @@ struct RunArgs {
     /// Write latency CDFs of every path as SVG.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// Write the performance document (markdown, e.g. docs/PERFORMANCE.md) from this run.
+    #[arg(long)]
+    doc: Option<PathBuf>,
+    /// Write files (--json, --plot, --doc) from a tree with uncommitted changes; they then say
+    /// DIRTY. Without it such a run is refused: figures written down must belong to a commit.
+    #[arg(long)]
+    allow_dirty: bool,
     /// Robots for the service paths (full run).
     #[arg(long, value_delimiter = ',', default_values_t = ["titan".to_string(), "scout-mini".to_string(), "xbot".to_string()])]
     robots: Vec<String>,
@@ -217,10 +226,33 @@ fn row(
         placement: placement.into(),
         summary: latencies.summary(),
         missed,
+        conditions: None,
         baseline: None,
         ratio_p50: None,
         ratio_p99: None,
+        inconsistent: None,
         latencies,
+    }
+}
+
+/// The baseline transport that waits like a service loop in `mode`.
+fn transport_of(mode: LoopMode) -> Transport {
+    match mode {
+        LoopMode::Event => Transport::IceoryxEvent,
+        LoopMode::Spin => Transport::IceoryxSpin,
+        LoopMode::Hybrid => Transport::IceoryxHybrid,
+    }
+}
+
+/// The period of `robot`'s heartbeat: the service's tick on that robot.
+fn tick_of(robot: RobotKind) -> Duration {
+    use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
+    match robot {
+        RobotKind::Titan => Duration::from_millis(TitanProfile::default().heartbeat_period_ms),
+        RobotKind::ScoutMini => {
+            Duration::from_millis(ScoutMiniProfile::default().heartbeat_period_ms)
+        }
+        RobotKind::Xbot => Duration::from_secs_f64(1.0 / XbotProfile::default().heartbeat_hz),
     }
 }
 
@@ -247,8 +279,11 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         .iter()
         .map(|r| r.parse::<RobotKind>().map_err(anyhow::Error::msg))
         .collect::<anyhow::Result<_>>()?;
+    let strict = args.json.is_some() || args.plot.is_some() || args.doc.is_some();
+    let provenance = provenance::Provenance::begin(strict, args.allow_dirty)?;
     let mut report = Report {
         machine: report::Machine::probe(),
+        provenance,
         ..Report::default()
     };
     if report.machine.cpus < 2 {
@@ -281,6 +316,10 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         (Transport::IceoryxSpin, Placement::CrossCpu, paced),
     ]);
     let runs = path_runs(args.quick, &robots);
+    // The warm baseline of the hybrid loop's preemption rows.
+    if runs.iter().any(|r| r.mode == LoopMode::Hybrid) {
+        baselines.push((Transport::IceoryxHybrid, Placement::CrossCpu, None));
+    }
     let steps = (if skip("baselines") {
         0
     } else {
@@ -308,10 +347,16 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             } else {
                 plan.baseline_rounds
             };
-            let l = baseline::run(transport, placement, rounds, pace, &prefix, &dir)?;
-            report
-                .rows
-                .push(row("baseline", what, "-", placement.label(), l, 0));
+            let l = baseline::run(transport, placement, rounds, pace, None, &prefix, &dir)?.pings;
+            let mut r = row("baseline", what, "-", placement.label(), l, 0);
+            r.conditions = Some(match pace {
+                Some(p) => format!(
+                    "one ping every {} ms, receiver otherwise idle (cold)",
+                    p.as_millis()
+                ),
+                None => "back to back (warm)".into(),
+            });
+            report.rows.push(r);
             bar.inc(1);
         }
     }
@@ -325,7 +370,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 r.placement.label()
             ));
             let (client_cpu, service_cpu) = r.placement.cpus();
-            let (_service, mut robot) =
+            let (service, mut robot) =
                 paths::start(r.robot, r.bus, r.mode, service_cpu, &prefix, &dir)?;
             let spin = r.mode == LoopMode::Spin;
             let (count, interval) = if r.robot == RobotKind::Xbot {
@@ -335,6 +380,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             } else {
                 (plan.commands, paths::COMMAND_INTERVAL)
             };
+            let feedback = paths::FeedbackRate::start(&mut robot)?;
             let result = paths::pinned(client_cpu, || -> anyhow::Result<_> {
                 let command = if count > 0 {
                     Some(paths::command_path(
@@ -352,34 +398,87 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 let preempt = paths::preemption(&mut robot, r.robot, preemptions, interval, spin)?;
                 Ok((command, state, preempt))
             })??;
-            let (command, state, (preempt, preempt_missed)) = result;
-            let placement = r.placement.label();
-            if let Some((l, missed)) = command {
-                report.rows.push(row(
-                    "command",
-                    label.clone(),
-                    r.mode.arg(),
-                    placement,
-                    l,
-                    missed,
-                ));
-            }
-            report.rows.push(row(
-                "state",
-                label.clone(),
-                r.mode.arg(),
-                placement,
-                state,
-                0,
+            let feed_per_s = feedback.per_second(&mut robot)?;
+            drop(robot);
+            drop(service);
+            bar.inc(1);
+
+            // The baseline of this run's command and state rows: its receiver lives like the
+            // service's loop did — woken by another process at the chassis' feedback rate, its
+            // own tick, the same placement and the same way of waiting.
+            let transport = transport_of(r.mode);
+            let tick = tick_of(r.robot);
+            bar.set_message(format!(
+                "baseline as {label}: {} woken {feed_per_s:.0}/s",
+                transport.label()
             ));
-            report.rows.push(row(
+            let rounds = if count > 0 { count } else { plan.paced_rounds };
+            let load = Load { feed_per_s, tick };
+            let measured = baseline::run(
+                transport,
+                r.placement,
+                rounds,
+                Some(interval),
+                Some(load),
+                &prefix,
+                &dir,
+            )?;
+            let placement = r.placement.label();
+            let conditions = format!(
+                "receiver woken {feed_per_s:.0}/s by another process (the feedback rate \
+                 measured in the {label} run) and by its own {} ms tick",
+                tick.as_millis()
+            );
+            let paced_what = format!("{} paced, loaded as {label}", transport.label());
+            let mut paced_row = row(
+                "baseline",
+                paced_what.clone(),
+                "-",
+                placement,
+                measured.pings,
+                0,
+            );
+            paced_row.conditions = Some(format!(
+                "one ping every {} ms; {conditions}",
+                interval.as_millis()
+            ));
+            report.rows.push(paced_row);
+            let feed_what = format!(
+                "{} at the feedback rate, loaded as {label}",
+                transport.label()
+            );
+            if let Some(feed) = measured.feed {
+                let mut feed_row = row("baseline", feed_what.clone(), "-", placement, feed, 0);
+                feed_row.conditions = Some(format!(
+                    "the feed's own hops: {feed_per_s:.0}/s; {conditions}"
+                ));
+                report.rows.push(feed_row);
+            }
+            let reference = |what: &str| Some(format!("{what}, {placement}"));
+            let warm = reference(transport.label());
+
+            let (command, state, (preempt, preempt_missed)) = result;
+            if let Some((l, missed)) = command {
+                let mut command_row =
+                    row("command", label.clone(), r.mode.arg(), placement, l, missed);
+                command_row.baseline = reference(&paced_what);
+                report.rows.push(command_row);
+            }
+            let mut state_row = row("state", label.clone(), r.mode.arg(), placement, state, 0);
+            state_row.baseline = reference(&feed_what);
+            report.rows.push(state_row);
+            let mut preempt_row = row(
                 "preemption",
                 label,
                 r.mode.arg(),
                 placement,
                 preempt,
                 preempt_missed,
-            ));
+            );
+            // The stop follows a teleop request at once: the loop is awake, as in a
+            // back-to-back ping-pong.
+            preempt_row.baseline = warm;
+            report.rows.push(preempt_row);
             bar.inc(1);
         }
     }
@@ -439,6 +538,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     }
     bar.finish_and_clear();
     report.compute_ratios();
+    report.provenance.end()?;
     // A directory named on the command line keeps its logs.
     if args.dir.is_none() {
         let _ = std::fs::remove_dir_all(&dir);
@@ -456,6 +556,9 @@ fn main() -> ExitCode {
             role: Role::Subscribe(args),
         }) => fanout::subscribe(&args),
         Some(RoleCmd::Role {
+            role: Role::Feed(args),
+        }) => baseline::feed(&args),
+        Some(RoleCmd::Role {
             role: Role::RecordTitan { out, seconds },
         }) => throughput::record_titan(&out, seconds).map(|frames| {
             eprintln!("{frames} frames written to {}", out.display());
@@ -468,6 +571,10 @@ fn main() -> ExitCode {
             }
             if let Some(path) = &cli.run.plot {
                 report.plot(path)?;
+            }
+            if let Some(path) = &cli.run.doc {
+                std::fs::write(path, report.markdown())
+                    .with_context(|| format!("writing {}", path.display()))?;
             }
             Ok(())
         }),

@@ -189,6 +189,11 @@ pub fn start(
         args.push("--cpu".into());
         args.push(cpu.to_string());
     }
+    if mode == LoopMode::Hybrid {
+        // The same window as the poll-then-block baseline's.
+        args.push("--spin-us".into());
+        args.push(crate::baseline::HYBRID_SPIN.as_micros().to_string());
+    }
     let service = Command::new(&chassisd)
         .args(&args)
         .env("CHASSIS_IPC_PREFIX", prefix)
@@ -281,6 +286,37 @@ impl MotionDecoder {
                 found
             }
         }
+    }
+}
+
+/// The frames a second the service reads from the chassis over a stretch of a run: the rate at
+/// which the chassis' feedback wakes the service's loop.
+pub struct FeedbackRate {
+    frames: u64,
+    at: u64,
+}
+
+impl FeedbackRate {
+    pub fn start(robot: &mut Robot) -> anyhow::Result<Self> {
+        let s = robot
+            .wait_state(Duration::from_secs(1))?
+            .context("no state")?;
+        Ok(Self {
+            frames: s.link.rx_frames,
+            at: now_ns(),
+        })
+    }
+
+    /// Frames read a second since [`FeedbackRate::start`].
+    pub fn per_second(&self, robot: &mut Robot) -> anyhow::Result<f64> {
+        let s = robot
+            .wait_state(Duration::from_secs(1))?
+            .context("no state")?;
+        let seconds = now_ns().saturating_sub(self.at) as f64 / 1e9;
+        if seconds <= 0.0 || s.link.rx_frames <= self.frames {
+            bail!("the chassis sent no feedback during the run");
+        }
+        Ok((s.link.rx_frames - self.frames) as f64 / seconds)
     }
 }
 

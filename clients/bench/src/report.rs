@@ -22,10 +22,18 @@ pub struct Row {
     pub summary: Summary,
     /// Requests that produced no frame within the wait (0 expected).
     pub missed: u64,
-    /// The baseline this row is compared with, p50 / baseline p50 and p99 / baseline p99.
+    /// A baseline's conditions: how it was paced and what its receiver lived with.
+    pub conditions: Option<String>,
+    /// The baseline row this path row is compared with (`what, placement` of that row): for a
+    /// command or state row, the baseline of the same run whose receiver lived like the
+    /// service's loop; for a preemption row, the warm (back-to-back) one.
     pub baseline: Option<String>,
+    /// p50 / baseline p50 and p99 / baseline p99.
     pub ratio_p50: Option<f64>,
     pub ratio_p99: Option<f64>,
+    /// Set when the row's p50 is below its baseline's, the hop the path contains: a path
+    /// cannot be faster than a part of it, so the two were not measured alike.
+    pub inconsistent: Option<String>,
     #[serde(skip)]
     pub latencies: Latencies,
 }
@@ -33,6 +41,7 @@ pub struct Row {
 /// Everything one run measured.
 #[derive(Debug, Default, Serialize)]
 pub struct Report {
+    pub provenance: crate::provenance::Provenance,
     pub machine: Machine,
     pub rows: Vec<Row>,
     pub cost: Vec<Cost>,
@@ -83,37 +92,40 @@ impl Machine {
 pub const PACED: &str = "paced";
 
 impl Report {
-    /// Fills in each service row's ratios to the paced raw iceoryx2 baseline of the same
-    /// placement (a service path's request also comes after a pause): event-driven and hybrid
-    /// loops against iceoryx2 event, spin against iceoryx2 busy-poll.
+    /// Fills in the ratios of every row that names its baseline, and flags a row whose p50 is
+    /// below its baseline's; a named baseline that is missing is a note.
     pub fn compute_ratios(&mut self) {
-        let baselines: Vec<(String, String, f64, f64)> = self
+        let baselines: Vec<(String, f64, f64)> = self
             .rows
             .iter()
             .filter(|r| r.path == "baseline")
             .map(|r| {
                 (
-                    r.what.clone(),
-                    r.placement.clone(),
+                    format!("{}, {}", r.what, r.placement),
                     r.summary.p50_us,
                     r.summary.p99_us,
                 )
             })
             .collect();
         for row in self.rows.iter_mut().filter(|r| r.path != "baseline") {
-            let transport = if row.mode == "spin" {
-                "iceoryx2 busy-poll"
-            } else {
-                "iceoryx2 event"
+            let Some(name) = row.baseline.clone() else {
+                continue;
             };
-            let wanted = format!("{transport} {PACED}");
-            if let Some((what, placement, p50, p99)) = baselines
-                .iter()
-                .find(|(w, p, _, _)| *w == wanted && *p == row.placement)
-            {
-                row.baseline = Some(format!("{what}, {placement}"));
-                row.ratio_p50 = (*p50 > 0.0).then(|| row.summary.p50_us / p50);
-                row.ratio_p99 = (*p99 > 0.0).then(|| row.summary.p99_us / p99);
+            let Some((_, p50, p99)) = baselines.iter().find(|(n, _, _)| *n == name) else {
+                self.notes.push(format!(
+                    "{} {} ({}, {}): its baseline '{name}' was not measured",
+                    row.path, row.what, row.mode, row.placement
+                ));
+                continue;
+            };
+            row.ratio_p50 = (*p50 > 0.0).then(|| row.summary.p50_us / p50);
+            row.ratio_p99 = (*p99 > 0.0).then(|| row.summary.p99_us / p99);
+            if row.summary.count > 0 && row.summary.p50_us < *p50 {
+                row.inconsistent = Some(format!(
+                    "p50 {:.1} µs is below the p50 {p50:.1} µs of the hop it contains ({name}): \
+                     the path and its baseline were not measured under the same conditions",
+                    row.summary.p50_us
+                ));
             }
         }
     }
@@ -122,11 +134,16 @@ impl Report {
     pub fn table(&self) -> String {
         let mut out = String::new();
         out.push_str(&format!(
-            "machine: {} CPUs, {}, kernel {}\n\n",
-            self.machine.cpus, self.machine.cpu_model, self.machine.kernel
+            "{}, {}; machine: {}, {} cores, kernel {}; host steal time over the run: {}\n\n",
+            self.provenance.date,
+            self.provenance.commit_text().replace('`', ""),
+            self.machine.cpu_model,
+            self.machine.cpus,
+            self.machine.kernel,
+            self.provenance.steal_text()
         ));
         out.push_str(&format!(
-            "{:<11} {:<26} {:<7} {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}  {}\n",
+            "{:<11} {:<60} {:<7} {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}  {}\n",
             "path",
             "what",
             "loop",
@@ -142,7 +159,7 @@ impl Report {
         for r in &self.rows {
             let s = &r.summary;
             let ratio = match (r.ratio_p50, r.ratio_p99, &r.baseline) {
-                (Some(x), Some(y), Some(b)) => format!("{x:.1}, {y:.1} ({b})"),
+                (Some(x), Some(y), Some(b)) => format!("{x:.2}, {y:.2} ({b})"),
                 _ => String::new(),
             };
             let missed = if r.missed > 0 {
@@ -151,7 +168,7 @@ impl Report {
                 String::new()
             };
             out.push_str(&format!(
-                "{:<11} {:<26} {:<7} {:<10} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1}  {}{}\n",
+                "{:<11} {:<60} {:<7} {:<10} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1}  {}{}\n",
                 r.path,
                 r.what,
                 r.mode,
@@ -164,6 +181,32 @@ impl Report {
                 s.max_us,
                 ratio,
                 missed
+            ));
+        }
+        let baselines: Vec<&Row> = self
+            .rows
+            .iter()
+            .filter(|r| r.conditions.is_some())
+            .collect();
+        if !baselines.is_empty() {
+            out.push_str("\nbaseline conditions:\n");
+            for r in baselines {
+                out.push_str(&format!(
+                    "  {}, {}: {}\n",
+                    r.what,
+                    r.placement,
+                    r.conditions.as_deref().unwrap_or_default()
+                ));
+            }
+        }
+        for r in self.rows.iter().filter(|r| r.inconsistent.is_some()) {
+            out.push_str(&format!(
+                "INCONSISTENT MEASUREMENT: {} {} ({} loop, {}): {}\n",
+                r.path,
+                r.what,
+                r.mode,
+                r.placement,
+                r.inconsistent.as_deref().unwrap_or_default()
             ));
         }
         if !self.cost.is_empty() {
@@ -257,5 +300,260 @@ impl Report {
         }
         root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
         Ok(())
+    }
+}
+
+/// A target the benchmark's figures are held to.
+struct Target {
+    what: String,
+    measured: String,
+    met: Option<bool>,
+}
+
+impl Report {
+    /// The rows of `path` in loop `mode`.
+    fn rows_of<'a>(&'a self, path: &'a str, mode: &'a str) -> impl Iterator<Item = &'a Row> {
+        self.rows
+            .iter()
+            .filter(move |r| r.path == path && r.mode == mode)
+    }
+
+    /// A ratio target over the rows of `path` in `mode`: every row's p99 ratio at most `bound`.
+    fn ratio_target(&self, path: &str, mode: &str, bound: f64, what: String) -> Target {
+        let rows: Vec<&Row> = self.rows_of(path, mode).collect();
+        let measured: Vec<String> = rows
+            .iter()
+            .map(|r| match r.ratio_p99 {
+                Some(x) => format!("{} {}: {x:.2} ×", r.what, r.placement),
+                None => format!("{} {}: no baseline", r.what, r.placement),
+            })
+            .collect();
+        let met = (!rows.is_empty()).then(|| {
+            rows.iter()
+                .all(|r| r.ratio_p99.is_some_and(|x| x <= bound) && r.inconsistent.is_none())
+        });
+        Target {
+            what,
+            measured: if measured.is_empty() {
+                "not measured".into()
+            } else {
+                measured.join("; ")
+            },
+            met,
+        }
+    }
+
+    fn targets(&self) -> Vec<Target> {
+        let mut targets = Vec::new();
+        for path in ["command", "state"] {
+            targets.push(self.ratio_target(
+                path,
+                "event",
+                2.0,
+                format!("{path} p99 ≤ 2 × its matched iceoryx2 event baseline's p99 (event loop)"),
+            ));
+            targets.push(self.ratio_target(
+                path,
+                "spin",
+                1.5,
+                format!("{path} p99 ≤ 1.5 × its matched busy-poll baseline's p99 (spin loop)"),
+            ));
+        }
+        let throughput = self.throughput.map(|t| t.frames_per_s);
+        targets.push(Target {
+            what: "decode + publish ≥ 1,000,000 frames/s on one core".into(),
+            measured: throughput.map_or("not measured".into(), |f| format!("{f:.0} frames/s")),
+            met: throughput.map(|f| f >= 1e6),
+        });
+        let at_500k = self.cost.iter().find(|c| c.bitrate == 500_000);
+        targets.push(Target {
+            what: "chassisd < 2 % of one core at a full 500 kbit/s bus".into(),
+            measured: at_500k.map_or("not measured".into(), |c| {
+                format!("{:.2} % at {:.0} frames/s", c.cpu_pct, c.frames_per_s)
+            }),
+            met: at_500k.map(|c| c.cpu_pct < 2.0),
+        });
+        let rss = self
+            .cost
+            .iter()
+            .map(|c| c.rss_mib)
+            .fold(None, |m: Option<f64>, r| Some(m.map_or(r, |m| m.max(r))));
+        targets.push(Target {
+            what: "resident memory < 20 MiB".into(),
+            measured: rss.map_or("not measured".into(), |r| format!("{r:.1} MiB")),
+            met: rss.map(|r| r < 20.0),
+        });
+        targets
+    }
+
+    /// The performance document: every figure from this run, nothing typed by hand.
+    pub fn markdown(&self) -> String {
+        use crate::baseline::HYBRID_SPIN;
+        use crate::paths::{COMMAND_INTERVAL, XBOT_COMMAND_INTERVAL};
+        let p = &self.provenance;
+        let mut out = String::from(
+            "# Performance\n\n\
+             Generated by `chassis-bench --doc` from one run: the service paths and the raw \
+             transport baselines beside them, measured in the same run. Do not edit it by hand; \
+             rerun the command below from a clean commit.\n\n",
+        );
+        out.push_str(&format!(
+            "Measured {} on {}; machine: {}, {} cores, Linux {}; the host's steal time over the \
+             run: {}.\n\nReproduce: `cargo build --release && target/release/{}`\n\n",
+            p.date,
+            p.commit_text(),
+            self.machine.cpu_model,
+            self.machine.cpus,
+            self.machine.kernel,
+            p.steal_text(),
+            p.command
+        ));
+        out.push_str("## The table\n\n");
+        out.push_str(
+            "| path | what | loop | placement | count | p50 µs | p90 µs | p99 µs | p99.9 µs | max \
+             µs | ÷ baseline p50, p99 | baseline |\n| --- | --- | --- | --- | ---: | ---: | ---: \
+             | ---: | ---: | ---: | --- | --- |\n",
+        );
+        for r in &self.rows {
+            let s = &r.summary;
+            let ratio = match (r.ratio_p50, r.ratio_p99) {
+                (Some(x), Some(y)) => format!("{x:.2}, {y:.2}"),
+                _ => String::new(),
+            };
+            let flag = if r.inconsistent.is_some() {
+                " **inconsistent**"
+            } else {
+                ""
+            };
+            let missed = if r.missed > 0 {
+                format!(" ({} missed)", r.missed)
+            } else {
+                String::new()
+            };
+            out.push_str(&format!(
+                "| {} | {} | {} | {} | {}{missed} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | \
+                 {ratio}{flag} | {} |\n",
+                r.path,
+                r.what,
+                r.mode,
+                r.placement,
+                s.count,
+                s.p50_us,
+                s.p90_us,
+                s.p99_us,
+                s.p999_us,
+                s.max_us,
+                r.baseline.as_deref().unwrap_or("")
+            ));
+        }
+        out.push('\n');
+        let inconsistent: Vec<&Row> = self
+            .rows
+            .iter()
+            .filter(|r| r.inconsistent.is_some())
+            .collect();
+        if !inconsistent.is_empty() {
+            out.push_str("**Inconsistent measurements** (flagged by the benchmark):\n\n");
+            for r in inconsistent {
+                out.push_str(&format!(
+                    "* {} {} ({} loop, {}): {}\n",
+                    r.path,
+                    r.what,
+                    r.mode,
+                    r.placement,
+                    r.inconsistent.as_deref().unwrap_or_default()
+                ));
+            }
+            out.push('\n');
+        }
+        out.push_str("**The baselines' conditions**:\n\n");
+        for r in self.rows.iter().filter(|r| r.conditions.is_some()) {
+            out.push_str(&format!(
+                "* {}, {}: {}\n",
+                r.what,
+                r.placement,
+                r.conditions.as_deref().unwrap_or_default()
+            ));
+        }
+        out.push_str("\n![one-way latency CDFs, one panel per kind of path](bench.svg)\n\n");
+
+        out.push_str(
+            "## Targets\n\n| target | measured in this run | met? |\n| --- | --- | --- |\n",
+        );
+        for t in self.targets() {
+            let met = match t.met {
+                Some(true) => "met",
+                Some(false) => "**not met**",
+                None => "not measured",
+            };
+            out.push_str(&format!("| {} | {} | {met} |\n", t.what, t.measured));
+        }
+        out.push('\n');
+
+        out.push_str("## Cost under a full bus, throughput, memory\n\n");
+        for c in &self.cost {
+            out.push_str(&format!(
+                "* {} kbit/s (the simulated chassis flooding the bus): {:.0} frames/s received; \
+                 the service's loop thread used {:.2} % of one core; resident memory {:.1} MiB\n",
+                c.bitrate / 1000,
+                c.frames_per_s,
+                c.cpu_pct,
+                c.rss_mib
+            ));
+        }
+        if let Some(t) = &self.throughput {
+            out.push_str(&format!(
+                "* a recorded TITAN bus replayed at full speed through the service: {} frames in \
+                 {:.2} s, {:.0} frames/s read, decoded and published; the service used {:.0} % \
+                 of a core\n",
+                t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct
+            ));
+        }
+        for note in &self.notes {
+            out.push_str(&format!("* note: {note}\n"));
+        }
+        out.push('\n');
+
+        out.push_str(&format!(
+            "## What each number means\n\n\
+             Every latency is one way, across processes, from two `CLOCK_MONOTONIC` stamps.\n\n\
+             | path | starts | ends |\n| --- | --- | --- |\n\
+             | command | a client creates a `VelocityRequest` and publishes it on `teleop` | \
+             chassisd has written the motion frame (the frame tap's TX stamp) |\n\
+             | state | chassisd has read a frame from the bus | the `ChassisState` it changed is \
+             in a subscriber of another process |\n\
+             | preemption | the `safety` source publishes a stop while `teleop` drives | the \
+             zero frame is written |\n\
+             | fan-out | as *state* | in each of several subscriber processes at once |\n\
+             | baseline | a {}-byte payload (a `ChassisState`) sent | received by the other \
+             process |\n\n\
+             * **loop**: `event` blocks on an iceoryx2 WaitSet, `spin` polls without blocking, \
+             `hybrid` polls for {} µs after each activity, then blocks.\n\
+             * **placement**: `same CPU` pins both ends to one CPU, `cross CPU` to two.\n\
+             * **Matched baselines.** A command or state row is divided by a baseline measured \
+             in the same run, right after it, whose receiver lives as the service's loop did: \
+             woken by another process at the chassis' feedback rate measured in that run, by \
+             its own tick (the robot's heartbeat period), with the same placement and the same \
+             way of waiting (a poll-then-block receiver for the hybrid loop). The command row's \
+             baseline is one ping per command period ({} ms; {} ms on the XBot, whose manual \
+             caps its command rate); the state row's is the feed's own hops at the feedback \
+             rate. A preemption's stop follows a request at once, while the loop is awake: its \
+             baseline is the back-to-back (warm) ping-pong of the same waiting and placement. \
+             The cold paced and back-to-back baselines are context rows.\n\
+             * **Inconsistent**: a path cannot be faster than a hop it contains; a row whose \
+             p50 is below its baseline's is flagged, not explained.\n\n",
+            size_of::<chassis_client::ChassisState>(),
+            HYBRID_SPIN.as_micros(),
+            COMMAND_INTERVAL.as_millis(),
+            XBOT_COMMAND_INTERVAL.as_millis()
+        ));
+        out.push_str(
+            "## Micro-benchmarks (criterion)\n\n```sh\n\
+             cargo bench -p chassis-protocols --bench codecs   # decode and encode of each robot's frames\n\
+             cargo bench -p chassisd --bench mux               # one request through the mux\n\
+             ```\n\n\
+             Criterion prints its medians; they are not part of this run.\n",
+        );
+        out
     }
 }

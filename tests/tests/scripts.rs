@@ -1,0 +1,203 @@
+//! The scripts CI runs, tested against stand-ins: `scripts/fuzz` must fail when a target crashes
+//! or cargo-fuzz fails, and pass only when every target ran without one.
+//!
+//! Each test copies the script into a scratch tree (`scripts/fuzz`, `fuzz/seeds/<target>/`) and
+//! puts a stand-in `cargo` first on `PATH`: it logs its arguments, answers `cargo fuzz --version`,
+//! and plays a clean run, a crash or a build failure on the target it is told to.
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The targets `scripts/fuzz` runs when it is given none.
+const TARGETS: [&str; 5] = [
+    "titan_decode",
+    "scout_mini_decode",
+    "xbot_stream",
+    "nmea_stream",
+    "candump_text",
+];
+
+const STAND_IN_CARGO: &str = r#"#!/bin/sh
+# A stand-in for cargo: logs its arguments, plays what $FUZZ_PLAY asks on $FUZZ_TARGET.
+echo "$*" >> "$FUZZ_CALLS"
+if [ "$1 $2" = "fuzz --version" ]; then
+    echo "cargo-fuzz 0.0.0 (stand-in)"
+    exit 0
+fi
+target=$5
+if [ "$target" != "$FUZZ_TARGET" ]; then
+    echo "Done 1000 runs in 1 second(s)"
+    echo "stat::number_of_executed_units: 1000"
+    exit 0
+fi
+case "$FUZZ_PLAY" in
+    crash|crash-exit-0)
+        echo "==4242== ERROR: libFuzzer: deadly signal"
+        echo "artifact_prefix='fuzz/artifacts/$target/'; Test unit written to fuzz/artifacts/$target/crash-0123"
+        echo "SUMMARY: libFuzzer: deadly signal"
+        if [ "$FUZZ_PLAY" = crash ]; then exit 77; fi
+        exit 0
+        ;;
+    build-error)
+        echo "error: could not compile \`chassis-fuzz\` (bin \"$target\") due to 1 previous error" >&2
+        exit 101
+        ;;
+    *)
+        echo "Done 1000 runs in 1 second(s)"
+        exit 0
+        ;;
+esac
+"#;
+
+/// A scratch copy of the script with a stand-in `cargo`.
+struct Sandbox {
+    root: PathBuf,
+}
+
+impl Sandbox {
+    fn new(test: &str) -> Self {
+        let root = std::env::temp_dir()
+            .join("chassis-tests")
+            .join(format!("scripts-{test}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        std::fs::create_dir_all(root.join("scripts")).unwrap();
+        let script = root.join("scripts/fuzz");
+        std::fs::copy(workspace.join("scripts/fuzz"), &script).unwrap();
+        for target in TARGETS {
+            let seeds = root.join("fuzz/seeds").join(target);
+            std::fs::create_dir_all(&seeds).unwrap();
+            std::fs::write(seeds.join("seed-0"), b"\x01\x02").unwrap();
+        }
+        let bin = root.join("bin");
+        std::fs::create_dir_all(&bin).unwrap();
+        let cargo = bin.join("cargo");
+        std::fs::write(&cargo, STAND_IN_CARGO).unwrap();
+        std::fs::set_permissions(&cargo, std::fs::Permissions::from_mode(0o755)).unwrap();
+        Self { root }
+    }
+
+    /// Runs `scripts/fuzz args…` with the stand-in playing `play` on `target`.
+    fn fuzz(&self, args: &[&str], play: &str, target: &str) -> Output {
+        let path = format!(
+            "{}:{}",
+            self.root.join("bin").display(),
+            std::env::var("PATH").unwrap_or_default()
+        );
+        Command::new(self.root.join("scripts/fuzz"))
+            .args(args)
+            .env("PATH", path)
+            .env("FUZZ_CALLS", self.calls_path())
+            .env("FUZZ_PLAY", play)
+            .env("FUZZ_TARGET", target)
+            .output()
+            .unwrap()
+    }
+
+    fn calls_path(&self) -> PathBuf {
+        self.root.join("cargo-calls")
+    }
+
+    /// The `cargo fuzz run` invocations, one line each.
+    fn runs(&self) -> Vec<String> {
+        std::fs::read_to_string(self.calls_path())
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| l.starts_with("fuzz run"))
+            .map(str::to_string)
+            .collect()
+    }
+}
+
+impl Drop for Sandbox {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.root);
+        }
+    }
+}
+
+fn text(output: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&output.stdout).into_owned(),
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+    )
+}
+
+/// Asserts every default target was run once, bounded to `seconds`.
+fn assert_every_target_ran(sandbox: &Sandbox, seconds: u32) {
+    let runs = sandbox.runs();
+    assert_eq!(runs.len(), TARGETS.len(), "{runs:?}");
+    for target in TARGETS {
+        assert!(
+            runs.iter().any(|r| r.contains(&format!(" {target} "))
+                && r.contains(&format!("-max_total_time={seconds}"))),
+            "{target} was not fuzzed for {seconds} s: {runs:?}"
+        );
+    }
+}
+
+#[test]
+fn fuzzing_passes_when_every_target_runs_without_a_crash() {
+    let sandbox = Sandbox::new("clean");
+    let output = sandbox.fuzz(&["3"], "clean", "");
+    let (stdout, stderr) = text(&output);
+    assert_eq!(output.status.code(), Some(0), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("no crash in 5 targets"),
+        "{stdout}\n{stderr}"
+    );
+    assert_every_target_ran(&sandbox, 3);
+}
+
+#[test]
+fn a_crashing_fuzz_target_fails_the_run_and_is_named() {
+    let sandbox = Sandbox::new("crash");
+    let output = sandbox.fuzz(&["2"], "crash", "scout_mini_decode");
+    let (stdout, stderr) = text(&output);
+    assert_eq!(output.status.code(), Some(1), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("scout_mini_decode found a crash (exit 77"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("FAILED: 1 of 5 targets: scout_mini_decode"),
+        "{stderr}"
+    );
+    assert!(!stdout.contains("fuzzing done"), "{stdout}");
+    // The other targets still ran: one run reports every crash.
+    assert_every_target_ran(&sandbox, 2);
+}
+
+#[test]
+fn a_crash_in_the_output_fails_the_run_even_with_exit_status_zero() {
+    let sandbox = Sandbox::new("crash0");
+    let output = sandbox.fuzz(&["1", "nmea_stream"], "crash-exit-0", "nmea_stream");
+    let (stdout, stderr) = text(&output);
+    assert_ne!(output.status.code(), Some(0), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("nmea_stream found a crash (exit 0"),
+        "{stderr}"
+    );
+    assert_eq!(sandbox.runs().len(), 1, "{:?}", sandbox.runs());
+}
+
+#[test]
+fn cargo_fuzz_failing_without_a_crash_fails_the_run_with_its_error() {
+    let sandbox = Sandbox::new("build");
+    let output = sandbox.fuzz(&["1"], "build-error", "xbot_stream");
+    let (stdout, stderr) = text(&output);
+    assert_eq!(output.status.code(), Some(1), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("cargo fuzz failed on xbot_stream (exit 101)"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("could not compile"), "{stderr}");
+    assert!(
+        stderr.contains("FAILED: 1 of 5 targets: xbot_stream"),
+        "{stderr}"
+    );
+}
