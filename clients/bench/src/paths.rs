@@ -371,6 +371,30 @@ const KEEP_ALIVE: Duration = Duration::from_millis(100);
 /// and the figure is the manual's rate bound, not the service's latency.
 pub const XBOT_COMMAND_INTERVAL: Duration = Duration::from_millis(1100);
 
+/// What the command path measured.
+#[derive(Debug)]
+pub struct CommandFigures {
+    /// Request created → its frame's write returned.
+    pub latencies: Latencies,
+    /// The service's own part: its loop woke for the request (the mux decision's stamp) → the
+    /// frame's write returned.
+    pub in_service: Latencies,
+    /// Requests that produced no frame within the wait.
+    pub missed: u64,
+}
+
+/// When the mux decided on request `seq` of source `index`: the stamp of the first published
+/// decision that reports it (published in the same pass as the frame, before the frame is seen).
+fn decision_stamp(robot: &mut Robot, index: usize, seq: u64) -> anyhow::Result<Option<u64>> {
+    let mut found = None;
+    robot.poll_mux(|m| {
+        if found.is_none() && m.sources().get(index).is_some_and(|s| s.last_seq == seq) {
+            found = Some(m.stamp_ns);
+        }
+    })?;
+    Ok(found)
+}
+
 /// Command-path latencies: `count` requests alternating between two speeds, one every
 /// `interval`.
 pub fn command_path(
@@ -379,9 +403,13 @@ pub fn command_path(
     count: u64,
     interval: Duration,
     spin: bool,
-) -> anyhow::Result<(Latencies, u64)> {
+) -> anyhow::Result<CommandFigures> {
     let tap = robot.frames(2048)?;
     let mut teleop = robot.source("teleop")?;
+    let teleop_index = robot
+        .latest_mux()?
+        .and_then(|m| m.sources().iter().position(|s| s.name() == "teleop"))
+        .ok_or_else(|| anyhow::anyhow!("the mux reports no teleop source"))?;
     let mut decoder = MotionDecoder::new(kind);
     // Exact on every wire: whole mm/s, whole percent of 5 m/s, exact in f32.
     let speeds = [0.25, 0.5];
@@ -396,6 +424,7 @@ pub fn command_path(
         Duration::from_secs(3),
     )?;
     let mut latencies = Latencies::new();
+    let mut in_service = Latencies::new();
     let mut missed = 0;
     // Between two samples further apart than the source's timeout, the current request is
     // repeated as a controller would: the mux output stays, no frame is sent for it.
@@ -411,6 +440,7 @@ pub fn command_path(
             }
         }
         tap.drain(|_| {})?;
+        robot.poll_mux(|_| {})?;
         // The first sample differs from the warm-up's 0.25: every sample is a change.
         let speed = speeds[usize::from(i % 2 == 0)];
         current = speed as f32;
@@ -427,12 +457,21 @@ pub fn command_path(
             spin,
             Duration::from_millis(500),
         )? {
-            Some(written) => latencies.record_between(stamp, written),
+            Some(written) => {
+                latencies.record_between(stamp, written);
+                if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
+                    in_service.record_between(decided, written);
+                }
+            }
             None => missed += 1,
         }
     }
     teleop.stop()?;
-    Ok((latencies, missed))
+    Ok(CommandFigures {
+        latencies,
+        in_service,
+        missed,
+    })
 }
 
 /// The part of a sample that changes only with what the chassis reports.
@@ -442,6 +481,7 @@ fn body(s: &ChassisState) -> ChassisState {
         stamp_ns: 0,
         group_stamp_ns: [0; chassis_client::GROUP_SLOTS],
         link: Default::default(),
+        published_ns: 0,
         ..*s
     }
 }
@@ -453,6 +493,8 @@ fn body(s: &ChassisState) -> ChassisState {
 pub struct StateRecorder {
     previous: Option<ChassisState>,
     pub latencies: Latencies,
+    /// The service's own part: the frame read → the sample handed to iceoryx2.
+    pub in_service: Latencies,
 }
 
 impl StateRecorder {
@@ -466,13 +508,15 @@ impl StateRecorder {
             .is_none_or(|p| body(&p).as_bytes() != body(state).as_bytes());
         if follows && changed {
             self.latencies.record_between(state.stamp_ns, received);
+            self.in_service
+                .record_between(state.stamp_ns, state.published_ns);
         }
         self.previous = Some(*state);
     }
 }
 
 /// State-path latencies while the robot drives (so frames keep changing the state).
-pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result<Latencies> {
+pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result<StateRecorder> {
     let mut teleop = robot.source("teleop")?;
     let mut recorder = StateRecorder::default();
     let mut last_request = 0u64;
@@ -489,7 +533,7 @@ pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result
         }
     }
     teleop.stop()?;
-    Ok(recorder.latencies)
+    Ok(recorder)
 }
 
 /// Preemption latencies: teleop drives; `safety` publishes a stop → the zero frame written.
@@ -624,6 +668,9 @@ pub fn rss_mib(pid: u32) -> anyhow::Result<f64> {
 /// CPU use and memory of the service at a given bus load.
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct Cost {
+    /// The bus the service read: `sim` (a socket pair, up to 256 frames per read) or `slcan-pty`
+    /// (`chassisd sim` behind an emulated slcan adapter on a pty: text lines, as a USB adapter).
+    pub bus: &'static str,
     pub bitrate: u32,
     pub frames_per_s: f64,
     pub cpu_pct: f64,
@@ -632,7 +679,13 @@ pub struct Cost {
 
 /// Loads the simulated bus to `bitrate`'s capacity (8-byte standard frames, no stuffing:
 /// 111 bits each) with the simulator's flood, and measures the service for `seconds`.
-pub fn cost_at(robot: &mut Robot, pid: u32, bitrate: u32, seconds: f64) -> anyhow::Result<Cost> {
+pub fn cost_at(
+    robot: &mut Robot,
+    bus: &'static str,
+    pid: u32,
+    bitrate: u32,
+    seconds: f64,
+) -> anyhow::Result<Cost> {
     let capacity = f64::from(bitrate) / 111.0;
     // The feedback the chassis sends anyway.
     let before = robot
@@ -688,6 +741,7 @@ pub fn cost_at(robot: &mut Robot, pid: u32, bitrate: u32, seconds: f64) -> anyho
         Duration::from_secs(3),
     )?;
     Ok(Cost {
+        bus,
         bitrate,
         frames_per_s: (frames - start_frames) as f64 / elapsed,
         cpu_pct: 100.0 * cpu / elapsed,

@@ -213,7 +213,8 @@ impl Report {
             out.push_str("\nservice cost under a fully loaded bus (simulated chassis flooding):\n");
             for c in &self.cost {
                 out.push_str(&format!(
-                    "  {:>5} kbit/s: {:>6.0} frames/s received, CPU {:>5.2} % of one core, RSS {:.1} MiB\n",
+                    "  {:>9} {:>5} kbit/s: {:>6.0} frames/s received, CPU {:>5.2} % of one core, RSS {:.1} MiB\n",
+                    c.bus,
                     c.bitrate / 1000,
                     c.frames_per_s,
                     c.cpu_pct,
@@ -236,12 +237,16 @@ impl Report {
     /// Latency CDFs of every row, log latency axis: one panel per kind of path (baselines,
     /// command, state, preemption, fan-out), all on the same axes so panels compare.
     pub fn plot(&self, path: &Path) -> anyhow::Result<()> {
-        const PANELS: [(&str, &str); 5] = [
+        const PANELS: [(&str, &str); 6] = [
             ("baseline", "raw transports (ping-pong, one way)"),
             ("command", "command: request created → frame written"),
             ("state", "state: frame read → state received"),
             ("preemption", "preemption: safety stop → zero frame written"),
             ("fan-out", "fan-out: state to 1, 4, 16 processes"),
+            (
+                "in-service",
+                "in-service: chassisd's own part (woke → frame written, frame read → state published)",
+            ),
         ];
         let root = SVGBackend::new(path, (1600, 1500)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -365,11 +370,19 @@ impl Report {
             measured: throughput.map_or("not measured".into(), |f| format!("{f:.0} frames/s")),
             met: throughput.map(|f| f >= 1e6),
         });
-        let at_500k = self.cost.iter().find(|c| c.bitrate == 500_000);
+        // Judged on the bus that costs the most.
+        let at_500k = self
+            .cost
+            .iter()
+            .filter(|c| c.bitrate == 500_000)
+            .max_by(|a, b| a.cpu_pct.total_cmp(&b.cpu_pct));
         targets.push(Target {
-            what: "chassisd < 2 % of one core at a full 500 kbit/s bus".into(),
+            what: "chassisd < 2 % of one core at a full 500 kbit/s bus (the worst bus)".into(),
             measured: at_500k.map_or("not measured".into(), |c| {
-                format!("{:.2} % at {:.0} frames/s", c.cpu_pct, c.frames_per_s)
+                format!(
+                    "{:.2} % at {:.0} frames/s ({})",
+                    c.cpu_pct, c.frames_per_s, c.bus
+                )
             }),
             met: at_500k.map(|c| c.cpu_pct < 2.0),
         });
@@ -493,14 +506,20 @@ impl Report {
         out.push_str("## Cost under a full bus, throughput, memory\n\n");
         for c in &self.cost {
             out.push_str(&format!(
-                "* {} kbit/s (the simulated chassis flooding the bus): {:.0} frames/s received; \
+                "* {} bus, {} kbit/s (the simulated chassis flooding it): {:.0} frames/s received; \
                  the service's loop thread used {:.2} % of one core; resident memory {:.1} MiB\n",
+                c.bus,
                 c.bitrate / 1000,
                 c.frames_per_s,
                 c.cpu_pct,
                 c.rss_mib
             ));
         }
+        out.push_str(
+            "* SocketCAN is not measured here (this kernel has no CAN; the VM that tests it \
+             emulates its CPU): its backend reads one frame per read(2) system call, like the \
+             slcan-pty bus reads each pty chunk, not in batches as the simulated bus does\n",
+        );
         if let Some(t) = &self.throughput {
             out.push_str(&format!(
                 "* a recorded TITAN bus replayed at full speed through the service: {} frames in \

@@ -252,12 +252,21 @@ impl Robot {
     }
 
     fn drain_mux(&mut self) -> Result<bool, ClientError> {
+        Ok(self.poll_mux(|_| {})? > 0)
+    }
+
+    /// Hands every mux decision published since the last read to `each`, oldest first, without
+    /// waiting (the subscriber keeps the last 4). Returns how many there were.
+    pub fn poll_mux(&mut self, mut each: impl FnMut(&MuxStatus)) -> Result<usize, ClientError> {
         self.open_mux()?;
         let Some(mux) = &self.mux else {
-            return Ok(false);
+            return Ok(0);
         };
         let latest = &mut self.latest_mux;
-        Ok(receive_all(mux, "receiving mux status", |m| *latest = Some(*m))? > 0)
+        receive_all(mux, "receiving mux status", |m| {
+            each(m);
+            *latest = Some(*m);
+        })
     }
 
     /// The newest mux decision.
@@ -507,6 +516,12 @@ pub struct Source {
 impl Source {
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// The sequence number of the last request sent (the mux reports it as
+    /// `SourceStatus::last_seq`).
+    pub fn last_seq(&self) -> u64 {
+        self.seq
     }
 
     /// Sends a request now: stamps it with the current `CLOCK_MONOTONIC` time (unless a stamp is

@@ -3,6 +3,8 @@
 //! [`SimHandle::spawn`] runs a firmware in its own thread on any [`Bus`]: the chassis side of a
 //! socket pair for the service's default `sim` bus, or a pty, an slcan pty, a serial port or a
 //! CAN interface for `chassisd sim`. Faults reach it through [`SimHandle::inject`].
+// The simulator's runner drives its firmware by the clock: it is a loop that owns the clock.
+#![allow(clippy::disallowed_methods)]
 
 use std::os::fd::{AsFd, AsRawFd};
 use std::os::unix::net::UnixDatagram;

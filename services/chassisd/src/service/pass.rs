@@ -1,5 +1,7 @@
 //! One pass of the shell: reading what the engine asks for, writing what it polls, publishing
 //! what it produced. Every item is stamped with the clock when it was read or written.
+// The shell owns the clock: it stamps what it reads and writes, and hands the time to the engine.
+#![allow(clippy::disallowed_methods)]
 
 use std::fmt::Display;
 
