@@ -382,8 +382,11 @@ impl SimKind {
     pub const OBSTACLE_BEHIND: u8 = 10;
     /// `value` extra feedback frames per second (0 stops).
     pub const FLOOD: u8 = 11;
+    /// Ask for what the simulated chassis really does (its true pose and speeds, not what it
+    /// reports): the answer's message reads `x_m=… y_m=… yaw_rad=… linear_mps=… angular_radps=…`.
+    pub const TRUTH: u8 = 12;
 
-    pub const NAMES: [(u8, &'static str); 11] = [
+    pub const NAMES: [(u8, &'static str); 12] = [
         (Self::MOTOR_DRIVER_LOSS, "motor-driver-loss"),
         (Self::BATTERY, "battery"),
         (Self::BUMPER, "bumper"),
@@ -395,6 +398,7 @@ impl SimKind {
         (Self::OBSTACLE_AHEAD, "obstacle-ahead"),
         (Self::OBSTACLE_BEHIND, "obstacle-behind"),
         (Self::FLOOD, "flood"),
+        (Self::TRUTH, "truth"),
     ];
 
     pub fn name(kind: u8) -> &'static str {

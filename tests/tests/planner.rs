@@ -73,16 +73,110 @@ fn square_length(robot: &str, size: f64) -> f64 {
     4.0 * size - 3.0 * (2.0 - std::f64::consts::FRAC_PI_2) * r
 }
 
+/// What the simulated chassis really did, asked for as it drives (`chassis sim truth`: the
+/// simulator's own pose, not what the chassis reports and the service integrates).
+struct Truth {
+    start: Option<(f64, f64, f64)>,
+    /// The latest true position, in the start frame.
+    here: Option<(f64, f64)>,
+    /// Path length of the true pose, m.
+    travelled_m: f64,
+    /// Closest true approach to each corner, m.
+    nearest: [f64; 3],
+    corners: [(f64, f64); 3],
+    asked: Option<Instant>,
+}
+
+impl Truth {
+    /// How often the truth is asked for while the robot drives.
+    const PERIOD: Duration = Duration::from_millis(50);
+
+    fn new(size: f64) -> Self {
+        Self {
+            start: None,
+            here: None,
+            travelled_m: 0.0,
+            nearest: [f64::INFINITY; 3],
+            corners: square_corners(size),
+            asked: None,
+        }
+    }
+
+    /// Asks the simulator where the robot truly is, at most once per [`Truth::PERIOD`].
+    fn sample(&mut self, robot: &mut Robot) {
+        if self.asked.is_some_and(|t| t.elapsed() < Self::PERIOD) {
+            return;
+        }
+        self.asked = Some(Instant::now());
+        let request = SimRequest {
+            kind: SimKind::TRUTH,
+            ..SimRequest::default()
+        };
+        let answer = robot.sim(request, Duration::from_secs(1)).unwrap();
+        assert!(answer.is_ok(), "{}", answer.message());
+        let value = |key: &str| -> f64 {
+            answer
+                .message()
+                .split_whitespace()
+                .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("no {key} in {:?}", answer.message()))
+        };
+        let (x, y, yaw) = (value("x_m"), value("y_m"), value("yaw_rad"));
+        let (x0, y0, yaw0) = *self.start.get_or_insert((x, y, yaw));
+        let (dx, dy) = (x - x0, y - y0);
+        let (sin, cos) = yaw0.sin_cos();
+        let here = (dx * cos + dy * sin, -dx * sin + dy * cos);
+        if let Some(last) = self.here {
+            self.travelled_m += distance(last, here);
+        }
+        for (k, &corner) in self.corners.iter().enumerate() {
+            self.nearest[k] = self.nearest[k].min(distance(here, corner));
+        }
+        self.here = Some(here);
+    }
+
+    /// The true drive went around the square and came back: the same rules as
+    /// [`Track::assert_went_around`], on the simulator's pose. Sampled every 50 ms, so a corner
+    /// passed at speed may be seen up to 50 ms away from its closest point (≈ 3 cm at 0.6 m/s).
+    fn assert_went_around(&self, robot: &str, size: f64, env: &Env) {
+        let length = square_length(robot, size);
+        let reach = corner_offset(robot) + CORNER_LIMIT_M;
+        let back = self.here.map_or(f64::INFINITY, |(x, y)| x.hypot(y));
+        eprintln!(
+            "{robot}: truly travelled {:.2} m; corners truly passed at {:.3?} m; truly ends \
+             {back:.3} m from the start",
+            self.travelled_m, self.nearest
+        );
+        assert!(
+            self.travelled_m >= 0.95 * length && self.travelled_m <= 1.1 * 4.0 * size,
+            "{robot}: truly travelled {:.2} m, the square is {length:.2} m\n{}",
+            self.travelled_m,
+            env.logs()
+        );
+        for k in 0..3 {
+            assert!(
+                self.nearest[k] <= reach,
+                "{robot}: corner {:?} truly passed at {:.3} m; limit {reach:.2}",
+                self.corners[k],
+                self.nearest[k]
+            );
+        }
+        assert!(
+            back < GOAL_LIMIT_M + CORNER_LIMIT_M,
+            "{robot}: the simulator puts the robot {back:.3} m from its start"
+        );
+    }
+}
+
 /// What a drive looked like, from every state sample of a [`StateStream`] (a reader that loses
 /// none while it is drained often enough).
 ///
-/// The simulated chassis' true pose is not reachable from a test: `chassisd` runs the simulator
-/// inside its own process and publishes only what the chassis reports (its wheel speeds) and
-/// the pose it integrates from them, which is what the planner steers by. So the track keeps two
-/// accounts and the tests check both: the odometry pose (what the planner saw), and the test's
-/// own integration of the reported body speeds over the samples' stamps (`speed_pose`,
-/// independent of the service's pose integrator and of anything the planner computes). A robot
-/// that never moved has neither a travelled distance nor reached corners in either.
+/// The track keeps two accounts from the samples and the tests check both: the odometry pose
+/// (what the planner saw), and the test's own integration of the reported body speeds over the
+/// samples' stamps (`speed_pose`, independent of the service's pose integrator and of anything the
+/// planner computes). A robot that never moved has neither a travelled distance nor reached
+/// corners in either. [`Truth`] checks the same against the simulator's own pose.
 struct Track {
     robot: &'static str,
     start: Option<(f64, f64, f64)>,
@@ -202,12 +296,14 @@ impl Track {
     }
 }
 
-/// Reads every state sample into `track` until `planner` exits (at most `limit`); its exit code.
+/// Reads every state sample into `track` (and, given one, the simulator's pose into `truth`)
+/// until `planner` exits (at most `limit`); its exit code.
 fn follow(
     env: &mut Env,
     planner: usize,
     stream: &StateStream,
     track: &mut Track,
+    mut truth: Option<(&mut Robot, &mut Truth)>,
     limit: Duration,
 ) -> Option<i32> {
     let end = Instant::now() + limit;
@@ -215,6 +311,9 @@ fn follow(
         stream
             .wait(Duration::from_millis(20), |s| track.add(s))
             .unwrap();
+        if let Some((robot, truth)) = truth.as_mut() {
+            truth.sample(robot);
+        }
         if let Ok(Some(status)) = env.proc(planner).child.try_wait() {
             track.drain(stream);
             return status.code();
@@ -267,13 +366,22 @@ fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
     let stream = robot.state_stream(256).unwrap();
     let mut track = Track::new(robot_kind, size.parse().unwrap());
     track.drain(&stream);
+    let mut truth = Truth::new(size.parse().unwrap());
+    truth.sample(&mut robot);
     let started = Instant::now();
     let planner = env.spawn(
         "planner",
         "chassis-planner",
         &["--name", &n, "--shape", "square", "--size", size],
     );
-    let code = follow(&mut env, planner, &stream, &mut track, SQUARE_LIMIT);
+    let code = follow(
+        &mut env,
+        planner,
+        &stream,
+        &mut track,
+        Some((&mut robot, &mut truth)),
+        SQUARE_LIMIT,
+    );
     let took = started.elapsed();
     assert_eq!(code, Some(0), "the planner did not finish\n{}", env.logs());
     let end = state(&mut robot);
@@ -293,6 +401,8 @@ fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
     assert!(end.motion.linear_mps.abs() < 0.02, "still moving: {end:?}");
     assert!(log.contains("following square of"), "no start line\n{log}");
     track.assert_went_around(size.parse().unwrap(), &env);
+    truth.sample(&mut robot);
+    truth.assert_went_around(robot_kind, size.parse().unwrap(), &env);
 }
 
 fn teleop_preempts_the_planner_and_hands_back(robot_kind: &'static str) {
@@ -356,7 +466,7 @@ fn teleop_preempts_the_planner_and_hands_back(robot_kind: &'static str) {
         env.logs()
     );
 
-    let code = follow(&mut env, planner, &stream, &mut track, SQUARE_LIMIT);
+    let code = follow(&mut env, planner, &stream, &mut track, None, SQUARE_LIMIT);
     let took = started.elapsed();
     assert_eq!(code, Some(0), "the planner did not finish\n{}", env.logs());
     let error = distance(position(&state(&mut robot)), goal);

@@ -119,6 +119,8 @@ pub enum SimCmd {
     BadChecksums { frames: u32 },
     /// FRAMES_PER_S extra feedback frames (0 stops).
     Flood { frames_per_s: u32 },
+    /// What the simulated chassis really does: its true pose and speeds (not what it reports).
+    Truth,
 }
 
 fn connect(name: &str) -> anyhow::Result<Robot> {
@@ -681,6 +683,7 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
         SimCmd::Flood { frames_per_s } => {
             request(SimKind::FLOOD, true, 0, f64::from(*frames_per_s))
         }
+        SimCmd::Truth => request(SimKind::TRUTH, false, 0, 0.0),
     };
     let mut robot = connect(name)?;
     let response = robot.sim(r, ANSWER_TIMEOUT)?;

@@ -14,7 +14,9 @@ use std::time::Duration;
 
 use chassis_interfaces::{ControlStatus, SimKind, SimRequest};
 use chassis_protocols::profile::Robot;
-use chassis_protocols::{Firmware, Injection, Profile, Timestamp, scout_mini, titan, xbot};
+use chassis_protocols::{
+    Firmware, Injection, Profile, SimTruth, Timestamp, scout_mini, titan, xbot,
+};
 use nix::poll::{PollFd, PollFlags};
 use nix::sys::time::TimeSpec;
 use tracing::{debug, warn};
@@ -59,6 +61,19 @@ pub fn carry_out(
     sim: Option<&SimHandle>,
     absent: (u8, &str),
 ) -> (u8, String) {
+    if request.kind == SimKind::TRUTH {
+        return match sim.map(SimHandle::truth) {
+            None => (absent.0, absent.1.to_string()),
+            Some(Ok(t)) => (
+                ControlStatus::OK,
+                format!(
+                    "x_m={:.4} y_m={:.4} yaw_rad={:.4} linear_mps={:.4} angular_radps={:.4}",
+                    t.x_m, t.y_m, t.yaw_rad, t.linear_mps, t.angular_radps
+                ),
+            ),
+            Some(Err(reason)) => (ControlStatus::REFUSED, reason.to_string()),
+        };
+    }
     match (injection_of(request), sim) {
         (Err(reason), _) => (ControlStatus::INVALID, reason.to_string()),
         (Ok(_), None) => (absent.0, absent.1.to_string()),
@@ -131,6 +146,7 @@ struct Ended {
 
 enum SimCommand {
     Inject(Injection, mpsc::Sender<bool>),
+    Truth(mpsc::Sender<SimTruth>),
     Stop,
 }
 
@@ -150,6 +166,7 @@ impl std::fmt::Debug for SimCommandBox {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match &self.0 {
             SimCommand::Inject(i, _) => write!(f, "Inject({})", i.name()),
+            SimCommand::Truth(_) => f.write_str("Truth"),
             SimCommand::Stop => f.write_str("Stop"),
         }
     }
@@ -201,6 +218,19 @@ impl SimHandle {
             .map_err(|_| SimError::Stopped)?;
         // The doorbell only wakes the thread early: a full or closed socket means it is awake
         // already or has ended, and the answer (or its absence) below says which.
+        self.doorbell.send(&[1]).ok();
+        answer
+            .recv_timeout(Duration::from_millis(200))
+            .map_err(|_| SimError::NoAnswer)
+    }
+
+    /// What the simulated chassis really does. Waits at most 200 ms for the simulator.
+    pub fn truth(&self) -> Result<SimTruth, SimError> {
+        let (reply, answer) = mpsc::channel();
+        self.commands
+            .send(SimCommandBox(SimCommand::Truth(reply)))
+            .map_err(|_| SimError::Stopped)?;
+        // As for an injection: the doorbell only wakes the thread early.
         self.doorbell.send(&[1]).ok();
         answer
             .recv_timeout(Duration::from_millis(200))
@@ -301,6 +331,10 @@ fn drive(
                     // The asker waits 200 ms at most: an answer nobody waits for any more is
                     // dropped on purpose (the injection took effect all the same).
                     reply.send(firmware.inject(now, injection)).ok();
+                }
+                // Likewise: an answer nobody waits for any more is dropped on purpose.
+                SimCommand::Truth(reply) => {
+                    reply.send(firmware.truth()).ok();
                 }
             }
         }
@@ -405,7 +439,11 @@ mod tests {
 
     #[test]
     fn every_sim_request_kind_maps_to_an_injection() {
-        for (kind, name) in SimKind::NAMES {
+        // The truth is a question, not an injection.
+        for (kind, name) in SimKind::NAMES
+            .into_iter()
+            .filter(|(k, _)| *k != SimKind::TRUTH)
+        {
             let request = SimRequest {
                 kind,
                 flag: 1,
