@@ -52,6 +52,8 @@ FRAMES_BUFFER: int = SERVICES["frames"]["limits"]["subscriber_max_buffer_size"]
 _LATEST_BUFFER = 4
 # Longest single wait for an answer before looking at the deadline again.
 _ANSWER_POLL_S = 0.05
+# How long an unknown source's error waits for the mux's list of the configured ones.
+_MUX_CONNECT_S = 0.5
 _NAME = re.compile(r"^[a-z0-9_-]{1,16}$")
 
 
@@ -601,7 +603,8 @@ class Robot:
             data = _open_pubsub(self._node, topic, _VelocityRequest)
             events = _open_event(self._node, topic)
         except NotServed:
-            mux = self.latest_mux()
+            # A new mux subscriber gets the latest decision once the publisher connects it.
+            mux = self.wait_mux(_MUX_CONNECT_S)
             configured = ", ".join(_source_names(mux)) if mux else "unknown"
             raise UnknownSource(
                 f"robot '{self.name}' has no source called '{name}' (configured: {configured}); "
