@@ -50,22 +50,31 @@ def main() -> int:
 
     robot = chassis.Robot.connect(args.name)
     safety = robot.source(args.source)
-    mask = lock_mask(robot.wait_mux(1.0), "estop")
     period = 1.0 / args.rate
-    latched: str | None = None
+    in_danger = False
+    lock_pending = False
     print(f"holding '{args.source}' of {args.name}", flush=True)
     try:
         while True:
             beat = time.monotonic() + period
             state = robot.wait_state(period)
             reason = danger(state, args.stop_m) if state is not None else None
-            if reason and latched is None:
-                latched = reason
-                print(f"latching the e-stop: {reason}", flush=True)
-            if latched:
-                safety.send(chassis.VelocityRequest(lock_engage=mask))
-            else:
+            if reason is None:
+                in_danger = lock_pending = False
                 safety.heartbeat()
+            else:
+                if not in_danger:
+                    # Each danger engages the e-stop lock once; chassisd holds it until an
+                    # operator releases it (`chassis control estop-release`).
+                    in_danger = lock_pending = True
+                    print(f"latching the e-stop: {reason}", flush=True)
+                mask = lock_mask(robot.latest_mux(), "estop") if lock_pending else 0
+                if mask:
+                    safety.send(chassis.VelocityRequest(lock_engage=mask))
+                    lock_pending = False
+                else:
+                    # A stop at the safety source's priority meanwhile.
+                    safety.stop()
             time.sleep(max(0.0, beat - time.monotonic()))
     except KeyboardInterrupt:
         return 0
