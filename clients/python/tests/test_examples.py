@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import re
 import signal
 import subprocess
+import sys
 import time
 
-from conftest import PYTHON_DIR, REPO, World, wait_until
+from conftest import PYTHON_DIR, REPO, World, binary, wait_until
 
 import chassis
 
@@ -15,8 +17,6 @@ EXAMPLES = PYTHON_DIR / "examples"
 
 
 def run(world: World, *args: str, timeout: float = 90) -> subprocess.CompletedProcess[str]:
-    import sys
-
     return subprocess.run(
         [sys.executable, *args],
         env=world.env,
@@ -112,3 +112,22 @@ def test_the_python_safety_monitor_holds_the_required_source(world: World) -> No
     wait_until("the robot stops without its monitor", lambda: speed_after(0.1) < 0.01, 10.0, world)
     mux = robot.wait_mux(1.0)
     assert mux is not None and mux.zero_reason == chassis.ZeroReason.REQUIRED_SOURCE_STALE
+
+
+def test_bench_prints_a_json_row_per_path(world: World) -> None:
+    world.chassisd("titan")
+    done = run(
+        world,
+        str(PYTHON_DIR / "bench.py"),
+        "--state-samples",
+        "50",
+        "--commands",
+        "5",
+        "--chassis",
+        str(binary("chassis")),
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [r["path"] for r in rows] == ["state", "command"], rows
+    assert rows[0]["samples"] >= 50 and rows[1]["samples"] + rows[1]["missed"] == 5, rows
+    assert all(0 < r["p50_us"] <= r["p99_us"] <= r["max_us"] for r in rows), rows
