@@ -192,11 +192,13 @@ class ControlAnswer(ControlResponse):
 
 
 def _source_names(mux: MuxStatus) -> list[str]:
+    """The names of the configured sources, in the mux's order (``MuxStatus.source_names()``)."""
     count = min(mux.source_count, len(mux.sources))
     return [fixed_str(mux.sources[i].name) for i in range(count)]
 
 
 def _active_source(mux: MuxStatus) -> str | None:
+    """The name of the source the mux follows, or None (``MuxStatus.active_source_name()``)."""
     if mux.active_source == MuxStatus.NO_SOURCE or mux.active_source >= len(mux.sources):
         return None
     return fixed_str(mux.sources[mux.active_source].name)
