@@ -1,0 +1,236 @@
+#!/usr/bin/env python3
+"""Latency of the Python client's two paths through a running ``chassisd``.
+
+* **state**: a frame read from the bus (``chassisd`` stamps it right after the read:
+  ``ChassisState.stamp_ns``) → this Python process woke with the ``ChassisState`` it changed in
+  hand (``CLOCK_MONOTONIC`` right after the wait returned and the samples were copied out). As in
+  ``chassis-bench``, only samples that follow their predecessor (``seq`` + 1) and whose content
+  changed count: a sample that merely refreshes stamps carries an older frame's read time. The
+  robot drives throughout (teleop, 0.6 m/s, 0.3 rad/s) so that frames keep changing the state.
+* **command**: a ``VelocityRequest`` stamped and sent here as the ``teleop`` source → the motion
+  frame that ``chassisd`` wrote to the bus (the frame tap's TX stamp, ``BusFrame.stamp_ns``,
+  taken right after the write). Requests alternate between two speeds, one every
+  ``--interval-ms``; each is a change, so each writes a frame. The frames are recognised by
+  their bytes as ``chassis encode --robot ROBOT velocity --vx V`` prints them, so this path needs
+  a robot whose motion frame is the same for the same speed (TITAN; SCOUT MINI's frames carry a
+  count and a checksum, the XBot's manual caps its rate).
+
+Both figures are one-way, from ``CLOCK_MONOTONIC`` stamps taken in two processes.
+
+Command line::
+
+    python3 clients/python/bench.py [--name titan] [--robot titan] [--prefix P]
+        [--state-samples 2000] [--commands 300] [--interval-ms 4]
+        [--chassis target/release/chassis] [--paths state,command]
+
+``chassisd`` must be running, a release build for meaningful figures, configured as
+``chassis-bench`` configures it — no acceleration smoothing and no minimum spacing between
+command frames, else the command path measures the ramp::
+
+    [driver]
+    min_command_interval_ms = 0
+    brake_idle_engage_ms = 0
+
+    [mux.limits]
+    linear_accel_mps2 = 0.0
+    angular_accel_radps2 = 0.0
+
+    chassisd --robot titan --no-safety-monitor --config bench.toml
+
+``--prefix`` (or ``CHASSIS_IPC_PREFIX``) is its iceoryx2 prefix. The ``teleop`` source must be
+free. ``--chassis`` is the ``chassis`` CLI (default: ``target/release/chassis``, or
+``CHASSIS_CLI``).
+
+Output: one JSON object per line on stdout, one per path::
+
+    {"client": "python", "path": "state", "robot": "titan", "samples": 2000, "missed": 0,
+     "p50_us": 61.2, "p99_us": 190.4, "max_us": 812.0, "mean_us": 75.3}
+
+``path`` is ``state`` or ``command``; ``samples`` the latencies recorded; ``missed`` the
+requests whose frame did not appear within 500 ms (command path; 0 for state); times in µs.
+Exit status 0, or 1 when a path recorded nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import chassis
+
+STATE_DRIVE = (0.6, 0.3)
+SPEEDS = (0.25, 0.5)
+FRAME_TIMEOUT_S = 0.5
+KEEP_ALIVE_S = 0.05
+# Fields of ChassisState that change without a new reading of the chassis.
+STAMP_FIELDS = ("seq", "stamp_ns", "group_stamp_ns", "link", "published_ns")
+
+
+def percentile(values: list[int], q: float) -> float:
+    """The ``q`` quantile (0..1) of ``values``, nearest rank."""
+    ordered = sorted(values)
+    rank = max(0, min(len(ordered) - 1, round(q * len(ordered) + 0.5) - 1))
+    return float(ordered[rank])
+
+
+def row(path: str, robot: str, latencies: list[int], missed: int) -> dict[str, object]:
+    """The JSON row of one path."""
+    out: dict[str, object] = {
+        "client": "python",
+        "path": path,
+        "robot": robot,
+        "samples": len(latencies),
+        "missed": missed,
+    }
+    if latencies:
+        out |= {
+            "p50_us": round(percentile(latencies, 0.50) / 1e3, 1),
+            "p99_us": round(percentile(latencies, 0.99) / 1e3, 1),
+            "max_us": round(max(latencies) / 1e3, 1),
+            "mean_us": round(sum(latencies) / len(latencies) / 1e3, 1),
+        }
+    return out
+
+
+def body(state: chassis.ChassisState) -> bytes:
+    """The bytes of ``state`` that change only with what the chassis reports."""
+    raw = bytearray(bytes(state))
+    for name in STAMP_FIELDS:
+        field = getattr(chassis.ChassisState, name)
+        raw[field.offset : field.offset + field.size] = bytes(field.size)
+    return bytes(raw)
+
+
+def state_path(robot: chassis.Robot, teleop: chassis.Source, samples: int) -> list[int]:
+    """State-path latencies, ns."""
+    stream = robot.state_stream()
+    latencies: list[int] = []
+    previous: chassis.ChassisState | None = None
+    previous_body = b""
+    last_request = 0
+    deadline = time.monotonic() + 120
+    while len(latencies) < samples and time.monotonic() < deadline:
+        if chassis.now_ns() - last_request > KEEP_ALIVE_S * 1e9:
+            teleop.twist(*STATE_DRIVE)
+            last_request = chassis.now_ns()
+        batch = stream.wait(0.02)
+        woke = chassis.now_ns()
+        for state in batch:
+            state_body = body(state)
+            if (
+                previous is not None
+                and state.seq == previous.seq + 1
+                and state_body != previous_body
+            ):
+                latencies.append(woke - state.stamp_ns)
+            previous, previous_body = state, state_body
+    teleop.stop()
+    return latencies
+
+
+def motion_frames(chassis_cli: str, robot: str) -> dict[float, tuple[int, bytes]]:
+    """The motion frame (CAN id, data) ``chassisd`` writes for each of :data:`SPEEDS`."""
+    frames = {}
+    for speed in SPEEDS:
+        out = subprocess.run(
+            [chassis_cli, "encode", "--robot", robot, "velocity", "--vx", str(speed)],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.split()
+        if len(out) != 1 or "#" not in out[0]:
+            raise SystemExit(f"bench.py: {robot}'s motion is not one CAN frame: {out}")
+        can_id, data = out[0].split("#")
+        frames[speed] = (int(can_id, 16), bytes.fromhex(data))
+    return frames
+
+
+def wait_for_frame(tap: chassis.FrameTap, frame: tuple[int, bytes], since: int) -> int | None:
+    """The TX stamp of ``frame`` written at or after ``since``, or None after the timeout."""
+    can_id, data = frame
+    deadline = time.monotonic() + FRAME_TIMEOUT_S
+    while time.monotonic() < deadline:
+        for f in tap.wait(0.005):
+            if (
+                f.direction == chassis.FrameDirection.TX
+                and f.can_id == can_id
+                and f.stamp_ns >= since
+                and bytes(f.data)[: f.len] == data
+            ):
+                return int(f.stamp_ns)
+    return None
+
+
+def command_path(
+    robot: chassis.Robot,
+    teleop: chassis.Source,
+    frames: dict[float, tuple[int, bytes]],
+    count: int,
+    interval_s: float,
+) -> tuple[list[int], int]:
+    """Command-path latencies, ns, and the requests whose frame never appeared."""
+    tap = robot.frames(chassis.FRAMES_BUFFER)
+    # Warm up: the first motion releases TITAN's brake and waits for command mode.
+    start = chassis.now_ns()
+    teleop.twist(SPEEDS[0], 0.0)
+    for _ in range(6):
+        if wait_for_frame(tap, frames[SPEEDS[0]], start) is not None:
+            break
+        teleop.twist(SPEEDS[0], 0.0)
+    latencies: list[int] = []
+    missed = 0
+    next_send = time.monotonic()
+    for i in range(count):
+        next_send += interval_s
+        time.sleep(max(0.0, next_send - time.monotonic()))
+        tap.drain()
+        speed = SPEEDS[1] if i % 2 == 0 else SPEEDS[0]
+        request = chassis.VelocityRequest.twist(speed, 0.0)
+        request.stamp_ns = stamp = chassis.now_ns()
+        teleop.send(request)
+        written = wait_for_frame(tap, frames[speed], stamp)
+        if written is None:
+            missed += 1
+        else:
+            latencies.append(written - stamp)
+    teleop.stop()
+    return latencies, missed
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--name", default="titan", help="the robot's name (chassisd --name)")
+    parser.add_argument("--robot", default="titan", help="its kind, for `chassis encode`")
+    parser.add_argument("--prefix", default=None, help="iceoryx2 prefix (CHASSIS_IPC_PREFIX)")
+    parser.add_argument("--state-samples", type=int, default=2000)
+    parser.add_argument("--commands", type=int, default=300)
+    parser.add_argument("--interval-ms", type=float, default=4.0)
+    parser.add_argument("--paths", default="state,command")
+    default_cli = Path(__file__).resolve().parents[2] / "target" / "release" / "chassis"
+    parser.add_argument("--chassis", default=os.environ.get("CHASSIS_CLI", str(default_cli)))
+    args = parser.parse_args()
+    paths = args.paths.split(",")
+
+    robot = chassis.Robot.connect(args.name, prefix=args.prefix)
+    teleop = robot.source("teleop")
+    rows = []
+    if "state" in paths:
+        rows.append(row("state", args.robot, state_path(robot, teleop, args.state_samples), 0))
+    if "command" in paths:
+        frames = motion_frames(args.chassis, args.robot)
+        latencies, missed = command_path(
+            robot, teleop, frames, args.commands, args.interval_ms / 1e3
+        )
+        rows.append(row("command", args.robot, latencies, missed))
+    for r in rows:
+        print(json.dumps(r), flush=True)
+    return 0 if all(r["samples"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,321 @@
+"""The package against real ``chassisd`` processes on the simulated robots."""
+
+from __future__ import annotations
+
+import signal
+import textwrap
+import time
+
+import pytest
+from conftest import World, binary, wait_until
+
+import chassis
+
+
+def drive(
+    robot: chassis.Robot,
+    source: chassis.Source,
+    request: chassis.VelocityRequest,
+    until: object,
+    timeout: float,
+    world: World,
+) -> chassis.ChassisState:
+    """Sends ``request`` at ≈ 20 Hz until ``until(state)`` holds; fails after ``timeout`` s."""
+    end = time.monotonic() + timeout
+    while True:
+        source.send(request)
+        state = robot.wait_state(0.05)
+        if state is not None and until(state):  # type: ignore[operator]
+            return state
+        if time.monotonic() > end:
+            last = robot.latest_state()
+            pytest.fail(
+                f"not reached within {timeout} s; last state "
+                f"{last.motion.to_dict() if last else None}\n{world.logs()}"
+            )
+
+
+@pytest.mark.parametrize("kind", ["titan", "scout-mini", "xbot"])
+def test_drives_and_reads_back_every_robot(world: World, kind: str) -> None:
+    robot = world.chassisd(kind)
+    start = robot.latest_state()
+    assert start is not None
+    assert chassis.RobotKind.name(start.robot) == kind
+    teleop = robot.source("teleop")
+    moving = drive(
+        robot,
+        teleop,
+        chassis.VelocityRequest.twist(0.3, 0.0),
+        lambda s: s.motion.linear_mps > 0.15 and s.odometry.x_m > start.odometry.x_m + 0.02,
+        15.0,
+        world,
+    )
+    assert moving.motion.linear_mps < 0.35
+    mux = robot.wait_mux(1.0)
+    assert mux is not None and mux.active_source_name() == "teleop"
+    assert mux.output.linear_x_mps == pytest.approx(0.3, abs=0.01)
+    drive(
+        robot,
+        teleop,
+        chassis.VelocityRequest.twist(0.0, 0.0),
+        lambda s: abs(s.motion.linear_mps) < 0.01,
+        15.0,
+        world,
+    )
+    assert robot.latest_state().to_dict()["motion"]["linear_mps"] == pytest.approx(0.0, abs=0.01)
+
+
+def test_a_robot_nobody_serves_is_reported_with_the_clis_advice(world: World) -> None:
+    with pytest.raises(chassis.NotServed, match="is chassisd running"):
+        chassis.Robot.connect("nobody", prefix=world.prefix)
+    with pytest.raises(chassis.BadName):
+        chassis.Robot.connect("Not A Name", prefix=world.prefix)
+
+
+def test_a_python_source_is_preempted_by_a_rust_teleop_and_handed_back(world: World) -> None:
+    robot = world.chassisd("titan")
+    planner = robot.source("planner")
+    slow = chassis.VelocityRequest.twist(0.2, 0.0)
+    drive(robot, planner, slow, lambda s: s.motion.linear_mps > 0.15, 15.0, world)
+
+    teleop = world.spawn(
+        "teleop",
+        [
+            str(binary("chassis")),
+            "pub",
+            "velocity",
+            "--source",
+            "teleop",
+            "--vx",
+            "0.5",
+            "--rate",
+            "20",
+            "--duration",
+            "2",
+            "--name",
+            "titan",
+        ],
+    )
+    seen: list[str | None] = []
+
+    def active() -> str | None:
+        planner.send(slow)
+        mux = robot.wait_mux(0.05)
+        name = mux.active_source_name() if mux else None
+        if not seen or seen[-1] != name:
+            seen.append(name)
+        return name
+
+    wait_until("the teleop takes over", lambda: active() == "teleop", 15.0, world)
+    drive(robot, planner, slow, lambda s: s.motion.linear_mps > 0.3, 15.0, world)
+    wait_until("the planner is handed back", lambda: active() == "planner", 15.0, world)
+    assert teleop.wait(timeout=15) == 0
+    drive(robot, planner, slow, lambda s: abs(s.motion.linear_mps - 0.2) < 0.03, 15.0, world)
+    assert seen[-2:] == ["teleop", "planner"], seen
+
+
+def test_a_source_held_by_another_process_is_taken(world: World) -> None:
+    robot = world.chassisd("titan")
+    holder = world.spawn(
+        "holder",
+        [
+            str(binary("chassis")),
+            "pub",
+            "velocity",
+            "--source",
+            "teleop",
+            "--heartbeat",
+            "--name",
+            "titan",
+        ],
+    )
+
+    def beating() -> bool:
+        # The CLI's heartbeats reach the mux: it holds the source.
+        mux = robot.wait_mux(0.05)
+        if mux is None:
+            return False
+        teleop = mux.sources[mux.source_names().index("teleop")]
+        return bool(teleop.flags & chassis.SourceFlags.FRESH)
+
+    wait_until("the CLI holds teleop", beating, 15.0, world)
+    with pytest.raises(chassis.SourceTaken, match="already held"):
+        robot.source("teleop")
+    # Another source is free, an unknown one is named with the configured ones.
+    robot.source("planner").heartbeat()
+    with pytest.raises(chassis.UnknownSource, match="safety, teleop, planner"):
+        robot.source("nosuch")
+    holder.send_signal(signal.SIGTERM)
+    assert holder.wait(timeout=15) == 0
+
+
+KEEP_DRIVING = textwrap.dedent(
+    """
+    import sys, time, chassis
+    robot = chassis.Robot.connect(sys.argv[1])
+    planner = robot.source("planner")
+    print("driving", flush=True)
+    while True:
+        planner.twist(0.3, 0.0)
+        time.sleep(0.05)
+    """
+)
+
+
+def test_a_killed_python_source_ends_its_motion_at_its_timeout(world: World) -> None:
+    robot = world.chassisd("titan")
+    driver = world.python("driver", "-c", KEEP_DRIVING, "titan")
+
+    def moving() -> bool:
+        state = robot.wait_state(0.05)
+        mux = robot.latest_mux()
+        return (
+            state is not None
+            and state.motion.linear_mps > 0.15
+            and mux is not None
+            and mux.active_source_name() == "planner"
+        )
+
+    wait_until("the Python planner drives", moving, 20.0, world)
+    driver.send_signal(signal.SIGKILL)
+    driver.wait(timeout=5)
+
+    def released() -> bool:
+        mux = robot.wait_mux(0.05)
+        return mux is not None and mux.active_source == chassis.MuxStatus.NO_SOURCE
+
+    wait_until("the mux drops the dead planner", released, 10.0, world)
+    mux = robot.latest_mux()
+    assert mux.zero_reason == chassis.ZeroReason.NO_ACTIVE_SOURCE
+    assert mux.output.linear_x_mps == 0.0
+    planner = mux.sources[mux.source_names().index("planner")]
+    assert not planner.flags & chassis.SourceFlags.FRESH, planner.to_dict()
+    # It was dropped for its age: the source's own timeout, not earlier.
+    assert planner.age_ms >= planner.timeout_ms, planner.to_dict()
+    wait_until(
+        "the robot stops",
+        lambda: (s := robot.wait_state(0.05)) is not None and abs(s.motion.linear_mps) < 0.01,
+        10.0,
+        world,
+    )
+
+
+def test_a_state_stream_loses_nothing_on_a_flooded_bus(world: World) -> None:
+    robot = world.chassisd("titan")
+    assert robot.state_stream(0).buffer == 1
+    stream = robot.state_stream(10**6)
+    assert stream.buffer == chassis.STATE_BUFFER
+    teleop = robot.source("teleop")
+    drive_request = chassis.VelocityRequest.twist(0.3, 0.0)
+    answer = robot.sim("flood", value=2000.0)
+    assert answer.ok, str(answer)
+    drive(robot, teleop, drive_request, lambda s: s.motion.linear_mps > 0.1, 15.0, world)
+    stream.drain()
+
+    received = gaps = lost = largest = 0
+    last: int | None = None
+    started = time.monotonic()
+    while time.monotonic() - started < 2.0:
+        teleop.send(drive_request)
+        time.sleep(0.006)
+        batch = stream.wait(0.1)
+        largest = max(largest, len(batch))
+        for state in batch:
+            received += 1
+            if last is not None and state.seq != last + 1:
+                gaps += 1
+                lost += max(0, state.seq - last - 1)
+            last = state.seq
+    print(f"stream: {received} samples, {gaps} gaps ({lost} lost), up to {largest} per read")
+    assert (gaps, lost) == (0, 0), f"lost {lost} samples in {gaps} gaps\n{world.logs()}"
+    assert received >= 1000, f"only {received} samples in 2 s"
+    assert largest > 4, f"at most {largest} samples per read: the bus was not flooded"
+
+
+def test_control_actions_are_answered_with_success_or_a_reason(world: World) -> None:
+    robot = world.chassisd("titan")
+    teleop = robot.source("teleop")
+    drive(
+        robot,
+        teleop,
+        chassis.VelocityRequest.twist(0.3, 0.0),
+        lambda s: s.motion.linear_mps > 0.15,
+        15.0,
+        world,
+    )
+    refused = robot.control("off-road", state="on")
+    assert refused.status == chassis.ControlStatus.REFUSED and "moving" in refused.text, str(
+        refused
+    )
+    refused = robot.control("brake", action="engage")
+    assert not refused.ok and refused.status_name == "refused", str(refused)
+    unsupported = robot.control("lights", mode="on")
+    assert unsupported.status == chassis.ControlStatus.UNSUPPORTED, str(unsupported)
+
+    # The operator's e-stop holds the robot whatever the teleop asks.
+    assert robot.control("estop").ok
+    stopped = drive(
+        robot,
+        teleop,
+        chassis.VelocityRequest.twist(0.3, 0.0),
+        lambda s: abs(s.motion.linear_mps) < 0.01,
+        15.0,
+        world,
+    )
+    assert stopped.motion.linear_mps == pytest.approx(0.0, abs=0.01)
+    mux = robot.wait_mux(1.0)
+    assert mux is not None and mux.zero_reason == chassis.ZeroReason.LOCKED
+    assert robot.control("estop-release").ok
+    drive(
+        robot,
+        teleop,
+        chassis.VelocityRequest.twist(0.3, 0.0),
+        lambda s: s.motion.linear_mps > 0.15,
+        15.0,
+        world,
+    )
+
+    drive(
+        robot,
+        teleop,
+        chassis.VelocityRequest.twist(0.0, 0.0),
+        lambda s: abs(s.motion.linear_mps) < 0.005,
+        15.0,
+        world,
+    )
+    teleop.stop()
+    engaged = robot.control("brake", action="engage")
+    assert engaged.ok, str(engaged)
+    assert robot.control("clear-fault", which="all").ok
+    assert robot.control("brake", action="release").ok
+
+    with pytest.raises(ValueError, match="unknown control action"):
+        robot.control("warp")
+    with pytest.raises(TypeError, match="needs"):
+        robot.control("brake")
+    with pytest.raises(ValueError, match="unknown fault"):
+        robot.control("clear-fault", which="everything")
+
+
+def test_xbot_lift_and_servos_are_controlled_and_a_range_is_refused(world: World) -> None:
+    robot = world.chassisd("xbot")
+    assert robot.control("power", state="on").ok
+    lift = robot.control("lift", position=50.0)
+    assert lift.ok, str(lift)
+    servos = robot.control("servos", pan=20.0, tilt=-10.0)
+    assert servos.ok, str(servos)
+    invalid = robot.control("lift", position=150.0)
+    assert invalid.status == chassis.ControlStatus.INVALID, str(invalid)
+    assert robot.control("steering-zero").status == chassis.ControlStatus.UNSUPPORTED
+
+
+def test_the_frame_tap_shows_both_directions(world: World) -> None:
+    robot = world.chassisd("scout-mini")
+    tap = robot.frames(chassis.FRAMES_BUFFER)
+    teleop = robot.source("teleop")
+    directions: set[int] = set()
+    end = time.monotonic() + 10
+    while directions != {chassis.FrameDirection.RX, chassis.FrameDirection.TX}:
+        teleop.twist(0.2, 0.0)
+        directions |= {frame.direction for frame in tap.wait(0.05)}
+        assert time.monotonic() < end, f"directions seen: {directions}"
