@@ -155,6 +155,39 @@ pub fn mux_json(mux: &MuxStatus) -> serde_json::Result<Value> {
     Ok(value)
 }
 
+/// Lets at most one sample per period through on average, judged on the samples' own stamps,
+/// with a quarter period of slack for the loop's jitter (a sample 19.5 ms after the last one
+/// of a 20 ms period passes; the next one is then due 40 ms after the first).
+#[derive(Debug, Clone, Copy)]
+pub struct Decimator {
+    period_ns: u64,
+    next_ns: Option<u64>,
+}
+
+impl Decimator {
+    pub fn new(period: Duration) -> Self {
+        Self {
+            period_ns: u64::try_from(period.as_nanos()).unwrap_or(u64::MAX),
+            next_ns: None,
+        }
+    }
+
+    /// True when the sample stamped `stamp_ns` is to be published.
+    pub fn pass(&mut self, stamp_ns: u64) -> bool {
+        let slack = self.period_ns / 4;
+        if let Some(next) = self.next_ns
+            && stamp_ns.saturating_add(slack) < next
+        {
+            return false;
+        }
+        let after_stamp = stamp_ns.saturating_add(self.period_ns - slack);
+        self.next_ns = Some(self.next_ns.map_or(after_stamp, |next| {
+            next.saturating_add(self.period_ns).max(after_stamp)
+        }));
+        true
+    }
+}
+
 /// `CLOCK_MONOTONIC` → Unix epoch, measured once.
 #[derive(Debug, Clone, Copy)]
 struct WallClock {
@@ -180,8 +213,9 @@ impl WallClock {
 
 /// Runs until SIGINT / SIGTERM.
 pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> anyhow::Result<()> {
-    let mut robot = Robot::connect(&config.name)
-        .with_context(|| format!("connecting to robot '{}'", config.name))?;
+    let Some(mut robot) = connect(&config.name) else {
+        return Ok(());
+    };
     let tap = robot.frames(TAP_BUFFER).context("opening the frame tap")?;
     let mut source = Teleop {
         enabled: config.drive,
@@ -192,12 +226,12 @@ pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> any
     let mut lp = Loop {
         channels,
         clock,
-        state_period_ns: u64::try_from(config.state_period.as_nanos()).unwrap_or(u64::MAX),
         body: None,
         codec: None,
         trail: Trail::default(),
         watch: Watch::default(),
-        last_state: None,
+        last_seq: None,
+        decimator: Decimator::new(config.state_period),
         last_scene_ns: 0,
         last_gps_ns: 0,
         last_mux: None,
@@ -241,6 +275,25 @@ pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> any
     Ok(())
 }
 
+/// Connects to the robot, waiting for chassisd to serve it; `None` when asked to stop first.
+fn connect(name: &str) -> Option<Robot> {
+    let mut ticker = Ticker::new(Duration::from_millis(250));
+    let mut told = false;
+    while !termination_requested() {
+        // chassisd opens its state service before the mux's: wait for both.
+        match Robot::connect(name).and_then(|mut robot| robot.latest_mux().map(|_| robot)) {
+            Ok(robot) => return Some(robot),
+            Err(e) if !told => {
+                told = true;
+                tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
+            }
+            Err(e) => tracing::debug!(error = %e, "connecting"),
+        }
+        ticker.wait();
+    }
+    None
+}
+
 /// The `foxglove` velocity source, opened when the first velocity arrives (chassisd may start
 /// after the bridge) and again after a failure.
 struct Teleop {
@@ -274,12 +327,12 @@ impl Teleop {
 struct Loop<'a> {
     channels: &'a Channels,
     clock: WallClock,
-    state_period_ns: u64,
     body: Option<(u8, Body)>,
     codec: Option<(u8, RobotCodec)>,
     trail: Trail,
     watch: Watch,
-    last_state: Option<(u64, u64)>,
+    last_seq: Option<u64>,
+    decimator: Decimator,
     last_scene_ns: u64,
     last_gps_ns: u64,
     last_mux: Option<MuxStatus>,
@@ -356,20 +409,17 @@ impl Loop<'_> {
     }
 
     fn state(&mut self, state: &ChassisState) {
-        if self.last_state.is_some_and(|(seq, _)| seq == state.seq) {
+        if self.last_seq == Some(state.seq) {
             return;
         }
+        self.last_seq = Some(state.seq);
         for (level, text) in self.watch.state(state) {
             self.log(level, text, state.stamp_ns);
         }
         self.trail.see(state);
-        if self
-            .last_state
-            .is_some_and(|(_, at)| state.stamp_ns.saturating_sub(at) < self.state_period_ns)
-        {
+        if !self.decimator.pass(state.stamp_ns) {
             return;
         }
-        self.last_state = Some((state.seq, state.stamp_ns));
         let wall = self.clock.wall(state.stamp_ns);
         if self
             .body
@@ -689,6 +739,30 @@ mod tests {
         assert!(control_request(ServiceAction::ClearFaults, br#"{"which":"nope"}"#).is_err());
         assert!(control_request(ServiceAction::Lift, br#"{"position_pct":120}"#).is_err());
         assert!(control_request(ServiceAction::Brake, br#"{"bogus":1}"#).is_err());
+    }
+
+    fn passed(period_ms: u64, samples: impl Iterator<Item = u64>) -> usize {
+        let mut d = Decimator::new(Duration::from_millis(period_ms));
+        samples.filter(|&t| d.pass(t)).count()
+    }
+
+    #[test]
+    fn the_state_is_decimated_to_the_period_on_average() {
+        // A sample every 4 ms for 10 s: 50 Hz out.
+        let n = passed(20, (0..2500).map(|i| i * 4_000_000));
+        assert!((499..=501).contains(&n), "{n}");
+        // Samples every 10 ms, read with ±1 ms of jitter: still every other one.
+        let jitter = |i: u64| if i.is_multiple_of(2) { 0 } else { 1_000_000 };
+        let n = passed(20, (0..1000).map(|i| i * 10_000_000 + jitter(i)));
+        assert!((499..=501).contains(&n), "{n}");
+        // A 20 ms source a little early now and then loses nothing.
+        let n = passed(
+            20,
+            (0..500).map(|i| i * 20_000_000 - if i.is_multiple_of(3) { 0 } else { 400_000 }),
+        );
+        assert_eq!(n, 500);
+        // Slower samples all pass.
+        assert_eq!(passed(20, (0..100).map(|i| i * 50_000_000)), 100);
     }
 
     #[test]
