@@ -758,7 +758,7 @@ mod tests {
         // A 20 ms source a little early now and then loses nothing.
         let n = passed(
             20,
-            (0..500).map(|i| i * 20_000_000 - if i.is_multiple_of(3) { 0 } else { 400_000 }),
+            (0..500u64).map(|i| i * 20_000_000 - if i.is_multiple_of(3) { 0 } else { 400_000 }),
         );
         assert_eq!(n, 500);
         // Slower samples all pass.
