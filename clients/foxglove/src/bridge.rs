@@ -32,7 +32,7 @@ use serde_json::{Map, Value, json};
 
 use crate::codec::RobotCodec;
 use crate::server::{Inbox, ServiceAction};
-use crate::view::{self, Body, Trail, Watch};
+use chassis_foxglove::view::{self, Body, Trail, Watch};
 
 /// Frames a `/frames` batch carries at most.
 pub const MAX_FRAMES_PER_BATCH: usize = 1000;
@@ -345,9 +345,10 @@ struct Loop<'a> {
 impl Loop<'_> {
     fn log(&self, level: log::Level, message: String, monotonic_ns: u64) {
         let wall = self.clock.wall(monotonic_ns);
-        self.channels
-            .log
-            .log_with_time(&view::log_message(level, message, wall), wall);
+        self.channels.log.log_with_time(
+            &view::log_message(view::LOG_NAME, level, message, wall),
+            wall,
+        );
     }
 
     fn handle(&mut self, message: Inbox, robot: &mut Robot, teleop: &mut Teleop) {

@@ -29,7 +29,6 @@
 mod bridge;
 mod codec;
 mod server;
-mod view;
 
 use std::process::ExitCode;
 use std::sync::mpsc;

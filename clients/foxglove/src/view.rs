@@ -1,7 +1,7 @@
 //! What the robot looks like in Foxglove: state samples in, Foxglove's well-known messages out.
 //!
-//! Pure: every function takes the sample and the wall-clock time to stamp it with; the loop in
-//! `bridge.rs` owns the clock and the channels.
+//! Pure: every function takes the sample and the time to stamp it with; the live bridge and
+//! `chassis record` own the clocks and the channels.
 //!
 //! Frames (REP 103: x forward, y left, z up; yaw left positive):
 //!
@@ -32,7 +32,7 @@ pub const BASE_LINK: &str = "base_link";
 pub const TRAIL_POINTS: usize = 2000;
 /// A new trail point once the robot moved this far from the last one, m.
 const TRAIL_STEP_M: f64 = 0.02;
-/// Name under which the bridge's log messages appear.
+/// Name under which the live bridge's log messages appear.
 pub const LOG_NAME: &str = "chassis-foxglove";
 
 /// A Foxglove timestamp from Unix-epoch nanoseconds.
@@ -361,13 +361,13 @@ pub fn scene(state: &ChassisState, body: &Body, trail: &Trail, wall_ns: u64) -> 
     }
 }
 
-/// A `/log` message from the bridge.
-pub fn log_message(level: log::Level, message: String, wall_ns: u64) -> Log {
+/// A `/log` message from the process `name`.
+pub fn log_message(name: &str, level: log::Level, message: String, ns: u64) -> Log {
     Log {
-        timestamp: Some(stamp(wall_ns)),
+        timestamp: Some(stamp(ns)),
         level: level as i32,
         message,
-        name: LOG_NAME.into(),
+        name: name.into(),
         ..Log::default()
     }
 }
