@@ -168,6 +168,7 @@ test("chassis-foxglove serves the simulated robot to a Foxglove client", async (
   const mux = follow(conn, "/mux");
   const log = follow(conn, "/log");
   const frames = follow(conn, "/frames");
+  const scene = follow(conn, "/scene");
 
   await t.test("/tf, /pose and /state decode while the robot stands", async () => {
     await until("state, pose and tf", () => state.latest && pose.latest && tf.latest);
@@ -211,8 +212,15 @@ test("chassis-foxglove serves the simulated robot to a Foxglove client", async (
     const base = tf.latest.transforms.find((x) => x.child_frame_id === "base_link");
     assert.ok(base.translation.x > x0 + 0.1, JSON.stringify(base));
     assert.ok(Math.abs(base.translation.x - pose.latest.pose.position.x) < 0.2, "tf and pose agree");
-    const body = [...conn.seen.channels.keys()];
-    assert.ok(body.includes("/scene"));
+    // The scene: the body in base_link, the trail in odom behind it.
+    await until("a trail in the scene", () => {
+      const trail = scene.latest && scene.latest.entities.find((e) => e.id === "trail");
+      return trail && trail.lines[0].points.length > 5;
+    });
+    const entities = Object.fromEntries(scene.latest.entities.map((e) => [e.id, e]));
+    assert.equal(entities.body.frame_id, "base_link");
+    assert.equal(entities.body.cubes.length, 1);
+    assert.equal(entities.trail.frame_id, "odom");
 
     // The operator's e-stop takes the mux from it while it keeps publishing.
     chassis(["control", "--name", NAME, "estop"]);
