@@ -67,6 +67,8 @@ struct McapRecording {
     metadata: BTreeMap<String, BTreeMap<String, String>>,
     /// (log_time, message) per topic suffix (`frames`, `state`, `mux`).
     messages: BTreeMap<String, Vec<(u64, Value)>>,
+    /// Messages per Foxglove topic (`/tf`, `/pose`, `/gps`, `/log`).
+    foxglove: BTreeMap<String, usize>,
 }
 
 impl McapRecording {
@@ -81,6 +83,13 @@ impl McapRecording {
             out.metadata.insert(meta.name, meta.metadata);
         }
         for channel in summary.channels.values() {
+            if !channel.topic.starts_with("/chassis/") {
+                // The Foxglove view's channels (/tf, /pose, /gps, /log): its protobuf schemas.
+                let schema = channel.schema.as_ref().unwrap();
+                assert!(schema.name.starts_with("foxglove."), "{}", schema.name);
+                assert_eq!(channel.message_encoding, "protobuf", "{}", channel.topic);
+                continue;
+            }
             assert_eq!(channel.message_encoding, "json", "{}", channel.topic);
             let schema = channel
                 .schema
@@ -92,6 +101,12 @@ impl McapRecording {
         for message in mcap::MessageStream::new(&bytes).unwrap() {
             let message = message.unwrap();
             assert_eq!(message.log_time, message.publish_time);
+            if !message.channel.topic.starts_with("/chassis/") {
+                *out.foxglove
+                    .entry(message.channel.topic.clone())
+                    .or_default() += 1;
+                continue;
+            }
             let topic = message
                 .channel
                 .topic
@@ -276,8 +291,16 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
     stop_recorder(&mut env, mcap_rec);
     stop_recorder(&mut env, log_rec);
 
-    // The MCAP file: three JSON channels with schemas, the metadata, no sequence gap.
+    // The MCAP file: three JSON channels with schemas, the metadata, no sequence gap; the
+    // Foxglove view's /tf and /pose beside them.
     let rec = McapRecording::read(&mcap_path);
+    for topic in ["/tf", "/pose"] {
+        assert!(
+            rec.foxglove.get(topic).is_some_and(|&n| n > 10),
+            "{:?}",
+            rec.foxglove
+        );
+    }
     let meta = &rec.metadata["chassis"];
     assert_eq!(meta["robot"], "titan");
     assert_eq!(meta["name"], n);

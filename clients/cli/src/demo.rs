@@ -1,5 +1,6 @@
 //! `chassis demo`: the whole system on a simulated robot in one command — `chassisd` on the
 //! simulated chassis, the safety monitor, the planner driving figure-eights, and the dashboard.
+//! With `--foxglove`, `chassis-foxglove` serves the live view on ws://localhost:8765 too.
 //! Ctrl-C (or `q` in the dashboard) stops every process cleanly.
 
 use std::io::IsTerminal;
@@ -32,6 +33,12 @@ pub struct DemoArgs {
     /// Figure-eight size, m (default: the planner's, which fits the robot's turning radius).
     #[arg(long)]
     pub size: Option<f64>,
+    /// Serve a live Foxglove view too (`chassis-foxglove`, on 127.0.0.1).
+    #[arg(long)]
+    pub foxglove: bool,
+    /// Port of the Foxglove view.
+    #[arg(long, default_value_t = 8765)]
+    pub foxglove_port: u16,
 }
 
 fn log_file(dir: &std::path::Path, label: &str) -> anyhow::Result<Stdio> {
@@ -85,6 +92,19 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     }
     children.spawn("chassis-planner", planner)?;
     eprintln!("chassis-planner: figure-eights, over and over");
+
+    if args.foxglove {
+        let mut view = Command::new(sibling("chassis-foxglove")?);
+        view.args(["--name", &name, "--port", &args.foxglove_port.to_string()])
+            .stdin(Stdio::null())
+            .stdout(log_file(&dir, "chassis-foxglove")?)
+            .stderr(log_file(&dir, "chassis-foxglove")?);
+        children.spawn("chassis-foxglove", view)?;
+        eprintln!(
+            "chassis-foxglove: open Foxglove, connect to ws://localhost:{}, import clients/foxglove/layout.json",
+            args.foxglove_port
+        );
+    }
 
     let dashboard =
         !args.no_dashboard && std::io::stdout().is_terminal() && args.duration.is_none();

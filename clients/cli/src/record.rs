@@ -2,14 +2,27 @@
 //!
 //! # `chassis record FILE` — MCAP
 //!
-//! Opens in Foxglove (or any MCAP tool). Three channels, JSON messages each described by a JSON
-//! Schema (schema encoding `jsonschema`):
+//! Opens in Foxglove (or any MCAP tool). Three channels of JSON messages each described by a
+//! JSON Schema (schema encoding `jsonschema`):
 //!
 //! | topic | schema | one message per |
 //! | --- | --- | --- |
 //! | `/chassis/<name>/frames` | `chassis.BusFrame` | frame on the bus, both directions: `stamp_ns`, `seq`, `direction` (`rx`/`tx`), `kind` (`can`/`serial`/`gps`), `can_id`, `extended`, `len`, `data` (the payload as hex) |
 //! | `/chassis/<name>/state` | `chassis.ChassisState` | state sample published: every one, in order (`seq` numbers them; gaps are counted) |
 //! | `/chassis/<name>/mux` | `chassis.MuxStatus` | mux decision seen (on change and at 10 Hz) |
+//!
+//! and beside them the well-known Foxglove schemas (protobuf), as the live view of
+//! `chassis-foxglove` publishes them, so a recording replayed in Foxglove's 3D panel looks the
+//! same:
+//!
+//! | topic | schema | what |
+//! | --- | --- | --- |
+//! | `/tf` | `foxglove.FrameTransforms` | odom → base_link from the odometry, base_link → the sensor frames; at most 50 per second |
+//! | `/pose` | `foxglove.PoseInFrame` | the robot in odom, with `/tf` |
+//! | `/gps` | `foxglove.LocationFix` | each new GPS fix |
+//! | `/log` | `foxglove.Log` | faults appearing and clearing, link flags, changes of the mux's winner |
+//!
+//! Their timestamps are the samples' `stamp_ns`, on the same clock as every `log_time`.
 //!
 //! Every message's `log_time` and `publish_time` are the sample's own `stamp_ns`: the
 //! **`CLOCK_MONOTONIC`** time of the machine that recorded (time since boot), not the wall clock.
@@ -62,13 +75,17 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
+use chassis_client::Group;
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, LinkFlags, MuxStatus, Robot, RobotKind,
     STATE_BUFFER, StateStream, install_signal_handlers, now_ns, termination_requested,
     valid_robot_name,
 };
+use chassis_foxglove::view;
 use chassis_protocols::{CanFrame, Robot as RobotModel};
 use clap::Args;
+use foxglove::Encode;
+use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame};
 use serde::Serialize;
 use serde_json::{Value, json};
 
@@ -338,13 +355,31 @@ trait Sink {
     fn finish(self: Box<Self>, counts: &Counts, seconds: f64) -> anyhow::Result<()>;
 }
 
-/// An MCAP file with the three channels.
+/// Shortest time between two `/tf` + `/pose` messages, ns (50 Hz, as the live view).
+const TF_PERIOD_NS: u64 = 20_000_000;
+/// Name of the recorder in `/log`.
+const LOG_NAME: &str = "chassis record";
+
+/// The Foxglove channels of a recording and what they need to remember.
+struct FoxgloveChannels {
+    tf: u16,
+    pose: u16,
+    gps: u16,
+    log: u16,
+    body: Option<(u8, view::Body)>,
+    watch: view::Watch,
+    last_tf_ns: Option<u64>,
+    last_gps_ns: u64,
+}
+
+/// An MCAP file with the chassis channels and the Foxglove ones.
 pub struct McapSink {
     writer: mcap::Writer<BufWriter<File>>,
     frames: u16,
     state: u16,
     mux: u16,
-    sequence: [u32; 3],
+    fox: FoxgloveChannels,
+    sequence: [u32; 7],
     start: Start,
 }
 
@@ -409,14 +444,105 @@ impl McapSink {
             &format!("{prefix}/mux"),
             "chassis::MuxStatus.v1",
         )?;
+        let mut foxglove_channel = |topic: &str,
+                                    schema: Option<foxglove::Schema>,
+                                    encoding: String|
+         -> anyhow::Result<u16> {
+            let schema = schema.with_context(|| format!("no schema for {topic}"))?;
+            let schema_id = writer.add_schema(&schema.name, &schema.encoding, &schema.data)?;
+            Ok(writer.add_channel(schema_id, topic, &encoding, &BTreeMap::new())?)
+        };
+        let fox = FoxgloveChannels {
+            tf: foxglove_channel(
+                "/tf",
+                FrameTransforms::get_schema(),
+                FrameTransforms::get_message_encoding(),
+            )?,
+            pose: foxglove_channel(
+                "/pose",
+                PoseInFrame::get_schema(),
+                PoseInFrame::get_message_encoding(),
+            )?,
+            gps: foxglove_channel(
+                "/gps",
+                LocationFix::get_schema(),
+                LocationFix::get_message_encoding(),
+            )?,
+            log: foxglove_channel("/log", Log::get_schema(), Log::get_message_encoding())?,
+            body: None,
+            watch: view::Watch::default(),
+            last_tf_ns: None,
+            last_gps_ns: 0,
+        };
         Ok(Self {
             writer,
             frames,
             state,
             mux,
-            sequence: [0; 3],
+            fox,
+            sequence: [0; 7],
             start,
         })
+    }
+
+    fn write_encoded<T: Encode>(
+        &mut self,
+        which: usize,
+        channel_id: u16,
+        stamp_ns: u64,
+        message: &T,
+    ) -> anyhow::Result<()> {
+        let mut data = Vec::new();
+        message
+            .encode(&mut data)
+            .map_err(|e| anyhow::anyhow!("encoding a Foxglove message: {e}"))?;
+        self.write(which, channel_id, stamp_ns, &data)
+    }
+
+    fn log(
+        &mut self,
+        level: foxglove::messages::log::Level,
+        text: String,
+        stamp_ns: u64,
+    ) -> anyhow::Result<()> {
+        let message = view::log_message(LOG_NAME, level, text, stamp_ns);
+        self.write_encoded(6, self.fox.log, stamp_ns, &message)
+    }
+
+    /// `/tf`, `/pose`, `/gps` and `/log` for a state sample.
+    fn foxglove_state(&mut self, state: &ChassisState) -> anyhow::Result<()> {
+        let t = state.stamp_ns;
+        for (level, text) in self.fox.watch.state(state) {
+            self.log(level, text, t)?;
+        }
+        if self
+            .fox
+            .body
+            .as_ref()
+            .is_none_or(|(kind, _)| *kind != state.robot)
+            && let Some(robot) = view::robot_of(state.robot)
+        {
+            self.fox.body = Some((state.robot, view::Body::of(robot)));
+        }
+        if self
+            .fox
+            .last_tf_ns
+            .is_none_or(|last| t.saturating_sub(last) >= TF_PERIOD_NS)
+            && let Some((_, body)) = &self.fox.body
+        {
+            let transforms = view::transforms(state, body, t);
+            self.fox.last_tf_ns = Some(t);
+            self.write_encoded(3, self.fox.tf, t, &transforms)?;
+            self.write_encoded(4, self.fox.pose, t, &view::pose_in_frame(state, t))?;
+        }
+        let gps_ns = state.group_stamp_ns[Group::Gps.index()];
+        if gps_ns != self.fox.last_gps_ns
+            && let Some(fix) = view::location_fix(state, t)
+        {
+            self.fox.last_gps_ns = gps_ns;
+            self.write_encoded(5, self.fox.gps, t, &fix)?;
+        }
+        Ok(())
     }
 
     fn write(
@@ -448,12 +574,17 @@ impl Sink for McapSink {
 
     fn state(&mut self, state: &ChassisState) -> anyhow::Result<()> {
         let data = serde_json::to_vec(state)?;
-        self.write(1, self.state, state.stamp_ns, &data)
+        self.write(1, self.state, state.stamp_ns, &data)?;
+        self.foxglove_state(state)
     }
 
     fn mux(&mut self, mux: &MuxStatus) -> anyhow::Result<()> {
         let data = serde_json::to_vec(mux)?;
-        self.write(2, self.mux, mux.stamp_ns, &data)
+        self.write(2, self.mux, mux.stamp_ns, &data)?;
+        if let Some((level, text)) = self.fox.watch.mux(mux) {
+            self.log(level, text, mux.stamp_ns)?;
+        }
+        Ok(())
     }
 
     fn finish(mut self: Box<Self>, counts: &Counts, seconds: f64) -> anyhow::Result<()> {
@@ -1205,6 +1336,7 @@ mod tests {
         };
         state.motion.linear_mps = 0.5;
         state.odometry.x_m = 1.25;
+        state.robot = RobotKind::TITAN;
         sink.state(&state).unwrap();
         let mux = MuxStatus {
             stamp_ns: 1_000_000_400,
@@ -1233,12 +1365,18 @@ mod tests {
             assert!(topics.contains(&topic.to_string()), "{topics:?}");
         }
         for channel in summary.channels.values() {
-            assert_eq!(channel.message_encoding, "json");
-            assert_eq!(channel.schema.as_ref().unwrap().encoding, "jsonschema");
+            if channel.topic.starts_with("/chassis/") {
+                assert_eq!(channel.message_encoding, "json");
+                assert_eq!(channel.schema.as_ref().unwrap().encoding, "jsonschema");
+            }
         }
-        let messages: Vec<mcap::Message> = mcap::MessageStream::new(&bytes)
+        let all: Vec<mcap::Message> = mcap::MessageStream::new(&bytes)
             .unwrap()
             .map(Result::unwrap)
+            .collect();
+        let messages: Vec<&mcap::Message> = all
+            .iter()
+            .filter(|m| m.channel.topic.starts_with("/chassis/"))
             .collect();
         assert_eq!(messages.len(), 4);
         let frame: Value = serde_json::from_slice(&messages[0].data).unwrap();
@@ -1264,6 +1402,99 @@ mod tests {
         let counts_back = mcap::read::metadata(&bytes, index).unwrap();
         assert_eq!(counts_back.metadata["frames"], "2");
         assert_eq!(counts_back.metadata["lost_frames"], "0");
+    }
+
+    #[test]
+    fn an_mcap_recording_carries_the_foxglove_schemas_of_the_live_view() {
+        use foxglove::Decode;
+        let path = scratch("foxglove.mcap");
+        let mut sink: Box<dyn Sink> = Box::new(McapSink::create(&path, start()).unwrap());
+        let mut state = ChassisState {
+            robot: RobotKind::TITAN,
+            ..ChassisState::default()
+        };
+        // 1 s of samples every 5 ms, driving forward at 1 m/s; a fault appears half-way.
+        for i in 0..200u64 {
+            state.seq = i;
+            state.stamp_ns = 1_000_000_000 + i * 5_000_000;
+            state.odometry.x_m = i as f64 * 0.005;
+            if i == 100 {
+                state.system.fault_flags =
+                    chassis_client::FaultFlags::from_name("heartbeat_lost").unwrap();
+            }
+            if i == 150 {
+                state.touch(Group::Gps, state.stamp_ns);
+                state.gps.fix_quality = 1;
+                state.gps.latitude_deg = 48.5;
+                state.gps.longitude_deg = 9.1;
+            }
+            sink.state(&state).unwrap();
+        }
+        sink.finish(&Counts::default(), 1.0).unwrap();
+
+        let bytes = std::fs::read(&path).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let schema_of_topic = |topic: &str| {
+            let c = summary
+                .channels
+                .values()
+                .find(|c| c.topic == topic)
+                .unwrap();
+            let s = c.schema.as_ref().unwrap();
+            (
+                s.name.clone(),
+                s.encoding.clone(),
+                c.message_encoding.clone(),
+            )
+        };
+        for (topic, name) in [
+            ("/tf", "foxglove.FrameTransforms"),
+            ("/pose", "foxglove.PoseInFrame"),
+            ("/gps", "foxglove.LocationFix"),
+            ("/log", "foxglove.Log"),
+        ] {
+            let (schema, encoding, message_encoding) = schema_of_topic(topic);
+            assert_eq!(schema, name);
+            assert_eq!(
+                (encoding.as_str(), message_encoding.as_str()),
+                ("protobuf", "protobuf")
+            );
+        }
+        let messages: Vec<mcap::Message> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+        let on = |topic: &str| -> Vec<&mcap::Message> {
+            messages
+                .iter()
+                .filter(|m| m.channel.topic == topic)
+                .collect()
+        };
+        // Every state sample as JSON, /tf and /pose at 50 Hz.
+        assert_eq!(on("/chassis/rec/state").len(), 200);
+        let tf = on("/tf");
+        assert_eq!(tf.len(), 50);
+        let last = FrameTransforms::decode(&tf[49].data[..]).unwrap();
+        let base = &last.transforms[0];
+        assert_eq!(base.child_frame_id, "base_link");
+        assert!((base.translation.unwrap().x - 0.98).abs() < 1e-9);
+        assert_eq!(tf[49].log_time, 1_000_000_000 + 196 * 5_000_000);
+        let pose = PoseInFrame::decode(&on("/pose")[49].data[..]).unwrap();
+        assert_eq!(pose.frame_id, "odom");
+        assert!((pose.pose.unwrap().position.unwrap().x - 0.98).abs() < 1e-9);
+        let gps = on("/gps");
+        assert_eq!(gps.len(), 1);
+        assert_eq!(
+            LocationFix::decode(&gps[0].data[..]).unwrap().latitude,
+            48.5
+        );
+        let logs: Vec<Log> = on("/log")
+            .iter()
+            .map(|m| Log::decode(&m.data[..]).unwrap())
+            .collect();
+        assert_eq!(logs.len(), 1, "{logs:?}");
+        assert!(logs[0].message.contains("heartbeat_lost"), "{logs:?}");
+        assert_eq!(logs[0].name, LOG_NAME);
     }
 
     #[test]

@@ -94,8 +94,9 @@ pub struct MuxConfig {
 }
 
 impl Default for MuxConfig {
-    /// `safety` (255, 200 ms, required), `teleop` (100, 300 ms), `planner` (10, 500 ms); lock
-    /// `estop` at 255.
+    /// `safety` (255, 200 ms, required), `teleop` (100, 300 ms), `planner` (10, 500 ms),
+    /// `foxglove` (100, 300 ms: the Teleop panel of a Foxglove view, teleop's rank); lock `estop`
+    /// at 255.
     fn default() -> Self {
         let source = |name: &str, priority, timeout_ms, required| SourceConfig {
             name: name.into(),
@@ -108,6 +109,7 @@ impl Default for MuxConfig {
                 source("safety", 255, 200, true),
                 source("teleop", 100, 300, false),
                 source("planner", 10, 500, false),
+                source("foxglove", 100, 300, false),
             ],
             locks: vec![LockConfig {
                 name: "estop".into(),

@@ -1,0 +1,150 @@
+//! One robot's codec behind a uniform face: frames in, JSON objects out, the fields as
+//! `chassis decode` prints them.
+
+use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
+use chassis_protocols::{CanFrame, DecodeError, Profile, Robot, scout_mini, titan, xbot};
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+/// A decoded frame as one JSON object: `robot`, `id`, `frame`, `direction`, then the frame's
+/// fields in SI units under the names the interfaces use.
+pub type FrameJson = Map<String, Value>;
+
+/// Why serial bytes did not decode into a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum SerialError {
+    /// The robot is on a CAN bus: its frames are given as `ID#HEX`.
+    #[error("{robot} speaks CAN: give frames as ID#HEX")]
+    NotSerial { robot: Robot },
+    /// The XBot stream parser rejected a candidate frame (its bytes are in the message).
+    #[error("{0}")]
+    Rejected(xbot::StreamError),
+}
+
+/// The codec of one robot, with its profile.
+#[derive(Debug)]
+pub enum RobotCodec {
+    Titan(TitanProfile),
+    ScoutMini(ScoutMiniProfile),
+    Xbot {
+        profile: XbotProfile,
+        parser: xbot::StreamParser,
+    },
+}
+
+impl RobotCodec {
+    pub fn new(profile: Profile) -> Self {
+        match profile {
+            Profile::Titan(p) => RobotCodec::Titan(p),
+            Profile::ScoutMini(p) => RobotCodec::ScoutMini(p),
+            Profile::Xbot(p) => RobotCodec::Xbot {
+                profile: p,
+                parser: xbot::StreamParser::new(),
+            },
+        }
+    }
+
+    pub fn robot(&self) -> Robot {
+        match self {
+            RobotCodec::Titan(_) => Robot::Titan,
+            RobotCodec::ScoutMini(_) => Robot::ScoutMini,
+            RobotCodec::Xbot { .. } => Robot::Xbot,
+        }
+    }
+
+    /// Decodes one CAN frame (TITAN, SCOUT MINI).
+    pub fn decode_can(&self, frame: &CanFrame) -> Result<FrameJson, DecodeError> {
+        match self {
+            RobotCodec::Titan(profile) => {
+                let decoded = titan::decode(frame, profile)?;
+                Ok(frame_json(
+                    Robot::Titan,
+                    decoded.id().into(),
+                    decoded.direction(),
+                    None,
+                    &decoded,
+                ))
+            }
+            RobotCodec::ScoutMini(profile) => {
+                let decoded = scout_mini::decode(frame, profile)?;
+                Ok(frame_json(
+                    Robot::ScoutMini,
+                    decoded.frame.id().into(),
+                    decoded.frame.direction(),
+                    Some(decoded.count),
+                    &decoded.frame,
+                ))
+            }
+            RobotCodec::Xbot { .. } => Err(DecodeError::UnknownId { id: frame.id() }),
+        }
+    }
+
+    /// Feeds serial bytes (XBot) and returns every frame or error they complete, in order.
+    /// Errors carry the bytes of the rejected candidate frame when there is one.
+    pub fn push_serial(&mut self, bytes: &[u8]) -> Vec<Result<FrameJson, SerialError>> {
+        let RobotCodec::Xbot { profile, parser } = self else {
+            return vec![Err(SerialError::NotSerial {
+                robot: self.robot(),
+            })];
+        };
+        parser.push(bytes);
+        let mut out = Vec::new();
+        while let Some(item) = parser.next_frame(profile) {
+            out.push(match item {
+                Ok(frame) => Ok(frame_json(
+                    Robot::Xbot,
+                    frame.command_id().into(),
+                    frame.direction(),
+                    None,
+                    &frame,
+                )),
+                Err(err) => Err(SerialError::Rejected(err)),
+            });
+        }
+        out
+    }
+}
+
+fn frame_json(
+    robot: Robot,
+    id: u32,
+    direction: chassis_protocols::Direction,
+    count: Option<u8>,
+    frame: &impl Serialize,
+) -> FrameJson {
+    let mut out = Map::new();
+    out.insert("robot".into(), robot.name().into());
+    let id_text = if robot.is_can() {
+        format!("0x{id:03X}")
+    } else {
+        format!("0x{id:02X}")
+    };
+    out.insert("id".into(), id_text.into());
+    if let Some(count) = count {
+        out.insert("count".into(), count.into());
+    }
+    match serde_json::to_value(frame) {
+        Ok(Value::Object(fields)) => {
+            // `frame` (the tag) first, then the direction, then the fields.
+            if let Some(name) = fields.get("frame") {
+                out.insert("frame".into(), name.clone());
+            }
+            out.insert(
+                "direction".into(),
+                serde_json::to_value(direction).unwrap_or(Value::Null),
+            );
+            for (key, value) in fields {
+                if key != "frame" {
+                    out.insert(key, value);
+                }
+            }
+        }
+        Ok(other) => {
+            out.insert("frame".into(), other);
+        }
+        Err(err) => {
+            out.insert("error".into(), err.to_string().into());
+        }
+    }
+    out
+}

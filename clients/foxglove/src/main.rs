@@ -1,0 +1,164 @@
+//! `chassis-foxglove --name ROBOT [--port 8765]`: a live Foxglove view of a robot served by
+//! chassisd, over the Foxglove WebSocket protocol (the official `foxglove` SDK's server).
+//!
+//! Open Foxglove, connect to `ws://localhost:8765`, import `clients/foxglove/layout.json`.
+//!
+//! | topic | schema | what |
+//! | --- | --- | --- |
+//! | `/tf` | `foxglove.FrameTransforms` | odom → base_link from the odometry, base_link → imu, gps and the XBot's range sensors |
+//! | `/pose` | `foxglove.PoseInFrame` | the robot in odom |
+//! | `/scene` | `foxglove.SceneUpdate` | the body, the XBot's range cones with their readings, the path just driven |
+//! | `/gps` | `foxglove.LocationFix` | the GPS fix, when there is one |
+//! | `/log` | `foxglove.Log` | faults appearing and clearing, link flags, mux changes, service calls |
+//! | `/state` | `chassis.ChassisState` (JSON) | every field of the state, ≤ 50 Hz |
+//! | `/mux` | `chassis.MuxStatus` (JSON) | every field of the mux decision, names spelled out |
+//! | `/frames` | `chassis.Frames` (JSON) | the bus frames, decoded, in batches every 100 ms |
+//!
+//! A client channel of `geometry_msgs/Twist` in JSON (Foxglove's Teleop panel) drives the robot
+//! as the mux source `foxglove` (teleop's priority, 300 ms timeout; below the safety monitor and
+//! the e-stop). Services: `/estop`, `/estop_release`, `/clear_faults`, `/mode`, `/brake`,
+//! `/lights`, `/off_road`, `/lift`, `/servos`, `/power`, `/steering_zero`, `/silent`, each
+//! answering with chassisd's response `{"ok", "status", "message"}`.
+//!
+//! `--read-only` offers no client publishing and only the `/estop` service: a view can always
+//! stop the robot, never drive it.
+//!
+//! It binds 127.0.0.1: anyone who reaches the port can drive the robot. `--bind ADDRESS`
+//! serves other hosts, with a warning.
+
+mod bridge;
+mod codec;
+mod server;
+
+use std::process::ExitCode;
+use std::sync::mpsc;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use clap::Parser;
+use foxglove::websocket::Capability;
+use foxglove::{Context, WebSocketServer};
+
+use crate::server::{Listener, ServiceAction};
+
+/// The fastest state rate a browser keeps up with, Hz.
+const MAX_STATE_HZ: f64 = 50.0;
+
+/// A live Foxglove view of a robot served by chassisd.
+#[derive(Debug, Parser)]
+#[command(name = "chassis-foxglove", version)]
+struct Cli {
+    /// The robot's name (chassisd --name).
+    #[arg(long)]
+    name: String,
+    /// TCP port of the WebSocket server (0: any free port, printed at start).
+    #[arg(long, default_value_t = 8765)]
+    port: u16,
+    /// Address to listen on. Anything but loopback lets other machines drive the robot.
+    #[arg(long, default_value = "127.0.0.1")]
+    bind: String,
+    /// View only: refuse client channels (no Teleop) and offer only the /estop service.
+    #[arg(long)]
+    read_only: bool,
+    /// State rate, Hz (at most 50).
+    #[arg(long, default_value_t = MAX_STATE_HZ)]
+    state_hz: f64,
+}
+
+fn is_loopback(bind: &str) -> bool {
+    bind == "localhost"
+        || bind
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
+fn run(cli: &Cli) -> anyhow::Result<()> {
+    if !(cli.state_hz > 0.0 && cli.state_hz <= MAX_STATE_HZ) {
+        anyhow::bail!("--state-hz must be in (0, {MAX_STATE_HZ}]");
+    }
+    if !is_loopback(&cli.bind) {
+        tracing::warn!(bind = cli.bind, "serving beyond this machine");
+        eprintln!(
+            "chassis-foxglove: WARNING: listening on {}: anyone who reaches port {} can {} robot '{}'",
+            cli.bind,
+            cli.port,
+            if cli.read_only {
+                "watch and e-stop"
+            } else {
+                "DRIVE"
+            },
+            cli.name
+        );
+    }
+    chassis_client::install_signal_handlers();
+    let (tx, rx) = mpsc::channel();
+    let ctx = Context::new();
+    let channels = bridge::Channels::new(&ctx)?;
+    let actions: Vec<ServiceAction> = if cli.read_only {
+        vec![ServiceAction::Estop]
+    } else {
+        ServiceAction::ALL.to_vec()
+    };
+    let mut capabilities = vec![Capability::Services];
+    if !cli.read_only {
+        capabilities.push(Capability::ClientPublish);
+    }
+    let handle = WebSocketServer::new()
+        .context(&ctx)
+        .name(format!("chassis-foxglove {}", cli.name))
+        .bind(cli.bind.clone(), cli.port)
+        .capabilities(capabilities)
+        .supported_encodings(["json"])
+        .listener(std::sync::Arc::new(Listener { inbox: tx.clone() }))
+        .services(actions.into_iter().map(|a| a.service(tx.clone())))
+        .start_blocking()
+        .with_context(|| format!("serving on {}:{}", cli.bind, cli.port))?;
+    drop(tx);
+    eprintln!(
+        "chassis-foxglove: robot '{}' on ws://{}:{}{}",
+        cli.name,
+        cli.bind,
+        handle.port(),
+        if cli.read_only { " (read-only)" } else { "" }
+    );
+    let config = bridge::Config {
+        name: cli.name.clone(),
+        state_period: Duration::from_secs_f64(1.0 / cli.state_hz),
+        drive: !cli.read_only,
+    };
+    let result = bridge::run(&config, &channels, &rx);
+    handle.stop().wait_blocking();
+    result
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match run(&cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("chassis-foxglove: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_loopback_addresses_count_as_local() {
+        assert!(is_loopback("127.0.0.1"));
+        assert!(is_loopback("::1"));
+        assert!(is_loopback("localhost"));
+        assert!(!is_loopback("0.0.0.0"));
+        assert!(!is_loopback("192.168.1.5"));
+    }
+}
