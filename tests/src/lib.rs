@@ -143,12 +143,21 @@ impl Env {
         let mut cmd = Command::new(bin(binary));
         cmd.args(args)
             .env(IPC_PREFIX_ENV, &self.prefix)
+            // Held locks are kept per test (a restarted chassisd of the same test finds them).
+            .env("XDG_STATE_HOME", self.state_home())
+            .env_remove("STATE_DIRECTORY")
             .env(
                 "RUST_LOG",
                 std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
             )
             .stdin(Stdio::null());
         cmd
+    }
+
+    /// `$XDG_STATE_HOME` of every process of this test: chassisd keeps robot NAME's held locks
+    /// in `chassisd/NAME/NAME.locks.json` under it.
+    pub fn state_home(&self) -> PathBuf {
+        self.dir.join("state")
     }
 
     /// Starts `binary args…` in the background; stdout and stderr go to `<dir>/<label>.log`.

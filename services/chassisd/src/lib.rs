@@ -10,6 +10,7 @@ pub mod clock;
 pub mod config;
 pub mod engine;
 pub mod ipc;
+pub mod lockfile;
 pub mod moderation;
 pub mod mux;
 pub mod service;

@@ -21,13 +21,14 @@ use iceoryx2::waitset::{
 };
 use iceoryx2_bb_posix::file_descriptor::{FileDescriptor, FileDescriptorBased};
 use iceoryx2_bb_posix::file_descriptor_set::SynchronousMultiplexing;
-use tracing::{info, info_span, warn};
+use tracing::{debug, error, info, info_span, warn};
 
 use crate::bus::{Bus, BusSpec, MAX_RX_BATCH};
 use crate::clock;
 use crate::config::{Config, LoopMode};
-use crate::engine::{Engine, EngineConfig, ListenerChange, Ticket, Wake};
+use crate::engine::{Engine, EngineConfig, HeldLock, ListenerChange, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};
+use crate::lockfile::{Clocks, LockFile};
 use crate::moderation::RxGate;
 use crate::mux::{Mux, MuxConfigError};
 use crate::setup::{Devices, Hardware, PinError, driver_for, pin_to_cpu};
@@ -107,6 +108,11 @@ struct Shell<D> {
     spin: Duration,
     /// When something last woke the loop (hybrid mode keeps polling for a while after it).
     last_activity: Timestamp,
+    /// Where the held locks outlive the process.
+    lock_file: LockFile,
+    /// A held set not yet on disk (its write failed), and when to try again.
+    unkept: Option<Vec<HeldLock>>,
+    keep_retry_at: Timestamp,
 }
 
 /// Runs the service on the devices its configuration names until SIGINT or SIGTERM. Returns
@@ -147,6 +153,17 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         Mux::new(&config.mux)?,
         now,
     );
+    // The locks held before a restart hold again before anything is decided.
+    let lock_file = LockFile::new(&config.state_dir, &config.name);
+    match lock_file.load(clocks(now)) {
+        Ok(held) => engine.restore_locks(now, &held),
+        Err(err) => {
+            let aside = lock_file
+                .set_aside()
+                .map_or_else(String::new, |p| format!(" (set aside as {})", p.display()));
+            engine.restore_failed(now, &format!("{err}{aside}"));
+        }
+    }
     let (bus, sim) = match devices.open_bus(now) {
         Ok((bus, sim)) => (Some(bus), sim),
         Err(err) => {
@@ -172,9 +189,13 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         loop_mode: config.loop_mode,
         spin: Duration::from_micros(config.spin_us),
         last_activity: now,
+        lock_file,
+        unkept: None,
+        keep_retry_at: now,
     };
     shell.open_due(&mut engine, now);
     engine.publish_all(now);
+    shell.keep_locks(&mut engine);
     shell.publish(&ports, &mut engine, now);
     shell.run(&ports, &mut engine)
 }
@@ -297,12 +318,49 @@ impl<D: Devices> Shell<D> {
         }
     }
 
+    /// Writes the held locks when the engine says the set changed, before the pass publishes
+    /// its answers; a failed write is retried every second until it succeeds.
+    pub(super) fn keep_locks(&mut self, engine: &mut Engine) {
+        if let Some(held) = engine.poll_held_locks() {
+            self.unkept = Some(held);
+        }
+        let Some(held) = &self.unkept else {
+            return;
+        };
+        let now = clock::now();
+        if now < self.keep_retry_at {
+            return;
+        }
+        match self.lock_file.store(held, clocks(now)) {
+            Ok(()) => {
+                debug!(
+                    held = held.len(),
+                    file = %self.lock_file.path().display(),
+                    "held locks kept"
+                );
+                self.unkept = None;
+            }
+            Err(err) => {
+                error!("{err}; the held locks would not survive a restart: retrying every second");
+                self.keep_retry_at = now + Duration::from_secs(1);
+            }
+        }
+    }
+
     fn shutdown(&mut self, ports: &Ports, engine: &mut Engine) {
         let now = clock::now();
         engine.shutdown(now);
         self.transmit(engine, now);
         engine.publish_all(now);
         self.publish(ports, engine, now);
+    }
+}
+
+/// Both clocks at `now` (the wall clock read right after).
+fn clocks(now: Timestamp) -> Clocks {
+    Clocks {
+        monotonic: now,
+        unix_ns: clock::unix_ns(),
     }
 }
 

@@ -61,8 +61,7 @@ use std::time::Duration;
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
     FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags, LockStatus, MuxStatus,
-    SourceFlags,
-    SourceStatus, VelocityRequest, ZeroReason,
+    SourceFlags, SourceStatus, VelocityRequest, ZeroReason,
 };
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
@@ -842,7 +841,11 @@ impl Engine {
             return;
         }
         for name in &wanted {
-            if self.mux.locks().any(|(n, held)| n == name && held.is_none()) {
+            if self
+                .mux
+                .locks()
+                .any(|(n, held)| n == name && held.is_none())
+            {
                 self.mux
                     .restore_lock(name, LockStatus::HOLDER_OPERATOR, now)
                     .ok();

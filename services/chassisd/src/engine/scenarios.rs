@@ -680,7 +680,11 @@ fn a_lock_restored_after_a_restart_holds_until_the_operator_releases_it() {
     );
     let lock = rig.mux().locks()[0];
     assert_eq!((lock.held, lock.holder), (1, LockStatus::HOLDER_OPERATOR));
-    assert_eq!(lock.since_ns, before.as_nanos(), "held since before the restart");
+    assert_eq!(
+        lock.since_ns,
+        before.as_nanos(),
+        "held since before the restart"
+    );
     assert_eq!(rig.mux().zero_reason, ZeroReason::LOCKED);
     assert!(
         rig.kept_locks.is_empty(),
@@ -689,7 +693,11 @@ fn a_lock_restored_after_a_restart_holds_until_the_operator_releases_it() {
     rig.run_until(at(1600));
     assert_eq!(rig.response(release).unwrap().0.message(), "estop released");
     assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(1500)));
-    assert_eq!(rig.kept_locks, vec![(at(1500), vec![])], "release clears the file");
+    assert_eq!(
+        rig.kept_locks,
+        vec![(at(1500), vec![])],
+        "release clears the file"
+    );
 }
 
 #[test]
