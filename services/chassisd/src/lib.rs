@@ -13,6 +13,7 @@ pub mod ipc;
 pub mod lockfile;
 pub mod moderation;
 pub mod mux;
+pub mod notify;
 pub mod service;
 pub mod setup;
 pub mod sim;

@@ -31,7 +31,8 @@ use crate::ipc::{IpcError, Ports};
 use crate::lockfile::{Clocks, LockFile};
 use crate::moderation::RxGate;
 use crate::mux::{Mux, MuxConfigError};
-use crate::setup::{Devices, Hardware, PinError, driver_for, pin_to_cpu};
+use crate::notify::Notifier;
+use crate::setup::{Devices, Hardware, PinError, driver_for, enter_realtime, pin_to_cpu};
 use crate::sim::SimHandle;
 
 mod pass;
@@ -113,6 +114,8 @@ struct Shell<D> {
     /// A held set not yet on disk (its write failed), and when to try again.
     unkept: Option<Vec<HeldLock>>,
     keep_retry_at: Timestamp,
+    /// systemd's notification socket, when started by a `Type=notify` unit.
+    notifier: Option<Notifier>,
 }
 
 /// Runs the service on the devices its configuration names until SIGINT or SIGTERM. Returns
@@ -192,11 +195,22 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         lock_file,
         unkept: None,
         keep_retry_at: now,
+        notifier: Notifier::from_env(),
     };
     shell.open_due(&mut engine, now);
     engine.publish_all(now);
     shell.keep_locks(&mut engine);
     shell.publish(&ports, &mut engine, now);
+    if let Some(notifier) = &mut shell.notifier {
+        notifier.ready(engine.mux().status());
+        if let Some(every) = notifier.ping_every() {
+            info!("systemd watchdog: pinging every {every:?}");
+        }
+    }
+    // Threads started before this (the simulated chassis) keep normal scheduling.
+    if let Some(priority) = config.realtime {
+        realtime_mode(priority);
+    }
     shell.run(&ports, &mut engine)
 }
 
@@ -262,19 +276,27 @@ impl<D: Devices> Shell<D> {
                     },
                     timeout,
                 )?;
-                if matches!(
-                    result,
-                    WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
-                ) {
-                    self.shutdown(ports, engine);
-                    return Ok(());
+                match result {
+                    WaitSetRunResult::TerminationRequest => {
+                        self.shutdown(ports, engine);
+                        return Ok(());
+                    }
+                    // A signal interrupted the wait: SIGTERM / SIGINT are reported as a
+                    // termination request by the next wait; anything else (a SIGCONT after a
+                    // SIGSTOP, a debugger) is no reason to stop.
+                    WaitSetRunResult::Interrupt => continue,
+                    _ => {}
                 }
                 // A moderation pause that ended: read what queued meanwhile, watch the bus again.
                 if !gate.is_open() && !engine.is_rx_paused(clock::now()) {
                     set_gate(&mut gate, true);
                     wake.bus = true;
                 }
-                if self.pass(ports, engine, wake) == Next::Rewire {
+                let next = self.pass(ports, engine, wake);
+                if let Some(notifier) = &mut self.notifier {
+                    notifier.pass(clock::now(), engine.mux().status());
+                }
+                if next == Next::Rewire {
                     break;
                 }
                 // Close the gate for a pause that began, open it when polling ended.
@@ -307,7 +329,14 @@ impl<D: Devices> Shell<D> {
     /// deadline, spin never blocks, hybrid polls for `spin_us` after each activity and then
     /// blocks.
     fn wait_time(&self, engine: &Engine, now: Timestamp) -> Duration {
-        let until_deadline = engine.poll_timeout().saturating_since(now);
+        let deadline = self
+            .notifier
+            .as_ref()
+            .and_then(Notifier::deadline)
+            .map_or(engine.poll_timeout(), |ping| {
+                ping.min(engine.poll_timeout())
+            });
+        let until_deadline = deadline.saturating_since(now);
         match self.loop_mode {
             LoopMode::Event => until_deadline,
             LoopMode::Spin => Duration::ZERO,
@@ -348,11 +377,32 @@ impl<D: Devices> Shell<D> {
     }
 
     fn shutdown(&mut self, ports: &Ports, engine: &mut Engine) {
+        if let Some(notifier) = &mut self.notifier {
+            notifier.stopping();
+        }
         let now = clock::now();
         engine.shutdown(now);
         self.transmit(engine, now);
         engine.publish_all(now);
         self.publish(ports, engine, now);
+    }
+}
+
+/// Real-time mode for the loop's thread; what the system refuses is a warning, and the loop
+/// runs with normal scheduling.
+fn realtime_mode(priority: u8) {
+    let (granted, refusals) = enter_realtime(priority);
+    for refusal in &refusals {
+        warn!("--realtime: {refusal}");
+    }
+    if granted.fifo {
+        info!(
+            priority,
+            memory_locked = granted.locked,
+            "real-time mode: the loop runs at SCHED_FIFO"
+        );
+    } else {
+        warn!("--realtime: the loop runs with normal scheduling");
     }
 }
 
