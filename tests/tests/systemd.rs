@@ -212,27 +212,31 @@ fn a_refused_realtime_mode_warns_and_runs_with_normal_scheduling() {
     let mut env = Env::new("rt-refused");
     let n = name("rtr");
     let chassisd = bin("chassisd").to_string_lossy().into_owned();
-    // Without CAP_SYS_NICE and CAP_IPC_LOCK, and with RLIMIT_RTPRIO 0, the kernel refuses.
-    let index = env.spawn_program(
-        "chassisd",
-        Path::new("/usr/bin/prlimit"),
-        &[
-            "--rtprio=0",
-            "--",
+    // With RLIMIT_RTPRIO 0 the kernel refuses SCHED_FIFO to an unprivileged process; root keeps
+    // CAP_SYS_NICE and CAP_IPC_LOCK unless they are taken away (setpriv).
+    let mut args = vec!["--rtprio=0", "--"];
+    let root = std::fs::metadata("/proc/self").is_ok_and(|m| {
+        use std::os::unix::fs::MetadataExt;
+        m.uid() == 0
+    });
+    if root {
+        args.extend([
             "/usr/bin/setpriv",
             "--bounding-set=-sys_nice,-ipc_lock",
             "--inh-caps=-sys_nice,-ipc_lock",
-            &chassisd,
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--no-safety-monitor",
-            "--realtime",
-            "10",
-        ],
-        &[],
-    );
+        ]);
+    }
+    args.extend([
+        chassisd.as_str(),
+        "--robot",
+        "titan",
+        "--name",
+        &n,
+        "--no-safety-monitor",
+        "--realtime",
+        "10",
+    ]);
+    let index = env.spawn_program("chassisd", Path::new("/usr/bin/prlimit"), &args, &[]);
     assert_drives(&env, &n);
     let log = env.proc(index).log_text();
     assert!(log.contains("WARN"), "{log}");
