@@ -76,9 +76,11 @@ impl Clocks {
         self.unix_ns.saturating_sub(age)
     }
 
+    /// A start before this boot reads as the boot itself (1 ns: a held lock's `since_ns` is
+    /// never the 0 of a free one).
     fn to_monotonic(self, since_unix_ns: u64) -> Timestamp {
         let age = self.unix_ns.saturating_sub(since_unix_ns);
-        Timestamp::from_nanos(self.monotonic.as_nanos().saturating_sub(age))
+        Timestamp::from_nanos(self.monotonic.as_nanos().saturating_sub(age).max(1))
     }
 }
 
@@ -212,6 +214,15 @@ mod tests {
             ("estop", "safety")
         );
         assert_eq!(back[0].since, Timestamp::from_millis(200_000 - 130_000));
+        // Held since before this boot: the boot.
+        let rebooted = Clocks {
+            monotonic: Timestamp::from_millis(5_000),
+            unix_ns: later.unix_ns,
+        };
+        assert_eq!(
+            file.load(rebooted).unwrap()[0].since,
+            Timestamp::from_nanos(1)
+        );
         file.store(&[], CLOCKS).unwrap();
         assert_eq!(file.load(CLOCKS).unwrap(), vec![], "a release clears it");
         assert!(!dir.join(".r1.locks.json.new").exists());
