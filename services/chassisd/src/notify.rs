@@ -149,9 +149,20 @@ mod tests {
 
     #[test]
     fn the_status_names_the_decision_and_the_held_locks() {
+        let t = Timestamp::from_millis;
         let mut mux = Mux::new(&MuxConfig::default()).unwrap();
-        mux.engage_lock(Timestamp::from_millis(1), "estop").unwrap();
-        mux.evaluate(Timestamp::from_millis(2));
+        mux.evaluate(t(1));
+        assert_eq!(describe(mux.status()), "stopped: required source stale");
+        let mut mux = Mux::new(&MuxConfig::default().without_required_sources()).unwrap();
+        let teleop = chassis_interfaces::VelocityRequest {
+            stamp_ns: t(1).as_nanos(),
+            ..chassis_interfaces::VelocityRequest::twist(0.3, 0.0)
+        };
+        mux.on_request(t(1), 1, &teleop).unwrap();
+        mux.evaluate(t(2));
+        assert_eq!(describe(mux.status()), "driving from teleop");
+        mux.engage_lock(t(3), "estop").unwrap();
+        mux.evaluate(t(4));
         assert_eq!(describe(mux.status()), "stopped: locked · held: estop");
     }
 
