@@ -122,10 +122,15 @@ fn an_answered_estop_is_held_after_a_kill_at_any_moment_after_the_answer() {
     let mut current = start(&mut env, "run0", &n);
     let mut robot = env.robot(&n, UP);
     let mut teleop = robot.source("teleop").unwrap();
-    for round in 1..=4 {
+    const ROUNDS: usize = 4;
+    let mut moments = Vec::new();
+    let mut held_after = 0;
+    for round in 1..=ROUNDS {
         assert!(control(&env, &n, "estop").contains("estop engaged"));
         // Teleop keeps asking while the kill comes, 0 to 30 ms after the answer.
-        let kill_at = Instant::now() + rng.between(Duration::ZERO, Duration::from_millis(30));
+        let delay = rng.between(Duration::ZERO, Duration::from_millis(30));
+        moments.push(format!("{:.1}", delay.as_secs_f64() * 1e3));
+        let kill_at = Instant::now() + delay;
         while Instant::now() < kill_at {
             teleop.send(VelocityRequest::twist(0.3, 0.0)).unwrap();
             pause(Duration::from_millis(2));
@@ -133,8 +138,26 @@ fn an_answered_estop_is_held_after_a_kill_at_any_moment_after_the_answer() {
         kill(&mut env, current);
         current = start(&mut env, &format!("run{round}"), &n);
         robot = env.robot(&n, UP);
+        if estop_held(&mut robot).0 {
+            held_after += 1;
+        }
         assert_held_until_released(&env, &n, &mut robot, &mut teleop);
     }
+    record_figure(&Figure {
+        rank: 710,
+        fault: "chassisd SIGKILLed with the e-stop held, and restarted".into(),
+        injection: format!(
+            "`chassis control estop`, then SIGKILL {} ms after the answer while teleop asks for              0.3 m/s; a new chassisd",
+            moments.join(", ")
+        ),
+        behaviour: "the restarted service holds the e-stop (restored from its state file,                     logged at WARN); teleop does not move the robot until `estop-release`"
+            .into(),
+        figure: format!("held after {held_after} of {ROUNDS} restarts"),
+        value: held_after as f64,
+        pass: held_after == ROUNDS,
+        suite: "latch".into(),
+        test: "an_answered_estop_is_held_after_a_kill_at_any_moment_after_the_answer".into(),
+    });
 }
 
 #[test]
