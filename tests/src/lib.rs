@@ -140,9 +140,17 @@ impl Env {
     }
 
     fn command(&self, binary: &str, args: &[&str]) -> Command {
-        let mut cmd = Command::new(bin(binary));
+        self.command_of(&bin(binary), args)
+    }
+
+    /// `program args…` with this test's prefix, state directory and log level.
+    fn command_of(&self, program: &Path, args: &[&str]) -> Command {
+        let mut cmd = Command::new(program);
         cmd.args(args)
             .env(IPC_PREFIX_ENV, &self.prefix)
+            // Held locks are kept per test (a restarted chassisd of the same test finds them).
+            .env("XDG_STATE_HOME", self.state_home())
+            .env_remove("STATE_DIRECTORY")
             .env(
                 "RUST_LOG",
                 std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
@@ -151,19 +159,38 @@ impl Env {
         cmd
     }
 
+    /// `$XDG_STATE_HOME` of every process of this test: chassisd keeps robot NAME's held locks
+    /// in `chassisd/NAME/NAME.locks.json` under it.
+    pub fn state_home(&self) -> PathBuf {
+        self.dir.join("state")
+    }
+
     /// Starts `binary args…` in the background; stdout and stderr go to `<dir>/<label>.log`.
     pub fn spawn(&mut self, label: &str, binary: &str, args: &[&str]) -> usize {
+        self.spawn_program(label, &bin(binary), args, &[])
+    }
+
+    /// Starts any `program args…` (a wrapper such as `setpriv` in front of a workspace binary)
+    /// in the background with `envs` added to its environment; logs as [`Env::spawn`].
+    pub fn spawn_program(
+        &mut self,
+        label: &str,
+        program: &Path,
+        args: &[&str],
+        envs: &[(&str, &str)],
+    ) -> usize {
         let log = self.dir.join(format!("{label}.log"));
         let file = File::create(&log).unwrap_or_else(|e| panic!("{}: {e}", log.display()));
         let err = file
             .try_clone()
             .unwrap_or_else(|e| panic!("{}: {e}", log.display()));
         let child = self
-            .command(binary, args)
+            .command_of(program, args)
+            .envs(envs.iter().copied())
             .stdout(file)
             .stderr(err)
             .spawn()
-            .unwrap_or_else(|e| panic!("starting {binary}: {e}"));
+            .unwrap_or_else(|e| panic!("starting {}: {e}", program.display()));
         self.procs.push(Proc {
             name: label.to_string(),
             child,

@@ -704,3 +704,27 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
         s.link.bus_reconnects
     );
 }
+
+#[test]
+fn a_robot_on_a_bus_of_the_wrong_kind_is_refused_at_start_with_the_kinds_it_accepts() {
+    let mut env = Env::new("wrong-bus");
+    let n = name("wb");
+    let index = env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "titan",
+            "--name",
+            &n,
+            "--bus",
+            "serial:/dev/ttyUSB0",
+        ],
+    );
+    assert_eq!(env.proc(index).wait_exit(Duration::from_secs(5)), Some(2));
+    let log = env.proc(index).log_text();
+    assert!(
+        log.contains("titan cannot be on serial:/dev/ttyUSB0")
+            && log.contains("can:IFACE, slcan:PATH[@BAUD]"),
+        "{log}"
+    );
+}

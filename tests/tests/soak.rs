@@ -2,8 +2,9 @@
 //! 500 kbit/s for `CHASSIS_SOAK_MINUTES` (default 10), with every client attached — the safety
 //! monitor (required), the planner driving figure-eights, `chassis record` to MCAP, a frame-tap
 //! reader and a state reader in this test, and `chassis status` connecting and leaving every
-//! sample period. Ignored by `cargo test`; `scripts/soak [MINUTES]` runs it in release mode and
-//! adds its figures to docs/RELIABILITY.md.
+//! sample period. Ignored by `cargo test`; `scripts/soak [--realtime PRIO] [MINUTES]` runs it in
+//! release mode (with `CHASSIS_SOAK_REALTIME`, chassisd in real-time mode) and adds its figures
+//! to docs/RELIABILITY.md.
 //!
 //! What "zero gaps" is measured on:
 //! * frames: `BusFrame::seq` counts every frame the service read or wrote. A reader that drains
@@ -129,7 +130,15 @@ fn a_titan_on_a_full_bus_with_every_client_runs_for_minutes_without_gaps_or_grow
     let period = Duration::from_secs(10).min(duration / 6);
     let mut env = Env::new("soak");
     let n = format!("soak{}", std::process::id() % 100_000);
-    let service = env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    // `scripts/soak --realtime PRIO`: chassisd's loop at SCHED_FIFO PRIO.
+    let realtime = std::env::var("CHASSIS_SOAK_REALTIME")
+        .ok()
+        .filter(|p| !p.is_empty());
+    let mut args = vec!["--robot", "titan", "--name", &n];
+    if let Some(priority) = &realtime {
+        args.extend(["--realtime", priority.as_str()]);
+    }
+    let service = env.chassisd("chassisd", &args);
     let mut robot = env.robot(&n, UP);
     let safety = env.spawn("safety", "chassis-safety", &["--name", &n]);
     let driving = wait_for(UP, || {

@@ -1,5 +1,6 @@
 //! One robot's codec behind a uniform face: frames in, JSON objects out.
 
+use chassis_interfaces::FaultFlags;
 use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
 use chassis_protocols::{CanFrame, DecodeError, Profile, Robot, scout_mini, titan, xbot};
 use serde::Serialize;
@@ -56,23 +57,56 @@ impl RobotCodec {
         match self {
             RobotCodec::Titan(profile) => {
                 let decoded = titan::decode(frame, profile)?;
-                Ok(frame_json(
+                let mut json = frame_json(
                     Robot::Titan,
                     decoded.id().into(),
                     decoded.direction(),
                     None,
                     &decoded,
-                ))
+                );
+                match &decoded {
+                    titan::Frame::SystemStatus(s) => {
+                        let body = if s.body_status == titan::body::EXCEPTION {
+                            FaultFlags::BODY_EXCEPTION
+                        } else {
+                            0
+                        };
+                        insert_faults(
+                            &mut json,
+                            titan::normalize_faults(s.vendor_fault_word) | body,
+                        );
+                    }
+                    titan::Frame::MotorSlow(m) => {
+                        json.insert(
+                            "driver_status_flags".into(),
+                            driver_status_names(m.driver_status).into(),
+                        );
+                    }
+                    titan::Frame::BmsAlarm(b) => {
+                        json.insert("alarms".into(), b.alarm_names().into());
+                        json.insert("warnings".into(), b.warning_names().into());
+                    }
+                    _ => {}
+                }
+                Ok(json)
             }
             RobotCodec::ScoutMini(profile) => {
                 let decoded = scout_mini::decode(frame, profile)?;
-                Ok(frame_json(
+                let mut json = frame_json(
                     Robot::ScoutMini,
                     decoded.frame.id().into(),
                     decoded.frame.direction(),
                     Some(decoded.count),
                     &decoded.frame,
-                ))
+                );
+                if let scout_mini::Frame::SystemStatus(s) = &decoded.frame {
+                    insert_faults(
+                        &mut json,
+                        scout_mini::normalize_faults(s.vendor_fault_word)
+                            | scout_mini::body_flags(s.body_status),
+                    );
+                }
+                Ok(json)
             }
             RobotCodec::Xbot { .. } => Err(DecodeError::UnknownId { id: frame.id() }),
         }
@@ -110,6 +144,30 @@ impl RobotCodec {
             _ => 0,
         }
     }
+}
+
+/// The normalized fault flags by name, as `chassis status` prints them: `faults` (the chassis
+/// stops or limits) and `warnings` (it still drives), beside the raw word.
+fn insert_faults(json: &mut FrameJson, flags: u64) {
+    json.insert(
+        "faults".into(),
+        FaultFlags::names(flags & !FaultFlags::WARNINGS).into(),
+    );
+    json.insert(
+        "warnings".into(),
+        FaultFlags::names(flags & FaultFlags::WARNINGS).into(),
+    );
+}
+
+/// The set bits of a motor driver status byte, by their names in the IPC contract.
+fn driver_status_names(bits: u8) -> Vec<String> {
+    chassis_interfaces::layout::constants()
+        .iter()
+        .filter(|group| group.name == "DriverStatus")
+        .flat_map(|group| group.values.iter())
+        .filter(|c| u64::from(bits) & c.value != 0)
+        .map(|c| c.name.to_lowercase())
+        .collect()
 }
 
 fn frame_json(

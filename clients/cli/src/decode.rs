@@ -185,6 +185,58 @@ mod tests {
     }
 
     #[test]
+    fn titan_faults_are_named_beside_the_raw_word() {
+        // The manual's layout: b5 bit5 bumper, b6 bit1 heartbeat lost, b7 bit0 under-voltage.
+        let (json, err, _) = decode(Robot::Titan, &["211#0201019000200201"], "");
+        assert_eq!(err, "");
+        assert_eq!(json[0]["vendor_fault_word"], 0x0020_0201);
+        assert_eq!(
+            json[0]["faults"],
+            serde_json::json!([
+                "heartbeat_lost",
+                "battery_under_voltage",
+                "bumper",
+                "body_exception"
+            ])
+        );
+        assert_eq!(json[0]["warnings"], serde_json::json!([]));
+        // b7 bit2: RC link lost only warns (the chassis still drives).
+        let (json, _, _) = decode(Robot::Titan, &["211#0001019000000004"], "");
+        assert_eq!(json[0]["faults"], serde_json::json!([]));
+        assert_eq!(json[0]["warnings"], serde_json::json!(["rc_link_lost"]));
+    }
+
+    #[test]
+    fn titan_motor_driver_status_and_bms_alarms_are_named() {
+        // 0x261 b5 = 0x41: supply under-voltage, enabled.
+        let (json, err, _) = decode(Robot::Titan, &["261#01E0001E1E410000"], "");
+        assert_eq!(err, "");
+        assert_eq!(
+            json[0]["driver_status_flags"],
+            serde_json::json!(["supply_under_voltage", "enabled"])
+        );
+        // 0x362: alarm 1 under-voltage, alarm 2 charge over-current, warning 1 over-temperature.
+        let (json, err, _) = decode(Robot::Titan, &["362#04010800"], "");
+        assert_eq!(err, "");
+        assert_eq!(
+            json[0]["alarms"],
+            serde_json::json!(["under_voltage", "charge_over_current"])
+        );
+        assert_eq!(json[0]["warnings"], serde_json::json!(["over_temperature"]));
+    }
+
+    #[test]
+    fn scout_mini_faults_are_named_beside_the_raw_word() {
+        // 0x151: emergency stop body state, 24.0 V, b4 bit0 (CAN command checksum error),
+        // count 0, checksum 0x4D.
+        let (json, err, _) = decode(Robot::ScoutMini, &["151#010100F00100004D"], "");
+        assert_eq!(err, "");
+        assert_eq!(json[0]["vendor_fault_word"], 0x0100);
+        assert_eq!(json[0]["faults"], serde_json::json!(["emergency_stop"]));
+        assert_eq!(json[0]["warnings"], serde_json::json!(["command_checksum"]));
+    }
+
+    #[test]
     fn titan_frames_from_arguments_become_json_with_si_fields() {
         let (json, err, summary) = decode(Robot::Titan, &["111#0096000000000000"], "");
         assert_eq!(err, "");

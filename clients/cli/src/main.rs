@@ -66,6 +66,7 @@ enum Cmd {
     },
     /// A human summary: mode, faults, battery, speeds, active source, bus health.
     Status {
+        /// The robot's name (chassisd --name).
         #[arg(long, default_value = "titan")]
         name: String,
         #[arg(long)]
@@ -73,7 +74,8 @@ enum Cmd {
     },
     /// Ask the running chassisd for a control action.
     Control {
-        #[arg(long, default_value = "titan")]
+        /// The robot's name (chassisd --name); accepted before or after the action.
+        #[arg(long, default_value = "titan", global = true)]
         name: String,
         #[command(subcommand)]
         command: live::ControlCmd,
@@ -92,7 +94,8 @@ enum Cmd {
     /// Inject a fault into the simulated chassis of a running chassisd (bus sim) or of
     /// `chassisd sim`.
     Sim {
-        #[arg(long, default_value = "titan")]
+        /// The robot's name (chassisd --name); accepted before or after the fault.
+        #[arg(long, default_value = "titan", global = true)]
         name: String,
         #[command(subcommand)]
         command: live::SimCmd,
@@ -217,5 +220,60 @@ fn main() -> ExitCode {
             eprintln!("chassis: {err:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::{CommandFactory, Parser};
+
+    use super::{Cli, Cmd};
+
+    fn name_of(args: &[&str]) -> String {
+        match Cli::try_parse_from(args)
+            .unwrap_or_else(|e| panic!("{args:?}: {e}"))
+            .command
+        {
+            Cmd::Control { name, .. } | Cmd::Sim { name, .. } | Cmd::Status { name, .. } => name,
+            Cmd::Echo(echo) => echo.name,
+            Cmd::Top(top) => top.name,
+            Cmd::Record(record) => record.name,
+            other => panic!("no name in {other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_robot_name_is_accepted_anywhere_on_the_command_line() {
+        for args in [
+            &["chassis", "control", "--name", "r1", "estop"][..],
+            &["chassis", "control", "estop", "--name", "r1"],
+            &["chassis", "control", "lock-release", "dock", "--name", "r1"],
+            &["chassis", "sim", "battery", "10", "--name", "r1"],
+            &["chassis", "sim", "--name", "r1", "silence", "1"],
+            &["chassis", "status", "--name", "r1"],
+            &["chassis", "echo", "state", "--name", "r1"],
+            &["chassis", "top", "--name", "r1"],
+        ] {
+            assert_eq!(name_of(args), "r1", "{args:?}");
+        }
+        assert_eq!(name_of(&["chassis", "control", "estop"]), "titan");
+    }
+
+    #[test]
+    fn every_subcommand_names_what_is_wrong_with_its_arguments() {
+        for (args, wanted) in [
+            (
+                &["chassis", "control", "estop", "--nmae", "r1"][..],
+                "--nmae",
+            ),
+            (&["chassis", "control", "--name"], "--name"),
+            (&["chassis", "sim", "bumper", "--name"], "--name"),
+            (&["chassis", "decode", "211#00"], "--robot"),
+            (&["chassis", "status", "--name", "r1", "extra"], "extra"),
+        ] {
+            let err = Cli::try_parse_from(args).unwrap_err().to_string();
+            assert!(err.contains(wanted), "{args:?}: {err}");
+        }
+        Cli::command().debug_assert();
     }
 }

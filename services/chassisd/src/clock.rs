@@ -17,6 +17,15 @@ pub fn now() -> Timestamp {
     })
 }
 
+/// The wall clock (`CLOCK_REALTIME`), ns since the Unix epoch: only for what must outlive the
+/// machine's monotonic clock (the held locks on disk).
+pub fn unix_ns() -> u64 {
+    clock_gettime(ClockId::CLOCK_REALTIME).map_or(0, |t| {
+        let ns = i128::from(t.tv_sec()) * 1_000_000_000 + i128::from(t.tv_nsec());
+        u64::try_from(ns).unwrap_or(0)
+    })
+}
+
 #[cfg(test)]
 #[allow(clippy::disallowed_methods)] // the clock's own test reads it
 mod tests {

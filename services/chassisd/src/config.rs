@@ -4,7 +4,7 @@
 //! are errors. Command-line options override the file. `chassisd --print-config` prints the
 //! effective configuration in this format.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use chassis_interfaces::valid_robot_name;
 use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
@@ -51,6 +51,14 @@ pub struct ServiceConfig {
     pub spin_us: u64,
     /// Pin the loop's thread to this CPU (`--cpu`).
     pub cpu: Option<usize>,
+    /// Real-time mode (`--realtime PRIO`): the loop's thread at SCHED_FIFO with this priority
+    /// (1-99) and every page of the process locked in memory. When the system refuses, the
+    /// service says so and runs with normal scheduling.
+    pub realtime: Option<u8>,
+    /// Where the held locks are kept across restarts (`--state-dir`; default:
+    /// `$STATE_DIRECTORY` under systemd, else `$XDG_STATE_HOME/chassisd/<name>`, else
+    /// `~/.local/state/chassisd/<name>`).
+    pub state_dir: Option<PathBuf>,
 }
 
 impl Default for ServiceConfig {
@@ -65,6 +73,8 @@ impl Default for ServiceConfig {
             loop_mode: LoopMode::Event,
             spin_us: 200,
             cpu: None,
+            realtime: None,
+            state_dir: None,
         }
     }
 }
@@ -121,6 +131,8 @@ pub struct Overrides {
     pub loop_mode: Option<LoopMode>,
     pub spin_us: Option<u64>,
     pub cpu: Option<usize>,
+    pub realtime: Option<u8>,
+    pub state_dir: Option<PathBuf>,
 }
 
 /// Why a configuration is not usable.
@@ -158,6 +170,18 @@ pub enum ConfigError {
     },
     #[error("[mux]: {0}")]
     Mux(#[from] MuxConfigError),
+    /// A bus the robot cannot be on (a CAN robot on a byte stream, or the reverse).
+    #[error("{robot} cannot be on {bus}: {robot}'s bus is one of {accepted}")]
+    WrongBus {
+        robot: Robot,
+        bus: String,
+        accepted: &'static str,
+    },
+    #[error(
+        "no place to keep the held locks: pass --state-dir (or set service.state_dir, \
+         $STATE_DIRECTORY, $XDG_STATE_HOME or $HOME)"
+    )]
+    NoStateDir,
 }
 
 /// The validated configuration.
@@ -176,6 +200,10 @@ pub struct Config {
     pub loop_mode: LoopMode,
     pub spin_us: u64,
     pub cpu: Option<usize>,
+    /// SCHED_FIFO priority of the loop's thread (real-time mode), if asked for.
+    pub realtime: Option<u8>,
+    /// The directory of the held-lock file.
+    pub state_dir: PathBuf,
     /// The required-source rule was lifted on the command line.
     pub no_safety_monitor: bool,
 }
@@ -224,6 +252,7 @@ impl RawConfig {
                 ),
             });
         }
+        check_bus_kind(robot, &bus, overrides.simulator)?;
         let gps = match overrides.gps {
             Some(gps) => Some(gps),
             None => self
@@ -268,6 +297,20 @@ impl RawConfig {
             self.mux
         };
         mux.validate()?;
+        let realtime = overrides.realtime.or(self.service.realtime);
+        if let Some(priority) = realtime
+            && !(1..=99).contains(&priority)
+        {
+            return Err(ConfigError::Bad {
+                key: "service.realtime",
+                reason: format!("{priority}: a SCHED_FIFO priority is 1 to 99"),
+            });
+        }
+        let state_dir = match overrides.state_dir.or(self.service.state_dir) {
+            Some(dir) => dir,
+            None => default_state_dir(&name, |key| std::env::var_os(key))
+                .ok_or(ConfigError::NoStateDir)?,
+        };
         Ok(Config {
             robot,
             name,
@@ -282,9 +325,72 @@ impl RawConfig {
             loop_mode: overrides.loop_mode.unwrap_or(self.service.loop_mode),
             spin_us: overrides.spin_us.unwrap_or(self.service.spin_us),
             cpu: overrides.cpu.or(self.service.cpu),
+            realtime,
+            state_dir,
             no_safety_monitor: overrides.no_safety_monitor,
         })
     }
+}
+
+/// The buses `robot` can be on, as the service (`simulator` false) or as `chassisd sim`.
+fn check_bus_kind(robot: Robot, bus: &BusSpec, simulator: bool) -> Result<(), ConfigError> {
+    let (fits, accepted) = match (robot.is_can(), simulator) {
+        (true, false) => (
+            matches!(
+                bus,
+                BusSpec::Sim | BusSpec::Can { .. } | BusSpec::Slcan { .. } | BusSpec::Replay { .. }
+            ),
+            "sim, can:IFACE, slcan:PATH[@BAUD], replay:FILE (a CAN bus)",
+        ),
+        (false, false) => (
+            matches!(
+                bus,
+                BusSpec::Sim | BusSpec::Serial { .. } | BusSpec::Replay { .. }
+            ),
+            "sim, serial:PATH[@BAUD], replay:FILE (an RS232 byte stream)",
+        ),
+        (true, true) => (
+            matches!(
+                bus,
+                BusSpec::Can { .. } | BusSpec::Slcan { .. } | BusSpec::SlcanPty { .. }
+            ),
+            "can:IFACE, slcan:PATH[@BAUD], slcan-pty:LINK (a CAN bus)",
+        ),
+        (false, true) => (
+            matches!(bus, BusSpec::Serial { .. } | BusSpec::Pty { .. }),
+            "serial:PATH[@BAUD], pty:LINK (an RS232 byte stream)",
+        ),
+    };
+    if fits {
+        Ok(())
+    } else {
+        Err(ConfigError::WrongBus {
+            robot,
+            bus: bus.to_string(),
+            accepted,
+        })
+    }
+}
+
+/// The default directory of the held-lock file: `$STATE_DIRECTORY` (systemd's
+/// `StateDirectory=`; the first of a colon-separated list), else
+/// `$XDG_STATE_HOME/chassisd/<name>`, else `$HOME/.local/state/chassisd/<name>`. `var` reads
+/// the environment.
+pub fn default_state_dir(
+    name: &str,
+    var: impl Fn(&str) -> Option<std::ffi::OsString>,
+) -> Option<PathBuf> {
+    let set = |key: &str| var(key).filter(|v| !v.is_empty());
+    if let Some(dirs) = set("STATE_DIRECTORY") {
+        let first = dirs.to_string_lossy().split(':').next().map(PathBuf::from);
+        if let Some(dir) = first.filter(|d| !d.as_os_str().is_empty()) {
+            return Some(dir);
+        }
+    }
+    if let Some(xdg) = set("XDG_STATE_HOME") {
+        return Some(PathBuf::from(xdg).join("chassisd").join(name));
+    }
+    set("HOME").map(|home| PathBuf::from(home).join(".local/state/chassisd").join(name))
 }
 
 fn parse_profile(robot: Robot, table: toml::Table) -> Result<Profile, ConfigError> {
@@ -316,6 +422,8 @@ impl Config {
                 loop_mode: self.loop_mode,
                 spin_us: self.spin_us,
                 cpu: self.cpu,
+                realtime: self.realtime,
+                state_dir: Some(self.state_dir.clone()),
             },
             bus: self.bus_settings.clone(),
             driver: self.driver.clone(),
@@ -408,6 +516,76 @@ mod tests {
         ));
         let raw: RawConfig = toml::from_str("[service]\ngps = \"can:vcan0\"\n").unwrap();
         assert!(raw.validate(titan()).is_err());
+    }
+
+    #[test]
+    fn a_robot_on_a_bus_of_the_wrong_kind_is_refused_with_the_kinds_it_accepts() {
+        let on = |robot, bus: &str, simulator| {
+            RawConfig::default().validate(Overrides {
+                robot: Some(robot),
+                bus: Some(bus.parse().unwrap()),
+                simulator,
+                ..Overrides::default()
+            })
+        };
+        let err = on(Robot::Titan, "serial:/dev/ttyUSB0", false).unwrap_err();
+        assert!(matches!(err, ConfigError::WrongBus { .. }), "{err}");
+        let text = err.to_string();
+        assert!(
+            text.contains("titan cannot be on serial:/dev/ttyUSB0"),
+            "{text}"
+        );
+        assert!(text.contains("can:IFACE, slcan:PATH"), "{text}");
+        let err = on(Robot::Xbot, "can:can0", false).unwrap_err();
+        assert!(err.to_string().contains("serial:PATH"), "{err}");
+        assert!(on(Robot::ScoutMini, "slcan:/dev/ttyACM0", false).is_ok());
+        assert!(on(Robot::Xbot, "serial:/dev/ttyUSB0", false).is_ok());
+        assert!(on(Robot::Titan, "slcan-pty:/tmp/x", true).is_ok());
+        assert!(on(Robot::Titan, "pty:/tmp/x", true).is_err());
+        assert!(on(Robot::Xbot, "slcan-pty:/tmp/x", true).is_err());
+    }
+
+    #[test]
+    fn the_state_directory_follows_systemd_then_xdg_then_home() {
+        let env = |pairs: &'static [(&'static str, &'static str)]| {
+            move |key: &str| {
+                pairs
+                    .iter()
+                    .find(|(k, _)| *k == key)
+                    .map(|(_, v)| std::ffi::OsString::from(v))
+            }
+        };
+        let all = env(&[
+            ("STATE_DIRECTORY", "/var/lib/chassisd/r1:/var/lib/other"),
+            ("XDG_STATE_HOME", "/x"),
+            ("HOME", "/h"),
+        ]);
+        assert_eq!(
+            default_state_dir("r1", all),
+            Some(PathBuf::from("/var/lib/chassisd/r1"))
+        );
+        let xdg = env(&[("XDG_STATE_HOME", "/x"), ("HOME", "/h")]);
+        assert_eq!(
+            default_state_dir("r1", xdg),
+            Some(PathBuf::from("/x/chassisd/r1"))
+        );
+        let home = env(&[("XDG_STATE_HOME", ""), ("HOME", "/h")]);
+        assert_eq!(
+            default_state_dir("r1", home),
+            Some(PathBuf::from("/h/.local/state/chassisd/r1"))
+        );
+        assert_eq!(default_state_dir("r1", env(&[])), None);
+    }
+
+    #[test]
+    fn a_realtime_priority_outside_1_to_99_is_refused() {
+        for (priority, ok) in [(0, false), (1, true), (99, true), (100, false)] {
+            let result = RawConfig::default().validate(Overrides {
+                realtime: Some(priority),
+                ..titan()
+            });
+            assert_eq!(result.is_ok(), ok, "{priority}");
+        }
     }
 
     #[test]

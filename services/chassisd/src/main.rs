@@ -65,6 +65,14 @@ struct ServiceArgs {
     /// Pin the loop's thread to this CPU.
     #[arg(long)]
     cpu: Option<usize>,
+    /// Real-time mode: the loop's thread at SCHED_FIFO with priority PRIO (1-99), memory
+    /// locked; when the system refuses, a warning and normal scheduling.
+    #[arg(long, value_name = "PRIO")]
+    realtime: Option<u8>,
+    /// Where the held locks are kept across restarts (default: $STATE_DIRECTORY, else
+    /// $XDG_STATE_HOME/chassisd/NAME, else ~/.local/state/chassisd/NAME).
+    #[arg(long, value_name = "DIR")]
+    state_dir: Option<PathBuf>,
 }
 
 fn parse_robot(text: &str) -> Result<Robot, UnknownRobot> {
@@ -90,6 +98,8 @@ fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), ConfigErro
         loop_mode: args.loop_mode,
         spin_us: args.spin_us,
         cpu: args.cpu,
+        realtime: args.realtime,
+        state_dir: args.state_dir,
     })?;
     Ok((config, args.print_config))
 }

@@ -394,6 +394,25 @@ impl Mux {
         Ok(true)
     }
 
+    /// Holds the lock `name` for `holder` (a source index or [`LockStatus::HOLDER_OPERATOR`])
+    /// since `since`, whatever held it before: how the service restores the locks it held before
+    /// a restart.
+    pub fn restore_lock(
+        &mut self,
+        name: &str,
+        holder: u8,
+        since: Timestamp,
+    ) -> Result<(), NoSuchLock> {
+        let lock = self.lock_mut(name)?;
+        lock.held = Some((holder, since));
+        Ok(())
+    }
+
+    /// Every configured lock in order: its name and, while held, its holder and since when.
+    pub fn locks(&self) -> impl Iterator<Item = (&str, Option<(u8, Timestamp)>)> {
+        self.locks.iter().map(|l| (l.config.name.as_str(), l.held))
+    }
+
     fn lock_mut(&mut self, name: &str) -> Result<&mut Lock, NoSuchLock> {
         let configured: Vec<&str> = self.locks.iter().map(|l| l.config.name.as_str()).collect();
         let error = NoSuchLock {

@@ -23,16 +23,18 @@ use iceoryx2::waitset::{
 };
 use iceoryx2_bb_posix::file_descriptor::{FileDescriptor, FileDescriptorBased};
 use iceoryx2_bb_posix::file_descriptor_set::SynchronousMultiplexing;
-use tracing::{info, info_span, warn};
+use tracing::{debug, error, info, info_span, warn};
 
 use crate::bus::{Bus, BusSpec, MAX_RX_BATCH};
 use crate::clock;
 use crate::config::{Config, LoopMode};
-use crate::engine::{Engine, EngineConfig, ListenerChange, Ticket, Wake};
+use crate::engine::{Engine, EngineConfig, HeldLock, ListenerChange, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};
+use crate::lockfile::{Clocks, LockFile};
 use crate::moderation::RxGate;
 use crate::mux::{Mux, MuxConfigError};
-use crate::setup::{Devices, Hardware, PinError, driver_for, pin_to_cpu};
+use crate::notify::Notifier;
+use crate::setup::{Devices, Hardware, PinError, driver_for, enter_realtime, pin_to_cpu};
 use crate::sim::SimHandle;
 
 mod pass;
@@ -109,6 +111,13 @@ struct Shell<D> {
     spin: Duration,
     /// When something last woke the loop (hybrid mode keeps polling for a while after it).
     last_activity: Timestamp,
+    /// Where the held locks outlive the process.
+    lock_file: LockFile,
+    /// A held set not yet on disk (its write failed), and when to try again.
+    unkept: Option<Vec<HeldLock>>,
+    keep_retry_at: Timestamp,
+    /// systemd's notification socket, when started by a `Type=notify` unit.
+    notifier: Option<Notifier>,
 }
 
 /// Runs the service on the devices its configuration names until SIGINT or SIGTERM. Returns
@@ -149,6 +158,17 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         Mux::new(&config.mux)?,
         now,
     );
+    // The locks held before a restart hold again before anything is decided.
+    let lock_file = LockFile::new(&config.state_dir, &config.name);
+    match lock_file.load(clocks(now)) {
+        Ok(held) => engine.restore_locks(now, &held),
+        Err(err) => {
+            let aside = lock_file
+                .set_aside()
+                .map_or_else(String::new, |p| format!(" (set aside as {})", p.display()));
+            engine.restore_failed(now, &format!("{err}{aside}"));
+        }
+    }
     let (bus, sim) = match devices.open_bus(now) {
         Ok((bus, sim)) => (Some(bus), sim),
         Err(err) => {
@@ -174,10 +194,25 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         loop_mode: config.loop_mode,
         spin: Duration::from_micros(config.spin_us),
         last_activity: now,
+        lock_file,
+        unkept: None,
+        keep_retry_at: now,
+        notifier: Notifier::from_env(),
     };
     shell.open_due(&mut engine, now);
     engine.publish_all(now);
+    shell.keep_locks(&mut engine);
     shell.publish(&ports, &mut engine, now);
+    if let Some(notifier) = &mut shell.notifier {
+        notifier.ready(engine.mux().status());
+        if let Some(every) = notifier.ping_every() {
+            info!("systemd watchdog: pinging every {every:?}");
+        }
+    }
+    // Threads started before this (the simulated chassis) keep normal scheduling.
+    if let Some(priority) = config.realtime {
+        realtime_mode(priority);
+    }
     shell.run(&ports, &mut engine)
 }
 
@@ -243,19 +278,27 @@ impl<D: Devices> Shell<D> {
                     },
                     timeout,
                 )?;
-                if matches!(
-                    result,
-                    WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
-                ) {
-                    self.shutdown(ports, engine);
-                    return Ok(());
+                match result {
+                    WaitSetRunResult::TerminationRequest => {
+                        self.shutdown(ports, engine);
+                        return Ok(());
+                    }
+                    // A signal interrupted the wait: SIGTERM / SIGINT are reported as a
+                    // termination request by the next wait; anything else (a SIGCONT after a
+                    // SIGSTOP, a debugger) is no reason to stop.
+                    WaitSetRunResult::Interrupt => continue,
+                    _ => {}
                 }
                 // A moderation pause that ended: read what queued meanwhile, watch the bus again.
                 if !gate.is_open() && !engine.is_rx_paused(clock::now()) {
                     set_gate(&mut gate, true);
                     wake.bus = true;
                 }
-                if self.pass(ports, engine, wake) == Next::Rewire {
+                let next = self.pass(ports, engine, wake);
+                if let Some(notifier) = &mut self.notifier {
+                    notifier.pass(clock::now(), engine.mux().status());
+                }
+                if next == Next::Rewire {
                     break;
                 }
                 // Close the gate for a pause that began, open it when polling ended.
@@ -288,7 +331,14 @@ impl<D: Devices> Shell<D> {
     /// deadline, spin never blocks, hybrid polls for `spin_us` after each activity and then
     /// blocks.
     fn wait_time(&self, engine: &Engine, now: Timestamp) -> Duration {
-        let until_deadline = engine.poll_timeout().saturating_since(now);
+        let deadline = self
+            .notifier
+            .as_ref()
+            .and_then(Notifier::deadline)
+            .map_or(engine.poll_timeout(), |ping| {
+                ping.min(engine.poll_timeout())
+            });
+        let until_deadline = deadline.saturating_since(now);
         match self.loop_mode {
             LoopMode::Event => until_deadline,
             LoopMode::Spin => Duration::ZERO,
@@ -299,12 +349,70 @@ impl<D: Devices> Shell<D> {
         }
     }
 
+    /// Writes the held locks when the engine says the set changed, before the pass publishes
+    /// its answers; a failed write is retried every second until it succeeds.
+    pub(super) fn keep_locks(&mut self, engine: &mut Engine) {
+        if let Some(held) = engine.poll_held_locks() {
+            self.unkept = Some(held);
+        }
+        let Some(held) = &self.unkept else {
+            return;
+        };
+        let now = clock::now();
+        if now < self.keep_retry_at {
+            return;
+        }
+        match self.lock_file.store(held, clocks(now)) {
+            Ok(()) => {
+                debug!(
+                    held = held.len(),
+                    file = %self.lock_file.path().display(),
+                    "held locks kept"
+                );
+                self.unkept = None;
+            }
+            Err(err) => {
+                error!("{err}; the held locks would not survive a restart: retrying every second");
+                self.keep_retry_at = now + Duration::from_secs(1);
+            }
+        }
+    }
+
     fn shutdown(&mut self, ports: &Ports, engine: &mut Engine) {
+        if let Some(notifier) = &mut self.notifier {
+            notifier.stopping();
+        }
         let now = clock::now();
         engine.shutdown(now);
         self.transmit(engine, now);
         engine.publish_all(now);
         self.publish(ports, engine, now);
+    }
+}
+
+/// Real-time mode for the loop's thread; what the system refuses is a warning, and the loop
+/// runs with normal scheduling.
+fn realtime_mode(priority: u8) {
+    let (granted, refusals) = enter_realtime(priority);
+    for refusal in &refusals {
+        warn!("--realtime: {refusal}");
+    }
+    if granted.fifo {
+        info!(
+            priority,
+            memory_locked = granted.locked,
+            "real-time mode: the loop runs at SCHED_FIFO"
+        );
+    } else {
+        warn!("--realtime: the loop runs with normal scheduling");
+    }
+}
+
+/// Both clocks at `now` (the wall clock read right after).
+fn clocks(now: Timestamp) -> Clocks {
+    Clocks {
+        monotonic: now,
+        unix_ns: clock::unix_ns(),
     }
 }
 

@@ -157,3 +157,60 @@ pub fn pin_to_cpu(cpu: usize) -> Result<(), PinError> {
     set.set(cpu).map_err(error)?;
     sched_setaffinity(nix::unistd::Pid::from_raw(0), &set).map_err(error)
 }
+
+/// What real-time mode got from the system.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Realtime {
+    /// The loop's thread runs at SCHED_FIFO.
+    pub fifo: bool,
+    /// Every page of the process is locked in memory.
+    pub locked: bool,
+}
+
+/// Why the system refused a part of real-time mode.
+#[derive(Debug, thiserror::Error)]
+pub enum RealtimeError {
+    #[error(
+        "SCHED_FIFO priority {priority} refused: {source} (needs CAP_SYS_NICE or an \
+         RLIMIT_RTPRIO of at least {priority}: `LimitRTPRIO=` in the unit, or rtprio in \
+         /etc/security/limits.conf)"
+    )]
+    Fifo {
+        priority: u8,
+        source: std::io::Error,
+    },
+    #[error(
+        "locking memory refused: {0} (needs CAP_IPC_LOCK or `LimitMEMLOCK=infinity` in the unit)"
+    )]
+    Lock(std::io::Error),
+}
+
+/// Real-time mode for the calling thread: SCHED_FIFO at `priority`, then every page of the
+/// process locked (current and future). Each refusal is returned beside what was granted; the
+/// caller warns and carries on with normal scheduling.
+pub fn enter_realtime(priority: u8) -> (Realtime, Vec<RealtimeError>) {
+    let mut errors = Vec::new();
+    let param = libc::sched_param {
+        sched_priority: i32::from(priority),
+    };
+    // SAFETY: pid 0 is the calling thread; `param` is a valid sched_param for the call.
+    let fifo = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0;
+    if !fifo {
+        errors.push(RealtimeError::Fifo {
+            priority,
+            source: std::io::Error::last_os_error(),
+        });
+    }
+    // SAFETY: mlockall takes flags only.
+    let locked = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } == 0;
+    if !locked {
+        errors.push(RealtimeError::Lock(std::io::Error::last_os_error()));
+    }
+    (Realtime { fifo, locked }, errors)
+}
+
+/// The calling thread's scheduling policy is SCHED_FIFO.
+pub fn is_fifo() -> bool {
+    // SAFETY: pid 0 is the calling thread.
+    unsafe { libc::sched_getscheduler(0) == libc::SCHED_FIFO }
+}

@@ -29,6 +29,21 @@
 //! 8. [`Engine::poll_publication`] until `None`; [`Engine::poll_open`] names a device to
 //!    (re)open, reported back with [`Engine::handle_opened`] / [`Engine::handle_open_failed`].
 //!
+//! # Locks that outlive the process
+//!
+//! A held lock (the operator's or the safety monitor's e-stop, any named lock) must survive a
+//! restart of the service: a latched stop is cleared only by an explicit release. The engine
+//! does no I/O, so the shell keeps the file and the engine says what to keep:
+//!
+//! * before the first decision the shell hands in what the file held,
+//!   [`Engine::restore_locks`] (each logged at WARN with its holder and age), or
+//!   [`Engine::restore_failed`] when the file could not be read or understood: the e-stop is
+//!   then held (the lock called `estop`, every lock when none has that name), since nothing
+//!   says it was free;
+//! * after every pass [`Engine::poll_held_locks`] returns the held set when it changed since
+//!   the last poll (an engage, a release, a restore that had to substitute the e-stop), and the
+//!   shell writes it before it sleeps again.
+//!
 //! The engine keeps its own rules whatever the order of its inputs: a request handled before a
 //! frame is decided before that frame reaches the driver ([`Engine::handle_rx`] decides first), so
 //! a command is never queued behind the bus.
@@ -45,8 +60,8 @@ use std::time::Duration;
 
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags, MuxStatus, SourceFlags,
-    SourceStatus, VelocityRequest, ZeroReason,
+    FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags, LockStatus, MuxStatus,
+    SourceFlags, SourceStatus, VelocityRequest, ZeroReason,
 };
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
@@ -162,6 +177,24 @@ pub enum Device {
     Gps,
 }
 
+/// A held lock as it outlives the process: the shell's state file keeps these.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HeldLock {
+    /// The configured lock's name, e.g. `estop`.
+    pub name: String,
+    /// The holding source's name, or [`HeldLock::OPERATOR`] (a control request).
+    pub holder: String,
+    /// When it was engaged (`CLOCK_MONOTONIC`).
+    pub since: Timestamp,
+}
+
+impl HeldLock {
+    /// The holder of a lock engaged by a control request.
+    pub const OPERATOR: &'static str = "operator";
+    /// The lock held when the held set cannot be known.
+    pub const ESTOP: &'static str = "estop";
+}
+
 /// At most one log line per second per kind, with the number held back.
 #[derive(Debug, Default)]
 struct Throttle {
@@ -250,6 +283,10 @@ pub struct Engine {
     /// Samples, answers and wake-ups the shell could not publish.
     ipc_failures: u64,
     publications: VecDeque<Publication>,
+    /// Each lock's holder and since when, as the shell was last told to keep it.
+    kept_locks: Vec<Option<(u8, Timestamp)>>,
+    /// The held set must be kept again even if it looks unchanged (a restore substituted it).
+    locks_dirty: bool,
 }
 
 impl std::fmt::Debug for Engine {
@@ -301,6 +338,8 @@ impl Engine {
             throttles: Throttles::default(),
             ipc_failures: 0,
             publications: VecDeque::new(),
+            kept_locks: mux.locks().map(|(_, held)| held).collect(),
+            locks_dirty: false,
             config,
             driver,
             mux,
@@ -309,7 +348,59 @@ impl Engine {
 
     // ---- inputs -------------------------------------------------------------------------
 
-    /// Starts a pass at `now` woken by `wake`: serves the tick when it is due and says what to
+    /// The locks held before a restart, handed in before the first decision: each is held
+    /// again at once and logged at WARN. A lock the configuration no longer has holds the
+    /// e-stop instead; a holder that is no longer a source becomes the operator (only a
+    /// release frees it).
+    pub fn restore_locks(&mut self, now: Timestamp, locks: &[HeldLock]) {
+        self.undecided = true;
+        let mut substituted = false;
+        for lock in locks {
+            let holder = if lock.holder == HeldLock::OPERATOR {
+                LockStatus::HOLDER_OPERATOR
+            } else {
+                match self.source_index(&lock.holder) {
+                    Some(index) => index,
+                    None => {
+                        substituted = true;
+                        LockStatus::HOLDER_OPERATOR
+                    }
+                }
+            };
+            let since = lock.since.min(now);
+            match self.mux.restore_lock(&lock.name, holder, since) {
+                Ok(()) => warn!(
+                    lock = lock.name,
+                    holder = lock.holder,
+                    held_for_s = now.saturating_since(since).as_secs(),
+                    "{} restored from before the restart: held by {} for {} s; only a release \
+                     frees it",
+                    lock.name,
+                    lock.holder,
+                    now.saturating_since(since).as_secs()
+                ),
+                Err(err) => {
+                    substituted = true;
+                    self.hold_estop(
+                        now,
+                        &format!("a lock held before the restart is unknown: {err}"),
+                    );
+                }
+            }
+        }
+        self.kept_locks = self.mux.locks().map(|(_, held)| held).collect();
+        self.locks_dirty = substituted;
+    }
+
+    /// The locks held before a restart cannot be known (`reason`: the state file is corrupt
+    /// or unreadable): the e-stop is held until the operator releases it.
+    pub fn restore_failed(&mut self, now: Timestamp, reason: &dyn Display) {
+        self.undecided = true;
+        self.hold_estop(now, reason);
+        self.locks_dirty = true;
+    }
+
+    /// Starts a pass at `now` woken by `wake`:    /// Starts a pass at `now` woken by `wake`: serves the tick when it is due and says what to
     /// read. The mux decides again at the next transmit, whatever woke the loop.
     pub fn begin_pass(&mut self, now: Timestamp, wake: Wake) -> Reads {
         let tick = self.tick.is_due(now);
@@ -644,6 +735,33 @@ impl Engine {
         self.driver.poll_transmit(now)
     }
 
+    /// The held locks when the set changed since the last call (engaged, released, restored
+    /// with a substitute): the shell keeps them (atomically) before it waits again.
+    pub fn poll_held_locks(&mut self) -> Option<Vec<HeldLock>> {
+        let unchanged = self
+            .mux
+            .locks()
+            .map(|(_, held)| held)
+            .eq(self.kept_locks.iter().copied());
+        if unchanged && !self.locks_dirty {
+            return None;
+        }
+        self.locks_dirty = false;
+        self.kept_locks = self.mux.locks().map(|(_, held)| held).collect();
+        let held = self
+            .mux
+            .locks()
+            .filter_map(|(name, held)| {
+                held.map(|(holder, since)| HeldLock {
+                    name: name.to_string(),
+                    holder: self.holder_name(holder),
+                    since,
+                })
+            })
+            .collect();
+        Some(held)
+    }
+
     /// The next thing to publish.
     pub fn poll_publication(&mut self) -> Option<Publication> {
         self.publications.pop_front()
@@ -707,6 +825,54 @@ impl Engine {
             self.mux_changed = true;
             self.log_mux_change();
         }
+    }
+
+    /// Holds the e-stop (the lock called `estop`; every lock when none has that name) for the
+    /// operator, logging why at ERROR.
+    fn hold_estop(&mut self, now: Timestamp, reason: &dyn Display) {
+        let names: Vec<String> = self.mux.locks().map(|(name, _)| name.to_string()).collect();
+        let wanted: Vec<String> = if names.iter().any(|n| n == HeldLock::ESTOP) {
+            vec![HeldLock::ESTOP.to_string()]
+        } else {
+            names
+        };
+        if wanted.is_empty() {
+            error!("{reason}; no lock is configured to hold");
+            return;
+        }
+        for name in &wanted {
+            if self
+                .mux
+                .locks()
+                .any(|(n, held)| n == name && held.is_none())
+            {
+                self.mux
+                    .restore_lock(name, LockStatus::HOLDER_OPERATOR, now)
+                    .ok();
+            }
+        }
+        error!(
+            "{reason}; starting with {} held until the operator releases it",
+            wanted.join(", ")
+        );
+    }
+
+    fn source_index(&self, name: &str) -> Option<u8> {
+        let sources = self.mux.status().sources();
+        // Fewer than MAX_SOURCES (8) sources: an index fits a u8.
+        sources
+            .iter()
+            .position(|s| s.name() == name)
+            .map(|i| i as u8)
+    }
+
+    fn holder_name(&self, holder: u8) -> String {
+        if holder == LockStatus::HOLDER_OPERATOR {
+            return HeldLock::OPERATOR.to_string();
+        }
+        self.mux
+            .source_status(usize::from(holder))
+            .map_or_else(|| HeldLock::OPERATOR.to_string(), |s| s.name().to_string())
     }
 
     fn respond(&mut self, now: Timestamp, ticket: Ticket, seq: u64, status: u8, message: &str) {

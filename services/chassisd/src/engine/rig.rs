@@ -23,7 +23,7 @@ use chassis_protocols::{
     DriverConfig, Injection, Profile, Robot, Timestamp, Transmit, scout_mini, titan,
 };
 
-use super::{Device, Engine, EngineConfig, ListenerChange, Publication, Ticket, Wake};
+use super::{Device, Engine, EngineConfig, HeldLock, ListenerChange, Publication, Ticket, Wake};
 use crate::bus::MAX_RX_BATCH;
 use crate::mux::{Mux, MuxConfig};
 use crate::setup::driver_for;
@@ -78,6 +78,8 @@ pub struct Rig {
     pub passes: Vec<Timestamp>,
     /// Listener changes the wake budget asked for.
     pub listener_changes: Vec<(Timestamp, ListenerChange)>,
+    /// Every held set the engine asked to keep (the shell's state file), and when.
+    pub kept_locks: Vec<(Timestamp, Vec<HeldLock>)>,
     /// Attempts to open a device, and when.
     pub opens: Vec<(Timestamp, Device)>,
     /// When each state was published: (seq, instant).
@@ -145,6 +147,7 @@ impl Rig {
             responses: Vec::new(),
             passes: Vec::new(),
             listener_changes: Vec::new(),
+            kept_locks: Vec::new(),
             opens: Vec::new(),
             state_times: Vec::new(),
             bus_reads: 0,
@@ -372,6 +375,9 @@ impl Rig {
             }
         }
         self.collect();
+        if let Some(held) = self.engine.poll_held_locks() {
+            self.kept_locks.push((now, held));
+        }
         self.gate_open = !self.engine.is_rx_paused(now);
         for change in self.engine.spend_wakeups(now, wake.sources) {
             self.listener_changes.push((now, change));

@@ -14,7 +14,7 @@ use chassis_interfaces::{
 use chassis_protocols::{Injection, Robot, Timestamp, Transmit, titan};
 
 use super::rig::{LATENCY, Rig, T0};
-use super::{Device, ListenerChange, Wake, WakeBudget};
+use super::{Device, HeldLock, ListenerChange, Wake, WakeBudget};
 use crate::mux::MuxConfig;
 
 fn ms(v: u64) -> Duration {
@@ -642,6 +642,146 @@ fn the_engine_waits_for_its_next_deadline() {
     // Nothing but the tick and the heartbeat (both on the 20 ms grid) is pending.
     assert!(t > rig.now() && t <= rig.now() + ms(20), "{t:?}");
     assert_eq!(rig.stalls, 0);
+}
+
+/// A fresh TITAN rig (a restarted service) whose safety monitor beats and whose teleop asks for
+/// 0.5 m/s every 50 ms from the start; `before_first_pass` runs before anything is decided.
+fn restarted(mux: MuxConfig, before_first_pass: impl FnOnce(&mut Rig)) -> Rig {
+    let mut rig = Rig::with(Robot::Titan, mux, |_| {});
+    before_first_pass(&mut rig);
+    rig.publish_every("safety", VelocityRequest::heartbeat(), ms(50), at(5000));
+    rig.publish_every("teleop", twist(0.5), ms(50), at(5000));
+    rig
+}
+
+fn held(name: &str, holder: &str, since: Timestamp) -> HeldLock {
+    HeldLock {
+        name: name.into(),
+        holder: holder.into(),
+        since,
+    }
+}
+
+#[test]
+fn a_lock_restored_after_a_restart_holds_until_the_operator_releases_it() {
+    let before = T0 - Duration::from_secs(30);
+    let mut rig = restarted(unsmoothed(), |rig| {
+        rig.engine
+            .restore_locks(T0, &[held("estop", HeldLock::OPERATOR, before)]);
+    });
+    let release = rig.control_at(
+        at(1500),
+        control(ControlKind::LOCK_RELEASE).with_name("estop"),
+    );
+    rig.run_until(at(1400));
+    assert!(
+        rig.motion().iter().all(|&(_, v)| v == 0.0),
+        "nothing moves while the restored e-stop is held"
+    );
+    let lock = rig.mux().locks()[0];
+    assert_eq!((lock.held, lock.holder), (1, LockStatus::HOLDER_OPERATOR));
+    assert_eq!(
+        lock.since_ns,
+        before.as_nanos(),
+        "held since before the restart"
+    );
+    assert_eq!(rig.mux().zero_reason, ZeroReason::LOCKED);
+    assert!(
+        rig.kept_locks.is_empty(),
+        "the file already holds what was restored"
+    );
+    rig.run_until(at(1600));
+    assert_eq!(rig.response(release).unwrap().0.message(), "estop released");
+    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(1500)));
+    assert_eq!(
+        rig.kept_locks,
+        vec![(at(1500), vec![])],
+        "release clears the file"
+    );
+}
+
+#[test]
+fn a_lock_restored_for_a_source_is_released_by_that_source() {
+    let mut rig = restarted(unsmoothed(), |rig| {
+        rig.engine.restore_locks(T0, &[held("estop", "safety", T0)]);
+    });
+    rig.run_until(at(500));
+    assert!(rig.motion().iter().all(|&(_, v)| v == 0.0));
+    assert_eq!(rig.mux().locks()[0].holder, 0, "the safety source holds it");
+    rig.request_at(
+        at(510),
+        "safety",
+        VelocityRequest {
+            lock_release: 1,
+            ..VelocityRequest::heartbeat()
+        },
+    );
+    rig.run_until(at(700));
+    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(510)));
+    assert_eq!(rig.kept_locks, vec![(at(510), vec![])]);
+}
+
+#[test]
+fn an_unreadable_lock_file_starts_with_the_estop_held_and_rewrites_it() {
+    let mut rig = restarted(unsmoothed(), |rig| {
+        rig.engine
+            .restore_failed(T0, &"the state file is not JSON (simulated)");
+    });
+    rig.run_until(at(1000));
+    assert!(rig.motion().iter().all(|&(_, v)| v == 0.0));
+    assert_eq!(rig.mux().zero_reason, ZeroReason::LOCKED);
+    assert_eq!(
+        rig.kept_locks,
+        vec![(T0, vec![held("estop", HeldLock::OPERATOR, T0)])],
+        "the held e-stop replaces the unreadable file at the first pass"
+    );
+    rig.control_at(
+        at(1007),
+        control(ControlKind::LOCK_RELEASE).with_name("estop"),
+    );
+    rig.run_until(at(1100));
+    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(1007)));
+}
+
+#[test]
+fn a_restored_lock_the_configuration_no_longer_has_holds_the_estop_instead() {
+    let mut rig = restarted(unsmoothed(), |rig| {
+        rig.engine
+            .restore_locks(T0, &[held("dock", HeldLock::OPERATOR, T0)]);
+    });
+    rig.run_until(at(500));
+    assert!(rig.motion().iter().all(|&(_, v)| v == 0.0));
+    assert_eq!(rig.mux().locks()[0].holder, LockStatus::HOLDER_OPERATOR);
+    assert_eq!(
+        rig.kept_locks,
+        vec![(T0, vec![held("estop", HeldLock::OPERATOR, T0)])]
+    );
+}
+
+#[test]
+fn every_engage_and_release_is_kept_at_once() {
+    let mut rig = ready();
+    rig.control_at(
+        at(433),
+        control(ControlKind::LOCK_ENGAGE).with_name("estop"),
+    );
+    rig.control_at(
+        at(633),
+        control(ControlKind::LOCK_ENGAGE).with_name("estop"),
+    );
+    rig.control_at(
+        at(833),
+        control(ControlKind::LOCK_RELEASE).with_name("estop"),
+    );
+    rig.run_until(at(1000));
+    assert_eq!(
+        rig.kept_locks,
+        vec![
+            (at(433), vec![held("estop", HeldLock::OPERATOR, at(433))]),
+            (at(833), vec![]),
+        ],
+        "an engage of a held lock changes nothing to keep"
+    );
 }
 
 /// Simulated seconds of the long run.

@@ -51,6 +51,8 @@ impl<D: Devices> Shell<D> {
         next |= self.transmit(engine, now);
         engine.end_pass(now);
         next |= self.open_due(engine, now);
+        // On disk before anyone is told: an answered engage survives a crash.
+        self.keep_locks(engine);
         self.publish(ports, engine, now);
         next
     }

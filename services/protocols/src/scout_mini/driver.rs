@@ -379,7 +379,8 @@ pub(crate) fn normalize_mode(wire_mode: u8) -> u8 {
 }
 
 /// The normalized `FaultFlags` of a 0x151 body status byte (emergency stop, exception).
-pub(crate) fn body_flags(body_status: u8) -> u64 {
+/// The normalized `FaultFlags` of a 0x151 body status (b0).
+pub fn body_flags(body_status: u8) -> u64 {
     match body_status {
         body::NORMAL => 0,
         body::EMERGENCY_STOP => FaultFlags::EMERGENCY_STOP,

@@ -8,7 +8,7 @@ mod sim;
 
 pub use codec::*;
 pub use commands::{clear_codes_for, frames_for, velocity_command};
-pub use driver::{ScoutMiniDriver, normalize_faults};
+pub use driver::{ScoutMiniDriver, body_flags, normalize_faults};
 pub use sim::ScoutMiniSim;
 
 #[cfg(test)]

@@ -367,6 +367,40 @@ pub struct BmsAlarm {
 }
 
 impl BmsAlarm {
+    /// Names of the bits of alarm 1 / warning 1 (b0, b2).
+    pub const BYTE_1_NAMES: [(u8, &'static str); 5] = [
+        (1 << 1, "over_voltage"),
+        (1 << 2, "under_voltage"),
+        (1 << 3, "over_temperature"),
+        (1 << 4, "under_temperature"),
+        (1 << 7, "discharge_over_current"),
+    ];
+    /// Names of the bits of alarm 2 / warning 2 (b1, b3).
+    pub const BYTE_2_NAMES: [(u8, &'static str); 1] = [(1 << 0, "charge_over_current")];
+
+    /// The alarms set (b0, b1), by name.
+    pub fn alarm_names(&self) -> Vec<&'static str> {
+        Self::names(self.alarm_1, self.alarm_2)
+    }
+
+    /// The warnings set (b2, b3), by name.
+    pub fn warning_names(&self) -> Vec<&'static str> {
+        Self::names(self.warning_1, self.warning_2)
+    }
+
+    fn names(first: u8, second: u8) -> Vec<&'static str> {
+        let set = |byte: u8, names: &[(u8, &'static str)]| {
+            names
+                .iter()
+                .filter(move |(bit, _)| byte & bit != 0)
+                .map(|(_, name)| *name)
+                .collect::<Vec<_>>()
+        };
+        let mut out = set(first, &Self::BYTE_1_NAMES);
+        out.extend(set(second, &Self::BYTE_2_NAMES));
+        out
+    }
+
     /// The four bytes as `BmsState::alarm_flags` holds them.
     pub fn alarm_flags(&self) -> u32 {
         u32::from_le_bytes([self.alarm_1, self.alarm_2, self.warning_1, self.warning_2])

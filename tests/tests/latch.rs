@@ -1,0 +1,188 @@
+//! Latches that survive restarts: a held e-stop outlives `kill -9` of chassisd, whenever it
+//! comes, and only `estop-release` frees it; an unreadable lock file starts the service with the
+//! e-stop held.
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use chassis_tests::*;
+use nix::sys::signal::Signal;
+
+const UP: Duration = Duration::from_secs(10);
+
+fn name(tag: &str) -> String {
+    // Robot names are at most 16 characters.
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+fn start(env: &mut Env, label: &str, n: &str) -> usize {
+    env.chassisd(
+        label,
+        &["--robot", "titan", "--name", n, "--no-safety-monitor"],
+    )
+}
+
+fn lock_file(env: &Env, n: &str) -> PathBuf {
+    env.state_home()
+        .join("chassisd")
+        .join(n)
+        .join(format!("{n}.locks.json"))
+}
+
+/// Teleop asks for 0.3 m/s every 20 ms for `duration`; the largest speed the chassis reported.
+fn drive(robot: &mut Robot, teleop: &mut Source, duration: Duration) -> f32 {
+    let end = Instant::now() + duration;
+    let mut max = 0.0f32;
+    while Instant::now() < end {
+        teleop.send(VelocityRequest::twist(0.3, 0.0)).unwrap();
+        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(20)) {
+            max = max.max(state.motion.linear_mps.abs());
+        }
+    }
+    max
+}
+
+fn control(env: &Env, n: &str, action: &str) -> String {
+    let out = env.chassis(&["control", "--name", n, action]);
+    assert!(
+        out.status.success(),
+        "chassis control {action}: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.logs()
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn estop_held(robot: &mut Robot) -> (bool, u8) {
+    let m = mux(robot);
+    let index = m.lock_index("estop").unwrap();
+    let lock = m.locks()[index];
+    (lock.held == 1, lock.holder)
+}
+
+fn kill(env: &mut Env, index: usize) {
+    env.proc(index).signal(Signal::SIGKILL);
+    assert_eq!(env.proc(index).wait_exit(Duration::from_secs(3)), None);
+    assert!(!env.proc(index).is_running());
+}
+
+/// After a restart with the e-stop held: teleop does not move the robot, the mux says why, and
+/// `estop-release` frees it.
+fn assert_held_until_released(env: &Env, n: &str, robot: &mut Robot, teleop: &mut Source) {
+    assert_eq!(
+        estop_held(robot),
+        (true, LockStatus::HOLDER_OPERATOR),
+        "{}",
+        env.logs()
+    );
+    let peak = drive(robot, teleop, Duration::from_millis(800));
+    assert!(peak < 0.01, "moved at {peak} m/s under a restored e-stop");
+    let m = mux(robot);
+    assert_eq!(m.output, Twist::ZERO);
+    assert_eq!(m.zero_reason, ZeroReason::LOCKED);
+    assert!(control(env, n, "estop-release").contains("estop released"));
+    let peak = drive(robot, teleop, Duration::from_secs(1));
+    assert!(peak > 0.2, "no motion after the release: {peak}");
+}
+
+#[test]
+fn a_held_estop_survives_sigkill_and_only_estop_release_frees_it() {
+    let mut env = Env::new("latch-kill");
+    let n = name("lk");
+    let first = start(&mut env, "first", &n);
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = robot.source("teleop").unwrap();
+    assert!(drive(&mut robot, &mut teleop, Duration::from_millis(800)) > 0.2);
+    assert!(control(&env, &n, "estop").contains("estop engaged"));
+    kill(&mut env, first);
+    let again = start(&mut env, "again", &n);
+    let mut robot = env.robot(&n, UP);
+    assert_held_until_released(&env, &n, &mut robot, &mut teleop);
+    let log = env.proc(again).log_text();
+    assert!(
+        log.contains("WARN") && log.contains("estop restored from before the restart"),
+        "{log}"
+    );
+    assert!(log.contains("held by operator"), "{log}");
+    // The release is kept too: killed again, it comes back free.
+    kill(&mut env, again);
+    start(&mut env, "third", &n);
+    let mut robot = env.robot(&n, UP);
+    assert!(!estop_held(&mut robot).0, "{}", env.logs());
+    assert!(drive(&mut robot, &mut teleop, Duration::from_secs(1)) > 0.2);
+}
+
+#[test]
+fn an_answered_estop_is_held_after_a_kill_at_any_moment_after_the_answer() {
+    let mut env = Env::new("latch-random");
+    let n = name("lr");
+    let mut rng = Rng::from_env("latch-random");
+    let mut current = start(&mut env, "run0", &n);
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = robot.source("teleop").unwrap();
+    const ROUNDS: usize = 4;
+    let mut moments = Vec::new();
+    let mut held_after = 0;
+    for round in 1..=ROUNDS {
+        assert!(control(&env, &n, "estop").contains("estop engaged"));
+        // Teleop keeps asking while the kill comes, 0 to 30 ms after the answer.
+        let delay = rng.between(Duration::ZERO, Duration::from_millis(30));
+        moments.push(format!("{:.1}", delay.as_secs_f64() * 1e3));
+        let kill_at = Instant::now() + delay;
+        while Instant::now() < kill_at {
+            teleop.send(VelocityRequest::twist(0.3, 0.0)).unwrap();
+            pause(Duration::from_millis(2));
+        }
+        kill(&mut env, current);
+        current = start(&mut env, &format!("run{round}"), &n);
+        robot = env.robot(&n, UP);
+        if estop_held(&mut robot).0 {
+            held_after += 1;
+        }
+        assert_held_until_released(&env, &n, &mut robot, &mut teleop);
+    }
+    record_figure(&Figure {
+        rank: 710,
+        fault: "chassisd SIGKILLed with the e-stop held, and restarted".into(),
+        injection: format!(
+            "`chassis control estop`, then SIGKILL {} ms after the answer while teleop asks for              0.3 m/s; a new chassisd",
+            moments.join(", ")
+        ),
+        behaviour: "the restarted service holds the e-stop (restored from its state file,                     logged at WARN); teleop does not move the robot until `estop-release`"
+            .into(),
+        figure: format!("held after {held_after} of {ROUNDS} restarts"),
+        value: held_after as f64,
+        pass: held_after == ROUNDS,
+        suite: "latch".into(),
+        test: "an_answered_estop_is_held_after_a_kill_at_any_moment_after_the_answer".into(),
+    });
+}
+
+#[test]
+fn a_corrupt_lock_file_starts_the_service_with_the_estop_held() {
+    let mut env = Env::new("latch-corrupt");
+    let n = name("lc");
+    let file = lock_file(&env, &n);
+    std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+    std::fs::write(&file, "{\"robot\":\"").unwrap();
+    let index = start(&mut env, "chassisd", &n);
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = robot.source("teleop").unwrap();
+    let log = env.proc(index).log_text();
+    assert!(log.contains("ERROR"), "{log}");
+    assert!(log.contains("is not a held-lock file"), "{log}");
+    assert!(log.contains("starting with estop held"), "{log}");
+    let aside = file.with_file_name(format!("{n}.locks.json.corrupt"));
+    assert_eq!(std::fs::read_to_string(&aside).unwrap(), "{\"robot\":\"");
+    // The file now says what is held.
+    let kept = std::fs::read_to_string(&file).unwrap();
+    assert!(
+        kept.contains("\"estop\"") && kept.contains("\"operator\""),
+        "{kept}"
+    );
+    assert_held_until_released(&env, &n, &mut robot, &mut teleop);
+    let kept = std::fs::read_to_string(&file).unwrap();
+    assert!(kept.contains("\"locks\":[]"), "{kept}");
+}

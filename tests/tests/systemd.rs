@@ -1,0 +1,275 @@
+//! chassisd under a supervisor: the sd-notify protocol on a notify socket this test owns
+//! (`READY=1` once the state service exists, `WATCHDOG=1` from the loop, `STATUS=`, `STOPPING=1`)
+//! and real-time mode, granted or refused.
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::os::unix::net::UnixDatagram;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use chassis_tests::*;
+use nix::sys::signal::Signal;
+
+const UP: Duration = Duration::from_secs(10);
+
+fn name(tag: &str) -> String {
+    // Robot names are at most 16 characters.
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+/// The socket systemd would own, bound by the test.
+fn notify_socket(env: &Env) -> (UnixDatagram, PathBuf) {
+    let path = env.dir.join("notify.sock");
+    let socket = UnixDatagram::bind(&path).unwrap();
+    (socket, path)
+}
+
+/// The next notification within `timeout`.
+fn next(socket: &UnixDatagram, timeout: Duration) -> Option<String> {
+    socket.set_read_timeout(Some(timeout)).unwrap();
+    let mut buf = [0u8; 1024];
+    socket
+        .recv(&mut buf)
+        .ok()
+        .map(|n| String::from_utf8_lossy(&buf[..n]).into_owned())
+}
+
+/// Notifications until one contains `wanted` (at most `timeout`); all of them, in order.
+fn until(socket: &UnixDatagram, wanted: &str, timeout: Duration, env: &Env) -> Vec<String> {
+    let end = Instant::now() + timeout;
+    let mut seen = Vec::new();
+    while Instant::now() < end {
+        if let Some(message) = next(socket, Duration::from_millis(100)) {
+            let done = message.contains(wanted);
+            seen.push(message);
+            if done {
+                return seen;
+            }
+        }
+    }
+    panic!("no {wanted} within {timeout:?}: {seen:?}\n{}", env.logs());
+}
+
+fn start_notified(env: &mut Env, n: &str, socket: &Path, watchdog_usec: Option<u64>) -> usize {
+    let socket = socket.to_string_lossy().into_owned();
+    let usec = watchdog_usec.map(|u| u.to_string());
+    let mut envs = vec![("NOTIFY_SOCKET", socket.as_str())];
+    if let Some(usec) = &usec {
+        envs.push(("WATCHDOG_USEC", usec.as_str()));
+    }
+    env.spawn_program(
+        "chassisd",
+        &bin("chassisd"),
+        &["--robot", "titan", "--name", n, "--no-safety-monitor"],
+        &envs,
+    )
+}
+
+#[test]
+fn ready_comes_once_the_state_service_exists_and_status_follows_the_mux() {
+    let mut env = Env::new("sd-ready");
+    let n = name("sdr");
+    let (socket, path) = notify_socket(&env);
+    let index = start_notified(&mut env, &n, &path, None);
+    let seen = until(&socket, "READY=1", UP, &env);
+    // Nothing but READY first: no watchdog was asked for.
+    assert_eq!(seen.len(), 1, "{seen:?}");
+    assert!(seen[0].contains("STATUS=stopped: "), "{seen:?}");
+    // The moment READY arrives the state service is there, with a sample in it.
+    let mut robot = Robot::connect_with_prefix(&n, Some(&env.prefix))
+        .unwrap_or_else(|e| panic!("READY before chassis/{n}/state: {e}\n{}", env.logs()));
+    assert!(
+        robot.wait_state(Duration::from_secs(1)).unwrap().is_some(),
+        "no state after READY"
+    );
+    let out = env.chassis(&["control", "--name", &n, "estop"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen = until(&socket, "held: estop", Duration::from_secs(3), &env);
+    // Nothing asks for motion, so the decision is "no active source", with the lock beside it.
+    assert_eq!(
+        seen.last().unwrap(),
+        "STATUS=stopped: no active source · held: estop"
+    );
+    env.proc(index).signal(Signal::SIGTERM);
+    let seen = until(&socket, "STOPPING=1", Duration::from_secs(3), &env);
+    assert!(!seen.iter().any(|m| m.contains("WATCHDOG")), "{seen:?}");
+    assert_eq!(env.proc(index).wait_exit(Duration::from_secs(3)), Some(0));
+}
+
+#[test]
+fn the_loop_pings_the_watchdog_twice_per_period_and_a_stopped_loop_does_not() {
+    let mut env = Env::new("sd-watchdog");
+    let n = name("sdw");
+    let (socket, path) = notify_socket(&env);
+    let period = Duration::from_millis(400);
+    let index = start_notified(&mut env, &n, &path, Some(400_000));
+    until(&socket, "READY=1", UP, &env);
+    let mut pings = Vec::new();
+    let window = Duration::from_secs(2);
+    let end = Instant::now() + window;
+    while Instant::now() < end {
+        if next(&socket, Duration::from_millis(50)).is_some_and(|m| m == "WATCHDOG=1") {
+            pings.push(Instant::now());
+        }
+    }
+    assert!(
+        pings.len() >= 2 * (window.as_millis() / period.as_millis()) as usize,
+        "{} pings in {window:?} with WATCHDOG_USEC {period:?}",
+        pings.len()
+    );
+    let worst = pings.windows(2).map(|w| w[1] - w[0]).max().unwrap();
+
+    // A loop that does not run (stopped, as a hung one would be) sends nothing.
+    let pid = env.proc(index).pid();
+    nix::sys::signal::kill(pid, Signal::SIGSTOP).unwrap();
+    pause(Duration::from_millis(100));
+    while next(&socket, Duration::from_millis(10)).is_some() {}
+    let while_stopped = next(&socket, Duration::from_secs(1));
+    nix::sys::signal::kill(pid, Signal::SIGCONT).unwrap();
+    let seen = until(&socket, "WATCHDOG=1", Duration::from_secs(2), &env);
+    let running = env.proc(index).is_running();
+    record_figure(&Figure {
+        rank: 720,
+        fault: "chassisd's event loop stops (hung) under a systemd watchdog".into(),
+        injection: format!(
+            "WATCHDOG_USEC {} ms on a notify socket of the test's; SIGSTOP for 1 s, then SIGCONT",
+            period.as_millis()
+        ),
+        behaviour: "WATCHDOG=1 from the loop four times per period; none while stopped (systemd \
+                    would restart the service); pings again after SIGCONT"
+            .into(),
+        figure: format!(
+            "{} pings in {} s, longest gap {:.0} ms; {} while stopped",
+            pings.len(),
+            window.as_secs(),
+            worst.as_secs_f64() * 1e3,
+            if while_stopped.is_some() {
+                "a ping"
+            } else {
+                "none"
+            }
+        ),
+        value: worst.as_secs_f64() * 1e3,
+        pass: worst < period && while_stopped.is_none() && running,
+        suite: "systemd".into(),
+        test: "the_loop_pings_the_watchdog_twice_per_period_and_a_stopped_loop_does_not".into(),
+    });
+    assert!(worst < period, "a gap of {worst:?} between pings");
+    assert_eq!(while_stopped, None, "a notification from a stopped process");
+    assert!(!seen.is_empty());
+    assert!(running, "SIGCONT stopped the service\n{}", env.logs());
+    env.proc(index).signal(Signal::SIGKILL);
+}
+
+/// Scheduling policy and real-time priority of `pid`'s main thread (the loop's).
+fn policy(pid: u32) -> (u32, u32) {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    let after = &stat[stat.rfind(')').unwrap() + 1..];
+    let fields: Vec<&str> = after.split_whitespace().collect();
+    // Fields 40 (rt_priority) and 41 (policy) of proc(5); `after` starts at field 3.
+    (fields[38].parse().unwrap(), fields[37].parse().unwrap())
+}
+
+const SCHED_FIFO: u32 = 1;
+const SCHED_OTHER: u32 = 0;
+
+/// Teleop drives the robot: the service runs whatever its scheduling.
+fn assert_drives(env: &Env, n: &str) {
+    let mut robot = env.robot(n, UP);
+    let mut teleop = robot.source("teleop").unwrap();
+    let end = Instant::now() + Duration::from_secs(1);
+    let mut peak = 0.0f32;
+    while Instant::now() < end {
+        teleop.send(VelocityRequest::twist(0.3, 0.0)).unwrap();
+        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(20)) {
+            peak = peak.max(s.motion.linear_mps.abs());
+        }
+    }
+    assert!(peak > 0.2, "no motion: {peak}\n{}", env.logs());
+}
+
+#[test]
+fn realtime_mode_runs_the_loop_at_sched_fifo_or_says_why_not() {
+    let mut env = Env::new("rt-granted");
+    let n = name("rtg");
+    let index = env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "titan",
+            "--name",
+            &n,
+            "--no-safety-monitor",
+            "--realtime",
+            "10",
+        ],
+    );
+    assert_drives(&env, &n);
+    let pid = env.proc(index).child.id();
+    let log = env.proc(index).log_text();
+    if log.contains("refused") {
+        // A system without the privilege: the warning and normal scheduling.
+        assert!(log.contains("normal scheduling"), "{log}");
+        assert_eq!(policy(pid).0, SCHED_OTHER);
+    } else {
+        assert!(
+            log.contains("real-time mode: the loop runs at SCHED_FIFO"),
+            "{log}"
+        );
+        assert_eq!(policy(pid), (SCHED_FIFO, 10));
+    }
+}
+
+#[test]
+fn a_refused_realtime_mode_warns_and_runs_with_normal_scheduling() {
+    let setpriv = Path::new("/usr/bin/setpriv");
+    if !setpriv.exists() || !Path::new("/usr/bin/prlimit").exists() {
+        eprintln!(
+            "skipped: setpriv and prlimit (util-linux) are needed to take the privilege away"
+        );
+        return;
+    }
+    let mut env = Env::new("rt-refused");
+    let n = name("rtr");
+    let chassisd = bin("chassisd").to_string_lossy().into_owned();
+    // With RLIMIT_RTPRIO 0 the kernel refuses SCHED_FIFO to an unprivileged process; root keeps
+    // CAP_SYS_NICE and CAP_IPC_LOCK unless they are taken away (setpriv).
+    let mut args = vec!["--rtprio=0", "--"];
+    let root = std::fs::metadata("/proc/self").is_ok_and(|m| {
+        use std::os::unix::fs::MetadataExt;
+        m.uid() == 0
+    });
+    if root {
+        args.extend([
+            "/usr/bin/setpriv",
+            "--bounding-set=-sys_nice,-ipc_lock",
+            "--inh-caps=-sys_nice,-ipc_lock",
+        ]);
+    }
+    args.extend([
+        chassisd.as_str(),
+        "--robot",
+        "titan",
+        "--name",
+        &n,
+        "--no-safety-monitor",
+        "--realtime",
+        "10",
+    ]);
+    let index = env.spawn_program("chassisd", Path::new("/usr/bin/prlimit"), &args, &[]);
+    assert_drives(&env, &n);
+    let log = env.proc(index).log_text();
+    assert!(log.contains("WARN"), "{log}");
+    assert!(log.contains("SCHED_FIFO priority 10 refused"), "{log}");
+    assert!(
+        log.contains("the loop runs with normal scheduling"),
+        "{log}"
+    );
+    // prlimit execs setpriv, which execs chassisd: the pid is chassisd's.
+    assert_eq!(policy(env.proc(index).child.id()).0, SCHED_OTHER);
+}
