@@ -573,6 +573,16 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
         test: "a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed",
         fault: "a second chassisd for the same robot name",
     },
+    ExpectedRow {
+        suite: "latch",
+        test: "an_answered_estop_is_held_after_a_kill_at_any_moment_after_the_answer",
+        fault: "chassisd SIGKILLed with the e-stop held, and restarted",
+    },
+    ExpectedRow {
+        suite: "systemd",
+        test: "the_loop_pings_the_watchdog_twice_per_period_and_a_stopped_loop_does_not",
+        fault: "chassisd's event loop stops (hung) under a systemd watchdog",
+    },
 ];
 
 /// Every row of the soak's table (`soak.jsonl`), in the order of the table.

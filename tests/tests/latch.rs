@@ -147,10 +147,10 @@ fn an_answered_estop_is_held_after_a_kill_at_any_moment_after_the_answer() {
         rank: 710,
         fault: "chassisd SIGKILLed with the e-stop held, and restarted".into(),
         injection: format!(
-            "`chassis control estop`, then SIGKILL {} ms after the answer while teleop asks for              0.3 m/s; a new chassisd",
+            "`chassis control estop`, then SIGKILL {} ms after the answer while teleop asks for 0.3 m/s; a new chassisd",
             moments.join(", ")
         ),
-        behaviour: "the restarted service holds the e-stop (restored from its state file,                     logged at WARN); teleop does not move the robot until `estop-release`"
+        behaviour: "the restarted service holds the e-stop (restored from its state file, logged at WARN); teleop does not move the robot until `estop-release`"
             .into(),
         figure: format!("held after {held_after} of {ROUNDS} restarts"),
         value: held_after as f64,
