@@ -406,8 +406,9 @@ pub fn command_path(
 ) -> anyhow::Result<CommandFigures> {
     let tap = robot.frames(2048)?;
     let mut teleop = robot.source("teleop")?;
+    // A new reader gets the latest decision with the service's next publication (10 Hz).
     let teleop_index = robot
-        .latest_mux()?
+        .wait_mux(Duration::from_secs(2))?
         .and_then(|m| m.sources().iter().position(|s| s.name() == "teleop"))
         .ok_or_else(|| anyhow::anyhow!("the mux reports no teleop source"))?;
     let mut decoder = MotionDecoder::new(kind);
