@@ -49,6 +49,10 @@ Output: one JSON object per line on stdout, one per path::
 ``path`` is ``state`` or ``command``; ``samples`` the latencies recorded; ``missed`` the
 requests whose frame did not appear within 500 ms (command path; 0 for state); times in µs.
 Exit status 0, or 1 when a path recorded nothing.
+
+``--latencies-dir DIR`` also writes every latency, one ns figure a line, to ``DIR/state.ns`` and
+``DIR/command.ns`` (and the command path's missed count to ``DIR/command.missed``):
+``chassis-bench`` summarises them as it does the Rust client's.
 """
 
 from __future__ import annotations
@@ -213,20 +217,28 @@ def main() -> int:
     parser.add_argument("--paths", default="state,command")
     default_cli = Path(__file__).resolve().parents[2] / "target" / "release" / "chassis"
     parser.add_argument("--chassis", default=os.environ.get("CHASSIS_CLI", str(default_cli)))
+    parser.add_argument("--latencies-dir", default=None, help="write every latency here")
     args = parser.parse_args()
     paths = args.paths.split(",")
 
     robot = chassis.Robot.connect(args.name, prefix=args.prefix)
     teleop = robot.source("teleop")
     rows = []
+    out = Path(args.latencies_dir) if args.latencies_dir else None
     if "state" in paths:
-        rows.append(row("state", args.robot, state_path(robot, teleop, args.state_samples), 0))
+        latencies = state_path(robot, teleop, args.state_samples)
+        rows.append(row("state", args.robot, latencies, 0))
+        if out:
+            (out / "state.ns").write_text("".join(f"{ns}\n" for ns in latencies))
     if "command" in paths:
         frames = motion_frames(args.chassis, args.robot)
         latencies, missed = command_path(
             robot, teleop, frames, args.commands, args.interval_ms / 1e3
         )
         rows.append(row("command", args.robot, latencies, missed))
+        if out:
+            (out / "command.ns").write_text("".join(f"{ns}\n" for ns in latencies))
+            (out / "command.missed").write_text(f"{missed}\n")
     for r in rows:
         print(json.dumps(r), flush=True)
     return 0 if all(r["samples"] for r in rows) else 1

@@ -15,6 +15,7 @@ mod fanout;
 mod paths;
 mod placement;
 mod provenance;
+mod python;
 mod report;
 mod stats;
 mod throughput;
@@ -362,6 +363,14 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     }
 
     if !skip("paths") {
+        let python = python::interpreter();
+        if python.is_none() {
+            report.notes.push(
+                "the Python client was not measured: target/python-venv is missing \
+                 (scripts/python-tests makes it)"
+                    .into(),
+            );
+        }
         for r in &runs {
             let label = bus_label(r.robot, r.bus);
             bar.set_message(format!(
@@ -396,7 +405,21 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     plan.preemptions
                 };
                 let preempt = paths::preemption(&mut robot, r.robot, preemptions, interval, spin)?;
-                Ok((command, state, preempt))
+                // The Python client beside the Rust one: same service, same placement.
+                let python = match (&python, r.robot, r.mode) {
+                    (Some(interpreter), RobotKind::Titan, LoopMode::Event) => Some(python::run(
+                        interpreter,
+                        robot.name(),
+                        &prefix,
+                        &paths::sibling("chassis")?,
+                        &dir,
+                        plan.states,
+                        count,
+                        interval,
+                    )?),
+                    _ => None,
+                };
+                Ok((command, state, preempt, python))
             })??;
             let feed_per_s = feedback.per_second(&mut robot)?;
             drop(robot);
@@ -457,7 +480,25 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let reference = |what: &str| Some(format!("{what}, {placement}"));
             let warm = reference(transport.label());
 
-            let (command, state, (preempt, preempt_missed)) = result;
+            let (command, state, (preempt, preempt_missed), python) = result;
+            if let Some(py) = python {
+                report.rows.push(row(
+                    "python",
+                    format!("{label}: state"),
+                    r.mode.arg(),
+                    placement,
+                    py.state,
+                    0,
+                ));
+                report.rows.push(row(
+                    "python",
+                    format!("{label}: command"),
+                    r.mode.arg(),
+                    placement,
+                    py.command,
+                    py.missed,
+                ));
+            }
             if let Some(figures) = command {
                 let mut command_row = row(
                     "command",

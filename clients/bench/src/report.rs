@@ -237,18 +237,19 @@ impl Report {
     /// Latency CDFs of every row, log latency axis: one panel per kind of path (baselines,
     /// command, state, preemption, fan-out), all on the same axes so panels compare.
     pub fn plot(&self, path: &Path) -> anyhow::Result<()> {
-        const PANELS: [(&str, &str); 6] = [
+        const PANELS: [(&str, &str); 7] = [
             ("baseline", "raw transports (ping-pong, one way)"),
             ("command", "command: request created → frame written"),
             ("state", "state: frame read → state received"),
             ("preemption", "preemption: safety stop → zero frame written"),
             ("fan-out", "fan-out: state to 1, 4, 16 processes"),
+            ("python", "Python client: frame read → state in Python; request → frame"),
             (
                 "in-service",
                 "in-service: chassisd's own part (woke → frame written, frame read → state published)",
             ),
         ];
-        let root = SVGBackend::new(path, (1600, 1500)).into_drawing_area();
+        let root = SVGBackend::new(path, (1600, 2000)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
         let root = root
             .titled(
@@ -262,7 +263,7 @@ impl Report {
             .map(|r| r.summary.max_us)
             .fold(10.0f64, f64::max)
             .min(1e6);
-        for (area, (kind, title)) in root.split_evenly((3, 2)).iter().zip(PANELS) {
+        for (area, (kind, title)) in root.split_evenly((4, 2)).iter().zip(PANELS) {
             let rows: Vec<&Row> = self.rows.iter().filter(|r| r.path == kind).collect();
             if rows.is_empty() {
                 continue;
@@ -323,6 +324,51 @@ impl Report {
             .filter(move |r| r.path == path && r.mode == mode)
     }
 
+    /// The Python client's state path p99 within 3 × the Rust client's, same run and placement.
+    fn python_target(&self) -> Target {
+        let pairs: Vec<(&Row, &Row)> = self
+            .rows
+            .iter()
+            .filter(|r| r.path == "python")
+            .filter_map(|py| {
+                let what = py.what.strip_suffix(": state")?;
+                let rust = self.rows.iter().find(|r| {
+                    r.path == "state"
+                        && r.what == what
+                        && r.mode == py.mode
+                        && r.placement == py.placement
+                })?;
+                Some((py, rust))
+            })
+            .collect();
+        let measured: Vec<String> = pairs
+            .iter()
+            .map(|(py, rust)| {
+                format!(
+                    "{} {}: {:.1} vs {:.1} µs, {:.2} ×",
+                    py.mode,
+                    py.placement,
+                    py.summary.p99_us,
+                    rust.summary.p99_us,
+                    py.summary.p99_us / rust.summary.p99_us
+                )
+            })
+            .collect();
+        Target {
+            what: "Python state p99 ≤ 3 × the Rust client's (same run, same placement)".into(),
+            measured: if measured.is_empty() {
+                "not measured".into()
+            } else {
+                measured.join("; ")
+            },
+            met: (!pairs.is_empty()).then(|| {
+                pairs
+                    .iter()
+                    .all(|(py, rust)| py.summary.p99_us <= 3.0 * rust.summary.p99_us)
+            }),
+        }
+    }
+
     /// A ratio target over the rows of `path` in `mode`: every row's p99 ratio at most `bound`.
     fn ratio_target(&self, path: &str, mode: &str, bound: f64, what: String) -> Target {
         let rows: Vec<&Row> = self.rows_of(path, mode).collect();
@@ -350,12 +396,14 @@ impl Report {
 
     fn targets(&self) -> Vec<Target> {
         let mut targets = Vec::new();
-        for path in ["command", "state"] {
+        for (path, bound) in [("command", 1.5), ("state", 2.0)] {
             targets.push(self.ratio_target(
                 path,
                 "event",
-                2.0,
-                format!("{path} p99 ≤ 2 × its matched iceoryx2 event baseline's p99 (event loop)"),
+                bound,
+                format!(
+                    "{path} p99 ≤ {bound} × its matched iceoryx2 event baseline's p99 (event loop)"
+                ),
             ));
             targets.push(self.ratio_target(
                 path,
@@ -364,6 +412,7 @@ impl Report {
                 format!("{path} p99 ≤ 1.5 × its matched busy-poll baseline's p99 (spin loop)"),
             ));
         }
+        targets.push(self.python_target());
         let throughput = self.throughput.map(|t| t.frames_per_s);
         targets.push(Target {
             what: "decode + publish ≥ 1,000,000 frames/s on one core".into(),
