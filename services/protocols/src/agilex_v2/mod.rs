@@ -1,0 +1,13 @@
+//! AgileX protocol V2: SCOUT 2.0, SCOUT MINI (V2 firmware, skid and omni), HUNTER 2.0 / SE,
+//! TRACER, BUNKER and RANGER MINI — one codec, one driver and one simulated firmware for the
+//! family, parametrised by a [`V2Profile`] per robot. CAN 2.0B 500 kbit/s, big-endian, no
+//! checksum; the layouts it shares with the TITAN use the TITAN's frame types.
+
+mod codec;
+pub mod profile;
+
+pub use codec::*;
+pub use profile::{Kinematics, V2Model, V2Profile};
+
+#[cfg(test)]
+mod tests;
