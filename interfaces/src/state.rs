@@ -20,13 +20,25 @@ impl RobotKind {
     pub const TITAN: u8 = 1;
     pub const SCOUT_MINI: u8 = 2;
     pub const XBOT: u8 = 3;
+    pub const SCOUT: u8 = 4;
+    pub const HUNTER: u8 = 5;
+    pub const HUNTER_SE: u8 = 6;
+    pub const TRACER: u8 = 7;
+    pub const BUNKER: u8 = 8;
+    pub const RANGER_MINI: u8 = 9;
 
-    /// The command-line spelling of a robot kind (`titan`, `scout-mini`, `xbot`).
+    /// The command-line spelling of a robot kind (`titan`, `scout-mini`, `hunter`, …).
     pub fn name(kind: u8) -> &'static str {
         match kind {
             Self::TITAN => "titan",
             Self::SCOUT_MINI => "scout-mini",
             Self::XBOT => "xbot",
+            Self::SCOUT => "scout",
+            Self::HUNTER => "hunter",
+            Self::HUNTER_SE => "hunter-se",
+            Self::TRACER => "tracer",
+            Self::BUNKER => "bunker",
+            Self::RANGER_MINI => "ranger-mini",
             _ => "unknown",
         }
     }

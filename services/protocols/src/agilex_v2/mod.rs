@@ -4,6 +4,7 @@
 //! checksum; the layouts it shares with the TITAN use the TITAN's frame types.
 
 mod codec;
+pub mod kinematics;
 pub mod profile;
 
 pub use codec::*;
