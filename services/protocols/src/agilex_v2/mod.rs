@@ -4,11 +4,19 @@
 //! checksum; the layouts it shares with the TITAN use the TITAN's frame types.
 
 mod codec;
+mod commands;
+mod driver;
 pub mod kinematics;
 pub mod profile;
+mod sim;
 
 pub use codec::*;
+pub use commands::{STOP, clear_code_for, frames_for};
+pub use driver::{V2Driver, normalize_faults};
 pub use profile::{Kinematics, V2Model, V2Profile};
+pub use sim::V2Sim;
 
+#[cfg(test)]
+mod scenarios;
 #[cfg(test)]
 mod tests;
