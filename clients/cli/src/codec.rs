@@ -1,5 +1,6 @@
 //! One robot's codec behind a uniform face: frames in, JSON objects out.
 
+use chassis_protocols::agilex_v2::{self, V2Profile};
 use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
 use chassis_protocols::{CanFrame, DecodeError, Profile, Robot, scout_mini, titan, xbot};
 use serde::Serialize;
@@ -29,6 +30,11 @@ pub enum RobotCodec {
         profile: XbotProfile,
         parser: xbot::StreamParser,
     },
+    /// An AgileX protocol-V2 robot.
+    V2 {
+        profile: V2Profile,
+        robot: Robot,
+    },
 }
 
 impl RobotCodec {
@@ -40,6 +46,10 @@ impl RobotCodec {
                 profile: p,
                 parser: xbot::StreamParser::new(),
             },
+            Profile::V2(p) => RobotCodec::V2 {
+                robot: Profile::V2(p.clone()).robot(),
+                profile: p,
+            },
         }
     }
 
@@ -48,6 +58,7 @@ impl RobotCodec {
             RobotCodec::Titan(_) => Robot::Titan,
             RobotCodec::ScoutMini(_) => Robot::ScoutMini,
             RobotCodec::Xbot { .. } => Robot::Xbot,
+            RobotCodec::V2 { robot, .. } => *robot,
         }
     }
 
@@ -73,6 +84,21 @@ impl RobotCodec {
                     Some(decoded.count),
                     &decoded.frame,
                 ))
+            }
+            RobotCodec::V2 { profile, robot } => {
+                let decoded = agilex_v2::decode(frame, profile)?;
+                let mut json = frame_json(
+                    *robot,
+                    decoded.id().into(),
+                    decoded.direction(),
+                    None,
+                    &decoded,
+                );
+                json.insert("protocol".into(), "v2".into());
+                if let agilex_v2::Frame::VersionText(t) = decoded {
+                    json.insert("text".into(), t.text().into());
+                }
+                Ok(json)
             }
             RobotCodec::Xbot { .. } => Err(DecodeError::UnknownId { id: frame.id() }),
         }

@@ -7,8 +7,9 @@
 use std::path::Path;
 
 use chassis_interfaces::valid_robot_name;
-use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{DriverConfig, Profile, ProfileError, Robot};
+use chassis_protocols::{
+    DriverConfig, Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, Robot,
+};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -32,8 +33,12 @@ pub enum LoopMode {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ServiceConfig {
-    /// Robot: `titan`, `scout-mini` or `xbot` (`--robot`).
+    /// Robot: `titan`, `scout-mini`, `xbot`, `scout`, `hunter`, `hunter-se`, `tracer`, `bunker`
+    /// or `ranger-mini` (`--robot`).
     pub robot: Option<Robot>,
+    /// AgileX wire protocol, `v1` or `v2` (`--protocol`); default: the robot's own (SCOUT MINI:
+    /// v1; the other AgileX robots here: v2).
+    pub protocol: Option<Protocol>,
     /// Namespace of every iceoryx2 service, `chassis/<name>/…` (`--name`; default: the robot).
     pub name: Option<String>,
     /// The bus (`--bus`): `sim`, `can:IFACE`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`.
@@ -57,6 +62,7 @@ impl Default for ServiceConfig {
     fn default() -> Self {
         Self {
             robot: None,
+            protocol: None,
             name: None,
             bus: None,
             gps: None,
@@ -112,6 +118,7 @@ pub struct RawConfig {
 #[derive(Debug, Clone, Default)]
 pub struct Overrides {
     pub robot: Option<Robot>,
+    pub protocol: Option<Protocol>,
     pub name: Option<String>,
     pub bus: Option<BusSpec>,
     pub gps: Option<BusSpec>,
@@ -148,6 +155,9 @@ pub enum ConfigError {
         key: &'static str,
         source: BusSpecError,
     },
+    /// A protocol the robot does not speak.
+    #[error("{0}")]
+    Protocol(#[from] ProtocolError),
     /// A `[profile]` whose values do not make a drivable robot.
     #[error("profile: {0}")]
     BadProfile(#[from] ProfileError),
@@ -241,7 +251,8 @@ impl RawConfig {
                 reason: format!("{gps}: the GPS receiver is a serial port (serial:PATH[@BAUD])"),
             });
         }
-        let mut profile = parse_profile(robot, self.profile)?;
+        let protocol = overrides.protocol.or(self.service.protocol);
+        let mut profile = parse_profile(robot, protocol, self.profile)?;
         profile.validate()?;
         // The simulated XBot's wheel separation is known; a real one's must be measured.
         if let (Profile::Xbot(p), BusSpec::Sim) = (&mut profile, &bus)
@@ -287,13 +298,19 @@ impl RawConfig {
     }
 }
 
-fn parse_profile(robot: Robot, table: toml::Table) -> Result<Profile, ConfigError> {
-    let err = |source| ConfigError::Profile { robot, source };
-    let value = toml::Value::Table(table);
-    Ok(match robot {
-        Robot::Titan => Profile::Titan(TitanProfile::deserialize(value).map_err(err)?),
-        Robot::ScoutMini => Profile::ScoutMini(ScoutMiniProfile::deserialize(value).map_err(err)?),
-        Robot::Xbot => Profile::Xbot(XbotProfile::deserialize(value).map_err(err)?),
+/// The robot's profile: its defaults (for `protocol`), with the `[profile]` keys set over them.
+fn parse_profile(
+    robot: Robot,
+    protocol: Option<Protocol>,
+    table: toml::Table,
+) -> Result<Profile, ConfigError> {
+    Profile::from_table(robot, protocol, &table).map_err(|e| match e {
+        ProfileTableError::Toml(source) => ConfigError::Profile { robot, source },
+        ProfileTableError::Protocol(e) => ConfigError::Protocol(e),
+        other => ConfigError::Bad {
+            key: "profile.model",
+            reason: other.to_string(),
+        },
     })
 }
 
@@ -304,10 +321,12 @@ impl Config {
             Profile::Titan(p) => toml::Table::try_from(p)?,
             Profile::ScoutMini(p) => toml::Table::try_from(p)?,
             Profile::Xbot(p) => toml::Table::try_from(p)?,
+            Profile::V2(p) => toml::Table::try_from(p)?,
         };
         let raw = RawConfig {
             service: ServiceConfig {
                 robot: Some(self.robot),
+                protocol: self.profile.protocol(),
                 name: Some(self.name.clone()),
                 bus: Some(self.bus.to_string()),
                 gps: self.gps.as_ref().map(ToString::to_string),

@@ -22,6 +22,11 @@ pub fn driver_for(profile: &Profile, config: &DriverConfig, now: Timestamp) -> B
             now,
         )),
         Profile::Xbot(p) => Box::new(xbot::XbotDriver::new(p.clone(), config.clone(), now)),
+        Profile::V2(p) => Box::new(chassis_protocols::agilex_v2::V2Driver::new(
+            p.clone(),
+            config.clone(),
+            now,
+        )),
     }
 }
 

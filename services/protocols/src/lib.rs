@@ -38,7 +38,9 @@ pub use command::{
 pub use driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
 pub use error::{DecodeError, EncodeError};
 pub use firmware::{Firmware, Injection, SimTruth};
-pub use profile::{Profile, ProfileError, Protocol, ProtocolError, Robot, UnknownRobot};
+pub use profile::{
+    Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, Robot, UnknownRobot,
+};
 pub use time::Timestamp;
 
 /// Who sends a frame.

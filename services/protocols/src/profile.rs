@@ -453,6 +453,19 @@ impl XbotProfile {
     }
 }
 
+/// Why a `[profile]` table does not make a profile.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ProfileTableError {
+    #[error(transparent)]
+    Protocol(#[from] ProtocolError),
+    /// An unknown key or a wrong type.
+    #[error(transparent)]
+    Toml(#[from] toml::de::Error),
+    /// A protocol-V2 `model` of another robot.
+    #[error("profile.model: a {model} model is not a {robot}")]
+    WrongModel { model: Robot, robot: Robot },
+}
+
 /// One robot's profile.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Profile {
@@ -494,6 +507,36 @@ impl Profile {
         Ok(match (protocol, robot.v2_model()) {
             (Protocol::V2, Some(model)) => Profile::V2(V2Profile::for_model(model)),
             _ => Profile::default_for(robot),
+        })
+    }
+
+    /// The defaults for `robot` speaking `protocol`, with the keys of `table` (the `[profile]`
+    /// table of the service's config) set over them. A protocol-V2 table may name a variant with
+    /// `model` (e.g. `scout-mini-omni`): its keys are then set over that variant's defaults.
+    pub fn from_table(
+        robot: Robot,
+        protocol: Option<Protocol>,
+        table: &toml::Table,
+    ) -> Result<Self, ProfileTableError> {
+        let value = toml::Value::Table(table.clone());
+        Ok(match Profile::default_for_protocol(robot, protocol)? {
+            Profile::Titan(_) => Profile::Titan(value.try_into()?),
+            Profile::ScoutMini(_) => Profile::ScoutMini(value.try_into()?),
+            Profile::Xbot(_) => Profile::Xbot(value.try_into()?),
+            Profile::V2(default) => {
+                let base = match table.get("model") {
+                    Some(model) => V2Profile::for_model(model.clone().try_into()?),
+                    None => default,
+                };
+                let profile = Profile::V2(base.with_overrides(table)?);
+                if profile.robot() != robot {
+                    return Err(ProfileTableError::WrongModel {
+                        model: profile.robot(),
+                        robot,
+                    });
+                }
+                profile
+            }
         })
     }
 
@@ -627,6 +670,18 @@ mod tests {
         let err = Profile::default_for_protocol(Robot::Hunter, Some(Protocol::V1)).unwrap_err();
         assert_eq!(err.to_string(), "hunter does not speak protocol v1 here");
         assert!("v3".parse::<Protocol>().is_err());
+        let omni: toml::Table = toml::from_str("model = \"scout-mini-omni\"").unwrap();
+        let Profile::V2(p) =
+            Profile::from_table(Robot::ScoutMini, Some(Protocol::V2), &omni).unwrap()
+        else {
+            panic!("not V2")
+        };
+        assert_eq!(p.max_lateral_mps, 2.0);
+        let err = Profile::from_table(Robot::Hunter, None, &omni).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "profile.model: a scout-mini model is not a hunter"
+        );
         assert!("husky".parse::<Robot>().is_err());
     }
 

@@ -85,6 +85,8 @@ pub fn frames_for(command: &Command, profile: &V2Profile) -> Result<Planned<Fram
                     "light mode {mode} / brightness {brightness_pct} %: modes are 0-3, brightness 0-100"
                 )));
             }
+            // The brightness byte is only read in custom mode (0x03); 0 otherwise.
+            let brightness_pct = if mode == 3 { brightness_pct } else { 0 };
             let lights = if enable {
                 Lights {
                     enabled: true,
