@@ -5,6 +5,7 @@
 
 mod codec;
 mod commands;
+pub mod detect;
 mod driver;
 pub mod kinematics;
 pub mod profile;
