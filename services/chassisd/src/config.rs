@@ -174,6 +174,9 @@ pub enum ConfigError {
 #[derive(Debug, Clone)]
 pub struct Config {
     pub robot: Robot,
+    /// The protocol asked for (`--protocol`, `service.protocol`); `None`: the robot's own — for a
+    /// SCOUT MINI on a real CAN bus, detected by listening before anything is sent.
+    pub protocol: Option<Protocol>,
     pub name: String,
     pub bus: BusSpec,
     pub gps: Option<BusSpec>,
@@ -281,6 +284,7 @@ impl RawConfig {
         mux.validate()?;
         Ok(Config {
             robot,
+            protocol,
             name,
             bus,
             gps,
@@ -326,7 +330,7 @@ impl Config {
         let raw = RawConfig {
             service: ServiceConfig {
                 robot: Some(self.robot),
-                protocol: self.profile.protocol(),
+                protocol: self.protocol,
                 name: Some(self.name.clone()),
                 bus: Some(self.bus.to_string()),
                 gps: self.gps.as_ref().map(ToString::to_string),

@@ -3,6 +3,7 @@
 //! family, parametrised by a [`V2Profile`] per robot. CAN 2.0B 500 kbit/s, big-endian, no
 //! checksum; the layouts it shares with the TITAN use the TITAN's frame types.
 
+mod auto;
 mod codec;
 mod commands;
 pub mod detect;
@@ -11,6 +12,7 @@ pub mod kinematics;
 pub mod profile;
 mod sim;
 
+pub use auto::AutoDriver;
 pub use codec::*;
 pub use commands::{STOP, clear_code_for, frames_for};
 pub use driver::{V2Driver, normalize_faults};
