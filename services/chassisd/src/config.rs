@@ -478,6 +478,44 @@ mod tests {
     }
 
     #[test]
+    fn agilex_v2_robots_take_their_protocol_and_model_from_the_file() {
+        let raw: RawConfig = toml::from_str(
+            "[service]\nrobot = \"scout-mini\"\nprotocol = \"v2\"\n\
+             [profile]\nmodel = \"scout-mini-omni\"\nshort_commands_dlc = 1\n",
+        )
+        .unwrap();
+        let c = raw.validate(Overrides::default()).unwrap();
+        assert_eq!(c.protocol, Some(Protocol::V2));
+        let Profile::V2(p) = &c.profile else {
+            panic!("not V2: {:?}", c.profile)
+        };
+        assert_eq!(p.max_lateral_mps, 2.0);
+        assert_eq!(p.short_commands_dlc, 1);
+        // The effective configuration reads back to the same profile.
+        let again: RawConfig = toml::from_str(&c.to_toml().unwrap()).unwrap();
+        assert_eq!(
+            again.validate(Overrides::default()).unwrap().profile,
+            c.profile
+        );
+        let err = RawConfig::default()
+            .validate(Overrides {
+                robot: Some(Robot::Hunter),
+                protocol: Some(Protocol::V1),
+                ..Overrides::default()
+            })
+            .unwrap_err();
+        assert_eq!(err.to_string(), "hunter does not speak protocol v1 here");
+        let wrong: RawConfig = toml::from_str("[profile]\nmodel = \"bunker\"\n").unwrap();
+        let err = wrong
+            .validate(Overrides {
+                robot: Some(Robot::Hunter),
+                ..Overrides::default()
+            })
+            .unwrap_err();
+        assert!(err.to_string().contains("not a hunter"), "{err}");
+    }
+
+    #[test]
     #[allow(clippy::approx_constant)] // 0.7853 is the reading of the manual's example
     fn a_profile_parameter_can_be_flipped_from_the_file() {
         let raw: RawConfig =
