@@ -229,3 +229,26 @@ fn the_v1_example_stays_v1_and_v2_is_only_on_request() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+#[test]
+fn chassis_detect_classifies_the_v1_example_as_v1_and_the_v2_capture_as_v2() {
+    let env = Env::new("protocol-detect");
+    let v1 = "130#01000A0000000044";
+    assert_eq!(run(&env, &["detect", v1, v1, v1]), "v1");
+    let capture = [
+        "detect",
+        "211#0100010000800000",
+        "221#0000000000000000",
+        "241#AA00000000000061",
+        "311#0000000000000000",
+    ];
+    assert_eq!(run(&env, &capture), "v2");
+    // A frame both protocols use proves nothing: no decision, exit 1, the ids heard named.
+    let out = env.chassis(&["detect", "211#0100010000800000"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("heard 0x211×1"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -12,6 +12,7 @@ mod action;
 mod codec;
 mod decode;
 mod demo;
+mod detect;
 mod encode;
 mod interfaces;
 mod live;
@@ -104,6 +105,15 @@ enum Cmd {
     },
     /// The IPC contract: services, limits and payload layouts (--json: the whole document).
     Interfaces(interfaces::InterfacesArgs),
+    /// Which AgileX protocol (v1 or v2) a chassis' frames speak, by the rule chassisd applies to
+    /// a SCOUT MINI before sending anything. Frames as for decode; stdin when none. Exits 1
+    /// without a decision.
+    Detect {
+        /// Consistent frames of one protocol needed to decide.
+        #[arg(long, default_value_t = 3)]
+        min_frames: u32,
+        frames: Vec<String>,
+    },
 }
 
 #[derive(Debug, Subcommand)]
@@ -204,6 +214,22 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 );
             }
             Ok(ExitCode::SUCCESS)
+        }
+        Cmd::Detect { min_frames, frames } => {
+            let (detection, bad) = detect::run(&frames, std::io::stdin().lock(), min_frames)?;
+            for line in bad {
+                eprintln!("{line}");
+            }
+            Ok(match detection {
+                chassis_protocols::agilex_v2::detect::Detection::Decided(protocol) => {
+                    println!("{protocol}");
+                    ExitCode::SUCCESS
+                }
+                other => {
+                    eprintln!("{}", other.describe());
+                    ExitCode::FAILURE
+                }
+            })
         }
         Cmd::Echo(args) => live::echo(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Pub {
