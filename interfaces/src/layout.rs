@@ -281,6 +281,7 @@ pub fn constants() -> Vec<ConstantGroup> {
             GPS_DOWN, SILENT_MODE,
         }),
         describe_constants!(enum ControlMode: u8 { UNKNOWN, STANDBY, COMMAND, REMOTE, SERIAL }),
+        describe_constants!(enum WireProtocol: u8 { OWN, V1, V2, DETECTING }),
         describe_constants!(flags DriverStatus: u8 {
             SUPPLY_UNDER_VOLTAGE, MOTOR_OVER_TEMPERATURE, DRIVER_OVER_CURRENT,
             DRIVER_OVER_TEMPERATURE, SENSOR_FAULT, DRIVER_ERROR, ENABLED,

@@ -222,6 +222,30 @@ impl ControlMode {
     }
 }
 
+/// Which AgileX wire protocol the driver speaks (`SystemState::wire_protocol`).
+#[derive(Debug, Clone, Copy)]
+pub struct WireProtocol;
+impl WireProtocol {
+    /// The robot has one protocol of its own (TITAN, XBot).
+    pub const OWN: u8 = 0;
+    /// AgileX V1 (count and checksum in every frame).
+    pub const V1: u8 = 1;
+    /// AgileX V2 (the TITAN's layout family).
+    pub const V2: u8 = 2;
+    /// Listening to find out (SCOUT MINI on a real bus): nothing is sent yet.
+    pub const DETECTING: u8 = 3;
+
+    pub fn name(protocol: u8) -> &'static str {
+        match protocol {
+            Self::OWN => "own",
+            Self::V1 => "v1",
+            Self::V2 => "v2",
+            Self::DETECTING => "detecting",
+            _ => "unknown",
+        }
+    }
+}
+
 /// Normalized fault flags (`SystemState::fault_flags`); the vendor's own word is kept beside it in
 /// `SystemState::vendor_fault_word`.
 #[derive(Debug, Clone, Copy)]
@@ -476,8 +500,8 @@ pub struct SystemState {
     pub steering_zero_done: u8,
     /// 1 when drive power is enabled (XBot power command; others: always 1 once reported).
     pub power_enabled: u8,
-    #[serde(skip)]
-    pub _reserved: u8,
+    /// [`WireProtocol`] the driver speaks (was a reserved byte: readers that ignore it see 0).
+    pub wire_protocol: u8,
 }
 
 describe_layout!(
@@ -495,7 +519,7 @@ describe_layout!(
         silent_mode,
         steering_zero_done,
         power_enabled,
-        _reserved,
+        wire_protocol,
     }
 );
 

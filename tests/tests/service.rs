@@ -734,5 +734,11 @@ fn scout_mini_without_a_protocol_flag_drives_a_v1_and_a_v2_chassis_alike() {
             logs.contains(&format!("SCOUT MINI speaks protocol {protocol}")),
             "{protocol}: no detection line\n{logs}"
         );
+        let status = env.chassis(&["status", "--name", &n]);
+        let status = String::from_utf8_lossy(&status.stdout);
+        assert!(
+            status.contains(&format!("protocol {protocol}")),
+            "{protocol}: {status}"
+        );
     }
 }

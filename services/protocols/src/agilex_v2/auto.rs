@@ -10,7 +10,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ChassisState, LinkFlags, RobotKind, Twist};
+use chassis_interfaces::{ChassisState, LinkFlags, RobotKind, Twist, WireProtocol};
 
 use super::detect::{Detection, Detector};
 use super::{V2Driver, V2Profile};
@@ -52,9 +52,13 @@ impl AutoDriver {
             config,
             detector,
             inner: None,
-            state: ChassisState {
-                robot: RobotKind::SCOUT_MINI,
-                ..ChassisState::default()
+            state: {
+                let mut state = ChassisState {
+                    robot: RobotKind::SCOUT_MINI,
+                    ..ChassisState::default()
+                };
+                state.system.wire_protocol = WireProtocol::DETECTING;
+                state
             },
             events: VecDeque::new(),
             command: Twist::ZERO,
@@ -266,6 +270,7 @@ mod tests {
         );
         let (ids, first) = drive(&mut pair);
         assert_eq!(pair.driver.protocol(), Some(Protocol::V1));
+        assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V1);
         assert!(ids.iter().all(|id| matches!(id, 0x130 | 0x140)), "{ids:x?}");
         assert!(first > T0, "sent before listening");
         assert!((pair.firmware.truth().linear_mps - 0.5).abs() < 0.06);
@@ -277,6 +282,7 @@ mod tests {
         let mut pair = Pair::new(auto(), V2Sim::new(profile, T0), T0);
         let (ids, first) = drive(&mut pair);
         assert_eq!(pair.driver.protocol(), Some(Protocol::V2));
+        assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V2);
         assert!(ids.iter().all(|id| matches!(id, 0x111 | 0x421)), "{ids:x?}");
         // Three V2 frames arrive within the first 20 ms feedback slot; nothing went out before.
         assert!(
@@ -290,6 +296,7 @@ mod tests {
     #[test]
     fn a_silent_bus_is_reported_and_retried_and_nothing_is_sent() {
         let mut d = auto();
+        assert_eq!(d.state().system.wire_protocol, WireProtocol::DETECTING);
         let deadline = d.poll_timeout().unwrap();
         assert_eq!(deadline, T0 + Duration::from_millis(5000));
         d.handle_timeout(deadline);

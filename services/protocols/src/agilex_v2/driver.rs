@@ -86,6 +86,7 @@ impl V2Driver {
             now,
         );
         core.state.system.control_mode = ControlMode::UNKNOWN;
+        core.state.system.wire_protocol = chassis_interfaces::WireProtocol::V2;
         let brake = if profile.brake_lock_value.is_some() {
             Brake::Unknown
         } else {
