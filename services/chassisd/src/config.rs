@@ -143,7 +143,9 @@ pub enum ConfigError {
         path: String,
         source: toml::de::Error,
     },
-    #[error("no robot given: pass --robot titan|scout-mini|xbot (or set service.robot)")]
+    #[error(
+        "no robot given: pass --robot titan|scout-mini|xbot|scout|hunter|hunter-se|tracer|bunker|ranger-mini (or set service.robot)"
+    )]
     NoRobot,
     #[error("'{0}' is not a valid robot name (1-16 of a-z 0-9 - _)")]
     BadName(String),
