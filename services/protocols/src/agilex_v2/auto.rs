@@ -283,7 +283,10 @@ mod tests {
         let (ids, first) = drive(&mut pair);
         assert_eq!(pair.driver.protocol(), Some(Protocol::V2));
         assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V2);
-        assert!(ids.iter().all(|id| matches!(id, 0x111 | 0x421)), "{ids:x?}");
+        assert!(
+            ids.iter().all(|id| matches!(id, 0x111 | 0x421 | 0x411)),
+            "{ids:x?}"
+        );
         // Three V2 frames arrive within the first 20 ms feedback slot; nothing went out before.
         assert!(
             first > T0 && first <= T0 + Duration::from_millis(60),

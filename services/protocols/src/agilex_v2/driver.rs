@@ -27,7 +27,7 @@ use chassis_interfaces::{
 use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake, vehicle};
 use super::commands::{STOP, frames_for};
 use super::kinematics::{RangerMode, body_twist, plan};
-use super::profile::{FaultMap, V2Profile};
+use super::profile::{self, FaultMap, V2Profile};
 use crate::command::Command;
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, DriverEvent, Level, PoseIntegrator, Rx,
@@ -70,6 +70,19 @@ pub struct V2Driver {
     steering_zero: Option<(u64, Timestamp)>,
     next_token: u64,
     other_faults: u64,
+    /// ⚠ D-1: `None` until CAN mode is first reported; then when to fall back to 0x4A1.
+    version: VersionQuery,
+}
+
+/// Where the version query stands (⚠ D-1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum VersionQuery {
+    /// Not asked yet (asked once the chassis first reports CAN mode).
+    NotAsked,
+    /// 0x411 sent; 0x4A1 follows at this time if 0x41A has not answered (`both`).
+    Asked { fallback: Option<Timestamp> },
+    /// Answered, given up, or never to be asked.
+    Done,
 }
 
 impl V2Driver {
@@ -113,7 +126,11 @@ impl V2Driver {
             steering_zero: None,
             next_token: 1,
             other_faults: 0,
+            version: VersionQuery::NotAsked,
         };
+        if driver.profile.version_query == profile::VersionQuery::Never {
+            driver.version = VersionQuery::Done;
+        }
         if driver.want_control {
             driver.request_mode(now);
         }
@@ -310,20 +327,27 @@ impl V2Driver {
                 }
                 self.core.state.touch(Group::BmsPack, t);
             }
-            Frame::Version(v) => self.core.notice(
+            Frame::VersionText(t) => self.core.notice(
                 Level::Info,
-                format!(
-                    "chassis versions: controller hw {}.{} sw {}.{}, driver hw {}.{} sw {}.{}",
-                    v.controller_hw[0],
-                    v.controller_hw[1],
-                    v.controller_sw[0],
-                    v.controller_sw[1],
-                    v.driver_hw[0],
-                    v.driver_hw[1],
-                    v.driver_sw[0],
-                    v.driver_sw[1]
-                ),
+                format!("chassis version text: {}", t.text().trim_end()),
             ),
+            Frame::Version(v) => {
+                self.version = VersionQuery::Done;
+                self.core.notice(
+                    Level::Info,
+                    format!(
+                        "chassis versions: controller hw {}.{} sw {}.{}, driver hw {}.{} sw {}.{}",
+                        v.controller_hw[0],
+                        v.controller_hw[1],
+                        v.controller_sw[0],
+                        v.controller_sw[1],
+                        v.driver_hw[0],
+                        v.driver_hw[1],
+                        v.driver_sw[0],
+                        v.driver_sw[1]
+                    ),
+                );
+            }
             Frame::SteeringZeroAck { done } => {
                 self.core.state.system.steering_zero_done = u8::from(done);
                 self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
@@ -392,6 +416,9 @@ impl V2Driver {
             .set_flag(LinkFlags::COMMAND_MODE, new_mode == ControlMode::COMMAND);
         self.core
             .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
+        if new_mode == ControlMode::COMMAND && self.version == VersionQuery::NotAsked {
+            self.ask_version(now);
+        }
         if new_mode == ControlMode::COMMAND {
             // The retry limit is for a chassis that keeps reporting standby: a standby after CAN
             // mode (a reboot, a hand-back) is answered at once.
@@ -439,6 +466,28 @@ impl V2Driver {
             );
             self.update_motion(now);
         }
+    }
+
+    /// ⚠ D-1: 0x411 (manual) or 0x4A1 (SDK); with `both`, 0x4A1 a second later if 0x41A is
+    /// silent. An answer is logged; silence is normal.
+    fn ask_version(&mut self, now: Timestamp) {
+        self.version = match self.profile.version_query {
+            profile::VersionQuery::Never => VersionQuery::Done,
+            profile::VersionQuery::Sdk => {
+                self.queue.push_back(Frame::SdkVersionRequest);
+                VersionQuery::Done
+            }
+            profile::VersionQuery::Manual => {
+                self.queue.push_back(Frame::VersionRequest);
+                VersionQuery::Asked { fallback: None }
+            }
+            profile::VersionQuery::Both => {
+                self.queue.push_back(Frame::VersionRequest);
+                VersionQuery::Asked {
+                    fallback: Some(now + Duration::from_secs(1)),
+                }
+            }
+        };
     }
 
     fn next_token(&mut self) -> u64 {
@@ -603,6 +652,14 @@ impl Driver for V2Driver {
         if self.core.check_silence(now, "feedback") {
             self.pose.reset();
         }
+        if let VersionQuery::Asked {
+            fallback: Some(due),
+        } = self.version
+            && now >= due
+        {
+            self.queue.push_back(Frame::SdkVersionRequest);
+            self.version = VersionQuery::Done;
+        }
         if let Some((lights, due)) = self.lights
             && now >= due
             && !self.core.bus_down
@@ -681,6 +738,12 @@ impl Driver for V2Driver {
     fn poll_timeout(&self) -> Option<Timestamp> {
         let mut next = Some(self.core.poll_timeout()?);
         if let Some((_, due)) = self.lights {
+            next = earliest(next, Some(due));
+        }
+        if let VersionQuery::Asked {
+            fallback: Some(due),
+        } = self.version
+        {
             next = earliest(next, Some(due));
         }
         if self.has_brake()

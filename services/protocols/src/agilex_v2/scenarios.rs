@@ -355,3 +355,38 @@ fn hunter_steering_zero_is_acknowledged() {
         0
     );
 }
+
+#[test]
+fn the_version_is_asked_once_in_can_mode_and_its_answer_logged() {
+    let mut p = pair(V2Model::Scout);
+    p.run_for(ms(2000));
+    let asked: Vec<u16> = sent(&p)
+        .iter()
+        .map(|(_, f)| f.id())
+        .filter(|id| matches!(*id, 0x411 | 0x4A1))
+        .collect();
+    // The simulated chassis answers 0x411 with 0x41A: no 0x4A1 fallback.
+    assert_eq!(asked, [0x411]);
+    let notices = crate::pair::notices(&p.take_events());
+    assert!(
+        notices
+            .iter()
+            .any(|(_, m)| m.contains("controller hw 1.0 sw 2.0")),
+        "{notices:?}"
+    );
+    // With `sdk` the 0x4A1 text is asked for instead, and logged.
+    let profile = V2Profile {
+        version_query: super::profile::VersionQuery::Sdk,
+        ..V2Profile::for_model(V2Model::Bunker)
+    };
+    let driver = V2Driver::new(profile.clone(), DriverConfig::default(), T0);
+    let mut p = Pair::new(driver, V2Sim::new(profile, T0), T0);
+    p.run_for(ms(500));
+    let notices = crate::pair::notices(&p.take_events());
+    assert!(
+        notices
+            .iter()
+            .any(|(_, m)| m.starts_with("chassis version text: AgileX")),
+        "{notices:?}"
+    );
+}
