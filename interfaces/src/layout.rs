@@ -273,12 +273,15 @@ pub fn types() -> Vec<TypeLayout> {
 pub fn constants() -> Vec<ConstantGroup> {
     use crate::*;
     let mut all = vec![
-        describe_constants!(enum RobotKind: u8 { UNKNOWN, TITAN, SCOUT_MINI, XBOT }),
+        describe_constants!(enum RobotKind: u8 {
+            UNKNOWN, TITAN, SCOUT_MINI, XBOT, SCOUT, HUNTER, HUNTER_SE, TRACER, BUNKER, RANGER_MINI
+        }),
         describe_constants!(flags LinkFlags: u32 {
             CHASSIS_SILENT, BUS_DOWN, COMMAND_MODE, RC_AUTHORITY, STEERING_ZERO_PENDING,
             GPS_DOWN, SILENT_MODE,
         }),
         describe_constants!(enum ControlMode: u8 { UNKNOWN, STANDBY, COMMAND, REMOTE, SERIAL }),
+        describe_constants!(enum WireProtocol: u8 { OWN, V1, V2, DETECTING }),
         describe_constants!(flags DriverStatus: u8 {
             SUPPLY_UNDER_VOLTAGE, MOTOR_OVER_TEMPERATURE, DRIVER_OVER_CURRENT,
             DRIVER_OVER_TEMPERATURE, SENSOR_FAULT, DRIVER_ERROR, ENABLED,

@@ -20,13 +20,25 @@ impl RobotKind {
     pub const TITAN: u8 = 1;
     pub const SCOUT_MINI: u8 = 2;
     pub const XBOT: u8 = 3;
+    pub const SCOUT: u8 = 4;
+    pub const HUNTER: u8 = 5;
+    pub const HUNTER_SE: u8 = 6;
+    pub const TRACER: u8 = 7;
+    pub const BUNKER: u8 = 8;
+    pub const RANGER_MINI: u8 = 9;
 
-    /// The command-line spelling of a robot kind (`titan`, `scout-mini`, `xbot`).
+    /// The command-line spelling of a robot kind (`titan`, `scout-mini`, `hunter`, …).
     pub fn name(kind: u8) -> &'static str {
         match kind {
             Self::TITAN => "titan",
             Self::SCOUT_MINI => "scout-mini",
             Self::XBOT => "xbot",
+            Self::SCOUT => "scout",
+            Self::HUNTER => "hunter",
+            Self::HUNTER_SE => "hunter-se",
+            Self::TRACER => "tracer",
+            Self::BUNKER => "bunker",
+            Self::RANGER_MINI => "ranger-mini",
             _ => "unknown",
         }
     }
@@ -205,6 +217,30 @@ impl ControlMode {
             Self::COMMAND => "command",
             Self::REMOTE => "remote",
             Self::SERIAL => "serial",
+            _ => "unknown",
+        }
+    }
+}
+
+/// Which AgileX wire protocol the driver speaks (`SystemState::wire_protocol`).
+#[derive(Debug, Clone, Copy)]
+pub struct WireProtocol;
+impl WireProtocol {
+    /// The robot has one protocol of its own (TITAN, XBot).
+    pub const OWN: u8 = 0;
+    /// AgileX V1 (count and checksum in every frame).
+    pub const V1: u8 = 1;
+    /// AgileX V2 (the TITAN's layout family).
+    pub const V2: u8 = 2;
+    /// Listening to find out (SCOUT MINI on a real bus): nothing is sent yet.
+    pub const DETECTING: u8 = 3;
+
+    pub fn name(protocol: u8) -> &'static str {
+        match protocol {
+            Self::OWN => "own",
+            Self::V1 => "v1",
+            Self::V2 => "v2",
+            Self::DETECTING => "detecting",
             _ => "unknown",
         }
     }
@@ -464,8 +500,8 @@ pub struct SystemState {
     pub steering_zero_done: u8,
     /// 1 when drive power is enabled (XBot power command; others: always 1 once reported).
     pub power_enabled: u8,
-    #[serde(skip)]
-    pub _reserved: u8,
+    /// [`WireProtocol`] the driver speaks (was a reserved byte: readers that ignore it see 0).
+    pub wire_protocol: u8,
 }
 
 describe_layout!(
@@ -483,7 +519,7 @@ describe_layout!(
         silent_mode,
         steering_zero_done,
         power_enabled,
-        _reserved,
+        wire_protocol,
     }
 );
 

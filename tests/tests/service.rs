@@ -728,3 +728,61 @@ fn a_robot_on_a_bus_of_the_wrong_kind_is_refused_at_start_with_the_kinds_it_acce
         "{log}"
     );
 }
+
+#[test]
+fn scout_mini_without_a_protocol_flag_drives_a_v1_and_a_v2_chassis_alike() {
+    for protocol in ["v1", "v2"] {
+        let mut env = Env::new(&format!("detect-{protocol}"));
+        let n = name(&format!("d{protocol}"));
+        let link = env.dir.join("scout-slcan");
+        let link_arg = format!("slcan-pty:{}", link.display());
+        env.chassisd(
+            "sim",
+            &[
+                "sim",
+                "--robot",
+                "scout-mini",
+                "--protocol",
+                protocol,
+                "--name",
+                &n,
+                "--bus",
+                &link_arg,
+            ],
+        );
+        assert!(
+            wait_for(UP, || link.exists()).is_some(),
+            "no link\n{}",
+            env.logs()
+        );
+        let bus = format!("slcan:{}", link.display());
+        env.chassisd(
+            "chassisd",
+            &[
+                "--robot",
+                "scout-mini",
+                "--name",
+                &n,
+                "--bus",
+                &bus,
+                "--no-safety-monitor",
+            ],
+        );
+        let mut robot = env.robot(&n, UP);
+        let mut teleop = source(&mut robot, "teleop");
+        let go = VelocityRequest::twist(0.3, 0.0);
+        let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+        assert!(peak > 0.2, "{protocol}: peak {peak}\n{}", env.logs());
+        let logs = env.logs();
+        assert!(
+            logs.contains(&format!("SCOUT MINI speaks protocol {protocol}")),
+            "{protocol}: no detection line\n{logs}"
+        );
+        let status = env.chassis(&["status", "--name", &n]);
+        let status = String::from_utf8_lossy(&status.stdout);
+        assert!(
+            status.contains(&format!("protocol {protocol}")),
+            "{protocol}: {status}"
+        );
+    }
+}

@@ -247,13 +247,12 @@ fn transport_of(mode: LoopMode) -> Transport {
 
 /// The period of `robot`'s heartbeat: the service's tick on that robot.
 fn tick_of(robot: RobotKind) -> Duration {
-    use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-    match robot {
-        RobotKind::Titan => Duration::from_millis(TitanProfile::default().heartbeat_period_ms),
-        RobotKind::ScoutMini => {
-            Duration::from_millis(ScoutMiniProfile::default().heartbeat_period_ms)
-        }
-        RobotKind::Xbot => Duration::from_secs_f64(1.0 / XbotProfile::default().heartbeat_hz),
+    use chassis_protocols::Profile;
+    match Profile::default_for(robot) {
+        Profile::Titan(p) => Duration::from_millis(p.heartbeat_period_ms),
+        Profile::ScoutMini(p) => Duration::from_millis(p.heartbeat_period_ms),
+        Profile::Xbot(p) => Duration::from_secs_f64(1.0 / p.heartbeat_hz),
+        Profile::V2(p) => Duration::from_millis(p.heartbeat_period_ms),
     }
 }
 

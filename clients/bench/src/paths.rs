@@ -19,7 +19,9 @@ use chassis_client::{
     VelocityRequest, now_ns,
 };
 use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{CanFrame, Robot as RobotKind, scout_mini, titan, xbot};
+use chassis_protocols::{
+    CanFrame, Profile, Robot as RobotKind, agilex_v2, scout_mini, titan, xbot,
+};
 use serde::Serialize;
 
 use zerocopy::IntoBytes;
@@ -284,6 +286,19 @@ impl MotionDecoder {
                     }
                 }
                 found
+            }
+            v2 => {
+                if frame.kind != FrameKind::CAN {
+                    return None;
+                }
+                let can = CanFrame::new(frame.can_id, frame.payload()).ok()?;
+                let Profile::V2(profile) = Profile::default_for(v2) else {
+                    return None;
+                };
+                match agilex_v2::decode(&can, &profile).ok()? {
+                    agilex_v2::Frame::MotionCommand(m) => Some(m.linear_mps),
+                    _ => None,
+                }
             }
         }
     }

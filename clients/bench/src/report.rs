@@ -243,7 +243,10 @@ impl Report {
             ("state", "state: frame read → state received"),
             ("preemption", "preemption: safety stop → zero frame written"),
             ("fan-out", "fan-out: state to 1, 4, 16 processes"),
-            ("python", "Python client: frame read → state in Python; request → frame"),
+            (
+                "python",
+                "Python client: frame read → state in Python; request → frame",
+            ),
             (
                 "in-service",
                 "in-service: chassisd's own part (woke → frame written, frame read → state published)",

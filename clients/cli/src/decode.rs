@@ -4,7 +4,7 @@ use std::io::{BufRead, Write};
 
 use chassis_protocols::{CandumpLine, Profile};
 
-use crate::codec::RobotCodec;
+use chassis_protocols::describe::RobotCodec;
 
 /// What a decode run saw.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]

@@ -17,7 +17,8 @@ use crate::procs::{Children, sibling};
 
 #[derive(Debug, Args)]
 pub struct DemoArgs {
-    /// The simulated robot: titan, scout-mini or xbot.
+    /// The simulated robot: titan, scout-mini, xbot, scout, hunter, hunter-se, tracer, bunker or
+    /// ranger-mini.
     #[arg(long, default_value = "titan", value_parser = crate::parse_robot)]
     pub robot: RobotKind,
     /// Name of the demo robot's services (default: demo-<robot>).

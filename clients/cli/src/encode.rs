@@ -1,6 +1,6 @@
 //! `chassis encode`: the frames the service would send for a command.
 
-use chassis_protocols::{Command, CommandError, Profile, scout_mini, titan, xbot};
+use chassis_protocols::{Command, CommandError, Profile, agilex_v2, scout_mini, titan, xbot};
 
 /// The frames for `command`, one per line: CAN as candump `ID#HEX`, XBot as spaced hex. SCOUT MINI
 /// counters start at 0. Also returns what was clamped on the way (`ClampFlags`).
@@ -22,6 +22,15 @@ pub fn encode(profile: &Profile, command: &Command) -> Result<(Vec<String>, u32)
                 .iter()
                 .zip(0u8..)
                 .map(|(f, count)| f.encode(count, p).map(|c| c.to_candump()))
+                .collect::<Result<_, _>>()?;
+            Ok((lines, planned.clamp_flags))
+        }
+        Profile::V2(p) => {
+            let planned = agilex_v2::frames_for(command, p)?;
+            let lines = planned
+                .frames
+                .iter()
+                .map(|f| f.encode(p).map(|c| c.to_candump()))
                 .collect::<Result<_, _>>()?;
             Ok((lines, planned.clamp_flags))
         }

@@ -7,8 +7,8 @@ use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, ClampFlags, ControlKind, ControlMode, ControlRequest, ControlStatus,
     FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus, Robot, SimKind,
-    SimRequest, SourceFlags, Ticker, VelocityRequest, ZeroReason, install_signal_handlers, now_ns,
-    termination_requested,
+    SimRequest, SourceFlags, Ticker, VelocityRequest, WireProtocol, ZeroReason,
+    install_signal_handlers, now_ns, termination_requested,
 };
 use chassis_protocols::command_to_request;
 use clap::{Args, Subcommand, ValueEnum};
@@ -440,8 +440,9 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         link.bus_reconnects
     );
     println!(
-        "mode       {}   flags {}",
+        "mode       {}   protocol {}   flags {}",
         ControlMode::name(s.system.control_mode),
+        WireProtocol::name(s.system.wire_protocol),
         LinkFlags::names(s.link_flags).join(", ")
     );
     println!(

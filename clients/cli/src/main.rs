@@ -5,14 +5,13 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use chassis_interfaces::ClampFlags;
-use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{Profile, Robot};
+use chassis_protocols::{Profile, Protocol, Robot};
 use clap::{Parser, Subcommand};
 
 mod action;
-mod codec;
 mod decode;
 mod demo;
+mod detect;
 mod encode;
 mod interfaces;
 mod live;
@@ -41,6 +40,9 @@ enum Cmd {
     Decode {
         #[arg(long, value_parser = parse_robot)]
         robot: Robot,
+        /// AgileX wire protocol, v1 or v2 (default: the robot's own; SCOUT MINI: v1).
+        #[arg(long, value_parser = parse_protocol)]
+        protocol: Option<Protocol>,
         /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
         #[arg(long)]
         profile: Option<PathBuf>,
@@ -51,6 +53,9 @@ enum Cmd {
     Encode {
         #[arg(long, value_parser = parse_robot)]
         robot: Robot,
+        /// AgileX wire protocol, v1 or v2 (default: the robot's own; SCOUT MINI: v1).
+        #[arg(long, value_parser = parse_protocol)]
+        protocol: Option<Protocol>,
         /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
         #[arg(long)]
         profile: Option<PathBuf>,
@@ -102,6 +107,15 @@ enum Cmd {
     },
     /// The IPC contract: services, limits and payload layouts (--json: the whole document).
     Interfaces(interfaces::InterfacesArgs),
+    /// Which AgileX protocol (v1 or v2) a chassis' frames speak, by the rule chassisd applies to
+    /// a SCOUT MINI before sending anything. Frames as for decode; stdin when none. Exits 1
+    /// without a decision.
+    Detect {
+        /// Consistent frames of one protocol needed to decide.
+        #[arg(long, default_value_t = 3)]
+        min_frames: u32,
+        frames: Vec<String>,
+    },
 }
 
 #[derive(Debug, Subcommand)]
@@ -131,22 +145,29 @@ pub(crate) fn parse_robot(text: &str) -> Result<Robot, chassis_protocols::Unknow
     text.parse()
 }
 
-/// The robot's profile: the manual's defaults, overridden by a TOML file when one is given.
-fn load_profile(robot: Robot, path: Option<&Path>) -> anyhow::Result<Profile> {
-    let Some(path) = path else {
-        return Ok(Profile::default_for(robot));
+fn parse_protocol(text: &str) -> Result<Protocol, chassis_protocols::ProtocolError> {
+    text.parse()
+}
+
+/// The robot's profile: the defaults for the protocol, overridden by a TOML file when one is
+/// given.
+fn load_profile(
+    robot: Robot,
+    protocol: Option<Protocol>,
+    path: Option<&Path>,
+) -> anyhow::Result<Profile> {
+    let table = match path {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading profile {}", path.display()))?;
+            toml::from_str::<toml::Table>(&text)
+                .with_context(|| format!("parsing {} profile {}", robot, path.display()))?
+        }
+        None => toml::Table::new(),
     };
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading profile {}", path.display()))?;
-    let context = || format!("parsing {} profile {}", robot, path.display());
-    Ok(match robot {
-        Robot::Titan => {
-            Profile::Titan(toml::from_str::<TitanProfile>(&text).with_context(context)?)
-        }
-        Robot::ScoutMini => {
-            Profile::ScoutMini(toml::from_str::<ScoutMiniProfile>(&text).with_context(context)?)
-        }
-        Robot::Xbot => Profile::Xbot(toml::from_str::<XbotProfile>(&text).with_context(context)?),
+    Profile::from_table(robot, protocol, &table).with_context(|| match path {
+        Some(path) => format!("{} profile {}", robot, path.display()),
+        None => format!("{robot} profile"),
     })
 }
 
@@ -154,10 +175,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Cmd::Decode {
             robot,
+            protocol,
             profile,
             frames,
         } => {
-            let profile = load_profile(robot, profile.as_deref())?;
+            let profile = load_profile(robot, protocol, profile.as_deref())?;
             let stdin = std::io::stdin().lock();
             let summary = decode::run(
                 profile,
@@ -174,10 +196,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Cmd::Encode {
             robot,
+            protocol,
             profile,
             what,
         } => {
-            let profile = load_profile(robot, profile.as_deref())?;
+            let profile = load_profile(robot, protocol, profile.as_deref())?;
             let command = match &what {
                 EncodeWhat::Velocity(v) => v.to_command(),
                 EncodeWhat::Action(a) => a.to_command().map_err(anyhow::Error::msg)?,
@@ -193,6 +216,22 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 );
             }
             Ok(ExitCode::SUCCESS)
+        }
+        Cmd::Detect { min_frames, frames } => {
+            let (detection, bad) = detect::run(&frames, std::io::stdin().lock(), min_frames)?;
+            for line in bad {
+                eprintln!("{line}");
+            }
+            Ok(match detection {
+                chassis_protocols::agilex_v2::detect::Detection::Decided(protocol) => {
+                    println!("{protocol}");
+                    ExitCode::SUCCESS
+                }
+                other => {
+                    eprintln!("{}", other.describe());
+                    ExitCode::FAILURE
+                }
+            })
         }
         Cmd::Echo(args) => live::echo(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Pub {

@@ -30,9 +30,9 @@ use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
 
-use crate::codec::RobotCodec;
 use crate::server::{Inbox, ServiceAction};
 use chassis_foxglove::view::{self, Body, Trail, Watch};
+use chassis_protocols::describe::RobotCodec;
 
 /// Frames a `/frames` batch carries at most.
 pub const MAX_FRAMES_PER_BATCH: usize = 1000;

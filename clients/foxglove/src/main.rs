@@ -27,7 +27,6 @@
 //! serves other hosts, with a warning.
 
 mod bridge;
-mod codec;
 mod server;
 
 use std::process::ExitCode;

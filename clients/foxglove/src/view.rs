@@ -115,7 +115,7 @@ pub struct Body {
 
 impl Body {
     /// The footprint: the wheelbase × track rectangle of the profile's defaults with the wheels'
-    /// size around it (TITAN, SCOUT MINI); the XBot's body (its profile has no wheelbase) with
+    /// size around it (TITAN, SCOUT MINI, the protocol-V2 robots); the XBot's body (its profile has no wheelbase) with
     /// its six range sensors.
     pub fn of(robot: Robot) -> Self {
         match robot {
@@ -137,6 +137,22 @@ impl Body {
                     sensors: Vec::new(),
                 }
             }
+            Robot::Scout
+            | Robot::Hunter
+            | Robot::HunterSe
+            | Robot::Tracer
+            | Robot::Bunker
+            | Robot::RangerMini => match chassis_protocols::Profile::default_for(robot) {
+                chassis_protocols::Profile::V2(p) => Body {
+                    length_m: p.wheelbase_m + 0.2,
+                    width_m: p.track_m + 0.15,
+                    height_m: 0.3,
+                    sensors: Vec::new(),
+                },
+                // Every protocol-V2 robot's default profile is a V2 one; anything else is drawn
+                // as a SCOUT MINI.
+                _ => Body::of(Robot::ScoutMini),
+            },
             Robot::Xbot => {
                 let (length_m, width_m) = (0.5, 0.4);
                 let side = std::f64::consts::FRAC_PI_6;

@@ -9,6 +9,12 @@
 //! | TITAN | dual Ackermann (front and rear axles steer opposite) | no | 3.0 m/s, 1.5 m/s while \|steer\| > 0.087 rad | radius ≥ 1.53 m |
 //! | SCOUT MINI | skid steer | yes | 5.0 m/s (commands in 1 % = 0.05 m/s steps) | 0.5235 rad/s (the manual's full scale) |
 //! | XBot | differential | yes | 1.5 m/s (below 0.01 m/s it does not move) | π rad/s |
+//! | SCOUT 2.0 (V2) | skid steer | yes | 1.5 m/s | 0.5235 rad/s |
+//! | HUNTER 2.0 | front Ackermann | no | 1.5 m/s | radius ≥ 1.30 m (inner angle 0.576 rad) |
+//! | HUNTER SE | front Ackermann | no | 1.5 m/s | radius ≥ 1.83 m (inner angle 0.4 rad) |
+//! | TRACER | differential | yes | 1.8 m/s | 1.0 rad/s |
+//! | BUNKER | tracked | yes | 1.5 m/s | 0.7853 rad/s |
+//! | RANGER MINI | four-wheel steering, followed in dual Ackermann | (spins, not used here) | 1.5 m/s | radius ≥ 0.6 m (0.476 m reachable) |
 
 use chassis_client::RobotKind;
 
@@ -18,6 +24,12 @@ pub enum RobotModel {
     Titan,
     ScoutMini,
     Xbot,
+    Scout,
+    Hunter,
+    HunterSe,
+    Tracer,
+    Bunker,
+    RangerMini,
 }
 
 impl RobotModel {
@@ -27,6 +39,12 @@ impl RobotModel {
             RobotKind::TITAN => Some(Self::Titan),
             RobotKind::SCOUT_MINI => Some(Self::ScoutMini),
             RobotKind::XBOT => Some(Self::Xbot),
+            RobotKind::SCOUT => Some(Self::Scout),
+            RobotKind::HUNTER => Some(Self::Hunter),
+            RobotKind::HUNTER_SE => Some(Self::HunterSe),
+            RobotKind::TRACER => Some(Self::Tracer),
+            RobotKind::BUNKER => Some(Self::Bunker),
+            RobotKind::RANGER_MINI => Some(Self::RangerMini),
             _ => None,
         }
     }
@@ -37,6 +55,12 @@ impl RobotModel {
             Self::Titan => RobotKind::TITAN,
             Self::ScoutMini => RobotKind::SCOUT_MINI,
             Self::Xbot => RobotKind::XBOT,
+            Self::Scout => RobotKind::SCOUT,
+            Self::Hunter => RobotKind::HUNTER,
+            Self::HunterSe => RobotKind::HUNTER_SE,
+            Self::Tracer => RobotKind::TRACER,
+            Self::Bunker => RobotKind::BUNKER,
+            Self::RangerMini => RobotKind::RANGER_MINI,
         }
     }
 
@@ -95,10 +119,55 @@ pub fn titan_turn_radius_m(steer_rad: f64) -> f64 {
     (TITAN_WHEELBASE_M / 2.0) / steer_rad.abs().tan() + TITAN_TRACK_M / 2.0
 }
 
+/// Smallest turning radius of front-wheel Ackermann steering (HUNTER): R = L / tan δ + W/2.
+fn front_ackermann_radius_m(wheelbase_m: f64, track_m: f64, max_inner_rad: f64) -> f64 {
+    wheelbase_m / max_inner_rad.tan() + track_m / 2.0
+}
+
 impl Kinematics {
+    /// An AgileX protocol-V2 robot (`V2Profile` defaults).
+    fn v2(model: RobotModel, steering: Steering, max_linear_mps: f64) -> Self {
+        Self {
+            model,
+            steering,
+            max_linear_mps,
+            min_linear_mps: 0.01,
+            min_angular_radps: 0.02,
+            default_speed_mps: 0.6,
+            response_lag_s: 0.2,
+        }
+    }
+
+    fn ackermann(min_turn_radius_m: f64, max_linear_mps: f64) -> Steering {
+        Steering::Ackermann {
+            min_turn_radius_m,
+            max_linear_turning_mps: max_linear_mps,
+            turning_above_curvature: f64::INFINITY,
+        }
+    }
+
     /// The defaults of `model`.
+    #[allow(clippy::approx_constant)] // 0.5235 and 0.7853 are the SDK's limits as printed
     pub fn of(model: RobotModel) -> Self {
+        let differential = |max_angular_radps| Steering::Differential { max_angular_radps };
         match model {
+            RobotModel::Scout => Self::v2(model, differential(0.5235), 1.5),
+            RobotModel::Tracer => Self::v2(model, differential(1.0), 1.8),
+            RobotModel::Bunker => Self::v2(model, differential(0.7853), 1.5),
+            RobotModel::Hunter => Self::v2(
+                model,
+                Self::ackermann(front_ackermann_radius_m(0.650, 0.605, 0.576), 1.5),
+                1.5,
+            ),
+            RobotModel::HunterSe => Self::v2(
+                model,
+                Self::ackermann(front_ackermann_radius_m(0.657, 0.550, 0.400), 1.5),
+                1.5,
+            ),
+            // Dual Ackermann reaches R = (L/2) / tan δ + W/2 = 0.476 m (L 0.494, W 0.364,
+            // δ 0.6981 rad); a tighter request makes the driver spin instead. Paths keep a
+            // margin so the follower's corrections stay in dual Ackermann.
+            RobotModel::RangerMini => Self::v2(model, Self::ackermann(0.6, 1.5), 1.5),
             RobotModel::Titan => Self {
                 model,
                 steering: Steering::Ackermann {
@@ -241,7 +310,17 @@ mod tests {
         );
         let xbot = Kinematics::of(RobotModel::Xbot).with_max_angular(1.0);
         assert_eq!(xbot.max_angular_radps(), 1.0);
-        for m in [RobotModel::Titan, RobotModel::ScoutMini, RobotModel::Xbot] {
+        for m in [
+            RobotModel::Titan,
+            RobotModel::ScoutMini,
+            RobotModel::Xbot,
+            RobotModel::Scout,
+            RobotModel::Hunter,
+            RobotModel::HunterSe,
+            RobotModel::Tracer,
+            RobotModel::Bunker,
+            RobotModel::RangerMini,
+        ] {
             assert_eq!(RobotModel::from_kind(m.kind()), Some(m));
         }
         assert_eq!(RobotModel::ScoutMini.name(), "scout-mini");

@@ -350,7 +350,7 @@ pub fn run(options: &Options) -> Result<Outcome, RunError> {
         (None, Some(seen)) => seen,
         (None, None) => {
             return Err(RunError::Usage(format!(
-                "chassis/{} does not say which robot it is: pass --robot titan|scout-mini|xbot",
+                "chassis/{} does not say which robot it is: pass --robot ROBOT (titan, scout-mini, xbot, hunter, …)",
                 options.name
             )));
         }

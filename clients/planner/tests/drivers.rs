@@ -12,6 +12,8 @@ use chassis_planner::kinematics::{Kinematics, RobotModel};
 use chassis_planner::path::Path;
 use chassis_planner::shapes::{self, Shape};
 use chassis_planner::tracker::{Activity, Measured, Tracker, TrackerConfig};
+use chassis_protocols::Profile;
+use chassis_protocols::agilex_v2::{V2Driver, V2Sim};
 use chassis_protocols::driver::{Driver, DriverConfig};
 use chassis_protocols::firmware::Firmware;
 use chassis_protocols::pair::Pair;
@@ -129,6 +131,14 @@ fn drive(model: RobotModel, shape: Shape) -> Outcome {
             );
             follow(&mut pair, model, &path)
         }
+        v2 => {
+            let robot: chassis_protocols::Robot = v2.name().parse().unwrap();
+            let Profile::V2(p) = Profile::default_for(robot) else {
+                panic!("{robot} is not an AgileX V2 robot");
+            };
+            let mut pair = Pair::new(V2Driver::new(p.clone(), config, T0), V2Sim::new(p, T0), T0);
+            follow(&mut pair, model, &path)
+        }
     };
     eprintln!(
         "{model:?} {shape:?}: odometry {:.4} m from the goal, truly {:.4} m; odometry drift \
@@ -142,9 +152,21 @@ fn drive(model: RobotModel, shape: Shape) -> Outcome {
     outcome
 }
 
+const ROBOTS: [RobotModel; 9] = [
+    RobotModel::Titan,
+    RobotModel::ScoutMini,
+    RobotModel::Xbot,
+    RobotModel::Scout,
+    RobotModel::Hunter,
+    RobotModel::HunterSe,
+    RobotModel::Tracer,
+    RobotModel::Bunker,
+    RobotModel::RangerMini,
+];
+
 #[test]
 fn every_robot_reaches_the_goal_of_its_square_on_its_real_driver_and_simulated_chassis() {
-    for model in [RobotModel::Titan, RobotModel::ScoutMini, RobotModel::Xbot] {
+    for model in ROBOTS {
         let o = drive(model, Shape::Square);
         assert!(o.goal_error_m < 0.05, "{model:?}: {o:?}");
         assert!(o.true_goal_error_m < 0.10, "{model:?}: {o:?}");
@@ -153,7 +175,7 @@ fn every_robot_reaches_the_goal_of_its_square_on_its_real_driver_and_simulated_c
 
 #[test]
 fn every_robot_reaches_the_goal_of_its_figure_eight_on_its_real_driver_and_simulated_chassis() {
-    for model in [RobotModel::Titan, RobotModel::ScoutMini, RobotModel::Xbot] {
+    for model in ROBOTS {
         let o = drive(model, Shape::FigureEight);
         assert!(o.goal_error_m < 0.05, "{model:?}: {o:?}");
         assert!(o.true_goal_error_m < 0.10, "{model:?}: {o:?}");

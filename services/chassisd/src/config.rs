@@ -7,8 +7,9 @@
 use std::path::{Path, PathBuf};
 
 use chassis_interfaces::valid_robot_name;
-use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{DriverConfig, Profile, ProfileError, Robot};
+use chassis_protocols::{
+    DriverConfig, Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, Robot,
+};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -32,8 +33,12 @@ pub enum LoopMode {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ServiceConfig {
-    /// Robot: `titan`, `scout-mini` or `xbot` (`--robot`).
+    /// Robot: `titan`, `scout-mini`, `xbot`, `scout`, `hunter`, `hunter-se`, `tracer`, `bunker`
+    /// or `ranger-mini` (`--robot`).
     pub robot: Option<Robot>,
+    /// AgileX wire protocol, `v1` or `v2` (`--protocol`); default: the robot's own (SCOUT MINI:
+    /// v1; the other AgileX robots here: v2).
+    pub protocol: Option<Protocol>,
     /// Namespace of every iceoryx2 service, `chassis/<name>/…` (`--name`; default: the robot).
     pub name: Option<String>,
     /// The bus (`--bus`): `sim`, `can:IFACE`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`.
@@ -65,6 +70,7 @@ impl Default for ServiceConfig {
     fn default() -> Self {
         Self {
             robot: None,
+            protocol: None,
             name: None,
             bus: None,
             gps: None,
@@ -122,6 +128,7 @@ pub struct RawConfig {
 #[derive(Debug, Clone, Default)]
 pub struct Overrides {
     pub robot: Option<Robot>,
+    pub protocol: Option<Protocol>,
     pub name: Option<String>,
     pub bus: Option<BusSpec>,
     pub gps: Option<BusSpec>,
@@ -148,7 +155,9 @@ pub enum ConfigError {
         path: String,
         source: toml::de::Error,
     },
-    #[error("no robot given: pass --robot titan|scout-mini|xbot (or set service.robot)")]
+    #[error(
+        "no robot given: pass --robot titan|scout-mini|xbot|scout|hunter|hunter-se|tracer|bunker|ranger-mini (or set service.robot)"
+    )]
     NoRobot,
     #[error("'{0}' is not a valid robot name (1-16 of a-z 0-9 - _)")]
     BadName(String),
@@ -160,6 +169,9 @@ pub enum ConfigError {
         key: &'static str,
         source: BusSpecError,
     },
+    /// A protocol the robot does not speak.
+    #[error("{0}")]
+    Protocol(#[from] ProtocolError),
     /// A `[profile]` whose values do not make a drivable robot.
     #[error("profile: {0}")]
     BadProfile(#[from] ProfileError),
@@ -188,6 +200,9 @@ pub enum ConfigError {
 #[derive(Debug, Clone)]
 pub struct Config {
     pub robot: Robot,
+    /// The protocol asked for (`--protocol`, `service.protocol`); `None`: the robot's own — for a
+    /// SCOUT MINI on a real CAN bus, detected by listening before anything is sent.
+    pub protocol: Option<Protocol>,
     pub name: String,
     pub bus: BusSpec,
     pub gps: Option<BusSpec>,
@@ -270,7 +285,8 @@ impl RawConfig {
                 reason: format!("{gps}: the GPS receiver is a serial port (serial:PATH[@BAUD])"),
             });
         }
-        let mut profile = parse_profile(robot, self.profile)?;
+        let protocol = overrides.protocol.or(self.service.protocol);
+        let mut profile = parse_profile(robot, protocol, self.profile)?;
         profile.validate()?;
         // The simulated XBot's wheel separation is known; a real one's must be measured.
         if let (Profile::Xbot(p), BusSpec::Sim) = (&mut profile, &bus)
@@ -313,6 +329,7 @@ impl RawConfig {
         };
         Ok(Config {
             robot,
+            protocol,
             name,
             bus,
             gps,
@@ -393,13 +410,19 @@ pub fn default_state_dir(
     set("HOME").map(|home| PathBuf::from(home).join(".local/state/chassisd").join(name))
 }
 
-fn parse_profile(robot: Robot, table: toml::Table) -> Result<Profile, ConfigError> {
-    let err = |source| ConfigError::Profile { robot, source };
-    let value = toml::Value::Table(table);
-    Ok(match robot {
-        Robot::Titan => Profile::Titan(TitanProfile::deserialize(value).map_err(err)?),
-        Robot::ScoutMini => Profile::ScoutMini(ScoutMiniProfile::deserialize(value).map_err(err)?),
-        Robot::Xbot => Profile::Xbot(XbotProfile::deserialize(value).map_err(err)?),
+/// The robot's profile: its defaults (for `protocol`), with the `[profile]` keys set over them.
+fn parse_profile(
+    robot: Robot,
+    protocol: Option<Protocol>,
+    table: toml::Table,
+) -> Result<Profile, ConfigError> {
+    Profile::from_table(robot, protocol, &table).map_err(|e| match e {
+        ProfileTableError::Toml(source) => ConfigError::Profile { robot, source },
+        ProfileTableError::Protocol(e) => ConfigError::Protocol(e),
+        other => ConfigError::Bad {
+            key: "profile.model",
+            reason: other.to_string(),
+        },
     })
 }
 
@@ -410,10 +433,12 @@ impl Config {
             Profile::Titan(p) => toml::Table::try_from(p)?,
             Profile::ScoutMini(p) => toml::Table::try_from(p)?,
             Profile::Xbot(p) => toml::Table::try_from(p)?,
+            Profile::V2(p) => toml::Table::try_from(p)?,
         };
         let raw = RawConfig {
             service: ServiceConfig {
                 robot: Some(self.robot),
+                protocol: self.protocol,
                 name: Some(self.name.clone()),
                 bus: Some(self.bus.to_string()),
                 gps: self.gps.as_ref().map(ToString::to_string),
@@ -631,6 +656,44 @@ mod tests {
             real.wheel_separation_m, None,
             "a real robot's must be measured"
         );
+    }
+
+    #[test]
+    fn agilex_v2_robots_take_their_protocol_and_model_from_the_file() {
+        let raw: RawConfig = toml::from_str(
+            "[service]\nrobot = \"scout-mini\"\nprotocol = \"v2\"\n\
+             [profile]\nmodel = \"scout-mini-omni\"\nshort_commands_dlc = 1\n",
+        )
+        .unwrap();
+        let c = raw.validate(Overrides::default()).unwrap();
+        assert_eq!(c.protocol, Some(Protocol::V2));
+        let Profile::V2(p) = &c.profile else {
+            panic!("not V2: {:?}", c.profile)
+        };
+        assert_eq!(p.max_lateral_mps, 2.0);
+        assert_eq!(p.short_commands_dlc, 1);
+        // The effective configuration reads back to the same profile.
+        let again: RawConfig = toml::from_str(&c.to_toml().unwrap()).unwrap();
+        assert_eq!(
+            again.validate(Overrides::default()).unwrap().profile,
+            c.profile
+        );
+        let err = RawConfig::default()
+            .validate(Overrides {
+                robot: Some(Robot::Hunter),
+                protocol: Some(Protocol::V1),
+                ..Overrides::default()
+            })
+            .unwrap_err();
+        assert_eq!(err.to_string(), "hunter does not speak protocol v1 here");
+        let wrong: RawConfig = toml::from_str("[profile]\nmodel = \"bunker\"\n").unwrap();
+        let err = wrong
+            .validate(Overrides {
+                robot: Some(Robot::Hunter),
+                ..Overrides::default()
+            })
+            .unwrap_err();
+        assert!(err.to_string().contains("not a hunter"), "{err}");
     }
 
     #[test]

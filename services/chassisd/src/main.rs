@@ -34,9 +34,12 @@ enum Cmd {
 
 #[derive(Debug, Args)]
 struct ServiceArgs {
-    /// titan, scout-mini or xbot.
+    /// titan, scout-mini, xbot, scout, hunter, hunter-se, tracer, bunker or ranger-mini.
     #[arg(long, value_parser = parse_robot)]
     robot: Option<Robot>,
+    /// AgileX wire protocol: v1 or v2 (default: the robot's own; SCOUT MINI: v1).
+    #[arg(long, value_parser = parse_protocol)]
+    protocol: Option<chassis_protocols::Protocol>,
     /// sim (default), can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD].
     #[arg(long, value_parser = parse_bus)]
     bus: Option<BusSpec>,
@@ -79,6 +82,12 @@ fn parse_robot(text: &str) -> Result<Robot, UnknownRobot> {
     text.parse()
 }
 
+fn parse_protocol(
+    text: &str,
+) -> Result<chassis_protocols::Protocol, chassis_protocols::ProtocolError> {
+    text.parse()
+}
+
 fn parse_bus(text: &str) -> Result<BusSpec, BusSpecError> {
     text.parse()
 }
@@ -90,6 +99,7 @@ fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), ConfigErro
     };
     let config = raw.validate(Overrides {
         robot: args.robot,
+        protocol: args.protocol,
         name: args.name,
         bus: args.bus,
         gps: args.gps,

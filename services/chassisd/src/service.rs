@@ -34,7 +34,7 @@ use crate::lockfile::{Clocks, LockFile};
 use crate::moderation::RxGate;
 use crate::mux::{Mux, MuxConfigError};
 use crate::notify::Notifier;
-use crate::setup::{Devices, Hardware, PinError, driver_for, enter_realtime, pin_to_cpu};
+use crate::setup::{Devices, Hardware, PinError, driver_for_config, enter_realtime, pin_to_cpu};
 use crate::sim::SimHandle;
 
 mod pass;
@@ -151,7 +151,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
     let sources: Vec<String> = config.mux.sources.iter().map(|s| s.name.clone()).collect();
     let ports = Ports::open(&config.name, &sources, config.bus == BusSpec::Sim)?;
     let now = clock::now();
-    let driver = driver_for(&config.profile, &config.driver, now);
+    let driver = driver_for_config(&config, now);
     let mut engine = Engine::new(
         EngineConfig::from_config(&config),
         driver,

@@ -12,6 +12,26 @@ use crate::config::Config;
 use crate::engine::BoxedDriver;
 use crate::sim::{SimHandle, firmware_for};
 
+/// The driver for `config`: a SCOUT MINI on a real CAN bus with no protocol asked for listens
+/// first and drives in the protocol it hears (V1 or V2); every other robot gets
+/// [`driver_for`] its profile.
+pub fn driver_for_config(config: &Config, now: Timestamp) -> BoxedDriver {
+    if let Profile::ScoutMini(v1) = &config.profile
+        && config.protocol.is_none()
+        && matches!(config.bus, BusSpec::Can { .. } | BusSpec::Slcan { .. })
+    {
+        return Box::new(chassis_protocols::agilex_v2::AutoDriver::new(
+            v1.clone(),
+            chassis_protocols::agilex_v2::V2Profile::for_model(
+                chassis_protocols::agilex_v2::V2Model::ScoutMini,
+            ),
+            config.driver.clone(),
+            now,
+        ));
+    }
+    driver_for(&config.profile, &config.driver, now)
+}
+
 /// The driver of `profile`'s robot.
 pub fn driver_for(profile: &Profile, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
     match profile {
@@ -22,6 +42,11 @@ pub fn driver_for(profile: &Profile, config: &DriverConfig, now: Timestamp) -> B
             now,
         )),
         Profile::Xbot(p) => Box::new(xbot::XbotDriver::new(p.clone(), config.clone(), now)),
+        Profile::V2(p) => Box::new(chassis_protocols::agilex_v2::V2Driver::new(
+            p.clone(),
+            config.clone(),
+            now,
+        )),
     }
 }
 

@@ -33,6 +33,7 @@ pub fn firmware_for(profile: &Profile, now: Timestamp) -> BoxedFirmware {
         Profile::Titan(p) => Box::new(titan::TitanSim::new(p.clone(), now)),
         Profile::ScoutMini(p) => Box::new(scout_mini::ScoutMiniSim::new(p.clone(), now)),
         Profile::Xbot(p) => Box::new(xbot::XbotSim::new(p.clone(), now)),
+        Profile::V2(p) => Box::new(chassis_protocols::agilex_v2::V2Sim::new(p.clone(), now)),
     }
 }
 

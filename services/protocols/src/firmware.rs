@@ -46,6 +46,8 @@ pub enum Injection {
     ObstacleBehind(Option<f64>),
     /// Send feedback as fast as the bus allows: `frames_per_s` extra frames (load tests).
     Flood { frames_per_s: u32 },
+    /// The chassis' own E-stop is pressed (`true`) or released (AgileX protocol V2).
+    EStop(bool),
 }
 
 impl Injection {
@@ -62,6 +64,7 @@ impl Injection {
             Injection::ObstacleAhead(_) => "obstacle-ahead",
             Injection::ObstacleBehind(_) => "obstacle-behind",
             Injection::Flood { .. } => "flood",
+            Injection::EStop(_) => "estop",
         }
     }
 }

@@ -14,8 +14,10 @@
 //! Frame structs hold SI values in ISO 8855 axes (x forward, y left, left turn positive); each
 //! codec is the only place that knows its vendor's units and signs.
 
+pub mod agilex_v2;
 pub mod can;
 pub mod command;
+pub mod describe;
 pub mod driver;
 mod error;
 pub mod firmware;
@@ -38,7 +40,9 @@ pub use command::{
 pub use driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
 pub use error::{DecodeError, EncodeError};
 pub use firmware::{Firmware, Injection, SimTruth};
-pub use profile::{Profile, ProfileError, Robot, UnknownRobot};
+pub use profile::{
+    Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, Robot, UnknownRobot,
+};
 pub use time::Timestamp;
 
 /// Who sends a frame.

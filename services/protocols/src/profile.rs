@@ -7,6 +7,8 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::agilex_v2::V2Profile;
+
 /// Which robot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -14,17 +16,46 @@ pub enum Robot {
     Titan,
     ScoutMini,
     Xbot,
+    /// SCOUT 2.0 (protocol V2).
+    Scout,
+    /// HUNTER 2.0 (protocol V2).
+    Hunter,
+    /// HUNTER SE (protocol V2).
+    HunterSe,
+    /// TRACER (protocol V2).
+    Tracer,
+    /// BUNKER / BUNKER MINI (protocol V2).
+    Bunker,
+    /// RANGER MINI 2.0 / 3.0 (protocol V2; 1.0 by its profile's `model`).
+    RangerMini,
 }
 
 impl Robot {
-    pub const ALL: [Robot; 3] = [Robot::Titan, Robot::ScoutMini, Robot::Xbot];
+    pub const ALL: [Robot; 9] = [
+        Robot::Titan,
+        Robot::ScoutMini,
+        Robot::Xbot,
+        Robot::Scout,
+        Robot::Hunter,
+        Robot::HunterSe,
+        Robot::Tracer,
+        Robot::Bunker,
+        Robot::RangerMini,
+    ];
 
-    /// The command-line spelling (`titan`, `scout-mini`, `xbot`), also the default robot name.
+    /// The command-line spelling (`titan`, `scout-mini`, `hunter`, …), also the default robot
+    /// name.
     pub fn name(self) -> &'static str {
         match self {
             Robot::Titan => "titan",
             Robot::ScoutMini => "scout-mini",
             Robot::Xbot => "xbot",
+            Robot::Scout => "scout",
+            Robot::Hunter => "hunter",
+            Robot::HunterSe => "hunter-se",
+            Robot::Tracer => "tracer",
+            Robot::Bunker => "bunker",
+            Robot::RangerMini => "ranger-mini",
         }
     }
 
@@ -35,18 +66,98 @@ impl Robot {
             Robot::Titan => RobotKind::TITAN,
             Robot::ScoutMini => RobotKind::SCOUT_MINI,
             Robot::Xbot => RobotKind::XBOT,
+            Robot::Scout => RobotKind::SCOUT,
+            Robot::Hunter => RobotKind::HUNTER,
+            Robot::HunterSe => RobotKind::HUNTER_SE,
+            Robot::Tracer => RobotKind::TRACER,
+            Robot::Bunker => RobotKind::BUNKER,
+            Robot::RangerMini => RobotKind::RANGER_MINI,
         }
     }
 
-    /// True for the robots on a CAN bus (TITAN, SCOUT MINI); the XBot speaks RS232.
+    /// True for the robots on a CAN bus (all but the XBot, which speaks RS232).
     pub fn is_can(self) -> bool {
-        matches!(self, Robot::Titan | Robot::ScoutMini)
+        !matches!(self, Robot::Xbot)
+    }
+
+    /// The wire protocols the robot may speak: SCOUT MINI V1 or V2; the other AgileX robots
+    /// here V2 (their V1 firmware has no codec here); TITAN and XBot their own.
+    pub fn protocols(self) -> &'static [Protocol] {
+        match self {
+            Robot::ScoutMini => &[Protocol::V1, Protocol::V2],
+            Robot::Titan | Robot::Xbot => &[],
+            _ => &[Protocol::V2],
+        }
+    }
+
+    /// The protocol-V2 model of this robot, if it speaks V2.
+    pub fn v2_model(self) -> Option<crate::agilex_v2::V2Model> {
+        use crate::agilex_v2::V2Model;
+        Some(match self {
+            Robot::ScoutMini => V2Model::ScoutMini,
+            Robot::Scout => V2Model::Scout,
+            Robot::Hunter => V2Model::Hunter,
+            Robot::HunterSe => V2Model::HunterSe,
+            Robot::Tracer => V2Model::Tracer,
+            Robot::Bunker => V2Model::Bunker,
+            Robot::RangerMini => V2Model::RangerMini,
+            Robot::Titan | Robot::Xbot => return None,
+        })
     }
 }
 
-/// A robot name that is none of `titan`, `scout-mini`, `xbot`.
+/// Which AgileX wire protocol: V1 (count and checksum in every frame) or V2 (the TITAN's family).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Protocol {
+    V1,
+    V2,
+}
+
+impl Protocol {
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::V1 => "v1",
+            Protocol::V2 => "v2",
+        }
+    }
+}
+
+/// A protocol name that is neither `v1` nor `v2`, or one the robot does not speak.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
-#[error("unknown robot '{name}' (expected titan, scout-mini or xbot)")]
+pub enum ProtocolError {
+    #[error("unknown protocol '{name}' (expected v1 or v2)")]
+    Unknown { name: String },
+    #[error("{robot} does not speak protocol {protocol} here")]
+    NotSpoken {
+        robot: Robot,
+        protocol: &'static str,
+    },
+}
+
+impl std::str::FromStr for Protocol {
+    type Err = ProtocolError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "v1" => Ok(Protocol::V1),
+            "v2" => Ok(Protocol::V2),
+            _ => Err(ProtocolError::Unknown { name: s.into() }),
+        }
+    }
+}
+
+impl std::fmt::Display for Protocol {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A robot name that is none of the known robots.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error(
+    "unknown robot '{name}' (expected titan, scout-mini, xbot, scout, hunter, hunter-se, tracer, \
+     bunker or ranger-mini)"
+)]
 pub struct UnknownRobot {
     pub name: String,
 }
@@ -342,21 +453,99 @@ impl XbotProfile {
     }
 }
 
+/// Why a `[profile]` table does not make a profile.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ProfileTableError {
+    #[error(transparent)]
+    Protocol(#[from] ProtocolError),
+    /// An unknown key or a wrong type.
+    #[error(transparent)]
+    Toml(#[from] toml::de::Error),
+    /// A protocol-V2 `model` of another robot.
+    #[error("profile.model: a {model} model is not a {robot}")]
+    WrongModel { model: Robot, robot: Robot },
+}
+
 /// One robot's profile.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Profile {
     Titan(TitanProfile),
     ScoutMini(ScoutMiniProfile),
     Xbot(XbotProfile),
+    /// An AgileX protocol-V2 robot (SCOUT MINI with V2 firmware included).
+    V2(V2Profile),
 }
 
 impl Profile {
-    /// The manuals' defaults for `robot`.
+    /// The manuals' defaults for `robot` (SCOUT MINI: protocol V1).
     pub fn default_for(robot: Robot) -> Self {
         match robot {
             Robot::Titan => Profile::Titan(TitanProfile::default()),
             Robot::ScoutMini => Profile::ScoutMini(ScoutMiniProfile::default()),
             Robot::Xbot => Profile::Xbot(XbotProfile::default()),
+            other => match other.v2_model() {
+                Some(model) => Profile::V2(V2Profile::for_model(model)),
+                None => Profile::Titan(TitanProfile::default()),
+            },
+        }
+    }
+
+    /// The defaults for `robot` speaking `protocol` (`None`: the robot's default protocol).
+    pub fn default_for_protocol(
+        robot: Robot,
+        protocol: Option<Protocol>,
+    ) -> Result<Self, ProtocolError> {
+        let Some(protocol) = protocol else {
+            return Ok(Profile::default_for(robot));
+        };
+        if !robot.protocols().contains(&protocol) {
+            return Err(ProtocolError::NotSpoken {
+                robot,
+                protocol: protocol.name(),
+            });
+        }
+        Ok(match (protocol, robot.v2_model()) {
+            (Protocol::V2, Some(model)) => Profile::V2(V2Profile::for_model(model)),
+            _ => Profile::default_for(robot),
+        })
+    }
+
+    /// The defaults for `robot` speaking `protocol`, with the keys of `table` (the `[profile]`
+    /// table of the service's config) set over them. A protocol-V2 table may name a variant with
+    /// `model` (e.g. `scout-mini-omni`): its keys are then set over that variant's defaults.
+    pub fn from_table(
+        robot: Robot,
+        protocol: Option<Protocol>,
+        table: &toml::Table,
+    ) -> Result<Self, ProfileTableError> {
+        let value = toml::Value::Table(table.clone());
+        Ok(match Profile::default_for_protocol(robot, protocol)? {
+            Profile::Titan(_) => Profile::Titan(value.try_into()?),
+            Profile::ScoutMini(_) => Profile::ScoutMini(value.try_into()?),
+            Profile::Xbot(_) => Profile::Xbot(value.try_into()?),
+            Profile::V2(default) => {
+                let base = match table.get("model") {
+                    Some(model) => V2Profile::for_model(model.clone().try_into()?),
+                    None => default,
+                };
+                let profile = Profile::V2(base.with_overrides(table)?);
+                if profile.robot() != robot {
+                    return Err(ProfileTableError::WrongModel {
+                        model: profile.robot(),
+                        robot,
+                    });
+                }
+                profile
+            }
+        })
+    }
+
+    /// The wire protocol of this profile, for the robots that have a choice of two.
+    pub fn protocol(&self) -> Option<Protocol> {
+        match self {
+            Profile::ScoutMini(_) => Some(Protocol::V1),
+            Profile::V2(_) => Some(Protocol::V2),
+            Profile::Titan(_) | Profile::Xbot(_) => None,
         }
     }
 
@@ -366,14 +555,25 @@ impl Profile {
             Profile::Titan(p) => p.validate(),
             Profile::ScoutMini(p) => p.validate(),
             Profile::Xbot(p) => p.validate(),
+            Profile::V2(p) => p.validate(),
         }
     }
 
     pub fn robot(&self) -> Robot {
+        use crate::agilex_v2::V2Model;
         match self {
             Profile::Titan(_) => Robot::Titan,
             Profile::ScoutMini(_) => Robot::ScoutMini,
             Profile::Xbot(_) => Robot::Xbot,
+            Profile::V2(p) => match p.model {
+                V2Model::Scout => Robot::Scout,
+                V2Model::ScoutMini | V2Model::ScoutMiniOmni => Robot::ScoutMini,
+                V2Model::Hunter => Robot::Hunter,
+                V2Model::HunterSe => Robot::HunterSe,
+                V2Model::Tracer => Robot::Tracer,
+                V2Model::Bunker => Robot::Bunker,
+                V2Model::RangerMini | V2Model::RangerMiniV1 => Robot::RangerMini,
+            },
         }
     }
 }
@@ -459,7 +659,29 @@ mod tests {
     fn robot_names_parse() {
         for r in Robot::ALL {
             assert_eq!(r.name().parse::<Robot>(), Ok(r));
+            assert_eq!(Profile::default_for(r).robot(), r);
+            assert_eq!(chassis_interfaces::RobotKind::name(r.kind()), r.name());
         }
+        let v2 = Profile::default_for_protocol(Robot::ScoutMini, Some(Protocol::V2)).unwrap();
+        assert_eq!(
+            (v2.robot(), v2.protocol()),
+            (Robot::ScoutMini, Some(Protocol::V2))
+        );
+        let err = Profile::default_for_protocol(Robot::Hunter, Some(Protocol::V1)).unwrap_err();
+        assert_eq!(err.to_string(), "hunter does not speak protocol v1 here");
+        assert!("v3".parse::<Protocol>().is_err());
+        let omni: toml::Table = toml::from_str("model = \"scout-mini-omni\"").unwrap();
+        let Profile::V2(p) =
+            Profile::from_table(Robot::ScoutMini, Some(Protocol::V2), &omni).unwrap()
+        else {
+            panic!("not V2")
+        };
+        assert_eq!(p.max_lateral_mps, 2.0);
+        let err = Profile::from_table(Robot::Hunter, None, &omni).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "profile.model: a scout-mini model is not a hunter"
+        );
         assert!("husky".parse::<Robot>().is_err());
     }
 

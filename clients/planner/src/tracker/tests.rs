@@ -78,6 +78,11 @@ impl Model {
                 self.target_v = v.clamp(-limit, limit);
                 self.target_steer = steer;
             }
+            // The AgileX V2 robots are followed on their real driver (tests/drivers.rs).
+            _ => {
+                self.target_v = c.linear_mps;
+                self.target_w = c.angular_radps;
+            }
         }
     }
 

@@ -449,7 +449,8 @@ impl Rig {
         }
     }
 
-    /// The speed an item commands, if it is a motion frame (TITAN 0x111, SCOUT MINI 0x130).
+    /// The speed an item commands, if it is a motion frame (TITAN and AgileX V2 0x111, SCOUT MINI
+    /// V1 0x130).
     pub fn commanded_speed(&self, item: &Transmit) -> Option<f64> {
         let frame = item.as_can()?;
         match &self.profile {
@@ -462,6 +463,10 @@ impl Rig {
                     frame: scout_mini::Frame::MotionCommand(c),
                     ..
                 }) => Some(c.linear_mps),
+                _ => None,
+            },
+            Profile::V2(p) => match chassis_protocols::agilex_v2::decode(frame, p) {
+                Ok(chassis_protocols::agilex_v2::Frame::MotionCommand(c)) => Some(c.linear_mps),
                 _ => None,
             },
             Profile::Xbot(_) => None,

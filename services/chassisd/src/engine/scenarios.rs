@@ -636,6 +636,36 @@ fn an_xbot_drives_and_stops_through_the_engine() {
 }
 
 #[test]
+fn every_agilex_v2_robot_drives_and_stops_through_the_engine() {
+    for robot in [
+        Robot::Scout,
+        Robot::Hunter,
+        Robot::HunterSe,
+        Robot::Tracer,
+        Robot::Bunker,
+        Robot::RangerMini,
+    ] {
+        let mut rig = ready_for(robot, unsmoothed(), 60);
+        rig.publish_every("teleop", twist(0.3), ms(50), at(2000));
+        rig.run_until(at(2000));
+        assert!(
+            (rig.firmware.truth().linear_mps - 0.3).abs() < 0.01,
+            "{robot}: {:?}",
+            rig.firmware.truth()
+        );
+        assert!(
+            rig.state().link_flags & LinkFlags::COMMAND_MODE != 0,
+            "{robot}"
+        );
+        rig.run_until(at(4000));
+        assert!(rig.firmware.truth().linear_mps.abs() < 1e-3, "{robot}");
+        assert_eq!(rig.mux().zero_reason, ZeroReason::NO_ACTIVE_SOURCE);
+        // The 0x111 heartbeat ran all along (every 20 ms for 3.8 s).
+        assert!(rig.motion().len() > 150, "{robot}");
+    }
+}
+
+#[test]
 fn the_engine_waits_for_its_next_deadline() {
     let rig = ready();
     let t = rig.engine.poll_timeout();

@@ -138,6 +138,7 @@ impl ScoutMiniDriver {
             now,
         );
         core.state.system.control_mode = ControlMode::UNKNOWN;
+        core.state.system.wire_protocol = chassis_interfaces::WireProtocol::V1;
         let want_control = config.take_control;
         Self {
             profile,

@@ -823,7 +823,10 @@ impl Firmware for ScoutMiniSim {
             Injection::Flood { frames_per_s } => {
                 self.flood = Flood::new(now, frames_per_s, Self::MAX_FLOOD_FRAMES_PER_S);
             }
-            Injection::Bumper(_) | Injection::ObstacleAhead(_) | Injection::ObstacleBehind(_) => {
+            Injection::Bumper(_)
+            | Injection::ObstacleAhead(_)
+            | Injection::ObstacleBehind(_)
+            | Injection::EStop(_) => {
                 return false;
             }
         }

@@ -1048,7 +1048,8 @@ impl Firmware for TitanSim {
             }
             Injection::BadChecksums(_)
             | Injection::ObstacleAhead(_)
-            | Injection::ObstacleBehind(_) => return false,
+            | Injection::ObstacleBehind(_)
+            | Injection::EStop(_) => return false,
         }
         true
     }

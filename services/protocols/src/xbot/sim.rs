@@ -784,7 +784,7 @@ impl Firmware for XbotSim {
                 };
                 self.soc_pct = soc_pct;
             }
-            Injection::Bumper(_) | Injection::RcTakeover(_) => return false,
+            Injection::Bumper(_) | Injection::RcTakeover(_) | Injection::EStop(_) => return false,
             Injection::Reboot => self.reboot(now),
             Injection::Silence(duration) => self.outbox.silence(now, duration),
             Injection::Garbage(bytes) => {

@@ -1,8 +1,10 @@
-//! One robot's codec behind a uniform face: frames in, JSON objects out.
+//! One robot's codec behind a uniform face: frames in, JSON objects out, the fields as
+//! `chassis decode` prints them (and the Foxglove bridge shows them).
 
+use crate::agilex_v2::{self, V2Profile};
+use crate::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
+use crate::{CanFrame, DecodeError, Profile, Robot, scout_mini, titan, xbot};
 use chassis_interfaces::FaultFlags;
-use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{CanFrame, DecodeError, Profile, Robot, scout_mini, titan, xbot};
 use serde::Serialize;
 use serde_json::{Map, Value};
 
@@ -30,6 +32,11 @@ pub enum RobotCodec {
         profile: XbotProfile,
         parser: xbot::StreamParser,
     },
+    /// An AgileX protocol-V2 robot.
+    V2 {
+        profile: V2Profile,
+        robot: Robot,
+    },
 }
 
 impl RobotCodec {
@@ -41,6 +48,10 @@ impl RobotCodec {
                 profile: p,
                 parser: xbot::StreamParser::new(),
             },
+            Profile::V2(p) => RobotCodec::V2 {
+                robot: Profile::V2(p.clone()).robot(),
+                profile: p,
+            },
         }
     }
 
@@ -49,6 +60,7 @@ impl RobotCodec {
             RobotCodec::Titan(_) => Robot::Titan,
             RobotCodec::ScoutMini(_) => Robot::ScoutMini,
             RobotCodec::Xbot { .. } => Robot::Xbot,
+            RobotCodec::V2 { robot, .. } => *robot,
         }
     }
 
@@ -105,6 +117,21 @@ impl RobotCodec {
                         scout_mini::normalize_faults(s.vendor_fault_word)
                             | scout_mini::body_flags(s.body_status),
                     );
+                }
+                Ok(json)
+            }
+            RobotCodec::V2 { profile, robot } => {
+                let decoded = agilex_v2::decode(frame, profile)?;
+                let mut json = frame_json(
+                    *robot,
+                    decoded.id().into(),
+                    decoded.direction(),
+                    None,
+                    &decoded,
+                );
+                json.insert("protocol".into(), "v2".into());
+                if let agilex_v2::Frame::VersionText(t) = decoded {
+                    json.insert("text".into(), t.text().into());
                 }
                 Ok(json)
             }
@@ -173,7 +200,7 @@ fn driver_status_names(bits: u8) -> Vec<String> {
 fn frame_json(
     robot: Robot,
     id: u32,
-    direction: chassis_protocols::Direction,
+    direction: crate::Direction,
     count: Option<u8>,
     frame: &impl Serialize,
 ) -> FrameJson {

@@ -1,0 +1,322 @@
+//! A SCOUT MINI of either firmware: listen first, then drive it in the protocol it speaks.
+//!
+//! [`AutoDriver`] transmits nothing until the [`Detector`] has decided (`PROTOCOLS-V2` §4.3); then
+//! it builds the V1 driver ([`ScoutMiniDriver`]) or the V2 one ([`V2Driver`]) at that instant and
+//! hands everything to it, so not one frame of the wrong protocol is ever sent. Without a decision
+//! by the deadline (or with both kinds of evidence) it sets [`LinkFlags::CHASSIS_SILENT`], logs
+//! what it heard and listens again. After the link is lost for longer than the deadline the
+//! decision stands (a firmware update needs a power cycle, which the service's restart covers).
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use chassis_interfaces::{ChassisState, LinkFlags, RobotKind, Twist, WireProtocol};
+
+use super::detect::{Detection, Detector};
+use super::{V2Driver, V2Profile};
+use crate::command::Command;
+use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
+use crate::profile::{Protocol, Robot, ScoutMiniProfile};
+use crate::scout_mini::ScoutMiniDriver;
+use crate::time::Timestamp;
+
+/// A SCOUT MINI driver that detects the protocol before sending anything.
+pub struct AutoDriver {
+    v1: ScoutMiniProfile,
+    v2: V2Profile,
+    config: DriverConfig,
+    detector: Detector,
+    inner: Option<(Protocol, Box<dyn Driver + Send>)>,
+    state: ChassisState,
+    events: VecDeque<DriverEvent>,
+    command: Twist,
+    bus_down: bool,
+}
+
+impl std::fmt::Debug for AutoDriver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AutoDriver")
+            .field("protocol", &self.protocol())
+            .field("detector", &self.detector)
+            .finish_non_exhaustive()
+    }
+}
+
+impl AutoDriver {
+    /// Listening from `now` (`v2.detect_timeout_ms`, `v2.detect_min_frames`).
+    pub fn new(v1: ScoutMiniProfile, v2: V2Profile, config: DriverConfig, now: Timestamp) -> Self {
+        let detector = Self::detector(&v2, now);
+        Self {
+            v1,
+            v2,
+            config,
+            detector,
+            inner: None,
+            state: {
+                let mut state = ChassisState {
+                    robot: RobotKind::SCOUT_MINI,
+                    ..ChassisState::default()
+                };
+                state.system.wire_protocol = WireProtocol::DETECTING;
+                state
+            },
+            events: VecDeque::new(),
+            command: Twist::ZERO,
+            bus_down: false,
+        }
+    }
+
+    fn detector(v2: &V2Profile, now: Timestamp) -> Detector {
+        Detector::new(
+            now,
+            Duration::from_millis(v2.detect_timeout_ms),
+            v2.detect_min_frames,
+        )
+    }
+
+    /// The protocol in use, once detected.
+    pub fn protocol(&self) -> Option<Protocol> {
+        self.inner.as_ref().map(|(p, _)| *p)
+    }
+
+    fn notice(&mut self, level: Level, message: String) {
+        self.events
+            .push_back(DriverEvent::Notice { level, message });
+    }
+
+    fn check(&mut self, now: Timestamp) {
+        if self.inner.is_some() {
+            return;
+        }
+        match self.detector.poll(now) {
+            Detection::Listening => {}
+            Detection::Decided(protocol) => {
+                let mut driver: Box<dyn Driver + Send> = match protocol {
+                    Protocol::V1 => Box::new(ScoutMiniDriver::new(
+                        self.v1.clone(),
+                        self.config.clone(),
+                        now,
+                    )),
+                    Protocol::V2 => {
+                        Box::new(V2Driver::new(self.v2.clone(), self.config.clone(), now))
+                    }
+                };
+                driver.set_command(now, &self.command);
+                if self.bus_down {
+                    driver.set_bus_down(now, true);
+                }
+                self.notice(
+                    Level::Info,
+                    format!("SCOUT MINI speaks protocol {protocol}: driving it as such"),
+                );
+                self.inner = Some((protocol, driver));
+            }
+            outcome @ (Detection::Silent { .. } | Detection::Conflicting { .. }) => {
+                self.state.link_flags |= LinkFlags::CHASSIS_SILENT;
+                self.notice(
+                    Level::Warn,
+                    format!(
+                        "SCOUT MINI protocol not detected within {} ms: {}; listening again",
+                        self.v2.detect_timeout_ms,
+                        outcome.describe()
+                    ),
+                );
+                self.detector = Self::detector(&self.v2, now);
+            }
+        }
+    }
+}
+
+impl Driver for AutoDriver {
+    fn robot(&self) -> Robot {
+        Robot::ScoutMini
+    }
+
+    fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
+        if let Some((_, driver)) = &mut self.inner {
+            driver.handle_rx(now, rx);
+            return;
+        }
+        if let Rx::Can(frame) = rx {
+            self.state.link.rx_frames += 1;
+            self.detector.handle_rx(frame);
+        }
+        self.check(now);
+    }
+
+    fn set_command(&mut self, now: Timestamp, command: &Twist) {
+        self.command = *command;
+        if let Some((_, driver)) = &mut self.inner {
+            driver.set_command(now, command);
+        }
+    }
+
+    fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
+        match &mut self.inner {
+            Some((_, driver)) => driver.control(now, command),
+            None => ControlOutcome::Refused(
+                "the SCOUT MINI's protocol (V1 or V2) is not detected yet: nothing is sent".into(),
+            ),
+        }
+    }
+
+    fn handle_timeout(&mut self, now: Timestamp) {
+        match &mut self.inner {
+            Some((_, driver)) => driver.handle_timeout(now),
+            None => self.check(now),
+        }
+    }
+
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+        self.inner
+            .as_mut()
+            .and_then(|(_, driver)| driver.poll_transmit(now))
+    }
+
+    fn poll_timeout(&self) -> Option<Timestamp> {
+        match &self.inner {
+            Some((_, driver)) => driver.poll_timeout(),
+            None => Some(self.detector.deadline()),
+        }
+    }
+
+    fn poll_event(&mut self) -> Option<DriverEvent> {
+        if let Some(event) = self.events.pop_front() {
+            return Some(event);
+        }
+        self.inner
+            .as_mut()
+            .and_then(|(_, driver)| driver.poll_event())
+    }
+
+    fn state(&self) -> &ChassisState {
+        match &self.inner {
+            Some((_, driver)) => driver.state(),
+            None => &self.state,
+        }
+    }
+
+    fn set_bus_down(&mut self, now: Timestamp, down: bool) {
+        self.bus_down = down;
+        match &mut self.inner {
+            Some((_, driver)) => driver.set_bus_down(now, down),
+            None => {
+                if down {
+                    self.state.link_flags |= LinkFlags::BUS_DOWN;
+                } else {
+                    self.state.link_flags &= !LinkFlags::BUS_DOWN;
+                    self.detector = Self::detector(&self.v2, now);
+                }
+            }
+        }
+    }
+
+    fn shutdown(&mut self, now: Timestamp) {
+        if let Some((_, driver)) = &mut self.inner {
+            driver.shutdown(now);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Direction;
+    use crate::agilex_v2::{V2Model, V2Sim};
+    use crate::firmware::Firmware;
+    use crate::pair::Pair;
+    use crate::scout_mini::ScoutMiniSim;
+    use chassis_interfaces::ControlMode;
+
+    const T0: Timestamp = Timestamp::from_millis(1000);
+
+    fn auto() -> AutoDriver {
+        AutoDriver::new(
+            ScoutMiniProfile::default(),
+            V2Profile::for_model(V2Model::ScoutMini),
+            DriverConfig::default(),
+            T0,
+        )
+    }
+
+    fn forward() -> Twist {
+        Twist {
+            linear_x_mps: 0.5,
+            ..Twist::ZERO
+        }
+    }
+
+    /// Drives `pair` forward and returns the ids the driver sent, and when it first sent.
+    fn drive<F: Firmware>(pair: &mut Pair<AutoDriver, F>) -> (Vec<u32>, Timestamp) {
+        pair.record = true;
+        pair.set_command(forward());
+        pair.run_for(Duration::from_millis(3000));
+        let sent: Vec<_> = pair
+            .log()
+            .iter()
+            .filter(|r| r.direction == Direction::ToChassis)
+            .filter_map(|r| r.item.as_can().map(|f| (r.at, f.id())))
+            .collect();
+        let first = sent.first().map(|(t, _)| *t).unwrap_or(T0);
+        (sent.into_iter().map(|(_, id)| id).collect(), first)
+    }
+
+    #[test]
+    fn a_v1_scout_mini_is_driven_in_v1_and_never_sees_a_v2_frame() {
+        let mut pair = Pair::new(
+            auto(),
+            ScoutMiniSim::new(ScoutMiniProfile::default(), T0),
+            T0,
+        );
+        let (ids, first) = drive(&mut pair);
+        assert_eq!(pair.driver.protocol(), Some(Protocol::V1));
+        assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V1);
+        assert!(ids.iter().all(|id| matches!(id, 0x130 | 0x140)), "{ids:x?}");
+        assert!(first > T0, "sent before listening");
+        assert!((pair.firmware.truth().linear_mps - 0.5).abs() < 0.06);
+    }
+
+    #[test]
+    fn a_v2_scout_mini_is_driven_in_v2_and_never_sees_a_v1_frame() {
+        let profile = V2Profile::for_model(V2Model::ScoutMini);
+        let mut pair = Pair::new(auto(), V2Sim::new(profile, T0), T0);
+        let (ids, first) = drive(&mut pair);
+        assert_eq!(pair.driver.protocol(), Some(Protocol::V2));
+        assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V2);
+        assert!(
+            ids.iter().all(|id| matches!(id, 0x111 | 0x421 | 0x411)),
+            "{ids:x?}"
+        );
+        // Three V2 frames arrive within the first 20 ms feedback slot; nothing went out before.
+        assert!(
+            first > T0 && first <= T0 + Duration::from_millis(60),
+            "{first:?}"
+        );
+        assert_eq!(pair.firmware.truth().control_mode, ControlMode::COMMAND);
+        assert!((pair.firmware.truth().linear_mps - 0.5).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_silent_bus_is_reported_and_retried_and_nothing_is_sent() {
+        let mut d = auto();
+        assert_eq!(d.state().system.wire_protocol, WireProtocol::DETECTING);
+        let deadline = d.poll_timeout().unwrap();
+        assert_eq!(deadline, T0 + Duration::from_millis(5000));
+        d.handle_timeout(deadline);
+        assert_ne!(d.state().link_flags & LinkFlags::CHASSIS_SILENT, 0);
+        let Some(DriverEvent::Notice { level, message }) = d.poll_event() else {
+            panic!("no notice");
+        };
+        assert_eq!(level, Level::Warn);
+        assert!(message.contains("nothing heard"), "{message}");
+        assert_eq!(d.poll_transmit(deadline), None);
+        assert_eq!(
+            d.poll_timeout(),
+            Some(deadline + Duration::from_millis(5000))
+        );
+        assert!(matches!(
+            d.control(deadline, &Command::Mode { take_control: true }),
+            ControlOutcome::Refused(_)
+        ));
+    }
+}

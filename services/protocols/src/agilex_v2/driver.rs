@@ -1,0 +1,799 @@
+//! The protocol-V2 driver: one state machine for the whole family, over the V2 codec and the
+//! shared [`DriverCore`].
+//!
+//! * **Heartbeat**: 0x111 every `heartbeat_period_ms` (20 ms), always — explicit zeros when
+//!   there is no command; a changed command goes out at once.
+//! * **Control mode** (`PROTOCOLS-V2` §5, §8 item 4): 0x421 `01` at start, and again whenever
+//!   0x211 b1 reads standby while we want control (a rebooted chassis, a heartbeat timeout, an
+//!   RC hand-back), at most every [`V2Driver::MODE_RETRY`]. An RC transmitter holding authority
+//!   is reported ([`LinkFlags::RC_AUTHORITY`]), never fought. After a reboot or an RC hand-back
+//!   the driver follows the mux's current output, as the TITAN's does.
+//! * **E-stop**: while 0x211 b0 reports it, and after its release until the command has been
+//!   zero once, 0x111 carries zeros ([`ClampFlags::CHASSIS_NOT_READY`]) — the chassis never
+//!   resumes an old twist on its own.
+//! * **Parking brake** (HUNTER 2.0): released once before motion in CAN command mode, engaged
+//!   after an idle time and on shutdown. Robots without one never see 0x131.
+//! * **RANGER motion mode**: 0x141 before the 0x111 that needs a different mode.
+//! * **Lights**: 0x121 repeated every `light_refresh_ms` while overridden; handing back sends one
+//!   `enabled = 0` frame.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use chassis_interfaces::{
+    ClampFlags, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags, SystemState, Twist,
+};
+
+use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake, vehicle};
+use super::commands::{STOP, frames_for};
+use super::kinematics::{RangerMode, body_twist, plan};
+use super::profile::{self, FaultMap, V2Profile};
+use crate::command::Command;
+use crate::driver::{
+    ControlOutcome, Driver, DriverConfig, DriverCore, DriverEvent, Level, PoseIntegrator, Rx,
+    Transmit, flags_of, requested_turn,
+};
+use crate::profile::{Profile, Robot};
+use crate::time::{Timestamp, earliest};
+
+/// What the driver believes about the parking brake (not reported except on HUNTER 2.0 b6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Brake {
+    Unknown,
+    Engaged,
+    Released,
+}
+
+/// The protocol-V2 driver.
+#[derive(Debug)]
+pub struct V2Driver {
+    profile: V2Profile,
+    robot: Robot,
+    config: DriverConfig,
+    core: DriverCore,
+    queue: VecDeque<Frame>,
+    pose: PoseIntegrator,
+    /// What the next 0x111 carries.
+    motion: Motion,
+    /// What the mux asked for, before the E-stop hold.
+    requested: Motion,
+    requested_flags: u32,
+    motion_clamp_flags: u32,
+    /// RANGER: the mode last sent (or reported by 0x291).
+    ranger_mode: Option<RangerMode>,
+    want_control: bool,
+    last_mode_request: Option<Timestamp>,
+    estop_hold: bool,
+    brake: Brake,
+    idle_since: Option<Timestamp>,
+    lights: Option<(Lights, Timestamp)>,
+    steering_zero: Option<(u64, Timestamp)>,
+    next_token: u64,
+    other_faults: u64,
+    /// ⚠ D-1: `None` until CAN mode is first reported; then when to fall back to 0x4A1.
+    version: VersionQuery,
+}
+
+/// Where the version query stands (⚠ D-1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum VersionQuery {
+    /// Not asked yet (asked once the chassis first reports CAN mode).
+    NotAsked,
+    /// 0x411 sent; 0x4A1 follows at this time if 0x41A has not answered (`both`).
+    Asked { fallback: Option<Timestamp> },
+    /// Answered, given up, or never to be asked.
+    Done,
+}
+
+impl V2Driver {
+    /// Least time between two 0x421 while the chassis keeps reporting standby (`PROTOCOLS-V2` §5).
+    pub const MODE_RETRY: Duration = Duration::from_millis(500);
+
+    /// A driver starting at `now`. With `config.take_control` it asks for CAN command mode at once.
+    pub fn new(profile: V2Profile, config: DriverConfig, now: Timestamp) -> Self {
+        let robot = Profile::V2(profile.clone()).robot();
+        let mut core = DriverCore::new(
+            robot.kind(),
+            Duration::from_millis(profile.heartbeat_period_ms),
+            &config,
+            now,
+        );
+        core.state.system.control_mode = ControlMode::UNKNOWN;
+        core.state.system.wire_protocol = chassis_interfaces::WireProtocol::V2;
+        let brake = if profile.brake_lock_value.is_some() {
+            Brake::Unknown
+        } else {
+            Brake::Released
+        };
+        let mut driver = Self {
+            want_control: config.take_control,
+            profile,
+            robot,
+            config,
+            core,
+            queue: VecDeque::new(),
+            pose: PoseIntegrator::default(),
+            motion: STOP,
+            requested: STOP,
+            requested_flags: 0,
+            motion_clamp_flags: 0,
+            ranger_mode: None,
+            last_mode_request: None,
+            estop_hold: false,
+            brake,
+            idle_since: Some(now),
+            lights: None,
+            steering_zero: None,
+            next_token: 1,
+            other_faults: 0,
+            version: VersionQuery::NotAsked,
+        };
+        if driver.profile.version_query == profile::VersionQuery::Never {
+            driver.version = VersionQuery::Done;
+        }
+        if driver.want_control {
+            driver.request_mode(now);
+        }
+        driver
+    }
+
+    pub fn profile(&self) -> &V2Profile {
+        &self.profile
+    }
+
+    fn has_brake(&self) -> bool {
+        self.profile.brake_lock_value.is_some()
+    }
+
+    fn request_mode(&mut self, now: Timestamp) {
+        self.queue.push_back(Frame::Mode(ModeCommand { can: true }));
+        self.last_mode_request = Some(now);
+    }
+
+    /// Recomputes what the heartbeat carries from the request and the E-stop hold.
+    fn update_motion(&mut self, now: Timestamp) {
+        let mut motion = self.requested;
+        let mut flags = self.requested_flags;
+        if self.estop_hold {
+            if motion != STOP {
+                flags |= ClampFlags::CHASSIS_NOT_READY;
+            }
+            motion = STOP;
+        }
+        let moving = motion != STOP;
+        if moving {
+            self.idle_since = None;
+        } else if self.idle_since.is_none() {
+            self.idle_since = Some(now);
+        }
+        self.core.schedule.update(&mut self.motion, motion, !moving);
+        self.motion_clamp_flags = flags;
+    }
+
+    fn plan(&mut self, now: Timestamp, command: &Twist) {
+        match plan(
+            command.linear_x_mps.into(),
+            command.linear_y_mps.into(),
+            requested_turn(command),
+            &self.profile,
+        ) {
+            Ok(planned) => {
+                if let Some(mode) = planned.mode
+                    && self.ranger_mode != Some(mode)
+                    && let Some(code) = mode.code(&self.profile)
+                {
+                    self.queue.push_back(Frame::MotionModeCommand(MotionMode {
+                        mode: code,
+                        changing: false,
+                    }));
+                    self.ranger_mode = Some(mode);
+                }
+                self.requested = planned.motion;
+                self.requested_flags = planned.clamp_flags;
+            }
+            // Non-finite input: the mux rejects it first; a stop is the only safe answer here.
+            Err(_) => {
+                self.requested = STOP;
+                self.requested_flags = ClampFlags::CHASSIS_NOT_READY;
+            }
+        }
+        // Released E-stop: hold zero until the command has been zero once.
+        if self.estop_hold && self.requested == STOP && !self.estop_reported() {
+            self.estop_hold = false;
+            self.core.notice(
+                Level::Info,
+                "E-stop released and command zero: motion allowed",
+            );
+        }
+        self.update_motion(now);
+    }
+
+    fn estop_reported(&self) -> bool {
+        self.core.state.system.fault_flags & FaultFlags::EMERGENCY_STOP != 0
+    }
+
+    fn update_body(&mut self, now: Timestamp) {
+        self.core.state.system.parking_brake_engaged =
+            u8::from(self.has_brake() && self.brake != Brake::Released);
+        self.core.state.touch(Group::Body, now.as_nanos());
+    }
+
+    fn apply(&mut self, now: Timestamp, frame: Frame) {
+        let t = now.as_nanos();
+        match frame {
+            Frame::SystemStatus(s) => self.apply_system(now, s),
+            Frame::MotionFeedback(m) => {
+                let (vx, vy, w) = body_twist(&m, self.ranger_mode, &self.profile);
+                let motion = &mut self.core.state.motion;
+                motion.linear_mps = vx as f32;
+                motion.lateral_mps = vy as f32;
+                motion.angular_radps = w as f32;
+                motion.steer_rad = m.steer_rad as f32;
+                self.core.state.touch(Group::Motion, t);
+                self.pose
+                    .update(now, vx, vy, w, &mut self.core.state.odometry);
+                self.core.state.touch(Group::Pose, t);
+            }
+            Frame::SteeringAngles(a) => {
+                self.core.state.motion.front_steer_rad = a.values[0] as f32;
+                self.core.state.motion.rear_steer_rad = a.values[2] as f32;
+                self.core.state.touch(Group::Steering, t);
+            }
+            Frame::WheelSpeeds(s) => {
+                let motion = &mut self.core.state.motion;
+                motion.wheel_mps = s.values.map(|v| v as f32);
+                motion.front_axle_mps = ((s.values[0] + s.values[1]) / 2.0) as f32;
+                motion.rear_axle_mps = ((s.values[2] + s.values[3]) / 2.0) as f32;
+                self.core.state.touch(Group::WheelSpeed, t);
+            }
+            Frame::MotionModeState(m) if !m.changing => {
+                self.ranger_mode = RangerMode::from_code(m.mode, &self.profile);
+            }
+            Frame::Odometer(o) => {
+                let odometry = &mut self.core.state.odometry;
+                odometry.left_distance_m = o.left_m;
+                odometry.right_distance_m = o.right_m;
+                self.core.state.touch(Group::Odometry, t);
+            }
+            Frame::MotorFast(m) => {
+                if let Some(motor) = self
+                    .core
+                    .state
+                    .motors
+                    .get_mut(usize::from(m.motor.max(1) - 1))
+                {
+                    motor.rpm = m.rpm as f32;
+                    motor.current_a = m.current_a as f32;
+                    motor.position_counts = m.position_counts.into();
+                }
+                self.core.state.touch(Group::MotorDrive, t);
+            }
+            Frame::MotorSlow(m) => {
+                if let Some(motor) = self
+                    .core
+                    .state
+                    .motors
+                    .get_mut(usize::from(m.motor.max(1) - 1))
+                {
+                    motor.driver_voltage_v = m.driver_voltage_v as f32;
+                    motor.driver_temp_c = m.driver_temp_c as f32;
+                    motor.motor_temp_c = m.motor_temp_c as f32;
+                    motor.driver_status = normalize_driver_status(m.driver_status, &self.profile);
+                }
+                self.core.state.touch(Group::MotorDriver, t);
+            }
+            Frame::Rc(r) => {
+                let rc = &mut self.core.state.rc;
+                rc.switch_a = r.switch_a;
+                rc.switch_b = r.switch_b;
+                rc.switch_c = r.switch_c;
+                rc.switch_d = r.switch_d;
+                rc.right_x_pct = r.right_x_pct;
+                rc.right_y_pct = r.right_y_pct;
+                rc.left_y_pct = r.left_y_pct;
+                rc.left_x_pct = r.left_x_pct;
+                rc.knob_a_pct = r.knob_a_pct;
+                rc.counter = r.counter;
+                self.core.state.touch(Group::Rc, t);
+            }
+            Frame::LightState(l) => {
+                let lights = &mut self.core.state.lights;
+                lights.control_enabled = u8::from(l.enabled);
+                lights.front_mode = l.front_mode;
+                lights.front_brightness_pct = l.front_brightness_pct;
+                self.core.state.touch(Group::Lights, t);
+            }
+            Frame::BmsData(b) => {
+                if let Some(bms) = self.core.state.bms.first_mut() {
+                    bms.soc_pct = b.soc_pct as f32;
+                    bms.soh_pct = b.soh_pct as f32;
+                    bms.voltage_v = b.voltage_v as f32;
+                    bms.current_a = b.current_a as f32;
+                    bms.temperature_c = b.temperature_c as f32;
+                }
+                self.core.state.system.battery_soc_pct = b.soc_pct as f32;
+                self.core.state.system.battery_current_a = b.current_a as f32;
+                self.core.state.touch(Group::BmsPack, t);
+            }
+            Frame::BmsAlarm(b) => {
+                if let Some(bms) = self.core.state.bms.first_mut() {
+                    bms.alarm_flags = b.alarm_flags();
+                }
+                let on = b.alarm_flags() & 0xFFFF != 0;
+                if on {
+                    self.other_faults |= FaultFlags::BMS_ALARM;
+                } else {
+                    self.other_faults &= !FaultFlags::BMS_ALARM;
+                }
+                self.core.state.touch(Group::BmsPack, t);
+            }
+            Frame::VersionText(t) => self.core.notice(
+                Level::Info,
+                format!("chassis version text: {}", t.text().trim_end()),
+            ),
+            Frame::Version(v) => {
+                self.version = VersionQuery::Done;
+                self.core.notice(
+                    Level::Info,
+                    format!(
+                        "chassis versions: controller hw {}.{} sw {}.{}, driver hw {}.{} sw {}.{}",
+                        v.controller_hw[0],
+                        v.controller_hw[1],
+                        v.controller_sw[0],
+                        v.controller_sw[1],
+                        v.driver_hw[0],
+                        v.driver_hw[1],
+                        v.driver_sw[0],
+                        v.driver_sw[1]
+                    ),
+                );
+            }
+            Frame::SteeringZeroAck { done } => {
+                self.core.state.system.steering_zero_done = u8::from(done);
+                self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
+                self.core.state.touch(Group::Body, t);
+                if let Some((token, _)) = self.steering_zero.take() {
+                    self.core.events.push_back(DriverEvent::ControlDone {
+                        token,
+                        status: if done {
+                            ControlStatus::OK
+                        } else {
+                            ControlStatus::REFUSED
+                        },
+                        message: if done {
+                            "steering zero set".into()
+                        } else {
+                            "the chassis refused the steering zero (0x43A 0xFF)".into()
+                        },
+                    });
+                }
+            }
+            // Commands from another node, and sensors without a place in the state.
+            _ => {}
+        }
+    }
+
+    fn apply_system(&mut self, now: Timestamp, s: codec::SystemStatus) {
+        let old_mode = self.core.state.system.control_mode;
+        let new_mode = match s.control {
+            "can" => ControlMode::COMMAND,
+            "rc" => ControlMode::REMOTE,
+            "standby" => ControlMode::STANDBY,
+            _ => ControlMode::UNKNOWN,
+        };
+        let old_faults = self.core.state.system.fault_flags;
+        let mut new_faults = normalize_faults(s.fault_word, &self.profile) | self.other_faults;
+        match s.vehicle_state {
+            vehicle::NORMAL => {}
+            vehicle::ESTOP => new_faults |= FaultFlags::EMERGENCY_STOP,
+            _ => new_faults |= FaultFlags::BODY_EXCEPTION,
+        }
+        if new_faults & FaultFlags::EMERGENCY_STOP != 0 && !self.estop_hold {
+            self.estop_hold = true;
+            self.core.notice(
+                Level::Warn,
+                "chassis E-stop: holding zero until it is released and the command is zero",
+            );
+            self.update_motion(now);
+        }
+        let sys = &mut self.core.state.system;
+        sys.body_status = if s.vehicle_state == vehicle::NORMAL {
+            SystemState::BODY_NORMAL
+        } else {
+            SystemState::BODY_EXCEPTION
+        };
+        sys.control_mode = new_mode;
+        sys.battery_voltage_v = s.battery_voltage_v as f32;
+        sys.vendor_fault_word = s.fault_word.into();
+        sys.fault_flags = new_faults;
+        sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
+        if self.profile.brake_lock_value.is_some() && self.profile.fault_map == FaultMap::Hunter2 {
+            // HUNTER 2.0 reports its brake in b6.
+            sys.parking_brake_engaged = u8::from(s.b6 == 0x01);
+        }
+        self.core.state.touch(Group::System, now.as_nanos());
+        self.core
+            .set_flag(LinkFlags::COMMAND_MODE, new_mode == ControlMode::COMMAND);
+        self.core
+            .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
+        if new_mode == ControlMode::COMMAND && self.version == VersionQuery::NotAsked {
+            self.ask_version(now);
+        }
+        if new_mode == ControlMode::COMMAND {
+            // The retry limit is for a chassis that keeps reporting standby: a standby after CAN
+            // mode (a reboot, a hand-back) is answered at once.
+            self.last_mode_request = None;
+        }
+        if new_mode != old_mode {
+            let level = if new_mode == ControlMode::COMMAND || old_mode == ControlMode::UNKNOWN {
+                Level::Info
+            } else {
+                Level::Warn
+            };
+            self.core.notice(
+                level,
+                format!(
+                    "chassis mode {} -> {}",
+                    ControlMode::name(old_mode),
+                    ControlMode::name(new_mode)
+                ),
+            );
+            if new_mode != ControlMode::COMMAND && self.has_brake() {
+                self.brake = Brake::Unknown;
+                self.update_body(now);
+            }
+        }
+        self.core
+            .fault_notices(old_faults, new_faults, FaultFlags::WARNINGS);
+        // ⚠ D-22: where the firmware has no standby code, "RC" (0x00) also means "not ours".
+        let not_ours = new_mode == ControlMode::STANDBY
+            || (self.profile.mode_codes.standby.is_none() && new_mode == ControlMode::REMOTE);
+        if not_ours
+            && self.want_control
+            && !self.core.bus_down
+            && self
+                .last_mode_request
+                .is_none_or(|t| now.saturating_since(t) >= Self::MODE_RETRY)
+        {
+            self.request_mode(now);
+        }
+        // The E-stop may have been released while the command was already zero.
+        if self.estop_hold && !self.estop_reported() && self.requested == STOP {
+            self.estop_hold = false;
+            self.core.notice(
+                Level::Info,
+                "E-stop released and command zero: motion allowed",
+            );
+            self.update_motion(now);
+        }
+    }
+
+    /// ⚠ D-1: 0x411 (manual) or 0x4A1 (SDK); with `both`, 0x4A1 a second later if 0x41A is
+    /// silent. An answer is logged; silence is normal.
+    fn ask_version(&mut self, now: Timestamp) {
+        self.version = match self.profile.version_query {
+            profile::VersionQuery::Never => VersionQuery::Done,
+            profile::VersionQuery::Sdk => {
+                self.queue.push_back(Frame::SdkVersionRequest);
+                VersionQuery::Done
+            }
+            profile::VersionQuery::Manual => {
+                self.queue.push_back(Frame::VersionRequest);
+                VersionQuery::Asked { fallback: None }
+            }
+            profile::VersionQuery::Both => {
+                self.queue.push_back(Frame::VersionRequest);
+                VersionQuery::Asked {
+                    fallback: Some(now + Duration::from_secs(1)),
+                }
+            }
+        };
+    }
+
+    fn next_token(&mut self) -> u64 {
+        let token = self.next_token;
+        self.next_token += 1;
+        token
+    }
+}
+
+/// The normalized `FaultFlags` of 0x211 b4-5 under the profile's ⚠ D-3 table.
+pub fn normalize_faults(word: u16, profile: &V2Profile) -> u64 {
+    const B4: u16 = 8;
+    let bit7 = if profile.fault_0080_is_estop {
+        FaultFlags::EMERGENCY_STOP
+    } else {
+        FaultFlags::FRONT_STEERING_ENCODER
+    };
+    let map: &[(u16, u64)] = match profile.fault_map {
+        FaultMap::Sdk => &[
+            (1 << B4, FaultFlags::MOTOR_DRIVER_ERROR),
+            (1 << (B4 + 1), FaultFlags::HEARTBEAT_LOST),
+            (1 << 0, FaultFlags::BATTERY_UNDER_VOLTAGE),
+            (1 << 1, FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING),
+            (1 << 2, FaultFlags::RC_LINK_LOST),
+            (1 << 3, FaultFlags::MOTOR_1_COMM_LOST),
+            (1 << 4, FaultFlags::MOTOR_2_COMM_LOST),
+            (1 << 5, FaultFlags::MOTOR_3_COMM_LOST),
+            (1 << 6, FaultFlags::MOTOR_4_COMM_LOST),
+        ],
+        FaultMap::ScoutV13 => &[
+            (1 << B4, FaultFlags::BATTERY_UNDER_VOLTAGE),
+            (1 << (B4 + 1), FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING),
+            (1 << (B4 + 2), FaultFlags::RC_LINK_LOST),
+        ],
+        FaultMap::TracerMini => &[
+            (1 << (B4 + 1), FaultFlags::OVER_CURRENT),
+            (1 << (B4 + 7), FaultFlags::BUMPER),
+            (1 << 0, FaultFlags::BATTERY_UNDER_VOLTAGE),
+            (1 << 1, FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING),
+            (1 << 2, FaultFlags::RC_LINK_LOST),
+        ],
+        FaultMap::Hunter2 => &[
+            (1 << (B4 + 1), FaultFlags::FRONT_STEERING_ENCODER),
+            (1 << (B4 + 2), FaultFlags::RC_LINK_LOST),
+            (1 << (B4 + 4), FaultFlags::HEARTBEAT_LOST),
+            (1 << (B4 + 6), FaultFlags::MOTOR_DRIVER_ERROR),
+            (1 << 0, FaultFlags::BATTERY_UNDER_VOLTAGE),
+            (1 << 3, FaultFlags::MOTOR_1_COMM_LOST),
+            (1 << 4, FaultFlags::MOTOR_2_COMM_LOST),
+            (1 << 5, FaultFlags::MOTOR_3_COMM_LOST),
+            (1 << 6, FaultFlags::OVER_TEMPERATURE),
+            (1 << 7, FaultFlags::OVER_CURRENT),
+        ],
+        FaultMap::HunterSe => &[
+            (1 << B4, FaultFlags::OVER_TEMPERATURE),
+            (1 << (B4 + 1), FaultFlags::OVER_CURRENT),
+            (1 << (B4 + 2), FaultFlags::MOTOR_DRIVER_ERROR),
+            (1 << 0, FaultFlags::BATTERY_UNDER_VOLTAGE),
+            (1 << 1, FaultFlags::FRONT_STEERING_ENCODER),
+            (1 << 2, FaultFlags::RC_LINK_LOST),
+            (1 << 3, FaultFlags::MOTOR_1_COMM_LOST),
+            (1 << 4, FaultFlags::MOTOR_2_COMM_LOST),
+            (1 << 5, FaultFlags::MOTOR_3_COMM_LOST),
+        ],
+    };
+    let bit7_flag = match profile.fault_map {
+        FaultMap::Sdk | FaultMap::HunterSe if word & 0x0080 != 0 => bit7,
+        _ => 0,
+    };
+    flags_of(word, map) | bit7_flag
+}
+
+/// `chassis_interfaces::DriverStatus` bits of 0x26x b5: bit 6 "enabled" per ⚠ D-7.
+fn normalize_driver_status(status: u8, profile: &V2Profile) -> u8 {
+    if profile.driver_bit6_means_enabled {
+        status
+    } else {
+        status ^ (1 << 6)
+    }
+}
+
+impl Driver for V2Driver {
+    fn robot(&self) -> Robot {
+        self.robot
+    }
+
+    crate::driver::core_accessors!();
+
+    fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
+        let profile = &self.profile;
+        if let Some(frame) = self.core.can_rx(now, rx, |f| codec::decode(f, profile)) {
+            self.apply(now, frame);
+        }
+    }
+
+    fn set_command(&mut self, now: Timestamp, command: &Twist) {
+        self.plan(now, command);
+    }
+
+    fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
+        let planned = match self
+            .core
+            .admit_control(command, |c| frames_for(c, &self.profile))
+        {
+            Ok(planned) => planned,
+            Err(outcome) => return outcome,
+        };
+        let outcome = match *command {
+            Command::Mode { take_control } => {
+                self.want_control = take_control;
+                ControlOutcome::Done(if take_control {
+                    "CAN command mode requested".into()
+                } else {
+                    "standby requested; motion commands will be ignored".into()
+                })
+            }
+            Command::Brake { engage } => {
+                self.brake = if engage {
+                    Brake::Engaged
+                } else {
+                    Brake::Released
+                };
+                self.update_body(now);
+                ControlOutcome::Done(format!(
+                    "parking brake {}",
+                    if engage { "engaged" } else { "released" }
+                ))
+            }
+            Command::Lights { enable, .. } => {
+                self.lights = match planned.frames.first() {
+                    Some(Frame::LightCommand(l)) if enable => Some((
+                        *l,
+                        now + Duration::from_millis(self.profile.light_refresh_ms),
+                    )),
+                    _ => None,
+                };
+                ControlOutcome::Done(if enable {
+                    "light control taken".into()
+                } else {
+                    "lights handed back to the chassis".into()
+                })
+            }
+            Command::SteeringZero => {
+                if self.steering_zero.is_some() {
+                    return ControlOutcome::Refused(
+                        "a steering zero is already waiting for its acknowledgement".into(),
+                    );
+                }
+                let token = self.next_token();
+                let deadline = now + Duration::from_millis(self.config.control_timeout_ms);
+                self.steering_zero = Some((token, deadline));
+                self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, true);
+                ControlOutcome::Pending(token)
+            }
+            _ => ControlOutcome::Done(format!("{} sent", command.name())),
+        };
+        self.queue.extend(planned.frames);
+        outcome
+    }
+
+    fn handle_timeout(&mut self, now: Timestamp) {
+        if self.core.check_silence(now, "feedback") {
+            self.pose.reset();
+        }
+        if let VersionQuery::Asked {
+            fallback: Some(due),
+        } = self.version
+            && now >= due
+        {
+            self.queue.push_back(Frame::SdkVersionRequest);
+            self.version = VersionQuery::Done;
+        }
+        if let Some((lights, due)) = self.lights
+            && now >= due
+            && !self.core.bus_down
+        {
+            self.queue.push_back(Frame::LightCommand(lights));
+            self.lights = Some((
+                lights,
+                now + Duration::from_millis(self.profile.light_refresh_ms),
+            ));
+        }
+        if self.has_brake()
+            && self.config.brake_idle_engage_ms > 0
+            && self.brake == Brake::Released
+            && self.idle_since.is_some_and(|since| {
+                now.saturating_since(since)
+                    >= Duration::from_millis(self.config.brake_idle_engage_ms)
+            })
+            && !self.core.bus_down
+        {
+            self.queue
+                .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
+            self.brake = Brake::Engaged;
+            self.update_body(now);
+        }
+        if let Some((token, deadline)) = self.steering_zero
+            && now >= deadline
+        {
+            self.steering_zero = None;
+            self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
+            self.core.events.push_back(DriverEvent::ControlDone {
+                token,
+                status: ControlStatus::TIMEOUT,
+                message: format!(
+                    "no steering zero acknowledgement (0x43A) within {} ms",
+                    self.config.control_timeout_ms
+                ),
+            });
+        }
+    }
+
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+        if self.core.bus_down {
+            self.queue.clear();
+            return None;
+        }
+        let frame = if let Some(frame) = self.queue.pop_front() {
+            frame
+        } else if self.core.schedule.is_due(now)
+            && self.motion != STOP
+            && self.has_brake()
+            && self.brake != Brake::Released
+            && self.core.state.system.control_mode == ControlMode::COMMAND
+        {
+            // Release before motion (HUNTER 2.0 ignores speed while braked).
+            self.brake = Brake::Released;
+            self.update_body(now);
+            Frame::ParkingBrake(ParkingBrake { engage: false })
+        } else if self.core.schedule.is_due(now) {
+            self.core.schedule.sent(now);
+            let (vx, vy, w) = body_twist(&self.motion, self.ranger_mode, &self.profile);
+            let echo = &mut self.core.state.command;
+            echo.linear_mps = vx as f32;
+            echo.lateral_mps = vy as f32;
+            echo.angular_radps = w as f32;
+            echo.steer_rad = self.motion.steer_rad as f32;
+            echo.clamp_flags = self.motion_clamp_flags;
+            self.core.state.touch(Group::Command, now.as_nanos());
+            Frame::MotionCommand(self.motion)
+        } else {
+            return None;
+        };
+        self.core
+            .transmit(frame.name(), frame.encode(&self.profile), Transmit::Can)
+    }
+
+    fn poll_timeout(&self) -> Option<Timestamp> {
+        let mut next = Some(self.core.poll_timeout()?);
+        if let Some((_, due)) = self.lights {
+            next = earliest(next, Some(due));
+        }
+        if let VersionQuery::Asked {
+            fallback: Some(due),
+        } = self.version
+        {
+            next = earliest(next, Some(due));
+        }
+        if self.has_brake()
+            && self.config.brake_idle_engage_ms > 0
+            && self.brake == Brake::Released
+            && let Some(since) = self.idle_since
+        {
+            next = earliest(
+                next,
+                Some(since + Duration::from_millis(self.config.brake_idle_engage_ms)),
+            );
+        }
+        if let Some((_, deadline)) = self.steering_zero {
+            next = earliest(next, Some(deadline));
+        }
+        next
+    }
+
+    fn set_bus_down(&mut self, now: Timestamp, down: bool) {
+        if !self.core.set_bus_down(now, down) {
+            return;
+        }
+        self.queue.clear();
+        if !down {
+            if self.has_brake() {
+                self.brake = Brake::Unknown;
+            }
+            self.ranger_mode = None;
+            self.pose.reset();
+            if self.want_control {
+                self.request_mode(now);
+            }
+            self.core
+                .notice(Level::Info, "bus back: taking control again");
+        }
+    }
+
+    fn shutdown(&mut self, now: Timestamp) {
+        self.requested = STOP;
+        self.update_motion(now);
+        self.queue.clear();
+        self.queue.push_back(Frame::MotionCommand(STOP));
+        if self.has_brake() {
+            self.queue
+                .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
+            self.brake = Brake::Engaged;
+            self.update_body(now);
+        }
+        if self.lights.take().is_some() {
+            self.queue.push_back(Frame::LightCommand(Lights::default()));
+        }
+    }
+}

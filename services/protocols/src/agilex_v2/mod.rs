@@ -1,0 +1,25 @@
+//! AgileX protocol V2: SCOUT 2.0, SCOUT MINI (V2 firmware, skid and omni), HUNTER 2.0 / SE,
+//! TRACER, BUNKER and RANGER MINI — one codec, one driver and one simulated firmware for the
+//! family, parametrised by a [`V2Profile`] per robot. CAN 2.0B 500 kbit/s, big-endian, no
+//! checksum; the layouts it shares with the TITAN use the TITAN's frame types.
+
+mod auto;
+mod codec;
+mod commands;
+pub mod detect;
+mod driver;
+pub mod kinematics;
+pub mod profile;
+mod sim;
+
+pub use auto::AutoDriver;
+pub use codec::*;
+pub use commands::{STOP, clear_code_for, frames_for};
+pub use driver::{V2Driver, normalize_faults};
+pub use profile::{Kinematics, V2Model, V2Profile};
+pub use sim::V2Sim;
+
+#[cfg(test)]
+mod scenarios;
+#[cfg(test)]
+mod tests;

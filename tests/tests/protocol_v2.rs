@@ -1,0 +1,254 @@
+//! The cited test vectors of AgileX protocol V2 (docs/PROTOCOLS.md, "AgileX protocol V2",
+//! TV1-TV17) through the command-line tools: `chassis decode --robot R` reads each one, and
+//! `chassis encode` prints exactly the vector's bytes for the commands it can express. The V1
+//! SCOUT MINI example still decodes as V1 (count and checksum) without `--protocol`.
+
+use chassis_tests::Env;
+
+/// One vector: robot (and protocol flag), frame, fields `chassis decode` must report, and the
+/// `chassis encode` arguments that print the same frame (empty: a report, or no such command).
+struct Vector {
+    name: &'static str,
+    robot: &'static [&'static str],
+    frame: &'static str,
+    decoded: &'static [&'static str],
+    encode: &'static [&'static str],
+}
+
+const VECTORS: &[Vector] = &[
+    Vector {
+        name: "TV1",
+        robot: &["hunter"],
+        frame: "111#0096000000000000",
+        decoded: &[r#""frame":"motion_command""#, r#""linear_mps":0.15,"#],
+        encode: &["velocity", "--vx", "0.15"],
+    },
+    Vector {
+        name: "TV2",
+        robot: &["hunter"],
+        frame: "111#00000000000000C8",
+        decoded: &[r#""linear_mps":0.0"#, r#""steer_rad":0.2"#],
+        encode: &["velocity", "--steer", "0.2"],
+    },
+    Vector {
+        name: "TV3",
+        robot: &["scout"],
+        frame: "111#0000003200000000",
+        decoded: &[r#""angular_radps":0.05,"#],
+        encode: &["velocity", "--wz", "0.05"],
+    },
+    Vector {
+        name: "TV4",
+        robot: &["bunker"],
+        frame: "111#000000C800000000",
+        decoded: &[r#""angular_radps":0.2,"#],
+        encode: &["velocity", "--wz", "0.2"],
+    },
+    Vector {
+        name: "TV5",
+        robot: &["bunker"],
+        frame: "111#00FA000000000000",
+        decoded: &[r#""linear_mps":0.25,"#, r#""lateral_mps":0.0"#],
+        encode: &["velocity", "--vx", "0.25"],
+    },
+    Vector {
+        name: "TV6",
+        robot: &["bunker"],
+        frame: "421#0100000000000000",
+        decoded: &[r#""frame":"mode""#, r#""can":true"#],
+        encode: &["mode", "command"],
+    },
+    Vector {
+        name: "TV7",
+        robot: &["bunker"],
+        frame: "421#0000000000000000",
+        decoded: &[r#""can":false"#],
+        encode: &["mode", "standby"],
+    },
+    Vector {
+        name: "TV8",
+        robot: &["bunker"],
+        frame: "211#0100010000800000",
+        decoded: &[
+            r#""vehicle_state":1"#,
+            r#""control":"standby""#,
+            r#""battery_voltage_v":25.6"#,
+            r#""fault_word":128"#,
+        ],
+        encode: &[],
+    },
+    Vector {
+        name: "TV9",
+        robot: &["bunker"],
+        frame: "221#0000000000000000",
+        decoded: &[r#""frame":"motion_feedback""#, r#""linear_mps":0.0"#],
+        encode: &[],
+    },
+    Vector {
+        name: "TV10",
+        robot: &["bunker"],
+        frame: "241#AA00000000000061",
+        decoded: &[
+            r#""switch_a":2"#,
+            r#""switch_b":2"#,
+            r#""switch_c":2"#,
+            r#""switch_d":2"#,
+            r#""counter":97"#,
+        ],
+        encode: &[],
+    },
+    Vector {
+        name: "TV11",
+        robot: &["bunker"],
+        frame: "311#0000000000000000",
+        decoded: &[
+            r#""frame":"odometer""#,
+            r#""left_m":0.0"#,
+            r#""right_m":0.0"#,
+        ],
+        encode: &[],
+    },
+    Vector {
+        name: "TV12",
+        robot: &["bunker"],
+        frame: "211#010100FE00800000",
+        decoded: &[r#""control":"can""#, r#""battery_voltage_v":25.4"#],
+        encode: &[],
+    },
+    Vector {
+        name: "TV13",
+        robot: &["tracer"],
+        frame: "121#0100000000000000",
+        decoded: &[
+            r#""frame":"light_command""#,
+            r#""enabled":true"#,
+            r#""front_mode":0"#,
+        ],
+        encode: &["lights", "off"],
+    },
+    Vector {
+        name: "TV14",
+        robot: &["scout-mini", "--protocol", "v2"],
+        frame: "4A1#01",
+        decoded: &[r#""frame":"sdk_version_request""#],
+        encode: &[],
+    },
+    Vector {
+        name: "TV15",
+        robot: &["scout"],
+        frame: "411#01",
+        decoded: &[r#""frame":"version_request""#],
+        encode: &[],
+    },
+    Vector {
+        name: "TV16",
+        robot: &["hunter"],
+        frame: "431#AA",
+        decoded: &[r#""frame":"steering_zero""#],
+        encode: &["steering-zero"],
+    },
+    Vector {
+        name: "TV16 reply",
+        robot: &["hunter"],
+        frame: "43A#EE",
+        decoded: &[r#""frame":"steering_zero_ack""#, r#""done":true"#],
+        encode: &[],
+    },
+    Vector {
+        name: "TV17",
+        robot: &["hunter-se"],
+        frame: "433#AA",
+        decoded: &[r#""frame":"steering_zero_query""#],
+        encode: &[],
+    },
+];
+
+fn run(env: &Env, args: &[&str]) -> String {
+    let out = env.chassis(args);
+    assert!(
+        out.status.success(),
+        "chassis {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).trim().to_string()
+}
+
+#[test]
+fn every_cited_v2_vector_decodes_and_the_commands_encode_to_its_bytes() {
+    let env = Env::new("protocol-v2");
+    for v in VECTORS {
+        let mut args = vec!["decode", "--robot"];
+        args.extend_from_slice(v.robot);
+        args.push(v.frame);
+        let json = run(&env, &args);
+        assert!(json.contains(r#""protocol":"v2""#), "{}: {json}", v.name);
+        for field in v.decoded {
+            assert!(json.contains(field), "{}: {field} not in {json}", v.name);
+        }
+        if !v.encode.is_empty() {
+            let mut args = vec!["encode", "--robot"];
+            args.extend_from_slice(v.robot);
+            args.extend_from_slice(v.encode);
+            let lines = run(&env, &args);
+            assert_eq!(lines.lines().last(), Some(v.frame), "{}: {args:?}", v.name);
+        }
+    }
+}
+
+#[test]
+fn the_v1_example_stays_v1_and_v2_is_only_on_request() {
+    let env = Env::new("protocol-v1");
+    // 0x130 with a valid V1 checksum in b7: the SCOUT MINI's default protocol.
+    let json = run(
+        &env,
+        &["decode", "--robot", "scout-mini", "130#01000a0000000044"],
+    );
+    assert!(json.contains(r#""count":0"#), "{json}");
+    assert!(!json.contains(r#""protocol":"v2""#), "{json}");
+    // The same robot with --protocol v2 speaks V2.
+    let v2 = run(
+        &env,
+        &[
+            "encode",
+            "--robot",
+            "scout-mini",
+            "--protocol",
+            "v2",
+            "velocity",
+            "--vx",
+            "0.03",
+        ],
+    );
+    assert_eq!(v2, "111#001E000000000000");
+    // A robot without V1 firmware support refuses --protocol v1.
+    let out = env.chassis(&["decode", "--robot", "hunter", "--protocol", "v1", "111#00"]);
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("hunter does not speak protocol v1"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn chassis_detect_classifies_the_v1_example_as_v1_and_the_v2_capture_as_v2() {
+    let env = Env::new("protocol-detect");
+    let v1 = "130#01000A0000000044";
+    assert_eq!(run(&env, &["detect", v1, v1, v1]), "v1");
+    let capture = [
+        "detect",
+        "211#0100010000800000",
+        "221#0000000000000000",
+        "241#AA00000000000061",
+        "311#0000000000000000",
+    ];
+    assert_eq!(run(&env, &capture), "v2");
+    // A frame both protocols use proves nothing: no decision, exit 1, the ids heard named.
+    let out = env.chassis(&["detect", "211#0100010000800000"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("heard 0x211×1"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
