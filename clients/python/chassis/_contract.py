@@ -269,7 +269,7 @@ class SystemState(Struct):
         ('silent_mode', ctypes.c_uint8),
         ('steering_zero_done', ctypes.c_uint8),
         ('power_enabled', ctypes.c_uint8),
-        ('_reserved', ctypes.c_uint8),
+        ('wire_protocol', ctypes.c_uint8),
     ]
 
     BODY_NORMAL = 0
@@ -839,7 +839,13 @@ class RobotKind(Constants):
     TITAN = 1
     SCOUT_MINI = 2
     XBOT = 3
-    NAMES = {0: 'unknown', 1: 'titan', 2: 'scout-mini', 3: 'xbot'}
+    SCOUT = 4
+    HUNTER = 5
+    HUNTER_SE = 6
+    TRACER = 7
+    BUNKER = 8
+    RANGER_MINI = 9
+    NAMES = {0: 'unknown', 1: 'titan', 2: 'scout-mini', 3: 'xbot', 4: 'scout', 5: 'hunter', 6: 'hunter-se', 7: 'tracer', 8: 'bunker', 9: 'ranger-mini'}
 
 
 class SafetyAction(Constants):
@@ -904,6 +910,16 @@ class SourceFlags(Constants):
     BLOCKED = 16
     LIMITING = 32
     NAMES = {1: 'required', 2: 'fresh', 4: 'active', 8: 'heartbeat', 16: 'blocked', 32: 'limiting'}
+
+
+class WireProtocol(Constants):
+    """``WireProtocol``: enum of u8."""
+
+    OWN = 0
+    V1 = 1
+    V2 = 2
+    DETECTING = 3
+    NAMES = {0: 'own', 1: 'v1', 2: 'v2', 3: 'detecting'}
 
 
 class ZeroReason(Constants):
@@ -973,5 +989,6 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'SimKind': SimKind,
     'SourceFlags': SourceFlags,
     'SystemState': SystemState,
+    'WireProtocol': WireProtocol,
     'ZeroReason': ZeroReason,
 }
