@@ -230,12 +230,16 @@ impl<D: Devices> Shell<D> {
                 },
             ));
         });
+        // Each sample goes to shared memory as soon as its frame is handled (a polling reader
+        // has it at once); the readers are woken once for the whole read.
+        let mut woken = Woken::default();
         for (stamp, item) in &received {
             engine.handle_rx(*stamp, item.as_rx());
+            woken = self.send(ports, engine, *stamp, woken);
         }
         self.scratch = received;
         let now = clock::now();
-        self.publish(ports, engine, now);
+        self.wake(ports, engine, now, woken);
         match result {
             Ok(count) => {
                 engine.handle_bus_read(now, items, count >= MAX_RX_BATCH);
@@ -299,7 +303,19 @@ impl<D: Devices> Shell<D> {
     /// batch, not one per sample (every sample is already in shared memory). A failure is
     /// counted by the engine and logged at most once a second.
     pub(super) fn publish(&mut self, ports: &Ports, engine: &mut Engine, now: Timestamp) {
-        let (mut state, mut frames, mut mux, mut answered) = (false, false, false, false);
+        let woken = self.send(ports, engine, now, Woken::default());
+        self.wake(ports, engine, now, woken);
+    }
+
+    /// Puts what the engine produced into shared memory, without waking anyone yet (a reader
+    /// that polls finds each sample the moment it is sent); returns which readers to wake.
+    fn send(&mut self, ports: &Ports, engine: &mut Engine, now: Timestamp, woken: Woken) -> Woken {
+        let Woken {
+            mut state,
+            mut frames,
+            mut mux,
+            mut answered,
+        } = woken;
         let failed = |engine: &mut Engine, what: &'static str, error: &dyn Display| {
             engine.handle_publish_failed(now, what, error);
         };
@@ -333,18 +349,37 @@ impl<D: Devices> Shell<D> {
                 }
             }
         }
+        Woken {
+            state,
+            frames,
+            mux,
+            answered,
+        }
+    }
+
+    /// Wakes the readers of what was sent: one notification per kind and batch.
+    fn wake(&self, ports: &Ports, engine: &mut Engine, now: Timestamp, woken: Woken) {
         let wake = [
-            (state, &ports.state.notifier, "state readers"),
-            (frames, &ports.frames.notifier, "frame readers"),
-            (mux, &ports.mux.notifier, "mux readers"),
-            (answered, &ports.control.notifier, "control clients"),
+            (woken.state, &ports.state.notifier, "state readers"),
+            (woken.frames, &ports.frames.notifier, "frame readers"),
+            (woken.mux, &ports.mux.notifier, "mux readers"),
+            (woken.answered, &ports.control.notifier, "control clients"),
         ];
         for (_, notifier, what) in wake.into_iter().filter(|(any, _, _)| *any) {
             if let Err(e) = notifier.notify() {
-                failed(engine, what, &e);
+                engine.handle_publish_failed(now, what, &e);
             }
         }
     }
+}
+
+/// Readers with something new to be woken for.
+#[derive(Debug, Default, Clone, Copy)]
+struct Woken {
+    state: bool,
+    frames: bool,
+    mux: bool,
+    answered: bool,
 }
 
 /// The items from `from` on were written by the write that returned at `written`.
