@@ -16,7 +16,7 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 use super::profile::{BmsAlarmLayout, RcStickOrder, V2Profile};
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::error::{DecodeError, EncodeError, check_range, to_i8, to_i16, to_i32, to_u8, to_u16};
+use crate::error::{DecodeError, EncodeError, check_range, to_i16, to_i32, to_u8, to_u16};
 use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
 use crate::wire::{read_bool, read_prefix, si, wire_bytes};
 
@@ -142,24 +142,6 @@ struct RcWire {
     knob_a: i8,
     reserved: u8,
     count: u8,
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct MotorFastWire {
-    rpm: I16,
-    current_da: I16,
-    position_counts: I32,
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct MotorSlowWire {
-    driver_voltage_dv: U16,
-    driver_temp_c: I16,
-    motor_temp_c: i8,
-    driver_status: u8,
-    reserved: [u8; 2],
 }
 
 #[repr(C)]
@@ -702,26 +684,13 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
         }
         other => {
             if let Some(n) = index_in(other, id::MOTOR_FAST_1, 8) {
-                let w: MotorFastWire = read_prefix(raw_id, data)?;
-                Frame::MotorFast(MotorFast {
-                    motor: n,
-                    rpm: w.rpm.get().into(),
-                    current_a: si(w.current_da.get(), 10.0),
-                    position_counts: if profile.motor_position_valid {
-                        w.position_counts.get()
-                    } else {
-                        0
-                    },
-                })
+                let mut m = MotorFast::from_wire(n, raw_id, data)?;
+                if !profile.motor_position_valid {
+                    m.position_counts = 0;
+                }
+                Frame::MotorFast(m)
             } else if let Some(n) = index_in(other, id::MOTOR_SLOW_1, 8) {
-                let w: MotorSlowWire = read_prefix(raw_id, data)?;
-                Frame::MotorSlow(MotorSlow {
-                    motor: n,
-                    driver_voltage_v: si(w.driver_voltage_dv.get(), 10.0),
-                    driver_temp_c: w.driver_temp_c.get().into(),
-                    motor_temp_c: w.motor_temp_c.into(),
-                    driver_status: w.driver_status,
-                })
+                Frame::MotorSlow(MotorSlow::from_wire(n, raw_id, data)?)
             } else if let Some(n) = index_in(other, id::IMU_ACCEL, 3) {
                 let w: ImuWire = read_prefix(raw_id, data)?;
                 Frame::Imu(Imu {
@@ -906,31 +875,8 @@ impl Frame {
                     }),
                 )
             }
-            Frame::MotorFast(m) => {
-                check_index("motor", m.motor, 1, 8)?;
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(MotorFastWire {
-                        rpm: to_i16("rpm", m.rpm, 1.0)?.into(),
-                        current_da: to_i16("current_a", m.current_a, 10.0)?.into(),
-                        position_counts: m.position_counts.into(),
-                    }),
-                )
-            }
-            Frame::MotorSlow(m) => {
-                check_index("motor", m.motor, 1, 8)?;
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(MotorSlowWire {
-                        driver_voltage_dv: to_u16("driver_voltage_v", m.driver_voltage_v, 10.0)?
-                            .into(),
-                        driver_temp_c: to_i16("driver_temp_c", m.driver_temp_c, 1.0)?.into(),
-                        motor_temp_c: to_i8("motor_temp_c", m.motor_temp_c, 1.0)?,
-                        driver_status: m.driver_status,
-                        reserved: [0; 2],
-                    }),
-                )
-            }
+            Frame::MotorFast(m) => CanFrame::from_parts(id, m.wire(8)?),
+            Frame::MotorSlow(m) => CanFrame::from_parts(id, m.wire(8)?),
             Frame::SteeringAngles(f) => {
                 CanFrame::from_parts(id, encode_four("steer_rad", f, profile.steer_unit.scale())?)
             }

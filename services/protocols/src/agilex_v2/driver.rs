@@ -684,20 +684,11 @@ impl Driver for V2Driver {
             self.brake = Brake::Engaged;
             self.update_body(now);
         }
-        if let Some((token, deadline)) = self.steering_zero
-            && now >= deadline
-        {
-            self.steering_zero = None;
-            self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
-            self.core.events.push_back(DriverEvent::ControlDone {
-                token,
-                status: ControlStatus::TIMEOUT,
-                message: format!(
-                    "no steering zero acknowledgement (0x43A) within {} ms",
-                    self.config.control_timeout_ms
-                ),
-            });
-        }
+        self.core.expire_steering_zero(
+            &mut self.steering_zero,
+            now,
+            self.config.control_timeout_ms,
+        );
     }
 
     fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {

@@ -586,22 +586,9 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
         }
         other => {
             if let Some(motor) = motor_index(other, id::MOTOR_FAST_1) {
-                let w: MotorFastWire = read_prefix(raw_id, data)?;
-                Frame::MotorFast(MotorFast {
-                    motor,
-                    rpm: w.rpm.get().into(),
-                    current_a: si(w.current_da.get(), 10.0),
-                    position_counts: w.position_counts.get(),
-                })
+                Frame::MotorFast(MotorFast::from_wire(motor, raw_id, data)?)
             } else if let Some(motor) = motor_index(other, id::MOTOR_SLOW_1) {
-                let w: MotorSlowWire = read_prefix(raw_id, data)?;
-                Frame::MotorSlow(MotorSlow {
-                    motor,
-                    driver_voltage_v: si(w.driver_voltage_dv.get(), 10.0),
-                    driver_temp_c: w.driver_temp_c.get().into(),
-                    motor_temp_c: w.motor_temp_c.into(),
-                    driver_status: w.driver_status,
-                })
+                Frame::MotorSlow(MotorSlow::from_wire(motor, raw_id, data)?)
             } else if let Some(group) = bms_group(other, id::BMS_DATA_0) {
                 let w: BmsDataWire = read_prefix(raw_id, data)?;
                 Frame::BmsData(BmsData {
@@ -631,6 +618,55 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
 
 fn check_index(field: &'static str, value: u8, max: u8, min: u8) -> Result<(), EncodeError> {
     check_range(field, value.into(), min.into(), max.into())
+}
+
+impl MotorFast {
+    /// Decodes the wire layout shared by the TITAN and the protocol-V2 robots.
+    pub(crate) fn from_wire(motor: u8, raw_id: u32, data: &[u8]) -> Result<Self, DecodeError> {
+        let w: MotorFastWire = read_prefix(raw_id, data)?;
+        Ok(MotorFast {
+            motor,
+            rpm: w.rpm.get().into(),
+            current_a: si(w.current_da.get(), 10.0),
+            position_counts: w.position_counts.get(),
+        })
+    }
+
+    /// The 8 wire bytes; `motors` is how many motors the robot numbers from 1.
+    pub(crate) fn wire(&self, motors: u8) -> Result<[u8; 8], EncodeError> {
+        check_range("motor", self.motor.into(), 1.0, motors.into())?;
+        Ok(wire_bytes::<8, _>(MotorFastWire {
+            rpm: to_i16("rpm", self.rpm, 1.0)?.into(),
+            current_da: to_i16("current_a", self.current_a, 10.0)?.into(),
+            position_counts: self.position_counts.into(),
+        }))
+    }
+}
+
+impl MotorSlow {
+    /// Decodes the wire layout shared by the TITAN and the protocol-V2 robots.
+    pub(crate) fn from_wire(motor: u8, raw_id: u32, data: &[u8]) -> Result<Self, DecodeError> {
+        let w: MotorSlowWire = read_prefix(raw_id, data)?;
+        Ok(MotorSlow {
+            motor,
+            driver_voltage_v: si(w.driver_voltage_dv.get(), 10.0),
+            driver_temp_c: w.driver_temp_c.get().into(),
+            motor_temp_c: w.motor_temp_c.into(),
+            driver_status: w.driver_status,
+        })
+    }
+
+    /// The 8 wire bytes; `motors` is how many motors the robot numbers from 1.
+    pub(crate) fn wire(&self, motors: u8) -> Result<[u8; 8], EncodeError> {
+        check_range("motor", self.motor.into(), 1.0, motors.into())?;
+        Ok(wire_bytes::<8, _>(MotorSlowWire {
+            driver_voltage_dv: to_u16("driver_voltage_v", self.driver_voltage_v, 10.0)?.into(),
+            driver_temp_c: to_i16("driver_temp_c", self.driver_temp_c, 1.0)?.into(),
+            motor_temp_c: to_i8("motor_temp_c", self.motor_temp_c, 1.0)?,
+            driver_status: self.driver_status,
+            reserved: [0; 2],
+        }))
+    }
 }
 
 impl Frame {
@@ -759,31 +795,8 @@ impl Frame {
                     }),
                 )
             }
-            Frame::MotorFast(m) => {
-                check_index("motor", m.motor, 4, 1)?;
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(MotorFastWire {
-                        rpm: to_i16("rpm", m.rpm, 1.0)?.into(),
-                        current_da: to_i16("current_a", m.current_a, 10.0)?.into(),
-                        position_counts: m.position_counts.into(),
-                    }),
-                )
-            }
-            Frame::MotorSlow(m) => {
-                check_index("motor", m.motor, 4, 1)?;
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(MotorSlowWire {
-                        driver_voltage_dv: to_u16("driver_voltage_v", m.driver_voltage_v, 10.0)?
-                            .into(),
-                        driver_temp_c: to_i16("driver_temp_c", m.driver_temp_c, 1.0)?.into(),
-                        motor_temp_c: to_i8("motor_temp_c", m.motor_temp_c, 1.0)?,
-                        driver_status: m.driver_status,
-                        reserved: [0; 2],
-                    }),
-                )
-            }
+            Frame::MotorFast(m) => CanFrame::from_parts(id, m.wire(4)?),
+            Frame::MotorSlow(m) => CanFrame::from_parts(id, m.wire(4)?),
             Frame::SteeringFeedback(s) => {
                 let sign = steer_feedback_sign(profile);
                 CanFrame::from_parts(
