@@ -120,6 +120,27 @@ struct Shell<D> {
     notifier: Option<Notifier>,
 }
 
+/// Opens the service's ports. A predecessor killed while it was creating one of them leaves that
+/// service hanging in creation until iceoryx2's creation timeout has passed: such a failure is
+/// tried again for a few seconds before it is reported (another chassisd serving the robot is
+/// reported at once).
+fn open_ports(name: &str, sources: &[String], with_sim: bool) -> Result<Ports, IpcError> {
+    const PATIENCE: Duration = Duration::from_secs(3);
+    const PAUSE: Duration = Duration::from_millis(100);
+    let deadline = clock::now() + PATIENCE;
+    loop {
+        match Ports::open(name, sources, with_sim) {
+            Err(IpcError::Contract(err)) if clock::now() < deadline => {
+                warn!("{err}; trying again");
+                // The loop has not started: nothing else waits on this thread.
+                #[allow(clippy::disallowed_methods)]
+                std::thread::sleep(PAUSE);
+            }
+            result => return result,
+        }
+    }
+}
+
 /// Runs the service on the devices its configuration names until SIGINT or SIGTERM. Returns
 /// after commanding zero.
 pub fn run(config: Config) -> Result<(), ServiceError> {
@@ -149,7 +170,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         info!(mode = ?config.loop_mode, spin_us = config.spin_us, "loop polls instead of blocking");
     }
     let sources: Vec<String> = config.mux.sources.iter().map(|s| s.name.clone()).collect();
-    let ports = Ports::open(&config.name, &sources, config.bus == BusSpec::Sim)?;
+    let ports = open_ports(&config.name, &sources, config.bus == BusSpec::Sim)?;
     let now = clock::now();
     let driver = driver_for_config(&config, now);
     let mut engine = Engine::new(
