@@ -129,6 +129,7 @@ fn open_ports(name: &str, sources: &[String], with_sim: bool) -> Result<Ports, I
     const PAUSE: Duration = Duration::from_millis(100);
     let deadline = clock::now() + PATIENCE;
     loop {
+        remove_dead_nodes();
         match Ports::open(name, sources, with_sim) {
             Err(IpcError::Contract(err)) if clock::now() < deadline => {
                 warn!("{err}; trying again");
@@ -138,6 +139,25 @@ fn open_ports(name: &str, sources: &[String], with_sim: bool) -> Result<Ports, I
             }
             result => return result,
         }
+    }
+}
+
+/// Removes what processes that died without cleaning up left behind (a service half created
+/// included), so that a service they were creating can be created again.
+fn remove_dead_nodes() {
+    let Ok(config) = crate::ipc::iceoryx_config() else {
+        return;
+    };
+    let listed = Node::<ipc::Service>::list(&config, |state| {
+        if let iceoryx2::node::NodeState::Dead(dead) = state
+            && let Err(e) = dead.try_remove_stale_resources()
+        {
+            debug!("removing a dead node's resources: {e}");
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = listed {
+        debug!("listing iceoryx2 nodes: {e}");
     }
 }
 
