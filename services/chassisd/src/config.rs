@@ -475,9 +475,16 @@ mod tests {
         let c = RawConfig::default().validate(titan()).unwrap();
         assert_eq!(c.name, "titan");
         assert_eq!(c.bus, BusSpec::Sim);
-        assert_eq!(c.mux.sources.len(), 4);
+        assert_eq!(c.mux.sources.len(), 5);
         assert_eq!(c.mux.sources[3].name, "foxglove");
         assert!(c.mux.sources[0].required);
+        let remote = &c.mux.sources[4];
+        assert_eq!(
+            (remote.name.as_str(), remote.priority, remote.timeout_ms),
+            ("remote", 100, 300)
+        );
+        assert!(remote.remote && !remote.required);
+        assert!(c.mux.sources[..4].iter().all(|s| !s.remote));
         assert_eq!(c.profile, Profile::default_for(Robot::Titan));
     }
 

@@ -1,0 +1,329 @@
+//! `chassis-zenoh` between two network namespaces joined by a veth pair, standing in for the
+//! robot's computer (10.77.0.1) and an operator's (10.77.0.2). chassisd and the robot side run
+//! under the test's iceoryx2 prefix; the operator side mirrors the robot under a prefix of its
+//! own, so the test drives through the network although both share this machine's /dev/shm.
+//!
+//! Needs root (`ip netns`, veth pairs) and iproute2; fails loudly without them. Each test makes
+//! its own namespaces (unique names) and removes them, whatever happens.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::path::Path;
+use std::process::Command;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use chassis_tests::*;
+
+const UP: Duration = Duration::from_secs(20);
+const ROBOT_ADDR: &str = "10.77.0.1";
+const OPERATOR_ADDR: &str = "10.77.0.2";
+const PORT: u16 = 7447;
+
+static NEXT: AtomicU32 = AtomicU32::new(0);
+
+fn name(tag: &str) -> String {
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+fn ip(args: &[&str]) {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("running ip {}: {e} (install iproute2)", args.join(" ")));
+    assert!(
+        out.status.success(),
+        "ip {} failed: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Two network namespaces joined by a veth pair; removed on drop.
+struct Link {
+    robot_ns: String,
+    operator_ns: String,
+    robot_if: String,
+}
+
+impl Link {
+    fn new() -> Self {
+        let id = format!(
+            "{}{}",
+            std::process::id() % 100_000,
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        );
+        let link = Link {
+            robot_ns: format!("czr{id}"),
+            operator_ns: format!("czo{id}"),
+            robot_if: format!("czr{id}"),
+        };
+        let operator_if = format!("czo{id}");
+        ip(&["netns", "add", &link.robot_ns]);
+        ip(&["netns", "add", &link.operator_ns]);
+        ip(&[
+            "link",
+            "add",
+            &link.robot_if,
+            "type",
+            "veth",
+            "peer",
+            "name",
+            &operator_if,
+        ]);
+        ip(&["link", "set", &link.robot_if, "netns", &link.robot_ns]);
+        ip(&["link", "set", &operator_if, "netns", &link.operator_ns]);
+        for (ns, dev, addr) in [
+            (&link.robot_ns, &link.robot_if, ROBOT_ADDR),
+            (&link.operator_ns, &operator_if, OPERATOR_ADDR),
+        ] {
+            ip(&["-n", ns, "addr", "add", &format!("{addr}/24"), "dev", dev]);
+            ip(&["-n", ns, "link", "set", dev, "up"]);
+            ip(&["-n", ns, "link", "set", "lo", "up"]);
+        }
+        link
+    }
+
+    /// Takes the robot's end of the link down (`up = false`) or up again.
+    fn set(&self, up: bool) {
+        ip(&[
+            "-n",
+            &self.robot_ns,
+            "link",
+            "set",
+            &self.robot_if,
+            if up { "up" } else { "down" },
+        ]);
+    }
+}
+
+impl Drop for Link {
+    fn drop(&mut self) {
+        // Removing a namespace removes its end of the veth pair, and so the pair.
+        for ns in [&self.robot_ns, &self.operator_ns] {
+            let _ = Command::new("ip").args(["netns", "del", ns]).status();
+        }
+    }
+}
+
+/// The operator side's iceoryx2 prefix: another computer's.
+fn operator_prefix(env: &Env) -> String {
+    format!("{}op_", env.prefix)
+}
+
+/// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
+fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
+    let bin = bin("chassis-zenoh");
+    let mut all = vec!["netns", "exec", ns, bin.to_str().unwrap()];
+    all.extend_from_slice(args);
+    env.spawn_program(
+        label,
+        Path::new("ip"),
+        &all,
+        &[(IPC_PREFIX_ENV, prefix), ("RUST_LOG", "info,zenoh=warn")],
+    )
+}
+
+fn endpoint(proto: &str) -> String {
+    format!("{proto}/{ROBOT_ADDR}:{PORT}")
+}
+
+/// chassisd (with its required safety monitor running) and the robot side, plain TCP.
+fn robot_side(env: &mut Env, link: &Link, n: &str) -> Robot {
+    env.chassisd("chassisd", &["--robot", "titan", "--name", n]);
+    env.spawn("safety", "chassis-safety", &["--name", n]);
+    let robot = env.robot(n, UP);
+    let prefix = env.prefix.clone();
+    let listen = endpoint("tcp");
+    zenoh_in(
+        env,
+        "zenoh-robot",
+        &link.robot_ns,
+        &prefix,
+        &["--name", n, "--listen", &listen, "--insecure"],
+    );
+    robot
+}
+
+/// The operator side's mirror and a connection to it.
+fn mirror(env: &mut Env, link: &Link, n: &str, extra: &[&str]) -> Robot {
+    let prefix = operator_prefix(env);
+    let connect = endpoint(if extra.contains(&"--certs") {
+        "tls"
+    } else {
+        "tcp"
+    });
+    let mut args = vec!["--name", n, "--connect", &connect, "--mirror"];
+    args.extend_from_slice(extra);
+    zenoh_in(env, "zenoh-operator", &link.operator_ns, &prefix, &args);
+    operator_robot(env, n, &prefix)
+}
+
+fn operator_robot(env: &Env, n: &str, prefix: &str) -> Robot {
+    let end = Instant::now() + UP;
+    loop {
+        match Robot::connect_with_prefix(n, Some(prefix)) {
+            Ok(robot) => return robot,
+            Err(e) => assert!(
+                Instant::now() < end,
+                "the mirror never served {n}: {e}\n{}",
+                env.logs()
+            ),
+        }
+        pause(Duration::from_millis(50));
+    }
+}
+
+/// The operator side's `remote` source, once the mirror has learned it from the robot's mux.
+fn remote_source(env: &Env, robot: &mut Robot) -> Source {
+    let end = Instant::now() + UP;
+    loop {
+        match robot.source("remote") {
+            Ok(source) => return source,
+            Err(e) => assert!(
+                Instant::now() < end,
+                "the mirror never offered the remote source: {e}\n{}",
+                env.logs()
+            ),
+        }
+        pause(Duration::from_millis(50));
+    }
+}
+
+fn active_name(m: &MuxStatus) -> String {
+    m.active().map_or("", |s| s.name()).to_string()
+}
+
+/// Sends `linear` every 50 ms from `source` until the robot's own mux has `remote` active and
+/// its state moves faster than `speed`; returns how long that took.
+fn drive_until_moving(
+    robot: &mut Robot,
+    source: &mut Source,
+    linear: f32,
+    speed: f32,
+    timeout: Duration,
+) -> Option<Duration> {
+    let start = Instant::now();
+    let mut last_send = None::<Instant>;
+    while start.elapsed() < timeout {
+        if last_send.is_none_or(|t| t.elapsed() >= Duration::from_millis(50)) {
+            source.send(VelocityRequest::twist(linear, 0.0)).unwrap();
+            last_send = Some(Instant::now());
+        }
+        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(10))
+            && s.motion.linear_mps > speed
+            && robot
+                .latest_mux()
+                .ok()
+                .flatten()
+                .is_some_and(|m| active_name(&m) == "remote")
+        {
+            return Some(start.elapsed());
+        }
+    }
+    None
+}
+
+#[test]
+fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeout() {
+    let link = Link::new();
+    let mut env = Env::new("zenoh-drive");
+    let n = name("zdr");
+    let mut robot = robot_side(&mut env, &link, &n);
+    let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
+    let mut remote = remote_source(&env, &mut operator);
+
+    // Only the remote sources exist on the operator's side: never the safety monitor's.
+    let err = operator.source("safety").unwrap_err();
+    assert!(matches!(err, ClientError::UnknownSource { .. }), "{err}");
+
+    // Drive from the operator's computer; the robot moves and its state comes back.
+    let took = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("the robot never moved\n{}", env.logs()));
+    let mirrored = wait_for(Duration::from_secs(3), || {
+        remote.send(VelocityRequest::twist(0.4, 0.0)).unwrap();
+        operator
+            .wait_state(Duration::from_millis(50))
+            .ok()
+            .flatten()
+            .is_some_and(|s| s.motion.linear_mps > 0.2)
+    });
+    assert!(
+        mirrored.is_some(),
+        "the operator never saw the robot move\n{}",
+        env.logs()
+    );
+    let timeout = source_timeout(&mux(&mut robot), "remote");
+    eprintln!("moving {took:?} after the first request; remote timeout {timeout:?}");
+
+    // A control action from the operator's computer is answered by chassisd.
+    let answer = operator
+        .control(
+            ControlRequest::new(ControlKind::LIGHTS).with_arg(0, LightMode::ON),
+            Duration::from_secs(5),
+        )
+        .unwrap();
+    assert!(
+        answer.status != ControlStatus::TIMEOUT,
+        "no answer through the mirror: {}",
+        answer.message()
+    );
+
+    // Cut the link mid-drive; the operator keeps sending.
+    let cut_ns = now_ns();
+    link.set(false);
+    let mut safety_stale = false;
+    let stopped = decided_after(
+        &mut robot,
+        cut_ns,
+        Duration::from_secs(3),
+        || {
+            let _ = remote.send(VelocityRequest::twist(0.4, 0.0));
+            pause(Duration::from_millis(20));
+        },
+        |m| {
+            safety_stale |= m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE
+                || !m.sources()[0].has(SourceFlags::FRESH);
+            active_name(m) != "remote" && m.output.linear_x_mps == 0.0
+        },
+    )
+    .unwrap_or_else(|| panic!("the robot kept driving after the cut\n{}", env.logs()));
+    eprintln!(
+        "link cut: the robot's mux commanded zero {:.0} ms after the cut (remote timeout {:?})",
+        stopped.as_secs_f64() * 1e3,
+        timeout
+    );
+    assert!(
+        stopped <= timeout + DECISION_ALLOWANCE + Duration::from_millis(30),
+        "stopped {stopped:?} after the cut; the remote source's timeout is {timeout:?}"
+    );
+    let m = mux(&mut robot);
+    assert!(
+        m.sources()[0].name() == "safety" && m.sources()[0].has(SourceFlags::FRESH),
+        "{m:?}"
+    );
+    assert!(
+        !safety_stale,
+        "the safety monitor went stale during the cut"
+    );
+    let halted = wait_for(Duration::from_secs(3), || {
+        state(&mut robot).motion.linear_mps.abs() < 0.02
+    });
+    assert!(halted.is_some(), "the robot did not come to a halt");
+
+    // Link back: the same processes drive again.
+    pause(Duration::from_millis(1000));
+    link.set(true);
+    let again = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("no motion after the link came back\n{}", env.logs()));
+    eprintln!("link back: moving again {again:?} after the link came up");
+    for i in 0..4 {
+        let running = env.proc(i).is_running();
+        assert!(
+            running,
+            "{} exited\n{}",
+            env.proc(i).name.clone(),
+            env.logs()
+        );
+    }
+    remote.stop().unwrap();
+}
