@@ -112,6 +112,18 @@ fn operator_prefix(env: &Env) -> String {
 
 /// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
 fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
+    zenoh_logging(env, label, ns, prefix, args, "info,zenoh=warn")
+}
+
+/// [`zenoh_in`] with the log filter `log`.
+fn zenoh_logging(
+    env: &mut Env,
+    label: &str,
+    ns: &str,
+    prefix: &str,
+    args: &[&str],
+    log: &str,
+) -> usize {
     let bin = bin("chassis-zenoh");
     let mut all = vec!["netns", "exec", ns, bin.to_str().unwrap()];
     all.extend_from_slice(args);
@@ -119,7 +131,7 @@ fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -
         label,
         Path::new("ip"),
         &all,
-        &[(IPC_PREFIX_ENV, prefix), ("RUST_LOG", "info,zenoh=warn")],
+        &[(IPC_PREFIX_ENV, prefix), ("RUST_LOG", log)],
     )
 }
 
@@ -326,4 +338,103 @@ fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeo
         );
     }
     remote.stop().unwrap();
+}
+
+fn gen_certs(env: &Env, dir: &Path) {
+    let out = Command::new(bin("chassis-zenoh"))
+        .args(["gen-certs", dir.to_str().unwrap(), "--host", ROBOT_ADDR])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "gen-certs: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.logs()
+    );
+}
+
+#[test]
+fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused() {
+    let link = Link::new();
+    let mut env = Env::new("zenoh-tls");
+    let n = name("ztl");
+    let certs = env.dir.join("certs");
+    let stranger = env.dir.join("stranger");
+    gen_certs(&env, &certs);
+    gen_certs(&env, &stranger);
+
+    // Plain TCP beyond loopback is refused unless asked for.
+    let out = Command::new(bin("chassis-zenoh"))
+        .args(["--name", &n, "--listen", &endpoint("tcp")])
+        .env(IPC_PREFIX_ENV, &env.prefix)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("refusing plain TCP"), "{stderr}");
+
+    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    env.spawn("safety", "chassis-safety", &["--name", &n]);
+    let mut robot = env.robot(&n, UP);
+    let prefix = env.prefix.clone();
+    let listen = endpoint("tls");
+    zenoh_in(
+        &mut env,
+        "zenoh-robot",
+        &link.robot_ns,
+        &prefix,
+        &[
+            "--name",
+            &n,
+            "--listen",
+            &listen,
+            "--certs",
+            certs.to_str().unwrap(),
+        ],
+    );
+    // A mirror holding certificates of another authority, under a prefix of its own.
+    let stranger_prefix = format!("{}st_", env.prefix);
+    zenoh_logging(
+        &mut env,
+        "zenoh-stranger",
+        &link.operator_ns,
+        &stranger_prefix,
+        &[
+            "--name",
+            &n,
+            "--connect",
+            &listen,
+            "--certs",
+            stranger.to_str().unwrap(),
+            "--mirror",
+        ],
+        "info,zenoh=debug",
+    );
+    let mut operator = mirror(&mut env, &link, &n, &["--certs", certs.to_str().unwrap()]);
+    let mut remote = remote_source(&env, &mut operator);
+    drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("the robot never moved under TLS\n{}", env.logs()));
+    remote.stop().unwrap();
+
+    // The stranger's mirror, running as long, has seen nothing of the robot.
+    let mut outsider = operator_robot(&env, &n, &stranger_prefix);
+    assert!(
+        outsider
+            .wait_state(Duration::from_secs(2))
+            .unwrap()
+            .is_none(),
+        "a mirror without the robot's CA got state\n{}",
+        env.logs()
+    );
+    assert!(outsider.latest_mux().unwrap().is_none());
+    assert!(matches!(
+        outsider.source("remote"),
+        Err(ClientError::UnknownSource { .. })
+    ));
+    let log = env.proc(3).log_text();
+    assert!(
+        log.to_lowercase().contains("certificate"),
+        "the stranger was not refused for its certificate\n{}",
+        env.logs()
+    );
 }

@@ -121,6 +121,8 @@ fn first_mux(robot: &mut Robot, wait: Duration) -> anyhow::Result<MuxStatus> {
 /// Runs the robot side until SIGINT/SIGTERM or a thread's failure.
 pub fn run(config: &Config) -> anyhow::Result<()> {
     let keys = Keys::new(&config.name);
+    // The endpoints and certificates are checked before anything else.
+    net::config(&config.net, &config.name, &[])?;
     let mut robot = connect(&config.name, config.wait)?;
     let mux = first_mux(&mut robot, config.wait)?;
     let remote = remote_sources(&mux);
