@@ -7,7 +7,7 @@
 //! its own namespaces (unique names) and removes them, whatever happens.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
@@ -437,4 +437,66 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
         "the stranger was not refused for its certificate\n{}",
         env.logs()
     );
+}
+
+/// The Python with `eclipse-zenoh` and the `chassis` package (scripts/zenoh-tests prepares
+/// target/python-venv), or `CHASSIS_ZENOH_PYTHON`.
+fn python() -> PathBuf {
+    let python = std::env::var_os("CHASSIS_ZENOH_PYTHON").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/python-venv/bin/python"),
+        PathBuf::from,
+    );
+    let ready = Command::new(&python)
+        .args(["-c", "import zenoh, chassis"])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        ready,
+        "{} cannot import zenoh and chassis: run scripts/zenoh-tests --prepare (it installs \
+         eclipse-zenoh and clients/python into target/python-venv)",
+        python.display()
+    );
+    python
+}
+
+#[test]
+fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() {
+    let python = python();
+    let link = Link::new();
+    let mut env = Env::new("zenoh-python");
+    let n = name("zpy");
+    robot_side(&mut env, &link, &n);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("zenoh/read_state.py");
+    let out = Command::new("ip")
+        .args(["netns", "exec", &link.operator_ns])
+        .arg(&python)
+        .arg(&script)
+        .args([
+            "--connect",
+            &endpoint("tcp"),
+            "--name",
+            &n,
+            "--count",
+            "50",
+            "--put-source",
+            "safety",
+        ])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "read_state.py failed: {}\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.logs()
+    );
+    let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    eprintln!("Python eclipse-zenoh reader: {summary}");
+    assert_eq!(summary["samples"], 50);
+    assert!(summary["matched"].as_u64().unwrap() >= 1, "{summary}");
+
+    // The requests on cmd/safety were refused by the robot side, and counted.
+    let refused = format!("refused a velocity request on chassis/{n}/cmd/safety");
+    let found = wait_for(Duration::from_secs(3), || env.logs().contains(&refused));
+    assert!(found.is_some(), "no refusal logged\n{}", env.logs());
 }
