@@ -5,7 +5,12 @@
 //!
 //! Needs root (`ip netns`, veth pairs) and iproute2; fails loudly without them. Each test makes
 //! its own namespaces (unique names) and removes them, whatever happens.
-#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::disallowed_methods
+)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -499,4 +504,253 @@ fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() 
     let refused = format!("refused a velocity request on chassis/{n}/cmd/safety");
     let found = wait_for(Duration::from_secs(3), || env.logs().contains(&refused));
     assert!(found.is_some(), "no refusal logged\n{}", env.logs());
+}
+
+/// Delay and loss on the link. `tc netem` where the kernel has it; otherwise (kernels built
+/// without `sch_netem`) loss from nftables (`numgen random`) on the operator's end of the veth
+/// and the delay from [`DelayRelay`], a relay in the operator's namespace that holds every
+/// chunk for the delay in each direction.
+enum Impairment {
+    Netem,
+    Emulated { _relay: DelayRelay },
+}
+
+const DELAY: Duration = Duration::from_millis(100);
+const LOSS_PERCENT: u32 = 5;
+/// Where the emulated impairment's relay listens, in the operator's namespace.
+const RELAY_PORT: u16 = 7448;
+
+fn run_in(ns: &str, program: &str, args: &[&str]) -> std::process::Output {
+    Command::new("ip")
+        .args(["netns", "exec", ns, program])
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("running {program} in {ns}: {e}"))
+}
+
+impl Impairment {
+    fn apply(link: &Link) -> Self {
+        let delay = format!("{}ms", DELAY.as_millis());
+        let loss = format!("{LOSS_PERCENT}%");
+        let operator_if = link.robot_if.replacen("czr", "czo", 1);
+        let mut netem = true;
+        for (ns, dev) in [
+            (&link.robot_ns, &link.robot_if),
+            (&link.operator_ns, &operator_if),
+        ] {
+            let out = run_in(
+                ns,
+                "tc",
+                &[
+                    "qdisc", "add", "dev", dev, "root", "netem", "delay", &delay, "loss", &loss,
+                ],
+            );
+            if !out.status.success() {
+                let err = String::from_utf8_lossy(&out.stderr);
+                assert!(
+                    err.contains("qdisc kind is unknown"),
+                    "tc netem failed: {err}"
+                );
+                netem = false;
+            }
+        }
+        if netem {
+            return Impairment::Netem;
+        }
+        eprintln!(
+            "this kernel has no netem qdisc: {LOSS_PERCENT} % loss from nftables, {delay} each way \
+             from a relay in the operator's namespace"
+        );
+        let ns = &link.operator_ns;
+        let nft = |rule: &str| {
+            let out = run_in(ns, "nft", &[rule]);
+            assert!(
+                out.status.success(),
+                "nft {rule}: {} (install nftables)",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        };
+        nft("add table inet impair");
+        for hook in ["input", "output"] {
+            nft(&format!(
+                "add chain inet impair {hook} {{ type filter hook {hook} priority 0; }}"
+            ));
+            let dir = if hook == "input" {
+                "iifname"
+            } else {
+                "oifname"
+            };
+            nft(&format!(
+                "add rule inet impair {hook} {dir} \"{operator_if}\" numgen random mod 100 < {LOSS_PERCENT} drop"
+            ));
+        }
+        Impairment::Emulated {
+            _relay: DelayRelay::start(ns, DELAY),
+        }
+    }
+
+    /// The endpoint the operator side connects to.
+    fn endpoint(&self) -> String {
+        match self {
+            Impairment::Netem => endpoint("tcp"),
+            Impairment::Emulated { .. } => format!("tcp/127.0.0.1:{RELAY_PORT}"),
+        }
+    }
+}
+
+/// A TCP relay in a network namespace: 127.0.0.1:[`RELAY_PORT`] → the robot's endpoint, each
+/// chunk held `delay` in each direction (order kept).
+struct DelayRelay {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl DelayRelay {
+    fn start(ns: &str, delay: Duration) -> Self {
+        use std::net::{TcpListener, TcpStream};
+        use std::sync::Arc;
+        use std::sync::atomic::AtomicBool;
+        let stop = Arc::new(AtomicBool::new(false));
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let path = format!("/var/run/netns/{ns}");
+        let flag = stop.clone();
+        std::thread::spawn(move || {
+            let file = std::fs::File::open(&path).unwrap();
+            nix::sched::setns(&file, nix::sched::CloneFlags::CLONE_NEWNET).unwrap();
+            let listener = TcpListener::bind(("127.0.0.1", RELAY_PORT)).unwrap();
+            listener.set_nonblocking(true).unwrap();
+            ready_tx.send(()).unwrap();
+            while !flag.load(Ordering::Relaxed) {
+                let Ok((inbound, _)) = listener.accept() else {
+                    pause(Duration::from_millis(20));
+                    continue;
+                };
+                inbound.set_nonblocking(false).unwrap();
+                let Ok(outbound) = TcpStream::connect((ROBOT_ADDR, PORT)) else {
+                    continue;
+                };
+                for (from, to) in [
+                    (inbound.try_clone().unwrap(), outbound.try_clone().unwrap()),
+                    (outbound, inbound),
+                ] {
+                    let _ = from.set_nodelay(true);
+                    let _ = to.set_nodelay(true);
+                    pump(from, to, delay);
+                }
+            }
+        });
+        ready_rx
+            .recv_timeout(Duration::from_secs(5))
+            .expect("the relay did not start");
+        DelayRelay { stop }
+    }
+}
+
+/// Copies `from` to `to`, each chunk `delay` after it was read.
+fn pump(mut from: std::net::TcpStream, mut to: std::net::TcpStream, delay: Duration) {
+    use std::io::{Read, Write};
+    let (tx, rx) = std::sync::mpsc::channel::<(Instant, Vec<u8>)>();
+    std::thread::spawn(move || {
+        let mut buf = vec![0u8; 65536];
+        while let Ok(n) = from.read(&mut buf) {
+            if n == 0
+                || tx
+                    .send((Instant::now() + delay, buf[..n].to_vec()))
+                    .is_err()
+            {
+                break;
+            }
+        }
+        let _ = from.shutdown(std::net::Shutdown::Both);
+    });
+    std::thread::spawn(move || {
+        while let Ok((due, bytes)) = rx.recv() {
+            pause(due.saturating_duration_since(Instant::now()));
+            if to.write_all(&bytes).is_err() {
+                break;
+            }
+        }
+        let _ = to.shutdown(std::net::Shutdown::Both);
+    });
+}
+
+impl Drop for DelayRelay {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+#[test]
+fn a_slow_lossy_link_still_drives() {
+    let link = Link::new();
+    let mut env = Env::new("zenoh-lossy");
+    let n = name("zls");
+    let mut robot = robot_side(&mut env, &link, &n);
+    let impairment = Impairment::apply(&link);
+    let prefix = operator_prefix(&env);
+    let connect = impairment.endpoint();
+    zenoh_in(
+        &mut env,
+        "zenoh-operator",
+        &link.operator_ns,
+        &prefix,
+        &[
+            "--name",
+            &n,
+            "--connect",
+            &connect,
+            "--mirror",
+            "--insecure",
+        ],
+    );
+    let mut operator = operator_robot(&env, &n, &prefix);
+    let mut remote = remote_source(&env, &mut operator);
+    let first = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("the robot never moved over the slow link\n{}", env.logs()));
+
+    // Drive at 20 Hz for 4 s and count the robot's mux decisions that chose the remote source.
+    let start = Instant::now();
+    let mut last_send = None::<Instant>;
+    let (mut decisions, mut remote_active, mut last_seq) = (0u32, 0u32, 0u64);
+    while start.elapsed() < Duration::from_secs(4) {
+        if last_send.is_none_or(|t| t.elapsed() >= Duration::from_millis(50)) {
+            remote.send(VelocityRequest::twist(0.4, 0.0)).unwrap();
+            last_send = Some(Instant::now());
+        }
+        if let Ok(Some(m)) = robot.wait_mux(Duration::from_millis(10))
+            && m.seq != last_seq
+        {
+            last_seq = m.seq;
+            decisions += 1;
+            remote_active += u32::from(active_name(&m) == "remote");
+        }
+    }
+    remote.stop().unwrap();
+    let share = f64::from(remote_active) / f64::from(decisions.max(1));
+    let state_back = wait_for(Duration::from_secs(5), || {
+        operator
+            .wait_state(Duration::from_millis(100))
+            .ok()
+            .flatten()
+            .is_some()
+    });
+    eprintln!(
+        "{} ms delay + {LOSS_PERCENT} % loss ({}): moving {first:?} after the first request; \
+         remote active in {:.0} % of {decisions} mux decisions over 4 s of driving at 20 Hz",
+        DELAY.as_millis(),
+        match impairment {
+            Impairment::Netem => "tc netem",
+            Impairment::Emulated { .. } => "nftables + delay relay",
+        },
+        share * 100.0
+    );
+    assert!(
+        state_back.is_some(),
+        "no state came back over the slow link"
+    );
+    assert!(
+        share >= 0.5,
+        "the remote source was active in only {:.0} % of the decisions\n{}",
+        share * 100.0,
+        env.logs()
+    );
 }
