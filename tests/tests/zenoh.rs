@@ -272,6 +272,32 @@ fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeo
     let timeout = source_timeout(&mux(&mut robot), "remote");
     eprintln!("moving {took:?} after the first request; remote timeout {timeout:?}");
 
+    // The unchanged dashboard on the operator's side shows the robot, its mux and its bus.
+    let top = Command::new(bin("chassis"))
+        .args(["top", "--once", "--name", &n])
+        .env(IPC_PREFIX_ENV, operator_prefix(&env))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = top.id();
+    let mut top = Some(top);
+    let done = wait_for(Duration::from_secs(10), || {
+        remote.send(VelocityRequest::twist(0.4, 0.0)).unwrap();
+        pause(Duration::from_millis(40));
+        top.as_mut()
+            .is_some_and(|t| t.try_wait().ok().flatten().is_some())
+    });
+    let out = top.take().unwrap().wait_with_output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        done.is_some() && out.status.success(),
+        "chassis top (pid {pid}) on the operator's side: {text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("active remote (priority 100"), "{text}");
+    assert!(text.contains("RX  0x211"), "{text}");
+
     // A control action from the operator's computer is answered by chassisd.
     let answer = operator
         .control(

@@ -28,6 +28,7 @@
 mod certs;
 mod mirror;
 mod net;
+mod raw;
 mod robot;
 mod wire;
 
@@ -89,9 +90,23 @@ enum Command {
         #[arg(long)]
         host: Vec<String>,
     },
+    /// (benchmark baseline) publish stamped samples on a bare Zenoh session.
+    #[command(hide = true)]
+    RawPub(raw::RawArgs),
+    /// (benchmark baseline) receive them and write their latencies.
+    #[command(hide = true)]
+    RawSub(raw::RawArgs),
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    match &cli.command {
+        Some(Command::RawPub(args)) => {
+            chassis_client::install_signal_handlers();
+            return raw::publish(args);
+        }
+        Some(Command::RawSub(args)) => return raw::subscribe(args),
+        _ => {}
+    }
     if let Some(Command::GenCerts { dir, host }) = cli.command {
         certs::generate(&dir, &host)?;
         eprintln!(
