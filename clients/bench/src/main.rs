@@ -616,8 +616,18 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 z.state,
                 0,
             );
-            state.baseline = reference;
+            state.baseline = reference.clone();
             report.rows.push(state);
+            let mut bridge = row(
+                "zenoh",
+                "robot's state published → in the operator's iceoryx2 (the bridge's part)".into(),
+                "event",
+                placement,
+                z.bridge,
+                0,
+            );
+            bridge.baseline = reference;
+            report.rows.push(bridge);
         } else {
             report
                 .notes

@@ -30,6 +30,9 @@ const RAW_PORT: u16 = 7449;
 pub struct ZenohFigures {
     pub command: paths::CommandFigures,
     pub state: Latencies,
+    /// chassisd published the sample → the operator's iceoryx2 subscriber has it: the bridge's
+    /// own part of the state path.
+    pub bridge: Latencies,
     pub raw: Latencies,
 }
 
@@ -284,6 +287,7 @@ pub fn run(
     // changing the state).
     let stream = operator.state_stream(STATE_BUFFER)?;
     let mut recorder = StateRecorder::default();
+    let mut bridge = Latencies::new();
     let mut last_request = 0u64;
     let deadline = now_ns() + 120_000_000_000;
     while recorder.latencies.count() < states && now_ns() < deadline {
@@ -291,7 +295,14 @@ pub fn run(
             remote.send(chassis_client::VelocityRequest::twist(0.6, 0.3))?;
             last_request = now_ns();
         }
-        stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
+        stream.wait(Duration::from_millis(20), |s| {
+            let received = now_ns();
+            let fresh = recorder.latencies.count();
+            recorder.sample(s, received);
+            if recorder.latencies.count() > fresh {
+                bridge.record_between(s.published_ns, received);
+            }
+        })?;
     }
     remote.stop()?;
     drop(stream);
@@ -304,6 +315,7 @@ pub fn run(
     Ok(ZenohFigures {
         command,
         state: recorder.latencies,
+        bridge,
         raw: raw_latencies,
     })
 }
