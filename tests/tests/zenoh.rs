@@ -780,3 +780,50 @@ fn a_slow_lossy_link_still_drives() {
         env.logs()
     );
 }
+
+#[test]
+fn chassis_teleop_on_the_operators_computer_drives_the_robot() {
+    if !tmux_available() {
+        eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
+        return;
+    }
+    let link = Link::new();
+    let mut env = Env::new("zenoh-teleop");
+    let n = name("ztp");
+    let mut robot = robot_side(&mut env, &link, &n);
+    let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
+    // The mirror offers the remote source once it has the robot's mux.
+    drop(remote_source(&env, &mut operator));
+    let log = env.dir.join("teleop.log");
+    let command = format!(
+        "env {}={} RUST_LOG=info {} --name {n} --source remote 2>{}; echo chassis-teleop exited $?; sleep 60",
+        IPC_PREFIX_ENV,
+        quote(&operator_prefix(&env)),
+        quote(&bin("chassis-teleop").to_string_lossy()),
+        quote(&log.to_string_lossy()),
+    );
+    let tmux = Tmux::start(&env.dir, "tmux", &command);
+    tmux.wait_for_text("idle — publishing nothing", UP);
+    let start = Instant::now();
+    let (mut peak, mut remote_won) = (0.0f32, false);
+    while start.elapsed() < Duration::from_millis(2000) {
+        tmux.send("w");
+        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(30)) {
+            peak = peak.max(state.motion.linear_mps);
+        }
+        if let Ok(Some(m)) = robot.latest_mux() {
+            remote_won |= active_name(&m) == "remote";
+        }
+    }
+    let screen = tmux.screen();
+    assert!(
+        remote_won,
+        "the robot's mux never chose remote\n{screen}\n{}",
+        env.logs()
+    );
+    assert!(
+        peak > 0.05,
+        "peak speed {peak} m/s while w was held\n{screen}"
+    );
+    assert!(screen.contains("DRIVING"), "{screen}");
+}
