@@ -522,12 +522,23 @@ fn body(s: &ChassisState) -> ChassisState {
 #[derive(Debug, Default)]
 pub struct StateRecorder {
     previous: Option<ChassisState>,
+    /// Record changed samples after a gap in `seq` too (behind a bridge that forwards the
+    /// newest sample of each read of the bus).
+    pub gaps_allowed: bool,
     pub latencies: Latencies,
     /// The service's own part: the frame read → the sample handed to iceoryx2.
     pub in_service: Latencies,
 }
 
 impl StateRecorder {
+    /// A recorder of samples that may skip some (`gaps_allowed`).
+    pub fn with_gaps() -> Self {
+        Self {
+            gaps_allowed: true,
+            ..Self::default()
+        }
+    }
+
     pub fn sample(&mut self, state: &ChassisState, received: u64) {
         if self.previous.is_some_and(|p| p.seq == state.seq) {
             return;
@@ -536,7 +547,7 @@ impl StateRecorder {
         let changed = self
             .previous
             .is_none_or(|p| body(&p).as_bytes() != body(state).as_bytes());
-        if follows && changed {
+        if (follows || self.gaps_allowed) && changed {
             self.latencies.record_between(state.stamp_ns, received);
             self.in_service
                 .record_between(state.stamp_ns, state.published_ns);

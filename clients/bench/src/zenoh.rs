@@ -286,7 +286,8 @@ pub fn run(
     // Robot state → the operator's iceoryx2 subscriber, while the robot drives (so frames keep
     // changing the state).
     let stream = operator.state_stream(STATE_BUFFER)?;
-    let mut recorder = StateRecorder::default();
+    // The robot side forwards the newest sample of each read of the bus: `seq` has gaps.
+    let mut recorder = StateRecorder::with_gaps();
     let mut bridge = Latencies::new();
     let mut last_request = 0u64;
     let deadline = now_ns() + 120_000_000_000;

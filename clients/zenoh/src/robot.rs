@@ -1,8 +1,8 @@
 //! The robot side: chassisd's services on Zenoh.
 //!
 //! * the main thread reads the state stream, the mux and the frame tap, and puts them on
-//!   `chassis/<name>/state`, `…/mux`, `…/frames` (fixed-layout bytes) and decimated JSON twins
-//!   (`…/state/json`, `…/mux/json`);
+//!   `chassis/<name>/state` (the newest sample of each read of the bus), `…/mux`, `…/frames`
+//!   (fixed-layout bytes) and decimated JSON twins (`…/state/json`, `…/mux/json`);
 //! * a thread holds the remote sources' publishers and takes `chassis/<name>/cmd/<source>` from
 //!   the network: only for sources chassisd's mux marks [`SourceFlags::REMOTE`] (never a
 //!   required one); each request is re-stamped on arrival, so its timeout runs from then;
@@ -255,7 +255,13 @@ fn publish(
     };
     put_mux(&first, &mut report);
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
-        states.wait(Duration::from_millis(20), |s| {
+        // chassisd publishes a sample per frame and wakes its readers once per read of the bus;
+        // a put costs tens of µs (the link's write): only the newest sample of each wake-up goes
+        // out, so none waits behind the older ones of its read (the state is a latest-value
+        // topic; `seq` numbers what was skipped).
+        let mut newest = None;
+        states.wait(Duration::from_millis(20), |s| newest = Some(*s))?;
+        if let Some(s) = newest.as_ref() {
             if state_rate.pass(s.stamp_ns)
                 && let Err(e) = state_pub.put(s.as_bytes()).wait()
             {
@@ -267,7 +273,7 @@ fn publish(
             {
                 report("state/json", e);
             }
-        })?;
+        }
         robot.poll_mux(|m| put_mux(m, &mut report))?;
         let now = now_ns();
         if now >= next_check {
