@@ -462,6 +462,26 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
         outsider.source("remote"),
         Err(ClientError::UnknownSource { .. })
     ));
+    // The operator's certificate reads the state, but the access list stops its puts on
+    // cmd/safety before they reach the bridge (which would log a refusal).
+    let python = python();
+    let stdout = read_state(
+        &python,
+        &env,
+        &link,
+        &n,
+        &listen,
+        &["--certs", certs.to_str().unwrap()],
+    );
+    let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert_eq!(summary["samples"], 50, "{summary}");
+    pause(Duration::from_millis(500));
+    assert!(
+        !env.logs().contains("refused a velocity request"),
+        "a put on cmd/safety passed the access list\n{}",
+        env.logs()
+    );
+
     let log = env.proc(3).log_text();
     assert!(
         log.to_lowercase().contains("certificate"),
@@ -490,6 +510,44 @@ fn python() -> PathBuf {
     python
 }
 
+/// Runs tests/zenoh/read_state.py in the operator's namespace (it publishes on `cmd/safety`
+/// too); returns its summary line.
+fn read_state(
+    python: &Path,
+    env: &Env,
+    link: &Link,
+    n: &str,
+    connect: &str,
+    extra: &[&str],
+) -> String {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("zenoh/read_state.py");
+    let out = Command::new("ip")
+        .args(["netns", "exec", &link.operator_ns])
+        .arg(python)
+        .arg(&script)
+        .args([
+            "--connect",
+            connect,
+            "--name",
+            n,
+            "--count",
+            "50",
+            "--put-source",
+            "safety",
+        ])
+        .args(extra)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "read_state.py failed: {}\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.logs()
+    );
+    stdout
+}
+
 #[test]
 fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() {
     let python = python();
@@ -497,30 +555,7 @@ fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() 
     let mut env = Env::new("zenoh-python");
     let n = name("zpy");
     robot_side(&mut env, &link, &n);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("zenoh/read_state.py");
-    let out = Command::new("ip")
-        .args(["netns", "exec", &link.operator_ns])
-        .arg(&python)
-        .arg(&script)
-        .args([
-            "--connect",
-            &endpoint("tcp"),
-            "--name",
-            &n,
-            "--count",
-            "50",
-            "--put-source",
-            "safety",
-        ])
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "read_state.py failed: {}\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
+    let stdout = read_state(&python, &env, &link, &n, &endpoint("tcp"), &[]);
     let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     eprintln!("Python eclipse-zenoh reader: {summary}");
     assert_eq!(summary["samples"], 50);

@@ -4,6 +4,7 @@
 Started by tests/tests/zenoh.rs inside the operator's network namespace::
 
     python read_state.py --connect tcp/10.77.0.1:7447 --name titan --count 50 [--put-source safety]
+    python read_state.py --connect tls/10.77.0.1:7447 --certs DIR --name titan …
 
 It checks the encoding (``application/octet-stream;<ChassisState's type name>``), the size,
 the robot kind and that ``seq`` rises; it matches JSON twins (``…/state/json``) with the binary
@@ -31,12 +32,19 @@ def fail(message: str) -> None:
     sys.exit(1)
 
 
-def session(endpoint: str) -> zenoh.Session:
+def session(endpoint: str, certs: str | None) -> zenoh.Session:
     config = zenoh.Config()
     config.insert_json5("mode", '"peer"')
     config.insert_json5("connect/endpoints", json.dumps([endpoint]))
     config.insert_json5("listen/endpoints", "[]")
     config.insert_json5("scouting/multicast/enabled", "false")
+    if certs:
+        # The operator's certificate from `chassis-zenoh gen-certs`: mutual TLS.
+        tls = "transport/link/tls"
+        config.insert_json5(f"{tls}/root_ca_certificate", json.dumps(f"{certs}/ca.pem"))
+        config.insert_json5(f"{tls}/connect_certificate", json.dumps(f"{certs}/operator.pem"))
+        config.insert_json5(f"{tls}/connect_private_key", json.dumps(f"{certs}/operator-key.pem"))
+        config.insert_json5(f"{tls}/enable_mtls", "true")
     return zenoh.open(config)
 
 
@@ -51,6 +59,7 @@ def main() -> None:
     parser.add_argument("--count", type=int, default=50)
     parser.add_argument("--timeout", type=float, default=20.0)
     parser.add_argument("--put-source")
+    parser.add_argument("--certs", help="directory of chassis-zenoh gen-certs (tls/ endpoints)")
     args = parser.parse_args()
 
     key = f"chassis/{args.name}/state"
@@ -61,7 +70,7 @@ def main() -> None:
     def take(sample: zenoh.Sample) -> None:
         inbox.put((str(sample.key_expr), str(sample.encoding), sample.payload.to_bytes()))
 
-    z = session(args.connect)
+    z = session(args.connect, args.certs)
     subscribers = [
         z.declare_subscriber(key, take),
         z.declare_subscriber(f"{key}/json", take),
