@@ -313,6 +313,28 @@ pub fn run(
     drop(robot);
     drop(service);
     drop(netns);
+    // The mirror's iceoryx2 files, under the operator's prefix of this run only.
+    for dir in [
+        "/dev/shm",
+        "/tmp/iceoryx2",
+        "/tmp/iceoryx2/services",
+        "/tmp/iceoryx2/nodes",
+    ] {
+        for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+            if entry
+                .file_name()
+                .to_string_lossy()
+                .starts_with(&operator_prefix)
+            {
+                let path = entry.path();
+                let _ = if path.is_dir() {
+                    std::fs::remove_dir_all(&path)
+                } else {
+                    std::fs::remove_file(&path)
+                };
+            }
+        }
+    }
     Ok(ZenohFigures {
         command,
         state: recorder.latencies,
