@@ -66,7 +66,7 @@ struct Cli {
     /// Allow plain TCP beyond loopback: anyone on that network can drive the robot.
     #[arg(long)]
     insecure: bool,
-    /// Robot side: binary state samples per second (0: every one chassisd publishes).
+    /// Robot side: most binary state samples per second (0: the newest of every read of the bus).
     #[arg(long, default_value_t = 0.0)]
     state_hz: f64,
     /// Robot side: JSON twins per second.
