@@ -42,7 +42,8 @@ const POLL: Duration = Duration::from_millis(100);
 pub struct Config {
     pub name: String,
     pub net: Net,
-    /// Binary state samples per second on the network (0: every one chassisd publishes).
+    /// Most binary state samples per second on the network (0: the newest of every read of the
+    /// bus).
     pub state_hz: f64,
     /// JSON twins per second.
     pub json_hz: f64,
