@@ -475,7 +475,8 @@ mod tests {
         let c = RawConfig::default().validate(titan()).unwrap();
         assert_eq!(c.name, "titan");
         assert_eq!(c.bus, BusSpec::Sim);
-        assert_eq!(c.mux.sources.len(), 4);
+        assert_eq!(c.mux.sources.len(), 5);
+        assert_eq!(c.mux.sources[4].name, "ros2");
         assert_eq!(c.mux.sources[3].name, "foxglove");
         assert!(c.mux.sources[0].required);
         assert_eq!(c.profile, Profile::default_for(Robot::Titan));

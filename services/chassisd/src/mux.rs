@@ -95,8 +95,9 @@ pub struct MuxConfig {
 
 impl Default for MuxConfig {
     /// `safety` (255, 200 ms, required), `teleop` (100, 300 ms), `planner` (10, 500 ms),
-    /// `foxglove` (100, 300 ms: the Teleop panel of a Foxglove view, teleop's rank); lock `estop`
-    /// at 255.
+    /// `foxglove` (100, 300 ms: the Teleop panel of a Foxglove view, teleop's rank), `ros2` (50,
+    /// 500 ms: a ROS 2 stack's `cmd_vel` through chassis-ros2, below teleop, above the planner);
+    /// lock `estop` at 255.
     fn default() -> Self {
         let source = |name: &str, priority, timeout_ms, required| SourceConfig {
             name: name.into(),
@@ -110,6 +111,7 @@ impl Default for MuxConfig {
                 source("teleop", 100, 300, false),
                 source("planner", 10, 500, false),
                 source("foxglove", 100, 300, false),
+                source("ros2", 50, 500, false),
             ],
             locks: vec![LockConfig {
                 name: "estop".into(),
