@@ -5,11 +5,20 @@ not against its own Rust structs: a field out of order or of the wrong width on 
 fails to decode.
 """
 
-
 from dataclasses import dataclass, field
 
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import array, float32, float64, int8, int32, sequence, uint8, uint16, uint32
+from cyclonedds.idl.types import (
+    array,
+    float32,
+    float64,
+    int8,
+    int32,
+    sequence,
+    uint8,
+    uint16,
+    uint32,
+)
 
 
 @dataclass
