@@ -599,3 +599,60 @@ pub fn state_loop(name: &str, frames: Frames, out: &Outputs) -> anyhow::Result<(
     }
     Ok(())
 }
+
+/// The far end of `chassis-bench`'s raw DDS hop (`clients/ros2/bench.py`): the bridge's own DDS
+/// stack with nothing behind it. Each `TwistStamped` on `chassis_bench/ping` (its stamp: the
+/// sender's `CLOCK_MONOTONIC` at the write) is recorded as a one-way latency and answered at once
+/// on `chassis_bench/pong`, stamped with this process' `CLOCK_MONOTONIC` at that write. Runs
+/// until SIGINT / SIGTERM, then writes the latencies, ns, one a line, to `out`.
+pub fn bench_echo(domain_id: u16, out: &std::path::Path) -> anyhow::Result<()> {
+    let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
+        .context("joining the DDS domain")?;
+    let mut node = context
+        .new_node(
+            NodeName::new("/", "chassis_bench_echo")
+                .map_err(|e| anyhow::anyhow!("node name: {e:?}"))?,
+            NodeOptions::new(),
+        )
+        .context("creating the node")?;
+    let ping_topic = node.create_topic(
+        &topic_name("/", "chassis_bench/ping")?,
+        TwistStamped::type_name(),
+        &reliable_qos(),
+    )?;
+    let pong_topic = node.create_topic(
+        &topic_name("/", "chassis_bench/pong")?,
+        TwistStamped::type_name(),
+        &reliable_qos(),
+    )?;
+    let mut ping: Subscription<TwistStamped> = node.create_subscription(&ping_topic, None)?;
+    let pong: Publisher<TwistStamped> = node.create_publisher(&pong_topic, None)?;
+    let mut poll = Poll::new()?;
+    poll.registry()
+        .register(&mut ping, CMD_VEL, Interest::READABLE)?;
+    let mut events = Events::with_capacity(4);
+    let mut latencies = Vec::new();
+    while !termination_requested() {
+        if let Err(e) = poll.poll(&mut events, Some(Duration::from_millis(100))) {
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                continue;
+            }
+            return Err(e).context("waiting for DDS");
+        }
+        while let Ok(Some((mut m, _))) = ping.take() {
+            let now = chassis_client::now_ns();
+            let sent = u64::try_from(m.header.stamp.nanos()).unwrap_or(0);
+            latencies.push(now.saturating_sub(sent));
+            m.header.stamp =
+                crate::msg::Time::from_nanos(i64::try_from(chassis_client::now_ns()).unwrap_or(0));
+            if let Err(e) = pong.publish(m) {
+                tracing::warn!(error = ?e, "pong not sent");
+            }
+        }
+    }
+    let text: String = latencies.iter().map(|l| format!("{l}\n")).collect();
+    std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+    drop(pong);
+    drop(ping);
+    Ok(())
+}

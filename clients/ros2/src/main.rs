@@ -29,8 +29,8 @@ enum Mapping {
 )]
 struct Cli {
     /// The robot's name in chassisd (`chassisd --name`, default its robot).
-    #[arg(long)]
-    name: String,
+    #[arg(long, required_unless_present = "bench_echo")]
+    name: Option<String>,
     /// ROS namespace of the node and every topic (`/robot1`); several robots on one computer
     /// each get their own.
     #[arg(long, default_value = "/")]
@@ -51,6 +51,9 @@ struct Cli {
     /// rmw_cyclonedds_cpp → cyclone, else enhanced).
     #[arg(long, value_enum)]
     service_mapping: Option<Mapping>,
+    /// (internal) Be the far end of chassis-bench's raw DDS hop; write its latencies here.
+    #[arg(long, hide = true)]
+    bench_echo: Option<std::path::PathBuf>,
 }
 
 fn namespace(ns: &str) -> String {
@@ -65,13 +68,19 @@ fn namespace(ns: &str) -> String {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    if let Some(out) = &cli.bench_echo {
+        return bridge::bench_echo(cli.domain_id, out);
+    }
+    let Some(name) = cli.name else {
+        anyhow::bail!("--name is required");
+    };
     let service_mapping = match cli.service_mapping {
         Some(Mapping::Enhanced) => ServiceMapping::Enhanced,
         Some(Mapping::Cyclone) => ServiceMapping::Cyclone,
         None => bridge::mapping_for_rmw(std::env::var("RMW_IMPLEMENTATION").ok().as_deref()),
     };
     let options = Options {
-        name: cli.name,
+        name,
         namespace: namespace(&cli.namespace),
         domain_id: cli.domain_id,
         stamped: cli.stamped,
