@@ -656,3 +656,89 @@ pub fn bench_echo(domain_id: u16, out: &std::path::Path) -> anyhow::Result<()> {
     drop(ping);
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::Vector3;
+
+    #[test]
+    fn a_twist_becomes_a_request_and_a_non_finite_one_does_not() {
+        let t = Twist {
+            linear: Vector3 {
+                x: 0.5,
+                y: 0.1,
+                z: 9.0,
+            },
+            angular: Vector3 {
+                x: 9.0,
+                y: 9.0,
+                z: -0.2,
+            },
+        };
+        let r = twist_request(&t).expect("finite");
+        assert_eq!(
+            (r.linear_x_mps, r.linear_y_mps, r.angular_z_radps),
+            (0.5, 0.1, -0.2)
+        );
+        assert_eq!(
+            r.stamp_ns, 0,
+            "stamped on arrival by the source, not by the sender"
+        );
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let mut t = t;
+            t.angular.z = bad;
+            assert!(twist_request(&t).is_none());
+            let mut t2 = t;
+            t2.angular.z = 0.0;
+            t2.linear.x = bad;
+            assert!(twist_request(&t2).is_none());
+        }
+        // What a ground robot ignores may be anything.
+        let mut t3 = t;
+        t3.linear.z = f64::NAN;
+        assert!(twist_request(&t3).is_some());
+    }
+
+    #[test]
+    fn services_ask_chassisd_for_the_operator_e_stop_and_a_fault_clear() {
+        let r = service_request(ServiceKind::Estop);
+        assert_eq!((r.kind, r.name()), (ControlKind::LOCK_ENGAGE, "estop"));
+        let r = service_request(ServiceKind::EstopRelease);
+        assert_eq!((r.kind, r.name()), (ControlKind::LOCK_RELEASE, "estop"));
+        let r = service_request(ServiceKind::ClearFaults);
+        assert_eq!(
+            (r.kind, r.arg[0]),
+            (ControlKind::CLEAR_FAULTS, FaultClear::ALL)
+        );
+    }
+
+    #[test]
+    fn a_refusal_is_no_success_with_its_reason() {
+        let ok = trigger_response(Ok(ControlResponse::new(1, ControlStatus::OK, "done")));
+        assert!(ok.success);
+        assert_eq!(ok.message, "ok: done");
+        let no = trigger_response(Ok(ControlResponse::new(
+            1,
+            ControlStatus::REFUSED,
+            "moving",
+        )));
+        assert!(!no.success);
+        assert_eq!(no.message, "refused: moving");
+        let gone = trigger_response(Err(ClientError::Ipc("gone".into())));
+        assert!(!gone.success && gone.message.starts_with("chassisd did not answer"));
+    }
+
+    #[test]
+    fn the_rmw_picks_the_service_mapping() {
+        assert!(matches!(
+            mapping_for_rmw(Some("rmw_cyclonedds_cpp")),
+            ServiceMapping::Cyclone
+        ));
+        assert!(matches!(
+            mapping_for_rmw(Some("rmw_fastrtps_cpp")),
+            ServiceMapping::Enhanced
+        ));
+        assert!(matches!(mapping_for_rmw(None), ServiceMapping::Enhanced));
+    }
+}

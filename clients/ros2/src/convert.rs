@@ -590,3 +590,157 @@ pub fn diagnostics_key(array: &DiagnosticArray) -> Vec<(u8, String)> {
         .map(|s| (s.level, s.message.clone()))
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassis_client::{FaultFlags, Group, LinkFlags, RobotKind};
+
+    const CLOCK: RosClock = RosClock {
+        offset_ns: 1_700_000_000_000_000_000,
+    };
+
+    fn titan() -> ChassisState {
+        let mut s = ChassisState {
+            robot: RobotKind::TITAN,
+            stamp_ns: 5_000_000_000,
+            ..ChassisState::default()
+        };
+        s.touch(Group::Motion, s.stamp_ns);
+        s.touch(Group::Pose, s.stamp_ns);
+        s.touch(Group::System, s.stamp_ns);
+        s.odometry.x_m = 1.0;
+        s.odometry.y_m = 2.0;
+        s.odometry.yaw_rad = std::f64::consts::FRAC_PI_2;
+        s.motion.linear_mps = 0.5;
+        s.motion.angular_radps = 0.25;
+        s.system.battery_voltage_v = 52.0;
+        s
+    }
+
+    #[test]
+    fn stamps_are_monotonic_time_plus_the_measured_offset() {
+        let t = CLOCK.ros_time(5_000_000_123);
+        assert_eq!(t.nanos(), 1_700_000_005_000_000_123);
+        assert_eq!(CLOCK.monotonic_ns(t), 5_000_000_123);
+    }
+
+    #[test]
+    fn odometry_is_odom_to_base_link_with_the_pose_and_the_body_twist() {
+        let frames = Frames::new("r1/");
+        let o = odometry(&titan(), CLOCK, &frames);
+        assert_eq!(o.header.frame_id, "r1/odom");
+        assert_eq!(o.child_frame_id, "r1/base_link");
+        assert_eq!(o.header.stamp, CLOCK.ros_time(5_000_000_000));
+        assert_eq!((o.pose.pose.position.x, o.pose.pose.position.y), (1.0, 2.0));
+        let q = o.pose.pose.orientation;
+        assert!((q.z - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12);
+        assert_eq!(o.twist.twist.linear.x, 0.5);
+        assert_eq!(o.twist.twist.angular.z, 0.25);
+        assert_eq!(o.pose.covariance[0], MEASURED_VARIANCE);
+        assert_eq!(o.pose.covariance[14], UNMEASURED_VARIANCE);
+        assert_eq!(o.pose.covariance[35], YAW_VARIANCE);
+        assert_eq!(o.pose.covariance[1], 0.0);
+        let tf = transform(&titan(), CLOCK, &frames);
+        assert_eq!(tf.transforms[0].transform.rotation, q);
+    }
+
+    #[test]
+    fn a_nan_speed_is_published_as_zero_not_nan() {
+        let mut s = titan();
+        s.motion.linear_mps = f32::NAN;
+        let o = odometry(&s, CLOCK, &Frames::new(""));
+        assert_eq!(o.twist.twist.linear.x, 0.0);
+    }
+
+    #[test]
+    fn battery_prefers_the_bms_and_leaves_the_unmeasured_nan() {
+        let s = titan();
+        let b = battery(&s, CLOCK, &Frames::new("")).expect("system battery");
+        assert_eq!(b.voltage, 52.0);
+        assert!(b.percentage.is_nan() && b.capacity.is_nan() && b.current.is_nan());
+        let mut s = titan();
+        s.touch(Group::BmsPack, s.stamp_ns);
+        s.bms[0].voltage_v = 48.5;
+        s.bms[0].soc_pct = 80.0;
+        s.bms[0].current_a = 3.0;
+        let b = battery(&s, CLOCK, &Frames::new("")).expect("bms");
+        assert_eq!((b.voltage, b.percentage, b.current), (48.5, 0.8, -3.0));
+        assert_eq!(
+            b.power_supply_status,
+            BatteryState::POWER_SUPPLY_STATUS_DISCHARGING
+        );
+        assert!(battery(&ChassisState::default(), CLOCK, &Frames::new("")).is_none());
+    }
+
+    #[test]
+    fn sensors_appear_only_where_the_robot_reports_them() {
+        let s = titan();
+        let f = Frames::new("");
+        assert!(imu(&s, CLOCK, &f).is_none());
+        assert!(range(&s, XBOT_RANGES[0], CLOCK, &f).is_none());
+        assert!(nav_sat_fix(&s, CLOCK, &f).is_none());
+        assert!(joint_states(&s, CLOCK, wheel_geometry(s.robot)).is_none());
+    }
+
+    #[test]
+    fn gps_without_a_fix_says_so_and_with_one_states_its_covariance() {
+        let mut s = titan();
+        s.touch(Group::Gps, s.stamp_ns);
+        let f = Frames::new("");
+        let none = nav_sat_fix(&s, CLOCK, &f).expect("gps reported");
+        assert_eq!(none.status.status, NavSatStatus::STATUS_NO_FIX);
+        s.gps.fix_quality = 1;
+        s.gps.latitude_deg = 53.36;
+        s.gps.longitude_deg = -6.5;
+        s.gps.hdop = 2.0;
+        let fix = nav_sat_fix(&s, CLOCK, &f).expect("fix");
+        assert_eq!(fix.status.status, NavSatStatus::STATUS_FIX);
+        assert_eq!((fix.latitude, fix.longitude), (53.36, -6.5));
+        assert_eq!(fix.position_covariance[0], 36.0);
+        assert_eq!(fix.position_covariance[8], 144.0);
+        assert_eq!(
+            fix.position_covariance_type,
+            NavSatFix::COVARIANCE_TYPE_APPROXIMATED
+        );
+    }
+
+    #[test]
+    fn xbot_wheels_are_joints_in_radians() {
+        let mut s = ChassisState {
+            robot: RobotKind::XBOT,
+            ..ChassisState::default()
+        };
+        s.touch(Group::WheelSpeed, 1);
+        s.motion.wheel_mps = [0.1, 0.2, 0.3, 0.4];
+        s.motors[0].position_counts = 1000;
+        let w = wheel_geometry(s.robot).expect("xbot geometry");
+        let j = joint_states(&s, CLOCK, Some(w)).expect("joints");
+        assert_eq!(j.name[0], "front_left_wheel_joint");
+        assert!((j.velocity[0] - 0.1 / w.radius_m).abs() < 1e-6);
+        assert!((j.position[0] - 1000.0 * w.metres_per_count / w.radius_m).abs() < 1e-9);
+        assert_eq!(j.position.len(), 4);
+    }
+
+    #[test]
+    fn diagnostics_name_faults_and_rank_errors_above_warnings() {
+        let mut s = titan();
+        let mux = MuxStatus::default();
+        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        assert_eq!(d.status[0].level, DiagnosticStatus::OK);
+        s.system.fault_flags = FaultFlags::BATTERY_LOW;
+        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        assert_eq!(d.status[0].level, DiagnosticStatus::WARN);
+        s.system.fault_flags |= FaultFlags::MOTOR_DRIVER_ERROR;
+        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        assert_eq!(d.status[0].level, DiagnosticStatus::ERROR);
+        assert!(d.status[0].values.iter().any(|kv| kv.value == "warning"));
+        s.link_flags = LinkFlags::BUS_DOWN;
+        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        assert_eq!(d.status[1].level, DiagnosticStatus::ERROR);
+        assert!(d.status[1].message.contains("bus_down"));
+        let stale = diagnostics("titan", None, None, Time::default());
+        assert_eq!(stale.status[0].level, DiagnosticStatus::STALE);
+        assert_ne!(diagnostics_key(&d), diagnostics_key(&stale));
+    }
+}
