@@ -501,24 +501,32 @@ impl StateLoop<'_> {
         }
     }
 
+    /// Publishes what `s` brings that the previous sample did not: odom and tf when the pose or
+    /// the body's motion was reported anew (a sample made by another frame repeats them), the
+    /// joints with their angles and speeds, each sensor with its own reading.
     fn on_state(&mut self, s: &ChassisState) {
+        use chassis_client::Group;
         let (clock, frames, out) = (self.clock, &self.frames, self.out);
-        let f = &mut self.failures;
-        Self::publish(f, "odom", &out.odom, convert::odometry(s, clock, frames));
-        if let Some(tf) = &out.tf {
-            Self::publish(f, "tf", tf, convert::transform(s, clock, frames));
-        }
-        if self.wheels.is_none() && self.latest.is_none_or(|l| l.robot != s.robot) {
-            self.wheels = convert::wheel_geometry(s.robot);
-        }
-        if let Some(j) = convert::joint_states(s, clock, self.wheels) {
-            Self::publish(f, "joint_states", &out.joint_states, j);
-        }
-        let fresh = |group: chassis_client::Group| {
-            self.latest
+        let latest = self.latest;
+        let fresh = |group: Group| {
+            latest
                 .is_none_or(|l| l.group_stamp_ns[group.index()] != s.group_stamp_ns[group.index()])
         };
-        use chassis_client::Group;
+        let f = &mut self.failures;
+        if fresh(Group::Pose) || fresh(Group::Motion) {
+            Self::publish(f, "odom", &out.odom, convert::odometry(s, clock, frames));
+            if let Some(tf) = &out.tf {
+                Self::publish(f, "tf", tf, convert::transform(s, clock, frames));
+            }
+        }
+        if latest.is_none_or(|l| l.robot != s.robot) {
+            self.wheels = convert::wheel_geometry(s.robot);
+        }
+        if (fresh(Group::Steering) || fresh(Group::WheelSpeed))
+            && let Some(j) = convert::joint_states(s, clock, self.wheels)
+        {
+            Self::publish(f, "joint_states", &out.joint_states, j);
+        }
         if (fresh(Group::BmsPack) || fresh(Group::System))
             && let Some(b) = convert::battery(s, clock, frames)
         {

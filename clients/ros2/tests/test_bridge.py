@@ -296,10 +296,10 @@ def test_each_service_answers_with_chassisd_s_response(ros: Ros) -> None:
 
     answer = estop.call(ros)
     assert answer.success, answer.message
-    assert estop_held(robot)
+    wait_until("the mux shows the e-stop held", lambda: estop_held(robot), 2.0, ros)
     answer = release.call(ros)
     assert answer.success, answer.message
-    assert not estop_held(robot)
+    wait_until("the mux shows the e-stop released", lambda: not estop_held(robot), 2.0, ros)
     answer = clear.call(ros)
     assert answer.success, answer.message
     # A refusal comes back with chassisd's reason: the XBot has no fault-clear command.
