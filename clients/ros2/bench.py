@@ -9,9 +9,9 @@ processes involved:
 * **cmd_vel → frame**: a ``geometry_msgs/Twist`` written on ``cmd_vel`` → the motion frame
   ``chassisd`` wrote to the bus (the frame tap's TX stamp). Requests alternate between two
   speeds, one every ``--interval-ms``, so each writes a frame (as ``clients/python/bench.py``).
-* **state → odom**: a frame that moved the robot's pose read by ``chassisd``
-  (``ChassisState.stamp_ns``) → the ``nav_msgs/Odometry`` carrying that pose taken by this
-  participant. Samples are matched by their pose.
+* **frame → odom**: a frame that moved the robot read by ``chassisd`` (``ChassisState.stamp_ns``)
+  → the ``nav_msgs/Odometry`` it produced taken by this participant. The bridge runs with
+  ``--monotonic-stamps``, so each odom's stamp is that read time itself.
 * **raw hops**: the same two DDS implementations with nothing behind them. ``chassis-ros2
   --bench-echo`` (the bridge's DDS stack) records each ``TwistStamped`` ping written here
   (Cyclone DDS → RustDDS, the cmd_vel hop) and answers it at once (RustDDS → Cyclone DDS, the
@@ -139,14 +139,10 @@ def command_path(
     return latencies, missed
 
 
-def state_path(
-    dp: DomainParticipant, robot: chassis.Robot, cmd: DataWriter, odom: DataReader, samples: int
-) -> list[int]:
-    """State → odom latencies, ns: each pose's first reading → the first odom carrying it."""
-    stream = robot.state_stream()
+def state_path(dp: DomainParticipant, cmd: DataWriter, odom: DataReader, samples: int) -> list[int]:
+    """Frame read → odom latencies, ns. The bridge runs with ``--monotonic-stamps``: each odom's
+    stamp is the ``CLOCK_MONOTONIC`` read time of the frame that produced it."""
     ws = waiter(dp, odom)
-    read_at: dict[tuple[float, float], int] = {}
-    matched: set[tuple[float, float]] = set()
     latencies: list[int] = []
     drive = m.Twist(linear=m.Vector3(x=STATE_DRIVE[0]), angular=m.Vector3(z=STATE_DRIVE[1]))
     last_request = 0
@@ -158,15 +154,7 @@ def state_path(
         ws.wait(duration(milliseconds=20))
         taken = odom.take(N=64)
         woke = chassis.now_ns()
-        for state in stream.drain():
-            pose = (state.odometry.x_m, state.odometry.y_m)
-            read_at.setdefault(pose, state.stamp_ns)
-        for sample in taken:
-            p = sample.pose.pose.position
-            pose = (p.x, p.y)
-            if pose in read_at and pose not in matched:
-                matched.add(pose)
-                latencies.append(woke - read_at[pose])
+        latencies.extend(woke - nanos(sample.header.stamp) for sample in taken)
     cmd.write(m.Twist())
     return latencies
 
@@ -213,7 +201,9 @@ def main() -> int:
         env["CHASSIS_IPC_PREFIX"] = args.prefix
     interval = args.interval_ms / 1e3
     with (out / "bridge.log").open("wb") as log:
-        bridge = subprocess.Popen([args.bridge, "--name", args.name], env=env, stderr=log)
+        bridge = subprocess.Popen(
+            [args.bridge, "--name", args.name, "--monotonic-stamps"], env=env, stderr=log
+        )
         echo = subprocess.Popen(
             [args.bridge, "--bench-echo", str(out / "raw-in.ns")], env=env, stderr=log
         )
@@ -231,7 +221,7 @@ def main() -> int:
         raw_out = raw_hops(dp, ping, pong, args.commands, interval)
         command, missed = command_path(robot, cmd, frames, args.commands, interval)
         time.sleep(0.6)  # the ros2 source expires: the state path starts from rest
-        state = state_path(dp, robot, cmd, odom, args.state_samples)
+        state = state_path(dp, cmd, odom, args.state_samples)
     finally:
         for proc in (echo, bridge):
             proc.send_signal(signal.SIGTERM)

@@ -58,6 +58,8 @@ pub struct Options {
     /// Prefix of every frame id (`robot1/`).
     pub frame_prefix: String,
     pub service_mapping: ServiceMapping,
+    /// Stamps are `CLOCK_MONOTONIC` itself, not ROS time.
+    pub monotonic_stamps: bool,
 }
 
 /// The service mapping ROS 2's RMW layer uses: rmw_cyclonedds_cpp has its own; rmw_fastrtps and
@@ -85,6 +87,16 @@ pub fn reliable_qos() -> QosProfile {
         .reliability_reliable(WhenFull::Wait(Duration::from_millis(10)))
         .durability(Durability::Volatile)
         .history(History::KeepLast { depth: 10 })
+}
+
+/// What the bridge's reliable writers keep for a slow reader: the last 100 (a subscriber asks
+/// for its own depth, rclcpp's 10 by default; depth is not part of matching). A writer whose
+/// window of unacknowledged samples is full drops the sample (counted) instead of blocking the
+/// state loop.
+pub fn reliable_writer_qos() -> QosProfile {
+    reliable_qos()
+        .reliability_reliable(WhenFull::Fail)
+        .history(History::KeepLast { depth: 100 })
 }
 
 /// QoS of `tf`: reliable, the last 100 (tf2_ros' `DynamicBroadcasterQoS`).
@@ -216,13 +228,13 @@ impl Entities {
             clear_faults: server("clear_faults")?,
         };
         let outputs = Outputs {
-            odom: node.create_publisher(&odom_topic, None)?,
+            odom: node.create_publisher(&odom_topic, Some(reliable_writer_qos()))?,
             tf: if options.tf {
-                Some(node.create_publisher(&tf_topic, None)?)
+                Some(node.create_publisher(&tf_topic, Some(reliable_writer_qos()))?)
             } else {
                 None
             },
-            joint_states: node.create_publisher(&joints_topic, None)?,
+            joint_states: node.create_publisher(&joints_topic, Some(reliable_writer_qos()))?,
             battery: node.create_publisher(&battery_topic, None)?,
             imu: node.create_publisher(&imu_topic, None)?,
             ranges: range_topics
@@ -230,7 +242,7 @@ impl Entities {
                 .map(|t| node.create_publisher(t, None))
                 .collect::<Result<Vec<_>, _>>()?,
             fix: node.create_publisher(&fix_topic, None)?,
-            diagnostics: node.create_publisher(&diag_topic, None)?,
+            diagnostics: node.create_publisher(&diag_topic, Some(reliable_writer_qos()))?,
         };
         Ok(Self {
             node,
@@ -572,14 +584,19 @@ impl StateLoop<'_> {
 }
 
 /// The state loop: runs until SIGINT / SIGTERM.
-pub fn state_loop(name: &str, frames: Frames, out: &Outputs) -> anyhow::Result<()> {
+pub fn state_loop(
+    name: &str,
+    frames: Frames,
+    clock: RosClock,
+    out: &Outputs,
+) -> anyhow::Result<()> {
     let Some(mut robot) = connect(name) else {
         return Ok(());
     };
     let mut lp = StateLoop {
         name,
         out,
-        clock: RosClock::measure(),
+        clock,
         frames,
         wheels: None,
         latest: None,

@@ -10,7 +10,7 @@ use std::process::ExitCode;
 
 use anyhow::Context as _;
 use chassis_ros2::bridge::{self, Entities, Options};
-use chassis_ros2::convert::Frames;
+use chassis_ros2::convert::{Frames, RosClock};
 use clap::{Parser, ValueEnum};
 use ros2_client::ServiceMapping;
 
@@ -51,6 +51,10 @@ struct Cli {
     /// rmw_cyclonedds_cpp → cyclone, else enhanced).
     #[arg(long, value_enum)]
     service_mapping: Option<Mapping>,
+    /// Stamp messages with `CLOCK_MONOTONIC` itself instead of ROS time (a stack on steady
+    /// time; chassis-bench reads latencies off the stamps this way).
+    #[arg(long)]
+    monotonic_stamps: bool,
     /// (internal) Be the far end of chassis-bench's raw DDS hop; write its latencies here.
     #[arg(long, hide = true)]
     bench_echo: Option<std::path::PathBuf>,
@@ -87,6 +91,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         tf: !cli.no_tf,
         frame_prefix: cli.frame_prefix,
         service_mapping,
+        monotonic_stamps: cli.monotonic_stamps,
     };
     let Entities {
         mut node,
@@ -119,7 +124,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         .context("starting the commands thread")?;
 
     let frames = Frames::new(&options.frame_prefix);
-    let result = bridge::state_loop(&options.name, frames, &outputs);
+    let clock = if options.monotonic_stamps {
+        RosClock::with_offset(0)
+    } else {
+        RosClock::measure()
+    };
+    let result = bridge::state_loop(&options.name, frames, clock, &outputs);
     chassis_client::request_termination();
     match commands.join() {
         Ok(Ok(drops)) => tracing::info!(?drops, "stopped"),
