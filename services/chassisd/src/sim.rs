@@ -68,8 +68,16 @@ pub fn carry_out(
             Some(Ok(t)) => (
                 ControlStatus::OK,
                 format!(
-                    "x_m={:.4} y_m={:.4} yaw_rad={:.4} linear_mps={:.4} angular_radps={:.4}",
-                    t.x_m, t.y_m, t.yaw_rad, t.linear_mps, t.angular_radps
+                    "x_m={:.4} y_m={:.4} yaw_rad={:.4} linear_mps={:.4} angular_radps={:.4} \
+                     commands={} decode_errors={} bad_checksums={}",
+                    t.x_m,
+                    t.y_m,
+                    t.yaw_rad,
+                    t.linear_mps,
+                    t.angular_radps,
+                    t.commands_received,
+                    t.decode_errors,
+                    t.bad_checksums_received
                 ),
             ),
             Some(Err(reason)) => (ControlStatus::REFUSED, reason.to_string()),

@@ -61,6 +61,9 @@ pub struct V2Driver {
     motion_clamp_flags: u32,
     /// RANGER: the mode last sent (or reported by 0x291).
     ranger_mode: Option<RangerMode>,
+    /// RANGER: the mode the present command needs, and when 0x141 last asked for it.
+    wanted_mode: Option<RangerMode>,
+    last_mode_command: Option<Timestamp>,
     want_control: bool,
     last_mode_request: Option<Timestamp>,
     estop_hold: bool,
@@ -88,6 +91,8 @@ enum VersionQuery {
 impl V2Driver {
     /// Least time between two 0x421 while the chassis keeps reporting standby (`PROTOCOLS-V2` §5).
     pub const MODE_RETRY: Duration = Duration::from_millis(500);
+    /// Least time between two 0x141 while a RANGER keeps reporting another motion mode.
+    pub const MOTION_MODE_RETRY: Duration = Duration::from_millis(100);
 
     /// A driver starting at `now`. With `config.take_control` it asks for CAN command mode at once.
     pub fn new(profile: V2Profile, config: DriverConfig, now: Timestamp) -> Self {
@@ -118,6 +123,8 @@ impl V2Driver {
             requested_flags: 0,
             motion_clamp_flags: 0,
             ranger_mode: None,
+            wanted_mode: None,
+            last_mode_command: None,
             last_mode_request: None,
             estop_hold: false,
             brake,
@@ -178,15 +185,13 @@ impl V2Driver {
             &self.profile,
         ) {
             Ok(planned) => {
+                if planned.mode.is_some() {
+                    self.wanted_mode = planned.mode;
+                }
                 if let Some(mode) = planned.mode
                     && self.ranger_mode != Some(mode)
-                    && let Some(code) = mode.code(&self.profile)
                 {
-                    self.queue.push_back(Frame::MotionModeCommand(MotionMode {
-                        mode: code,
-                        changing: false,
-                    }));
-                    self.ranger_mode = Some(mode);
+                    self.send_motion_mode(now, mode);
                 }
                 self.requested = planned.motion;
                 self.requested_flags = planned.clamp_flags;
@@ -206,6 +211,33 @@ impl V2Driver {
             );
         }
         self.update_motion(now);
+    }
+
+    /// RANGER: 0x141 for `mode`, ahead of the next 0x111.
+    fn send_motion_mode(&mut self, now: Timestamp, mode: RangerMode) {
+        if let Some(code) = mode.code(&self.profile) {
+            self.queue.push_back(Frame::MotionModeCommand(MotionMode {
+                mode: code,
+                changing: false,
+            }));
+            self.ranger_mode = Some(mode);
+            self.last_mode_command = Some(now);
+        }
+    }
+
+    /// RANGER: a chassis reporting another mode than the command needs (it rebooted into its
+    /// default mode, or the RC changed it) is asked again, at most every
+    /// [`V2Driver::MOTION_MODE_RETRY`], once it obeys (CAN command mode).
+    fn keep_motion_mode(&mut self, now: Timestamp, reported: Option<RangerMode>) {
+        if let Some(wanted) = self.wanted_mode
+            && reported != Some(wanted)
+            && self.core.state.system.control_mode == ControlMode::COMMAND
+            && self
+                .last_mode_command
+                .is_none_or(|t| now.saturating_since(t) >= Self::MOTION_MODE_RETRY)
+        {
+            self.send_motion_mode(now, wanted);
+        }
     }
 
     fn estop_reported(&self) -> bool {
@@ -247,7 +279,9 @@ impl V2Driver {
                 self.core.state.touch(Group::WheelSpeed, t);
             }
             Frame::MotionModeState(m) if !m.changing => {
-                self.ranger_mode = RangerMode::from_code(m.mode, &self.profile);
+                let reported = RangerMode::from_code(m.mode, &self.profile);
+                self.ranger_mode = reported;
+                self.keep_motion_mode(now, reported);
             }
             Frame::Odometer(o) => {
                 let odometry = &mut self.core.state.odometry;
@@ -423,6 +457,14 @@ impl V2Driver {
             // The retry limit is for a chassis that keeps reporting standby: a standby after CAN
             // mode (a reboot, a hand-back) is answered at once.
             self.last_mode_request = None;
+        }
+        if new_mode == ControlMode::COMMAND
+            && old_mode != ControlMode::COMMAND
+            && let Some(wanted) = self.wanted_mode
+        {
+            // Back from standby (a reboot, a heartbeat timeout) or an RC session: the chassis
+            // may be in another motion mode than the one last sent.
+            self.send_motion_mode(now, wanted);
         }
         if new_mode != old_mode {
             let level = if new_mode == ControlMode::COMMAND || old_mode == ControlMode::UNKNOWN {
