@@ -384,8 +384,8 @@ impl SimKind {
     pub const FLOOD: u8 = 11;
     /// Ask for what the simulated chassis really does (its true pose and speeds, not what it
     /// reports): the answer's message reads `x_m=… y_m=… yaw_rad=… linear_mps=… angular_radps=…
-    /// commands=… decode_errors=… bad_checksums=…` (the last three count the frames it obeyed,
-    /// could not decode and dropped for a bad checksum since power-up).
+    /// commands=… rejected=…` (the frames it obeyed, and those it could not decode or dropped
+    /// for a bad checksum, since power-up).
     pub const TRUTH: u8 = 12;
 
     pub const NAMES: [(u8, &'static str); 12] = [

@@ -145,7 +145,7 @@ pub(crate) fn parse_robot(text: &str) -> Result<Robot, chassis_protocols::Unknow
     text.parse()
 }
 
-fn parse_protocol(text: &str) -> Result<Protocol, chassis_protocols::ProtocolError> {
+pub(crate) fn parse_protocol(text: &str) -> Result<Protocol, chassis_protocols::ProtocolError> {
     text.parse()
 }
 

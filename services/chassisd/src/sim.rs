@@ -69,15 +69,14 @@ pub fn carry_out(
                 ControlStatus::OK,
                 format!(
                     "x_m={:.4} y_m={:.4} yaw_rad={:.4} linear_mps={:.4} angular_radps={:.4} \
-                     commands={} decode_errors={} bad_checksums={}",
+                     commands={} rejected={}",
                     t.x_m,
                     t.y_m,
                     t.yaw_rad,
                     t.linear_mps,
                     t.angular_radps,
                     t.commands_received,
-                    t.decode_errors,
-                    t.bad_checksums_received
+                    t.decode_errors + t.bad_checksums_received
                 ),
             ),
             Some(Err(reason)) => (ControlStatus::REFUSED, reason.to_string()),
