@@ -40,7 +40,8 @@ enum Cmd {
     Decode {
         #[arg(long, value_parser = parse_robot)]
         robot: Robot,
-        /// AgileX wire protocol, v1 or v2 (default: the robot's own; SCOUT MINI: v1).
+        /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
+        /// the other AgileX robots v2).
         #[arg(long, value_parser = parse_protocol)]
         protocol: Option<Protocol>,
         /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
@@ -53,7 +54,8 @@ enum Cmd {
     Encode {
         #[arg(long, value_parser = parse_robot)]
         robot: Robot,
-        /// AgileX wire protocol, v1 or v2 (default: the robot's own; SCOUT MINI: v1).
+        /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
+        /// the other AgileX robots v2).
         #[arg(long, value_parser = parse_protocol)]
         protocol: Option<Protocol>,
         /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).

@@ -5,29 +5,39 @@
 //! configuration (and runs the simulated chassis for the `sim` bus). A test hands the shell its
 //! own [`Devices`].
 
-use chassis_protocols::{DriverConfig, Profile, Timestamp, scout_mini, titan, xbot};
+use chassis_protocols::{
+    DriverConfig, Profile, Timestamp, V1Profile, agilex_v2, scout_mini, titan, xbot,
+};
 
 use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use crate::config::Config;
 use crate::engine::BoxedDriver;
 use crate::sim::{SimHandle, firmware_for};
 
-/// The driver for `config`: a SCOUT MINI on a real CAN bus with no protocol asked for listens
-/// first and drives in the protocol it hears (V1 or V2); every other robot gets
-/// [`driver_for`] its profile.
+/// The driver for `config`: a robot that may speak AgileX protocol V1 or V2 (SCOUT MINI, SCOUT
+/// 2.0, BUNKER) on a real CAN bus with no protocol asked for listens first and drives in the
+/// protocol it hears; every other robot gets [`driver_for`] its profile. The configured profile
+/// stands for the robot's default protocol (SCOUT MINI: V1, SCOUT and BUNKER: V2), the other
+/// protocol gets its defaults.
 pub fn driver_for_config(config: &Config, now: Timestamp) -> BoxedDriver {
-    if let Profile::ScoutMini(v1) = &config.profile
-        && config.protocol.is_none()
-        && matches!(config.bus, BusSpec::Can { .. } | BusSpec::Slcan { .. })
-    {
-        return Box::new(chassis_protocols::agilex_v2::AutoDriver::new(
-            v1.clone(),
-            chassis_protocols::agilex_v2::V2Profile::for_model(
-                chassis_protocols::agilex_v2::V2Model::ScoutMini,
-            ),
-            config.driver.clone(),
-            now,
-        ));
+    let real_can = matches!(config.bus, BusSpec::Can { .. } | BusSpec::Slcan { .. });
+    if config.protocol.is_none() && real_can {
+        let robot = config.profile.robot();
+        let pair = match (&config.profile, robot.v1_model(), robot.v2_model()) {
+            (Profile::ScoutMini(v1), _, Some(model)) => {
+                Some((v1.clone(), agilex_v2::V2Profile::for_model(model)))
+            }
+            (Profile::V2(v2), Some(model), _) => Some((V1Profile::for_model(model), v2.clone())),
+            _ => None,
+        };
+        if let Some((v1, v2)) = pair {
+            return Box::new(agilex_v2::AutoDriver::new(
+                v1,
+                v2,
+                config.driver.clone(),
+                now,
+            ));
+        }
     }
     driver_for(&config.profile, &config.driver, now)
 }
@@ -42,11 +52,7 @@ pub fn driver_for(profile: &Profile, config: &DriverConfig, now: Timestamp) -> B
             now,
         )),
         Profile::Xbot(p) => Box::new(xbot::XbotDriver::new(p.clone(), config.clone(), now)),
-        Profile::V2(p) => Box::new(chassis_protocols::agilex_v2::V2Driver::new(
-            p.clone(),
-            config.clone(),
-            now,
-        )),
+        Profile::V2(p) => Box::new(agilex_v2::V2Driver::new(p.clone(), config.clone(), now)),
     }
 }
 

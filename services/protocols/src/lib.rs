@@ -42,6 +42,7 @@ pub use error::{DecodeError, EncodeError};
 pub use firmware::{Firmware, Injection, SimTruth};
 pub use profile::{
     Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, Robot, UnknownRobot,
+    V1Model, V1Profile,
 };
 pub use time::Timestamp;
 
