@@ -898,7 +898,7 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
         nix::fcntl::FcntlArg::F_SETFL(nix::fcntl::OFlag::O_NONBLOCK),
     )
     .unwrap();
-    let mut drain = |master: &mut std::fs::File| {
+    let drain = |master: &mut std::fs::File| {
         let mut text = Vec::new();
         let mut buf = [0u8; 4096];
         while let Ok(got) = master.read(&mut buf) {

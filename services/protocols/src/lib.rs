@@ -14,6 +14,7 @@
 //! Frame structs hold SI values in ISO 8855 axes (x forward, y left, left turn positive); each
 //! codec is the only place that knows its vendor's units and signs.
 
+mod agilex;
 pub mod agilex_v2;
 pub mod can;
 pub mod command;
