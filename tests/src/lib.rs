@@ -515,6 +515,21 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
     },
     ExpectedRow {
         suite: "faults",
+        test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 10 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 100 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 1000 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
         test: "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
         fault: "bad checksums on the SCOUT MINI's CAN frames, 10 frames/s",
     },
