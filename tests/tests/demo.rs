@@ -72,12 +72,13 @@ fn chassis_demo_drives_figure_eights_under_the_safety_monitor_and_ctrl_c_stops_e
     );
 }
 
-/// Every AgileX protocol-V2 robot (the SCOUT MINI with V2 firmware included) runs the demo on
-/// its simulated chassis: the planner drives it under the safety monitor, in protocol V2, and
-/// the demo ends by itself after `--duration`. All robots at once, to keep the test short.
+/// Every AgileX protocol-V2 robot (the SCOUT MINI with V2 firmware included), and the SCOUT
+/// and BUNKER with V1 firmware, run the demo on their simulated chassis: the planner drives each
+/// under the safety monitor, in its protocol, and the demo ends by itself after `--duration`.
+/// All robots at once, to keep the test short.
 #[test]
-fn chassis_demo_runs_every_protocol_v2_robot() {
-    const ROBOTS: [(&str, Option<&str>); 7] = [
+fn chassis_demo_runs_every_agilex_robot_in_each_protocol() {
+    const ROBOTS: [(&str, Option<&str>); 9] = [
         ("scout", None),
         ("scout-mini", Some("v2")),
         ("hunter", None),
@@ -85,6 +86,8 @@ fn chassis_demo_runs_every_protocol_v2_robot() {
         ("tracer", None),
         ("bunker", None),
         ("ranger-mini", None),
+        ("scout", Some("v1")),
+        ("bunker", Some("v1")),
     ];
     let mut env = Env::new("demo-v2");
     let tag = std::process::id() % 10_000;
@@ -105,9 +108,9 @@ fn chassis_demo_runs_every_protocol_v2_robot() {
             args.extend(["--protocol", protocol]);
         }
         let index = env.spawn(&format!("demo-{robot}"), "chassis", &args);
-        demos.push((*robot, name, index));
+        demos.push((*robot, *protocol, name, index));
     }
-    for (robot, name, _) in &demos {
+    for (robot, protocol, name, _) in &demos {
         let mut handle = env.robot(name, Duration::from_secs(20));
         let driving = wait_for(Duration::from_secs(10), || {
             let m = mux(&mut handle);
@@ -118,14 +121,18 @@ fn chassis_demo_runs_every_protocol_v2_robot() {
         });
         assert!(driving.is_some(), "{robot}: not driving\n{}", env.logs());
         let s = state(&mut handle);
-        assert_eq!(s.system.wire_protocol, WireProtocol::V2, "{robot}");
+        let expected = match protocol {
+            Some("v1") => WireProtocol::V1,
+            _ => WireProtocol::V2,
+        };
+        assert_eq!(s.system.wire_protocol, expected, "{robot} {protocol:?}");
         assert_eq!(RobotKind::name(s.robot), *robot);
         assert!(
             mux(&mut handle).sources()[0].has(SourceFlags::FRESH),
             "{robot}: safety monitor not alive"
         );
     }
-    for (robot, _, index) in demos {
+    for (robot, _, _, index) in demos {
         assert_eq!(
             env.proc(index).wait_exit(Duration::from_secs(30)),
             Some(0),
