@@ -110,8 +110,8 @@ enum Cmd {
     /// The IPC contract: services, limits and payload layouts (--json: the whole document).
     Interfaces(interfaces::InterfacesArgs),
     /// Which AgileX protocol (v1 or v2) a chassis' frames speak, by the rule chassisd applies to
-    /// a SCOUT MINI before sending anything. Frames as for decode; stdin when none. Exits 1
-    /// without a decision.
+    /// a SCOUT MINI, SCOUT or BUNKER before sending anything. Frames as for decode; stdin when
+    /// none. Exits 1 without a decision.
     Detect {
         /// Consistent frames of one protocol needed to decide.
         #[arg(long, default_value_t = 3)]
