@@ -802,44 +802,17 @@ fn scout_mini_scout_and_bunker_without_a_protocol_flag_drive_a_v1_and_a_v2_chass
         );
         // Not one frame of the other protocol reached the chassis: a V2 frame on a V1 chassis
         // is an unknown id or a bad checksum there, a V1 frame on a V2 chassis an unknown id.
-        let truth = sim_counts(&mut handle);
-        assert!(truth.commands > 50, "{robot} {protocol}: {truth:?}");
+        let truth = sim_truth(&mut handle);
+        assert!(
+            truth.get("commands") > 50.0,
+            "{robot} {protocol}: {truth:?}"
+        );
         assert_eq!(
-            truth.rejected,
-            0,
+            truth.get("rejected"),
+            0.0,
             "{robot} {protocol}: frames of the wrong protocol reached the chassis\n{}",
             env.logs()
         );
-    }
-}
-
-/// What the simulated chassis counted since power-up.
-#[derive(Debug)]
-struct SimCounts {
-    commands: u64,
-    /// Frames it could not decode or dropped for a bad checksum.
-    rejected: u64,
-}
-
-/// Asks the simulated chassis (embedded or `chassisd sim`) what it received.
-fn sim_counts(robot: &mut Robot) -> SimCounts {
-    let request = SimRequest {
-        kind: SimKind::TRUTH,
-        ..SimRequest::default()
-    };
-    let answer = robot.sim(request, Duration::from_secs(2)).unwrap();
-    assert!(answer.is_ok(), "{}", answer.message());
-    let value = |key: &str| -> u64 {
-        answer
-            .message()
-            .split_whitespace()
-            .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
-            .and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("no {key} in {:?}", answer.message()))
-    };
-    SimCounts {
-        commands: value("commands"),
-        rejected: value("rejected"),
     }
 }
 

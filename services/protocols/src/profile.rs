@@ -357,17 +357,20 @@ impl ScoutMiniProfile {
             },
         }
     }
+}
 
-    /// This profile with the keys of `overrides` (the `[profile]` table of the service's
-    /// config) set over it. Unknown keys and wrong types are errors.
-    pub fn with_overrides(&self, overrides: &toml::Table) -> Result<Self, toml::de::Error> {
-        let mut table = toml::Table::try_from(self)
-            .map_err(|e| <toml::de::Error as serde::de::Error>::custom(format!("profile: {e}")))?;
-        for (key, value) in overrides {
-            table.insert(key.clone(), value.clone());
-        }
-        toml::Value::Table(table).try_into()
+/// `profile` with the keys of `overrides` (the `[profile]` table of the service's config) set
+/// over it. Unknown keys and wrong types are errors.
+pub(crate) fn with_overrides<P>(profile: &P, overrides: &toml::Table) -> Result<P, toml::de::Error>
+where
+    P: Serialize + serde::de::DeserializeOwned,
+{
+    let mut table = toml::Table::try_from(profile)
+        .map_err(|e| <toml::de::Error as serde::de::Error>::custom(format!("profile: {e}")))?;
+    for (key, value) in overrides {
+        table.insert(key.clone(), value.clone());
     }
+    toml::Value::Table(table).try_into()
 }
 
 /// XBot: differential (optionally omni) drive, RS232, little-endian.
@@ -619,38 +622,32 @@ impl Profile {
         table: &toml::Table,
     ) -> Result<Self, ProfileTableError> {
         let value = toml::Value::Table(table.clone());
-        Ok(match Profile::default_for_protocol(robot, protocol)? {
+        let model = table.get("model").cloned();
+        let profile = match Profile::default_for_protocol(robot, protocol)? {
             Profile::Titan(_) => Profile::Titan(value.try_into()?),
-            Profile::ScoutMini(default) => {
-                let base = match table.get("model") {
-                    Some(model) => ScoutMiniProfile::for_model(model.clone().try_into()?),
-                    None => default,
-                };
-                let profile = Profile::ScoutMini(base.with_overrides(table)?);
-                if profile.robot() != robot {
-                    return Err(ProfileTableError::WrongModel {
-                        model: profile.robot(),
-                        robot,
-                    });
-                }
-                profile
-            }
             Profile::Xbot(_) => Profile::Xbot(value.try_into()?),
-            Profile::V2(default) => {
-                let base = match table.get("model") {
-                    Some(model) => V2Profile::for_model(model.clone().try_into()?),
+            Profile::ScoutMini(default) => {
+                let base = match model {
+                    Some(model) => ScoutMiniProfile::for_model(model.try_into()?),
                     None => default,
                 };
-                let profile = Profile::V2(base.with_overrides(table)?);
-                if profile.robot() != robot {
-                    return Err(ProfileTableError::WrongModel {
-                        model: profile.robot(),
-                        robot,
-                    });
-                }
-                profile
+                Profile::ScoutMini(with_overrides(&base, table)?)
             }
-        })
+            Profile::V2(default) => {
+                let base = match model {
+                    Some(model) => V2Profile::for_model(model.try_into()?),
+                    None => default,
+                };
+                Profile::V2(with_overrides(&base, table)?)
+            }
+        };
+        if profile.robot() != robot {
+            return Err(ProfileTableError::WrongModel {
+                model: profile.robot(),
+                robot,
+            });
+        }
+        Ok(profile)
     }
 
     /// The wire protocol of this profile, for the robots that have a choice of two.
