@@ -294,6 +294,11 @@ pub struct ScoutMiniProfile {
     pub under_voltage_alarm_v: f64,
     /// Battery under-voltage failure level, V.
     pub under_voltage_failure_v: f64,
+    /// ⚠ D-16 (`PROTOCOLS-V2.md` §4.3): on a real CAN bus without a protocol asked for, listen
+    /// this long for V1/V2 evidence before reporting silence and listening again, ms.
+    pub detect_timeout_ms: u64,
+    /// ⚠ D-16: consistent frames of one protocol needed to decide.
+    pub detect_min_frames: u32,
 }
 
 impl Default for ScoutMiniProfile {
@@ -312,6 +317,8 @@ impl Default for ScoutMiniProfile {
             heartbeat_period_ms: 20,
             under_voltage_alarm_v: 22.5,
             under_voltage_failure_v: 22.0,
+            detect_timeout_ms: 5000,
+            detect_min_frames: 3,
         }
     }
 }
@@ -480,6 +487,23 @@ fn positive(name: &'static str, value: f64) -> Result<(), ProfileError> {
     }
 }
 
+/// Checks the protocol detection listens for a while and needs at least one frame (⚠ D-16).
+pub(crate) fn detection(timeout_ms: u64, min_frames: u32) -> Result<(), ProfileError> {
+    if timeout_ms == 0 {
+        return Err(ProfileError::NotPositive {
+            name: "detect_timeout_ms",
+            value: 0.0,
+        });
+    }
+    if min_frames == 0 {
+        return Err(ProfileError::NotPositive {
+            name: "detect_min_frames",
+            value: 0.0,
+        });
+    }
+    Ok(())
+}
+
 fn timeouts(heartbeat_ms: u64, timeout_ms: u64) -> Result<(), ProfileError> {
     if heartbeat_ms == 0 || heartbeat_ms >= timeout_ms {
         return Err(ProfileError::Heartbeat {
@@ -518,6 +542,7 @@ impl ScoutMiniProfile {
         positive("angular_full_scale_rad_s", self.angular_full_scale_rad_s)?;
         positive("max_linear_mps", self.max_linear_mps)?;
         positive("max_angular_rad_s", self.max_angular_rad_s)?;
+        detection(self.detect_timeout_ms, self.detect_min_frames)?;
         timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
     }
 }

@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use chassis_interfaces::{ChassisState, LinkFlags, Twist, WireProtocol};
 
-use super::detect::{Detection, Detector};
+use super::detect::{DetectSettings, Detection, Detector};
 use super::{V2Driver, V2Profile};
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
@@ -27,6 +27,7 @@ pub struct AutoDriver {
     robot: Robot,
     v1: ScoutMiniProfile,
     v2: V2Profile,
+    detect: DetectSettings,
     config: DriverConfig,
     detector: Detector,
     inner: Option<(Protocol, Box<dyn Driver + Send>)>,
@@ -46,15 +47,22 @@ impl std::fmt::Debug for AutoDriver {
 }
 
 impl AutoDriver {
-    /// Listening from `now` (`v2.detect_timeout_ms`, `v2.detect_min_frames`), for the robot of
-    /// `v1` (its V1 `model`; `v2` is that robot's V2 profile).
-    pub fn new(v1: ScoutMiniProfile, v2: V2Profile, config: DriverConfig, now: Timestamp) -> Self {
-        let detector = Self::detector(&v2, now);
+    /// Listening from `now` as `detect` says, for the robot of `v1` (its V1 `model`; `v2` is
+    /// that robot's V2 profile).
+    pub fn new(
+        v1: ScoutMiniProfile,
+        v2: V2Profile,
+        detect: DetectSettings,
+        config: DriverConfig,
+        now: Timestamp,
+    ) -> Self {
+        let detector = Self::detector(detect, now);
         let robot = v1.model.robot();
         Self {
             robot,
             v1,
             v2,
+            detect,
             config,
             detector,
             inner: None,
@@ -72,11 +80,11 @@ impl AutoDriver {
         }
     }
 
-    fn detector(v2: &V2Profile, now: Timestamp) -> Detector {
+    fn detector(detect: DetectSettings, now: Timestamp) -> Detector {
         Detector::new(
             now,
-            Duration::from_millis(v2.detect_timeout_ms),
-            v2.detect_min_frames,
+            Duration::from_millis(detect.timeout_ms),
+            detect.min_frames,
         )
     }
 
@@ -132,11 +140,11 @@ impl AutoDriver {
                     format!(
                         "{} protocol not detected within {} ms: {}; listening again",
                         self.shown_name(),
-                        self.v2.detect_timeout_ms,
+                        self.detect.timeout_ms,
                         outcome.describe()
                     ),
                 );
-                self.detector = Self::detector(&self.v2, now);
+                self.detector = Self::detector(self.detect, now);
             }
         }
     }
@@ -221,7 +229,7 @@ impl Driver for AutoDriver {
                     self.state.link_flags |= LinkFlags::BUS_DOWN;
                 } else {
                     self.state.link_flags &= !LinkFlags::BUS_DOWN;
-                    self.detector = Self::detector(&self.v2, now);
+                    self.detector = Self::detector(self.detect, now);
                 }
             }
         }
@@ -248,9 +256,12 @@ mod tests {
     const T0: Timestamp = Timestamp::from_millis(1000);
 
     fn auto() -> AutoDriver {
+        let v1 = ScoutMiniProfile::default();
+        let detect = DetectSettings::from(&v1);
         AutoDriver::new(
-            ScoutMiniProfile::default(),
+            v1,
             V2Profile::for_model(V2Model::ScoutMini),
+            detect,
             DriverConfig::default(),
             T0,
         )
@@ -300,7 +311,8 @@ mod tests {
     fn a_v1_chassis_is_driven_in_v1_and_never_sees_a_v2_frame() {
         for (v1, v2) in robots() {
             let robot = v1.model.robot();
-            let driver = AutoDriver::new(v1.clone(), v2, DriverConfig::default(), T0);
+            let detect = DetectSettings::from(&v2);
+            let driver = AutoDriver::new(v1.clone(), v2, detect, DriverConfig::default(), T0);
             assert_eq!(driver.robot(), robot);
             assert_eq!(driver.state().robot, robot.kind());
             let mut pair = Pair::new(driver, ScoutMiniSim::new(v1, T0), T0);
@@ -332,7 +344,8 @@ mod tests {
     fn a_v2_chassis_is_driven_in_v2_and_never_sees_a_v1_frame() {
         for (v1, v2) in robots() {
             let robot = v1.model.robot();
-            let driver = AutoDriver::new(v1, v2.clone(), DriverConfig::default(), T0);
+            let detect = DetectSettings::from(&v2);
+            let driver = AutoDriver::new(v1, v2.clone(), detect, DriverConfig::default(), T0);
             let mut pair = Pair::new(driver, V2Sim::new(v2, T0), T0);
             let (ids, first) = drive(&mut pair);
             assert_eq!(pair.driver.protocol(), Some(Protocol::V2), "{robot}");

@@ -528,7 +528,7 @@ impl V2Profile {
                 timeout_ms: self.command_timeout_ms,
             });
         }
-        Ok(())
+        crate::profile::detection(self.detect_timeout_ms, self.detect_min_frames)
     }
 }
 
