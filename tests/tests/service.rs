@@ -911,3 +911,55 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
         "{ids:?}"
     );
 }
+
+/// A protocol-V2 chassis' own E-stop switch (`chassis sim estop-switch`): the robot stops and
+/// reports it; released, it stays still while the command is the old one, and drives again only
+/// after the command was zero once.
+#[test]
+fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_again() {
+    let mut env = Env::new("estop-switch");
+    let n = name("esw");
+    env.chassisd(
+        "chassisd",
+        &["--robot", "hunter", "--name", &n, "--no-safety-monitor"],
+    );
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.4, 0.0);
+    let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    assert!(peak > 0.3, "peak {peak}\n{}", env.logs());
+    let switch = |robot: &mut Robot, on: bool| {
+        let answer = robot
+            .sim(
+                SimRequest {
+                    kind: SimKind::ESTOP_SWITCH,
+                    flag: u8::from(on),
+                    ..SimRequest::default()
+                },
+                Duration::from_secs(2),
+            )
+            .unwrap();
+        assert!(answer.is_ok(), "{}", answer.message());
+    };
+    switch(&mut robot, true);
+    drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(1));
+    let s = state(&mut robot);
+    assert!(s.motion.linear_mps.abs() < 0.05, "{}", s.motion.linear_mps);
+    assert_ne!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
+    switch(&mut robot, false);
+    let held = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(1));
+    let s = state(&mut robot);
+    assert!(held < 0.05, "moved on its own after the release: {held}");
+    assert_eq!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
+    assert_ne!(s.command.clamp_flags & ClampFlags::CHASSIS_NOT_READY, 0);
+    let stop = VelocityRequest::twist(0.0, 0.0);
+    drive_for(
+        &mut robot,
+        &mut teleop,
+        None,
+        stop,
+        Duration::from_millis(300),
+    );
+    let again = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    assert!(again > 0.3, "not driving again: {again}\n{}", env.logs());
+}

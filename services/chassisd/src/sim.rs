@@ -138,6 +138,7 @@ pub fn injection_of(request: &SimRequest) -> Result<Injection, BadSimRequest> {
         }
         SimKind::OBSTACLE_AHEAD => Injection::ObstacleAhead(on.then_some(finite("range")?)),
         SimKind::OBSTACLE_BEHIND => Injection::ObstacleBehind(on.then_some(finite("range")?)),
+        SimKind::ESTOP_SWITCH => Injection::EStop(on),
         SimKind::FLOOD => Injection::Flood {
             frames_per_s: finite("frame rate")?.min(1e6) as u32,
         },
