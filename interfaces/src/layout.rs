@@ -295,7 +295,7 @@ pub fn constants() -> Vec<ConstantGroup> {
             NONE, NO_ACTIVE_SOURCE, REQUIRED_SOURCE_STALE, LOCKED, STARTING,
         }),
         describe_constants!(flags SourceFlags: u8 {
-            REQUIRED, FRESH, ACTIVE, HEARTBEAT, BLOCKED, LIMITING,
+            REQUIRED, FRESH, ACTIVE, HEARTBEAT, BLOCKED, LIMITING, REMOTE,
         }),
         describe_constants!(flags RequestFlags: u32 { STEER, HEARTBEAT, LIMIT }),
         describe_constants!(enum ControlKind: u8 {

@@ -164,6 +164,8 @@ impl SourceFlags {
     pub const BLOCKED: u8 = 1 << 4;
     /// Its latest request is a speed envelope that currently limits the output.
     pub const LIMITING: u8 = 1 << 5;
+    /// Configured `remote`: a bridge (`chassis-zenoh`) may publish on it for another computer.
+    pub const REMOTE: u8 = 1 << 6;
 }
 
 /// One configured velocity source, as the mux sees it.

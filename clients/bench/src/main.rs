@@ -20,6 +20,7 @@ mod report;
 mod ros2;
 mod stats;
 mod throughput;
+mod zenoh;
 
 use baseline::{Load, Transport};
 use paths::{BusKind, LoopMode};
@@ -87,7 +88,7 @@ struct RunArgs {
     /// Robots for the service paths (full run).
     #[arg(long, value_delimiter = ',', default_values_t = ["titan".to_string(), "scout-mini".to_string(), "xbot".to_string()])]
     robots: Vec<String>,
-    /// Skip parts: baselines, paths, fanout, cost, throughput.
+    /// Skip parts: baselines, paths, fanout, cost, throughput, zenoh.
     #[arg(long, value_delimiter = ',')]
     skip: Vec<String>,
     /// Scratch directory for logs and sockets, kept afterwards (default: a new one under /tmp,
@@ -332,6 +333,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     }) + (if skip("paths") { 0 } else { runs.len() })
         + (if skip("fanout") { 0 } else { plan.fanout.len() })
         + usize::from(!skip("cost"))
+        + usize::from(!skip("zenoh"))
         + usize::from(!skip("throughput"));
     let bar = ProgressBar::new(steps as u64);
     bar.set_style(
@@ -633,6 +635,54 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             ));
             bar.inc(1);
         }
+    }
+
+    if !skip("zenoh") {
+        if zenoh::possible() {
+            bar.set_message("chassis-zenoh between two network namespaces");
+            let z = zenoh::run(
+                &prefix,
+                &dir,
+                plan.commands,
+                paths::COMMAND_INTERVAL,
+                plan.states,
+            )?;
+            let placement = "2 netns, veth";
+            let base = "Zenoh put → subscriber, 840 B";
+            let mut raw = row("baseline", base.into(), "-", placement, z.raw, 0);
+            raw.conditions = Some(format!(
+                "one sample every {} ms from the robot's namespace to the operator's, bare \
+                 sessions configured as chassis-zenoh's, same run",
+                paths::COMMAND_INTERVAL.as_millis()
+            ));
+            report.rows.push(raw);
+            let reference = Some(format!("{base}, {placement}"));
+            let mut command = row(
+                "zenoh",
+                "operator's remote source → robot's frame written (titan sim)".into(),
+                "event",
+                placement,
+                z.command.latencies,
+                z.command.missed,
+            );
+            command.baseline = reference.clone();
+            report.rows.push(command);
+            let mut state = row(
+                "zenoh",
+                "robot's frame read → state in the operator's iceoryx2 (titan sim)".into(),
+                "event",
+                placement,
+                z.state,
+                0,
+            );
+            state.baseline = reference;
+            report.rows.push(state);
+        } else {
+            report
+                .notes
+                .push("chassis-zenoh was not measured: its network namespaces need root".into());
+        }
+        bar.inc(1);
     }
 
     if !skip("cost") {

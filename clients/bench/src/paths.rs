@@ -419,13 +419,27 @@ pub fn command_path(
     interval: Duration,
     spin: bool,
 ) -> anyhow::Result<CommandFigures> {
-    let tap = robot.frames(2048)?;
     let mut teleop = robot.source("teleop")?;
+    command_path_via(robot, &mut teleop, kind, count, interval, spin)
+}
+
+/// [`command_path`] with requests from `teleop`, a source opened anywhere (through a bridge
+/// from another computer too): the frames and the mux are read from `robot`.
+pub fn command_path_via(
+    robot: &mut Robot,
+    teleop: &mut Source,
+    kind: RobotKind,
+    count: u64,
+    interval: Duration,
+    spin: bool,
+) -> anyhow::Result<CommandFigures> {
+    let tap = robot.frames(2048)?;
     // A new reader gets the latest decision with the service's next publication (10 Hz).
+    let source = teleop.name().to_string();
     let teleop_index = robot
         .wait_mux(Duration::from_secs(2))?
-        .and_then(|m| m.sources().iter().position(|s| s.name() == "teleop"))
-        .ok_or_else(|| anyhow::anyhow!("the mux reports no teleop source"))?;
+        .and_then(|m| m.sources().iter().position(|s| s.name() == source))
+        .ok_or_else(|| anyhow::anyhow!("the mux reports no {source} source"))?;
     let mut decoder = MotionDecoder::new(kind);
     // Exact on every wire: whole mm/s, whole percent of 5 m/s, exact in f32.
     let speeds = [0.25, 0.5];

@@ -910,7 +910,8 @@ class SourceFlags(Constants):
     HEARTBEAT = 8
     BLOCKED = 16
     LIMITING = 32
-    NAMES = {1: 'required', 2: 'fresh', 4: 'active', 8: 'heartbeat', 16: 'blocked', 32: 'limiting'}
+    REMOTE = 64
+    NAMES = {1: 'required', 2: 'fresh', 4: 'active', 8: 'heartbeat', 16: 'blocked', 32: 'limiting', 64: 'remote'}
 
 
 class WireProtocol(Constants):

@@ -477,10 +477,17 @@ mod tests {
         let c = RawConfig::default().validate(titan()).unwrap();
         assert_eq!(c.name, "titan");
         assert_eq!(c.bus, BusSpec::Sim);
-        assert_eq!(c.mux.sources.len(), 5);
-        assert_eq!(c.mux.sources[4].name, "ros2");
+        assert_eq!(c.mux.sources.len(), 6);
+        assert_eq!(c.mux.sources[5].name, "ros2");
         assert_eq!(c.mux.sources[3].name, "foxglove");
         assert!(c.mux.sources[0].required);
+        let remote = &c.mux.sources[4];
+        assert_eq!(
+            (remote.name.as_str(), remote.priority, remote.timeout_ms),
+            ("remote", 100, 300)
+        );
+        assert!(remote.remote && !remote.required);
+        assert!(c.mux.sources.iter().all(|s| s.remote == (s.name == "remote")));
         assert_eq!(c.profile, Profile::default_for(Robot::Titan));
     }
 

@@ -40,6 +40,10 @@ pub struct SourceConfig {
     pub timeout_ms: u64,
     #[serde(default)]
     pub required: bool,
+    /// Another computer may publish on it through a bridge (`chassis-zenoh`); never a required
+    /// source.
+    #[serde(default)]
+    pub remote: bool,
 }
 
 /// One configured lock.
@@ -95,7 +99,8 @@ pub struct MuxConfig {
 
 impl Default for MuxConfig {
     /// `safety` (255, 200 ms, required), `teleop` (100, 300 ms), `planner` (10, 500 ms),
-    /// `foxglove` (100, 300 ms: the Teleop panel of a Foxglove view, teleop's rank), `ros2` (50,
+    /// `foxglove` (100, 300 ms: the Teleop panel of a Foxglove view, teleop's rank), `remote`
+    /// (100, 300 ms, remote: a teleop on another computer, through `chassis-zenoh`), `ros2` (50,
     /// 500 ms: a ROS 2 stack's `cmd_vel` through chassis-ros2, below teleop, above the planner);
     /// lock `estop` at 255.
     fn default() -> Self {
@@ -104,6 +109,7 @@ impl Default for MuxConfig {
             priority,
             timeout_ms,
             required,
+            remote: false,
         };
         Self {
             sources: vec![
@@ -111,6 +117,10 @@ impl Default for MuxConfig {
                 source("teleop", 100, 300, false),
                 source("planner", 10, 500, false),
                 source("foxglove", 100, 300, false),
+                SourceConfig {
+                    remote: true,
+                    ..source("remote", 100, 300, false)
+                },
                 source("ros2", 50, 500, false),
             ],
             locks: vec![LockConfig {
@@ -137,6 +147,11 @@ pub enum MuxConfigError {
     Duplicate(String),
     #[error("source '{0}' needs a timeout above 0 ms")]
     ZeroTimeout(String),
+    #[error(
+        "source '{0}' is both required and remote: the source the robot cannot move without \
+         never comes from another computer"
+    )]
+    RemoteRequired(String),
 }
 
 impl MuxConfig {
@@ -171,6 +186,9 @@ impl MuxConfig {
         }
         if let Some(s) = self.sources.iter().find(|s| s.timeout_ms == 0) {
             return Err(MuxConfigError::ZeroTimeout(s.name.clone()));
+        }
+        if let Some(s) = self.sources.iter().find(|s| s.remote && s.required) {
+            return Err(MuxConfigError::RemoteRequired(s.name.clone()));
         }
         Ok(())
     }
@@ -313,6 +331,9 @@ impl Mux {
             slot.age_ms = u32::MAX;
             if source.config.required {
                 slot.flags |= SourceFlags::REQUIRED;
+            }
+            if source.config.remote {
+                slot.flags |= SourceFlags::REMOTE;
             }
         }
         for (slot, lock) in status.locks.iter_mut().zip(&locks) {
@@ -644,6 +665,9 @@ impl Mux {
             } else {
                 0
             };
+            if source.config.remote {
+                flags |= SourceFlags::REMOTE;
+            }
             if source.is_fresh(now) {
                 flags |= SourceFlags::FRESH;
             }
@@ -831,12 +855,14 @@ mod tests {
                     priority: 50,
                     timeout_ms: 500,
                     required: false,
+                    remote: false,
                 },
                 SourceConfig {
                     name: "b".into(),
                     priority: 50,
                     timeout_ms: 500,
                     required: false,
+                    remote: false,
                 },
             ],
             locks: vec![],
@@ -1171,6 +1197,12 @@ mod tests {
         let mut c = MuxConfig::default();
         c.sources[2].timeout_ms = 0;
         assert!(matches!(c.validate(), Err(MuxConfigError::ZeroTimeout(_))));
+        let mut c = MuxConfig::default();
+        c.sources[0].remote = true;
+        assert_eq!(
+            c.validate(),
+            Err(MuxConfigError::RemoteRequired("safety".into()))
+        );
         let c = MuxConfig {
             sources: vec![],
             ..MuxConfig::default()
@@ -1189,5 +1221,17 @@ mod tests {
         assert_eq!(s.sources()[2].name(), "planner");
         assert_eq!(s.locks()[0].name(), "estop");
         assert_eq!(s.sources()[0].timeout_ms, 200);
+        let remote = s.sources().iter().find(|s| s.name() == "remote").unwrap();
+        assert!(remote.has(SourceFlags::REMOTE));
+        assert!(!s.sources()[0].has(SourceFlags::REMOTE));
+        m.evaluate(ms(2));
+        let remote = m
+            .status()
+            .sources()
+            .iter()
+            .find(|s| s.name() == "remote")
+            .copied()
+            .unwrap();
+        assert!(remote.has(SourceFlags::REMOTE), "kept after a decision");
     }
 }

@@ -1,0 +1,309 @@
+//! `chassis-zenoh` paths between two network namespaces joined by a veth pair (the robot's
+//! computer and an operator's), beside a bare Zenoh put → subscriber over the same veth in the
+//! same run:
+//!
+//! * operator request → frame on the robot's bus: the operator side's `remote` source (its
+//!   own iceoryx2 prefix) → mirror → Zenoh → robot side → chassisd → the frame written;
+//! * robot state → operator: the frame read by chassisd → the state sample in an iceoryx2
+//!   subscriber of the operator side's mirror.
+//!
+//! Needs root (`ip netns`); without it the rows are left out with a note.
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use chassis_client::{Robot, STATE_BUFFER, Source, now_ns};
+use chassis_protocols::Robot as RobotKind;
+
+use crate::paths::{self, BusKind, LoopMode, StateRecorder};
+use crate::stats::Latencies;
+
+const ROBOT_ADDR: &str = "10.77.0.1";
+const OPERATOR_ADDR: &str = "10.77.0.2";
+const BRIDGE_PORT: u16 = 7447;
+const RAW_PORT: u16 = 7449;
+
+/// What the Zenoh run measured.
+#[derive(Debug)]
+pub struct ZenohFigures {
+    pub command: paths::CommandFigures,
+    pub state: Latencies,
+    pub raw: Latencies,
+}
+
+/// Two namespaces joined by a veth pair, removed on drop.
+struct Netns {
+    robot: String,
+    operator: String,
+}
+
+fn ip(args: &[&str]) -> anyhow::Result<()> {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .with_context(|| format!("running ip {} (install iproute2)", args.join(" ")))?;
+    if !out.status.success() {
+        bail!(
+            "ip {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    Ok(())
+}
+
+impl Netns {
+    fn new() -> anyhow::Result<Self> {
+        let id = std::process::id() % 100_000;
+        let ns = Netns {
+            robot: format!("cbr{id}"),
+            operator: format!("cbo{id}"),
+        };
+        ip(&["netns", "add", &ns.robot])?;
+        ip(&["netns", "add", &ns.operator])?;
+        ip(&[
+            "link",
+            "add",
+            &ns.robot,
+            "type",
+            "veth",
+            "peer",
+            "name",
+            &ns.operator,
+        ])?;
+        for (name, addr) in [(&ns.robot, ROBOT_ADDR), (&ns.operator, OPERATOR_ADDR)] {
+            ip(&["link", "set", name, "netns", name])?;
+            ip(&[
+                "-n",
+                name,
+                "addr",
+                "add",
+                &format!("{addr}/24"),
+                "dev",
+                name,
+            ])?;
+            ip(&["-n", name, "link", "set", name, "up"])?;
+            ip(&["-n", name, "link", "set", "lo", "up"])?;
+        }
+        Ok(ns)
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        for ns in [&self.robot, &self.operator] {
+            let _ = Command::new("ip").args(["netns", "del", ns]).status();
+        }
+    }
+}
+
+/// Processes stopped on drop.
+struct Children(Vec<Child>);
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for child in self.0.iter_mut().rev() {
+            if let Ok(pid) = i32::try_from(child.id()) {
+                let _ = nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(pid),
+                    nix::sys::signal::Signal::SIGTERM,
+                );
+            }
+            let _ = child.wait();
+        }
+    }
+}
+
+fn zenoh_in(ns: &str, prefix: &str, args: &[&str], log: &Path) -> anyhow::Result<Command> {
+    let mut cmd = Command::new("ip");
+    cmd.args(["netns", "exec", ns])
+        .arg(paths::sibling("chassis-zenoh")?)
+        .args(args)
+        .env("CHASSIS_IPC_PREFIX", prefix)
+        .env("RUST_LOG", "warn,zenoh=error")
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(
+            std::fs::File::create(log).with_context(|| format!("{}", log.display()))?,
+        ));
+    Ok(cmd)
+}
+
+/// True when this process may make network namespaces.
+pub fn possible() -> bool {
+    use std::os::unix::fs::MetadataExt as _;
+    // /proc/self belongs to the process's effective user.
+    std::fs::metadata("/proc/self").is_ok_and(|m| m.uid() == 0)
+}
+
+fn wait_until<T>(
+    what: &str,
+    timeout: Duration,
+    mut f: impl FnMut() -> Option<T>,
+) -> anyhow::Result<T> {
+    let deadline = now_ns() + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
+    let mut ticker = chassis_client::Ticker::new(Duration::from_millis(50));
+    loop {
+        if let Some(v) = f() {
+            return Ok(v);
+        }
+        if now_ns() > deadline {
+            bail!("{what} within {timeout:?}");
+        }
+        ticker.wait();
+    }
+}
+
+/// Runs the Zenoh paths: `commands` requests one per `interval`, `states` state samples,
+/// `raw` bare Zenoh samples.
+pub fn run(
+    prefix: &str,
+    dir: &Path,
+    commands: u64,
+    interval: Duration,
+    states: u64,
+) -> anyhow::Result<ZenohFigures> {
+    let netns = Netns::new()?;
+    let (service, mut robot) = paths::start(
+        RobotKind::Titan,
+        BusKind::Sim,
+        LoopMode::Event,
+        None,
+        prefix,
+        dir,
+    )?;
+    let name = service.name.clone();
+    let operator_prefix = format!("{prefix}op_");
+    let bridge = format!("tcp/{ROBOT_ADDR}:{BRIDGE_PORT}");
+    let raw = format!("tcp/{ROBOT_ADDR}:{RAW_PORT}");
+    let mut children = Children(Vec::new());
+
+    // The bare Zenoh hop first, alone on the link: robot side publishes, operator subscribes.
+    let raw_file = dir.join("zenoh-raw.ns");
+    let count = commands.max(200).to_string();
+    let mut sub = zenoh_in(
+        &netns.operator,
+        &operator_prefix,
+        &[
+            "raw-sub",
+            "--connect",
+            &raw,
+            "--insecure",
+            "--count",
+            &count,
+        ],
+        &dir.join("zenoh-raw-sub.log"),
+    )?;
+    let mut sub = sub
+        .arg("--out")
+        .arg(&raw_file)
+        .spawn()
+        .context("starting chassis-zenoh raw-sub")?;
+    let interval_ms = interval.as_millis().max(1).to_string();
+    let mut publisher = zenoh_in(
+        &netns.robot,
+        prefix,
+        &[
+            "raw-pub",
+            "--listen",
+            &raw,
+            "--insecure",
+            "--interval-ms",
+            &interval_ms,
+        ],
+        &dir.join("zenoh-raw-pub.log"),
+    )?
+    .spawn()
+    .context("starting chassis-zenoh raw-pub")?;
+    let status = sub.wait()?;
+    let _ = publisher.wait();
+    if !status.success() {
+        bail!(
+            "the bare Zenoh baseline failed; see {}",
+            dir.join("zenoh-raw-sub.log").display()
+        );
+    }
+    let mut raw_latencies = Latencies::new();
+    for line in std::fs::read_to_string(&raw_file)?.lines() {
+        raw_latencies.record(line.trim().parse().context("a latency in ns")?);
+    }
+
+    children.0.push(
+        zenoh_in(
+            &netns.robot,
+            prefix,
+            &["--name", &name, "--listen", &bridge, "--insecure"],
+            &dir.join("zenoh-robot.log"),
+        )?
+        .spawn()
+        .context("starting chassis-zenoh (robot side)")?,
+    );
+    children.0.push(
+        zenoh_in(
+            &netns.operator,
+            &operator_prefix,
+            &[
+                "--name",
+                &name,
+                "--connect",
+                &bridge,
+                "--insecure",
+                "--mirror",
+            ],
+            &dir.join("zenoh-operator.log"),
+        )?
+        .spawn()
+        .context("starting chassis-zenoh --mirror")?,
+    );
+    let mut operator = wait_until(
+        "the mirror served no state",
+        Duration::from_secs(20),
+        || {
+            let mut r = Robot::connect_with_prefix(&name, Some(&operator_prefix)).ok()?;
+            r.wait_state(Duration::from_millis(100)).ok().flatten()?;
+            Some(r)
+        },
+    )?;
+    let mut remote: Source = wait_until(
+        "the mirror offered no remote source",
+        Duration::from_secs(20),
+        || operator.source("remote").ok(),
+    )?;
+
+    let command = paths::command_path_via(
+        &mut robot,
+        &mut remote,
+        RobotKind::Titan,
+        commands,
+        interval,
+        false,
+    )?;
+
+    // Robot state → the operator's iceoryx2 subscriber, while the robot drives (so frames keep
+    // changing the state).
+    let stream = operator.state_stream(STATE_BUFFER)?;
+    let mut recorder = StateRecorder::default();
+    let mut last_request = 0u64;
+    let deadline = now_ns() + 120_000_000_000;
+    while recorder.latencies.count() < states && now_ns() < deadline {
+        if now_ns().saturating_sub(last_request) > 50_000_000 {
+            remote.send(chassis_client::VelocityRequest::twist(0.6, 0.3))?;
+            last_request = now_ns();
+        }
+        stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
+    }
+    remote.stop()?;
+    drop(stream);
+    drop(remote);
+    drop(operator);
+    drop(children);
+    drop(robot);
+    drop(service);
+    drop(netns);
+    Ok(ZenohFigures {
+        command,
+        state: recorder.latencies,
+        raw: raw_latencies,
+    })
+}

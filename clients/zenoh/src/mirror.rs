@@ -1,0 +1,376 @@
+//! The operator side (`--mirror`): the robot's services recreated in this computer's iceoryx2,
+//! with the contract's limits, so that the unchanged local tools — `chassis top`,
+//! `chassis-teleop --source remote`, `chassis echo`, Python clients — work here.
+//!
+//! * the main thread creates `state`, `mux` and `frames` and publishes what arrives from the
+//!   robot (the Zenoh callbacks hand the samples over a channel: iceoryx2 ports stay on the
+//!   thread that made them);
+//! * a thread per remote source (learned from the robot's mux) creates `cmd/<source>` and puts
+//!   every request on `chassis/<name>/cmd/<source>`;
+//! * a thread serves `control`, asking the robot's queryable for each request.
+//!
+//! Stamps are the robot's `CLOCK_MONOTONIC`: ages computed from them here are only meaningful
+//! when both sides share a clock (two namespaces of one machine).
+
+use std::collections::HashSet;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use chassis_client::{
+    BusFrame, ChassisState, ControlRequest, ControlResponse, ControlStatus, MuxStatus, ServiceKind,
+    VelocityRequest, service_name, termination_requested,
+};
+use chassis_ipc::{CMD, CONTROL, FRAMES, MUX, STATE, Writer};
+use iceoryx2::prelude::*;
+use zenoh::Wait as _;
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::sample::{Sample, SampleKind};
+use zerocopy::IntoBytes as _;
+
+use crate::net::{self, Net};
+use crate::robot::{guard, remote_sources};
+use crate::wire::{Keys, Wire};
+
+/// How long a control request waits for the robot's answer.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
+/// How often blocked threads look at the stop flag.
+const POLL: Duration = Duration::from_millis(100);
+
+/// What the operator side needs to know.
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub name: String,
+    pub net: Net,
+}
+
+enum Incoming {
+    State(Sample),
+    Mux(Sample),
+    Frames(Sample),
+    Alive(bool),
+}
+
+fn node(name: &str, role: &str) -> anyhow::Result<Node<ipc::Service>> {
+    Ok(chassis_ipc::node(
+        Some(&format!("chassis-zenoh/{name}/{role}")),
+        &chassis_ipc::config(None)?,
+        SignalHandlingMode::Disabled,
+    )?)
+}
+
+fn zerr(what: &str) -> impl FnOnce(zenoh::Error) -> anyhow::Error + '_ {
+    move |e| anyhow::anyhow!("{what}: {e}")
+}
+
+/// Runs the operator side until SIGINT/SIGTERM or a thread's failure.
+pub fn run(config: &Config) -> anyhow::Result<()> {
+    let keys = Keys::new(&config.name);
+    let node = node(&config.name, "mirror")?;
+    let state_name = service_name(&config.name, ServiceKind::State);
+    let state = match STATE.create(&node, &state_name)?.publisher() {
+        Ok(writer) => writer,
+        Err(chassis_ipc::IpcError::Taken { .. }) => anyhow::bail!(
+            "robot '{}' is already served on this computer (chassisd or another mirror holds {state_name}); \
+             give the mirror its own CHASSIS_IPC_PREFIX or stop the other",
+            config.name
+        ),
+        Err(e) => return Err(e.into()),
+    };
+    let mux = MUX
+        .create(&node, &service_name(&config.name, ServiceKind::Mux))?
+        .publisher()?;
+    let frames = FRAMES
+        .create(&node, &service_name(&config.name, ServiceKind::Frames))?
+        .publisher()?;
+
+    let session = net::open(net::config(&config.net, &config.name, &[])?)?;
+    eprintln!(
+        "chassis-zenoh: mirroring robot '{}' from {}",
+        config.name,
+        config.net.endpoints.join(", ")
+    );
+    let (tx, rx) = mpsc::channel::<Incoming>();
+    let subscribe = |key: &str, wrap: fn(Sample) -> Incoming| {
+        let tx = tx.clone();
+        session
+            .declare_subscriber(key.to_string())
+            .callback(move |sample| {
+                let _ = tx.send(wrap(sample));
+            })
+            .wait()
+            .map_err(zerr(key))
+    };
+    let _state_sub = subscribe(&keys.state, Incoming::State)?;
+    let _mux_sub = subscribe(&keys.mux, Incoming::Mux)?;
+    let _frames_sub = subscribe(&keys.frames, Incoming::Frames)?;
+    let alive_tx = tx.clone();
+    let _alive_sub = session
+        .liveliness()
+        .declare_subscriber(&keys.alive)
+        .history(true)
+        .callback(move |sample| {
+            let _ = alive_tx.send(Incoming::Alive(sample.kind() == SampleKind::Put));
+        })
+        .wait()
+        .map_err(zerr(&keys.alive))?;
+    drop(tx);
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut threads = Vec::new();
+    {
+        let (name, session, keys, stop) = (
+            config.name.clone(),
+            session.clone(),
+            keys.clone(),
+            stop.clone(),
+        );
+        threads.push(
+            std::thread::Builder::new()
+                .name("control".into())
+                .spawn(move || guard(&stop, || serve_control(&name, &session, &keys, &stop)))?,
+        );
+    }
+
+    let mut sources_started: HashSet<String> = HashSet::new();
+    let states = Wire::<ChassisState>::new();
+    let muxes = Wire::<MuxStatus>::new();
+    let bus = Wire::<BusFrame>::new();
+    let mut dropped: u64 = 0;
+    let mut drop_sample = |what: &str, e: &dyn std::fmt::Display| {
+        dropped += 1;
+        if dropped.is_power_of_two() {
+            tracing::warn!(dropped, "dropped a {what} sample from the robot: {e}");
+            eprintln!(
+                "chassis-zenoh: dropped a {what} sample from the robot: {e} ({dropped} dropped)"
+            );
+        }
+    };
+    let mut result = Ok(());
+    while !termination_requested() && !stop.load(Ordering::Relaxed) {
+        let incoming = match rx.recv_timeout(POLL) {
+            Ok(incoming) => incoming,
+            Err(mpsc::RecvTimeoutError::Timeout) => continue,
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        };
+        let sent = match incoming {
+            Incoming::State(sample) => {
+                match states.decode(sample.encoding(), &sample.payload().to_bytes()) {
+                    Ok(s) => send(&state, s),
+                    Err(e) => {
+                        drop_sample("state", &e);
+                        Ok(())
+                    }
+                }
+            }
+            Incoming::Mux(sample) => {
+                match muxes.decode(sample.encoding(), &sample.payload().to_bytes()) {
+                    Ok(m) => {
+                        for source in remote_sources(&m) {
+                            if sources_started.insert(source.clone()) {
+                                let (name, session, keys, stop) = (
+                                    config.name.clone(),
+                                    session.clone(),
+                                    keys.clone(),
+                                    stop.clone(),
+                                );
+                                threads.push(
+                                    std::thread::Builder::new()
+                                        .name(format!("cmd/{source}"))
+                                        .spawn(move || {
+                                            guard(&stop, || {
+                                                forward(&name, &session, &keys, &source, &stop)
+                                            })
+                                        })?,
+                                );
+                            }
+                        }
+                        send(&mux, m)
+                    }
+                    Err(e) => {
+                        drop_sample("mux", &e);
+                        Ok(())
+                    }
+                }
+            }
+            Incoming::Frames(sample) => {
+                match bus.decode_all(sample.encoding(), &sample.payload().to_bytes()) {
+                    Ok(batch) => batch.into_iter().try_for_each(|f| send(&frames, f)),
+                    Err(e) => {
+                        drop_sample("frames", &e);
+                        Ok(())
+                    }
+                }
+            }
+            Incoming::Alive(alive) => {
+                eprintln!(
+                    "chassis-zenoh: robot '{}' {}",
+                    config.name,
+                    if alive {
+                        "reachable"
+                    } else {
+                        "lost (its remote sources time out on the robot)"
+                    }
+                );
+                Ok(())
+            }
+        };
+        if let Err(e) = sent {
+            result = Err(e);
+            break;
+        }
+    }
+    stop.store(true, Ordering::Relaxed);
+    let mut failures = Vec::new();
+    for thread in threads {
+        match thread.join() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => failures.push(format!("{e:#}")),
+            Err(_) => failures.push("a thread panicked".into()),
+        }
+    }
+    let _ = session.close().wait();
+    result?;
+    if !failures.is_empty() {
+        anyhow::bail!("{}", failures.join("; "));
+    }
+    Ok(())
+}
+
+fn send<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
+    writer: &Writer<T>,
+    value: T,
+) -> anyhow::Result<()> {
+    writer
+        .publisher
+        .send_copy(value)
+        .map_err(|e| anyhow::anyhow!("publishing: {e}"))?;
+    writer
+        .notifier
+        .notify()
+        .map_err(|e| anyhow::anyhow!("waking the readers: {e}"))?;
+    Ok(())
+}
+
+/// Creates the local `cmd/<source>` and puts each request on the network.
+fn forward(
+    name: &str,
+    session: &zenoh::Session,
+    keys: &Keys,
+    source: &str,
+    stop: &AtomicBool,
+) -> anyhow::Result<()> {
+    let node = node(name, &format!("cmd-{source}"))?;
+    let service = service_name(name, ServiceKind::Cmd(source));
+    let reader = CMD
+        .create(&node, &service)?
+        .subscriber(CMD.limits.subscriber_max_buffer_size)?;
+    let key = keys.cmd(source);
+    let publisher = session
+        .declare_publisher(key.clone())
+        .encoding(Wire::<VelocityRequest>::new().encoding())
+        .congestion_control(CongestionControl::Drop)
+        .priority(Priority::InteractiveHigh)
+        .express(true)
+        .wait()
+        .map_err(zerr(&key))?;
+    eprintln!("chassis-zenoh: source '{source}' of robot '{name}' ready here");
+    let mut failed: u64 = 0;
+    while !termination_requested() && !stop.load(Ordering::Relaxed) {
+        reader
+            .listener
+            .timed_wait(|_| {}, POLL)
+            .map_err(|e| anyhow::anyhow!("waiting on {service}: {e}"))?;
+        while let Some(sample) = reader
+            .subscriber
+            .receive()
+            .map_err(|e| anyhow::anyhow!("receiving on {service}: {e}"))?
+        {
+            if let Err(e) = publisher.put(sample.payload().as_bytes()).wait() {
+                failed += 1;
+                if failed.is_power_of_two() {
+                    tracing::warn!(failed, "putting {key}: {e}");
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Serves the local `control`, asking the robot for each request.
+fn serve_control(
+    name: &str,
+    session: &zenoh::Session,
+    keys: &Keys,
+    stop: &AtomicBool,
+) -> anyhow::Result<()> {
+    let node = node(name, "control")?;
+    let service = service_name(name, ServiceKind::Control);
+    let ports = CONTROL
+        .create(&node, &service)?
+        .server()
+        .with_context(|| format!("serving {service}"))?;
+    let requests = Wire::<ControlRequest>::new();
+    let responses = Wire::<ControlResponse>::new();
+    while !termination_requested() && !stop.load(Ordering::Relaxed) {
+        ports
+            .requests
+            .timed_wait(|_| {}, POLL)
+            .map_err(|e| anyhow::anyhow!("waiting on {service}: {e}"))?;
+        while let Some(active) = ports
+            .server
+            .receive()
+            .map_err(|e| anyhow::anyhow!("receiving on {service}: {e}"))?
+        {
+            let request = *active.payload();
+            let mut response =
+                ask(session, keys, &requests, &responses, &request).unwrap_or_else(|message| {
+                    ControlResponse::new(request.seq, ControlStatus::TIMEOUT, &message)
+                });
+            response.request_seq = request.seq;
+            active
+                .send_copy(response)
+                .map_err(|e| anyhow::anyhow!("answering on {service}: {e}"))?;
+            ports
+                .replies
+                .notify()
+                .map_err(|e| anyhow::anyhow!("waking the clients of {service}: {e}"))?;
+        }
+    }
+    Ok(())
+}
+
+/// The robot's answer to `request`, or why there is none.
+fn ask(
+    session: &zenoh::Session,
+    keys: &Keys,
+    requests: &Wire<ControlRequest>,
+    responses: &Wire<ControlResponse>,
+    request: &ControlRequest,
+) -> Result<ControlResponse, String> {
+    let replies = session
+        .get(keys.control.clone())
+        .payload(request.as_bytes())
+        .encoding(requests.encoding())
+        .timeout(ANSWER_TIMEOUT)
+        .wait()
+        .map_err(|e| format!("asking the robot: {e}"))?;
+    match replies.recv() {
+        Ok(reply) => match reply.result() {
+            Ok(sample) => responses
+                .decode(sample.encoding(), &sample.payload().to_bytes())
+                .map_err(|e| format!("the robot's answer: {e}")),
+            Err(err) => Err(format!(
+                "the robot refused: {}",
+                err.payload()
+                    .try_to_string()
+                    .map_or_else(|_| "?".into(), |s| s.into_owned())
+            )),
+        },
+        Err(_) => Err(format!(
+            "no answer from the robot over Zenoh within {ANSWER_TIMEOUT:?}"
+        )),
+    }
+}

@@ -1,0 +1,439 @@
+//! The robot side: chassisd's services on Zenoh.
+//!
+//! * the main thread reads the state stream, the mux and the frame tap, and puts them on
+//!   `chassis/<name>/state`, `…/mux`, `…/frames` (fixed-layout bytes) and decimated JSON twins
+//!   (`…/state/json`, `…/mux/json`);
+//! * a thread holds the remote sources' publishers and takes `chassis/<name>/cmd/<source>` from
+//!   the network: only for sources chassisd's mux marks [`SourceFlags::REMOTE`] (never a
+//!   required one); each request is re-stamped on arrival, so its timeout runs from then;
+//! * a thread answers the queryable `chassis/<name>/control` with chassisd's response.
+//!
+//! iceoryx2 ports are not `Send`: each thread connects to the robot itself.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::Context as _;
+use chassis_client::{
+    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, Robot, STATE_BUFFER,
+    Source, SourceFlags, Ticker, VelocityRequest, now_ns, termination_requested,
+};
+use zenoh::Wait as _;
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::sample::Sample;
+use zerocopy::IntoBytes as _;
+
+use crate::net::{self, Net};
+use crate::wire::{Keys, Wire};
+
+/// How long a control request waits for chassisd.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
+/// Frames are sent in batches this often.
+const FRAMES_PERIOD_NS: u64 = 50_000_000;
+/// Frames the tap holds between two batches.
+const TAP_BUFFER: usize = 1024;
+/// How often blocked threads look at the stop flag.
+const POLL: Duration = Duration::from_millis(100);
+
+/// What the robot side needs to know.
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub name: String,
+    pub net: Net,
+    /// Binary state samples per second on the network (0: every one chassisd publishes).
+    pub state_hz: f64,
+    /// JSON twins per second.
+    pub json_hz: f64,
+    /// How long to wait for chassisd at start.
+    pub wait: Duration,
+}
+
+/// Lets one sample per period through on average, judged on the samples' own stamps, with a
+/// quarter period of slack for the publisher's jitter.
+#[derive(Debug, Clone, Copy)]
+pub struct Rate {
+    period_ns: u64,
+    next_ns: Option<u64>,
+}
+
+impl Rate {
+    /// `hz` ≤ 0: every sample.
+    pub fn new(hz: f64) -> Self {
+        let period_ns = if hz > 0.0 { (1e9 / hz) as u64 } else { 0 };
+        Self {
+            period_ns,
+            next_ns: None,
+        }
+    }
+
+    pub fn pass(&mut self, stamp_ns: u64) -> bool {
+        let slack = self.period_ns / 4;
+        if let Some(next) = self.next_ns
+            && stamp_ns.saturating_add(slack) < next
+        {
+            return false;
+        }
+        let after_stamp = stamp_ns.saturating_add(self.period_ns - slack);
+        self.next_ns = Some(self.next_ns.map_or(after_stamp, |next| {
+            next.saturating_add(self.period_ns).max(after_stamp)
+        }));
+        true
+    }
+}
+
+/// The remote sources of a mux decision: configured `remote`, never required.
+pub fn remote_sources(mux: &MuxStatus) -> Vec<String> {
+    mux.sources()
+        .iter()
+        .filter(|s| s.has(SourceFlags::REMOTE) && !s.has(SourceFlags::REQUIRED))
+        .map(|s| s.name().to_string())
+        .collect()
+}
+
+fn connect(name: &str, wait: Duration) -> anyhow::Result<Robot> {
+    let deadline = now_ns().saturating_add(u64::try_from(wait.as_nanos()).unwrap_or(u64::MAX));
+    let mut retry = Ticker::new(Duration::from_millis(100));
+    loop {
+        match Robot::connect(name) {
+            Ok(robot) => return Ok(robot),
+            Err(e) if now_ns() >= deadline || termination_requested() => {
+                return Err(e).context("connecting to chassisd");
+            }
+            Err(_) => retry.wait(),
+        }
+    }
+}
+
+fn first_mux(robot: &mut Robot, wait: Duration) -> anyhow::Result<MuxStatus> {
+    let deadline = now_ns().saturating_add(u64::try_from(wait.as_nanos()).unwrap_or(u64::MAX));
+    loop {
+        if let Some(mux) = robot.wait_mux(Duration::from_millis(100))? {
+            return Ok(mux);
+        }
+        if now_ns() >= deadline || termination_requested() {
+            anyhow::bail!("chassisd published no mux decision within {wait:?}");
+        }
+    }
+}
+
+/// Runs the robot side until SIGINT/SIGTERM or a thread's failure.
+pub fn run(config: &Config) -> anyhow::Result<()> {
+    let keys = Keys::new(&config.name);
+    // The endpoints and certificates are checked before anything else.
+    net::config(&config.net, &config.name, &[])?;
+    let mut robot = connect(&config.name, config.wait)?;
+    let mux = first_mux(&mut robot, config.wait)?;
+    let remote = remote_sources(&mux);
+    let session = net::open(net::config(&config.net, &config.name, &remote)?)?;
+    eprintln!(
+        "chassis-zenoh: robot '{}' on {} (remote sources: {})",
+        config.name,
+        config.net.endpoints.join(", "),
+        if remote.is_empty() {
+            "none".to_string()
+        } else {
+            remote.join(", ")
+        }
+    );
+    let _alive = session
+        .liveliness()
+        .declare_token(&keys.alive)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys.alive))?;
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut threads = Vec::new();
+    if !remote.is_empty() {
+        let (name, session, keys, stop) = (
+            config.name.clone(),
+            session.clone(),
+            keys.clone(),
+            stop.clone(),
+        );
+        let remote = remote.clone();
+        threads.push(
+            std::thread::Builder::new()
+                .name("cmd".into())
+                .spawn(move || guard(&stop, || drive(&name, &session, &keys, &remote, &stop)))?,
+        );
+    }
+    {
+        let (name, session, keys, stop) = (
+            config.name.clone(),
+            session.clone(),
+            keys.clone(),
+            stop.clone(),
+        );
+        threads.push(
+            std::thread::Builder::new()
+                .name("control".into())
+                .spawn(move || guard(&stop, || control(&name, &session, &keys, &stop)))?,
+        );
+    }
+    let result = publish(config, &session, &keys, &mut robot, mux, &stop);
+    stop.store(true, Ordering::Relaxed);
+    let mut failures = Vec::new();
+    for thread in threads {
+        match thread.join() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => failures.push(format!("{e:#}")),
+            Err(_) => failures.push("a thread panicked".into()),
+        }
+    }
+    let _ = session.close().wait();
+    result?;
+    if !failures.is_empty() {
+        anyhow::bail!("{}", failures.join("; "));
+    }
+    Ok(())
+}
+
+/// Runs `f`, raising the stop flag when it ends (so that the others end too).
+pub fn guard(stop: &AtomicBool, f: impl FnOnce() -> anyhow::Result<()>) -> anyhow::Result<()> {
+    let result = f();
+    stop.store(true, Ordering::Relaxed);
+    result
+}
+
+fn zerr(what: &str) -> impl FnOnce(zenoh::Error) -> anyhow::Error + '_ {
+    move |e| anyhow::anyhow!("{what}: {e}")
+}
+
+/// The main thread: state, mux and frames onto the network.
+fn publish(
+    config: &Config,
+    session: &zenoh::Session,
+    keys: &Keys,
+    robot: &mut Robot,
+    first: MuxStatus,
+    stop: &AtomicBool,
+) -> anyhow::Result<()> {
+    let declare = |key: &str, encoding: zenoh::bytes::Encoding, express: bool| {
+        session
+            .declare_publisher(key.to_string())
+            .encoding(encoding)
+            .congestion_control(CongestionControl::Drop)
+            .priority(Priority::DataHigh)
+            .express(express)
+            .wait()
+            .map_err(zerr(key))
+    };
+    let state_pub = declare(&keys.state, Wire::<ChassisState>::new().encoding(), true)?;
+    let mux_pub = declare(&keys.mux, Wire::<MuxStatus>::new().encoding(), true)?;
+    let frames_pub = declare(&keys.frames, Wire::<BusFrame>::new().encoding(), false)?;
+    let json = zenoh::bytes::Encoding::APPLICATION_JSON;
+    let state_json_pub = declare(&keys.state_json, json.clone(), false)?;
+    let mux_json_pub = declare(&keys.mux_json, json, false)?;
+
+    let states = robot.state_stream(STATE_BUFFER)?;
+    let tap = robot.frames(TAP_BUFFER)?;
+    let mut state_rate = Rate::new(config.state_hz);
+    let mut state_json_rate = Rate::new(config.json_hz);
+    let mut mux_json_rate = Rate::new(config.json_hz);
+    let mut next_frames = now_ns();
+    let mut next_check = now_ns();
+    let mut batch: Vec<u8> = Vec::new();
+    let mut failed: u64 = 0;
+    let mut report = |what: &str, e: zenoh::Error| {
+        failed += 1;
+        if failed.is_power_of_two() {
+            tracing::warn!(failed, "putting {what}: {e}");
+        }
+    };
+    let mut put_mux = |m: &MuxStatus, report: &mut dyn FnMut(&str, zenoh::Error)| {
+        if let Err(e) = mux_pub.put(m.as_bytes()).wait() {
+            report("mux", e);
+        }
+        if mux_json_rate.pass(m.stamp_ns)
+            && let Ok(text) = serde_json::to_vec(m)
+            && let Err(e) = mux_json_pub.put(text).wait()
+        {
+            report("mux/json", e);
+        }
+    };
+    put_mux(&first, &mut report);
+    while !termination_requested() && !stop.load(Ordering::Relaxed) {
+        states.wait(Duration::from_millis(20), |s| {
+            if state_rate.pass(s.stamp_ns)
+                && let Err(e) = state_pub.put(s.as_bytes()).wait()
+            {
+                report("state", e);
+            }
+            if state_json_rate.pass(s.stamp_ns)
+                && let Ok(text) = serde_json::to_vec(s)
+                && let Err(e) = state_json_pub.put(text).wait()
+            {
+                report("state/json", e);
+            }
+        })?;
+        robot.poll_mux(|m| put_mux(m, &mut report))?;
+        let now = now_ns();
+        if now >= next_check {
+            // Opening the service to count its publishers costs file operations: once a second.
+            next_check = now + 1_000_000_000;
+            if !robot.is_served() {
+                anyhow::bail!("chassisd stopped serving '{}'", config.name);
+            }
+        }
+        if now >= next_frames {
+            next_frames = now + FRAMES_PERIOD_NS;
+            batch.clear();
+            tap.drain(|f| batch.extend_from_slice(f.as_bytes()))?;
+            if !batch.is_empty()
+                && let Err(e) = frames_pub.put(batch.clone()).wait()
+            {
+                report("frames", e);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Takes velocity requests from the network for the remote sources.
+fn drive(
+    name: &str,
+    session: &zenoh::Session,
+    keys: &Keys,
+    remote: &[String],
+    stop: &AtomicBool,
+) -> anyhow::Result<()> {
+    let mut robot = Robot::connect(name)?;
+    let mut sources: HashMap<String, Source> = HashMap::new();
+    for source in remote {
+        let publisher = robot
+            .source(source)
+            .with_context(|| format!("taking the remote source '{source}'"))?;
+        sources.insert(source.clone(), publisher);
+    }
+    let subscriber = session
+        .declare_subscriber(keys.cmd_any.clone())
+        .wait()
+        .map_err(zerr(&keys.cmd_any))?;
+    let wire = Wire::<VelocityRequest>::new();
+    let mut refused: u64 = 0;
+    let mut bad: u64 = 0;
+    while !termination_requested() && !stop.load(Ordering::Relaxed) {
+        let sample = match subscriber.recv_timeout(POLL) {
+            Ok(Some(sample)) => sample,
+            Ok(None) => continue,
+            Err(e) => anyhow::bail!("receiving velocity requests: {e}"),
+        };
+        let arrived = now_ns();
+        let key = sample.key_expr().as_str();
+        let Some(source) = keys.source_of(key).and_then(|s| sources.get_mut(s)) else {
+            refused += 1;
+            tracing::warn!(
+                key,
+                refused,
+                "refused a velocity request: not a remote source of this robot"
+            );
+            eprintln!(
+                "chassis-zenoh: refused a velocity request on {key}: not a remote source of robot '{name}' ({refused} refused)"
+            );
+            continue;
+        };
+        match decode(&wire, &sample) {
+            Ok(mut request) => {
+                // Another computer's clock means nothing here: the request's age counts from
+                // its arrival.
+                request.stamp_ns = arrived;
+                source.send(request)?;
+            }
+            Err(e) => {
+                bad += 1;
+                tracing::warn!(key, bad, "dropped a velocity request: {e}");
+            }
+        }
+    }
+    Ok(())
+}
+
+fn decode<T>(wire: &Wire<T>, sample: &Sample) -> Result<T, crate::wire::WireError>
+where
+    T: chassis_client::layout::Layout
+        + zerocopy::FromBytes
+        + zerocopy::IntoBytes
+        + zerocopy::Immutable
+        + zerocopy::KnownLayout
+        + Copy,
+{
+    wire.decode(sample.encoding(), &sample.payload().to_bytes())
+}
+
+/// Answers `chassis/<name>/control` with chassisd's responses.
+fn control(
+    name: &str,
+    session: &zenoh::Session,
+    keys: &Keys,
+    stop: &AtomicBool,
+) -> anyhow::Result<()> {
+    let mut robot = Robot::connect(name)?;
+    let queryable = session
+        .declare_queryable(keys.control.clone())
+        .wait()
+        .map_err(zerr(&keys.control))?;
+    let requests = Wire::<ControlRequest>::new();
+    let responses = Wire::<ControlResponse>::new();
+    while !termination_requested() && !stop.load(Ordering::Relaxed) {
+        let query = match queryable.recv_timeout(POLL) {
+            Ok(Some(query)) => query,
+            Ok(None) => continue,
+            Err(e) => anyhow::bail!("receiving control requests: {e}"),
+        };
+        let request = match (query.payload(), query.encoding()) {
+            (Some(payload), Some(encoding)) => requests
+                .decode(encoding, &payload.to_bytes())
+                .map_err(|e| e.to_string()),
+            _ => Err("a control request carries a ControlRequest".to_string()),
+        };
+        let answer =
+            request.and_then(|r| robot.control(r, ANSWER_TIMEOUT).map_err(|e| e.to_string()));
+        let sent = match answer {
+            Ok(response) => query
+                .reply(query.key_expr().clone(), response.as_bytes())
+                .encoding(responses.encoding())
+                .wait(),
+            Err(message) => {
+                tracing::warn!("control request failed: {message}");
+                query.reply_err(message).wait()
+            }
+        };
+        if let Err(e) = sent {
+            tracing::warn!("answering a control request: {e}");
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rate_passes_one_sample_per_period() {
+        let mut rate = Rate::new(10.0);
+        let passed: Vec<u64> = (0..100u64)
+            .map(|i| i * 10_000_000)
+            .filter(|&t| rate.pass(t))
+            .collect();
+        assert!((10..=11).contains(&passed.len()), "{passed:?}");
+        let mut every = Rate::new(0.0);
+        assert!((0..5).all(|t| every.pass(t)));
+    }
+
+    #[test]
+    fn only_remote_sources_that_are_not_required_are_taken() {
+        let mut mux = MuxStatus {
+            source_count: 3,
+            ..MuxStatus::default()
+        };
+        mux.sources[0].set_name("safety");
+        mux.sources[0].flags = SourceFlags::REQUIRED | SourceFlags::REMOTE;
+        mux.sources[1].set_name("teleop");
+        mux.sources[2].set_name("remote");
+        mux.sources[2].flags = SourceFlags::REMOTE;
+        assert_eq!(remote_sources(&mux), vec!["remote".to_string()]);
+    }
+}

@@ -1,0 +1,782 @@
+//! `chassis-zenoh` between two network namespaces joined by a veth pair, standing in for the
+//! robot's computer (10.77.0.1) and an operator's (10.77.0.2). chassisd and the robot side run
+//! under the test's iceoryx2 prefix; the operator side mirrors the robot under a prefix of its
+//! own, so the test drives through the network although both share this machine's /dev/shm.
+//!
+//! Needs root (`ip netns`, veth pairs) and iproute2; fails loudly without them. Each test makes
+//! its own namespaces (unique names) and removes them, whatever happens.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::disallowed_methods
+)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use chassis_tests::*;
+
+const UP: Duration = Duration::from_secs(20);
+const ROBOT_ADDR: &str = "10.77.0.1";
+const OPERATOR_ADDR: &str = "10.77.0.2";
+const PORT: u16 = 7447;
+
+static NEXT: AtomicU32 = AtomicU32::new(0);
+
+fn name(tag: &str) -> String {
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+fn ip(args: &[&str]) {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("running ip {}: {e} (install iproute2)", args.join(" ")));
+    assert!(
+        out.status.success(),
+        "ip {} failed: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Two network namespaces joined by a veth pair; removed on drop.
+struct Link {
+    robot_ns: String,
+    operator_ns: String,
+    robot_if: String,
+}
+
+impl Link {
+    fn new() -> Self {
+        let id = format!(
+            "{}{}",
+            std::process::id() % 100_000,
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        );
+        let link = Link {
+            robot_ns: format!("czr{id}"),
+            operator_ns: format!("czo{id}"),
+            robot_if: format!("czr{id}"),
+        };
+        let operator_if = format!("czo{id}");
+        ip(&["netns", "add", &link.robot_ns]);
+        ip(&["netns", "add", &link.operator_ns]);
+        ip(&[
+            "link",
+            "add",
+            &link.robot_if,
+            "type",
+            "veth",
+            "peer",
+            "name",
+            &operator_if,
+        ]);
+        ip(&["link", "set", &link.robot_if, "netns", &link.robot_ns]);
+        ip(&["link", "set", &operator_if, "netns", &link.operator_ns]);
+        for (ns, dev, addr) in [
+            (&link.robot_ns, &link.robot_if, ROBOT_ADDR),
+            (&link.operator_ns, &operator_if, OPERATOR_ADDR),
+        ] {
+            ip(&["-n", ns, "addr", "add", &format!("{addr}/24"), "dev", dev]);
+            ip(&["-n", ns, "link", "set", dev, "up"]);
+            ip(&["-n", ns, "link", "set", "lo", "up"]);
+        }
+        link
+    }
+
+    /// Takes the robot's end of the link down (`up = false`) or up again.
+    fn set(&self, up: bool) {
+        ip(&[
+            "-n",
+            &self.robot_ns,
+            "link",
+            "set",
+            &self.robot_if,
+            if up { "up" } else { "down" },
+        ]);
+    }
+}
+
+impl Drop for Link {
+    fn drop(&mut self) {
+        // Removing a namespace removes its end of the veth pair, and so the pair.
+        for ns in [&self.robot_ns, &self.operator_ns] {
+            let _ = Command::new("ip").args(["netns", "del", ns]).status();
+        }
+    }
+}
+
+/// The operator side's iceoryx2 prefix: another computer's.
+fn operator_prefix(env: &Env) -> String {
+    format!("{}op_", env.prefix)
+}
+
+/// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
+fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
+    zenoh_logging(env, label, ns, prefix, args, "info,zenoh=warn")
+}
+
+/// [`zenoh_in`] with the log filter `log`.
+fn zenoh_logging(
+    env: &mut Env,
+    label: &str,
+    ns: &str,
+    prefix: &str,
+    args: &[&str],
+    log: &str,
+) -> usize {
+    let bin = bin("chassis-zenoh");
+    let mut all = vec!["netns", "exec", ns, bin.to_str().unwrap()];
+    all.extend_from_slice(args);
+    env.spawn_program(
+        label,
+        Path::new("ip"),
+        &all,
+        &[(IPC_PREFIX_ENV, prefix), ("RUST_LOG", log)],
+    )
+}
+
+fn endpoint(proto: &str) -> String {
+    format!("{proto}/{ROBOT_ADDR}:{PORT}")
+}
+
+/// chassisd (with its required safety monitor running) and the robot side, plain TCP.
+fn robot_side(env: &mut Env, link: &Link, n: &str) -> Robot {
+    env.chassisd("chassisd", &["--robot", "titan", "--name", n]);
+    env.spawn("safety", "chassis-safety", &["--name", n]);
+    let robot = env.robot(n, UP);
+    let prefix = env.prefix.clone();
+    let listen = endpoint("tcp");
+    zenoh_in(
+        env,
+        "zenoh-robot",
+        &link.robot_ns,
+        &prefix,
+        &["--name", n, "--listen", &listen, "--insecure"],
+    );
+    robot
+}
+
+/// The operator side's mirror and a connection to it.
+fn mirror(env: &mut Env, link: &Link, n: &str, extra: &[&str]) -> Robot {
+    let prefix = operator_prefix(env);
+    let connect = endpoint(if extra.contains(&"--certs") {
+        "tls"
+    } else {
+        "tcp"
+    });
+    let mut args = vec!["--name", n, "--connect", &connect, "--mirror"];
+    args.extend_from_slice(extra);
+    zenoh_in(env, "zenoh-operator", &link.operator_ns, &prefix, &args);
+    operator_robot(env, n, &prefix)
+}
+
+fn operator_robot(env: &Env, n: &str, prefix: &str) -> Robot {
+    let end = Instant::now() + UP;
+    loop {
+        match Robot::connect_with_prefix(n, Some(prefix)) {
+            Ok(robot) => return robot,
+            Err(e) => assert!(
+                Instant::now() < end,
+                "the mirror never served {n}: {e}\n{}",
+                env.logs()
+            ),
+        }
+        pause(Duration::from_millis(50));
+    }
+}
+
+/// The operator side's `remote` source, once the mirror has learned it from the robot's mux.
+fn remote_source(env: &Env, robot: &mut Robot) -> Source {
+    let end = Instant::now() + UP;
+    loop {
+        match robot.source("remote") {
+            Ok(source) => return source,
+            Err(e) => assert!(
+                Instant::now() < end,
+                "the mirror never offered the remote source: {e}\n{}",
+                env.logs()
+            ),
+        }
+        pause(Duration::from_millis(50));
+    }
+}
+
+fn active_name(m: &MuxStatus) -> String {
+    m.active().map_or("", |s| s.name()).to_string()
+}
+
+/// Sends `linear` every 50 ms from `source` until the robot's own mux has `remote` active and
+/// its state moves faster than `speed`; returns how long that took.
+fn drive_until_moving(
+    robot: &mut Robot,
+    source: &mut Source,
+    linear: f32,
+    speed: f32,
+    timeout: Duration,
+) -> Option<Duration> {
+    let start = Instant::now();
+    let mut last_send = None::<Instant>;
+    while start.elapsed() < timeout {
+        if last_send.is_none_or(|t| t.elapsed() >= Duration::from_millis(50)) {
+            source.send(VelocityRequest::twist(linear, 0.0)).unwrap();
+            last_send = Some(Instant::now());
+        }
+        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(10))
+            && s.motion.linear_mps > speed
+            && robot
+                .latest_mux()
+                .ok()
+                .flatten()
+                .is_some_and(|m| active_name(&m) == "remote")
+        {
+            return Some(start.elapsed());
+        }
+    }
+    None
+}
+
+#[test]
+fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeout() {
+    let link = Link::new();
+    let mut env = Env::new("zenoh-drive");
+    let n = name("zdr");
+    let mut robot = robot_side(&mut env, &link, &n);
+    let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
+    let mut remote = remote_source(&env, &mut operator);
+
+    // Only the remote sources exist on the operator's side: never the safety monitor's.
+    let err = operator.source("safety").unwrap_err();
+    assert!(matches!(err, ClientError::UnknownSource { .. }), "{err}");
+
+    // Drive from the operator's computer; the robot moves and its state comes back.
+    let took = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("the robot never moved\n{}", env.logs()));
+    let mirrored = wait_for(Duration::from_secs(3), || {
+        remote.send(VelocityRequest::twist(0.4, 0.0)).unwrap();
+        operator
+            .wait_state(Duration::from_millis(50))
+            .ok()
+            .flatten()
+            .is_some_and(|s| s.motion.linear_mps > 0.2)
+    });
+    assert!(
+        mirrored.is_some(),
+        "the operator never saw the robot move\n{}",
+        env.logs()
+    );
+    let timeout = source_timeout(&mux(&mut robot), "remote");
+    eprintln!("moving {took:?} after the first request; remote timeout {timeout:?}");
+
+    // The unchanged dashboard on the operator's side shows the robot, its mux and its bus.
+    let top = Command::new(bin("chassis"))
+        .args(["top", "--once", "--name", &n])
+        .env(IPC_PREFIX_ENV, operator_prefix(&env))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = top.id();
+    let mut top = Some(top);
+    let done = wait_for(Duration::from_secs(10), || {
+        remote.send(VelocityRequest::twist(0.4, 0.0)).unwrap();
+        pause(Duration::from_millis(40));
+        top.as_mut()
+            .is_some_and(|t| t.try_wait().ok().flatten().is_some())
+    });
+    let out = top.take().unwrap().wait_with_output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        done.is_some() && out.status.success(),
+        "chassis top (pid {pid}) on the operator's side: {text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("active remote (priority 100"), "{text}");
+    assert!(text.contains("RX  0x211"), "{text}");
+
+    // A control action from the operator's computer is answered by chassisd.
+    let answer = operator
+        .control(
+            ControlRequest::new(ControlKind::LIGHTS).with_arg(0, LightMode::ON),
+            Duration::from_secs(5),
+        )
+        .unwrap();
+    assert!(
+        answer.status != ControlStatus::TIMEOUT,
+        "no answer through the mirror: {}",
+        answer.message()
+    );
+
+    // Cut the link mid-drive; the operator keeps sending.
+    let cut_ns = now_ns();
+    link.set(false);
+    let mut safety_stale = false;
+    let stopped = decided_after(
+        &mut robot,
+        cut_ns,
+        Duration::from_secs(3),
+        || {
+            let _ = remote.send(VelocityRequest::twist(0.4, 0.0));
+            pause(Duration::from_millis(20));
+        },
+        |m| {
+            safety_stale |= m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE
+                || !m.sources()[0].has(SourceFlags::FRESH);
+            active_name(m) != "remote" && m.output.linear_x_mps == 0.0
+        },
+    )
+    .unwrap_or_else(|| panic!("the robot kept driving after the cut\n{}", env.logs()));
+    eprintln!(
+        "link cut: the robot's mux commanded zero {:.0} ms after the cut (remote timeout {:?})",
+        stopped.as_secs_f64() * 1e3,
+        timeout
+    );
+    assert!(
+        stopped <= timeout + DECISION_ALLOWANCE + Duration::from_millis(30),
+        "stopped {stopped:?} after the cut; the remote source's timeout is {timeout:?}"
+    );
+    let m = mux(&mut robot);
+    assert!(
+        m.sources()[0].name() == "safety" && m.sources()[0].has(SourceFlags::FRESH),
+        "{m:?}"
+    );
+    assert!(
+        !safety_stale,
+        "the safety monitor went stale during the cut"
+    );
+    let halted = wait_for(Duration::from_secs(3), || {
+        state(&mut robot).motion.linear_mps.abs() < 0.02
+    });
+    assert!(halted.is_some(), "the robot did not come to a halt");
+
+    // Link back: the same processes drive again.
+    pause(Duration::from_millis(1000));
+    link.set(true);
+    let again = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("no motion after the link came back\n{}", env.logs()));
+    eprintln!("link back: moving again {again:?} after the link came up");
+    for i in 0..4 {
+        let running = env.proc(i).is_running();
+        assert!(
+            running,
+            "{} exited\n{}",
+            env.proc(i).name.clone(),
+            env.logs()
+        );
+    }
+    remote.stop().unwrap();
+}
+
+fn gen_certs(env: &Env, dir: &Path) {
+    let out = Command::new(bin("chassis-zenoh"))
+        .args(["gen-certs", dir.to_str().unwrap(), "--host", ROBOT_ADDR])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "gen-certs: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.logs()
+    );
+}
+
+#[test]
+fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused() {
+    let link = Link::new();
+    let mut env = Env::new("zenoh-tls");
+    let n = name("ztl");
+    let certs = env.dir.join("certs");
+    let stranger = env.dir.join("stranger");
+    gen_certs(&env, &certs);
+    gen_certs(&env, &stranger);
+
+    // Plain TCP beyond loopback is refused unless asked for.
+    let out = Command::new(bin("chassis-zenoh"))
+        .args(["--name", &n, "--listen", &endpoint("tcp")])
+        .env(IPC_PREFIX_ENV, &env.prefix)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("refusing plain TCP"), "{stderr}");
+
+    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    env.spawn("safety", "chassis-safety", &["--name", &n]);
+    let mut robot = env.robot(&n, UP);
+    let prefix = env.prefix.clone();
+    let listen = endpoint("tls");
+    zenoh_in(
+        &mut env,
+        "zenoh-robot",
+        &link.robot_ns,
+        &prefix,
+        &[
+            "--name",
+            &n,
+            "--listen",
+            &listen,
+            "--certs",
+            certs.to_str().unwrap(),
+        ],
+    );
+    // A mirror holding certificates of another authority, under a prefix of its own.
+    let stranger_prefix = format!("{}st_", env.prefix);
+    zenoh_logging(
+        &mut env,
+        "zenoh-stranger",
+        &link.operator_ns,
+        &stranger_prefix,
+        &[
+            "--name",
+            &n,
+            "--connect",
+            &listen,
+            "--certs",
+            stranger.to_str().unwrap(),
+            "--mirror",
+        ],
+        "info,zenoh=debug",
+    );
+    let mut operator = mirror(&mut env, &link, &n, &["--certs", certs.to_str().unwrap()]);
+    let mut remote = remote_source(&env, &mut operator);
+    drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("the robot never moved under TLS\n{}", env.logs()));
+    remote.stop().unwrap();
+
+    // The stranger's mirror, running as long, has seen nothing of the robot.
+    let mut outsider = operator_robot(&env, &n, &stranger_prefix);
+    assert!(
+        outsider
+            .wait_state(Duration::from_secs(2))
+            .unwrap()
+            .is_none(),
+        "a mirror without the robot's CA got state\n{}",
+        env.logs()
+    );
+    assert!(outsider.latest_mux().unwrap().is_none());
+    assert!(matches!(
+        outsider.source("remote"),
+        Err(ClientError::UnknownSource { .. })
+    ));
+    let log = env.proc(3).log_text();
+    assert!(
+        log.to_lowercase().contains("certificate"),
+        "the stranger was not refused for its certificate\n{}",
+        env.logs()
+    );
+}
+
+/// The Python with `eclipse-zenoh` and the `chassis` package (scripts/zenoh-tests prepares
+/// target/python-venv), or `CHASSIS_ZENOH_PYTHON`.
+fn python() -> PathBuf {
+    let python = std::env::var_os("CHASSIS_ZENOH_PYTHON").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/python-venv/bin/python"),
+        PathBuf::from,
+    );
+    let ready = Command::new(&python)
+        .args(["-c", "import zenoh, chassis"])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        ready,
+        "{} cannot import zenoh and chassis: run scripts/zenoh-tests --prepare (it installs \
+         eclipse-zenoh and clients/python into target/python-venv)",
+        python.display()
+    );
+    python
+}
+
+#[test]
+fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() {
+    let python = python();
+    let link = Link::new();
+    let mut env = Env::new("zenoh-python");
+    let n = name("zpy");
+    robot_side(&mut env, &link, &n);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("zenoh/read_state.py");
+    let out = Command::new("ip")
+        .args(["netns", "exec", &link.operator_ns])
+        .arg(&python)
+        .arg(&script)
+        .args([
+            "--connect",
+            &endpoint("tcp"),
+            "--name",
+            &n,
+            "--count",
+            "50",
+            "--put-source",
+            "safety",
+        ])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "read_state.py failed: {}\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.logs()
+    );
+    let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    eprintln!("Python eclipse-zenoh reader: {summary}");
+    assert_eq!(summary["samples"], 50);
+    assert!(summary["matched"].as_u64().unwrap() >= 1, "{summary}");
+
+    // The requests on cmd/safety were refused by the robot side, and counted.
+    let refused = format!("refused a velocity request on chassis/{n}/cmd/safety");
+    let found = wait_for(Duration::from_secs(3), || env.logs().contains(&refused));
+    assert!(found.is_some(), "no refusal logged\n{}", env.logs());
+}
+
+/// Delay and loss on the link. `tc netem` where the kernel has it; otherwise (kernels built
+/// without `sch_netem`) loss from nftables (`numgen random`) on the operator's end of the veth
+/// and the delay from [`DelayRelay`], a relay in the operator's namespace that holds every
+/// chunk for the delay in each direction.
+enum Impairment {
+    Netem,
+    Emulated { _relay: DelayRelay },
+}
+
+const DELAY: Duration = Duration::from_millis(100);
+const LOSS_PERCENT: u32 = 5;
+/// Where the emulated impairment's relay listens, in the operator's namespace.
+const RELAY_PORT: u16 = 7448;
+
+fn run_in(ns: &str, program: &str, args: &[&str]) -> std::process::Output {
+    Command::new("ip")
+        .args(["netns", "exec", ns, program])
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("running {program} in {ns}: {e}"))
+}
+
+impl Impairment {
+    fn apply(link: &Link) -> Self {
+        let delay = format!("{}ms", DELAY.as_millis());
+        let loss = format!("{LOSS_PERCENT}%");
+        let operator_if = link.robot_if.replacen("czr", "czo", 1);
+        let mut netem = true;
+        for (ns, dev) in [
+            (&link.robot_ns, &link.robot_if),
+            (&link.operator_ns, &operator_if),
+        ] {
+            let out = run_in(
+                ns,
+                "tc",
+                &[
+                    "qdisc", "add", "dev", dev, "root", "netem", "delay", &delay, "loss", &loss,
+                ],
+            );
+            if !out.status.success() {
+                let err = String::from_utf8_lossy(&out.stderr);
+                assert!(
+                    err.contains("qdisc kind is unknown"),
+                    "tc netem failed: {err}"
+                );
+                netem = false;
+            }
+        }
+        if netem {
+            return Impairment::Netem;
+        }
+        eprintln!(
+            "this kernel has no netem qdisc: {LOSS_PERCENT} % loss from nftables, {delay} each way \
+             from a relay in the operator's namespace"
+        );
+        let ns = &link.operator_ns;
+        let nft = |rule: &str| {
+            let out = run_in(ns, "nft", &[rule]);
+            assert!(
+                out.status.success(),
+                "nft {rule}: {} (install nftables)",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        };
+        nft("add table inet impair");
+        for hook in ["input", "output"] {
+            nft(&format!(
+                "add chain inet impair {hook} {{ type filter hook {hook} priority 0; }}"
+            ));
+            let dir = if hook == "input" {
+                "iifname"
+            } else {
+                "oifname"
+            };
+            nft(&format!(
+                "add rule inet impair {hook} {dir} \"{operator_if}\" numgen random mod 100 < {LOSS_PERCENT} drop"
+            ));
+        }
+        Impairment::Emulated {
+            _relay: DelayRelay::start(ns, DELAY),
+        }
+    }
+
+    /// The endpoint the operator side connects to.
+    fn endpoint(&self) -> String {
+        match self {
+            Impairment::Netem => endpoint("tcp"),
+            Impairment::Emulated { .. } => format!("tcp/127.0.0.1:{RELAY_PORT}"),
+        }
+    }
+}
+
+/// A TCP relay in a network namespace: 127.0.0.1:[`RELAY_PORT`] → the robot's endpoint, each
+/// chunk held `delay` in each direction (order kept).
+struct DelayRelay {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl DelayRelay {
+    fn start(ns: &str, delay: Duration) -> Self {
+        use std::net::{TcpListener, TcpStream};
+        use std::sync::Arc;
+        use std::sync::atomic::AtomicBool;
+        let stop = Arc::new(AtomicBool::new(false));
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let path = format!("/var/run/netns/{ns}");
+        let flag = stop.clone();
+        std::thread::spawn(move || {
+            let file = std::fs::File::open(&path).unwrap();
+            nix::sched::setns(&file, nix::sched::CloneFlags::CLONE_NEWNET).unwrap();
+            let listener = TcpListener::bind(("127.0.0.1", RELAY_PORT)).unwrap();
+            listener.set_nonblocking(true).unwrap();
+            ready_tx.send(()).unwrap();
+            while !flag.load(Ordering::Relaxed) {
+                let Ok((inbound, _)) = listener.accept() else {
+                    pause(Duration::from_millis(20));
+                    continue;
+                };
+                inbound.set_nonblocking(false).unwrap();
+                let Ok(outbound) = TcpStream::connect((ROBOT_ADDR, PORT)) else {
+                    continue;
+                };
+                for (from, to) in [
+                    (inbound.try_clone().unwrap(), outbound.try_clone().unwrap()),
+                    (outbound, inbound),
+                ] {
+                    let _ = from.set_nodelay(true);
+                    let _ = to.set_nodelay(true);
+                    pump(from, to, delay);
+                }
+            }
+        });
+        ready_rx
+            .recv_timeout(Duration::from_secs(5))
+            .expect("the relay did not start");
+        DelayRelay { stop }
+    }
+}
+
+/// Copies `from` to `to`, each chunk `delay` after it was read.
+fn pump(mut from: std::net::TcpStream, mut to: std::net::TcpStream, delay: Duration) {
+    use std::io::{Read, Write};
+    let (tx, rx) = std::sync::mpsc::channel::<(Instant, Vec<u8>)>();
+    std::thread::spawn(move || {
+        let mut buf = vec![0u8; 65536];
+        while let Ok(n) = from.read(&mut buf) {
+            if n == 0
+                || tx
+                    .send((Instant::now() + delay, buf[..n].to_vec()))
+                    .is_err()
+            {
+                break;
+            }
+        }
+        let _ = from.shutdown(std::net::Shutdown::Both);
+    });
+    std::thread::spawn(move || {
+        while let Ok((due, bytes)) = rx.recv() {
+            pause(due.saturating_duration_since(Instant::now()));
+            if to.write_all(&bytes).is_err() {
+                break;
+            }
+        }
+        let _ = to.shutdown(std::net::Shutdown::Both);
+    });
+}
+
+impl Drop for DelayRelay {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+#[test]
+fn a_slow_lossy_link_still_drives() {
+    let link = Link::new();
+    let mut env = Env::new("zenoh-lossy");
+    let n = name("zls");
+    let mut robot = robot_side(&mut env, &link, &n);
+    let impairment = Impairment::apply(&link);
+    let prefix = operator_prefix(&env);
+    let connect = impairment.endpoint();
+    zenoh_in(
+        &mut env,
+        "zenoh-operator",
+        &link.operator_ns,
+        &prefix,
+        &[
+            "--name",
+            &n,
+            "--connect",
+            &connect,
+            "--mirror",
+            "--insecure",
+        ],
+    );
+    let mut operator = operator_robot(&env, &n, &prefix);
+    let mut remote = remote_source(&env, &mut operator);
+    let first = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("the robot never moved over the slow link\n{}", env.logs()));
+
+    // Drive at 20 Hz for 4 s and count the robot's mux decisions that chose the remote source.
+    let start = Instant::now();
+    let mut last_send = None::<Instant>;
+    let (mut decisions, mut remote_active, mut last_seq) = (0u32, 0u32, 0u64);
+    while start.elapsed() < Duration::from_secs(4) {
+        if last_send.is_none_or(|t| t.elapsed() >= Duration::from_millis(50)) {
+            remote.send(VelocityRequest::twist(0.4, 0.0)).unwrap();
+            last_send = Some(Instant::now());
+        }
+        if let Ok(Some(m)) = robot.wait_mux(Duration::from_millis(10))
+            && m.seq != last_seq
+        {
+            last_seq = m.seq;
+            decisions += 1;
+            remote_active += u32::from(active_name(&m) == "remote");
+        }
+    }
+    remote.stop().unwrap();
+    let share = f64::from(remote_active) / f64::from(decisions.max(1));
+    let state_back = wait_for(Duration::from_secs(5), || {
+        operator
+            .wait_state(Duration::from_millis(100))
+            .ok()
+            .flatten()
+            .is_some()
+    });
+    eprintln!(
+        "{} ms delay + {LOSS_PERCENT} % loss ({}): moving {first:?} after the first request; \
+         remote active in {:.0} % of {decisions} mux decisions over 4 s of driving at 20 Hz",
+        DELAY.as_millis(),
+        match impairment {
+            Impairment::Netem => "tc netem",
+            Impairment::Emulated { .. } => "nftables + delay relay",
+        },
+        share * 100.0
+    );
+    assert!(
+        state_back.is_some(),
+        "no state came back over the slow link"
+    );
+    assert!(
+        share >= 0.5,
+        "the remote source was active in only {:.0} % of the decisions\n{}",
+        share * 100.0,
+        env.logs()
+    );
+}
