@@ -487,7 +487,12 @@ mod tests {
             ("remote", 100, 300)
         );
         assert!(remote.remote && !remote.required);
-        assert!(c.mux.sources.iter().all(|s| s.remote == (s.name == "remote")));
+        assert!(
+            c.mux
+                .sources
+                .iter()
+                .all(|s| s.remote == (s.name == "remote"))
+        );
         assert_eq!(c.profile, Profile::default_for(Robot::Titan));
     }
 
