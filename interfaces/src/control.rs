@@ -383,10 +383,15 @@ impl SimKind {
     /// `value` extra feedback frames per second (0 stops).
     pub const FLOOD: u8 = 11;
     /// Ask for what the simulated chassis really does (its true pose and speeds, not what it
-    /// reports): the answer's message reads `x_m=… y_m=… yaw_rad=… linear_mps=… angular_radps=…`.
+    /// reports): the answer's message reads `x_m=… y_m=… yaw_rad=… linear_mps=… angular_radps=…
+    /// commands=… rejected=…` (the frames it obeyed, and those it could not decode or dropped
+    /// for a bad checksum, since power-up).
     pub const TRUTH: u8 = 12;
+    /// The chassis' own emergency-stop switch pressed (`flag` 1) or released (AgileX protocol
+    /// V2: 0x211 b0 reports it).
+    pub const ESTOP_SWITCH: u8 = 13;
 
-    pub const NAMES: [(u8, &'static str); 12] = [
+    pub const NAMES: [(u8, &'static str); 13] = [
         (Self::MOTOR_DRIVER_LOSS, "motor-driver-loss"),
         (Self::BATTERY, "battery"),
         (Self::BUMPER, "bumper"),
@@ -399,6 +404,7 @@ impl SimKind {
         (Self::OBSTACLE_BEHIND, "obstacle-behind"),
         (Self::FLOOD, "flood"),
         (Self::TRUTH, "truth"),
+        (Self::ESTOP_SWITCH, "estop-switch"),
     ];
 
     pub fn name(kind: u8) -> &'static str {

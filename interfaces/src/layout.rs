@@ -311,7 +311,7 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(enum ControlStatus: u8 { OK, REFUSED, UNSUPPORTED, INVALID, TIMEOUT }),
         describe_constants!(enum SimKind: u8 {
             MOTOR_DRIVER_LOSS, BATTERY, BUMPER, RC_TAKEOVER, REBOOT, SILENCE, GARBAGE,
-            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD,
+            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH,
         }),
         describe_constants!(enum FrameDirection: u8 { RX, TX }),
         describe_constants!(enum FrameKind: u8 { CAN, SERIAL, GPS }),

@@ -392,6 +392,36 @@ pub fn state(robot: &mut Robot) -> ChassisState {
         .unwrap_or_else(|| panic!("no state from chassis/{}", robot.name()))
 }
 
+/// What the simulated chassis (embedded or `chassisd sim`) really does: the `key=value` pairs of
+/// its truth (`SimKind::TRUTH`: true pose and speeds, commands obeyed, frames rejected), read
+/// by [`SimTruth::get`].
+pub fn sim_truth(robot: &mut Robot) -> SimTruth {
+    let request = SimRequest {
+        kind: SimKind::TRUTH,
+        ..SimRequest::default()
+    };
+    let answer = robot
+        .sim(request, Duration::from_secs(2))
+        .unwrap_or_else(|e| panic!("sim truth: {e}"));
+    assert!(answer.is_ok(), "{}", answer.message());
+    SimTruth(answer.message().to_string())
+}
+
+/// The simulated chassis' answer to `SimKind::TRUTH`.
+#[derive(Debug, Clone)]
+pub struct SimTruth(String);
+
+impl SimTruth {
+    /// The value of `key` (panics when it is missing: the answer's format is the contract).
+    pub fn get(&self, key: &str) -> f64 {
+        self.0
+            .split_whitespace()
+            .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no {key} in {:?}", self.0))
+    }
+}
+
 /// The latest mux status (waits up to a second).
 pub fn mux(robot: &mut Robot) -> MuxStatus {
     robot
@@ -512,6 +542,21 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
         suite: "faults",
         test: "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
         fault: "garbage CAN frames (id 0x7F0) on the TITAN's bus, 1000 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 10 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 100 frames/s",
+    },
+    ExpectedRow {
+        suite: "faults",
+        test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
+        fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 1000 frames/s",
     },
     ExpectedRow {
         suite: "faults",

@@ -71,3 +71,75 @@ fn chassis_demo_drives_figure_eights_under_the_safety_monitor_and_ctrl_c_stops_e
         stopped.elapsed()
     );
 }
+
+/// Every AgileX protocol-V2 robot (the SCOUT MINI with V2 firmware included), and the SCOUT
+/// and BUNKER with V1 firmware, run the demo on their simulated chassis: the planner drives each
+/// under the safety monitor, in its protocol, and the demo ends by itself after `--duration`.
+/// All robots at once, to keep the test short.
+#[test]
+fn chassis_demo_runs_every_agilex_robot_in_each_protocol() {
+    const ROBOTS: [(&str, Option<&str>); 9] = [
+        ("scout", None),
+        ("scout-mini", Some("v2")),
+        ("hunter", None),
+        ("hunter-se", None),
+        ("tracer", None),
+        ("bunker", None),
+        ("ranger-mini", None),
+        ("scout", Some("v1")),
+        ("bunker", Some("v1")),
+    ];
+    let mut env = Env::new("demo-v2");
+    let tag = std::process::id() % 10_000;
+    let mut demos = Vec::new();
+    for (k, (robot, protocol)) in ROBOTS.iter().enumerate() {
+        let name = format!("dv{k}{tag}");
+        let mut args = vec![
+            "demo",
+            "--robot",
+            robot,
+            "--name",
+            &name,
+            "--no-dashboard",
+            "--duration",
+            "12",
+        ];
+        if let Some(protocol) = protocol {
+            args.extend(["--protocol", protocol]);
+        }
+        let index = env.spawn(&format!("demo-{robot}"), "chassis", &args);
+        demos.push((*robot, *protocol, name, index));
+    }
+    for (robot, protocol, name, _) in &demos {
+        let mut handle = env.robot(name, Duration::from_secs(20));
+        let driving = wait_for(Duration::from_secs(10), || {
+            let m = mux(&mut handle);
+            let s = state(&mut handle);
+            m.active().map(SourceStatus::name) == Some("planner")
+                && m.zero_reason == ZeroReason::NONE
+                && s.motion.linear_mps.abs() > 0.1
+        });
+        assert!(driving.is_some(), "{robot}: not driving\n{}", env.logs());
+        let s = state(&mut handle);
+        let expected = match protocol {
+            Some("v1") => WireProtocol::V1,
+            _ => WireProtocol::V2,
+        };
+        assert_eq!(s.system.wire_protocol, expected, "{robot} {protocol:?}");
+        assert_eq!(RobotKind::name(s.robot), *robot);
+        assert!(
+            mux(&mut handle).sources()[0].has(SourceFlags::FRESH),
+            "{robot}: safety monitor not alive"
+        );
+    }
+    for (robot, _, _, index) in demos {
+        assert_eq!(
+            env.proc(index).wait_exit(Duration::from_secs(30)),
+            Some(0),
+            "{robot}\n{}",
+            env.logs()
+        );
+        let log = env.proc(index).log_text();
+        assert!(log.contains("active planner"), "{robot}: {log}");
+    }
+}

@@ -906,7 +906,7 @@ struct StormResult {
 /// The error counter a storm of `kind` raises on `robot`.
 fn storm_counter(robot: RobotModel, kind: u8, link: &LinkStats) -> u64 {
     match (robot, kind) {
-        (RobotModel::Titan, _) => link.rx_unknown_id,
+        (RobotModel::Titan | RobotModel::Hunter, _) => link.rx_unknown_id,
         (RobotModel::Xbot, SimKind::GARBAGE) => link.rx_bytes_discarded,
         _ => link.rx_bad_checksum,
     }
@@ -917,6 +917,8 @@ enum RobotModel {
     Titan,
     ScoutMini,
     Xbot,
+    /// HUNTER 2.0, for the AgileX protocol-V2 family.
+    Hunter,
 }
 
 impl RobotModel {
@@ -925,6 +927,7 @@ impl RobotModel {
             RobotModel::Titan => "titan",
             RobotModel::ScoutMini => "scout-mini",
             RobotModel::Xbot => "xbot",
+            RobotModel::Hunter => "hunter",
         }
     }
 }
@@ -1008,8 +1011,14 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
                     .sim(
                         SimRequest {
                             kind: storm.kind,
-                            // TITAN garbage comes as bytes, 8 to a frame.
-                            value: f64::from(per * if model == RobotModel::Titan { 8 } else { 1 }),
+                            // TITAN and V2 garbage comes as bytes, 8 to a frame.
+                            value: f64::from(
+                                per * if matches!(model, RobotModel::Titan | RobotModel::Hunter) {
+                                    8
+                                } else {
+                                    1
+                                },
+                            ),
                             ..SimRequest::default()
                         },
                         Duration::from_secs(3),
@@ -1053,7 +1062,7 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
             ..StormResult::default()
         };
         match model {
-            RobotModel::Titan => {
+            RobotModel::Titan | RobotModel::Hunter => {
                 r.good_on_tap = rx.iter().filter(|f| f.can_id != 0x7F0).count() as u64;
                 r.injected = r.tap_frames - r.good_on_tap;
             }
@@ -1083,6 +1092,9 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
     for (storm, r) in &results {
         let what = match (model, storm.kind) {
             (RobotModel::Titan, _) => "garbage CAN frames (id 0x7F0) on the TITAN's bus",
+            (RobotModel::Hunter, _) => {
+                "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2)"
+            }
             (RobotModel::ScoutMini, _) => "bad checksums on the SCOUT MINI's CAN frames",
             (RobotModel::Xbot, SimKind::GARBAGE) => "garbage bytes on the XBot's serial line",
             (RobotModel::Xbot, _) => "bad checksums on the XBot's serial reports",
@@ -1145,6 +1157,20 @@ fn garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame() {
     storms(
         RobotModel::Titan,
         "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
+        &[frames(10), frames(100), frames(1000)],
+    );
+}
+
+#[test]
+fn garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame() {
+    let frames = |rate| Storm {
+        kind: SimKind::GARBAGE,
+        rate,
+        unit: "frames",
+    };
+    storms(
+        RobotModel::Hunter,
+        "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
         &[frames(10), frames(100), frames(1000)],
     );
 }

@@ -108,21 +108,8 @@ impl Truth {
             return;
         }
         self.asked = Some(Instant::now());
-        let request = SimRequest {
-            kind: SimKind::TRUTH,
-            ..SimRequest::default()
-        };
-        let answer = robot.sim(request, Duration::from_secs(1)).unwrap();
-        assert!(answer.is_ok(), "{}", answer.message());
-        let value = |key: &str| -> f64 {
-            answer
-                .message()
-                .split_whitespace()
-                .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
-                .and_then(|v| v.parse().ok())
-                .unwrap_or_else(|| panic!("no {key} in {:?}", answer.message()))
-        };
-        let (x, y, yaw) = (value("x_m"), value("y_m"), value("yaw_rad"));
+        let truth = sim_truth(robot);
+        let (x, y, yaw) = (truth.get("x_m"), truth.get("y_m"), truth.get("yaw_rad"));
         let (x0, y0, yaw0) = *self.start.get_or_insert((x, y, yaw));
         let (dx, dy) = (x - x0, y - y0);
         let (sin, cos) = yaw0.sin_cos();

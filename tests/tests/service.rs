@@ -729,19 +729,28 @@ fn a_robot_on_a_bus_of_the_wrong_kind_is_refused_at_start_with_the_kinds_it_acce
     );
 }
 
+/// SCOUT MINI, SCOUT and BUNKER exist with V1 and with V2 firmware: without `--protocol`
+/// chassisd listens first and drives each in the protocol it hears.
 #[test]
-fn scout_mini_without_a_protocol_flag_drives_a_v1_and_a_v2_chassis_alike() {
-    for protocol in ["v1", "v2"] {
-        let mut env = Env::new(&format!("detect-{protocol}"));
-        let n = name(&format!("d{protocol}"));
-        let link = env.dir.join("scout-slcan");
+fn scout_mini_scout_and_bunker_without_a_protocol_flag_drive_a_v1_and_a_v2_chassis_alike() {
+    for (robot, protocol) in [
+        ("scout-mini", "v1"),
+        ("scout-mini", "v2"),
+        ("scout", "v1"),
+        ("scout", "v2"),
+        ("bunker", "v1"),
+        ("bunker", "v2"),
+    ] {
+        let mut env = Env::new(&format!("detect-{robot}-{protocol}"));
+        let n = name(&format!("d{}{protocol}", &robot[..2]));
+        let link = env.dir.join("agilex-slcan");
         let link_arg = format!("slcan-pty:{}", link.display());
         env.chassisd(
             "sim",
             &[
                 "sim",
                 "--robot",
-                "scout-mini",
+                robot,
                 "--protocol",
                 protocol,
                 "--name",
@@ -760,7 +769,7 @@ fn scout_mini_without_a_protocol_flag_drives_a_v1_and_a_v2_chassis_alike() {
             "chassisd",
             &[
                 "--robot",
-                "scout-mini",
+                robot,
                 "--name",
                 &n,
                 "--bus",
@@ -768,21 +777,189 @@ fn scout_mini_without_a_protocol_flag_drives_a_v1_and_a_v2_chassis_alike() {
                 "--no-safety-monitor",
             ],
         );
-        let mut robot = env.robot(&n, UP);
-        let mut teleop = source(&mut robot, "teleop");
+        let mut handle = env.robot(&n, UP);
+        let mut teleop = source(&mut handle, "teleop");
         let go = VelocityRequest::twist(0.3, 0.0);
-        let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
-        assert!(peak > 0.2, "{protocol}: peak {peak}\n{}", env.logs());
+        let peak = drive_for(&mut handle, &mut teleop, None, go, Duration::from_secs(2));
+        assert!(
+            peak > 0.2,
+            "{robot} {protocol}: peak {peak}\n{}",
+            env.logs()
+        );
         let logs = env.logs();
         assert!(
-            logs.contains(&format!("SCOUT MINI speaks protocol {protocol}")),
-            "{protocol}: no detection line\n{logs}"
+            logs.contains(&format!(
+                "{} speaks protocol {protocol}",
+                robot.replace('-', " ").to_uppercase()
+            )),
+            "{robot} {protocol}: no detection line\n{logs}"
         );
         let status = env.chassis(&["status", "--name", &n]);
         let status = String::from_utf8_lossy(&status.stdout);
         assert!(
             status.contains(&format!("protocol {protocol}")),
-            "{protocol}: {status}"
+            "{robot} {protocol}: {status}"
+        );
+        // Not one frame of the other protocol reached the chassis: a V2 frame on a V1 chassis
+        // is an unknown id or a bad checksum there, a V1 frame on a V2 chassis an unknown id.
+        let truth = sim_truth(&mut handle);
+        assert!(
+            truth.get("commands") > 50.0,
+            "{robot} {protocol}: {truth:?}"
+        );
+        assert_eq!(
+            truth.get("rejected"),
+            0.0,
+            "{robot} {protocol}: frames of the wrong protocol reached the chassis\n{}",
+            env.logs()
         );
     }
+}
+
+/// A BUNKER that says nothing: chassisd sends nothing, reports `chassis silent` with a log line
+/// naming what it heard and keeps listening; once the chassis speaks V2 it decides, and what it
+/// sends from then on is V2. The slcan adapter is a pty this test holds.
+#[test]
+fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
+    use std::io::{Read, Write};
+    use std::os::fd::AsFd;
+
+    let mut env = Env::new("detect-silent");
+    let n = name("dsil");
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let slave_path = nix::unistd::ttyname(pty.slave.as_fd()).unwrap();
+    let config = env.dir.join("bunker.toml");
+    std::fs::write(&config, "[profile]\ndetect_timeout_ms = 1000\n").unwrap();
+    let bus = format!("slcan:{}", slave_path.display());
+    env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "bunker",
+            "--name",
+            &n,
+            "--bus",
+            &bus,
+            "--no-safety-monitor",
+            "--config",
+            config.to_str().unwrap(),
+        ],
+    );
+    let mut handle = env.robot(&n, UP);
+    let silent = wait_for(Duration::from_secs(3), || {
+        state(&mut handle).link_flags & LinkFlags::CHASSIS_SILENT != 0
+    });
+    assert!(silent.is_some(), "not reported silent\n{}", env.logs());
+    let status = env.chassis(&["status", "--name", &n]);
+    let status = String::from_utf8_lossy(&status.stdout);
+    assert!(
+        status.contains("chassis silent") && status.contains("protocol detecting"),
+        "{status}"
+    );
+    assert!(
+        env.logs().contains(
+            "BUNKER protocol not detected within 1000 ms: nothing heard on the bus \
+             (wiring, bit rate, chassis off?); listening again"
+        ),
+        "{}",
+        env.logs()
+    );
+    // Only the adapter's setup (`C`, bit rate, `O`) came out of chassisd: no CAN frame.
+    let mut master = std::fs::File::from(pty.master);
+    nix::fcntl::fcntl(
+        master.as_fd(),
+        nix::fcntl::FcntlArg::F_SETFL(nix::fcntl::OFlag::O_NONBLOCK),
+    )
+    .unwrap();
+    let drain = |master: &mut std::fs::File| {
+        let mut text = Vec::new();
+        let mut buf = [0u8; 4096];
+        while let Ok(got) = master.read(&mut buf) {
+            if got == 0 {
+                break;
+            }
+            text.extend_from_slice(&buf[..got]);
+        }
+        String::from_utf8_lossy(&text).into_owned()
+    };
+    let before = drain(&mut master);
+    assert_eq!(before, "C\rS6\rO\r", "sent while listening");
+    // The chassis speaks V2 (0x221 motion feedback, 0x211 status in standby): decided.
+    let decided = wait_for(Duration::from_secs(3), || {
+        master
+            .write_all(b"t22180000000000000000\rt21180000010000000000\r")
+            .unwrap();
+        state(&mut handle).system.wire_protocol == WireProtocol::V2
+    });
+    assert!(decided.is_some(), "not decided\n{}", env.logs());
+    let logged = wait_for(Duration::from_secs(3), || {
+        env.logs().contains("BUNKER speaks protocol v2")
+    });
+    assert!(logged.is_some(), "{}", env.logs());
+    // A few heartbeat periods of what it sends now.
+    std::thread::sleep(Duration::from_millis(200));
+    let after = drain(&mut master);
+    let ids: std::collections::BTreeSet<&str> = after
+        .split('\r')
+        .filter_map(|line| line.strip_prefix('t'))
+        .filter_map(|frame| frame.get(..3))
+        .collect();
+    assert!(ids.contains("421") && ids.contains("111"), "{after:?}");
+    assert!(
+        ids.iter()
+            .all(|id| ["111", "421", "411", "4A1"].contains(id)),
+        "{ids:?}"
+    );
+}
+
+/// A protocol-V2 chassis' own E-stop switch (`chassis sim estop-switch`): the robot stops and
+/// reports it; released, it stays still while the command is the old one, and drives again only
+/// after the command was zero once.
+#[test]
+fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_again() {
+    let mut env = Env::new("estop-switch");
+    let n = name("esw");
+    env.chassisd(
+        "chassisd",
+        &["--robot", "hunter", "--name", &n, "--no-safety-monitor"],
+    );
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.4, 0.0);
+    let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    assert!(peak > 0.3, "peak {peak}\n{}", env.logs());
+    let switch = |robot: &mut Robot, on: bool| {
+        let answer = robot
+            .sim(
+                SimRequest {
+                    kind: SimKind::ESTOP_SWITCH,
+                    flag: u8::from(on),
+                    ..SimRequest::default()
+                },
+                Duration::from_secs(2),
+            )
+            .unwrap();
+        assert!(answer.is_ok(), "{}", answer.message());
+    };
+    switch(&mut robot, true);
+    drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(1));
+    let s = state(&mut robot);
+    assert!(s.motion.linear_mps.abs() < 0.05, "{}", s.motion.linear_mps);
+    assert_ne!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
+    switch(&mut robot, false);
+    let held = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(1));
+    let s = state(&mut robot);
+    assert!(held < 0.05, "moved on its own after the release: {held}");
+    assert_eq!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
+    assert_ne!(s.command.clamp_flags & ClampFlags::CHASSIS_NOT_READY, 0);
+    let stop = VelocityRequest::twist(0.0, 0.0);
+    drive_for(
+        &mut robot,
+        &mut teleop,
+        None,
+        stop,
+        Duration::from_millis(300),
+    );
+    let again = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    assert!(again > 0.3, "not driving again: {again}\n{}", env.logs());
 }

@@ -17,6 +17,7 @@ mod placement;
 mod provenance;
 mod python;
 mod report;
+mod ros2;
 mod stats;
 mod throughput;
 mod zenoh;
@@ -238,6 +239,10 @@ fn row(
 }
 
 /// The baseline transport that waits like a service loop in `mode`.
+/// The raw DDS hops the ROS 2 rows contain (Cyclone DDS is the peer, RustDDS the bridge's).
+const DDS_IN: &str = "DDS Cyclone DDS → RustDDS";
+const DDS_OUT: &str = "DDS RustDDS → Cyclone DDS";
+
 fn transport_of(mode: LoopMode) -> Transport {
     match mode {
         LoopMode::Event => Transport::IceoryxEvent,
@@ -372,6 +377,14 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     .into(),
             );
         }
+        let ros2 = ros2::interpreter();
+        if ros2.is_none() {
+            report.notes.push(
+                "the ROS 2 bridge was not measured: target/ros2-venv is missing \
+                 (scripts/ros2-tests makes it)"
+                    .into(),
+            );
+        }
         for r in &runs {
             let label = bus_label(r.robot, r.bus);
             bar.set_message(format!(
@@ -420,7 +433,22 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     )?),
                     _ => None,
                 };
-                Ok((command, state, preempt, python))
+                // The ROS 2 bridge beside them: same service, same placement.
+                let ros2 = match (&ros2, r.robot, r.mode) {
+                    (Some(interpreter), RobotKind::Titan, LoopMode::Event) => Some(ros2::run(
+                        interpreter,
+                        robot.name(),
+                        &prefix,
+                        &paths::sibling("chassis-ros2")?,
+                        &paths::sibling("chassis")?,
+                        &dir,
+                        plan.states,
+                        count,
+                        interval,
+                    )?),
+                    _ => None,
+                };
+                Ok((command, state, preempt, python, ros2))
             })??;
             let feed_per_s = feedback.per_second(&mut robot)?;
             drop(robot);
@@ -481,7 +509,38 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let reference = |what: &str| Some(format!("{what}, {placement}"));
             let warm = reference(transport.label());
 
-            let (command, state, (preempt, preempt_missed), python) = result;
+            let (command, state, (preempt, preempt_missed), python, ros2) = result;
+            if let Some(dds) = ros2 {
+                let conditions = format!(
+                    "one message every {} ms, measured by the ROS 2 run's own script, same run",
+                    interval.as_millis()
+                );
+                for (what, latencies) in [(DDS_IN, dds.raw_in), (DDS_OUT, dds.raw_out)] {
+                    let mut r = row("baseline", what.into(), "-", placement, latencies, 0);
+                    r.conditions = Some(conditions.clone());
+                    report.rows.push(r);
+                }
+                let mut command_row = row(
+                    "ros2",
+                    format!("{label}: cmd_vel → frame"),
+                    r.mode.arg(),
+                    placement,
+                    dds.command,
+                    dds.missed,
+                );
+                command_row.baseline = reference(DDS_IN);
+                report.rows.push(command_row);
+                let mut state_row = row(
+                    "ros2",
+                    format!("{label}: frame read → odom"),
+                    r.mode.arg(),
+                    placement,
+                    dds.state,
+                    0,
+                );
+                state_row.baseline = reference(DDS_OUT);
+                report.rows.push(state_row);
+            }
             if let Some(py) = python {
                 report.rows.push(row(
                     "python",

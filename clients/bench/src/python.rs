@@ -23,7 +23,7 @@ pub struct PythonFigures {
 }
 
 /// The repository the benchmark was built from.
-fn repo() -> PathBuf {
+pub(crate) fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
@@ -34,7 +34,7 @@ pub fn interpreter() -> Option<PathBuf> {
     python.exists().then_some(python)
 }
 
-fn read_latencies(file: &Path) -> anyhow::Result<Latencies> {
+pub(crate) fn read_latencies(file: &Path) -> anyhow::Result<Latencies> {
     let mut latencies = Latencies::new();
     let text =
         std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;

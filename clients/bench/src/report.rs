@@ -237,7 +237,7 @@ impl Report {
     /// Latency CDFs of every row, log latency axis: one panel per kind of path (baselines,
     /// command, state, preemption, fan-out), all on the same axes so panels compare.
     pub fn plot(&self, path: &Path) -> anyhow::Result<()> {
-        const PANELS: [(&str, &str); 7] = [
+        const PANELS: [(&str, &str); 8] = [
             ("baseline", "raw transports (ping-pong, one way)"),
             ("command", "command: request created → frame written"),
             ("state", "state: frame read → state received"),
@@ -250,6 +250,10 @@ impl Report {
             (
                 "in-service",
                 "in-service: chassisd's own part (woke → frame written, frame read → state published)",
+            ),
+            (
+                "ros2",
+                "ROS 2 bridge: cmd_vel → frame; frame read → odom (Cyclone DDS peer)",
             ),
         ];
         let root = SVGBackend::new(path, (1600, 2000)).into_drawing_area();
@@ -416,6 +420,13 @@ impl Report {
             ));
         }
         targets.push(self.python_target());
+        targets.push(self.ratio_target(
+            "ros2",
+            "event",
+            1.5,
+            "ROS 2 bridge p99 ≤ 1.5 × the raw DDS hop it contains (Cyclone DDS ↔ RustDDS, same run)"
+                .into(),
+        ));
         let throughput = self.throughput.map(|t| t.frames_per_s);
         targets.push(Target {
             what: "decode + publish ≥ 1,000,000 frames/s on one core".into(),
@@ -596,6 +607,9 @@ impl Report {
              | preemption | the `safety` source publishes a stop while `teleop` drives | the \
              zero frame is written |\n\
              | fan-out | as *state* | in each of several subscriber processes at once |\n\
+             | ros2 | a Cyclone DDS participant writes `cmd_vel`; chassisd has read a frame | \
+             the motion frame is written; the `odom` carrying that frame's pose is taken by the \
+             participant (through `chassis-ros2`) |\n\
              | baseline | a {}-byte payload (a `ChassisState`) sent | received by the other \
              process |\n\n\
              * **loop**: `event` blocks on an iceoryx2 WaitSet, `spin` polls without blocking, \

@@ -21,6 +21,10 @@ pub struct DemoArgs {
     /// ranger-mini.
     #[arg(long, default_value = "titan", value_parser = crate::parse_robot)]
     pub robot: RobotKind,
+    /// AgileX wire protocol of the simulated chassis, v1 or v2 (default: the robot's own; SCOUT
+    /// MINI: v1).
+    #[arg(long, value_parser = crate::parse_protocol)]
+    pub protocol: Option<chassis_protocols::Protocol>,
     /// Name of the demo robot's services (default: demo-<robot>).
     #[arg(long)]
     pub name: Option<String>,
@@ -65,10 +69,16 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         .stdin(Stdio::null())
         .stdout(log_file(&dir, "chassisd")?)
         .stderr(log_file(&dir, "chassisd")?);
+    if let Some(protocol) = args.protocol {
+        service.args(["--protocol", protocol.name()]);
+    }
     children.spawn("chassisd", service)?;
     eprintln!(
-        "chassisd: simulated {} as chassis/{name} (logs in {})",
+        "chassisd: simulated {}{} as chassis/{name} (logs in {})",
         args.robot,
+        args.protocol
+            .map(|p| format!(" (protocol {p})"))
+            .unwrap_or_default(),
         dir.display()
     );
     let mut robot = connect(&name, &mut children)?;

@@ -1,5 +1,5 @@
 //! `chassis detect`: which AgileX protocol (V1 or V2) a recording of a chassis' frames speaks,
-//! by the rule `chassisd` applies before it sends anything to a SCOUT MINI.
+//! by the rule `chassisd` applies before it sends anything to a SCOUT MINI, SCOUT or BUNKER.
 
 use std::io::BufRead;
 use std::time::Duration;

@@ -105,6 +105,11 @@ pub enum SimCmd {
         #[arg(value_enum)]
         state: OnOff,
     },
+    /// The chassis' own emergency-stop switch pressed (on) or released (AgileX V2 robots).
+    EstopSwitch {
+        #[arg(value_enum)]
+        state: OnOff,
+    },
     /// Motor driver N lost (on) or back (off).
     MotorLoss {
         motor: u8,
@@ -673,6 +678,7 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
         SimCmd::Battery { soc_pct } => request(SimKind::BATTERY, true, 0, *soc_pct),
         SimCmd::Bumper { state } => request(SimKind::BUMPER, state.is_on(), 0, 0.0),
         SimCmd::Rc { state } => request(SimKind::RC_TAKEOVER, state.is_on(), 0, 0.0),
+        SimCmd::EstopSwitch { state } => request(SimKind::ESTOP_SWITCH, state.is_on(), 0, 0.0),
         SimCmd::MotorLoss { motor, state } => {
             request(SimKind::MOTOR_DRIVER_LOSS, state.is_on(), *motor, 0.0)
         }

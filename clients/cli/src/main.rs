@@ -40,7 +40,8 @@ enum Cmd {
     Decode {
         #[arg(long, value_parser = parse_robot)]
         robot: Robot,
-        /// AgileX wire protocol, v1 or v2 (default: the robot's own; SCOUT MINI: v1).
+        /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
+        /// the other AgileX robots v2).
         #[arg(long, value_parser = parse_protocol)]
         protocol: Option<Protocol>,
         /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
@@ -53,7 +54,8 @@ enum Cmd {
     Encode {
         #[arg(long, value_parser = parse_robot)]
         robot: Robot,
-        /// AgileX wire protocol, v1 or v2 (default: the robot's own; SCOUT MINI: v1).
+        /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
+        /// the other AgileX robots v2).
         #[arg(long, value_parser = parse_protocol)]
         protocol: Option<Protocol>,
         /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
@@ -108,8 +110,8 @@ enum Cmd {
     /// The IPC contract: services, limits and payload layouts (--json: the whole document).
     Interfaces(interfaces::InterfacesArgs),
     /// Which AgileX protocol (v1 or v2) a chassis' frames speak, by the rule chassisd applies to
-    /// a SCOUT MINI before sending anything. Frames as for decode; stdin when none. Exits 1
-    /// without a decision.
+    /// a SCOUT MINI, SCOUT or BUNKER before sending anything. Frames as for decode; stdin when
+    /// none. Exits 1 without a decision.
     Detect {
         /// Consistent frames of one protocol needed to decide.
         #[arg(long, default_value_t = 3)]
@@ -145,7 +147,7 @@ pub(crate) fn parse_robot(text: &str) -> Result<Robot, chassis_protocols::Unknow
     text.parse()
 }
 
-fn parse_protocol(text: &str) -> Result<Protocol, chassis_protocols::ProtocolError> {
+pub(crate) fn parse_protocol(text: &str) -> Result<Protocol, chassis_protocols::ProtocolError> {
     text.parse()
 }
 

@@ -651,6 +651,12 @@ pub fn termination_requested() -> bool {
     STOP.load(Ordering::Relaxed)
 }
 
+/// Makes [`termination_requested`] true from now on, as a signal would: a thread that ends on
+/// its own error stops the process' other loops.
+pub fn request_termination() {
+    STOP.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
 /// A periodic timer on `CLOCK_MONOTONIC` with absolute deadlines: periods never drift, and a
 /// late wake-up skips the missed ones instead of bunching up. A signal ends the wait early.
 #[derive(Debug)]

@@ -896,7 +896,8 @@ class SimKind(Constants):
     OBSTACLE_AHEAD = 9
     OBSTACLE_BEHIND = 10
     FLOOD = 11
-    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood'}
+    ESTOP_SWITCH = 13
+    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 13: 'estop-switch'}
 
 
 class SourceFlags(Constants):

@@ -37,7 +37,8 @@ pub struct ServiceConfig {
     /// or `ranger-mini` (`--robot`).
     pub robot: Option<Robot>,
     /// AgileX wire protocol, `v1` or `v2` (`--protocol`); default: the robot's own (SCOUT MINI:
-    /// v1; the other AgileX robots here: v2).
+    /// v1; the other AgileX robots here: v2). SCOUT MINI, SCOUT and BUNKER on a real CAN bus
+    /// without it listen first and drive in the protocol they hear.
     pub protocol: Option<Protocol>,
     /// Namespace of every iceoryx2 service, `chassis/<name>/…` (`--name`; default: the robot).
     pub name: Option<String>,
@@ -201,7 +202,8 @@ pub enum ConfigError {
 pub struct Config {
     pub robot: Robot,
     /// The protocol asked for (`--protocol`, `service.protocol`); `None`: the robot's own — for a
-    /// SCOUT MINI on a real CAN bus, detected by listening before anything is sent.
+    /// SCOUT MINI, SCOUT or BUNKER on a real CAN bus, detected by listening before anything is
+    /// sent.
     pub protocol: Option<Protocol>,
     pub name: String,
     pub bus: BusSpec,
@@ -475,7 +477,8 @@ mod tests {
         let c = RawConfig::default().validate(titan()).unwrap();
         assert_eq!(c.name, "titan");
         assert_eq!(c.bus, BusSpec::Sim);
-        assert_eq!(c.mux.sources.len(), 5);
+        assert_eq!(c.mux.sources.len(), 6);
+        assert_eq!(c.mux.sources[5].name, "ros2");
         assert_eq!(c.mux.sources[3].name, "foxglove");
         assert!(c.mux.sources[0].required);
         let remote = &c.mux.sources[4];
@@ -484,7 +487,12 @@ mod tests {
             ("remote", 100, 300)
         );
         assert!(remote.remote && !remote.required);
-        assert!(c.mux.sources[..4].iter().all(|s| !s.remote));
+        assert!(
+            c.mux
+                .sources
+                .iter()
+                .all(|s| s.remote == (s.name == "remote"))
+        );
         assert_eq!(c.profile, Profile::default_for(Robot::Titan));
     }
 

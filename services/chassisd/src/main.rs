@@ -37,7 +37,8 @@ struct ServiceArgs {
     /// titan, scout-mini, xbot, scout, hunter, hunter-se, tracer, bunker or ranger-mini.
     #[arg(long, value_parser = parse_robot)]
     robot: Option<Robot>,
-    /// AgileX wire protocol: v1 or v2 (default: the robot's own; SCOUT MINI: v1).
+    /// AgileX wire protocol: v1 or v2 (default on a real CAN bus: detected for scout-mini, scout
+    /// and bunker; on the simulator: the robot's own, SCOUT MINI v1, the others v2).
     #[arg(long, value_parser = parse_protocol)]
     protocol: Option<chassis_protocols::Protocol>,
     /// sim (default), can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD].

@@ -100,8 +100,9 @@ pub struct MuxConfig {
 impl Default for MuxConfig {
     /// `safety` (255, 200 ms, required), `teleop` (100, 300 ms), `planner` (10, 500 ms),
     /// `foxglove` (100, 300 ms: the Teleop panel of a Foxglove view, teleop's rank), `remote`
-    /// (100, 300 ms, remote: a teleop on another computer, through `chassis-zenoh`); lock
-    /// `estop` at 255.
+    /// (100, 300 ms, remote: a teleop on another computer, through `chassis-zenoh`), `ros2` (50,
+    /// 500 ms: a ROS 2 stack's `cmd_vel` through chassis-ros2, below teleop, above the planner);
+    /// lock `estop` at 255.
     fn default() -> Self {
         let source = |name: &str, priority, timeout_ms, required| SourceConfig {
             name: name.into(),
@@ -120,6 +121,7 @@ impl Default for MuxConfig {
                     remote: true,
                     ..source("remote", 100, 300, false)
                 },
+                source("ros2", 50, 500, false),
             ],
             locks: vec![LockConfig {
                 name: "estop".into(),

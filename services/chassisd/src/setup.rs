@@ -5,29 +5,48 @@
 //! configuration (and runs the simulated chassis for the `sim` bus). A test hands the shell its
 //! own [`Devices`].
 
-use chassis_protocols::{DriverConfig, Profile, Timestamp, scout_mini, titan, xbot};
+use chassis_protocols::{
+    DriverConfig, Profile, Timestamp, V1Profile, agilex_v2, scout_mini, titan, xbot,
+};
+
+use chassis_protocols::agilex_v2::detect::DetectSettings;
 
 use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use crate::config::Config;
 use crate::engine::BoxedDriver;
 use crate::sim::{SimHandle, firmware_for};
 
-/// The driver for `config`: a SCOUT MINI on a real CAN bus with no protocol asked for listens
-/// first and drives in the protocol it hears (V1 or V2); every other robot gets
-/// [`driver_for`] its profile.
+/// The driver for `config`: a robot that may speak AgileX protocol V1 or V2 (SCOUT MINI, SCOUT
+/// 2.0, BUNKER) on a real CAN bus with no protocol asked for listens first and drives in the
+/// protocol it hears; every other robot gets [`driver_for`] its profile. The configured profile
+/// stands for the robot's default protocol (SCOUT MINI: V1, SCOUT and BUNKER: V2), the other
+/// protocol gets its defaults.
 pub fn driver_for_config(config: &Config, now: Timestamp) -> BoxedDriver {
-    if let Profile::ScoutMini(v1) = &config.profile
-        && config.protocol.is_none()
-        && matches!(config.bus, BusSpec::Can { .. } | BusSpec::Slcan { .. })
-    {
-        return Box::new(chassis_protocols::agilex_v2::AutoDriver::new(
-            v1.clone(),
-            chassis_protocols::agilex_v2::V2Profile::for_model(
-                chassis_protocols::agilex_v2::V2Model::ScoutMini,
-            ),
-            config.driver.clone(),
-            now,
-        ));
+    let real_can = matches!(config.bus, BusSpec::Can { .. } | BusSpec::Slcan { .. });
+    if config.protocol.is_none() && real_can {
+        let robot = config.profile.robot();
+        let pair = match (&config.profile, robot.v1_model(), robot.v2_model()) {
+            (Profile::ScoutMini(v1), _, Some(model)) => Some((
+                v1.clone(),
+                agilex_v2::V2Profile::for_model(model),
+                DetectSettings::from(v1),
+            )),
+            (Profile::V2(v2), Some(model), _) => Some((
+                V1Profile::for_model(model),
+                v2.clone(),
+                DetectSettings::from(v2),
+            )),
+            _ => None,
+        };
+        if let Some((v1, v2, detect)) = pair {
+            return Box::new(agilex_v2::AutoDriver::new(
+                v1,
+                v2,
+                detect,
+                config.driver.clone(),
+                now,
+            ));
+        }
     }
     driver_for(&config.profile, &config.driver, now)
 }
@@ -42,11 +61,7 @@ pub fn driver_for(profile: &Profile, config: &DriverConfig, now: Timestamp) -> B
             now,
         )),
         Profile::Xbot(p) => Box::new(xbot::XbotDriver::new(p.clone(), config.clone(), now)),
-        Profile::V2(p) => Box::new(chassis_protocols::agilex_v2::V2Driver::new(
-            p.clone(),
-            config.clone(),
-            now,
-        )),
+        Profile::V2(p) => Box::new(agilex_v2::V2Driver::new(p.clone(), config.clone(), now)),
     }
 }
 
@@ -238,4 +253,48 @@ pub fn enter_realtime(priority: u8) -> (Realtime, Vec<RealtimeError>) {
 pub fn is_fifo() -> bool {
     // SAFETY: pid 0 is the calling thread.
     unsafe { libc::sched_getscheduler(0) == libc::SCHED_FIFO }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{Overrides, RawConfig};
+    use chassis_protocols::Robot;
+
+    /// The robots of either firmware on a real CAN bus detect with the settings of the profile
+    /// they are configured with: the SCOUT MINI's V1 one, the SCOUT's and BUNKER's V2 one.
+    #[test]
+    fn detection_listens_as_long_as_the_configured_profile_says() {
+        let now = Timestamp::from_millis(1000);
+        for (robot, detecting) in [
+            ("scout-mini", true),
+            ("scout", true),
+            ("bunker", true),
+            ("hunter", false),
+        ] {
+            let raw: RawConfig = toml::from_str(&format!(
+                "[service]\nrobot = \"{robot}\"\nbus = \"can:can0\"\n\
+                 [profile]\ndetect_timeout_ms = 1200\n"
+            ))
+            .unwrap();
+            let config = raw.validate(Overrides::default()).unwrap();
+            let driver = driver_for_config(&config, now);
+            assert_eq!(driver.robot(), robot.parse::<Robot>().unwrap());
+            let deadline = driver.poll_timeout().unwrap();
+            if detecting {
+                assert_eq!(
+                    driver.state().system.wire_protocol,
+                    chassis_interfaces::WireProtocol::DETECTING,
+                    "{robot}"
+                );
+                assert_eq!(deadline, now + std::time::Duration::from_millis(1200));
+            } else {
+                assert_eq!(
+                    driver.state().system.wire_protocol,
+                    chassis_interfaces::WireProtocol::V2,
+                    "{robot}"
+                );
+            }
+        }
+    }
 }

@@ -68,8 +68,15 @@ pub fn carry_out(
             Some(Ok(t)) => (
                 ControlStatus::OK,
                 format!(
-                    "x_m={:.4} y_m={:.4} yaw_rad={:.4} linear_mps={:.4} angular_radps={:.4}",
-                    t.x_m, t.y_m, t.yaw_rad, t.linear_mps, t.angular_radps
+                    "x_m={:.4} y_m={:.4} yaw_rad={:.4} linear_mps={:.4} angular_radps={:.4} \
+                     commands={} rejected={}",
+                    t.x_m,
+                    t.y_m,
+                    t.yaw_rad,
+                    t.linear_mps,
+                    t.angular_radps,
+                    t.commands_received,
+                    t.decode_errors + t.bad_checksums_received
                 ),
             ),
             Some(Err(reason)) => (ControlStatus::REFUSED, reason.to_string()),
@@ -131,6 +138,7 @@ pub fn injection_of(request: &SimRequest) -> Result<Injection, BadSimRequest> {
         }
         SimKind::OBSTACLE_AHEAD => Injection::ObstacleAhead(on.then_some(finite("range")?)),
         SimKind::OBSTACLE_BEHIND => Injection::ObstacleBehind(on.then_some(finite("range")?)),
+        SimKind::ESTOP_SWITCH => Injection::EStop(on),
         SimKind::FLOOD => Injection::Flood {
             frames_per_s: finite("frame rate")?.min(1e6) as u32,
         },

@@ -58,7 +58,7 @@ impl RobotCodec {
     pub fn robot(&self) -> Robot {
         match self {
             RobotCodec::Titan(_) => Robot::Titan,
-            RobotCodec::ScoutMini(_) => Robot::ScoutMini,
+            RobotCodec::ScoutMini(p) => p.model.robot(),
             RobotCodec::Xbot { .. } => Robot::Xbot,
             RobotCodec::V2 { robot, .. } => *robot,
         }
@@ -105,7 +105,7 @@ impl RobotCodec {
             RobotCodec::ScoutMini(profile) => {
                 let decoded = scout_mini::decode(frame, profile)?;
                 let mut json = frame_json(
-                    Robot::ScoutMini,
+                    profile.model.robot(),
                     decoded.frame.id().into(),
                     decoded.frame.direction(),
                     Some(decoded.count),

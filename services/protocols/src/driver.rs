@@ -313,29 +313,6 @@ pub(crate) struct DriverCore {
 }
 
 impl DriverCore {
-    /// Ends a steering-zero request still waiting for its acknowledgement (0x43A) once its
-    /// deadline has passed: answered with a timeout, the pending flag cleared.
-    pub(crate) fn expire_steering_zero(
-        &mut self,
-        pending: &mut Option<(u64, Timestamp)>,
-        now: Timestamp,
-        timeout_ms: u64,
-    ) {
-        let Some((token, deadline)) = *pending else {
-            return;
-        };
-        if now < deadline {
-            return;
-        }
-        *pending = None;
-        self.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
-        self.events.push_back(DriverEvent::ControlDone {
-            token,
-            status: ControlStatus::TIMEOUT,
-            message: format!("no steering zero acknowledgement (0x43A) within {timeout_ms} ms"),
-        });
-    }
-
     /// A core starting at `now` for a robot whose motion frame repeats every `heartbeat`; the
     /// first heartbeat is due at once and silence is counted from `now`.
     pub(crate) fn new(

@@ -64,7 +64,7 @@ impl Injection {
             Injection::ObstacleAhead(_) => "obstacle-ahead",
             Injection::ObstacleBehind(_) => "obstacle-behind",
             Injection::Flood { .. } => "flood",
-            Injection::EStop(_) => "estop",
+            Injection::EStop(_) => "estop-switch",
         }
     }
 }

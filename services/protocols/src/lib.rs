@@ -14,6 +14,7 @@
 //! Frame structs hold SI values in ISO 8855 axes (x forward, y left, left turn positive); each
 //! codec is the only place that knows its vendor's units and signs.
 
+mod agilex;
 pub mod agilex_v2;
 pub mod can;
 pub mod command;
@@ -42,6 +43,7 @@ pub use error::{DecodeError, EncodeError};
 pub use firmware::{Firmware, Injection, SimTruth};
 pub use profile::{
     Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, Robot, UnknownRobot,
+    V1Model, V1Profile,
 };
 pub use time::Timestamp;
 

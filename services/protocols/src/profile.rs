@@ -80,14 +80,25 @@ impl Robot {
         !matches!(self, Robot::Xbot)
     }
 
-    /// The wire protocols the robot may speak: SCOUT MINI V1 or V2; the other AgileX robots
-    /// here V2 (their V1 firmware has no codec here); TITAN and XBot their own.
+    /// The wire protocols the robot may speak: SCOUT MINI, SCOUT 2.0 and BUNKER V1 or V2 (the
+    /// firmwares AgileX shipped before and after 2020); HUNTER 2.0 / SE, TRACER and RANGER MINI
+    /// V2 only; TITAN and XBot their own.
     pub fn protocols(self) -> &'static [Protocol] {
         match self {
-            Robot::ScoutMini => &[Protocol::V1, Protocol::V2],
+            Robot::ScoutMini | Robot::Scout | Robot::Bunker => &[Protocol::V1, Protocol::V2],
             Robot::Titan | Robot::Xbot => &[],
             _ => &[Protocol::V2],
         }
+    }
+
+    /// The protocol-V1 model of this robot, if it may speak V1.
+    pub fn v1_model(self) -> Option<V1Model> {
+        Some(match self {
+            Robot::ScoutMini => V1Model::ScoutMini,
+            Robot::Scout => V1Model::Scout,
+            Robot::Bunker => V1Model::Bunker,
+            _ => return None,
+        })
     }
 
     /// The protocol-V2 model of this robot, if it speaks V2.
@@ -226,10 +237,41 @@ impl Default for TitanProfile {
     }
 }
 
-/// AgileX SCOUT MINI: four-wheel skid steer, CAN 500 kbit/s, count + checksum in every frame.
+/// Which robot speaks the AgileX protocol V1 (0x130 / 0x131 / 0x151 / 0x200-0x203, count and
+/// checksum in every frame). The three share the frame set and differ in the percent full
+/// scales of 0x130, their geometry and their limits.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum V1Model {
+    /// SCOUT MINI (its 2019 manual, `PROTOCOLS.md` §2).
+    #[default]
+    ScoutMini,
+    /// SCOUT 2.0 with V1 firmware.
+    Scout,
+    /// BUNKER with V1 firmware.
+    Bunker,
+}
+
+impl V1Model {
+    pub fn robot(self) -> Robot {
+        match self {
+            V1Model::ScoutMini => Robot::ScoutMini,
+            V1Model::Scout => Robot::Scout,
+            V1Model::Bunker => Robot::Bunker,
+        }
+    }
+}
+
+/// The AgileX protocol-V1 profile (SCOUT MINI, SCOUT 2.0, BUNKER).
+pub type V1Profile = ScoutMiniProfile;
+
+/// AgileX protocol V1 — SCOUT MINI by default, SCOUT 2.0 and BUNKER by `model`: skid steer or
+/// tracks, CAN 500 kbit/s, count + checksum in every frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ScoutMiniProfile {
+    /// Which V1 robot (its defaults come from [`ScoutMiniProfile::for_model`]).
+    pub model: V1Model,
     /// Wheelbase, m.
     pub wheelbase_m: f64,
     /// Track, m.
@@ -252,6 +294,11 @@ pub struct ScoutMiniProfile {
     pub under_voltage_alarm_v: f64,
     /// Battery under-voltage failure level, V.
     pub under_voltage_failure_v: f64,
+    /// ⚠ D-16 (`PROTOCOLS-V2.md` §4.3): on a real CAN bus without a protocol asked for, listen
+    /// this long for V1/V2 evidence before reporting silence and listening again, ms.
+    pub detect_timeout_ms: u64,
+    /// ⚠ D-16: consistent frames of one protocol needed to decide.
+    pub detect_min_frames: u32,
 }
 
 impl Default for ScoutMiniProfile {
@@ -259,6 +306,7 @@ impl Default for ScoutMiniProfile {
     #[allow(clippy::approx_constant)]
     fn default() -> Self {
         Self {
+            model: V1Model::ScoutMini,
             wheelbase_m: 0.452,
             track_m: 0.450,
             linear_full_scale_mps: 5.0,
@@ -269,8 +317,67 @@ impl Default for ScoutMiniProfile {
             heartbeat_period_ms: 20,
             under_voltage_alarm_v: 22.5,
             under_voltage_failure_v: 22.0,
+            detect_timeout_ms: 5000,
+            detect_min_frames: 3,
         }
     }
+}
+
+impl ScoutMiniProfile {
+    /// The defaults of a V1 `model`.
+    ///
+    /// SCOUT 2.0 (`PROTOCOLS-V2.md` §3.1): 0x130 full scales 1.5 m/s and 0.5235 rad/s (AgileX's
+    /// SDK, `ScoutV2Limits`, which its V1 parser scales the percentages by), the same values as
+    /// limits; wheelbase 0.498 m, track 0.583 m (AgileX's SCOUT 2.0 model); battery warning
+    /// 23.5 V and failure 22 V (SCOUT manual v1.3.0).
+    ///
+    /// BUNKER (§3.7): full scales 3.0 m/s and 2.5235 rad/s (the SDK's `BunkerLimits`); limits
+    /// 1.5 m/s and 0.7853 rad/s and the 0.5 × 0.5 m track geometry, as the V2 BUNKER profile
+    /// (no V1 BUNKER manual was found); the SCOUT MINI's battery levels (a BUNKER MINI's 24 V
+    /// pack).
+    #[allow(clippy::approx_constant)] // 0.5235 and 0.7853 are the sources' values as printed
+    pub fn for_model(model: V1Model) -> Self {
+        let base = ScoutMiniProfile::default();
+        match model {
+            V1Model::ScoutMini => base,
+            V1Model::Scout => ScoutMiniProfile {
+                model,
+                wheelbase_m: 0.498,
+                track_m: 0.583,
+                linear_full_scale_mps: 1.5,
+                angular_full_scale_rad_s: 0.5235,
+                max_linear_mps: 1.5,
+                max_angular_rad_s: 0.5235,
+                under_voltage_alarm_v: 23.5,
+                under_voltage_failure_v: 22.0,
+                ..base
+            },
+            V1Model::Bunker => ScoutMiniProfile {
+                model,
+                wheelbase_m: 0.5,
+                track_m: 0.5,
+                linear_full_scale_mps: 3.0,
+                angular_full_scale_rad_s: 2.5235,
+                max_linear_mps: 1.5,
+                max_angular_rad_s: 0.7853,
+                ..base
+            },
+        }
+    }
+}
+
+/// `profile` with the keys of `overrides` (the `[profile]` table of the service's config) set
+/// over it. Unknown keys and wrong types are errors.
+pub(crate) fn with_overrides<P>(profile: &P, overrides: &toml::Table) -> Result<P, toml::de::Error>
+where
+    P: Serialize + serde::de::DeserializeOwned,
+{
+    let mut table = toml::Table::try_from(profile)
+        .map_err(|e| <toml::de::Error as serde::de::Error>::custom(format!("profile: {e}")))?;
+    for (key, value) in overrides {
+        table.insert(key.clone(), value.clone());
+    }
+    toml::Value::Table(table).try_into()
 }
 
 /// XBot: differential (optionally omni) drive, RS232, little-endian.
@@ -380,6 +487,23 @@ fn positive(name: &'static str, value: f64) -> Result<(), ProfileError> {
     }
 }
 
+/// Checks the protocol detection listens for a while and needs at least one frame (⚠ D-16).
+pub(crate) fn detection(timeout_ms: u64, min_frames: u32) -> Result<(), ProfileError> {
+    if timeout_ms == 0 {
+        return Err(ProfileError::NotPositive {
+            name: "detect_timeout_ms",
+            value: 0.0,
+        });
+    }
+    if min_frames == 0 {
+        return Err(ProfileError::NotPositive {
+            name: "detect_min_frames",
+            value: 0.0,
+        });
+    }
+    Ok(())
+}
+
 fn timeouts(heartbeat_ms: u64, timeout_ms: u64) -> Result<(), ProfileError> {
     if heartbeat_ms == 0 || heartbeat_ms >= timeout_ms {
         return Err(ProfileError::Heartbeat {
@@ -418,6 +542,7 @@ impl ScoutMiniProfile {
         positive("angular_full_scale_rad_s", self.angular_full_scale_rad_s)?;
         positive("max_linear_mps", self.max_linear_mps)?;
         positive("max_angular_rad_s", self.max_angular_rad_s)?;
+        detection(self.detect_timeout_ms, self.detect_min_frames)?;
         timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
     }
 }
@@ -461,7 +586,7 @@ pub enum ProfileTableError {
     /// An unknown key or a wrong type.
     #[error(transparent)]
     Toml(#[from] toml::de::Error),
-    /// A protocol-V2 `model` of another robot.
+    /// A protocol-V1 or V2 `model` of another robot.
     #[error("profile.model: a {model} model is not a {robot}")]
     WrongModel { model: Robot, robot: Robot },
 }
@@ -504,8 +629,11 @@ impl Profile {
                 protocol: protocol.name(),
             });
         }
-        Ok(match (protocol, robot.v2_model()) {
-            (Protocol::V2, Some(model)) => Profile::V2(V2Profile::for_model(model)),
+        Ok(match (protocol, robot.v1_model(), robot.v2_model()) {
+            (Protocol::V1, Some(model), _) => {
+                Profile::ScoutMini(ScoutMiniProfile::for_model(model))
+            }
+            (Protocol::V2, _, Some(model)) => Profile::V2(V2Profile::for_model(model)),
             _ => Profile::default_for(robot),
         })
     }
@@ -519,25 +647,32 @@ impl Profile {
         table: &toml::Table,
     ) -> Result<Self, ProfileTableError> {
         let value = toml::Value::Table(table.clone());
-        Ok(match Profile::default_for_protocol(robot, protocol)? {
+        let model = table.get("model").cloned();
+        let profile = match Profile::default_for_protocol(robot, protocol)? {
             Profile::Titan(_) => Profile::Titan(value.try_into()?),
-            Profile::ScoutMini(_) => Profile::ScoutMini(value.try_into()?),
             Profile::Xbot(_) => Profile::Xbot(value.try_into()?),
-            Profile::V2(default) => {
-                let base = match table.get("model") {
-                    Some(model) => V2Profile::for_model(model.clone().try_into()?),
+            Profile::ScoutMini(default) => {
+                let base = match model {
+                    Some(model) => ScoutMiniProfile::for_model(model.try_into()?),
                     None => default,
                 };
-                let profile = Profile::V2(base.with_overrides(table)?);
-                if profile.robot() != robot {
-                    return Err(ProfileTableError::WrongModel {
-                        model: profile.robot(),
-                        robot,
-                    });
-                }
-                profile
+                Profile::ScoutMini(with_overrides(&base, table)?)
             }
-        })
+            Profile::V2(default) => {
+                let base = match model {
+                    Some(model) => V2Profile::for_model(model.try_into()?),
+                    None => default,
+                };
+                Profile::V2(with_overrides(&base, table)?)
+            }
+        };
+        if profile.robot() != robot {
+            return Err(ProfileTableError::WrongModel {
+                model: profile.robot(),
+                robot,
+            });
+        }
+        Ok(profile)
     }
 
     /// The wire protocol of this profile, for the robots that have a choice of two.
@@ -563,7 +698,7 @@ impl Profile {
         use crate::agilex_v2::V2Model;
         match self {
             Profile::Titan(_) => Robot::Titan,
-            Profile::ScoutMini(_) => Robot::ScoutMini,
+            Profile::ScoutMini(p) => p.model.robot(),
             Profile::Xbot(_) => Robot::Xbot,
             Profile::V2(p) => match p.model {
                 V2Model::Scout => Robot::Scout,
@@ -597,6 +732,58 @@ mod tests {
         assert_eq!(x.encoder_counts_per_rev, 8000.0);
         assert_eq!(x.wheel_separation_m, None);
         assert!(x.heartbeat_hz > 5.0 && x.heartbeat_hz < 10.0);
+    }
+
+    #[test]
+    #[allow(clippy::approx_constant)] // 0.5235 is the sources' value
+    fn scout_and_bunker_speak_v1_with_their_own_scales_and_hunter_does_not() {
+        for (robot, scales) in [
+            (Robot::ScoutMini, (5.0, 0.5235)),
+            (Robot::Scout, (1.5, 0.5235)),
+            (Robot::Bunker, (3.0, 2.5235)),
+        ] {
+            assert!(robot.protocols().contains(&Protocol::V1), "{robot}");
+            let profile = Profile::default_for_protocol(robot, Some(Protocol::V1)).unwrap();
+            assert_eq!(profile.robot(), robot);
+            assert_eq!(profile.protocol(), Some(Protocol::V1));
+            let Profile::ScoutMini(p) = &profile else {
+                panic!("{robot}: {profile:?}");
+            };
+            assert_eq!(
+                (p.linear_full_scale_mps, p.angular_full_scale_rad_s),
+                scales
+            );
+            assert_eq!(profile.validate(), Ok(()), "{robot}");
+        }
+        // Their default protocol stays what it was: SCOUT MINI V1, SCOUT and BUNKER V2.
+        assert_eq!(
+            Profile::default_for(Robot::Scout).protocol(),
+            Some(Protocol::V2)
+        );
+        assert_eq!(
+            Profile::default_for_protocol(Robot::Hunter, Some(Protocol::V1)),
+            Err(ProtocolError::NotSpoken {
+                robot: Robot::Hunter,
+                protocol: "v1"
+            })
+        );
+        // A `[profile]` table of a V1 BUNKER starts from the BUNKER's values.
+        let table: toml::Table = toml::from_str("max_linear_mps = 1.0").unwrap();
+        let Profile::ScoutMini(p) =
+            Profile::from_table(Robot::Bunker, Some(Protocol::V1), &table).unwrap()
+        else {
+            panic!("not V1");
+        };
+        assert_eq!((p.model, p.max_linear_mps), (V1Model::Bunker, 1.0));
+        assert_eq!(p.linear_full_scale_mps, 3.0);
+        let scout: toml::Table = toml::from_str("model = \"scout\"").unwrap();
+        assert_eq!(
+            Profile::from_table(Robot::Bunker, Some(Protocol::V1), &scout),
+            Err(ProfileTableError::WrongModel {
+                model: Robot::Scout,
+                robot: Robot::Bunker
+            })
+        );
     }
 
     #[test]

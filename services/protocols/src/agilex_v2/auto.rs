@@ -1,4 +1,5 @@
-//! A SCOUT MINI of either firmware: listen first, then drive it in the protocol it speaks.
+//! A SCOUT MINI, SCOUT 2.0 or BUNKER of either firmware: listen first, then drive it in the
+//! protocol it speaks.
 //!
 //! [`AutoDriver`] transmits nothing until the [`Detector`] has decided (`PROTOCOLS-V2` §4.3); then
 //! it builds the V1 driver ([`ScoutMiniDriver`]) or the V2 one ([`V2Driver`]) at that instant and
@@ -10,9 +11,9 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ChassisState, LinkFlags, RobotKind, Twist, WireProtocol};
+use chassis_interfaces::{ChassisState, LinkFlags, Twist, WireProtocol};
 
-use super::detect::{Detection, Detector};
+use super::detect::{DetectSettings, Detection, Detector};
 use super::{V2Driver, V2Profile};
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
@@ -20,10 +21,13 @@ use crate::profile::{Protocol, Robot, ScoutMiniProfile};
 use crate::scout_mini::ScoutMiniDriver;
 use crate::time::Timestamp;
 
-/// A SCOUT MINI driver that detects the protocol before sending anything.
+/// A driver for a robot that may speak V1 or V2 (SCOUT MINI, SCOUT 2.0, BUNKER) that detects
+/// the protocol before sending anything.
 pub struct AutoDriver {
+    robot: Robot,
     v1: ScoutMiniProfile,
     v2: V2Profile,
+    detect: DetectSettings,
     config: DriverConfig,
     detector: Detector,
     inner: Option<(Protocol, Box<dyn Driver + Send>)>,
@@ -43,18 +47,28 @@ impl std::fmt::Debug for AutoDriver {
 }
 
 impl AutoDriver {
-    /// Listening from `now` (`v2.detect_timeout_ms`, `v2.detect_min_frames`).
-    pub fn new(v1: ScoutMiniProfile, v2: V2Profile, config: DriverConfig, now: Timestamp) -> Self {
-        let detector = Self::detector(&v2, now);
+    /// Listening from `now` as `detect` says, for the robot of `v1` (its V1 `model`; `v2` is
+    /// that robot's V2 profile).
+    pub fn new(
+        v1: ScoutMiniProfile,
+        v2: V2Profile,
+        detect: DetectSettings,
+        config: DriverConfig,
+        now: Timestamp,
+    ) -> Self {
+        let detector = Self::detector(detect, now);
+        let robot = v1.model.robot();
         Self {
+            robot,
             v1,
             v2,
+            detect,
             config,
             detector,
             inner: None,
             state: {
                 let mut state = ChassisState {
-                    robot: RobotKind::SCOUT_MINI,
+                    robot: robot.kind(),
                     ..ChassisState::default()
                 };
                 state.system.wire_protocol = WireProtocol::DETECTING;
@@ -66,17 +80,22 @@ impl AutoDriver {
         }
     }
 
-    fn detector(v2: &V2Profile, now: Timestamp) -> Detector {
+    fn detector(detect: DetectSettings, now: Timestamp) -> Detector {
         Detector::new(
             now,
-            Duration::from_millis(v2.detect_timeout_ms),
-            v2.detect_min_frames,
+            Duration::from_millis(detect.timeout_ms),
+            detect.min_frames,
         )
     }
 
     /// The protocol in use, once detected.
     pub fn protocol(&self) -> Option<Protocol> {
         self.inner.as_ref().map(|(p, _)| *p)
+    }
+
+    /// The robot as the logs name it: `SCOUT MINI`, `SCOUT`, `BUNKER`.
+    fn shown_name(&self) -> String {
+        self.robot.name().replace('-', " ").to_uppercase()
     }
 
     fn notice(&mut self, level: Level, message: String) {
@@ -107,7 +126,10 @@ impl AutoDriver {
                 }
                 self.notice(
                     Level::Info,
-                    format!("SCOUT MINI speaks protocol {protocol}: driving it as such"),
+                    format!(
+                        "{} speaks protocol {protocol}: driving it as such",
+                        self.shown_name()
+                    ),
                 );
                 self.inner = Some((protocol, driver));
             }
@@ -116,12 +138,13 @@ impl AutoDriver {
                 self.notice(
                     Level::Warn,
                     format!(
-                        "SCOUT MINI protocol not detected within {} ms: {}; listening again",
-                        self.v2.detect_timeout_ms,
+                        "{} protocol not detected within {} ms: {}; listening again",
+                        self.shown_name(),
+                        self.detect.timeout_ms,
                         outcome.describe()
                     ),
                 );
-                self.detector = Self::detector(&self.v2, now);
+                self.detector = Self::detector(self.detect, now);
             }
         }
     }
@@ -129,7 +152,7 @@ impl AutoDriver {
 
 impl Driver for AutoDriver {
     fn robot(&self) -> Robot {
-        Robot::ScoutMini
+        self.robot
     }
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
@@ -154,9 +177,10 @@ impl Driver for AutoDriver {
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
         match &mut self.inner {
             Some((_, driver)) => driver.control(now, command),
-            None => ControlOutcome::Refused(
-                "the SCOUT MINI's protocol (V1 or V2) is not detected yet: nothing is sent".into(),
-            ),
+            None => ControlOutcome::Refused(format!(
+                "the {}'s protocol (V1 or V2) is not detected yet: nothing is sent",
+                self.shown_name()
+            )),
         }
     }
 
@@ -205,7 +229,7 @@ impl Driver for AutoDriver {
                     self.state.link_flags |= LinkFlags::BUS_DOWN;
                 } else {
                     self.state.link_flags &= !LinkFlags::BUS_DOWN;
-                    self.detector = Self::detector(&self.v2, now);
+                    self.detector = Self::detector(self.detect, now);
                 }
             }
         }
@@ -225,15 +249,19 @@ mod tests {
     use crate::agilex_v2::{V2Model, V2Sim};
     use crate::firmware::Firmware;
     use crate::pair::Pair;
+    use crate::profile::V1Model;
     use crate::scout_mini::ScoutMiniSim;
     use chassis_interfaces::ControlMode;
 
     const T0: Timestamp = Timestamp::from_millis(1000);
 
     fn auto() -> AutoDriver {
+        let v1 = ScoutMiniProfile::default();
+        let detect = DetectSettings::from(&v1);
         AutoDriver::new(
-            ScoutMiniProfile::default(),
+            v1,
             V2Profile::for_model(V2Model::ScoutMini),
+            detect,
             DriverConfig::default(),
             T0,
         )
@@ -261,39 +289,83 @@ mod tests {
         (sent.into_iter().map(|(_, id)| id).collect(), first)
     }
 
-    #[test]
-    fn a_v1_scout_mini_is_driven_in_v1_and_never_sees_a_v2_frame() {
-        let mut pair = Pair::new(
-            auto(),
-            ScoutMiniSim::new(ScoutMiniProfile::default(), T0),
-            T0,
-        );
-        let (ids, first) = drive(&mut pair);
-        assert_eq!(pair.driver.protocol(), Some(Protocol::V1));
-        assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V1);
-        assert!(ids.iter().all(|id| matches!(id, 0x130 | 0x140)), "{ids:x?}");
-        assert!(first > T0, "sent before listening");
-        assert!((pair.firmware.truth().linear_mps - 0.5).abs() < 0.06);
+    /// The robots with V1 and V2 firmware, each with its V1 and V2 profile.
+    fn robots() -> [(ScoutMiniProfile, V2Profile); 3] {
+        [
+            (
+                ScoutMiniProfile::default(),
+                V2Profile::for_model(V2Model::ScoutMini),
+            ),
+            (
+                ScoutMiniProfile::for_model(V1Model::Scout),
+                V2Profile::for_model(V2Model::Scout),
+            ),
+            (
+                ScoutMiniProfile::for_model(V1Model::Bunker),
+                V2Profile::for_model(V2Model::Bunker),
+            ),
+        ]
     }
 
     #[test]
-    fn a_v2_scout_mini_is_driven_in_v2_and_never_sees_a_v1_frame() {
-        let profile = V2Profile::for_model(V2Model::ScoutMini);
-        let mut pair = Pair::new(auto(), V2Sim::new(profile, T0), T0);
-        let (ids, first) = drive(&mut pair);
-        assert_eq!(pair.driver.protocol(), Some(Protocol::V2));
-        assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V2);
-        assert!(
-            ids.iter().all(|id| matches!(id, 0x111 | 0x421 | 0x411)),
-            "{ids:x?}"
-        );
-        // Three V2 frames arrive within the first 20 ms feedback slot; nothing went out before.
-        assert!(
-            first > T0 && first <= T0 + Duration::from_millis(60),
-            "{first:?}"
-        );
-        assert_eq!(pair.firmware.truth().control_mode, ControlMode::COMMAND);
-        assert!((pair.firmware.truth().linear_mps - 0.5).abs() < 1e-3);
+    fn a_v1_chassis_is_driven_in_v1_and_never_sees_a_v2_frame() {
+        for (v1, v2) in robots() {
+            let robot = v1.model.robot();
+            let detect = DetectSettings::from(&v2);
+            let driver = AutoDriver::new(v1.clone(), v2, detect, DriverConfig::default(), T0);
+            assert_eq!(driver.robot(), robot);
+            assert_eq!(driver.state().robot, robot.kind());
+            let mut pair = Pair::new(driver, ScoutMiniSim::new(v1, T0), T0);
+            let (ids, first) = drive(&mut pair);
+            assert_eq!(pair.driver.protocol(), Some(Protocol::V1), "{robot}");
+            assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V1);
+            assert_eq!(pair.driver.state().robot, robot.kind(), "{robot}");
+            assert!(ids.iter().all(|id| matches!(id, 0x130 | 0x140)), "{ids:x?}");
+            assert!(first > T0, "{robot}: sent before listening");
+            assert!(
+                (pair.firmware.truth().linear_mps - 0.5).abs() < 0.06,
+                "{robot}: {:?}",
+                pair.firmware.truth()
+            );
+            assert_eq!(pair.firmware.truth().decode_errors, 0, "{robot}");
+            let events = pair.take_events();
+            let notices = crate::pair::notices(&events);
+            let shown = robot.name().replace('-', " ").to_uppercase();
+            assert!(
+                notices
+                    .iter()
+                    .any(|(_, m)| *m == format!("{shown} speaks protocol v1: driving it as such")),
+                "{notices:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_v2_chassis_is_driven_in_v2_and_never_sees_a_v1_frame() {
+        for (v1, v2) in robots() {
+            let robot = v1.model.robot();
+            let detect = DetectSettings::from(&v2);
+            let driver = AutoDriver::new(v1, v2.clone(), detect, DriverConfig::default(), T0);
+            let mut pair = Pair::new(driver, V2Sim::new(v2, T0), T0);
+            let (ids, first) = drive(&mut pair);
+            assert_eq!(pair.driver.protocol(), Some(Protocol::V2), "{robot}");
+            assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V2);
+            assert_eq!(pair.driver.state().robot, robot.kind(), "{robot}");
+            assert!(
+                ids.iter()
+                    .all(|id| matches!(id, 0x111 | 0x421 | 0x411 | 0x4A1)),
+                "{ids:x?}"
+            );
+            // Three V2 frames arrive within the first 20 ms feedback slot (100 ms where 0x211
+            // comes every 100 ms: 0x221 is the evidence); nothing went out before.
+            assert!(
+                first > T0 && first <= T0 + Duration::from_millis(60),
+                "{robot}: {first:?}"
+            );
+            assert_eq!(pair.firmware.truth().control_mode, ControlMode::COMMAND);
+            assert!((pair.firmware.truth().linear_mps - 0.5).abs() < 1e-3);
+            assert_eq!(pair.firmware.truth().decode_errors, 0, "{robot}");
+        }
     }
 
     #[test]

@@ -59,6 +59,34 @@ impl Detection {
     }
 }
 
+/// How long to listen and how much evidence decides (⚠ D-16): from the profile the robot is
+/// configured with (SCOUT MINI: its V1 profile; SCOUT, BUNKER: their V2 profile).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DetectSettings {
+    /// Listen this long for V1/V2 evidence before reporting silence and listening again, ms.
+    pub timeout_ms: u64,
+    /// Consistent frames of one protocol needed to decide.
+    pub min_frames: u32,
+}
+
+impl From<&crate::agilex_v2::V2Profile> for DetectSettings {
+    fn from(p: &crate::agilex_v2::V2Profile) -> Self {
+        Self {
+            timeout_ms: p.detect_timeout_ms,
+            min_frames: p.detect_min_frames,
+        }
+    }
+}
+
+impl From<&crate::profile::ScoutMiniProfile> for DetectSettings {
+    fn from(p: &crate::profile::ScoutMiniProfile) -> Self {
+        Self {
+            timeout_ms: p.detect_timeout_ms,
+            min_frames: p.detect_min_frames,
+        }
+    }
+}
+
 /// The passive V1/V2 detector.
 #[derive(Debug, Clone)]
 pub struct Detector {

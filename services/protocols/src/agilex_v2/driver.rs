@@ -21,35 +21,27 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags, SystemState, Twist,
+    ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState, Twist,
 };
 
 use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake, vehicle};
 use super::commands::{STOP, frames_for};
 use super::kinematics::{RangerMode, body_twist, plan};
 use super::profile::{self, FaultMap, V2Profile};
+use crate::agilex::{self, BrakeKeeper, ModeKeeper, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, DriverEvent, Level, PoseIntegrator, Rx,
-    Transmit, flags_of, requested_turn,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
+    flags_of, requested_turn,
 };
 use crate::profile::{Profile, Robot};
 use crate::time::{Timestamp, earliest};
-
-/// What the driver believes about the parking brake (not reported except on HUNTER 2.0 b6).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Brake {
-    Unknown,
-    Engaged,
-    Released,
-}
 
 /// The protocol-V2 driver.
 #[derive(Debug)]
 pub struct V2Driver {
     profile: V2Profile,
     robot: Robot,
-    config: DriverConfig,
     core: DriverCore,
     queue: VecDeque<Frame>,
     pose: PoseIntegrator,
@@ -61,14 +53,15 @@ pub struct V2Driver {
     motion_clamp_flags: u32,
     /// RANGER: the mode last sent (or reported by 0x291).
     ranger_mode: Option<RangerMode>,
-    want_control: bool,
-    last_mode_request: Option<Timestamp>,
+    /// RANGER: the mode the present command needs, and when 0x141 last asked for it.
+    wanted_mode: Option<RangerMode>,
+    last_mode_command: Option<Timestamp>,
+    mode: ModeKeeper,
     estop_hold: bool,
-    brake: Brake,
-    idle_since: Option<Timestamp>,
+    /// What the driver believes about the parking brake (reported only by HUNTER 2.0, b6).
+    brake: BrakeKeeper,
     lights: Option<(Lights, Timestamp)>,
-    steering_zero: Option<(u64, Timestamp)>,
-    next_token: u64,
+    steering_zero: SteeringZero,
     other_faults: u64,
     /// ⚠ D-1: `None` until CAN mode is first reported; then when to fall back to 0x4A1.
     version: VersionQuery,
@@ -88,6 +81,8 @@ enum VersionQuery {
 impl V2Driver {
     /// Least time between two 0x421 while the chassis keeps reporting standby (`PROTOCOLS-V2` §5).
     pub const MODE_RETRY: Duration = Duration::from_millis(500);
+    /// Least time between two 0x141 while a RANGER keeps reporting another motion mode.
+    pub const MOTION_MODE_RETRY: Duration = Duration::from_millis(100);
 
     /// A driver starting at `now`. With `config.take_control` it asks for CAN command mode at once.
     pub fn new(profile: V2Profile, config: DriverConfig, now: Timestamp) -> Self {
@@ -100,16 +95,16 @@ impl V2Driver {
         );
         core.state.system.control_mode = ControlMode::UNKNOWN;
         core.state.system.wire_protocol = chassis_interfaces::WireProtocol::V2;
-        let brake = if profile.brake_lock_value.is_some() {
-            Brake::Unknown
-        } else {
-            Brake::Released
-        };
         let mut driver = Self {
-            want_control: config.take_control,
+            mode: ModeKeeper::new(config.take_control, Self::MODE_RETRY),
+            brake: BrakeKeeper::new(
+                profile.brake_lock_value.is_some(),
+                config.brake_idle_engage_ms,
+                now,
+            ),
+            steering_zero: SteeringZero::new(config.control_timeout_ms),
             profile,
             robot,
-            config,
             core,
             queue: VecDeque::new(),
             pose: PoseIntegrator::default(),
@@ -118,20 +113,17 @@ impl V2Driver {
             requested_flags: 0,
             motion_clamp_flags: 0,
             ranger_mode: None,
-            last_mode_request: None,
+            wanted_mode: None,
+            last_mode_command: None,
             estop_hold: false,
-            brake,
-            idle_since: Some(now),
             lights: None,
-            steering_zero: None,
-            next_token: 1,
             other_faults: 0,
             version: VersionQuery::NotAsked,
         };
         if driver.profile.version_query == profile::VersionQuery::Never {
             driver.version = VersionQuery::Done;
         }
-        if driver.want_control {
+        if driver.mode.wants_control() {
             driver.request_mode(now);
         }
         driver
@@ -141,13 +133,9 @@ impl V2Driver {
         &self.profile
     }
 
-    fn has_brake(&self) -> bool {
-        self.profile.brake_lock_value.is_some()
-    }
-
     fn request_mode(&mut self, now: Timestamp) {
         self.queue.push_back(Frame::Mode(ModeCommand { can: true }));
-        self.last_mode_request = Some(now);
+        self.mode.requested(now);
     }
 
     /// Recomputes what the heartbeat carries from the request and the E-stop hold.
@@ -161,11 +149,7 @@ impl V2Driver {
             motion = STOP;
         }
         let moving = motion != STOP;
-        if moving {
-            self.idle_since = None;
-        } else if self.idle_since.is_none() {
-            self.idle_since = Some(now);
-        }
+        self.brake.planned(now, moving);
         self.core.schedule.update(&mut self.motion, motion, !moving);
         self.motion_clamp_flags = flags;
     }
@@ -178,15 +162,13 @@ impl V2Driver {
             &self.profile,
         ) {
             Ok(planned) => {
+                if planned.mode.is_some() {
+                    self.wanted_mode = planned.mode;
+                }
                 if let Some(mode) = planned.mode
                     && self.ranger_mode != Some(mode)
-                    && let Some(code) = mode.code(&self.profile)
                 {
-                    self.queue.push_back(Frame::MotionModeCommand(MotionMode {
-                        mode: code,
-                        changing: false,
-                    }));
-                    self.ranger_mode = Some(mode);
+                    self.send_motion_mode(now, mode);
                 }
                 self.requested = planned.motion;
                 self.requested_flags = planned.clamp_flags;
@@ -208,13 +190,39 @@ impl V2Driver {
         self.update_motion(now);
     }
 
+    /// RANGER: 0x141 for `mode`, ahead of the next 0x111.
+    fn send_motion_mode(&mut self, now: Timestamp, mode: RangerMode) {
+        if let Some(code) = mode.code(&self.profile) {
+            self.queue.push_back(Frame::MotionModeCommand(MotionMode {
+                mode: code,
+                changing: false,
+            }));
+            self.ranger_mode = Some(mode);
+            self.last_mode_command = Some(now);
+        }
+    }
+
+    /// RANGER: a chassis reporting another mode than the command needs (it rebooted into its
+    /// default mode, or the RC changed it) is asked again, at most every
+    /// [`V2Driver::MOTION_MODE_RETRY`], once it obeys (CAN command mode).
+    fn keep_motion_mode(&mut self, now: Timestamp, reported: Option<RangerMode>) {
+        if let Some(wanted) = self.wanted_mode
+            && reported != Some(wanted)
+            && self.core.state.system.control_mode == ControlMode::COMMAND
+            && self
+                .last_mode_command
+                .is_none_or(|t| now.saturating_since(t) >= Self::MOTION_MODE_RETRY)
+        {
+            self.send_motion_mode(now, wanted);
+        }
+    }
+
     fn estop_reported(&self) -> bool {
         self.core.state.system.fault_flags & FaultFlags::EMERGENCY_STOP != 0
     }
 
     fn update_body(&mut self, now: Timestamp) {
-        self.core.state.system.parking_brake_engaged =
-            u8::from(self.has_brake() && self.brake != Brake::Released);
+        self.core.state.system.parking_brake_engaged = u8::from(self.brake.engaged());
         self.core.state.touch(Group::Body, now.as_nanos());
     }
 
@@ -247,7 +255,9 @@ impl V2Driver {
                 self.core.state.touch(Group::WheelSpeed, t);
             }
             Frame::MotionModeState(m) if !m.changing => {
-                self.ranger_mode = RangerMode::from_code(m.mode, &self.profile);
+                let reported = RangerMode::from_code(m.mode, &self.profile);
+                self.ranger_mode = reported;
+                self.keep_motion_mode(now, reported);
             }
             Frame::Odometer(o) => {
                 let odometry = &mut self.core.state.odometry;
@@ -255,47 +265,12 @@ impl V2Driver {
                 odometry.right_distance_m = o.right_m;
                 self.core.state.touch(Group::Odometry, t);
             }
-            Frame::MotorFast(m) => {
-                if let Some(motor) = self
-                    .core
-                    .state
-                    .motors
-                    .get_mut(usize::from(m.motor.max(1) - 1))
-                {
-                    motor.rpm = m.rpm as f32;
-                    motor.current_a = m.current_a as f32;
-                    motor.position_counts = m.position_counts.into();
-                }
-                self.core.state.touch(Group::MotorDrive, t);
-            }
+            Frame::MotorFast(m) => agilex::apply_motor_fast(&mut self.core.state, &m, t),
             Frame::MotorSlow(m) => {
-                if let Some(motor) = self
-                    .core
-                    .state
-                    .motors
-                    .get_mut(usize::from(m.motor.max(1) - 1))
-                {
-                    motor.driver_voltage_v = m.driver_voltage_v as f32;
-                    motor.driver_temp_c = m.driver_temp_c as f32;
-                    motor.motor_temp_c = m.motor_temp_c as f32;
-                    motor.driver_status = normalize_driver_status(m.driver_status, &self.profile);
-                }
-                self.core.state.touch(Group::MotorDriver, t);
+                let status = normalize_driver_status(m.driver_status, &self.profile);
+                agilex::apply_motor_slow(&mut self.core.state, &m, status, t);
             }
-            Frame::Rc(r) => {
-                let rc = &mut self.core.state.rc;
-                rc.switch_a = r.switch_a;
-                rc.switch_b = r.switch_b;
-                rc.switch_c = r.switch_c;
-                rc.switch_d = r.switch_d;
-                rc.right_x_pct = r.right_x_pct;
-                rc.right_y_pct = r.right_y_pct;
-                rc.left_y_pct = r.left_y_pct;
-                rc.left_x_pct = r.left_x_pct;
-                rc.knob_a_pct = r.knob_a_pct;
-                rc.counter = r.counter;
-                self.core.state.touch(Group::Rc, t);
-            }
+            Frame::Rc(r) => agilex::apply_rc(&mut self.core.state, &r, t),
             Frame::LightState(l) => {
                 let lights = &mut self.core.state.lights;
                 lights.control_enabled = u8::from(l.enabled);
@@ -303,29 +278,10 @@ impl V2Driver {
                 lights.front_brightness_pct = l.front_brightness_pct;
                 self.core.state.touch(Group::Lights, t);
             }
-            Frame::BmsData(b) => {
-                if let Some(bms) = self.core.state.bms.first_mut() {
-                    bms.soc_pct = b.soc_pct as f32;
-                    bms.soh_pct = b.soh_pct as f32;
-                    bms.voltage_v = b.voltage_v as f32;
-                    bms.current_a = b.current_a as f32;
-                    bms.temperature_c = b.temperature_c as f32;
-                }
-                self.core.state.system.battery_soc_pct = b.soc_pct as f32;
-                self.core.state.system.battery_current_a = b.current_a as f32;
-                self.core.state.touch(Group::BmsPack, t);
-            }
+            Frame::BmsData(b) => agilex::apply_bms_data(&mut self.core.state, &b, t),
             Frame::BmsAlarm(b) => {
-                if let Some(bms) = self.core.state.bms.first_mut() {
-                    bms.alarm_flags = b.alarm_flags();
-                }
-                let on = b.alarm_flags() & 0xFFFF != 0;
-                if on {
-                    self.other_faults |= FaultFlags::BMS_ALARM;
-                } else {
-                    self.other_faults &= !FaultFlags::BMS_ALARM;
-                }
-                self.core.state.touch(Group::BmsPack, t);
+                let any_alarm = agilex::apply_bms_alarm(&mut self.core.state, &b, t);
+                agilex::set_bits(&mut self.other_faults, FaultFlags::BMS_ALARM, any_alarm);
             }
             Frame::VersionText(t) => self.core.notice(
                 Level::Info,
@@ -349,24 +305,8 @@ impl V2Driver {
                 );
             }
             Frame::SteeringZeroAck { done } => {
-                self.core.state.system.steering_zero_done = u8::from(done);
-                self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
+                self.steering_zero.answered(&mut self.core, done);
                 self.core.state.touch(Group::Body, t);
-                if let Some((token, _)) = self.steering_zero.take() {
-                    self.core.events.push_back(DriverEvent::ControlDone {
-                        token,
-                        status: if done {
-                            ControlStatus::OK
-                        } else {
-                            ControlStatus::REFUSED
-                        },
-                        message: if done {
-                            "steering zero set".into()
-                        } else {
-                            "the chassis refused the steering zero (0x43A 0xFF)".into()
-                        },
-                    });
-                }
             }
             // Commands from another node, and sensors without a place in the state.
             _ => {}
@@ -422,39 +362,27 @@ impl V2Driver {
         if new_mode == ControlMode::COMMAND {
             // The retry limit is for a chassis that keeps reporting standby: a standby after CAN
             // mode (a reboot, a hand-back) is answered at once.
-            self.last_mode_request = None;
+            self.mode.obeyed();
         }
-        if new_mode != old_mode {
-            let level = if new_mode == ControlMode::COMMAND || old_mode == ControlMode::UNKNOWN {
-                Level::Info
-            } else {
-                Level::Warn
-            };
-            self.core.notice(
-                level,
-                format!(
-                    "chassis mode {} -> {}",
-                    ControlMode::name(old_mode),
-                    ControlMode::name(new_mode)
-                ),
-            );
-            if new_mode != ControlMode::COMMAND && self.has_brake() {
-                self.brake = Brake::Unknown;
-                self.update_body(now);
-            }
+        if new_mode == ControlMode::COMMAND
+            && old_mode != ControlMode::COMMAND
+            && let Some(wanted) = self.wanted_mode
+        {
+            // Back from standby (a reboot, a heartbeat timeout) or an RC session: the chassis
+            // may be in another motion mode than the one last sent.
+            self.send_motion_mode(now, wanted);
+        }
+        agilex::mode_changed(&mut self.core, old_mode, new_mode);
+        if new_mode != old_mode && new_mode != ControlMode::COMMAND && self.brake.fitted() {
+            self.brake.forget();
+            self.update_body(now);
         }
         self.core
             .fault_notices(old_faults, new_faults, FaultFlags::WARNINGS);
         // ⚠ D-22: where the firmware has no standby code, "RC" (0x00) also means "not ours".
         let not_ours = new_mode == ControlMode::STANDBY
             || (self.profile.mode_codes.standby.is_none() && new_mode == ControlMode::REMOTE);
-        if not_ours
-            && self.want_control
-            && !self.core.bus_down
-            && self
-                .last_mode_request
-                .is_none_or(|t| now.saturating_since(t) >= Self::MODE_RETRY)
-        {
+        if self.mode.ask_again(now, not_ours, self.core.bus_down) {
             self.request_mode(now);
         }
         // The E-stop may have been released while the command was already zero.
@@ -488,12 +416,6 @@ impl V2Driver {
                 }
             }
         };
-    }
-
-    fn next_token(&mut self) -> u64 {
-        let token = self.next_token;
-        self.next_token += 1;
-        token
     }
 }
 
@@ -596,20 +518,9 @@ impl Driver for V2Driver {
             Err(outcome) => return outcome,
         };
         let outcome = match *command {
-            Command::Mode { take_control } => {
-                self.want_control = take_control;
-                ControlOutcome::Done(if take_control {
-                    "CAN command mode requested".into()
-                } else {
-                    "standby requested; motion commands will be ignored".into()
-                })
-            }
+            Command::Mode { take_control } => self.mode.command(take_control),
             Command::Brake { engage } => {
-                self.brake = if engage {
-                    Brake::Engaged
-                } else {
-                    Brake::Released
-                };
+                self.brake.set(engage, false);
                 self.update_body(now);
                 ControlOutcome::Done(format!(
                     "parking brake {}",
@@ -630,18 +541,10 @@ impl Driver for V2Driver {
                     "lights handed back to the chassis".into()
                 })
             }
-            Command::SteeringZero => {
-                if self.steering_zero.is_some() {
-                    return ControlOutcome::Refused(
-                        "a steering zero is already waiting for its acknowledgement".into(),
-                    );
-                }
-                let token = self.next_token();
-                let deadline = now + Duration::from_millis(self.config.control_timeout_ms);
-                self.steering_zero = Some((token, deadline));
-                self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, true);
-                ControlOutcome::Pending(token)
-            }
+            Command::SteeringZero => match self.steering_zero.start(&mut self.core, now) {
+                Ok(token) => ControlOutcome::Pending(token),
+                Err(refused) => return refused,
+            },
             _ => ControlOutcome::Done(format!("{} sent", command.name())),
         };
         self.queue.extend(planned.frames);
@@ -670,25 +573,12 @@ impl Driver for V2Driver {
                 now + Duration::from_millis(self.profile.light_refresh_ms),
             ));
         }
-        if self.has_brake()
-            && self.config.brake_idle_engage_ms > 0
-            && self.brake == Brake::Released
-            && self.idle_since.is_some_and(|since| {
-                now.saturating_since(since)
-                    >= Duration::from_millis(self.config.brake_idle_engage_ms)
-            })
-            && !self.core.bus_down
-        {
+        if self.brake.idle_engage_due(now, self.core.bus_down) {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.brake = Brake::Engaged;
             self.update_body(now);
         }
-        self.core.expire_steering_zero(
-            &mut self.steering_zero,
-            now,
-            self.config.control_timeout_ms,
-        );
+        self.steering_zero.expire(&mut self.core, now);
     }
 
     fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
@@ -699,13 +589,12 @@ impl Driver for V2Driver {
         let frame = if let Some(frame) = self.queue.pop_front() {
             frame
         } else if self.core.schedule.is_due(now)
-            && self.motion != STOP
-            && self.has_brake()
-            && self.brake != Brake::Released
-            && self.core.state.system.control_mode == ControlMode::COMMAND
+            && self.brake.release_before(
+                self.motion != STOP,
+                self.core.state.system.control_mode == ControlMode::COMMAND,
+            )
         {
             // Release before motion (HUNTER 2.0 ignores speed while braked).
-            self.brake = Brake::Released;
             self.update_body(now);
             Frame::ParkingBrake(ParkingBrake { engage: false })
         } else if self.core.schedule.is_due(now) {
@@ -737,20 +626,10 @@ impl Driver for V2Driver {
         {
             next = earliest(next, Some(due));
         }
-        if self.has_brake()
-            && self.config.brake_idle_engage_ms > 0
-            && self.brake == Brake::Released
-            && let Some(since) = self.idle_since
-        {
-            next = earliest(
-                next,
-                Some(since + Duration::from_millis(self.config.brake_idle_engage_ms)),
-            );
-        }
-        if let Some((_, deadline)) = self.steering_zero {
-            next = earliest(next, Some(deadline));
-        }
-        next
+        earliest(
+            earliest(next, self.brake.deadline()),
+            self.steering_zero.deadline(),
+        )
     }
 
     fn set_bus_down(&mut self, now: Timestamp, down: bool) {
@@ -759,12 +638,10 @@ impl Driver for V2Driver {
         }
         self.queue.clear();
         if !down {
-            if self.has_brake() {
-                self.brake = Brake::Unknown;
-            }
+            self.brake.forget();
             self.ranger_mode = None;
             self.pose.reset();
-            if self.want_control {
+            if self.mode.wants_control() {
                 self.request_mode(now);
             }
             self.core
@@ -777,10 +654,9 @@ impl Driver for V2Driver {
         self.update_motion(now);
         self.queue.clear();
         self.queue.push_back(Frame::MotionCommand(STOP));
-        if self.has_brake() {
+        if self.brake.engage() {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.brake = Brake::Engaged;
             self.update_body(now);
         }
         if self.lights.take().is_some() {

@@ -475,12 +475,7 @@ impl V2Profile {
     /// This profile with the keys of `overrides` (the `[profile]` table of the service's
     /// config) set over it. Unknown keys and wrong types are errors.
     pub fn with_overrides(&self, overrides: &toml::Table) -> Result<Self, toml::de::Error> {
-        let mut table = toml::Table::try_from(self)
-            .map_err(|e| <toml::de::Error as serde::de::Error>::custom(format!("profile: {e}")))?;
-        for (key, value) in overrides {
-            table.insert(key.clone(), value.clone());
-        }
-        toml::Value::Table(table).try_into()
+        crate::profile::with_overrides(self, overrides)
     }
 
     /// Checks the values make a drivable robot.
@@ -533,7 +528,7 @@ impl V2Profile {
                 timeout_ms: self.command_timeout_ms,
             });
         }
-        Ok(())
+        crate::profile::detection(self.detect_timeout_ms, self.detect_min_frames)
     }
 }
 

@@ -56,13 +56,33 @@ fn close(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol
 }
 
-/// The kinds, with a twist each can follow exactly.
-const KINDS: [(V2Model, f64, f64, f64); 4] = [
+/// The kinds, with a twist each can follow exactly: differential (BUNKER), omni (SCOUT MINI
+/// mecanum), Ackermann (HUNTER) and the three motion modes of four-wheel steering (RANGER MINI
+/// dual Ackermann, crab, spin).
+const KINDS: [(V2Model, f64, f64, f64); 6] = [
     (V2Model::Bunker, 0.5, 0.0, 0.3),
     (V2Model::ScoutMiniOmni, 0.4, 0.2, 0.3),
     (V2Model::Hunter, 0.8, 0.0, 0.4),
     (V2Model::RangerMini, 0.6, 0.0, 0.3),
+    (V2Model::RangerMini, 0.3, 0.3, 0.0),
+    (V2Model::RangerMini, 0.0, 0.0, 0.8),
 ];
+
+/// The speed a kind has while following its twist (crab: along the wheels).
+fn follows(p: &V2Pair, (vx, vy, w): (f64, f64, f64)) -> bool {
+    let t = p.firmware.truth();
+    close(t.linear_mps, vx, 1e-3)
+        && close(t.lateral_mps, vy, 1e-3)
+        && close(t.angular_radps, w, 1e-3)
+}
+
+/// Standing: no body speed at all.
+fn standing(p: &V2Pair) -> bool {
+    let t = p.firmware.truth();
+    close(t.linear_mps, 0.0, 0.01)
+        && close(t.lateral_mps, 0.0, 0.01)
+        && close(t.angular_radps, 0.0, 0.01)
+}
 
 #[test]
 fn power_up_enable_drive_stop_for_every_kinematic_kind() {
@@ -157,21 +177,32 @@ fn ranger_sends_its_motion_mode_before_the_motion_that_needs_it() {
 
 #[test]
 fn heartbeat_gap_stops_the_chassis_and_the_next_command_resumes() {
-    let mut p = pair(V2Model::Bunker);
-    p.run_for(ms(100));
-    p.set_command(twist(0.5, 0.0, 0.0));
-    p.run_for(ms(1000));
-    p.cut = true;
-    p.run_for(ms(1500));
-    let t = p.firmware.truth();
-    assert!(close(t.linear_mps, 0.0, 0.01), "{t:?}");
-    assert_ne!(t.fault_flags & FaultFlags::HEARTBEAT_LOST, 0);
-    assert_ne!(p.driver.state().link_flags & LinkFlags::CHASSIS_SILENT, 0);
-    p.cut = false;
-    p.run_for(ms(1500));
-    let t = p.firmware.truth();
-    assert!(close(t.linear_mps, 0.5, 1e-3), "{t:?}");
-    assert_eq!(t.fault_flags & FaultFlags::HEARTBEAT_LOST, 0);
+    for (model, vx, vy, w) in KINDS {
+        let mut p = pair(model);
+        p.run_for(ms(100));
+        p.set_command(twist(vx, vy, w));
+        p.run_for(ms(1500));
+        assert!(
+            follows(&p, (vx, vy, w)),
+            "{model:?}: {:?}",
+            p.firmware.truth()
+        );
+        p.cut = true;
+        p.run_for(ms(1500));
+        let t = p.firmware.truth();
+        assert!(standing(&p), "{model:?}: {t:?}");
+        assert_ne!(t.fault_flags & FaultFlags::HEARTBEAT_LOST, 0, "{model:?}");
+        assert_ne!(
+            p.driver.state().link_flags & LinkFlags::CHASSIS_SILENT,
+            0,
+            "{model:?}"
+        );
+        p.cut = false;
+        p.run_for(ms(2000));
+        let t = p.firmware.truth();
+        assert!(follows(&p, (vx, vy, w)), "{model:?}: {t:?}");
+        assert_eq!(t.fault_flags & FaultFlags::HEARTBEAT_LOST, 0, "{model:?}");
+    }
 }
 
 #[test]
@@ -191,7 +222,11 @@ fn reboot_mid_drive_is_back_in_can_mode_within_100_ms_of_its_first_report() {
         assert_eq!(p.firmware.truth().boots, 2);
         // It follows the mux's current output again (§8 item 4: same rule as the TITAN).
         p.run_for(ms(3000));
-        assert!(close(p.firmware.truth().linear_mps, vx, 1e-3), "{model:?}");
+        assert!(
+            follows(&p, (vx, vy, w)),
+            "{model:?}: {:?}",
+            p.firmware.truth()
+        );
     }
     // The timing on a robot reporting every 20 ms: CAN mode back within 100 ms of the boot end.
     let mut p = pair(V2Model::RangerMini);
@@ -209,76 +244,115 @@ fn reboot_mid_drive_is_back_in_can_mode_within_100_ms_of_its_first_report() {
 
 #[test]
 fn rc_takeover_is_reported_never_fought_and_the_hand_back_is_taken_over() {
-    let mut p = pair(V2Model::Hunter);
-    p.run_for(ms(100));
-    p.set_command(twist(0.5, 0.0, 0.0));
-    p.run_for(ms(1000));
-    assert!(p.inject(Injection::RcTakeover(true)));
-    p.run_for(ms(200));
-    p.clear_log();
-    p.run_for(ms(1000));
-    assert_ne!(p.driver.state().link_flags & LinkFlags::RC_AUTHORITY, 0);
-    assert_eq!(p.firmware.truth().control_mode, ControlMode::REMOTE);
-    assert!(close(p.firmware.truth().linear_mps, 0.0, 0.01));
-    assert!(
-        !sent(&p).iter().any(|(_, f)| f.id() == id::MODE),
-        "0x421 sent while the RC holds authority"
-    );
-    assert!(p.inject(Injection::RcTakeover(false)));
-    let back = p.run_until_true(ms(1000), |p| {
-        p.firmware.truth().control_mode == ControlMode::COMMAND
-    });
-    assert!(back.is_some());
-    p.run_for(ms(2000));
-    assert!(close(p.firmware.truth().linear_mps, 0.5, 1e-3));
+    for (model, vx, vy, w) in KINDS {
+        let mut p = pair(model);
+        p.run_for(ms(100));
+        p.set_command(twist(vx, vy, w));
+        p.run_for(ms(1500));
+        assert!(p.inject(Injection::RcTakeover(true)));
+        p.run_for(ms(200));
+        p.clear_log();
+        p.run_for(ms(1000));
+        assert_ne!(
+            p.driver.state().link_flags & LinkFlags::RC_AUTHORITY,
+            0,
+            "{model:?}"
+        );
+        assert_eq!(
+            p.firmware.truth().control_mode,
+            ControlMode::REMOTE,
+            "{model:?}"
+        );
+        assert!(standing(&p), "{model:?}: {:?}", p.firmware.truth());
+        assert!(
+            !sent(&p).iter().any(|(_, f)| f.id() == id::MODE),
+            "{model:?}: 0x421 sent while the RC holds authority"
+        );
+        assert!(p.inject(Injection::RcTakeover(false)));
+        let back = p.run_until_true(ms(1000), |p| {
+            p.firmware.truth().control_mode == ControlMode::COMMAND
+        });
+        assert!(back.is_some(), "{model:?}");
+        p.run_for(ms(2000));
+        assert!(
+            follows(&p, (vx, vy, w)),
+            "{model:?}: {:?}",
+            p.firmware.truth()
+        );
+    }
 }
 
 #[test]
 fn estop_holds_zero_until_released_and_the_command_was_zero_once() {
-    let mut p = pair(V2Model::Bunker);
-    p.run_for(ms(100));
-    p.set_command(twist(0.5, 0.0, 0.0));
-    p.run_for(ms(1000));
-    assert!(p.inject(Injection::EStop(true)));
-    p.run_for(ms(1000));
-    assert!(close(p.firmware.truth().linear_mps, 0.0, 0.01));
-    assert_ne!(
-        p.driver.state().system.fault_flags & FaultFlags::EMERGENCY_STOP,
-        0
-    );
-    assert!(p.inject(Injection::EStop(false)));
-    p.run_for(ms(1000));
-    // Released, but the command never went to zero: the robot does not resume on its own.
-    assert!(close(p.firmware.truth().linear_mps, 0.0, 0.01));
-    assert_ne!(
-        p.driver.state().command.clamp_flags & ClampFlags::CHASSIS_NOT_READY,
-        0
-    );
-    p.set_command(Twist::ZERO);
-    p.run_for(ms(100));
-    p.set_command(twist(0.5, 0.0, 0.0));
-    p.run_for(ms(2000));
-    assert!(close(p.firmware.truth().linear_mps, 0.5, 1e-3));
+    for (model, vx, vy, w) in KINDS {
+        let mut p = pair(model);
+        p.run_for(ms(100));
+        p.set_command(twist(vx, vy, w));
+        p.run_for(ms(1500));
+        assert!(p.inject(Injection::EStop(true)));
+        p.run_for(ms(1000));
+        assert!(standing(&p), "{model:?}: {:?}", p.firmware.truth());
+        assert_ne!(
+            p.driver.state().system.fault_flags & FaultFlags::EMERGENCY_STOP,
+            0,
+            "{model:?}"
+        );
+        assert!(p.inject(Injection::EStop(false)));
+        p.run_for(ms(1000));
+        // Released, but the command never went to zero: the robot does not resume on its own.
+        assert!(standing(&p), "{model:?}: {:?}", p.firmware.truth());
+        assert_ne!(
+            p.driver.state().command.clamp_flags & ClampFlags::CHASSIS_NOT_READY,
+            0,
+            "{model:?}"
+        );
+        p.set_command(Twist::ZERO);
+        p.run_for(ms(100));
+        p.set_command(twist(vx, vy, w));
+        p.run_for(ms(2000));
+        assert!(
+            follows(&p, (vx, vy, w)),
+            "{model:?}: {:?}",
+            p.firmware.truth()
+        );
+    }
 }
 
 #[test]
 fn limits_are_applied_by_the_driver_before_the_wire() {
-    for (model, vx, w) in [
-        (V2Model::Bunker, 5.0, 3.0),
-        (V2Model::Hunter, 5.0, 5.0),
-        (V2Model::ScoutMini, 5.0, 5.0),
+    for (model, vx, vy, w) in [
+        (V2Model::Bunker, 5.0, 0.0, 3.0),
+        (V2Model::ScoutMini, 5.0, 0.0, 5.0),
+        (V2Model::ScoutMiniOmni, 5.0, 5.0, 0.0),
+        (V2Model::Hunter, 5.0, 0.0, 5.0),
+        (V2Model::RangerMini, 5.0, 0.0, 0.0),
+        (V2Model::RangerMini, 0.0, 0.0, 9.0),
     ] {
         let mut p = pair(model);
         p.run_for(ms(100));
-        p.set_command(twist(vx, 0.0, w));
+        p.set_command(twist(vx, vy, w));
         p.run_for(ms(2000));
         let profile = p.driver.profile().clone();
+        let t = p.firmware.truth();
         assert_ne!(p.driver.state().command.clamp_flags, 0, "{model:?}");
-        assert!(close(
-            p.firmware.truth().linear_mps,
-            profile.max_linear_mps,
-            1e-3
-        ));
+        if vx != 0.0 {
+            assert!(
+                close(t.linear_mps, profile.max_linear_mps, 1e-3),
+                "{model:?}: {t:?}"
+            );
+        }
+        if vy != 0.0 {
+            assert!(
+                close(t.lateral_mps, profile.max_lateral_mps, 1e-3),
+                "{model:?}: {t:?}"
+            );
+        }
+        if vx == 0.0 && vy == 0.0 {
+            assert!(
+                close(t.angular_radps, profile.max_angular_radps, 1e-3),
+                "{model:?}: {t:?}"
+            );
+        }
         assert_eq!(p.firmware.commands_clamped(), 0, "{model:?}");
     }
 }

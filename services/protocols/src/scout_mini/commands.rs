@@ -4,7 +4,6 @@ use chassis_interfaces::{ClampFlags, FaultClear};
 
 use super::codec::{Frame, Lights, MotionCommand, clear_code, mode};
 use super::kinematics::{SkidCommand, twist_to_command};
-use crate::Robot;
 use crate::command::{Command, CommandError, Planned, Turn};
 use crate::profile::ScoutMiniProfile;
 
@@ -57,7 +56,7 @@ pub fn frames_for(
     command: &Command,
     profile: &ScoutMiniProfile,
 ) -> Result<Planned<Frame>, CommandError> {
-    let robot = Robot::ScoutMini;
+    let robot = profile.model.robot();
     let standing = MotionCommand::drive(0.0, 0.0);
     Ok(match *command {
         Command::Velocity {

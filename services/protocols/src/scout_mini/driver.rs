@@ -6,8 +6,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, RobotKind, SystemState,
-    Twist,
+    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, SystemState, Twist,
 };
 
 use super::codec::{self, Frame, Lights, MotionCommand, body, clear_code, fault, mode};
@@ -132,7 +131,7 @@ impl ScoutMiniDriver {
     /// `config.take_control`, else 0x00).
     pub fn new(profile: ScoutMiniProfile, config: DriverConfig, now: Timestamp) -> Self {
         let mut core = DriverCore::new(
-            RobotKind::SCOUT_MINI,
+            profile.model.robot().kind(),
             Duration::from_millis(profile.heartbeat_period_ms),
             &config,
             now,
@@ -432,7 +431,7 @@ pub fn normalize_faults(word: u16) -> u64 {
 
 impl Driver for ScoutMiniDriver {
     fn robot(&self) -> Robot {
-        Robot::ScoutMini
+        self.profile.model.robot()
     }
 
     crate::driver::core_accessors!();

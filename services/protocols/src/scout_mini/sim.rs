@@ -734,7 +734,7 @@ impl ScoutMiniSim {
 
 impl Firmware for ScoutMiniSim {
     fn robot(&self) -> Robot {
-        Robot::ScoutMini
+        self.profile.model.robot()
     }
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {

@@ -13,17 +13,17 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags, RobotKind, SystemState,
-    Twist,
+    ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, RobotKind, SystemState, Twist,
 };
 
 use super::codec::{self, Frame, MotionCommand, ParkingBrake, fault, mode};
 use super::commands::{frames_for, motion_command};
 use super::kinematics::yaw_rate;
+use crate::agilex::{self, BrakeKeeper, ModeKeeper, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, DriverEvent, Level, PoseIntegrator, Rx,
-    Transmit, flags_of, requested_turn,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
+    flags_of, requested_turn,
 };
 use crate::profile::{Robot, TitanProfile};
 use crate::time::{Timestamp, earliest};
@@ -33,34 +33,20 @@ const STANDING_MPS: f64 = 0.01;
 /// Least time between two 0x421 frames while the chassis keeps reporting standby.
 const MODE_RETRY: Duration = Duration::from_millis(50);
 
-/// What the driver believes about the parking brake (TITAN does not report it).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Brake {
-    /// Not known (power-up, chassis reboot): treated as engaged.
-    Unknown,
-    Engaged,
-    Released,
-}
-
 /// The TITAN driver.
 #[derive(Debug)]
 pub struct TitanDriver {
     profile: TitanProfile,
-    config: DriverConfig,
     core: DriverCore,
     queue: VecDeque<Frame>,
     pose: PoseIntegrator,
     /// The motion the next 0x111 carries.
     motion: MotionCommand,
     motion_clamp_flags: u32,
-    want_control: bool,
-    last_mode_request: Option<Timestamp>,
-    brake: Brake,
-    /// The brake was engaged on request: motion waits until it is released on request.
-    brake_held: bool,
-    idle_since: Option<Timestamp>,
-    steering_zero: Option<(u64, Timestamp)>,
-    next_token: u64,
+    mode: ModeKeeper,
+    /// TITAN does not report its brake: what the driver believes.
+    brake: BrakeKeeper,
+    steering_zero: SteeringZero,
     other_faults: u64,
 }
 
@@ -75,23 +61,18 @@ impl TitanDriver {
         );
         core.state.system.control_mode = ControlMode::UNKNOWN;
         let mut driver = Self {
-            want_control: config.take_control,
+            mode: ModeKeeper::new(config.take_control, MODE_RETRY),
+            brake: BrakeKeeper::new(true, config.brake_idle_engage_ms, now),
+            steering_zero: SteeringZero::new(config.control_timeout_ms),
             profile,
-            config,
             core,
             queue: VecDeque::new(),
             pose: PoseIntegrator::default(),
             motion: MotionCommand::default(),
             motion_clamp_flags: 0,
-            last_mode_request: None,
-            brake: Brake::Unknown,
-            brake_held: false,
-            idle_since: Some(now),
-            steering_zero: None,
-            next_token: 1,
             other_faults: 0,
         };
-        if driver.want_control {
+        if driver.mode.wants_control() {
             driver.request_mode(now);
         }
         driver
@@ -105,7 +86,7 @@ impl TitanDriver {
         self.queue.push_back(Frame::Mode(codec::ModeCommand {
             mode: mode::CAN_COMMAND,
         }));
-        self.last_mode_request = Some(now);
+        self.mode.requested(now);
     }
 
     fn is_moving(&self) -> bool {
@@ -125,7 +106,7 @@ impl TitanDriver {
             // Non-finite input: the mux rejects it first; a stop is the only safe answer here.
             Err(_) => (MotionCommand::default(), ClampFlags::CHASSIS_NOT_READY),
         };
-        if self.brake_held && motion.linear_mps != 0.0 {
+        if self.brake.held() && motion.linear_mps != 0.0 {
             motion = MotionCommand {
                 linear_mps: 0.0,
                 steer_rad: motion.steer_rad,
@@ -133,17 +114,13 @@ impl TitanDriver {
             flags |= ClampFlags::CHASSIS_NOT_READY;
         }
         let moving = motion.linear_mps != 0.0;
-        if moving {
-            self.idle_since = None;
-        } else if self.idle_since.is_none() {
-            self.idle_since = Some(now);
-        }
+        self.brake.planned(now, moving);
         self.core.schedule.update(&mut self.motion, motion, !moving);
         self.motion_clamp_flags = flags;
     }
 
     fn update_body(&mut self, now: Timestamp) {
-        self.core.state.system.parking_brake_engaged = u8::from(self.brake != Brake::Released);
+        self.core.state.system.parking_brake_engaged = u8::from(self.brake.engaged());
         self.core.state.touch(Group::Body, now.as_nanos());
     }
 
@@ -177,102 +154,30 @@ impl TitanDriver {
                 self.core.state.odometry.rear_distance_m = o.rear_distance_m;
                 self.core.state.touch(Group::Odometry, t);
             }
-            Frame::MotorFast(m) => {
-                if let Some(motor) = self
-                    .core
-                    .state
-                    .motors
-                    .get_mut(usize::from(m.motor.max(1) - 1))
-                {
-                    motor.rpm = m.rpm as f32;
-                    motor.current_a = m.current_a as f32;
-                    motor.position_counts = m.position_counts.into();
-                }
-                self.core.state.touch(Group::MotorDrive, t);
-            }
+            Frame::MotorFast(m) => agilex::apply_motor_fast(&mut self.core.state, &m, t),
             Frame::MotorSlow(m) => {
-                if let Some(motor) = self
-                    .core
-                    .state
-                    .motors
-                    .get_mut(usize::from(m.motor.max(1) - 1))
-                {
-                    motor.driver_voltage_v = m.driver_voltage_v as f32;
-                    motor.driver_temp_c = m.driver_temp_c as f32;
-                    motor.motor_temp_c = m.motor_temp_c as f32;
-                    motor.driver_status = m.driver_status;
-                }
-                self.core.state.touch(Group::MotorDriver, t);
+                agilex::apply_motor_slow(&mut self.core.state, &m, m.driver_status, t);
             }
-            Frame::Rc(r) => {
-                let rc = &mut self.core.state.rc;
-                rc.switch_a = r.switch_a;
-                rc.switch_b = r.switch_b;
-                rc.switch_c = r.switch_c;
-                rc.switch_d = r.switch_d;
-                rc.right_x_pct = r.right_x_pct;
-                rc.right_y_pct = r.right_y_pct;
-                rc.left_y_pct = r.left_y_pct;
-                rc.left_x_pct = r.left_x_pct;
-                rc.knob_a_pct = r.knob_a_pct;
-                rc.counter = r.counter;
-                self.core.state.touch(Group::Rc, t);
-            }
+            Frame::Rc(r) => agilex::apply_rc(&mut self.core.state, &r, t),
             Frame::BmsData(b) => {
-                let group = usize::from(b.group.min(2));
-                if let Some(bms) = self.core.state.bms.get_mut(group) {
-                    bms.soc_pct = b.soc_pct as f32;
-                    bms.soh_pct = b.soh_pct as f32;
-                    bms.voltage_v = b.voltage_v as f32;
-                    bms.current_a = b.current_a as f32;
-                    bms.temperature_c = b.temperature_c as f32;
-                }
-                if group == 0 {
-                    self.core.state.system.battery_soc_pct = b.soc_pct as f32;
-                    self.core.state.system.battery_current_a = b.current_a as f32;
+                agilex::apply_bms_data(&mut self.core.state, &b, t);
+                if b.group == 0 {
                     let low = b.soc_pct < self.profile.low_battery_warning_soc_pct;
-                    self.set_other_fault(FaultFlags::BATTERY_LOW, low);
+                    agilex::set_bits(&mut self.other_faults, FaultFlags::BATTERY_LOW, low);
                 }
-                self.core.state.touch(bms_group(group), t);
             }
             Frame::BmsAlarm(b) => {
-                let group = usize::from(b.group.min(2));
-                if let Some(bms) = self.core.state.bms.get_mut(group) {
-                    bms.alarm_flags = b.alarm_flags();
-                }
-                let any_alarm = self
-                    .core
-                    .state
-                    .bms
-                    .iter()
-                    .any(|b| b.alarm_flags & 0xFFFF != 0);
-                self.set_other_fault(FaultFlags::BMS_ALARM, any_alarm);
-                self.core.state.touch(bms_group(group), t);
+                let any_alarm = agilex::apply_bms_alarm(&mut self.core.state, &b, t);
+                agilex::set_bits(&mut self.other_faults, FaultFlags::BMS_ALARM, any_alarm);
             }
             Frame::SteeringZeroAck => {
-                self.core.state.system.steering_zero_done = 1;
-                self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
+                self.steering_zero.answered(&mut self.core, true);
                 self.core.state.touch(Group::Body, t);
-                if let Some((token, _)) = self.steering_zero.take() {
-                    self.core.events.push_back(DriverEvent::ControlDone {
-                        token,
-                        status: ControlStatus::OK,
-                        message: "steering zero set".into(),
-                    });
-                }
                 self.core.notice(Level::Info, "steering zero position set");
             }
             // Commands on the bus from another node ([`Frame::direction`] `ToChassis`): not ours
             // to decode into state.
             _ => {}
-        }
-    }
-
-    fn set_other_fault(&mut self, flag: u64, on: bool) {
-        if on {
-            self.other_faults |= flag;
-        } else {
-            self.other_faults &= !flag;
         }
     }
 
@@ -308,53 +213,23 @@ impl TitanDriver {
         self.core
             .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
 
-        if new_mode != old_mode {
-            // Losing command mode is worth a warning; finding out the mode at power-up is not.
-            let level = if new_mode == ControlMode::COMMAND || old_mode == ControlMode::UNKNOWN {
-                Level::Info
-            } else {
-                Level::Warn
-            };
-            self.core.notice(
-                level,
-                format!(
-                    "chassis mode {} -> {}",
-                    ControlMode::name(old_mode),
-                    ControlMode::name(new_mode)
-                ),
-            );
-            if new_mode == ControlMode::STANDBY || new_mode == ControlMode::REMOTE {
-                // After a reboot or an RC session the brake may be engaged again.
-                self.brake = Brake::Unknown;
-                self.update_body(now);
-            }
+        agilex::mode_changed(&mut self.core, old_mode, new_mode);
+        if new_mode != old_mode
+            && (new_mode == ControlMode::STANDBY || new_mode == ControlMode::REMOTE)
+        {
+            // After a reboot or an RC session the brake may be engaged again.
+            self.brake.forget();
+            self.update_body(now);
         }
         self.core
             .fault_notices(old_faults, new_faults, FaultFlags::WARNINGS);
         // Power-cycle recovery: a chassis in standby while we want control is asked again.
-        if new_mode == ControlMode::STANDBY
-            && self.want_control
-            && !self.core.bus_down
-            && self
-                .last_mode_request
-                .is_none_or(|t| now.saturating_since(t) >= MODE_RETRY)
+        if self
+            .mode
+            .ask_again(now, new_mode == ControlMode::STANDBY, self.core.bus_down)
         {
             self.request_mode(now);
         }
-    }
-
-    fn next_token(&mut self) -> u64 {
-        let token = self.next_token;
-        self.next_token += 1;
-        token
-    }
-}
-
-fn bms_group(group: usize) -> Group {
-    match group {
-        0 => Group::BmsPack,
-        1 => Group::Bms1,
-        _ => Group::Bms2,
     }
 }
 
@@ -415,14 +290,7 @@ impl Driver for TitanDriver {
         };
         let t = now.as_nanos();
         let outcome = match *command {
-            Command::Mode { take_control } => {
-                self.want_control = take_control;
-                ControlOutcome::Done(if take_control {
-                    "CAN command mode requested".into()
-                } else {
-                    "standby requested; motion commands will be ignored".into()
-                })
-            }
+            Command::Mode { take_control } => self.mode.command(take_control),
             Command::Brake { engage } => {
                 if engage && self.is_moving() {
                     return ControlOutcome::Refused(format!(
@@ -430,12 +298,7 @@ impl Driver for TitanDriver {
                         self.core.state.motion.linear_mps
                     ));
                 }
-                self.brake_held = engage;
-                self.brake = if engage {
-                    Brake::Engaged
-                } else {
-                    Brake::Released
-                };
+                self.brake.set(engage, true);
                 self.update_body(now);
                 ControlOutcome::Done(if engage {
                     "parking brake engaged; motion waits until it is released".into()
@@ -463,17 +326,10 @@ impl Driver for TitanDriver {
                         "steering zero is set only while standing still".into(),
                     );
                 }
-                if self.steering_zero.is_some() {
-                    return ControlOutcome::Refused(
-                        "a steering zero calibration is already waiting for its acknowledgement"
-                            .into(),
-                    );
+                match self.steering_zero.start(&mut self.core, now) {
+                    Ok(token) => ControlOutcome::Pending(token),
+                    Err(refused) => return refused,
                 }
-                let token = self.next_token();
-                let deadline = now + Duration::from_millis(self.config.control_timeout_ms);
-                self.steering_zero = Some((token, deadline));
-                self.core.set_flag(LinkFlags::STEERING_ZERO_PENDING, true);
-                ControlOutcome::Pending(token)
             }
             Command::Silent { enter } => {
                 self.core.state.system.silent_mode = u8::from(enter);
@@ -495,25 +351,12 @@ impl Driver for TitanDriver {
         if self.core.check_silence(now, "feedback") {
             self.pose.reset();
         }
-        if self.config.brake_idle_engage_ms > 0
-            && self.brake == Brake::Released
-            && !self.brake_held
-            && self.idle_since.is_some_and(|since| {
-                now.saturating_since(since)
-                    >= Duration::from_millis(self.config.brake_idle_engage_ms)
-            })
-            && !self.core.bus_down
-        {
+        if self.brake.idle_engage_due(now, self.core.bus_down) {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.brake = Brake::Engaged;
             self.update_body(now);
         }
-        self.core.expire_steering_zero(
-            &mut self.steering_zero,
-            now,
-            self.config.control_timeout_ms,
-        );
+        self.steering_zero.expire(&mut self.core, now);
     }
 
     fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
@@ -524,16 +367,15 @@ impl Driver for TitanDriver {
         let frame = if let Some(frame) = self.queue.pop_front() {
             frame
         } else if self.core.schedule.is_due(now)
-            && self.motion.linear_mps != 0.0
-            && self.brake != Brake::Released
-            && self.core.state.system.control_mode == ControlMode::COMMAND
+            && self.brake.release_before(
+                self.motion.linear_mps != 0.0,
+                self.core.state.system.control_mode == ControlMode::COMMAND,
+            )
         {
             // Release before motion: after power-up, a chassis reboot or an idle engagement the
-            // brake goes first, then this same deadline sends the motion frame. Only in CAN
-            // command mode: standby and RC authority ignore 0x131, and a release sent then would
-            // be believed while the brake stays engaged. Until command mode is reported the
-            // heartbeat carries the command alone (a braked chassis does not move on it).
-            self.brake = Brake::Released;
+            // brake goes first, then this same deadline sends the motion frame. Until command
+            // mode is reported the heartbeat carries the command alone (a braked chassis does not
+            // move on it).
             self.update_body(now);
             Frame::ParkingBrake(ParkingBrake { engage: false })
         } else if self.core.schedule.is_due(now) {
@@ -555,21 +397,11 @@ impl Driver for TitanDriver {
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        let mut next = Some(self.core.poll_timeout()?);
-        if self.config.brake_idle_engage_ms > 0
-            && self.brake == Brake::Released
-            && !self.brake_held
-            && let Some(since) = self.idle_since
-        {
-            next = earliest(
-                next,
-                Some(since + Duration::from_millis(self.config.brake_idle_engage_ms)),
-            );
-        }
-        if let Some((_, deadline)) = self.steering_zero {
-            next = earliest(next, Some(deadline));
-        }
-        next
+        let next = Some(self.core.poll_timeout()?);
+        earliest(
+            earliest(next, self.brake.deadline()),
+            self.steering_zero.deadline(),
+        )
     }
 
     fn set_bus_down(&mut self, now: Timestamp, down: bool) {
@@ -578,9 +410,9 @@ impl Driver for TitanDriver {
         }
         self.queue.clear();
         if !down {
-            self.brake = Brake::Unknown;
+            self.brake.forget();
             self.pose.reset();
-            if self.want_control {
+            if self.mode.wants_control() {
                 self.request_mode(now);
             }
             self.core
@@ -594,7 +426,7 @@ impl Driver for TitanDriver {
         self.queue.push_back(Frame::MotionCommand(self.motion));
         self.queue
             .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-        self.brake = Brake::Engaged;
+        self.brake.engage();
         self.update_body(now);
     }
 }

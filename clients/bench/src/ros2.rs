@@ -1,0 +1,93 @@
+//! The ROS 2 bridge's paths (`clients/ros2/bench.py`, a Cyclone DDS participant standing in for
+//! a ROS 2 node) on the same service as the Rust client's rows, in the same run and placement,
+//! beside the raw DDS hops between the same two implementations (Cyclone DDS ↔ the bridge's
+//! RustDDS) measured by the same script in the same run.
+//!
+//! DDS discovery multicasts: the script runs under `unshare --net` with only the loopback up, so
+//! no discovery packet leaves the machine (iceoryx2 is shared memory and works across it).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+
+use crate::python::{read_latencies, repo};
+use crate::stats::Latencies;
+
+/// What the ROS 2 bridge's run measured.
+#[derive(Debug)]
+pub struct Ros2Figures {
+    /// `cmd_vel` written by the peer → the motion frame written to the bus.
+    pub command: Latencies,
+    /// Frame read by chassisd → the `odom` carrying its pose taken by the peer.
+    pub state: Latencies,
+    /// Raw DDS hop, peer (Cyclone DDS) → the bridge's DDS stack (RustDDS).
+    pub raw_in: Latencies,
+    /// Raw DDS hop, the bridge's DDS stack → the peer.
+    pub raw_out: Latencies,
+    /// `cmd_vel` messages whose frame did not appear.
+    pub missed: u64,
+}
+
+/// The interpreter of the ROS 2 bridge's test environment (`scripts/ros2-tests` makes it, with
+/// Cyclone DDS and the `chassis` package installed), if there is one.
+pub fn interpreter() -> Option<PathBuf> {
+    let python = repo().join("target/ros2-venv/bin/python");
+    python.exists().then_some(python)
+}
+
+/// Runs `bench.py` against the robot `name` (TITAN) served under `prefix`.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    python: &Path,
+    name: &str,
+    prefix: &str,
+    bridge: &Path,
+    chassis_cli: &Path,
+    dir: &Path,
+    states: u64,
+    commands: u64,
+    interval: Duration,
+) -> anyhow::Result<Ros2Figures> {
+    let out = dir.join(format!("ros2-{name}"));
+    std::fs::create_dir_all(&out)?;
+    let log = std::fs::File::create(out.join("bench.log"))?;
+    let status = Command::new("unshare")
+        .args(["--net", "--", "sh", "-c"])
+        .arg("ip link set lo up && ip link set lo multicast on && exec \"$@\"")
+        .arg("ros2-bench")
+        .arg(python)
+        .arg(repo().join("clients/ros2/bench.py"))
+        .args(["--name", name, "--robot", "titan", "--prefix", prefix])
+        .arg("--bridge")
+        .arg(bridge)
+        .arg("--chassis")
+        .arg(chassis_cli)
+        .args(["--state-samples", &states.to_string()])
+        .args(["--commands", &commands.to_string()])
+        .args(["--interval-ms", &interval.as_millis().to_string()])
+        .arg("--latencies-dir")
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(log)
+        .status()
+        .context("starting the ROS 2 bridge's benchmark (unshare --net)")?;
+    if !status.success() {
+        bail!(
+            "the ROS 2 bridge's benchmark failed ({status}); see {}",
+            out.join("bench.log").display()
+        );
+    }
+    let missed = std::fs::read_to_string(out.join("command.missed"))
+        .ok()
+        .and_then(|t| t.trim().parse().ok())
+        .unwrap_or(0);
+    Ok(Ros2Figures {
+        command: read_latencies(&out.join("command.ns"))?,
+        state: read_latencies(&out.join("state.ns"))?,
+        raw_in: read_latencies(&out.join("raw-in.ns"))?,
+        raw_out: read_latencies(&out.join("raw-out.ns"))?,
+        missed,
+    })
+}

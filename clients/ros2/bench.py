@@ -1,0 +1,248 @@
+#!/usr/bin/env python3
+"""Latency of the ROS 2 bridge's two paths, beside the raw DDS hop it contains, in one run.
+
+A Cyclone DDS participant (the Python binding) stands in for a ROS 2 node, as in the bridge's
+tests. Against a running ``chassisd`` (configured as ``chassis-bench`` configures it) this
+script starts ``chassis-ros2`` and measures, from ``CLOCK_MONOTONIC`` stamps taken in the
+processes involved:
+
+* **cmd_vel → frame**: a ``geometry_msgs/Twist`` written on ``cmd_vel`` → the motion frame
+  ``chassisd`` wrote to the bus (the frame tap's TX stamp). Requests alternate between two
+  speeds, one every ``--interval-ms``, so each writes a frame (as ``clients/python/bench.py``).
+* **frame → odom**: a frame that moved the robot read by ``chassisd`` (``ChassisState.stamp_ns``)
+  → the ``nav_msgs/Odometry`` it produced taken by this participant. The bridge runs with
+  ``--monotonic-stamps``, so each odom's stamp is that read time itself.
+* **raw hops**: the same two DDS implementations with nothing behind them. ``chassis-ros2
+  --bench-echo`` (the bridge's DDS stack) records each ``TwistStamped`` ping written here
+  (Cyclone DDS → RustDDS, the cmd_vel hop) and answers it at once (RustDDS → Cyclone DDS, the
+  odom hop), at the command path's pace.
+
+DDS discovery multicasts: run it only in a network namespace whose only interface is the
+loopback (``chassis-bench`` runs it under ``unshare --net``); it refuses to run elsewhere.
+
+Command line::
+
+    python3 clients/ros2/bench.py --name titan --prefix P --bridge target/release/chassis-ros2
+        --chassis target/release/chassis --latencies-dir DIR
+        [--state-samples 2000] [--commands 300] [--interval-ms 4]
+
+Writes DIR/command.ns, DIR/state.ns, DIR/raw-in.ns (Cyclone → RustDDS), DIR/raw-out.ns
+(RustDDS → Cyclone), one latency in ns a line, and DIR/command.missed; prints one JSON line per
+path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from cyclonedds.core import (
+    InstanceState,
+    Policy,
+    Qos,
+    ReadCondition,
+    SampleState,
+    ViewState,
+    WaitSet,
+)
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+import chassis
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE / "tests"))
+sys.path.insert(0, str(HERE.parent / "python"))
+
+import bench as client_bench  # noqa: E402  (clients/python/bench.py: frames, percentiles)
+import ros2_types as m  # noqa: E402
+
+DOMAIN = 77
+DISCOVERY_S = 15.0
+STATE_DRIVE = (0.6, 0.3)
+
+
+def interfaces() -> list[str]:
+    with open("/proc/net/dev") as f:
+        return sorted(line.split(":")[0].strip() for line in f.readlines()[2:])
+
+
+def reliable() -> Qos:
+    return Qos(
+        Policy.Reliability.Reliable(duration(milliseconds=100)),
+        Policy.Durability.Volatile,
+        Policy.History.KeepLast(10),
+    )
+
+
+def stamp(ns: int) -> m.Time:
+    return m.Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def nanos(t: m.Time) -> int:
+    return t.sec * 1_000_000_000 + t.nanosec
+
+
+def wait_matched(writer: DataWriter, what: str) -> None:
+    end = time.monotonic() + DISCOVERY_S
+    while writer.get_publication_matched_status().current_count == 0:
+        if time.monotonic() > end:
+            raise SystemExit(f"bench.py: {what} never matched")
+        time.sleep(0.01)
+
+
+def waiter(dp: DomainParticipant, reader: DataReader) -> WaitSet:
+    ws = WaitSet(dp)
+    ws.attach(ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+    return ws
+
+
+def command_path(
+    robot: chassis.Robot,
+    cmd: DataWriter,
+    frames: dict[float, tuple[int, bytes]],
+    count: int,
+    interval_s: float,
+) -> tuple[list[int], int]:
+    tap = robot.frames(chassis.FRAMES_BUFFER)
+    speeds = client_bench.SPEEDS
+    start = chassis.now_ns()
+    for _ in range(20):
+        cmd.write(m.Twist(linear=m.Vector3(x=speeds[0])))
+        if client_bench.wait_for_frame(tap, frames[speeds[0]], start) is not None:
+            break
+    latencies: list[int] = []
+    missed = 0
+    next_send = time.monotonic()
+    for i in range(count):
+        next_send += interval_s
+        time.sleep(max(0.0, next_send - time.monotonic()))
+        tap.drain()
+        speed = speeds[1] if i % 2 == 0 else speeds[0]
+        sent = chassis.now_ns()
+        cmd.write(m.Twist(linear=m.Vector3(x=speed)))
+        written = client_bench.wait_for_frame(tap, frames[speed], sent)
+        if written is None:
+            missed += 1
+        else:
+            latencies.append(written - sent)
+    cmd.write(m.Twist())
+    return latencies, missed
+
+
+def state_path(dp: DomainParticipant, cmd: DataWriter, odom: DataReader, samples: int) -> list[int]:
+    """Frame read → odom latencies, ns. The bridge runs with ``--monotonic-stamps``: each odom's
+    stamp is the ``CLOCK_MONOTONIC`` read time of the frame that produced it."""
+    ws = waiter(dp, odom)
+    latencies: list[int] = []
+    drive = m.Twist(linear=m.Vector3(x=STATE_DRIVE[0]), angular=m.Vector3(z=STATE_DRIVE[1]))
+    last_request = 0
+    deadline = time.monotonic() + 120
+    while len(latencies) < samples and time.monotonic() < deadline:
+        if chassis.now_ns() - last_request > 50_000_000:
+            cmd.write(drive)
+            last_request = chassis.now_ns()
+        ws.wait(duration(milliseconds=20))
+        taken = odom.take(N=64)
+        woke = chassis.now_ns()
+        latencies.extend(woke - nanos(sample.header.stamp) for sample in taken)
+    cmd.write(m.Twist())
+    return latencies
+
+
+def raw_hops(
+    dp: DomainParticipant, ping: DataWriter, pong: DataReader, count: int, interval_s: float
+) -> list[int]:
+    ws = waiter(dp, pong)
+    out: list[int] = []
+    next_send = time.monotonic()
+    for _ in range(count):
+        next_send += interval_s
+        time.sleep(max(0.0, next_send - time.monotonic()))
+        ping.write(m.TwistStamped(header=m.Header(stamp=stamp(chassis.now_ns()))))
+        end = time.monotonic() + 0.5
+        got = False
+        while not got and time.monotonic() < end:
+            ws.wait(duration(milliseconds=50))
+            woke = chassis.now_ns()
+            for sample in pong.take(N=8):
+                out.append(woke - nanos(sample.header.stamp))
+                got = True
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--name", default="titan")
+    parser.add_argument("--robot", default="titan")
+    parser.add_argument("--prefix", default=os.environ.get("CHASSIS_IPC_PREFIX"))
+    parser.add_argument("--bridge", required=True)
+    parser.add_argument("--chassis", required=True)
+    parser.add_argument("--latencies-dir", type=Path, required=True)
+    parser.add_argument("--state-samples", type=int, default=2000)
+    parser.add_argument("--commands", type=int, default=300)
+    parser.add_argument("--interval-ms", type=float, default=4.0)
+    args = parser.parse_args()
+    if interfaces() != ["lo"]:
+        raise SystemExit("bench.py: run it in a network namespace with only a loopback")
+    out: Path = args.latencies_dir
+    out.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN), RUST_LOG="warn")
+    if args.prefix:
+        env["CHASSIS_IPC_PREFIX"] = args.prefix
+    interval = args.interval_ms / 1e3
+    with (out / "bridge.log").open("wb") as log:
+        bridge = subprocess.Popen(
+            [args.bridge, "--name", args.name, "--monotonic-stamps"], env=env, stderr=log
+        )
+        echo = subprocess.Popen(
+            [args.bridge, "--bench-echo", str(out / "raw-in.ns")], env=env, stderr=log
+        )
+    try:
+        robot = chassis.Robot.connect(args.name, prefix=args.prefix)
+        dp = DomainParticipant(DOMAIN)
+        cmd = DataWriter(dp, Topic(dp, "rt/cmd_vel", m.Twist), qos=reliable())
+        odom = DataReader(dp, Topic(dp, "rt/odom", m.Odometry), qos=reliable())
+        ping = DataWriter(dp, Topic(dp, "rt/chassis_bench/ping", m.TwistStamped), qos=reliable())
+        pong = DataReader(dp, Topic(dp, "rt/chassis_bench/pong", m.TwistStamped), qos=reliable())
+        wait_matched(cmd, "cmd_vel")
+        wait_matched(ping, "the echo's ping")
+        frames = client_bench.motion_frames(args.chassis, args.robot)
+
+        raw_out = raw_hops(dp, ping, pong, args.commands, interval)
+        command, missed = command_path(robot, cmd, frames, args.commands, interval)
+        time.sleep(0.6)  # the ros2 source expires: the state path starts from rest
+        state = state_path(dp, cmd, odom, args.state_samples)
+    finally:
+        for proc in (echo, bridge):
+            proc.send_signal(signal.SIGTERM)
+        for proc in (echo, bridge):
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+    raw_in = [int(x) for x in (out / "raw-in.ns").read_text().split()]
+    figures = {
+        "command": (command, missed),
+        "state": (state, 0),
+        "raw-in": (raw_in, 0),
+        "raw-out": (raw_out, 0),
+    }
+    for path, (latencies, lost) in figures.items():
+        (out / f"{path}.ns").write_text("".join(f"{x}\n" for x in latencies))
+        print(json.dumps(client_bench.row(path, args.robot, latencies, lost) | {"client": "ros2"}))
+    (out / "command.missed").write_text(f"{missed}\n")
+    return 0 if all(lat for lat, _ in figures.values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

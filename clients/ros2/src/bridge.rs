@@ -1,0 +1,769 @@
+//! The bridge's ROS 2 node and its two loops.
+//!
+//! * **Commands** ([`commands`], a thread of its own): `cmd_vel` and `e_stop` subscriptions and
+//!   the three services, waited on with mio. A velocity goes into the mux as the source `ros2`
+//!   the moment it is read, re-stamped with this computer's `CLOCK_MONOTONIC` (a ROS stamp is
+//!   another clock), so chassisd's 500 ms timeout runs from its arrival. Service calls and the
+//!   e-stop wait for chassisd's control answer.
+//! * **State** ([`state_loop`], the main thread): each state sample chassisd publishes becomes
+//!   `odom` and `tf` at once; `joint_states`, `battery_state`, `imu/data`, `range/*` and `fix`
+//!   follow the sample when the robot reports them; `diagnostics` goes out every second and on
+//!   every change of a level or message.
+//!
+//! iceoryx2 ports stay on the thread that opened them (each loop has its own [`Robot`]); the DDS
+//! entities are created once and moved into the loop that uses them.
+
+use std::time::Duration;
+
+use anyhow::Context as _;
+use chassis_client::{
+    ChassisState, ClientError, ControlKind, ControlRequest, ControlResponse, ControlStatus,
+    FaultClear, MuxStatus, Robot, Source, Ticker, VelocityRequest, termination_requested,
+};
+use mio::{Events, Interest, Poll, Token};
+use ros2_client::{
+    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher,
+    QosProfile, Server, ServiceMapping, Subscription,
+    qos::{Durability, History, WhenFull},
+    service::RmwRequestId,
+};
+
+use crate::convert::{self, Frames, RosClock, WheelGeometry, XBOT_RANGES};
+use crate::msg::{
+    BatteryState, Bool, DiagnosticArray, Imu, JointState, NavSatFix, Odometry, Range, TfMessage,
+    TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed, trigger_type,
+};
+
+/// The mux source the bridge publishes into (chassisd's default configuration has it).
+pub const SOURCE: &str = "ros2";
+/// How long a service call or the e-stop waits for chassisd's answer.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(2);
+/// The period of `diagnostics` when nothing changes.
+const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
+/// The ROS 2 node's name.
+pub const NODE_NAME: &str = "chassis_ros2";
+
+/// What the bridge is told on its command line.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// chassisd's robot name (`chassis/<name>/…`).
+    pub name: String,
+    /// ROS namespace of every topic and of the node, `/` or `/robot1`.
+    pub namespace: String,
+    pub domain_id: u16,
+    /// `cmd_vel` is `geometry_msgs/TwistStamped` instead of `Twist`.
+    pub stamped: bool,
+    /// Publish odom → base_link on `tf`.
+    pub tf: bool,
+    /// Prefix of every frame id (`robot1/`).
+    pub frame_prefix: String,
+    pub service_mapping: ServiceMapping,
+    /// Stamps are `CLOCK_MONOTONIC` itself, not ROS time.
+    pub monotonic_stamps: bool,
+}
+
+/// The service mapping ROS 2's RMW layer uses: rmw_cyclonedds_cpp has its own; rmw_fastrtps and
+/// rmw_connextdds use the "enhanced" mapping of the DDS-RPC specification.
+pub fn mapping_for_rmw(rmw: Option<&str>) -> ServiceMapping {
+    match rmw {
+        Some(r) if r.contains("cyclonedds") => ServiceMapping::Cyclone,
+        _ => ServiceMapping::Enhanced,
+    }
+}
+
+/// QoS of the streams REP-2003 calls sensor data (`imu/data`, `range/*`, `fix`,
+/// `battery_state`): best effort, the last 5 (rclcpp's `SensorDataQoS`).
+pub fn sensor_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_best_effort()
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: 5 })
+}
+
+/// QoS of `odom`, `joint_states`, `diagnostics`, `cmd_vel`, `e_stop`: reliable, volatile, the
+/// last 10 (rclcpp's default).
+pub fn reliable_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_reliable(WhenFull::Wait(Duration::from_millis(10)))
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: 10 })
+}
+
+/// What the bridge's reliable writers keep for a slow reader: the last 100 (a subscriber asks
+/// for its own depth, rclcpp's 10 by default; depth is not part of matching). A writer whose
+/// window of unacknowledged samples is full drops the sample (counted) instead of blocking the
+/// state loop.
+pub fn reliable_writer_qos() -> QosProfile {
+    reliable_qos()
+        .reliability_reliable(WhenFull::Fail)
+        .history(History::KeepLast { depth: 100 })
+}
+
+/// QoS of `tf`: reliable, the last 100 (tf2_ros' `DynamicBroadcasterQoS`).
+pub fn tf_qos() -> QosProfile {
+    reliable_qos().history(History::KeepLast { depth: 100 })
+}
+
+/// The node and every DDS entity, before they are handed to the loops.
+pub struct Entities {
+    pub node: Node,
+    pub commands: Commands,
+    pub outputs: Outputs,
+}
+
+/// What the commands loop reads.
+pub struct Commands {
+    cmd_vel: CmdVel,
+    e_stop: Subscription<Bool>,
+    estop: Server<TriggerRequest, TriggerResponse>,
+    estop_release: Server<TriggerRequest, TriggerResponse>,
+    clear_faults: Server<TriggerRequest, TriggerResponse>,
+}
+
+enum CmdVel {
+    Plain(Subscription<Twist>),
+    Stamped(Subscription<TwistStamped>),
+}
+
+/// What the state loop publishes.
+pub struct Outputs {
+    odom: Publisher<Odometry>,
+    tf: Option<Publisher<TfMessage>>,
+    joint_states: Publisher<JointState>,
+    battery: Publisher<BatteryState>,
+    imu: Publisher<Imu>,
+    ranges: Vec<Publisher<Range>>,
+    fix: Publisher<NavSatFix>,
+    diagnostics: Publisher<DiagnosticArray>,
+}
+
+macro_rules! opaque_debug {
+    ($($ty:ident),*) => {$(
+        impl std::fmt::Debug for $ty {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.debug_struct(stringify!($ty)).finish_non_exhaustive()
+            }
+        }
+    )*};
+}
+opaque_debug!(Entities, Commands, Outputs);
+
+fn topic_name(namespace: &str, path: &str) -> anyhow::Result<Name> {
+    let full = if namespace == "/" {
+        format!("/{path}")
+    } else {
+        format!("{namespace}/{path}")
+    };
+    Name::parse(&full).map_err(|e| anyhow::anyhow!("bad ROS name {full}: {e:?}"))
+}
+
+impl Entities {
+    /// Joins DDS domain `options.domain_id` and creates the node, its topics and services.
+    pub fn create(options: &Options) -> anyhow::Result<Self> {
+        let context = Context::with_options(ContextOptions::new().domain_id(options.domain_id))
+            .context("joining the DDS domain")?;
+        let node_name = NodeName::new(&options.namespace, NODE_NAME)
+            .map_err(|e| anyhow::anyhow!("bad namespace {}: {e:?}", options.namespace))?;
+        let mut node = context
+            .new_node(node_name, NodeOptions::new().enable_rosout(true))
+            .context("creating the ROS 2 node")?;
+        let ns = options.namespace.as_str();
+        let private = if ns == "/" {
+            format!("/{NODE_NAME}")
+        } else {
+            format!("{ns}/{NODE_NAME}")
+        };
+
+        let topic = |path: &str, ty: MessageTypeName, qos: &QosProfile| {
+            let name = topic_name(ns, path)?;
+            node.create_topic(&name, ty, qos)
+                .with_context(|| format!("creating topic {path}"))
+        };
+        let cmd_vel_topic = if options.stamped {
+            topic("cmd_vel", TwistStamped::type_name(), &reliable_qos())?
+        } else {
+            topic("cmd_vel", Twist::type_name(), &reliable_qos())?
+        };
+        let e_stop_topic = topic("e_stop", Bool::type_name(), &reliable_qos())?;
+        let odom_topic = topic("odom", Odometry::type_name(), &reliable_qos())?;
+        let tf_topic = topic("tf", TfMessage::type_name(), &tf_qos())?;
+        let joints_topic = topic("joint_states", JointState::type_name(), &reliable_qos())?;
+        let battery_topic = topic("battery_state", BatteryState::type_name(), &sensor_qos())?;
+        let imu_topic = topic("imu/data", Imu::type_name(), &sensor_qos())?;
+        let fix_topic = topic("fix", NavSatFix::type_name(), &sensor_qos())?;
+        let diag_topic = topic("diagnostics", DiagnosticArray::type_name(), &reliable_qos())?;
+        let range_topics = XBOT_RANGES
+            .iter()
+            .map(|s| {
+                topic(
+                    &format!("range/{}", s.name),
+                    Range::type_name(),
+                    &sensor_qos(),
+                )
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+
+        let cmd_vel = if options.stamped {
+            CmdVel::Stamped(node.create_subscription(&cmd_vel_topic, None)?)
+        } else {
+            CmdVel::Plain(node.create_subscription(&cmd_vel_topic, None)?)
+        };
+        let e_stop = node.create_subscription(&e_stop_topic, None)?;
+        let mut server = |base: &str| {
+            let name = topic_name(&private, base)?;
+            node.create_server(
+                options.service_mapping,
+                &name,
+                &trigger_type(),
+                reliable_qos(),
+                reliable_qos(),
+            )
+            .with_context(|| format!("creating service ~/{base}"))
+        };
+        let commands = Commands {
+            cmd_vel,
+            e_stop,
+            estop: server("estop")?,
+            estop_release: server("estop_release")?,
+            clear_faults: server("clear_faults")?,
+        };
+        let outputs = Outputs {
+            odom: node.create_publisher(&odom_topic, Some(reliable_writer_qos()))?,
+            tf: if options.tf {
+                Some(node.create_publisher(&tf_topic, Some(reliable_writer_qos()))?)
+            } else {
+                None
+            },
+            joint_states: node.create_publisher(&joints_topic, Some(reliable_writer_qos()))?,
+            battery: node.create_publisher(&battery_topic, None)?,
+            imu: node.create_publisher(&imu_topic, None)?,
+            ranges: range_topics
+                .iter()
+                .map(|t| node.create_publisher(t, None))
+                .collect::<Result<Vec<_>, _>>()?,
+            fix: node.create_publisher(&fix_topic, None)?,
+            diagnostics: node.create_publisher(&diag_topic, Some(reliable_writer_qos()))?,
+        };
+        Ok(Self {
+            node,
+            commands,
+            outputs,
+        })
+    }
+}
+
+/// Connects to chassisd, waiting for it to serve `name` (the bridge may start first). `None`
+/// when the process is asked to stop while waiting.
+pub fn connect(name: &str) -> Option<Robot> {
+    let mut ticker = Ticker::new(Duration::from_millis(250));
+    let mut told = false;
+    while !termination_requested() {
+        match Robot::connect(name).and_then(|mut robot| robot.latest_mux().map(|_| robot)) {
+            Ok(robot) => return Some(robot),
+            Err(e) if !told => {
+                told = true;
+                tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
+            }
+            Err(e) => tracing::debug!(error = %e, "connecting"),
+        }
+        ticker.wait();
+    }
+    None
+}
+
+/// Counts of what the commands loop refused, logged as they happen.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Drops {
+    /// Velocities with a NaN or infinite component.
+    pub non_finite: u64,
+    /// Velocities chassisd's source did not take (source held by another process, IPC error).
+    pub unsent: u64,
+    /// Messages DDS could not deserialize.
+    pub undecodable: u64,
+}
+
+/// A `cmd_vel` twist as a velocity request, or `None` when a component the robot uses is not a
+/// finite number. linear.x, linear.y and angular.z are used; the rest has no meaning for a
+/// ground robot and is ignored.
+pub fn twist_request(twist: &Twist) -> Option<VelocityRequest> {
+    let used = [twist.linear.x, twist.linear.y, twist.angular.z];
+    if used.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    Some(VelocityRequest {
+        linear_y_mps: twist.linear.y as f32,
+        ..VelocityRequest::twist(twist.linear.x as f32, twist.angular.z as f32)
+    })
+}
+
+/// The control request a service asks for.
+pub fn service_request(service: ServiceKind) -> ControlRequest {
+    match service {
+        ServiceKind::Estop => ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("estop"),
+        ServiceKind::EstopRelease => {
+            ControlRequest::new(ControlKind::LOCK_RELEASE).with_name("estop")
+        }
+        ServiceKind::ClearFaults => {
+            ControlRequest::new(ControlKind::CLEAR_FAULTS).with_arg(0, FaultClear::ALL)
+        }
+    }
+}
+
+/// The three `std_srvs/Trigger` services.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServiceKind {
+    Estop,
+    EstopRelease,
+    ClearFaults,
+}
+
+/// chassisd's answer as a `Trigger` response: success when it did it, and its message (a
+/// refusal's reason) either way.
+pub fn trigger_response(answer: Result<ControlResponse, ClientError>) -> TriggerResponse {
+    match answer {
+        Ok(r) => TriggerResponse {
+            success: r.status == ControlStatus::OK,
+            message: if r.message().is_empty() {
+                ControlStatus::name(r.status).to_string()
+            } else {
+                format!("{}: {}", ControlStatus::name(r.status), r.message())
+            },
+        },
+        Err(e) => TriggerResponse {
+            success: false,
+            message: format!("chassisd did not answer: {e}"),
+        },
+    }
+}
+
+const CMD_VEL: Token = Token(0);
+const E_STOP: Token = Token(1);
+const ESTOP: Token = Token(2);
+const ESTOP_RELEASE: Token = Token(3);
+const CLEAR_FAULTS: Token = Token(4);
+
+/// The commands loop: runs until SIGINT / SIGTERM.
+pub fn commands(name: &str, mut c: Commands) -> anyhow::Result<Drops> {
+    let Some(mut robot) = connect(name) else {
+        return Ok(Drops::default());
+    };
+    let mut poll = Poll::new().context("creating the poll")?;
+    let registry = poll.registry();
+    match &mut c.cmd_vel {
+        CmdVel::Plain(s) => registry.register(s, CMD_VEL, Interest::READABLE)?,
+        CmdVel::Stamped(s) => registry.register(s, CMD_VEL, Interest::READABLE)?,
+    }
+    registry.register(&mut c.e_stop, E_STOP, Interest::READABLE)?;
+    registry.register(&mut c.estop, ESTOP, Interest::READABLE)?;
+    registry.register(&mut c.estop_release, ESTOP_RELEASE, Interest::READABLE)?;
+    registry.register(&mut c.clear_faults, CLEAR_FAULTS, Interest::READABLE)?;
+
+    let mut source: Option<Source> = None;
+    let mut drops = Drops::default();
+    let mut events = Events::with_capacity(16);
+    while !termination_requested() {
+        if let Err(e) = poll.poll(&mut events, Some(Duration::from_millis(100))) {
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                continue;
+            }
+            return Err(e).context("waiting for DDS");
+        }
+        // Every reader is drained on every wake: a readiness may have been merged with another.
+        drain_cmd_vel(&c.cmd_vel, &mut robot, &mut source, &mut drops);
+        drain_e_stop(&c.e_stop, &mut robot, &mut drops);
+        for (server, kind) in [
+            (&c.estop, ServiceKind::Estop),
+            (&c.estop_release, ServiceKind::EstopRelease),
+            (&c.clear_faults, ServiceKind::ClearFaults),
+        ] {
+            serve(server, kind, &mut robot, &mut drops);
+        }
+    }
+    Ok(drops)
+}
+
+fn drain_cmd_vel(
+    cmd_vel: &CmdVel,
+    robot: &mut Robot,
+    source: &mut Option<Source>,
+    drops: &mut Drops,
+) {
+    loop {
+        let taken = match cmd_vel {
+            CmdVel::Plain(s) => s.take().map(|m| m.map(|(t, _)| t)),
+            CmdVel::Stamped(s) => s.take().map(|m| m.map(|(t, _)| t.twist)),
+        };
+        let twist = match taken {
+            Ok(Some(twist)) => twist,
+            Ok(None) => return,
+            Err(e) => {
+                drops.undecodable += 1;
+                tracing::warn!(error = ?e, count = drops.undecodable, "cmd_vel: unreadable message dropped");
+                continue;
+            }
+        };
+        let Some(request) = twist_request(&twist) else {
+            drops.non_finite += 1;
+            tracing::warn!(
+                ?twist,
+                count = drops.non_finite,
+                "cmd_vel with a non-finite component dropped"
+            );
+            continue;
+        };
+        forward(request, robot, source, drops);
+    }
+}
+
+/// Sends `request` as the `ros2` source, opening it when needed (chassisd may have restarted).
+fn forward(
+    request: VelocityRequest,
+    robot: &mut Robot,
+    source: &mut Option<Source>,
+    drops: &mut Drops,
+) {
+    if source.is_none() {
+        match robot.source(SOURCE) {
+            Ok(s) => *source = Some(s),
+            Err(e) => {
+                drops.unsent += 1;
+                tracing::warn!(error = %e, count = drops.unsent, "cmd_vel dropped: cannot publish as source '{SOURCE}'");
+                return;
+            }
+        }
+    }
+    if let Some(s) = source
+        && let Err(e) = s.send(request)
+    {
+        drops.unsent += 1;
+        tracing::warn!(error = %e, count = drops.unsent, "cmd_vel dropped");
+        *source = None;
+    }
+}
+
+fn drain_e_stop(e_stop: &Subscription<Bool>, robot: &mut Robot, drops: &mut Drops) {
+    loop {
+        match e_stop.take() {
+            Ok(Some((msg, _))) if msg.data => {
+                let answer = robot.control(service_request(ServiceKind::Estop), ANSWER_TIMEOUT);
+                let r = trigger_response(answer);
+                tracing::info!(success = r.success, message = %r.message, "e_stop: engaged the operator e-stop");
+            }
+            // Releasing stays explicit (~/estop_release): a false on the topic does nothing.
+            Ok(Some(_)) => {}
+            Ok(None) => return,
+            Err(e) => {
+                drops.undecodable += 1;
+                tracing::warn!(error = ?e, count = drops.undecodable, "e_stop: unreadable message dropped");
+            }
+        }
+    }
+}
+
+fn serve(
+    server: &Server<TriggerRequest, TriggerResponse>,
+    kind: ServiceKind,
+    robot: &mut Robot,
+    drops: &mut Drops,
+) {
+    loop {
+        let id: RmwRequestId = match server.receive_request() {
+            Ok(Some((id, _))) => id,
+            Ok(None) => return,
+            Err(e) => {
+                drops.undecodable += 1;
+                tracing::warn!(error = ?e, ?kind, "service request unreadable, dropped");
+                continue;
+            }
+        };
+        let response = trigger_response(robot.control(service_request(kind), ANSWER_TIMEOUT));
+        tracing::info!(?kind, success = response.success, message = %response.message, "service call");
+        if let Err(e) = server.send_response(id, response) {
+            tracing::warn!(error = ?e, ?kind, "service response not sent");
+        }
+    }
+}
+
+/// What the state loop keeps between samples.
+struct StateLoop<'a> {
+    name: &'a str,
+    out: &'a Outputs,
+    clock: RosClock,
+    frames: Frames,
+    wheels: Option<WheelGeometry>,
+    latest: Option<ChassisState>,
+    mux: Option<MuxStatus>,
+    last_diagnostics: Option<(u64, Vec<(u8, String)>)>,
+    /// Publications DDS refused, counted and logged.
+    failures: u64,
+}
+
+impl StateLoop<'_> {
+    fn publish<M: serde::Serialize + std::fmt::Debug>(
+        failures: &mut u64,
+        topic: &str,
+        p: &Publisher<M>,
+        m: M,
+    ) {
+        if let Err(e) = p.publish(m) {
+            *failures += 1;
+            if failures.is_power_of_two() {
+                tracing::warn!(error = ?e, topic, count = *failures, "publication failed");
+            }
+        }
+    }
+
+    /// Publishes what `s` brings that the previous sample did not: odom and tf when the pose or
+    /// the body's motion was reported anew (a sample made by another frame repeats them), the
+    /// joints with their angles and speeds, each sensor with its own reading.
+    fn on_state(&mut self, s: &ChassisState) {
+        use chassis_client::Group;
+        let (clock, frames, out) = (self.clock, &self.frames, self.out);
+        let latest = self.latest;
+        let fresh = |group: Group| {
+            latest
+                .is_none_or(|l| l.group_stamp_ns[group.index()] != s.group_stamp_ns[group.index()])
+        };
+        let f = &mut self.failures;
+        if fresh(Group::Pose) || fresh(Group::Motion) {
+            Self::publish(f, "odom", &out.odom, convert::odometry(s, clock, frames));
+            if let Some(tf) = &out.tf {
+                Self::publish(f, "tf", tf, convert::transform(s, clock, frames));
+            }
+        }
+        if latest.is_none_or(|l| l.robot != s.robot) {
+            self.wheels = convert::wheel_geometry(s.robot);
+        }
+        if (fresh(Group::Steering) || fresh(Group::WheelSpeed))
+            && let Some(j) = convert::joint_states(s, clock, self.wheels)
+        {
+            Self::publish(f, "joint_states", &out.joint_states, j);
+        }
+        if (fresh(Group::BmsPack) || fresh(Group::System))
+            && let Some(b) = convert::battery(s, clock, frames)
+        {
+            Self::publish(f, "battery_state", &out.battery, b);
+        }
+        if fresh(Group::Imu)
+            && let Some(i) = convert::imu(s, clock, frames)
+        {
+            Self::publish(f, "imu/data", &out.imu, i);
+        }
+        if fresh(Group::Ranges) {
+            for (sensor, p) in XBOT_RANGES.iter().zip(&out.ranges) {
+                if let Some(r) = convert::range(s, *sensor, clock, frames) {
+                    Self::publish(f, "range", p, r);
+                }
+            }
+        }
+        if fresh(Group::Gps)
+            && let Some(fix) = convert::nav_sat_fix(s, clock, frames)
+        {
+            Self::publish(f, "fix", &out.fix, fix);
+        }
+        self.latest = Some(*s);
+    }
+
+    fn diagnostics(&mut self, now_ns: u64) {
+        let stamp = self.clock.ros_time(now_ns);
+        let array = convert::diagnostics(self.name, self.latest.as_ref(), self.mux.as_ref(), stamp);
+        let key = convert::diagnostics_key(&array);
+        let due = self.last_diagnostics.as_ref().is_none_or(|(at, last)| {
+            u128::from(now_ns.saturating_sub(*at)) >= DIAGNOSTICS_PERIOD.as_nanos() || *last != key
+        });
+        if due {
+            Self::publish(
+                &mut self.failures,
+                "diagnostics",
+                &self.out.diagnostics,
+                array,
+            );
+            self.last_diagnostics = Some((now_ns, key));
+        }
+    }
+}
+
+/// The state loop: runs until SIGINT / SIGTERM.
+pub fn state_loop(
+    name: &str,
+    frames: Frames,
+    clock: RosClock,
+    out: &Outputs,
+) -> anyhow::Result<()> {
+    let Some(mut robot) = connect(name) else {
+        return Ok(());
+    };
+    let mut lp = StateLoop {
+        name,
+        out,
+        clock,
+        frames,
+        wheels: None,
+        latest: None,
+        mux: None,
+        last_diagnostics: None,
+        failures: 0,
+    };
+    tracing::info!(robot = name, "bridging");
+    while !termination_requested() {
+        // Every sample the subscriber holds, oldest first: odom keeps the robot's own rate.
+        let mut samples = Vec::with_capacity(4);
+        if let Err(e) = robot.wait_states(Duration::from_millis(50), |s| samples.push(*s)) {
+            if termination_requested() {
+                break;
+            }
+            return Err(e).context("reading state");
+        }
+        for s in &samples {
+            lp.on_state(s);
+        }
+        if let Some(m) = robot.latest_mux().context("reading the mux decision")? {
+            lp.mux = Some(m);
+        }
+        lp.diagnostics(chassis_client::now_ns());
+    }
+    Ok(())
+}
+
+/// The far end of `chassis-bench`'s raw DDS hop (`clients/ros2/bench.py`): the bridge's own DDS
+/// stack with nothing behind it. Each `TwistStamped` on `chassis_bench/ping` (its stamp: the
+/// sender's `CLOCK_MONOTONIC` at the write) is recorded as a one-way latency and answered at once
+/// on `chassis_bench/pong`, stamped with this process' `CLOCK_MONOTONIC` at that write. Runs
+/// until SIGINT / SIGTERM, then writes the latencies, ns, one a line, to `out`.
+pub fn bench_echo(domain_id: u16, out: &std::path::Path) -> anyhow::Result<()> {
+    let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
+        .context("joining the DDS domain")?;
+    let mut node = context
+        .new_node(
+            NodeName::new("/", "chassis_bench_echo")
+                .map_err(|e| anyhow::anyhow!("node name: {e:?}"))?,
+            NodeOptions::new(),
+        )
+        .context("creating the node")?;
+    let ping_topic = node.create_topic(
+        &topic_name("/", "chassis_bench/ping")?,
+        TwistStamped::type_name(),
+        &reliable_qos(),
+    )?;
+    let pong_topic = node.create_topic(
+        &topic_name("/", "chassis_bench/pong")?,
+        TwistStamped::type_name(),
+        &reliable_qos(),
+    )?;
+    let mut ping: Subscription<TwistStamped> = node.create_subscription(&ping_topic, None)?;
+    let pong: Publisher<TwistStamped> = node.create_publisher(&pong_topic, None)?;
+    let mut poll = Poll::new()?;
+    poll.registry()
+        .register(&mut ping, CMD_VEL, Interest::READABLE)?;
+    let mut events = Events::with_capacity(4);
+    let mut latencies = Vec::new();
+    while !termination_requested() {
+        if let Err(e) = poll.poll(&mut events, Some(Duration::from_millis(100))) {
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                continue;
+            }
+            return Err(e).context("waiting for DDS");
+        }
+        while let Ok(Some((mut m, _))) = ping.take() {
+            let now = chassis_client::now_ns();
+            let sent = u64::try_from(m.header.stamp.nanos()).unwrap_or(0);
+            latencies.push(now.saturating_sub(sent));
+            m.header.stamp =
+                crate::msg::Time::from_nanos(i64::try_from(chassis_client::now_ns()).unwrap_or(0));
+            if let Err(e) = pong.publish(m) {
+                tracing::warn!(error = ?e, "pong not sent");
+            }
+        }
+    }
+    let text: String = latencies.iter().map(|l| format!("{l}\n")).collect();
+    std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+    drop(pong);
+    drop(ping);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::Vector3;
+
+    #[test]
+    fn a_twist_becomes_a_request_and_a_non_finite_one_does_not() {
+        let t = Twist {
+            linear: Vector3 {
+                x: 0.5,
+                y: 0.1,
+                z: 9.0,
+            },
+            angular: Vector3 {
+                x: 9.0,
+                y: 9.0,
+                z: -0.2,
+            },
+        };
+        let r = twist_request(&t).expect("finite");
+        assert_eq!(
+            (r.linear_x_mps, r.linear_y_mps, r.angular_z_radps),
+            (0.5, 0.1, -0.2)
+        );
+        assert_eq!(
+            r.stamp_ns, 0,
+            "stamped on arrival by the source, not by the sender"
+        );
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let mut t = t;
+            t.angular.z = bad;
+            assert!(twist_request(&t).is_none());
+            let mut t2 = t;
+            t2.angular.z = 0.0;
+            t2.linear.x = bad;
+            assert!(twist_request(&t2).is_none());
+        }
+        // What a ground robot ignores may be anything.
+        let mut t3 = t;
+        t3.linear.z = f64::NAN;
+        assert!(twist_request(&t3).is_some());
+    }
+
+    #[test]
+    fn services_ask_chassisd_for_the_operator_e_stop_and_a_fault_clear() {
+        let r = service_request(ServiceKind::Estop);
+        assert_eq!((r.kind, r.name()), (ControlKind::LOCK_ENGAGE, "estop"));
+        let r = service_request(ServiceKind::EstopRelease);
+        assert_eq!((r.kind, r.name()), (ControlKind::LOCK_RELEASE, "estop"));
+        let r = service_request(ServiceKind::ClearFaults);
+        assert_eq!(
+            (r.kind, r.arg[0]),
+            (ControlKind::CLEAR_FAULTS, FaultClear::ALL)
+        );
+    }
+
+    #[test]
+    fn a_refusal_is_no_success_with_its_reason() {
+        let ok = trigger_response(Ok(ControlResponse::new(1, ControlStatus::OK, "done")));
+        assert!(ok.success);
+        assert_eq!(ok.message, "ok: done");
+        let no = trigger_response(Ok(ControlResponse::new(
+            1,
+            ControlStatus::REFUSED,
+            "moving",
+        )));
+        assert!(!no.success);
+        assert_eq!(no.message, "refused: moving");
+        let gone = trigger_response(Err(ClientError::Ipc("gone".into())));
+        assert!(!gone.success && gone.message.starts_with("chassisd did not answer"));
+    }
+
+    #[test]
+    fn the_rmw_picks_the_service_mapping() {
+        assert!(matches!(
+            mapping_for_rmw(Some("rmw_cyclonedds_cpp")),
+            ServiceMapping::Cyclone
+        ));
+        assert!(matches!(
+            mapping_for_rmw(Some("rmw_fastrtps_cpp")),
+            ServiceMapping::Enhanced
+        ));
+        assert!(matches!(mapping_for_rmw(None), ServiceMapping::Enhanced));
+    }
+}

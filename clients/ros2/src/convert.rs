@@ -1,0 +1,746 @@
+//! `ChassisState` and `MuxStatus` → ROS 2 messages, as pure functions.
+//!
+//! Frames follow REP-103 and REP-105: `base_link` is x forward, y left, z up; `odom` is the frame
+//! the robot started in. Stamps: every state sample carries `CLOCK_MONOTONIC` nanoseconds
+//! (`stamp_ns`, the receive time of the frame that produced it). The bridge measures the offset
+//! between the system clock and `CLOCK_MONOTONIC` once at start ([`RosClock::measure`]) and adds
+//! it to every stamp, so messages carry ROS time (Unix time) and keep the monotonic clock's
+//! spacing; a later step of the system clock (NTP) does not move them until the bridge restarts.
+
+use chassis_client::{
+    ChassisState, ClampFlags, FaultFlags, Group, LinkFlags, MuxStatus, RobotKind, WireProtocol,
+    ZeroReason,
+};
+
+use chassis_protocols::profile::XbotProfile;
+
+use crate::msg::{
+    BatteryState, DiagnosticArray, DiagnosticStatus, Header, Imu, JointState, KeyValue, NavSatFix,
+    NavSatStatus, Odometry, Point, Pose, PoseWithCovariance, Quaternion, Range, TfMessage, Time,
+    Transform, TransformStamped, Twist, TwistWithCovariance, Vector3,
+};
+
+/// Frame names (`--frame-prefix` is prepended, e.g. `robot1/`).
+#[derive(Debug, Clone)]
+pub struct Frames {
+    pub odom: String,
+    pub base_link: String,
+    pub gps: String,
+    pub imu: String,
+    prefix: String,
+}
+
+impl Frames {
+    pub fn new(prefix: &str) -> Self {
+        Self {
+            odom: format!("{prefix}odom"),
+            base_link: format!("{prefix}base_link"),
+            gps: format!("{prefix}gps_link"),
+            imu: format!("{prefix}imu_link"),
+            prefix: prefix.to_string(),
+        }
+    }
+
+    /// A sensor's frame: `<prefix><name>_link`.
+    pub fn sensor(&self, name: &str) -> String {
+        format!("{}{name}_link", self.prefix)
+    }
+}
+
+/// `CLOCK_MONOTONIC` → ROS time (the system clock), with the offset measured once.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RosClock {
+    offset_ns: i128,
+}
+
+impl RosClock {
+    /// Reads both clocks once.
+    // The bridge's one reading of the system clock, at start.
+    #[allow(clippy::disallowed_methods)]
+    pub fn measure() -> Self {
+        let wall = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i128);
+        Self::with_offset(wall - i128::from(chassis_client::now_ns()))
+    }
+
+    /// A clock `offset_ns` ahead of `CLOCK_MONOTONIC`.
+    pub fn with_offset(offset_ns: i128) -> Self {
+        Self { offset_ns }
+    }
+
+    /// The ROS time of the monotonic instant `monotonic_ns`.
+    pub fn ros_time(self, monotonic_ns: u64) -> Time {
+        let ns = i128::from(monotonic_ns) + self.offset_ns;
+        Time::from_nanos(i64::try_from(ns).unwrap_or(i64::MAX))
+    }
+
+    /// The monotonic instant of the ROS time `time`.
+    pub fn monotonic_ns(self, time: Time) -> u64 {
+        u64::try_from(i128::from(time.nanos()) - self.offset_ns).unwrap_or(0)
+    }
+}
+
+/// Variance stated for what the wheels measure well (x, y, vx, vy; a robot that cannot move
+/// sideways reports vy = 0 by construction). The pose's variances do not grow with distance here: the driver's
+/// dead reckoning has no error model, and a localiser fusing `odom` (robot_localization) weighs
+/// it by the twist, whose variance is stated.
+pub const MEASURED_VARIANCE: f64 = 1e-3;
+/// Variance stated for the yaw and yaw rate integrated from wheel speeds (skid steer slips).
+pub const YAW_VARIANCE: f64 = 1e-2;
+/// Variance for what a ground robot does not measure at all (z, roll, pitch and their rates):
+/// large, as REP-105 odometry publishers state it.
+pub const UNMEASURED_VARIANCE: f64 = 1e6;
+
+/// The diagonal of a 6×6 covariance.
+fn diagonal(values: [f64; 6]) -> [f64; 36] {
+    let mut m = [0.0; 36];
+    for (i, v) in values.into_iter().enumerate() {
+        m[i * 7] = v;
+    }
+    m
+}
+
+fn finite(v: f32) -> f64 {
+    if v.is_finite() { f64::from(v) } else { 0.0 }
+}
+
+/// `odom`: the driver's integrated pose and the reported body twist, odom → base_link.
+pub fn odometry(state: &ChassisState, clock: RosClock, frames: &Frames) -> Odometry {
+    let o = &state.odometry;
+    let m = &state.motion;
+    Odometry {
+        header: Header::new(clock.ros_time(state.stamp_ns), &frames.odom),
+        child_frame_id: frames.base_link.clone(),
+        pose: PoseWithCovariance {
+            pose: Pose {
+                position: Point {
+                    x: o.x_m,
+                    y: o.y_m,
+                    z: 0.0,
+                },
+                orientation: Quaternion::from_yaw(o.yaw_rad),
+            },
+            covariance: diagonal([
+                MEASURED_VARIANCE,
+                MEASURED_VARIANCE,
+                UNMEASURED_VARIANCE,
+                UNMEASURED_VARIANCE,
+                UNMEASURED_VARIANCE,
+                YAW_VARIANCE,
+            ]),
+        },
+        twist: TwistWithCovariance {
+            twist: Twist {
+                linear: Vector3 {
+                    x: finite(m.linear_mps),
+                    y: finite(m.lateral_mps),
+                    z: 0.0,
+                },
+                angular: Vector3 {
+                    x: 0.0,
+                    y: 0.0,
+                    z: finite(m.angular_radps),
+                },
+            },
+            covariance: diagonal([
+                MEASURED_VARIANCE,
+                MEASURED_VARIANCE,
+                UNMEASURED_VARIANCE,
+                UNMEASURED_VARIANCE,
+                UNMEASURED_VARIANCE,
+                YAW_VARIANCE,
+            ]),
+        },
+    }
+}
+
+/// `tf`: odom → base_link, the same pose as [`odometry`].
+pub fn transform(state: &ChassisState, clock: RosClock, frames: &Frames) -> TfMessage {
+    let o = &state.odometry;
+    TfMessage {
+        transforms: vec![TransformStamped {
+            header: Header::new(clock.ros_time(state.stamp_ns), &frames.odom),
+            child_frame_id: frames.base_link.clone(),
+            transform: Transform {
+                translation: Vector3 {
+                    x: o.x_m,
+                    y: o.y_m,
+                    z: 0.0,
+                },
+                rotation: Quaternion::from_yaw(o.yaw_rad),
+            },
+        }],
+    }
+}
+
+/// The wheel geometry joint states need: radius and travel per encoder count, m. Only the XBot's
+/// manual gives them (its profile's defaults); the AgileX manuals give no wheel radius, so their
+/// wheel joints are not published.
+pub fn wheel_geometry(robot: u8) -> Option<WheelGeometry> {
+    (robot == RobotKind::XBOT).then(|| {
+        let xbot = XbotProfile::default();
+        WheelGeometry {
+            radius_m: xbot.wheel_diameter_m / 2.0,
+            metres_per_count: xbot.metres_per_count(),
+        }
+    })
+}
+
+/// See [`wheel_geometry`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WheelGeometry {
+    pub radius_m: f64,
+    pub metres_per_count: f64,
+}
+
+/// The wheels in `ChassisState::motion.wheel_mps` order.
+pub const WHEELS: [&str; 4] = ["front_left", "front_right", "rear_left", "rear_right"];
+
+/// `joint_states`: the steering joints where the robot reports their angles (TITAN, HUNTER,
+/// RANGER MINI: `front_steer_joint`, `rear_steer_joint`), and the wheel joints (angle and rate)
+/// where the robot reports per-wheel speeds and its wheel radius is known (XBot). `None` when the
+/// robot reports neither.
+pub fn joint_states(
+    state: &ChassisState,
+    clock: RosClock,
+    wheels: Option<WheelGeometry>,
+) -> Option<JointState> {
+    let mut joints = JointState {
+        header: Header::new(clock.ros_time(state.stamp_ns), ""),
+        ..JointState::default()
+    };
+    let steering = state.is_valid(Group::Steering);
+    if steering {
+        for (name, angle) in [
+            ("front_steer_joint", state.motion.front_steer_rad),
+            ("rear_steer_joint", state.motion.rear_steer_rad),
+        ] {
+            joints.name.push(name.to_string());
+            joints.position.push(finite(angle));
+            joints.velocity.push(f64::NAN);
+        }
+    }
+    if let Some(w) = wheels.filter(|_| state.is_valid(Group::WheelSpeed)) {
+        for (i, wheel) in WHEELS.iter().enumerate() {
+            joints.name.push(format!("{wheel}_wheel_joint"));
+            let travel_m = state.motors[i].position_counts as f64 * w.metres_per_count;
+            joints.position.push(travel_m / w.radius_m);
+            joints
+                .velocity
+                .push(finite(state.motion.wheel_mps[i]) / w.radius_m);
+        }
+    }
+    (!joints.name.is_empty()).then_some(joints)
+}
+
+/// `battery_state`: the BMS pack where the robot has one, else the chassis' own battery reading.
+/// Unmeasured fields are NaN, as `sensor_msgs/BatteryState` asks.
+pub fn battery(state: &ChassisState, clock: RosClock, frames: &Frames) -> Option<BatteryState> {
+    let mut b = BatteryState {
+        header: Header::new(clock.ros_time(state.stamp_ns), &frames.base_link),
+        voltage: f32::NAN,
+        temperature: f32::NAN,
+        current: f32::NAN,
+        charge: f32::NAN,
+        capacity: f32::NAN,
+        design_capacity: f32::NAN,
+        percentage: f32::NAN,
+        power_supply_status: BatteryState::POWER_SUPPLY_STATUS_UNKNOWN,
+        power_supply_health: BatteryState::POWER_SUPPLY_HEALTH_UNKNOWN,
+        power_supply_technology: BatteryState::POWER_SUPPLY_TECHNOLOGY_UNKNOWN,
+        present: true,
+        ..BatteryState::default()
+    };
+    if state.is_valid(Group::BmsPack) {
+        let pack = &state.bms[0];
+        b.voltage = pack.voltage_v;
+        b.current = -pack.current_a; // ROS: negative while discharging.
+        b.temperature = pack.temperature_c;
+        b.percentage = pack.soc_pct / 100.0;
+        b.power_supply_status = if pack.current_a > 0.0 {
+            BatteryState::POWER_SUPPLY_STATUS_DISCHARGING
+        } else if pack.current_a < 0.0 {
+            BatteryState::POWER_SUPPLY_STATUS_CHARGING
+        } else {
+            BatteryState::POWER_SUPPLY_STATUS_UNKNOWN
+        };
+        b.power_supply_health = if state.system.fault_flags & FaultFlags::OVER_TEMPERATURE != 0 {
+            BatteryState::POWER_SUPPLY_HEALTH_OVERHEAT
+        } else {
+            BatteryState::POWER_SUPPLY_HEALTH_GOOD
+        };
+    } else if state.is_valid(Group::System) {
+        let s = &state.system;
+        b.voltage = s.battery_voltage_v;
+        if s.battery_soc_pct > 0.0 {
+            b.percentage = s.battery_soc_pct / 100.0;
+        }
+        if s.battery_current_a != 0.0 {
+            b.current = -s.battery_current_a;
+        }
+    } else {
+        return None;
+    }
+    Some(b)
+}
+
+/// `imu/data` (XBot): orientation from the board's roll, pitch and yaw, its rates and
+/// accelerations. No covariance is known: each matrix's first element is 0 ("unknown"), as the
+/// message's comment allows.
+pub fn imu(state: &ChassisState, clock: RosClock, frames: &Frames) -> Option<Imu> {
+    if !state.is_valid(Group::Imu) {
+        return None;
+    }
+    let i = &state.imu;
+    let v = |a: [f32; 3]| Vector3 {
+        x: finite(a[0]),
+        y: finite(a[1]),
+        z: finite(a[2]),
+    };
+    Some(Imu {
+        header: Header::new(
+            clock.ros_time(state.group_stamp_ns[Group::Imu.index()]),
+            &frames.imu,
+        ),
+        orientation: Quaternion::from_rpy(
+            finite(i.roll_rad),
+            finite(i.pitch_rad),
+            finite(i.yaw_rad),
+        ),
+        orientation_covariance: [0.0; 9],
+        angular_velocity: v(i.gyro_radps),
+        angular_velocity_covariance: [0.0; 9],
+        linear_acceleration: v(i.accel_mps2),
+        linear_acceleration_covariance: [0.0; 9],
+    })
+}
+
+/// One range sensor of the XBot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RangeSensor {
+    /// Topic suffix and frame stem: `range/<name>`, `<name>_link`.
+    pub name: &'static str,
+    pub radiation_type: u8,
+    /// Index into `RangesState::ir_m` or `ultrasonic_m`.
+    pub index: usize,
+}
+
+/// The XBot's three rear IR cliff sensors and three front ultrasonic sensors (PROTOCOLS.md).
+pub const XBOT_RANGES: [RangeSensor; 6] = [
+    RangeSensor {
+        name: "ir_rear_left",
+        radiation_type: Range::INFRARED,
+        index: 0,
+    },
+    RangeSensor {
+        name: "ir_rear_centre",
+        radiation_type: Range::INFRARED,
+        index: 1,
+    },
+    RangeSensor {
+        name: "ir_rear_right",
+        radiation_type: Range::INFRARED,
+        index: 2,
+    },
+    RangeSensor {
+        name: "ultrasonic_front_left",
+        radiation_type: Range::ULTRASOUND,
+        index: 0,
+    },
+    RangeSensor {
+        name: "ultrasonic_front_centre",
+        radiation_type: Range::ULTRASOUND,
+        index: 1,
+    },
+    RangeSensor {
+        name: "ultrasonic_front_right",
+        radiation_type: Range::ULTRASOUND,
+        index: 2,
+    },
+];
+
+/// `range/<sensor>` for one XBot sensor. The manual states neither field of view nor limits:
+/// the message says so with `field_of_view` 0 and `min_range` 0 / `max_range` +∞.
+pub fn range(
+    state: &ChassisState,
+    sensor: RangeSensor,
+    clock: RosClock,
+    frames: &Frames,
+) -> Option<Range> {
+    if !state.is_valid(Group::Ranges) {
+        return None;
+    }
+    let r = &state.ranges;
+    let value = if sensor.radiation_type == Range::INFRARED {
+        r.ir_m[sensor.index]
+    } else {
+        r.ultrasonic_m[sensor.index]
+    };
+    Some(Range {
+        header: Header::new(
+            clock.ros_time(state.group_stamp_ns[Group::Ranges.index()]),
+            &frames.sensor(sensor.name),
+        ),
+        radiation_type: sensor.radiation_type,
+        field_of_view: 0.0,
+        min_range: 0.0,
+        max_range: f32::INFINITY,
+        range: value,
+        variance: 0.0,
+    })
+}
+
+/// Horizontal error of a GPS receiver at HDOP 1, m (a common figure for a single-frequency
+/// receiver): the covariance stated is `(hdop × this)²` horizontally, twice that vertically.
+pub const GPS_UERE_M: f64 = 3.0;
+
+/// `fix` (XBot GPS). Before the receiver has a fix: `STATUS_NO_FIX` with zeros.
+pub fn nav_sat_fix(state: &ChassisState, clock: RosClock, frames: &Frames) -> Option<NavSatFix> {
+    if !state.is_valid(Group::Gps) {
+        return None;
+    }
+    let g = &state.gps;
+    let stamp = clock.ros_time(state.group_stamp_ns[Group::Gps.index()]);
+    let mut fix = NavSatFix {
+        header: Header::new(stamp, &frames.gps),
+        status: NavSatStatus {
+            status: NavSatStatus::STATUS_NO_FIX,
+            service: NavSatStatus::SERVICE_GPS,
+        },
+        ..NavSatFix::default()
+    };
+    if g.fix_quality == 0 {
+        return Some(fix);
+    }
+    fix.status.status = match g.fix_quality {
+        2 => NavSatStatus::STATUS_SBAS_FIX,
+        4 | 5 => NavSatStatus::STATUS_GBAS_FIX,
+        _ => NavSatStatus::STATUS_FIX,
+    };
+    fix.latitude = g.latitude_deg;
+    fix.longitude = g.longitude_deg;
+    fix.altitude = f64::from(g.altitude_m);
+    if g.hdop > 0.0 && g.hdop.is_finite() {
+        let h = (f64::from(g.hdop) * GPS_UERE_M).powi(2);
+        fix.position_covariance = [h, 0.0, 0.0, 0.0, h, 0.0, 0.0, 0.0, 4.0 * h];
+        fix.position_covariance_type = NavSatFix::COVARIANCE_TYPE_APPROXIMATED;
+    }
+    Some(fix)
+}
+
+/// `diagnostics`: the chassis' faults and warnings by name, the bus link, the mux decision with
+/// its clamp reasons. `hardware_id` is the robot's name.
+pub fn diagnostics(
+    name: &str,
+    state: Option<&ChassisState>,
+    mux: Option<&MuxStatus>,
+    stamp: Time,
+) -> DiagnosticArray {
+    let mut status = Vec::new();
+    let prefix = "chassis";
+    match state {
+        Some(state) => {
+            status.push(faults_status(name, prefix, state));
+            status.push(link_status(name, prefix, state));
+        }
+        None => status.push(DiagnosticStatus {
+            level: DiagnosticStatus::STALE,
+            name: format!("{prefix}: link"),
+            message: "no state from chassisd yet".into(),
+            hardware_id: name.into(),
+            values: Vec::new(),
+        }),
+    }
+    if let Some(mux) = mux {
+        status.push(mux_status(name, prefix, mux, state));
+    }
+    DiagnosticArray {
+        header: Header::new(stamp, ""),
+        status,
+    }
+}
+
+fn faults_status(name: &str, prefix: &str, state: &ChassisState) -> DiagnosticStatus {
+    let flags = state.system.fault_flags;
+    let errors = flags & !FaultFlags::WARNINGS;
+    let warnings = flags & FaultFlags::WARNINGS;
+    let (level, message) = if errors != 0 {
+        (
+            DiagnosticStatus::ERROR,
+            FaultFlags::names(errors).join(", "),
+        )
+    } else if warnings != 0 {
+        (
+            DiagnosticStatus::WARN,
+            FaultFlags::names(warnings).join(", "),
+        )
+    } else {
+        (DiagnosticStatus::OK, "no faults".to_string())
+    };
+    let mut values = vec![KeyValue::new(
+        "vendor_fault_word",
+        format!("0x{:08x}", state.system.vendor_fault_word),
+    )];
+    for (bit, fault) in FaultFlags::ALL {
+        if flags & bit != 0 {
+            let kind = if bit & FaultFlags::WARNINGS != 0 {
+                "warning"
+            } else {
+                "fault"
+            };
+            values.push(KeyValue::new(fault, kind));
+        }
+    }
+    DiagnosticStatus {
+        level,
+        name: format!("{prefix}: faults"),
+        message,
+        hardware_id: name.into(),
+        values,
+    }
+}
+
+fn link_status(name: &str, prefix: &str, state: &ChassisState) -> DiagnosticStatus {
+    let l = &state.link;
+    let down = state.link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT);
+    let (level, message) = if down != 0 {
+        (DiagnosticStatus::ERROR, LinkFlags::names(down).join(", "))
+    } else if state.has_link_flag(LinkFlags::RC_AUTHORITY) {
+        (
+            DiagnosticStatus::WARN,
+            "the RC transmitter has authority".into(),
+        )
+    } else {
+        (
+            DiagnosticStatus::OK,
+            "bus up, chassis answering".to_string(),
+        )
+    };
+    DiagnosticStatus {
+        level,
+        name: format!("{prefix}: link"),
+        message,
+        hardware_id: name.into(),
+        values: vec![
+            KeyValue::new("robot", RobotKind::name(state.robot)),
+            KeyValue::new("protocol", WireProtocol::name(state.system.wire_protocol)),
+            KeyValue::new("flags", LinkFlags::names(state.link_flags).join(", ")),
+            KeyValue::new("rx_frames", l.rx_frames),
+            KeyValue::new("tx_frames", l.tx_frames),
+            KeyValue::new("rx_bad_checksum", l.rx_bad_checksum),
+            KeyValue::new("rx_decode_errors", l.rx_decode_errors),
+            KeyValue::new("rx_unknown_id", l.rx_unknown_id),
+            KeyValue::new("tx_errors", l.tx_errors),
+            KeyValue::new("bus_reconnects", l.bus_reconnects),
+            KeyValue::new(
+                "battery_voltage_v",
+                format!("{:.2}", state.system.battery_voltage_v),
+            ),
+        ],
+    }
+}
+
+fn mux_status(
+    name: &str,
+    prefix: &str,
+    mux: &MuxStatus,
+    state: Option<&ChassisState>,
+) -> DiagnosticStatus {
+    let active = mux.active().map_or("none", |s| s.name());
+    let locks: Vec<&str> = mux
+        .locks()
+        .iter()
+        .filter(|l| l.holder != chassis_client::LockStatus::HOLDER_NONE)
+        .map(|l| l.name())
+        .collect();
+    let clamps = state.map_or(0, |s| s.command.clamp_flags);
+    let (level, message) = if !locks.is_empty() {
+        (
+            DiagnosticStatus::WARN,
+            format!("locked: {}", locks.join(", ")),
+        )
+    } else if mux.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE {
+        (
+            DiagnosticStatus::WARN,
+            "the required source is stale: holding zero".into(),
+        )
+    } else {
+        (DiagnosticStatus::OK, format!("active source: {active}"))
+    };
+    DiagnosticStatus {
+        level,
+        name: format!("{prefix}: mux"),
+        message,
+        hardware_id: name.into(),
+        values: vec![
+            KeyValue::new("active", active),
+            KeyValue::new("zero_reason", ZeroReason::name(mux.zero_reason)),
+            KeyValue::new("locks_held", locks.join(", ")),
+            KeyValue::new("clamps", ClampFlags::names(clamps).join(", ")),
+        ],
+    }
+}
+
+/// What [`diagnostics`] reports, without the counters: a change of it publishes at once.
+pub fn diagnostics_key(array: &DiagnosticArray) -> Vec<(u8, String)> {
+    array
+        .status
+        .iter()
+        .map(|s| (s.level, s.message.clone()))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassis_client::{FaultFlags, Group, LinkFlags, RobotKind};
+
+    const CLOCK: RosClock = RosClock {
+        offset_ns: 1_700_000_000_000_000_000,
+    };
+
+    fn titan() -> ChassisState {
+        let mut s = ChassisState {
+            robot: RobotKind::TITAN,
+            stamp_ns: 5_000_000_000,
+            ..ChassisState::default()
+        };
+        s.touch(Group::Motion, s.stamp_ns);
+        s.touch(Group::Pose, s.stamp_ns);
+        s.touch(Group::System, s.stamp_ns);
+        s.odometry.x_m = 1.0;
+        s.odometry.y_m = 2.0;
+        s.odometry.yaw_rad = std::f64::consts::FRAC_PI_2;
+        s.motion.linear_mps = 0.5;
+        s.motion.angular_radps = 0.25;
+        s.system.battery_voltage_v = 52.0;
+        s
+    }
+
+    #[test]
+    fn stamps_are_monotonic_time_plus_the_measured_offset() {
+        let t = CLOCK.ros_time(5_000_000_123);
+        assert_eq!(t.nanos(), 1_700_000_005_000_000_123);
+        assert_eq!(CLOCK.monotonic_ns(t), 5_000_000_123);
+    }
+
+    #[test]
+    fn odometry_is_odom_to_base_link_with_the_pose_and_the_body_twist() {
+        let frames = Frames::new("r1/");
+        let o = odometry(&titan(), CLOCK, &frames);
+        assert_eq!(o.header.frame_id, "r1/odom");
+        assert_eq!(o.child_frame_id, "r1/base_link");
+        assert_eq!(o.header.stamp, CLOCK.ros_time(5_000_000_000));
+        assert_eq!((o.pose.pose.position.x, o.pose.pose.position.y), (1.0, 2.0));
+        let q = o.pose.pose.orientation;
+        assert!((q.z - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12);
+        assert_eq!(o.twist.twist.linear.x, 0.5);
+        assert_eq!(o.twist.twist.angular.z, 0.25);
+        assert_eq!(o.pose.covariance[0], MEASURED_VARIANCE);
+        assert_eq!(o.pose.covariance[14], UNMEASURED_VARIANCE);
+        assert_eq!(o.pose.covariance[35], YAW_VARIANCE);
+        assert_eq!(o.pose.covariance[1], 0.0);
+        let tf = transform(&titan(), CLOCK, &frames);
+        assert_eq!(tf.transforms[0].transform.rotation, q);
+    }
+
+    #[test]
+    fn a_nan_speed_is_published_as_zero_not_nan() {
+        let mut s = titan();
+        s.motion.linear_mps = f32::NAN;
+        let o = odometry(&s, CLOCK, &Frames::new(""));
+        assert_eq!(o.twist.twist.linear.x, 0.0);
+    }
+
+    #[test]
+    fn battery_prefers_the_bms_and_leaves_the_unmeasured_nan() {
+        let s = titan();
+        let b = battery(&s, CLOCK, &Frames::new("")).expect("system battery");
+        assert_eq!(b.voltage, 52.0);
+        assert!(b.percentage.is_nan() && b.capacity.is_nan() && b.current.is_nan());
+        let mut s = titan();
+        s.touch(Group::BmsPack, s.stamp_ns);
+        s.bms[0].voltage_v = 48.5;
+        s.bms[0].soc_pct = 80.0;
+        s.bms[0].current_a = 3.0;
+        let b = battery(&s, CLOCK, &Frames::new("")).expect("bms");
+        assert_eq!((b.voltage, b.percentage, b.current), (48.5, 0.8, -3.0));
+        assert_eq!(
+            b.power_supply_status,
+            BatteryState::POWER_SUPPLY_STATUS_DISCHARGING
+        );
+        assert!(battery(&ChassisState::default(), CLOCK, &Frames::new("")).is_none());
+    }
+
+    #[test]
+    fn sensors_appear_only_where_the_robot_reports_them() {
+        let s = titan();
+        let f = Frames::new("");
+        assert!(imu(&s, CLOCK, &f).is_none());
+        assert!(range(&s, XBOT_RANGES[0], CLOCK, &f).is_none());
+        assert!(nav_sat_fix(&s, CLOCK, &f).is_none());
+        assert!(joint_states(&s, CLOCK, wheel_geometry(s.robot)).is_none());
+    }
+
+    #[test]
+    fn gps_without_a_fix_says_so_and_with_one_states_its_covariance() {
+        let mut s = titan();
+        s.touch(Group::Gps, s.stamp_ns);
+        let f = Frames::new("");
+        let none = nav_sat_fix(&s, CLOCK, &f).expect("gps reported");
+        assert_eq!(none.status.status, NavSatStatus::STATUS_NO_FIX);
+        s.gps.fix_quality = 1;
+        s.gps.latitude_deg = 53.36;
+        s.gps.longitude_deg = -6.5;
+        s.gps.hdop = 2.0;
+        let fix = nav_sat_fix(&s, CLOCK, &f).expect("fix");
+        assert_eq!(fix.status.status, NavSatStatus::STATUS_FIX);
+        assert_eq!((fix.latitude, fix.longitude), (53.36, -6.5));
+        assert_eq!(fix.position_covariance[0], 36.0);
+        assert_eq!(fix.position_covariance[8], 144.0);
+        assert_eq!(
+            fix.position_covariance_type,
+            NavSatFix::COVARIANCE_TYPE_APPROXIMATED
+        );
+    }
+
+    #[test]
+    fn xbot_wheels_are_joints_in_radians() {
+        let mut s = ChassisState {
+            robot: RobotKind::XBOT,
+            ..ChassisState::default()
+        };
+        s.touch(Group::WheelSpeed, 1);
+        s.motion.wheel_mps = [0.1, 0.2, 0.3, 0.4];
+        s.motors[0].position_counts = 1000;
+        let w = wheel_geometry(s.robot).expect("xbot geometry");
+        let j = joint_states(&s, CLOCK, Some(w)).expect("joints");
+        assert_eq!(j.name[0], "front_left_wheel_joint");
+        assert!((j.velocity[0] - 0.1 / w.radius_m).abs() < 1e-6);
+        assert!((j.position[0] - 1000.0 * w.metres_per_count / w.radius_m).abs() < 1e-9);
+        assert_eq!(j.position.len(), 4);
+    }
+
+    #[test]
+    fn diagnostics_name_faults_and_rank_errors_above_warnings() {
+        let mut s = titan();
+        let mux = MuxStatus::default();
+        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        assert_eq!(d.status[0].level, DiagnosticStatus::OK);
+        s.system.fault_flags = FaultFlags::BATTERY_LOW;
+        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        assert_eq!(d.status[0].level, DiagnosticStatus::WARN);
+        s.system.fault_flags |= FaultFlags::MOTOR_DRIVER_ERROR;
+        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        assert_eq!(d.status[0].level, DiagnosticStatus::ERROR);
+        assert!(d.status[0].values.iter().any(|kv| kv.value == "warning"));
+        s.link_flags = LinkFlags::BUS_DOWN;
+        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        assert_eq!(d.status[1].level, DiagnosticStatus::ERROR);
+        assert!(d.status[1].message.contains("bus_down"));
+        let stale = diagnostics("titan", None, None, Time::default());
+        assert_eq!(stale.status[0].level, DiagnosticStatus::STALE);
+        assert_ne!(diagnostics_key(&d), diagnostics_key(&stale));
+    }
+}

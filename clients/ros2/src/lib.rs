@@ -1,0 +1,15 @@
+//! `chassis-ros2`: a robot served by chassisd, as a ROS 2 base driver, in pure Rust.
+//!
+//! The bridge speaks DDS itself through [`ros2_client`] (on RustDDS): no ROS installation, no
+//! colcon, only cargo. It was chosen over the alternatives because it is pure Rust and
+//! maintained (releases follow the ROS 2 distributions; Jazzy is the default), it implements
+//! ROS 2's naming, type names and both service mappings of the RMW layers (Fast DDS' "enhanced"
+//! and Cyclone DDS'), and it needs no C toolchain; `r2r` and `rclrs` need a sourced ROS 2
+//! installation to build, and the `cyclonedds` bindings a C library.
+//!
+//! [`bridge`] holds the node and its loops, [`convert`] the state → message mapping (pure
+//! functions), [`msg`] the ROS 2 message types.
+
+pub mod bridge;
+pub mod convert;
+pub mod msg;

@@ -1,0 +1,174 @@
+//! `chassis-ros2 --name ROBOT`: the robot served by chassisd as a ROS 2 base driver.
+//!
+//! In: `cmd_vel` (`geometry_msgs/Twist`, or `TwistStamped` with `--stamped`) as the mux source
+//! `ros2`; `e_stop` (`std_msgs/Bool`: true engages the operator e-stop). Services `~/estop`,
+//! `~/estop_release`, `~/clear_faults` (`std_srvs/Trigger`). Out: `odom`, `tf`,
+//! `joint_states`, `battery_state`, `imu/data`, `range/<sensor>`, `fix`, `diagnostics`.
+//! See the README's "ROS 2" section.
+
+use std::process::ExitCode;
+
+use anyhow::Context as _;
+use chassis_ros2::bridge::{self, Entities, Options};
+use chassis_ros2::convert::{Frames, RosClock};
+use clap::{Parser, ValueEnum};
+use ros2_client::ServiceMapping;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Mapping {
+    /// The DDS-RPC "enhanced" mapping (rmw_fastrtps_cpp, rmw_connextdds).
+    Enhanced,
+    /// rmw_cyclonedds_cpp's mapping.
+    Cyclone,
+}
+
+#[derive(Debug, Parser)]
+#[command(
+    version,
+    about = "A robot served by chassisd as a ROS 2 base driver, over DDS"
+)]
+struct Cli {
+    /// The robot's name in chassisd (`chassisd --name`, default its robot).
+    #[arg(long, required_unless_present = "bench_echo")]
+    name: Option<String>,
+    /// ROS namespace of the node and every topic (`/robot1`); several robots on one computer
+    /// each get their own.
+    #[arg(long, default_value = "/")]
+    namespace: String,
+    /// DDS domain (default: `ROS_DOMAIN_ID`, else 0).
+    #[arg(long, env = "ROS_DOMAIN_ID", default_value_t = 0)]
+    domain_id: u16,
+    /// `cmd_vel` carries `geometry_msgs/TwistStamped` (as Jazzy's controllers take it).
+    #[arg(long)]
+    stamped: bool,
+    /// Do not publish odom → base_link on `tf` (a localiser publishes it).
+    #[arg(long)]
+    no_tf: bool,
+    /// Prefix of every frame id, e.g. `robot1/` (default: none).
+    #[arg(long, default_value = "")]
+    frame_prefix: String,
+    /// Service mapping of the ROS 2 peers (default: from `RMW_IMPLEMENTATION`:
+    /// rmw_cyclonedds_cpp → cyclone, else enhanced).
+    #[arg(long, value_enum)]
+    service_mapping: Option<Mapping>,
+    /// Stamp messages with `CLOCK_MONOTONIC` itself instead of ROS time (a stack on steady
+    /// time; chassis-bench reads latencies off the stamps this way).
+    #[arg(long)]
+    monotonic_stamps: bool,
+    /// (internal) Be the far end of chassis-bench's raw DDS hop; write its latencies here.
+    #[arg(long, hide = true)]
+    bench_echo: Option<std::path::PathBuf>,
+}
+
+fn namespace(ns: &str) -> String {
+    let trimmed = ns.trim_end_matches('/');
+    if trimmed.is_empty() {
+        "/".to_string()
+    } else if trimmed.starts_with('/') {
+        trimmed.to_string()
+    } else {
+        format!("/{trimmed}")
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    if let Some(out) = &cli.bench_echo {
+        return bridge::bench_echo(cli.domain_id, out);
+    }
+    let Some(name) = cli.name else {
+        anyhow::bail!("--name is required");
+    };
+    let service_mapping = match cli.service_mapping {
+        Some(Mapping::Enhanced) => ServiceMapping::Enhanced,
+        Some(Mapping::Cyclone) => ServiceMapping::Cyclone,
+        None => bridge::mapping_for_rmw(std::env::var("RMW_IMPLEMENTATION").ok().as_deref()),
+    };
+    let options = Options {
+        name,
+        namespace: namespace(&cli.namespace),
+        domain_id: cli.domain_id,
+        stamped: cli.stamped,
+        tf: !cli.no_tf,
+        frame_prefix: cli.frame_prefix,
+        service_mapping,
+        monotonic_stamps: cli.monotonic_stamps,
+    };
+    let Entities {
+        mut node,
+        commands,
+        outputs,
+    } = Entities::create(&options)?;
+    tracing::info!(
+        namespace = %options.namespace,
+        domain = options.domain_id,
+        mapping = ?options.service_mapping,
+        "ROS 2 node {} up",
+        bridge::NODE_NAME
+    );
+
+    // The node's own housekeeping (ROS graph discovery, parameter events) runs in the background.
+    let spinner = node.spinner().context("starting the node's spinner")?;
+    std::thread::Builder::new()
+        .name("ros2-spinner".into())
+        .spawn(move || {
+            if let Err(e) = smol::block_on(spinner.spin()) {
+                tracing::warn!(error = ?e, "the node's spinner stopped");
+            }
+        })
+        .context("starting the spinner thread")?;
+
+    let name = options.name.clone();
+    let commands = std::thread::Builder::new()
+        .name("ros2-commands".into())
+        .spawn(move || bridge::commands(&name, commands))
+        .context("starting the commands thread")?;
+
+    let frames = Frames::new(&options.frame_prefix);
+    let clock = if options.monotonic_stamps {
+        RosClock::with_offset(0)
+    } else {
+        RosClock::measure()
+    };
+    let result = bridge::state_loop(&options.name, frames, clock, &outputs);
+    chassis_client::request_termination();
+    match commands.join() {
+        Ok(Ok(drops)) => tracing::info!(?drops, "stopped"),
+        Ok(Err(e)) => return Err(e),
+        Err(_) => anyhow::bail!("the commands thread panicked"),
+    }
+    // Writers before the participant, so that RustDDS can tell the peers they are gone.
+    drop(outputs);
+    drop(node);
+    result
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,rustdds=error,ros2_client=warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    chassis_client::install_signal_handlers();
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn namespaces_are_absolute_without_a_trailing_slash() {
+        assert_eq!(namespace("/"), "/");
+        assert_eq!(namespace(""), "/");
+        assert_eq!(namespace("robot1"), "/robot1");
+        assert_eq!(namespace("/robot1/"), "/robot1");
+    }
+}
