@@ -19,7 +19,9 @@ import argparse
 import ctypes
 import json
 import math
+import os
 import queue
+import subprocess
 import sys
 import time
 
@@ -52,6 +54,15 @@ def close(a: float, b: float) -> bool:
     return math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-6)
 
 
+def in_a_test_namespace() -> bool:
+    """True inside a named network namespace (``ip netns exec``): the test's own, never the
+    machine's, so that Zenoh never reaches a real interface."""
+    out = subprocess.run(
+        ["ip", "netns", "identify", str(os.getpid())], capture_output=True, text=True, check=False
+    )
+    return out.returncode == 0 and out.stdout.strip() != ""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--connect", required=True)
@@ -61,6 +72,8 @@ def main() -> None:
     parser.add_argument("--put-source")
     parser.add_argument("--certs", help="directory of chassis-zenoh gen-certs (tls/ endpoints)")
     args = parser.parse_args()
+    if not in_a_test_namespace():
+        fail("run me only inside the network namespace tests/tests/zenoh.rs builds (ip netns)")
 
     key = f"chassis/{args.name}/state"
     expected_encoding = f"application/octet-stream;{chassis.ChassisState.type_name()}"

@@ -56,7 +56,7 @@ class World:
         self.env = dict(
             os.environ,
             CHASSIS_IPC_PREFIX=self.prefix,
-            RUST_LOG="info,rustdds=error,ros2_client=warn",
+            RUST_LOG="info",
             XDG_STATE_HOME=str(tmp / "state"),
         )
         self.procs: list[tuple[str, subprocess.Popen[bytes], Path]] = []

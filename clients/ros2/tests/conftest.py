@@ -48,6 +48,7 @@ class Ros(World):
         self.domain = next(_domains)
         self.env["ROS_DOMAIN_ID"] = str(self.domain)
         self.env["RMW_IMPLEMENTATION"] = "rmw_cyclonedds_cpp"
+        self.env["RUST_LOG"] = "info,rustdds=error,ros2_client=warn"
 
     def bridge(self, name: str, *args: str, label: str = "chassis-ros2") -> None:
         """Starts ``chassis-ros2 --name name args…``."""
