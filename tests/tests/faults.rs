@@ -1461,10 +1461,14 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
             ..VelocityRequest::twist(0.3, 0.0)
         },
     ];
-    // 1000 a second for 3 s: 50 times a normal client's rate, paced so that the 16-deep queue
-    // of the source never overflows and every one reaches the mux.
+    // 500 a second for 3 s: 25 times a normal client's rate, half the wake budget chassisd
+    // grants a source (20 a tick), paced without catching up in bursts after this process was
+    // descheduled, so that the 16-deep queue of the source never overflows and every one
+    // reaches the mux.
+    const PERIOD: Duration = Duration::from_micros(2000);
     let duration = Duration::from_secs(3);
     let start = Instant::now();
+    let mut next = start;
     let mut sent = 0u64;
     let mut outputs_finite = true;
     let mut max_output = 0.0f32;
@@ -1473,8 +1477,8 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
             .send(bad[(sent % bad.len() as u64) as usize])
             .unwrap();
         sent += 1;
-        let due = start + Duration::from_micros(sent * 1000);
-        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+        next = (next + PERIOD).max(Instant::now());
+        if let Some(wait) = next.checked_duration_since(Instant::now()) {
             pause(wait);
         }
         if sent.is_multiple_of(20) {
@@ -1544,7 +1548,7 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
         test,
         "NaN, ±inf and absurd requests (1000 m/s, -100 rad/s, 3 rad steering)",
         &format!(
-            "{sent} bad requests as teleop at 1000/s for {:.1} s, right after a valid 0.3 m/s",
+            "{sent} bad requests as teleop at 500/s for {:.1} s, right after a valid 0.3 m/s",
             flooded.as_secs_f64()
         ),
         &format!(
