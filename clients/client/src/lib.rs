@@ -651,6 +651,27 @@ pub fn termination_requested() -> bool {
     STOP.load(Ordering::Relaxed)
 }
 
+/// Connects to the robot `name` once chassisd serves it — its state and its mux decision (the
+/// service opens the state before the mux) — trying every `retry`. `waiting` hears each failed
+/// attempt, with `true` for the first (to say once that the process waits). `None` when SIGINT
+/// or SIGTERM arrives first.
+pub fn wait_for_robot(
+    name: &str,
+    retry: Duration,
+    mut waiting: impl FnMut(&ClientError, bool),
+) -> Option<Robot> {
+    let mut ticker = Ticker::new(retry);
+    let mut first = true;
+    while !termination_requested() {
+        match Robot::connect(name).and_then(|mut robot| robot.latest_mux().map(|_| robot)) {
+            Ok(robot) => return Some(robot),
+            Err(e) => waiting(&e, std::mem::take(&mut first)),
+        }
+        ticker.wait();
+    }
+    None
+}
+
 /// Makes [`termination_requested`] true from now on, as a signal would: a thread that ends on
 /// its own error stops the process' other loops.
 pub fn request_termination() {

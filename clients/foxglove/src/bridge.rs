@@ -277,21 +277,13 @@ pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> any
 
 /// Connects to the robot, waiting for chassisd to serve it; `None` when asked to stop first.
 fn connect(name: &str) -> Option<Robot> {
-    let mut ticker = Ticker::new(Duration::from_millis(250));
-    let mut told = false;
-    while !termination_requested() {
-        // chassisd opens its state service before the mux's: wait for both.
-        match Robot::connect(name).and_then(|mut robot| robot.latest_mux().map(|_| robot)) {
-            Ok(robot) => return Some(robot),
-            Err(e) if !told => {
-                told = true;
-                tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
-            }
-            Err(e) => tracing::debug!(error = %e, "connecting"),
+    chassis_client::wait_for_robot(name, Duration::from_millis(250), |e, first| {
+        if first {
+            tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
+        } else {
+            tracing::debug!(error = %e, "connecting");
         }
-        ticker.wait();
-    }
-    None
+    })
 }
 
 /// The `foxglove` velocity source, opened when the first velocity arrives (chassisd may start

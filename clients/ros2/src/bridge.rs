@@ -18,7 +18,7 @@ use std::time::Duration;
 use anyhow::Context as _;
 use chassis_client::{
     ChassisState, ClientError, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    FaultClear, MuxStatus, Robot, Source, Ticker, VelocityRequest, termination_requested,
+    FaultClear, MuxStatus, Robot, Source, VelocityRequest, termination_requested,
 };
 use mio::{Events, Interest, Poll, Token};
 use ros2_client::{
@@ -255,20 +255,13 @@ impl Entities {
 /// Connects to chassisd, waiting for it to serve `name` (the bridge may start first). `None`
 /// when the process is asked to stop while waiting.
 pub fn connect(name: &str) -> Option<Robot> {
-    let mut ticker = Ticker::new(Duration::from_millis(250));
-    let mut told = false;
-    while !termination_requested() {
-        match Robot::connect(name).and_then(|mut robot| robot.latest_mux().map(|_| robot)) {
-            Ok(robot) => return Some(robot),
-            Err(e) if !told => {
-                told = true;
-                tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
-            }
-            Err(e) => tracing::debug!(error = %e, "connecting"),
+    chassis_client::wait_for_robot(name, Duration::from_millis(250), |e, first| {
+        if first {
+            tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
+        } else {
+            tracing::debug!(error = %e, "connecting");
         }
-        ticker.wait();
-    }
-    None
+    })
 }
 
 /// Counts of what the commands loop refused, logged as they happen.

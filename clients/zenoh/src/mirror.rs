@@ -31,7 +31,7 @@ use zenoh::sample::{Sample, SampleKind};
 use zerocopy::IntoBytes as _;
 
 use crate::net::{self, Net};
-use crate::robot::{guard, remote_sources};
+use crate::robot::{finish, guard, remote_sources};
 use crate::wire::{Keys, Wire};
 
 /// How long a control request waits for the robot's answer.
@@ -222,21 +222,7 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             break;
         }
     }
-    stop.store(true, Ordering::Relaxed);
-    let mut failures = Vec::new();
-    for thread in threads {
-        match thread.join() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => failures.push(format!("{e:#}")),
-            Err(_) => failures.push("a thread panicked".into()),
-        }
-    }
-    let _ = session.close().wait();
-    result?;
-    if !failures.is_empty() {
-        anyhow::bail!("{}", failures.join("; "));
-    }
-    Ok(())
+    finish(&stop, threads, &session, result)
 }
 
 fn send<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(

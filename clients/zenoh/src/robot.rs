@@ -174,6 +174,17 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
         );
     }
     let result = publish(config, &session, &keys, &mut robot, mux, &stop);
+    finish(&stop, threads, &session, result)
+}
+
+/// Ends a side: raises the stop flag, joins its threads, closes the session, and reports the
+/// loop's own error first, then every thread's.
+pub fn finish(
+    stop: &AtomicBool,
+    threads: Vec<std::thread::JoinHandle<anyhow::Result<()>>>,
+    session: &zenoh::Session,
+    result: anyhow::Result<()>,
+) -> anyhow::Result<()> {
     stop.store(true, Ordering::Relaxed);
     let mut failures = Vec::new();
     for thread in threads {
