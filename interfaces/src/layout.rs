@@ -264,6 +264,14 @@ pub fn types() -> Vec<TypeLayout> {
         ControlResponse::layout(),
         SimRequest::layout(),
         SafetyStatus::layout(),
+        RobotDescription::layout(),
+        MotionLimits::layout(),
+        Geometry::layout(),
+        BatteryLevels::layout(),
+        OdometryVariance::layout(),
+        SensorDescription::layout(),
+        JointDescription::layout(),
+        SourceDescription::layout(),
     ];
     all.sort_by_key(|t| t.name);
     all
@@ -313,6 +321,15 @@ pub fn constants() -> Vec<ConstantGroup> {
             MOTOR_DRIVER_LOSS, BATTERY, BUMPER, RC_TAKEOVER, REBOOT, SILENCE, GARBAGE,
             BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH,
         }),
+        describe_constants!(enum Kinematics: u8 {
+            DIFFERENTIAL, SKID_STEER, TRACKED, OMNI, ACKERMANN, DUAL_ACKERMANN, FOUR_WHEEL_STEER,
+        }),
+        describe_constants!(enum BusKind: u8 { CAN, RS232 }),
+        describe_constants!(flags DescriptionFlags: u8 {
+            SIMULATED, BRAKE, LIGHTS, LATERAL, SAFETY_REQUIRED,
+        }),
+        describe_constants!(enum SensorKind: u8 { ULTRASONIC, INFRARED, IMU, GPS, BUMPER }),
+        describe_constants!(enum JointSource: u8 { FRONT_STEER, REAR_STEER, WHEEL }),
         describe_constants!(enum FrameDirection: u8 { RX, TX }),
         describe_constants!(enum FrameKind: u8 { CAN, SERIAL, GPS }),
         describe_constants!(enum SafetyRule: u8 {
@@ -367,6 +384,7 @@ mod tests {
             include_str!("frame.rs"),
             include_str!("control.rs"),
             include_str!("safety.rs"),
+            include_str!("description.rs"),
         ];
         let declared: usize = sources
             .iter()

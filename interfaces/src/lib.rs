@@ -16,6 +16,7 @@
 //! another process can compute one-way latencies without clock synchronisation.
 
 mod control;
+mod description;
 mod frame;
 pub mod layout;
 mod mux;
@@ -28,6 +29,11 @@ mod text;
 pub use control::{
     ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, LightMode, SimKind,
     SimRequest,
+};
+pub use description::{
+    BatteryLevels, BusKind, DescriptionFlags, DescriptionFull, Geometry, JointDescription,
+    JointSource, Kinematics, LABEL_LEN, MAX_JOINTS, MAX_SENSORS, MotionLimits, OdometryVariance,
+    RobotDescription, SensorDescription, SensorKind, SourceDescription,
 };
 pub use frame::{BusFrame, FrameDirection, FrameKind};
 pub use mux::{ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Twist, ZeroReason};

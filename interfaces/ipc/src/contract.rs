@@ -14,8 +14,8 @@ use serde::Serialize;
 
 use crate::limits::{EventLimits, PubSubLimits, RequestResponseLimits};
 use crate::{
-    CMD, CONTROL, FRAMES, IPC_PREFIX_ENV, MUX, PubSub, REPLY_SUFFIX, RequestResponse, SIM, STATE,
-    ServiceKind, publication, reply_name, service_name,
+    CMD, CONTROL, DESCRIPTION, FRAMES, IPC_PREFIX_ENV, MUX, PubSub, REPLY_SUFFIX, RequestResponse,
+    SIM, STATE, ServiceKind, publication, reply_name, service_name,
 };
 
 /// Version of the document's shape (not of the types: each type name carries its own).
@@ -133,6 +133,7 @@ pub fn document() -> Document {
         topic(&STATE, ServiceKind::State, "chassisd"),
         topic(&FRAMES, ServiceKind::Frames, "chassisd"),
         topic(&MUX, ServiceKind::Mux, "chassisd"),
+        topic(&DESCRIPTION, ServiceKind::Description, "chassisd"),
         topic(
             &CMD,
             ServiceKind::Cmd(SOURCE),

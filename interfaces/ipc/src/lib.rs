@@ -5,6 +5,7 @@
 //! | `state` | publish-subscribe, history 1, + event | `ChassisState` | `chassisd` |
 //! | `frames` | publish-subscribe + event | `BusFrame` (both directions) | `chassisd` |
 //! | `mux` | publish-subscribe, history 1, + event | `MuxStatus` | `chassisd` |
+//! | `robot` | publish-subscribe, history 1, + event | `RobotDescription` | `chassisd` |
 //! | `cmd/<source>` | publish-subscribe + event, one publisher | `VelocityRequest` | `chassisd` |
 //! | `control` | request-response + 2 events | `ControlRequest` → `ControlResponse` | `chassisd` |
 //! | `sim` | request-response + 2 events | `SimRequest` → `ControlResponse` | `chassisd` (simulated bus), `chassisd sim` |
@@ -34,9 +35,9 @@ mod ports;
 
 pub use error::IpcError;
 pub use limits::{
-    CMD, CONTROL, EventLimits, FRAMES, FRAMES_BUFFER, MAX_CLIENTS, MAX_FRAME_READERS, MAX_NODES,
-    MAX_READERS, MUX, PUBLICATION, PubSub, PubSubLimits, RequestResponse, RequestResponseLimits,
-    SIM, STATE, STATE_BUFFER, publication,
+    CMD, CONTROL, DESCRIPTION, EventLimits, FRAMES, FRAMES_BUFFER, MAX_CLIENTS, MAX_FRAME_READERS,
+    MAX_NODES, MAX_READERS, MUX, PUBLICATION, PubSub, PubSubLimits, RequestResponse,
+    RequestResponseLimits, SIM, STATE, STATE_BUFFER, publication,
 };
 pub use names::{IPC_PREFIX_ENV, REPLY_SUFFIX, ServiceKind, config, reply_name, service_name};
 pub use ports::{ClientPorts, Exchange, Reader, ServerPorts, Topic, Writer, node};

@@ -3,7 +3,8 @@
 use std::marker::PhantomData;
 
 use chassis_interfaces::{
-    BusFrame, ChassisState, ControlRequest, MuxStatus, SimRequest, VelocityRequest,
+    BusFrame, ChassisState, ControlRequest, MuxStatus, RobotDescription, SimRequest,
+    VelocityRequest,
 };
 use serde::Serialize;
 
@@ -152,6 +153,22 @@ pub const FRAMES: PubSub<BusFrame> = PubSub::new(PubSubLimits {
 pub const MUX: PubSub<MuxStatus> = PubSub::new(PubSubLimits {
     history_size: 1,
     subscriber_max_buffer_size: STATUS_BUFFER,
+    max_publishers: 1,
+    max_subscribers: MAX_READERS,
+    max_nodes: MAX_NODES,
+    safe_overflow: true,
+    event: EventLimits {
+        max_notifiers: PUBLISHER_NOTIFIERS,
+        max_listeners: MAX_READERS,
+        max_nodes: MAX_NODES,
+    },
+});
+
+/// `chassis/<robot>/robot`: the robot's description, history 1 (a client started an hour later
+/// reads it at once). Published at start and when it changes (the protocol once detected).
+pub const DESCRIPTION: PubSub<RobotDescription> = PubSub::new(PubSubLimits {
+    history_size: 1,
+    subscriber_max_buffer_size: 2,
     max_publishers: 1,
     max_subscribers: MAX_READERS,
     max_nodes: MAX_NODES,

@@ -21,6 +21,8 @@ pub enum ServiceKind<'a> {
     Frames,
     /// `MuxStatus`.
     Mux,
+    /// `RobotDescription` on `chassis/<robot>/robot`, publish-subscribe with history 1.
+    Description,
     /// `ControlRequest` → `ControlResponse`, request-response.
     Control,
     /// `SimRequest` → `ControlResponse`: fault injection into a simulated chassis.
@@ -40,6 +42,7 @@ pub fn service_name(robot: &str, kind: ServiceKind<'_>) -> String {
         ServiceKind::State => format!("chassis/{robot}/state"),
         ServiceKind::Frames => format!("chassis/{robot}/frames"),
         ServiceKind::Mux => format!("chassis/{robot}/mux"),
+        ServiceKind::Description => format!("chassis/{robot}/robot"),
         ServiceKind::Control => format!("chassis/{robot}/control"),
         ServiceKind::Sim => format!("chassis/{robot}/sim"),
         ServiceKind::Cmd(source) => format!("chassis/{robot}/cmd/{source}"),

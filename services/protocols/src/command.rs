@@ -1,11 +1,11 @@
-//! Robot-independent commands and the frames each robot needs for them.
+//! RobotKind-independent commands and the frames each robot needs for them.
 //!
 //! `chassis encode` prints these frames; the drivers send the same ones, so what the CLI shows is
 //! what the service puts on the wire.
 
 use thiserror::Error;
 
-use crate::{EncodeError, Robot};
+use crate::{EncodeError, RobotKind};
 
 /// How a velocity command turns.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,7 +92,7 @@ impl<F> Planned<F> {
 pub enum CommandError {
     /// The robot has no such function.
     #[error("{robot} has no {what}")]
-    Unsupported { robot: Robot, what: String },
+    Unsupported { robot: RobotKind, what: String },
     /// An argument the robot cannot take.
     #[error("{0}")]
     Invalid(String),
@@ -101,7 +101,7 @@ pub enum CommandError {
 }
 
 impl CommandError {
-    pub(crate) fn unsupported(robot: Robot, what: impl Into<String>) -> Self {
+    pub(crate) fn unsupported(robot: RobotKind, what: impl Into<String>) -> Self {
         CommandError::Unsupported {
             robot,
             what: what.into(),

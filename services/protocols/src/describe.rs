@@ -3,7 +3,7 @@
 
 use crate::agilex_v2::{self, V2Profile};
 use crate::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use crate::{CanFrame, DecodeError, Profile, Robot, scout_mini, titan, xbot};
+use crate::{CanFrame, DecodeError, Profile, RobotKind, scout_mini, titan, xbot};
 use chassis_interfaces::FaultFlags;
 use serde::Serialize;
 use serde_json::{Map, Value};
@@ -17,7 +17,7 @@ pub type FrameJson = Map<String, Value>;
 pub enum SerialError {
     /// The robot is on a CAN bus: its frames are given as `ID#HEX`.
     #[error("{robot} speaks CAN: give frames as ID#HEX")]
-    NotSerial { robot: Robot },
+    NotSerial { robot: RobotKind },
     /// The XBot stream parser rejected a candidate frame (its bytes are in the message).
     #[error("{0}")]
     Rejected(xbot::StreamError),
@@ -35,7 +35,7 @@ pub enum RobotCodec {
     /// An AgileX protocol-V2 robot.
     V2 {
         profile: V2Profile,
-        robot: Robot,
+        robot: RobotKind,
     },
 }
 
@@ -55,11 +55,11 @@ impl RobotCodec {
         }
     }
 
-    pub fn robot(&self) -> Robot {
+    pub fn robot(&self) -> RobotKind {
         match self {
-            RobotCodec::Titan(_) => Robot::Titan,
+            RobotCodec::Titan(_) => RobotKind::Titan,
             RobotCodec::ScoutMini(p) => p.model.robot(),
-            RobotCodec::Xbot { .. } => Robot::Xbot,
+            RobotCodec::Xbot { .. } => RobotKind::Xbot,
             RobotCodec::V2 { robot, .. } => *robot,
         }
     }
@@ -70,7 +70,7 @@ impl RobotCodec {
             RobotCodec::Titan(profile) => {
                 let decoded = titan::decode(frame, profile)?;
                 let mut json = frame_json(
-                    Robot::Titan,
+                    RobotKind::Titan,
                     decoded.id().into(),
                     decoded.direction(),
                     None,
@@ -152,7 +152,7 @@ impl RobotCodec {
         while let Some(item) = parser.next_frame(profile) {
             out.push(match item {
                 Ok(frame) => Ok(frame_json(
-                    Robot::Xbot,
+                    RobotKind::Xbot,
                     frame.command_id().into(),
                     frame.direction(),
                     None,
@@ -198,7 +198,7 @@ fn driver_status_names(bits: u8) -> Vec<String> {
 }
 
 fn frame_json(
-    robot: Robot,
+    robot: RobotKind,
     id: u32,
     direction: crate::Direction,
     count: Option<u8>,

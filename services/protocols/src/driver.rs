@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::DecodeError;
 use crate::can::CanFrame;
 use crate::command::{Command, Turn};
-use crate::profile::Robot;
+use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 
 /// What arrived from the bus.
@@ -130,9 +130,12 @@ pub enum DriverEvent {
     Notice { level: Level, message: String },
 }
 
+/// A driver of any robot, as the registry makes them.
+pub type BoxedDriver = Box<dyn Driver + Send>;
+
 /// The contract every robot driver fulfils.
 pub trait Driver {
-    fn robot(&self) -> Robot;
+    fn robot(&self) -> RobotKind;
 
     /// Feeds what arrived from the bus at `now`.
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>);
@@ -168,6 +171,43 @@ pub trait Driver {
     /// Orderly stop: command zero and, where the robot has one, engage the parking brake. The
     /// owner drains [`Driver::poll_transmit`] afterwards.
     fn shutdown(&mut self, now: Timestamp);
+}
+
+/// A boxed driver is a driver (the registry's drivers run in [`crate::pair::Pair`] and the engine).
+impl<D: Driver + ?Sized> Driver for Box<D> {
+    fn robot(&self) -> RobotKind {
+        (**self).robot()
+    }
+    fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
+        (**self).handle_rx(now, rx);
+    }
+    fn set_command(&mut self, now: Timestamp, command: &Twist) {
+        (**self).set_command(now, command);
+    }
+    fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
+        (**self).control(now, command)
+    }
+    fn handle_timeout(&mut self, now: Timestamp) {
+        (**self).handle_timeout(now);
+    }
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+        (**self).poll_transmit(now)
+    }
+    fn poll_timeout(&self) -> Option<Timestamp> {
+        (**self).poll_timeout()
+    }
+    fn poll_event(&mut self) -> Option<DriverEvent> {
+        (**self).poll_event()
+    }
+    fn state(&self) -> &ChassisState {
+        (**self).state()
+    }
+    fn set_bus_down(&mut self, now: Timestamp, down: bool) {
+        (**self).set_bus_down(now, down);
+    }
+    fn shutdown(&mut self, now: Timestamp) {
+        (**self).shutdown(now);
+    }
 }
 
 /// Settings every driver shares (the `[driver]` table of the service's config).

@@ -17,7 +17,7 @@ use serde::Serialize;
 
 use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit, wrap_angle};
-use crate::profile::Robot;
+use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp};
 
 /// A fault or event to inject into a simulated chassis.
@@ -98,8 +98,12 @@ pub struct SimTruth {
 }
 
 /// The contract every simulated firmware fulfils.
+/// A simulated firmware of any robot, as the registry makes them; it may run on a thread of its
+/// own.
+pub type BoxedFirmware = Box<dyn Firmware + Send>;
+
 pub trait Firmware {
-    fn robot(&self) -> Robot;
+    fn robot(&self) -> RobotKind;
 
     /// Feeds what the computer sent at `now`.
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>);
@@ -118,6 +122,31 @@ pub trait Firmware {
 
     /// What the chassis really does.
     fn truth(&self) -> SimTruth;
+}
+
+/// A boxed firmware is a firmware.
+impl<F: Firmware + ?Sized> Firmware for Box<F> {
+    fn robot(&self) -> RobotKind {
+        (**self).robot()
+    }
+    fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
+        (**self).handle_rx(now, rx);
+    }
+    fn handle_timeout(&mut self, now: Timestamp) {
+        (**self).handle_timeout(now);
+    }
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+        (**self).poll_transmit(now)
+    }
+    fn poll_timeout(&self) -> Option<Timestamp> {
+        (**self).poll_timeout()
+    }
+    fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
+        (**self).inject(now, injection)
+    }
+    fn truth(&self) -> SimTruth {
+        (**self).truth()
+    }
 }
 
 /// Longest time a simulated chassis integrates at once; a longer gap between calls is not

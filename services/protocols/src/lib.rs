@@ -19,12 +19,14 @@ pub mod agilex_v2;
 pub mod can;
 pub mod command;
 pub mod describe;
+pub mod description;
 pub mod driver;
 mod error;
 pub mod firmware;
 pub mod nmea;
 pub mod pair;
 pub mod profile;
+pub mod registry;
 pub mod scout_mini;
 #[cfg(test)]
 mod sim_bench;
@@ -38,13 +40,13 @@ pub use command::{
     BadControlRequest, Command, CommandError, ControlAction, Planned, Turn, command_to_request,
     request_to_action,
 };
-pub use driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
+pub use driver::{BoxedDriver, ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
 pub use error::{DecodeError, EncodeError};
-pub use firmware::{Firmware, Injection, SimTruth};
+pub use firmware::{BoxedFirmware, Firmware, Injection, SimTruth};
 pub use profile::{
-    Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, Robot, UnknownRobot,
-    V1Model, V1Profile,
+    Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, V1Model, V1Profile,
 };
+pub use registry::{RobotEntry, RobotKind, UnknownRobot};
 pub use time::Timestamp;
 
 /// Who sends a frame.

@@ -8,114 +8,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::agilex_v2::V2Profile;
-
-/// Which robot.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Robot {
-    Titan,
-    ScoutMini,
-    Xbot,
-    /// SCOUT 2.0 (protocol V2).
-    Scout,
-    /// HUNTER 2.0 (protocol V2).
-    Hunter,
-    /// HUNTER SE (protocol V2).
-    HunterSe,
-    /// TRACER (protocol V2).
-    Tracer,
-    /// BUNKER / BUNKER MINI (protocol V2).
-    Bunker,
-    /// RANGER MINI 2.0 / 3.0 (protocol V2; 1.0 by its profile's `model`).
-    RangerMini,
-}
-
-impl Robot {
-    pub const ALL: [Robot; 9] = [
-        Robot::Titan,
-        Robot::ScoutMini,
-        Robot::Xbot,
-        Robot::Scout,
-        Robot::Hunter,
-        Robot::HunterSe,
-        Robot::Tracer,
-        Robot::Bunker,
-        Robot::RangerMini,
-    ];
-
-    /// The command-line spelling (`titan`, `scout-mini`, `hunter`, …), also the default robot
-    /// name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Robot::Titan => "titan",
-            Robot::ScoutMini => "scout-mini",
-            Robot::Xbot => "xbot",
-            Robot::Scout => "scout",
-            Robot::Hunter => "hunter",
-            Robot::HunterSe => "hunter-se",
-            Robot::Tracer => "tracer",
-            Robot::Bunker => "bunker",
-            Robot::RangerMini => "ranger-mini",
-        }
-    }
-
-    /// `chassis_interfaces::RobotKind` value.
-    pub fn kind(self) -> u8 {
-        use chassis_interfaces::RobotKind;
-        match self {
-            Robot::Titan => RobotKind::TITAN,
-            Robot::ScoutMini => RobotKind::SCOUT_MINI,
-            Robot::Xbot => RobotKind::XBOT,
-            Robot::Scout => RobotKind::SCOUT,
-            Robot::Hunter => RobotKind::HUNTER,
-            Robot::HunterSe => RobotKind::HUNTER_SE,
-            Robot::Tracer => RobotKind::TRACER,
-            Robot::Bunker => RobotKind::BUNKER,
-            Robot::RangerMini => RobotKind::RANGER_MINI,
-        }
-    }
-
-    /// True for the robots on a CAN bus (all but the XBot, which speaks RS232).
-    pub fn is_can(self) -> bool {
-        !matches!(self, Robot::Xbot)
-    }
-
-    /// The wire protocols the robot may speak: SCOUT MINI, SCOUT 2.0 and BUNKER V1 or V2 (the
-    /// firmwares AgileX shipped before and after 2020); HUNTER 2.0 / SE, TRACER and RANGER MINI
-    /// V2 only; TITAN and XBot their own.
-    pub fn protocols(self) -> &'static [Protocol] {
-        match self {
-            Robot::ScoutMini | Robot::Scout | Robot::Bunker => &[Protocol::V1, Protocol::V2],
-            Robot::Titan | Robot::Xbot => &[],
-            _ => &[Protocol::V2],
-        }
-    }
-
-    /// The protocol-V1 model of this robot, if it may speak V1.
-    pub fn v1_model(self) -> Option<V1Model> {
-        Some(match self {
-            Robot::ScoutMini => V1Model::ScoutMini,
-            Robot::Scout => V1Model::Scout,
-            Robot::Bunker => V1Model::Bunker,
-            _ => return None,
-        })
-    }
-
-    /// The protocol-V2 model of this robot, if it speaks V2.
-    pub fn v2_model(self) -> Option<crate::agilex_v2::V2Model> {
-        use crate::agilex_v2::V2Model;
-        Some(match self {
-            Robot::ScoutMini => V2Model::ScoutMini,
-            Robot::Scout => V2Model::Scout,
-            Robot::Hunter => V2Model::Hunter,
-            Robot::HunterSe => V2Model::HunterSe,
-            Robot::Tracer => V2Model::Tracer,
-            Robot::Bunker => V2Model::Bunker,
-            Robot::RangerMini => V2Model::RangerMini,
-            Robot::Titan | Robot::Xbot => return None,
-        })
-    }
-}
+use crate::registry::RobotKind;
 
 /// Which AgileX wire protocol: V1 (count and checksum in every frame) or V2 (the TITAN's family).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -141,7 +34,7 @@ pub enum ProtocolError {
     Unknown { name: String },
     #[error("{robot} does not speak protocol {protocol} here")]
     NotSpoken {
-        robot: Robot,
+        robot: RobotKind,
         protocol: &'static str,
     },
 }
@@ -158,32 +51,6 @@ impl std::str::FromStr for Protocol {
 }
 
 impl std::fmt::Display for Protocol {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// A robot name that is none of the known robots.
-#[derive(Debug, Clone, PartialEq, Eq, Error)]
-#[error(
-    "unknown robot '{name}' (expected titan, scout-mini, xbot, scout, hunter, hunter-se, tracer, \
-     bunker or ranger-mini)"
-)]
-pub struct UnknownRobot {
-    pub name: String,
-}
-
-impl std::str::FromStr for Robot {
-    type Err = UnknownRobot;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Robot::ALL
-            .into_iter()
-            .find(|r| r.name() == s)
-            .ok_or_else(|| UnknownRobot { name: s.into() })
-    }
-}
-
-impl std::fmt::Display for Robot {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
     }
@@ -253,11 +120,11 @@ pub enum V1Model {
 }
 
 impl V1Model {
-    pub fn robot(self) -> Robot {
+    pub fn robot(self) -> RobotKind {
         match self {
-            V1Model::ScoutMini => Robot::ScoutMini,
-            V1Model::Scout => Robot::Scout,
-            V1Model::Bunker => Robot::Bunker,
+            V1Model::ScoutMini => RobotKind::ScoutMini,
+            V1Model::Scout => RobotKind::Scout,
+            V1Model::Bunker => RobotKind::Bunker,
         }
     }
 }
@@ -294,6 +161,8 @@ pub struct ScoutMiniProfile {
     pub under_voltage_alarm_v: f64,
     /// Battery under-voltage failure level, V.
     pub under_voltage_failure_v: f64,
+    /// Pack voltage when fully charged, V (NaN: not in the manuals at hand).
+    pub battery_full_v: f64,
     /// ⚠ D-16 (`PROTOCOLS-V2.md` §4.3): on a real CAN bus without a protocol asked for, listen
     /// this long for V1/V2 evidence before reporting silence and listening again, ms.
     pub detect_timeout_ms: u64,
@@ -317,6 +186,8 @@ impl Default for ScoutMiniProfile {
             heartbeat_period_ms: 20,
             under_voltage_alarm_v: 22.5,
             under_voltage_failure_v: 22.0,
+            // "the voltage of fully-recharged battery is about 29.2 V" (SCOUT MINI manual §4.1).
+            battery_full_v: 29.2,
             detect_timeout_ms: 5000,
             detect_min_frames: 3,
         }
@@ -350,6 +221,7 @@ impl ScoutMiniProfile {
                 max_angular_rad_s: 0.5235,
                 under_voltage_alarm_v: 23.5,
                 under_voltage_failure_v: 22.0,
+                battery_full_v: f64::NAN,
                 ..base
             },
             V1Model::Bunker => ScoutMiniProfile {
@@ -360,6 +232,7 @@ impl ScoutMiniProfile {
                 angular_full_scale_rad_s: 2.5235,
                 max_linear_mps: 1.5,
                 max_angular_rad_s: 0.7853,
+                battery_full_v: f64::NAN,
                 ..base
             },
         }
@@ -416,6 +289,11 @@ pub struct XbotProfile {
     pub heartbeat_hz: f64,
     /// The board's command timeout, ms.
     pub command_timeout_ms: u64,
+    /// Battery voltage when fully charged, V (the manual's charging voltage, 24.9 V).
+    pub battery_full_v: f64,
+    /// Battery voltage below which the robot should be charged, V. Not in the manual: 15 % of
+    /// the 23.0-26.0 V range the simulated chassis models; set your pack's level.
+    pub battery_low_v: f64,
 }
 
 impl Default for XbotProfile {
@@ -435,6 +313,8 @@ impl Default for XbotProfile {
             bcd_currents_and_ranges: false,
             heartbeat_hz: 8.0,
             command_timeout_ms: 500,
+            battery_full_v: 24.9,
+            battery_low_v: 23.45,
         }
     }
 }
@@ -588,7 +468,7 @@ pub enum ProfileTableError {
     Toml(#[from] toml::de::Error),
     /// A protocol-V1 or V2 `model` of another robot.
     #[error("profile.model: a {model} model is not a {robot}")]
-    WrongModel { model: Robot, robot: Robot },
+    WrongModel { model: RobotKind, robot: RobotKind },
 }
 
 /// One robot's profile.
@@ -602,53 +482,17 @@ pub enum Profile {
 }
 
 impl Profile {
-    /// The manuals' defaults for `robot` (SCOUT MINI: protocol V1).
-    pub fn default_for(robot: Robot) -> Self {
-        match robot {
-            Robot::Titan => Profile::Titan(TitanProfile::default()),
-            Robot::ScoutMini => Profile::ScoutMini(ScoutMiniProfile::default()),
-            Robot::Xbot => Profile::Xbot(XbotProfile::default()),
-            other => match other.v2_model() {
-                Some(model) => Profile::V2(V2Profile::for_model(model)),
-                None => Profile::Titan(TitanProfile::default()),
-            },
-        }
-    }
-
-    /// The defaults for `robot` speaking `protocol` (`None`: the robot's default protocol).
-    pub fn default_for_protocol(
-        robot: Robot,
-        protocol: Option<Protocol>,
-    ) -> Result<Self, ProtocolError> {
-        let Some(protocol) = protocol else {
-            return Ok(Profile::default_for(robot));
-        };
-        if !robot.protocols().contains(&protocol) {
-            return Err(ProtocolError::NotSpoken {
-                robot,
-                protocol: protocol.name(),
-            });
-        }
-        Ok(match (protocol, robot.v1_model(), robot.v2_model()) {
-            (Protocol::V1, Some(model), _) => {
-                Profile::ScoutMini(ScoutMiniProfile::for_model(model))
-            }
-            (Protocol::V2, _, Some(model)) => Profile::V2(V2Profile::for_model(model)),
-            _ => Profile::default_for(robot),
-        })
-    }
-
     /// The defaults for `robot` speaking `protocol`, with the keys of `table` (the `[profile]`
     /// table of the service's config) set over them. A protocol-V2 table may name a variant with
     /// `model` (e.g. `scout-mini-omni`): its keys are then set over that variant's defaults.
     pub fn from_table(
-        robot: Robot,
+        robot: RobotKind,
         protocol: Option<Protocol>,
         table: &toml::Table,
     ) -> Result<Self, ProfileTableError> {
         let value = toml::Value::Table(table.clone());
         let model = table.get("model").cloned();
-        let profile = match Profile::default_for_protocol(robot, protocol)? {
+        let profile = match robot.entry().default_profile(protocol)? {
             Profile::Titan(_) => Profile::Titan(value.try_into()?),
             Profile::Xbot(_) => Profile::Xbot(value.try_into()?),
             Profile::ScoutMini(default) => {
@@ -694,20 +538,20 @@ impl Profile {
         }
     }
 
-    pub fn robot(&self) -> Robot {
+    pub fn robot(&self) -> RobotKind {
         use crate::agilex_v2::V2Model;
         match self {
-            Profile::Titan(_) => Robot::Titan,
+            Profile::Titan(_) => RobotKind::Titan,
             Profile::ScoutMini(p) => p.model.robot(),
-            Profile::Xbot(_) => Robot::Xbot,
+            Profile::Xbot(_) => RobotKind::Xbot,
             Profile::V2(p) => match p.model {
-                V2Model::Scout => Robot::Scout,
-                V2Model::ScoutMini | V2Model::ScoutMiniOmni => Robot::ScoutMini,
-                V2Model::Hunter => Robot::Hunter,
-                V2Model::HunterSe => Robot::HunterSe,
-                V2Model::Tracer => Robot::Tracer,
-                V2Model::Bunker => Robot::Bunker,
-                V2Model::RangerMini | V2Model::RangerMiniV1 => Robot::RangerMini,
+                V2Model::Scout => RobotKind::Scout,
+                V2Model::ScoutMini | V2Model::ScoutMiniOmni => RobotKind::ScoutMini,
+                V2Model::Hunter => RobotKind::Hunter,
+                V2Model::HunterSe => RobotKind::HunterSe,
+                V2Model::Tracer => RobotKind::Tracer,
+                V2Model::Bunker => RobotKind::Bunker,
+                V2Model::RangerMini | V2Model::RangerMiniV1 => RobotKind::RangerMini,
             },
         }
     }
@@ -738,12 +582,12 @@ mod tests {
     #[allow(clippy::approx_constant)] // 0.5235 is the sources' value
     fn scout_and_bunker_speak_v1_with_their_own_scales_and_hunter_does_not() {
         for (robot, scales) in [
-            (Robot::ScoutMini, (5.0, 0.5235)),
-            (Robot::Scout, (1.5, 0.5235)),
-            (Robot::Bunker, (3.0, 2.5235)),
+            (RobotKind::ScoutMini, (5.0, 0.5235)),
+            (RobotKind::Scout, (1.5, 0.5235)),
+            (RobotKind::Bunker, (3.0, 2.5235)),
         ] {
             assert!(robot.protocols().contains(&Protocol::V1), "{robot}");
-            let profile = Profile::default_for_protocol(robot, Some(Protocol::V1)).unwrap();
+            let profile = robot.entry().default_profile(Some(Protocol::V1)).unwrap();
             assert_eq!(profile.robot(), robot);
             assert_eq!(profile.protocol(), Some(Protocol::V1));
             let Profile::ScoutMini(p) = &profile else {
@@ -757,20 +601,22 @@ mod tests {
         }
         // Their default protocol stays what it was: SCOUT MINI V1, SCOUT and BUNKER V2.
         assert_eq!(
-            Profile::default_for(Robot::Scout).protocol(),
+            RobotKind::Scout.entry().defaults().protocol(),
             Some(Protocol::V2)
         );
         assert_eq!(
-            Profile::default_for_protocol(Robot::Hunter, Some(Protocol::V1)),
+            RobotKind::Hunter
+                .entry()
+                .default_profile(Some(Protocol::V1)),
             Err(ProtocolError::NotSpoken {
-                robot: Robot::Hunter,
+                robot: RobotKind::Hunter,
                 protocol: "v1"
             })
         );
         // A `[profile]` table of a V1 BUNKER starts from the BUNKER's values.
         let table: toml::Table = toml::from_str("max_linear_mps = 1.0").unwrap();
         let Profile::ScoutMini(p) =
-            Profile::from_table(Robot::Bunker, Some(Protocol::V1), &table).unwrap()
+            Profile::from_table(RobotKind::Bunker, Some(Protocol::V1), &table).unwrap()
         else {
             panic!("not V1");
         };
@@ -778,10 +624,10 @@ mod tests {
         assert_eq!(p.linear_full_scale_mps, 3.0);
         let scout: toml::Table = toml::from_str("model = \"scout\"").unwrap();
         assert_eq!(
-            Profile::from_table(Robot::Bunker, Some(Protocol::V1), &scout),
+            Profile::from_table(RobotKind::Bunker, Some(Protocol::V1), &scout),
             Err(ProfileTableError::WrongModel {
-                model: Robot::Scout,
-                robot: Robot::Bunker
+                model: RobotKind::Scout,
+                robot: RobotKind::Bunker
             })
         );
     }
@@ -797,8 +643,8 @@ mod tests {
 
     #[test]
     fn the_defaults_validate_and_nonsense_does_not() {
-        for r in Robot::ALL {
-            assert_eq!(Profile::default_for(r).validate(), Ok(()), "{r}");
+        for r in RobotKind::ALL {
+            assert_eq!(r.entry().defaults().validate(), Ok(()), "{r}");
         }
         let zero = ScoutMiniProfile {
             angular_full_scale_rad_s: 0.0,
@@ -844,32 +690,38 @@ mod tests {
 
     #[test]
     fn robot_names_parse() {
-        for r in Robot::ALL {
-            assert_eq!(r.name().parse::<Robot>(), Ok(r));
-            assert_eq!(Profile::default_for(r).robot(), r);
-            assert_eq!(chassis_interfaces::RobotKind::name(r.kind()), r.name());
+        for r in RobotKind::ALL {
+            assert_eq!(r.name().parse::<RobotKind>(), Ok(r));
+            assert_eq!(r.entry().defaults().robot(), r);
+            assert_eq!(RobotKind::from_id(r.id()), Some(r));
         }
-        let v2 = Profile::default_for_protocol(Robot::ScoutMini, Some(Protocol::V2)).unwrap();
+        let v2 = RobotKind::ScoutMini
+            .entry()
+            .default_profile(Some(Protocol::V2))
+            .unwrap();
         assert_eq!(
             (v2.robot(), v2.protocol()),
-            (Robot::ScoutMini, Some(Protocol::V2))
+            (RobotKind::ScoutMini, Some(Protocol::V2))
         );
-        let err = Profile::default_for_protocol(Robot::Hunter, Some(Protocol::V1)).unwrap_err();
+        let err = RobotKind::Hunter
+            .entry()
+            .default_profile(Some(Protocol::V1))
+            .unwrap_err();
         assert_eq!(err.to_string(), "hunter does not speak protocol v1 here");
         assert!("v3".parse::<Protocol>().is_err());
         let omni: toml::Table = toml::from_str("model = \"scout-mini-omni\"").unwrap();
         let Profile::V2(p) =
-            Profile::from_table(Robot::ScoutMini, Some(Protocol::V2), &omni).unwrap()
+            Profile::from_table(RobotKind::ScoutMini, Some(Protocol::V2), &omni).unwrap()
         else {
             panic!("not V2")
         };
         assert_eq!(p.max_lateral_mps, 2.0);
-        let err = Profile::from_table(Robot::Hunter, None, &omni).unwrap_err();
+        let err = Profile::from_table(RobotKind::Hunter, None, &omni).unwrap_err();
         assert_eq!(
             err.to_string(),
             "profile.model: a scout-mini model is not a hunter"
         );
-        assert!("husky".parse::<Robot>().is_err());
+        assert!("husky".parse::<RobotKind>().is_err());
     }
 
     #[test]

@@ -17,14 +17,15 @@ use super::detect::{DetectSettings, Detection, Detector};
 use super::{V2Driver, V2Profile};
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
-use crate::profile::{Protocol, Robot, ScoutMiniProfile};
+use crate::profile::{Protocol, ScoutMiniProfile};
+use crate::registry::RobotKind;
 use crate::scout_mini::ScoutMiniDriver;
 use crate::time::Timestamp;
 
 /// A driver for a robot that may speak V1 or V2 (SCOUT MINI, SCOUT 2.0, BUNKER) that detects
 /// the protocol before sending anything.
 pub struct AutoDriver {
-    robot: Robot,
+    robot: RobotKind,
     v1: ScoutMiniProfile,
     v2: V2Profile,
     detect: DetectSettings,
@@ -68,7 +69,7 @@ impl AutoDriver {
             inner: None,
             state: {
                 let mut state = ChassisState {
-                    robot: robot.kind(),
+                    robot: robot.id(),
                     ..ChassisState::default()
                 };
                 state.system.wire_protocol = WireProtocol::DETECTING;
@@ -151,7 +152,7 @@ impl AutoDriver {
 }
 
 impl Driver for AutoDriver {
-    fn robot(&self) -> Robot {
+    fn robot(&self) -> RobotKind {
         self.robot
     }
 
@@ -314,12 +315,12 @@ mod tests {
             let detect = DetectSettings::from(&v2);
             let driver = AutoDriver::new(v1.clone(), v2, detect, DriverConfig::default(), T0);
             assert_eq!(driver.robot(), robot);
-            assert_eq!(driver.state().robot, robot.kind());
+            assert_eq!(driver.state().robot, robot.id());
             let mut pair = Pair::new(driver, ScoutMiniSim::new(v1, T0), T0);
             let (ids, first) = drive(&mut pair);
             assert_eq!(pair.driver.protocol(), Some(Protocol::V1), "{robot}");
             assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V1);
-            assert_eq!(pair.driver.state().robot, robot.kind(), "{robot}");
+            assert_eq!(pair.driver.state().robot, robot.id(), "{robot}");
             assert!(ids.iter().all(|id| matches!(id, 0x130 | 0x140)), "{ids:x?}");
             assert!(first > T0, "{robot}: sent before listening");
             assert!(
@@ -350,7 +351,7 @@ mod tests {
             let (ids, first) = drive(&mut pair);
             assert_eq!(pair.driver.protocol(), Some(Protocol::V2), "{robot}");
             assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V2);
-            assert_eq!(pair.driver.state().robot, robot.kind(), "{robot}");
+            assert_eq!(pair.driver.state().robot, robot.id(), "{robot}");
             assert!(
                 ids.iter()
                     .all(|id| matches!(id, 0x111 | 0x421 | 0x411 | 0x4A1)),

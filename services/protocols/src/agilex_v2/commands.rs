@@ -27,7 +27,7 @@ pub fn clear_code_for(which: u8, profile: &V2Profile) -> Option<u8> {
     })
 }
 
-fn robot(profile: &V2Profile) -> crate::Robot {
+fn robot(profile: &V2Profile) -> crate::RobotKind {
     Profile::V2(profile.clone()).robot()
 }
 

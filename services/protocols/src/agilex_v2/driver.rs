@@ -34,14 +34,15 @@ use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
     flags_of, requested_turn,
 };
-use crate::profile::{Profile, Robot};
+use crate::profile::Profile;
+use crate::registry::RobotKind;
 use crate::time::{Timestamp, earliest};
 
 /// The protocol-V2 driver.
 #[derive(Debug)]
 pub struct V2Driver {
     profile: V2Profile,
-    robot: Robot,
+    robot: RobotKind,
     core: DriverCore,
     queue: VecDeque<Frame>,
     pose: PoseIntegrator,
@@ -88,7 +89,7 @@ impl V2Driver {
     pub fn new(profile: V2Profile, config: DriverConfig, now: Timestamp) -> Self {
         let robot = Profile::V2(profile.clone()).robot();
         let mut core = DriverCore::new(
-            robot.kind(),
+            robot.id(),
             Duration::from_millis(profile.heartbeat_period_ms),
             &config,
             now,
@@ -492,7 +493,7 @@ fn normalize_driver_status(status: u8, profile: &V2Profile) -> u8 {
 }
 
 impl Driver for V2Driver {
-    fn robot(&self) -> Robot {
+    fn robot(&self) -> RobotKind {
         self.robot
     }
 

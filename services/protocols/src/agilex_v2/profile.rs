@@ -292,6 +292,9 @@ pub struct V2Profile {
     pub clear_all_code: u8,
     /// Battery under-voltage alarm level, V (0x211 b2-3).
     pub under_voltage_alarm_v: f64,
+    /// Battery under-voltage failure level, V: the chassis cuts drive power below it (SCOUT 2.0
+    /// §2.3.2 table: 22 V; HUNTER SE: 24 V; the others' manuals give none, so 22 V).
+    pub under_voltage_failure_v: f64,
 }
 
 impl Default for V2Profile {
@@ -354,6 +357,7 @@ impl V2Profile {
             motion_mode_feedback: false,
             clear_all_code: 0x00,
             under_voltage_alarm_v: 23.5,
+            under_voltage_failure_v: 22.0,
         };
         match model {
             V2Model::Scout => base,
@@ -408,6 +412,8 @@ impl V2Profile {
                 motor_position_valid: false,
                 rear_light: false,
                 under_voltage_alarm_v: 24.5,
+                // "cut-off < 24 V (SOC < 10 %)" (HSE §1.2).
+                under_voltage_failure_v: 24.0,
                 ..base
             },
             V2Model::Tracer => V2Profile {

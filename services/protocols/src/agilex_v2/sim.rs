@@ -52,7 +52,8 @@ use crate::firmware::{
     BatteryModel, Firmware, Injection, Outbox, Pose, SimTruth, first_order_lag, garbage_frames,
     state_of_charge, substeps,
 };
-use crate::profile::{Profile, Robot};
+use crate::profile::Profile;
+use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
 
@@ -75,7 +76,7 @@ fn heartbeat_bit(profile: &V2Profile) -> u16 {
 #[derive(Debug)]
 pub struct V2Sim {
     profile: V2Profile,
-    robot: Robot,
+    robot: RobotKind,
     mode: Mode,
     applied: Motion,
     command: Motion,
@@ -562,7 +563,7 @@ fn wrap_mm(distance_m: f64) -> f64 {
 }
 
 impl Firmware for V2Sim {
-    fn robot(&self) -> Robot {
+    fn robot(&self) -> RobotKind {
         self.robot
     }
 

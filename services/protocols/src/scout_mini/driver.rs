@@ -17,7 +17,8 @@ use crate::driver::{
     CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx,
     Transmit, flags_of, requested_turn,
 };
-use crate::profile::{Robot, ScoutMiniProfile};
+use crate::profile::ScoutMiniProfile;
+use crate::registry::RobotKind;
 use crate::time::{Timestamp, earliest};
 
 /// What the driver wants of the front light (0x140).
@@ -131,7 +132,7 @@ impl ScoutMiniDriver {
     /// `config.take_control`, else 0x00).
     pub fn new(profile: ScoutMiniProfile, config: DriverConfig, now: Timestamp) -> Self {
         let mut core = DriverCore::new(
-            profile.model.robot().kind(),
+            profile.model.robot().id(),
             Duration::from_millis(profile.heartbeat_period_ms),
             &config,
             now,
@@ -430,7 +431,7 @@ pub fn normalize_faults(word: u16) -> u64 {
 }
 
 impl Driver for ScoutMiniDriver {
-    fn robot(&self) -> Robot {
+    fn robot(&self) -> RobotKind {
         self.profile.model.robot()
     }
 

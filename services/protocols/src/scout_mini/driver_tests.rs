@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use chassis_interfaces::{
     ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LightMode, LinkFlags, RequestFlags,
-    RobotKind, SystemState, Twist,
+    SystemState, Twist,
 };
 use proptest::prelude::*;
 
@@ -16,7 +16,8 @@ use super::{ScoutMiniDriver, normalize_faults};
 use crate::can::CanFrame;
 use crate::command::{Command, Turn};
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
-use crate::profile::{Robot, ScoutMiniProfile};
+use crate::profile::ScoutMiniProfile;
+use crate::registry::RobotKind;
 use crate::scout_mini::{
     Frame, Lights, MotionCommand, MotionFeedback, MotorFeedback, SystemStatus, body, checksum,
     fault, light_mode, mode,
@@ -125,8 +126,8 @@ fn notices(d: &mut ScoutMiniDriver) -> Vec<(Level, String)> {
 #[test]
 fn the_first_heartbeat_is_the_manuals_command_mode_frame() {
     let mut d = driver();
-    assert_eq!(d.robot(), Robot::ScoutMini);
-    assert_eq!(d.state().robot, RobotKind::SCOUT_MINI);
+    assert_eq!(d.robot(), RobotKind::ScoutMini);
+    assert_eq!(d.state().robot, RobotKind::ScoutMini.id());
     assert_eq!(d.state().system.control_mode, ControlMode::UNKNOWN);
     assert!(d.wants_control());
     // The manual's third example, count 0.

@@ -19,7 +19,8 @@ use crate::firmware::{
     BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
     garbage_frames, motor_index, non_negative, state_of_charge, substeps,
 };
-use crate::profile::{Robot, ScoutMiniProfile};
+use crate::profile::ScoutMiniProfile;
+use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 
 /// The last obeyed motion command.
@@ -733,7 +734,7 @@ impl ScoutMiniSim {
 }
 
 impl Firmware for ScoutMiniSim {
-    fn robot(&self) -> Robot {
+    fn robot(&self) -> RobotKind {
         self.profile.model.robot()
     }
 

@@ -189,7 +189,7 @@ fn the_chassis_powers_up_in_command_mode_with_the_rc_transmitter_off() {
         b.last(id::LIGHT_STATE),
         Frame::LightState(Lights::default())
     );
-    assert_eq!(b.sim.robot(), crate::Robot::ScoutMini);
+    assert_eq!(b.sim.robot(), crate::RobotKind::ScoutMini);
 }
 
 #[test]

@@ -6,7 +6,7 @@ use super::codec::{
     ClearFault, Frame, ModeCommand, MotionCommand, ParkingBrake, Switch, clear_code, mode,
 };
 use super::kinematics::{steer_command, twist_to_command};
-use crate::Robot;
+use crate::RobotKind;
 use crate::command::{Command, CommandError, Planned, Turn};
 use crate::profile::TitanProfile;
 
@@ -65,7 +65,7 @@ pub fn frames_for(
     command: &Command,
     profile: &TitanProfile,
 ) -> Result<Planned<Frame>, CommandError> {
-    let robot = Robot::Titan;
+    let robot = RobotKind::Titan;
     Ok(match *command {
         Command::Velocity {
             linear_x_mps,

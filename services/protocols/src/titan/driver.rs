@@ -13,7 +13,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, RobotKind, SystemState, Twist,
+    ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState, Twist,
 };
 
 use super::codec::{self, Frame, MotionCommand, ParkingBrake, fault, mode};
@@ -25,7 +25,8 @@ use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
     flags_of, requested_turn,
 };
-use crate::profile::{Robot, TitanProfile};
+use crate::profile::TitanProfile;
+use crate::registry::RobotKind;
 use crate::time::{Timestamp, earliest};
 
 /// Speed below which the robot counts as standing still, m/s.
@@ -54,7 +55,7 @@ impl TitanDriver {
     /// A driver starting at `now`. With `config.take_control` it asks for CAN command mode at once.
     pub fn new(profile: TitanProfile, config: DriverConfig, now: Timestamp) -> Self {
         let mut core = DriverCore::new(
-            RobotKind::TITAN,
+            RobotKind::Titan.id(),
             Duration::from_millis(profile.heartbeat_period_ms),
             &config,
             now,
@@ -263,8 +264,8 @@ pub fn normalize_faults(word: u32) -> u64 {
 }
 
 impl Driver for TitanDriver {
-    fn robot(&self) -> Robot {
-        Robot::Titan
+    fn robot(&self) -> RobotKind {
+        RobotKind::Titan
     }
 
     crate::driver::core_accessors!();

@@ -20,7 +20,8 @@ use crate::firmware::{
     BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
     garbage_frames, motor_index, non_negative, state_of_charge, substeps,
 };
-use crate::profile::{Robot, TitanProfile};
+use crate::profile::TitanProfile;
+use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 
 /// Who holds authority over the chassis.
@@ -942,8 +943,8 @@ impl TitanSim {
 }
 
 impl Firmware for TitanSim {
-    fn robot(&self) -> Robot {
-        Robot::Titan
+    fn robot(&self) -> RobotKind {
+        RobotKind::Titan
     }
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {

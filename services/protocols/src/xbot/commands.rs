@@ -3,7 +3,7 @@
 use chassis_interfaces::ClampFlags;
 
 use super::codec::{Frame, LiftCommand, PowerCommand, ServoCommand, VelocityCommand};
-use crate::Robot;
+use crate::RobotKind;
 use crate::command::{Command, CommandError, Planned, Turn};
 use crate::profile::XbotProfile;
 
@@ -77,7 +77,7 @@ pub fn frames_for(
     command: &Command,
     profile: &XbotProfile,
 ) -> Result<Planned<Frame>, CommandError> {
-    let robot = Robot::Xbot;
+    let robot = RobotKind::Xbot;
     Ok(match *command {
         Command::Velocity {
             linear_x_mps,

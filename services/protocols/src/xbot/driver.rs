@@ -5,9 +5,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{
-    ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, RobotKind, Twist,
-};
+use chassis_interfaces::{ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, Twist};
 
 use super::codec::{Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, VelocityCommand};
 use super::commands::{frames_for, velocity_command};
@@ -17,7 +15,8 @@ use crate::command::{Command, Turn};
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, Rx, Transmit, Unwrap16, wrap_angle,
 };
-use crate::profile::{Robot, XbotProfile};
+use crate::profile::XbotProfile;
+use crate::registry::RobotKind;
 use crate::time::{Timestamp, earliest};
 
 /// The manual's bound on the 0x03 rate ("more than 5 Hz and less than 10 Hz"): at most this many
@@ -264,7 +263,7 @@ impl XbotDriver {
             _ => (FALLBACK_HEARTBEAT_HZ, Duration::from_millis(125)),
         };
         let mut driver = Self {
-            core: DriverCore::new(RobotKind::XBOT, period, &config, now),
+            core: DriverCore::new(RobotKind::Xbot.id(), period, &config, now),
             parser: StreamParser::new(),
             queue: VecDeque::new(),
             twist: Twist::ZERO,
@@ -667,8 +666,8 @@ fn integrate_arc(
 }
 
 impl Driver for XbotDriver {
-    fn robot(&self) -> Robot {
-        Robot::Xbot
+    fn robot(&self) -> RobotKind {
+        RobotKind::Xbot
     }
 
     crate::driver::core_accessors!();

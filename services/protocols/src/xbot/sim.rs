@@ -14,7 +14,8 @@ use crate::firmware::{
     BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, first_order_lag, motor_index,
     non_negative, state_of_charge, substeps,
 };
-use crate::profile::{Robot, XbotProfile};
+use crate::profile::XbotProfile;
+use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 
 /// The simulated XBot board: the chassis side of the RS232 link, built on the XBot codec.
@@ -715,8 +716,8 @@ impl XbotSim {
 }
 
 impl Firmware for XbotSim {
-    fn robot(&self) -> Robot {
-        Robot::Xbot
+    fn robot(&self) -> RobotKind {
+        RobotKind::Xbot
     }
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {

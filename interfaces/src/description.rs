@@ -1,0 +1,840 @@
+//! `RobotDescription`: what the robot `chassisd` drives *is* — its kind, model and protocol, the
+//! effective profile after every override (limits, geometry, battery levels), its sensors with
+//! their mounting, its joints and the mux's source table — published on `chassis/<name>/robot`
+//! with history 1, so a client that starts an hour later reads it at once.
+//!
+//! Clients (safety monitor, planner, views, bridges, Python) read robot facts from here, never
+//! from a table of their own. Unknown values are NaN (a length the manuals do not give); counts
+//! say how many entries of each fixed array are used.
+
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use serde::Serialize;
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
+
+use crate::layout::describe_layout;
+use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
+use crate::{MAX_SOURCES, NAME_LEN};
+
+/// Most sensors a description lists.
+pub const MAX_SENSORS: usize = 12;
+/// Most joints a description lists.
+pub const MAX_JOINTS: usize = 12;
+/// Length of a sensor's or joint's name (also its frame id), NUL-padded UTF-8.
+pub const LABEL_LEN: usize = 32;
+
+/// How the robot's wheels turn a twist into motion (`RobotDescription::kinematics`).
+#[derive(Debug, Clone, Copy)]
+pub struct Kinematics;
+impl Kinematics {
+    /// Two driven wheels (or sides): (v, ω).
+    pub const DIFFERENTIAL: u8 = 1;
+    /// Four wheels, skid-steered: (v, ω), turning by slipping.
+    pub const SKID_STEER: u8 = 2;
+    /// Tracks: (v, ω), turning by slipping.
+    pub const TRACKED: u8 = 3;
+    /// Mecanum or omni wheels: (v, v_y, ω).
+    pub const OMNI: u8 = 4;
+    /// Front-wheel Ackermann: (v, δ); no turn on the spot.
+    pub const ACKERMANN: u8 = 5;
+    /// Front and rear axles steering opposite (TITAN): (v, δ).
+    pub const DUAL_ACKERMANN: u8 = 6;
+    /// Four independently steered wheels (dual Ackermann, crab, spin).
+    pub const FOUR_WHEEL_STEER: u8 = 7;
+
+    pub fn name(kinematics: u8) -> &'static str {
+        match kinematics {
+            Self::DIFFERENTIAL => "differential",
+            Self::SKID_STEER => "skid_steer",
+            Self::TRACKED => "tracked",
+            Self::OMNI => "omni",
+            Self::ACKERMANN => "ackermann",
+            Self::DUAL_ACKERMANN => "dual_ackermann",
+            Self::FOUR_WHEEL_STEER => "four_wheel_steer",
+            _ => "unknown",
+        }
+    }
+
+    /// True where the robot steers its wheels and cannot turn on the spot by (v = 0, ω).
+    pub fn steers(kinematics: u8) -> bool {
+        matches!(kinematics, Self::ACKERMANN | Self::DUAL_ACKERMANN)
+    }
+}
+
+/// Which bus the robot is on (`RobotDescription::bus`).
+#[derive(Debug, Clone, Copy)]
+pub struct BusKind;
+impl BusKind {
+    /// CAN (SocketCAN, slcan).
+    pub const CAN: u8 = 1;
+    /// RS232 byte stream.
+    pub const RS232: u8 = 2;
+
+    pub fn name(bus: u8) -> &'static str {
+        match bus {
+            Self::CAN => "can",
+            Self::RS232 => "rs232",
+            _ => "unknown",
+        }
+    }
+}
+
+/// Bits of [`RobotDescription::flags`].
+#[derive(Debug, Clone, Copy)]
+pub struct DescriptionFlags;
+impl DescriptionFlags {
+    /// The bus is the simulated chassis (embedded or `chassisd sim`), not a robot.
+    pub const SIMULATED: u8 = 1 << 0;
+    /// The robot has a parking brake chassisd can lock and release.
+    pub const BRAKE: u8 = 1 << 1;
+    /// The robot has lights chassisd can switch.
+    pub const LIGHTS: u8 = 1 << 2;
+    /// The robot can move sideways (`linear_y`).
+    pub const LATERAL: u8 = 1 << 3;
+    /// The mux requires its safety source (`--no-safety-monitor` not given).
+    pub const SAFETY_REQUIRED: u8 = 1 << 4;
+}
+
+/// What a sensor measures (`SensorDescription::kind`).
+#[derive(Debug, Clone, Copy)]
+pub struct SensorKind;
+impl SensorKind {
+    /// An ultrasonic range sensor: its reading is `RangesState::ultrasonic_m[index]`.
+    pub const ULTRASONIC: u8 = 1;
+    /// An infrared range sensor: `RangesState::ir_m[index]`.
+    pub const INFRARED: u8 = 2;
+    /// An inertial unit: `ChassisState::imu`.
+    pub const IMU: u8 = 3;
+    /// A GNSS receiver: `ChassisState::gps`.
+    pub const GPS: u8 = 4;
+    /// Bumpers: `FaultFlags::BUMPER`.
+    pub const BUMPER: u8 = 5;
+
+    pub fn name(kind: u8) -> &'static str {
+        match kind {
+            Self::ULTRASONIC => "ultrasonic",
+            Self::INFRARED => "infrared",
+            Self::IMU => "imu",
+            Self::GPS => "gps",
+            Self::BUMPER => "bumper",
+            _ => "unknown",
+        }
+    }
+
+    /// True for the range sensors (a cone in a view, a `sensor_msgs/Range` in ROS 2).
+    pub fn is_range(kind: u8) -> bool {
+        matches!(kind, Self::ULTRASONIC | Self::INFRARED)
+    }
+}
+
+/// Which reading of the state a joint's position comes from (`JointDescription::source`).
+#[derive(Debug, Clone, Copy)]
+pub struct JointSource;
+impl JointSource {
+    /// `MotionState::front_steer_rad` (a revolute steering joint).
+    pub const FRONT_STEER: u8 = 1;
+    /// `MotionState::rear_steer_rad`.
+    pub const REAR_STEER: u8 = 2;
+    /// A wheel: `MotionState::wheel_mps[index]` and `MotorState::position_counts` of motor
+    /// `index` (continuous; needs the geometry's wheel radius and travel per count).
+    pub const WHEEL: u8 = 3;
+
+    pub fn name(source: u8) -> &'static str {
+        match source {
+            Self::FRONT_STEER => "front_steer",
+            Self::REAR_STEER => "rear_steer",
+            Self::WHEEL => "wheel",
+            _ => "unknown",
+        }
+    }
+}
+
+/// Speed and acceleration limits; NaN where there is none.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::MotionLimits.v1")]
+pub struct MotionLimits {
+    /// Largest forward speed, m/s.
+    pub forward_mps: f64,
+    /// Largest reverse speed (a positive number), m/s.
+    pub reverse_mps: f64,
+    /// Largest |lateral speed|, m/s (0: the robot cannot move sideways).
+    pub lateral_mps: f64,
+    /// Largest |yaw rate|, rad/s.
+    pub angular_radps: f64,
+    /// Largest |steering angle| (inner wheel), rad; NaN where the robot does not steer.
+    pub steer_rad: f64,
+    /// Largest |linear acceleration|, m/s²; NaN: not limited.
+    pub linear_accel_mps2: f64,
+    /// Largest |yaw acceleration|, rad/s²; NaN: not limited.
+    pub angular_accel_radps2: f64,
+}
+
+describe_layout!(
+    MotionLimits,
+    motion_limits_description_covers_every_byte {
+        forward_mps,
+        reverse_mps,
+        lateral_mps,
+        angular_radps,
+        steer_rad,
+        linear_accel_mps2,
+        angular_accel_radps2,
+    }
+);
+
+impl MotionLimits {
+    /// No limit at all.
+    pub const NONE: MotionLimits = MotionLimits {
+        forward_mps: f64::NAN,
+        reverse_mps: f64::NAN,
+        lateral_mps: f64::NAN,
+        angular_radps: f64::NAN,
+        steer_rad: f64::NAN,
+        linear_accel_mps2: f64::NAN,
+        angular_accel_radps2: f64::NAN,
+    };
+
+    /// The tighter of two limits, field by field (NaN: no limit on that side).
+    pub fn tighter(&self, other: &MotionLimits) -> MotionLimits {
+        let min = |a: f64, b: f64| match (a.is_nan(), b.is_nan()) {
+            (true, _) => b,
+            (_, true) => a,
+            _ => a.min(b),
+        };
+        MotionLimits {
+            forward_mps: min(self.forward_mps, other.forward_mps),
+            reverse_mps: min(self.reverse_mps, other.reverse_mps),
+            lateral_mps: min(self.lateral_mps, other.lateral_mps),
+            angular_radps: min(self.angular_radps, other.angular_radps),
+            steer_rad: min(self.steer_rad, other.steer_rad),
+            linear_accel_mps2: min(self.linear_accel_mps2, other.linear_accel_mps2),
+            angular_accel_radps2: min(self.angular_accel_radps2, other.angular_accel_radps2),
+        }
+    }
+}
+
+/// The robot's geometry, m; NaN where the manuals do not give it.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::Geometry.v1")]
+pub struct Geometry {
+    /// Distance between the axles, m.
+    pub wheelbase_m: f64,
+    /// Distance between the left and right wheels (or tracks), m.
+    pub track_m: f64,
+    /// Drive wheel radius, m.
+    pub wheel_radius_m: f64,
+    /// Wheel travel per encoder count, m.
+    pub travel_per_count_m: f64,
+    /// The body's outline, centred on `base_link`: length (x), width (y), height (z), m.
+    pub length_m: f64,
+    pub width_m: f64,
+    pub height_m: f64,
+    /// Smallest turn radius (Ackermann robots), m; 0 where it turns on the spot.
+    pub min_turn_radius_m: f64,
+}
+
+describe_layout!(
+    Geometry,
+    geometry_description_covers_every_byte {
+        wheelbase_m,
+        track_m,
+        wheel_radius_m,
+        travel_per_count_m,
+        length_m,
+        width_m,
+        height_m,
+        min_turn_radius_m,
+    }
+);
+
+/// Battery levels; NaN where the robot reports no such reading or the manual gives no level.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::BatteryLevels.v1")]
+pub struct BatteryLevels {
+    /// Pack voltage when full, V.
+    pub full_v: f64,
+    /// Below this the chassis warns (its under-voltage alarm), V.
+    pub low_v: f64,
+    /// Below this the chassis cuts drive power (its under-voltage failure), V.
+    pub critical_v: f64,
+    /// State of charge below which the chassis warns, %.
+    pub low_soc_pct: f64,
+    /// State of charge below which the chassis cuts drive power, %.
+    pub critical_soc_pct: f64,
+}
+
+describe_layout!(
+    BatteryLevels,
+    battery_levels_description_covers_every_byte {
+        full_v,
+        low_v,
+        critical_v,
+        low_soc_pct,
+        critical_soc_pct,
+    }
+);
+
+/// Odometry's stated (not measured) variances, for the bridges' covariance matrices.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::OdometryVariance.v1")]
+pub struct OdometryVariance {
+    /// Of x and y, m².
+    pub position_m2: f64,
+    /// Of yaw, rad².
+    pub yaw_rad2: f64,
+    /// Of the linear and lateral speed, (m/s)².
+    pub linear_m2ps2: f64,
+    /// Of the yaw rate, (rad/s)².
+    pub angular_rad2ps2: f64,
+}
+
+describe_layout!(
+    OdometryVariance,
+    odometry_variance_description_covers_every_byte {
+        position_m2,
+        yaw_rad2,
+        linear_m2ps2,
+        angular_rad2ps2,
+    }
+);
+
+/// One sensor and where it sits on the body (in `base_link`, REP-103 axes).
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::SensorDescription.v1")]
+pub struct SensorDescription {
+    /// The sensor's name, also its frame id (`ultrasonic_front_left`).
+    #[serde(serialize_with = "serialize_fixed_str")]
+    pub name: [u8; LABEL_LEN],
+    /// [`SensorKind`].
+    pub kind: u8,
+    /// Index of its reading in the state (e.g. `RangesState::ultrasonic_m[index]`).
+    pub index: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 6],
+    pub x_m: f64,
+    pub y_m: f64,
+    pub z_m: f64,
+    /// Heading of its axis, rad, left of forward positive.
+    pub yaw_rad: f64,
+    /// Full opening angle of a range sensor's cone, rad (NaN otherwise).
+    pub field_of_view_rad: f64,
+    /// Nearest and farthest reading a range sensor gives, m (NaN otherwise).
+    pub min_range_m: f64,
+    pub max_range_m: f64,
+}
+
+describe_layout!(
+    SensorDescription,
+    sensor_description_covers_every_byte {
+        name,
+        kind,
+        index,
+        _reserved,
+        x_m,
+        y_m,
+        z_m,
+        yaw_rad,
+        field_of_view_rad,
+        min_range_m,
+        max_range_m,
+    }
+);
+
+impl SensorDescription {
+    pub fn name(&self) -> &str {
+        read_fixed_str(&self.name)
+    }
+}
+
+/// One joint the bridges publish (`sensor_msgs/JointState`).
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::JointDescription.v1")]
+pub struct JointDescription {
+    /// The joint's name (`front_steer_joint`, `front_left_wheel_joint`).
+    #[serde(serialize_with = "serialize_fixed_str")]
+    pub name: [u8; LABEL_LEN],
+    /// [`JointSource`]: which reading of the state is its position.
+    pub source: u8,
+    /// Which wheel (`MotionState::wheel_mps` order) for a wheel joint.
+    pub index: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 6],
+}
+
+describe_layout!(
+    JointDescription,
+    joint_description_covers_every_byte {
+        name,
+        source,
+        index,
+        _reserved
+    }
+);
+
+impl JointDescription {
+    pub fn name(&self) -> &str {
+        read_fixed_str(&self.name)
+    }
+}
+
+/// One velocity source of the mux, as configured.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    FromBytes,
+    IntoBytes,
+    Immutable,
+    KnownLayout,
+    ZeroCopySend,
+    Serialize,
+)]
+#[type_name("chassis::SourceDescription.v1")]
+pub struct SourceDescription {
+    /// Source name (`teleop`): the service `chassis/<name>/cmd/<source>`.
+    #[serde(serialize_with = "serialize_fixed_str")]
+    pub name: [u8; NAME_LEN],
+    /// Its request ends its motion this long after it was made, ms.
+    pub timeout_ms: u32,
+    pub priority: u8,
+    /// `SourceFlags::REQUIRED` and `SourceFlags::REMOTE` as configured.
+    pub flags: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 2],
+}
+
+describe_layout!(
+    SourceDescription,
+    source_description_covers_every_byte {
+        name,
+        timeout_ms,
+        priority,
+        flags,
+        _reserved
+    }
+);
+
+impl SourceDescription {
+    pub fn name(&self) -> &str {
+        read_fixed_str(&self.name)
+    }
+}
+
+/// The robot `chassisd` drives, as it is configured and detected: see the module doc.
+#[repr(C)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, FromBytes, IntoBytes, Immutable, KnownLayout, ZeroCopySend,
+)]
+#[type_name("chassis::RobotDescription.v1")]
+pub struct RobotDescription {
+    /// Bumped at every publication (a change of protocol once detection decides).
+    pub seq: u64,
+    /// `CLOCK_MONOTONIC` when it was published, ns.
+    pub stamp_ns: u64,
+    /// The robot's kind: `chassis_protocols::RobotKind` as a number, as in
+    /// `ChassisState::robot`.
+    pub kind: u8,
+    /// `WireProtocol` in use (`DETECTING` until detection decides).
+    pub protocol: u8,
+    /// [`Kinematics`].
+    pub kinematics: u8,
+    /// [`BusKind`].
+    pub bus: u8,
+    /// [`DescriptionFlags`].
+    pub flags: u8,
+    pub sensor_count: u8,
+    pub joint_count: u8,
+    pub source_count: u8,
+    /// The robot's name (`--name`): its services are `chassis/<name>/…`.
+    pub name: [u8; NAME_LEN],
+    /// The kind's `--robot` spelling (`hunter`).
+    pub kind_name: [u8; NAME_LEN],
+    /// The variant of the kind the profile describes (`scout-mini-omni`, `ranger-mini-v1`, or
+    /// the kind's name).
+    pub model: [u8; LABEL_LEN],
+    /// What people call it (`AgileX HUNTER 2.0`).
+    pub display_name: [u8; LABEL_LEN],
+    /// The limits the driver itself applies: the robot's profile after overrides.
+    pub robot_limits: MotionLimits,
+    /// chassisd's configured speed and acceleration limits (`[mux]`), applied to every source.
+    pub configured_limits: MotionLimits,
+    pub geometry: Geometry,
+    pub battery: BatteryLevels,
+    pub odometry_variance: OdometryVariance,
+    /// The chassis' own command timeout, ms (it stops without a command for this long).
+    pub command_timeout_ms: u32,
+    /// The heartbeat chassisd sends, ms.
+    pub heartbeat_period_ms: u32,
+    pub sensors: [SensorDescription; MAX_SENSORS],
+    pub joints: [JointDescription; MAX_JOINTS],
+    pub sources: [SourceDescription; MAX_SOURCES],
+}
+
+describe_layout!(
+    RobotDescription,
+    robot_description_covers_every_byte {
+        seq,
+        stamp_ns,
+        kind,
+        protocol,
+        kinematics,
+        bus,
+        flags,
+        sensor_count,
+        joint_count,
+        source_count,
+        name,
+        kind_name,
+        model,
+        display_name,
+        robot_limits,
+        configured_limits,
+        geometry,
+        battery,
+        odometry_variance,
+        command_timeout_ms,
+        heartbeat_period_ms,
+        sensors,
+        joints,
+        sources,
+    }
+);
+
+impl Default for RobotDescription {
+    fn default() -> Self {
+        Self {
+            seq: 0,
+            stamp_ns: 0,
+            kind: 0,
+            protocol: 0,
+            kinematics: 0,
+            bus: 0,
+            flags: 0,
+            sensor_count: 0,
+            joint_count: 0,
+            source_count: 0,
+            name: [0; NAME_LEN],
+            kind_name: [0; NAME_LEN],
+            model: [0; LABEL_LEN],
+            display_name: [0; LABEL_LEN],
+            robot_limits: MotionLimits::NONE,
+            configured_limits: MotionLimits::NONE,
+            geometry: Geometry {
+                wheelbase_m: f64::NAN,
+                track_m: f64::NAN,
+                wheel_radius_m: f64::NAN,
+                travel_per_count_m: f64::NAN,
+                length_m: f64::NAN,
+                width_m: f64::NAN,
+                height_m: f64::NAN,
+                min_turn_radius_m: f64::NAN,
+            },
+            battery: BatteryLevels {
+                full_v: f64::NAN,
+                low_v: f64::NAN,
+                critical_v: f64::NAN,
+                low_soc_pct: f64::NAN,
+                critical_soc_pct: f64::NAN,
+            },
+            odometry_variance: OdometryVariance::default(),
+            command_timeout_ms: 0,
+            heartbeat_period_ms: 0,
+            sensors: [SensorDescription::default(); MAX_SENSORS],
+            joints: [JointDescription::default(); MAX_JOINTS],
+            sources: [SourceDescription::default(); MAX_SOURCES],
+        }
+    }
+}
+
+/// A list of the description is full.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DescriptionFull {
+    pub what: &'static str,
+    pub max: usize,
+}
+
+impl core::fmt::Display for DescriptionFull {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "a robot description holds at most {} {}",
+            self.max, self.what
+        )
+    }
+}
+
+impl std::error::Error for DescriptionFull {}
+
+impl RobotDescription {
+    /// The robot's name (`--name`).
+    pub fn name(&self) -> &str {
+        read_fixed_str(&self.name)
+    }
+
+    /// The kind's `--robot` spelling.
+    pub fn kind_name(&self) -> &str {
+        read_fixed_str(&self.kind_name)
+    }
+
+    pub fn model(&self) -> &str {
+        read_fixed_str(&self.model)
+    }
+
+    pub fn display_name(&self) -> &str {
+        read_fixed_str(&self.display_name)
+    }
+
+    pub fn set_name(&mut self, name: &str) {
+        write_fixed_str(&mut self.name, name);
+    }
+
+    pub fn set_kind_name(&mut self, name: &str) {
+        write_fixed_str(&mut self.kind_name, name);
+    }
+
+    pub fn set_model(&mut self, model: &str) {
+        write_fixed_str(&mut self.model, model);
+    }
+
+    pub fn set_display_name(&mut self, name: &str) {
+        write_fixed_str(&mut self.display_name, name);
+    }
+
+    /// The sensors in use.
+    pub fn sensors(&self) -> &[SensorDescription] {
+        &self.sensors[..usize::from(self.sensor_count).min(MAX_SENSORS)]
+    }
+
+    /// The joints in use.
+    pub fn joints(&self) -> &[JointDescription] {
+        &self.joints[..usize::from(self.joint_count).min(MAX_JOINTS)]
+    }
+
+    /// The configured sources.
+    pub fn sources(&self) -> &[SourceDescription] {
+        &self.sources[..usize::from(self.source_count).min(MAX_SOURCES)]
+    }
+
+    /// Adds a sensor named `name`.
+    pub fn push_sensor(
+        &mut self,
+        name: &str,
+        mut sensor: SensorDescription,
+    ) -> Result<(), DescriptionFull> {
+        let slot = self
+            .sensors
+            .get_mut(usize::from(self.sensor_count))
+            .ok_or(DescriptionFull {
+                what: "sensors",
+                max: MAX_SENSORS,
+            })?;
+        write_fixed_str(&mut sensor.name, name);
+        *slot = sensor;
+        self.sensor_count += 1;
+        Ok(())
+    }
+
+    /// Adds a joint named `name` whose position is `source` (`index`: the wheel).
+    pub fn push_joint(&mut self, name: &str, source: u8, index: u8) -> Result<(), DescriptionFull> {
+        let slot = self
+            .joints
+            .get_mut(usize::from(self.joint_count))
+            .ok_or(DescriptionFull {
+                what: "joints",
+                max: MAX_JOINTS,
+            })?;
+        *slot = JointDescription {
+            source,
+            index,
+            ..JointDescription::default()
+        };
+        write_fixed_str(&mut slot.name, name);
+        self.joint_count += 1;
+        Ok(())
+    }
+
+    /// Adds a source of the mux.
+    pub fn push_source(
+        &mut self,
+        name: &str,
+        priority: u8,
+        timeout_ms: u32,
+        flags: u8,
+    ) -> Result<(), DescriptionFull> {
+        let slot = self
+            .sources
+            .get_mut(usize::from(self.source_count))
+            .ok_or(DescriptionFull {
+                what: "sources",
+                max: MAX_SOURCES,
+            })?;
+        *slot = SourceDescription {
+            timeout_ms,
+            priority,
+            flags,
+            ..SourceDescription::default()
+        };
+        write_fixed_str(&mut slot.name, name);
+        self.source_count += 1;
+        Ok(())
+    }
+
+    /// The tighter of the robot's and the configured limits: what the robot will do at most.
+    pub fn effective_limits(&self) -> MotionLimits {
+        self.robot_limits.tighter(&self.configured_limits)
+    }
+
+    /// The source called `name`.
+    pub fn source(&self, name: &str) -> Option<&SourceDescription> {
+        self.sources().iter().find(|s| s.name() == name)
+    }
+
+    /// True when the description was published (a default one has seq 0 and no kind).
+    pub fn is_known(&self) -> bool {
+        self.kind != 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_is_pinned() {
+        assert_eq!(core::mem::size_of::<MotionLimits>(), 56);
+        assert_eq!(core::mem::size_of::<Geometry>(), 64);
+        assert_eq!(core::mem::size_of::<BatteryLevels>(), 40);
+        assert_eq!(core::mem::size_of::<OdometryVariance>(), 32);
+        assert_eq!(core::mem::size_of::<SensorDescription>(), 96);
+        assert_eq!(core::mem::size_of::<JointDescription>(), 40);
+        assert_eq!(core::mem::size_of::<SourceDescription>(), 24);
+        assert_eq!(core::mem::size_of::<RobotDescription>(), 2200);
+        assert_eq!(core::mem::align_of::<RobotDescription>(), 8);
+        assert_eq!(core::mem::offset_of!(RobotDescription, name), 24);
+        assert_eq!(core::mem::offset_of!(RobotDescription, robot_limits), 120);
+        assert_eq!(core::mem::offset_of!(RobotDescription, sensors), 376);
+    }
+
+    #[test]
+    fn lists_fill_up_and_refuse_more() {
+        let mut d = RobotDescription::default();
+        assert!(!d.is_known());
+        for i in 0..MAX_SOURCES {
+            d.push_source(&format!("s{i}"), i as u8, 100, 0).unwrap();
+        }
+        assert_eq!(
+            d.push_source("one-too-many", 1, 100, 0),
+            Err(DescriptionFull {
+                what: "sources",
+                max: MAX_SOURCES
+            })
+        );
+        assert_eq!(d.sources().len(), MAX_SOURCES);
+        assert_eq!(d.source("s3").map(|s| s.priority), Some(3));
+        d.push_joint("front_steer_joint", JointSource::FRONT_STEER, 0)
+            .unwrap();
+        assert_eq!(d.joints()[0].name(), "front_steer_joint");
+        d.push_sensor(
+            "ultrasonic_front_left",
+            SensorDescription {
+                kind: SensorKind::ULTRASONIC,
+                ..SensorDescription::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(d.sensors()[0].name(), "ultrasonic_front_left");
+    }
+
+    #[test]
+    fn the_effective_limits_are_the_tighter_of_the_two() {
+        let mut d = RobotDescription::default();
+        d.robot_limits.forward_mps = 1.5;
+        d.robot_limits.angular_radps = 2.0;
+        d.configured_limits.forward_mps = 0.5;
+        let e = d.effective_limits();
+        assert_eq!(e.forward_mps, 0.5);
+        assert_eq!(e.angular_radps, 2.0);
+        assert!(e.lateral_mps.is_nan());
+    }
+}

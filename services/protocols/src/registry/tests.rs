@@ -1,0 +1,216 @@
+//! Every robot of the registry, walked whole: a robot missing anywhere fails here.
+
+use std::time::Duration;
+
+use chassis_interfaces::{Kinematics, MAX_JOINTS, MAX_SENSORS, Twist, WireProtocol};
+
+use super::*;
+use crate::description::describe;
+use crate::pair::Pair;
+
+#[test]
+fn every_kind_has_an_entry_that_names_it_back() {
+    let mut names = std::collections::HashSet::new();
+    for kind in RobotKind::ALL {
+        let entry = kind.entry();
+        assert_eq!(entry.kind, kind);
+        assert_eq!(RobotKind::from_id(kind.id()), Some(kind));
+        assert_eq!(kind.name().parse::<RobotKind>(), Ok(kind));
+        assert_eq!(find(entry.name).map(|e| e.kind), Some(kind));
+        assert!(names.insert(entry.name), "{} named twice", entry.name);
+        assert!(!entry.display_name.is_empty(), "{kind}");
+        assert!(entry.sensors.len() <= MAX_SENSORS, "{kind}");
+        assert!(entry.joints.len() <= MAX_JOINTS, "{kind}");
+        assert!(
+            entry.outline.length_m > 0.0 && entry.outline.width_m > 0.0,
+            "{kind}"
+        );
+    }
+    assert_eq!(RobotKind::from_id(0), None);
+    assert!("husky".parse::<RobotKind>().is_err());
+}
+
+#[test]
+fn every_robot_defaults_to_a_valid_profile_of_its_own_kind_in_each_of_its_protocols() {
+    for kind in RobotKind::ALL {
+        let entry = kind.entry();
+        let defaults = entry.defaults();
+        assert_eq!(defaults.robot(), kind);
+        assert_eq!(defaults.validate(), Ok(()), "{kind}");
+        assert_eq!(defaults.protocol(), entry.default_protocol, "{kind}");
+        for &protocol in entry.protocols {
+            let profile = entry.default_profile(Some(protocol)).unwrap();
+            assert_eq!(
+                (profile.robot(), profile.protocol()),
+                (kind, Some(protocol))
+            );
+            assert_eq!(profile.validate(), Ok(()), "{kind} {protocol}");
+        }
+        for protocol in [Protocol::V1, Protocol::V2] {
+            if !entry.protocols.contains(&protocol) {
+                assert!(
+                    entry.default_profile(Some(protocol)).is_err(),
+                    "{kind} {protocol}"
+                );
+            }
+        }
+    }
+}
+
+/// The driver against the robot's simulated firmware, on simulated time: after power-up a
+/// forward command moves the simulated chassis forward, and the driver reports it.
+#[test]
+fn every_robot_drives_its_simulated_firmware_in_each_of_its_protocols() {
+    for kind in RobotKind::ALL {
+        let entry = kind.entry();
+        let mut profiles = vec![entry.defaults()];
+        for &protocol in entry.protocols {
+            profiles.push(entry.default_profile(Some(protocol)).unwrap());
+        }
+        for profile in profiles {
+            let start = Timestamp::from_millis(1_000);
+            let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
+            let firmware = (entry.firmware)(&profile, start);
+            assert_eq!((driver.robot(), firmware.robot()), (kind, kind));
+            let mut pair = Pair::new(driver, firmware, start);
+            pair.run_for(Duration::from_secs(3));
+            let forward = Twist {
+                linear_x_mps: 0.3,
+                ..Twist::ZERO
+            };
+            let now = pair.now();
+            pair.driver.set_command(now, &forward);
+            pair.run_for(Duration::from_secs(3));
+            let truth = pair.firmware.truth();
+            assert!(
+                truth.x_m > 0.2,
+                "{kind} ({:?}): the simulated chassis moved {:.3} m",
+                profile.protocol(),
+                truth.x_m
+            );
+            let state = pair.driver.state();
+            assert_eq!(state.robot, kind.id());
+            assert!(state.motion.linear_mps > 0.2, "{kind}: {:?}", state.motion);
+        }
+    }
+}
+
+/// Every frame the simulated firmware and the driver exchange decodes with the robot's frame
+/// describer, and each CAN frame's JSON names the robot.
+#[test]
+fn every_robot_describes_the_frames_of_its_own_exchange() {
+    for kind in RobotKind::ALL {
+        let entry = kind.entry();
+        let profile = entry.defaults();
+        let start = Timestamp::from_millis(1_000);
+        let mut firmware = (entry.firmware)(&profile, start);
+        let mut codec = (entry.codec)(profile.clone());
+        let mut decoded = 0;
+        let mut now = start;
+        for _ in 0..50 {
+            now += Duration::from_millis(20);
+            firmware.handle_timeout(now);
+            while let Some(out) = firmware.poll_transmit(now) {
+                let jsons: Vec<_> = match &out {
+                    crate::Transmit::Can(frame) => vec![
+                        codec
+                            .decode_can(frame)
+                            .unwrap_or_else(|e| panic!("{kind}: {frame:?}: {e}")),
+                    ],
+                    crate::Transmit::Bytes(bytes) => codec
+                        .push_serial(bytes)
+                        .into_iter()
+                        .map(|r| r.unwrap_or_else(|e| panic!("{kind}: {e}")))
+                        .collect(),
+                };
+                for json in jsons {
+                    assert_eq!(json["robot"], kind.name(), "{kind}: {json:?}");
+                    decoded += 1;
+                }
+            }
+        }
+        assert!(decoded > 10, "{kind}: only {decoded} frames described");
+    }
+}
+
+#[test]
+fn every_robot_has_a_description_with_limits_geometry_and_a_battery_level() {
+    for kind in RobotKind::ALL {
+        let entry = kind.entry();
+        let mut profiles = vec![entry.defaults()];
+        for &protocol in entry.protocols {
+            profiles.push(entry.default_profile(Some(protocol)).unwrap());
+        }
+        for profile in profiles {
+            let d = describe(&profile);
+            let what = format!("{kind} {:?}", profile.protocol());
+            assert_eq!(d.kind, kind.id(), "{what}");
+            assert_eq!(d.kind_name(), kind.name(), "{what}");
+            assert_eq!(d.display_name(), entry.display_name, "{what}");
+            assert!(!d.model().is_empty(), "{what}");
+            assert_ne!(Kinematics::name(d.kinematics), "unknown", "{what}");
+            assert_ne!(d.protocol, WireProtocol::DETECTING, "{what}");
+            let limits = d.robot_limits;
+            assert!(
+                limits.forward_mps > 0.0 && limits.reverse_mps > 0.0,
+                "{what}"
+            );
+            assert!(limits.lateral_mps >= 0.0, "{what}");
+            assert!(
+                limits.angular_radps > 0.0 || limits.steer_rad > 0.0,
+                "{what}: neither a yaw-rate nor a steering limit"
+            );
+            assert!(
+                d.geometry.length_m > 0.0 && d.geometry.width_m > 0.0,
+                "{what}"
+            );
+            // The safety monitor's battery rule needs a level on every robot.
+            let b = d.battery;
+            assert!(
+                b.low_v > 0.0 || b.low_soc_pct > 0.0,
+                "{what}: no battery level: {b:?}"
+            );
+            assert!(
+                d.command_timeout_ms > 0 && d.heartbeat_period_ms > 0,
+                "{what}"
+            );
+            assert!(
+                d.heartbeat_period_ms < d.command_timeout_ms,
+                "{what}: heartbeat {} ms, chassis timeout {} ms",
+                d.heartbeat_period_ms,
+                d.command_timeout_ms
+            );
+            assert_eq!(d.sensors().len(), entry.sensors.len(), "{what}");
+        }
+    }
+}
+
+#[test]
+fn an_override_of_a_limit_reaches_the_description() {
+    let table: toml::Table = toml::from_str("max_linear_mps = 0.4").unwrap();
+    let profile = Profile::from_table(RobotKind::Hunter, None, &table).unwrap();
+    assert_eq!(describe(&profile).robot_limits.forward_mps, 0.4);
+    let table: toml::Table = toml::from_str("model = \"scout-mini-omni\"").unwrap();
+    let omni = Profile::from_table(RobotKind::ScoutMini, Some(Protocol::V2), &table).unwrap();
+    let d = describe(&omni);
+    assert_eq!(d.model(), "scout-mini-omni");
+    assert_eq!(d.kinematics, Kinematics::OMNI);
+    assert!(d.robot_limits.lateral_mps > 0.0);
+}
+
+#[test]
+fn the_xbot_describes_its_range_sensors_and_its_wheels() {
+    let d = describe(&RobotKind::Xbot.entry().defaults());
+    let names: Vec<&str> = d.sensors().iter().map(|s| s.name()).collect();
+    assert!(names.contains(&"ultrasonic_front_centre"), "{names:?}");
+    assert!(names.contains(&"ir_rear_left"), "{names:?}");
+    let joints: Vec<&str> = d.joints().iter().map(|j| j.name()).collect();
+    assert_eq!(
+        joints,
+        ["front_left_wheel_joint", "front_right_wheel_joint"]
+    );
+    assert!((d.geometry.wheel_radius_m - 0.1).abs() < 1e-12);
+    let titan = describe(&RobotKind::Titan.entry().defaults());
+    let joints: Vec<&str> = titan.joints().iter().map(|j| j.name()).collect();
+    assert_eq!(joints, ["front_steer_joint", "rear_steer_joint"]);
+}
