@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context;
-use chassis_protocols::Robot as RobotKind;
+use chassis_protocols::RobotKind;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -254,7 +254,7 @@ fn transport_of(mode: LoopMode) -> Transport {
 /// The period of `robot`'s heartbeat: the service's tick on that robot.
 fn tick_of(robot: RobotKind) -> Duration {
     use chassis_protocols::Profile;
-    match Profile::default_for(robot) {
+    match robot.entry().defaults() {
         Profile::Titan(p) => Duration::from_millis(p.heartbeat_period_ms),
         Profile::ScoutMini(p) => Duration::from_millis(p.heartbeat_period_ms),
         Profile::Xbot(p) => Duration::from_secs_f64(1.0 / p.heartbeat_hz),

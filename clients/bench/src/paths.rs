@@ -19,9 +19,7 @@ use chassis_client::{
     VelocityRequest, now_ns,
 };
 use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{
-    CanFrame, Profile, Robot as RobotKind, agilex_v2, scout_mini, titan, xbot,
-};
+use chassis_protocols::{CanFrame, Profile, RobotKind, agilex_v2, scout_mini, titan, xbot};
 use serde::Serialize;
 
 use zerocopy::IntoBytes;
@@ -292,7 +290,7 @@ impl MotionDecoder {
                     return None;
                 }
                 let can = CanFrame::new(frame.can_id, frame.payload()).ok()?;
-                let Profile::V2(profile) = Profile::default_for(v2) else {
+                let Profile::V2(profile) = v2.entry().defaults() else {
                     return None;
                 };
                 match agilex_v2::decode(&can, &profile).ok()? {

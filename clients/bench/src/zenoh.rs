@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::{Robot, STATE_BUFFER, Source, now_ns};
-use chassis_protocols::Robot as RobotKind;
+use chassis_protocols::RobotKind;
 
 use crate::paths::{self, BusKind, LoopMode, StateRecorder};
 use crate::stats::Latencies;

@@ -158,10 +158,10 @@ impl HexStream {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chassis_protocols::Robot;
+    use chassis_protocols::RobotKind;
 
     fn decode(
-        robot: Robot,
+        robot: RobotKind,
         args: &[&str],
         stdin: &str,
     ) -> (Vec<serde_json::Value>, String, Summary) {
@@ -169,7 +169,7 @@ mod tests {
         let mut out = Vec::new();
         let mut err = Vec::new();
         let summary = run(
-            Profile::default_for(robot),
+            robot.entry().defaults(),
             &args,
             stdin.as_bytes(),
             &mut out,
@@ -187,7 +187,7 @@ mod tests {
     #[test]
     fn titan_faults_are_named_beside_the_raw_word() {
         // The manual's layout: b5 bit5 bumper, b6 bit1 heartbeat lost, b7 bit0 under-voltage.
-        let (json, err, _) = decode(Robot::Titan, &["211#0201019000200201"], "");
+        let (json, err, _) = decode(RobotKind::Titan, &["211#0201019000200201"], "");
         assert_eq!(err, "");
         assert_eq!(json[0]["vendor_fault_word"], 0x0020_0201);
         assert_eq!(
@@ -201,7 +201,7 @@ mod tests {
         );
         assert_eq!(json[0]["warnings"], serde_json::json!([]));
         // b7 bit2: RC link lost only warns (the chassis still drives).
-        let (json, _, _) = decode(Robot::Titan, &["211#0001019000000004"], "");
+        let (json, _, _) = decode(RobotKind::Titan, &["211#0001019000000004"], "");
         assert_eq!(json[0]["faults"], serde_json::json!([]));
         assert_eq!(json[0]["warnings"], serde_json::json!(["rc_link_lost"]));
     }
@@ -209,14 +209,14 @@ mod tests {
     #[test]
     fn titan_motor_driver_status_and_bms_alarms_are_named() {
         // 0x261 b5 = 0x41: supply under-voltage, enabled.
-        let (json, err, _) = decode(Robot::Titan, &["261#01E0001E1E410000"], "");
+        let (json, err, _) = decode(RobotKind::Titan, &["261#01E0001E1E410000"], "");
         assert_eq!(err, "");
         assert_eq!(
             json[0]["driver_status_flags"],
             serde_json::json!(["supply_under_voltage", "enabled"])
         );
         // 0x362: alarm 1 under-voltage, alarm 2 charge over-current, warning 1 over-temperature.
-        let (json, err, _) = decode(Robot::Titan, &["362#04010800"], "");
+        let (json, err, _) = decode(RobotKind::Titan, &["362#04010800"], "");
         assert_eq!(err, "");
         assert_eq!(
             json[0]["alarms"],
@@ -229,7 +229,7 @@ mod tests {
     fn scout_mini_faults_are_named_beside_the_raw_word() {
         // 0x151: emergency stop body state, 24.0 V, b4 bit0 (CAN command checksum error),
         // count 0, checksum 0x4D.
-        let (json, err, _) = decode(Robot::ScoutMini, &["151#010100F00100004D"], "");
+        let (json, err, _) = decode(RobotKind::ScoutMini, &["151#010100F00100004D"], "");
         assert_eq!(err, "");
         assert_eq!(json[0]["vendor_fault_word"], 0x0100);
         assert_eq!(json[0]["faults"], serde_json::json!(["emergency_stop"]));
@@ -238,7 +238,7 @@ mod tests {
 
     #[test]
     fn titan_frames_from_arguments_become_json_with_si_fields() {
-        let (json, err, summary) = decode(Robot::Titan, &["111#0096000000000000"], "");
+        let (json, err, summary) = decode(RobotKind::Titan, &["111#0096000000000000"], "");
         assert_eq!(err, "");
         assert_eq!(
             summary,
@@ -261,7 +261,7 @@ mod tests {
                      garbage\n\
                      \n\
                      (1700000000.020000) can0 43A#EE\n";
-        let (json, err, summary) = decode(Robot::Titan, &[], stdin);
+        let (json, err, summary) = decode(RobotKind::Titan, &[], stdin);
         assert_eq!(
             summary,
             Summary {
@@ -279,7 +279,7 @@ mod tests {
 
     #[test]
     fn unknown_ids_are_reported_by_frame() {
-        let (_, err, summary) = decode(Robot::Titan, &["7FF#00"], "");
+        let (_, err, summary) = decode(RobotKind::Titan, &["7FF#00"], "");
         assert_eq!(summary.failed, 1);
         assert_eq!(err.trim(), "7FF#00: unknown frame id 0x7FF");
     }

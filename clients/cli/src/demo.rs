@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::{Robot, Ticker, install_signal_handlers, now_ns, termination_requested};
-use chassis_protocols::Robot as RobotKind;
+use chassis_protocols::RobotKind;
 use clap::Args;
 
 use crate::procs::{Children, sibling};

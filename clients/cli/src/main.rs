@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use chassis_interfaces::ClampFlags;
-use chassis_protocols::{Profile, Protocol, Robot};
+use chassis_protocols::{Profile, Protocol, RobotKind};
 use clap::{Parser, Subcommand};
 
 mod action;
@@ -39,7 +39,7 @@ enum Cmd {
     /// given. Exits 1 if any frame failed.
     Decode {
         #[arg(long, value_parser = parse_robot)]
-        robot: Robot,
+        robot: RobotKind,
         /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
         /// the other AgileX robots v2).
         #[arg(long, value_parser = parse_protocol)]
@@ -53,7 +53,7 @@ enum Cmd {
     /// Print the frame(s) the service would send for a command (CAN as `ID#HEX`, XBot as hex).
     Encode {
         #[arg(long, value_parser = parse_robot)]
-        robot: Robot,
+        robot: RobotKind,
         /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
         /// the other AgileX robots v2).
         #[arg(long, value_parser = parse_protocol)]
@@ -143,7 +143,7 @@ fn restore_sigpipe() {
     let _ = unsafe { signal(Signal::SIGPIPE, SigHandler::SigDfl) };
 }
 
-pub(crate) fn parse_robot(text: &str) -> Result<Robot, chassis_protocols::UnknownRobot> {
+pub(crate) fn parse_robot(text: &str) -> Result<RobotKind, chassis_protocols::UnknownRobot> {
     text.parse()
 }
 
@@ -154,7 +154,7 @@ pub(crate) fn parse_protocol(text: &str) -> Result<Protocol, chassis_protocols::
 /// The robot's profile: the defaults for the protocol, overridden by a TOML file when one is
 /// given.
 fn load_profile(
-    robot: Robot,
+    robot: RobotKind,
     protocol: Option<Protocol>,
     path: Option<&Path>,
 ) -> anyhow::Result<Profile> {

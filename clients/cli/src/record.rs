@@ -77,12 +77,11 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::Group;
 use chassis_client::{
-    BusFrame, ChassisState, FrameDirection, FrameKind, LinkFlags, MuxStatus, Robot, RobotKind,
-    STATE_BUFFER, StateStream, install_signal_handlers, now_ns, termination_requested,
-    valid_robot_name,
+    BusFrame, ChassisState, FrameDirection, FrameKind, LinkFlags, MuxStatus, Robot, STATE_BUFFER,
+    StateStream, install_signal_handlers, now_ns, termination_requested, valid_robot_name,
 };
 use chassis_foxglove::view;
-use chassis_protocols::{CanFrame, Robot as RobotModel};
+use chassis_protocols::{CanFrame, RobotKind};
 use clap::Args;
 use foxglove::Encode;
 use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame};
@@ -125,7 +124,7 @@ pub struct ReplayArgs {
     pub file: PathBuf,
     /// The robot (default: the one the MCAP recording names; required for a candump log).
     #[arg(long, value_parser = parse_model)]
-    pub robot: Option<RobotModel>,
+    pub robot: Option<RobotKind>,
     /// The replayed robot's name (chassis/<NAME>/…); keep it apart from a live robot's.
     #[arg(long, default_value = "replay")]
     pub name: String,
@@ -146,7 +145,7 @@ pub struct ReplayArgs {
     pub quiet: bool,
 }
 
-fn parse_model(text: &str) -> Result<RobotModel, chassis_protocols::UnknownRobot> {
+fn parse_model(text: &str) -> Result<RobotKind, chassis_protocols::UnknownRobot> {
     text.parse()
 }
 
@@ -520,9 +519,10 @@ impl McapSink {
             .body
             .as_ref()
             .is_none_or(|(kind, _)| *kind != state.robot)
-            && let Some(robot) = view::robot_of(state.robot)
+            && let Some(robot) = RobotKind::from_id(state.robot)
         {
-            self.fox.body = Some((state.robot, view::Body::of(robot)));
+            let description = chassis_protocols::description::describe(&robot.entry().defaults());
+            self.fox.body = Some((state.robot, view::Body::of(&description)));
         }
         if self
             .fox
@@ -830,7 +830,7 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
             .with_context(|| format!("chassis/{} published no state within 2 s", args.name))?,
     };
     let kind = first.robot;
-    if args.candump && kind == RobotKind::XBOT {
+    if args.candump && RobotKind::from_id(kind) == Some(RobotKind::Xbot) {
         bail!(
             "the xbot speaks RS232: its serial stream is not CAN and cannot be a candump log; \
              record MCAP instead (chassis record FILE.mcap)"
@@ -856,7 +856,7 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
     }
 
     let start = Start {
-        robot: RobotKind::name(kind),
+        robot: RobotKind::from_id(kind).map_or("unknown", RobotKind::name),
         name: args.name.clone(),
         monotonic_ns: now_ns(),
         wall_ns: wall_ns(),
@@ -1064,7 +1064,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         Some(meta) => match meta.get("robot") {
             Some(robot) => Some(
                 robot
-                    .parse::<RobotModel>()
+                    .parse::<RobotKind>()
                     .map_err(anyhow::Error::msg)
                     .with_context(|| format!("the robot {} names", path.display()))?,
             ),
@@ -1336,7 +1336,7 @@ mod tests {
         };
         state.motion.linear_mps = 0.5;
         state.odometry.x_m = 1.25;
-        state.robot = RobotKind::TITAN;
+        state.robot = RobotKind::Titan.id();
         sink.state(&state).unwrap();
         let mux = MuxStatus {
             stamp_ns: 1_000_000_400,
@@ -1410,7 +1410,7 @@ mod tests {
         let path = scratch("foxglove.mcap");
         let mut sink: Box<dyn Sink> = Box::new(McapSink::create(&path, start()).unwrap());
         let mut state = ChassisState {
-            robot: RobotKind::TITAN,
+            robot: RobotKind::Titan.id(),
             ..ChassisState::default()
         };
         // 1 s of samples every 5 ms, driving forward at 1 m/s; a fault appears half-way.

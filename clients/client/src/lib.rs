@@ -36,8 +36,8 @@ use std::time::Duration;
 
 pub use chassis_interfaces::*;
 use chassis_ipc::{
-    CMD, CONTROL, ClientPorts, FRAMES, IpcError, MUX, PUBLICATION, Reader, RequestResponse, SIM,
-    STATE, Writer, publication,
+    CMD, CONTROL, ClientPorts, DESCRIPTION, FRAMES, IpcError, MUX, PUBLICATION, Reader,
+    RequestResponse, SIM, STATE, Writer, publication,
 };
 pub use chassis_ipc::{IPC_PREFIX_ENV, STATE_BUFFER, ServiceKind, service_name};
 use iceoryx2::pending_response::PendingResponse;
@@ -72,6 +72,11 @@ pub enum ClientError {
         what: &'static str,
         timeout: Duration,
     },
+    #[error(
+        "chassis/{name}/robot has no description: is its chassisd older than the robot \
+         description, or not serving yet?"
+    )]
+    NoDescription { name: String },
     #[error("'{0}' is not a valid robot or source name (1-16 of a-z 0-9 - _)")]
     BadName(String),
     #[error("iceoryx2: {0}")]
@@ -105,6 +110,8 @@ type Counter<Req> = ClientPorts<Req>;
 const LATEST_STATE_BUFFER: usize = 4;
 /// Mux decisions a [`Robot`]'s own subscriber keeps (it wants the newest).
 const LATEST_MUX_BUFFER: usize = 4;
+/// Longest a reader waiting for the description sleeps between two looks.
+const DESCRIPTION_POLL: Duration = Duration::from_millis(50);
 
 /// A connection to one robot.
 ///
@@ -122,6 +129,8 @@ pub struct Robot {
     mux_events: Option<Listener<ipc::Service>>,
     latest_state: Option<ChassisState>,
     latest_mux: Option<MuxStatus>,
+    description: Option<Subscriber<ipc::Service, RobotDescription, ()>>,
+    latest_description: Option<RobotDescription>,
     control: Option<Counter<ControlRequest>>,
     sim: Option<Counter<SimRequest>>,
     control_seq: u64,
@@ -168,6 +177,8 @@ impl Robot {
             mux_events: None,
             latest_state: None,
             latest_mux: None,
+            description: None,
+            latest_description: None,
             control: None,
             sim: None,
             control_seq: 0,
@@ -287,6 +298,65 @@ impl Robot {
         }
         self.drain_mux()?;
         Ok(self.latest_mux)
+    }
+
+    /// Takes every pending description; true if there was one.
+    fn drain_description(&mut self) -> Result<bool, ClientError> {
+        if self.description.is_none() {
+            let reader = DESCRIPTION
+                .open(
+                    &self.node,
+                    &service_name(&self.name, ServiceKind::Description),
+                )?
+                .subscriber(DESCRIPTION.limits.subscriber_max_buffer_size)?;
+            self.description = Some(reader.subscriber);
+        }
+        let Some(subscriber) = &self.description else {
+            return Ok(false);
+        };
+        let latest = &mut self.latest_description;
+        Ok(
+            receive_all(subscriber, "receiving the robot description", |d| {
+                *latest = Some(*d)
+            })? > 0,
+        )
+    }
+
+    /// What the robot is, as `chassisd` describes the robot it drives: kind, model, protocol
+    /// in use, the effective limits, geometry, battery levels, sensors, joints and the mux's
+    /// sources. Kept for late joiners: the first call waits at most `timeout` (the service hands
+    /// it to a new reader within one tick of its loop). Later calls return at once, with any
+    /// newer description (the protocol once detection decides).
+    pub fn description(&mut self, timeout: Duration) -> Result<RobotDescription, ClientError> {
+        self.drain_description()?;
+        if let Some(description) = self.latest_description {
+            return Ok(description);
+        }
+        let deadline =
+            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+        loop {
+            let left = deadline.saturating_sub(now_ns());
+            if left == 0 {
+                return Err(ClientError::NoDescription {
+                    name: self.name.clone(),
+                });
+            }
+            // The state is published at least every 100 ms: each sample is a chance to look.
+            self.state_events
+                .timed_wait(|_| {}, Duration::from_nanos(left).min(DESCRIPTION_POLL))
+                .map_err(ipc("waiting for the robot description"))?;
+            if self.drain_description()? {
+                return self.latest_description.ok_or(ClientError::NoDescription {
+                    name: self.name.clone(),
+                });
+            }
+        }
+    }
+
+    /// The newest description received so far, without waiting.
+    pub fn latest_description(&mut self) -> Result<Option<RobotDescription>, ClientError> {
+        self.drain_description()?;
+        Ok(self.latest_description)
     }
 
     /// Publishes velocity requests as the configured source `name`. Fails if the service has no

@@ -24,7 +24,8 @@ use chassis_client::{
     FaultClear, FrameDirection, FrameKind, LightMode, MuxStatus, Robot, Source, Ticker,
     termination_requested,
 };
-use chassis_protocols::{Command, Profile, command_to_request};
+use chassis_protocols::description::describe;
+use chassis_protocols::{Command, RobotKind, command_to_request};
 use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame, SceneUpdate, log};
 use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use serde::Deserialize;
@@ -418,9 +419,10 @@ impl Loop<'_> {
             .body
             .as_ref()
             .is_none_or(|(kind, _)| *kind != state.robot)
-            && let Some(robot) = view::robot_of(state.robot)
+            && let Some(robot) = RobotKind::from_id(state.robot)
         {
-            self.body = Some((state.robot, Body::of(robot)));
+            let description = describe(&robot.entry().defaults());
+            self.body = Some((state.robot, Body::of(&description)));
         }
         let c = self.channels;
         if c.state.has_sinks() {
@@ -490,9 +492,10 @@ impl Loop<'_> {
         }
         let kind = self.last_state_robot();
         if self.codec.as_ref().is_none_or(|(k, _)| *k != kind)
-            && let Some(robot) = view::robot_of(kind)
+            && let Some(robot) = RobotKind::from_id(kind)
         {
-            self.codec = Some((kind, RobotCodec::new(Profile::default_for(robot))));
+            let entry = robot.entry();
+            self.codec = Some((kind, (entry.codec)(entry.defaults())));
         }
         let mut entry = Map::new();
         entry.insert("stamp_ns".into(), frame.stamp_ns.into());

@@ -14,10 +14,8 @@
 //! | `ir_left`, `ir_centre`, `ir_right` | `base_link` | XBot IR cliff sensors, rear edge, looking back |
 
 use chassis_client::{
-    ChassisState, FaultFlags, Group, LinkFlags, MuxStatus, RobotKind, ZeroReason,
+    ChassisState, FaultFlags, Group, LinkFlags, MuxStatus, RobotDescription, SensorKind, ZeroReason,
 };
-use chassis_protocols::Robot;
-use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile};
 use foxglove::messages::{
     Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, LinePrimitive,
     LocationFix, Log, Point3, Pose, PoseInFrame, Quaternion, SceneEntity, SceneUpdate, Timestamp,
@@ -73,16 +71,6 @@ fn color(r: f64, g: f64, b: f64, a: f64) -> Color {
     Color { r, g, b, a }
 }
 
-/// The robot behind a `ChassisState::robot` value.
-pub fn robot_of(kind: u8) -> Option<Robot> {
-    match kind {
-        RobotKind::TITAN => Some(Robot::Titan),
-        RobotKind::SCOUT_MINI => Some(Robot::ScoutMini),
-        RobotKind::XBOT => Some(Robot::Xbot),
-        _ => None,
-    }
-}
-
 /// Which of the XBot's range sensors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RangeKind {
@@ -91,9 +79,9 @@ pub enum RangeKind {
 }
 
 /// A range sensor mounted on the body.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct SensorMount {
-    pub frame: &'static str,
+    pub frame: String,
     pub kind: RangeKind,
     /// Index into `RangesState::ultrasonic_m` or `ir_m`.
     pub index: usize,
@@ -104,7 +92,7 @@ pub struct SensorMount {
     pub cone_rad: f64,
 }
 
-/// The body drawn in the scene, from the robot's profile.
+/// The body drawn in the scene, from the robot's description.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Body {
     pub length_m: f64,
@@ -114,73 +102,34 @@ pub struct Body {
 }
 
 impl Body {
-    /// The footprint: the wheelbase × track rectangle of the profile's defaults with the wheels'
-    /// size around it (TITAN, SCOUT MINI, the protocol-V2 robots); the XBot's body (its profile has no wheelbase) with
-    /// its six range sensors.
-    pub fn of(robot: Robot) -> Self {
-        match robot {
-            Robot::Titan => {
-                let p = TitanProfile::default();
-                Body {
-                    length_m: p.wheelbase_m + 0.35,
-                    width_m: p.track_m + 0.25,
-                    height_m: 0.45,
-                    sensors: Vec::new(),
-                }
-            }
-            Robot::ScoutMini => {
-                let p = ScoutMiniProfile::default();
-                Body {
-                    length_m: p.wheelbase_m + 0.2,
-                    width_m: p.track_m + 0.12,
-                    height_m: 0.25,
-                    sensors: Vec::new(),
-                }
-            }
-            Robot::Scout
-            | Robot::Hunter
-            | Robot::HunterSe
-            | Robot::Tracer
-            | Robot::Bunker
-            | Robot::RangerMini => match chassis_protocols::Profile::default_for(robot) {
-                chassis_protocols::Profile::V2(p) => Body {
-                    length_m: p.wheelbase_m + 0.2,
-                    width_m: p.track_m + 0.15,
-                    height_m: 0.3,
-                    sensors: Vec::new(),
-                },
-                // Every protocol-V2 robot's default profile is a V2 one; anything else is drawn
-                // as a SCOUT MINI.
-                _ => Body::of(Robot::ScoutMini),
-            },
-            Robot::Xbot => {
-                let (length_m, width_m) = (0.5, 0.4);
-                let side = std::f64::consts::FRAC_PI_6;
-                let mount = |frame, kind, index, x_m, y_m, yaw_rad, cone_deg: f64| SensorMount {
-                    frame,
-                    kind,
-                    index,
-                    x_m,
-                    y_m,
-                    yaw_rad,
-                    cone_rad: cone_deg.to_radians(),
+    /// The described robot's outline and its range sensors with their cones.
+    pub fn of(description: &RobotDescription) -> Self {
+        let g = &description.geometry;
+        let sensors = description
+            .sensors()
+            .iter()
+            .filter_map(|s| {
+                let kind = match s.kind {
+                    SensorKind::ULTRASONIC => RangeKind::Ultrasonic,
+                    SensorKind::INFRARED => RangeKind::Ir,
+                    _ => return None,
                 };
-                let (front, rear, w) = (length_m / 2.0, -length_m / 2.0, width_m / 2.0 - 0.05);
-                let back = std::f64::consts::PI;
-                Body {
-                    length_m,
-                    width_m,
-                    height_m: 0.3,
-                    sensors: vec![
-                        mount("us_left", RangeKind::Ultrasonic, 0, front, w, side, 30.0),
-                        mount("us_centre", RangeKind::Ultrasonic, 1, front, 0.0, 0.0, 30.0),
-                        mount("us_right", RangeKind::Ultrasonic, 2, front, -w, -side, 30.0),
-                        mount("ir_left", RangeKind::Ir, 0, rear, w, back, 10.0),
-                        mount("ir_centre", RangeKind::Ir, 1, rear, 0.0, back, 10.0),
-                        mount("ir_right", RangeKind::Ir, 2, rear, -w, back, 10.0),
-                    ],
-                }
-            }
+                Some(SensorMount {
+                    frame: s.name().to_string(),
+                    kind,
+                    index: usize::from(s.index).min(2),
+                    x_m: s.x_m,
+                    y_m: s.y_m,
+                    yaw_rad: s.yaw_rad,
+                    cone_rad: s.field_of_view_rad,
+                })
+            })
+            .collect();
+        Body {
+            length_m: g.length_m,
+            width_m: g.width_m,
+            height_m: g.height_m,
+            sensors,
         }
     }
 }
@@ -225,7 +174,7 @@ pub fn transforms(state: &ChassisState, body: &Body, wall_ns: u64) -> FrameTrans
     for s in &body.sensors {
         transforms.push(tf(
             BASE_LINK,
-            s.frame,
+            &s.frame,
             s.x_m,
             s.y_m,
             body.height_m / 2.0,
@@ -476,10 +425,12 @@ pub fn held_locks(mux: &MuxStatus) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chassis_protocols::RobotKind;
+    use chassis_protocols::description::describe;
 
     fn driven(x: f64, y: f64, yaw: f64) -> ChassisState {
         let mut s = ChassisState {
-            robot: RobotKind::XBOT,
+            robot: RobotKind::Xbot.id(),
             ..ChassisState::default()
         };
         s.odometry.x_m = x;
@@ -490,7 +441,7 @@ mod tests {
 
     #[test]
     fn the_base_link_follows_the_odometry() {
-        let body = Body::of(Robot::Xbot);
+        let body = Body::of(&describe(&RobotKind::Xbot.entry().defaults()));
         let tf = transforms(&driven(1.5, -0.5, std::f64::consts::FRAC_PI_2), &body, 0);
         let base = &tf.transforms[0];
         assert_eq!(
@@ -531,7 +482,7 @@ mod tests {
 
     #[test]
     fn range_cones_show_only_the_sensors_with_a_reading() {
-        let body = Body::of(Robot::Xbot);
+        let body = Body::of(&describe(&RobotKind::Xbot.entry().defaults()));
         let mut s = driven(0.0, 0.0, 0.0);
         s.ranges.ultrasonic_m = [0.0, 1.25, 0.0];
         let update = scene(&s, &body, &Trail::default(), 0);
@@ -543,7 +494,12 @@ mod tests {
         let p = cone.pose.unwrap().position.unwrap();
         assert!((p.x - (body.length_m / 2.0 + 0.625)).abs() < 1e-9, "{p:?}");
         // A TITAN has no range sensors: only its body and trail.
-        let titan = scene(&s, &Body::of(Robot::Titan), &Trail::default(), 0);
+        let titan = scene(
+            &s,
+            &Body::of(&describe(&RobotKind::Titan.entry().defaults())),
+            &Trail::default(),
+            0,
+        );
         assert_eq!(titan.entities.len(), 2);
     }
 

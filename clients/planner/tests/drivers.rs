@@ -132,8 +132,8 @@ fn drive(model: RobotModel, shape: Shape) -> Outcome {
             follow(&mut pair, model, &path)
         }
         v2 => {
-            let robot: chassis_protocols::Robot = v2.name().parse().unwrap();
-            let Profile::V2(p) = Profile::default_for(robot) else {
+            let robot: chassis_protocols::RobotKind = v2.name().parse().unwrap();
+            let Profile::V2(p) = robot.entry().defaults() else {
                 panic!("{robot} is not an AgileX V2 robot");
             };
             let mut pair = Pair::new(V2Driver::new(p.clone(), config, T0), V2Sim::new(p, T0), T0);

@@ -131,6 +131,21 @@ SERVICES: dict[str, dict[str, Any]] = {   'cmd': {   'created_by': 'chassisd (on
                'name': 'chassis/{robot}/mux',
                'pattern': 'publish_subscribe',
                'payload': 'MuxStatus'},
+    'robot': {   'created_by': 'chassisd',
+                 'events': [   {   'max_listeners': 40,
+                                   'max_nodes': 64,
+                                   'max_notifiers': 2,
+                                   'name': 'chassis/{robot}/robot',
+                                   'notified_by': 'the publisher, after sending'}],
+                 'limits': {   'history_size': 1,
+                               'max_nodes': 64,
+                               'max_publishers': 1,
+                               'max_subscribers': 40,
+                               'safe_overflow': True,
+                               'subscriber_max_buffer_size': 2},
+                 'name': 'chassis/{robot}/robot',
+                 'pattern': 'publish_subscribe',
+                 'payload': 'RobotDescription'},
     'safety': {   'created_by': 'chassis-safety',
                   'events': [   {   'max_listeners': 40,
                                     'max_nodes': 64,
@@ -184,6 +199,19 @@ SERVICES: dict[str, dict[str, Any]] = {   'cmd': {   'created_by': 'chassisd (on
                  'name': 'chassis/{robot}/state',
                  'pattern': 'publish_subscribe',
                  'payload': 'ChassisState'}}
+
+
+class BatteryLevels(Struct):
+    """``chassis::BatteryLevels.v1``: 40 bytes, aligned to 8."""
+
+    _type_name = 'chassis::BatteryLevels.v1'
+    _fields_ = [
+        ('full_v', ctypes.c_double),
+        ('low_v', ctypes.c_double),
+        ('critical_v', ctypes.c_double),
+        ('low_soc_pct', ctypes.c_double),
+        ('critical_soc_pct', ctypes.c_double),
+    ]
 
 
 class BmsState(Struct):
@@ -482,6 +510,34 @@ class ControlResponse(Struct):
     ]
 
 
+class Geometry(Struct):
+    """``chassis::Geometry.v1``: 64 bytes, aligned to 8."""
+
+    _type_name = 'chassis::Geometry.v1'
+    _fields_ = [
+        ('wheelbase_m', ctypes.c_double),
+        ('track_m', ctypes.c_double),
+        ('wheel_radius_m', ctypes.c_double),
+        ('travel_per_count_m', ctypes.c_double),
+        ('length_m', ctypes.c_double),
+        ('width_m', ctypes.c_double),
+        ('height_m', ctypes.c_double),
+        ('min_turn_radius_m', ctypes.c_double),
+    ]
+
+
+class JointDescription(Struct):
+    """``chassis::JointDescription.v1``: 40 bytes, aligned to 1."""
+
+    _type_name = 'chassis::JointDescription.v1'
+    _fields_ = [
+        ('name', (ctypes.c_uint8 * 32)),
+        ('source', ctypes.c_uint8),
+        ('index', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 6)),
+    ]
+
+
 class LockStatus(Struct):
     """``chassis::LockStatus.v1``: 32 bytes, aligned to 8."""
 
@@ -498,6 +554,21 @@ class LockStatus(Struct):
     HOLDER_OPERATOR = 254
     HOLDER_NONE = 255
     NAMES = {254: 'holder-operator', 255: 'holder-none'}
+
+
+class MotionLimits(Struct):
+    """``chassis::MotionLimits.v1``: 56 bytes, aligned to 8."""
+
+    _type_name = 'chassis::MotionLimits.v1'
+    _fields_ = [
+        ('forward_mps', ctypes.c_double),
+        ('reverse_mps', ctypes.c_double),
+        ('lateral_mps', ctypes.c_double),
+        ('angular_radps', ctypes.c_double),
+        ('steer_rad', ctypes.c_double),
+        ('linear_accel_mps2', ctypes.c_double),
+        ('angular_accel_radps2', ctypes.c_double),
+    ]
 
 
 class Twist(Struct):
@@ -553,6 +624,82 @@ class MuxStatus(Struct):
 
     NO_SOURCE = 255
     NAMES = {255: 'no-source'}
+
+
+class OdometryVariance(Struct):
+    """``chassis::OdometryVariance.v1``: 32 bytes, aligned to 8."""
+
+    _type_name = 'chassis::OdometryVariance.v1'
+    _fields_ = [
+        ('position_m2', ctypes.c_double),
+        ('yaw_rad2', ctypes.c_double),
+        ('linear_m2ps2', ctypes.c_double),
+        ('angular_rad2ps2', ctypes.c_double),
+    ]
+
+
+class SensorDescription(Struct):
+    """``chassis::SensorDescription.v1``: 96 bytes, aligned to 8."""
+
+    _type_name = 'chassis::SensorDescription.v1'
+    _fields_ = [
+        ('name', (ctypes.c_uint8 * 32)),
+        ('kind', ctypes.c_uint8),
+        ('index', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 6)),
+        ('x_m', ctypes.c_double),
+        ('y_m', ctypes.c_double),
+        ('z_m', ctypes.c_double),
+        ('yaw_rad', ctypes.c_double),
+        ('field_of_view_rad', ctypes.c_double),
+        ('min_range_m', ctypes.c_double),
+        ('max_range_m', ctypes.c_double),
+    ]
+
+
+class SourceDescription(Struct):
+    """``chassis::SourceDescription.v1``: 24 bytes, aligned to 4."""
+
+    _type_name = 'chassis::SourceDescription.v1'
+    _fields_ = [
+        ('name', (ctypes.c_uint8 * 16)),
+        ('timeout_ms', ctypes.c_uint32),
+        ('priority', ctypes.c_uint8),
+        ('flags', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 2)),
+    ]
+
+
+class RobotDescription(Struct):
+    """``chassis::RobotDescription.v1``: 2200 bytes, aligned to 8."""
+
+    _type_name = 'chassis::RobotDescription.v1'
+    _fields_ = [
+        ('seq', ctypes.c_uint64),
+        ('stamp_ns', ctypes.c_uint64),
+        ('kind', ctypes.c_uint8),
+        ('protocol', ctypes.c_uint8),
+        ('kinematics', ctypes.c_uint8),
+        ('bus', ctypes.c_uint8),
+        ('flags', ctypes.c_uint8),
+        ('sensor_count', ctypes.c_uint8),
+        ('joint_count', ctypes.c_uint8),
+        ('source_count', ctypes.c_uint8),
+        ('name', (ctypes.c_uint8 * 16)),
+        ('kind_name', (ctypes.c_uint8 * 16)),
+        ('model', (ctypes.c_uint8 * 32)),
+        ('display_name', (ctypes.c_uint8 * 32)),
+        ('robot_limits', MotionLimits),
+        ('configured_limits', MotionLimits),
+        ('geometry', Geometry),
+        ('battery', BatteryLevels),
+        ('odometry_variance', OdometryVariance),
+        ('command_timeout_ms', ctypes.c_uint32),
+        ('heartbeat_period_ms', ctypes.c_uint32),
+        ('sensors', (SensorDescription * 12)),
+        ('joints', (JointDescription * 12)),
+        ('sources', (SourceDescription * 8)),
+    ]
 
 
 class SafetyStatus(Struct):
@@ -624,6 +771,14 @@ class VelocityRequest(Struct):
     ]
 
 
+class BusKind(Constants):
+    """``BusKind``: enum of u8."""
+
+    CAN = 1
+    RS232 = 2
+    NAMES = {1: 'can', 2: 'rs232'}
+
+
 class ClampFlags(Constants):
     """``ClampFlags``: flags of u32."""
 
@@ -681,6 +836,18 @@ class ControlStatus(Constants):
     INVALID = 3
     TIMEOUT = 4
     NAMES = {0: 'ok', 1: 'refused', 2: 'unsupported', 3: 'invalid', 4: 'timeout'}
+
+
+class DescriptionFlags(Constants):
+    """``DescriptionFlags``: flags of u8."""
+
+    FLAGS = True
+    SIMULATED = 1
+    BRAKE = 2
+    LIGHTS = 4
+    LATERAL = 8
+    SAFETY_REQUIRED = 16
+    NAMES = {1: 'simulated', 2: 'brake', 4: 'lights', 8: 'lateral', 16: 'safety-required'}
 
 
 class DriverStatus(Constants):
@@ -798,6 +965,28 @@ class Group(Constants):
     NAMES = {0: 'motion', 1: 'steering', 2: 'wheel-speed', 3: 'odometry', 4: 'pose', 5: 'system', 6: 'motor-drive', 7: 'motor-driver', 8: 'bms-pack', 9: 'bms-1', 10: 'bms-2', 11: 'rc', 12: 'lights', 13: 'body', 14: 'ranges', 15: 'imu', 16: 'lift', 17: 'pan-tilt', 18: 'gps', 19: 'command'}
 
 
+class JointSource(Constants):
+    """``JointSource``: enum of u8."""
+
+    FRONT_STEER = 1
+    REAR_STEER = 2
+    WHEEL = 3
+    NAMES = {1: 'front-steer', 2: 'rear-steer', 3: 'wheel'}
+
+
+class Kinematics(Constants):
+    """``Kinematics``: enum of u8."""
+
+    DIFFERENTIAL = 1
+    SKID_STEER = 2
+    TRACKED = 3
+    OMNI = 4
+    ACKERMANN = 5
+    DUAL_ACKERMANN = 6
+    FOUR_WHEEL_STEER = 7
+    NAMES = {1: 'differential', 2: 'skid-steer', 3: 'tracked', 4: 'omni', 5: 'ackermann', 6: 'dual-ackermann', 7: 'four-wheel-steer'}
+
+
 class LightMode(Constants):
     """``LightMode``: enum of u8."""
 
@@ -882,6 +1071,17 @@ class SafetyRule(Constants):
     NAMES = {0: 'fault', 1: 'battery', 2: 'stale', 3: 'bumper', 4: 'ultrasonic', 5: 'ir', 6: 'speed', 7: 'operator'}
 
 
+class SensorKind(Constants):
+    """``SensorKind``: enum of u8."""
+
+    ULTRASONIC = 1
+    INFRARED = 2
+    IMU = 3
+    GPS = 4
+    BUMPER = 5
+    NAMES = {1: 'ultrasonic', 2: 'infrared', 3: 'imu', 4: 'gps', 5: 'bumper'}
+
+
 class SimKind(Constants):
     """``SimKind``: enum of u8."""
 
@@ -937,27 +1137,35 @@ class ZeroReason(Constants):
 
 # Every IPC type, by its Rust name.
 TYPES: dict[str, type[Struct]] = {
+    'BatteryLevels': BatteryLevels,
     'BmsState': BmsState,
     'BusFrame': BusFrame,
     'ChassisState': ChassisState,
     'CommandEcho': CommandEcho,
     'ControlRequest': ControlRequest,
     'ControlResponse': ControlResponse,
+    'Geometry': Geometry,
     'GpsFix': GpsFix,
     'ImuState': ImuState,
+    'JointDescription': JointDescription,
     'LiftState': LiftState,
     'LightsState': LightsState,
     'LinkStats': LinkStats,
     'LockStatus': LockStatus,
+    'MotionLimits': MotionLimits,
     'MotionState': MotionState,
     'MotorState': MotorState,
     'MuxStatus': MuxStatus,
     'OdometryState': OdometryState,
+    'OdometryVariance': OdometryVariance,
     'PanTiltState': PanTiltState,
     'RangesState': RangesState,
     'RcState': RcState,
+    'RobotDescription': RobotDescription,
     'SafetyStatus': SafetyStatus,
+    'SensorDescription': SensorDescription,
     'SimRequest': SimRequest,
+    'SourceDescription': SourceDescription,
     'SourceStatus': SourceStatus,
     'SystemState': SystemState,
     'Twist': Twist,
@@ -967,10 +1175,12 @@ TYPES: dict[str, type[Struct]] = {
 # The constant groups by their Rust name (a type's own are its class attributes).
 CONSTANT_GROUPS: dict[str, Any] = {
     'BusFrame': BusFrame,
+    'BusKind': BusKind,
     'ClampFlags': ClampFlags,
     'ControlKind': ControlKind,
     'ControlMode': ControlMode,
     'ControlStatus': ControlStatus,
+    'DescriptionFlags': DescriptionFlags,
     'DriverStatus': DriverStatus,
     'EstopState': EstopState,
     'FaultClear': FaultClear,
@@ -978,6 +1188,8 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'FrameDirection': FrameDirection,
     'FrameKind': FrameKind,
     'Group': Group,
+    'JointSource': JointSource,
+    'Kinematics': Kinematics,
     'LightMode': LightMode,
     'LinkFlags': LinkFlags,
     'LockStatus': LockStatus,
@@ -988,6 +1200,7 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'SafetyEvent': SafetyEvent,
     'SafetyRule': SafetyRule,
     'SafetyStatus': SafetyStatus,
+    'SensorKind': SensorKind,
     'SimKind': SimKind,
     'SourceFlags': SourceFlags,
     'SystemState': SystemState,

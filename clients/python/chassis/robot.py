@@ -35,6 +35,7 @@ from ._contract import (
     LightMode,
     MuxStatus,
     RequestFlags,
+    RobotDescription,
     SimKind,
     SimRequest,
     Struct,
@@ -205,6 +206,32 @@ def _active_source(mux: MuxStatus) -> str | None:
 
 
 MuxStatus.source_names = _source_names  # type: ignore[attr-defined]
+
+
+def _described(array: Any, count: int) -> list[Any]:
+    return [array[i] for i in range(min(count, len(array)))]
+
+
+def _description_summary(d: RobotDescription) -> dict[str, Any]:
+    """The description with its texts as strings and only the used list entries."""
+    out = d.to_dict()
+    for key in ("name", "kind_name", "model", "display_name"):
+        out[key] = fixed_str(getattr(d, key))
+    out["sensors"] = [
+        {**s.to_dict(), "name": fixed_str(s.name)} for s in _described(d.sensors, d.sensor_count)
+    ]
+    out["joints"] = [
+        {**j.to_dict(), "name": fixed_str(j.name)} for j in _described(d.joints, d.joint_count)
+    ]
+    out["sources"] = [
+        {**s.to_dict(), "name": fixed_str(s.name)} for s in _described(d.sources, d.source_count)
+    ]
+    for key in ("sensor_count", "joint_count", "source_count"):
+        del out[key]
+    return out
+
+
+RobotDescription.summary = _description_summary  # type: ignore[attr-defined]
 MuxStatus.active_source_name = _active_source  # type: ignore[attr-defined]
 
 
@@ -503,6 +530,8 @@ class Robot:
         self._mux: _Reader | None = None
         self._latest_state: ChassisState | None = None
         self._latest_mux: MuxStatus | None = None
+        self._description: _Reader | None = None
+        self._latest_description: RobotDescription | None = None
         self._control: _Counter | None = None
         self._sim: _Counter | None = None
         self._seq = 0
@@ -594,6 +623,44 @@ class Robot:
             if samples:
                 self._latest_mux = samples[-1]
         return self._latest_mux
+
+    def _take_description(self) -> int:
+        if self._description is None:
+            self._description = _Reader(
+                self._node, service_name(self.name, "robot"), RobotDescription, 2
+            )
+        samples = self._description.drain()
+        if samples:
+            self._latest_description = samples[-1]
+        return len(samples)
+
+    def wait_description(self, timeout: float = 1.0) -> RobotDescription:
+        """What the robot is, as ``chassisd`` describes the robot it drives: kind, model,
+        protocol in use, its effective limits, geometry, battery levels, sensors, joints and
+        the mux's sources (see ``RobotDescription.summary()`` for a readable dict).
+
+        The service keeps it for late joiners and hands it to a new reader within one tick of
+        its loop: the first call waits at most ``timeout`` seconds for it. Raises
+        :class:`Timeout` when none arrives.
+        """
+        self._take_description()
+        deadline = time.monotonic() + timeout
+        while self._latest_description is None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise Timeout(f"no description on {service_name(self.name, 'robot')}")
+            # The state is published at least every 100 ms: each sample is a chance to look.
+            states = self._state.wait(min(left, _ANSWER_POLL_S))
+            if states:
+                self._latest_state = states[-1]
+            self._take_description()
+        return self._latest_description
+
+    @property
+    def description(self) -> RobotDescription:
+        """The robot's description (:meth:`wait_description` with a one-second wait), updated
+        when the service publishes a new one (the protocol once detection decides)."""
+        return self.wait_description(1.0)
 
     def source(self, name: str) -> Source:
         """Publishes velocity requests as the configured source ``name`` (its priority and

@@ -5,6 +5,7 @@ from __future__ import annotations
 import signal
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 from conftest import World, binary, wait_until
@@ -40,7 +41,9 @@ def test_drives_and_reads_back_every_robot(world: World, kind: str) -> None:
     robot = world.chassisd(kind)
     start = robot.latest_state()
     assert start is not None
-    assert chassis.RobotKind.name(start.robot) == kind
+    described = robot.description
+    assert chassis.fixed_str(described.kind_name) == kind
+    assert described.kind == start.robot
     teleop = robot.source("teleop")
     moving = drive(
         robot,
@@ -63,6 +66,27 @@ def test_drives_and_reads_back_every_robot(world: World, kind: str) -> None:
         world,
     )
     assert robot.latest_state().to_dict()["motion"]["linear_mps"] == pytest.approx(0.0, abs=0.01)
+
+
+def test_the_description_is_read_late_and_carries_the_configured_override(
+    world: World, tmp_path: Path
+) -> None:
+    config = tmp_path / "ranger.toml"
+    config.write_text("[profile]\nmax_linear_mps = 0.6\n")
+    world.chassisd("ranger-mini", "--config", str(config), safety=True)
+    time.sleep(1.5)
+    late = world.connect("ranger-mini")
+    started = time.monotonic()
+    d = late.description
+    assert time.monotonic() - started < 0.5
+    summary = d.summary()
+    assert summary["kind_name"] == "ranger-mini"
+    assert summary["display_name"] == "AgileX RANGER MINI"
+    assert d.robot_limits.forward_mps == pytest.approx(0.6)
+    assert d.kinematics == chassis.Kinematics.FOUR_WHEEL_STEER
+    assert [j["name"] for j in summary["joints"]] == ["front_steer_joint", "rear_steer_joint"]
+    safety = [s for s in summary["sources"] if s["name"] == "safety"]
+    assert safety and safety[0]["flags"] & chassis.SourceFlags.REQUIRED
 
 
 def test_a_robot_nobody_serves_is_reported_with_the_clis_advice(world: World) -> None:

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use chassis_interfaces::valid_robot_name;
 use chassis_protocols::{
-    DriverConfig, Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, Robot,
+    DriverConfig, Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, RobotKind,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -35,7 +35,7 @@ pub enum LoopMode {
 pub struct ServiceConfig {
     /// Robot: `titan`, `scout-mini`, `xbot`, `scout`, `hunter`, `hunter-se`, `tracer`, `bunker`
     /// or `ranger-mini` (`--robot`).
-    pub robot: Option<Robot>,
+    pub robot: Option<RobotKind>,
     /// AgileX wire protocol, `v1` or `v2` (`--protocol`); default: the robot's own (SCOUT MINI:
     /// v1; the other AgileX robots here: v2). SCOUT MINI, SCOUT and BUNKER on a real CAN bus
     /// without it listen first and drive in the protocol they hear.
@@ -128,7 +128,7 @@ pub struct RawConfig {
 /// Command-line choices that override the file.
 #[derive(Debug, Clone, Default)]
 pub struct Overrides {
-    pub robot: Option<Robot>,
+    pub robot: Option<RobotKind>,
     pub protocol: Option<Protocol>,
     pub name: Option<String>,
     pub bus: Option<BusSpec>,
@@ -178,7 +178,7 @@ pub enum ConfigError {
     BadProfile(#[from] ProfileError),
     #[error("[profile] for {robot}: {source}")]
     Profile {
-        robot: Robot,
+        robot: RobotKind,
         source: toml::de::Error,
     },
     #[error("[mux]: {0}")]
@@ -186,7 +186,7 @@ pub enum ConfigError {
     /// A bus the robot cannot be on (a CAN robot on a byte stream, or the reverse).
     #[error("{robot} cannot be on {bus}: {robot}'s bus is one of {accepted}")]
     WrongBus {
-        robot: Robot,
+        robot: RobotKind,
         bus: String,
         accepted: &'static str,
     },
@@ -200,7 +200,7 @@ pub enum ConfigError {
 /// The validated configuration.
 #[derive(Debug, Clone)]
 pub struct Config {
-    pub robot: Robot,
+    pub robot: RobotKind,
     /// The protocol asked for (`--protocol`, `service.protocol`); `None`: the robot's own — for a
     /// SCOUT MINI, SCOUT or BUNKER on a real CAN bus, detected by listening before anything is
     /// sent.
@@ -352,7 +352,7 @@ impl RawConfig {
 }
 
 /// The buses `robot` can be on, as the service (`simulator` false) or as `chassisd sim`.
-fn check_bus_kind(robot: Robot, bus: &BusSpec, simulator: bool) -> Result<(), ConfigError> {
+fn check_bus_kind(robot: RobotKind, bus: &BusSpec, simulator: bool) -> Result<(), ConfigError> {
     let (fits, accepted) = match (robot.is_can(), simulator) {
         (true, false) => (
             matches!(
@@ -414,7 +414,7 @@ pub fn default_state_dir(
 
 /// The robot's profile: its defaults (for `protocol`), with the `[profile]` keys set over them.
 fn parse_profile(
-    robot: Robot,
+    robot: RobotKind,
     protocol: Option<Protocol>,
     table: toml::Table,
 ) -> Result<Profile, ConfigError> {
@@ -467,7 +467,7 @@ mod tests {
 
     fn titan() -> Overrides {
         Overrides {
-            robot: Some(Robot::Titan),
+            robot: Some(RobotKind::Titan),
             ..Overrides::default()
         }
     }
@@ -493,7 +493,7 @@ mod tests {
                 .iter()
                 .all(|s| s.remote == (s.name == "remote"))
         );
-        assert_eq!(c.profile, Profile::default_for(Robot::Titan));
+        assert_eq!(c.profile, RobotKind::Titan.entry().defaults());
     }
 
     #[test]
@@ -523,7 +523,7 @@ mod tests {
                 ..Overrides::default()
             })
             .unwrap();
-        assert_eq!((c.robot, c.name.as_str()), (Robot::Xbot, "right"));
+        assert_eq!((c.robot, c.name.as_str()), (RobotKind::Xbot, "right"));
         assert_eq!(c.bus.to_string(), "serial:/dev/ttyS1");
     }
 
@@ -568,7 +568,7 @@ mod tests {
                 ..Overrides::default()
             })
         };
-        let err = on(Robot::Titan, "serial:/dev/ttyUSB0", false).unwrap_err();
+        let err = on(RobotKind::Titan, "serial:/dev/ttyUSB0", false).unwrap_err();
         assert!(matches!(err, ConfigError::WrongBus { .. }), "{err}");
         let text = err.to_string();
         assert!(
@@ -576,13 +576,13 @@ mod tests {
             "{text}"
         );
         assert!(text.contains("can:IFACE, slcan:PATH"), "{text}");
-        let err = on(Robot::Xbot, "can:can0", false).unwrap_err();
+        let err = on(RobotKind::Xbot, "can:can0", false).unwrap_err();
         assert!(err.to_string().contains("serial:PATH"), "{err}");
-        assert!(on(Robot::ScoutMini, "slcan:/dev/ttyACM0", false).is_ok());
-        assert!(on(Robot::Xbot, "serial:/dev/ttyUSB0", false).is_ok());
-        assert!(on(Robot::Titan, "slcan-pty:/tmp/x", true).is_ok());
-        assert!(on(Robot::Titan, "pty:/tmp/x", true).is_err());
-        assert!(on(Robot::Xbot, "slcan-pty:/tmp/x", true).is_err());
+        assert!(on(RobotKind::ScoutMini, "slcan:/dev/ttyACM0", false).is_ok());
+        assert!(on(RobotKind::Xbot, "serial:/dev/ttyUSB0", false).is_ok());
+        assert!(on(RobotKind::Titan, "slcan-pty:/tmp/x", true).is_ok());
+        assert!(on(RobotKind::Titan, "pty:/tmp/x", true).is_err());
+        assert!(on(RobotKind::Xbot, "slcan-pty:/tmp/x", true).is_err());
     }
 
     #[test]
@@ -633,7 +633,7 @@ mod tests {
         let raw: RawConfig = toml::from_str("[profile]\nlinear_full_scale_mps = 0\n").unwrap();
         let err = raw
             .validate(Overrides {
-                robot: Some(Robot::ScoutMini),
+                robot: Some(RobotKind::ScoutMini),
                 ..Overrides::default()
             })
             .unwrap_err();
@@ -649,7 +649,7 @@ mod tests {
         let xbot = |bus| {
             RawConfig::default()
                 .validate(Overrides {
-                    robot: Some(Robot::Xbot),
+                    robot: Some(RobotKind::Xbot),
                     bus,
                     ..Overrides::default()
                 })
@@ -695,7 +695,7 @@ mod tests {
         );
         let err = RawConfig::default()
             .validate(Overrides {
-                robot: Some(Robot::Hunter),
+                robot: Some(RobotKind::Hunter),
                 protocol: Some(Protocol::V1),
                 ..Overrides::default()
             })
@@ -704,7 +704,7 @@ mod tests {
         let wrong: RawConfig = toml::from_str("[profile]\nmodel = \"bunker\"\n").unwrap();
         let err = wrong
             .validate(Overrides {
-                robot: Some(Robot::Hunter),
+                robot: Some(RobotKind::Hunter),
                 ..Overrides::default()
             })
             .unwrap_err();
@@ -718,7 +718,7 @@ mod tests {
             toml::from_str("[profile]\nangular_full_scale_rad_s = 0.7853\n").unwrap();
         let c = raw
             .validate(Overrides {
-                robot: Some(Robot::ScoutMini),
+                robot: Some(RobotKind::ScoutMini),
                 ..Overrides::default()
             })
             .unwrap();

@@ -2,11 +2,12 @@
 //! (`chassis-ipc`): this module creates every service of one robot with them and holds the ports.
 
 use chassis_interfaces::{
-    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, SimRequest, VelocityRequest,
+    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, RobotDescription,
+    SimRequest, VelocityRequest,
 };
 use chassis_ipc::{
-    CMD, CONTROL, FRAMES, MUX, Reader, RequestResponse, SIM, STATE, ServerPorts, ServiceKind,
-    Writer, service_name,
+    CMD, CONTROL, DESCRIPTION, FRAMES, MUX, Reader, RequestResponse, SIM, STATE, ServerPorts,
+    ServiceKind, Writer, service_name,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -24,6 +25,7 @@ const _: () = assert!(FRAMES.limits.subscriber_max_buffer_size >= crate::bus::MA
 pub type StatePublisher = Publisher<ipc::Service, ChassisState, ()>;
 pub type FramePublisher = Publisher<ipc::Service, BusFrame, ()>;
 pub type MuxPublisher = Publisher<ipc::Service, MuxStatus, ()>;
+pub type DescriptionPublisher = Publisher<ipc::Service, RobotDescription, ()>;
 pub type CmdSubscriber = Subscriber<ipc::Service, VelocityRequest, ()>;
 pub type ControlServer = Server<ipc::Service, ControlRequest, (), ControlResponse, ()>;
 pub type SimServer = Server<ipc::Service, SimRequest, (), ControlResponse, ()>;
@@ -89,6 +91,7 @@ pub struct Ports {
     pub state: Outlet<StatePublisher>,
     pub frames: Outlet<FramePublisher>,
     pub mux: Outlet<MuxPublisher>,
+    pub description: Outlet<DescriptionPublisher>,
     pub sources: Vec<Inlet>,
     pub control: Desk<ControlServer>,
     pub sim: Option<Desk<SimServer>>,
@@ -122,6 +125,9 @@ impl Ports {
             .publisher()?;
         let mux = MUX
             .create(&node, &service_name(robot_name, ServiceKind::Mux))?
+            .publisher()?;
+        let description = DESCRIPTION
+            .create(&node, &service_name(robot_name, ServiceKind::Description))?
             .publisher()?;
 
         let mut inlets = Vec::with_capacity(sources.len());
@@ -159,6 +165,7 @@ impl Ports {
             state: state.into(),
             frames: frames.into(),
             mux: mux.into(),
+            description: description.into(),
             sources: inlets,
             control,
             sim,

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chassis_protocols::{Robot, UnknownRobot};
+use chassis_protocols::{RobotKind, UnknownRobot};
 use chassisd::bus::{BusSpec, BusSpecError};
 use chassisd::config::{Config, ConfigError, LoopMode, Overrides, RawConfig};
 use clap::{Args, Parser, Subcommand};
@@ -36,7 +36,7 @@ enum Cmd {
 struct ServiceArgs {
     /// titan, scout-mini, xbot, scout, hunter, hunter-se, tracer, bunker or ranger-mini.
     #[arg(long, value_parser = parse_robot)]
-    robot: Option<Robot>,
+    robot: Option<RobotKind>,
     /// AgileX wire protocol: v1 or v2 (default on a real CAN bus: detected for scout-mini, scout
     /// and bunker; on the simulator: the robot's own, SCOUT MINI v1, the others v2).
     #[arg(long, value_parser = parse_protocol)]
@@ -79,7 +79,7 @@ struct ServiceArgs {
     state_dir: Option<PathBuf>,
 }
 
-fn parse_robot(text: &str) -> Result<Robot, UnknownRobot> {
+fn parse_robot(text: &str) -> Result<RobotKind, UnknownRobot> {
     text.parse()
 }
 

@@ -5,64 +5,22 @@
 //! configuration (and runs the simulated chassis for the `sim` bus). A test hands the shell its
 //! own [`Devices`].
 
-use chassis_protocols::{
-    DriverConfig, Profile, Timestamp, V1Profile, agilex_v2, scout_mini, titan, xbot,
-};
-
-use chassis_protocols::agilex_v2::detect::DetectSettings;
+use chassis_protocols::{BoxedDriver, Profile, Timestamp};
 
 use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use crate::config::Config;
-use crate::engine::BoxedDriver;
-use crate::sim::{SimHandle, firmware_for};
+use crate::sim::SimHandle;
 
-/// The driver for `config`: a robot that may speak AgileX protocol V1 or V2 (SCOUT MINI, SCOUT
-/// 2.0, BUNKER) on a real CAN bus with no protocol asked for listens first and drives in the
-/// protocol it hears; every other robot gets [`driver_for`] its profile. The configured profile
-/// stands for the robot's default protocol (SCOUT MINI: V1, SCOUT and BUNKER: V2), the other
-/// protocol gets its defaults.
+/// The driver for `config`, as the registry makes it: a robot that may speak AgileX protocol V1
+/// or V2 (SCOUT MINI, SCOUT 2.0, BUNKER) on a real CAN bus with no protocol asked for listens
+/// first and drives in the protocol it hears ([`chassis_protocols::RobotEntry::driver`]).
 pub fn driver_for_config(config: &Config, now: Timestamp) -> BoxedDriver {
     let real_can = matches!(config.bus, BusSpec::Can { .. } | BusSpec::Slcan { .. });
-    if config.protocol.is_none() && real_can {
-        let robot = config.profile.robot();
-        let pair = match (&config.profile, robot.v1_model(), robot.v2_model()) {
-            (Profile::ScoutMini(v1), _, Some(model)) => Some((
-                v1.clone(),
-                agilex_v2::V2Profile::for_model(model),
-                DetectSettings::from(v1),
-            )),
-            (Profile::V2(v2), Some(model), _) => Some((
-                V1Profile::for_model(model),
-                v2.clone(),
-                DetectSettings::from(v2),
-            )),
-            _ => None,
-        };
-        if let Some((v1, v2, detect)) = pair {
-            return Box::new(agilex_v2::AutoDriver::new(
-                v1,
-                v2,
-                detect,
-                config.driver.clone(),
-                now,
-            ));
-        }
-    }
-    driver_for(&config.profile, &config.driver, now)
-}
-
-/// The driver of `profile`'s robot.
-pub fn driver_for(profile: &Profile, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
-    match profile {
-        Profile::Titan(p) => Box::new(titan::TitanDriver::new(p.clone(), config.clone(), now)),
-        Profile::ScoutMini(p) => Box::new(scout_mini::ScoutMiniDriver::new(
-            p.clone(),
-            config.clone(),
-            now,
-        )),
-        Profile::Xbot(p) => Box::new(xbot::XbotDriver::new(p.clone(), config.clone(), now)),
-        Profile::V2(p) => Box::new(agilex_v2::V2Driver::new(p.clone(), config.clone(), now)),
-    }
+    let detect = config.protocol.is_none() && real_can;
+    config
+        .robot
+        .entry()
+        .driver(&config.profile, detect, &config.driver, now)
 }
 
 /// Where the shell gets its devices.
@@ -126,7 +84,7 @@ pub fn open_bus(
     };
     Ok(match spec {
         BusSpec::Sim => {
-            let firmware = firmware_for(&config.profile, now);
+            let firmware = (config.robot.entry().firmware)(&config.profile, now);
             let io = |e: std::io::Error| BusError::Open {
                 name: "sim".into(),
                 reason: e.to_string(),
@@ -259,7 +217,7 @@ pub fn is_fifo() -> bool {
 mod tests {
     use super::*;
     use crate::config::{Overrides, RawConfig};
-    use chassis_protocols::Robot;
+    use chassis_protocols::RobotKind;
 
     /// The robots of either firmware on a real CAN bus detect with the settings of the profile
     /// they are configured with: the SCOUT MINI's V1 one, the SCOUT's and BUNKER's V2 one.
@@ -279,7 +237,7 @@ mod tests {
             .unwrap();
             let config = raw.validate(Overrides::default()).unwrap();
             let driver = driver_for_config(&config, now);
-            assert_eq!(driver.robot(), robot.parse::<Robot>().unwrap());
+            assert_eq!(driver.robot(), robot.parse::<RobotKind>().unwrap());
             let deadline = driver.poll_timeout().unwrap();
             if detecting {
                 assert_eq!(

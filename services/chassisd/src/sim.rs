@@ -13,10 +13,8 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use chassis_interfaces::{ControlStatus, SimKind, SimRequest};
-use chassis_protocols::profile::Robot;
-use chassis_protocols::{
-    Firmware, Injection, Profile, SimTruth, Timestamp, scout_mini, titan, xbot,
-};
+use chassis_protocols::RobotKind;
+use chassis_protocols::{Firmware, Injection, SimTruth};
 use nix::poll::{PollFd, PollFlags};
 use nix::sys::time::TimeSpec;
 use tracing::{debug, warn};
@@ -24,18 +22,7 @@ use tracing::{debug, warn};
 use crate::bus::{Bus, BusError};
 use crate::clock;
 
-/// A simulated firmware that can move to its own thread.
-pub type BoxedFirmware = Box<dyn Firmware + Send>;
-
-/// The simulated firmware of `profile`'s robot, powered up at `now`.
-pub fn firmware_for(profile: &Profile, now: Timestamp) -> BoxedFirmware {
-    match profile {
-        Profile::Titan(p) => Box::new(titan::TitanSim::new(p.clone(), now)),
-        Profile::ScoutMini(p) => Box::new(scout_mini::ScoutMiniSim::new(p.clone(), now)),
-        Profile::Xbot(p) => Box::new(xbot::XbotSim::new(p.clone(), now)),
-        Profile::V2(p) => Box::new(chassis_protocols::agilex_v2::V2Sim::new(p.clone(), now)),
-    }
-}
+pub use chassis_protocols::BoxedFirmware;
 
 /// Why a [`SimRequest`] asks for nothing the simulator can do.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -165,7 +152,7 @@ pub struct SimHandle {
     commands: mpsc::Sender<SimCommandBox>,
     doorbell: UnixDatagram,
     thread: Option<JoinHandle<Ended>>,
-    robot: Robot,
+    robot: RobotKind,
 }
 
 /// `SimCommand` with a `Debug` face for the handle.
@@ -214,7 +201,7 @@ impl SimHandle {
         })
     }
 
-    pub fn robot(&self) -> Robot {
+    pub fn robot(&self) -> RobotKind {
         self.robot
     }
 
@@ -423,8 +410,8 @@ mod tests {
 
     #[test]
     fn a_simulator_that_loses_its_bus_hands_back_its_firmware_to_run_again() {
-        let profile = Profile::default_for(chassis_protocols::Robot::Titan);
-        let firmware = firmware_for(&profile, clock::now());
+        let profile = chassis_protocols::RobotKind::Titan.entry().defaults();
+        let firmware = (RobotKind::Titan.entry().firmware)(&profile, clock::now());
         let (service_end, chassis_end) = PairCan::pair("sim").unwrap();
         let sim = SimHandle::spawn(firmware, Bus::Can(Box::new(chassis_end))).unwrap();
         let mut service_end = Bus::Can(Box::new(service_end));

@@ -23,7 +23,7 @@ use crate::bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
 use crate::clock;
 use crate::config::Config;
 use crate::ipc::{IpcError, iceoryx_config, open_desk};
-use crate::sim::{SimHandle, carry_out, firmware_for};
+use crate::sim::{SimHandle, carry_out};
 
 /// Why the simulated chassis stopped (or never started).
 #[derive(Debug, Error)]
@@ -117,7 +117,7 @@ pub fn run(config: &Config) -> Result<(), StandaloneError> {
         bus = bus.name(),
         "simulated chassis up (faults: {sim_name})"
     );
-    let firmware = firmware_for(&config.profile, clock::now());
+    let firmware = (config.robot.entry().firmware)(&config.profile, clock::now());
     let mut chassis = Chassis::Running(SimHandle::spawn(firmware, bus)?);
 
     let node = chassis_ipc::node(

@@ -54,7 +54,7 @@ use std::str::FromStr;
 use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
-use chassis_protocols::{CanFrame, CandumpLine, Robot, Timestamp, Transmit};
+use chassis_protocols::{CanFrame, CandumpLine, RobotKind, Timestamp, Transmit};
 use nix::errno::Errno;
 use nix::poll::{PollFd, PollFlags};
 use nix::sys::time::TimeSpec;
@@ -205,7 +205,7 @@ pub enum Recording {
     /// The bytes of an MCAP file, and the robot its metadata names.
     Mcap {
         bytes: Vec<u8>,
-        robot: Option<Robot>,
+        robot: Option<RobotKind>,
     },
     /// A candump log (read line by line as it plays).
     Candump { path: String },
@@ -231,7 +231,7 @@ impl Recording {
             let bytes = std::fs::read(path).map_err(|e| open_error(path, e))?;
             let robot = match mcap_metadata(&bytes) {
                 Some(meta) => match meta.get("robot") {
-                    Some(name) => Some(name.parse::<Robot>().map_err(|e| open_error(path, e))?),
+                    Some(name) => Some(name.parse::<RobotKind>().map_err(|e| open_error(path, e))?),
                     None => None,
                 },
                 None => None,
@@ -245,7 +245,7 @@ impl Recording {
     }
 
     /// The robot the recording is of, when it says.
-    pub fn robot(&self) -> Option<Robot> {
+    pub fn robot(&self) -> Option<RobotKind> {
         match self {
             Recording::Mcap { robot, .. } => *robot,
             Recording::Candump { .. } => None,
@@ -253,7 +253,7 @@ impl Recording {
     }
 
     /// Checks that `robot`'s service can play this recording.
-    pub fn check(&self, path: &str, robot: Robot) -> Result<(), BusError> {
+    pub fn check(&self, path: &str, robot: RobotKind) -> Result<(), BusError> {
         match self {
             Recording::Mcap {
                 robot: Some(recorded),
@@ -479,7 +479,7 @@ impl Iterator for McapSteps<'_> {
 static PLAYED: Mutex<Vec<String>> = Mutex::new(Vec::new());
 
 /// Opens `path` for `robot`'s service and starts playing it at `speed` in its own thread.
-pub fn open(path: &str, speed: ReplaySpeed, robot: Robot) -> Result<Bus, BusError> {
+pub fn open(path: &str, speed: ReplaySpeed, robot: RobotKind) -> Result<Bus, BusError> {
     {
         let played = PLAYED.lock().unwrap_or_else(PoisonError::into_inner);
         if played.iter().any(|p| p == path) {
@@ -976,9 +976,9 @@ mod tests {
         );
         let text = path.to_str().unwrap();
         let recording = Recording::open(text).unwrap();
-        assert_eq!(recording.robot(), Some(Robot::Titan));
-        recording.check(text, Robot::Titan).unwrap();
-        let err = recording.check(text, Robot::ScoutMini).unwrap_err();
+        assert_eq!(recording.robot(), Some(RobotKind::Titan));
+        recording.check(text, RobotKind::Titan).unwrap();
+        let err = recording.check(text, RobotKind::ScoutMini).unwrap_err();
         assert!(err.to_string().contains("--robot titan"), "{err}");
         let steps: Vec<Step> = recording.steps().unwrap().collect();
         assert_eq!(steps.len(), 3, "{steps:?}");
@@ -995,8 +995,8 @@ mod tests {
         let text = path.to_str().unwrap();
         let recording = Recording::open(text).unwrap();
         assert_eq!(recording.robot(), None);
-        assert!(recording.check(text, Robot::Xbot).is_err());
-        recording.check(text, Robot::Titan).unwrap();
+        assert!(recording.check(text, RobotKind::Xbot).is_err());
+        recording.check(text, RobotKind::Titan).unwrap();
         let _ = std::fs::remove_file(path);
     }
 
@@ -1009,7 +1009,7 @@ mod tests {
         )
         .unwrap();
         let text = path.to_str().unwrap();
-        let mut bus = open(text, ReplaySpeed::Max, Robot::Titan).unwrap();
+        let mut bus = open(text, ReplaySpeed::Max, RobotKind::Titan).unwrap();
         let mut got = Vec::new();
         let mut gone = false;
         for _ in 0..500 {
@@ -1038,7 +1038,7 @@ mod tests {
         }
         assert_eq!(got, vec![0x211, 0x311]);
         assert!(gone, "the replay bus did not end");
-        let again = open(text, ReplaySpeed::Max, Robot::Titan).unwrap_err();
+        let again = open(text, ReplaySpeed::Max, RobotKind::Titan).unwrap_err();
         assert!(again.to_string().contains("plays once"), "{again}");
         let _ = std::fs::remove_file(path);
     }

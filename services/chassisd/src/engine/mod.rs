@@ -61,7 +61,7 @@ use std::time::Duration;
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
     FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags, LockStatus, MuxStatus,
-    SourceFlags, SourceStatus, VelocityRequest, ZeroReason,
+    RobotDescription, SourceFlags, SourceStatus, VelocityRequest, WireProtocol, ZeroReason,
 };
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
@@ -77,7 +77,7 @@ use crate::config::{Config, LoopMode};
 use crate::mux::{Mux, Rejection};
 
 /// The robot's driver behind the common contract.
-pub type BoxedDriver = Box<dyn Driver>;
+pub use chassis_protocols::BoxedDriver;
 
 /// The shell's handle of a control request waiting for its answer.
 pub type Ticket = u64;
@@ -96,6 +96,10 @@ pub struct EngineConfig {
     pub rx_moderation: Duration,
     /// A GPS receiver is configured.
     pub gps: bool,
+    /// The robot's description for each protocol its driver may report speaking
+    /// (`SystemState::wire_protocol`): the one matching the driver's is published at start and
+    /// again when detection decides. Empty: no description is published.
+    pub descriptions: Vec<RobotDescription>,
 }
 
 impl EngineConfig {
@@ -116,6 +120,15 @@ impl EngineConfig {
                 _ => Duration::from_micros(config.bus_settings.rx_moderation_us),
             },
             gps: config.gps.is_some(),
+            descriptions: [
+                WireProtocol::OWN,
+                WireProtocol::V1,
+                WireProtocol::V2,
+                WireProtocol::DETECTING,
+            ]
+            .into_iter()
+            .map(|protocol| crate::description::for_config(config, protocol))
+            .collect(),
         }
     }
 }
@@ -129,6 +142,8 @@ pub enum Publication {
     Frame(BusFrame),
     /// On `chassis/<name>/mux`.
     Mux(Box<MuxStatus>),
+    /// On `chassis/<name>/robot`.
+    Description(Box<RobotDescription>),
     /// The answer to the control request the shell handed in with `ticket`.
     Response {
         ticket: Ticket,
@@ -271,6 +286,9 @@ pub struct Engine {
     state_seq: u64,
     frame_seq: u64,
     mux_seq: u64,
+    /// The protocol the last published description was of, and its sequence number.
+    described_protocol: Option<u8>,
+    description_seq: u64,
     last_state_body: Option<ChassisState>,
     last_state_publish: Timestamp,
     last_mux_publish: Option<Timestamp>,
@@ -328,6 +346,8 @@ impl Engine {
             state_seq: 0,
             frame_seq: 0,
             mux_seq: 0,
+            described_protocol: None,
+            description_seq: 0,
             last_state_body: None,
             last_state_publish: now,
             last_mux_publish: None,
@@ -644,6 +664,7 @@ impl Engine {
     /// 100 ms).
     pub fn end_pass(&mut self, now: Timestamp) {
         self.drain_driver_events(now);
+        self.publish_description_if_changed(now);
         let period_over = self
             .last_mux_publish
             .is_none_or(|t| now.saturating_since(t) >= self.config.mux_status_period);
@@ -715,8 +736,37 @@ impl Engine {
     /// Publishes the state and the mux status now (at start and at the end).
     pub fn publish_all(&mut self, now: Timestamp) {
         self.drain_driver_events(now);
+        self.publish_description_if_changed(now);
         self.publish_state(now);
         self.publish_mux(now);
+    }
+
+    /// Publishes the description of the protocol the driver speaks when it is not the one
+    /// published last (at start, and when detection decides).
+    fn publish_description_if_changed(&mut self, now: Timestamp) {
+        let protocol = self.driver.state().system.wire_protocol;
+        if self.described_protocol == Some(protocol) {
+            return;
+        }
+        let Some(template) = self
+            .config
+            .descriptions
+            .iter()
+            .find(|d| d.protocol == protocol)
+        else {
+            return;
+        };
+        self.described_protocol = Some(protocol);
+        self.description_seq += 1;
+        let mut description = Box::new(*template);
+        description.seq = self.description_seq;
+        description.stamp_ns = now.as_nanos();
+        info!(
+            protocol = WireProtocol::name(protocol),
+            "describing the robot on chassis/<name>/robot"
+        );
+        self.publications
+            .push_back(Publication::Description(description));
     }
 
     // ---- outputs ------------------------------------------------------------------------

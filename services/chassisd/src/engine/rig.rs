@@ -17,17 +17,17 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, VelocityRequest,
+    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, RobotDescription,
+    VelocityRequest,
 };
 use chassis_protocols::{
-    DriverConfig, Injection, Profile, Robot, Timestamp, Transmit, scout_mini, titan,
+    DriverConfig, Injection, Profile, RobotKind, Timestamp, Transmit, scout_mini, titan,
 };
 
 use super::{Device, Engine, EngineConfig, HeldLock, ListenerChange, Publication, Ticket, Wake};
 use crate::bus::MAX_RX_BATCH;
 use crate::mux::{Mux, MuxConfig};
-use crate::setup::driver_for;
-use crate::sim::{BoxedFirmware, firmware_for};
+use crate::sim::BoxedFirmware;
 
 /// Where every rig starts.
 pub const T0: Timestamp = Timestamp::from_millis(1_000);
@@ -72,6 +72,8 @@ pub struct Rig {
     pub states: Vec<ChassisState>,
     pub muxes: Vec<MuxStatus>,
     pub frames: Vec<BusFrame>,
+    /// Every published description, and when.
+    pub descriptions: Vec<(RobotDescription, Timestamp)>,
     /// Answers to control requests: ticket, answer, when.
     pub responses: Vec<(Ticket, ControlResponse, Timestamp)>,
     /// Passes run, and the instants of each.
@@ -105,8 +107,8 @@ impl std::fmt::Debug for Rig {
 
 impl Rig {
     /// `robot` with `mux`, and `adjust` applied to the engine's settings.
-    pub fn with(robot: Robot, mux: MuxConfig, adjust: impl FnOnce(&mut EngineConfig)) -> Self {
-        let mut profile = Profile::default_for(robot);
+    pub fn with(robot: RobotKind, mux: MuxConfig, adjust: impl FnOnce(&mut EngineConfig)) -> Self {
+        let mut profile = robot.entry().defaults();
         if let Profile::Xbot(p) = &mut profile {
             p.wheel_separation_m =
                 Some(chassis_protocols::xbot::XbotSim::DEFAULT_WHEEL_SEPARATION_M);
@@ -118,9 +120,11 @@ impl Rig {
             reconnect_max: Duration::from_millis(2000),
             rx_moderation: Duration::from_micros(4000),
             gps: false,
+            descriptions: Vec::new(),
         };
         adjust(&mut config);
-        let driver = driver_for(&profile, &DriverConfig::default(), T0);
+        let entry = robot.entry();
+        let driver = (entry.driver)(&profile, &DriverConfig::default(), T0);
         let engine = Engine::new(
             config,
             driver,
@@ -129,7 +133,7 @@ impl Rig {
         );
         let mut rig = Self {
             engine,
-            firmware: firmware_for(&profile, T0),
+            firmware: (entry.firmware)(&profile, T0),
             profile,
             mux_config: mux,
             now: T0,
@@ -144,6 +148,7 @@ impl Rig {
             states: Vec::new(),
             muxes: Vec::new(),
             frames: Vec::new(),
+            descriptions: Vec::new(),
             responses: Vec::new(),
             passes: Vec::new(),
             listener_changes: Vec::new(),
@@ -442,6 +447,9 @@ impl Rig {
                     self.muxes.push(*status);
                 }
                 Publication::Frame(frame) => self.frames.push(frame),
+                Publication::Description(description) => {
+                    self.descriptions.push((*description, self.now))
+                }
                 Publication::Response { ticket, response } => {
                     self.responses.push((ticket, response, self.now))
                 }

@@ -11,7 +11,7 @@ use std::time::Duration;
 use chassis_interfaces::{
     ControlKind, ControlRequest, ControlStatus, LinkFlags, LockStatus, VelocityRequest, ZeroReason,
 };
-use chassis_protocols::{Injection, Robot, Timestamp, Transmit, titan};
+use chassis_protocols::{Injection, RobotKind, Timestamp, Transmit, titan};
 
 use super::rig::{LATENCY, Rig, T0};
 use super::{Device, HeldLock, ListenerChange, Wake, WakeBudget};
@@ -35,7 +35,7 @@ fn unsmoothed() -> MuxConfig {
 
 /// A TITAN rig whose safety monitor beats every 50 ms for `seconds`, run 200 ms: the chassis is
 /// in CAN command mode and nothing asks for motion.
-fn ready_for(robot: Robot, mux: MuxConfig, seconds: u64) -> Rig {
+fn ready_for(robot: RobotKind, mux: MuxConfig, seconds: u64) -> Rig {
     let mut rig = Rig::with(robot, mux, |_| {});
     rig.publish_every(
         "safety",
@@ -48,7 +48,7 @@ fn ready_for(robot: Robot, mux: MuxConfig, seconds: u64) -> Rig {
 }
 
 fn ready() -> Rig {
-    ready_for(Robot::Titan, unsmoothed(), 60)
+    ready_for(RobotKind::Titan, unsmoothed(), 60)
 }
 
 fn twist(v: f32) -> VelocityRequest {
@@ -223,7 +223,7 @@ fn a_higher_priority_source_preempts_and_hands_back_at_its_timeout() {
 
 #[test]
 fn nothing_moves_before_the_safety_monitor_speaks() {
-    let mut rig = Rig::with(Robot::Titan, unsmoothed(), |_| {});
+    let mut rig = Rig::with(RobotKind::Titan, unsmoothed(), |_| {});
     rig.publish_every("teleop", twist(0.5), ms(50), at(1000));
     rig.request_at(at(600), "safety", VelocityRequest::heartbeat());
     rig.run_until(at(650));
@@ -237,7 +237,7 @@ fn nothing_moves_before_the_safety_monitor_speaks() {
 
 #[test]
 fn the_required_source_going_silent_stops_the_robot_at_its_timeout() {
-    let mut rig = Rig::with(Robot::Titan, unsmoothed(), |_| {});
+    let mut rig = Rig::with(RobotKind::Titan, unsmoothed(), |_| {});
     rig.publish_every("safety", VelocityRequest::heartbeat(), ms(50), at(550));
     rig.publish_every("teleop", twist(0.5), ms(50), at(2000));
     rig.run_until(at(1000));
@@ -288,7 +288,7 @@ fn an_operator_lock_blocks_every_lower_source_until_released() {
 fn a_lock_held_by_a_source_survives_its_holder_going_silent() {
     let mut mux = unsmoothed().without_required_sources();
     mux.sources[0].required = false;
-    let mut rig = Rig::with(Robot::Titan, mux, |_| {});
+    let mut rig = Rig::with(RobotKind::Titan, mux, |_| {});
     rig.run_until(at(200));
     rig.request_at(
         at(210),
@@ -581,7 +581,7 @@ fn a_saturated_bus_is_read_once_per_moderation_interval_and_loses_nothing() {
 
 #[test]
 fn acceleration_smoothing_ramps_but_a_timeout_cuts_at_once() {
-    let mut rig = ready_for(Robot::Titan, MuxConfig::default(), 60);
+    let mut rig = ready_for(RobotKind::Titan, MuxConfig::default(), 60);
     rig.request_at(at(220), "teleop", twist(1.0));
     rig.publish_every("teleop", twist(1.0), ms(50), at(1020));
     rig.run_until(at(1500));
@@ -599,7 +599,7 @@ fn acceleration_smoothing_ramps_but_a_timeout_cuts_at_once() {
 
 #[test]
 fn the_gps_receiver_is_opened_at_start_and_retried_every_second() {
-    let mut rig = Rig::with(Robot::Xbot, unsmoothed(), |c| c.gps = true);
+    let mut rig = Rig::with(RobotKind::Xbot, unsmoothed(), |c| c.gps = true);
     rig.run_until(at(3500));
     let gps: Vec<Timestamp> = rig
         .opens
@@ -613,7 +613,7 @@ fn the_gps_receiver_is_opened_at_start_and_retried_every_second() {
 
 #[test]
 fn a_scout_mini_drives_and_stops_through_the_engine() {
-    let mut rig = ready_for(Robot::ScoutMini, unsmoothed(), 60);
+    let mut rig = ready_for(RobotKind::ScoutMini, unsmoothed(), 60);
     rig.request_at(at(300), "teleop", twist(0.5));
     rig.run_until(at(1000));
     assert_eq!(rig.first_motion(at(300), |v| v > 0.4), Some(at(300)));
@@ -622,7 +622,7 @@ fn a_scout_mini_drives_and_stops_through_the_engine() {
 
 #[test]
 fn an_xbot_drives_and_stops_through_the_engine() {
-    let mut rig = ready_for(Robot::Xbot, unsmoothed(), 60);
+    let mut rig = ready_for(RobotKind::Xbot, unsmoothed(), 60);
     rig.publish_every("teleop", twist(0.3), ms(50), at(1500));
     rig.run_until(at(1500));
     assert!(
@@ -638,12 +638,12 @@ fn an_xbot_drives_and_stops_through_the_engine() {
 #[test]
 fn every_agilex_v2_robot_drives_and_stops_through_the_engine() {
     for robot in [
-        Robot::Scout,
-        Robot::Hunter,
-        Robot::HunterSe,
-        Robot::Tracer,
-        Robot::Bunker,
-        Robot::RangerMini,
+        RobotKind::Scout,
+        RobotKind::Hunter,
+        RobotKind::HunterSe,
+        RobotKind::Tracer,
+        RobotKind::Bunker,
+        RobotKind::RangerMini,
     ] {
         let mut rig = ready_for(robot, unsmoothed(), 60);
         rig.publish_every("teleop", twist(0.3), ms(50), at(2000));
@@ -677,7 +677,7 @@ fn the_engine_waits_for_its_next_deadline() {
 /// A fresh TITAN rig (a restarted service) whose safety monitor beats and whose teleop asks for
 /// 0.5 m/s every 50 ms from the start; `before_first_pass` runs before anything is decided.
 fn restarted(mux: MuxConfig, before_first_pass: impl FnOnce(&mut Rig)) -> Rig {
-    let mut rig = Rig::with(Robot::Titan, mux, |_| {});
+    let mut rig = Rig::with(RobotKind::Titan, mux, |_| {});
     before_first_pass(&mut rig);
     rig.publish_every("safety", VelocityRequest::heartbeat(), ms(50), at(5000));
     rig.publish_every("teleop", twist(0.5), ms(50), at(5000));
@@ -848,7 +848,7 @@ struct Seen {
 
 #[test]
 fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_rule() {
-    let mut rig = Rig::with(Robot::Titan, MuxConfig::default(), |_| {});
+    let mut rig = Rig::with(RobotKind::Titan, MuxConfig::default(), |_| {});
     let mut dice = Dice(0x5EED_CAFE_F00D_D00D);
     let (safety, teleop, planner) = (
         rig.source("safety"),

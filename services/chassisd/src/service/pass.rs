@@ -17,6 +17,16 @@ use crate::ipc::Ports;
 use crate::setup::Devices;
 use crate::sim::carry_out;
 
+/// Hands the robot's description to readers that joined since the last tick: iceoryx2 delivers
+/// a publisher's history when the publisher updates its connections, and the description is
+/// published only when it changes. A reader waiting for it is woken by the next state sample.
+fn refresh_description_readers(ports: &Ports) {
+    use iceoryx2::port::update_connections::UpdateConnections;
+    if let Err(e) = ports.description.publisher.update_connections() {
+        debug!("robot description: connecting new readers: {e}");
+    }
+}
+
 impl<D: Devices> Shell<D> {
     /// One pass after a wake-up (see the engine's documentation for the order). Requests go
     /// first and reach the bus before anything else is read: the command path is the one whose
@@ -54,6 +64,9 @@ impl<D: Devices> Shell<D> {
         // On disk before anyone is told: an answered engage survives a crash.
         self.keep_locks(engine);
         self.publish(ports, engine, now);
+        if reads.tick {
+            refresh_description_readers(ports);
+        }
         next
     }
 
@@ -339,6 +352,15 @@ impl<D: Devices> Shell<D> {
                     Ok(_) => mux = true,
                     Err(e) => failed(engine, "mux status", &e),
                 },
+                // Rare (at start, once detection decides): its readers are woken at once.
+                Publication::Description(description) => {
+                    let sent = ports.description.publisher.send_copy(*description);
+                    match sent.map(|_| ports.description.notifier.notify()) {
+                        Ok(Ok(_)) => {}
+                        Ok(Err(e)) => failed(engine, "robot description wake-up", &e),
+                        Err(e) => failed(engine, "robot description", &e),
+                    }
+                }
                 Publication::Response { ticket, response } => {
                     if let Some(active) = self.pending.remove(&ticket) {
                         match active.send_copy(response) {
