@@ -4,12 +4,16 @@
 
 use std::hint::black_box;
 
+use chassis_interfaces::GpsFix;
 use chassis_protocols::driver::{Driver, DriverConfig, Rx};
 use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{CanFrame, Timestamp, scout_mini, titan, xbot};
+use chassis_protocols::{CanFrame, Timestamp, nmea, scout_mini, titan, xbot};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
 const XBOT_SENSOR: &str = "AA5547100162260302000100000005 0A0006000000000000060003000000000000050000000000000000E80301000000000000000000000000000000000000000000000000000000000002DC2F";
+
+const NMEA_GGA: &str = "$GPGGA,092750.000,5321.6802,N,00630.3372,W,1,8,1.03,61.7,M,55.2,M,,*76";
+const NMEA_RMC: &str = "$GNRMC,083559.00,A,3352.12800,S,15112.55800,E,0.004,77.52,091202,,,A*56";
 
 fn hex(text: &str) -> Vec<u8> {
     let text: String = text.split_whitespace().collect();
@@ -44,6 +48,32 @@ fn codecs(c: &mut Criterion) {
             parser.push(black_box(&sensor));
             parser.next_frame(&xbot_profile)
         })
+    });
+    g.bench_function("nmea GGA sentence", |b| {
+        b.iter(|| nmea::parse_sentence(black_box(NMEA_GGA)))
+    });
+    g.bench_function("nmea RMC sentence", |b| {
+        b.iter(|| nmea::parse_sentence(black_box(NMEA_RMC)))
+    });
+    g.bench_function("nmea GGA line through the line reader into the fix", |b| {
+        let mut reader = nmea::LineReader::new();
+        let mut fix = GpsFix::default();
+        let line = format!("{NMEA_GGA}\r\n");
+        b.iter(|| {
+            reader.push(black_box(line.as_bytes()));
+            while let Some(line) = reader.next_line() {
+                if let Ok(sentence) = nmea::parse_sentence(&line) {
+                    nmea::apply(&sentence, &mut fix);
+                }
+            }
+        })
+    });
+    // The same sentences through the `nmea` crate, for reference (see src/nmea/mod.rs).
+    g.bench_function("nmea GGA sentence, nmea crate", |b| {
+        b.iter(|| ::nmea::parse_str(black_box(NMEA_GGA)).is_ok())
+    });
+    g.bench_function("nmea RMC sentence, nmea crate", |b| {
+        b.iter(|| ::nmea::parse_str(black_box(NMEA_RMC)).is_ok())
     });
     g.finish();
 

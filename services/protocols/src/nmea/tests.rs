@@ -7,6 +7,8 @@ use proptest::prelude::*;
 use super::*;
 use crate::DecodeError;
 
+mod crosscheck;
+
 fn parse(line: &str) -> Sentence {
     parse_sentence(line).unwrap_or_else(|e| panic!("{line}: {e}"))
 }
