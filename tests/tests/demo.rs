@@ -107,7 +107,9 @@ fn chassis_demo_runs_every_agilex_robot_in_each_protocol() {
         if let Some(protocol) = protocol {
             args.extend(["--protocol", protocol]);
         }
-        let index = env.spawn(&format!("demo-{robot}"), "chassis", &args);
+        // One log per demo: SCOUT and BUNKER run twice, once per protocol.
+        let label = format!("demo-{robot}-{}", protocol.unwrap_or("default"));
+        let index = env.spawn(&label, "chassis", &args);
         demos.push((*robot, *protocol, name, index));
     }
     for (robot, protocol, name, _) in &demos {
