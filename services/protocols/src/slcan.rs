@@ -71,8 +71,11 @@ pub fn decode_frame(line: &[u8]) -> Option<CanFrame> {
     }
     let data_start = 2 + id_len;
     let data_end = data_start + 2 * dlc;
-    let rest = line.len().checked_sub(data_end)?;
-    if rest != 0 && rest != 4 {
+    // Nothing after the data, or a timestamp of four hex digits.
+    let timestamp = line.get(data_end..)?;
+    if !(timestamp.is_empty()
+        || timestamp.len() == 4 && timestamp.iter().all(u8::is_ascii_hexdigit))
+    {
         return None;
     }
     let mut data = [0u8; 8];
@@ -212,6 +215,28 @@ mod tests {
                 String::from_utf8_lossy(bad)
             );
         }
+    }
+
+    /// Found by fuzzing (`slcan_stream`): a timestamp that is not four hex digits was taken.
+    #[test]
+    fn a_frame_line_whose_timestamp_is_not_hex_is_refused() {
+        for bad in [
+            &b"t12381122334455667788)9AA"[..],
+            b"t43A1EEzzzz",
+            b"t1110t111",
+            b"T18FF00012010 \x00\x00 ",
+        ] {
+            assert_eq!(
+                decode_frame(bad),
+                None,
+                "{:?}",
+                String::from_utf8_lossy(bad)
+            );
+        }
+        assert_eq!(
+            decode_frame(b"t1238112233445566778899AA"),
+            Some(frame("123#1122334455667788"))
+        );
     }
 
     #[test]
