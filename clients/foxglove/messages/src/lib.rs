@@ -30,8 +30,11 @@ use serde_json::{Value, json};
 /// Foxglove's Teleop panel advertises them.
 pub const TWIST_SCHEMAS: [&str; 2] = ["geometry_msgs/Twist", "geometry_msgs/msg/Twist"];
 
-/// A `geometry_msgs/Twist` as JSON; a missing part is zero.
+/// A `geometry_msgs/Twist` as JSON; a missing part is zero, a field a Twist does not have
+/// refuses the message (a `TwistStamped` sent on a Twist channel would otherwise be a silent
+/// zero), and so does every byte that is not JSON.
 #[derive(Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Twist {
     #[serde(default)]
     pub linear: Vector,
@@ -40,6 +43,7 @@ pub struct Twist {
 }
 
 #[derive(Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Vector {
     #[serde(default)]
     pub x: f64,
@@ -235,6 +239,8 @@ pub fn response_json(response: &ControlResponse) -> Value {
 /// Why a service request is not a control request.
 #[derive(Debug, thiserror::Error)]
 pub enum CallError {
+    #[error("request is not text: {0}")]
+    Utf8(#[from] std::str::Utf8Error),
     #[error("request is not JSON of the service's schema: {0}")]
     Json(#[from] serde_json::Error),
     #[error("unknown fault '{0}'")]
@@ -279,9 +285,10 @@ impl Default for Fields {
     }
 }
 
-/// The control request a service call asks for. An empty payload is `{}`: every default.
+/// The control request a service call asks for. An empty payload is `{}`: every default;
+/// bytes that are not text are refused, never taken for nothing.
 pub fn control_request(action: ServiceAction, payload: &[u8]) -> Result<ControlRequest, CallError> {
-    let text = std::str::from_utf8(payload).unwrap_or("").trim();
+    let text = std::str::from_utf8(payload)?.trim_ascii();
     let f: Fields = if text.is_empty() {
         Fields::default()
     } else {
@@ -387,6 +394,29 @@ mod tests {
         assert!(twist_request("/cmd_vel", br#"{"linear":{"x":3.4e38}}"#).is_ok());
     }
 
+    /// Found by fuzzing (`foxglove_client`): bytes that are not JSON (not UTF-8, inside a field
+    /// a Twist does not have) were taken as a zero Twist.
+    #[test]
+    fn a_twist_message_that_is_not_json_or_has_other_fields_is_refused() {
+        for payload in [
+            &b"{\"liangular\":{\"\xb5\":0,\"y\":0,\"z\":0}}"[..],
+            b"{\"linear\":{\"x\":0.5},\"note\":\"\xff\"}",
+            // A TwistStamped on a Twist channel would be a silent zero.
+            br#"{"header":{"frame_id":"base_link"},"twist":{"linear":{"x":0.5}}}"#,
+            br#"{"linear":{"x":0.5,"w":1}}"#,
+            br#"{"linear":{"x":0.5},"linear":{"x":5}}"#,
+        ] {
+            assert!(
+                matches!(
+                    twist_request("/cmd_vel", payload),
+                    Err(TwistError::Json { .. })
+                ),
+                "{}",
+                String::from_utf8_lossy(payload)
+            );
+        }
+    }
+
     #[test]
     fn only_json_twist_channels_are_velocities() {
         assert!(check_twist_channel("/cmd_vel", "geometry_msgs/Twist", "json").is_ok());
@@ -421,6 +451,31 @@ mod tests {
         for action in ServiceAction::ALL {
             let r = control_request(action, b"{}").unwrap();
             assert_eq!(r.kind, action.kind(), "{action:?}");
+        }
+    }
+
+    /// Found by fuzzing (`foxglove_client`): a request that was not UTF-8 was read as nothing,
+    /// so every default — a `/mode` call asking for standby took control.
+    #[test]
+    fn a_service_request_that_is_not_utf8_is_refused_not_taken_for_the_defaults() {
+        for payload in [
+            &b"{\"ta\xbb\xbbk$_control\":false}"[..],
+            b"{\"take_control\":false}\xff",
+            b"\xff",
+        ] {
+            assert!(
+                matches!(
+                    control_request(ServiceAction::Mode, payload),
+                    Err(CallError::Utf8(_))
+                ),
+                "{}",
+                String::from_utf8_lossy(payload)
+            );
+        }
+        // Nothing at all is every default.
+        for payload in [&b""[..], b"  \n"] {
+            let r = control_request(ServiceAction::Mode, payload).unwrap();
+            assert_eq!(r.arg[0], chassis_interfaces::ControlMode::COMMAND);
         }
     }
 
