@@ -23,34 +23,91 @@ use chassis_interfaces::{
     VelocityRequest,
 };
 use chassis_protocols::{Command, command_to_request};
-use serde::Deserialize;
+use serde::de::{self, MapAccess, Visitor};
+use serde::{Deserialize, Deserializer};
 use serde_json::{Value, json};
 
 /// Schema names of the velocity messages taken from clients: ROS 1 and ROS 2 spellings, as
 /// Foxglove's Teleop panel advertises them.
 pub const TWIST_SCHEMAS: [&str; 2] = ["geometry_msgs/Twist", "geometry_msgs/msg/Twist"];
 
-/// A `geometry_msgs/Twist` as JSON; a missing part is zero, a field a Twist does not have
-/// refuses the message (a `TwistStamped` sent on a Twist channel would otherwise be a silent
-/// zero), and so does every byte that is not JSON.
-#[derive(Debug, Default, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
+/// A `geometry_msgs/Twist` as JSON: objects only (serde's derived structs would also read an
+/// array by position), a missing part is zero, and a field a Twist does not have or a field
+/// given twice refuses the message (a `TwistStamped` sent on a Twist channel would otherwise
+/// be a silent zero), as does every byte that is not JSON.
+#[derive(Debug, Default, PartialEq)]
 pub struct Twist {
-    #[serde(default)]
     pub linear: Vector,
-    #[serde(default)]
     pub angular: Vector,
 }
 
-#[derive(Debug, Default, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug, Default, PartialEq)]
 pub struct Vector {
-    #[serde(default)]
     pub x: f64,
-    #[serde(default)]
     pub y: f64,
-    #[serde(default)]
     pub z: f64,
+}
+
+/// Reads a JSON object whose keys are among `names`, each at most once.
+struct Object<T, const N: usize> {
+    what: &'static str,
+    names: &'static [&'static str; N],
+    _t: std::marker::PhantomData<fn() -> T>,
+}
+
+impl<'de, T: Deserialize<'de>, const N: usize> Visitor<'de> for Object<T, N> {
+    type Value = [Option<T>; N];
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        write!(f, "{} (an object of {})", self.what, self.names.join(", "))
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+        let mut values: [Option<T>; N] = std::array::from_fn(|_| None);
+        while let Some(key) = map.next_key::<String>()? {
+            let Some(i) = self.names.iter().position(|n| *n == key) else {
+                return Err(de::Error::unknown_field(&key, self.names));
+            };
+            if values[i].is_some() {
+                return Err(de::Error::duplicate_field(self.names[i]));
+            }
+            values[i] = Some(map.next_value()?);
+        }
+        Ok(values)
+    }
+}
+
+fn object<'de, D: Deserializer<'de>, T: Deserialize<'de>, const N: usize>(
+    deserializer: D,
+    what: &'static str,
+    names: &'static [&'static str; N],
+) -> Result<[Option<T>; N], D::Error> {
+    deserializer.deserialize_map(Object {
+        what,
+        names,
+        _t: std::marker::PhantomData,
+    })
+}
+
+impl<'de> Deserialize<'de> for Twist {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let [linear, angular] = object(deserializer, "a Twist", &["linear", "angular"])?;
+        Ok(Twist {
+            linear: linear.unwrap_or_default(),
+            angular: angular.unwrap_or_default(),
+        })
+    }
+}
+
+impl<'de> Deserialize<'de> for Vector {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let [x, y, z] = object(deserializer, "a Vector3", &["x", "y", "z"])?;
+        Ok(Vector {
+            x: x.unwrap_or_default(),
+            y: y.unwrap_or_default(),
+            z: z.unwrap_or_default(),
+        })
+    }
 }
 
 /// Why a client message is not a velocity.
@@ -288,11 +345,18 @@ impl Default for Fields {
 /// The control request a service call asks for. An empty payload is `{}`: every default;
 /// bytes that are not text are refused, never taken for nothing.
 pub fn control_request(action: ServiceAction, payload: &[u8]) -> Result<ControlRequest, CallError> {
-    let text = std::str::from_utf8(payload)?.trim_ascii();
+    // JSON's whitespace only (no form feed).
+    let text = std::str::from_utf8(payload)?.trim_matches([' ', '\t', '\n', '\r']);
     let f: Fields = if text.is_empty() {
         Fields::default()
-    } else {
+    } else if text.starts_with('{') {
         serde_json::from_str(text)?
+    } else {
+        // Fields are flat: only the top level could be an array read by position.
+        return Err(CallError::Json(de::Error::invalid_type(
+            de::Unexpected::Other("a JSON value that is not an object"),
+            &"an object of the service's fields",
+        )));
     };
     let command = match action {
         ServiceAction::Estop => {
@@ -410,6 +474,33 @@ mod tests {
                 matches!(
                     twist_request("/cmd_vel", payload),
                     Err(TwistError::Json { .. })
+                ),
+                "{}",
+                String::from_utf8_lossy(payload)
+            );
+        }
+    }
+
+    /// Found by fuzzing (`foxglove_client`): serde's derived structs also read a JSON array,
+    /// by position — `[]` was a zero Twist or every default of a service, `[{"x":1}]` a speed.
+    #[test]
+    fn a_json_array_is_no_twist_and_no_service_request() {
+        for payload in [&b"[]"[..], br#"[{"x":1}]"#, br#"{"linear":[1,0,0]}"#] {
+            assert!(
+                matches!(
+                    twist_request("/cmd_vel", payload),
+                    Err(TwistError::Json { .. })
+                ),
+                "{}",
+                String::from_utf8_lossy(payload)
+            );
+        }
+        // Nor is a form feed JSON's whitespace (found by fuzzing too).
+        for payload in [&b"[]"[..], br#"["all"]"#, b" [ ] ", b"\x0c{}", b"{}\x0c"] {
+            assert!(
+                matches!(
+                    control_request(ServiceAction::Silent, payload),
+                    Err(CallError::Json(_))
                 ),
                 "{}",
                 String::from_utf8_lossy(payload)
