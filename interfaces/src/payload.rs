@@ -48,7 +48,9 @@ pub enum PayloadError {
 }
 
 /// An IPC type that may cross a network as a payload.
-pub trait Payload: Layout + FromBytes + IntoBytes + Immutable + KnownLayout + Copy {
+pub trait Payload:
+    Layout + FromBytes + IntoBytes + Immutable + KnownLayout + Copy + core::fmt::Debug
+{
     /// Why this value must not be taken from another computer, if it must not.
     fn refusal(&self) -> Option<&'static str> {
         None
