@@ -17,41 +17,61 @@ import json
 import math
 import pathlib
 import struct
+from typing import Any
 
 HERE = pathlib.Path(__file__).parent
 ROOT = HERE / "seeds"
 CONTRACT = json.loads((HERE.parent / "interfaces" / "contract.json").read_text())
 
 
-def can(id_, hex_):
+def can(id_: int, hex_: str) -> bytes:
     return id_.to_bytes(2, "little") + bytes.fromhex(hex_)
 
 
 # ---------------------------------------------------------------------------------------------
 # AgileX protocol V2: the leading byte picks the profile (low nibble: the model, in the order of
 # fuzz_targets/agilex_v2_decode.rs; high bits: flipped doubtful choices).
-V2_MODELS = ["scout", "scout-mini", "scout-mini-omni", "hunter", "hunter-se", "tracer", "bunker",
-             "ranger-mini", "ranger-mini-v1"]
+V2_MODELS = [
+    "scout",
+    "scout-mini",
+    "scout-mini-omni",
+    "hunter",
+    "hunter-se",
+    "tracer",
+    "bunker",
+    "ranger-mini",
+    "ranger-mini-v1",
+]
 
 
-def v2(model, id_, hex_, flips=0):
+def v2(model: str, id_: int, hex_: str, flips: int = 0) -> bytes:
     return bytes([V2_MODELS.index(model) | flips]) + can(id_, hex_)
 
 
 # ---------------------------------------------------------------------------------------------
 # IPC samples packed from the contract.
-FORMATS = {"u8": "B", "u16": "H", "u32": "I", "u64": "Q", "i8": "b", "i16": "h", "i32": "i",
-           "i64": "q", "f32": "f", "f64": "d"}
+FORMATS = {
+    "u8": "B",
+    "u16": "H",
+    "u32": "I",
+    "u64": "Q",
+    "i8": "b",
+    "i16": "h",
+    "i32": "i",
+    "i64": "q",
+    "f32": "f",
+    "f64": "d",
+}
 
 
-def const(group, name):
+def const(group: str, name: str) -> int:
     return next(v["value"] for v in CONTRACT["constants"][group]["values"] if v["name"] == name)
 
 
-def locate(type_name, path):
+def locate(type_name: str, path: str) -> tuple[int, dict[str, Any]]:
     """Offset and field type of a dotted path (`motion.linear_mps`, `sources.0.name`)."""
     offset = 0
-    ty = {"kind": "struct", "struct": type_name}
+    ty: dict[str, Any] = {"kind": "struct", "struct": type_name}
     for part in path.split("."):
         if ty["kind"] == "struct":
             field = next(f for f in CONTRACT["types"][ty["struct"]]["fields"] if f["name"] == part)
@@ -65,7 +85,7 @@ def locate(type_name, path):
     return offset, ty
 
 
-def size_of(ty):
+def size_of(ty: dict[str, Any]) -> int:
     if ty["kind"] == "primitive":
         return struct.calcsize(FORMATS[ty["primitive"]])
     if ty["kind"] == "array":
@@ -73,7 +93,7 @@ def size_of(ty):
     return CONTRACT["types"][ty["struct"]]["size"]
 
 
-def ipc(type_name, values):
+def ipc(type_name: str, values: dict[str, Any]) -> bytes:
     """The bytes of one `type_name` sample: zeros, then `values` by dotted path."""
     buf = bytearray(CONTRACT["types"][type_name]["size"])
     for path, value in values.items():
@@ -81,31 +101,43 @@ def ipc(type_name, values):
         if isinstance(value, (str, bytes)):
             text = value.encode() if isinstance(value, str) else value
             assert ty["kind"] == "array" and len(text) <= ty["len"], path
-            buf[offset:offset + len(text)] = text
+            buf[offset : offset + len(text)] = text
         else:
             struct.pack_into("=" + FORMATS[ty["primitive"]], buf, offset, value)
     return bytes(buf)
 
 
 # The leading byte of zenoh_payload: the type, in the order of fuzz_targets/zenoh_payload.rs.
-PAYLOAD_TYPES = ["VelocityRequest", "ControlRequest", "ChassisState", "MuxStatus", "BusFrame",
-                 "ControlResponse"]
+PAYLOAD_TYPES = [
+    "VelocityRequest",
+    "ControlRequest",
+    "ChassisState",
+    "MuxStatus",
+    "BusFrame",
+    "ControlResponse",
+]
 STAMP = 1_700_000_000_000_000_000
 
 
-def payload(type_name, *samples):
+def payload(type_name: str, *samples: dict[str, Any]) -> bytes:
     return bytes([PAYLOAD_TYPES.index(type_name)]) + b"".join(ipc(type_name, s) for s in samples)
 
 
-def media_type(type_name):
+def media_type(type_name: str) -> str:
     return f"application/octet-stream;{CONTRACT['types'][type_name]['type_name']}"
 
 
-def frame(seq, can_id, direction, hex_):
+def frame(seq: int, can_id: int, direction: str, hex_: str) -> dict[str, Any]:
     data = bytes.fromhex(hex_)
-    return {"stamp_ns": STAMP + seq, "seq": seq, "can_id": can_id,
-            "direction": const("FrameDirection", direction), "kind": const("FrameKind", "CAN"),
-            "len": len(data), "data": data}
+    return {
+        "stamp_ns": STAMP + seq,
+        "seq": seq,
+        "can_id": can_id,
+        "direction": const("FrameDirection", direction),
+        "kind": const("FrameKind", "CAN"),
+        "len": len(data),
+        "data": data,
+    }
 
 
 TWIST = {"stamp_ns": STAMP, "seq": 7, "linear_x_mps": 0.5, "angular_z_radps": -0.25}
@@ -114,18 +146,30 @@ TWIST = {"stamp_ns": STAMP, "seq": 7, "linear_x_mps": 0.5, "angular_z_radps": -0
 # Foxglove: a Twist channel message has a leading byte < 0x80 (bits 0-1: the channel's schema,
 # 0 geometry_msgs/Twist, 1 geometry_msgs/msg/Twist; bit 2: cdr instead of json); a service call
 # 0x80 + the service's index in ServiceAction::ALL.
-SERVICES = ["/estop", "/estop_release", "/clear_faults", "/mode", "/brake", "/lights",
-            "/off_road", "/lift", "/servos", "/power", "/steering_zero", "/silent"]
+SERVICES = [
+    "/estop",
+    "/estop_release",
+    "/clear_faults",
+    "/mode",
+    "/brake",
+    "/lights",
+    "/off_road",
+    "/lift",
+    "/servos",
+    "/power",
+    "/steering_zero",
+    "/silent",
+]
 
 
-def teleop(field, value, schema=0):
+def teleop(field: str, value: float, schema: int = 0) -> bytes:
     message = {"linear": {"x": 0, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}}
     part, axis = field.split("-")
     message[part][axis] = value
     return bytes([schema]) + json.dumps(message, separators=(",", ":")).encode()
 
 
-def service(name, request):
+def service(name: str, request: str) -> bytes:
     return bytes([0x80 | SERVICES.index(name)]) + request.encode()
 
 
@@ -172,10 +216,13 @@ SEEDS = {
         "power-on": b"\x01" + bytes.fromhex("AA5502010102"),
         "forward-0.2": b"\x05" + bytes.fromhex("AA550D03CDCC4C3E00000000000000007D"),
         "lift-10": b"\x02" + bytes.fromhex("AA550304010A0C"),
-        "servos": b"\x03" + bytes.fromhex("AA55030500 5A5C".replace(" ", "")),
-        "sensor": b"\x10" + bytes.fromhex(
-            "AA5547100162260302000100000005 0A00060000000000060003000000000000050000000000000000"
-            "E80301000000000000000000000000000000000000000000000000000000000002DC2F".replace(" ", "")),
+        "servos": b"\x03" + bytes.fromhex("AA550305005A5C"),
+        "sensor": b"\x10"
+        + bytes.fromhex(
+            "AA5547100162260302000100000005"
+            "0A00060000000000060003000000000000050000000000000000"
+            "E80301000000000000000000000000000000000000000000000000000000000002DC2F"
+        ),
         "garbage-then-frame": b"\x04" + bytes.fromhex("00AA12AA55AA5502010102"),
     },
     "nmea_stream": {
@@ -199,50 +246,119 @@ SEEDS = {
     },
     "zenoh_payload": {
         "velocity-twist": payload("VelocityRequest", TWIST),
-        "velocity-steer": payload("VelocityRequest", {
-            "stamp_ns": STAMP, "seq": 8, "linear_x_mps": 0.3, "steer_rad": 0.2,
-            "flags": const("RequestFlags", "STEER")}),
-        "velocity-heartbeat": payload("VelocityRequest", {
-            "stamp_ns": STAMP, "seq": 9, "flags": const("RequestFlags", "HEARTBEAT")}),
-        "velocity-limit": payload("VelocityRequest", {
-            "stamp_ns": STAMP, "seq": 10, "flags": const("RequestFlags", "LIMIT"),
-            "limit_forward_mps": 0.0, "limit_reverse_mps": 0.5, "limit_lateral_mps": 0.5,
-            "limit_angular_radps": 1.0}),
+        "velocity-steer": payload(
+            "VelocityRequest",
+            {
+                "stamp_ns": STAMP,
+                "seq": 8,
+                "linear_x_mps": 0.3,
+                "steer_rad": 0.2,
+                "flags": const("RequestFlags", "STEER"),
+            },
+        ),
+        "velocity-heartbeat": payload(
+            "VelocityRequest",
+            {"stamp_ns": STAMP, "seq": 9, "flags": const("RequestFlags", "HEARTBEAT")},
+        ),
+        "velocity-limit": payload(
+            "VelocityRequest",
+            {
+                "stamp_ns": STAMP,
+                "seq": 10,
+                "flags": const("RequestFlags", "LIMIT"),
+                "limit_forward_mps": 0.0,
+                "limit_reverse_mps": 0.5,
+                "limit_lateral_mps": 0.5,
+                "limit_angular_radps": 1.0,
+            },
+        ),
         "velocity-nan": payload("VelocityRequest", {**TWIST, "linear_x_mps": math.nan}),
-        "control-estop-release": payload("ControlRequest", {
-            "stamp_ns": STAMP, "seq": 1, "kind": const("ControlKind", "LOCK_RELEASE"),
-            "name": "estop"}),
-        "control-lights": payload("ControlRequest", {
-            "stamp_ns": STAMP, "seq": 2, "kind": const("ControlKind", "LIGHTS"),
-            "arg.0": const("LightMode", "CUSTOM"), "arg.1": 40, "arg.2": 1}),
-        "control-lift": payload("ControlRequest", {
-            "stamp_ns": STAMP, "seq": 3, "kind": const("ControlKind", "LIFT"), "arg.0": 1,
-            "value.0": 50.0}),
-        "state-titan": payload("ChassisState", {
-            "seq": 1000, "stamp_ns": STAMP, "robot": const("RobotKind", "TITAN"),
-            "motion.linear_mps": 0.5, "motion.angular_radps": 0.1,
-            "odometry.x_m": 1.5, "system.battery_voltage_v": 25.6,
-            "system.battery_soc_pct": 80.0}),
-        "mux-three-sources": payload("MuxStatus", {
-            "stamp_ns": STAMP, "seq": 50, "source_count": 3, "lock_count": 1,
-            "active_source": 1, "active_priority": 50,
-            "sources.0.name": "safety", "sources.0.priority": 100,
-            "sources.0.flags": const("SourceFlags", "REQUIRED") | const("SourceFlags", "FRESH"),
-            "sources.1.name": "teleop", "sources.1.priority": 50,
-            "sources.1.flags": const("SourceFlags", "ACTIVE") | const("SourceFlags", "FRESH"),
-            "sources.2.name": "remote", "sources.2.priority": 40,
-            "sources.2.flags": const("SourceFlags", "REMOTE"),
-            "locks.0.name": "estop", "locks.0.priority": 255}),
-        "frames-batch": payload("BusFrame", frame(1, 0x211, "RX", "0001010000000000"),
-                                frame(2, 0x111, "TX", "0096000000000000")),
-        "response-ok": payload("ControlResponse", {
-            "stamp_ns": STAMP, "request_seq": 1, "status": const("ControlStatus", "OK"),
-            "message": "estop released"}),
+        "control-estop-release": payload(
+            "ControlRequest",
+            {
+                "stamp_ns": STAMP,
+                "seq": 1,
+                "kind": const("ControlKind", "LOCK_RELEASE"),
+                "name": "estop",
+            },
+        ),
+        "control-lights": payload(
+            "ControlRequest",
+            {
+                "stamp_ns": STAMP,
+                "seq": 2,
+                "kind": const("ControlKind", "LIGHTS"),
+                "arg.0": const("LightMode", "CUSTOM"),
+                "arg.1": 40,
+                "arg.2": 1,
+            },
+        ),
+        "control-lift": payload(
+            "ControlRequest",
+            {
+                "stamp_ns": STAMP,
+                "seq": 3,
+                "kind": const("ControlKind", "LIFT"),
+                "arg.0": 1,
+                "value.0": 50.0,
+            },
+        ),
+        "state-titan": payload(
+            "ChassisState",
+            {
+                "seq": 1000,
+                "stamp_ns": STAMP,
+                "robot": const("RobotKind", "TITAN"),
+                "motion.linear_mps": 0.5,
+                "motion.angular_radps": 0.1,
+                "odometry.x_m": 1.5,
+                "system.battery_voltage_v": 25.6,
+                "system.battery_soc_pct": 80.0,
+            },
+        ),
+        "mux-three-sources": payload(
+            "MuxStatus",
+            {
+                "stamp_ns": STAMP,
+                "seq": 50,
+                "source_count": 3,
+                "lock_count": 1,
+                "active_source": 1,
+                "active_priority": 50,
+                "sources.0.name": "safety",
+                "sources.0.priority": 100,
+                "sources.0.flags": const("SourceFlags", "REQUIRED") | const("SourceFlags", "FRESH"),
+                "sources.1.name": "teleop",
+                "sources.1.priority": 50,
+                "sources.1.flags": const("SourceFlags", "ACTIVE") | const("SourceFlags", "FRESH"),
+                "sources.2.name": "remote",
+                "sources.2.priority": 40,
+                "sources.2.flags": const("SourceFlags", "REMOTE"),
+                "locks.0.name": "estop",
+                "locks.0.priority": 255,
+            },
+        ),
+        "frames-batch": payload(
+            "BusFrame",
+            frame(1, 0x211, "RX", "0001010000000000"),
+            frame(2, 0x111, "TX", "0096000000000000"),
+        ),
+        "response-ok": payload(
+            "ControlResponse",
+            {
+                "stamp_ns": STAMP,
+                "request_seq": 1,
+                "status": const("ControlStatus", "OK"),
+                "message": "estop released",
+            },
+        ),
         # A velocity request under a state's media type (bit 7: another type's).
         "velocity-as-state": bytes([0x80 | (2 << 3)]) + ipc("VelocityRequest", TWIST),
         # The media type spelled out (bit 6), then a NUL, then the bytes.
-        "velocity-media-type-text": bytes([0x40]) + media_type("VelocityRequest").encode()
-        + b"\0" + ipc("VelocityRequest", TWIST),
+        "velocity-media-type-text": bytes([0x40])
+        + media_type("VelocityRequest").encode()
+        + b"\0"
+        + ipc("VelocityRequest", TWIST),
     },
     "foxglove_client": {
         "teleop-up": teleop("linear-x", 1),
