@@ -21,6 +21,7 @@ mod frame;
 pub mod layout;
 mod mux;
 mod names;
+pub mod payload;
 mod request;
 mod safety;
 mod state;

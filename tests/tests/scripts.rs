@@ -1,9 +1,11 @@
-//! The scripts CI runs, tested against stand-ins: `scripts/fuzz` must fail when a target crashes
-//! or cargo-fuzz fails, and pass only when every target ran without one.
+//! The scripts CI runs, tested against stand-ins: `scripts/fuzz` must fail when a target crashes,
+//! executes no input or cargo-fuzz fails, and pass only when every target ran inputs without a
+//! crash.
 //!
 //! Each test copies the script into a scratch tree (`scripts/fuzz`, `fuzz/seeds/<target>/`) and
 //! puts a stand-in `cargo` first on `PATH`: it logs its arguments, answers `cargo fuzz --version`,
-//! and plays a clean run, a crash or a build failure on the target it is told to.
+//! and plays a clean run, a crash, a run of zero inputs, a run without statistics or a build
+//! failure on the target it is told to.
 // Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
@@ -11,13 +13,17 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// The targets `scripts/fuzz` runs when it is given none.
-const TARGETS: [&str; 5] = [
+/// The targets `scripts/fuzz` runs when it is given none: every target of `fuzz/Cargo.toml`.
+const TARGETS: [&str; 9] = [
     "titan_decode",
     "scout_mini_decode",
+    "agilex_v2_decode",
     "xbot_stream",
     "nmea_stream",
     "candump_text",
+    "slcan_stream",
+    "zenoh_payload",
+    "foxglove_client",
 ];
 
 const STAND_IN_CARGO: &str = r#"#!/bin/sh
@@ -45,8 +51,19 @@ case "$FUZZ_PLAY" in
         echo "error: could not compile \`chassis-fuzz\` (bin \"$target\") due to 1 previous error" >&2
         exit 101
         ;;
+    zero)
+        # libFuzzer given nothing to run (e.g. -runs=0 on an empty corpus) exits 0.
+        echo "Done 0 runs in 0 second(s)"
+        echo "stat::number_of_executed_units: 0"
+        exit 0
+        ;;
+    no-stats)
+        echo "Done 1000 runs in 1 second(s)"
+        exit 0
+        ;;
     *)
         echo "Done 1000 runs in 1 second(s)"
+        echo "stat::number_of_executed_units: 1000"
         exit 0
         ;;
 esac
@@ -147,8 +164,16 @@ fn fuzzing_passes_when_every_target_runs_without_a_crash() {
     let (stdout, stderr) = text(&output);
     assert_eq!(output.status.code(), Some(0), "{stdout}\n{stderr}");
     assert!(
-        stdout.contains("no crash in 5 targets"),
+        stdout.contains("no crash in 9 targets, each executed inputs"),
         "{stdout}\n{stderr}"
+    );
+    // Each target's executed count is shown.
+    assert_eq!(
+        stdout
+            .matches("stat::number_of_executed_units: 1000")
+            .count(),
+        TARGETS.len(),
+        "{stdout}"
     );
     assert_every_target_ran(&sandbox, 3);
 }
@@ -164,7 +189,7 @@ fn a_crashing_fuzz_target_fails_the_run_and_is_named() {
         "{stderr}"
     );
     assert!(
-        stderr.contains("FAILED: 1 of 5 targets: scout_mini_decode"),
+        stderr.contains("FAILED: 1 of 9 targets: scout_mini_decode"),
         "{stderr}"
     );
     assert!(!stdout.contains("fuzzing done"), "{stdout}");
@@ -197,7 +222,66 @@ fn cargo_fuzz_failing_without_a_crash_fails_the_run_with_its_error() {
     );
     assert!(stderr.contains("could not compile"), "{stderr}");
     assert!(
-        stderr.contains("FAILED: 1 of 5 targets: xbot_stream"),
+        stderr.contains("FAILED: 1 of 9 targets: xbot_stream"),
         "{stderr}"
     );
+}
+
+#[test]
+fn a_target_that_executes_no_input_fails_the_run_and_is_named() {
+    let sandbox = Sandbox::new("zero");
+    let output = sandbox.fuzz(&["2"], "zero", "slcan_stream");
+    let (stdout, stderr) = text(&output);
+    assert_eq!(output.status.code(), Some(1), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("slcan_stream executed no input (stat::number_of_executed_units: 0)"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("FAILED: 1 of 9 targets: slcan_stream"),
+        "{stderr}"
+    );
+    assert!(!stdout.contains("fuzzing done"), "{stdout}");
+    assert_every_target_ran(&sandbox, 2);
+}
+
+#[test]
+fn a_run_that_reports_no_executed_count_fails_like_a_run_of_none() {
+    let sandbox = Sandbox::new("nostats");
+    let output = sandbox.fuzz(&["1", "zenoh_payload"], "no-stats", "zenoh_payload");
+    let (stdout, stderr) = text(&output);
+    assert_eq!(output.status.code(), Some(1), "{stdout}\n{stderr}");
+    assert!(
+        stderr
+            .contains("zenoh_payload executed no input (stat::number_of_executed_units: missing)"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn the_default_targets_are_every_target_of_the_fuzz_crate() {
+    let manifest =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/Cargo.toml"))
+            .unwrap();
+    let mut defined: Vec<&str> = manifest
+        .split("[[bin]]")
+        .skip(1)
+        .filter_map(|bin| {
+            bin.lines()
+                .find_map(|l| l.trim().strip_prefix("name = "))
+                .map(|name| name.trim_matches('"'))
+        })
+        .collect();
+    defined.sort_unstable();
+    let mut listed = TARGETS.to_vec();
+    listed.sort_unstable();
+    assert_eq!(defined, listed);
+    // And each has its seeds.
+    for target in TARGETS {
+        let seeds = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../fuzz/seeds")
+            .join(target);
+        let count = std::fs::read_dir(&seeds).map_or(0, |d| d.count());
+        assert!(count > 0, "{target} has no seeds in {}", seeds.display());
+    }
 }

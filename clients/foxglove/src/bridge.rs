@@ -20,19 +20,18 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::{
-    BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    FaultClear, FrameDirection, FrameKind, LightMode, MuxStatus, Robot, Source, Ticker,
-    termination_requested,
+    BusFrame, ChassisState, ControlStatus, FrameDirection, FrameKind, MuxStatus, Robot, Source,
+    Ticker, termination_requested,
 };
+use chassis_protocols::RobotKind;
 use chassis_protocols::description::describe;
-use chassis_protocols::{Command, RobotKind, command_to_request};
 use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame, SceneUpdate, log};
 use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
-use serde::Deserialize;
 use serde_json::{Map, Value, json};
 
-use crate::server::{Inbox, ServiceAction};
+use crate::server::Inbox;
 use chassis_foxglove::view::{self, Body, Trail, Watch};
+use chassis_foxglove_messages::{control_request, response_json};
 use chassis_protocols::describe::RobotCodec;
 
 /// Frames a `/frames` batch carries at most.
@@ -592,150 +591,9 @@ impl Loop<'_> {
     }
 }
 
-/// chassisd's answer as the service's JSON response.
-pub fn response_json(response: &ControlResponse) -> Value {
-    json!({
-        "ok": response.is_ok(),
-        "status": ControlStatus::name(response.status),
-        "message": response.message(),
-    })
-}
-
-/// Why a service request is not a control request.
-#[derive(Debug, thiserror::Error)]
-pub enum CallError {
-    #[error("request is not JSON of the service's schema: {0}")]
-    Json(#[from] serde_json::Error),
-    #[error("unknown fault '{0}'")]
-    UnknownFault(String),
-    #[error("unknown light mode '{0}' (off, on, breathing, custom, auto)")]
-    LightMode(String),
-    #[error("{0} is out of range")]
-    Range(&'static str),
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-struct Fields {
-    which: String,
-    take_control: bool,
-    engage: bool,
-    enter: bool,
-    enable: bool,
-    mode: String,
-    brightness_pct: u8,
-    position_pct: f64,
-    disable: bool,
-    pan_deg: f64,
-    tilt_deg: f64,
-}
-
-impl Default for Fields {
-    fn default() -> Self {
-        Self {
-            which: "all".into(),
-            take_control: true,
-            engage: true,
-            enter: true,
-            enable: true,
-            mode: "on".into(),
-            brightness_pct: 100,
-            position_pct: 0.0,
-            disable: false,
-            pan_deg: 0.0,
-            tilt_deg: 0.0,
-        }
-    }
-}
-
-/// The control request a service call asks for. An empty payload is `{}`: every default.
-pub fn control_request(action: ServiceAction, payload: &[u8]) -> Result<ControlRequest, CallError> {
-    let text = std::str::from_utf8(payload).unwrap_or("").trim();
-    let f: Fields = if text.is_empty() {
-        Fields::default()
-    } else {
-        serde_json::from_str(text)?
-    };
-    let command = match action {
-        ServiceAction::Estop => {
-            return Ok(ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("estop"));
-        }
-        ServiceAction::EstopRelease => {
-            return Ok(ControlRequest::new(ControlKind::LOCK_RELEASE).with_name("estop"));
-        }
-        ServiceAction::ClearFaults => Command::ClearFaults {
-            which: FaultClear::from_name(&f.which).ok_or(CallError::UnknownFault(f.which))?,
-        },
-        ServiceAction::Mode => Command::Mode {
-            take_control: f.take_control,
-        },
-        ServiceAction::Brake => Command::Brake { engage: f.engage },
-        ServiceAction::Lights => {
-            if f.brightness_pct > 100 {
-                return Err(CallError::Range("brightness_pct"));
-            }
-            let (enable, mode) = match f.mode.as_str() {
-                "off" => (true, LightMode::OFF),
-                "on" => (true, LightMode::ON),
-                "breathing" => (true, LightMode::BREATHING),
-                "custom" => (true, LightMode::CUSTOM),
-                "auto" => (false, LightMode::OFF),
-                _ => return Err(CallError::LightMode(f.mode)),
-            };
-            Command::Lights {
-                enable,
-                mode,
-                brightness_pct: f.brightness_pct,
-            }
-        }
-        ServiceAction::OffRoad => Command::OffRoad { enter: f.enter },
-        ServiceAction::Lift => {
-            if !(0.0..=100.0).contains(&f.position_pct) {
-                return Err(CallError::Range("position_pct"));
-            }
-            Command::Lift {
-                enable: !f.disable,
-                position_pct: f.position_pct,
-            }
-        }
-        ServiceAction::Servos => {
-            if !(-90.0..=90.0).contains(&f.pan_deg) || !(-90.0..=90.0).contains(&f.tilt_deg) {
-                return Err(CallError::Range("pan_deg / tilt_deg"));
-            }
-            Command::Servos {
-                pan_rad: f.pan_deg.to_radians(),
-                tilt_rad: f.tilt_deg.to_radians(),
-            }
-        }
-        ServiceAction::Power => Command::Power { enable: f.enable },
-        ServiceAction::SteeringZero => Command::SteeringZero,
-        ServiceAction::Silent => Command::Silent { enter: f.enter },
-    };
-    command_to_request(&command).ok_or(CallError::Range("command"))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_estop_services_engage_and_release_the_estop_lock() {
-        let r = control_request(ServiceAction::Estop, b"").unwrap();
-        assert_eq!((r.kind, r.name()), (ControlKind::LOCK_ENGAGE, "estop"));
-        let r = control_request(ServiceAction::EstopRelease, b"{}").unwrap();
-        assert_eq!((r.kind, r.name()), (ControlKind::LOCK_RELEASE, "estop"));
-    }
-
-    #[test]
-    fn service_requests_become_the_control_requests_of_chassis_control() {
-        let r = control_request(ServiceAction::ClearFaults, br#"{"which":"all"}"#).unwrap();
-        assert_eq!(r.kind, ControlKind::CLEAR_FAULTS);
-        let r = control_request(ServiceAction::Mode, br#"{"take_control":false}"#).unwrap();
-        assert_eq!(r.kind, ControlKind::MODE);
-        assert!(control_request(ServiceAction::ClearFaults, br#"{"which":"nope"}"#).is_err());
-        assert!(control_request(ServiceAction::Lift, br#"{"position_pct":120}"#).is_err());
-        assert!(control_request(ServiceAction::Brake, br#"{"bogus":1}"#).is_err());
-    }
 
     fn passed(period_ms: u64, samples: impl Iterator<Item = u64>) -> usize {
         let mut d = Decimator::new(Duration::from_millis(period_ms));

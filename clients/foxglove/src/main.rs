@@ -38,7 +38,9 @@ use clap::Parser;
 use foxglove::websocket::Capability;
 use foxglove::{Context, WebSocketServer};
 
-use crate::server::{Listener, ServiceAction};
+use chassis_foxglove_messages::ServiceAction;
+
+use crate::server::Listener;
 
 /// The fastest state rate a browser keeps up with, Hz.
 const MAX_STATE_HZ: f64 = 50.0;
@@ -109,7 +111,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         .capabilities(capabilities)
         .supported_encodings(["json"])
         .listener(std::sync::Arc::new(Listener { inbox: tx.clone() }))
-        .services(actions.into_iter().map(|a| a.service(tx.clone())))
+        .services(actions.into_iter().map(|a| server::service(a, tx.clone())))
         .start_blocking()
         .with_context(|| format!("serving on {}:{}", cli.bind, cli.port))?;
     drop(tx);

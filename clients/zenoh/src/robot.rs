@@ -5,7 +5,9 @@
 //!   (fixed-layout bytes) and decimated JSON twins (`…/state/json`, `…/mux/json`);
 //! * a thread holds the remote sources' publishers and takes `chassis/<name>/cmd/<source>` from
 //!   the network: only for sources chassisd's mux marks [`SourceFlags::REMOTE`] (never a
-//!   required one); each request is re-stamped on arrival, so its timeout runs from then;
+//!   required one); a request that is not one, or carries a NaN or an infinity, is dropped and
+//!   counted ([`chassis_client::payload`]); each is re-stamped on arrival, so its timeout runs
+//!   from then;
 //! * a thread answers the queryable `chassis/<name>/control` with chassisd's response.
 //!
 //! iceoryx2 ports are not `Send`: each thread connects to the robot itself.
@@ -24,6 +26,8 @@ use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::Sample;
 use zerocopy::IntoBytes as _;
+
+use chassis_client::payload::{Payload, PayloadError};
 
 use crate::net::{self, Net};
 use crate::wire::{Keys, Wire};
@@ -359,24 +363,19 @@ fn drive(
                 request.stamp_ns = arrived;
                 source.send(request)?;
             }
+            // Not the type, cut, or carrying a NaN or an infinity: never passed on as motion.
             Err(e) => {
                 bad += 1;
-                tracing::warn!(key, bad, "dropped a velocity request: {e}");
+                if bad.is_power_of_two() {
+                    tracing::warn!(key, bad, "dropped a velocity request: {e}");
+                }
             }
         }
     }
     Ok(())
 }
 
-fn decode<T>(wire: &Wire<T>, sample: &Sample) -> Result<T, crate::wire::WireError>
-where
-    T: chassis_client::layout::Layout
-        + zerocopy::FromBytes
-        + zerocopy::IntoBytes
-        + zerocopy::Immutable
-        + zerocopy::KnownLayout
-        + Copy,
-{
+fn decode<T: Payload>(wire: &Wire<T>, sample: &Sample) -> Result<T, PayloadError> {
     wire.decode(sample.encoding(), &sample.payload().to_bytes())
 }
 

@@ -1,31 +1,17 @@
 //! The Zenoh side of the contract: key expressions, encodings and the fixed-layout payloads.
 //!
-//! Every binary payload is the IPC type's bytes exactly as they lie in shared memory (native
-//! byte order, the layout `interfaces/contract.json` describes), with the encoding
-//! `application/octet-stream;<type name>`, e.g. `application/octet-stream;chassis::ChassisState.v2`:
-//! a reader checks the type name (and so the layout version) before it reads a byte.
+//! Every binary payload is the IPC type's bytes exactly as they lie in shared memory, with the
+//! encoding `application/octet-stream;<type name>`, e.g.
+//! `application/octet-stream;chassis::ChassisState.v2`. The bytes and the check of what arrives
+//! from another computer are [`chassis_client::payload`]'s (sans-IO, fuzzed); [`Wire`] only
+//! carries them in Zenoh's [`Encoding`].
 
-use chassis_client::layout::Layout;
+use chassis_client::payload::{Payload, PayloadError, PayloadType};
 use chassis_client::{ServiceKind, service_name};
-use thiserror::Error;
 use zenoh::bytes::Encoding;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
-
-/// Why a payload was not taken.
-#[derive(Debug, Error, PartialEq, Eq)]
-pub enum WireError {
-    #[error("encoding '{got}' is not the expected '{expected}'")]
-    Encoding { got: String, expected: String },
-    #[error("{len} bytes, not a multiple of the {size} bytes of {type_name}")]
-    Size {
-        len: usize,
-        size: usize,
-        type_name: &'static str,
-    },
-}
 
 /// The encoding of a payload carrying `T` (one or several, back to back).
-pub fn encoding<T: Layout>() -> Encoding {
+pub fn encoding<T: Payload>() -> Encoding {
     Encoding::APPLICATION_OCTET_STREAM.with_schema(T::layout().type_name)
 }
 
@@ -33,19 +19,14 @@ pub fn encoding<T: Layout>() -> Encoding {
 #[derive(Debug, Clone)]
 pub struct Wire<T> {
     encoding: Encoding,
-    text: String,
-    type_name: &'static str,
-    _t: std::marker::PhantomData<fn() -> T>,
+    payload: PayloadType<T>,
 }
 
-impl<T: Layout + FromBytes + IntoBytes + Immutable + KnownLayout + Copy> Wire<T> {
+impl<T: Payload> Wire<T> {
     pub fn new() -> Self {
-        let encoding = encoding::<T>();
         Self {
-            text: encoding.to_string(),
-            encoding,
-            type_name: T::layout().type_name,
-            _t: std::marker::PhantomData,
+            encoding: encoding::<T>(),
+            payload: PayloadType::new(),
         }
     }
 
@@ -53,43 +34,18 @@ impl<T: Layout + FromBytes + IntoBytes + Immutable + KnownLayout + Copy> Wire<T>
         self.encoding.clone()
     }
 
-    /// The values a payload carries, after checking its encoding and its length.
-    pub fn decode_all(&self, encoding: &Encoding, bytes: &[u8]) -> Result<Vec<T>, WireError> {
-        if encoding.to_string() != self.text {
-            return Err(WireError::Encoding {
-                got: encoding.to_string(),
-                expected: self.text.clone(),
-            });
-        }
-        let size = size_of::<T>();
-        if !bytes.len().is_multiple_of(size) {
-            return Err(WireError::Size {
-                len: bytes.len(),
-                size,
-                type_name: self.type_name,
-            });
-        }
-        Ok(bytes
-            .chunks_exact(size)
-            .filter_map(|chunk| T::read_from_bytes(chunk).ok())
-            .collect())
+    /// The values a payload carries, after checking its encoding, its length and each value.
+    pub fn decode_all(&self, encoding: &Encoding, bytes: &[u8]) -> Result<Vec<T>, PayloadError> {
+        self.payload.decode_all(&encoding.to_string(), bytes)
     }
 
     /// The one value a payload carries.
-    pub fn decode(&self, encoding: &Encoding, bytes: &[u8]) -> Result<T, WireError> {
-        let values = self.decode_all(encoding, bytes)?;
-        match values.as_slice() {
-            [one] => Ok(*one),
-            _ => Err(WireError::Size {
-                len: bytes.len(),
-                size: size_of::<T>(),
-                type_name: self.type_name,
-            }),
-        }
+    pub fn decode(&self, encoding: &Encoding, bytes: &[u8]) -> Result<T, PayloadError> {
+        self.payload.decode(&encoding.to_string(), bytes)
     }
 }
 
-impl<T: Layout + FromBytes + IntoBytes + Immutable + KnownLayout + Copy> Default for Wire<T> {
+impl<T: Payload> Default for Wire<T> {
     fn default() -> Self {
         Self::new()
     }
@@ -145,37 +101,40 @@ impl Keys {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chassis_client::{ChassisState, VelocityRequest};
+    use chassis_client::{
+        BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, VelocityRequest,
+    };
+    use zerocopy::IntoBytes as _;
 
     #[test]
-    fn payloads_carry_the_type_name_and_are_checked() {
+    fn zenoh_encodings_are_the_payload_media_types() {
+        fn same<T: Payload>() {
+            assert_eq!(
+                Wire::<T>::new().encoding().to_string(),
+                PayloadType::<T>::new().media_type()
+            );
+        }
+        same::<VelocityRequest>();
+        same::<ChassisState>();
+        same::<MuxStatus>();
+        same::<BusFrame>();
+        same::<ControlRequest>();
+        same::<ControlResponse>();
         let wire = Wire::<VelocityRequest>::new();
-        assert_eq!(
-            wire.encoding().to_string(),
-            format!(
-                "application/octet-stream;{}",
-                VelocityRequest::layout().type_name
-            )
-        );
         let request = VelocityRequest::twist(0.5, -0.25);
-        let decoded = wire
-            .decode(&wire.encoding(), request.as_bytes())
-            .expect("decodes");
-        assert_eq!(decoded, request);
-        let state = Wire::<ChassisState>::new();
-        assert!(matches!(
-            state.decode(&wire.encoding(), ChassisState::default().as_bytes()),
-            Err(WireError::Encoding { .. })
-        ));
-        assert!(matches!(
-            wire.decode(&wire.encoding(), &[0; 7]),
-            Err(WireError::Size { len: 7, .. })
-        ));
-        let two = [request, request];
         assert_eq!(
-            wire.decode_all(&wire.encoding(), two.as_bytes()),
-            Ok(two.to_vec())
+            wire.decode(&wire.encoding(), request.as_bytes()),
+            Ok(request)
         );
+        assert!(matches!(
+            wire.decode(&Wire::<ChassisState>::new().encoding(), request.as_bytes()),
+            Err(PayloadError::MediaType { .. })
+        ));
+        let nan = VelocityRequest::twist(f32::NAN, 0.0);
+        assert!(matches!(
+            wire.decode(&wire.encoding(), nan.as_bytes()),
+            Err(PayloadError::Refused { .. })
+        ));
     }
 
     #[test]

@@ -9,7 +9,8 @@
 //!   every frame of the manual in both directions.
 //! * [`nmea`]: the NMEA 0183 sentences of the XBot's GPS receiver.
 //! * [`profile`]: every physical constant and every doubtful (⚠) choice of the manuals.
-//! * [`can`]: the CAN frame type and the can-utils text forms.
+//! * [`can`]: the CAN frame type and the can-utils text forms; [`slcan`]: a serial CAN
+//!   adapter's text.
 //!
 //! Frame structs hold SI values in ISO 8855 axes (x forward, y left, left turn positive); each
 //! codec is the only place that knows its vendor's units and signs.
@@ -30,6 +31,7 @@ pub mod registry;
 pub mod scout_mini;
 #[cfg(test)]
 mod sim_bench;
+pub mod slcan;
 pub mod time;
 pub mod titan;
 mod wire;

@@ -465,8 +465,26 @@ fn encode_motion(m: &Motion, profile: &V2Profile) -> Result<[u8; 8], EncodeError
     }))
 }
 
+/// Light modes: 0 off, 1 on, 2 breathing, 3 custom brightness.
+const MAX_LIGHT_MODE: u8 = 3;
+const MAX_BRIGHTNESS_PCT: u8 = 100;
+
 fn decode_lights(raw_id: u32, data: &[u8]) -> Result<Lights, DecodeError> {
     let w: LightWire = read_prefix(raw_id, data)?;
+    for (field, value, max) in [
+        ("front light mode", w.front_mode, MAX_LIGHT_MODE),
+        (
+            "front brightness",
+            w.front_brightness_pct,
+            MAX_BRIGHTNESS_PCT,
+        ),
+        ("rear light mode", w.rear_mode, MAX_LIGHT_MODE),
+        ("rear brightness", w.rear_brightness_pct, MAX_BRIGHTNESS_PCT),
+    ] {
+        if value > max {
+            return Err(invalid(raw_id, field, value));
+        }
+    }
     Ok(Lights {
         enabled: read_bool(raw_id, "light control", w.enabled)?,
         front_mode: w.front_mode,
@@ -801,10 +819,10 @@ impl Frame {
                     ("front_brightness_pct", l.front_brightness_pct),
                     ("rear_brightness_pct", l.rear_brightness_pct),
                 ] {
-                    check_index(field, v, 0, 100)?;
+                    check_index(field, v, 0, MAX_BRIGHTNESS_PCT)?;
                 }
-                check_index("front_mode", l.front_mode, 0, 3)?;
-                check_index("rear_mode", l.rear_mode, 0, 3)?;
+                check_index("front_mode", l.front_mode, 0, MAX_LIGHT_MODE)?;
+                check_index("rear_mode", l.rear_mode, 0, MAX_LIGHT_MODE)?;
                 CanFrame::from_parts(
                     id,
                     wire_bytes::<8, _>(LightWire {

@@ -1,6 +1,7 @@
 //! The test vectors of the V2 reading (§6, TV1-TV17), each decoded and encoded back.
 
 use super::*;
+use crate::DecodeError;
 use crate::Direction;
 use crate::can::CanFrame;
 use crate::titan::RcFeedback;
@@ -353,4 +354,38 @@ fn nonsense_is_an_error_not_a_panic() {
         ..Motion::default()
     });
     assert!(too_fast.encode(&p).is_err());
+}
+
+/// Found by fuzzing (`agilex_v2_decode`): a light frame whose mode or brightness the wire
+/// cannot carry decoded, then could not be encoded back.
+#[test]
+fn a_light_frame_with_a_mode_or_brightness_beyond_the_manual_is_refused() {
+    let p = V2Profile::default();
+    for text in [
+        "121#0100002100000000",
+        "231#0104000000000000",
+        "231#0103650000000000",
+        "121#0100000065000000",
+    ] {
+        assert!(
+            matches!(
+                decode(&frame(text), &p),
+                Err(DecodeError::InvalidValue { .. })
+            ),
+            "{text}"
+        );
+    }
+    // The edges are lights.
+    let Frame::LightState(l) = decoded("231#0103640364000009", &p) else {
+        panic!()
+    };
+    assert_eq!(
+        (
+            l.front_mode,
+            l.front_brightness_pct,
+            l.rear_mode,
+            l.rear_brightness_pct
+        ),
+        (3, 100, 3, 100)
+    );
 }
