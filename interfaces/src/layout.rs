@@ -300,10 +300,10 @@ pub fn constants() -> Vec<ConstantGroup> {
             CONFIG_SPEED_LIMIT, QUANTISED, CHASSIS_NOT_READY, SAFETY_LIMIT,
         }),
         describe_constants!(enum ZeroReason: u8 {
-            NONE, NO_ACTIVE_SOURCE, REQUIRED_SOURCE_STALE, LOCKED, STARTING,
+            NONE, NO_ACTIVE_SOURCE, REQUIRED_SOURCE_STALE, LOCKED, STARTING, AWAITING_ZERO,
         }),
         describe_constants!(flags SourceFlags: u8 {
-            REQUIRED, FRESH, ACTIVE, HEARTBEAT, BLOCKED, LIMITING, REMOTE,
+            REQUIRED, FRESH, ACTIVE, HEARTBEAT, BLOCKED, LIMITING, REMOTE, AWAITING_ZERO,
         }),
         describe_constants!(flags RequestFlags: u32 { STEER, HEARTBEAT, LIMIT }),
         describe_constants!(enum ControlKind: u8 {

@@ -135,6 +135,10 @@ impl ZeroReason {
     pub const LOCKED: u8 = 3;
     /// The mux has not started yet.
     pub const STARTING: u8 = 4;
+    /// A lock was released while the source that would win asked for motion: a release never
+    /// starts motion, so the mux waits until that source asks for zero (or stops asking);
+    /// [`MuxStatus::awaiting_source`] names it.
+    pub const AWAITING_ZERO: u8 = 5;
 
     pub fn name(reason: u8) -> &'static str {
         match reason {
@@ -143,6 +147,7 @@ impl ZeroReason {
             Self::REQUIRED_SOURCE_STALE => "required_source_stale",
             Self::LOCKED => "locked",
             Self::STARTING => "starting",
+            Self::AWAITING_ZERO => "awaiting_zero",
             _ => "unknown",
         }
     }
@@ -166,6 +171,9 @@ impl SourceFlags {
     pub const LIMITING: u8 = 1 << 5;
     /// Configured `remote`: a bridge (`chassis-zenoh`) may publish on it for another computer.
     pub const REMOTE: u8 = 1 << 6;
+    /// It asked for motion when a lock blocking it was released: its motion is not obeyed until
+    /// it asks for zero (or stops asking).
+    pub const AWAITING_ZERO: u8 = 1 << 7;
 }
 
 /// One configured velocity source, as the mux sees it.
@@ -322,8 +330,11 @@ pub struct MuxStatus {
     pub zero_reason: u8,
     pub source_count: u8,
     pub lock_count: u8,
+    /// While `zero_reason` is [`ZeroReason::AWAITING_ZERO`]: index into `sources` of the source
+    /// whose zero command the mux waits for (it would win). Was a reserved byte.
+    pub awaiting_source: u8,
     #[serde(skip)]
-    pub _reserved: [u8; 3],
+    pub _reserved: [u8; 2],
     pub sources: [SourceStatus; MAX_SOURCES],
     pub locks: [LockStatus; MAX_LOCKS],
 }
@@ -343,6 +354,7 @@ describe_layout!(
         zero_reason,
         source_count,
         lock_count,
+        awaiting_source,
         _reserved,
         sources,
         locks,
@@ -365,6 +377,14 @@ impl MuxStatus {
     /// The winning source, if any.
     pub fn active(&self) -> Option<&SourceStatus> {
         self.sources().get(usize::from(self.active_source))
+    }
+
+    /// The source whose zero command the mux waits for after a release, if it waits.
+    pub fn awaiting(&self) -> Option<&SourceStatus> {
+        if self.zero_reason != ZeroReason::AWAITING_ZERO {
+            return None;
+        }
+        self.sources().get(usize::from(self.awaiting_source))
     }
 
     /// Index of the lock called `name`.

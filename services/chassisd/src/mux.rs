@@ -14,6 +14,13 @@
 //! * Configured speed limits, then acceleration smoothing; a stop from a safety-priority source,
 //!   a stale required source, a lock and the timeout of the last active source are never
 //!   smoothed: motion never outlives a dead source's timeout.
+//! * **A release never starts motion** (ISO 13850, IEC 60204-1: resetting a stop shall not
+//!   initiate a restart). When a lock is released — by its holder, the operator, any bridge, or
+//!   after a latch restored at start — every source it blocked that was asking for motion at
+//!   that moment is *awaiting zero*: its motion is not obeyed until it asks for zero (a zero
+//!   request or a heartbeat) or stops asking (its request times out). While the source that
+//!   would win awaits, the output is zero and `MuxStatus` says so (`ZeroReason::AWAITING_ZERO`,
+//!   `awaiting_source`); it does not hand the robot to a lower source either.
 //! * A request with a NaN or infinite number, a negative envelope, or a speed no chassis could
 //!   reach (over [`MAX_SANE_SPEED`] or [`MAX_SANE_YAW_RATE`], steering past ±90°) is rejected
 //!   and counted against its source; the source's previous request stands.
@@ -246,6 +253,9 @@ struct Source {
     /// Latest request and the time its age counts from.
     latest: Option<(Timestamp, VelocityRequest)>,
     rejected: u32,
+    /// It asked for motion when a lock that blocked it was released: its motion waits for a
+    /// zero request (or its timeout).
+    awaiting_zero: bool,
 }
 
 impl Source {
@@ -256,6 +266,15 @@ impl Source {
 
     fn expiry(&self) -> Option<Timestamp> {
         self.latest.map(|(t, _)| t + self.timeout)
+    }
+
+    /// Whether its latest request, fresh at `now`, asks for motion (not a heartbeat, not an
+    /// envelope, not zero).
+    fn asks_for_motion(&self, now: Timestamp) -> bool {
+        self.is_fresh(now)
+            && self
+                .latest
+                .is_some_and(|(_, r)| !r.is_heartbeat() && !twist_of(&r).is_zero())
     }
 }
 
@@ -305,6 +324,7 @@ impl Mux {
                 config: c.clone(),
                 latest: None,
                 rejected: 0,
+                awaiting_zero: false,
             })
             .collect();
         let locks: Vec<Lock> = config
@@ -387,8 +407,12 @@ impl Mux {
         }
         let arrival = Timestamp::from_nanos(request.stamp_ns).min(now);
         source.latest = Some((arrival, *request));
+        if request.is_heartbeat() || twist_of(request).is_zero() {
+            source.awaiting_zero = false;
+        }
         // Index < MAX_SOURCES (8) fits a u8.
         let holder = index as u8;
+        let mut released = Vec::new();
         for (bit, lock) in self.locks.iter_mut().enumerate() {
             if request.lock_engage & (1 << bit) != 0 && lock.held.is_none() {
                 lock.held = Some((holder, now));
@@ -396,15 +420,44 @@ impl Mux {
             if request.lock_release & (1 << bit) != 0 && lock.held.is_some_and(|(h, _)| h == holder)
             {
                 lock.held = None;
+                released.push(lock.config.priority);
             }
+        }
+        for priority in released {
+            self.await_zero_below(now, priority);
         }
         Ok(())
     }
 
-    /// Releases the lock `name` whoever holds it (operator). Returns whether it was held.
-    pub fn release_lock(&mut self, name: &str) -> Result<bool, NoSuchLock> {
+    /// Releases the lock `name` at `now` whoever holds it (operator). Returns whether it was
+    /// held. The sources it blocked that ask for motion now await a zero request.
+    pub fn release_lock(&mut self, now: Timestamp, name: &str) -> Result<bool, NoSuchLock> {
         let lock = self.lock_mut(name)?;
-        Ok(lock.held.take().is_some())
+        let priority = lock.config.priority;
+        let was_held = lock.held.take().is_some();
+        if was_held {
+            self.await_zero_below(now, priority);
+        }
+        Ok(was_held)
+    }
+
+    /// The sources whose motion waits for a zero request since a release.
+    pub fn awaiting_zero(&self) -> Vec<&str> {
+        self.sources
+            .iter()
+            .filter(|s| s.awaiting_zero)
+            .map(|s| s.config.name.as_str())
+            .collect()
+    }
+
+    /// A lock of `priority` was released at `now`: every source it blocked that asks for motion
+    /// awaits a zero request before its motion is obeyed again.
+    fn await_zero_below(&mut self, now: Timestamp, priority: u8) {
+        for source in &mut self.sources {
+            if source.config.priority < priority && source.asks_for_motion(now) {
+                source.awaiting_zero = true;
+            }
+        }
     }
 
     /// Engages the lock `name` on behalf of the operator. Returns whether it was free.
@@ -465,6 +518,12 @@ impl Mux {
             .sources
             .iter()
             .any(|s| s.config.required && !s.is_fresh(now));
+        // A source that stopped asking awaits nothing any more.
+        for source in &mut self.sources {
+            if source.awaiting_zero && !source.is_fresh(now) {
+                source.awaiting_zero = false;
+            }
+        }
 
         // The winner: fresh, asking for something, not blocked; highest priority, then newest.
         let mut winner: Option<usize> = None;
@@ -494,8 +553,11 @@ impl Mux {
             }
         }
 
+        let awaiting = winner.filter(|&w| self.sources[w].awaiting_zero);
         let (requested, reason, winner) = if required_stale {
             (Twist::ZERO, ZeroReason::REQUIRED_SOURCE_STALE, None)
+        } else if awaiting.is_some() {
+            (Twist::ZERO, ZeroReason::AWAITING_ZERO, None)
         } else if let Some(w) = winner {
             let request = self.sources[w].latest.map(|(_, r)| r).unwrap_or_default();
             (twist_of(&request), ZeroReason::NONE, Some(w))
@@ -527,6 +589,7 @@ impl Mux {
                 ZeroReason::REQUIRED_SOURCE_STALE
                     | ZeroReason::LOCKED
                     | ZeroReason::NO_ACTIVE_SOURCE
+                    | ZeroReason::AWAITING_ZERO
             );
         let output = if unsmoothed {
             limited
@@ -539,6 +602,7 @@ impl Mux {
 
         let previous = self.status;
         self.fill_status(now, winner, reason, requested, output, clamp_flags);
+        self.status.awaiting_source = awaiting.map_or(MuxStatus::NO_SOURCE, |w| w as u8);
         for &i in &limited_by {
             if let Some(slot) = self.status.sources.get_mut(i) {
                 slot.flags |= SourceFlags::LIMITING;
@@ -548,6 +612,7 @@ impl Mux {
             || previous.zero_reason != self.status.zero_reason
             || previous.output != self.status.output
             || previous.clamp_flags != self.status.clamp_flags
+            || previous.awaiting_source != self.status.awaiting_source
             || previous.locks != self.status.locks;
         Decision { output, changed }
     }
@@ -679,6 +744,9 @@ impl Mux {
             }
             if blocking_priority.is_some_and(|p| source.config.priority < p) {
                 flags |= SourceFlags::BLOCKED;
+            }
+            if source.awaiting_zero {
+                flags |= SourceFlags::AWAITING_ZERO;
             }
             slot.flags = flags;
             slot.age_ms = source.latest.map_or(u32::MAX, |(t, _)| age_ms(now, t));
@@ -1000,7 +1068,12 @@ mod tests {
         };
         m.on_request(ms(30), SAFETY, &release).unwrap();
         m.on_request(ms(30), TELEOP, &request(ms(30), 0.4)).unwrap();
-        assert_eq!(m.evaluate(ms(30)).output.linear_x_mps, 0.4);
+        // Teleop asked for motion when the lock went: a release never starts motion.
+        assert_eq!(m.evaluate(ms(30)).output, Twist::ZERO);
+        assert_eq!(m.status().zero_reason, ZeroReason::AWAITING_ZERO);
+        m.on_request(ms(40), TELEOP, &request(ms(40), 0.0)).unwrap();
+        m.on_request(ms(50), TELEOP, &request(ms(50), 0.4)).unwrap();
+        assert_eq!(m.evaluate(ms(50)).output.linear_x_mps, 0.4);
     }
 
     #[test]
@@ -1016,9 +1089,86 @@ mod tests {
             m.on_request(ms(t), PLANNER, &request(ms(t), 0.3)).unwrap();
             assert_eq!(m.evaluate(ms(t)).output, Twist::ZERO, "at {t} ms");
         }
-        assert_eq!(m.release_lock("estop"), Ok(true));
-        assert_eq!(m.evaluate(ms(5001)).output.linear_x_mps, 0.3);
-        assert!(m.release_lock("nope").is_err());
+        assert_eq!(m.release_lock(ms(5001), "estop"), Ok(true));
+        assert_eq!(m.evaluate(ms(5001)).output, Twist::ZERO, "awaiting zero");
+        m.on_request(ms(5020), PLANNER, &request(ms(5020), 0.0))
+            .unwrap();
+        m.on_request(ms(5040), PLANNER, &request(ms(5040), 0.3))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(5040)).output.linear_x_mps, 0.3);
+        assert!(m.release_lock(ms(5040), "nope").is_err());
+    }
+
+    /// ISO 13850 / IEC 60204-1: resetting a stop shall not initiate a restart. Teleop keeps
+    /// asking for 0.3 m/s through an e-stop: the release leaves the robot still, names teleop as
+    /// the source it waits for, and neither hands the robot to a lower source nor needs anything
+    /// from a source that was not asking for motion.
+    #[test]
+    fn a_release_never_starts_motion_until_the_winner_asks_for_zero() {
+        let mut m = mux_unrequired();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.3)).unwrap();
+        assert_eq!(m.evaluate(ms(0)).output.linear_x_mps, 0.3);
+        assert_eq!(m.engage_lock(ms(10), "estop"), Ok(true));
+        m.on_request(ms(20), TELEOP, &request(ms(20), 0.3)).unwrap();
+        m.on_request(ms(20), PLANNER, &request(ms(20), 0.2))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(20)).output, Twist::ZERO);
+        assert_eq!(m.release_lock(ms(30), "estop"), Ok(true));
+        assert_eq!(m.awaiting_zero(), ["teleop", "planner"]);
+        for t in (30..300).step_by(20) {
+            m.on_request(ms(t), TELEOP, &request(ms(t), 0.3)).unwrap();
+            m.on_request(ms(t), PLANNER, &request(ms(t), 0.2)).unwrap();
+            let d = m.evaluate(ms(t));
+            assert_eq!(d.output, Twist::ZERO, "at {t} ms");
+            assert_eq!(m.status().zero_reason, ZeroReason::AWAITING_ZERO);
+            assert_eq!(m.status().awaiting().map(|s| s.name()), Some("teleop"));
+            assert_ne!(
+                m.status().sources[TELEOP].flags & SourceFlags::AWAITING_ZERO,
+                0
+            );
+        }
+        // Teleop lets go (a zero request): teleop drives at once when it asks again.
+        m.on_request(ms(300), TELEOP, &request(ms(300), 0.0))
+            .unwrap();
+        m.on_request(ms(300), PLANNER, &request(ms(300), 0.2))
+            .unwrap();
+        assert_eq!(
+            m.evaluate(ms(300)).output,
+            Twist::ZERO,
+            "teleop's zero wins"
+        );
+        m.on_request(ms(320), TELEOP, &request(ms(320), 0.3))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(320)).output.linear_x_mps, 0.3);
+        assert_eq!(m.awaiting_zero(), ["planner"]);
+        // The planner still awaits its own zero: teleop falling silent does not hand it the
+        // robot.
+        let after_timeout = ms(320) + Duration::from_millis(400);
+        m.on_request(after_timeout, PLANNER, &request(after_timeout, 0.2))
+            .unwrap();
+        assert_eq!(m.evaluate(after_timeout).output, Twist::ZERO);
+        assert_eq!(m.status().awaiting().map(|s| s.name()), Some("planner"));
+    }
+
+    /// A source that stops asking (its request times out) awaits nothing any more: asking again
+    /// later is a new start, not the old request resuming.
+    #[test]
+    fn a_source_that_stopped_asking_after_a_release_drives_when_it_asks_again() {
+        let mut m = mux_unrequired();
+        assert_eq!(m.engage_lock(ms(0), "estop"), Ok(true));
+        m.on_request(ms(10), TELEOP, &request(ms(10), 0.3)).unwrap();
+        assert_eq!(m.release_lock(ms(20), "estop"), Ok(true));
+        assert_eq!(m.evaluate(ms(20)).output, Twist::ZERO);
+        let later = ms(10) + Duration::from_secs(1);
+        assert_eq!(m.evaluate(later).output, Twist::ZERO);
+        assert!(m.awaiting_zero().is_empty());
+        m.on_request(later, TELEOP, &request(later, 0.3)).unwrap();
+        assert_eq!(m.evaluate(later).output.linear_x_mps, 0.3);
+        // A release while nothing asked for motion leaves every source free.
+        assert_eq!(m.engage_lock(later, "estop"), Ok(true));
+        let quiet = later + Duration::from_secs(1);
+        assert_eq!(m.release_lock(quiet, "estop"), Ok(true));
+        assert!(m.awaiting_zero().is_empty());
     }
 
     #[test]

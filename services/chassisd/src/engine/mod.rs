@@ -481,8 +481,18 @@ impl Engine {
             Err(reason) => (ControlStatus::INVALID, reason.to_string()),
             Ok(ControlAction::LockRelease(name)) => {
                 self.undecided = true;
-                match self.mux.release_lock(&name) {
-                    Ok(true) => (ControlStatus::OK, format!("{name} released")),
+                match self.mux.release_lock(now, &name) {
+                    Ok(true) => match self.mux.awaiting_zero().as_slice() {
+                        [] => (ControlStatus::OK, format!("{name} released")),
+                        waiting => (
+                            ControlStatus::OK,
+                            format!(
+                                "{name} released; nothing moves until {} asks for zero (a \
+                                 release never starts motion)",
+                                waiting.join(", ")
+                            ),
+                        ),
+                    },
                     Ok(false) => (ControlStatus::OK, format!("{name} was not held")),
                     Err(err) => (ControlStatus::INVALID, err.to_string()),
                 }
