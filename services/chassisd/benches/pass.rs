@@ -59,7 +59,7 @@ fn pass(c: &mut Criterion) {
                 t += Duration::from_millis(1);
                 n += 1;
                 // The safety monitor every 50 ms, teleop every pass, a frame every pass.
-                let safety = n % 50 == 0;
+                let safety = n.is_multiple_of(50);
                 let wake = Wake {
                     bus: true,
                     sources: 0b10 | u32::from(safety),
