@@ -131,8 +131,6 @@ pub struct World {
     pub worst_rx_wait: Duration,
     /// Frames the chassis sent while the bus worked.
     frames_sent_to_engine: u64,
-    /// Steps at the same instant without progress (a side asking for a deadline in the past).
-    pub stalls: u64,
 }
 
 /// The engine, a simulated chassis and scripted clients on simulated time.
@@ -153,6 +151,9 @@ impl std::fmt::Debug for Rig {
 }
 
 impl Rig {
+    /// Steps at one instant that make the run a stalled one.
+    const STALL: u32 = 10_000;
+
     /// `robot` with `mux`, and `adjust` applied to the engine's settings. The engine starts
     /// ([`Engine::start`]) at the first run, so a scenario can restore locks before it, as the
     /// service does.
@@ -212,7 +213,6 @@ impl Rig {
             frames_read: 0,
             worst_rx_wait: Duration::ZERO,
             frames_sent_to_engine: 0,
-            stalls: 0,
         };
         Self {
             engine,
@@ -373,7 +373,8 @@ impl Rig {
         pending.insert(index, (at, bytes.to_vec()));
     }
 
-    /// Runs until `until`.
+    /// Runs until `until`. Time that stops moving (a side asking for a deadline in the past, a
+    /// wake-up the engine does not serve) fails the scenario.
     pub fn run_until(&mut self, until: Timestamp) {
         if !self.started {
             self.started = true;
@@ -388,11 +389,11 @@ impl Rig {
             self.step(until);
             if self.world.now == before {
                 same += 1;
-                if same > 10_000 {
-                    self.world.stalls += 1;
-                    self.world.now += Duration::from_micros(1);
-                    same = 0;
-                }
+                assert!(
+                    same <= Self::STALL,
+                    "stalled at {before:?}: {} steps without time moving",
+                    Self::STALL
+                );
             } else {
                 same = 0;
             }
@@ -602,8 +603,16 @@ impl World {
         self.woken_in_pass = 0;
     }
 
-    /// A pass ended: the readers of everything it published were woken.
+    /// A pass ended: the readers of everything it published were woken. A request that landed
+    /// during the pass and was not read waits like any other (its notification wakes the loop
+    /// again).
     fn end_pass(&mut self) {
+        let due = self.script.partition_point(|(t, _)| *t <= self.now);
+        for (_, action) in &mut self.script[..due] {
+            if let Action::Request { meanwhile, .. } = action {
+                *meanwhile = false;
+            }
+        }
         assert_eq!(
             self.woken_in_pass, self.published_kinds,
             "readers woken at {:?} (one bit per kind) are not those of what was published",

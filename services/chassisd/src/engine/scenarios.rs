@@ -772,7 +772,6 @@ fn the_engine_waits_for_its_next_deadline() {
     let t = rig.engine.poll_timeout();
     // Nothing but the tick and the heartbeat (both on the 20 ms grid) is pending.
     assert!(t > rig.now() && t <= rig.now() + ms(20), "{t:?}");
-    assert_eq!(rig.world.stalls, 0);
 }
 
 /// A fresh TITAN rig (a restarted service) whose safety monitor beats and whose teleop asks for
@@ -1123,7 +1122,6 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
         }
         rig.forget();
     }
-    assert_eq!(rig.world.stalls, 0);
     assert_eq!(steps, LONG_RUN_S * 100);
     assert!(moving > 10_000, "the robot drove ({moving} motion frames)");
     assert!(zero_checked > 10_000);
