@@ -4,8 +4,8 @@
 //! clock; the scenario rig (`engine::rig`) on a simulated wire, scripted clients and simulated
 //! time. Both call [`Engine::run_pass`], so the order the scenarios test is the order the service
 //! runs. The engine stays sans-IO: it reads no clock (it asks [`PassIo::now`]), opens nothing,
-//! and the trait is used generically (no dynamic dispatch, no allocation per pass: the items
-//! between the bus and the engine live in buffers the engine keeps).
+//! and the trait is used generically (no dynamic dispatch; the sequence itself allocates
+//! nothing: the items between the bus and the engine live in buffers the engine keeps).
 
 use std::fmt::Display;
 use std::time::Duration;
