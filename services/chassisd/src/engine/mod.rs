@@ -53,9 +53,10 @@
 //!   says it was free;
 //! * [`Engine::poll_held_locks`] returns the held set when it changed since the last poll (an
 //!   engage, a release, a restore that had to substitute the e-stop); a pass keeps it
-//!   ([`PassIo::keep_locks`]: write, fsync, rename) right after its command path, and in any
-//!   case before it hands out a publication, so an engage is on disk before it is answered or
-//!   shown in the mux status. A failed write is logged at ERROR and tried again every second.
+//!   ([`PassIo::keep_locks`]: write, fsync, rename) right after its command path — the only
+//!   steps that change it — and before it hands out its first publication, so an engage is on
+//!   disk before it is answered or shown in the mux status ([`Engine::start`] and
+//!   [`Engine::stop`] likewise). A failed write is logged at ERROR and tried again every second.
 //!
 //! The engine keeps its own rules whatever the order of its inputs: a request handled before a
 //! frame is decided before that frame reaches the driver ([`Engine::handle_rx`] decides first), so
@@ -307,9 +308,10 @@ pub struct Engine {
     /// A held set not kept yet (its write failed), and when to try again.
     unkept: Option<Vec<HeldLock>>,
     keep_retry_at: Timestamp,
-    /// Items between the bus and the engine in a pass, kept to spare an allocation per pass.
+    /// Items read from the bus in a pass, kept to spare an allocation per pass.
     rx_items: Vec<(Timestamp, Transmit)>,
-    tx_items: Vec<(Timestamp, Transmit)>,
+    /// Items written that the backend holds, with the instant their write returned.
+    tx_held: Vec<(Timestamp, Transmit)>,
     /// The readers to wake at the end of the pass, one bit per [`Readers`].
     to_wake: u8,
 }
@@ -369,7 +371,7 @@ impl Engine {
             unkept: None,
             keep_retry_at: now,
             rx_items: Vec::new(),
-            tx_items: Vec::new(),
+            tx_held: Vec::new(),
             to_wake: 0,
             config,
             driver,

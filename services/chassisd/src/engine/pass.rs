@@ -212,6 +212,7 @@ impl Engine {
     pub fn start(&mut self, io: &mut impl PassIo, now: Timestamp) {
         self.open_due(io, now);
         self.publish_all(now);
+        self.keep_locks(io, now);
         self.tell(io, now);
     }
 
@@ -221,28 +222,22 @@ impl Engine {
         self.shutdown(now);
         self.transmit(io, now);
         self.publish_all(now);
+        self.keep_locks(io, now);
         self.tell(io, now);
     }
 
     /// Writes what the engine polls. Each item is stamped when its write returned (an item the
-    /// backend held, when the write or the flush that carried it returned) and tapped once the
-    /// stamps are known; a lost bus is closed.
+    /// backend held, when the write or the flush that carried it returned) and tapped once its
+    /// stamp is known; a lost bus is closed.
     fn transmit(&mut self, io: &mut impl PassIo, now: Timestamp) {
-        let mut sent = std::mem::take(&mut self.tx_items);
-        sent.clear();
-        // The first of the items the backend still holds.
-        let mut held_from = None;
         let mut lost = None;
         while let Some(item) = self.poll_transmit(now) {
             match io.write(&item) {
                 Ok(Written::Out(at)) => {
-                    sent.push((at, item));
-                    restamp(&mut sent, held_from.take(), at);
+                    self.tap_held(Some(at));
+                    self.handle_sent(at, &item);
                 }
-                Ok(Written::Held(at)) => {
-                    sent.push((at, item));
-                    held_from.get_or_insert(sent.len() - 1);
-                }
+                Ok(Written::Held(at)) => self.tx_held.push((at, item)),
                 Err(WriteError::Dropped(err)) => self.handle_tx_dropped(now, &err),
                 Err(WriteError::Lost(err)) => {
                     lost = Some(err);
@@ -252,19 +247,30 @@ impl Engine {
         }
         if lost.is_none() && self.bus == Link::Up {
             match io.flush() {
-                Ok(at) => restamp(&mut sent, held_from, at),
+                Ok(at) => self.tap_held(Some(at)),
                 Err(WriteError::Dropped(err)) => self.handle_tx_dropped(now, &err),
                 Err(WriteError::Lost(err)) => lost = Some(err),
             }
         }
-        for (stamp, item) in &sent {
-            self.handle_sent(*stamp, item);
-        }
-        self.tx_items = sent;
+        // Written, but not known to have left the backend: stamped when their write returned.
+        self.tap_held(None);
         if let Some(err) = lost {
             io.close(Device::Bus);
             self.handle_bus_lost(now, &err);
         }
+    }
+
+    /// Taps the items the backend held, stamped `out` (when the write or flush that carried
+    /// them returned) or, without it, when their own write returned.
+    fn tap_held(&mut self, out: Option<Timestamp>) {
+        if self.tx_held.is_empty() {
+            return;
+        }
+        let mut held = std::mem::take(&mut self.tx_held);
+        for (stamp, item) in held.drain(..) {
+            self.handle_sent(out.unwrap_or(stamp), &item);
+        }
+        self.tx_held = held;
     }
 
     /// Reads one batch from the bus. Each item goes to the driver in the order read, and what
@@ -338,12 +344,9 @@ impl Engine {
         }
     }
 
-    /// Puts every pending publication in shared memory, the held set kept first.
+    /// Puts every pending publication in shared memory. The held set only changes with the
+    /// requests and control requests of the command path, and is kept right after it.
     fn publish(&mut self, io: &mut impl PassIo, now: Timestamp) {
-        if self.publications.is_empty() {
-            return;
-        }
-        self.keep_locks(io, now);
         while let Some(publication) = self.publications.pop_front() {
             let readers = Readers::of(&publication);
             match io.publish(publication) {
@@ -355,7 +358,6 @@ impl Engine {
 
     /// Publishes what is left and wakes the readers of everything the pass published.
     fn tell(&mut self, io: &mut impl PassIo, now: Timestamp) {
-        self.keep_locks(io, now);
         self.publish(io, now);
         let to_wake = std::mem::take(&mut self.to_wake);
         for readers in Readers::ALL {
@@ -364,15 +366,6 @@ impl Engine {
             {
                 self.handle_publish_failed(now, readers.what().1, &err);
             }
-        }
-    }
-}
-
-/// The items from `from` on were written by the write that returned at `written`.
-fn restamp(sent: &mut [(Timestamp, Transmit)], from: Option<usize>, written: Timestamp) {
-    if let Some(from) = from {
-        for (stamp, _) in sent.iter_mut().skip(from) {
-            *stamp = written;
         }
     }
 }
