@@ -222,7 +222,7 @@ pub fn remove_dead_nodes() {
 
 /// How old a half-created service must be before it counts as abandoned: iceoryx2 gives up
 /// opening one after its creation timeout (500 ms by default); nothing takes seconds to create.
-const ABANDONED_AFTER: Duration = Duration::from_secs(2);
+pub const ABANDONED_AFTER: Duration = Duration::from_secs(2);
 
 /// Removes the static files of services whose creator died before finishing them. iceoryx2
 /// writes such a file owner-writable and makes it read-only once the service is complete; a

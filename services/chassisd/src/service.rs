@@ -3,9 +3,10 @@
 //! One thread owns the iceoryx2 ports, the bus and GPS descriptors, the simulated chassis and the
 //! clock. An iceoryx2 `WaitSet` waits on the bus (through the receive-moderation gate), the GPS
 //! port, the listeners of every source, of `control` and of `sim`, with a timeout at the engine's
-//! next deadline. Each wake-up runs one pass ([`Shell::pass`]): it reads what the engine asks
-//! for, hands it over with the time it was read, writes what the engine polls, and publishes what
-//! it produced. Every decision is the engine's; this module only moves bytes and reads the clock.
+//! next deadline. Each wake-up runs one pass: the engine's [`Engine::run_pass`], which owns the
+//! order, on the shell's ports, devices and clock (`service/pass.rs`, the shell's
+//! [`crate::engine::PassIo`]). Every decision is the engine's; this module only moves bytes,
+//! reads the clock and keeps the wait set.
 //! Single-threaded means decode, mux and transmit never lock each other and ports never cross
 //! threads.
 // The shell owns the clock: it stamps what it reads and writes, and hands the time to the engine.
@@ -236,8 +237,10 @@ impl<D: Devices> Shell<D> {
     fn run(&mut self, ports: &Ports, engine: &mut Engine) -> Result<(), ServiceError> {
         let mut gate = RxGate::new()?;
         loop {
-            // The previous session's wait set is gone: failed buses can close now.
+            // The previous session's wait set is gone: failed buses can close now, and the new
+            // one watches the descriptors as they are.
             self.retired.clear();
+            self.next = Next::Continue;
             let waitset = WaitSetBuilder::new()
                 .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
                 .create::<ipc::Service>()?;
