@@ -1,5 +1,9 @@
 //! The service's iceoryx2 ports. Names, limits and the builders are the contract's
-//! (`chassis-ipc`): this module creates every service of one robot with them and holds the ports.
+//! (`chassis-ipc`): this module creates every service of one robot with them and holds the ports,
+//! and it cleans up what a killed predecessor left in iceoryx2's directories
+//! ([`remove_dead_nodes`], [`remove_abandoned_creations`]) so that the ports can be created again.
+
+use std::time::Duration;
 
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, RobotDescription,
@@ -16,6 +20,7 @@ use iceoryx2::port::server::Server;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use thiserror::Error;
+use tracing::{debug, warn};
 
 // The readers of `state` and `frames` are woken once per read of the bus: a reader must find
 // room for a whole read.
@@ -201,4 +206,104 @@ where
         listener: requests,
         notifier: replies,
     })
+}
+
+/// Removes what processes that died without cleaning up left behind (a service half created
+/// included), so that a service they were creating can be created again.
+pub fn remove_dead_nodes() {
+    let Ok(config) = iceoryx_config() else {
+        return;
+    };
+    let listed = Node::<ipc::Service>::list(&config, |state| {
+        if let iceoryx2::node::NodeState::Dead(dead) = state
+            && let Err(e) = dead.try_remove_stale_resources()
+        {
+            debug!("removing a dead node's resources: {e}");
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = listed {
+        debug!("listing iceoryx2 nodes: {e}");
+    }
+}
+
+/// How old a half-created service must be before it counts as abandoned: iceoryx2 gives up
+/// opening one after its creation timeout (500 ms by default); nothing takes seconds to create.
+pub const ABANDONED_AFTER: Duration = Duration::from_secs(2);
+
+/// Removes the static files of services whose creator died before finishing them. iceoryx2
+/// writes such a file owner-writable and makes it read-only once the service is complete; a
+/// process killed in between leaves a file no cleanup of dead nodes removes (the service never
+/// listed the node), and every later open or create fails with `HangsInCreation`. Only files of
+/// this process' iceoryx2 prefix, still writable, and older than [`ABANDONED_AFTER`] go.
+pub fn remove_abandoned_creations() {
+    let Ok(config) = iceoryx_config() else {
+        return;
+    };
+    let global = &config.global;
+    let dir =
+        std::path::Path::new(global.root_path().as_str()).join(global.service.directory.as_str());
+    // Modification times are wall-clock times: the one reading of the system clock here.
+    #[allow(clippy::disallowed_methods)]
+    let now = std::time::SystemTime::now();
+    for file in abandoned_creations(&dir, global.prefix.as_str(), now) {
+        match std::fs::remove_file(dir.join(&file)) {
+            Ok(()) => warn!(file, "removed a service its creator abandoned half created"),
+            Err(e) => debug!(file, "removing an abandoned service file: {e}"),
+        }
+    }
+}
+
+/// The files in `dir` of the iceoryx2 `prefix` that are still writable (unfinished) and older
+/// than [`ABANDONED_AFTER`] at `now`.
+fn abandoned_creations(
+    dir: &std::path::Path,
+    prefix: &str,
+    now: std::time::SystemTime,
+) -> Vec<String> {
+    use std::os::unix::fs::PermissionsExt;
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .filter_map(|entry| {
+            let file = entry.file_name().to_str()?.to_string();
+            let meta = entry.metadata().ok()?;
+            let writable = meta.permissions().mode() & 0o200 != 0;
+            let age = now.duration_since(meta.modified().ok()?).ok()?;
+            (file.starts_with(prefix) && meta.is_file() && writable && age >= ABANDONED_AFTER)
+                .then_some(file)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt;
+
+    #[test]
+    // File modification times are wall-clock times: the test compares with the system clock.
+    #[allow(clippy::disallowed_methods)]
+    fn only_old_unfinished_files_of_the_prefix_are_abandoned() {
+        let dir = std::env::temp_dir().join(format!("chassisd-abandoned-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let make = |name: &str, mode: u32| {
+            let path = dir.join(name);
+            std::fs::write(&path, b"x").unwrap();
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
+        };
+        make("px_half.service", 0o600);
+        make("px_done.service", 0o400);
+        make("other_half.service", 0o600);
+        let later = std::time::SystemTime::now() + Duration::from_secs(3);
+        assert_eq!(
+            abandoned_creations(&dir, "px_", later),
+            vec!["px_half.service"]
+        );
+        // Young enough to be a creation in progress.
+        assert!(abandoned_creations(&dir, "px_", std::time::SystemTime::now()).is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -19,7 +19,7 @@
 use std::os::fd::{AsFd, AsRawFd, BorrowedFd, RawFd};
 use std::time::Duration;
 
-use chassis_protocols::Timestamp;
+use chassis_protocols::{Rx, Timestamp};
 use nix::sys::epoll::{Epoll, EpollCreateFlags, EpollEvent, EpollFlags};
 
 /// An epoll set that holds the bus descriptor while open and nothing while closed; the wait
@@ -86,6 +86,19 @@ impl RxGate {
 impl AsFd for RxGate {
     fn as_fd(&self) -> BorrowedFd<'_> {
         self.epoll.0.as_fd()
+    }
+}
+
+/// Bytes of a byte stream that weigh one frame: a CAN payload's worth.
+pub const BYTES_PER_FRAME: usize = 8;
+
+/// What an item read from the bus weighs, in frames: a CAN frame one, a chunk of a byte stream
+/// one per [`BYTES_PER_FRAME`] bytes begun. A serial robot's feedback is counted at the rate of
+/// the CAN frames that would carry it, so one bucket serves both kinds of bus.
+pub fn weight(rx: Rx<'_>) -> usize {
+    match rx {
+        Rx::Can(_) => 1,
+        Rx::Bytes(bytes) => bytes.len().div_ceil(BYTES_PER_FRAME),
     }
 }
 
@@ -270,6 +283,41 @@ mod tests {
             times.extend((0..n).map(|k| start + k * 222));
         }
         times
+    }
+
+    #[test]
+    fn a_can_frame_weighs_one_and_a_byte_chunk_one_per_eight_bytes_begun() {
+        let frame = chassis_protocols::CanFrame::new(0x211, &[0; 8]).unwrap();
+        assert_eq!(weight(Rx::Can(&frame)), 1);
+        let empty = chassis_protocols::CanFrame::new(0x211, &[]).unwrap();
+        assert_eq!(
+            weight(Rx::Can(&empty)),
+            1,
+            "a frame weighs one whatever its payload"
+        );
+        let weights: Vec<usize> = [0, 1, 8, 9, 16, 17, 4096]
+            .iter()
+            .map(|&n| weight(Rx::Bytes(&vec![0u8; n])))
+            .collect();
+        assert_eq!(weights, [0, 1, 1, 2, 2, 3, 512]);
+    }
+
+    #[test]
+    fn a_serial_flood_pauses_like_a_can_flood_of_the_same_bytes() {
+        // 4,500 CAN frames a second, or the same payload bytes as 36-byte chunks a millisecond
+        // (4.5 per read): both saturate the bucket.
+        let weigh = |chunk: usize| weight(Rx::Bytes(&vec![0u8; chunk]));
+        let mut can = RxModeration::new(Duration::from_millis(4), us(0));
+        let mut serial = RxModeration::new(Duration::from_millis(4), us(0));
+        let (mut can_paused, mut serial_paused) = (false, false);
+        for ms in 0..100 {
+            can_paused |= can.on_read(us(ms * 1000), 4, false);
+            serial_paused |= serial.on_read(us(ms * 1000), weigh(36), false);
+        }
+        assert!(can_paused && serial_paused);
+        // Counted per read instead, the serial flood would never pause.
+        let mut per_read = RxModeration::new(Duration::from_millis(4), us(0));
+        assert!((0..100).all(|ms| !per_read.on_read(us(ms * 1000), 1, false)));
     }
 
     #[test]

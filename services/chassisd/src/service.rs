@@ -3,9 +3,10 @@
 //! One thread owns the iceoryx2 ports, the bus and GPS descriptors, the simulated chassis and the
 //! clock. An iceoryx2 `WaitSet` waits on the bus (through the receive-moderation gate), the GPS
 //! port, the listeners of every source, of `control` and of `sim`, with a timeout at the engine's
-//! next deadline. Each wake-up runs one pass ([`Shell::pass`]): it reads what the engine asks
-//! for, hands it over with the time it was read, writes what the engine polls, and publishes what
-//! it produced. Every decision is the engine's; this module only moves bytes and reads the clock.
+//! next deadline. Each wake-up runs one pass: the engine's [`Engine::run_pass`], which owns the
+//! order, on the shell's ports, devices and clock (`service/pass.rs`, the shell's
+//! [`crate::engine::PassIo`]). Every decision is the engine's; this module only moves bytes,
+//! reads the clock and keeps the wait set.
 //! Single-threaded means decode, mux and transmit never lock each other and ports never cross
 //! threads.
 // The shell owns the clock: it stamps what it reads and writes, and hands the time to the engine.
@@ -15,7 +16,7 @@ use std::collections::HashMap;
 use std::time::Duration;
 
 use chassis_interfaces::{ControlRequest, ControlResponse};
-use chassis_protocols::{Timestamp, Transmit};
+use chassis_protocols::Timestamp;
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{
@@ -23,12 +24,12 @@ use iceoryx2::waitset::{
 };
 use iceoryx2_bb_posix::file_descriptor::{FileDescriptor, FileDescriptorBased};
 use iceoryx2_bb_posix::file_descriptor_set::SynchronousMultiplexing;
-use tracing::{debug, error, info, info_span, warn};
+use tracing::{info, info_span, warn};
 
-use crate::bus::{Bus, BusSpec, MAX_RX_BATCH};
+use crate::bus::{Bus, BusSpec};
 use crate::clock;
 use crate::config::{Config, LoopMode};
-use crate::engine::{Engine, EngineConfig, HeldLock, ListenerChange, Ticket, Wake};
+use crate::engine::{Engine, EngineConfig, ListenerChange, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};
 use crate::lockfile::{Clocks, LockFile};
 use crate::moderation::RxGate;
@@ -105,17 +106,14 @@ struct Shell<D> {
     retired: Vec<Bus>,
     pending: HashMap<Ticket, PendingControl>,
     next_ticket: Ticket,
-    /// Items between the bus and the engine, kept to spare an allocation per batch.
-    scratch: Vec<(Timestamp, Transmit)>,
+    /// A device was lost or (re)opened in this pass: the wait set must be rebuilt.
+    next: Next,
     loop_mode: LoopMode,
     spin: Duration,
     /// When something last woke the loop (hybrid mode keeps polling for a while after it).
     last_activity: Timestamp,
     /// Where the held locks outlive the process.
     lock_file: LockFile,
-    /// A held set not yet on disk (its write failed), and when to try again.
-    unkept: Option<Vec<HeldLock>>,
-    keep_retry_at: Timestamp,
     /// systemd's notification socket, when started by a `Type=notify` unit.
     notifier: Option<Notifier>,
 }
@@ -129,11 +127,11 @@ fn open_ports(name: &str, sources: &[String], with_sim: bool) -> Result<Ports, I
     const PAUSE: Duration = Duration::from_millis(100);
     let deadline = clock::now() + PATIENCE;
     loop {
-        remove_dead_nodes();
+        crate::ipc::remove_dead_nodes();
         match Ports::open(name, sources, with_sim) {
             Err(IpcError::Contract(err)) if clock::now() < deadline => {
                 warn!("{err}; trying again");
-                remove_abandoned_creations();
+                crate::ipc::remove_abandoned_creations();
                 // The loop has not started: nothing else waits on this thread.
                 #[allow(clippy::disallowed_methods)]
                 std::thread::sleep(PAUSE);
@@ -141,76 +139,6 @@ fn open_ports(name: &str, sources: &[String], with_sim: bool) -> Result<Ports, I
             result => return result,
         }
     }
-}
-
-/// Removes what processes that died without cleaning up left behind (a service half created
-/// included), so that a service they were creating can be created again.
-fn remove_dead_nodes() {
-    let Ok(config) = crate::ipc::iceoryx_config() else {
-        return;
-    };
-    let listed = Node::<ipc::Service>::list(&config, |state| {
-        if let iceoryx2::node::NodeState::Dead(dead) = state
-            && let Err(e) = dead.try_remove_stale_resources()
-        {
-            debug!("removing a dead node's resources: {e}");
-        }
-        CallbackProgression::Continue
-    });
-    if let Err(e) = listed {
-        debug!("listing iceoryx2 nodes: {e}");
-    }
-}
-
-/// How old a half-created service must be before it counts as abandoned: iceoryx2 gives up
-/// opening one after its creation timeout (500 ms by default); nothing takes seconds to create.
-const ABANDONED_AFTER: Duration = Duration::from_secs(2);
-
-/// Removes the static files of services whose creator died before finishing them. iceoryx2
-/// writes such a file owner-writable and makes it read-only once the service is complete; a
-/// process killed in between leaves a file no cleanup of dead nodes removes (the service never
-/// listed the node), and every later open or create fails with `HangsInCreation`. Only files of
-/// this process' iceoryx2 prefix, still writable, and older than [`ABANDONED_AFTER`] go.
-fn remove_abandoned_creations() {
-    let Ok(config) = crate::ipc::iceoryx_config() else {
-        return;
-    };
-    let global = &config.global;
-    let dir =
-        std::path::Path::new(global.root_path().as_str()).join(global.service.directory.as_str());
-    // Modification times are wall-clock times: the one reading of the system clock here.
-    #[allow(clippy::disallowed_methods)]
-    let now = std::time::SystemTime::now();
-    for file in abandoned_creations(&dir, global.prefix.as_str(), now) {
-        match std::fs::remove_file(dir.join(&file)) {
-            Ok(()) => warn!(file, "removed a service its creator abandoned half created"),
-            Err(e) => debug!(file, "removing an abandoned service file: {e}"),
-        }
-    }
-}
-
-/// The files in `dir` of the iceoryx2 `prefix` that are still writable (unfinished) and older
-/// than [`ABANDONED_AFTER`] at `now`.
-fn abandoned_creations(
-    dir: &std::path::Path,
-    prefix: &str,
-    now: std::time::SystemTime,
-) -> Vec<String> {
-    use std::os::unix::fs::PermissionsExt;
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Vec::new();
-    };
-    entries
-        .flatten()
-        .filter_map(|entry| {
-            let file = entry.file_name().to_str()?.to_string();
-            let meta = entry.metadata().ok()?;
-            let writable = meta.permissions().mode() & 0o200 != 0;
-            let age = now.duration_since(meta.modified().ok()?).ok()?;
-            (file.starts_with(prefix) && meta.is_file() && writable && age >= ABANDONED_AFTER)
-                .then_some(file)
-        })
-        .collect()
 }
 
 /// Runs the service on the devices its configuration names until SIGINT or SIGTERM. Returns
@@ -283,19 +211,14 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         retired: Vec::new(),
         pending: HashMap::new(),
         next_ticket: 0,
-        scratch: Vec::with_capacity(MAX_RX_BATCH),
+        next: Next::Continue,
         loop_mode: config.loop_mode,
         spin: Duration::from_micros(config.spin_us),
         last_activity: now,
         lock_file,
-        unkept: None,
-        keep_retry_at: now,
         notifier: Notifier::from_env(),
     };
-    shell.open_due(&mut engine, now);
-    engine.publish_all(now);
-    shell.keep_locks(&mut engine);
-    shell.publish(&ports, &mut engine, now);
+    engine.start(&mut shell.io(&ports), now);
     if let Some(notifier) = &mut shell.notifier {
         notifier.ready(engine.mux().status());
         if let Some(every) = notifier.ping_every() {
@@ -314,8 +237,10 @@ impl<D: Devices> Shell<D> {
     fn run(&mut self, ports: &Ports, engine: &mut Engine) -> Result<(), ServiceError> {
         let mut gate = RxGate::new()?;
         loop {
-            // The previous session's wait set is gone: failed buses can close now.
+            // The previous session's wait set is gone: failed buses can close now, and the new
+            // one watches the descriptors as they are.
             self.retired.clear();
+            self.next = Next::Continue;
             let waitset = WaitSetBuilder::new()
                 .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
                 .create::<ipc::Service>()?;
@@ -442,44 +367,11 @@ impl<D: Devices> Shell<D> {
         }
     }
 
-    /// Writes the held locks when the engine says the set changed, before the pass publishes
-    /// its answers; a failed write is retried every second until it succeeds.
-    pub(super) fn keep_locks(&mut self, engine: &mut Engine) {
-        if let Some(held) = engine.poll_held_locks() {
-            self.unkept = Some(held);
-        }
-        let Some(held) = &self.unkept else {
-            return;
-        };
-        let now = clock::now();
-        if now < self.keep_retry_at {
-            return;
-        }
-        match self.lock_file.store(held, clocks(now)) {
-            Ok(()) => {
-                debug!(
-                    held = held.len(),
-                    file = %self.lock_file.path().display(),
-                    "held locks kept"
-                );
-                self.unkept = None;
-            }
-            Err(err) => {
-                error!("{err}; the held locks would not survive a restart: retrying every second");
-                self.keep_retry_at = now + Duration::from_secs(1);
-            }
-        }
-    }
-
     fn shutdown(&mut self, ports: &Ports, engine: &mut Engine) {
         if let Some(notifier) = &mut self.notifier {
             notifier.stopping();
         }
-        let now = clock::now();
-        engine.shutdown(now);
-        self.transmit(engine, now);
-        engine.publish_all(now);
-        self.publish(ports, engine, now);
+        engine.stop(&mut self.io(ports), clock::now());
     }
 }
 
@@ -512,33 +404,5 @@ fn clocks(now: Timestamp) -> Clocks {
 fn set_gate(gate: &mut RxGate, open: bool) {
     if let Err(e) = gate.set_open(open) {
         warn!("bus gate: {e}");
-    }
-}
-
-#[cfg(test)]
-mod abandoned_tests {
-    use super::*;
-    use std::os::unix::fs::PermissionsExt;
-
-    #[test]
-    fn only_old_unfinished_files_of_the_prefix_are_abandoned() {
-        let dir = std::env::temp_dir().join(format!("chassisd-abandoned-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let make = |name: &str, mode: u32| {
-            let path = dir.join(name);
-            std::fs::write(&path, b"x").unwrap();
-            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
-        };
-        make("px_half.service", 0o600);
-        make("px_done.service", 0o400);
-        make("other_half.service", 0o600);
-        let later = std::time::SystemTime::now() + Duration::from_secs(3);
-        assert_eq!(
-            abandoned_creations(&dir, "px_", later),
-            vec!["px_half.service"]
-        );
-        // Young enough to be a creation in progress.
-        assert!(abandoned_creations(&dir, "px_", std::time::SystemTime::now()).is_empty());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

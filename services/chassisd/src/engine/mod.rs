@@ -3,31 +3,42 @@
 //!
 //! The engine owns the robot's driver, the mux and its locks, receive moderation, the wake
 //! budget's bookkeeping, the bus and GPS reconnection timers, the GPS sentence reader and the
-//! numbering of everything published. It imports no iceoryx2 and no bus backend, and it never
-//! reads the clock: the shell (`crate::service`) owns the wait set, the ports, the descriptors
-//! and the clock, feeds the engine, and carries out what it polls. The same engine runs against a
-//! simulated chassis on simulated time in the scenarios of `engine::scenarios`.
+//! numbering of everything published, and the order of a pass. It imports no iceoryx2 and no
+//! bus backend, and it never reads the clock: the shell (`crate::service`) owns the wait set,
+//! the ports, the descriptors and the clock, and lends them to each pass through [`PassIo`].
+//! The same engine runs the same passes against a simulated chassis on simulated time in the
+//! scenarios of `engine::scenarios`.
 //!
 //! # One pass
 //!
-//! The shell runs one pass per wake-up, in this order — the command path first:
+//! The sequence of a pass is the engine's: [`Engine::run_pass`] runs it against a [`PassIo`],
+//! the caller's ports, devices and clock (the shell's iceoryx2 ports and bus descriptors; the
+//! scenario rig's simulated wire and scripted clients), the command path first:
 //!
 //! 1. [`Engine::begin_pass`] with what woke the loop; it serves the tick and says what to read
 //!    ([`Reads`]: every source, control and the bus on the tick).
 //! 2. [`Engine::handle_request`] for every pending request of those sources,
-//!    [`Engine::handle_control`] for every control request.
-//! 3. [`Engine::poll_transmit`] until `None`: the mux decides at the first poll after new input,
-//!    and a changed command is out before anything else is read. Every item written is reported
-//!    with [`Engine::handle_sent`] (the tap numbers it).
-//! 4. Requests that arrived meanwhile (the shell consumes the listeners' notifications, then
-//!    reads those sources again) are handled and polled again: decided again at once.
-//! 5. The bus is drained: [`Engine::handle_rx`] per item, then [`Engine::handle_bus_read`]
-//!    (moderation), or [`Engine::handle_bus_lost`]; GPS bytes with [`Engine::handle_gps`].
+//!    [`Engine::handle_control`] for every control request; then transmit:
+//!    [`Engine::poll_transmit`] until `None` (the mux decides at the first poll after new
+//!    input, and a changed command is out before anything else is read), every item written
+//!    reported with [`Engine::handle_sent`] and the time its write returned (the tap numbers it).
+//! 3. The notifications of the listeners that fired are consumed and those sources read again:
+//!    a request that arrived meanwhile is handled and transmitted at once.
+//! 4. A changed held set is kept (see below) before anything of the pass is published.
+//! 5. The bus is drained: [`Engine::handle_rx`] per item, its publications out before the next
+//!    item, then [`Engine::handle_bus_read`] (moderation, weighing each item with
+//!    [`crate::moderation::weight`]), or [`Engine::handle_bus_lost`]; GPS bytes with
+//!    [`Engine::handle_gps`].
 //! 6. [`Engine::handle_timeout`] (driver deadlines: the heartbeat, the chassis' silence), and
 //!    transmit again.
-//! 7. [`Engine::end_pass`]: mux status on change and at its rate, the tick's state refresh.
-//! 8. [`Engine::poll_publication`] until `None`; [`Engine::poll_open`] names a device to
-//!    (re)open, reported back with [`Engine::handle_opened`] / [`Engine::handle_open_failed`].
+//! 7. [`Engine::end_pass`]: mux status on change and at its rate, the tick's state refresh;
+//!    [`Engine::poll_open`] names a device to (re)open, reported back with
+//!    [`Engine::handle_opened`] / [`Engine::handle_open_failed`]; [`Engine::poll_publication`]
+//!    until `None`; the readers of what was published woken once per kind.
+//!
+//! [`Engine::start`] and [`Engine::stop`] are the service's first and last publications, on the
+//! same [`PassIo`]. The steps stay public: a scenario can feed the engine in any order to check
+//! that its rules do not depend on the order.
 //!
 //! # Locks that outlive the process
 //!
@@ -40,15 +51,19 @@
 //!   [`Engine::restore_failed`] when the file could not be read or understood: the e-stop is
 //!   then held (the lock called `estop`, every lock when none has that name), since nothing
 //!   says it was free;
-//! * after every pass [`Engine::poll_held_locks`] returns the held set when it changed since
-//!   the last poll (an engage, a release, a restore that had to substitute the e-stop), and the
-//!   shell writes it before it sleeps again.
+//! * [`Engine::poll_held_locks`] returns the held set when it changed since the last poll (an
+//!   engage, a release, a restore that had to substitute the e-stop); a pass keeps it
+//!   ([`PassIo::keep_locks`]: write, fsync, rename) right after its command path — the only
+//!   steps that change it — and before it hands out its first publication, so an engage is on
+//!   disk before it is answered or shown in the mux status ([`Engine::start`] and
+//!   [`Engine::stop`] likewise). A failed write is logged at ERROR and tried again every second.
 //!
 //! The engine keeps its own rules whatever the order of its inputs: a request handled before a
 //! frame is decided before that frame reaches the driver ([`Engine::handle_rx`] decides first), so
 //! a command is never queued behind the bus.
 
 mod budget;
+mod pass;
 #[cfg(test)]
 mod rig;
 #[cfg(test)]
@@ -72,6 +87,7 @@ use tracing::{debug, error, info, warn};
 use zerocopy::IntoBytes;
 
 pub use budget::{ListenerChange, WakeBudget};
+pub use pass::{PassIo, Readers, WriteError, Written};
 
 use crate::config::{Config, LoopMode};
 use crate::mux::{Mux, Rejection};
@@ -283,6 +299,8 @@ pub struct Engine {
     mux_changed: bool,
     requests: bool,
     on_tick: bool,
+    /// The last pass served the tick.
+    served_tick: bool,
     state_seq: u64,
     frame_seq: u64,
     mux_seq: u64,
@@ -293,6 +311,8 @@ pub struct Engine {
     last_state_publish: Timestamp,
     last_mux_publish: Option<Timestamp>,
     last_rx_frames: u64,
+    /// The GPS sentence stamp of the last state published.
+    last_gps_stamp_ns: u64,
     /// Control requests waiting for the chassis: driver token → (ticket, request seq).
     pending_controls: HashMap<u64, (Ticket, u64)>,
     last_zero_reason: u8,
@@ -305,6 +325,15 @@ pub struct Engine {
     kept_locks: Vec<Option<(u8, Timestamp)>>,
     /// The held set must be kept again even if it looks unchanged (a restore substituted it).
     locks_dirty: bool,
+    /// A held set not kept yet (its write failed), and when to try again.
+    unkept: Option<Vec<HeldLock>>,
+    keep_retry_at: Timestamp,
+    /// Items read from the bus in a pass, kept to spare an allocation per pass.
+    rx_items: Vec<(Timestamp, Transmit)>,
+    /// Items written that the backend holds, with the instant their write returned.
+    tx_held: Vec<(Timestamp, Transmit)>,
+    /// The readers to wake at the end of the pass, one bit per [`Readers`].
+    to_wake: u8,
 }
 
 impl std::fmt::Debug for Engine {
@@ -343,6 +372,7 @@ impl Engine {
             mux_changed: false,
             requests: false,
             on_tick: false,
+            served_tick: false,
             state_seq: 0,
             frame_seq: 0,
             mux_seq: 0,
@@ -352,6 +382,7 @@ impl Engine {
             last_state_publish: now,
             last_mux_publish: None,
             last_rx_frames: 0,
+            last_gps_stamp_ns: 0,
             pending_controls: HashMap::new(),
             last_zero_reason: ZeroReason::STARTING,
             last_active: MuxStatus::NO_SOURCE,
@@ -360,6 +391,11 @@ impl Engine {
             publications: VecDeque::new(),
             kept_locks: mux.locks().map(|(_, held)| held).collect(),
             locks_dirty: false,
+            unkept: None,
+            keep_retry_at: now,
+            rx_items: Vec::new(),
+            tx_held: Vec::new(),
+            to_wake: 0,
             config,
             driver,
             mux,
@@ -420,7 +456,12 @@ impl Engine {
         self.locks_dirty = true;
     }
 
-    /// Starts a pass at `now` woken by `wake`:    /// Starts a pass at `now` woken by `wake`: serves the tick when it is due and says what to
+    /// Starts a pass at `now` woken by `wake`:    /// Whether the last pass served the loop's tick.
+    pub fn served_tick(&self) -> bool {
+        self.served_tick
+    }
+
+    /// Starts a pass at `now` woken by `wake`: serves the tick when it is due and says what to
     /// read. The mux decides again at the next transmit, whatever woke the loop.
     pub fn begin_pass(&mut self, now: Timestamp, wake: Wake) -> Reads {
         let tick = self.tick.is_due(now);
@@ -428,6 +469,7 @@ impl Engine {
             self.tick.served(now);
         }
         self.on_tick |= tick;
+        self.served_tick = tick;
         self.undecided = true;
         self.requests = false;
         let all = (1u32 << self.mux.status().sources().len()) - 1;
@@ -670,8 +712,8 @@ impl Engine {
 
     /// Ends a pass: answers finished control requests, logs the driver's notices, publishes
     /// the mux status (on a change, while ramping after requests, and at its rate) and on the
-    /// tick refreshes the state (frames arrived that did not change it, and at least every
-    /// 100 ms).
+    /// tick refreshes the state (frames or GPS sentences arrived that did not change it, and at
+    /// least every 100 ms).
     pub fn end_pass(&mut self, now: Timestamp) {
         self.drain_driver_events(now);
         self.publish_description_if_changed(now);
@@ -687,6 +729,7 @@ impl Engine {
         if std::mem::take(&mut self.on_tick) {
             let rx_frames = self.driver.state().link.rx_frames;
             if rx_frames != self.last_rx_frames
+                || self.gps_stamp_ns != self.last_gps_stamp_ns
                 || now.saturating_since(self.last_state_publish) >= EngineConfig::STATE_REFRESH
             {
                 self.publish_state(now);
@@ -726,7 +769,8 @@ impl Engine {
     }
 
     /// Orderly stop: command zero (and the brake where there is one), refuse the control
-    /// requests still waiting. The shell transmits what follows, then [`Engine::publish_all`].
+    /// requests still waiting. What follows is transmitted, then [`Engine::publish_all`]
+    /// ([`Engine::stop`] does all three).
     pub fn shutdown(&mut self, now: Timestamp) {
         info!("stopping: commanding zero and engaging the brake where there is one");
         self.undecided = false;
@@ -796,7 +840,7 @@ impl Engine {
     }
 
     /// The held locks when the set changed since the last call (engaged, released, restored
-    /// with a substitute): the shell keeps them (atomically) before it waits again.
+    /// with a substitute): to be kept (atomically) before anything else is published.
     pub fn poll_held_locks(&mut self) -> Option<Vec<HeldLock>> {
         let unchanged = self
             .mux
@@ -955,6 +999,7 @@ impl Engine {
         self.state_seq += 1;
         state.seq = self.state_seq;
         self.last_rx_frames = state.link.rx_frames;
+        self.last_gps_stamp_ns = self.gps_stamp_ns;
         self.last_state_body = Some(state_body(&state));
         self.last_state_publish = now;
         self.publications

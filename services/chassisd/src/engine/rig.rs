@@ -1,17 +1,21 @@
 //! The engine against a simulated chassis on simulated time: the scenario harness one level up
 //! from `chassis_protocols::pair::Pair`.
 //!
-//! A [`Rig`] runs the engine exactly as the shell does (one pass per wake-up, in the shell's
-//! order), wired to the robot's simulated firmware by a wire with a one-way latency. Clients are
-//! scripted: requests and control calls are scheduled at instants, and they wake the engine as a
-//! notification would. The clock jumps from one deadline to the next (the engine's, the
-//! firmware's, the wire's, the script's), so thousands of simulated seconds run in seconds and
-//! every time a scenario asserts is exact.
+//! A [`Rig`] runs the engine's own pass ([`Engine::run_pass`], the sequence the shell runs) once
+//! per wake-up, against a [`World`]: the robot's simulated firmware at the far end of a wire
+//! with a one-way latency, a GPS receiver that can be plugged in, and scripted clients. Requests
+//! and control calls are scheduled at instants and wake the engine as a notification would; a
+//! request can also arrive while a pass runs, between its first read of the sources and the
+//! acknowledgement of their listeners. The clock jumps from one deadline to the next (the
+//! engine's, the firmware's, the wire's, the script's), so thousands of simulated seconds run in
+//! seconds and every time a scenario asserts is exact.
 //!
-//! Everything the engine publishes is kept ([`Rig::states`], [`Rig::muxes`], [`Rig::responses`]),
-//! every item it writes is on [`Rig::wire`], and invariants that must hold at every instant are
-//! checked as the run goes (every published state numbered one above the last; see
-//! [`Rig::check`] for the safety rules checked against the wire).
+//! Everything the engine publishes is kept ([`World::states`], [`World::muxes`],
+//! [`World::responses`]), every item it writes is on [`World::wire`], and rules of the pass are
+//! checked as the run goes: every published state and mux status numbered one above the last;
+//! the held locks kept before anything of the same pass is published; nothing published after
+//! the pass woke its readers; each kind of reader woken at most once per pass. The safety rules
+//! are checked against the wire by the scenarios (the random run of `scenarios`).
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -24,7 +28,10 @@ use chassis_protocols::{
     DriverConfig, Injection, Profile, RobotKind, Timestamp, Transmit, scout_mini, titan,
 };
 
-use super::{Device, Engine, EngineConfig, HeldLock, ListenerChange, Publication, Ticket, Wake};
+use super::{
+    Device, Engine, EngineConfig, HeldLock, ListenerChange, PassIo, Publication, Readers, Ticket,
+    Wake, WriteError, Written,
+};
 use crate::bus::MAX_RX_BATCH;
 use crate::mux::{Mux, MuxConfig};
 use crate::sim::BoxedFirmware;
@@ -44,13 +51,34 @@ pub struct Sent {
 /// A scripted client action.
 #[derive(Debug, Clone)]
 enum Action {
-    Request(usize, VelocityRequest),
+    /// A request of the source with this index. `meanwhile`: it lands while the pass it wakes
+    /// runs, after the first read of the sources: only the read after the acknowledgement of
+    /// the listeners finds it.
+    Request {
+        source: usize,
+        request: VelocityRequest,
+        meanwhile: bool,
+    },
     Control(ControlRequest),
 }
 
-/// The engine, a simulated chassis and scripted clients on simulated time.
-pub struct Rig {
-    pub engine: Engine,
+/// A simulated GPS receiver on its serial port.
+#[derive(Debug, Default)]
+struct Gps {
+    /// Plugged in: opening it succeeds.
+    plugged: bool,
+    /// Opened by the engine and not lost since.
+    open: bool,
+    /// Unplugged while open: the engine learns it at its next read.
+    failed: bool,
+    /// Bytes it sends, and when they arrive.
+    pending: VecDeque<(Timestamp, Vec<u8>)>,
+}
+
+/// Everything around the engine: the clock, the wire and the chassis, the GPS receiver, the
+/// scripted clients, and the record of what the engine wrote, published and kept. It is the
+/// engine's [`PassIo`] in the rig.
+pub struct World {
     pub firmware: BoxedFirmware,
     pub profile: Profile,
     pub mux_config: MuxConfig,
@@ -59,6 +87,7 @@ pub struct Rig {
     /// Frames in the service's receive queue (the kernel's), with their arrival.
     to_engine: VecDeque<(Timestamp, Transmit)>,
     script: Vec<(Timestamp, Action)>,
+    gps: Gps,
     /// The bus works; while false everything sent is lost, reads fail and reopening fails.
     bus_ok: bool,
     /// The bus failed and the engine has not been told yet.
@@ -66,6 +95,14 @@ pub struct Rig {
     /// The receive gate (the shell stops watching a paused bus).
     gate_open: bool,
     next_ticket: Ticket,
+    /// The disk keeps what is written to it; while false every write of the held locks fails.
+    disk_ok: bool,
+    /// In the current pass: the listeners were acknowledged; publications handed out, and their
+    /// readers (one bit per [`Readers`]); readers woken.
+    acknowledged: bool,
+    published_in_pass: usize,
+    published_kinds: u8,
+    woken_in_pass: u8,
     /// Every item the engine wrote.
     pub wire: Vec<Sent>,
     /// Every published state, mux status and frame, in order.
@@ -78,10 +115,14 @@ pub struct Rig {
     pub responses: Vec<(Ticket, ControlResponse, Timestamp)>,
     /// Passes run, and the instants of each.
     pub passes: Vec<Timestamp>,
+    /// Readers woken, and when.
+    pub wakes: Vec<(Timestamp, Readers)>,
     /// Listener changes the wake budget asked for.
     pub listener_changes: Vec<(Timestamp, ListenerChange)>,
-    /// Every held set the engine asked to keep (the shell's state file), and when.
+    /// Every held set the engine kept (the shell's state file), and when.
     pub kept_locks: Vec<(Timestamp, Vec<HeldLock>)>,
+    /// Writes of the held locks that failed (the disk was broken), and when.
+    pub keep_failures: Vec<Timestamp>,
     /// Attempts to open a device, and when.
     pub opens: Vec<(Timestamp, Device)>,
     /// When each state was published: (seq, instant).
@@ -92,21 +133,32 @@ pub struct Rig {
     pub worst_rx_wait: Duration,
     /// Frames the chassis sent while the bus worked.
     frames_sent_to_engine: u64,
-    /// Steps at the same instant without progress (a side asking for a deadline in the past).
-    pub stalls: u64,
+}
+
+/// The engine, a simulated chassis and scripted clients on simulated time.
+pub struct Rig {
+    pub engine: Engine,
+    pub world: World,
+    /// The engine's first publications ([`Engine::start`]) are out.
+    started: bool,
 }
 
 impl std::fmt::Debug for Rig {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Rig")
-            .field("now", &self.now)
+            .field("now", &self.world.now)
             .field("engine", &self.engine)
             .finish_non_exhaustive()
     }
 }
 
 impl Rig {
-    /// `robot` with `mux`, and `adjust` applied to the engine's settings.
+    /// Steps at one instant that make the run a stalled one.
+    const STALL: u32 = 10_000;
+
+    /// `robot` with `mux`, and `adjust` applied to the engine's settings. The engine starts
+    /// ([`Engine::start`]) at the first run, so a scenario can restore locks before it, as the
+    /// service does.
     pub fn with(robot: RobotKind, mux: MuxConfig, adjust: impl FnOnce(&mut EngineConfig)) -> Self {
         let mut profile = robot.entry().defaults();
         if let Profile::Xbot(p) = &mut profile {
@@ -131,8 +183,7 @@ impl Rig {
             Mux::new(&mux).expect("a valid mux configuration"),
             T0,
         );
-        let mut rig = Self {
-            engine,
+        let world = World {
             firmware: (entry.firmware)(&profile, T0),
             profile,
             mux_config: mux,
@@ -140,10 +191,16 @@ impl Rig {
             to_firmware: VecDeque::new(),
             to_engine: VecDeque::new(),
             script: Vec::new(),
+            gps: Gps::default(),
             bus_ok: true,
             bus_failed: false,
             gate_open: true,
             next_ticket: 0,
+            disk_ok: true,
+            acknowledged: false,
+            published_in_pass: 0,
+            published_kinds: 0,
+            woken_in_pass: 0,
             wire: Vec::new(),
             states: Vec::new(),
             muxes: Vec::new(),
@@ -151,28 +208,32 @@ impl Rig {
             descriptions: Vec::new(),
             responses: Vec::new(),
             passes: Vec::new(),
+            wakes: Vec::new(),
             listener_changes: Vec::new(),
             kept_locks: Vec::new(),
+            keep_failures: Vec::new(),
             opens: Vec::new(),
             state_times: Vec::new(),
             bus_reads: 0,
             frames_read: 0,
             worst_rx_wait: Duration::ZERO,
             frames_sent_to_engine: 0,
-            stalls: 0,
         };
-        rig.engine.publish_all(T0);
-        rig.collect();
-        rig
+        Self {
+            engine,
+            world,
+            started: false,
+        }
     }
 
     pub fn now(&self) -> Timestamp {
-        self.now
+        self.world.now
     }
 
     /// The index of the configured source `name`.
     pub fn source(&self, name: &str) -> usize {
-        self.mux_config
+        self.world
+            .mux_config
             .sources
             .iter()
             .position(|s| s.name == name)
@@ -180,15 +241,38 @@ impl Rig {
     }
 
     /// Source `name` publishes `request` at `at` (stamped then).
-    pub fn request_at(&mut self, at: Timestamp, name: &str, mut request: VelocityRequest) {
+    pub fn request_at(&mut self, at: Timestamp, name: &str, request: VelocityRequest) {
+        self.schedule_request(at, name, request, false);
+    }
+
+    /// Source `name` publishes `request` at `at`, landing while the pass it wakes runs: after
+    /// that pass has read the sources once, before it acknowledges their listeners.
+    pub fn request_meanwhile(&mut self, at: Timestamp, name: &str, request: VelocityRequest) {
+        self.schedule_request(at, name, request, true);
+    }
+
+    fn schedule_request(
+        &mut self,
+        at: Timestamp,
+        name: &str,
+        mut request: VelocityRequest,
+        meanwhile: bool,
+    ) {
         request.stamp_ns = at.as_nanos();
-        let index = self.source(name);
-        self.schedule(at, Action::Request(index, request));
+        let source = self.source(name);
+        self.schedule(
+            at,
+            Action::Request {
+                source,
+                request,
+                meanwhile,
+            },
+        );
     }
 
     /// Source `name` publishes `request` now.
     pub fn request(&mut self, name: &str, request: VelocityRequest) {
-        self.request_at(self.now, name, request);
+        self.request_at(self.world.now, name, request);
     }
 
     /// Source `name` publishes `request` every `period` from now until `until` (excluded).
@@ -199,7 +283,7 @@ impl Rig {
         period: Duration,
         until: Timestamp,
     ) {
-        let mut at = self.now;
+        let mut at = self.world.now;
         while at < until {
             self.request_at(at, name, request);
             at += period;
@@ -208,63 +292,113 @@ impl Rig {
 
     /// A control request arrives at `at`; returns its ticket.
     pub fn control_at(&mut self, at: Timestamp, mut request: ControlRequest) -> Ticket {
-        self.next_ticket += 1;
-        request.seq = self.next_ticket;
+        self.world.next_ticket += 1;
+        request.seq = self.world.next_ticket;
         request.stamp_ns = at.as_nanos();
         self.schedule(at, Action::Control(request));
-        self.next_ticket
+        self.world.next_ticket
     }
 
     /// The answer to `ticket`, if it came.
     pub fn response(&self, ticket: Ticket) -> Option<(ControlResponse, Timestamp)> {
-        self.responses
+        self.world
+            .responses
             .iter()
             .find(|(t, _, _)| *t == ticket)
             .map(|(_, r, at)| (*r, *at))
     }
 
     fn schedule(&mut self, at: Timestamp, action: Action) {
-        let at = at.max(self.now);
-        let index = self.script.partition_point(|(t, _)| *t <= at);
-        self.script.insert(index, (at, action));
+        let at = at.max(self.world.now);
+        let index = self.world.script.partition_point(|(t, _)| *t <= at);
+        self.world.script.insert(index, (at, action));
     }
 
     /// Injects a fault into the simulated chassis now.
     pub fn inject(&mut self, injection: Injection) -> bool {
-        let now = self.now;
-        let ok = self.firmware.inject(now, injection);
+        let now = self.world.now;
+        let ok = self.world.firmware.inject(now, injection);
         self.flush_firmware();
         ok
     }
 
     /// The bus fails now (a cable pulled): the engine learns it at its next read.
     pub fn cut_bus(&mut self) {
-        self.bus_ok = false;
+        let world = &mut self.world;
+        world.bus_ok = false;
         // A service that has already closed the bus has nothing to learn.
-        self.bus_failed = self.engine.is_bus_up();
-        self.frames_sent_to_engine -= self.to_engine.len() as u64;
-        self.to_engine.clear();
-        self.to_firmware.clear();
+        world.bus_failed = self.engine.is_bus_up();
+        world.frames_sent_to_engine -= world.to_engine.len() as u64;
+        world.to_engine.clear();
+        world.to_firmware.clear();
     }
 
     /// The bus can be opened again.
     pub fn restore_bus(&mut self) {
-        self.bus_ok = true;
+        self.world.bus_ok = true;
     }
 
-    /// Runs until `until`.
+    /// Every write of the held locks fails from now on (a full or read-only disk).
+    pub fn break_disk(&mut self) {
+        self.world.disk_ok = false;
+    }
+
+    /// Writes of the held locks succeed again.
+    pub fn mend_disk(&mut self) {
+        self.world.disk_ok = true;
+    }
+
+    /// Runs until a frame of the chassis is on its way to the engine; returns when it arrives.
+    pub fn next_frame_arrival(&mut self) -> Timestamp {
+        loop {
+            if let Some((arrival, _)) = self.world.to_engine.back() {
+                return *arrival;
+            }
+            self.run_for(Duration::from_micros(100));
+        }
+    }
+
+    /// The GPS receiver is plugged in: the next attempt opens it.
+    pub fn plug_gps(&mut self) {
+        self.world.gps.plugged = true;
+    }
+
+    /// The GPS receiver is unplugged now: an open one fails at the engine's next read.
+    pub fn unplug_gps(&mut self) {
+        let gps = &mut self.world.gps;
+        gps.plugged = false;
+        gps.failed = gps.open;
+        gps.pending.clear();
+    }
+
+    /// The GPS receiver sends `bytes` at `at` (lost while it is not open).
+    pub fn gps_sends_at(&mut self, at: Timestamp, bytes: &[u8]) {
+        let pending = &mut self.world.gps.pending;
+        let index = pending.partition_point(|(t, _)| *t <= at);
+        pending.insert(index, (at, bytes.to_vec()));
+    }
+
+    /// Runs until `until`. Time that stops moving (a side asking for a deadline in the past, a
+    /// wake-up the engine does not serve) fails the scenario.
     pub fn run_until(&mut self, until: Timestamp) {
+        if !self.started {
+            self.started = true;
+            let now = self.world.now;
+            self.world.begin_pass();
+            self.engine.start(&mut self.world, now);
+            self.world.end_pass();
+        }
         let mut same = 0u32;
-        while self.now < until {
-            let before = self.now;
+        while self.world.now < until {
+            let before = self.world.now;
             self.step(until);
-            if self.now == before {
+            if self.world.now == before {
                 same += 1;
-                if same > 10_000 {
-                    self.stalls += 1;
-                    self.now += Duration::from_micros(1);
-                    same = 0;
-                }
+                assert!(
+                    same <= Self::STALL,
+                    "stalled at {before:?}: {} steps without time moving",
+                    Self::STALL
+                );
             } else {
                 same = 0;
             }
@@ -273,22 +407,39 @@ impl Rig {
 
     /// Runs for `duration`.
     pub fn run_for(&mut self, duration: Duration) {
-        let until = self.now + duration;
+        let until = self.world.now + duration;
         self.run_until(until);
+    }
+
+    /// The orderly stop now ([`Engine::stop`]).
+    pub fn stop(&mut self) {
+        let now = self.world.now;
+        self.world.begin_pass();
+        self.engine.stop(&mut self.world, now);
+        self.world.end_pass();
     }
 
     /// The next instant something happens.
     fn next_event(&self) -> Timestamp {
+        let world = &self.world;
         [
             Some(self.engine.poll_timeout()),
-            self.firmware.poll_timeout(),
-            self.to_firmware.front().map(|(t, _)| *t),
-            self.to_engine
+            world.firmware.poll_timeout(),
+            world.to_firmware.front().map(|(t, _)| *t),
+            world
+                .to_engine
                 .front()
-                .filter(|_| self.gate_open)
+                .filter(|_| world.gate_open)
                 .map(|(t, _)| *t),
-            self.script.first().map(|(t, _)| *t),
-            (self.bus_failed && self.gate_open).then_some(self.now),
+            world.script.first().map(|(t, _)| *t),
+            (world.bus_failed && world.gate_open).then_some(world.now),
+            world
+                .gps
+                .pending
+                .front()
+                .filter(|_| world.gps.open)
+                .map(|(t, _)| *t),
+            world.gps.failed.then_some(world.now),
         ]
         .into_iter()
         .flatten()
@@ -297,163 +448,73 @@ impl Rig {
     }
 
     fn step(&mut self, until: Timestamp) {
-        let next = self.next_event().min(until).max(self.now);
-        self.now = next;
-        let now = self.now;
+        let next = self.next_event().min(until).max(self.world.now);
+        self.world.now = next;
+        let now = next;
         // The chassis side first: what reached it, its deadlines, what it sends back.
-        while let Some((_, item)) = self.to_firmware.front().filter(|(t, _)| *t <= now) {
+        let world = &mut self.world;
+        while let Some((_, item)) = world.to_firmware.front().filter(|(t, _)| *t <= now) {
             let item = item.clone();
-            self.to_firmware.pop_front();
-            self.firmware.handle_rx(now, item.as_rx());
+            world.to_firmware.pop_front();
+            world.firmware.handle_rx(now, item.as_rx());
         }
-        if self.firmware.poll_timeout().is_some_and(|t| t <= now) {
-            self.firmware.handle_timeout(now);
+        if world.firmware.poll_timeout().is_some_and(|t| t <= now) {
+            world.firmware.handle_timeout(now);
+        }
+        // What the receiver sent while nobody had it open is gone.
+        if !world.gps.open {
+            while world.gps.pending.front().is_some_and(|(t, _)| *t <= now) {
+                world.gps.pending.pop_front();
+            }
         }
         self.flush_firmware();
         // What wakes the service.
+        let world = &mut self.world;
         let mut wake = Wake::default();
-        for (at, action) in &self.script {
+        for (at, action) in &world.script {
             if *at > now {
                 break;
             }
             match action {
-                Action::Request(index, _) => wake.sources |= 1 << index,
+                Action::Request { source, .. } => wake.sources |= 1 << source,
                 Action::Control(_) => wake.control = true,
             }
         }
-        if !self.gate_open && !self.engine.is_rx_paused(now) {
-            self.gate_open = true;
+        if !world.gate_open && !self.engine.is_rx_paused(now) {
+            world.gate_open = true;
             wake.bus = true;
         }
-        wake.bus |= self.gate_open
-            && (self.bus_failed || self.to_engine.front().is_some_and(|(t, _)| *t <= now));
+        wake.bus |= world.gate_open
+            && (world.bus_failed || world.to_engine.front().is_some_and(|(t, _)| *t <= now));
+        wake.gps = world.gps.failed
+            || world.gps.open && world.gps.pending.front().is_some_and(|(t, _)| *t <= now);
         if wake.is_activity() || self.engine.poll_timeout() <= now {
             self.pass(now, wake);
         }
     }
 
     fn flush_firmware(&mut self) {
-        let now = self.now;
-        while let Some(item) = self.firmware.poll_transmit(now) {
+        let world = &mut self.world;
+        let now = world.now;
+        while let Some(item) = world.firmware.poll_transmit(now) {
             // Nobody reads a bus the service has closed: what the chassis sends then is lost.
-            if self.bus_ok && self.engine.is_bus_up() {
-                self.frames_sent_to_engine += 1;
-                self.to_engine.push_back((now + LATENCY, item));
+            if world.bus_ok && self.engine.is_bus_up() {
+                world.frames_sent_to_engine += 1;
+                world.to_engine.push_back((now + LATENCY, item));
             }
         }
     }
 
-    /// One pass, in the shell's order (`crate::service::Shell::pass`).
+    /// One pass: the engine's own ([`Engine::run_pass`]), then what the shell's loop does
+    /// between passes (the receive gate, the wake budget).
     fn pass(&mut self, now: Timestamp, wake: Wake) {
-        self.passes.push(now);
-        let reads = self.engine.begin_pass(now, wake);
-        // The sources and control requests due now.
-        let due = self.script.partition_point(|(t, _)| *t <= now);
-        let mut later = Vec::new();
-        for (at, action) in self.script.drain(..due) {
-            match action {
-                Action::Request(index, request) if reads.sources & (1 << index) != 0 => {
-                    self.engine.handle_request(now, index, &request).ok();
-                }
-                Action::Control(request) if reads.control => {
-                    self.engine.handle_control(now, request.seq, &request);
-                }
-                action => later.push((at, action)),
-            }
-        }
-        self.script.splice(0..0, later);
-        self.transmit(now);
-        if reads.bus {
-            self.read_bus(now);
-        }
-        self.engine.handle_timeout(now);
-        self.transmit(now);
-        self.engine.end_pass(now);
-        while let Some(device) = self.engine.poll_open(now) {
-            self.opens.push((now, device));
-            if device == Device::Bus && self.bus_ok {
-                self.bus_failed = false;
-                self.engine.handle_opened(now, device, "sim");
-            } else {
-                self.engine
-                    .handle_open_failed(now, device, &"no such device (simulated)");
-            }
-        }
-        self.collect();
-        if let Some(held) = self.engine.poll_held_locks() {
-            self.kept_locks.push((now, held));
-        }
-        self.gate_open = !self.engine.is_rx_paused(now);
+        self.world.passes.push(now);
+        self.world.begin_pass();
+        self.engine.run_pass(&mut self.world, wake);
+        self.world.end_pass();
+        self.world.gate_open = !self.engine.is_rx_paused(now);
         for change in self.engine.spend_wakeups(now, wake.sources) {
-            self.listener_changes.push((now, change));
-        }
-    }
-
-    fn transmit(&mut self, now: Timestamp) {
-        while let Some(item) = self.engine.poll_transmit(now) {
-            if !self.bus_ok {
-                self.bus_failed = false;
-                self.engine.handle_bus_lost(now, &"simulated bus cut");
-                continue;
-            }
-            self.to_firmware.push_back((now + LATENCY, item.clone()));
-            self.engine.handle_sent(now, &item);
-            self.wire.push(Sent { at: now, item });
-        }
-    }
-
-    fn read_bus(&mut self, now: Timestamp) {
-        if self.bus_failed {
-            self.frames_sent_to_engine -= self.to_engine.len() as u64;
-            self.to_engine.clear();
-            self.bus_failed = false;
-            self.engine.handle_bus_lost(now, &"simulated bus cut");
-            return;
-        }
-        self.bus_reads += 1;
-        let mut items = 0;
-        while items < MAX_RX_BATCH {
-            let Some((arrived, item)) = self.to_engine.front().filter(|(t, _)| *t <= now) else {
-                break;
-            };
-            self.worst_rx_wait = self.worst_rx_wait.max(now.saturating_since(*arrived));
-            let item = item.clone();
-            self.to_engine.pop_front();
-            self.frames_read += 1;
-            items += match &item {
-                Transmit::Can(_) => 1,
-                Transmit::Bytes(bytes) => bytes.len().div_ceil(8),
-            };
-            self.engine.handle_rx(now, item.as_rx());
-        }
-        self.engine.handle_bus_read(now, items, false);
-    }
-
-    /// Takes what the engine published, checking the numbering.
-    fn collect(&mut self) {
-        while let Some(publication) = self.engine.poll_publication() {
-            match publication {
-                Publication::State(state) => {
-                    if let Some(last) = self.states.last() {
-                        assert_eq!(state.seq, last.seq + 1, "state numbering at {:?}", self.now);
-                    }
-                    self.state_times.push((state.seq, self.now));
-                    self.states.push(*state);
-                }
-                Publication::Mux(status) => {
-                    if let Some(last) = self.muxes.last() {
-                        assert_eq!(status.seq, last.seq + 1, "mux numbering at {:?}", self.now);
-                    }
-                    self.muxes.push(*status);
-                }
-                Publication::Frame(frame) => self.frames.push(frame),
-                Publication::Description(description) => {
-                    self.descriptions.push((*description, self.now))
-                }
-                Publication::Response { ticket, response } => {
-                    self.responses.push((ticket, response, self.now))
-                }
-            }
+            self.world.listener_changes.push((now, change));
         }
     }
 
@@ -461,7 +522,7 @@ impl Rig {
     /// V1 0x130).
     pub fn commanded_speed(&self, item: &Transmit) -> Option<f64> {
         let frame = item.as_can()?;
-        match &self.profile {
+        match &self.world.profile {
             Profile::Titan(p) => match titan::decode(frame, p) {
                 Ok(titan::Frame::MotionCommand(c)) => Some(c.linear_mps),
                 _ => None,
@@ -483,7 +544,8 @@ impl Rig {
 
     /// The motion frames on the wire: when, and the speed each commanded.
     pub fn motion(&self) -> Vec<(Timestamp, f64)> {
-        self.wire
+        self.world
+            .wire
             .iter()
             .filter_map(|s| self.commanded_speed(&s.item).map(|v| (s.at, v)))
             .collect()
@@ -500,32 +562,264 @@ impl Rig {
     /// Frames the chassis sent over a working bus that the engine has not read (none may be
     /// lost; those still in the queue are not lost).
     pub fn frames_lost(&self) -> u64 {
-        self.frames_sent_to_engine - self.frames_read - self.to_engine.len() as u64
+        let world = &self.world;
+        world.frames_sent_to_engine - world.frames_read - world.to_engine.len() as u64
     }
 
     /// Forgets the logs (a long run checks them as it goes), keeping the newest state and mux
     /// status for the numbering checks.
     pub fn forget(&mut self) {
-        let n = self.states.len().saturating_sub(1);
-        self.states.drain(..n);
-        let n = self.muxes.len().saturating_sub(1);
-        self.muxes.drain(..n);
-        self.wire.clear();
-        self.frames.clear();
-        self.state_times.clear();
-        self.passes.clear();
-        self.responses.clear();
+        let world = &mut self.world;
+        let n = world.states.len().saturating_sub(1);
+        world.states.drain(..n);
+        let n = world.muxes.len().saturating_sub(1);
+        world.muxes.drain(..n);
+        world.wire.clear();
+        world.frames.clear();
+        world.state_times.clear();
+        world.passes.clear();
+        world.wakes.clear();
+        world.responses.clear();
     }
 
     /// The newest published mux status.
     pub fn mux(&self) -> &MuxStatus {
-        self.muxes
+        self.world
+            .muxes
             .last()
             .expect("the mux status is published at start")
     }
 
     /// The newest published state.
     pub fn state(&self) -> &ChassisState {
-        self.states.last().expect("the state is published at start")
+        self.world
+            .states
+            .last()
+            .expect("the state is published at start")
     }
+}
+
+impl World {
+    /// A pass (or the start, or the stop) begins: the checks of one pass start over.
+    fn begin_pass(&mut self) {
+        self.acknowledged = false;
+        self.published_in_pass = 0;
+        self.published_kinds = 0;
+        self.woken_in_pass = 0;
+    }
+
+    /// A pass ended: the readers of everything it published were woken. A request that landed
+    /// during the pass and was not read waits like any other (its notification wakes the loop
+    /// again).
+    fn end_pass(&mut self) {
+        let due = self.script.partition_point(|(t, _)| *t <= self.now);
+        for (_, action) in &mut self.script[..due] {
+            if let Action::Request { meanwhile, .. } = action {
+                *meanwhile = false;
+            }
+        }
+        assert_eq!(
+            self.woken_in_pass, self.published_kinds,
+            "readers woken at {:?} (one bit per kind) are not those of what was published",
+            self.now
+        );
+    }
+
+    /// Takes the due actions `wanted` picks, in order, leaving the others in the script.
+    fn take_due(&mut self, mut wanted: impl FnMut(&Action) -> bool) -> Vec<Action> {
+        let due = self.script.partition_point(|(t, _)| *t <= self.now);
+        let mut taken = Vec::new();
+        let mut kept = Vec::new();
+        for (at, action) in self.script.drain(..due) {
+            if wanted(&action) {
+                taken.push(action);
+            } else {
+                kept.push((at, action));
+            }
+        }
+        self.script.splice(0..0, kept);
+        taken
+    }
+}
+
+impl PassIo for World {
+    type Error = &'static str;
+
+    fn now(&mut self) -> Timestamp {
+        self.now
+    }
+
+    fn read_requests(&mut self, sources: u32, mut take: impl FnMut(usize, &VelocityRequest)) {
+        let acknowledged = self.acknowledged;
+        let readable = |action: &Action| match action {
+            Action::Request {
+                source, meanwhile, ..
+            } => sources & (1 << source) != 0 && (acknowledged || !meanwhile),
+            Action::Control(_) => false,
+        };
+        for action in self.take_due(readable) {
+            if let Action::Request {
+                source, request, ..
+            } = action
+            {
+                take(source, &request);
+            }
+        }
+    }
+
+    fn read_control(&mut self, mut take: impl FnMut(Ticket, &ControlRequest)) {
+        for action in self.take_due(|action| matches!(action, Action::Control(_))) {
+            if let Action::Control(request) = action {
+                take(request.seq, &request);
+            }
+        }
+    }
+
+    fn serve_simulator(&mut self, _now: Timestamp) {
+        // The scenarios inject faults into the firmware directly.
+    }
+
+    fn acknowledge(&mut self, _sources: u32) {
+        self.acknowledged = true;
+    }
+
+    fn write(&mut self, item: &Transmit) -> Result<Written, WriteError<Self::Error>> {
+        if !self.bus_ok {
+            return Err(WriteError::Lost("simulated bus cut"));
+        }
+        self.to_firmware
+            .push_back((self.now + LATENCY, item.clone()));
+        self.wire.push(Sent {
+            at: self.now,
+            item: item.clone(),
+        });
+        Ok(Written::Out(self.now))
+    }
+
+    fn flush(&mut self) -> Result<Timestamp, WriteError<Self::Error>> {
+        Ok(self.now)
+    }
+
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, Transmit)>) -> Result<bool, Self::Error> {
+        if self.bus_failed {
+            self.frames_sent_to_engine -= self.to_engine.len() as u64;
+            self.to_engine.clear();
+            return Err("simulated bus cut");
+        }
+        self.bus_reads += 1;
+        let now = self.now;
+        let mut count = 0;
+        while count < MAX_RX_BATCH {
+            let Some((arrived, item)) = self.to_engine.front().filter(|(t, _)| *t <= now) else {
+                break;
+            };
+            self.worst_rx_wait = self.worst_rx_wait.max(now.saturating_since(*arrived));
+            into.push((now, item.clone()));
+            self.to_engine.pop_front();
+            self.frames_read += 1;
+            count += 1;
+        }
+        Ok(count >= MAX_RX_BATCH)
+    }
+
+    fn read_gps(&mut self, mut take: impl FnMut(&[u8])) -> Result<(), Self::Error> {
+        if self.gps.failed {
+            return Err("GPS receiver unplugged (simulated)");
+        }
+        while let Some((_, bytes)) = self.gps.pending.front().filter(|(t, _)| *t <= self.now) {
+            take(bytes);
+            self.gps.pending.pop_front();
+        }
+        Ok(())
+    }
+
+    fn open(&mut self, now: Timestamp, device: Device) -> Result<&str, Self::Error> {
+        self.opens.push((now, device));
+        match device {
+            Device::Bus if self.bus_ok => {
+                self.bus_failed = false;
+                Ok("sim")
+            }
+            Device::Gps if self.gps.plugged => {
+                self.gps.open = true;
+                Ok("gps (simulated)")
+            }
+            _ => Err("no such device (simulated)"),
+        }
+    }
+
+    fn close(&mut self, device: Device) {
+        match device {
+            Device::Bus => self.bus_failed = false,
+            Device::Gps => {
+                self.gps.open = false;
+                self.gps.failed = false;
+            }
+        }
+    }
+
+    fn keep_locks(&mut self, held: &[HeldLock]) -> Result<(), Self::Error> {
+        assert_eq!(
+            self.published_in_pass, 0,
+            "locks kept at {:?} after a publication of the same pass",
+            self.now
+        );
+        if !self.disk_ok {
+            self.keep_failures.push(self.now);
+            return Err("no space left on device (simulated)");
+        }
+        self.kept_locks.push((self.now, held.to_vec()));
+        Ok(())
+    }
+
+    fn publish(&mut self, publication: Publication) -> Result<(), Self::Error> {
+        assert_eq!(
+            self.woken_in_pass, 0,
+            "published at {:?} after the pass woke its readers",
+            self.now
+        );
+        self.published_in_pass += 1;
+        self.published_kinds |= bit(Readers::of(&publication));
+        match publication {
+            Publication::State(state) => {
+                if let Some(last) = self.states.last() {
+                    assert_eq!(state.seq, last.seq + 1, "state numbering at {:?}", self.now);
+                }
+                self.state_times.push((state.seq, self.now));
+                self.states.push(*state);
+            }
+            Publication::Mux(status) => {
+                if let Some(last) = self.muxes.last() {
+                    assert_eq!(status.seq, last.seq + 1, "mux numbering at {:?}", self.now);
+                }
+                self.muxes.push(*status);
+            }
+            Publication::Frame(frame) => self.frames.push(frame),
+            Publication::Description(description) => {
+                self.descriptions.push((*description, self.now))
+            }
+            Publication::Response { ticket, response } => {
+                self.responses.push((ticket, response, self.now))
+            }
+        }
+        Ok(())
+    }
+
+    fn wake(&mut self, readers: Readers) -> Result<(), Self::Error> {
+        let bit = bit(readers);
+        assert_eq!(
+            self.woken_in_pass & bit,
+            0,
+            "{readers:?} woken twice at {:?}",
+            self.now
+        );
+        self.woken_in_pass |= bit;
+        self.wakes.push((self.now, readers));
+        Ok(())
+    }
+}
+
+/// One bit per kind of readers.
+fn bit(readers: Readers) -> u8 {
+    1 << readers as u8
 }

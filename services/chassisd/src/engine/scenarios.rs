@@ -154,6 +154,29 @@ fn a_request_that_arrives_during_a_pass_is_decided_again() {
 }
 
 #[test]
+fn a_request_that_lands_while_its_listener_is_acknowledged_is_sent_in_the_same_pass() {
+    let mut rig = ready();
+    let t = at(231);
+    rig.request_at(t, "teleop", twist(0.5));
+    // Published after the pass read teleop, before it consumed teleop's notification: its
+    // notification is consumed with the first, and only the read after it finds the request.
+    rig.request_meanwhile(t, "teleop", twist(0.0));
+    rig.run_until(at(240));
+    let sent: Vec<f64> = rig
+        .motion()
+        .into_iter()
+        .filter(|&(when, _)| when == t)
+        .map(|(_, v)| v)
+        .collect();
+    assert_eq!(sent, [0.5, 0.0]);
+    assert_eq!(
+        rig.world.passes.iter().filter(|&&p| p == t).count(),
+        1,
+        "decided and sent by the pass that acknowledged it, not a later one"
+    );
+}
+
+#[test]
 fn a_changed_command_waits_for_the_drivers_minimum_interval_but_a_stop_does_not() {
     let mut rig = ready();
     rig.request_at(at(207), "teleop", twist(0.5));
@@ -229,7 +252,8 @@ fn nothing_moves_before_the_safety_monitor_speaks() {
     rig.run_until(at(650));
     assert_eq!(rig.first_motion(T0, |v| v != 0.0), Some(at(600)));
     assert!(
-        rig.muxes
+        rig.world
+            .muxes
             .iter()
             .any(|m| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE)
     );
@@ -245,6 +269,7 @@ fn the_required_source_going_silent_stops_the_robot_at_its_timeout() {
     assert_eq!(rig.first_motion(at(500), |v| v == 0.0), Some(at(700)));
     assert!(rig.motion().iter().all(|&(t, v)| t < at(700) || v == 0.0));
     let stale = rig
+        .world
         .muxes
         .iter()
         .find(|m| {
@@ -270,19 +295,32 @@ fn an_operator_lock_blocks_every_lower_source_until_released() {
         at(1233),
         control(ControlKind::LOCK_RELEASE).with_name("estop"),
     );
+    rig.run_until(at(1290));
+    // A release never starts motion: teleop still asks for 0.5 m/s, so the mux waits for its
+    // zero.
+    assert_eq!(rig.mux().zero_reason, ZeroReason::AWAITING_ZERO);
+    // Teleop lets go between two of its requests (every 50 ms from 200 ms): the next one drives.
+    rig.request_at(at(1310), "teleop", twist(0.0));
     rig.run_until(at(1400));
     assert_eq!(rig.first_motion(at(201), |v| v == 0.0), Some(at(433)));
     assert!(
         rig.motion()
             .iter()
-            .all(|&(t, v)| !(at(433)..at(1233)).contains(&t) || v == 0.0)
+            .all(|&(t, v)| !(at(433)..at(1350)).contains(&t) || v == 0.0)
     );
-    assert_eq!(rig.first_motion(at(434), |v| v > 0.0), Some(at(1233)));
+    assert_eq!(rig.first_motion(at(434), |v| v > 0.0), Some(at(1350)));
     let (engaged, when) = rig.response(engage).unwrap();
     assert!(engaged.is_ok(), "{}", engaged.message());
     assert_eq!(when, at(433));
-    assert_eq!(rig.response(release).unwrap().0.message(), "estop released");
+    assert_eq!(
+        rig.response(release).unwrap().0.message(),
+        WAITING_FOR_TELEOP
+    );
 }
+
+/// What the operator's release answers while teleop asks for motion.
+const WAITING_FOR_TELEOP: &str =
+    "estop released; nothing moves until teleop asks for zero (a release never starts motion)";
 
 #[test]
 fn a_lock_held_by_a_source_survives_its_holder_going_silent() {
@@ -312,9 +350,10 @@ fn a_lock_held_by_a_source_survives_its_holder_going_silent() {
         at(2005),
         control(ControlKind::LOCK_RELEASE).with_name("estop"),
     );
+    rig.request_at(at(2025), "teleop", twist(0.0));
     rig.run_until(at(2100));
     assert!(rig.response(release).unwrap().0.is_ok());
-    assert_eq!(rig.first_motion(at(2000), |v| v > 0.0), Some(at(2005)));
+    assert_eq!(rig.first_motion(at(2000), |v| v > 0.0), Some(at(2050)));
     assert_eq!(rig.mux().locks()[0].holder, LockStatus::HOLDER_NONE);
 }
 
@@ -369,28 +408,20 @@ fn a_control_request_waiting_for_the_chassis_is_answered_when_it_answers() {
 #[test]
 fn shutdown_commands_zero_and_refuses_the_requests_still_waiting() {
     let mut rig = ready();
+    rig.request_at(at(255), "teleop", twist(0.5));
     let ticket = rig.control_at(at(255), control(ControlKind::STEERING_ZERO));
     rig.run_until(at(260));
     assert!(rig.response(ticket).is_none(), "waiting for the chassis");
-    rig.engine.shutdown(at(260));
-    let mut last = None;
-    while let Some(item) = rig.engine.poll_transmit(at(260)) {
-        last = rig.commanded_speed(&item).or(last);
-    }
-    assert_eq!(last, Some(0.0));
-    rig.engine.publish_all(at(260));
-    rig.run_for(Duration::ZERO);
-    let mut answers = Vec::new();
-    while let Some(p) = rig.engine.poll_publication() {
-        if let super::Publication::Response { ticket, response } = p {
-            answers.push((ticket, response));
-        }
-    }
-    assert!(
-        answers
-            .iter()
-            .any(|(t, r)| *t == ticket && r.status == ControlStatus::REFUSED),
-        "{answers:?}"
+    assert_eq!(speed_at(&rig, at(260)), 0.5);
+    let states = rig.world.states.len();
+    rig.stop();
+    assert_eq!(rig.motion().last(), Some(&(at(260), 0.0)), "zero, at once");
+    let (answer, when) = rig.response(ticket).unwrap();
+    assert_eq!((answer.status, when), (ControlStatus::REFUSED, at(260)));
+    assert_eq!(
+        rig.world.states.len(),
+        states + 1,
+        "the last state is published"
     );
 }
 
@@ -400,6 +431,7 @@ fn the_state_is_published_on_change_and_refreshed_on_the_tick() {
     rig.run_until(at(1000));
     // Every feedback frame that changes the state is published the instant it is read.
     let changes = rig
+        .world
         .states
         .iter()
         .filter(|s| (at(400).as_nanos()..at(1000).as_nanos()).contains(&s.stamp_ns))
@@ -408,18 +440,19 @@ fn the_state_is_published_on_change_and_refreshed_on_the_tick() {
     // A silent chassis: the state is still refreshed on the tick, every 100 ms.
     rig.inject(Injection::Silence(ms(500)));
     let silent_from = rig.now();
-    let before = rig.states.len();
+    let before = rig.world.states.len();
     rig.run_until(at(1400));
-    let refreshed: Vec<u64> = rig.states[before..].iter().map(|s| s.seq).collect();
+    let refreshed: Vec<u64> = rig.world.states[before..].iter().map(|s| s.seq).collect();
     assert!(!refreshed.is_empty());
     let stamps: Vec<Timestamp> = rig
+        .world
         .passes
         .iter()
         .copied()
         .filter(|&t| t > silent_from)
         .collect();
     assert!(!stamps.is_empty());
-    let published_at: Vec<Timestamp> = rig.states[before..]
+    let published_at: Vec<Timestamp> = rig.world.states[before..]
         .iter()
         .filter_map(|s| rig_publication_time(&rig, s.seq))
         .collect();
@@ -435,7 +468,8 @@ fn the_state_is_published_on_change_and_refreshed_on_the_tick() {
 /// When the state numbered `seq` was published (the rig keeps the instants of its passes; a
 /// refreshed state carries its frames' stamps, not the publication's).
 fn rig_publication_time(rig: &Rig, seq: u64) -> Option<Timestamp> {
-    rig.state_times
+    rig.world
+        .state_times
         .iter()
         .find(|(s, _)| *s == seq)
         .map(|(_, t)| *t)
@@ -445,8 +479,8 @@ fn rig_publication_time(rig: &Rig, seq: u64) -> Option<Timestamp> {
 fn the_mux_status_is_published_on_change_and_every_100_ms() {
     let mut rig = ready();
     rig.run_until(at(800));
-    let before = rig.muxes.len();
-    let quiet: Vec<u64> = rig.muxes[..before]
+    let before = rig.world.muxes.len();
+    let quiet: Vec<u64> = rig.world.muxes[..before]
         .windows(2)
         .filter(|w| w[0].stamp_ns >= at(300).as_nanos())
         .map(|w| w[1].stamp_ns - w[0].stamp_ns)
@@ -458,7 +492,7 @@ fn the_mux_status_is_published_on_change_and_every_100_ms() {
     rig.request_at(at(813), "teleop", twist(0.4));
     rig.run_until(at(830));
     assert!(
-        rig.muxes[before..]
+        rig.world.muxes[before..]
             .iter()
             .any(|m| m.stamp_ns == at(813).as_nanos() && m.active().is_some()),
         "a change is published at once"
@@ -472,8 +506,14 @@ fn a_lost_bus_is_reopened_with_doubling_backoff_and_nothing_is_written_meanwhile
     rig.run_until(at(305));
     rig.cut_bus();
     rig.run_until(at(4000));
-    let lost_at = rig.passes.iter().copied().find(|&t| t >= at(305)).unwrap();
-    let attempts: Vec<Timestamp> = rig.opens.iter().map(|(t, _)| *t).collect();
+    let lost_at = rig
+        .world
+        .passes
+        .iter()
+        .copied()
+        .find(|&t| t >= at(305))
+        .unwrap();
+    let attempts: Vec<Timestamp> = rig.world.opens.iter().map(|(t, _)| *t).collect();
     let gaps: Vec<u64> = std::iter::once(lost_at)
         .chain(attempts.iter().copied())
         .collect::<Vec<_>>()
@@ -482,7 +522,7 @@ fn a_lost_bus_is_reopened_with_doubling_backoff_and_nothing_is_written_meanwhile
         .collect();
     assert_eq!(gaps[..5], [100, 200, 400, 800, 1600]);
     assert!(gaps[5..].iter().all(|&g| g == 2000), "{gaps:?}");
-    assert!(rig.wire.iter().all(|s| s.at <= lost_at));
+    assert!(rig.world.wire.iter().all(|s| s.at <= lost_at));
     assert!(rig.state().link_flags & LinkFlags::BUS_DOWN != 0);
     // Back: the next attempt opens it and the robot is driven again.
     rig.restore_bus();
@@ -490,9 +530,9 @@ fn a_lost_bus_is_reopened_with_doubling_backoff_and_nothing_is_written_meanwhile
     // +4695 ms opens it.
     let next_attempt = lost_at + ms(100 + 200 + 400 + 800 + 1600 + 2000);
     rig.run_until(next_attempt + ms(300));
-    assert_eq!(rig.opens.last().map(|(t, _)| *t), Some(next_attempt));
+    assert_eq!(rig.world.opens.last().map(|(t, _)| *t), Some(next_attempt));
     assert_eq!(
-        rig.wire.iter().find(|s| s.at > lost_at).map(|s| s.at),
+        rig.world.wire.iter().find(|s| s.at > lost_at).map(|s| s.at),
         Some(next_attempt)
     );
     assert!(rig.first_motion(next_attempt, |v| v > 0.0).is_some());
@@ -500,7 +540,7 @@ fn a_lost_bus_is_reopened_with_doubling_backoff_and_nothing_is_written_meanwhile
     rig.cut_bus();
     let second_loss = rig.now();
     rig.run_for(ms(150));
-    let retry = rig.opens.last().map(|(t, _)| *t).unwrap();
+    let retry = rig.world.opens.last().map(|(t, _)| *t).unwrap();
     assert!(retry > second_loss && retry.saturating_since(second_loss) <= ms(100));
 }
 
@@ -511,12 +551,14 @@ fn a_flooding_source_is_read_on_the_tick_only_and_keeps_its_place() {
     rig.run_until(at(600));
     let teleop = rig.source("teleop");
     let detached: Vec<Timestamp> = rig
+        .world
         .listener_changes
         .iter()
         .filter(|(_, c)| *c == ListenerChange::Detach(teleop))
         .map(|(t, _)| *t)
         .collect();
     let attached: Vec<Timestamp> = rig
+        .world
         .listener_changes
         .iter()
         .filter(|(_, c)| *c == ListenerChange::Attach(teleop))
@@ -546,7 +588,8 @@ fn the_safety_source_is_never_detached() {
     rig.run_until(at(400));
     let safety = rig.source("safety");
     assert!(
-        rig.listener_changes
+        rig.world
+            .listener_changes
             .iter()
             .all(|(_, c)| *c != ListenerChange::Detach(safety))
     );
@@ -556,7 +599,7 @@ fn the_safety_source_is_never_detached() {
 fn ordinary_feedback_is_read_the_moment_it_arrives() {
     let mut rig = ready();
     rig.run_until(at(2000));
-    assert_eq!(rig.worst_rx_wait, Duration::ZERO);
+    assert_eq!(rig.world.worst_rx_wait, Duration::ZERO);
 }
 
 #[test]
@@ -564,18 +607,18 @@ fn a_saturated_bus_is_read_once_per_moderation_interval_and_loses_nothing() {
     let mut rig = ready();
     rig.inject(Injection::Flood { frames_per_s: 4000 });
     rig.run_until(at(1200));
-    let reads_before = rig.bus_reads;
-    let read_frames = rig.frames_read;
+    let reads_before = rig.world.bus_reads;
+    let read_frames = rig.world.frames_read;
     rig.run_until(at(2200));
-    let reads = rig.bus_reads - reads_before;
+    let reads = rig.world.bus_reads - reads_before;
     // One read per 4 ms and one per 20 ms tick at most, instead of one per frame (≈ 4,500).
     assert!(reads <= 250 + 50 + 5, "{reads} reads in one second");
     assert!(
-        rig.worst_rx_wait <= Duration::from_micros(4000),
+        rig.world.worst_rx_wait <= Duration::from_micros(4000),
         "{:?}",
-        rig.worst_rx_wait
+        rig.world.worst_rx_wait
     );
-    assert!(rig.frames_read - read_frames > 4000);
+    assert!(rig.world.frames_read - read_frames > 4000);
     assert_eq!(rig.frames_lost(), 0);
 }
 
@@ -602,6 +645,7 @@ fn the_gps_receiver_is_opened_at_start_and_retried_every_second() {
     let mut rig = Rig::with(RobotKind::Xbot, unsmoothed(), |c| c.gps = true);
     rig.run_until(at(3500));
     let gps: Vec<Timestamp> = rig
+        .world
         .opens
         .iter()
         .filter(|(_, d)| *d == Device::Gps)
@@ -609,6 +653,74 @@ fn the_gps_receiver_is_opened_at_start_and_retried_every_second() {
         .collect();
     assert_eq!(gps, [T0, at(1000), at(2000), at(3000)]);
     assert!(rig.state().link_flags & LinkFlags::GPS_DOWN != 0);
+}
+
+/// A GGA sentence with a fix at 48.1173° N, 11.5167° E, eight satellites.
+const GGA: &[u8] = b"$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n";
+
+#[test]
+fn a_gps_fix_is_read_in_the_pass_it_wakes_and_published_by_the_next_tick() {
+    let mut rig = Rig::with(RobotKind::Xbot, unsmoothed(), |c| c.gps = true);
+    rig.plug_gps();
+    rig.gps_sends_at(at(507), GGA);
+    rig.run_until(at(600));
+    let gps: Vec<Timestamp> = rig
+        .world
+        .opens
+        .iter()
+        .filter(|(_, d)| *d == Device::Gps)
+        .map(|(t, _)| *t)
+        .collect();
+    assert_eq!(gps, [T0], "opened at start");
+    assert!(
+        rig.world.passes.contains(&at(507)),
+        "the receiver woke a pass"
+    );
+    let tapped: Vec<u64> = rig
+        .world
+        .frames
+        .iter()
+        .filter(|f| f.kind == chassis_interfaces::FrameKind::GPS)
+        .map(|f| f.stamp_ns)
+        .collect();
+    assert_eq!(tapped.first(), Some(&at(507).as_nanos()), "{tapped:?}");
+    let (seq, state) = rig
+        .world
+        .states
+        .iter()
+        .find(|s| s.gps.has_fix())
+        .map(|s| (s.seq, *s))
+        .expect("the fix is published");
+    assert!((state.gps.latitude_deg - 48.1173).abs() < 1e-4);
+    assert_eq!(state.gps.satellites, 8);
+    assert_eq!(state.link_flags & LinkFlags::GPS_DOWN, 0);
+    let published = rig_publication_time(&rig, seq).unwrap();
+    assert!((at(507)..=at(520)).contains(&published), "{published:?}");
+}
+
+#[test]
+fn a_gps_receiver_unplugged_is_closed_at_once_and_reopened_when_it_is_back() {
+    let mut rig = Rig::with(RobotKind::Xbot, unsmoothed(), |c| c.gps = true);
+    rig.plug_gps();
+    rig.run_until(at(700));
+    rig.unplug_gps();
+    rig.run_until(at(2000));
+    assert!(rig.state().link_flags & LinkFlags::GPS_DOWN != 0);
+    rig.plug_gps();
+    rig.run_until(at(3000));
+    let gps: Vec<Timestamp> = rig
+        .world
+        .opens
+        .iter()
+        .filter(|(_, d)| *d == Device::Gps)
+        .map(|(t, _)| *t)
+        .collect();
+    assert_eq!(
+        gps,
+        [T0, at(1700), at(2700)],
+        "a second after the loss, then every second"
+    );
+    assert_eq!(rig.state().link_flags & LinkFlags::GPS_DOWN, 0);
 }
 
 #[test]
@@ -626,12 +738,12 @@ fn an_xbot_drives_and_stops_through_the_engine() {
     rig.publish_every("teleop", twist(0.3), ms(50), at(1500));
     rig.run_until(at(1500));
     assert!(
-        rig.firmware.truth().linear_mps > 0.2,
+        rig.world.firmware.truth().linear_mps > 0.2,
         "{:?}",
-        rig.firmware.truth()
+        rig.world.firmware.truth()
     );
     rig.run_until(at(3000));
-    assert!(rig.firmware.truth().linear_mps.abs() < 1e-3);
+    assert!(rig.world.firmware.truth().linear_mps.abs() < 1e-3);
     assert_eq!(rig.mux().zero_reason, ZeroReason::NO_ACTIVE_SOURCE);
 }
 
@@ -649,16 +761,19 @@ fn every_agilex_v2_robot_drives_and_stops_through_the_engine() {
         rig.publish_every("teleop", twist(0.3), ms(50), at(2000));
         rig.run_until(at(2000));
         assert!(
-            (rig.firmware.truth().linear_mps - 0.3).abs() < 0.01,
+            (rig.world.firmware.truth().linear_mps - 0.3).abs() < 0.01,
             "{robot}: {:?}",
-            rig.firmware.truth()
+            rig.world.firmware.truth()
         );
         assert!(
             rig.state().link_flags & LinkFlags::COMMAND_MODE != 0,
             "{robot}"
         );
         rig.run_until(at(4000));
-        assert!(rig.firmware.truth().linear_mps.abs() < 1e-3, "{robot}");
+        assert!(
+            rig.world.firmware.truth().linear_mps.abs() < 1e-3,
+            "{robot}"
+        );
         assert_eq!(rig.mux().zero_reason, ZeroReason::NO_ACTIVE_SOURCE);
         // The 0x111 heartbeat ran all along (every 20 ms for 3.8 s).
         assert!(rig.motion().len() > 150, "{robot}");
@@ -671,7 +786,6 @@ fn the_engine_waits_for_its_next_deadline() {
     let t = rig.engine.poll_timeout();
     // Nothing but the tick and the heartbeat (both on the 20 ms grid) is pending.
     assert!(t > rig.now() && t <= rig.now() + ms(20), "{t:?}");
-    assert_eq!(rig.stalls, 0);
 }
 
 /// A fresh TITAN rig (a restarted service) whose safety monitor beats and whose teleop asks for
@@ -717,14 +831,18 @@ fn a_lock_restored_after_a_restart_holds_until_the_operator_releases_it() {
     );
     assert_eq!(rig.mux().zero_reason, ZeroReason::LOCKED);
     assert!(
-        rig.kept_locks.is_empty(),
+        rig.world.kept_locks.is_empty(),
         "the file already holds what was restored"
     );
+    rig.request_at(at(1525), "teleop", twist(0.0));
     rig.run_until(at(1600));
-    assert_eq!(rig.response(release).unwrap().0.message(), "estop released");
-    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(1500)));
     assert_eq!(
-        rig.kept_locks,
+        rig.response(release).unwrap().0.message(),
+        WAITING_FOR_TELEOP
+    );
+    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(1550)));
+    assert_eq!(
+        rig.world.kept_locks,
         vec![(at(1500), vec![])],
         "release clears the file"
     );
@@ -746,9 +864,10 @@ fn a_lock_restored_for_a_source_is_released_by_that_source() {
             ..VelocityRequest::heartbeat()
         },
     );
+    rig.request_at(at(525), "teleop", twist(0.0));
     rig.run_until(at(700));
-    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(510)));
-    assert_eq!(rig.kept_locks, vec![(at(510), vec![])]);
+    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(550)));
+    assert_eq!(rig.world.kept_locks, vec![(at(510), vec![])]);
 }
 
 #[test]
@@ -761,7 +880,7 @@ fn an_unreadable_lock_file_starts_with_the_estop_held_and_rewrites_it() {
     assert!(rig.motion().iter().all(|&(_, v)| v == 0.0));
     assert_eq!(rig.mux().zero_reason, ZeroReason::LOCKED);
     assert_eq!(
-        rig.kept_locks,
+        rig.world.kept_locks,
         vec![(T0, vec![held("estop", HeldLock::OPERATOR, T0)])],
         "the held e-stop replaces the unreadable file at the first pass"
     );
@@ -769,8 +888,9 @@ fn an_unreadable_lock_file_starts_with_the_estop_held_and_rewrites_it() {
         at(1007),
         control(ControlKind::LOCK_RELEASE).with_name("estop"),
     );
+    rig.request_at(at(1025), "teleop", twist(0.0));
     rig.run_until(at(1100));
-    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(1007)));
+    assert_eq!(rig.first_motion(at(0), |v| v > 0.0), Some(at(1050)));
 }
 
 #[test]
@@ -783,7 +903,7 @@ fn a_restored_lock_the_configuration_no_longer_has_holds_the_estop_instead() {
     assert!(rig.motion().iter().all(|&(_, v)| v == 0.0));
     assert_eq!(rig.mux().locks()[0].holder, LockStatus::HOLDER_OPERATOR);
     assert_eq!(
-        rig.kept_locks,
+        rig.world.kept_locks,
         vec![(T0, vec![held("estop", HeldLock::OPERATOR, T0)])]
     );
 }
@@ -805,13 +925,67 @@ fn every_engage_and_release_is_kept_at_once() {
     );
     rig.run_until(at(1000));
     assert_eq!(
-        rig.kept_locks,
+        rig.world.kept_locks,
         vec![
             (at(433), vec![held("estop", HeldLock::OPERATOR, at(433))]),
             (at(833), vec![]),
         ],
         "an engage of a held lock changes nothing to keep"
     );
+}
+
+#[test]
+fn a_lock_engaged_in_a_pass_that_reads_frames_is_on_disk_before_anything_is_published() {
+    let mut rig = ready();
+    rig.publish_every("teleop", twist(0.5), ms(50), at(3000));
+    rig.run_until(at(420));
+    // The engage arrives with a frame of the chassis: one pass reads both, and publishes the
+    // frame's state while the bus is drained, before its end.
+    let t = rig.next_frame_arrival();
+    let engage = rig.control_at(t, control(ControlKind::LOCK_ENGAGE).with_name("estop"));
+    rig.run_until(t + ms(1));
+    assert_eq!(
+        rig.world.passes.iter().filter(|&&p| p == t).count(),
+        1,
+        "one pass"
+    );
+    assert!(
+        rig.world.state_times.iter().any(|&(_, when)| when == t),
+        "the pass published a state from the frame"
+    );
+    // (The rig checks at every pass that the locks are kept before its first publication.)
+    assert_eq!(
+        rig.world.kept_locks,
+        vec![(t, vec![held("estop", HeldLock::OPERATOR, t)])]
+    );
+    assert_eq!(rig.response(engage).map(|(_, when)| when), Some(t));
+    assert_eq!(rig.first_motion(t, |v| v == 0.0), Some(t));
+}
+
+#[test]
+fn a_failed_write_of_the_locks_is_tried_again_every_second_without_holding_the_answer() {
+    let mut rig = ready();
+    rig.publish_every("teleop", twist(0.5), ms(50), at(3000));
+    rig.break_disk();
+    let engage = rig.control_at(
+        at(433),
+        control(ControlKind::LOCK_ENGAGE).with_name("estop"),
+    );
+    rig.run_until(at(2000));
+    assert_eq!(rig.response(engage).map(|(_, when)| when), Some(at(433)));
+    assert_eq!(rig.first_motion(at(433), |v| v == 0.0), Some(at(433)));
+    let failures = rig.world.keep_failures.clone();
+    assert_eq!(failures[0], at(433));
+    // Once a second, at the first pass after (the tick at the latest).
+    assert_eq!(failures.len(), 2, "{failures:?}");
+    assert!((at(1433)..=at(1453)).contains(&failures[1]), "{failures:?}");
+    assert!(rig.world.kept_locks.is_empty());
+    rig.mend_disk();
+    rig.run_until(at(3000));
+    let (kept_at, kept) = rig.world.kept_locks[0].clone();
+    assert!((at(2433)..=at(2453)).contains(&kept_at), "{kept_at:?}");
+    assert_eq!(kept, vec![held("estop", HeldLock::OPERATOR, at(433))]);
+    assert_eq!(rig.world.kept_locks.len(), 1, "kept once");
 }
 
 /// Simulated seconds of the long run.
@@ -844,6 +1018,11 @@ struct Seen {
     asking: Option<Timestamp>,
     /// Arrival of the latest request of any kind.
     any: Option<Timestamp>,
+    /// The speed it asked for last.
+    speed: f32,
+    /// It asked for motion when the e-stop was released and has not asked for zero (nor
+    /// stopped asking) since: a release never starts motion.
+    awaiting_zero: bool,
 }
 
 #[test]
@@ -901,6 +1080,8 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
                     seen[index] = Seen {
                         asking: Some(now),
                         any: Some(now),
+                        speed: v,
+                        awaiting_zero: seen[index].awaiting_zero && v != 0.0,
                     };
                 }
             }
@@ -910,6 +1091,14 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
             held = false;
             if let Some(last) = locks.last_mut() {
                 last.1 = now;
+            }
+            for s in [teleop, planner] {
+                let asking = seen[s]
+                    .asking
+                    .is_some_and(|a| now.saturating_since(a) < timeouts[s]);
+                if asking && seen[s].speed != 0.0 {
+                    seen[s].awaiting_zero = true;
+                }
             }
         }
         if dice.below(3000) == 0 {
@@ -945,12 +1134,29 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
                     moving += 1;
                 }
             }
-            let Some(v) = wire.filter(|&v| v != 0.0) else {
-                continue;
-            };
             let fresh = |s: usize, last: Option<Timestamp>| {
                 last.is_some_and(|a| t.saturating_since(a) < timeouts[s])
             };
+            // A source that stopped asking awaits nothing any more.
+            for s in [teleop, planner] {
+                if !fresh(s, seen[s].asking) {
+                    seen[s].awaiting_zero = false;
+                }
+            }
+            let Some(v) = wire.filter(|&v| v != 0.0) else {
+                continue;
+            };
+            // The source that would win (teleop outranks the planner) must not be awaiting
+            // its zero since a release.
+            if let Some(winner) = [teleop, planner]
+                .into_iter()
+                .find(|&s| fresh(s, seen[s].asking))
+            {
+                assert!(
+                    !seen[winner].awaiting_zero,
+                    "motion {v} at {t:?} after a release, before source {winner} asked for zero"
+                );
+            }
             assert!(
                 fresh(safety, seen[safety].any),
                 "motion {v} at {t:?} while the safety monitor is silent"
@@ -968,10 +1174,9 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
         }
         rig.forget();
     }
-    assert_eq!(rig.stalls, 0);
     assert_eq!(steps, LONG_RUN_S * 100);
     assert!(moving > 10_000, "the robot drove ({moving} motion frames)");
     assert!(zero_checked > 10_000);
-    assert!(rig.opens.len() > 5, "buses were lost and reopened");
+    assert!(rig.world.opens.len() > 5, "buses were lost and reopened");
     assert!(rig.state().seq > 100_000, "{} states", rig.state().seq);
 }

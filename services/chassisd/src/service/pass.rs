@@ -1,21 +1,40 @@
-//! One pass of the shell: reading what the engine asks for, writing what it polls, publishing
-//! what it produced. Every item is stamped with the clock when it was read or written.
+//! The shell's side of a pass: the [`PassIo`] the engine runs its pass on ([`Engine::run_pass`]
+//! owns the order). Each method moves bytes between the engine and the iceoryx2 ports, the bus
+//! and the GPS port, and stamps what it reads or writes with the clock.
 // The shell owns the clock: it stamps what it reads and writes, and hands the time to the engine.
 #![allow(clippy::disallowed_methods)]
 
-use std::fmt::Display;
-
-use chassis_interfaces::{ControlResponse, ControlStatus};
+use chassis_interfaces::{ControlRequest, ControlResponse, ControlStatus, VelocityRequest};
 use chassis_protocols::{Rx, Timestamp, Transmit};
+use iceoryx2::port::notifier::NotifierNotifyError;
+use iceoryx2::port::{LoanError, SendError};
 use tracing::{debug, info, warn};
 
-use super::{Next, Shell};
+use super::{Next, Shell, clocks};
 use crate::bus::{BusError, MAX_RX_BATCH};
 use crate::clock;
-use crate::engine::{Device, Engine, Publication, Wake};
+use crate::engine::{
+    Device, Engine, HeldLock, PassIo, Publication, Readers, Ticket, Wake, WriteError, Written,
+};
 use crate::ipc::Ports;
+use crate::lockfile::LockFileError;
 use crate::setup::Devices;
 use crate::sim::carry_out;
+
+/// Why an operation of a pass failed.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum PassError {
+    #[error(transparent)]
+    Bus(#[from] BusError),
+    #[error(transparent)]
+    Locks(#[from] LockFileError),
+    #[error(transparent)]
+    Loan(#[from] LoanError),
+    #[error(transparent)]
+    Send(#[from] SendError),
+    #[error(transparent)]
+    Notify(#[from] NotifierNotifyError),
+}
 
 /// Hands the robot's description to readers that joined since the last tick: iceoryx2 delivers
 /// a publisher's history when the publisher updates its connections, and the description is
@@ -28,71 +47,49 @@ fn refresh_description_readers(ports: &Ports) {
 }
 
 impl<D: Devices> Shell<D> {
-    /// One pass after a wake-up (see the engine's documentation for the order). Requests go
-    /// first and reach the bus before anything else is read: the command path is the one whose
-    /// latency matters, and waking the readers of received frames could hand the CPU to them
-    /// before the command is out.
+    /// One pass after a wake-up, in the engine's order ([`Engine::run_pass`]). Returns whether
+    /// a descriptor was lost or (re)opened (the wait set must be rebuilt).
     pub(super) fn pass(&mut self, ports: &Ports, engine: &mut Engine, wake: Wake) -> Next {
-        let mut next = Next::Continue;
-        let woke = clock::now();
         if wake.is_activity() {
-            self.last_activity = woke;
+            self.last_activity = clock::now();
         }
-        let reads = engine.begin_pass(woke, wake);
-        self.read_sources(ports, engine, woke, reads.sources);
-        if reads.control {
-            self.read_control(ports, engine, woke);
-        }
-        if reads.sim {
-            self.handle_sim(ports, woke);
-        }
-        next |= self.transmit(engine, woke);
-        if self.acknowledge_sources(ports, engine, wake.sources) {
-            next |= self.transmit(engine, clock::now());
-        }
-        if reads.bus {
-            next |= self.read_bus(ports, engine);
-        }
-        let now = clock::now();
-        if reads.gps {
-            next |= self.read_gps(engine, now);
-        }
-        engine.handle_timeout(now);
-        next |= self.transmit(engine, now);
-        engine.end_pass(now);
-        next |= self.open_due(engine, now);
-        // On disk before anyone is told: an answered engage survives a crash.
-        self.keep_locks(engine);
-        self.publish(ports, engine, now);
-        if reads.tick {
+        engine.run_pass(&mut self.io(ports), wake);
+        if engine.served_tick() {
             refresh_description_readers(ports);
         }
-        next
+        std::mem::replace(&mut self.next, Next::Continue)
     }
 
-    /// Hands every pending request of the sources in `mask` to the engine. Samples are read
-    /// before the notification is consumed (a sample is in shared memory before its
-    /// notification is sent): the system call waits until the command is out, in
-    /// [`Shell::acknowledge_sources`].
-    fn read_sources(
-        &mut self,
-        ports: &Ports,
-        engine: &mut Engine,
-        now: Timestamp,
-        mask: u32,
-    ) -> bool {
-        let mut any = false;
-        for (index, inlet) in ports.sources.iter().enumerate() {
-            if mask & (1 << index) == 0 {
+    /// The ports and devices lent to the engine for one pass.
+    pub(super) fn io<'a>(&'a mut self, ports: &'a Ports) -> ShellIo<'a, D> {
+        ShellIo { shell: self, ports }
+    }
+}
+
+/// The shell's ports and devices, lent to one pass of the engine.
+pub(super) struct ShellIo<'a, D> {
+    shell: &'a mut Shell<D>,
+    ports: &'a Ports,
+}
+
+impl<D: Devices> PassIo for ShellIo<'_, D> {
+    type Error = PassError;
+
+    fn now(&mut self) -> Timestamp {
+        clock::now()
+    }
+
+    /// Samples are read before the notification is consumed (a sample is in shared memory
+    /// before its notification is sent): that system call waits until the command is out, in
+    /// [`PassIo::acknowledge`].
+    fn read_requests(&mut self, sources: u32, mut take: impl FnMut(usize, &VelocityRequest)) {
+        for (index, inlet) in self.ports.sources.iter().enumerate() {
+            if sources & (1 << index) == 0 {
                 continue;
             }
             loop {
                 match inlet.subscriber.receive() {
-                    Ok(Some(sample)) => {
-                        any = true;
-                        // A rejected request is counted and logged by the engine.
-                        engine.handle_request(now, index, &sample).ok();
-                    }
+                    Ok(Some(sample)) => take(index, &sample),
                     Ok(None) => break,
                     Err(e) => {
                         debug!(source = inlet.name, "receive: {e}");
@@ -101,29 +98,15 @@ impl<D: Devices> Shell<D> {
                 }
             }
         }
-        any
     }
 
-    /// Consumes the notifications that woke the loop (only a listener that fired is read: an
-    /// idle one would cost a system call for nothing), then reads those sources once more: a
-    /// request that arrived in between had its notification consumed here.
-    fn acknowledge_sources(&mut self, ports: &Ports, engine: &mut Engine, fired: u32) -> bool {
-        for (index, inlet) in ports.sources.iter().enumerate() {
-            if fired & (1 << index) != 0
-                && let Err(e) = inlet.listener.try_wait(|_| {})
-            {
-                debug!(source = inlet.name, "consuming notifications: {e}");
-            }
-        }
-        fired != 0 && self.read_sources(ports, engine, clock::now(), fired)
-    }
-
-    fn read_control(&mut self, ports: &Ports, engine: &mut Engine, now: Timestamp) {
-        if let Err(e) = ports.control.listener.try_wait(|_| {}) {
+    fn read_control(&mut self, mut take: impl FnMut(Ticket, &ControlRequest)) {
+        let control = &self.ports.control;
+        if let Err(e) = control.listener.try_wait(|_| {}) {
             debug!("consuming control notifications: {e}");
         }
         loop {
-            let active = match ports.control.server.receive() {
+            let active = match control.server.receive() {
                 Ok(Some(active)) => active,
                 Ok(None) => break,
                 Err(e) => {
@@ -131,17 +114,16 @@ impl<D: Devices> Shell<D> {
                     break;
                 }
             };
-            self.next_ticket += 1;
-            let ticket = self.next_ticket;
+            self.shell.next_ticket += 1;
+            let ticket = self.shell.next_ticket;
             let request = *active.payload();
-            self.pending.insert(ticket, active);
-            engine.handle_control(now, ticket, &request);
+            self.shell.pending.insert(ticket, active);
+            take(ticket, &request);
         }
     }
 
-    /// Fault injection into the simulated chassis: the simulator's business, not the engine's.
-    fn handle_sim(&mut self, ports: &Ports, now: Timestamp) {
-        let Some(desk) = &ports.sim else {
+    fn serve_simulator(&mut self, now: Timestamp) {
+        let Some(desk) = &self.ports.sim else {
             return;
         };
         if let Err(e) = desk.listener.try_wait(|_| {}) {
@@ -151,7 +133,7 @@ impl<D: Devices> Shell<D> {
             let request = *active.payload();
             let (status, message) = carry_out(
                 &request,
-                self.sim.as_ref(),
+                self.shell.sim.as_ref(),
                 (ControlStatus::UNSUPPORTED, "the bus is not the simulator"),
             );
             info!(status = ControlStatus::name(status), "simulator: {message}");
@@ -166,249 +148,159 @@ impl<D: Devices> Shell<D> {
         }
     }
 
-    /// Writes what the engine polls; each item is stamped when its write returned (an item a
-    /// backend buffered, when the write that carried it returned).
-    pub(super) fn transmit(&mut self, engine: &mut Engine, now: Timestamp) -> Next {
-        let mut sent = std::mem::take(&mut self.scratch);
-        sent.clear();
-        // The first of the items the backend still holds.
-        let mut buffered_from = None;
-        let mut lost = None;
-        while let Some(item) = engine.poll_transmit(now) {
-            let Some(bus) = self.bus.as_mut() else {
-                break;
-            };
-            match bus.transmit(&item) {
-                Ok(()) => {
-                    let written = clock::now();
-                    sent.push((written, item));
-                    if bus.unflushed() == 0 {
-                        restamp(&mut sent, buffered_from.take(), written);
-                    } else {
-                        buffered_from.get_or_insert(sent.len() - 1);
-                    }
-                }
-                Err(err) if err.is_disconnect() => {
-                    lost = Some(err);
-                    break;
-                }
-                Err(err) => engine.handle_tx_dropped(now, &err),
+    /// Only a listener that fired is read: an idle one would cost a system call for nothing.
+    fn acknowledge(&mut self, sources: u32) {
+        for (index, inlet) in self.ports.sources.iter().enumerate() {
+            if sources & (1 << index) != 0
+                && let Err(e) = inlet.listener.try_wait(|_| {})
+            {
+                debug!(source = inlet.name, "consuming notifications: {e}");
             }
-        }
-        if lost.is_none()
-            && let Some(bus) = self.bus.as_mut()
-        {
-            match bus.flush() {
-                Ok(()) => restamp(&mut sent, buffered_from, clock::now()),
-                Err(err) if err.is_disconnect() => lost = Some(err),
-                Err(err) => engine.handle_tx_dropped(now, &err),
-            }
-        }
-        for (stamp, item) in &sent {
-            engine.handle_sent(*stamp, item);
-        }
-        self.scratch = sent;
-        match lost {
-            Some(err) => self.lose_bus(engine, now, &err),
-            None => Next::Continue,
         }
     }
 
-    fn lose_bus(&mut self, engine: &mut Engine, now: Timestamp, err: &BusError) -> Next {
-        self.retired.extend(self.bus.take());
-        engine.handle_bus_lost(now, err);
-        Next::Rewire
-    }
-
-    /// Drains the bus (at most one batch): every item is stamped when read and handed to the
-    /// engine; the readers of what it published are woken at once.
-    fn read_bus(&mut self, ports: &Ports, engine: &mut Engine) -> Next {
-        let Some(bus) = self.bus.as_mut() else {
-            return Next::Continue;
+    fn write(&mut self, item: &Transmit) -> Result<Written, WriteError<PassError>> {
+        let Some(bus) = self.shell.bus.as_mut() else {
+            return Err(WriteError::Lost(no_bus()));
         };
-        let mut received = std::mem::take(&mut self.scratch);
-        received.clear();
-        let mut items = 0;
-        let result = bus.receive(|rx| {
+        match bus.transmit(item) {
+            Ok(()) => {
+                let written = clock::now();
+                Ok(if bus.unflushed() == 0 {
+                    Written::Out(written)
+                } else {
+                    Written::Held(written)
+                })
+            }
+            Err(err) => Err(classify(err)),
+        }
+    }
+
+    fn flush(&mut self) -> Result<Timestamp, WriteError<PassError>> {
+        let Some(bus) = self.shell.bus.as_mut() else {
+            return Err(WriteError::Lost(no_bus()));
+        };
+        match bus.flush() {
+            Ok(()) => Ok(clock::now()),
+            Err(err) => Err(classify(err)),
+        }
+    }
+
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, Transmit)>) -> Result<bool, PassError> {
+        let Some(bus) = self.shell.bus.as_mut() else {
+            return Err(no_bus());
+        };
+        let count = bus.receive(|rx| {
             let stamp = clock::now();
-            items += match rx {
-                Rx::Can(_) => 1,
-                Rx::Bytes(bytes) => bytes.len().div_ceil(8),
-            };
-            received.push((
+            into.push((
                 stamp,
                 match rx {
                     Rx::Can(frame) => Transmit::Can(*frame),
                     Rx::Bytes(bytes) => Transmit::Bytes(bytes.to_vec()),
                 },
             ));
-        });
-        // Each sample goes to shared memory as soon as its frame is handled (a polling reader
-        // has it at once); the readers are woken once for the whole read.
-        let mut woken = Woken::default();
-        for (stamp, item) in &received {
-            engine.handle_rx(*stamp, item.as_rx());
-            woken = self.send(ports, engine, *stamp, woken);
-        }
-        self.scratch = received;
-        let now = clock::now();
-        self.wake(ports, engine, now, woken);
-        match result {
-            Ok(count) => {
-                engine.handle_bus_read(now, items, count >= MAX_RX_BATCH);
-                Next::Continue
-            }
-            Err(err) => self.lose_bus(engine, now, &err),
-        }
+        })?;
+        Ok(count >= MAX_RX_BATCH)
     }
 
-    fn read_gps(&mut self, engine: &mut Engine, now: Timestamp) -> Next {
-        let Some(gps) = self.gps.as_mut() else {
-            return Next::Continue;
+    fn read_gps(&mut self, mut take: impl FnMut(&[u8])) -> Result<(), PassError> {
+        let Some(gps) = self.shell.gps.as_mut() else {
+            return Ok(());
         };
-        let result = gps.receive(|rx| {
+        gps.receive(|rx| {
             if let Rx::Bytes(bytes) = rx {
-                engine.handle_gps(now, bytes);
+                take(bytes);
             }
-        });
-        match result {
-            Ok(_) => Next::Continue,
-            Err(err) => {
-                self.retired.extend(self.gps.take());
-                engine.handle_gps_lost(now, &err);
-                Next::Rewire
-            }
-        }
+        })?;
+        Ok(())
     }
 
-    /// Opens what the engine asks for.
-    pub(super) fn open_due(&mut self, engine: &mut Engine, now: Timestamp) -> Next {
-        let mut next = Next::Continue;
-        while let Some(device) = engine.poll_open(now) {
-            match device {
-                Device::Bus => {
-                    // A simulator thread that ended is replaced by a fresh (power-up) one.
-                    self.sim = None;
-                    match self.devices.open_bus(now) {
-                        Ok((bus, sim)) => {
-                            engine.handle_opened(now, device, bus.name());
-                            self.bus = Some(bus);
-                            self.sim = sim;
-                            next = Next::Rewire;
-                        }
-                        Err(err) => engine.handle_open_failed(now, device, &err),
-                    }
-                }
-                Device::Gps => match self.devices.open_gps() {
-                    Ok(gps) => {
-                        engine.handle_opened(now, device, gps.name());
-                        self.gps = Some(gps);
-                        next = Next::Rewire;
-                    }
-                    Err(err) => engine.handle_open_failed(now, device, &err),
-                },
+    fn open(&mut self, now: Timestamp, device: Device) -> Result<&str, PassError> {
+        let shell = &mut *self.shell;
+        let opened = match device {
+            Device::Bus => {
+                // A simulator thread that ended is replaced by a fresh (power-up) one.
+                shell.sim = None;
+                let (bus, sim) = shell.devices.open_bus(now)?;
+                shell.sim = sim;
+                shell.bus.insert(bus)
             }
-        }
-        next
-    }
-
-    /// Publishes what the engine produced and wakes the readers: one notification per kind and
-    /// batch, not one per sample (every sample is already in shared memory). A failure is
-    /// counted by the engine and logged at most once a second.
-    pub(super) fn publish(&mut self, ports: &Ports, engine: &mut Engine, now: Timestamp) {
-        let woken = self.send(ports, engine, now, Woken::default());
-        self.wake(ports, engine, now, woken);
-    }
-
-    /// Puts what the engine produced into shared memory, without waking anyone yet (a reader
-    /// that polls finds each sample the moment it is sent); returns which readers to wake.
-    fn send(&mut self, ports: &Ports, engine: &mut Engine, now: Timestamp, woken: Woken) -> Woken {
-        let Woken {
-            mut state,
-            mut frames,
-            mut mux,
-            mut answered,
-        } = woken;
-        let failed = |engine: &mut Engine, what: &'static str, error: &dyn Display| {
-            engine.handle_publish_failed(now, what, error);
+            Device::Gps => shell.gps.insert(shell.devices.open_gps()?),
         };
-        while let Some(publication) = engine.poll_publication() {
-            match publication {
-                Publication::State(mut sample) => match ports.state.publisher.loan_uninit() {
-                    Ok(slot) => {
-                        sample.published_ns = clock::now().as_nanos();
-                        match slot.write_payload(*sample).send() {
-                            Ok(_) => state = true,
-                            Err(e) => failed(engine, "state", &e),
-                        }
-                    }
-                    Err(e) => failed(engine, "state", &e),
-                },
-                Publication::Frame(frame) => match ports.frames.publisher.send_copy(frame) {
-                    Ok(_) => frames = true,
-                    Err(e) => failed(engine, "frame", &e),
-                },
-                Publication::Mux(status) => match ports.mux.publisher.send_copy(*status) {
-                    Ok(_) => mux = true,
-                    Err(e) => failed(engine, "mux status", &e),
-                },
-                // Rare (at start, once detection decides): its readers are woken at once.
-                Publication::Description(description) => {
-                    let sent = ports.description.publisher.send_copy(*description);
-                    match sent.map(|_| ports.description.notifier.notify()) {
-                        Ok(Ok(_)) => {}
-                        Ok(Err(e)) => failed(engine, "robot description wake-up", &e),
-                        Err(e) => failed(engine, "robot description", &e),
-                    }
-                }
-                Publication::Response { ticket, response } => {
-                    if let Some(active) = self.pending.remove(&ticket) {
-                        match active.send_copy(response) {
-                            Ok(()) => answered = true,
-                            Err(e) => failed(engine, "control response", &e),
-                        }
-                    }
+        shell.next = Next::Rewire;
+        Ok(opened.name())
+    }
+
+    /// The descriptor stays open until the wait set that watches it is gone.
+    fn close(&mut self, device: Device) {
+        let shell = &mut *self.shell;
+        let failed = match device {
+            Device::Bus => shell.bus.take(),
+            Device::Gps => shell.gps.take(),
+        };
+        shell.retired.extend(failed);
+        shell.next = Next::Rewire;
+    }
+
+    fn keep_locks(&mut self, held: &[HeldLock]) -> Result<(), PassError> {
+        self.shell.lock_file.store(held, clocks(clock::now()))?;
+        debug!(file = %self.shell.lock_file.path().display(), "held locks kept");
+        Ok(())
+    }
+
+    fn publish(&mut self, publication: Publication) -> Result<(), PassError> {
+        let ports = self.ports;
+        match publication {
+            Publication::State(mut sample) => {
+                let slot = ports.state.publisher.loan_uninit()?;
+                sample.published_ns = clock::now().as_nanos();
+                slot.write_payload(*sample).send()?;
+            }
+            Publication::Frame(frame) => {
+                ports.frames.publisher.send_copy(frame)?;
+            }
+            Publication::Mux(status) => {
+                ports.mux.publisher.send_copy(*status)?;
+            }
+            Publication::Description(description) => {
+                ports.description.publisher.send_copy(*description)?;
+            }
+            Publication::Response { ticket, response } => {
+                if let Some(active) = self.shell.pending.remove(&ticket) {
+                    active.send_copy(response)?;
                 }
             }
         }
-        Woken {
-            state,
-            frames,
-            mux,
-            answered,
-        }
+        Ok(())
     }
 
-    /// Wakes the readers of what was sent: one notification per kind and batch.
-    fn wake(&self, ports: &Ports, engine: &mut Engine, now: Timestamp, woken: Woken) {
-        let wake = [
-            (woken.state, &ports.state.notifier, "state readers"),
-            (woken.frames, &ports.frames.notifier, "frame readers"),
-            (woken.mux, &ports.mux.notifier, "mux readers"),
-            (woken.answered, &ports.control.notifier, "control clients"),
-        ];
-        for (_, notifier, what) in wake.into_iter().filter(|(any, _, _)| *any) {
-            if let Err(e) = notifier.notify() {
-                engine.handle_publish_failed(now, what, &e);
-            }
-        }
+    fn wake(&mut self, readers: Readers) -> Result<(), PassError> {
+        let ports = self.ports;
+        let notifier = match readers {
+            Readers::State => &ports.state.notifier,
+            Readers::Frames => &ports.frames.notifier,
+            Readers::Mux => &ports.mux.notifier,
+            Readers::Description => &ports.description.notifier,
+            Readers::Control => &ports.control.notifier,
+        };
+        notifier.notify()?;
+        Ok(())
     }
 }
 
-/// Readers with something new to be woken for.
-#[derive(Debug, Default, Clone, Copy)]
-struct Woken {
-    state: bool,
-    frames: bool,
-    mux: bool,
-    answered: bool,
+/// A failed write: the bus gone, or this item dropped.
+fn classify(err: BusError) -> WriteError<PassError> {
+    if err.is_disconnect() {
+        WriteError::Lost(err.into())
+    } else {
+        WriteError::Dropped(err.into())
+    }
 }
 
-/// The items from `from` on were written by the write that returned at `written`.
-fn restamp(sent: &mut [(Timestamp, Transmit)], from: Option<usize>, written: Timestamp) {
-    if let Some(from) = from {
-        for (stamp, _) in sent.iter_mut().skip(from) {
-            *stamp = written;
-        }
-    }
+/// The engine asked for a device the shell has not got (it was closed): a lost device.
+fn no_bus() -> PassError {
+    PassError::Bus(BusError::Open {
+        name: "bus".into(),
+        reason: "not open".into(),
+    })
 }
