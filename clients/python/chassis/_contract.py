@@ -617,7 +617,8 @@ class MuxStatus(Struct):
         ('zero_reason', ctypes.c_uint8),
         ('source_count', ctypes.c_uint8),
         ('lock_count', ctypes.c_uint8),
-        ('_reserved', (ctypes.c_uint8 * 3)),
+        ('awaiting_source', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 2)),
         ('sources', (SourceStatus * 8)),
         ('locks', (LockStatus * 4)),
     ]
@@ -1111,7 +1112,8 @@ class SourceFlags(Constants):
     BLOCKED = 16
     LIMITING = 32
     REMOTE = 64
-    NAMES = {1: 'required', 2: 'fresh', 4: 'active', 8: 'heartbeat', 16: 'blocked', 32: 'limiting', 64: 'remote'}
+    AWAITING_ZERO = 128
+    NAMES = {1: 'required', 2: 'fresh', 4: 'active', 8: 'heartbeat', 16: 'blocked', 32: 'limiting', 64: 'remote', 128: 'awaiting-zero'}
 
 
 class WireProtocol(Constants):
@@ -1132,7 +1134,8 @@ class ZeroReason(Constants):
     REQUIRED_SOURCE_STALE = 2
     LOCKED = 3
     STARTING = 4
-    NAMES = {0: 'none', 1: 'no-active-source', 2: 'required-source-stale', 3: 'locked', 4: 'starting'}
+    AWAITING_ZERO = 5
+    NAMES = {0: 'none', 1: 'no-active-source', 2: 'required-source-stale', 3: 'locked', 4: 'starting', 5: 'awaiting-zero'}
 
 
 # Every IPC type, by its Rust name.
