@@ -299,10 +299,14 @@ impl Levels {
         if config.speed.is_some() {
             let (f, r) = (&self.speed_forward_mps, &self.speed_reverse_mps);
             if f.value == r.value {
-                out.push(format!(
-                    "speed rule: acts above {} either way",
-                    level(f, "m/s")
-                ));
+                out.push(match f.value {
+                    Some(v) => format!(
+                        "speed rule: acts above {} m/s either way — {}",
+                        number(v),
+                        f.origin
+                    ),
+                    None => format!("speed rule: no limit — {}", f.origin),
+                });
             } else {
                 out.push(format!(
                     "speed rule: acts above {} forward, above {} reverse",

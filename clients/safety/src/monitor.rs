@@ -197,7 +197,7 @@ impl Described {
         engine.set_description(d);
         let label = format!("chassis/{}", d.name());
         let robot = format!(
-            "{label} is a {} ({}, model {}, protocol {})",
+            "{label}: {} ({}, model {}, protocol {})",
             d.display_name(),
             d.kind_name(),
             d.model(),
