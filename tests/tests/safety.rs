@@ -728,3 +728,90 @@ fn a_profile_override_in_chassisds_config_reaches_the_monitor() {
         "{text}"
     );
 }
+
+/// A SCOUT MINI on a real bus (slcan over a pty) is described as detecting, with its V1
+/// profile's 5 m/s, until chassisd hears it speak V2 (3 m/s): the monitor takes the newer
+/// description, and a runaway at 4 m/s — under the first level (5.55 m/s), over the new one
+/// (3.35 m/s) — stops the robot.
+#[test]
+fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
+    let mut env = Env::new("safety-detect");
+    let n = name("sdt");
+    let link = env.dir.join("scout-mini-slcan");
+    let bus = format!("slcan:{}", link.display());
+    // chassisd first: it serves, describes the robot as detecting, and waits for its bus.
+    env.chassisd(
+        "chassisd",
+        &["--robot", "scout-mini", "--name", &n, "--bus", &bus],
+    );
+    let mut robot = env.robot(&n, UP);
+    let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
+    let logged = |env: &mut Env, texts: &[&str]| {
+        wait_for(Duration::from_secs(10), || {
+            let log = env.proc(monitor).log_text();
+            texts.iter().all(|t| log.contains(t))
+        })
+        .is_some()
+    };
+    let detecting = logged(
+        &mut env,
+        &[
+            "(scout-mini, model scout-mini, protocol detecting); description seq",
+            "speed rule: acts above 5.55 m/s either way",
+        ],
+    );
+    assert!(detecting, "{}", env.logs());
+
+    let pty = format!("slcan-pty:{}", link.display());
+    env.chassisd(
+        "sim",
+        &[
+            "sim",
+            "--robot",
+            "scout-mini",
+            "--protocol",
+            "v2",
+            "--name",
+            &n,
+            "--bus",
+            &pty,
+        ],
+    );
+    let decided = logged(
+        &mut env,
+        &[
+            "(scout-mini, model scout-mini, protocol v2); description seq",
+            "speed rule: acts above 3.35 m/s either way",
+        ],
+    );
+    assert!(decided, "{}", env.logs());
+
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.5, 0.0);
+    let moving = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(10),
+        |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > 0.3,
+    );
+    assert!(moving.is_some(), "no motion\n{}", env.logs());
+    run_ok(&env, &["sim", "--name", &n, "runaway", "4.0"]);
+    let stopped = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(5),
+        |m, _| m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
+    );
+    assert!(
+        stopped.is_some(),
+        "no stop for a runaway at 4 m/s\n{}",
+        env.logs()
+    );
+    let status = safety(&robot);
+    assert!(status.is_active(SafetyRule::SPEED), "{status:?}");
+    assert!(
+        status.last_text().ends_with("> 3.35 m/s"),
+        "{}",
+        status.last_text()
+    );
+}

@@ -319,7 +319,7 @@ impl Levels {
             let (soc, volt) = (&self.battery_soc_pct, &self.battery_voltage_v);
             out.push(match (soc.value, volt.value) {
                 (Some(_), Some(_)) => format!(
-                    "battery rule: state of charge below {} where the robot reports one, else \
+                    "battery rule: where the robot reports a state of charge, below {}; else \
                      voltage below {}",
                     level(soc, "%"),
                     level(volt, "V")
