@@ -390,8 +390,12 @@ impl SimKind {
     /// The chassis' own emergency-stop switch pressed (`flag` 1) or released (AgileX protocol
     /// V2: 0x211 b0 reports it).
     pub const ESTOP_SWITCH: u8 = 13;
+    /// The speed loop runs away (downhill, a failing speed controller, bad feedback): the
+    /// chassis drives at `value` m/s forward (negative: reverse) whatever it is commanded, until
+    /// `flag` 0 gives the control back.
+    pub const RUNAWAY: u8 = 14;
 
-    pub const NAMES: [(u8, &'static str); 13] = [
+    pub const NAMES: [(u8, &'static str); 14] = [
         (Self::MOTOR_DRIVER_LOSS, "motor-driver-loss"),
         (Self::BATTERY, "battery"),
         (Self::BUMPER, "bumper"),
@@ -405,6 +409,7 @@ impl SimKind {
         (Self::FLOOD, "flood"),
         (Self::TRUTH, "truth"),
         (Self::ESTOP_SWITCH, "estop-switch"),
+        (Self::RUNAWAY, "runaway"),
     ];
 
     pub fn name(kind: u8) -> &'static str {
@@ -442,7 +447,7 @@ pub struct SimRequest {
     pub index: u8,
     #[serde(skip)]
     pub _reserved: [u8; 5],
-    /// Amount for the kinds that take one (%, s, m, bytes, frames).
+    /// Amount for the kinds that take one (%, s, m, bytes, frames, m/s).
     pub value: f64,
 }
 

@@ -319,7 +319,7 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(enum ControlStatus: u8 { OK, REFUSED, UNSUPPORTED, INVALID, TIMEOUT }),
         describe_constants!(enum SimKind: u8 {
             MOTOR_DRIVER_LOSS, BATTERY, BUMPER, RC_TAKEOVER, REBOOT, SILENCE, GARBAGE,
-            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH,
+            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH, RUNAWAY,
         }),
         describe_constants!(enum Kinematics: u8 {
             DIFFERENTIAL, SKID_STEER, TRACKED, OMNI, ACKERMANN, DUAL_ACKERMANN, FOUR_WHEEL_STEER,

@@ -206,9 +206,14 @@ impl Env {
 
     /// Runs `chassis args…` to completion.
     pub fn chassis(&self, args: &[&str]) -> Output {
-        self.command("chassis", args)
+        self.run("chassis", args)
+    }
+
+    /// Runs the workspace binary `binary args…` to completion.
+    pub fn run(&self, binary: &str, args: &[&str]) -> Output {
+        self.command(binary, args)
             .output()
-            .unwrap_or_else(|e| panic!("running chassis: {e}"))
+            .unwrap_or_else(|e| panic!("running {binary}: {e}"))
     }
 
     pub fn proc(&mut self, index: usize) -> &mut Proc {

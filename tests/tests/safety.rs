@@ -1,6 +1,8 @@
 //! The safety monitor (`chassis-safety`) with the real processes: chassisd on the simulated
 //! chassis with its `safety` source required, the monitor, the CLI, and the test as the teleop
-//! and planner clients.
+//! and planner clients. The monitor knows no robot: its speed and battery levels come from the
+//! description chassisd publishes (tested here on protocol-V2 robots and through a `[profile]`
+//! override), and for every robot of the registry in `chassis-safety`'s own tests.
 // Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
 #![allow(
     clippy::unwrap_used,
@@ -30,7 +32,12 @@ fn source(robot: &mut Robot, name: &str) -> Source {
 /// Starts chassisd on the simulated `robot` (safety source required) and the monitor; returns
 /// the connection once the monitor's heartbeats reach the mux, and the monitor's index.
 fn start(env: &mut Env, robot: &str, n: &str) -> (Robot, usize) {
-    env.chassisd("chassisd", &["--robot", robot, "--name", n]);
+    start_with(env, &["--robot", robot, "--name", n], n)
+}
+
+/// [`start`] with chassisd's arguments.
+fn start_with(env: &mut Env, chassisd: &[&str], n: &str) -> (Robot, usize) {
+    env.chassisd("chassisd", chassisd);
     let mut r = env.robot(n, UP);
     let monitor = env.spawn("safety", "chassis-safety", &["--name", n]);
     let alive = wait_for(UP, || {
@@ -518,4 +525,293 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
     );
     assert_eq!(env.proc(monitor).wait_exit(Duration::from_secs(3)), Some(0));
     eprintln!("monitor SIGTERMed → zero after {:?}", stopped.unwrap());
+}
+
+/// Writes chassisd's configuration for a test; returns its path.
+fn chassisd_config(env: &Env, text: &str) -> String {
+    let path = env.dir.join("chassisd.toml");
+    std::fs::write(&path, text).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+/// A HUNTER whose driver is limited to 0.5 m/s by a `[profile]` override: requests beyond the
+/// limit are clamped and the monitor lets it drive; the simulated chassis then runs away at
+/// 1.0 m/s (`chassis sim runaway`) — under the HUNTER's own 1.5 m/s, beyond the configured limit
+/// — and the monitor stops it; once it obeys again it drives again.
+#[test]
+fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
+    let mut env = Env::new("safety-runaway");
+    let n = name("srw");
+    let config = chassisd_config(&env, "[profile]\nmax_linear_mps = 0.5\n");
+    let (mut robot, monitor) = start_with(
+        &mut env,
+        &["--robot", "hunter", "--name", &n, "--config", &config],
+        &n,
+    );
+    let mut teleop = source(&mut robot, "teleop");
+    // Asking for more than the limit is a request the driver clamps, not a runaway.
+    let fast = VelocityRequest::twist(0.8, 0.0);
+    let (_, high) = drive(
+        &mut robot,
+        &mut [(&mut teleop, fast)],
+        Duration::from_secs(2),
+    );
+    assert!(
+        (0.4..=0.55).contains(&high),
+        "peak {high} (limit 0.5)\n{}",
+        env.logs()
+    );
+    let status = safety(&robot);
+    assert!(!status.is_active(SafetyRule::SPEED), "{status:?}");
+    assert_eq!(status.action, SafetyAction::NONE);
+
+    run_ok(&env, &["sim", "--name", &n, "runaway", "1.0"]);
+    let mut fastest = 0.0f32;
+    let stopped = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, fast)],
+        Duration::from_secs(5),
+        |m, s| {
+            fastest = fastest.max(s.motion.linear_mps);
+            m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety")
+        },
+    )
+    .unwrap_or_else(|| panic!("no stop for a runaway at 1.0 m/s\n{}", env.logs()));
+    eprintln!("runaway at 1.0 m/s past a 0.5 m/s limit → safety stop after {stopped:?}");
+    assert!(fastest > 0.6, "measured at most {fastest} m/s");
+    let status = safety(&robot);
+    assert!(status.is_active(SafetyRule::SPEED), "{status:?}");
+    assert_eq!(status.action, SafetyAction::STOP);
+    assert!(status.trigger_count(SafetyRule::SPEED) >= 1);
+    assert!(
+        status.last_text().starts_with("speed: ") && status.last_text().ends_with("> 0.60 m/s"),
+        "{}",
+        status.last_text()
+    );
+    // The mux keeps the output at zero while the chassis still runs away.
+    let (_, high) = drive(
+        &mut robot,
+        &mut [(&mut teleop, fast)],
+        Duration::from_secs(1),
+    );
+    assert!(high > 0.6, "the runaway went on: {high}");
+    assert_eq!(mux(&mut robot).output, Twist::ZERO);
+
+    run_ok(&env, &["sim", "--name", &n, "runaway", "--clear"]);
+    let again = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, fast)],
+        Duration::from_secs(5),
+        |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > 0.3,
+    );
+    assert!(
+        again.is_some(),
+        "no motion once the chassis obeys again\n{}",
+        env.logs()
+    );
+    assert!(!safety(&robot).is_active(SafetyRule::SPEED));
+    assert!(env.proc(monitor).is_running());
+}
+
+/// A RANGER MINI (protocol V2): its description gives its under-voltage alarm, 23.5 V, and no
+/// state-of-charge level, so the monitor judges the voltage although the chassis reports a state
+/// of charge, and says so; a flat battery stops it, a charged one lets it drive again.
+#[test]
+fn a_ranger_mini_with_a_low_battery_is_stopped_by_the_monitor() {
+    let mut env = Env::new("safety-ranger-battery");
+    let n = name("srb");
+    let (mut robot, monitor) = start(&mut env, "ranger-mini", &n);
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.3, 0.0);
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    assert!(high > 0.2, "peak {high}\n{}", env.logs());
+
+    // 8 %: 22.4 V in the simulated 22-27 V pack, below 23.5 V.
+    run_ok(&env, &["sim", "--name", &n, "battery", "8"]);
+    let stopped = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(5),
+        |m, _| m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
+    )
+    .unwrap_or_else(|| panic!("no stop for a low battery\n{}", env.logs()));
+    eprintln!("RANGER MINI battery 8 % → safety stop after {stopped:?} (1 s trigger time)");
+    let status = safety(&robot);
+    assert!(status.is_active(SafetyRule::BATTERY), "{status:?}");
+    assert_eq!(status.action, SafetyAction::STOP);
+    assert!(
+        status.last_text().starts_with("battery: 22.")
+            && status.last_text().ends_with("V < 23.50 V"),
+        "{}",
+        status.last_text()
+    );
+    let log = env.proc(monitor).log_text();
+    assert!(
+        log.contains(&format!(
+            "battery: judging chassis/{n} by its voltage (below 23.5 V, description \
+             (chassis/{n}: battery.low_v)); it reports a state of charge, but no level is known \
+             for it"
+        )),
+        "{log}"
+    );
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    let still = state(&mut robot).motion.linear_mps.abs();
+    assert!(still < 0.01, "rolling at {still} (peak {high})");
+
+    run_ok(&env, &["sim", "--name", &n, "battery", "60"]);
+    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(3));
+    assert!(
+        high > 0.2,
+        "no motion with a charged battery: {high}\n{}",
+        env.logs()
+    );
+}
+
+/// chassisd's `[profile]` lowers the HUNTER's speed limit and raises its under-voltage alarm:
+/// the running monitor's levels follow, as its log and `--print-config` against the running
+/// robot say, each with where it comes from.
+#[test]
+fn a_profile_override_in_chassisds_config_reaches_the_monitor() {
+    let mut env = Env::new("safety-profile");
+    let n = name("spo");
+    let config = chassisd_config(
+        &env,
+        "[profile]\nmax_linear_mps = 0.5\nunder_voltage_alarm_v = 25.0\n",
+    );
+    let (_robot, monitor) = start_with(
+        &mut env,
+        &["--robot", "hunter", "--name", &n, "--config", &config],
+        &n,
+    );
+    let speed = format!(
+        "speed rule: acts above 0.6 m/s either way — description (chassis/{n}: forward limit \
+         0.5 m/s (the driver's limit) × limit_factor 1.1 + limit_margin_mps 0.05)"
+    );
+    let logged = wait_for(Duration::from_secs(5), || {
+        env.proc(monitor).log_text().contains(&speed)
+    });
+    let log = env.proc(monitor).log_text();
+    assert!(logged.is_some(), "{log}");
+    assert!(
+        log.contains(&format!(
+            "battery rule: voltage below 25.0 V — description (chassis/{n}: battery.low_v)"
+        )),
+        "{log}"
+    );
+
+    let out = env.run("chassis-safety", &["--print-config", "--name", &n]);
+    assert!(out.status.success(), "{out:?}");
+    let text = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{text}");
+    assert!(
+        text.contains(&format!(
+            "\n# max_linear_mps = 0.6  # description (chassis/{n}: forward limit 0.5 m/s \
+             (the driver's limit) × limit_factor 1.1 + limit_margin_mps 0.05)\n"
+        )),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!(
+            "\n# min_voltage_v = 25.0  # description (chassis/{n}: battery.low_v)\n"
+        )),
+        "{text}"
+    );
+    assert!(text.contains("AgileX HUNTER 2.0 (hunter, model hunter, protocol v2)"));
+    assert!(text.contains("\ntrigger_ms = 200  # default\n"), "{text}");
+
+    // Without a running chassisd the levels are unknown, and the output says so.
+    let out = env.run("chassis-safety", &["--print-config", "--name", "nobody"]);
+    assert!(out.status.success(), "{out:?}");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("\n# max_linear_mps: unknown: until chassis/nobody's description is read\n"),
+        "{text}"
+    );
+}
+
+/// A SCOUT MINI on a real bus (slcan over a pty) is described as detecting, with its V1
+/// profile's 5 m/s, until chassisd hears it speak V2 (3 m/s): the monitor takes the newer
+/// description, and a runaway at 4 m/s — under the first level (5.55 m/s), over the new one
+/// (3.35 m/s) — stops the robot.
+#[test]
+fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
+    let mut env = Env::new("safety-detect");
+    let n = name("sdt");
+    let link = env.dir.join("scout-mini-slcan");
+    let bus = format!("slcan:{}", link.display());
+    // chassisd first: it serves, describes the robot as detecting, and waits for its bus.
+    env.chassisd(
+        "chassisd",
+        &["--robot", "scout-mini", "--name", &n, "--bus", &bus],
+    );
+    let mut robot = env.robot(&n, UP);
+    let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
+    let logged = |env: &mut Env, texts: &[&str]| {
+        wait_for(Duration::from_secs(10), || {
+            let log = env.proc(monitor).log_text();
+            texts.iter().all(|t| log.contains(t))
+        })
+        .is_some()
+    };
+    let detecting = logged(
+        &mut env,
+        &[
+            "(scout-mini, model scout-mini, protocol detecting); description seq",
+            "speed rule: acts above 5.55 m/s either way",
+        ],
+    );
+    assert!(detecting, "{}", env.logs());
+
+    let pty = format!("slcan-pty:{}", link.display());
+    env.chassisd(
+        "sim",
+        &[
+            "sim",
+            "--robot",
+            "scout-mini",
+            "--protocol",
+            "v2",
+            "--name",
+            &n,
+            "--bus",
+            &pty,
+        ],
+    );
+    let decided = logged(
+        &mut env,
+        &[
+            "(scout-mini, model scout-mini, protocol v2); description seq",
+            "speed rule: acts above 3.35 m/s either way",
+        ],
+    );
+    assert!(decided, "{}", env.logs());
+
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.5, 0.0);
+    let moving = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(10),
+        |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > 0.3,
+    );
+    assert!(moving.is_some(), "no motion\n{}", env.logs());
+    run_ok(&env, &["sim", "--name", &n, "runaway", "4.0"]);
+    let stopped = drive_until(
+        &mut robot,
+        &mut [(&mut teleop, go)],
+        Duration::from_secs(5),
+        |m, _| m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
+    );
+    assert!(
+        stopped.is_some(),
+        "no stop for a runaway at 4 m/s\n{}",
+        env.logs()
+    );
+    let status = safety(&robot);
+    assert!(status.is_active(SafetyRule::SPEED), "{status:?}");
+    assert!(
+        status.last_text().ends_with("> 3.35 m/s"),
+        "{}",
+        status.last_text()
+    );
 }

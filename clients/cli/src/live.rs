@@ -126,6 +126,14 @@ pub enum SimCmd {
     Flood { frames_per_s: u32 },
     /// What the simulated chassis really does: its true pose and speeds (not what it reports).
     Truth,
+    /// The speed loop runs away: the chassis drives at SPEED m/s (negative: reverse) whatever
+    /// it is commanded, past its limits; --clear gives the control back.
+    Runaway {
+        #[arg(allow_negative_numbers = true)]
+        speed: Option<f64>,
+        #[arg(long)]
+        clear: bool,
+    },
 }
 
 fn connect(name: &str) -> anyhow::Result<Robot> {
@@ -691,6 +699,11 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
             request(SimKind::FLOOD, true, 0, f64::from(*frames_per_s))
         }
         SimCmd::Truth => request(SimKind::TRUTH, false, 0, 0.0),
+        SimCmd::Runaway { speed, clear } => match (speed, clear) {
+            (_, true) => request(SimKind::RUNAWAY, false, 0, 0.0),
+            (Some(v), false) if v.is_finite() => request(SimKind::RUNAWAY, true, 0, *v),
+            _ => bail!("give a speed in m/s, or --clear"),
+        },
     };
     let mut robot = connect(name)?;
     let response = robot.sim(r, ANSWER_TIMEOUT)?;

@@ -1098,7 +1098,8 @@ class SimKind(Constants):
     OBSTACLE_BEHIND = 10
     FLOOD = 11
     ESTOP_SWITCH = 13
-    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 13: 'estop-switch'}
+    RUNAWAY = 14
+    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 13: 'estop-switch', 14: 'runaway'}
 
 
 class SourceFlags(Constants):

@@ -6,11 +6,18 @@
 //! release condition: a margin past the threshold the measurement must cross back over
 //! (hysteresis), and `release_ms`, how long it must stay there. `trigger_ms` is how long a
 //! condition must hold before the rule acts (0: at once).
+//!
+//! Nothing here knows a robot. The levels of the speed and battery rules come from the robot's
+//! description, as chassisd publishes it for the robot it drives (its profile and its configured
+//! limits after every override; see [`crate::levels`]); a plain number in the file
+//! (`min_voltage_v = 23.0`, `max_linear_mps = 2.0`) overrides the description's on the robot the
+//! monitor runs for.
 
-use std::path::Path;
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
 
-use chassis_client::{FaultFlags, RobotKind, valid_robot_name};
-use serde::{Deserialize, Serialize};
+use chassis_client::{FaultFlags, valid_robot_name};
+use serde::{Deserialize, Deserializer, Serialize};
 use thiserror::Error;
 
 /// What a rule does while it is in force.
@@ -114,52 +121,50 @@ impl Default for FaultRule {
     }
 }
 
-/// Battery voltages per robot, V (0: no voltage rule for that robot).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct BatteryVoltages {
-    pub titan: f64,
-    #[serde(rename = "scout-mini")]
-    pub scout_mini: f64,
-    pub xbot: f64,
-}
-
-impl Default for BatteryVoltages {
-    /// 15 % of each pack's open-circuit range as the simulated chassis models it from the
-    /// manuals: TITAN 44.0-52.0 V, SCOUT MINI 21.0-29.2 V, XBot 23.0-26.0 V.
-    fn default() -> Self {
-        Self {
-            titan: 45.2,
-            scout_mini: 22.2,
-            xbot: 23.45,
-        }
+/// A level the file may set as a plain number, overriding the robot's description. Anything
+/// else — the per-robot tables of earlier versions (`[rules.battery.min_voltage_v]` with
+/// `titan = …`) among them — is refused with a word on what replaced them.
+fn plain_number<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Option<f64>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Written {
+        Number(f64),
+        Other(serde::de::IgnoredAny),
+    }
+    match Written::deserialize(deserializer)? {
+        Written::Number(v) => Ok(Some(v)),
+        Written::Other(_) => Err(serde::de::Error::custom(
+            "must be a plain number; per-robot tables are no longer read: the level comes from \
+             the description of the robot chassisd drives (its [profile] after every \
+             override), and a number here overrides it for the robot this monitor runs for",
+        )),
     }
 }
 
-impl BatteryVoltages {
-    fn of(&self, robot: u8) -> f64 {
-        match robot {
-            RobotKind::TITAN => self.titan,
-            RobotKind::SCOUT_MINI => self.scout_mini,
-            RobotKind::XBOT => self.xbot,
-            _ => 0.0,
-        }
-    }
-}
-
-/// `[rules.battery]`: state of charge from the BMS, or the voltage where there is none.
+/// `[rules.battery]`: the state of charge where the robot reports one and there is a level
+/// for it, else the voltage.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct BatteryRule {
     pub enabled: bool,
     pub action: Action,
-    /// Triggers below this state of charge, % (robots with a BMS: TITAN).
-    pub min_soc_pct: f64,
-    /// Releases at or above `min_soc_pct` + this, %.
+    /// Triggers below this state of charge, %. Absent: the description's
+    /// `battery.low_soc_pct` (the chassis' low-battery warning), else its `critical_soc_pct`.
+    #[serde(
+        deserialize_with = "plain_number",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub min_soc_pct: Option<f64>,
+    /// Releases at or above the state-of-charge level + this, %.
     pub release_margin_pct: f64,
-    /// Triggers below this voltage where the robot reports no state of charge.
-    pub min_voltage_v: BatteryVoltages,
-    /// Releases at or above `min_voltage_v` + this, V.
+    /// Triggers below this voltage where the state of charge is not judged, V. Absent: the
+    /// description's `battery.low_v` (the chassis' under-voltage alarm), else its `critical_v`.
+    #[serde(
+        deserialize_with = "plain_number",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub min_voltage_v: Option<f64>,
+    /// Releases at or above the voltage level + this, V.
     pub release_margin_v: f64,
     /// A voltage sags while accelerating: it must read low this long.
     pub trigger_ms: u64,
@@ -171,9 +176,9 @@ impl Default for BatteryRule {
         Self {
             enabled: true,
             action: Action::Stop,
-            min_soc_pct: 15.0,
+            min_soc_pct: None,
             release_margin_pct: 5.0,
-            min_voltage_v: BatteryVoltages::default(),
+            min_voltage_v: None,
             release_margin_v: 0.3,
             trigger_ms: 1000,
             release_ms: 1000,
@@ -320,47 +325,27 @@ range_rule!(
     0.03
 );
 
-/// Speed limits per robot, m/s (0: no speed rule for that robot).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct SpeedLimits {
-    pub titan: f64,
-    #[serde(rename = "scout-mini")]
-    pub scout_mini: f64,
-    pub xbot: f64,
-}
-
-impl Default for SpeedLimits {
-    /// Each robot's top speed from its manual + 10 %: faster means a runaway (downhill, a
-    /// failing speed loop, bad feedback), never a request.
-    fn default() -> Self {
-        Self {
-            titan: 3.3,
-            scout_mini: 6.1,
-            xbot: 1.65,
-        }
-    }
-}
-
-impl SpeedLimits {
-    fn of(&self, robot: u8) -> f64 {
-        match robot {
-            RobotKind::TITAN => self.titan,
-            RobotKind::SCOUT_MINI => self.scout_mini,
-            RobotKind::XBOT => self.xbot,
-            _ => 0.0,
-        }
-    }
-}
-
-/// `[rules.speed]`: measured |linear speed| above a limit.
+/// `[rules.speed]`: a measured linear speed beyond what the robot may do — a runaway (downhill,
+/// a failing speed loop, bad feedback), never a request: the mux and the driver keep every
+/// request inside the robot's effective limits.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SpeedRule {
     pub enabled: bool,
     pub action: Action,
-    pub max_linear_mps: SpeedLimits,
-    /// Releases below the limit − this, m/s.
+    /// Triggers above this measured |linear speed|, m/s, either way. Absent: the description's
+    /// effective limits (the tighter of the driver's and chassisd's `[mux.limits]`), forward and
+    /// reverse, × `limit_factor` + `limit_margin_mps`.
+    #[serde(
+        deserialize_with = "plain_number",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub max_linear_mps: Option<f64>,
+    /// How far past the description's limit a measured speed may go, as a factor (≥ 1)…
+    pub limit_factor: f64,
+    /// …plus a margin, m/s (speed measurement noise, overshoot at low limits).
+    pub limit_margin_mps: f64,
+    /// Releases below the trigger level − this (at most half of it), m/s.
     pub release_margin_mps: f64,
     pub trigger_ms: u64,
     pub release_ms: u64,
@@ -371,7 +356,9 @@ impl Default for SpeedRule {
         Self {
             enabled: true,
             action: Action::Stop,
-            max_linear_mps: SpeedLimits::default(),
+            max_linear_mps: None,
+            limit_factor: 1.1,
+            limit_margin_mps: 0.05,
             release_margin_mps: 0.2,
             trigger_ms: 200,
             release_ms: 500,
@@ -458,21 +445,17 @@ pub struct Faults {
     pub mask: u64,
 }
 
-/// The validated battery rule.
+/// The validated battery rule; its levels are resolved with the robot's description
+/// ([`crate::levels::Levels`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Battery {
     pub timing: Timing,
-    pub min_soc_pct: f64,
+    /// The file's state-of-charge level, %, overriding the description's.
+    pub min_soc_pct: Option<f64>,
     pub release_margin_pct: f64,
-    pub min_voltage_v: BatteryVoltages,
+    /// The file's voltage level, V, overriding the description's.
+    pub min_voltage_v: Option<f64>,
     pub release_margin_v: f64,
-}
-
-impl Battery {
-    /// The voltage threshold for a robot kind (0: none).
-    pub fn min_voltage_v(&self, robot: u8) -> f64 {
-        self.min_voltage_v.of(robot)
-    }
 }
 
 /// The validated stale rule.
@@ -493,19 +476,16 @@ pub struct RangeZones {
     pub max_age_ns: u64,
 }
 
-/// The validated speed rule.
+/// The validated speed rule; its levels are resolved with the robot's description
+/// ([`crate::levels::Levels`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Speed {
     pub timing: Timing,
-    pub max_linear_mps: SpeedLimits,
+    /// The file's trigger level, m/s, overriding the description's.
+    pub max_linear_mps: Option<f64>,
+    pub limit_factor: f64,
+    pub limit_margin_mps: f64,
     pub release_margin_mps: f64,
-}
-
-impl Speed {
-    /// The limit for a robot kind (0: none).
-    pub fn max_linear_mps(&self, robot: u8) -> f64 {
-        self.max_linear_mps.of(robot)
-    }
 }
 
 /// The slow envelope, m/s and rad/s.
@@ -532,7 +512,48 @@ pub struct Config {
     pub ir: Option<RangeZones>,
     pub speed: Option<Speed>,
     pub operator: bool,
+    /// The file it was read from (`None`: the defaults).
+    pub file: Option<ConfigFile>,
     raw: RawConfig,
+}
+
+/// The file a configuration was read from, and the keys it sets (`rules.speed.trigger_ms`):
+/// a value is `config` where the file sets it, `default` where it does not.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigFile {
+    pub path: PathBuf,
+    pub keys: BTreeSet<String>,
+}
+
+impl ConfigFile {
+    fn of(path: &Path, table: &toml::Table) -> Self {
+        fn walk(prefix: &str, table: &toml::Table, keys: &mut BTreeSet<String>) {
+            for (key, value) in table {
+                let path = if prefix.is_empty() {
+                    key.clone()
+                } else {
+                    format!("{prefix}.{key}")
+                };
+                match value {
+                    toml::Value::Table(inner) => walk(&path, inner, keys),
+                    _ => {
+                        keys.insert(path);
+                    }
+                }
+            }
+        }
+        let mut keys = BTreeSet::new();
+        walk("", table, &mut keys);
+        Self {
+            path: path.to_path_buf(),
+            keys,
+        }
+    }
+
+    /// True when the file sets `key` (dotted: `rules.battery.min_voltage_v`).
+    pub fn sets(&self, key: &str) -> bool {
+        self.keys.contains(key)
+    }
 }
 
 pub(crate) fn ms_to_ns(ms: u64) -> u64 {
@@ -559,6 +580,21 @@ fn check_timing(key: &str, trigger_ms: u64, release_ms: u64) -> Result<(), Confi
     Ok(())
 }
 
+/// Levels the file may leave out, but if it sets them they must be above 0.
+fn check_positive(key: &str, values: &[(&str, Option<f64>)]) -> Result<(), ConfigError> {
+    for (name, v) in values {
+        if let Some(v) = v
+            && !(v.is_finite() && *v > 0.0)
+        {
+            return Err(bad(
+                key,
+                format!("{name} must be a finite number above 0 (is {v})"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn check_non_negative(key: &str, values: &[(&str, f64)]) -> Result<(), ConfigError> {
     for (name, v) in values {
         if !(v.is_finite() && *v >= 0.0) {
@@ -572,18 +608,6 @@ fn check_non_negative(key: &str, values: &[(&str, f64)]) -> Result<(), ConfigErr
 }
 
 impl RawConfig {
-    /// Reads a TOML file in the `--print-config` format.
-    pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.display().to_string(),
-            source,
-        })?;
-        Self::parse(&text).map_err(|source| ConfigError::Parse {
-            path: path.display().to_string(),
-            source,
-        })
-    }
-
     pub fn parse(text: &str) -> Result<Self, toml::de::Error> {
         toml::from_str(text)
     }
@@ -647,22 +671,25 @@ impl RawConfig {
         check_non_negative(
             "rules.battery",
             &[
-                ("min_soc_pct", b.min_soc_pct),
                 ("release_margin_pct", b.release_margin_pct),
                 ("release_margin_v", b.release_margin_v),
-                ("min_voltage_v.titan", b.min_voltage_v.titan),
-                ("min_voltage_v.scout-mini", b.min_voltage_v.scout_mini),
-                ("min_voltage_v.xbot", b.min_voltage_v.xbot),
             ],
         )?;
-        if b.min_soc_pct > 100.0 {
+        check_positive(
+            "rules.battery",
+            &[
+                ("min_soc_pct", b.min_soc_pct),
+                ("min_voltage_v", b.min_voltage_v),
+            ],
+        )?;
+        if b.min_soc_pct.is_some_and(|v| v > 100.0) {
             return Err(bad("rules.battery.min_soc_pct", "must be at most 100 %"));
         }
         let battery = b.enabled.then(|| Battery {
             timing: Timing::new(b.action, b.trigger_ms, b.release_ms),
             min_soc_pct: b.min_soc_pct,
             release_margin_pct: b.release_margin_pct,
-            min_voltage_v: b.min_voltage_v.clone(),
+            min_voltage_v: b.min_voltage_v,
             release_margin_v: b.release_margin_v,
         });
 
@@ -703,14 +730,25 @@ impl RawConfig {
             "rules.speed",
             &[
                 ("release_margin_mps", sp.release_margin_mps),
-                ("max_linear_mps.titan", sp.max_linear_mps.titan),
-                ("max_linear_mps.scout-mini", sp.max_linear_mps.scout_mini),
-                ("max_linear_mps.xbot", sp.max_linear_mps.xbot),
+                ("limit_margin_mps", sp.limit_margin_mps),
             ],
         )?;
+        check_positive("rules.speed", &[("max_linear_mps", sp.max_linear_mps)])?;
+        if !(sp.limit_factor.is_finite() && (1.0..=3.0).contains(&sp.limit_factor)) {
+            return Err(bad(
+                "rules.speed.limit_factor",
+                format!(
+                    "must be 1 to 3 (is {}): below 1 the rule would stop a robot driving as \
+                     fast as it may",
+                    sp.limit_factor
+                ),
+            ));
+        }
         let speed = sp.enabled.then(|| Speed {
             timing: Timing::new(sp.action, sp.trigger_ms, sp.release_ms),
-            max_linear_mps: sp.max_linear_mps.clone(),
+            max_linear_mps: sp.max_linear_mps,
+            limit_factor: sp.limit_factor,
+            limit_margin_mps: sp.limit_margin_mps,
             release_margin_mps: sp.release_margin_mps,
         });
 
@@ -728,15 +766,54 @@ impl RawConfig {
             ir,
             speed,
             operator: r.operator.enabled,
+            file: None,
             raw: self,
         })
     }
 }
 
 impl Config {
-    /// The configuration with everything filled in, in the file's format.
+    /// Reads, checks and validates a TOML file in the `--print-config` format, remembering
+    /// which keys it sets.
+    pub fn load(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let parse_error = |source| ConfigError::Parse {
+            path: path.display().to_string(),
+            source,
+        };
+        let table: toml::Table = toml::from_str(&text).map_err(parse_error)?;
+        let raw = RawConfig::parse(&text).map_err(parse_error)?;
+        let mut config = raw.validate()?;
+        config.file = Some(ConfigFile::of(path, &table));
+        Ok(config)
+    }
+
+    /// The configuration as written, with every default filled in.
+    pub(crate) fn raw(&self) -> &RawConfig {
+        &self.raw
+    }
+
+    /// The defaults, every rule on.
+    pub fn defaults() -> Result<Config, ConfigError> {
+        RawConfig::default().validate()
+    }
+
+    /// The configuration as the file gives it (levels the file leaves to the description
+    /// absent), one key per line: `crate::levels::print_config` annotates it.
     pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
-        toml::to_string_pretty(&self.raw)
+        toml::to_string(&self.raw)
+    }
+
+    /// Where the value of `key` (dotted) comes from when not from the description: the file
+    /// that sets it, or the default.
+    pub fn origin_of(&self, key: &str) -> crate::levels::Origin {
+        match &self.file {
+            Some(file) if file.sets(key) => crate::levels::Origin::Config(file.path.clone()),
+            _ => crate::levels::Origin::Default,
+        }
     }
 }
 
@@ -778,7 +855,7 @@ mod tests {
     #[test]
     fn a_partial_table_keeps_the_defaults_of_the_keys_it_leaves_out() {
         let c = RawConfig::parse(
-            "[rules.ir]\nstop_m = 0.1\n[rules.battery.min_voltage_v]\nxbot = 23.0\n\
+            "[rules.ir]\nstop_m = 0.1\n[rules.battery]\nmin_voltage_v = 23\n\
              [rules.bumper]\naction = \"stop\"\n",
         )
         .unwrap()
@@ -787,9 +864,70 @@ mod tests {
         let ir = c.ir.unwrap();
         assert_eq!((ir.stop_m, ir.slow_m, ir.hysteresis_m), (0.1, 0.3, 0.03));
         let b = c.battery.unwrap();
-        assert_eq!(b.min_voltage_v(RobotKind::XBOT), 23.0);
-        assert_eq!(b.min_voltage_v(RobotKind::TITAN), 45.2);
+        assert_eq!(
+            b.min_voltage_v,
+            Some(23.0),
+            "a plain number, an integer too"
+        );
+        assert_eq!(b.min_soc_pct, None, "left to the description");
+        assert_eq!(b.release_margin_v, 0.3);
         assert_eq!(c.bumper.unwrap().action, Action::Stop);
+    }
+
+    #[test]
+    fn the_levels_are_left_to_the_description_unless_the_file_sets_them() {
+        let c = defaults();
+        assert_eq!(c.battery.unwrap().min_voltage_v, None);
+        let s = c.speed.unwrap();
+        assert_eq!(s.max_linear_mps, None);
+        assert_eq!((s.limit_factor, s.limit_margin_mps), (1.1, 0.05));
+        let c = RawConfig::parse("[rules.speed]\nmax_linear_mps = 2.0\nlimit_factor = 1.2\n")
+            .unwrap()
+            .validate()
+            .unwrap();
+        let s = c.speed.unwrap();
+        assert_eq!((s.max_linear_mps, s.limit_factor), (Some(2.0), 1.2));
+    }
+
+    #[test]
+    fn a_per_robot_table_of_earlier_versions_is_refused_with_what_replaced_it() {
+        for text in [
+            "[rules.battery.min_voltage_v]\nxbot = 23.0\n",
+            "[rules.speed.max_linear_mps]\ntitan = 3.3\n",
+            "[rules.battery]\nmin_soc_pct = \"15\"\n",
+        ] {
+            let err = RawConfig::parse(text).unwrap_err().to_string();
+            assert!(err.contains("plain number"), "{text}: {err}");
+            assert!(err.contains("description"), "{text}: {err}");
+        }
+    }
+
+    #[test]
+    fn a_loaded_file_says_which_keys_it_sets() {
+        let dir = std::env::temp_dir().join(format!("chassis-safety-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("safety.toml");
+        std::fs::write(
+            &path,
+            "[rules.speed]\ntrigger_ms = 100\n[rules.battery]\nmin_voltage_v = 23.0\n",
+        )
+        .unwrap();
+        let c = Config::load(&path).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        let file = c.file.as_ref().unwrap();
+        assert_eq!(
+            file.keys.iter().map(String::as_str).collect::<Vec<_>>(),
+            ["rules.battery.min_voltage_v", "rules.speed.trigger_ms"]
+        );
+        assert_eq!(
+            c.origin_of("rules.speed.trigger_ms"),
+            crate::levels::Origin::Config(path.clone())
+        );
+        assert_eq!(
+            c.origin_of("rules.speed.release_ms"),
+            crate::levels::Origin::Default
+        );
+        assert_eq!(c.speed.unwrap().timing.trigger_ns, 100_000_000);
     }
 
     #[test]
@@ -798,7 +936,7 @@ mod tests {
             "[rules.ultrasonic]\nstop_distance = 0.3\n",
             "[monitor]\nrate_hz = 50\n",
             "[rules.teleport]\nenabled = true\n",
-            "[rules.speed.max_linear_mps]\nscout_mini = 2.0\n",
+            "[rules.speed]\nmax_speed = 2.0\n",
             "[rules.bumper]\naction = \"explode\"\n",
         ] {
             assert!(RawConfig::parse(text).is_err(), "{text} was accepted");
@@ -825,6 +963,12 @@ mod tests {
         check("[slow]\nlinear_mps = -1.0\n", "slow");
         check("[rules.stale]\nservice_timeout_ms = 5\n", "rules.stale");
         check("[rules.speed]\nrelease_ms = 3600000\n", "rules.speed");
+        check(
+            "[rules.speed]\nlimit_factor = 0.9\n",
+            "rules.speed.limit_factor",
+        );
+        check("[rules.speed]\nmax_linear_mps = 0\n", "rules.speed");
+        check("[rules.battery]\nmin_voltage_v = -24.0\n", "rules.battery");
     }
 
     #[test]
@@ -832,10 +976,20 @@ mod tests {
         let c = defaults();
         let text = c.to_toml().unwrap();
         assert!(text.contains("[rules.ultrasonic]"), "{text}");
-        assert!(text.contains("scout-mini = "), "{text}");
+        assert!(
+            !text.contains("min_voltage_v"),
+            "left to the description: {text}"
+        );
         let again = RawConfig::parse(&text).unwrap().validate().unwrap();
         assert_eq!(again, c);
         assert_eq!(again.to_toml().unwrap(), text);
+        let set = RawConfig::parse("[rules.battery]\nmin_voltage_v = 23.0\n")
+            .unwrap()
+            .validate()
+            .unwrap();
+        let text = set.to_toml().unwrap();
+        assert!(text.contains("min_voltage_v = 23.0"), "{text}");
+        assert_eq!(RawConfig::parse(&text).unwrap().validate().unwrap(), set);
     }
 
     #[test]

@@ -4,6 +4,10 @@
 //! The engine keeps what it needs to judge staleness on its own clock (when the state's `seq`
 //! last changed), each rule's debounced level and each latch.
 //!
+//! It knows no robot: the speed and battery rules take their levels from the robot's
+//! description ([`Engine::set_description`], resolved by [`Levels`]), or from the file where it
+//! overrides them. Until a description is read only the file's levels are in force.
+//!
 //! # Levels, hysteresis and timing
 //!
 //! Every rule has a level: 0 (clear) or 1 (in force); the range rules have 1 = slow zone and
@@ -29,10 +33,11 @@
 
 use chassis_client::{
     ChassisState, EstopState, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus, RULE_SLOTS,
-    SafetyAction, SafetyEvent, SafetyRule, SafetyStatus, VelocityRequest,
+    RobotDescription, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus, VelocityRequest,
 };
 
 use crate::config::{Action, Config, RangeZones, SlowSpeeds, Timing};
+use crate::levels::{BatteryBasis, Levels, number};
 
 /// A speed envelope, m/s and rad/s; [`SafetyStatus::UNLIMITED`] limits nothing.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -158,6 +163,9 @@ pub struct Decision {
     pub events: Vec<Event>,
     /// Problems with the setup, each reported once (WARN).
     pub notices: Vec<String>,
+    /// What the engine decided about the setup, each said once (INFO): the reading the battery
+    /// rule judges.
+    pub infos: Vec<String>,
 }
 
 /// A rule's level, following its target after `trigger` (up) or `release` (down).
@@ -230,7 +238,7 @@ enum Cause {
     Bumper,
     Range,
     Blind,
-    Speed,
+    Speed { reverse: bool },
     Operator,
 }
 
@@ -290,6 +298,12 @@ struct LastEvent {
 pub struct Engine {
     config: Config,
     source: String,
+    /// The robot as messages name it (`chassis/h1`).
+    label: String,
+    /// The speed and battery levels in force.
+    levels: Levels,
+    /// The reading the battery rule judged last (`None`: not judged yet).
+    battery_basis: Option<Option<BatteryBasis>>,
     rules: [RuleState; SafetyRule::COUNT],
     /// `seq` of the newest state sample and when it was first seen.
     state_seq: Option<u64>,
@@ -303,11 +317,17 @@ pub struct Engine {
 const RANGE_RULES: [u8; 2] = [SafetyRule::ULTRASONIC, SafetyRule::IR];
 
 impl Engine {
-    /// An engine for the monitor publishing as source `source` (to recognise its own lock).
-    pub fn new(config: Config, source: &str) -> Self {
+    /// An engine for the monitor publishing as source `source` (to recognise its own lock) for
+    /// the robot `label` (`chassis/h1`, in messages), with the file's levels only until
+    /// [`Engine::set_description`].
+    pub fn new(config: Config, source: &str, label: &str) -> Self {
+        let levels = Levels::resolve(&config, None, label);
         Self {
             config,
             source: source.to_string(),
+            label: label.to_string(),
+            levels,
+            battery_basis: None,
             rules: Default::default(),
             state_seq: None,
             state_arrival_ns: 0,
@@ -320,6 +340,20 @@ impl Engine {
 
     pub fn config(&self) -> &Config {
         &self.config
+    }
+
+    /// The speed and battery levels in force, and where each comes from.
+    pub fn levels(&self) -> &Levels {
+        &self.levels
+    }
+
+    /// Takes the speed and battery levels from the robot's description (a newer one replaces
+    /// them: a protocol detected, a restarted chassisd with another configuration). Rules keep
+    /// their state; the next evaluation judges with the new levels.
+    pub fn set_description(&mut self, description: &RobotDescription) -> &Levels {
+        self.levels = Levels::resolve(&self.config, Some(description), &self.label);
+        self.battery_basis = None;
+        &self.levels
     }
 
     /// The operator's e-stop (SIGUSR1): latches at the next evaluation. Returns false when the
@@ -371,11 +405,13 @@ impl Engine {
     ) -> Decision {
         let mut events = Vec::new();
         let mut notices = Vec::new();
+        let mut infos = Vec::new();
         if self.state_seq != Some(state.seq) {
             self.state_seq = Some(state.seq);
             self.state_arrival_ns = now_ns;
         }
         let lock = self.observe_lock(mux, &mut notices);
+        self.observe_battery_basis(state, &mut notices, &mut infos);
 
         for rule in 0..SafetyRule::COUNT as u8 {
             let Some(timing) = self.timing(rule) else {
@@ -419,7 +455,8 @@ impl Engine {
             }
         }
 
-        let decision = self.combine(&lock, events, notices);
+        let mut decision = self.combine(&lock, events, notices);
+        decision.infos = infos;
         if let Some(event) = decision.events.last() {
             self.last_event = LastEvent {
                 rule: Some(event.rule),
@@ -429,6 +466,58 @@ impl Engine {
             };
         }
         decision
+    }
+
+    /// Says once which reading the battery rule judges, and loudly when the robot reports a
+    /// reading but no level is known for it.
+    fn observe_battery_basis(
+        &mut self,
+        state: &ChassisState,
+        notices: &mut Vec<String>,
+        infos: &mut Vec<String>,
+    ) {
+        if self.config.battery.is_none() {
+            return;
+        }
+        let soc = state.is_valid(Group::BmsPack);
+        let voltage = state.is_valid(Group::System);
+        if !(soc || voltage) {
+            return;
+        }
+        let basis = self.levels.battery_basis(soc, voltage);
+        if self.battery_basis == Some(basis) {
+            return;
+        }
+        self.battery_basis = Some(basis);
+        let label = &self.label;
+        let level = |v: Option<f64>| v.map_or_else(|| "?".to_string(), number);
+        match basis {
+            Some(BatteryBasis::Soc) => infos.push(format!(
+                "battery: judging {label} by its state of charge (below {} %, {})",
+                level(self.levels.battery_soc_pct.value),
+                self.levels.battery_soc_pct.origin
+            )),
+            Some(BatteryBasis::Voltage) => infos.push(format!(
+                "battery: judging {label} by its voltage (below {} V, {}){}",
+                level(self.levels.battery_voltage_v.value),
+                self.levels.battery_voltage_v.origin,
+                if soc {
+                    "; it reports a state of charge, but no level is known for it"
+                } else {
+                    "; it reports no state of charge"
+                }
+            )),
+            None => notices.push(format!(
+                "battery rule: {label} reports its {} but no level is known for it ({}): no \
+                 battery rule; set [rules.battery] min_voltage_v or min_soc_pct",
+                if soc {
+                    "state of charge and voltage"
+                } else {
+                    "voltage"
+                },
+                self.levels.battery_voltage_v.origin
+            )),
+        }
     }
 
     fn observe_lock(&mut self, mux: Option<&MuxStatus>, notices: &mut Vec<String>) -> LockView {
@@ -629,6 +718,7 @@ impl Engine {
             estop: lock.estop,
             events,
             notices,
+            infos: Vec::new(),
         }
     }
 
@@ -651,23 +741,27 @@ impl Engine {
                 let Some(b) = &c.battery else {
                     return Measure::clear();
                 };
-                let (value, threshold, margin, cause) = if state.is_valid(Group::BmsPack) {
-                    (
+                let levels = &self.levels;
+                let basis = levels.battery_basis(
+                    state.is_valid(Group::BmsPack),
+                    state.is_valid(Group::System),
+                );
+                let (value, threshold, margin, cause) = match basis {
+                    Some(BatteryBasis::Soc) => (
                         f64::from(state.system.battery_soc_pct),
-                        b.min_soc_pct,
+                        levels.battery_soc_pct.value.unwrap_or(f64::NAN),
                         b.release_margin_pct,
                         Cause::Soc,
-                    )
-                } else if state.is_valid(Group::System) && b.min_voltage_v(state.robot) > 0.0 {
-                    (
+                    ),
+                    Some(BatteryBasis::Voltage) => (
                         f64::from(state.system.battery_voltage_v),
-                        b.min_voltage_v(state.robot),
+                        levels.battery_voltage_v.value.unwrap_or(f64::NAN),
                         b.release_margin_v,
                         Cause::Voltage,
-                    )
-                } else {
-                    // Never reported: unknown is not low (the stale rule covers silence).
-                    return Measure::clear();
+                    ),
+                    // Never reported, or no level (said loudly): unknown is not low (the stale
+                    // rule covers silence).
+                    None => return Measure::clear(),
                 };
                 let threshold = if level > 0 {
                     threshold + margin
@@ -733,16 +827,20 @@ impl Engine {
                 let Some(s) = &c.speed else {
                     return Measure::clear();
                 };
-                let max = s.max_linear_mps(state.robot);
-                if max <= 0.0 || !state.is_valid(Group::Motion) {
+                if !state.is_valid(Group::Motion) {
                     return Measure::clear();
                 }
-                let value = f64::from(state.motion.linear_mps.abs());
+                let linear = f64::from(state.motion.linear_mps);
+                // No limit that way: said loudly when the description was read.
+                let Some(max) = self.levels.speed_limit(linear) else {
+                    return Measure::clear();
+                };
+                let value = linear.abs();
                 // A speed that is not a number counts as too fast.
                 let (target, threshold) = if level == 0 {
                     (value.is_nan() || value > max, max)
                 } else {
-                    let release = max - s.release_margin_mps;
+                    let release = max - s.release_margin_mps.min(max / 2.0);
                     (value.is_nan() || value >= release, release)
                 };
                 Measure {
@@ -750,7 +848,9 @@ impl Engine {
                     value,
                     threshold,
                     stop_edge: f64::NAN,
-                    cause: Cause::Speed,
+                    cause: Cause::Speed {
+                        reverse: linear < 0.0,
+                    },
                 }
             }
             _ => Measure::clear(),
@@ -875,8 +975,13 @@ fn describe(rule: u8, from: u8, to: u8, m: &Measure, threshold: f64) -> String {
             m.value, threshold
         ),
         (Cause::Range, false) => format!("{name}: clear, {:.2} m ≥ {:.2} m", m.value, threshold),
-        (Cause::Speed, true) => format!("{name}: {:.2} m/s > {:.2} m/s", m.value, threshold),
-        (Cause::Speed, false) => format!(
+        (Cause::Speed { reverse }, true) => format!(
+            "{name}: {:.2} m/s{} > {:.2} m/s",
+            m.value,
+            if reverse { " reverse" } else { "" },
+            threshold
+        ),
+        (Cause::Speed { .. }, false) => format!(
             "{name}: {:.2} m/s < {:.2} m/s, released",
             m.value, threshold
         ),

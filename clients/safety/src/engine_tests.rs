@@ -2,7 +2,9 @@
 
 use super::*;
 use crate::config::RawConfig;
-use chassis_client::RobotKind;
+use crate::levels::Origin;
+use chassis_protocols::RobotKind;
+use chassis_protocols::description::describe;
 
 /// Simulated time starts here (ms), so "never" (0) is long ago.
 const T0_MS: u64 = 10_000;
@@ -37,23 +39,32 @@ fn mux_with_estop() -> MuxStatus {
     m
 }
 
+/// The description chassisd publishes of `kind` with its default profile.
+fn description(kind: RobotKind) -> RobotDescription {
+    describe(&kind.entry().defaults())
+}
+
 impl Rig {
-    fn with_config(robot: u8, toml: &str) -> Self {
+    /// An engine that has read `description`, judging a robot of its kind.
+    fn described(description: &RobotDescription, toml: &str) -> Self {
+        let kind = RobotKind::from_id(description.kind).unwrap();
         let config = RawConfig::parse(toml).unwrap().validate().unwrap();
+        let mut engine = Engine::new(config, "safety", "chassis/test");
+        engine.set_description(description);
         let mut state = ChassisState {
-            robot,
+            robot: kind.id(),
             ..ChassisState::default()
         };
         state.system.battery_soc_pct = 80.0;
-        state.system.battery_voltage_v = match robot {
-            RobotKind::TITAN => 50.0,
-            RobotKind::XBOT => 25.5,
+        state.system.battery_voltage_v = match kind {
+            RobotKind::Titan => 50.0,
+            RobotKind::Xbot => 25.5,
             _ => 27.0,
         };
         state.ranges.ultrasonic_m = [6.0; 3];
         state.ranges.ir_m = [0.8; 3];
         let mut rig = Self {
-            engine: Engine::new(config, "safety"),
+            engine,
             state,
             mux: Some(mux_with_estop()),
             now_ms: 0,
@@ -63,8 +74,12 @@ impl Rig {
         rig
     }
 
-    fn new(robot: u8) -> Self {
-        Self::with_config(robot, "")
+    fn with_config(kind: RobotKind, toml: &str) -> Self {
+        Self::described(&description(kind), toml)
+    }
+
+    fn new(kind: RobotKind) -> Self {
+        Self::with_config(kind, "")
     }
 
     fn refresh(&mut self) {
@@ -74,9 +89,11 @@ impl Rig {
         for group in [Group::Motion, Group::System] {
             self.state.touch(group, now);
         }
-        match self.state.robot {
-            RobotKind::TITAN => self.state.touch(Group::BmsPack, now),
-            RobotKind::XBOT => self.state.touch(Group::Ranges, now),
+        // What each simulated chassis reports: a state of charge from the TITAN's BMS, ranges
+        // from the XBot.
+        match RobotKind::from_id(self.state.robot) {
+            Some(RobotKind::Titan) => self.state.touch(Group::BmsPack, now),
+            Some(RobotKind::Xbot) => self.state.touch(Group::Ranges, now),
             _ => {}
         }
     }
@@ -130,10 +147,10 @@ fn texts(d: &Decision) -> Vec<&str> {
 
 #[test]
 fn all_is_well_means_heartbeats_and_no_rule_in_force() {
-    for robot in [RobotKind::TITAN, RobotKind::SCOUT_MINI, RobotKind::XBOT] {
+    for robot in RobotKind::ALL {
         let mut rig = Rig::new(robot);
         let d = rig.run(2000);
-        assert_eq!(d.command, Command::Heartbeat, "{}", RobotKind::name(robot));
+        assert_eq!(d.command, Command::Heartbeat, "{robot}");
         assert_eq!(d.action, SafetyAction::NONE);
         assert_eq!(d.active_rules, 0);
         assert!(d.events.is_empty(), "{:?}", texts(&d));
@@ -143,7 +160,7 @@ fn all_is_well_means_heartbeats_and_no_rule_in_force() {
 
 #[test]
 fn a_non_warning_fault_stops_at_once_and_releases_after_its_release_time() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.run(100);
     rig.state.system.fault_flags = FaultFlags::MOTOR_2_COMM_LOST;
     let d = rig.run(20);
@@ -161,7 +178,7 @@ fn a_non_warning_fault_stops_at_once_and_releases_after_its_release_time() {
 
 #[test]
 fn warnings_alone_do_not_stop() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.state.system.fault_flags = FaultFlags::WARNINGS;
     let d = rig.run(1000);
     assert_eq!(d.command, Command::Heartbeat);
@@ -170,7 +187,7 @@ fn warnings_alone_do_not_stop() {
 
 #[test]
 fn the_battery_triggers_below_its_threshold_after_the_trigger_time_and_releases_above_the_margin() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.state.system.battery_soc_pct = 14.0;
     assert_eq!(rig.run(900).command, Command::Heartbeat, "1 s trigger time");
     let d = rig.run(200);
@@ -190,7 +207,7 @@ fn the_battery_triggers_below_its_threshold_after_the_trigger_time_and_releases_
 
 #[test]
 fn a_battery_that_dips_shorter_than_the_trigger_time_is_ignored() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     for _ in 0..5 {
         rig.state.system.battery_voltage_v = 23.0; // sag while accelerating
         assert_eq!(rig.run(600).command, Command::Heartbeat);
@@ -201,7 +218,7 @@ fn a_battery_that_dips_shorter_than_the_trigger_time_is_ignored() {
 
 #[test]
 fn a_robot_without_a_bms_is_judged_by_its_own_voltage_threshold() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     assert!(!rig.state.is_valid(Group::BmsPack));
     rig.state.system.battery_voltage_v = 23.3;
     let d = rig.run(1100);
@@ -215,7 +232,7 @@ fn a_robot_without_a_bms_is_judged_by_its_own_voltage_threshold() {
 
 #[test]
 fn a_state_that_stops_arriving_stops_the_robot_on_the_monitors_own_clock() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.run(500);
     rig.frozen = true;
     assert_eq!(
@@ -242,7 +259,7 @@ fn a_state_that_stops_arriving_stops_the_robot_on_the_monitors_own_clock() {
 
 #[test]
 fn a_silent_chassis_or_a_lost_bus_stops_the_robot_though_the_service_still_publishes() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.run(200);
     rig.state.link_flags = LinkFlags::BUS_DOWN;
     let d = rig.run(20);
@@ -253,7 +270,7 @@ fn a_silent_chassis_or_a_lost_bus_stops_the_robot_though_the_service_still_publi
 
     // Samples keep coming (the service refreshes them), but no frame from the chassis: its
     // stamp stops moving.
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.run(200);
     let stamp = rig.state.stamp_ns;
     let mut d = rig.run(0);
@@ -278,7 +295,7 @@ fn a_silent_chassis_or_a_lost_bus_stops_the_robot_though_the_service_still_publi
 
 #[test]
 fn a_state_that_never_heard_the_chassis_is_stale() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.state = ChassisState::default();
     rig.frozen = true;
     let d = rig.run(20);
@@ -287,7 +304,7 @@ fn a_state_that_never_heard_the_chassis_is_stale() {
 
 #[test]
 fn an_obstacle_ahead_in_the_slow_zone_limits_only_the_forward_speed() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.run(100);
     rig.state.ranges.ultrasonic_m = [0.7, 0.6, 0.7];
     let d = rig.run(20);
@@ -303,7 +320,7 @@ fn an_obstacle_ahead_in_the_slow_zone_limits_only_the_forward_speed() {
 
 #[test]
 fn an_obstacle_ahead_in_the_stop_zone_blocks_forward_motion_but_lets_the_robot_reverse() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.run(100);
     rig.state.ranges.ultrasonic_m = [0.35, 0.3, 0.35];
     let d = rig.run(20);
@@ -327,7 +344,7 @@ fn an_obstacle_ahead_in_the_stop_zone_blocks_forward_motion_but_lets_the_robot_r
 
 #[test]
 fn an_obstacle_behind_blocks_reversing_but_not_driving_forward() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.state.ranges.ir_m = [0.14, 0.1, 0.14];
     let d = rig.run(40);
     let Command::Limit(e) = d.command else {
@@ -350,7 +367,7 @@ fn an_obstacle_behind_blocks_reversing_but_not_driving_forward() {
 
 #[test]
 fn obstacles_on_both_sides_block_both_directions_but_still_allow_a_slow_turn() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.state.ranges.ultrasonic_m = [0.2; 3];
     rig.state.ranges.ir_m = [0.1; 3];
     let d = rig.run(40);
@@ -367,7 +384,7 @@ fn obstacles_on_both_sides_block_both_directions_but_still_allow_a_slow_turn() {
 
 #[test]
 fn range_zones_release_only_beyond_their_hysteresis_and_after_the_release_time() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.state.ranges.ultrasonic_m = [0.3; 3];
     rig.run(40);
     // Just outside the stop zone but inside its 5 cm hysteresis: still blocked.
@@ -400,7 +417,7 @@ fn range_zones_release_only_beyond_their_hysteresis_and_after_the_release_time()
 
 #[test]
 fn one_noisy_clear_reading_does_not_release_a_zone() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.state.ranges.ultrasonic_m = [0.3; 3];
     rig.run(40);
     for _ in 0..10 {
@@ -414,7 +431,7 @@ fn one_noisy_clear_reading_does_not_release_a_zone() {
 
 #[test]
 fn robots_without_ranges_are_never_limited_by_the_range_rules() {
-    for robot in [RobotKind::TITAN, RobotKind::SCOUT_MINI] {
+    for robot in [RobotKind::Titan, RobotKind::ScoutMini] {
         let mut rig = Rig::new(robot);
         // Zeros in fields the robot never reported are not readings.
         rig.state.ranges = Default::default();
@@ -425,7 +442,7 @@ fn robots_without_ranges_are_never_limited_by_the_range_rules() {
 
 #[test]
 fn ranges_that_stop_updating_count_as_obstacles_in_both_directions() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.run(100);
     let stamp = rig.state.group_stamp_ns[Group::Ranges.index()];
     let mut d = rig.run(0);
@@ -445,7 +462,7 @@ fn ranges_that_stop_updating_count_as_obstacles_in_both_directions() {
 
 #[test]
 fn a_non_finite_range_reading_is_an_obstacle() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.state.ranges.ultrasonic_m = [6.0, f32::NAN, 6.0];
     let d = rig.run(40);
     assert!(matches!(d.command, Command::Limit(e) if e.forward_mps == 0.0));
@@ -453,8 +470,15 @@ fn a_non_finite_range_reading_is_an_obstacle() {
 
 #[test]
 fn a_speed_above_the_limit_stops_and_releases_below_the_margin() {
-    let mut rig = Rig::new(RobotKind::XBOT);
-    rig.state.motion.linear_mps = -1.7;
+    // The XBot's description: 1.5 m/s either way; × 1.1 + 0.05 m/s = 1.7 m/s.
+    let mut rig = Rig::new(RobotKind::Xbot);
+    rig.state.motion.linear_mps = -1.69;
+    assert_eq!(
+        rig.run(1000).command,
+        Command::Heartbeat,
+        "inside the margin"
+    );
+    rig.state.motion.linear_mps = -1.8;
     assert_eq!(
         rig.run(180).command,
         Command::Heartbeat,
@@ -462,18 +486,159 @@ fn a_speed_above_the_limit_stops_and_releases_below_the_margin() {
     );
     let d = rig.run(40);
     assert_eq!(d.command, Command::Stop);
-    assert_eq!(texts(&d), ["speed: 1.70 m/s > 1.65 m/s"]);
-    rig.state.motion.linear_mps = 1.5;
-    assert_eq!(rig.run(2000).command, Command::Stop, "inside the margin");
+    assert_eq!(texts(&d), ["speed: 1.80 m/s reverse > 1.70 m/s"]);
+    rig.state.motion.linear_mps = 1.6;
+    assert_eq!(
+        rig.run(2000).command,
+        Command::Stop,
+        "inside the release margin"
+    );
     rig.state.motion.linear_mps = 1.4;
     let d = rig.run(520);
     assert_eq!(d.command, Command::Heartbeat);
-    assert_eq!(texts(&d), ["speed: 1.40 m/s < 1.45 m/s, released"]);
+    assert_eq!(texts(&d), ["speed: 1.40 m/s < 1.50 m/s, released"]);
+}
+
+#[test]
+fn the_speed_limit_follows_the_descriptions_effective_limits_per_direction() {
+    let mut d = description(RobotKind::Hunter);
+    // chassisd's [mux.limits]: 0.5 m/s forward, the driver's 1.5 m/s reverse.
+    d.configured_limits.forward_mps = 0.5;
+    let mut rig = Rig::described(&d, "");
+    let levels = rig.engine.levels();
+    assert!((levels.speed_forward_mps.value.unwrap() - 0.6).abs() < 1e-9);
+    assert!((levels.speed_reverse_mps.value.unwrap() - 1.7).abs() < 1e-9);
+    rig.state.motion.linear_mps = -1.0;
+    assert_eq!(
+        rig.run(1000).command,
+        Command::Heartbeat,
+        "reverse: 1.7 m/s"
+    );
+    rig.state.motion.linear_mps = 0.7;
+    let d = rig.run(300);
+    assert_eq!(d.command, Command::Stop);
+    assert_eq!(texts(&d), ["speed: 0.70 m/s > 0.60 m/s"]);
+}
+
+#[test]
+fn a_newer_description_replaces_the_levels() {
+    // A SCOUT MINI heard speaking V1 (5 m/s full scale), then described again as V2 (3 m/s).
+    let mut rig = Rig::new(RobotKind::ScoutMini);
+    rig.state.motion.linear_mps = 4.0;
+    assert_eq!(rig.run(1000).command, Command::Heartbeat);
+    let v2 = describe(
+        &RobotKind::ScoutMini
+            .entry()
+            .default_profile(Some(chassis_protocols::Protocol::V2))
+            .unwrap(),
+    );
+    assert_eq!(v2.robot_limits.forward_mps, 3.0);
+    rig.engine.set_description(&v2);
+    let d = rig.run(300);
+    assert_eq!(d.command, Command::Stop);
+    assert_eq!(texts(&d), ["speed: 4.00 m/s > 3.35 m/s"]);
+}
+
+#[test]
+fn an_explicit_level_in_the_file_wins_over_the_description() {
+    let mut rig = Rig::with_config(
+        RobotKind::Xbot,
+        "[rules.speed]\nmax_linear_mps = 1.0\n[rules.battery]\nmin_voltage_v = 24.0\n",
+    );
+    let levels = rig.engine.levels().clone();
+    assert_eq!(levels.speed_forward_mps.value, Some(1.0));
+    assert_eq!(levels.speed_reverse_mps.value, Some(1.0));
+    assert!(matches!(levels.speed_forward_mps.origin, Origin::Config(_)));
+    // What the description gives is kept for --print-config.
+    let (described, _) = levels.speed_forward_mps.described.clone().unwrap();
+    assert!((described - 1.7).abs() < 1e-9);
+    assert_eq!(levels.battery_voltage_v.value, Some(24.0));
+    rig.state.system.battery_voltage_v = 23.8;
+    rig.state.motion.linear_mps = 1.2;
+    let d = rig.run(1100);
+    assert_eq!(d.command, Command::Stop);
+    assert_eq!(
+        texts(&d),
+        ["speed: 1.20 m/s > 1.00 m/s", "battery: 23.80 V < 24.00 V"]
+    );
+}
+
+#[test]
+fn without_a_description_only_the_files_levels_are_in_force_and_the_rest_is_said() {
+    let config = RawConfig::parse("[rules.battery]\nmin_voltage_v = 24.0\n")
+        .unwrap()
+        .validate()
+        .unwrap();
+    let engine = Engine::new(config, "safety", "chassis/test");
+    let levels = engine.levels();
+    assert_eq!(levels.speed_forward_mps.value, None);
+    assert_eq!(levels.battery_voltage_v.value, Some(24.0));
+    let warnings = levels.warnings(engine.config(), "chassis/test");
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert!(
+        warnings[0].starts_with("speed rule: no forward or reverse limit for chassis/test"),
+        "{warnings:?}"
+    );
+}
+
+#[test]
+fn a_description_without_a_level_a_rule_needs_is_said_naming_the_rule_and_the_robot() {
+    let mut d = description(RobotKind::Bunker);
+    d.battery.low_v = f64::NAN;
+    d.battery.critical_v = f64::NAN;
+    d.robot_limits.reverse_mps = f64::NAN;
+    let mut rig = Rig::described(&d, "");
+    let warnings = rig
+        .engine
+        .levels()
+        .warnings(rig.engine.config(), "chassis/test");
+    assert_eq!(warnings.len(), 2, "{warnings:?}");
+    assert!(
+        warnings[0].starts_with("speed rule: no reverse limit for chassis/test (AgileX BUNKER"),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings[1].starts_with("battery rule: no level for chassis/test (AgileX BUNKER"),
+        "{warnings:?}"
+    );
+    // At run time too: the robot reports a voltage, and nothing judges it.
+    let d = rig.run(20);
+    assert_eq!(d.notices.len(), 1, "{:?}", d.notices);
+    assert!(d.notices[0].starts_with("battery rule: chassis/test reports its"));
+}
+
+#[test]
+fn the_battery_rule_says_which_reading_it_judges() {
+    let mut rig = Rig::new(RobotKind::Titan);
+    let d = rig.run(20);
+    assert_eq!(d.infos.len(), 1, "{:?}", d.infos);
+    assert!(
+        d.infos[0]
+            .starts_with("battery: judging chassis/test by its state of charge (below 15.0 %"),
+        "{:?}",
+        d.infos
+    );
+    assert!(rig.run(1000).infos.is_empty(), "said once");
+    let mut rig = Rig::new(RobotKind::RangerMini);
+    // A protocol-V2 chassis reports a state of charge, but its description gives no level for
+    // one: the voltage is judged.
+    rig.state.touch(Group::BmsPack, ns(rig.now_ms));
+    let d = rig.run(20);
+    assert!(
+        d.infos[0].starts_with("battery: judging chassis/test by its voltage (below 23.5 V"),
+        "{:?}",
+        d.infos
+    );
+    assert!(
+        d.infos[0].contains("reports a state of charge"),
+        "{:?}",
+        d.infos
+    );
 }
 
 #[test]
 fn the_bumper_latches_the_estop_until_the_operator_releases_it() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.run(100);
     rig.state.system.fault_flags = FaultFlags::BUMPER | FaultFlags::BODY_EXCEPTION;
     let d = rig.run(20);
@@ -507,7 +672,7 @@ fn the_bumper_latches_the_estop_until_the_operator_releases_it() {
 
 #[test]
 fn a_release_while_the_bumper_is_still_pressed_does_not_relatch_until_it_is_pressed_again() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.state.system.fault_flags = FaultFlags::BUMPER;
     rig.run(40);
     rig.lock(Some(0));
@@ -529,7 +694,7 @@ fn a_release_while_the_bumper_is_still_pressed_does_not_relatch_until_it_is_pres
 
 #[test]
 fn a_latch_without_a_mux_status_stops_until_the_lock_can_be_engaged() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.mux = None;
     rig.state.system.fault_flags = FaultFlags::BUMPER;
     let d = rig.run(40);
@@ -542,7 +707,7 @@ fn a_latch_without_a_mux_status_stops_until_the_lock_can_be_engaged() {
 
 #[test]
 fn a_restarted_service_gets_the_latched_lock_engaged_again() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     rig.state.system.fault_flags = FaultFlags::BUMPER;
     rig.run(40);
     rig.lock(Some(0));
@@ -556,7 +721,7 @@ fn a_restarted_service_gets_the_latched_lock_engaged_again() {
 
 #[test]
 fn without_an_estop_lock_a_latching_rule_acts_as_a_stop() {
-    let mut rig = Rig::new(RobotKind::TITAN);
+    let mut rig = Rig::new(RobotKind::Titan);
     let m = rig.mux.as_mut().unwrap();
     m.lock_count = 0;
     rig.state.system.fault_flags = FaultFlags::BUMPER;
@@ -572,7 +737,7 @@ fn without_an_estop_lock_a_latching_rule_acts_as_a_stop() {
 
 #[test]
 fn the_operator_estop_latches_and_an_operator_lock_is_reported() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.run(100);
     assert!(rig.engine.request_operator_estop());
     let d = rig.run(20);
@@ -597,7 +762,7 @@ fn the_operator_estop_latches_and_an_operator_lock_is_reported() {
 
 #[test]
 fn the_strictest_rule_wins() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     rig.state.ranges.ultrasonic_m = [0.5; 3];
     assert!(matches!(rig.run(40).command, Command::Limit(_)));
     rig.state.system.fault_flags = FaultFlags::MOTOR_DRIVER_ERROR;
@@ -612,7 +777,7 @@ fn the_strictest_rule_wins() {
 
 #[test]
 fn a_slow_action_publishes_the_slow_envelope_in_every_direction() {
-    let mut rig = Rig::with_config(RobotKind::TITAN, "[rules.battery]\naction = \"slow\"\n");
+    let mut rig = Rig::with_config(RobotKind::Titan, "[rules.battery]\naction = \"slow\"\n");
     rig.state.system.battery_soc_pct = 5.0;
     let d = rig.run(1100);
     assert_eq!(
@@ -628,7 +793,7 @@ fn a_slow_action_publishes_the_slow_envelope_in_every_direction() {
 
 #[test]
 fn a_range_rule_set_to_stop_stops_inside_its_stop_zone_only() {
-    let mut rig = Rig::with_config(RobotKind::XBOT, "[rules.ultrasonic]\naction = \"stop\"\n");
+    let mut rig = Rig::with_config(RobotKind::Xbot, "[rules.ultrasonic]\naction = \"stop\"\n");
     rig.state.ranges.ultrasonic_m = [0.5; 3];
     assert!(matches!(rig.run(40).command, Command::Limit(_)));
     rig.state.ranges.ultrasonic_m = [0.2; 3];
@@ -638,7 +803,7 @@ fn a_range_rule_set_to_stop_stops_inside_its_stop_zone_only() {
 #[test]
 fn disabled_rules_never_trigger() {
     let mut rig = Rig::with_config(
-        RobotKind::XBOT,
+        RobotKind::Xbot,
         "[rules.ultrasonic]\nenabled = false\n[rules.ir]\nenabled = false\n\
          [rules.stale]\nenabled = false\n[rules.operator]\nenabled = false\n",
     );
@@ -655,7 +820,7 @@ fn disabled_rules_never_trigger() {
 
 #[test]
 fn the_status_reports_the_decision_counts_and_the_last_event() {
-    let mut rig = Rig::new(RobotKind::XBOT);
+    let mut rig = Rig::new(RobotKind::Xbot);
     for _ in 0..3 {
         rig.state.ranges.ultrasonic_m = [0.3; 3];
         rig.run(40);
@@ -677,4 +842,74 @@ fn the_status_reports_the_decision_counts_and_the_last_event() {
     assert_eq!(status.last_text(), "ultrasonic: slow zone, 0.60 m < 0.80 m");
     assert_eq!(status.enabled_rules, (1 << SafetyRule::COUNT) - 1);
     assert_eq!(status.estop, EstopState::FREE);
+}
+
+/// Every robot of the registry, end to end on simulated time: its default description, its
+/// driver against its simulated firmware, and the engine judging what the driver reports. A
+/// robot whose description lacks a level, or whose chassis reports no reading the level is
+/// for, fails here.
+#[test]
+fn every_robot_of_the_registry_has_a_speed_rule_and_a_battery_rule() {
+    use chassis_protocols::{DriverConfig, Injection, Timestamp, pair::Pair};
+    use std::time::Duration;
+
+    /// Runs the pair for `ms` in 20 ms steps, evaluating the engine on what the driver reports;
+    /// returns the rules that were in force at some step and every event text.
+    fn watch<D: chassis_protocols::Driver, F: chassis_protocols::Firmware>(
+        pair: &mut Pair<D, F>,
+        engine: &mut Engine,
+        ms: u64,
+    ) -> (u32, Vec<String>) {
+        let (mut active, mut texts) = (0, Vec::new());
+        for _ in 0..ms / 20 {
+            pair.run_for(Duration::from_millis(20));
+            let now = pair.now().as_nanos();
+            let d = engine.evaluate(now, pair.driver.state(), None);
+            active |= d.active_rules;
+            texts.extend(d.events.into_iter().map(|e| e.text));
+        }
+        (active, texts)
+    }
+
+    for kind in RobotKind::ALL {
+        let entry = kind.entry();
+        let profile = entry.defaults();
+        let description = describe(&profile);
+        let config = RawConfig::default().validate().unwrap();
+        let mut engine = Engine::new(config, "safety", "chassis/test");
+        engine.set_description(&description);
+        let warnings = engine.levels().warnings(engine.config(), "chassis/test");
+        assert!(warnings.is_empty(), "{kind}: {warnings:?}");
+
+        let start = Timestamp::from_millis(1_000);
+        let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
+        let firmware = (entry.firmware)(&profile, start);
+        let mut pair = Pair::new(driver, firmware, start);
+        let (active, texts) = watch(&mut pair, &mut engine, 2000);
+        let both = SafetyRule::bit(SafetyRule::SPEED) | SafetyRule::bit(SafetyRule::BATTERY);
+        assert_eq!(active & both, 0, "{kind} at rest: {texts:?}");
+
+        // A runaway past the description's limit.
+        let limit = description.effective_limits().forward_mps;
+        assert!(pair.inject(Injection::Runaway(Some(limit * 1.5))), "{kind}");
+        let (active, texts) = watch(&mut pair, &mut engine, 2000);
+        assert_ne!(
+            active & SafetyRule::bit(SafetyRule::SPEED),
+            0,
+            "{kind}: no speed rule at {} m/s past a {limit} m/s limit: {texts:?}",
+            limit * 1.5
+        );
+        assert!(pair.inject(Injection::Runaway(None)), "{kind}");
+        watch(&mut pair, &mut engine, 2000);
+
+        // A flat battery, as the robot reports it (state of charge or voltage).
+        assert!(pair.inject(Injection::Battery { soc_pct: 5.0 }), "{kind}");
+        let (active, texts) = watch(&mut pair, &mut engine, 3000);
+        assert_ne!(
+            active & SafetyRule::bit(SafetyRule::BATTERY),
+            0,
+            "{kind}: no battery rule at 5 % ({:?} V reported): {texts:?}",
+            pair.driver.state().system.battery_voltage_v
+        );
+    }
 }

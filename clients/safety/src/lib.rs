@@ -7,8 +7,12 @@
 //! arriving, a silent chassis and blind range sensors all stop the robot.
 //!
 //! * [`config`]: the TOML file, its defaults and its validation;
+//! * [`levels`]: the speed and battery levels, from the robot's description (never from a
+//!   table of robots here) or the file, and where each comes from;
 //! * [`engine`]: the pure rule engine (state and mux status in, a decision out);
-//! * [`monitor`]: the loop that connects, reads, decides, publishes and reconnects.
+//! * [`monitor`]: the loop that connects, reads the description, decides, publishes and
+//!   reconnects;
+//! * [`print`]: `--print-config`, every value with where it comes from.
 //!
 //! What it publishes on its source, by the strictest rule in force: a heartbeat while all is
 //! well; a speed envelope (`VelocityRequest::limit`) for `slow` rules and the range rules' zones
@@ -19,4 +23,6 @@
 
 pub mod config;
 pub mod engine;
+pub mod levels;
 pub mod monitor;
+pub mod print;

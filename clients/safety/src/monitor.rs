@@ -8,6 +8,10 @@
 //! * The request is sent at once when the decision changes and re-sent every
 //!   `publish_period_ms` (50 ms), well inside the source's 200 ms timeout.
 //! * `SafetyStatus` is published on every change and every `status_period_ms` (100 ms).
+//! * The robot's description (`chassis/<name>/robot`) is read on every connection and watched
+//!   for a newer one (chassisd's protocol detection deciding, a restarted chassisd with another
+//!   configuration): the speed and battery rules take their levels from it, and the log says
+//!   which, from where, and loudly what is missing.
 //! * SIGUSR1 latches the operator e-stop; SIGINT / SIGTERM send a last stop and end the loop
 //!   (exit code 0). Nothing else ends it: a lost service is logged (ERROR) and reconnected with
 //!   backoff (100 ms doubling to 2 s).
@@ -20,8 +24,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use chassis_client::{
-    ClientError, Publication, Robot, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus, Source,
-    Ticker, install_signal_handlers, now_ns, termination_requested,
+    ClientError, Publication, Robot, RobotDescription, SafetyAction, SafetyEvent, SafetyRule,
+    SafetyStatus, Source, Ticker, WireProtocol, install_signal_handlers, now_ns,
+    termination_requested,
 };
 use thiserror::Error;
 use tracing::{debug, error, info, info_span, warn};
@@ -57,6 +62,9 @@ enum LinkLost {
 const SOURCE_TAKEN_ATTEMPTS: u32 = 5;
 /// While the state is stale, how often to check whether the service is still there.
 const SERVED_CHECK_NS: u64 = 1_000_000_000;
+/// How long a new connection waits for the robot's description (chassisd hands it to a new
+/// reader within one tick of its loop).
+const DESCRIPTION_WAIT: Duration = Duration::from_secs(2);
 
 /// Connects to the robot `name`, publishes as `source`, and runs until SIGINT or SIGTERM.
 pub fn run(config: Config, name: &str, source: &str) -> Result<(), MonitorError> {
@@ -65,7 +73,8 @@ pub fn run(config: Config, name: &str, source: &str) -> Result<(), MonitorError>
     let operator = Arc::new(AtomicBool::new(false));
     signal_hook::flag::register(signal_hook::consts::SIGUSR1, Arc::clone(&operator))
         .map_err(MonitorError::Signal)?;
-    let mut engine = Engine::new(config, source);
+    let label = format!("chassis/{name}");
+    let mut engine = Engine::new(config, source, &label);
     let mut status = SafetyStatus {
         started_ns: now_ns(),
         ..SafetyStatus::default()
@@ -74,6 +83,7 @@ pub fn run(config: Config, name: &str, source: &str) -> Result<(), MonitorError>
         "safety monitor for chassis/{name} as source '{source}': rules {}",
         SafetyRule::names(engine.enabled_rules()).join(", ")
     );
+    let mut described = Described::default();
     let mut backoff_ms = 100u64;
     let mut failures = 0u32;
     let mut taken = 0u32;
@@ -84,7 +94,7 @@ pub fn run(config: Config, name: &str, source: &str) -> Result<(), MonitorError>
                 failures = 0;
                 taken = 0;
                 info!("connected to chassis/{name}: publishing as source '{source}'");
-                match serve(&mut engine, link, &operator, &mut status) {
+                match serve(&mut engine, link, &operator, &mut status, &mut described) {
                     Ok(()) => return Ok(()),
                     Err(reason) => error!(
                         "lost chassis/{name}: {reason}; the robot stops (its required source \
@@ -169,12 +179,77 @@ struct Reported {
     active_rules: u32,
 }
 
+/// The description in force: which one (`seq`, `stamp_ns`), and the levels last logged.
+#[derive(Debug, Default)]
+struct Described {
+    applied: Option<(u64, u64)>,
+    logged: Vec<String>,
+}
+
+impl Described {
+    /// Takes a description the engine has not seen yet; logs the robot and the levels when
+    /// they change, and loudly what a rule lacks.
+    fn apply(&mut self, engine: &mut Engine, d: &RobotDescription) {
+        if self.applied == Some((d.seq, d.stamp_ns)) {
+            return;
+        }
+        self.applied = Some((d.seq, d.stamp_ns));
+        engine.set_description(d);
+        let label = format!("chassis/{}", d.name());
+        let robot = format!(
+            "{label}: {} ({}, model {}, protocol {})",
+            d.display_name(),
+            d.kind_name(),
+            d.model(),
+            WireProtocol::name(d.protocol),
+        );
+        let summary = engine.levels().summary(engine.config());
+        let warnings = engine.levels().warnings(engine.config(), &label);
+        // Logged when the robot or a level changed, not at every reconnection.
+        let said: Vec<String> = std::iter::once(robot.clone())
+            .chain(summary.iter().cloned())
+            .chain(warnings.iter().cloned())
+            .collect();
+        if said == self.logged {
+            debug!("description seq {}: nothing new", d.seq);
+            return;
+        }
+        info!("{robot}; description seq {}", d.seq);
+        for line in &summary {
+            info!("{line}");
+        }
+        for warning in &warnings {
+            warn!("{warning}");
+        }
+        self.logged = said;
+    }
+
+    /// A connection that found no description: said loudly when a rule waits for one.
+    fn missing(&self, engine: &Engine, name: &str, error: &ClientError) {
+        let warnings = engine
+            .levels()
+            .warnings(engine.config(), &format!("chassis/{name}"));
+        if warnings.is_empty() {
+            debug!("no description of chassis/{name}: {error}");
+        } else {
+            warn!(
+                "no description of chassis/{name} within {DESCRIPTION_WAIT:?} ({error}); until \
+                 one comes:"
+            );
+            for warning in warnings {
+                warn!("{warning}");
+            }
+        }
+    }
+}
+
 /// Runs the loop on one connection: `Ok` on SIGINT/SIGTERM, `Err` when the service is gone.
 fn serve(
     engine: &mut Engine,
     mut link: Link,
     operator: &AtomicBool,
     status: &mut SafetyStatus,
+    described: &mut Described,
 ) -> Result<(), LinkLost> {
     let evaluate_period = Duration::from_nanos(engine.config().evaluate_period_ns);
     let publish_period_ns = engine.config().publish_period_ns;
@@ -185,6 +260,11 @@ fn serve(
     let mut last_status_ns = 0u64;
     let mut last_served_check_ns = now_ns();
     let mut reported = Reported::default();
+    let name = link.robot.name().to_string();
+    match link.robot.description(DESCRIPTION_WAIT) {
+        Ok(d) => described.apply(engine, &d),
+        Err(e) => described.missing(engine, &name, &e),
+    }
     loop {
         if termination_requested() {
             let stopped = link.source.stop();
@@ -227,6 +307,11 @@ fn serve(
             debug!("reading the mux status: {e}");
             None
         });
+        match link.robot.latest_description() {
+            Ok(Some(d)) => described.apply(engine, &d),
+            Ok(None) => {}
+            Err(e) => debug!("reading the robot description: {e}"),
+        }
         let now = now_ns();
         let decision = engine.evaluate(now, &state, mux.as_ref());
         report(&decision, &lock, &mut reported);
@@ -301,6 +386,9 @@ fn rounded(v: f64) -> f64 {
 fn report(decision: &Decision, lock: &str, reported: &mut Reported) {
     for notice in &decision.notices {
         warn!("{notice}");
+    }
+    for line in &decision.infos {
+        info!("{line}");
     }
     for e in &decision.events {
         let rule = SafetyRule::name(e.rule);

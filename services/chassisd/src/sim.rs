@@ -25,10 +25,12 @@ use crate::clock;
 pub use chassis_protocols::BoxedFirmware;
 
 /// Why a [`SimRequest`] asks for nothing the simulator can do.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum BadSimRequest {
     #[error("{0} must be a finite, non-negative number")]
     NotFinite(&'static str),
+    #[error("a runaway speed must be a number of at most {max} m/s either way")]
+    BadRunaway { max: f64 },
     #[error("unknown simulator request kind {0}")]
     UnknownKind(u8),
 }
@@ -126,6 +128,13 @@ pub fn injection_of(request: &SimRequest) -> Result<Injection, BadSimRequest> {
         SimKind::OBSTACLE_AHEAD => Injection::ObstacleAhead(on.then_some(finite("range")?)),
         SimKind::OBSTACLE_BEHIND => Injection::ObstacleBehind(on.then_some(finite("range")?)),
         SimKind::ESTOP_SWITCH => Injection::EStop(on),
+        SimKind::RUNAWAY => {
+            let max = chassis_protocols::firmware::MAX_RUNAWAY_MPS;
+            if on && !(value.is_finite() && value.abs() <= max) {
+                return Err(BadSimRequest::BadRunaway { max });
+            }
+            Injection::Runaway(on.then_some(value))
+        }
         SimKind::FLOOD => Injection::Flood {
             frames_per_s: finite("frame rate")?.min(1e6) as u32,
         },
@@ -463,5 +472,19 @@ mod tests {
             ..SimRequest::default()
         };
         assert!(injection_of(&nan).is_err());
+        let reverse = SimRequest {
+            kind: SimKind::RUNAWAY,
+            flag: 1,
+            value: -1.0,
+            ..SimRequest::default()
+        };
+        assert_eq!(injection_of(&reverse), Ok(Injection::Runaway(Some(-1.0))));
+        let absurd = SimRequest {
+            value: 1e6,
+            ..reverse
+        };
+        assert!(injection_of(&absurd).is_err());
+        let clear = SimRequest { flag: 0, ..absurd };
+        assert_eq!(injection_of(&clear), Ok(Injection::Runaway(None)));
     }
 }

@@ -48,6 +48,10 @@ pub enum Injection {
     Flood { frames_per_s: u32 },
     /// The chassis' own E-stop is pressed (`true`) or released (AgileX protocol V2).
     EStop(bool),
+    /// The speed loop runs away (downhill, a failing speed controller, bad feedback): the
+    /// chassis drives at this forward speed, m/s (negative: reverse), whatever it is commanded
+    /// and past its own limits; `None` gives the control back. Every simulated chassis has it.
+    Runaway(Option<f64>),
 }
 
 impl Injection {
@@ -65,6 +69,7 @@ impl Injection {
             Injection::ObstacleBehind(_) => "obstacle-behind",
             Injection::Flood { .. } => "flood",
             Injection::EStop(_) => "estop-switch",
+            Injection::Runaway(_) => "runaway",
         }
     }
 }
@@ -373,6 +378,20 @@ pub(crate) fn garbage_frames(id: u16, bytes: &[u8]) -> impl Iterator<Item = CanF
 /// An injected or configured state of charge, % (clamped to 0-100); `None` when not a number.
 pub(crate) fn state_of_charge(soc_pct: f64) -> Option<f64> {
     soc_pct.is_finite().then(|| soc_pct.clamp(0.0, 100.0))
+}
+
+/// Fastest runaway a simulated chassis takes, m/s (the service rejects requests beyond 50 m/s as
+/// absurd; a runaway is no request, but nothing real drives faster either).
+pub const MAX_RUNAWAY_MPS: f64 = 50.0;
+
+/// An injected runaway speed, m/s: `Some(None)` gives the control back, `None` when the speed is
+/// not a number or beyond [`MAX_RUNAWAY_MPS`].
+pub(crate) fn runaway_speed(speed: Option<f64>) -> Option<Option<f64>> {
+    match speed {
+        None => Some(None),
+        Some(v) if v.is_finite() && v.abs() <= MAX_RUNAWAY_MPS => Some(Some(v)),
+        Some(_) => None,
+    }
 }
 
 /// The index of motor driver `motor` (numbered from 1) among `count`, if there is one.

@@ -50,7 +50,7 @@ use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
     BatteryModel, Firmware, Injection, Outbox, Pose, SimTruth, first_order_lag, garbage_frames,
-    state_of_charge, substeps,
+    runaway_speed, state_of_charge, substeps,
 };
 use crate::profile::Profile;
 use crate::registry::RobotKind;
@@ -89,6 +89,8 @@ pub struct V2Sim {
     lights: Lights,
     steering_offset: i16,
     soc_pct: f64,
+    /// An injected runaway: the forward speed the chassis drives at whatever it is told.
+    runaway_mps: Option<f64>,
     pose: Pose,
     odometer_m: [f64; 2],
     last_update: Timestamp,
@@ -150,6 +152,7 @@ impl V2Sim {
             lights: Lights::default(),
             steering_offset: 22000,
             soc_pct: 100.0,
+            runaway_mps: None,
             pose: Pose::default(),
             odometer_m: [0.0; 2],
             last_update: now,
@@ -258,7 +261,7 @@ impl V2Sim {
     }
 
     fn step(&mut self, dt: f64) {
-        let target = if self.drive_blocked() {
+        let mut target = if self.drive_blocked() {
             Motion {
                 steer_rad: self.applied.steer_rad,
                 ..STOP
@@ -266,6 +269,9 @@ impl V2Sim {
         } else {
             self.command
         };
+        if let Some(runaway) = self.runaway_mps {
+            target.linear_mps = runaway;
+        }
         let tau = self.speed_time_constant_s;
         self.applied = Motion {
             linear_mps: first_order_lag(self.applied.linear_mps, target.linear_mps, tau, dt),
@@ -670,6 +676,12 @@ impl Firmware for V2Sim {
                     return false;
                 };
                 self.soc_pct = soc_pct;
+            }
+            Injection::Runaway(speed) => {
+                let Some(speed) = runaway_speed(speed) else {
+                    return false;
+                };
+                self.runaway_mps = speed;
             }
             Injection::Silence(duration) => self.outbox.silence(now, duration),
             Injection::Garbage(bytes) => {

@@ -6,6 +6,7 @@ use chassis_interfaces::{Kinematics, MAX_JOINTS, MAX_SENSORS, Twist, WireProtoco
 
 use super::*;
 use crate::description::describe;
+use crate::firmware::Injection;
 use crate::pair::Pair;
 
 #[test]
@@ -92,6 +93,39 @@ fn every_robot_drives_its_simulated_firmware_in_each_of_its_protocols() {
             assert_eq!(state.robot, kind.id());
             assert!(state.motion.linear_mps > 0.2, "{kind}: {:?}", state.motion);
         }
+    }
+}
+
+/// A runaway (the speed loop fails, the robot rolls downhill) drives every simulated chassis
+/// past its limit whatever the driver commands, the driver reports the speed it measures, and
+/// clearing it gives the control back: what the safety monitor's speed rule is tested with.
+#[test]
+fn every_robot_runs_away_past_its_limit_when_told_to_and_obeys_again_after() {
+    for kind in RobotKind::ALL {
+        let entry = kind.entry();
+        let profile = entry.defaults();
+        let limit = describe(&profile).robot_limits.forward_mps;
+        let start = Timestamp::from_millis(1_000);
+        let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
+        let firmware = (entry.firmware)(&profile, start);
+        let mut pair = Pair::new(driver, firmware, start);
+        pair.run_for(Duration::from_secs(2));
+        let runaway = limit + 0.5;
+        assert!(pair.inject(Injection::Runaway(Some(runaway))), "{kind}");
+        let now = pair.now();
+        pair.driver.set_command(now, &Twist::ZERO);
+        pair.run_for(Duration::from_secs(3));
+        let truth = pair.firmware.truth().linear_mps;
+        let measured = f64::from(pair.driver.state().motion.linear_mps);
+        assert!(
+            truth > limit + 0.4 && measured > limit + 0.4,
+            "{kind}: limit {limit} m/s, runaway {runaway}: true {truth:.3}, measured {measured:.3}"
+        );
+        assert!(pair.inject(Injection::Runaway(None)), "{kind}");
+        pair.run_for(Duration::from_secs(3));
+        let measured = pair.driver.state().motion.linear_mps;
+        assert!(measured.abs() < 0.05, "{kind}: still {measured} m/s");
+        assert!(!pair.inject(Injection::Runaway(Some(f64::NAN))), "{kind}");
     }
 }
 

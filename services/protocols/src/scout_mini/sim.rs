@@ -17,7 +17,7 @@ use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
     BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
-    garbage_frames, motor_index, non_negative, state_of_charge, substeps,
+    garbage_frames, motor_index, non_negative, runaway_speed, state_of_charge, substeps,
 };
 use crate::profile::ScoutMiniProfile;
 use crate::registry::RobotKind;
@@ -200,6 +200,8 @@ pub struct ScoutMiniSim {
     driver_temp_c: [f64; 4],
     soc_pct: f64,
     pack_current_a: f64,
+    /// An injected runaway: the forward speed the chassis drives at whatever it is told.
+    runaway_mps: Option<f64>,
 
     // Output.
     fast: Grid,
@@ -297,6 +299,7 @@ impl ScoutMiniSim {
             current_sq_a2: [0.0; 4],
             driver_temp_c: [Self::AMBIENT_C; 4],
             soc_pct: 100.0,
+            runaway_mps: None,
             pack_current_a: Self::IDLE_CURRENT_A,
             fast: Grid::new(Self::FEEDBACK_PERIOD, now),
             flood: None,
@@ -603,7 +606,11 @@ impl ScoutMiniSim {
     /// Integrates `dt` seconds (one sub-step of [`substeps`], never zero).
     fn step(&mut self, dt: f64) {
         self.refresh_conditions();
-        let (target, tau) = self.target();
+        let (mut target, mut tau) = self.target();
+        if let Some(runaway) = self.runaway_mps {
+            target.linear_mps = runaway;
+            tau = self.speed_time_constant_s;
+        }
         let lag = |from: f64, to: f64| first_order_lag(from, to, tau, dt);
         let (v0, w0) = (self.linear_mps, self.angular_radps);
         let v1 = lag(v0, target.linear_mps);
@@ -812,6 +819,12 @@ impl Firmware for ScoutMiniSim {
                     self.command = Motion::default();
                     self.command_until = None;
                 }
+            }
+            Injection::Runaway(speed) => {
+                let Some(speed) = runaway_speed(speed) else {
+                    return false;
+                };
+                self.runaway_mps = speed;
             }
             Injection::Reboot => self.reboot(now),
             Injection::Silence(duration) => self.outbox.silence(now, duration),

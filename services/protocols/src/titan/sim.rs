@@ -18,7 +18,7 @@ use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
     BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
-    garbage_frames, motor_index, non_negative, state_of_charge, substeps,
+    garbage_frames, motor_index, non_negative, runaway_speed, state_of_charge, substeps,
 };
 use crate::profile::TitanProfile;
 use crate::registry::RobotKind;
@@ -222,6 +222,8 @@ pub struct TitanSim {
     encoder_counts: [f64; 4],
     soc_pct: f64,
     pack_current_a: f64,
+    /// An injected runaway: the forward speed the chassis drives at whatever it is told.
+    runaway_mps: Option<f64>,
 
     // Output.
     fast: Grid,
@@ -322,6 +324,7 @@ impl TitanSim {
             motor_current_a: [0.0; 4],
             encoder_counts: [0.0; 4],
             soc_pct: 100.0,
+            runaway_mps: None,
             pack_current_a: Self::IDLE_CURRENT_A,
             fast: Grid::new(Self::FAST_PERIOD, now),
             slow: Grid::new(Self::SLOW_PERIOD, now),
@@ -665,10 +668,10 @@ impl TitanSim {
     fn step(&mut self, dt: f64) {
         self.refresh_conditions();
         let blocked = self.drive_blocked();
-        let (target, tau) = if blocked {
-            (0.0, self.stop_time_constant_s)
-        } else {
-            (self.command.linear_mps, self.speed_time_constant_s)
+        let (target, tau) = match self.runaway_mps {
+            Some(runaway) => (runaway, self.speed_time_constant_s),
+            None if blocked => (0.0, self.stop_time_constant_s),
+            None => (self.command.linear_mps, self.speed_time_constant_s),
         };
         let v0 = self.linear_mps;
         let v1 = first_order_lag(v0, target, tau, dt);
@@ -1036,6 +1039,12 @@ impl Firmware for TitanSim {
                 } else if self.mode == Mode::Remote {
                     self.enter_standby();
                 }
+            }
+            Injection::Runaway(speed) => {
+                let Some(speed) = runaway_speed(speed) else {
+                    return false;
+                };
+                self.runaway_mps = speed;
             }
             Injection::Reboot => self.reboot(now),
             Injection::Silence(duration) => self.outbox.silence(now, duration),

@@ -12,7 +12,7 @@ use crate::DecodeError;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
     BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, first_order_lag, motor_index,
-    non_negative, state_of_charge, substeps,
+    non_negative, runaway_speed, state_of_charge, substeps,
 };
 use crate::profile::XbotProfile;
 use crate::registry::RobotKind;
@@ -131,6 +131,8 @@ pub struct XbotSim {
     lift_current_a: f64,
     soc_pct: f64,
     pack_current_a: f64,
+    /// An injected runaway: the forward speed the chassis drives at whatever it is told.
+    runaway_mps: Option<f64>,
 
     // Output.
     reports: Grid,
@@ -242,6 +244,7 @@ impl XbotSim {
             motor_current_a: [0.0; 4],
             lift_current_a: 0.0,
             soc_pct: 100.0,
+            runaway_mps: None,
             pack_current_a: Self::IDLE_CURRENT_A,
             reports: Grid::new(Self::REPORT_PERIOD, now),
             flood: None,
@@ -544,13 +547,18 @@ impl XbotSim {
     /// Integrates `dt` seconds (one sub-step of [`substeps`], never zero).
     fn step(&mut self, dt: f64) {
         let blocked = self.drive_blocked();
-        let (targets, tau) = if blocked {
-            ([0.0; 4], self.stop_time_constant_s)
-        } else {
-            (
+        let wheels = self.wheels();
+        let (targets, tau) = match self.runaway_mps {
+            // Every driven wheel at the runaway speed: straight ahead, past every limit.
+            Some(runaway) => (
+                std::array::from_fn(|i| if i < wheels { runaway } else { 0.0 }),
+                self.speed_time_constant_s,
+            ),
+            None if blocked => ([0.0; 4], self.stop_time_constant_s),
+            None => (
                 self.wheel_targets(&self.command),
                 self.speed_time_constant_s,
-            )
+            ),
         };
         let w0 = self.wheel_mps;
         let w1: [f64; 4] = std::array::from_fn(|i| first_order_lag(w0[i], targets[i], tau, dt));
@@ -565,7 +573,6 @@ impl XbotSim {
         let (v0, _, _) = self.body(&w0);
         let (v1, _, _) = self.body(&w1);
         self.forward_accel_mps2 = (v1 - v0) / dt;
-        let wheels = self.wheels();
         for i in 0..4 {
             let driving = i < wheels && self.powered && !self.motor_lost[i];
             let accel = (w1[i] - w0[i]) / dt;
@@ -786,6 +793,12 @@ impl Firmware for XbotSim {
                 self.soc_pct = soc_pct;
             }
             Injection::Bumper(_) | Injection::RcTakeover(_) | Injection::EStop(_) => return false,
+            Injection::Runaway(speed) => {
+                let Some(speed) = runaway_speed(speed) else {
+                    return false;
+                };
+                self.runaway_mps = speed;
+            }
             Injection::Reboot => self.reboot(now),
             Injection::Silence(duration) => self.outbox.silence(now, duration),
             Injection::Garbage(bytes) => {
