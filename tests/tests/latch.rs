@@ -83,8 +83,118 @@ fn assert_held_until_released(env: &Env, n: &str, robot: &mut Robot, teleop: &mu
     assert_eq!(m.output, Twist::ZERO);
     assert_eq!(m.zero_reason, ZeroReason::LOCKED);
     assert!(control(env, n, "estop-release").contains("estop released"));
+    // A release never starts motion: teleop lets go, then drives again.
+    teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
     let peak = drive(robot, teleop, Duration::from_secs(1));
-    assert!(peak > 0.2, "no motion after the release: {peak}");
+    assert!(peak > 0.2, "no motion after the release and a zero: {peak}");
+}
+
+/// `chassis pub velocity` keeps asking as teleop for 0.3 m/s, in a process of its own, through
+/// an e-stop and its release.
+fn keep_asking(env: &mut Env, n: &str) -> usize {
+    env.spawn(
+        "pub",
+        "chassis",
+        &[
+            "pub", "velocity", "--name", n, "--source", "teleop", "--vx", "0.3", "--rate", "20",
+        ],
+    )
+}
+
+/// The fastest the chassis reported over `duration`, reading only.
+fn peak_speed(robot: &mut Robot, duration: Duration) -> f32 {
+    let end = Instant::now() + duration;
+    let mut max = 0.0f32;
+    while Instant::now() < end {
+        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(20)) {
+            max = max.max(state.motion.linear_mps.abs());
+        }
+    }
+    max
+}
+
+/// After `estop-release` with teleop still asking for motion: nothing moves, the answer, the
+/// mux and `chassis status` say what the robot waits for.
+fn assert_release_waits_for_teleop(env: &Env, n: &str, robot: &mut Robot) {
+    let answer = control(env, n, "estop-release");
+    assert!(
+        answer.contains("nothing moves until teleop asks for zero"),
+        "{answer}"
+    );
+    let peak = peak_speed(robot, Duration::from_millis(1500));
+    assert!(
+        peak < 0.01,
+        "moved at {peak} m/s after the release by itself"
+    );
+    let m = mux(robot);
+    assert_eq!(m.output, Twist::ZERO);
+    assert_eq!(m.zero_reason, ZeroReason::AWAITING_ZERO);
+    assert_eq!(m.awaiting().map(|s| s.name()), Some("teleop"));
+    let status = env.chassis(&["status", "--name", n]);
+    let status = String::from_utf8_lossy(&status.stdout).to_string();
+    assert!(
+        status.contains("waiting for a zero command from teleop"),
+        "{status}"
+    );
+}
+
+/// ISO 13850 / IEC 60204-1: resetting a stop shall not initiate a restart. The operator's
+/// release leaves the robot still while teleop asks for motion; a zero from teleop (here: it
+/// stops, and a new `chassis pub` asks again) lets it drive.
+#[test]
+fn an_estop_release_never_restarts_motion_by_itself() {
+    let mut env = Env::new("latch-reset");
+    let n = name("lr");
+    start(&mut env, "chassisd", &n);
+    let mut robot = env.robot(&n, UP);
+    let asking = keep_asking(&mut env, &n);
+    let moving = wait_for(Duration::from_secs(5), || {
+        peak_speed(&mut robot, Duration::from_millis(100)) > 0.2
+    });
+    assert!(moving.is_some(), "chassis pub never drove\n{}", env.logs());
+    assert!(control(&env, &n, "estop").contains("estop engaged"));
+    assert_eq!(mux(&mut robot).output, Twist::ZERO);
+    let stopped = wait_for(Duration::from_secs(5), || {
+        peak_speed(&mut robot, Duration::from_millis(100)) < 0.001
+    });
+    assert!(stopped.is_some(), "the e-stop did not stop the chassis");
+    assert_release_waits_for_teleop(&env, &n, &mut robot);
+    // Teleop lets go: its publisher stops (its requests time out), then asks again.
+    env.proc(asking).signal(Signal::SIGTERM);
+    env.proc(asking).wait_exit(Duration::from_secs(3));
+    pause(Duration::from_millis(400));
+    keep_asking(&mut env, &n);
+    let again = wait_for(Duration::from_secs(5), || {
+        peak_speed(&mut robot, Duration::from_millis(100)) > 0.2
+    });
+    assert!(
+        again.is_some(),
+        "no motion once teleop asked again\n{}",
+        env.logs()
+    );
+}
+
+/// A latch restored after a restart obeys the same rule when it is released.
+#[test]
+fn the_release_of_a_latch_restored_after_a_restart_never_starts_motion() {
+    let mut env = Env::new("latch-restored-reset");
+    let n = name("lq");
+    let first = start(&mut env, "first", &n);
+    let mut robot = env.robot(&n, UP);
+    assert!(control(&env, &n, "estop").contains("estop engaged"));
+    kill(&mut env, first);
+    start(&mut env, "again", &n);
+    let mut robot_again = env.robot(&n, UP);
+    drop(robot);
+    keep_asking(&mut env, &n);
+    assert!(peak_speed(&mut robot_again, Duration::from_millis(800)) < 0.01);
+    assert_eq!(
+        estop_held(&mut robot_again),
+        (true, LockStatus::HOLDER_OPERATOR)
+    );
+    assert_release_waits_for_teleop(&env, &n, &mut robot_again);
+    robot = robot_again;
+    assert!(peak_speed(&mut robot, Duration::from_millis(100)) < 0.01);
 }
 
 #[test]

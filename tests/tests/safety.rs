@@ -382,6 +382,8 @@ fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
         "peak {high}"
     );
     run_ok(&env, &["control", "--name", &n, "estop-release"]);
+    // A release never starts motion (tests/tests/latch.rs): teleop asks for zero, then drives.
+    teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
     let (_, high) = drive(
         &mut robot,
         &mut [(&mut teleop, go)],
@@ -389,7 +391,7 @@ fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
     );
     assert!(
         high > 0.2,
-        "no motion after the release: {high}\n{}",
+        "no motion after the release and teleop's zero: {high}\n{}",
         env.logs()
     );
     assert!(env.proc(monitor).is_running());

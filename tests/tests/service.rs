@@ -279,6 +279,8 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("estop released"));
+    // A release never starts motion (tests/tests/latch.rs): teleop lets go first.
+    teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
     let peak = drive_for(
         &mut robot,
         &mut teleop,

@@ -580,7 +580,13 @@ fn mux_summary(m: &MuxStatus) -> String {
             s.priority,
             m.active_age_ms
         ),
-        None => format!("none — zero because {}", ZeroReason::name(m.zero_reason)),
+        None => match m.awaiting() {
+            Some(s) => format!(
+                "none — waiting for a zero command from {} (a release never starts motion)",
+                s.name()
+            ),
+            None => format!("none — zero because {}", ZeroReason::name(m.zero_reason)),
+        },
     };
     out.push_str(&format!(
         "mux        active {active}   output vx {:.3} vy {:.3} wz {:.3}\n",
@@ -609,6 +615,9 @@ fn mux_summary(m: &MuxStatus) -> String {
             }
             if s.has(SourceFlags::BLOCKED) {
                 words.push("blocked".into());
+            }
+            if s.has(SourceFlags::AWAITING_ZERO) {
+                words.push("awaiting zero".into());
             }
             if s.rejected > 0 {
                 words.push(format!("{} rejected", s.rejected));

@@ -103,8 +103,13 @@ def test_the_python_safety_monitor_holds_the_required_source(world: World) -> No
     assert mux is not None and mux.zero_reason == chassis.ZeroReason.LOCKED
     assert "latching the e-stop: obstacle at" in (world.tmp / "safety-monitor.log").read_text()
 
-    # Released by the operator, it drives again while the monitor beats…
+    # Released by the operator while the planner asks for motion: a release never starts
+    # motion, so the robot waits for the planner's zero…
+    planner.twist(0.3, 0.0)
     assert robot.control("estop-release").ok
+    assert speed_after(0.5) < 0.01, "moved after the release by itself"
+    # …and drives again, while the monitor beats, once the planner has asked for zero.
+    planner.twist(0.0, 0.0)
     wait_until("the robot moves again", moving, 10.0, world)
     # …and stops when the monitor dies.
     monitor.send_signal(signal.SIGKILL)

@@ -289,7 +289,22 @@ def test_control_actions_are_answered_with_success_or_a_reason(world: World) -> 
     assert stopped.motion.linear_mps == pytest.approx(0.0, abs=0.01)
     mux = robot.wait_mux(1.0)
     assert mux is not None and mux.zero_reason == chassis.ZeroReason.LOCKED
-    assert robot.control("estop-release").ok
+    # A release never starts motion: the teleop still asks for 0.3 m/s, so nothing moves
+    # until it has asked for zero.
+    teleop.send(chassis.VelocityRequest.twist(0.3, 0.0))
+    released = robot.control("estop-release")
+    assert released.ok and "nothing moves until teleop asks for zero" in released.text, str(
+        released
+    )
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:
+        teleop.send(chassis.VelocityRequest.twist(0.3, 0.0))
+        state = robot.wait_state(0.05)
+        assert state is None or abs(state.motion.linear_mps) < 0.01, "moved after the release"
+    mux = robot.wait_mux(1.0)
+    assert mux is not None and mux.zero_reason == chassis.ZeroReason.AWAITING_ZERO
+    assert chassis.fixed_str(mux.sources[mux.awaiting_source].name) == "teleop"
+    teleop.send(chassis.VelocityRequest.twist(0.0, 0.0))
     drive(
         robot,
         teleop,

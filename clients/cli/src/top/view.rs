@@ -195,7 +195,10 @@ fn mux_panel(s: &Snapshot) -> Panel {
             bold(Color::Green),
         ),
         None => Span::styled(
-            format!("active none — zero: {}", ZeroReason::name(m.zero_reason)),
+            match m.awaiting() {
+                Some(s) => format!("active none — waiting for a zero command from {}", s.name()),
+                None => format!("active none — zero: {}", ZeroReason::name(m.zero_reason)),
+            },
             bold(Color::Yellow),
         ),
     };
@@ -239,6 +242,7 @@ fn mux_panel(s: &Snapshot) -> Panel {
             (SourceFlags::HEARTBEAT, "heartbeat"),
             (SourceFlags::LIMITING, "limiting"),
             (SourceFlags::BLOCKED, "blocked"),
+            (SourceFlags::AWAITING_ZERO, "awaiting zero"),
         ] {
             if src.has(flag) {
                 flags.push(word);
