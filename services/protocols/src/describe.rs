@@ -268,9 +268,9 @@ fn insert_faults(json: &mut FrameJson, flags: u64) {
     );
 }
 
-/// The set bits of a motor driver status byte, by their names in the IPC contract; a set bit
-/// the contract does not name reads `bit7`.
-fn driver_status_names(bits: u8) -> Vec<String> {
+/// The set bits of a motor driver status byte (`chassis_interfaces::DriverStatus`), by their
+/// names in the IPC contract; a set bit the contract does not name reads `bit7`.
+pub fn driver_status_names(bits: u8) -> Vec<String> {
     let constants = chassis_interfaces::layout::constants();
     let named: Vec<_> = constants
         .iter()
