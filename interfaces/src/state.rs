@@ -208,7 +208,8 @@ impl ControlMode {
     pub const COMMAND: u8 = 2;
     /// An RC transmitter is in control.
     pub const REMOTE: u8 = 3;
-    /// SCOUT MINI's serial command mode (commands on another port; CAN commands ignored).
+    /// Serial command mode (commands on another port; CAN commands ignored): SCOUT MINI V1, and
+    /// protocol V2's "UART" / "APP" mode (0x211 b1 = 0x02 where the profile's mode codes say so).
     pub const SERIAL: u8 = 4;
 
     pub fn name(mode: u8) -> &'static str {

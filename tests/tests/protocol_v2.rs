@@ -71,9 +71,12 @@ const VECTORS: &[Vector] = &[
         frame: "211#0100010000800000",
         decoded: &[
             r#""vehicle_state":1"#,
+            r#""vehicle":"estop""#,
             r#""control":"standby""#,
             r#""battery_voltage_v":25.6"#,
             r#""fault_word":128"#,
+            r#""fault_bits":["estop"]"#,
+            r#""faults":["emergency_stop"]"#,
         ],
         encode: &[],
     },
@@ -112,7 +115,12 @@ const VECTORS: &[Vector] = &[
         name: "TV12",
         robot: &["bunker"],
         frame: "211#010100FE00800000",
-        decoded: &[r#""control":"can""#, r#""battery_voltage_v":25.4"#],
+        decoded: &[
+            r#""vehicle":"estop""#,
+            r#""control":"can""#,
+            r#""battery_voltage_v":25.4"#,
+            r#""fault_bits":["estop"]"#,
+        ],
         encode: &[],
     },
     Vector {
@@ -251,6 +259,47 @@ fn chassis_detect_classifies_the_v1_example_as_v1_and_the_v2_capture_as_v2() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// Every V2 robot's `chassis decode` names an E-stop vehicle state (0x211 b0 = 0x01, fault word
+/// 0) and the bit of its own fault table that says "RC link lost" (`PROTOCOLS-V2` §2.3.2).
+#[test]
+fn every_v2_robot_names_the_estop_and_its_own_fault_bits() {
+    let env = Env::new("protocol-v2-names");
+    let cases: [(&str, &str, &str); 7] = [
+        ("scout", "211#0001010000040000", "rc_signal_lost"),
+        ("scout-mini", "211#0001010000040000", "rc_signal_lost"),
+        ("bunker", "211#0001010000040000", "rc_signal_lost"),
+        ("ranger-mini", "211#0001010000040000", "rc_signal_lost"),
+        ("tracer", "211#0001010000040000", "rc_link_lost"),
+        ("hunter-se", "211#0001010000040000", "rc_link_lost"),
+        ("hunter", "211#0001010004000000", "rc_link_lost"),
+    ];
+    for (robot, rc_lost, name) in cases {
+        let decode = |frame: &str| {
+            run(
+                &env,
+                &["decode", "--robot", robot, "--protocol", "v2", frame],
+            )
+        };
+        let json = decode("211#0100010000000000");
+        for field in [
+            r#""vehicle":"estop""#,
+            r#""fault_bits":[]"#,
+            r#""faults":["emergency_stop"]"#,
+        ] {
+            assert!(json.contains(field), "{robot}: {field} not in {json}");
+        }
+        let json = decode(rc_lost);
+        for field in [
+            r#""vehicle":"normal""#,
+            &format!(r#""fault_bits":["{name}"]"#),
+            r#""faults":[]"#,
+            r#""warnings":["rc_link_lost"]"#,
+        ] {
+            assert!(json.contains(field), "{robot}: {field} not in {json}");
+        }
+    }
 }
 
 /// Every AgileX robot in each protocol it speaks: `chassis encode` prints the frames of a

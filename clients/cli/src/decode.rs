@@ -237,6 +237,54 @@ mod tests {
     }
 
     #[test]
+    fn a_v2_bunkers_estop_and_fault_bits_are_named_beside_the_raw_word() {
+        // TV8: BUNKER MINI 2.0 with its E-stop pressed, before any 0x421.
+        let (json, err, _) = decode(RobotKind::Bunker, &["211#0100010000800000"], "");
+        assert_eq!(err, "");
+        assert_eq!(json[0]["vehicle_state"], 1);
+        assert_eq!(json[0]["vehicle"], "estop");
+        assert_eq!(json[0]["control"], "standby");
+        assert_eq!(json[0]["fault_word"], 0x0080);
+        assert_eq!(json[0]["fault_bits"], serde_json::json!(["estop"]));
+        assert_eq!(json[0]["faults"], serde_json::json!(["emergency_stop"]));
+        // HUNTER 2.0's own table (H2X): b4 bit4 host communication lost, b5 bit6 driver
+        // over-temperature; RC is mode 2 there; b6 is its brake.
+        let (json, err, _) = decode(RobotKind::Hunter, &["211#0002010010400100"], "");
+        assert_eq!(err, "");
+        assert_eq!(json[0]["vehicle"], "normal");
+        assert_eq!(json[0]["control"], "rc");
+        assert_eq!(
+            json[0]["fault_bits"],
+            serde_json::json!(["host_communication_lost", "driver_over_temperature"])
+        );
+        assert_eq!(
+            json[0]["faults"],
+            serde_json::json!(["heartbeat_lost", "over_temperature"])
+        );
+        assert_eq!(json[0]["parking_brake_engaged"], true);
+    }
+
+    #[test]
+    fn v2_driver_status_and_bms_alarms_are_named() {
+        // ⚠ D-7: b5 = 0x40 is "enabled" on a BUNKER, "disabled" on a HUNTER 2.0.
+        let (json, _, _) = decode(RobotKind::Bunker, &["261#00F0001E1E400000"], "");
+        assert_eq!(
+            json[0]["driver_status_flags"],
+            serde_json::json!(["enabled"])
+        );
+        let (json, _, _) = decode(RobotKind::Hunter, &["261#00F0001E1E400000"], "");
+        assert_eq!(json[0]["driver_status_flags"], serde_json::json!([]));
+        assert_eq!(json[0]["driver_enabled"], false);
+        let (json, err, _) = decode(RobotKind::HunterSe, &["362#04010800"], "");
+        assert_eq!(err, "");
+        assert_eq!(
+            json[0]["alarms"],
+            serde_json::json!(["under_voltage", "charge_over_current"])
+        );
+        assert_eq!(json[0]["warnings"], serde_json::json!(["over_temperature"]));
+    }
+
+    #[test]
     fn titan_frames_from_arguments_become_json_with_si_fields() {
         let (json, err, summary) = decode(RobotKind::Titan, &["111#0096000000000000"], "");
         assert_eq!(err, "");

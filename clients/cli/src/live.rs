@@ -11,6 +11,8 @@ use chassis_client::{
     install_signal_handlers, now_ns, termination_requested,
 };
 use chassis_protocols::command_to_request;
+use chassis_protocols::describe;
+use chassis_protocols::titan::BmsAlarm;
 use clap::{Args, Subcommand, ValueEnum};
 
 use crate::action::{Action, OnOff, VelocityArgs};
@@ -429,11 +431,26 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     let Some(s) = state else {
         bail!("chassis/{name} published no state within 1 s");
     };
-    println!(
+    print!("{}", state_report(name, &s, &age));
+    if let Some(m) = mux {
+        println!("{}", mux_summary(&m));
+    }
+    if let Some(safety) = safety {
+        println!("{}", safety_summary(safety.as_ref()));
+    }
+    Ok(())
+}
+
+/// What `chassis status` says about one state sample: robot, bus, mode, motion, command,
+/// battery, faults and warnings by name (with the chassis' own fault word), and — where the
+/// robot reports them — its motor drivers' status bits and its BMS alarms.
+fn state_report(name: &str, s: &ChassisState, age: &str) -> String {
+    let mut lines = Vec::new();
+    lines.push(format!(
         "robot      {} (chassis/{name})   state #{}, {age} old",
         chassis_client::RobotKind::name(s.robot),
         s.seq,
-    );
+    ));
     let link = &s.link;
     let health = if s.has_link_flag(LinkFlags::BUS_DOWN) {
         "DOWN"
@@ -442,7 +459,7 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     } else {
         "ok"
     };
-    println!(
+    lines.push(format!(
         "bus        {health}: rx {} frames, tx {}, bad checksums {}, decode errors {}, unknown ids {}, discarded bytes {}, reconnects {}",
         link.rx_frames,
         link.tx_frames,
@@ -451,14 +468,14 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         link.rx_unknown_id,
         link.rx_bytes_discarded,
         link.bus_reconnects
-    );
-    println!(
+    ));
+    lines.push(format!(
         "mode       {}   protocol {}   flags {}",
         ControlMode::name(s.system.control_mode),
         WireProtocol::name(s.system.wire_protocol),
         LinkFlags::names(s.link_flags).join(", ")
-    );
-    println!(
+    ));
+    lines.push(format!(
         "motion     {:.3} m/s  {:.3} rad/s  steer {:.3} rad   pose x {:.2} m  y {:.2} m  yaw {:.1}°",
         s.motion.linear_mps,
         s.motion.angular_radps,
@@ -466,15 +483,15 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         s.odometry.x_m,
         s.odometry.y_m,
         s.odometry.yaw_rad.to_degrees()
-    );
-    println!(
+    ));
+    lines.push(format!(
         "command    {:.3} m/s  {:.3} rad/s  steer {:.3} rad  clamped {}",
         s.command.linear_mps,
         s.command.angular_radps,
         s.command.steer_rad,
         ClampFlags::names(s.command.clamp_flags).join(", ")
-    );
-    println!(
+    ));
+    lines.push(format!(
         "battery    {:.1} V{}",
         s.system.battery_voltage_v,
         if s.is_valid(chassis_client::Group::BmsPack) {
@@ -482,30 +499,69 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         } else {
             String::new()
         }
-    );
-    let listed = |bits: u64| {
-        let names = FaultFlags::names(bits);
-        if names.is_empty() {
-            "none".to_string()
-        } else {
-            names.join(", ")
-        }
-    };
-    println!(
+    ));
+    let listed = |bits: u64| listed_names(&FaultFlags::names(bits));
+    lines.push(format!(
         "faults     {}",
         listed(s.system.fault_flags & !FaultFlags::WARNINGS)
-    );
-    println!(
+    ));
+    lines.push(format!(
         "warnings   {}",
         listed(s.system.fault_flags & FaultFlags::WARNINGS)
-    );
-    if let Some(m) = mux {
-        println!("{}", mux_summary(&m));
+    ));
+    if s.system.vendor_fault_word != 0 {
+        lines.push(format!(
+            "chassis    fault word 0x{:04x}",
+            s.system.vendor_fault_word
+        ));
     }
-    if let Some(safety) = safety {
-        println!("{}", safety_summary(safety.as_ref()));
+    if s.is_valid(chassis_client::Group::MotorDriver) {
+        let drivers: Vec<String> = s
+            .motors
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.driver_voltage_v != 0.0 || m.driver_status != 0)
+            .map(|(i, m)| {
+                let mut names = describe::driver_status_names(m.driver_status);
+                let enabled = names.iter().any(|n| n == "enabled");
+                names.retain(|n| n != "enabled");
+                format!(
+                    "{} {}{}",
+                    i + 1,
+                    if enabled { "enabled" } else { "disabled" },
+                    if names.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({})", names.join(", "))
+                    }
+                )
+            })
+            .collect();
+        if !drivers.is_empty() {
+            lines.push(format!("drivers    {}", drivers.join(", ")));
+        }
     }
-    Ok(())
+    for (group, bms) in s.bms.iter().enumerate() {
+        if bms.alarm_flags != 0 {
+            let alarm = BmsAlarm::from_alarm_flags(group as u8, bms.alarm_flags);
+            lines.push(format!(
+                "bms {group}      alarms {}   warnings {}",
+                listed_names(&alarm.alarm_names()),
+                listed_names(&alarm.warning_names())
+            ));
+        }
+    }
+    let mut text = lines.join("\n");
+    text.push('\n');
+    text
+}
+
+fn listed_names(names: &[&str]) -> String {
+    if names.is_empty() {
+        "none".to_string()
+    } else {
+        names.join(", ")
+    }
 }
 
 /// The safety monitor's `SafetyStatus` (`None`: its service exists but nothing was published).
@@ -717,4 +773,76 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
     let mut robot = connect(name)?;
     let response = robot.sim(r, ANSWER_TIMEOUT)?;
     print_answer(&response)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassis_protocols::{CanFrame, Driver, DriverConfig, RobotKind, Rx, Timestamp};
+
+    /// The state the robot's own driver (default profile) makes of `frames`.
+    fn state_of(robot: RobotKind, frames: &[&str]) -> ChassisState {
+        let entry = robot.entry();
+        let now = Timestamp::from_millis(1_000);
+        let mut driver = entry.driver(&entry.defaults(), false, &DriverConfig::default(), now);
+        for frame in frames {
+            driver.handle_rx(now, Rx::Can(&CanFrame::from_candump(frame).unwrap()));
+        }
+        *driver.state()
+    }
+
+    fn line<'a>(report: &'a str, head: &str) -> &'a str {
+        report
+            .lines()
+            .find(|l| l.starts_with(head))
+            .unwrap_or_else(|| panic!("no '{head}' line in\n{report}"))
+    }
+
+    #[test]
+    fn status_names_a_v2_bunkers_estop_drivers_and_bms_alarms() {
+        // TV8 (BUNKER MINI 2.0, E-stop pressed), a driver at 24 V enabled, a BMS alarm, and
+        // 0x211 again (the BMS alarm joins the faults with it).
+        let s = state_of(
+            RobotKind::Bunker,
+            &[
+                "211#0100010000800000",
+                "261#00F0001E1E400000",
+                "362#04010800",
+                "211#0100010000800000",
+            ],
+        );
+        let report = state_report("bunker", &s, "5 ms");
+        assert!(
+            line(&report, "robot").starts_with("robot      bunker (chassis/bunker)"),
+            "{report}"
+        );
+        assert!(
+            line(&report, "mode").contains("standby   protocol v2"),
+            "{report}"
+        );
+        assert_eq!(line(&report, "faults"), "faults     emergency_stop");
+        assert_eq!(line(&report, "warnings"), "warnings   bms_alarm");
+        assert_eq!(line(&report, "chassis"), "chassis    fault word 0x0080");
+        assert_eq!(line(&report, "drivers"), "drivers    1 enabled");
+        assert_eq!(
+            line(&report, "bms 0"),
+            "bms 0      alarms under_voltage, charge_over_current   warnings over_temperature"
+        );
+    }
+
+    #[test]
+    fn status_reads_a_hunters_driver_bit_6_as_disabled() {
+        // ⚠ D-7: HUNTER 2.0's bit 6 set means disabled; bit 0 is supply under-voltage.
+        let s = state_of(
+            RobotKind::Hunter,
+            &["211#0001010000000000", "261#00F0001E1E410000"],
+        );
+        let report = state_report("hunter", &s, "5 ms");
+        assert_eq!(line(&report, "faults"), "faults     none");
+        assert_eq!(
+            line(&report, "drivers"),
+            "drivers    1 disabled (supply_under_voltage)"
+        );
+        assert!(!report.contains("chassis    fault word"), "{report}");
+    }
 }

@@ -228,6 +228,7 @@ pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> any
         clock,
         body: None,
         codec: None,
+        wire_protocol: 0,
         trail: Trail::default(),
         watch: Watch::default(),
         last_seq: None,
@@ -320,7 +321,9 @@ struct Loop<'a> {
     channels: &'a Channels,
     clock: WallClock,
     body: Option<(u8, Body)>,
-    codec: Option<(u8, RobotCodec)>,
+    /// The describer of `/frames`, for (robot kind, wire protocol) of the last state sample.
+    codec: Option<((u8, u8), RobotCodec)>,
+    wire_protocol: u8,
     trail: Trail,
     watch: Watch,
     last_seq: Option<u64>,
@@ -406,6 +409,7 @@ impl Loop<'_> {
             return;
         }
         self.last_seq = Some(state.seq);
+        self.wire_protocol = state.system.wire_protocol;
         for (level, text) in self.watch.state(state) {
             self.log(level, text, state.stamp_ns);
         }
@@ -490,11 +494,12 @@ impl Loop<'_> {
             return;
         }
         let kind = self.last_state_robot();
-        if self.codec.as_ref().is_none_or(|(k, _)| *k != kind)
+        let key = (kind, self.wire_protocol);
+        if self.codec.as_ref().is_none_or(|(k, _)| *k != key)
             && let Some(robot) = RobotKind::from_id(kind)
         {
-            let entry = robot.entry();
-            self.codec = Some((kind, (entry.codec)(entry.defaults())));
+            // A robot with two protocols (SCOUT MINI, SCOUT 2.0, BUNKER) in the one it speaks.
+            self.codec = Some((key, robot.entry().codec_for_wire(self.wire_protocol)));
         }
         let mut entry = Map::new();
         entry.insert("stamp_ns".into(), frame.stamp_ns.into());

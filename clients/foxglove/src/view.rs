@@ -516,6 +516,39 @@ mod tests {
         assert_eq!(fix.position_covariance[0], 25.0);
     }
 
+    /// The state the robot's own driver (default profile) makes of `frames`.
+    fn driver_state(robot: RobotKind, frames: &[&str]) -> ChassisState {
+        use chassis_protocols::{CanFrame, DriverConfig, Rx, Timestamp};
+        let entry = robot.entry();
+        let now = Timestamp::from_millis(1_000);
+        let mut driver = entry.driver(&entry.defaults(), false, &DriverConfig::default(), now);
+        for frame in frames {
+            driver.handle_rx(now, Rx::Can(&CanFrame::from_candump(frame).unwrap()));
+        }
+        *driver.state()
+    }
+
+    #[test]
+    fn a_v2_robots_estop_is_logged_by_name_and_so_is_its_release() {
+        let mut watch = Watch::default();
+        // TV8: BUNKER MINI 2.0, E-stop pressed (0x211 b0 = 0x01, fault word 0x0080).
+        let pressed = driver_state(RobotKind::Bunker, &["211#0100010000800000"]);
+        let lines = watch.state(&pressed);
+        assert_eq!(
+            lines,
+            vec![(log::Level::Error, "fault: emergency_stop".to_string())]
+        );
+        let released = driver_state(RobotKind::Bunker, &["211#0000010000000000"]);
+        let lines = watch.state(&released);
+        assert_eq!(
+            lines,
+            vec![(
+                log::Level::Info,
+                "fault cleared: emergency_stop".to_string()
+            )]
+        );
+    }
+
     #[test]
     fn faults_log_when_they_appear_and_when_they_clear() {
         let mut watch = Watch::default();

@@ -723,6 +723,34 @@ mod tests {
     }
 
     #[test]
+    fn diagnostics_name_a_v2_robots_estop_and_keep_its_fault_word() {
+        use chassis_protocols::{CanFrame, Driver, DriverConfig, Rx, Timestamp};
+        // TV8 (BUNKER MINI 2.0, E-stop pressed) through the BUNKER's own driver.
+        let entry = chassis_protocols::RobotKind::Bunker.entry();
+        let now = Timestamp::from_millis(1_000);
+        let mut driver = entry.driver(&entry.defaults(), false, &DriverConfig::default(), now);
+        let tv8 = CanFrame::from_candump("211#0100010000800000").unwrap();
+        driver.handle_rx(now, Rx::Can(&tv8));
+        let d = diagnostics("bunker", Some(driver.state()), None, Time::default());
+        let faults = &d.status[0];
+        assert_eq!(faults.name, "chassis: faults");
+        assert_eq!(faults.level, DiagnosticStatus::ERROR);
+        assert_eq!(faults.message, "emergency_stop");
+        let values: Vec<_> = faults
+            .values
+            .iter()
+            .map(|kv| (kv.key.as_str(), kv.value.as_str()))
+            .collect();
+        assert_eq!(
+            values,
+            vec![
+                ("vendor_fault_word", "0x00000080"),
+                ("emergency_stop", "fault")
+            ]
+        );
+    }
+
+    #[test]
     fn diagnostics_name_faults_and_rank_errors_above_warnings() {
         let mut s = titan();
         let mux = MuxStatus::default();

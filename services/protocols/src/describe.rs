@@ -4,7 +4,7 @@
 use crate::agilex_v2::{self, V2Profile};
 use crate::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
 use crate::{CanFrame, DecodeError, Profile, RobotKind, scout_mini, titan, xbot};
-use chassis_interfaces::FaultFlags;
+use chassis_interfaces::{DriverStatus, FaultFlags, LightMode};
 use serde::Serialize;
 use serde_json::{Map, Value};
 
@@ -94,10 +94,8 @@ impl RobotCodec {
                             driver_status_names(m.driver_status).into(),
                         );
                     }
-                    titan::Frame::BmsAlarm(b) => {
-                        json.insert("alarms".into(), b.alarm_names().into());
-                        json.insert("warnings".into(), b.warning_names().into());
-                    }
+                    titan::Frame::BmsAlarm(b) => insert_bms_alarms(&mut json, b),
+                    titan::Frame::Rc(r) => insert_switches(&mut json, r),
                     _ => {}
                 }
                 Ok(json)
@@ -130,9 +128,7 @@ impl RobotCodec {
                     &decoded,
                 );
                 json.insert("protocol".into(), "v2".into());
-                if let agilex_v2::Frame::VersionText(t) = decoded {
-                    json.insert("text".into(), t.text().into());
-                }
+                name_v2_fields(&mut json, &decoded, profile);
                 Ok(json)
             }
             RobotCodec::Xbot { .. } => Err(DecodeError::UnknownId { id: frame.id() }),
@@ -173,6 +169,92 @@ impl RobotCodec {
     }
 }
 
+/// Names beside the codes of a protocol-V2 frame, read under the robot's profile: 0x211's
+/// vehicle state (in the frame already), its fault bits by the names of the robot's ⚠ D-3 table
+/// (`fault_bits`) and as normalized flags (`faults`, `warnings`, with the E-stop or exception of
+/// b0), HUNTER 2.0's brake in b6; the driver status bits after ⚠ D-7; the BMS alarms (⚠ D-6); the
+/// RANGER motion mode (⚠ D-12); light modes; RC lever positions.
+fn name_v2_fields(json: &mut FrameJson, frame: &agilex_v2::Frame, profile: &V2Profile) {
+    use agilex_v2::Frame;
+    match frame {
+        Frame::SystemStatus(s) => {
+            json.insert(
+                "fault_bits".into(),
+                profile.fault_names(s.fault_word).into(),
+            );
+            insert_faults(
+                json,
+                agilex_v2::normalize_faults(s.fault_word, profile)
+                    | agilex_v2::vehicle_state_flags(s.vehicle_state),
+            );
+            if profile.reports_brake_in_b6() {
+                json.insert("parking_brake_engaged".into(), (s.b6 == 0x01).into());
+            }
+        }
+        Frame::MotorSlow(m) => {
+            let status = agilex_v2::normalize_driver_status(m.driver_status, profile);
+            json.insert(
+                "driver_status_flags".into(),
+                driver_status_names(status).into(),
+            );
+            json.insert(
+                "driver_enabled".into(),
+                (status & DriverStatus::ENABLED != 0).into(),
+            );
+        }
+        Frame::BmsAlarm(b) => insert_bms_alarms(json, b),
+        Frame::BmsProtection(p) => {
+            json.insert("protections".into(), p.names(true).into());
+            json.insert("states".into(), p.names(false).into());
+        }
+        Frame::MotionModeState(m) | Frame::MotionModeCommand(m) => {
+            json.insert(
+                "motion_mode".into(),
+                agilex_v2::motion_mode_name(m.mode, profile).into(),
+            );
+        }
+        Frame::LightState(l) | Frame::LightCommand(l) => {
+            json.insert("front_light".into(), LightMode::name(l.front_mode).into());
+            if profile.rear_light {
+                json.insert("rear_light".into(), LightMode::name(l.rear_mode).into());
+            }
+        }
+        Frame::Rc(r) => insert_switches(json, r),
+        Frame::VersionText(t) => {
+            json.insert("text".into(), t.text().into());
+        }
+        _ => {}
+    }
+}
+
+/// 0x362's alarm and warning bits by name.
+fn insert_bms_alarms(json: &mut FrameJson, b: &titan::BmsAlarm) {
+    json.insert("alarms".into(), b.alarm_names().into());
+    json.insert("warnings".into(), b.warning_names().into());
+}
+
+/// 0x241's lever positions by name (`PROTOCOLS-V2` §2.3.3): SWA and SWD have two positions,
+/// SWB and SWC three; 0b00 reads `none` (no RC data).
+fn insert_switches(json: &mut FrameJson, r: &titan::RcFeedback) {
+    let position = |value: u8, three: bool| match value {
+        2 => "up",
+        1 if three => "middle",
+        3 => "down",
+        0 => "none",
+        _ => "unknown",
+    };
+    let mut levers = Map::new();
+    for (name, value, three) in [
+        ("swa", r.switch_a, false),
+        ("swb", r.switch_b, true),
+        ("swc", r.switch_c, true),
+        ("swd", r.switch_d, false),
+    ] {
+        levers.insert(name.into(), position(value, three).into());
+    }
+    json.insert("switches".into(), Value::Object(levers));
+}
+
 /// The normalized fault flags by name, as `chassis status` prints them: `faults` (the chassis
 /// stops or limits) and `warnings` (it still drives), beside the raw word.
 fn insert_faults(json: &mut FrameJson, flags: u64) {
@@ -186,14 +268,24 @@ fn insert_faults(json: &mut FrameJson, flags: u64) {
     );
 }
 
-/// The set bits of a motor driver status byte, by their names in the IPC contract.
-fn driver_status_names(bits: u8) -> Vec<String> {
-    chassis_interfaces::layout::constants()
+/// The set bits of a motor driver status byte (`chassis_interfaces::DriverStatus`), by their
+/// names in the IPC contract; a set bit the contract does not name reads `bit7`.
+pub fn driver_status_names(bits: u8) -> Vec<String> {
+    let constants = chassis_interfaces::layout::constants();
+    let named: Vec<_> = constants
         .iter()
         .filter(|group| group.name == "DriverStatus")
         .flat_map(|group| group.values.iter())
-        .filter(|c| u64::from(bits) & c.value != 0)
-        .map(|c| c.name.to_lowercase())
+        .collect();
+    (0..8)
+        .map(|n| 1u64 << n)
+        .filter(|bit| u64::from(bits) & bit != 0)
+        .map(|bit| {
+            named.iter().find(|c| c.value == bit).map_or_else(
+                || format!("bit{}", bit.trailing_zeros()),
+                |c| c.name.to_lowercase(),
+            )
+        })
         .collect()
 }
 

@@ -16,7 +16,9 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::{BusKind, JointSource, Kinematics, OdometryVariance, SensorKind};
+use chassis_interfaces::{
+    BusKind, JointSource, Kinematics, OdometryVariance, SensorKind, WireProtocol,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::agilex_v2::{self, V2Model, V2Profile, detect::DetectSettings};
@@ -634,6 +636,21 @@ impl RobotEntry {
             }
         }
         (self.driver)(profile, config, now)
+    }
+
+    /// Its frame describer for the protocol a state sample says the driver speaks
+    /// (`SystemState::wire_protocol`): the manuals' profile of V1 or V2 where the robot speaks
+    /// that one, its default profile otherwise (its own protocol, or still detecting).
+    pub fn codec_for_wire(&self, wire_protocol: u8) -> RobotCodec {
+        let protocol = match wire_protocol {
+            WireProtocol::V1 => Some(Protocol::V1),
+            WireProtocol::V2 => Some(Protocol::V2),
+            _ => None,
+        };
+        let profile = protocol
+            .and_then(|p| self.default_profile(Some(p)).ok())
+            .unwrap_or_else(|| self.defaults());
+        (self.codec)(profile)
     }
 
     /// The manuals' profile of its default protocol.

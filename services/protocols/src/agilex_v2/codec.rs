@@ -89,6 +89,16 @@ pub mod vehicle {
     pub const NORMAL: u8 = 0x00;
     pub const ESTOP: u8 = 0x01;
     pub const EXCEPTION: u8 = 0x02;
+
+    /// The name of a 0x211 b0 value: `normal`, `estop`, `exception` or `unknown`.
+    pub fn name(state: u8) -> &'static str {
+        match state {
+            NORMAL => "normal",
+            ESTOP => "estop",
+            EXCEPTION => "exception",
+            _ => "unknown",
+        }
+    }
 }
 
 /// 0x43A b0.
@@ -274,6 +284,8 @@ pub struct SteeringZeroOffset {
 pub struct SystemStatus {
     /// 0x00 normal, 0x01 E-stop, 0x02 exception.
     pub vehicle_state: u8,
+    /// Its name: normal, estop, exception or unknown ([`vehicle::name`]).
+    pub vehicle: &'static str,
     /// b1 as sent (⚠ D-2: meaning per profile, see [`SystemStatus::control`]).
     pub mode: u8,
     /// The mode's meaning under the profile: standby, can, uart, rc or unknown.
@@ -371,6 +383,63 @@ pub struct BmsProtection {
     pub count: u8,
 }
 
+impl BmsProtection {
+    /// The bits of protection codes 1-4 (b0-b3) by name, with `true` for a protection (a fault)
+    /// and `false` for a state bit (current flowing, a MOS switch on) — the masks the SDK keeps
+    /// in `agilex_message.h` (`BMS_PROT1..4_*`).
+    pub const NAMES: [&'static [(u8, &'static str, bool)]; 4] = [
+        &[
+            (0x01, "charging_current", false),
+            (0x02, "charging_over_current", true),
+            (0x10, "discharging_current", false),
+            (0x20, "discharging_over_current", true),
+            (0x40, "discharging_short_circuit", true),
+        ],
+        &[
+            (0x01, "cell_open_circuit", true),
+            (0x02, "temperature_sensor_open_circuit", true),
+            (0x10, "cell_over_voltage", true),
+            (0x20, "cell_under_voltage", true),
+            (0x40, "total_over_voltage", true),
+            (0x80, "total_under_voltage", true),
+        ],
+        &[
+            (0x04, "charging_over_temperature", true),
+            (0x08, "discharging_over_temperature", true),
+            (0x10, "charging_under_temperature", true),
+            (0x20, "discharging_under_temperature", true),
+            (0x40, "charging_temperature_difference", true),
+            (0x80, "discharging_temperature_difference", true),
+        ],
+        &[
+            (0x01, "charging_mos_on", false),
+            (0x02, "discharging_mos_on", false),
+            (0x04, "charging_mos_failure", true),
+            (0x08, "discharging_mos_failure", true),
+            (0x10, "weak_signal_switch_open", true),
+        ],
+    ];
+
+    /// The set bits that are protections (`true`) or states (`false`), by name.
+    pub fn names(&self, protections: bool) -> Vec<&'static str> {
+        self.codes
+            .iter()
+            .zip(Self::NAMES)
+            .flat_map(|(code, names)| {
+                names
+                    .iter()
+                    .filter(move |(bit, _, p)| code & bit != 0 && *p == protections)
+                    .map(|(_, name, _)| *name)
+            })
+            .collect()
+    }
+
+    /// Any protection bit is set.
+    pub fn any_protection(&self) -> bool {
+        !self.names(true).is_empty()
+    }
+}
+
 /// Every protocol-V2 frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 #[serde(tag = "frame", rename_all = "snake_case")]
@@ -425,6 +494,25 @@ pub fn control_name(mode: u8, profile: &V2Profile) -> &'static str {
         "standby"
     } else if Some(mode) == codes.uart {
         "uart"
+    } else {
+        "unknown"
+    }
+}
+
+/// The name of a 0x141 / 0x291 b0 motion mode under the profile's ⚠ D-12 codes: dual_ackermann,
+/// crab, spin, park, side_slip or unknown.
+pub fn motion_mode_name(mode: u8, profile: &V2Profile) -> &'static str {
+    let codes = &profile.ranger_mode_codes;
+    if mode == codes.dual_ackermann {
+        "dual_ackermann"
+    } else if mode == codes.crab {
+        "crab"
+    } else if mode == codes.spin {
+        "spin"
+    } else if Some(mode) == codes.park {
+        "park"
+    } else if Some(mode) == codes.side_slip {
+        "side_slip"
     } else {
         "unknown"
     }
@@ -620,6 +708,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
             let w: SystemStatusWire = read_prefix(raw_id, data)?;
             Frame::SystemStatus(SystemStatus {
                 vehicle_state: w.vehicle_state,
+                vehicle: vehicle::name(w.vehicle_state),
                 mode: w.mode,
                 control: control_name(w.mode, profile),
                 battery_voltage_v: si(w.battery_dv.get(), 10.0),

@@ -27,12 +27,12 @@ use chassis_interfaces::{
 use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake, vehicle};
 use super::commands::{STOP, frames_for};
 use super::kinematics::{RangerMode, body_twist, plan};
-use super::profile::{self, FaultMap, V2Profile};
+use super::profile::{self, V2Profile};
 use crate::agilex::{self, BrakeKeeper, ModeKeeper, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
-    flags_of, requested_turn,
+    requested_turn,
 };
 use crate::profile::Profile;
 use crate::registry::RobotKind;
@@ -284,6 +284,13 @@ impl V2Driver {
                 let any_alarm = agilex::apply_bms_alarm(&mut self.core.state, &b, t);
                 agilex::set_bits(&mut self.other_faults, FaultFlags::BMS_ALARM, any_alarm);
             }
+            // ⚠ D-6, the older layout: a protection bit is an alarm; its codes are not alarm
+            // and warning bytes, so `BmsState::alarm_flags` is left alone.
+            Frame::BmsProtection(p) => agilex::set_bits(
+                &mut self.other_faults,
+                FaultFlags::BMS_ALARM,
+                p.any_protection(),
+            ),
             Frame::VersionText(t) => self.core.notice(
                 Level::Info,
                 format!("chassis version text: {}", t.text().trim_end()),
@@ -320,15 +327,13 @@ impl V2Driver {
             "can" => ControlMode::COMMAND,
             "rc" => ControlMode::REMOTE,
             "standby" => ControlMode::STANDBY,
+            "uart" => ControlMode::SERIAL,
             _ => ControlMode::UNKNOWN,
         };
         let old_faults = self.core.state.system.fault_flags;
-        let mut new_faults = normalize_faults(s.fault_word, &self.profile) | self.other_faults;
-        match s.vehicle_state {
-            vehicle::NORMAL => {}
-            vehicle::ESTOP => new_faults |= FaultFlags::EMERGENCY_STOP,
-            _ => new_faults |= FaultFlags::BODY_EXCEPTION,
-        }
+        let new_faults = normalize_faults(s.fault_word, &self.profile)
+            | vehicle_state_flags(s.vehicle_state)
+            | self.other_faults;
         if new_faults & FaultFlags::EMERGENCY_STOP != 0 && !self.estop_hold {
             self.estop_hold = true;
             self.core.notice(
@@ -338,17 +343,17 @@ impl V2Driver {
             self.update_motion(now);
         }
         let sys = &mut self.core.state.system;
-        sys.body_status = if s.vehicle_state == vehicle::NORMAL {
-            SystemState::BODY_NORMAL
-        } else {
-            SystemState::BODY_EXCEPTION
+        sys.body_status = match s.vehicle_state {
+            vehicle::NORMAL => SystemState::BODY_NORMAL,
+            vehicle::ESTOP => SystemState::BODY_EMERGENCY_STOP,
+            _ => SystemState::BODY_EXCEPTION,
         };
         sys.control_mode = new_mode;
         sys.battery_voltage_v = s.battery_voltage_v as f32;
         sys.vendor_fault_word = s.fault_word.into();
         sys.fault_flags = new_faults;
         sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
-        if self.profile.brake_lock_value.is_some() && self.profile.fault_map == FaultMap::Hunter2 {
+        if self.profile.reports_brake_in_b6() {
             // HUNTER 2.0 reports its brake in b6.
             sys.parking_brake_engaged = u8::from(s.b6 == 0x01);
         }
@@ -420,71 +425,27 @@ impl V2Driver {
     }
 }
 
-/// The normalized `FaultFlags` of 0x211 b4-5 under the profile's ⚠ D-3 table.
+/// The normalized `FaultFlags` of 0x211 b4-5 under the profile's ⚠ D-3 table (and ⚠ D-20 for
+/// b5 bit7). Bits the table does not name raise nothing; they stay in the vendor's word.
 pub fn normalize_faults(word: u16, profile: &V2Profile) -> u64 {
-    const B4: u16 = 8;
-    let bit7 = if profile.fault_0080_is_estop {
-        FaultFlags::EMERGENCY_STOP
-    } else {
-        FaultFlags::FRONT_STEERING_ENCODER
-    };
-    let map: &[(u16, u64)] = match profile.fault_map {
-        FaultMap::Sdk => &[
-            (1 << B4, FaultFlags::MOTOR_DRIVER_ERROR),
-            (1 << (B4 + 1), FaultFlags::HEARTBEAT_LOST),
-            (1 << 0, FaultFlags::BATTERY_UNDER_VOLTAGE),
-            (1 << 1, FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING),
-            (1 << 2, FaultFlags::RC_LINK_LOST),
-            (1 << 3, FaultFlags::MOTOR_1_COMM_LOST),
-            (1 << 4, FaultFlags::MOTOR_2_COMM_LOST),
-            (1 << 5, FaultFlags::MOTOR_3_COMM_LOST),
-            (1 << 6, FaultFlags::MOTOR_4_COMM_LOST),
-        ],
-        FaultMap::ScoutV13 => &[
-            (1 << B4, FaultFlags::BATTERY_UNDER_VOLTAGE),
-            (1 << (B4 + 1), FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING),
-            (1 << (B4 + 2), FaultFlags::RC_LINK_LOST),
-        ],
-        FaultMap::TracerMini => &[
-            (1 << (B4 + 1), FaultFlags::OVER_CURRENT),
-            (1 << (B4 + 7), FaultFlags::BUMPER),
-            (1 << 0, FaultFlags::BATTERY_UNDER_VOLTAGE),
-            (1 << 1, FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING),
-            (1 << 2, FaultFlags::RC_LINK_LOST),
-        ],
-        FaultMap::Hunter2 => &[
-            (1 << (B4 + 1), FaultFlags::FRONT_STEERING_ENCODER),
-            (1 << (B4 + 2), FaultFlags::RC_LINK_LOST),
-            (1 << (B4 + 4), FaultFlags::HEARTBEAT_LOST),
-            (1 << (B4 + 6), FaultFlags::MOTOR_DRIVER_ERROR),
-            (1 << 0, FaultFlags::BATTERY_UNDER_VOLTAGE),
-            (1 << 3, FaultFlags::MOTOR_1_COMM_LOST),
-            (1 << 4, FaultFlags::MOTOR_2_COMM_LOST),
-            (1 << 5, FaultFlags::MOTOR_3_COMM_LOST),
-            (1 << 6, FaultFlags::OVER_TEMPERATURE),
-            (1 << 7, FaultFlags::OVER_CURRENT),
-        ],
-        FaultMap::HunterSe => &[
-            (1 << B4, FaultFlags::OVER_TEMPERATURE),
-            (1 << (B4 + 1), FaultFlags::OVER_CURRENT),
-            (1 << (B4 + 2), FaultFlags::MOTOR_DRIVER_ERROR),
-            (1 << 0, FaultFlags::BATTERY_UNDER_VOLTAGE),
-            (1 << 1, FaultFlags::FRONT_STEERING_ENCODER),
-            (1 << 2, FaultFlags::RC_LINK_LOST),
-            (1 << 3, FaultFlags::MOTOR_1_COMM_LOST),
-            (1 << 4, FaultFlags::MOTOR_2_COMM_LOST),
-            (1 << 5, FaultFlags::MOTOR_3_COMM_LOST),
-        ],
-    };
-    let bit7_flag = match profile.fault_map {
-        FaultMap::Sdk | FaultMap::HunterSe if word & 0x0080 != 0 => bit7,
-        _ => 0,
-    };
-    flags_of(word, map) | bit7_flag
+    profile
+        .fault_bits()
+        .filter(|b| word & b.mask != 0)
+        .fold(0, |flags, b| flags | b.flag)
+}
+
+/// The normalized `FaultFlags` of 0x211 b0: E-stop (0x01), exception (0x02 and anything else
+/// not normal).
+pub fn vehicle_state_flags(vehicle_state: u8) -> u64 {
+    match vehicle_state {
+        vehicle::NORMAL => 0,
+        vehicle::ESTOP => FaultFlags::EMERGENCY_STOP,
+        _ => FaultFlags::BODY_EXCEPTION,
+    }
 }
 
 /// `chassis_interfaces::DriverStatus` bits of 0x26x b5: bit 6 "enabled" per ⚠ D-7.
-fn normalize_driver_status(status: u8, profile: &V2Profile) -> u8 {
+pub fn normalize_driver_status(status: u8, profile: &V2Profile) -> u8 {
     if profile.driver_bit6_means_enabled {
         status
     } else {

@@ -15,10 +15,12 @@ mod sim;
 pub use auto::AutoDriver;
 pub use codec::*;
 pub use commands::{STOP, clear_code_for, frames_for};
-pub use driver::{V2Driver, normalize_faults};
+pub use driver::{V2Driver, normalize_driver_status, normalize_faults, vehicle_state_flags};
 pub use profile::{Kinematics, V2Model, V2Profile};
 pub use sim::V2Sim;
 
+#[cfg(test)]
+mod names_tests;
 #[cfg(test)]
 mod scenarios;
 #[cfg(test)]

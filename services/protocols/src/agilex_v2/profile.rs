@@ -2,6 +2,7 @@
 //! model. Every doubtful point of the V2 reading (`docs/PROTOCOLS.md`, "AgileX protocol V2",
 //! ⚠ D-1 … D-26) is a field here, with the reading's proposed default for that robot.
 
+use chassis_interfaces::FaultFlags as F;
 use serde::{Deserialize, Serialize};
 
 use crate::profile::ProfileError;
@@ -110,6 +111,159 @@ pub enum FaultMap {
     Hunter2,
     /// HUNTER SE.
     HunterSe,
+}
+
+/// One bit of 0x211's fault word (b4 = high byte, b5 = low byte) under a ⚠ D-3 table: its name
+/// as `PROTOCOLS-V2` §2.3.2 gives it for that robot, and the normalized flag it raises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FaultBit {
+    /// The bit in the `u16be` word (b4 bit0 = 0x0100, b5 bit0 = 0x0001).
+    pub mask: u16,
+    /// The vendor's meaning, in snake case.
+    pub name: &'static str,
+    /// The `chassis_interfaces::FaultFlags` bit it sets.
+    pub flag: u64,
+}
+
+const fn bit(mask: u16, name: &'static str, flag: u64) -> FaultBit {
+    FaultBit { mask, name, flag }
+}
+
+/// b4 bit `n` of 0x211 (the high byte of the fault word).
+const fn b4(n: u16) -> u16 {
+    1 << (8 + n)
+}
+
+/// b5 bit `n` of 0x211 (the low byte of the fault word).
+const fn b5(n: u16) -> u16 {
+    1 << n
+}
+
+/// The bit ⚠ D-20 decides: SDK "steering encoder", HUNTER SE and the BUNKER MINI capture "E-stop".
+pub const FAULT_0080: u16 = b5(7);
+
+/// §2.3.2, SDK generic masks (`agilex_message.h`), SCOUT 2.0 / MINI later firmware; ROAS agrees
+/// on b5 bits 0-6. b5 bit7 is ⚠ D-20's.
+const SDK_FAULTS: &[FaultBit] = &[
+    bit(b4(0), "motor_driver_error", F::MOTOR_DRIVER_ERROR),
+    bit(b4(1), "host_communication_lost", F::HEARTBEAT_LOST),
+    bit(b5(0), "battery_failure", F::BATTERY_UNDER_VOLTAGE),
+    bit(b5(1), "battery_warning", F::BATTERY_UNDER_VOLTAGE_WARNING),
+    bit(b5(2), "rc_signal_lost", F::RC_LINK_LOST),
+    bit(b5(3), "motor_1_communication_lost", F::MOTOR_1_COMM_LOST),
+    bit(b5(4), "motor_2_communication_lost", F::MOTOR_2_COMM_LOST),
+    bit(b5(5), "motor_3_communication_lost", F::MOTOR_3_COMM_LOST),
+    bit(b5(6), "motor_4_communication_lost", F::MOTOR_4_COMM_LOST),
+];
+
+/// §2.3.2, SCOUT v1.3.0 (S2D table 3.2), TRACER v1.2 (TRM table 3.2): b4 only.
+const SCOUT_V13_FAULTS: &[FaultBit] = &[
+    bit(
+        b4(0),
+        "battery_under_voltage_failure",
+        F::BATTERY_UNDER_VOLTAGE,
+    ),
+    bit(
+        b4(1),
+        "battery_under_voltage_warning",
+        F::BATTERY_UNDER_VOLTAGE_WARNING,
+    ),
+    bit(b4(2), "rc_link_lost", F::RC_LINK_LOST),
+];
+
+/// §2.3.2, TRACER MINI (TMM p18).
+const TRACER_MINI_FAULTS: &[FaultBit] = &[
+    bit(b4(1), "accessory_12v_over_current", F::OVER_CURRENT),
+    bit(b4(7), "anti_collision_strip", F::BUMPER),
+    bit(
+        b5(0),
+        "battery_under_voltage_failure",
+        F::BATTERY_UNDER_VOLTAGE,
+    ),
+    bit(
+        b5(1),
+        "battery_under_voltage_warning",
+        F::BATTERY_UNDER_VOLTAGE_WARNING,
+    ),
+    bit(b5(2), "rc_link_lost", F::RC_LINK_LOST),
+];
+
+/// §2.3.2, HUNTER 2.0 (H2X table 1).
+const HUNTER_2_FAULTS: &[FaultBit] = &[
+    bit(
+        b4(1),
+        "front_steering_encoder_offline",
+        F::FRONT_STEERING_ENCODER,
+    ),
+    bit(b4(2), "rc_link_lost", F::RC_LINK_LOST),
+    bit(b4(4), "host_communication_lost", F::HEARTBEAT_LOST),
+    bit(b4(6), "driver_state_error", F::MOTOR_DRIVER_ERROR),
+    bit(b5(0), "battery_under_voltage", F::BATTERY_UNDER_VOLTAGE),
+    bit(
+        b5(3),
+        "steering_driver_communication_lost",
+        F::MOTOR_1_COMM_LOST,
+    ),
+    bit(
+        b5(4),
+        "rear_right_driver_communication_lost",
+        F::MOTOR_2_COMM_LOST,
+    ),
+    bit(
+        b5(5),
+        "rear_left_driver_communication_lost",
+        F::MOTOR_3_COMM_LOST,
+    ),
+    bit(b5(6), "driver_over_temperature", F::OVER_TEMPERATURE),
+    bit(b5(7), "motor_over_current", F::OVER_CURRENT),
+];
+
+/// §2.3.2, HUNTER SE (HSE table 3.1); b5 bit7 is ⚠ D-20's.
+const HUNTER_SE_FAULTS: &[FaultBit] = &[
+    bit(b4(0), "motor_over_temperature", F::OVER_TEMPERATURE),
+    bit(b4(1), "driver_over_current", F::OVER_CURRENT),
+    bit(b4(2), "driver_status_error", F::MOTOR_DRIVER_ERROR),
+    bit(b5(0), "battery_under_voltage", F::BATTERY_UNDER_VOLTAGE),
+    bit(
+        b5(1),
+        "steering_zero_setting_error",
+        F::FRONT_STEERING_ENCODER,
+    ),
+    bit(b5(2), "rc_link_lost", F::RC_LINK_LOST),
+    bit(
+        b5(3),
+        "steering_driver_communication_lost",
+        F::MOTOR_1_COMM_LOST,
+    ),
+    bit(
+        b5(4),
+        "rear_right_driver_communication_lost",
+        F::MOTOR_2_COMM_LOST,
+    ),
+    bit(
+        b5(5),
+        "rear_left_driver_communication_lost",
+        F::MOTOR_3_COMM_LOST,
+    ),
+];
+
+impl FaultMap {
+    /// The table's bits, as §2.3.2 names them. On the SDK and HUNTER SE tables b5 bit7
+    /// ([`FAULT_0080`]) is left to ⚠ D-20 ([`V2Profile::fault_bits`] adds it).
+    pub fn bits(self) -> &'static [FaultBit] {
+        match self {
+            FaultMap::Sdk => SDK_FAULTS,
+            FaultMap::ScoutV13 => SCOUT_V13_FAULTS,
+            FaultMap::TracerMini => TRACER_MINI_FAULTS,
+            FaultMap::Hunter2 => HUNTER_2_FAULTS,
+            FaultMap::HunterSe => HUNTER_SE_FAULTS,
+        }
+    }
+
+    /// Whether b5 bit7 is left to ⚠ D-20 (the SDK and HUNTER SE tables).
+    pub fn leaves_0080_to_d20(self) -> bool {
+        matches!(self, FaultMap::Sdk | FaultMap::HunterSe)
+    }
 }
 
 /// ⚠ D-6: layout of 0x362.
@@ -307,6 +461,16 @@ fn names(list: &[&str]) -> Vec<String> {
     list.iter().map(|s| (*s).to_string()).collect()
 }
 
+/// `b4_bitN` / `b5_bitN` for a fault-word bit no table names.
+fn unnamed_fault_bit(mask: u16) -> String {
+    let n = mask.trailing_zeros();
+    if n >= 8 {
+        format!("b4_bit{}", n - 8)
+    } else {
+        format!("b5_bit{n}")
+    }
+}
+
 impl V2Profile {
     /// The reading's defaults for `model`.
     // 0.5235 and 2.5235 are the SDK's full scales as printed, not approximations of π/6.
@@ -476,6 +640,45 @@ impl V2Profile {
                 ..V2Profile::for_model(V2Model::RangerMini)
             },
         }
+    }
+
+    /// Every named bit of 0x211's fault word on this robot: the ⚠ D-3 table, with b5 bit7 as
+    /// ⚠ D-20 reads it where the table leaves it open.
+    pub fn fault_bits(&self) -> impl Iterator<Item = FaultBit> + '_ {
+        let d20 = self.fault_map.leaves_0080_to_d20().then(|| {
+            if self.fault_0080_is_estop {
+                bit(FAULT_0080, "estop", F::EMERGENCY_STOP)
+            } else {
+                bit(FAULT_0080, "steering_encoder", F::FRONT_STEERING_ENCODER)
+            }
+        });
+        self.fault_map.bits().iter().copied().chain(d20)
+    }
+
+    /// The names of the bits set in a 0x211 fault word, in the order of §2.3.2's table (b4 bit0
+    /// … bit7, then b5 bit0 … bit7); a set bit the robot's table does not name reads `b4_bit3`,
+    /// `b5_bit6`, ….
+    pub fn fault_names(&self, word: u16) -> Vec<String> {
+        (8..16u16)
+            .chain(0..8)
+            .map(|n| 1u16 << n)
+            .filter(|mask| word & mask != 0)
+            .map(|mask| {
+                self.fault_bits()
+                    .find(|b| b.mask == mask)
+                    .map_or_else(|| unnamed_fault_bit(mask), |b| b.name.to_string())
+            })
+            .collect()
+    }
+
+    /// The fault-word bit that raises `flag` on this robot, if its table has one.
+    pub fn fault_bit_for(&self, flag: u64) -> Option<u16> {
+        self.fault_bits().find(|b| b.flag == flag).map(|b| b.mask)
+    }
+
+    /// 0x211 b6 is the parking-brake state (HUNTER 2.0, H2X row 18); reserved elsewhere.
+    pub fn reports_brake_in_b6(&self) -> bool {
+        self.brake_lock_value.is_some() && self.fault_map == FaultMap::Hunter2
     }
 
     /// This profile with the keys of `overrides` (the `[profile]` table of the service's

@@ -44,7 +44,7 @@ use super::codec::{
 use super::commands::STOP;
 use super::driver::normalize_faults;
 use super::kinematics::{RangerMode, body_twist};
-use super::profile::{FaultMap, Kinematics, SpinField, V2Profile};
+use super::profile::{Kinematics, SpinField, V2Profile};
 use crate::Direction;
 use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
@@ -62,14 +62,6 @@ enum Mode {
     Standby,
     Command,
     Remote,
-}
-
-/// SDK fault bit "host communication lost" (b4 bit1); HUNTER 2.0: b4 bit4.
-fn heartbeat_bit(profile: &V2Profile) -> u16 {
-    match profile.fault_map {
-        FaultMap::Hunter2 => 1 << 12,
-        _ => 1 << 9,
-    }
 }
 
 /// The simulated protocol-V2 chassis.
@@ -431,13 +423,22 @@ impl V2Sim {
         }
     }
 
+    /// The fault word as the robot's ⚠ D-3 table spells it: "host communication lost" (SDK b4
+    /// bit1, HUNTER 2.0 b4 bit4; the TRACER MINI and HUNTER SE tables have no such bit) and the
+    /// E-stop bit where ⚠ D-20 reads b5 bit7 so.
     fn fault_word(&self) -> u16 {
         let mut word = 0;
         if self.heartbeat_lost {
-            word |= heartbeat_bit(&self.profile);
+            word |= self
+                .profile
+                .fault_bit_for(FaultFlags::HEARTBEAT_LOST)
+                .unwrap_or(0);
         }
-        if self.estop && self.profile.fault_0080_is_estop {
-            word |= 0x0080;
+        if self.estop {
+            word |= self
+                .profile
+                .fault_bit_for(FaultFlags::EMERGENCY_STOP)
+                .unwrap_or(0);
         }
         word
     }
@@ -454,11 +455,12 @@ impl V2Sim {
             } else {
                 vehicle::NORMAL
             },
+            vehicle: "",
             mode: self.wire_mode(),
             control: "",
             battery_voltage_v: (self.battery_v() * 10.0).round() / 10.0,
             fault_word: self.fault_word(),
-            b6: u8::from(self.profile.fault_map == FaultMap::Hunter2 && self.brake_engaged),
+            b6: u8::from(self.profile.reports_brake_in_b6() && self.brake_engaged),
             count,
         });
         self.send(frame);

@@ -79,6 +79,7 @@ fn tv8_tv12_system_state_of_a_bunker_mini_with_its_estop_pressed() {
         &bunker(),
         Frame::SystemStatus(SystemStatus {
             vehicle_state: vehicle::ESTOP,
+            vehicle: "estop",
             mode: 0,
             control: "standby",
             battery_voltage_v: 25.6,
@@ -92,6 +93,7 @@ fn tv8_tv12_system_state_of_a_bunker_mini_with_its_estop_pressed() {
         &bunker(),
         Frame::SystemStatus(SystemStatus {
             vehicle_state: vehicle::ESTOP,
+            vehicle: "estop",
             mode: 1,
             control: "can",
             battery_voltage_v: 25.4,

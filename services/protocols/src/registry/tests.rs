@@ -5,6 +5,7 @@ use std::time::Duration;
 use chassis_interfaces::{Kinematics, MAX_JOINTS, MAX_SENSORS, Twist, WireProtocol};
 
 use super::*;
+use crate::CanFrame;
 use crate::description::describe;
 use crate::firmware::Injection;
 use crate::pair::Pair;
@@ -247,4 +248,38 @@ fn the_xbot_describes_its_range_sensors_and_its_wheels() {
     let titan = describe(&RobotKind::Titan.entry().defaults());
     let joints: Vec<&str> = titan.joints().iter().map(|j| j.name()).collect();
     assert_eq!(joints, ["front_steer_joint", "rear_steer_joint"]);
+}
+
+#[test]
+fn the_frame_describer_follows_the_protocol_the_state_reports() {
+    let tv8 = CanFrame::from_candump("211#0100010000800000").unwrap();
+    // SCOUT MINI and BUNKER speak V1 or V2: a state saying V2 gets the V2 describer, names and all.
+    for robot in [RobotKind::ScoutMini, RobotKind::Scout, RobotKind::Bunker] {
+        let json = robot
+            .entry()
+            .codec_for_wire(WireProtocol::V2)
+            .decode_can(&tv8)
+            .unwrap();
+        assert_eq!(json["protocol"], "v2", "{robot:?}");
+        assert_eq!(json["vehicle"], "estop", "{robot:?}");
+        assert_eq!(
+            json["faults"],
+            serde_json::json!(["emergency_stop"]),
+            "{robot:?}"
+        );
+        let v1 = robot.entry().codec_for_wire(WireProtocol::V1);
+        assert_eq!(v1.robot(), robot);
+        assert!(
+            v1.decode_can(&tv8).is_err(),
+            "{robot:?}: 0x211 is no V1 frame"
+        );
+    }
+    // Still detecting: the robot's default protocol (SCOUT MINI: V1).
+    let detecting = RobotKind::ScoutMini
+        .entry()
+        .codec_for_wire(WireProtocol::DETECTING);
+    assert!(detecting.decode_can(&tv8).is_err());
+    // A robot with one protocol of its own keeps it.
+    let titan = RobotKind::Titan.entry().codec_for_wire(WireProtocol::V2);
+    assert_eq!(titan.robot(), RobotKind::Titan);
 }

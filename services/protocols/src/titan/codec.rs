@@ -401,6 +401,18 @@ impl BmsAlarm {
         out
     }
 
+    /// The bytes `BmsState::alarm_flags` holds, back as a frame of `group`.
+    pub fn from_alarm_flags(group: u8, flags: u32) -> Self {
+        let [alarm_1, alarm_2, warning_1, warning_2] = flags.to_le_bytes();
+        BmsAlarm {
+            group,
+            alarm_1,
+            alarm_2,
+            warning_1,
+            warning_2,
+        }
+    }
+
     /// The four bytes as `BmsState::alarm_flags` holds them.
     pub fn alarm_flags(&self) -> u32 {
         u32::from_le_bytes([self.alarm_1, self.alarm_2, self.warning_1, self.warning_2])
