@@ -120,12 +120,9 @@ pub enum V1Model {
 }
 
 impl V1Model {
+    /// The robot of this model, as the registry knows it.
     pub fn robot(self) -> RobotKind {
-        match self {
-            V1Model::ScoutMini => RobotKind::ScoutMini,
-            V1Model::Scout => RobotKind::Scout,
-            V1Model::Bunker => RobotKind::Bunker,
-        }
+        RobotKind::of_v1(self).unwrap_or(RobotKind::ScoutMini)
     }
 }
 
@@ -538,21 +535,14 @@ impl Profile {
         }
     }
 
+    /// The robot the profile is of, as the registry knows its models. (Every V1 and V2 model
+    /// belongs to a registry entry: `registry::tests` checks it; the fallbacks are unreachable.)
     pub fn robot(&self) -> RobotKind {
-        use crate::agilex_v2::V2Model;
         match self {
             Profile::Titan(_) => RobotKind::Titan,
             Profile::ScoutMini(p) => p.model.robot(),
             Profile::Xbot(_) => RobotKind::Xbot,
-            Profile::V2(p) => match p.model {
-                V2Model::Scout => RobotKind::Scout,
-                V2Model::ScoutMini | V2Model::ScoutMiniOmni => RobotKind::ScoutMini,
-                V2Model::Hunter => RobotKind::Hunter,
-                V2Model::HunterSe => RobotKind::HunterSe,
-                V2Model::Tracer => RobotKind::Tracer,
-                V2Model::Bunker => RobotKind::Bunker,
-                V2Model::RangerMini | V2Model::RangerMiniV1 => RobotKind::RangerMini,
-            },
+            Profile::V2(p) => RobotKind::of_v2(p.model).unwrap_or(RobotKind::Scout),
         }
     }
 }

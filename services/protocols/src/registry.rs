@@ -127,8 +127,9 @@ pub struct RobotEntry {
     pub default_protocol: Option<Protocol>,
     /// Its protocol-V1 model, where it may speak V1.
     pub v1_model: Option<V1Model>,
-    /// Its protocol-V2 model, where it may speak V2.
-    pub v2_model: Option<V2Model>,
+    /// Its protocol-V2 models, where it may speak V2: the first is its plain model, the others
+    /// variants a profile's `model` may name (`scout-mini-omni`, `ranger-mini-v1`).
+    pub v2_models: &'static [V2Model],
     /// `chassis_interfaces::Kinematics` of its plain model (a profile's `model` or `omni` may
     /// name a mecanum variant).
     pub kinematics: u8,
@@ -346,7 +347,7 @@ static TITAN: RobotEntry = RobotEntry {
     protocols: &[],
     default_protocol: None,
     v1_model: None,
-    v2_model: None,
+    v2_models: &[],
     kinematics: Kinematics::DUAL_ACKERMANN,
     outline: Outline {
         length_m: 1.640,
@@ -371,7 +372,7 @@ static SCOUT_MINI: RobotEntry = RobotEntry {
     protocols: &[Protocol::V1, Protocol::V2],
     default_protocol: Some(Protocol::V1),
     v1_model: Some(V1Model::ScoutMini),
-    v2_model: Some(V2Model::ScoutMini),
+    v2_models: &[V2Model::ScoutMini, V2Model::ScoutMiniOmni],
     kinematics: Kinematics::SKID_STEER,
     outline: Outline {
         length_m: 0.627,
@@ -396,7 +397,7 @@ static XBOT: RobotEntry = RobotEntry {
     protocols: &[],
     default_protocol: None,
     v1_model: None,
-    v2_model: None,
+    v2_models: &[],
     kinematics: Kinematics::DIFFERENTIAL,
     outline: XBOT_OUTLINE,
     sensors: XBOT_SENSORS,
@@ -416,7 +417,7 @@ static SCOUT: RobotEntry = RobotEntry {
     protocols: &[Protocol::V1, Protocol::V2],
     default_protocol: Some(Protocol::V2),
     v1_model: Some(V1Model::Scout),
-    v2_model: Some(V2Model::Scout),
+    v2_models: &[V2Model::Scout],
     kinematics: Kinematics::SKID_STEER,
     outline: around_wheels(0.498, 0.583, 0.35),
     sensors: &[],
@@ -436,7 +437,7 @@ static HUNTER: RobotEntry = RobotEntry {
     protocols: &[Protocol::V2],
     default_protocol: Some(Protocol::V2),
     v1_model: None,
-    v2_model: Some(V2Model::Hunter),
+    v2_models: &[V2Model::Hunter],
     kinematics: Kinematics::ACKERMANN,
     outline: around_wheels(0.650, 0.605, 0.38),
     sensors: &[],
@@ -456,7 +457,7 @@ static HUNTER_SE: RobotEntry = RobotEntry {
     protocols: &[Protocol::V2],
     default_protocol: Some(Protocol::V2),
     v1_model: None,
-    v2_model: Some(V2Model::HunterSe),
+    v2_models: &[V2Model::HunterSe],
     kinematics: Kinematics::ACKERMANN,
     outline: around_wheels(0.657, 0.550, 0.33),
     sensors: &[],
@@ -476,7 +477,7 @@ static TRACER: RobotEntry = RobotEntry {
     protocols: &[Protocol::V2],
     default_protocol: Some(Protocol::V2),
     v1_model: None,
-    v2_model: Some(V2Model::Tracer),
+    v2_models: &[V2Model::Tracer],
     kinematics: Kinematics::DIFFERENTIAL,
     outline: Outline {
         length_m: 0.700,
@@ -501,7 +502,7 @@ static BUNKER: RobotEntry = RobotEntry {
     protocols: &[Protocol::V1, Protocol::V2],
     default_protocol: Some(Protocol::V2),
     v1_model: Some(V1Model::Bunker),
-    v2_model: Some(V2Model::Bunker),
+    v2_models: &[V2Model::Bunker],
     kinematics: Kinematics::TRACKED,
     outline: around_wheels(0.5, 0.5, 0.30),
     sensors: &[],
@@ -521,7 +522,7 @@ static RANGER_MINI: RobotEntry = RobotEntry {
     protocols: &[Protocol::V2],
     default_protocol: Some(Protocol::V2),
     v1_model: None,
-    v2_model: Some(V2Model::RangerMini),
+    v2_models: &[V2Model::RangerMini, V2Model::RangerMiniV1],
     kinematics: Kinematics::FOUR_WHEEL_STEER,
     outline: around_wheels(0.494, 0.364, 0.34),
     sensors: &[],
@@ -593,9 +594,23 @@ impl RobotKind {
         self.entry().v1_model
     }
 
-    /// The protocol-V2 model of this robot, if it speaks V2.
+    /// The plain protocol-V2 model of this robot, if it speaks V2.
     pub fn v2_model(self) -> Option<V2Model> {
-        self.entry().v2_model
+        self.entry().v2_models.first().copied()
+    }
+
+    /// The robot a protocol-V1 model is.
+    pub fn of_v1(model: V1Model) -> Option<RobotKind> {
+        RobotKind::ALL
+            .into_iter()
+            .find(|k| k.v1_model() == Some(model))
+    }
+
+    /// The robot a protocol-V2 model (or variant) is.
+    pub fn of_v2(model: V2Model) -> Option<RobotKind> {
+        RobotKind::ALL
+            .into_iter()
+            .find(|k| k.entry().v2_models.contains(&model))
     }
 }
 
@@ -612,7 +627,7 @@ impl RobotEntry {
         now: Timestamp,
     ) -> BoxedDriver {
         if detect {
-            let pair = match (profile, self.v1_model, self.v2_model) {
+            let pair = match (profile, self.v1_model, self.v2_models.first().copied()) {
                 (Profile::ScoutMini(v1), _, Some(model)) => Some((
                     v1.clone(),
                     V2Profile::for_model(model),
@@ -673,8 +688,9 @@ impl RobotEntry {
                 .map(|m| Profile::ScoutMini(V1Profile::for_model(m)))
                 .ok_or(not_spoken(Protocol::V1)),
             Some(Protocol::V2) => self
-                .v2_model
-                .map(|m| Profile::V2(V2Profile::for_model(m)))
+                .v2_models
+                .first()
+                .map(|&m| Profile::V2(V2Profile::for_model(m)))
                 .ok_or(not_spoken(Protocol::V2)),
         }
     }

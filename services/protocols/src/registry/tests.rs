@@ -32,6 +32,54 @@ fn every_kind_has_an_entry_that_names_it_back() {
     assert!("husky".parse::<RobotKind>().is_err());
 }
 
+/// Every protocol-V1 and V2 model is some robot's: a model added to its family without a
+/// registry entry fails here (the match below stops compiling when a model is added, so the
+/// list stays whole).
+#[test]
+fn every_protocol_model_belongs_to_one_robot() {
+    use crate::agilex_v2::V2Model;
+    fn listed(model: V2Model) -> V2Model {
+        match model {
+            V2Model::Scout
+            | V2Model::ScoutMini
+            | V2Model::ScoutMiniOmni
+            | V2Model::Hunter
+            | V2Model::HunterSe
+            | V2Model::Tracer
+            | V2Model::Bunker
+            | V2Model::RangerMini
+            | V2Model::RangerMiniV1 => model,
+        }
+    }
+    let v2 = [
+        V2Model::Scout,
+        V2Model::ScoutMini,
+        V2Model::ScoutMiniOmni,
+        V2Model::Hunter,
+        V2Model::HunterSe,
+        V2Model::Tracer,
+        V2Model::Bunker,
+        V2Model::RangerMini,
+        V2Model::RangerMiniV1,
+    ];
+    for model in v2.map(listed) {
+        let owners: Vec<RobotKind> = RobotKind::ALL
+            .into_iter()
+            .filter(|k| k.entry().v2_models.contains(&model))
+            .collect();
+        assert_eq!(owners.len(), 1, "{model:?}: {owners:?}");
+        assert_eq!(
+            Profile::V2(V2Profile::for_model(model)).robot(),
+            owners[0],
+            "{model:?}"
+        );
+    }
+    for model in [V1Model::ScoutMini, V1Model::Scout, V1Model::Bunker] {
+        let kind = RobotKind::of_v1(model).unwrap_or_else(|| panic!("{model:?} has no robot"));
+        assert_eq!(kind.v1_model(), Some(model));
+    }
+}
+
 #[test]
 fn every_robot_defaults_to_a_valid_profile_of_its_own_kind_in_each_of_its_protocols() {
     for kind in RobotKind::ALL {
