@@ -34,6 +34,10 @@
 
 use std::time::Duration;
 
+#[cfg(feature = "foxglove")]
+pub mod foxglove;
+pub mod watch;
+
 pub use chassis_interfaces::*;
 use chassis_ipc::{
     CMD, CONTROL, ClientPorts, FRAMES, IpcError, MUX, PUBLICATION, Reader, RequestResponse, SIM,

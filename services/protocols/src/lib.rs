@@ -10,12 +10,14 @@
 //! * [`nmea`]: the NMEA 0183 sentences of the XBot's GPS receiver.
 //! * [`profile`]: every physical constant and every doubtful (⚠) choice of the manuals.
 //! * [`can`]: the CAN frame type and the can-utils text forms.
+//! * [`body`]: what each robot looks like from outside (its box and range sensors), for views.
 //!
 //! Frame structs hold SI values in ISO 8855 axes (x forward, y left, left turn positive); each
 //! codec is the only place that knows its vendor's units and signs.
 
 mod agilex;
 pub mod agilex_v2;
+pub mod body;
 pub mod can;
 pub mod command;
 pub mod describe;

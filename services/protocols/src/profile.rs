@@ -75,6 +75,12 @@ impl Robot {
         }
     }
 
+    /// The robot behind a `chassis_interfaces::RobotKind` value (`ChassisState::robot`); `None`
+    /// for a value no robot has (0 before the first sample, or a newer service's robot).
+    pub fn from_kind(kind: u8) -> Option<Robot> {
+        Robot::ALL.into_iter().find(|robot| robot.kind() == kind)
+    }
+
     /// True for the robots on a CAN bus (all but the XBot, which speaks RS232).
     pub fn is_can(self) -> bool {
         !matches!(self, Robot::Xbot)
@@ -840,6 +846,20 @@ mod tests {
                 .to_string()
                 .contains("heartbeat_period_ms")
         );
+    }
+
+    #[test]
+    fn every_named_robot_kind_is_a_robot_and_back() {
+        use chassis_interfaces::RobotKind;
+        for kind in 0..=u8::MAX {
+            match Robot::from_kind(kind) {
+                Some(robot) => assert_eq!(robot.kind(), kind),
+                // A kind without a robot has no name either: none is forgotten by `ALL`.
+                None => assert_eq!(RobotKind::name(kind), "unknown", "kind {kind}"),
+            }
+        }
+        assert_eq!(Robot::from_kind(RobotKind::UNKNOWN), None);
+        assert_eq!(Robot::from_kind(RobotKind::HUNTER), Some(Robot::Hunter));
     }
 
     #[test]
