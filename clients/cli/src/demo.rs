@@ -25,7 +25,7 @@ pub struct DemoArgs {
     /// MINI: v1).
     #[arg(long, value_parser = crate::parse_protocol)]
     pub protocol: Option<chassis_protocols::Protocol>,
-    /// Name of the demo robot's services (default: demo-<robot>).
+    /// Name of the demo robot's services (default: demo-ROBOT).
     #[arg(long)]
     pub name: Option<String>,
     /// Stop after this many seconds (default: until Ctrl-C or `q`).

@@ -127,7 +127,7 @@ pub struct ReplayArgs {
     /// The robot (default: the one the MCAP recording names; required for a candump log).
     #[arg(long, value_parser = parse_model)]
     pub robot: Option<RobotModel>,
-    /// The replayed robot's name (chassis/<NAME>/…); keep it apart from a live robot's.
+    /// The replayed robot's name (chassis/NAME/…); keep it apart from a live robot's.
     #[arg(long, default_value = "replay")]
     pub name: String,
     /// As fast as the service takes the frames.

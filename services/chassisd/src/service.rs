@@ -3,11 +3,11 @@
 //! One thread owns the iceoryx2 ports, the bus and GPS descriptors, the simulated chassis and the
 //! clock. An iceoryx2 `WaitSet` waits on the bus (through the receive-moderation gate), the GPS
 //! port, the listeners of every source, of `control` and of `sim`, with a timeout at the engine's
-//! next deadline. Each wake-up runs one pass ([`Shell::pass`]): it reads what the engine asks
-//! for, hands it over with the time it was read, writes what the engine polls, and publishes what
-//! it produced. Every decision is the engine's; this module only moves bytes and reads the clock.
-//! Single-threaded means decode, mux and transmit never lock each other and ports never cross
-//! threads.
+//! next deadline. Each wake-up runs one pass (`Shell::pass`, in `service/pass.rs`): it reads
+//! what the engine asks for, hands it over with the time it was read, writes what the engine
+//! polls, and publishes what it produced. Every decision is the engine's; this module only
+//! moves bytes and reads the clock. Single-threaded means decode, mux and transmit never lock
+//! each other and ports never cross threads.
 // The shell owns the clock: it stamps what it reads and writes, and hands the time to the engine.
 #![allow(clippy::disallowed_methods)]
 
