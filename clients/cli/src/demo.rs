@@ -131,7 +131,8 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
             .stderr(log_file(&dir, "chassis-foxglove")?);
         children.spawn("chassis-foxglove", view)?;
         eprintln!(
-            "chassis-foxglove: open Foxglove, connect to ws://localhost:{}, import clients/foxglove/layout.json",
+            "chassis-foxglove: open Foxglove, connect to ws://localhost:{}, import clients/foxglove/layout.json \
+             (installed: /usr/share/chassisd/foxglove/layout.json)",
             args.foxglove_port
         );
     }
