@@ -72,6 +72,39 @@ fn chassis_demo_drives_figure_eights_under_the_safety_monitor_and_ctrl_c_stops_e
     );
 }
 
+/// The Foxglove bridge is not in the default build: `chassis demo --foxglove` without it names
+/// the command that builds it, before it starts anything.
+#[test]
+fn chassis_demo_with_foxglove_but_no_bridge_says_how_to_build_it_and_starts_nothing() {
+    let env = Env::new("demo-no-foxglove");
+    // A release directory as a fresh `cargo build --release` leaves it: the core's programs,
+    // no bridge. The others are never started, so empty files stand in for them.
+    let release = env.dir.join("release");
+    std::fs::create_dir_all(&release).unwrap();
+    let chassis = release.join("chassis");
+    std::fs::copy(bin("chassis"), &chassis).unwrap();
+    for program in ["chassisd", "chassis-safety", "chassis-planner"] {
+        std::fs::write(release.join(program), "").unwrap();
+    }
+    let name = format!("nf{}", std::process::id() % 100_000);
+    let out = std::process::Command::new(&chassis)
+        .args(["demo", "--foxglove", "--no-dashboard", "--name", &name])
+        .env(IPC_PREFIX_ENV, &env.prefix)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "{} is missing: build it with `cargo build --release -p chassis-foxglove`",
+            release.join("chassis-foxglove").display()
+        )),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("chassisd: simulated"), "{stderr}");
+}
+
 /// Every AgileX protocol-V2 robot (the SCOUT MINI with V2 firmware included), and the SCOUT
 /// and BUNKER with V1 firmware, run the demo on their simulated chassis: the planner drives each
 /// under the safety monitor, in its protocol, and the demo ends by itself after `--duration`.

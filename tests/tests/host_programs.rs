@@ -386,6 +386,12 @@ fn shell_tokens(script: &str) -> Vec<Token> {
                 i = end + 1;
                 continue;
             }
+            '<' if chars.get(i + 1) == Some(&'<') && chars.get(i + 2) == Some(&'<') => {
+                // A here-string (`<<<"$text"`): its word is data, the line goes on.
+                flush(&mut word, &mut tokens);
+                i += 3;
+                continue;
+            }
             '<' if chars.get(i + 1) == Some(&'<') && chars.get(i + 2) != Some(&'<') => {
                 // A heredoc: its terminator is the next word, unquoted.
                 let mut j = i + 2;
@@ -718,11 +724,13 @@ cat <<EOF
 gcc would be data here
 EOF
 for x in a b; do cp "$x" /tmp; done
+grep -qxF "$line" <<<"$text" || wc -l <<<"$text"
+lintian "$deb"
 "#;
     let found = shell_programs(script);
     let want: BTreeSet<String> = [
-        "awk", "bash", "cat", "cp", "ip", "pytest", "readlink", "socat", "sort", "timeout",
-        "unshare",
+        "awk", "bash", "cat", "cp", "grep", "ip", "lintian", "pytest", "readlink", "socat", "sort",
+        "timeout", "unshare", "wc",
     ]
     .iter()
     .map(|s| s.to_string())

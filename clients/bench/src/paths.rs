@@ -83,7 +83,7 @@ pub fn sibling(binary: &str) -> anyhow::Result<PathBuf> {
     let path = exe.with_file_name(binary);
     if !path.exists() {
         bail!(
-            "{} not found next to chassis-bench: build the workspace (`cargo build --release`)",
+            "{} not found next to chassis-bench: build the whole workspace (`cargo build --release --workspace`)",
             path.display()
         );
     }

@@ -475,7 +475,7 @@ impl Report {
         );
         out.push_str(&format!(
             "Measured {} on {}; machine: {}, {} cores, Linux {}; the host's steal time over the \
-             run: {}.\n\nReproduce: `cargo build --release && target/release/{}`\n\n",
+             run: {}.\n\nReproduce: `cargo build --release --workspace && target/release/{}`\n\n",
             p.date,
             p.commit_text(),
             self.machine.cpu_model,

@@ -25,7 +25,7 @@ pub struct DemoArgs {
     /// MINI: v1).
     #[arg(long, value_parser = crate::parse_protocol)]
     pub protocol: Option<chassis_protocols::Protocol>,
-    /// Name of the demo robot's services (default: demo-<robot>).
+    /// Name of the demo robot's services (default: demo-ROBOT).
     #[arg(long)]
     pub name: Option<String>,
     /// Stop after this many seconds (default: until Ctrl-C or `q`).
@@ -46,6 +46,14 @@ pub struct DemoArgs {
     pub foxglove_port: u16,
 }
 
+/// The programs a demo starts, found next to this executable.
+struct Programs {
+    chassisd: PathBuf,
+    safety: PathBuf,
+    planner: PathBuf,
+    foxglove: Option<PathBuf>,
+}
+
 fn log_file(dir: &std::path::Path, label: &str) -> anyhow::Result<Stdio> {
     let path = dir.join(format!("{label}.log"));
     Ok(Stdio::from(
@@ -61,9 +69,20 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| format!("demo-{}", args.robot.name()));
     let dir: PathBuf = std::env::temp_dir().join(format!("chassis-demo-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    // Every program first: a missing one (the Foxglove bridge is not in the default build) is
+    // named, with the command that builds it, before anything starts.
+    let programs = Programs {
+        chassisd: sibling("chassisd")?,
+        safety: sibling("chassis-safety")?,
+        planner: sibling("chassis-planner")?,
+        foxglove: args
+            .foxglove
+            .then(|| sibling("chassis-foxglove"))
+            .transpose()?,
+    };
     let mut children = Children::default();
 
-    let mut service = Command::new(sibling("chassisd")?);
+    let mut service = Command::new(&programs.chassisd);
     service
         .args(["--robot", args.robot.name(), "--name", &name])
         .stdin(Stdio::null())
@@ -83,7 +102,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     );
     let mut robot = connect(&name, &mut children)?;
 
-    let mut safety = Command::new(sibling("chassis-safety")?);
+    let mut safety = Command::new(&programs.safety);
     safety
         .args(["--name", &name])
         .stdin(Stdio::null())
@@ -92,7 +111,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     children.spawn("chassis-safety", safety)?;
     eprintln!("chassis-safety: watching faults, battery, staleness, bumper, ranges, speed");
 
-    let mut planner = Command::new(sibling("chassis-planner")?);
+    let mut planner = Command::new(&programs.planner);
     planner
         .args(["--name", &name, "--shape", "figure-eight", "--repeat"])
         .stdin(Stdio::null())
@@ -104,15 +123,16 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     children.spawn("chassis-planner", planner)?;
     eprintln!("chassis-planner: figure-eights, over and over");
 
-    if args.foxglove {
-        let mut view = Command::new(sibling("chassis-foxglove")?);
+    if let Some(foxglove) = &programs.foxglove {
+        let mut view = Command::new(foxglove);
         view.args(["--name", &name, "--port", &args.foxglove_port.to_string()])
             .stdin(Stdio::null())
             .stdout(log_file(&dir, "chassis-foxglove")?)
             .stderr(log_file(&dir, "chassis-foxglove")?);
         children.spawn("chassis-foxglove", view)?;
         eprintln!(
-            "chassis-foxglove: open Foxglove, connect to ws://localhost:{}, import clients/foxglove/layout.json",
+            "chassis-foxglove: open Foxglove, connect to ws://localhost:{}, import clients/foxglove/layout.json \
+             (installed: /usr/share/chassisd/foxglove/layout.json)",
             args.foxglove_port
         );
     }

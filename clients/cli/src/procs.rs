@@ -1,6 +1,6 @@
 //! Starting the workspace's other programs from the CLI (`chassis demo`, `chassis replay`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::Duration;
 
@@ -9,18 +9,35 @@ use chassis_client::{Ticker, now_ns};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
-/// The program `name` installed next to this `chassis` executable.
+/// The program `name` installed next to this `chassis` executable; when it is missing, the
+/// error says how to build it.
 pub fn sibling(name: &str) -> anyhow::Result<PathBuf> {
-    let path = std::env::current_exe()
-        .context("finding this executable")?
-        .with_file_name(name);
+    let exe = std::env::current_exe().context("finding this executable")?;
+    let path = exe.with_file_name(name);
     if !path.exists() {
         bail!(
-            "{} is missing: it is built with the workspace (`cargo build --release`)",
-            path.display()
+            "{} is missing: build it with `{}`",
+            path.display(),
+            build_command(&exe, name)
         );
     }
     Ok(path)
+}
+
+/// The command that builds the program `name` beside the executable `exe`: a debug build when
+/// `exe` is in cargo's `debug` directory, else a release build. Every program the CLI starts is
+/// in the package of its own name; the bridges (`chassis-foxglove`, …) are not in the default
+/// `cargo build`.
+fn build_command(exe: &Path, name: &str) -> String {
+    let debug = exe
+        .parent()
+        .and_then(Path::file_name)
+        .is_some_and(|dir| dir == "debug");
+    if debug {
+        format!("cargo build -p {name}")
+    } else {
+        format!("cargo build --release -p {name}")
+    }
 }
 
 /// Makes `command`'s process get SIGTERM when this one dies, however it dies.
@@ -90,5 +107,26 @@ impl Children {
 impl Drop for Children {
     fn drop(&mut self) {
         self.stop_all(Duration::from_secs(3));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_program_is_built_in_the_profile_of_the_cli_that_needs_it() {
+        assert_eq!(
+            build_command(Path::new("/src/target/release/chassis"), "chassis-foxglove"),
+            "cargo build --release -p chassis-foxglove"
+        );
+        assert_eq!(
+            build_command(Path::new("/src/target/debug/chassis"), "chassis-foxglove"),
+            "cargo build -p chassis-foxglove"
+        );
+        assert_eq!(
+            build_command(Path::new("/usr/bin/chassis"), "chassisd"),
+            "cargo build --release -p chassisd"
+        );
     }
 }

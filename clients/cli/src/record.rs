@@ -76,11 +76,12 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::Group;
+use chassis_client::foxglove as view;
+use chassis_client::watch::{Severity, Watch};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, LinkFlags, MuxStatus, Robot, STATE_BUFFER,
     StateStream, install_signal_handlers, now_ns, termination_requested, valid_robot_name,
 };
-use chassis_foxglove::view;
 use chassis_protocols::{CanFrame, RobotKind};
 use clap::Args;
 use foxglove::Encode;
@@ -125,7 +126,7 @@ pub struct ReplayArgs {
     /// The robot (default: the one the MCAP recording names; required for a candump log).
     #[arg(long, value_parser = parse_model)]
     pub robot: Option<RobotKind>,
-    /// The replayed robot's name (chassis/<NAME>/…); keep it apart from a live robot's.
+    /// The replayed robot's name (chassis/NAME/…); keep it apart from a live robot's.
     #[arg(long, default_value = "replay")]
     pub name: String,
     /// As fast as the service takes the frames.
@@ -366,7 +367,7 @@ struct FoxgloveChannels {
     gps: u16,
     log: u16,
     body: Option<(u8, view::Body)>,
-    watch: view::Watch,
+    watch: Watch,
     last_tf_ns: Option<u64>,
     last_gps_ns: u64,
 }
@@ -469,7 +470,7 @@ impl McapSink {
             )?,
             log: foxglove_channel("/log", Log::get_schema(), Log::get_message_encoding())?,
             body: None,
-            watch: view::Watch::default(),
+            watch: Watch::default(),
             last_tf_ns: None,
             last_gps_ns: 0,
         };
@@ -498,12 +499,7 @@ impl McapSink {
         self.write(which, channel_id, stamp_ns, &data)
     }
 
-    fn log(
-        &mut self,
-        level: foxglove::messages::log::Level,
-        text: String,
-        stamp_ns: u64,
-    ) -> anyhow::Result<()> {
+    fn log(&mut self, level: Severity, text: String, stamp_ns: u64) -> anyhow::Result<()> {
         let message = view::log_message(LOG_NAME, level, text, stamp_ns);
         self.write_encoded(6, self.fox.log, stamp_ns, &message)
     }
@@ -519,10 +515,9 @@ impl McapSink {
             .body
             .as_ref()
             .is_none_or(|(kind, _)| *kind != state.robot)
-            && let Some(robot) = RobotKind::from_id(state.robot)
+            && let Some(body) = view::body_of(state.robot)
         {
-            let description = chassis_protocols::description::describe(&robot.entry().defaults());
-            self.fox.body = Some((state.robot, view::Body::of(&description)));
+            self.fox.body = Some((state.robot, body));
         }
         if self
             .fox

@@ -31,8 +31,27 @@
 //! ```
 //!
 //! iceoryx2 ports are not `Send`: keep a [`Robot`] and its [`Source`]s on one thread.
+//!
+//! Every message is a plain fixed-layout value (re-exported from `chassis-interfaces`), the
+//! same bytes in every process and language, on services named after the robot:
+//!
+//! ```
+//! use chassis_client::{ServiceKind, VelocityRequest, service_name};
+//!
+//! let request = VelocityRequest::twist(0.3, 0.1); // m/s forward, rad/s left
+//! assert!(request.is_finite() && !request.is_heartbeat());
+//! assert_eq!(std::mem::size_of::<VelocityRequest>(), 64);
+//! assert_eq!(
+//!     service_name("titan", ServiceKind::Cmd("teleop")),
+//!     "chassis/titan/cmd/teleop"
+//! );
+//! ```
 
 use std::time::Duration;
+
+#[cfg(feature = "foxglove")]
+pub mod foxglove;
+pub mod watch;
 
 pub use chassis_interfaces::*;
 use chassis_ipc::{
@@ -137,7 +156,27 @@ pub struct Robot {
 }
 
 impl Robot {
-    /// Connects to the robot served as `chassis/<name>/`.
+    /// Connects to the robot served as `chassis/<name>/`: fails with
+    /// [`ClientError::NotRunning`] when no `chassisd` serves it (yet), and with
+    /// [`ClientError::BadName`] before touching shared memory for a name no robot can have.
+    ///
+    /// ```no_run
+    /// use chassis_client::{ClientError, Robot};
+    ///
+    /// match Robot::connect("titan") {
+    ///     Ok(robot) => println!("connected to {}", robot.name()),
+    ///     Err(ClientError::NotRunning { .. }) => eprintln!("start it: chassisd --robot titan"),
+    ///     Err(e) => return Err(e),
+    /// }
+    /// # Ok::<(), ClientError>(())
+    /// ```
+    ///
+    /// ```
+    /// use chassis_client::{ClientError, Robot};
+    ///
+    /// // Names are 1-16 of a-z 0-9 - _, checked before anything is opened.
+    /// assert!(matches!(Robot::connect("Titan!"), Err(ClientError::BadName(_))));
+    /// ```
     pub fn connect(name: &str) -> Result<Self, ClientError> {
         Self::connect_with_prefix(name, None)
     }
@@ -239,6 +278,27 @@ impl Robot {
     }
 
     /// The newest state sample (a late joiner gets the last one published).
+    ///
+    /// ```no_run
+    /// use chassis_client::{ControlMode, Group, Robot};
+    ///
+    /// let mut robot = Robot::connect("titan")?;
+    /// if let Some(state) = robot.latest_state()? {
+    ///     println!(
+    ///         "{:.2} m/s, {:.2} rad/s, {}, at ({:.2}, {:.2}) m",
+    ///         state.motion.linear_mps,
+    ///         state.motion.angular_radps,
+    ///         ControlMode::name(state.system.control_mode),
+    ///         state.odometry.x_m,
+    ///         state.odometry.y_m,
+    ///     );
+    ///     // A signal the robot never reported reads 0 with its group marked invalid.
+    ///     if state.is_valid(Group::Gps) && state.gps.has_fix() {
+    ///         println!("at {:.6}°, {:.6}°", state.gps.latitude_deg, state.gps.longitude_deg);
+    ///     }
+    /// }
+    /// # Ok::<(), chassis_client::ClientError>(())
+    /// ```
     pub fn latest_state(&mut self) -> Result<Option<ChassisState>, ClientError> {
         self.drain_state()?;
         Ok(self.latest_state)
@@ -361,6 +421,25 @@ impl Robot {
 
     /// Publishes velocity requests as the configured source `name`. Fails if the service has no
     /// such source, or if another process already holds it.
+    ///
+    /// The source's priority and timeout are the service's: a request counts until the
+    /// source's timeout after it, so a client publishes at a steady rate, and its motion ends
+    /// by itself when the client stops or dies.
+    ///
+    /// ```no_run
+    /// use std::time::Duration;
+    /// use chassis_client::{Robot, Ticker, VelocityRequest};
+    ///
+    /// let mut robot = Robot::connect("titan")?;
+    /// let mut planner = robot.source("planner")?;
+    /// let mut ticker = Ticker::new(Duration::from_millis(50));
+    /// for _ in 0..40 {
+    ///     planner.send(VelocityRequest::steer(0.5, 0.2))?; // 0.5 m/s, wheels 0.2 rad left
+    ///     ticker.wait();
+    /// }
+    /// planner.stop()?;
+    /// # Ok::<(), chassis_client::ClientError>(())
+    /// ```
     pub fn source(&mut self, name: &str) -> Result<Source, ClientError> {
         if !valid_robot_name(name) {
             return Err(ClientError::BadName(name.to_string()));
@@ -424,7 +503,22 @@ impl Robot {
         }
     }
 
-    /// Asks for a control action and waits at most `timeout` for the answer.
+    /// Asks for a control action and waits at most `timeout` for the answer: success, or a
+    /// status and the reason it was refused.
+    ///
+    /// ```no_run
+    /// use std::time::Duration;
+    /// use chassis_client::{ControlKind, ControlRequest, ControlStatus, Robot};
+    ///
+    /// let mut robot = Robot::connect("titan")?;
+    /// // The operator's e-stop: held (across restarts of chassisd) until released by name.
+    /// let estop = ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("estop");
+    /// let answer = robot.control(estop, Duration::from_secs(1))?;
+    /// if !answer.is_ok() {
+    ///     eprintln!("refused: {} {}", ControlStatus::name(answer.status), answer.message());
+    /// }
+    /// # Ok::<(), chassis_client::ClientError>(())
+    /// ```
     pub fn control(
         &mut self,
         mut request: ControlRequest,

@@ -19,18 +19,20 @@ use std::sync::mpsc::{Receiver, TryRecvError};
 use std::time::Duration;
 
 use anyhow::Context as _;
+use chassis_client::foxglove as fox;
+use chassis_client::watch::{self, Severity, Watch};
 use chassis_client::{
     BusFrame, ChassisState, ControlStatus, FrameDirection, FrameKind, MuxStatus, Robot, Source,
     Ticker, termination_requested,
 };
 use chassis_protocols::RobotKind;
-use chassis_protocols::description::describe;
-use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame, SceneUpdate, log};
+use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame, SceneUpdate};
 use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use serde_json::{Map, Value, json};
 
 use crate::server::Inbox;
-use chassis_foxglove::view::{self, Body, Trail, Watch};
+use crate::view::{self, Trail};
+use chassis_client::foxglove::Body;
 use chassis_foxglove_messages::{control_request, response_json};
 use chassis_protocols::describe::RobotCodec;
 
@@ -150,7 +152,7 @@ pub fn mux_json(mux: &MuxStatus) -> serde_json::Result<Value> {
             "zero_reason_name".into(),
             chassis_client::ZeroReason::name(mux.zero_reason).into(),
         );
-        obj.insert("locks_held".into(), view::held_locks(mux).into());
+        obj.insert("locks_held".into(), watch::held_locks(mux).into());
     }
     Ok(value)
 }
@@ -242,7 +244,7 @@ pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> any
         last_batch_ns: 0,
     };
     lp.log(
-        log::Level::Info,
+        Severity::Info,
         format!("bridging robot '{}'", config.name),
         chassis_client::now_ns(),
     );
@@ -338,10 +340,10 @@ struct Loop<'a> {
 }
 
 impl Loop<'_> {
-    fn log(&self, level: log::Level, message: String, monotonic_ns: u64) {
+    fn log(&self, level: Severity, message: String, monotonic_ns: u64) {
         let wall = self.clock.wall(monotonic_ns);
         self.channels.log.log_with_time(
-            &view::log_message(view::LOG_NAME, level, message, wall),
+            &fox::log_message(view::LOG_NAME, level, message, wall),
             wall,
         );
     }
@@ -379,9 +381,9 @@ impl Loop<'_> {
                 match answer {
                     Ok(response) => {
                         let level = if response.is_ok() {
-                            log::Level::Info
+                            Severity::Info
                         } else {
-                            log::Level::Warning
+                            Severity::Warning
                         };
                         self.log(
                             level,
@@ -396,7 +398,7 @@ impl Loop<'_> {
                         responder.respond_ok(response_json(&response).to_string());
                     }
                     Err(e) => {
-                        self.log(log::Level::Error, format!("{}: {e}", action.name()), now);
+                        self.log(Severity::Error, format!("{}: {e}", action.name()), now);
                         responder.respond_err(e);
                     }
                 }
@@ -422,10 +424,9 @@ impl Loop<'_> {
             .body
             .as_ref()
             .is_none_or(|(kind, _)| *kind != state.robot)
-            && let Some(robot) = RobotKind::from_id(state.robot)
+            && let Some(body) = fox::body_of(state.robot)
         {
-            let description = describe(&robot.entry().defaults());
-            self.body = Some((state.robot, Body::of(&description)));
+            self.body = Some((state.robot, body));
         }
         let c = self.channels;
         if c.state.has_sinks() {
@@ -436,10 +437,9 @@ impl Loop<'_> {
                 Err(e) => tracing::debug!(error = %e, "encoding a state sample"),
             }
         }
-        c.pose
-            .log_with_time(&view::pose_in_frame(state, wall), wall);
+        c.pose.log_with_time(&fox::pose_in_frame(state, wall), wall);
         if let Some((_, body)) = &self.body {
-            c.tf.log_with_time(&view::transforms(state, body, wall), wall);
+            c.tf.log_with_time(&fox::transforms(state, body, wall), wall);
             if state.stamp_ns.saturating_sub(self.last_scene_ns) >= SCENE_PERIOD_NS {
                 self.last_scene_ns = state.stamp_ns;
                 if c.scene.has_sinks() {
@@ -450,7 +450,7 @@ impl Loop<'_> {
         }
         let gps_stamp = state.group_stamp_ns[chassis_client::Group::Gps.index()];
         if gps_stamp != self.last_gps_ns
-            && let Some(fix) = view::location_fix(state, wall)
+            && let Some(fix) = fox::location_fix(state, wall)
         {
             self.last_gps_ns = gps_stamp;
             c.gps.log_with_time(&fix, wall);
@@ -461,7 +461,7 @@ impl Loop<'_> {
         let changed = self.last_mux.is_none_or(|last| {
             (last.active_source, last.zero_reason, last.clamp_flags)
                 != (mux.active_source, mux.zero_reason, mux.clamp_flags)
-                || view::held_locks(&last) != view::held_locks(mux)
+                || watch::held_locks(&last) != watch::held_locks(mux)
         });
         if let Some((level, text)) = self.watch.mux(mux) {
             self.log(level, text, mux.stamp_ns);

@@ -28,6 +28,7 @@
 
 mod bridge;
 mod server;
+mod view;
 
 use std::process::ExitCode;
 use std::sync::mpsc;

@@ -679,6 +679,17 @@ mod tests {
     }
 
     #[test]
+    fn every_id_is_one_robot_and_back() {
+        for id in 0..=u8::MAX {
+            if let Some(kind) = RobotKind::from_id(id) {
+                assert_eq!(kind.id(), id);
+            }
+        }
+        assert_eq!(RobotKind::from_id(0), None);
+        assert_eq!(RobotKind::from_id(5), Some(RobotKind::Hunter));
+    }
+
+    #[test]
     fn robot_names_parse() {
         for r in RobotKind::ALL {
             assert_eq!(r.name().parse::<RobotKind>(), Ok(r));

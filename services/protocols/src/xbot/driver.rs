@@ -115,12 +115,12 @@ struct SpeedRef {
 /// # Heartbeat and the 10 Hz bound
 ///
 /// 0x03 goes out on a fixed grid at `profile.heartbeat_hz` (8 Hz = every 125 ms) through
-/// [`CommandSchedule`], always, with explicit zeros when there is no command. A changed command
-/// goes out at once, between heartbeats — but the manual wants the 0x03 rate **below 10 Hz**, and a
-/// mux output changing every millisecond would otherwise send hundreds of frames a second. So a
-/// change frame is sent only if every one-second window that contains it still holds at most
-/// [`MAX_VELOCITY_FRAMES_PER_S`] (10) velocity frames, counting the frames already sent and the
-/// heartbeats still due on the grid:
+/// [`CommandSchedule`](crate::driver::CommandSchedule), always, with explicit zeros when there
+/// is no command. A changed command goes out at once, between heartbeats — but the manual
+/// wants the 0x03 rate **below 10 Hz**, and a mux output changing every millisecond would
+/// otherwise send hundreds of frames a second. So a change frame is sent only if every
+/// one-second window that contains it still holds at most [`MAX_VELOCITY_FRAMES_PER_S`] (10)
+/// velocity frames, counting the frames already sent and the heartbeats still due on the grid:
 ///
 /// * a **stop** (all zero) may take the last slot: it goes out at once unless the window is
 ///   already full;
