@@ -194,6 +194,19 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
         let before = quiescent(&mut robot, &mut wire, &mut teleop, go);
         let sent_before = sim_injected(&mut robot);
         wire.frames.clear();
+        // The quiet moment's silence has up to 100 ms still to run: the storm starts once the
+        // chassis talks again (a frame decoded since that moment), so that the whole storm falls
+        // on a talking chassis and the robot's speed is held over all of it.
+        let talking = wait_for(Duration::from_secs(1), || {
+            teleop.send(go).unwrap();
+            wire.pump();
+            state(&mut robot).link.rx_frames > before.link.rx_frames
+        });
+        assert!(
+            talking.is_some(),
+            "the chassis never talked again after the quiet moment\n{}",
+            env.logs()
+        );
         // Injections every 100 ms (or one bad frame every 1/rate s below 10 a second).
         let interval = Duration::from_secs_f64((1.0 / f64::from(storm.rate)).max(0.1));
         let per = (f64::from(storm.rate) * interval.as_secs_f64()).round() as u32;
@@ -223,9 +236,7 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
             }
             teleop.send(go).unwrap();
             wire.pump();
-            if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(20))
-                && started.elapsed() > Duration::from_millis(400)
-            {
+            if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(20)) {
                 min_speed = min_speed.min(s.motion.linear_mps);
             }
         }
