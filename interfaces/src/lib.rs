@@ -29,7 +29,7 @@ mod text;
 
 pub use control::{
     ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, LightMode, SimKind,
-    SimRequest,
+    SimRequest, SimTruthPage,
 };
 pub use description::{
     BatteryLevels, BusKind, DescriptionFlags, DescriptionFull, Geometry, JointDescription,

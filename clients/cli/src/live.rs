@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, ClampFlags, ControlKind, ControlMode, ControlRequest, ControlStatus,
     FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus, Robot, SimKind,
-    SimRequest, SourceFlags, Ticker, VelocityRequest, WireProtocol, ZeroReason,
+    SimRequest, SimTruthPage, SourceFlags, Ticker, VelocityRequest, WireProtocol, ZeroReason,
     install_signal_handlers, now_ns, termination_requested,
 };
 use chassis_protocols::command_to_request;
@@ -126,8 +126,12 @@ pub enum SimCmd {
     BadChecksums { frames: u32 },
     /// FRAMES_PER_S extra feedback frames (0 stops).
     Flood { frames_per_s: u32 },
-    /// What the simulated chassis really does: its true pose and speeds (not what it reports).
-    Truth,
+    /// What the simulated chassis really does: its true pose and speeds (not what it reports);
+    /// --injected: the garbage, bad-checksum and flood frames it has sent since power-up.
+    Truth {
+        #[arg(long)]
+        injected: bool,
+    },
     /// The speed loop runs away: the chassis drives at SPEED m/s (negative: reverse) whatever
     /// it is commanded, past its limits; --clear gives the control back.
     Runaway {
@@ -763,7 +767,14 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
         SimCmd::Flood { frames_per_s } => {
             request(SimKind::FLOOD, true, 0, f64::from(*frames_per_s))
         }
-        SimCmd::Truth => request(SimKind::TRUTH, false, 0, 0.0),
+        SimCmd::Truth { injected } => {
+            let page = if *injected {
+                SimTruthPage::INJECTED
+            } else {
+                SimTruthPage::MOTION
+            };
+            request(SimKind::TRUTH, false, page, 0.0)
+        }
         SimCmd::Runaway { speed, clear } => match (speed, clear) {
             (_, true) => request(SimKind::RUNAWAY, false, 0, 0.0),
             (Some(v), false) if v.is_finite() => request(SimKind::RUNAWAY, true, 0, *v),
