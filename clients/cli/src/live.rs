@@ -14,6 +14,7 @@ use chassis_protocols::command_to_request;
 use clap::{Args, Subcommand, ValueEnum};
 
 use crate::action::{Action, OnOff, VelocityArgs};
+use crate::described;
 
 /// How long a request may wait for the service's answer.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
@@ -411,6 +412,12 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         None => inherited,
     };
     let age = state.map_or(String::new(), |s| age_text(s.stamp_ns));
+    // What the robot is (published with history 1: a new reader has it within a tick).
+    let description = match robot.description(Duration::from_millis(500)) {
+        Ok(d) => Some(d),
+        Err(chassis_client::ClientError::NoDescription { .. }) => None,
+        Err(e) => return Err(e.into()),
+    };
     // The safety monitor's status, when one has made its service (a new reader gets the latest
     // sample with the monitor's next publication, at least every 100 ms).
     let safety = match robot
@@ -422,18 +429,44 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     if json {
         println!(
             "{}",
-            serde_json::json!({ "name": name, "state": state, "mux": mux, "safety": safety.flatten() })
+            serde_json::json!({
+                "name": name,
+                "description": description.as_ref().map(described::json),
+                "state": state,
+                "mux": mux,
+                "safety": safety.flatten(),
+            })
         );
         return Ok(());
     }
     let Some(s) = state else {
         bail!("chassis/{name} published no state within 1 s");
     };
-    println!(
-        "robot      {} (chassis/{name})   state #{}, {age} old",
-        chassis_client::RobotKind::name(s.robot),
-        s.seq,
-    );
+    match &description {
+        Some(d) => {
+            println!(
+                "robot      {} · chassis/{name}   state #{}, {age} old",
+                described::title(d),
+                s.seq,
+            );
+            println!("model      {}", described::model_line(d));
+            println!("limits     {}", described::limits_line(d));
+            if let Some(origin) = described::limits_origin_line(d) {
+                println!("           {origin}");
+            }
+            if let Some(sensors) = described::sensors_line(d) {
+                println!("sensors    {sensors}");
+            }
+            if let Some(joints) = described::joints_line(d) {
+                println!("joints     {joints}");
+            }
+        }
+        None => println!(
+            "robot      robot kind {} (chassis/{name}, no description: chassisd older than the \
+             robot description?)   state #{}, {age} old",
+            s.robot, s.seq,
+        ),
+    }
     let link = &s.link;
     let health = if s.has_link_flag(LinkFlags::BUS_DOWN) {
         "DOWN"
@@ -475,13 +508,8 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         ClampFlags::names(s.command.clamp_flags).join(", ")
     );
     println!(
-        "battery    {:.1} V{}",
-        s.system.battery_voltage_v,
-        if s.is_valid(chassis_client::Group::BmsPack) {
-            format!("  {:.0} %", s.system.battery_soc_pct)
-        } else {
-            String::new()
-        }
+        "battery    {}",
+        described::battery_line(Some(&s), description.as_ref())
     );
     let listed = |bits: u64| {
         let names = FaultFlags::names(bits);
@@ -499,6 +527,9 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         "warnings   {}",
         listed(s.system.fault_flags & FaultFlags::WARNINGS)
     );
+    if let Some(d) = &description {
+        println!("config     {}", described::sources_line(d));
+    }
     if let Some(m) = mux {
         println!("{}", mux_summary(&m));
     }
