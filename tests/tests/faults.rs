@@ -15,6 +15,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::time::{Duration, Instant};
 
+use chassis_protocols::{Profile, RobotKind};
 use chassis_tests::*;
 use nix::sys::signal::Signal;
 
@@ -903,31 +904,31 @@ struct StormResult {
     min_speed: f32,
 }
 
-/// The error counter a storm of `kind` raises on `robot`.
-fn storm_counter(robot: RobotModel, kind: u8, link: &LinkStats) -> u64 {
-    match (robot, kind) {
-        (RobotModel::Titan | RobotModel::Hunter, _) => link.rx_unknown_id,
-        (RobotModel::Xbot, SimKind::GARBAGE) => link.rx_bytes_discarded,
-        _ => link.rx_bad_checksum,
-    }
-}
-
+/// How a robot's bus carries a storm, by the family of its protocol (the registry's profile of
+/// the robot): CAN frames where a bad one is an unknown id (TITAN, AgileX V2), CAN frames with a
+/// checksum (AgileX V1, the SCOUT MINI), or a serial byte stream (XBot).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum RobotModel {
-    Titan,
-    ScoutMini,
-    Xbot,
-    /// HUNTER 2.0, for the AgileX protocol-V2 family.
-    Hunter,
+enum StormWire {
+    UnknownIds,
+    CheckedCan,
+    Serial,
 }
 
-impl RobotModel {
-    fn arg(self) -> &'static str {
-        match self {
-            RobotModel::Titan => "titan",
-            RobotModel::ScoutMini => "scout-mini",
-            RobotModel::Xbot => "xbot",
-            RobotModel::Hunter => "hunter",
+impl StormWire {
+    fn of(robot: RobotKind) -> Self {
+        match robot.entry().defaults() {
+            Profile::Titan(_) | Profile::V2(_) => StormWire::UnknownIds,
+            Profile::ScoutMini(_) => StormWire::CheckedCan,
+            Profile::Xbot(_) => StormWire::Serial,
+        }
+    }
+
+    /// The error counter a storm of `kind` raises.
+    fn counter(self, kind: u8, link: &LinkStats) -> u64 {
+        match (self, kind) {
+            (StormWire::UnknownIds, _) => link.rx_unknown_id,
+            (StormWire::Serial, SimKind::GARBAGE) => link.rx_bytes_discarded,
+            _ => link.rx_bad_checksum,
         }
     }
 }
@@ -975,13 +976,21 @@ fn quiescent(
     s
 }
 
-fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
+/// Storms of `phases` on `robot_kind`'s bus; `who` names it in the rows ("TITAN's").
+fn storms(robot_kind: RobotKind, who: &str, test: &str, phases: &[Storm]) {
+    let wire_kind = StormWire::of(robot_kind);
     let _machine = shared();
-    let mut env = Env::new(&format!("storm-{}", model.arg()));
-    let n = name(&format!("st{}", &model.arg()[..2]));
+    let mut env = Env::new(&format!("storm-{robot_kind}"));
+    let n = name(&format!("st{}", &robot_kind.name()[..2]));
     env.chassisd(
         "chassisd",
-        &["--robot", model.arg(), "--name", &n, "--no-safety-monitor"],
+        &[
+            "--robot",
+            robot_kind.name(),
+            "--name",
+            &n,
+            "--no-safety-monitor",
+        ],
     );
     let mut robot = env.robot(&n, UP);
     let mut teleop = robot.source("teleop").unwrap();
@@ -1013,7 +1022,7 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
                             kind: storm.kind,
                             // TITAN and V2 garbage comes as bytes, 8 to a frame.
                             value: f64::from(
-                                per * if matches!(model, RobotModel::Titan | RobotModel::Hunter) {
+                                per * if wire_kind == StormWire::UnknownIds {
                                     8
                                 } else {
                                     1
@@ -1054,19 +1063,19 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
         let mut r = StormResult {
             requested: injected,
             injected,
-            counted: storm_counter(model, storm.kind, &after.link)
-                - storm_counter(model, storm.kind, &before.link),
+            counted: wire_kind.counter(storm.kind, &after.link)
+                - wire_kind.counter(storm.kind, &before.link),
             tap_frames: rx.len() as u64,
             decoded: after.link.rx_frames - before.link.rx_frames,
             min_speed,
             ..StormResult::default()
         };
-        match model {
-            RobotModel::Titan | RobotModel::Hunter => {
+        match wire_kind {
+            StormWire::UnknownIds => {
                 r.good_on_tap = rx.iter().filter(|f| f.can_id != 0x7F0).count() as u64;
                 r.injected = r.tap_frames - r.good_on_tap;
             }
-            RobotModel::ScoutMini => {
+            StormWire::CheckedCan => {
                 r.good_on_tap = rx.iter().filter(|f| scout_checksum_ok(f)).count() as u64;
                 r.injected = r.tap_frames - r.good_on_tap;
                 let mut last: HashMap<u32, u8> = HashMap::new();
@@ -1077,7 +1086,7 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
                     }
                 }
             }
-            RobotModel::Xbot => {
+            StormWire::Serial => {
                 // Whole 75-byte reports: the good ones decode, the rest is discarded.
                 let bytes: u64 = rx.iter().map(|f| u64::from(f.len)).sum();
                 r.tap_frames = bytes;
@@ -1085,19 +1094,22 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
                     (bytes - (after.link.rx_bytes_discarded - before.link.rx_bytes_discarded)) / 75;
             }
         }
-        eprintln!("{} {} {}/s: {r:?}", model.arg(), storm.unit, storm.rate);
+        eprintln!("{robot_kind} {} {}/s: {r:?}", storm.unit, storm.rate);
         results.push((*storm, r));
     }
     let dropped_at_source = env.proc(0).log_text().contains("dropped a frame");
     for (storm, r) in &results {
-        let what = match (model, storm.kind) {
-            (RobotModel::Titan, _) => "garbage CAN frames (id 0x7F0) on the TITAN's bus",
-            (RobotModel::Hunter, _) => {
-                "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2)"
+        let what = match (wire_kind, storm.kind) {
+            (StormWire::UnknownIds, _) => {
+                let v2 = matches!(robot_kind.entry().defaults(), Profile::V2(_));
+                let protocol = if v2 { " (protocol V2)" } else { "" };
+                format!("garbage CAN frames (id 0x7F0) on the {who} bus{protocol}")
             }
-            (RobotModel::ScoutMini, _) => "bad checksums on the SCOUT MINI's CAN frames",
-            (RobotModel::Xbot, SimKind::GARBAGE) => "garbage bytes on the XBot's serial line",
-            (RobotModel::Xbot, _) => "bad checksums on the XBot's serial reports",
+            (StormWire::CheckedCan, _) => format!("bad checksums on the {who} CAN frames"),
+            (StormWire::Serial, SimKind::GARBAGE) => {
+                format!("garbage bytes on the {who} serial line")
+            }
+            (StormWire::Serial, _) => format!("bad checksums on the {who} serial reports"),
         };
         let lost = r.good_on_tap.saturating_sub(r.decoded) + r.count_gaps;
         let exact = r.counted == r.injected && r.decoded == r.good_on_tap && r.count_gaps == 0;
@@ -1155,7 +1167,8 @@ fn garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame() {
         unit: "frames",
     };
     storms(
-        RobotModel::Titan,
+        RobotKind::Titan,
+        "TITAN's",
         "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
         &[frames(10), frames(100), frames(1000)],
     );
@@ -1169,7 +1182,8 @@ fn garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame(
         unit: "frames",
     };
     storms(
-        RobotModel::Hunter,
+        RobotKind::Hunter,
+        "HUNTER's",
         "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
         &[frames(10), frames(100), frames(1000)],
     );
@@ -1183,7 +1197,8 @@ fn bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame(
         unit: "frames",
     };
     storms(
-        RobotModel::ScoutMini,
+        RobotKind::ScoutMini,
+        "SCOUT MINI's",
         "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
         &[bad(10), bad(100), bad(250)],
     );
@@ -1202,7 +1217,8 @@ fn garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good
         unit: "reports",
     };
     storms(
-        RobotModel::Xbot,
+        RobotKind::Xbot,
+        "XBot's",
         "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
         &[
             garbage(100),
