@@ -44,7 +44,7 @@ pub use safety::{EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, 
 pub use state::{
     BmsState, ChassisState, CommandEcho, ControlMode, DriverStatus, FaultFlags, GROUP_SLOTS,
     GpsFix, Group, ImuState, LiftState, LightsState, LinkFlags, LinkStats, MotionState, MotorState,
-    OdometryState, PanTiltState, RangesState, RcState, RobotKind, SystemState, WireProtocol,
+    OdometryState, PanTiltState, RangesState, RcState, SystemState, WireProtocol,
 };
 pub use text::{read_fixed_str, write_fixed_str};
 

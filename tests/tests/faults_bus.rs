@@ -11,6 +11,7 @@
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
+use chassis_protocols::{Profile, RobotKind};
 use chassis_tests::faults::*;
 use chassis_tests::*;
 
@@ -82,48 +83,46 @@ impl StormResult {
     }
 }
 
-/// The error counter a storm of `kind` raises on `robot`.
-fn storm_counter(robot: RobotModel, kind: u8, link: &LinkStats) -> u64 {
-    match (robot, kind) {
-        (RobotModel::Titan | RobotModel::Hunter, _) => link.rx_unknown_id,
-        (RobotModel::Xbot, SimKind::GARBAGE) => link.rx_bytes_discarded,
-        _ => link.rx_bad_checksum,
-    }
-}
-
-/// The sender's count of what a storm of `kind` injects on `robot` (`sim truth --injected`).
-fn injected_counter(robot: RobotModel, kind: u8) -> &'static str {
-    match (robot, kind) {
-        (RobotModel::Titan | RobotModel::Hunter | RobotModel::ScoutMini, SimKind::GARBAGE) => {
-            "garbage_frames"
-        }
-        (RobotModel::Xbot, SimKind::GARBAGE) => "garbage_bytes",
-        _ => "bad_checksums",
-    }
-}
-
+/// How a robot's bus carries a storm, by the family of its protocol (the registry's profile of
+/// the robot): CAN frames where a bad one is an unknown id (TITAN, AgileX V2), CAN frames with a
+/// checksum (AgileX V1, the SCOUT MINI), or a serial byte stream (XBot).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum RobotModel {
-    Titan,
-    ScoutMini,
-    Xbot,
-    /// HUNTER 2.0, for the AgileX protocol-V2 family.
-    Hunter,
+enum StormWire {
+    UnknownIds,
+    CheckedCan,
+    Serial,
 }
 
-impl RobotModel {
-    fn arg(self) -> &'static str {
-        match self {
-            RobotModel::Titan => "titan",
-            RobotModel::ScoutMini => "scout-mini",
-            RobotModel::Xbot => "xbot",
-            RobotModel::Hunter => "hunter",
+impl StormWire {
+    fn of(robot: RobotKind) -> Self {
+        match robot.entry().defaults() {
+            Profile::Titan(_) | Profile::V2(_) => StormWire::UnknownIds,
+            Profile::ScoutMini(_) => StormWire::CheckedCan,
+            Profile::Xbot(_) => StormWire::Serial,
+        }
+    }
+
+    /// The error counter a storm of `kind` raises.
+    fn counter(self, kind: u8, link: &LinkStats) -> u64 {
+        match (self, kind) {
+            (StormWire::UnknownIds, _) => link.rx_unknown_id,
+            (StormWire::Serial, SimKind::GARBAGE) => link.rx_bytes_discarded,
+            _ => link.rx_bad_checksum,
+        }
+    }
+
+    /// The sender's count of what a storm of `kind` injects (`sim truth --injected`).
+    fn injected_counter(self, kind: u8) -> &'static str {
+        match (self, kind) {
+            (StormWire::UnknownIds | StormWire::CheckedCan, SimKind::GARBAGE) => "garbage_frames",
+            (StormWire::Serial, SimKind::GARBAGE) => "garbage_bytes",
+            _ => "bad_checksums",
         }
     }
 
     /// CAN garbage comes as bytes, 8 to a frame.
     fn garbage_in_frames(self) -> bool {
-        matches!(self, RobotModel::Titan | RobotModel::Hunter)
+        self == StormWire::UnknownIds
     }
 }
 
@@ -170,13 +169,21 @@ fn quiescent(
     s
 }
 
-fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
+/// Storms of `phases` on `robot_kind`'s bus; `who` names it in the rows ("TITAN's").
+fn storms(robot_kind: RobotKind, who: &str, test: &str, phases: &[Storm]) {
+    let carrier = StormWire::of(robot_kind);
     let _machine = shared();
-    let mut env = Env::new(&format!("storm-{}", model.arg()));
-    let n = name(&format!("st{}", &model.arg()[..2]));
+    let mut env = Env::new(&format!("storm-{robot_kind}"));
+    let n = name(&format!("st{}", &robot_kind.name()[..2]));
     env.chassisd(
         "chassisd",
-        &["--robot", model.arg(), "--name", &n, "--no-safety-monitor"],
+        &[
+            "--robot",
+            robot_kind.name(),
+            "--name",
+            &n,
+            "--no-safety-monitor",
+        ],
     );
     let mut robot = env.robot(&n, UP);
     let mut teleop = robot.source("teleop").unwrap();
@@ -190,7 +197,7 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
     assert!(moving.is_some(), "no drive\n{}", env.logs());
     let mut results = Vec::new();
     for storm in phases {
-        let counter = injected_counter(model, storm.kind);
+        let counter = carrier.injected_counter(storm.kind);
         let before = quiescent(&mut robot, &mut wire, &mut teleop, go);
         let sent_before = sim_injected(&mut robot);
         wire.frames.clear();
@@ -222,7 +229,7 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
                         SimRequest {
                             kind: storm.kind,
                             // TITAN and V2 garbage comes as bytes, 8 to a frame.
-                            value: f64::from(per * if model.garbage_in_frames() { 8 } else { 1 }),
+                            value: f64::from(per * if carrier.garbage_in_frames() { 8 } else { 1 }),
                             ..SimRequest::default()
                         },
                         Duration::from_secs(3),
@@ -263,19 +270,19 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
             injected: sent.count(counter) - sent_before.count(counter),
             injected_bytes: sent.count("garbage_bytes") - sent_before.count("garbage_bytes"),
             settle_ms,
-            counted: storm_counter(model, storm.kind, &after.link)
-                - storm_counter(model, storm.kind, &before.link),
+            counted: carrier.counter(storm.kind, &after.link)
+                - carrier.counter(storm.kind, &before.link),
             tap_frames: rx.len() as u64,
             decoded: after.link.rx_frames - before.link.rx_frames,
             min_speed,
             ..StormResult::default()
         };
-        match model {
-            RobotModel::Titan | RobotModel::Hunter => {
+        match carrier {
+            StormWire::UnknownIds => {
                 r.good_on_tap = rx.iter().filter(|f| f.can_id != 0x7F0).count() as u64;
                 r.on_wire = r.tap_frames - r.good_on_tap;
             }
-            RobotModel::ScoutMini => {
+            StormWire::CheckedCan => {
                 r.good_on_tap = rx.iter().filter(|f| scout_checksum_ok(f)).count() as u64;
                 r.on_wire = r.tap_frames - r.good_on_tap;
                 let mut last: HashMap<u32, u8> = HashMap::new();
@@ -286,7 +293,7 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
                     }
                 }
             }
-            RobotModel::Xbot => {
+            StormWire::Serial => {
                 // The bytes read: whole 75-byte reports that decoded, and the rest. Garbage:
                 // the rest is the garbage. Bad checksums: the rest is whole reports.
                 let bytes: u64 = rx.iter().map(|f| u64::from(f.len)).sum();
@@ -303,22 +310,25 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
                 };
             }
         }
-        eprintln!("{} {} {}/s: {r:?}", model.arg(), storm.unit, storm.rate);
+        eprintln!("{robot_kind} {} {}/s: {r:?}", storm.unit, storm.rate);
         results.push((*storm, r));
     }
     let dropped_at_source = env.proc(0).log_text().contains("dropped a frame");
     let mut figures = Figures::faults();
     for (storm, r) in &results {
-        let what = match (model, storm.kind) {
-            (RobotModel::Titan, _) => "garbage CAN frames (id 0x7F0) on the TITAN's bus",
-            (RobotModel::Hunter, _) => {
-                "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2)"
+        let what = match (carrier, storm.kind) {
+            (StormWire::UnknownIds, _) => {
+                let v2 = matches!(robot_kind.entry().defaults(), Profile::V2(_));
+                let protocol = if v2 { " (protocol V2)" } else { "" };
+                format!("garbage CAN frames (id 0x7F0) on the {who} bus{protocol}")
             }
-            (RobotModel::ScoutMini, _) => "bad checksums on the SCOUT MINI's CAN frames",
-            (RobotModel::Xbot, SimKind::GARBAGE) => "garbage bytes on the XBot's serial line",
-            (RobotModel::Xbot, _) => "bad checksums on the XBot's serial reports",
+            (StormWire::CheckedCan, _) => format!("bad checksums on the {who} CAN frames"),
+            (StormWire::Serial, SimKind::GARBAGE) => {
+                format!("garbage bytes on the {who} serial line")
+            }
+            (StormWire::Serial, _) => format!("bad checksums on the {who} serial reports"),
         };
-        let bytes_ok = !model.garbage_in_frames() || r.injected_bytes == 8 * r.asked;
+        let bytes_ok = !carrier.garbage_in_frames() || r.injected_bytes == 8 * r.asked;
         let pass =
             r.exact() && bytes_ok && !dropped_at_source && wire.lost == 0 && r.min_speed > 0.45;
         figures.add(fault_figure(
@@ -366,7 +376,7 @@ fn storms(model: RobotModel, test: &str, phases: &[Storm]) {
     for (storm, r) in &results {
         assert!(r.asked > 0, "{storm:?}: nothing asked: {r:?}");
         assert_eq!(r.injected, r.asked, "{storm:?}: the sender's count: {r:?}");
-        if model.garbage_in_frames() {
+        if carrier.garbage_in_frames() {
             assert_eq!(r.injected_bytes, 8 * r.asked, "{storm:?}: {r:?}");
         }
         assert!(
@@ -392,7 +402,8 @@ fn garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame() {
         unit: "frames",
     };
     storms(
-        RobotModel::Titan,
+        RobotKind::Titan,
+        "TITAN's",
         "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
         &[frames(10), frames(100), frames(1000)],
     );
@@ -406,7 +417,8 @@ fn garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame(
         unit: "frames",
     };
     storms(
-        RobotModel::Hunter,
+        RobotKind::Hunter,
+        "HUNTER's",
         "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
         &[frames(10), frames(100), frames(1000)],
     );
@@ -420,7 +432,8 @@ fn bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame(
         unit: "frames",
     };
     storms(
-        RobotModel::ScoutMini,
+        RobotKind::ScoutMini,
+        "SCOUT MINI's",
         "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
         &[bad(10), bad(100), bad(250)],
     );
@@ -439,7 +452,8 @@ fn garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good
         unit: "reports",
     };
     storms(
-        RobotModel::Xbot,
+        RobotKind::Xbot,
+        "XBot's",
         "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
         &[
             garbage(100),
