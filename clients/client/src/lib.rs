@@ -49,9 +49,14 @@
 
 use std::time::Duration;
 
+mod clock;
 #[cfg(feature = "foxglove")]
 pub mod foxglove;
+mod rate;
 pub mod watch;
+
+pub use clock::WallClock;
+pub use rate::Decimator;
 
 pub use chassis_interfaces::*;
 use chassis_ipc::{
