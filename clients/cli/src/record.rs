@@ -594,15 +594,8 @@ pub fn candump_line(
     frame: &BusFrame,
     flag: Option<char>,
 ) -> Option<String> {
-    if frame.kind != FrameKind::CAN || frame.flags & BusFrame::REMOTE != 0 {
-        return None;
-    }
-    let can = if frame.flags & BusFrame::EXTENDED_ID != 0 {
-        CanFrame::new_extended(frame.can_id, frame.payload())
-    } else {
-        CanFrame::new(frame.can_id, frame.payload())
-    }
-    .ok()?;
+    // Serial and GPS chunks and remote frames have no candump line.
+    let can = CanFrame::try_from(frame).ok()?;
     let micros = wall_ns.max(0) / 1000;
     let mut line = format!(
         "({}.{:06}) {iface} {}",

@@ -312,7 +312,10 @@ mod tests {
         let wheels = &schema["properties"]["motion"]["properties"]["wheel_mps"];
         assert_eq!(wheels["type"], "array");
         assert_eq!(wheels["items"]["type"], "number");
-        assert_eq!((&wheels["minItems"], &wheels["maxItems"]), (&4.into(), &4.into()));
+        assert_eq!(
+            (&wheels["minItems"], &wheels["maxItems"]),
+            (&4.into(), &4.into())
+        );
     }
 
     #[test]

@@ -239,7 +239,10 @@ impl Loop<'_> {
         self.body = Some(Body::of(d));
         self.codec = RobotCodec::for_description(d);
         if self.codec.is_none() {
-            tracing::warn!(kind = d.kind, "a robot kind this view does not know: frames not decoded");
+            tracing::warn!(
+                kind = d.kind,
+                "a robot kind this view does not know: frames not decoded"
+            );
         }
         self.log(
             Severity::Info,
@@ -339,10 +342,8 @@ impl Loop<'_> {
             if state.stamp_ns.saturating_sub(self.last_scene_ns) >= SCENE_PERIOD_NS {
                 self.last_scene_ns = state.stamp_ns;
                 if c.scene.has_sinks() {
-                    c.scene.log_with_time(
-                        &convert::scene(state, body, &self.trail, wall),
-                        wall,
-                    );
+                    c.scene
+                        .log_with_time(&convert::scene(state, body, &self.trail, wall), wall);
                 }
             }
         }

@@ -330,7 +330,11 @@ mod tests {
         assert_eq!(unknown[0]["error"], "robot not known yet");
         // A CAN id beyond 11 bits without the extended flag is refused, not decoded.
         let bad = frame_entries(&tapped(FrameKind::CAN, 0x800, &[0]), codec.as_mut());
-        assert!(bad[0]["error"].as_str().unwrap().contains("11 bits"), "{}", bad[0]);
+        assert!(
+            bad[0]["error"].as_str().unwrap().contains("11 bits"),
+            "{}",
+            bad[0]
+        );
         // A GPS chunk is its sentence.
         let gps = frame_entries(&tapped(FrameKind::GPS, 0, b"$GPGGA,1*00\r\n"), None);
         assert_eq!(gps[0]["raw"], "$GPGGA,1*00");

@@ -105,7 +105,10 @@ fn main() -> ExitCode {
         .with_writer(std::io::stderr)
         .init();
     chassis_client::install_signal_handlers();
-    match Cli::parse().config().and_then(|config| bridge::run(&config)) {
+    match Cli::parse()
+        .config()
+        .and_then(|config| bridge::run(&config))
+    {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("chassis-foxglove: {err:#}");

@@ -278,7 +278,10 @@ mod tests {
         };
         tapped.set_payload(&[1, 2, 3]);
         let can = CanFrame::try_from(&tapped).unwrap();
-        assert_eq!((can.id(), can.is_extended(), can.data()), (0x211, false, &[1, 2, 3][..]));
+        assert_eq!(
+            (can.id(), can.is_extended(), can.data()),
+            (0x211, false, &[1, 2, 3][..])
+        );
         tapped.flags = BusFrame::EXTENDED_ID;
         tapped.can_id = 0x1234_5678;
         assert_eq!(

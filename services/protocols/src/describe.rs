@@ -380,7 +380,10 @@ mod tests {
         v2.protocol = WireProtocol::V2;
         match RobotCodec::for_description(&v2) {
             Some(RobotCodec::V2 { profile, robot }) => {
-                assert_eq!((profile.model, robot), (V2Model::ScoutMiniOmni, RobotKind::ScoutMini));
+                assert_eq!(
+                    (profile.model, robot),
+                    (V2Model::ScoutMiniOmni, RobotKind::ScoutMini)
+                );
             }
             other => panic!("{other:?}"),
         }

@@ -97,12 +97,7 @@ struct Namer {
 
 impl Namer {
     fn can(&self, frame: &BusFrame) -> Option<&'static str> {
-        let can = if frame.flags & BusFrame::EXTENDED_ID != 0 {
-            CanFrame::new_extended(frame.can_id, frame.payload())
-        } else {
-            CanFrame::new(frame.can_id, frame.payload())
-        }
-        .ok()?;
+        let can = CanFrame::try_from(frame).ok()?;
         match self.robot {
             RobotKind::TITAN => titan::decode(&can, &self.titan).ok().map(|f| f.name()),
             RobotKind::SCOUT_MINI => scout_mini::decode(&can, &self.scout)
