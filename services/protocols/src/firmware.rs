@@ -16,7 +16,7 @@ use std::time::Duration;
 use serde::Serialize;
 
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit, wrap_angle};
+use crate::driver::{Rx, WireItem, wrap_angle};
 use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp};
 
@@ -183,7 +183,7 @@ pub trait Firmware {
     fn handle_timeout(&mut self, now: Timestamp);
 
     /// The next frame (or serial chunk) the chassis sends.
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit>;
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem>;
 
     /// When [`Firmware::handle_timeout`] must be called next.
     fn poll_timeout(&self) -> Option<Timestamp>;
@@ -206,7 +206,7 @@ impl<F: Firmware + ?Sized> Firmware for Box<F> {
     fn handle_timeout(&mut self, now: Timestamp) {
         (**self).handle_timeout(now);
     }
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         (**self).poll_transmit(now)
     }
     fn poll_timeout(&self) -> Option<Timestamp> {

@@ -6,29 +6,29 @@
 use std::time::Duration;
 
 use crate::can::CanFrame;
-use crate::driver::Transmit;
+use crate::driver::WireItem;
 use crate::firmware::{Firmware, Injection};
 use crate::time::{Timestamp, earliest};
 
 /// What one robot's firmware puts on the wire: CAN frames or serial chunks.
 pub(crate) trait Sent: Sized {
-    fn from_transmit(item: Transmit) -> Option<Self>;
+    fn from_transmit(item: WireItem) -> Option<Self>;
 }
 
 impl Sent for CanFrame {
-    fn from_transmit(item: Transmit) -> Option<Self> {
+    fn from_transmit(item: WireItem) -> Option<Self> {
         match item {
-            Transmit::Can(frame) => Some(frame),
-            Transmit::Bytes(_) => None,
+            WireItem::Can(frame) => Some(frame),
+            WireItem::Bytes(_) => None,
         }
     }
 }
 
 impl Sent for Vec<u8> {
-    fn from_transmit(item: Transmit) -> Option<Self> {
+    fn from_transmit(item: WireItem) -> Option<Self> {
         match item {
-            Transmit::Bytes(bytes) => Some(bytes),
-            Transmit::Can(_) => None,
+            WireItem::Bytes(bytes) => Some(bytes),
+            WireItem::Can(_) => None,
         }
     }
 }

@@ -31,7 +31,7 @@ use super::profile::{self, V2Profile};
 use crate::agilex::{self, BrakeKeeper, ModeKeeper, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
     requested_turn,
 };
 use crate::profile::Profile;
@@ -543,7 +543,7 @@ impl Driver for V2Driver {
         self.steering_zero.expire(&mut self.core, now);
     }
 
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         if self.core.bus_down {
             self.queue.clear();
             return None;
@@ -574,7 +574,7 @@ impl Driver for V2Driver {
             return None;
         };
         self.core
-            .transmit(frame.name(), frame.encode(&self.profile), Transmit::Can)
+            .transmit(frame.name(), frame.encode(&self.profile), WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

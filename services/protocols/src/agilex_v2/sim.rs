@@ -47,7 +47,7 @@ use super::kinematics::{RangerMode, body_twist};
 use super::profile::{Kinematics, SpinField, V2Profile};
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit};
+use crate::driver::{Rx, WireItem};
 use crate::firmware::{
     BatteryModel, Firmware, Injection, Outbox, Pose, SimTruth, first_order_lag, push_garbage,
     runaway_speed, state_of_charge, substeps,
@@ -626,8 +626,8 @@ impl Firmware for V2Sim {
         }
     }
 
-    fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.outbox.pop().map(Transmit::Can)
+    fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
+        self.outbox.pop().map(WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

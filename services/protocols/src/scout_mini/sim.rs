@@ -14,7 +14,7 @@ use super::driver::{body_flags, normalize_faults};
 use super::kinematics::side_speeds;
 use crate::DecodeError;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit};
+use crate::driver::{Rx, WireItem};
 use crate::firmware::{
     BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, clamp_i16,
     first_order_lag, motor_index, non_negative, push_garbage, runaway_speed, state_of_charge,
@@ -791,8 +791,8 @@ impl Firmware for ScoutMiniSim {
         self.send_flood(now);
     }
 
-    fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.outbox.pop().map(Transmit::Can)
+    fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
+        self.outbox.pop().map(WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

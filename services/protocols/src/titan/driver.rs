@@ -22,7 +22,7 @@ use super::kinematics::yaw_rate;
 use crate::agilex::{self, BrakeKeeper, ModeKeeper, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
     flags_of, requested_turn,
 };
 use crate::profile::TitanProfile;
@@ -360,7 +360,7 @@ impl Driver for TitanDriver {
         self.steering_zero.expire(&mut self.core, now);
     }
 
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         if self.core.bus_down {
             self.queue.clear();
             return None;
@@ -394,7 +394,7 @@ impl Driver for TitanDriver {
             return None;
         };
         self.core
-            .transmit(frame.name(), frame.encode(&self.profile), Transmit::Can)
+            .transmit(frame.name(), frame.encode(&self.profile), WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

@@ -15,7 +15,7 @@ use super::driver::normalize_faults;
 use super::kinematics::{steer_command, yaw_rate};
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit};
+use crate::driver::{Rx, WireItem};
 use crate::firmware::{
     BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, clamp_i16,
     first_order_lag, motor_index, non_negative, push_garbage, runaway_speed, state_of_charge,
@@ -997,8 +997,8 @@ impl Firmware for TitanSim {
         self.send_flood(now);
     }
 
-    fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.outbox.pop().map(Transmit::Can)
+    fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
+        self.outbox.pop().map(WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

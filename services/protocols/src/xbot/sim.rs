@@ -9,7 +9,7 @@ use chassis_interfaces::ControlMode;
 use super::codec::{Frame, SensorReport, VelocityCommand, scale};
 use super::stream::StreamParser;
 use crate::DecodeError;
-use crate::driver::{Rx, Transmit};
+use crate::driver::{Rx, WireItem};
 use crate::firmware::{
     BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth,
     first_order_lag, motor_index, non_negative, runaway_speed, state_of_charge, substeps,
@@ -22,7 +22,7 @@ use crate::time::{Grid, Timestamp, earliest};
 ///
 /// [`XbotSim`] is sans-IO like the driver: bytes from the computer go in with their time
 /// ([`Firmware::handle_rx`], any chunking; a [`StreamParser`] finds the frames), sensor reports
-/// come out as [`Transmit::Bytes`] ([`Firmware::poll_transmit`]), and [`Firmware::poll_timeout`]
+/// come out as [`WireItem::Bytes`] ([`Firmware::poll_transmit`]), and [`Firmware::poll_timeout`]
 /// names the next deadline. It never reads a clock. Every frame in either direction goes through
 /// the codec, so the profile's ⚠ choices (yaw-rate and lateral signs, BCD currents and ranges,
 /// counts per wheel turn) are honoured on this side too.
@@ -770,8 +770,8 @@ impl Firmware for XbotSim {
         }
     }
 
-    fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.outbox.pop().map(Transmit::Bytes)
+    fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
+        self.outbox.pop().map(WireItem::Bytes)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
