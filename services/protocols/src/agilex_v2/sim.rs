@@ -677,19 +677,16 @@ impl Firmware for V2Sim {
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        let injection = match self.chassis.inject(now, injection) {
-            Applied::Condition | Applied::Done => return true,
+        match self.chassis.inject(now, injection) {
+            Applied::Condition | Applied::Done => {}
             Applied::Refused => return false,
-            Applied::Robot(injection) => injection,
-        };
-        match injection {
-            Injection::EStop(pressed) => {
+            Applied::Robot(Injection::EStop(pressed)) => {
                 self.estop = pressed;
                 if pressed {
                     self.command = STOP;
                 }
             }
-            Injection::RcTakeover(on) => {
+            Applied::Robot(Injection::RcTakeover(on)) => {
                 self.rc_on = on;
                 if on {
                     self.mode = Mode::Remote;
@@ -699,12 +696,12 @@ impl Firmware for V2Sim {
                     self.mode = Mode::Standby;
                 }
             }
-            Injection::Reboot => {
+            Applied::Robot(Injection::Reboot) => {
                 self.power_up();
                 self.chassis.reboot(now);
             }
             // No bumper, no range sensors.
-            _ => return false,
+            Applied::Robot(_) => return false,
         }
         true
     }

@@ -245,3 +245,204 @@ impl<T> Chassis<T> {
         .fold(None, earliest)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::firmware::MAX_RUNAWAY_MPS;
+
+    const T0: Timestamp = Timestamp::from_millis(1_000);
+
+    fn ms(v: u64) -> Duration {
+        Duration::from_millis(v)
+    }
+
+    const CAN: Injectable = Injectable {
+        motors: 4,
+        max_flood_per_s: 1000,
+        checksums: false,
+    };
+
+    const SERIAL: Injectable = Injectable {
+        motors: 2,
+        max_flood_per_s: 100,
+        checksums: true,
+    };
+
+    fn can() -> Chassis<CanFrame> {
+        Chassis::new(CAN, ms(300))
+    }
+
+    fn serial() -> Chassis<Vec<u8>> {
+        Chassis::new(SERIAL, ms(300))
+    }
+
+    fn sent<T: Item>(chassis: &mut Chassis<T>) -> Vec<WireItem> {
+        std::iter::from_fn(|| chassis.poll_transmit()).collect()
+    }
+
+    #[test]
+    fn garbage_goes_out_as_frames_of_8_bytes_on_can_and_as_is_on_a_serial_line() {
+        let mut c = can();
+        assert_eq!(
+            c.inject(T0, Injection::Garbage((0u8..20).collect())),
+            Applied::Done
+        );
+        let frames = sent(&mut c);
+        let lens: Vec<usize> = frames
+            .iter()
+            .map(|f| f.as_can().map_or(0, |f| f.data().len()))
+            .collect();
+        assert_eq!(lens, [8, 8, 4]);
+        assert!(
+            frames
+                .iter()
+                .all(|f| f.as_can().is_some_and(|f| f.id() == u32::from(GARBAGE_ID)))
+        );
+        let injected = c.outbox.injected();
+        assert_eq!((injected.garbage_frames, injected.garbage_bytes), (3, 20));
+
+        let mut s = serial();
+        assert_eq!(
+            s.inject(T0, Injection::Garbage(vec![1, 2, 3])),
+            Applied::Done
+        );
+        assert_eq!(s.inject(T0, Injection::Garbage(Vec::new())), Applied::Done);
+        assert_eq!(sent(&mut s), [WireItem::Bytes(vec![1, 2, 3])]);
+        let injected = s.outbox.injected();
+        assert_eq!((injected.garbage_frames, injected.garbage_bytes), (1, 3));
+    }
+
+    #[test]
+    fn garbage_goes_out_even_while_silent_but_nothing_else_may() {
+        let mut c = can();
+        assert_eq!(c.inject(T0, Injection::Silence(ms(100))), Applied::Done);
+        assert!(c.is_quiet(T0 + ms(99)));
+        assert!(!c.is_quiet(T0 + ms(100)));
+        assert_eq!(c.inject(T0, Injection::Garbage(vec![0xFF])), Applied::Done);
+        assert_eq!(sent(&mut c).len(), 1);
+        assert_eq!(c.poll_timeout(), Some(T0 + ms(100)));
+        assert_eq!(c.expire(T0 + ms(100)), None);
+        assert_eq!(c.poll_timeout(), None);
+    }
+
+    #[test]
+    fn what_a_robot_lacks_or_a_value_out_of_range_is_refused() {
+        let mut c = can();
+        assert_eq!(c.inject(T0, Injection::BadChecksums(3)), Applied::Refused);
+        assert!(!c.take_corruption());
+        let mut s = serial();
+        for motor in [0, 3, 5] {
+            let loss = Injection::MotorDriverLoss { motor, lost: true };
+            assert_eq!(s.inject(T0, loss), Applied::Refused, "motor {motor}");
+        }
+        assert_eq!(s.motor_lost, [false; 4]);
+        let soc = Injection::Battery { soc_pct: f64::NAN };
+        assert_eq!(s.inject(T0, soc), Applied::Refused);
+        let runaway = Injection::Runaway(Some(MAX_RUNAWAY_MPS + 1.0));
+        assert_eq!(s.inject(T0, runaway), Applied::Refused);
+        let mut none = Chassis::<CanFrame>::new(
+            Injectable {
+                motors: 0,
+                max_flood_per_s: 0,
+                checksums: false,
+            },
+            ms(300),
+        );
+        let flood = Injection::Flood { frames_per_s: 10 };
+        assert_eq!(none.inject(T0, flood), Applied::Refused);
+        let loss = Injection::MotorDriverLoss {
+            motor: 1,
+            lost: true,
+        };
+        assert_eq!(none.inject(T0, loss), Applied::Refused);
+    }
+
+    #[test]
+    fn conditions_come_back_for_the_rules_and_the_robots_own_injections_come_back_whole() {
+        let mut s = serial();
+        let loss = Injection::MotorDriverLoss {
+            motor: 2,
+            lost: true,
+        };
+        assert_eq!(s.inject(T0, loss), Applied::Condition);
+        assert_eq!(s.motor_lost, [false, true, false, false]);
+        let soc = Injection::Battery { soc_pct: 150.0 };
+        assert_eq!(s.inject(T0, soc), Applied::Condition);
+        assert_eq!(s.soc_pct, 100.0);
+        assert_eq!(s.inject(T0, Injection::Runaway(Some(-2.0))), Applied::Done);
+        assert_eq!(s.runaway_mps, Some(-2.0));
+        assert_eq!(s.inject(T0, Injection::Runaway(None)), Applied::Done);
+        assert_eq!(s.runaway_mps, None);
+        for own in [
+            Injection::Reboot,
+            Injection::RcTakeover(true),
+            Injection::Bumper(true),
+            Injection::EStop(true),
+            Injection::ObstacleAhead(Some(1.0)),
+        ] {
+            assert_eq!(s.inject(T0, own.clone()), Applied::Robot(own));
+        }
+    }
+
+    #[test]
+    fn bad_checksum_injections_add_up_frame_by_frame() {
+        let mut s = serial();
+        assert_eq!(s.inject(T0, Injection::BadChecksums(2)), Applied::Done);
+        assert!(s.take_corruption());
+        assert_eq!(s.inject(T0, Injection::BadChecksums(2)), Applied::Done);
+        let taken: Vec<bool> = (0..5).map(|_| s.take_corruption()).collect();
+        assert_eq!(taken, [true, true, true, false, false]);
+    }
+
+    #[test]
+    fn a_flood_is_capped_at_what_the_robot_carries_and_zero_stops_it() {
+        let mut s = serial();
+        let flood = Injection::Flood {
+            frames_per_s: 1_000_000,
+        };
+        assert_eq!(s.inject(T0, flood), Applied::Done);
+        // 100 a second at the most: one every 10 ms, alternating kinds.
+        assert_eq!(s.poll_timeout(), Some(T0 + ms(10)));
+        assert_eq!(s.flood_due(T0 + ms(9)), None);
+        assert_eq!(s.flood_due(T0 + ms(10)), Some(false));
+        assert_eq!(s.flood_due(T0 + ms(20)), Some(true));
+        let stop = Injection::Flood { frames_per_s: 0 };
+        assert_eq!(s.inject(T0 + ms(20), stop), Applied::Done);
+        assert_eq!(s.flood_due(T0 + ms(30)), None);
+        assert_eq!(s.poll_timeout(), None);
+    }
+
+    #[test]
+    fn a_reboot_counts_drops_the_queue_and_ends_after_the_boot_time_or_at_once() {
+        let mut c = can();
+        assert_eq!(c.inject(T0, Injection::Garbage(vec![1])), Applied::Done);
+        assert!(!c.reboot(T0));
+        assert_eq!(c.boots, 1);
+        assert!(c.is_booting() && c.is_quiet(T0));
+        assert!(sent(&mut c).is_empty(), "the queue is dropped");
+        assert_eq!(c.poll_timeout(), Some(T0 + ms(300)));
+        assert_eq!(c.expire(T0 + ms(299)), None);
+        assert_eq!(c.expire(T0 + ms(301)), Some(T0 + ms(300)));
+        assert!(!c.is_booting());
+
+        c.set_boot_time(Duration::ZERO);
+        assert!(c.reboot(T0 + ms(400)), "no boot time: booted at once");
+        assert_eq!(c.boots, 2);
+        assert!(!c.is_booting());
+    }
+
+    #[test]
+    fn silence_floods_and_corruptions_survive_a_reboot() {
+        let mut s = serial();
+        assert_eq!(s.inject(T0, Injection::Silence(ms(1000))), Applied::Done);
+        assert_eq!(s.inject(T0, Injection::BadChecksums(1)), Applied::Done);
+        let flood = Injection::Flood { frames_per_s: 10 };
+        assert_eq!(s.inject(T0, flood), Applied::Done);
+        assert!(!s.reboot(T0));
+        assert_eq!(s.expire(T0 + ms(300)), Some(T0 + ms(300)));
+        assert!(s.is_quiet(T0 + ms(300)), "still silenced");
+        assert_eq!(s.flood_due(T0 + ms(100)), Some(false));
+        assert!(s.take_corruption());
+    }
+}

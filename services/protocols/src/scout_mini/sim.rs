@@ -787,26 +787,20 @@ impl Firmware for ScoutMiniSim {
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        let injection = match self.chassis.inject(now, injection) {
-            Applied::Condition => {
-                self.refresh_conditions();
-                return true;
-            }
-            Applied::Done => return true,
+        match self.chassis.inject(now, injection) {
+            Applied::Condition => self.refresh_conditions(),
+            Applied::Done => {}
             Applied::Refused => return false,
-            Applied::Robot(injection) => injection,
-        };
-        match injection {
-            Injection::RcTakeover(on) => {
+            Applied::Robot(Injection::RcTakeover(on)) => {
                 self.rc_on = on;
                 if on {
                     self.command = Motion::default();
                     self.command_until = None;
                 }
             }
-            Injection::Reboot => self.reboot(now),
+            Applied::Robot(Injection::Reboot) => self.reboot(now),
             // The anti-collision tube is no switch; no range sensors, no E-stop switch.
-            _ => return false,
+            Applied::Robot(_) => return false,
         }
         true
     }

@@ -371,8 +371,8 @@ impl Driver for TitanDriver {
         );
         let frame = match next? {
             Next::Queued(frame) => frame,
-            // Until command mode is reported the heartbeat carries the command alone (a braked
-            // chassis does not move on it).
+            // The brake is released only once command mode is reported; until then the
+            // heartbeat carries the command alone (a braked chassis does not move on it).
             Next::ReleaseBrake => {
                 self.update_body(now);
                 Frame::ParkingBrake(ParkingBrake { engage: false })

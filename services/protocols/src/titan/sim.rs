@@ -1000,21 +1000,15 @@ impl Firmware for TitanSim {
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        let injection = match self.chassis.inject(now, injection) {
-            Applied::Condition => {
-                self.refresh_conditions();
-                return true;
-            }
-            Applied::Done => return true,
+        match self.chassis.inject(now, injection) {
+            Applied::Condition => self.refresh_conditions(),
+            Applied::Done => {}
             Applied::Refused => return false,
-            Applied::Robot(injection) => injection,
-        };
-        match injection {
-            Injection::Bumper(pressed) => {
+            Applied::Robot(Injection::Bumper(pressed)) => {
                 self.bumper = pressed;
                 self.refresh_conditions();
             }
-            Injection::RcTakeover(on) => {
+            Applied::Robot(Injection::RcTakeover(on)) => {
                 self.rc_on = on;
                 if on {
                     self.mode = Mode::Remote;
@@ -1025,9 +1019,9 @@ impl Firmware for TitanSim {
                     self.enter_standby();
                 }
             }
-            Injection::Reboot => self.reboot(now),
+            Applied::Robot(Injection::Reboot) => self.reboot(now),
             // No checksum, no range sensors, no E-stop switch.
-            _ => return false,
+            Applied::Robot(_) => return false,
         }
         true
     }

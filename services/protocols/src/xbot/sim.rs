@@ -761,25 +761,19 @@ impl Firmware for XbotSim {
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        let injection = match self.chassis.inject(now, injection) {
-            Applied::Condition | Applied::Done => return true,
+        match self.chassis.inject(now, injection) {
+            Applied::Condition | Applied::Done => {}
             Applied::Refused => return false,
-            Applied::Robot(injection) => injection,
-        };
-        match injection {
-            Injection::Reboot => self.reboot(now),
-            Injection::ObstacleAhead(range) | Injection::ObstacleBehind(range) => {
-                if range.is_some_and(|d| !(d.is_finite() && d >= 0.0)) {
-                    return false;
-                }
-                if matches!(injection, Injection::ObstacleAhead(_)) {
-                    self.obstacle_ahead_m = range;
-                } else {
-                    self.obstacle_behind_m = range;
-                }
+            Applied::Robot(Injection::Reboot) => self.reboot(now),
+            Applied::Robot(Injection::ObstacleAhead(range)) if valid_range(range) => {
+                self.obstacle_ahead_m = range;
             }
-            // The serial protocol has no RC, no bumper and no E-stop switch.
-            _ => return false,
+            Applied::Robot(Injection::ObstacleBehind(range)) if valid_range(range) => {
+                self.obstacle_behind_m = range;
+            }
+            // An obstacle at no finite distance; the serial protocol has no RC, no bumper and no
+            // E-stop switch.
+            Applied::Robot(_) => return false,
         }
         true
     }
@@ -809,6 +803,11 @@ impl Firmware for XbotSim {
             injected: self.chassis.outbox.injected(),
         }
     }
+}
+
+/// An injected obstacle range: `None` (nothing in view) or a finite distance ≥ 0, m.
+fn valid_range(range: Option<f64>) -> bool {
+    range.is_none_or(|d| d.is_finite() && d >= 0.0)
 }
 
 /// Number of driven wheels: 2, or 4 on omni variants.
