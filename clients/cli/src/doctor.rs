@@ -16,7 +16,8 @@ use std::time::Duration;
 
 use anyhow::Context;
 use chassis_client::{
-    ChassisState, ControlMode, ControllerState, FaultFlags, LinkFlags, Robot, WireProtocol, now_ns,
+    ChassisState, ControlMode, ControllerState, FaultFlags, LinkFlags, LockStatus, MuxStatus,
+    Robot, SourceFlags, WireProtocol, now_ns,
 };
 use chassis_protocols::agilex_v2::detect::{Detection, Detector};
 use chassis_protocols::registry::Bus as RobotBus;
@@ -244,7 +245,10 @@ pub fn diagnose(target: &Target, emit: &mut dyn FnMut(Check)) {
         )),
     }
     match (&serving, heard) {
-        (Some(state), _) => from_service(target, state, emit),
+        (Some((state, mux)), _) => {
+            from_service(target, state, emit);
+            mux_check(target, mux.as_ref(), emit);
+        }
         (None, Some(Some(state))) => robot_mode(&state, emit),
         _ => {}
     }
@@ -1003,7 +1007,7 @@ fn robot_mode(state: &ChassisState, emit: &mut dyn FnMut(Check)) {
 }
 
 /// Whether a chassisd serves `target.name`, and a fresh state sample when it does.
-fn chassisd_serving(target: &Target) -> (Option<ChassisState>, Check) {
+fn chassisd_serving(target: &Target) -> (Option<(ChassisState, Option<MuxStatus>)>, Check) {
     let name = &target.name;
     let mut robot = match Robot::connect(name) {
         Ok(robot) => robot,
@@ -1034,6 +1038,10 @@ fn chassisd_serving(target: &Target) -> (Option<ChassisState>, Check) {
         }
     };
     let state = robot.wait_state(Duration::from_millis(1500)).ok().flatten();
+    let mux = match robot.latest_mux() {
+        Ok(Some(m)) => Some(m),
+        _ => robot.wait_mux(Duration::from_millis(500)).ok().flatten(),
+    };
     match state {
         Some(s) if s.robot != target.robot.id() => (
             None,
@@ -1048,7 +1056,7 @@ fn chassisd_serving(target: &Target) -> (Option<ChassisState>, Check) {
             .fix("give this robot another --name, or stop that chassisd"),
         ),
         Some(s) => (
-            Some(s),
+            Some((s, mux)),
             check(
                 "chassisd",
                 Verdict::Ok,
@@ -1153,6 +1161,77 @@ fn from_service(target: &Target, s: &ChassisState, emit: &mut dyn FnMut(Check)) 
         ));
     }
     robot_mode(s, emit);
+}
+
+/// What chassisd's mux lets through: a required source that is silent (the safety monitor not
+/// running) or a held lock (an e-stop) stops every source below it.
+fn mux_check(target: &Target, mux: Option<&MuxStatus>, emit: &mut dyn FnMut(Check)) {
+    let name = &target.name;
+    let Some(m) = mux else {
+        emit(check(
+            "mux",
+            Verdict::Warn,
+            "chassisd published no mux decision",
+        ));
+        return;
+    };
+    let mut blocked = false;
+    let sources = &m.sources[..usize::from(m.source_count).min(m.sources.len())];
+    for s in sources {
+        if s.flags & SourceFlags::REQUIRED != 0 && s.flags & SourceFlags::FRESH == 0 {
+            blocked = true;
+            emit(
+                check(
+                    "mux",
+                    Verdict::Fail,
+                    format!(
+                        "the required source {} is silent: nothing moves without it",
+                        s.name()
+                    ),
+                )
+                .fix(format!(
+                    "start the safety monitor: `sudo systemctl start chassis-safety@{name}` or \
+                     `chassis-safety --name {name}` (chassisd --no-safety-monitor lifts the rule)"
+                )),
+            );
+        }
+    }
+    let locks = &m.locks[..usize::from(m.lock_count).min(m.locks.len())];
+    for l in locks.iter().filter(|l| l.held != 0) {
+        blocked = true;
+        let release = if l.name() == "estop" {
+            format!("chassis control --name {name} estop-release")
+        } else {
+            format!("chassis control --name {name} lock-release {}", l.name())
+        };
+        let holder = match l.holder {
+            LockStatus::HOLDER_OPERATOR => "an operator".to_string(),
+            h => sources.get(usize::from(h)).map_or_else(
+                || "a source".to_string(),
+                |s| format!("the source {}", s.name()),
+            ),
+        };
+        emit(
+            check(
+                "mux",
+                Verdict::Fail,
+                format!(
+                    "the lock {} (priority {}) is held by {holder}: sources below it do not move \
+                     the robot",
+                    l.name(),
+                    l.priority
+                ),
+            )
+            .fix(format!("when it is safe: `{release}`")),
+        );
+    }
+    if !blocked {
+        emit(check(
+            "mux",
+            Verdict::Ok,
+            "no lock held, every required source alive",
+        ));
+    }
 }
 
 // ------------------------------------------------------------------------- the computer
