@@ -510,13 +510,20 @@ fn listen_can(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> Opti
     };
     let mut frames = Vec::new();
     let mut errors = 0u32;
+    let mut overflows = 0u32;
     let mut bus_off = false;
     let end = deadline(target.listen);
     while now_ns() < end {
         match bus.recv_event() {
             Ok(Some(CanEvent::Frame(frame))) => frames.push(frame),
             Ok(Some(CanEvent::Controller(report))) => {
-                if report.from_frame {
+                if report.overflow {
+                    overflows += 1;
+                }
+                if report.bus_error
+                    || report.no_ack
+                    || report.state >= ControllerState::ERROR_WARNING
+                {
                     errors += 1;
                 }
                 bus_off |= report.state == ControllerState::BUS_OFF;
@@ -543,12 +550,29 @@ fn listen_can(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> Opti
                     Verdict::Warn
                 },
                 format!(
-                    "{errors} error report(s) from the controller in {:.1} s{}",
+                    "{errors} report(s) of errors on the bus from the controller in {:.1} s{}",
                     target.listen.as_secs_f64(),
                     if bus_off { ", bus-off among them" } else { "" }
                 ),
             )
             .fix(chassisd::controller::BUS_TROUBLE),
+        );
+    }
+    if overflows > 0 {
+        emit(
+            check(
+                "overflow",
+                Verdict::Warn,
+                format!(
+                    "the controller's buffer overflowed {overflows} time(s) in {:.1} s: frames \
+                     were lost before this computer read them",
+                    target.listen.as_secs_f64()
+                ),
+            )
+            .fix(
+                "a busy or slow computer, or a USB adapter behind a shared hub: give the \
+                 adapter its own port, or chassisd a CPU (`--cpu N --realtime 80`)",
+            ),
         );
     }
     can_frames(target, &frames, emit)
