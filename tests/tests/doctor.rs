@@ -69,6 +69,23 @@ fn on_the_simulated_robot_the_doctor_reads_chassisd_and_fails_while_the_rc_holds
     assert_eq!(line(&report, "state-dir").0, "ok", "{report}");
     assert_eq!(line(&report, "mux").0, "ok", "{report}");
     assert!(report.contains("verdict: ready to drive"), "{report}");
+    // --json: one object per check, then the verdict.
+    let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim", "--json"]);
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let last = lines.last().unwrap();
+    assert_eq!(
+        (last["verdict"].as_str(), last["failed"].as_u64()),
+        (Some("ready"), Some(0))
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|c| c["check"] == "mux" && c["verdict"] == "ok"),
+        "{lines:?}"
+    );
 
     let rc = env.chassis(&["sim", "--name", &n, "rc", "on"]);
     assert!(rc.status.success(), "{}", text(&rc));
