@@ -514,6 +514,82 @@ fn serve(
     }
 }
 
+/// One message of the state loop, for its topic.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Message {
+    /// `odom` (boxed: three times the size of the others).
+    Odom(Box<Odometry>),
+    /// `tf` (odom → base_link).
+    Tf(TfMessage),
+    /// `joint_states`.
+    Joints(JointState),
+    /// `battery_state`.
+    Battery(BatteryState),
+    /// `imu/data`.
+    Imu(Imu),
+    /// `range/<sensor>`: the index of the sensor in the `ranges` [`messages`] was given.
+    Range(usize, Range),
+    /// `fix`.
+    Fix(NavSatFix),
+}
+
+/// What `s` brings that the previous sample `latest` did not: odom and tf when the pose or the
+/// body's motion was reported anew (a sample made by another frame repeats them), the joints
+/// with their angles and speeds, each range sensor of `ranges` with its own reading. The
+/// robot's `description` gives the odometry's variances and the joints. The bridge publishes
+/// these; `chassis-ros2 --record` writes them.
+pub fn messages(
+    latest: Option<&ChassisState>,
+    s: &ChassisState,
+    description: &RobotDescription,
+    ranges: &[RangeSensor],
+    clock: RosClock,
+    frames: &Frames,
+) -> Vec<Message> {
+    use chassis_client::Group;
+    let fresh = |group: Group| {
+        latest.is_none_or(|l| l.group_stamp_ns[group.index()] != s.group_stamp_ns[group.index()])
+    };
+    let mut out = Vec::new();
+    if fresh(Group::Pose) || fresh(Group::Motion) {
+        out.push(Message::Odom(Box::new(convert::odometry(
+            s,
+            &description.odometry_variance,
+            clock,
+            frames,
+        ))));
+        out.push(Message::Tf(convert::transform(s, clock, frames)));
+    }
+    if (fresh(Group::Steering) || fresh(Group::WheelSpeed))
+        && let Some(j) = convert::joint_states(s, description, clock)
+    {
+        out.push(Message::Joints(j));
+    }
+    if (fresh(Group::BmsPack) || fresh(Group::System))
+        && let Some(b) = convert::battery(s, clock, frames)
+    {
+        out.push(Message::Battery(b));
+    }
+    if fresh(Group::Imu)
+        && let Some(i) = convert::imu(s, clock, frames)
+    {
+        out.push(Message::Imu(i));
+    }
+    if fresh(Group::Ranges) {
+        for (index, sensor) in ranges.iter().enumerate() {
+            if let Some(r) = convert::range(s, sensor, clock, frames) {
+                out.push(Message::Range(index, r));
+            }
+        }
+    }
+    if fresh(Group::Gps)
+        && let Some(fix) = convert::nav_sat_fix(s, clock, frames)
+    {
+        out.push(Message::Fix(fix));
+    }
+    out
+}
+
 /// What the state loop keeps between samples.
 struct StateLoop<'a> {
     name: &'a str,
@@ -521,6 +597,8 @@ struct StateLoop<'a> {
     clock: RosClock,
     frames: Frames,
     description: RobotDescription,
+    /// The range sensors of `out.ranges`, in its order.
+    sensors: Vec<RangeSensor>,
     latest: Option<ChassisState>,
     mux: Option<MuxStatus>,
     last_diagnostics: Option<(u64, Vec<(u8, String)>)>,
@@ -543,51 +621,36 @@ impl StateLoop<'_> {
         }
     }
 
-    /// Publishes what `s` brings that the previous sample did not: odom and tf when the pose or
-    /// the body's motion was reported anew (a sample made by another frame repeats them), the
-    /// joints with their angles and speeds, each sensor with its own reading.
+    /// Publishes what `s` brings that the previous sample did not ([`messages`]).
     fn on_state(&mut self, s: &ChassisState) {
-        use chassis_client::Group;
-        let (clock, frames, out, d) = (self.clock, &self.frames, self.out, &self.description);
-        let latest = self.latest;
-        let fresh = |group: Group| {
-            latest
-                .is_none_or(|l| l.group_stamp_ns[group.index()] != s.group_stamp_ns[group.index()])
-        };
+        let out = self.out;
         let f = &mut self.failures;
-        if fresh(Group::Pose) || fresh(Group::Motion) {
-            let odom = convert::odometry(s, &d.odometry_variance, clock, frames);
-            Self::publish(f, "odom", &out.odom, odom);
-            if let Some(tf) = &out.tf {
-                Self::publish(f, "tf", tf, convert::transform(s, clock, frames));
-            }
-        }
-        if (fresh(Group::Steering) || fresh(Group::WheelSpeed))
-            && let Some(j) = convert::joint_states(s, d, clock)
-        {
-            Self::publish(f, "joint_states", &out.joint_states, j);
-        }
-        if (fresh(Group::BmsPack) || fresh(Group::System))
-            && let Some(b) = convert::battery(s, clock, frames)
-        {
-            Self::publish(f, "battery_state", &out.battery, b);
-        }
-        if fresh(Group::Imu)
-            && let Some(i) = convert::imu(s, clock, frames)
-        {
-            Self::publish(f, "imu/data", &out.imu, i);
-        }
-        if fresh(Group::Ranges) {
-            for (sensor, p) in &out.ranges {
-                if let Some(r) = convert::range(s, sensor, clock, frames) {
-                    Self::publish(f, "range", p, r);
+        let messages = messages(
+            self.latest.as_ref(),
+            s,
+            &self.description,
+            &self.sensors,
+            self.clock,
+            &self.frames,
+        );
+        for m in messages {
+            match m {
+                Message::Odom(m) => Self::publish(f, "odom", &out.odom, *m),
+                Message::Tf(m) => {
+                    if let Some(tf) = &out.tf {
+                        Self::publish(f, "tf", tf, m);
+                    }
                 }
+                Message::Joints(m) => Self::publish(f, "joint_states", &out.joint_states, m),
+                Message::Battery(m) => Self::publish(f, "battery_state", &out.battery, m),
+                Message::Imu(m) => Self::publish(f, "imu/data", &out.imu, m),
+                Message::Range(i, m) => {
+                    if let Some((_, p)) = out.ranges.get(i) {
+                        Self::publish(f, "range", p, m);
+                    }
+                }
+                Message::Fix(m) => Self::publish(f, "fix", &out.fix, m),
             }
-        }
-        if fresh(Group::Gps)
-            && let Some(fix) = convert::nav_sat_fix(s, clock, frames)
-        {
-            Self::publish(f, "fix", &out.fix, fix);
         }
         self.latest = Some(*s);
     }
@@ -640,6 +703,11 @@ pub fn state_loop(
         clock,
         frames,
         description,
+        sensors: out
+            .ranges
+            .iter()
+            .map(|(sensor, _)| sensor.clone())
+            .collect(),
         latest: None,
         mux: None,
         last_diagnostics: None,

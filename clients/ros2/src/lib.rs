@@ -13,3 +13,4 @@
 pub mod bridge;
 pub mod convert;
 pub mod msg;
+pub mod record;
