@@ -133,6 +133,12 @@ fn zenoh_in(ns: &str, prefix: &str, args: &[&str], log: &Path) -> anyhow::Result
     Ok(cmd)
 }
 
+/// The rows' names: the bare Zenoh hop and the bridge's three paths.
+pub const RAW: &str = "Zenoh put → subscriber, 840 B";
+pub const COMMAND: &str = "operator's remote source → robot's frame written (titan sim)";
+pub const STATE: &str = "robot's frame read → state in the operator's iceoryx2 (titan sim)";
+pub const BRIDGE: &str = "robot's state published → in the operator's iceoryx2 (the bridge's part)";
+
 /// True when this process may make network namespaces.
 pub fn possible() -> bool {
     use std::os::unix::fs::MetadataExt as _;
@@ -281,6 +287,7 @@ pub fn run(
         commands,
         interval,
         false,
+        paths::Reach::Exact,
     )?;
 
     // Robot state → the operator's iceoryx2 subscriber, while the robot drives (so frames keep
