@@ -102,6 +102,11 @@ impl Machine {
 /// How a paced baseline is labelled: one ping per command period, the hop after the pause only.
 pub const PACED: &str = "paced";
 
+/// How far below the sum of the p50s of the hops it contains a row's p50 may be before it is
+/// flagged: medians of independent hops add only approximately (on a loaded 2-core machine a
+/// ROS 2 row came 1.5 % and 5.9 % below the sum in two runs; the bias this catches was 19 %).
+pub const SUM_TOLERANCE: f64 = 0.10;
+
 /// Fewest samples whose 99th percentile is shown: below it, the p99 is nearly the maximum.
 pub const MIN_FOR_P99: u64 = 100;
 /// Fewest samples whose 99.9th percentile is shown.
@@ -211,11 +216,13 @@ impl Report {
                     .collect();
                 if parts.iter().all(|p| p.is_some_and(|s| s.count > 0)) {
                     let sum: f64 = parts.iter().flatten().map(|s| s.p50_us).sum();
-                    if row.summary.count > 0 && row.summary.p50_us < sum {
+                    if row.summary.count > 0 && row.summary.p50_us < sum * (1.0 - SUM_TOLERANCE) {
                         flags.push(format!(
-                            "p50 {:.1} µs is below {sum:.1} µs, the sum of the p50s of the hops \
-                             it contains ({}): they were not measured under the same conditions",
+                            "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
+                             p50s of the hops it contains ({}): they were not measured under the \
+                             same conditions",
                             row.summary.p50_us,
+                            SUM_TOLERANCE * 100.0,
                             row.contains.join(" + ")
                         ));
                     }
@@ -761,9 +768,9 @@ impl Report {
              baseline is the back-to-back (warm) ping-pong of the same waiting and placement. \
              The cold paced and back-to-back baselines are context rows.\n\
              * **Inconsistent**: a path cannot be faster than a hop it contains; a row whose \
-             p50 is below its baseline's, or below the sum of the p50s of the rows it contains \
-             (a ROS 2 row contains a raw DDS hop and the service's own path), is flagged, not \
-             explained.\n\
+             p50 is below its baseline's, or more than {} % below the sum of the p50s of the \
+             rows it contains (a ROS 2 row contains a raw DDS hop and the service's own path; \
+             medians add only approximately), is flagged, not explained.\n\
              * **What a client reads.** Every state row reads a lossless stream, as a client \
              that needs every sample does (`Robot::state_stream`, `StateStream` in Python), and \
              applies one rule in Rust, Python and the ROS 2 script alike: a sample counts when \
@@ -782,6 +789,7 @@ impl Report {
             HYBRID_SPIN.as_micros(),
             COMMAND_INTERVAL.as_millis(),
             XBOT_COMMAND_INTERVAL.as_millis(),
+            SUM_TOLERANCE * 100.0,
             MIN_FOR_P99,
             MIN_FOR_P999
         ));
@@ -860,8 +868,9 @@ mod tests {
 
     #[test]
     fn a_row_cheaper_than_the_hops_it_contains_is_flagged_and_fails_the_smoke_check() {
-        // Above its DDS hop (300 µs), below the hop plus the command path (500 µs).
-        let (report, expected) = run_with_ros2_row(450);
+        // Above its DDS hop (300 µs), more than 10 % below the hop plus the command path
+        // (500 µs).
+        let (report, expected) = run_with_ros2_row(440);
         let ros2 = &report.rows[2];
         assert!(
             ros2.inconsistent
@@ -874,6 +883,12 @@ mod tests {
             failures.iter().any(|f| f.starts_with("flagged row: ros2")),
             "{failures:?}"
         );
+    }
+
+    #[test]
+    fn a_row_within_the_tolerance_of_the_sum_of_its_hops_is_not_flagged() {
+        let (report, _) = run_with_ros2_row(460);
+        assert_eq!(report.rows[2].inconsistent, None);
     }
 
     #[test]
