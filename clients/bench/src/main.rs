@@ -457,7 +457,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     }
     if !skip("zenoh") && zenoh::possible() {
         let placement = "2 netns, veth";
-        expected.push(row_key("baseline", zenoh::RAW, "-", placement));
+        for raw in [zenoh::RAW_COMMAND, zenoh::RAW_STATE] {
+            expected.push(row_key("baseline", raw, "-", placement));
+        }
         for what in [zenoh::COMMAND, zenoh::STATE, zenoh::BRIDGE] {
             expected.push(row_key("zenoh", what, "event", placement));
         }
@@ -896,15 +898,30 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 plan.states,
             )?;
             let placement = "2 netns, veth";
-            let base = zenoh::RAW;
-            let mut raw = row("baseline", base.into(), "-", placement, z.raw, 0);
-            raw.conditions = Some(format!(
-                "one sample every {} ms from the robot's namespace to the operator's, bare \
-                 sessions configured as chassis-zenoh's, same run",
-                paths::COMMAND_INTERVAL.as_millis()
-            ));
-            report.rows.push(raw);
-            let reference = Some(format!("{base}, {placement}"));
+            let command_count = z.command.latencies.count();
+            let state_count = z.state.count();
+            for (what, count) in [
+                (zenoh::RAW_COMMAND, command_count),
+                (zenoh::RAW_STATE, state_count),
+            ] {
+                let mut raw = row(
+                    "baseline",
+                    what.into(),
+                    "-",
+                    placement,
+                    baseline::last_of(&z.raw, count),
+                    0,
+                );
+                raw.conditions = Some(format!(
+                    "one sample every {} ms from the robot's namespace to the operator's, bare \
+                     sessions configured as chassis-zenoh's, same run; the last {count} of {} \
+                     after a warm-up",
+                    paths::COMMAND_INTERVAL.as_millis(),
+                    z.raw.len()
+                ));
+                report.rows.push(raw);
+            }
+            let reference = Some(format!("{}, {placement}", zenoh::RAW_COMMAND));
             let mut command = row(
                 "zenoh",
                 zenoh::COMMAND.into(),
@@ -915,6 +932,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             );
             command.baseline = reference.clone();
             report.rows.push(command);
+            let reference = Some(format!("{}, {placement}", zenoh::RAW_STATE));
             let mut state = row("zenoh", zenoh::STATE.into(), "event", placement, z.state, 0);
             state.baseline = reference.clone();
             report.rows.push(state);
