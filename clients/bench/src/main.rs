@@ -609,7 +609,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let pings_wanted = command
                 .as_ref()
                 .map_or(plan.paced_rounds, |c| c.latencies.count());
-            let feed_rounds = (state.latencies.count() as f64
+            // A tenth more: the feed starts after the receiver and keeps its own pace.
+            let feed_rounds = (1.1 * state.latencies.count() as f64
                 / (feed_per_s * interval.as_secs_f64()).max(1e-9))
             .ceil() as u64;
             let rounds = pings_wanted.max(feed_rounds) + 1;
@@ -755,6 +756,40 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     py.missed,
                 ));
             }
+            if let Some(figures) = &command {
+                report.parts.push(report::Parts {
+                    path: "command".into(),
+                    what: label.clone(),
+                    mode: r.mode.arg().into(),
+                    placement: placement.into(),
+                    parts: vec![
+                        (
+                            "request created → loop woke".into(),
+                            figures.wake_up.summary(),
+                        ),
+                        (
+                            "loop woke → frame written".into(),
+                            figures.in_service.summary(),
+                        ),
+                    ],
+                });
+            }
+            report.parts.push(report::Parts {
+                path: "state".into(),
+                what: label.clone(),
+                mode: r.mode.arg().into(),
+                placement: placement.into(),
+                parts: vec![
+                    (
+                        "frame read → handed to iceoryx2".into(),
+                        state.in_service.summary(),
+                    ),
+                    (
+                        "handed to iceoryx2 → reader has it".into(),
+                        state.delivery.summary(),
+                    ),
+                ],
+            });
             if let Some(figures) = command {
                 let mut command_row = row(
                     "command",

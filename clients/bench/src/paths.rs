@@ -431,6 +431,8 @@ pub struct CommandFigures {
     /// The service's own part: its loop woke for the request (the mux decision's stamp) → the
     /// frame's write returned.
     pub in_service: Latencies,
+    /// The part before it, of the same samples: request created → the loop woke for it.
+    pub wake_up: Latencies,
     /// Requests that produced no frame within the wait.
     pub missed: u64,
 }
@@ -513,6 +515,7 @@ pub fn command_path_via(
 
     let mut latencies = Latencies::new();
     let mut in_service = Latencies::new();
+    let mut wake_up = Latencies::new();
     let mut missed = 0;
     // Between two samples further apart than the source's timeout, the current request is
     // repeated as a controller would: the mux output stays, no frame is sent for it.
@@ -558,6 +561,7 @@ pub fn command_path_via(
                 latencies.record_between(stamp, written);
                 if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
                     in_service.record_between(decided, written);
+                    wake_up.record_between(stamp, decided);
                 }
             }
             None => missed += 1,
@@ -567,6 +571,7 @@ pub fn command_path_via(
     Ok(CommandFigures {
         latencies,
         in_service,
+        wake_up,
         missed,
     })
 }
@@ -588,6 +593,8 @@ pub struct StateRecorder {
     pub latencies: Latencies,
     /// The service's own part: the frame read → the sample handed to iceoryx2.
     pub in_service: Latencies,
+    /// The part after it, of the same samples: handed to iceoryx2 → this reader has it.
+    pub delivery: Latencies,
     /// Samples published that this reader never received (gaps in `seq`).
     pub dropped: u64,
     /// Samples received whose stamp was not newer (tick refreshes): not recorded.
@@ -625,6 +632,7 @@ impl StateRecorder {
         self.latencies.record_between(state.stamp_ns, received);
         self.in_service
             .record_between(state.stamp_ns, state.published_ns);
+        self.delivery.record_between(state.published_ns, received);
     }
 }
 

@@ -54,10 +54,26 @@ pub struct Report {
     pub rows: Vec<Row>,
     pub cost: Vec<Cost>,
     pub throughput: Option<Throughput>,
+    /// Where the time of the service paths goes, run by run.
+    pub parts: Vec<Parts>,
     pub notes: Vec<String>,
     /// The rows the run planned ([`row_key`]s), for the smoke check.
     #[serde(skip)]
     pub expected: Vec<String>,
+}
+
+/// One path of one run split at the stamps the code takes: each part's distribution over the
+/// same samples (a sample counts in every part or in none).
+#[derive(Debug, Clone, Serialize)]
+pub struct Parts {
+    /// `command` or `state`.
+    pub path: String,
+    /// The run: robot and bus, loop, placement.
+    pub what: String,
+    pub mode: String,
+    pub placement: String,
+    /// (from → to, its distribution), in the order a sample passes them.
+    pub parts: Vec<(String, Summary)>,
 }
 
 /// Replay of a recorded bus through decode + publish as fast as the service drains it.
@@ -342,6 +358,30 @@ impl Report {
                 r.placement,
                 r.inconsistent.as_deref().unwrap_or_default()
             ));
+        }
+        if !self.parts.is_empty() {
+            out.push_str("\nwhere each microsecond goes (p50 / p99 µs, same samples):\n");
+            for p in &self.parts {
+                let parts: Vec<String> = p
+                    .parts
+                    .iter()
+                    .map(|(part, s)| {
+                        format!(
+                            "{part} {:.1} / {}",
+                            s.p50_us,
+                            percentile(s.p99_us, s.count, MIN_FOR_P99)
+                        )
+                    })
+                    .collect();
+                out.push_str(&format!(
+                    "  {} {} ({}, {}): {}\n",
+                    p.path,
+                    p.what,
+                    p.mode,
+                    p.placement,
+                    parts.join("; ")
+                ));
+            }
         }
         if !self.cost.is_empty() {
             out.push_str("\nservice cost under a fully loaded bus (simulated chassis flooding):\n");
@@ -708,6 +748,8 @@ impl Report {
         }
         out.push('\n');
 
+        out.push_str(&self.parts_markdown());
+
         out.push_str("## Cost under a full bus, throughput, memory\n\n");
         for c in &self.cost {
             out.push_str(&format!(
@@ -804,6 +846,50 @@ impl Report {
     }
 }
 
+impl Report {
+    /// The section *Where each microsecond goes*: each part's p50 and p99 over the same
+    /// samples, and the part's share of the sum of the p50s.
+    fn parts_markdown(&self) -> String {
+        let mut out = String::from(
+            "## Where each microsecond goes\n\n\
+             Each command and state row of the table split at the stamps the code takes, over \
+             the same samples: *request created* (the client's `VelocityRequest::stamp_ns`) → \
+             *loop woke* (the service loop's stamp when it woke for it, the mux decision's \
+             `stamp_ns`) → *frame written* (the frame tap's TX stamp, the write's return); \
+             *frame read* (`ChassisState::stamp_ns`, the read's return) → *sample handed to \
+             iceoryx2* (`ChassisState::published_ns`) → *reader has it* (the client's stamp once \
+             its wait returned). Reading the request, the mux, the encoding and the write are \
+             not told apart inside *loop woke → frame written*, nor decoding from the rest of \
+             the pass inside *frame read → handed to iceoryx2*: chassisd takes no stamp between \
+             them. Reproduce: the command at the top of this document (`--skip \
+             baselines,fanout,cost,throughput,zenoh` keeps only the paths).\n\n\
+             | path | run | loop | placement | part | p50 µs | p99 µs | share of the p50s |\n\
+             | --- | --- | --- | --- | --- | ---: | ---: | ---: |\n",
+        );
+        for p in &self.parts {
+            let total: f64 = p.parts.iter().map(|(_, s)| s.p50_us).sum();
+            for (part, s) in &p.parts {
+                let share = if total > 0.0 {
+                    format!("{:.0} %", 100.0 * s.p50_us / total)
+                } else {
+                    String::new()
+                };
+                out.push_str(&format!(
+                    "| {} | {} | {} | {} | {part} | {:.1} | {} | {share} |\n",
+                    p.path,
+                    p.what,
+                    p.mode,
+                    p.placement,
+                    s.p50_us,
+                    percentile(s.p99_us, s.count, MIN_FOR_P99)
+                ));
+            }
+        }
+        out.push('\n');
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -889,6 +975,24 @@ mod tests {
     fn a_row_within_the_tolerance_of_the_sum_of_its_hops_is_not_flagged() {
         let (report, _) = run_with_ros2_row(460);
         assert_eq!(report.rows[2].inconsistent, None);
+    }
+
+    #[test]
+    fn the_microseconds_table_gives_each_part_and_its_share_of_the_p50s() {
+        let part = |us| measured("command", "x", "event", us, 200).summary;
+        let report = Report {
+            parts: vec![Parts {
+                path: "command".into(),
+                what: "titan sim".into(),
+                mode: "event".into(),
+                placement: "cross CPU".into(),
+                parts: vec![("woke".into(), part(30)), ("written".into(), part(10))],
+            }],
+            ..Report::default()
+        };
+        let md = report.parts_markdown();
+        assert!(md.contains("| woke | 30.0 | 30.0 | 75 % |"), "{md}");
+        assert!(md.contains("| written | 10.0 | 10.0 | 25 % |"), "{md}");
     }
 
     #[test]
