@@ -9,6 +9,11 @@ use crate::IpcError;
 /// different prefixes never see each other (tests running in parallel isolate themselves so).
 pub const IPC_PREFIX_ENV: &str = "CHASSIS_IPC_PREFIX";
 
+/// Environment variable asking `chassisd` for its pass trace: the stamps it takes inside each
+/// pass that wrote a frame or published a state, written to the file it names as the service
+/// stops (`chassis-bench`'s table of where each microsecond goes).
+pub const PASS_TRACE_ENV: &str = "CHASSIS_PASS_TRACE";
+
 /// What [`reply_name`] appends to a request-response service's name.
 pub const REPLY_SUFFIX: &str = "/reply";
 

@@ -39,6 +39,7 @@ use crate::setup::{Devices, Hardware, PinError, driver_for_config, enter_realtim
 use crate::sim::SimHandle;
 
 mod pass;
+pub(crate) mod trace;
 
 /// Why the service stopped.
 #[derive(Debug, thiserror::Error)]
@@ -116,6 +117,8 @@ struct Shell<D> {
     lock_file: LockFile,
     /// systemd's notification socket, when started by a `Type=notify` unit.
     notifier: Option<Notifier>,
+    /// The stamps inside each pass, when `CHASSIS_PASS_TRACE` asks for them.
+    trace: Option<trace::PassTrace>,
 }
 
 /// Opens the service's ports. A predecessor killed while it was creating one of them leaves that
@@ -217,6 +220,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         last_activity: now,
         lock_file,
         notifier: Notifier::from_env(),
+        trace: trace::PassTrace::from_env(),
     };
     engine.start(&mut shell.io(&ports), now);
     if let Some(notifier) = &mut shell.notifier {
@@ -372,6 +376,12 @@ impl<D: Devices> Shell<D> {
             notifier.stopping();
         }
         engine.stop(&mut self.io(ports), clock::now());
+        if let Some(trace) = &self.trace {
+            match trace.write_out() {
+                Ok(()) => info!(file = %trace.path().display(), "pass trace written"),
+                Err(e) => warn!(file = %trace.path().display(), "pass trace not written: {e}"),
+            }
+        }
     }
 }
 
