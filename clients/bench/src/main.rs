@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 mod baseline;
 mod fanout;
+mod parts;
 mod paths;
 mod placement;
 mod provenance;
@@ -532,8 +533,16 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 r.placement.label()
             ));
             let (client_cpu, service_cpu) = r.placement.cpus();
-            let (service, mut robot) =
-                paths::start(r.robot, r.bus, r.mode, service_cpu, &prefix, &dir)?;
+            let (service, mut robot) = paths::start_configured(
+                r.robot,
+                r.bus,
+                r.mode,
+                service_cpu,
+                paths::ServiceConfig::Bench,
+                true,
+                &prefix,
+                &dir,
+            )?;
             let spin = r.mode == LoopMode::Spin;
             let (count, interval) = if r.robot == RobotKind::Xbot {
                 // The XBot's manual caps the command rate below 10 Hz: a change goes out at once
@@ -591,7 +600,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             })??;
             let feed_per_s = feedback.per_second(&mut robot)?;
             drop(robot);
-            drop(service);
+            let passes = service.stop()?;
             bar.inc(1);
 
             // The baseline of this run's command and state rows: its receiver lives like the
@@ -756,40 +765,22 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     py.missed,
                 ));
             }
-            if let Some(figures) = &command {
-                report.parts.push(report::Parts {
-                    path: "command".into(),
-                    what: label.clone(),
-                    mode: r.mode.arg().into(),
-                    placement: placement.into(),
-                    parts: vec![
-                        (
-                            "request created → loop woke".into(),
-                            figures.wake_up.summary(),
-                        ),
-                        (
-                            "loop woke → frame written".into(),
-                            figures.in_service.summary(),
-                        ),
-                    ],
-                });
-            }
-            report.parts.push(report::Parts {
-                path: "state".into(),
+            let run_parts = |path: &str, parts| report::Parts {
+                path: path.into(),
                 what: label.clone(),
                 mode: r.mode.arg().into(),
                 placement: placement.into(),
-                parts: vec![
-                    (
-                        "frame read → handed to iceoryx2".into(),
-                        state.in_service.summary(),
-                    ),
-                    (
-                        "handed to iceoryx2 → reader has it".into(),
-                        state.delivery.summary(),
-                    ),
-                ],
-            });
+                parts,
+            };
+            if let Some(figures) = &command {
+                report.parts.push(run_parts(
+                    "command",
+                    parts::command(&figures.samples, &passes),
+                ));
+            }
+            report
+                .parts
+                .push(run_parts("state", parts::state(&state.samples, &passes)));
             if let Some(figures) = command {
                 let mut command_row = row(
                     "command",
@@ -855,6 +846,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             LoopMode::Event,
             service_cpu,
             paths::ServiceConfig::Default,
+            false,
             &prefix,
             &dir,
         )?;

@@ -15,8 +15,8 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::{
-    BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, Robot, STATE_BUFFER,
-    SimKind, SimRequest, Source, Ticker, VelocityRequest, now_ns,
+    BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, PASS_TRACE_ENV, Robot,
+    STATE_BUFFER, SimKind, SimRequest, Source, Ticker, VelocityRequest, now_ns,
 };
 use chassis_protocols::describe::{FrameJson, RobotCodec};
 use chassis_protocols::{CanFrame, RobotKind};
@@ -59,11 +59,74 @@ pub struct Service {
     pub name: String,
     children: Vec<Child>,
     pub pid: u32,
+    /// Where chassisd writes its pass trace as it stops, when asked for one.
+    trace: Option<PathBuf>,
 }
 
-impl Drop for Service {
-    fn drop(&mut self) {
-        for child in self.children.iter_mut().rev() {
+/// The stamps chassisd took inside one pass (its pass trace, `CHASSIS_PASS_TRACE`), ns; 0 where
+/// the pass did not do the thing.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PassStamps {
+    pub woke: u64,
+    pub requests_read: u64,
+    pub write_started: u64,
+    pub written: u64,
+    pub state_handed: u64,
+    pub state_sent: u64,
+    pub state_readers_woken: u64,
+}
+
+impl Service {
+    /// Stops the service and returns the passes of its trace (none when it kept no trace).
+    pub fn stop(mut self) -> anyhow::Result<Vec<PassStamps>> {
+        self.stop_children();
+        let Some(path) = &self.trace else {
+            return Ok(Vec::new());
+        };
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading chassisd's pass trace {}", path.display()))?;
+        let mut lines = text.lines();
+        let header = lines.next().unwrap_or_default();
+        if header
+            != "woke requests_read write_started written state_handed state_sent \
+                state_readers_woken"
+        {
+            bail!("{}: unknown columns '{header}'", path.display());
+        }
+        lines
+            .map(|line| {
+                let v: Vec<u64> = line
+                    .split_whitespace()
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()
+                    .with_context(|| format!("{}: '{line}'", path.display()))?;
+                let [
+                    woke,
+                    requests_read,
+                    write_started,
+                    written,
+                    state_handed,
+                    state_sent,
+                    state_readers_woken,
+                ] = v[..]
+                else {
+                    bail!("{}: '{line}' has not 7 stamps", path.display());
+                };
+                Ok(PassStamps {
+                    woke,
+                    requests_read,
+                    write_started,
+                    written,
+                    state_handed,
+                    state_sent,
+                    state_readers_woken,
+                })
+            })
+            .collect()
+    }
+
+    fn stop_children(&mut self) {
+        for mut child in self.children.drain(..).rev() {
             if let Ok(pid) = i32::try_from(child.id()) {
                 let _ = nix::sys::signal::kill(
                     nix::unistd::Pid::from_raw(pid),
@@ -72,6 +135,12 @@ impl Drop for Service {
             }
             let _ = child.wait();
         }
+    }
+}
+
+impl Drop for Service {
+    fn drop(&mut self) {
+        self.stop_children();
     }
 }
 
@@ -132,22 +201,27 @@ pub fn start(
         mode,
         service_cpu,
         ServiceConfig::Bench,
+        false,
         prefix,
         dir,
     )
 }
 
-/// [`start`] with chassisd configured as `config` says.
+/// [`start`] with chassisd configured as `config` says, keeping its pass trace with `trace`
+/// ([`Service::stop`] returns it).
+#[allow(clippy::too_many_arguments)]
 pub fn start_configured(
     robot: RobotKind,
     bus: BusKind,
     mode: LoopMode,
     service_cpu: Option<usize>,
     config: ServiceConfig,
+    trace: bool,
     prefix: &str,
     dir: &Path,
 ) -> anyhow::Result<(Service, Robot)> {
     let name = format!("bn{}", unique());
+    let trace = trace.then(|| dir.join(format!("{name}-passes.txt")));
     let chassisd = sibling("chassisd")?;
     let config = write_config(dir, &name, config)?;
     let mut children = Vec::new();
@@ -230,7 +304,11 @@ pub fn start_configured(
         args.push("--spin-us".into());
         args.push(crate::baseline::HYBRID_SPIN.as_micros().to_string());
     }
-    let service = Command::new(&chassisd)
+    let mut service = Command::new(&chassisd);
+    if let Some(path) = &trace {
+        service.env(PASS_TRACE_ENV, path);
+    }
+    let service = service
         .args(&args)
         .env(IPC_PREFIX_ENV, prefix)
         .env("RUST_LOG", "warn")
@@ -244,6 +322,7 @@ pub fn start_configured(
         name: name.clone(),
         children,
         pid,
+        trace,
     };
     let deadline = now_ns() + 15_000_000_000;
     let mut robot_conn = loop {
@@ -431,8 +510,8 @@ pub struct CommandFigures {
     /// The service's own part: its loop woke for the request (the mux decision's stamp) → the
     /// frame's write returned.
     pub in_service: Latencies,
-    /// The part before it, of the same samples: request created → the loop woke for it.
-    pub wake_up: Latencies,
+    /// Each sample's (request created, frame written) stamps, ns.
+    pub samples: Vec<(u64, u64)>,
     /// Requests that produced no frame within the wait.
     pub missed: u64,
 }
@@ -515,7 +594,7 @@ pub fn command_path_via(
 
     let mut latencies = Latencies::new();
     let mut in_service = Latencies::new();
-    let mut wake_up = Latencies::new();
+    let mut samples = Vec::new();
     let mut missed = 0;
     // Between two samples further apart than the source's timeout, the current request is
     // repeated as a controller would: the mux output stays, no frame is sent for it.
@@ -559,9 +638,9 @@ pub fn command_path_via(
         )? {
             Some(written) => {
                 latencies.record_between(stamp, written);
+                samples.push((stamp, written));
                 if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
                     in_service.record_between(decided, written);
-                    wake_up.record_between(stamp, decided);
                 }
             }
             None => missed += 1,
@@ -571,7 +650,7 @@ pub fn command_path_via(
     Ok(CommandFigures {
         latencies,
         in_service,
-        wake_up,
+        samples,
         missed,
     })
 }
@@ -593,8 +672,8 @@ pub struct StateRecorder {
     pub latencies: Latencies,
     /// The service's own part: the frame read → the sample handed to iceoryx2.
     pub in_service: Latencies,
-    /// The part after it, of the same samples: handed to iceoryx2 → this reader has it.
-    pub delivery: Latencies,
+    /// Each recorded sample's (frame read, handed to iceoryx2, received) stamps, ns.
+    pub samples: Vec<(u64, u64, u64)>,
     /// Samples published that this reader never received (gaps in `seq`).
     pub dropped: u64,
     /// Samples received whose stamp was not newer (tick refreshes): not recorded.
@@ -632,7 +711,8 @@ impl StateRecorder {
         self.latencies.record_between(state.stamp_ns, received);
         self.in_service
             .record_between(state.stamp_ns, state.published_ns);
-        self.delivery.record_between(state.published_ns, received);
+        self.samples
+            .push((state.stamp_ns, state.published_ns, received));
     }
 }
 

@@ -853,18 +853,19 @@ impl Report {
         let mut out = String::from(
             "## Where each microsecond goes\n\n\
              Each command and state row of the table split at the stamps the code takes, over \
-             the same samples: *request created* (the client's `VelocityRequest::stamp_ns`) → \
-             *loop woke* (the service loop's stamp when it woke for it, the mux decision's \
-             `stamp_ns`) → *frame written* (the frame tap's TX stamp, the write's return); \
-             *frame read* (`ChassisState::stamp_ns`, the read's return) → *sample handed to \
-             iceoryx2* (`ChassisState::published_ns`) → *reader has it* (the client's stamp once \
-             its wait returned). Reading the request, the mux, the encoding and the write are \
-             not told apart inside *loop woke → frame written*, nor decoding from the rest of \
-             the pass inside *frame read → handed to iceoryx2*: chassisd takes no stamp between \
-             them. Reproduce: the command at the top of this document (`--skip \
-             baselines,fanout,cost,throughput,zenoh` keeps only the paths).\n\n\
-             | path | run | loop | placement | part | p50 µs | p99 µs | share of the p50s |\n\
-             | --- | --- | --- | --- | --- | ---: | ---: | ---: |\n",
+             the same samples (the count column: the samples whose pass took every stamp; a \
+             frame that was not its pass's first write is left out). The client stamps the \
+             request it creates and the sample it receives; chassisd, run with \
+             `CHASSIS_PASS_TRACE=FILE` (the bench sets it), keeps the stamps it takes inside each \
+             pass and writes them as it stops: the loop woke (the mux decision's `stamp_ns`), \
+             the read of the sources that took the request returned, the pass's first write to \
+             the bus began and returned (the frame tap's TX stamp); the frame read \
+             (`ChassisState::stamp_ns`), the sample handed to iceoryx2 (`published_ns`), its \
+             send returned, the state readers' notification returned. Reproduce: the command \
+             at the top of this document; `--skip fanout,cost,throughput,zenoh` keeps the \
+             paths and their baselines.\n\n\
+             | path | run | loop | placement | part | samples | p50 µs | p99 µs | share of the \
+             p50s |\n| --- | --- | --- | --- | --- | ---: | ---: | ---: | ---: |\n",
         );
         for p in &self.parts {
             let total: f64 = p.parts.iter().map(|(_, s)| s.p50_us).sum();
@@ -875,11 +876,12 @@ impl Report {
                     String::new()
                 };
                 out.push_str(&format!(
-                    "| {} | {} | {} | {} | {part} | {:.1} | {} | {share} |\n",
+                    "| {} | {} | {} | {} | {part} | {} | {:.1} | {} | {share} |\n",
                     p.path,
                     p.what,
                     p.mode,
                     p.placement,
+                    s.count,
                     s.p50_us,
                     percentile(s.p99_us, s.count, MIN_FOR_P99)
                 ));
@@ -991,8 +993,11 @@ mod tests {
             ..Report::default()
         };
         let md = report.parts_markdown();
-        assert!(md.contains("| woke | 30.0 | 30.0 | 75 % |"), "{md}");
-        assert!(md.contains("| written | 10.0 | 10.0 | 25 % |"), "{md}");
+        assert!(md.contains("| woke | 200 | 30.0 | 30.0 | 75 % |"), "{md}");
+        assert!(
+            md.contains("| written | 200 | 10.0 | 10.0 | 25 % |"),
+            "{md}"
+        );
     }
 
     #[test]
