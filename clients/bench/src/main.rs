@@ -70,7 +70,7 @@ enum Role {
 
 #[derive(Debug, Args)]
 struct RunArgs {
-    /// A short run (under 30 s): fewer samples, the TITAN on the simulated bus only.
+    /// A short run: fewer samples, the TITAN on the simulated bus only.
     #[arg(long)]
     quick: bool,
     /// The CI's check of the benchmark itself: a quick run without the throughput replay that
