@@ -1,8 +1,8 @@
 //! Where each microsecond goes: the command and state samples of a run split at the stamps
 //! chassisd took inside the pass that served each (its pass trace, `CHASSIS_PASS_TRACE`). A
 //! sample counts in every part or in none: one whose pass is not in the trace, or whose pass
-//! did not take a stamp in between (the frame was not the pass's first write), is left out, and
-//! the parts say how many samples they hold.
+//! did not take a stamp in between (a frame that was not the pass's first write), is left out,
+//! and the parts say how many samples they hold.
 
 use std::collections::HashMap;
 
@@ -63,31 +63,30 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps]) -> Split {
     )
 }
 
-/// Frame read → the sample handed to iceoryx2 → its send returned → the state readers woken →
-/// the reader has it, for each `(frame read, handed, received)` sample that was its pass's first
-/// state.
+/// Frame read → the sample handed to iceoryx2 → the state readers woken at the end of its pass →
+/// the reader has it, for each `(frame read, handed, received)` sample handed within a pass of
+/// the trace (from the pass's first state handed to its readers woken).
 pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
-    let by_handed: HashMap<u64, &PassStamps> = passes
+    let mut with_state: Vec<&PassStamps> = passes
         .iter()
-        .filter(|p| p.state_handed != 0)
-        .map(|p| (p.state_handed, p))
+        .filter(|p| p.state_handed != 0 && p.state_readers_woken != 0)
         .collect();
+    with_state.sort_by_key(|p| p.state_handed);
+    // The last pass that handed a state at or before the sample: the sample's own when it was
+    // handed before that pass woke the readers (else its stamps are out of order: left out).
+    let pass_of = |handed: u64| {
+        let after = with_state.partition_point(|p| p.state_handed <= handed);
+        with_state.get(after.checked_sub(1)?).copied()
+    };
     split(
         &[
             "frame read → handed to iceoryx2 (decode, state)",
-            "handed → sent",
-            "sent → readers woken (the rest of the pass)",
+            "handed → readers woken (the rest of the pass)",
             "readers woken → reader has it",
         ],
         samples.iter().filter_map(|&(read, handed, received)| {
-            let p = by_handed.get(&handed)?;
-            Some(vec![
-                read,
-                handed,
-                p.state_sent,
-                p.state_readers_woken,
-                received,
-            ])
+            let p = pass_of(handed)?;
+            Some(vec![read, handed, p.state_readers_woken, received])
         }),
     )
 }
@@ -115,7 +114,7 @@ mod tests {
     }
 
     #[test]
-    fn a_state_sample_whose_pass_took_no_stamp_in_between_is_left_out_of_every_part() {
+    fn a_state_sample_counts_within_its_pass_and_one_outside_every_pass_is_left_out() {
         let passes = [
             PassStamps {
                 state_handed: 110,
@@ -124,11 +123,17 @@ mod tests {
                 ..PassStamps::default()
             },
             PassStamps {
-                state_handed: 210,
+                state_handed: 300,
+                state_readers_woken: 400,
                 ..PassStamps::default()
             },
         ];
-        let split = state(&[(100, 110, 190), (200, 210, 290)], &passes);
-        assert!(split.iter().all(|(_, s)| s.count == 1), "{split:?}");
+        // The pass's second sample (handed at 130) counts; one handed at 200 belongs to no pass.
+        let split = state(
+            &[(100, 130, 190), (180, 200, 290), (250, 300, 450)],
+            &passes,
+        );
+        assert!(split.iter().all(|(_, s)| s.count == 2), "{split:?}");
+        assert_eq!(split[1].1.max_us, 0.1, "{split:?}");
     }
 }
