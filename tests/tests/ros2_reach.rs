@@ -188,6 +188,7 @@ fn a_dds_peer_on_the_robots_network_drives_only_when_the_discovery_range_allows_
     );
     pause(Duration::from_secs(2));
     let (matched, won, peak) = peer_drives(&env, &link, &mut robot, &domain, 5.0);
+    let by_default = (matched, won, peak);
     assert_eq!(
         (matched, won, peak),
         (0, false, 0.0),
@@ -227,4 +228,18 @@ fn a_dds_peer_on_the_robots_network_drives_only_when_the_discovery_range_allows_
         "the peer could not drive with ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET: matched {matched}, won {won}, peak {peak}\n{}",
         env.logs()
     );
+    record_figure(&Figure {
+        rank: 750,
+        fault: "a DDS peer on the robot's network publishes cmd_vel".into(),
+        injection: "a Cyclone DDS participant in a second namespace, over a veth pair with multicast, publishes 0.3 m/s at 20 Hz; chassis-ros2 with ROS 2's discovery switches unset, then with ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET".into(),
+        behaviour: "by default the bridge's participant stays on this computer: the peer matched no reader and the mux never took `ros2`; with SUBNET it drove, and the bridge said so at start".into(),
+        figure: format!(
+            "default: {} readers matched, ros2 won {}, output {} m/s; SUBNET: {matched} matched, output {peak} m/s",
+            by_default.0, by_default.1, by_default.2
+        ),
+        value: f64::from(by_default.2),
+        pass: true,
+        suite: "ros2_reach".into(),
+        test: "a_dds_peer_on_the_robots_network_drives_only_when_the_discovery_range_allows_it".into(),
+    });
 }

@@ -991,6 +991,17 @@ fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_st
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("no motion after the zero\n{}", env.logs()));
     remote.stop().unwrap();
+    record_figure(&Figure {
+        rank: 730,
+        fault: "the e-stop released through the Zenoh mirror while the operator asks for motion".into(),
+        injection: "the operator drives `remote` at 0.4 m/s across two namespaces, engages the e-stop through the mirror's `control`, keeps asking, and releases it the same way".into(),
+        behaviour: "nothing moved after the release; the robot's mux held zero awaiting the remote source's zero (AWAITING_ZERO), then drove on the operator's next requests".into(),
+        figure: format!("fastest {peak:.3} m/s in the 1.5 s after the release"),
+        value: f64::from(peak),
+        pass: true,
+        suite: "zenoh".into(),
+        test: "the_operator_reads_the_robots_description_and_a_release_through_the_mirror_starts_no_motion".into(),
+    });
 }
 
 /// Cuts the link with nftables (every packet dropped both ways on the operator's end) or
@@ -1106,4 +1117,30 @@ fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("no motion from new requests\n{}", env.logs()));
     remote.stop().unwrap();
+    let latest_ms = too_old
+        .iter()
+        .filter_map(|l| {
+            l.split("made ")
+                .nth(1)?
+                .split(" ms")
+                .next()?
+                .parse::<u64>()
+                .ok()
+        })
+        .max()
+        .unwrap_or(0);
+    record_figure(&Figure {
+        rank: 740,
+        fault: "remote requests buffered through a Zenoh link outage".into(),
+        injection: "the operator drives `remote` at 0.4 m/s; nftables drops every packet of the link for 1.2 s; the operator asks for 0.5 s of it, then stops asking".into(),
+        behaviour: "the requests held by the connection arrived when the link returned and were dropped and counted as too old (their stamps against the operator's clock, measured on the session); the mux obeyed none; new requests drove".into(),
+        figure: format!(
+            "{asked} asked during the outage, {} dropped as too old, the latest {latest_ms} ms after it was made (bound 250 ms); mux output after the link returned {peak_output} m/s",
+            too_old.len()
+        ),
+        value: f64::from(peak_output),
+        pass: true,
+        suite: "zenoh".into(),
+        test: "requests_buffered_through_an_outage_never_drive_when_the_link_comes_back".into(),
+    });
 }
