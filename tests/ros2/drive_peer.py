@@ -11,16 +11,15 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(
-    0, str(Path(__file__).resolve().parents[2] / "clients" / "ros2" / "tests")
-)
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "clients" / "ros2" / "tests"))
 
-import ros2_types as m
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
+
+import ros2_types as m
 
 
 def main() -> None:
