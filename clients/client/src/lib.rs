@@ -55,7 +55,7 @@ pub mod foxglove;
 mod rate;
 pub mod watch;
 
-pub use clock::WallClock;
+pub use clock::{PEER_CLOCK_SAMPLES, PeerClock, WallClock};
 pub use rate::Decimator;
 
 pub use chassis_interfaces::*;

@@ -66,6 +66,11 @@ struct Cli {
     /// With --record: stop after this many seconds.
     #[arg(long, requires = "record")]
     duration: Option<f64>,
+    /// Oldest a `TwistStamped` may be when it arrives, ms (its stamp against this computer's
+    /// clock: the sender's clock must be synchronised, as ROS 2 assumes); older ones are
+    /// dropped and counted.
+    #[arg(long, default_value_t = 250)]
+    max_age_ms: u64,
     /// (internal) Be the far end of chassis-bench's raw DDS hop; write its latencies here.
     #[arg(long, hide = true)]
     bench_echo: Option<std::path::PathBuf>,
@@ -112,6 +117,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Mapping::Cyclone) => ServiceMapping::Cyclone,
         None => bridge::mapping_for_rmw(std::env::var("RMW_IMPLEMENTATION").ok().as_deref()),
     };
+    let reach = chassis_ros2::discovery::Reach::from_env()?;
+    // Loud on purpose: who can drive the robot through this bridge.
+    if reach.range == chassis_ros2::discovery::Range::Subnet {
+        tracing::warn!("{}", reach.describe());
+    } else {
+        tracing::info!("{}", reach.describe());
+    }
+    eprintln!("chassis-ros2: {}", reach.describe());
     let options = Options {
         name,
         namespace: namespace(&cli.namespace),
@@ -121,6 +134,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         frame_prefix: cli.frame_prefix,
         service_mapping,
         monotonic_stamps: cli.monotonic_stamps,
+        reach,
     };
     // The node's topics follow the robot chassisd describes: wait for it first.
     let Some(described) = bridge::describe(&options.name) else {
@@ -150,18 +164,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         })
         .context("starting the spinner thread")?;
 
-    let name = options.name.clone();
-    let commands = std::thread::Builder::new()
-        .name("ros2-commands".into())
-        .spawn(move || bridge::commands(&name, commands))
-        .context("starting the commands thread")?;
-
     let frames = Frames::new(&options.frame_prefix);
     let clock = if options.monotonic_stamps {
         RosClock::with_offset(0)
     } else {
         RosClock::measure()
     };
+    let name = options.name.clone();
+    let max_age = std::time::Duration::from_millis(cli.max_age_ms);
+    let commands = std::thread::Builder::new()
+        .name("ros2-commands".into())
+        .spawn(move || bridge::commands(&name, commands, clock, max_age))
+        .context("starting the commands thread")?;
     let result = bridge::state_loop(&options.name, described, frames, clock, &outputs);
     chassis_client::request_termination();
     match commands.join() {
