@@ -255,7 +255,7 @@ pub fn types() -> Vec<TypeLayout> {
         CommandEcho::layout(),
         LinkStats::layout(),
         VelocityRequest::layout(),
-        Twist::layout(),
+        BodyVelocity::layout(),
         SourceStatus::layout(),
         LockStatus::layout(),
         MuxStatus::layout(),
@@ -420,11 +420,11 @@ mod tests {
 
     #[test]
     fn a_missing_field_is_caught() {
-        let mut layout = crate::Twist::layout();
+        let mut layout = crate::BodyVelocity::layout();
         assert_eq!(layout.gap(), None);
         layout.fields.remove(2);
         assert!(layout.gap().is_some_and(|g| g.contains("steer_rad")));
-        let mut layout = crate::Twist::layout();
+        let mut layout = crate::BodyVelocity::layout();
         layout.fields.pop();
         assert!(layout.gap().is_some_and(|g| g.contains("20 bytes long")));
     }

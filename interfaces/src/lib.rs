@@ -37,7 +37,9 @@ pub use description::{
     RobotDescription, SensorDescription, SensorKind, SourceDescription,
 };
 pub use frame::{BusFrame, FrameDirection, FrameKind};
-pub use mux::{ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Twist, ZeroReason};
+pub use mux::{
+    BodyVelocity, ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, ZeroReason,
+};
 pub use names::valid_robot_name;
 pub use request::{RequestFlags, VelocityRequest};
 pub use safety::{EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus};

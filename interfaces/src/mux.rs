@@ -10,7 +10,9 @@ use crate::layout::describe_layout;
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 use crate::{MAX_LOCKS, MAX_SOURCES, NAME_LEN};
 
-/// A motion command in SI units (the same fields as a `VelocityRequest`).
+/// The velocity asked of the robot's body, in SI units (the same fields as a
+/// `VelocityRequest`): what the mux was asked and what it commands. Not a ROS `Twist`: it
+/// carries a steering angle and flags too.
 #[repr(C)]
 #[derive(
     Debug,
@@ -25,8 +27,8 @@ use crate::{MAX_LOCKS, MAX_SOURCES, NAME_LEN};
     ZeroCopySend,
     Serialize,
 )]
-#[type_name("chassis::Twist.v1")]
-pub struct Twist {
+#[type_name("chassis::BodyVelocity.v1")]
+pub struct BodyVelocity {
     pub linear_x_mps: f32,
     pub linear_y_mps: f32,
     pub angular_z_radps: f32,
@@ -36,7 +38,7 @@ pub struct Twist {
 }
 
 describe_layout!(
-    Twist,
+    BodyVelocity,
     twist_description_covers_every_byte {
         linear_x_mps,
         linear_y_mps,
@@ -46,8 +48,8 @@ describe_layout!(
     }
 );
 
-impl Twist {
-    pub const ZERO: Twist = Twist {
+impl BodyVelocity {
+    pub const ZERO: BodyVelocity = BodyVelocity {
         linear_x_mps: 0.0,
         linear_y_mps: 0.0,
         angular_z_radps: 0.0,
@@ -314,9 +316,9 @@ pub struct MuxStatus {
     pub stamp_ns: u64,
     pub seq: u64,
     /// The winner's request as received (zero when nothing is active).
-    pub requested: Twist,
+    pub requested: BodyVelocity,
     /// What the mux passed to the driver after limits and smoothing.
-    pub output: Twist,
+    pub output: BodyVelocity,
     /// [`ClampFlags`] the mux applied.
     pub clamp_flags: u32,
     /// Age of the winner's request, ms (`u32::MAX` when nothing is active).
@@ -400,8 +402,11 @@ mod tests {
 
     #[test]
     fn mux_status_layout_is_pinned() {
-        assert_eq!((size_of::<Twist>(), align_of::<Twist>()), (20, 4));
-        assert_eq!(offset_of!(Twist, flags), 16);
+        assert_eq!(
+            (size_of::<BodyVelocity>(), align_of::<BodyVelocity>()),
+            (20, 4)
+        );
+        assert_eq!(offset_of!(BodyVelocity, flags), 16);
         assert_eq!(
             (size_of::<SourceStatus>(), align_of::<SourceStatus>()),
             (40, 8)
@@ -446,7 +451,7 @@ mod tests {
 
     #[test]
     fn a_steer_command_with_zero_speed_but_an_angle_is_not_zero() {
-        let mut t = Twist::ZERO;
+        let mut t = BodyVelocity::ZERO;
         assert!(t.is_zero());
         t.steer_rad = 0.2;
         assert!(t.is_zero(), "steer ignored without the STEER flag");

@@ -7,7 +7,7 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::layout::describe_layout;
 
-/// Bits of [`VelocityRequest::flags`] (and of `Twist::flags`).
+/// Bits of [`VelocityRequest::flags`] (and of `BodyVelocity::flags`).
 #[derive(Debug, Clone, Copy)]
 pub struct RequestFlags;
 impl RequestFlags {

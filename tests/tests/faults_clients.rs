@@ -481,7 +481,7 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
         .map(|f| i16::from_be_bytes([f.payload()[0], f.payload()[1]]).unsigned_abs())
         .max()
         .unwrap_or(0);
-    let stopped = after.output == Twist::ZERO && !teleop_after.has(SourceFlags::FRESH);
+    let stopped = after.output == BodyVelocity::ZERO && !teleop_after.has(SourceFlags::FRESH);
     eprintln!(
         "sent {sent} bad requests in {flooded:?}: {rejected} rejected ({per_source} by \
          teleop), {} log lines, last valid seq {valid_seq} → {}, wire max {wire_max} mm/s",

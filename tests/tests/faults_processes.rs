@@ -640,7 +640,7 @@ fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault:
         let mut zero_at = 0;
         let zero = pump.until(&mut robot, Duration::from_secs(3), |m, _| {
             let stopped =
-                m.output == Twist::ZERO && !source_status(m, source).has(SourceFlags::FRESH);
+                m.output == BodyVelocity::ZERO && !source_status(m, source).has(SourceFlags::FRESH);
             if stopped {
                 zero_at = m.stamp_ns;
             }

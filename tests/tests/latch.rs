@@ -80,7 +80,7 @@ fn assert_held_until_released(env: &Env, n: &str, robot: &mut Robot, teleop: &mu
     let peak = drive(robot, teleop, Duration::from_millis(800));
     assert!(peak < 0.01, "moved at {peak} m/s under a restored e-stop");
     let m = mux(robot);
-    assert_eq!(m.output, Twist::ZERO);
+    assert_eq!(m.output, BodyVelocity::ZERO);
     assert_eq!(m.zero_reason, ZeroReason::LOCKED);
     assert!(control(env, n, "estop-release").contains("estop released"));
     // A release never starts motion: teleop lets go, then drives again.
@@ -131,7 +131,7 @@ fn assert_release_waits_for_teleop(env: &Env, n: &str, robot: &mut Robot) -> f32
         "moved at {peak} m/s after the release by itself"
     );
     let m = mux(robot);
-    assert_eq!(m.output, Twist::ZERO);
+    assert_eq!(m.output, BodyVelocity::ZERO);
     assert_eq!(m.zero_reason, ZeroReason::AWAITING_ZERO);
     assert_eq!(m.awaiting().map(|s| s.name()), Some("teleop"));
     let status = env.chassis(&["status", "--name", n]);
@@ -158,7 +158,7 @@ fn an_estop_release_never_restarts_motion_by_itself() {
     });
     assert!(moving.is_some(), "chassis pub never drove\n{}", env.logs());
     assert!(control(&env, &n, "estop").contains("estop engaged"));
-    assert_eq!(mux(&mut robot).output, Twist::ZERO);
+    assert_eq!(mux(&mut robot).output, BodyVelocity::ZERO);
     let stopped = wait_for(Duration::from_secs(5), || {
         peak_speed(&mut robot, Duration::from_millis(100)) < 0.001
     });

@@ -263,7 +263,7 @@ fn sigkill_of_the_safety_monitor_stops_the_robot_within_the_source_timeout() {
         &mut robot,
         &mut [(&mut teleop, go)],
         Duration::from_secs(2),
-        |m, _| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == Twist::ZERO,
+        |m, _| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == BodyVelocity::ZERO,
     )
     .unwrap_or_else(|| panic!("no safe stop after the kill\n{}", env.logs()));
     eprintln!("safety monitor SIGKILLed → mux output zero after {stopped:?} (timeout 200 ms)");
@@ -312,7 +312,11 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
     while Instant::now() < end {
         teleop.send(go).unwrap();
         let m = mux(&mut robot);
-        assert_eq!(m.output, Twist::ZERO, "commanded motion under the latch");
+        assert_eq!(
+            m.output,
+            BodyVelocity::ZERO,
+            "commanded motion under the latch"
+        );
     }
     let s = state(&mut robot);
     assert_eq!(
@@ -366,7 +370,7 @@ fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
         &mut robot,
         &mut [(&mut teleop, go)],
         Duration::from_secs(2),
-        |m, _| m.locks()[estop].held == 1 && m.output == Twist::ZERO,
+        |m, _| m.locks()[estop].held == 1 && m.output == BodyVelocity::ZERO,
     );
     assert!(latched.is_some(), "no latch\n{}", env.logs());
     eprintln!(
@@ -413,7 +417,7 @@ fn a_low_battery_stops_the_robot_and_a_charged_one_lets_it_drive_again() {
         &mut robot,
         &mut [(&mut teleop, go)],
         Duration::from_secs(5),
-        |m, _| m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
+        |m, _| m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
     )
     .unwrap_or_else(|| panic!("no stop for a low battery\n{}", env.logs()));
     eprintln!("battery 12 % → safety stop after {stopped:?} (1 s trigger time)");
@@ -453,7 +457,7 @@ fn a_silent_chassis_stops_the_robot_until_it_talks_again() {
         &mut robot,
         &mut [(&mut teleop, go)],
         Duration::from_secs(2),
-        |m, _| m.output == Twist::ZERO,
+        |m, _| m.output == BodyVelocity::ZERO,
     )
     .unwrap_or_else(|| panic!("no stop while the chassis is silent\n{}", env.logs()));
     eprintln!("chassis silent → safety stop after {stopped:?}");
@@ -518,7 +522,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
         &mut robot,
         &mut [(&mut teleop, go)],
         Duration::from_secs(2),
-        |m, _| m.output == Twist::ZERO,
+        |m, _| m.output == BodyVelocity::ZERO,
     );
     assert!(
         stopped.is_some_and(|t| t < Duration::from_millis(200)),
@@ -575,7 +579,7 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
         Duration::from_secs(5),
         |m, s| {
             fastest = fastest.max(s.motion.linear_mps);
-            m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety")
+            m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety")
         },
     )
     .unwrap_or_else(|| panic!("no stop for a runaway at 1.0 m/s\n{}", env.logs()));
@@ -597,7 +601,7 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
         Duration::from_secs(1),
     );
     assert!(high > 0.6, "the runaway went on: {high}");
-    assert_eq!(mux(&mut robot).output, Twist::ZERO);
+    assert_eq!(mux(&mut robot).output, BodyVelocity::ZERO);
 
     run_ok(&env, &["sim", "--name", &n, "runaway", "--clear"]);
     let again = drive_until(
@@ -634,7 +638,7 @@ fn a_ranger_mini_with_a_low_battery_is_stopped_by_the_monitor() {
         &mut robot,
         &mut [(&mut teleop, go)],
         Duration::from_secs(5),
-        |m, _| m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
+        |m, _| m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
     )
     .unwrap_or_else(|| panic!("no stop for a low battery\n{}", env.logs()));
     eprintln!("RANGER MINI battery 8 % → safety stop after {stopped:?} (1 s trigger time)");
@@ -802,7 +806,7 @@ fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
         &mut robot,
         &mut [(&mut teleop, go)],
         Duration::from_secs(5),
-        |m, _| m.output == Twist::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
+        |m, _| m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
     );
     assert!(
         stopped.is_some(),

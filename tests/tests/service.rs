@@ -171,14 +171,14 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
         killed,
         Duration::from_secs(2),
         || teleop.send(request).unwrap(),
-        |m| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == Twist::ZERO,
+        |m| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == BodyVelocity::ZERO,
     )
     .unwrap_or_else(|| panic!("no safe stop\n{}", env.logs()));
     assert!(
         stopped <= timeout + DECISION_ALLOWANCE,
         "safe stop {stopped:?} after the kill (timeout {timeout:?})"
     );
-    assert_eq!(mux(&mut robot).output, Twist::ZERO);
+    assert_eq!(mux(&mut robot).output, BodyVelocity::ZERO);
     eprintln!("required source killed → zero command after {stopped:?}");
 }
 
@@ -259,7 +259,11 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
         safety.heartbeat().unwrap();
         // Safety's own stop wins first, then (after its next heartbeat) the lock holds.
         let m = mux(&mut robot);
-        assert_eq!(m.output, Twist::ZERO, "commanded motion under the e-stop");
+        assert_eq!(
+            m.output,
+            BodyVelocity::ZERO,
+            "commanded motion under the e-stop"
+        );
     }
     let s = state(&mut robot);
     assert!(
@@ -315,7 +319,7 @@ fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
         killed,
         Duration::from_secs(2),
         || {},
-        |m| m.output == Twist::ZERO,
+        |m| m.output == BodyVelocity::ZERO,
     )
     .unwrap_or_else(|| panic!("still commanding after the kill\n{}", env.logs()));
     eprintln!("teleop SIGKILLed → zero command after {zero:?} (timeout {timeout:?})");

@@ -955,7 +955,7 @@ pub fn cost_at(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chassis_client::Twist;
+    use chassis_client::BodyVelocity;
     use chassis_protocols::driver::DriverConfig;
     use chassis_protocols::pair::Pair;
     use chassis_protocols::{Direction, Timestamp, WireItem};
@@ -974,9 +974,9 @@ mod tests {
             let mut pair = Pair::new(driver, firmware, start);
             pair.run_for(Duration::from_secs(2));
             pair.record = true;
-            pair.set_command(Twist {
+            pair.set_command(BodyVelocity {
                 linear_x_mps: 0.3,
-                ..Twist::ZERO
+                ..BodyVelocity::ZERO
             });
             pair.run_for(Duration::from_millis(500));
             let mut decoder = MotionDecoder::new(kind);

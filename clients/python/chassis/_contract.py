@@ -228,6 +228,19 @@ class BmsState(Struct):
     ]
 
 
+class BodyVelocity(Struct):
+    """``chassis::BodyVelocity.v1``: 20 bytes, aligned to 4."""
+
+    _type_name = 'chassis::BodyVelocity.v1'
+    _fields_ = [
+        ('linear_x_mps', ctypes.c_float),
+        ('linear_y_mps', ctypes.c_float),
+        ('angular_z_radps', ctypes.c_float),
+        ('steer_rad', ctypes.c_float),
+        ('flags', ctypes.c_uint32),
+    ]
+
+
 class BusFrame(Struct):
     """``chassis::BusFrame.v1``: 104 bytes, aligned to 8."""
 
@@ -581,19 +594,6 @@ class MotionLimits(Struct):
     ]
 
 
-class Twist(Struct):
-    """``chassis::Twist.v1``: 20 bytes, aligned to 4."""
-
-    _type_name = 'chassis::Twist.v1'
-    _fields_ = [
-        ('linear_x_mps', ctypes.c_float),
-        ('linear_y_mps', ctypes.c_float),
-        ('angular_z_radps', ctypes.c_float),
-        ('steer_rad', ctypes.c_float),
-        ('flags', ctypes.c_uint32),
-    ]
-
-
 class SourceStatus(Struct):
     """``chassis::SourceStatus.v1``: 40 bytes, aligned to 8."""
 
@@ -617,8 +617,8 @@ class MuxStatus(Struct):
     _fields_ = [
         ('stamp_ns', ctypes.c_uint64),
         ('seq', ctypes.c_uint64),
-        ('requested', Twist),
-        ('output', Twist),
+        ('requested', BodyVelocity),
+        ('output', BodyVelocity),
         ('clamp_flags', ctypes.c_uint32),
         ('active_age_ms', ctypes.c_uint32),
         ('rejected_requests', ctypes.c_uint64),
@@ -1150,6 +1150,7 @@ class ZeroReason(Constants):
 TYPES: dict[str, type[Struct]] = {
     'BatteryLevels': BatteryLevels,
     'BmsState': BmsState,
+    'BodyVelocity': BodyVelocity,
     'BusFrame': BusFrame,
     'ChassisState': ChassisState,
     'CommandEcho': CommandEcho,
@@ -1179,7 +1180,6 @@ TYPES: dict[str, type[Struct]] = {
     'SourceDescription': SourceDescription,
     'SourceStatus': SourceStatus,
     'SystemState': SystemState,
-    'Twist': Twist,
     'VelocityRequest': VelocityRequest,
 }
 

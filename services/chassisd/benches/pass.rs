@@ -10,7 +10,7 @@ use std::time::Duration;
 use chassis_interfaces::{ControlRequest, VelocityRequest};
 use chassis_protocols::{DriverConfig, Profile, RobotKind, Timestamp, WireItem};
 use chassisd::engine::{
-    BusItem, Device, Engine, EngineConfig, HeldLock, PassIo, Publication, Readers, Ticket, Wake,
+    BusItem, Device, Engine, EngineConfig, HeldLock, PassIo, Readers, Ticket, ToPublish, Wake,
     WriteError, Written,
 };
 use chassisd::mux::{Mux, MuxConfig};
@@ -102,7 +102,7 @@ impl PassIo for BenchIo {
         Ok(())
     }
 
-    fn publish(&mut self, publication: Publication) -> Result<(), Infallible> {
+    fn publish(&mut self, publication: ToPublish) -> Result<(), Infallible> {
         black_box(publication);
         Ok(())
     }

@@ -31,8 +31,8 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, LockStatus, MAX_LOCKS, MAX_SOURCES, MuxStatus, RequestFlags, SourceFlags,
-    SourceStatus, Twist, VelocityRequest, ZeroReason, valid_robot_name,
+    BodyVelocity, ClampFlags, LockStatus, MAX_LOCKS, MAX_SOURCES, MuxStatus, RequestFlags,
+    SourceFlags, SourceStatus, VelocityRequest, ZeroReason, valid_robot_name,
 };
 use chassis_protocols::Timestamp;
 use serde::{Deserialize, Serialize};
@@ -289,7 +289,7 @@ struct Lock {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Decision {
     /// What to command.
-    pub output: Twist,
+    pub output: BodyVelocity,
     /// The status changed in a way worth publishing at once (winner, reason, output, locks).
     pub changed: bool,
 }
@@ -300,7 +300,7 @@ pub struct Mux {
     sources: Vec<Source>,
     locks: Vec<Lock>,
     limits: LimitsConfig,
-    output: Twist,
+    output: BodyVelocity,
     last_evaluation: Option<Timestamp>,
     status: MuxStatus,
     rejected: u64,
@@ -365,7 +365,7 @@ impl Mux {
             sources,
             locks,
             limits: config.limits.clone(),
-            output: Twist::ZERO,
+            output: BodyVelocity::ZERO,
             last_evaluation: None,
             status,
             rejected: 0,
@@ -555,16 +555,16 @@ impl Mux {
 
         let awaiting = winner.filter(|&w| self.sources[w].awaiting_zero);
         let (requested, reason, winner) = if required_stale {
-            (Twist::ZERO, ZeroReason::REQUIRED_SOURCE_STALE, None)
+            (BodyVelocity::ZERO, ZeroReason::REQUIRED_SOURCE_STALE, None)
         } else if awaiting.is_some() {
-            (Twist::ZERO, ZeroReason::AWAITING_ZERO, None)
+            (BodyVelocity::ZERO, ZeroReason::AWAITING_ZERO, None)
         } else if let Some(w) = winner {
             let request = self.sources[w].latest.map(|(_, r)| r).unwrap_or_default();
             (twist_of(&request), ZeroReason::NONE, Some(w))
         } else if any_fresh_request {
-            (Twist::ZERO, ZeroReason::LOCKED, None)
+            (BodyVelocity::ZERO, ZeroReason::LOCKED, None)
         } else {
-            (Twist::ZERO, ZeroReason::NO_ACTIVE_SOURCE, None)
+            (BodyVelocity::ZERO, ZeroReason::NO_ACTIVE_SOURCE, None)
         };
 
         let (limited, mut clamp_flags) = self.apply_speed_limits(requested);
@@ -617,7 +617,7 @@ impl Mux {
         Decision { output, changed }
     }
 
-    fn apply_speed_limits(&self, mut t: Twist) -> (Twist, u32) {
+    fn apply_speed_limits(&self, mut t: BodyVelocity) -> (BodyVelocity, u32) {
         let mut flags = 0;
         let mut clamp = |v: &mut f32, max: f64| {
             if max > 0.0 && f64::from(v.abs()) > max {
@@ -633,7 +633,12 @@ impl Mux {
 
     /// Clamps `t` to the envelopes of the fresh limiting sources at or above `priority`;
     /// returns the sources whose envelope changed it.
-    fn apply_envelopes(&self, now: Timestamp, priority: u8, mut t: Twist) -> (Twist, Vec<usize>) {
+    fn apply_envelopes(
+        &self,
+        now: Timestamp,
+        priority: u8,
+        mut t: BodyVelocity,
+    ) -> (BodyVelocity, Vec<usize>) {
         let mut by = Vec::new();
         for (i, s) in self.sources.iter().enumerate() {
             let Some((_, r)) = s.latest else { continue };
@@ -659,7 +664,7 @@ impl Mux {
         (t, by)
     }
 
-    fn smooth(&self, target: Twist, dt: f64) -> (Twist, u32) {
+    fn smooth(&self, target: BodyVelocity, dt: f64) -> (BodyVelocity, u32) {
         let mut flags = 0;
         let mut step = |from: f32, to: f32, rate: f64| -> f32 {
             if rate <= 0.0 {
@@ -674,7 +679,7 @@ impl Mux {
                 to
             }
         };
-        let out = Twist {
+        let out = BodyVelocity {
             linear_x_mps: step(
                 self.output.linear_x_mps,
                 target.linear_x_mps,
@@ -701,8 +706,8 @@ impl Mux {
         now: Timestamp,
         winner: Option<usize>,
         reason: u8,
-        requested: Twist,
-        output: Twist,
+        requested: BodyVelocity,
+        output: BodyVelocity,
         clamp_flags: u32,
     ) {
         let status = &mut self.status;
@@ -775,7 +780,7 @@ impl Mux {
     }
 
     /// The latest output.
-    pub fn output(&self) -> Twist {
+    pub fn output(&self) -> BodyVelocity {
         self.output
     }
 
@@ -799,8 +804,8 @@ impl Mux {
     }
 }
 
-fn twist_of(request: &VelocityRequest) -> Twist {
-    Twist {
+fn twist_of(request: &VelocityRequest) -> BodyVelocity {
+    BodyVelocity {
         linear_x_mps: request.linear_x_mps,
         linear_y_mps: request.linear_y_mps,
         angular_z_radps: request.angular_z_radps,
@@ -860,7 +865,7 @@ mod tests {
         let mut m = mux();
         m.on_request(ms(0), PLANNER, &request(ms(0), 0.5)).unwrap();
         let d = m.evaluate(ms(1));
-        assert_eq!(d.output, Twist::ZERO);
+        assert_eq!(d.output, BodyVelocity::ZERO);
         assert_eq!(m.status().zero_reason, ZeroReason::REQUIRED_SOURCE_STALE);
     }
 
@@ -900,7 +905,7 @@ mod tests {
         m.on_request(ms(0), TELEOP, &request(ms(0), 0.0)).unwrap();
         m.evaluate(ms(0));
         let d = m.evaluate(ms(301));
-        assert_eq!(d.output, Twist::ZERO);
+        assert_eq!(d.output, BodyVelocity::ZERO);
         assert_eq!(m.status().zero_reason, ZeroReason::NO_ACTIVE_SOURCE);
         assert_eq!(m.next_deadline(ms(301)), None);
     }
@@ -953,12 +958,12 @@ mod tests {
         // Created 400 ms ago: older than teleop's 300 ms timeout on arrival.
         m.on_request(ms(1000), TELEOP, &request(ms(600), 0.4))
             .unwrap();
-        assert_eq!(m.evaluate(ms(1000)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(1000)).output, BodyVelocity::ZERO);
         // Stamped an hour ahead: counts from its arrival.
         m.on_request(ms(2000), TELEOP, &request(ms(3_602_000), 0.4))
             .unwrap();
         assert_eq!(m.evaluate(ms(2100)).output.linear_x_mps, 0.4);
-        assert_eq!(m.evaluate(ms(2301)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(2301)).output, BodyVelocity::ZERO);
     }
 
     #[test]
@@ -1049,7 +1054,7 @@ mod tests {
         // Safety's own zero request wins first; then it sends heartbeats only.
         m.on_request(ms(10), SAFETY, &heartbeat(ms(10))).unwrap();
         m.on_request(ms(10), TELEOP, &request(ms(10), 0.4)).unwrap();
-        assert_eq!(m.evaluate(ms(10)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(10)).output, BodyVelocity::ZERO);
         assert_eq!(m.status().zero_reason, ZeroReason::LOCKED);
         assert_eq!(m.status().locks[0].held, 1);
         assert_eq!(m.status().locks[0].holder, SAFETY as u8);
@@ -1061,7 +1066,7 @@ mod tests {
         };
         m.on_request(ms(20), TELEOP, &sneaky).unwrap();
         m.on_request(ms(20), SAFETY, &heartbeat(ms(20))).unwrap();
-        assert_eq!(m.evaluate(ms(20)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(20)).output, BodyVelocity::ZERO);
         let release = VelocityRequest {
             lock_release: 1,
             ..heartbeat(ms(30))
@@ -1069,7 +1074,7 @@ mod tests {
         m.on_request(ms(30), SAFETY, &release).unwrap();
         m.on_request(ms(30), TELEOP, &request(ms(30), 0.4)).unwrap();
         // Teleop asked for motion when the lock went: a release never starts motion.
-        assert_eq!(m.evaluate(ms(30)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(30)).output, BodyVelocity::ZERO);
         assert_eq!(m.status().zero_reason, ZeroReason::AWAITING_ZERO);
         m.on_request(ms(40), TELEOP, &request(ms(40), 0.0)).unwrap();
         m.on_request(ms(50), TELEOP, &request(ms(50), 0.4)).unwrap();
@@ -1087,10 +1092,14 @@ mod tests {
         // Teleop dies: it never sends again. The planner is below the lock's priority.
         for t in (1000..=5000).step_by(500) {
             m.on_request(ms(t), PLANNER, &request(ms(t), 0.3)).unwrap();
-            assert_eq!(m.evaluate(ms(t)).output, Twist::ZERO, "at {t} ms");
+            assert_eq!(m.evaluate(ms(t)).output, BodyVelocity::ZERO, "at {t} ms");
         }
         assert_eq!(m.release_lock(ms(5001), "estop"), Ok(true));
-        assert_eq!(m.evaluate(ms(5001)).output, Twist::ZERO, "awaiting zero");
+        assert_eq!(
+            m.evaluate(ms(5001)).output,
+            BodyVelocity::ZERO,
+            "awaiting zero"
+        );
         m.on_request(ms(5020), PLANNER, &request(ms(5020), 0.0))
             .unwrap();
         m.on_request(ms(5040), PLANNER, &request(ms(5040), 0.3))
@@ -1112,14 +1121,14 @@ mod tests {
         m.on_request(ms(20), TELEOP, &request(ms(20), 0.3)).unwrap();
         m.on_request(ms(20), PLANNER, &request(ms(20), 0.2))
             .unwrap();
-        assert_eq!(m.evaluate(ms(20)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(20)).output, BodyVelocity::ZERO);
         assert_eq!(m.release_lock(ms(30), "estop"), Ok(true));
         assert_eq!(m.awaiting_zero(), ["teleop", "planner"]);
         for t in (30..300).step_by(20) {
             m.on_request(ms(t), TELEOP, &request(ms(t), 0.3)).unwrap();
             m.on_request(ms(t), PLANNER, &request(ms(t), 0.2)).unwrap();
             let d = m.evaluate(ms(t));
-            assert_eq!(d.output, Twist::ZERO, "at {t} ms");
+            assert_eq!(d.output, BodyVelocity::ZERO, "at {t} ms");
             assert_eq!(m.status().zero_reason, ZeroReason::AWAITING_ZERO);
             assert_eq!(m.status().awaiting().map(|s| s.name()), Some("teleop"));
             assert_ne!(
@@ -1134,7 +1143,7 @@ mod tests {
             .unwrap();
         assert_eq!(
             m.evaluate(ms(300)).output,
-            Twist::ZERO,
+            BodyVelocity::ZERO,
             "teleop's zero wins"
         );
         m.on_request(ms(320), TELEOP, &request(ms(320), 0.3))
@@ -1146,7 +1155,7 @@ mod tests {
         let after_timeout = ms(320) + Duration::from_millis(400);
         m.on_request(after_timeout, PLANNER, &request(after_timeout, 0.2))
             .unwrap();
-        assert_eq!(m.evaluate(after_timeout).output, Twist::ZERO);
+        assert_eq!(m.evaluate(after_timeout).output, BodyVelocity::ZERO);
         assert_eq!(m.status().awaiting().map(|s| s.name()), Some("planner"));
     }
 
@@ -1158,9 +1167,9 @@ mod tests {
         assert_eq!(m.engage_lock(ms(0), "estop"), Ok(true));
         m.on_request(ms(10), TELEOP, &request(ms(10), 0.3)).unwrap();
         assert_eq!(m.release_lock(ms(20), "estop"), Ok(true));
-        assert_eq!(m.evaluate(ms(20)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(20)).output, BodyVelocity::ZERO);
         let later = ms(10) + Duration::from_secs(1);
-        assert_eq!(m.evaluate(later).output, Twist::ZERO);
+        assert_eq!(m.evaluate(later).output, BodyVelocity::ZERO);
         assert!(m.awaiting_zero().is_empty());
         m.on_request(later, TELEOP, &request(later, 0.3)).unwrap();
         assert_eq!(m.evaluate(later).output.linear_x_mps, 0.3);
@@ -1177,7 +1186,7 @@ mod tests {
         assert_eq!(m.engage_lock(ms(0), "estop"), Ok(true));
         assert_eq!(m.engage_lock(ms(1), "estop"), Ok(false));
         m.on_request(ms(2), TELEOP, &request(ms(2), 0.3)).unwrap();
-        assert_eq!(m.evaluate(ms(2)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(2)).output, BodyVelocity::ZERO);
         assert_eq!(m.status().locks[0].holder, LockStatus::HOLDER_OPERATOR);
     }
 
@@ -1214,7 +1223,7 @@ mod tests {
         // Safety asks for a stop: zero at once.
         m.on_request(ms(1210), SAFETY, &request(ms(1210), 0.0))
             .unwrap();
-        assert_eq!(m.evaluate(ms(1210)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(1210)).output, BodyVelocity::ZERO);
         assert_eq!(m.status().active_source, SAFETY as u8);
     }
 
@@ -1231,7 +1240,7 @@ mod tests {
         assert_eq!(m.output().linear_x_mps, 0.5);
         // Teleop's last request was at 2000 ms: still moving at 2299 ms, zero at 2300 ms.
         assert_eq!(m.evaluate(ms(2299)).output.linear_x_mps, 0.5);
-        assert_eq!(m.evaluate(ms(2300)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(2300)).output, BodyVelocity::ZERO);
     }
 
     #[test]
@@ -1252,7 +1261,7 @@ mod tests {
         m.on_request(ms(1100), TELEOP, &request(ms(1100), 0.5))
             .unwrap();
         // Safety's last heartbeat was at 1000 ms; its timeout is 200 ms.
-        assert_eq!(m.evaluate(ms(1201)).output, Twist::ZERO);
+        assert_eq!(m.evaluate(ms(1201)).output, BodyVelocity::ZERO);
     }
 
     #[test]

@@ -12,7 +12,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ControlStatus, FaultFlags, LinkFlags, OdometryState, RequestFlags, Twist,
+    BodyVelocity, ChassisState, ControlStatus, FaultFlags, LinkFlags, OdometryState, RequestFlags,
 };
 use serde::{Deserialize, Serialize};
 
@@ -146,7 +146,7 @@ pub trait Driver {
     /// The mux's output: the motion to command from now on (SI units, ISO axes). A changed command
     /// is sent at once (subject to [`DriverConfig::min_command_interval_ms`]); the heartbeat
     /// repeats the latest one.
-    fn set_command(&mut self, now: Timestamp, command: &Twist);
+    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity);
 
     /// A control action (mode, brake, lights, …). Motion commands go through
     /// [`Driver::set_command`]; a [`Command::Velocity`] here is `Invalid`.
@@ -184,7 +184,7 @@ impl<D: Driver + ?Sized> Driver for Box<D> {
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         (**self).handle_rx(now, rx);
     }
-    fn set_command(&mut self, now: Timestamp, command: &Twist) {
+    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
         (**self).set_command(now, command);
     }
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
@@ -607,7 +607,7 @@ where
 
 /// How a twist asks to turn: a steering angle when it carries `RequestFlags::STEER`, else a
 /// yaw rate.
-pub(crate) fn requested_turn(command: &Twist) -> Turn {
+pub(crate) fn requested_turn(command: &BodyVelocity) -> Turn {
     if command.flags & RequestFlags::STEER != 0 {
         Turn::Steer(command.steer_rad.into())
     } else {

@@ -455,7 +455,7 @@ mod tests {
     use std::time::Duration;
 
     use super::*;
-    use chassis_client::Twist;
+    use chassis_client::BodyVelocity;
     use chassis_protocols::driver::DriverConfig;
     use chassis_protocols::pair::Pair;
     use chassis_protocols::profile::XbotProfile;
@@ -485,9 +485,9 @@ mod tests {
             let mut pair = Pair::new(driver, firmware, start);
             pair.record = true;
             pair.run_for(Duration::from_secs(2));
-            pair.set_command(Twist {
+            pair.set_command(BodyVelocity {
                 linear_x_mps: 0.3,
-                ..Twist::ZERO
+                ..BodyVelocity::ZERO
             });
             pair.run_for(Duration::from_secs(1));
             let mut stats = BusStats::new(Some(&profile));

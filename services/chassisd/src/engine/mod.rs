@@ -165,7 +165,7 @@ pub enum BusItem {
 
 /// Something for the shell to publish.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Publication {
+pub enum ToPublish {
     /// On `chassis/<name>/state`.
     State(Box<ChassisState>),
     /// On the frame tap `chassis/<name>/frames`.
@@ -336,7 +336,7 @@ pub struct Engine {
     throttles: Throttles,
     /// Samples, answers and wake-ups the shell could not publish.
     ipc_failures: u64,
-    publications: VecDeque<Publication>,
+    publications: VecDeque<ToPublish>,
     /// Each lock's holder and since when, as the shell was last told to keep it.
     kept_locks: Vec<Option<(u8, Timestamp)>>,
     /// The held set must be kept again even if it looks unchanged (a restore substituted it).
@@ -535,7 +535,7 @@ impl Engine {
     }
 
     /// A control request, answered now or once the chassis has answered (a
-    /// [`Publication::Response`] with `ticket`).
+    /// [`ToPublish::Response`] with `ticket`).
     pub fn handle_control(&mut self, now: Timestamp, ticket: Ticket, request: &ControlRequest) {
         let seq = request.seq;
         let (status, message) = match request_to_action(request) {
@@ -856,7 +856,7 @@ impl Engine {
             "describing the robot on chassis/<name>/robot"
         );
         self.publications
-            .push_back(Publication::Description(description));
+            .push_back(ToPublish::Description(description));
     }
 
     // ---- outputs ------------------------------------------------------------------------
@@ -903,7 +903,7 @@ impl Engine {
     }
 
     /// The next thing to publish.
-    pub fn poll_publication(&mut self) -> Option<Publication> {
+    pub fn poll_publication(&mut self) -> Option<ToPublish> {
         self.publications.pop_front()
     }
 
@@ -1019,7 +1019,7 @@ impl Engine {
         let mut response = ControlResponse::new(seq, status, message);
         response.stamp_ns = now.as_nanos();
         self.publications
-            .push_back(Publication::Response { ticket, response });
+            .push_back(ToPublish::Response { ticket, response });
     }
 
     fn publish_state(&mut self, now: Timestamp) {
@@ -1040,7 +1040,7 @@ impl Engine {
         self.last_state_body = Some(state_body(&state));
         self.last_state_publish = now;
         self.publications
-            .push_back(Publication::State(Box::new(state)));
+            .push_back(ToPublish::State(Box::new(state)));
     }
 
     fn publish_state_if_changed(&mut self, now: Timestamp) {
@@ -1061,7 +1061,7 @@ impl Engine {
         status.seq = self.mux_seq;
         self.last_mux_publish = Some(now);
         self.publications
-            .push_back(Publication::Mux(Box::new(status)));
+            .push_back(ToPublish::Mux(Box::new(status)));
     }
 
     /// Puts `item` on the tap. `bytes_kind` is the kind of a byte chunk (serial or GPS).
@@ -1083,7 +1083,7 @@ impl Engine {
                     ..BusFrame::default()
                 };
                 frame.set_payload(can.data());
-                self.publications.push_back(Publication::Frame(frame));
+                self.publications.push_back(ToPublish::Frame(frame));
             }
             Rx::Bytes(bytes) => {
                 for chunk in bytes.chunks(BusFrame::DATA_LEN) {
@@ -1096,7 +1096,7 @@ impl Engine {
                         ..BusFrame::default()
                     };
                     frame.set_payload(chunk);
-                    self.publications.push_back(Publication::Frame(frame));
+                    self.publications.push_back(ToPublish::Frame(frame));
                 }
             }
         }

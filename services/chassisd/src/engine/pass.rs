@@ -14,7 +14,7 @@ use chassis_interfaces::{ControlRequest, VelocityRequest};
 use chassis_protocols::{Timestamp, WireItem};
 use tracing::{debug, error};
 
-use super::{BusItem, Device, Engine, HeldLock, Link, Publication, Ticket, Wake};
+use super::{BusItem, Device, Engine, HeldLock, Link, Ticket, ToPublish, Wake};
 
 /// How a write to the bus went.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -63,13 +63,13 @@ impl Readers {
     }
 
     /// Whose readers `publication` is for.
-    pub fn of(publication: &Publication) -> Self {
+    pub fn of(publication: &ToPublish) -> Self {
         match publication {
-            Publication::State(_) => Readers::State,
-            Publication::Frame(_) => Readers::Frames,
-            Publication::Mux(_) => Readers::Mux,
-            Publication::Description(_) => Readers::Description,
-            Publication::Response { .. } => Readers::Control,
+            ToPublish::State(_) => Readers::State,
+            ToPublish::Frame(_) => Readers::Frames,
+            ToPublish::Mux(_) => Readers::Mux,
+            ToPublish::Description(_) => Readers::Description,
+            ToPublish::Response { .. } => Readers::Control,
         }
     }
 
@@ -102,7 +102,7 @@ pub trait PassIo {
     fn read_requests(&mut self, sources: u32, take: impl FnMut(usize, &VelocityRequest));
 
     /// Hands `take` every pending control request with the ticket its answer will carry
-    /// ([`Publication::Response`]).
+    /// ([`ToPublish::Response`]).
     fn read_control(&mut self, take: impl FnMut(Ticket, &ControlRequest));
 
     /// Serves the simulated chassis' fault injections: the simulator's business, not the
@@ -144,7 +144,7 @@ pub trait PassIo {
 
     /// Puts one publication in shared memory (a control answer: to the client waiting for it)
     /// without waking its readers.
-    fn publish(&mut self, publication: Publication) -> Result<(), Self::Error>;
+    fn publish(&mut self, publication: ToPublish) -> Result<(), Self::Error>;
 
     /// Wakes the readers of `readers`.
     fn wake(&mut self, readers: Readers) -> Result<(), Self::Error>;

@@ -29,8 +29,8 @@ use chassis_protocols::{
 };
 
 use super::{
-    BusItem, Device, Engine, EngineConfig, HeldLock, ListenerChange, PassIo, Publication, Readers,
-    Ticket, Wake, WriteError, Written,
+    BusItem, Device, Engine, EngineConfig, HeldLock, ListenerChange, PassIo, Readers, Ticket,
+    ToPublish, Wake, WriteError, Written,
 };
 use crate::bus::MAX_RX_BATCH;
 use crate::controller::ControllerReport;
@@ -816,7 +816,7 @@ impl PassIo for World {
         Ok(())
     }
 
-    fn publish(&mut self, publication: Publication) -> Result<(), Self::Error> {
+    fn publish(&mut self, publication: ToPublish) -> Result<(), Self::Error> {
         assert_eq!(
             self.woken_in_pass, 0,
             "published at {:?} after the pass woke its readers",
@@ -825,24 +825,22 @@ impl PassIo for World {
         self.published_in_pass += 1;
         self.published_kinds |= bit(Readers::of(&publication));
         match publication {
-            Publication::State(state) => {
+            ToPublish::State(state) => {
                 if let Some(last) = self.states.last() {
                     assert_eq!(state.seq, last.seq + 1, "state numbering at {:?}", self.now);
                 }
                 self.state_times.push((state.seq, self.now));
                 self.states.push(*state);
             }
-            Publication::Mux(status) => {
+            ToPublish::Mux(status) => {
                 if let Some(last) = self.muxes.last() {
                     assert_eq!(status.seq, last.seq + 1, "mux numbering at {:?}", self.now);
                 }
                 self.muxes.push(*status);
             }
-            Publication::Frame(frame) => self.frames.push(frame),
-            Publication::Description(description) => {
-                self.descriptions.push((*description, self.now))
-            }
-            Publication::Response { ticket, response } => {
+            ToPublish::Frame(frame) => self.frames.push(frame),
+            ToPublish::Description(description) => self.descriptions.push((*description, self.now)),
+            ToPublish::Response { ticket, response } => {
                 self.responses.push((ticket, response, self.now))
             }
         }

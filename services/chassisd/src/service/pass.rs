@@ -15,7 +15,7 @@ use super::{Next, Shell, clocks};
 use crate::bus::{BusError, MAX_RX_BATCH, Received};
 use crate::clock;
 use crate::engine::{
-    BusItem, Device, Engine, HeldLock, PassIo, Publication, Readers, Ticket, Wake, WriteError,
+    BusItem, Device, Engine, HeldLock, PassIo, Readers, Ticket, ToPublish, Wake, WriteError,
     Written,
 };
 use crate::ipc::Ports;
@@ -289,10 +289,10 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
         Ok(())
     }
 
-    fn publish(&mut self, publication: Publication) -> Result<(), PassError> {
+    fn publish(&mut self, publication: ToPublish) -> Result<(), PassError> {
         let ports = self.ports;
         match publication {
-            Publication::State(mut sample) => {
+            ToPublish::State(mut sample) => {
                 let slot = ports.state.publisher.loan_uninit()?;
                 sample.published_ns = clock::now().as_nanos();
                 slot.write_payload(*sample).send()?;
@@ -301,16 +301,16 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
                 }
                 self.stamp(|p| &mut p.state_sent);
             }
-            Publication::Frame(frame) => {
+            ToPublish::Frame(frame) => {
                 ports.frames.publisher.send_copy(frame)?;
             }
-            Publication::Mux(status) => {
+            ToPublish::Mux(status) => {
                 ports.mux.publisher.send_copy(*status)?;
             }
-            Publication::Description(description) => {
+            ToPublish::Description(description) => {
                 ports.description.publisher.send_copy(*description)?;
             }
-            Publication::Response { ticket, response } => {
+            ToPublish::Response { ticket, response } => {
                 if let Some(active) = self.shell.pending.remove(&ticket) {
                     active.send_copy(response)?;
                 }

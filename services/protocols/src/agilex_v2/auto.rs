@@ -11,7 +11,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ChassisState, LinkFlags, Twist, WireProtocol};
+use chassis_interfaces::{BodyVelocity, ChassisState, LinkFlags, WireProtocol};
 
 use super::detect::{DetectSettings, Detection, Detector};
 use super::{V2Driver, V2Profile};
@@ -34,7 +34,7 @@ pub struct AutoDriver {
     inner: Option<(Protocol, Box<dyn Driver + Send>)>,
     state: ChassisState,
     events: VecDeque<DriverEvent>,
-    command: Twist,
+    command: BodyVelocity,
     bus_down: bool,
 }
 
@@ -76,7 +76,7 @@ impl AutoDriver {
                 state
             },
             events: VecDeque::new(),
-            command: Twist::ZERO,
+            command: BodyVelocity::ZERO,
             bus_down: false,
         }
     }
@@ -168,7 +168,7 @@ impl Driver for AutoDriver {
         self.check(now);
     }
 
-    fn set_command(&mut self, now: Timestamp, command: &Twist) {
+    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
         self.command = *command;
         if let Some((_, driver)) = &mut self.inner {
             driver.set_command(now, command);
@@ -268,10 +268,10 @@ mod tests {
         )
     }
 
-    fn forward() -> Twist {
-        Twist {
+    fn forward() -> BodyVelocity {
+        BodyVelocity {
             linear_x_mps: 0.5,
-            ..Twist::ZERO
+            ..BodyVelocity::ZERO
         }
     }
 

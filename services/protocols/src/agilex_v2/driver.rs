@@ -21,7 +21,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState, Twist,
+    BodyVelocity, ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState,
 };
 
 use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake, vehicle};
@@ -155,7 +155,7 @@ impl V2Driver {
         self.motion_clamp_flags = flags;
     }
 
-    fn plan(&mut self, now: Timestamp, command: &Twist) {
+    fn plan(&mut self, now: Timestamp, command: &BodyVelocity) {
         match plan(
             command.linear_x_mps.into(),
             command.linear_y_mps.into(),
@@ -467,7 +467,7 @@ impl Driver for V2Driver {
         }
     }
 
-    fn set_command(&mut self, now: Timestamp, command: &Twist) {
+    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
         self.plan(now, command);
     }
 

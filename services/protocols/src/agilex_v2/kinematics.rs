@@ -1,4 +1,4 @@
-//! Twist ↔ 0x111 / 0x221 per kinematic kind (`PROTOCOLS-V2` §2.4, §3.3, §3.6, §3.8).
+//! BodyVelocity ↔ 0x111 / 0x221 per kinematic kind (`PROTOCOLS-V2` §2.4, §3.3, §3.6, §3.8).
 //!
 //! * Differential / skid / tracked: (v, ω); v_y is unachievable.
 //! * Omni (mecanum SCOUT MINI): (v, ω, v_y).

@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::{ClampFlags, ControlMode, FaultFlags, LinkFlags, Twist};
+use chassis_interfaces::{BodyVelocity, ClampFlags, ControlMode, FaultFlags, LinkFlags};
 
 use super::{Frame, V2Driver, V2Model, V2Profile, V2Sim, decode, id};
 use crate::Direction;
@@ -22,12 +22,12 @@ fn ms(v: u64) -> Duration {
     Duration::from_millis(v)
 }
 
-fn twist(vx: f64, vy: f64, w: f64) -> Twist {
-    Twist {
+fn twist(vx: f64, vy: f64, w: f64) -> BodyVelocity {
+    BodyVelocity {
         linear_x_mps: vx as f32,
         linear_y_mps: vy as f32,
         angular_z_radps: w as f32,
-        ..Twist::ZERO
+        ..BodyVelocity::ZERO
     }
 }
 
@@ -116,7 +116,7 @@ fn power_up_enable_drive_stop_for_every_kinematic_kind() {
             t.x_m,
             t.y_m
         );
-        p.set_command(Twist::ZERO);
+        p.set_command(BodyVelocity::ZERO);
         p.run_for(ms(2000));
         assert!(close(p.firmware.truth().linear_mps, 0.0, 1e-3), "{model:?}");
         // Only V2 command ids ever went out, and 0x111 at the heartbeat period.
@@ -328,7 +328,7 @@ fn estop_holds_zero_until_released_and_the_command_was_zero_once() {
             0,
             "{model:?}"
         );
-        p.set_command(Twist::ZERO);
+        p.set_command(BodyVelocity::ZERO);
         p.run_for(ms(100));
         p.set_command(twist(vx, vy, w));
         p.run_for(ms(2000));

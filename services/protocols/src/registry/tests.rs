@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::{Kinematics, MAX_JOINTS, MAX_SENSORS, Twist, WireProtocol};
+use chassis_interfaces::{BodyVelocity, Kinematics, MAX_JOINTS, MAX_SENSORS, WireProtocol};
 
 use super::*;
 use crate::CanFrame;
@@ -124,9 +124,9 @@ fn every_robot_drives_its_simulated_firmware_in_each_of_its_protocols() {
             assert_eq!((driver.robot(), firmware.robot()), (kind, kind));
             let mut pair = Pair::new(driver, firmware, start);
             pair.run_for(Duration::from_secs(3));
-            let forward = Twist {
+            let forward = BodyVelocity {
                 linear_x_mps: 0.3,
-                ..Twist::ZERO
+                ..BodyVelocity::ZERO
             };
             let now = pair.now();
             pair.driver.set_command(now, &forward);
@@ -162,7 +162,7 @@ fn every_robot_runs_away_past_its_limit_when_told_to_and_obeys_again_after() {
         let runaway = limit + 0.5;
         assert!(pair.inject(Injection::Runaway(Some(runaway))), "{kind}");
         let now = pair.now();
-        pair.driver.set_command(now, &Twist::ZERO);
+        pair.driver.set_command(now, &BodyVelocity::ZERO);
         pair.run_for(Duration::from_secs(3));
         let truth = pair.firmware.truth().linear_mps;
         let measured = f64::from(pair.driver.state().motion.linear_mps);
@@ -292,10 +292,10 @@ fn every_steered_robot_is_described_with_the_radius_its_driver_turns() {
             let firmware = (entry.firmware)(&profile, start);
             let mut pair = Pair::new(driver, firmware, start);
             pair.run_for(Duration::from_secs(2));
-            let twist = Twist {
+            let twist = BodyVelocity {
                 linear_x_mps: 0.3,
                 angular_z_radps: (0.3 / r) as f32,
-                ..Twist::ZERO
+                ..BodyVelocity::ZERO
             };
             let now = pair.now();
             pair.driver.set_command(now, &twist);

@@ -6,7 +6,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, SystemState, Twist,
+    BodyVelocity, ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, SystemState,
 };
 
 use super::codec::{self, Frame, Lights, MotionCommand, body, clear_code, fault, mode};
@@ -172,7 +172,7 @@ impl ScoutMiniDriver {
     }
 
     /// Recomputes the request from a twist.
-    fn plan(&mut self, command: &Twist) {
+    fn plan(&mut self, command: &BodyVelocity) {
         self.requested = velocity_command(
             command.linear_x_mps.into(),
             command.linear_y_mps.into(),
@@ -444,7 +444,7 @@ impl Driver for ScoutMiniDriver {
         }
     }
 
-    fn set_command(&mut self, _now: Timestamp, command: &Twist) {
+    fn set_command(&mut self, _now: Timestamp, command: &BodyVelocity) {
         self.plan(command);
     }
 
@@ -575,7 +575,7 @@ impl Driver for ScoutMiniDriver {
     }
 
     fn shutdown(&mut self, _now: Timestamp) {
-        self.plan(&Twist::ZERO);
+        self.plan(&BodyVelocity::ZERO);
         // Due at once even when the command was already zero.
         self.core.schedule.command_changed(true);
     }

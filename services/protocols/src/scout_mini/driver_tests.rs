@@ -7,8 +7,8 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LightMode, LinkFlags, RequestFlags,
-    SystemState, Twist,
+    BodyVelocity, ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LightMode, LinkFlags,
+    RequestFlags, SystemState,
 };
 use proptest::prelude::*;
 
@@ -42,11 +42,11 @@ fn driver() -> ScoutMiniDriver {
     ScoutMiniDriver::new(p(), DriverConfig::default(), T0)
 }
 
-fn twist(linear_x_mps: f32, angular_z_radps: f32) -> Twist {
-    Twist {
+fn twist(linear_x_mps: f32, angular_z_radps: f32) -> BodyVelocity {
+    BodyVelocity {
         linear_x_mps,
         angular_z_radps,
-        ..Twist::ZERO
+        ..BodyVelocity::ZERO
     }
 }
 
@@ -182,13 +182,13 @@ fn a_changed_command_goes_out_at_once_and_a_stop_is_never_delayed() {
     assert_eq!(d.poll_timeout(), Some(at(7)));
     assert_eq!(motion_bytes(&drain(&mut d, at(7))[0]).0, [1, 0, 20, 0]);
     // A stop goes out at once, even right after another frame.
-    d.set_command(at_us(7_500), &Twist::ZERO);
+    d.set_command(at_us(7_500), &BodyVelocity::ZERO);
     assert_eq!(
         motion_bytes(&drain(&mut d, at_us(7_500))[0]).0,
         [1, 0, 0, 0]
     );
     // The same command again changes nothing; the heartbeat keeps its grid.
-    d.set_command(at(8), &Twist::ZERO);
+    d.set_command(at(8), &BodyVelocity::ZERO);
     assert!(drain(&mut d, at(8)).is_empty());
     assert_eq!(d.poll_timeout(), Some(at(20)));
 }
@@ -197,7 +197,7 @@ fn a_changed_command_goes_out_at_once_and_a_stop_is_never_delayed() {
 fn limits_and_quantisation_are_echoed_with_their_flags() {
     let mut d = driver();
     drain(&mut d, T0);
-    let mut send = |now: u64, command: Twist| {
+    let mut send = |now: u64, command: BodyVelocity| {
         d.set_command(at(now), &command);
         let (payload, _) = motion_bytes(&drain(&mut d, at(now))[0]);
         (payload, d.state().command)
@@ -221,7 +221,7 @@ fn limits_and_quantisation_are_echoed_with_their_flags() {
     assert_eq!(echo.clamp_flags, ClampFlags::ANGULAR_LIMIT);
     let (payload, echo) = send(
         40,
-        Twist {
+        BodyVelocity {
             linear_y_mps: 0.3,
             ..twist(0.5, 0.0)
         },
@@ -258,7 +258,7 @@ fn a_steering_request_becomes_the_bicycle_yaw_rate_and_nan_a_flagged_stop() {
     drain(&mut d, T0);
     d.set_command(
         at(5),
-        &Twist {
+        &BodyVelocity {
             steer_rad: 0.02,
             flags: RequestFlags::STEER,
             ..twist(0.5, 9.0)

@@ -13,7 +13,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState, Twist,
+    BodyVelocity, ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState,
 };
 
 use super::codec::{self, Frame, MotionCommand, ParkingBrake, fault, mode};
@@ -96,7 +96,7 @@ impl TitanDriver {
     }
 
     /// Recomputes the motion to send from the latest command.
-    fn plan(&mut self, now: Timestamp, command: &Twist) {
+    fn plan(&mut self, now: Timestamp, command: &BodyVelocity) {
         let (mut motion, mut flags) = match motion_command(
             command.linear_x_mps.into(),
             command.linear_y_mps.into(),
@@ -277,7 +277,7 @@ impl Driver for TitanDriver {
         }
     }
 
-    fn set_command(&mut self, now: Timestamp, command: &Twist) {
+    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
         self.plan(now, command);
     }
 
@@ -418,7 +418,7 @@ impl Driver for TitanDriver {
     }
 
     fn shutdown(&mut self, now: Timestamp) {
-        self.plan(now, &Twist::ZERO);
+        self.plan(now, &BodyVelocity::ZERO);
         self.queue.clear();
         self.queue.push_back(Frame::MotionCommand(self.motion));
         self.queue

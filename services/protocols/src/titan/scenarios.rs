@@ -10,7 +10,8 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, ControlStatus, FaultClear, FaultFlags, LinkFlags, RequestFlags, Twist,
+    BodyVelocity, ClampFlags, ControlMode, ControlStatus, FaultClear, FaultFlags, LinkFlags,
+    RequestFlags,
 };
 
 use super::{Frame, MotionCommand, TitanDriver, TitanSim, decode, id, mode};
@@ -36,20 +37,20 @@ fn ms(v: u64) -> Duration {
     Duration::from_millis(v)
 }
 
-fn twist(linear_mps: f64, angular_radps: f64) -> Twist {
-    Twist {
+fn twist(linear_mps: f64, angular_radps: f64) -> BodyVelocity {
+    BodyVelocity {
         linear_x_mps: linear_mps as f32,
         angular_z_radps: angular_radps as f32,
-        ..Twist::ZERO
+        ..BodyVelocity::ZERO
     }
 }
 
-fn steer(linear_mps: f64, steer_rad: f64) -> Twist {
-    Twist {
+fn steer(linear_mps: f64, steer_rad: f64) -> BodyVelocity {
+    BodyVelocity {
         linear_x_mps: linear_mps as f32,
         steer_rad: steer_rad as f32,
         flags: RequestFlags::STEER,
-        ..Twist::ZERO
+        ..BodyVelocity::ZERO
     }
 }
 
@@ -68,7 +69,7 @@ fn pair() -> TitanPair {
 }
 
 /// Powered up, 100 ms for the chassis to enter CAN command mode, then `command` for `settle`.
-fn driving(command: Twist, settle: Duration) -> TitanPair {
+fn driving(command: BodyVelocity, settle: Duration) -> TitanPair {
     let mut p = pair();
     p.run_for(ms(100));
     assert_eq!(p.firmware.truth().control_mode, ControlMode::COMMAND);
@@ -224,7 +225,7 @@ fn power_up_takes_command_mode_releases_the_brake_once_drives_true_and_brakes_on
     // 100 ms; during the first 5 s it alternates with 0.9 m/s (50 changes), then it holds.
     let drive_start = p.now();
     let mut changes = 0;
-    let mut previous = Twist::ZERO;
+    let mut previous = BodyVelocity::ZERO;
     for i in 0..100 {
         let command = if i < 50 && i % 2 == 1 {
             twist(0.9, 0.3)
@@ -297,7 +298,7 @@ fn power_up_takes_command_mode_releases_the_brake_once_drives_true_and_brakes_on
     assert!(front_m > 9.0 && front_m < 10.0, "odometer {front_m}");
 
     // Stop: the zero goes out at once; the brake engages once, exactly 5 s later.
-    p.set_command(Twist::ZERO);
+    p.set_command(BodyVelocity::ZERO);
     let stop_at = p.now();
     let (_, zero_at, zero) = *motion_sent(&p, stop_at).first().unwrap();
     assert_eq!((zero_at, zero), (stop_at, MotionCommand::default()));
@@ -667,7 +668,7 @@ fn an_rc_takeover_is_reported_not_fought_and_control_returns_when_the_transmitte
 #[test]
 fn a_brake_engaged_before_an_rc_session_is_not_released_behind_the_transmitters_back() {
     let mut p = driving(twist(1.0, 0.0), ms(2000));
-    p.set_command(Twist::ZERO);
+    p.set_command(BodyVelocity::ZERO);
     p.run_for(ms(6000));
     assert!(truth(&p).brake_engaged, "the idle brake engaged");
     assert_eq!(p.driver.state().system.parking_brake_engaged, 1);
@@ -811,7 +812,7 @@ fn commands_beyond_the_limits_are_clamped_on_the_wire_and_flagged_in_the_echo() 
     p.run_for(ms(100));
     // Sets the command and returns the data of the 0x111 that carried it: the first one after
     // the call, within the 2 ms minimum interval (the change may follow a heartbeat at once).
-    let command = |p: &mut TitanPair, twist: Twist| {
+    let command = |p: &mut TitanPair, twist: BodyVelocity| {
         let at = p.now();
         let logged = p.log().len();
         p.set_command(twist);
@@ -888,10 +889,10 @@ fn commands_beyond_the_limits_are_clamped_on_the_wire_and_flagged_in_the_echo() 
         t.steer_rad
     );
 
-    let lateral = Twist {
+    let lateral = BodyVelocity {
         linear_x_mps: 0.5,
         linear_y_mps: 0.3,
-        ..Twist::ZERO
+        ..BodyVelocity::ZERO
     };
     assert_eq!(
         command(&mut p, lateral),
@@ -986,7 +987,7 @@ fn off_road_mode_is_refused_while_moving_and_accepted_while_standing() {
     );
     assert!(sent(&p, id::OFF_ROAD, at).is_empty());
 
-    p.set_command(Twist::ZERO);
+    p.set_command(BodyVelocity::ZERO);
     p.run_for(ms(3000));
     let at = p.now();
     let outcome = p.control(&Command::OffRoad { enter: true });
@@ -1222,7 +1223,7 @@ fn three_thousand_simulated_seconds_of_driving_run_without_stalls_and_the_pose_t
     let mut last_odometer = 0.0;
     for second in 0..3000 {
         let command = if second % 17 == 16 {
-            Twist::ZERO
+            BodyVelocity::ZERO
         } else {
             twist(rng.next() * 2.4 - 1.2, rng.next() * 1.0 - 0.5)
         };
@@ -1236,7 +1237,7 @@ fn three_thousand_simulated_seconds_of_driving_run_without_stalls_and_the_pose_t
         distance += (odometer - last_odometer).abs();
         last_odometer = odometer;
     }
-    p.set_command(Twist::ZERO);
+    p.set_command(BodyVelocity::ZERO);
     p.run_for(ms(2000));
     let t = truth(&p);
     let s = p.driver.state();

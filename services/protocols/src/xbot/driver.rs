@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, Twist};
+use chassis_interfaces::{BodyVelocity, ClampFlags, ControlMode, Group, LinkFlags, RequestFlags};
 
 use super::codec::{Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, VelocityCommand};
 use super::commands::{frames_for, velocity_command};
@@ -226,7 +226,7 @@ pub struct XbotDriver {
 
     // Velocity.
     /// The latest command from the mux.
-    twist: Twist,
+    twist: BodyVelocity,
     /// What the next 0x03 carries.
     desired: VelocityCommand,
     desired_flags: u32,
@@ -270,7 +270,7 @@ impl XbotDriver {
             core: DriverCore::new(RobotKind::Xbot.id(), period, &config, now),
             parser: StreamParser::new(),
             queue: VecDeque::new(),
-            twist: Twist::ZERO,
+            twist: BodyVelocity::ZERO,
             desired: VelocityCommand::default(),
             desired_flags: 0,
             on_wire: None,
@@ -695,7 +695,7 @@ impl Driver for XbotDriver {
         self.core.state.link.rx_bytes_discarded = self.parser.bytes_discarded();
     }
 
-    fn set_command(&mut self, now: Timestamp, command: &Twist) {
+    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
         self.twist = *command;
         self.plan(now);
     }
@@ -810,7 +810,7 @@ impl Driver for XbotDriver {
     }
 
     fn shutdown(&mut self, now: Timestamp) {
-        self.twist = Twist::ZERO;
+        self.twist = BodyVelocity::ZERO;
         self.plan(now);
         self.queue.clear();
         // The one frame exempt from the rate bound: a final stop is never held back.

@@ -3,7 +3,7 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::time::Duration;
 
-use chassis_interfaces::{ClampFlags, ControlMode, Group, LinkFlags, RequestFlags, Twist};
+use chassis_interfaces::{BodyVelocity, ClampFlags, ControlMode, Group, LinkFlags, RequestFlags};
 use proptest::prelude::*;
 
 use super::*;
@@ -110,7 +110,7 @@ impl Bench {
         self.run_until(self.now + duration);
     }
 
-    fn set(&mut self, command: Twist) {
+    fn set(&mut self, command: BodyVelocity) {
         self.d.set_command(self.now, &command);
         self.drain();
     }
@@ -355,7 +355,7 @@ fn a_stop_after_a_flood_of_changes_still_goes_out_at_once() {
     }
     b.run_for(ms(3));
     let frames_before = b.velocities().len();
-    b.set(Twist::ZERO);
+    b.set(BodyVelocity::ZERO);
     let (t, v) = *b.velocities().last().unwrap();
     assert_eq!(b.velocities().len(), frames_before + 1);
     assert_eq!((t, v), (b.now, VelocityCommand::default()));
@@ -372,7 +372,7 @@ fn a_stop_after_a_flood_of_changes_still_goes_out_at_once() {
 
 #[test]
 fn limits_and_clamp_flags_are_echoed_with_what_went_on_the_wire() {
-    let cases: [(Twist, f64, f64, f64, u32); 6] = [
+    let cases: [(BodyVelocity, f64, f64, f64, u32); 6] = [
         (
             twist(2.0, 0.0, 0.0),
             1.5,
@@ -402,7 +402,7 @@ fn limits_and_clamp_flags_are_echoed_with_what_went_on_the_wire() {
             ClampFlags::ANGULAR_LIMIT,
         ),
         (
-            Twist {
+            BodyVelocity {
                 steer_rad: 0.2,
                 flags: RequestFlags::STEER,
                 ..twist(0.5, 0.0, 0.0)
@@ -441,7 +441,7 @@ fn limits_and_clamp_flags_are_echoed_with_what_went_on_the_wire() {
 fn a_steering_request_with_a_zero_angle_drives_straight() {
     let mut b = Bench::new();
     b.run_for(ms(10));
-    b.set(Twist {
+    b.set(BodyVelocity {
         flags: RequestFlags::STEER,
         angular_z_radps: 0.7,
         ..twist(0.5, 0.0, 0.7)

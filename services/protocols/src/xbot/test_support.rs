@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::Twist;
+use chassis_interfaces::BodyVelocity;
 
 use crate::profile::XbotProfile;
 use crate::time::Timestamp;
@@ -16,12 +16,12 @@ pub(crate) fn p() -> XbotProfile {
     XbotProfile::default()
 }
 
-pub(crate) fn twist(vx: f32, vy: f32, wz: f32) -> Twist {
-    Twist {
+pub(crate) fn twist(vx: f32, vy: f32, wz: f32) -> BodyVelocity {
+    BodyVelocity {
         linear_x_mps: vx,
         linear_y_mps: vy,
         angular_z_radps: wz,
-        ..Twist::ZERO
+        ..BodyVelocity::ZERO
     }
 }
 
