@@ -682,7 +682,7 @@ fn a_configured_speed_limit_reaches_the_planner_which_never_asks_above_it() {
     let start: serde_json::Value = serde_json::from_str(start).unwrap();
     assert_eq!(start["limits"]["max_linear_mps"], 0.4, "{start}");
     assert_eq!(start["speed_mps"], 0.4, "{start}");
-    assert_eq!(start["model"], "AgileX TITAN (titan)", "{start}");
+    assert_eq!(start["described_as"], "AgileX TITAN (titan)", "{start}");
 }
 
 #[test]

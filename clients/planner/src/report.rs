@@ -15,7 +15,7 @@ use crate::kinematics::Kinematics;
 pub struct Start {
     pub robot: String,
     /// What the robot is, from its description (`AgileX TITAN (titan)`).
-    pub model: String,
+    pub described_as: String,
     pub path: String,
     pub length_m: f64,
     /// Turns on the spot at corners.
@@ -128,7 +128,7 @@ impl Reporter {
             self.emit(&json!({
                 "event": "start",
                 "robot": s.robot,
-                "model": s.model,
+                "described_as": s.described_as,
                 "path": s.path,
                 "length_m": round(s.length_m, 3),
                 "corner_stops": s.corner_stops,
@@ -154,7 +154,7 @@ impl Reporter {
             "following {} ({length}{corners}): {} '{}' at {:.2} m/s ({}) from x {:.3} y {:.3} \
              yaw {:.1}°, goal x {:.3} y {:.3}",
             s.path,
-            s.model,
+            s.described_as,
             s.robot,
             s.speed_mps,
             limits_text(&s.kinematics),

@@ -409,7 +409,7 @@ pub fn run(options: &Options) -> Result<Outcome, RunError> {
     let goal = tracker.goal();
     reporter.start(&Start {
         robot: options.name.clone(),
-        model: match description.display_name() {
+        described_as: match description.display_name() {
             "" => robot_text.clone(),
             display => format!("{display} ({robot_text})"),
         },

@@ -208,11 +208,11 @@ mod tests {
 
     #[test]
     fn a_square_is_four_sides_long_and_closed() {
-        for model in [RobotKind::ScoutMini, RobotKind::Xbot] {
-            let p = build(Shape::Square, 2.0, 1, &kin(model)).unwrap();
+        for robot in [RobotKind::ScoutMini, RobotKind::Xbot] {
+            let p = build(Shape::Square, 2.0, 1, &kin(robot)).unwrap();
             assert!((p.length_m() - 8.0).abs() < 1e-12);
             assert!(p.is_closed(1e-12));
-            let twice = build(Shape::Square, 2.0, 2, &kin(model)).unwrap();
+            let twice = build(Shape::Square, 2.0, 2, &kin(robot)).unwrap();
             assert!((twice.length_m() - 16.0).abs() < 1e-12);
         }
     }

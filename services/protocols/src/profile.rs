@@ -463,9 +463,9 @@ pub enum ProfileTableError {
     /// An unknown key or a wrong type.
     #[error(transparent)]
     Toml(#[from] toml::de::Error),
-    /// A protocol-V1 or V2 `model` of another robot.
-    #[error("profile.model: a {model} model is not a {robot}")]
-    WrongModel { model: RobotKind, robot: RobotKind },
+    /// A protocol-V1 or V2 `model` of another robot: `owner` is the robot the model belongs to.
+    #[error("profile.model: a {owner} model is not a {robot}")]
+    WrongModel { owner: RobotKind, robot: RobotKind },
 }
 
 /// One robot's profile.
@@ -509,7 +509,7 @@ impl Profile {
         };
         if profile.robot() != robot {
             return Err(ProfileTableError::WrongModel {
-                model: profile.robot(),
+                owner: profile.robot(),
                 robot,
             });
         }
@@ -616,7 +616,7 @@ mod tests {
         assert_eq!(
             Profile::from_table(RobotKind::Bunker, Some(Protocol::V1), &scout),
             Err(ProfileTableError::WrongModel {
-                model: RobotKind::Scout,
+                owner: RobotKind::Scout,
                 robot: RobotKind::Bunker
             })
         );
