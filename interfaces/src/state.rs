@@ -177,10 +177,15 @@ impl LinkFlags {
     pub const GPS_DOWN: u32 = 1 << 5;
     /// The chassis was told to stop transmitting (CAN-upgrade silent mode).
     pub const SILENT_MODE: u32 = 1 << 6;
+    /// Set by a mirror on another computer (`chassis-zenoh --mirror`), never by chassisd:
+    /// nothing has arrived from the robot over the network for longer than the mirror's loss
+    /// limit (or its liveliness token is gone). The sample is the last one received, published
+    /// again; the robot's own remote sources time out on the robot.
+    pub const REMOTE_LOST: u32 = 1 << 7;
 
     /// Names of the set bits, for logs and JSON.
     pub fn names(bits: u32) -> Vec<&'static str> {
-        const NAMES: [(u32, &str); 7] = [
+        const NAMES: [(u32, &str); 8] = [
             (LinkFlags::CHASSIS_SILENT, "chassis_silent"),
             (LinkFlags::BUS_DOWN, "bus_down"),
             (LinkFlags::COMMAND_MODE, "command_mode"),
@@ -188,6 +193,7 @@ impl LinkFlags {
             (LinkFlags::STEERING_ZERO_PENDING, "steering_zero_pending"),
             (LinkFlags::GPS_DOWN, "gps_down"),
             (LinkFlags::SILENT_MODE, "silent_mode"),
+            (LinkFlags::REMOTE_LOST, "remote_lost"),
         ];
         NAMES
             .iter()

@@ -1009,7 +1009,8 @@ class LinkFlags(Constants):
     STEERING_ZERO_PENDING = 16
     GPS_DOWN = 32
     SILENT_MODE = 64
-    NAMES = {1: 'chassis-silent', 2: 'bus-down', 4: 'command-mode', 8: 'rc-authority', 16: 'steering-zero-pending', 32: 'gps-down', 64: 'silent-mode'}
+    REMOTE_LOST = 128
+    NAMES = {1: 'chassis-silent', 2: 'bus-down', 4: 'command-mode', 8: 'rc-authority', 16: 'steering-zero-pending', 32: 'gps-down', 64: 'silent-mode', 128: 'remote-lost'}
 
 
 class RequestFlags(Constants):

@@ -21,17 +21,19 @@ use std::time::Duration;
 use anyhow::Context as _;
 use chassis_client::{
     BusFrame, ChassisState, ControlRequest, ControlResponse, ControlStatus, MuxStatus, ServiceKind,
-    VelocityRequest, service_name, termination_requested,
+    VelocityRequest, now_ns, service_name, termination_requested,
 };
 use chassis_ipc::{CMD, CONTROL, FRAMES, MUX, STATE, Writer};
+use iceoryx2::port::update_connections::UpdateConnections as _;
 use iceoryx2::prelude::*;
 use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::{Sample, SampleKind};
 use zerocopy::IntoBytes as _;
 
+use crate::fleet::{LOST_AFTER, LinkWatch, Lost};
 use crate::net::{self, Net};
-use crate::robot::{finish, guard, remote_sources};
+use crate::robot::{guard, remote_sources};
 use crate::wire::{Keys, Wire};
 
 /// How long a control request waits for the robot's answer.
@@ -67,31 +69,41 @@ fn zerr(what: &str) -> impl FnOnce(zenoh::Error) -> anyhow::Error + '_ {
 
 /// Runs the operator side until SIGINT/SIGTERM or a thread's failure.
 pub fn run(config: &Config) -> anyhow::Result<()> {
-    let keys = Keys::new(&config.name);
-    let node = node(&config.name, "mirror")?;
-    let state_name = service_name(&config.name, ServiceKind::State);
-    let state = match STATE.create(&node, &state_name)?.publisher() {
-        Ok(writer) => writer,
-        Err(chassis_ipc::IpcError::Taken { .. }) => anyhow::bail!(
-            "robot '{}' is already served on this computer (chassisd or another mirror holds {state_name}); \
-             give the mirror its own CHASSIS_IPC_PREFIX or stop the other",
-            config.name
-        ),
-        Err(e) => return Err(e.into()),
-    };
-    let mux = MUX
-        .create(&node, &service_name(&config.name, ServiceKind::Mux))?
-        .publisher()?;
-    let frames = FRAMES
-        .create(&node, &service_name(&config.name, ServiceKind::Frames))?
-        .publisher()?;
-
     let session = net::open(net::config(&config.net, &config.name, &[])?)?;
     eprintln!(
         "chassis-zenoh: mirroring robot '{}' from {}",
         config.name,
         config.net.endpoints.join(", ")
     );
+    let stop = Arc::new(AtomicBool::new(false));
+    let result = serve(&config.name, &session, &stop);
+    let _ = session.close().wait();
+    result
+}
+
+/// Mirrors the robot `name` over `session` into this computer's iceoryx2 until SIGINT/SIGTERM,
+/// `stop`, or a thread's failure (which raises `stop`). The session stays open: a fleet's
+/// mirrors share one.
+pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> anyhow::Result<()> {
+    let keys = Keys::new(name);
+    let node = node(name, "mirror")?;
+    let state_name = service_name(name, ServiceKind::State);
+    let state = match STATE.create(&node, &state_name)?.publisher() {
+        Ok(writer) => writer,
+        Err(chassis_ipc::IpcError::Taken { .. }) => anyhow::bail!(
+            "robot '{}' is already served on this computer (chassisd or another mirror holds {state_name}); \
+             give the mirror its own CHASSIS_IPC_PREFIX or stop the other",
+            name
+        ),
+        Err(e) => return Err(e.into()),
+    };
+    let mux = MUX
+        .create(&node, &service_name(name, ServiceKind::Mux))?
+        .publisher()?;
+    let frames = FRAMES
+        .create(&node, &service_name(name, ServiceKind::Frames))?
+        .publisher()?;
+
     let (tx, rx) = mpsc::channel::<Incoming>();
     let subscribe = |key: &str, wrap: fn(Sample) -> Incoming| {
         let tx = tx.clone();
@@ -118,11 +130,10 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
         .map_err(zerr(&keys.alive))?;
     drop(tx);
 
-    let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
     {
         let (name, session, keys, stop) = (
-            config.name.clone(),
+            name.to_string(),
             session.clone(),
             keys.clone(),
             stop.clone(),
@@ -148,17 +159,45 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             );
         }
     };
+    let mut link = LinkWatch::new(LOST_AFTER);
     let mut result = Ok(());
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
         let incoming = match rx.recv_timeout(POLL) {
             Ok(incoming) => incoming,
-            Err(mpsc::RecvTimeoutError::Timeout) => continue,
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                // A reader that came after the robot's last decision gets it from the
+                // history when the publisher looks for new readers.
+                if let Err(e) = mux.publisher.update_connections() {
+                    tracing::debug!("handing the mux history to new readers: {e}");
+                }
+                // Silence: the last state again, marked lost, once the loss limit is passed.
+                if let Some(lost) = link.poll(now_ns()) {
+                    report_lost(name, &lost);
+                    if let Err(e) = send(&state, lost.state) {
+                        result = Err(e);
+                        break;
+                    }
+                }
+                continue;
+            }
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
         };
+        if let Some(lost) = link.poll(now_ns()) {
+            report_lost(name, &lost);
+            if let Err(e) = send(&state, lost.state) {
+                result = Err(e);
+                break;
+            }
+        }
         let sent = match incoming {
             Incoming::State(sample) => {
                 match states.decode(sample.encoding(), &sample.payload().to_bytes()) {
-                    Ok(s) => send(&state, s),
+                    Ok(s) => {
+                        if link.heard(now_ns(), &s) {
+                            eprintln!("chassis-zenoh: robot '{name}' heard again");
+                        }
+                        send(&state, s)
+                    }
                     Err(e) => {
                         drop_sample("state", &e);
                         Ok(())
@@ -171,7 +210,7 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
                         for source in remote_sources(&m) {
                             if sources_started.insert(source.clone()) {
                                 let (name, session, keys, stop) = (
-                                    config.name.clone(),
+                                    name.to_string(),
                                     session.clone(),
                                     keys.clone(),
                                     stop.clone(),
@@ -207,14 +246,20 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             Incoming::Alive(alive) => {
                 eprintln!(
                     "chassis-zenoh: robot '{}' {}",
-                    config.name,
+                    name,
                     if alive {
                         "reachable"
                     } else {
                         "lost (its remote sources time out on the robot)"
                     }
                 );
-                Ok(())
+                match link.alive(now_ns(), alive) {
+                    Some(lost) => {
+                        report_lost(name, &lost);
+                        send(&state, lost.state)
+                    }
+                    None => Ok(()),
+                }
             }
         };
         if let Err(e) = sent {
@@ -222,7 +267,41 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             break;
         }
     }
-    finish(&stop, threads, &session, result)
+    join(stop, threads, result)
+}
+
+fn report_lost(name: &str, lost: &Lost) {
+    if lost.first {
+        tracing::warn!(robot = name, "link lost: {}", lost.why);
+        eprintln!(
+            "chassis-zenoh: robot '{name}' LOST: {} (shown here as remote_lost; its remote \
+             sources time out on the robot)",
+            lost.why
+        );
+    }
+}
+
+/// Ends one robot's mirror: raises its stop flag, joins its threads, and reports the loop's own
+/// error first, then every thread's.
+fn join(
+    stop: &AtomicBool,
+    threads: Vec<std::thread::JoinHandle<anyhow::Result<()>>>,
+    result: anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    stop.store(true, Ordering::Relaxed);
+    let mut failures = Vec::new();
+    for thread in threads {
+        match thread.join() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => failures.push(format!("{e:#}")),
+            Err(_) => failures.push("a thread panicked".into()),
+        }
+    }
+    result?;
+    if !failures.is_empty() {
+        anyhow::bail!("{}", failures.join("; "));
+    }
+    Ok(())
 }
 
 fn send<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(

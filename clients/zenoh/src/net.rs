@@ -191,6 +191,15 @@ fn access_list(robot: &str, remote_sources: &[String]) -> serde_json::Value {
             "permission": "allow",
             "key_exprs": [all],
         }),
+        // A fleet's operator asks which robots are alive with one wildcard (`chassis/*/alive`):
+        // this robot answers with its own token only.
+        json!({
+            "id": "operator-finds-robots",
+            "messages": ["declare_liveliness_subscriber", "liveliness_query"],
+            "flows": ["ingress"],
+            "permission": "allow",
+            "key_exprs": ["chassis/*/alive"],
+        }),
         json!({
             "id": "operator-controls",
             "messages": ["query"],
