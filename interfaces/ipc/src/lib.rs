@@ -39,5 +39,7 @@ pub use limits::{
     MAX_NODES, MAX_READERS, MUX, PUBLICATION, PubSub, PubSubLimits, RequestResponse,
     RequestResponseLimits, SIM, STATE, STATE_BUFFER, publication,
 };
-pub use names::{IPC_PREFIX_ENV, REPLY_SUFFIX, ServiceKind, config, reply_name, service_name};
+pub use names::{
+    IPC_PREFIX_ENV, REPLY_SUFFIX, ServiceKind, config, reply_name, robots, service_name,
+};
 pub use ports::{ClientPorts, Exchange, Reader, ServerPorts, Topic, Writer, node};
