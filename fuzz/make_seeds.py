@@ -308,7 +308,9 @@ SEEDS = {
             {
                 "seq": 1000,
                 "stamp_ns": STAMP,
-                "robot": const("RobotKind", "TITAN"),
+                # The TITAN's kind number (chassis_protocols::RobotKind::Titan.id()): the kind
+                # is the registry's key, not a constant of the contract.
+                "robot": 1,
                 "motion.linear_mps": 0.5,
                 "motion.angular_radps": 0.1,
                 "odometry.x_m": 1.5,

@@ -355,6 +355,22 @@ mod tests {
     }
 }
 
+/// [`SimRequest::index`] of a [`SimKind::TRUTH`] request: the page of the truth to answer with
+/// (one page fits a [`ControlResponse`]).
+#[derive(Debug, Clone, Copy)]
+pub struct SimTruthPage;
+impl SimTruthPage {
+    /// The true motion and the frames obeyed and rejected (see [`SimKind::TRUTH`]).
+    pub const MOTION: u8 = 0;
+    /// The faults the chassis injected, counted as each left it for the bus since power-up
+    /// (queued ones, and those a silence or a reboot cleared, are not): `garbage_frames=…
+    /// garbage_bytes=… bad_checksums=… flood_frames=…` — garbage CAN frames (serial: writes)
+    /// and their bytes, frames (serial reports) sent with a corrupted checksum, and the extra
+    /// frames of a flood. What a storm's sender really sent, for tests to hold the service's
+    /// counters against.
+    pub const INJECTED: u8 = 1;
+}
+
 /// [`SimRequest::kind`]: faults and events a simulated chassis can be given
 /// (`chassis/<name>/sim`, offered only when the bus is the simulator).
 #[derive(Debug, Clone, Copy)]
@@ -385,7 +401,8 @@ impl SimKind {
     /// Ask for what the simulated chassis really does (its true pose and speeds, not what it
     /// reports): the answer's message reads `x_m=… y_m=… yaw_rad=… linear_mps=… angular_radps=…
     /// commands=… rejected=…` (the frames it obeyed, and those it could not decode or dropped
-    /// for a bad checksum, since power-up).
+    /// for a bad checksum, since power-up). `index` [`SimTruthPage::INJECTED`] asks for the
+    /// faults it injected instead.
     pub const TRUTH: u8 = 12;
     /// The chassis' own emergency-stop switch pressed (`flag` 1) or released (AgileX protocol
     /// V2: 0x211 b0 reports it).
@@ -443,7 +460,8 @@ pub struct SimRequest {
     pub kind: u8,
     /// On/off for the kinds that switch something.
     pub flag: u8,
-    /// Motor number for [`SimKind::MOTOR_DRIVER_LOSS`].
+    /// Motor number for [`SimKind::MOTOR_DRIVER_LOSS`]; the page of [`SimKind::TRUTH`]'s answer
+    /// ([`SimTruthPage`]).
     pub index: u8,
     #[serde(skip)]
     pub _reserved: [u8; 5],

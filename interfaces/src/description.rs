@@ -255,7 +255,9 @@ pub struct Geometry {
     pub length_m: f64,
     pub width_m: f64,
     pub height_m: f64,
-    /// Smallest turn radius (Ackermann robots), m; 0 where it turns on the spot.
+    /// Smallest radius of `base_link`'s path while driving (robots that steer: the inner
+    /// wheels at full lock), m; 0 where it turns on the spot. A four-wheel-steered robot
+    /// (RANGER MINI) drives dual Ackermann down to this radius and spins on the spot below it.
     pub min_turn_radius_m: f64,
 }
 

@@ -281,9 +281,6 @@ pub fn types() -> Vec<TypeLayout> {
 pub fn constants() -> Vec<ConstantGroup> {
     use crate::*;
     let mut all = vec![
-        describe_constants!(enum RobotKind: u8 {
-            UNKNOWN, TITAN, SCOUT_MINI, XBOT, SCOUT, HUNTER, HUNTER_SE, TRACER, BUNKER, RANGER_MINI
-        }),
         describe_constants!(flags LinkFlags: u32 {
             CHASSIS_SILENT, BUS_DOWN, COMMAND_MODE, RC_AUTHORITY, STEERING_ZERO_PENDING,
             GPS_DOWN, SILENT_MODE, REMOTE_LOST,

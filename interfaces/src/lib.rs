@@ -29,7 +29,7 @@ mod text;
 
 pub use control::{
     ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, LightMode, SimKind,
-    SimRequest,
+    SimRequest, SimTruthPage,
 };
 pub use description::{
     BatteryLevels, BusKind, DescriptionFlags, DescriptionFull, Geometry, JointDescription,
@@ -44,7 +44,7 @@ pub use safety::{EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, 
 pub use state::{
     BmsState, ChassisState, CommandEcho, ControlMode, DriverStatus, FaultFlags, GROUP_SLOTS,
     GpsFix, Group, ImuState, LiftState, LightsState, LinkFlags, LinkStats, MotionState, MotorState,
-    OdometryState, PanTiltState, RangesState, RcState, RobotKind, SystemState, WireProtocol,
+    OdometryState, PanTiltState, RangesState, RcState, SystemState, WireProtocol,
 };
 pub use text::{read_fixed_str, write_fixed_str};
 

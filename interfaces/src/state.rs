@@ -12,38 +12,6 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::layout::describe_layout;
 
-/// Which robot produced a sample (`ChassisState::robot`).
-#[derive(Debug, Clone, Copy)]
-pub struct RobotKind;
-impl RobotKind {
-    pub const UNKNOWN: u8 = 0;
-    pub const TITAN: u8 = 1;
-    pub const SCOUT_MINI: u8 = 2;
-    pub const XBOT: u8 = 3;
-    pub const SCOUT: u8 = 4;
-    pub const HUNTER: u8 = 5;
-    pub const HUNTER_SE: u8 = 6;
-    pub const TRACER: u8 = 7;
-    pub const BUNKER: u8 = 8;
-    pub const RANGER_MINI: u8 = 9;
-
-    /// The command-line spelling of a robot kind (`titan`, `scout-mini`, `hunter`, …).
-    pub fn name(kind: u8) -> &'static str {
-        match kind {
-            Self::TITAN => "titan",
-            Self::SCOUT_MINI => "scout-mini",
-            Self::XBOT => "xbot",
-            Self::SCOUT => "scout",
-            Self::HUNTER => "hunter",
-            Self::HUNTER_SE => "hunter-se",
-            Self::TRACER => "tracer",
-            Self::BUNKER => "bunker",
-            Self::RANGER_MINI => "ranger-mini",
-            _ => "unknown",
-        }
-    }
-}
-
 /// Signal groups: the index into [`ChassisState::group_stamp_ns`] and the bit in
 /// [`ChassisState::valid_mask`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -1035,7 +1003,10 @@ pub struct ChassisState {
     pub valid_mask: u32,
     /// [`LinkFlags`].
     pub link_flags: u32,
-    /// [`RobotKind`].
+    /// The robot's kind: `chassis_protocols::RobotKind` as a number (its registry's key; 0:
+    /// none), as in `RobotDescription::kind`. What the kind *is* — its names, limits, geometry —
+    /// comes from the description chassisd publishes (`chassis/<name>/robot`), never from a
+    /// table of a client's.
     pub robot: u8,
     #[serde(skip)]
     pub _reserved: [u8; 7],

@@ -228,11 +228,36 @@ test("chassis-foxglove serves the simulated robot to a Foxglove client", async (
     await until("the robot to stop", () => Math.abs(state.latest.motion.linear_mps) < 0.05);
     assert.ok(log.all.some((l) => /mux/.test(l.message)), JSON.stringify(log.all.map((l) => l.message)));
 
-    // Released through the service, the Teleop drives again.
+    // Released through the service while the Teleop still asks for 0.5 m/s: the release never
+    // starts motion. The mux waits for a zero command from the foxglove source, and the robot
+    // stands however long the Teleop keeps asking.
     const release = await call(conn, "/estop_release");
     assert.equal(release.ok, true, JSON.stringify(release));
-    await until("the foxglove source to win again", () => mux.latest.active_name === "foxglove");
+    assert.match(release.message, /nothing moves until foxglove asks for zero/, JSON.stringify(release));
+    await until("the mux to wait for a zero command", () =>
+      !mux.latest.locks_held.includes("estop") && mux.latest.zero_reason_name === "awaiting_zero",
+    );
+    const waiting = mux.latest.sources[mux.latest.awaiting_source];
+    assert.equal(waiting && waiting.name, "foxglove", JSON.stringify(mux.latest));
+    const xReleased = pose.latest.pose.position.x;
+    await sleep(1000);
+    assert.equal(mux.latest.zero_reason_name, "awaiting_zero", JSON.stringify(mux.latest));
+    assert.notEqual(mux.latest.active_name, "foxglove");
+    assert.ok(Math.abs(state.latest.motion.linear_mps) < 0.05, JSON.stringify(state.latest.motion));
+    assert.ok(Math.abs(pose.latest.pose.position.x - xReleased) < 0.02, "the robot stood after the release");
+
+    // A zero from the Teleop (a released stick) rearms it; asking again drives.
     clearInterval(timer);
+    const zero = new Uint8Array(
+      Buffer.from(JSON.stringify({ linear: { x: 0, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } })),
+    );
+    conn.client.sendMessage(channelId, zero);
+    await until("the mux to stop waiting", () => mux.latest.zero_reason_name !== "awaiting_zero");
+    const again = setInterval(() => conn.client.sendMessage(channelId, twist), 50);
+    t.after(() => clearInterval(again));
+    await until("the foxglove source to win again", () => mux.latest.active_name === "foxglove");
+    await until("the robot to drive again", () => state.latest.motion.linear_mps > 0.2);
+    clearInterval(again);
     conn.client.unadvertise(channelId);
     await until("the robot to stop after the Teleop", () => Math.abs(state.latest.motion.linear_mps) < 0.05);
   });

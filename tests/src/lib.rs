@@ -9,6 +9,8 @@
 //! and it waits on the wall clock.
 #![allow(clippy::panic, clippy::disallowed_methods)]
 
+pub mod faults;
+
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -397,6 +399,32 @@ pub fn state(robot: &mut Robot) -> ChassisState {
         .unwrap_or_else(|| panic!("no state from chassis/{}", robot.name()))
 }
 
+/// "Drove again" after a fault (a restart, a reconnection): waits at most `timeout` for a state
+/// sample whose motion group (`ChassisState::group_stamp_ns[Group::Motion]`) was stamped after
+/// `since_ns` — a speed the chassis reported after the fault, never the last one the state keeps
+/// from before it — and that satisfies `condition` (a speed, a flag). `between` runs on every
+/// turn (the test's own sends, a pumped tap). Returns that sample and how long after `since_ns`
+/// its motion was stamped.
+pub fn drove_again_after(
+    robot: &mut Robot,
+    since_ns: u64,
+    timeout: Duration,
+    mut between: impl FnMut(),
+    mut condition: impl FnMut(&ChassisState) -> bool,
+) -> Option<(ChassisState, Duration)> {
+    let end = Instant::now() + timeout;
+    while Instant::now() < end {
+        between();
+        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(10)) {
+            let motion = s.group_stamp_ns[Group::Motion as usize];
+            if motion > since_ns && condition(&s) {
+                return Some((s, Duration::from_nanos(motion - since_ns)));
+            }
+        }
+    }
+    None
+}
+
 /// What the simulated chassis (embedded or `chassisd sim`) really does: the `key=value` pairs of
 /// its truth (`SimKind::TRUTH`: true pose and speeds, commands obeyed, frames rejected), read
 /// by [`SimTruth::get`].
@@ -412,13 +440,42 @@ pub fn sim_truth(robot: &mut Robot) -> SimTruth {
     SimTruth(answer.message().to_string())
 }
 
-/// The simulated chassis' answer to `SimKind::TRUTH`.
+/// The faults the simulated chassis injected, as it counted them when each left it for the bus
+/// (`SimTruthPage::INJECTED`: `garbage_frames`, `garbage_bytes`, `bad_checksums`,
+/// `flood_frames`, since power-up), read by [`SimTruth::get`]: the sender's truth of a storm.
+pub fn sim_injected(robot: &mut Robot) -> SimTruth {
+    let request = SimRequest {
+        kind: SimKind::TRUTH,
+        index: SimTruthPage::INJECTED,
+        ..SimRequest::default()
+    };
+    let answer = robot
+        .sim(request, Duration::from_secs(2))
+        .unwrap_or_else(|e| panic!("sim truth --injected: {e}"));
+    assert!(answer.is_ok(), "{}", answer.message());
+    SimTruth(answer.message().to_string())
+}
+
+/// The simulated chassis' answer to `SimKind::TRUTH`, one of its pages.
 #[derive(Debug, Clone)]
 pub struct SimTruth(String);
 
 impl SimTruth {
     /// The value of `key` (panics when it is missing: the answer's format is the contract).
     pub fn get(&self, key: &str) -> f64 {
+        self.value(key)
+    }
+
+    /// The value of counter `key`, exact (panics when it is missing).
+    pub fn count(&self, key: &str) -> u64 {
+        self.0
+            .split_whitespace()
+            .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no count {key} in {:?}", self.0))
+    }
+
+    fn value(&self, key: &str) -> f64 {
         self.0
             .split_whitespace()
             .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
@@ -439,7 +496,7 @@ pub fn mux(robot: &mut Robot) -> MuxStatus {
 // ----- Reliability figures (docs/RELIABILITY.md) -----
 
 /// Environment variable naming the directory the fault tests record their figures in
-/// (`faults.jsonl`, one [`Figure`] a line); unset, [`record_figure`] does nothing.
+/// (`faults.jsonl`, one [`Figure`] a line); unset, [`Figures`] only prints them.
 pub const RELIABILITY_DIR_ENV: &str = "CHASSIS_RELIABILITY_DIR";
 
 /// One row of the reliability table: a fault, how the test injected it, what the system did,
@@ -489,37 +546,37 @@ impl ExpectedRow {
 /// Every row of the fault matrix (`faults.jsonl`), in the order of the table.
 pub const FAULT_ROWS: &[ExpectedRow] = &[
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_processes",
         test: "sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_reconnect",
         fault: "SIGKILL of chassisd (simulated bus)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_processes",
         test: "sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeout",
         fault: "SIGKILL of chassisd (slcan over a pty to `chassisd sim`)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_processes",
         test: "sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived",
         fault: "SIGKILL of `chassisd sim` (the XBot's serial link over a pty hangs up)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_processes",
         test: "sigkill_of_the_safety_monitor_at_random_moments_stops_the_robot_within_its_timeout",
         fault: "SIGKILL of chassis-safety (the required source)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_processes",
         test: "sigkill_of_the_planner_at_random_moments_ends_its_motion_with_its_timeout",
         fault: "SIGKILL of chassis-planner (figure-eights)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_processes",
         test: "sigkill_of_chassis_pub_at_random_moments_ends_its_motion_with_its_timeout",
         fault: "SIGKILL of `chassis pub` (as teleop)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_processes",
         test: "sigkill_of_chassis_teleop_in_a_terminal_ends_its_motion_with_its_timeout",
         fault: "SIGKILL of chassis-teleop (a key held in a terminal)",
     },
@@ -534,87 +591,97 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
         fault: "serial line hang-up (XBot over a pty)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
         fault: "garbage CAN frames (id 0x7F0) on the TITAN's bus, 10 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
         fault: "garbage CAN frames (id 0x7F0) on the TITAN's bus, 100 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_frame_storms_on_the_titan_bus_are_counted_and_lose_no_good_frame",
         fault: "garbage CAN frames (id 0x7F0) on the TITAN's bus, 1000 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
         fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 10 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
         fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 100 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_frame_storms_on_a_protocol_v2_bus_are_counted_and_lose_no_good_frame",
         fault: "garbage CAN frames (id 0x7F0) on the HUNTER's bus (protocol V2), 1000 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
         fault: "bad checksums on the SCOUT MINI's CAN frames, 10 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
         fault: "bad checksums on the SCOUT MINI's CAN frames, 100 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "bad_checksum_storms_on_the_scout_mini_bus_are_counted_and_lose_no_good_frame",
         fault: "bad checksums on the SCOUT MINI's CAN frames, 250 frames/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
         fault: "garbage bytes on the XBot's serial line, 100 bytes/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
         fault: "garbage bytes on the XBot's serial line, 1000 bytes/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
         fault: "garbage bytes on the XBot's serial line, 10000 bytes/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
         fault: "bad checksums on the XBot's serial reports, 5 reports/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_bus",
         test: "garbage_and_bad_checksum_storms_on_the_xbot_line_are_counted_and_lose_no_good_report",
         fault: "bad checksums on the XBot's serial reports, 20 reports/s",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_clients",
         test: "a_rogue_client_flooding_requests_neither_wins_nor_shakes_the_heartbeat",
-        fault: "a rogue client flooding the `planner` source",
+        fault: "a rogue client flooding the `planner` source (below teleop, which drives)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_clients",
+        test: "a_rogue_client_of_the_driving_priority_wins_only_with_the_newer_request",
+        fault: "a rogue client flooding the `foxglove` source (teleop's priority; teleop drives)",
+    },
+    ExpectedRow {
+        suite: "faults_clients",
+        test: "a_rogue_client_above_the_driving_priority_wins_by_design_and_shakes_nothing",
+        fault: "a rogue client flooding the `teleop` source (above the planner, which drives)",
+    },
+    ExpectedRow {
+        suite: "faults_clients",
         test: "non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second",
         fault: "NaN, ±inf and absurd requests (1000 m/s, -100 rad/s, 3 rad steering)",
     },
     ExpectedRow {
-        suite: "faults",
+        suite: "faults_clients",
         test: "a_second_publisher_on_the_safety_source_is_refused_and_the_monitor_unharmed",
         fault: "a second publisher on the `safety` source while chassis-safety holds it",
     },
@@ -630,8 +697,8 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
     },
     ExpectedRow {
         suite: "systemd",
-        test: "the_loop_pings_the_watchdog_twice_per_period_and_a_stopped_loop_does_not",
-        fault: "chassisd's event loop stops (hung) under a systemd watchdog",
+        test: "the_watchdog_pings_come_from_the_loop_and_stop_while_it_stalls",
+        fault: "chassisd's event loop stalls (hung) under a systemd watchdog",
     },
 ];
 
@@ -677,27 +744,94 @@ pub fn expected_rows(file: &str) -> &'static [ExpectedRow] {
     }
 }
 
-/// Appends `row` to `$CHASSIS_RELIABILITY_DIR/faults.jsonl` (or to `file` under that directory
-/// with [`record_figure_in`]) and prints it; without the variable it is only printed.
-pub fn record_figure(row: &Figure) {
-    record_figure_in("faults.jsonl", row);
+/// The figures of one test, written when the test ends: into
+/// `$CHASSIS_RELIABILITY_DIR/faults.jsonl` ([`Figures::faults`]) or `soak.jsonl`
+/// ([`Figures::soak`]), and printed; without the variable they are only printed.
+///
+/// A figure's `pass` is the test's verdict on it, but it is written as passing only when the
+/// test got to its end: [`Figures::finish`] is the test's last statement, after its last
+/// assert. A test that panics (a failed assert anywhere, before or after the figure was
+/// measured) or never calls `finish` writes its figures with `pass: false` when they are
+/// dropped. The report also reads each test's outcome from libtest's output
+/// (`reliability-report`), so a row never shows pass for a failed test.
+#[derive(Debug)]
+#[must_use = "a test's figures are written by `finish`, its last statement"]
+pub struct Figures {
+    file: &'static str,
+    rows: Vec<Figure>,
+    finished: bool,
 }
 
-/// Like [`record_figure`], into `$CHASSIS_RELIABILITY_DIR/<file>`.
-pub fn record_figure_in(file: &str, row: &Figure) {
-    use std::io::Write;
-    assert!(
-        expected_rows(file).iter().any(|e| e.matches(row)),
-        "the figure of '{}' ({} {}) is not in the report's list of rows ({}): add it there",
-        row.fault,
-        row.suite,
-        row.test,
-        if file == "soak.jsonl" {
-            "SOAK_ROWS"
-        } else {
-            "FAULT_ROWS"
+impl Figures {
+    /// The figures of a fault test (`faults.jsonl`, rows of [`FAULT_ROWS`]).
+    pub fn faults() -> Self {
+        Self::new("faults.jsonl")
+    }
+
+    /// The figures of the soak (`soak.jsonl`, rows of [`SOAK_ROWS`]).
+    pub fn soak() -> Self {
+        Self::new("soak.jsonl")
+    }
+
+    fn new(file: &'static str) -> Self {
+        Self {
+            file,
+            rows: Vec::new(),
+            finished: false,
         }
-    );
+    }
+
+    /// Adds `row`, to be written when the test ends. It must be one of the report's rows.
+    pub fn add(&mut self, row: Figure) {
+        assert!(
+            expected_rows(self.file).iter().any(|e| e.matches(&row)),
+            "the figure of '{}' ({} {}) is not in the report's list of rows ({}): add it there",
+            row.fault,
+            row.suite,
+            row.test,
+            if self.file == "soak.jsonl" {
+                "SOAK_ROWS"
+            } else {
+                "FAULT_ROWS"
+            }
+        );
+        self.rows.push(row);
+    }
+
+    /// The test's last statement: every assert passed, so each figure is written with the
+    /// test's own verdict on it.
+    pub fn finish(mut self) {
+        self.finished = true;
+        let rows = std::mem::take(&mut self.rows);
+        for row in &rows {
+            if let Err(e) = write_figure(self.file, row) {
+                panic!("recording a figure: {e}");
+            }
+        }
+    }
+}
+
+impl Drop for Figures {
+    /// The test did not get to `finish`: its figures are written as failed.
+    fn drop(&mut self) {
+        if self.finished {
+            return;
+        }
+        for row in &self.rows {
+            let failed = Figure {
+                pass: false,
+                ..row.clone()
+            };
+            if let Err(e) = write_figure(self.file, &failed) {
+                eprintln!("recording a failed figure: {e}");
+            }
+        }
+    }
+}
+
+/// Appends `row` to `$CHASSIS_RELIABILITY_DIR/<file>` and prints it.
+fn write_figure(file: &str, row: &Figure) -> std::io::Result<()> {
+    use std::io::Write;
     eprintln!(
         "FIGURE [{}] {}: {} — {}",
         if row.pass { "pass" } else { "FAIL" },
@@ -706,24 +840,19 @@ pub fn record_figure_in(file: &str, row: &Figure) {
         row.behaviour
     );
     let Some(dir) = std::env::var_os(RELIABILITY_DIR_ENV) else {
-        return;
+        return Ok(());
     };
     let dir = PathBuf::from(dir);
-    let _ = std::fs::create_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
     let path = dir.join(file);
-    let line = match serde_json::to_string(row) {
-        Ok(json) => json + "\n",
-        Err(e) => panic!("figure as JSON: {e}"),
-    };
+    let line = serde_json::to_string(row)? + "\n";
     // One write of one line with O_APPEND: tests running in parallel never interleave.
-    let written = std::fs::OpenOptions::new()
+    std::fs::OpenOptions::new()
         .create(true)
         .append(true)
         .open(&path)
-        .and_then(|mut f| f.write_all(line.as_bytes()));
-    if let Err(e) = written {
-        panic!("recording a figure in {}: {e}", path.display());
-    }
+        .and_then(|mut f| f.write_all(line.as_bytes()))
+        .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))
 }
 
 /// A small seeded random number generator (SplitMix64): fault moments that a seed reproduces.

@@ -161,7 +161,11 @@ fn chassis_demo_runs_every_agilex_robot_in_each_protocol() {
             _ => WireProtocol::V2,
         };
         assert_eq!(s.system.wire_protocol, expected, "{robot} {protocol:?}");
-        assert_eq!(RobotKind::name(s.robot), *robot);
+        let described = handle
+            .description(Duration::from_secs(2))
+            .unwrap_or_else(|e| panic!("{robot}: {e}\n{}", env.logs()));
+        assert_eq!(described.kind_name(), *robot);
+        assert_eq!(described.kind, s.robot);
         assert!(
             mux(&mut handle).sources()[0].has(SourceFlags::FRESH),
             "{robot}: safety monitor not alive"

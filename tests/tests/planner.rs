@@ -7,7 +7,9 @@
 
 use std::time::{Duration, Instant};
 
+use chassis_planner::kinematics::Kinematics;
 use chassis_planner::run::FINAL_STOP_S;
+use chassis_planner::shapes::corner_radius_m;
 use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(10);
@@ -24,10 +26,18 @@ fn name(tag: &str) -> String {
 }
 
 /// The square each robot drives: TITAN cannot turn tighter than 1.53 m, so its corners are
-/// rounded to 1.76 m and its square needs at least 3.52 m; 4 m is its default. The others turn
-/// on the spot and drive the 2 m square of the issue.
+/// rounded to 1.79 m (1.15 × the 1.56 m the planner asks for at least) and its square needs at
+/// least 3.59 m; 4 m is its default. The others turn on the spot and drive the 2 m square of the
+/// issue.
 fn square_size(robot: &str) -> &'static str {
     if robot == "titan" { "4" } else { "2" }
+}
+
+/// The radius of the corners the planner builds for the robot chassisd describes (0 for a robot
+/// that turns on the spot), from the same description the planner reads.
+fn corner_radius(robot: &mut Robot) -> f64 {
+    let described = robot.description(UP).unwrap();
+    corner_radius_m(&Kinematics::from_description(&described).unwrap())
 }
 
 /// `chassisd` on the simulated `robot`, and a connection to it.
@@ -47,30 +57,19 @@ fn square_corners(size: f64) -> [(f64, f64); 3] {
     [(size, 0.0), (size, size), (0.0, size)]
 }
 
-/// TITAN's rounded corners: 1.15 × its 1.53 m turning radius.
-const TITAN_CORNER_RADIUS_M: f64 = 1.76;
 /// How close a corner must be passed, on top of the rounding, m.
 const CORNER_LIMIT_M: f64 = 0.15;
 
 /// How far from a sharp corner the path passes, m: a corner rounded to radius r is passed at
 /// r(√2 − 1).
-fn corner_offset(robot: &str) -> f64 {
-    if robot == "titan" {
-        TITAN_CORNER_RADIUS_M * (std::f64::consts::SQRT_2 - 1.0)
-    } else {
-        0.0
-    }
+fn corner_offset(corner_radius_m: f64) -> f64 {
+    corner_radius_m * (std::f64::consts::SQRT_2 - 1.0)
 }
 
 /// The shortest path around the square, m: a rounded corner saves (2 − π/2)·r of the 2r of its
 /// legs; the start is not rounded, the other three corners are.
-fn square_length(robot: &str, size: f64) -> f64 {
-    let r = if robot == "titan" {
-        TITAN_CORNER_RADIUS_M
-    } else {
-        0.0
-    };
-    4.0 * size - 3.0 * (2.0 - std::f64::consts::FRAC_PI_2) * r
+fn square_length(corner_radius_m: f64, size: f64) -> f64 {
+    4.0 * size - 3.0 * (2.0 - std::f64::consts::FRAC_PI_2) * corner_radius_m
 }
 
 /// What the simulated chassis really did, asked for as it drives (`chassis sim truth`: the
@@ -126,9 +125,9 @@ impl Truth {
     /// The true drive went around the square and came back: the same rules as
     /// [`Track::assert_went_around`], on the simulator's pose. Sampled every 50 ms, so a corner
     /// passed at speed may be seen up to 50 ms away from its closest point (≈ 3 cm at 0.6 m/s).
-    fn assert_went_around(&self, robot: &str, size: f64, env: &Env) {
-        let length = square_length(robot, size);
-        let reach = corner_offset(robot) + CORNER_LIMIT_M;
+    fn assert_went_around(&self, robot: &str, corner_radius_m: f64, size: f64, env: &Env) {
+        let length = square_length(corner_radius_m, size);
+        let reach = corner_offset(corner_radius_m) + CORNER_LIMIT_M;
         let back = self.here.map_or(f64::INFINITY, |(x, y)| x.hypot(y));
         eprintln!(
             "{robot}: truly travelled {:.2} m; corners truly passed at {:.3?} m; truly ends \
@@ -166,6 +165,8 @@ impl Truth {
 /// corners in either. [`Truth`] checks the same against the simulator's own pose.
 struct Track {
     robot: &'static str,
+    /// The radius of the square's rounded corners, m (0: sharp).
+    corner_radius_m: f64,
     start: Option<(f64, f64, f64)>,
     last: Option<ChassisState>,
     /// Path length of the odometry pose, m.
@@ -183,9 +184,10 @@ struct Track {
 }
 
 impl Track {
-    fn new(robot: &'static str, size: f64) -> Self {
+    fn new(robot: &'static str, corner_radius_m: f64, size: f64) -> Self {
         Self {
             robot,
+            corner_radius_m,
             start: None,
             last: None,
             odometry_m: 0.0,
@@ -240,8 +242,8 @@ impl Track {
     /// the shortest path around it and not much more, every corner passed within its rounding
     /// plus [`CORNER_LIMIT_M`] (both accounts), and the test's integration back at the start.
     fn assert_went_around(&self, size: f64, env: &Env) {
-        let length = square_length(self.robot, size);
-        let reach = corner_offset(self.robot) + CORNER_LIMIT_M;
+        let length = square_length(self.corner_radius_m, size);
+        let reach = corner_offset(self.corner_radius_m) + CORNER_LIMIT_M;
         let (x, y, _) = self.speed_pose;
         let back = x.hypot(y);
         eprintln!(
@@ -350,8 +352,9 @@ fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
     let (mut robot, n) = start(&mut env, robot_kind, "psq");
     let goal = position(&state(&mut robot));
     let size = square_size(robot_kind);
+    let corners = corner_radius(&mut robot);
     let stream = robot.state_stream(256).unwrap();
-    let mut track = Track::new(robot_kind, size.parse().unwrap());
+    let mut track = Track::new(robot_kind, corners, size.parse().unwrap());
     track.drain(&stream);
     let mut truth = Truth::new(size.parse().unwrap());
     truth.sample(&mut robot);
@@ -389,7 +392,7 @@ fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
     assert!(log.contains("following square of"), "no start line\n{log}");
     track.assert_went_around(size.parse().unwrap(), &env);
     truth.sample(&mut robot);
-    truth.assert_went_around(robot_kind, size.parse().unwrap(), &env);
+    truth.assert_went_around(robot_kind, corners, size.parse().unwrap(), &env);
 }
 
 fn teleop_preempts_the_planner_and_hands_back(robot_kind: &'static str) {
@@ -397,8 +400,9 @@ fn teleop_preempts_the_planner_and_hands_back(robot_kind: &'static str) {
     let (mut robot, n) = start(&mut env, robot_kind, "pho");
     let goal = position(&state(&mut robot));
     let size = square_size(robot_kind);
+    let corners = corner_radius(&mut robot);
     let stream = robot.state_stream(256).unwrap();
-    let mut track = Track::new(robot_kind, size.parse().unwrap());
+    let mut track = Track::new(robot_kind, corners, size.parse().unwrap());
     track.drain(&stream);
     let started = Instant::now();
     let planner = env.spawn(
@@ -569,11 +573,116 @@ fn an_xbot_without_its_wheel_separation_has_no_pose_and_the_planner_says_so() {
     let code = env.proc(planner).wait_exit(Duration::from_secs(10));
     let log = env.proc(planner).log_text();
     assert_eq!(code, Some(1), "{}", env.logs());
+    // What to do comes from the description: it gives no track, and the parameters are listed
+    // by `--print-config`.
     assert!(
-        log.contains("publishes no pose") && log.contains("wheel_separation_m"),
+        log.contains("publishes no pose")
+            && log.contains("gives no track")
+            && log.contains("chassisd --robot xbot --print-config"),
         "{log}"
     );
     assert!(state(&mut robot).motion.linear_mps.abs() < 0.01);
+}
+
+/// chassisd's `[profile] max_linear_mps = 0.4` reaches the planner through the robot's
+/// description: with its default cruise speed of 0.8 m/s it drives a line asking for 0.4 m/s at
+/// most — every mux decision while it drives shows what it asked — and the driver never has to
+/// clamp a request of it.
+#[test]
+fn a_configured_speed_limit_reaches_the_planner_which_never_asks_above_it() {
+    const LIMIT_MPS: f64 = 0.4;
+    let mut env = Env::new("plan-limit");
+    let n = name("plim");
+    let config = env.dir.join("limit.toml");
+    std::fs::write(
+        &config,
+        format!("[profile]\nmax_linear_mps = {LIMIT_MPS}\n"),
+    )
+    .unwrap();
+    env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "titan",
+            "--name",
+            &n,
+            "--no-safety-monitor",
+            "--config",
+            config.to_str().unwrap(),
+        ],
+    );
+    let mut robot = env.robot(&n, UP);
+    let described = robot.description(UP).unwrap();
+    assert_eq!(described.effective_limits().forward_mps, LIMIT_MPS);
+    let planner = env.spawn(
+        "planner",
+        "chassis-planner",
+        &["--name", &n, "--shape", "line", "--size", "3", "--json"],
+    );
+    let end = Instant::now() + SQUARE_LIMIT;
+    let mut asked = Vec::new();
+    let mut clamped = 0u32;
+    let mut fastest = 0.0f64;
+    let code = loop {
+        if let Some(s) = robot.wait_state(Duration::from_millis(20)).unwrap() {
+            fastest = fastest.max(f64::from(s.motion.linear_mps));
+        }
+        robot
+            .poll_mux(|m| {
+                if m.active().map(|a| a.name()) == Some("planner") {
+                    asked.push(f64::from(m.requested.linear_x_mps));
+                    if m.clamp_flags & ClampFlags::LINEAR_LIMIT != 0 {
+                        clamped += 1;
+                    }
+                }
+            })
+            .unwrap();
+        if let Ok(Some(status)) = env.proc(planner).child.try_wait() {
+            break status.code();
+        }
+        assert!(
+            Instant::now() < end,
+            "the planner did not finish\n{}",
+            env.logs()
+        );
+    };
+    let log = env.proc(planner).log_text();
+    let most = asked.iter().copied().fold(0.0f64, f64::max);
+    eprintln!(
+        "titan with max_linear_mps = {LIMIT_MPS}: {} decisions for the planner, it asked for at \
+         most {most:.3} m/s, the robot drove at most {fastest:.3} m/s; {clamped} clamped",
+        asked.len()
+    );
+    assert_eq!(code, Some(0), "{}", env.logs());
+    assert!(
+        asked.len() > 50,
+        "{} decisions\n{}",
+        asked.len(),
+        env.logs()
+    );
+    // The request is an f32 on the wire.
+    assert!(most <= LIMIT_MPS + 1e-6, "asked for {most} m/s\n{log}");
+    assert!(
+        most > 0.9 * LIMIT_MPS,
+        "it never drove at its limit: {most} m/s\n{log}"
+    );
+    assert_eq!(
+        clamped, 0,
+        "the driver clamped the planner's requests\n{log}"
+    );
+    assert!(
+        fastest <= LIMIT_MPS + 0.02,
+        "the robot drove at {fastest} m/s"
+    );
+    // The planner says which limits it follows, and where from.
+    let start = log
+        .lines()
+        .find(|l| l.contains("\"event\":\"start\""))
+        .unwrap_or_else(|| panic!("no start line\n{log}"));
+    let start: serde_json::Value = serde_json::from_str(start).unwrap();
+    assert_eq!(start["limits"]["max_linear_mps"], 0.4, "{start}");
+    assert_eq!(start["speed_mps"], 0.4, "{start}");
+    assert_eq!(start["model"], "AgileX TITAN (titan)", "{start}");
 }
 
 #[test]

@@ -101,14 +101,67 @@ fn ready_comes_once_the_state_service_exists_and_status_follows_the_mux() {
     assert_eq!(env.proc(index).wait_exit(Duration::from_secs(3)), Some(0));
 }
 
+/// Voluntary context switches of a thread of process `pid`: its main thread (the event loop's)
+/// with `None`, else the one called `comm` (`None`: no such thread).
+fn switches(pid: u32, comm: Option<&str>) -> Option<u64> {
+    let dir = match comm {
+        None => std::path::PathBuf::from(format!("/proc/{pid}/task/{pid}")),
+        Some(comm) => std::fs::read_dir(format!("/proc/{pid}/task"))
+            .ok()?
+            .flatten()
+            .map(|task| task.path())
+            .find(|dir| {
+                std::fs::read_to_string(dir.join("comm")).is_ok_and(|c| c.trim() == comm)
+            })?,
+    };
+    std::fs::read_to_string(dir.join("status"))
+        .ok()?
+        .lines()
+        .find_map(|l| l.strip_prefix("voluntary_ctxt_switches:"))
+        .and_then(|v| v.trim().parse().ok())
+}
+
+/// The process state letter of `pid` (`T`: stopped).
+fn process_state(pid: u32) -> char {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    stat.rsplit(')')
+        .next()
+        .and_then(|rest| rest.trim_start().chars().next())
+        .unwrap_or('?')
+}
+
+/// The pings come from the event loop itself: with the loop's thread alone stalled (the test
+/// hook `TEST_LOOP_STALL_ENV`: the other threads of the process run on, the simulated chassis
+/// among them), no `WATCHDOG=1` arrives, and the pings resume when the loop does. A ping sent
+/// by a timer thread beside the loop would go on through the stall.
 #[test]
-fn the_loop_pings_the_watchdog_twice_per_period_and_a_stopped_loop_does_not() {
+fn the_watchdog_pings_come_from_the_loop_and_stop_while_it_stalls() {
     let mut env = Env::new("sd-watchdog");
     let n = name("sdw");
     let (socket, path) = notify_socket(&env);
     let period = Duration::from_millis(400);
-    let index = start_notified(&mut env, &n, &path, Some(400_000));
+    let stall_file = env.dir.join("stall-loop");
+    let socket_path = path.to_string_lossy().into_owned();
+    let stall_path = stall_file.to_string_lossy().into_owned();
+    let index = env.spawn_program(
+        "chassisd",
+        &bin("chassisd"),
+        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+        &[
+            ("NOTIFY_SOCKET", socket_path.as_str()),
+            ("WATCHDOG_USEC", "400000"),
+            (TEST_LOOP_STALL_ENV, stall_path.as_str()),
+        ],
+    );
     until(&socket, "READY=1", UP, &env);
+    let pid = env.proc(index).child.id();
+    assert!(
+        env.proc(index)
+            .log_text()
+            .contains("a test hook stalls the event loop"),
+        "the hook was not armed\n{}",
+        env.logs()
+    );
     let mut pings = Vec::new();
     let window = Duration::from_secs(2);
     let end = Instant::now() + window;
@@ -117,53 +170,123 @@ fn the_loop_pings_the_watchdog_twice_per_period_and_a_stopped_loop_does_not() {
             pings.push(Instant::now());
         }
     }
+    let worst = pings
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .max()
+        .unwrap_or(window);
+
+    // Stall the loop's thread for 1 s: the request is written whole, then moved into place.
+    let stall = Duration::from_millis(1000);
+    let request = env.dir.join("stall-loop.new");
+    std::fs::write(&request, stall.as_millis().to_string()).unwrap();
+    std::fs::rename(&request, &stall_file).unwrap();
+    let taken = wait_for(Duration::from_secs(1), || !stall_file.exists());
+    // The loop removes the file right before it sleeps, after the pass's own ping (if one was
+    // due): whatever is in the socket now was sent before the stall.
+    let stalled_at = Instant::now();
+    while next(&socket, Duration::from_millis(1)).is_some() {}
+    let sim_before = switches(pid, Some("sim-titan"));
+    let loop_before = switches(pid, None);
+    let state_during = process_state(pid);
+    let mut while_stalled = 0;
+    let quiet_until = stalled_at + stall - Duration::from_millis(50);
+    while Instant::now() < quiet_until {
+        let wait = quiet_until.saturating_duration_since(Instant::now());
+        if next(&socket, wait.max(Duration::from_millis(1))).is_some_and(|m| m == "WATCHDOG=1")
+            && Instant::now() < quiet_until
+        {
+            while_stalled += 1;
+        }
+    }
+    let sim_after = switches(pid, Some("sim-titan"));
+    let loop_after = switches(pid, None);
+    // The loop comes back: the first ping after the stall.
+    let mut resumed = None;
+    let end = stalled_at + Duration::from_secs(3);
+    while resumed.is_none() && Instant::now() < end {
+        if next(&socket, Duration::from_millis(20)).is_some_and(|m| m == "WATCHDOG=1") {
+            resumed = Some(stalled_at.elapsed());
+        }
+    }
+    let running = env.proc(index).is_running();
+    // Other threads ran while the loop slept: the simulated chassis woke for its frames (every
+    // 20 ms), the loop not at all.
+    let sim_ran = sim_before
+        .zip(sim_after)
+        .map_or(0, |(b, a)| a.saturating_sub(b));
+    let loop_ran = loop_before
+        .zip(loop_after)
+        .map_or(u64::MAX, |(b, a)| a.saturating_sub(b));
+    let others_ran = sim_ran >= 10 && loop_ran == 0 && state_during != 'T';
+    // Back within a ping period (100 ms) of the stall's end, with a loaded machine's allowance.
+    let back_bound = stall + period / 4 + Duration::from_millis(200);
+    let back_in_time =
+        resumed.is_some_and(|r| r >= stall - Duration::from_millis(50) && r <= back_bound);
+    let resumed_ms = resumed.map_or(f64::NAN, |r| r.as_secs_f64() * 1e3);
+    let pass = taken.is_some()
+        && worst < period
+        && pings.len() >= 2 * (window.as_millis() / period.as_millis()) as usize
+        && while_stalled == 0
+        && others_ran
+        && back_in_time
+        && running;
+    let mut figures = Figures::faults();
+    figures.add(Figure {
+        rank: 720,
+        fault: "chassisd's event loop stalls (hung) under a systemd watchdog".into(),
+        injection: format!(
+            "WATCHDOG_USEC {} ms on a notify socket of the test's; the loop's thread alone \
+             stalled for {} ms (the test hook {TEST_LOOP_STALL_ENV}; the process's other threads \
+             run on)",
+            period.as_millis(),
+            stall.as_millis()
+        ),
+        behaviour: "WATCHDOG=1 from the loop four times per period; none while the loop stalled \
+                    (systemd would restart the service) though the simulated chassis' thread \
+                    kept running; pings again once the loop ran"
+            .into(),
+        figure: format!(
+            "{} pings in {} s, longest gap {:.0} ms; {while_stalled} while stalled (the \
+             simulated chassis' thread woke {sim_ran} times meanwhile, the loop's {loop_ran}); \
+             the first ping {resumed_ms:.0} ms after the stall began",
+            pings.len(),
+            window.as_secs(),
+            worst.as_secs_f64() * 1e3,
+        ),
+        value: worst.as_secs_f64() * 1e3,
+        pass,
+        suite: "systemd".into(),
+        test: "the_watchdog_pings_come_from_the_loop_and_stop_while_it_stalls".into(),
+    });
+    assert!(
+        taken.is_some(),
+        "the loop never took the stall request\n{}",
+        env.logs()
+    );
     assert!(
         pings.len() >= 2 * (window.as_millis() / period.as_millis()) as usize,
         "{} pings in {window:?} with WATCHDOG_USEC {period:?}",
         pings.len()
     );
-    let worst = pings.windows(2).map(|w| w[1] - w[0]).max().unwrap();
-
-    // A loop that does not run (stopped, as a hung one would be) sends nothing.
-    let pid = env.proc(index).pid();
-    nix::sys::signal::kill(pid, Signal::SIGSTOP).unwrap();
-    pause(Duration::from_millis(100));
-    while next(&socket, Duration::from_millis(10)).is_some() {}
-    let while_stopped = next(&socket, Duration::from_secs(1));
-    nix::sys::signal::kill(pid, Signal::SIGCONT).unwrap();
-    let seen = until(&socket, "WATCHDOG=1", Duration::from_secs(2), &env);
-    let running = env.proc(index).is_running();
-    record_figure(&Figure {
-        rank: 720,
-        fault: "chassisd's event loop stops (hung) under a systemd watchdog".into(),
-        injection: format!(
-            "WATCHDOG_USEC {} ms on a notify socket of the test's; SIGSTOP for 1 s, then SIGCONT",
-            period.as_millis()
-        ),
-        behaviour: "WATCHDOG=1 from the loop four times per period; none while stopped (systemd \
-                    would restart the service); pings again after SIGCONT"
-            .into(),
-        figure: format!(
-            "{} pings in {} s, longest gap {:.0} ms; {} while stopped",
-            pings.len(),
-            window.as_secs(),
-            worst.as_secs_f64() * 1e3,
-            if while_stopped.is_some() {
-                "a ping"
-            } else {
-                "none"
-            }
-        ),
-        value: worst.as_secs_f64() * 1e3,
-        pass: worst < period && while_stopped.is_none() && running,
-        suite: "systemd".into(),
-        test: "the_loop_pings_the_watchdog_twice_per_period_and_a_stopped_loop_does_not".into(),
-    });
     assert!(worst < period, "a gap of {worst:?} between pings");
-    assert_eq!(while_stopped, None, "a notification from a stopped process");
-    assert!(!seen.is_empty());
-    assert!(running, "SIGCONT stopped the service\n{}", env.logs());
+    assert_eq!(
+        while_stalled, 0,
+        "pings while the loop stalled: not from the loop"
+    );
+    assert!(
+        others_ran,
+        "the simulated chassis' thread woke {sim_ran} times, the loop's {loop_ran}, process \
+         state {state_during}: not the loop alone stalled"
+    );
+    assert!(
+        back_in_time,
+        "the first ping {resumed:?} after a stall of {stall:?} (bound {back_bound:?})\n{}",
+        env.logs()
+    );
+    assert!(running, "the stall stopped the service\n{}", env.logs());
     env.proc(index).signal(Signal::SIGKILL);
+    figures.finish();
 }
 
 /// Scheduling policy and real-time priority of `pid`'s main thread (the loop's).

@@ -1,6 +1,7 @@
 //! The operator's tools against a running chassisd: `chassis-teleop` in a real terminal (tmux:
-//! keys sent with `send-keys`, the screen read with `capture-pane`), and `chassis top --once`.
-//! The teleop test is skipped, with a notice, where `tmux` is not installed.
+//! keys sent with `send-keys`, the screen read with `capture-pane`), `chassis top --once` and
+//! `chassis status`, each showing the robot as chassisd describes it. The teleop tests are
+//! skipped, with a notice, where `tmux` is not installed.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::time::{Duration, Instant};
@@ -60,6 +61,9 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
     );
     assert!(screen.contains("DRIVING"), "{screen}");
     assert!(screen.contains("active     teleop"), "{screen}");
+    // The robot as chassisd describes it.
+    assert!(screen.contains("AgileX TITAN (titan)"), "{screen}");
+    assert!(screen.contains("robot: ≤ 3.00 m/s forward"), "{screen}");
 
     // Let go: the hold lapses (200 ms after the last repeat), one stop goes out, the command
     // on the wire is zero at once and the simulated TITAN coasts to a halt (a first-order lag
@@ -193,4 +197,176 @@ fn top_once_prints_rates_per_can_id_and_the_active_source() {
     assert!(text.contains("motion_command"), "{text}");
     assert!(text.contains("0 dropped (seq gaps)"), "{text}");
     assert!(text.contains("state age"), "{text}");
+}
+
+/// chassisd's `[profile] max_linear_mps = 0.3` on a TITAN: the teleop reads it from the robot's
+/// description, its speed steps stop there (`+` pressed a dozen times), and holding `w` asks the
+/// mux for 0.3 m/s at most — without the driver having to clamp it.
+#[test]
+fn teleop_in_a_terminal_steps_no_faster_than_the_limit_chassisd_describes() {
+    if !tmux_available() {
+        eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
+        return;
+    }
+    let mut env = Env::new("teleop-limit");
+    let n = name("tlim");
+    let config = env.dir.join("limit.toml");
+    std::fs::write(&config, "[profile]\nmax_linear_mps = 0.3\n").unwrap();
+    env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "titan",
+            "--name",
+            &n,
+            "--no-safety-monitor",
+            "--config",
+            config.to_str().unwrap(),
+        ],
+    );
+    let mut robot = env.robot(&n, UP);
+    let log = env.dir.join("teleop.log");
+    let command = format!(
+        "env {}={} RUST_LOG=info {} --name {n} 2>{}; echo chassis-teleop exited $?; sleep 60",
+        IPC_PREFIX_ENV,
+        quote(&env.prefix),
+        quote(&bin("chassis-teleop").to_string_lossy()),
+        quote(&log.to_string_lossy()),
+    );
+    let tmux = Tmux::start(&env.dir, "tmux", &command);
+    tmux.wait_for_text("idle — publishing nothing", UP);
+    for _ in 0..12 {
+        tmux.send("+");
+    }
+    // 0.3 m/s in steps of 0.1 is three steps; the yaw rate's 1.0 rad/s in steps of 0.2, five.
+    let screen = tmux.wait_for_text("step 5/5: 0.30 m/s, 1.00 rad/s", UP);
+    assert!(screen.contains("robot: ≤ 0.30 m/s forward"), "{screen}");
+    let start = Instant::now();
+    let mut asked = 0.0f32;
+    let mut decisions = 0;
+    let mut clamped = 0;
+    while start.elapsed() < Duration::from_millis(1500) {
+        tmux.send("w");
+        let _ = robot.wait_state(Duration::from_millis(30));
+        robot
+            .poll_mux(|m| {
+                if m.active().is_some_and(|s| s.name() == "teleop") {
+                    decisions += 1;
+                    asked = asked.max(m.requested.linear_x_mps);
+                    if m.clamp_flags & ClampFlags::LINEAR_LIMIT != 0 {
+                        clamped += 1;
+                    }
+                }
+            })
+            .unwrap();
+    }
+    eprintln!(
+        "titan with max_linear_mps = 0.3: teleop asked for at most {asked} m/s in {decisions} \
+         decisions, {clamped} clamped"
+    );
+    assert!(decisions > 10, "teleop never drove\n{}", tmux.screen());
+    assert!(f64::from(asked) <= 0.3, "asked for {asked} m/s");
+    assert!(asked > 0.29, "asked for {asked} m/s");
+    assert_eq!(clamped, 0, "the driver clamped teleop's requests");
+    tmux.send("q");
+    tmux.wait_for_text("chassis-teleop exited 0", Duration::from_secs(5));
+}
+
+/// `chassis top --once` and `chassis status` (text and `--json`) on a HUNTER 2.0 with
+/// `[profile] max_linear_mps = 0.4`: what the robot is, its effective limits, every frame of
+/// its AgileX V2 exchange named by the registry's codec of the described robot.
+#[test]
+fn top_and_status_show_the_robot_as_described_and_name_every_frame() {
+    let mut env = Env::new("top-hunter");
+    let n = name("toph");
+    let config = env.dir.join("hunter.toml");
+    std::fs::write(&config, "[profile]\nmax_linear_mps = 0.4\n").unwrap();
+    env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "hunter",
+            "--name",
+            &n,
+            "--no-safety-monitor",
+            "--config",
+            config.to_str().unwrap(),
+        ],
+    );
+    let mut robot = env.robot(&n, UP);
+    env.spawn(
+        "pub",
+        "chassis",
+        &[
+            "pub",
+            "velocity",
+            "--source",
+            "teleop",
+            "--vx",
+            "0.2",
+            "--duration",
+            "6",
+            "--name",
+            &n,
+        ],
+    );
+    let driving = wait_for(UP, || {
+        mux(&mut robot)
+            .active()
+            .is_some_and(|s| s.name() == "teleop")
+    });
+    assert!(driving.is_some(), "teleop never won\n{}", env.logs());
+    let out = env.chassis(&["top", "--once", "--name", &n]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("AgileX HUNTER 2.0 (hunter)"), "{text}");
+    assert!(text.contains("limits    forward 0.40"), "{text}");
+    assert!(text.contains("protocol v2"), "{text}");
+    let rows: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("RX  0x") || l.starts_with("TX  0x"))
+        .collect();
+    assert!(rows.len() >= 3, "{text}");
+    for row in &rows {
+        assert!(!row.contains(" ? "), "an unnamed frame: {row}\n{text}");
+    }
+    assert!(
+        rows.iter()
+            .any(|r| r.starts_with("TX  0x111") && r.contains("motion_command")),
+        "{text}"
+    );
+
+    let out = env.chassis(&["status", "--name", &n]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(
+        text.contains("robot      AgileX HUNTER 2.0 (hunter)"),
+        "{text}"
+    );
+    assert!(
+        text.contains("limits     forward 0.40 · reverse 0.40 m/s"),
+        "{text}"
+    );
+    assert!(text.contains("config     safety 255"), "{text}");
+    let out = env.chassis(&["status", "--name", &n, "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let d = &json["description"];
+    assert_eq!(d["kind_name"], "hunter", "{json}");
+    assert_eq!(d["effective_limits"]["forward_mps"], 0.4, "{json}");
+    assert_eq!(d["robot_limits"]["forward_mps"], 0.4, "{json}");
+    assert_eq!(d["protocol_name"], "v2", "{json}");
+    assert!(
+        d["sources"]
+            .as_array()
+            .is_some_and(|s| s.iter().any(|s| s["name"] == "teleop")),
+        "{json}"
+    );
+    assert!(
+        json["state"].is_object() && json["mux"].is_object(),
+        "{json}"
+    );
 }

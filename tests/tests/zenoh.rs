@@ -469,7 +469,7 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
         &python,
         &env,
         &link,
-        &n,
+        &mut robot,
         &listen,
         &["--certs", certs.to_str().unwrap()],
     );
@@ -511,15 +511,21 @@ fn python() -> PathBuf {
 }
 
 /// Runs tests/zenoh/read_state.py in the operator's namespace (it publishes on `cmd/safety`
-/// too); returns its summary line.
+/// too), expecting the robot kind `robot`'s description gives; returns its summary line.
 fn read_state(
     python: &Path,
     env: &Env,
     link: &Link,
-    n: &str,
+    robot: &mut Robot,
     connect: &str,
     extra: &[&str],
 ) -> String {
+    let n = robot.name().to_string();
+    let kind = robot
+        .description(UP)
+        .unwrap_or_else(|e| panic!("no description of {n}: {e}\n{}", env.logs()))
+        .kind
+        .to_string();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("zenoh/read_state.py");
     let out = Command::new("ip")
         .args(["netns", "exec", &link.operator_ns])
@@ -529,7 +535,9 @@ fn read_state(
             "--connect",
             connect,
             "--name",
-            n,
+            &n,
+            "--kind",
+            &kind,
             "--count",
             "50",
             "--put-source",
@@ -554,8 +562,8 @@ fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() 
     let link = Link::new();
     let mut env = Env::new("zenoh-python");
     let n = name("zpy");
-    robot_side(&mut env, &link, &n);
-    let stdout = read_state(&python, &env, &link, &n, &endpoint("tcp"), &[]);
+    let mut robot = robot_side(&mut env, &link, &n);
+    let stdout = read_state(&python, &env, &link, &mut robot, &endpoint("tcp"), &[]);
     let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     eprintln!("Python eclipse-zenoh reader: {summary}");
     assert_eq!(summary["samples"], 50);

@@ -3,13 +3,16 @@
 
 Started by tests/tests/zenoh.rs inside the operator's network namespace::
 
-    python read_state.py --connect tcp/10.77.0.1:7447 --name titan --count 50 [--put-source safety]
-    python read_state.py --connect tls/10.77.0.1:7447 --certs DIR --name titan …
+    python read_state.py --connect tcp/10.77.0.1:7447 --name titan --kind 1 --count 50 \
+        [--put-source safety]
+    python read_state.py --connect tls/10.77.0.1:7447 --certs DIR --name titan --kind 1 …
 
 It checks the encoding (``application/octet-stream;<ChassisState's type name>``), the size,
-the robot kind and that ``seq`` rises; it matches JSON twins (``…/state/json``) with the binary
-sample of the same ``seq``, field by field. With ``--put-source S`` it also publishes velocity
-requests on ``chassis/<name>/cmd/S`` (which the robot side must refuse unless S is remote).
+that the robot kind is the one chassisd describes (``--kind``: the description's ``kind``, which
+the test reads on the robot's side) and that ``seq`` rises; it matches JSON twins
+(``…/state/json``) with the binary sample of the same ``seq``, field by field. With
+``--put-source S`` it also publishes velocity requests on ``chassis/<name>/cmd/S`` (which the
+robot side must refuse unless S is remote).
 Prints a JSON summary on stdout; exits 1 with the reason on stderr when a check fails.
 """
 
@@ -67,6 +70,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--connect", required=True)
     parser.add_argument("--name", required=True)
+    parser.add_argument(
+        "--kind", type=int, required=True, help="the robot kind its description gives (a number)"
+    )
     parser.add_argument("--count", type=int, default=50)
     parser.add_argument("--timeout", type=float, default=20.0)
     parser.add_argument("--put-source")
@@ -110,8 +116,8 @@ def main() -> None:
         state = chassis.ChassisState.from_buffer_copy(payload)
         if state.seq <= last_seq:
             fail(f"seq went from {last_seq} to {state.seq}")
-        if state.robot != chassis.RobotKind.TITAN:
-            fail(f"robot kind {state.robot}, expected TITAN ({chassis.RobotKind.TITAN})")
+        if state.robot != args.kind:
+            fail(f"robot kind {state.robot}, the description gives {args.kind}")
         if state.stamp_ns == 0:
             fail("a state without its stamp")
         last_seq = state.seq

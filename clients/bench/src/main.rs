@@ -251,15 +251,10 @@ fn transport_of(mode: LoopMode) -> Transport {
     }
 }
 
-/// The period of `robot`'s heartbeat: the service's tick on that robot.
+/// The period of `robot`'s heartbeat: the service's tick on that robot (the registry's, of its
+/// default profile).
 fn tick_of(robot: RobotKind) -> Duration {
-    use chassis_protocols::Profile;
-    match robot.entry().defaults() {
-        Profile::Titan(p) => Duration::from_millis(p.heartbeat_period_ms),
-        Profile::ScoutMini(p) => Duration::from_millis(p.heartbeat_period_ms),
-        Profile::Xbot(p) => Duration::from_secs_f64(1.0 / p.heartbeat_hz),
-        Profile::V2(p) => Duration::from_millis(p.heartbeat_period_ms),
-    }
+    chassis_protocols::registry::heartbeat_period(&robot.entry().defaults())
 }
 
 fn bus_label(robot: RobotKind, bus: BusKind) -> String {

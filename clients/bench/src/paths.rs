@@ -15,11 +15,11 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::{
-    BusFrame, ChassisState, FrameDirection, FrameKind, Robot, SimKind, SimRequest, Source, Ticker,
-    VelocityRequest, now_ns,
+    BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, Robot, SimKind, SimRequest,
+    Source, Ticker, VelocityRequest, now_ns,
 };
-use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{CanFrame, Profile, RobotKind, agilex_v2, scout_mini, titan, xbot};
+use chassis_protocols::describe::{FrameJson, RobotCodec};
+use chassis_protocols::{CanFrame, RobotKind};
 use serde::Serialize;
 
 use zerocopy::IntoBytes;
@@ -145,7 +145,7 @@ pub fn start(
                     "--bus",
                     &sim_bus,
                 ])
-                .env("CHASSIS_IPC_PREFIX", prefix)
+                .env(IPC_PREFIX_ENV, prefix)
                 .env("RUST_LOG", "warn")
                 .stdout(log("sim")?)
                 .stderr(log("sim-err")?)
@@ -196,7 +196,7 @@ pub fn start(
     }
     let service = Command::new(&chassisd)
         .args(&args)
-        .env("CHASSIS_IPC_PREFIX", prefix)
+        .env(IPC_PREFIX_ENV, prefix)
         .env("RUST_LOG", "warn")
         .stdout(log("chassisd")?)
         .stderr(log("chassisd-err")?)
@@ -236,17 +236,18 @@ pub fn start(
     Ok((service, robot_conn))
 }
 
-/// The linear speed a transmitted motion frame commands, if the frame is one.
+/// The linear speed a transmitted motion frame commands, if the frame is one: the frame as the
+/// robot's codec of the registry describes it (`(entry.codec)(profile)`, what `chassis decode`
+/// prints), a serial robot's frames found in its byte stream.
 struct MotionDecoder {
-    robot: RobotKind,
-    xbot: xbot::StreamParser,
+    codec: RobotCodec,
 }
 
 impl MotionDecoder {
     fn new(robot: RobotKind) -> Self {
+        let entry = robot.entry();
         Self {
-            robot,
-            xbot: xbot::StreamParser::new(),
+            codec: (entry.codec)(entry.defaults()),
         }
     }
 
@@ -254,51 +255,28 @@ impl MotionDecoder {
         if frame.direction != FrameDirection::TX {
             return None;
         }
-        match self.robot {
-            RobotKind::Titan | RobotKind::ScoutMini => {
-                if frame.kind != FrameKind::CAN {
-                    return None;
-                }
-                let can = CanFrame::new(frame.can_id, frame.payload()).ok()?;
-                if self.robot == RobotKind::Titan {
-                    match titan::decode(&can, &TitanProfile::default()).ok()? {
-                        titan::Frame::MotionCommand(m) => Some(m.linear_mps),
-                        _ => None,
-                    }
-                } else {
-                    match scout_mini::decode(&can, &ScoutMiniProfile::default())
-                        .ok()?
-                        .frame
-                    {
-                        scout_mini::Frame::MotionCommand(m) => Some(m.linear_mps),
-                        _ => None,
-                    }
-                }
-            }
-            RobotKind::Xbot => {
-                self.xbot.push(frame.payload());
-                let mut found = None;
-                while let Some(item) = self.xbot.next_frame(&XbotProfile::default()) {
-                    if let Ok(xbot::Frame::Velocity(v)) = item {
-                        found = Some(v.linear_x_mps);
-                    }
-                }
-                found
-            }
-            v2 => {
-                if frame.kind != FrameKind::CAN {
-                    return None;
-                }
-                let can = CanFrame::new(frame.can_id, frame.payload()).ok()?;
-                let Profile::V2(profile) = v2.entry().defaults() else {
-                    return None;
-                };
-                match agilex_v2::decode(&can, &profile).ok()? {
-                    agilex_v2::Frame::MotionCommand(m) => Some(m.linear_mps),
-                    _ => None,
-                }
-            }
-        }
+        let decoded: Vec<FrameJson> = if frame.kind == FrameKind::CAN {
+            let can = CanFrame::new(frame.can_id, frame.payload()).ok()?;
+            vec![self.codec.decode_can(&can).ok()?]
+        } else {
+            self.codec
+                .push_serial(frame.payload())
+                .into_iter()
+                .filter_map(Result::ok)
+                .collect()
+        };
+        decoded.iter().rev().find_map(commanded_speed)
+    }
+}
+
+/// The forward speed a motion frame commands (`motion_command` of the CAN robots, `velocity` of
+/// the serial ones), m/s.
+fn commanded_speed(json: &FrameJson) -> Option<f64> {
+    match json.get("frame")?.as_str()? {
+        "motion_command" | "velocity" => ["linear_mps", "linear_x_mps"]
+            .iter()
+            .find_map(|key| json.get(*key)?.as_f64()),
+        _ => None,
     }
 }
 
@@ -786,4 +764,65 @@ pub fn cost_at(
         cpu_pct: 100.0 * cpu / elapsed,
         rss_mib: rss,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassis_client::Twist;
+    use chassis_protocols::driver::DriverConfig;
+    use chassis_protocols::pair::Pair;
+    use chassis_protocols::{Direction, Timestamp, Transmit};
+
+    /// Every robot's driver asked for 0.3 m/s against its simulated firmware: the command path
+    /// finds that speed in the motion frames it wrote, as the tap shows them (a serial robot's
+    /// frames cut into chunks), by the robot's codec of the registry.
+    #[test]
+    fn every_robots_motion_frames_tell_the_speed_they_command() {
+        for kind in RobotKind::ALL {
+            let entry = kind.entry();
+            let profile = entry.defaults();
+            let start = Timestamp::from_millis(1_000);
+            let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
+            let firmware = (entry.firmware)(&profile, start);
+            let mut pair = Pair::new(driver, firmware, start);
+            pair.run_for(Duration::from_secs(2));
+            pair.record = true;
+            pair.set_command(Twist {
+                linear_x_mps: 0.3,
+                ..Twist::ZERO
+            });
+            pair.run_for(Duration::from_millis(500));
+            let mut decoder = MotionDecoder::new(kind);
+            let mut speeds = Vec::new();
+            for record in pair.log() {
+                let mut frame = BusFrame {
+                    direction: match record.direction {
+                        Direction::ToChassis => FrameDirection::TX,
+                        Direction::FromChassis => FrameDirection::RX,
+                    },
+                    ..BusFrame::default()
+                };
+                let chunks: Vec<Vec<u8>> = match &record.item {
+                    Transmit::Can(can) => {
+                        frame.kind = FrameKind::CAN;
+                        frame.can_id = can.id();
+                        vec![can.data().to_vec()]
+                    }
+                    Transmit::Bytes(bytes) => {
+                        frame.kind = FrameKind::SERIAL;
+                        bytes.chunks(3).map(<[u8]>::to_vec).collect()
+                    }
+                };
+                for chunk in chunks {
+                    frame.set_payload(&chunk);
+                    speeds.extend(decoder.linear(&frame));
+                }
+            }
+            assert!(
+                speeds.iter().any(|v| (v - 0.3).abs() < 1e-6),
+                "{kind}: speeds on the wire {speeds:?}"
+            );
+        }
+    }
 }

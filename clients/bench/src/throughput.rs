@@ -71,7 +71,7 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
         ])
         .arg("--bus")
         .arg(format!("replay:{}@max", file.display()))
-        .env("CHASSIS_IPC_PREFIX", prefix)
+        .env(chassis_client::IPC_PREFIX_ENV, prefix)
         .env("RUST_LOG", "warn")
         .stdout(Stdio::null())
         .stderr(Stdio::from(log))

@@ -124,7 +124,7 @@ fn zenoh_in(ns: &str, prefix: &str, args: &[&str], log: &Path) -> anyhow::Result
     cmd.args(["netns", "exec", ns])
         .arg(paths::sibling("chassis-zenoh")?)
         .args(args)
-        .env("CHASSIS_IPC_PREFIX", prefix)
+        .env(chassis_client::IPC_PREFIX_ENV, prefix)
         .env("RUST_LOG", "warn,zenoh=error")
         .stdout(Stdio::null())
         .stderr(Stdio::from(

@@ -24,7 +24,7 @@ use std::time::Duration;
 use anyhow::Context as _;
 use chassis_client::{
     ChassisState, ControlMode, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus, Robot,
-    RobotDescription, RobotKind, WireProtocol, ZeroReason, install_signal_handlers, now_ns,
+    RobotDescription, WireProtocol, ZeroReason, install_signal_handlers, now_ns,
     termination_requested,
 };
 use clap::Args;
@@ -162,7 +162,11 @@ fn row(name: &str, seen: &Seen, now_ns: u64) -> Row {
     let s = seen.state.as_ref();
     let d = seen.description.as_ref();
     let kind = d.map_or_else(
-        || s.map_or("?", |s| RobotKind::name(s.robot)).to_string(),
+        || {
+            s.and_then(|s| chassis_protocols::RobotKind::from_id(s.robot))
+                .map_or("?", chassis_protocols::RobotKind::name)
+                .to_string()
+        },
         |d| d.kind_name().to_string(),
     );
     let protocol = match (s, d) {

@@ -6,9 +6,9 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, ClampFlags, ControlKind, ControlMode, ControlRequest, ControlStatus,
-    FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus, Robot, SimKind,
-    SimRequest, SourceFlags, Ticker, VelocityRequest, WireProtocol, ZeroReason,
-    install_signal_handlers, now_ns, termination_requested,
+    FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus, Robot,
+    RobotDescription, SimKind, SimRequest, SimTruthPage, SourceFlags, Ticker, VelocityRequest,
+    WireProtocol, ZeroReason, install_signal_handlers, now_ns, termination_requested,
 };
 use chassis_protocols::command_to_request;
 use chassis_protocols::describe;
@@ -16,6 +16,7 @@ use chassis_protocols::titan::BmsAlarm;
 use clap::{Args, Subcommand, ValueEnum};
 
 use crate::action::{Action, OnOff, VelocityArgs};
+use crate::described;
 
 /// How long a request may wait for the service's answer.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
@@ -126,8 +127,12 @@ pub enum SimCmd {
     BadChecksums { frames: u32 },
     /// FRAMES_PER_S extra feedback frames (0 stops).
     Flood { frames_per_s: u32 },
-    /// What the simulated chassis really does: its true pose and speeds (not what it reports).
-    Truth,
+    /// What the simulated chassis really does: its true pose and speeds (not what it reports);
+    /// --injected: the garbage, bad-checksum and flood frames it has sent since power-up.
+    Truth {
+        #[arg(long)]
+        injected: bool,
+    },
     /// The speed loop runs away: the chassis drives at SPEED m/s (negative: reverse) whatever
     /// it is commanded, past its limits; --clear gives the control back.
     Runaway {
@@ -413,6 +418,12 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
         None => inherited,
     };
     let age = state.map_or(String::new(), |s| age_text(s.stamp_ns));
+    // What the robot is (published with history 1: a new reader has it within a tick).
+    let description = match robot.description(Duration::from_millis(500)) {
+        Ok(d) => Some(d),
+        Err(chassis_client::ClientError::NoDescription { .. }) => None,
+        Err(e) => return Err(e.into()),
+    };
     // The safety monitor's status, when one has made its service (a new reader gets the latest
     // sample with the monitor's next publication, at least every 100 ms).
     let safety = match robot
@@ -424,14 +435,20 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     if json {
         println!(
             "{}",
-            serde_json::json!({ "name": name, "state": state, "mux": mux, "safety": safety.flatten() })
+            serde_json::json!({
+                "name": name,
+                "description": description.as_ref().map(described::json),
+                "state": state,
+                "mux": mux,
+                "safety": safety.flatten(),
+            })
         );
         return Ok(());
     }
     let Some(s) = state else {
         bail!("chassis/{name} published no state within 1 s");
     };
-    print!("{}", state_report(name, &s, &age));
+    print!("{}", state_report(name, &s, description.as_ref(), &age));
     if let Some(m) = mux {
         println!("{}", mux_summary(&m));
     }
@@ -441,16 +458,42 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// What `chassis status` says about one state sample: robot, bus, mode, motion, command,
-/// battery, faults and warnings by name (with the chassis' own fault word), and — where the
-/// robot reports them — its motor drivers' status bits and its BMS alarms.
-fn state_report(name: &str, s: &ChassisState, age: &str) -> String {
+/// What `chassis status` says about one state sample: the robot as chassisd describes it
+/// (model, limits, sensors, joints), bus, mode, motion, command, battery against the described
+/// levels, faults and warnings by name (with the chassis' own fault word), where the robot
+/// reports them its motor drivers' status bits and its BMS alarms, and the configured sources.
+fn state_report(
+    name: &str,
+    s: &ChassisState,
+    description: Option<&RobotDescription>,
+    age: &str,
+) -> String {
     let mut lines = Vec::new();
-    lines.push(format!(
-        "robot      {} (chassis/{name})   state #{}, {age} old",
-        chassis_client::RobotKind::name(s.robot),
-        s.seq,
-    ));
+    match description {
+        Some(d) => {
+            lines.push(format!(
+                "robot      {} · chassis/{name}   state #{}, {age} old",
+                described::title(d),
+                s.seq,
+            ));
+            lines.push(format!("model      {}", described::model_line(d)));
+            lines.push(format!("limits     {}", described::limits_line(d)));
+            if let Some(origin) = described::limits_origin_line(d) {
+                lines.push(format!("           {origin}"));
+            }
+            if let Some(sensors) = described::sensors_line(d) {
+                lines.push(format!("sensors    {sensors}"));
+            }
+            if let Some(joints) = described::joints_line(d) {
+                lines.push(format!("joints     {joints}"));
+            }
+        }
+        None => lines.push(format!(
+            "robot      robot kind {} (chassis/{name}, no description: chassisd older than the \
+             robot description?)   state #{}, {age} old",
+            s.robot, s.seq,
+        )),
+    }
     let link = &s.link;
     let health = if s.has_link_flag(LinkFlags::BUS_DOWN) {
         "DOWN"
@@ -492,13 +535,8 @@ fn state_report(name: &str, s: &ChassisState, age: &str) -> String {
         ClampFlags::names(s.command.clamp_flags).join(", ")
     ));
     lines.push(format!(
-        "battery    {:.1} V{}",
-        s.system.battery_voltage_v,
-        if s.is_valid(chassis_client::Group::BmsPack) {
-            format!("  {:.0} %", s.system.battery_soc_pct)
-        } else {
-            String::new()
-        }
+        "battery    {}",
+        described::battery_line(Some(s), description)
     ));
     let listed = |bits: u64| listed_names(&FaultFlags::names(bits));
     lines.push(format!(
@@ -550,6 +588,9 @@ fn state_report(name: &str, s: &ChassisState, age: &str) -> String {
                 listed_names(&alarm.warning_names())
             ));
         }
+    }
+    if let Some(d) = description {
+        lines.push(format!("config     {}", described::sources_line(d)));
     }
     let mut text = lines.join("\n");
     text.push('\n');
@@ -763,7 +804,14 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
         SimCmd::Flood { frames_per_s } => {
             request(SimKind::FLOOD, true, 0, f64::from(*frames_per_s))
         }
-        SimCmd::Truth => request(SimKind::TRUTH, false, 0, 0.0),
+        SimCmd::Truth { injected } => {
+            let page = if *injected {
+                SimTruthPage::INJECTED
+            } else {
+                SimTruthPage::MOTION
+            };
+            request(SimKind::TRUTH, false, page, 0.0)
+        }
         SimCmd::Runaway { speed, clear } => match (speed, clear) {
             (_, true) => request(SimKind::RUNAWAY, false, 0, 0.0),
             (Some(v), false) if v.is_finite() => request(SimKind::RUNAWAY, true, 0, *v),
@@ -794,7 +842,10 @@ mod tests {
     fn line<'a>(report: &'a str, head: &str) -> &'a str {
         report
             .lines()
-            .find(|l| l.starts_with(head))
+            .find(|l| {
+                l.strip_prefix(head)
+                    .is_some_and(|rest| rest.starts_with(' '))
+            })
             .unwrap_or_else(|| panic!("no '{head}' line in\n{report}"))
     }
 
@@ -811,10 +862,18 @@ mod tests {
                 "211#0100010000800000",
             ],
         );
-        let report = state_report("bunker", &s, "5 ms");
+        let described =
+            chassis_protocols::description::describe(&RobotKind::Bunker.entry().defaults());
+        let report = state_report("bunker", &s, Some(&described), "5 ms");
         assert!(
-            line(&report, "robot").starts_with("robot      bunker (chassis/bunker)"),
+            line(&report, "robot")
+                .starts_with("robot      AgileX BUNKER (bunker) · chassis/bunker"),
             "{report}"
+        );
+        let without = state_report("bunker", &s, None, "5 ms");
+        assert!(
+            line(&without, "robot").contains("no description"),
+            "{without}"
         );
         assert!(
             line(&report, "mode").contains("standby   protocol v2"),
@@ -837,7 +896,7 @@ mod tests {
             RobotKind::Hunter,
             &["211#0001010000000000", "261#00F0001E1E410000"],
         );
-        let report = state_report("hunter", &s, "5 ms");
+        let report = state_report("hunter", &s, None, "5 ms");
         assert_eq!(line(&report, "faults"), "faults     none");
         assert_eq!(
             line(&report, "drivers"),

@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 mod action;
 mod decode;
 mod demo;
+mod described;
 mod detect;
 mod encode;
 mod fleet;

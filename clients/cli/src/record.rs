@@ -825,9 +825,11 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
             .with_context(|| format!("chassis/{} published no state within 2 s", args.name))?,
     };
     let kind = first.robot;
-    if args.candump && RobotKind::from_id(kind) == Some(RobotKind::Xbot) {
+    if args.candump
+        && let Some(serial) = RobotKind::from_id(kind).filter(|k| !k.is_can())
+    {
         bail!(
-            "the xbot speaks RS232: its serial stream is not CAN and cannot be a candump log; \
+            "the {serial} speaks RS232: its serial stream is not CAN and cannot be a candump log; \
              record MCAP instead (chassis record FILE.mcap)"
         );
     }

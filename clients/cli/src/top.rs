@@ -1,4 +1,5 @@
-//! `chassis top`: a live dashboard of state, mux decisions, bus statistics and latency.
+//! `chassis top`: a live dashboard of the robot as chassisd describes it, its state, mux
+//! decisions, bus statistics and latency.
 //!
 //! The loop blocks in [`Robot::wait_state`] (at most 50 ms, so keys stay responsive), then
 //! drains the frame tap and the mux status into [`stats`] and redraws every `--interval-ms`.
@@ -14,12 +15,13 @@ use std::time::Duration;
 
 use anyhow::Context;
 use chassis_client::{
-    ChassisState, FrameTap, MuxStatus, Robot, RobotKind, install_signal_handlers, now_ns,
-    termination_requested,
+    ChassisState, ClientError, FrameTap, MuxStatus, Robot, RobotDescription,
+    install_signal_handlers, now_ns, termination_requested,
 };
 use clap::Args;
 use crossterm::event::{self, Event, KeyCode, KeyEventKind, KeyModifiers};
 
+use crate::described;
 use stats::{BusStats, Latency};
 use view::Snapshot;
 
@@ -27,6 +29,9 @@ use view::Snapshot;
 const TAP_BUFFER: usize = 2048;
 /// Longest wait for a state sample, so keys and the screen stay responsive.
 const MAX_WAIT: Duration = Duration::from_millis(50);
+/// Longest wait at start for the robot's description (chassisd hands it to a new reader within
+/// a tick of its loop).
+const DESCRIPTION_WAIT: Duration = Duration::from_millis(500);
 
 #[derive(Debug, Args)]
 pub struct TopArgs {
@@ -49,6 +54,7 @@ pub struct TopArgs {
 struct Collector {
     bus: BusStats,
     latency: Latency,
+    description: Option<RobotDescription>,
     state: Option<ChassisState>,
     mux: Option<MuxStatus>,
     start_ns: u64,
@@ -72,6 +78,17 @@ impl Collector {
             self.latency.on_mux(&mux);
             self.mux = Some(mux);
         }
+        if let Some(d) = robot.latest_description()?
+            && self
+                .description
+                .is_none_or(|seen| (seen.seq, seen.stamp_ns) != (d.seq, d.stamp_ns))
+        {
+            // Protocol detection decided, or chassisd came back with another robot: its
+            // frames are named anew.
+            self.bus
+                .set_profile(described::profile_of(Some(&d), self.state.as_ref()).as_ref());
+            self.description = Some(d);
+        }
         let now = now_ns();
         self.bus.expire(now);
         self.latency.resolve(now, &self.bus);
@@ -84,6 +101,7 @@ impl Collector {
             name,
             now_ns: now,
             running_ns: now.saturating_sub(self.start_ns),
+            description: self.description.as_ref(),
             state: self.state.as_ref(),
             mux: self.mux.as_ref(),
             bus: &self.bus,
@@ -104,9 +122,17 @@ pub fn run(args: &TopArgs) -> anyhow::Result<()> {
         Some(state) => Some(state),
         None => robot.wait_state(Duration::from_secs(1))?,
     };
+    let description = match robot.description(DESCRIPTION_WAIT) {
+        Ok(d) => Some(d),
+        // An older chassisd: the state's robot kind names the frames.
+        Err(ClientError::NoDescription { .. }) => None,
+        Err(e) => return Err(e.into()),
+    };
+    let profile = described::profile_of(description.as_ref(), first.as_ref());
     let mut collector = Collector {
-        bus: BusStats::new(first.map_or(RobotKind::UNKNOWN, |s| s.robot)),
+        bus: BusStats::new(profile.as_ref()),
         latency: Latency::default(),
+        description,
         state: first,
         mux: None,
         start_ns: now_ns(),

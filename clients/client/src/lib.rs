@@ -58,7 +58,9 @@ use chassis_ipc::{
     CMD, CONTROL, ClientPorts, DESCRIPTION, FRAMES, IpcError, MUX, PUBLICATION, Reader,
     RequestResponse, SIM, STATE, Writer, publication,
 };
-pub use chassis_ipc::{IPC_PREFIX_ENV, STATE_BUFFER, ServiceKind, service_name};
+pub use chassis_ipc::{
+    IPC_PREFIX_ENV, STATE_BUFFER, ServiceKind, TEST_LOOP_STALL_ENV, service_name,
+};
 use iceoryx2::pending_response::PendingResponse;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;

@@ -1,328 +1,361 @@
-//! What each robot can do, as far as following a path is concerned.
+//! What the robot can do, as far as following a path is concerned — read from the
+//! `RobotDescription` chassisd publishes (`chassis/<name>/robot`), never from a table of robots:
 //!
-//! The values are the defaults of `chassisd`'s robot profiles (the manuals'), repeated here
-//! because a client depends on `chassis-client` only. A robot whose `chassisd` config changes
-//! them is driven with `--min-turn-radius` / `--max-angular` / `--speed`.
+//! * **how it turns**, from its kinematics: differential, skid-steered, tracked and omni robots
+//!   turn on the spot; Ackermann, dual-Ackermann and four-wheel-steered robots are followed
+//!   with steered wheels (a four-wheel-steered robot spins on the spot only below its smallest
+//!   dual-Ackermann radius, a change of mode the follower keeps clear of);
+//! * **its smallest turning radius** (robots that steer): the larger of the description's
+//!   `geometry.min_turn_radius_m` and the radius its effective steering limit reaches with its
+//!   wheelbase and track (R = L / tan δ + W/2 with the front axle steering, (L/2) / tan δ + W/2
+//!   with both), so a tighter `[mux.limits]` steering limit widens it, and kept
+//!   [`TURN_RADIUS_MARGIN`] clear of the boundary, where a driver clamps the angle or (four-wheel
+//!   steering) spins instead;
+//! * **its speed limits**: the description's effective limits (the robot's after every
+//!   `[profile]` override, tightened by chassisd's `[mux.limits]`): forward, reverse, yaw rate
+//!   where there is one (the mux clamps a steered robot's yaw rate too, which would change the
+//!   curvature driven), and the sideways speed of a robot that can move sideways.
 //!
-//! | robot | drive | turns on the spot | top speed | turning limit |
-//! | --- | --- | --- | --- | --- |
-//! | TITAN | dual Ackermann (front and rear axles steer opposite) | no | 3.0 m/s, 1.5 m/s while \|steer\| > 0.087 rad | radius ≥ 1.53 m |
-//! | SCOUT MINI | skid steer | yes | 5.0 m/s (commands in 1 % = 0.05 m/s steps) | 0.5235 rad/s (the manual's full scale) |
-//! | XBot | differential | yes | 1.5 m/s (below 0.01 m/s it does not move) | π rad/s |
-//! | SCOUT 2.0 (V2) | skid steer | yes | 1.5 m/s | 0.5235 rad/s |
-//! | HUNTER 2.0 | front Ackermann | no | 1.5 m/s | radius ≥ 1.30 m (inner angle 0.576 rad) |
-//! | HUNTER SE | front Ackermann | no | 1.5 m/s | radius ≥ 1.83 m (inner angle 0.4 rad) |
-//! | TRACER | differential | yes | 1.8 m/s | 1.0 rad/s |
-//! | BUNKER | tracked | yes | 1.5 m/s | 0.7853 rad/s |
-//! | RANGER MINI | four-wheel steering, followed in dual Ackermann | (spins, not used here) | 1.5 m/s | radius ≥ 0.6 m (0.476 m reachable) |
+//! What no description states is the planner's own tuning, the same for every robot: the
+//! slowest speed and yaw rate worth commanding ([`MIN_LINEAR_MPS`]: the coarsest command
+//! resolution among the robots, 1 % of 5 m/s; [`MIN_ANGULAR_RADPS`]), how long the robot coasts
+//! after a stop ([`RESPONSE_LAG_S`]: the simulated chassis' response, 0.2-0.3 s), and the cruise
+//! speed when `--speed` is not given ([`DEFAULT_SPEED_MPS`], within the robot's limit).
 
-use chassis_client::RobotKind;
+use chassis_client::{DescriptionFlags, Kinematics as KinematicsKind, RobotDescription};
+use thiserror::Error;
 
-/// The robots the planner knows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum RobotModel {
-    Titan,
-    ScoutMini,
-    Xbot,
-    Scout,
-    Hunter,
-    HunterSe,
-    Tracer,
-    Bunker,
-    RangerMini,
-}
-
-impl RobotModel {
-    /// The model of a `ChassisState::robot` value.
-    pub fn from_kind(kind: u8) -> Option<Self> {
-        match kind {
-            RobotKind::TITAN => Some(Self::Titan),
-            RobotKind::SCOUT_MINI => Some(Self::ScoutMini),
-            RobotKind::XBOT => Some(Self::Xbot),
-            RobotKind::SCOUT => Some(Self::Scout),
-            RobotKind::HUNTER => Some(Self::Hunter),
-            RobotKind::HUNTER_SE => Some(Self::HunterSe),
-            RobotKind::TRACER => Some(Self::Tracer),
-            RobotKind::BUNKER => Some(Self::Bunker),
-            RobotKind::RANGER_MINI => Some(Self::RangerMini),
-            _ => None,
-        }
-    }
-
-    /// The `ChassisState::robot` value of this model.
-    pub fn kind(self) -> u8 {
-        match self {
-            Self::Titan => RobotKind::TITAN,
-            Self::ScoutMini => RobotKind::SCOUT_MINI,
-            Self::Xbot => RobotKind::XBOT,
-            Self::Scout => RobotKind::SCOUT,
-            Self::Hunter => RobotKind::HUNTER,
-            Self::HunterSe => RobotKind::HUNTER_SE,
-            Self::Tracer => RobotKind::TRACER,
-            Self::Bunker => RobotKind::BUNKER,
-            Self::RangerMini => RobotKind::RANGER_MINI,
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        RobotKind::name(self.kind())
-    }
-}
+/// Slowest speed worth commanding, m/s: below it a robot may not move (the XBot below
+/// 0.01 m/s) or the command rounds to zero (the SCOUT MINI's 1 % steps of 5 m/s).
+pub const MIN_LINEAR_MPS: f64 = 0.05;
+/// Slowest yaw rate worth commanding for a turn on the spot, rad/s.
+pub const MIN_ANGULAR_RADPS: f64 = 0.06;
+/// How long the robot takes to answer a change of speed, s: it coasts speed × this after a stop.
+pub const RESPONSE_LAG_S: f64 = 0.25;
+/// Cruise speed when `--speed` is not given, m/s (or the robot's limit, if lower).
+pub const DEFAULT_SPEED_MPS: f64 = 0.8;
+/// A steered robot is asked for radii at least this × its smallest: at the boundary itself a
+/// driver clamps its steering angle, or (four-wheel steering) spins on the spot instead.
+pub const TURN_RADIUS_MARGIN: f64 = 1.02;
 
 /// How a robot turns.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Steering {
-    /// Skid or differential drive: any yaw rate up to the limit, also standing still.
-    Differential { max_angular_radps: f64 },
+    /// Skid, tracked, differential or omni drive: any yaw rate up to the limit, also standing
+    /// still.
+    Differential,
     /// Steered wheels: a curvature of at most 1 / `min_turn_radius_m`, and only while moving.
-    Ackermann {
-        min_turn_radius_m: f64,
-        /// Top speed while the path curves more than `turning_above_curvature` (1/m).
-        max_linear_turning_mps: f64,
-        turning_above_curvature: f64,
-    },
+    Ackermann { min_turn_radius_m: f64 },
 }
 
-/// A robot's limits and habits as the path follower sees them.
+/// A robot's limits as the path follower sees them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Kinematics {
-    pub model: RobotModel,
     pub steering: Steering,
-    /// Top speed, m/s.
+    /// Top forward speed, m/s.
     pub max_linear_mps: f64,
-    /// Slowest speed worth commanding, m/s: below it the robot does not move (XBot), or the
-    /// command rounds to zero (SCOUT MINI's 1 % steps).
+    /// Top reverse speed (a positive number), m/s.
+    pub max_reverse_mps: f64,
+    /// Largest |yaw rate|, rad/s (infinite where nothing limits it but the curvature).
+    pub max_angular_radps: f64,
+    /// Largest |sideways speed|, m/s (0: the robot cannot move sideways).
+    pub lateral_mps: f64,
+    /// Slowest speed worth commanding, m/s.
     pub min_linear_mps: f64,
     /// Slowest yaw rate worth commanding for a turn on the spot, rad/s.
     pub min_angular_radps: f64,
     /// Cruise speed when `--speed` is not given, m/s.
     pub default_speed_mps: f64,
     /// Time constant of the robot's speed response, s: how far it coasts after a stop
-    /// (speed × lag). The simulated chassis: 0.3 s (TITAN, SCOUT MINI), 0.2 s (XBot).
+    /// (speed × lag).
     pub response_lag_s: f64,
 }
 
-/// TITAN's geometry (`TitanProfile` defaults): wheelbase, track, largest inner steering angle.
-pub const TITAN_WHEELBASE_M: f64 = 0.845;
-pub const TITAN_TRACK_M: f64 = 0.860;
-pub const TITAN_MAX_STEER_RAD: f64 = 0.367;
-/// SCOUT MINI's yaw rate at 100 % of its motion command (`ScoutMiniProfile` default: the
-/// manual's table as printed — not an approximation of π/6).
-#[allow(clippy::approx_constant)]
-pub const SCOUT_MINI_ANGULAR_FULL_SCALE_RADPS: f64 = 0.5235;
-/// Above this inner steering angle TITAN's top speed is 1.5 m/s.
-pub const TITAN_FAST_STEER_LIMIT_RAD: f64 = 0.087;
-
-/// Body turning radius of dual-Ackermann steering at inner wheel angle `steer_rad`: the centre
-/// of rotation lies on the lateral line through the body centre, R = (L/2) / tan δ + W/2.
-pub fn titan_turn_radius_m(steer_rad: f64) -> f64 {
-    (TITAN_WHEELBASE_M / 2.0) / steer_rad.abs().tan() + TITAN_TRACK_M / 2.0
+/// Why a description cannot be driven.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum KinematicsError {
+    #[error(
+        "the description of {robot} gives no forward speed limit (robot and configured limits \
+         are both unset)"
+    )]
+    NoSpeedLimit { robot: String },
+    #[error(
+        "{robot} steers its wheels, but its description gives neither a turning radius nor a \
+         steering limit with its wheelbase and track"
+    )]
+    NoTurnRadius { robot: String },
+    #[error("{robot} has kinematics {kinematics} ({name}), which the planner does not know")]
+    UnknownKinematics {
+        robot: String,
+        kinematics: u8,
+        name: &'static str,
+    },
 }
 
-/// Smallest turning radius of front-wheel Ackermann steering (HUNTER): R = L / tan δ + W/2.
-fn front_ackermann_radius_m(wheelbase_m: f64, track_m: f64, max_inner_rad: f64) -> f64 {
-    wheelbase_m / max_inner_rad.tan() + track_m / 2.0
+/// `kind_name` and `model` of a description, for messages (`hunter`, `scout-mini (scout-mini-omni)`).
+pub fn robot_label(d: &RobotDescription) -> String {
+    match (d.kind_name(), d.model()) {
+        ("", _) => format!("robot kind {}", d.kind),
+        (kind, model) if model.is_empty() || model == kind => kind.to_string(),
+        (kind, model) => format!("{kind} ({model})"),
+    }
+}
+
+fn positive(value: f64) -> Option<f64> {
+    (value.is_finite() && value > 0.0).then_some(value)
+}
+
+/// The radius of `base_link`'s path at inner steering angle `steer_rad`: the turn centre lies on
+/// the rear axle's line (front steering) or half way between the axles (both steering).
+fn radius_at_steer(kinematics: u8, d: &RobotDescription, steer_rad: f64) -> Option<f64> {
+    let wheelbase = positive(d.geometry.wheelbase_m)?;
+    let half_track = positive(d.geometry.track_m).map_or(0.0, |w| w / 2.0);
+    let tan = positive(steer_rad.abs().tan())?;
+    let along = match kinematics {
+        KinematicsKind::ACKERMANN => wheelbase,
+        _ => wheelbase / 2.0,
+    };
+    Some(along / tan + half_track)
 }
 
 impl Kinematics {
-    /// An AgileX protocol-V2 robot (`V2Profile` defaults).
-    fn v2(model: RobotModel, steering: Steering, max_linear_mps: f64) -> Self {
-        Self {
-            model,
+    /// The robot a description describes, within its effective limits.
+    pub fn from_description(d: &RobotDescription) -> Result<Self, KinematicsError> {
+        let robot = robot_label(d);
+        let limits = d.effective_limits();
+        let max_linear_mps =
+            positive(limits.forward_mps).ok_or_else(|| KinematicsError::NoSpeedLimit {
+                robot: robot.clone(),
+            })?;
+        let max_reverse_mps = positive(limits.reverse_mps).unwrap_or(max_linear_mps);
+        let max_angular_radps = positive(limits.angular_radps).unwrap_or(f64::INFINITY);
+        let lateral_mps = if d.flags & DescriptionFlags::LATERAL != 0 {
+            positive(limits.lateral_mps).unwrap_or(0.0)
+        } else {
+            0.0
+        };
+        let steering = match d.kinematics {
+            KinematicsKind::DIFFERENTIAL
+            | KinematicsKind::SKID_STEER
+            | KinematicsKind::TRACKED
+            | KinematicsKind::OMNI => Steering::Differential,
+            k @ (KinematicsKind::ACKERMANN
+            | KinematicsKind::DUAL_ACKERMANN
+            | KinematicsKind::FOUR_WHEEL_STEER) => {
+                let described = positive(d.geometry.min_turn_radius_m);
+                let reached = radius_at_steer(k, d, limits.steer_rad);
+                let radius = match (described, reached) {
+                    (Some(a), Some(b)) => a.max(b),
+                    (Some(r), None) | (None, Some(r)) => r,
+                    (None, None) => return Err(KinematicsError::NoTurnRadius { robot }),
+                };
+                Steering::Ackermann {
+                    min_turn_radius_m: radius * TURN_RADIUS_MARGIN,
+                }
+            }
+            other => {
+                return Err(KinematicsError::UnknownKinematics {
+                    robot,
+                    kinematics: other,
+                    name: KinematicsKind::name(other),
+                });
+            }
+        };
+        Ok(Self {
             steering,
             max_linear_mps,
-            min_linear_mps: 0.01,
-            min_angular_radps: 0.02,
-            default_speed_mps: 0.6,
-            response_lag_s: 0.2,
-        }
-    }
-
-    fn ackermann(min_turn_radius_m: f64, max_linear_mps: f64) -> Steering {
-        Steering::Ackermann {
-            min_turn_radius_m,
-            max_linear_turning_mps: max_linear_mps,
-            turning_above_curvature: f64::INFINITY,
-        }
-    }
-
-    /// The defaults of `model`.
-    #[allow(clippy::approx_constant)] // 0.5235 and 0.7853 are the SDK's limits as printed
-    pub fn of(model: RobotModel) -> Self {
-        let differential = |max_angular_radps| Steering::Differential { max_angular_radps };
-        match model {
-            RobotModel::Scout => Self::v2(model, differential(0.5235), 1.5),
-            RobotModel::Tracer => Self::v2(model, differential(1.0), 1.8),
-            RobotModel::Bunker => Self::v2(model, differential(0.7853), 1.5),
-            RobotModel::Hunter => Self::v2(
-                model,
-                Self::ackermann(front_ackermann_radius_m(0.650, 0.605, 0.576), 1.5),
-                1.5,
-            ),
-            RobotModel::HunterSe => Self::v2(
-                model,
-                Self::ackermann(front_ackermann_radius_m(0.657, 0.550, 0.400), 1.5),
-                1.5,
-            ),
-            // Dual Ackermann reaches R = (L/2) / tan δ + W/2 = 0.476 m (L 0.494, W 0.364,
-            // δ 0.6981 rad); a tighter request makes the driver spin instead. Paths keep a
-            // margin so the follower's corrections stay in dual Ackermann.
-            RobotModel::RangerMini => Self::v2(model, Self::ackermann(0.6, 1.5), 1.5),
-            RobotModel::Titan => Self {
-                model,
-                steering: Steering::Ackermann {
-                    min_turn_radius_m: titan_turn_radius_m(TITAN_MAX_STEER_RAD),
-                    max_linear_turning_mps: 1.5,
-                    turning_above_curvature: 1.0 / titan_turn_radius_m(TITAN_FAST_STEER_LIMIT_RAD),
-                },
-                max_linear_mps: 3.0,
-                min_linear_mps: 0.05,
-                min_angular_radps: 0.0,
-                default_speed_mps: 1.0,
-                response_lag_s: 0.3,
-            },
-            RobotModel::ScoutMini => Self {
-                model,
-                steering: Steering::Differential {
-                    max_angular_radps: SCOUT_MINI_ANGULAR_FULL_SCALE_RADPS,
-                },
-                max_linear_mps: 5.0,
-                min_linear_mps: 0.05,
-                min_angular_radps: 0.06,
-                default_speed_mps: 0.8,
-                response_lag_s: 0.3,
-            },
-            RobotModel::Xbot => Self {
-                model,
-                steering: Steering::Differential {
-                    max_angular_radps: std::f64::consts::PI,
-                },
-                max_linear_mps: 1.5,
-                min_linear_mps: 0.03,
-                min_angular_radps: 0.06,
-                default_speed_mps: 0.8,
-                response_lag_s: 0.2,
-            },
-        }
+            max_reverse_mps,
+            max_angular_radps,
+            lateral_mps,
+            min_linear_mps: MIN_LINEAR_MPS.min(max_linear_mps),
+            min_angular_radps: MIN_ANGULAR_RADPS.min(max_angular_radps),
+            default_speed_mps: DEFAULT_SPEED_MPS.min(max_linear_mps),
+            response_lag_s: RESPONSE_LAG_S,
+        })
     }
 
     /// True when the robot can turn on the spot.
     pub fn turns_on_the_spot(&self) -> bool {
-        matches!(self.steering, Steering::Differential { .. })
+        matches!(self.steering, Steering::Differential)
     }
 
-    /// Smallest turning radius, m (0 for a robot that turns on the spot).
+    /// Smallest turning radius the follower asks for, m (0 for a robot that turns on the spot).
     pub fn min_turn_radius_m(&self) -> f64 {
         match self.steering {
-            Steering::Differential { .. } => 0.0,
-            Steering::Ackermann {
-                min_turn_radius_m, ..
-            } => min_turn_radius_m,
+            Steering::Differential => 0.0,
+            Steering::Ackermann { min_turn_radius_m } => min_turn_radius_m,
         }
     }
 
     /// Largest curvature the robot can drive, 1/m (infinite for one that turns on the spot).
     pub fn max_curvature(&self) -> f64 {
         match self.steering {
-            Steering::Differential { .. } => f64::INFINITY,
-            Steering::Ackermann {
-                min_turn_radius_m, ..
-            } => 1.0 / min_turn_radius_m,
+            Steering::Differential => f64::INFINITY,
+            Steering::Ackermann { min_turn_radius_m } => 1.0 / min_turn_radius_m,
         }
     }
 
     /// Largest yaw rate, rad/s (infinite when only the curvature limits it).
     pub fn max_angular_radps(&self) -> f64 {
-        match self.steering {
-            Steering::Differential { max_angular_radps } => max_angular_radps,
-            Steering::Ackermann { .. } => f64::INFINITY,
-        }
+        self.max_angular_radps
     }
 
-    /// Sets the smallest turning radius (Ackermann) — a `chassisd` config with another geometry.
+    /// Widens the smallest turning radius (robots that steer) — `--min-turn-radius`.
     pub fn with_min_turn_radius(mut self, radius_m: f64) -> Self {
-        if let Steering::Ackermann {
-            min_turn_radius_m, ..
-        } = &mut self.steering
-        {
+        if let Steering::Ackermann { min_turn_radius_m } = &mut self.steering {
             *min_turn_radius_m = radius_m;
         }
         self
     }
 
-    /// Sets the largest yaw rate (differential) — e.g. SCOUT MINI with another full scale.
+    /// Lowers the largest yaw rate — `--max-angular`.
     pub fn with_max_angular(mut self, radps: f64) -> Self {
-        if let Steering::Differential { max_angular_radps } = &mut self.steering {
-            *max_angular_radps = radps;
-        }
+        self.max_angular_radps = radps;
+        self.min_angular_radps = self.min_angular_radps.min(radps);
         self
     }
 
-    /// Top speed on a path of curvature `curvature` (1/m) from the robot's own limits: TITAN's
-    /// lower limit while steering, a differential robot's yaw-rate limit.
+    /// Top speed on a path of curvature `curvature` (1/m): the speed limit, and the yaw-rate
+    /// limit on a curve.
     pub fn max_speed_at(&self, curvature: f64) -> f64 {
         let k = curvature.abs();
-        match self.steering {
-            Steering::Differential { max_angular_radps } => {
-                if k > 0.0 {
-                    self.max_linear_mps.min(max_angular_radps / k)
-                } else {
-                    self.max_linear_mps
-                }
-            }
-            Steering::Ackermann {
-                max_linear_turning_mps,
-                turning_above_curvature,
-                ..
-            } => {
-                if k > turning_above_curvature {
-                    self.max_linear_mps.min(max_linear_turning_mps)
-                } else {
-                    self.max_linear_mps
-                }
-            }
+        if k > 0.0 {
+            self.max_linear_mps.min(self.max_angular_radps / k)
+        } else {
+            self.max_linear_mps
         }
+    }
+
+    /// `newer`'s limits with this one's steering, if a path built for this one still fits
+    /// `newer`: the same way of turning, and no wider a turning radius (a newer description —
+    /// protocol detection deciding, a restarted chassisd — changes the limits under a path).
+    pub fn updated_by(&self, newer: &Kinematics) -> Option<Kinematics> {
+        let fits = match (self.steering, newer.steering) {
+            (Steering::Differential, Steering::Differential) => true,
+            (
+                Steering::Ackermann {
+                    min_turn_radius_m: built,
+                },
+                Steering::Ackermann {
+                    min_turn_radius_m: now,
+                },
+            ) => now <= built + 1e-9,
+            _ => false,
+        };
+        fits.then_some(Kinematics {
+            steering: self.steering,
+            ..*newer
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chassis_client::{JointSource, MotionLimits};
 
-    #[test]
-    fn titan_cannot_turn_tighter_than_about_one_and_a_half_metres() {
-        let k = Kinematics::of(RobotModel::Titan);
-        let r = k.min_turn_radius_m();
-        assert!(r > 1.52 && r < 1.54, "{r}");
-        assert!(!k.turns_on_the_spot());
-        // 1.5 m/s once the steering exceeds 0.087 rad, i.e. below a radius of about 5.3 m.
-        assert_eq!(k.max_speed_at(1.0 / 5.0), 1.5);
-        assert_eq!(k.max_speed_at(1.0 / 6.0), 3.0);
+    /// A description as chassisd would publish it, without chassis-protocols.
+    fn described(kinematics: u8) -> RobotDescription {
+        let mut d = RobotDescription {
+            kind: 1,
+            kinematics,
+            ..RobotDescription::default()
+        };
+        d.set_kind_name("test-robot");
+        d.robot_limits = MotionLimits {
+            forward_mps: 1.5,
+            reverse_mps: 1.0,
+            lateral_mps: 0.0,
+            angular_radps: 0.8,
+            steer_rad: 0.5,
+            ..MotionLimits::NONE
+        };
+        d.geometry.wheelbase_m = 0.6;
+        d.geometry.track_m = 0.5;
+        let _ = d.push_joint("front_steer_joint", JointSource::FRONT_STEER, 0);
+        d
     }
 
     #[test]
-    fn skid_and_differential_robots_turn_on_the_spot_within_their_yaw_rate() {
-        let scout = Kinematics::of(RobotModel::ScoutMini);
-        assert!(scout.turns_on_the_spot());
-        assert_eq!(scout.max_curvature(), f64::INFINITY);
-        assert!(
-            (scout.max_speed_at(2.0) - SCOUT_MINI_ANGULAR_FULL_SCALE_RADPS / 2.0).abs() < 1e-12
+    fn a_robot_that_turns_on_the_spot_keeps_its_yaw_rate_and_speeds() {
+        let k = Kinematics::from_description(&described(KinematicsKind::SKID_STEER)).unwrap();
+        assert!(k.turns_on_the_spot());
+        assert_eq!(k.max_curvature(), f64::INFINITY);
+        assert_eq!((k.max_linear_mps, k.max_reverse_mps), (1.5, 1.0));
+        assert_eq!(k.max_angular_radps(), 0.8);
+        assert!((k.max_speed_at(2.0) - 0.4).abs() < 1e-12);
+        assert_eq!(k.lateral_mps, 0.0);
+        assert_eq!(k.default_speed_mps, DEFAULT_SPEED_MPS);
+    }
+
+    #[test]
+    fn a_steered_robot_turns_no_tighter_than_its_steering_reaches() {
+        let mut d = described(KinematicsKind::ACKERMANN);
+        // Front steering: R = L / tan δ + W/2.
+        let reach = 0.6 / 0.5f64.tan() + 0.25;
+        let k = Kinematics::from_description(&d).unwrap();
+        assert!(!k.turns_on_the_spot());
+        assert!((k.min_turn_radius_m() - reach * TURN_RADIUS_MARGIN).abs() < 1e-9);
+        // A larger described radius wins.
+        d.geometry.min_turn_radius_m = 3.0;
+        let k = Kinematics::from_description(&d).unwrap();
+        assert!((k.min_turn_radius_m() - 3.0 * TURN_RADIUS_MARGIN).abs() < 1e-9);
+        // A tighter configured steering limit widens it.
+        d.geometry.min_turn_radius_m = 0.0;
+        d.configured_limits.steer_rad = 0.2;
+        let k = Kinematics::from_description(&d).unwrap();
+        let reach = 0.6 / 0.2f64.tan() + 0.25;
+        assert!((k.min_turn_radius_m() - reach * TURN_RADIUS_MARGIN).abs() < 1e-9);
+        // Both axles steering: half the wheelbase.
+        d.configured_limits.steer_rad = f64::NAN;
+        d.kinematics = KinematicsKind::DUAL_ACKERMANN;
+        let k = Kinematics::from_description(&d).unwrap();
+        let reach = 0.3 / 0.5f64.tan() + 0.25;
+        assert!((k.min_turn_radius_m() - reach * TURN_RADIUS_MARGIN).abs() < 1e-9);
+    }
+
+    #[test]
+    fn configured_limits_tighten_the_robots_own() {
+        let mut d = described(KinematicsKind::DIFFERENTIAL);
+        d.configured_limits.forward_mps = 0.4;
+        d.configured_limits.angular_radps = 0.3;
+        let k = Kinematics::from_description(&d).unwrap();
+        assert_eq!(k.max_linear_mps, 0.4);
+        assert_eq!(k.max_angular_radps(), 0.3);
+        assert_eq!(
+            k.default_speed_mps, 0.4,
+            "the cruise speed stays within the limit"
         );
-        let xbot = Kinematics::of(RobotModel::Xbot).with_max_angular(1.0);
-        assert_eq!(xbot.max_angular_radps(), 1.0);
-        for m in [
-            RobotModel::Titan,
-            RobotModel::ScoutMini,
-            RobotModel::Xbot,
-            RobotModel::Scout,
-            RobotModel::Hunter,
-            RobotModel::HunterSe,
-            RobotModel::Tracer,
-            RobotModel::Bunker,
-            RobotModel::RangerMini,
-        ] {
-            assert_eq!(RobotModel::from_kind(m.kind()), Some(m));
-        }
-        assert_eq!(RobotModel::ScoutMini.name(), "scout-mini");
+    }
+
+    #[test]
+    fn a_robot_that_moves_sideways_says_so_and_nan_means_no_limit() {
+        let mut d = described(KinematicsKind::OMNI);
+        d.robot_limits.lateral_mps = 0.7;
+        d.flags |= DescriptionFlags::LATERAL;
+        d.robot_limits.angular_radps = f64::NAN;
+        let k = Kinematics::from_description(&d).unwrap();
+        assert_eq!(k.lateral_mps, 0.7);
+        assert_eq!(k.max_angular_radps(), f64::INFINITY);
+    }
+
+    #[test]
+    fn a_description_without_what_the_planner_needs_is_refused() {
+        let mut d = described(KinematicsKind::ACKERMANN);
+        d.robot_limits.forward_mps = f64::NAN;
+        assert!(matches!(
+            Kinematics::from_description(&d),
+            Err(KinematicsError::NoSpeedLimit { .. })
+        ));
+        let mut d = described(KinematicsKind::ACKERMANN);
+        d.robot_limits.steer_rad = f64::NAN;
+        d.geometry.min_turn_radius_m = f64::NAN;
+        let err = Kinematics::from_description(&d).unwrap_err();
+        assert!(err.to_string().contains("test-robot steers"), "{err}");
+        let d = described(0);
+        assert!(matches!(
+            Kinematics::from_description(&d),
+            Err(KinematicsError::UnknownKinematics { .. })
+        ));
     }
 }

@@ -14,7 +14,6 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chassis_planner::kinematics::RobotModel;
 use chassis_planner::run::{self, EXIT_INTERRUPTED, Options, Outcome, Repeat, Route};
 use chassis_planner::shapes::Shape;
 use clap::{ArgGroup, Parser};
@@ -22,19 +21,18 @@ use clap::{ArgGroup, Parser};
 /// Drive a path to its end with pure pursuit on the robot's odometry, and stop there.
 ///
 /// The path is in the frame of the robot's pose at start (x ahead, y left, metres): the robot
-/// follows the shape from wherever it stands. TITAN cannot turn on the spot: its squares get
-/// corners of 1.15 × its 1.53 m turning radius (so a size of at least 3.52 m; default 4 m) and
-/// its figure-eights circles of that radius (default 7.5 m). SCOUT MINI and XBot stop and turn on
-/// the spot at sharp corners.
+/// follows the shape from wherever it stands. What the robot can do comes from the description
+/// chassisd publishes (its kinematics, turning radius and effective speed limits, every
+/// `[profile]` and `[mux.limits]` override included). A robot that steers its wheels (TITAN,
+/// HUNTER, RANGER MINI) gets corners of 1.15 × its turning radius (TITAN: a square of at least
+/// 3.59 m, default 4 m; figure-eights of at least 7.17 m, default 7.5 m); one that turns on the
+/// spot stops and turns at sharp corners.
 #[derive(Debug, Parser)]
 #[command(name = "chassis-planner", version, group(ArgGroup::new("route").required(true).args(["path", "shape"])))]
 struct Cli {
     /// The robot's name (`chassisd --name`).
     #[arg(long, default_value = "titan")]
     name: String,
-    /// Which robot it is (default: what its state says).
-    #[arg(long, value_enum)]
-    robot: Option<RobotModel>,
     /// A waypoint file: CSV `x,y` (optional header) or TOML `[[waypoint]] x = … y = …`, metres.
     #[arg(long, value_name = "FILE")]
     path: Option<PathBuf>,
@@ -44,7 +42,7 @@ struct Cli {
     /// Size of the shape, m (default 2, or the smallest multiple of 0.5 m the robot can turn).
     #[arg(long, value_name = "M", requires = "shape")]
     size: Option<f64>,
-    /// Cruise speed, m/s (default: TITAN 1.0, SCOUT MINI 0.8, XBot 0.8).
+    /// Cruise speed, m/s (default 0.8, or the robot's effective limit if lower).
     #[arg(long, value_name = "M/S")]
     speed: Option<f64>,
     /// The velocity source to publish on (configured in chassisd: `planner`, priority 10).
@@ -65,11 +63,10 @@ struct Cli {
     /// Progress and the summary as JSON lines.
     #[arg(long)]
     json: bool,
-    /// TITAN's smallest turning radius, m, if chassisd's profile changes its geometry.
+    /// A wider smallest turning radius than the robot's, m (robots that steer).
     #[arg(long, value_name = "M")]
     min_turn_radius: Option<f64>,
-    /// Largest yaw rate of a robot that turns on the spot, rad/s (SCOUT MINI's default full
-    /// scale is 0.5235).
+    /// A lower largest yaw rate than the robot's effective limit, rad/s.
     #[arg(long, value_name = "RAD/S")]
     max_angular: Option<f64>,
 }
@@ -84,7 +81,6 @@ fn options(cli: Cli) -> Options {
     };
     Options {
         name: cli.name,
-        robot: cli.robot,
         route,
         repeat: if cli.repeat {
             Repeat::Forever

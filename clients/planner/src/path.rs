@@ -11,6 +11,9 @@ use crate::geometry::{Point, Pose, wrap_angle};
 
 /// Points closer than this to their predecessor are dropped, m.
 const SAME_POINT_M: f64 = 1e-6;
+/// A later pass of the path is taken for the robot's position only when it is nearer than the
+/// earliest pass by more than this, m ([`Path::project`]).
+pub const PASS_SLACK_M: f64 = 0.1;
 
 /// Why points do not make a path.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -197,12 +200,17 @@ impl Path {
 
     /// The nearest point to `p` with an arc length in `[from, to]`. With `open_end` the segment
     /// holding `to` continues straight past it, so a position beyond `to` projects beyond it.
+    ///
+    /// Where the path passes `p` more than once in the window (it crosses or touches itself: a
+    /// figure-eight's middle is also its end), the earliest pass within [`PASS_SLACK_M`] of the
+    /// nearest is taken, so a robot on the first pass is not moved on to the second.
     pub fn project(&self, p: Point, from: f64, to: f64, open_end: bool) -> Projection {
         let to = to.max(from);
         let first = self.segment_after(from.max(0.0));
         let last = self.segment_before(to.min(self.length_m()));
         let last = last.max(first);
-        let mut best: Option<(f64, Projection)> = None;
+        // The nearest point of each segment, in order.
+        let mut nearest: Vec<(f64, Projection)> = Vec::with_capacity(last + 1 - first);
         for i in first..=last {
             let (a, b) = (self.points[i], self.points[i + 1]);
             let span = self.s[i + 1] - self.s[i];
@@ -218,25 +226,35 @@ impl Path {
             let foot = Point::new(a.x + ux * t, a.y + uy * t);
             let distance = p.distance(foot);
             let lateral = ux * (p.y - foot.y) - uy * (p.x - foot.x);
-            if best.is_none_or(|(d, _)| distance < d - 1e-12) {
-                best = Some((
-                    distance,
-                    Projection {
-                        s: self.s[i] + t,
-                        point: foot,
-                        lateral_m: lateral,
-                    },
-                ));
-            }
+            nearest.push((
+                distance,
+                Projection {
+                    s: self.s[i] + t,
+                    point: foot,
+                    lateral_m: lateral,
+                },
+            ));
         }
-        best.map_or(
-            Projection {
-                s: from,
-                point: self.point_at(from),
-                lateral_m: 0.0,
-            },
-            |(_, projection)| projection,
-        )
+        let closest = nearest
+            .iter()
+            .map(|(d, _)| *d)
+            .fold(f64::INFINITY, f64::min);
+        // A pass is a local minimum of the distance along the path; the closest one is one.
+        let pass = |k: usize| {
+            let d = nearest[k].0;
+            (k == 0 || d <= nearest[k - 1].0 + 1e-12)
+                && nearest.get(k + 1).is_none_or(|next| d <= next.0 + 1e-12)
+        };
+        (0..nearest.len())
+            .find(|&k| pass(k) && nearest[k].0 <= closest + PASS_SLACK_M)
+            .map_or(
+                Projection {
+                    s: from,
+                    point: self.point_at(from),
+                    lateral_m: 0.0,
+                },
+                |k| nearest[k].1,
+            )
     }
 
     /// The path given in `pose`'s frame, in the outer frame.
@@ -397,6 +415,41 @@ mod tests {
         assert!((past.s - 2.3).abs() < 1e-12);
         let closed = p.project(Point::new(2.3, 0.0), 0.0, 2.0, false);
         assert!((closed.s - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn where_the_path_passes_twice_the_earlier_pass_is_kept_unless_far_worse() {
+        // Out along x and back along it 2 cm to the left: two passes of every point.
+        let p = Path::new(vec![
+            Point::new(0.0, 0.0),
+            Point::new(1.0, 0.0),
+            Point::new(1.0, 0.02),
+            Point::new(0.0, 0.02),
+        ])
+        .unwrap();
+        // On the way out, 1.5 cm left of it: the way back is nearer, the way out is kept.
+        let out = p.project(Point::new(0.5, 0.015), 0.0, p.length_m(), false);
+        assert!((out.s - 0.5).abs() < 1e-12, "{out:?}");
+        assert!((out.lateral_m - 0.015).abs() < 1e-12);
+        // Far nearer the second pass than the first: the second.
+        let p = Path::new(vec![
+            Point::new(0.0, 0.0),
+            Point::new(1.0, 0.0),
+            Point::new(1.0, 0.5),
+            Point::new(0.0, 0.5),
+        ])
+        .unwrap();
+        let back = p.project(Point::new(0.5, 0.45), 0.0, p.length_m(), false);
+        assert!((back.s - 2.0).abs() < 1e-12, "{back:?}");
+        // Along one pass the nearest point is kept, not an earlier vertex within the slack.
+        let line = Path::new(
+            (0..=20)
+                .map(|i| Point::new(f64::from(i) * 0.05, 0.0))
+                .collect(),
+        )
+        .unwrap();
+        let on = line.project(Point::new(0.52, 0.03), 0.0, 1.0, false);
+        assert!((on.s - 0.52).abs() < 1e-12, "{on:?}");
     }
 
     #[test]

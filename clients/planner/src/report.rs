@@ -8,17 +8,21 @@ use std::io::Write;
 use serde_json::{Value, json};
 
 use crate::geometry::Pose;
+use crate::kinematics::Kinematics;
 
 /// Where the plan starts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Start {
     pub robot: String,
-    pub model: &'static str,
+    /// What the robot is, from its description (`AgileX TITAN (titan)`).
+    pub model: String,
     pub path: String,
     pub length_m: f64,
     /// Turns on the spot at corners.
     pub corner_stops: usize,
     pub speed_mps: f64,
+    /// The limits followed (from the description, with the command line's overrides).
+    pub kinematics: Kinematics,
     pub pose: Pose,
     pub goal: (f64, f64),
     pub repeat_forever: bool,
@@ -66,6 +70,43 @@ fn pose_json(pose: Pose) -> Value {
     json!({ "x_m": round(pose.x, 4), "y_m": round(pose.y, 4), "yaw_rad": round(pose.yaw, 4) })
 }
 
+/// A finite number, or null (JSON has no infinity).
+fn finite(value: f64, places: i32) -> Value {
+    if value.is_finite() {
+        json!(round(value, places))
+    } else {
+        Value::Null
+    }
+}
+
+fn limits_json(k: &Kinematics) -> Value {
+    json!({
+        "max_linear_mps": finite(k.max_linear_mps, 3),
+        "max_reverse_mps": finite(k.max_reverse_mps, 3),
+        "max_angular_radps": finite(k.max_angular_radps, 3),
+        "lateral_mps": finite(k.lateral_mps, 3),
+        "turns_on_the_spot": k.turns_on_the_spot(),
+        "min_turn_radius_m": finite(k.min_turn_radius_m(), 3),
+    })
+}
+
+/// `within 1.50 m/s, 0.52 rad/s, turning on the spot`.
+fn limits_text(k: &Kinematics) -> String {
+    let mut words = vec![format!("within {:.2} m/s", k.max_linear_mps)];
+    if k.max_angular_radps.is_finite() {
+        words.push(format!("{:.2} rad/s", k.max_angular_radps));
+    }
+    if k.lateral_mps > 0.0 {
+        words.push(format!("{:.2} m/s sideways", k.lateral_mps));
+    }
+    words.push(if k.turns_on_the_spot() {
+        "turning on the spot".to_string()
+    } else {
+        format!("turning no tighter than {:.2} m", k.min_turn_radius_m())
+    });
+    words.join(", ")
+}
+
 impl Reporter {
     pub fn new(json: bool) -> Self {
         Self { json }
@@ -92,6 +133,7 @@ impl Reporter {
                 "length_m": round(s.length_m, 3),
                 "corner_stops": s.corner_stops,
                 "speed_mps": s.speed_mps,
+                "limits": limits_json(&s.kinematics),
                 "start": pose_json(s.pose),
                 "goal": { "x_m": round(s.goal.0, 4), "y_m": round(s.goal.1, 4) },
                 "repeat_forever": s.repeat_forever,
@@ -109,12 +151,13 @@ impl Reporter {
             format!("{:.2} m", s.length_m)
         };
         self.line(&format!(
-            "following {} ({length}{corners}): {} '{}' at {:.2} m/s from x {:.3} y {:.3} yaw \
-             {:.1}°, goal x {:.3} y {:.3}",
+            "following {} ({length}{corners}): {} '{}' at {:.2} m/s ({}) from x {:.3} y {:.3} \
+             yaw {:.1}°, goal x {:.3} y {:.3}",
             s.path,
             s.model,
             s.robot,
             s.speed_mps,
+            limits_text(&s.kinematics),
             s.pose.x,
             s.pose.y,
             s.pose.yaw.to_degrees(),
@@ -153,6 +196,23 @@ impl Reporter {
             "{:6.1} s  {:<10} travelled {:6.2} m  {remaining}  cross-track {:+.3} m  {:.2} m/s{held}",
             p.time_s, p.activity, p.travelled_m, p.cross_track_m, p.linear_mps
         ));
+    }
+
+    /// A newer description of the robot changed the limits under way.
+    pub fn limits(&self, time_s: f64, seq: u64, kinematics: &Kinematics) {
+        if self.json {
+            self.emit(&json!({
+                "event": "limits",
+                "time_s": round(time_s, 2),
+                "description_seq": seq,
+                "limits": limits_json(kinematics),
+            }));
+        } else {
+            self.line(&format!(
+                "{time_s:6.1} s  the robot's description changed (#{seq}): {}",
+                limits_text(kinematics)
+            ));
+        }
     }
 
     /// A hold began (`held` true) or ended.

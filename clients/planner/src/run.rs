@@ -1,19 +1,22 @@
-//! The planner's loop: connect, build the path in the frame of the start pose, then at 50 Hz
-//! read the latest state and mux status, judge them ([`Watch`]), ask the [`Tracker`] for a
-//! command and publish it on the planner's source. The only module that reads the clock, and
-//! only through `chassis_client::now_ns` and `Ticker`.
+//! The planner's loop: connect, read the robot's description (what it is and its effective
+//! limits: [`Kinematics::from_description`]), build the path in the frame of the start pose,
+//! then at 50 Hz read the latest state and mux status, judge them ([`Watch`]), ask the
+//! [`Tracker`] for a command and publish it on the planner's source. A newer description
+//! (protocol detection deciding, a restarted chassisd with another configuration) changes the
+//! limits under way, or ends the run if the path no longer fits the robot. The only module that
+//! reads the clock, and only through `chassis_client::now_ns` and `Ticker`.
 
 use std::path::PathBuf;
 use std::time::Duration;
 
 use chassis_client::{
-    ChassisState, ClientError, Group, Robot, Source, Ticker, VelocityRequest,
-    install_signal_handlers, now_ns, termination_requested,
+    ChassisState, ClientError, Group, Kinematics as KinematicsKind, Robot, RobotDescription,
+    Source, Ticker, VelocityRequest, install_signal_handlers, now_ns, termination_requested,
 };
 use thiserror::Error;
 
 use crate::geometry::{Point, Pose};
-use crate::kinematics::{Kinematics, RobotModel};
+use crate::kinematics::{Kinematics, KinematicsError, robot_label};
 use crate::path::{Path, PathError};
 use crate::report::{Progress, Reporter, Start, Summary};
 use crate::shapes::{self, CORNER_RADIUS_MARGIN, SAMPLE_STEP_M, Shape, ShapeError};
@@ -29,7 +32,7 @@ pub const FINAL_STOP_S: f64 = 0.3;
 pub const PROGRESS_S: f64 = 1.0;
 /// Longest wait for a new state sample, and the oldest pose followed, s.
 pub const STALE_S: f64 = 1.0;
-/// Longest wait at start for a state with a pose, s.
+/// Longest wait at start for a state with a pose, and for the robot's description, s.
 pub const STARTUP_S: f64 = 2.0;
 /// Smallest goal tolerance: the follower stops within 5 mm of where it aims, m.
 pub const MIN_GOAL_TOLERANCE_M: f64 = 0.01;
@@ -54,7 +57,6 @@ pub enum Repeat {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Options {
     pub name: String,
-    pub robot: Option<RobotModel>,
     pub route: Route,
     pub repeat: Repeat,
     pub speed_mps: Option<f64>,
@@ -93,6 +95,18 @@ pub enum RunError {
     Failure(#[from] Failure),
     #[error(transparent)]
     Track(#[from] TrackError),
+    /// The description gives too little to drive by.
+    #[error(transparent)]
+    Kinematics(#[from] KinematicsError),
+    /// A newer description of the robot no longer fits the path under way.
+    #[error(
+        "chassis/{name} describes its robot anew (description #{seq}): {what}; the path was          built for the robot as it was"
+    )]
+    DescriptionChanged {
+        name: String,
+        seq: u64,
+        what: String,
+    },
     /// SIGINT or SIGTERM before the planner started driving (exit 130).
     #[error("interrupted before the start")]
     Interrupted,
@@ -106,7 +120,11 @@ impl RunError {
             | RunError::Waypoints(_)
             | RunError::Shape(_)
             | RunError::Path(_) => 2,
-            RunError::Client(_) | RunError::Failure(_) | RunError::Track(_) => 1,
+            RunError::Client(_)
+            | RunError::Failure(_)
+            | RunError::Track(_)
+            | RunError::Kinematics(_)
+            | RunError::DescriptionChanged { .. } => 1,
             RunError::Interrupted => EXIT_INTERRUPTED,
         }
     }
@@ -131,46 +149,70 @@ fn positive(name: &str, value: f64) -> Result<f64, RunError> {
     }
 }
 
-/// The robot's kinematics with the command line's overrides.
-pub fn kinematics(options: &Options, model: RobotModel) -> Result<Kinematics, RunError> {
-    let mut kin = Kinematics::of(model);
+/// The robot's kinematics from its description, with the command line's overrides: a wider
+/// turning radius, a lower yaw rate, never beyond what the description allows.
+pub fn kinematics(options: &Options, d: &RobotDescription) -> Result<Kinematics, RunError> {
+    let robot = robot_label(d);
+    let mut kin = Kinematics::from_description(d)?;
     if let Some(radius) = options.min_turn_radius_m {
         if kin.turns_on_the_spot() {
             return Err(RunError::Usage(format!(
-                "--min-turn-radius is for robots that steer; {} turns on the spot",
-                model.name()
+                "--min-turn-radius is for robots that steer; {robot} turns on the spot",
             )));
         }
-        kin = kin.with_min_turn_radius(positive("--min-turn-radius", radius)?);
+        let radius = positive("--min-turn-radius", radius)?;
+        if radius < kin.min_turn_radius_m() {
+            return Err(RunError::Usage(format!(
+                "--min-turn-radius {radius} is tighter than {robot} turns ({:.3} m, from its \
+                 description)",
+                kin.min_turn_radius_m()
+            )));
+        }
+        kin = kin.with_min_turn_radius(radius);
     }
     if let Some(rate) = options.max_angular_radps {
-        if !kin.turns_on_the_spot() {
+        let rate = positive("--max-angular", rate)?;
+        if rate > kin.max_angular_radps() {
             return Err(RunError::Usage(format!(
-                "--max-angular is for robots that turn on the spot; {} steers (use \
-                 --min-turn-radius)",
-                model.name()
+                "--max-angular {rate} is above {robot}'s effective yaw-rate limit ({} rad/s, \
+                 from its description)",
+                kin.max_angular_radps()
             )));
         }
-        kin = kin.with_max_angular(positive("--max-angular", rate)?);
+        kin = kin.with_max_angular(rate);
     }
     Ok(kin)
 }
 
 /// The cruise speed: `--speed` within the robot's limits, or its default.
-pub fn cruise_speed(options: &Options, kin: &Kinematics) -> Result<f64, RunError> {
+pub fn cruise_speed(options: &Options, kin: &Kinematics, robot: &str) -> Result<f64, RunError> {
     let Some(speed) = options.speed_mps else {
         return Ok(kin.default_speed_mps);
     };
     let speed = positive("--speed", speed)?;
     if speed > kin.max_linear_mps || speed < kin.min_linear_mps {
         return Err(RunError::Usage(format!(
-            "--speed {speed} is outside what {} can do ({} to {} m/s)",
-            kin.model.name(),
-            kin.min_linear_mps,
-            kin.max_linear_mps
+            "--speed {speed} is outside what {robot} can do ({} to {} m/s, from its \
+             description's effective limits)",
+            kin.min_linear_mps, kin.max_linear_mps
         )));
     }
     Ok(speed)
+}
+
+/// What to do about a robot that publishes no pose, from its description: a robot that turns
+/// by its wheel speeds integrates its pose from them and its track.
+pub fn pose_hint(d: &RobotDescription) -> String {
+    if d.geometry.track_m.is_finite() || KinematicsKind::steers(d.kinematics) {
+        return String::new();
+    }
+    format!(
+        ": its description gives no track (the distance between its wheels), which a {} \
+         robot's odometry needs — set it in chassisd's [profile] (`chassisd --robot {} \
+         --print-config` lists the parameters)",
+        KinematicsKind::name(d.kinematics),
+        d.kind_name()
+    )
 }
 
 /// Builds the path for `kin`: a shape, or a file's waypoints (from the robot's position if they
@@ -261,6 +303,7 @@ fn measured(state: &ChassisState) -> Measured {
         pose: pose_of(state),
         linear_mps: f64::from(state.motion.linear_mps),
         angular_radps: f64::from(state.motion.angular_radps),
+        lateral_mps: f64::from(state.motion.lateral_mps),
     }
 }
 
@@ -274,11 +317,7 @@ fn ns(seconds: f64) -> u64 {
 }
 
 /// Waits for a state with a pose.
-fn first_state(
-    robot: &mut Robot,
-    name: &str,
-    model: Option<RobotModel>,
-) -> Result<ChassisState, RunError> {
+fn first_state(robot: &mut Robot, name: &str, pose_hint: &str) -> Result<ChassisState, RunError> {
     let end = now_ns().saturating_add(ns(STARTUP_S));
     let mut latest = robot.latest_state()?;
     loop {
@@ -293,15 +332,36 @@ fn first_state(
         if now_ns() >= end {
             return Err(match latest {
                 None => Failure::StaleState { seconds: STARTUP_S }.into(),
-                Some(state) => {
-                    Failure::no_pose(name, model.or_else(|| RobotModel::from_kind(state.robot)))
-                        .into()
-                }
+                Some(_) => Failure::no_pose(name, pose_hint).into(),
             });
         }
         if let Some(state) = robot.wait_state(Duration::from_millis(100))? {
             latest = Some(state);
         }
+    }
+}
+
+/// `value` as the `f32` a request carries, never larger: a request at a limit must not read above
+/// it once widened again (0.4 is 0.4000000059604645 as an `f32`), or the driver clamps it.
+pub fn toward_zero(value: f64) -> f32 {
+    let narrow = value as f32;
+    if f64::from(narrow).abs() > value.abs() {
+        if narrow > 0.0 {
+            narrow.next_down()
+        } else {
+            narrow.next_up()
+        }
+    } else {
+        narrow
+    }
+}
+
+/// How a robot turns, for messages.
+fn turning_text(kin: &Kinematics) -> String {
+    if kin.turns_on_the_spot() {
+        "on the spot".into()
+    } else {
+        format!("no tighter than {:.2} m", kin.min_turn_radius_m())
     }
 }
 
@@ -334,29 +394,11 @@ pub fn run(options: &Options) -> Result<Outcome, RunError> {
     }
     let reporter = Reporter::new(options.json);
     let mut robot = Robot::connect(&options.name)?;
-    let state = first_state(&mut robot, &options.name, options.robot)?;
-    let reported = RobotModel::from_kind(state.robot);
-    let model = match (options.robot, reported) {
-        (Some(asked), Some(seen)) if asked != seen => {
-            eprintln!(
-                "chassis-planner: chassis/{} reports a {}; driving it as a {} as asked",
-                options.name,
-                seen.name(),
-                asked.name()
-            );
-            asked
-        }
-        (Some(asked), _) => asked,
-        (None, Some(seen)) => seen,
-        (None, None) => {
-            return Err(RunError::Usage(format!(
-                "chassis/{} does not say which robot it is: pass --robot ROBOT (titan, scout-mini, xbot, hunter, …)",
-                options.name
-            )));
-        }
-    };
-    let kin = kinematics(options, model)?;
-    let speed = cruise_speed(options, &kin)?;
+    let mut description = robot.description(Duration::from_secs_f64(STARTUP_S))?;
+    let robot_text = robot_label(&description);
+    let state = first_state(&mut robot, &options.name, &pose_hint(&description))?;
+    let kin = kinematics(options, &description)?;
+    let speed = cruise_speed(options, &kin, &robot_text)?;
     let plan = plan(options, &kin)?;
     let start = pose_of(&state);
     let mut config = TrackerConfig::new(kin, speed);
@@ -367,11 +409,15 @@ pub fn run(options: &Options) -> Result<Outcome, RunError> {
     let goal = tracker.goal();
     reporter.start(&Start {
         robot: options.name.clone(),
-        model: model.name(),
+        model: match description.display_name() {
+            "" => robot_text.clone(),
+            display => format!("{display} ({robot_text})"),
+        },
         path: plan.description.clone(),
         length_m: plan.period_m.unwrap_or_else(|| tracker.path().length_m()),
         corner_stops: tracker.corner_stops(),
         speed_mps: speed,
+        kinematics: kin,
         pose: start,
         goal: (goal.x, goal.y),
         repeat_forever: plan.period_m.is_some(),
@@ -381,7 +427,7 @@ pub fn run(options: &Options) -> Result<Outcome, RunError> {
     let mut watch = Watch::new(
         WatchConfig {
             name: options.name.clone(),
-            model: Some(model),
+            pose_hint: pose_hint(&description),
             source: options.source.clone(),
             preempt_timeout_ns: ns(options.preempt_timeout_s),
             state_timeout_ns: ns(STALE_S),
@@ -419,6 +465,32 @@ pub fn run(options: &Options) -> Result<Outcome, RunError> {
             stop_for(&mut source, &mut ticker, FINAL_STOP_S)?;
             reporter.interrupted(seconds(now.saturating_sub(t0)));
             return Ok(Outcome::Interrupted);
+        }
+        if let Some(newer) = robot.latest_description()?
+            && (newer.seq, newer.stamp_ns) != (description.seq, description.stamp_ns)
+        {
+            description = newer;
+            let limits = kinematics(options, &description).and_then(|k| {
+                tracker.config().kinematics.updated_by(&k).ok_or_else(|| {
+                    RunError::DescriptionChanged {
+                        name: options.name.clone(),
+                        seq: description.seq,
+                        what: format!(
+                            "{} now turns {}",
+                            robot_label(&description),
+                            turning_text(&k)
+                        ),
+                    }
+                })
+            });
+            match limits {
+                Ok(k) if k == tracker.config().kinematics => {}
+                Ok(k) => {
+                    tracker.set_kinematics(k);
+                    reporter.limits(seconds(now.saturating_sub(t0)), description.seq, &k);
+                }
+                Err(e) => return fail(&mut source, &mut ticker, e, now),
+            }
         }
         let state = robot.latest_state()?;
         let mux = robot.latest_mux()?;
@@ -461,10 +533,11 @@ pub fn run(options: &Options) -> Result<Outcome, RunError> {
         if step.activity == Activity::Done {
             break;
         }
-        let request = VelocityRequest::twist(
-            step.command.linear_mps as f32,
-            step.command.angular_radps as f32,
+        let mut request = VelocityRequest::twist(
+            toward_zero(step.command.linear_mps),
+            toward_zero(step.command.angular_radps),
         );
+        request.linear_y_mps = toward_zero(step.command.lateral_mps);
         source.send(request)?;
         if seconds(now.saturating_sub(last_progress)) >= PROGRESS_S {
             last_progress = now;
@@ -499,4 +572,39 @@ pub fn run(options: &Options) -> Result<Outcome, RunError> {
         pose: end,
     });
     Ok(Outcome::Reached)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_request_at_a_limit_never_reads_above_it() {
+        assert!(f64::from(0.4f32) > 0.4, "the case it is for");
+        for v in [0.4, -0.4, 0.1, -0.1, 1.5, 0.6109, -3.0, 0.0, 1e-9] {
+            let narrow = toward_zero(v);
+            assert!(f64::from(narrow).abs() <= v.abs(), "{v}: {narrow}");
+            assert!((f64::from(narrow) - v).abs() < 1e-6, "{v}: {narrow}");
+        }
+    }
+
+    #[test]
+    fn a_robot_without_a_track_is_told_where_to_set_it() {
+        let mut d = RobotDescription {
+            kinematics: KinematicsKind::DIFFERENTIAL,
+            ..RobotDescription::default()
+        };
+        d.set_kind_name("xbot");
+        let hint = pose_hint(&d);
+        assert!(hint.contains("gives no track"), "{hint}");
+        assert!(
+            hint.contains("chassisd --robot xbot --print-config"),
+            "{hint}"
+        );
+        d.geometry.track_m = 0.45;
+        assert_eq!(pose_hint(&d), "");
+        d.geometry.track_m = f64::NAN;
+        d.kinematics = KinematicsKind::ACKERMANN;
+        assert_eq!(pose_hint(&d), "", "a steered robot's pose needs no track");
+    }
 }

@@ -7,9 +7,10 @@
 //!   the start with the start heading — `size` across, `size / 2` wide.
 //!
 //! A robot that turns on the spot drives the square's corners exactly (it stops and turns). A
-//! robot with a minimum turning radius (TITAN, 1.53 m) cannot: its square gets corners rounded
-//! to [`CORNER_RADIUS_MARGIN`] × its minimum radius, which needs `size ≥ 2 ×` that radius
-//! (3.52 m for TITAN); its figure-eight needs circles of that radius (`size ≥ 4 ×`, 7.04 m).
+//! robot with a minimum turning radius (TITAN: 1.53 m by its description, 1.56 m as the planner
+//! asks for it) cannot: its square gets corners rounded to [`CORNER_RADIUS_MARGIN`] × its
+//! minimum radius, which needs `size ≥ 2 ×` that radius (3.59 m for TITAN); its figure-eight
+//! needs circles of that radius (`size ≥ 4 ×`, 7.17 m).
 //! The margin leaves the path follower room to correct on an arc. A size too small for the robot
 //! is refused with the smallest that works, and the default size is the smallest multiple of
 //! 0.5 m from 2 m up that fits.
@@ -76,13 +77,12 @@ pub enum ShapeError {
     #[error("--size must be a positive number of metres (got {0})")]
     BadSize(f64),
     #[error(
-        "a {shape} of {size_m:.2} m is too small for {robot}: it cannot turn tighter than \
+        "a {shape} of {size_m:.2} m is too small for the robot: it cannot turn tighter than \
          {min_radius_m:.2} m, so its corners get a {radius_m:.2} m radius and the {shape} \
          needs --size {min_size_m:.2} or more"
     )]
     TooSmall {
         shape: &'static str,
-        robot: &'static str,
         size_m: f64,
         min_size_m: f64,
         radius_m: f64,
@@ -156,7 +156,6 @@ pub fn build(
     if size_m + 1e-9 < min_size {
         return Err(ShapeError::TooSmall {
             shape: shape.name(),
-            robot: kinematics.model.name(),
             size_m,
             min_size_m: min_size,
             radius_m: radius,
@@ -174,27 +173,42 @@ pub fn build(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinematics::RobotModel;
+    use chassis_protocols::RobotKind;
+    use chassis_protocols::description::describe;
     use std::f64::consts::PI;
 
-    fn kin(model: RobotModel) -> Kinematics {
-        Kinematics::of(model)
+    /// A robot as chassisd describes it with its registry defaults.
+    fn kin(kind: RobotKind) -> Kinematics {
+        Kinematics::from_description(&describe(&kind.entry().defaults())).unwrap()
+    }
+
+    #[test]
+    fn every_robot_gets_every_shape_at_its_default_size() {
+        for kind in RobotKind::ALL {
+            let k = kin(kind);
+            for shape in [Shape::Line, Shape::Square, Shape::FigureEight] {
+                let size = shape.default_size_m(&k);
+                let path = build(shape, size, 1, &k)
+                    .unwrap_or_else(|e| panic!("{kind}: {shape:?} of {size} m: {e}"));
+                assert!(path.length_m() >= size, "{kind}: {shape:?}");
+            }
+        }
     }
 
     #[test]
     fn a_line_is_as_long_as_its_size_and_open() {
-        let p = build(Shape::Line, 3.0, 1, &kin(RobotModel::Xbot)).unwrap();
+        let p = build(Shape::Line, 3.0, 1, &kin(RobotKind::Xbot)).unwrap();
         assert!((p.length_m() - 3.0).abs() < 1e-12);
         assert!(!p.is_closed(0.01));
         assert_eq!(
-            build(Shape::Line, 3.0, 2, &kin(RobotModel::Xbot)),
+            build(Shape::Line, 3.0, 2, &kin(RobotKind::Xbot)),
             Err(ShapeError::NotClosed("line"))
         );
     }
 
     #[test]
     fn a_square_is_four_sides_long_and_closed() {
-        for model in [RobotModel::ScoutMini, RobotModel::Xbot] {
+        for model in [RobotKind::ScoutMini, RobotKind::Xbot] {
             let p = build(Shape::Square, 2.0, 1, &kin(model)).unwrap();
             assert!((p.length_m() - 8.0).abs() < 1e-12);
             assert!(p.is_closed(1e-12));
@@ -205,7 +219,7 @@ mod tests {
 
     #[test]
     fn a_figure_eight_is_two_closed_circles_long() {
-        let p = build(Shape::FigureEight, 2.0, 1, &kin(RobotModel::ScoutMini)).unwrap();
+        let p = build(Shape::FigureEight, 2.0, 1, &kin(RobotKind::ScoutMini)).unwrap();
         let expected = 2.0 * 2.0 * PI * 0.5;
         // A sampled circle is a little shorter than the circle.
         assert!(
@@ -227,7 +241,7 @@ mod tests {
 
     #[test]
     fn titan_gets_a_square_with_corners_it_can_turn_and_the_same_closure() {
-        let titan = kin(RobotModel::Titan);
+        let titan = kin(RobotKind::Titan);
         let radius = corner_radius_m(&titan);
         assert!(radius > 1.7 && radius < 1.8, "{radius}");
         let p = build(Shape::Square, 4.0, 1, &titan).unwrap();
@@ -247,19 +261,23 @@ mod tests {
 
     #[test]
     fn a_shape_too_small_for_titan_is_refused_with_the_size_that_works() {
-        let titan = kin(RobotModel::Titan);
+        let titan = kin(RobotKind::Titan);
         let err = build(Shape::Square, 2.0, 1, &titan).unwrap_err();
         let ShapeError::TooSmall { min_size_m, .. } = err else {
             panic!("{err}")
         };
-        assert!(min_size_m > 3.5 && min_size_m < 3.6, "{min_size_m}");
-        assert!(err.to_string().contains("--size 3.5"), "{err}");
+        // The figures of the module's docs.
+        assert!((titan.min_turn_radius_m() - 1.56).abs() < 0.005);
+        assert!((min_size_m - 3.59).abs() < 0.005, "{min_size_m}");
+        assert!(err.to_string().contains("--size 3.59"), "{err}");
+        let eight = Shape::FigureEight.min_size_m(corner_radius_m(&titan));
+        assert!((eight - 7.17).abs() < 0.005, "{eight}");
         assert!(build(Shape::FigureEight, 6.0, 1, &titan).is_err());
         assert_eq!(Shape::Square.default_size_m(&titan), 4.0);
         assert_eq!(Shape::FigureEight.default_size_m(&titan), 7.5);
         assert_eq!(Shape::Line.default_size_m(&titan), 2.0);
         assert_eq!(
-            Shape::Square.default_size_m(&kin(RobotModel::ScoutMini)),
+            Shape::Square.default_size_m(&kin(RobotKind::ScoutMini)),
             2.0
         );
         assert!(build(Shape::FigureEight, 7.5, 2, &titan).is_ok());

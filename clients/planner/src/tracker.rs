@@ -20,15 +20,16 @@
 //!   [`TrackerConfig::realign_angle_rad`] off its heading (after a preemption moved it, say)
 //!   turns on the spot toward it first.
 //! * **Speed.** The cruise speed, limited by the path's curvature (lateral acceleration, the
-//!   robot's yaw-rate limit, TITAN's 1.5 m/s while steering), by braking at
+//!   robot's yaw-rate limit), by braking at
 //!   [`TrackerConfig::decel_mps2`] toward the next stop, and raised at most at
 //!   [`TrackerConfig::accel_mps2`]. Near a stop a proportional controller on the along-track
 //!   distance takes over, never slower than the robot's slowest useful speed; the robot is
 //!   told to stop once the distance left is what it will coast (speed × its response lag).
 //! * **Goal.** At the end the robot stops; once it stands still the goal is reached when it is
-//!   within the tolerance of the last point. If not, a robot that turns on the spot turns toward
-//!   the goal (or away from it, to back up) and drives straight to it; a steered robot only
-//!   drives straight forward or back, so a sideways miss is a failure. Three tries at most.
+//!   within the tolerance of the last point. If not, a robot that moves sideways (omni wheels)
+//!   drives straight to it without turning; a robot that turns on the spot turns toward the goal
+//!   (or away from it, to back up) and drives straight to it; a steered robot only drives
+//!   straight forward or back, so a sideways miss is a failure. Three tries at most.
 
 use thiserror::Error;
 
@@ -47,6 +48,8 @@ const STANDSTILL_RADPS: f64 = 0.02;
 const ARRIVE_M: f64 = 0.005;
 /// The projection may move back this far (a robot pushed back), m.
 const BACK_WINDOW_M: f64 = 0.3;
+/// Top speed of a correction at the goal, m/s.
+const CORRECTION_MPS: f64 = 0.2;
 
 /// The follower's tuning.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -119,6 +122,8 @@ pub struct Measured {
     pub pose: Pose,
     pub linear_mps: f64,
     pub angular_radps: f64,
+    /// Sideways speed, left positive (robots that move sideways), m/s.
+    pub lateral_mps: f64,
 }
 
 /// A twist to send.
@@ -126,12 +131,15 @@ pub struct Measured {
 pub struct Command {
     pub linear_mps: f64,
     pub angular_radps: f64,
+    /// Sideways speed, left positive: only for a robot that moves sideways, m/s.
+    pub lateral_mps: f64,
 }
 
 impl Command {
     pub const STOP: Command = Command {
         linear_mps: 0.0,
         angular_radps: 0.0,
+        lateral_mps: 0.0,
     };
 }
 
@@ -247,35 +255,7 @@ impl Tracker {
             }
         }
         stops.push(path.length_m());
-        let cruise = config.cruise_mps.min(kin.max_linear_mps);
-        let nominal_lookahead = config.lookahead_m(cruise);
-        // The curvature pure pursuit will ask for around each point.
-        let mut raw = vec![cruise; n];
-        for i in 1..n - 1 {
-            let span = (0.5 * (s[i + 1] - s[i - 1])).min(nominal_lookahead);
-            let k = if span > 0.0 {
-                angles[i].abs() / span
-            } else {
-                0.0
-            };
-            raw[i] = curve_speed(&config, k).min(cruise);
-        }
-        let is_stop = |i: usize| stops.iter().any(|&x| (x - s[i]).abs() < 1e-9);
-        let segment_limit: Vec<f64> = (0..n - 1)
-            .map(|i| {
-                let a = if is_stop(i) { cruise } else { raw[i] };
-                let b = if is_stop(i + 1) { cruise } else { raw[i + 1] };
-                a.min(b)
-            })
-            .collect();
-        let mut vertex_limit: Vec<f64> = (0..n)
-            .map(|i| if is_stop(i) { 0.0 } else { raw[i] })
-            .collect();
-        for i in (0..n - 1).rev() {
-            let reachable =
-                (vertex_limit[i + 1].powi(2) + 2.0 * config.decel_mps2 * (s[i + 1] - s[i])).sqrt();
-            vertex_limit[i] = vertex_limit[i].min(reachable);
-        }
+        let (vertex_limit, segment_limit) = speed_profile(&config, &path, &stops);
         Self {
             config,
             path,
@@ -299,6 +279,17 @@ impl Tracker {
 
     pub fn config(&self) -> &TrackerConfig {
         &self.config
+    }
+
+    /// Drives on within new limits (a newer description of the robot): the speed profile is
+    /// made again, the progress kept. The path stays what it was built for, so `kinematics`
+    /// must turn the same way, no wider ([`Kinematics::updated_by`] makes such limits).
+    pub fn set_kinematics(&mut self, kinematics: Kinematics) {
+        self.config.kinematics = kinematics;
+        let (vertex_limit, segment_limit) = speed_profile(&self.config, &self.path, &self.stops);
+        self.vertex_limit = vertex_limit;
+        self.segment_limit = segment_limit;
+        self.last_speed = self.last_speed.min(kinematics.max_linear_mps);
     }
 
     /// The arc lengths where the robot stops (sharp corners and the end).
@@ -342,6 +333,7 @@ impl Tracker {
             m.pose.yaw,
             m.linear_mps,
             m.angular_radps,
+            m.lateral_mps,
         ]
         .iter()
         .all(|v| v.is_finite());
@@ -479,8 +471,8 @@ impl Tracker {
         let max = c.kinematics.max_angular_radps();
         let rate = (c.turn_gain * error.abs()).clamp(c.kinematics.min_angular_radps, max);
         Some(Command {
-            linear_mps: 0.0,
             angular_radps: error.signum() * rate,
+            ..Command::STOP
         })
     }
 
@@ -574,6 +566,7 @@ impl Tracker {
             Some(Command {
                 linear_mps: speed,
                 angular_radps: angular,
+                lateral_mps: 0.0,
             }),
             lateral,
         )
@@ -598,6 +591,33 @@ impl Tracker {
         let kin = c.kinematics;
         let goal = m.pose.to_local(self.goal());
         let distance = goal.x.hypot(goal.y);
+        let slowest = kin.min_linear_mps;
+        let fastest = |reverse: bool| {
+            let limit = if reverse {
+                kin.max_reverse_mps
+            } else {
+                kin.max_linear_mps
+            };
+            CORRECTION_MPS.min(limit).max(slowest)
+        };
+        if kin.lateral_mps > 0.0 {
+            // Straight at the goal, forward and sideways at once, without turning.
+            let left = (
+                goal.x - m.linear_mps * kin.response_lag_s,
+                goal.y - m.lateral_mps * kin.response_lag_s,
+            );
+            let length = left.0.hypot(left.1);
+            if length <= ARRIVE_M {
+                return Ok(None);
+            }
+            let top = fastest(left.0 < 0.0).min(kin.lateral_mps.max(slowest));
+            let speed = (c.approach_gain * length).clamp(slowest, top);
+            return Ok(Some(Command {
+                linear_mps: speed * left.0 / length,
+                lateral_mps: speed * left.1 / length,
+                ..Command::STOP
+            }));
+        }
         if kin.turns_on_the_spot() {
             let bearing = goal.y.atan2(goal.x);
             let facing = if bearing.abs() > std::f64::consts::FRAC_PI_2 {
@@ -623,11 +643,10 @@ impl Tracker {
         if left.abs() <= ARRIVE_M {
             return Ok(None);
         }
-        let speed = (c.approach_gain * left.abs())
-            .clamp(kin.min_linear_mps, 0.2_f64.max(kin.min_linear_mps));
+        let speed = (c.approach_gain * left.abs()).clamp(slowest, fastest(left < 0.0));
         Ok(Some(Command {
             linear_mps: left.signum() * speed,
-            angular_radps: 0.0,
+            ..Command::STOP
         }))
     }
 }
@@ -642,10 +661,49 @@ fn curve_speed(config: &TrackerConfig, k: f64) -> f64 {
         f64::INFINITY
     };
     let robot = match config.kinematics.steering {
-        Steering::Differential { .. } => config.kinematics.max_speed_at(k / 0.8),
+        Steering::Differential => config.kinematics.max_speed_at(k / 0.8),
         Steering::Ackermann { .. } => config.kinematics.max_speed_at(k),
     };
     lateral.min(robot).min(config.cruise_mps)
+}
+
+/// The speed limit at each point of `path` (braking toward the stops included) and of each of
+/// its segments (from the curvature pure pursuit will ask for around its ends), within the
+/// cruise speed and the robot's limits.
+fn speed_profile(config: &TrackerConfig, path: &Path, stops: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let angles = path.turn_angles();
+    let s = path.arc_lengths();
+    let n = s.len();
+    let cruise = config.cruise_mps.min(config.kinematics.max_linear_mps);
+    let nominal_lookahead = config.lookahead_m(cruise);
+    // The curvature pure pursuit will ask for around each point.
+    let mut raw = vec![cruise; n];
+    for i in 1..n - 1 {
+        let span = (0.5 * (s[i + 1] - s[i - 1])).min(nominal_lookahead);
+        let k = if span > 0.0 {
+            angles[i].abs() / span
+        } else {
+            0.0
+        };
+        raw[i] = curve_speed(config, k).min(cruise);
+    }
+    let is_stop = |i: usize| stops.iter().any(|&x| (x - s[i]).abs() < 1e-9);
+    let segment_limit: Vec<f64> = (0..n - 1)
+        .map(|i| {
+            let a = if is_stop(i) { cruise } else { raw[i] };
+            let b = if is_stop(i + 1) { cruise } else { raw[i + 1] };
+            a.min(b)
+        })
+        .collect();
+    let mut vertex_limit: Vec<f64> = (0..n)
+        .map(|i| if is_stop(i) { 0.0 } else { raw[i] })
+        .collect();
+    for i in (0..n - 1).rev() {
+        let reachable =
+            (vertex_limit[i + 1].powi(2) + 2.0 * config.decel_mps2 * (s[i + 1] - s[i])).sqrt();
+        vertex_limit[i] = vertex_limit[i].min(reachable);
+    }
+    (vertex_limit, segment_limit)
 }
 
 #[cfg(test)]

@@ -11,8 +11,6 @@ use chassis_client::{
 };
 use thiserror::Error;
 
-use crate::kinematics::RobotModel;
-
 /// Why the robot does not obey the planner right now.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Hold {
@@ -56,7 +54,7 @@ pub enum Failure {
         "chassis/{name} publishes no pose (its pose group is not valid), so there is nothing to \
          follow a path with{hint}"
     )]
-    NoPose { name: String, hint: &'static str },
+    NoPose { name: String, hint: String },
     #[error("the pose is {seconds:.1} s old{link}: the chassis stopped reporting")]
     StalePose { seconds: f64, link: String },
     #[error("{hold} for {seconds:.1} s, longer than the preemption timeout ({timeout_s} s)")]
@@ -68,17 +66,12 @@ pub enum Failure {
 }
 
 impl Failure {
-    /// The failure of a robot without a pose, with what to do about it.
-    pub fn no_pose(name: &str, model: Option<RobotModel>) -> Self {
+    /// The failure of a robot without a pose, with what to do about it (`hint`, from the
+    /// robot's description: `run::pose_hint`).
+    pub fn no_pose(name: &str, hint: &str) -> Self {
         Failure::NoPose {
             name: name.to_string(),
-            hint: match model {
-                Some(RobotModel::Xbot) => {
-                    ": the XBot's pose needs its wheel separation — set \
-                     profile.wheel_separation_m in chassisd's config"
-                }
-                _ => "",
-            },
+            hint: hint.to_string(),
         }
     }
 }
@@ -88,7 +81,8 @@ impl Failure {
 pub struct WatchConfig {
     /// The robot's name (messages).
     pub name: String,
-    pub model: Option<RobotModel>,
+    /// What to do about a missing pose (appended to the failure).
+    pub pose_hint: String,
     /// The planner's source.
     pub source: String,
     /// Longest hold, ns.
@@ -158,7 +152,7 @@ impl Watch {
             });
         }
         match state.age_ns(Group::Pose, now_ns) {
-            None => return Err(Failure::no_pose(&self.config.name, self.config.model)),
+            None => return Err(Failure::no_pose(&self.config.name, &self.config.pose_hint)),
             Some(age) if age > self.config.pose_timeout_ns => {
                 let flags = LinkFlags::names(state.link_flags);
                 return Err(Failure::StalePose {
@@ -236,7 +230,7 @@ mod tests {
     fn config() -> WatchConfig {
         WatchConfig {
             name: "bot".into(),
-            model: Some(RobotModel::Xbot),
+            pose_hint: ": set its track".into(),
             source: "planner".into(),
             preempt_timeout_ns: 2 * S,
             state_timeout_ns: S,
@@ -383,7 +377,10 @@ mod tests {
             ..ChassisState::default()
         };
         let err = w.observe(0, Some(&no_pose), None).unwrap_err();
-        assert!(err.to_string().contains("wheel_separation_m"), "{err}");
+        assert!(
+            err.to_string().ends_with("path with: set its track"),
+            "{err}"
+        );
 
         let mut w = Watch::new(config(), 0);
         let mut old = state(1, S);

@@ -1023,22 +1023,6 @@ class RequestFlags(Constants):
     NAMES = {1: 'steer', 2: 'heartbeat', 4: 'limit'}
 
 
-class RobotKind(Constants):
-    """``RobotKind``: enum of u8."""
-
-    UNKNOWN = 0
-    TITAN = 1
-    SCOUT_MINI = 2
-    XBOT = 3
-    SCOUT = 4
-    HUNTER = 5
-    HUNTER_SE = 6
-    TRACER = 7
-    BUNKER = 8
-    RANGER_MINI = 9
-    NAMES = {0: 'unknown', 1: 'titan', 2: 'scout-mini', 3: 'xbot', 4: 'scout', 5: 'hunter', 6: 'hunter-se', 7: 'tracer', 8: 'bunker', 9: 'ranger-mini'}
-
-
 class SafetyAction(Constants):
     """``SafetyAction``: enum of u8."""
 
@@ -1200,7 +1184,6 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'LockStatus': LockStatus,
     'MuxStatus': MuxStatus,
     'RequestFlags': RequestFlags,
-    'RobotKind': RobotKind,
     'SafetyAction': SafetyAction,
     'SafetyEvent': SafetyEvent,
     'SafetyRule': SafetyRule,

@@ -184,6 +184,16 @@ KEEP_DRIVING = textwrap.dedent(
         time.sleep(0.05)
     """
 )
+# KEEP_DRIVING's period: its last request is at most this old (and its own scheduling) when
+# it is killed.
+KEEP_DRIVING_PERIOD_MS = 50.0
+# How late the test may see the mux drop a dead source, on top of its timeout: the service
+# decides at the expiry, its loop waking up to a tick (20 ms) late on a loaded machine, and the
+# test reads the newest status, which may be the next tick's (20 ms).
+DECISION_ALLOWANCE_MS = 40.0
+# How early, before the timeout counted from the kill: the age the last request already had
+# (a period), and the driver's own scheduling (30 ms: a sleep that overran, a late send).
+EARLY_ALLOWANCE_MS = KEEP_DRIVING_PERIOD_MS + 30.0
 
 
 def test_a_killed_python_source_ends_its_motion_at_its_timeout(world: World) -> None:
@@ -201,21 +211,37 @@ def test_a_killed_python_source_ends_its_motion_at_its_timeout(world: World) -> 
         )
 
     wait_until("the Python planner drives", moving, 20.0, world)
+    killed_ns = chassis.now_ns()
     driver.send_signal(signal.SIGKILL)
     driver.wait(timeout=5)
 
-    def released() -> bool:
-        mux = robot.wait_mux(0.05)
-        return mux is not None and mux.active_source == chassis.MuxStatus.NO_SOURCE
-
-    wait_until("the mux drops the dead planner", released, 10.0, world)
-    mux = robot.latest_mux()
-    assert mux.zero_reason == chassis.ZeroReason.NO_ACTIVE_SOURCE
-    assert mux.output.linear_x_mps == 0.0
-    planner = mux.sources[mux.source_names().index("planner")]
+    # The first status after the kill in which the mux dropped the planner: read as they come
+    # (no sleep between reads), so that its stamp is the decision's, not the reader's.
+    released: chassis.MuxStatus | None = None
+    end = time.monotonic() + 10.0
+    while released is None and time.monotonic() < end:
+        mux = robot.wait_mux(0.02)
+        if (
+            mux is not None
+            and mux.stamp_ns > killed_ns
+            and mux.active_source == chassis.MuxStatus.NO_SOURCE
+        ):
+            released = mux
+    assert released is not None, f"the mux never dropped the dead planner\n{world.logs()}"
+    assert released.zero_reason == chassis.ZeroReason.NO_ACTIVE_SOURCE
+    assert released.output.linear_x_mps == 0.0
+    planner = released.sources[released.source_names().index("planner")]
     assert not planner.flags & chassis.SourceFlags.FRESH, planner.to_dict()
-    # It was dropped for its age: the source's own timeout, not earlier.
+    # It was dropped for its age: the source's own timeout, not earlier…
     assert planner.age_ms >= planner.timeout_ms, planner.to_dict()
+    # … and at it, by the test's clock: from the kill to the decision, the timeout less the
+    # age its last request had at the kill, and no later than the timeout and the allowance.
+    after_ms = (released.stamp_ns - killed_ns) / 1e6
+    assert after_ms >= planner.timeout_ms - EARLY_ALLOWANCE_MS, (after_ms, planner.to_dict())
+    assert after_ms <= planner.timeout_ms + DECISION_ALLOWANCE_MS, (
+        after_ms,
+        planner.to_dict(),
+    )
     wait_until(
         "the robot stops",
         lambda: (s := robot.wait_state(0.05)) is not None and abs(s.motion.linear_mps) < 0.01,

@@ -483,7 +483,10 @@ struct StateLoop<'a> {
     out: &'a Outputs,
     clock: RosClock,
     frames: Frames,
+    /// The robot description's wheel geometry (`None`: no description yet, or one without it).
     wheels: Option<WheelGeometry>,
+    /// `seq` of the description `wheels` comes from.
+    description_seq: Option<u64>,
     latest: Option<ChassisState>,
     mux: Option<MuxStatus>,
     last_diagnostics: Option<(u64, Vec<(u8, String)>)>,
@@ -523,9 +526,6 @@ impl StateLoop<'_> {
             if let Some(tf) = &out.tf {
                 Self::publish(f, "tf", tf, convert::transform(s, clock, frames));
             }
-        }
-        if latest.is_none_or(|l| l.robot != s.robot) {
-            self.wheels = convert::wheel_geometry(s.robot);
         }
         if (fresh(Group::Steering) || fresh(Group::WheelSpeed))
             && let Some(j) = convert::joint_states(s, clock, self.wheels)
@@ -592,6 +592,7 @@ pub fn state_loop(
         clock,
         frames,
         wheels: None,
+        description_seq: None,
         latest: None,
         mux: None,
         last_diagnostics: None,
@@ -606,6 +607,16 @@ pub fn state_loop(
                 break;
             }
             return Err(e).context("reading state");
+        }
+        // The description before the samples: a newer one (the protocol detection decided)
+        // brings the wheel geometry the joints are reported with.
+        if let Some(d) = robot
+            .latest_description()
+            .context("reading the robot description")?
+            && lp.description_seq != Some(d.seq)
+        {
+            lp.description_seq = Some(d.seq);
+            lp.wheels = convert::wheel_geometry(&d);
         }
         for s in &samples {
             lp.on_state(s);

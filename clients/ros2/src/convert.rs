@@ -8,11 +8,11 @@
 //! spacing; a later step of the system clock (NTP) does not move them until the bridge restarts.
 
 use chassis_client::{
-    ChassisState, ClampFlags, FaultFlags, Group, LinkFlags, MuxStatus, RobotKind, WireProtocol,
-    ZeroReason,
+    ChassisState, ClampFlags, FaultFlags, Group, LinkFlags, MuxStatus, RobotDescription,
+    WireProtocol, ZeroReason,
 };
 
-use chassis_protocols::profile::XbotProfile;
+use chassis_protocols::RobotKind;
 
 use crate::msg::{
     BatteryState, DiagnosticArray, DiagnosticStatus, Header, Imu, JointState, KeyValue, NavSatFix,
@@ -174,16 +174,14 @@ pub fn transform(state: &ChassisState, clock: RosClock, frames: &Frames) -> TfMe
     }
 }
 
-/// The wheel geometry joint states need: radius and travel per encoder count, m. Only the XBot's
-/// manual gives them (its profile's defaults); the AgileX manuals give no wheel radius, so their
-/// wheel joints are not published.
-pub fn wheel_geometry(robot: u8) -> Option<WheelGeometry> {
-    (robot == RobotKind::XBOT).then(|| {
-        let xbot = XbotProfile::default();
-        WheelGeometry {
-            radius_m: xbot.wheel_diameter_m / 2.0,
-            metres_per_count: xbot.metres_per_count(),
-        }
+/// The wheel geometry joint states need: radius and travel per encoder count, m, as the robot's
+/// description gives them (`geometry.wheel_radius_m`, `travel_per_count_m`). A robot described
+/// without them (the AgileX manuals give no wheel radius) has no wheel joints published.
+pub fn wheel_geometry(description: &RobotDescription) -> Option<WheelGeometry> {
+    let g = &description.geometry;
+    (g.wheel_radius_m > 0.0 && g.travel_per_count_m > 0.0).then_some(WheelGeometry {
+        radius_m: g.wheel_radius_m,
+        metres_per_count: g.travel_per_count_m,
     })
 }
 
@@ -523,7 +521,10 @@ fn link_status(name: &str, prefix: &str, state: &ChassisState) -> DiagnosticStat
         message,
         hardware_id: name.into(),
         values: vec![
-            KeyValue::new("robot", RobotKind::name(state.robot)),
+            KeyValue::new(
+                "robot",
+                RobotKind::from_id(state.robot).map_or("unknown", RobotKind::name),
+            ),
             KeyValue::new("protocol", WireProtocol::name(state.system.wire_protocol)),
             KeyValue::new("flags", LinkFlags::names(state.link_flags).join(", ")),
             KeyValue::new("rx_frames", l.rx_frames),
@@ -594,7 +595,12 @@ pub fn diagnostics_key(array: &DiagnosticArray) -> Vec<(u8, String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chassis_client::{FaultFlags, Group, LinkFlags, RobotKind};
+    use chassis_client::{FaultFlags, Group, LinkFlags};
+
+    /// The description chassisd publishes of `kind` with its default profile.
+    fn described(kind: RobotKind) -> RobotDescription {
+        chassis_protocols::description::describe(&kind.entry().defaults())
+    }
 
     const CLOCK: RosClock = RosClock {
         offset_ns: 1_700_000_000_000_000_000,
@@ -602,7 +608,7 @@ mod tests {
 
     fn titan() -> ChassisState {
         let mut s = ChassisState {
-            robot: RobotKind::TITAN,
+            robot: RobotKind::Titan.id(),
             stamp_ns: 5_000_000_000,
             ..ChassisState::default()
         };
@@ -680,7 +686,9 @@ mod tests {
         assert!(imu(&s, CLOCK, &f).is_none());
         assert!(range(&s, XBOT_RANGES[0], CLOCK, &f).is_none());
         assert!(nav_sat_fix(&s, CLOCK, &f).is_none());
-        assert!(joint_states(&s, CLOCK, wheel_geometry(s.robot)).is_none());
+        assert!(wheel_geometry(&described(RobotKind::Titan)).is_none());
+        let xbot = wheel_geometry(&described(RobotKind::Xbot));
+        assert!(joint_states(&s, CLOCK, xbot).is_none());
     }
 
     #[test]
@@ -708,13 +716,13 @@ mod tests {
     #[test]
     fn xbot_wheels_are_joints_in_radians() {
         let mut s = ChassisState {
-            robot: RobotKind::XBOT,
+            robot: RobotKind::Xbot.id(),
             ..ChassisState::default()
         };
         s.touch(Group::WheelSpeed, 1);
         s.motion.wheel_mps = [0.1, 0.2, 0.3, 0.4];
         s.motors[0].position_counts = 1000;
-        let w = wheel_geometry(s.robot).expect("xbot geometry");
+        let w = wheel_geometry(&described(RobotKind::Xbot)).expect("xbot geometry");
         let j = joint_states(&s, CLOCK, Some(w)).expect("joints");
         assert_eq!(j.name[0], "front_left_wheel_joint");
         assert!((j.velocity[0] - 0.1 / w.radius_m).abs() < 1e-6);

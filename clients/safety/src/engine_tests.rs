@@ -56,11 +56,10 @@ impl Rig {
             ..ChassisState::default()
         };
         state.system.battery_soc_pct = 80.0;
-        state.system.battery_voltage_v = match kind {
-            RobotKind::Titan => 50.0,
-            RobotKind::Xbot => 25.5,
-            _ => 27.0,
-        };
+        // A healthy pack: full, or 2 V above the described low level where no full voltage is
+        // described.
+        let battery = description.battery;
+        state.system.battery_voltage_v = battery.full_v.max(battery.low_v + 2.0) as f32;
         state.ranges.ultrasonic_m = [6.0; 3];
         state.ranges.ir_m = [0.8; 3];
         let mut rig = Self {

@@ -6,6 +6,10 @@
 //! decision and redraws (ratatui sends only the cells that changed, which keeps it light over
 //! SSH).
 //!
+//! The robot's description (`chassis/<name>/robot`) is read at start and again whenever chassisd
+//! publishes a newer one: the screen shows what the robot is, and the speed steps stop at its
+//! effective limits ([`keys::Limits`]).
+//!
 //! Stopping: a focus loss or a lapsed hold sends one stop (see [`crate::keys`]); quitting, an
 //! error or a panic stops the robot if we were moving it ([`Outlet`]'s `Drop`), and the terminal
 //! is restored in every case ([`Screen`]'s `Drop`, plus a panic hook). A hung-up SSH session
@@ -19,8 +23,8 @@ use std::time::Duration;
 
 use anyhow::Context;
 use chassis_client::{
-    ChassisState, MuxStatus, Robot, Source, VelocityRequest, install_signal_handlers, now_ns,
-    termination_requested,
+    ChassisState, ClientError, MuxStatus, Robot, RobotDescription, Source, VelocityRequest,
+    install_signal_handlers, now_ns, termination_requested,
 };
 use crossterm::event::{
     self, DisableFocusChange, EnableFocusChange, Event, KeyboardEnhancementFlags,
@@ -41,6 +45,9 @@ use crate::view::{self, KeysView, Releases, View};
 const TICK_NS: u64 = 50_000_000;
 /// How often to check that chassisd still serves the robot while its state is stale.
 const SERVED_CHECK_NS: u64 = 1_000_000_000;
+/// Longest wait at start for the robot's description (chassisd hands it to a new reader within
+/// a tick of its loop).
+const DESCRIPTION_WAIT: Duration = Duration::from_millis(500);
 
 /// What `chassis-teleop` was asked to do.
 #[derive(Debug, Clone)]
@@ -177,6 +184,7 @@ impl Drop for Screen {
 
 /// What the loop keeps between ticks.
 struct Seen {
+    description: Option<RobotDescription>,
     state: Option<ChassisState>,
     mux: Option<MuxStatus>,
     message: Option<String>,
@@ -190,7 +198,17 @@ fn drive(
     options: &Options,
 ) -> anyhow::Result<()> {
     let mut teleop = Teleop::new(options.settings);
+    let description = match robot.description(DESCRIPTION_WAIT) {
+        Ok(d) => Some(d),
+        // An older chassisd: the steps are the command line's alone.
+        Err(ClientError::NoDescription { .. }) => None,
+        Err(e) => return Err(e.into()),
+    };
+    if let Some(d) = &description {
+        teleop.set_limits(keys::Limits::of(d));
+    }
     let mut seen = Seen {
+        description,
         state: None,
         mux: None,
         message: None,
@@ -203,7 +221,11 @@ fn drive(
         }
         let now = now_ns();
         if now >= next_tick {
-            refresh(robot, &mut seen, now)?;
+            if refresh(robot, &mut seen, now)?
+                && let Some(d) = &seen.description
+            {
+                teleop.set_limits(keys::Limits::of(d));
+            }
             draw(screen, &teleop, &seen, options, now).context("drawing the screen")?;
             // A late tick skips the missed ones instead of bunching up.
             next_tick = next_tick.saturating_add(TICK_NS);
@@ -274,7 +296,17 @@ fn act(
     Ok(false)
 }
 
-fn refresh(robot: &mut Robot, seen: &mut Seen, now: u64) -> anyhow::Result<()> {
+/// Reads what is new; true when a newer description came.
+fn refresh(robot: &mut Robot, seen: &mut Seen, now: u64) -> anyhow::Result<bool> {
+    let mut described = false;
+    if let Some(d) = robot.latest_description()?
+        && seen
+            .description
+            .is_none_or(|old| (old.seq, old.stamp_ns) != (d.seq, d.stamp_ns))
+    {
+        seen.description = Some(d);
+        described = true;
+    }
     if let Some(state) = robot.latest_state()? {
         seen.state = Some(state);
     }
@@ -299,7 +331,7 @@ fn refresh(robot: &mut Robot, seen: &mut Seen, now: u64) -> anyhow::Result<()> {
             seen.message = None;
         }
     }
-    Ok(())
+    Ok(described)
 }
 
 fn draw(
@@ -315,12 +347,14 @@ fn draw(
         robot: &options.name,
         source: &options.source,
         now_ns: now,
+        description: seen.description.as_ref(),
         state: seen.state.as_ref(),
         mux: seen.mux.as_ref(),
         keys: KeysView {
             held: teleop.held(),
             level: teleop.level(),
-            max_level: settings.max_level(),
+            max_level: teleop.max_level(),
+            limits: teleop.limits(),
             linear_mps,
             angular_radps,
             command: teleop.command(),

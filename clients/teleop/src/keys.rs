@@ -27,7 +27,12 @@
 //! The cost of inferring: a single tap drives for up to 700 ms. Both windows are options.
 //!
 //! While a motion key is held the command is published every [`Settings::period_ns`] (20 Hz),
-//! and at once whenever it changes. When the last key ends, one explicit stop goes out and then
+//! and at once whenever it changes.
+//!
+//! The speed steps stop at the robot's effective limits ([`Limits`], from the description
+//! chassisd publishes: the robot's own after every `[profile]` override, tightened by
+//! `[mux.limits]`): forward and reverse each, and the yaw rate where the robot has a limit, so
+//! no step asks for more than the robot will do. When the last key ends, one explicit stop goes out and then
 //! nothing, so the mux's timeout hands the robot back to lower-priority sources (the planner).
 
 use crossterm::event::{Event, KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
@@ -225,6 +230,52 @@ impl Settings {
     }
 }
 
+/// The robot's effective limits, as its description gives them (infinite: none).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub forward_mps: f32,
+    pub reverse_mps: f32,
+    pub angular_radps: f32,
+}
+
+impl Limits {
+    /// No limit known (no description yet).
+    pub const NONE: Limits = Limits {
+        forward_mps: f32::INFINITY,
+        reverse_mps: f32::INFINITY,
+        angular_radps: f32::INFINITY,
+    };
+
+    /// The effective limits of a description; an unset (NaN) or non-positive one is none.
+    pub fn of(d: &chassis_client::RobotDescription) -> Self {
+        let e = d.effective_limits();
+        let limit = |v: f64| {
+            if v.is_finite() && v > 0.0 {
+                // Never above the limit once widened again (0.3 is 0.30000001 as an f32), or
+                // the driver clamps a step at the limit.
+                let narrow = v as f32;
+                if f64::from(narrow) > v {
+                    narrow.next_down()
+                } else {
+                    narrow
+                }
+            } else {
+                f32::INFINITY
+            }
+        };
+        let forward = limit(e.forward_mps);
+        Limits {
+            forward_mps: forward,
+            reverse_mps: if e.reverse_mps.is_nan() {
+                forward
+            } else {
+                limit(e.reverse_mps)
+            },
+            angular_radps: limit(e.angular_radps),
+        }
+    }
+}
+
 /// The set of motion keys held.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Held(u8);
@@ -253,6 +304,8 @@ pub struct Teleop {
     hold_until_ns: u64,
     /// Speed step, 1 ..= max level.
     level: u32,
+    /// The robot's effective limits.
+    limits: Limits,
     /// When the command is due again while driving.
     next_send_ns: u64,
 }
@@ -264,8 +317,42 @@ impl Teleop {
             held: Held::default(),
             hold_until_ns: 0,
             level: 1,
+            limits: Limits::NONE,
             next_send_ns: 0,
         }
+    }
+
+    /// The robot's effective limits (a description, or a newer one): the steps stop there.
+    pub fn set_limits(&mut self, limits: Limits) {
+        self.limits = limits;
+        self.level = self.level.min(self.max_level());
+    }
+
+    pub fn limits(&self) -> Limits {
+        self.limits
+    }
+
+    /// Largest forward or reverse speed a step asks for.
+    fn max_linear(&self) -> f32 {
+        let robot = self.limits.forward_mps.max(self.limits.reverse_mps);
+        self.settings.max_linear_mps.min(robot)
+    }
+
+    fn max_angular(&self) -> f32 {
+        self.settings
+            .max_angular_radps
+            .min(self.limits.angular_radps)
+    }
+
+    /// Speed steps from the slowest to where both speeds reached their maximum, within the
+    /// robot's limits.
+    pub fn max_level(&self) -> u32 {
+        Settings {
+            max_linear_mps: self.max_linear().max(self.settings.linear_step_mps),
+            max_angular_radps: self.max_angular().max(self.settings.angular_step_radps),
+            ..self.settings
+        }
+        .max_level()
     }
 
     pub fn settings(&self) -> &Settings {
@@ -289,20 +376,27 @@ impl Teleop {
     pub fn speeds(&self) -> (f32, f32) {
         let level = self.level as f32;
         (
-            (level * self.settings.linear_step_mps).min(self.settings.max_linear_mps),
-            (level * self.settings.angular_step_radps).min(self.settings.max_angular_radps),
+            (level * self.settings.linear_step_mps).min(self.max_linear()),
+            (level * self.settings.angular_step_radps).min(self.max_angular()),
         )
     }
 
-    /// The command the held keys ask for (zero when none is held; opposite keys cancel).
+    /// The command the held keys ask for (zero when none is held; opposite keys cancel),
+    /// forward and reverse each within the robot's limit.
     pub fn command(&self) -> Command {
         let (v, w) = self.speeds();
         let axis = |plus: Motion, minus: Motion| {
             f32::from(u8::from(self.held.contains(plus)))
                 - f32::from(u8::from(self.held.contains(minus)))
         };
+        let linear = axis(Motion::Forward, Motion::Reverse);
+        let speed = if linear > 0.0 {
+            v.min(self.limits.forward_mps)
+        } else {
+            v.min(self.limits.reverse_mps)
+        };
         Command {
-            linear_mps: axis(Motion::Forward, Motion::Reverse) * v,
+            linear_mps: linear * speed,
             angular_radps: axis(Motion::Left, Motion::Right) * w,
         }
     }
@@ -387,7 +481,7 @@ impl Teleop {
     fn step(&mut self, now_ns: u64, up: bool) -> Option<Action> {
         let before = self.command();
         self.level = if up {
-            (self.level + 1).min(self.settings.max_level())
+            (self.level + 1).min(self.max_level())
         } else {
             self.level.saturating_sub(1).max(1)
         };
@@ -608,6 +702,63 @@ mod tests {
             t.handle(3 * MS, Input::Key(Key::Slower, Edge::Press));
         }
         assert_eq!(t.level(), 1);
+    }
+
+    #[test]
+    fn the_steps_stop_at_the_robots_effective_limits() {
+        // 1.0 m/s and 1.0 rad/s in steps of 0.1 and 0.2 asked; the robot does 0.45 m/s forward,
+        // 0.25 m/s reverse and 0.5 rad/s.
+        let mut t = Teleop::new(Settings::default());
+        assert_eq!(t.max_level(), 10);
+        t.set_limits(Limits {
+            forward_mps: 0.45,
+            reverse_mps: 0.25,
+            angular_radps: 0.5,
+        });
+        assert_eq!(t.max_level(), 5, "0.45 m/s in steps of 0.1");
+        for _ in 0..20 {
+            t.handle(0, Input::Key(Key::Faster, Edge::Press));
+        }
+        assert_eq!(t.level(), 5);
+        let (v, w) = t.speeds();
+        assert!((v - 0.45).abs() < 1e-6 && (w - 0.5).abs() < 1e-6, "{v} {w}");
+        assert_eq!(t.handle(MS, press(Motion::Forward)), drive(0.45, 0.0));
+        t.handle(2 * MS, Input::FocusLost);
+        assert_eq!(t.handle(3 * MS, press(Motion::Reverse)), drive(-0.25, 0.0));
+        t.handle(4 * MS, Input::FocusLost);
+        assert_eq!(t.handle(5 * MS, press(Motion::Left)), drive(0.0, 0.5));
+        // Tighter limits later (a newer description) bring the step down with them.
+        t.set_limits(Limits {
+            forward_mps: 0.2,
+            reverse_mps: 0.2,
+            angular_radps: f32::INFINITY,
+        });
+        assert_eq!(t.level(), 5, "the yaw rate still has five steps");
+        assert!((t.speeds().0 - 0.2).abs() < 1e-6);
+        t.set_limits(Limits::NONE);
+        assert_eq!(t.max_level(), 10);
+    }
+
+    #[test]
+    fn limits_come_from_the_description_and_nan_is_no_limit() {
+        let mut d = chassis_client::RobotDescription::default();
+        d.robot_limits.forward_mps = 1.5;
+        d.robot_limits.angular_radps = 0.8;
+        d.configured_limits.forward_mps = 0.6;
+        let l = Limits::of(&d);
+        assert!((l.forward_mps - 0.6).abs() < 1e-6, "{}", l.forward_mps);
+        assert_eq!(l.reverse_mps, l.forward_mps, "reverse unset: as forward");
+        assert!((l.angular_radps - 0.8).abs() < 1e-6);
+        d.robot_limits.angular_radps = f64::NAN;
+        d.robot_limits.reverse_mps = 1.0;
+        let l = Limits::of(&d);
+        assert_eq!(l.angular_radps, f32::INFINITY);
+        assert_eq!(l.reverse_mps, 1.0);
+        // 0.3 m/s is a little more as an f32: the step stays below the limit.
+        d.configured_limits.forward_mps = 0.3;
+        let l = Limits::of(&d);
+        assert!(f64::from(l.forward_mps) <= 0.3, "{}", l.forward_mps);
+        assert!(f64::from(l.forward_mps) > 0.3 - 1e-6);
     }
 
     #[test]

@@ -2,8 +2,8 @@
 //! and a render function from it. Pure: tests render into ratatui's `TestBackend`.
 
 use chassis_client::{
-    ChassisState, ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus,
-    SourceFlags, ZeroReason,
+    ChassisState, ClampFlags, ControlMode, FaultFlags, Group, Kinematics, LinkFlags, LockStatus,
+    MuxStatus, RobotDescription, SourceFlags, WireProtocol, ZeroReason,
 };
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
@@ -11,7 +11,7 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Padding, Paragraph, Wrap};
 
-use crate::keys::{Command, Held, Motion};
+use crate::keys::{Command, Held, Limits, Motion};
 
 /// A state older than this is shown as stale.
 const STALE_NS: u64 = 500_000_000;
@@ -33,6 +33,8 @@ pub struct KeysView {
     pub held: Held,
     pub level: u32,
     pub max_level: u32,
+    /// The robot's effective limits the steps stop at.
+    pub limits: Limits,
     /// Speeds of the current step.
     pub linear_mps: f32,
     pub angular_radps: f32,
@@ -50,6 +52,8 @@ pub struct View<'a> {
     pub robot: &'a str,
     pub source: &'a str,
     pub now_ns: u64,
+    /// What chassisd says the robot is (`None`: not yet, or an older chassisd).
+    pub description: Option<&'a RobotDescription>,
     pub state: Option<&'a ChassisState>,
     pub mux: Option<&'a MuxStatus>,
     pub keys: KeysView,
@@ -250,6 +254,7 @@ fn render_keys(frame: &mut Frame, area: Rect, view: &View) {
                 "  step {}/{}: {:.2} m/s, {:.2} rad/s",
                 k.level, k.max_level, k.linear_mps, k.angular_radps
             )),
+            Span::styled(limits_text(&k.limits), Style::default().fg(Color::DarkGray)),
         ]),
         Line::from(Span::styled(releases, Style::default().fg(Color::DarkGray))),
     ];
@@ -265,6 +270,55 @@ fn render_keys(frame: &mut Frame, area: Rect, view: &View) {
         ),
         area,
     );
+}
+
+/// `  robot: ≤ 1.50 m/s forward, 1.00 reverse, 0.52 rad/s` (the limits known).
+fn limits_text(l: &Limits) -> String {
+    let mut words = Vec::new();
+    if l.forward_mps.is_finite() {
+        words.push(format!("≤ {:.2} m/s forward", l.forward_mps));
+    }
+    if l.reverse_mps.is_finite() {
+        words.push(format!("{:.2} reverse", l.reverse_mps));
+    }
+    if l.angular_radps.is_finite() {
+        words.push(format!("{:.2} rad/s", l.angular_radps));
+    }
+    if words.is_empty() {
+        String::new()
+    } else {
+        format!("  robot: {}", words.join(", "))
+    }
+}
+
+/// The robot as described: `AgileX TITAN (titan)`, its kinematics and protocol in use.
+fn robot_lines(d: &RobotDescription) -> Vec<Line<'static>> {
+    let title = match (d.display_name(), d.kind_name()) {
+        ("", kind) => kind.to_string(),
+        (display, kind) => format!("{display} ({kind})"),
+    };
+    let mut lines = vec![Line::from(vec![
+        label("robot"),
+        Span::styled(title, bold(Color::White)),
+    ])];
+    let mut words = vec![
+        Kinematics::name(d.kinematics).to_string(),
+        format!("protocol {}", WireProtocol::name(d.protocol)),
+    ];
+    if d.model() != d.kind_name() {
+        words.insert(0, d.model().to_string());
+    }
+    lines.push(Line::from(vec![
+        label("drive"),
+        Span::raw(words.join(" · ")),
+    ]));
+    if Kinematics::steers(d.kinematics) {
+        lines.push(Line::from(vec![
+            label("turning"),
+            Span::raw("only while moving (steered wheels)"),
+        ]));
+    }
+    lines
 }
 
 fn render_mux(frame: &mut Frame, area: Rect, view: &View) {
@@ -373,7 +427,7 @@ fn render_mux(frame: &mut Frame, area: Rect, view: &View) {
 }
 
 fn render_robot(frame: &mut Frame, area: Rect, view: &View) {
-    let mut lines = Vec::new();
+    let mut lines = view.description.map(robot_lines).unwrap_or_default();
     match view.state {
         None => lines.push(Line::from("waiting for the robot's state…")),
         Some(s) => {
@@ -411,10 +465,20 @@ fn render_robot(frame: &mut Frame, area: Rect, view: &View) {
                     | FaultFlags::BATTERY_UNDER_VOLTAGE
                     | FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING)
                 != 0;
+            let level = view
+                .description
+                .map(|d| (d.battery.low_v, d.battery.low_soc_pct))
+                .map_or(String::new(), |(v, pct)| {
+                    match (v.is_finite(), pct.is_finite()) {
+                        (_, true) => format!("  (low below {pct:.0} %)"),
+                        (true, false) => format!("  (low below {v:.1} V)"),
+                        _ => String::new(),
+                    }
+                });
             lines.push(Line::from(vec![
                 label("battery"),
                 Span::styled(
-                    format!("{:.1} V{soc}", s.system.battery_voltage_v),
+                    format!("{:.1} V{soc}{level}", s.system.battery_voltage_v),
                     if low {
                         bold(Color::Red)
                     } else {
@@ -467,7 +531,9 @@ fn render_robot(frame: &mut Frame, area: Rect, view: &View) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chassis_client::RobotKind;
+    use crate::keys::{Settings, Teleop};
+    use chassis_protocols::RobotKind;
+    use chassis_protocols::description::describe;
     use ratatui::Terminal;
     use ratatui::backend::TestBackend;
 
@@ -503,7 +569,6 @@ mod tests {
 
     fn state() -> ChassisState {
         let mut s = ChassisState {
-            robot: RobotKind::TITAN,
             stamp_ns: 1_000_000_000,
             ..ChassisState::default()
         };
@@ -522,6 +587,7 @@ mod tests {
             held: Held::default(),
             level: 1,
             max_level: 10,
+            limits: Limits::NONE,
             linear_mps: 0.1,
             angular_radps: 0.2,
             command,
@@ -554,6 +620,7 @@ mod tests {
             robot: "titan",
             source: "teleop",
             now_ns: 1_100_000_000,
+            description: None,
             state: Some(&state),
             mux: Some(&mux),
             keys: keys(true),
@@ -572,6 +639,46 @@ mod tests {
     }
 
     #[test]
+    fn every_robot_is_shown_as_described_with_the_limits_its_steps_stop_at() {
+        let mux = mux("teleop");
+        let state = state();
+        for kind in RobotKind::ALL {
+            let mut d = describe(&kind.entry().defaults());
+            // chassisd's `[mux.limits] max_linear_mps = 0.45`.
+            d.configured_limits.forward_mps = 0.45;
+            d.configured_limits.reverse_mps = 0.45;
+            let mut teleop = Teleop::new(Settings::default());
+            teleop.set_limits(Limits::of(&d));
+            let mut keys = keys(false);
+            keys.limits = teleop.limits();
+            keys.max_level = teleop.max_level();
+            let view = View {
+                robot: kind.name(),
+                source: "teleop",
+                now_ns: 1_000_000_000,
+                description: Some(&d),
+                state: Some(&state),
+                mux: Some(&mux),
+                keys,
+                message: None,
+            };
+            let text = screen(&view);
+            let title = format!("{} ({})", kind.entry().display_name, kind.name());
+            assert!(text.contains(&title), "{kind}: {text}");
+            assert!(
+                text.contains("robot: ≤ 0.45 m/s forward, 0.45 reverse"),
+                "{text}"
+            );
+            assert_eq!(
+                text.contains("only while moving (steered wheels)"),
+                Kinematics::steers(d.kinematics),
+                "{kind}: {text}"
+            );
+            assert!(text.contains("(low below"), "{kind}: {text}");
+        }
+    }
+
+    #[test]
     fn a_higher_priority_winner_is_highlighted_as_a_safety_override() {
         let mux = mux("safety");
         let state = state();
@@ -579,6 +686,7 @@ mod tests {
             robot: "titan",
             source: "teleop",
             now_ns: 1_000_000_000,
+            description: None,
             state: Some(&state),
             mux: Some(&mux),
             keys: keys(true),
@@ -606,6 +714,7 @@ mod tests {
             robot: "titan",
             source: "teleop",
             now_ns: 0,
+            description: None,
             state: None,
             mux: Some(&mux),
             keys: keys(false),
@@ -636,6 +745,7 @@ mod tests {
             robot: "titan",
             source: "teleop",
             now_ns: 3_000_000_000,
+            description: None,
             state: Some(&state),
             mux: Some(&mux),
             keys: keys(false),

@@ -9,6 +9,13 @@ use crate::IpcError;
 /// different prefixes never see each other (tests running in parallel isolate themselves so).
 pub const IPC_PREFIX_ENV: &str = "CHASSIS_IPC_PREFIX";
 
+/// Test hook of chassisd, never for a robot: set at chassisd's start to a file path, the event
+/// loop's thread alone stalls — as a hung loop would, while the process's other threads run on
+/// — for the milliseconds written in that file whenever it appears (the loop removes it).
+/// chassisd warns at start when it is set. The watchdog test uses it to show that the watchdog's
+/// pings come from the loop itself.
+pub const TEST_LOOP_STALL_ENV: &str = "CHASSISD_TEST_LOOP_STALL_FILE";
+
 /// What [`reply_name`] appends to a request-response service's name.
 pub const REPLY_SUFFIX: &str = "/reply";
 

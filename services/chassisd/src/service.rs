@@ -37,8 +37,10 @@ use crate::mux::{Mux, MuxConfigError};
 use crate::notify::Notifier;
 use crate::setup::{Devices, Hardware, PinError, driver_for_config, enter_realtime, pin_to_cpu};
 use crate::sim::SimHandle;
+use stall::LoopStall;
 
 mod pass;
+mod stall;
 
 /// Why the service stopped.
 #[derive(Debug, thiserror::Error)]
@@ -116,6 +118,8 @@ struct Shell<D> {
     lock_file: LockFile,
     /// systemd's notification socket, when started by a `Type=notify` unit.
     notifier: Option<Notifier>,
+    /// The test hook that stalls the loop (`stall.rs`); `None` unless a test armed it.
+    loop_stall: Option<LoopStall>,
 }
 
 /// Opens the service's ports. A predecessor killed while it was creating one of them leaves that
@@ -217,6 +221,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         last_activity: now,
         lock_file,
         notifier: Notifier::from_env(),
+        loop_stall: LoopStall::from_env(),
     };
     engine.start(&mut shell.io(&ports), now);
     if let Some(notifier) = &mut shell.notifier {
@@ -315,6 +320,9 @@ impl<D: Devices> Shell<D> {
                 let next = self.pass(ports, engine, wake);
                 if let Some(notifier) = &mut self.notifier {
                     notifier.pass(clock::now(), engine.mux().status());
+                }
+                if let Some(stall) = &self.loop_stall {
+                    stall.check();
                 }
                 if next == Next::Rewire {
                     break;

@@ -12,7 +12,7 @@ use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use chassis_interfaces::{ControlStatus, SimKind, SimRequest};
+use chassis_interfaces::{ControlStatus, SimKind, SimRequest, SimTruthPage};
 use chassis_protocols::RobotKind;
 use chassis_protocols::{Firmware, Injection, SimTruth};
 use nix::poll::{PollFd, PollFlags};
@@ -54,20 +54,7 @@ pub fn carry_out(
     if request.kind == SimKind::TRUTH {
         return match sim.map(SimHandle::truth) {
             None => (absent.0, absent.1.to_string()),
-            Some(Ok(t)) => (
-                ControlStatus::OK,
-                format!(
-                    "x_m={:.4} y_m={:.4} yaw_rad={:.4} linear_mps={:.4} angular_radps={:.4} \
-                     commands={} rejected={}",
-                    t.x_m,
-                    t.y_m,
-                    t.yaw_rad,
-                    t.linear_mps,
-                    t.angular_radps,
-                    t.commands_received,
-                    t.decode_errors + t.bad_checksums_received
-                ),
-            ),
+            Some(Ok(t)) => (ControlStatus::OK, truth_text(&t, request.index)),
             Some(Err(reason)) => (ControlStatus::REFUSED, reason.to_string()),
         };
     }
@@ -86,6 +73,30 @@ pub fn carry_out(
             }
         }
     }
+}
+
+/// The answer to [`SimKind::TRUTH`], page `page` ([`SimTruthPage`]; an unknown page is the
+/// motion's). The injected page fits a `ControlResponse` for counters below 10^13 (a flood of
+/// 100,000 frames/s needs three years to get there).
+pub fn truth_text(t: &SimTruth, page: u8) -> String {
+    if page == SimTruthPage::INJECTED {
+        let i = t.injected;
+        return format!(
+            "garbage_frames={} garbage_bytes={} bad_checksums={} flood_frames={}",
+            i.garbage_frames, i.garbage_bytes, i.bad_checksum_frames, i.flood_frames
+        );
+    }
+    format!(
+        "x_m={:.4} y_m={:.4} yaw_rad={:.4} linear_mps={:.4} angular_radps={:.4} commands={} \
+         rejected={}",
+        t.x_m,
+        t.y_m,
+        t.yaw_rad,
+        t.linear_mps,
+        t.angular_radps,
+        t.commands_received,
+        t.decode_errors + t.bad_checksums_received
+    )
 }
 
 /// The injection a [`SimRequest`] asks for.
@@ -440,6 +451,29 @@ mod tests {
             "no feedback after"
         );
         assert!(sim.stop().is_ok());
+    }
+
+    #[test]
+    fn the_truth_answers_each_page_within_a_control_response() {
+        let truth = SimTruth {
+            injected: chassis_protocols::InjectedCounts {
+                garbage_frames: 9_999_999_999_999,
+                garbage_bytes: 9_999_999_999_999,
+                bad_checksum_frames: 9_999_999_999_999,
+                flood_frames: 9_999_999_999_999,
+            },
+            commands_received: 7,
+            ..SimTruth::default()
+        };
+        let injected = truth_text(&truth, SimTruthPage::INJECTED);
+        assert!(
+            injected.len() <= chassis_interfaces::ControlResponse::MESSAGE_LEN,
+            "{} bytes: {injected}",
+            injected.len()
+        );
+        assert!(injected.starts_with("garbage_frames=9999999999999 garbage_bytes="));
+        let motion = truth_text(&truth, SimTruthPage::MOTION);
+        assert!(motion.starts_with("x_m=0.0000 ") && motion.contains(" commands=7 "));
     }
 
     #[test]

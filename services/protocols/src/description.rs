@@ -11,6 +11,7 @@ use chassis_interfaces::{
 use crate::agilex_v2::{self, V2Model};
 use crate::profile::Profile;
 use crate::registry::{RobotEntry, heartbeat_period};
+use crate::titan;
 
 /// The description of `profile`'s robot: kind, model, protocol, the driver's limits, geometry,
 /// battery levels, sensors, joints, odometry variances, the chassis' timeouts.
@@ -53,8 +54,9 @@ pub fn describe(profile: &Profile) -> RobotDescription {
             };
             d.geometry.wheelbase_m = p.wheelbase_m;
             d.geometry.track_m = p.track_m;
-            // Both axles steer: the turn centre lies on the line half way between them.
-            d.geometry.min_turn_radius_m = p.wheelbase_m / 2.0 / p.max_steer_rad.tan();
+            // Both axles steer: the turn centre lies on the line half way between them, and the
+            // body's centre runs half a track outside the inner wheels.
+            d.geometry.min_turn_radius_m = titan::kinematics::min_turn_radius_m(p);
             d.battery = BatteryLevels {
                 // The TITAN manual: charge when the remote shows less than 15 % or the tail
                 // display less than 45 V; below 10 % the chassis cuts drive power.
@@ -115,8 +117,14 @@ pub fn describe(profile: &Profile) -> RobotDescription {
             d.geometry.wheelbase_m = p.wheelbase_m;
             d.geometry.track_m = p.track_m;
             d.geometry.min_turn_radius_m = match p.kinematics {
-                agilex_v2::Kinematics::Ackermann => p.wheelbase_m / p.max_steer_rad.tan(),
-                // Four-wheel steering spins on the spot below its turn radius.
+                // The front inner wheel at full lock; the body's centre runs half a track
+                // outside it (the driver's R = L / tan δᵢ + W/2).
+                agilex_v2::Kinematics::Ackermann => {
+                    p.wheelbase_m / p.max_steer_rad.tan() + p.track_m / 2.0
+                }
+                // Four-wheel steering drives dual Ackermann down to this radius and spins on
+                // the spot below it.
+                agilex_v2::Kinematics::FourWheelSteer => p.min_turn_radius_m,
                 _ => 0.0,
             };
             d.battery.low_v = p.under_voltage_alarm_v;

@@ -100,6 +100,72 @@ pub struct SimTruth {
     pub decode_errors: u64,
     /// Times the chassis rebooted.
     pub boots: u32,
+    /// The injected faults that left the chassis, counted as they were handed to the bus.
+    pub injected: InjectedCounts,
+}
+
+/// What a simulated chassis has sent of its injected faults since power-up, counted when each
+/// item leaves it ([`Firmware::poll_transmit`]): an injection still queued, or cleared by a
+/// silence or a reboot before it went out, is not counted. The sender's truth a storm is
+/// measured against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct InjectedCounts {
+    /// [`Injection::Garbage`] items sent: CAN frames (8 bytes each, the last shorter), or
+    /// writes on a serial line.
+    pub garbage_frames: u64,
+    /// [`Injection::Garbage`] bytes sent.
+    pub garbage_bytes: u64,
+    /// Frames (serial reports) sent with a corrupted checksum ([`Injection::BadChecksums`]).
+    pub bad_checksum_frames: u64,
+    /// Extra frames (serial reports) sent by [`Injection::Flood`].
+    pub flood_frames: u64,
+}
+
+impl InjectedCounts {
+    /// One item of `bytes` garbage bytes.
+    pub(crate) fn garbage(bytes: usize) -> Self {
+        Self {
+            garbage_frames: 1,
+            garbage_bytes: bytes as u64,
+            ..Self::default()
+        }
+    }
+
+    /// One frame (report) with a corrupted checksum.
+    pub(crate) const BAD_CHECKSUM: Self = Self {
+        garbage_frames: 0,
+        garbage_bytes: 0,
+        bad_checksum_frames: 1,
+        flood_frames: 0,
+    };
+
+    /// One extra frame (report) of a flood.
+    pub(crate) const FLOOD: Self = Self {
+        garbage_frames: 0,
+        garbage_bytes: 0,
+        bad_checksum_frames: 0,
+        flood_frames: 1,
+    };
+
+    /// True when the item carries no injected fault.
+    pub(crate) fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+impl std::ops::Add for InjectedCounts {
+    type Output = Self;
+
+    fn add(self, other: Self) -> Self {
+        Self {
+            garbage_frames: self.garbage_frames.saturating_add(other.garbage_frames),
+            garbage_bytes: self.garbage_bytes.saturating_add(other.garbage_bytes),
+            bad_checksum_frames: self
+                .bad_checksum_frames
+                .saturating_add(other.bad_checksum_frames),
+            flood_frames: self.flood_frames.saturating_add(other.flood_frames),
+        }
+    }
 }
 
 /// The contract every simulated firmware fulfils.
@@ -258,12 +324,14 @@ impl BatteryModel {
 }
 
 /// What a simulated chassis has for transmission: a bounded queue (the oldest item goes first
-/// when nobody polls) and the window of an injected silence.
+/// when nobody polls), the window of an injected silence, and the injected faults that left.
 #[derive(Debug, Clone)]
 pub(crate) struct Outbox<T> {
-    queue: VecDeque<T>,
+    /// Each item with the injected faults it carries.
+    queue: VecDeque<(T, InjectedCounts)>,
     silent_until: Option<Timestamp>,
     dropped: u64,
+    sent: InjectedCounts,
 }
 
 impl<T> Outbox<T> {
@@ -272,19 +340,37 @@ impl<T> Outbox<T> {
             queue: VecDeque::new(),
             silent_until: None,
             dropped: 0,
+            sent: InjectedCounts::default(),
         }
     }
 
+    /// Queues an item that carries no injected fault.
     pub(crate) fn push(&mut self, item: T) {
+        self.push_injected(item, InjectedCounts::default());
+    }
+
+    /// Queues an item carrying `injected` faults; they count once the item leaves
+    /// ([`Outbox::pop`]).
+    pub(crate) fn push_injected(&mut self, item: T, injected: InjectedCounts) {
         if self.queue.len() >= TX_QUEUE_LIMIT {
             self.queue.pop_front();
             self.dropped += 1;
         }
-        self.queue.push_back(item);
+        self.queue.push_back((item, injected));
     }
 
+    /// The next item to send; the faults it carries count as injected from now.
     pub(crate) fn pop(&mut self) -> Option<T> {
-        self.queue.pop_front()
+        let (item, injected) = self.queue.pop_front()?;
+        if !injected.is_empty() {
+            self.sent = self.sent + injected;
+        }
+        Some(item)
+    }
+
+    /// The injected faults that have left so far.
+    pub(crate) fn injected(&self) -> InjectedCounts {
+        self.sent
     }
 
     pub(crate) fn clear(&mut self) {
@@ -373,6 +459,15 @@ pub(crate) fn garbage_frames(id: u16, bytes: &[u8]) -> impl Iterator<Item = CanF
     bytes
         .chunks(8)
         .filter_map(move |chunk| CanFrame::new(u32::from(id), chunk).ok())
+}
+
+/// Queues [`Injection::Garbage`] on a CAN bus ([`garbage_frames`]), each frame counted as
+/// injected when it leaves.
+pub(crate) fn push_garbage(outbox: &mut Outbox<CanFrame>, id: u16, bytes: &[u8]) {
+    for frame in garbage_frames(id, bytes) {
+        let len = frame.data().len();
+        outbox.push_injected(frame, InjectedCounts::garbage(len));
+    }
 }
 
 /// An injected or configured state of charge, % (clamped to 0-100); `None` when not a number.

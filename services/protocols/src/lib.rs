@@ -44,7 +44,7 @@ pub use command::{
 };
 pub use driver::{BoxedDriver, ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
 pub use error::{DecodeError, EncodeError};
-pub use firmware::{BoxedFirmware, Firmware, Injection, SimTruth};
+pub use firmware::{BoxedFirmware, Firmware, InjectedCounts, Injection, SimTruth};
 pub use profile::{
     Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, V1Model, V1Profile,
 };

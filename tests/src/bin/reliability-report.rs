@@ -7,6 +7,12 @@
 //! reliability-report render DIR OUT # faults.jsonl + soak.jsonl → OUT (markdown)
 //! ```
 //!
+//! A row passes only when its test passed: `render` reads each test's outcome from libtest's
+//! output of the run, which the scripts keep beside the figures (`DIR/faults-tests.log`,
+//! `DIR/soak-tests.log`). A row whose test failed, or whose outcome the log does not hold, is
+//! FAIL whatever its figure says (the tests write a figure as passing only from their last
+//! statement, `chassis_tests::Figures::finish`, and as failed when they panic).
+//!
 //! `begin` refuses a git tree with uncommitted changes: the figures must belong to a commit.
 //! `--allow-dirty` lets a local run through; its section then says DIRTY. `scripts/reliability`
 //! and `scripts/soak` call it; see their headers.
@@ -215,6 +221,130 @@ fn read_figures(path: &Path) -> anyhow::Result<Vec<Figure>> {
         .collect()
 }
 
+/// What libtest said of one test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Outcome {
+    Passed,
+    Failed,
+    Ignored,
+    /// Not in the run's log: not run, or its test binary ended without a summary.
+    Unknown,
+}
+
+/// Every test's outcome in the output of `cargo test` (stdout and stderr together), by
+/// (suite, test): the suite is the integration test file cargo names in its `Running
+/// tests/SUITE.rs (…)` line. Read from what libtest prints whatever the capture mode:
+/// `test NAME ... ok|FAILED|ignored` (with `--nocapture` the verdict may come lines later, after
+/// the test's own output), the names under the second `failures:` heading, and the binary's
+/// `test result:` line — a test named in a binary that never printed its result (it crashed) is
+/// not known to have passed.
+#[derive(Debug, Default)]
+struct Outcomes(BTreeMap<(String, String), Outcome>);
+
+impl Outcomes {
+    fn parse(text: &str) -> Self {
+        let mut outcomes = BTreeMap::new();
+        let mut suite: Option<String> = None;
+        // Per binary: names started, verdicts on their line, the failures list, its summary.
+        let mut started: Vec<String> = Vec::new();
+        let mut verdicts: BTreeMap<String, Outcome> = BTreeMap::new();
+        let mut failed: Vec<String> = Vec::new();
+        let mut summary = false;
+        let mut failures_headings = 0;
+        let mut flush = |suite: &Option<String>,
+                         started: &mut Vec<String>,
+                         verdicts: &mut BTreeMap<String, Outcome>,
+                         failed: &mut Vec<String>,
+                         summary: bool| {
+            if let Some(suite) = suite {
+                for name in started.drain(..) {
+                    let outcome = if failed.contains(&name) {
+                        Outcome::Failed
+                    } else {
+                        match verdicts.get(&name) {
+                            Some(v) => *v,
+                            None if summary => Outcome::Passed,
+                            None => Outcome::Unknown,
+                        }
+                    };
+                    outcomes.insert((suite.clone(), name), outcome);
+                }
+            }
+            started.clear();
+            verdicts.clear();
+            failed.clear();
+        };
+        for line in text.lines() {
+            let trimmed = line.trim();
+            if let Some(rest) = trimmed.strip_prefix("Running ") {
+                flush(&suite, &mut started, &mut verdicts, &mut failed, summary);
+                summary = false;
+                failures_headings = 0;
+                suite = rest
+                    .split_whitespace()
+                    .next()
+                    .and_then(|path| path.strip_prefix("tests/"))
+                    .and_then(|file| file.strip_suffix(".rs"))
+                    .map(str::to_string);
+                continue;
+            }
+            if trimmed.starts_with("test result:") {
+                summary = true;
+                continue;
+            }
+            if trimmed == "failures:" {
+                failures_headings += 1;
+                continue;
+            }
+            // The second `failures:` heading lists the failed tests, indented.
+            if failures_headings >= 2
+                && line.starts_with("    ")
+                && !trimmed.is_empty()
+                && !trimmed.contains(' ')
+            {
+                failed.push(trimmed.to_string());
+                continue;
+            }
+            if let Some(start) = line.find("test ")
+                && let Some((name, verdict)) = line[start + 5..].split_once(" ... ")
+                && !name.is_empty()
+                && !name.contains(' ')
+            {
+                started.push(name.to_string());
+                let verdict = verdict.trim();
+                let outcome = if verdict.starts_with("ok") {
+                    Some(Outcome::Passed)
+                } else if verdict.starts_with("FAILED") {
+                    Some(Outcome::Failed)
+                } else if verdict.starts_with("ignored") {
+                    Some(Outcome::Ignored)
+                } else {
+                    None
+                };
+                if let Some(outcome) = outcome {
+                    verdicts.insert(name.to_string(), outcome);
+                }
+            }
+        }
+        flush(&suite, &mut started, &mut verdicts, &mut failed, summary);
+        Self(outcomes)
+    }
+
+    /// Reads `path` (missing: no outcome known).
+    fn read(path: &Path) -> Self {
+        std::fs::read_to_string(path)
+            .map(|text| Self::parse(&text))
+            .unwrap_or_default()
+    }
+
+    fn of(&self, suite: &str, test: &str) -> Outcome {
+        self.0
+            .get(&(suite.to_string(), test.to_string()))
+            .copied()
+            .unwrap_or(Outcome::Unknown)
+    }
+}
+
 fn read_info(path: &Path) -> Option<RunInfo> {
     serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
 }
@@ -258,7 +388,10 @@ Each row is a test with the real processes (`chassisd`, `chassisd sim`, `chassis
 system did and measures a figure. This file is generated from the figures of one run — do not
 edit it by hand: `scripts/reliability` runs the fault tests and renders it, `scripts/soak`
 adds the soak section. The fault tests are part of `cargo test` (and of `.ci/run`); random
-fault moments come from a printed seed (`CHASSIS_FAULT_SEED=N` repeats a run).
+fault moments come from a printed seed (`CHASSIS_FAULT_SEED=N` repeats a run). A row passes
+only if its figure is within its bounds and its test passed: a test writes its figures as
+passing only from its last statement, after its last assert, and the report reads each test's
+outcome from the run's libtest output.
 
 ";
 
@@ -270,39 +403,67 @@ const NOTES: &str = "\
   never gets a grace period: its motion ends when its last request reaches its timeout, so both
   stay at or below the timeout. The robot standing still takes longer: that is the simulated
   chassis braking (a first-order lag), not the service.
-* **Storms** are bracketed by a short injected silence of the chassis, so that the service's
-  counters and the frames on the tap are compared at a quiet moment: the bad frames counted
-  equal the bad frames on the wire, and every good frame on the wire was decoded.
-* **The rogue client** is one thread publishing as fast as it can. The service's wake-up
-  budget (`WakeBudget` in `services/chassisd/src/service.rs`) detaches a source's listener for
-  the rest of a tick after its share of wake-ups; the source's requests are still read every
-  tick. The row gives the share of a core the service used under the flood, as measured.
-* **Heartbeat jitter** on a shared machine is bounded by the kernel as well as by the service,
-  so the flood test compares its window with a quiet window measured just before (both are in
-  the row), and holds the bulk of the periods (not every one) within 20 ± 2 ms. The soak is
-  stricter: it fails on any 0x111 gap of two periods (40 ms) or more. Such a gap means the
-  service's loop did not run for that long, and the state readers' longest wait for a sample
-  shows the same stall. The TITAN itself stops only after 500 ms without a command.
+* **Storms** are held against the sender's truth: the simulated chassis counts every garbage
+  frame (byte) and every frame it corrupted as it hands it to the bus (`chassis sim truth
+  --injected`). A row requires that something was asked for, that the chassis injected exactly
+  that (once its last pending corruptions went out: the time after the storm is in the row,
+  bounded by 1 s), and then — at a quiet moment, bracketed by an injected silence — that the
+  bad items on the service's tap and its counters equal the injected count, with every good
+  frame on the wire decoded. No difference is allowed.
+* **Drove again** (after a restart, a hang-up) is a speed the chassis reported after the
+  fault: a state sample whose motion group was stamped after the restart
+  (`chassis_tests::drove_again_after`), never the last speed the state keeps from before it.
+* **The rogue client** is one thread publishing as fast as it can, on a source below, equal to
+  and above the one that drives. Below, it never wins; equal, the newer request wins (the mux's
+  ages say which, in every sample); above, it wins, by design. In every case the monitor stays
+  fresh, every request the rogue sent is read (the mux's last seq of its source is the rogue's
+  last), the heartbeat keeps its grid and the service stays within half a core. The service's
+  wake-up budget (`WakeBudget` in `services/chassisd/src/service.rs`) detaches a source's
+  listener for the rest of a tick after its share of wake-ups; the source's requests are still
+  read every tick. chassisd runs in real-time mode there, as `--realtime` runs it on a robot:
+  with normal scheduling a loop that sleeps waits for the kernel behind a thread that never does
+  (25-30 ms wake-ups on the 2-core machine of these figures).
+* **Heartbeat jitter** is measured per slot of the 20 ms grid, from the start of a window to
+  its end: the lateness of the first 0x111 of each slot, each slot served (a heartbeat less
+  than a period late), no gap of two periods (40 ms), the end of the window included — a
+  heartbeat that stops for good fails on its count and its last gap. The flood tests compare
+  their window with a quiet window measured just before (both are in the row) and hold the
+  bulk of the slots (90 %) within 2 ms. The soak holds every slot but one per mille served.
+  Such a gap means the service's loop did not run for that long, and the state readers'
+  longest wait for a sample shows the same stall. The TITAN itself stops only after 500 ms
+  without a command.
+* **The watchdog** is tested with the loop's thread alone stalled (a test hook of chassisd,
+  armed only by `CHASSISD_TEST_LOOP_STALL_FILE`), its other threads running on: a ping from a
+  timer beside the loop would not stop.
+* **The held e-stop** is killed at measured moments after chassisd's answer: at once after the
+  answer arrived, then one draw in each 6 ms of the 30 ms after the answer's stamp.
 ";
 
-/// One rendered row: the expected row and its figure, if one was recorded.
+/// One rendered row: the expected row, its figure if one was recorded, its test's outcome.
 struct Row<'a> {
     fault: &'a str,
     command: String,
     figure: Option<&'a Figure>,
     /// False for a recorded figure that is in no expected row.
     expected: bool,
+    outcome: Outcome,
 }
 
 impl Row<'_> {
+    /// Within its bounds: an expected row, its figure says so, and its test passed.
     fn pass(&self) -> bool {
-        self.expected && self.figure.is_some_and(|f| f.pass)
+        self.expected && self.outcome == Outcome::Passed && self.figure.is_some_and(|f| f.pass)
     }
 }
 
 /// The rows of a table: every expected row in its order, with the last figure recorded for it
-/// (none: its test failed before measuring), then any recorded figure no row expects.
-fn rows<'a>(expected: &'a [ExpectedRow], figures: &'a [Figure]) -> Vec<Row<'a>> {
+/// (none: its test failed before measuring) and its test's outcome, then any recorded figure no
+/// row expects.
+fn rows<'a>(
+    expected: &'a [ExpectedRow],
+    figures: &'a [Figure],
+    outcomes: &Outcomes,
+) -> Vec<Row<'a>> {
     let mut rows: Vec<Row<'a>> = expected
         .iter()
         .map(|e| Row {
@@ -310,6 +471,7 @@ fn rows<'a>(expected: &'a [ExpectedRow], figures: &'a [Figure]) -> Vec<Row<'a>> 
             command: e.command(),
             figure: figures.iter().rev().find(|f| e.matches(f)),
             expected: true,
+            outcome: outcomes.of(e.suite, e.test),
         })
         .collect();
     for f in figures {
@@ -319,6 +481,7 @@ fn rows<'a>(expected: &'a [ExpectedRow], figures: &'a [Figure]) -> Vec<Row<'a>> 
                 command: format!("cargo test -p chassis-tests --test {} {}", f.suite, f.test),
                 figure: Some(f),
                 expected: false,
+                outcome: outcomes.of(&f.suite, &f.test),
             });
         }
     }
@@ -327,10 +490,13 @@ fn rows<'a>(expected: &'a [ExpectedRow], figures: &'a [Figure]) -> Vec<Row<'a>> 
 
 /// The verdict cell of a row.
 fn result_cell(row: &Row) -> &'static str {
-    match (row.expected, row.figure) {
-        (false, _) => "**FAIL** (a figure no row of the report expects)",
-        (true, None) => "**FAIL** (no figure: the test failed before recording it)",
-        (true, Some(f)) => verdict(f.pass),
+    match (row.expected, row.figure, row.outcome) {
+        (false, _, _) => "**FAIL** (a figure no row of the report expects)",
+        (true, None, _) => "**FAIL** (no figure: the test failed before recording it)",
+        (true, Some(_), Outcome::Failed) => "**FAIL** (its test failed)",
+        (true, Some(_), Outcome::Ignored) => "**FAIL** (its test was ignored)",
+        (true, Some(_), Outcome::Unknown) => "**FAIL** (no outcome of its test in the run's log)",
+        (true, Some(f), Outcome::Passed) => verdict(f.pass),
     }
 }
 
@@ -350,9 +516,18 @@ fn summary(rows: &[Row]) -> String {
             missing.join("; ")
         ));
     }
+    let test_failed = rows
+        .iter()
+        .filter(|r| r.figure.is_some() && r.expected && r.outcome != Outcome::Passed)
+        .count();
+    if test_failed > 0 {
+        text.push_str(&format!(
+            " {test_failed} whose test did not pass (failed, or no outcome in the run's log)."
+        ));
+    }
     let failed = rows
         .iter()
-        .filter(|r| r.figure.is_some() && !r.pass())
+        .filter(|r| r.figure.is_some() && r.outcome == Outcome::Passed && !r.pass())
         .count();
     if failed > 0 {
         text.push_str(&format!(" {failed} recorded outside their bounds."));
@@ -376,7 +551,11 @@ fn render(dir: &Path, out_path: &Path) -> anyhow::Result<usize> {
 
     out.push_str("## The fault matrix\n\n");
     provenance(&mut out, faults_info.as_ref());
-    let fault_rows = rows(FAULT_ROWS, &faults);
+    let fault_rows = rows(
+        FAULT_ROWS,
+        &faults,
+        &Outcomes::read(&dir.join("faults-tests.log")),
+    );
     out.push_str(&summary(&fault_rows));
     out.push_str("\n\n");
     out.push_str(
@@ -412,7 +591,11 @@ fn render(dir: &Path, out_path: &Path) -> anyhow::Result<usize> {
         for injection in runs.keys() {
             out.push_str(&format!("{injection}.\n\n"));
         }
-        soak_rows = rows(SOAK_ROWS, &soak);
+        soak_rows = rows(
+            SOAK_ROWS,
+            &soak,
+            &Outcomes::read(&dir.join("soak-tests.log")),
+        );
         out.push_str(&summary(&soak_rows));
         out.push_str("\n\n");
         out.push_str("| measured | what it shows | figure | result |\n| --- | --- | --- | --- |\n");
@@ -502,6 +685,167 @@ fn main() -> ExitCode {
 mod tests {
     use super::*;
 
+    /// The outcomes of a run in which every expected test passed.
+    fn all_passed() -> Outcomes {
+        Outcomes(
+            FAULT_ROWS
+                .iter()
+                .chain(SOAK_ROWS)
+                .map(|r| ((r.suite.to_string(), r.test.to_string()), Outcome::Passed))
+                .collect(),
+        )
+    }
+
+    /// Output of `cargo test … 2>&1` as the scripts keep it: three binaries, one with a failed
+    /// test, one run with `--nocapture` (the verdict after the test's own output), one that
+    /// crashed before its summary.
+    const LOG: &str = "\
+   Compiling chassis-tests v0.1.0 (/w/tests)
+    Finished `test` profile [unoptimized + debuginfo] target(s) in 9.1s
+     Running tests/faults_bus.rs (target/debug/deps/faults_bus-0a1b)
+
+running 3 tests
+test garbage_storms ... ok
+test bad_checksum_storms ... FAILED
+test slow_one ... ignored, needs a robot
+
+failures:
+
+---- bad_checksum_storms stdout ----
+thread 'bad_checksum_storms' panicked at tests/tests/faults_bus.rs:1:1:
+the sender's count
+
+failures:
+    bad_checksum_storms
+
+test result: FAILED. 1 passed; 1 failed; 1 ignored; 0 measured; 0 filtered out; finished in 20.00s
+
+     Running tests/soak.rs (target/release/deps/soak-9f)
+
+running 1 test
+test a_titan_soak ... 10 s: chassisd 29212 KiB, 146 fds
+FIGURE [pass] heartbeat (0x111) jitter: 500 of 500 slots served
+ok
+
+test result: ok. 1 passed; 0 failed; 0 ignored; 0 measured; 0 filtered out; finished in 60.00s
+
+     Running tests/systemd.rs (target/debug/deps/systemd-77)
+
+running 2 tests
+test ready_first ... ok
+test the_watchdog_test ... 
+error: test failed, to rerun pass `-p chassis-tests --test systemd`
+";
+
+    #[test]
+    fn libtest_output_gives_each_tests_outcome() {
+        let outcomes = Outcomes::parse(LOG);
+        assert_eq!(outcomes.of("faults_bus", "garbage_storms"), Outcome::Passed);
+        assert_eq!(
+            outcomes.of("faults_bus", "bad_checksum_storms"),
+            Outcome::Failed
+        );
+        assert_eq!(outcomes.of("faults_bus", "slow_one"), Outcome::Ignored);
+        // The verdict came lines after the name, behind the test's output.
+        assert_eq!(outcomes.of("soak", "a_titan_soak"), Outcome::Passed);
+        // Its binary ended without a summary: the test that was running is not known to pass,
+        // the one that said ok did.
+        assert_eq!(outcomes.of("systemd", "ready_first"), Outcome::Passed);
+        assert_eq!(
+            outcomes.of("systemd", "the_watchdog_test"),
+            Outcome::Unknown
+        );
+        // Not run at all, or in another suite.
+        assert_eq!(outcomes.of("faults_bus", "nothing"), Outcome::Unknown);
+        assert_eq!(outcomes.of("soak", "garbage_storms"), Outcome::Unknown);
+    }
+
+    #[test]
+    fn a_failed_tests_row_is_rendered_fail_though_its_figure_says_pass() {
+        let figures: Vec<Figure> = FAULT_ROWS.iter().map(|r| figure_of(r, true)).collect();
+        let mut outcomes = all_passed();
+        let failed = &FAULT_ROWS[2];
+        outcomes.0.insert(
+            (failed.suite.to_string(), failed.test.to_string()),
+            Outcome::Failed,
+        );
+        // And one whose outcome the log does not hold.
+        let unknown = &FAULT_ROWS[4];
+        outcomes
+            .0
+            .remove(&(unknown.suite.to_string(), unknown.test.to_string()));
+        let rows = rows(FAULT_ROWS, &figures, &outcomes);
+        assert!(rows[2].figure.is_some_and(|f| f.pass));
+        assert!(!rows[2].pass());
+        assert_eq!(result_cell(&rows[2]), "**FAIL** (its test failed)");
+        assert!(!rows[4].pass());
+        assert!(result_cell(&rows[4]).contains("no outcome"));
+        assert_eq!(rows.iter().filter(|r| !r.pass()).count(), 2);
+        let text = summary(&rows);
+        assert!(
+            text.starts_with(&format!(
+                "{} of {} rows within their bounds. 2 whose test did not pass",
+                FAULT_ROWS.len() - 2,
+                FAULT_ROWS.len()
+            )),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_failed_test_renders_fail_in_the_document() {
+        let dir = std::env::temp_dir().join(format!("reliability-render-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let figures: String = FAULT_ROWS
+            .iter()
+            .map(|r| serde_json::to_string(&figure_of(r, true)).unwrap() + "\n")
+            .collect();
+        std::fs::write(dir.join("faults.jsonl"), figures).unwrap();
+        // libtest's output: every test passed but the first row's.
+        let mut log = String::new();
+        let mut suites: Vec<&str> = FAULT_ROWS.iter().map(|r| r.suite).collect();
+        suites.dedup();
+        for suite in suites {
+            log.push_str(&format!(
+                "     Running tests/{suite}.rs (target/debug/deps/x)\n"
+            ));
+            for row in FAULT_ROWS.iter().filter(|r| r.suite == suite) {
+                let verdict = if row == &FAULT_ROWS[0] {
+                    "FAILED"
+                } else {
+                    "ok"
+                };
+                log.push_str(&format!("test {} ... {verdict}\n", row.test));
+            }
+            log.push_str("test result: ok. 1 passed\n");
+        }
+        std::fs::write(dir.join("faults-tests.log"), log).unwrap();
+        let out = dir.join("RELIABILITY.md");
+        let failures = render(&dir, &out).unwrap();
+        let text = std::fs::read_to_string(&out).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        // Every row of the first row's test fails with it (a test may record several rows).
+        let of_first = FAULT_ROWS
+            .iter()
+            .filter(|r| r.test == FAULT_ROWS[0].test)
+            .count();
+        assert_eq!(failures, of_first);
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("| {} |", FAULT_ROWS[0].fault)))
+            .unwrap();
+        assert!(line.contains("**FAIL** (its test failed)"), "{line}");
+        assert!(
+            text.contains(&format!(
+                "{} of {} rows within their bounds.",
+                FAULT_ROWS.len() - of_first,
+                FAULT_ROWS.len()
+            )),
+            "{text}"
+        );
+    }
+
     fn figure_of(row: &ExpectedRow, pass: bool) -> Figure {
         Figure {
             rank: 0,
@@ -525,7 +869,7 @@ mod tests {
             .filter(|(i, _)| *i != 1)
             .map(|(_, r)| figure_of(r, true))
             .collect();
-        let rows = rows(FAULT_ROWS, &figures);
+        let rows = rows(FAULT_ROWS, &figures, &all_passed());
         assert_eq!(rows.len(), FAULT_ROWS.len());
         assert!(rows[1].figure.is_none() && !rows[1].pass());
         assert!(rows[1].command.contains(FAULT_ROWS[1].test));
@@ -552,7 +896,7 @@ mod tests {
             fault: "a fault nobody expects",
         };
         figures.push(figure_of(&stray, true));
-        let rows = rows(FAULT_ROWS, &figures);
+        let rows = rows(FAULT_ROWS, &figures, &all_passed());
         assert_eq!(rows.len(), FAULT_ROWS.len() + 1);
         assert!(!rows[0].pass());
         assert!(!rows[FAULT_ROWS.len()].pass());

@@ -26,10 +26,10 @@
 use std::collections::{HashMap, VecDeque};
 
 use chassis_client::{
-    BusFrame, ChassisState, FrameDirection, FrameKind, GROUP_SLOTS, LinkStats, MuxStatus, RobotKind,
+    BusFrame, ChassisState, FrameDirection, FrameKind, GROUP_SLOTS, LinkStats, MuxStatus,
 };
-use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{CanFrame, scout_mini, titan, xbot};
+use chassis_protocols::describe::{FrameJson, RobotCodec};
+use chassis_protocols::{CanFrame, Profile};
 
 /// Frame rates are counted over this sliding window.
 pub const WINDOW_NS: u64 = 1_000_000_000;
@@ -45,14 +45,16 @@ const MATCH_GIVE_UP_NS: u64 = 500_000_000;
 pub enum FrameKey {
     /// A CAN id (the standard and extended spaces apart).
     Can { id: u32, extended: bool },
-    /// An XBot frame found in the serial stream, by command id.
-    Xbot { command: u8 },
+    /// A frame the robot's codec found in the serial stream, by its command id.
+    Serial { command: u32 },
+    /// A chunk of a serial stream no codec reads (no description of the robot yet).
+    Bytes,
     /// A chunk of the GPS receiver's NMEA stream.
     Gps,
 }
 
 impl FrameKey {
-    /// `0x211`, `0x18FF0001`, `xbot 0x10`, `gps`.
+    /// `0x211`, `0x18FF0001`, `0x10`, `bytes`, `gps`.
     pub fn text(&self) -> String {
         match self {
             FrameKey::Can {
@@ -60,7 +62,8 @@ impl FrameKey {
                 extended: false,
             } => format!("0x{id:03X}"),
             FrameKey::Can { id, extended: true } => format!("0x{id:08X}"),
-            FrameKey::Xbot { command } => format!("0x{command:02X}"),
+            FrameKey::Serial { command } => format!("0x{command:02X}"),
+            FrameKey::Bytes => "bytes".into(),
             FrameKey::Gps => "gps".into(),
         }
     }
@@ -72,7 +75,7 @@ pub struct KeyStats {
     pub direction: u8,
     pub key: FrameKey,
     /// The frame's name in the robot's protocol, when it decodes.
-    pub name: Option<&'static str>,
+    pub name: Option<String>,
     /// Frames in the window.
     pub in_window: u64,
     /// Frames since the dashboard started.
@@ -86,29 +89,61 @@ impl KeyStats {
     }
 }
 
-/// Names frames by decoding them with the robot's default profile.
-#[derive(Debug)]
+/// The frame name (`motion_command`) and command id of a decoded frame.
+fn name_and_id(json: &FrameJson) -> (Option<String>, Option<u32>) {
+    let name = json
+        .get("frame")
+        .and_then(|v| v.as_str())
+        .map(str::to_string);
+    let id = json
+        .get("id")
+        .and_then(|v| v.as_str())
+        .and_then(|text| u32::from_str_radix(text.trim_start_matches("0x"), 16).ok());
+    (name, id)
+}
+
+/// Names frames by decoding them with the robot's codec (the registry's, `(entry.codec)` of the
+/// described robot's profile): one per direction, as a serial robot's stream parser keeps the
+/// part of a frame that ends in the next read.
+#[derive(Debug, Default)]
 struct Namer {
-    robot: u8,
-    titan: TitanProfile,
-    scout: ScoutMiniProfile,
-    xbot: XbotProfile,
+    rx: Option<RobotCodec>,
+    tx: Option<RobotCodec>,
+    /// The robot is on a serial line (its codec reads a byte stream).
+    serial: bool,
 }
 
 impl Namer {
-    fn can(&self, frame: &BusFrame) -> Option<&'static str> {
+    fn of(profile: Option<&Profile>) -> Self {
+        let codec = || profile.map(|p| (p.robot().entry().codec)(p.clone()));
+        Self {
+            rx: codec(),
+            tx: codec(),
+            serial: profile.is_some_and(|p| !p.robot().is_can()),
+        }
+    }
+
+    fn can(&self, frame: &BusFrame) -> Option<String> {
         let can = if frame.flags & BusFrame::EXTENDED_ID != 0 {
             CanFrame::new_extended(frame.can_id, frame.payload())
         } else {
             CanFrame::new(frame.can_id, frame.payload())
         }
         .ok()?;
-        match self.robot {
-            RobotKind::TITAN => titan::decode(&can, &self.titan).ok().map(|f| f.name()),
-            RobotKind::SCOUT_MINI => scout_mini::decode(&can, &self.scout)
-                .ok()
-                .map(|d| d.frame.name()),
-            _ => None,
+        let json = self.rx.as_ref()?.decode_can(&can).ok()?;
+        name_and_id(&json).0
+    }
+
+    /// The codec that finds frames in a serial stream read in `direction` (`None` for a robot
+    /// on a CAN bus, or none described).
+    fn serial_codec(&mut self, direction: u8) -> Option<&mut RobotCodec> {
+        if !self.serial {
+            return None;
+        }
+        if direction == FrameDirection::TX {
+            self.tx.as_mut()
+        } else {
+            self.rx.as_mut()
         }
     }
 }
@@ -121,39 +156,41 @@ pub struct BusStats {
     index: HashMap<(u8, FrameKey), usize>,
     /// (stamp, index into `keys`) of every counted frame in the window, oldest first.
     window: VecDeque<(u64, usize)>,
-    xbot_rx: xbot::StreamParser,
-    xbot_tx: xbot::StreamParser,
     last_seq: Option<u64>,
     /// Frames the tap lost between two reads (gaps in `BusFrame::seq`).
     pub dropped: u64,
     /// Frames read from the tap.
     pub frames: u64,
-    /// Candidate XBot frames the dashboard's own stream parsers rejected.
+    /// Candidate serial frames the dashboard's own stream parsers rejected.
     pub serial_rejects: u64,
     /// Stamps of motion frames written (TX), oldest first.
     motion_tx: VecDeque<u64>,
 }
 
 impl BusStats {
-    /// `robot` is a [`RobotKind`]; it only names the CAN ids.
-    pub fn new(robot: u8) -> Self {
+    /// `profile` is the described robot's (`described::profile_of`): its codec names the
+    /// frames and finds them in a serial stream. `None` counts CAN ids and serial chunks
+    /// unnamed.
+    pub fn new(profile: Option<&Profile>) -> Self {
         Self {
-            namer: Namer {
-                robot,
-                titan: TitanProfile::default(),
-                scout: ScoutMiniProfile::default(),
-                xbot: XbotProfile::default(),
-            },
+            namer: Namer::of(profile),
             keys: Vec::new(),
             index: HashMap::new(),
             window: VecDeque::new(),
-            xbot_rx: xbot::StreamParser::new(),
-            xbot_tx: xbot::StreamParser::new(),
             last_seq: None,
             dropped: 0,
             frames: 0,
             serial_rejects: 0,
             motion_tx: VecDeque::new(),
+        }
+    }
+
+    /// Names frames from now on with another profile's codec (a newer description: protocol
+    /// detection decided, another robot behind the name): names given so far are forgotten.
+    pub fn set_profile(&mut self, profile: Option<&Profile>) {
+        self.namer = Namer::of(profile);
+        for key in &mut self.keys {
+            key.name = None;
         }
     }
 
@@ -182,27 +219,28 @@ impl BusStats {
             }
             FrameKind::GPS => {
                 let slot = self.slot(frame.direction, FrameKey::Gps);
-                self.keys[slot].name = Some("nmea");
+                self.keys[slot].name = Some("nmea".into());
                 self.count(slot, frame.stamp_ns, frame.direction);
             }
             _ => {
-                let parser = if frame.direction == FrameDirection::TX {
-                    &mut self.xbot_tx
-                } else {
-                    &mut self.xbot_rx
+                let Some(codec) = self.namer.serial_codec(frame.direction) else {
+                    let slot = self.slot(frame.direction, FrameKey::Bytes);
+                    self.count(slot, frame.stamp_ns, frame.direction);
+                    return;
                 };
-                parser.push(frame.payload());
-                let mut found = Vec::new();
-                while let Some(item) = parser.next_frame(&self.namer.xbot) {
+                for item in codec.push_serial(frame.payload()) {
                     match item {
-                        Ok(f) => found.push((f.command_id(), f.name())),
+                        Ok(json) => {
+                            let (name, id) = name_and_id(&json);
+                            let Some(command) = id else {
+                                continue;
+                            };
+                            let slot = self.slot(frame.direction, FrameKey::Serial { command });
+                            self.keys[slot].name = name;
+                            self.count(slot, frame.stamp_ns, frame.direction);
+                        }
                         Err(_) => self.serial_rejects += 1,
                     }
-                }
-                for (command, name) in found {
-                    let slot = self.slot(frame.direction, FrameKey::Xbot { command });
-                    self.keys[slot].name = Some(name);
-                    self.count(slot, frame.stamp_ns, frame.direction);
                 }
             }
         }
@@ -228,7 +266,7 @@ impl BusStats {
         let stats = &mut self.keys[slot];
         stats.total += 1;
         stats.in_window += 1;
-        let motion = matches!(stats.name, Some("motion_command" | "velocity"));
+        let motion = matches!(stats.name.as_deref(), Some("motion_command" | "velocity"));
         self.window.push_back((stamp_ns, slot));
         if direction == FrameDirection::TX && motion {
             self.motion_tx.push_back(stamp_ns);
@@ -419,9 +457,109 @@ impl Latency {
 
 #[cfg(test)]
 mod tests {
+    use std::time::Duration;
+
     use super::*;
+    use chassis_client::Twist;
+    use chassis_protocols::driver::DriverConfig;
+    use chassis_protocols::pair::Pair;
+    use chassis_protocols::profile::XbotProfile;
+    use chassis_protocols::{Direction, RobotKind, Timestamp, Transmit, xbot};
 
     const MS: u64 = 1_000_000;
+
+    fn defaults(kind: RobotKind) -> Profile {
+        kind.entry().defaults()
+    }
+
+    fn titan() -> BusStats {
+        BusStats::new(Some(&defaults(RobotKind::Titan)))
+    }
+
+    /// Every robot's driver against its simulated firmware, the wire seen as the tap shows it:
+    /// every frame of the exchange, in both directions, gets its name from the robot's codec,
+    /// and the motion frames are told apart (decision→wire needs them).
+    #[test]
+    fn every_robots_frames_get_names() {
+        for kind in RobotKind::ALL {
+            let entry = kind.entry();
+            let profile = entry.defaults();
+            let start = Timestamp::from_millis(1_000);
+            let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
+            let firmware = (entry.firmware)(&profile, start);
+            let mut pair = Pair::new(driver, firmware, start);
+            pair.record = true;
+            pair.run_for(Duration::from_secs(2));
+            pair.set_command(Twist {
+                linear_x_mps: 0.3,
+                ..Twist::ZERO
+            });
+            pair.run_for(Duration::from_secs(1));
+            let mut stats = BusStats::new(Some(&profile));
+            for (seq, record) in pair.log().iter().enumerate() {
+                let mut frame = BusFrame {
+                    seq: seq as u64 + 1,
+                    stamp_ns: record.at.as_nanos(),
+                    direction: match record.direction {
+                        Direction::ToChassis => FrameDirection::TX,
+                        Direction::FromChassis => FrameDirection::RX,
+                    },
+                    ..BusFrame::default()
+                };
+                match &record.item {
+                    Transmit::Can(can) => {
+                        frame.kind = FrameKind::CAN;
+                        frame.can_id = can.id();
+                        if can.is_extended() {
+                            frame.flags |= BusFrame::EXTENDED_ID;
+                        }
+                        frame.set_payload(can.data());
+                    }
+                    Transmit::Bytes(bytes) => {
+                        frame.kind = FrameKind::SERIAL;
+                        frame.set_payload(bytes);
+                    }
+                }
+                stats.on_frame(&frame);
+            }
+            let keys = stats.keys();
+            assert!(keys.len() >= 3, "{kind}: {keys:?}");
+            let unnamed: Vec<String> = keys
+                .iter()
+                .filter(|k| k.name.is_none())
+                .map(|k| k.key.text())
+                .collect();
+            assert!(unnamed.is_empty(), "{kind}: unnamed {unnamed:?}");
+            assert_eq!(stats.serial_rejects, 0, "{kind}");
+            assert!(
+                stats.first_motion_tx_after(0).is_some(),
+                "{kind}: no motion frame among {keys:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_newer_profile_renames_the_frames_and_none_counts_them_unnamed() {
+        let mut stats = BusStats::new(None);
+        stats.on_frame(&can(1, 0, 0x111, FrameDirection::TX));
+        let mut chunk = BusFrame {
+            seq: 2,
+            kind: FrameKind::SERIAL,
+            ..BusFrame::default()
+        };
+        chunk.set_payload(&[0xAA, 0x55]);
+        stats.on_frame(&chunk);
+        let keys = stats.keys();
+        assert!(keys.iter().all(|k| k.name.is_none()), "{keys:?}");
+        assert!(keys.iter().any(|k| k.key == FrameKey::Bytes));
+        stats.set_profile(Some(&defaults(RobotKind::Titan)));
+        stats.on_frame(&can(3, 1, 0x111, FrameDirection::TX));
+        let named = stats.keys().into_iter().find(|k| k.key.text() == "0x111");
+        assert_eq!(
+            named.and_then(|k| k.name).as_deref(),
+            Some("motion_command")
+        );
+    }
 
     fn can(seq: u64, stamp_ms: u64, id: u32, direction: u8) -> BusFrame {
         let mut f = BusFrame {
@@ -446,7 +584,7 @@ mod tests {
 
     #[test]
     fn rates_per_id_and_direction_count_the_last_second() {
-        let mut stats = BusStats::new(RobotKind::TITAN);
+        let mut stats = titan();
         let mut seq = 0;
         // 0x211 at 50 Hz and 0x221 at 100 Hz received, 0x111 at 50 Hz sent, for 2 s.
         for ms in 0..2000u64 {
@@ -481,7 +619,7 @@ mod tests {
 
     #[test]
     fn sequence_gaps_count_as_tap_drops() {
-        let mut stats = BusStats::new(RobotKind::TITAN);
+        let mut stats = titan();
         for seq in [5, 6, 7, 10, 11, 20] {
             stats.on_frame(&can(seq, seq, 0x211, FrameDirection::RX));
         }
@@ -491,16 +629,16 @@ mod tests {
 
     #[test]
     fn titan_frames_are_named_by_decoding_them() {
-        let mut stats = BusStats::new(RobotKind::TITAN);
+        let mut stats = titan();
         stats.on_frame(&can(1, 0, 0x111, FrameDirection::TX));
         stats.on_frame(&can(2, 0, 0x7AB, FrameDirection::RX));
         let keys = stats.keys();
         let name = |text: &str| {
             keys.iter()
                 .find(|k| k.key.text() == text)
-                .and_then(|k| k.name)
+                .and_then(|k| k.name.clone())
         };
-        assert_eq!(name("0x111"), Some("motion_command"));
+        assert_eq!(name("0x111").as_deref(), Some("motion_command"));
         assert_eq!(name("0x7AB"), None);
     }
 
@@ -510,7 +648,7 @@ mod tests {
         let frame = xbot::Frame::Velocity(xbot::VelocityCommand::default())
             .encode(&profile)
             .unwrap();
-        let mut stats = BusStats::new(RobotKind::XBOT);
+        let mut stats = BusStats::new(Some(&defaults(RobotKind::Xbot)));
         let mut bytes = frame.clone();
         bytes.extend_from_slice(&frame);
         let (a, b) = bytes.split_at(frame.len() + 2);
@@ -527,8 +665,8 @@ mod tests {
         }
         let keys = stats.keys();
         assert_eq!(keys.len(), 1);
-        assert_eq!(keys[0].key, FrameKey::Xbot { command: 0x03 });
-        assert_eq!(keys[0].name, Some("velocity"));
+        assert_eq!(keys[0].key, FrameKey::Serial { command: 0x03 });
+        assert_eq!(keys[0].name.as_deref(), Some("velocity"));
         assert_eq!(keys[0].total, 2);
         assert_eq!(stats.first_motion_tx_after(0), Some(0));
         assert_eq!(stats.first_motion_tx_after(1), Some(MS));
@@ -594,7 +732,7 @@ mod tests {
 
     #[test]
     fn a_changed_decision_is_matched_with_the_next_motion_frame() {
-        let mut bus = BusStats::new(RobotKind::TITAN);
+        let mut bus = titan();
         let mut l = Latency::default();
         let mut mux = MuxStatus {
             seq: 1,

@@ -2,8 +2,8 @@
 //! or as plain text (`--once`).
 
 use chassis_client::{
-    ChassisState, ClampFlags, ControlMode, FaultFlags, FrameDirection, Group, LinkFlags,
-    LockStatus, MuxStatus, RobotKind, SourceFlags, ZeroReason,
+    ChassisState, ClampFlags, ControlMode, FaultFlags, FrameDirection, LinkFlags, LockStatus,
+    MuxStatus, RobotDescription, SourceFlags, ZeroReason,
 };
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout};
@@ -12,6 +12,7 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Paragraph};
 
 use super::stats::{BusStats, Latency, Samples, WINDOW_NS};
+use crate::described;
 
 /// Everything one screen shows.
 #[derive(Debug)]
@@ -20,6 +21,8 @@ pub struct Snapshot<'a> {
     pub now_ns: u64,
     /// How long the dashboard has been collecting, ns.
     pub running_ns: u64,
+    /// What chassisd says the robot is (`None`: an older chassisd, or not yet).
+    pub description: Option<&'a RobotDescription>,
     pub state: Option<&'a ChassisState>,
     pub mux: Option<&'a MuxStatus>,
     pub bus: &'a BusStats,
@@ -76,14 +79,28 @@ fn robot_panel(s: &Snapshot) -> Panel {
         };
     };
     let age = s.now_ns.saturating_sub(st.stamp_ns);
+    let title = s.description.map_or_else(
+        || format!("robot kind {} (no description)", st.robot),
+        described::title,
+    );
     lines.push(Line::from(vec![
         label("robot"),
-        Span::styled(
-            format!("{} (chassis/{})", RobotKind::name(st.robot), s.name),
-            bold(Color::White),
-        ),
+        Span::styled(format!("{title} · chassis/{}", s.name), bold(Color::White)),
         Span::raw(format!("  state #{}, {} old", st.seq, duration_text(age))),
     ]));
+    if let Some(d) = s.description {
+        lines.push(row("model", described::model_line(d)));
+        lines.push(row("limits", described::limits_line(d)));
+        if let Some(origin) = described::limits_origin_line(d) {
+            lines.push(Line::from(vec![label(""), dim(origin)]));
+        }
+        if let Some(sensors) = described::sensors_line(d) {
+            lines.push(row("sensors", sensors));
+        }
+        if let Some(joints) = described::joints_line(d) {
+            lines.push(row("joints", joints));
+        }
+    }
     let mut flags = vec![Span::raw(
         ControlMode::name(st.system.control_mode).to_string(),
     )];
@@ -117,18 +134,7 @@ fn robot_panel(s: &Snapshot) -> Panel {
     ]));
     lines.push(row(
         "battery",
-        format!(
-            "{:.1} V{}",
-            st.system.battery_voltage_v,
-            if st.is_valid(Group::BmsPack) {
-                format!(
-                    "  {:.0} %  {:+.1} A",
-                    st.system.battery_soc_pct, st.system.battery_current_a
-                )
-            } else {
-                String::new()
-            }
-        ),
+        described::battery_line(Some(st), s.description),
     ));
     lines.push(row(
         "speeds",
@@ -225,8 +231,8 @@ fn mux_panel(s: &Snapshot) -> Panel {
         Span::raw(format!("   rejected requests {}", m.rejected_requests)),
     ]));
     lines.push(Line::from(dim(format!(
-        "{:<10}{:<10}{:>4} {:>9}  flags",
-        "", "source", "prio", "age"
+        "{:<10}{:<10}{:>4} {:>8} {:>9}  flags",
+        "", "source", "prio", "timeout", "age"
     ))));
     for src in m.sources() {
         let age = if src.age_ms == u32::MAX {
@@ -238,6 +244,7 @@ fn mux_panel(s: &Snapshot) -> Panel {
         for (flag, word) in [
             (SourceFlags::ACTIVE, "ACTIVE"),
             (SourceFlags::REQUIRED, "required"),
+            (SourceFlags::REMOTE, "remote"),
             (SourceFlags::FRESH, "fresh"),
             (SourceFlags::HEARTBEAT, "heartbeat"),
             (SourceFlags::LIMITING, "limiting"),
@@ -265,9 +272,10 @@ fn mux_panel(s: &Snapshot) -> Panel {
             label(""),
             Span::styled(
                 format!(
-                    "{:<10}{:>4} {:>9}  {}",
+                    "{:<10}{:>4} {:>8} {:>9}  {}",
                     src.name(),
                     src.priority,
+                    format!("{} ms", src.timeout_ms),
                     age,
                     flags.join(" ")
                 ),
@@ -382,7 +390,7 @@ fn bus_panel(s: &Snapshot) -> Panel {
             Span::raw(format!(
                 "{:<12}{:<20}{:>10.0}{:>10}",
                 k.key.text(),
-                k.name.unwrap_or("?"),
+                k.name.as_deref().unwrap_or("?"),
                 k.rate_hz(),
                 k.total
             )),
@@ -537,12 +545,20 @@ pub fn render(frame: &mut Frame, s: &Snapshot) {
 mod tests {
     use super::*;
     use chassis_client::{BusFrame, FrameKind};
+    use chassis_protocols::RobotKind;
+    use chassis_protocols::description::describe;
     use ratatui::Terminal;
     use ratatui::backend::TestBackend;
 
+    fn titan() -> RobotDescription {
+        let mut d = describe(&RobotKind::Titan.entry().defaults());
+        d.configured_limits.forward_mps = 1.2;
+        d
+    }
+
     fn snapshot_parts() -> (ChassisState, MuxStatus, BusStats, Latency) {
         let mut state = ChassisState {
-            robot: RobotKind::TITAN,
+            robot: RobotKind::Titan.id(),
             seq: 7,
             stamp_ns: 5_000_000_000,
             ..ChassisState::default()
@@ -563,7 +579,7 @@ mod tests {
         mux.sources[1].priority = 100;
         mux.sources[1].flags = SourceFlags::ACTIVE | SourceFlags::FRESH;
         mux.locks[0].set_name("estop");
-        let mut bus = BusStats::new(RobotKind::TITAN);
+        let mut bus = BusStats::new(Some(&RobotKind::Titan.entry().defaults()));
         for i in 0..50u64 {
             let mut f = BusFrame {
                 seq: i + 1,
@@ -584,10 +600,12 @@ mod tests {
     #[test]
     fn the_text_snapshot_shows_rates_per_id_the_active_source_and_latency() {
         let (state, mux, bus, latency) = snapshot_parts();
+        let description = titan();
         let s = Snapshot {
             name: "titan",
             now_ns: 5_000_000_000,
             running_ns: 2_000_000_000,
+            description: Some(&description),
             state: Some(&state),
             mux: Some(&mux),
             bus: &bus,
@@ -599,6 +617,20 @@ mod tests {
         assert!(text.contains("active teleop (priority 100"), "{text}");
         assert!(text.contains("bad checksums 3"), "{text}");
         assert!(text.contains("estop free"), "{text}");
+        assert!(
+            text.contains("AgileX TITAN (titan) · chassis/titan"),
+            "{text}"
+        );
+        assert!(
+            text.contains("limits    forward 1.20 · reverse 3.00 m/s"),
+            "{text}"
+        );
+        assert!(text.contains("[mux.limits] forward 1.20"), "{text}");
+        assert!(text.contains("levels: low 45.0 V / 15 %"), "{text}");
+        assert!(
+            text.contains("joints    front_steer_joint, rear_steer_joint"),
+            "{text}"
+        );
         assert!(text.contains("state age"), "{text}");
         assert!(text.contains("300 µs"), "{text}");
         let rate_line = text.lines().find(|l| l.contains("0x211")).unwrap();
@@ -608,10 +640,12 @@ mod tests {
     #[test]
     fn the_dashboard_renders_every_panel() {
         let (state, mux, bus, latency) = snapshot_parts();
+        let description = titan();
         let s = Snapshot {
             name: "titan",
             now_ns: 5_000_000_000,
             running_ns: 2_000_000_000,
+            description: Some(&description),
             state: Some(&state),
             mux: Some(&mux),
             bus: &bus,

@@ -49,7 +49,7 @@ use crate::Direction;
 use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
-    BatteryModel, Firmware, Injection, Outbox, Pose, SimTruth, first_order_lag, garbage_frames,
+    BatteryModel, Firmware, Injection, Outbox, Pose, SimTruth, first_order_lag, push_garbage,
     runaway_speed, state_of_charge, substeps,
 };
 use crate::profile::Profile;
@@ -686,11 +686,7 @@ impl Firmware for V2Sim {
                 self.runaway_mps = speed;
             }
             Injection::Silence(duration) => self.outbox.silence(now, duration),
-            Injection::Garbage(bytes) => {
-                for frame in garbage_frames(Self::GARBAGE_ID, &bytes) {
-                    self.outbox.push(frame);
-                }
-            }
+            Injection::Garbage(bytes) => push_garbage(&mut self.outbox, Self::GARBAGE_ID, &bytes),
             Injection::MotorDriverLoss { .. }
             | Injection::Bumper(_)
             | Injection::BadChecksums(_)
@@ -723,6 +719,7 @@ impl Firmware for V2Sim {
             bad_checksums_received: 0,
             decode_errors: self.decode_errors,
             boots: self.boots,
+            injected: self.outbox.injected(),
         }
     }
 }

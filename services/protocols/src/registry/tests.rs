@@ -268,6 +268,56 @@ fn every_robot_has_a_description_with_limits_geometry_and_a_battery_level() {
     }
 }
 
+/// The turning radius a robot that steers is described with is the one its driver turns at full
+/// lock: a twist a little wider is driven as asked, a little tighter is clamped (or, four-wheel
+/// steering, spun) and flagged — what the planner keeps its paths to.
+#[test]
+fn every_steered_robot_is_described_with_the_radius_its_driver_turns() {
+    use chassis_interfaces::ClampFlags;
+    let mut steered = 0;
+    for kind in RobotKind::ALL {
+        let entry = kind.entry();
+        let profile = entry.defaults();
+        let d = describe(&profile);
+        let radius = d.geometry.min_turn_radius_m;
+        if !d.robot_limits.steer_rad.is_finite() {
+            assert_eq!(radius, 0.0, "{kind} turns on the spot");
+            continue;
+        }
+        steered += 1;
+        assert!(radius > 0.0, "{kind}: {radius}");
+        let flags_at = |r: f64| {
+            let start = Timestamp::from_millis(1_000);
+            let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
+            let firmware = (entry.firmware)(&profile, start);
+            let mut pair = Pair::new(driver, firmware, start);
+            pair.run_for(Duration::from_secs(2));
+            let twist = Twist {
+                linear_x_mps: 0.3,
+                angular_z_radps: (0.3 / r) as f32,
+                ..Twist::ZERO
+            };
+            let now = pair.now();
+            pair.driver.set_command(now, &twist);
+            pair.run_for(Duration::from_millis(200));
+            pair.driver.state().command.clamp_flags
+        };
+        let wider = flags_at(radius * 1.01);
+        assert_eq!(
+            wider & ClampFlags::TURN_RADIUS_LIMIT,
+            0,
+            "{kind}: {radius} m"
+        );
+        let tighter = flags_at(radius * 0.99);
+        assert_ne!(
+            tighter & ClampFlags::TURN_RADIUS_LIMIT,
+            0,
+            "{kind}: {radius} m"
+        );
+    }
+    assert!(steered >= 4, "TITAN, HUNTER, HUNTER SE, RANGER MINI");
+}
+
 #[test]
 fn an_override_of_a_limit_reaches_the_description() {
     let table: toml::Table = toml::from_str("max_linear_mps = 0.4").unwrap();

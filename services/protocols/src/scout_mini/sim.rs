@@ -16,8 +16,9 @@ use crate::DecodeError;
 use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
-    BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
-    garbage_frames, motor_index, non_negative, runaway_speed, state_of_charge, substeps,
+    BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, clamp_i16,
+    first_order_lag, motor_index, non_negative, push_garbage, runaway_speed, state_of_charge,
+    substeps,
 };
 use crate::profile::ScoutMiniProfile;
 use crate::registry::RobotKind;
@@ -161,7 +162,9 @@ const FEEDBACK_IDS: [u16; 7] = [
 ///   many extra feedback frames per second (copies of 0x131 and 0x200, alternating, each with its
 ///   id's next count; at most [`ScoutMiniSim::MAX_FLOOD_FRAMES_PER_S`]; 0 stops it);
 ///   `BadChecksums(n)` corrupts the checksum byte (inverted) of the next `n` frames sent, flood
-///   copies included — all three survive a reboot. `Garbage(bytes)` puts frames with id
+///   copies included (a second injection adds to what the first has not corrupted yet) — all
+///   three survive a reboot. [`SimTruth::injected`] counts the corrupted, flood and garbage
+///   frames as they leave. `Garbage(bytes)` puts frames with id
 ///   [`ScoutMiniSim::GARBAGE_ID`] (0x7F0, unused by SCOUT MINI) carrying the bytes 8 at a time on
 ///   the bus at once — another node's noise, so even during silence. `Bumper`, `ObstacleAhead`
 ///   and `ObstacleBehind` return `false` (the SCOUT MINI's anti-collision tube is no switch and
@@ -664,6 +667,12 @@ impl ScoutMiniSim {
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
+        self.send_injected(now, frame, InjectedCounts::default());
+    }
+
+    /// Like [`ScoutMiniSim::send`], for a frame that carries an injected fault (a flood's); a
+    /// pending [`Injection::BadChecksums`] corrupts it as it would any frame.
+    fn send_injected(&mut self, now: Timestamp, frame: Frame, mut injected: InjectedCounts) {
         if self.is_quiet(now) {
             return;
         }
@@ -682,8 +691,9 @@ impl ScoutMiniSim {
         if self.corrupt_next > 0 {
             self.corrupt_next -= 1;
             can = corrupt_checksum(&can);
+            injected = injected + InjectedCounts::BAD_CHECKSUM;
         }
-        self.outbox.push(can);
+        self.outbox.push_injected(can, injected);
     }
 
     fn motion_feedback(&self) -> Frame {
@@ -736,7 +746,7 @@ impl ScoutMiniSim {
         } else {
             self.motion_feedback()
         };
-        self.send(now, frame);
+        self.send_injected(now, frame, InjectedCounts::FLOOD);
     }
 }
 
@@ -828,12 +838,10 @@ impl Firmware for ScoutMiniSim {
             }
             Injection::Reboot => self.reboot(now),
             Injection::Silence(duration) => self.outbox.silence(now, duration),
-            Injection::Garbage(bytes) => {
-                for frame in garbage_frames(Self::GARBAGE_ID, &bytes) {
-                    self.outbox.push(frame);
-                }
-            }
-            Injection::BadChecksums(n) => self.corrupt_next = n,
+            Injection::Garbage(bytes) => push_garbage(&mut self.outbox, Self::GARBAGE_ID, &bytes),
+            // Injections add up: one that comes before the last one's frames have all gone out
+            // takes nothing away from it.
+            Injection::BadChecksums(n) => self.corrupt_next = self.corrupt_next.saturating_add(n),
             Injection::Flood { frames_per_s } => {
                 self.flood = Flood::new(now, frames_per_s, Self::MAX_FLOOD_FRAMES_PER_S);
             }
@@ -869,6 +877,7 @@ impl Firmware for ScoutMiniSim {
             bad_checksums_received: self.bad_checksums,
             decode_errors: self.decode_errors,
             boots: self.boots,
+            injected: self.outbox.injected(),
         }
     }
 }

@@ -755,6 +755,69 @@ fn garbage_and_unknown_frames_are_counted_and_ignored() {
     assert_eq!(b.v(), 0.0);
 }
 
+/// A second injection before the first one's frames have all gone out adds to it (the storms
+/// of the fault matrix inject every 100 ms, faster than 7 frames a slot corrupt a large count),
+/// and the truth counts each corrupted frame as it leaves.
+#[test]
+fn bad_checksum_injections_add_up_and_count_as_they_leave() {
+    let mut b = Bench::new();
+    b.run_for(ms(30));
+    assert!(b.inject(Injection::BadChecksums(10)));
+    assert_eq!(
+        b.sim.truth().injected.bad_checksum_frames,
+        0,
+        "none sent yet"
+    );
+    b.run_for(ms(20));
+    let halfway = b.sim.truth().injected.bad_checksum_frames;
+    assert_eq!(halfway, 7, "one slot of 7 frames");
+    assert!(b.inject(Injection::BadChecksums(10)));
+    let start = b.sent.len();
+    b.run_for(ms(200));
+    let bad = b.sent[start..]
+        .iter()
+        .filter(|(_, f)| decode(f, &b.profile).is_err())
+        .count() as u64;
+    assert_eq!(halfway + bad, 20, "3 left of the first, 10 of the second");
+    let injected = b.sim.truth().injected;
+    assert_eq!(injected.bad_checksum_frames, 20);
+    assert_eq!(
+        (injected.garbage_frames, injected.flood_frames),
+        (0, 0),
+        "{injected:?}"
+    );
+}
+
+/// Garbage and flood frames count when they leave: garbage queued and then cleared by a silence
+/// never went out.
+#[test]
+fn garbage_and_flood_frames_count_as_they_leave() {
+    let mut b = Bench::new();
+    b.run_for(ms(30));
+    let now = b.now;
+    assert!(b.sim.inject(now, Injection::Garbage((0u8..20).collect())));
+    assert_eq!(b.sim.truth().injected.garbage_frames, 0, "queued, not sent");
+    assert!(b.sim.inject(now, Injection::Silence(ms(10))));
+    b.run_for(ms(30));
+    assert_eq!(
+        b.sim.truth().injected.garbage_frames,
+        0,
+        "cleared, never sent"
+    );
+    assert!(b.inject(Injection::Garbage((0u8..20).collect())));
+    let injected = b.sim.truth().injected;
+    assert_eq!((injected.garbage_frames, injected.garbage_bytes), (3, 20));
+    assert!(b.inject(Injection::Flood { frames_per_s: 1000 }));
+    b.run_for(ms(1000));
+    assert_eq!(b.sim.truth().injected.flood_frames, 1000);
+    // A flood frame that is corrupted counts as both.
+    assert!(b.inject(Injection::BadChecksums(10_000)));
+    b.run_for(ms(100));
+    let injected = b.sim.truth().injected;
+    assert_eq!(injected.flood_frames, 1100);
+    assert_eq!(injected.bad_checksum_frames, 100 + 35);
+}
+
 #[test]
 fn injections_the_scout_mini_lacks_are_refused() {
     let mut b = Bench::new();

@@ -17,8 +17,9 @@ use crate::Direction;
 use crate::can::CanFrame;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
-    BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, clamp_i16, first_order_lag,
-    garbage_frames, motor_index, non_negative, runaway_speed, state_of_charge, substeps,
+    BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, clamp_i16,
+    first_order_lag, motor_index, non_negative, push_garbage, runaway_speed, state_of_charge,
+    substeps,
 };
 use crate::profile::TitanProfile;
 use crate::registry::RobotKind;
@@ -748,12 +749,17 @@ impl TitanSim {
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
+        self.send_injected(now, frame, InjectedCounts::default());
+    }
+
+    /// Like [`TitanSim::send`], for a frame that carries an injected fault.
+    fn send_injected(&mut self, now: Timestamp, frame: Frame, injected: InjectedCounts) {
         if self.is_quiet(now) {
             return;
         }
         // Every value is kept inside its wire range; a frame that still does not fit is dropped.
         if let Ok(can) = frame.encode(&self.profile) {
-            self.outbox.push(can);
+            self.outbox.push_injected(can, injected);
         } else {
             self.outbox.count_dropped();
         }
@@ -926,7 +932,7 @@ impl TitanSim {
         } else {
             self.motion_feedback()
         };
-        self.send(now, frame);
+        self.send_injected(now, frame, InjectedCounts::FLOOD);
     }
 
     /// The normalized flags of what the chassis reports (0x211 word, body state, BMS).
@@ -1048,11 +1054,7 @@ impl Firmware for TitanSim {
             }
             Injection::Reboot => self.reboot(now),
             Injection::Silence(duration) => self.outbox.silence(now, duration),
-            Injection::Garbage(bytes) => {
-                for frame in garbage_frames(Self::GARBAGE_ID, &bytes) {
-                    self.outbox.push(frame);
-                }
-            }
+            Injection::Garbage(bytes) => push_garbage(&mut self.outbox, Self::GARBAGE_ID, &bytes),
             Injection::Flood { frames_per_s } => {
                 self.flood = Flood::new(now, frames_per_s, Self::MAX_FLOOD_FRAMES_PER_S);
             }
@@ -1085,6 +1087,7 @@ impl Firmware for TitanSim {
             bad_checksums_received: 0,
             decode_errors: self.decode_errors,
             boots: self.boots,
+            injected: self.outbox.injected(),
         }
     }
 }

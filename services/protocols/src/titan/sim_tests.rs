@@ -746,6 +746,8 @@ fn garbage_and_unknown_frames_are_counted_and_ignored() {
     assert!(b.inject(Injection::Garbage((0u8..20).collect())));
     let garbage: Vec<_> = b.sent.iter().filter(|(_, f)| f.id() == 0x7F0).collect();
     assert_eq!(garbage.len(), 3);
+    let injected = b.sim.truth().injected;
+    assert_eq!((injected.garbage_frames, injected.garbage_bytes), (3, 20));
     assert_eq!(garbage[2].1.data(), &[16, 17, 18, 19]);
     assert!(decode(&garbage[0].1, &b.profile).is_err());
     b.run_for(ms(100));
@@ -773,10 +775,12 @@ fn a_flood_adds_the_requested_extra_frames() {
     let start = b.now;
     b.run_for(ms(1000));
     assert_eq!(b.sent_since(start), normal + 1000);
+    assert_eq!(b.sim.truth().injected.flood_frames, 1000);
     b.inject(Injection::Flood { frames_per_s: 0 });
     let start = b.now;
     b.run_for(ms(1000));
     assert_eq!(b.sent_since(start), normal);
+    assert_eq!(b.sim.truth().injected.flood_frames, 1000);
 }
 
 #[test]

@@ -29,9 +29,8 @@ const HEARTBEAT_JITTER: Duration = Duration::from_millis(5);
 /// at most 1 kHz).
 const FALLBACK_HEARTBEAT_HZ: f64 = 8.0;
 const WINDOW: Duration = Duration::from_secs(1);
-/// Below this gap between two sensor frames the board's 16-bit µs stamp (wrapping every
-/// 65.536 ms) is unambiguous and is used as the sample interval instead of the receive times.
-const STAMP_TRUSTED_BELOW: Duration = Duration::from_millis(45);
+/// The board's 16-bit µs stamp wraps every 65.536 ms, s.
+const STAMP_WRAP_S: f64 = 65_536e-6;
 /// Wheel speeds are differences over at least this span of the board's time: closer reports
 /// (a flood, a burst) would turn one count of quantisation into a large speed error.
 const MIN_SPEED_SPAN: Duration = Duration::from_millis(15);
@@ -185,8 +184,13 @@ struct SpeedRef {
 ///   `profile.metres_per_count()`, `Odometry`), `motion.wheel_mps` and the axle means
 ///   (`WheelSpeed`), and `motion.linear_mps` = the mean of the front wheel speeds (`Motion`).
 ///   Speeds are encoder differences over at least 15 ms of the board's time (so a flood or a burst
-///   of reports does not turn one count of quantisation into noise), timed by the board's µs stamp
-///   when it is unambiguous (reports less than 45 ms apart), else by the receive times.
+///   of reports does not turn one count of quantisation into noise), timed by the board's µs stamp.
+///   The stamp wraps every 65.536 ms, so the receive times only choose how many wraps lie between
+///   two reports (the count that brings the stamps' difference nearest the receive gap): a report
+///   lost to a bad checksum and the next one read late by the host (two reports 40 ms apart on the
+///   board, read 53 ms apart) still give the wheels' speed, not three quarters of it. The receive
+///   gap may be off by up to half a wrap (32.8 ms) either way; a stamp that did not move between
+///   two reports (a board that does not fill it) leaves the receive gap.
 /// * With `profile.wheel_separation_m` set: `motion.angular_radps` = (v_right − v_left) / separation,
 ///   and the pose (`odometry.x_m`, `y_m`, `yaw_rad`, `Pose`) integrated from the encoder
 ///   displacements (arc midpoint rule; independent of serial timing jitter).
@@ -637,15 +641,17 @@ impl XbotDriver {
     }
 }
 
-/// Seconds between two reports: the board's µs stamp when unambiguous, else the receive times.
+/// Seconds between two reports on the board's clock: the difference of its µs stamps plus the
+/// whole wraps that bring it nearest the receive gap; the receive gap if the stamp did not move.
 fn sample_interval(now: Timestamp, before: Timestamp, stamp_before: u16, stamp_us: u16) -> f64 {
-    let received = now.saturating_since(before);
-    let stamped = Duration::from_micros(stamp_us.wrapping_sub(stamp_before).into());
-    if received < STAMP_TRUSTED_BELOW && !stamped.is_zero() {
-        stamped.as_secs_f64()
-    } else {
-        received.as_secs_f64()
+    let received = now.saturating_since(before).as_secs_f64();
+    let ticks_us = stamp_us.wrapping_sub(stamp_before);
+    if ticks_us == 0 {
+        return received;
     }
+    let stamped = f64::from(ticks_us) * 1e-6;
+    let wraps = ((received - stamped) / STAMP_WRAP_S).round().max(0.0);
+    stamped + wraps * STAMP_WRAP_S
 }
 
 /// Adds the arc driven by a differential drive whose left and right wheels travelled

@@ -794,6 +794,49 @@ fn speeds_use_the_boards_stamp_when_reports_arrive_in_a_burst() {
     );
 }
 
+/// Reports every 20 ms of the board's time at a steady speed; some are lost to bad checksums and
+/// some are read late by the service (a loaded host). The speed is the encoder travel over the
+/// board's time between the two good reports, whatever the receive gap says.
+#[test]
+fn a_report_lost_to_a_bad_checksum_and_the_next_one_read_late_leave_the_speed_true() {
+    let step: u16 = 127;
+    let v = f64::from(step) * p().metres_per_count() / 0.02;
+    // (reports lost before this one, how late this one is read, ms): one lost and the next
+    // read 13 ms late (received 53 ms after the last good one, on the board 40 ms); three
+    // lost (80 ms on the board, the stamp wrapped once) read 5 ms late; one read 25 ms late
+    // and the next on time (received 15 ms apart, 20 ms on the board); one lost after a
+    // report read 25 ms late (received 15 ms apart, 40 ms on the board).
+    let cases: [(u16, u64); 5] = [(0, 0), (1, 13), (3, 5), (0, 25), (1, 0)];
+    let mut b = Bench::new();
+    let mut board_ms: u64 = 0;
+    let mut wheels: u16 = 0;
+    b.feed(&report([0; 4], 0));
+    let mut read_late = 0;
+    for (i, (lost, late)) in cases.into_iter().chain([(0, 0)]).enumerate() {
+        let mut bad = Frame::Sensor(report([0; 4], 0)).encode(&p()).unwrap();
+        *bad.last_mut().unwrap() ^= 0x01;
+        for _ in 0..lost {
+            board_ms += 20;
+            wheels = wheels.wrapping_add(step);
+            b.run_until(T0 + ms(board_ms));
+            b.bytes(&bad);
+        }
+        board_ms += 20;
+        wheels = wheels.wrapping_add(step);
+        b.run_until(T0 + ms(board_ms + late));
+        let stamp = (board_ms * 1_000 % 65_536) as u16;
+        b.feed(&report([wheels, wheels, 0, 0], stamp));
+        let got = f64::from(b.state().motion.linear_mps);
+        assert!(
+            close(got, v, 0.005),
+            "case {i} ({lost} lost, read {late} ms late after one {read_late} ms late): \
+             {got:.3} m/s, the wheels at {v:.3} m/s"
+        );
+        read_late = late;
+    }
+    assert_eq!(b.state().link.rx_bad_checksum, 5);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Link.
 

@@ -11,8 +11,8 @@ use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::driver::{Rx, Transmit};
 use crate::firmware::{
-    BatteryModel, Firmware, Flood, Injection, Outbox, Pose, SimTruth, first_order_lag, motor_index,
-    non_negative, runaway_speed, state_of_charge, substeps,
+    BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth,
+    first_order_lag, motor_index, non_negative, runaway_speed, state_of_charge, substeps,
 };
 use crate::profile::XbotProfile;
 use crate::registry::RobotKind;
@@ -84,7 +84,8 @@ use crate::time::{Grid, Timestamp, earliest};
 ///   `RcTakeover` and `Bumper` return `false`: the XBot's serial protocol has neither.
 ///   `Silence(d)` transmits nothing for `d` (commands are still obeyed). `Garbage(bytes)` puts the
 ///   bytes on the wire at once, as is, even while silent (line noise). `BadChecksums(n)` flips the
-///   checksum of the next `n` reports. `Flood { frames_per_s }` adds that many extra reports per
+///   checksum of the next `n` reports (injections add up). [`SimTruth::injected`] counts the
+///   garbage, corrupted and flood reports as they leave. `Flood { frames_per_s }` adds that many extra reports per
 ///   second (at most what the line carries at the profile's baud rate, 10 bits a byte; 0 stops it).
 ///   Silence, flood, pending corruptions and obstacles survive a reboot.
 #[derive(Debug)]
@@ -619,8 +620,10 @@ impl XbotSim {
         self.booting_until.is_some() || self.outbox.is_silenced(now)
     }
 
-    fn enqueue(&mut self, bytes: Vec<u8>) {
-        let chunks: Vec<Vec<u8>> = if self.tx_chunk_len == 0 {
+    /// Queues a report in chunks; the injected faults it carries count when its last chunk
+    /// leaves.
+    fn enqueue(&mut self, bytes: Vec<u8>, injected: InjectedCounts) {
+        let mut chunks: Vec<Vec<u8>> = if self.tx_chunk_len == 0 {
             vec![bytes]
         } else {
             bytes
@@ -628,8 +631,12 @@ impl XbotSim {
                 .map(<[u8]>::to_vec)
                 .collect()
         };
+        let last = chunks.pop();
         for chunk in chunks {
             self.outbox.push(chunk);
+        }
+        if let Some(chunk) = last {
+            self.outbox.push_injected(chunk, injected);
         }
     }
 
@@ -696,7 +703,8 @@ impl XbotSim {
         }
     }
 
-    fn send_report(&mut self, now: Timestamp) {
+    /// Sends a status report; `injected` says whether a flood asked for it.
+    fn send_report(&mut self, now: Timestamp, mut injected: InjectedCounts) {
         if self.is_quiet(now) {
             return;
         }
@@ -711,9 +719,10 @@ impl XbotSim {
             if let Some(checksum) = bytes.last_mut() {
                 *checksum ^= 0xFF;
             }
+            injected = injected + InjectedCounts::BAD_CHECKSUM;
         }
         self.reports_sent += 1;
-        self.enqueue(bytes);
+        self.enqueue(bytes, injected);
     }
 
     /// Most reports per second the line carries at the profile's baud rate (10 bits a byte).
@@ -748,7 +757,7 @@ impl Firmware for XbotSim {
         self.expire(now);
         if self.booting_until.is_none() && self.reports.is_due(now) {
             self.reports.served(now);
-            self.send_report(now);
+            self.send_report(now, InjectedCounts::default());
         }
         if self
             .flood
@@ -757,7 +766,7 @@ impl Firmware for XbotSim {
             .is_some()
             && self.booting_until.is_none()
         {
-            self.send_report(now);
+            self.send_report(now, InjectedCounts::FLOOD);
         }
     }
 
@@ -803,7 +812,9 @@ impl Firmware for XbotSim {
             Injection::Silence(duration) => self.outbox.silence(now, duration),
             Injection::Garbage(bytes) => {
                 if !bytes.is_empty() {
-                    self.outbox.push(bytes);
+                    let len = bytes.len();
+                    self.outbox
+                        .push_injected(bytes, InjectedCounts::garbage(len));
                 }
             }
             Injection::BadChecksums(n) => self.corrupt_next = self.corrupt_next.saturating_add(n),
@@ -846,6 +857,7 @@ impl Firmware for XbotSim {
             bad_checksums_received: self.bad_checksums_received,
             decode_errors: self.decode_errors,
             boots: self.boots,
+            injected: self.outbox.injected(),
         }
     }
 }

@@ -562,6 +562,8 @@ fn garbage_goes_on_the_wire_as_is_even_while_silent() {
     b.inject(Injection::Silence(ms(100)));
     assert!(b.inject(Injection::Garbage(vec![0xAA, 0x55, 0x47, 0x10, 0x00])));
     assert_eq!(b.sent, vec![(T0, vec![0xAA, 0x55, 0x47, 0x10, 0x00])]);
+    let injected = b.sim.truth().injected;
+    assert_eq!((injected.garbage_frames, injected.garbage_bytes), (1, 5));
 }
 
 #[test]
@@ -574,6 +576,7 @@ fn bad_checksums_corrupt_exactly_the_next_n_reports() {
     assert_eq!(b.sim.reports_sent(), 11);
     assert_eq!(b.sim.reports_corrupted(), 3);
     assert_eq!(errors, 3);
+    assert_eq!(b.sim.truth().injected.bad_checksum_frames, 3);
     let times: Vec<_> = reports
         .iter()
         .map(|(t, _)| t.saturating_since(T0))
@@ -607,6 +610,7 @@ fn a_flood_adds_reports_up_to_what_the_line_carries() {
     b.run_for(ms(1000));
     // 115200 baud / 10 bits / 75 bytes = 153 a second.
     assert_eq!(b.sim.reports_sent() - sent, 50 + 153);
+    assert_eq!(b.sim.truth().injected.flood_frames, 99 + 153);
     b.inject(Injection::Flood { frames_per_s: 0 });
     let sent = b.sim.reports_sent();
     b.run_for(ms(1000));
@@ -684,6 +688,12 @@ fn split_output_reassembles_to_the_same_reports() {
         11 * whole.sent.len(),
         "75 bytes in chunks of 7"
     );
+    // A corrupted report split in chunks counts once, when its last chunk has left.
+    assert!(split.inject(Injection::BadChecksums(2)));
+    split.run_for(ms(20));
+    assert_eq!(split.sim.truth().injected.bad_checksum_frames, 1);
+    split.run_for(ms(100));
+    assert_eq!(split.sim.truth().injected.bad_checksum_frames, 2);
 }
 
 proptest! {
