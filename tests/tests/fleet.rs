@@ -451,7 +451,7 @@ fn an_operator_finds_three_robots_sees_one_lost_stops_the_others_and_finds_a_fou
     assert!(m.sources()[0].has(SourceFlags::FRESH), "{m:?}");
 
     // The fleet view: A lost, B and C ok.
-    let rows = fleet(&env, "0.5");
+    let rows = fleet(&env, "1.5");
     assert_eq!(rows[a.as_str()]["link"], "lost", "{rows:#?}");
     assert_eq!(rows[b.as_str()]["link"], "ok", "{rows:#?}");
     assert_eq!(rows[c.as_str()]["link"], "ok", "{rows:#?}");
