@@ -300,7 +300,13 @@ fn drive_until_remote_wins(env: &Env, robots: &mut [&mut Robot], sources: &mut [
             s.send(VelocityRequest::twist(0.3, 0.0)).unwrap();
         }
         pause(Duration::from_millis(50));
-        if robots.iter_mut().all(|r| active_name(&mux(r)) == "remote") {
+        if robots.iter_mut().all(|r| {
+            let _ = r.wait_mux(Duration::from_millis(50));
+            r.latest_mux()
+                .ok()
+                .flatten()
+                .is_some_and(|m| active_name(&m) == "remote")
+        }) {
             return;
         }
         assert!(
