@@ -692,6 +692,11 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
     },
     ExpectedRow {
         suite: "latch",
+        test: "an_estop_release_never_restarts_motion_by_itself",
+        fault: "the e-stop released while teleop keeps asking for motion",
+    },
+    ExpectedRow {
+        suite: "latch",
         test: "an_answered_estop_is_held_after_a_kill_at_any_moment_after_the_answer",
         fault: "chassisd SIGKILLed with the e-stop held, and restarted",
     },

@@ -113,15 +113,19 @@ fn peak_speed(robot: &mut Robot, duration: Duration) -> f32 {
     max
 }
 
+/// How long [`assert_release_waits_for_teleop`] watches the robot after the release.
+const WATCHED_AFTER_RELEASE: Duration = Duration::from_millis(1500);
+
 /// After `estop-release` with teleop still asking for motion: nothing moves, the answer, the
-/// mux and `chassis status` say what the robot waits for.
-fn assert_release_waits_for_teleop(env: &Env, n: &str, robot: &mut Robot) {
+/// mux and `chassis status` say what the robot waits for. Returns the fastest the chassis
+/// reported over [`WATCHED_AFTER_RELEASE`] after the release.
+fn assert_release_waits_for_teleop(env: &Env, n: &str, robot: &mut Robot) -> f32 {
     let answer = control(env, n, "estop-release");
     assert!(
         answer.contains("nothing moves until teleop asks for zero"),
         "{answer}"
     );
-    let peak = peak_speed(robot, Duration::from_millis(1500));
+    let peak = peak_speed(robot, WATCHED_AFTER_RELEASE);
     assert!(
         peak < 0.01,
         "moved at {peak} m/s after the release by itself"
@@ -136,6 +140,7 @@ fn assert_release_waits_for_teleop(env: &Env, n: &str, robot: &mut Robot) {
         status.contains("waiting for a zero command from teleop"),
         "{status}"
     );
+    peak
 }
 
 /// ISO 13850 / IEC 60204-1: resetting a stop shall not initiate a restart. The operator's
@@ -158,7 +163,7 @@ fn an_estop_release_never_restarts_motion_by_itself() {
         peak_speed(&mut robot, Duration::from_millis(100)) < 0.001
     });
     assert!(stopped.is_some(), "the e-stop did not stop the chassis");
-    assert_release_waits_for_teleop(&env, &n, &mut robot);
+    let peak_after_release = assert_release_waits_for_teleop(&env, &n, &mut robot);
     // Teleop lets go: its publisher stops (its requests time out), then asks again.
     env.proc(asking).signal(Signal::SIGTERM);
     env.proc(asking).wait_exit(Duration::from_secs(3));
@@ -167,11 +172,37 @@ fn an_estop_release_never_restarts_motion_by_itself() {
     let again = wait_for(Duration::from_secs(5), || {
         peak_speed(&mut robot, Duration::from_millis(100)) > 0.2
     });
+    let mut figures = Figures::faults();
+    figures.add(Figure {
+        rank: 705,
+        fault: "the e-stop released while teleop keeps asking for motion".into(),
+        injection: "`chassis pub velocity --source teleop --vx 0.3 --rate 20` drives; \
+            `chassis control estop`, then `estop-release` while it keeps asking; then it stops \
+            (its requests time out: a zero) and a new `chassis pub` asks again"
+            .into(),
+        behaviour: "a release never starts motion (ISO 13850): the robot stood, the mux \
+            commanded zero awaiting a zero from teleop, the answer and `chassis status` said so \
+            (\"waiting for a zero command from teleop\"); once teleop had let go, asking again \
+            drove"
+            .into(),
+        figure: format!(
+            "fastest {peak_after_release:.3} m/s over the {} ms after the release (bound \
+             0.01 m/s; teleop asked for 0.3 throughout); driving again {} after teleop asked \
+             anew",
+            WATCHED_AFTER_RELEASE.as_millis(),
+            again.map_or("never".to_string(), |d| format!("{} ms", d.as_millis()))
+        ),
+        value: f64::from(peak_after_release),
+        pass: peak_after_release < 0.01 && again.is_some(),
+        suite: "latch".into(),
+        test: "an_estop_release_never_restarts_motion_by_itself".into(),
+    });
     assert!(
         again.is_some(),
         "no motion once teleop asked again\n{}",
         env.logs()
     );
+    figures.finish();
 }
 
 /// A latch restored after a restart obeys the same rule when it is released.
