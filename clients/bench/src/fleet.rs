@@ -96,6 +96,8 @@ pub struct SizeFigures {
 #[derive(Debug, Serialize)]
 pub struct FleetReport {
     pub provenance: Provenance,
+    /// `release build` or `debug build (…)`: the profile of the binaries measured.
+    pub build: String,
     pub machine: Machine,
     pub seconds: f64,
     pub sizes: Vec<SizeFigures>,
@@ -236,8 +238,17 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<FleetReport> {
     }
     let sizes = result?;
     provenance.end()?;
+    let build = if std::env::current_exe()?
+        .to_string_lossy()
+        .contains("/debug/")
+    {
+        "**a debug build** (unoptimised: every figure is higher than a release build's)".into()
+    } else {
+        "release build".into()
+    };
     Ok(FleetReport {
         provenance,
+        build,
         machine: Machine::probe(),
         seconds: args.seconds,
         sizes,
@@ -456,12 +467,14 @@ impl FleetReport {
              {}, {} cores, Linux {} — **a loaded 2-core machine**: every robot's chassisd, its \
              simulated chassis and its robot side run on the same two cores as the operator, so \
              the figures are an upper bound on the operator's own cost and latency.\n\n\
-             Reproduce: `cargo build --release --workspace && sudo target/release/{}`\n\n",
+             Binaries: {}. Reproduce: `cargo build --release --workspace && sudo \
+             target/release/{}`\n\n",
             p.date,
             p.commit_text(),
             self.machine.cpu_model,
             self.machine.cpus,
             self.machine.kernel,
+            self.build,
             p.command
         );
         out.push_str(&format!(
