@@ -543,25 +543,38 @@ impl FleetReport {
                 / (last.robots - first.robots) as f64;
             let per_robot_mib = (last.operator_rss_mib - first.operator_rss_mib)
                 / (last.robots - first.robots) as f64;
-            let rate = last.samples_per_s / last.robots as f64;
+            // The rate each robot sends when the machine keeps up: the smallest fleet's.
+            let rate = first.samples_per_s / first.robots as f64;
+            let last_rate = last.samples_per_s / last.robots as f64;
             let state_bytes = size_of::<ChassisState>() as f64;
             out.push_str(&format!(
                 "**How it grows.** From {} to {} robots the operator's CPU grew by {:.2} % of a \
                  core per robot and its memory by {:.2} MiB per robot (a mirror is a few threads \
-                 and its iceoryx2 services); each robot sent {:.0} states/s, {:.0} kB/s of state \
-                 at {} bytes a sample.\n\n",
+                 and its iceoryx2 services); a robot alone sent {:.0} states/s, {:.0} kB/s of \
+                 state at {} bytes a sample.{}\n\n",
                 first.robots,
                 last.robots,
                 per_robot_cpu,
                 per_robot_mib,
                 rate,
                 rate * state_bytes / 1e3,
-                state_bytes
+                state_bytes,
+                if last_rate < 0.8 * rate {
+                    format!(
+                        " At {} robots this machine no longer kept up (busy {:.0} %): each robot's \
+                         states arrived at {last_rate:.0}/s, and the latency there is mostly time \
+                         spent waiting for a CPU; the operator's CPU per robot above is \
+                         understated by as much.",
+                        last.robots, last.machine_busy_pct
+                    )
+                } else {
+                    String::new()
+                }
             ));
             out.push_str(&format!(
                 "**On paper: 1,000 robots across sites** (the arithmetic from this run's rates, \
                  not a measurement).\n\n\
-                 * *Rates.* At this run's {rate:.0} full states/s per robot, 1,000 robots are \
+                 * *Rates.* At this run's {rate:.0} full states/s per robot (a robot alone), 1,000 robots are \
                  {:.0} MB/s of state into one operator and, at {per_robot_cpu:.2} % of a core \
                  per mirrored robot, about {:.0} cores of mirroring: one operator cannot mirror \
                  them all at full rate, and need not. An operator watches a fleet at 1-10 Hz and \
