@@ -436,10 +436,14 @@ mod tests {
 
     #[test]
     fn a_lost_robot_shows_lost_and_its_last_known_estop() {
-        let mut state = ChassisState::default();
-        state.link_flags = LinkFlags::REMOTE_LOST;
-        let mut mux = MuxStatus::default();
-        mux.lock_count = 1;
+        let mut state = ChassisState {
+            link_flags: LinkFlags::REMOTE_LOST,
+            ..ChassisState::default()
+        };
+        let mut mux = MuxStatus {
+            lock_count: 1,
+            ..MuxStatus::default()
+        };
         mux.locks[0].set_name("estop");
         mux.locks[0].held = 1;
         mux.locks[0].holder = LockStatus::HOLDER_OPERATOR;
