@@ -115,6 +115,7 @@ PAYLOAD_TYPES = [
     "MuxStatus",
     "BusFrame",
     "ControlResponse",
+    "RobotDescription",
 ]
 STAMP = 1_700_000_000_000_000_000
 
@@ -352,6 +353,28 @@ SEEDS = {
                 "request_seq": 1,
                 "status": const("ControlStatus", "OK"),
                 "message": "estop released",
+            },
+        ),
+        # An XBot as chassisd describes it: one range sensor, one wheel joint, one source.
+        "description-xbot": payload(
+            "RobotDescription",
+            {
+                "seq": 1,
+                "stamp_ns": STAMP,
+                "kind": const("RobotKind", "XBOT"),
+                "sensor_count": 1,
+                "joint_count": 1,
+                "source_count": 1,
+                "name": "xbot",
+                "kind_name": "xbot",
+                "geometry.wheel_radius_m": 0.0625,
+                "sensors.0.name": "ultrasonic_front_centre",
+                "sensors.0.kind": const("SensorKind", "ULTRASONIC"),
+                "sensors.0.max_range_m": 6.0,
+                "joints.0.name": "front_left_wheel_joint",
+                "joints.0.source": const("JointSource", "WHEEL"),
+                "sources.0.name": "safety",
+                "sources.0.priority": 255,
             },
         ),
         # A velocity request under a state's media type (bit 7: another type's).

@@ -1,8 +1,9 @@
 //! Any payload, under any media type, into the decoder chassis-zenoh applies to what another
 //! computer sends (`chassis_interfaces::payload`), for every type it carries: no panic; taken
 //! exactly when the media type names the type, the length is a whole number of values and no
-//! velocity request carries a NaN, an infinity or a negative envelope (judged here from the
-//! contract's layout, not from the decoder's own check); what is taken is the bytes that came,
+//! velocity request carries a NaN, an infinity or a negative envelope and no robot description
+//! counts more sensors, joints or sources than its lists hold (judged here from the contract's
+//! layout, not from the decoder's own check); what is taken is the bytes that came,
 //! and reads back (names, JSON, control requests as chassisd reads them) without a panic.
 #![no_main]
 
@@ -10,13 +11,13 @@ use chassis_interfaces::layout::{FieldType, Layout};
 use chassis_interfaces::payload::{Payload, PayloadError, PayloadType};
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, RequestFlags,
-    VelocityRequest,
+    RobotDescription, VelocityRequest,
 };
 use chassis_protocols::{ControlAction, command_to_request, request_to_action};
 use libfuzzer_sys::fuzz_target;
 use zerocopy::IntoBytes;
 
-const MEDIA_TYPES: usize = 6;
+const MEDIA_TYPES: usize = 7;
 
 fn media_type(index: usize) -> String {
     match index % MEDIA_TYPES {
@@ -25,8 +26,25 @@ fn media_type(index: usize) -> String {
         2 => PayloadType::<ChassisState>::new().media_type().to_string(),
         3 => PayloadType::<MuxStatus>::new().media_type().to_string(),
         4 => PayloadType::<BusFrame>::new().media_type().to_string(),
-        _ => PayloadType::<ControlResponse>::new().media_type().to_string(),
+        5 => PayloadType::<ControlResponse>::new().media_type().to_string(),
+        _ => PayloadType::<RobotDescription>::new().media_type().to_string(),
     }
+}
+
+/// A robot description the operator's computer must not take: a count (`sensor_count`, …)
+/// beyond the length of the list it counts (`sensors`, …), both read from the contract.
+fn must_refuse_description(chunk: &[u8]) -> bool {
+    let layout = RobotDescription::layout();
+    let field = |name: &str| layout.fields.iter().find(|f| f.name == name).expect("a field");
+    [("sensor_count", "sensors"), ("joint_count", "joints"), ("source_count", "sources")]
+        .iter()
+        .any(|(count, list)| {
+            let len = match &field(list).ty {
+                FieldType::Array { len, .. } => *len,
+                other => panic!("{list} is {other:?}, not a list"),
+            };
+            usize::from(chunk[field(count).offset]) > len
+        })
 }
 
 /// A velocity request the robot must not take: a non-finite `f32` anywhere (every `f32` field
@@ -137,9 +155,20 @@ fuzz_target!(|data: &[u8]| {
         4 => check::<BusFrame>(&media, bytes, |_| false, |f| {
             assert!(f.payload().len() <= BusFrame::DATA_LEN);
         }),
-        _ => check::<ControlResponse>(&media, bytes, |_| false, |r| {
+        5 => check::<ControlResponse>(&media, bytes, |_| false, |r| {
             let _ = r.message();
             let _ = r.is_ok();
+        }),
+        // The mirror republishes it to the operator's clients, which read its lists and names.
+        _ => check::<RobotDescription>(&media, bytes, must_refuse_description, |d| {
+            assert!(d.sensors().len() == usize::from(d.sensor_count));
+            assert!(d.joints().len() == usize::from(d.joint_count));
+            assert!(d.sources().len() == usize::from(d.source_count));
+            let _ = (d.name(), d.model(), d.kind_name(), d.display_name());
+            let names = d.sensors().iter().map(|s| s.name().len()).sum::<usize>()
+                + d.joints().iter().map(|j| j.name().len()).sum::<usize>()
+                + d.sources().iter().map(|s| s.name().len()).sum::<usize>();
+            assert!(names <= 32 * (d.sensors().len() + d.joints().len() + d.sources().len()));
         }),
     }
 });

@@ -16,8 +16,8 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::layout::Layout;
 use crate::{
-    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, SafetyStatus, SimRequest,
-    VelocityRequest,
+    BusFrame, ChassisState, ControlRequest, ControlResponse, MAX_JOINTS, MAX_SENSORS, MAX_SOURCES,
+    MuxStatus, RobotDescription, SafetyStatus, SimRequest, VelocityRequest,
 };
 
 /// The media type of every payload, before `;<type name>`.
@@ -64,6 +64,15 @@ impl Payload for ControlRequest {}
 impl Payload for ControlResponse {}
 impl Payload for SimRequest {}
 impl Payload for SafetyStatus {}
+
+impl Payload for RobotDescription {
+    fn refusal(&self) -> Option<&'static str> {
+        (usize::from(self.sensor_count) > MAX_SENSORS
+            || usize::from(self.joint_count) > MAX_JOINTS
+            || usize::from(self.source_count) > MAX_SOURCES)
+            .then_some("a count of sensors, joints or sources beyond its list")
+    }
+}
 
 impl Payload for VelocityRequest {
     fn refusal(&self) -> Option<&'static str> {
@@ -243,6 +252,19 @@ mod tests {
         assert!(matches!(
             requests.decode_all(media, PayloadType::encode(&batch)),
             Err(PayloadError::Refused { index: 1, .. })
+        ));
+        // A description counts no more entries than its lists hold; its unknowns are NaN.
+        let descriptions = PayloadType::<RobotDescription>::new();
+        let mut d = RobotDescription::default();
+        assert!(
+            descriptions
+                .decode(descriptions.media_type(), d.as_bytes())
+                .is_ok()
+        );
+        d.joint_count = crate::MAX_JOINTS as u8 + 1;
+        assert!(matches!(
+            descriptions.decode(descriptions.media_type(), d.as_bytes()),
+            Err(PayloadError::Refused { index: 0, .. })
         ));
         // Other types carry whatever they carry: a state with a NaN is a state.
         let mut state = ChassisState::default();

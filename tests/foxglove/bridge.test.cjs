@@ -204,7 +204,11 @@ test("chassis-foxglove serves the simulated robot to a Foxglove client", async (
     const twist = new Uint8Array(
       Buffer.from(JSON.stringify({ linear: { x: 0.5, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } })),
     );
-    const timer = setInterval(() => conn.client.sendMessage(channelId, twist), 50);
+    const zero = new Uint8Array(
+      Buffer.from(JSON.stringify({ linear: { x: 0, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } })),
+    );
+    let asking = twist;
+    const timer = setInterval(() => conn.client.sendMessage(channelId, asking), 50);
     t.after(() => clearInterval(timer));
     await until("the foxglove source to win the mux", () => mux.latest && mux.latest.active_name === "foxglove");
     await until("the robot to drive", () => state.latest.motion.linear_mps > 0.2);
@@ -225,39 +229,29 @@ test("chassis-foxglove serves the simulated robot to a Foxglove client", async (
     // The operator's e-stop takes the mux from it while it keeps publishing.
     chassis(["control", "--name", NAME, "estop"]);
     await until("the e-stop to take the mux", () => mux.latest.active_name !== "foxglove" && mux.latest.locks_held.includes("estop"));
-    await until("the robot to stop", () => Math.abs(state.latest.motion.linear_mps) < 0.05);
+    await until("the robot to stand", () => Math.abs(state.latest.motion.linear_mps) < 0.001);
     assert.ok(log.all.some((l) => /mux/.test(l.message)), JSON.stringify(log.all.map((l) => l.message)));
 
-    // Released through the service while the Teleop still asks for 0.5 m/s: the release never
-    // starts motion. The mux waits for a zero command from the foxglove source, and the robot
-    // stands however long the Teleop keeps asking.
+    // Released through the service while the Teleop still asks for 0.5 m/s: nothing moves, and
+    // the mux says it waits for the foxglove source's zero.
     const release = await call(conn, "/estop_release");
     assert.equal(release.ok, true, JSON.stringify(release));
-    assert.match(release.message, /nothing moves until foxglove asks for zero/, JSON.stringify(release));
-    await until("the mux to wait for a zero command", () =>
-      !mux.latest.locks_held.includes("estop") && mux.latest.zero_reason_name === "awaiting_zero",
-    );
-    const waiting = mux.latest.sources[mux.latest.awaiting_source];
-    assert.equal(waiting && waiting.name, "foxglove", JSON.stringify(mux.latest));
-    const xReleased = pose.latest.pose.position.x;
-    await sleep(1000);
+    let peak = 0;
+    const end = Date.now() + 1500;
+    while (Date.now() < end) {
+      peak = Math.max(peak, Math.abs(state.latest.motion.linear_mps));
+      await sleep(20);
+    }
+    assert.ok(peak < 0.01, `the release started motion: ${peak} m/s`);
+    assert.match(release.message, /until foxglove asks for zero/);
     assert.equal(mux.latest.zero_reason_name, "awaiting_zero", JSON.stringify(mux.latest));
-    assert.notEqual(mux.latest.active_name, "foxglove");
-    assert.ok(Math.abs(state.latest.motion.linear_mps) < 0.05, JSON.stringify(state.latest.motion));
-    assert.ok(Math.abs(pose.latest.pose.position.x - xReleased) < 0.02, "the robot stood after the release");
-
-    // A zero from the Teleop (a released stick) rearms it; asking again drives.
-    clearInterval(timer);
-    const zero = new Uint8Array(
-      Buffer.from(JSON.stringify({ linear: { x: 0, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } })),
-    );
-    conn.client.sendMessage(channelId, zero);
-    await until("the mux to stop waiting", () => mux.latest.zero_reason_name !== "awaiting_zero");
-    const again = setInterval(() => conn.client.sendMessage(channelId, twist), 50);
-    t.after(() => clearInterval(again));
+    // A zero from the Teleop, then it drives again.
+    asking = zero;
+    await until("the mux to take the zero", () => mux.latest.zero_reason_name !== "awaiting_zero");
+    asking = twist;
     await until("the foxglove source to win again", () => mux.latest.active_name === "foxglove");
     await until("the robot to drive again", () => state.latest.motion.linear_mps > 0.2);
-    clearInterval(again);
+    clearInterval(timer);
     conn.client.unadvertise(channelId);
     await until("the robot to stop after the Teleop", () => Math.abs(state.latest.motion.linear_mps) < 0.05);
   });

@@ -870,3 +870,131 @@ fn chassis_teleop_on_the_operators_computer_drives_the_robot() {
     );
     assert!(screen.contains("DRIVING"), "{screen}");
 }
+
+/// The fastest the robot's chassis reported over `duration` while `source` keeps asking for
+/// `linear` every 20 ms.
+fn peak_while_asking(
+    robot: &mut Robot,
+    source: &mut Source,
+    linear: f32,
+    duration: Duration,
+) -> f32 {
+    let end = Instant::now() + duration;
+    let mut peak = 0.0f32;
+    while Instant::now() < end {
+        source.send(VelocityRequest::twist(linear, 0.0)).unwrap();
+        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(20)) {
+            peak = peak.max(s.motion.linear_mps.abs());
+        }
+    }
+    peak
+}
+
+#[test]
+fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_starts_no_motion() {
+    let link = Link::new();
+    let mut env = Env::new("zenoh-release");
+    let n = name("zrl");
+    let mut robot = robot_side(&mut env, &link, &n);
+    let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
+
+    // What the robot is, read on the operator's computer as beside chassisd: the same bytes.
+    let here = robot.description(UP).unwrap();
+    let there = operator
+        .description(UP)
+        .unwrap_or_else(|e| panic!("no description through the mirror: {e}\n{}", env.logs()));
+    // (Debug text: its unknowns are NaN, which equals nothing.)
+    assert!(
+        format!("{there:?}") == format!("{here:?}"),
+        "the mirrored description differs: {there:?}"
+    );
+    assert_eq!((there.name(), there.kind_name()), (n.as_str(), "titan"));
+    // And by the Python client there, under the operator's prefix.
+    let script = format!(
+        "import json, chassis\n\
+         r = chassis.Robot.connect({n:?}, prefix={prefix:?})\n\
+         d = r.wait_description(10.0).summary()\n\
+         print(json.dumps({{'name': d['name'], 'kind': d['kind_name'], 'sources': [s['name'] for s in d['sources']]}}))\n",
+        prefix = operator_prefix(&env),
+    );
+    let out = Command::new(python())
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "the Python client read no description through the mirror: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.logs()
+    );
+    let py: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert_eq!(
+        (py["name"].as_str(), py["kind"].as_str()),
+        (Some(n.as_str()), Some("titan")),
+        "{py}"
+    );
+    assert!(
+        py["sources"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s == "remote"),
+        "{py}"
+    );
+
+    // The operator drives, then engages the e-stop through the mirror while still asking.
+    let mut remote = remote_source(&env, &mut operator);
+    drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("the robot never moved\n{}", env.logs()));
+    let estop = |kind| ControlRequest::new(kind).with_name("estop");
+    let engaged = operator
+        .control(estop(ControlKind::LOCK_ENGAGE), Duration::from_secs(5))
+        .unwrap();
+    assert_eq!(engaged.status, ControlStatus::OK, "{}", engaged.message());
+    // Standing still (a sample stamped after the e-stop reads no speed) before the release.
+    let halted = wait_for(Duration::from_secs(5), || {
+        remote.send(VelocityRequest::twist(0.4, 0.0)).unwrap();
+        state(&mut robot).motion.linear_mps.abs() < 0.001
+    });
+    assert!(
+        halted.is_some(),
+        "the e-stop did not halt the robot\n{}",
+        env.logs()
+    );
+
+    // Released through the mirror with the operator still asking for 0.4 m/s: nothing moves,
+    // and the robot's mux says it waits for the remote source's zero.
+    let released = operator
+        .control(estop(ControlKind::LOCK_RELEASE), Duration::from_secs(5))
+        .unwrap();
+    assert_eq!(released.status, ControlStatus::OK, "{}", released.message());
+    let peak = peak_while_asking(&mut robot, &mut remote, 0.4, Duration::from_millis(1500));
+    assert!(
+        peak < 0.01,
+        "the release through the mirror started motion: {peak} m/s"
+    );
+    assert!(
+        released.message().contains("until remote asks for zero"),
+        "{}",
+        released.message()
+    );
+    let m = mux(&mut robot);
+    assert_eq!(m.zero_reason, ZeroReason::AWAITING_ZERO, "{m:?}");
+    assert_eq!(m.awaiting().map(|s| s.name()), Some("remote"));
+
+    // A zero from the operator, then motion is obeyed again.
+    let zeroed = wait_for(Duration::from_secs(3), || {
+        remote.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
+        pause(Duration::from_millis(20));
+        mux(&mut robot).awaiting().is_none()
+    });
+    assert!(
+        zeroed.is_some(),
+        "the remote source's zero never reached the mux\n{}",
+        env.logs()
+    );
+    drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("no motion after the zero\n{}", env.logs()));
+    remote.stop().unwrap();
+}

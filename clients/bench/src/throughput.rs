@@ -11,7 +11,7 @@ use chassis_client::{Robot, Twist, now_ns};
 use chassis_protocols::driver::{Driver, DriverConfig};
 use chassis_protocols::pair::Pair;
 use chassis_protocols::profile::TitanProfile;
-use chassis_protocols::{CandumpLine, Direction, Timestamp, Transmit, titan};
+use chassis_protocols::{CandumpLine, Direction, Timestamp, WireItem, titan};
 
 use crate::paths::{cpu_seconds_of_thread, sibling};
 use crate::placement::{pause, unique};
@@ -37,7 +37,7 @@ pub fn record_titan(path: &Path, seconds: u64) -> anyhow::Result<u64> {
         });
         pair.run_for(Duration::from_secs(1));
         for record in pair.log() {
-            if let (Direction::FromChassis, Transmit::Can(frame)) = (record.direction, &record.item)
+            if let (Direction::FromChassis, WireItem::Can(frame)) = (record.direction, &record.item)
             {
                 let line = CandumpLine {
                     time_s: record.at.as_nanos() as f64 / 1e9,

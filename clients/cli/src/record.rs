@@ -76,7 +76,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::Group;
-use chassis_client::foxglove as view;
+use chassis_client::foxglove::{self as view, schema_of};
 use chassis_client::watch::{Severity, Watch};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, LinkFlags, MuxStatus, Robot, STATE_BUFFER,
@@ -259,29 +259,6 @@ fn frame_schema() -> Value {
             "data": {"type": "string", "description": "payload, hex"}
         }
     })
-}
-
-/// A JSON Schema describing `value`'s shape (the fixed-layout samples serialize every field, so
-/// a default sample shows them all).
-pub fn schema_of(value: &Value) -> Value {
-    match value {
-        Value::Null => json!({}),
-        Value::Bool(_) => json!({"type": "boolean"}),
-        Value::Number(n) if n.is_f64() => json!({"type": "number"}),
-        Value::Number(_) => json!({"type": "integer"}),
-        Value::String(_) => json!({"type": "string"}),
-        Value::Array(items) => json!({
-            "type": "array",
-            "items": items.first().map_or(json!({}), schema_of),
-            "minItems": items.len(),
-            "maxItems": items.len(),
-        }),
-        Value::Object(map) => {
-            let properties: serde_json::Map<String, Value> =
-                map.iter().map(|(k, v)| (k.clone(), schema_of(v))).collect();
-            json!({"type": "object", "properties": properties})
-        }
-    }
 }
 
 fn titled(mut schema: Value, title: &str, description: &str) -> Value {
@@ -617,15 +594,8 @@ pub fn candump_line(
     frame: &BusFrame,
     flag: Option<char>,
 ) -> Option<String> {
-    if frame.kind != FrameKind::CAN || frame.flags & BusFrame::REMOTE != 0 {
-        return None;
-    }
-    let can = if frame.flags & BusFrame::EXTENDED_ID != 0 {
-        CanFrame::new_extended(frame.can_id, frame.payload())
-    } else {
-        CanFrame::new(frame.can_id, frame.payload())
-    }
-    .ok()?;
+    // Serial and GPS chunks and remote frames have no candump line.
+    let can = CanFrame::try_from(frame).ok()?;
     let micros = wall_ns.max(0) / 1000;
     let mut line = format!(
         "({}.{:06}) {iface} {}",

@@ -126,6 +126,32 @@ pub fn body_of(kind: u8) -> Option<Body> {
     Some(Body::of(&description))
 }
 
+/// The JSON Schema (Foxglove's `jsonschema` encoding) of a JSON value's shape: every field
+/// with its type, arrays with their length. The fixed-layout samples serialize every field, so a
+/// default sample shows them all: `schema_of(&serde_json::to_value(ChassisState::default())?)`.
+/// The live view and `chassis record` describe their JSON channels with it.
+pub fn schema_of(value: &serde_json::Value) -> serde_json::Value {
+    use serde_json::{Value, json};
+    match value {
+        Value::Null => json!({}),
+        Value::Bool(_) => json!({"type": "boolean"}),
+        Value::Number(n) if n.is_f64() => json!({"type": "number"}),
+        Value::Number(_) => json!({"type": "integer"}),
+        Value::String(_) => json!({"type": "string"}),
+        Value::Array(items) => json!({
+            "type": "array",
+            "items": items.first().map_or(json!({}), schema_of),
+            "minItems": items.len(),
+            "maxItems": items.len(),
+        }),
+        Value::Object(map) => {
+            let properties: serde_json::Map<String, Value> =
+                map.iter().map(|(k, v)| (k.clone(), schema_of(v))).collect();
+            json!({"type": "object", "properties": properties})
+        }
+    }
+}
+
 /// `/tf`: odom → base_link from the odometry, base_link → imu, gps and each range sensor.
 pub fn transforms(state: &ChassisState, body: &Body, wall_ns: u64) -> FrameTransforms {
     let timestamp = Some(stamp(wall_ns));
@@ -272,6 +298,24 @@ mod tests {
             assert!(body_of(kind.id()).is_some(), "{kind}");
         }
         assert!(body_of(0).is_none());
+    }
+
+    #[test]
+    fn the_state_schema_names_every_field_with_its_type() {
+        let schema = schema_of(&serde_json::to_value(ChassisState::default()).unwrap());
+        assert_eq!(schema["type"], "object");
+        assert_eq!(
+            schema["properties"]["motion"]["properties"]["linear_mps"]["type"],
+            "number"
+        );
+        assert_eq!(schema["properties"]["seq"]["type"], "integer");
+        let wheels = &schema["properties"]["motion"]["properties"]["wheel_mps"];
+        assert_eq!(wheels["type"], "array");
+        assert_eq!(wheels["items"]["type"], "number");
+        assert_eq!(
+            (&wheels["minItems"], &wheels["maxItems"]),
+            (&4.into(), &4.into())
+        );
     }
 
     #[test]

@@ -49,9 +49,14 @@
 
 use std::time::Duration;
 
+mod clock;
 #[cfg(feature = "foxglove")]
 pub mod foxglove;
+mod rate;
 pub mod watch;
+
+pub use clock::WallClock;
+pub use rate::Decimator;
 
 pub use chassis_interfaces::*;
 use chassis_ipc::{
@@ -390,15 +395,18 @@ impl Robot {
     /// it to a new reader within one tick of its loop). Later calls return at once, with any
     /// newer description (the protocol once detection decides).
     pub fn description(&mut self, timeout: Duration) -> Result<RobotDescription, ClientError> {
-        self.drain_description()?;
+        let deadline =
+            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+        // A service that is starting (chassisd, or a mirror of another computer's robot) may
+        // not have created the description's service yet: it counts as no description yet.
+        let mut drained = self.drain_description();
         if let Some(description) = self.latest_description {
             return Ok(description);
         }
-        let deadline =
-            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
         loop {
             let left = deadline.saturating_sub(now_ns());
             if left == 0 {
+                drained?;
                 return Err(ClientError::NoDescription {
                     name: self.name.clone(),
                 });
@@ -407,7 +415,8 @@ impl Robot {
             self.state_events
                 .timed_wait(|_| {}, Duration::from_nanos(left).min(DESCRIPTION_POLL))
                 .map_err(ipc("waiting for the robot description"))?;
-            if self.drain_description()? {
+            drained = self.drain_description();
+            if matches!(drained, Ok(true)) {
                 return self.latest_description.ok_or(ClientError::NoDescription {
                     name: self.name.clone(),
                 });

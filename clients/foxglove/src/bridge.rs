@@ -1,8 +1,11 @@
 //! The robot loop: one thread owns the iceoryx2 ports (a `Robot`, its `foxglove` source and a
 //! frame tap), reads the server's [`Inbox`], and logs to the Foxglove channels.
 //!
-//! Every 10 ms it drains the inbox (velocities, service calls), the frame tap and the newest
-//! state and mux decision. It publishes
+//! It draws the robot chassisd describes on `chassis/<name>/robot` — the body's outline, its
+//! range sensors and the codec of its bus — and takes a newer description when one is published
+//! (protocol detection deciding, a restarted chassisd). Every 10 ms it drains the inbox
+//! (velocities, service calls), the frame tap and the newest state and mux decision. It
+//! publishes
 //!
 //! * `/state`, `/tf`, `/pose` for the newest state sample at most every [`Config::state_period`]
 //!   of the samples' own stamps (≤ 50 Hz: what a browser keeps up with), `/gps` with them when
@@ -12,29 +15,26 @@
 //!   [`MAX_FRAMES_PER_BATCH`]; the batch says how many it left out);
 //! * `/log`: faults appearing and clearing, link flags, mux changes, service calls.
 //!
-//! Decoding and encoding are skipped for a channel nobody subscribes to.
+//! Decoding and encoding are skipped for a channel nobody subscribes to. Service calls are
+//! answered with chassisd's response as it is (`{"ok", "status", "message"}`).
 
-use std::sync::Arc;
-use std::sync::mpsc::{Receiver, TryRecvError};
+use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::time::Duration;
 
 use anyhow::Context as _;
-use chassis_client::foxglove as fox;
+use chassis_client::foxglove::{self as fox, Body};
 use chassis_client::watch::{self, Severity, Watch};
 use chassis_client::{
-    BusFrame, ChassisState, ControlStatus, FrameDirection, FrameKind, MuxStatus, Robot, Source,
-    Ticker, termination_requested,
+    BusFrame, ChassisState, ControlStatus, Decimator, MuxStatus, Robot, RobotDescription, Source,
+    Ticker, WallClock, termination_requested,
 };
-use chassis_protocols::RobotKind;
-use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame, SceneUpdate};
-use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
-use serde_json::{Map, Value, json};
-
-use crate::server::Inbox;
-use crate::view::{self, Trail};
-use chassis_client::foxglove::Body;
 use chassis_foxglove_messages::{control_request, response_json};
 use chassis_protocols::describe::RobotCodec;
+use foxglove::PartialMetadata;
+use serde_json::{Value, json};
+
+use crate::convert::{self, Trail, frame_entries, mux_json};
+use crate::server::{self, Channels, Inbox};
 
 /// Frames a `/frames` batch carries at most.
 pub const MAX_FRAMES_PER_BATCH: usize = 1000;
@@ -47,174 +47,45 @@ const MUX_PERIOD_NS: u64 = 100_000_000;
 const FRAMES_PERIOD_NS: u64 = 100_000_000;
 /// How long a service call waits for chassisd's answer.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
+/// How long a new connection waits for the robot's description before drawing without it.
+const DESCRIPTION_WAIT: Duration = Duration::from_secs(2);
 
-/// What the loop needs to know.
+/// What the bridge is told.
 #[derive(Debug, Clone)]
 pub struct Config {
+    /// chassisd's robot name (`chassis/<name>/…`).
     pub name: String,
+    /// Address and TCP port of the WebSocket server (port 0: any free port).
+    pub bind: String,
+    pub port: u16,
     /// Shortest time between two published state samples.
     pub state_period: Duration,
-    /// Publish velocities from clients as the `foxglove` source.
+    /// Take client channels (the Teleop panel) as the `foxglove` source and offer every
+    /// service; off: only `/estop`.
     pub drive: bool,
 }
 
-/// The channels the bridge logs to.
-#[derive(Debug)]
-pub struct Channels {
-    pub tf: Channel<FrameTransforms>,
-    pub pose: Channel<PoseInFrame>,
-    pub scene: Channel<SceneUpdate>,
-    pub gps: Channel<LocationFix>,
-    pub log: Channel<Log>,
-    pub state: Arc<RawChannel>,
-    pub mux: Arc<RawChannel>,
-    pub frames: Arc<RawChannel>,
+/// Serves the robot on the WebSocket until SIGINT / SIGTERM.
+pub fn run(config: &Config) -> anyhow::Result<()> {
+    let (tx, rx) = mpsc::channel();
+    let ctx = foxglove::Context::new();
+    let channels = Channels::new(&ctx)?;
+    let handle = server::start(&ctx, config, &tx)?;
+    drop(tx);
+    eprintln!(
+        "chassis-foxglove: robot '{}' on ws://{}:{}{}",
+        config.name,
+        config.bind,
+        handle.port(),
+        if config.drive { "" } else { " (read-only)" }
+    );
+    let result = robot_loop(config, &channels, &rx);
+    handle.stop().wait_blocking();
+    result
 }
 
-/// A JSON Schema describing a JSON value's shape: every field with its type.
-pub fn schema_of(value: &Value) -> Value {
-    match value {
-        Value::Null => json!({}),
-        Value::Bool(_) => json!({"type": "boolean"}),
-        Value::Number(n) if n.is_f64() => json!({"type": "number"}),
-        Value::Number(_) => json!({"type": "integer"}),
-        Value::String(_) => json!({"type": "string"}),
-        Value::Array(items) => json!({
-            "type": "array",
-            "items": items.first().map_or(json!({}), schema_of),
-        }),
-        Value::Object(map) => {
-            let properties: Map<String, Value> =
-                map.iter().map(|(k, v)| (k.clone(), schema_of(v))).collect();
-            json!({"type": "object", "properties": properties})
-        }
-    }
-}
-
-fn frames_schema() -> Value {
-    json!({
-        "type": "object",
-        "title": "chassis.Frames",
-        "description": "Bus frames since the previous batch, each decoded as `chassis decode` prints it",
-        "properties": {
-            "count": {"type": "integer", "description": "frames in this batch"},
-            "left_out": {"type": "integer", "description": "frames seen but not carried (batch full)"},
-            "frames": {"type": "array", "items": {"type": "object", "properties": {
-                "stamp_ns": {"type": "integer"},
-                "seq": {"type": "integer"},
-                "direction": {"type": "string"},
-                "raw": {"type": "string"},
-                "decoded": {"type": "object"},
-                "error": {"type": "string"}
-            }}}
-        }
-    })
-}
-
-impl Channels {
-    /// Creates the channels in `ctx`.
-    pub fn new(ctx: &Arc<Context>) -> anyhow::Result<Self> {
-        let json_channel = |topic: &str, schema_name: &str, schema: Value| {
-            ctx.channel_builder(topic)
-                .message_encoding("json")
-                .schema(Schema::new(
-                    schema_name,
-                    "jsonschema",
-                    schema.to_string().into_bytes(),
-                ))
-                .build_raw()
-                .with_context(|| format!("creating {topic}"))
-        };
-        let state_value = serde_json::to_value(ChassisState::default())?;
-        let mux_value = mux_json(&MuxStatus::default())?;
-        Ok(Self {
-            tf: ctx.channel_builder("/tf").build(),
-            pose: ctx.channel_builder("/pose").build(),
-            scene: ctx.channel_builder("/scene").build(),
-            gps: ctx.channel_builder("/gps").build(),
-            log: ctx.channel_builder("/log").build(),
-            state: json_channel("/state", "chassis.ChassisState", schema_of(&state_value))?,
-            mux: json_channel("/mux", "chassis.MuxStatus", schema_of(&mux_value))?,
-            frames: json_channel("/frames", "chassis.Frames", frames_schema())?,
-        })
-    }
-}
-
-/// `/mux`: every field of the decision, with the names spelled out.
-pub fn mux_json(mux: &MuxStatus) -> serde_json::Result<Value> {
-    let mut value = serde_json::to_value(mux)?;
-    if let Some(obj) = value.as_object_mut() {
-        obj.insert(
-            "active_name".into(),
-            mux.active().map_or("", |s| s.name()).into(),
-        );
-        obj.insert(
-            "zero_reason_name".into(),
-            chassis_client::ZeroReason::name(mux.zero_reason).into(),
-        );
-        obj.insert("locks_held".into(), watch::held_locks(mux).into());
-    }
-    Ok(value)
-}
-
-/// Lets at most one sample per period through on average, judged on the samples' own stamps,
-/// with a quarter period of slack for the loop's jitter (a sample 19.5 ms after the last one
-/// of a 20 ms period passes; the next one is then due 40 ms after the first).
-#[derive(Debug, Clone, Copy)]
-pub struct Decimator {
-    period_ns: u64,
-    next_ns: Option<u64>,
-}
-
-impl Decimator {
-    pub fn new(period: Duration) -> Self {
-        Self {
-            period_ns: u64::try_from(period.as_nanos()).unwrap_or(u64::MAX),
-            next_ns: None,
-        }
-    }
-
-    /// True when the sample stamped `stamp_ns` is to be published.
-    pub fn pass(&mut self, stamp_ns: u64) -> bool {
-        let slack = self.period_ns / 4;
-        if let Some(next) = self.next_ns
-            && stamp_ns.saturating_add(slack) < next
-        {
-            return false;
-        }
-        let after_stamp = stamp_ns.saturating_add(self.period_ns - slack);
-        self.next_ns = Some(self.next_ns.map_or(after_stamp, |next| {
-            next.saturating_add(self.period_ns).max(after_stamp)
-        }));
-        true
-    }
-}
-
-/// `CLOCK_MONOTONIC` → Unix epoch, measured once.
-#[derive(Debug, Clone, Copy)]
-struct WallClock {
-    offset_ns: i128,
-}
-
-impl WallClock {
-    // The loop's one reading of the wall clock, at start, to stamp messages in Unix time.
-    #[allow(clippy::disallowed_methods)]
-    fn measure() -> Self {
-        let wall = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as i128);
-        Self {
-            offset_ns: wall - i128::from(chassis_client::now_ns()),
-        }
-    }
-
-    fn wall(self, monotonic_ns: u64) -> u64 {
-        u64::try_from(i128::from(monotonic_ns) + self.offset_ns).unwrap_or(0)
-    }
-}
-
-/// Runs until SIGINT / SIGTERM.
-pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> anyhow::Result<()> {
+/// The loop on the robot's side of the server, until SIGINT / SIGTERM.
+fn robot_loop(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> anyhow::Result<()> {
     let Some(mut robot) = connect(&config.name) else {
         return Ok(());
     };
@@ -224,13 +95,12 @@ pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> any
         source: None,
         warned: false,
     };
-    let clock = WallClock::measure();
     let mut lp = Loop {
         channels,
-        clock,
+        clock: WallClock::measure(),
+        described: None,
         body: None,
         codec: None,
-        wire_protocol: 0,
         trail: Trail::default(),
         watch: Watch::default(),
         last_seq: None,
@@ -248,6 +118,14 @@ pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> any
         format!("bridging robot '{}'", config.name),
         chassis_client::now_ns(),
     );
+    match robot.description(DESCRIPTION_WAIT) {
+        Ok(d) => lp.describe(&d),
+        Err(e) => tracing::warn!(
+            error = %e,
+            "no description of robot '{}' yet: no body, sensors or decoded frames until one comes",
+            config.name
+        ),
+    }
     let mut ticker = Ticker::new(TICK);
     while !termination_requested() {
         loop {
@@ -258,6 +136,9 @@ pub fn run(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> any
             }
         }
         let now = chassis_client::now_ns();
+        if let Some(d) = robot.latest_description()? {
+            lp.describe(&d);
+        }
         let want_frames = channels.frames.has_sinks();
         tap.drain(|frame| lp.frame(frame, want_frames))
             .context("reading the frame tap")?;
@@ -322,10 +203,11 @@ impl Teleop {
 struct Loop<'a> {
     channels: &'a Channels,
     clock: WallClock,
-    body: Option<(u8, Body)>,
-    /// The describer of `/frames`, for (robot kind, wire protocol) of the last state sample.
-    codec: Option<((u8, u8), RobotCodec)>,
-    wire_protocol: u8,
+    /// The description drawn (`seq`, `stamp_ns`: a restarted chassisd counts again).
+    described: Option<(u64, u64)>,
+    body: Option<Body>,
+    /// The describer of `/frames`, for the robot and protocol of the description.
+    codec: Option<RobotCodec>,
     trail: Trail,
     watch: Watch,
     last_seq: Option<u64>,
@@ -341,10 +223,36 @@ struct Loop<'a> {
 
 impl Loop<'_> {
     fn log(&self, level: Severity, message: String, monotonic_ns: u64) {
-        let wall = self.clock.wall(monotonic_ns);
+        let wall = self.clock.wall_ns(monotonic_ns);
         self.channels.log.log_with_time(
-            &fox::log_message(view::LOG_NAME, level, message, wall),
+            &fox::log_message(convert::LOG_NAME, level, message, wall),
             wall,
+        );
+    }
+
+    /// Takes the robot's body, sensors and codec from a description not drawn yet.
+    fn describe(&mut self, d: &RobotDescription) {
+        if self.described == Some((d.seq, d.stamp_ns)) {
+            return;
+        }
+        self.described = Some((d.seq, d.stamp_ns));
+        self.body = Some(Body::of(d));
+        self.codec = RobotCodec::for_description(d);
+        if self.codec.is_none() {
+            tracing::warn!(
+                kind = d.kind,
+                "a robot kind this view does not know: frames not decoded"
+            );
+        }
+        self.log(
+            Severity::Info,
+            format!(
+                "robot: {} ({}), {} range sensors",
+                d.display_name(),
+                d.model(),
+                self.body.as_ref().map_or(0, |b| b.sensors.len())
+            ),
+            d.stamp_ns,
         );
     }
 
@@ -411,7 +319,6 @@ impl Loop<'_> {
             return;
         }
         self.last_seq = Some(state.seq);
-        self.wire_protocol = state.system.wire_protocol;
         for (level, text) in self.watch.state(state) {
             self.log(level, text, state.stamp_ns);
         }
@@ -419,15 +326,7 @@ impl Loop<'_> {
         if !self.decimator.pass(state.stamp_ns) {
             return;
         }
-        let wall = self.clock.wall(state.stamp_ns);
-        if self
-            .body
-            .as_ref()
-            .is_none_or(|(kind, _)| *kind != state.robot)
-            && let Some(body) = fox::body_of(state.robot)
-        {
-            self.body = Some((state.robot, body));
-        }
+        let wall = self.clock.wall_ns(state.stamp_ns);
         let c = self.channels;
         if c.state.has_sinks() {
             match serde_json::to_vec(state) {
@@ -438,13 +337,13 @@ impl Loop<'_> {
             }
         }
         c.pose.log_with_time(&fox::pose_in_frame(state, wall), wall);
-        if let Some((_, body)) = &self.body {
+        if let Some(body) = &self.body {
             c.tf.log_with_time(&fox::transforms(state, body, wall), wall);
             if state.stamp_ns.saturating_sub(self.last_scene_ns) >= SCENE_PERIOD_NS {
                 self.last_scene_ns = state.stamp_ns;
                 if c.scene.has_sinks() {
                     c.scene
-                        .log_with_time(&view::scene(state, body, &self.trail, wall), wall);
+                        .log_with_time(&convert::scene(state, body, &self.trail, wall), wall);
                 }
             }
         }
@@ -478,7 +377,7 @@ impl Loop<'_> {
             match mux_json(mux).and_then(|v| serde_json::to_vec(&v)) {
                 Ok(bytes) => self.channels.mux.log_with_meta(
                     &bytes,
-                    PartialMetadata::with_log_time(self.clock.wall(mux.stamp_ns)),
+                    PartialMetadata::with_log_time(self.clock.wall_ns(mux.stamp_ns)),
                 ),
                 Err(e) => tracing::debug!(error = %e, "encoding a mux decision"),
             }
@@ -493,83 +392,7 @@ impl Loop<'_> {
             self.left_out += 1;
             return;
         }
-        let kind = self.last_state_robot();
-        let key = (kind, self.wire_protocol);
-        if self.codec.as_ref().is_none_or(|(k, _)| *k != key)
-            && let Some(robot) = RobotKind::from_id(kind)
-        {
-            // A robot with two protocols (SCOUT MINI, SCOUT 2.0, BUNKER) in the one it speaks.
-            self.codec = Some((key, robot.entry().codec_for_wire(self.wire_protocol)));
-        }
-        let mut entry = Map::new();
-        entry.insert("stamp_ns".into(), frame.stamp_ns.into());
-        entry.insert("seq".into(), frame.seq.into());
-        let direction = if frame.direction == FrameDirection::TX {
-            "tx"
-        } else {
-            "rx"
-        };
-        entry.insert("direction".into(), direction.into());
-        let hex: String = frame.payload().iter().map(|b| format!("{b:02X}")).collect();
-        match frame.kind {
-            FrameKind::CAN => {
-                entry.insert("raw".into(), format!("{:03X}#{hex}", frame.can_id).into());
-                let can = if frame.flags & BusFrame::EXTENDED_ID != 0 {
-                    chassis_protocols::CanFrame::new_extended(frame.can_id, frame.payload())
-                } else {
-                    chassis_protocols::CanFrame::new(frame.can_id, frame.payload())
-                };
-                match (&self.codec, can) {
-                    (Some((_, codec)), Ok(can)) => match codec.decode_can(&can) {
-                        Ok(decoded) => {
-                            entry.insert("decoded".into(), Value::Object(decoded));
-                        }
-                        Err(e) => {
-                            entry.insert("error".into(), e.to_string().into());
-                        }
-                    },
-                    (_, Err(e)) => {
-                        entry.insert("error".into(), e.to_string().into());
-                    }
-                    (None, Ok(_)) => {
-                        entry.insert("error".into(), "robot not known yet".into());
-                    }
-                }
-                self.batch.push(Value::Object(entry));
-            }
-            FrameKind::GPS => {
-                entry.insert(
-                    "raw".into(),
-                    String::from_utf8_lossy(frame.payload()).trim_end().into(),
-                );
-                self.batch.push(Value::Object(entry));
-            }
-            _ => {
-                entry.insert("raw".into(), hex.into());
-                let decoded = self
-                    .codec
-                    .as_mut()
-                    .map(|(_, codec)| codec.push_serial(frame.payload()))
-                    .unwrap_or_default();
-                // A serial read may complete several frames, or none: one entry per frame.
-                if decoded.is_empty() {
-                    self.batch.push(Value::Object(entry));
-                    return;
-                }
-                for item in decoded {
-                    let mut e = entry.clone();
-                    match item {
-                        Ok(fields) => e.insert("decoded".into(), Value::Object(fields)),
-                        Err(err) => e.insert("error".into(), err.to_string().into()),
-                    };
-                    self.batch.push(Value::Object(e));
-                }
-            }
-        }
-    }
-
-    fn last_state_robot(&self) -> u8 {
-        self.body.as_ref().map_or(0, |(kind, _)| *kind)
+        self.batch.extend(frame_entries(frame, self.codec.as_mut()));
     }
 
     fn flush_frames(&mut self, now: u64) {
@@ -587,51 +410,11 @@ impl Loop<'_> {
         });
         self.left_out = 0;
         match serde_json::to_vec(&batch) {
-            Ok(bytes) => self
-                .channels
-                .frames
-                .log_with_meta(&bytes, PartialMetadata::with_log_time(self.clock.wall(now))),
+            Ok(bytes) => self.channels.frames.log_with_meta(
+                &bytes,
+                PartialMetadata::with_log_time(self.clock.wall_ns(now)),
+            ),
             Err(e) => tracing::debug!(error = %e, "encoding a frame batch"),
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn passed(period_ms: u64, samples: impl Iterator<Item = u64>) -> usize {
-        let mut d = Decimator::new(Duration::from_millis(period_ms));
-        samples.filter(|&t| d.pass(t)).count()
-    }
-
-    #[test]
-    fn the_state_is_decimated_to_the_period_on_average() {
-        // A sample every 4 ms for 10 s: 50 Hz out.
-        let n = passed(20, (0..2500).map(|i| i * 4_000_000));
-        assert!((499..=501).contains(&n), "{n}");
-        // Samples every 10 ms, read with ±1 ms of jitter: still every other one.
-        let jitter = |i: u64| if i.is_multiple_of(2) { 0 } else { 1_000_000 };
-        let n = passed(20, (0..1000).map(|i| i * 10_000_000 + jitter(i)));
-        assert!((499..=501).contains(&n), "{n}");
-        // A 20 ms source a little early now and then loses nothing.
-        let n = passed(
-            20,
-            (0..500u64).map(|i| i * 20_000_000 - if i.is_multiple_of(3) { 0 } else { 400_000 }),
-        );
-        assert_eq!(n, 500);
-        // Slower samples all pass.
-        assert_eq!(passed(20, (0..100).map(|i| i * 50_000_000)), 100);
-    }
-
-    #[test]
-    fn the_state_schema_names_the_plotted_speed() {
-        let schema = schema_of(&serde_json::to_value(ChassisState::default()).unwrap());
-        assert_eq!(
-            schema["properties"]["motion"]["properties"]["linear_mps"]["type"],
-            "number"
-        );
-        let mux = schema_of(&mux_json(&MuxStatus::default()).unwrap());
-        assert_eq!(mux["properties"]["active_name"]["type"], "string");
     }
 }

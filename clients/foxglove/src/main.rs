@@ -5,14 +5,14 @@
 //!
 //! | topic | schema | what |
 //! | --- | --- | --- |
-//! | `/tf` | `foxglove.FrameTransforms` | odom → base_link from the odometry, base_link → imu, gps and the XBot's range sensors |
+//! | `/tf` | `foxglove.FrameTransforms` | odom → base_link from the odometry, base_link → imu, gps and the range sensors of the robot's description |
 //! | `/pose` | `foxglove.PoseInFrame` | the robot in odom |
-//! | `/scene` | `foxglove.SceneUpdate` | the body, the XBot's range cones with their readings, the path just driven |
+//! | `/scene` | `foxglove.SceneUpdate` | the body's outline and range cones from the robot's description, the cones sized by their readings, the path just driven |
 //! | `/gps` | `foxglove.LocationFix` | the GPS fix, when there is one |
 //! | `/log` | `foxglove.Log` | faults appearing and clearing, link flags, mux changes, service calls |
 //! | `/state` | `chassis.ChassisState` (JSON) | every field of the state, ≤ 50 Hz |
 //! | `/mux` | `chassis.MuxStatus` (JSON) | every field of the mux decision, names spelled out |
-//! | `/frames` | `chassis.Frames` (JSON) | the bus frames, decoded, in batches every 100 ms |
+//! | `/frames` | `chassis.Frames` (JSON) | the bus frames, decoded in the described robot's protocol, in batches every 100 ms |
 //!
 //! A client channel of `geometry_msgs/Twist` in JSON (Foxglove's Teleop panel) drives the robot
 //! as the mux source `foxglove` (teleop's priority, 300 ms timeout; below the safety monitor and
@@ -27,21 +27,13 @@
 //! serves other hosts, with a warning.
 
 mod bridge;
+mod convert;
 mod server;
-mod view;
 
 use std::process::ExitCode;
-use std::sync::mpsc;
 use std::time::Duration;
 
-use anyhow::Context as _;
 use clap::Parser;
-use foxglove::websocket::Capability;
-use foxglove::{Context, WebSocketServer};
-
-use chassis_foxglove_messages::ServiceAction;
-
-use crate::server::Listener;
 
 /// The fastest state rate a browser keeps up with, Hz.
 const MAX_STATE_HZ: f64 = 50.0;
@@ -74,63 +66,34 @@ fn is_loopback(bind: &str) -> bool {
             .is_ok_and(|ip| ip.is_loopback())
 }
 
-fn run(cli: &Cli) -> anyhow::Result<()> {
-    if !(cli.state_hz > 0.0 && cli.state_hz <= MAX_STATE_HZ) {
-        anyhow::bail!("--state-hz must be in (0, {MAX_STATE_HZ}]");
+impl Cli {
+    /// The bridge's configuration, checked; warns when the server reaches beyond this machine.
+    fn config(self) -> anyhow::Result<bridge::Config> {
+        if !(self.state_hz > 0.0 && self.state_hz <= MAX_STATE_HZ) {
+            anyhow::bail!("--state-hz must be in (0, {MAX_STATE_HZ}]");
+        }
+        if !is_loopback(&self.bind) {
+            tracing::warn!(bind = self.bind, "serving beyond this machine");
+            eprintln!(
+                "chassis-foxglove: WARNING: listening on {}: anyone who reaches port {} can {} robot '{}'",
+                self.bind,
+                self.port,
+                if self.read_only {
+                    "watch and e-stop"
+                } else {
+                    "DRIVE"
+                },
+                self.name
+            );
+        }
+        Ok(bridge::Config {
+            name: self.name,
+            bind: self.bind,
+            port: self.port,
+            state_period: Duration::from_secs_f64(1.0 / self.state_hz),
+            drive: !self.read_only,
+        })
     }
-    if !is_loopback(&cli.bind) {
-        tracing::warn!(bind = cli.bind, "serving beyond this machine");
-        eprintln!(
-            "chassis-foxglove: WARNING: listening on {}: anyone who reaches port {} can {} robot '{}'",
-            cli.bind,
-            cli.port,
-            if cli.read_only {
-                "watch and e-stop"
-            } else {
-                "DRIVE"
-            },
-            cli.name
-        );
-    }
-    chassis_client::install_signal_handlers();
-    let (tx, rx) = mpsc::channel();
-    let ctx = Context::new();
-    let channels = bridge::Channels::new(&ctx)?;
-    let actions: Vec<ServiceAction> = if cli.read_only {
-        vec![ServiceAction::Estop]
-    } else {
-        ServiceAction::ALL.to_vec()
-    };
-    let mut capabilities = vec![Capability::Services];
-    if !cli.read_only {
-        capabilities.push(Capability::ClientPublish);
-    }
-    let handle = WebSocketServer::new()
-        .context(&ctx)
-        .name(format!("chassis-foxglove {}", cli.name))
-        .bind(cli.bind.clone(), cli.port)
-        .capabilities(capabilities)
-        .supported_encodings(["json"])
-        .listener(std::sync::Arc::new(Listener { inbox: tx.clone() }))
-        .services(actions.into_iter().map(|a| server::service(a, tx.clone())))
-        .start_blocking()
-        .with_context(|| format!("serving on {}:{}", cli.bind, cli.port))?;
-    drop(tx);
-    eprintln!(
-        "chassis-foxglove: robot '{}' on ws://{}:{}{}",
-        cli.name,
-        cli.bind,
-        handle.port(),
-        if cli.read_only { " (read-only)" } else { "" }
-    );
-    let config = bridge::Config {
-        name: cli.name.clone(),
-        state_period: Duration::from_secs_f64(1.0 / cli.state_hz),
-        drive: !cli.read_only,
-    };
-    let result = bridge::run(&config, &channels, &rx);
-    handle.stop().wait_blocking();
-    result
 }
 
 fn main() -> ExitCode {
@@ -141,8 +104,11 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .init();
-    let cli = Cli::parse();
-    match run(&cli) {
+    chassis_client::install_signal_handlers();
+    match Cli::parse()
+        .config()
+        .and_then(|config| bridge::run(&config))
+    {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("chassis-foxglove: {err:#}");

@@ -1,15 +1,96 @@
-//! The Foxglove side: the WebSocket server's callbacks, which run on its own threads, turn
-//! into [`Inbox`] messages for the robot loop (iceoryx2 ports are not `Send`: only that loop
-//! touches them). Nothing here talks to the robot.
+//! The Foxglove side: the WebSocket server, its channels, and its callbacks, which run on the
+//! server's own threads and turn into [`Inbox`] messages for the robot loop (iceoryx2 ports are
+//! not `Send`: only that loop touches them). Nothing here talks to the robot.
 
+use std::sync::Arc;
 use std::sync::mpsc::Sender;
 
-use chassis_client::VelocityRequest;
+use anyhow::Context as _;
+use chassis_client::foxglove::schema_of;
+use chassis_client::{ChassisState, MuxStatus, VelocityRequest};
 use chassis_foxglove_messages::{self as messages, ServiceAction, TwistError, response_schema};
-use foxglove::Schema;
+use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame, SceneUpdate};
 use foxglove::websocket::service::{Handler, Request, Responder, Service, ServiceSchema};
-use foxglove::websocket::{Client, ClientChannel, ServerListener, Status};
+use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener, Status};
+use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServer, WebSocketServerHandle};
 use serde_json::Value;
+
+use crate::bridge::Config;
+use crate::convert::{frames_schema, mux_json};
+
+/// The channels the bridge logs to.
+#[derive(Debug)]
+pub struct Channels {
+    pub tf: Channel<FrameTransforms>,
+    pub pose: Channel<PoseInFrame>,
+    pub scene: Channel<SceneUpdate>,
+    pub gps: Channel<LocationFix>,
+    pub log: Channel<Log>,
+    pub state: Arc<RawChannel>,
+    pub mux: Arc<RawChannel>,
+    pub frames: Arc<RawChannel>,
+}
+
+impl Channels {
+    /// Creates the channels in `ctx`: Foxglove's well-known messages, and JSON channels whose
+    /// schemas name every field of the IPC types.
+    pub fn new(ctx: &Arc<Context>) -> anyhow::Result<Self> {
+        let json_channel = |topic: &str, schema_name: &str, schema: Value| {
+            ctx.channel_builder(topic)
+                .message_encoding("json")
+                .schema(Schema::new(
+                    schema_name,
+                    "jsonschema",
+                    schema.to_string().into_bytes(),
+                ))
+                .build_raw()
+                .with_context(|| format!("creating {topic}"))
+        };
+        let state_value = serde_json::to_value(ChassisState::default())?;
+        let mux_value = mux_json(&MuxStatus::default())?;
+        Ok(Self {
+            tf: ctx.channel_builder("/tf").build(),
+            pose: ctx.channel_builder("/pose").build(),
+            scene: ctx.channel_builder("/scene").build(),
+            gps: ctx.channel_builder("/gps").build(),
+            log: ctx.channel_builder("/log").build(),
+            state: json_channel("/state", "chassis.ChassisState", schema_of(&state_value))?,
+            mux: json_channel("/mux", "chassis.MuxStatus", schema_of(&mux_value))?,
+            frames: json_channel("/frames", "chassis.Frames", frames_schema())?,
+        })
+    }
+}
+
+/// Starts the WebSocket server of `ctx` on `config.bind:config.port`: services and client
+/// publishing (the Teleop panel) unless `config.drive` is off, when only `/estop` is offered.
+/// Client messages and service calls go to `inbox`.
+pub fn start(
+    ctx: &Arc<Context>,
+    config: &Config,
+    inbox: &Sender<Inbox>,
+) -> anyhow::Result<WebSocketServerHandle> {
+    let actions: Vec<ServiceAction> = if config.drive {
+        ServiceAction::ALL.to_vec()
+    } else {
+        vec![ServiceAction::Estop]
+    };
+    let mut capabilities = vec![Capability::Services];
+    if config.drive {
+        capabilities.push(Capability::ClientPublish);
+    }
+    WebSocketServer::new()
+        .context(ctx)
+        .name(format!("chassis-foxglove {}", config.name))
+        .bind(config.bind.clone(), config.port)
+        .capabilities(capabilities)
+        .supported_encodings(["json"])
+        .listener(Arc::new(Listener {
+            inbox: inbox.clone(),
+        }))
+        .services(actions.into_iter().map(|a| service(a, inbox.clone())))
+        .start_blocking()
+        .with_context(|| format!("serving on {}:{}", config.bind, config.port))
+}
 
 /// What the server's callbacks ask of the robot loop.
 #[derive(Debug)]

@@ -10,6 +10,12 @@
 //!   follow the sample when the robot reports them; `diagnostics` goes out every second and on
 //!   every change of a level or message.
 //!
+//! What the robot is comes from the description chassisd publishes (`chassis/<name>/robot`,
+//! read once before the node is created, [`describe`]): a `range/<name>` topic per range sensor
+//! it lists, the joints it lists in `joint_states`, the wheel geometry of the wheel joints and
+//! the variances of `odom`. A newer description (protocol detection deciding) updates the
+//! joints and variances; its range sensors are the node's topics, fixed at start.
+//!
 //! iceoryx2 ports stay on the thread that opened them (each loop has its own [`Robot`]); the DDS
 //! entities are created once and moved into the loop that uses them.
 
@@ -18,7 +24,7 @@ use std::time::Duration;
 use anyhow::Context as _;
 use chassis_client::{
     ChassisState, ClientError, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    FaultClear, MuxStatus, Robot, Source, VelocityRequest, termination_requested,
+    FaultClear, MuxStatus, Robot, RobotDescription, Source, VelocityRequest, termination_requested,
 };
 use mio::{Events, Interest, Poll, Token};
 use ros2_client::{
@@ -28,7 +34,7 @@ use ros2_client::{
     service::RmwRequestId,
 };
 
-use crate::convert::{self, Frames, RosClock, WheelGeometry, XBOT_RANGES};
+use crate::convert::{self, Frames, RangeSensor, RosClock};
 use crate::msg::{
     BatteryState, Bool, DiagnosticArray, Imu, JointState, NavSatFix, Odometry, Range, TfMessage,
     TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed, trigger_type,
@@ -132,7 +138,8 @@ pub struct Outputs {
     joint_states: Publisher<JointState>,
     battery: Publisher<BatteryState>,
     imu: Publisher<Imu>,
-    ranges: Vec<Publisher<Range>>,
+    /// One per range sensor of the description.
+    ranges: Vec<(RangeSensor, Publisher<Range>)>,
     fix: Publisher<NavSatFix>,
     diagnostics: Publisher<DiagnosticArray>,
 }
@@ -158,8 +165,9 @@ fn topic_name(namespace: &str, path: &str) -> anyhow::Result<Name> {
 }
 
 impl Entities {
-    /// Joins DDS domain `options.domain_id` and creates the node, its topics and services.
-    pub fn create(options: &Options) -> anyhow::Result<Self> {
+    /// Joins DDS domain `options.domain_id` and creates the node, its topics and services, a
+    /// `range/<name>` topic for each range sensor `description` lists.
+    pub fn create(options: &Options, description: &RobotDescription) -> anyhow::Result<Self> {
         let context = Context::with_options(ContextOptions::new().domain_id(options.domain_id))
             .context("joining the DDS domain")?;
         let node_name = NodeName::new(&options.namespace, NODE_NAME)
@@ -192,14 +200,15 @@ impl Entities {
         let imu_topic = topic("imu/data", Imu::type_name(), &sensor_qos())?;
         let fix_topic = topic("fix", NavSatFix::type_name(), &sensor_qos())?;
         let diag_topic = topic("diagnostics", DiagnosticArray::type_name(), &reliable_qos())?;
-        let range_topics = XBOT_RANGES
-            .iter()
+        let range_topics = convert::range_sensors(description)
+            .into_iter()
             .map(|s| {
-                topic(
+                let t = topic(
                     &format!("range/{}", s.name),
                     Range::type_name(),
                     &sensor_qos(),
-                )
+                )?;
+                Ok((s, t))
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
 
@@ -238,8 +247,8 @@ impl Entities {
             battery: node.create_publisher(&battery_topic, None)?,
             imu: node.create_publisher(&imu_topic, None)?,
             ranges: range_topics
-                .iter()
-                .map(|t| node.create_publisher(t, None))
+                .into_iter()
+                .map(|(s, t)| node.create_publisher(&t, None).map(|p| (s, p)))
                 .collect::<Result<Vec<_>, _>>()?,
             fix: node.create_publisher(&fix_topic, None)?,
             diagnostics: node.create_publisher(&diag_topic, Some(reliable_writer_qos()))?,
@@ -262,6 +271,34 @@ pub fn connect(name: &str) -> Option<Robot> {
             tracing::debug!(error = %e, "connecting");
         }
     })
+}
+
+/// Connects to chassisd and reads the robot's description, waiting for both (the bridge may
+/// start first). `None` when the process is asked to stop while waiting.
+pub fn describe(name: &str) -> Option<(Robot, RobotDescription)> {
+    let mut robot = connect(name)?;
+    let mut warned = false;
+    while !termination_requested() {
+        match robot.description(Duration::from_secs(1)) {
+            Ok(d) => {
+                tracing::info!(
+                    robot = name,
+                    model = d.model(),
+                    sensors = d.sensors().len(),
+                    joints = d.joints().len(),
+                    "{}",
+                    d.display_name()
+                );
+                return Some((robot, d));
+            }
+            Err(e) if !warned => {
+                warned = true;
+                tracing::warn!(error = %e, "waiting for the description of robot '{name}'");
+            }
+            Err(e) => tracing::debug!(error = %e, "no description yet"),
+        }
+    }
+    None
 }
 
 /// Counts of what the commands loop refused, logged as they happen.
@@ -483,10 +520,7 @@ struct StateLoop<'a> {
     out: &'a Outputs,
     clock: RosClock,
     frames: Frames,
-    /// The robot description's wheel geometry (`None`: no description yet, or one without it).
-    wheels: Option<WheelGeometry>,
-    /// `seq` of the description `wheels` comes from.
-    description_seq: Option<u64>,
+    description: RobotDescription,
     latest: Option<ChassisState>,
     mux: Option<MuxStatus>,
     last_diagnostics: Option<(u64, Vec<(u8, String)>)>,
@@ -514,7 +548,7 @@ impl StateLoop<'_> {
     /// joints with their angles and speeds, each sensor with its own reading.
     fn on_state(&mut self, s: &ChassisState) {
         use chassis_client::Group;
-        let (clock, frames, out) = (self.clock, &self.frames, self.out);
+        let (clock, frames, out, d) = (self.clock, &self.frames, self.out, &self.description);
         let latest = self.latest;
         let fresh = |group: Group| {
             latest
@@ -522,13 +556,14 @@ impl StateLoop<'_> {
         };
         let f = &mut self.failures;
         if fresh(Group::Pose) || fresh(Group::Motion) {
-            Self::publish(f, "odom", &out.odom, convert::odometry(s, clock, frames));
+            let odom = convert::odometry(s, &d.odometry_variance, clock, frames);
+            Self::publish(f, "odom", &out.odom, odom);
             if let Some(tf) = &out.tf {
                 Self::publish(f, "tf", tf, convert::transform(s, clock, frames));
             }
         }
         if (fresh(Group::Steering) || fresh(Group::WheelSpeed))
-            && let Some(j) = convert::joint_states(s, clock, self.wheels)
+            && let Some(j) = convert::joint_states(s, d, clock)
         {
             Self::publish(f, "joint_states", &out.joint_states, j);
         }
@@ -543,8 +578,8 @@ impl StateLoop<'_> {
             Self::publish(f, "imu/data", &out.imu, i);
         }
         if fresh(Group::Ranges) {
-            for (sensor, p) in XBOT_RANGES.iter().zip(&out.ranges) {
-                if let Some(r) = convert::range(s, *sensor, clock, frames) {
+            for (sensor, p) in &out.ranges {
+                if let Some(r) = convert::range(s, sensor, clock, frames) {
                     Self::publish(f, "range", p, r);
                 }
             }
@@ -555,6 +590,21 @@ impl StateLoop<'_> {
             Self::publish(f, "fix", &out.fix, fix);
         }
         self.latest = Some(*s);
+    }
+
+    /// Takes a newer description: its joints, wheel geometry and variances.
+    fn describe(&mut self, d: RobotDescription) {
+        if (d.seq, d.stamp_ns) == (self.description.seq, self.description.stamp_ns) {
+            return;
+        }
+        let ranges = |d: &RobotDescription| convert::range_sensors(d);
+        if ranges(&d) != ranges(&self.description) {
+            tracing::warn!(
+                "the robot's range sensors changed: range topics stay those of the start (restart chassis-ros2)"
+            );
+        }
+        tracing::info!(model = d.model(), seq = d.seq, "a newer robot description");
+        self.description = d;
     }
 
     fn diagnostics(&mut self, now_ns: u64) {
@@ -576,23 +626,20 @@ impl StateLoop<'_> {
     }
 }
 
-/// The state loop: runs until SIGINT / SIGTERM.
+/// The state loop, on `robot` as [`describe`] connected it: runs until SIGINT / SIGTERM.
 pub fn state_loop(
     name: &str,
+    (mut robot, description): (Robot, RobotDescription),
     frames: Frames,
     clock: RosClock,
     out: &Outputs,
 ) -> anyhow::Result<()> {
-    let Some(mut robot) = connect(name) else {
-        return Ok(());
-    };
     let mut lp = StateLoop {
         name,
         out,
         clock,
         frames,
-        wheels: None,
-        description_seq: None,
+        description,
         latest: None,
         mux: None,
         last_diagnostics: None,
@@ -608,21 +655,17 @@ pub fn state_loop(
             }
             return Err(e).context("reading state");
         }
-        // The description before the samples: a newer one (the protocol detection decided)
-        // brings the wheel geometry the joints are reported with.
-        if let Some(d) = robot
-            .latest_description()
-            .context("reading the robot description")?
-            && lp.description_seq != Some(d.seq)
-        {
-            lp.description_seq = Some(d.seq);
-            lp.wheels = convert::wheel_geometry(&d);
-        }
         for s in &samples {
             lp.on_state(s);
         }
         if let Some(m) = robot.latest_mux().context("reading the mux decision")? {
             lp.mux = Some(m);
+        }
+        if let Some(d) = robot
+            .latest_description()
+            .context("reading the robot description")?
+        {
+            lp.describe(d);
         }
         lp.diagnostics(chassis_client::now_ns());
     }

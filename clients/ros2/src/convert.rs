@@ -1,24 +1,26 @@
-//! `ChassisState` and `MuxStatus` → ROS 2 messages, as pure functions.
+//! `ChassisState` and `MuxStatus` → ROS 2 messages, as pure functions. What the robot is —
+//! its range sensors and their limits, its joints, its wheel geometry, the variances odometry
+//! states — comes from the description chassisd publishes (`RobotDescription`), never from a
+//! table of robots here.
 //!
 //! Frames follow REP-103 and REP-105: `base_link` is x forward, y left, z up; `odom` is the frame
 //! the robot started in. Stamps: every state sample carries `CLOCK_MONOTONIC` nanoseconds
-//! (`stamp_ns`, the receive time of the frame that produced it). The bridge measures the offset
-//! between the system clock and `CLOCK_MONOTONIC` once at start ([`RosClock::measure`]) and adds
-//! it to every stamp, so messages carry ROS time (Unix time) and keep the monotonic clock's
-//! spacing; a later step of the system clock (NTP) does not move them until the bridge restarts.
+//! (`stamp_ns`, the receive time of the frame that produced it). [`RosClock`] is the client
+//! library's [`WallClock`] (the offset between the system clock and `CLOCK_MONOTONIC`, measured
+//! once at start): messages carry ROS time (Unix time) and keep the monotonic clock's spacing; a
+//! later step of the system clock (NTP) does not move them until the bridge restarts.
 
 use chassis_client::{
-    ChassisState, ClampFlags, FaultFlags, Group, LinkFlags, MuxStatus, RobotDescription,
-    WireProtocol, ZeroReason,
+    ChassisState, ClampFlags, FaultFlags, Group, JointSource, LinkFlags, MuxStatus,
+    OdometryVariance, RobotDescription, SensorKind, WallClock, WireProtocol, ZeroReason,
 };
-
-use chassis_protocols::RobotKind;
 
 use crate::msg::{
     BatteryState, DiagnosticArray, DiagnosticStatus, Header, Imu, JointState, KeyValue, NavSatFix,
     NavSatStatus, Odometry, Point, Pose, PoseWithCovariance, Quaternion, Range, TfMessage, Time,
     Transform, TransformStamped, Twist, TwistWithCovariance, Vector3,
 };
+use chassis_protocols::RobotKind;
 
 /// Frame names (`--frame-prefix` is prepended, e.g. `robot1/`).
 #[derive(Debug, Clone)]
@@ -47,49 +49,39 @@ impl Frames {
     }
 }
 
-/// `CLOCK_MONOTONIC` → ROS time (the system clock), with the offset measured once.
+/// `CLOCK_MONOTONIC` → ROS time (the system clock): the client library's [`WallClock`] in ROS'
+/// `Time`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RosClock {
-    offset_ns: i128,
-}
+pub struct RosClock(WallClock);
 
 impl RosClock {
-    /// Reads both clocks once.
-    // The bridge's one reading of the system clock, at start.
-    #[allow(clippy::disallowed_methods)]
+    /// Reads both clocks once ([`WallClock::measure`]).
     pub fn measure() -> Self {
-        let wall = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as i128);
-        Self::with_offset(wall - i128::from(chassis_client::now_ns()))
+        Self(WallClock::measure())
     }
 
-    /// A clock `offset_ns` ahead of `CLOCK_MONOTONIC`.
-    pub fn with_offset(offset_ns: i128) -> Self {
-        Self { offset_ns }
+    /// A clock `offset_ns` ahead of `CLOCK_MONOTONIC` (0: stamps are monotonic time).
+    pub const fn with_offset(offset_ns: i128) -> Self {
+        Self(WallClock::with_offset(offset_ns))
     }
 
     /// The ROS time of the monotonic instant `monotonic_ns`.
     pub fn ros_time(self, monotonic_ns: u64) -> Time {
-        let ns = i128::from(monotonic_ns) + self.offset_ns;
-        Time::from_nanos(i64::try_from(ns).unwrap_or(i64::MAX))
+        Time::from_nanos(i64::try_from(self.0.wall_ns(monotonic_ns)).unwrap_or(i64::MAX))
     }
 
     /// The monotonic instant of the ROS time `time`.
     pub fn monotonic_ns(self, time: Time) -> u64 {
-        u64::try_from(i128::from(time.nanos()) - self.offset_ns).unwrap_or(0)
+        self.0
+            .monotonic_ns(u64::try_from(time.nanos()).unwrap_or(0))
     }
 }
 
-/// Variance stated for what the wheels measure well (x, y, vx, vy; a robot that cannot move
-/// sideways reports vy = 0 by construction). The pose's variances do not grow with distance here: the driver's
-/// dead reckoning has no error model, and a localiser fusing `odom` (robot_localization) weighs
-/// it by the twist, whose variance is stated.
-pub const MEASURED_VARIANCE: f64 = 1e-3;
-/// Variance stated for the yaw and yaw rate integrated from wheel speeds (skid steer slips).
-pub const YAW_VARIANCE: f64 = 1e-2;
 /// Variance for what a ground robot does not measure at all (z, roll, pitch and their rates):
-/// large, as REP-105 odometry publishers state it.
+/// large, as REP-105 odometry publishers state it. What it does measure (x, y, yaw and their
+/// rates) has the variances of the robot's description (`RobotDescription::odometry_variance`);
+/// they do not grow with distance: the driver's dead reckoning has no error model, and a
+/// localiser fusing `odom` (robot_localization) weighs it by the twist.
 pub const UNMEASURED_VARIANCE: f64 = 1e6;
 
 /// The diagonal of a 6×6 covariance.
@@ -105,8 +97,23 @@ fn finite(v: f32) -> f64 {
     if v.is_finite() { f64::from(v) } else { 0.0 }
 }
 
-/// `odom`: the driver's integrated pose and the reported body twist, odom → base_link.
-pub fn odometry(state: &ChassisState, clock: RosClock, frames: &Frames) -> Odometry {
+/// A variance as stated, or the unmeasured one where the description has none (NaN).
+fn variance(v: f64) -> f64 {
+    if v.is_finite() && v >= 0.0 {
+        v
+    } else {
+        UNMEASURED_VARIANCE
+    }
+}
+
+/// `odom`: the driver's integrated pose and the reported body twist, odom → base_link, with the
+/// variances the robot's description states.
+pub fn odometry(
+    state: &ChassisState,
+    variances: &OdometryVariance,
+    clock: RosClock,
+    frames: &Frames,
+) -> Odometry {
     let o = &state.odometry;
     let m = &state.motion;
     Odometry {
@@ -122,12 +129,12 @@ pub fn odometry(state: &ChassisState, clock: RosClock, frames: &Frames) -> Odome
                 orientation: Quaternion::from_yaw(o.yaw_rad),
             },
             covariance: diagonal([
-                MEASURED_VARIANCE,
-                MEASURED_VARIANCE,
+                variance(variances.position_m2),
+                variance(variances.position_m2),
                 UNMEASURED_VARIANCE,
                 UNMEASURED_VARIANCE,
                 UNMEASURED_VARIANCE,
-                YAW_VARIANCE,
+                variance(variances.yaw_rad2),
             ]),
         },
         twist: TwistWithCovariance {
@@ -144,12 +151,12 @@ pub fn odometry(state: &ChassisState, clock: RosClock, frames: &Frames) -> Odome
                 },
             },
             covariance: diagonal([
-                MEASURED_VARIANCE,
-                MEASURED_VARIANCE,
+                variance(variances.linear_m2ps2),
+                variance(variances.linear_m2ps2),
                 UNMEASURED_VARIANCE,
                 UNMEASURED_VARIANCE,
                 UNMEASURED_VARIANCE,
-                YAW_VARIANCE,
+                variance(variances.angular_rad2ps2),
             ]),
         },
     }
@@ -174,15 +181,19 @@ pub fn transform(state: &ChassisState, clock: RosClock, frames: &Frames) -> TfMe
     }
 }
 
-/// The wheel geometry joint states need: radius and travel per encoder count, m, as the robot's
-/// description gives them (`geometry.wheel_radius_m`, `travel_per_count_m`). A robot described
-/// without them (the AgileX manuals give no wheel radius) has no wheel joints published.
+/// The wheel geometry wheel joints need: radius and travel per encoder count, m, from the
+/// description's geometry; `None` where it does not give both (the AgileX manuals give no wheel
+/// radius: their wheel joints are not published).
 pub fn wheel_geometry(description: &RobotDescription) -> Option<WheelGeometry> {
     let g = &description.geometry;
-    (g.wheel_radius_m > 0.0 && g.travel_per_count_m > 0.0).then_some(WheelGeometry {
-        radius_m: g.wheel_radius_m,
-        metres_per_count: g.travel_per_count_m,
-    })
+    (g.wheel_radius_m.is_finite()
+        && g.wheel_radius_m > 0.0
+        && g.travel_per_count_m.is_finite()
+        && g.travel_per_count_m > 0.0)
+        .then_some(WheelGeometry {
+            radius_m: g.wheel_radius_m,
+            metres_per_count: g.travel_per_count_m,
+        })
 }
 
 /// See [`wheel_geometry`].
@@ -192,42 +203,41 @@ pub struct WheelGeometry {
     pub metres_per_count: f64,
 }
 
-/// The wheels in `ChassisState::motion.wheel_mps` order.
-pub const WHEELS: [&str; 4] = ["front_left", "front_right", "rear_left", "rear_right"];
-
-/// `joint_states`: the steering joints where the robot reports their angles (TITAN, HUNTER,
-/// RANGER MINI: `front_steer_joint`, `rear_steer_joint`), and the wheel joints (angle and rate)
-/// where the robot reports per-wheel speeds and its wheel radius is known (XBot). `None` when the
-/// robot reports neither.
+/// `joint_states`: the description's joints, in its order — steering joints where the robot
+/// reports their angles, wheel joints (angle and rate) where it reports per-wheel speeds and its
+/// wheel geometry is known. `None` when none of them has a reading.
 pub fn joint_states(
     state: &ChassisState,
+    description: &RobotDescription,
     clock: RosClock,
-    wheels: Option<WheelGeometry>,
 ) -> Option<JointState> {
     let mut joints = JointState {
         header: Header::new(clock.ros_time(state.stamp_ns), ""),
         ..JointState::default()
     };
     let steering = state.is_valid(Group::Steering);
-    if steering {
-        for (name, angle) in [
-            ("front_steer_joint", state.motion.front_steer_rad),
-            ("rear_steer_joint", state.motion.rear_steer_rad),
-        ] {
-            joints.name.push(name.to_string());
-            joints.position.push(finite(angle));
-            joints.velocity.push(f64::NAN);
-        }
-    }
-    if let Some(w) = wheels.filter(|_| state.is_valid(Group::WheelSpeed)) {
-        for (i, wheel) in WHEELS.iter().enumerate() {
-            joints.name.push(format!("{wheel}_wheel_joint"));
-            let travel_m = state.motors[i].position_counts as f64 * w.metres_per_count;
-            joints.position.push(travel_m / w.radius_m);
-            joints
-                .velocity
-                .push(finite(state.motion.wheel_mps[i]) / w.radius_m);
-        }
+    let wheels = wheel_geometry(description).filter(|_| state.is_valid(Group::WheelSpeed));
+    for joint in description.joints() {
+        let (position, velocity) = match joint.source {
+            JointSource::FRONT_STEER if steering => {
+                (finite(state.motion.front_steer_rad), f64::NAN)
+            }
+            JointSource::REAR_STEER if steering => (finite(state.motion.rear_steer_rad), f64::NAN),
+            JointSource::WHEEL => {
+                let i = usize::from(joint.index);
+                let (Some(w), Some(motor), Some(speed)) =
+                    (wheels, state.motors.get(i), state.motion.wheel_mps.get(i))
+                else {
+                    continue;
+                };
+                let travel_m = motor.position_counts as f64 * w.metres_per_count;
+                (travel_m / w.radius_m, finite(*speed) / w.radius_m)
+            }
+            _ => continue,
+        };
+        joints.name.push(joint.name().to_string());
+        joints.position.push(position);
+        joints.velocity.push(velocity);
     }
     (!joints.name.is_empty()).then_some(joints)
 }
@@ -314,55 +324,47 @@ pub fn imu(state: &ChassisState, clock: RosClock, frames: &Frames) -> Option<Imu
     })
 }
 
-/// One range sensor of the XBot.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// One range sensor of the robot's description.
+#[derive(Debug, Clone, PartialEq)]
 pub struct RangeSensor {
     /// Topic suffix and frame stem: `range/<name>`, `<name>_link`.
-    pub name: &'static str,
+    pub name: String,
     pub radiation_type: u8,
     /// Index into `RangesState::ir_m` or `ultrasonic_m`.
     pub index: usize,
+    /// Full opening angle, rad; 0 where the description does not give it.
+    pub field_of_view_rad: f32,
+    /// Nearest and farthest reading, m; 0 and +∞ where the description does not give them.
+    pub min_range_m: f32,
+    pub max_range_m: f32,
 }
 
-/// The XBot's three rear IR cliff sensors and three front ultrasonic sensors (PROTOCOLS.md).
-pub const XBOT_RANGES: [RangeSensor; 6] = [
-    RangeSensor {
-        name: "ir_rear_left",
-        radiation_type: Range::INFRARED,
-        index: 0,
-    },
-    RangeSensor {
-        name: "ir_rear_centre",
-        radiation_type: Range::INFRARED,
-        index: 1,
-    },
-    RangeSensor {
-        name: "ir_rear_right",
-        radiation_type: Range::INFRARED,
-        index: 2,
-    },
-    RangeSensor {
-        name: "ultrasonic_front_left",
-        radiation_type: Range::ULTRASOUND,
-        index: 0,
-    },
-    RangeSensor {
-        name: "ultrasonic_front_centre",
-        radiation_type: Range::ULTRASOUND,
-        index: 1,
-    },
-    RangeSensor {
-        name: "ultrasonic_front_right",
-        radiation_type: Range::ULTRASOUND,
-        index: 2,
-    },
-];
+/// The range sensors of `description`, in its order (`range/<name>` each).
+pub fn range_sensors(description: &RobotDescription) -> Vec<RangeSensor> {
+    let given = |v: f64, otherwise: f32| if v.is_finite() { v as f32 } else { otherwise };
+    description
+        .sensors()
+        .iter()
+        .filter(|s| SensorKind::is_range(s.kind))
+        .map(|s| RangeSensor {
+            name: s.name().to_string(),
+            radiation_type: if s.kind == SensorKind::INFRARED {
+                Range::INFRARED
+            } else {
+                Range::ULTRASOUND
+            },
+            index: usize::from(s.index),
+            field_of_view_rad: given(s.field_of_view_rad, 0.0),
+            min_range_m: given(s.min_range_m, 0.0),
+            max_range_m: given(s.max_range_m, f32::INFINITY),
+        })
+        .collect()
+}
 
-/// `range/<sensor>` for one XBot sensor. The manual states neither field of view nor limits:
-/// the message says so with `field_of_view` 0 and `min_range` 0 / `max_range` +∞.
+/// `range/<sensor>` for one range sensor, with the limits its description states.
 pub fn range(
     state: &ChassisState,
-    sensor: RangeSensor,
+    sensor: &RangeSensor,
     clock: RosClock,
     frames: &Frames,
 ) -> Option<Range> {
@@ -370,20 +372,21 @@ pub fn range(
         return None;
     }
     let r = &state.ranges;
-    let value = if sensor.radiation_type == Range::INFRARED {
-        r.ir_m[sensor.index]
+    let readings: &[f32] = if sensor.radiation_type == Range::INFRARED {
+        &r.ir_m
     } else {
-        r.ultrasonic_m[sensor.index]
+        &r.ultrasonic_m
     };
+    let value = *readings.get(sensor.index)?;
     Some(Range {
         header: Header::new(
             clock.ros_time(state.group_stamp_ns[Group::Ranges.index()]),
-            &frames.sensor(sensor.name),
+            &frames.sensor(&sensor.name),
         ),
         radiation_type: sensor.radiation_type,
-        field_of_view: 0.0,
-        min_range: 0.0,
-        max_range: f32::INFINITY,
+        field_of_view: sensor.field_of_view_rad,
+        min_range: sensor.min_range_m,
+        max_range: sensor.max_range_m,
         range: value,
         variance: 0.0,
     })
@@ -596,15 +599,13 @@ pub fn diagnostics_key(array: &DiagnosticArray) -> Vec<(u8, String)> {
 mod tests {
     use super::*;
     use chassis_client::{FaultFlags, Group, LinkFlags};
+    use chassis_protocols::description::describe;
 
-    /// The description chassisd publishes of `kind` with its default profile.
+    const CLOCK: RosClock = RosClock::with_offset(1_700_000_000_000_000_000);
+
     fn described(kind: RobotKind) -> RobotDescription {
-        chassis_protocols::description::describe(&kind.entry().defaults())
+        describe(&kind.entry().defaults())
     }
-
-    const CLOCK: RosClock = RosClock {
-        offset_ns: 1_700_000_000_000_000_000,
-    };
 
     fn titan() -> ChassisState {
         let mut s = ChassisState {
@@ -634,7 +635,8 @@ mod tests {
     #[test]
     fn odometry_is_odom_to_base_link_with_the_pose_and_the_body_twist() {
         let frames = Frames::new("r1/");
-        let o = odometry(&titan(), CLOCK, &frames);
+        let d = described(RobotKind::Titan);
+        let o = odometry(&titan(), &d.odometry_variance, CLOCK, &frames);
         assert_eq!(o.header.frame_id, "r1/odom");
         assert_eq!(o.child_frame_id, "r1/base_link");
         assert_eq!(o.header.stamp, CLOCK.ros_time(5_000_000_000));
@@ -643,10 +645,25 @@ mod tests {
         assert!((q.z - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12);
         assert_eq!(o.twist.twist.linear.x, 0.5);
         assert_eq!(o.twist.twist.angular.z, 0.25);
-        assert_eq!(o.pose.covariance[0], MEASURED_VARIANCE);
+        // The variances are the description's.
+        let v = d.odometry_variance;
+        assert_eq!(o.pose.covariance[0], v.position_m2);
         assert_eq!(o.pose.covariance[14], UNMEASURED_VARIANCE);
-        assert_eq!(o.pose.covariance[35], YAW_VARIANCE);
+        assert_eq!(o.pose.covariance[35], v.yaw_rad2);
         assert_eq!(o.pose.covariance[1], 0.0);
+        assert_eq!(o.twist.covariance[0], v.linear_m2ps2);
+        assert_eq!(o.twist.covariance[35], v.angular_rad2ps2);
+        let stated = OdometryVariance {
+            position_m2: 0.25,
+            yaw_rad2: f64::NAN,
+            ..v
+        };
+        let o2 = odometry(&titan(), &stated, CLOCK, &frames);
+        assert_eq!(o2.pose.covariance[0], 0.25);
+        assert_eq!(
+            o2.pose.covariance[35], UNMEASURED_VARIANCE,
+            "NaN: not measured"
+        );
         let tf = transform(&titan(), CLOCK, &frames);
         assert_eq!(tf.transforms[0].transform.rotation, q);
     }
@@ -655,7 +672,7 @@ mod tests {
     fn a_nan_speed_is_published_as_zero_not_nan() {
         let mut s = titan();
         s.motion.linear_mps = f32::NAN;
-        let o = odometry(&s, CLOCK, &Frames::new(""));
+        let o = odometry(&s, &OdometryVariance::default(), CLOCK, &Frames::new(""));
         assert_eq!(o.twist.twist.linear.x, 0.0);
     }
 
@@ -684,11 +701,12 @@ mod tests {
         let s = titan();
         let f = Frames::new("");
         assert!(imu(&s, CLOCK, &f).is_none());
-        assert!(range(&s, XBOT_RANGES[0], CLOCK, &f).is_none());
+        let xbot = described(RobotKind::Xbot);
+        assert!(range(&s, &range_sensors(&xbot)[0], CLOCK, &f).is_none());
         assert!(nav_sat_fix(&s, CLOCK, &f).is_none());
-        assert!(wheel_geometry(&described(RobotKind::Titan)).is_none());
-        let xbot = wheel_geometry(&described(RobotKind::Xbot));
-        assert!(joint_states(&s, CLOCK, xbot).is_none());
+        assert!(joint_states(&s, &xbot, CLOCK).is_none());
+        // A TITAN describes no range sensor: it gets no range topic.
+        assert!(range_sensors(&described(RobotKind::Titan)).is_empty());
     }
 
     #[test]
@@ -722,19 +740,72 @@ mod tests {
         s.touch(Group::WheelSpeed, 1);
         s.motion.wheel_mps = [0.1, 0.2, 0.3, 0.4];
         s.motors[0].position_counts = 1000;
-        let w = wheel_geometry(&described(RobotKind::Xbot)).expect("xbot geometry");
-        let j = joint_states(&s, CLOCK, Some(w)).expect("joints");
+        let xbot = described(RobotKind::Xbot);
+        let w = wheel_geometry(&xbot).expect("xbot geometry");
+        let j = joint_states(&s, &xbot, CLOCK).expect("joints");
+        let names: Vec<&str> = xbot.joints().iter().map(|j| j.name()).collect();
+        assert_eq!(j.name, names, "the description's joints, in its order");
         assert_eq!(j.name[0], "front_left_wheel_joint");
         assert!((j.velocity[0] - 0.1 / w.radius_m).abs() < 1e-6);
         assert!((j.position[0] - 1000.0 * w.metres_per_count / w.radius_m).abs() < 1e-9);
-        assert_eq!(j.position.len(), 4);
+        // Its two-wheel base describes the front pair only.
+        assert_eq!(j.position.len(), 2);
+        // Without a wheel radius (as the AgileX manuals give none): no wheel joints.
+        let mut unknown = xbot;
+        unknown.geometry.wheel_radius_m = f64::NAN;
+        assert!(joint_states(&s, &unknown, CLOCK).is_none());
+    }
+
+    #[test]
+    fn a_titan_publishes_its_described_steering_joints() {
+        let mut s = titan();
+        s.touch(Group::Steering, s.stamp_ns);
+        s.motion.front_steer_rad = 0.2;
+        s.motion.rear_steer_rad = -0.2;
+        let d = described(RobotKind::Titan);
+        let j = joint_states(&s, &d, CLOCK).expect("steering joints");
+        assert_eq!(j.name, ["front_steer_joint", "rear_steer_joint"]);
+        assert_eq!(j.position, [0.2f32 as f64, -0.2f32 as f64]);
+    }
+
+    #[test]
+    fn range_topics_are_the_described_sensors_with_their_limits() {
+        let xbot = described(RobotKind::Xbot);
+        let sensors = range_sensors(&xbot);
+        let described_ranges: Vec<_> = xbot
+            .sensors()
+            .iter()
+            .filter(|s| SensorKind::is_range(s.kind))
+            .collect();
+        assert_eq!(sensors.len(), described_ranges.len());
+        assert!(sensors.iter().any(|s| s.name == "ir_rear_left"));
+        let mut s = ChassisState::default();
+        s.touch(Group::Ranges, 7);
+        s.ranges.ultrasonic_m = [0.5, 1.25, 2.0];
+        let centre = sensors
+            .iter()
+            .find(|r| r.name == "ultrasonic_front_centre")
+            .expect("the centre ultrasonic sensor");
+        let d = described_ranges
+            .iter()
+            .find(|d| d.name() == "ultrasonic_front_centre")
+            .unwrap();
+        let r = range(&s, centre, CLOCK, &Frames::new("r1/")).expect("a reading");
+        assert_eq!(r.range, 1.25);
+        assert_eq!(r.header.frame_id, "r1/ultrasonic_front_centre_link");
+        assert_eq!(r.radiation_type, Range::ULTRASOUND);
+        if d.max_range_m.is_finite() {
+            assert_eq!(r.max_range, d.max_range_m as f32);
+        } else {
+            assert_eq!(r.max_range, f32::INFINITY);
+        }
     }
 
     #[test]
     fn diagnostics_name_a_v2_robots_estop_and_keep_its_fault_word() {
         use chassis_protocols::{CanFrame, Driver, DriverConfig, Rx, Timestamp};
         // TV8 (BUNKER MINI 2.0, E-stop pressed) through the BUNKER's own driver.
-        let entry = chassis_protocols::RobotKind::Bunker.entry();
+        let entry = RobotKind::Bunker.entry();
         let now = Timestamp::from_millis(1_000);
         let mut driver = entry.driver(&entry.defaults(), false, &DriverConfig::default(), now);
         let tv8 = CanFrame::from_candump("211#0100010000800000").unwrap();

@@ -93,11 +93,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         service_mapping,
         monotonic_stamps: cli.monotonic_stamps,
     };
+    // The node's topics follow the robot chassisd describes: wait for it first.
+    let Some(described) = bridge::describe(&options.name) else {
+        return Ok(());
+    };
     let Entities {
         mut node,
         commands,
         outputs,
-    } = Entities::create(&options)?;
+    } = Entities::create(&options, &described.1)?;
     tracing::info!(
         namespace = %options.namespace,
         domain = options.domain_id,
@@ -129,7 +133,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     } else {
         RosClock::measure()
     };
-    let result = bridge::state_loop(&options.name, frames, clock, &outputs);
+    let result = bridge::state_loop(&options.name, described, frames, clock, &outputs);
     chassis_client::request_termination();
     match commands.join() {
         Ok(Ok(drops)) => tracing::info!(?drops, "stopped"),

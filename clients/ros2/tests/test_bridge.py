@@ -165,9 +165,13 @@ def test_twist_drives_the_robot_and_odom_tf_follow(ros: Ros) -> None:
     # REP-103: a left turn at positive yaw rate makes the heading grow.
     q = later.pose.pose.orientation
     assert q.z > 0.0 and math.isclose(q.z**2 + q.w**2, 1.0, rel_tol=1e-9)
-    # Covariances as documented: measured x, y, yaw; z, roll, pitch unmeasured.
+    # Covariances from the robot's description: x, y, yaw as it states them; z, roll, pitch
+    # unmeasured.
+    variance = robot.wait_description(5.0).odometry_variance
     cov = later.pose.covariance
-    assert cov[0] == cov[7] == pytest.approx(1e-3) and cov[14] == pytest.approx(1e6)
+    assert cov[0] == cov[7] == pytest.approx(variance.position_m2)
+    assert cov[35] == pytest.approx(variance.yaw_rad2) and cov[14] == pytest.approx(1e6)
+    assert later.twist.covariance[0] == pytest.approx(variance.linear_m2ps2)
     # ROS time: stamps are Unix time, within a few seconds of this computer's clock.
     stamp = later.header.stamp.sec + later.header.stamp.nanosec * 1e-9
     assert abs(stamp - time.time()) < 5.0
@@ -310,6 +314,64 @@ def test_each_service_answers_with_chassisd_s_response(ros: Ros) -> None:
     assert refused.message.startswith("unsupported:"), refused.message
 
 
+def test_a_release_through_the_service_never_starts_motion(ros: Ros) -> None:
+    robot = ros.chassisd("titan")
+    ros.bridge("titan")
+    peer = Peer(ros.domain)
+    cmd = peer.writer("rt/cmd_vel", m.Twist)
+    estop = TriggerClient(peer, "/chassis_ros2/estop")
+    release = TriggerClient(peer, "/chassis_ros2/estop_release")
+    wait_matched(cmd, ros)
+
+    with Publishing(cmd, twist(0.3)):
+        wait_until(
+            "ros2 drives",
+            lambda: (s := robot.latest_state()) is not None and s.motion.linear_mps > 0.2,
+            10.0,
+            ros,
+        )
+        assert estop.call(ros).success
+        wait_until(
+            "the robot stands",
+            lambda: (s := robot.wait_state(0.1)) is not None and abs(s.motion.linear_mps) < 0.001,
+            5.0,
+            ros,
+        )
+        # Released while Nav2 (here: the publisher) still asks for 0.3 m/s: nothing moves.
+        answer = release.call(ros)
+        assert answer.success, answer.message
+        peak = 0.0
+        end = time.monotonic() + 1.5
+        while time.monotonic() < end:
+            s = robot.wait_state(0.05)
+            if s is not None:
+                peak = max(peak, abs(s.motion.linear_mps))
+        assert peak < 0.01, f"the release started motion: {peak} m/s\n{ros.logs()}"
+        assert "until ros2 asks for zero" in answer.message, answer.message
+        mux = latest_mux(robot)
+        assert mux is not None and mux.zero_reason == chassis.ZeroReason.AWAITING_ZERO
+        awaited = mux.sources[mux.awaiting_source]
+        assert chassis.fixed_str(awaited.name) == "ros2"
+    # A zero on cmd_vel, then motion is obeyed again.
+    drive_until(
+        cmd,
+        twist(0.0),
+        lambda: (
+            (x := latest_mux(robot)) is not None
+            and x.zero_reason != chassis.ZeroReason.AWAITING_ZERO
+        ),
+        5.0,
+        ros,
+    )
+    drive_until(
+        cmd,
+        twist(0.3),
+        lambda: (s := robot.latest_state()) is not None and s.motion.linear_mps > 0.2,
+        10.0,
+        ros,
+    )
+
+
 def test_stamped_cmd_vel_and_namespaces(ros: Ros) -> None:
     robot = ros.chassisd("scout-mini", "--name", "left")
     ros.bridge("left", "--stamped", "--namespace", "/left", "--frame-prefix", "left/")
@@ -397,14 +459,17 @@ def test_every_topic_decodes_on_each_robot(ros: Ros) -> None:
         link = dict((kv.key, kv.value) for kv in diag.status[1].values)
         assert link["robot"] == name and int(link["rx_frames"]) > 0
 
-    # TITAN reports its steering angles; the XBot its wheels.
+    # TITAN reports its steering angles; the XBot its wheels: the joints each description lists.
+    def described_joints(robot: chassis.Robot) -> list[str]:
+        return [j["name"] for j in robot.wait_description(5.0).summary()["joints"]]
+
     joints = take_until(readers["titan"]["joint_states"], lambda j: True, 5.0, ros, "titan joints")
     assert joints.name == ["front_steer_joint", "rear_steer_joint"]
+    assert joints.name == described_joints(robots["titan"])
     joints = take_until(readers["xbot"]["joint_states"], lambda j: True, 5.0, ros, "xbot joints")
-    assert joints.name == [
-        f"{w}_wheel_joint" for w in ("front_left", "front_right", "rear_left", "rear_right")
-    ]
-    assert len(joints.position) == len(joints.velocity) == 4
+    assert joints.name == described_joints(robots["xbot"])
+    assert joints.name[:2] == ["front_left_wheel_joint", "front_right_wheel_joint"]
+    assert len(joints.position) == len(joints.velocity) == len(joints.name)
 
     imu = take_until(readers["xbot"]["imu"], lambda i: True, 5.0, ros, "xbot imu")
     q = imu.orientation

@@ -2,9 +2,12 @@
 //! with the contract's limits, so that the unchanged local tools — `chassis top`,
 //! `chassis-teleop --source remote`, `chassis echo`, Python clients — work here.
 //!
-//! * the main thread creates `state`, `mux` and `frames` and publishes what arrives from the
-//!   robot (the Zenoh callbacks hand the samples over a channel: iceoryx2 ports stay on the
-//!   thread that made them);
+//! * the main thread creates `state`, `mux`, `robot` and `frames` and publishes what arrives
+//!   from the robot (the Zenoh callbacks hand the samples over a channel: iceoryx2 ports stay on
+//!   the thread that made them). The robot's description is asked for when the robot side
+//!   becomes reachable (at start and after every outage) and taken whenever it changes, so a
+//!   client here reads it as it would beside chassisd (`Robot::description`, Python's
+//!   `Robot.wait_description`);
 //! * a thread per remote source (learned from the robot's mux) creates `cmd/<source>` and puts
 //!   every request on `chassis/<name>/cmd/<source>`;
 //! * a thread serves `control`, asking the robot's queryable for each request.
@@ -20,10 +23,10 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::{
-    BusFrame, ChassisState, ControlRequest, ControlResponse, ControlStatus, MuxStatus, ServiceKind,
-    VelocityRequest, now_ns, service_name, termination_requested,
+    BusFrame, ChassisState, ControlRequest, ControlResponse, ControlStatus, MuxStatus,
+    RobotDescription, ServiceKind, VelocityRequest, now_ns, service_name, termination_requested,
 };
-use chassis_ipc::{CMD, CONTROL, FRAMES, MUX, STATE, Writer};
+use chassis_ipc::{CMD, CONTROL, DESCRIPTION, FRAMES, MUX, STATE, Writer};
 use iceoryx2::port::update_connections::UpdateConnections as _;
 use iceoryx2::prelude::*;
 use zenoh::Wait as _;
@@ -52,6 +55,7 @@ enum Incoming {
     State(Sample),
     Mux(Sample),
     Frames(Sample),
+    Description(Sample),
     Alive(bool),
 }
 
@@ -103,6 +107,9 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
     let frames = FRAMES
         .create(&node, &service_name(name, ServiceKind::Frames))?
         .publisher()?;
+    let description = DESCRIPTION
+        .create(&node, &service_name(name, ServiceKind::Description))?
+        .publisher()?;
 
     let (tx, rx) = mpsc::channel::<Incoming>();
     let subscribe = |key: &str, wrap: fn(Sample) -> Incoming| {
@@ -118,6 +125,23 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
     let _state_sub = subscribe(&keys.state, Incoming::State)?;
     let _mux_sub = subscribe(&keys.mux, Incoming::Mux)?;
     let _frames_sub = subscribe(&keys.frames, Incoming::Frames)?;
+    let _description_sub = subscribe(&keys.description, Incoming::Description)?;
+    let ask_tx = tx.clone();
+    let ask_description = |session: &zenoh::Session| {
+        let tx = ask_tx.clone();
+        let asked = session
+            .get(keys.description.clone())
+            .callback(move |reply| {
+                if let Ok(sample) = reply.into_result() {
+                    let _ = tx.send(Incoming::Description(sample));
+                }
+            })
+            .timeout(ANSWER_TIMEOUT)
+            .wait();
+        if let Err(e) = asked {
+            tracing::warn!("asking the robot for its description: {e}");
+        }
+    };
     let alive_tx = tx.clone();
     let _alive_sub = session
         .liveliness()
@@ -149,6 +173,9 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
     let states = Wire::<ChassisState>::new();
     let muxes = Wire::<MuxStatus>::new();
     let bus = Wire::<BusFrame>::new();
+    let descriptions = Wire::<RobotDescription>::new();
+    let mut described: Option<(u64, u64)> = None;
+    let mut next_connections = now_ns();
     let mut dropped: u64 = 0;
     let mut drop_sample = |what: &str, e: &dyn std::fmt::Display| {
         dropped += 1;
@@ -162,14 +189,21 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
     let mut link = LinkWatch::new(LOST_AFTER);
     let mut result = Ok(());
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
+        // The description is kept for late joiners: a reader that connects here gets it once
+        // the publisher has seen it.
+        if now_ns() >= next_connections {
+            next_connections = now_ns() + 100_000_000;
+            if let Err(e) = description.publisher.update_connections() {
+                tracing::debug!("connecting late readers of the description: {e:?}");
+            }
+            // And of the robot's last decision, which a lost robot does not renew.
+            if let Err(e) = mux.publisher.update_connections() {
+                tracing::debug!("connecting late readers of the mux: {e:?}");
+            }
+        }
         let incoming = match rx.recv_timeout(POLL) {
             Ok(incoming) => incoming,
             Err(mpsc::RecvTimeoutError::Timeout) => {
-                // A reader that came after the robot's last decision gets it from the
-                // history when the publisher looks for new readers.
-                if let Err(e) = mux.publisher.update_connections() {
-                    tracing::debug!("handing the mux history to new readers: {e}");
-                }
                 // Silence: the last state again, marked lost, once the loss limit is passed.
                 if let Some(lost) = link.poll(now_ns()) {
                     report_lost(name, &lost);
@@ -243,7 +277,31 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                     }
                 }
             }
+            Incoming::Description(sample) => {
+                match descriptions.decode(sample.encoding(), &sample.payload().to_bytes()) {
+                    Ok(d) if described != Some((d.seq, d.stamp_ns)) => {
+                        described = Some((d.seq, d.stamp_ns));
+                        eprintln!(
+                            "chassis-zenoh: robot '{}' is {} ({}, {} sensors, {} joints)",
+                            name,
+                            d.display_name(),
+                            d.model(),
+                            d.sensors().len(),
+                            d.joints().len()
+                        );
+                        send(&description, d)
+                    }
+                    Ok(_) => Ok(()),
+                    Err(e) => {
+                        drop_sample("robot", &e);
+                        Ok(())
+                    }
+                }
+            }
             Incoming::Alive(alive) => {
+                if alive {
+                    ask_description(&session);
+                }
                 eprintln!(
                     "chassis-zenoh: robot '{}' {}",
                     name,

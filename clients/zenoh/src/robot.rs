@@ -1,8 +1,10 @@
 //! The robot side: chassisd's services on Zenoh.
 //!
-//! * the main thread reads the state stream, the mux and the frame tap, and puts them on
-//!   `chassis/<name>/state` (the newest sample of each read of the bus), `…/mux`, `…/frames`
-//!   (fixed-layout bytes) and decimated JSON twins (`…/state/json`, `…/mux/json`);
+//! * the main thread reads the state stream, the mux, the robot's description and the frame
+//!   tap, and puts them on `chassis/<name>/state` (the newest sample of each read of the bus),
+//!   `…/mux`, `…/robot` (when it changes; a queryable on the same key answers a mirror that
+//!   connects later), `…/frames` (fixed-layout bytes) and decimated JSON twins
+//!   (`…/state/json`, `…/mux/json`);
 //! * a thread holds the remote sources' publishers and takes `chassis/<name>/cmd/<source>` from
 //!   the network: only for sources chassisd's mux marks [`SourceFlags::REMOTE`] (never a
 //!   required one); a request that is not one, or carries a NaN or an infinity, is dropped and
@@ -13,14 +15,15 @@
 //! iceoryx2 ports are not `Send`: each thread connects to the robot itself.
 
 use std::collections::HashMap;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::{
-    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, Robot, STATE_BUFFER,
-    Source, SourceFlags, Ticker, VelocityRequest, now_ns, termination_requested,
+    BusFrame, ChassisState, ControlRequest, ControlResponse, Decimator, MuxStatus, Robot,
+    RobotDescription, STATE_BUFFER, Source, SourceFlags, Ticker, VelocityRequest, now_ns,
+    termination_requested,
 };
 use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
@@ -53,39 +56,6 @@ pub struct Config {
     pub json_hz: f64,
     /// How long to wait for chassisd at start.
     pub wait: Duration,
-}
-
-/// Lets one sample per period through on average, judged on the samples' own stamps, with a
-/// quarter period of slack for the publisher's jitter.
-#[derive(Debug, Clone, Copy)]
-pub struct Rate {
-    period_ns: u64,
-    next_ns: Option<u64>,
-}
-
-impl Rate {
-    /// `hz` ≤ 0: every sample.
-    pub fn new(hz: f64) -> Self {
-        let period_ns = if hz > 0.0 { (1e9 / hz) as u64 } else { 0 };
-        Self {
-            period_ns,
-            next_ns: None,
-        }
-    }
-
-    pub fn pass(&mut self, stamp_ns: u64) -> bool {
-        let slack = self.period_ns / 4;
-        if let Some(next) = self.next_ns
-            && stamp_ns.saturating_add(slack) < next
-        {
-            return false;
-        }
-        let after_stamp = stamp_ns.saturating_add(self.period_ns - slack);
-        self.next_ns = Some(self.next_ns.map_or(after_stamp, |next| {
-            next.saturating_add(self.period_ns).max(after_stamp)
-        }));
-        true
-    }
 }
 
 /// The remote sources of a mux decision: configured `remote`, never required.
@@ -245,9 +215,36 @@ fn publish(
 
     let states = robot.state_stream(STATE_BUFFER)?;
     let tap = robot.frames(TAP_BUFFER)?;
-    let mut state_rate = Rate::new(config.state_hz);
-    let mut state_json_rate = Rate::new(config.json_hz);
-    let mut mux_json_rate = Rate::new(config.json_hz);
+    let description_pub = declare(
+        &keys.description,
+        Wire::<RobotDescription>::new().encoding(),
+        false,
+    )?;
+    // The newest description, for the queryable that answers a mirror connecting later.
+    let described: Arc<Mutex<Option<RobotDescription>>> = Arc::new(Mutex::new(None));
+    let _description_queryable = {
+        let described = described.clone();
+        let encoding = Wire::<RobotDescription>::new().encoding();
+        session
+            .declare_queryable(keys.description.clone())
+            .callback(move |query| {
+                let latest = described.lock().ok().and_then(|d| *d);
+                if let Some(d) = latest
+                    && let Err(e) = query
+                        .reply(query.key_expr().clone(), d.as_bytes())
+                        .encoding(encoding.clone())
+                        .wait()
+                {
+                    tracing::warn!("answering a query for the description: {e}");
+                }
+            })
+            .wait()
+            .map_err(zerr(&keys.description))?
+    };
+    let mut state_rate = Decimator::per_second(config.state_hz);
+    let mut state_json_rate = Decimator::per_second(config.json_hz);
+    let mut mux_json_rate = Decimator::per_second(config.json_hz);
+    let mut last_description: Option<(u64, u64)> = None;
     let mut next_frames = now_ns();
     let mut next_check = now_ns();
     let mut batch: Vec<u8> = Vec::new();
@@ -291,6 +288,17 @@ fn publish(
             }
         }
         robot.poll_mux(|m| put_mux(m, &mut report))?;
+        if let Some(d) = robot.latest_description()?
+            && last_description != Some((d.seq, d.stamp_ns))
+        {
+            last_description = Some((d.seq, d.stamp_ns));
+            if let Ok(mut latest) = described.lock() {
+                *latest = Some(d);
+            }
+            if let Err(e) = description_pub.put(d.as_bytes()).wait() {
+                report("robot", e);
+            }
+        }
         let now = now_ns();
         if now >= next_check {
             // Opening the service to count its publishers costs file operations: once a second.
@@ -427,18 +435,6 @@ fn control(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_rate_passes_one_sample_per_period() {
-        let mut rate = Rate::new(10.0);
-        let passed: Vec<u64> = (0..100u64)
-            .map(|i| i * 10_000_000)
-            .filter(|&t| rate.pass(t))
-            .collect();
-        assert!((10..=11).contains(&passed.len()), "{passed:?}");
-        let mut every = Rate::new(0.0);
-        assert!((0..5).all(|t| every.pass(t)));
-    }
 
     #[test]
     fn only_remote_sources_that_are_not_required_are_taken() {

@@ -60,6 +60,9 @@ pub struct Keys {
     pub mux: String,
     pub mux_json: String,
     pub frames: String,
+    /// `chassis/<name>/robot`: the robot's description, put when it changes and answered to a
+    /// query (a mirror that starts or reconnects later asks for it).
+    pub description: String,
     pub control: String,
     /// `chassis/<name>/cmd/*`: every source, for the robot side's one subscriber.
     pub cmd_any: String,
@@ -78,6 +81,7 @@ impl Keys {
             state,
             mux,
             frames: service_name(name, ServiceKind::Frames),
+            description: service_name(name, ServiceKind::Description),
             control: service_name(name, ServiceKind::Control),
             cmd_any: service_name(name, ServiceKind::Cmd("*")),
             alive: format!("chassis/{name}/alive"),
@@ -102,7 +106,8 @@ impl Keys {
 mod tests {
     use super::*;
     use chassis_client::{
-        BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, VelocityRequest,
+        BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, RobotDescription,
+        VelocityRequest,
     };
     use zerocopy::IntoBytes as _;
 
@@ -120,6 +125,7 @@ mod tests {
         same::<BusFrame>();
         same::<ControlRequest>();
         same::<ControlResponse>();
+        same::<RobotDescription>();
         let wire = Wire::<VelocityRequest>::new();
         let request = VelocityRequest::twist(0.5, -0.25);
         assert_eq!(
@@ -144,6 +150,7 @@ mod tests {
         assert_eq!(keys.state_json, "chassis/titan/state/json");
         assert_eq!(keys.cmd("remote"), "chassis/titan/cmd/remote");
         assert_eq!(keys.cmd_any, "chassis/titan/cmd/*");
+        assert_eq!(keys.description, "chassis/titan/robot");
         assert_eq!(keys.source_of("chassis/titan/cmd/remote"), Some("remote"));
         assert_eq!(keys.source_of("chassis/titan/cmd/"), None);
         assert_eq!(keys.source_of("chassis/other/cmd/remote"), None);

@@ -8,7 +8,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use chassis_interfaces::{ControlRequest, VelocityRequest};
-use chassis_protocols::{DriverConfig, Profile, RobotKind, Timestamp, Transmit};
+use chassis_protocols::{DriverConfig, Profile, RobotKind, Timestamp, WireItem};
 use chassisd::engine::{
     Device, Engine, EngineConfig, HeldLock, PassIo, Publication, Readers, Ticket, Wake, WriteError,
     Written,
@@ -19,7 +19,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 const T0: Timestamp = Timestamp::from_millis(1_000);
 
 /// Two seconds of a TITAN's feedback, as its simulated firmware sends it.
-fn feedback(profile: &Profile) -> Vec<Transmit> {
+fn feedback(profile: &Profile) -> Vec<WireItem> {
     let mut firmware = (RobotKind::Titan.entry().firmware)(profile, T0);
     let mut frames = Vec::new();
     let mut t = T0;
@@ -42,7 +42,7 @@ struct BenchIo {
     now: Timestamp,
     /// Sources with a request not yet read (one bit each), and the frame not yet read.
     requests: u32,
-    frame: Option<Transmit>,
+    frame: Option<WireItem>,
 }
 
 impl PassIo for BenchIo {
@@ -69,7 +69,7 @@ impl PassIo for BenchIo {
 
     fn acknowledge(&mut self, _sources: u32) {}
 
-    fn write(&mut self, item: &Transmit) -> Result<Written, WriteError<Infallible>> {
+    fn write(&mut self, item: &WireItem) -> Result<Written, WriteError<Infallible>> {
         black_box(item);
         Ok(Written::Out(self.now))
     }
@@ -78,7 +78,7 @@ impl PassIo for BenchIo {
         Ok(self.now)
     }
 
-    fn read_bus(&mut self, into: &mut Vec<(Timestamp, Transmit)>) -> Result<bool, Infallible> {
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, WireItem)>) -> Result<bool, Infallible> {
         into.extend(self.frame.take().map(|frame| (self.now, frame)));
         Ok(false)
     }

@@ -9,9 +9,12 @@
 //!   time and on shutdown, forgotten after a reboot or an RC session.
 //! * [`SteeringZero`]: one steering-zero request (0x431 → 0x43A) waiting for its
 //!   acknowledgement, answered with a timeout when none comes.
+//! * [`next_frame`]: the order both send in — queued frames, then at the heartbeat deadline the
+//!   brake release the motion needs, then the motion frame.
 //! * The feedback frames both read with the same layout (0x241 RC, 0x25x / 0x26x motors,
 //!   0x361 / 0x362 battery) go into the state by the `apply_*` functions.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{ChassisState, ControlMode, ControlStatus, Group, LinkFlags};
@@ -19,6 +22,47 @@ use chassis_interfaces::{ChassisState, ControlMode, ControlStatus, Group, LinkFl
 use crate::driver::{ControlOutcome, DriverCore, DriverEvent, Level};
 use crate::time::Timestamp;
 use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
+
+/// What an AgileX driver sends next ([`next_frame`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Next<F> {
+    /// A queued frame: a mode request, a brake, a light or a clear-fault command.
+    Queued(F),
+    /// At the heartbeat deadline, the parking brake's release before the motion it would hold
+    /// back (after power-up, a chassis reboot or an idle engagement); the same deadline sends
+    /// the motion next.
+    ReleaseBrake,
+    /// The heartbeat's motion frame (0x111), counted as sent.
+    Motion,
+}
+
+/// The order every AgileX driver sends in: what is queued first, then at the heartbeat deadline
+/// the brake release the motion needs (only in CAN command mode, the one mode that obeys 0x131),
+/// then the motion frame. Nothing while the bus is down: what was queued is dropped.
+pub(crate) fn next_frame<F>(
+    core: &mut DriverCore,
+    queue: &mut VecDeque<F>,
+    brake: &mut BrakeKeeper,
+    moving: bool,
+    now: Timestamp,
+) -> Option<Next<F>> {
+    if core.bus_down {
+        queue.clear();
+        return None;
+    }
+    if let Some(frame) = queue.pop_front() {
+        return Some(Next::Queued(frame));
+    }
+    if !core.schedule.is_due(now) {
+        return None;
+    }
+    let command_mode = core.state.system.control_mode == ControlMode::COMMAND;
+    if brake.release_before(moving, command_mode) {
+        return Some(Next::ReleaseBrake);
+    }
+    core.schedule.sent(now);
+    Some(Next::Motion)
+}
 
 /// Whether the driver wants CAN command mode, and when it last asked (0x421).
 #[derive(Debug, Clone)]

@@ -1,7 +1,9 @@
-//! A classic CAN frame, and its can-utils text forms (`123#DEADBEEF`, `candump -l` log lines).
+//! A classic CAN frame, its can-utils text forms (`123#DEADBEEF`, `candump -l` log lines), and
+//! the CAN frame a `BusFrame` of chassisd's frame tap carries.
 
 use std::fmt;
 
+use chassis_interfaces::{BusFrame, FrameKind};
 use thiserror::Error;
 
 /// A classic CAN 2.0 data frame (0-8 bytes).
@@ -24,6 +26,8 @@ pub enum CanFrameError {
     Syntax { text: String },
     #[error("remote (RTR) frames carry no data and are not used by these robots")]
     Remote,
+    #[error("a tapped serial or GPS chunk, not a CAN frame")]
+    NotCan,
 }
 
 impl CanFrame {
@@ -159,6 +163,27 @@ impl fmt::Display for CanFrame {
     }
 }
 
+/// The CAN frame a tapped [`BusFrame`] carries: its id (29 bits where it says
+/// [`BusFrame::EXTENDED_ID`]) and its data. Every reader of the frame tap that decodes CAN
+/// (the Foxglove view's `/frames`, `chassis record`, `chassis top`) converts with this.
+impl TryFrom<&BusFrame> for CanFrame {
+    type Error = CanFrameError;
+
+    fn try_from(frame: &BusFrame) -> Result<Self, CanFrameError> {
+        if frame.kind != FrameKind::CAN {
+            return Err(CanFrameError::NotCan);
+        }
+        if frame.flags & BusFrame::REMOTE != 0 {
+            return Err(CanFrameError::Remote);
+        }
+        if frame.flags & BusFrame::EXTENDED_ID != 0 {
+            Self::new_extended(frame.can_id, frame.payload())
+        } else {
+            Self::new(frame.can_id, frame.payload())
+        }
+    }
+}
+
 /// One line of a `candump -l` log: `(1700000000.000000) can0 123#DEADBEEF`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CandumpLine {
@@ -242,6 +267,36 @@ mod tests {
             assert!(CanFrame::from_candump(bad).is_err(), "{bad:?}");
         }
         assert!(CanFrame::from_candump("123#000000000000000000").is_err());
+    }
+
+    #[test]
+    fn a_tapped_bus_frame_is_the_can_frame_it_carries() {
+        let mut tapped = BusFrame {
+            kind: FrameKind::CAN,
+            can_id: 0x211,
+            ..BusFrame::default()
+        };
+        tapped.set_payload(&[1, 2, 3]);
+        let can = CanFrame::try_from(&tapped).unwrap();
+        assert_eq!(
+            (can.id(), can.is_extended(), can.data()),
+            (0x211, false, &[1, 2, 3][..])
+        );
+        tapped.flags = BusFrame::EXTENDED_ID;
+        tapped.can_id = 0x1234_5678;
+        assert_eq!(
+            CanFrame::try_from(&tapped).unwrap().to_candump(),
+            "12345678#010203"
+        );
+        tapped.flags = 0;
+        assert!(matches!(
+            CanFrame::try_from(&tapped),
+            Err(CanFrameError::IdOutOfRange { bits: 11, .. })
+        ));
+        tapped.flags = BusFrame::REMOTE;
+        assert_eq!(CanFrame::try_from(&tapped), Err(CanFrameError::Remote));
+        tapped.kind = FrameKind::SERIAL;
+        assert_eq!(CanFrame::try_from(&tapped), Err(CanFrameError::NotCan));
     }
 
     #[test]

@@ -1,10 +1,10 @@
 //! One robot's codec behind a uniform face: frames in, JSON objects out, the fields as
 //! `chassis decode` prints them (and the Foxglove bridge shows them).
 
-use crate::agilex_v2::{self, V2Profile};
-use crate::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
+use crate::agilex_v2::{self, V2Model, V2Profile};
+use crate::profile::{ScoutMiniProfile, TitanProfile, V1Model, XbotProfile};
 use crate::{CanFrame, DecodeError, Profile, RobotKind, scout_mini, titan, xbot};
-use chassis_interfaces::{DriverStatus, FaultFlags, LightMode};
+use chassis_interfaces::{DriverStatus, FaultFlags, LightMode, RobotDescription, WireProtocol};
 use serde::Serialize;
 use serde_json::{Map, Value};
 
@@ -53,6 +53,31 @@ impl RobotCodec {
                 profile: p,
             },
         }
+    }
+
+    /// The codec of the robot `description` describes (as chassisd publishes it), in the
+    /// protocol it says is in use, with the manuals' profile of its model: how a client that
+    /// knows the robot only from its description (the Foxglove view's `/frames`) reads its bus.
+    /// Its own protocol, or still detecting: the kind's default profile. `None` for a kind the
+    /// registry does not know.
+    pub fn for_description(description: &RobotDescription) -> Option<Self> {
+        let entry = RobotKind::from_id(description.kind)?.entry();
+        let model = || Value::String(description.model().to_string());
+        let profile = match description.protocol {
+            WireProtocol::V2 => serde_json::from_value::<V2Model>(model())
+                .ok()
+                .filter(|m| entry.v2_models.contains(m))
+                .map(|m| Profile::V2(V2Profile::for_model(m))),
+            WireProtocol::V1 => serde_json::from_value::<V1Model>(model())
+                .ok()
+                .filter(|m| entry.v1_model == Some(*m))
+                .map(|m| Profile::ScoutMini(ScoutMiniProfile::for_model(m))),
+            _ => None,
+        };
+        Some(profile.map_or_else(
+            || entry.codec_for_wire(description.protocol),
+            RobotCodec::new,
+        ))
     }
 
     pub fn robot(&self) -> RobotKind {
@@ -331,4 +356,44 @@ fn frame_json(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::description::describe;
+
+    #[test]
+    fn a_description_gives_the_codec_of_its_robot_in_the_protocol_in_use() {
+        for kind in RobotKind::ALL {
+            let d = describe(&kind.entry().defaults());
+            let codec = RobotCodec::for_description(&d).expect("a codec");
+            assert_eq!(codec.robot(), kind);
+        }
+        // A SCOUT MINI described in V1, then (detection decided) in V2 with its omni model.
+        let v1 = describe(&RobotKind::ScoutMini.entry().defaults());
+        assert!(matches!(
+            RobotCodec::for_description(&v1),
+            Some(RobotCodec::ScoutMini(_))
+        ));
+        let mut v2 = describe(&Profile::V2(V2Profile::for_model(V2Model::ScoutMiniOmni)));
+        v2.protocol = WireProtocol::V2;
+        match RobotCodec::for_description(&v2) {
+            Some(RobotCodec::V2 { profile, robot }) => {
+                assert_eq!(
+                    (profile.model, robot),
+                    (V2Model::ScoutMiniOmni, RobotKind::ScoutMini)
+                );
+            }
+            other => panic!("{other:?}"),
+        }
+        // A model of another robot is not taken: the kind's own V2 profile is.
+        let mut hunter = describe(&RobotKind::Hunter.entry().defaults());
+        hunter.set_model("scout-mini-omni");
+        match RobotCodec::for_description(&hunter) {
+            Some(RobotCodec::V2 { profile, .. }) => assert_eq!(profile.model, V2Model::Hunter),
+            other => panic!("{other:?}"),
+        }
+        assert!(RobotCodec::for_description(&RobotDescription::default()).is_none());
+    }
 }

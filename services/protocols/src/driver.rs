@@ -31,27 +31,30 @@ pub enum Rx<'a> {
     Bytes(&'a [u8]),
 }
 
-/// Something to put on the bus.
+/// One item on the wire, owned, in either direction: what a driver or a simulated firmware puts
+/// on the bus, and what a bus hands back as received. [`Rx`] is its borrowed form.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Transmit {
+pub enum WireItem {
+    /// One CAN frame (TITAN, SCOUT MINI, protocol V2).
     Can(CanFrame),
+    /// A chunk of a serial byte stream (XBot).
     Bytes(Vec<u8>),
 }
 
-impl Transmit {
+impl WireItem {
     /// The CAN frame, if this is one.
     pub fn as_can(&self) -> Option<&CanFrame> {
         match self {
-            Transmit::Can(frame) => Some(frame),
-            Transmit::Bytes(_) => None,
+            WireItem::Can(frame) => Some(frame),
+            WireItem::Bytes(_) => None,
         }
     }
 
     /// As a received item for the other side of the wire.
     pub fn as_rx(&self) -> Rx<'_> {
         match self {
-            Transmit::Can(frame) => Rx::Can(frame),
-            Transmit::Bytes(bytes) => Rx::Bytes(bytes),
+            WireItem::Can(frame) => Rx::Can(frame),
+            WireItem::Bytes(bytes) => Rx::Bytes(bytes),
         }
     }
 }
@@ -153,7 +156,7 @@ pub trait Driver {
     fn handle_timeout(&mut self, now: Timestamp);
 
     /// The next frame to send, if any.
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit>;
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem>;
 
     /// When [`Driver::handle_timeout`] must be called next.
     fn poll_timeout(&self) -> Option<Timestamp>;
@@ -190,7 +193,7 @@ impl<D: Driver + ?Sized> Driver for Box<D> {
     fn handle_timeout(&mut self, now: Timestamp) {
         (**self).handle_timeout(now);
     }
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         (**self).poll_transmit(now)
     }
     fn poll_timeout(&self) -> Option<Timestamp> {
@@ -512,8 +515,8 @@ impl DriverCore {
         &mut self,
         name: &str,
         encoded: Result<T, E>,
-        wrap: impl FnOnce(T) -> Transmit,
-    ) -> Option<Transmit> {
+        wrap: impl FnOnce(T) -> WireItem,
+    ) -> Option<WireItem> {
         match encoded {
             Ok(item) => {
                 self.state.link.tx_frames += 1;

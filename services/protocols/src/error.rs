@@ -100,6 +100,16 @@ pub(crate) fn to_i32(field: &'static str, value: f64, scale: f64) -> Result<i32,
 }
 
 /// Checks that a value fits `min..=max` (for fields sent as they are, such as percentages).
+/// Checks a byte-sized field against `min..=max`.
+pub(crate) fn check_u8(
+    field: &'static str,
+    value: u8,
+    min: u8,
+    max: u8,
+) -> Result<(), EncodeError> {
+    check_range(field, value.into(), min.into(), max.into())
+}
+
 pub(crate) fn check_range(
     field: &'static str,
     value: f64,

@@ -8,17 +8,21 @@
 //!
 //! Below the contract are the pieces every simulated chassis shares: the sub-stepped physics
 //! clock, the first-order speed lag, the true pose, the battery model, the bounded transmit queue
-//! with its silence window, and the feedback flood of load tests.
+//! with its silence window, the feedback flood of load tests, and [`Chassis`] — the state and the
+//! fault injection every simulated firmware embeds.
+
+mod chassis;
 
 use std::collections::VecDeque;
 use std::time::Duration;
 
 use serde::Serialize;
 
-use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit, wrap_angle};
+use crate::driver::{Rx, WireItem, wrap_angle};
 use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp};
+
+pub(crate) use chassis::{Applied, Chassis, GARBAGE_ID, Injectable};
 
 /// A fault or event to inject into a simulated chassis.
 #[derive(Debug, Clone, PartialEq)]
@@ -183,7 +187,7 @@ pub trait Firmware {
     fn handle_timeout(&mut self, now: Timestamp);
 
     /// The next frame (or serial chunk) the chassis sends.
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit>;
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem>;
 
     /// When [`Firmware::handle_timeout`] must be called next.
     fn poll_timeout(&self) -> Option<Timestamp>;
@@ -206,7 +210,7 @@ impl<F: Firmware + ?Sized> Firmware for Box<F> {
     fn handle_timeout(&mut self, now: Timestamp) {
         (**self).handle_timeout(now);
     }
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         (**self).poll_transmit(now)
     }
     fn poll_timeout(&self) -> Option<Timestamp> {
@@ -450,23 +454,6 @@ impl Flood {
         self.toggle = !self.toggle;
         self.grid.served(now);
         Some(second)
-    }
-}
-
-/// [`Injection::Garbage`] on a CAN bus: the bytes, 8 at a time, as frames with an id the robot
-/// does not use.
-pub(crate) fn garbage_frames(id: u16, bytes: &[u8]) -> impl Iterator<Item = CanFrame> + '_ {
-    bytes
-        .chunks(8)
-        .filter_map(move |chunk| CanFrame::new(u32::from(id), chunk).ok())
-}
-
-/// Queues [`Injection::Garbage`] on a CAN bus ([`garbage_frames`]), each frame counted as
-/// injected when it leaves.
-pub(crate) fn push_garbage(outbox: &mut Outbox<CanFrame>, id: u16, bytes: &[u8]) {
-    for frame in garbage_frames(id, bytes) {
-        let len = frame.data().len();
-        outbox.push_injected(frame, InjectedCounts::garbage(len));
     }
 }
 

@@ -42,7 +42,7 @@ pub use command::{
     BadControlRequest, Command, CommandError, ControlAction, Planned, Turn, command_to_request,
     request_to_action,
 };
-pub use driver::{BoxedDriver, ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, Transmit};
+pub use driver::{BoxedDriver, ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, WireItem};
 pub use error::{DecodeError, EncodeError};
 pub use firmware::{BoxedFirmware, Firmware, InjectedCounts, Injection, SimTruth};
 pub use profile::{

@@ -12,7 +12,7 @@ use chassis_interfaces::Twist;
 
 use crate::Direction;
 use crate::command::Command;
-use crate::driver::{ControlOutcome, Driver, DriverEvent, Level, Transmit};
+use crate::driver::{ControlOutcome, Driver, DriverEvent, Level, WireItem};
 use crate::firmware::{Firmware, Injection};
 use crate::time::{Timestamp, earliest};
 
@@ -22,7 +22,7 @@ pub struct Record {
     /// When it was sent.
     pub at: Timestamp,
     pub direction: Direction,
-    pub item: Transmit,
+    pub item: WireItem,
     /// Sent while the wire was cut: it never arrived.
     pub lost: bool,
 }
@@ -39,8 +39,8 @@ pub struct Pair<D, F> {
     pub cut: bool,
     /// While true, every item sent is kept in [`Pair::log`].
     pub record: bool,
-    to_firmware: VecDeque<(Timestamp, Transmit)>,
-    to_driver: VecDeque<(Timestamp, Transmit)>,
+    to_firmware: VecDeque<(Timestamp, WireItem)>,
+    to_driver: VecDeque<(Timestamp, WireItem)>,
     log: Vec<Record>,
     events: Vec<DriverEvent>,
     /// Times a side kept asking for a deadline that had already passed (a bug in that side).
@@ -173,7 +173,7 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
         }
     }
 
-    fn send(&mut self, direction: Direction, item: Transmit) {
+    fn send(&mut self, direction: Direction, item: WireItem) {
         if self.record {
             self.log.push(Record {
                 at: self.now,
@@ -216,13 +216,13 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
     }
 
     /// Puts something on the wire towards the driver, as if the chassis had sent it.
-    pub fn send_to_driver(&mut self, item: Transmit) {
+    pub fn send_to_driver(&mut self, item: WireItem) {
         self.send(Direction::FromChassis, item);
     }
 
     /// Puts something on the wire towards the chassis, as if the driver had sent it (a rogue
     /// node, a corrupted frame).
-    pub fn send_to_firmware(&mut self, item: Transmit) {
+    pub fn send_to_firmware(&mut self, item: WireItem) {
         self.send(Direction::ToChassis, item);
     }
 

@@ -1,116 +1,134 @@
 //! The bench of the simulated firmwares' own tests: one firmware alone on simulated time, fed by
-//! hand, with an optional heartbeat from "the computer". Each robot's tests keep their `Bench`
-//! (its fields are what the tests read) and implement [`SimBench`] for it; the time-keeping is
-//! written once here.
+//! hand, with an optional heartbeat from "the computer". The bench is written once here; each
+//! robot's tests say what its firmware sends and hears ([`BenchFirmware`]) and add their own
+//! helpers to `Bench<TheirSim>`.
 
 use std::time::Duration;
 
 use crate::can::CanFrame;
-use crate::driver::Transmit;
+use crate::driver::WireItem;
 use crate::firmware::{Firmware, Injection};
 use crate::time::{Timestamp, earliest};
 
 /// What one robot's firmware puts on the wire: CAN frames or serial chunks.
 pub(crate) trait Sent: Sized {
-    fn from_transmit(item: Transmit) -> Option<Self>;
+    fn from_wire(item: WireItem) -> Option<Self>;
 }
 
 impl Sent for CanFrame {
-    fn from_transmit(item: Transmit) -> Option<Self> {
+    fn from_wire(item: WireItem) -> Option<Self> {
         match item {
-            Transmit::Can(frame) => Some(frame),
-            Transmit::Bytes(_) => None,
+            WireItem::Can(frame) => Some(frame),
+            WireItem::Bytes(_) => None,
         }
     }
 }
 
 impl Sent for Vec<u8> {
-    fn from_transmit(item: Transmit) -> Option<Self> {
+    fn from_wire(item: WireItem) -> Option<Self> {
         match item {
-            Transmit::Bytes(bytes) => Some(bytes),
-            Transmit::Can(_) => None,
+            WireItem::Bytes(bytes) => Some(bytes),
+            WireItem::Can(_) => None,
         }
     }
 }
 
-/// The bench's fields the shared methods work on.
-pub(crate) struct Parts<'a, F, I, C> {
-    pub(crate) sim: &'a mut F,
-    pub(crate) now: &'a mut Timestamp,
-    /// Everything the chassis sent, with the time it was polled.
-    pub(crate) sent: &'a mut Vec<(Timestamp, I)>,
-    pub(crate) heartbeat: &'a mut Option<C>,
-    pub(crate) next_heartbeat: &'a mut Timestamp,
-    pub(crate) last_heartbeat: &'a mut Option<Timestamp>,
-}
-
-/// A firmware on simulated time whose heartbeat command is `Command`.
-pub(crate) trait SimBench {
-    type Firmware: Firmware;
+/// A firmware as its bench drives it: what it sends, its profile, and its heartbeat command.
+pub(crate) trait BenchFirmware: Firmware + Sized {
     type Item: Sent;
     type Command: Copy;
+    type Profile: Clone;
     const HEARTBEAT_PERIOD: Duration;
 
-    fn parts(&mut self) -> Parts<'_, Self::Firmware, Self::Item, Self::Command>;
-
-    /// Everything the chassis sent, with the time it was polled.
-    fn sent(&self) -> &[(Timestamp, Self::Item)];
+    fn bench_profile(&self) -> &Self::Profile;
 
     /// What the computer sends at each heartbeat.
-    fn send_heartbeat(&mut self, command: Self::Command);
+    fn send_heartbeat(bench: &mut Bench<Self>, command: Self::Command);
+}
 
-    fn inject(&mut self, injection: Injection) -> bool {
-        let p = self.parts();
-        let ok = p.sim.inject(*p.now, injection);
+/// One firmware on simulated time, and everything it sent.
+pub(crate) struct Bench<F: BenchFirmware> {
+    pub(crate) sim: F,
+    /// The profile the computer's side encodes and decodes with (the firmware's own).
+    pub(crate) profile: F::Profile,
+    pub(crate) now: Timestamp,
+    /// Everything the chassis sent, with the time it was polled.
+    pub(crate) sent: Vec<(Timestamp, F::Item)>,
+    heartbeat: Option<F::Command>,
+    next_heartbeat: Timestamp,
+    /// When the computer last sent its heartbeat.
+    pub(crate) last_heartbeat: Option<Timestamp>,
+    /// The computer's rolling count, for robots whose commands carry one (SCOUT MINI).
+    pub(crate) count: u8,
+}
+
+impl<F: BenchFirmware> Bench<F> {
+    /// `sim` at `now`, with what it sent at once already drained.
+    pub(crate) fn with(sim: F, now: Timestamp) -> Self {
+        let mut bench = Self {
+            profile: sim.bench_profile().clone(),
+            sim,
+            now,
+            sent: Vec::new(),
+            heartbeat: None,
+            next_heartbeat: now,
+            last_heartbeat: None,
+            count: 0,
+        };
+        bench.drain();
+        bench
+    }
+
+    pub(crate) fn inject(&mut self, injection: Injection) -> bool {
+        let ok = self.sim.inject(self.now, injection);
         self.drain();
         ok
     }
 
     /// Sends `command` every heartbeat period from now on (`None` stops it).
-    fn heartbeat(&mut self, command: Option<Self::Command>) {
-        let p = self.parts();
-        if p.heartbeat.is_none() {
-            *p.next_heartbeat = *p.now;
+    pub(crate) fn heartbeat(&mut self, command: Option<F::Command>) {
+        if self.heartbeat.is_none() {
+            self.next_heartbeat = self.now;
         }
-        *p.heartbeat = command;
+        self.heartbeat = command;
     }
 
-    fn drain(&mut self) {
-        let p = self.parts();
-        while let Some(item) = p.sim.poll_transmit(*p.now) {
-            let Some(item) = Self::Item::from_transmit(item) else {
+    pub(crate) fn drain(&mut self) {
+        while let Some(item) = self.sim.poll_transmit(self.now) {
+            let Some(item) = F::Item::from_wire(item) else {
                 panic!("the firmware sent the other kind of bus item");
             };
-            p.sent.push((*p.now, item));
+            self.sent.push((self.now, item));
         }
     }
 
     /// Moves time from deadline to deadline for `duration`, sending the heartbeat when it is
     /// due; a firmware whose deadline does not move on is a stall.
-    fn run_for(&mut self, duration: Duration) {
-        let until = *self.parts().now + duration;
+    pub(crate) fn run_for(&mut self, duration: Duration) {
+        let until = self.now + duration;
         loop {
-            let p = self.parts();
-            let heartbeat = p.heartbeat.map(|_| *p.next_heartbeat);
-            let next = earliest(p.sim.poll_timeout(), heartbeat).unwrap_or(until);
-            assert!(next >= *p.now, "deadline {next:?} before now {:?}", p.now);
+            let heartbeat = self.heartbeat.map(|_| self.next_heartbeat);
+            let next = earliest(self.sim.poll_timeout(), heartbeat).unwrap_or(until);
+            assert!(
+                next >= self.now,
+                "deadline {next:?} before now {:?}",
+                self.now
+            );
             if next > until {
-                *p.now = until;
+                self.now = until;
                 break;
             }
-            *p.now = next;
-            if let Some(command) = *p.heartbeat
-                && *p.next_heartbeat <= next
+            self.now = next;
+            if let Some(command) = self.heartbeat
+                && self.next_heartbeat <= next
             {
-                self.send_heartbeat(command);
-                let p = self.parts();
-                *p.last_heartbeat = Some(next);
-                *p.next_heartbeat += Self::HEARTBEAT_PERIOD;
+                F::send_heartbeat(self, command);
+                self.last_heartbeat = Some(next);
+                self.next_heartbeat += F::HEARTBEAT_PERIOD;
             }
-            let p = self.parts();
-            if p.sim.poll_timeout().is_some_and(|t| t <= next) {
-                p.sim.handle_timeout(next);
-                let after = p.sim.poll_timeout().unwrap();
+            if self.sim.poll_timeout().is_some_and(|t| t <= next) {
+                self.sim.handle_timeout(next);
+                let after = self.sim.poll_timeout().unwrap();
                 assert!(
                     after > next,
                     "stall: {after:?} after handle_timeout at {next:?}"
@@ -121,7 +139,7 @@ pub(crate) trait SimBench {
     }
 
     /// Items sent strictly after `since`.
-    fn sent_since(&self, since: Timestamp) -> usize {
-        self.sent().iter().filter(|(t, _)| *t > since).count()
+    pub(crate) fn sent_since(&self, since: Timestamp) -> usize {
+        self.sent.iter().filter(|(t, _)| *t > since).count()
     }
 }

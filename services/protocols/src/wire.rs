@@ -24,12 +24,35 @@ pub(crate) fn read_bool(id: u32, field: &'static str, byte: u8) -> Result<bool, 
     match byte {
         0x00 => Ok(false),
         0x01 => Ok(true),
-        value => Err(DecodeError::InvalidValue {
-            id,
-            field,
-            value: value.into(),
-        }),
+        value => Err(invalid(id, field, value)),
     }
+}
+
+/// The first data byte of frame `id` (one-byte commands); none is [`DecodeError::TooShort`].
+pub(crate) fn first_byte(id: u32, data: &[u8]) -> Result<u8, DecodeError> {
+    data.first().copied().ok_or(DecodeError::TooShort {
+        id,
+        len: 0,
+        need: 1,
+    })
+}
+
+/// [`DecodeError::InvalidValue`] for a byte-sized field of frame `id`.
+pub(crate) fn invalid(id: u32, field: &'static str, value: u8) -> DecodeError {
+    DecodeError::InvalidValue {
+        id,
+        field,
+        value: value.into(),
+    }
+}
+
+/// The number, from 1, of `id` in a block of `count` consecutive ids starting at `first` (motor
+/// 1-n, sensor 1-n); `None` outside it.
+pub(crate) fn index_in(id: u16, first: u16, count: u16) -> Option<u8> {
+    (first..first.saturating_add(count))
+        .contains(&id)
+        .then(|| u8::try_from(id - first + 1).ok())
+        .flatten()
 }
 
 /// Decodes `raw / scale` for display and state (`scale` = wire units per SI unit).

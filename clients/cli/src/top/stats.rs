@@ -124,12 +124,7 @@ impl Namer {
     }
 
     fn can(&self, frame: &BusFrame) -> Option<String> {
-        let can = if frame.flags & BusFrame::EXTENDED_ID != 0 {
-            CanFrame::new_extended(frame.can_id, frame.payload())
-        } else {
-            CanFrame::new(frame.can_id, frame.payload())
-        }
-        .ok()?;
+        let can = CanFrame::try_from(frame).ok()?;
         let json = self.rx.as_ref()?.decode_can(&can).ok()?;
         name_and_id(&json).0
     }

@@ -20,7 +20,7 @@ use std::io;
 use std::os::fd::RawFd;
 use std::str::FromStr;
 
-use chassis_protocols::{CanFrame, Rx, Transmit};
+use chassis_protocols::{CanFrame, Rx, WireItem};
 use thiserror::Error;
 
 pub mod conformance;
@@ -174,10 +174,10 @@ impl Bus {
 
     /// Sends one item. A CAN frame on a byte bus (or bytes on a CAN bus) is a bug in the caller
     /// and is reported as a protocol error.
-    pub fn transmit(&mut self, item: &Transmit) -> Result<(), BusError> {
+    pub fn transmit(&mut self, item: &WireItem) -> Result<(), BusError> {
         match (self, item) {
-            (Bus::Can(bus), Transmit::Can(frame)) => bus.send(frame),
-            (Bus::Bytes(bus), Transmit::Bytes(bytes)) => bus.write_all(bytes),
+            (Bus::Can(bus), WireItem::Can(frame)) => bus.send(frame),
+            (Bus::Bytes(bus), WireItem::Bytes(bytes)) => bus.write_all(bytes),
             (bus, _) => Err(BusError::Protocol {
                 name: bus.name().to_string(),
                 reason: "frame kind does not match the bus kind".into(),

@@ -54,7 +54,7 @@ use std::str::FromStr;
 use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
-use chassis_protocols::{CanFrame, CandumpLine, RobotKind, Timestamp, Transmit};
+use chassis_protocols::{CanFrame, CandumpLine, RobotKind, Timestamp, WireItem};
 use nix::errno::Errno;
 use nix::poll::{PollFd, PollFlags};
 use nix::sys::time::TimeSpec;
@@ -183,7 +183,7 @@ pub const METADATA_NAME: &str = "chassis";
 #[derive(Debug, Clone, PartialEq)]
 pub struct Entry {
     pub stamp_ns: u64,
-    pub item: Transmit,
+    pub item: WireItem,
 }
 
 /// One record of a recording, as the replay sees it.
@@ -372,11 +372,11 @@ pub fn frame_step(log_time: u64, data: &[u8]) -> Step {
                 CanFrame::new(record.can_id, &bytes)
             };
             match frame {
-                Ok(frame) => Transmit::Can(frame),
+                Ok(frame) => WireItem::Can(frame),
                 Err(err) => return Step::Bad(err.to_string()),
             }
         }
-        "serial" => Transmit::Bytes(bytes),
+        "serial" => WireItem::Bytes(bytes),
         _ => return Step::Other,
     };
     Step::Rx(Entry {
@@ -412,7 +412,7 @@ pub fn candump_step(line: &str) -> Option<Step> {
         });
     Some(Step::Rx(Entry {
         stamp_ns,
-        item: Transmit::Can(parsed.frame),
+        item: WireItem::Can(parsed.frame),
     }))
 }
 
@@ -576,7 +576,7 @@ enum Push {
 /// Writes `entry` (from byte `offset` for a serial chunk) into the pair.
 fn push(bus: &mut Bus, entry: &Entry, offset: &mut usize) -> Result<Push, BusError> {
     match (&entry.item, &mut *bus) {
-        (Transmit::Bytes(bytes), Bus::Bytes(byte_bus)) => {
+        (WireItem::Bytes(bytes), Bus::Bytes(byte_bus)) => {
             // A chunk must go whole, so write it directly and keep what did not fit.
             // SAFETY: the descriptor belongs to `byte_bus`, borrowed for this call.
             let fd = unsafe { BorrowedFd::borrow_raw(byte_bus.raw_fd()) };
@@ -687,7 +687,7 @@ fn play(
                 pending = loop {
                     match steps.next() {
                         Some(Step::Rx(entry)) => {
-                            let wrong_kind = is_can != matches!(entry.item, Transmit::Can(_));
+                            let wrong_kind = is_can != matches!(entry.item, WireItem::Can(_));
                             if wrong_kind {
                                 stats.bad += 1;
                                 continue;
@@ -861,7 +861,7 @@ mod tests {
         assert_eq!(entry.stamp_ns, 1_700_000_000_250_000_000);
         assert_eq!(
             entry.item,
-            Transmit::Can(CanFrame::from_candump("211#0102030405060708").unwrap())
+            WireItem::Can(CanFrame::from_candump("211#0102030405060708").unwrap())
         );
         assert!(matches!(
             candump_step("(1.000000) can0 211#01 R"),
@@ -885,7 +885,7 @@ mod tests {
             frame_step(7, rx),
             Step::Rx(Entry {
                 stamp_ns: 7,
-                item: Transmit::Can(CanFrame::new(0x211, &[0x0A, 0x0B]).unwrap()),
+                item: WireItem::Can(CanFrame::new(0x211, &[0x0A, 0x0B]).unwrap()),
             })
         );
         let serial = br#"{"direction":"rx","kind":"serial","data":"AA55"}"#;
@@ -893,7 +893,7 @@ mod tests {
             frame_step(1, serial),
             Step::Rx(Entry {
                 stamp_ns: 1,
-                item: Transmit::Bytes(vec![0xAA, 0x55]),
+                item: WireItem::Bytes(vec![0xAA, 0x55]),
             })
         );
         let tx = br#"{"direction":"tx","kind":"can","can_id":273,"data":""}"#;
@@ -1029,7 +1029,7 @@ mod tests {
             // A datagram peer that left shows only when we send.
             if got.len() == 2 {
                 let frame = CanFrame::new(0x111, &[0]).unwrap();
-                if let Err(err) = bus.transmit(&Transmit::Can(frame)) {
+                if let Err(err) = bus.transmit(&WireItem::Can(frame)) {
                     assert!(err.is_disconnect(), "{err}");
                     gone = true;
                     break;

@@ -80,7 +80,7 @@ use chassis_interfaces::{
 };
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
-    ControlAction, ControlOutcome, Driver, DriverEvent, Rx, Timestamp, Transmit, nmea,
+    ControlAction, ControlOutcome, Driver, DriverEvent, Rx, Timestamp, WireItem, nmea,
     request_to_action, time::Grid,
 };
 use tracing::{debug, error, info, warn};
@@ -329,9 +329,9 @@ pub struct Engine {
     unkept: Option<Vec<HeldLock>>,
     keep_retry_at: Timestamp,
     /// Items read from the bus in a pass, kept to spare an allocation per pass.
-    rx_items: Vec<(Timestamp, Transmit)>,
+    rx_items: Vec<(Timestamp, WireItem)>,
     /// Items written that the backend holds, with the instant their write returned.
-    tx_held: Vec<(Timestamp, Transmit)>,
+    tx_held: Vec<(Timestamp, WireItem)>,
     /// The readers to wake at the end of the pass, one bit per [`Readers`].
     to_wake: u8,
 }
@@ -615,7 +615,7 @@ impl Engine {
     }
 
     /// An item the shell wrote to the bus; `stamp` is when the write returned.
-    pub fn handle_sent(&mut self, stamp: Timestamp, item: &Transmit) {
+    pub fn handle_sent(&mut self, stamp: Timestamp, item: &WireItem) {
         self.tap(stamp, FrameDirection::TX, FrameKind::SERIAL, item.as_rx());
     }
 
@@ -827,7 +827,7 @@ impl Engine {
 
     /// The next item to write to the bus. The mux decides first when something changed since
     /// its last decision. While the bus is down nothing is sent (the driver does not queue).
-    pub fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    pub fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         if self.undecided {
             self.decide(now);
         }

@@ -11,7 +11,7 @@ use std::fmt::Display;
 use std::time::Duration;
 
 use chassis_interfaces::{ControlRequest, VelocityRequest};
-use chassis_protocols::{Timestamp, Transmit};
+use chassis_protocols::{Timestamp, WireItem};
 use tracing::{debug, error};
 
 use super::{Device, Engine, HeldLock, Link, Publication, Ticket, Wake};
@@ -116,7 +116,7 @@ pub trait PassIo {
     // ---- the devices ----------------------------------------------------------------------
 
     /// Writes one item to the bus.
-    fn write(&mut self, item: &Transmit) -> Result<Written, WriteError<Self::Error>>;
+    fn write(&mut self, item: &WireItem) -> Result<Written, WriteError<Self::Error>>;
 
     /// Writes what the backend holds; `Ok` with the instant the flush returned.
     fn flush(&mut self) -> Result<Timestamp, WriteError<Self::Error>>;
@@ -124,7 +124,7 @@ pub trait PassIo {
     /// Reads what the bus has pending, at most one batch, into `into`, each item stamped when
     /// it was read. `Ok(true)`: the batch limit stopped the read with more pending. An error is
     /// a lost bus (the items read before it are in `into`).
-    fn read_bus(&mut self, into: &mut Vec<(Timestamp, Transmit)>) -> Result<bool, Self::Error>;
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, WireItem)>) -> Result<bool, Self::Error>;
 
     /// Hands `take` what the GPS receiver has pending. An error is a lost receiver.
     fn read_gps(&mut self, take: impl FnMut(&[u8])) -> Result<(), Self::Error>;

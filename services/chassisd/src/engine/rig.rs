@@ -25,7 +25,7 @@ use chassis_interfaces::{
     VelocityRequest,
 };
 use chassis_protocols::{
-    DriverConfig, Injection, Profile, RobotKind, Timestamp, Transmit, scout_mini, titan,
+    DriverConfig, Injection, Profile, RobotKind, Timestamp, WireItem, scout_mini, titan,
 };
 
 use super::{
@@ -45,7 +45,7 @@ pub const LATENCY: Duration = Duration::from_micros(250);
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sent {
     pub at: Timestamp,
-    pub item: Transmit,
+    pub item: WireItem,
 }
 
 /// A scripted client action.
@@ -83,9 +83,9 @@ pub struct World {
     pub profile: Profile,
     pub mux_config: MuxConfig,
     now: Timestamp,
-    to_firmware: VecDeque<(Timestamp, Transmit)>,
+    to_firmware: VecDeque<(Timestamp, WireItem)>,
     /// Frames in the service's receive queue (the kernel's), with their arrival.
-    to_engine: VecDeque<(Timestamp, Transmit)>,
+    to_engine: VecDeque<(Timestamp, WireItem)>,
     script: Vec<(Timestamp, Action)>,
     gps: Gps,
     /// The bus works; while false everything sent is lost, reads fail and reopening fails.
@@ -520,7 +520,7 @@ impl Rig {
 
     /// The speed an item commands, if it is a motion frame (TITAN and AgileX V2 0x111, SCOUT MINI
     /// V1 0x130).
-    pub fn commanded_speed(&self, item: &Transmit) -> Option<f64> {
+    pub fn commanded_speed(&self, item: &WireItem) -> Option<f64> {
         let frame = item.as_can()?;
         match &self.world.profile {
             Profile::Titan(p) => match titan::decode(frame, p) {
@@ -683,7 +683,7 @@ impl PassIo for World {
         self.acknowledged = true;
     }
 
-    fn write(&mut self, item: &Transmit) -> Result<Written, WriteError<Self::Error>> {
+    fn write(&mut self, item: &WireItem) -> Result<Written, WriteError<Self::Error>> {
         if !self.bus_ok {
             return Err(WriteError::Lost("simulated bus cut"));
         }
@@ -700,7 +700,7 @@ impl PassIo for World {
         Ok(self.now)
     }
 
-    fn read_bus(&mut self, into: &mut Vec<(Timestamp, Transmit)>) -> Result<bool, Self::Error> {
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, WireItem)>) -> Result<bool, Self::Error> {
         if self.bus_failed {
             self.frames_sent_to_engine -= self.to_engine.len() as u64;
             self.to_engine.clear();

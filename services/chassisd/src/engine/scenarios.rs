@@ -11,7 +11,7 @@ use std::time::Duration;
 use chassis_interfaces::{
     ControlKind, ControlRequest, ControlStatus, LinkFlags, LockStatus, VelocityRequest, ZeroReason,
 };
-use chassis_protocols::{Injection, RobotKind, Timestamp, Transmit, titan};
+use chassis_protocols::{Injection, RobotKind, Timestamp, WireItem, titan};
 
 use super::rig::{LATENCY, Rig, T0};
 use super::{Device, HeldLock, ListenerChange, Wake, WakeBudget};
@@ -117,7 +117,7 @@ fn a_command_is_decided_before_the_bus_is_drained() {
     let mut rig = ready();
     let t = at(231);
     let titan_profile = chassis_protocols::profile::TitanProfile::default();
-    let feedback = Transmit::Can(
+    let feedback = WireItem::Can(
         titan::Frame::MotionFeedback(titan::MotionFeedback::default())
             .encode(&titan_profile)
             .unwrap(),

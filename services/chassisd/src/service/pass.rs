@@ -5,7 +5,7 @@
 #![allow(clippy::disallowed_methods)]
 
 use chassis_interfaces::{ControlRequest, ControlResponse, ControlStatus, VelocityRequest};
-use chassis_protocols::{Rx, Timestamp, Transmit};
+use chassis_protocols::{Rx, Timestamp, WireItem};
 use iceoryx2::port::notifier::NotifierNotifyError;
 use iceoryx2::port::{LoanError, SendError};
 use tracing::{debug, info, warn};
@@ -159,7 +159,7 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
         }
     }
 
-    fn write(&mut self, item: &Transmit) -> Result<Written, WriteError<PassError>> {
+    fn write(&mut self, item: &WireItem) -> Result<Written, WriteError<PassError>> {
         let Some(bus) = self.shell.bus.as_mut() else {
             return Err(WriteError::Lost(no_bus()));
         };
@@ -186,7 +186,7 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
         }
     }
 
-    fn read_bus(&mut self, into: &mut Vec<(Timestamp, Transmit)>) -> Result<bool, PassError> {
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, WireItem)>) -> Result<bool, PassError> {
         let Some(bus) = self.shell.bus.as_mut() else {
             return Err(no_bus());
         };
@@ -195,8 +195,8 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
             into.push((
                 stamp,
                 match rx {
-                    Rx::Can(frame) => Transmit::Can(*frame),
-                    Rx::Bytes(bytes) => Transmit::Bytes(bytes.to_vec()),
+                    Rx::Can(frame) => WireItem::Can(*frame),
+                    Rx::Bytes(bytes) => WireItem::Bytes(bytes.to_vec()),
                 },
             ));
         })?;

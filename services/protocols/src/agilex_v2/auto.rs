@@ -16,7 +16,7 @@ use chassis_interfaces::{ChassisState, LinkFlags, Twist, WireProtocol};
 use super::detect::{DetectSettings, Detection, Detector};
 use super::{V2Driver, V2Profile};
 use crate::command::Command;
-use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
+use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
 use crate::profile::{Protocol, ScoutMiniProfile};
 use crate::registry::RobotKind;
 use crate::scout_mini::ScoutMiniDriver;
@@ -192,7 +192,7 @@ impl Driver for AutoDriver {
         }
     }
 
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         self.inner
             .as_mut()
             .and_then(|(_, driver)| driver.poll_transmit(now))

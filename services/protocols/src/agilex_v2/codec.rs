@@ -16,9 +16,9 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 use super::profile::{BmsAlarmLayout, RcStickOrder, V2Profile};
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::error::{DecodeError, EncodeError, check_range, to_i16, to_i32, to_u8, to_u16};
+use crate::error::{DecodeError, EncodeError, check_u8, to_i16, to_i32, to_u8, to_u16};
 use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
-use crate::wire::{read_bool, read_prefix, si, wire_bytes};
+use crate::wire::{first_byte, index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
 /// Frame identifiers.
 pub mod id {
@@ -526,13 +526,6 @@ fn lateral_sign(profile: &V2Profile) -> f64 {
     }
 }
 
-fn index_in(id: u16, first: u16, count: u16) -> Option<u8> {
-    // count ≤ 8: the index fits u8.
-    (first..first + count)
-        .contains(&id)
-        .then(|| (id - first + 1) as u8)
-}
-
 fn decode_motion(raw_id: u32, data: &[u8], profile: &V2Profile) -> Result<Motion, DecodeError> {
     let w: MotionWire = read_prefix(raw_id, data)?;
     Ok(Motion {
@@ -603,22 +596,6 @@ fn sticks(b1: i8, b2: i8, profile: &V2Profile) -> (i8, i8) {
     match profile.rc_stick_order {
         RcStickOrder::Sdk => (b1, b2),
         RcStickOrder::Pya => (b2, b1),
-    }
-}
-
-fn first_byte(raw_id: u32, data: &[u8]) -> Result<u8, DecodeError> {
-    data.first().copied().ok_or(DecodeError::TooShort {
-        id: raw_id,
-        len: 0,
-        need: 1,
-    })
-}
-
-fn invalid(raw_id: u32, field: &'static str, value: u8) -> DecodeError {
-    DecodeError::InvalidValue {
-        id: raw_id,
-        field,
-        value: value.into(),
     }
 }
 
@@ -827,10 +804,6 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
     Ok(decoded)
 }
 
-fn check_index(field: &'static str, value: u8, min: u8, max: u8) -> Result<(), EncodeError> {
-    check_range(field, value.into(), min.into(), max.into())
-}
-
 /// A one-byte command at the profile's ⚠ D-9 DLC (1, or 8 zero-padded).
 fn short(id: u16, byte: u8, profile: &V2Profile) -> CanFrame {
     if profile.short_commands_dlc == 1 {
@@ -908,10 +881,10 @@ impl Frame {
                     ("front_brightness_pct", l.front_brightness_pct),
                     ("rear_brightness_pct", l.rear_brightness_pct),
                 ] {
-                    check_index(field, v, 0, MAX_BRIGHTNESS_PCT)?;
+                    check_u8(field, v, 0, MAX_BRIGHTNESS_PCT)?;
                 }
-                check_index("front_mode", l.front_mode, 0, MAX_LIGHT_MODE)?;
-                check_index("rear_mode", l.rear_mode, 0, MAX_LIGHT_MODE)?;
+                check_u8("front_mode", l.front_mode, 0, MAX_LIGHT_MODE)?;
+                check_u8("rear_mode", l.rear_mode, 0, MAX_LIGHT_MODE)?;
                 CanFrame::from_parts(
                     id,
                     wire_bytes::<8, _>(LightWire {
@@ -959,7 +932,7 @@ impl Frame {
                     ("switch_c", r.switch_c),
                     ("switch_d", r.switch_d),
                 ] {
-                    check_index(field, v, 0, 3)?;
+                    check_u8(field, v, 0, 3)?;
                 }
                 let (b1, b2) = match profile.rc_stick_order {
                     RcStickOrder::Sdk => (r.right_x_pct, r.right_y_pct),
@@ -1001,7 +974,7 @@ impl Frame {
                 )
             }
             Frame::Imu(i) => {
-                check_index("kind", i.kind, 0, 2)?;
+                check_u8("kind", i.kind, 0, 2)?;
                 CanFrame::from_parts(
                     id,
                     wire_bytes::<8, _>(ImuWire {
@@ -1013,11 +986,11 @@ impl Frame {
             }
             Frame::Bumper { state } => CanFrame::from_parts(id, [*state, 0, 0, 0, 0, 0, 0, 0]),
             Frame::Ultrasonic(u) => {
-                check_index("sensor", u.sensor, 1, 8)?;
+                check_u8("sensor", u.sensor, 1, 8)?;
                 CanFrame::from_parts(id, u.raw)
             }
             Frame::Uwb(u) => {
-                check_index("module", u.module, 1, 4)?;
+                check_u8("module", u.module, 1, 4)?;
                 CanFrame::from_parts(
                     id,
                     wire_bytes::<8, _>(UwbWire {

@@ -28,10 +28,10 @@ use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, Parking
 use super::commands::{STOP, frames_for};
 use super::kinematics::{RangerMode, body_twist, plan};
 use super::profile::{self, V2Profile};
-use crate::agilex::{self, BrakeKeeper, ModeKeeper, SteeringZero};
+use crate::agilex::{self, BrakeKeeper, ModeKeeper, Next, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
     requested_turn,
 };
 use crate::profile::Profile;
@@ -543,38 +543,36 @@ impl Driver for V2Driver {
         self.steering_zero.expire(&mut self.core, now);
     }
 
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
-        if self.core.bus_down {
-            self.queue.clear();
-            return None;
-        }
-        let frame = if let Some(frame) = self.queue.pop_front() {
-            frame
-        } else if self.core.schedule.is_due(now)
-            && self.brake.release_before(
-                self.motion != STOP,
-                self.core.state.system.control_mode == ControlMode::COMMAND,
-            )
-        {
-            // Release before motion (HUNTER 2.0 ignores speed while braked).
-            self.update_body(now);
-            Frame::ParkingBrake(ParkingBrake { engage: false })
-        } else if self.core.schedule.is_due(now) {
-            self.core.schedule.sent(now);
-            let (vx, vy, w) = body_twist(&self.motion, self.ranger_mode, &self.profile);
-            let echo = &mut self.core.state.command;
-            echo.linear_mps = vx as f32;
-            echo.lateral_mps = vy as f32;
-            echo.angular_radps = w as f32;
-            echo.steer_rad = self.motion.steer_rad as f32;
-            echo.clamp_flags = self.motion_clamp_flags;
-            self.core.state.touch(Group::Command, now.as_nanos());
-            Frame::MotionCommand(self.motion)
-        } else {
-            return None;
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
+        let moving = self.motion != STOP;
+        let next = agilex::next_frame(
+            &mut self.core,
+            &mut self.queue,
+            &mut self.brake,
+            moving,
+            now,
+        );
+        let frame = match next? {
+            Next::Queued(frame) => frame,
+            // HUNTER 2.0 ignores speed while braked.
+            Next::ReleaseBrake => {
+                self.update_body(now);
+                Frame::ParkingBrake(ParkingBrake { engage: false })
+            }
+            Next::Motion => {
+                let (vx, vy, w) = body_twist(&self.motion, self.ranger_mode, &self.profile);
+                let echo = &mut self.core.state.command;
+                echo.linear_mps = vx as f32;
+                echo.lateral_mps = vy as f32;
+                echo.angular_radps = w as f32;
+                echo.steer_rad = self.motion.steer_rad as f32;
+                echo.clamp_flags = self.motion_clamp_flags;
+                self.core.state.touch(Group::Command, now.as_nanos());
+                Frame::MotionCommand(self.motion)
+            }
         };
         self.core
-            .transmit(frame.name(), frame.encode(&self.profile), Transmit::Can)
+            .transmit(frame.name(), frame.encode(&self.profile), WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

@@ -242,6 +242,28 @@ fn reboot_mid_drive_is_back_in_can_mode_within_100_ms_of_its_first_report() {
     assert!(back.saturating_since(boot_end) <= ms(100), "{back:?}");
 }
 
+/// [`Injection::Silence`] stops everything the chassis sends, feedback and replies alike, for
+/// its length; then the feedback resumes on its own.
+#[test]
+fn an_injected_silence_silences_the_chassis_for_its_length() {
+    for (model, ..) in KINDS {
+        let mut p = pair(model);
+        p.run_for(ms(500));
+        assert!(p.inject(Injection::Silence(ms(1000))));
+        p.clear_log();
+        p.run_for(ms(990));
+        let from_chassis = |p: &V2Pair| {
+            p.log()
+                .iter()
+                .filter(|r| r.direction == Direction::FromChassis)
+                .count()
+        };
+        assert_eq!(from_chassis(&p), 0, "{model:?}");
+        p.run_for(ms(200));
+        assert!(from_chassis(&p) > 0, "{model:?}");
+    }
+}
+
 #[test]
 fn rc_takeover_is_reported_never_fought_and_the_hand_back_is_taken_over() {
     for (model, vx, vy, w) in KINDS {

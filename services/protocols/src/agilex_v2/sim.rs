@@ -47,10 +47,10 @@ use super::kinematics::{RangerMode, body_twist};
 use super::profile::{Kinematics, SpinField, V2Profile};
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit};
+use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    BatteryModel, Firmware, Injection, Outbox, Pose, SimTruth, first_order_lag, push_garbage,
-    runaway_speed, state_of_charge, substeps,
+    Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, Injection, Pose, SimTruth,
+    first_order_lag, substeps,
 };
 use crate::profile::Profile;
 use crate::registry::RobotKind;
@@ -80,16 +80,13 @@ pub struct V2Sim {
     ranger_mode: RangerMode,
     lights: Lights,
     steering_offset: i16,
-    soc_pct: f64,
-    /// An injected runaway: the forward speed the chassis drives at whatever it is told.
-    runaway_mps: Option<f64>,
     pose: Pose,
     odometer_m: [f64; 2],
     last_update: Timestamp,
-    booting_until: Option<Timestamp>,
-    boot_time: Duration,
     speed_time_constant_s: f64,
-    outbox: Outbox<CanFrame>,
+    /// What every simulated chassis shares: the outbox, the boot, the battery's charge and the
+    /// injected faults.
+    chassis: Chassis<CanFrame>,
     status: Grid,
     fast: Grid,
     slow: Grid,
@@ -100,7 +97,6 @@ pub struct V2Sim {
     commands_clamped: u64,
     frames_ignored: u64,
     decode_errors: u64,
-    boots: u32,
 }
 
 impl V2Sim {
@@ -112,7 +108,7 @@ impl V2Sim {
     /// Time constant of the speed response, s.
     pub const DEFAULT_SPEED_TIME_CONSTANT_S: f64 = 0.2;
     /// CAN id of injected garbage frames (unused by protocol V2).
-    pub const GARBAGE_ID: u16 = 0x7F0;
+    pub const GARBAGE_ID: u16 = GARBAGE_ID;
     /// Wheel radius for the actuator rpm, m (not in any source).
     pub const WHEEL_RADIUS_M: f64 = 0.08;
     /// 24 V-class pack.
@@ -143,15 +139,18 @@ impl V2Sim {
             ranger_mode: RangerMode::DualAckermann,
             lights: Lights::default(),
             steering_offset: 22000,
-            soc_pct: 100.0,
-            runaway_mps: None,
             pose: Pose::default(),
             odometer_m: [0.0; 2],
             last_update: now,
-            booting_until: None,
-            boot_time: Self::DEFAULT_BOOT_TIME,
             speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
-            outbox: Outbox::new(),
+            chassis: Chassis::new(
+                Injectable {
+                    motors: 0,
+                    max_flood_per_s: 0,
+                    checksums: false,
+                },
+                Self::DEFAULT_BOOT_TIME,
+            ),
             status: Grid::new(status, now),
             fast: Grid::new(Self::FAST_PERIOD, now),
             slow: Grid::new(Self::SLOW_PERIOD, now),
@@ -162,16 +161,17 @@ impl V2Sim {
             commands_clamped: 0,
             frames_ignored: 0,
             decode_errors: 0,
-            boots: 1,
             profile,
         };
+        // Power-up counts as the first boot.
+        sim.chassis.boots = 1;
         sim.power_up();
         sim
     }
 
     /// Silence after a reboot.
     pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
-        self.boot_time = boot_time;
+        self.chassis.set_boot_time(boot_time);
         self
     }
 
@@ -225,15 +225,8 @@ impl V2Sim {
         self.lights = Lights::default();
     }
 
-    fn is_booting(&self, now: Timestamp) -> bool {
-        self.booting_until.is_some_and(|t| now < t)
-    }
-
     fn expire(&mut self, now: Timestamp) {
-        if self.booting_until.is_some_and(|t| now >= t) {
-            self.booting_until = None;
-        }
-        self.outbox.expire(now);
+        self.chassis.expire(now);
         for dt in substeps(&mut self.last_update, now) {
             self.step(dt);
         }
@@ -261,7 +254,7 @@ impl V2Sim {
         } else {
             self.command
         };
-        if let Some(runaway) = self.runaway_mps {
+        if let Some(runaway) = self.chassis.runaway_mps {
             target.linear_mps = runaway;
         }
         let tau = self.speed_time_constant_s;
@@ -290,7 +283,7 @@ impl V2Sim {
         self.odometer_m[1] += right * dt;
         // Electronics 1 A plus 4 A per m/s.
         let current = 1.0 + 4.0 * vx.abs();
-        self.soc_pct = Self::BATTERY.drain(self.soc_pct, current, dt, 1.0);
+        self.chassis.soc_pct = Self::BATTERY.drain(self.chassis.soc_pct, current, dt, 1.0);
     }
 
     /// The true body twist (v, v_y, ω).
@@ -374,37 +367,46 @@ impl V2Sim {
                 self.lights = Lights { count: 0, ..l };
             }
             Frame::ClearFault(_) => self.heartbeat_lost = false,
-            Frame::VersionRequest => self.send(Frame::Version(Version {
-                controller_hw: [1, 0],
-                driver_hw: [1, 0],
-                controller_sw: [2, 0],
-                driver_sw: [2, 0],
-            })),
+            Frame::VersionRequest => self.send(
+                now,
+                Frame::Version(Version {
+                    controller_hw: [1, 0],
+                    driver_hw: [1, 0],
+                    controller_sw: [2, 0],
+                    driver_sw: [2, 0],
+                }),
+            ),
             Frame::SdkVersionRequest => {
                 for chunk in Self::VERSION_TEXT.chunks_exact(8) {
                     let mut bytes = [0u8; 8];
                     bytes.copy_from_slice(chunk);
-                    self.send(Frame::VersionText(VersionText { bytes }));
+                    self.send(now, Frame::VersionText(VersionText { bytes }));
                 }
             }
             Frame::SteeringZero if command_mode => {
-                self.send(Frame::SteeringZeroAck { done: true });
+                self.send(now, Frame::SteeringZeroAck { done: true });
             }
             Frame::SteeringZeroOffset(o) if command_mode => self.steering_offset = o.pulses,
             Frame::SteeringZeroQuery => {
-                self.send(Frame::SteeringZeroOffsetReply(SteeringZeroOffset {
-                    pulses: self.steering_offset,
-                }));
+                self.send(
+                    now,
+                    Frame::SteeringZeroOffsetReply(SteeringZeroOffset {
+                        pulses: self.steering_offset,
+                    }),
+                );
             }
             _ => self.commands_ignored += 1,
         }
     }
 
-    fn send(&mut self, frame: Frame) {
+    fn send(&mut self, now: Timestamp, frame: Frame) {
+        if self.chassis.is_quiet(now) {
+            return;
+        }
         match frame.encode(&self.profile) {
-            Ok(can) => self.outbox.push(can),
+            Ok(can) => self.chassis.outbox.push(can),
             // A value the wire cannot carry (a speed beyond ±32 m/s): nothing to send.
-            Err(_) => self.outbox.count_dropped(),
+            Err(_) => self.chassis.outbox.count_dropped(),
         }
     }
 
@@ -444,10 +446,10 @@ impl V2Sim {
     }
 
     fn battery_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.soc_pct, 1.0)
+        Self::BATTERY.voltage_v(self.chassis.soc_pct, 1.0)
     }
 
-    fn send_status(&mut self) {
+    fn send_status(&mut self, now: Timestamp) {
         let count = self.next_count();
         let frame = Frame::SystemStatus(SystemStatus {
             vehicle_state: if self.estop {
@@ -463,36 +465,45 @@ impl V2Sim {
             b6: u8::from(self.profile.reports_brake_in_b6() && self.brake_engaged),
             count,
         });
-        self.send(frame);
+        self.send(now, frame);
     }
 
-    fn send_fast(&mut self) {
-        self.send(Frame::MotionFeedback(self.applied));
+    fn send_fast(&mut self, now: Timestamp) {
+        self.send(now, Frame::MotionFeedback(self.applied));
         if self.rc_on {
             let count = self.next_count();
-            self.send(Frame::Rc(RcFeedback {
-                switch_a: 2,
-                switch_b: 1,
-                switch_c: 2,
-                switch_d: 2,
-                counter: count,
-                ..RcFeedback::default()
-            }));
+            self.send(
+                now,
+                Frame::Rc(RcFeedback {
+                    switch_a: 2,
+                    switch_b: 1,
+                    switch_c: 2,
+                    switch_d: 2,
+                    counter: count,
+                    ..RcFeedback::default()
+                }),
+            );
         }
         let (vx, _, _) = self.body();
         let rpm = (vx / (2.0 * std::f64::consts::PI * Self::WHEEL_RADIUS_M) * 60.0).round();
         for motor in 1..=self.profile.actuators.min(8) {
-            self.send(Frame::MotorFast(MotorFast {
-                motor,
-                rpm: rpm.clamp(-30000.0, 30000.0),
-                current_a: 0.0,
-                position_counts: 0,
-            }));
+            self.send(
+                now,
+                Frame::MotorFast(MotorFast {
+                    motor,
+                    rpm: rpm.clamp(-30000.0, 30000.0),
+                    current_a: 0.0,
+                    position_counts: 0,
+                }),
+            );
         }
-        self.send(Frame::Odometer(Odometer {
-            left_m: wrap_mm(self.odometer_m[0]),
-            right_m: wrap_mm(self.odometer_m[1]),
-        }));
+        self.send(
+            now,
+            Frame::Odometer(Odometer {
+                left_m: wrap_mm(self.odometer_m[0]),
+                right_m: wrap_mm(self.odometer_m[1]),
+            }),
+        );
         if self.profile.kinematics == Kinematics::FourWheelSteer {
             let steer = self.applied.steer_rad;
             let angles = match self.ranger_mode {
@@ -500,29 +511,38 @@ impl V2Sim {
                 RangerMode::Crab => [steer; 4],
                 RangerMode::Spin | RangerMode::Park => [0.0; 4],
             };
-            self.send(Frame::SteeringAngles(Four { values: angles }));
-            self.send(Frame::WheelSpeeds(Four {
-                values: [vx.clamp(-30.0, 30.0); 4],
-            }));
+            self.send(now, Frame::SteeringAngles(Four { values: angles }));
+            self.send(
+                now,
+                Frame::WheelSpeeds(Four {
+                    values: [vx.clamp(-30.0, 30.0); 4],
+                }),
+            );
             if self.profile.motion_mode_feedback
                 && let Some(code) = self.ranger_mode.code(&self.profile)
             {
-                self.send(Frame::MotionModeState(MotionMode {
-                    mode: code,
-                    changing: false,
-                }));
+                self.send(
+                    now,
+                    Frame::MotionModeState(MotionMode {
+                        mode: code,
+                        changing: false,
+                    }),
+                );
             }
         }
         if self.profile.front_light {
             let count = self.next_count();
-            self.send(Frame::LightState(Lights {
-                count,
-                ..self.lights
-            }));
+            self.send(
+                now,
+                Frame::LightState(Lights {
+                    count,
+                    ..self.lights
+                }),
+            );
         }
     }
 
-    fn send_slow(&mut self) {
+    fn send_slow(&mut self, now: Timestamp) {
         let voltage = (self.battery_v() * 10.0).round() / 10.0;
         let enabled = !self.drive_blocked();
         let bit6 = if enabled == self.profile.driver_bit6_means_enabled {
@@ -531,27 +551,33 @@ impl V2Sim {
             0
         };
         for motor in 1..=self.profile.actuators.min(8) {
-            self.send(Frame::MotorSlow(MotorSlow {
-                motor,
-                driver_voltage_v: voltage,
-                driver_temp_c: 30.0,
-                motor_temp_c: 28.0,
-                driver_status: bit6,
-            }));
+            self.send(
+                now,
+                Frame::MotorSlow(MotorSlow {
+                    motor,
+                    driver_voltage_v: voltage,
+                    driver_temp_c: 30.0,
+                    motor_temp_c: 28.0,
+                    driver_status: bit6,
+                }),
+            );
         }
     }
 
-    fn send_bms(&mut self) {
+    fn send_bms(&mut self, now: Timestamp) {
         let lsb = self.profile.bms_voltage_lsb_v;
-        self.send(Frame::BmsData(BmsData {
-            group: 0,
-            soc_pct: self.soc_pct.round().clamp(0.0, 100.0),
-            soh_pct: 100.0,
-            voltage_v: (self.battery_v() / lsb).round() * lsb,
-            current_a: 1.0,
-            temperature_c: 25.0,
-        }));
-        self.send(Frame::BmsAlarm(BmsAlarm::default()));
+        self.send(
+            now,
+            Frame::BmsData(BmsData {
+                group: 0,
+                soc_pct: self.chassis.soc_pct.round().clamp(0.0, 100.0),
+                soh_pct: 100.0,
+                voltage_v: (self.battery_v() / lsb).round() * lsb,
+                current_a: 1.0,
+                temperature_c: 25.0,
+            }),
+        );
+        self.send(now, Frame::BmsAlarm(BmsAlarm::default()));
     }
 
     fn fault_flags(&self) -> u64 {
@@ -581,7 +607,7 @@ impl Firmware for V2Sim {
             self.decode_errors += 1;
             return;
         };
-        if self.is_booting(now) {
+        if self.chassis.is_booting() {
             return;
         }
         let decoded = match decode(frame, &self.profile) {
@@ -599,35 +625,36 @@ impl Firmware for V2Sim {
 
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
-        let booting = self.is_booting(now);
+        // Nothing is sent, and no rolling count moves, while booting or silenced.
+        let quiet = self.chassis.is_quiet(now);
         if self.status.is_due(now) {
             self.status.served(now);
-            if !booting {
-                self.send_status();
+            if !quiet {
+                self.send_status(now);
             }
         }
         if self.fast.is_due(now) {
             self.fast.served(now);
-            if !booting {
-                self.send_fast();
+            if !quiet {
+                self.send_fast(now);
             }
         }
         if self.slow.is_due(now) {
             self.slow.served(now);
-            if !booting {
-                self.send_slow();
+            if !quiet {
+                self.send_slow(now);
             }
         }
         if self.bms.is_due(now) {
             self.bms.served(now);
-            if !booting {
-                self.send_bms();
+            if !quiet {
+                self.send_bms(now);
             }
         }
     }
 
-    fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.outbox.pop().map(Transmit::Can)
+    fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
+        self.chassis.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
@@ -643,21 +670,23 @@ impl Firmware for V2Sim {
                     .map(|t| t + Duration::from_millis(self.profile.command_timeout_ms + 1))
             })
             .flatten();
-        [heartbeat, self.booting_until, self.outbox.silent_until()]
+        [heartbeat, self.chassis.poll_timeout()]
             .into_iter()
             .fold(Some(grids), earliest)
     }
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match injection {
-            Injection::EStop(pressed) => {
+        match self.chassis.inject(now, injection) {
+            Applied::Condition | Applied::Done => {}
+            Applied::Refused => return false,
+            Applied::Robot(Injection::EStop(pressed)) => {
                 self.estop = pressed;
                 if pressed {
                     self.command = STOP;
                 }
             }
-            Injection::RcTakeover(on) => {
+            Applied::Robot(Injection::RcTakeover(on)) => {
                 self.rc_on = on;
                 if on {
                     self.mode = Mode::Remote;
@@ -667,32 +696,12 @@ impl Firmware for V2Sim {
                     self.mode = Mode::Standby;
                 }
             }
-            Injection::Reboot => {
-                self.boots += 1;
-                self.outbox.clear();
+            Applied::Robot(Injection::Reboot) => {
                 self.power_up();
-                self.booting_until = Some(now + self.boot_time);
+                self.chassis.reboot(now);
             }
-            Injection::Battery { soc_pct } => {
-                let Some(soc_pct) = state_of_charge(soc_pct) else {
-                    return false;
-                };
-                self.soc_pct = soc_pct;
-            }
-            Injection::Runaway(speed) => {
-                let Some(speed) = runaway_speed(speed) else {
-                    return false;
-                };
-                self.runaway_mps = speed;
-            }
-            Injection::Silence(duration) => self.outbox.silence(now, duration),
-            Injection::Garbage(bytes) => push_garbage(&mut self.outbox, Self::GARBAGE_ID, &bytes),
-            Injection::MotorDriverLoss { .. }
-            | Injection::Bumper(_)
-            | Injection::BadChecksums(_)
-            | Injection::ObstacleAhead(_)
-            | Injection::ObstacleBehind(_)
-            | Injection::Flood { .. } => return false,
+            // No bumper, no range sensors.
+            Applied::Robot(_) => return false,
         }
         true
     }
@@ -713,13 +722,13 @@ impl Firmware for V2Sim {
                 Mode::Remote => ControlMode::REMOTE,
             },
             brake_engaged: self.brake_engaged,
-            soc_pct: self.soc_pct,
+            soc_pct: self.chassis.soc_pct,
             fault_flags: self.fault_flags(),
             commands_received: self.commands_received,
             bad_checksums_received: 0,
             decode_errors: self.decode_errors,
-            boots: self.boots,
-            injected: self.outbox.injected(),
+            boots: self.chassis.boots,
+            injected: self.chassis.outbox.injected(),
         }
     }
 }

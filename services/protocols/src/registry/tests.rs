@@ -195,12 +195,12 @@ fn every_robot_describes_the_frames_of_its_own_exchange() {
             firmware.handle_timeout(now);
             while let Some(out) = firmware.poll_transmit(now) {
                 let jsons: Vec<_> = match &out {
-                    crate::Transmit::Can(frame) => vec![
+                    crate::WireItem::Can(frame) => vec![
                         codec
                             .decode_can(frame)
                             .unwrap_or_else(|e| panic!("{kind}: {frame:?}: {e}")),
                     ],
-                    crate::Transmit::Bytes(bytes) => codec
+                    crate::WireItem::Bytes(bytes) => codec
                         .push_serial(bytes)
                         .into_iter()
                         .map(|r| r.unwrap_or_else(|e| panic!("{kind}: {e}")))

@@ -32,9 +32,9 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::error::{DecodeError, EncodeError, check_range, to_i8, to_i16, to_u16, to_wire};
+use crate::error::{DecodeError, EncodeError, check_u8, to_i8, to_i16, to_u16, to_wire};
 use crate::profile::ScoutMiniProfile;
-use crate::wire::{read_bool, read_prefix, si, wire_bytes};
+use crate::wire::{index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
 /// Frame identifiers.
 pub mod id {
@@ -405,21 +405,6 @@ pub struct Decoded {
     pub count: u8,
 }
 
-fn motor_index(id: u16) -> Option<u8> {
-    // 0..=3 fits u8.
-    (id::MOTOR_1..id::MOTOR_1 + 4)
-        .contains(&id)
-        .then(|| (id - id::MOTOR_1 + 1) as u8)
-}
-
-fn invalid(id: u32, field: &'static str, value: u8) -> DecodeError {
-    DecodeError::InvalidValue {
-        id,
-        field,
-        value: value.into(),
-    }
-}
-
 fn read_percent(id: u32, field: &'static str, percent: i8) -> Result<i8, DecodeError> {
     if (-100..=100).contains(&percent) {
         Ok(percent)
@@ -515,7 +500,7 @@ pub fn decode(frame: &CanFrame, profile: &ScoutMiniProfile) -> Result<Decoded, D
             })
         }
         other => {
-            let Some(motor) = motor_index(other) else {
+            let Some(motor) = index_in(other, id::MOTOR_1, 4) else {
                 return Err(DecodeError::UnknownId { id: raw_id });
             };
             let w: MotorWire = read_prefix(raw_id, payload)?;
@@ -532,11 +517,6 @@ pub fn decode(frame: &CanFrame, profile: &ScoutMiniProfile) -> Result<Decoded, D
         frame: decoded,
         count: wire.count,
     })
-}
-
-/// Checks a byte-sized field against `min..=max`.
-fn check_u8(field: &'static str, value: u8, min: u8, max: u8) -> Result<(), EncodeError> {
-    check_range(field, value.into(), min.into(), max.into())
 }
 
 impl Frame {

@@ -15,7 +15,7 @@ use super::kinematics::SkidCommand;
 use crate::command::Command;
 use crate::driver::{
     CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx,
-    Transmit, flags_of, requested_turn,
+    WireItem, flags_of, requested_turn,
 };
 use crate::profile::ScoutMiniProfile;
 use crate::registry::RobotKind;
@@ -209,7 +209,7 @@ impl ScoutMiniDriver {
     }
 
     /// Encodes and counts one frame with the count of its id.
-    fn transmit(&mut self, frame: Frame) -> Option<Transmit> {
+    fn transmit(&mut self, frame: Frame) -> Option<WireItem> {
         let count = match frame {
             Frame::LightCommand(_) => &mut self.light_count,
             _ => &mut self.motion_count,
@@ -220,7 +220,7 @@ impl ScoutMiniDriver {
         }
         // Quantisation keeps every planned value on the wire's range; a failure is a bug guard
         // (or a profile with a full scale that is not positive).
-        self.core.transmit(frame.name(), encoded, Transmit::Can)
+        self.core.transmit(frame.name(), encoded, WireItem::Can)
     }
 
     fn motion_frame(&mut self, now: Timestamp) -> Frame {
@@ -531,7 +531,7 @@ impl Driver for ScoutMiniDriver {
         }
     }
 
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         if self.core.bus_down {
             return None;
         }

@@ -15,7 +15,7 @@ use proptest::prelude::*;
 use super::{ScoutMiniDriver, normalize_faults};
 use crate::can::CanFrame;
 use crate::command::{Command, Turn};
-use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
+use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
 use crate::profile::ScoutMiniProfile;
 use crate::registry::RobotKind;
 use crate::scout_mini::{
@@ -58,7 +58,7 @@ fn can(text: &str) -> CanFrame {
 fn drain(d: &mut ScoutMiniDriver, now: Timestamp) -> Vec<CanFrame> {
     let mut out = Vec::new();
     while let Some(item) = d.poll_transmit(now) {
-        let Transmit::Can(frame) = item else {
+        let WireItem::Can(frame) = item else {
             panic!("SCOUT MINI sent serial bytes");
         };
         out.push(frame);

@@ -15,7 +15,7 @@ use super::{Frame, Lights, MotionCommand, ScoutMiniDriver, ScoutMiniSim, decode,
 use crate::Direction;
 use crate::can::CanFrame;
 use crate::command::Command;
-use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Transmit};
+use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, WireItem};
 use crate::firmware::{Firmware, Injection};
 use crate::pair::{Pair, notices};
 use crate::profile::ScoutMiniProfile;
@@ -73,7 +73,7 @@ fn logged(
         .iter()
         .filter(|r| r.direction == direction && r.at >= since)
         .filter_map(|r| match &r.item {
-            Transmit::Can(f) if f.id() == frame_id => Some((r.at, *f)),
+            WireItem::Can(f) if f.id() == frame_id => Some((r.at, *f)),
             _ => None,
         })
         .collect()
@@ -408,7 +408,7 @@ fn corrupt_frames_from_the_computer_are_dropped_and_raise_the_chassis_checksum_f
         let frame = Frame::MotionCommand(MotionCommand::drive(2.0, 0.0))
             .encode(200 + count, &profile)
             .unwrap();
-        p.send_to_firmware(Transmit::Can(corrupted(&frame)));
+        p.send_to_firmware(WireItem::Can(corrupted(&frame)));
     }
     // They cross the wire (250 µs) before the chassis sees them.
     p.run_for(ms(1));

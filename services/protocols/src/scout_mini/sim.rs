@@ -14,11 +14,10 @@ use super::driver::{body_flags, normalize_faults};
 use super::kinematics::side_speeds;
 use crate::DecodeError;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit};
+use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, clamp_i16,
-    first_order_lag, motor_index, non_negative, push_garbage, runaway_speed, state_of_charge,
-    substeps,
+    Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, InjectedCounts, Injection,
+    Pose, SimTruth, clamp_i16, first_order_lag, non_negative, state_of_charge, substeps,
 };
 use crate::profile::ScoutMiniProfile;
 use crate::registry::RobotKind;
@@ -175,7 +174,6 @@ pub struct ScoutMiniSim {
     // Options.
     speed_time_constant_s: f64,
     stop_time_constant_s: f64,
-    boot_time: Duration,
     checksum_fault_hold: Duration,
 
     // Control state.
@@ -183,9 +181,7 @@ pub struct ScoutMiniSim {
     command: Motion,
     /// The command is dropped (timeout) at this time.
     command_until: Option<Timestamp>,
-    booting_until: Option<Timestamp>,
     checksum_fault_until: Option<Timestamp>,
-    motor_lost: [bool; 4],
     extra_load_a: f64,
     /// Latched 0x151 b5 bits.
     latched: u16,
@@ -201,20 +197,16 @@ pub struct ScoutMiniSim {
     /// Moving mean of the squared motor currents, A².
     current_sq_a2: [f64; 4],
     driver_temp_c: [f64; 4],
-    soc_pct: f64,
     pack_current_a: f64,
-    /// An injected runaway: the forward speed the chassis drives at whatever it is told.
-    runaway_mps: Option<f64>,
 
     // Output.
     fast: Grid,
-    flood: Option<Flood>,
     counts: [u8; FEEDBACK_IDS.len()],
-    corrupt_next: u32,
-    outbox: Outbox<CanFrame>,
+    /// What every simulated chassis shares: the outbox, the boot, the battery's charge and the
+    /// injected faults.
+    chassis: Chassis<CanFrame>,
 
     // Counters.
-    boots: u32,
     commands_received: u64,
     commands_ignored: u64,
     decode_errors: u64,
@@ -238,7 +230,7 @@ impl ScoutMiniSim {
     /// How long 0x151 b4 bit0 stays set after the last frame with a bad checksum.
     pub const DEFAULT_CHECKSUM_FAULT_HOLD: Duration = Duration::from_millis(500);
     /// CAN id of injected garbage frames (unused by SCOUT MINI).
-    pub const GARBAGE_ID: u16 = 0x7F0;
+    pub const GARBAGE_ID: u16 = GARBAGE_ID;
     /// The battery.
     pub const BATTERY: BatteryModel = BatteryModel {
         capacity_ah: 15.0,
@@ -282,14 +274,11 @@ impl ScoutMiniSim {
             profile,
             speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
             stop_time_constant_s: Self::DEFAULT_STOP_TIME_CONSTANT_S,
-            boot_time: Self::DEFAULT_BOOT_TIME,
             checksum_fault_hold: Self::DEFAULT_CHECKSUM_FAULT_HOLD,
             rc_on: false,
             command: Motion::default(),
             command_until: None,
-            booting_until: None,
             checksum_fault_until: None,
-            motor_lost: [false; 4],
             extra_load_a: 0.0,
             latched: 0,
             lights: Lights::default(),
@@ -301,15 +290,17 @@ impl ScoutMiniSim {
             motor_current_a: [0.0; 4],
             current_sq_a2: [0.0; 4],
             driver_temp_c: [Self::AMBIENT_C; 4],
-            soc_pct: 100.0,
-            runaway_mps: None,
             pack_current_a: Self::IDLE_CURRENT_A,
             fast: Grid::new(Self::FEEDBACK_PERIOD, now),
-            flood: None,
             counts: [0; FEEDBACK_IDS.len()],
-            corrupt_next: 0,
-            outbox: Outbox::new(),
-            boots: 0,
+            chassis: Chassis::new(
+                Injectable {
+                    motors: 4,
+                    max_flood_per_s: Self::MAX_FLOOD_FRAMES_PER_S,
+                    checksums: true,
+                },
+                Self::DEFAULT_BOOT_TIME,
+            ),
             commands_received: 0,
             commands_ignored: 0,
             decode_errors: 0,
@@ -332,7 +323,7 @@ impl ScoutMiniSim {
 
     /// Silence after a reboot.
     pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
-        self.boot_time = boot_time;
+        self.chassis.set_boot_time(boot_time);
         self
     }
 
@@ -345,7 +336,7 @@ impl ScoutMiniSim {
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
         if let Some(soc_pct) = state_of_charge(soc_pct) {
-            self.soc_pct = soc_pct;
+            self.chassis.soc_pct = soc_pct;
             self.refresh_conditions();
         }
         self
@@ -367,7 +358,7 @@ impl ScoutMiniSim {
 
     /// Frames dropped because nobody polled the transmit queue.
     pub fn frames_dropped(&self) -> u64 {
-        self.outbox.dropped()
+        self.chassis.outbox.dropped()
     }
 
     /// The 0x151 fault word the chassis reports at its latest time.
@@ -382,12 +373,12 @@ impl ScoutMiniSim {
 
     /// True while the chassis boots after a reboot.
     pub fn is_booting(&self) -> bool {
-        self.booting_until.is_some()
+        self.chassis.is_booting()
     }
 
     /// Battery voltage under the present load, V (what 0x151 reports).
     pub fn battery_voltage_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.soc_pct, self.pack_current_a)
+        Self::BATTERY.voltage_v(self.chassis.soc_pct, self.pack_current_a)
     }
 
     /// Pack current, A (positive = discharging).
@@ -435,7 +426,7 @@ impl ScoutMiniSim {
 
     /// The drive output is off (booting, power cut, protection).
     fn output_cut(&self) -> bool {
-        self.booting_until.is_some() || self.latched != 0
+        self.chassis.is_booting() || self.latched != 0
     }
 
     fn fault_word(&self, now: Timestamp) -> u16 {
@@ -476,10 +467,10 @@ impl ScoutMiniSim {
 
     /// Latches the faults whose cause is present (lost drivers, flat battery, heat, current).
     fn refresh_conditions(&mut self) {
-        if self.booting_until.is_some() {
+        if self.chassis.is_booting() {
             return;
         }
-        for (lost, bit) in self.motor_lost.iter().zip(MOTOR_COMM) {
+        for (lost, bit) in self.chassis.motor_lost.iter().zip(MOTOR_COMM) {
             if *lost {
                 self.latched |= bit;
             }
@@ -508,11 +499,9 @@ impl ScoutMiniSim {
         for dt in substeps(&mut self.last_update, now) {
             self.step(dt);
         }
-        if self.booting_until.is_some_and(|t| now >= t) {
-            self.booting_until = None;
+        if self.chassis.expire(now).is_some() {
             self.refresh_conditions();
         }
-        self.outbox.expire(now);
         if self.command_until.is_some_and(|t| now >= t) {
             self.command_until = None;
             self.command = Motion::default();
@@ -573,19 +562,14 @@ impl ScoutMiniSim {
     }
 
     fn reboot(&mut self, now: Timestamp) {
-        self.boots = self.boots.saturating_add(1);
         self.command = Motion::default();
         self.command_until = None;
         self.checksum_fault_until = None;
         self.latched = 0;
         self.lights = Lights::default();
         self.counts = [0; FEEDBACK_IDS.len()];
-        self.outbox.clear();
-        if self.boot_time.is_zero() {
-            self.booting_until = None;
+        if self.chassis.reboot(now) {
             self.refresh_conditions();
-        } else {
-            self.booting_until = Some(now + self.boot_time);
         }
     }
 
@@ -594,7 +578,7 @@ impl ScoutMiniSim {
 
     /// Target speeds and the time constant toward them.
     fn target(&self) -> (Motion, f64) {
-        if self.booting_until.is_some() || self.latched & POWER_FAULTS != 0 {
+        if self.chassis.is_booting() || self.latched & POWER_FAULTS != 0 {
             (Motion::default(), self.stop_time_constant_s)
         } else if self.latched & PROTECTIONS != 0 {
             (Motion::default(), Self::PROTECTION_STOP_TIME_CONSTANT_S)
@@ -610,7 +594,7 @@ impl ScoutMiniSim {
     fn step(&mut self, dt: f64) {
         self.refresh_conditions();
         let (mut target, mut tau) = self.target();
-        if let Some(runaway) = self.runaway_mps {
+        if let Some(runaway) = self.chassis.runaway_mps {
             target.linear_mps = runaway;
             tau = self.speed_time_constant_s;
         }
@@ -634,7 +618,7 @@ impl ScoutMiniSim {
         let rms_keep = (-dt / Self::CURRENT_RMS_TIME_CONSTANT_S).exp();
         let heat_keep = (-dt / Self::THERMAL_TIME_CONSTANT_S).exp();
         let currents: [f64; 4] = std::array::from_fn(|motor| {
-            if output_on && !self.motor_lost[motor] {
+            if output_on && !self.chassis.motor_lost[motor] {
                 ((Self::MOTOR_A_PER_MPS * self.wheel_mps[motor]
                     + Self::MOTOR_A_PER_MPS2 * accel[motor])
                     .abs()
@@ -656,14 +640,15 @@ impl ScoutMiniSim {
             *temp = steady + (*temp - steady) * heat_keep;
         }
         self.pack_current_a = Self::IDLE_CURRENT_A + self.motor_current_a.iter().sum::<f64>();
-        self.soc_pct = Self::BATTERY.drain(self.soc_pct, self.pack_current_a, dt, 1.0);
+        self.chassis.soc_pct =
+            Self::BATTERY.drain(self.chassis.soc_pct, self.pack_current_a, dt, 1.0);
     }
 
     // -----------------------------------------------------------------------------------------
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.booting_until.is_some() || self.outbox.is_silenced(now)
+        self.chassis.is_quiet(now)
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
@@ -678,22 +663,21 @@ impl ScoutMiniSim {
         }
         let Some(index) = FEEDBACK_IDS.iter().position(|i| *i == frame.id()) else {
             // Only feedback ids are sent by the chassis.
-            self.outbox.count_dropped();
+            self.chassis.outbox.count_dropped();
             return;
         };
         let count = self.counts[index];
         // Every value is kept inside its wire range; a frame that still does not fit is dropped.
         let Ok(mut can) = frame.encode(count, &self.profile) else {
-            self.outbox.count_dropped();
+            self.chassis.outbox.count_dropped();
             return;
         };
         self.counts[index] = count.wrapping_add(1);
-        if self.corrupt_next > 0 {
-            self.corrupt_next -= 1;
+        if self.chassis.take_corruption() {
             can = corrupt_checksum(&can);
             injected = injected + InjectedCounts::BAD_CHECKSUM;
         }
-        self.outbox.push_injected(can, injected);
+        self.chassis.outbox.push_injected(can, injected);
     }
 
     fn motion_feedback(&self) -> Frame {
@@ -730,7 +714,7 @@ impl ScoutMiniSim {
         );
         self.send(now, self.motion_feedback());
         for motor in 0..4 {
-            if !self.motor_lost[motor] {
+            if !self.chassis.motor_lost[motor] {
                 self.send(now, self.motor_feedback(motor));
             }
         }
@@ -738,10 +722,10 @@ impl ScoutMiniSim {
     }
 
     fn send_flood(&mut self, now: Timestamp) {
-        let Some(second) = self.flood.as_mut().and_then(|flood| flood.due(now)) else {
+        let Some(second) = self.chassis.flood_due(now) else {
             return;
         };
-        let frame = if second && !self.motor_lost[0] {
+        let frame = if second && !self.chassis.motor_lost[0] {
             self.motor_feedback(0)
         } else {
             self.motion_feedback()
@@ -757,7 +741,7 @@ impl Firmware for ScoutMiniSim {
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
-        if self.booting_until.is_some() {
+        if self.chassis.is_booting() {
             self.commands_ignored += 1;
             return;
         }
@@ -791,66 +775,32 @@ impl Firmware for ScoutMiniSim {
         self.send_flood(now);
     }
 
-    fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.outbox.pop().map(Transmit::Can)
+    fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
+        self.chassis.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        [
-            self.command_until,
-            self.booting_until,
-            self.outbox.silent_until(),
-            self.flood.map(|f| f.next()),
-        ]
-        .into_iter()
-        .fold(Some(self.fast.next()), earliest)
+        [self.command_until, self.chassis.poll_timeout()]
+            .into_iter()
+            .fold(Some(self.fast.next()), earliest)
     }
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match injection {
-            Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = motor_index(motor, 4) else {
-                    return false;
-                };
-                self.motor_lost[index] = lost;
-                self.refresh_conditions();
-            }
-            Injection::Battery { soc_pct } => {
-                let Some(soc_pct) = state_of_charge(soc_pct) else {
-                    return false;
-                };
-                self.soc_pct = soc_pct;
-                self.refresh_conditions();
-            }
-            Injection::RcTakeover(on) => {
+        match self.chassis.inject(now, injection) {
+            Applied::Condition => self.refresh_conditions(),
+            Applied::Done => {}
+            Applied::Refused => return false,
+            Applied::Robot(Injection::RcTakeover(on)) => {
                 self.rc_on = on;
                 if on {
                     self.command = Motion::default();
                     self.command_until = None;
                 }
             }
-            Injection::Runaway(speed) => {
-                let Some(speed) = runaway_speed(speed) else {
-                    return false;
-                };
-                self.runaway_mps = speed;
-            }
-            Injection::Reboot => self.reboot(now),
-            Injection::Silence(duration) => self.outbox.silence(now, duration),
-            Injection::Garbage(bytes) => push_garbage(&mut self.outbox, Self::GARBAGE_ID, &bytes),
-            // Injections add up: one that comes before the last one's frames have all gone out
-            // takes nothing away from it.
-            Injection::BadChecksums(n) => self.corrupt_next = self.corrupt_next.saturating_add(n),
-            Injection::Flood { frames_per_s } => {
-                self.flood = Flood::new(now, frames_per_s, Self::MAX_FLOOD_FRAMES_PER_S);
-            }
-            Injection::Bumper(_)
-            | Injection::ObstacleAhead(_)
-            | Injection::ObstacleBehind(_)
-            | Injection::EStop(_) => {
-                return false;
-            }
+            Applied::Robot(Injection::Reboot) => self.reboot(now),
+            // The anti-collision tube is no switch; no range sensors, no E-stop switch.
+            Applied::Robot(_) => return false,
         }
         true
     }
@@ -870,14 +820,14 @@ impl Firmware for ScoutMiniSim {
                 ControlMode::COMMAND
             },
             brake_engaged: false,
-            soc_pct: self.soc_pct,
+            soc_pct: self.chassis.soc_pct,
             fault_flags: normalize_faults(self.fault_word(self.last_update))
                 | body_flags(self.body_status()),
             commands_received: self.commands_received,
             bad_checksums_received: self.bad_checksums,
             decode_errors: self.decode_errors,
-            boots: self.boots,
-            injected: self.outbox.injected(),
+            boots: self.chassis.boots,
+            injected: self.chassis.outbox.injected(),
         }
     }
 }

@@ -19,7 +19,7 @@ use crate::scout_mini::{
     Decoded, Frame, Lights, MotionCommand, MotionFeedback, MotorFeedback, SystemStatus, body,
     checksum, clear_code, decode, fault, id, light_mode, mode,
 };
-use crate::sim_bench::{Parts, SimBench};
+use crate::sim_bench::BenchFirmware;
 use crate::time::Timestamp;
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
@@ -47,63 +47,26 @@ fn corrupted(frame: &CanFrame) -> CanFrame {
 }
 
 /// The firmware on simulated time, with an optional 20 ms 0x130 heartbeat from "the computer".
-struct Bench {
-    sim: ScoutMiniSim,
-    profile: ScoutMiniProfile,
-    now: Timestamp,
-    /// Everything the chassis sent, with the time it was polled.
-    sent: Vec<(Timestamp, CanFrame)>,
-    heartbeat: Option<MotionCommand>,
-    next_heartbeat: Timestamp,
-    last_heartbeat: Option<Timestamp>,
-    /// The computer's rolling count of 0x130 and 0x140.
-    count: u8,
-}
+type Bench = crate::sim_bench::Bench<ScoutMiniSim>;
 
-impl SimBench for Bench {
-    type Firmware = ScoutMiniSim;
+impl BenchFirmware for ScoutMiniSim {
     type Item = CanFrame;
     type Command = MotionCommand;
+    type Profile = ScoutMiniProfile;
     const HEARTBEAT_PERIOD: Duration = Duration::from_millis(20);
 
-    fn parts(&mut self) -> Parts<'_, ScoutMiniSim, CanFrame, MotionCommand> {
-        Parts {
-            sim: &mut self.sim,
-            now: &mut self.now,
-            sent: &mut self.sent,
-            heartbeat: &mut self.heartbeat,
-            next_heartbeat: &mut self.next_heartbeat,
-            last_heartbeat: &mut self.last_heartbeat,
-        }
+    fn bench_profile(&self) -> &ScoutMiniProfile {
+        self.profile()
     }
 
-    fn sent(&self) -> &[(Timestamp, CanFrame)] {
-        &self.sent
-    }
-
-    fn send_heartbeat(&mut self, command: MotionCommand) {
-        self.send(Frame::MotionCommand(command));
+    fn send_heartbeat(bench: &mut Bench, command: MotionCommand) {
+        bench.send(Frame::MotionCommand(command));
     }
 }
 
 impl Bench {
     fn new() -> Self {
-        Self::with(ScoutMiniSim::new(ScoutMiniProfile::default(), T0))
-    }
-
-    fn with(sim: ScoutMiniSim) -> Self {
-        let mut bench = Self {
-            profile: sim.profile().clone(),
-            sim,
-            now: T0,
-            sent: Vec::new(),
-            heartbeat: None,
-            next_heartbeat: T0,
-            last_heartbeat: None,
-            count: 0,
-        };
-        bench.drain();
-        bench
+        Self::with(ScoutMiniSim::new(ScoutMiniProfile::default(), T0), T0)
     }
 
     /// Driving at `linear_mps` for `warm_up`, 0x130 every 20 ms.
@@ -361,6 +324,7 @@ fn a_bad_checksum_is_dropped_and_sets_the_checksum_fault_for_500_ms() {
     // The hold is an option.
     let mut b = Bench::with(
         ScoutMiniSim::new(ScoutMiniProfile::default(), T0).with_checksum_fault_hold(ms(50)),
+        T0,
     );
     let bad = corrupted(&b.encode(Frame::MotionCommand(drive(0.0, 0.0))));
     b.send_raw(bad);
@@ -911,7 +875,10 @@ fn the_true_full_scale_is_the_profile_the_firmware_is_built_with() {
         angular_full_scale_rad_s: 0.7853,
         ..ScoutMiniProfile::default()
     };
-    let mut b = Bench::with(ScoutMiniSim::new(example, T0).with_speed_time_constant_s(0.0));
+    let mut b = Bench::with(
+        ScoutMiniSim::new(example, T0).with_speed_time_constant_s(0.0),
+        T0,
+    );
     // The manual's second example frame: 10 % of the angular full scale.
     b.send_raw(CanFrame::from_candump("130#0100000A00000044").unwrap());
     b.run_for(ms(20));

@@ -11,9 +11,11 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::error::{DecodeError, EncodeError, check_range, to_i8, to_i16, to_i32, to_u8, to_u16};
+use crate::error::{
+    DecodeError, EncodeError, check_range, check_u8, to_i8, to_i16, to_i32, to_u8, to_u16,
+};
 use crate::profile::TitanProfile;
-use crate::wire::{read_bool, read_prefix, si, wire_bytes};
+use crate::wire::{first_byte, index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
 /// Frame identifiers.
 pub mod id {
@@ -452,13 +454,6 @@ fn steer_feedback_sign(profile: &TitanProfile) -> f64 {
     }
 }
 
-fn motor_index(id: u16, first: u16) -> Option<u8> {
-    // 0..=3 fits u8.
-    (first..first + 4)
-        .contains(&id)
-        .then(|| (id - first + 1) as u8)
-}
-
 fn bms_group(id: u16, first: u16) -> Option<u8> {
     [first, first + 2, first + 4]
         .iter()
@@ -473,13 +468,6 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
         return Err(DecodeError::ExtendedId { id: raw_id });
     }
     let data = frame.data();
-    let first_byte = |need_id: u32| {
-        data.first().copied().ok_or(DecodeError::TooShort {
-            id: need_id,
-            len: 0,
-            need: 1,
-        })
-    };
     // Standard ids are at most 0x7FF: the cast keeps every bit.
     let id16 = raw_id as u16;
     let frame = match id16 {
@@ -492,54 +480,38 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
         }
         id::PARKING_BRAKE => {
             // 0x00 engage, 0x01 release.
-            let release = read_bool(raw_id, "parking brake", first_byte(raw_id)?)?;
+            let release = read_bool(raw_id, "parking brake", first_byte(raw_id, data)?)?;
             Frame::ParkingBrake(ParkingBrake { engage: !release })
         }
         id::MODE => {
-            let m = first_byte(raw_id)?;
+            let m = first_byte(raw_id, data)?;
             if m != mode::STANDBY && m != mode::CAN_COMMAND {
-                return Err(DecodeError::InvalidValue {
-                    id: raw_id,
-                    field: "mode",
-                    value: m.into(),
-                });
+                return Err(invalid(raw_id, "mode", m));
             }
             Frame::Mode(ModeCommand { mode: m })
         }
         id::SILENT_MODE => Frame::SilentMode(Switch {
-            enter: read_bool(raw_id, "silent mode", first_byte(raw_id)?)?,
+            enter: read_bool(raw_id, "silent mode", first_byte(raw_id, data)?)?,
         }),
         id::OFF_ROAD => Frame::OffRoad(Switch {
-            enter: read_bool(raw_id, "off-road mode", first_byte(raw_id)?)?,
+            enter: read_bool(raw_id, "off-road mode", first_byte(raw_id, data)?)?,
         }),
-        id::STEERING_ZERO => match first_byte(raw_id)? {
+        id::STEERING_ZERO => match first_byte(raw_id, data)? {
             STEERING_ZERO_MAGIC => Frame::SteeringZero,
             other => {
-                return Err(DecodeError::InvalidValue {
-                    id: raw_id,
-                    field: "steering zero",
-                    value: other.into(),
-                });
+                return Err(invalid(raw_id, "steering zero", other));
             }
         },
-        id::STEERING_ZERO_ACK => match first_byte(raw_id)? {
+        id::STEERING_ZERO_ACK => match first_byte(raw_id, data)? {
             STEERING_ZERO_ACK_MAGIC => Frame::SteeringZeroAck,
             other => {
-                return Err(DecodeError::InvalidValue {
-                    id: raw_id,
-                    field: "steering zero acknowledgement",
-                    value: other.into(),
-                });
+                return Err(invalid(raw_id, "steering zero acknowledgement", other));
             }
         },
         id::CLEAR_FAULT => {
-            let code = first_byte(raw_id)?;
+            let code = first_byte(raw_id, data)?;
             if !clear_code::is_defined(code) {
-                return Err(DecodeError::InvalidValue {
-                    id: raw_id,
-                    field: "fault clear code",
-                    value: code.into(),
-                });
+                return Err(invalid(raw_id, "fault clear code", code));
             }
             Frame::ClearFault(ClearFault { code })
         }
@@ -597,9 +569,9 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
             })
         }
         other => {
-            if let Some(motor) = motor_index(other, id::MOTOR_FAST_1) {
+            if let Some(motor) = index_in(other, id::MOTOR_FAST_1, 4) {
                 Frame::MotorFast(MotorFast::from_wire(motor, raw_id, data)?)
-            } else if let Some(motor) = motor_index(other, id::MOTOR_SLOW_1) {
+            } else if let Some(motor) = index_in(other, id::MOTOR_SLOW_1, 4) {
                 Frame::MotorSlow(MotorSlow::from_wire(motor, raw_id, data)?)
             } else if let Some(group) = bms_group(other, id::BMS_DATA_0) {
                 let w: BmsDataWire = read_prefix(raw_id, data)?;
@@ -626,10 +598,6 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
         }
     };
     Ok(frame)
-}
-
-fn check_index(field: &'static str, value: u8, max: u8, min: u8) -> Result<(), EncodeError> {
-    check_range(field, value.into(), min.into(), max.into())
 }
 
 impl MotorFast {
@@ -788,7 +756,7 @@ impl Frame {
                     ("switch_c", r.switch_c),
                     ("switch_d", r.switch_d),
                 ] {
-                    check_index(field, v, 3, 0)?;
+                    check_u8(field, v, 0, 3)?;
                 }
                 CanFrame::from_parts(
                     id,
@@ -838,7 +806,7 @@ impl Frame {
                 }),
             ),
             Frame::BmsData(b) => {
-                check_index("group", b.group, 2, 0)?;
+                check_u8("group", b.group, 0, 2)?;
                 CanFrame::from_parts(
                     id,
                     wire_bytes::<8, _>(BmsDataWire {
@@ -851,7 +819,7 @@ impl Frame {
                 )
             }
             Frame::BmsAlarm(b) => {
-                check_index("group", b.group, 2, 0)?;
+                check_u8("group", b.group, 0, 2)?;
                 CanFrame::from_parts(
                     id,
                     wire_bytes::<4, _>(BmsAlarmWire {

@@ -19,10 +19,10 @@ use chassis_interfaces::{
 use super::codec::{self, Frame, MotionCommand, ParkingBrake, fault, mode};
 use super::commands::{frames_for, motion_command};
 use super::kinematics::yaw_rate;
-use crate::agilex::{self, BrakeKeeper, ModeKeeper, SteeringZero};
+use crate::agilex::{self, BrakeKeeper, ModeKeeper, Next, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, Transmit,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
     flags_of, requested_turn,
 };
 use crate::profile::TitanProfile;
@@ -360,41 +360,37 @@ impl Driver for TitanDriver {
         self.steering_zero.expire(&mut self.core, now);
     }
 
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
-        if self.core.bus_down {
-            self.queue.clear();
-            return None;
-        }
-        let frame = if let Some(frame) = self.queue.pop_front() {
-            frame
-        } else if self.core.schedule.is_due(now)
-            && self.brake.release_before(
-                self.motion.linear_mps != 0.0,
-                self.core.state.system.control_mode == ControlMode::COMMAND,
-            )
-        {
-            // Release before motion: after power-up, a chassis reboot or an idle engagement the
-            // brake goes first, then this same deadline sends the motion frame. Until command
-            // mode is reported the heartbeat carries the command alone (a braked chassis does not
-            // move on it).
-            self.update_body(now);
-            Frame::ParkingBrake(ParkingBrake { engage: false })
-        } else if self.core.schedule.is_due(now) {
-            self.core.schedule.sent(now);
-            let echo = &mut self.core.state.command;
-            echo.linear_mps = self.motion.linear_mps as f32;
-            echo.steer_rad = self.motion.steer_rad as f32;
-            echo.angular_radps =
-                yaw_rate(self.motion.linear_mps, self.motion.steer_rad, &self.profile) as f32;
-            echo.lateral_mps = 0.0;
-            echo.clamp_flags = self.motion_clamp_flags;
-            self.core.state.touch(Group::Command, now.as_nanos());
-            Frame::MotionCommand(self.motion)
-        } else {
-            return None;
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
+        let moving = self.motion.linear_mps != 0.0;
+        let next = agilex::next_frame(
+            &mut self.core,
+            &mut self.queue,
+            &mut self.brake,
+            moving,
+            now,
+        );
+        let frame = match next? {
+            Next::Queued(frame) => frame,
+            // The brake is released only once command mode is reported; until then the
+            // heartbeat carries the command alone (a braked chassis does not move on it).
+            Next::ReleaseBrake => {
+                self.update_body(now);
+                Frame::ParkingBrake(ParkingBrake { engage: false })
+            }
+            Next::Motion => {
+                let echo = &mut self.core.state.command;
+                echo.linear_mps = self.motion.linear_mps as f32;
+                echo.steer_rad = self.motion.steer_rad as f32;
+                echo.angular_radps =
+                    yaw_rate(self.motion.linear_mps, self.motion.steer_rad, &self.profile) as f32;
+                echo.lateral_mps = 0.0;
+                echo.clamp_flags = self.motion_clamp_flags;
+                self.core.state.touch(Group::Command, now.as_nanos());
+                Frame::MotionCommand(self.motion)
+            }
         };
         self.core
-            .transmit(frame.name(), frame.encode(&self.profile), Transmit::Can)
+            .transmit(frame.name(), frame.encode(&self.profile), WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

@@ -15,11 +15,10 @@ use super::driver::normalize_faults;
 use super::kinematics::{steer_command, yaw_rate};
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::driver::{Rx, Transmit};
+use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, clamp_i16,
-    first_order_lag, motor_index, non_negative, push_garbage, runaway_speed, state_of_charge,
-    substeps,
+    Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, InjectedCounts, Injection,
+    Pose, SimTruth, clamp_i16, first_order_lag, non_negative, state_of_charge, substeps,
 };
 use crate::profile::TitanProfile;
 use crate::registry::RobotKind;
@@ -188,7 +187,6 @@ pub struct TitanSim {
     speed_time_constant_s: f64,
     stop_time_constant_s: f64,
     steer_rate_radps: f64,
-    boot_time: Duration,
     steering_zero_delay: Duration,
     batteries: u8,
 
@@ -201,11 +199,9 @@ pub struct TitanSim {
     brake_engaged: bool,
     off_road: bool,
     silent_mode: bool,
-    booting_until: Option<Timestamp>,
     rc_on: bool,
     rc_counter: u8,
     bumper: bool,
-    motor_lost: [bool; 4],
     /// 0x211 fault word (latched bits and live conditions).
     faults: u32,
 
@@ -221,21 +217,18 @@ pub struct TitanSim {
     motor_current_a: [f64; 4],
     /// Encoder positions, counts, kept in [0, 2³²).
     encoder_counts: [f64; 4],
-    soc_pct: f64,
     pack_current_a: f64,
-    /// An injected runaway: the forward speed the chassis drives at whatever it is told.
-    runaway_mps: Option<f64>,
 
     // Output.
     fast: Grid,
     slow: Grid,
     bms: Grid,
-    flood: Option<Flood>,
     zero_replies: VecDeque<Timestamp>,
-    outbox: Outbox<CanFrame>,
+    /// What every simulated chassis shares: the outbox, the boot, the battery's charge and the
+    /// injected faults.
+    chassis: Chassis<CanFrame>,
 
     // Counters.
-    boots: u32,
     commands_received: u64,
     commands_ignored: u64,
     commands_clamped: u64,
@@ -269,7 +262,7 @@ impl TitanSim {
     /// Speed below which the robot stands still (off-road switching), m/s.
     pub const STANDING_STILL_MPS: f64 = 0.01;
     /// CAN id of injected garbage frames (unused by TITAN).
-    pub const GARBAGE_ID: u16 = 0x7F0;
+    pub const GARBAGE_ID: u16 = GARBAGE_ID;
     /// The pack (one battery; [`Self::with_batteries`] doubles the capacity).
     pub const BATTERY: BatteryModel = BatteryModel {
         capacity_ah: 24.0,
@@ -298,7 +291,6 @@ impl TitanSim {
             speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
             stop_time_constant_s: Self::DEFAULT_STOP_TIME_CONSTANT_S,
             steer_rate_radps: Self::DEFAULT_STEER_RATE_RADPS,
-            boot_time: Self::DEFAULT_BOOT_TIME,
             steering_zero_delay: Self::DEFAULT_STEERING_ZERO_DELAY,
             batteries: 1,
             mode: Mode::Standby,
@@ -308,11 +300,9 @@ impl TitanSim {
             brake_engaged: true,
             off_road: false,
             silent_mode: false,
-            booting_until: None,
             rc_on: false,
             rc_counter: 0,
             bumper: false,
-            motor_lost: [false; 4],
             faults: 0,
             last_update: now,
             linear_mps: 0.0,
@@ -324,16 +314,19 @@ impl TitanSim {
             wheel_mps: [0.0; 4],
             motor_current_a: [0.0; 4],
             encoder_counts: [0.0; 4],
-            soc_pct: 100.0,
-            runaway_mps: None,
             pack_current_a: Self::IDLE_CURRENT_A,
             fast: Grid::new(Self::FAST_PERIOD, now),
             slow: Grid::new(Self::SLOW_PERIOD, now),
             bms: Grid::new(Self::BMS_PERIOD, now),
-            flood: None,
             zero_replies: VecDeque::new(),
-            outbox: Outbox::new(),
-            boots: 0,
+            chassis: Chassis::new(
+                Injectable {
+                    motors: 4,
+                    max_flood_per_s: Self::MAX_FLOOD_FRAMES_PER_S,
+                    checksums: false,
+                },
+                Self::DEFAULT_BOOT_TIME,
+            ),
             commands_received: 0,
             commands_ignored: 0,
             commands_clamped: 0,
@@ -366,7 +359,7 @@ impl TitanSim {
 
     /// Silence after a reboot.
     pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
-        self.boot_time = boot_time;
+        self.chassis.set_boot_time(boot_time);
         self
     }
 
@@ -385,7 +378,7 @@ impl TitanSim {
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
         if let Some(soc_pct) = state_of_charge(soc_pct) {
-            self.soc_pct = soc_pct;
+            self.chassis.soc_pct = soc_pct;
             self.refresh_conditions();
         }
         self
@@ -412,7 +405,7 @@ impl TitanSim {
 
     /// Frames dropped because nobody polled the transmit queue.
     pub fn frames_dropped(&self) -> u64 {
-        self.outbox.dropped()
+        self.chassis.outbox.dropped()
     }
 
     /// The 0x211 fault word the chassis reports.
@@ -430,7 +423,7 @@ impl TitanSim {
 
     /// True while the chassis boots after a reboot.
     pub fn is_booting(&self) -> bool {
-        self.booting_until.is_some()
+        self.chassis.is_booting()
     }
 
     /// Front and rear odometers, m (unwrapped).
@@ -440,7 +433,7 @@ impl TitanSim {
 
     /// Pack voltage under the present load, V.
     pub fn battery_voltage_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.soc_pct, self.pack_current_a)
+        Self::BATTERY.voltage_v(self.chassis.soc_pct, self.pack_current_a)
     }
 
     /// Pack current, A (positive = discharging).
@@ -452,7 +445,7 @@ impl TitanSim {
     // Rules.
 
     fn is_powered(&self) -> bool {
-        self.booting_until.is_none() && self.faults & fault::BATTERY_UNDER_VOLTAGE == 0
+        !self.chassis.is_booting() && self.faults & fault::BATTERY_UNDER_VOLTAGE == 0
     }
 
     /// Why the wheels may not turn right now, if they may not.
@@ -461,15 +454,15 @@ impl TitanSim {
             || self.mode != Mode::Command
             || self.brake_engaged
             || self.faults & STOP_FAULTS != 0
-            || self.soc_pct < self.profile.low_battery_cutoff_soc_pct
+            || self.chassis.soc_pct < self.profile.low_battery_cutoff_soc_pct
     }
 
     /// Re-raises the faults whose cause persists (lost drivers, bumper, flat battery).
     fn refresh_conditions(&mut self) {
-        if self.booting_until.is_some() {
+        if self.chassis.is_booting() {
             return;
         }
-        for (lost, bit) in self.motor_lost.iter().zip(MOTOR_COMM_LOST) {
+        for (lost, bit) in self.chassis.motor_lost.iter().zip(MOTOR_COMM_LOST) {
             if *lost {
                 self.faults |= bit;
             }
@@ -479,7 +472,7 @@ impl TitanSim {
         } else {
             self.faults &= !fault::BUMPER;
         }
-        if self.soc_pct < self.profile.low_battery_cutoff_soc_pct {
+        if self.chassis.soc_pct < self.profile.low_battery_cutoff_soc_pct {
             self.faults |= fault::BATTERY_UNDER_VOLTAGE;
         }
         if self.drive_blocked() {
@@ -488,7 +481,7 @@ impl TitanSim {
     }
 
     fn heartbeat_deadline(&self) -> Option<Timestamp> {
-        (self.mode == Mode::Command && self.booting_until.is_none()).then(|| {
+        (self.mode == Mode::Command && !self.chassis.is_booting()).then(|| {
             self.last_motion_rx
                 + Duration::from_millis(self.profile.command_timeout_ms)
                 + Duration::from_nanos(1)
@@ -515,11 +508,9 @@ impl TitanSim {
         for dt in substeps(&mut self.last_update, now) {
             self.step(dt);
         }
-        if self.booting_until.is_some_and(|t| now >= t) {
-            self.booting_until = None;
+        if self.chassis.expire(now).is_some() {
             self.refresh_conditions();
         }
-        self.outbox.expire(now);
         if self.heartbeat_deadline().is_some_and(|t| now >= t) {
             self.faults |= fault::HEARTBEAT_LOST;
             self.enter_standby();
@@ -538,7 +529,7 @@ impl TitanSim {
     }
 
     fn on_command(&mut self, now: Timestamp, frame: Frame) {
-        if self.booting_until.is_some() || !self.accepts(frame.id()) {
+        if self.chassis.is_booting() || !self.accepts(frame.id()) {
             self.commands_ignored += 1;
             return;
         }
@@ -579,7 +570,7 @@ impl TitanSim {
             Frame::SilentMode(s) => {
                 self.silent_mode = s.enter;
                 if s.enter {
-                    self.outbox.clear();
+                    self.chassis.outbox.clear();
                 }
             }
             Frame::OffRoad(s) => {
@@ -599,7 +590,7 @@ impl TitanSim {
 
     fn clear_faults(&mut self, code: u8) {
         let motor_bit = |m: usize| {
-            if self.motor_lost[m] {
+            if self.chassis.motor_lost[m] {
                 0
             } else {
                 MOTOR_COMM_LOST[m]
@@ -620,7 +611,7 @@ impl TitanSim {
             }
             // Power is restored only from a battery above the cut-off.
             clear_code::BATTERY_UNDER_VOLTAGE
-                if self.soc_pct >= self.profile.low_battery_cutoff_soc_pct =>
+                if self.chassis.soc_pct >= self.profile.low_battery_cutoff_soc_pct =>
             {
                 fault::BATTERY_UNDER_VOLTAGE
             }
@@ -635,7 +626,6 @@ impl TitanSim {
     }
 
     fn reboot(&mut self, now: Timestamp) {
-        self.boots = self.boots.saturating_add(1);
         self.mode = if self.rc_on {
             Mode::Remote
         } else {
@@ -652,13 +642,9 @@ impl TitanSim {
         self.encoder_counts = [0.0; 4];
         self.rc_counter = 0;
         self.zero_replies.clear();
-        self.outbox.clear();
         self.last_motion_rx = now;
-        if self.boot_time.is_zero() {
-            self.booting_until = None;
+        if self.chassis.reboot(now) {
             self.refresh_conditions();
-        } else {
-            self.booting_until = Some(now + self.boot_time);
         }
     }
 
@@ -669,7 +655,7 @@ impl TitanSim {
     fn step(&mut self, dt: f64) {
         self.refresh_conditions();
         let blocked = self.drive_blocked();
-        let (target, tau) = match self.runaway_mps {
+        let (target, tau) = match self.chassis.runaway_mps {
             Some(runaway) => (runaway, self.speed_time_constant_s),
             None if blocked => (0.0, self.stop_time_constant_s),
             None => (self.command.linear_mps, self.speed_time_constant_s),
@@ -691,7 +677,7 @@ impl TitanSim {
         let s_mid = 0.5 * (s0 + s1);
         let w_mid = yaw_rate(v_mid, s_mid, &self.profile);
         self.pose.advance(v_mid, 0.0, w_mid, dt);
-        if self.booting_until.is_none() {
+        if !self.chassis.is_booting() {
             self.front_odometer_m += v_mid * dt;
             self.rear_odometer_m += v_mid * dt;
             let counts_per_m = Self::GEAR_RATIO * Self::ENCODER_PULSES_PER_REV
@@ -713,8 +699,8 @@ impl TitanSim {
         }
         self.pack_current_a =
             Self::IDLE_CURRENT_A + self.motor_current_a.iter().map(|c| c.abs()).sum::<f64>();
-        self.soc_pct = Self::BATTERY.drain(
-            self.soc_pct,
+        self.chassis.soc_pct = Self::BATTERY.drain(
+            self.chassis.soc_pct,
             self.pack_current_a,
             dt,
             f64::from(self.batteries),
@@ -745,7 +731,7 @@ impl TitanSim {
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.booting_until.is_some() || self.silent_mode || self.outbox.is_silenced(now)
+        self.chassis.is_quiet(now) || self.silent_mode
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
@@ -759,9 +745,9 @@ impl TitanSim {
         }
         // Every value is kept inside its wire range; a frame that still does not fit is dropped.
         if let Ok(can) = frame.encode(&self.profile) {
-            self.outbox.push_injected(can, injected);
+            self.chassis.outbox.push_injected(can, injected);
         } else {
-            self.outbox.count_dropped();
+            self.chassis.outbox.count_dropped();
         }
     }
 
@@ -829,7 +815,7 @@ impl TitanSim {
             );
         }
         for motor in 0..4 {
-            if !self.motor_lost[motor] {
+            if !self.chassis.motor_lost[motor] {
                 self.send(now, self.motor_fast(motor));
             }
         }
@@ -868,7 +854,7 @@ impl TitanSim {
             status |= DriverStatus::SUPPLY_UNDER_VOLTAGE;
         }
         for motor in 0..4 {
-            if self.motor_lost[motor] {
+            if self.chassis.motor_lost[motor] {
                 continue;
             }
             let current = self.motor_current_a[motor].abs();
@@ -886,14 +872,14 @@ impl TitanSim {
     }
 
     fn send_bms(&mut self, now: Timestamp) {
-        let soc = self.soc_pct.floor().clamp(0.0, 100.0);
+        let soc = self.chassis.soc_pct.floor().clamp(0.0, 100.0);
         let voltage = self.battery_voltage_v().min(655.35);
         let current = clamp_i16(self.pack_current_a, 10.0);
         let mut alarm = BmsAlarm::default();
-        if self.soc_pct < self.profile.low_battery_warning_soc_pct {
+        if self.chassis.soc_pct < self.profile.low_battery_warning_soc_pct {
             alarm.warning_1 |= BMS_UNDER_VOLTAGE;
         }
-        if self.soc_pct < self.profile.low_battery_cutoff_soc_pct {
+        if self.chassis.soc_pct < self.profile.low_battery_cutoff_soc_pct {
             alarm.alarm_1 |= BMS_UNDER_VOLTAGE;
         }
         let data = BmsData {
@@ -924,10 +910,10 @@ impl TitanSim {
     }
 
     fn send_flood(&mut self, now: Timestamp) {
-        let Some(second) = self.flood.as_mut().and_then(|flood| flood.due(now)) else {
+        let Some(second) = self.chassis.flood_due(now) else {
             return;
         };
-        let frame = if second && !self.motor_lost[0] {
+        let frame = if second && !self.chassis.motor_lost[0] {
             self.motor_fast(0)
         } else {
             self.motion_feedback()
@@ -941,10 +927,10 @@ impl TitanSim {
         if self.faults != 0 {
             flags |= FaultFlags::BODY_EXCEPTION;
         }
-        if self.soc_pct < self.profile.low_battery_warning_soc_pct {
+        if self.chassis.soc_pct < self.profile.low_battery_warning_soc_pct {
             flags |= FaultFlags::BATTERY_LOW;
         }
-        if self.soc_pct < self.profile.low_battery_cutoff_soc_pct {
+        if self.chassis.soc_pct < self.profile.low_battery_cutoff_soc_pct {
             flags |= FaultFlags::BMS_ALARM;
         }
         flags
@@ -997,8 +983,8 @@ impl Firmware for TitanSim {
         self.send_flood(now);
     }
 
-    fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.outbox.pop().map(Transmit::Can)
+    fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
+        self.chassis.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
@@ -1006,9 +992,7 @@ impl Firmware for TitanSim {
         [
             self.heartbeat_deadline(),
             self.zero_replies.front().copied(),
-            self.booting_until,
-            self.outbox.silent_until(),
-            self.flood.map(|f| f.next()),
+            self.chassis.poll_timeout(),
         ]
         .into_iter()
         .fold(Some(grids), earliest)
@@ -1016,26 +1000,15 @@ impl Firmware for TitanSim {
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match injection {
-            Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = motor_index(motor, 4) else {
-                    return false;
-                };
-                self.motor_lost[index] = lost;
-                self.refresh_conditions();
-            }
-            Injection::Battery { soc_pct } => {
-                let Some(soc_pct) = state_of_charge(soc_pct) else {
-                    return false;
-                };
-                self.soc_pct = soc_pct;
-                self.refresh_conditions();
-            }
-            Injection::Bumper(pressed) => {
+        match self.chassis.inject(now, injection) {
+            Applied::Condition => self.refresh_conditions(),
+            Applied::Done => {}
+            Applied::Refused => return false,
+            Applied::Robot(Injection::Bumper(pressed)) => {
                 self.bumper = pressed;
                 self.refresh_conditions();
             }
-            Injection::RcTakeover(on) => {
+            Applied::Robot(Injection::RcTakeover(on)) => {
                 self.rc_on = on;
                 if on {
                     self.mode = Mode::Remote;
@@ -1046,22 +1019,9 @@ impl Firmware for TitanSim {
                     self.enter_standby();
                 }
             }
-            Injection::Runaway(speed) => {
-                let Some(speed) = runaway_speed(speed) else {
-                    return false;
-                };
-                self.runaway_mps = speed;
-            }
-            Injection::Reboot => self.reboot(now),
-            Injection::Silence(duration) => self.outbox.silence(now, duration),
-            Injection::Garbage(bytes) => push_garbage(&mut self.outbox, Self::GARBAGE_ID, &bytes),
-            Injection::Flood { frames_per_s } => {
-                self.flood = Flood::new(now, frames_per_s, Self::MAX_FLOOD_FRAMES_PER_S);
-            }
-            Injection::BadChecksums(_)
-            | Injection::ObstacleAhead(_)
-            | Injection::ObstacleBehind(_)
-            | Injection::EStop(_) => return false,
+            Applied::Robot(Injection::Reboot) => self.reboot(now),
+            // No checksum, no range sensors, no E-stop switch.
+            Applied::Robot(_) => return false,
         }
         true
     }
@@ -1081,13 +1041,13 @@ impl Firmware for TitanSim {
                 Mode::Remote => ControlMode::REMOTE,
             },
             brake_engaged: self.brake_engaged,
-            soc_pct: self.soc_pct,
+            soc_pct: self.chassis.soc_pct,
             fault_flags: self.fault_flags(),
             commands_received: self.commands_received,
             bad_checksums_received: 0,
             decode_errors: self.decode_errors,
-            boots: self.boots,
-            injected: self.outbox.injected(),
+            boots: self.chassis.boots,
+            injected: self.chassis.outbox.injected(),
         }
     }
 }

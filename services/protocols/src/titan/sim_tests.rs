@@ -11,7 +11,7 @@ use crate::can::CanFrame;
 use crate::driver::Rx;
 use crate::firmware::{Firmware, Injection};
 use crate::profile::TitanProfile;
-use crate::sim_bench::{Parts, SimBench};
+use crate::sim_bench::BenchFirmware;
 use crate::time::Timestamp;
 use crate::titan::BmsData;
 use crate::titan::{
@@ -33,60 +33,26 @@ fn motion(linear_mps: f64, steer_rad: f64) -> MotionCommand {
 }
 
 /// The firmware on simulated time, with an optional 20 ms 0x111 heartbeat from "the computer".
-struct Bench {
-    sim: TitanSim,
-    profile: TitanProfile,
-    now: Timestamp,
-    /// Everything the chassis sent, with the time it was polled.
-    sent: Vec<(Timestamp, CanFrame)>,
-    heartbeat: Option<MotionCommand>,
-    next_heartbeat: Timestamp,
-    last_heartbeat: Option<Timestamp>,
-}
+type Bench = crate::sim_bench::Bench<TitanSim>;
 
-impl SimBench for Bench {
-    type Firmware = TitanSim;
+impl BenchFirmware for TitanSim {
     type Item = CanFrame;
     type Command = MotionCommand;
+    type Profile = TitanProfile;
     const HEARTBEAT_PERIOD: Duration = Duration::from_millis(20);
 
-    fn parts(&mut self) -> Parts<'_, TitanSim, CanFrame, MotionCommand> {
-        Parts {
-            sim: &mut self.sim,
-            now: &mut self.now,
-            sent: &mut self.sent,
-            heartbeat: &mut self.heartbeat,
-            next_heartbeat: &mut self.next_heartbeat,
-            last_heartbeat: &mut self.last_heartbeat,
-        }
+    fn bench_profile(&self) -> &TitanProfile {
+        self.profile()
     }
 
-    fn sent(&self) -> &[(Timestamp, CanFrame)] {
-        &self.sent
-    }
-
-    fn send_heartbeat(&mut self, command: MotionCommand) {
-        self.send(Frame::MotionCommand(command));
+    fn send_heartbeat(bench: &mut Bench, command: MotionCommand) {
+        bench.send(Frame::MotionCommand(command));
     }
 }
 
 impl Bench {
     fn new() -> Self {
-        Self::with(TitanSim::new(TitanProfile::default(), T0))
-    }
-
-    fn with(sim: TitanSim) -> Self {
-        let mut bench = Self {
-            profile: sim.profile().clone(),
-            sim,
-            now: T0,
-            sent: Vec::new(),
-            heartbeat: None,
-            next_heartbeat: T0,
-            last_heartbeat: None,
-        };
-        bench.drain();
-        bench
+        Self::with(TitanSim::new(TitanProfile::default(), T0), T0)
     }
 
     /// In CAN command mode with the brake released.
@@ -709,7 +675,7 @@ fn steering_slews_and_is_reported_through_the_profile_sign() {
         steering_feedback_left_positive: true,
         ..TitanProfile::default()
     };
-    let mut b = Bench::with(TitanSim::new(flipped, T0).with_steer_rate_radps(0.0));
+    let mut b = Bench::with(TitanSim::new(flipped, T0).with_steer_rate_radps(0.0), T0);
     b.send(Frame::Mode(ModeCommand {
         mode: mode::CAN_COMMAND,
     }));
@@ -809,7 +775,10 @@ fn the_battery_drains_visibly_and_its_voltage_dips_under_load() {
         "battery 2 not fitted"
     );
 
-    let mut b = Bench::with(TitanSim::new(TitanProfile::default(), T0).with_batteries(2));
+    let mut b = Bench::with(
+        TitanSim::new(TitanProfile::default(), T0).with_batteries(2),
+        T0,
+    );
     b.run_for(ms(600));
     let (Frame::BmsData(pack), Frame::BmsData(second)) = (b.last(0x361), b.last(0x365)) else {
         panic!()

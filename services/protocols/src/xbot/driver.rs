@@ -13,7 +13,7 @@ use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::command::{Command, Turn};
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, Level, Rx, Transmit, Unwrap16, wrap_angle,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, Rx, Unwrap16, WireItem, wrap_angle,
 };
 use crate::profile::XbotProfile;
 use crate::registry::RobotKind;
@@ -94,7 +94,7 @@ struct SpeedRef {
 /// The XBot driver: a pure state machine over the XBot codec (RS232 byte stream).
 ///
 /// Sans-IO like every driver: serial bytes go in with their time ([`Driver::handle_rx`], any
-/// chunking), frames come out as [`Transmit::Bytes`] ([`Driver::poll_transmit`]), and
+/// chunking), frames come out as [`WireItem::Bytes`] ([`Driver::poll_transmit`]), and
 /// [`Driver::poll_timeout`] names the next deadline. It never reads a clock.
 ///
 /// # Link
@@ -770,7 +770,7 @@ impl Driver for XbotDriver {
         }
     }
 
-    fn poll_transmit(&mut self, now: Timestamp) -> Option<Transmit> {
+    fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         if self.core.bus_down {
             self.queue.clear();
             return None;
@@ -784,7 +784,7 @@ impl Driver for XbotDriver {
             return None;
         };
         self.core
-            .transmit(frame.name(), frame.encode(&self.profile), Transmit::Bytes)
+            .transmit(frame.name(), frame.encode(&self.profile), WireItem::Bytes)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

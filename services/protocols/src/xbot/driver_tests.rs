@@ -8,7 +8,7 @@ use proptest::prelude::*;
 
 use super::*;
 use crate::command::Command;
-use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, Transmit};
+use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
 use crate::profile::XbotProfile;
 use crate::time::Timestamp;
 use crate::xbot::test_support::{close, hex, max_per_second, ms, p, pieces, twist};
@@ -67,7 +67,7 @@ impl Bench {
 
     fn drain(&mut self) {
         while let Some(item) = self.d.poll_transmit(self.now) {
-            let Transmit::Bytes(bytes) = item else {
+            let WireItem::Bytes(bytes) = item else {
                 panic!("the XBot driver sent a CAN frame");
             };
             let mut parser = StreamParser::new();

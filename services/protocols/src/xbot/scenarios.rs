@@ -11,7 +11,7 @@ use chassis_interfaces::{ClampFlags, Group, LinkFlags, Twist};
 use super::{Frame, StreamParser, XbotDriver, XbotSim};
 use crate::Direction;
 use crate::command::Command;
-use crate::driver::{Driver, DriverConfig, DriverEvent, Level, Transmit};
+use crate::driver::{Driver, DriverConfig, DriverEvent, Level, WireItem};
 use crate::firmware::{Firmware, Injection};
 use crate::pair::Pair;
 use crate::profile::XbotProfile;
@@ -49,7 +49,7 @@ fn to_chassis(pair: &XbotPair) -> Vec<(Timestamp, Frame)> {
         .iter()
         .filter(|r| r.direction == Direction::ToChassis)
         .map(|r| {
-            let Transmit::Bytes(bytes) = &r.item else {
+            let WireItem::Bytes(bytes) = &r.item else {
                 panic!("CAN from the XBot driver");
             };
             let mut parser = StreamParser::new();

@@ -9,10 +9,10 @@ use chassis_interfaces::ControlMode;
 use super::codec::{Frame, SensorReport, VelocityCommand, scale};
 use super::stream::StreamParser;
 use crate::DecodeError;
-use crate::driver::{Rx, Transmit};
+use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    BatteryModel, Firmware, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth,
-    first_order_lag, motor_index, non_negative, runaway_speed, state_of_charge, substeps,
+    Applied, BatteryModel, Chassis, Firmware, Injectable, InjectedCounts, Injection, Pose,
+    SimTruth, first_order_lag, non_negative, state_of_charge, substeps,
 };
 use crate::profile::XbotProfile;
 use crate::registry::RobotKind;
@@ -22,7 +22,7 @@ use crate::time::{Grid, Timestamp, earliest};
 ///
 /// [`XbotSim`] is sans-IO like the driver: bytes from the computer go in with their time
 /// ([`Firmware::handle_rx`], any chunking; a [`StreamParser`] finds the frames), sensor reports
-/// come out as [`Transmit::Bytes`] ([`Firmware::poll_transmit`]), and [`Firmware::poll_timeout`]
+/// come out as [`WireItem::Bytes`] ([`Firmware::poll_transmit`]), and [`Firmware::poll_timeout`]
 /// names the next deadline. It never reads a clock. Every frame in either direction goes through
 /// the codec, so the profile's ⚠ choices (yaw-rate and lateral signs, BCD currents and ranges,
 /// counts per wheel turn) are honoured on this side too.
@@ -95,7 +95,6 @@ pub struct XbotSim {
     wheel_separation_m: f64,
     speed_time_constant_s: f64,
     stop_time_constant_s: f64,
-    boot_time: Duration,
     tx_chunk_len: usize,
 
     // Control state.
@@ -105,13 +104,10 @@ pub struct XbotSim {
     command: VelocityCommand,
     heartbeat_alive: bool,
     last_velocity_rx: Timestamp,
-    booting_until: Option<Timestamp>,
     /// Origin of the board's µs timestamp and of the encoder counts: the end of the last boot.
     booted_at: Timestamp,
-    motor_lost: [bool; 4],
     obstacle_ahead_m: Option<f64>,
     obstacle_behind_m: Option<f64>,
-    corrupt_next: u32,
     lift_enabled: bool,
     lift_target_pct: f64,
     pan_rad: f64,
@@ -130,18 +126,15 @@ pub struct XbotSim {
     lift_moving: bool,
     motor_current_a: [f64; 4],
     lift_current_a: f64,
-    soc_pct: f64,
     pack_current_a: f64,
-    /// An injected runaway: the forward speed the chassis drives at whatever it is told.
-    runaway_mps: Option<f64>,
 
     // Output.
     reports: Grid,
-    flood: Option<Flood>,
-    outbox: Outbox<Vec<u8>>,
+    /// What every simulated chassis shares: the outbox, the boot, the battery's charge and the
+    /// injected faults.
+    chassis: Chassis<Vec<u8>>,
 
     // Counters.
-    boots: u32,
     commands_received: u64,
     commands_ignored: u64,
     bad_checksums_received: u64,
@@ -212,24 +205,28 @@ impl XbotSim {
             .wheel_separation_m
             .filter(|s| s.is_finite() && *s > 0.0)
             .unwrap_or(Self::DEFAULT_WHEEL_SEPARATION_M);
+        let chassis = Chassis::new(
+            Injectable {
+                motors: wheel_count(&profile),
+                max_flood_per_s: line_reports_per_s(&profile),
+                checksums: true,
+            },
+            Self::DEFAULT_BOOT_TIME,
+        );
         Self {
             profile,
             wheel_separation_m,
             speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
             stop_time_constant_s: Self::DEFAULT_STOP_TIME_CONSTANT_S,
-            boot_time: Self::DEFAULT_BOOT_TIME,
             tx_chunk_len: 0,
             parser: StreamParser::new(),
             powered: false,
             command: VelocityCommand::default(),
             heartbeat_alive: false,
             last_velocity_rx: now,
-            booting_until: None,
             booted_at: now,
-            motor_lost: [false; 4],
             obstacle_ahead_m: None,
             obstacle_behind_m: None,
-            corrupt_next: 0,
             lift_enabled: false,
             lift_target_pct: 0.0,
             pan_rad: 0.0,
@@ -244,13 +241,9 @@ impl XbotSim {
             lift_moving: false,
             motor_current_a: [0.0; 4],
             lift_current_a: 0.0,
-            soc_pct: 100.0,
-            runaway_mps: None,
             pack_current_a: Self::IDLE_CURRENT_A,
             reports: Grid::new(Self::REPORT_PERIOD, now),
-            flood: None,
-            outbox: Outbox::new(),
-            boots: 0,
+            chassis,
             commands_received: 0,
             commands_ignored: 0,
             bad_checksums_received: 0,
@@ -276,14 +269,14 @@ impl XbotSim {
 
     /// Silence after a reboot (zero: the board answers at once).
     pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
-        self.boot_time = boot_time;
+        self.chassis.set_boot_time(boot_time);
         self
     }
 
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
         if let Some(soc_pct) = state_of_charge(soc_pct) {
-            self.soc_pct = soc_pct;
+            self.chassis.soc_pct = soc_pct;
         }
         self
     }
@@ -311,7 +304,7 @@ impl XbotSim {
 
     /// True while the board boots after a reboot.
     pub fn is_booting(&self) -> bool {
-        self.booting_until.is_some()
+        self.chassis.is_booting()
     }
 
     /// The lift's position and target, % of travel.
@@ -365,7 +358,7 @@ impl XbotSim {
 
     /// Chunks dropped because nobody polled the transmit queue (or a report did not encode).
     pub fn frames_dropped(&self) -> u64 {
-        self.outbox.dropped()
+        self.chassis.outbox.dropped()
     }
 
     /// Times the 500 ms heartbeat timeout set the speed to 0.
@@ -375,7 +368,7 @@ impl XbotSim {
 
     /// Pack voltage under the present load, V.
     pub fn battery_voltage_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.soc_pct, self.pack_current_a)
+        Self::BATTERY.voltage_v(self.chassis.soc_pct, self.pack_current_a)
     }
 
     // -----------------------------------------------------------------------------------------
@@ -383,13 +376,18 @@ impl XbotSim {
 
     /// Number of driven wheels: 2, or 4 on omni variants.
     fn wheels(&self) -> usize {
-        if self.profile.omni { 4 } else { 2 }
+        wheel_count(&self.profile)
     }
 
     fn drive_blocked(&self) -> bool {
         !self.powered
-            || self.booting_until.is_some()
-            || self.motor_lost.iter().take(self.wheels()).any(|l| *l)
+            || self.chassis.is_booting()
+            || self
+                .chassis
+                .motor_lost
+                .iter()
+                .take(self.wheels())
+                .any(|l| *l)
     }
 
     fn heartbeat_deadline(&self) -> Option<Timestamp> {
@@ -405,14 +403,10 @@ impl XbotSim {
         for dt in substeps(&mut self.last_update, now) {
             self.step(dt);
         }
-        if let Some(until) = self.booting_until
-            && now >= until
-        {
-            self.booting_until = None;
+        if let Some(until) = self.chassis.expire(now) {
             self.booted_at = until;
             self.reports = Grid::new(Self::REPORT_PERIOD, until);
         }
-        self.outbox.expire(now);
         if self.heartbeat_deadline().is_some_and(|t| now >= t) {
             self.heartbeat_alive = false;
             self.command = VelocityCommand::default();
@@ -437,7 +431,7 @@ impl XbotSim {
     }
 
     fn on_frame(&mut self, now: Timestamp, frame: Frame) {
-        if self.booting_until.is_some() {
+        if self.chassis.is_booting() {
             self.commands_ignored += 1;
             return;
         }
@@ -483,7 +477,6 @@ impl XbotSim {
     }
 
     fn reboot(&mut self, now: Timestamp) {
-        self.boots = self.boots.saturating_add(1);
         self.powered = false;
         self.command = VelocityCommand::default();
         self.heartbeat_alive = false;
@@ -492,13 +485,9 @@ impl XbotSim {
         self.pan_rad = 0.0;
         self.tilt_rad = 0.0;
         self.parser.clear();
-        self.outbox.clear();
-        if self.boot_time.is_zero() {
-            self.booting_until = None;
+        if self.chassis.reboot(now) {
             self.booted_at = now;
             self.reports = Grid::new(Self::REPORT_PERIOD, now);
-        } else {
-            self.booting_until = Some(now + self.boot_time);
         }
         self.wheel_travel_m = [0.0; 4];
         self.lift_pct_at_boot = self.lift_pct;
@@ -549,7 +538,7 @@ impl XbotSim {
     fn step(&mut self, dt: f64) {
         let blocked = self.drive_blocked();
         let wheels = self.wheels();
-        let (targets, tau) = match self.runaway_mps {
+        let (targets, tau) = match self.chassis.runaway_mps {
             // Every driven wheel at the runaway speed: straight ahead, past every limit.
             Some(runaway) => (
                 std::array::from_fn(|i| if i < wheels { runaway } else { 0.0 }),
@@ -566,7 +555,7 @@ impl XbotSim {
         let mid = [0, 1, 2, 3].map(|i| 0.5 * (w0[i] + w1[i]));
         let (v, vy, w) = self.body(&mid);
         self.pose.advance(v, vy, w, dt);
-        if self.booting_until.is_none() {
+        if !self.chassis.is_booting() {
             for (travel, speed) in self.wheel_travel_m.iter_mut().zip(mid) {
                 *travel += speed * dt;
             }
@@ -575,7 +564,7 @@ impl XbotSim {
         let (v1, _, _) = self.body(&w1);
         self.forward_accel_mps2 = (v1 - v0) / dt;
         for i in 0..4 {
-            let driving = i < wheels && self.powered && !self.motor_lost[i];
+            let driving = i < wheels && self.powered && !self.chassis.motor_lost[i];
             let accel = (w1[i] - w0[i]) / dt;
             self.motor_current_a[i] = if driving {
                 ((Self::MOTOR_A_PER_MPS * w1[i] + Self::MOTOR_A_PER_MPS2 * accel).abs()
@@ -588,7 +577,7 @@ impl XbotSim {
         self.wheel_mps = w1;
 
         // Lift.
-        let booted = self.booting_until.is_none();
+        let booted = !self.chassis.is_booting();
         let gap = self.lift_target_pct - self.lift_pct;
         self.lift_moving = booted && self.lift_enabled && gap != 0.0;
         if self.lift_moving {
@@ -610,14 +599,15 @@ impl XbotSim {
         // Battery.
         self.pack_current_a =
             Self::IDLE_CURRENT_A + self.motor_current_a.iter().sum::<f64>() + self.lift_current_a;
-        self.soc_pct = Self::BATTERY.drain(self.soc_pct, self.pack_current_a, dt, 1.0);
+        self.chassis.soc_pct =
+            Self::BATTERY.drain(self.chassis.soc_pct, self.pack_current_a, dt, 1.0);
     }
 
     // -----------------------------------------------------------------------------------------
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.booting_until.is_some() || self.outbox.is_silenced(now)
+        self.chassis.is_quiet(now)
     }
 
     /// Queues a report in chunks; the injected faults it carries count when its last chunk
@@ -633,10 +623,10 @@ impl XbotSim {
         };
         let last = chunks.pop();
         for chunk in chunks {
-            self.outbox.push(chunk);
+            self.chassis.outbox.push(chunk);
         }
         if let Some(chunk) = last {
-            self.outbox.push_injected(chunk, injected);
+            self.chassis.outbox.push_injected(chunk, injected);
         }
     }
 
@@ -710,11 +700,10 @@ impl XbotSim {
         }
         let Ok(mut bytes) = Frame::Sensor(self.report(now)).encode(&self.profile) else {
             // Every value is kept inside its wire range; this is a bug guard.
-            self.outbox.count_dropped();
+            self.chassis.outbox.count_dropped();
             return;
         };
-        if self.corrupt_next > 0 {
-            self.corrupt_next -= 1;
+        if self.chassis.take_corruption() {
             self.reports_corrupted += 1;
             if let Some(checksum) = bytes.last_mut() {
                 *checksum ^= 0xFF;
@@ -723,11 +712,6 @@ impl XbotSim {
         }
         self.reports_sent += 1;
         self.enqueue(bytes, injected);
-    }
-
-    /// Most reports per second the line carries at the profile's baud rate (10 bits a byte).
-    fn line_reports_per_s(&self) -> u32 {
-        (self.profile.baud / 10 / Self::REPORT_LEN).max(1)
     }
 }
 
@@ -755,82 +739,41 @@ impl Firmware for XbotSim {
 
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
-        if self.booting_until.is_none() && self.reports.is_due(now) {
+        if !self.chassis.is_booting() && self.reports.is_due(now) {
             self.reports.served(now);
             self.send_report(now, InjectedCounts::default());
         }
-        if self
-            .flood
-            .as_mut()
-            .and_then(|flood| flood.due(now))
-            .is_some()
-            && self.booting_until.is_none()
-        {
+        if self.chassis.flood_due(now).is_some() && !self.chassis.is_booting() {
             self.send_report(now, InjectedCounts::FLOOD);
         }
     }
 
-    fn poll_transmit(&mut self, _now: Timestamp) -> Option<Transmit> {
-        self.outbox.pop().map(Transmit::Bytes)
+    fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
+        self.chassis.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        let reports = self.booting_until.is_none().then_some(self.reports.next());
-        [
-            self.heartbeat_deadline(),
-            self.booting_until,
-            self.outbox.silent_until(),
-            self.flood.map(|f| f.next()),
-        ]
-        .into_iter()
-        .fold(reports, earliest)
+        let reports = (!self.chassis.is_booting()).then_some(self.reports.next());
+        [self.heartbeat_deadline(), self.chassis.poll_timeout()]
+            .into_iter()
+            .fold(reports, earliest)
     }
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match injection {
-            Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = motor_index(motor, self.wheels()) else {
-                    return false;
-                };
-                self.motor_lost[index] = lost;
+        match self.chassis.inject(now, injection) {
+            Applied::Condition | Applied::Done => {}
+            Applied::Refused => return false,
+            Applied::Robot(Injection::Reboot) => self.reboot(now),
+            Applied::Robot(Injection::ObstacleAhead(range)) if valid_range(range) => {
+                self.obstacle_ahead_m = range;
             }
-            Injection::Battery { soc_pct } => {
-                let Some(soc_pct) = state_of_charge(soc_pct) else {
-                    return false;
-                };
-                self.soc_pct = soc_pct;
+            Applied::Robot(Injection::ObstacleBehind(range)) if valid_range(range) => {
+                self.obstacle_behind_m = range;
             }
-            Injection::Bumper(_) | Injection::RcTakeover(_) | Injection::EStop(_) => return false,
-            Injection::Runaway(speed) => {
-                let Some(speed) = runaway_speed(speed) else {
-                    return false;
-                };
-                self.runaway_mps = speed;
-            }
-            Injection::Reboot => self.reboot(now),
-            Injection::Silence(duration) => self.outbox.silence(now, duration),
-            Injection::Garbage(bytes) => {
-                if !bytes.is_empty() {
-                    let len = bytes.len();
-                    self.outbox
-                        .push_injected(bytes, InjectedCounts::garbage(len));
-                }
-            }
-            Injection::BadChecksums(n) => self.corrupt_next = self.corrupt_next.saturating_add(n),
-            Injection::ObstacleAhead(range) | Injection::ObstacleBehind(range) => {
-                if range.is_some_and(|d| !(d.is_finite() && d >= 0.0)) {
-                    return false;
-                }
-                if matches!(injection, Injection::ObstacleAhead(_)) {
-                    self.obstacle_ahead_m = range;
-                } else {
-                    self.obstacle_behind_m = range;
-                }
-            }
-            Injection::Flood { frames_per_s } => {
-                self.flood = Flood::new(now, frames_per_s, self.line_reports_per_s());
-            }
+            // An obstacle at no finite distance; the serial protocol has no RC, no bumper and no
+            // E-stop switch.
+            Applied::Robot(_) => return false,
         }
         true
     }
@@ -845,21 +788,36 @@ impl Firmware for XbotSim {
             x_m: self.pose.x_m,
             y_m: self.pose.y_m,
             yaw_rad: self.pose.yaw_rad,
-            control_mode: if self.powered && self.booting_until.is_none() {
+            control_mode: if self.powered && !self.chassis.is_booting() {
                 ControlMode::COMMAND
             } else {
                 ControlMode::STANDBY
             },
             brake_engaged: false,
-            soc_pct: self.soc_pct,
+            soc_pct: self.chassis.soc_pct,
             fault_flags: 0,
             commands_received: self.commands_received,
             bad_checksums_received: self.bad_checksums_received,
             decode_errors: self.decode_errors,
-            boots: self.boots,
-            injected: self.outbox.injected(),
+            boots: self.chassis.boots,
+            injected: self.chassis.outbox.injected(),
         }
     }
+}
+
+/// An injected obstacle range: `None` (nothing in view) or a finite distance ≥ 0, m.
+fn valid_range(range: Option<f64>) -> bool {
+    range.is_none_or(|d| d.is_finite() && d >= 0.0)
+}
+
+/// Number of driven wheels: 2, or 4 on omni variants.
+fn wheel_count(profile: &XbotProfile) -> usize {
+    if profile.omni { 4 } else { 2 }
+}
+
+/// Most reports per second the line carries at the profile's baud rate (10 bits a byte).
+fn line_reports_per_s(profile: &XbotProfile) -> u32 {
+    (profile.baud / 10 / XbotSim::REPORT_LEN).max(1)
 }
 
 /// A signed count as the 16-bit wrapping counter reports it.

@@ -9,7 +9,7 @@ use super::XbotSim;
 use crate::driver::Rx;
 use crate::firmware::{Firmware, Injection};
 use crate::profile::XbotProfile;
-use crate::sim_bench::{Parts, SimBench};
+use crate::sim_bench::BenchFirmware;
 use crate::time::Timestamp;
 use crate::xbot::test_support::{close, ms, p, pieces};
 use crate::xbot::{
@@ -27,60 +27,26 @@ fn velocity(vx: f64, vy: f64, wz: f64) -> VelocityCommand {
 }
 
 /// The board on simulated time, with an optional 125 ms 0x03 heartbeat from "the computer".
-struct Bench {
-    sim: XbotSim,
-    profile: XbotProfile,
-    now: Timestamp,
-    /// Every chunk the board sent, with the time it was polled.
-    sent: Vec<(Timestamp, Vec<u8>)>,
-    heartbeat: Option<VelocityCommand>,
-    next_heartbeat: Timestamp,
-    last_heartbeat: Option<Timestamp>,
-}
+type Bench = crate::sim_bench::Bench<XbotSim>;
 
-impl SimBench for Bench {
-    type Firmware = XbotSim;
+impl BenchFirmware for XbotSim {
     type Item = Vec<u8>;
     type Command = VelocityCommand;
+    type Profile = XbotProfile;
     const HEARTBEAT_PERIOD: Duration = Duration::from_millis(125);
 
-    fn parts(&mut self) -> Parts<'_, XbotSim, Vec<u8>, VelocityCommand> {
-        Parts {
-            sim: &mut self.sim,
-            now: &mut self.now,
-            sent: &mut self.sent,
-            heartbeat: &mut self.heartbeat,
-            next_heartbeat: &mut self.next_heartbeat,
-            last_heartbeat: &mut self.last_heartbeat,
-        }
+    fn bench_profile(&self) -> &XbotProfile {
+        self.profile()
     }
 
-    fn sent(&self) -> &[(Timestamp, Vec<u8>)] {
-        &self.sent
-    }
-
-    fn send_heartbeat(&mut self, command: VelocityCommand) {
-        self.send(Frame::Velocity(command));
+    fn send_heartbeat(bench: &mut Bench, command: VelocityCommand) {
+        bench.send(Frame::Velocity(command));
     }
 }
 
 impl Bench {
     fn new() -> Self {
-        Self::with(XbotSim::new(p(), T0))
-    }
-
-    fn with(sim: XbotSim) -> Self {
-        let mut bench = Self {
-            profile: sim.profile().clone(),
-            sim,
-            now: T0,
-            sent: Vec::new(),
-            heartbeat: None,
-            next_heartbeat: T0,
-            last_heartbeat: None,
-        };
-        bench.drain();
-        bench
+        Self::with(XbotSim::new(p(), T0), T0)
     }
 
     /// Drive power enabled.
@@ -293,7 +259,7 @@ fn the_sign_parameters_are_honoured_through_the_codec() {
         "the wire sign differs"
     );
     for (profile, expect_left) in [(flipped, true), (p(), false)] {
-        let mut b = Bench::with(XbotSim::new(profile, T0));
+        let mut b = Bench::with(XbotSim::new(profile, T0), T0);
         b.send(Frame::Power(PowerCommand { enable: true }));
         for _ in 0..8 {
             b.send_raw(&bytes);
@@ -423,7 +389,7 @@ fn obstacle_injections_show_in_the_ranges_and_do_not_stop_the_robot() {
         bcd_currents_and_ranges: true,
         ..p()
     };
-    let mut b = Bench::with(XbotSim::new(bcd, T0));
+    let mut b = Bench::with(XbotSim::new(bcd, T0), T0);
     b.run_for(ms(40));
     assert_eq!(
         b.last().ultrasonic_m,
@@ -462,7 +428,7 @@ fn a_lost_motor_driver_stops_drive_and_reads_zero_current() {
         );
     }
     let omni = XbotProfile { omni: true, ..p() };
-    let mut b = Bench::with(XbotSim::new(omni, T0));
+    let mut b = Bench::with(XbotSim::new(omni, T0), T0);
     assert!(b.inject(Injection::MotorDriverLoss {
         motor: 4,
         lost: true
@@ -655,7 +621,7 @@ fn a_late_call_skips_missed_reports_without_a_burst() {
 #[test]
 fn omni_variants_move_sideways_and_report_four_wheels() {
     let omni = XbotProfile { omni: true, ..p() };
-    let mut b = Bench::with(XbotSim::new(omni, T0));
+    let mut b = Bench::with(XbotSim::new(omni, T0), T0);
     b.send(Frame::Power(PowerCommand { enable: true }));
     b.heartbeat(Some(velocity(0.0, 0.3, 0.0)));
     b.run_for(ms(3000));
@@ -676,7 +642,7 @@ fn omni_variants_move_sideways_and_report_four_wheels() {
 #[test]
 fn split_output_reassembles_to_the_same_reports() {
     let mut whole = Bench::powered();
-    let mut split = Bench::with(XbotSim::new(p(), T0).with_tx_chunk_len(7));
+    let mut split = Bench::with(XbotSim::new(p(), T0).with_tx_chunk_len(7), T0);
     split.send(Frame::Power(PowerCommand { enable: true }));
     for b in [&mut whole, &mut split] {
         b.heartbeat(Some(velocity(0.3, 0.0, 0.2)));
