@@ -361,7 +361,8 @@ SEEDS = {
             {
                 "seq": 1,
                 "stamp_ns": STAMP,
-                "kind": const("RobotKind", "XBOT"),
+                # The XBot's kind number (chassis_protocols::RobotKind::Xbot.id()).
+                "kind": 3,
                 "sensor_count": 1,
                 "joint_count": 1,
                 "source_count": 1,

@@ -90,7 +90,7 @@ pub struct TypeLayout {
     /// The Rust name (`ChassisState`): how fields and services refer to it.
     #[serde(skip)]
     pub name: &'static str,
-    /// The iceoryx2 type name, with its layout version (`chassis::ChassisState.v2`).
+    /// The iceoryx2 type name, with its layout version (`chassis::ChassisState.v3`).
     pub type_name: &'static str,
     pub size: usize,
     pub align: usize,
@@ -283,10 +283,13 @@ pub fn constants() -> Vec<ConstantGroup> {
     let mut all = vec![
         describe_constants!(flags LinkFlags: u32 {
             CHASSIS_SILENT, BUS_DOWN, COMMAND_MODE, RC_AUTHORITY, STEERING_ZERO_PENDING,
-            GPS_DOWN, SILENT_MODE, REMOTE_LOST,
+            GPS_DOWN, SILENT_MODE, CAN_ERROR_PASSIVE, CAN_BUS_OFF, REMOTE_LOST,
         }),
         describe_constants!(enum ControlMode: u8 { UNKNOWN, STANDBY, COMMAND, REMOTE, SERIAL }),
         describe_constants!(enum WireProtocol: u8 { OWN, V1, V2, DETECTING }),
+        describe_constants!(enum ControllerState: u8 {
+            UNKNOWN, ERROR_ACTIVE, ERROR_WARNING, ERROR_PASSIVE, BUS_OFF,
+        }),
         describe_constants!(flags DriverStatus: u8 {
             SUPPLY_UNDER_VOLTAGE, MOTOR_OVER_TEMPERATURE, DRIVER_OVER_CURRENT,
             DRIVER_OVER_TEMPERATURE, SENSOR_FAULT, DRIVER_ERROR, ENABLED,

@@ -4,7 +4,7 @@
 //! `#[repr(C)]`, holds no pointer and no heap memory, uses fixed-width integers and floats only
 //! (enumerations are a `u8` plus named constants), and names its unit in every field name
 //! (`linear_mps`, `steer_rad`, `voltage_v`, `stamp_ns`). The iceoryx2 type name carries a layout
-//! version (`"chassis::ChassisState.v2"`): iceoryx2 itself compares only name, size and alignment,
+//! version (`"chassis::ChassisState.v3"`): iceoryx2 itself compares only name, size and alignment,
 //! so any layout change must bump the version. Layout tests in each module pin size, alignment and
 //! field offsets so such a change is always deliberate.
 //!
@@ -42,9 +42,10 @@ pub use names::valid_robot_name;
 pub use request::{RequestFlags, VelocityRequest};
 pub use safety::{EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus};
 pub use state::{
-    BmsState, ChassisState, CommandEcho, ControlMode, DriverStatus, FaultFlags, GROUP_SLOTS,
-    GpsFix, Group, ImuState, LiftState, LightsState, LinkFlags, LinkStats, MotionState, MotorState,
-    OdometryState, PanTiltState, RangesState, RcState, SystemState, WireProtocol,
+    BmsState, ChassisState, CommandEcho, ControlMode, ControllerState, DriverStatus, FaultFlags,
+    GROUP_SLOTS, GpsFix, Group, ImuState, LiftState, LightsState, LinkFlags, LinkStats,
+    MotionState, MotorState, OdometryState, PanTiltState, RangesState, RcState, SystemState,
+    WireProtocol,
 };
 pub use text::{read_fixed_str, write_fixed_str};
 

@@ -145,15 +145,21 @@ impl LinkFlags {
     pub const GPS_DOWN: u32 = 1 << 5;
     /// The chassis was told to stop transmitting (CAN-upgrade silent mode).
     pub const SILENT_MODE: u32 = 1 << 6;
+    /// The CAN controller is error-passive: an error counter passed 127 (SocketCAN error
+    /// frames; `LinkStats::can_state`). It still sends and receives, but the bus is unhealthy.
+    pub const CAN_ERROR_PASSIVE: u32 = 1 << 7;
+    /// The CAN controller is bus-off: it takes no part in the bus until it is restarted
+    /// (`restart-ms`, or the interface taken down and up); nothing reaches the chassis.
+    pub const CAN_BUS_OFF: u32 = 1 << 8;
     /// Set by a mirror on another computer (`chassis-zenoh --mirror`), never by chassisd:
     /// nothing has arrived from the robot over the network for longer than the mirror's loss
     /// limit (or its liveliness token is gone). The sample is the last one received, published
     /// again; the robot's own remote sources time out on the robot.
-    pub const REMOTE_LOST: u32 = 1 << 7;
+    pub const REMOTE_LOST: u32 = 1 << 9;
 
     /// Names of the set bits, for logs and JSON.
     pub fn names(bits: u32) -> Vec<&'static str> {
-        const NAMES: [(u32, &str); 8] = [
+        const NAMES: [(u32, &str); 10] = [
             (LinkFlags::CHASSIS_SILENT, "chassis_silent"),
             (LinkFlags::BUS_DOWN, "bus_down"),
             (LinkFlags::COMMAND_MODE, "command_mode"),
@@ -161,6 +167,8 @@ impl LinkFlags {
             (LinkFlags::STEERING_ZERO_PENDING, "steering_zero_pending"),
             (LinkFlags::GPS_DOWN, "gps_down"),
             (LinkFlags::SILENT_MODE, "silent_mode"),
+            (LinkFlags::CAN_ERROR_PASSIVE, "can_error_passive"),
+            (LinkFlags::CAN_BUS_OFF, "can_bus_off"),
             (LinkFlags::REMOTE_LOST, "remote_lost"),
         ];
         NAMES
@@ -168,6 +176,33 @@ impl LinkFlags {
             .filter(|(bit, _)| bits & bit != 0)
             .map(|(_, name)| *name)
             .collect()
+    }
+}
+
+/// The CAN controller's error state (`LinkStats::can_state`), as ISO 11898-1 defines it from
+/// the controller's transmit and receive error counters and SocketCAN reports it.
+#[derive(Debug, Clone, Copy)]
+pub struct ControllerState;
+impl ControllerState {
+    /// Not known: not a CAN bus, or the controller reported nothing (a vcan has no controller).
+    pub const UNKNOWN: u8 = 0;
+    /// Both error counters below 96: all is well.
+    pub const ERROR_ACTIVE: u8 = 1;
+    /// An error counter reached 96.
+    pub const ERROR_WARNING: u8 = 2;
+    /// An error counter passed 127: the controller no longer signals the errors it sees.
+    pub const ERROR_PASSIVE: u8 = 3;
+    /// The transmit error counter passed 255: the controller is off the bus.
+    pub const BUS_OFF: u8 = 4;
+
+    pub fn name(state: u8) -> &'static str {
+        match state {
+            Self::ERROR_ACTIVE => "error-active",
+            Self::ERROR_WARNING => "error-warning",
+            Self::ERROR_PASSIVE => "error-passive",
+            Self::BUS_OFF => "bus-off",
+            _ => "unknown",
+        }
     }
 }
 
@@ -941,7 +976,7 @@ describe_layout!(
     ZeroCopySend,
     Serialize,
 )]
-#[type_name("chassis::LinkStats.v2")]
+#[type_name("chassis::LinkStats.v3")]
 pub struct LinkStats {
     /// Frames received and decoded.
     pub rx_frames: u64,
@@ -961,6 +996,28 @@ pub struct LinkStats {
     pub bus_reconnects: u64,
     /// Samples, answers and reader wake-ups chassisd could not publish over iceoryx2.
     pub ipc_failures: u64,
+    /// SocketCAN error frames read: the CAN controller's reports on itself and the bus.
+    pub can_error_frames: u64,
+    /// Times the CAN controller became error-passive.
+    pub can_error_passive: u64,
+    /// Times the CAN controller went bus-off.
+    pub can_bus_off: u64,
+    /// Times the CAN controller was restarted after a bus-off (the kernel's `restart-ms`, or
+    /// `ip link set IFACE type can restart`).
+    pub can_restarts: u64,
+    /// Protocol violations the CAN controller reported (bit, stuff, form, CRC errors): noise,
+    /// a wrong bit rate, missing termination or CAN H and L swapped.
+    pub can_bus_errors: u64,
+    /// Reports of a frame sent that no other node acknowledged: the controller is alone on the
+    /// bus, or hears it at another bit rate.
+    pub can_no_ack: u64,
+    /// [`ControllerState`] of the CAN controller now.
+    pub can_state: u8,
+    /// The controller's transmit and receive error counters, as its last report carrying them.
+    pub can_tx_error_count: u8,
+    pub can_rx_error_count: u8,
+    #[serde(skip)]
+    pub _reserved: [u8; 5],
 }
 
 describe_layout!(
@@ -975,6 +1032,16 @@ describe_layout!(
         tx_errors,
         bus_reconnects,
         ipc_failures,
+        can_error_frames,
+        can_error_passive,
+        can_bus_off,
+        can_restarts,
+        can_bus_errors,
+        can_no_ack,
+        can_state,
+        can_tx_error_count,
+        can_rx_error_count,
+        _reserved,
     }
 );
 
@@ -993,7 +1060,7 @@ describe_layout!(
     ZeroCopySend,
     Serialize,
 )]
-#[type_name("chassis::ChassisState.v2")]
+#[type_name("chassis::ChassisState.v3")]
 pub struct ChassisState {
     /// Incremented for every published sample.
     pub seq: u64,
@@ -1093,8 +1160,8 @@ mod tests {
 
     #[test]
     fn chassis_state_layout_is_pinned() {
-        assert_eq!(size_of::<ChassisState>(), 840);
-        assert_eq!(offset_of!(ChassisState, published_ns), 832);
+        assert_eq!(size_of::<ChassisState>(), 896);
+        assert_eq!(offset_of!(ChassisState, published_ns), 888);
         assert_eq!(align_of::<ChassisState>(), 8);
         assert_eq!(offset_of!(ChassisState, seq), 0);
         assert_eq!(offset_of!(ChassisState, stamp_ns), 8);
@@ -1168,8 +1235,12 @@ mod tests {
             (size_of::<CommandEcho>(), align_of::<CommandEcho>()),
             (24, 4)
         );
-        assert_eq!((size_of::<LinkStats>(), align_of::<LinkStats>()), (72, 8));
+        assert_eq!((size_of::<LinkStats>(), align_of::<LinkStats>()), (128, 8));
         assert_eq!(offset_of!(LinkStats, ipc_failures), 64);
+        assert_eq!(offset_of!(LinkStats, can_error_frames), 72);
+        assert_eq!(offset_of!(LinkStats, can_no_ack), 112);
+        assert_eq!(offset_of!(LinkStats, can_state), 120);
+        assert_eq!(offset_of!(LinkStats, can_rx_error_count), 122);
         assert_eq!(offset_of!(LinkStats, bus_reconnects), 56);
     }
 
@@ -1177,7 +1248,7 @@ mod tests {
     fn type_names_carry_a_layout_version() {
         // SAFETY: type_name only returns the string given to the derive.
         let name = unsafe { <ChassisState as ZeroCopySend>::type_name() };
-        assert_eq!(name, "chassis::ChassisState.v2");
+        assert_eq!(name, "chassis::ChassisState.v3");
     }
 
     #[test]

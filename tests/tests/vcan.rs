@@ -545,3 +545,184 @@ fn the_interface_going_down_and_up_mid_drive_is_detected_and_survived() {
         log.matches("Failed to detach").count()
     ));
 }
+
+/// Sends a raw frame with `can_id` (flags included) and 8 data bytes on the interface, as a
+/// driver's error frame reaches every socket: vcan has no controller of its own, so the
+/// kernel's error frames for one are written here, byte for byte as `can_change_state()`,
+/// `can_bus_off()` and `can_restart()` (drivers/net/can/dev/dev.c) fill them.
+fn send_raw(can_id: u32, data: [u8; 8]) {
+    use socketcan::{CanSocket, Socket};
+    let socket = CanSocket::open(&iface()).unwrap();
+    let mut raw = socketcan::frame::can_frame_default();
+    raw.can_id = can_id;
+    raw.can_dlc = 8;
+    raw.data = data;
+    socket.write_frame(&socketcan::CanFrame::from(raw)).unwrap();
+}
+
+/// `CAN_ERR_FLAG` | the class bits.
+const CAN_ERR: u32 = 0x2000_0000;
+
+fn doctor(env: &Env, n: &str, robot: &str) -> (Option<i32>, String) {
+    let bus = format!("can:{}", iface());
+    let out = env.chassis(&[
+        "doctor", "--robot", robot, "--name", n, "--bus", &bus, "--listen", "1",
+    ]);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    println!("{text}");
+    (out.status.code(), text)
+}
+
+fn verdict_of<'a>(report: &'a str, key: &str) -> &'a str {
+    report
+        .lines()
+        .find_map(|l| {
+            let mut w = l.split_whitespace();
+            let v = w.next()?;
+            (w.next()? == key).then_some(v)
+        })
+        .unwrap_or_else(|| panic!("no '{key}' line in\n{report}"))
+}
+
+#[test]
+#[ignore = "needs kernel CAN (vcan) and root: scripts/vm-tests runs it in a VM"]
+fn the_doctor_on_socketcan_down_silent_and_with_the_simulated_titan() {
+    let mut env = Env::new("vcan-doctor");
+    let iface = iface();
+    let n = name("vx");
+
+    ip(&["link", "set", &iface, "down"]);
+    let (code, report) = doctor(&env, &n, "titan");
+    ip(&["link", "set", &iface, "up"]);
+    assert_eq!(code, Some(1), "{report}");
+    assert_eq!(verdict_of(&report, "interface"), "ok", "{report}");
+    assert_eq!(verdict_of(&report, "up"), "FAIL", "{report}");
+    assert!(
+        report.contains(&format!("fix: sudo ip link set {iface} up")),
+        "{report}"
+    );
+
+    // Up, nobody on the bus.
+    let (code, report) = doctor(&env, &n, "titan");
+    assert_eq!(code, Some(1), "{report}");
+    assert_eq!(verdict_of(&report, "bitrate"), "skip", "{report}");
+    assert_eq!(verdict_of(&report, "frames"), "FAIL", "{report}");
+    assert!(report.contains("nothing heard in 1.0 s"), "{report}");
+
+    // The simulated TITAN on the bus: heard, a TITAN's frames, in standby until chassisd asks.
+    let bus = format!("can:{iface}");
+    env.chassisd(
+        "sim",
+        &[
+            "sim",
+            "--robot",
+            "titan",
+            "--name",
+            &name("vy"),
+            "--bus",
+            &bus,
+        ],
+    );
+    let mut report = String::new();
+    let heard = wait_for(UP, || {
+        let (code, text) = doctor(&env, &n, "titan");
+        report = text;
+        code == Some(0)
+    });
+    assert!(heard.is_some(), "{report}\n{}", env.logs());
+    assert_eq!(verdict_of(&report, "frames"), "ok", "{report}");
+    assert_eq!(verdict_of(&report, "robot"), "ok", "{report}");
+    assert_eq!(verdict_of(&report, "e-stop"), "ok", "{report}");
+    figure("chassis doctor on vcan: down, silent and the simulated TITAN as expected");
+
+    // The same robot asked for as a SCOUT MINI: its V1/V2 rule hears V2 and the frames fit.
+    let (_, report) = doctor(&env, &n, "scout-mini");
+    assert!(report.contains("AgileX v2"), "{report}");
+}
+
+#[test]
+#[ignore = "needs kernel CAN (vcan) and root: scripts/vm-tests runs it in a VM"]
+fn error_frames_on_the_socket_are_published_as_bus_off_and_restart_and_the_doctor_fails() {
+    let mut env = Env::new("vcan-busoff");
+    let n = name("vb");
+    let bus = format!("can:{}", iface());
+    env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "titan",
+            "--name",
+            &n,
+            "--bus",
+            &bus,
+            "--no-safety-monitor",
+        ],
+    );
+    let mut robot = env.robot(&n, UP);
+
+    // can_bus_off(): CAN_ERR_BUSOFF, no data.
+    send_raw(CAN_ERR | 0x040, [0; 8]);
+    let off = wait_for(UP, || {
+        state(&mut robot).has_link_flag(LinkFlags::CAN_BUS_OFF)
+    });
+    assert!(off.is_some(), "no bus-off published\n{}", env.logs());
+    let s = state(&mut robot);
+    assert_eq!(
+        (
+            s.link.can_state,
+            s.link.can_bus_off,
+            s.link.can_error_frames
+        ),
+        (ControllerState::BUS_OFF, 1, 1)
+    );
+    figure(format!(
+        "an error frame (bus-off) on {} → published in {}",
+        iface(),
+        ms(off.unwrap())
+    ));
+    let status = env.chassis(&["status", "--name", &n]);
+    let text = String::from_utf8_lossy(&status.stdout);
+    assert!(text.contains("BUS-OFF"), "{text}");
+    assert!(text.contains("can        bus-off"), "{text}");
+    let (code, report) = doctor(&env, &n, "titan");
+    assert_eq!(code, Some(1), "{report}");
+    assert_eq!(verdict_of(&report, "controller"), "FAIL", "{report}");
+    assert!(
+        env.logs().contains("the CAN controller is bus-off"),
+        "{}",
+        env.logs()
+    );
+
+    // can_restart(): CAN_ERR_RESTARTED.
+    send_raw(CAN_ERR | 0x100, [0; 8]);
+    let back = wait_for(UP, || {
+        let s = state(&mut robot);
+        s.link.can_state == ControllerState::ERROR_ACTIVE && s.link.can_restarts == 1
+    });
+    assert!(back.is_some(), "no restart published\n{}", env.logs());
+    assert!(!state(&mut robot).has_link_flag(LinkFlags::CAN_BUS_OFF));
+
+    // can_change_state() to error-passive on the transmit side, counters 128/5.
+    send_raw(CAN_ERR | 0x004 | 0x200, [0, 0x20, 0, 0, 0, 0, 128, 5]);
+    let passive = wait_for(UP, || {
+        state(&mut robot).has_link_flag(LinkFlags::CAN_ERROR_PASSIVE)
+    });
+    assert!(
+        passive.is_some(),
+        "no error-passive published\n{}",
+        env.logs()
+    );
+    let s = state(&mut robot);
+    assert_eq!(
+        (
+            s.link.can_tx_error_count,
+            s.link.can_rx_error_count,
+            s.link.can_error_passive
+        ),
+        (128, 5, 1)
+    );
+}

@@ -1,5 +1,5 @@
-//! Raw-transport baselines: ping-pong between two processes with the payload of a
-//! `ChassisState` (840 bytes) over iceoryx2 (event-driven and busy-polling), a Unix datagram
+//! Raw-transport baselines: ping-pong between two processes with the payload of
+//! a `ChassisState` (its size) over iceoryx2 (event-driven and busy-polling), a Unix datagram
 //! socket and UDP on loopback. One-way latency comes from `CLOCK_MONOTONIC` stamps (one clock for
 //! the whole machine), in both directions of every round trip — or, paced like the service paths'
 //! requests, the first hop after each pause only. A paced run can give the receiving side the

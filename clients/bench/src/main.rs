@@ -647,8 +647,11 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 plan.states,
             )?;
             let placement = "2 netns, veth";
-            let base = "Zenoh put → subscriber, 840 B";
-            let mut raw = row("baseline", base.into(), "-", placement, z.raw, 0);
+            let base = format!(
+                "Zenoh put → subscriber, {} B",
+                size_of::<chassis_client::ChassisState>()
+            );
+            let mut raw = row("baseline", base.clone(), "-", placement, z.raw, 0);
             raw.conditions = Some(format!(
                 "one sample every {} ms from the robot's namespace to the operator's, bare \
                  sessions configured as chassis-zenoh's, same run",

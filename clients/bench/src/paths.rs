@@ -772,7 +772,7 @@ mod tests {
     use chassis_client::Twist;
     use chassis_protocols::driver::DriverConfig;
     use chassis_protocols::pair::Pair;
-    use chassis_protocols::{Direction, Timestamp, Transmit};
+    use chassis_protocols::{Direction, Timestamp, WireItem};
 
     /// Every robot's driver asked for 0.3 m/s against its simulated firmware: the command path
     /// finds that speed in the motion frames it wrote, as the tap shows them (a serial robot's
@@ -804,12 +804,12 @@ mod tests {
                     ..BusFrame::default()
                 };
                 let chunks: Vec<Vec<u8>> = match &record.item {
-                    Transmit::Can(can) => {
+                    WireItem::Can(can) => {
                         frame.kind = FrameKind::CAN;
                         frame.can_id = can.id();
                         vec![can.data().to_vec()]
                     }
-                    Transmit::Bytes(bytes) => {
+                    WireItem::Bytes(bytes) => {
                         frame.kind = FrameKind::SERIAL;
                         bytes.chunks(3).map(<[u8]>::to_vec).collect()
                     }

@@ -6,9 +6,10 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, ClampFlags, ControlKind, ControlMode, ControlRequest, ControlStatus,
-    FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus, Robot,
-    RobotDescription, SimKind, SimRequest, SimTruthPage, SourceFlags, Ticker, VelocityRequest,
-    WireProtocol, ZeroReason, install_signal_handlers, now_ns, termination_requested,
+    ControllerState, FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus,
+    Robot, RobotDescription, SimKind, SimRequest, SimTruthPage, SourceFlags, Ticker,
+    VelocityRequest, WireProtocol, ZeroReason, install_signal_handlers, now_ns,
+    termination_requested,
 };
 use chassis_protocols::command_to_request;
 use chassis_protocols::describe;
@@ -497,6 +498,8 @@ fn state_report(
     let link = &s.link;
     let health = if s.has_link_flag(LinkFlags::BUS_DOWN) {
         "DOWN"
+    } else if s.has_link_flag(LinkFlags::CAN_BUS_OFF) {
+        "BUS-OFF"
     } else if s.has_link_flag(LinkFlags::CHASSIS_SILENT) {
         "chassis silent"
     } else {
@@ -512,6 +515,21 @@ fn state_report(
         link.rx_bytes_discarded,
         link.bus_reconnects
     ));
+    if link.can_state != ControllerState::UNKNOWN || link.can_error_frames > 0 {
+        lines.push(format!(
+            "can        {}   error counters tx {} rx {}   error frames {}, error-passive {}, \
+             bus-off {}, restarts {}, bus errors {}, unacknowledged {}",
+            ControllerState::name(link.can_state),
+            link.can_tx_error_count,
+            link.can_rx_error_count,
+            link.can_error_frames,
+            link.can_error_passive,
+            link.can_bus_off,
+            link.can_restarts,
+            link.can_bus_errors,
+            link.can_no_ack,
+        ));
+    }
     lines.push(format!(
         "mode       {}   protocol {}   flags {}",
         ControlMode::name(s.system.control_mode),
@@ -886,6 +904,31 @@ mod tests {
         assert_eq!(
             line(&report, "bms 0"),
             "bms 0      alarms under_voltage, charge_over_current   warnings over_temperature"
+        );
+    }
+
+    #[test]
+    fn status_says_bus_off_and_the_can_controllers_counts() {
+        let mut s = state_of(RobotKind::Titan, &[]);
+        let report = state_report("titan", &s, None, "5 ms");
+        assert!(!report.contains("\ncan "), "{report}");
+        s.link_flags |= LinkFlags::CAN_BUS_OFF | LinkFlags::CHASSIS_SILENT;
+        s.link.can_state = ControllerState::BUS_OFF;
+        (s.link.can_tx_error_count, s.link.can_rx_error_count) = (255, 3);
+        (
+            s.link.can_error_frames,
+            s.link.can_bus_off,
+            s.link.can_restarts,
+        ) = (4, 2, 1);
+        let report = state_report("titan", &s, None, "5 ms");
+        assert!(
+            line(&report, "bus").starts_with("bus        BUS-OFF: "),
+            "{report}"
+        );
+        assert_eq!(
+            line(&report, "can"),
+            "can        bus-off   error counters tx 255 rx 3   error frames 4, error-passive 0, \
+             bus-off 2, restarts 1, bus errors 0, unacknowledged 0"
         );
     }
 

@@ -13,6 +13,7 @@ mod decode;
 mod demo;
 mod described;
 mod detect;
+mod doctor;
 mod encode;
 mod fleet;
 mod interfaces;
@@ -125,6 +126,11 @@ enum Cmd {
     },
     /// The IPC contract: services, limits and payload layouts (--json: the whole document).
     Interfaces(interfaces::InterfacesArgs),
+    /// Check everything between this computer and the robot's bus, in order: the interface or
+    /// device, its bit rate and permissions, the CAN controller, the frames heard and whose
+    /// they are, the robot's control mode and E-stop, chassisd, its state directory and
+    /// iceoryx2. Each line gives a verdict and the fix; exits 1 when something blocks driving.
+    Doctor(doctor::DoctorArgs),
     /// Which AgileX protocol (v1 or v2) a chassis' frames speak, by the rule chassisd applies to
     /// a SCOUT MINI, SCOUT or BUNKER before sending anything. Frames as for decode; stdin when
     /// none. Exits 1 without a decision.
@@ -251,6 +257,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 }
             })
         }
+        Cmd::Doctor(args) => Ok(if doctor::run(&args)? {
+            ExitCode::SUCCESS
+        } else {
+            ExitCode::FAILURE
+        }),
         Cmd::Echo(args) => live::echo(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Pub {
             what: PubWhat::Velocity(args),

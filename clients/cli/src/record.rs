@@ -409,7 +409,7 @@ impl McapSink {
                  *_stamp_ns are CLOCK_MONOTONIC ns",
             ),
             &format!("{prefix}/state"),
-            "chassis::ChassisState.v2",
+            "chassis::ChassisState.v3",
         )?;
         let mux = channel(
             "chassis.MuxStatus",

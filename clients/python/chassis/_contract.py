@@ -437,9 +437,9 @@ class CommandEcho(Struct):
 
 
 class LinkStats(Struct):
-    """``chassis::LinkStats.v2``: 72 bytes, aligned to 8."""
+    """``chassis::LinkStats.v3``: 128 bytes, aligned to 8."""
 
-    _type_name = 'chassis::LinkStats.v2'
+    _type_name = 'chassis::LinkStats.v3'
     _fields_ = [
         ('rx_frames', ctypes.c_uint64),
         ('tx_frames', ctypes.c_uint64),
@@ -450,13 +450,23 @@ class LinkStats(Struct):
         ('tx_errors', ctypes.c_uint64),
         ('bus_reconnects', ctypes.c_uint64),
         ('ipc_failures', ctypes.c_uint64),
+        ('can_error_frames', ctypes.c_uint64),
+        ('can_error_passive', ctypes.c_uint64),
+        ('can_bus_off', ctypes.c_uint64),
+        ('can_restarts', ctypes.c_uint64),
+        ('can_bus_errors', ctypes.c_uint64),
+        ('can_no_ack', ctypes.c_uint64),
+        ('can_state', ctypes.c_uint8),
+        ('can_tx_error_count', ctypes.c_uint8),
+        ('can_rx_error_count', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 5)),
     ]
 
 
 class ChassisState(Struct):
-    """``chassis::ChassisState.v2``: 840 bytes, aligned to 8."""
+    """``chassis::ChassisState.v3``: 896 bytes, aligned to 8."""
 
-    _type_name = 'chassis::ChassisState.v2'
+    _type_name = 'chassis::ChassisState.v3'
     _fields_ = [
         ('seq', ctypes.c_uint64),
         ('stamp_ns', ctypes.c_uint64),
@@ -839,6 +849,17 @@ class ControlStatus(Constants):
     NAMES = {0: 'ok', 1: 'refused', 2: 'unsupported', 3: 'invalid', 4: 'timeout'}
 
 
+class ControllerState(Constants):
+    """``ControllerState``: enum of u8."""
+
+    UNKNOWN = 0
+    ERROR_ACTIVE = 1
+    ERROR_WARNING = 2
+    ERROR_PASSIVE = 3
+    BUS_OFF = 4
+    NAMES = {0: 'unknown', 1: 'error-active', 2: 'error-warning', 3: 'error-passive', 4: 'bus-off'}
+
+
 class DescriptionFlags(Constants):
     """``DescriptionFlags``: flags of u8."""
 
@@ -1009,8 +1030,10 @@ class LinkFlags(Constants):
     STEERING_ZERO_PENDING = 16
     GPS_DOWN = 32
     SILENT_MODE = 64
-    REMOTE_LOST = 128
-    NAMES = {1: 'chassis-silent', 2: 'bus-down', 4: 'command-mode', 8: 'rc-authority', 16: 'steering-zero-pending', 32: 'gps-down', 64: 'silent-mode', 128: 'remote-lost'}
+    CAN_ERROR_PASSIVE = 128
+    CAN_BUS_OFF = 256
+    REMOTE_LOST = 512
+    NAMES = {1: 'chassis-silent', 2: 'bus-down', 4: 'command-mode', 8: 'rc-authority', 16: 'steering-zero-pending', 32: 'gps-down', 64: 'silent-mode', 128: 'can-error-passive', 256: 'can-bus-off', 512: 'remote-lost'}
 
 
 class RequestFlags(Constants):
@@ -1169,6 +1192,7 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'ControlKind': ControlKind,
     'ControlMode': ControlMode,
     'ControlStatus': ControlStatus,
+    'ControllerState': ControllerState,
     'DescriptionFlags': DescriptionFlags,
     'DriverStatus': DriverStatus,
     'EstopState': EstopState,

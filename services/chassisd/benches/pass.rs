@@ -10,8 +10,8 @@ use std::time::Duration;
 use chassis_interfaces::{ControlRequest, VelocityRequest};
 use chassis_protocols::{DriverConfig, Profile, RobotKind, Timestamp, WireItem};
 use chassisd::engine::{
-    Device, Engine, EngineConfig, HeldLock, PassIo, Publication, Readers, Ticket, Wake, WriteError,
-    Written,
+    BusItem, Device, Engine, EngineConfig, HeldLock, PassIo, Publication, Readers, Ticket, Wake,
+    WriteError, Written,
 };
 use chassisd::mux::{Mux, MuxConfig};
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -78,8 +78,12 @@ impl PassIo for BenchIo {
         Ok(self.now)
     }
 
-    fn read_bus(&mut self, into: &mut Vec<(Timestamp, WireItem)>) -> Result<bool, Infallible> {
-        into.extend(self.frame.take().map(|frame| (self.now, frame)));
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, BusItem)>) -> Result<bool, Infallible> {
+        into.extend(
+            self.frame
+                .take()
+                .map(|frame| (self.now, BusItem::Rx(frame))),
+        );
         Ok(false)
     }
 
@@ -131,6 +135,7 @@ fn engine(profile: &Profile) -> Engine {
         reconnect_max: Duration::from_millis(2000),
         rx_moderation: Duration::from_micros(4000),
         gps: false,
+        bus: "can:bench0".into(),
         descriptions: Vec::new(),
     };
     Engine::new(

@@ -8,6 +8,7 @@
 pub mod bus;
 pub mod clock;
 pub mod config;
+pub mod controller;
 pub mod description;
 pub mod engine;
 pub mod ipc;

@@ -459,7 +459,7 @@ mod tests {
     use chassis_protocols::driver::DriverConfig;
     use chassis_protocols::pair::Pair;
     use chassis_protocols::profile::XbotProfile;
-    use chassis_protocols::{Direction, RobotKind, Timestamp, Transmit, xbot};
+    use chassis_protocols::{Direction, RobotKind, Timestamp, WireItem, xbot};
 
     const MS: u64 = 1_000_000;
 
@@ -502,7 +502,7 @@ mod tests {
                     ..BusFrame::default()
                 };
                 match &record.item {
-                    Transmit::Can(can) => {
+                    WireItem::Can(can) => {
                         frame.kind = FrameKind::CAN;
                         frame.can_id = can.id();
                         if can.is_extended() {
@@ -510,7 +510,7 @@ mod tests {
                         }
                         frame.set_payload(can.data());
                     }
-                    Transmit::Bytes(bytes) => {
+                    WireItem::Bytes(bytes) => {
                         frame.kind = FrameKind::SERIAL;
                         frame.set_payload(bytes);
                     }

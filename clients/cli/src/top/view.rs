@@ -2,8 +2,8 @@
 //! or as plain text (`--once`).
 
 use chassis_client::{
-    ChassisState, ClampFlags, ControlMode, FaultFlags, FrameDirection, LinkFlags, LockStatus,
-    MuxStatus, RobotDescription, SourceFlags, ZeroReason,
+    ChassisState, ClampFlags, ControlMode, ControllerState, FaultFlags, FrameDirection, LinkFlags,
+    LockStatus, MuxStatus, RobotDescription, SourceFlags, ZeroReason,
 };
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout};
@@ -335,6 +335,30 @@ fn bus_panel(s: &Snapshot) -> Panel {
                 },
             ),
         ]));
+        if l.can_state != ControllerState::UNKNOWN || l.can_error_frames > 0 {
+            lines.push(Line::from(vec![
+                label("can"),
+                Span::styled(
+                    format!(
+                        "{}  tx/rx errors {}/{}  bus-off {}  restarts {}  error-passive {}  bus errors {}",
+                        ControllerState::name(l.can_state),
+                        l.can_tx_error_count,
+                        l.can_rx_error_count,
+                        l.can_bus_off,
+                        l.can_restarts,
+                        l.can_error_passive,
+                        l.can_bus_errors
+                    ),
+                    match l.can_state {
+                        ControllerState::BUS_OFF => bold(Color::Red),
+                        ControllerState::ERROR_PASSIVE | ControllerState::ERROR_WARNING => {
+                            bold(Color::Yellow)
+                        }
+                        _ => Style::default(),
+                    },
+                ),
+            ]));
+        }
     }
     lines.push(Line::from(vec![
         label("tap"),

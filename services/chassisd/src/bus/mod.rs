@@ -23,6 +23,8 @@ use std::str::FromStr;
 use chassis_protocols::{CanFrame, Rx, WireItem};
 use thiserror::Error;
 
+use crate::controller::ControllerReport;
+
 pub mod conformance;
 pub mod datagram;
 pub mod replay;
@@ -83,10 +85,24 @@ pub(crate) fn classify(name: &str, err: io::Error, sending: bool) -> Result<(), 
     })
 }
 
+/// What a CAN bus hands in: a frame, or a report of its controller on itself (SocketCAN's error
+/// frames).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CanEvent {
+    Frame(CanFrame),
+    Controller(ControllerReport),
+}
+
 /// A CAN bus: classic frames in and out, non-blocking.
 pub trait CanBus: Send + fmt::Debug {
-    /// The next received frame, `Ok(None)` when nothing is pending.
+    /// The next received frame, `Ok(None)` when nothing is pending. The controller's reports
+    /// are skipped.
     fn recv(&mut self) -> Result<Option<CanFrame>, BusError>;
+    /// The next frame or report of the controller, in the order the bus delivered them. A
+    /// backend without a controller of its own (a socket pair, slcan) has only frames.
+    fn recv_event(&mut self) -> Result<Option<CanEvent>, BusError> {
+        Ok(self.recv()?.map(CanEvent::Frame))
+    }
     /// Sends one frame. A backend may buffer it until [`CanBus::flush`].
     fn send(&mut self, frame: &CanFrame) -> Result<(), BusError>;
     /// Writes whatever [`CanBus::send`] buffered. Callers flush after each batch of sends.
@@ -122,6 +138,13 @@ pub enum Bus {
     Bytes(Box<dyn ByteBus>),
 }
 
+/// One item read from a bus: received bytes or a frame, or a report of the CAN controller.
+#[derive(Debug, Clone, Copy)]
+pub enum Received<'a> {
+    Rx(Rx<'a>),
+    Controller(&'a ControllerReport),
+}
+
 /// Most items drained from the bus per wake-up, so a flooding bus cannot starve the rest of the
 /// loop (the descriptor stays readable and the loop comes back at once).
 pub const MAX_RX_BATCH: usize = 256;
@@ -142,19 +165,30 @@ impl Bus {
     }
 
     /// Reads what is pending (at most [`MAX_RX_BATCH`] items) and hands each to `sink`. Returns
-    /// how many items were read.
+    /// how many items were read. The CAN controller's reports are read and skipped.
     pub fn receive(&mut self, mut sink: impl FnMut(Rx<'_>)) -> Result<usize, BusError> {
+        self.receive_all(|item| {
+            if let Received::Rx(rx) = item {
+                sink(rx);
+            }
+        })
+    }
+
+    /// Like [`Bus::receive`], with the CAN controller's reports among the frames, in the order
+    /// they were read (each counts as an item).
+    pub fn receive_all(&mut self, mut sink: impl FnMut(Received<'_>)) -> Result<usize, BusError> {
         let mut count = 0;
         match self {
             Bus::Can(bus) => {
                 while count < MAX_RX_BATCH {
-                    match bus.recv()? {
-                        Some(frame) => {
-                            sink(Rx::Can(&frame));
-                            count += 1;
+                    match bus.recv_event()? {
+                        Some(CanEvent::Frame(frame)) => sink(Received::Rx(Rx::Can(&frame))),
+                        Some(CanEvent::Controller(report)) => {
+                            sink(Received::Controller(&report));
                         }
                         None => break,
                     }
+                    count += 1;
                 }
             }
             Bus::Bytes(bus) => {
@@ -164,7 +198,7 @@ impl Bus {
                     if n == 0 {
                         break;
                     }
-                    sink(Rx::Bytes(&buf[..n]));
+                    sink(Received::Rx(Rx::Bytes(&buf[..n])));
                     count += 1;
                 }
             }

@@ -75,8 +75,9 @@ use std::time::Duration;
 
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags, LockStatus, MuxStatus,
-    RobotDescription, SourceFlags, SourceStatus, VelocityRequest, WireProtocol, ZeroReason,
+    ControllerState, FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags, LockStatus,
+    MuxStatus, RobotDescription, SourceFlags, SourceStatus, VelocityRequest, WireProtocol,
+    ZeroReason,
 };
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
@@ -90,6 +91,7 @@ pub use budget::{ListenerChange, WakeBudget};
 pub use pass::{PassIo, Readers, WriteError, Written};
 
 use crate::config::{Config, LoopMode};
+use crate::controller::{self, Controller, ControllerReport};
 use crate::mux::{Mux, Rejection};
 
 /// The robot's driver behind the common contract.
@@ -112,6 +114,8 @@ pub struct EngineConfig {
     pub rx_moderation: Duration,
     /// A GPS receiver is configured.
     pub gps: bool,
+    /// The bus, for logs (`can:can0`).
+    pub bus: String,
     /// The robot's description for each protocol its driver may report speaking
     /// (`SystemState::wire_protocol`): the one matching the driver's is published at start and
     /// again when detection decides. Empty: no description is published.
@@ -136,6 +140,7 @@ impl EngineConfig {
                 _ => Duration::from_micros(config.bus_settings.rx_moderation_us),
             },
             gps: config.gps.is_some(),
+            bus: config.bus.to_string(),
             descriptions: [
                 WireProtocol::OWN,
                 WireProtocol::V1,
@@ -147,6 +152,15 @@ impl EngineConfig {
             .collect(),
         }
     }
+}
+
+/// One item read from the bus, as the engine takes it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BusItem {
+    /// A frame, or bytes of a byte stream.
+    Rx(WireItem),
+    /// A report of the CAN controller on itself (a SocketCAN error frame).
+    Controller(ControllerReport),
 }
 
 /// Something for the shell to publish.
@@ -264,6 +278,8 @@ struct Throttles {
     tx: Throttle,
     flood: Throttle,
     publish: Throttle,
+    controller: Throttle,
+    bus_errors: Throttle,
 }
 
 /// The part of a state sample that changes only when the chassis reports something new.
@@ -328,8 +344,10 @@ pub struct Engine {
     /// A held set not kept yet (its write failed), and when to try again.
     unkept: Option<Vec<HeldLock>>,
     keep_retry_at: Timestamp,
+    /// The CAN controller's state and reports (SocketCAN).
+    controller: Controller,
     /// Items read from the bus in a pass, kept to spare an allocation per pass.
-    rx_items: Vec<(Timestamp, WireItem)>,
+    rx_items: Vec<(Timestamp, BusItem)>,
     /// Items written that the backend holds, with the instant their write returned.
     tx_held: Vec<(Timestamp, WireItem)>,
     /// The readers to wake at the end of the pass, one bit per [`Readers`].
@@ -393,6 +411,7 @@ impl Engine {
             locks_dirty: false,
             unkept: None,
             keep_retry_at: now,
+            controller: Controller::default(),
             rx_items: Vec::new(),
             tx_held: Vec::new(),
             to_wake: 0,
@@ -579,8 +598,23 @@ impl Engine {
             self.decide(stamp);
         }
         self.tap(stamp, FrameDirection::RX, FrameKind::SERIAL, rx);
+        if matches!(rx, Rx::Can(_)) && self.controller.state() == ControllerState::BUS_OFF {
+            let change = self.controller.heard_frame();
+            self.log_controller(stamp, &change);
+            self.publish_state(stamp);
+        }
         self.driver.handle_rx(stamp, rx);
         self.publish_state_if_changed(stamp);
+    }
+
+    /// A report of the CAN controller read at `stamp`: counted, logged with what to do, and
+    /// the state published when the controller's state changed.
+    pub fn handle_controller(&mut self, stamp: Timestamp, report: &ControllerReport) {
+        let change = self.controller.apply(report);
+        self.log_controller(stamp, &change);
+        if change.state.is_some() {
+            self.publish_state(stamp);
+        }
     }
 
     /// A read of the bus at `now` gave `items` frames (a byte stream: one per 8 bytes);
@@ -667,6 +701,8 @@ impl Engine {
         match device {
             Device::Bus => {
                 info!(bus = name, "bus open again");
+                // The interface was down (the controller restarted) or replaced.
+                self.controller.reopened();
                 self.bus = Link::Up;
                 self.bus_backoff = self.config.reconnect_initial;
                 self.rx_moderation.reset(now);
@@ -996,6 +1032,7 @@ impl Engine {
             state.link_flags |= LinkFlags::GPS_DOWN;
         }
         state.link.ipc_failures = self.ipc_failures;
+        self.controller.write(&mut state);
         self.state_seq += 1;
         state.seq = self.state_seq;
         self.last_rx_frames = state.link.rx_frames;
@@ -1089,6 +1126,86 @@ impl Engine {
                     Level::Error => error!("{message}"),
                 },
             }
+        }
+    }
+
+    /// Logs what a report of the CAN controller changed: a new state always (at most once a
+    /// second, with the number held back), bus errors and missing acknowledgements at most once
+    /// a second with their totals.
+    fn log_controller(&mut self, now: Timestamp, change: &controller::Change) {
+        let bus = self.config.bus.as_str();
+        let iface = bus.strip_prefix("can:").unwrap_or(bus);
+        let mut link = Default::default();
+        if change.state.is_some() || change.restarted {
+            let mut state = ChassisState::default();
+            self.controller.write(&mut state);
+            link = state.link;
+        }
+        if let Some((from, to)) = change.state
+            && let Some(held) = self.throttles.controller.allow(now)
+        {
+            let counters = format!(
+                "error counters: tx {}, rx {}",
+                link.can_tx_error_count, link.can_rx_error_count
+            );
+            match to {
+                ControllerState::BUS_OFF => error!(
+                    held_back = held,
+                    bus_off = link.can_bus_off,
+                    "{bus}: the CAN controller is bus-off: it has left the bus ({}); nothing \
+                     reaches the chassis; {}",
+                    controller::BUS_TROUBLE,
+                    controller::bus_off_fix(iface, self.controller.restart_ms())
+                ),
+                ControllerState::ERROR_PASSIVE => warn!(
+                    held_back = held,
+                    "{bus}: the CAN controller is error-passive ({counters}): {}",
+                    controller::BUS_TROUBLE
+                ),
+                ControllerState::ERROR_WARNING => info!(
+                    held_back = held,
+                    "{bus}: the CAN controller is at the error warning level ({counters})"
+                ),
+                ControllerState::ERROR_ACTIVE
+                    if matches!(
+                        from,
+                        ControllerState::BUS_OFF | ControllerState::ERROR_PASSIVE
+                    ) =>
+                {
+                    info!(
+                        held_back = held,
+                        "{bus}: the CAN controller is error-active again"
+                    )
+                }
+                ControllerState::UNKNOWN if from == ControllerState::BUS_OFF => info!(
+                    held_back = held,
+                    "{bus}: frames arrive again: the CAN controller is back on the bus"
+                ),
+                _ => debug!(
+                    "{bus}: CAN controller {} → {}",
+                    ControllerState::name(from),
+                    ControllerState::name(to)
+                ),
+            }
+        }
+        if change.restarted {
+            warn!(
+                restarts = link.can_restarts,
+                "{bus}: the CAN controller was restarted after a bus-off"
+            );
+        }
+        if (change.bus_error || change.no_ack)
+            && let Some(held) = self.throttles.bus_errors.allow(now)
+        {
+            let mut state = ChassisState::default();
+            self.controller.write(&mut state);
+            warn!(
+                held_back = held,
+                bus_errors = state.link.can_bus_errors,
+                unacknowledged = state.link.can_no_ack,
+                "{bus}: the CAN controller reports errors on the bus ({})",
+                controller::BUS_TROUBLE
+            );
         }
     }
 

@@ -14,7 +14,7 @@ use chassis_interfaces::{ControlRequest, VelocityRequest};
 use chassis_protocols::{Timestamp, WireItem};
 use tracing::{debug, error};
 
-use super::{Device, Engine, HeldLock, Link, Publication, Ticket, Wake};
+use super::{BusItem, Device, Engine, HeldLock, Link, Publication, Ticket, Wake};
 
 /// How a write to the bus went.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -122,9 +122,10 @@ pub trait PassIo {
     fn flush(&mut self) -> Result<Timestamp, WriteError<Self::Error>>;
 
     /// Reads what the bus has pending, at most one batch, into `into`, each item stamped when
-    /// it was read. `Ok(true)`: the batch limit stopped the read with more pending. An error is
-    /// a lost bus (the items read before it are in `into`).
-    fn read_bus(&mut self, into: &mut Vec<(Timestamp, WireItem)>) -> Result<bool, Self::Error>;
+    /// it was read, the CAN controller's reports among the frames in the order read.
+    /// `Ok(true)`: the batch limit stopped the read with more pending. An error is a lost bus
+    /// (the items read before it are in `into`).
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, BusItem)>) -> Result<bool, Self::Error>;
 
     /// Hands `take` what the GPS receiver has pending. An error is a lost receiver.
     fn read_gps(&mut self, take: impl FnMut(&[u8])) -> Result<(), Self::Error>;
@@ -291,8 +292,16 @@ impl Engine {
         let result = io.read_bus(&mut received);
         let mut weight = 0;
         for (stamp, item) in &received {
-            weight += crate::moderation::weight(item.as_rx());
-            self.handle_rx(*stamp, item.as_rx());
+            match item {
+                BusItem::Rx(item) => {
+                    weight += crate::moderation::weight(item.as_rx());
+                    self.handle_rx(*stamp, item.as_rx());
+                }
+                BusItem::Controller(report) => {
+                    weight += 1;
+                    self.handle_controller(*stamp, report);
+                }
+            }
             self.publish(io, *stamp);
         }
         self.rx_items = received;

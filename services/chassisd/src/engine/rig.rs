@@ -21,18 +21,19 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, RobotDescription,
-    VelocityRequest,
+    BusFrame, ChassisState, ControlRequest, ControlResponse, ControllerState, MuxStatus,
+    RobotDescription, VelocityRequest,
 };
 use chassis_protocols::{
     DriverConfig, Injection, Profile, RobotKind, Timestamp, WireItem, scout_mini, titan,
 };
 
 use super::{
-    Device, Engine, EngineConfig, HeldLock, ListenerChange, PassIo, Publication, Readers, Ticket,
-    Wake, WriteError, Written,
+    BusItem, Device, Engine, EngineConfig, HeldLock, ListenerChange, PassIo, Publication, Readers,
+    Ticket, Wake, WriteError, Written,
 };
 use crate::bus::MAX_RX_BATCH;
+use crate::controller::ControllerReport;
 use crate::mux::{Mux, MuxConfig};
 use crate::sim::BoxedFirmware;
 
@@ -84,14 +85,17 @@ pub struct World {
     pub mux_config: MuxConfig,
     now: Timestamp,
     to_firmware: VecDeque<(Timestamp, WireItem)>,
-    /// Frames in the service's receive queue (the kernel's), with their arrival.
-    to_engine: VecDeque<(Timestamp, WireItem)>,
+    /// Frames (and the CAN controller's reports) in the service's receive queue (the
+    /// kernel's), with their arrival.
+    to_engine: VecDeque<(Timestamp, BusItem)>,
     script: Vec<(Timestamp, Action)>,
     gps: Gps,
     /// The bus works; while false everything sent is lost, reads fail and reopening fails.
     bus_ok: bool,
     /// The bus failed and the engine has not been told yet.
     bus_failed: bool,
+    /// The CAN controller is bus-off: the bus stays open, nothing crosses it.
+    bus_off: bool,
     /// The receive gate (the shell stops watching a paused bus).
     gate_open: bool,
     next_ticket: Ticket,
@@ -172,6 +176,7 @@ impl Rig {
             reconnect_max: Duration::from_millis(2000),
             rx_moderation: Duration::from_micros(4000),
             gps: false,
+            bus: "can:rig0".into(),
             descriptions: Vec::new(),
         };
         adjust(&mut config);
@@ -194,6 +199,7 @@ impl Rig {
             gps: Gps::default(),
             bus_ok: true,
             bus_failed: false,
+            bus_off: false,
             gate_open: true,
             next_ticket: 0,
             disk_ok: true,
@@ -336,6 +342,39 @@ impl Rig {
     /// The bus can be opened again.
     pub fn restore_bus(&mut self) {
         self.world.bus_ok = true;
+    }
+
+    /// The CAN controller reports `report` now (it reaches the engine with the frames' latency).
+    pub fn controller_reports(&mut self, report: ControllerReport) {
+        let world = &mut self.world;
+        world
+            .to_engine
+            .push_back((world.now + LATENCY, BusItem::Controller(report)));
+    }
+
+    /// The CAN controller goes bus-off now: it says so, and from now on nothing it is given
+    /// is sent (the kernel refuses it) and nothing of the chassis is received.
+    pub fn bus_off(&mut self) {
+        self.world.bus_off = true;
+        self.controller_reports(ControllerReport {
+            state: ControllerState::BUS_OFF,
+            restart_ms: Some(0),
+            from_frame: true,
+            ..ControllerReport::default()
+        });
+    }
+
+    /// The CAN controller is restarted now (restart-ms, or `ip link … restart`): the bus works
+    /// again, and the controller says so when `reported` (some drivers send nothing).
+    pub fn restart_controller(&mut self, reported: bool) {
+        self.world.bus_off = false;
+        if reported {
+            self.controller_reports(ControllerReport {
+                restarted: true,
+                from_frame: true,
+                ..ControllerReport::default()
+            });
+        }
     }
 
     /// Every write of the held locks fails from now on (a full or read-only disk).
@@ -498,9 +537,11 @@ impl Rig {
         let now = world.now;
         while let Some(item) = world.firmware.poll_transmit(now) {
             // Nobody reads a bus the service has closed: what the chassis sends then is lost.
-            if world.bus_ok && self.engine.is_bus_up() {
+            if world.bus_ok && !world.bus_off && self.engine.is_bus_up() {
                 world.frames_sent_to_engine += 1;
-                world.to_engine.push_back((now + LATENCY, item));
+                world
+                    .to_engine
+                    .push_back((now + LATENCY, BusItem::Rx(item)));
             }
         }
     }
@@ -687,6 +728,9 @@ impl PassIo for World {
         if !self.bus_ok {
             return Err(WriteError::Lost("simulated bus cut"));
         }
+        if self.bus_off {
+            return Err(WriteError::Dropped("the controller is bus-off"));
+        }
         self.to_firmware
             .push_back((self.now + LATENCY, item.clone()));
         self.wire.push(Sent {
@@ -700,7 +744,7 @@ impl PassIo for World {
         Ok(self.now)
     }
 
-    fn read_bus(&mut self, into: &mut Vec<(Timestamp, WireItem)>) -> Result<bool, Self::Error> {
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, BusItem)>) -> Result<bool, Self::Error> {
         if self.bus_failed {
             self.frames_sent_to_engine -= self.to_engine.len() as u64;
             self.to_engine.clear();

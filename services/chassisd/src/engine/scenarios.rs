@@ -9,7 +9,8 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ControlKind, ControlRequest, ControlStatus, LinkFlags, LockStatus, VelocityRequest, ZeroReason,
+    ControlKind, ControlRequest, ControlStatus, ControllerState, LinkFlags, LockStatus,
+    VelocityRequest, ZeroReason,
 };
 use chassis_protocols::{Injection, RobotKind, Timestamp, WireItem, titan};
 
@@ -542,6 +543,113 @@ fn a_lost_bus_is_reopened_with_doubling_backoff_and_nothing_is_written_meanwhile
     rig.run_for(ms(150));
     let retry = rig.world.opens.last().map(|(t, _)| *t).unwrap();
     assert!(retry > second_loss && retry.saturating_since(second_loss) <= ms(100));
+}
+
+/// The first published state with `flag` set at or after `since`, and when it was published.
+fn published_with(rig: &Rig, flag: u32, set: bool, since: Timestamp) -> Option<Timestamp> {
+    rig.world
+        .states
+        .iter()
+        .filter(|s| s.has_link_flag(flag) == set)
+        .filter_map(|s| rig_publication_time(rig, s.seq))
+        .find(|&t| t >= since)
+}
+
+#[test]
+fn a_bus_off_is_published_at_once_and_a_restart_drives_the_robot_again() {
+    let mut rig = ready();
+    rig.publish_every("teleop", twist(0.5), ms(50), at(10_000));
+    rig.run_until(at(500));
+    assert!(rig.first_motion(at(200), |v| v > 0.0).is_some());
+    rig.bus_off();
+    let off = rig.now();
+    rig.run_until(at(1500));
+    // Published in the pass that read the report, one wire latency later.
+    assert_eq!(
+        published_with(&rig, LinkFlags::CAN_BUS_OFF, true, off),
+        Some(off + LATENCY)
+    );
+    let s = *rig.state();
+    assert!(s.has_link_flag(LinkFlags::CAN_BUS_OFF), "{s:?}");
+    assert!(s.has_link_flag(LinkFlags::CHASSIS_SILENT));
+    assert_eq!(
+        (
+            s.link.can_state,
+            s.link.can_bus_off,
+            s.link.can_error_frames
+        ),
+        (ControllerState::BUS_OFF, 1, 1)
+    );
+    // A bus-off controller sends nothing: the driver's frames were refused.
+    assert!(rig.world.wire.iter().all(|w| w.at <= off + LATENCY));
+
+    rig.restart_controller(true);
+    let restarted = rig.now();
+    rig.run_until(at(2500));
+    assert_eq!(
+        published_with(&rig, LinkFlags::CAN_BUS_OFF, false, restarted),
+        Some(restarted + LATENCY)
+    );
+    let s = *rig.state();
+    assert_eq!(
+        s.link_flags & (LinkFlags::CAN_BUS_OFF | LinkFlags::CHASSIS_SILENT),
+        0
+    );
+    assert_eq!(
+        (s.link.can_state, s.link.can_bus_off, s.link.can_restarts),
+        (ControllerState::ERROR_ACTIVE, 1, 1)
+    );
+    assert!(rig.first_motion(restarted, |v| v > 0.0).is_some());
+}
+
+#[test]
+fn frames_arriving_after_an_unreported_restart_clear_the_bus_off() {
+    let mut rig = ready();
+    rig.run_until(at(300));
+    rig.bus_off();
+    rig.run_until(at(800));
+    assert!(rig.state().has_link_flag(LinkFlags::CAN_BUS_OFF));
+    rig.restart_controller(false);
+    let restarted = rig.now();
+    let first_frame = rig.next_frame_arrival();
+    rig.run_until(at(1300));
+    assert_eq!(
+        published_with(&rig, LinkFlags::CAN_BUS_OFF, false, restarted),
+        Some(first_frame)
+    );
+    let s = rig.state();
+    assert_eq!(s.link.can_state, ControllerState::UNKNOWN);
+    assert_eq!((s.link.can_bus_off, s.link.can_restarts), (1, 0));
+}
+
+#[test]
+fn an_error_passive_controller_is_flagged_and_its_bus_errors_counted() {
+    let mut rig = ready();
+    rig.run_until(at(300));
+    let report = |state, counters| crate::controller::ControllerReport {
+        state,
+        counters: Some(counters),
+        bus_error: true,
+        from_frame: true,
+        ..Default::default()
+    };
+    rig.controller_reports(report(ControllerState::ERROR_WARNING, (96, 0)));
+    rig.controller_reports(report(ControllerState::ERROR_PASSIVE, (128, 0)));
+    rig.run_until(at(400));
+    let s = *rig.state();
+    assert!(s.has_link_flag(LinkFlags::CAN_ERROR_PASSIVE));
+    assert_eq!(
+        (
+            s.link.can_error_passive,
+            s.link.can_bus_errors,
+            s.link.can_tx_error_count
+        ),
+        (1, 2, 128)
+    );
+    rig.controller_reports(report(ControllerState::ERROR_ACTIVE, (20, 0)));
+    rig.run_until(at(500));
+    assert_eq!(rig.state().link_flags & LinkFlags::CAN_ERROR_PASSIVE, 0);
+    assert_eq!(rig.state().link.can_error_passive, 1);
 }
 
 #[test]

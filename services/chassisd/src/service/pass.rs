@@ -11,10 +11,11 @@ use iceoryx2::port::{LoanError, SendError};
 use tracing::{debug, info, warn};
 
 use super::{Next, Shell, clocks};
-use crate::bus::{BusError, MAX_RX_BATCH};
+use crate::bus::{BusError, MAX_RX_BATCH, Received};
 use crate::clock;
 use crate::engine::{
-    Device, Engine, HeldLock, PassIo, Publication, Readers, Ticket, Wake, WriteError, Written,
+    BusItem, Device, Engine, HeldLock, PassIo, Publication, Readers, Ticket, Wake, WriteError,
+    Written,
 };
 use crate::ipc::Ports;
 use crate::lockfile::LockFileError;
@@ -186,17 +187,18 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
         }
     }
 
-    fn read_bus(&mut self, into: &mut Vec<(Timestamp, WireItem)>) -> Result<bool, PassError> {
+    fn read_bus(&mut self, into: &mut Vec<(Timestamp, BusItem)>) -> Result<bool, PassError> {
         let Some(bus) = self.shell.bus.as_mut() else {
             return Err(no_bus());
         };
-        let count = bus.receive(|rx| {
+        let count = bus.receive_all(|item| {
             let stamp = clock::now();
             into.push((
                 stamp,
-                match rx {
-                    Rx::Can(frame) => WireItem::Can(*frame),
-                    Rx::Bytes(bytes) => WireItem::Bytes(bytes.to_vec()),
+                match item {
+                    Received::Rx(Rx::Can(frame)) => BusItem::Rx(WireItem::Can(*frame)),
+                    Received::Rx(Rx::Bytes(bytes)) => BusItem::Rx(WireItem::Bytes(bytes.to_vec())),
+                    Received::Controller(report) => BusItem::Controller(*report),
                 },
             ));
         })?;

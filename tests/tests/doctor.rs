@@ -1,0 +1,203 @@
+//! `chassis doctor` against real processes: chassisd on the simulated robot (serving, then with
+//! its RC transmitter taking over), the XBot's simulated board on a serial pty (heard, then
+//! unreadable for a user outside its group, then gone) and an slcan adapter's side on a pty.
+//! SocketCAN is checked in the VM (tests/tests/vcan.rs).
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::path::Path;
+use std::process::Output;
+use std::time::Duration;
+
+use chassis_tests::*;
+
+const UP: Duration = Duration::from_secs(10);
+
+fn name(tag: &str) -> String {
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+fn text(out: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// The report's line for check `key`, as `(verdict, rest)`.
+fn line<'a>(report: &'a str, key: &str) -> (&'a str, &'a str) {
+    report
+        .lines()
+        .filter_map(|l| {
+            let mut words = l.split_whitespace();
+            let verdict = words.next()?;
+            (words.next()? == key).then_some((verdict, l))
+        })
+        .next()
+        .unwrap_or_else(|| panic!("no '{key}' line in\n{report}"))
+}
+
+#[test]
+fn on_the_simulated_robot_the_doctor_reads_chassisd_and_fails_while_the_rc_holds_it() {
+    let mut env = Env::new("doctor-sim");
+    let n = name("ds");
+    env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "titan",
+            "--name",
+            &n,
+            "--bus",
+            "sim",
+            "--no-safety-monitor",
+        ],
+    );
+    env.robot(&n, UP);
+    let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim"]);
+    let report = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{report}\n{}", env.logs());
+    assert_eq!(line(&report, "chassisd").0, "ok", "{report}");
+    assert!(
+        line(&report, "chassisd").1.contains("owns the bus"),
+        "{report}"
+    );
+    assert_eq!(line(&report, "frames").0, "ok", "{report}");
+    assert_eq!(line(&report, "mode").0, "ok", "{report}");
+    assert_eq!(line(&report, "e-stop").0, "ok", "{report}");
+    assert_eq!(line(&report, "state-dir").0, "ok", "{report}");
+    assert!(report.contains("verdict: ready to drive"), "{report}");
+
+    let rc = env.chassis(&["sim", "--name", &n, "rc", "on"]);
+    assert!(rc.status.success(), "{}", text(&rc));
+    let mut report = String::new();
+    let failed = wait_for(UP, || {
+        let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim"]);
+        report = text(&out);
+        out.status.code() == Some(1)
+    });
+    assert!(failed.is_some(), "{report}");
+    let (verdict, mode) = line(&report, "mode");
+    assert_eq!(verdict, "FAIL", "{report}");
+    assert!(mode.contains("RC transmitter holds the robot"), "{report}");
+    assert!(
+        report.contains("verdict: 1 problem blocks driving"),
+        "{report}"
+    );
+
+    // The robot called so is a TITAN: asked about it as a HUNTER, the doctor says so.
+    let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim", "--robot", "hunter"]);
+    let report = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{report}");
+    assert!(
+        line(&report, "chassisd").1.contains("as a titan"),
+        "{report}"
+    );
+}
+
+/// `chassisd sim --robot ROBOT --bus KIND:LINK`, once the link exists.
+fn board(env: &mut Env, robot: &str, kind: &str, tag: &str) -> std::path::PathBuf {
+    let link = env.dir.join(tag);
+    let bus = format!("{kind}:{}", link.display());
+    env.chassisd(
+        "sim",
+        &["sim", "--robot", robot, "--name", &name(tag), "--bus", &bus],
+    );
+    assert!(
+        wait_for(UP, || link.exists()).is_some(),
+        "no pty link\n{}",
+        env.logs()
+    );
+    link
+}
+
+#[test]
+fn on_a_serial_pty_the_doctor_hears_the_xbot_and_names_permission_and_missing_devices() {
+    let mut env = Env::new("doctor-pty");
+    let link = board(&mut env, "xbot", "pty", "xbot");
+    let bus = format!("serial:{}", link.display());
+    let n = name("dx");
+    let out = env.chassis(&["doctor", "--robot", "xbot", "--name", &n, "--bus", &bus]);
+    let report = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{report}\n{}", env.logs());
+    assert_eq!(line(&report, "device").0, "ok", "{report}");
+    assert_eq!(line(&report, "permission").0, "ok", "{report}");
+    let (verdict, frames) = line(&report, "frames");
+    assert_eq!(verdict, "ok", "{report}");
+    assert!(frames.contains("xbot reports"), "{report}");
+    assert_eq!(line(&report, "mode").0, "ok", "{report}");
+
+    // The same port for another user: first the owner's alone (as a pty is made), then shared
+    // with dialout, the user outside it.
+    let pts = std::fs::canonicalize(&link).unwrap();
+    let serial = format!("serial:{}", pts.display());
+    let as_nobody = || {
+        let out = std::process::Command::new("setpriv")
+            .args(["--reuid=65534", "--regid=65534", "--clear-groups", "--"])
+            .arg(bin("chassis"))
+            .args(["doctor", "--robot", "xbot", "--name", &n, "--bus", &serial])
+            .env("HOME", &env.dir)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+        text(&out)
+    };
+    let chmod = |mode: u32| {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&pts, std::fs::Permissions::from_mode(mode)).unwrap();
+    };
+    chmod(0o600);
+    let report = as_nobody();
+    let (verdict, permission) = line(&report, "permission");
+    assert_eq!(verdict, "FAIL", "{report}");
+    assert!(permission.contains("mode 600"), "{report}");
+    assert!(
+        report.contains("GROUP=\"dialout\", MODE=\"0660\""),
+        "{report}"
+    );
+    // Debian's dialout group.
+    std::os::unix::fs::chown(&pts, None, Some(20)).unwrap();
+    chmod(0o660);
+    let report = as_nobody();
+    let (verdict, permission) = line(&report, "permission");
+    assert_eq!(verdict, "FAIL", "{report}");
+    assert!(
+        permission.contains("owner group dialout, mode 660"),
+        "{report}"
+    );
+    assert!(
+        report.contains("fix: sudo usermod -aG dialout nobody"),
+        "{report}"
+    );
+
+    let gone = format!("serial:{}", env.dir.join("nothing").display());
+    let out = env.chassis(&["doctor", "--robot", "xbot", "--name", &n, "--bus", &gone]);
+    let report = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{report}");
+    assert_eq!(line(&report, "device").0, "FAIL", "{report}");
+    assert!(!Path::new(&gone).exists());
+}
+
+#[test]
+fn on_an_slcan_pty_the_doctor_finds_the_adapter_and_the_titan_behind_it() {
+    let mut env = Env::new("doctor-slcan");
+    let link = board(&mut env, "titan", "slcan-pty", "slcan");
+    let bus = format!("slcan:{}", link.display());
+    let n = name("dc");
+    let out = env.chassis(&["doctor", "--robot", "titan", "--name", &n, "--bus", &bus]);
+    let report = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{report}\n{}", env.logs());
+    let (verdict, adapter) = line(&report, "adapter");
+    assert_eq!(verdict, "ok", "{report}");
+    assert!(adapter.contains("V1013"), "{report}");
+    assert_eq!(line(&report, "frames").0, "ok", "{report}");
+    let (verdict, robot) = line(&report, "robot");
+    assert_eq!(verdict, "ok", "{report}");
+    assert!(robot.contains("the frames fit a titan"), "{report}");
+
+    // A serial robot's port named as an slcan adapter: the wrong kind of bus.
+    let out = env.chassis(&["doctor", "--robot", "xbot", "--name", &n, "--bus", &bus]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert_eq!(line(&text(&out), "bus").0, "FAIL");
+}
