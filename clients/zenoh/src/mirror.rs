@@ -300,7 +300,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
             }
             Incoming::Alive(alive) => {
                 if alive {
-                    ask_description(&session);
+                    ask_description(session);
                 }
                 eprintln!(
                     "chassis-zenoh: robot '{}' {}",
