@@ -3,10 +3,13 @@
 
 * **state**: a frame read from the bus (``chassisd`` stamps it right after the read:
   ``ChassisState.stamp_ns``) → this Python process woke with the ``ChassisState`` it changed in
-  hand (``CLOCK_MONOTONIC`` right after the wait returned and the samples were copied out). As in
-  ``chassis-bench``, only samples that follow their predecessor (``seq`` + 1) and whose content
-  changed count: a sample that merely refreshes stamps carries an older frame's read time. The
-  robot drives throughout (teleop, 0.6 m/s, 0.3 rad/s) so that frames keep changing the state.
+  hand (``CLOCK_MONOTONIC`` right after the wait returned and the samples were copied out). The
+  samples are read from a lossless ``StateStream``; by the rule ``chassis-bench`` applies to
+  every client alike, a sample counts when its stamp is newer than every stamp received before
+  it (a sample the service's tick merely refreshed carries an older frame's read time, and the
+  first sample is the one published before the stream opened); gaps in ``seq`` are samples
+  lost, counted as dropped. The robot drives throughout (teleop, 0.6 m/s, 0.3 rad/s) so that
+  frames keep changing the state.
 * **command**: a ``VelocityRequest`` stamped and sent here as the ``teleop`` source → the motion
   frame that ``chassisd`` wrote to the bus (the frame tap's TX stamp, ``BusFrame.stamp_ns``,
   taken right after the write). Requests alternate between two speeds, one every
@@ -51,8 +54,9 @@ requests whose frame did not appear within 500 ms (command path; 0 for state); t
 Exit status 0, or 1 when a path recorded nothing.
 
 ``--latencies-dir DIR`` also writes every latency, one ns figure a line, to ``DIR/state.ns`` and
-``DIR/command.ns`` (and the command path's missed count to ``DIR/command.missed``):
-``chassis-bench`` summarises them as it does the Rust client's.
+``DIR/command.ns`` (and the command path's missed count to ``DIR/command.missed``, the state
+path's dropped samples to ``DIR/state.dropped``): ``chassis-bench`` summarises them as it does
+the Rust client's.
 """
 
 from __future__ import annotations
@@ -71,8 +75,6 @@ STATE_DRIVE = (0.6, 0.3)
 SPEEDS = (0.25, 0.5)
 FRAME_TIMEOUT_S = 0.5
 KEEP_ALIVE_S = 0.05
-# Fields of ChassisState that change without a new reading of the chassis.
-STAMP_FIELDS = ("seq", "stamp_ns", "group_stamp_ns", "link", "published_ns")
 
 
 def percentile(values: list[int], q: float) -> float:
@@ -101,40 +103,48 @@ def row(path: str, robot: str, latencies: list[int], missed: int) -> dict[str, o
     return out
 
 
-def body(state: chassis.ChassisState) -> bytes:
-    """The bytes of ``state`` that change only with what the chassis reports."""
-    raw = bytearray(bytes(state))
-    for name in STAMP_FIELDS:
-        field = getattr(chassis.ChassisState, name)
-        raw[field.offset : field.offset + field.size] = bytes(field.size)
-    return bytes(raw)
+class StateRecorder:
+    """The state-path rule every client of ``chassis-bench`` applies alike: a sample counts when
+    its stamp is newer than every stamp received before it; the first sample only sets the
+    stamp; gaps in ``seq`` are dropped samples."""
+
+    def __init__(self) -> None:
+        self.latencies: list[int] = []
+        self.dropped = 0
+        self.last_seq: int | None = None
+        self.newest_stamp: int | None = None
+
+    def sample(self, state: chassis.ChassisState, received: int) -> None:
+        """Takes one received sample."""
+        if self.last_seq is not None:
+            if state.seq <= self.last_seq:
+                return
+            self.dropped += state.seq - self.last_seq - 1
+        self.last_seq = state.seq
+        if self.newest_stamp is not None and state.stamp_ns <= self.newest_stamp:
+            return
+        first = self.newest_stamp is None
+        self.newest_stamp = state.stamp_ns
+        if not first:
+            self.latencies.append(received - state.stamp_ns)
 
 
-def state_path(robot: chassis.Robot, teleop: chassis.Source, samples: int) -> list[int]:
-    """State-path latencies, ns."""
+def state_path(robot: chassis.Robot, teleop: chassis.Source, samples: int) -> StateRecorder:
+    """State-path latencies, ns, and the samples dropped."""
     stream = robot.state_stream()
-    latencies: list[int] = []
-    previous: chassis.ChassisState | None = None
-    previous_body = b""
+    recorder = StateRecorder()
     last_request = 0
     deadline = time.monotonic() + 120
-    while len(latencies) < samples and time.monotonic() < deadline:
+    while len(recorder.latencies) < samples and time.monotonic() < deadline:
         if chassis.now_ns() - last_request > KEEP_ALIVE_S * 1e9:
             teleop.twist(*STATE_DRIVE)
             last_request = chassis.now_ns()
         batch = stream.wait(0.02)
         woke = chassis.now_ns()
         for state in batch:
-            state_body = body(state)
-            if (
-                previous is not None
-                and state.seq == previous.seq + 1
-                and state_body != previous_body
-            ):
-                latencies.append(woke - state.stamp_ns)
-            previous, previous_body = state, state_body
+            recorder.sample(state, woke)
     teleop.stop()
-    return latencies
+    return recorder
 
 
 def motion_frames(chassis_cli: str, robot: str) -> dict[float, tuple[int, bytes]]:
@@ -226,10 +236,12 @@ def main() -> int:
     rows = []
     out = Path(args.latencies_dir) if args.latencies_dir else None
     if "state" in paths:
-        latencies = state_path(robot, teleop, args.state_samples)
-        rows.append(row("state", args.robot, latencies, 0))
+        recorder = state_path(robot, teleop, args.state_samples)
+        latencies = recorder.latencies
+        rows.append(row("state", args.robot, latencies, 0) | {"dropped": recorder.dropped})
         if out:
             (out / "state.ns").write_text("".join(f"{ns}\n" for ns in latencies))
+            (out / "state.dropped").write_text(f"{recorder.dropped}\n")
     if "command" in paths:
         frames = motion_frames(args.chassis, args.robot)
         latencies, missed = command_path(

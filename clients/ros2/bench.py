@@ -11,11 +11,16 @@ processes involved:
   speeds, one every ``--interval-ms``, so each writes a frame (as ``clients/python/bench.py``).
 * **frame → odom**: a frame that moved the robot read by ``chassisd`` (``ChassisState.stamp_ns``)
   → the ``nav_msgs/Odometry`` it produced taken by this participant. The bridge runs with
-  ``--monotonic-stamps``, so each odom's stamp is that read time itself.
+  ``--monotonic-stamps``, so each odom's stamp is that read time itself. By the rule
+  ``chassis-bench`` applies to every client alike, an odom counts when its stamp is newer than
+  every stamp taken before it: one that repeats an older frame's read time (a tick's refresh) is
+  left out, and the first only sets the stamp.
 * **raw hops**: the same two DDS implementations with nothing behind them. ``chassis-ros2
   --bench-echo`` (the bridge's DDS stack) records each ``TwistStamped`` ping written here
   (Cyclone DDS → RustDDS, the cmd_vel hop) and answers it at once (RustDDS → Cyclone DDS, the
-  odom hop), at the command path's pace.
+  odom hop), at the command path's pace, after a warm-up of ``WARMUP`` pings that are not
+  counted, and as many counted as the path each hop divides: ``--commands`` for the cmd_vel hop,
+  ``--state-samples`` for the odom hop.
 
 DDS discovery multicasts: run it only in a network namespace whose only interface is the
 loopback (``chassis-bench`` runs it under ``unshare --net``); it refuses to run elsewhere.
@@ -69,6 +74,9 @@ import ros2_types as m  # noqa: E402
 DOMAIN = 77
 DISCOVERY_S = 15.0
 STATE_DRIVE = (0.6, 0.3)
+# Pings before the counted ones: both stacks' first samples (discovery, allocation) left out, as
+# chassis-bench's iceoryx2 baselines leave theirs out.
+WARMUP = 200
 
 
 def interfaces() -> list[str]:
@@ -146,6 +154,7 @@ def state_path(dp: DomainParticipant, cmd: DataWriter, odom: DataReader, samples
     latencies: list[int] = []
     drive = m.Twist(linear=m.Vector3(x=STATE_DRIVE[0]), angular=m.Vector3(z=STATE_DRIVE[1]))
     last_request = 0
+    newest: int | None = None
     deadline = time.monotonic() + 120
     while len(latencies) < samples and time.monotonic() < deadline:
         if chassis.now_ns() - last_request > 50_000_000:
@@ -154,7 +163,11 @@ def state_path(dp: DomainParticipant, cmd: DataWriter, odom: DataReader, samples
         ws.wait(duration(milliseconds=20))
         taken = odom.take(N=64)
         woke = chassis.now_ns()
-        latencies.extend(woke - nanos(sample.header.stamp) for sample in taken)
+        for sample in taken:
+            read = nanos(sample.header.stamp)
+            if newest is not None and read > newest:
+                latencies.append(woke - read)
+            newest = read if newest is None else max(newest, read)
     cmd.write(m.Twist())
     return latencies
 
@@ -218,7 +231,11 @@ def main() -> int:
         wait_matched(ping, "the echo's ping")
         frames = client_bench.motion_frames(args.chassis, args.robot)
 
-        raw_out = raw_hops(dp, ping, pong, args.commands, interval)
+        # Warm-up pings first (their hops left out on both sides), then as many as the longer
+        # path needs; each hop keeps as many as the path it divides.
+        counted = max(args.commands, args.state_samples)
+        raw_out = raw_hops(dp, ping, pong, WARMUP + counted, interval)[WARMUP:]
+        raw_out = raw_out[: args.state_samples]
         command, missed = command_path(robot, cmd, frames, args.commands, interval)
         time.sleep(0.6)  # the ros2 source expires: the state path starts from rest
         state = state_path(dp, cmd, odom, args.state_samples)
@@ -230,7 +247,8 @@ def main() -> int:
                 proc.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 proc.kill()
-    raw_in = [int(x) for x in (out / "raw-in.ns").read_text().split()]
+    raw_in = [int(x) for x in (out / "raw-in.ns").read_text().split()][WARMUP:]
+    raw_in = raw_in[: args.commands]
     figures = {
         "command": (command, missed),
         "state": (state, 0),

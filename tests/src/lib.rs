@@ -705,6 +705,21 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
         test: "the_watchdog_pings_come_from_the_loop_and_stop_while_it_stalls",
         fault: "chassisd's event loop stalls (hung) under a systemd watchdog",
     },
+    ExpectedRow {
+        suite: "zenoh",
+        test: "the_operator_reads_the_robots_description_and_a_release_through_the_mirror_starts_no_motion",
+        fault: "the e-stop released through the Zenoh mirror while the operator asks for motion",
+    },
+    ExpectedRow {
+        suite: "zenoh",
+        test: "requests_buffered_through_an_outage_never_drive_when_the_link_comes_back",
+        fault: "remote requests buffered through a Zenoh link outage",
+    },
+    ExpectedRow {
+        suite: "ros2_reach",
+        test: "a_dds_peer_on_the_robots_network_drives_only_when_the_discovery_range_allows_it",
+        fault: "a DDS peer on the robot's network publishes cmd_vel",
+    },
 ];
 
 /// Every row of the soak's table (`soak.jsonl`), in the order of the table.

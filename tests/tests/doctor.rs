@@ -67,7 +67,25 @@ fn on_the_simulated_robot_the_doctor_reads_chassisd_and_fails_while_the_rc_holds
     assert_eq!(line(&report, "mode").0, "ok", "{report}");
     assert_eq!(line(&report, "e-stop").0, "ok", "{report}");
     assert_eq!(line(&report, "state-dir").0, "ok", "{report}");
+    assert_eq!(line(&report, "mux").0, "ok", "{report}");
     assert!(report.contains("verdict: ready to drive"), "{report}");
+    // --json: one object per check, then the verdict.
+    let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim", "--json"]);
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let last = lines.last().unwrap();
+    assert_eq!(
+        (last["verdict"].as_str(), last["failed"].as_u64()),
+        (Some("ready"), Some(0))
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|c| c["check"] == "mux" && c["verdict"] == "ok"),
+        "{lines:?}"
+    );
 
     let rc = env.chassis(&["sim", "--name", &n, "rc", "on"]);
     assert!(rc.status.success(), "{}", text(&rc));
@@ -92,6 +110,59 @@ fn on_the_simulated_robot_the_doctor_reads_chassisd_and_fails_while_the_rc_holds
     assert_eq!(out.status.code(), Some(1), "{report}");
     assert!(
         line(&report, "chassisd").1.contains("as a titan"),
+        "{report}"
+    );
+}
+
+#[test]
+fn the_doctor_names_a_silent_safety_monitor_and_a_held_estop_with_their_fixes() {
+    let mut env = Env::new("doctor-mux");
+    let n = name("dm");
+    // The safety rule on, no monitor running.
+    env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--bus", "sim"],
+    );
+    env.robot(&n, UP);
+    let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim"]);
+    let report = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{report}\n{}", env.logs());
+    let (verdict, mux) = line(&report, "mux");
+    assert_eq!(verdict, "FAIL", "{report}");
+    assert!(
+        mux.contains("the required source safety is silent"),
+        "{report}"
+    );
+    assert!(
+        report.contains(&format!("systemctl start chassis-safety@{n}")),
+        "{report}"
+    );
+
+    // A stand-in monitor's heartbeats, then an operator's e-stop.
+    env.spawn(
+        "safety",
+        "chassis",
+        &[
+            "pub",
+            "velocity",
+            "--name",
+            &n,
+            "--source",
+            "safety",
+            "--heartbeat",
+        ],
+    );
+    let stop = env.chassis(&["control", "--name", &n, "estop"]);
+    assert!(stop.status.success(), "{}", text(&stop));
+    let mut report = String::new();
+    let held = wait_for(UP, || {
+        report = text(&env.chassis(&["doctor", "--name", &n, "--bus", "sim"]));
+        report.contains("the lock estop") && !report.contains("required source safety")
+    });
+    assert!(held.is_some(), "{report}");
+    assert_eq!(line(&report, "mux").0, "FAIL", "{report}");
+    assert!(
+        report.contains(&format!("`chassis control --name {n} estop-release`")),
         "{report}"
     );
 }

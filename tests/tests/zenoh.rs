@@ -482,9 +482,11 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
         env.logs()
     );
 
+    // Refused for its certificate, as the TLS handshake says (not for any other failure, nor
+    // passed by a mere mention of certificates being loaded).
     let log = env.proc(3).log_text();
     assert!(
-        log.to_lowercase().contains("certificate"),
+        log.contains("invalid peer certificate"),
         "the stranger was not refused for its certificate\n{}",
         env.logs()
     );
@@ -997,4 +999,160 @@ fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_st
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("no motion after the zero\n{}", env.logs()));
     remote.stop().unwrap();
+    let mut figures = Figures::faults();
+    figures.add(Figure {
+        rank: 730,
+        fault: "the e-stop released through the Zenoh mirror while the operator asks for motion".into(),
+        injection: "the operator drives `remote` at 0.4 m/s across two namespaces, engages the e-stop through the mirror's `control`, keeps asking, and releases it the same way".into(),
+        behaviour: "nothing moved after the release; the robot's mux held zero awaiting the remote source's zero (AWAITING_ZERO), then drove on the operator's next requests".into(),
+        figure: format!("fastest {peak:.3} m/s in the 1.5 s after the release"),
+        value: f64::from(peak),
+        pass: true,
+        suite: "zenoh".into(),
+        test: "the_operator_reads_the_robots_description_and_a_release_through_the_mirror_starts_no_motion".into(),
+    });
+    figures.finish();
+}
+
+/// Cuts the link with nftables (every packet dropped both ways on the operator's end) or
+/// restores it. Unlike taking the veth down, the TCP connection outlives the cut, so what the
+/// operator side wrote meanwhile is retransmitted when the link returns.
+fn nft_cut(link: &Link, cut: bool) {
+    let ns = &link.operator_ns;
+    let operator_if = link.robot_if.replacen("czr", "czo", 1);
+    let nft = |rule: &str| {
+        let out = run_in(ns, "nft", &[rule]);
+        assert!(
+            out.status.success(),
+            "nft {rule}: {} (install nftables)",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    if !cut {
+        nft("delete table inet cut");
+        return;
+    }
+    nft("add table inet cut");
+    for (hook, dir) in [("input", "iifname"), ("output", "oifname")] {
+        nft(&format!(
+            "add chain inet cut {hook} {{ type filter hook {hook} priority 0; }}"
+        ));
+        nft(&format!(
+            "add rule inet cut {hook} {dir} \"{operator_if}\" drop"
+        ));
+    }
+}
+
+#[test]
+fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
+    let link = Link::new();
+    let mut env = Env::new("zenoh-stale");
+    let n = name("zst");
+    let mut robot = robot_side(&mut env, &link, &n);
+    let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
+    let mut remote = remote_source(&env, &mut operator);
+    drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("the robot never moved\n{}", env.logs()));
+
+    // The link goes down mid-drive; the operator keeps asking for 0.5 s, then its program
+    // stops asking; the link comes back 1.2 s after the cut.
+    let cut = Instant::now();
+    nft_cut(&link, true);
+    let mut asked = 0u32;
+    while cut.elapsed() < Duration::from_millis(500) {
+        remote.send(VelocityRequest::twist(0.4, 0.0)).unwrap();
+        asked += 1;
+        pause(Duration::from_millis(20));
+    }
+    let halted = wait_for(Duration::from_secs(3), || {
+        state(&mut robot).motion.linear_mps.abs() < 0.001
+    });
+    assert!(
+        halted.is_some(),
+        "the robot kept moving through the outage\n{}",
+        env.logs()
+    );
+    while cut.elapsed() < Duration::from_millis(1200) {
+        pause(Duration::from_millis(10));
+    }
+    let back_ns = now_ns();
+    nft_cut(&link, false);
+
+    // Not one motion from the old requests: every mux decision and state sample after the link
+    // came back asks for and shows standstill.
+    let end = Instant::now() + Duration::from_secs(3);
+    let (mut peak_output, mut peak_speed) = (0.0f32, 0.0f32);
+    let mut samples = 0;
+    while Instant::now() < end {
+        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(10))
+            && s.stamp_ns > back_ns
+        {
+            samples += 1;
+            peak_speed = peak_speed.max(s.motion.linear_mps.abs());
+        }
+        robot
+            .poll_mux(|m| {
+                if m.stamp_ns > back_ns {
+                    peak_output = peak_output.max(m.output.linear_x_mps.abs());
+                }
+            })
+            .unwrap();
+    }
+    assert!(samples > 0, "no state after the link came back");
+    assert_eq!(
+        peak_output,
+        0.0,
+        "the mux obeyed a request made before the outage\n{}",
+        env.logs()
+    );
+    assert!(peak_speed < 0.01, "the robot moved at {peak_speed} m/s");
+    // The old requests did arrive, and were dropped as too old (not for want of a clock).
+    let log = env.proc(2).log_text();
+    let too_old: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("dropped a velocity request") && l.contains("before it arrived"))
+        .collect();
+    assert!(
+        !too_old.is_empty(),
+        "none of the {asked} requests made during the outage arrived late (nothing was judged)\n{}",
+        env.logs()
+    );
+    eprintln!(
+        "{asked} requests asked during the outage; {} dropped as too old on the robot side, the last: {}",
+        too_old.len(),
+        too_old.last().copied().unwrap_or("")
+    );
+
+    // The operator drives again with new requests.
+    drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
+        .unwrap_or_else(|| panic!("no motion from new requests\n{}", env.logs()));
+    remote.stop().unwrap();
+    let latest_ms = too_old
+        .iter()
+        .filter_map(|l| {
+            l.split("made ")
+                .nth(1)?
+                .split(" ms")
+                .next()?
+                .parse::<u64>()
+                .ok()
+        })
+        .max()
+        .unwrap_or(0);
+    let mut figures = Figures::faults();
+    figures.add(Figure {
+        rank: 740,
+        fault: "remote requests buffered through a Zenoh link outage".into(),
+        injection: "the operator drives `remote` at 0.4 m/s; nftables drops every packet of the link for 1.2 s; the operator asks for 0.5 s of it, then stops asking".into(),
+        behaviour: "the requests held by the connection arrived when the link returned and were dropped and counted as too old (their stamps against the operator's clock, measured on the session); the mux obeyed none; new requests drove".into(),
+        figure: format!(
+            "{asked} asked during the outage, {} dropped as too old, the latest {latest_ms} ms after it was made (bound 250 ms); mux output after the link returned {peak_output} m/s",
+            too_old.len()
+        ),
+        value: f64::from(peak_output),
+        pass: true,
+        suite: "zenoh".into(),
+        test: "requests_buffered_through_an_outage_never_drive_when_the_link_comes_back".into(),
+    });
+    figures.finish();
 }

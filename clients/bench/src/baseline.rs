@@ -542,10 +542,30 @@ fn wait_ready(child: &mut Child) -> anyhow::Result<BufReader<ChildStdout>> {
     Ok(reader)
 }
 
-/// What a baseline run measured: the pings' hops, and a loaded receiver's feed hops.
+/// What a baseline run measured: the pings' hops, and a loaded receiver's feed hops (every
+/// one, ns, in order).
 pub struct Measured {
-    pub pings: Latencies,
-    pub feed: Option<Latencies>,
+    /// Every counted hop of the pings, ns, in order.
+    pub pings: Vec<u64>,
+    pub feed: Option<Vec<u64>>,
+}
+
+impl Measured {
+    /// Every ping hop as a distribution.
+    pub fn all_pings(&self) -> Latencies {
+        last_of(&self.pings, u64::MAX)
+    }
+}
+
+/// The last `count` of `hops` (all of them when there are fewer): a baseline with as many
+/// samples as the path it divides, taken once the receiver had run longest.
+pub fn last_of(hops: &[u64], count: u64) -> Latencies {
+    let keep = usize::try_from(count).unwrap_or(usize::MAX).min(hops.len());
+    let mut latencies = Latencies::new();
+    for &ns in &hops[hops.len() - keep..] {
+        latencies.record(ns);
+    }
+    latencies
 }
 
 /// Runs `rounds` ping-pongs (after a warm-up) and returns the one-way latencies of both
@@ -643,24 +663,22 @@ pub fn run(
             let path = args.feed_file();
             let text = std::fs::read_to_string(&path)
                 .with_context(|| format!("reading {}", path.display()))?;
-            let mut latencies = Latencies::new();
-            for ns in text.lines().filter_map(|l| l.parse::<u64>().ok()) {
-                latencies.record(ns);
-            }
-            Some(latencies)
+            Some(text.lines().filter_map(|l| l.parse::<u64>().ok()).collect())
         }
         None => None,
     };
     Ok(Measured { pings, feed })
 }
 
+/// The counted hops, ns (a hop whose clocks disagree, the answer stamped before the ping, is
+/// recorded as 0 ns: it stays counted and shows at the bottom of the distribution).
 fn ping_rounds(
     endpoint: &mut dyn Endpoint,
     transport: Transport,
     rounds: u64,
     pace: Option<Duration>,
-) -> anyhow::Result<Latencies> {
-    let mut latencies = Latencies::new();
+) -> anyhow::Result<Vec<u64>> {
+    let mut latencies = Vec::new();
     let warmup = if pace.is_some() { 20 } else { 200 };
     let mut ticker = pace.map(chassis_client::Ticker::new);
     for seq in 0..warmup + rounds {
@@ -677,10 +695,10 @@ fn ping_rounds(
             bail!("{}: no answer to ping {seq}", transport.label());
         };
         if seq >= warmup {
-            latencies.record(pong.measured_ns);
+            latencies.push(pong.measured_ns);
             // Paced, only the hop after the pause counts: the answer finds both ends awake.
             if pace.is_none() {
-                latencies.record_between(pong.stamp_ns, arrived);
+                latencies.push(arrived.saturating_sub(pong.stamp_ns));
             }
         }
     }

@@ -4,7 +4,7 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use chassis_client::{Robot, VelocityRequest, now_ns};
+use chassis_client::{Robot, STATE_BUFFER, VelocityRequest, now_ns};
 
 use crate::paths::StateRecorder;
 use crate::stats::Latencies;
@@ -23,11 +23,13 @@ pub struct SubscribeArgs {
 /// The subscriber role: records state latencies for `seconds`, then prints its histogram (hex
 /// of the HdrHistogram V2 encoding) on stdout.
 pub fn subscribe(args: &SubscribeArgs) -> anyhow::Result<()> {
-    let mut robot = Robot::connect_with_prefix(&args.name, Some(&args.prefix))?;
+    let robot = Robot::connect_with_prefix(&args.name, Some(&args.prefix))?;
+    // Every sample, as a client that needs them all reads them.
+    let stream = robot.state_stream(STATE_BUFFER)?;
     let mut recorder = StateRecorder::default();
     let end = now_ns() + (args.seconds * 1e9) as u64;
     while now_ns() < end {
-        robot.wait_states(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
+        stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
     }
     let hex: String = recorder
         .latencies

@@ -13,6 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 mod baseline;
 mod fanout;
 mod fleet;
+mod parts;
 mod paths;
 mod placement;
 mod provenance;
@@ -26,7 +27,7 @@ mod zenoh;
 use baseline::{Load, Transport};
 use paths::{BusKind, LoopMode};
 use placement::Placement;
-use report::{Report, Row};
+use report::{Report, Row, row_key};
 use stats::Latencies;
 
 #[derive(Debug, Parser)]
@@ -73,9 +74,15 @@ enum Role {
 
 #[derive(Debug, Args)]
 struct RunArgs {
-    /// A short run (under 30 s): fewer samples, the TITAN on the simulated bus only.
+    /// A short run: fewer samples, the TITAN on the simulated bus only.
     #[arg(long)]
     quick: bool,
+    /// The CI's check of the benchmark itself: a quick run without the throughput replay that
+    /// fails (exit 1) when a row it plans is missing or has no sample, when a row is flagged
+    /// inconsistent, when a baseline a row names was not measured or two rows share a name.
+    /// Never on a target: the figures of a shared machine are what they are.
+    #[arg(long)]
+    smoke: bool,
     /// Write every figure as JSON.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -115,6 +122,21 @@ struct Plan {
 }
 
 impl Plan {
+    /// The smoke run's: enough samples for every row to exist and its p99 to be shown, no more.
+    fn smoke() -> Self {
+        Self {
+            baseline_rounds: 500,
+            paced_rounds: 100,
+            commands: 100,
+            xbot_commands: 0,
+            states: 300,
+            preemptions: 100,
+            fanout: vec![2],
+            fanout_seconds: 1.0,
+            cost_seconds: 1.0,
+        }
+    }
+
     fn new(quick: bool) -> Self {
         if quick {
             Self {
@@ -123,7 +145,7 @@ impl Plan {
                 commands: 300,
                 xbot_commands: 0,
                 states: 1000,
-                preemptions: 40,
+                preemptions: 100,
                 fanout: vec![1, 4],
                 fanout_seconds: 1.5,
                 cost_seconds: 1.5,
@@ -233,6 +255,8 @@ fn row(
         placement: placement.into(),
         summary: latencies.summary(),
         missed,
+        dropped: 0,
+        contains: Vec::new(),
         conditions: None,
         baseline: None,
         ratio_p50: None,
@@ -241,6 +265,12 @@ fn row(
         latencies,
     }
 }
+
+/// The default-configuration command row's `what`: the TITAN on the simulated bus with
+/// chassisd's defaults (no [`paths::BENCH_CONFIG`]), a sample ending at the first frame that
+/// moves toward the request (the mux ramps the change).
+pub const DEFAULT_CONFIG_ROW: &str =
+    "titan sim, chassisd's default configuration, request → first frame toward it";
 
 /// The baseline transport that waits like a service loop in `mode`.
 /// The raw DDS hops the ROS 2 rows contain (Cyclone DDS is the peer, RustDDS the bridge's).
@@ -271,8 +301,16 @@ fn bus_label(robot: RobotKind, bus: BusKind) -> String {
 }
 
 fn run(args: &RunArgs) -> anyhow::Result<Report> {
-    let plan = Plan::new(args.quick);
-    let skip = |part: &str| args.skip.iter().any(|s| s == part);
+    let quick = args.quick || args.smoke;
+    let plan = if args.smoke {
+        Plan::smoke()
+    } else {
+        Plan::new(quick)
+    };
+    // The smoke run checks rows: the bus-load cost and the replay make none.
+    let skip = |part: &str| {
+        args.skip.iter().any(|s| s == part) || (args.smoke && matches!(part, "cost" | "throughput"))
+    };
     let dir = match &args.dir {
         Some(d) => d.clone(),
         None => std::env::temp_dir().join(format!("chassis-bench-{}", std::process::id())),
@@ -320,16 +358,124 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         (Transport::IceoryxEvent, Placement::CrossCpu, paced),
         (Transport::IceoryxSpin, Placement::CrossCpu, paced),
     ]);
-    let runs = path_runs(args.quick, &robots);
+    let mut runs = path_runs(quick, &robots);
+    if args.smoke {
+        // The event loop only: a busy-polling loop on a shared 2-core machine measures the
+        // machine's other work (a smoke run is about rows, not figures).
+        runs.retain(|r| r.mode == LoopMode::Event);
+    }
     // The warm baseline of the hybrid loop's preemption rows.
     if runs.iter().any(|r| r.mode == LoopMode::Hybrid) {
         baselines.push((Transport::IceoryxHybrid, Placement::CrossCpu, None));
     }
+    // Every row this run plans, named as the code below names them: a smoke run fails when
+    // one of them did not come.
+    let python = python::interpreter();
+    let ros2 = ros2::interpreter();
+    let mut expected: Vec<String> = Vec::new();
+    if !skip("baselines") {
+        for (transport, placement, pace) in &baselines {
+            let what = match pace {
+                Some(_) => format!("{} {}", transport.label(), report::PACED),
+                None => transport.label().to_string(),
+            };
+            expected.push(row_key("baseline", &what, "-", placement.label()));
+        }
+    }
+    if !skip("paths") {
+        for r in &runs {
+            let label = bus_label(r.robot, r.bus);
+            let (mode, placement) = (r.mode.arg(), r.placement.label());
+            let t = transport_of(r.mode).label();
+            for what in [
+                format!("{t} paced, loaded as {label}"),
+                format!("{t} at the feedback rate, loaded as {label}"),
+                format!("{t} back to back, loaded as {label}"),
+            ] {
+                expected.push(row_key("baseline", &what, "-", placement));
+            }
+            let commands = if r.robot == RobotKind::Xbot {
+                plan.xbot_commands
+            } else {
+                plan.commands
+            };
+            if commands > 0 {
+                expected.push(row_key("command", &label, mode, placement));
+                expected.push(row_key(
+                    "in-service",
+                    &format!("{label}: command"),
+                    mode,
+                    placement,
+                ));
+            }
+            expected.push(row_key("state", &label, mode, placement));
+            expected.push(row_key(
+                "in-service",
+                &format!("{label}: state"),
+                mode,
+                placement,
+            ));
+            expected.push(row_key("preemption", &label, mode, placement));
+            if (r.robot, r.mode) == (RobotKind::Titan, LoopMode::Event) {
+                if python.is_some() {
+                    for p in ["state", "command"] {
+                        expected.push(row_key("python", &format!("{label}: {p}"), mode, placement));
+                    }
+                }
+                if ros2.is_some() {
+                    for (what, dds) in [("cmd_vel → frame", DDS_IN), ("frame read → odom", DDS_OUT)]
+                    {
+                        expected.push(row_key(
+                            "ros2",
+                            &format!("{label}: {what}"),
+                            mode,
+                            placement,
+                        ));
+                        expected.push(row_key(
+                            "baseline",
+                            &format!("{dds}, beside {label}"),
+                            "-",
+                            placement,
+                        ));
+                    }
+                }
+            }
+        }
+        let cross = Placement::CrossCpu.label();
+        expected.push(row_key("command", DEFAULT_CONFIG_ROW, "event", cross));
+        expected.push(row_key(
+            "in-service",
+            &format!("{DEFAULT_CONFIG_ROW}: command"),
+            "event",
+            cross,
+        ));
+    }
+    if !skip("fanout") {
+        for n in &plan.fanout {
+            expected.push(row_key(
+                "fan-out",
+                &format!("titan sim → {n} processes"),
+                "event",
+                "unpinned",
+            ));
+        }
+    }
+    if !skip("zenoh") && zenoh::possible() {
+        let placement = "2 netns, veth";
+        for raw in [zenoh::RAW_COMMAND, zenoh::RAW_STATE] {
+            expected.push(row_key("baseline", raw, "-", placement));
+        }
+        for what in [zenoh::COMMAND, zenoh::STATE, zenoh::BRIDGE] {
+            expected.push(row_key("zenoh", what, "event", placement));
+        }
+    }
+    report.expected = expected;
+
     let steps = (if skip("baselines") {
         0
     } else {
         baselines.len()
-    }) + (if skip("paths") { 0 } else { runs.len() })
+    }) + (if skip("paths") { 0 } else { runs.len() + 1 })
         + (if skip("fanout") { 0 } else { plan.fanout.len() })
         + usize::from(!skip("cost"))
         + usize::from(!skip("zenoh"))
@@ -353,7 +499,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             } else {
                 plan.baseline_rounds
             };
-            let l = baseline::run(transport, placement, rounds, pace, None, &prefix, &dir)?.pings;
+            let l =
+                baseline::run(transport, placement, rounds, pace, None, &prefix, &dir)?.all_pings();
             let mut r = row("baseline", what, "-", placement.label(), l, 0);
             r.conditions = Some(match pace {
                 Some(p) => format!(
@@ -368,7 +515,6 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     }
 
     if !skip("paths") {
-        let python = python::interpreter();
         if python.is_none() {
             report.notes.push(
                 "the Python client was not measured: target/python-venv is missing \
@@ -376,7 +522,6 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     .into(),
             );
         }
-        let ros2 = ros2::interpreter();
         if ros2.is_none() {
             report.notes.push(
                 "the ROS 2 bridge was not measured: target/ros2-venv is missing \
@@ -392,8 +537,16 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 r.placement.label()
             ));
             let (client_cpu, service_cpu) = r.placement.cpus();
-            let (service, mut robot) =
-                paths::start(r.robot, r.bus, r.mode, service_cpu, &prefix, &dir)?;
+            let (service, mut robot) = paths::start_configured(
+                r.robot,
+                r.bus,
+                r.mode,
+                service_cpu,
+                paths::ServiceConfig::Bench,
+                true,
+                &prefix,
+                &dir,
+            )?;
             let spin = r.mode == LoopMode::Spin;
             let (count, interval) = if r.robot == RobotKind::Xbot {
                 // The XBot's manual caps the command rate below 10 Hz: a change goes out at once
@@ -451,7 +604,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             })??;
             let feed_per_s = feedback.per_second(&mut robot)?;
             drop(robot);
-            drop(service);
+            let passes = service.stop()?;
             bar.inc(1);
 
             // The baseline of this run's command and state rows: its receiver lives like the
@@ -463,7 +616,17 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 "baseline as {label}: {} woken {feed_per_s:.0}/s",
                 transport.label()
             ));
-            let rounds = if count > 0 { count } else { plan.paced_rounds };
+            let (command, state, (preempt, preempt_missed), python, ros2) = result;
+            // As many samples as the rows each part divides: the command row's pings, the state
+            // row's feed hops (the run lasts until the feed made that many).
+            let pings_wanted = command
+                .as_ref()
+                .map_or(plan.paced_rounds, |c| c.latencies.count());
+            // A tenth more: the feed starts after the receiver and keeps its own pace.
+            let feed_rounds = (1.1 * state.latencies.count() as f64
+                / (feed_per_s * interval.as_secs_f64()).max(1e-9))
+            .ceil() as u64;
+            let rounds = pings_wanted.max(feed_rounds) + 1;
             let load = Load { feed_per_s, tick };
             let measured = baseline::run(
                 transport,
@@ -486,11 +649,11 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 paced_what.clone(),
                 "-",
                 placement,
-                measured.pings,
+                baseline::last_of(&measured.pings, pings_wanted),
                 0,
             );
             paced_row.conditions = Some(format!(
-                "one ping every {} ms; {conditions}",
+                "one ping every {} ms, the last {pings_wanted} of {rounds}; {conditions}",
                 interval.as_millis()
             ));
             report.rows.push(paced_row);
@@ -499,23 +662,59 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 transport.label()
             );
             if let Some(feed) = measured.feed {
-                let mut feed_row = row("baseline", feed_what.clone(), "-", placement, feed, 0);
+                // As many hops as the state row has samples: the last ones, the receiver warm.
+                let hops = baseline::last_of(&feed, state.latencies.count());
+                let mut feed_row = row("baseline", feed_what.clone(), "-", placement, hops, 0);
                 feed_row.conditions = Some(format!(
-                    "the feed's own hops: {feed_per_s:.0}/s; {conditions}"
+                    "the feed's own hops: {feed_per_s:.0}/s, the last {} of {}; {conditions}",
+                    state.latencies.count(),
+                    feed.len()
                 ));
                 report.rows.push(feed_row);
             }
             let reference = |what: &str| Some(format!("{what}, {placement}"));
-            let warm = reference(transport.label());
+            // The preemption's stop follows a request at once, while the loop is awake: its
+            // baseline is back to back, loaded as the service was, with as many samples (two
+            // hops a round).
+            bar.set_message(format!(
+                "baseline as {label}: {} back to back, loaded",
+                transport.label()
+            ));
+            let warm_what = format!("{} back to back, loaded as {label}", transport.label());
+            let warm_rounds = preempt.count().div_ceil(2).max(1);
+            let warm_measured = baseline::run(
+                transport,
+                r.placement,
+                warm_rounds,
+                None,
+                Some(load),
+                &prefix,
+                &dir,
+            )?;
+            let mut warm_row = row(
+                "baseline",
+                warm_what.clone(),
+                "-",
+                placement,
+                warm_measured.all_pings(),
+                0,
+            );
+            warm_row.conditions = Some(format!(
+                "{warm_rounds} ping-pongs back to back (both hops), after a warm-up; {conditions}"
+            ));
+            report.rows.push(warm_row);
+            let warm = reference(&warm_what);
 
-            let (command, state, (preempt, preempt_missed), python, ros2) = result;
             if let Some(dds) = ros2 {
                 let conditions = format!(
                     "one message every {} ms, measured by the ROS 2 run's own script, same run",
                     interval.as_millis()
                 );
-                for (what, latencies) in [(DDS_IN, dds.raw_in), (DDS_OUT, dds.raw_out)] {
-                    let mut r = row("baseline", what.into(), "-", placement, latencies, 0);
+                // Named after this run: a full run measures the bridge beside more than one.
+                let dds_in = format!("{DDS_IN}, beside {label}");
+                let dds_out = format!("{DDS_OUT}, beside {label}");
+                for (what, latencies) in [(&dds_in, dds.raw_in), (&dds_out, dds.raw_out)] {
+                    let mut r = row("baseline", what.clone(), "-", placement, latencies, 0);
                     r.conditions = Some(conditions.clone());
                     report.rows.push(r);
                 }
@@ -527,7 +726,12 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     dds.command,
                     dds.missed,
                 );
-                command_row.baseline = reference(DDS_IN);
+                command_row.baseline = reference(&dds_in);
+                // The DDS hop in, then the service's command path.
+                command_row.contains = vec![
+                    row_key("baseline", &dds_in, "-", placement),
+                    row_key("command", &label, r.mode.arg(), placement),
+                ];
                 report.rows.push(command_row);
                 let mut state_row = row(
                     "ros2",
@@ -537,18 +741,25 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     dds.state,
                     0,
                 );
-                state_row.baseline = reference(DDS_OUT);
+                state_row.baseline = reference(&dds_out);
+                // The service's state path, then the DDS hop out.
+                state_row.contains = vec![
+                    row_key("state", &label, r.mode.arg(), placement),
+                    row_key("baseline", &dds_out, "-", placement),
+                ];
                 report.rows.push(state_row);
             }
             if let Some(py) = python {
-                report.rows.push(row(
+                let mut state_row = row(
                     "python",
                     format!("{label}: state"),
                     r.mode.arg(),
                     placement,
                     py.state,
                     0,
-                ));
+                );
+                state_row.dropped = py.dropped;
+                report.rows.push(state_row);
                 report.rows.push(row(
                     "python",
                     format!("{label}: command"),
@@ -558,6 +769,22 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     py.missed,
                 ));
             }
+            let run_parts = |path: &str, parts| report::Parts {
+                path: path.into(),
+                what: label.clone(),
+                mode: r.mode.arg().into(),
+                placement: placement.into(),
+                parts,
+            };
+            if let Some(figures) = &command {
+                report.parts.push(run_parts(
+                    "command",
+                    parts::command(&figures.samples, &passes),
+                ));
+            }
+            report
+                .parts
+                .push(run_parts("state", parts::state(&state.samples, &passes)));
             if let Some(figures) = command {
                 let mut command_row = row(
                     "command",
@@ -586,6 +813,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 state.latencies,
                 0,
             );
+            state_row.dropped = state.dropped;
             state_row.baseline = reference(&feed_what);
             report.rows.push(state_row);
             report.rows.push(row(
@@ -610,6 +838,60 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             report.rows.push(preempt_row);
             bar.inc(1);
         }
+
+        // chassisd as it ships beside the benchmark's configuration: the TITAN on the simulated
+        // bus, event loop, cross CPU, against the same matched baseline as that run's row.
+        bar.set_message("titan sim in chassisd's default configuration");
+        let placement = Placement::CrossCpu;
+        let (client_cpu, service_cpu) = placement.cpus();
+        let (service, mut robot) = paths::start_configured(
+            RobotKind::Titan,
+            BusKind::Sim,
+            LoopMode::Event,
+            service_cpu,
+            paths::ServiceConfig::Default,
+            false,
+            &prefix,
+            &dir,
+        )?;
+        let figures = paths::pinned(client_cpu, || -> anyhow::Result<_> {
+            let mut teleop = robot.source("teleop")?;
+            paths::command_path_via(
+                &mut robot,
+                &mut teleop,
+                RobotKind::Titan,
+                plan.commands,
+                paths::COMMAND_INTERVAL,
+                false,
+                paths::Reach::Toward,
+            )
+        })??;
+        drop(robot);
+        drop(service);
+        let label = bus_label(RobotKind::Titan, BusKind::Sim);
+        let mut default_row = row(
+            "command",
+            DEFAULT_CONFIG_ROW.to_string(),
+            LoopMode::Event.arg(),
+            placement.label(),
+            figures.latencies,
+            figures.missed,
+        );
+        default_row.baseline = Some(format!(
+            "{} paced, loaded as {label}, {}",
+            Transport::IceoryxEvent.label(),
+            placement.label()
+        ));
+        report.rows.push(default_row);
+        report.rows.push(row(
+            "in-service",
+            format!("{DEFAULT_CONFIG_ROW}: command"),
+            LoopMode::Event.arg(),
+            placement.label(),
+            figures.in_service,
+            0,
+        ));
+        bar.inc(1);
     }
 
     if !skip("fanout") {
@@ -647,21 +929,33 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 plan.states,
             )?;
             let placement = "2 netns, veth";
-            let base = format!(
-                "Zenoh put → subscriber, {} B",
-                size_of::<chassis_client::ChassisState>()
-            );
-            let mut raw = row("baseline", base.clone(), "-", placement, z.raw, 0);
-            raw.conditions = Some(format!(
-                "one sample every {} ms from the robot's namespace to the operator's, bare \
-                 sessions configured as chassis-zenoh's, same run",
-                paths::COMMAND_INTERVAL.as_millis()
-            ));
-            report.rows.push(raw);
-            let reference = Some(format!("{base}, {placement}"));
+            let command_count = z.command.latencies.count();
+            let state_count = z.state.count();
+            for (what, count) in [
+                (zenoh::RAW_COMMAND, command_count),
+                (zenoh::RAW_STATE, state_count),
+            ] {
+                let mut raw = row(
+                    "baseline",
+                    what.into(),
+                    "-",
+                    placement,
+                    baseline::last_of(&z.raw, count),
+                    0,
+                );
+                raw.conditions = Some(format!(
+                    "one sample every {} ms from the robot's namespace to the operator's, bare \
+                     sessions configured as chassis-zenoh's, same run; the last {count} of {} \
+                     after a warm-up",
+                    paths::COMMAND_INTERVAL.as_millis(),
+                    z.raw.len()
+                ));
+                report.rows.push(raw);
+            }
+            let reference = Some(format!("{}, {placement}", zenoh::RAW_COMMAND));
             let mut command = row(
                 "zenoh",
-                "operator's remote source → robot's frame written (titan sim)".into(),
+                zenoh::COMMAND.into(),
                 "event",
                 placement,
                 z.command.latencies,
@@ -669,19 +963,13 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             );
             command.baseline = reference.clone();
             report.rows.push(command);
-            let mut state = row(
-                "zenoh",
-                "robot's frame read → state in the operator's iceoryx2 (titan sim)".into(),
-                "event",
-                placement,
-                z.state,
-                0,
-            );
+            let reference = Some(format!("{}, {placement}", zenoh::RAW_STATE));
+            let mut state = row("zenoh", zenoh::STATE.into(), "event", placement, z.state, 0);
             state.baseline = reference.clone();
             report.rows.push(state);
             let mut bridge = row(
                 "zenoh",
-                "robot's state published → in the operator's iceoryx2 (the bridge's part)".into(),
+                zenoh::BRIDGE.into(),
                 "event",
                 placement,
                 z.bridge,
@@ -721,7 +1009,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     if !skip("throughput") {
         bar.set_message("replaying a recorded bus at full speed");
         let file = dir.join("titan.log");
-        let seconds = if args.quick { 300 } else { 1500 };
+        let seconds = if quick { 300 } else { 1500 };
         let frames = throughput::record_titan(&file, seconds)?;
         report.throughput = Some(throughput::replay(&file, frames, &prefix, &dir)?);
         bar.inc(1);
@@ -776,6 +1064,23 @@ fn main() -> ExitCode {
                 };
                 std::fs::write(path, text)
                     .with_context(|| format!("writing {}", path.display()))?;
+            }
+            if cli.run.smoke {
+                let failures = report.smoke_failures(&report.expected);
+                for failure in &failures {
+                    eprintln!("smoke: {failure}");
+                }
+                if !failures.is_empty() {
+                    anyhow::bail!(
+                        "the smoke run failed: {} failure(s), {} rows planned",
+                        failures.len(),
+                        report.expected.len()
+                    );
+                }
+                eprintln!(
+                    "smoke: all {} planned rows measured, none flagged",
+                    report.expected.len()
+                );
             }
             Ok(())
         }),

@@ -15,14 +15,12 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::{
-    BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, Robot, SimKind, SimRequest,
-    Source, Ticker, VelocityRequest, now_ns,
+    BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, PASS_TRACE_ENV, Robot,
+    STATE_BUFFER, SimKind, SimRequest, Source, Ticker, VelocityRequest, now_ns,
 };
 use chassis_protocols::describe::{FrameJson, RobotCodec};
 use chassis_protocols::{CanFrame, RobotKind};
 use serde::Serialize;
-
-use zerocopy::IntoBytes;
 
 use crate::placement::{pause, pin_current_thread, unique, unpin_current_thread};
 use crate::stats::Latencies;
@@ -61,11 +59,74 @@ pub struct Service {
     pub name: String,
     children: Vec<Child>,
     pub pid: u32,
+    /// Where chassisd writes its pass trace as it stops, when asked for one.
+    trace: Option<PathBuf>,
 }
 
-impl Drop for Service {
-    fn drop(&mut self) {
-        for child in self.children.iter_mut().rev() {
+/// The stamps chassisd took inside one pass (its pass trace, `CHASSIS_PASS_TRACE`), ns; 0 where
+/// the pass did not do the thing.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PassStamps {
+    pub woke: u64,
+    pub requests_read: u64,
+    pub write_started: u64,
+    pub written: u64,
+    pub state_handed: u64,
+    pub state_sent: u64,
+    pub state_readers_woken: u64,
+}
+
+impl Service {
+    /// Stops the service and returns the passes of its trace (none when it kept no trace).
+    pub fn stop(mut self) -> anyhow::Result<Vec<PassStamps>> {
+        self.stop_children();
+        let Some(path) = &self.trace else {
+            return Ok(Vec::new());
+        };
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading chassisd's pass trace {}", path.display()))?;
+        let mut lines = text.lines();
+        let header = lines.next().unwrap_or_default();
+        if header
+            != "woke requests_read write_started written state_handed state_sent \
+                state_readers_woken"
+        {
+            bail!("{}: unknown columns '{header}'", path.display());
+        }
+        lines
+            .map(|line| {
+                let v: Vec<u64> = line
+                    .split_whitespace()
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()
+                    .with_context(|| format!("{}: '{line}'", path.display()))?;
+                let [
+                    woke,
+                    requests_read,
+                    write_started,
+                    written,
+                    state_handed,
+                    state_sent,
+                    state_readers_woken,
+                ] = v[..]
+                else {
+                    bail!("{}: '{line}' has not 7 stamps", path.display());
+                };
+                Ok(PassStamps {
+                    woke,
+                    requests_read,
+                    write_started,
+                    written,
+                    state_handed,
+                    state_sent,
+                    state_readers_woken,
+                })
+            })
+            .collect()
+    }
+
+    fn stop_children(&mut self) {
+        for mut child in self.children.drain(..).rev() {
             if let Ok(pid) = i32::try_from(child.id()) {
                 let _ = nix::sys::signal::kill(
                     nix::unistd::Pid::from_raw(pid),
@@ -74,6 +135,12 @@ impl Drop for Service {
             }
             let _ = child.wait();
         }
+    }
+}
+
+impl Drop for Service {
+    fn drop(&mut self) {
+        self.stop_children();
     }
 }
 
@@ -90,15 +157,32 @@ pub fn sibling(binary: &str) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
-/// A service configuration for latency runs: no acceleration smoothing, no minimum spacing
-/// between command frames, no idle brake.
-pub fn write_config(dir: &Path) -> anyhow::Result<PathBuf> {
-    let path = dir.join("bench.toml");
-    std::fs::write(
-        &path,
-        "[driver]\nmin_command_interval_ms = 0\nbrake_idle_engage_ms = 0\n\n\
-         [mux.limits]\nlinear_accel_mps2 = 0.0\nangular_accel_radps2 = 0.0\n",
-    )?;
+/// The configuration of chassisd in the benchmark's runs, where it differs from the default:
+/// no minimum spacing between command frames (default 2 ms), no idle brake (the TITAN's brake
+/// engages after an idle time by default), no acceleration smoothing (by default the mux ramps a
+/// change at 2 m/s² and its yaw-rate limit): a command's frame then carries the requested speed
+/// itself, which the command path waits for. The document states it; a default-configuration
+/// row is measured beside it.
+pub const BENCH_CONFIG: &str = "[driver]\nmin_command_interval_ms = 0\nbrake_idle_engage_ms = 0\n\n\
+                                [mux.limits]\nlinear_accel_mps2 = 0.0\nangular_accel_radps2 = 0.0\n";
+
+/// Which configuration a run's chassisd has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServiceConfig {
+    /// [`BENCH_CONFIG`].
+    Bench,
+    /// chassisd's defaults.
+    Default,
+}
+
+/// Writes the configuration file of a run.
+fn write_config(dir: &Path, name: &str, config: ServiceConfig) -> anyhow::Result<PathBuf> {
+    let path = dir.join(format!("{name}.toml"));
+    let text = match config {
+        ServiceConfig::Bench => BENCH_CONFIG,
+        ServiceConfig::Default => "",
+    };
+    std::fs::write(&path, text)?;
     Ok(path)
 }
 
@@ -111,9 +195,35 @@ pub fn start(
     prefix: &str,
     dir: &Path,
 ) -> anyhow::Result<(Service, Robot)> {
+    start_configured(
+        robot,
+        bus,
+        mode,
+        service_cpu,
+        ServiceConfig::Bench,
+        false,
+        prefix,
+        dir,
+    )
+}
+
+/// [`start`] with chassisd configured as `config` says, keeping its pass trace with `trace`
+/// ([`Service::stop`] returns it).
+#[allow(clippy::too_many_arguments)]
+pub fn start_configured(
+    robot: RobotKind,
+    bus: BusKind,
+    mode: LoopMode,
+    service_cpu: Option<usize>,
+    config: ServiceConfig,
+    trace: bool,
+    prefix: &str,
+    dir: &Path,
+) -> anyhow::Result<(Service, Robot)> {
     let name = format!("bn{}", unique());
+    let trace = trace.then(|| dir.join(format!("{name}-passes.txt")));
     let chassisd = sibling("chassisd")?;
-    let config = write_config(dir)?;
+    let config = write_config(dir, &name, config)?;
     let mut children = Vec::new();
     let log = |label: &str| -> anyhow::Result<Stdio> {
         Ok(Stdio::from(std::fs::File::create(
@@ -194,7 +304,11 @@ pub fn start(
         args.push("--spin-us".into());
         args.push(crate::baseline::HYBRID_SPIN.as_micros().to_string());
     }
-    let service = Command::new(&chassisd)
+    let mut service = Command::new(&chassisd);
+    if let Some(path) = &trace {
+        service.env(PASS_TRACE_ENV, path);
+    }
+    let service = service
         .args(&args)
         .env(IPC_PREFIX_ENV, prefix)
         .env("RUST_LOG", "warn")
@@ -208,6 +322,7 @@ pub fn start(
         name: name.clone(),
         children,
         pid,
+        trace,
     };
     let deadline = now_ns() + 15_000_000_000;
     let mut robot_conn = loop {
@@ -241,6 +356,8 @@ pub fn start(
 /// prints), a serial robot's frames found in its byte stream.
 struct MotionDecoder {
     codec: RobotCodec,
+    /// The speed of the last motion frame decoded.
+    last: Option<f64>,
 }
 
 impl MotionDecoder {
@@ -248,6 +365,7 @@ impl MotionDecoder {
         let entry = robot.entry();
         Self {
             codec: (entry.codec)(entry.defaults()),
+            last: None,
         }
     }
 
@@ -265,7 +383,11 @@ impl MotionDecoder {
                 .filter_map(Result::ok)
                 .collect()
         };
-        decoded.iter().rev().find_map(commanded_speed)
+        let speed = decoded.iter().rev().find_map(commanded_speed);
+        if speed.is_some() {
+            self.last = speed;
+        }
+        speed
     }
 }
 
@@ -321,15 +443,33 @@ fn wait_for_motion(
     spin: bool,
     timeout: Duration,
 ) -> anyhow::Result<Option<u64>> {
+    wait_for_motion_that(
+        tap,
+        decoder,
+        |v| (v - speed).abs() < 1e-6,
+        since,
+        spin,
+        timeout,
+    )
+}
+
+/// Drains the tap until a TX motion frame whose commanded speed `accept`s, stamped at or after
+/// `since`, appears; returns its stamp.
+fn wait_for_motion_that(
+    tap: &chassis_client::FrameTap,
+    decoder: &mut MotionDecoder,
+    accept: impl Fn(f64) -> bool,
+    since: u64,
+    spin: bool,
+    timeout: Duration,
+) -> anyhow::Result<Option<u64>> {
     let deadline = since + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
     loop {
         let mut found = None;
         let each = |frame: &BusFrame| {
             if found.is_none()
                 && frame.stamp_ns >= since
-                && decoder
-                    .linear(frame)
-                    .is_some_and(|v| (v - speed).abs() < 1e-6)
+                && decoder.linear(frame).is_some_and(&accept)
             {
                 found = Some(frame.stamp_ns);
             }
@@ -370,6 +510,8 @@ pub struct CommandFigures {
     /// The service's own part: its loop woke for the request (the mux decision's stamp) → the
     /// frame's write returned.
     pub in_service: Latencies,
+    /// Each sample's (request created, frame written) stamps, ns.
+    pub samples: Vec<(u64, u64)>,
     /// Requests that produced no frame within the wait.
     pub missed: u64,
 }
@@ -386,6 +528,16 @@ fn decision_stamp(robot: &mut Robot, index: usize, seq: u64) -> anyhow::Result<O
     Ok(found)
 }
 
+/// Which frame ends a command-path sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reach {
+    /// The frame that commands the requested speed itself ([`BENCH_CONFIG`]: no ramp).
+    Exact,
+    /// The first frame that moves the commanded speed toward the request (the default
+    /// configuration ramps a change over many frames).
+    Toward,
+}
+
 /// Command-path latencies: `count` requests alternating between two speeds, one every
 /// `interval`.
 pub fn command_path(
@@ -396,7 +548,15 @@ pub fn command_path(
     spin: bool,
 ) -> anyhow::Result<CommandFigures> {
     let mut teleop = robot.source("teleop")?;
-    command_path_via(robot, &mut teleop, kind, count, interval, spin)
+    command_path_via(
+        robot,
+        &mut teleop,
+        kind,
+        count,
+        interval,
+        spin,
+        Reach::Exact,
+    )
 }
 
 /// [`command_path`] with requests from `teleop`, a source opened anywhere (through a bridge
@@ -408,6 +568,7 @@ pub fn command_path_via(
     count: u64,
     interval: Duration,
     spin: bool,
+    reach: Reach,
 ) -> anyhow::Result<CommandFigures> {
     let tap = robot.frames(2048)?;
     // A new reader gets the latest decision with the service's next publication (10 Hz).
@@ -419,18 +580,21 @@ pub fn command_path_via(
     let mut decoder = MotionDecoder::new(kind);
     // Exact on every wire: whole mm/s, whole percent of 5 m/s, exact in f32.
     let speeds = [0.25, 0.5];
-    // Warm up: the first motion releases TITAN's brake and waits for command mode.
-    teleop.send(VelocityRequest::twist(0.25, 0.0))?;
-    wait_for_motion(
-        &tap,
-        &mut decoder,
-        0.25,
-        now_ns(),
-        spin,
-        Duration::from_secs(3),
-    )?;
+    // Warm up: the first motion releases TITAN's brake and waits for command mode (and, ramped,
+    // reaches the first speed).
+    let warm_until = now_ns() + 3_000_000_000;
+    let mut ticker = Ticker::new(COMMAND_INTERVAL);
+    while now_ns() < warm_until {
+        teleop.send(VelocityRequest::twist(0.25, 0.0))?;
+        if wait_for_motion(&tap, &mut decoder, 0.25, now_ns(), spin, Duration::ZERO)?.is_some() {
+            break;
+        }
+        ticker.wait();
+    }
+
     let mut latencies = Latencies::new();
     let mut in_service = Latencies::new();
+    let mut samples = Vec::new();
     let mut missed = 0;
     // Between two samples further apart than the source's timeout, the current request is
     // repeated as a controller would: the mux output stays, no frame is sent for it.
@@ -445,26 +609,36 @@ pub fn command_path_via(
                 teleop.send(VelocityRequest::twist(current, 0.0))?;
             }
         }
-        tap.drain(|_| {})?;
+        tap.drain(|f| {
+            decoder.linear(f);
+        })?;
         robot.poll_mux(|_| {})?;
         // The first sample differs from the warm-up's 0.25: every sample is a change.
         let speed = speeds[usize::from(i % 2 == 0)];
         current = speed as f32;
+        let from = decoder.last.unwrap_or(0.25);
+        let accept = move |v: f64| match reach {
+            Reach::Exact => (v - speed).abs() < 1e-6,
+            Reach::Toward => {
+                (v - from).abs() > 1e-9 && (v - from).signum() == (speed - from).signum()
+            }
+        };
         let stamp = now_ns();
         teleop.send(VelocityRequest {
             stamp_ns: stamp,
             ..VelocityRequest::twist(speed as f32, 0.0)
         })?;
-        match wait_for_motion(
+        match wait_for_motion_that(
             &tap,
             &mut decoder,
-            speed,
+            accept,
             stamp,
             spin,
             Duration::from_millis(500),
         )? {
             Some(written) => {
                 latencies.record_between(stamp, written);
+                samples.push((stamp, written));
                 if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
                     in_service.record_between(decided, written);
                 }
@@ -476,34 +650,34 @@ pub fn command_path_via(
     Ok(CommandFigures {
         latencies,
         in_service,
+        samples,
         missed,
     })
 }
 
-/// The part of a sample that changes only with what the chassis reports.
-fn body(s: &ChassisState) -> ChassisState {
-    ChassisState {
-        seq: 0,
-        stamp_ns: 0,
-        group_stamp_ns: [0; chassis_client::GROUP_SLOTS],
-        link: Default::default(),
-        published_ns: 0,
-        ..*s
-    }
-}
-
-/// Records state-path latencies from consecutive samples: only samples whose content changed
-/// (those are published the moment the frame is read; a sample that merely refreshes stamps
-/// carries an older frame's read time).
+/// Records state-path latencies from the samples a reader receives, by the rule every client
+/// of the benchmark applies alike (the Rust rows here, `clients/python/bench.py`,
+/// `clients/ros2/bench.py`): a sample counts when its stamp (the read time of the frame that
+/// made it) is newer than every stamp received before it. A sample the service's tick merely
+/// refreshed carries an older frame's read time and is left out, as is the first one (the
+/// newest sample published before the reader opened). Gaps in `seq` are samples the reader
+/// lost: counted as dropped, never silently.
 #[derive(Debug, Default)]
 pub struct StateRecorder {
-    previous: Option<ChassisState>,
-    /// Record changed samples after a gap in `seq` too (behind a bridge that forwards the
-    /// newest sample of each read of the bus).
+    last_seq: Option<u64>,
+    newest_stamp: Option<u64>,
+    /// Gaps in `seq` are by design (behind a bridge that forwards the newest sample of each
+    /// read of the bus), not samples lost: not counted as dropped.
     pub gaps_allowed: bool,
     pub latencies: Latencies,
     /// The service's own part: the frame read → the sample handed to iceoryx2.
     pub in_service: Latencies,
+    /// Each recorded sample's (frame read, handed to iceoryx2, received) stamps, ns.
+    pub samples: Vec<(u64, u64, u64)>,
+    /// Samples published that this reader never received (gaps in `seq`).
+    pub dropped: u64,
+    /// Samples received whose stamp was not newer (tick refreshes): not recorded.
+    pub refreshes: u64,
 }
 
 impl StateRecorder {
@@ -516,25 +690,37 @@ impl StateRecorder {
     }
 
     pub fn sample(&mut self, state: &ChassisState, received: u64) {
-        if self.previous.is_some_and(|p| p.seq == state.seq) {
+        if let Some(last) = self.last_seq {
+            if state.seq <= last {
+                return;
+            }
+            if !self.gaps_allowed {
+                self.dropped += state.seq - last - 1;
+            }
+        }
+        self.last_seq = Some(state.seq);
+        let Some(newest) = self.newest_stamp else {
+            self.newest_stamp = Some(state.stamp_ns);
+            return;
+        };
+        if state.stamp_ns <= newest {
+            self.refreshes += 1;
             return;
         }
-        let follows = self.previous.is_some_and(|p| state.seq == p.seq + 1);
-        let changed = self
-            .previous
-            .is_none_or(|p| body(&p).as_bytes() != body(state).as_bytes());
-        if (follows || self.gaps_allowed) && changed {
-            self.latencies.record_between(state.stamp_ns, received);
-            self.in_service
-                .record_between(state.stamp_ns, state.published_ns);
-        }
-        self.previous = Some(*state);
+        self.newest_stamp = Some(state.stamp_ns);
+        self.latencies.record_between(state.stamp_ns, received);
+        self.in_service
+            .record_between(state.stamp_ns, state.published_ns);
+        self.samples
+            .push((state.stamp_ns, state.published_ns, received));
     }
 }
 
-/// State-path latencies while the robot drives (so frames keep changing the state).
+/// State-path latencies while the robot drives (so frames keep changing the state), read as a
+/// client that needs every sample reads them: a lossless [`chassis_client::StateStream`].
 pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result<StateRecorder> {
     let mut teleop = robot.source("teleop")?;
+    let stream = robot.state_stream(STATE_BUFFER)?;
     let mut recorder = StateRecorder::default();
     let mut last_request = 0u64;
     let deadline = now_ns() + 120_000_000_000;
@@ -544,9 +730,9 @@ pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result
             last_request = now_ns();
         }
         if spin {
-            robot.poll_states(|s| recorder.sample(s, now_ns()))?;
+            stream.drain(|s| recorder.sample(s, now_ns()))?;
         } else {
-            robot.wait_states(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
+            stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
         }
     }
     teleop.stop()?;
@@ -824,5 +1010,44 @@ mod tests {
                 "{kind}: speeds on the wire {speeds:?}"
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod state_recorder_tests {
+    use super::*;
+
+    fn sample(seq: u64, stamp_ns: u64) -> ChassisState {
+        ChassisState {
+            seq,
+            stamp_ns,
+            published_ns: stamp_ns + 10_000,
+            ..ChassisState::default()
+        }
+    }
+
+    #[test]
+    fn the_state_rule_leaves_out_the_first_sample_and_tick_refreshes_and_counts_gaps() {
+        let mut r = StateRecorder::default();
+        // The sample published before the reader opened: only sets the stamp.
+        r.sample(&sample(10, 1_000_000), 1_500_000);
+        // A new frame: 50 µs.
+        r.sample(&sample(11, 2_000_000), 2_050_000);
+        // The tick's refresh of the same frame's state: left out.
+        r.sample(&sample(12, 2_000_000), 3_000_000);
+        // The same sample twice (a repeat): nothing.
+        r.sample(&sample(12, 2_000_000), 3_000_000);
+        // Two samples lost, then a new frame: 20 µs.
+        r.sample(&sample(15, 4_000_000), 4_020_000);
+        assert_eq!(r.latencies.count(), 2);
+        assert_eq!((r.refreshes, r.dropped), (1, 2));
+        let s = r.latencies.summary();
+        assert!((s.max_us - 50.0).abs() < 0.1, "{s:?}");
+        assert_eq!(r.in_service.count(), 2);
+
+        let mut bridged = StateRecorder::with_gaps();
+        bridged.sample(&sample(1, 1_000), 2_000);
+        bridged.sample(&sample(5, 9_000), 10_000);
+        assert_eq!((bridged.latencies.count(), bridged.dropped), (1, 0));
     }
 }

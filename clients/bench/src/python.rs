@@ -20,6 +20,8 @@ pub struct PythonFigures {
     pub command: Latencies,
     /// Requests whose frame did not appear.
     pub missed: u64,
+    /// State samples the Python reader never received (gaps in `seq`).
+    pub dropped: u64,
 }
 
 /// The repository the benchmark was built from.
@@ -79,13 +81,19 @@ pub fn run(
             out.join("bench.log").display()
         );
     }
-    let missed = std::fs::read_to_string(out.join("command.missed"))
-        .ok()
-        .and_then(|t| t.trim().parse().ok())
-        .unwrap_or(0);
     Ok(PythonFigures {
         state: read_latencies(&out.join("state.ns"))?,
         command: read_latencies(&out.join("command.ns"))?,
-        missed,
+        missed: read_count(&out.join("command.missed"))?,
+        dropped: read_count(&out.join("state.dropped"))?,
     })
+}
+
+/// A count the script wrote, one number in a file.
+pub(crate) fn read_count(file: &Path) -> anyhow::Result<u64> {
+    let text =
+        std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+    text.trim()
+        .parse()
+        .with_context(|| format!("a count in {}", file.display()))
 }

@@ -22,6 +22,13 @@ pub struct Row {
     pub summary: Summary,
     /// Requests that produced no frame within the wait (0 expected).
     pub missed: u64,
+    /// Samples published that the reader never received (gaps in `seq` of a lossless stream;
+    /// 0 expected). Samples out of the histogram's range are `summary.out_of_range`.
+    pub dropped: u64,
+    /// The rows whose hops this row contains, one after the other ([`row_key`] of each): the
+    /// ROS 2 bridge's rows contain a DDS hop and the service's own path. A row whose p50 is
+    /// below the sum of theirs is flagged as one below its baseline is.
+    pub contains: Vec<String>,
     /// A baseline's conditions: how it was paced and what its receiver lived with.
     pub conditions: Option<String>,
     /// The baseline row this path row is compared with (`what, placement` of that row): for a
@@ -31,8 +38,9 @@ pub struct Row {
     /// p50 / baseline p50 and p99 / baseline p99.
     pub ratio_p50: Option<f64>,
     pub ratio_p99: Option<f64>,
-    /// Set when the row's p50 is below its baseline's, the hop the path contains: a path
-    /// cannot be faster than a part of it, so the two were not measured alike.
+    /// Set when the row's p50 is below its baseline's, the hop the path contains, or below the
+    /// sum of the rows it contains: a path cannot be faster than a part of it, so they were not
+    /// measured alike.
     pub inconsistent: Option<String>,
     #[serde(skip)]
     pub latencies: Latencies,
@@ -46,7 +54,26 @@ pub struct Report {
     pub rows: Vec<Row>,
     pub cost: Vec<Cost>,
     pub throughput: Option<Throughput>,
+    /// Where the time of the service paths goes, run by run.
+    pub parts: Vec<Parts>,
     pub notes: Vec<String>,
+    /// The rows the run planned ([`row_key`]s), for the smoke check.
+    #[serde(skip)]
+    pub expected: Vec<String>,
+}
+
+/// One path of one run split at the stamps the code takes: each part's distribution over the
+/// same samples (a sample counts in every part or in none).
+#[derive(Debug, Clone, Serialize)]
+pub struct Parts {
+    /// `command` or `state`.
+    pub path: String,
+    /// The run: robot and bus, loop, placement.
+    pub what: String,
+    pub mode: String,
+    pub placement: String,
+    /// (from → to, its distribution), in the order a sample passes them.
+    pub parts: Vec<(String, Summary)>,
 }
 
 /// Replay of a recorded bus through decode + publish as fast as the service drains it.
@@ -91,43 +118,171 @@ impl Machine {
 /// How a paced baseline is labelled: one ping per command period, the hop after the pause only.
 pub const PACED: &str = "paced";
 
+/// How far below the sum of the p50s of the hops it contains a row's p50 may be before it is
+/// flagged: medians of independent hops add only approximately (on a loaded 2-core machine a
+/// ROS 2 row came 1.5 % and 5.9 % below the sum in two runs; the bias this catches was 19 %).
+pub const SUM_TOLERANCE: f64 = 0.10;
+
+/// Fewest samples whose 99th percentile is shown: below it, the p99 is nearly the maximum.
+pub const MIN_FOR_P99: u64 = 100;
+/// Fewest samples whose 99.9th percentile is shown.
+pub const MIN_FOR_P999: u64 = 1000;
+
+/// A row's name, unique in a run: `path what (loop, placement)`.
+pub fn row_key(path: &str, what: &str, mode: &str, placement: &str) -> String {
+    format!("{path} {what} ({mode}, {placement})")
+}
+
+/// A percentile for a table: `—` when the row has too few samples to tell it from the maximum.
+fn percentile(value: f64, count: u64, fewest: u64) -> String {
+    if count >= fewest {
+        format!("{value:.1}")
+    } else {
+        "—".into()
+    }
+}
+
+impl Row {
+    /// [`row_key`] of this row.
+    pub fn key(&self) -> String {
+        row_key(&self.path, &self.what, &self.mode, &self.placement)
+    }
+
+    /// The row's count with what it lost beside it: `1000`, `998 (+2 dropped, 1 out of range)`.
+    fn count_text(&self) -> String {
+        let mut lost = Vec::new();
+        if self.missed > 0 {
+            lost.push(format!("{} missed", self.missed));
+        }
+        if self.dropped > 0 {
+            lost.push(format!("{} dropped", self.dropped));
+        }
+        if self.summary.out_of_range > 0 {
+            lost.push(format!("{} out of range", self.summary.out_of_range));
+        }
+        if lost.is_empty() {
+            self.summary.count.to_string()
+        } else {
+            format!("{} ({})", self.summary.count, lost.join(", "))
+        }
+    }
+}
+
 impl Report {
-    /// Fills in the ratios of every row that names its baseline, and flags a row whose p50 is
-    /// below its baseline's; a named baseline that is missing is a note.
+    /// Fills in the ratios of every row that names its baseline (the p99 ratio only where both
+    /// have [`MIN_FOR_P99`] samples), and flags a row whose p50 is below its baseline's or below
+    /// the sum of the rows it contains; a named baseline or contained row that is missing, and
+    /// two rows of the same name, are notes.
     pub fn compute_ratios(&mut self) {
-        let baselines: Vec<(String, f64, f64)> = self
+        let mut seen = std::collections::BTreeMap::<String, usize>::new();
+        for r in &self.rows {
+            *seen.entry(r.key()).or_default() += 1;
+        }
+        for (key, n) in seen.into_iter().filter(|(_, n)| *n > 1) {
+            self.notes
+                .push(format!("two rows are named '{key}' ({n} of them)"));
+        }
+        let baselines: Vec<(String, Summary)> = self
             .rows
             .iter()
             .filter(|r| r.path == "baseline")
-            .map(|r| {
-                (
-                    format!("{}, {}", r.what, r.placement),
-                    r.summary.p50_us,
-                    r.summary.p99_us,
-                )
-            })
+            .map(|r| (format!("{}, {}", r.what, r.placement), r.summary))
             .collect();
+        let all: Vec<(String, Summary)> = self.rows.iter().map(|r| (r.key(), r.summary)).collect();
         for row in self.rows.iter_mut().filter(|r| r.path != "baseline") {
-            let Some(name) = row.baseline.clone() else {
-                continue;
-            };
-            let Some((_, p50, p99)) = baselines.iter().find(|(n, _, _)| *n == name) else {
-                self.notes.push(format!(
-                    "{} {} ({}, {}): its baseline '{name}' was not measured",
-                    row.path, row.what, row.mode, row.placement
-                ));
-                continue;
-            };
-            row.ratio_p50 = (*p50 > 0.0).then(|| row.summary.p50_us / p50);
-            row.ratio_p99 = (*p99 > 0.0).then(|| row.summary.p99_us / p99);
-            if row.summary.count > 0 && row.summary.p50_us < *p50 {
-                row.inconsistent = Some(format!(
-                    "p50 {:.1} µs is below the p50 {p50:.1} µs of the hop it contains ({name}): \
-                     the path and its baseline were not measured under the same conditions",
-                    row.summary.p50_us
-                ));
+            let mut flags = Vec::new();
+            if let Some(name) = row.baseline.clone() {
+                let found: Vec<&Summary> = baselines
+                    .iter()
+                    .filter(|(n, _)| *n == name)
+                    .map(|(_, s)| s)
+                    .collect();
+                match found[..] {
+                    [] => self.notes.push(format!(
+                        "{}: its baseline '{name}' was not measured",
+                        row.key()
+                    )),
+                    [base] => {
+                        row.ratio_p50 =
+                            (base.p50_us > 0.0).then(|| row.summary.p50_us / base.p50_us);
+                        row.ratio_p99 = (base.p99_us > 0.0
+                            && base.count >= MIN_FOR_P99
+                            && row.summary.count >= MIN_FOR_P99)
+                            .then(|| row.summary.p99_us / base.p99_us);
+                        if row.summary.count > 0 && row.summary.p50_us < base.p50_us {
+                            flags.push(format!(
+                                "p50 {:.1} µs is below the p50 {:.1} µs of the hop it contains \
+                                 ({name}): the path and its baseline were not measured under the \
+                                 same conditions",
+                                row.summary.p50_us, base.p50_us
+                            ));
+                        }
+                    }
+                    _ => self.notes.push(format!(
+                        "{}: more than one baseline is named '{name}'",
+                        row.key()
+                    )),
+                }
+            }
+            if !row.contains.is_empty() {
+                let parts: Vec<Option<&Summary>> = row
+                    .contains
+                    .iter()
+                    .map(|k| all.iter().find(|(n, _)| n == k).map(|(_, s)| s))
+                    .collect();
+                if parts.iter().all(|p| p.is_some_and(|s| s.count > 0)) {
+                    let sum: f64 = parts.iter().flatten().map(|s| s.p50_us).sum();
+                    if row.summary.count > 0 && row.summary.p50_us < sum * (1.0 - SUM_TOLERANCE) {
+                        flags.push(format!(
+                            "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
+                             p50s of the hops it contains ({}): they were not measured under the \
+                             same conditions",
+                            row.summary.p50_us,
+                            SUM_TOLERANCE * 100.0,
+                            row.contains.join(" + ")
+                        ));
+                    }
+                } else {
+                    self.notes.push(format!(
+                        "{}: a row it contains was not measured ({})",
+                        row.key(),
+                        row.contains.join(", ")
+                    ));
+                }
+            }
+            row.inconsistent = (!flags.is_empty()).then(|| flags.join("; "));
+        }
+    }
+
+    /// What makes a run fail its smoke check (`--smoke`): each of `expected` ([`row_key`]s)
+    /// missing or without a sample, any row flagged inconsistent, any baseline or contained row
+    /// not measured, two rows of one name. Never a target: the figures of a loaded machine are
+    /// what they are.
+    pub fn smoke_failures(&self, expected: &[String]) -> Vec<String> {
+        let mut failures = Vec::new();
+        for key in expected {
+            match self.rows.iter().find(|r| r.key() == *key) {
+                None => failures.push(format!("missing row: {key}")),
+                Some(r) if r.summary.count == 0 => failures.push(format!("no sample: {key}")),
+                Some(_) => {}
             }
         }
+        for r in self.rows.iter().filter(|r| r.inconsistent.is_some()) {
+            failures.push(format!(
+                "flagged row: {}: {}",
+                r.key(),
+                r.inconsistent.as_deref().unwrap_or_default()
+            ));
+        }
+        for note in &self.notes {
+            if note.contains("was not measured")
+                || note.starts_with("two rows")
+                || note.contains("more than one baseline")
+            {
+                failures.push(note.clone());
+            }
+        }
+        failures
     }
 
     /// The table.
@@ -160,27 +315,22 @@ impl Report {
             let s = &r.summary;
             let ratio = match (r.ratio_p50, r.ratio_p99, &r.baseline) {
                 (Some(x), Some(y), Some(b)) => format!("{x:.2}, {y:.2} ({b})"),
+                (Some(x), None, Some(b)) => format!("{x:.2}, — ({b})"),
                 _ => String::new(),
             };
-            let missed = if r.missed > 0 {
-                format!(" [{} missed]", r.missed)
-            } else {
-                String::new()
-            };
             out.push_str(&format!(
-                "{:<11} {:<60} {:<7} {:<10} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1}  {}{}\n",
+                "{:<11} {:<60} {:<7} {:<10} {:>7} {:>9.1} {:>9.1} {:>9} {:>9} {:>9.1}  {}\n",
                 r.path,
                 r.what,
                 r.mode,
                 r.placement,
-                s.count,
+                r.count_text(),
                 s.p50_us,
                 s.p90_us,
-                s.p99_us,
-                s.p999_us,
+                percentile(s.p99_us, s.count, MIN_FOR_P99),
+                percentile(s.p999_us, s.count, MIN_FOR_P999),
                 s.max_us,
                 ratio,
-                missed
             ));
         }
         let baselines: Vec<&Row> = self
@@ -208,6 +358,30 @@ impl Report {
                 r.placement,
                 r.inconsistent.as_deref().unwrap_or_default()
             ));
+        }
+        if !self.parts.is_empty() {
+            out.push_str("\nwhere each microsecond goes (p50 / p99 µs, same samples):\n");
+            for p in &self.parts {
+                let parts: Vec<String> = p
+                    .parts
+                    .iter()
+                    .map(|(part, s)| {
+                        format!(
+                            "{part} {:.1} / {}",
+                            s.p50_us,
+                            percentile(s.p99_us, s.count, MIN_FOR_P99)
+                        )
+                    })
+                    .collect();
+                out.push_str(&format!(
+                    "  {} {} ({}, {}): {}\n",
+                    p.path,
+                    p.what,
+                    p.mode,
+                    p.placement,
+                    parts.join("; ")
+                ));
+            }
         }
         if !self.cost.is_empty() {
             out.push_str("\nservice cost under a fully loaded bus (simulated chassis flooding):\n");
@@ -376,9 +550,13 @@ impl Report {
         }
     }
 
-    /// A ratio target over the rows of `path` in `mode`: every row's p99 ratio at most `bound`.
+    /// A ratio target over the rows of `path` in `mode`: every row's p99 ratio at most `bound`
+    /// (the default-configuration row measures something else: the first frame of a ramp).
     fn ratio_target(&self, path: &str, mode: &str, bound: f64, what: String) -> Target {
-        let rows: Vec<&Row> = self.rows_of(path, mode).collect();
+        let rows: Vec<&Row> = self
+            .rows_of(path, mode)
+            .filter(|r| r.what != crate::DEFAULT_CONFIG_ROW)
+            .collect();
         let measured: Vec<String> = rows
             .iter()
             .map(|r| match r.ratio_p99 {
@@ -484,6 +662,18 @@ impl Report {
             p.steal_text(),
             p.command
         ));
+        out.push_str(&format!(
+            "## chassisd's configuration in these runs\n\n\
+             The latency runs start chassisd with this file (`--config`), not with its defaults: \
+             no minimum spacing between command frames (default 2 ms), no idle brake, no \
+             acceleration smoothing (by default the mux ramps a change), so that a command's \
+             frame carries the requested speed itself:\n\n```toml\n{}```\n\n\
+             The row *command {}* is measured beside them with chassisd's default configuration: \
+             the TITAN on the simulated bus, event loop, cross CPU; one of its samples ends at \
+             the first motion frame that moves the commanded speed toward the request.\n\n",
+            crate::paths::BENCH_CONFIG,
+            crate::DEFAULT_CONFIG_ROW
+        ));
         out.push_str("## The table\n\n");
         out.push_str(
             "| path | what | loop | placement | count | p50 µs | p90 µs | p99 µs | p99.9 µs | max \
@@ -494,6 +684,7 @@ impl Report {
             let s = &r.summary;
             let ratio = match (r.ratio_p50, r.ratio_p99) {
                 (Some(x), Some(y)) => format!("{x:.2}, {y:.2}"),
+                (Some(x), None) => format!("{x:.2}, —"),
                 _ => String::new(),
             };
             let flag = if r.inconsistent.is_some() {
@@ -501,23 +692,18 @@ impl Report {
             } else {
                 ""
             };
-            let missed = if r.missed > 0 {
-                format!(" ({} missed)", r.missed)
-            } else {
-                String::new()
-            };
             out.push_str(&format!(
-                "| {} | {} | {} | {} | {}{missed} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | \
-                 {ratio}{flag} | {} |\n",
+                "| {} | {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {:.1} | {ratio}{flag} | {} \
+                 |\n",
                 r.path,
                 r.what,
                 r.mode,
                 r.placement,
-                s.count,
+                r.count_text(),
                 s.p50_us,
                 s.p90_us,
-                s.p99_us,
-                s.p999_us,
+                percentile(s.p99_us, s.count, MIN_FOR_P99),
+                percentile(s.p999_us, s.count, MIN_FOR_P999),
                 s.max_us,
                 r.baseline.as_deref().unwrap_or("")
             ));
@@ -565,6 +751,8 @@ impl Report {
             out.push_str(&format!("| {} | {} | {met} |\n", t.what, t.measured));
         }
         out.push('\n');
+
+        out.push_str(&self.parts_markdown());
 
         out.push_str("## Cost under a full bus, throughput, memory\n\n");
         for c in &self.cost {
@@ -626,11 +814,30 @@ impl Report {
              baseline is the back-to-back (warm) ping-pong of the same waiting and placement. \
              The cold paced and back-to-back baselines are context rows.\n\
              * **Inconsistent**: a path cannot be faster than a hop it contains; a row whose \
-             p50 is below its baseline's is flagged, not explained.\n\n",
+             p50 is below its baseline's, or more than {} % below the sum of the p50s of the \
+             rows it contains (a ROS 2 row contains a raw DDS hop and the service's own path; \
+             medians add only approximately), is flagged, not explained.\n\
+             * **What a client reads.** Every state row reads a lossless stream, as a client \
+             that needs every sample does (`Robot::state_stream`, `StateStream` in Python), and \
+             applies one rule in Rust, Python and the ROS 2 script alike: a sample counts when \
+             its stamp (the read time of the frame that made it) is newer than every stamp \
+             received before it; a sample the service's tick merely refreshed carries an older \
+             read time and is left out, and so is the first (published before the reader \
+             opened). Gaps in `seq` are samples the reader lost: the count column shows them as \
+             *dropped*, beside requests *missed* and samples *out of range* of the histogram.\n\
+             * **Same samples.** A matched baseline has as many samples as the row it divides: \
+             the last ones of a run long enough for both the command row's pings and the state \
+             row's feed hops; a preemption row's warm baseline runs as many hops, loaded as the \
+             service was. The raw DDS hops are warmed up (200 pings not counted) and count as \
+             many hops as the ROS 2 row each divides. A p99 is shown from {} samples on, a \
+             p99.9 from {} (below, it would be the maximum).\n\n",
             size_of::<chassis_client::ChassisState>(),
             HYBRID_SPIN.as_micros(),
             COMMAND_INTERVAL.as_millis(),
-            XBOT_COMMAND_INTERVAL.as_millis()
+            XBOT_COMMAND_INTERVAL.as_millis(),
+            SUM_TOLERANCE * 100.0,
+            MIN_FOR_P99,
+            MIN_FOR_P999
         ));
         out.push_str(
             "## Micro-benchmarks (criterion)\n\n```sh\n\
@@ -640,5 +847,215 @@ impl Report {
              Criterion prints its medians; they are not part of this run.\n",
         );
         out
+    }
+}
+
+impl Report {
+    /// The section *Where each microsecond goes*: each part's p50 and p99 over the same
+    /// samples, and the part's share of the sum of the p50s.
+    fn parts_markdown(&self) -> String {
+        let mut out = String::from(
+            "## Where each microsecond goes\n\n\
+             Each command and state row of the table split at the stamps the code takes, over \
+             the same samples (the count column: the samples whose pass took every stamp; a \
+             frame that was not its pass's first write, a state sample handed outside a traced \
+             pass, are left out). The client stamps the \
+             request it creates and the sample it receives; chassisd, run with \
+             `CHASSIS_PASS_TRACE=FILE` (the bench sets it), keeps the stamps it takes inside each \
+             pass and writes them as it stops: the loop woke (the mux decision's `stamp_ns`), \
+             the read of the sources that took the request returned, the pass's first write to \
+             the bus began and returned (the frame tap's TX stamp); the frame read \
+             (`ChassisState::stamp_ns`), the sample handed to iceoryx2 (`published_ns`), the \
+             state readers' notification at the end of its pass returned. Reproduce: the command \
+             at the top of this document; `--skip fanout,cost,throughput,zenoh` keeps the \
+             paths and their baselines.\n\n\
+             | path | run | loop | placement | part | samples | p50 µs | p99 µs | share of the \
+             p50s |\n| --- | --- | --- | --- | --- | ---: | ---: | ---: | ---: |\n",
+        );
+        for p in &self.parts {
+            let total: f64 = p.parts.iter().map(|(_, s)| s.p50_us).sum();
+            for (part, s) in &p.parts {
+                let share = if total > 0.0 {
+                    format!("{:.0} %", 100.0 * s.p50_us / total)
+                } else {
+                    String::new()
+                };
+                out.push_str(&format!(
+                    "| {} | {} | {} | {} | {part} | {} | {:.1} | {} | {share} |\n",
+                    p.path,
+                    p.what,
+                    p.mode,
+                    p.placement,
+                    s.count,
+                    s.p50_us,
+                    percentile(s.p99_us, s.count, MIN_FOR_P99)
+                ));
+            }
+        }
+        out.push('\n');
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A row of `path` with `n` samples of `us` µs each.
+    fn measured(path: &str, what: &str, mode: &str, us: u64, n: u64) -> Row {
+        let mut latencies = Latencies::new();
+        for _ in 0..n {
+            latencies.record(us * 1000);
+        }
+        Row {
+            path: path.into(),
+            what: what.into(),
+            mode: mode.into(),
+            placement: "cross CPU".into(),
+            summary: latencies.summary(),
+            missed: 0,
+            dropped: 0,
+            contains: Vec::new(),
+            conditions: None,
+            baseline: None,
+            ratio_p50: None,
+            ratio_p99: None,
+            inconsistent: None,
+            latencies,
+        }
+    }
+
+    /// A ROS 2 row containing a DDS hop and the service's command path, and what the smoke
+    /// check expects of the run.
+    fn run_with_ros2_row(ros2_us: u64) -> (Report, Vec<String>) {
+        let mut ros2 = measured("ros2", "cmd_vel → frame", "event", ros2_us, 200);
+        ros2.baseline = Some("dds, cross CPU".into());
+        ros2.contains = vec![
+            row_key("baseline", "dds", "-", "cross CPU"),
+            row_key("command", "titan sim", "event", "cross CPU"),
+        ];
+        let rows = vec![
+            measured("baseline", "dds", "-", 300, 200),
+            measured("command", "titan sim", "event", 200, 200),
+            ros2,
+        ];
+        let expected = rows.iter().map(Row::key).collect();
+        let mut report = Report {
+            rows,
+            ..Report::default()
+        };
+        report.compute_ratios();
+        (report, expected)
+    }
+
+    #[test]
+    fn a_run_with_every_planned_row_and_none_flagged_passes_the_smoke_check() {
+        let (report, expected) = run_with_ros2_row(600);
+        assert_eq!(report.smoke_failures(&expected), Vec::<String>::new());
+        let ros2 = &report.rows[2];
+        assert!(
+            ros2.ratio_p50.is_some_and(|r| (r - 2.0).abs() < 0.01),
+            "{ros2:?}"
+        );
+    }
+
+    #[test]
+    fn a_row_cheaper_than_the_hops_it_contains_is_flagged_and_fails_the_smoke_check() {
+        // Above its DDS hop (300 µs), more than 10 % below the hop plus the command path
+        // (500 µs).
+        let (report, expected) = run_with_ros2_row(440);
+        let ros2 = &report.rows[2];
+        assert!(
+            ros2.inconsistent
+                .as_deref()
+                .is_some_and(|f| f.contains("sum")),
+            "{ros2:?}"
+        );
+        let failures = report.smoke_failures(&expected);
+        assert!(
+            failures.iter().any(|f| f.starts_with("flagged row: ros2")),
+            "{failures:?}"
+        );
+    }
+
+    #[test]
+    fn a_row_within_the_tolerance_of_the_sum_of_its_hops_is_not_flagged() {
+        let (report, _) = run_with_ros2_row(460);
+        assert_eq!(report.rows[2].inconsistent, None);
+    }
+
+    #[test]
+    fn the_microseconds_table_gives_each_part_and_its_share_of_the_p50s() {
+        let part = |us| measured("command", "x", "event", us, 200).summary;
+        let report = Report {
+            parts: vec![Parts {
+                path: "command".into(),
+                what: "titan sim".into(),
+                mode: "event".into(),
+                placement: "cross CPU".into(),
+                parts: vec![("woke".into(), part(30)), ("written".into(), part(10))],
+            }],
+            ..Report::default()
+        };
+        let md = report.parts_markdown();
+        assert!(md.contains("| woke | 200 | 30.0 | 30.0 | 75 % |"), "{md}");
+        assert!(
+            md.contains("| written | 200 | 10.0 | 10.0 | 25 % |"),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn a_missing_row_fails_the_smoke_check() {
+        let (mut report, expected) = run_with_ros2_row(600);
+        report.rows.remove(1);
+        let failures = report.smoke_failures(&expected);
+        assert!(
+            failures.contains(&format!("missing row: {}", expected[1])),
+            "{failures:?}"
+        );
+    }
+
+    #[test]
+    fn two_rows_of_one_name_and_a_baseline_never_measured_fail_the_smoke_check() {
+        let (mut report, expected) = run_with_ros2_row(600);
+        report
+            .rows
+            .push(measured("command", "titan sim", "event", 200, 200));
+        let mut orphan = measured("state", "titan sim", "event", 200, 200);
+        orphan.baseline = Some("feed, cross CPU".into());
+        report.rows.push(orphan);
+        report.notes.clear();
+        report.compute_ratios();
+        let failures = report.smoke_failures(&expected);
+        assert!(
+            failures.iter().any(|f| f.starts_with("two rows")),
+            "{failures:?}"
+        );
+        assert!(
+            failures.iter().any(|f| f.contains("was not measured")),
+            "{failures:?}"
+        );
+    }
+
+    #[test]
+    fn a_p99_of_fewer_than_100_samples_is_not_shown_nor_divided() {
+        let mut few = measured("preemption", "titan sim", "event", 50, 40);
+        few.baseline = Some("warm, cross CPU".into());
+        let mut report = Report {
+            rows: vec![measured("baseline", "warm", "-", 20, 200), few],
+            ..Report::default()
+        };
+        report.compute_ratios();
+        assert!(report.rows[1].ratio_p50.is_some() && report.rows[1].ratio_p99.is_none());
+        assert_eq!(
+            percentile(report.rows[1].summary.p99_us, 40, MIN_FOR_P99),
+            "—"
+        );
+        assert!(
+            report.table().contains("2.50, — (warm, cross CPU)"),
+            "{}",
+            report.table()
+        );
     }
 }

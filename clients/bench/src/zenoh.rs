@@ -33,7 +33,8 @@ pub struct ZenohFigures {
     /// chassisd published the sample → the operator's iceoryx2 subscriber has it: the bridge's
     /// own part of the state path.
     pub bridge: Latencies,
-    pub raw: Latencies,
+    /// The bare hops after the warm-up, ns, in order.
+    pub raw: Vec<u64>,
 }
 
 /// Two namespaces joined by a veth pair, removed on drop.
@@ -133,6 +134,17 @@ fn zenoh_in(ns: &str, prefix: &str, args: &[&str], log: &Path) -> anyhow::Result
     Ok(cmd)
 }
 
+/// Bare Zenoh samples received before the counted ones (sessions, routes, allocations warm).
+const RAW_WARMUP: u64 = 200;
+
+/// The rows' names: the bare Zenoh hop (one row as many samples as the command row, one as the
+/// state rows) and the bridge's three paths.
+pub const RAW_COMMAND: &str = "Zenoh put → subscriber, 840 B, as many as the command row";
+pub const RAW_STATE: &str = "Zenoh put → subscriber, 840 B, as many as the state rows";
+pub const COMMAND: &str = "operator's remote source → robot's frame written (titan sim)";
+pub const STATE: &str = "robot's frame read → state in the operator's iceoryx2 (titan sim)";
+pub const BRIDGE: &str = "robot's state published → in the operator's iceoryx2 (the bridge's part)";
+
 /// True when this process may make network namespaces.
 pub fn possible() -> bool {
     use std::os::unix::fs::MetadataExt as _;
@@ -184,7 +196,13 @@ pub fn run(
 
     // The bare Zenoh hop first, alone on the link: robot side publishes, operator subscribes.
     let raw_file = dir.join("zenoh-raw.ns");
-    let count = commands.max(200).to_string();
+    // A warm-up first (not counted), then as many as the longer of the bridge's paths.
+    let wanted = RAW_WARMUP + commands.max(states);
+    let count = wanted.to_string();
+    // Twice the time the samples take at their pace, and discovery.
+    let timeout = (2.0 * wanted as f64 * interval.as_secs_f64() + 30.0)
+        .ceil()
+        .to_string();
     let mut sub = zenoh_in(
         &netns.operator,
         &operator_prefix,
@@ -195,6 +213,8 @@ pub fn run(
             "--insecure",
             "--count",
             &count,
+            "--timeout",
+            &timeout,
         ],
         &dir.join("zenoh-raw-sub.log"),
     )?;
@@ -214,6 +234,8 @@ pub fn run(
             "--insecure",
             "--interval-ms",
             &interval_ms,
+            "--timeout",
+            &timeout,
         ],
         &dir.join("zenoh-raw-pub.log"),
     )?
@@ -227,10 +249,11 @@ pub fn run(
             dir.join("zenoh-raw-sub.log").display()
         );
     }
-    let mut raw_latencies = Latencies::new();
-    for line in std::fs::read_to_string(&raw_file)?.lines() {
-        raw_latencies.record(line.trim().parse().context("a latency in ns")?);
-    }
+    let raw_latencies = std::fs::read_to_string(&raw_file)?
+        .lines()
+        .map(|line| line.trim().parse::<u64>().context("a latency in ns"))
+        .skip(usize::try_from(RAW_WARMUP).unwrap_or(usize::MAX))
+        .collect::<anyhow::Result<Vec<u64>>>()?;
 
     children.0.push(
         zenoh_in(
@@ -281,6 +304,7 @@ pub fn run(
         commands,
         interval,
         false,
+        paths::Reach::Exact,
     )?;
 
     // Robot state → the operator's iceoryx2 subscriber, while the robot drives (so frames keep

@@ -16,7 +16,8 @@ use std::time::Duration;
 
 use anyhow::Context;
 use chassis_client::{
-    ChassisState, ControlMode, ControllerState, FaultFlags, LinkFlags, Robot, WireProtocol, now_ns,
+    ChassisState, ControlMode, ControllerState, FaultFlags, LinkFlags, LockStatus, MuxStatus,
+    Robot, SourceFlags, WireProtocol, now_ns,
 };
 use chassis_protocols::agilex_v2::detect::{Detection, Detector};
 use chassis_protocols::registry::Bus as RobotBus;
@@ -244,7 +245,10 @@ pub fn diagnose(target: &Target, emit: &mut dyn FnMut(Check)) {
         )),
     }
     match (&serving, heard) {
-        (Some(state), _) => from_service(target, state, emit),
+        (Some((state, mux)), _) => {
+            from_service(target, state, emit);
+            mux_check(target, mux.as_ref(), emit);
+        }
         (None, Some(Some(state))) => robot_mode(&state, emit),
         _ => {}
     }
@@ -506,13 +510,20 @@ fn listen_can(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> Opti
     };
     let mut frames = Vec::new();
     let mut errors = 0u32;
+    let mut overflows = 0u32;
     let mut bus_off = false;
     let end = deadline(target.listen);
     while now_ns() < end {
         match bus.recv_event() {
             Ok(Some(CanEvent::Frame(frame))) => frames.push(frame),
             Ok(Some(CanEvent::Controller(report))) => {
-                if report.from_frame {
+                if report.overflow {
+                    overflows += 1;
+                }
+                if report.bus_error
+                    || report.no_ack
+                    || report.state >= ControllerState::ERROR_WARNING
+                {
                     errors += 1;
                 }
                 bus_off |= report.state == ControllerState::BUS_OFF;
@@ -539,12 +550,29 @@ fn listen_can(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> Opti
                     Verdict::Warn
                 },
                 format!(
-                    "{errors} error report(s) from the controller in {:.1} s{}",
+                    "{errors} report(s) of errors on the bus from the controller in {:.1} s{}",
                     target.listen.as_secs_f64(),
                     if bus_off { ", bus-off among them" } else { "" }
                 ),
             )
             .fix(chassisd::controller::BUS_TROUBLE),
+        );
+    }
+    if overflows > 0 {
+        emit(
+            check(
+                "overflow",
+                Verdict::Warn,
+                format!(
+                    "the controller's buffer overflowed {overflows} time(s) in {:.1} s: frames \
+                     were lost before this computer read them",
+                    target.listen.as_secs_f64()
+                ),
+            )
+            .fix(
+                "a busy or slow computer, or a USB adapter behind a shared hub: give the \
+                 adapter its own port, or chassisd a CPU (`--cpu N --realtime 80`)",
+            ),
         );
     }
     can_frames(target, &frames, emit)
@@ -1003,7 +1031,7 @@ fn robot_mode(state: &ChassisState, emit: &mut dyn FnMut(Check)) {
 }
 
 /// Whether a chassisd serves `target.name`, and a fresh state sample when it does.
-fn chassisd_serving(target: &Target) -> (Option<ChassisState>, Check) {
+fn chassisd_serving(target: &Target) -> (Option<(ChassisState, Option<MuxStatus>)>, Check) {
     let name = &target.name;
     let mut robot = match Robot::connect(name) {
         Ok(robot) => robot,
@@ -1034,6 +1062,10 @@ fn chassisd_serving(target: &Target) -> (Option<ChassisState>, Check) {
         }
     };
     let state = robot.wait_state(Duration::from_millis(1500)).ok().flatten();
+    let mux = match robot.latest_mux() {
+        Ok(Some(m)) => Some(m),
+        _ => robot.wait_mux(Duration::from_millis(500)).ok().flatten(),
+    };
     match state {
         Some(s) if s.robot != target.robot.id() => (
             None,
@@ -1051,7 +1083,7 @@ fn chassisd_serving(target: &Target) -> (Option<ChassisState>, Check) {
             .fix("give this robot another --name, or stop that chassisd"),
         ),
         Some(s) => (
-            Some(s),
+            Some((s, mux)),
             check(
                 "chassisd",
                 Verdict::Ok,
@@ -1156,6 +1188,77 @@ fn from_service(target: &Target, s: &ChassisState, emit: &mut dyn FnMut(Check)) 
         ));
     }
     robot_mode(s, emit);
+}
+
+/// What chassisd's mux lets through: a required source that is silent (the safety monitor not
+/// running) or a held lock (an e-stop) stops every source below it.
+fn mux_check(target: &Target, mux: Option<&MuxStatus>, emit: &mut dyn FnMut(Check)) {
+    let name = &target.name;
+    let Some(m) = mux else {
+        emit(check(
+            "mux",
+            Verdict::Warn,
+            "chassisd published no mux decision",
+        ));
+        return;
+    };
+    let mut blocked = false;
+    let sources = &m.sources[..usize::from(m.source_count).min(m.sources.len())];
+    for s in sources {
+        if s.flags & SourceFlags::REQUIRED != 0 && s.flags & SourceFlags::FRESH == 0 {
+            blocked = true;
+            emit(
+                check(
+                    "mux",
+                    Verdict::Fail,
+                    format!(
+                        "the required source {} is silent: nothing moves without it",
+                        s.name()
+                    ),
+                )
+                .fix(format!(
+                    "start the safety monitor: `sudo systemctl start chassis-safety@{name}` or \
+                     `chassis-safety --name {name}` (chassisd --no-safety-monitor lifts the rule)"
+                )),
+            );
+        }
+    }
+    let locks = &m.locks[..usize::from(m.lock_count).min(m.locks.len())];
+    for l in locks.iter().filter(|l| l.held != 0) {
+        blocked = true;
+        let release = if l.name() == "estop" {
+            format!("chassis control --name {name} estop-release")
+        } else {
+            format!("chassis control --name {name} lock-release {}", l.name())
+        };
+        let holder = match l.holder {
+            LockStatus::HOLDER_OPERATOR => "an operator".to_string(),
+            h => sources.get(usize::from(h)).map_or_else(
+                || "a source".to_string(),
+                |s| format!("the source {}", s.name()),
+            ),
+        };
+        emit(
+            check(
+                "mux",
+                Verdict::Fail,
+                format!(
+                    "the lock {} (priority {}) is held by {holder}: sources below it do not move \
+                     the robot",
+                    l.name(),
+                    l.priority
+                ),
+            )
+            .fix(format!("when it is safe: `{release}`")),
+        );
+    }
+    if !blocked {
+        emit(check(
+            "mux",
+            Verdict::Ok,
+            "no lock held, every required source alive",
+        ));
+    }
 }
 
 // ------------------------------------------------------------------------- the computer

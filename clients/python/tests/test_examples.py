@@ -135,4 +135,6 @@ def test_bench_prints_a_json_row_per_path(world: World) -> None:
     rows = [json.loads(line) for line in done.stdout.splitlines()]
     assert [r["path"] for r in rows] == ["state", "command"], rows
     assert rows[0]["samples"] >= 50 and rows[1]["samples"] + rows[1]["missed"] == 5, rows
+    # The state path reads a lossless stream and says what it lost.
+    assert rows[0]["dropped"] == 0, rows
     assert all(0 < r["p50_us"] <= r["p99_us"] <= r["max_us"] for r in rows), rows

@@ -35,6 +35,7 @@ use ros2_client::{
 };
 
 use crate::convert::{self, Frames, RangeSensor, RosClock};
+use crate::discovery::Reach;
 use crate::msg::{
     BatteryState, Bool, DiagnosticArray, Imu, JointState, NavSatFix, Odometry, Range, TfMessage,
     TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed, trigger_type,
@@ -66,6 +67,8 @@ pub struct Options {
     pub service_mapping: ServiceMapping,
     /// Stamps are `CLOCK_MONOTONIC` itself, not ROS time.
     pub monotonic_stamps: bool,
+    /// How far the participant reaches (ROS 2's discovery switches).
+    pub reach: Reach,
 }
 
 /// The service mapping ROS 2's RMW layer uses: rmw_cyclonedds_cpp has its own; rmw_fastrtps and
@@ -86,13 +89,25 @@ pub fn sensor_qos() -> QosProfile {
         .history(History::KeepLast { depth: 5 })
 }
 
-/// QoS of `odom`, `joint_states`, `diagnostics`, `cmd_vel`, `e_stop`: reliable, volatile, the
-/// last 10 (rclcpp's default).
+/// QoS of `odom`, `joint_states`, `diagnostics`, `e_stop`: reliable, volatile, the last 10
+/// (rclcpp's default).
 pub fn reliable_qos() -> QosProfile {
     QosProfile::publisher_default()
         .reliability_reliable(WhenFull::Wait(Duration::from_millis(10)))
         .durability(Durability::Volatile)
         .history(History::KeepLast { depth: 10 })
+}
+
+/// QoS of the bridge's `cmd_vel` reader: best effort, volatile, the last 1. A best-effort
+/// reader is never sent a retransmission, so a reliable writer (Nav2's, `ros2 topic pub`'s —
+/// reliable offers match a best-effort request) cannot replay twists it buffered through an
+/// outage when the link comes back: what arrives was sent just now. A lost twist is replaced by
+/// the next one (a controller publishes at 10-50 Hz); the mux's timeout covers a silence.
+pub fn cmd_vel_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_best_effort()
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: 1 })
 }
 
 /// What the bridge's reliable writers keep for a slow reader: the last 100 (a subscriber asks
@@ -168,8 +183,13 @@ impl Entities {
     /// Joins DDS domain `options.domain_id` and creates the node, its topics and services, a
     /// `range/<name>` topic for each range sensor `description` lists.
     pub fn create(options: &Options, description: &RobotDescription) -> anyhow::Result<Self> {
-        let context = Context::with_options(ContextOptions::new().domain_id(options.domain_id))
-            .context("joining the DDS domain")?;
+        let mut participant = rustdds::DomainParticipantBuilder::new(options.domain_id);
+        if let Some(addresses) = options.reach.only_networks() {
+            participant = participant.with_only_networks(addresses);
+        }
+        let participant = participant.build().context("joining the DDS domain")?;
+        let context =
+            Context::from_domain_participant(participant).context("joining the DDS domain")?;
         let node_name = NodeName::new(&options.namespace, NODE_NAME)
             .map_err(|e| anyhow::anyhow!("bad namespace {}: {e:?}", options.namespace))?;
         let mut node = context
@@ -213,9 +233,9 @@ impl Entities {
             .collect::<anyhow::Result<Vec<_>>>()?;
 
         let cmd_vel = if options.stamped {
-            CmdVel::Stamped(node.create_subscription(&cmd_vel_topic, None)?)
+            CmdVel::Stamped(node.create_subscription(&cmd_vel_topic, Some(cmd_vel_qos()))?)
         } else {
-            CmdVel::Plain(node.create_subscription(&cmd_vel_topic, None)?)
+            CmdVel::Plain(node.create_subscription(&cmd_vel_topic, Some(cmd_vel_qos()))?)
         };
         let e_stop = node.create_subscription(&e_stop_topic, None)?;
         let mut server = |base: &str| {
@@ -310,6 +330,39 @@ pub struct Drops {
     pub unsent: u64,
     /// Messages DDS could not deserialize.
     pub undecodable: u64,
+    /// `TwistStamped`s older than the bound when they arrived (or unstamped).
+    pub stale: u64,
+}
+
+/// The `CLOCK_MONOTONIC` instant a `TwistStamped` stamped `stamp` (ROS time, the sender's
+/// system clock, as NTP keeps ROS computers) was made, if it arrived at `now_ns` at most
+/// `max_age_ns` after that and not more than that before (a clock that far ahead is not
+/// trusted either); never later than `now_ns`. An unstamped one (0) is refused.
+pub fn stamp_age_check(
+    stamp: crate::msg::Time,
+    clock: RosClock,
+    now_ns: u64,
+    max_age_ns: u64,
+) -> Result<u64, String> {
+    if stamp.nanos() <= 0 {
+        return Err("unstamped (header.stamp 0)".into());
+    }
+    let made = clock.monotonic_ns(stamp);
+    let age = i128::from(now_ns) - i128::from(made);
+    if age > i128::from(max_age_ns) {
+        return Err(format!(
+            "made {} ms before it arrived (at most {} ms)",
+            age / 1_000_000,
+            max_age_ns / 1_000_000
+        ));
+    }
+    if -age > i128::from(max_age_ns) {
+        return Err(format!(
+            "stamped {} ms in the future (the sender's clock is not this one's)",
+            -age / 1_000_000
+        ));
+    }
+    Ok(made.min(now_ns))
 }
 
 /// A `cmd_vel` twist as a velocity request, or `None` when a component the robot uses is not a
@@ -372,8 +425,15 @@ const ESTOP: Token = Token(2);
 const ESTOP_RELEASE: Token = Token(3);
 const CLEAR_FAULTS: Token = Token(4);
 
-/// The commands loop: runs until SIGINT / SIGTERM.
-pub fn commands(name: &str, mut c: Commands) -> anyhow::Result<Drops> {
+/// The commands loop: runs until SIGINT / SIGTERM. A `TwistStamped` older than `max_age` when it
+/// arrives is dropped and counted (`clock`: ROS time ↔ `CLOCK_MONOTONIC`).
+pub fn commands(
+    name: &str,
+    mut c: Commands,
+    clock: RosClock,
+    max_age: Duration,
+) -> anyhow::Result<Drops> {
+    let max_age_ns = u64::try_from(max_age.as_nanos()).unwrap_or(u64::MAX);
     let Some(mut robot) = connect(name) else {
         return Ok(Drops::default());
     };
@@ -399,7 +459,8 @@ pub fn commands(name: &str, mut c: Commands) -> anyhow::Result<Drops> {
             return Err(e).context("waiting for DDS");
         }
         // Every reader is drained on every wake: a readiness may have been merged with another.
-        drain_cmd_vel(&c.cmd_vel, &mut robot, &mut source, &mut drops);
+        let age = (clock, max_age_ns);
+        drain_cmd_vel(&c.cmd_vel, age, &mut robot, &mut source, &mut drops);
         drain_e_stop(&c.e_stop, &mut robot, &mut drops);
         for (server, kind) in [
             (&c.estop, ServiceKind::Estop),
@@ -414,17 +475,20 @@ pub fn commands(name: &str, mut c: Commands) -> anyhow::Result<Drops> {
 
 fn drain_cmd_vel(
     cmd_vel: &CmdVel,
+    (clock, max_age_ns): (RosClock, u64),
     robot: &mut Robot,
     source: &mut Option<Source>,
     drops: &mut Drops,
 ) {
     loop {
         let taken = match cmd_vel {
-            CmdVel::Plain(s) => s.take().map(|m| m.map(|(t, _)| t)),
-            CmdVel::Stamped(s) => s.take().map(|m| m.map(|(t, _)| t.twist)),
+            CmdVel::Plain(s) => s.take().map(|m| m.map(|(t, _)| (t, None))),
+            CmdVel::Stamped(s) => s
+                .take()
+                .map(|m| m.map(|(t, _)| (t.twist, Some(t.header.stamp)))),
         };
-        let twist = match taken {
-            Ok(Some(twist)) => twist,
+        let (twist, stamp) = match taken {
+            Ok(Some(taken)) => taken,
             Ok(None) => return,
             Err(e) => {
                 drops.undecodable += 1;
@@ -432,7 +496,7 @@ fn drain_cmd_vel(
                 continue;
             }
         };
-        let Some(request) = twist_request(&twist) else {
+        let Some(mut request) = twist_request(&twist) else {
             drops.non_finite += 1;
             tracing::warn!(
                 ?twist,
@@ -441,6 +505,17 @@ fn drain_cmd_vel(
             );
             continue;
         };
+        if let Some(stamp) = stamp {
+            match stamp_age_check(stamp, clock, chassis_client::now_ns(), max_age_ns) {
+                // Its timeout runs from when it was made.
+                Ok(made) => request.stamp_ns = made,
+                Err(why) => {
+                    drops.stale += 1;
+                    tracing::warn!(count = drops.stale, "cmd_vel dropped as stale: {why}");
+                    continue;
+                }
+            }
+        }
         forward(request, robot, source, drops);
     }
 }
@@ -514,6 +589,82 @@ fn serve(
     }
 }
 
+/// One message of the state loop, for its topic.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Message {
+    /// `odom` (boxed: three times the size of the others).
+    Odom(Box<Odometry>),
+    /// `tf` (odom → base_link).
+    Tf(TfMessage),
+    /// `joint_states`.
+    Joints(JointState),
+    /// `battery_state`.
+    Battery(BatteryState),
+    /// `imu/data`.
+    Imu(Imu),
+    /// `range/<sensor>`: the index of the sensor in the `ranges` [`messages`] was given.
+    Range(usize, Range),
+    /// `fix`.
+    Fix(NavSatFix),
+}
+
+/// What `s` brings that the previous sample `latest` did not: odom and tf when the pose or the
+/// body's motion was reported anew (a sample made by another frame repeats them), the joints
+/// with their angles and speeds, each range sensor of `ranges` with its own reading. The
+/// robot's `description` gives the odometry's variances and the joints. The bridge publishes
+/// these; `chassis-ros2 --record` writes them.
+pub fn messages(
+    latest: Option<&ChassisState>,
+    s: &ChassisState,
+    description: &RobotDescription,
+    ranges: &[RangeSensor],
+    clock: RosClock,
+    frames: &Frames,
+) -> Vec<Message> {
+    use chassis_client::Group;
+    let fresh = |group: Group| {
+        latest.is_none_or(|l| l.group_stamp_ns[group.index()] != s.group_stamp_ns[group.index()])
+    };
+    let mut out = Vec::new();
+    if fresh(Group::Pose) || fresh(Group::Motion) {
+        out.push(Message::Odom(Box::new(convert::odometry(
+            s,
+            &description.odometry_variance,
+            clock,
+            frames,
+        ))));
+        out.push(Message::Tf(convert::transform(s, clock, frames)));
+    }
+    if (fresh(Group::Steering) || fresh(Group::WheelSpeed))
+        && let Some(j) = convert::joint_states(s, description, clock)
+    {
+        out.push(Message::Joints(j));
+    }
+    if (fresh(Group::BmsPack) || fresh(Group::System))
+        && let Some(b) = convert::battery(s, clock, frames)
+    {
+        out.push(Message::Battery(b));
+    }
+    if fresh(Group::Imu)
+        && let Some(i) = convert::imu(s, clock, frames)
+    {
+        out.push(Message::Imu(i));
+    }
+    if fresh(Group::Ranges) {
+        for (index, sensor) in ranges.iter().enumerate() {
+            if let Some(r) = convert::range(s, sensor, clock, frames) {
+                out.push(Message::Range(index, r));
+            }
+        }
+    }
+    if fresh(Group::Gps)
+        && let Some(fix) = convert::nav_sat_fix(s, clock, frames)
+    {
+        out.push(Message::Fix(fix));
+    }
+    out
+}
+
 /// What the state loop keeps between samples.
 struct StateLoop<'a> {
     name: &'a str,
@@ -521,6 +672,8 @@ struct StateLoop<'a> {
     clock: RosClock,
     frames: Frames,
     description: RobotDescription,
+    /// The range sensors of `out.ranges`, in its order.
+    sensors: Vec<RangeSensor>,
     latest: Option<ChassisState>,
     mux: Option<MuxStatus>,
     last_diagnostics: Option<(u64, Vec<(u8, String)>)>,
@@ -543,51 +696,36 @@ impl StateLoop<'_> {
         }
     }
 
-    /// Publishes what `s` brings that the previous sample did not: odom and tf when the pose or
-    /// the body's motion was reported anew (a sample made by another frame repeats them), the
-    /// joints with their angles and speeds, each sensor with its own reading.
+    /// Publishes what `s` brings that the previous sample did not ([`messages`]).
     fn on_state(&mut self, s: &ChassisState) {
-        use chassis_client::Group;
-        let (clock, frames, out, d) = (self.clock, &self.frames, self.out, &self.description);
-        let latest = self.latest;
-        let fresh = |group: Group| {
-            latest
-                .is_none_or(|l| l.group_stamp_ns[group.index()] != s.group_stamp_ns[group.index()])
-        };
+        let out = self.out;
         let f = &mut self.failures;
-        if fresh(Group::Pose) || fresh(Group::Motion) {
-            let odom = convert::odometry(s, &d.odometry_variance, clock, frames);
-            Self::publish(f, "odom", &out.odom, odom);
-            if let Some(tf) = &out.tf {
-                Self::publish(f, "tf", tf, convert::transform(s, clock, frames));
-            }
-        }
-        if (fresh(Group::Steering) || fresh(Group::WheelSpeed))
-            && let Some(j) = convert::joint_states(s, d, clock)
-        {
-            Self::publish(f, "joint_states", &out.joint_states, j);
-        }
-        if (fresh(Group::BmsPack) || fresh(Group::System))
-            && let Some(b) = convert::battery(s, clock, frames)
-        {
-            Self::publish(f, "battery_state", &out.battery, b);
-        }
-        if fresh(Group::Imu)
-            && let Some(i) = convert::imu(s, clock, frames)
-        {
-            Self::publish(f, "imu/data", &out.imu, i);
-        }
-        if fresh(Group::Ranges) {
-            for (sensor, p) in &out.ranges {
-                if let Some(r) = convert::range(s, sensor, clock, frames) {
-                    Self::publish(f, "range", p, r);
+        let messages = messages(
+            self.latest.as_ref(),
+            s,
+            &self.description,
+            &self.sensors,
+            self.clock,
+            &self.frames,
+        );
+        for m in messages {
+            match m {
+                Message::Odom(m) => Self::publish(f, "odom", &out.odom, *m),
+                Message::Tf(m) => {
+                    if let Some(tf) = &out.tf {
+                        Self::publish(f, "tf", tf, m);
+                    }
                 }
+                Message::Joints(m) => Self::publish(f, "joint_states", &out.joint_states, m),
+                Message::Battery(m) => Self::publish(f, "battery_state", &out.battery, m),
+                Message::Imu(m) => Self::publish(f, "imu/data", &out.imu, m),
+                Message::Range(i, m) => {
+                    if let Some((_, p)) = out.ranges.get(i) {
+                        Self::publish(f, "range", p, m);
+                    }
+                }
+                Message::Fix(m) => Self::publish(f, "fix", &out.fix, m),
             }
-        }
-        if fresh(Group::Gps)
-            && let Some(fix) = convert::nav_sat_fix(s, clock, frames)
-        {
-            Self::publish(f, "fix", &out.fix, fix);
         }
         self.latest = Some(*s);
     }
@@ -640,6 +778,11 @@ pub fn state_loop(
         clock,
         frames,
         description,
+        sensors: out
+            .ranges
+            .iter()
+            .map(|(sensor, _)| sensor.clone())
+            .collect(),
         latest: None,
         mux: None,
         last_diagnostics: None,
@@ -770,6 +913,30 @@ mod tests {
         let mut t3 = t;
         t3.linear.z = f64::NAN;
         assert!(twist_request(&t3).is_some());
+    }
+
+    #[test]
+    fn a_stamped_twist_older_than_the_bound_is_stale() {
+        use crate::msg::Time;
+        let ms = 1_000_000u64;
+        // ROS time is monotonic time + 1000 s here.
+        let clock = RosClock::with_offset(1_000_000_000_000);
+        let stamp = |mono_ms: u64| Time::from_nanos((1_000_000 + mono_ms) as i64 * ms as i64);
+        let max = 250 * ms;
+        assert_eq!(
+            stamp_age_check(stamp(5_000), clock, 5_100 * ms, max),
+            Ok(5_000 * ms)
+        );
+        assert!(stamp_age_check(stamp(5_000), clock, 5_251 * ms, max).is_err());
+        let old = stamp_age_check(stamp(5_000), clock, 6_200 * ms, max).unwrap_err();
+        assert!(old.contains("1200 ms"), "{old}");
+        // A little ahead (clocks a few ms apart): taken, stamped at its arrival.
+        assert_eq!(
+            stamp_age_check(stamp(5_010), clock, 5_000 * ms, max),
+            Ok(5_000 * ms)
+        );
+        assert!(stamp_age_check(stamp(9_000), clock, 5_000 * ms, max).is_err());
+        assert!(stamp_age_check(Time::default(), clock, 5_000 * ms, max).is_err());
     }
 
     #[test]

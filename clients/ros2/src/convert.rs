@@ -11,8 +11,8 @@
 //! later step of the system clock (NTP) does not move them until the bridge restarts.
 
 use chassis_client::{
-    ChassisState, ClampFlags, FaultFlags, Group, JointSource, LinkFlags, MuxStatus,
-    OdometryVariance, RobotDescription, SensorKind, WallClock, WireProtocol, ZeroReason,
+    ChassisState, ClampFlags, ControllerState, FaultFlags, Group, JointSource, LinkFlags,
+    MuxStatus, OdometryVariance, RobotDescription, SensorKind, WallClock, WireProtocol, ZeroReason,
 };
 
 use crate::msg::{
@@ -504,9 +504,15 @@ fn faults_status(name: &str, prefix: &str, state: &ChassisState) -> DiagnosticSt
 
 fn link_status(name: &str, prefix: &str, state: &ChassisState) -> DiagnosticStatus {
     let l = &state.link;
-    let down = state.link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT);
+    let down = state.link_flags
+        & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT | LinkFlags::CAN_BUS_OFF);
     let (level, message) = if down != 0 {
         (DiagnosticStatus::ERROR, LinkFlags::names(down).join(", "))
+    } else if state.has_link_flag(LinkFlags::CAN_ERROR_PASSIVE) {
+        (
+            DiagnosticStatus::WARN,
+            "the CAN controller is error-passive: errors on the bus".into(),
+        )
     } else if state.has_link_flag(LinkFlags::RC_AUTHORITY) {
         (
             DiagnosticStatus::WARN,
@@ -537,6 +543,13 @@ fn link_status(name: &str, prefix: &str, state: &ChassisState) -> DiagnosticStat
             KeyValue::new("rx_unknown_id", l.rx_unknown_id),
             KeyValue::new("tx_errors", l.tx_errors),
             KeyValue::new("bus_reconnects", l.bus_reconnects),
+            KeyValue::new("can_state", ControllerState::name(l.can_state)),
+            KeyValue::new("can_tx_error_count", l.can_tx_error_count),
+            KeyValue::new("can_rx_error_count", l.can_rx_error_count),
+            KeyValue::new("can_bus_off", l.can_bus_off),
+            KeyValue::new("can_restarts", l.can_restarts),
+            KeyValue::new("can_error_passive", l.can_error_passive),
+            KeyValue::new("can_bus_errors", l.can_bus_errors),
             KeyValue::new(
                 "battery_voltage_v",
                 format!("{:.2}", state.system.battery_voltage_v),
@@ -849,5 +862,36 @@ mod tests {
         let stale = diagnostics("titan", None, None, Time::default());
         assert_eq!(stale.status[0].level, DiagnosticStatus::STALE);
         assert_ne!(diagnostics_key(&d), diagnostics_key(&stale));
+    }
+
+    #[test]
+    fn diagnostics_report_the_can_controller() {
+        let mut s = titan();
+        let value = |d: &DiagnosticArray, key: &str| {
+            d.status[1]
+                .values
+                .iter()
+                .find(|kv| kv.key == key)
+                .map(|kv| kv.value.clone())
+                .unwrap()
+        };
+        s.link.can_state = ControllerState::ERROR_PASSIVE;
+        s.link.can_tx_error_count = 130;
+        s.link_flags = LinkFlags::CAN_ERROR_PASSIVE;
+        let d = diagnostics("titan", Some(&s), None, Time::default());
+        assert_eq!(d.status[1].level, DiagnosticStatus::WARN);
+        assert_eq!(value(&d, "can_state"), "error-passive");
+        assert_eq!(value(&d, "can_tx_error_count"), "130");
+        s.link.can_state = ControllerState::BUS_OFF;
+        s.link.can_bus_off = 1;
+        s.link_flags = LinkFlags::CAN_BUS_OFF | LinkFlags::CHASSIS_SILENT;
+        let d = diagnostics("titan", Some(&s), None, Time::default());
+        assert_eq!(d.status[1].level, DiagnosticStatus::ERROR);
+        assert!(
+            d.status[1].message.contains("can_bus_off"),
+            "{}",
+            d.status[1].message
+        );
+        assert_eq!(value(&d, "can_bus_off"), "1");
     }
 }

@@ -8,8 +8,11 @@
 //! installation to build, and the `cyclonedds` bindings a C library.
 //!
 //! [`bridge`] holds the node and its loops, [`convert`] the state → message mapping (pure
-//! functions), [`msg`] the ROS 2 message types.
+//! functions), [`msg`] the ROS 2 message types, [`discovery`] how far the participant reaches
+//! (ROS 2's discovery switches; this computer only by default).
 
 pub mod bridge;
 pub mod convert;
+pub mod discovery;
 pub mod msg;
+pub mod record;

@@ -5,6 +5,10 @@
 //! `~/estop_release`, `~/clear_faults` (`std_srvs/Trigger`). Out: `odom`, `tf`,
 //! `joint_states`, `battery_state`, `imu/data`, `range/<sensor>`, `fix`, `diagnostics`.
 //! See the README's "ROS 2" section.
+//!
+//! `chassis-ros2 --name ROBOT --record run.mcap [--duration S]` joins no DDS domain: it writes
+//! the same state topics into a ROS 2 bag (MCAP, CDR) that `ros2 bag play` and Foxglove read
+//! ([`chassis_ros2::record`]).
 
 use std::process::ExitCode;
 
@@ -55,6 +59,18 @@ struct Cli {
     /// time; chassis-bench reads latencies off the stamps this way).
     #[arg(long)]
     monotonic_stamps: bool,
+    /// Record the bridge's state topics into this ROS 2 bag (MCAP, CDR, `ros2msg` schemas)
+    /// instead of publishing them over DDS; stops at SIGINT/SIGTERM or after --duration.
+    #[arg(long)]
+    record: Option<std::path::PathBuf>,
+    /// With --record: stop after this many seconds.
+    #[arg(long, requires = "record")]
+    duration: Option<f64>,
+    /// Oldest a `TwistStamped` may be when it arrives, ms (its stamp against this computer's
+    /// clock: the sender's clock must be synchronised, as ROS 2 assumes); older ones are
+    /// dropped and counted.
+    #[arg(long, default_value_t = 250)]
+    max_age_ms: u64,
     /// (internal) Be the far end of chassis-bench's raw DDS hop; write its latencies here.
     #[arg(long, hide = true)]
     bench_echo: Option<std::path::PathBuf>,
@@ -78,11 +94,37 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let Some(name) = cli.name else {
         anyhow::bail!("--name is required");
     };
+    if let Some(path) = &cli.record {
+        let options = chassis_ros2::record::RecordOptions {
+            name,
+            namespace: namespace(&cli.namespace),
+            frame_prefix: cli.frame_prefix,
+            tf: !cli.no_tf,
+            monotonic_stamps: cli.monotonic_stamps,
+            duration: match cli.duration {
+                Some(s) if s.is_finite() && s > 0.0 => Some(std::time::Duration::from_secs_f64(s)),
+                Some(s) => anyhow::bail!("--duration {s}: a positive number of seconds"),
+                None => None,
+            },
+        };
+        let counts = chassis_ros2::record::record(path, &options)?;
+        let total: u64 = counts.values().map(|&n| u64::from(n)).sum();
+        tracing::info!(?counts, "{total} messages written to {}", path.display());
+        return Ok(());
+    }
     let service_mapping = match cli.service_mapping {
         Some(Mapping::Enhanced) => ServiceMapping::Enhanced,
         Some(Mapping::Cyclone) => ServiceMapping::Cyclone,
         None => bridge::mapping_for_rmw(std::env::var("RMW_IMPLEMENTATION").ok().as_deref()),
     };
+    let reach = chassis_ros2::discovery::Reach::from_env()?;
+    // Loud on purpose: who can drive the robot through this bridge.
+    if reach.range == chassis_ros2::discovery::Range::Subnet {
+        tracing::warn!("{}", reach.describe());
+    } else {
+        tracing::info!("{}", reach.describe());
+    }
+    eprintln!("chassis-ros2: {}", reach.describe());
     let options = Options {
         name,
         namespace: namespace(&cli.namespace),
@@ -92,6 +134,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         frame_prefix: cli.frame_prefix,
         service_mapping,
         monotonic_stamps: cli.monotonic_stamps,
+        reach,
     };
     // The node's topics follow the robot chassisd describes: wait for it first.
     let Some(described) = bridge::describe(&options.name) else {
@@ -121,18 +164,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         })
         .context("starting the spinner thread")?;
 
-    let name = options.name.clone();
-    let commands = std::thread::Builder::new()
-        .name("ros2-commands".into())
-        .spawn(move || bridge::commands(&name, commands))
-        .context("starting the commands thread")?;
-
     let frames = Frames::new(&options.frame_prefix);
     let clock = if options.monotonic_stamps {
         RosClock::with_offset(0)
     } else {
         RosClock::measure()
     };
+    let name = options.name.clone();
+    let max_age = std::time::Duration::from_millis(cli.max_age_ms);
+    let commands = std::thread::Builder::new()
+        .name("ros2-commands".into())
+        .spawn(move || bridge::commands(&name, commands, clock, max_age))
+        .context("starting the commands thread")?;
     let result = bridge::state_loop(&options.name, described, frames, clock, &outputs);
     chassis_client::request_termination();
     match commands.join() {

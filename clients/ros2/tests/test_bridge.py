@@ -103,7 +103,7 @@ def twist(vx: float, wz: float = 0.0, vy: float = 0.0) -> m.Twist:
 
 class Publishing:
     """Publishes a message at 20 Hz in the background, as Nav2's controller does, while the
-    test looks at the robot."""
+    test looks at the robot (``message`` may be a function making each one, to stamp it)."""
 
     def __init__(self, writer: DataWriter[Any], message: Any) -> None:
         self.writer = writer
@@ -113,7 +113,7 @@ class Publishing:
 
     def run(self) -> None:
         while not self.stop.is_set():
-            self.writer.write(self.message)
+            self.writer.write(self.message() if callable(self.message) else self.message)
             self.stop.wait(0.05)
 
     def __enter__(self) -> Publishing:
@@ -331,12 +331,16 @@ def test_a_release_through_the_service_never_starts_motion(ros: Ros) -> None:
             ros,
         )
         assert estop.call(ros).success
-        wait_until(
-            "the robot stands",
-            lambda: (s := robot.wait_state(0.1)) is not None and abs(s.motion.linear_mps) < 0.001,
-            5.0,
-            ros,
-        )
+
+        def standing(duration: float = 0.3) -> bool:
+            end = time.monotonic() + duration
+            while time.monotonic() < end:
+                s = robot.wait_state(0.05)
+                if s is not None and abs(s.motion.linear_mps) >= 0.001:
+                    return False
+            return True
+
+        wait_until("the robot stands", standing, 5.0, ros)
         # Released while Nav2 (here: the publisher) still asks for 0.3 m/s: nothing moves.
         answer = release.call(ros)
         assert answer.success, answer.message
@@ -379,8 +383,27 @@ def test_stamped_cmd_vel_and_namespaces(ros: Ros) -> None:
     cmd = peer.writer("rt/left/cmd_vel", m.TwistStamped)
     odom = peer.reader("rt/left/odom", m.Odometry)
     wait_matched(cmd, ros)
-    message = m.TwistStamped(header=m.Header(frame_id="left/base_link"), twist=twist(0.3))
-    with Publishing(cmd, message):
+
+    def stamped(age_s: float) -> Callable[[], m.TwistStamped]:
+        def make() -> m.TwistStamped:
+            ns = time.time_ns() - int(age_s * 1e9)
+            stamp = m.Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+            header = m.Header(stamp=stamp, frame_id="left/base_link")
+            return m.TwistStamped(header=header, twist=twist(0.3))
+
+        return make
+
+    # Made 2 s ago (held through an outage) or unstamped: dropped, counted, never obeyed.
+    for old in (stamped(2.0), lambda: m.TwistStamped(header=m.Header(), twist=twist(0.3))):
+        with Publishing(cmd, old):
+            time.sleep(1.0)
+            assert active(robot) != "ros2", ros.logs()
+            state = robot.latest_state()
+            assert state is not None and state.command.linear_mps == 0.0
+    assert "cmd_vel dropped as stale: made 2" in ros.logs(), ros.logs()
+    assert "cmd_vel dropped as stale: unstamped" in ros.logs(), ros.logs()
+    # Stamped now: obeyed.
+    with Publishing(cmd, stamped(0.0)):
         wait_until("the mux follows ros2", lambda: active(robot) == "ros2", 10.0, ros)
         o = take_until(odom, lambda o: o.twist.twist.linear.x > 0.2, 10.0, ros, "odom")
     assert (o.header.frame_id, o.child_frame_id) == ("left/odom", "left/base_link")

@@ -92,6 +92,10 @@ struct Cli {
     /// Robot side: how long to wait for chassisd at start, s.
     #[arg(long, default_value_t = 10.0)]
     wait: f64,
+    /// Robot side: oldest a velocity request may be when it arrives, ms (judged on its stamp
+    /// against the operator side's clock, measured on the session); older ones are dropped.
+    #[arg(long, default_value_t = 250)]
+    max_age_ms: u64,
 }
 
 #[derive(Debug, Subcommand)]
@@ -182,6 +186,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             state_hz: cli.state_hz,
             json_hz: cli.json_hz,
             wait: Duration::from_secs_f64(cli.wait.max(0.0)),
+            max_age: Duration::from_millis(cli.max_age_ms),
         })
     } else if cli.mirror {
         mirror::run(&mirror::Config {

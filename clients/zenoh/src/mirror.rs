@@ -10,7 +10,10 @@
 //!   `Robot.wait_description`);
 //! * a thread per remote source (learned from the robot's mux) creates `cmd/<source>` and puts
 //!   every request on `chassis/<name>/cmd/<source>`;
-//! * a thread serves `control`, asking the robot's queryable for each request.
+//! * a thread serves `control`, asking the robot's queryable for each request;
+//! * a queryable `chassis/<name>/clock` answers the robot side's clock queries with this
+//!   computer's `CLOCK_MONOTONIC`: the robot side measures the offset and delay from them and
+//!   judges each request's age by its stamp (made here by the client that sent it).
 //!
 //! Stamps are the robot's `CLOCK_MONOTONIC`: ages computed from them here are only meaningful
 //! when both sides share a clock (two namespaces of one machine).
@@ -143,6 +146,20 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
         }
     };
     let alive_tx = tx.clone();
+    let _clock = session
+        .declare_queryable(keys.clock.clone())
+        .callback(|query| {
+            let now = now_ns();
+            if let Err(e) = query
+                .reply(query.key_expr().clone(), now.to_le_bytes().to_vec())
+                .encoding(crate::wire::clock_encoding())
+                .wait()
+            {
+                tracing::debug!("answering a clock query: {e}");
+            }
+        })
+        .wait()
+        .map_err(zerr(&keys.clock))?;
     let _alive_sub = session
         .liveliness()
         .declare_subscriber(&keys.alive)

@@ -178,8 +178,9 @@ pub fn config(net: &Net, robot: &str, remote_sources: &[String]) -> anyhow::Resu
 }
 
 /// The robot side's access list: everything is denied but what a holder of the operator's
-/// certificate needs — reading the robot's publications, asking its control queryable,
-/// publishing on its remote sources — and what the robot side itself sends.
+/// certificate needs — reading the robot's publications, asking its control and description
+/// queryables, answering the robot side's clock queries, publishing on its remote sources — and
+/// what the robot side itself sends.
 fn access_list(robot: &str, remote_sources: &[String]) -> serde_json::Value {
     let all = format!("chassis/{robot}/**");
     let cmds: Vec<String> = remote_sources
@@ -208,7 +209,24 @@ fn access_list(robot: &str, remote_sources: &[String]) -> serde_json::Value {
             "messages": ["query"],
             "flows": ["ingress"],
             "permission": "allow",
-            "key_exprs": [format!("chassis/{robot}/control")],
+            "key_exprs": [
+                format!("chassis/{robot}/control"),
+                format!("chassis/{robot}/robot"),
+            ],
+        }),
+        json!({
+            "id": "operator-clock",
+            "messages": ["declare_queryable", "reply"],
+            "flows": ["ingress"],
+            "permission": "allow",
+            "key_exprs": [format!("chassis/{robot}/clock")],
+        }),
+        json!({
+            "id": "robot-asks-the-clock",
+            "messages": ["query"],
+            "flows": ["egress"],
+            "permission": "allow",
+            "key_exprs": [format!("chassis/{robot}/clock")],
         }),
         json!({
             "id": "robot-publishes",
@@ -292,6 +310,15 @@ mod tests {
             .unwrap();
         assert_eq!(drives["key_exprs"], json!(["chassis/titan/cmd/remote"]));
         assert_eq!(acl["subjects"][0]["cert_common_names"][0], OPERATOR_CN);
+        // The operator answers the robot side's clock queries, and nothing else there.
+        let clock = acl["rules"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["id"] == "operator-clock")
+            .unwrap();
+        assert_eq!(clock["key_exprs"], json!(["chassis/titan/clock"]));
+        assert_eq!(clock["flows"], json!(["ingress"]));
         let none = access_list("titan", &[]);
         assert!(
             none["rules"]

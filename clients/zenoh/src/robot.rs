@@ -8,8 +8,13 @@
 //! * a thread holds the remote sources' publishers and takes `chassis/<name>/cmd/<source>` from
 //!   the network: only for sources chassisd's mux marks [`SourceFlags::REMOTE`] (never a
 //!   required one); a request that is not one, or carries a NaN or an infinity, is dropped and
-//!   counted ([`chassis_client::payload`]); each is re-stamped on arrival, so its timeout runs
-//!   from then;
+//!   counted ([`chassis_client::payload`]). A request is made on the operator's computer and
+//!   stamped there with its `CLOCK_MONOTONIC`; this thread asks the mirror for its clock every
+//!   [`CLOCK_PERIOD`] (`chassis/<name>/clock`) and keeps the offset of the fastest recent round
+//!   trip ([`PeerClock`]). A request older than `max_age` when it arrives (buffered through an
+//!   outage, or its clock not measured yet) is dropped and counted, never obeyed; one that is
+//!   taken is re-stamped with the instant it was made, in this computer's clock, so chassisd's
+//!   source timeout runs from then, not from its arrival;
 //! * a thread answers the queryable `chassis/<name>/control` with chassisd's response.
 //!
 //! iceoryx2 ports are not `Send`: each thread connects to the robot itself.
@@ -21,8 +26,8 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::{
-    BusFrame, ChassisState, ControlRequest, ControlResponse, Decimator, MuxStatus, Robot,
-    RobotDescription, STATE_BUFFER, Source, SourceFlags, Ticker, VelocityRequest, now_ns,
+    BusFrame, ChassisState, ControlRequest, ControlResponse, Decimator, MuxStatus, PeerClock,
+    Robot, RobotDescription, STATE_BUFFER, Source, SourceFlags, Ticker, VelocityRequest, now_ns,
     termination_requested,
 };
 use zenoh::Wait as _;
@@ -43,6 +48,8 @@ const FRAMES_PERIOD_NS: u64 = 50_000_000;
 const TAP_BUFFER: usize = 1024;
 /// How often blocked threads look at the stop flag.
 const POLL: Duration = Duration::from_millis(100);
+/// How often the drive thread measures the operator side's clock.
+pub const CLOCK_PERIOD: Duration = Duration::from_millis(500);
 
 /// What the robot side needs to know.
 #[derive(Debug, Clone)]
@@ -56,6 +63,9 @@ pub struct Config {
     pub json_hz: f64,
     /// How long to wait for chassisd at start.
     pub wait: Duration,
+    /// Oldest a velocity request may be when it arrives (its stamp against the operator's
+    /// measured clock); older ones are dropped.
+    pub max_age: Duration,
 }
 
 /// The remote sources of a mux decision: configured `remote`, never required.
@@ -128,10 +138,15 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             stop.clone(),
         );
         let remote = remote.clone();
+        let max_age = config.max_age;
         threads.push(
             std::thread::Builder::new()
                 .name("cmd".into())
-                .spawn(move || guard(&stop, || drive(&name, &session, &keys, &remote, &stop)))?,
+                .spawn(move || {
+                    guard(&stop, || {
+                        drive(&name, &session, &keys, &remote, max_age, &stop)
+                    })
+                })?,
         );
     }
     {
@@ -327,8 +342,10 @@ fn drive(
     session: &zenoh::Session,
     keys: &Keys,
     remote: &[String],
+    max_age: Duration,
     stop: &AtomicBool,
 ) -> anyhow::Result<()> {
+    let max_age_ns = u64::try_from(max_age.as_nanos()).unwrap_or(u64::MAX);
     let mut robot = Robot::connect(name)?;
     let mut sources: HashMap<String, Source> = HashMap::new();
     for source in remote {
@@ -344,8 +361,47 @@ fn drive(
     let wire = Wire::<VelocityRequest>::new();
     let mut refused: u64 = 0;
     let mut bad: u64 = 0;
+    let mut stale: u64 = 0;
+    let mut peer = PeerClock::default();
+    // Round trips (sent, the mirror's reading, received) from the query callbacks.
+    let (clock_tx, clock_rx) = std::sync::mpsc::channel::<(u64, u64, u64)>();
+    let mut next_clock = now_ns();
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
-        let sample = match subscriber.recv_timeout(POLL) {
+        let now = now_ns();
+        if now >= next_clock {
+            next_clock = now + u64::try_from(CLOCK_PERIOD.as_nanos()).unwrap_or(u64::MAX);
+            let tx = clock_tx.clone();
+            let asked = session
+                .get(keys.clock.clone())
+                .callback(move |reply| {
+                    let received = now_ns();
+                    if let Ok(sample) = reply.result()
+                        && let Some(peer_ns) = crate::wire::clock_reading(
+                            sample.encoding(),
+                            &sample.payload().to_bytes(),
+                        )
+                    {
+                        let _ = tx.send((now, peer_ns, received));
+                    }
+                })
+                .timeout(CLOCK_PERIOD)
+                .wait();
+            if let Err(e) = asked {
+                tracing::debug!("asking the operator side's clock: {e}");
+            }
+        }
+        while let Ok((sent, peer_ns, received)) = clock_rx.try_recv() {
+            let first = peer.offset().is_none();
+            peer.record(sent, peer_ns, received);
+            if first && let Some((offset, uncertainty)) = peer.offset() {
+                tracing::info!(
+                    offset_ns = offset,
+                    uncertainty_ns = uncertainty,
+                    "measured the operator side's clock"
+                );
+            }
+        }
+        let sample = match subscriber.recv_timeout(Duration::from_millis(20)) {
             Ok(Some(sample)) => sample,
             Ok(None) => continue,
             Err(e) => anyhow::bail!("receiving velocity requests: {e}"),
@@ -365,12 +421,22 @@ fn drive(
             continue;
         };
         match decode(&wire, &sample) {
-            Ok(mut request) => {
-                // Another computer's clock means nothing here: the request's age counts from
-                // its arrival.
-                request.stamp_ns = arrived;
-                source.send(request)?;
-            }
+            Ok(mut request) => match judge(&peer, request.stamp_ns, arrived, max_age_ns) {
+                Ok(made) => {
+                    // Its timeout runs from when it was made, in this computer's clock.
+                    request.stamp_ns = made;
+                    source.send(request)?;
+                }
+                Err(why) => {
+                    stale += 1;
+                    tracing::warn!(key, stale, "dropped a velocity request: {why}");
+                    if stale.is_power_of_two() {
+                        eprintln!(
+                            "chassis-zenoh: dropped a velocity request on {key}: {why} ({stale} dropped as stale)"
+                        );
+                    }
+                }
+            },
             // Not the type, cut, or carrying a NaN or an infinity: never passed on as motion.
             Err(e) => {
                 bad += 1;
@@ -381,6 +447,37 @@ fn drive(
         }
     }
     Ok(())
+}
+
+/// Why a request is not obeyed: too old, or made on a clock not measured yet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum Stale {
+    #[error("made {age_ms} ms before it arrived (at most {max_ms} ms)")]
+    TooOld { age_ms: u64, max_ms: u64 },
+    #[error("the operator side's clock is not measured yet")]
+    NoClock,
+}
+
+/// The instant, in this computer's clock, a request stamped `stamp_ns` on the operator's was
+/// made, if it arrived at `arrived_ns` at most `max_age_ns` after that (the clock's uncertainty
+/// counted in its favour); never later than its arrival.
+pub fn judge(
+    peer: &PeerClock,
+    stamp_ns: u64,
+    arrived_ns: u64,
+    max_age_ns: u64,
+) -> Result<u64, Stale> {
+    let (Some((made, _)), Some(age)) = (peer.local_ns(stamp_ns), peer.age_ns(stamp_ns, arrived_ns))
+    else {
+        return Err(Stale::NoClock);
+    };
+    if age > max_age_ns {
+        return Err(Stale::TooOld {
+            age_ms: age / 1_000_000,
+            max_ms: max_age_ns / 1_000_000,
+        });
+    }
+    Ok(made.min(arrived_ns))
 }
 
 fn decode<T: Payload>(wire: &Wire<T>, sample: &Sample) -> Result<T, PayloadError> {
@@ -435,6 +532,36 @@ fn control(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_request_older_than_the_bound_or_on_an_unmeasured_clock_is_stale() {
+        let ms = 1_000_000u64;
+        let mut peer = PeerClock::default();
+        assert_eq!(judge(&peer, 5, 10, 250 * ms), Err(Stale::NoClock));
+        // The operator's clock is 100 s ahead; round trips of 4 ms.
+        peer.record(1_000 * ms, 101_002 * ms, 1_004 * ms);
+        // Made at 2.000 s here, arriving 50 ms later: taken, stamped when it was made.
+        assert_eq!(
+            judge(&peer, 102_000 * ms, 2_050 * ms, 250 * ms),
+            Ok(2_000 * ms)
+        );
+        // Buffered through an outage: arriving 1.2 s later, dropped.
+        assert_eq!(
+            judge(&peer, 102_000 * ms, 3_200 * ms, 250 * ms),
+            Err(Stale::TooOld {
+                age_ms: 1_198,
+                max_ms: 250
+            })
+        );
+        // At the bound, counting the 2 ms of doubt in its favour: taken.
+        assert!(judge(&peer, 102_000 * ms, 2_252 * ms, 250 * ms).is_ok());
+        assert!(judge(&peer, 102_000 * ms, 2_253 * ms, 250 * ms).is_err());
+        // Stamped in the future: taken, but never stamped later than its arrival.
+        assert_eq!(
+            judge(&peer, 103_000 * ms, 2_050 * ms, 250 * ms),
+            Ok(2_050 * ms)
+        );
+    }
 
     #[test]
     fn only_remote_sources_that_are_not_required_are_taken() {

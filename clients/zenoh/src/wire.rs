@@ -51,6 +51,19 @@ impl<T: Payload> Default for Wire<T> {
     }
 }
 
+/// The encoding of a clock reading: `CLOCK_MONOTONIC` ns, 8 bytes little-endian.
+pub fn clock_encoding() -> Encoding {
+    Encoding::APPLICATION_OCTET_STREAM.with_schema("chassis::MonotonicNs")
+}
+
+/// A clock reading from its payload, if it is one.
+pub fn clock_reading(encoding: &Encoding, bytes: &[u8]) -> Option<u64> {
+    if *encoding != clock_encoding() {
+        return None;
+    }
+    Some(u64::from_le_bytes(bytes.try_into().ok()?))
+}
+
 /// The key expressions of one robot: the iceoryx2 service names, so that one name means one
 /// thing on both sides.
 #[derive(Debug, Clone)]
@@ -63,6 +76,9 @@ pub struct Keys {
     /// `chassis/<name>/robot`: the robot's description, put when it changes and answered to a
     /// query (a mirror that starts or reconnects later asks for it).
     pub description: String,
+    /// `chassis/<name>/clock`: the operator side's `CLOCK_MONOTONIC`, answered to the robot
+    /// side's queries (8 bytes, little-endian ns), so the robot side knows how old a request is.
+    pub clock: String,
     pub control: String,
     /// `chassis/<name>/cmd/*`: every source, for the robot side's one subscriber.
     pub cmd_any: String,
@@ -82,6 +98,7 @@ impl Keys {
             mux,
             frames: service_name(name, ServiceKind::Frames),
             description: service_name(name, ServiceKind::Description),
+            clock: format!("chassis/{name}/clock"),
             control: service_name(name, ServiceKind::Control),
             cmd_any: service_name(name, ServiceKind::Cmd("*")),
             alive: format!("chassis/{name}/alive"),
@@ -141,6 +158,23 @@ mod tests {
             wire.decode(&wire.encoding(), nan.as_bytes()),
             Err(PayloadError::Refused { .. })
         ));
+    }
+
+    #[test]
+    fn a_clock_reading_is_eight_bytes_under_its_encoding() {
+        let ns: u64 = 1_234_567_890_123;
+        assert_eq!(
+            clock_reading(&clock_encoding(), &ns.to_le_bytes()),
+            Some(ns)
+        );
+        assert_eq!(
+            clock_reading(&clock_encoding(), &ns.to_le_bytes()[..7]),
+            None
+        );
+        assert_eq!(
+            clock_reading(&Wire::<ChassisState>::new().encoding(), &ns.to_le_bytes()),
+            None
+        );
     }
 
     #[test]

@@ -40,7 +40,7 @@ pub use limits::{
     RequestResponseLimits, SIM, STATE, STATE_BUFFER, publication,
 };
 pub use names::{
-    IPC_PREFIX_ENV, REPLY_SUFFIX, ServiceKind, TEST_LOOP_STALL_ENV, config, reply_name, robots,
-    service_name,
+    IPC_PREFIX_ENV, PASS_TRACE_ENV, REPLY_SUFFIX, ServiceKind, TEST_LOOP_STALL_ENV, config,
+    reply_name, robots, service_name,
 };
 pub use ports::{ClientPorts, Exchange, Reader, ServerPorts, Topic, Writer, node};

@@ -17,6 +17,7 @@
 //! | error counters only (`CAN_ERR_CNT`) | from the counters (≥ 128 passive, ≥ 96 warning) | |
 //! | protocol violation, bus error | unchanged | `can_bus_errors` |
 //! | no ACK | unchanged | `can_no_ack` |
+//! | controller problem: rx/tx overflow (frames lost in the controller) | unchanged | |
 //!
 //! Every error frame counts in `can_error_frames`. A data frame heard while the controller is
 //! believed bus-off means it is on the bus again (a restart whose report was lost, or a driver
@@ -38,6 +39,9 @@ pub struct ControllerReport {
     pub bus_error: bool,
     /// A frame sent was not acknowledged by any node.
     pub no_ack: bool,
+    /// The controller's receive (or transmit) buffer overflowed: frames were lost in it, not on
+    /// the bus (the computer did not read fast enough).
+    pub overflow: bool,
     /// The transmit and receive error counters, when the report carries them.
     pub counters: Option<(u8, u8)>,
     /// The interface's `restart-ms` when the report was made (asked on a bus-off), `None` when
@@ -79,6 +83,7 @@ pub struct Change {
     pub restarted: bool,
     pub bus_error: bool,
     pub no_ack: bool,
+    pub overflow: bool,
 }
 
 impl Change {
@@ -117,6 +122,7 @@ impl Controller {
             restarted: report.restarted,
             bus_error: report.bus_error,
             no_ack: report.no_ack,
+            overflow: report.overflow,
             state: None,
         };
         if report.restarted {

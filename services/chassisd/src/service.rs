@@ -41,6 +41,7 @@ use stall::LoopStall;
 
 mod pass;
 mod stall;
+pub(crate) mod trace;
 
 /// Why the service stopped.
 #[derive(Debug, thiserror::Error)]
@@ -120,6 +121,8 @@ struct Shell<D> {
     notifier: Option<Notifier>,
     /// The test hook that stalls the loop (`stall.rs`); `None` unless a test armed it.
     loop_stall: Option<LoopStall>,
+    /// The stamps inside each pass, when `CHASSIS_PASS_TRACE` asks for them.
+    trace: Option<trace::PassTrace>,
 }
 
 /// Opens the service's ports. A predecessor killed while it was creating one of them leaves that
@@ -222,6 +225,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         lock_file,
         notifier: Notifier::from_env(),
         loop_stall: LoopStall::from_env(),
+        trace: trace::PassTrace::from_env(),
     };
     engine.start(&mut shell.io(&ports), now);
     if let Some(notifier) = &mut shell.notifier {
@@ -380,6 +384,12 @@ impl<D: Devices> Shell<D> {
             notifier.stopping();
         }
         engine.stop(&mut self.io(ports), clock::now());
+        if let Some(trace) = &self.trace {
+            match trace.write_out() {
+                Ok(()) => info!(file = %trace.path().display(), "pass trace written"),
+                Err(e) => warn!(file = %trace.path().display(), "pass trace not written: {e}"),
+            }
+        }
     }
 }
 

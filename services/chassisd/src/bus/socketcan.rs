@@ -115,6 +115,8 @@ pub fn report_of(error: &CanError) -> ControllerReport {
         ..ControllerReport::default()
     };
     if let Some(problems) = error.controller() {
+        report.overflow =
+            problems.intersects(ControllerProblems::RX_OVERFLOW | ControllerProblems::TX_OVERFLOW);
         // `can_change_state()` reports the state entered, the transmit and the receive side
         // each; the worse of the two is the controller's.
         report.state = if problems
@@ -283,6 +285,14 @@ mod tests {
         let r = kernel_error_frame(0x008 | 0x080 | 0x200, [0, 0, 0x88, 0x19, 0, 0, 8, 0]);
         assert!(r.bus_error && !r.no_ack);
         assert_eq!(r.counters, Some((8, 0)));
+        // The receive FIFO overflowed (CAN_ERR_CRTL_RX_OVERFLOW 0x01, with the counters), as
+        // QEMU's emulated SJA1000 reports it under load: frames lost, the state unchanged.
+        let r = kernel_error_frame(0x004 | 0x200, [0, 0x01, 0, 0, 0, 0, 0, 0]);
+        assert!(r.overflow && !r.bus_error, "{r:?}");
+        assert_eq!(
+            (r.state, r.counters),
+            (ControllerState::UNKNOWN, Some((0, 0)))
+        );
         // No acknowledgement (CAN_ERR_ACK), as m_can and flexcan report it.
         let r = kernel_error_frame(0x020 | 0x080, [0; 8]);
         assert!(r.no_ack && r.bus_error);

@@ -1207,6 +1207,15 @@ impl Engine {
                 controller::BUS_TROUBLE
             );
         }
+        if change.overflow
+            && let Some(held) = self.throttles.bus_errors.allow(now)
+        {
+            warn!(
+                held_back = held,
+                "{bus}: the CAN controller's buffer overflowed: frames were lost before this \
+                 computer read them (a busy or slow host, a USB adapter behind a shared hub)"
+            );
+        }
     }
 
     fn log_mux_change(&mut self) {

@@ -10,6 +10,7 @@ use iceoryx2::port::notifier::NotifierNotifyError;
 use iceoryx2::port::{LoanError, SendError};
 use tracing::{debug, info, warn};
 
+use super::trace::PassStamps;
 use super::{Next, Shell, clocks};
 use crate::bus::{BusError, MAX_RX_BATCH, Received};
 use crate::clock;
@@ -54,7 +55,14 @@ impl<D: Devices> Shell<D> {
         if wake.is_activity() {
             self.last_activity = clock::now();
         }
+        if let Some(trace) = &mut self.trace {
+            // What the service did outside a pass (its first publications) is not a pass's.
+            trace.current = PassStamps::default();
+        }
         engine.run_pass(&mut self.io(ports), wake);
+        if let Some(trace) = &mut self.trace {
+            trace.end_pass();
+        }
         if engine.served_tick() {
             refresh_description_readers(ports);
         }
@@ -73,24 +81,41 @@ pub(super) struct ShellIo<'a, D> {
     ports: &'a Ports,
 }
 
+impl<D> ShellIo<'_, D> {
+    /// With the pass trace on, `slot` of the pass under way takes the time now (once a pass).
+    fn stamp(&mut self, slot: fn(&mut PassStamps) -> &mut u64) {
+        if let Some(trace) = &mut self.shell.trace {
+            PassStamps::first(slot(&mut trace.current), clock::now().as_nanos());
+        }
+    }
+}
+
 impl<D: Devices> PassIo for ShellIo<'_, D> {
     type Error = PassError;
 
     fn now(&mut self) -> Timestamp {
-        clock::now()
+        let now = clock::now();
+        if let Some(trace) = &mut self.shell.trace {
+            PassStamps::first(&mut trace.current.woke, now.as_nanos());
+        }
+        now
     }
 
     /// Samples are read before the notification is consumed (a sample is in shared memory
     /// before its notification is sent): that system call waits until the command is out, in
     /// [`PassIo::acknowledge`].
     fn read_requests(&mut self, sources: u32, mut take: impl FnMut(usize, &VelocityRequest)) {
+        let mut took = false;
         for (index, inlet) in self.ports.sources.iter().enumerate() {
             if sources & (1 << index) == 0 {
                 continue;
             }
             loop {
                 match inlet.subscriber.receive() {
-                    Ok(Some(sample)) => take(index, &sample),
+                    Ok(Some(sample)) => {
+                        took = true;
+                        take(index, &sample);
+                    }
                     Ok(None) => break,
                     Err(e) => {
                         debug!(source = inlet.name, "receive: {e}");
@@ -98,6 +123,9 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
                     }
                 }
             }
+        }
+        if took {
+            self.stamp(|p| &mut p.requests_read);
         }
     }
 
@@ -161,6 +189,7 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
     }
 
     fn write(&mut self, item: &WireItem) -> Result<Written, WriteError<PassError>> {
+        self.stamp(|p| &mut p.write_started);
         let Some(bus) = self.shell.bus.as_mut() else {
             return Err(WriteError::Lost(no_bus()));
         };
@@ -168,6 +197,9 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
             Ok(()) => {
                 let written = clock::now();
                 Ok(if bus.unflushed() == 0 {
+                    if let Some(trace) = &mut self.shell.trace {
+                        PassStamps::first(&mut trace.current.written, written.as_nanos());
+                    }
                     Written::Out(written)
                 } else {
                     Written::Held(written)
@@ -182,7 +214,14 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
             return Err(WriteError::Lost(no_bus()));
         };
         match bus.flush() {
-            Ok(()) => Ok(clock::now()),
+            Ok(()) => {
+                let flushed = clock::now();
+                // A held frame is out when the flush that carried it returned: its tap stamp.
+                if let Some(trace) = &mut self.shell.trace {
+                    PassStamps::first(&mut trace.current.written, flushed.as_nanos());
+                }
+                Ok(flushed)
+            }
             Err(err) => Err(classify(err)),
         }
     }
@@ -257,6 +296,10 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
                 let slot = ports.state.publisher.loan_uninit()?;
                 sample.published_ns = clock::now().as_nanos();
                 slot.write_payload(*sample).send()?;
+                if let Some(trace) = &mut self.shell.trace {
+                    PassStamps::first(&mut trace.current.state_handed, sample.published_ns);
+                }
+                self.stamp(|p| &mut p.state_sent);
             }
             Publication::Frame(frame) => {
                 ports.frames.publisher.send_copy(frame)?;
@@ -286,6 +329,9 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
             Readers::Control => &ports.control.notifier,
         };
         notifier.notify()?;
+        if readers == Readers::State {
+            self.stamp(|p| &mut p.state_readers_woken);
+        }
         Ok(())
     }
 }

@@ -1,0 +1,139 @@
+//! Where each microsecond goes: the command and state samples of a run split at the stamps
+//! chassisd took inside the pass that served each (its pass trace, `CHASSIS_PASS_TRACE`). A
+//! sample counts in every part or in none: one whose pass is not in the trace, or whose pass
+//! did not take a stamp in between (a frame that was not the pass's first write), is left out,
+//! and the parts say how many samples they hold.
+
+use std::collections::HashMap;
+
+use crate::paths::PassStamps;
+use crate::stats::{Latencies, Summary};
+
+/// The parts of one path, in the order a sample passes them: (from → to, distribution).
+pub type Split = Vec<(String, Summary)>;
+
+/// Splits `parts.len()` stamps, each later than or at the one before, into the distributions
+/// between consecutive stamps; a sample whose stamps are not in order is left out.
+fn split(names: &[&str], samples: impl Iterator<Item = Vec<u64>>) -> Split {
+    let mut parts: Vec<Latencies> = names.iter().map(|_| Latencies::new()).collect();
+    for stamps in samples {
+        if stamps.len() != names.len() + 1
+            || stamps.contains(&0)
+            || stamps.windows(2).any(|w| w[1] < w[0])
+        {
+            continue;
+        }
+        for (part, w) in parts.iter_mut().zip(stamps.windows(2)) {
+            part.record_between(w[0], w[1]);
+        }
+    }
+    names
+        .iter()
+        .zip(parts)
+        .map(|(name, l)| ((*name).to_string(), l.summary()))
+        .collect()
+}
+
+/// Request created → the loop woke → the sources read → the first write began → the frame
+/// written, for each `(request created, frame written)` sample whose frame was its pass's first
+/// write.
+pub fn command(samples: &[(u64, u64)], passes: &[PassStamps]) -> Split {
+    let by_written: HashMap<u64, &PassStamps> = passes
+        .iter()
+        .filter(|p| p.written != 0)
+        .map(|p| (p.written, p))
+        .collect();
+    split(
+        &[
+            "request created → loop woke",
+            "loop woke → request read",
+            "request read → write begun (mux, driver, encoding)",
+            "write begun → frame written",
+        ],
+        samples.iter().filter_map(|&(created, written)| {
+            let p = by_written.get(&written)?;
+            Some(vec![
+                created,
+                p.woke,
+                p.requests_read,
+                p.write_started,
+                written,
+            ])
+        }),
+    )
+}
+
+/// Frame read → the sample handed to iceoryx2 → the state readers woken at the end of its pass →
+/// the reader has it, for each `(frame read, handed, received)` sample handed within a pass of
+/// the trace (from the pass's first state handed to its readers woken).
+pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
+    let mut with_state: Vec<&PassStamps> = passes
+        .iter()
+        .filter(|p| p.state_handed != 0 && p.state_readers_woken != 0)
+        .collect();
+    with_state.sort_by_key(|p| p.state_handed);
+    // The last pass that handed a state at or before the sample: the sample's own when it was
+    // handed before that pass woke the readers (else its stamps are out of order: left out).
+    let pass_of = |handed: u64| {
+        let after = with_state.partition_point(|p| p.state_handed <= handed);
+        with_state.get(after.checked_sub(1)?).copied()
+    };
+    split(
+        &[
+            "frame read → handed to iceoryx2 (decode, state)",
+            "handed → readers woken (the rest of the pass)",
+            "readers woken → reader has it",
+        ],
+        samples.iter().filter_map(|&(read, handed, received)| {
+            let p = pass_of(handed)?;
+            Some(vec![read, handed, p.state_readers_woken, received])
+        }),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_command_sample_is_split_at_its_passes_stamps_and_one_without_its_pass_is_left_out() {
+        let passes = [PassStamps {
+            woke: 1_050_000,
+            requests_read: 1_052_000,
+            write_started: 1_055_000,
+            written: 1_060_000,
+            ..PassStamps::default()
+        }];
+        let split = command(&[(1_000_000, 1_060_000), (2_000_000, 2_100_000)], &passes);
+        // Whole µs (the histogram keeps 3 significant digits).
+        let us: Vec<(u64, u64)> = split
+            .iter()
+            .map(|(_, s)| (s.p50_us as u64, s.count))
+            .collect();
+        assert_eq!(us, vec![(50, 1), (2, 1), (3, 1), (5, 1)], "{split:?}");
+    }
+
+    #[test]
+    fn a_state_sample_counts_within_its_pass_and_one_outside_every_pass_is_left_out() {
+        let passes = [
+            PassStamps {
+                state_handed: 110,
+                state_sent: 120,
+                state_readers_woken: 150,
+                ..PassStamps::default()
+            },
+            PassStamps {
+                state_handed: 300,
+                state_readers_woken: 400,
+                ..PassStamps::default()
+            },
+        ];
+        // The pass's second sample (handed at 130) counts; one handed at 200 belongs to no pass.
+        let split = state(
+            &[(100, 130, 190), (180, 200, 290), (250, 300, 450)],
+            &passes,
+        );
+        assert!(split.iter().all(|(_, s)| s.count == 2), "{split:?}");
+        assert_eq!(split[1].1.max_us, 0.1, "{split:?}");
+    }
+}

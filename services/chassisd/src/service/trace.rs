@@ -1,0 +1,127 @@
+//! The pass trace, for `chassis-bench`'s table of where each microsecond goes: with
+//! `CHASSIS_PASS_TRACE=FILE` in its environment, the shell keeps the stamps it takes inside each
+//! pass that wrote a frame or published a state, in memory (at most [`MAX_PASSES`], the first
+//! ones), and writes them to FILE as the service stops. Without the variable nothing is kept and
+//! no stamp is taken beyond the ones the service takes anyway.
+//!
+//! FILE: a header line naming the columns, then one line per pass, `CLOCK_MONOTONIC` ns, 0 where
+//! the pass did not do the thing: `woke` (the engine's first clock reading of the pass: the mux
+//! decision's `stamp_ns`), `requests_read` (the read of the sources that took a request returned),
+//! `write_started` and `written` (the pass's first write to the bus began; its frame was out:
+//! the write returned, or the flush that carried a held frame did — the frame tap's TX stamp), `state_handed` (the first state sample loaned: its `published_ns`),
+//! `state_sent` (its send returned), `state_readers_woken` (the state readers' notification
+//! returned).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use chassis_ipc::PASS_TRACE_ENV;
+
+/// Most passes kept (7 stamps each: about 11 MB).
+pub(crate) const MAX_PASSES: usize = 200_000;
+
+/// The stamps of one pass, ns (0: not taken).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct PassStamps {
+    pub woke: u64,
+    pub requests_read: u64,
+    pub write_started: u64,
+    pub written: u64,
+    pub state_handed: u64,
+    pub state_sent: u64,
+    pub state_readers_woken: u64,
+}
+
+impl PassStamps {
+    const HEADER: &'static str =
+        "woke requests_read write_started written state_handed state_sent state_readers_woken";
+
+    fn line(&self) -> String {
+        format!(
+            "{} {} {} {} {} {} {}",
+            self.woke,
+            self.requests_read,
+            self.write_started,
+            self.written,
+            self.state_handed,
+            self.state_sent,
+            self.state_readers_woken
+        )
+    }
+
+    /// Sets `slot` to `now` unless the pass already took it.
+    pub fn first(slot: &mut u64, now: u64) {
+        if *slot == 0 {
+            *slot = now;
+        }
+    }
+}
+
+/// The passes kept and the one under way.
+#[derive(Debug)]
+pub(crate) struct PassTrace {
+    path: PathBuf,
+    passes: Vec<PassStamps>,
+    /// The pass under way.
+    pub current: PassStamps,
+}
+
+impl PassTrace {
+    /// The trace `CHASSIS_PASS_TRACE` asks for, if it does.
+    pub fn from_env() -> Option<Self> {
+        let path = std::env::var_os(PASS_TRACE_ENV)?;
+        Some(Self {
+            path: path.into(),
+            passes: Vec::with_capacity(MAX_PASSES),
+            current: PassStamps::default(),
+        })
+    }
+
+    /// Ends the pass under way: kept when it wrote or published a state.
+    pub fn end_pass(&mut self) {
+        let pass = std::mem::take(&mut self.current);
+        if (pass.written != 0 || pass.state_handed != 0) && self.passes.len() < MAX_PASSES {
+            self.passes.push(pass);
+        }
+    }
+
+    /// Writes the passes kept to the file.
+    pub fn write_out(&self) -> std::io::Result<()> {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(&self.path)?);
+        writeln!(out, "{}", PassStamps::HEADER)?;
+        for pass in &self.passes {
+            writeln!(out, "{}", pass.line())?;
+        }
+        out.flush()
+    }
+
+    pub fn path(&self) -> &std::path::Path {
+        &self.path
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_passes_that_wrote_or_published_are_kept_and_a_stamp_is_the_first_of_its_pass() {
+        let dir = std::env::temp_dir().join(format!("pass-trace-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut trace = PassTrace {
+            path: dir.join("passes.txt"),
+            passes: Vec::new(),
+            current: PassStamps::default(),
+        };
+        PassStamps::first(&mut trace.current.woke, 10);
+        trace.end_pass();
+        PassStamps::first(&mut trace.current.woke, 20);
+        PassStamps::first(&mut trace.current.written, 25);
+        PassStamps::first(&mut trace.current.written, 27);
+        trace.end_pass();
+        trace.write_out().unwrap();
+        let text = std::fs::read_to_string(trace.path()).unwrap();
+        assert_eq!(text, format!("{}\n20 0 0 25 0 0 0\n", PassStamps::HEADER));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
