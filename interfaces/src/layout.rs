@@ -283,7 +283,7 @@ pub fn constants() -> Vec<ConstantGroup> {
     let mut all = vec![
         describe_constants!(flags LinkFlags: u32 {
             CHASSIS_SILENT, BUS_DOWN, COMMAND_MODE, RC_AUTHORITY, STEERING_ZERO_PENDING,
-            GPS_DOWN, SILENT_MODE, CAN_ERROR_PASSIVE, CAN_BUS_OFF,
+            GPS_DOWN, SILENT_MODE, CAN_ERROR_PASSIVE, CAN_BUS_OFF, REMOTE_LOST,
         }),
         describe_constants!(enum ControlMode: u8 { UNKNOWN, STANDBY, COMMAND, REMOTE, SERIAL }),
         describe_constants!(enum WireProtocol: u8 { OWN, V1, V2, DETECTING }),

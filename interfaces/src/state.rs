@@ -151,10 +151,15 @@ impl LinkFlags {
     /// The CAN controller is bus-off: it takes no part in the bus until it is restarted
     /// (`restart-ms`, or the interface taken down and up); nothing reaches the chassis.
     pub const CAN_BUS_OFF: u32 = 1 << 8;
+    /// Set by a mirror on another computer (`chassis-zenoh --mirror`), never by chassisd:
+    /// nothing has arrived from the robot over the network for longer than the mirror's loss
+    /// limit (or its liveliness token is gone). The sample is the last one received, published
+    /// again; the robot's own remote sources time out on the robot.
+    pub const REMOTE_LOST: u32 = 1 << 9;
 
     /// Names of the set bits, for logs and JSON.
     pub fn names(bits: u32) -> Vec<&'static str> {
-        const NAMES: [(u32, &str); 9] = [
+        const NAMES: [(u32, &str); 10] = [
             (LinkFlags::CHASSIS_SILENT, "chassis_silent"),
             (LinkFlags::BUS_DOWN, "bus_down"),
             (LinkFlags::COMMAND_MODE, "command_mode"),
@@ -164,6 +169,7 @@ impl LinkFlags {
             (LinkFlags::SILENT_MODE, "silent_mode"),
             (LinkFlags::CAN_ERROR_PASSIVE, "can_error_passive"),
             (LinkFlags::CAN_BUS_OFF, "can_bus_off"),
+            (LinkFlags::REMOTE_LOST, "remote_lost"),
         ];
         NAMES
             .iter()

@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 mod baseline;
 mod fanout;
+mod fleet;
 mod parts;
 mod paths;
 mod placement;
@@ -45,6 +46,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum RoleCmd {
+    /// One operator mirroring 1, 5, 10, 20 simulated robots over Zenoh (root): its CPU and
+    /// memory, each robot's state latency; `--doc` writes the `## Fleet` section.
+    Fleet(fleet::FleetArgs),
     /// (internal) the far end of a measurement.
     #[command(hide = true)]
     Role {
@@ -1037,6 +1041,9 @@ fn main() -> ExitCode {
         }) => throughput::record_titan(&out, seconds).map(|frames| {
             eprintln!("{frames} frames written to {}", out.display());
         }),
+        Some(RoleCmd::Fleet(args)) => {
+            fleet::run(&args).and_then(|report| fleet::write(&report, &args))
+        }
         None => run(&cli.run).and_then(|report| {
             print!("{}", report.table());
             if let Some(path) = &cli.run.json {
@@ -1047,7 +1054,15 @@ fn main() -> ExitCode {
                 report.plot(path)?;
             }
             if let Some(path) = &cli.run.doc {
-                std::fs::write(path, report.markdown())
+                // The fleet section comes from `chassis-bench fleet`: kept as it is.
+                let kept = std::fs::read_to_string(path)
+                    .ok()
+                    .and_then(|text| fleet::section_of(&text));
+                let text = match kept {
+                    Some(section) => fleet::splice(&report.markdown(), &section),
+                    None => report.markdown(),
+                };
+                std::fs::write(path, text)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
             if cli.run.smoke {

@@ -839,7 +839,7 @@ pub fn cpu_seconds_of_thread(pid: u32, tid: u32) -> anyhow::Result<f64> {
     stat_cpu_seconds(&format!("{task}/stat"))
 }
 
-fn stat_cpu_seconds(path: &str) -> anyhow::Result<f64> {
+pub(crate) fn stat_cpu_seconds(path: &str) -> anyhow::Result<f64> {
     let stat = std::fs::read_to_string(path)?;
     // Fields after the command name (which may contain spaces) start after the last ')'.
     let rest = stat

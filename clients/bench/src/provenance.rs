@@ -12,6 +12,8 @@ use serde::Serialize;
 pub struct CpuTimes {
     total: u64,
     steal: u64,
+    /// idle + iowait.
+    idle: u64,
 }
 
 impl CpuTimes {
@@ -31,7 +33,18 @@ impl CpuTimes {
         Ok(Self {
             total: fields.iter().take(8).sum(),
             steal,
+            idle: fields.get(3).copied().unwrap_or(0) + fields.get(4).copied().unwrap_or(0),
         })
+    }
+}
+
+impl CpuTimes {
+    /// Ticks every CPU was busy (not idle, not waiting for I/O) and ticks in all, since `self`
+    /// up to `later`.
+    pub fn busy_since(&self, later: &CpuTimes) -> (u64, u64) {
+        let total = later.total.saturating_sub(self.total);
+        let idle = later.idle.saturating_sub(self.idle);
+        (total.saturating_sub(idle), total)
     }
 }
 

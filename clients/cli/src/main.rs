@@ -15,6 +15,7 @@ mod described;
 mod detect;
 mod doctor;
 mod encode;
+mod fleet;
 mod interfaces;
 mod live;
 mod procs;
@@ -86,9 +87,23 @@ enum Cmd {
         /// The robot's name (chassisd --name); accepted before or after the action.
         #[arg(long, default_value = "titan", global = true)]
         name: String,
+        /// Every robot served on this computer (its own or mirrored): `estop` only. Each
+        /// robot's answer is listed; a robot that does not answer within --timeout-ms is named
+        /// NOT stopped and the exit status is 1. Releases stay per robot (--name).
+        #[arg(long, global = true)]
+        all: bool,
+        /// With --all: each answer as JSON.
+        #[arg(long, global = true, requires = "all")]
+        json: bool,
+        #[command(flatten)]
+        estop: fleet::EstopArgs,
         #[command(subcommand)]
         command: live::ControlCmd,
     },
+    /// Every robot served on this computer (by its chassisd, or mirrored by
+    /// `chassis-zenoh --mirror-all`), one row each: kind, protocol, mode, battery, faults, the
+    /// mux's winner and speed, link age and latency, e-stop. `e` e-stops them all.
+    Fleet(fleet::FleetArgs),
     /// A live dashboard: state, mux decisions, bus statistics (frames/s per id, errors, drops)
     /// and end-to-end latency.
     Top(top::TopArgs),
@@ -252,9 +267,23 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             what: PubWhat::Velocity(args),
         } => live::publish(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Status { name, json } => live::status(&name, json).map(|()| ExitCode::SUCCESS),
-        Cmd::Control { name, command } => {
+        Cmd::Control {
+            all: true,
+            json,
+            estop,
+            command,
+            ..
+        } => match command {
+            live::ControlCmd::Estop => fleet::estop_all(&estop, json),
+            _ => anyhow::bail!(
+                "--all takes estop only: a release (or any other action) is asked of one robot \
+                 at a time (--name NAME)"
+            ),
+        },
+        Cmd::Control { name, command, .. } => {
             live::control(&name, &command).map(|()| ExitCode::SUCCESS)
         }
+        Cmd::Fleet(args) => fleet::run(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Sim { name, command } => live::sim(&name, &command).map(|()| ExitCode::SUCCESS),
         Cmd::Top(args) => top::run(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Demo(args) => demo::run(&args).map(|()| ExitCode::SUCCESS),
@@ -310,6 +339,30 @@ mod tests {
             assert_eq!(name_of(args), "r1", "{args:?}");
         }
         assert_eq!(name_of(&["chassis", "control", "estop"]), "titan");
+    }
+
+    #[test]
+    fn control_all_is_the_fleet_estop() {
+        let cli = Cli::try_parse_from([
+            "chassis",
+            "control",
+            "--all",
+            "estop",
+            "--timeout-ms",
+            "500",
+        ])
+        .unwrap();
+        match cli.command {
+            Cmd::Control {
+                all: true, estop, ..
+            } => assert_eq!(estop.timeout_ms, 500),
+            other => panic!("{other:?}"),
+        }
+        let err = super::run(
+            Cli::try_parse_from(["chassis", "control", "--all", "estop-release"]).unwrap(),
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("one robot at a time"), "{err}");
     }
 
     #[test]

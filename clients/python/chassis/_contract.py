@@ -1032,7 +1032,8 @@ class LinkFlags(Constants):
     SILENT_MODE = 64
     CAN_ERROR_PASSIVE = 128
     CAN_BUS_OFF = 256
-    NAMES = {1: 'chassis-silent', 2: 'bus-down', 4: 'command-mode', 8: 'rc-authority', 16: 'steering-zero-pending', 32: 'gps-down', 64: 'silent-mode', 128: 'can-error-passive', 256: 'can-bus-off'}
+    REMOTE_LOST = 512
+    NAMES = {1: 'chassis-silent', 2: 'bus-down', 4: 'command-mode', 8: 'rc-authority', 16: 'steering-zero-pending', 32: 'gps-down', 64: 'silent-mode', 128: 'can-error-passive', 256: 'can-bus-off', 512: 'remote-lost'}
 
 
 class RequestFlags(Constants):

@@ -22,10 +22,16 @@
 //! recreates state, mux, frames, control and the remote sources in the local iceoryx2, so that
 //! `chassis top --name titan` and `chassis-teleop --name titan --source remote` work there.
 //!
+//! A fleet from one operator's computer: `--connect` each robot's endpoint (repeatable) with
+//! `--mirror-all` (or `--robots titan,scout$*`) instead of `--name … --mirror`: every robot found
+//! through Zenoh's liveliness is mirrored under its name, robots switched on later too, and a
+//! robot whose link is lost is shown so (`LinkFlags::REMOTE_LOST`) within a second.
+//!
 //! `chassis-zenoh gen-certs DIR --host 192.168.1.20` makes the certificates (a CA, the robot's,
 //! the operator's). Plain `tcp/` is refused beyond loopback unless `--insecure`.
 
 mod certs;
+mod fleet;
 mod mirror;
 mod net;
 mod raw;
@@ -60,6 +66,14 @@ struct Cli {
     /// Operator side: recreate the robot's services in this computer's iceoryx2.
     #[arg(long, requires = "connect")]
     mirror: bool,
+    /// Operator side: mirror every robot found on the endpoints given (Zenoh liveliness), each
+    /// under its name, including robots that appear later. No --name.
+    #[arg(long, requires = "connect", conflicts_with_all = ["mirror", "name"])]
+    mirror_all: bool,
+    /// Operator side: mirror the robots these names or key-expression chunks name (comma
+    /// separated: `titan,scout1`, `scout$*`), found as --mirror-all finds them.
+    #[arg(long, value_delimiter = ',', requires = "connect", conflicts_with_all = ["mirror", "name"])]
+    robots: Vec<String>,
     /// The directory `chassis-zenoh gen-certs` wrote (for tls/ endpoints).
     #[arg(long)]
     certs: Option<PathBuf>,
@@ -127,8 +141,29 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         );
         return Ok(());
     }
+    if cli.mirror_all || !cli.robots.is_empty() {
+        chassis_client::install_signal_handlers();
+        let patterns = if cli.robots.is_empty() {
+            vec!["*".to_string()]
+        } else {
+            cli.robots.clone()
+        };
+        for pattern in &patterns {
+            fleet::check_pattern(pattern)?;
+        }
+        return fleet::run(&fleet::Config {
+            net: net::Net {
+                role: net::Role::Operator,
+                endpoints: cli.connect,
+                certs: cli.certs,
+                insecure: cli.insecure,
+                lease_ms: cli.lease_ms,
+            },
+            patterns,
+        });
+    }
     let Some(name) = cli.name.clone() else {
-        anyhow::bail!("--name ROBOT is needed (or the gen-certs command)");
+        anyhow::bail!("--name ROBOT is needed (or --mirror-all, or the gen-certs command)");
     };
     if !chassis_client::valid_robot_name(&name) {
         anyhow::bail!("'{name}' is not a valid robot name (1-16 of a-z 0-9 - _)");

@@ -37,8 +37,9 @@ use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::{Sample, SampleKind};
 use zerocopy::IntoBytes as _;
 
+use crate::fleet::{LOST_AFTER, LinkWatch, Lost};
 use crate::net::{self, Net};
-use crate::robot::{finish, guard, remote_sources};
+use crate::robot::{guard, remote_sources};
 use crate::wire::{Keys, Wire};
 
 /// How long a control request waits for the robot's answer.
@@ -75,34 +76,44 @@ fn zerr(what: &str) -> impl FnOnce(zenoh::Error) -> anyhow::Error + '_ {
 
 /// Runs the operator side until SIGINT/SIGTERM or a thread's failure.
 pub fn run(config: &Config) -> anyhow::Result<()> {
-    let keys = Keys::new(&config.name);
-    let node = node(&config.name, "mirror")?;
-    let state_name = service_name(&config.name, ServiceKind::State);
-    let state = match STATE.create(&node, &state_name)?.publisher() {
-        Ok(writer) => writer,
-        Err(chassis_ipc::IpcError::Taken { .. }) => anyhow::bail!(
-            "robot '{}' is already served on this computer (chassisd or another mirror holds {state_name}); \
-             give the mirror its own CHASSIS_IPC_PREFIX or stop the other",
-            config.name
-        ),
-        Err(e) => return Err(e.into()),
-    };
-    let mux = MUX
-        .create(&node, &service_name(&config.name, ServiceKind::Mux))?
-        .publisher()?;
-    let frames = FRAMES
-        .create(&node, &service_name(&config.name, ServiceKind::Frames))?
-        .publisher()?;
-    let description = DESCRIPTION
-        .create(&node, &service_name(&config.name, ServiceKind::Description))?
-        .publisher()?;
-
     let session = net::open(net::config(&config.net, &config.name, &[])?)?;
     eprintln!(
         "chassis-zenoh: mirroring robot '{}' from {}",
         config.name,
         config.net.endpoints.join(", ")
     );
+    let stop = Arc::new(AtomicBool::new(false));
+    let result = serve(&config.name, &session, &stop);
+    let _ = session.close().wait();
+    result
+}
+
+/// Mirrors the robot `name` over `session` into this computer's iceoryx2 until SIGINT/SIGTERM,
+/// `stop`, or a thread's failure (which raises `stop`). The session stays open: a fleet's
+/// mirrors share one.
+pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> anyhow::Result<()> {
+    let keys = Keys::new(name);
+    let node = node(name, "mirror")?;
+    let state_name = service_name(name, ServiceKind::State);
+    let state = match STATE.create(&node, &state_name)?.publisher() {
+        Ok(writer) => writer,
+        Err(chassis_ipc::IpcError::Taken { .. }) => anyhow::bail!(
+            "robot '{}' is already served on this computer (chassisd or another mirror holds {state_name}); \
+             give the mirror its own CHASSIS_IPC_PREFIX or stop the other",
+            name
+        ),
+        Err(e) => return Err(e.into()),
+    };
+    let mux = MUX
+        .create(&node, &service_name(name, ServiceKind::Mux))?
+        .publisher()?;
+    let frames = FRAMES
+        .create(&node, &service_name(name, ServiceKind::Frames))?
+        .publisher()?;
+    let description = DESCRIPTION
+        .create(&node, &service_name(name, ServiceKind::Description))?
+        .publisher()?;
+
     let (tx, rx) = mpsc::channel::<Incoming>();
     let subscribe = |key: &str, wrap: fn(Sample) -> Incoming| {
         let tx = tx.clone();
@@ -160,11 +171,10 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
         .map_err(zerr(&keys.alive))?;
     drop(tx);
 
-    let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
     {
         let (name, session, keys, stop) = (
-            config.name.clone(),
+            name.to_string(),
             session.clone(),
             keys.clone(),
             stop.clone(),
@@ -193,6 +203,7 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             );
         }
     };
+    let mut link = LinkWatch::new(LOST_AFTER);
     let mut result = Ok(());
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
         // The description is kept for late joiners: a reader that connects here gets it once
@@ -202,16 +213,42 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             if let Err(e) = description.publisher.update_connections() {
                 tracing::debug!("connecting late readers of the description: {e:?}");
             }
+            // And of the robot's last decision, which a lost robot does not renew.
+            if let Err(e) = mux.publisher.update_connections() {
+                tracing::debug!("connecting late readers of the mux: {e:?}");
+            }
         }
         let incoming = match rx.recv_timeout(POLL) {
             Ok(incoming) => incoming,
-            Err(mpsc::RecvTimeoutError::Timeout) => continue,
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                // Silence: the last state again, marked lost, once the loss limit is passed.
+                if let Some(lost) = link.poll(now_ns()) {
+                    report_lost(name, &lost);
+                    if let Err(e) = send(&state, lost.state) {
+                        result = Err(e);
+                        break;
+                    }
+                }
+                continue;
+            }
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
         };
+        if let Some(lost) = link.poll(now_ns()) {
+            report_lost(name, &lost);
+            if let Err(e) = send(&state, lost.state) {
+                result = Err(e);
+                break;
+            }
+        }
         let sent = match incoming {
             Incoming::State(sample) => {
                 match states.decode(sample.encoding(), &sample.payload().to_bytes()) {
-                    Ok(s) => send(&state, s),
+                    Ok(s) => {
+                        if link.heard(now_ns(), &s) {
+                            eprintln!("chassis-zenoh: robot '{name}' heard again");
+                        }
+                        send(&state, s)
+                    }
                     Err(e) => {
                         drop_sample("state", &e);
                         Ok(())
@@ -224,7 +261,7 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
                         for source in remote_sources(&m) {
                             if sources_started.insert(source.clone()) {
                                 let (name, session, keys, stop) = (
-                                    config.name.clone(),
+                                    name.to_string(),
                                     session.clone(),
                                     keys.clone(),
                                     stop.clone(),
@@ -263,7 +300,7 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
                         described = Some((d.seq, d.stamp_ns));
                         eprintln!(
                             "chassis-zenoh: robot '{}' is {} ({}, {} sensors, {} joints)",
-                            config.name,
+                            name,
                             d.display_name(),
                             d.model(),
                             d.sensors().len(),
@@ -280,18 +317,24 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             }
             Incoming::Alive(alive) => {
                 if alive {
-                    ask_description(&session);
+                    ask_description(session);
                 }
                 eprintln!(
                     "chassis-zenoh: robot '{}' {}",
-                    config.name,
+                    name,
                     if alive {
                         "reachable"
                     } else {
                         "lost (its remote sources time out on the robot)"
                     }
                 );
-                Ok(())
+                match link.alive(now_ns(), alive) {
+                    Some(lost) => {
+                        report_lost(name, &lost);
+                        send(&state, lost.state)
+                    }
+                    None => Ok(()),
+                }
             }
         };
         if let Err(e) = sent {
@@ -299,7 +342,41 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
             break;
         }
     }
-    finish(&stop, threads, &session, result)
+    join(stop, threads, result)
+}
+
+fn report_lost(name: &str, lost: &Lost) {
+    if lost.first {
+        tracing::warn!(robot = name, "link lost: {}", lost.why);
+        eprintln!(
+            "chassis-zenoh: robot '{name}' LOST: {} (shown here as remote_lost; its remote \
+             sources time out on the robot)",
+            lost.why
+        );
+    }
+}
+
+/// Ends one robot's mirror: raises its stop flag, joins its threads, and reports the loop's own
+/// error first, then every thread's.
+fn join(
+    stop: &AtomicBool,
+    threads: Vec<std::thread::JoinHandle<anyhow::Result<()>>>,
+    result: anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    stop.store(true, Ordering::Relaxed);
+    let mut failures = Vec::new();
+    for thread in threads {
+        match thread.join() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => failures.push(format!("{e:#}")),
+            Err(_) => failures.push("a thread panicked".into()),
+        }
+    }
+    result?;
+    if !failures.is_empty() {
+        anyhow::bail!("{}", failures.join("; "));
+    }
+    Ok(())
 }
 
 fn send<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(

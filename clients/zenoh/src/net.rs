@@ -116,6 +116,9 @@ pub fn config(net: &Net, robot: &str, remote_sources: &[String]) -> anyhow::Resu
     set(&mut config, "mode", "\"peer\"")?;
     // No discovery on any interface: the peers are the endpoints given, nothing else.
     set(&mut config, "scouting/multicast/enabled", "false")?;
+    // Nor does a peer learn other peers from the ones it knows: robots of one operator never
+    // try to connect to each other.
+    set(&mut config, "scouting/gossip/enabled", "false")?;
     set(
         &mut config,
         "transport/link/tx/lease",
@@ -191,6 +194,15 @@ fn access_list(robot: &str, remote_sources: &[String]) -> serde_json::Value {
             "flows": ["ingress"],
             "permission": "allow",
             "key_exprs": [all],
+        }),
+        // A fleet's operator asks which robots are alive with one wildcard (`chassis/*/alive`):
+        // this robot answers with its own token only.
+        json!({
+            "id": "operator-finds-robots",
+            "messages": ["declare_liveliness_subscriber", "liveliness_query"],
+            "flows": ["ingress"],
+            "permission": "allow",
+            "key_exprs": ["chassis/*/alive"],
         }),
         json!({
             "id": "operator-controls",

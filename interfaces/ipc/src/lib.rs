@@ -41,6 +41,6 @@ pub use limits::{
 };
 pub use names::{
     IPC_PREFIX_ENV, PASS_TRACE_ENV, REPLY_SUFFIX, ServiceKind, TEST_LOOP_STALL_ENV, config,
-    reply_name, service_name,
+    reply_name, robots, service_name,
 };
 pub use ports::{ClientPorts, Exchange, Reader, ServerPorts, Topic, Writer, node};

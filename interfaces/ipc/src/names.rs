@@ -83,6 +83,39 @@ pub fn config(prefix: Option<&str>) -> Result<Config, IpcError> {
     Ok(config)
 }
 
+/// The robots whose `state` service exists under `config` (this computer's iceoryx2 with one
+/// file prefix), sorted by name: each `chassis/<robot>/state` publish-subscribe service, whether
+/// chassisd or a mirror (`chassis-zenoh`) created it. A service outlives a killed owner until
+/// the next cleanup, so a listed robot may have no publisher: open it to know.
+pub fn robots(config: &Config) -> Result<Vec<String>, IpcError> {
+    let mut names = Vec::new();
+    ipc::Service::list(config, |service| {
+        let details = &service.static_details;
+        if matches!(
+            details.messaging_pattern(),
+            iceoryx2::service::static_config::messaging_pattern::MessagingPattern::PublishSubscribe(
+                _
+            )
+        ) && let Some(robot) = robot_of_state(details.name().as_str())
+        {
+            names.push(robot.to_string());
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(IpcError::service("chassis/*/state", "listing"))?;
+    names.sort();
+    names.dedup();
+    Ok(names)
+}
+
+/// The robot a state service's name belongs to (`chassis/<robot>/state`).
+fn robot_of_state(service: &str) -> Option<&str> {
+    service
+        .strip_prefix("chassis/")
+        .and_then(|rest| rest.strip_suffix("/state"))
+        .filter(|robot| !robot.is_empty() && !robot.contains('/'))
+}
+
 pub(crate) fn iceoryx_name(name: &str) -> Result<ServiceName, IpcError> {
     name.try_into().map_err(|e| IpcError::ServiceName {
         name: name.to_string(),
@@ -112,6 +145,14 @@ mod tests {
             reply_name(&service_name("titan", ServiceKind::Control)),
             "chassis/titan/control/reply"
         );
+    }
+
+    #[test]
+    fn a_robot_is_named_by_its_state_service_only() {
+        assert_eq!(robot_of_state("chassis/titan/state"), Some("titan"));
+        assert_eq!(robot_of_state("chassis/titan/mux"), None);
+        assert_eq!(robot_of_state("chassis/titan/cmd/state"), None);
+        assert_eq!(robot_of_state("chassis//state"), None);
     }
 
     #[test]

@@ -1,0 +1,648 @@
+//! `chassis-bench fleet`: one operator, many simulated robots, on this machine.
+//!
+//! In one network namespace of its own (loopback only: nothing reaches a real interface), N
+//! robots run as on their computers — `chassisd --robot KIND` on its simulated chassis and
+//! `chassis-zenoh --listen tcp/127.0.0.1:PORT`, under one iceoryx2 prefix — and one operator's
+//! `chassis-zenoh --connect … --mirror-all` mirrors them under another prefix. Robots are added
+//! (1, 5, 10, 20 by default; the kinds in turn: TITAN, SCOUT MINI, HUNTER), and for each size
+//! a fresh operator is started and measured once it mirrors every robot:
+//!
+//! * the operator's CPU (its process' user + system time over the window, % of one core) and
+//!   resident memory (`VmRSS` at the end, `VmHWM` its peak);
+//! * each robot's state latency to the operator as `chassis fleet --once --json` measures it:
+//!   chassisd handed the sample to iceoryx2 on the robot (`published_ns`) → a reader on the
+//!   operator's side woken by the mirrored sample (both stamps from this machine's
+//!   `CLOCK_MONOTONIC`), and the state samples per second that arrived;
+//! * the robot sides' CPU, and the whole machine's busy share over the window (the robots'
+//!   own load shares the operator's two cores here).
+//!
+//! `--doc FILE` writes the section `## Fleet` of that document (the rest is kept); the main
+//! run's `--doc` keeps this section as it is.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use chassis_client::{ChassisState, Robot, now_ns};
+use clap::Args;
+use serde::Serialize;
+
+use crate::paths;
+use crate::provenance::{CpuTimes, Provenance};
+use crate::report::Machine;
+
+/// The heading of the section this writes.
+pub const HEADING: &str = "## Fleet";
+const BASE_PORT: u16 = 7600;
+const KINDS: [&str; 3] = ["titan", "scout-mini", "hunter"];
+
+#[derive(Debug, Args)]
+pub struct FleetArgs {
+    /// Fleet sizes to measure, ascending (robots are added, never restarted).
+    #[arg(long, value_delimiter = ',', default_values_t = [1usize, 5, 10, 20])]
+    pub sizes: Vec<usize>,
+    /// Seconds measured at each size.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Write the `## Fleet` section of this markdown document (e.g. docs/PERFORMANCE.md).
+    #[arg(long)]
+    pub doc: Option<PathBuf>,
+    /// Write the figures as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write files from a tree with uncommitted changes (they then say DIRTY).
+    #[arg(long)]
+    pub allow_dirty: bool,
+    /// Scratch directory for logs (default: a new one under /tmp, removed at the end).
+    #[arg(long)]
+    pub dir: Option<PathBuf>,
+}
+
+/// One robot's state path to the operator at one fleet size.
+#[derive(Debug, Clone, Serialize)]
+pub struct RobotFigures {
+    pub name: String,
+    pub kind: String,
+    pub samples_per_s: f64,
+    pub p50_ms: f64,
+    pub p99_ms: f64,
+    pub max_ms: f64,
+}
+
+/// One fleet size.
+#[derive(Debug, Clone, Serialize)]
+pub struct SizeFigures {
+    pub robots: usize,
+    pub operator_cpu_pct: f64,
+    pub operator_rss_mib: f64,
+    pub operator_peak_rss_mib: f64,
+    pub operator_threads: u64,
+    /// Every robot side together, % of one core.
+    pub robot_sides_cpu_pct: f64,
+    /// The whole machine's busy share over the window, % of all cores.
+    pub machine_busy_pct: f64,
+    pub samples_per_s: f64,
+    /// The median of the robots' p50s, the worst p99 and the worst max.
+    pub median_p50_ms: f64,
+    pub worst_p99_ms: f64,
+    pub worst_max_ms: f64,
+    pub per_robot: Vec<RobotFigures>,
+    /// Robots the operator did not show with fresh samples.
+    pub missing: Vec<String>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct FleetReport {
+    pub provenance: Provenance,
+    /// `release build` or `debug build (…)`: the profile of the binaries measured.
+    pub build: String,
+    pub machine: Machine,
+    pub seconds: f64,
+    pub sizes: Vec<SizeFigures>,
+}
+
+/// Processes stopped (SIGTERM, then waited for) on drop, newest first.
+#[derive(Default)]
+struct Children(Vec<Child>);
+
+impl Children {
+    fn push(&mut self, child: Child) -> u32 {
+        let pid = child.id();
+        self.0.push(child);
+        pid
+    }
+}
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for child in self.0.iter_mut().rev() {
+            if let Ok(pid) = i32::try_from(child.id()) {
+                let _ = nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(pid),
+                    nix::sys::signal::Signal::SIGTERM,
+                );
+            }
+        }
+        for child in self.0.iter_mut().rev() {
+            let _ = child.wait();
+        }
+    }
+}
+
+/// A network namespace with loopback only, removed on drop.
+struct Netns(String);
+
+impl Netns {
+    fn new() -> anyhow::Result<Self> {
+        let name = format!("cfb{}", std::process::id() % 100_000);
+        for args in [
+            vec!["netns", "add", name.as_str()],
+            vec!["-n", name.as_str(), "link", "set", "lo", "up"],
+        ] {
+            let out = Command::new("ip")
+                .args(&args)
+                .output()
+                .context("running ip (install iproute2)")?;
+            if !out.status.success() {
+                bail!(
+                    "ip {}: {}",
+                    args.join(" "),
+                    String::from_utf8_lossy(&out.stderr).trim()
+                );
+            }
+        }
+        Ok(Self(name))
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        let _ = Command::new("ip").args(["netns", "del", &self.0]).status();
+    }
+}
+
+fn log_file(dir: &Path, name: &str) -> anyhow::Result<Stdio> {
+    let path = dir.join(format!("{name}.log"));
+    Ok(Stdio::from(
+        std::fs::File::create(&path).with_context(|| format!("{}", path.display()))?,
+    ))
+}
+
+/// User + system CPU time of a whole process, s.
+fn process_cpu_s(pid: u32) -> anyhow::Result<f64> {
+    paths::stat_cpu_seconds(&format!("/proc/{pid}/stat"))
+}
+
+fn status_field(pid: u32, field: &str) -> anyhow::Result<f64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix(field))
+        .and_then(|v| v.split_whitespace().next())
+        .with_context(|| format!("no {field}"))?
+        .parse::<f64>()
+        .context(field.to_string())
+}
+
+fn wait_until(what: &str, timeout: Duration, mut ok: impl FnMut() -> bool) -> anyhow::Result<()> {
+    let end = now_ns() + timeout.as_nanos() as u64;
+    while !ok() {
+        if now_ns() > end {
+            bail!("{what} within {timeout:?}");
+        }
+        crate::placement::pause(Duration::from_millis(100));
+    }
+    Ok(())
+}
+
+/// A robot served under `prefix` whose state arrives.
+fn serves(name: &str, prefix: &str) -> bool {
+    Robot::connect_with_prefix(name, Some(prefix)).is_ok_and(|mut r| {
+        r.wait_state(Duration::from_millis(300))
+            .ok()
+            .flatten()
+            .is_some_and(|s: ChassisState| {
+                s.link_flags & chassis_client::LinkFlags::REMOTE_LOST == 0
+            })
+    })
+}
+
+/// Runs the fleet benchmark.
+pub fn run(args: &FleetArgs) -> anyhow::Result<FleetReport> {
+    if !crate::zenoh::possible() {
+        bail!("the fleet benchmark needs root (a network namespace of its own)");
+    }
+    if args.sizes.is_empty() || args.sizes.windows(2).any(|w| w[0] >= w[1]) {
+        bail!("--sizes must be ascending, e.g. 1,5,10,20");
+    }
+    if !(args.seconds.is_finite() && args.seconds >= 1.0) {
+        bail!("--seconds must be at least 1");
+    }
+    let strict = args.doc.is_some() || args.json.is_some();
+    let mut provenance = Provenance::begin(strict, args.allow_dirty)?;
+    let (dir, remove_dir) = match &args.dir {
+        Some(dir) => (dir.clone(), false),
+        None => (
+            std::env::temp_dir().join(format!("chassis-bench-fleet-{}", std::process::id())),
+            true,
+        ),
+    };
+    std::fs::create_dir_all(&dir)?;
+    let result = measure(args, &dir);
+    if remove_dir && result.is_ok() {
+        let _ = std::fs::remove_dir_all(&dir);
+    } else {
+        eprintln!("logs in {}", dir.display());
+    }
+    let sizes = result?;
+    provenance.end()?;
+    let build = if std::env::current_exe()?
+        .to_string_lossy()
+        .contains("/debug/")
+    {
+        "**a debug build** (unoptimised: every figure is higher than a release build's)".into()
+    } else {
+        "release build".into()
+    };
+    Ok(FleetReport {
+        provenance,
+        build,
+        machine: Machine::probe(),
+        seconds: args.seconds,
+        sizes,
+    })
+}
+
+fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
+    let netns = Netns::new()?;
+    let prefix = format!("cfb{}_", std::process::id() % 100_000);
+    let operator_prefix = format!("{prefix}op_");
+    let (chassisd, zenoh, chassis) = (
+        paths::sibling("chassisd")?,
+        paths::sibling("chassis-zenoh")?,
+        paths::sibling("chassis")?,
+    );
+    let mut robots = Children::default();
+    let mut robot_side_pids = Vec::new();
+    let mut names: Vec<(String, &str)> = Vec::new();
+    let mut figures = Vec::new();
+    for &size in &args.sizes {
+        while names.len() < size {
+            let k = names.len();
+            let (name, kind) = (format!("fb{k}"), KINDS[k % KINDS.len()]);
+            robots.push(
+                Command::new(&chassisd)
+                    .args(["--robot", kind, "--name", &name, "--no-safety-monitor"])
+                    .env("CHASSIS_IPC_PREFIX", &prefix)
+                    .env("XDG_STATE_HOME", dir.join("state"))
+                    .env("RUST_LOG", "warn")
+                    .stdout(Stdio::null())
+                    .stderr(log_file(dir, &format!("chassisd-{name}"))?)
+                    .spawn()
+                    .context("starting chassisd")?,
+            );
+            wait_until(
+                &format!("chassisd {name} serving"),
+                Duration::from_secs(30),
+                || serves(&name, &prefix),
+            )?;
+            let listen = format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16);
+            robot_side_pids.push(
+                robots.push(
+                    Command::new("ip")
+                        .args(["netns", "exec", &netns.0])
+                        .arg(&zenoh)
+                        .args(["--name", &name, "--listen", &listen])
+                        .env("CHASSIS_IPC_PREFIX", &prefix)
+                        .env("RUST_LOG", "warn,zenoh=error")
+                        .stdout(Stdio::null())
+                        .stderr(log_file(dir, &format!("zenoh-{name}"))?)
+                        .spawn()
+                        .context("starting chassis-zenoh")?,
+                ),
+            );
+            names.push((name, kind));
+        }
+        eprintln!("fleet of {size}: starting the operator");
+        let mut operator = Children::default();
+        let mut command = Command::new("ip");
+        command.args(["netns", "exec", &netns.0]).arg(&zenoh);
+        for k in 0..size {
+            command.args([
+                "--connect",
+                &format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16),
+            ]);
+        }
+        let operator_pid = operator.push(
+            command
+                .arg("--mirror-all")
+                .env("CHASSIS_IPC_PREFIX", &operator_prefix)
+                .env("RUST_LOG", "warn,zenoh=error")
+                .stdout(Stdio::null())
+                .stderr(log_file(dir, &format!("operator-{size}"))?)
+                .spawn()
+                .context("starting the operator's chassis-zenoh")?,
+        );
+        for (name, _) in &names {
+            wait_until(
+                &format!("the operator mirroring {name}"),
+                Duration::from_secs(60),
+                || serves(name, &operator_prefix),
+            )?;
+        }
+        crate::placement::pause(Duration::from_secs(2));
+
+        let machine0 = CpuTimes::read()?;
+        let cpu0 = process_cpu_s(operator_pid)?;
+        let sides0: f64 = robot_side_pids
+            .iter()
+            .map(|&p| process_cpu_s(p).unwrap_or(0.0))
+            .sum();
+        let start = now_ns();
+        let out = Command::new(&chassis)
+            .args([
+                "fleet",
+                "--once",
+                "--json",
+                "--collect",
+                &args.seconds.to_string(),
+            ])
+            .env("CHASSIS_IPC_PREFIX", &operator_prefix)
+            .output()
+            .context("running chassis fleet")?;
+        let elapsed = now_ns().saturating_sub(start) as f64 / 1e9;
+        let cpu1 = process_cpu_s(operator_pid)?;
+        let sides1: f64 = robot_side_pids
+            .iter()
+            .map(|&p| process_cpu_s(p).unwrap_or(0.0))
+            .sum();
+        let (busy, total) = machine0.busy_since(&CpuTimes::read()?);
+        if !out.status.success() {
+            bail!(
+                "chassis fleet failed: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        let doc: serde_json::Value =
+            serde_json::from_slice(&out.stdout).context("chassis fleet --json")?;
+        let rows = doc["robots"].as_array().context("no robots")?;
+        let mut per_robot = Vec::new();
+        let mut missing = Vec::new();
+        for (name, kind) in &names {
+            let row = rows.iter().find(|r| r["name"] == name.as_str());
+            match row.map(|r| &r["latency"]) {
+                Some(l) if l["count"].as_u64().is_some_and(|c| c > 0) => {
+                    per_robot.push(RobotFigures {
+                        name: name.clone(),
+                        kind: (*kind).to_string(),
+                        samples_per_s: l["count"].as_f64().unwrap_or(0.0) / args.seconds,
+                        p50_ms: l["p50_ms"].as_f64().unwrap_or(f64::NAN),
+                        p99_ms: l["p99_ms"].as_f64().unwrap_or(f64::NAN),
+                        max_ms: l["max_ms"].as_f64().unwrap_or(f64::NAN),
+                    })
+                }
+                _ => missing.push(name.clone()),
+            }
+        }
+        let mut p50s: Vec<f64> = per_robot.iter().map(|r| r.p50_ms).collect();
+        p50s.sort_by(f64::total_cmp);
+        let size_figures = SizeFigures {
+            robots: size,
+            operator_cpu_pct: 100.0 * (cpu1 - cpu0) / elapsed,
+            operator_rss_mib: status_field(operator_pid, "VmRSS:")? / 1024.0,
+            operator_peak_rss_mib: status_field(operator_pid, "VmHWM:")? / 1024.0,
+            operator_threads: status_field(operator_pid, "Threads:")? as u64,
+            robot_sides_cpu_pct: 100.0 * (sides1 - sides0) / elapsed,
+            machine_busy_pct: if total > 0 {
+                100.0 * busy as f64 / total as f64
+            } else {
+                0.0
+            },
+            samples_per_s: per_robot.iter().map(|r| r.samples_per_s).sum(),
+            median_p50_ms: p50s.get(p50s.len() / 2).copied().unwrap_or(f64::NAN),
+            worst_p99_ms: per_robot.iter().map(|r| r.p99_ms).fold(0.0, f64::max),
+            worst_max_ms: per_robot.iter().map(|r| r.max_ms).fold(0.0, f64::max),
+            per_robot,
+            missing,
+        };
+        eprintln!(
+            "fleet of {size}: operator {:.1} % of a core, {:.1} MiB; {:.0} states/s; p50 {:.2} ms, worst p99 {:.2} ms",
+            size_figures.operator_cpu_pct,
+            size_figures.operator_rss_mib,
+            size_figures.samples_per_s,
+            size_figures.median_p50_ms,
+            size_figures.worst_p99_ms
+        );
+        figures.push(size_figures);
+        drop(operator);
+    }
+    drop(robots);
+    drop(netns);
+    Ok(figures)
+}
+
+/// `text` with its `## Fleet` section replaced by `section` (appended when it has none).
+pub fn splice(text: &str, section: &str) -> String {
+    let section = section.trim_end();
+    let Some(start) = find_heading(text) else {
+        return format!("{}\n\n{section}\n", text.trim_end());
+    };
+    let after = &text[start + HEADING.len()..];
+    let end = after
+        .find("\n## ")
+        .map_or(text.len(), |i| start + HEADING.len() + i + 1);
+    format!("{}{section}\n\n{}", &text[..start], &text[end..])
+        .trim_end()
+        .to_string()
+        + "\n"
+}
+
+/// The `## Fleet` section of `text`, if it has one.
+pub fn section_of(text: &str) -> Option<String> {
+    let start = find_heading(text)?;
+    let after = &text[start + HEADING.len()..];
+    let end = after
+        .find("\n## ")
+        .map_or(text.len(), |i| start + HEADING.len() + i + 1);
+    Some(text[start..end].trim_end().to_string())
+}
+
+fn find_heading(text: &str) -> Option<usize> {
+    if text.starts_with(HEADING) {
+        return Some(0);
+    }
+    text.find(&format!("\n{HEADING}")).map(|i| i + 1)
+}
+
+impl FleetReport {
+    /// The `## Fleet` section: method, figures, and the arithmetic for a larger fleet.
+    pub fn markdown(&self) -> String {
+        let p = &self.provenance;
+        let mut out = format!(
+            "{HEADING}: one operator, many robots\n\n\
+             Generated by `chassis-bench fleet --doc docs/PERFORMANCE.md` (the rest of this \
+             document by the main run, which keeps this section). Measured {} on {}; machine: \
+             {}, {} cores, Linux {} — **a loaded 2-core machine**: every robot's chassisd, its \
+             simulated chassis and its robot side run on the same two cores as the operator, so \
+             the figures are an upper bound on the operator's own cost and latency.\n\n\
+             Binaries: {}. Reproduce: `cargo build --release --workspace && sudo \
+             target/release/{}`\n\n",
+            p.date,
+            p.commit_text(),
+            self.machine.cpu_model,
+            self.machine.cpus,
+            self.machine.kernel,
+            self.build,
+            p.command
+        );
+        out.push_str(&format!(
+            "**Method.** In one network namespace (loopback only), N simulated robots — \
+             TITAN, SCOUT MINI and HUNTER in turn, each `chassisd --robot KIND \
+             --no-safety-monitor` with `chassis-zenoh --name NAME --listen tcp/127.0.0.1:PORT` \
+             (plain TCP on loopback: the cost of TLS is not in these figures) — and one operator: \
+             `chassis-zenoh --connect …×N --mirror-all`, started afresh for each size and \
+             measured once it mirrored every robot. Over {:.0} s: the operator's CPU (user + \
+             system time of its process, % of one core), its resident memory at the end and at \
+             its peak, and each robot's state latency as `chassis fleet --once --json` measures \
+             it — chassisd hands the sample to iceoryx2 on the robot (`published_ns`) → a \
+             reader woken by the mirrored sample in the operator's iceoryx2, both stamps from \
+             this machine's `CLOCK_MONOTONIC` — with the samples per second that arrived \
+             (the robot side puts the newest state of each read of the bus).\n\n",
+            self.seconds
+        ));
+        out.push_str(
+            "| robots | operator CPU, % of a core | operator RSS (peak), MiB | threads | \
+             states/s arriving | latency p50 (median robot), ms | worst p99, ms | worst max, \
+             ms | robot sides' CPU, % of a core | machine busy, % |\n\
+             | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        );
+        for s in &self.sizes {
+            out.push_str(&format!(
+                "| {} | {:.1} | {:.1} ({:.1}) | {} | {:.0} | {:.2} | {:.2} | {:.1} | {:.1} | {:.0} |\n",
+                s.robots,
+                s.operator_cpu_pct,
+                s.operator_rss_mib,
+                s.operator_peak_rss_mib,
+                s.operator_threads,
+                s.samples_per_s,
+                s.median_p50_ms,
+                s.worst_p99_ms,
+                s.worst_max_ms,
+                s.robot_sides_cpu_pct,
+                s.machine_busy_pct
+            ));
+        }
+        out.push('\n');
+        for s in self.sizes.iter().filter(|s| !s.missing.is_empty()) {
+            out.push_str(&format!(
+                "* **{} robots: no fresh samples from {}** (counted as missing, not as fast)\n",
+                s.robots,
+                s.missing.join(", ")
+            ));
+        }
+        if let Some(largest) = self.sizes.last() {
+            out.push_str(&format!(
+                "Each robot at {} robots:\n\n| robot | kind | states/s | p50 ms | p99 ms | max ms |\n\
+                 | --- | --- | ---: | ---: | ---: | ---: |\n",
+                largest.robots
+            ));
+            for r in &largest.per_robot {
+                out.push_str(&format!(
+                    "| {} | {} | {:.0} | {:.2} | {:.2} | {:.1} |\n",
+                    r.name, r.kind, r.samples_per_s, r.p50_ms, r.p99_ms, r.max_ms
+                ));
+            }
+            out.push('\n');
+        }
+        if let (Some(first), Some(last)) = (self.sizes.first(), self.sizes.last())
+            && last.robots > first.robots
+        {
+            let per_robot_cpu = (last.operator_cpu_pct - first.operator_cpu_pct)
+                / (last.robots - first.robots) as f64;
+            let per_robot_mib = (last.operator_rss_mib - first.operator_rss_mib)
+                / (last.robots - first.robots) as f64;
+            // The rate each robot sends when the machine keeps up: the smallest fleet's.
+            let rate = first.samples_per_s / first.robots as f64;
+            let last_rate = last.samples_per_s / last.robots as f64;
+            let state_bytes = size_of::<ChassisState>() as f64;
+            out.push_str(&format!(
+                "**How it grows.** From {} to {} robots the operator's CPU grew by {:.2} % of a \
+                 core per robot and its memory by {:.2} MiB per robot (a mirror is a few threads \
+                 and its iceoryx2 services); a robot alone sent {:.0} states/s, {:.0} kB/s of \
+                 state at {} bytes a sample.{}\n\n",
+                first.robots,
+                last.robots,
+                per_robot_cpu,
+                per_robot_mib,
+                rate,
+                rate * state_bytes / 1e3,
+                state_bytes,
+                if last_rate < 0.8 * rate {
+                    format!(
+                        " At {} robots this machine no longer kept up (busy {:.0} %): each robot's \
+                         states arrived at {last_rate:.0}/s, and the latency there is mostly time \
+                         spent waiting for a CPU; the operator's CPU per robot above is \
+                         understated by as much.",
+                        last.robots, last.machine_busy_pct
+                    )
+                } else {
+                    String::new()
+                }
+            ));
+            out.push_str(&format!(
+                "**On paper: 1,000 robots across sites** (the arithmetic from this run's rates, \
+                 not a measurement).\n\n\
+                 * *Rates.* At this run's {rate:.0} full states/s per robot (a robot alone), 1,000 robots are \
+                 {:.0} MB/s of state into one operator and, at {per_robot_cpu:.2} % of a core \
+                 per mirrored robot, about {:.0} cores of mirroring: one operator cannot mirror \
+                 them all at full rate, and need not. An operator watches a fleet at 1-10 Hz and \
+                 drives one robot at a time: the fleet view would subscribe to the JSON twins \
+                 (`chassis/*/state/json`, 10 Hz, or a 1 Hz summary key) and mirror a robot at \
+                 full rate only when it is opened (`--robots NAME`). At 1 Hz × ~1 kB, 1,000 \
+                 robots are 1 MB/s.\n\
+                 * *Routers.* One Zenoh router per site (`zenohd`, or this crate's `zenoh` in \
+                 router mode), robots connecting to their site's router as clients or peers, \
+                 routers meshed across sites over TLS; the operator connects to one router, not \
+                 to 1,000 endpoints. Liveliness already works through routers (each router \
+                 aggregates its robots' tokens), so discovery is unchanged.\n\
+                 * *Key expressions.* `chassis/<site>/<robot>/…` instead of `chassis/<robot>/…` \
+                 so that an operator subscribes to a site (`chassis/north/*/alive`) and routers \
+                 route by prefix; robot names are unique per site, not worldwide.\n\
+                 * *Access control moves to the routers*: today each robot's own access list \
+                 names the operator's certificate; behind a router the robot sees the router's \
+                 certificate, so the site router holds the per-robot rules (operator \
+                 certificates per site or per role) and the robot's list allows its router only.\n\
+                 * *The fleet e-stop* asks 1,000 queryables at once: one Zenoh `get` on \
+                 `chassis/north/*/control` answered by each robot, counted against the \
+                 liveliness list, so that a robot that does not answer is still named.\n\
+                 * *What the design would change*: a mirror per robot in one process is fine for \
+                 tens; for thousands the operator keeps one subscriber per key pattern and \
+                 creates a robot's iceoryx2 services only when a local tool opens it.\n",
+                1000.0 * rate * state_bytes / 1e6,
+                10.0 * per_robot_cpu,
+            ));
+        }
+        out
+    }
+}
+
+/// Writes the report's files.
+pub fn write(report: &FleetReport, args: &FleetArgs) -> anyhow::Result<()> {
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &args.doc {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        std::fs::write(path, splice(&text, &report.markdown()))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{}", report.markdown())?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fleet_section_is_replaced_and_the_rest_kept() {
+        let doc = "# Performance\n\nintro\n\n## The table\n\nrows\n";
+        let once = splice(doc, "## Fleet: x\n\nfigures 1\n");
+        assert_eq!(once, format!("{}\n## Fleet: x\n\nfigures 1\n", doc));
+        let twice = splice(&once, "## Fleet: y\n\nfigures 2");
+        assert!(
+            twice.contains("figures 2") && !twice.contains("figures 1"),
+            "{twice}"
+        );
+        assert!(twice.starts_with("# Performance\n\nintro\n\n## The table\n\nrows\n"));
+        let middle = "# P\n\n## Fleet: old\n\nold\n\n## Micro\n\nm\n";
+        let replaced = splice(middle, "## Fleet: new\n\nnew");
+        assert_eq!(replaced, "# P\n\n## Fleet: new\n\nnew\n\n## Micro\n\nm\n");
+        assert_eq!(section_of(middle).as_deref(), Some("## Fleet: old\n\nold"));
+        assert_eq!(section_of(doc), None);
+    }
+}
