@@ -31,11 +31,11 @@
 //! the operator's). Plain `tcp/` is refused beyond loopback unless `--insecure`.
 
 mod certs;
+mod export;
 mod fleet;
 mod mirror;
 mod net;
 mod raw;
-mod robot;
 mod wire;
 
 use std::path::PathBuf;
@@ -180,7 +180,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         if !(cli.json_hz > 0.0 && cli.state_hz >= 0.0) {
             anyhow::bail!("--json-hz must be above 0 and --state-hz at least 0");
         }
-        robot::run(&robot::Config {
+        export::run(&export::Config {
             name,
             net: net(net::Role::Robot, cli.listen),
             state_hz: cli.state_hz,

@@ -37,9 +37,9 @@ use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::{Sample, SampleKind};
 use zerocopy::IntoBytes as _;
 
+use crate::export::{guard, remote_sources};
 use crate::fleet::{LOST_AFTER, LinkWatch, Lost};
 use crate::net::{self, Net};
-use crate::robot::{guard, remote_sources};
 use crate::wire::{Keys, Wire};
 
 /// How long a control request waits for the robot's answer.

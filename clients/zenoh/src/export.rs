@@ -1,4 +1,4 @@
-//! The robot side: chassisd's services on Zenoh.
+//! The robot side (`export`): chassisd's services exported onto Zenoh for an operator to mirror.
 //!
 //! * the main thread reads the state stream, the mux, the robot's description and the frame
 //!   tap, and puts them on `chassis/<name>/state` (the newest sample of each read of the bus),
