@@ -10,6 +10,7 @@
 #![allow(clippy::panic, clippy::disallowed_methods)]
 
 pub mod faults;
+pub mod netns;
 
 use std::fs::File;
 use std::path::{Path, PathBuf};

@@ -23,6 +23,7 @@ use std::process::{Command, Output};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
+use chassis_tests::netns::*;
 use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(30);
@@ -31,27 +32,6 @@ const PORT: u16 = 7447;
 const LOST_WITHIN: Duration = Duration::from_secs(1);
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
-
-fn ip(args: &[&str]) {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("running ip {}: {e} (install iproute2)", args.join(" ")));
-    assert!(
-        out.status.success(),
-        "ip {} failed: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn run_in(ns: &str, program: &str, args: &[&str]) -> Output {
-    Command::new("ip")
-        .args(["netns", "exec", ns, program])
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("running {program} in {ns}: {e}"))
-}
 
 /// The operator's namespace and one namespace per robot slot, each joined to the operator's by
 /// a veth pair; removed on drop.
@@ -156,10 +136,6 @@ impl Drop for Net {
     }
 }
 
-fn operator_prefix(env: &Env) -> String {
-    format!("{}op_", env.prefix)
-}
-
 /// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
 fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
     let bin = bin("chassis-zenoh");
@@ -254,38 +230,7 @@ fn fleet_shows(env: &Env, names: &[&str]) -> serde_json::Map<String, serde_json:
 }
 
 fn operator_robot(env: &Env, n: &str) -> Robot {
-    let prefix = operator_prefix(env);
-    let end = Instant::now() + UP;
-    loop {
-        match Robot::connect_with_prefix(n, Some(&prefix)) {
-            Ok(robot) => return robot,
-            Err(e) => assert!(
-                Instant::now() < end,
-                "the mirror never served {n}: {e}\n{}",
-                env.logs()
-            ),
-        }
-        pause(Duration::from_millis(50));
-    }
-}
-
-fn remote_source(env: &Env, robot: &mut Robot) -> Source {
-    let end = Instant::now() + UP;
-    loop {
-        match robot.source("remote") {
-            Ok(source) => return source,
-            Err(e) => assert!(
-                Instant::now() < end,
-                "the mirror never offered the remote source: {e}\n{}",
-                env.logs()
-            ),
-        }
-        pause(Duration::from_millis(50));
-    }
-}
-
-fn active_name(m: &MuxStatus) -> String {
-    m.active().map_or("", |s| s.name()).to_string()
+    netns::operator_robot(env, n, &operator_prefix(env), UP)
 }
 
 fn estop_held(m: &MuxStatus) -> bool {
@@ -380,8 +325,8 @@ fn an_operator_finds_three_robots_sees_one_lost_stops_the_others_and_finds_a_fou
     // Drive A and B from the operator's computer.
     let mut op_a = operator_robot(&env, a);
     let mut op_b = operator_robot(&env, b);
-    let mut remote_a = remote_source(&env, &mut op_a);
-    let mut remote_b = remote_source(&env, &mut op_b);
+    let mut remote_a = remote_source(&env, &mut op_a, UP);
+    let mut remote_b = remote_source(&env, &mut op_b, UP);
     drive_until_remote_wins(
         &env,
         &mut [&mut robot_a, &mut robot_b],

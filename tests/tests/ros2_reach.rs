@@ -17,25 +17,13 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use chassis_tests::netns::*;
 use chassis_tests::*;
 use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(20);
 const ROBOT_ADDR: &str = "10.78.0.1";
 const PEER_ADDR: &str = "10.78.0.2";
-
-fn ip(args: &[&str]) {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("running ip {}: {e} (install iproute2)", args.join(" ")));
-    assert!(
-        out.status.success(),
-        "ip {} failed: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 /// Two network namespaces joined by a veth pair, multicast on and routed; removed on drop.
 struct Link {

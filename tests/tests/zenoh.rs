@@ -17,6 +17,7 @@ use std::process::Command;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
+use chassis_tests::netns::*;
 use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(20);
@@ -28,19 +29,6 @@ static NEXT: AtomicU32 = AtomicU32::new(0);
 
 fn name(tag: &str) -> String {
     format!("{tag}{}", std::process::id() % 100_000)
-}
-
-fn ip(args: &[&str]) {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("running ip {}: {e} (install iproute2)", args.join(" ")));
-    assert!(
-        out.status.success(),
-        "ip {} failed: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 /// Two network namespaces joined by a veth pair; removed on drop.
@@ -110,11 +98,6 @@ impl Drop for Link {
     }
 }
 
-/// The operator side's iceoryx2 prefix: another computer's.
-fn operator_prefix(env: &Env) -> String {
-    format!("{}op_", env.prefix)
-}
-
 /// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
 fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
     zenoh_logging(env, label, ns, prefix, args, "info,zenoh=warn")
@@ -172,42 +155,7 @@ fn mirror(env: &mut Env, link: &Link, n: &str, extra: &[&str]) -> Robot {
     let mut args = vec!["--name", n, "--connect", &connect, "--mirror"];
     args.extend_from_slice(extra);
     zenoh_in(env, "zenoh-operator", &link.operator_ns, &prefix, &args);
-    operator_robot(env, n, &prefix)
-}
-
-fn operator_robot(env: &Env, n: &str, prefix: &str) -> Robot {
-    let end = Instant::now() + UP;
-    loop {
-        match Robot::connect_with_prefix(n, Some(prefix)) {
-            Ok(robot) => return robot,
-            Err(e) => assert!(
-                Instant::now() < end,
-                "the mirror never served {n}: {e}\n{}",
-                env.logs()
-            ),
-        }
-        pause(Duration::from_millis(50));
-    }
-}
-
-/// The operator side's `remote` source, once the mirror has learned it from the robot's mux.
-fn remote_source(env: &Env, robot: &mut Robot) -> Source {
-    let end = Instant::now() + UP;
-    loop {
-        match robot.source("remote") {
-            Ok(source) => return source,
-            Err(e) => assert!(
-                Instant::now() < end,
-                "the mirror never offered the remote source: {e}\n{}",
-                env.logs()
-            ),
-        }
-        pause(Duration::from_millis(50));
-    }
-}
-
-fn active_name(m: &MuxStatus) -> String {
-    m.active().map_or("", |s| s.name()).to_string()
+    operator_robot(env, n, &prefix, UP)
 }
 
 /// Sends `linear` every 50 ms from `source` until the robot's own mux has `remote` active and
@@ -247,7 +195,7 @@ fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeo
     let n = name("zdr");
     let mut robot = robot_side(&mut env, &link, &n);
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
-    let mut remote = remote_source(&env, &mut operator);
+    let mut remote = remote_source(&env, &mut operator, UP);
 
     // Only the remote sources exist on the operator's side: never the safety monitor's.
     let err = operator.source("safety").unwrap_err();
@@ -442,13 +390,13 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
         "info,zenoh=debug",
     );
     let mut operator = mirror(&mut env, &link, &n, &["--certs", certs.to_str().unwrap()]);
-    let mut remote = remote_source(&env, &mut operator);
+    let mut remote = remote_source(&env, &mut operator, UP);
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("the robot never moved under TLS\n{}", env.logs()));
     remote.stop().unwrap();
 
     // The stranger's mirror, running as long, has seen nothing of the robot.
-    let mut outsider = operator_robot(&env, &n, &stranger_prefix);
+    let mut outsider = operator_robot(&env, &n, &stranger_prefix, UP);
     assert!(
         outsider
             .wait_state(Duration::from_secs(2))
@@ -590,14 +538,6 @@ const DELAY: Duration = Duration::from_millis(100);
 const LOSS_PERCENT: u32 = 5;
 /// Where the emulated impairment's relay listens, in the operator's namespace.
 const RELAY_PORT: u16 = 7448;
-
-fn run_in(ns: &str, program: &str, args: &[&str]) -> std::process::Output {
-    Command::new("ip")
-        .args(["netns", "exec", ns, program])
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("running {program} in {ns}: {e}"))
-}
 
 impl Impairment {
     fn apply(link: &Link) -> Self {
@@ -773,8 +713,8 @@ fn a_slow_lossy_link_still_drives() {
             "--insecure",
         ],
     );
-    let mut operator = operator_robot(&env, &n, &prefix);
-    let mut remote = remote_source(&env, &mut operator);
+    let mut operator = operator_robot(&env, &n, &prefix, UP);
+    let mut remote = remote_source(&env, &mut operator, UP);
     let first = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("the robot never moved over the slow link\n{}", env.logs()));
 
@@ -838,7 +778,7 @@ fn chassis_teleop_on_the_operators_computer_drives_the_robot() {
     let mut robot = robot_side(&mut env, &link, &n);
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
     // The mirror offers the remote source once it has the robot's mux.
-    drop(remote_source(&env, &mut operator));
+    drop(remote_source(&env, &mut operator, UP));
     let log = env.dir.join("teleop.log");
     let command = format!(
         "env {}={} RUST_LOG=info {} --name {n} --source remote 2>{}; echo chassis-teleop exited $?; sleep 60",
@@ -946,7 +886,7 @@ fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_st
     );
 
     // The operator drives, then engages the e-stop through the mirror while still asking.
-    let mut remote = remote_source(&env, &mut operator);
+    let mut remote = remote_source(&env, &mut operator, UP);
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("the robot never moved\n{}", env.logs()));
     let estop = |kind| ControlRequest::new(kind).with_name("estop");
@@ -1050,7 +990,7 @@ fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
     let n = name("zst");
     let mut robot = robot_side(&mut env, &link, &n);
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
-    let mut remote = remote_source(&env, &mut operator);
+    let mut remote = remote_source(&env, &mut operator, UP);
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("the robot never moved\n{}", env.logs()));
 
