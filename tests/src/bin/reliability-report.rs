@@ -19,9 +19,10 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitCode};
+use std::process::ExitCode;
 
 use anyhow::{Context, bail};
+use chassis_provenance::{CpuTimes, GitState, Steal, output};
 use chassis_tests::{ExpectedRow, FAULT_ROWS, Figure, SOAK_ROWS, STATE_BUFFER};
 use serde::{Deserialize, Serialize};
 
@@ -39,82 +40,6 @@ struct RunInfo {
     cpu_start: Option<CpuTimes>,
     /// The host's steal time between `begin` and `end`.
     steal: Option<Steal>,
-}
-
-/// The first line of `/proc/stat`: CPU time of every CPU together, clock ticks.
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
-struct CpuTimes {
-    total: u64,
-    steal: u64,
-}
-
-impl CpuTimes {
-    fn read() -> anyhow::Result<Self> {
-        let stat = std::fs::read_to_string("/proc/stat").context("reading /proc/stat")?;
-        let line = stat
-            .lines()
-            .find(|l| l.starts_with("cpu "))
-            .context("/proc/stat has no cpu line")?;
-        let fields: Vec<u64> = line
-            .split_whitespace()
-            .skip(1)
-            .map(|v| v.parse().context("a field of /proc/stat's cpu line"))
-            .collect::<anyhow::Result<_>>()?;
-        // user nice system idle iowait irq softirq steal guest guest_nice; guest time is
-        // already counted in user and nice.
-        let steal = *fields.get(7).context("/proc/stat has no steal column")?;
-        Ok(Self {
-            total: fields.iter().take(8).sum(),
-            steal,
-        })
-    }
-}
-
-/// Steal time over a run: time the host ran something else while this machine's CPUs wanted
-/// to run.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
-struct Steal {
-    steal_s: f64,
-    cpu_time_s: f64,
-}
-
-impl Steal {
-    fn between(start: CpuTimes, end: CpuTimes) -> Self {
-        let hz = ticks_per_second();
-        Self {
-            steal_s: end.steal.saturating_sub(start.steal) as f64 / hz,
-            cpu_time_s: end.total.saturating_sub(start.total) as f64 / hz,
-        }
-    }
-
-    fn text(&self) -> String {
-        let share = if self.cpu_time_s > 0.0 {
-            100.0 * self.steal_s / self.cpu_time_s
-        } else {
-            0.0
-        };
-        format!(
-            "{:.2} s of {:.0} s of CPU time ({share:.2} %)",
-            self.steal_s, self.cpu_time_s
-        )
-    }
-}
-
-fn ticks_per_second() -> f64 {
-    nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK)
-        .ok()
-        .flatten()
-        .map_or(100.0, |t| t as f64)
-}
-
-fn output(program: &str, args: &[&str]) -> String {
-    Command::new(program)
-        .args(args)
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-        .unwrap_or_default()
 }
 
 fn machine() -> String {
@@ -147,15 +72,9 @@ fn machine() -> String {
 
 /// The commit checked out, and the files changed since (tracked files only).
 fn git_state() -> anyhow::Result<(String, Vec<String>)> {
-    let commit = output("git", &["rev-parse", "--short", "HEAD"]);
-    if commit.is_empty() {
-        bail!("not a git checkout (or git is missing): the figures would belong to no commit");
-    }
-    let changed = output("git", &["status", "--porcelain", "--untracked-files=no"])
-        .lines()
-        .map(|l| l.trim().to_string())
-        .collect();
-    Ok((commit, changed))
+    let git = GitState::read()
+        .context("not a git checkout (or git is missing): the figures would belong to no commit")?;
+    Ok((git.commit, git.changed))
 }
 
 fn info_path(dir: &Path, name: &str) -> PathBuf {
@@ -178,7 +97,7 @@ fn begin(dir: &Path, name: &str, command: &str, allow_dirty: bool) -> anyhow::Re
         );
     }
     let info = RunInfo {
-        date: output("date", &["-u", "+%Y-%m-%d %H:%M UTC"]),
+        date: chassis_provenance::utc_date(),
         commit,
         dirty: !changed.is_empty(),
         machine: machine(),
@@ -199,7 +118,7 @@ fn end(dir: &Path, name: &str) -> anyhow::Result<()> {
     let start = info
         .cpu_start
         .with_context(|| format!("{} has no start figures", path.display()))?;
-    info.steal = Some(Steal::between(start, CpuTimes::read()?));
+    info.steal = Some(start.steal_until(&CpuTimes::read()?));
     // The tree must still be the commit the run began on.
     let (commit, changed) = git_state()?;
     if commit != info.commit || !changed.is_empty() {
