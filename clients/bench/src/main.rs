@@ -262,6 +262,7 @@ fn row(
         ratio_p50: None,
         ratio_p99: None,
         inconsistent: None,
+        below_sum_only: false,
         latencies,
     }
 }
@@ -1066,6 +1067,9 @@ fn main() -> ExitCode {
                     .with_context(|| format!("writing {}", path.display()))?;
             }
             if cli.run.smoke {
+                for warning in report.smoke_warnings() {
+                    eprintln!("smoke: {warning}");
+                }
                 let failures = report.smoke_failures(&report.expected);
                 for failure in &failures {
                     eprintln!("smoke: {failure}");
