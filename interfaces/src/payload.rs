@@ -9,7 +9,7 @@
 //!
 //! Every bit pattern is a value of these types, but not every value may cross: a
 //! [`VelocityRequest`] with a NaN, an infinity or a negative envelope is refused here, at the
-//! edge, before it reaches a mux ([`Payload::check`]).
+//! edge, before it reaches a mux ([`Payload::refusal`]).
 
 use thiserror::Error;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};

@@ -12,7 +12,7 @@
 //! * [`engine`]: the pure rule engine (state and mux status in, a decision out);
 //! * [`monitor`]: the loop that connects, reads the description, decides, publishes and
 //!   reconnects;
-//! * [`print`]: `--print-config`, every value with where it comes from.
+//! * [`print`](mod@print): `--print-config`, every value with where it comes from.
 //!
 //! What it publishes on its source, by the strictest rule in force: a heartbeat while all is
 //! well; a speed envelope (`VelocityRequest::limit`) for `slow` rules and the range rules' zones

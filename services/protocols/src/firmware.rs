@@ -8,7 +8,7 @@
 //!
 //! Below the contract are the pieces every simulated chassis shares: the sub-stepped physics
 //! clock, the first-order speed lag, the true pose, the battery model, the bounded transmit queue
-//! with its silence window, the feedback flood of load tests, and [`Chassis`] — the state and the
+//! with its silence window, the feedback flood of load tests, and `Chassis` — the state and the
 //! fault injection every simulated firmware embeds.
 
 mod chassis;
