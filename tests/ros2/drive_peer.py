@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -22,7 +24,27 @@ from cyclonedds.util import duration
 import ros2_types as m
 
 
+def refuse_the_hosts_network() -> None:
+    """Exits unless this process runs in a named network namespace (`ip netns exec NAME …`, as
+    the test starts it): DDS discovery must never reach a real interface."""
+    try:
+        name = subprocess.run(
+            ["ip", "netns", "identify", str(os.getpid())],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError) as e:
+        sys.exit(f"drive_peer.py: cannot tell which network namespace this is ({e}); refusing")
+    if not name:
+        sys.exit(
+            "drive_peer.py: runs only inside a test's network namespace (ip netns exec …), "
+            "never on the host's network"
+        )
+
+
 def main() -> None:
+    refuse_the_hosts_network()
     parser = argparse.ArgumentParser()
     parser.add_argument("--domain", type=int, required=True)
     parser.add_argument("--seconds", type=float, default=4.0)
