@@ -110,6 +110,41 @@ impl Proc {
     pub fn log_text(&self) -> String {
         std::fs::read_to_string(&self.log).unwrap_or_default()
     }
+
+    /// What the kernel says of the process, for a failure's log: running with each thread's
+    /// wait channel (where a silent process is stuck), or how it ended (an empty log and a
+    /// signal tell a crash from a hang).
+    pub fn kernel_view(&self) -> String {
+        let pid = self.child.id();
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+            return format!("pid {pid}: ended and reaped");
+        };
+        // The fields after the command name (which may hold spaces) in parentheses.
+        let fields: Vec<&str> = stat
+            .rsplit_once(')')
+            .map_or("", |(_, rest)| rest)
+            .split_whitespace()
+            .collect();
+        let state = fields.first().copied().unwrap_or("?");
+        if state == "Z" {
+            // The last field is the exit status as waitpid(2) reports it.
+            let code: i32 = fields.last().and_then(|f| f.parse().ok()).unwrap_or(-1);
+            return match (code & 0x7f, (code >> 8) & 0xff) {
+                (0, status) => format!("pid {pid}: exited with status {status}"),
+                (signal, _) => format!("pid {pid}: killed by signal {signal}"),
+            };
+        }
+        let mut threads = Vec::new();
+        if let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) {
+            for task in tasks.flatten() {
+                let path = task.path();
+                let wchan = std::fs::read_to_string(path.join("wchan")).unwrap_or_default();
+                let comm = std::fs::read_to_string(path.join("comm")).unwrap_or_default();
+                threads.push(format!("{} in {}", comm.trim(), wchan.trim()));
+            }
+        }
+        format!("pid {pid}: state {state}; threads: {}", threads.join(", "))
+    }
 }
 
 /// Waits without spinning (tests only; the production code never sleeps).
@@ -260,9 +295,10 @@ impl Env {
         let mut out = String::new();
         for p in &self.procs {
             out.push_str(&format!(
-                "----- {} ({}) -----\n{}\n",
+                "----- {} ({}; {}) -----\n{}\n",
                 p.name,
                 p.log.display(),
+                p.kernel_view(),
                 p.log_text()
             ));
         }

@@ -207,6 +207,61 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
     figures.finish();
 }
 
+/// A chassisd killed between making a service's shared-memory segment and sizing it leaves an
+/// empty, unreadable segment; iceoryx2 0.10 waits without end to open one, and removing the dead
+/// instance's node opens every service it used. Made here without luck: an instance that served
+/// is killed, and its services' dynamic segments are emptied as such a kill leaves them. The next
+/// instance must serve (it removes them; it used to hang before its first log line).
+#[test]
+fn a_restart_after_a_kill_before_a_segment_was_sized_serves() {
+    let _machine = shared();
+    let mut env = Env::new("kill-unsized");
+    let n = name("kus");
+    let args = ["--robot", "titan", "--name", n.as_str(), "--no-safety-monitor"];
+    let first = env.chassisd("chassisd-0", &args);
+    drop(env.robot(&n, UP));
+    env.proc(first).signal(Signal::SIGKILL);
+    env.proc(first).wait_exit(Duration::from_secs(3));
+    let mut emptied = Vec::new();
+    for entry in std::fs::read_dir("/dev/shm").unwrap().flatten() {
+        let file = entry.file_name().to_string_lossy().to_string();
+        if file.starts_with(&env.prefix) && file.ends_with(".dynamic") {
+            let path = entry.path();
+            std::fs::File::options()
+                .write(true)
+                .open(&path)
+                .unwrap()
+                .set_len(0)
+                .unwrap();
+            std::fs::set_permissions(&path, std::os::unix::fs::PermissionsExt::from_mode(0o200))
+                .unwrap();
+            emptied.push(file);
+        }
+    }
+    assert!(
+        emptied.len() >= 4,
+        "the killed instance left {} dynamic segments",
+        emptied.len()
+    );
+    let second = env.chassisd("chassisd-1", &args);
+    let served = wait_for(Duration::from_secs(5), || {
+        env.proc(second).log_text().contains("serving chassis/")
+    });
+    assert!(
+        served.is_some(),
+        "the restart did not serve within 5 s after {} segments were emptied\n{}",
+        emptied.len(),
+        env.logs()
+    );
+    let mut robot = env.robot(&n, UP);
+    assert!(state(&mut robot).link.rx_frames > 0, "{}", env.logs());
+    assert!(
+        env.proc(second).log_text().contains("never sized"),
+        "the restart did not say what it removed\n{}",
+        env.logs()
+    );
+}
+
 #[test]
 fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeout() {
     let _machine = shared();
@@ -434,6 +489,10 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
         );
         let killed = Instant::now();
         env.proc(sim).signal(Signal::SIGKILL);
+        // The dead simulator's link names a pseudo-terminal number the kernel hands out again:
+        // removed at once, as udev removes an unplugged adapter's node, so that the service's
+        // reopening never lands on another program's terminal.
+        std::fs::remove_file(&link).ok();
         let lost = pump.until(&mut robot, Duration::from_secs(3), |_, s| {
             s.link_flags & LinkFlags::BUS_DOWN != 0
         });

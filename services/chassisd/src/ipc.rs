@@ -1,7 +1,8 @@
 //! The service's iceoryx2 ports. Names, limits and the builders are the contract's
 //! (`chassis-ipc`): this module creates every service of one robot with them and holds the ports,
 //! and it cleans up what a killed predecessor left in iceoryx2's directories
-//! ([`remove_dead_nodes`], [`remove_abandoned_creations`]) so that the ports can be created again.
+//! ([`remove_unsized_segments`], [`remove_dead_nodes`], [`remove_abandoned_creations`]) so that
+//! the ports can be created again.
 
 use std::time::Duration;
 
@@ -278,6 +279,95 @@ fn abandoned_creations(
         .collect()
 }
 
+/// Where POSIX shared memory lives on Linux: iceoryx2's segments are files here.
+const SHM_DIR: &str = "/dev/shm";
+
+/// How long a shared-memory segment may stay empty before it counts as abandoned: its creator
+/// sizes it right after making it, and iceoryx2 gives a whole creation 500 ms.
+pub const UNSIZED_AFTER: Duration = Duration::from_millis(500);
+
+/// Removes the shared-memory segments whose creator died between making them and sizing them
+/// (a chassisd killed while it created its services). iceoryx2 0.10 retries opening an empty
+/// segment without a timeout (`posix_shared_memory`'s open treats a zero-size mapping as "not
+/// yet"), and removing a dead node opens every service it used: without this, a restart after
+/// such a kill would hang in [`remove_dead_nodes`] for good, before it logs a line. A segment
+/// younger than [`UNSIZED_AFTER`] may have a live creator about to size it: it is waited for,
+/// at most that long, and removed only if it is still empty then.
+pub fn remove_unsized_segments() {
+    let Ok(config) = iceoryx_config() else {
+        return;
+    };
+    let prefix = config.global.prefix.as_str();
+    let dir = std::path::Path::new(SHM_DIR);
+    const PAUSE: Duration = Duration::from_millis(50);
+    let rounds = UNSIZED_AFTER.as_millis() / PAUSE.as_millis();
+    for round in 0..=rounds {
+        // Modification times are wall-clock times: the one reading of the system clock here.
+        #[allow(clippy::disallowed_methods)]
+        let now = std::time::SystemTime::now();
+        let (old, young) = unsized_segments(dir, prefix, now);
+        // In the last round, a segment seen empty all along is abandoned whatever its time says.
+        let last = round == rounds;
+        let abandoned = if last {
+            [old, young.clone()].concat()
+        } else {
+            old
+        };
+        for file in abandoned {
+            match std::fs::remove_file(dir.join(&file)) {
+                Ok(()) => warn!(
+                    file,
+                    "removed a shared-memory segment its creator never sized"
+                ),
+                Err(e) => debug!(file, "removing an unsized segment: {e}"),
+            }
+        }
+        if last || young.is_empty() {
+            return;
+        }
+        // The ports are not open yet: nothing else waits on this thread.
+        #[allow(clippy::disallowed_methods)]
+        std::thread::sleep(PAUSE);
+    }
+}
+
+/// The empty, uninitialised (not yet readable) segments of the iceoryx2 `prefix` in `dir`: those
+/// older than [`UNSIZED_AFTER`] at `now`, and the younger ones.
+fn unsized_segments(
+    dir: &std::path::Path,
+    prefix: &str,
+    now: std::time::SystemTime,
+) -> (Vec<String>, Vec<String>) {
+    use std::os::unix::fs::PermissionsExt;
+    let (mut old, mut young) = (Vec::new(), Vec::new());
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return (old, young);
+    };
+    for entry in entries.flatten() {
+        let Some(file) = entry.file_name().to_str().map(str::to_string) else {
+            continue;
+        };
+        let Ok(meta) = entry.metadata() else {
+            continue;
+        };
+        let unreadable = meta.permissions().mode() & 0o400 == 0;
+        if !(file.starts_with(prefix) && meta.is_file() && meta.len() == 0 && unreadable) {
+            continue;
+        }
+        let age = meta
+            .modified()
+            .ok()
+            .and_then(|m| now.duration_since(m).ok())
+            .unwrap_or(Duration::ZERO);
+        if age >= UNSIZED_AFTER {
+            old.push(file);
+        } else {
+            young.push(file);
+        }
+    }
+    (old, young)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -304,6 +394,29 @@ mod tests {
         );
         // Young enough to be a creation in progress.
         assert!(abandoned_creations(&dir, "px_", std::time::SystemTime::now()).is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    // File modification times are wall-clock times: the test compares with the system clock.
+    #[allow(clippy::disallowed_methods)]
+    fn only_empty_unreadable_segments_of_the_prefix_are_unsized() {
+        let dir = std::env::temp_dir().join(format!("chassisd-unsized-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let make = |name: &str, bytes: &[u8], mode: u32| {
+            let path = dir.join(name);
+            std::fs::write(&path, bytes).unwrap();
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
+        };
+        make("px_empty.dynamic", b"", 0o200);
+        make("px_sized.dynamic", b"x", 0o200);
+        make("px_ready.dynamic", b"", 0o600);
+        make("other_empty.dynamic", b"", 0o200);
+        let later = std::time::SystemTime::now() + Duration::from_secs(1);
+        let (old, young) = unsized_segments(&dir, "px_", later);
+        assert_eq!((old, young), (vec!["px_empty.dynamic".to_string()], vec![]));
+        let (old, young) = unsized_segments(&dir, "px_", std::time::SystemTime::now());
+        assert_eq!((old, young), (vec![], vec!["px_empty.dynamic".to_string()]));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -134,6 +134,7 @@ fn open_ports(name: &str, sources: &[String], with_sim: bool) -> Result<Ports, I
     const PAUSE: Duration = Duration::from_millis(100);
     let deadline = clock::now() + PATIENCE;
     loop {
+        crate::ipc::remove_unsized_segments();
         crate::ipc::remove_dead_nodes();
         match Ports::open(name, sources, with_sim) {
             Err(IpcError::Contract(err)) if clock::now() < deadline => {
