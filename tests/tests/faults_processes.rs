@@ -217,7 +217,13 @@ fn a_restart_after_a_kill_before_a_segment_was_sized_serves() {
     let _machine = shared();
     let mut env = Env::new("kill-unsized");
     let n = name("kus");
-    let args = ["--robot", "titan", "--name", n.as_str(), "--no-safety-monitor"];
+    let args = [
+        "--robot",
+        "titan",
+        "--name",
+        n.as_str(),
+        "--no-safety-monitor",
+    ];
     let first = env.chassisd("chassisd-0", &args);
     drop(env.robot(&n, UP));
     env.proc(first).signal(Signal::SIGKILL);
