@@ -45,8 +45,8 @@ async function until(what, predicate, timeoutMs = 10000) {
 }
 
 /** Starts a bridge on a free port and returns its URL once it listens. */
-async function bridge(extra = []) {
-  const child = start("chassis-foxglove", ["--name", NAME, "--port", "0", ...extra]);
+async function bridge(extra = [], names = NAME) {
+  const child = start("chassis-foxglove", ["--name", names, "--port", "0", ...extra]);
   const match = await until("the bridge to listen", () =>
     child.output.match(/on ws:\/\/127\.0\.0\.1:(\d+)/),
   );
@@ -54,7 +54,7 @@ async function bridge(extra = []) {
 }
 
 /** A connected client that records what the server says. */
-async function connect(url) {
+async function connect(url, channels = 8) {
   const ws = new WebSocket(url, ["foxglove.sdk.v1"]);
   const client = new FoxgloveClient({ ws });
   const seen = {
@@ -77,7 +77,7 @@ async function connect(url) {
   client.on("serviceCallResponse", (r) => seen.responses.set(r.callId, r));
   client.on("serviceCallFailure", (f) => seen.failures.set(f.callId, f));
   await until("the server info", () => seen.serverInfo);
-  await until("the channels", () => seen.channels.size >= 8);
+  await until("the channels", () => seen.channels.size >= channels);
   return { client, seen, ws };
 }
 
@@ -278,5 +278,74 @@ test("chassis-foxglove serves the simulated robot to a Foxglove client", async (
   });
 
   assert.equal(chassisd.exitCode, null, chassisd.output);
+  assert.equal(child.exitCode, null, child.output);
+});
+
+test("one bridge serves several robots, each under its own prefix and frames", async (t) => {
+  const names = [`${NAME}a`, `${NAME}b`];
+  const robots = [
+    start("chassisd", ["--robot", "titan", "--name", names[0], "--no-safety-monitor"]),
+    start("chassisd", ["--robot", "scout-mini", "--name", names[1], "--no-safety-monitor"]),
+  ];
+  const { url, child } = await bridge([], names.join(","));
+  const conn = await connect(url, 16);
+  t.after(() => conn.client.close());
+
+  // Every channel and service of each robot under its name; none left unprefixed.
+  for (const name of names) {
+    for (const topic of ["tf", "pose", "scene", "gps", "log", "state", "mux", "frames"]) {
+      assert.ok(conn.seen.channels.has(`/${name}/${topic}`), `/${name}/${topic} advertised`);
+    }
+  }
+  assert.ok(!conn.seen.channels.has("/state"), "no unprefixed channel");
+  await until("both robots' services", () => names.every((n) => conn.seen.services.has(`/${n}/estop`)));
+  assert.ok(!conn.seen.services.has("/estop"), "no unprefixed service");
+
+  const pose = names.map((n) => follow(conn, `/${n}/pose`));
+  const tf = names.map((n) => follow(conn, `/${n}/tf`));
+  const mux = names.map((n) => follow(conn, `/${n}/mux`));
+  const scene = follow(conn, `/${names[1]}/scene`);
+  const log = follow(conn, `/${names[1]}/log`);
+  await until("both poses and transforms", () => pose.every((p) => p.latest) && tf.every((x) => x.latest));
+  names.forEach((name, i) => {
+    assert.equal(pose[i].latest.frame_id, `${name}/odom`);
+    const base = tf[i].latest.transforms.find((x) => x.child_frame_id === `${name}/base_link`);
+    assert.ok(base, JSON.stringify(tf[i].latest));
+    assert.equal(base.parent_frame_id, `${name}/odom`);
+    // Sensors hang from the robot's own base_link.
+    for (const x of tf[i].latest.transforms) {
+      assert.ok(x.child_frame_id.startsWith(`${name}/`), JSON.stringify(x));
+    }
+  });
+  await until("the second robot's body", () => scene.latest && scene.latest.entities.some((e) => e.id === "body"));
+  assert.ok(scene.latest.entities.every((e) => e.frame_id.startsWith(`${names[1]}/`)), JSON.stringify(scene.latest.entities.map((e) => e.frame_id)));
+  await until("the second robot's description in its log", () => log.all.some((l) => /SCOUT MINI/i.test(l.message)));
+
+  // A Teleop on the second robot's topic drives it alone.
+  const x0 = pose.map((p) => p.latest.pose.position.x);
+  const id = conn.client.advertise({ topic: `/${names[1]}/cmd_vel`, encoding: "json", schemaName: "geometry_msgs/Twist" });
+  const twist = new Uint8Array(Buffer.from(JSON.stringify({ linear: { x: 0.4, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } })));
+  const timer = setInterval(() => conn.client.sendMessage(id, twist), 50);
+  t.after(() => clearInterval(timer));
+  await until("the second robot to move", () => pose[1].latest.pose.position.x > x0[1] + 0.2);
+  assert.equal(mux[1].latest.active_name, "foxglove");
+  assert.ok(Math.abs(pose[0].latest.pose.position.x - x0[0]) < 0.01, "the first robot stood still");
+  assert.notEqual(mux[0].latest.active_name, "foxglove");
+
+  // A Teleop on a topic under no robot's name is refused with a status and drives nothing.
+  const stray = conn.client.advertise({ topic: "/cmd_vel", encoding: "json", schemaName: "geometry_msgs/Twist" });
+  await until("the refusal of /cmd_vel", () => conn.seen.statuses.some((s) => /names no robot/.test(s.message)));
+  conn.client.unadvertise(stray);
+
+  // The first robot's e-stop service holds the first robot only.
+  const stop = await call(conn, `/${names[0]}/estop`);
+  assert.equal(stop.ok, true, JSON.stringify(stop));
+  await until("the first robot's e-stop", () => mux[0].latest.locks_held.includes("estop"));
+  assert.ok(!mux[1].latest.locks_held.includes("estop"), JSON.stringify(mux[1].latest));
+  assert.equal(mux[1].latest.active_name, "foxglove");
+  clearInterval(timer);
+  conn.client.unadvertise(id);
+
+  for (const r of robots) assert.equal(r.exitCode, null, r.output);
   assert.equal(child.exitCode, null, child.output);
 });

@@ -1,5 +1,7 @@
-//! The robot loop: one thread owns the iceoryx2 ports (a `Robot`, its `foxglove` source and a
-//! frame tap), reads the server's [`Inbox`], and logs to the Foxglove channels.
+//! The robot loops: one thread per robot owns its iceoryx2 ports (a `Robot`, its `foxglove`
+//! source and a frame tap), reads the server's [`Inbox`] for that robot, and logs to the robot's
+//! Foxglove channels (under `/<name>` and its frames under `<name>/` when the bridge serves
+//! several robots: [`Naming`]).
 //!
 //! It draws the robot chassisd describes on `chassis/<name>/robot` — the body's outline, its
 //! range sensors and the codec of its bus — and takes a newer description when one is published
@@ -34,7 +36,8 @@ use foxglove::PartialMetadata;
 use serde_json::{Value, json};
 
 use crate::convert::{self, Trail, frame_entries, mux_json};
-use crate::server::{self, Channels, Inbox};
+use crate::naming::Naming;
+use crate::server::{self, Channels, Inbox, Route};
 
 /// Frames a `/frames` batch carries at most.
 pub const MAX_FRAMES_PER_BATCH: usize = 1000;
@@ -53,8 +56,8 @@ const DESCRIPTION_WAIT: Duration = Duration::from_secs(2);
 /// What the bridge is told.
 #[derive(Debug, Clone)]
 pub struct Config {
-    /// chassisd's robot name (`chassis/<name>/…`).
-    pub name: String,
+    /// chassisd's robot names (`chassis/<name>/…`): one, or several each under its own prefix.
+    pub names: Vec<String>,
     /// Address and TCP port of the WebSocket server (port 0: any free port).
     pub bind: String,
     pub port: u16,
@@ -65,28 +68,82 @@ pub struct Config {
     pub drive: bool,
 }
 
-/// Serves the robot on the WebSocket until SIGINT / SIGTERM.
+/// One robot's side of the bridge.
+struct Served {
+    naming: Naming,
+    channels: Channels,
+    inbox: Receiver<Inbox>,
+}
+
+/// Serves the robots on the WebSocket until SIGINT / SIGTERM, or until one robot's loop fails
+/// (the others then stop too, and the failure is the bridge's).
 pub fn run(config: &Config) -> anyhow::Result<()> {
-    let (tx, rx) = mpsc::channel();
     let ctx = foxglove::Context::new();
-    let channels = Channels::new(&ctx)?;
-    let handle = server::start(&ctx, config, &tx)?;
-    drop(tx);
+    let prefixed = config.names.len() > 1;
+    let mut served = Vec::new();
+    let mut routes = Vec::new();
+    for name in &config.names {
+        let naming = Naming::of(name, prefixed);
+        let (tx, rx) = mpsc::channel();
+        served.push(Served {
+            channels: Channels::new(&ctx, &naming)?,
+            naming: naming.clone(),
+            inbox: rx,
+        });
+        routes.push(Route { naming, inbox: tx });
+    }
+    let handle = server::start(&ctx, config, &routes)?;
+    drop(routes);
+    let quoted: Vec<String> = config.names.iter().map(|n| format!("'{n}'")).collect();
     eprintln!(
-        "chassis-foxglove: robot '{}' on ws://{}:{}{}",
-        config.name,
+        "chassis-foxglove: robot{} {}{} on ws://{}:{}{}",
+        if prefixed { "s" } else { "" },
+        quoted.join(", "),
+        if prefixed {
+            " (each under /<name>/…)"
+        } else {
+            ""
+        },
         config.bind,
         handle.port(),
         if config.drive { "" } else { " (read-only)" }
     );
-    let result = robot_loop(config, &channels, &rx);
+    let result = std::thread::scope(|scope| {
+        let loops: Vec<_> = served
+            .into_iter()
+            .map(|robot| {
+                scope.spawn(move || {
+                    let name = robot.naming.robot.clone();
+                    let result = robot_loop(config, &robot);
+                    if result.is_err() {
+                        chassis_client::request_termination();
+                    }
+                    result.with_context(|| format!("robot '{name}'"))
+                })
+            })
+            .collect();
+        loops
+            .into_iter()
+            .map(|handle| {
+                handle
+                    .join()
+                    .unwrap_or_else(|_| Err(anyhow::anyhow!("a robot loop panicked")))
+            })
+            .collect::<anyhow::Result<Vec<()>>>()
+    });
     handle.stop().wait_blocking();
-    result
+    result.map(drop)
 }
 
-/// The loop on the robot's side of the server, until SIGINT / SIGTERM.
-fn robot_loop(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> anyhow::Result<()> {
-    let Some(mut robot) = connect(&config.name) else {
+/// The loop on one robot's side of the server, until SIGINT / SIGTERM or another robot's loop
+/// failed.
+fn robot_loop(config: &Config, served: &Served) -> anyhow::Result<()> {
+    let Served {
+        naming,
+        channels,
+        inbox,
+    } = served;
+    let Some(mut robot) = connect(&naming.robot) else {
         return Ok(());
     };
     let tap = robot.frames(TAP_BUFFER).context("opening the frame tap")?;
@@ -97,6 +154,7 @@ fn robot_loop(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> 
     };
     let mut lp = Loop {
         channels,
+        naming,
         clock: WallClock::measure(),
         described: None,
         body: None,
@@ -115,7 +173,7 @@ fn robot_loop(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> 
     };
     lp.log(
         Severity::Info,
-        format!("bridging robot '{}'", config.name),
+        format!("bridging robot '{}'", naming.robot),
         chassis_client::now_ns(),
     );
     match robot.description(DESCRIPTION_WAIT) {
@@ -123,7 +181,7 @@ fn robot_loop(config: &Config, channels: &Channels, inbox: &Receiver<Inbox>) -> 
         Err(e) => tracing::warn!(
             error = %e,
             "no description of robot '{}' yet: no body, sensors or decoded frames until one comes",
-            config.name
+            naming.robot
         ),
     }
     let mut ticker = Ticker::new(TICK);
@@ -202,6 +260,7 @@ impl Teleop {
 
 struct Loop<'a> {
     channels: &'a Channels,
+    naming: &'a Naming,
     clock: WallClock,
     /// The description drawn (`seq`, `stamp_ns`: a restarted chassisd counts again).
     described: Option<(u64, u64)>,
@@ -336,14 +395,18 @@ impl Loop<'_> {
                 Err(e) => tracing::debug!(error = %e, "encoding a state sample"),
             }
         }
-        c.pose.log_with_time(&fox::pose_in_frame(state, wall), wall);
+        let n = self.naming;
+        c.pose
+            .log_with_time(&n.pose(fox::pose_in_frame(state, wall)), wall);
         if let Some(body) = &self.body {
-            c.tf.log_with_time(&fox::transforms(state, body, wall), wall);
+            c.tf.log_with_time(&n.transforms(fox::transforms(state, body, wall)), wall);
             if state.stamp_ns.saturating_sub(self.last_scene_ns) >= SCENE_PERIOD_NS {
                 self.last_scene_ns = state.stamp_ns;
                 if c.scene.has_sinks() {
-                    c.scene
-                        .log_with_time(&convert::scene(state, body, &self.trail, wall), wall);
+                    c.scene.log_with_time(
+                        &n.scene(convert::scene(state, body, &self.trail, wall)),
+                        wall,
+                    );
                 }
             }
         }
@@ -352,7 +415,7 @@ impl Loop<'_> {
             && let Some(fix) = fox::location_fix(state, wall)
         {
             self.last_gps_ns = gps_stamp;
-            c.gps.log_with_time(&fix, wall);
+            c.gps.log_with_time(&n.fix(fix), wall);
         }
     }
 

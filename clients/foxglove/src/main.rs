@@ -1,5 +1,5 @@
-//! `chassis-foxglove --name ROBOT [--port 8765]`: a live Foxglove view of a robot served by
-//! chassisd, over the Foxglove WebSocket protocol (the official `foxglove` SDK's server).
+//! `chassis-foxglove --name ROBOT[,ROBOT…] [--port 8765]`: a live Foxglove view of robots served
+//! by chassisd, over the Foxglove WebSocket protocol (the official `foxglove` SDK's server).
 //!
 //! Open Foxglove, connect to `ws://localhost:8765`, import `clients/foxglove/layout.json`.
 //!
@@ -23,11 +23,19 @@
 //! `--read-only` offers no client publishing and only the `/estop` service: a view can always
 //! stop the robot, never drive it.
 //!
+//! **Several robots** (`--name scout1,scout2,titan`, typically those `chassis-zenoh
+//! --mirror-all` brings to an operator's computer): one server, each robot's channels and
+//! services under its name (`/scout1/tf`, `/scout1/state`, `/scout1/estop`, …) and its frames
+//! too (`scout1/odom` → `scout1/base_link`: each robot keeps its own odometry origin). A
+//! Teleop panel drives the robot its topic names (`/scout1/cmd_vel`); a topic under no robot's
+//! name is refused with a status. Each robot has its own loop and waits for its own chassisd.
+//!
 //! It binds 127.0.0.1: anyone who reaches the port can drive the robot. `--bind ADDRESS`
 //! serves other hosts, with a warning.
 
 mod bridge;
 mod convert;
+mod naming;
 mod server;
 
 use std::process::ExitCode;
@@ -42,9 +50,10 @@ const MAX_STATE_HZ: f64 = 50.0;
 #[derive(Debug, Parser)]
 #[command(name = "chassis-foxglove", version)]
 struct Cli {
-    /// The robot's name (chassisd --name).
-    #[arg(long)]
-    name: String,
+    /// The robot's name (chassisd --name). Several (`--name a --name b`, or `--name a,b`):
+    /// each robot's topics and services under `/<name>/…`, its frames under `<name>/…`.
+    #[arg(long, required = true, value_delimiter = ',')]
+    name: Vec<String>,
     /// TCP port of the WebSocket server (0: any free port, printed at start).
     #[arg(long, default_value_t = 8765)]
     port: u16,
@@ -72,10 +81,11 @@ impl Cli {
         if !(self.state_hz > 0.0 && self.state_hz <= MAX_STATE_HZ) {
             anyhow::bail!("--state-hz must be in (0, {MAX_STATE_HZ}]");
         }
+        naming::check_names(&self.name).map_err(anyhow::Error::msg)?;
         if !is_loopback(&self.bind) {
             tracing::warn!(bind = self.bind, "serving beyond this machine");
             eprintln!(
-                "chassis-foxglove: WARNING: listening on {}: anyone who reaches port {} can {} robot '{}'",
+                "chassis-foxglove: WARNING: listening on {}: anyone who reaches port {} can {} robot(s) {}",
                 self.bind,
                 self.port,
                 if self.read_only {
@@ -83,11 +93,11 @@ impl Cli {
                 } else {
                     "DRIVE"
                 },
-                self.name
+                self.name.join(", ")
             );
         }
         Ok(bridge::Config {
-            name: self.name,
+            names: self.name,
             bind: self.bind,
             port: self.port,
             state_period: Duration::from_secs_f64(1.0 / self.state_hz),

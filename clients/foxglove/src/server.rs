@@ -1,6 +1,6 @@
 //! The Foxglove side: the WebSocket server, its channels, and its callbacks, which run on the
-//! server's own threads and turn into [`Inbox`] messages for the robot loop (iceoryx2 ports are
-//! not `Send`: only that loop touches them). Nothing here talks to the robot.
+//! server's own threads and turn into [`Inbox`] messages for the loop of the robot they address
+//! (iceoryx2 ports are not `Send`: only that loop touches them). Nothing here talks to a robot.
 
 use std::sync::Arc;
 use std::sync::mpsc::Sender;
@@ -17,8 +17,9 @@ use serde_json::Value;
 
 use crate::bridge::Config;
 use crate::convert::{frames_schema, mux_json};
+use crate::naming::Naming;
 
-/// The channels the bridge logs to.
+/// The channels the bridge logs one robot to.
 #[derive(Debug)]
 pub struct Channels {
     pub tf: Channel<FrameTransforms>,
@@ -32,11 +33,12 @@ pub struct Channels {
 }
 
 impl Channels {
-    /// Creates the channels in `ctx`: Foxglove's well-known messages, and JSON channels whose
-    /// schemas name every field of the IPC types.
-    pub fn new(ctx: &Arc<Context>) -> anyhow::Result<Self> {
+    /// Creates the channels of the robot `naming` names in `ctx`: Foxglove's well-known
+    /// messages, and JSON channels whose schemas name every field of the IPC types.
+    pub fn new(ctx: &Arc<Context>, naming: &Naming) -> anyhow::Result<Self> {
         let json_channel = |topic: &str, schema_name: &str, schema: Value| {
-            ctx.channel_builder(topic)
+            let topic = naming.topic(topic);
+            ctx.channel_builder(&topic)
                 .message_encoding("json")
                 .schema(Schema::new(
                     schema_name,
@@ -49,11 +51,11 @@ impl Channels {
         let state_value = serde_json::to_value(ChassisState::default())?;
         let mux_value = mux_json(&MuxStatus::default())?;
         Ok(Self {
-            tf: ctx.channel_builder("/tf").build(),
-            pose: ctx.channel_builder("/pose").build(),
-            scene: ctx.channel_builder("/scene").build(),
-            gps: ctx.channel_builder("/gps").build(),
-            log: ctx.channel_builder("/log").build(),
+            tf: ctx.channel_builder(naming.topic("/tf")).build(),
+            pose: ctx.channel_builder(naming.topic("/pose")).build(),
+            scene: ctx.channel_builder(naming.topic("/scene")).build(),
+            gps: ctx.channel_builder(naming.topic("/gps")).build(),
+            log: ctx.channel_builder(naming.topic("/log")).build(),
             state: json_channel("/state", "chassis.ChassisState", schema_of(&state_value))?,
             mux: json_channel("/mux", "chassis.MuxStatus", schema_of(&mux_value))?,
             frames: json_channel("/frames", "chassis.Frames", frames_schema())?,
@@ -61,13 +63,20 @@ impl Channels {
     }
 }
 
-/// Starts the WebSocket server of `ctx` on `config.bind:config.port`: services and client
-/// publishing (the Teleop panel) unless `config.drive` is off, when only `/estop` is offered.
-/// Client messages and service calls go to `inbox`.
+/// One robot's loop, as the server reaches it.
+#[derive(Debug, Clone)]
+pub struct Route {
+    pub naming: Naming,
+    pub inbox: Sender<Inbox>,
+}
+
+/// Starts the WebSocket server of `ctx` on `config.bind:config.port`: each robot's services and
+/// client publishing (the Teleop panel) unless `config.drive` is off, when only its `/estop` is
+/// offered. A client message or service call goes to the loop of the robot it addresses.
 pub fn start(
     ctx: &Arc<Context>,
     config: &Config,
-    inbox: &Sender<Inbox>,
+    routes: &[Route],
 ) -> anyhow::Result<WebSocketServerHandle> {
     let actions: Vec<ServiceAction> = if config.drive {
         ServiceAction::ALL.to_vec()
@@ -80,14 +89,18 @@ pub fn start(
     }
     WebSocketServer::new()
         .context(ctx)
-        .name(format!("chassis-foxglove {}", config.name))
+        .name(format!("chassis-foxglove {}", config.names.join(",")))
         .bind(config.bind.clone(), config.port)
         .capabilities(capabilities)
         .supported_encodings(["json"])
         .listener(Arc::new(Listener {
-            inbox: inbox.clone(),
+            routes: routes.to_vec(),
         }))
-        .services(actions.into_iter().map(|a| service(a, inbox.clone())))
+        .services(routes.iter().flat_map(|route| {
+            actions
+                .iter()
+                .map(|&a| service(a, &route.naming, route.inbox.clone()))
+        }))
         .start_blocking()
         .with_context(|| format!("serving on {}:{}", config.bind, config.port))
 }
@@ -112,15 +125,34 @@ pub fn check_twist_channel(channel: &ClientChannel) -> Result<(), TwistError> {
     messages::check_twist_channel(&channel.topic, &channel.schema_name, &channel.encoding)
 }
 
-/// The server's listener: client publishes become [`Inbox`] messages.
+/// The server's listener: client publishes become [`Inbox`] messages for the robot whose
+/// prefix their topic carries (any topic, when the bridge serves one robot).
 #[derive(Debug)]
 pub struct Listener {
-    pub inbox: Sender<Inbox>,
+    pub routes: Vec<Route>,
+}
+
+impl Listener {
+    fn route(&self, topic: &str) -> Option<&Route> {
+        self.routes.iter().find(|r| r.naming.owns(topic))
+    }
+
+    /// Why a client's topic reaches no robot.
+    fn unrouted(&self, topic: &str) -> String {
+        let prefixes: Vec<String> = self.routes.iter().map(|r| r.naming.topic("/…")).collect();
+        format!(
+            "{topic} names no robot this bridge serves (velocities go to {}): its messages are ignored",
+            prefixes.join(", ")
+        )
+    }
 }
 
 impl ServerListener for Listener {
     fn on_client_advertise(&self, client: Client, channel: &ClientChannel) {
         match check_twist_channel(channel) {
+            Ok(()) if self.route(&channel.topic).is_none() => {
+                client.send_status(Status::warning(self.unrouted(&channel.topic)));
+            }
             Ok(()) => tracing::info!(topic = channel.topic, "a client publishes velocities"),
             Err(e) => {
                 tracing::debug!(error = %e, "client channel refused");
@@ -130,7 +162,10 @@ impl ServerListener for Listener {
     }
 
     fn on_client_unadvertise(&self, _client: Client, channel: &ClientChannel) {
-        if check_twist_channel(channel).is_ok() && self.inbox.send(Inbox::TwistEnded).is_err() {
+        if check_twist_channel(channel).is_ok()
+            && let Some(route) = self.route(&channel.topic)
+            && route.inbox.send(Inbox::TwistEnded).is_err()
+        {
             tracing::debug!("the robot loop has ended");
         }
     }
@@ -139,11 +174,14 @@ impl ServerListener for Listener {
         let request = check_twist_channel(channel)
             .and_then(|()| messages::twist_request(&channel.topic, payload));
         match request {
-            Ok(request) => {
-                if self.inbox.send(Inbox::Twist(request)).is_err() {
-                    tracing::debug!("the robot loop has ended");
+            Ok(request) => match self.route(&channel.topic) {
+                Some(route) => {
+                    if route.inbox.send(Inbox::Twist(request)).is_err() {
+                        tracing::debug!("the robot loop has ended");
+                    }
                 }
-            }
+                None => tracing::debug!(topic = channel.topic, "a velocity for no robot"),
+            },
             Err(e) => {
                 tracing::debug!(error = %e, "client message ignored");
                 client.send_status(Status::warning(e.to_string()));
@@ -152,8 +190,9 @@ impl ServerListener for Listener {
     }
 }
 
-/// The service advertised to clients for `action`, handing its calls to the robot loop.
-pub fn service(action: ServiceAction, inbox: Sender<Inbox>) -> Service {
+/// The service advertised to clients for `action` on the robot `naming` names, handing its
+/// calls to that robot's loop.
+pub fn service(action: ServiceAction, naming: &Naming, inbox: Sender<Inbox>) -> Service {
     let schema_name = format!("chassis{}", action.name().replace('/', "."));
     let json_schema = |name: String, value: &Value| {
         Schema::new(name, "jsonschema", value.to_string().into_bytes())
@@ -167,7 +206,7 @@ pub fn service(action: ServiceAction, inbox: Sender<Inbox>) -> Service {
             "json",
             json_schema(format!("{schema_name}.Response"), &response_schema()),
         );
-    Service::builder(action.name(), schema).handler(CallHandler { action, inbox })
+    Service::builder(naming.topic(action.name()), schema).handler(CallHandler { action, inbox })
 }
 
 struct CallHandler {
