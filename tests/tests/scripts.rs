@@ -26,6 +26,21 @@ const TARGETS: [&str; 9] = [
     "foxglove_client",
 ];
 
+/// Runs a program the test has just written. A child another test forks while the file is
+/// open for writing holds it open until that child execs, and an exec meanwhile fails with
+/// "text file busy" (ETXTBSY): the test's own race, not the program's, so it is retried.
+fn exec_retrying(run: impl Fn() -> std::io::Result<Output>) -> Output {
+    for _ in 0..100 {
+        match run() {
+            Err(e) if e.kind() == std::io::ErrorKind::ExecutableFileBusy => {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            result => return result.unwrap(),
+        }
+    }
+    run().unwrap()
+}
+
 const STAND_IN_CARGO: &str = r#"#!/bin/sh
 # A stand-in for cargo: logs its arguments, plays what $FUZZ_PLAY asks on $FUZZ_TARGET.
 echo "$*" >> "$FUZZ_CALLS"
@@ -94,6 +109,14 @@ impl Sandbox {
         let cargo = bin.join("cargo");
         std::fs::write(&cargo, STAND_IN_CARGO).unwrap();
         std::fs::set_permissions(&cargo, std::fs::Permissions::from_mode(0o755)).unwrap();
+        // Once one exec of the stand-in succeeded, no child forked while it was being written
+        // holds it open any more: the script's own exec of it cannot fail with ETXTBSY.
+        exec_retrying(|| {
+            Command::new(&cargo)
+                .args(["fuzz", "--version"])
+                .env("FUZZ_CALLS", "/dev/null")
+                .output()
+        });
         Self { root }
     }
 
@@ -104,14 +127,15 @@ impl Sandbox {
             self.root.join("bin").display(),
             std::env::var("PATH").unwrap_or_default()
         );
-        Command::new(self.root.join("scripts/fuzz"))
-            .args(args)
-            .env("PATH", path)
-            .env("FUZZ_CALLS", self.calls_path())
-            .env("FUZZ_PLAY", play)
-            .env("FUZZ_TARGET", target)
-            .output()
-            .unwrap()
+        exec_retrying(|| {
+            Command::new(self.root.join("scripts/fuzz"))
+                .args(args)
+                .env("PATH", &path)
+                .env("FUZZ_CALLS", self.calls_path())
+                .env("FUZZ_PLAY", play)
+                .env("FUZZ_TARGET", target)
+                .output()
+        })
     }
 
     fn calls_path(&self) -> PathBuf {
