@@ -25,11 +25,7 @@ pub fn exclusive() -> RwLockWriteGuard<'static, ()> {
     MACHINE.write().unwrap_or_else(|e| e.into_inner())
 }
 
-/// A robot name unique to this test process: `tag` and the pid (names are at most 16
-/// characters).
-pub fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
+pub use crate::name;
 
 /// Nanoseconds as milliseconds.
 pub fn ms(ns: i128) -> f64 {

@@ -242,6 +242,71 @@ impl Env {
         self.spawn(label, "chassisd", args)
     }
 
+    /// Starts chassisd (labelled `chassisd`) serving `robot` as chassis/`name`, with `extra`
+    /// arguments after `--robot ROBOT --name NAME`.
+    pub fn serve(&mut self, robot: &str, name: &str, extra: &[&str]) -> usize {
+        let mut args = vec!["--robot", robot, "--name", name];
+        args.extend_from_slice(extra);
+        self.chassisd("chassisd", &args)
+    }
+
+    /// Starts `chassisd sim` (labelled `label`) simulating `robot` as chassis/`name` on `bus`,
+    /// with `extra` arguments after `sim --robot ROBOT`.
+    pub fn sim(
+        &mut self,
+        label: &str,
+        robot: &str,
+        extra: &[&str],
+        name: &str,
+        bus: &str,
+    ) -> usize {
+        let mut args = vec!["sim", "--robot", robot];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--name", name, "--bus", bus]);
+        self.chassisd(label, &args)
+    }
+
+    /// Starts `chassisd sim` (labelled `sim`) simulating `robot` as chassis/`name` at the far
+    /// end of `line`, a pty it links at `link`, and waits for the link (at most `timeout`);
+    /// returns the simulator's index and the `--bus` for chassisd's end.
+    pub fn sim_on_pty(
+        &mut self,
+        robot: &str,
+        extra: &[&str],
+        name: &str,
+        line: Line,
+        link: &Path,
+        timeout: Duration,
+    ) -> (usize, String) {
+        let sim = self.sim("sim", robot, extra, name, &line.sim_bus(link));
+        self.wait_link(link, timeout);
+        (sim, line.bus(link))
+    }
+
+    /// Waits until `path` (the link to a simulator's pty) exists, at most `timeout`.
+    pub fn wait_link(&self, path: &Path, timeout: Duration) {
+        assert!(
+            wait_for(timeout, || path.exists()).is_some(),
+            "no link {}\n{}",
+            path.display(),
+            self.logs()
+        );
+    }
+
+    /// Writes `text` to `file` in the test's directory; returns the path.
+    pub fn write(&self, file: &str, text: &str) -> PathBuf {
+        let path = self.dir.join(file);
+        std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        path
+    }
+
+    /// Starts `chassis pub velocity --name NAME args…` (labelled `label`) in the background.
+    pub fn publish(&mut self, label: &str, name: &str, args: &[&str]) -> usize {
+        let mut all = vec!["pub", "velocity", "--name", name];
+        all.extend_from_slice(args);
+        self.spawn(label, "chassis", &all)
+    }
+
     /// Runs `chassis args…` to completion.
     pub fn chassis(&self, args: &[&str]) -> Output {
         self.run("chassis", args)
@@ -402,6 +467,60 @@ pub fn decided_after(
         }
     }
     None
+}
+
+/// The `[profile]` a simulated XBot board needs over a real serial line: a real XBot's wheel
+/// separation must be measured, and the board's is 0.45 m.
+pub const XBOT_PROFILE: &str = "[profile]\nwheel_separation_m = 0.45\n";
+
+/// A serial line through a pty between `chassisd sim` and chassisd.
+#[derive(Clone, Copy, Debug)]
+pub enum Line {
+    /// A robot's own serial protocol (the XBot's).
+    Serial,
+    /// CAN through an slcan adapter.
+    Slcan,
+}
+
+impl Line {
+    /// `chassisd sim`'s `--bus`: it makes the pty and links it at `link`.
+    pub fn sim_bus(self, link: &Path) -> String {
+        match self {
+            Self::Serial => format!("pty:{}", link.display()),
+            Self::Slcan => format!("slcan-pty:{}", link.display()),
+        }
+    }
+
+    /// chassisd's `--bus`: it opens the pty behind `link`.
+    pub fn bus(self, link: &Path) -> String {
+        match self {
+            Self::Serial => format!("serial:{}", link.display()),
+            Self::Slcan => format!("slcan:{}", link.display()),
+        }
+    }
+}
+
+/// A robot name unique to this test process: `tag` and the pid (names are at most 16
+/// characters).
+pub fn name(tag: &str) -> String {
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+/// Client `name`'s velocity source on `robot`.
+pub fn source(robot: &mut Robot, name: &str) -> Source {
+    robot
+        .source(name)
+        .unwrap_or_else(|e| panic!("source {name}: {e}"))
+}
+
+/// Sends `request` to the simulated chassis and checks it was accepted; returns the answer's
+/// stamp (what it asked for happened just before it).
+pub fn sim_ok(robot: &mut Robot, request: SimRequest) -> u64 {
+    let answer = robot
+        .sim(request, Duration::from_secs(3))
+        .unwrap_or_else(|e| panic!("sim: {e}"));
+    assert!(answer.is_ok(), "{}", answer.message());
+    answer.stamp_ns
 }
 
 /// The timeout of source `name` as the running mux reports it.

@@ -14,10 +14,6 @@ use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(20);
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 #[test]
 fn a_late_client_reads_the_description_of_the_configured_robot_with_its_overrides() {
     let mut env = Env::new("describe-hunter");
@@ -28,17 +24,7 @@ fn a_late_client_reads_the_description_of_the_configured_robot_with_its_override
         "[profile]\nmax_linear_mps = 0.4\n[mux.limits]\nmax_angular_radps = 0.7\n",
     )
     .unwrap();
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "hunter",
-            "--name",
-            &n,
-            "--config",
-            config.to_str().unwrap(),
-        ],
-    );
+    env.serve("hunter", &n, &["--config", config.to_str().unwrap()]);
     let _ = env.robot(&n, UP);
     // A client that comes an hour later (here: two seconds) reads it at once.
     std::thread::sleep(Duration::from_secs(2));
@@ -80,39 +66,9 @@ fn the_description_follows_protocol_detection() {
     let mut env = Env::new("describe-detect");
     let n = name("dd");
     let link = env.dir.join("scout-mini-slcan");
-    let link_arg = format!("slcan-pty:{}", link.display());
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "scout-mini",
-            "--protocol",
-            "v2",
-            "--name",
-            &n,
-            "--bus",
-            &link_arg,
-        ],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no link\n{}",
-        env.logs()
-    );
-    let bus = format!("slcan:{}", link.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "scout-mini",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    let extra = ["--protocol", "v2"];
+    let (_, bus) = env.sim_on_pty("scout-mini", &extra, &n, Line::Slcan, &link, UP);
+    env.serve("scout-mini", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let decided = wait_for(Duration::from_secs(10), || {
         let _ = robot.wait_state(Duration::from_millis(100));

@@ -13,10 +13,6 @@ use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 fn text(out: &Output) -> String {
     format!(
         "{}{}",
@@ -42,18 +38,7 @@ fn line<'a>(report: &'a str, key: &str) -> (&'a str, &'a str) {
 fn on_the_simulated_robot_the_doctor_reads_chassisd_and_fails_while_the_rc_holds_it() {
     let mut env = Env::new("doctor-sim");
     let n = name("ds");
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            "sim",
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("titan", &n, &["--bus", "sim", "--no-safety-monitor"]);
     env.robot(&n, UP);
     let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim"]);
     let report = text(&out);
@@ -119,10 +104,7 @@ fn the_doctor_names_a_silent_safety_monitor_and_a_held_estop_with_their_fixes() 
     let mut env = Env::new("doctor-mux");
     let n = name("dm");
     // The safety rule on, no monitor running.
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--bus", "sim"],
-    );
+    env.serve("titan", &n, &["--bus", "sim"]);
     env.robot(&n, UP);
     let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim"]);
     let report = text(&out);
@@ -139,19 +121,7 @@ fn the_doctor_names_a_silent_safety_monitor_and_a_held_estop_with_their_fixes() 
     );
 
     // A stand-in monitor's heartbeats, then an operator's e-stop.
-    env.spawn(
-        "safety",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--name",
-            &n,
-            "--source",
-            "safety",
-            "--heartbeat",
-        ],
-    );
+    env.publish("safety", &n, &["--source", "safety", "--heartbeat"]);
     let stop = env.chassis(&["control", "--name", &n, "estop"]);
     assert!(stop.status.success(), "{}", text(&stop));
     let mut report = String::new();
@@ -167,27 +137,18 @@ fn the_doctor_names_a_silent_safety_monitor_and_a_held_estop_with_their_fixes() 
     );
 }
 
-/// `chassisd sim --robot ROBOT --bus KIND:LINK`, once the link exists.
-fn board(env: &mut Env, robot: &str, kind: &str, tag: &str) -> std::path::PathBuf {
+/// `chassisd sim --robot ROBOT` at the far end of `line`, once its link exists; returns the
+/// link and the `--bus` of the near end.
+fn board(env: &mut Env, robot: &str, line: Line, tag: &str) -> (std::path::PathBuf, String) {
     let link = env.dir.join(tag);
-    let bus = format!("{kind}:{}", link.display());
-    env.chassisd(
-        "sim",
-        &["sim", "--robot", robot, "--name", &name(tag), "--bus", &bus],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no pty link\n{}",
-        env.logs()
-    );
-    link
+    let (_, bus) = env.sim_on_pty(robot, &[], &name(tag), line, &link, UP);
+    (link, bus)
 }
 
 #[test]
 fn on_a_serial_pty_the_doctor_hears_the_xbot_and_names_permission_and_missing_devices() {
     let mut env = Env::new("doctor-pty");
-    let link = board(&mut env, "xbot", "pty", "xbot");
-    let bus = format!("serial:{}", link.display());
+    let (link, bus) = board(&mut env, "xbot", Line::Serial, "xbot");
     let n = name("dx");
     let out = env.chassis(&["doctor", "--robot", "xbot", "--name", &n, "--bus", &bus]);
     let report = text(&out);
@@ -253,8 +214,7 @@ fn on_a_serial_pty_the_doctor_hears_the_xbot_and_names_permission_and_missing_de
 #[test]
 fn on_an_slcan_pty_the_doctor_finds_the_adapter_and_the_titan_behind_it() {
     let mut env = Env::new("doctor-slcan");
-    let link = board(&mut env, "titan", "slcan-pty", "slcan");
-    let bus = format!("slcan:{}", link.display());
+    let (_, bus) = board(&mut env, "titan", Line::Slcan, "slcan");
     let n = name("dc");
     let out = env.chassis(&["doctor", "--robot", "titan", "--name", &n, "--bus", &bus]);
     let report = text(&out);

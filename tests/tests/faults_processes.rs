@@ -276,24 +276,7 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
     let n = name("ksp");
     let mut rng = Rng::from_env(test);
     let link = env.dir.join("titan-slcan");
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &format!("slcan-pty:{}", link.display()),
-        ],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no link\n{}",
-        env.logs()
-    );
-    let bus = format!("slcan:{}", link.display());
+    let (_, bus) = env.sim_on_pty("titan", &[], &n, Line::Slcan, &link, UP);
     let args = [
         "--robot",
         "titan",
@@ -439,32 +422,15 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
     let n = name("ksm");
     let mut rng = Rng::from_env(test);
     let link = env.dir.join("xbot");
-    let sim_args_text = format!("pty:{}", link.display());
-    let sim_args = [
-        "sim",
-        "--robot",
+    let sim_bus = Line::Serial.sim_bus(&link);
+    let mut sim = env.sim("sim-0", "xbot", &[], &n, &sim_bus);
+    env.wait_link(&link, UP);
+    let config = env.write("xbot.toml", XBOT_PROFILE);
+    let bus = Line::Serial.bus(&link);
+    env.serve(
         "xbot",
-        "--name",
-        n.as_str(),
-        "--bus",
-        sim_args_text.as_str(),
-    ];
-    let mut sim = env.chassisd("sim-0", &sim_args);
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no link\n{}",
-        env.logs()
-    );
-    let config = env.dir.join("xbot.toml");
-    std::fs::write(&config, "[profile]\nwheel_separation_m = 0.45\n").unwrap();
-    let bus = format!("serial:{}", link.display());
-    env.chassisd(
-        "chassisd",
+        &n,
         &[
-            "--robot",
-            "xbot",
-            "--name",
-            &n,
             "--bus",
             &bus,
             "--no-safety-monitor",
@@ -519,7 +485,7 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
             .filter(|f| f.direction == FrameDirection::TX)
             .count();
         let restarted = now_ns();
-        sim = env.chassisd(&format!("sim-{cycle}"), &sim_args);
+        sim = env.sim(&format!("sim-{cycle}"), "xbot", &[], &n, &sim_bus);
         // The state keeps the speed from before the hang-up: only a speed the chassis reported
         // after its restart shows that it drives again.
         let back = drove_again_after(

@@ -12,11 +12,6 @@ use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 fn start(env: &mut Env, label: &str, n: &str) -> usize {
     env.chassisd(
         label,
@@ -92,12 +87,10 @@ fn assert_held_until_released(env: &Env, n: &str, robot: &mut Robot, teleop: &mu
 /// `chassis pub velocity` keeps asking as teleop for 0.3 m/s, in a process of its own, through
 /// an e-stop and its release.
 fn keep_asking(env: &mut Env, n: &str) -> usize {
-    env.spawn(
+    env.publish(
         "pub",
-        "chassis",
-        &[
-            "pub", "velocity", "--name", n, "--source", "teleop", "--vx", "0.3", "--rate", "20",
-        ],
+        n,
+        &["--source", "teleop", "--vx", "0.3", "--rate", "20"],
     )
 }
 

@@ -20,11 +20,6 @@ const GOAL_LIMIT_M: f64 = 0.10;
 /// `--preempt-timeout` of the give-up tests.
 const PREEMPT_TIMEOUT: Duration = Duration::from_secs(1);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 /// The square each robot drives: TITAN cannot turn tighter than 1.53 m, so its corners are
 /// rounded to 1.79 m (1.15 × the 1.56 m the planner asks for at least) and its square needs at
 /// least 3.59 m; 4 m is its default. The others turn on the spot and drive the 2 m square of the
@@ -43,10 +38,7 @@ fn corner_radius(robot: &mut Robot) -> f64 {
 /// `chassisd` on the simulated `robot`, and a connection to it.
 fn start(env: &mut Env, robot: &str, tag: &str) -> (Robot, String) {
     let n = name(tag);
-    env.chassisd(
-        "chassisd",
-        &["--robot", robot, "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve(robot, &n, &["--no-safety-monitor"]);
     let robot = env.robot(&n, UP);
     (robot, n)
 }
@@ -540,29 +532,8 @@ fn an_xbot_without_its_wheel_separation_has_no_pose_and_the_planner_says_so() {
     let mut env = Env::new("plan-nopose");
     let n = name("pnp");
     let link = env.dir.join("xbot");
-    let sim_bus = format!("pty:{}", link.display());
-    env.chassisd(
-        "sim",
-        &["sim", "--robot", "xbot", "--name", &n, "--bus", &sim_bus],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no pty link\n{}",
-        env.logs()
-    );
-    let bus = format!("serial:{}", link.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "xbot",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    let (_, bus) = env.sim_on_pty("xbot", &[], &n, Line::Serial, &link, UP);
+    env.serve("xbot", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     assert!(!state(&mut robot).is_valid(Group::Pose));
     let planner = env.spawn(
@@ -599,17 +570,10 @@ fn a_configured_speed_limit_reaches_the_planner_which_never_asks_above_it() {
         format!("[profile]\nmax_linear_mps = {LIMIT_MPS}\n"),
     )
     .unwrap();
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
+    env.serve(
+        "titan",
+        &n,
+        &["--no-safety-monitor", "--config", config.to_str().unwrap()],
     );
     let mut robot = env.robot(&n, UP);
     let described = robot.description(UP).unwrap();

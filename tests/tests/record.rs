@@ -15,11 +15,6 @@ use serde_json::Value;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 /// Waits until the recorder started as `index` says it is recording.
 fn wait_recording(env: &mut Env, index: usize) {
     let ready = wait_for(UP, || env.proc(index).log_text().contains("Ctrl-C to stop"));
@@ -243,10 +238,7 @@ fn json_f64(value: &Value, path: &[&str]) -> f64 {
 fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry_and_pose() {
     let mut env = Env::new("record-titan");
     let n = name("rec");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mcap_path = env.dir.join("drive.mcap");
     let log_path = env.dir.join("drive.log");
@@ -449,10 +441,7 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
 fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
     let mut env = Env::new("record-flood");
     let n = name("fld");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let _robot = env.robot(&n, UP);
     let flood = env.chassis(&["sim", "--name", &n, "flood", "4000"]);
     assert!(
@@ -510,10 +499,7 @@ fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
 fn an_xbot_records_to_mcap_only_and_its_serial_stream_replays_to_the_recorded_pose() {
     let mut env = Env::new("record-xbot");
     let n = name("xrec");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "xbot", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("xbot", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let refused = env.chassis(&[
         "record",
@@ -546,8 +532,7 @@ fn an_xbot_records_to_mcap_only_and_its_serial_stream_replays_to_the_recorded_po
 
     // The simulated XBot's wheel separation is known to `--bus sim` only: give it to the replay,
     // which then integrates the pose from the replayed encoders exactly as the robot did.
-    let config = env.dir.join("xbot.toml");
-    std::fs::write(&config, "[profile]\nwheel_separation_m = 0.45\n").unwrap();
+    let config = env.write("xbot.toml", XBOT_PROFILE);
     let out = env.chassis(&[
         "replay",
         &text,

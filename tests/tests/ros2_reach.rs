@@ -160,10 +160,7 @@ fn a_dds_peer_on_the_robots_network_drives_only_when_the_discovery_range_allows_
     let mut env = Env::new("ros2-reach");
     let n = format!("rr{}", std::process::id() % 100_000);
     let domain = (40 + std::process::id() % 50).to_string();
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
 
     // Default: this computer only. The peer, 10.78.0.2, matches no reader and nothing moves.

@@ -12,10 +12,6 @@ use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 fn drive(robot: &mut Robot, source: &mut Source, request: VelocityRequest, for_: Duration) -> f32 {
     let end = Instant::now() + for_;
     let mut peak = 0.0f32;
@@ -91,27 +87,13 @@ fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_han
     let mut env = Env::new("xbot-pty");
     let n = name("xb");
     let link = env.dir.join("xbot");
-    let sim_bus = format!("pty:{}", link.display());
-    let sim = env.chassisd(
-        "sim",
-        &["sim", "--robot", "xbot", "--name", &n, "--bus", &sim_bus],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no pty link\n{}",
-        env.logs()
-    );
+    let (sim, bus) = env.sim_on_pty("xbot", &[], &n, Line::Serial, &link, UP);
     // A real XBot's wheel separation must be measured: give the simulated board's.
-    let config = env.dir.join("xbot.toml");
-    std::fs::write(&config, "[profile]\nwheel_separation_m = 0.45\n").unwrap();
-    let bus = format!("serial:{}", link.display());
-    env.chassisd(
-        "chassisd",
+    let config = env.write("xbot.toml", XBOT_PROFILE);
+    env.serve(
+        "xbot",
+        &n,
         &[
-            "--robot",
-            "xbot",
-            "--name",
-            &n,
             "--bus",
             &bus,
             "--no-safety-monitor",
@@ -192,10 +174,7 @@ fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_han
     let down_for = killed.elapsed();
     let _ = std::fs::remove_file(&link);
     let restarted = now_ns();
-    env.chassisd(
-        "sim2",
-        &["sim", "--robot", "xbot", "--name", &n, "--bus", &sim_bus],
-    );
+    env.sim("sim2", "xbot", &[], &n, &Line::Serial.sim_bus(&link));
     // The state keeps the speed from before the hang-up: driving again is a speed the board
     // reported after the line came back.
     let back = drove_again_after(
@@ -250,18 +229,7 @@ fn the_gps_receiver_feeds_the_fix_into_state_and_no_fix_is_reported_as_such() {
     let pty = nix::pty::openpty(None, None).unwrap();
     let slave_path = nix::unistd::ttyname(pty.slave.as_fd()).unwrap();
     let gps = format!("serial:{}", slave_path.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "xbot",
-            "--name",
-            &n,
-            "--gps",
-            &gps,
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("xbot", &n, &["--gps", &gps, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut master = std::fs::File::from(pty.master);
     let fix = nmea("GPGGA,092750.000,5321.6802,N,00630.3372,W,1,8,1.03,61.7,M,55.2,M,,");
@@ -306,10 +274,7 @@ fn the_gps_receiver_feeds_the_fix_into_state_and_no_fix_is_reported_as_such() {
 fn scout_mini_drives_on_its_simulated_chassis_with_checksums_checked_both_ways() {
     let mut env = Env::new("scout");
     let n = name("sm");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "scout-mini", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("scout-mini", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = robot.source("teleop").unwrap();
     let peak = drive(

@@ -10,17 +10,6 @@ use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
-fn source(robot: &mut Robot, name: &str) -> Source {
-    robot
-        .source(name)
-        .unwrap_or_else(|e| panic!("source {name}: {e}"))
-}
-
 /// Sends `request` every 20 ms for `duration` (and keeps a safety heartbeat if given).
 fn drive_for(
     robot: &mut Robot,
@@ -47,10 +36,7 @@ fn drive_for(
 fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
     let mut env = Env::new("pub-drive");
     let n = name("pub");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     // What a user watches: `chassis echo state`, one JSON object per sample printed.
     let echo = env.spawn(
@@ -59,21 +45,10 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
         &["echo", "state", "--json", "--name", &n],
     );
     pause(Duration::from_millis(300));
-    let publisher = env.spawn(
+    let publisher = env.publish(
         "pub",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--source",
-            "teleop",
-            "--vx",
-            "0.3",
-            "--duration",
-            "2",
-            "--name",
-            &n,
-        ],
+        &n,
+        &["--source", "teleop", "--vx", "0.3", "--duration", "2"],
     );
     let moving = max_speed(&mut robot, Duration::from_millis(2200));
     assert!(moving > 0.25, "peak speed {moving} m/s");
@@ -120,7 +95,7 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
 fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
     let mut env = Env::new("required");
     let n = name("req");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    env.serve("titan", &n, &[]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let request = VelocityRequest::twist(0.4, 0.0);
@@ -137,20 +112,10 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
         ZeroReason::REQUIRED_SOURCE_STALE
     );
 
-    let heartbeat = env.spawn(
+    let heartbeat = env.publish(
         "safety",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--source",
-            "safety",
-            "--heartbeat",
-            "--rate",
-            "20",
-            "--name",
-            &n,
-        ],
+        &n,
+        &["--source", "safety", "--heartbeat", "--rate", "20"],
     );
     let peak = drive_for(
         &mut robot,
@@ -186,10 +151,7 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
 fn teleop_preempts_the_planner_and_hands_back_when_it_goes_quiet() {
     let mut env = Env::new("preempt");
     let n = name("pre");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut planner = source(&mut robot, "planner");
     let mut teleop = source(&mut robot, "teleop");
@@ -237,7 +199,7 @@ fn teleop_preempts_the_planner_and_hands_back_when_it_goes_quiet() {
 fn a_latched_estop_holds_until_the_operator_releases_it() {
     let mut env = Env::new("estop");
     let n = name("est");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    env.serve("titan", &n, &[]);
     let mut robot = env.robot(&n, UP);
     let mut safety = source(&mut robot, "safety");
     let mut teleop = source(&mut robot, "teleop");
@@ -299,10 +261,7 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
 fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
     let mut env = Env::new("client-kill");
     let n = name("ck");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let args = [
         "pub", "velocity", "--source", "teleop", "--vx", "0.3", "--name", &n,
@@ -449,10 +408,7 @@ fn a_service_killed_with_sigkill_restarts_cleanly_and_clients_reconnect() {
 fn sigterm_commands_zero_and_exits_zero() {
     let mut env = Env::new("sigterm");
     let n = name("term");
-    let service = env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let service = env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     drive_for(
@@ -496,10 +452,7 @@ fn sigterm_commands_zero_and_exits_zero() {
 fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_loses() {
     let mut env = Env::new("stream");
     let n = name("strm");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     // The buffer asked for is clamped to 1..=the service's maximum.
     assert_eq!(robot.state_stream(0).unwrap().buffer(), 1);
@@ -593,10 +546,7 @@ fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_
 fn control_requests_are_answered_with_success_or_a_reason() {
     let mut env = Env::new("control");
     let n = name("ctl");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let _robot = env.robot(&n, UP);
     let ok = env.chassis(&["control", "--name", &n, "off-road", "on"]);
     assert!(
@@ -633,29 +583,8 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
     let mut env = Env::new("slcan");
     let n = name("sl");
     let link = env.dir.join("titan-slcan");
-    let link_arg = format!("slcan-pty:{}", link.display());
-    let sim = env.chassisd(
-        "sim",
-        &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no link\n{}",
-        env.logs()
-    );
-    let bus = format!("slcan:{}", link.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    let (sim, bus) = env.sim_on_pty("titan", &[], &n, Line::Slcan, &link, UP);
+    env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
@@ -672,10 +601,7 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
     let _ = std::fs::remove_file(&link);
     let down_for = killed.elapsed();
     let restarted = now_ns();
-    env.chassisd(
-        "sim2",
-        &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg],
-    );
+    env.sim("sim2", "titan", &[], &n, &Line::Slcan.sim_bus(&link));
     // The state keeps the speed from before the hang-up: driving again is a speed the chassis
     // reported after the adapter came back.
     let back = drove_again_after(
@@ -726,17 +652,7 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
 fn a_robot_on_a_bus_of_the_wrong_kind_is_refused_at_start_with_the_kinds_it_accepts() {
     let mut env = Env::new("wrong-bus");
     let n = name("wb");
-    let index = env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            "serial:/dev/ttyUSB0",
-        ],
-    );
+    let index = env.serve("titan", &n, &["--bus", "serial:/dev/ttyUSB0"]);
     assert_eq!(env.proc(index).wait_exit(Duration::from_secs(5)), Some(2));
     let log = env.proc(index).log_text();
     assert!(
@@ -761,39 +677,9 @@ fn scout_mini_scout_and_bunker_without_a_protocol_flag_drive_a_v1_and_a_v2_chass
         let mut env = Env::new(&format!("detect-{robot}-{protocol}"));
         let n = name(&format!("d{}{protocol}", &robot[..2]));
         let link = env.dir.join("agilex-slcan");
-        let link_arg = format!("slcan-pty:{}", link.display());
-        env.chassisd(
-            "sim",
-            &[
-                "sim",
-                "--robot",
-                robot,
-                "--protocol",
-                protocol,
-                "--name",
-                &n,
-                "--bus",
-                &link_arg,
-            ],
-        );
-        assert!(
-            wait_for(UP, || link.exists()).is_some(),
-            "no link\n{}",
-            env.logs()
-        );
-        let bus = format!("slcan:{}", link.display());
-        env.chassisd(
-            "chassisd",
-            &[
-                "--robot",
-                robot,
-                "--name",
-                &n,
-                "--bus",
-                &bus,
-                "--no-safety-monitor",
-            ],
-        );
+        let extra = ["--protocol", protocol];
+        let (_, bus) = env.sim_on_pty(robot, &extra, &n, Line::Slcan, &link, UP);
+        env.serve(robot, &n, &["--bus", &bus, "--no-safety-monitor"]);
         let mut handle = env.robot(&n, UP);
         let mut teleop = source(&mut handle, "teleop");
         let go = VelocityRequest::twist(0.3, 0.0);
@@ -848,13 +734,10 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
     let config = env.dir.join("bunker.toml");
     std::fs::write(&config, "[profile]\ndetect_timeout_ms = 1000\n").unwrap();
     let bus = format!("slcan:{}", slave_path.display());
-    env.chassisd(
-        "chassisd",
+    env.serve(
+        "bunker",
+        &n,
         &[
-            "--robot",
-            "bunker",
-            "--name",
-            &n,
             "--bus",
             &bus,
             "--no-safety-monitor",
@@ -936,10 +819,7 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
 fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_again() {
     let mut env = Env::new("estop-switch");
     let n = name("esw");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "hunter", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("hunter", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.4, 0.0);

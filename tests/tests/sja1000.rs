@@ -105,18 +105,7 @@ fn the_doctor_reads_bit_rate_restart_ms_and_controller_state_of_a_real_driver() 
     // Both controllers right; the simulated TITAN on can1.
     set("can0", 500_000, 100);
     set("can1", 500_000, 100);
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "titan",
-            "--name",
-            &format!("{n}s"),
-            "--bus",
-            "can:can1",
-        ],
-    );
+    env.sim("sim", "titan", &[], &format!("{n}s"), "can:can1");
     let mut report = String::new();
     let ready = wait_for(UP, || {
         let (code, text) = doctor(&env, &n, "can:can0");
@@ -136,18 +125,7 @@ fn the_doctor_reads_bit_rate_restart_ms_and_controller_state_of_a_real_driver() 
     assert!(!report.contains("bus-errors"), "{report}");
 
     // chassisd on can0 reads the controller's state at open and drives the TITAN across.
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            "can:can0",
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("titan", &n, &["--bus", "can:can0", "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let active = wait_for(UP, || {
         let s = state(&mut robot);

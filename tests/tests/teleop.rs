@@ -10,11 +10,6 @@ use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 #[test]
 fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop() {
     if !tmux_available() {
@@ -23,10 +18,7 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
     }
     let mut env = Env::new("teleop-tmux");
     let n = name("tel");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let log = env.dir.join("teleop.log");
     let command = format!(
@@ -143,26 +135,12 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
 fn top_once_prints_rates_per_can_id_and_the_active_source() {
     let mut env = Env::new("top-once");
     let n = name("top");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
-    env.spawn(
+    env.publish(
         "pub",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--source",
-            "teleop",
-            "--vx",
-            "0.2",
-            "--duration",
-            "6",
-            "--name",
-            &n,
-        ],
+        &n,
+        &["--source", "teleop", "--vx", "0.2", "--duration", "6"],
     );
     let driving = wait_for(UP, || {
         mux(&mut robot)
@@ -212,17 +190,10 @@ fn teleop_in_a_terminal_steps_no_faster_than_the_limit_chassisd_describes() {
     let n = name("tlim");
     let config = env.dir.join("limit.toml");
     std::fs::write(&config, "[profile]\nmax_linear_mps = 0.3\n").unwrap();
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
+    env.serve(
+        "titan",
+        &n,
+        &["--no-safety-monitor", "--config", config.to_str().unwrap()],
     );
     let mut robot = env.robot(&n, UP);
     let log = env.dir.join("teleop.log");
@@ -281,34 +252,16 @@ fn top_and_status_show_the_robot_as_described_and_name_every_frame() {
     let n = name("toph");
     let config = env.dir.join("hunter.toml");
     std::fs::write(&config, "[profile]\nmax_linear_mps = 0.4\n").unwrap();
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "hunter",
-            "--name",
-            &n,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
+    env.serve(
+        "hunter",
+        &n,
+        &["--no-safety-monitor", "--config", config.to_str().unwrap()],
     );
     let mut robot = env.robot(&n, UP);
-    env.spawn(
+    env.publish(
         "pub",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--source",
-            "teleop",
-            "--vx",
-            "0.2",
-            "--duration",
-            "6",
-            "--name",
-            &n,
-        ],
+        &n,
+        &["--source", "teleop", "--vx", "0.2", "--duration", "6"],
     );
     let driving = wait_for(UP, || {
         mux(&mut robot)

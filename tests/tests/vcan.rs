@@ -25,10 +25,6 @@ fn iface() -> String {
     std::env::var("CHASSIS_VCAN").unwrap_or_else(|_| "vcan0".into())
 }
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 fn figure(text: impl AsRef<str>) {
     println!("figure: {}", text.as_ref());
 }
@@ -92,12 +88,6 @@ impl Drop for Tool {
     }
 }
 
-fn source(robot: &mut Robot, name: &str) -> Source {
-    robot
-        .source(name)
-        .unwrap_or_else(|e| panic!("source {name}: {e}"))
-}
-
 /// Sends `request` every 20 ms until `done(state)` holds or `timeout` passes; returns the time
 /// it took.
 fn drive_until(
@@ -122,22 +112,8 @@ fn drive_until(
 /// `chassisd sim --robot titan` and `chassisd --robot titan`, both on the vcan interface.
 fn titan_on_vcan(env: &mut Env, n: &str) -> (usize, usize) {
     let bus = format!("can:{}", iface());
-    let sim = env.chassisd(
-        "sim",
-        &["sim", "--robot", "titan", "--name", n, "--bus", &bus],
-    );
-    let service = env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    let sim = env.sim("sim", "titan", &[], n, &bus);
+    let service = env.serve("titan", n, &["--bus", &bus, "--no-safety-monitor"]);
     (sim, service)
 }
 
@@ -225,18 +201,7 @@ fn frames_from_cansend_update_the_state_of_a_service_without_a_chassis() {
     let mut env = Env::new("vcan-cansend");
     let n = name("vs");
     let bus = format!("can:{}", iface());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     // No chassis on the bus: the service says so.
     let silent = wait_for(Duration::from_secs(5), || {
@@ -322,18 +287,7 @@ fn candump_of_what_the_service_sends_decodes_with_chassis_decode() {
     assert!(listening.is_some(), "candump never listened");
 
     let bus = format!("can:{iface}");
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     // A status frame reporting standby: the service asks for command mode again.
     pause(Duration::from_millis(500));
@@ -503,10 +457,7 @@ fn the_interface_going_down_and_up_mid_drive_is_detected_and_survived() {
     let sim_ended = env.proc(sim).wait_exit(Duration::from_secs(2)).is_some();
     if sim_ended {
         let bus = format!("can:{iface}");
-        env.chassisd(
-            "sim2",
-            &["sim", "--robot", "titan", "--name", &n, "--bus", &bus],
-        );
+        env.sim("sim2", "titan", &[], &n, &bus);
     }
     let reopened = wait_for(Duration::from_secs(10), || {
         state(&mut robot).link_flags & LinkFlags::BUS_DOWN == 0
@@ -615,18 +566,7 @@ fn the_doctor_on_socketcan_down_silent_and_with_the_simulated_titan() {
 
     // The simulated TITAN on the bus: heard, a TITAN's frames, in standby until chassisd asks.
     let bus = format!("can:{iface}");
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "titan",
-            "--name",
-            &name("vy"),
-            "--bus",
-            &bus,
-        ],
-    );
+    env.sim("sim", "titan", &[], &name("vy"), &bus);
     let mut report = String::new();
     let heard = wait_for(UP, || {
         let (code, text) = doctor(&env, &n, "titan");
@@ -650,18 +590,7 @@ fn error_frames_on_the_socket_are_published_as_bus_off_and_restart_and_the_docto
     let mut env = Env::new("vcan-busoff");
     let n = name("vb");
     let bus = format!("can:{}", iface());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
 
     // can_bus_off(): CAN_ERR_BUSOFF, no data.

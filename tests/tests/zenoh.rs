@@ -27,10 +27,6 @@ const PORT: u16 = 7447;
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 /// Two network namespaces joined by a veth pair; removed on drop.
 struct Link {
     robot_ns: String,
@@ -129,7 +125,7 @@ fn endpoint(proto: &str) -> String {
 
 /// chassisd (with its required safety monitor running) and the robot side, plain TCP.
 fn robot_side(env: &mut Env, link: &Link, n: &str) -> Robot {
-    env.chassisd("chassisd", &["--robot", "titan", "--name", n]);
+    env.serve("titan", n, &[]);
     env.spawn("safety", "chassis-safety", &["--name", n]);
     let robot = env.robot(n, UP);
     let prefix = env.prefix.clone();
@@ -352,7 +348,7 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
     assert!(!out.status.success(), "{stderr}");
     assert!(stderr.contains("refusing plain TCP"), "{stderr}");
 
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    env.serve("titan", &n, &[]);
     env.spawn("safety", "chassis-safety", &["--name", &n]);
     let mut robot = env.robot(&n, UP);
     let prefix = env.prefix.clone();
