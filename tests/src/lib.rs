@@ -250,6 +250,22 @@ impl Env {
         self.chassisd("chassisd", &args)
     }
 
+    /// A test's environment (`test` names it) with chassisd serving `robot` as chassis/NAME
+    /// (`tag` and the pid) with `extra` arguments: the environment, NAME and the connection
+    /// (up within `up`).
+    pub fn serving(
+        test: &str,
+        (tag, robot): (&str, &str),
+        extra: &[&str],
+        up: Duration,
+    ) -> (Self, String, Robot) {
+        let mut env = Self::new(test);
+        let n = name(tag);
+        env.serve(robot, &n, extra);
+        let connection = env.robot(&n, up);
+        (env, n, connection)
+    }
+
     /// Starts `chassisd sim` (labelled `label`) simulating `robot` as chassis/`name` on `bus`,
     /// with `extra` arguments after `sim --robot ROBOT`.
     pub fn sim(
@@ -283,6 +299,17 @@ impl Env {
         (sim, line.bus(link))
     }
 
+    /// A simulated XBot board (`chassisd sim`, labelled `sim`) on a serial pty linked at `link`,
+    /// and chassisd serving it as chassis/`name` with [`XBOT_PROFILE`] over the other end;
+    /// returns the simulator's index and the connection (each up within `timeout`).
+    pub fn xbot_over_pty(&mut self, name: &str, link: &Path, timeout: Duration) -> (usize, Robot) {
+        let (sim, bus) = self.sim_on_pty("xbot", &[], name, Line::Serial, link, timeout);
+        let config = self.write("xbot.toml", XBOT_PROFILE);
+        let extra = ["--bus", &bus, "--no-safety-monitor", "--config", &config];
+        self.serve("xbot", name, &extra);
+        (sim, self.robot(name, timeout))
+    }
+
     /// Waits until `path` (the link to a simulator's pty) exists, at most `timeout`.
     pub fn wait_link(&self, path: &Path, timeout: Duration) {
         assert!(
@@ -293,11 +320,12 @@ impl Env {
         );
     }
 
-    /// Writes `text` to `file` in the test's directory; returns the path.
-    pub fn write(&self, file: &str, text: &str) -> PathBuf {
+    /// Writes `text` to `file` in the test's directory (a configuration); returns its path as a
+    /// program's argument.
+    pub fn write(&self, file: &str, text: &str) -> String {
         let path = self.dir.join(file);
         std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        path
+        path.to_string_lossy().into_owned()
     }
 
     /// Starts `chassis pub velocity --name NAME args…` (labelled `label`) in the background.
@@ -310,6 +338,18 @@ impl Env {
     /// Runs `chassis args…` to completion.
     pub fn chassis(&self, args: &[&str]) -> Output {
         self.run("chassis", args)
+    }
+
+    /// Runs `chassis args…` to completion, which must succeed; returns what it printed.
+    pub fn chassis_ok(&self, args: &[&str]) -> String {
+        let out = self.chassis(args);
+        assert!(
+            out.status.success(),
+            "chassis {args:?}: {}\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            self.logs()
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
     }
 
     /// Runs the workspace binary `binary args…` to completion.
@@ -388,27 +428,11 @@ impl Drop for Env {
             eprintln!("{}", self.logs());
         }
         // Shared-memory files of this test's prefix.
-        for dir in [
-            "/dev/shm",
-            "/tmp/iceoryx2",
-            "/tmp/iceoryx2/services",
-            "/tmp/iceoryx2/nodes",
-        ] {
-            if let Ok(entries) = std::fs::read_dir(dir) {
-                for entry in entries.flatten() {
-                    if entry
-                        .file_name()
-                        .to_string_lossy()
-                        .starts_with(&self.prefix)
-                    {
-                        let path = entry.path();
-                        if path.is_dir() {
-                            let _ = std::fs::remove_dir_all(path);
-                        } else {
-                            let _ = std::fs::remove_file(path);
-                        }
-                    }
-                }
+        for path in ipc_files(&self.prefix) {
+            if path.is_dir() {
+                let _ = std::fs::remove_dir_all(path);
+            } else {
+                let _ = std::fs::remove_file(path);
             }
         }
         if !std::thread::panicking() {
@@ -500,6 +524,158 @@ impl Line {
     }
 }
 
+/// The shared-memory and socket files of the iceoryx2 prefix `prefix`.
+pub fn ipc_files(prefix: &str) -> Vec<PathBuf> {
+    let dirs = [
+        "/dev/shm",
+        "/tmp/iceoryx2",
+        "/tmp/iceoryx2/services",
+        "/tmp/iceoryx2/nodes",
+    ];
+    let mut files = Vec::new();
+    for dir in dirs {
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            files.extend(
+                entries
+                    .flatten()
+                    .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+                    .map(|e| e.path()),
+            );
+        }
+    }
+    files
+}
+
+/// A hang-up of the pty line to a `chassisd sim` mid-drive, and the row of the reliability
+/// report that says how it went.
+#[derive(Debug)]
+pub struct HangUp<'a> {
+    pub rank: u32,
+    pub fault: &'a str,
+    pub injection: &'a str,
+    /// What the figure says came back ("line", "adapter").
+    pub end: &'a str,
+    /// Above this speed (m/s) the robot drives again.
+    pub above_mps: f32,
+    pub suite: &'a str,
+    pub test: &'a str,
+}
+
+impl HangUp<'_> {
+    /// SIGKILLs the simulator `sim` (it simulates `kind` as chassis/`name` at the far end of
+    /// `line`, linked at `link`); the loss must be reported within 3 s. Then starts it again
+    /// (labelled `sim2`) and waits up to 10 s for a speed above `above_mps` the chassis reported
+    /// after the restart, with the bus up, while `send` keeps asking. Returns the figure (to be
+    /// finished by the test once its asserts passed) and how long after the restart the robot
+    /// drove again.
+    pub fn run(
+        &self,
+        (env, robot): (&mut Env, &mut Robot),
+        (sim, kind, name): (usize, &str, &str),
+        (line, link): (Line, &Path),
+        send: impl FnMut(),
+    ) -> (Figures, Option<Duration>) {
+        env.proc(sim).signal(Signal::SIGKILL);
+        let killed = Instant::now();
+        let lost = wait_for(Duration::from_secs(3), || {
+            state(robot).link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) != 0
+        });
+        assert!(lost.is_some(), "the loss was not reported\n{}", env.logs());
+        let down_for = killed.elapsed();
+        let _ = std::fs::remove_file(link);
+        let restarted = now_ns();
+        env.sim("sim2", kind, &[], name, &line.sim_bus(link));
+        // The state keeps the speed from before the hang-up: driving again is a speed the
+        // chassis reported after the line came back.
+        let above = self.above_mps;
+        let back = drove_again_after(robot, restarted, Duration::from_secs(10), send, |s| {
+            s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > above
+        })
+        .map(|(_, after)| after);
+        let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+        let mut figures = Figures::faults();
+        figures.add(Figure {
+            rank: self.rank,
+            fault: self.fault.into(),
+            injection: self.injection.into(),
+            behaviour: "the loss was reported (`bus_down` / `chassis_silent`), the port \
+                        reopened with backoff, and the robot drove again on the same client \
+                        connection"
+                .into(),
+            figure: format!(
+                "loss reported {:.0} ms after the hang-up; driving again {:.0} ms after the \
+                 {} came back (the motion stamp of the first sample above {} m/s; restarted \
+                 {:.0} ms after the hang-up)",
+                ms(lost),
+                ms(back),
+                self.end,
+                self.above_mps,
+                down_for.as_secs_f64() * 1e3
+            ),
+            value: ms(back),
+            pass: back.is_some(),
+            suite: self.suite.into(),
+            test: self.test.into(),
+        });
+        (figures, back)
+    }
+}
+
+/// What a program printed, standard output then standard error.
+pub fn output_text(out: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// The line of `chassis doctor`'s `report` for check `key`, as `(verdict, line)`.
+pub fn doctor_line<'a>(report: &'a str, key: &str) -> (&'a str, &'a str) {
+    report
+        .lines()
+        .find_map(|l| {
+            let mut words = l.split_whitespace();
+            let verdict = words.next()?;
+            (words.next()? == key).then_some((verdict, l))
+        })
+        .unwrap_or_else(|| panic!("no '{key}' line in\n{report}"))
+}
+
+/// Checks that `chassis doctor`'s `report` gives check `key` the verdict `verdict` on a line
+/// that says `text`.
+pub fn check_line(report: &str, key: &str, verdict: &str, text: &str) {
+    let (got, line) = doctor_line(report, key);
+    assert_eq!(got, verdict, "{report}");
+    assert!(line.contains(text), "{report}");
+}
+
+/// Runs `check` (a `chassis doctor`) until it exits 0, at most `timeout`; returns how long that
+/// took and the last report.
+pub fn until_passes(
+    timeout: Duration,
+    mut check: impl FnMut() -> (Option<i32>, String),
+) -> (Option<Duration>, String) {
+    let mut report = String::new();
+    let passed = wait_for(timeout, || {
+        let (code, text) = check();
+        report = text;
+        code == Some(0)
+    });
+    (passed, report)
+}
+
+/// Runs `chassis doctor --robot ROBOT --name NAME --bus BUS --listen 1`; returns its exit code
+/// and its report (printed too).
+pub fn doctor_listening(env: &Env, robot: &str, name: &str, bus: &str) -> (Option<i32>, String) {
+    let out = env.chassis(&[
+        "doctor", "--robot", robot, "--name", name, "--bus", bus, "--listen", "1",
+    ]);
+    let text = output_text(&out);
+    println!("{text}");
+    (out.status.code(), text)
+}
+
 /// A robot name unique to this test process: `tag` and the pid (names are at most 16
 /// characters).
 pub fn name(tag: &str) -> String {
@@ -579,6 +755,33 @@ pub fn drove_again_after(
         }
     }
     None
+}
+
+/// Asks the simulated chassis for 0.3 s of silence and waits until the service has handled
+/// every frame read before it (frames in flight, then a state sample, out at least every
+/// 100 ms) while `teleop` keeps sending `go` and `pump` drains the test's tap; returns that
+/// state, the tap drained to the same point.
+pub fn quiet_moment(
+    robot: &mut Robot,
+    teleop: &mut Source,
+    go: VelocityRequest,
+    mut pump: impl FnMut(),
+) -> ChassisState {
+    let silence = SimRequest {
+        kind: SimKind::SILENCE,
+        value: 0.3,
+        ..SimRequest::default()
+    };
+    sim_ok(robot, silence);
+    let end = Instant::now() + Duration::from_millis(200);
+    while Instant::now() < end {
+        teleop.send(go).unwrap_or_else(|e| panic!("teleop: {e}"));
+        pump();
+        pause(Duration::from_millis(20));
+    }
+    let s = state(robot);
+    pump();
+    s
 }
 
 /// What the simulated chassis (embedded or `chassisd sim`) really does: the `key=value` pairs of

@@ -18,13 +18,11 @@ const UP: Duration = Duration::from_secs(20);
 fn a_late_client_reads_the_description_of_the_configured_robot_with_its_overrides() {
     let mut env = Env::new("describe-hunter");
     let n = name("dh");
-    let config = env.dir.join("hunter.toml");
-    std::fs::write(
-        &config,
+    let config = env.write(
+        "hunter.toml",
         "[profile]\nmax_linear_mps = 0.4\n[mux.limits]\nmax_angular_radps = 0.7\n",
-    )
-    .unwrap();
-    env.serve("hunter", &n, &["--config", config.to_str().unwrap()]);
+    );
+    env.serve("hunter", &n, &["--config", &config]);
     let _ = env.robot(&n, UP);
     // A client that comes an hour later (here: two seconds) reads it at once.
     std::thread::sleep(Duration::from_secs(2));

@@ -538,10 +538,7 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
 fn a_second_publisher_on_the_safety_source_is_refused_and_the_monitor_unharmed() {
     let _machine = shared();
     let test = "a_second_publisher_on_the_safety_source_is_refused_and_the_monitor_unharmed";
-    let mut env = Env::new("safety-taken");
-    let n = name("stk");
-    env.serve("titan", &n, &[]);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) = Env::serving("safety-taken", ("stk", "titan"), &[], UP);
     let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
     let alive = wait_for(UP, || {
         source_status(&mux(&mut robot), "safety").has(SourceFlags::FRESH)

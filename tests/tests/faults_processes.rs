@@ -34,25 +34,6 @@ mod rank {
 
 // ----- SIGKILL of the service -----
 
-/// Shared-memory and socket files of the test's iceoryx2 prefix.
-fn ipc_files(prefix: &str) -> usize {
-    let mut count = 0;
-    for dir in [
-        "/dev/shm",
-        "/tmp/iceoryx2",
-        "/tmp/iceoryx2/services",
-        "/tmp/iceoryx2/nodes",
-    ] {
-        if let Ok(entries) = std::fs::read_dir(dir) {
-            count += entries
-                .flatten()
-                .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
-                .count();
-        }
-    }
-    count
-}
-
 /// The first start-up kill comes this soon after the spawn: before chassisd can have made its
 /// ports (its start takes tens of milliseconds even in release mode).
 const EARLY_KILL: Duration = Duration::from_millis(5);
@@ -77,7 +58,7 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
         source_status(m, "safety").has(SourceFlags::FRESH) && s.motion.linear_mps > 0.3
     });
     assert!(driving.is_some(), "no drive at the start\n{}", env.logs());
-    let files_before = ipc_files(&env.prefix);
+    let files_before = ipc_files(&env.prefix).len();
 
     // Kill at random moments: every other kill falls into the start-up of the instance spawned
     // just before (0-150 ms after its spawn: the ports half made, or not yet), the others into
@@ -148,7 +129,7 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
     let guarded = pump.until(&mut robot, UP, |m, _| {
         m.stamp_ns > restarted && source_status(m, "safety").has(SourceFlags::FRESH)
     });
-    let files_after = ipc_files(&env.prefix);
+    let files_after = ipc_files(&env.prefix).len();
     let pass = back.is_some()
         && guarded.is_some()
         && env.proc(service).is_running()
@@ -423,22 +404,7 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
     let mut rng = Rng::from_env(test);
     let link = env.dir.join("xbot");
     let sim_bus = Line::Serial.sim_bus(&link);
-    let mut sim = env.sim("sim-0", "xbot", &[], &n, &sim_bus);
-    env.wait_link(&link, UP);
-    let config = env.write("xbot.toml", XBOT_PROFILE);
-    let bus = Line::Serial.bus(&link);
-    env.serve(
-        "xbot",
-        &n,
-        &[
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (mut sim, mut robot) = env.xbot_over_pty(&n, &link, UP);
     let mut teleop = robot.source("teleop").unwrap();
     let go = VelocityRequest::twist(0.4, 0.0);
     let mut wire = Wire::new(&robot);

@@ -564,17 +564,11 @@ fn a_configured_speed_limit_reaches_the_planner_which_never_asks_above_it() {
     const LIMIT_MPS: f64 = 0.4;
     let mut env = Env::new("plan-limit");
     let n = name("plim");
-    let config = env.dir.join("limit.toml");
-    std::fs::write(
-        &config,
-        format!("[profile]\nmax_linear_mps = {LIMIT_MPS}\n"),
-    )
-    .unwrap();
-    env.serve(
-        "titan",
-        &n,
-        &["--no-safety-monitor", "--config", config.to_str().unwrap()],
+    let config = env.write(
+        "limit.toml",
+        &format!("[profile]\nmax_linear_mps = {LIMIT_MPS}\n"),
     );
+    env.serve("titan", &n, &["--no-safety-monitor", "--config", &config]);
     let mut robot = env.robot(&n, UP);
     let described = robot.description(UP).unwrap();
     assert_eq!(described.effective_limits().forward_mps, LIMIT_MPS);

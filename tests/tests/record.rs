@@ -236,10 +236,12 @@ fn json_f64(value: &Value, path: &[&str]) -> f64 {
 
 #[test]
 fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry_and_pose() {
-    let mut env = Env::new("record-titan");
-    let n = name("rec");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) = Env::serving(
+        "record-titan",
+        ("rec", "titan"),
+        &["--no-safety-monitor"],
+        UP,
+    );
     let mcap_path = env.dir.join("drive.mcap");
     let log_path = env.dir.join("drive.log");
     let mcap_text = mcap_path.to_str().unwrap().to_string();
@@ -439,10 +441,12 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
 
 #[test]
 fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
-    let mut env = Env::new("record-flood");
-    let n = name("fld");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let _robot = env.robot(&n, UP);
+    let (mut env, n, _robot) = Env::serving(
+        "record-flood",
+        ("fld", "titan"),
+        &["--no-safety-monitor"],
+        UP,
+    );
     let flood = env.chassis(&["sim", "--name", &n, "flood", "4000"]);
     assert!(
         flood.status.success(),
@@ -497,10 +501,12 @@ fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
 
 #[test]
 fn an_xbot_records_to_mcap_only_and_its_serial_stream_replays_to_the_recorded_pose() {
-    let mut env = Env::new("record-xbot");
-    let n = name("xrec");
-    env.serve("xbot", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) = Env::serving(
+        "record-xbot",
+        ("xrec", "xbot"),
+        &["--no-safety-monitor"],
+        UP,
+    );
     let refused = env.chassis(&[
         "record",
         "--candump",
@@ -540,7 +546,7 @@ fn an_xbot_records_to_mcap_only_and_its_serial_stream_replays_to_the_recorded_po
         "--name",
         &name("xrp"),
         "--config",
-        config.to_str().unwrap(),
+        &config,
         "--json",
         "--quiet",
     ]);

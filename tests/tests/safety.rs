@@ -164,17 +164,6 @@ fn inject(robot: &mut Robot, kind: u8, on: bool, value: f64) -> u64 {
     sim_ok(robot, request)
 }
 
-fn run_ok(env: &Env, args: &[&str]) -> String {
-    let out = env.chassis(args);
-    assert!(
-        out.status.success(),
-        "chassis {args:?}: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
 #[test]
 fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_lets_it_reverse() {
     let mut env = Env::new("safety-obstacle");
@@ -235,7 +224,7 @@ fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_let
     assert!(s.last_text().contains("stop zone"), "{}", s.last_text());
     let m = mux(&mut robot);
     assert_ne!(m.clamp_flags & ClampFlags::SAFETY_LIMIT, 0);
-    let status = run_ok(&env, &["status", "--name", &n]);
+    let status = env.chassis_ok(&["status", "--name", &n]);
     assert!(status.contains("SLOW by ultrasonic"), "{status}");
 
     // Teleop (higher priority) cannot push through either.
@@ -263,7 +252,7 @@ fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_let
     assert!(x1 < x0 - 0.1, "moved from {x0} m to {x1} m");
 
     // The obstacle goes: forward again (after the 300 ms release time).
-    run_ok(&env, &["sim", "--name", &n, "obstacle-ahead", "--clear"]);
+    env.chassis_ok(&["sim", "--name", &n, "obstacle-ahead", "--clear"]);
     let high = drive_one(&mut robot, &mut teleop, ahead, Duration::from_millis(1500));
     assert!(
         high > 0.25,
@@ -322,7 +311,7 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
         "bumper pressed → estop lock engaged after {:.1} ms",
         m.locks()[estop].since_ns.saturating_sub(pressed) as f64 / 1e6
     );
-    run_ok(&env, &["sim", "--name", &n, "bumper", "off"]);
+    env.chassis_ok(&["sim", "--name", &n, "bumper", "off"]);
 
     // Teleop keeps asking; the lock holds after the bumper is released.
     let end = Instant::now() + Duration::from_millis(2000);
@@ -351,10 +340,10 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
     assert!(status.is_active(SafetyRule::BUMPER));
     assert_eq!(status.estop, EstopState::HELD_BY_MONITOR);
     assert_eq!(status.trigger_count(SafetyRule::BUMPER), 1);
-    let text = run_ok(&env, &["status", "--name", &n]);
+    let text = env.chassis_ok(&["status", "--name", &n]);
     assert!(text.contains("LATCH by bumper"), "{text}");
 
-    let out = run_ok(&env, &["control", "--name", &n, "estop-release"]);
+    let out = env.chassis_ok(&["control", "--name", &n, "estop-release"]);
     assert!(out.contains("estop released"), "{out}");
     let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
     assert!(
@@ -396,7 +385,7 @@ fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
         state(&mut robot).motion.linear_mps.abs() < 0.01,
         "peak {high}"
     );
-    run_ok(&env, &["control", "--name", &n, "estop-release"]);
+    env.chassis_ok(&["control", "--name", &n, "estop-release"]);
     // A release never starts motion (tests/tests/latch.rs): teleop asks for zero, then drives.
     teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
     let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
@@ -423,7 +412,7 @@ fn a_low_battery_stops_and_a_charged_one_drives(
     let (mut robot, monitor) = start(&mut env, kind, n);
     let (mut teleop, go) = teleop_drives(&env, &mut robot);
 
-    run_ok(&env, &["sim", "--name", n, "battery", percent]);
+    env.chassis_ok(&["sim", "--name", n, "battery", percent]);
     let timeout = Duration::from_secs(5);
     let stopped =
         stopped_by_the_monitor(&env, &mut robot, &mut teleop, go, timeout, "a low battery");
@@ -435,7 +424,7 @@ fn a_low_battery_stops_and_a_charged_one_drives(
     check_log(&env.proc(monitor).log_text());
     stands_still(&mut robot, &mut teleop, go, Duration::from_secs(1));
 
-    run_ok(&env, &["sim", "--name", n, "battery", "60"]);
+    env.chassis_ok(&["sim", "--name", n, "battery", "60"]);
     let high = drive_one(&mut robot, &mut teleop, go, Duration::from_secs(3));
     assert!(
         high > 0.2,
@@ -464,7 +453,7 @@ fn a_silent_chassis_stops_the_robot_until_it_talks_again() {
     let (mut robot, _) = start(&mut env, "titan", &n);
     let (mut teleop, go) = teleop_drives(&env, &mut robot);
 
-    run_ok(&env, &["sim", "--name", &n, "silence", "1.5"]);
+    env.chassis_ok(&["sim", "--name", &n, "silence", "1.5"]);
     let stopped = until_one(
         &mut robot,
         &mut teleop,
@@ -551,8 +540,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
 
 /// Writes chassisd's configuration for a test; returns its path.
 fn chassisd_config(env: &Env, text: &str) -> String {
-    let path = env.write("chassisd.toml", text);
-    path.to_str().unwrap().to_string()
+    env.write("chassisd.toml", text)
 }
 
 /// A HUNTER whose driver is limited to 0.5 m/s by a `[profile]` override: requests beyond the
@@ -582,7 +570,7 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
     assert!(!status.is_active(SafetyRule::SPEED), "{status:?}");
     assert_eq!(status.action, SafetyAction::NONE);
 
-    run_ok(&env, &["sim", "--name", &n, "runaway", "1.0"]);
+    env.chassis_ok(&["sim", "--name", &n, "runaway", "1.0"]);
     let mut fastest = 0.0f32;
     let stopped = until_one(
         &mut robot,
@@ -611,7 +599,7 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
     assert!(high > 0.6, "the runaway went on: {high}");
     assert_eq!(mux(&mut robot).output, BodyVelocity::ZERO);
 
-    run_ok(&env, &["sim", "--name", &n, "runaway", "--clear"]);
+    env.chassis_ok(&["sim", "--name", &n, "runaway", "--clear"]);
     let again = until_one(
         &mut robot,
         &mut teleop,
@@ -767,7 +755,7 @@ fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
         |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > 0.3,
     );
     assert!(moving.is_some(), "no motion\n{}", env.logs());
-    run_ok(&env, &["sim", "--name", &n, "runaway", "4.0"]);
+    env.chassis_ok(&["sim", "--name", &n, "runaway", "4.0"]);
     let timeout = Duration::from_secs(5);
     stopped_by_the_monitor(
         &env,

@@ -34,10 +34,8 @@ fn drive_for(
 
 #[test]
 fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
-    let mut env = Env::new("pub-drive");
-    let n = name("pub");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) =
+        Env::serving("pub-drive", ("pub", "titan"), &["--no-safety-monitor"], UP);
     // What a user watches: `chassis echo state`, one JSON object per sample printed.
     let echo = env.spawn(
         "echo",
@@ -93,10 +91,7 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
 
 #[test]
 fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
-    let mut env = Env::new("required");
-    let n = name("req");
-    env.serve("titan", &n, &[]);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) = Env::serving("required", ("req", "titan"), &[], UP);
     let mut teleop = source(&mut robot, "teleop");
     let request = VelocityRequest::twist(0.4, 0.0);
     let peak = drive_for(
@@ -149,10 +144,8 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
 
 #[test]
 fn teleop_preempts_the_planner_and_hands_back_when_it_goes_quiet() {
-    let mut env = Env::new("preempt");
-    let n = name("pre");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (env, _, mut robot) =
+        Env::serving("preempt", ("pre", "titan"), &["--no-safety-monitor"], UP);
     let mut planner = source(&mut robot, "planner");
     let mut teleop = source(&mut robot, "teleop");
     let until =
@@ -197,10 +190,7 @@ fn teleop_preempts_the_planner_and_hands_back_when_it_goes_quiet() {
 
 #[test]
 fn a_latched_estop_holds_until_the_operator_releases_it() {
-    let mut env = Env::new("estop");
-    let n = name("est");
-    env.serve("titan", &n, &[]);
-    let mut robot = env.robot(&n, UP);
+    let (env, n, mut robot) = Env::serving("estop", ("est", "titan"), &[], UP);
     let mut safety = source(&mut robot, "safety");
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
@@ -259,10 +249,8 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
 
 #[test]
 fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
-    let mut env = Env::new("client-kill");
-    let n = name("ck");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) =
+        Env::serving("client-kill", ("ck", "titan"), &["--no-safety-monitor"], UP);
     let args = [
         "pub", "velocity", "--source", "teleop", "--vx", "0.3", "--name", &n,
     ];
@@ -450,10 +438,8 @@ fn sigterm_commands_zero_and_exits_zero() {
 
 #[test]
 fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_loses() {
-    let mut env = Env::new("stream");
-    let n = name("strm");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (env, n, mut robot) =
+        Env::serving("stream", ("strm", "titan"), &["--no-safety-monitor"], UP);
     // The buffer asked for is clamped to 1..=the service's maximum.
     assert_eq!(robot.state_stream(0).unwrap().buffer(), 1);
     let stream = robot.state_stream(usize::MAX).unwrap();
@@ -544,10 +530,7 @@ fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_
 
 #[test]
 fn control_requests_are_answered_with_success_or_a_reason() {
-    let mut env = Env::new("control");
-    let n = name("ctl");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let _robot = env.robot(&n, UP);
+    let (env, n, _robot) = Env::serving("control", ("ctl", "titan"), &["--no-safety-monitor"], UP);
     let ok = env.chassis(&["control", "--name", &n, "off-road", "on"]);
     assert!(
         ok.status.success(),
@@ -592,48 +575,21 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
     assert!(peak > 0.2, "peak {peak} over slcan\n{}", env.logs());
 
     // Hang-up: the simulated chassis (and its pty) vanish.
-    env.proc(sim).signal(Signal::SIGKILL);
-    let killed = Instant::now();
-    let lost = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) != 0
-    });
-    assert!(lost.is_some(), "the loss was not reported\n{}", env.logs());
-    let _ = std::fs::remove_file(&link);
-    let down_for = killed.elapsed();
-    let restarted = now_ns();
-    env.sim("sim2", "titan", &[], &n, &Line::Slcan.sim_bus(&link));
-    // The state keeps the speed from before the hang-up: driving again is a speed the chassis
-    // reported after the adapter came back.
-    let back = drove_again_after(
-        &mut robot,
-        restarted,
-        Duration::from_secs(10),
-        || teleop.send(go).unwrap(),
-        |s| s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > 0.1,
-    )
-    .map(|(_, after)| after);
-    let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
-    let mut figures = Figures::faults();
-    figures.add(Figure {
+    let hang_up = HangUp {
         rank: 200,
-        fault: "slcan adapter hang-up (TITAN over an slcan pty)".into(),
-        injection: "SIGKILL of `chassisd sim --bus slcan-pty:…` mid-drive, restarted".into(),
-        behaviour: "the loss was reported (`bus_down` / `chassis_silent`), the port reopened \
-                    with backoff, and the robot drove again on the same client connection"
-            .into(),
-        figure: format!(
-            "loss reported {:.0} ms after the hang-up; driving again {:.0} ms after the \
-             adapter came back (the motion stamp of the first sample above 0.1 m/s; restarted \
-             {:.0} ms after the hang-up)",
-            ms(lost),
-            ms(back),
-            down_for.as_secs_f64() * 1e3
-        ),
-        value: ms(back),
-        pass: lost.is_some() && back.is_some(),
-        suite: "service".into(),
-        test: "titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up".into(),
-    });
+        fault: "slcan adapter hang-up (TITAN over an slcan pty)",
+        injection: "SIGKILL of `chassisd sim --bus slcan-pty:…` mid-drive, restarted",
+        end: "adapter",
+        above_mps: 0.1,
+        suite: "service",
+        test: "titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up",
+    };
+    let (figures, back) = hang_up.run(
+        (&mut env, &mut robot),
+        (sim, "titan", &n),
+        (Line::Slcan, &link),
+        || teleop.send(go).unwrap(),
+    );
     assert!(
         back.is_some(),
         "no motion after reconnecting\n{}",
@@ -731,19 +687,12 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
     let n = name("dsil");
     let pty = nix::pty::openpty(None, None).unwrap();
     let slave_path = nix::unistd::ttyname(pty.slave.as_fd()).unwrap();
-    let config = env.dir.join("bunker.toml");
-    std::fs::write(&config, "[profile]\ndetect_timeout_ms = 1000\n").unwrap();
+    let config = env.write("bunker.toml", "[profile]\ndetect_timeout_ms = 1000\n");
     let bus = format!("slcan:{}", slave_path.display());
     env.serve(
         "bunker",
         &n,
-        &[
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
+        &["--bus", &bus, "--no-safety-monitor", "--config", &config],
     );
     let mut handle = env.robot(&n, UP);
     let silent = wait_for(Duration::from_secs(3), || {
@@ -817,10 +766,12 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
 /// after the command was zero once.
 #[test]
 fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_again() {
-    let mut env = Env::new("estop-switch");
-    let n = name("esw");
-    env.serve("hunter", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (env, _, mut robot) = Env::serving(
+        "estop-switch",
+        ("esw", "hunter"),
+        &["--no-safety-monitor"],
+        UP,
+    );
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.4, 0.0);
     let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));

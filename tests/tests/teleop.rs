@@ -10,16 +10,9 @@ use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(10);
 
-#[test]
-fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop() {
-    if !tmux_available() {
-        eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
-        return;
-    }
-    let mut env = Env::new("teleop-tmux");
-    let n = name("tel");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+/// `chassis-teleop --name N` in a tmux terminal, once it shows that it publishes nothing; returns
+/// the terminal and the path of teleop's log.
+fn teleop_in_tmux(env: &Env, n: &str) -> (Tmux, std::path::PathBuf) {
     let log = env.dir.join("teleop.log");
     let command = format!(
         "env {}={} RUST_LOG=info {} --name {n} 2>{}; echo chassis-teleop exited $?; sleep 60",
@@ -30,6 +23,22 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
     );
     let tmux = Tmux::start(&env.dir, "tmux", &command);
     tmux.wait_for_text("idle — publishing nothing", UP);
+    (tmux, log)
+}
+
+#[test]
+fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop() {
+    if !tmux_available() {
+        eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
+        return;
+    }
+    let (env, n, mut robot) = Env::serving(
+        "teleop-tmux",
+        ("tel", "titan"),
+        &["--no-safety-monitor"],
+        UP,
+    );
+    let (tmux, log) = teleop_in_tmux(&env, &n);
 
     // Hold `w`: a terminal's auto-repeat, as tmux delivers it, every 30 ms for 1.5 s.
     let start = Instant::now();
@@ -131,30 +140,33 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
     );
 }
 
-#[test]
-fn top_once_prints_rates_per_can_id_and_the_active_source() {
-    let mut env = Env::new("top-once");
-    let n = name("top");
-    env.serve("titan", &n, &["--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+/// `chassis top --once` while `chassis pub` drives chassis/`n` at 0.2 m/s as teleop (once
+/// teleop won the mux): its output.
+fn top_once_while_teleop_drives(env: &mut Env, robot: &mut Robot, n: &str) -> String {
     env.publish(
         "pub",
-        &n,
+        n,
         &["--source", "teleop", "--vx", "0.2", "--duration", "6"],
     );
     let driving = wait_for(UP, || {
-        mux(&mut robot)
-            .active()
-            .is_some_and(|s| s.name() == "teleop")
+        mux(robot).active().is_some_and(|s| s.name() == "teleop")
     });
     assert!(driving.is_some(), "teleop never won\n{}", env.logs());
-    let out = env.chassis(&["top", "--once", "--name", &n]);
-    let text = String::from_utf8_lossy(&out.stdout);
+    let out = env.chassis(&["top", "--once", "--name", n]);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
         "{text}\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    text
+}
+
+#[test]
+fn top_once_prints_rates_per_can_id_and_the_active_source() {
+    let (mut env, n, mut robot) =
+        Env::serving("top-once", ("top", "titan"), &["--no-safety-monitor"], UP);
+    let text = top_once_while_teleop_drives(&mut env, &mut robot, &n);
     assert!(text.contains("active teleop (priority 100"), "{text}");
     // TITAN's system status arrives at 50 Hz, its motion command goes out at 50 Hz.
     let rate = |prefix: &str| -> f64 {
@@ -188,24 +200,10 @@ fn teleop_in_a_terminal_steps_no_faster_than_the_limit_chassisd_describes() {
     }
     let mut env = Env::new("teleop-limit");
     let n = name("tlim");
-    let config = env.dir.join("limit.toml");
-    std::fs::write(&config, "[profile]\nmax_linear_mps = 0.3\n").unwrap();
-    env.serve(
-        "titan",
-        &n,
-        &["--no-safety-monitor", "--config", config.to_str().unwrap()],
-    );
+    let config = env.write("limit.toml", "[profile]\nmax_linear_mps = 0.3\n");
+    env.serve("titan", &n, &["--no-safety-monitor", "--config", &config]);
     let mut robot = env.robot(&n, UP);
-    let log = env.dir.join("teleop.log");
-    let command = format!(
-        "env {}={} RUST_LOG=info {} --name {n} 2>{}; echo chassis-teleop exited $?; sleep 60",
-        IPC_PREFIX_ENV,
-        quote(&env.prefix),
-        quote(&bin("chassis-teleop").to_string_lossy()),
-        quote(&log.to_string_lossy()),
-    );
-    let tmux = Tmux::start(&env.dir, "tmux", &command);
-    tmux.wait_for_text("idle — publishing nothing", UP);
+    let (tmux, _) = teleop_in_tmux(&env, &n);
     for _ in 0..12 {
         tmux.send("+");
     }
@@ -250,32 +248,10 @@ fn teleop_in_a_terminal_steps_no_faster_than_the_limit_chassisd_describes() {
 fn top_and_status_show_the_robot_as_described_and_name_every_frame() {
     let mut env = Env::new("top-hunter");
     let n = name("toph");
-    let config = env.dir.join("hunter.toml");
-    std::fs::write(&config, "[profile]\nmax_linear_mps = 0.4\n").unwrap();
-    env.serve(
-        "hunter",
-        &n,
-        &["--no-safety-monitor", "--config", config.to_str().unwrap()],
-    );
+    let config = env.write("hunter.toml", "[profile]\nmax_linear_mps = 0.4\n");
+    env.serve("hunter", &n, &["--no-safety-monitor", "--config", &config]);
     let mut robot = env.robot(&n, UP);
-    env.publish(
-        "pub",
-        &n,
-        &["--source", "teleop", "--vx", "0.2", "--duration", "6"],
-    );
-    let driving = wait_for(UP, || {
-        mux(&mut robot)
-            .active()
-            .is_some_and(|s| s.name() == "teleop")
-    });
-    assert!(driving.is_some(), "teleop never won\n{}", env.logs());
-    let out = env.chassis(&["top", "--once", "--name", &n]);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = top_once_while_teleop_drives(&mut env, &mut robot, &n);
     assert!(text.contains("AgileX HUNTER 2.0 (hunter)"), "{text}");
     assert!(text.contains("limits    forward 0.40"), "{text}");
     assert!(text.contains("protocol v2"), "{text}");

@@ -117,6 +117,13 @@ fn titan_on_vcan(env: &mut Env, n: &str) -> (usize, usize) {
     (sim, service)
 }
 
+/// `chassisd --robot titan` alone on the vcan interface: its connection.
+fn service_on_vcan(env: &mut Env, n: &str) -> Robot {
+    let bus = format!("can:{}", iface());
+    env.serve("titan", n, &["--bus", &bus, "--no-safety-monitor"]);
+    env.robot(n, UP)
+}
+
 fn in_command_mode(s: &ChassisState) -> bool {
     s.system.control_mode == ControlMode::COMMAND
         && s.link_flags & (LinkFlags::CHASSIS_SILENT | LinkFlags::BUS_DOWN) == 0
@@ -200,9 +207,7 @@ fn chassisd_drives_the_simulated_titan_across_vcan_end_to_end() {
 fn frames_from_cansend_update_the_state_of_a_service_without_a_chassis() {
     let mut env = Env::new("vcan-cansend");
     let n = name("vs");
-    let bus = format!("can:{}", iface());
-    env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let mut robot = service_on_vcan(&mut env, &n);
     // No chassis on the bus: the service says so.
     let silent = wait_for(Duration::from_secs(5), || {
         state(&mut robot).link_flags & LinkFlags::CHASSIS_SILENT != 0
@@ -515,28 +520,11 @@ fn send_raw(can_id: u32, data: [u8; 8]) {
 const CAN_ERR: u32 = 0x2000_0000;
 
 fn doctor(env: &Env, n: &str, robot: &str) -> (Option<i32>, String) {
-    let bus = format!("can:{}", iface());
-    let out = env.chassis(&[
-        "doctor", "--robot", robot, "--name", n, "--bus", &bus, "--listen", "1",
-    ]);
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    println!("{text}");
-    (out.status.code(), text)
+    doctor_listening(env, robot, n, &format!("can:{}", iface()))
 }
 
 fn verdict_of<'a>(report: &'a str, key: &str) -> &'a str {
-    report
-        .lines()
-        .find_map(|l| {
-            let mut w = l.split_whitespace();
-            let v = w.next()?;
-            (w.next()? == key).then_some(v)
-        })
-        .unwrap_or_else(|| panic!("no '{key}' line in\n{report}"))
+    doctor_line(report, key).0
 }
 
 #[test]
@@ -567,12 +555,7 @@ fn the_doctor_on_socketcan_down_silent_and_with_the_simulated_titan() {
     // The simulated TITAN on the bus: heard, a TITAN's frames, in standby until chassisd asks.
     let bus = format!("can:{iface}");
     env.sim("sim", "titan", &[], &name("vy"), &bus);
-    let mut report = String::new();
-    let heard = wait_for(UP, || {
-        let (code, text) = doctor(&env, &n, "titan");
-        report = text;
-        code == Some(0)
-    });
+    let (heard, report) = until_passes(UP, || doctor(&env, &n, "titan"));
     assert!(heard.is_some(), "{report}\n{}", env.logs());
     assert_eq!(verdict_of(&report, "frames"), "ok", "{report}");
     assert_eq!(verdict_of(&report, "robot"), "ok", "{report}");
@@ -589,9 +572,7 @@ fn the_doctor_on_socketcan_down_silent_and_with_the_simulated_titan() {
 fn error_frames_on_the_socket_are_published_as_bus_off_and_restart_and_the_doctor_fails() {
     let mut env = Env::new("vcan-busoff");
     let n = name("vb");
-    let bus = format!("can:{}", iface());
-    env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let mut robot = service_on_vcan(&mut env, &n);
 
     // can_bus_off(): CAN_ERR_BUSOFF, no data.
     send_raw(CAN_ERR | 0x040, [0; 8]);

@@ -27,71 +27,16 @@ const PORT: u16 = 7447;
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
 
-/// Two network namespaces joined by a veth pair; removed on drop.
-struct Link {
-    robot_ns: String,
-    operator_ns: String,
-    robot_if: String,
-}
-
-impl Link {
-    fn new() -> Self {
-        let id = format!(
-            "{}{}",
-            std::process::id() % 100_000,
-            NEXT.fetch_add(1, Ordering::Relaxed)
-        );
-        let link = Link {
-            robot_ns: format!("czr{id}"),
-            operator_ns: format!("czo{id}"),
-            robot_if: format!("czr{id}"),
-        };
-        let operator_if = format!("czo{id}");
-        ip(&["netns", "add", &link.robot_ns]);
-        ip(&["netns", "add", &link.operator_ns]);
-        ip(&[
-            "link",
-            "add",
-            &link.robot_if,
-            "type",
-            "veth",
-            "peer",
-            "name",
-            &operator_if,
-        ]);
-        ip(&["link", "set", &link.robot_if, "netns", &link.robot_ns]);
-        ip(&["link", "set", &operator_if, "netns", &link.operator_ns]);
-        for (ns, dev, addr) in [
-            (&link.robot_ns, &link.robot_if, ROBOT_ADDR),
-            (&link.operator_ns, &operator_if, OPERATOR_ADDR),
-        ] {
-            ip(&["-n", ns, "addr", "add", &format!("{addr}/24"), "dev", dev]);
-            ip(&["-n", ns, "link", "set", dev, "up"]);
-            ip(&["-n", ns, "link", "set", "lo", "up"]);
-        }
-        link
-    }
-
-    /// Takes the robot's end of the link down (`up = false`) or up again.
-    fn set(&self, up: bool) {
-        ip(&[
-            "-n",
-            &self.robot_ns,
-            "link",
-            "set",
-            &self.robot_if,
-            if up { "up" } else { "down" },
-        ]);
-    }
-}
-
-impl Drop for Link {
-    fn drop(&mut self) {
-        // Removing a namespace removes its end of the veth pair, and so the pair.
-        for ns in [&self.robot_ns, &self.operator_ns] {
-            let _ = Command::new("ip").args(["netns", "del", ns]).status();
-        }
-    }
+/// The robot's computer and the operator's, in namespaces unique to the test.
+fn link() -> VethPair {
+    let id = format!(
+        "{}{}",
+        std::process::id() % 100_000,
+        NEXT.fetch_add(1, Ordering::Relaxed)
+    );
+    let robot = (format!("czr{id}"), ROBOT_ADDR);
+    let operator = (format!("czo{id}"), OPERATOR_ADDR);
+    VethPair::new((&robot.0, robot.1), (&operator.0, operator.1), false)
 }
 
 /// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
@@ -124,7 +69,7 @@ fn endpoint(proto: &str) -> String {
 }
 
 /// chassisd (with its required safety monitor running) and the robot side, plain TCP.
-fn robot_side(env: &mut Env, link: &Link, n: &str) -> Robot {
+fn robot_side(env: &mut Env, link: &VethPair, n: &str) -> Robot {
     env.serve("titan", n, &[]);
     env.spawn("safety", "chassis-safety", &["--name", n]);
     let robot = env.robot(n, UP);
@@ -141,7 +86,7 @@ fn robot_side(env: &mut Env, link: &Link, n: &str) -> Robot {
 }
 
 /// The operator side's mirror and a connection to it.
-fn mirror(env: &mut Env, link: &Link, n: &str, extra: &[&str]) -> Robot {
+fn mirror(env: &mut Env, link: &VethPair, n: &str, extra: &[&str]) -> Robot {
     let prefix = operator_prefix(env);
     let connect = endpoint(if extra.contains(&"--certs") {
         "tls"
@@ -150,7 +95,7 @@ fn mirror(env: &mut Env, link: &Link, n: &str, extra: &[&str]) -> Robot {
     });
     let mut args = vec!["--name", n, "--connect", &connect, "--mirror"];
     args.extend_from_slice(extra);
-    zenoh_in(env, "zenoh-operator", &link.operator_ns, &prefix, &args);
+    zenoh_in(env, "zenoh-operator", &link.peer_ns, &prefix, &args);
     operator_robot(env, n, &prefix, UP)
 }
 
@@ -186,7 +131,7 @@ fn drive_until_moving(
 
 #[test]
 fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeout() {
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("zenoh-drive");
     let n = name("zdr");
     let mut robot = robot_side(&mut env, &link, &n);
@@ -330,7 +275,7 @@ fn gen_certs(env: &Env, dir: &Path) {
 
 #[test]
 fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused() {
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("zenoh-tls");
     let n = name("ztl");
     let certs = env.dir.join("certs");
@@ -372,7 +317,7 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
     zenoh_logging(
         &mut env,
         "zenoh-stranger",
-        &link.operator_ns,
+        &link.peer_ns,
         &stranger_prefix,
         &[
             "--name",
@@ -461,7 +406,7 @@ fn python() -> PathBuf {
 fn read_state(
     python: &Path,
     env: &Env,
-    link: &Link,
+    link: &VethPair,
     robot: &mut Robot,
     connect: &str,
     extra: &[&str],
@@ -474,7 +419,7 @@ fn read_state(
         .to_string();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("zenoh/read_state.py");
     let out = Command::new("ip")
-        .args(["netns", "exec", &link.operator_ns])
+        .args(["netns", "exec", &link.peer_ns])
         .arg(python)
         .arg(&script)
         .args([
@@ -505,7 +450,7 @@ fn read_state(
 #[test]
 fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() {
     let python = python();
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("zenoh-python");
     let n = name("zpy");
     let mut robot = robot_side(&mut env, &link, &n);
@@ -536,14 +481,14 @@ const LOSS_PERCENT: u32 = 5;
 const RELAY_PORT: u16 = 7448;
 
 impl Impairment {
-    fn apply(link: &Link) -> Self {
+    fn apply(link: &VethPair) -> Self {
         let delay = format!("{}ms", DELAY.as_millis());
         let loss = format!("{LOSS_PERCENT}%");
-        let operator_if = link.robot_if.replacen("czr", "czo", 1);
+        let operator_if = &link.peer_if;
         let mut netem = true;
         for (ns, dev) in [
             (&link.robot_ns, &link.robot_if),
-            (&link.operator_ns, &operator_if),
+            (&link.peer_ns, operator_if),
         ] {
             let out = run_in(
                 ns,
@@ -568,7 +513,7 @@ impl Impairment {
             "this kernel has no netem qdisc: {LOSS_PERCENT} % loss from nftables, {delay} each way \
              from a relay in the operator's namespace"
         );
-        let ns = &link.operator_ns;
+        let ns = &link.peer_ns;
         let nft = |rule: &str| {
             let out = run_in(ns, "nft", &[rule]);
             assert!(
@@ -688,7 +633,7 @@ impl Drop for DelayRelay {
 
 #[test]
 fn a_slow_lossy_link_still_drives() {
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("zenoh-lossy");
     let n = name("zls");
     let mut robot = robot_side(&mut env, &link, &n);
@@ -698,7 +643,7 @@ fn a_slow_lossy_link_still_drives() {
     zenoh_in(
         &mut env,
         "zenoh-operator",
-        &link.operator_ns,
+        &link.peer_ns,
         &prefix,
         &[
             "--name",
@@ -768,7 +713,7 @@ fn chassis_teleop_on_the_operators_computer_drives_the_robot() {
         eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
         return;
     }
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("zenoh-teleop");
     let n = name("ztp");
     let mut robot = robot_side(&mut env, &link, &n);
@@ -830,7 +775,7 @@ fn peak_while_asking(
 
 #[test]
 fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_starts_no_motion() {
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("zenoh-release");
     let n = name("zrl");
     let mut robot = robot_side(&mut env, &link, &n);
@@ -953,9 +898,9 @@ fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_st
 /// Cuts the link with nftables (every packet dropped both ways on the operator's end) or
 /// restores it. Unlike taking the veth down, the TCP connection outlives the cut, so what the
 /// operator side wrote meanwhile is retransmitted when the link returns.
-fn nft_cut(link: &Link, cut: bool) {
-    let ns = &link.operator_ns;
-    let operator_if = link.robot_if.replacen("czr", "czo", 1);
+fn nft_cut(link: &VethPair, cut: bool) {
+    let ns = &link.peer_ns;
+    let operator_if = &link.peer_if;
     let nft = |rule: &str| {
         let out = run_in(ns, "nft", &[rule]);
         assert!(
@@ -981,7 +926,7 @@ fn nft_cut(link: &Link, cut: bool) {
 
 #[test]
 fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("zenoh-stale");
     let n = name("zst");
     let mut robot = robot_side(&mut env, &link, &n);
