@@ -721,6 +721,12 @@ pub fn max_speed(robot: &mut Robot, duration: Duration) -> f32 {
     max
 }
 
+/// Waits at most `timeout` until the robot moves slower than `below_mps` (either way); returns
+/// how long that took.
+pub fn comes_to_rest(robot: &mut Robot, timeout: Duration, below_mps: f32) -> Option<Duration> {
+    wait_for(timeout, || state(robot).motion.linear_mps.abs() < below_mps)
+}
+
 /// The current state (waits up to a second for one).
 pub fn state(robot: &mut Robot) -> ChassisState {
     robot
@@ -729,6 +735,18 @@ pub fn state(robot: &mut Robot) -> ChassisState {
         .flatten()
         .or_else(|| robot.latest_state().ok().flatten())
         .unwrap_or_else(|| panic!("no state from chassis/{}", robot.name()))
+}
+
+/// The shell command that runs `chassis-teleop --name N` in a terminal under the test's prefix,
+/// its log going to `log`.
+pub fn teleop_command(env: &Env, n: &str, log: &Path) -> String {
+    format!(
+        "env {}={} RUST_LOG=info {} --name {n} 2>{}",
+        IPC_PREFIX_ENV,
+        quote(&env.prefix),
+        quote(&bin("chassis-teleop").to_string_lossy()),
+        quote(&log.to_string_lossy()),
+    )
 }
 
 /// "Drove again" after a fault (a restart, a reconnection): waits at most `timeout` for a state

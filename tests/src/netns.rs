@@ -3,12 +3,13 @@
 //! Zenoh mirror (its own iceoryx2 prefix, the robot and the `remote` source it serves). Needs
 //! root; nothing here touches an interface outside the namespaces a test creates.
 
+use std::path::Path;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use chassis_client::{MuxStatus, Robot, Source};
+use chassis_client::{IPC_PREFIX_ENV, MuxStatus, Robot, Source};
 
-use crate::{Env, pause};
+use crate::{Env, bin, pause};
 
 /// Runs `ip args…`; a failure fails the test with what `ip` said.
 pub fn ip(args: &[&str]) {
@@ -96,6 +97,41 @@ impl Drop for VethPair {
             let _ = Command::new("ip").args(["netns", "del", ns]).status();
         }
     }
+}
+
+/// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
+pub fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
+    zenoh_logging(env, label, ns, prefix, args, "info,zenoh=warn")
+}
+
+/// [`zenoh_in`] with the log filter `log`.
+pub fn zenoh_logging(
+    env: &mut Env,
+    label: &str,
+    ns: &str,
+    prefix: &str,
+    args: &[&str],
+    log: &str,
+) -> usize {
+    let bin_text = bin("chassis-zenoh").to_string_lossy().into_owned();
+    let mut all = vec!["netns", "exec", ns, &bin_text];
+    all.extend_from_slice(args);
+    env.spawn_program(
+        label,
+        Path::new("ip"),
+        &all,
+        &[(IPC_PREFIX_ENV, prefix), ("RUST_LOG", log)],
+    )
+}
+
+/// Runs `nft RULE` inside the namespace `ns`; a failure fails the test with what it said.
+pub fn nft(ns: &str, rule: &str) {
+    let out = run_in(ns, "nft", &[rule]);
+    assert!(
+        out.status.success(),
+        "nft {rule}: {} (install nftables)",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 /// Runs `program args…` inside the namespace `ns` and returns what it did.

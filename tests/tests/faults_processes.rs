@@ -555,13 +555,7 @@ fn start_client(env: &mut Env, client: Client, n: &str, cycle: usize) -> Running
         )),
         Client::Teleop => {
             let log = env.dir.join(format!("{label}.log"));
-            let command = format!(
-                "exec env {}={} RUST_LOG=info {} --name {n} 2>{}",
-                IPC_PREFIX_ENV,
-                quote(&env.prefix),
-                quote(&bin("chassis-teleop").to_string_lossy()),
-                quote(&log.to_string_lossy()),
-            );
+            let command = format!("exec {}", teleop_command(env, n, &log));
             Running::Terminal(Tmux::start(&env.dir, &label, &command))
         }
     }

@@ -38,9 +38,7 @@ fn drive(robot: &mut Robot, request: VelocityRequest, duration: Duration) {
 
 /// Waits until the robot stands still, then returns its state.
 fn standing(robot: &mut Robot) -> ChassisState {
-    let still = wait_for(Duration::from_secs(5), || {
-        state(robot).motion.linear_mps.abs() < 0.005
-    });
+    let still = comes_to_rest(robot, Duration::from_secs(5), 0.005);
     assert!(still.is_some(), "the robot did not stop");
     pause(Duration::from_millis(300));
     state(robot)

@@ -6,12 +6,7 @@
 //!
 //! Needs root (`ip netns`, veth pairs) and scripts/ros2-tests' virtualenv; discovery runs only on
 //! the namespaces' own interfaces.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::disallowed_methods
-)]
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

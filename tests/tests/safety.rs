@@ -24,6 +24,15 @@ fn start(env: &mut Env, robot: &str, n: &str) -> (Robot, usize) {
     start_with(env, &["--robot", robot, "--name", n], n)
 }
 
+/// [`start`] in a new environment (`test` names it) for robot NAME (`tag` and the pid): the
+/// environment, NAME, the connection and the monitor's index.
+fn started(test: &str, (tag, robot): (&str, &str)) -> (Env, String, Robot, usize) {
+    let mut env = Env::new(test);
+    let n = name(tag);
+    let (connection, monitor) = start(&mut env, robot, &n);
+    (env, n, connection, monitor)
+}
+
 /// [`start`] with chassisd's arguments.
 fn start_with(env: &mut Env, chassisd: &[&str], n: &str) -> (Robot, usize) {
     env.chassisd("chassisd", chassisd);
@@ -113,6 +122,16 @@ fn until_one(
     drive_until(robot, &mut [(source, go)], timeout, condition)
 }
 
+/// The mux commands zero.
+fn output_zero(m: &MuxStatus, _: &ChassisState) -> bool {
+    m.output == BodyVelocity::ZERO
+}
+
+/// Teleop drives: it is the active source and the robot moves faster than `speed`.
+fn teleop_above(speed: f32) -> impl FnMut(&MuxStatus, &ChassisState) -> bool {
+    move |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > speed
+}
+
 /// Keeps sending while waiting for `condition` on the mux status; returns the time it took.
 fn drive_until(
     robot: &mut Robot,
@@ -166,9 +185,7 @@ fn inject(robot: &mut Robot, kind: u8, on: bool, value: f64) -> u64 {
 
 #[test]
 fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_lets_it_reverse() {
-    let mut env = Env::new("safety-obstacle");
-    let n = name("sob");
-    let (mut robot, _) = start(&mut env, "xbot", &n);
+    let (env, n, mut robot, _) = started("safety-obstacle", ("sob", "xbot"));
     let mut planner = source(&mut robot, "planner");
     let mut teleop = source(&mut robot, "teleop");
     let ahead = VelocityRequest::twist(0.3, 0.0);
@@ -263,9 +280,7 @@ fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_let
 
 #[test]
 fn sigkill_of_the_safety_monitor_stops_the_robot_within_the_source_timeout() {
-    let mut env = Env::new("safety-kill");
-    let n = name("skl");
-    let (mut robot, monitor) = start(&mut env, "titan", &n);
+    let (mut env, _, mut robot, monitor) = started("safety-kill", ("skl", "titan"));
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.4, 0.0);
     let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
@@ -290,9 +305,7 @@ fn sigkill_of_the_safety_monitor_stops_the_robot_within_the_source_timeout() {
 
 #[test]
 fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
-    let mut env = Env::new("safety-latch");
-    let n = name("slt");
-    let (mut robot, _) = start(&mut env, "titan", &n);
+    let (mut env, n, mut robot, _) = started("safety-latch", ("slt", "titan"));
     let (mut teleop, go) = teleop_drives(&env, &mut robot);
 
     let estop = mux(&mut robot).lock_index("estop").unwrap();
@@ -359,9 +372,7 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
 
 #[test]
 fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
-    let mut env = Env::new("safety-usr1");
-    let n = name("sus");
-    let (mut robot, monitor) = start(&mut env, "xbot", &n);
+    let (mut env, n, mut robot, monitor) = started("safety-usr1", ("sus", "xbot"));
     let (mut teleop, go) = teleop_drives(&env, &mut robot);
     env.proc(monitor).signal(Signal::SIGUSR1);
     let estop = mux(&mut robot).lock_index("estop").unwrap();
@@ -448,9 +459,7 @@ fn a_low_battery_stops_the_robot_and_a_charged_one_lets_it_drive_again() {
 
 #[test]
 fn a_silent_chassis_stops_the_robot_until_it_talks_again() {
-    let mut env = Env::new("safety-silent");
-    let n = name("ssl");
-    let (mut robot, _) = start(&mut env, "titan", &n);
+    let (env, n, mut robot, _) = started("safety-silent", ("ssl", "titan"));
     let (mut teleop, go) = teleop_drives(&env, &mut robot);
 
     env.chassis_ok(&["sim", "--name", &n, "silence", "1.5"]);
@@ -459,7 +468,7 @@ fn a_silent_chassis_stops_the_robot_until_it_talks_again() {
         &mut teleop,
         go,
         Duration::from_secs(2),
-        |m, _| m.output == BodyVelocity::ZERO,
+        output_zero,
     )
     .unwrap_or_else(|| panic!("no stop while the chassis is silent\n{}", env.logs()));
     eprintln!("chassis silent → safety stop after {stopped:?}");
@@ -527,7 +536,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
         &mut teleop,
         go,
         Duration::from_secs(2),
-        |m, _| m.output == BodyVelocity::ZERO,
+        output_zero,
     );
     assert!(
         stopped.is_some_and(|t| t < Duration::from_millis(200)),
@@ -605,7 +614,7 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
         &mut teleop,
         fast,
         Duration::from_secs(5),
-        |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > 0.3,
+        teleop_above(0.3),
     );
     assert!(
         again.is_some(),
@@ -752,7 +761,7 @@ fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
         &mut teleop,
         go,
         Duration::from_secs(10),
-        |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > 0.3,
+        teleop_above(0.3),
     );
     assert!(moving.is_some(), "no motion\n{}", env.logs());
     env.chassis_ok(&["sim", "--name", &n, "runaway", "4.0"]);

@@ -54,9 +54,7 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
         env.proc(publisher).wait_exit(Duration::from_secs(5)),
         Some(0)
     );
-    let stopped = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).motion.linear_mps.abs() < 0.01
-    });
+    let stopped = comes_to_rest(&mut robot, Duration::from_secs(3), 0.01);
     assert!(
         stopped.is_some(),
         "still moving after the publisher stopped\n{}",

@@ -15,11 +15,8 @@ const UP: Duration = Duration::from_secs(10);
 fn teleop_in_tmux(env: &Env, n: &str) -> (Tmux, std::path::PathBuf) {
     let log = env.dir.join("teleop.log");
     let command = format!(
-        "env {}={} RUST_LOG=info {} --name {n} 2>{}; echo chassis-teleop exited $?; sleep 60",
-        IPC_PREFIX_ENV,
-        quote(&env.prefix),
-        quote(&bin("chassis-teleop").to_string_lossy()),
-        quote(&log.to_string_lossy()),
+        "{}; echo chassis-teleop exited $?; sleep 60",
+        teleop_command(env, n, &log)
     );
     let tmux = Tmux::start(&env.dir, "tmux", &command);
     tmux.wait_for_text("idle — publishing nothing", UP);
@@ -74,9 +71,7 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
         m.output.linear_x_mps == 0.0 && m.requested.linear_x_mps == 0.0
     });
     let zero_after = last_key.elapsed();
-    let stopped = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).motion.linear_mps.abs() < 0.01
-    });
+    let stopped = comes_to_rest(&mut robot, Duration::from_secs(3), 0.01);
     let stopped_after = last_key.elapsed();
     eprintln!(
         "peak {peak:.3} m/s while w was held; after the last key: commanded zero in \

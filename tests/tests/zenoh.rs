@@ -5,12 +5,7 @@
 //!
 //! Needs root (`ip netns`, veth pairs) and iproute2; fails loudly without them. Each test makes
 //! its own namespaces (unique names) and removes them, whatever happens.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::disallowed_methods
-)]
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -39,61 +34,54 @@ fn link() -> VethPair {
     VethPair::new((&robot.0, robot.1), (&operator.0, operator.1), false)
 }
 
-/// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
-fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
-    zenoh_logging(env, label, ns, prefix, args, "info,zenoh=warn")
-}
-
-/// [`zenoh_in`] with the log filter `log`.
-fn zenoh_logging(
-    env: &mut Env,
-    label: &str,
-    ns: &str,
-    prefix: &str,
-    args: &[&str],
-    log: &str,
-) -> usize {
-    let bin = bin("chassis-zenoh");
-    let mut all = vec!["netns", "exec", ns, bin.to_str().unwrap()];
-    all.extend_from_slice(args);
-    env.spawn_program(
-        label,
-        Path::new("ip"),
-        &all,
-        &[(IPC_PREFIX_ENV, prefix), ("RUST_LOG", log)],
-    )
-}
-
 fn endpoint(proto: &str) -> String {
     format!("{proto}/{ROBOT_ADDR}:{PORT}")
 }
 
+/// A test (`test` names its environment) between two namespaces, with chassisd and the robot
+/// side running for robot NAME (`tag` and the pid): the namespaces, the environment, NAME and
+/// the connection to chassisd.
+fn robot_over_link(test: &str, tag: &str) -> (VethPair, Env, String, Robot) {
+    let link = link();
+    let mut env = Env::new(test);
+    let n = name(tag);
+    let robot = robot_side(&mut env, &link, &n);
+    (link, env, n, robot)
+}
+
 /// chassisd (with its required safety monitor running) and the robot side, plain TCP.
 fn robot_side(env: &mut Env, link: &VethPair, n: &str) -> Robot {
+    robot_side_with(env, link, n, "tcp", &["--insecure"])
+}
+
+/// chassisd (with its required safety monitor running) and the robot side listening on
+/// `scheme` (`tcp`, `tls`), with `extra` arguments.
+fn robot_side_with(env: &mut Env, link: &VethPair, n: &str, scheme: &str, extra: &[&str]) -> Robot {
     env.serve("titan", n, &[]);
     env.spawn("safety", "chassis-safety", &["--name", n]);
     let robot = env.robot(n, UP);
     let prefix = env.prefix.clone();
-    let listen = endpoint("tcp");
-    zenoh_in(
-        env,
-        "zenoh-robot",
-        &link.robot_ns,
-        &prefix,
-        &["--name", n, "--listen", &listen, "--insecure"],
-    );
+    let listen = endpoint(scheme);
+    let mut args = vec!["--name", n, "--listen", &listen];
+    args.extend_from_slice(extra);
+    zenoh_in(env, "zenoh-robot", &link.robot_ns, &prefix, &args);
     robot
 }
 
 /// The operator side's mirror and a connection to it.
 fn mirror(env: &mut Env, link: &VethPair, n: &str, extra: &[&str]) -> Robot {
-    let prefix = operator_prefix(env);
     let connect = endpoint(if extra.contains(&"--certs") {
         "tls"
     } else {
         "tcp"
     });
-    let mut args = vec!["--name", n, "--connect", &connect, "--mirror"];
+    mirror_at(env, link, n, &connect, extra)
+}
+
+/// The operator side's mirror connecting to `connect`, and a connection to it.
+fn mirror_at(env: &mut Env, link: &VethPair, n: &str, connect: &str, extra: &[&str]) -> Robot {
+    let prefix = operator_prefix(env);
+    let mut args = vec!["--name", n, "--connect", connect, "--mirror"];
     args.extend_from_slice(extra);
     zenoh_in(env, "zenoh-operator", &link.peer_ns, &prefix, &args);
     operator_robot(env, n, &prefix, UP)
@@ -131,10 +119,7 @@ fn drive_until_moving(
 
 #[test]
 fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeout() {
-    let link = link();
-    let mut env = Env::new("zenoh-drive");
-    let n = name("zdr");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-drive", "zdr");
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
     let mut remote = remote_source(&env, &mut operator, UP);
 
@@ -237,9 +222,7 @@ fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeo
         !safety_stale,
         "the safety monitor went stale during the cut"
     );
-    let halted = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).motion.linear_mps.abs() < 0.02
-    });
+    let halted = comes_to_rest(&mut robot, Duration::from_secs(3), 0.02);
     assert!(halted.is_some(), "the robot did not come to a halt");
 
     // Link back: the same processes drive again.
@@ -293,25 +276,9 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
     assert!(!out.status.success(), "{stderr}");
     assert!(stderr.contains("refusing plain TCP"), "{stderr}");
 
-    env.serve("titan", &n, &[]);
-    env.spawn("safety", "chassis-safety", &["--name", &n]);
-    let mut robot = env.robot(&n, UP);
-    let prefix = env.prefix.clone();
+    let certs_arg = ["--certs", certs.to_str().unwrap()];
+    let mut robot = robot_side_with(&mut env, &link, &n, "tls", &certs_arg);
     let listen = endpoint("tls");
-    zenoh_in(
-        &mut env,
-        "zenoh-robot",
-        &link.robot_ns,
-        &prefix,
-        &[
-            "--name",
-            &n,
-            "--listen",
-            &listen,
-            "--certs",
-            certs.to_str().unwrap(),
-        ],
-    );
     // A mirror holding certificates of another authority, under a prefix of its own.
     let stranger_prefix = format!("{}st_", env.prefix);
     zenoh_logging(
@@ -330,7 +297,7 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
         ],
         "info,zenoh=debug",
     );
-    let mut operator = mirror(&mut env, &link, &n, &["--certs", certs.to_str().unwrap()]);
+    let mut operator = mirror(&mut env, &link, &n, &certs_arg);
     let mut remote = remote_source(&env, &mut operator, UP);
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("the robot never moved under TLS\n{}", env.logs()));
@@ -450,10 +417,7 @@ fn read_state(
 #[test]
 fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() {
     let python = python();
-    let link = link();
-    let mut env = Env::new("zenoh-python");
-    let n = name("zpy");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, env, n, mut robot) = robot_over_link("zenoh-python", "zpy");
     let stdout = read_state(&python, &env, &link, &mut robot, &endpoint("tcp"), &[]);
     let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     eprintln!("Python eclipse-zenoh reader: {summary}");
@@ -514,27 +478,23 @@ impl Impairment {
              from a relay in the operator's namespace"
         );
         let ns = &link.peer_ns;
-        let nft = |rule: &str| {
-            let out = run_in(ns, "nft", &[rule]);
-            assert!(
-                out.status.success(),
-                "nft {rule}: {} (install nftables)",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        };
-        nft("add table inet impair");
+        nft(ns, "add table inet impair");
         for hook in ["input", "output"] {
-            nft(&format!(
-                "add chain inet impair {hook} {{ type filter hook {hook} priority 0; }}"
-            ));
+            nft(
+                ns,
+                &format!("add chain inet impair {hook} {{ type filter hook {hook} priority 0; }}"),
+            );
             let dir = if hook == "input" {
                 "iifname"
             } else {
                 "oifname"
             };
-            nft(&format!(
-                "add rule inet impair {hook} {dir} \"{operator_if}\" numgen random mod 100 < {LOSS_PERCENT} drop"
-            ));
+            nft(
+                ns,
+                &format!(
+                    "add rule inet impair {hook} {dir} \"{operator_if}\" numgen random mod 100 < {LOSS_PERCENT} drop"
+                ),
+            );
         }
         Impairment::Emulated {
             _relay: DelayRelay::start(ns, DELAY),
@@ -592,7 +552,7 @@ impl DelayRelay {
         });
         ready_rx
             .recv_timeout(Duration::from_secs(5))
-            .expect("the relay did not start");
+            .unwrap_or_else(|e| panic!("the relay did not start: {e}"));
         DelayRelay { stop }
     }
 }
@@ -633,28 +593,10 @@ impl Drop for DelayRelay {
 
 #[test]
 fn a_slow_lossy_link_still_drives() {
-    let link = link();
-    let mut env = Env::new("zenoh-lossy");
-    let n = name("zls");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-lossy", "zls");
     let impairment = Impairment::apply(&link);
-    let prefix = operator_prefix(&env);
     let connect = impairment.endpoint();
-    zenoh_in(
-        &mut env,
-        "zenoh-operator",
-        &link.peer_ns,
-        &prefix,
-        &[
-            "--name",
-            &n,
-            "--connect",
-            &connect,
-            "--mirror",
-            "--insecure",
-        ],
-    );
-    let mut operator = operator_robot(&env, &n, &prefix, UP);
+    let mut operator = mirror_at(&mut env, &link, &n, &connect, &["--insecure"]);
     let mut remote = remote_source(&env, &mut operator, UP);
     let first = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("the robot never moved over the slow link\n{}", env.logs()));
@@ -713,10 +655,7 @@ fn chassis_teleop_on_the_operators_computer_drives_the_robot() {
         eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
         return;
     }
-    let link = link();
-    let mut env = Env::new("zenoh-teleop");
-    let n = name("ztp");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-teleop", "ztp");
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
     // The mirror offers the remote source once it has the robot's mux.
     drop(remote_source(&env, &mut operator, UP));
@@ -775,10 +714,7 @@ fn peak_while_asking(
 
 #[test]
 fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_starts_no_motion() {
-    let link = link();
-    let mut env = Env::new("zenoh-release");
-    let n = name("zrl");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-release", "zrl");
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
 
     // What the robot is, read on the operator's computer as beside chassisd: the same bytes.
@@ -901,35 +837,26 @@ fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_st
 fn nft_cut(link: &VethPair, cut: bool) {
     let ns = &link.peer_ns;
     let operator_if = &link.peer_if;
-    let nft = |rule: &str| {
-        let out = run_in(ns, "nft", &[rule]);
-        assert!(
-            out.status.success(),
-            "nft {rule}: {} (install nftables)",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
     if !cut {
-        nft("delete table inet cut");
+        nft(ns, "delete table inet cut");
         return;
     }
-    nft("add table inet cut");
+    nft(ns, "add table inet cut");
     for (hook, dir) in [("input", "iifname"), ("output", "oifname")] {
-        nft(&format!(
-            "add chain inet cut {hook} {{ type filter hook {hook} priority 0; }}"
-        ));
-        nft(&format!(
-            "add rule inet cut {hook} {dir} \"{operator_if}\" drop"
-        ));
+        nft(
+            ns,
+            &format!("add chain inet cut {hook} {{ type filter hook {hook} priority 0; }}"),
+        );
+        nft(
+            ns,
+            &format!("add rule inet cut {hook} {dir} \"{operator_if}\" drop"),
+        );
     }
 }
 
 #[test]
 fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
-    let link = link();
-    let mut env = Env::new("zenoh-stale");
-    let n = name("zst");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-stale", "zst");
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
     let mut remote = remote_source(&env, &mut operator, UP);
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
@@ -945,9 +872,7 @@ fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
         asked += 1;
         pause(Duration::from_millis(20));
     }
-    let halted = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).motion.linear_mps.abs() < 0.001
-    });
+    let halted = comes_to_rest(&mut robot, Duration::from_secs(3), 0.001);
     assert!(
         halted.is_some(),
         "the robot kept moving through the outage\n{}",
