@@ -35,14 +35,6 @@ fn corner_radius(robot: &mut Robot) -> f64 {
     corner_radius_m(&Kinematics::from_description(&described).unwrap())
 }
 
-/// `chassisd` on the simulated `robot`, and a connection to it.
-fn start(env: &mut Env, robot: &str, tag: &str) -> (Robot, String) {
-    let n = name(tag);
-    env.serve(robot, &n, &["--no-safety-monitor"]);
-    let robot = env.robot(&n, UP);
-    (robot, n)
-}
-
 /// The corners of the square of `size` m, in the frame of the robot's start pose (the planner
 /// drives (0, 0) → (s, 0) → (s, s) → (0, s) → (0, 0), `chassis-planner --shape square`).
 fn square_corners(size: f64) -> [(f64, f64); 3] {
@@ -339,23 +331,41 @@ fn wait_until_driving_then(env: &Env, robot: &mut Robot, speed: f32, mut each: i
     assert!(driving.is_some(), "the planner never drove\n{}", env.logs());
 }
 
-fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
-    let mut env = Env::new(&format!("plan-square-{robot_kind}"));
-    let (mut robot, n) = start(&mut env, robot_kind, "psq");
-    let goal = position(&state(&mut robot));
+/// A test's environment (`test` names it) with `chassisd` on the simulated `robot` as
+/// chassis/NAME (`tag` and the pid): the environment, NAME and a connection.
+fn start(test: &str, robot: &str, tag: &str) -> (Env, String, Robot) {
+    Env::serving(test, (tag, robot), &["--no-safety-monitor"], UP)
+}
+
+/// Where a square starts (the goal: it ends there too), its size, the robot's corner radius, a
+/// state stream and the track of it drained so far.
+fn square_start(
+    robot: &mut Robot,
+    robot_kind: &'static str,
+) -> ((f64, f64), &'static str, f64, StateStream, Track) {
+    let goal = position(&state(robot));
     let size = square_size(robot_kind);
-    let corners = corner_radius(&mut robot);
+    let corners = corner_radius(robot);
     let stream = robot.state_stream(256).unwrap();
     let mut track = Track::new(robot_kind, corners, size.parse().unwrap());
     track.drain(&stream);
+    (goal, size, corners, stream, track)
+}
+
+/// Starts `chassis-planner --name N args…`.
+fn spawn_planner(env: &mut Env, n: &str, args: &[&str]) -> usize {
+    let mut all = vec!["--name", n];
+    all.extend_from_slice(args);
+    env.spawn("planner", "chassis-planner", &all)
+}
+
+fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
+    let (mut env, n, mut robot) = start(&format!("plan-square-{robot_kind}"), robot_kind, "psq");
+    let (goal, size, corners, stream, mut track) = square_start(&mut robot, robot_kind);
     let mut truth = Truth::new(size.parse().unwrap());
     truth.sample(&mut robot);
     let started = Instant::now();
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
-        &["--name", &n, "--shape", "square", "--size", size],
-    );
+    let planner = spawn_planner(&mut env, &n, &["--shape", "square", "--size", size]);
     let code = follow(
         &mut env,
         planner,
@@ -388,21 +398,13 @@ fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
 }
 
 fn teleop_preempts_the_planner_and_hands_back(robot_kind: &'static str) {
-    let mut env = Env::new(&format!("plan-handback-{robot_kind}"));
-    let (mut robot, n) = start(&mut env, robot_kind, "pho");
-    let goal = position(&state(&mut robot));
-    let size = square_size(robot_kind);
-    let corners = corner_radius(&mut robot);
-    let stream = robot.state_stream(256).unwrap();
-    let mut track = Track::new(robot_kind, corners, size.parse().unwrap());
-    track.drain(&stream);
+    let (mut env, n, mut robot) = start(&format!("plan-handback-{robot_kind}"), robot_kind, "pho");
+    let (goal, size, _, stream, mut track) = square_start(&mut robot, robot_kind);
     let started = Instant::now();
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
+    let planner = spawn_planner(
+        &mut env,
+        &n,
         &[
-            "--name",
-            &n,
             "--shape",
             "square",
             "--size",
@@ -467,14 +469,11 @@ fn teleop_preempts_the_planner_and_hands_back(robot_kind: &'static str) {
 }
 
 fn a_preemption_longer_than_the_timeout_makes_the_planner_give_up(robot_kind: &str) {
-    let mut env = Env::new(&format!("plan-timeout-{robot_kind}"));
-    let (mut robot, n) = start(&mut env, robot_kind, "pto");
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
+    let (mut env, n, mut robot) = start(&format!("plan-timeout-{robot_kind}"), robot_kind, "pto");
+    let planner = spawn_planner(
+        &mut env,
+        &n,
         &[
-            "--name",
-            &n,
             "--shape",
             "line",
             "--size",
@@ -536,11 +535,7 @@ fn an_xbot_without_its_wheel_separation_has_no_pose_and_the_planner_says_so() {
     env.serve("xbot", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     assert!(!state(&mut robot).is_valid(Group::Pose));
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
-        &["--name", &n, "--shape", "line"],
-    );
+    let planner = spawn_planner(&mut env, &n, &["--shape", "line"]);
     let code = env.proc(planner).wait_exit(Duration::from_secs(10));
     let log = env.proc(planner).log_text();
     assert_eq!(code, Some(1), "{}", env.logs());
@@ -572,11 +567,7 @@ fn a_configured_speed_limit_reaches_the_planner_which_never_asks_above_it() {
     let mut robot = env.robot(&n, UP);
     let described = robot.description(UP).unwrap();
     assert_eq!(described.effective_limits().forward_mps, LIMIT_MPS);
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
-        &["--name", &n, "--shape", "line", "--size", "3", "--json"],
-    );
+    let planner = spawn_planner(&mut env, &n, &["--shape", "line", "--size", "3", "--json"]);
     let end = Instant::now() + SQUARE_LIMIT;
     let mut asked = Vec::new();
     let mut clamped = 0u32;
