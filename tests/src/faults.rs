@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use crate::{
     BusFrame, ChassisState, Figure, FrameDirection, FrameTap, MuxStatus, Robot, Source,
-    SourceStatus, Spread, Tmux, VelocityRequest,
+    SourceStatus, Spread, Tmux, VelocityRequest, drove_again_after,
 };
 
 /// The tests that measure timing under load take this exclusively; the others share it, so the
@@ -209,6 +209,17 @@ impl<'a> Pump<'a> {
             }
         }
         None
+    }
+
+    /// [`drove_again_after`] `since_ns`, pumping meanwhile.
+    pub fn drove_again(
+        &mut self,
+        robot: &mut Robot,
+        since_ns: u64,
+        timeout: Duration,
+        condition: impl FnMut(&ChassisState) -> bool,
+    ) -> Option<(ChassisState, Duration)> {
+        drove_again_after(robot, since_ns, timeout, || self.tick(), condition)
     }
 }
 

@@ -12,6 +12,7 @@
 // Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
+use std::sync::RwLockReadGuard;
 use std::time::{Duration, Instant};
 
 use chassis_tests::faults::*;
@@ -34,18 +35,31 @@ mod rank {
 
 // ----- SIGKILL of the service -----
 
+/// A fault test's start: the machine shared with the other fault tests, its environment
+/// (`label`), the robot's name (`tag` and the pid) and the seeded generator of `test`.
+fn fault_start(
+    test: &str,
+    label: &str,
+    tag: &str,
+) -> (RwLockReadGuard<'static, ()>, Env, String, Rng) {
+    let machine = shared();
+    (machine, Env::new(label), name(tag), Rng::from_env(test))
+}
+
+/// How long a fault test drives before its next fault: a random moment of up to 800 ms.
+fn a_moment(rng: &mut Rng) -> Duration {
+    rng.between(Duration::ZERO, Duration::from_millis(800))
+}
+
 /// The first start-up kill comes this soon after the spawn: before chassisd can have made its
 /// ports (its start takes tens of milliseconds even in release mode).
 const EARLY_KILL: Duration = Duration::from_millis(5);
 
 #[test]
 fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_reconnect() {
-    let _machine = shared();
     let test =
         "sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_reconnect";
-    let mut env = Env::new("kill-service");
-    let n = name("ksv");
-    let mut rng = Rng::from_env(test);
+    let (_machine, mut env, n, mut rng) = fault_start(test, "kill-service", "ksv");
     let args = ["--robot", "titan", "--name", n.as_str()];
     let first = env.chassisd("chassisd-0", &args);
     let mut robot = env.robot(&n, UP);
@@ -251,11 +265,8 @@ fn a_restart_after_a_kill_before_a_segment_was_sized_serves() {
 
 #[test]
 fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeout() {
-    let _machine = shared();
     let test = "sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeout";
-    let mut env = Env::new("kill-service-pty");
-    let n = name("ksp");
-    let mut rng = Rng::from_env(test);
+    let (_machine, mut env, n, mut rng) = fault_start(test, "kill-service-pty", "ksp");
     let link = env.dir.join("titan-slcan");
     let (_, bus) = env.sim_on_pty("titan", &[], &n, Line::Slcan, &link, UP);
     let args = [
@@ -281,21 +292,14 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
     for cycle in 1..=3 {
         let mut pump = Pump::new(&mut teleop, go, &mut wire);
         // Driving (again, after the restart of the cycle before): a speed reported since.
-        let driving = drove_again_after(
-            &mut robot,
-            restarted,
-            UP,
-            || pump.tick(),
-            |s| s.motion.linear_mps > 0.45 && s.is_valid(Group::Odometry),
-        );
+        let driving = pump.drove_again(&mut robot, restarted, UP, |s| {
+            s.motion.linear_mps > 0.45 && s.is_valid(Group::Odometry)
+        });
         if driving.is_none() {
             failure = Some(format!("cycle {cycle}: no drive"));
             break;
         }
-        pump.run(
-            &mut robot,
-            rng.between(Duration::ZERO, Duration::from_millis(800)),
-        );
+        pump.run(&mut robot, a_moment(&mut rng));
         let before = state(&mut robot);
         env.proc(service).signal(Signal::SIGKILL);
         env.proc(service).wait_exit(Duration::from_secs(3));
@@ -348,13 +352,7 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
     let bound_ms = 500.0 + 3.0 * 100.0 + 20.0;
     // The last restart drove again: a speed reported after it.
     let mut pump = Pump::new(&mut teleop, go, &mut wire);
-    let again = drove_again_after(
-        &mut robot,
-        restarted,
-        UP,
-        || pump.tick(),
-        |s| s.motion.linear_mps > 0.4,
-    );
+    let again = pump.drove_again(&mut robot, restarted, UP, |s| s.motion.linear_mps > 0.4);
     let again_ms = again.map_or(f64::NAN, |(_, d)| d.as_secs_f64() * 1e3);
     let pass = failure.is_none() && coasts.len() == 3 && worst_ms <= bound_ms && again.is_some();
     let mut figures = Figures::faults();
@@ -397,11 +395,8 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
 
 #[test]
 fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
-    let _machine = shared();
     let test = "sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived";
-    let mut env = Env::new("kill-sim");
-    let n = name("ksm");
-    let mut rng = Rng::from_env(test);
+    let (_machine, mut env, n, mut rng) = fault_start(test, "kill-sim", "ksm");
     let link = env.dir.join("xbot");
     let sim_bus = Line::Serial.sim_bus(&link);
     let (mut sim, mut robot) = env.xbot_over_pty(&n, &link, UP);
@@ -421,10 +416,7 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
             failure = Some(format!("cycle {cycle}: no drive"));
             break;
         }
-        pump.run(
-            &mut robot,
-            rng.between(Duration::ZERO, Duration::from_millis(800)),
-        );
+        pump.run(&mut robot, a_moment(&mut rng));
         let killed = Instant::now();
         env.proc(sim).signal(Signal::SIGKILL);
         // The dead simulator's link names a pseudo-terminal number the kernel hands out again:
@@ -566,10 +558,11 @@ fn start_client(env: &mut Env, client: Client, n: &str, cycle: usize) -> Running
 /// restart taking the source again.
 fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault: &str) {
     const CYCLES: usize = 4;
-    let _machine = shared();
-    let mut env = Env::new(&format!("kill-{}", client.source()));
-    let n = name(&format!("k{}", &client.source()[..2]));
-    let mut rng = Rng::from_env(test);
+    let (_machine, mut env, n, mut rng) = fault_start(
+        test,
+        &format!("kill-{}", client.source()),
+        &format!("k{}", &client.source()[..2]),
+    );
     let mut args = vec!["--robot", "titan", "--name", n.as_str()];
     if client != Client::Safety {
         args.push("--no-safety-monitor");
