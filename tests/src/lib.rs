@@ -245,9 +245,14 @@ impl Env {
     /// Starts chassisd (labelled `chassisd`) serving `robot` as chassis/`name`, with `extra`
     /// arguments after `--robot ROBOT --name NAME`.
     pub fn serve(&mut self, robot: &str, name: &str, extra: &[&str]) -> usize {
+        self.serve_as("chassisd", (robot, name), extra)
+    }
+
+    /// [`Env::serve`] with the label `label` (a restarted service, a second one).
+    pub fn serve_as(&mut self, label: &str, (robot, name): (&str, &str), extra: &[&str]) -> usize {
         let mut args = vec!["--robot", robot, "--name", name];
         args.extend_from_slice(extra);
-        self.chassisd("chassisd", &args)
+        self.chassisd(label, &args)
     }
 
     /// A test's environment (`test` names it) with chassisd serving `robot` as chassis/NAME

@@ -369,13 +369,10 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
     // Replay the MCAP file as fast as the service takes it: every RX frame arrives and decodes,
     // and what the chassis reported itself (the odometer) is reproduced exactly.
     let fast = name("rpm");
-    let replay_max = env.chassisd(
+    let replay_max = env.serve_as(
         "replay-max",
+        ("titan", &fast),
         &[
-            "--robot",
-            "titan",
-            "--name",
-            &fast,
             "--bus",
             &format!("replay:{mcap_text}@max"),
             "--no-safety-monitor",
@@ -476,13 +473,10 @@ fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
 
     // The same recording replayed as fast as the service decodes and publishes it.
     let fast = name("fldr");
-    let replay = env.chassisd(
+    let replay = env.serve_as(
         "replay",
+        ("titan", &fast),
         &[
-            "--robot",
-            "titan",
-            "--name",
-            &fast,
             "--bus",
             &format!("replay:{text}@max"),
             "--no-safety-monitor",

@@ -489,7 +489,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
     let n = name("srs");
     // The monitor first: no service yet. It says so and keeps trying.
     let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
-    let first = env.chassisd("first", &["--robot", "titan", "--name", &n]);
+    let first = env.serve_as("first", ("titan", &n), &[]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
@@ -506,7 +506,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
     env.proc(first).wait_exit(Duration::from_secs(3));
     assert!(env.proc(monitor).is_running(), "{}", env.logs());
     let restarted = now_ns();
-    env.chassisd("again", &["--robot", "titan", "--name", &n]);
+    env.serve_as("again", ("titan", &n), &[]);
     // Only samples of the new service count (the last ones of the first are still cached).
     let moving = until_one(
         &mut robot,

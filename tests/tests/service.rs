@@ -10,15 +10,16 @@ use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
 
-/// Sends `request` every 20 ms for `duration` (and keeps a safety heartbeat if given).
+/// Sends `request` every 20 ms for `ms` milliseconds (and keeps a safety heartbeat if given);
+/// returns the highest speed seen.
 fn drive_for(
     robot: &mut Robot,
     teleop: &mut Source,
     mut safety: Option<&mut Source>,
     request: VelocityRequest,
-    duration: Duration,
+    ms: u64,
 ) -> f32 {
-    let end = Instant::now() + duration;
+    let end = Instant::now() + Duration::from_millis(ms);
     let mut max = 0.0f32;
     while Instant::now() < end {
         teleop.send(request).unwrap();
@@ -30,6 +31,22 @@ fn drive_for(
         }
     }
     max
+}
+
+/// SIGKILLs process `index`, the client of source `source`; returns how long after the kill the
+/// mux decided `condition` (at most 2 s, `between` running meanwhile) and the source's timeout
+/// the running mux reports.
+fn sigkill_then(
+    (env, robot): (&mut Env, &mut Robot),
+    (index, source): (usize, &str),
+    between: impl FnMut(),
+    condition: impl FnMut(&MuxStatus) -> bool,
+) -> (Option<Duration>, Duration) {
+    let timeout = source_timeout(&mux(robot), source);
+    let killed = now_ns();
+    env.proc(index).signal(Signal::SIGKILL);
+    let decided = decided_after(robot, killed, Duration::from_secs(2), between, condition);
+    (decided, timeout)
 }
 
 #[test]
@@ -92,13 +109,7 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
     let (mut env, n, mut robot) = Env::serving("required", ("req", "titan"), &[], UP);
     let mut teleop = source(&mut robot, "teleop");
     let request = VelocityRequest::twist(0.4, 0.0);
-    let peak = drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        request,
-        Duration::from_millis(800),
-    );
+    let peak = drive_for(&mut robot, &mut teleop, None, request, 800);
     assert!(peak < 0.01, "moved to {peak} m/s without a safety monitor");
     assert_eq!(
         mux(&mut robot).zero_reason,
@@ -110,28 +121,18 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
         &n,
         &["--source", "safety", "--heartbeat", "--rate", "20"],
     );
-    let peak = drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        request,
-        Duration::from_millis(1500),
-    );
+    let peak = drive_for(&mut robot, &mut teleop, None, request, 1500);
     assert!(peak > 0.3, "peak {peak} m/s with the monitor alive");
 
     // SIGKILL the monitor: its last heartbeat came before the kill, so the mux stops at most the
     // source's timeout after the kill (plus the allowance for a late decision or a late look).
-    let timeout = source_timeout(&mux(&mut robot), "safety");
-    let killed = now_ns();
-    env.proc(heartbeat).signal(Signal::SIGKILL);
-    let stopped = decided_after(
-        &mut robot,
-        killed,
-        Duration::from_secs(2),
+    let (stopped, timeout) = sigkill_then(
+        (&mut env, &mut robot),
+        (heartbeat, "safety"),
         || teleop.send(request).unwrap(),
         |m| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == BodyVelocity::ZERO,
-    )
-    .unwrap_or_else(|| panic!("no safe stop\n{}", env.logs()));
+    );
+    let stopped = stopped.unwrap_or_else(|| panic!("no safe stop\n{}", env.logs()));
     assert!(
         stopped <= timeout + DECISION_ALLOWANCE,
         "safe stop {stopped:?} after the kill (timeout {timeout:?})"
@@ -192,13 +193,7 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
     let mut safety = source(&mut robot, "safety");
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
-    let peak = drive_for(
-        &mut robot,
-        &mut teleop,
-        Some(&mut safety),
-        go,
-        Duration::from_secs(1),
-    );
+    let peak = drive_for(&mut robot, &mut teleop, Some(&mut safety), go, 1000);
     assert!(peak > 0.2, "peak {peak}");
     let estop = mux(&mut robot).lock_index("estop").unwrap();
     safety.stop_and_lock(1 << estop).unwrap();
@@ -235,13 +230,7 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("estop released"));
     // A release never starts motion (tests/tests/latch.rs): teleop lets go first.
     teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
-    let peak = drive_for(
-        &mut robot,
-        &mut teleop,
-        Some(&mut safety),
-        go,
-        Duration::from_secs(1),
-    );
+    let peak = drive_for(&mut robot, &mut teleop, Some(&mut safety), go, 1000);
     assert!(peak > 0.2, "no motion after the release: {peak}");
 }
 
@@ -256,17 +245,13 @@ fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
     assert!(max_speed(&mut robot, Duration::from_millis(1200)) > 0.2);
     // The dead client's last request came before the kill: the mux commands zero at most the
     // source's timeout after it (plus the allowance for a late decision or a late look).
-    let timeout = source_timeout(&mux(&mut robot), "teleop");
-    let killed = now_ns();
-    env.proc(first).signal(Signal::SIGKILL);
-    let zero = decided_after(
-        &mut robot,
-        killed,
-        Duration::from_secs(2),
+    let (zero, timeout) = sigkill_then(
+        (&mut env, &mut robot),
+        (first, "teleop"),
         || {},
         |m| m.output == BodyVelocity::ZERO,
-    )
-    .unwrap_or_else(|| panic!("still commanding after the kill\n{}", env.logs()));
+    );
+    let zero = zero.unwrap_or_else(|| panic!("still commanding after the kill\n{}", env.logs()));
     eprintln!("teleop SIGKILLed → zero command after {zero:?} (timeout {timeout:?})");
     assert!(
         zero <= timeout + DECISION_ALLOWANCE,
@@ -286,16 +271,10 @@ fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
 fn a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed() {
     let mut env = Env::new("second");
     let n = name("sec");
-    let first = env.chassisd(
-        "first",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let first = env.serve_as("first", ("titan", &n), &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let started = Instant::now();
-    let second = env.chassisd(
-        "second",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let second = env.serve_as("second", ("titan", &n), &["--no-safety-monitor"]);
     let code = env.proc(second).wait_exit(Duration::from_secs(10));
     let refused_in = started.elapsed();
     let seq = state(&mut robot).seq;
@@ -351,28 +330,15 @@ fn a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed() {
 fn a_service_killed_with_sigkill_restarts_cleanly_and_clients_reconnect() {
     let mut env = Env::new("restart");
     let n = name("rs");
-    let first = env.chassisd(
-        "first",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let first = env.serve_as("first", ("titan", &n), &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
-    assert!(
-        drive_for(
-            &mut robot,
-            &mut teleop,
-            None,
-            VelocityRequest::twist(0.3, 0.0),
-            Duration::from_secs(1)
-        ) > 0.2
-    );
+    let go = VelocityRequest::twist(0.3, 0.0);
+    assert!(drive_for(&mut robot, &mut teleop, None, go, 1000) > 0.2);
     env.proc(first).signal(Signal::SIGKILL);
     env.proc(first).wait_exit(Duration::from_secs(3));
     let restarted = now_ns();
-    let again = env.chassisd(
-        "again",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let again = env.serve_as("again", ("titan", &n), &["--no-safety-monitor"]);
     // The old client keeps its source; the new service reads it: a speed reported after the
     // restart.
     let back = drove_again_after(
@@ -397,13 +363,8 @@ fn sigterm_commands_zero_and_exits_zero() {
     let service = env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
-    drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        VelocityRequest::twist(0.3, 0.0),
-        Duration::from_millis(600),
-    );
+    let go = VelocityRequest::twist(0.3, 0.0);
+    drive_for(&mut robot, &mut teleop, None, go, 600);
     let tap = robot.frames(512).unwrap();
     env.proc(service).signal(Signal::SIGTERM);
     assert_eq!(env.proc(service).wait_exit(Duration::from_secs(5)), Some(0));
@@ -463,13 +424,7 @@ fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_
         )
         .unwrap();
     assert!(answer.is_ok(), "{}", answer.message());
-    let moving = drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        drive,
-        Duration::from_millis(800),
-    );
+    let moving = drive_for(&mut robot, &mut teleop, None, drive, 800);
     assert!(moving > 0.1, "peak speed {moving} m/s\n{}", env.logs());
     stream.drain(|_| {}).unwrap();
     latest.poll_states(|_| {}).unwrap();
@@ -529,31 +484,15 @@ fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_
 #[test]
 fn control_requests_are_answered_with_success_or_a_reason() {
     let (env, n, _robot) = Env::serving("control", ("ctl", "titan"), &["--no-safety-monitor"], UP);
-    let ok = env.chassis(&["control", "--name", &n, "off-road", "on"]);
-    assert!(
-        ok.status.success(),
-        "{}",
-        String::from_utf8_lossy(&ok.stderr)
-    );
-    assert_eq!(
-        String::from_utf8_lossy(&ok.stdout).trim(),
-        "ok: off-road mode on"
-    );
+    let ok = env.chassis_ok(&["control", "--name", &n, "off-road", "on"]);
+    assert_eq!(ok.trim(), "ok: off-road mode on");
     let unsupported = env.chassis(&["control", "--name", &n, "lift", "--position", "50"]);
     assert_eq!(unsupported.status.code(), Some(1));
     assert!(
         String::from_utf8_lossy(&unsupported.stderr).contains("unsupported: titan has no lift")
     );
-    let zero = env.chassis(&["control", "--name", &n, "steering-zero"]);
-    assert!(
-        zero.status.success(),
-        "{}",
-        String::from_utf8_lossy(&zero.stderr)
-    );
-    assert_eq!(
-        String::from_utf8_lossy(&zero.stdout).trim(),
-        "ok: steering zero set"
-    );
+    let zero = env.chassis_ok(&["control", "--name", &n, "steering-zero"]);
+    assert_eq!(zero.trim(), "ok: steering zero set");
     let missing = env.chassis(&["status", "--name", "nobody"]);
     assert_eq!(missing.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&missing.stderr).contains("is chassisd running?"));
@@ -569,7 +508,7 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
-    let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    let peak = drive_for(&mut robot, &mut teleop, None, go, 2000);
     assert!(peak > 0.2, "peak {peak} over slcan\n{}", env.logs());
 
     // Hang-up: the simulated chassis (and its pty) vanish.
@@ -637,7 +576,7 @@ fn scout_mini_scout_and_bunker_without_a_protocol_flag_drive_a_v1_and_a_v2_chass
         let mut handle = env.robot(&n, UP);
         let mut teleop = source(&mut handle, "teleop");
         let go = VelocityRequest::twist(0.3, 0.0);
-        let peak = drive_for(&mut handle, &mut teleop, None, go, Duration::from_secs(2));
+        let peak = drive_for(&mut handle, &mut teleop, None, go, 2000);
         assert!(
             peak > 0.2,
             "{robot} {protocol}: peak {peak}\n{}",
@@ -772,7 +711,7 @@ fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_agai
     );
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.4, 0.0);
-    let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    let peak = drive_for(&mut robot, &mut teleop, None, go, 2000);
     assert!(peak > 0.3, "peak {peak}\n{}", env.logs());
     let switch = |robot: &mut Robot, on: bool| {
         let answer = robot
@@ -788,24 +727,18 @@ fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_agai
         assert!(answer.is_ok(), "{}", answer.message());
     };
     switch(&mut robot, true);
-    drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(1));
+    drive_for(&mut robot, &mut teleop, None, go, 1000);
     let s = state(&mut robot);
     assert!(s.motion.linear_mps.abs() < 0.05, "{}", s.motion.linear_mps);
     assert_ne!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
     switch(&mut robot, false);
-    let held = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(1));
+    let held = drive_for(&mut robot, &mut teleop, None, go, 1000);
     let s = state(&mut robot);
     assert!(held < 0.05, "moved on its own after the release: {held}");
     assert_eq!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
     assert_ne!(s.command.clamp_flags & ClampFlags::CHASSIS_NOT_READY, 0);
     let stop = VelocityRequest::twist(0.0, 0.0);
-    drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        stop,
-        Duration::from_millis(300),
-    );
-    let again = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    drive_for(&mut robot, &mut teleop, None, stop, 300);
+    let again = drive_for(&mut robot, &mut teleop, None, go, 2000);
     assert!(again > 0.3, "not driving again: {again}\n{}", env.logs());
 }
