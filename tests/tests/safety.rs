@@ -111,15 +111,19 @@ fn stopped_by_the_monitor(
     .unwrap_or_else(|| panic!("no stop for {what}\n{}", env.logs()))
 }
 
-/// [`drive_until`] with one source and request.
+/// [`drive_until`] with one source and its request, for at most `ms` milliseconds.
 fn until_one(
     robot: &mut Robot,
-    source: &mut Source,
-    go: VelocityRequest,
-    timeout: Duration,
+    (source, go): (&mut Source, VelocityRequest),
+    ms: u64,
     condition: impl FnMut(&MuxStatus, &ChassisState) -> bool,
 ) -> Option<Duration> {
-    drive_until(robot, &mut [(source, go)], timeout, condition)
+    drive_until(
+        robot,
+        &mut [(source, go)],
+        Duration::from_millis(ms),
+        condition,
+    )
 }
 
 /// The mux commands zero.
@@ -287,13 +291,9 @@ fn sigkill_of_the_safety_monitor_stops_the_robot_within_the_source_timeout() {
     assert!(high > 0.3, "peak {high} m/s with the monitor alive");
 
     env.proc(monitor).signal(Signal::SIGKILL);
-    let stopped = until_one(
-        &mut robot,
-        &mut teleop,
-        go,
-        Duration::from_secs(2),
-        |m, _| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == BodyVelocity::ZERO,
-    )
+    let stopped = until_one(&mut robot, (&mut teleop, go), 2000, |m, _| {
+        m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == BodyVelocity::ZERO
+    })
     .unwrap_or_else(|| panic!("no safe stop after the kill\n{}", env.logs()));
     eprintln!("safety monitor SIGKILLed → mux output zero after {stopped:?} (timeout 200 ms)");
     assert!(
@@ -310,13 +310,9 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
 
     let estop = mux(&mut robot).lock_index("estop").unwrap();
     let pressed = inject(&mut robot, SimKind::BUMPER, true, 0.0);
-    let latched = until_one(
-        &mut robot,
-        &mut teleop,
-        go,
-        Duration::from_secs(3),
-        |m, _| m.locks()[estop].held == 1,
-    );
+    let latched = until_one(&mut robot, (&mut teleop, go), 3000, |m, _| {
+        m.locks()[estop].held == 1
+    });
     assert!(latched.is_some(), "no latch\n{}", env.logs());
     let m = mux(&mut robot);
     assert_eq!(m.locks()[estop].holder, 0, "held by the safety source");
@@ -376,13 +372,9 @@ fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
     let (mut teleop, go) = teleop_drives(&env, &mut robot);
     env.proc(monitor).signal(Signal::SIGUSR1);
     let estop = mux(&mut robot).lock_index("estop").unwrap();
-    let latched = until_one(
-        &mut robot,
-        &mut teleop,
-        go,
-        Duration::from_secs(2),
-        |m, _| m.locks()[estop].held == 1 && m.output == BodyVelocity::ZERO,
-    );
+    let latched = until_one(&mut robot, (&mut teleop, go), 2000, |m, _| {
+        m.locks()[estop].held == 1 && m.output == BodyVelocity::ZERO
+    });
     assert!(latched.is_some(), "no latch\n{}", env.logs());
     eprintln!(
         "SIGUSR1 → estop held, output zero after {:?}",
@@ -463,14 +455,8 @@ fn a_silent_chassis_stops_the_robot_until_it_talks_again() {
     let (mut teleop, go) = teleop_drives(&env, &mut robot);
 
     env.chassis_ok(&["sim", "--name", &n, "silence", "1.5"]);
-    let stopped = until_one(
-        &mut robot,
-        &mut teleop,
-        go,
-        Duration::from_secs(2),
-        output_zero,
-    )
-    .unwrap_or_else(|| panic!("no stop while the chassis is silent\n{}", env.logs()));
+    let stopped = until_one(&mut robot, (&mut teleop, go), 2000, output_zero)
+        .unwrap_or_else(|| panic!("no stop while the chassis is silent\n{}", env.logs()));
     eprintln!("chassis silent → safety stop after {stopped:?}");
     assert!(safety(&robot).is_active(SafetyRule::STALE));
     // The chassis talks again after 1.5 s; motion 0.5 s after that.
@@ -493,13 +479,9 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
-    let moving = until_one(
-        &mut robot,
-        &mut teleop,
-        go,
-        Duration::from_secs(5),
-        |_, s| s.motion.linear_mps > 0.2,
-    );
+    let moving = until_one(&mut robot, (&mut teleop, go), 5000, |_, s| {
+        s.motion.linear_mps > 0.2
+    });
     assert!(moving.is_some(), "no motion\n{}", env.logs());
 
     env.proc(first).signal(Signal::SIGKILL);
@@ -508,20 +490,14 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
     let restarted = now_ns();
     env.serve_as("again", ("titan", &n), &[]);
     // Only samples of the new service count (the last ones of the first are still cached).
-    let moving = until_one(
-        &mut robot,
-        &mut teleop,
-        go,
-        Duration::from_secs(10),
-        |m, s| {
-            m.stamp_ns > restarted
-                && s.stamp_ns > restarted
-                && m.sources()
-                    .iter()
-                    .any(|s| s.name() == "safety" && s.has(SourceFlags::FRESH))
-                && s.motion.linear_mps > 0.2
-        },
-    );
+    let moving = until_one(&mut robot, (&mut teleop, go), 10000, |m, s| {
+        m.stamp_ns > restarted
+            && s.stamp_ns > restarted
+            && m.sources()
+                .iter()
+                .any(|s| s.name() == "safety" && s.has(SourceFlags::FRESH))
+            && s.motion.linear_mps > 0.2
+    });
     assert!(
         moving.is_some(),
         "no motion after the restart\n{}",
@@ -531,13 +507,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
 
     // SIGTERM: a last stop, exit code 0.
     env.proc(monitor).signal(Signal::SIGTERM);
-    let stopped = until_one(
-        &mut robot,
-        &mut teleop,
-        go,
-        Duration::from_secs(2),
-        output_zero,
-    );
+    let stopped = until_one(&mut robot, (&mut teleop, go), 2000, output_zero);
     assert!(
         stopped.is_some_and(|t| t < Duration::from_millis(200)),
         "{stopped:?}\n{}",
@@ -581,16 +551,10 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
 
     env.chassis_ok(&["sim", "--name", &n, "runaway", "1.0"]);
     let mut fastest = 0.0f32;
-    let stopped = until_one(
-        &mut robot,
-        &mut teleop,
-        fast,
-        Duration::from_secs(5),
-        |m, s| {
-            fastest = fastest.max(s.motion.linear_mps);
-            m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety")
-        },
-    )
+    let stopped = until_one(&mut robot, (&mut teleop, fast), 5000, |m, s| {
+        fastest = fastest.max(s.motion.linear_mps);
+        m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety")
+    })
     .unwrap_or_else(|| panic!("no stop for a runaway at 1.0 m/s\n{}", env.logs()));
     eprintln!("runaway at 1.0 m/s past a 0.5 m/s limit → safety stop after {stopped:?}");
     assert!(fastest > 0.6, "measured at most {fastest} m/s");
@@ -609,13 +573,7 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
     assert_eq!(mux(&mut robot).output, BodyVelocity::ZERO);
 
     env.chassis_ok(&["sim", "--name", &n, "runaway", "--clear"]);
-    let again = until_one(
-        &mut robot,
-        &mut teleop,
-        fast,
-        Duration::from_secs(5),
-        teleop_above(0.3),
-    );
+    let again = until_one(&mut robot, (&mut teleop, fast), 5000, teleop_above(0.3));
     assert!(
         again.is_some(),
         "no motion once the chassis obeys again\n{}",
@@ -756,13 +714,7 @@ fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
 
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.5, 0.0);
-    let moving = until_one(
-        &mut robot,
-        &mut teleop,
-        go,
-        Duration::from_secs(10),
-        teleop_above(0.3),
-    );
+    let moving = until_one(&mut robot, (&mut teleop, go), 10000, teleop_above(0.3));
     assert!(moving.is_some(), "no motion\n{}", env.logs());
     env.chassis_ok(&["sim", "--name", &n, "runaway", "4.0"]);
     let timeout = Duration::from_secs(5);
