@@ -308,10 +308,27 @@ impl Env {
     /// and chassisd serving it as chassis/`name` with [`XBOT_PROFILE`] over the other end;
     /// returns the simulator's index and the connection (each up within `timeout`).
     pub fn xbot_over_pty(&mut self, name: &str, link: &Path, timeout: Duration) -> (usize, Robot) {
-        let (sim, bus) = self.sim_on_pty("xbot", &[], name, Line::Serial, link, timeout);
         let config = self.write("xbot.toml", XBOT_PROFILE);
-        let extra = ["--bus", &bus, "--no-safety-monitor", "--config", &config];
-        self.serve("xbot", name, &extra);
+        let extra = ["--config", config.as_str()];
+        self.over_pty(("xbot", name), Line::Serial, link, &extra, timeout)
+    }
+
+    /// A simulated `robot` (`chassisd sim`, labelled `sim`) at the far end of `line`, a pty
+    /// linked at `link`, and chassisd serving it as chassis/`name` without its safety monitor
+    /// over the other end, with `extra` arguments; returns the simulator's index and the
+    /// connection (each up within `timeout`).
+    pub fn over_pty(
+        &mut self,
+        (robot, name): (&str, &str),
+        line: Line,
+        link: &Path,
+        extra: &[&str],
+        timeout: Duration,
+    ) -> (usize, Robot) {
+        let (sim, bus) = self.sim_on_pty(robot, &[], name, line, link, timeout);
+        let mut args = vec!["--bus", bus.as_str(), "--no-safety-monitor"];
+        args.extend_from_slice(extra);
+        self.serve(robot, name, &args);
         (sim, self.robot(name, timeout))
     }
 
@@ -716,10 +733,15 @@ pub fn source_timeout(m: &MuxStatus, name: &str) -> Duration {
 
 /// Reads states for `duration` and returns the largest |linear speed| seen.
 pub fn max_speed(robot: &mut Robot, duration: Duration) -> f32 {
+    max_speed_polling(robot, duration, Duration::from_millis(50))
+}
+
+/// [`max_speed`], waiting at most `poll` for each state sample.
+pub fn max_speed_polling(robot: &mut Robot, duration: Duration, poll: Duration) -> f32 {
     let end = Instant::now() + duration;
     let mut max = 0.0f32;
     while Instant::now() < end {
-        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(50)) {
+        if let Ok(Some(state)) = robot.wait_state(poll) {
             max = max.max(state.motion.linear_mps.abs());
         }
     }

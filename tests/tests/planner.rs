@@ -531,9 +531,7 @@ fn an_xbot_without_its_wheel_separation_has_no_pose_and_the_planner_says_so() {
     let mut env = Env::new("plan-nopose");
     let n = name("pnp");
     let link = env.dir.join("xbot");
-    let (_, bus) = env.sim_on_pty("xbot", &[], &n, Line::Serial, &link, UP);
-    env.serve("xbot", &n, &["--bus", &bus, "--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (_, mut robot) = env.over_pty(("xbot", &n), Line::Serial, &link, &[], UP);
     assert!(!state(&mut robot).is_valid(Group::Pose));
     let planner = spawn_planner(&mut env, &n, &["--shape", "line"]);
     let code = env.proc(planner).wait_exit(Duration::from_secs(10));

@@ -503,9 +503,7 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
     let mut env = Env::new("slcan");
     let n = name("sl");
     let link = env.dir.join("titan-slcan");
-    let (sim, bus) = env.sim_on_pty("titan", &[], &n, Line::Slcan, &link, UP);
-    env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
-    let mut robot = env.robot(&n, UP);
+    let (sim, mut robot) = env.over_pty(("titan", &n), Line::Slcan, &link, &[], UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
     let peak = drive_for(&mut robot, &mut teleop, None, go, 2000);

@@ -117,11 +117,16 @@ fn titan_on_vcan(env: &mut Env, n: &str) -> (usize, usize) {
     (sim, service)
 }
 
-/// `chassisd --robot titan` alone on the vcan interface: its connection.
-fn service_on_vcan(env: &mut Env, n: &str) -> Robot {
+/// A test's environment (`test` names it) with `chassisd --robot titan` alone on the vcan
+/// interface as chassis/NAME (`tag` and the pid): the environment, NAME and a connection.
+fn service_on_vcan(test: &str, tag: &str) -> (Env, String, Robot) {
     let bus = format!("can:{}", iface());
-    env.serve("titan", n, &["--bus", &bus, "--no-safety-monitor"]);
-    env.robot(n, UP)
+    Env::serving(
+        test,
+        (tag, "titan"),
+        &["--bus", &bus, "--no-safety-monitor"],
+        UP,
+    )
 }
 
 fn in_command_mode(s: &ChassisState) -> bool {
@@ -205,9 +210,7 @@ fn chassisd_drives_the_simulated_titan_across_vcan_end_to_end() {
 #[test]
 #[ignore = "needs kernel CAN (vcan) and root: scripts/vm-tests runs it in a VM"]
 fn frames_from_cansend_update_the_state_of_a_service_without_a_chassis() {
-    let mut env = Env::new("vcan-cansend");
-    let n = name("vs");
-    let mut robot = service_on_vcan(&mut env, &n);
+    let (env, _, mut robot) = service_on_vcan("vcan-cansend", "vs");
     // No chassis on the bus: the service says so.
     let silent = wait_for(Duration::from_secs(5), || {
         state(&mut robot).link_flags & LinkFlags::CHASSIS_SILENT != 0
@@ -570,9 +573,7 @@ fn the_doctor_on_socketcan_down_silent_and_with_the_simulated_titan() {
 #[test]
 #[ignore = "needs kernel CAN (vcan) and root: scripts/vm-tests runs it in a VM"]
 fn error_frames_on_the_socket_are_published_as_bus_off_and_restart_and_the_doctor_fails() {
-    let mut env = Env::new("vcan-busoff");
-    let n = name("vb");
-    let mut robot = service_on_vcan(&mut env, &n);
+    let (env, n, mut robot) = service_on_vcan("vcan-busoff", "vb");
 
     // can_bus_off(): CAN_ERR_BUSOFF, no data.
     send_raw(CAN_ERR | 0x040, [0; 8]);
