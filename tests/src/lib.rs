@@ -374,6 +374,19 @@ impl Env {
         String::from_utf8_lossy(&out.stdout).into_owned()
     }
 
+    /// What a program that had to succeed printed; otherwise fails the test with `what` (what
+    /// it did), its output and every log.
+    pub fn succeeded(&self, what: &str, out: &Output) -> String {
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "{what}: {}\n{stdout}\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            self.logs()
+        );
+        stdout
+    }
+
     /// Runs the workspace binary `binary args…` to completion.
     pub fn run(&self, binary: &str, args: &[&str]) -> Output {
         self.command(binary, args)
@@ -696,6 +709,36 @@ pub fn doctor_listening(env: &Env, robot: &str, name: &str, bus: &str) -> (Optio
     let text = output_text(&out);
     println!("{text}");
     (out.status.code(), text)
+}
+
+/// The Python of a virtualenv the test scripts prepare: `$ENV_VAR` if set, else
+/// `target/VENV/bin/python`; it must run `import IMPORTS`, or the test fails saying what is
+/// missing (`missing`) and how to prepare it (`hint`).
+pub fn venv_python(
+    env_var: &str,
+    venv: &str,
+    (imports, missing): (&str, &str),
+    hint: &str,
+) -> PathBuf {
+    let python = std::env::var_os(env_var).map_or_else(
+        || {
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../target")
+                .join(venv)
+                .join("bin/python")
+        },
+        PathBuf::from,
+    );
+    let ready = Command::new(&python)
+        .args(["-c", &format!("import {imports}")])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        ready,
+        "{} cannot import {missing}: {hint}",
+        python.display()
+    );
+    python
 }
 
 /// A robot name unique to this test process: `tag` and the pid (names are at most 16

@@ -30,20 +30,12 @@ fn link() -> VethPair {
 
 /// scripts/ros2-tests' Python (with `cyclonedds`), or `CHASSIS_ROS2_PYTHON`.
 fn python() -> PathBuf {
-    let python = std::env::var_os("CHASSIS_ROS2_PYTHON").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/ros2-venv/bin/python"),
-        PathBuf::from,
-    );
-    let ready = Command::new(&python)
-        .args(["-c", "import cyclonedds"])
-        .status()
-        .is_ok_and(|s| s.success());
-    assert!(
-        ready,
-        "{} cannot import cyclonedds: run scripts/ros2-tests once (it makes target/ros2-venv)",
-        python.display()
-    );
-    python
+    venv_python(
+        "CHASSIS_ROS2_PYTHON",
+        "ros2-venv",
+        ("cyclonedds", "cyclonedds"),
+        "run scripts/ros2-tests once (it makes target/ros2-venv)",
+    )
 }
 
 /// Starts chassis-ros2 in the robot's namespace with `envs` added.
@@ -102,13 +94,7 @@ fn peer_drives(
         pause(Duration::from_millis(10));
     }
     let out = child.wait_with_output().unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "drive_peer.py: {}\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
+    let stdout = env.succeeded("drive_peer.py", &out);
     let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     (summary["matched"].as_u64().unwrap(), won, peak)
 }

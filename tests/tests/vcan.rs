@@ -310,12 +310,7 @@ fn candump_of_what_the_service_sends_decodes_with_chassis_decode() {
         .stdin(File::open(&log).unwrap())
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&decode.stdout);
-    assert!(
-        decode.status.success(),
-        "chassis decode failed: {}\n{text}",
-        String::from_utf8_lossy(&decode.stderr)
-    );
+    let stdout = env.succeeded(&format!("chassis decode failed on\n{text}"), &decode);
     let heartbeats = stdout
         .lines()
         .filter(|l| {

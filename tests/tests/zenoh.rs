@@ -351,21 +351,13 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
 /// The Python with `eclipse-zenoh` and the `chassis` package (scripts/zenoh-tests prepares
 /// target/python-venv), or `CHASSIS_ZENOH_PYTHON`.
 fn python() -> PathBuf {
-    let python = std::env::var_os("CHASSIS_ZENOH_PYTHON").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/python-venv/bin/python"),
-        PathBuf::from,
-    );
-    let ready = Command::new(&python)
-        .args(["-c", "import zenoh, chassis"])
-        .status()
-        .is_ok_and(|s| s.success());
-    assert!(
-        ready,
-        "{} cannot import zenoh and chassis: run scripts/zenoh-tests --prepare (it installs \
-         eclipse-zenoh and clients/python into target/python-venv)",
-        python.display()
-    );
-    python
+    venv_python(
+        "CHASSIS_ZENOH_PYTHON",
+        "python-venv",
+        ("zenoh, chassis", "zenoh and chassis"),
+        "run scripts/zenoh-tests --prepare (it installs eclipse-zenoh and clients/python into \
+         target/python-venv)",
+    )
 }
 
 /// Runs tests/zenoh/read_state.py in the operator's namespace (it publishes on `cmd/safety`
@@ -404,14 +396,7 @@ fn read_state(
         .args(extra)
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "read_state.py failed: {}\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
-    stdout
+    env.succeeded("read_state.py failed", &out)
 }
 
 #[test]
@@ -740,12 +725,9 @@ fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_st
         .args(["-c", &script])
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "the Python client read no description through the mirror: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
+    let stdout = env.succeeded(
+        "the Python client read no description through the mirror",
+        &out,
     );
     let py: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     assert_eq!(
