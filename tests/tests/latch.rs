@@ -50,14 +50,7 @@ fn drive(robot: &mut Robot, teleop: &mut Source, duration: Duration) -> f32 {
 }
 
 fn control(env: &Env, n: &str, action: &str) -> String {
-    let out = env.chassis(&["control", "--name", n, action]);
-    assert!(
-        out.status.success(),
-        "chassis control {action}: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    env.chassis_ok(&["control", "--name", n, action])
 }
 
 fn estop_held(robot: &mut Robot) -> (bool, u8) {

@@ -232,6 +232,19 @@ fn json_f64(value: &Value, path: &[&str]) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("{path:?} in {value}"))
 }
 
+/// chassisd (labelled `label`) replaying the recording `file` as fast as it takes it, as robot
+/// NAME (`tag` and the pid): its index and a connection.
+fn replay_at_max(env: &mut Env, (label, tag): (&str, &str), file: &str) -> (usize, Robot) {
+    let n = name(tag);
+    let bus = format!("replay:{file}@max");
+    let replay = env.serve_as(
+        label,
+        ("titan", &n),
+        &["--bus", &bus, "--no-safety-monitor"],
+    );
+    (replay, env.robot(&n, UP))
+}
+
 #[test]
 fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry_and_pose() {
     let (mut env, n, mut robot) = Env::serving(
@@ -368,17 +381,7 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
 
     // Replay the MCAP file as fast as the service takes it: every RX frame arrives and decodes,
     // and what the chassis reported itself (the odometer) is reproduced exactly.
-    let fast = name("rpm");
-    let replay_max = env.serve_as(
-        "replay-max",
-        ("titan", &fast),
-        &[
-            "--bus",
-            &format!("replay:{mcap_text}@max"),
-            "--no-safety-monitor",
-        ],
-    );
-    let mut replay = env.robot(&fast, UP);
+    let (replay_max, mut replay) = replay_at_max(&mut env, ("replay-max", "rpm"), &mcap_text);
     let end = replayed(&mut replay, &env);
     assert_eq!(
         end.link.rx_frames,
@@ -472,17 +475,7 @@ fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
     assert!(rate > 2000.0, "{rate:.0} frames/s: the bus was not loaded");
 
     // The same recording replayed as fast as the service decodes and publishes it.
-    let fast = name("fldr");
-    let replay = env.serve_as(
-        "replay",
-        ("titan", &fast),
-        &[
-            "--bus",
-            &format!("replay:{text}@max"),
-            "--no-safety-monitor",
-        ],
-    );
-    let mut robot = env.robot(&fast, UP);
+    let (replay, mut robot) = replay_at_max(&mut env, ("replay", "fldr"), &text);
     let end = replayed(&mut robot, &env);
     assert_eq!(end.link.rx_frames, rec.rx_frames() as u64);
     println!(
