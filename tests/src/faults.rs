@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use crate::{
     BusFrame, ChassisState, Figure, FrameDirection, FrameTap, MuxStatus, Robot, Source,
-    SourceStatus, Spread, Tmux, VelocityRequest,
+    SourceStatus, Spread, Tmux, VelocityRequest, drove_again_after,
 };
 
 /// The tests that measure timing under load take this exclusively; the others share it, so the
@@ -25,11 +25,7 @@ pub fn exclusive() -> RwLockWriteGuard<'static, ()> {
     MACHINE.write().unwrap_or_else(|e| e.into_inner())
 }
 
-/// A robot name unique to this test process: `tag` and the pid (names are at most 16
-/// characters).
-pub fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
+pub use crate::name;
 
 /// Nanoseconds as milliseconds.
 pub fn ms(ns: i128) -> f64 {
@@ -213,6 +209,17 @@ impl<'a> Pump<'a> {
             }
         }
         None
+    }
+
+    /// [`drove_again_after`] `since_ns`, pumping meanwhile.
+    pub fn drove_again(
+        &mut self,
+        robot: &mut Robot,
+        since_ns: u64,
+        timeout: Duration,
+        condition: impl FnMut(&ChassisState) -> bool,
+    ) -> Option<(ChassisState, Duration)> {
+        drove_again_after(robot, since_ns, timeout, || self.tick(), condition)
     }
 }
 

@@ -242,9 +242,149 @@ impl Env {
         self.spawn(label, "chassisd", args)
     }
 
+    /// Starts chassisd (labelled `chassisd`) serving `robot` as chassis/`name`, with `extra`
+    /// arguments after `--robot ROBOT --name NAME`.
+    pub fn serve(&mut self, robot: &str, name: &str, extra: &[&str]) -> usize {
+        self.serve_as("chassisd", (robot, name), extra)
+    }
+
+    /// [`Env::serve`] with the label `label` (a restarted service, a second one).
+    pub fn serve_as(&mut self, label: &str, (robot, name): (&str, &str), extra: &[&str]) -> usize {
+        let mut args = vec!["--robot", robot, "--name", name];
+        args.extend_from_slice(extra);
+        self.chassisd(label, &args)
+    }
+
+    /// A test's environment (`test` names it) with chassisd serving `robot` as chassis/NAME
+    /// (`tag` and the pid) with `extra` arguments: the environment, NAME and the connection
+    /// (up within `up`).
+    pub fn serving(
+        test: &str,
+        (tag, robot): (&str, &str),
+        extra: &[&str],
+        up: Duration,
+    ) -> (Self, String, Robot) {
+        let mut env = Self::new(test);
+        let n = name(tag);
+        env.serve(robot, &n, extra);
+        let connection = env.robot(&n, up);
+        (env, n, connection)
+    }
+
+    /// Starts `chassisd sim` (labelled `label`) simulating `robot` as chassis/`name` on `bus`,
+    /// with `extra` arguments after `sim --robot ROBOT`.
+    pub fn sim(
+        &mut self,
+        label: &str,
+        robot: &str,
+        extra: &[&str],
+        name: &str,
+        bus: &str,
+    ) -> usize {
+        let mut args = vec!["sim", "--robot", robot];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--name", name, "--bus", bus]);
+        self.chassisd(label, &args)
+    }
+
+    /// Starts `chassisd sim` (labelled `sim`) simulating `robot` as chassis/`name` at the far
+    /// end of `line`, a pty it links at `link`, and waits for the link (at most `timeout`);
+    /// returns the simulator's index and the `--bus` for chassisd's end.
+    pub fn sim_on_pty(
+        &mut self,
+        robot: &str,
+        extra: &[&str],
+        name: &str,
+        line: Line,
+        link: &Path,
+        timeout: Duration,
+    ) -> (usize, String) {
+        let sim = self.sim("sim", robot, extra, name, &line.sim_bus(link));
+        self.wait_link(link, timeout);
+        (sim, line.bus(link))
+    }
+
+    /// A simulated XBot board (`chassisd sim`, labelled `sim`) on a serial pty linked at `link`,
+    /// and chassisd serving it as chassis/`name` with [`XBOT_PROFILE`] over the other end;
+    /// returns the simulator's index and the connection (each up within `timeout`).
+    pub fn xbot_over_pty(&mut self, name: &str, link: &Path, timeout: Duration) -> (usize, Robot) {
+        let config = self.write("xbot.toml", XBOT_PROFILE);
+        let extra = ["--config", config.as_str()];
+        self.over_pty(("xbot", name), Line::Serial, link, &extra, timeout)
+    }
+
+    /// A simulated `robot` (`chassisd sim`, labelled `sim`) at the far end of `line`, a pty
+    /// linked at `link`, and chassisd serving it as chassis/`name` without its safety monitor
+    /// over the other end, with `extra` arguments; returns the simulator's index and the
+    /// connection (each up within `timeout`).
+    pub fn over_pty(
+        &mut self,
+        (robot, name): (&str, &str),
+        line: Line,
+        link: &Path,
+        extra: &[&str],
+        timeout: Duration,
+    ) -> (usize, Robot) {
+        let (sim, bus) = self.sim_on_pty(robot, &[], name, line, link, timeout);
+        let mut args = vec!["--bus", bus.as_str(), "--no-safety-monitor"];
+        args.extend_from_slice(extra);
+        self.serve(robot, name, &args);
+        (sim, self.robot(name, timeout))
+    }
+
+    /// Waits until `path` (the link to a simulator's pty) exists, at most `timeout`.
+    pub fn wait_link(&self, path: &Path, timeout: Duration) {
+        assert!(
+            wait_for(timeout, || path.exists()).is_some(),
+            "no link {}\n{}",
+            path.display(),
+            self.logs()
+        );
+    }
+
+    /// Writes `text` to `file` in the test's directory (a configuration); returns its path as a
+    /// program's argument.
+    pub fn write(&self, file: &str, text: &str) -> String {
+        let path = self.dir.join(file);
+        std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        path.to_string_lossy().into_owned()
+    }
+
+    /// Starts `chassis pub velocity --name NAME args…` (labelled `label`) in the background.
+    pub fn publish(&mut self, label: &str, name: &str, args: &[&str]) -> usize {
+        let mut all = vec!["pub", "velocity", "--name", name];
+        all.extend_from_slice(args);
+        self.spawn(label, "chassis", &all)
+    }
+
     /// Runs `chassis args…` to completion.
     pub fn chassis(&self, args: &[&str]) -> Output {
         self.run("chassis", args)
+    }
+
+    /// Runs `chassis args…` to completion, which must succeed; returns what it printed.
+    pub fn chassis_ok(&self, args: &[&str]) -> String {
+        let out = self.chassis(args);
+        assert!(
+            out.status.success(),
+            "chassis {args:?}: {}\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            self.logs()
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    /// What a program that had to succeed printed; otherwise fails the test with `what` (what
+    /// it did), its output and every log.
+    pub fn succeeded(&self, what: &str, out: &Output) -> String {
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "{what}: {}\n{stdout}\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            self.logs()
+        );
+        stdout
     }
 
     /// Runs the workspace binary `binary args…` to completion.
@@ -323,27 +463,11 @@ impl Drop for Env {
             eprintln!("{}", self.logs());
         }
         // Shared-memory files of this test's prefix.
-        for dir in [
-            "/dev/shm",
-            "/tmp/iceoryx2",
-            "/tmp/iceoryx2/services",
-            "/tmp/iceoryx2/nodes",
-        ] {
-            if let Ok(entries) = std::fs::read_dir(dir) {
-                for entry in entries.flatten() {
-                    if entry
-                        .file_name()
-                        .to_string_lossy()
-                        .starts_with(&self.prefix)
-                    {
-                        let path = entry.path();
-                        if path.is_dir() {
-                            let _ = std::fs::remove_dir_all(path);
-                        } else {
-                            let _ = std::fs::remove_file(path);
-                        }
-                    }
-                }
+        for path in ipc_files(&self.prefix) {
+            if path.is_dir() {
+                let _ = std::fs::remove_dir_all(path);
+            } else {
+                let _ = std::fs::remove_file(path);
             }
         }
         if !std::thread::panicking() {
@@ -404,6 +528,242 @@ pub fn decided_after(
     None
 }
 
+/// The `[profile]` a simulated XBot board needs over a real serial line: a real XBot's wheel
+/// separation must be measured, and the board's is 0.45 m.
+pub const XBOT_PROFILE: &str = "[profile]\nwheel_separation_m = 0.45\n";
+
+/// A serial line through a pty between `chassisd sim` and chassisd.
+#[derive(Clone, Copy, Debug)]
+pub enum Line {
+    /// A robot's own serial protocol (the XBot's).
+    Serial,
+    /// CAN through an slcan adapter.
+    Slcan,
+}
+
+impl Line {
+    /// `chassisd sim`'s `--bus`: it makes the pty and links it at `link`.
+    pub fn sim_bus(self, link: &Path) -> String {
+        match self {
+            Self::Serial => format!("pty:{}", link.display()),
+            Self::Slcan => format!("slcan-pty:{}", link.display()),
+        }
+    }
+
+    /// chassisd's `--bus`: it opens the pty behind `link`.
+    pub fn bus(self, link: &Path) -> String {
+        match self {
+            Self::Serial => format!("serial:{}", link.display()),
+            Self::Slcan => format!("slcan:{}", link.display()),
+        }
+    }
+}
+
+/// The shared-memory and socket files of the iceoryx2 prefix `prefix`.
+pub fn ipc_files(prefix: &str) -> Vec<PathBuf> {
+    let dirs = [
+        "/dev/shm",
+        "/tmp/iceoryx2",
+        "/tmp/iceoryx2/services",
+        "/tmp/iceoryx2/nodes",
+    ];
+    let mut files = Vec::new();
+    for dir in dirs {
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            files.extend(
+                entries
+                    .flatten()
+                    .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+                    .map(|e| e.path()),
+            );
+        }
+    }
+    files
+}
+
+/// A hang-up of the pty line to a `chassisd sim` mid-drive, and the row of the reliability
+/// report that says how it went.
+#[derive(Debug)]
+pub struct HangUp<'a> {
+    pub rank: u32,
+    pub fault: &'a str,
+    pub injection: &'a str,
+    /// What the figure says came back ("line", "adapter").
+    pub end: &'a str,
+    /// Above this speed (m/s) the robot drives again.
+    pub above_mps: f32,
+    pub suite: &'a str,
+    pub test: &'a str,
+}
+
+impl HangUp<'_> {
+    /// SIGKILLs the simulator `sim` (it simulates `kind` as chassis/`name` at the far end of
+    /// `line`, linked at `link`); the loss must be reported within 3 s. Then starts it again
+    /// (labelled `sim2`) and waits up to 10 s for a speed above `above_mps` the chassis reported
+    /// after the restart, with the bus up, while `send` keeps asking. Returns the figure (to be
+    /// finished by the test once its asserts passed) and how long after the restart the robot
+    /// drove again.
+    pub fn run(
+        &self,
+        (env, robot): (&mut Env, &mut Robot),
+        (sim, kind, name): (usize, &str, &str),
+        (line, link): (Line, &Path),
+        send: impl FnMut(),
+    ) -> (Figures, Option<Duration>) {
+        env.proc(sim).signal(Signal::SIGKILL);
+        let killed = Instant::now();
+        let lost = wait_for(Duration::from_secs(3), || {
+            state(robot).link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) != 0
+        });
+        assert!(lost.is_some(), "the loss was not reported\n{}", env.logs());
+        let down_for = killed.elapsed();
+        let _ = std::fs::remove_file(link);
+        let restarted = now_ns();
+        env.sim("sim2", kind, &[], name, &line.sim_bus(link));
+        // The state keeps the speed from before the hang-up: driving again is a speed the
+        // chassis reported after the line came back.
+        let above = self.above_mps;
+        let back = drove_again_after(robot, restarted, Duration::from_secs(10), send, |s| {
+            s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > above
+        })
+        .map(|(_, after)| after);
+        let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+        let mut figures = Figures::faults();
+        figures.add(Figure {
+            rank: self.rank,
+            fault: self.fault.into(),
+            injection: self.injection.into(),
+            behaviour: "the loss was reported (`bus_down` / `chassis_silent`), the port \
+                        reopened with backoff, and the robot drove again on the same client \
+                        connection"
+                .into(),
+            figure: format!(
+                "loss reported {:.0} ms after the hang-up; driving again {:.0} ms after the \
+                 {} came back (the motion stamp of the first sample above {} m/s; restarted \
+                 {:.0} ms after the hang-up)",
+                ms(lost),
+                ms(back),
+                self.end,
+                self.above_mps,
+                down_for.as_secs_f64() * 1e3
+            ),
+            value: ms(back),
+            pass: back.is_some(),
+            suite: self.suite.into(),
+            test: self.test.into(),
+        });
+        (figures, back)
+    }
+}
+
+/// What a program printed, standard output then standard error.
+pub fn output_text(out: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// The line of `chassis doctor`'s `report` for check `key`, as `(verdict, line)`.
+pub fn doctor_line<'a>(report: &'a str, key: &str) -> (&'a str, &'a str) {
+    report
+        .lines()
+        .find_map(|l| {
+            let mut words = l.split_whitespace();
+            let verdict = words.next()?;
+            (words.next()? == key).then_some((verdict, l))
+        })
+        .unwrap_or_else(|| panic!("no '{key}' line in\n{report}"))
+}
+
+/// Checks that `chassis doctor`'s `report` gives check `key` the verdict `verdict` on a line
+/// that says `text`.
+pub fn check_line(report: &str, key: &str, verdict: &str, text: &str) {
+    let (got, line) = doctor_line(report, key);
+    assert_eq!(got, verdict, "{report}");
+    assert!(line.contains(text), "{report}");
+}
+
+/// Runs `check` (a `chassis doctor`) until it exits 0, at most `timeout`; returns how long that
+/// took and the last report.
+pub fn until_passes(
+    timeout: Duration,
+    mut check: impl FnMut() -> (Option<i32>, String),
+) -> (Option<Duration>, String) {
+    let mut report = String::new();
+    let passed = wait_for(timeout, || {
+        let (code, text) = check();
+        report = text;
+        code == Some(0)
+    });
+    (passed, report)
+}
+
+/// Runs `chassis doctor --robot ROBOT --name NAME --bus BUS --listen 1`; returns its exit code
+/// and its report (printed too).
+pub fn doctor_listening(env: &Env, robot: &str, name: &str, bus: &str) -> (Option<i32>, String) {
+    let out = env.chassis(&[
+        "doctor", "--robot", robot, "--name", name, "--bus", bus, "--listen", "1",
+    ]);
+    let text = output_text(&out);
+    println!("{text}");
+    (out.status.code(), text)
+}
+
+/// The Python of a virtualenv the test scripts prepare: `$ENV_VAR` if set, else
+/// `target/VENV/bin/python`; it must run `import IMPORTS`, or the test fails saying what is
+/// missing (`missing`) and how to prepare it (`hint`).
+pub fn venv_python(
+    env_var: &str,
+    venv: &str,
+    (imports, missing): (&str, &str),
+    hint: &str,
+) -> PathBuf {
+    let python = std::env::var_os(env_var).map_or_else(
+        || {
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../target")
+                .join(venv)
+                .join("bin/python")
+        },
+        PathBuf::from,
+    );
+    let ready = Command::new(&python)
+        .args(["-c", &format!("import {imports}")])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        ready,
+        "{} cannot import {missing}: {hint}",
+        python.display()
+    );
+    python
+}
+
+/// A robot name unique to this test process: `tag` and the pid (names are at most 16
+/// characters).
+pub fn name(tag: &str) -> String {
+    format!("{tag}{}", std::process::id() % 100_000)
+}
+
+/// Client `name`'s velocity source on `robot`.
+pub fn source(robot: &mut Robot, name: &str) -> Source {
+    robot
+        .source(name)
+        .unwrap_or_else(|e| panic!("source {name}: {e}"))
+}
+
+/// Sends `request` to the simulated chassis and checks it was accepted; returns the answer's
+/// stamp (what it asked for happened just before it).
+pub fn sim_ok(robot: &mut Robot, request: SimRequest) -> u64 {
+    let answer = robot
+        .sim(request, Duration::from_secs(3))
+        .unwrap_or_else(|e| panic!("sim: {e}"));
+    assert!(answer.is_ok(), "{}", answer.message());
+    answer.stamp_ns
+}
+
 /// The timeout of source `name` as the running mux reports it.
 pub fn source_timeout(m: &MuxStatus, name: &str) -> Duration {
     let source = m
@@ -416,14 +776,25 @@ pub fn source_timeout(m: &MuxStatus, name: &str) -> Duration {
 
 /// Reads states for `duration` and returns the largest |linear speed| seen.
 pub fn max_speed(robot: &mut Robot, duration: Duration) -> f32 {
+    max_speed_polling(robot, duration, Duration::from_millis(50))
+}
+
+/// [`max_speed`], waiting at most `poll` for each state sample.
+pub fn max_speed_polling(robot: &mut Robot, duration: Duration, poll: Duration) -> f32 {
     let end = Instant::now() + duration;
     let mut max = 0.0f32;
     while Instant::now() < end {
-        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(50)) {
+        if let Ok(Some(state)) = robot.wait_state(poll) {
             max = max.max(state.motion.linear_mps.abs());
         }
     }
     max
+}
+
+/// Waits at most `timeout` until the robot moves slower than `below_mps` (either way); returns
+/// how long that took.
+pub fn comes_to_rest(robot: &mut Robot, timeout: Duration, below_mps: f32) -> Option<Duration> {
+    wait_for(timeout, || state(robot).motion.linear_mps.abs() < below_mps)
 }
 
 /// The current state (waits up to a second for one).
@@ -434,6 +805,18 @@ pub fn state(robot: &mut Robot) -> ChassisState {
         .flatten()
         .or_else(|| robot.latest_state().ok().flatten())
         .unwrap_or_else(|| panic!("no state from chassis/{}", robot.name()))
+}
+
+/// The shell command that runs `chassis-teleop --name N` in a terminal under the test's prefix,
+/// its log going to `log`.
+pub fn teleop_command(env: &Env, n: &str, log: &Path) -> String {
+    format!(
+        "env {}={} RUST_LOG=info {} --name {n} 2>{}",
+        IPC_PREFIX_ENV,
+        quote(&env.prefix),
+        quote(&bin("chassis-teleop").to_string_lossy()),
+        quote(&log.to_string_lossy()),
+    )
 }
 
 /// "Drove again" after a fault (a restart, a reconnection): waits at most `timeout` for a state
@@ -460,6 +843,33 @@ pub fn drove_again_after(
         }
     }
     None
+}
+
+/// Asks the simulated chassis for 0.3 s of silence and waits until the service has handled
+/// every frame read before it (frames in flight, then a state sample, out at least every
+/// 100 ms) while `teleop` keeps sending `go` and `pump` drains the test's tap; returns that
+/// state, the tap drained to the same point.
+pub fn quiet_moment(
+    robot: &mut Robot,
+    teleop: &mut Source,
+    go: VelocityRequest,
+    mut pump: impl FnMut(),
+) -> ChassisState {
+    let silence = SimRequest {
+        kind: SimKind::SILENCE,
+        value: 0.3,
+        ..SimRequest::default()
+    };
+    sim_ok(robot, silence);
+    let end = Instant::now() + Duration::from_millis(200);
+    while Instant::now() < end {
+        teleop.send(go).unwrap_or_else(|e| panic!("teleop: {e}"));
+        pump();
+        pause(Duration::from_millis(20));
+    }
+    let s = state(robot);
+    pump();
+    s
 }
 
 /// What the simulated chassis (embedded or `chassisd sim`) really does: the `key=value` pairs of

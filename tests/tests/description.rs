@@ -1,12 +1,7 @@
 //! `chassis/<name>/robot`: chassisd describes the robot it drives — the effective profile after
 //! every override, the protocol once detection decides, the mux's sources — and a client that
 //! starts later reads it at once.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::disallowed_methods
-)]
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::time::{Duration, Instant};
 
@@ -14,31 +9,15 @@ use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(20);
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 #[test]
 fn a_late_client_reads_the_description_of_the_configured_robot_with_its_overrides() {
     let mut env = Env::new("describe-hunter");
     let n = name("dh");
-    let config = env.dir.join("hunter.toml");
-    std::fs::write(
-        &config,
+    let config = env.write(
+        "hunter.toml",
         "[profile]\nmax_linear_mps = 0.4\n[mux.limits]\nmax_angular_radps = 0.7\n",
-    )
-    .unwrap();
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "hunter",
-            "--name",
-            &n,
-            "--config",
-            config.to_str().unwrap(),
-        ],
     );
+    env.serve("hunter", &n, &["--config", &config]);
     let _ = env.robot(&n, UP);
     // A client that comes an hour later (here: two seconds) reads it at once.
     std::thread::sleep(Duration::from_secs(2));
@@ -63,7 +42,9 @@ fn a_late_client_reads_the_description_of_the_configured_robot_with_its_override
     assert_eq!(d.effective_limits().forward_mps, 0.4);
     assert!(d.flags & DescriptionFlags::SIMULATED != 0);
     assert!(d.flags & DescriptionFlags::SAFETY_REQUIRED != 0);
-    let safety = d.source("safety").expect("the safety source");
+    let safety = d
+        .source("safety")
+        .unwrap_or_else(|| panic!("no safety source"));
     assert!(safety.flags & SourceFlags::REQUIRED != 0);
     assert_eq!(d.source("teleop").map(|s| s.priority), Some(100));
     assert!(d.battery.low_v > 20.0, "{:?}", d.battery);
@@ -80,39 +61,9 @@ fn the_description_follows_protocol_detection() {
     let mut env = Env::new("describe-detect");
     let n = name("dd");
     let link = env.dir.join("scout-mini-slcan");
-    let link_arg = format!("slcan-pty:{}", link.display());
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "scout-mini",
-            "--protocol",
-            "v2",
-            "--name",
-            &n,
-            "--bus",
-            &link_arg,
-        ],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no link\n{}",
-        env.logs()
-    );
-    let bus = format!("slcan:{}", link.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "scout-mini",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    let extra = ["--protocol", "v2"];
+    let (_, bus) = env.sim_on_pty("scout-mini", &extra, &n, Line::Slcan, &link, UP);
+    env.serve("scout-mini", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let decided = wait_for(Duration::from_secs(10), || {
         let _ = robot.wait_state(Duration::from_millis(100));

@@ -6,68 +6,31 @@
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::path::Path;
-use std::process::Output;
 use std::time::Duration;
 
 use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
-fn text(out: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    )
-}
-
-/// The report's line for check `key`, as `(verdict, rest)`.
-fn line<'a>(report: &'a str, key: &str) -> (&'a str, &'a str) {
-    report
-        .lines()
-        .filter_map(|l| {
-            let mut words = l.split_whitespace();
-            let verdict = words.next()?;
-            (words.next()? == key).then_some((verdict, l))
-        })
-        .next()
-        .unwrap_or_else(|| panic!("no '{key}' line in\n{report}"))
-}
-
 #[test]
 fn on_the_simulated_robot_the_doctor_reads_chassisd_and_fails_while_the_rc_holds_it() {
     let mut env = Env::new("doctor-sim");
     let n = name("ds");
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            "sim",
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("titan", &n, &["--bus", "sim", "--no-safety-monitor"]);
     env.robot(&n, UP);
     let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim"]);
-    let report = text(&out);
+    let report = output_text(&out);
     assert_eq!(out.status.code(), Some(0), "{report}\n{}", env.logs());
-    assert_eq!(line(&report, "chassisd").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "chassisd").0, "ok", "{report}");
     assert!(
-        line(&report, "chassisd").1.contains("owns the bus"),
+        doctor_line(&report, "chassisd").1.contains("owns the bus"),
         "{report}"
     );
-    assert_eq!(line(&report, "frames").0, "ok", "{report}");
-    assert_eq!(line(&report, "mode").0, "ok", "{report}");
-    assert_eq!(line(&report, "e-stop").0, "ok", "{report}");
-    assert_eq!(line(&report, "state-dir").0, "ok", "{report}");
-    assert_eq!(line(&report, "mux").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "frames").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "mode").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "e-stop").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "state-dir").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "mux").0, "ok", "{report}");
     assert!(report.contains("verdict: ready to drive"), "{report}");
     // --json: one object per check, then the verdict.
     let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim", "--json"]);
@@ -88,17 +51,15 @@ fn on_the_simulated_robot_the_doctor_reads_chassisd_and_fails_while_the_rc_holds
     );
 
     let rc = env.chassis(&["sim", "--name", &n, "rc", "on"]);
-    assert!(rc.status.success(), "{}", text(&rc));
+    assert!(rc.status.success(), "{}", output_text(&rc));
     let mut report = String::new();
     let failed = wait_for(UP, || {
         let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim"]);
-        report = text(&out);
+        report = output_text(&out);
         out.status.code() == Some(1)
     });
     assert!(failed.is_some(), "{report}");
-    let (verdict, mode) = line(&report, "mode");
-    assert_eq!(verdict, "FAIL", "{report}");
-    assert!(mode.contains("RC transmitter holds the robot"), "{report}");
+    check_line(&report, "mode", "FAIL", "RC transmitter holds the robot");
     assert!(
         report.contains("verdict: 1 problem blocks driving"),
         "{report}"
@@ -106,10 +67,10 @@ fn on_the_simulated_robot_the_doctor_reads_chassisd_and_fails_while_the_rc_holds
 
     // The robot called so is a TITAN: asked about it as a HUNTER, the doctor says so.
     let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim", "--robot", "hunter"]);
-    let report = text(&out);
+    let report = output_text(&out);
     assert_eq!(out.status.code(), Some(1), "{report}");
     assert!(
-        line(&report, "chassisd").1.contains("as a titan"),
+        doctor_line(&report, "chassisd").1.contains("as a titan"),
         "{report}"
     );
 }
@@ -119,19 +80,16 @@ fn the_doctor_names_a_silent_safety_monitor_and_a_held_estop_with_their_fixes() 
     let mut env = Env::new("doctor-mux");
     let n = name("dm");
     // The safety rule on, no monitor running.
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--bus", "sim"],
-    );
+    env.serve("titan", &n, &["--bus", "sim"]);
     env.robot(&n, UP);
     let out = env.chassis(&["doctor", "--name", &n, "--bus", "sim"]);
-    let report = text(&out);
+    let report = output_text(&out);
     assert_eq!(out.status.code(), Some(1), "{report}\n{}", env.logs());
-    let (verdict, mux) = line(&report, "mux");
-    assert_eq!(verdict, "FAIL", "{report}");
-    assert!(
-        mux.contains("the required source safety is silent"),
-        "{report}"
+    check_line(
+        &report,
+        "mux",
+        "FAIL",
+        "the required source safety is silent",
     );
     assert!(
         report.contains(&format!("systemctl start chassis-safety@{n}")),
@@ -139,65 +97,48 @@ fn the_doctor_names_a_silent_safety_monitor_and_a_held_estop_with_their_fixes() 
     );
 
     // A stand-in monitor's heartbeats, then an operator's e-stop.
-    env.spawn(
-        "safety",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--name",
-            &n,
-            "--source",
-            "safety",
-            "--heartbeat",
-        ],
-    );
+    env.publish("safety", &n, &["--source", "safety", "--heartbeat"]);
     let stop = env.chassis(&["control", "--name", &n, "estop"]);
-    assert!(stop.status.success(), "{}", text(&stop));
+    assert!(stop.status.success(), "{}", output_text(&stop));
     let mut report = String::new();
     let held = wait_for(UP, || {
-        report = text(&env.chassis(&["doctor", "--name", &n, "--bus", "sim"]));
+        report = output_text(&env.chassis(&["doctor", "--name", &n, "--bus", "sim"]));
         report.contains("the lock estop") && !report.contains("required source safety")
     });
     assert!(held.is_some(), "{report}");
-    assert_eq!(line(&report, "mux").0, "FAIL", "{report}");
+    assert_eq!(doctor_line(&report, "mux").0, "FAIL", "{report}");
     assert!(
         report.contains(&format!("`chassis control --name {n} estop-release`")),
         "{report}"
     );
 }
 
-/// `chassisd sim --robot ROBOT --bus KIND:LINK`, once the link exists.
-fn board(env: &mut Env, robot: &str, kind: &str, tag: &str) -> std::path::PathBuf {
+/// `chassisd sim --robot ROBOT` at the far end of `line`, once its link exists; returns the
+/// link and the `--bus` of the near end.
+fn board(env: &mut Env, robot: &str, line: Line, tag: &str) -> (std::path::PathBuf, String) {
     let link = env.dir.join(tag);
-    let bus = format!("{kind}:{}", link.display());
-    env.chassisd(
-        "sim",
-        &["sim", "--robot", robot, "--name", &name(tag), "--bus", &bus],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no pty link\n{}",
-        env.logs()
-    );
-    link
+    let (_, bus) = env.sim_on_pty(robot, &[], &name(tag), line, &link, UP);
+    (link, bus)
+}
+
+/// Runs `chassis doctor --robot ROBOT --name N --bus BUS`, which must pass; returns its report.
+fn passes(env: &Env, robot: &str, n: &str, bus: &str) -> String {
+    let out = env.chassis(&["doctor", "--robot", robot, "--name", n, "--bus", bus]);
+    let report = output_text(&out);
+    assert_eq!(out.status.code(), Some(0), "{report}\n{}", env.logs());
+    report
 }
 
 #[test]
 fn on_a_serial_pty_the_doctor_hears_the_xbot_and_names_permission_and_missing_devices() {
     let mut env = Env::new("doctor-pty");
-    let link = board(&mut env, "xbot", "pty", "xbot");
-    let bus = format!("serial:{}", link.display());
+    let (link, bus) = board(&mut env, "xbot", Line::Serial, "xbot");
     let n = name("dx");
-    let out = env.chassis(&["doctor", "--robot", "xbot", "--name", &n, "--bus", &bus]);
-    let report = text(&out);
-    assert_eq!(out.status.code(), Some(0), "{report}\n{}", env.logs());
-    assert_eq!(line(&report, "device").0, "ok", "{report}");
-    assert_eq!(line(&report, "permission").0, "ok", "{report}");
-    let (verdict, frames) = line(&report, "frames");
-    assert_eq!(verdict, "ok", "{report}");
-    assert!(frames.contains("xbot reports"), "{report}");
-    assert_eq!(line(&report, "mode").0, "ok", "{report}");
+    let report = passes(&env, "xbot", &n, &bus);
+    assert_eq!(doctor_line(&report, "device").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "permission").0, "ok", "{report}");
+    check_line(&report, "frames", "ok", "xbot reports");
+    assert_eq!(doctor_line(&report, "mode").0, "ok", "{report}");
 
     // The same port for another user: first the owner's alone (as a pty is made), then shared
     // with dialout, the user outside it.
@@ -211,8 +152,8 @@ fn on_a_serial_pty_the_doctor_hears_the_xbot_and_names_permission_and_missing_de
             .env("HOME", &env.dir)
             .output()
             .unwrap();
-        assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-        text(&out)
+        assert_eq!(out.status.code(), Some(1), "{}", output_text(&out));
+        output_text(&out)
     };
     let chmod = |mode: u32| {
         use std::os::unix::fs::PermissionsExt;
@@ -220,9 +161,7 @@ fn on_a_serial_pty_the_doctor_hears_the_xbot_and_names_permission_and_missing_de
     };
     chmod(0o600);
     let report = as_nobody();
-    let (verdict, permission) = line(&report, "permission");
-    assert_eq!(verdict, "FAIL", "{report}");
-    assert!(permission.contains("mode 600"), "{report}");
+    check_line(&report, "permission", "FAIL", "mode 600");
     assert!(
         report.contains("GROUP=\"dialout\", MODE=\"0660\""),
         "{report}"
@@ -231,11 +170,11 @@ fn on_a_serial_pty_the_doctor_hears_the_xbot_and_names_permission_and_missing_de
     std::os::unix::fs::chown(&pts, None, Some(20)).unwrap();
     chmod(0o660);
     let report = as_nobody();
-    let (verdict, permission) = line(&report, "permission");
-    assert_eq!(verdict, "FAIL", "{report}");
-    assert!(
-        permission.contains("owner group dialout, mode 660"),
-        "{report}"
+    check_line(
+        &report,
+        "permission",
+        "FAIL",
+        "owner group dialout, mode 660",
     );
     assert!(
         report.contains("fix: sudo usermod -aG dialout nobody"),
@@ -244,31 +183,24 @@ fn on_a_serial_pty_the_doctor_hears_the_xbot_and_names_permission_and_missing_de
 
     let gone = format!("serial:{}", env.dir.join("nothing").display());
     let out = env.chassis(&["doctor", "--robot", "xbot", "--name", &n, "--bus", &gone]);
-    let report = text(&out);
+    let report = output_text(&out);
     assert_eq!(out.status.code(), Some(1), "{report}");
-    assert_eq!(line(&report, "device").0, "FAIL", "{report}");
+    assert_eq!(doctor_line(&report, "device").0, "FAIL", "{report}");
     assert!(!Path::new(&gone).exists());
 }
 
 #[test]
 fn on_an_slcan_pty_the_doctor_finds_the_adapter_and_the_titan_behind_it() {
     let mut env = Env::new("doctor-slcan");
-    let link = board(&mut env, "titan", "slcan-pty", "slcan");
-    let bus = format!("slcan:{}", link.display());
+    let (_, bus) = board(&mut env, "titan", Line::Slcan, "slcan");
     let n = name("dc");
-    let out = env.chassis(&["doctor", "--robot", "titan", "--name", &n, "--bus", &bus]);
-    let report = text(&out);
-    assert_eq!(out.status.code(), Some(0), "{report}\n{}", env.logs());
-    let (verdict, adapter) = line(&report, "adapter");
-    assert_eq!(verdict, "ok", "{report}");
-    assert!(adapter.contains("V1013"), "{report}");
-    assert_eq!(line(&report, "frames").0, "ok", "{report}");
-    let (verdict, robot) = line(&report, "robot");
-    assert_eq!(verdict, "ok", "{report}");
-    assert!(robot.contains("the frames fit a titan"), "{report}");
+    let report = passes(&env, "titan", &n, &bus);
+    check_line(&report, "adapter", "ok", "V1013");
+    assert_eq!(doctor_line(&report, "frames").0, "ok", "{report}");
+    check_line(&report, "robot", "ok", "the frames fit a titan");
 
     // A serial robot's port named as an slcan adapter: the wrong kind of bus.
     let out = env.chassis(&["doctor", "--robot", "xbot", "--name", &n, "--bus", &bus]);
-    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    assert_eq!(line(&text(&out), "bus").0, "FAIL");
+    assert_eq!(out.status.code(), Some(1), "{}", output_text(&out));
+    assert_eq!(doctor_line(&output_text(&out), "bus").0, "FAIL");
 }

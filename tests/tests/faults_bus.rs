@@ -138,37 +138,6 @@ fn scout_checksum_ok(f: &BusFrame) -> bool {
     sum == checksum
 }
 
-/// Injects a silence long enough for the service to have handled and published every frame so
-/// far; returns the state and leaves the tap drained to the same point.
-fn quiescent(
-    robot: &mut Robot,
-    wire: &mut Wire,
-    teleop: &mut Source,
-    go: VelocityRequest,
-) -> ChassisState {
-    let answer = robot
-        .sim(
-            SimRequest {
-                kind: SimKind::SILENCE,
-                value: 0.3,
-                ..SimRequest::default()
-            },
-            Duration::from_secs(3),
-        )
-        .unwrap();
-    assert!(answer.is_ok(), "{}", answer.message());
-    // Frames in flight, then at least one state publication (every 100 ms at the latest).
-    let end = Instant::now() + Duration::from_millis(200);
-    while Instant::now() < end {
-        teleop.send(go).unwrap();
-        wire.pump();
-        pause(Duration::from_millis(20));
-    }
-    let s = state(robot);
-    wire.pump();
-    s
-}
-
 /// Storms of `phases` on `robot_kind`'s bus; `who` names it in the rows ("TITAN's").
 fn storms(robot_kind: RobotKind, who: &str, test: &str, phases: &[Storm]) {
     let carrier = StormWire::of(robot_kind);
@@ -198,7 +167,7 @@ fn storms(robot_kind: RobotKind, who: &str, test: &str, phases: &[Storm]) {
     let mut results = Vec::new();
     for storm in phases {
         let counter = carrier.injected_counter(storm.kind);
-        let before = quiescent(&mut robot, &mut wire, &mut teleop, go);
+        let before = quiet_moment(&mut robot, &mut teleop, go, || wire.pump());
         let sent_before = sim_injected(&mut robot);
         wire.frames.clear();
         // The quiet moment's silence has up to 100 ms still to run: the storm starts once the
@@ -256,7 +225,7 @@ fn storms(robot_kind: RobotKind, who: &str, test: &str, phases: &[Storm]) {
             sent.count(counter) - sent_before.count(counter) >= asked
         });
         let settle_ms = settled.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
-        let after = quiescent(&mut robot, &mut wire, &mut teleop, go);
+        let after = quiet_moment(&mut robot, &mut teleop, go, || wire.pump());
         // Nothing more may leave after the count was reached (a corruption beyond what was
         // asked would show here).
         let sent = sim_injected(&mut robot);

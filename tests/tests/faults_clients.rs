@@ -109,10 +109,7 @@ fn rogue_flood(flood: &Flood) {
     // quiet window too at times); what is measured here is whether the flood reaches the loop
     // through chassisd (its wake-ups, its CPU), not the kernel's time slices. Where the system
     // refuses real-time mode, chassisd says so and the row says so.
-    let service = env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--realtime", "10"],
-    );
+    let service = env.serve("titan", &n, &["--realtime", "10"]);
     let mut robot = env.robot(&n, UP);
     let realtime = env
         .proc(service)
@@ -385,10 +382,7 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
     let test = "non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second";
     let mut env = Env::new("absurd");
     let n = name("abs");
-    let service = env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let service = env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = robot.source("teleop").unwrap();
     let go = VelocityRequest::twist(0.3, 0.0);
@@ -544,10 +538,7 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
 fn a_second_publisher_on_the_safety_source_is_refused_and_the_monitor_unharmed() {
     let _machine = shared();
     let test = "a_second_publisher_on_the_safety_source_is_refused_and_the_monitor_unharmed";
-    let mut env = Env::new("safety-taken");
-    let n = name("stk");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) = Env::serving("safety-taken", ("stk", "titan"), &[], UP);
     let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
     let alive = wait_for(UP, || {
         source_status(&mux(&mut robot), "safety").has(SourceFlags::FRESH)

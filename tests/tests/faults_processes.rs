@@ -12,6 +12,7 @@
 // Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
+use std::sync::RwLockReadGuard;
 use std::time::{Duration, Instant};
 
 use chassis_tests::faults::*;
@@ -34,23 +35,20 @@ mod rank {
 
 // ----- SIGKILL of the service -----
 
-/// Shared-memory and socket files of the test's iceoryx2 prefix.
-fn ipc_files(prefix: &str) -> usize {
-    let mut count = 0;
-    for dir in [
-        "/dev/shm",
-        "/tmp/iceoryx2",
-        "/tmp/iceoryx2/services",
-        "/tmp/iceoryx2/nodes",
-    ] {
-        if let Ok(entries) = std::fs::read_dir(dir) {
-            count += entries
-                .flatten()
-                .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
-                .count();
-        }
-    }
-    count
+/// A fault test's start: the machine shared with the other fault tests, its environment
+/// (`label`), the robot's name (`tag` and the pid) and the seeded generator of `test`.
+fn fault_start(
+    test: &str,
+    label: &str,
+    tag: &str,
+) -> (RwLockReadGuard<'static, ()>, Env, String, Rng) {
+    let machine = shared();
+    (machine, Env::new(label), name(tag), Rng::from_env(test))
+}
+
+/// How long a fault test drives before its next fault: a random moment of up to 800 ms.
+fn a_moment(rng: &mut Rng) -> Duration {
+    rng.between(Duration::ZERO, Duration::from_millis(800))
 }
 
 /// The first start-up kill comes this soon after the spawn: before chassisd can have made its
@@ -59,12 +57,9 @@ const EARLY_KILL: Duration = Duration::from_millis(5);
 
 #[test]
 fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_reconnect() {
-    let _machine = shared();
     let test =
         "sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_reconnect";
-    let mut env = Env::new("kill-service");
-    let n = name("ksv");
-    let mut rng = Rng::from_env(test);
+    let (_machine, mut env, n, mut rng) = fault_start(test, "kill-service", "ksv");
     let args = ["--robot", "titan", "--name", n.as_str()];
     let first = env.chassisd("chassisd-0", &args);
     let mut robot = env.robot(&n, UP);
@@ -77,7 +72,7 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
         source_status(m, "safety").has(SourceFlags::FRESH) && s.motion.linear_mps > 0.3
     });
     assert!(driving.is_some(), "no drive at the start\n{}", env.logs());
-    let files_before = ipc_files(&env.prefix);
+    let files_before = ipc_files(&env.prefix).len();
 
     // Kill at random moments: every other kill falls into the start-up of the instance spawned
     // just before (0-150 ms after its spawn: the ports half made, or not yet), the others into
@@ -148,7 +143,7 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
     let guarded = pump.until(&mut robot, UP, |m, _| {
         m.stamp_ns > restarted && source_status(m, "safety").has(SourceFlags::FRESH)
     });
-    let files_after = ipc_files(&env.prefix);
+    let files_after = ipc_files(&env.prefix).len();
     let pass = back.is_some()
         && guarded.is_some()
         && env.proc(service).is_running()
@@ -270,30 +265,10 @@ fn a_restart_after_a_kill_before_a_segment_was_sized_serves() {
 
 #[test]
 fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeout() {
-    let _machine = shared();
     let test = "sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeout";
-    let mut env = Env::new("kill-service-pty");
-    let n = name("ksp");
-    let mut rng = Rng::from_env(test);
+    let (_machine, mut env, n, mut rng) = fault_start(test, "kill-service-pty", "ksp");
     let link = env.dir.join("titan-slcan");
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &format!("slcan-pty:{}", link.display()),
-        ],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no link\n{}",
-        env.logs()
-    );
-    let bus = format!("slcan:{}", link.display());
+    let (_, bus) = env.sim_on_pty("titan", &[], &n, Line::Slcan, &link, UP);
     let args = [
         "--robot",
         "titan",
@@ -317,21 +292,14 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
     for cycle in 1..=3 {
         let mut pump = Pump::new(&mut teleop, go, &mut wire);
         // Driving (again, after the restart of the cycle before): a speed reported since.
-        let driving = drove_again_after(
-            &mut robot,
-            restarted,
-            UP,
-            || pump.tick(),
-            |s| s.motion.linear_mps > 0.45 && s.is_valid(Group::Odometry),
-        );
+        let driving = pump.drove_again(&mut robot, restarted, UP, |s| {
+            s.motion.linear_mps > 0.45 && s.is_valid(Group::Odometry)
+        });
         if driving.is_none() {
             failure = Some(format!("cycle {cycle}: no drive"));
             break;
         }
-        pump.run(
-            &mut robot,
-            rng.between(Duration::ZERO, Duration::from_millis(800)),
-        );
+        pump.run(&mut robot, a_moment(&mut rng));
         let before = state(&mut robot);
         env.proc(service).signal(Signal::SIGKILL);
         env.proc(service).wait_exit(Duration::from_secs(3));
@@ -384,13 +352,7 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
     let bound_ms = 500.0 + 3.0 * 100.0 + 20.0;
     // The last restart drove again: a speed reported after it.
     let mut pump = Pump::new(&mut teleop, go, &mut wire);
-    let again = drove_again_after(
-        &mut robot,
-        restarted,
-        UP,
-        || pump.tick(),
-        |s| s.motion.linear_mps > 0.4,
-    );
+    let again = pump.drove_again(&mut robot, restarted, UP, |s| s.motion.linear_mps > 0.4);
     let again_ms = again.map_or(f64::NAN, |(_, d)| d.as_secs_f64() * 1e3);
     let pass = failure.is_none() && coasts.len() == 3 && worst_ms <= bound_ms && again.is_some();
     let mut figures = Figures::faults();
@@ -433,46 +395,11 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
 
 #[test]
 fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
-    let _machine = shared();
     let test = "sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived";
-    let mut env = Env::new("kill-sim");
-    let n = name("ksm");
-    let mut rng = Rng::from_env(test);
+    let (_machine, mut env, n, mut rng) = fault_start(test, "kill-sim", "ksm");
     let link = env.dir.join("xbot");
-    let sim_args_text = format!("pty:{}", link.display());
-    let sim_args = [
-        "sim",
-        "--robot",
-        "xbot",
-        "--name",
-        n.as_str(),
-        "--bus",
-        sim_args_text.as_str(),
-    ];
-    let mut sim = env.chassisd("sim-0", &sim_args);
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no link\n{}",
-        env.logs()
-    );
-    let config = env.dir.join("xbot.toml");
-    std::fs::write(&config, "[profile]\nwheel_separation_m = 0.45\n").unwrap();
-    let bus = format!("serial:{}", link.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "xbot",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
-    );
-    let mut robot = env.robot(&n, UP);
+    let sim_bus = Line::Serial.sim_bus(&link);
+    let (mut sim, mut robot) = env.xbot_over_pty(&n, &link, UP);
     let mut teleop = robot.source("teleop").unwrap();
     let go = VelocityRequest::twist(0.4, 0.0);
     let mut wire = Wire::new(&robot);
@@ -489,10 +416,7 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
             failure = Some(format!("cycle {cycle}: no drive"));
             break;
         }
-        pump.run(
-            &mut robot,
-            rng.between(Duration::ZERO, Duration::from_millis(800)),
-        );
+        pump.run(&mut robot, a_moment(&mut rng));
         let killed = Instant::now();
         env.proc(sim).signal(Signal::SIGKILL);
         // The dead simulator's link names a pseudo-terminal number the kernel hands out again:
@@ -519,7 +443,7 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
             .filter(|f| f.direction == FrameDirection::TX)
             .count();
         let restarted = now_ns();
-        sim = env.chassisd(&format!("sim-{cycle}"), &sim_args);
+        sim = env.sim(&format!("sim-{cycle}"), "xbot", &[], &n, &sim_bus);
         // The state keeps the speed from before the hang-up: only a speed the chassis reported
         // after its restart shows that it drives again.
         let back = drove_again_after(
@@ -623,13 +547,7 @@ fn start_client(env: &mut Env, client: Client, n: &str, cycle: usize) -> Running
         )),
         Client::Teleop => {
             let log = env.dir.join(format!("{label}.log"));
-            let command = format!(
-                "exec env {}={} RUST_LOG=info {} --name {n} 2>{}",
-                IPC_PREFIX_ENV,
-                quote(&env.prefix),
-                quote(&bin("chassis-teleop").to_string_lossy()),
-                quote(&log.to_string_lossy()),
-            );
+            let command = format!("exec {}", teleop_command(env, n, &log));
             Running::Terminal(Tmux::start(&env.dir, &label, &command))
         }
     }
@@ -640,10 +558,11 @@ fn start_client(env: &mut Env, client: Client, n: &str, cycle: usize) -> Running
 /// restart taking the source again.
 fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault: &str) {
     const CYCLES: usize = 4;
-    let _machine = shared();
-    let mut env = Env::new(&format!("kill-{}", client.source()));
-    let n = name(&format!("k{}", &client.source()[..2]));
-    let mut rng = Rng::from_env(test);
+    let (_machine, mut env, n, mut rng) = fault_start(
+        test,
+        &format!("kill-{}", client.source()),
+        &format!("k{}", &client.source()[..2]),
+    );
     let mut args = vec!["--robot", "titan", "--name", n.as_str()];
     if client != Client::Safety {
         args.push("--no-safety-monitor");

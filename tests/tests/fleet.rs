@@ -113,12 +113,7 @@ impl Net {
             format!("add rule inet cut input iifname \"{dev}\" drop"),
             format!("add rule inet cut output oifname \"{dev}\" drop"),
         ] {
-            let out = run_in(&self.operator_ns, "nft", &[&rule]);
-            assert!(
-                out.status.success(),
-                "nft {rule}: {} (install nftables)",
-                String::from_utf8_lossy(&out.stderr)
-            );
+            nft(&self.operator_ns, &rule);
         }
     }
 }
@@ -134,19 +129,6 @@ impl Drop for Net {
             .args(["netns", "del", &self.operator_ns])
             .status();
     }
-}
-
-/// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
-fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
-    let bin = bin("chassis-zenoh");
-    let mut all = vec!["netns", "exec", ns, bin.to_str().unwrap()];
-    all.extend_from_slice(args);
-    env.spawn_program(
-        label,
-        Path::new("ip"),
-        &all,
-        &[(IPC_PREFIX_ENV, prefix), ("RUST_LOG", "info,zenoh=warn")],
-    )
 }
 
 /// Robot slot `k`: chassisd of `kind` named `n`, its safety monitor, and its robot side on
@@ -433,9 +415,7 @@ fn an_operator_finds_three_robots_sees_one_lost_stops_the_others_and_finds_a_fou
         !estop_held(&mux(&mut robot_a)),
         "A cannot have heard the e-stop"
     );
-    let halted = wait_for(Duration::from_secs(3), || {
-        state(&mut robot_b).motion.linear_mps.abs() < 0.02
-    });
+    let halted = comes_to_rest(&mut robot_b, Duration::from_secs(3), 0.02);
     assert!(
         halted.is_some(),
         "B did not come to a halt under the e-stop"

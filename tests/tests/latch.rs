@@ -12,16 +12,21 @@ use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 fn start(env: &mut Env, label: &str, n: &str) -> usize {
     env.chassisd(
         label,
         &["--robot", "titan", "--name", n, "--no-safety-monitor"],
     )
+}
+
+/// A test's environment (`test` names it) and chassisd labelled `first` for robot NAME (`tag`
+/// and the pid): the environment, NAME, chassisd's index and a connection.
+fn start_first(test: &str, tag: &str) -> (Env, String, usize, Robot) {
+    let mut env = Env::new(test);
+    let n = name(tag);
+    let first = start(&mut env, "first", &n);
+    let robot = env.robot(&n, UP);
+    (env, n, first, robot)
 }
 
 fn lock_file(env: &Env, n: &str) -> PathBuf {
@@ -45,14 +50,7 @@ fn drive(robot: &mut Robot, teleop: &mut Source, duration: Duration) -> f32 {
 }
 
 fn control(env: &Env, n: &str, action: &str) -> String {
-    let out = env.chassis(&["control", "--name", n, action]);
-    assert!(
-        out.status.success(),
-        "chassis control {action}: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    env.chassis_ok(&["control", "--name", n, action])
 }
 
 fn estop_held(robot: &mut Robot) -> (bool, u8) {
@@ -92,25 +90,16 @@ fn assert_held_until_released(env: &Env, n: &str, robot: &mut Robot, teleop: &mu
 /// `chassis pub velocity` keeps asking as teleop for 0.3 m/s, in a process of its own, through
 /// an e-stop and its release.
 fn keep_asking(env: &mut Env, n: &str) -> usize {
-    env.spawn(
+    env.publish(
         "pub",
-        "chassis",
-        &[
-            "pub", "velocity", "--name", n, "--source", "teleop", "--vx", "0.3", "--rate", "20",
-        ],
+        n,
+        &["--source", "teleop", "--vx", "0.3", "--rate", "20"],
     )
 }
 
 /// The fastest the chassis reported over `duration`, reading only.
 fn peak_speed(robot: &mut Robot, duration: Duration) -> f32 {
-    let end = Instant::now() + duration;
-    let mut max = 0.0f32;
-    while Instant::now() < end {
-        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(20)) {
-            max = max.max(state.motion.linear_mps.abs());
-        }
-    }
-    max
+    max_speed_polling(robot, duration, Duration::from_millis(20))
 }
 
 /// How long [`assert_release_waits_for_teleop`] watches the robot after the release.
@@ -208,10 +197,7 @@ fn an_estop_release_never_restarts_motion_by_itself() {
 /// A latch restored after a restart obeys the same rule when it is released.
 #[test]
 fn the_release_of_a_latch_restored_after_a_restart_never_starts_motion() {
-    let mut env = Env::new("latch-restored-reset");
-    let n = name("lq");
-    let first = start(&mut env, "first", &n);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, first, mut robot) = start_first("latch-restored-reset", "lq");
     assert!(control(&env, &n, "estop").contains("estop engaged"));
     kill(&mut env, first);
     start(&mut env, "again", &n);
@@ -230,10 +216,7 @@ fn the_release_of_a_latch_restored_after_a_restart_never_starts_motion() {
 
 #[test]
 fn a_held_estop_survives_sigkill_and_only_estop_release_frees_it() {
-    let mut env = Env::new("latch-kill");
-    let n = name("lk");
-    let first = start(&mut env, "first", &n);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, first, mut robot) = start_first("latch-kill", "lk");
     let mut teleop = robot.source("teleop").unwrap();
     assert!(drive(&mut robot, &mut teleop, Duration::from_millis(800)) > 0.2);
     assert!(control(&env, &n, "estop").contains("estop engaged"));

@@ -123,25 +123,22 @@ const XBOT_SENSOR: &str = concat!(
     "00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 02 DC 2F",
 );
 
-fn run(env: &Env, args: &[&str]) -> String {
-    let out = env.chassis(args);
-    assert!(
-        out.status.success(),
-        "chassis {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).trim().to_string()
-}
-
 #[test]
 fn chassis_encode_prints_every_manual_example_and_chassis_decode_reads_it_back() {
     let env = Env::new("manual");
     for example in EXAMPLES {
         let mut args = vec!["encode", "--robot", example.robot];
         args.extend_from_slice(example.encode);
-        assert_eq!(run(&env, &args), example.frame, "chassis {args:?}");
+        assert_eq!(
+            env.chassis_ok(&args).trim(),
+            example.frame,
+            "chassis {args:?}"
+        );
 
-        let json = run(&env, &["decode", "--robot", example.robot, example.frame]);
+        let json = env
+            .chassis_ok(&["decode", "--robot", example.robot, example.frame])
+            .trim()
+            .to_string();
         for field in example.decoded {
             assert!(
                 json.contains(field),
@@ -156,7 +153,10 @@ fn chassis_encode_prints_every_manual_example_and_chassis_decode_reads_it_back()
 #[test]
 fn chassis_decode_reads_the_manuals_xbot_sensor_frame() {
     let env = Env::new("manual-sensor");
-    let json = run(&env, &["decode", "--robot", "xbot", XBOT_SENSOR]);
+    let json = env
+        .chassis_ok(&["decode", "--robot", "xbot", XBOT_SENSOR])
+        .trim()
+        .to_string();
     for field in [
         r#""frame":"sensor""#,
         r#""battery_voltage_v":26.62"#,

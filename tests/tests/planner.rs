@@ -20,11 +20,6 @@ const GOAL_LIMIT_M: f64 = 0.10;
 /// `--preempt-timeout` of the give-up tests.
 const PREEMPT_TIMEOUT: Duration = Duration::from_secs(1);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 /// The square each robot drives: TITAN cannot turn tighter than 1.53 m, so its corners are
 /// rounded to 1.79 m (1.15 × the 1.56 m the planner asks for at least) and its square needs at
 /// least 3.59 m; 4 m is its default. The others turn on the spot and drive the 2 m square of the
@@ -38,17 +33,6 @@ fn square_size(robot: &str) -> &'static str {
 fn corner_radius(robot: &mut Robot) -> f64 {
     let described = robot.description(UP).unwrap();
     corner_radius_m(&Kinematics::from_description(&described).unwrap())
-}
-
-/// `chassisd` on the simulated `robot`, and a connection to it.
-fn start(env: &mut Env, robot: &str, tag: &str) -> (Robot, String) {
-    let n = name(tag);
-    env.chassisd(
-        "chassisd",
-        &["--robot", robot, "--name", &n, "--no-safety-monitor"],
-    );
-    let robot = env.robot(&n, UP);
-    (robot, n)
 }
 
 /// The corners of the square of `size` m, in the frame of the robot's start pose (the planner
@@ -347,23 +331,41 @@ fn wait_until_driving_then(env: &Env, robot: &mut Robot, speed: f32, mut each: i
     assert!(driving.is_some(), "the planner never drove\n{}", env.logs());
 }
 
-fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
-    let mut env = Env::new(&format!("plan-square-{robot_kind}"));
-    let (mut robot, n) = start(&mut env, robot_kind, "psq");
-    let goal = position(&state(&mut robot));
+/// A test's environment (`test` names it) with `chassisd` on the simulated `robot` as
+/// chassis/NAME (`tag` and the pid): the environment, NAME and a connection.
+fn start(test: &str, robot: &str, tag: &str) -> (Env, String, Robot) {
+    Env::serving(test, (tag, robot), &["--no-safety-monitor"], UP)
+}
+
+/// Where a square starts (the goal: it ends there too), its size, the robot's corner radius, a
+/// state stream and the track of it drained so far.
+fn square_start(
+    robot: &mut Robot,
+    robot_kind: &'static str,
+) -> ((f64, f64), &'static str, f64, StateStream, Track) {
+    let goal = position(&state(robot));
     let size = square_size(robot_kind);
-    let corners = corner_radius(&mut robot);
+    let corners = corner_radius(robot);
     let stream = robot.state_stream(256).unwrap();
     let mut track = Track::new(robot_kind, corners, size.parse().unwrap());
     track.drain(&stream);
+    (goal, size, corners, stream, track)
+}
+
+/// Starts `chassis-planner --name N args…`.
+fn spawn_planner(env: &mut Env, n: &str, args: &[&str]) -> usize {
+    let mut all = vec!["--name", n];
+    all.extend_from_slice(args);
+    env.spawn("planner", "chassis-planner", &all)
+}
+
+fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
+    let (mut env, n, mut robot) = start(&format!("plan-square-{robot_kind}"), robot_kind, "psq");
+    let (goal, size, corners, stream, mut track) = square_start(&mut robot, robot_kind);
     let mut truth = Truth::new(size.parse().unwrap());
     truth.sample(&mut robot);
     let started = Instant::now();
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
-        &["--name", &n, "--shape", "square", "--size", size],
-    );
+    let planner = spawn_planner(&mut env, &n, &["--shape", "square", "--size", size]);
     let code = follow(
         &mut env,
         planner,
@@ -396,21 +398,13 @@ fn planner_drives_the_square_back_to_its_start(robot_kind: &'static str) {
 }
 
 fn teleop_preempts_the_planner_and_hands_back(robot_kind: &'static str) {
-    let mut env = Env::new(&format!("plan-handback-{robot_kind}"));
-    let (mut robot, n) = start(&mut env, robot_kind, "pho");
-    let goal = position(&state(&mut robot));
-    let size = square_size(robot_kind);
-    let corners = corner_radius(&mut robot);
-    let stream = robot.state_stream(256).unwrap();
-    let mut track = Track::new(robot_kind, corners, size.parse().unwrap());
-    track.drain(&stream);
+    let (mut env, n, mut robot) = start(&format!("plan-handback-{robot_kind}"), robot_kind, "pho");
+    let (goal, size, _, stream, mut track) = square_start(&mut robot, robot_kind);
     let started = Instant::now();
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
+    let planner = spawn_planner(
+        &mut env,
+        &n,
         &[
-            "--name",
-            &n,
             "--shape",
             "square",
             "--size",
@@ -475,14 +469,11 @@ fn teleop_preempts_the_planner_and_hands_back(robot_kind: &'static str) {
 }
 
 fn a_preemption_longer_than_the_timeout_makes_the_planner_give_up(robot_kind: &str) {
-    let mut env = Env::new(&format!("plan-timeout-{robot_kind}"));
-    let (mut robot, n) = start(&mut env, robot_kind, "pto");
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
+    let (mut env, n, mut robot) = start(&format!("plan-timeout-{robot_kind}"), robot_kind, "pto");
+    let planner = spawn_planner(
+        &mut env,
+        &n,
         &[
-            "--name",
-            &n,
             "--shape",
             "line",
             "--size",
@@ -540,36 +531,9 @@ fn an_xbot_without_its_wheel_separation_has_no_pose_and_the_planner_says_so() {
     let mut env = Env::new("plan-nopose");
     let n = name("pnp");
     let link = env.dir.join("xbot");
-    let sim_bus = format!("pty:{}", link.display());
-    env.chassisd(
-        "sim",
-        &["sim", "--robot", "xbot", "--name", &n, "--bus", &sim_bus],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no pty link\n{}",
-        env.logs()
-    );
-    let bus = format!("serial:{}", link.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "xbot",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (_, mut robot) = env.over_pty(("xbot", &n), Line::Serial, &link, &[], UP);
     assert!(!state(&mut robot).is_valid(Group::Pose));
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
-        &["--name", &n, "--shape", "line"],
-    );
+    let planner = spawn_planner(&mut env, &n, &["--shape", "line"]);
     let code = env.proc(planner).wait_exit(Duration::from_secs(10));
     let log = env.proc(planner).log_text();
     assert_eq!(code, Some(1), "{}", env.logs());
@@ -593,32 +557,15 @@ fn a_configured_speed_limit_reaches_the_planner_which_never_asks_above_it() {
     const LIMIT_MPS: f64 = 0.4;
     let mut env = Env::new("plan-limit");
     let n = name("plim");
-    let config = env.dir.join("limit.toml");
-    std::fs::write(
-        &config,
-        format!("[profile]\nmax_linear_mps = {LIMIT_MPS}\n"),
-    )
-    .unwrap();
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
+    let config = env.write(
+        "limit.toml",
+        &format!("[profile]\nmax_linear_mps = {LIMIT_MPS}\n"),
     );
+    env.serve("titan", &n, &["--no-safety-monitor", "--config", &config]);
     let mut robot = env.robot(&n, UP);
     let described = robot.description(UP).unwrap();
     assert_eq!(described.effective_limits().forward_mps, LIMIT_MPS);
-    let planner = env.spawn(
-        "planner",
-        "chassis-planner",
-        &["--name", &n, "--shape", "line", "--size", "3", "--json"],
-    );
+    let planner = spawn_planner(&mut env, &n, &["--shape", "line", "--size", "3", "--json"]);
     let end = Instant::now() + SQUARE_LIMIT;
     let mut asked = Vec::new();
     let mut clamped = 0u32;

@@ -171,16 +171,6 @@ const VECTORS: &[Vector] = &[
     },
 ];
 
-fn run(env: &Env, args: &[&str]) -> String {
-    let out = env.chassis(args);
-    assert!(
-        out.status.success(),
-        "chassis {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).trim().to_string()
-}
-
 #[test]
 fn every_cited_v2_vector_decodes_and_the_commands_encode_to_its_bytes() {
     let env = Env::new("protocol-v2");
@@ -188,7 +178,7 @@ fn every_cited_v2_vector_decodes_and_the_commands_encode_to_its_bytes() {
         let mut args = vec!["decode", "--robot"];
         args.extend_from_slice(v.robot);
         args.push(v.frame);
-        let json = run(&env, &args);
+        let json = env.chassis_ok(&args).trim().to_string();
         assert!(json.contains(r#""protocol":"v2""#), "{}: {json}", v.name);
         for field in v.decoded {
             assert!(json.contains(field), "{}: {field} not in {json}", v.name);
@@ -197,7 +187,7 @@ fn every_cited_v2_vector_decodes_and_the_commands_encode_to_its_bytes() {
             let mut args = vec!["encode", "--robot"];
             args.extend_from_slice(v.robot);
             args.extend_from_slice(v.encode);
-            let lines = run(&env, &args);
+            let lines = env.chassis_ok(&args).trim().to_string();
             assert_eq!(lines.lines().last(), Some(v.frame), "{}: {args:?}", v.name);
         }
     }
@@ -207,16 +197,15 @@ fn every_cited_v2_vector_decodes_and_the_commands_encode_to_its_bytes() {
 fn the_v1_example_stays_v1_and_v2_is_only_on_request() {
     let env = Env::new("protocol-v1");
     // 0x130 with a valid V1 checksum in b7: the SCOUT MINI's default protocol.
-    let json = run(
-        &env,
-        &["decode", "--robot", "scout-mini", "130#01000a0000000044"],
-    );
+    let json = env
+        .chassis_ok(&["decode", "--robot", "scout-mini", "130#01000a0000000044"])
+        .trim()
+        .to_string();
     assert!(json.contains(r#""count":0"#), "{json}");
     assert!(!json.contains(r#""protocol":"v2""#), "{json}");
     // The same robot with --protocol v2 speaks V2.
-    let v2 = run(
-        &env,
-        &[
+    let v2 = env
+        .chassis_ok(&[
             "encode",
             "--robot",
             "scout-mini",
@@ -225,8 +214,9 @@ fn the_v1_example_stays_v1_and_v2_is_only_on_request() {
             "velocity",
             "--vx",
             "0.03",
-        ],
-    );
+        ])
+        .trim()
+        .to_string();
     assert_eq!(v2, "111#001E000000000000");
     // A robot without V1 firmware support refuses --protocol v1.
     let out = env.chassis(&["decode", "--robot", "hunter", "--protocol", "v1", "111#00"]);
@@ -242,7 +232,7 @@ fn the_v1_example_stays_v1_and_v2_is_only_on_request() {
 fn chassis_detect_classifies_the_v1_example_as_v1_and_the_v2_capture_as_v2() {
     let env = Env::new("protocol-detect");
     let v1 = "130#01000A0000000044";
-    assert_eq!(run(&env, &["detect", v1, v1, v1]), "v1");
+    assert_eq!(env.chassis_ok(&["detect", v1, v1, v1]).trim(), "v1");
     let capture = [
         "detect",
         "211#0100010000800000",
@@ -250,7 +240,7 @@ fn chassis_detect_classifies_the_v1_example_as_v1_and_the_v2_capture_as_v2() {
         "241#AA00000000000061",
         "311#0000000000000000",
     ];
-    assert_eq!(run(&env, &capture), "v2");
+    assert_eq!(env.chassis_ok(&capture).trim(), "v2");
     // A frame both protocols use proves nothing: no decision, exit 1, the ids heard named.
     let out = env.chassis(&["detect", "211#0100010000800000"]);
     assert_eq!(out.status.code(), Some(1));
@@ -277,10 +267,9 @@ fn every_v2_robot_names_the_estop_and_its_own_fault_bits() {
     ];
     for (robot, rc_lost, name) in cases {
         let decode = |frame: &str| {
-            run(
-                &env,
-                &["decode", "--robot", robot, "--protocol", "v2", frame],
-            )
+            env.chassis_ok(&["decode", "--robot", robot, "--protocol", "v2", frame])
+                .trim()
+                .to_string()
         };
         let json = decode("211#0100010000000000");
         for field in [
@@ -367,14 +356,14 @@ fn every_agilex_robot_encodes_and_decodes_in_each_of_its_protocols() {
             "velocity",
         ];
         args.extend_from_slice(velocity);
-        let lines = run(&env, &args);
+        let lines = env.chassis_ok(&args).trim().to_string();
         assert!(!lines.is_empty(), "{robot} {protocol}: nothing encoded");
         let mut motion = None;
         for line in lines.lines() {
-            let json = run(
-                &env,
-                &["decode", "--robot", robot, "--protocol", protocol, line],
-            );
+            let json = env
+                .chassis_ok(&["decode", "--robot", robot, "--protocol", protocol, line])
+                .trim()
+                .to_string();
             assert!(
                 json.contains(&format!(r#""robot":"{robot}""#)),
                 "{robot}: {json}"

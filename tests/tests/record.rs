@@ -15,11 +15,6 @@ use serde_json::Value;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 /// Waits until the recorder started as `index` says it is recording.
 fn wait_recording(env: &mut Env, index: usize) {
     let ready = wait_for(UP, || env.proc(index).log_text().contains("Ctrl-C to stop"));
@@ -43,9 +38,7 @@ fn drive(robot: &mut Robot, request: VelocityRequest, duration: Duration) {
 
 /// Waits until the robot stands still, then returns its state.
 fn standing(robot: &mut Robot) -> ChassisState {
-    let still = wait_for(Duration::from_secs(5), || {
-        state(robot).motion.linear_mps.abs() < 0.005
-    });
+    let still = comes_to_rest(robot, Duration::from_secs(5), 0.005);
     assert!(still.is_some(), "the robot did not stop");
     pause(Duration::from_millis(300));
     state(robot)
@@ -239,15 +232,27 @@ fn json_f64(value: &Value, path: &[&str]) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("{path:?} in {value}"))
 }
 
+/// chassisd (labelled `label`) replaying the recording `file` as fast as it takes it, as robot
+/// NAME (`tag` and the pid): its index and a connection.
+fn replay_at_max(env: &mut Env, (label, tag): (&str, &str), file: &str) -> (usize, Robot) {
+    let n = name(tag);
+    let bus = format!("replay:{file}@max");
+    let replay = env.serve_as(
+        label,
+        ("titan", &n),
+        &["--bus", &bus, "--no-safety-monitor"],
+    );
+    (replay, env.robot(&n, UP))
+}
+
 #[test]
 fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry_and_pose() {
-    let mut env = Env::new("record-titan");
-    let n = name("rec");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    let (mut env, n, mut robot) = Env::serving(
+        "record-titan",
+        ("rec", "titan"),
+        &["--no-safety-monitor"],
+        UP,
     );
-    let mut robot = env.robot(&n, UP);
     let mcap_path = env.dir.join("drive.mcap");
     let log_path = env.dir.join("drive.log");
     let mcap_text = mcap_path.to_str().unwrap().to_string();
@@ -376,20 +381,7 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
 
     // Replay the MCAP file as fast as the service takes it: every RX frame arrives and decodes,
     // and what the chassis reported itself (the odometer) is reproduced exactly.
-    let fast = name("rpm");
-    let replay_max = env.chassisd(
-        "replay-max",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &fast,
-            "--bus",
-            &format!("replay:{mcap_text}@max"),
-            "--no-safety-monitor",
-        ],
-    );
-    let mut replay = env.robot(&fast, UP);
+    let (replay_max, mut replay) = replay_at_max(&mut env, ("replay-max", "rpm"), &mcap_text);
     let end = replayed(&mut replay, &env);
     assert_eq!(
         end.link.rx_frames,
@@ -447,13 +439,12 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
 
 #[test]
 fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
-    let mut env = Env::new("record-flood");
-    let n = name("fld");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    let (mut env, n, _robot) = Env::serving(
+        "record-flood",
+        ("fld", "titan"),
+        &["--no-safety-monitor"],
+        UP,
     );
-    let _robot = env.robot(&n, UP);
     let flood = env.chassis(&["sim", "--name", &n, "flood", "4000"]);
     assert!(
         flood.status.success(),
@@ -484,20 +475,7 @@ fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
     assert!(rate > 2000.0, "{rate:.0} frames/s: the bus was not loaded");
 
     // The same recording replayed as fast as the service decodes and publishes it.
-    let fast = name("fldr");
-    let replay = env.chassisd(
-        "replay",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &fast,
-            "--bus",
-            &format!("replay:{text}@max"),
-            "--no-safety-monitor",
-        ],
-    );
-    let mut robot = env.robot(&fast, UP);
+    let (replay, mut robot) = replay_at_max(&mut env, ("replay", "fldr"), &text);
     let end = replayed(&mut robot, &env);
     assert_eq!(end.link.rx_frames, rec.rx_frames() as u64);
     println!(
@@ -508,13 +486,12 @@ fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
 
 #[test]
 fn an_xbot_records_to_mcap_only_and_its_serial_stream_replays_to_the_recorded_pose() {
-    let mut env = Env::new("record-xbot");
-    let n = name("xrec");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "xbot", "--name", &n, "--no-safety-monitor"],
+    let (mut env, n, mut robot) = Env::serving(
+        "record-xbot",
+        ("xrec", "xbot"),
+        &["--no-safety-monitor"],
+        UP,
     );
-    let mut robot = env.robot(&n, UP);
     let refused = env.chassis(&[
         "record",
         "--candump",
@@ -546,8 +523,7 @@ fn an_xbot_records_to_mcap_only_and_its_serial_stream_replays_to_the_recorded_po
 
     // The simulated XBot's wheel separation is known to `--bus sim` only: give it to the replay,
     // which then integrates the pose from the replayed encoders exactly as the robot did.
-    let config = env.dir.join("xbot.toml");
-    std::fs::write(&config, "[profile]\nwheel_separation_m = 0.45\n").unwrap();
+    let config = env.write("xbot.toml", XBOT_PROFILE);
     let out = env.chassis(&[
         "replay",
         &text,
@@ -555,7 +531,7 @@ fn an_xbot_records_to_mcap_only_and_its_serial_stream_replays_to_the_recorded_po
         "--name",
         &name("xrp"),
         "--config",
-        config.to_str().unwrap(),
+        &config,
         "--json",
         "--quiet",
     ]);

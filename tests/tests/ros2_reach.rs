@@ -6,12 +6,7 @@
 //!
 //! Needs root (`ip netns`, veth pairs) and scripts/ros2-tests' virtualenv; discovery runs only on
 //! the namespaces' own interfaces.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::disallowed_methods
-)]
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -25,70 +20,26 @@ const UP: Duration = Duration::from_secs(20);
 const ROBOT_ADDR: &str = "10.78.0.1";
 const PEER_ADDR: &str = "10.78.0.2";
 
-/// Two network namespaces joined by a veth pair, multicast on and routed; removed on drop.
-struct Link {
-    robot_ns: String,
-    peer_ns: String,
-}
-
-impl Link {
-    fn new() -> Self {
-        let id = std::process::id() % 100_000;
-        let link = Link {
-            robot_ns: format!("crr{id}"),
-            peer_ns: format!("crp{id}"),
-        };
-        let (robot_if, peer_if) = (format!("crr{id}"), format!("crp{id}"));
-        ip(&["netns", "add", &link.robot_ns]);
-        ip(&["netns", "add", &link.peer_ns]);
-        ip(&[
-            "link", "add", &robot_if, "type", "veth", "peer", "name", &peer_if,
-        ]);
-        ip(&["link", "set", &robot_if, "netns", &link.robot_ns]);
-        ip(&["link", "set", &peer_if, "netns", &link.peer_ns]);
-        for (ns, dev, addr) in [
-            (&link.robot_ns, &robot_if, ROBOT_ADDR),
-            (&link.peer_ns, &peer_if, PEER_ADDR),
-        ] {
-            ip(&["-n", ns, "addr", "add", &format!("{addr}/24"), "dev", dev]);
-            ip(&["-n", ns, "link", "set", dev, "multicast", "on"]);
-            ip(&["-n", ns, "link", "set", dev, "up"]);
-            ip(&["-n", ns, "link", "set", "lo", "up"]);
-            ip(&["-n", ns, "link", "set", "lo", "multicast", "on"]);
-            ip(&["-n", ns, "route", "add", "224.0.0.0/4", "dev", dev]);
-        }
-        link
-    }
-}
-
-impl Drop for Link {
-    fn drop(&mut self) {
-        for ns in [&self.robot_ns, &self.peer_ns] {
-            let _ = Command::new("ip").args(["netns", "del", ns]).status();
-        }
-    }
+/// The robot's computer and another on its network, in namespaces unique to the test, with
+/// multicast on and routed.
+fn link() -> VethPair {
+    let id = std::process::id() % 100_000;
+    let (robot, peer) = (format!("crr{id}"), format!("crp{id}"));
+    VethPair::new((&robot, ROBOT_ADDR), (&peer, PEER_ADDR), true)
 }
 
 /// scripts/ros2-tests' Python (with `cyclonedds`), or `CHASSIS_ROS2_PYTHON`.
 fn python() -> PathBuf {
-    let python = std::env::var_os("CHASSIS_ROS2_PYTHON").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/ros2-venv/bin/python"),
-        PathBuf::from,
-    );
-    let ready = Command::new(&python)
-        .args(["-c", "import cyclonedds"])
-        .status()
-        .is_ok_and(|s| s.success());
-    assert!(
-        ready,
-        "{} cannot import cyclonedds: run scripts/ros2-tests once (it makes target/ros2-venv)",
-        python.display()
-    );
-    python
+    venv_python(
+        "CHASSIS_ROS2_PYTHON",
+        "ros2-venv",
+        ("cyclonedds", "cyclonedds"),
+        "run scripts/ros2-tests once (it makes target/ros2-venv)",
+    )
 }
 
 /// Starts chassis-ros2 in the robot's namespace with `envs` added.
-fn bridge(env: &mut Env, link: &Link, n: &str, domain: &str, envs: &[(&str, &str)]) -> usize {
+fn bridge(env: &mut Env, link: &VethPair, n: &str, domain: &str, envs: &[(&str, &str)]) -> usize {
     let bin = bin("chassis-ros2");
     let prefix = env.prefix.clone();
     let mut all = vec![(IPC_PREFIX_ENV, prefix.as_str()), ("ROS_DOMAIN_ID", domain)];
@@ -114,7 +65,7 @@ fn bridge(env: &mut Env, link: &Link, n: &str, domain: &str, envs: &[(&str, &str
 /// output the mux asked for).
 fn peer_drives(
     env: &Env,
-    link: &Link,
+    link: &VethPair,
     robot: &mut Robot,
     domain: &str,
     seconds: f64,
@@ -143,27 +94,18 @@ fn peer_drives(
         pause(Duration::from_millis(10));
     }
     let out = child.wait_with_output().unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "drive_peer.py: {}\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
+    let stdout = env.succeeded("drive_peer.py", &out);
     let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     (summary["matched"].as_u64().unwrap(), won, peak)
 }
 
 #[test]
 fn a_dds_peer_on_the_robots_network_drives_only_when_the_discovery_range_allows_it() {
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("ros2-reach");
     let n = format!("rr{}", std::process::id() % 100_000);
     let domain = (40 + std::process::id() % 50).to_string();
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
 
     // Default: this computer only. The peer, 10.78.0.2, matches no reader and nothing moves.

@@ -18,21 +18,19 @@ use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
-fn source(robot: &mut Robot, name: &str) -> Source {
-    robot
-        .source(name)
-        .unwrap_or_else(|e| panic!("source {name}: {e}"))
-}
-
 /// Starts chassisd on the simulated `robot` (safety source required) and the monitor; returns
 /// the connection once the monitor's heartbeats reach the mux, and the monitor's index.
 fn start(env: &mut Env, robot: &str, n: &str) -> (Robot, usize) {
     start_with(env, &["--robot", robot, "--name", n], n)
+}
+
+/// [`start`] in a new environment (`test` names it) for robot NAME (`tag` and the pid): the
+/// environment, NAME, the connection and the monitor's index.
+fn started(test: &str, (tag, robot): (&str, &str)) -> (Env, String, Robot, usize) {
+    let mut env = Env::new(test);
+    let n = name(tag);
+    let (connection, monitor) = start(&mut env, robot, &n);
+    (env, n, connection, monitor)
 }
 
 /// [`start`] with chassisd's arguments.
@@ -73,6 +71,69 @@ fn drive(
         }
     }
     (low, high)
+}
+
+/// [`drive`] with one source and request; returns the highest forward speed seen.
+fn drive_one(robot: &mut Robot, source: &mut Source, go: VelocityRequest, d: Duration) -> f32 {
+    drive(robot, &mut [(source, go)], d).1
+}
+
+/// [`drive_one`], then the robot must stand.
+fn stands_still(robot: &mut Robot, source: &mut Source, go: VelocityRequest, d: Duration) {
+    let high = drive_one(robot, source, go, d);
+    let still = state(robot).motion.linear_mps.abs();
+    assert!(still < 0.01, "rolling at {still} (peak {high})");
+}
+
+/// The teleop source of a robot the test just started, checked to drive at 0.3 m/s within a
+/// second; returns it with its request.
+fn teleop_drives(env: &Env, robot: &mut Robot) -> (Source, VelocityRequest) {
+    let mut teleop = source(robot, "teleop");
+    let go = VelocityRequest::twist(0.3, 0.0);
+    let high = drive_one(robot, &mut teleop, go, Duration::from_secs(1));
+    assert!(high > 0.2, "peak {high}\n{}", env.logs());
+    (teleop, go)
+}
+
+/// Keeps sending `go` until the monitor is the active source and the output is zero (at most
+/// `timeout`); returns the time it took, or fails the test with `what` stopped the robot.
+fn stopped_by_the_monitor(
+    env: &Env,
+    robot: &mut Robot,
+    teleop: &mut Source,
+    go: VelocityRequest,
+    timeout: Duration,
+    what: &str,
+) -> Duration {
+    drive_until(robot, &mut [(teleop, go)], timeout, |m, _| {
+        m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety")
+    })
+    .unwrap_or_else(|| panic!("no stop for {what}\n{}", env.logs()))
+}
+
+/// [`drive_until`] with one source and its request, for at most `ms` milliseconds.
+fn until_one(
+    robot: &mut Robot,
+    (source, go): (&mut Source, VelocityRequest),
+    ms: u64,
+    condition: impl FnMut(&MuxStatus, &ChassisState) -> bool,
+) -> Option<Duration> {
+    drive_until(
+        robot,
+        &mut [(source, go)],
+        Duration::from_millis(ms),
+        condition,
+    )
+}
+
+/// The mux commands zero.
+fn output_zero(m: &MuxStatus, _: &ChassisState) -> bool {
+    m.output == BodyVelocity::ZERO
+}
+
+/// Teleop drives: it is the active source and the robot moves faster than `speed`.
+fn teleop_above(speed: f32) -> impl FnMut(&MuxStatus, &ChassisState) -> bool {
+    move |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > speed
 }
 
 /// Keeps sending while waiting for `condition` on the mux status; returns the time it took.
@@ -117,37 +178,18 @@ fn safety(robot: &Robot) -> SafetyStatus {
 /// Injects a fault into the simulated chassis; returns the service's answer stamp (the
 /// injection happened just before it).
 fn inject(robot: &mut Robot, kind: u8, on: bool, value: f64) -> u64 {
-    let answer = robot
-        .sim(
-            SimRequest {
-                kind,
-                flag: u8::from(on),
-                value,
-                ..SimRequest::default()
-            },
-            Duration::from_secs(3),
-        )
-        .unwrap();
-    assert!(answer.is_ok(), "{}", answer.message());
-    answer.stamp_ns
-}
-
-fn run_ok(env: &Env, args: &[&str]) -> String {
-    let out = env.chassis(args);
-    assert!(
-        out.status.success(),
-        "chassis {args:?}: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    let request = SimRequest {
+        kind,
+        flag: u8::from(on),
+        value,
+        ..SimRequest::default()
+    };
+    sim_ok(robot, request)
 }
 
 #[test]
 fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_lets_it_reverse() {
-    let mut env = Env::new("safety-obstacle");
-    let n = name("sob");
-    let (mut robot, _) = start(&mut env, "xbot", &n);
+    let (env, n, mut robot, _) = started("safety-obstacle", ("sob", "xbot"));
     let mut planner = source(&mut robot, "planner");
     let mut teleop = source(&mut robot, "teleop");
     let ahead = VelocityRequest::twist(0.3, 0.0);
@@ -203,7 +245,7 @@ fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_let
     assert!(s.last_text().contains("stop zone"), "{}", s.last_text());
     let m = mux(&mut robot);
     assert_ne!(m.clamp_flags & ClampFlags::SAFETY_LIMIT, 0);
-    let status = run_ok(&env, &["status", "--name", &n]);
+    let status = env.chassis_ok(&["status", "--name", &n]);
     assert!(status.contains("SLOW by ultrasonic"), "{status}");
 
     // Teleop (higher priority) cannot push through either.
@@ -231,12 +273,8 @@ fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_let
     assert!(x1 < x0 - 0.1, "moved from {x0} m to {x1} m");
 
     // The obstacle goes: forward again (after the 300 ms release time).
-    run_ok(&env, &["sim", "--name", &n, "obstacle-ahead", "--clear"]);
-    let (_, high) = drive(
-        &mut robot,
-        &mut [(&mut teleop, ahead)],
-        Duration::from_millis(1500),
-    );
+    env.chassis_ok(&["sim", "--name", &n, "obstacle-ahead", "--clear"]);
+    let high = drive_one(&mut robot, &mut teleop, ahead, Duration::from_millis(1500));
     assert!(
         high > 0.25,
         "no forward motion after the obstacle left: {high}"
@@ -246,58 +284,35 @@ fn the_monitor_stops_teleop_and_planner_at_an_obstacle_ahead_of_the_xbot_but_let
 
 #[test]
 fn sigkill_of_the_safety_monitor_stops_the_robot_within_the_source_timeout() {
-    let mut env = Env::new("safety-kill");
-    let n = name("skl");
-    let (mut robot, monitor) = start(&mut env, "titan", &n);
+    let (mut env, _, mut robot, monitor) = started("safety-kill", ("skl", "titan"));
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.4, 0.0);
-    let (_, high) = drive(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_millis(1500),
-    );
+    let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
     assert!(high > 0.3, "peak {high} m/s with the monitor alive");
 
     env.proc(monitor).signal(Signal::SIGKILL);
-    let stopped = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(2),
-        |m, _| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == BodyVelocity::ZERO,
-    )
+    let stopped = until_one(&mut robot, (&mut teleop, go), 2000, |m, _| {
+        m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == BodyVelocity::ZERO
+    })
     .unwrap_or_else(|| panic!("no safe stop after the kill\n{}", env.logs()));
     eprintln!("safety monitor SIGKILLed → mux output zero after {stopped:?} (timeout 200 ms)");
     assert!(
         stopped <= Duration::from_millis(250),
         "safe stop after {stopped:?}"
     );
-    let (_, high) = drive(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_millis(1500),
-    );
-    let still = state(&mut robot).motion.linear_mps.abs();
-    assert!(still < 0.01, "still rolling at {still} (peak {high})");
+    stands_still(&mut robot, &mut teleop, go, Duration::from_millis(1500));
 }
 
 #[test]
 fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
-    let mut env = Env::new("safety-latch");
-    let n = name("slt");
-    let (mut robot, _) = start(&mut env, "titan", &n);
-    let mut teleop = source(&mut robot, "teleop");
-    let go = VelocityRequest::twist(0.3, 0.0);
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
-    assert!(high > 0.2, "peak {high}");
+    let (mut env, n, mut robot, _) = started("safety-latch", ("slt", "titan"));
+    let (mut teleop, go) = teleop_drives(&env, &mut robot);
 
     let estop = mux(&mut robot).lock_index("estop").unwrap();
     let pressed = inject(&mut robot, SimKind::BUMPER, true, 0.0);
-    let latched = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(3),
-        |m, _| m.locks()[estop].held == 1,
-    );
+    let latched = until_one(&mut robot, (&mut teleop, go), 3000, |m, _| {
+        m.locks()[estop].held == 1
+    });
     assert!(latched.is_some(), "no latch\n{}", env.logs());
     let m = mux(&mut robot);
     assert_eq!(m.locks()[estop].holder, 0, "held by the safety source");
@@ -305,7 +320,7 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
         "bumper pressed → estop lock engaged after {:.1} ms",
         m.locks()[estop].since_ns.saturating_sub(pressed) as f64 / 1e6
     );
-    run_ok(&env, &["sim", "--name", &n, "bumper", "off"]);
+    env.chassis_ok(&["sim", "--name", &n, "bumper", "off"]);
 
     // Teleop keeps asking; the lock holds after the bumper is released.
     let end = Instant::now() + Duration::from_millis(2000);
@@ -334,16 +349,12 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
     assert!(status.is_active(SafetyRule::BUMPER));
     assert_eq!(status.estop, EstopState::HELD_BY_MONITOR);
     assert_eq!(status.trigger_count(SafetyRule::BUMPER), 1);
-    let text = run_ok(&env, &["status", "--name", &n]);
+    let text = env.chassis_ok(&["status", "--name", &n]);
     assert!(text.contains("LATCH by bumper"), "{text}");
 
-    let out = run_ok(&env, &["control", "--name", &n, "estop-release"]);
+    let out = env.chassis_ok(&["control", "--name", &n, "estop-release"]);
     assert!(out.contains("estop released"), "{out}");
-    let (_, high) = drive(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_millis(1500),
-    );
+    let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
     assert!(
         high > 0.2,
         "no motion after the release: {high}\n{}",
@@ -357,21 +368,13 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
 
 #[test]
 fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
-    let mut env = Env::new("safety-usr1");
-    let n = name("sus");
-    let (mut robot, monitor) = start(&mut env, "xbot", &n);
-    let mut teleop = source(&mut robot, "teleop");
-    let go = VelocityRequest::twist(0.3, 0.0);
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
-    assert!(high > 0.2, "peak {high}");
+    let (mut env, n, mut robot, monitor) = started("safety-usr1", ("sus", "xbot"));
+    let (mut teleop, go) = teleop_drives(&env, &mut robot);
     env.proc(monitor).signal(Signal::SIGUSR1);
     let estop = mux(&mut robot).lock_index("estop").unwrap();
-    let latched = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(2),
-        |m, _| m.locks()[estop].held == 1 && m.output == BodyVelocity::ZERO,
-    );
+    let latched = until_one(&mut robot, (&mut teleop, go), 2000, |m, _| {
+        m.locks()[estop].held == 1 && m.output == BodyVelocity::ZERO
+    });
     assert!(latched.is_some(), "no latch\n{}", env.logs());
     eprintln!(
         "SIGUSR1 → estop held, output zero after {:?}",
@@ -380,19 +383,15 @@ fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
     let status = safety(&robot);
     assert!(status.is_active(SafetyRule::OPERATOR), "{status:?}");
     assert_eq!(status.action, SafetyAction::LATCH);
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
+    let high = drive_one(&mut robot, &mut teleop, go, Duration::from_secs(1));
     assert!(
         state(&mut robot).motion.linear_mps.abs() < 0.01,
         "peak {high}"
     );
-    run_ok(&env, &["control", "--name", &n, "estop-release"]);
+    env.chassis_ok(&["control", "--name", &n, "estop-release"]);
     // A release never starts motion (tests/tests/latch.rs): teleop asks for zero, then drives.
     teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
-    let (_, high) = drive(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_millis(1500),
-    );
+    let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
     assert!(
         high > 0.2,
         "no motion after the release and teleop's zero: {high}\n{}",
@@ -401,40 +400,35 @@ fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
     assert!(env.proc(monitor).is_running());
 }
 
-#[test]
-fn a_low_battery_stops_the_robot_and_a_charged_one_lets_it_drive_again() {
-    let mut env = Env::new("safety-battery");
-    let n = name("sbt");
-    let (mut robot, _) = start(&mut env, "titan", &n);
-    let mut teleop = source(&mut robot, "teleop");
-    let go = VelocityRequest::twist(0.3, 0.0);
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
-    assert!(high > 0.2, "peak {high}");
+/// Starts `kind` as `n` with the monitor, drives, empties its battery to `percent`: the
+/// monitor must stop the robot by its battery rule with `check` true of its text; fills it to
+/// 60 %: the robot must drive again. `check_log` then judges the monitor's log.
+fn a_low_battery_stops_and_a_charged_one_drives(
+    test: &str,
+    kind: &str,
+    n: &str,
+    percent: &str,
+    check: impl Fn(&str) -> bool,
+    check_log: impl FnOnce(&str),
+) {
+    let mut env = Env::new(test);
+    let (mut robot, monitor) = start(&mut env, kind, n);
+    let (mut teleop, go) = teleop_drives(&env, &mut robot);
 
-    // 12 %: below the monitor's 15 %, above the 10 % at which the TITAN cuts power itself.
-    run_ok(&env, &["sim", "--name", &n, "battery", "12"]);
-    let stopped = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(5),
-        |m, _| m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
-    )
-    .unwrap_or_else(|| panic!("no stop for a low battery\n{}", env.logs()));
-    eprintln!("battery 12 % → safety stop after {stopped:?} (1 s trigger time)");
+    env.chassis_ok(&["sim", "--name", n, "battery", percent]);
+    let timeout = Duration::from_secs(5);
+    let stopped =
+        stopped_by_the_monitor(&env, &mut robot, &mut teleop, go, timeout, "a low battery");
+    eprintln!("{kind} battery {percent} % → safety stop after {stopped:?} (1 s trigger time)");
     let status = safety(&robot);
     assert!(status.is_active(SafetyRule::BATTERY), "{status:?}");
     assert_eq!(status.action, SafetyAction::STOP);
-    assert!(
-        status.last_text().contains("% < 15 %"),
-        "{}",
-        status.last_text()
-    );
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
-    let still = state(&mut robot).motion.linear_mps.abs();
-    assert!(still < 0.01, "rolling at {still} (peak {high})");
+    assert!(check(status.last_text()), "{}", status.last_text());
+    check_log(&env.proc(monitor).log_text());
+    stands_still(&mut robot, &mut teleop, go, Duration::from_secs(1));
 
-    run_ok(&env, &["sim", "--name", &n, "battery", "60"]);
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(3));
+    env.chassis_ok(&["sim", "--name", n, "battery", "60"]);
+    let high = drive_one(&mut robot, &mut teleop, go, Duration::from_secs(3));
     assert!(
         high > 0.2,
         "no motion with a charged battery: {high}\n{}",
@@ -443,27 +437,30 @@ fn a_low_battery_stops_the_robot_and_a_charged_one_lets_it_drive_again() {
 }
 
 #[test]
-fn a_silent_chassis_stops_the_robot_until_it_talks_again() {
-    let mut env = Env::new("safety-silent");
-    let n = name("ssl");
-    let (mut robot, _) = start(&mut env, "titan", &n);
-    let mut teleop = source(&mut robot, "teleop");
-    let go = VelocityRequest::twist(0.3, 0.0);
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
-    assert!(high > 0.2, "peak {high}");
+fn a_low_battery_stops_the_robot_and_a_charged_one_lets_it_drive_again() {
+    // 12 %: below the monitor's 15 %, above the 10 % at which the TITAN cuts power itself.
+    a_low_battery_stops_and_a_charged_one_drives(
+        "safety-battery",
+        "titan",
+        &name("sbt"),
+        "12",
+        |text| text.contains("% < 15 %"),
+        |_| {},
+    );
+}
 
-    run_ok(&env, &["sim", "--name", &n, "silence", "1.5"]);
-    let stopped = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(2),
-        |m, _| m.output == BodyVelocity::ZERO,
-    )
-    .unwrap_or_else(|| panic!("no stop while the chassis is silent\n{}", env.logs()));
+#[test]
+fn a_silent_chassis_stops_the_robot_until_it_talks_again() {
+    let (env, n, mut robot, _) = started("safety-silent", ("ssl", "titan"));
+    let (mut teleop, go) = teleop_drives(&env, &mut robot);
+
+    env.chassis_ok(&["sim", "--name", &n, "silence", "1.5"]);
+    let stopped = until_one(&mut robot, (&mut teleop, go), 2000, output_zero)
+        .unwrap_or_else(|| panic!("no stop while the chassis is silent\n{}", env.logs()));
     eprintln!("chassis silent → safety stop after {stopped:?}");
     assert!(safety(&robot).is_active(SafetyRule::STALE));
     // The chassis talks again after 1.5 s; motion 0.5 s after that.
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(3));
+    let high = drive_one(&mut robot, &mut teleop, go, Duration::from_secs(3));
     assert!(
         high > 0.2,
         "no motion after the silence: {high}\n{}",
@@ -478,37 +475,29 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
     let n = name("srs");
     // The monitor first: no service yet. It says so and keeps trying.
     let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
-    let first = env.chassisd("first", &["--robot", "titan", "--name", &n]);
+    let first = env.serve_as("first", ("titan", &n), &[]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
-    let moving = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(5),
-        |_, s| s.motion.linear_mps > 0.2,
-    );
+    let moving = until_one(&mut robot, (&mut teleop, go), 5000, |_, s| {
+        s.motion.linear_mps > 0.2
+    });
     assert!(moving.is_some(), "no motion\n{}", env.logs());
 
     env.proc(first).signal(Signal::SIGKILL);
     env.proc(first).wait_exit(Duration::from_secs(3));
     assert!(env.proc(monitor).is_running(), "{}", env.logs());
     let restarted = now_ns();
-    env.chassisd("again", &["--robot", "titan", "--name", &n]);
+    env.serve_as("again", ("titan", &n), &[]);
     // Only samples of the new service count (the last ones of the first are still cached).
-    let moving = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(10),
-        |m, s| {
-            m.stamp_ns > restarted
-                && s.stamp_ns > restarted
-                && m.sources()
-                    .iter()
-                    .any(|s| s.name() == "safety" && s.has(SourceFlags::FRESH))
-                && s.motion.linear_mps > 0.2
-        },
-    );
+    let moving = until_one(&mut robot, (&mut teleop, go), 10000, |m, s| {
+        m.stamp_ns > restarted
+            && s.stamp_ns > restarted
+            && m.sources()
+                .iter()
+                .any(|s| s.name() == "safety" && s.has(SourceFlags::FRESH))
+            && s.motion.linear_mps > 0.2
+    });
     assert!(
         moving.is_some(),
         "no motion after the restart\n{}",
@@ -518,12 +507,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
 
     // SIGTERM: a last stop, exit code 0.
     env.proc(monitor).signal(Signal::SIGTERM);
-    let stopped = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(2),
-        |m, _| m.output == BodyVelocity::ZERO,
-    );
+    let stopped = until_one(&mut robot, (&mut teleop, go), 2000, output_zero);
     assert!(
         stopped.is_some_and(|t| t < Duration::from_millis(200)),
         "{stopped:?}\n{}",
@@ -535,9 +519,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
 
 /// Writes chassisd's configuration for a test; returns its path.
 fn chassisd_config(env: &Env, text: &str) -> String {
-    let path = env.dir.join("chassisd.toml");
-    std::fs::write(&path, text).unwrap();
-    path.to_str().unwrap().to_string()
+    env.write("chassisd.toml", text)
 }
 
 /// A HUNTER whose driver is limited to 0.5 m/s by a `[profile]` override: requests beyond the
@@ -557,11 +539,7 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
     let mut teleop = source(&mut robot, "teleop");
     // Asking for more than the limit is a request the driver clamps, not a runaway.
     let fast = VelocityRequest::twist(0.8, 0.0);
-    let (_, high) = drive(
-        &mut robot,
-        &mut [(&mut teleop, fast)],
-        Duration::from_secs(2),
-    );
+    let high = drive_one(&mut robot, &mut teleop, fast, Duration::from_secs(2));
     assert!(
         (0.4..=0.55).contains(&high),
         "peak {high} (limit 0.5)\n{}",
@@ -571,17 +549,12 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
     assert!(!status.is_active(SafetyRule::SPEED), "{status:?}");
     assert_eq!(status.action, SafetyAction::NONE);
 
-    run_ok(&env, &["sim", "--name", &n, "runaway", "1.0"]);
+    env.chassis_ok(&["sim", "--name", &n, "runaway", "1.0"]);
     let mut fastest = 0.0f32;
-    let stopped = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, fast)],
-        Duration::from_secs(5),
-        |m, s| {
-            fastest = fastest.max(s.motion.linear_mps);
-            m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety")
-        },
-    )
+    let stopped = until_one(&mut robot, (&mut teleop, fast), 5000, |m, s| {
+        fastest = fastest.max(s.motion.linear_mps);
+        m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety")
+    })
     .unwrap_or_else(|| panic!("no stop for a runaway at 1.0 m/s\n{}", env.logs()));
     eprintln!("runaway at 1.0 m/s past a 0.5 m/s limit → safety stop after {stopped:?}");
     assert!(fastest > 0.6, "measured at most {fastest} m/s");
@@ -595,21 +568,12 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
         status.last_text()
     );
     // The mux keeps the output at zero while the chassis still runs away.
-    let (_, high) = drive(
-        &mut robot,
-        &mut [(&mut teleop, fast)],
-        Duration::from_secs(1),
-    );
+    let high = drive_one(&mut robot, &mut teleop, fast, Duration::from_secs(1));
     assert!(high > 0.6, "the runaway went on: {high}");
     assert_eq!(mux(&mut robot).output, BodyVelocity::ZERO);
 
-    run_ok(&env, &["sim", "--name", &n, "runaway", "--clear"]);
-    let again = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, fast)],
-        Duration::from_secs(5),
-        |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > 0.3,
-    );
+    env.chassis_ok(&["sim", "--name", &n, "runaway", "--clear"]);
+    let again = until_one(&mut robot, (&mut teleop, fast), 5000, teleop_above(0.3));
     assert!(
         again.is_some(),
         "no motion once the chassis obeys again\n{}",
@@ -624,52 +588,24 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
 /// of charge, and says so; a flat battery stops it, a charged one lets it drive again.
 #[test]
 fn a_ranger_mini_with_a_low_battery_is_stopped_by_the_monitor() {
-    let mut env = Env::new("safety-ranger-battery");
     let n = name("srb");
-    let (mut robot, monitor) = start(&mut env, "ranger-mini", &n);
-    let mut teleop = source(&mut robot, "teleop");
-    let go = VelocityRequest::twist(0.3, 0.0);
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
-    assert!(high > 0.2, "peak {high}\n{}", env.logs());
-
     // 8 %: 22.4 V in the simulated 22-27 V pack, below 23.5 V.
-    run_ok(&env, &["sim", "--name", &n, "battery", "8"]);
-    let stopped = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(5),
-        |m, _| m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
-    )
-    .unwrap_or_else(|| panic!("no stop for a low battery\n{}", env.logs()));
-    eprintln!("RANGER MINI battery 8 % → safety stop after {stopped:?} (1 s trigger time)");
-    let status = safety(&robot);
-    assert!(status.is_active(SafetyRule::BATTERY), "{status:?}");
-    assert_eq!(status.action, SafetyAction::STOP);
-    assert!(
-        status.last_text().starts_with("battery: 22.")
-            && status.last_text().ends_with("V < 23.50 V"),
-        "{}",
-        status.last_text()
-    );
-    let log = env.proc(monitor).log_text();
-    assert!(
-        log.contains(&format!(
-            "battery: judging chassis/{n} by its voltage (below 23.5 V, description \
-             (chassis/{n}: battery.low_v)); it reports a state of charge, but no level is known \
-             for it"
-        )),
-        "{log}"
-    );
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(1));
-    let still = state(&mut robot).motion.linear_mps.abs();
-    assert!(still < 0.01, "rolling at {still} (peak {high})");
-
-    run_ok(&env, &["sim", "--name", &n, "battery", "60"]);
-    let (_, high) = drive(&mut robot, &mut [(&mut teleop, go)], Duration::from_secs(3));
-    assert!(
-        high > 0.2,
-        "no motion with a charged battery: {high}\n{}",
-        env.logs()
+    a_low_battery_stops_and_a_charged_one_drives(
+        "safety-ranger-battery",
+        "ranger-mini",
+        &n,
+        "8",
+        |text| text.starts_with("battery: 22.") && text.ends_with("V < 23.50 V"),
+        |log| {
+            assert!(
+                log.contains(&format!(
+                    "battery: judging chassis/{n} by its voltage (below 23.5 V, description \
+                     (chassis/{n}: battery.low_v)); it reports a state of charge, but no level \
+                     is known for it"
+                )),
+                "{log}"
+            );
+        },
     );
 }
 
@@ -744,12 +680,9 @@ fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
     let mut env = Env::new("safety-detect");
     let n = name("sdt");
     let link = env.dir.join("scout-mini-slcan");
-    let bus = format!("slcan:{}", link.display());
+    let bus = Line::Slcan.bus(&link);
     // chassisd first: it serves, describes the robot as detecting, and waits for its bus.
-    env.chassisd(
-        "chassisd",
-        &["--robot", "scout-mini", "--name", &n, "--bus", &bus],
-    );
+    env.serve("scout-mini", &n, &["--bus", &bus]);
     let mut robot = env.robot(&n, UP);
     let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
     let logged = |env: &mut Env, texts: &[&str]| {
@@ -768,21 +701,8 @@ fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
     );
     assert!(detecting, "{}", env.logs());
 
-    let pty = format!("slcan-pty:{}", link.display());
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "scout-mini",
-            "--protocol",
-            "v2",
-            "--name",
-            &n,
-            "--bus",
-            &pty,
-        ],
-    );
+    let pty = Line::Slcan.sim_bus(&link);
+    env.sim("sim", "scout-mini", &["--protocol", "v2"], &n, &pty);
     let decided = logged(
         &mut env,
         &[
@@ -794,24 +714,17 @@ fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
 
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.5, 0.0);
-    let moving = drive_until(
-        &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(10),
-        |m, s| m.active().is_some_and(|a| a.name() == "teleop") && s.motion.linear_mps > 0.3,
-    );
+    let moving = until_one(&mut robot, (&mut teleop, go), 10000, teleop_above(0.3));
     assert!(moving.is_some(), "no motion\n{}", env.logs());
-    run_ok(&env, &["sim", "--name", &n, "runaway", "4.0"]);
-    let stopped = drive_until(
+    env.chassis_ok(&["sim", "--name", &n, "runaway", "4.0"]);
+    let timeout = Duration::from_secs(5);
+    stopped_by_the_monitor(
+        &env,
         &mut robot,
-        &mut [(&mut teleop, go)],
-        Duration::from_secs(5),
-        |m, _| m.output == BodyVelocity::ZERO && m.active().is_some_and(|s| s.name() == "safety"),
-    );
-    assert!(
-        stopped.is_some(),
-        "no stop for a runaway at 4 m/s\n{}",
-        env.logs()
+        &mut teleop,
+        go,
+        timeout,
+        "a runaway at 4 m/s",
     );
     let status = safety(&robot);
     assert!(status.is_active(SafetyRule::SPEED), "{status:?}");

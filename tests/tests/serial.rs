@@ -8,13 +8,8 @@ use std::os::fd::AsFd;
 use std::time::{Duration, Instant};
 
 use chassis_tests::*;
-use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
-
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
 
 fn drive(robot: &mut Robot, source: &mut Source, request: VelocityRequest, for_: Duration) -> f32 {
     let end = Instant::now() + for_;
@@ -54,72 +49,13 @@ impl TapBytes {
     }
 }
 
-/// Asks the chassis for 0.3 s of silence and waits until the service has handled everything
-/// read before it (a state sample is out at least every 100 ms); returns that state, the tap
-/// drained to the same point.
-fn quiet_moment(
-    robot: &mut Robot,
-    teleop: &mut Source,
-    go: VelocityRequest,
-    tap: &FrameTap,
-    wire: &mut TapBytes,
-) -> ChassisState {
-    let answer = robot
-        .sim(
-            SimRequest {
-                kind: SimKind::SILENCE,
-                value: 0.3,
-                ..SimRequest::default()
-            },
-            Duration::from_secs(3),
-        )
-        .unwrap();
-    assert!(answer.is_ok(), "{}", answer.message());
-    let end = Instant::now() + Duration::from_millis(200);
-    while Instant::now() < end {
-        teleop.send(go).unwrap();
-        wire.drain(tap);
-        pause(Duration::from_millis(20));
-    }
-    let s = state(robot);
-    wire.drain(tap);
-    s
-}
-
 #[test]
 fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_hang_up() {
     let mut env = Env::new("xbot-pty");
     let n = name("xb");
     let link = env.dir.join("xbot");
-    let sim_bus = format!("pty:{}", link.display());
-    let sim = env.chassisd(
-        "sim",
-        &["sim", "--robot", "xbot", "--name", &n, "--bus", &sim_bus],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no pty link\n{}",
-        env.logs()
-    );
     // A real XBot's wheel separation must be measured: give the simulated board's.
-    let config = env.dir.join("xbot.toml");
-    std::fs::write(&config, "[profile]\nwheel_separation_m = 0.45\n").unwrap();
-    let bus = format!("serial:{}", link.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "xbot",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (sim, mut robot) = env.xbot_over_pty(&n, &link, UP);
     let mut teleop = robot.source("teleop").unwrap();
     let peak = drive(
         &mut robot,
@@ -140,7 +76,7 @@ fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_han
     let tap = robot.frames(2048).unwrap();
     let go = VelocityRequest::twist(0.4, 0.0);
     let mut wire = TapBytes::default();
-    let before = quiet_moment(&mut robot, &mut teleop, go, &tap, &mut wire);
+    let before = quiet_moment(&mut robot, &mut teleop, go, || wire.drain(&tap));
     wire.rx_bytes = 0;
     const GARBAGE: u64 = 3000;
     let out = env.chassis(&["sim", "--name", &n, "garbage", &GARBAGE.to_string()]);
@@ -158,7 +94,7 @@ fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_han
             peak = peak.max(s.motion.linear_mps.abs());
         }
     }
-    let after = quiet_moment(&mut robot, &mut teleop, go, &tap, &mut wire);
+    let after = quiet_moment(&mut robot, &mut teleop, go, || wire.drain(&tap));
     let discarded = after.link.rx_bytes_discarded - before.link.rx_bytes_discarded;
     let decoded = after.link.rx_frames - before.link.rx_frames;
     // Every byte read is on the tap: what was not discarded is whole 75-byte reports.
@@ -179,56 +115,21 @@ fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_han
     );
     assert!(peak > 0.3, "peak {peak} m/s during the garbage");
 
-    env.proc(sim).signal(Signal::SIGKILL);
-    let killed = Instant::now();
-    let lost = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) != 0
-    });
-    assert!(
-        lost.is_some(),
-        "the hang-up was not reported\n{}",
-        env.logs()
-    );
-    let down_for = killed.elapsed();
-    let _ = std::fs::remove_file(&link);
-    let restarted = now_ns();
-    env.chassisd(
-        "sim2",
-        &["sim", "--robot", "xbot", "--name", &n, "--bus", &sim_bus],
-    );
-    // The state keeps the speed from before the hang-up: driving again is a speed the board
-    // reported after the line came back.
-    let back = drove_again_after(
-        &mut robot,
-        restarted,
-        Duration::from_secs(10),
-        || teleop.send(VelocityRequest::twist(0.4, 0.0)).unwrap(),
-        |s| s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > 0.2,
-    )
-    .map(|(_, after)| after);
-    let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
-    let mut figures = Figures::faults();
-    figures.add(Figure {
+    let hang_up = HangUp {
         rank: 210,
-        fault: "serial line hang-up (XBot over a pty)".into(),
-        injection: "SIGKILL of `chassisd sim --bus pty:…` mid-drive, restarted".into(),
-        behaviour: "the loss was reported (`bus_down` / `chassis_silent`), the port reopened \
-                    with backoff, and the robot drove again on the same client connection"
-            .into(),
-        figure: format!(
-            "loss reported {:.0} ms after the hang-up; driving again {:.0} ms after the \
-             line came back (the motion stamp of the first sample above 0.2 m/s; restarted \
-             {:.0} ms after the hang-up)",
-            ms(lost),
-            ms(back),
-            down_for.as_secs_f64() * 1e3
-        ),
-        value: ms(back),
-        pass: back.is_some(),
-        suite: "serial".into(),
-        test: "xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_hang_up"
-            .into(),
-    });
+        fault: "serial line hang-up (XBot over a pty)",
+        injection: "SIGKILL of `chassisd sim --bus pty:…` mid-drive, restarted",
+        end: "line",
+        above_mps: 0.2,
+        suite: "serial",
+        test: "xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_hang_up",
+    };
+    let (figures, back) = hang_up.run(
+        (&mut env, &mut robot),
+        (sim, "xbot", &n),
+        (Line::Serial, &link),
+        || teleop.send(VelocityRequest::twist(0.4, 0.0)).unwrap(),
+    );
     assert!(
         back.is_some(),
         "no motion after reconnecting\n{}",
@@ -250,18 +151,7 @@ fn the_gps_receiver_feeds_the_fix_into_state_and_no_fix_is_reported_as_such() {
     let pty = nix::pty::openpty(None, None).unwrap();
     let slave_path = nix::unistd::ttyname(pty.slave.as_fd()).unwrap();
     let gps = format!("serial:{}", slave_path.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "xbot",
-            "--name",
-            &n,
-            "--gps",
-            &gps,
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("xbot", &n, &["--gps", &gps, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut master = std::fs::File::from(pty.master);
     let fix = nmea("GPGGA,092750.000,5321.6802,N,00630.3372,W,1,8,1.03,61.7,M,55.2,M,,");
@@ -304,13 +194,8 @@ fn the_gps_receiver_feeds_the_fix_into_state_and_no_fix_is_reported_as_such() {
 
 #[test]
 fn scout_mini_drives_on_its_simulated_chassis_with_checksums_checked_both_ways() {
-    let mut env = Env::new("scout");
-    let n = name("sm");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "scout-mini", "--name", &n, "--no-safety-monitor"],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (env, n, mut robot) =
+        Env::serving("scout", ("sm", "scout-mini"), &["--no-safety-monitor"], UP);
     let mut teleop = robot.source("teleop").unwrap();
     let peak = drive(
         &mut robot,

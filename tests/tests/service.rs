@@ -10,26 +10,16 @@ use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
-fn source(robot: &mut Robot, name: &str) -> Source {
-    robot
-        .source(name)
-        .unwrap_or_else(|e| panic!("source {name}: {e}"))
-}
-
-/// Sends `request` every 20 ms for `duration` (and keeps a safety heartbeat if given).
+/// Sends `request` every 20 ms for `ms` milliseconds (and keeps a safety heartbeat if given);
+/// returns the highest speed seen.
 fn drive_for(
     robot: &mut Robot,
     teleop: &mut Source,
     mut safety: Option<&mut Source>,
     request: VelocityRequest,
-    duration: Duration,
+    ms: u64,
 ) -> f32 {
-    let end = Instant::now() + duration;
+    let end = Instant::now() + Duration::from_millis(ms);
     let mut max = 0.0f32;
     while Instant::now() < end {
         teleop.send(request).unwrap();
@@ -43,15 +33,26 @@ fn drive_for(
     max
 }
 
+/// SIGKILLs process `index`, the client of source `source`; returns how long after the kill the
+/// mux decided `condition` (at most 2 s, `between` running meanwhile) and the source's timeout
+/// the running mux reports.
+fn sigkill_then(
+    (env, robot): (&mut Env, &mut Robot),
+    (index, source): (usize, &str),
+    between: impl FnMut(),
+    condition: impl FnMut(&MuxStatus) -> bool,
+) -> (Option<Duration>, Duration) {
+    let timeout = source_timeout(&mux(robot), source);
+    let killed = now_ns();
+    env.proc(index).signal(Signal::SIGKILL);
+    let decided = decided_after(robot, killed, Duration::from_secs(2), between, condition);
+    (decided, timeout)
+}
+
 #[test]
 fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
-    let mut env = Env::new("pub-drive");
-    let n = name("pub");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) =
+        Env::serving("pub-drive", ("pub", "titan"), &["--no-safety-monitor"], UP);
     // What a user watches: `chassis echo state`, one JSON object per sample printed.
     let echo = env.spawn(
         "echo",
@@ -59,21 +60,10 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
         &["echo", "state", "--json", "--name", &n],
     );
     pause(Duration::from_millis(300));
-    let publisher = env.spawn(
+    let publisher = env.publish(
         "pub",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--source",
-            "teleop",
-            "--vx",
-            "0.3",
-            "--duration",
-            "2",
-            "--name",
-            &n,
-        ],
+        &n,
+        &["--source", "teleop", "--vx", "0.3", "--duration", "2"],
     );
     let moving = max_speed(&mut robot, Duration::from_millis(2200));
     assert!(moving > 0.25, "peak speed {moving} m/s");
@@ -81,9 +71,7 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
         env.proc(publisher).wait_exit(Duration::from_secs(5)),
         Some(0)
     );
-    let stopped = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).motion.linear_mps.abs() < 0.01
-    });
+    let stopped = comes_to_rest(&mut robot, Duration::from_secs(3), 0.01);
     assert!(
         stopped.is_some(),
         "still moving after the publisher stopped\n{}",
@@ -118,62 +106,33 @@ fn chassis_pub_drives_the_simulated_titan_and_it_stops_afterwards() {
 
 #[test]
 fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
-    let mut env = Env::new("required");
-    let n = name("req");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) = Env::serving("required", ("req", "titan"), &[], UP);
     let mut teleop = source(&mut robot, "teleop");
     let request = VelocityRequest::twist(0.4, 0.0);
-    let peak = drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        request,
-        Duration::from_millis(800),
-    );
+    let peak = drive_for(&mut robot, &mut teleop, None, request, 800);
     assert!(peak < 0.01, "moved to {peak} m/s without a safety monitor");
     assert_eq!(
         mux(&mut robot).zero_reason,
         ZeroReason::REQUIRED_SOURCE_STALE
     );
 
-    let heartbeat = env.spawn(
+    let heartbeat = env.publish(
         "safety",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--source",
-            "safety",
-            "--heartbeat",
-            "--rate",
-            "20",
-            "--name",
-            &n,
-        ],
+        &n,
+        &["--source", "safety", "--heartbeat", "--rate", "20"],
     );
-    let peak = drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        request,
-        Duration::from_millis(1500),
-    );
+    let peak = drive_for(&mut robot, &mut teleop, None, request, 1500);
     assert!(peak > 0.3, "peak {peak} m/s with the monitor alive");
 
     // SIGKILL the monitor: its last heartbeat came before the kill, so the mux stops at most the
     // source's timeout after the kill (plus the allowance for a late decision or a late look).
-    let timeout = source_timeout(&mux(&mut robot), "safety");
-    let killed = now_ns();
-    env.proc(heartbeat).signal(Signal::SIGKILL);
-    let stopped = decided_after(
-        &mut robot,
-        killed,
-        Duration::from_secs(2),
+    let (stopped, timeout) = sigkill_then(
+        (&mut env, &mut robot),
+        (heartbeat, "safety"),
         || teleop.send(request).unwrap(),
         |m| m.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE && m.output == BodyVelocity::ZERO,
-    )
-    .unwrap_or_else(|| panic!("no safe stop\n{}", env.logs()));
+    );
+    let stopped = stopped.unwrap_or_else(|| panic!("no safe stop\n{}", env.logs()));
     assert!(
         stopped <= timeout + DECISION_ALLOWANCE,
         "safe stop {stopped:?} after the kill (timeout {timeout:?})"
@@ -184,13 +143,8 @@ fn the_robot_moves_only_while_the_required_safety_monitor_is_alive() {
 
 #[test]
 fn teleop_preempts_the_planner_and_hands_back_when_it_goes_quiet() {
-    let mut env = Env::new("preempt");
-    let n = name("pre");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (env, _, mut robot) =
+        Env::serving("preempt", ("pre", "titan"), &["--no-safety-monitor"], UP);
     let mut planner = source(&mut robot, "planner");
     let mut teleop = source(&mut robot, "teleop");
     let until =
@@ -235,20 +189,11 @@ fn teleop_preempts_the_planner_and_hands_back_when_it_goes_quiet() {
 
 #[test]
 fn a_latched_estop_holds_until_the_operator_releases_it() {
-    let mut env = Env::new("estop");
-    let n = name("est");
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
-    let mut robot = env.robot(&n, UP);
+    let (env, n, mut robot) = Env::serving("estop", ("est", "titan"), &[], UP);
     let mut safety = source(&mut robot, "safety");
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
-    let peak = drive_for(
-        &mut robot,
-        &mut teleop,
-        Some(&mut safety),
-        go,
-        Duration::from_secs(1),
-    );
+    let peak = drive_for(&mut robot, &mut teleop, Some(&mut safety), go, 1000);
     assert!(peak > 0.2, "peak {peak}");
     let estop = mux(&mut robot).lock_index("estop").unwrap();
     safety.stop_and_lock(1 << estop).unwrap();
@@ -285,25 +230,14 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("estop released"));
     // A release never starts motion (tests/tests/latch.rs): teleop lets go first.
     teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
-    let peak = drive_for(
-        &mut robot,
-        &mut teleop,
-        Some(&mut safety),
-        go,
-        Duration::from_secs(1),
-    );
+    let peak = drive_for(&mut robot, &mut teleop, Some(&mut safety), go, 1000);
     assert!(peak > 0.2, "no motion after the release: {peak}");
 }
 
 #[test]
 fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
-    let mut env = Env::new("client-kill");
-    let n = name("ck");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (mut env, n, mut robot) =
+        Env::serving("client-kill", ("ck", "titan"), &["--no-safety-monitor"], UP);
     let args = [
         "pub", "velocity", "--source", "teleop", "--vx", "0.3", "--name", &n,
     ];
@@ -311,17 +245,13 @@ fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
     assert!(max_speed(&mut robot, Duration::from_millis(1200)) > 0.2);
     // The dead client's last request came before the kill: the mux commands zero at most the
     // source's timeout after it (plus the allowance for a late decision or a late look).
-    let timeout = source_timeout(&mux(&mut robot), "teleop");
-    let killed = now_ns();
-    env.proc(first).signal(Signal::SIGKILL);
-    let zero = decided_after(
-        &mut robot,
-        killed,
-        Duration::from_secs(2),
+    let (zero, timeout) = sigkill_then(
+        (&mut env, &mut robot),
+        (first, "teleop"),
         || {},
         |m| m.output == BodyVelocity::ZERO,
-    )
-    .unwrap_or_else(|| panic!("still commanding after the kill\n{}", env.logs()));
+    );
+    let zero = zero.unwrap_or_else(|| panic!("still commanding after the kill\n{}", env.logs()));
     eprintln!("teleop SIGKILLed → zero command after {zero:?} (timeout {timeout:?})");
     assert!(
         zero <= timeout + DECISION_ALLOWANCE,
@@ -341,16 +271,10 @@ fn a_client_killed_mid_drive_is_harmless_and_its_source_can_be_taken_again() {
 fn a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed() {
     let mut env = Env::new("second");
     let n = name("sec");
-    let first = env.chassisd(
-        "first",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let first = env.serve_as("first", ("titan", &n), &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let started = Instant::now();
-    let second = env.chassisd(
-        "second",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let second = env.serve_as("second", ("titan", &n), &["--no-safety-monitor"]);
     let code = env.proc(second).wait_exit(Duration::from_secs(10));
     let refused_in = started.elapsed();
     let seq = state(&mut robot).seq;
@@ -406,28 +330,15 @@ fn a_second_chassisd_for_the_same_robot_is_refused_and_the_first_is_unharmed() {
 fn a_service_killed_with_sigkill_restarts_cleanly_and_clients_reconnect() {
     let mut env = Env::new("restart");
     let n = name("rs");
-    let first = env.chassisd(
-        "first",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let first = env.serve_as("first", ("titan", &n), &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
-    assert!(
-        drive_for(
-            &mut robot,
-            &mut teleop,
-            None,
-            VelocityRequest::twist(0.3, 0.0),
-            Duration::from_secs(1)
-        ) > 0.2
-    );
+    let go = VelocityRequest::twist(0.3, 0.0);
+    assert!(drive_for(&mut robot, &mut teleop, None, go, 1000) > 0.2);
     env.proc(first).signal(Signal::SIGKILL);
     env.proc(first).wait_exit(Duration::from_secs(3));
     let restarted = now_ns();
-    let again = env.chassisd(
-        "again",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let again = env.serve_as("again", ("titan", &n), &["--no-safety-monitor"]);
     // The old client keeps its source; the new service reads it: a speed reported after the
     // restart.
     let back = drove_again_after(
@@ -449,19 +360,11 @@ fn a_service_killed_with_sigkill_restarts_cleanly_and_clients_reconnect() {
 fn sigterm_commands_zero_and_exits_zero() {
     let mut env = Env::new("sigterm");
     let n = name("term");
-    let service = env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
+    let service = env.serve("titan", &n, &["--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
-    drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        VelocityRequest::twist(0.3, 0.0),
-        Duration::from_millis(600),
-    );
+    let go = VelocityRequest::twist(0.3, 0.0);
+    drive_for(&mut robot, &mut teleop, None, go, 600);
     let tap = robot.frames(512).unwrap();
     env.proc(service).signal(Signal::SIGTERM);
     assert_eq!(env.proc(service).wait_exit(Duration::from_secs(5)), Some(0));
@@ -494,13 +397,8 @@ fn sigterm_commands_zero_and_exits_zero() {
 
 #[test]
 fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_loses() {
-    let mut env = Env::new("stream");
-    let n = name("strm");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (env, n, mut robot) =
+        Env::serving("stream", ("strm", "titan"), &["--no-safety-monitor"], UP);
     // The buffer asked for is clamped to 1..=the service's maximum.
     assert_eq!(robot.state_stream(0).unwrap().buffer(), 1);
     let stream = robot.state_stream(usize::MAX).unwrap();
@@ -526,13 +424,7 @@ fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_
         )
         .unwrap();
     assert!(answer.is_ok(), "{}", answer.message());
-    let moving = drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        drive,
-        Duration::from_millis(800),
-    );
+    let moving = drive_for(&mut robot, &mut teleop, None, drive, 800);
     assert!(moving > 0.1, "peak speed {moving} m/s\n{}", env.logs());
     stream.drain(|_| {}).unwrap();
     latest.poll_states(|_| {}).unwrap();
@@ -591,38 +483,16 @@ fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_
 
 #[test]
 fn control_requests_are_answered_with_success_or_a_reason() {
-    let mut env = Env::new("control");
-    let n = name("ctl");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
-    let _robot = env.robot(&n, UP);
-    let ok = env.chassis(&["control", "--name", &n, "off-road", "on"]);
-    assert!(
-        ok.status.success(),
-        "{}",
-        String::from_utf8_lossy(&ok.stderr)
-    );
-    assert_eq!(
-        String::from_utf8_lossy(&ok.stdout).trim(),
-        "ok: off-road mode on"
-    );
+    let (env, n, _robot) = Env::serving("control", ("ctl", "titan"), &["--no-safety-monitor"], UP);
+    let ok = env.chassis_ok(&["control", "--name", &n, "off-road", "on"]);
+    assert_eq!(ok.trim(), "ok: off-road mode on");
     let unsupported = env.chassis(&["control", "--name", &n, "lift", "--position", "50"]);
     assert_eq!(unsupported.status.code(), Some(1));
     assert!(
         String::from_utf8_lossy(&unsupported.stderr).contains("unsupported: titan has no lift")
     );
-    let zero = env.chassis(&["control", "--name", &n, "steering-zero"]);
-    assert!(
-        zero.status.success(),
-        "{}",
-        String::from_utf8_lossy(&zero.stderr)
-    );
-    assert_eq!(
-        String::from_utf8_lossy(&zero.stdout).trim(),
-        "ok: steering zero set"
-    );
+    let zero = env.chassis_ok(&["control", "--name", &n, "steering-zero"]);
+    assert_eq!(zero.trim(), "ok: steering zero set");
     let missing = env.chassis(&["status", "--name", "nobody"]);
     assert_eq!(missing.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&missing.stderr).contains("is chassisd running?"));
@@ -633,81 +503,28 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
     let mut env = Env::new("slcan");
     let n = name("sl");
     let link = env.dir.join("titan-slcan");
-    let link_arg = format!("slcan-pty:{}", link.display());
-    let sim = env.chassisd(
-        "sim",
-        &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg],
-    );
-    assert!(
-        wait_for(UP, || link.exists()).is_some(),
-        "no link\n{}",
-        env.logs()
-    );
-    let bus = format!("slcan:{}", link.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (sim, mut robot) = env.over_pty(("titan", &n), Line::Slcan, &link, &[], UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.3, 0.0);
-    let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    let peak = drive_for(&mut robot, &mut teleop, None, go, 2000);
     assert!(peak > 0.2, "peak {peak} over slcan\n{}", env.logs());
 
     // Hang-up: the simulated chassis (and its pty) vanish.
-    env.proc(sim).signal(Signal::SIGKILL);
-    let killed = Instant::now();
-    let lost = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) != 0
-    });
-    assert!(lost.is_some(), "the loss was not reported\n{}", env.logs());
-    let _ = std::fs::remove_file(&link);
-    let down_for = killed.elapsed();
-    let restarted = now_ns();
-    env.chassisd(
-        "sim2",
-        &["sim", "--robot", "titan", "--name", &n, "--bus", &link_arg],
-    );
-    // The state keeps the speed from before the hang-up: driving again is a speed the chassis
-    // reported after the adapter came back.
-    let back = drove_again_after(
-        &mut robot,
-        restarted,
-        Duration::from_secs(10),
-        || teleop.send(go).unwrap(),
-        |s| s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > 0.1,
-    )
-    .map(|(_, after)| after);
-    let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
-    let mut figures = Figures::faults();
-    figures.add(Figure {
+    let hang_up = HangUp {
         rank: 200,
-        fault: "slcan adapter hang-up (TITAN over an slcan pty)".into(),
-        injection: "SIGKILL of `chassisd sim --bus slcan-pty:…` mid-drive, restarted".into(),
-        behaviour: "the loss was reported (`bus_down` / `chassis_silent`), the port reopened \
-                    with backoff, and the robot drove again on the same client connection"
-            .into(),
-        figure: format!(
-            "loss reported {:.0} ms after the hang-up; driving again {:.0} ms after the \
-             adapter came back (the motion stamp of the first sample above 0.1 m/s; restarted \
-             {:.0} ms after the hang-up)",
-            ms(lost),
-            ms(back),
-            down_for.as_secs_f64() * 1e3
-        ),
-        value: ms(back),
-        pass: lost.is_some() && back.is_some(),
-        suite: "service".into(),
-        test: "titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up".into(),
-    });
+        fault: "slcan adapter hang-up (TITAN over an slcan pty)",
+        injection: "SIGKILL of `chassisd sim --bus slcan-pty:…` mid-drive, restarted",
+        end: "adapter",
+        above_mps: 0.1,
+        suite: "service",
+        test: "titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up",
+    };
+    let (figures, back) = hang_up.run(
+        (&mut env, &mut robot),
+        (sim, "titan", &n),
+        (Line::Slcan, &link),
+        || teleop.send(go).unwrap(),
+    );
     assert!(
         back.is_some(),
         "no motion after reconnecting\n{}",
@@ -726,17 +543,7 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
 fn a_robot_on_a_bus_of_the_wrong_kind_is_refused_at_start_with_the_kinds_it_accepts() {
     let mut env = Env::new("wrong-bus");
     let n = name("wb");
-    let index = env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            "serial:/dev/ttyUSB0",
-        ],
-    );
+    let index = env.serve("titan", &n, &["--bus", "serial:/dev/ttyUSB0"]);
     assert_eq!(env.proc(index).wait_exit(Duration::from_secs(5)), Some(2));
     let log = env.proc(index).log_text();
     assert!(
@@ -761,43 +568,13 @@ fn scout_mini_scout_and_bunker_without_a_protocol_flag_drive_a_v1_and_a_v2_chass
         let mut env = Env::new(&format!("detect-{robot}-{protocol}"));
         let n = name(&format!("d{}{protocol}", &robot[..2]));
         let link = env.dir.join("agilex-slcan");
-        let link_arg = format!("slcan-pty:{}", link.display());
-        env.chassisd(
-            "sim",
-            &[
-                "sim",
-                "--robot",
-                robot,
-                "--protocol",
-                protocol,
-                "--name",
-                &n,
-                "--bus",
-                &link_arg,
-            ],
-        );
-        assert!(
-            wait_for(UP, || link.exists()).is_some(),
-            "no link\n{}",
-            env.logs()
-        );
-        let bus = format!("slcan:{}", link.display());
-        env.chassisd(
-            "chassisd",
-            &[
-                "--robot",
-                robot,
-                "--name",
-                &n,
-                "--bus",
-                &bus,
-                "--no-safety-monitor",
-            ],
-        );
+        let extra = ["--protocol", protocol];
+        let (_, bus) = env.sim_on_pty(robot, &extra, &n, Line::Slcan, &link, UP);
+        env.serve(robot, &n, &["--bus", &bus, "--no-safety-monitor"]);
         let mut handle = env.robot(&n, UP);
         let mut teleop = source(&mut handle, "teleop");
         let go = VelocityRequest::twist(0.3, 0.0);
-        let peak = drive_for(&mut handle, &mut teleop, None, go, Duration::from_secs(2));
+        let peak = drive_for(&mut handle, &mut teleop, None, go, 2000);
         assert!(
             peak > 0.2,
             "{robot} {protocol}: peak {peak}\n{}",
@@ -845,22 +622,12 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
     let n = name("dsil");
     let pty = nix::pty::openpty(None, None).unwrap();
     let slave_path = nix::unistd::ttyname(pty.slave.as_fd()).unwrap();
-    let config = env.dir.join("bunker.toml");
-    std::fs::write(&config, "[profile]\ndetect_timeout_ms = 1000\n").unwrap();
+    let config = env.write("bunker.toml", "[profile]\ndetect_timeout_ms = 1000\n");
     let bus = format!("slcan:{}", slave_path.display());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "bunker",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
+    env.serve(
+        "bunker",
+        &n,
+        &["--bus", &bus, "--no-safety-monitor", "--config", &config],
     );
     let mut handle = env.robot(&n, UP);
     let silent = wait_for(Duration::from_secs(3), || {
@@ -934,16 +701,15 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
 /// after the command was zero once.
 #[test]
 fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_again() {
-    let mut env = Env::new("estop-switch");
-    let n = name("esw");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "hunter", "--name", &n, "--no-safety-monitor"],
+    let (env, _, mut robot) = Env::serving(
+        "estop-switch",
+        ("esw", "hunter"),
+        &["--no-safety-monitor"],
+        UP,
     );
-    let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");
     let go = VelocityRequest::twist(0.4, 0.0);
-    let peak = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    let peak = drive_for(&mut robot, &mut teleop, None, go, 2000);
     assert!(peak > 0.3, "peak {peak}\n{}", env.logs());
     let switch = |robot: &mut Robot, on: bool| {
         let answer = robot
@@ -959,24 +725,18 @@ fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_agai
         assert!(answer.is_ok(), "{}", answer.message());
     };
     switch(&mut robot, true);
-    drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(1));
+    drive_for(&mut robot, &mut teleop, None, go, 1000);
     let s = state(&mut robot);
     assert!(s.motion.linear_mps.abs() < 0.05, "{}", s.motion.linear_mps);
     assert_ne!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
     switch(&mut robot, false);
-    let held = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(1));
+    let held = drive_for(&mut robot, &mut teleop, None, go, 1000);
     let s = state(&mut robot);
     assert!(held < 0.05, "moved on its own after the release: {held}");
     assert_eq!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
     assert_ne!(s.command.clamp_flags & ClampFlags::CHASSIS_NOT_READY, 0);
     let stop = VelocityRequest::twist(0.0, 0.0);
-    drive_for(
-        &mut robot,
-        &mut teleop,
-        None,
-        stop,
-        Duration::from_millis(300),
-    );
-    let again = drive_for(&mut robot, &mut teleop, None, go, Duration::from_secs(2));
+    drive_for(&mut robot, &mut teleop, None, stop, 300);
+    let again = drive_for(&mut robot, &mut teleop, None, go, 2000);
     assert!(again > 0.3, "not driving again: {again}\n{}", env.logs());
 }

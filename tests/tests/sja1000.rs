@@ -47,27 +47,7 @@ fn set(iface: &str, bitrate: u32, restart_ms: u32) {
 }
 
 fn doctor(env: &Env, n: &str, bus: &str) -> (Option<i32>, String) {
-    let out = env.chassis(&[
-        "doctor", "--robot", "titan", "--name", n, "--bus", bus, "--listen", "1",
-    ]);
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    println!("{text}");
-    (out.status.code(), text)
-}
-
-fn line<'a>(report: &'a str, key: &str) -> (&'a str, &'a str) {
-    report
-        .lines()
-        .find_map(|l| {
-            let mut w = l.split_whitespace();
-            let v = w.next()?;
-            (w.next()? == key).then_some((v, l))
-        })
-        .unwrap_or_else(|| panic!("no '{key}' line in\n{report}"))
+    doctor_listening(env, "titan", n, bus)
 }
 
 #[test]
@@ -81,73 +61,48 @@ fn the_doctor_reads_bit_rate_restart_ms_and_controller_state_of_a_real_driver() 
     let (code, report) = doctor(&env, &n, "can:can0");
     assert_eq!(code, Some(1), "{report}");
     assert!(
-        line(&report, "interface").1.contains("driver kvaser_pci"),
+        doctor_line(&report, "interface")
+            .1
+            .contains("driver kvaser_pci"),
         "{report}"
     );
-    let (verdict, bitrate) = line(&report, "bitrate");
-    assert_eq!(verdict, "FAIL", "{report}");
-    assert!(
-        bitrate.contains("250000 bit/s; the AgileX TITAN speaks 500000"),
-        "{report}"
+    check_line(
+        &report,
+        "bitrate",
+        "FAIL",
+        "250000 bit/s; the AgileX TITAN speaks 500000",
     );
     assert!(
         report.contains("type can bitrate 500000 restart-ms 100"),
         "{report}"
     );
-    assert_eq!(line(&report, "restart-ms").0, "warn", "{report}");
-    let (verdict, controller) = line(&report, "controller");
-    assert_eq!(verdict, "ok", "{report}");
-    assert!(
-        controller.contains("error-active (error counters tx 0, rx 0)"),
-        "{report}"
+    assert_eq!(doctor_line(&report, "restart-ms").0, "warn", "{report}");
+    check_line(
+        &report,
+        "controller",
+        "ok",
+        "error-active (error counters tx 0, rx 0)",
     );
 
     // Both controllers right; the simulated TITAN on can1.
     set("can0", 500_000, 100);
     set("can1", 500_000, 100);
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "titan",
-            "--name",
-            &format!("{n}s"),
-            "--bus",
-            "can:can1",
-        ],
-    );
-    let mut report = String::new();
-    let ready = wait_for(UP, || {
-        let (code, text) = doctor(&env, &n, "can:can0");
-        report = text;
-        code == Some(0)
-    });
+    env.sim("sim", "titan", &[], &format!("{n}s"), "can:can1");
+    let (ready, report) = until_passes(UP, || doctor(&env, &n, "can:can0"));
     assert!(ready.is_some(), "{report}\n{}", env.logs());
     assert!(
-        line(&report, "bitrate")
+        doctor_line(&report, "bitrate")
             .1
             .contains("500000 bit/s, the AgileX TITAN's")
     );
-    assert_eq!(line(&report, "restart-ms").0, "ok", "{report}");
-    assert_eq!(line(&report, "robot").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "restart-ms").0, "ok", "{report}");
+    assert_eq!(doctor_line(&report, "robot").0, "ok", "{report}");
     // QEMU's controller reports no bus error; under load its receive FIFO overflows, which is
     // said as such, not as trouble on the bus.
     assert!(!report.contains("bus-errors"), "{report}");
 
     // chassisd on can0 reads the controller's state at open and drives the TITAN across.
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            "can:can0",
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("titan", &n, &["--bus", "can:can0", "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     let active = wait_for(UP, || {
         let s = state(&mut robot);

@@ -13,11 +13,6 @@ use nix::sys::signal::Signal;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 /// The socket systemd would own, bound by the test.
 fn notify_socket(env: &Env) -> (UnixDatagram, PathBuf) {
     let path = env.dir.join("notify.sock");
@@ -320,18 +315,7 @@ fn assert_drives(env: &Env, n: &str) {
 fn realtime_mode_runs_the_loop_at_sched_fifo_or_says_why_not() {
     let mut env = Env::new("rt-granted");
     let n = name("rtg");
-    let index = env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--no-safety-monitor",
-            "--realtime",
-            "10",
-        ],
-    );
+    let index = env.serve("titan", &n, &["--no-safety-monitor", "--realtime", "10"]);
     assert_drives(&env, &n);
     let pid = env.proc(index).child.id();
     let log = env.proc(index).log_text();

@@ -10,9 +10,17 @@ use chassis_tests::*;
 
 const UP: Duration = Duration::from_secs(10);
 
-fn name(tag: &str) -> String {
-    // Robot names are at most 16 characters.
-    format!("{tag}{}", std::process::id() % 100_000)
+/// `chassis-teleop --name N` in a tmux terminal, once it shows that it publishes nothing; returns
+/// the terminal and the path of teleop's log.
+fn teleop_in_tmux(env: &Env, n: &str) -> (Tmux, std::path::PathBuf) {
+    let log = env.dir.join("teleop.log");
+    let command = format!(
+        "{}; echo chassis-teleop exited $?; sleep 60",
+        teleop_command(env, n, &log)
+    );
+    let tmux = Tmux::start(&env.dir, "tmux", &command);
+    tmux.wait_for_text("idle — publishing nothing", UP);
+    (tmux, log)
 }
 
 #[test]
@@ -21,23 +29,13 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
         eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
         return;
     }
-    let mut env = Env::new("teleop-tmux");
-    let n = name("tel");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
+    let (env, n, mut robot) = Env::serving(
+        "teleop-tmux",
+        ("tel", "titan"),
+        &["--no-safety-monitor"],
+        UP,
     );
-    let mut robot = env.robot(&n, UP);
-    let log = env.dir.join("teleop.log");
-    let command = format!(
-        "env {}={} RUST_LOG=info {} --name {n} 2>{}; echo chassis-teleop exited $?; sleep 60",
-        IPC_PREFIX_ENV,
-        quote(&env.prefix),
-        quote(&bin("chassis-teleop").to_string_lossy()),
-        quote(&log.to_string_lossy()),
-    );
-    let tmux = Tmux::start(&env.dir, "tmux", &command);
-    tmux.wait_for_text("idle — publishing nothing", UP);
+    let (tmux, log) = teleop_in_tmux(&env, &n);
 
     // Hold `w`: a terminal's auto-repeat, as tmux delivers it, every 30 ms for 1.5 s.
     let start = Instant::now();
@@ -73,9 +71,7 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
         m.output.linear_x_mps == 0.0 && m.requested.linear_x_mps == 0.0
     });
     let zero_after = last_key.elapsed();
-    let stopped = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).motion.linear_mps.abs() < 0.01
-    });
+    let stopped = comes_to_rest(&mut robot, Duration::from_secs(3), 0.01);
     let stopped_after = last_key.elapsed();
     eprintln!(
         "peak {peak:.3} m/s while w was held; after the last key: commanded zero in \
@@ -139,44 +135,33 @@ fn teleop_in_a_terminal_drives_while_w_is_held_stops_after_and_latches_the_estop
     );
 }
 
-#[test]
-fn top_once_prints_rates_per_can_id_and_the_active_source() {
-    let mut env = Env::new("top-once");
-    let n = name("top");
-    env.chassisd(
-        "chassisd",
-        &["--robot", "titan", "--name", &n, "--no-safety-monitor"],
-    );
-    let mut robot = env.robot(&n, UP);
-    env.spawn(
+/// `chassis top --once` while `chassis pub` drives chassis/`n` at 0.2 m/s as teleop (once
+/// teleop won the mux): its output.
+fn top_once_while_teleop_drives(env: &mut Env, robot: &mut Robot, n: &str) -> String {
+    env.publish(
         "pub",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--source",
-            "teleop",
-            "--vx",
-            "0.2",
-            "--duration",
-            "6",
-            "--name",
-            &n,
-        ],
+        n,
+        &["--source", "teleop", "--vx", "0.2", "--duration", "6"],
     );
     let driving = wait_for(UP, || {
-        mux(&mut robot)
-            .active()
-            .is_some_and(|s| s.name() == "teleop")
+        mux(robot).active().is_some_and(|s| s.name() == "teleop")
     });
     assert!(driving.is_some(), "teleop never won\n{}", env.logs());
-    let out = env.chassis(&["top", "--once", "--name", &n]);
-    let text = String::from_utf8_lossy(&out.stdout);
+    let out = env.chassis(&["top", "--once", "--name", n]);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
         "{text}\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    text
+}
+
+#[test]
+fn top_once_prints_rates_per_can_id_and_the_active_source() {
+    let (mut env, n, mut robot) =
+        Env::serving("top-once", ("top", "titan"), &["--no-safety-monitor"], UP);
+    let text = top_once_while_teleop_drives(&mut env, &mut robot, &n);
     assert!(text.contains("active teleop (priority 100"), "{text}");
     // TITAN's system status arrives at 50 Hz, its motion command goes out at 50 Hz.
     let rate = |prefix: &str| -> f64 {
@@ -210,31 +195,10 @@ fn teleop_in_a_terminal_steps_no_faster_than_the_limit_chassisd_describes() {
     }
     let mut env = Env::new("teleop-limit");
     let n = name("tlim");
-    let config = env.dir.join("limit.toml");
-    std::fs::write(&config, "[profile]\nmax_linear_mps = 0.3\n").unwrap();
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
-    );
+    let config = env.write("limit.toml", "[profile]\nmax_linear_mps = 0.3\n");
+    env.serve("titan", &n, &["--no-safety-monitor", "--config", &config]);
     let mut robot = env.robot(&n, UP);
-    let log = env.dir.join("teleop.log");
-    let command = format!(
-        "env {}={} RUST_LOG=info {} --name {n} 2>{}; echo chassis-teleop exited $?; sleep 60",
-        IPC_PREFIX_ENV,
-        quote(&env.prefix),
-        quote(&bin("chassis-teleop").to_string_lossy()),
-        quote(&log.to_string_lossy()),
-    );
-    let tmux = Tmux::start(&env.dir, "tmux", &command);
-    tmux.wait_for_text("idle — publishing nothing", UP);
+    let (tmux, _) = teleop_in_tmux(&env, &n);
     for _ in 0..12 {
         tmux.send("+");
     }
@@ -279,50 +243,10 @@ fn teleop_in_a_terminal_steps_no_faster_than_the_limit_chassisd_describes() {
 fn top_and_status_show_the_robot_as_described_and_name_every_frame() {
     let mut env = Env::new("top-hunter");
     let n = name("toph");
-    let config = env.dir.join("hunter.toml");
-    std::fs::write(&config, "[profile]\nmax_linear_mps = 0.4\n").unwrap();
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "hunter",
-            "--name",
-            &n,
-            "--no-safety-monitor",
-            "--config",
-            config.to_str().unwrap(),
-        ],
-    );
+    let config = env.write("hunter.toml", "[profile]\nmax_linear_mps = 0.4\n");
+    env.serve("hunter", &n, &["--no-safety-monitor", "--config", &config]);
     let mut robot = env.robot(&n, UP);
-    env.spawn(
-        "pub",
-        "chassis",
-        &[
-            "pub",
-            "velocity",
-            "--source",
-            "teleop",
-            "--vx",
-            "0.2",
-            "--duration",
-            "6",
-            "--name",
-            &n,
-        ],
-    );
-    let driving = wait_for(UP, || {
-        mux(&mut robot)
-            .active()
-            .is_some_and(|s| s.name() == "teleop")
-    });
-    assert!(driving.is_some(), "teleop never won\n{}", env.logs());
-    let out = env.chassis(&["top", "--once", "--name", &n]);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = top_once_while_teleop_drives(&mut env, &mut robot, &n);
     assert!(text.contains("AgileX HUNTER 2.0 (hunter)"), "{text}");
     assert!(text.contains("limits    forward 0.40"), "{text}");
     assert!(text.contains("protocol v2"), "{text}");

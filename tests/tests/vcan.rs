@@ -25,10 +25,6 @@ fn iface() -> String {
     std::env::var("CHASSIS_VCAN").unwrap_or_else(|_| "vcan0".into())
 }
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
 fn figure(text: impl AsRef<str>) {
     println!("figure: {}", text.as_ref());
 }
@@ -92,12 +88,6 @@ impl Drop for Tool {
     }
 }
 
-fn source(robot: &mut Robot, name: &str) -> Source {
-    robot
-        .source(name)
-        .unwrap_or_else(|e| panic!("source {name}: {e}"))
-}
-
 /// Sends `request` every 20 ms until `done(state)` holds or `timeout` passes; returns the time
 /// it took.
 fn drive_until(
@@ -122,23 +112,21 @@ fn drive_until(
 /// `chassisd sim --robot titan` and `chassisd --robot titan`, both on the vcan interface.
 fn titan_on_vcan(env: &mut Env, n: &str) -> (usize, usize) {
     let bus = format!("can:{}", iface());
-    let sim = env.chassisd(
-        "sim",
-        &["sim", "--robot", "titan", "--name", n, "--bus", &bus],
-    );
-    let service = env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    let sim = env.sim("sim", "titan", &[], n, &bus);
+    let service = env.serve("titan", n, &["--bus", &bus, "--no-safety-monitor"]);
     (sim, service)
+}
+
+/// A test's environment (`test` names it) with `chassisd --robot titan` alone on the vcan
+/// interface as chassis/NAME (`tag` and the pid): the environment, NAME and a connection.
+fn service_on_vcan(test: &str, tag: &str) -> (Env, String, Robot) {
+    let bus = format!("can:{}", iface());
+    Env::serving(
+        test,
+        (tag, "titan"),
+        &["--bus", &bus, "--no-safety-monitor"],
+        UP,
+    )
 }
 
 fn in_command_mode(s: &ChassisState) -> bool {
@@ -222,22 +210,7 @@ fn chassisd_drives_the_simulated_titan_across_vcan_end_to_end() {
 #[test]
 #[ignore = "needs kernel CAN (vcan) and root: scripts/vm-tests runs it in a VM"]
 fn frames_from_cansend_update_the_state_of_a_service_without_a_chassis() {
-    let mut env = Env::new("vcan-cansend");
-    let n = name("vs");
-    let bus = format!("can:{}", iface());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (env, _, mut robot) = service_on_vcan("vcan-cansend", "vs");
     // No chassis on the bus: the service says so.
     let silent = wait_for(Duration::from_secs(5), || {
         state(&mut robot).link_flags & LinkFlags::CHASSIS_SILENT != 0
@@ -322,18 +295,7 @@ fn candump_of_what_the_service_sends_decodes_with_chassis_decode() {
     assert!(listening.is_some(), "candump never listened");
 
     let bus = format!("can:{iface}");
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
+    env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
     let mut robot = env.robot(&n, UP);
     // A status frame reporting standby: the service asks for command mode again.
     pause(Duration::from_millis(500));
@@ -348,12 +310,7 @@ fn candump_of_what_the_service_sends_decodes_with_chassis_decode() {
         .stdin(File::open(&log).unwrap())
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&decode.stdout);
-    assert!(
-        decode.status.success(),
-        "chassis decode failed: {}\n{text}",
-        String::from_utf8_lossy(&decode.stderr)
-    );
+    let stdout = env.succeeded(&format!("chassis decode failed on\n{text}"), &decode);
     let heartbeats = stdout
         .lines()
         .filter(|l| {
@@ -503,10 +460,7 @@ fn the_interface_going_down_and_up_mid_drive_is_detected_and_survived() {
     let sim_ended = env.proc(sim).wait_exit(Duration::from_secs(2)).is_some();
     if sim_ended {
         let bus = format!("can:{iface}");
-        env.chassisd(
-            "sim2",
-            &["sim", "--robot", "titan", "--name", &n, "--bus", &bus],
-        );
+        env.sim("sim2", "titan", &[], &n, &bus);
     }
     let reopened = wait_for(Duration::from_secs(10), || {
         state(&mut robot).link_flags & LinkFlags::BUS_DOWN == 0
@@ -564,28 +518,11 @@ fn send_raw(can_id: u32, data: [u8; 8]) {
 const CAN_ERR: u32 = 0x2000_0000;
 
 fn doctor(env: &Env, n: &str, robot: &str) -> (Option<i32>, String) {
-    let bus = format!("can:{}", iface());
-    let out = env.chassis(&[
-        "doctor", "--robot", robot, "--name", n, "--bus", &bus, "--listen", "1",
-    ]);
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    println!("{text}");
-    (out.status.code(), text)
+    doctor_listening(env, robot, n, &format!("can:{}", iface()))
 }
 
 fn verdict_of<'a>(report: &'a str, key: &str) -> &'a str {
-    report
-        .lines()
-        .find_map(|l| {
-            let mut w = l.split_whitespace();
-            let v = w.next()?;
-            (w.next()? == key).then_some(v)
-        })
-        .unwrap_or_else(|| panic!("no '{key}' line in\n{report}"))
+    doctor_line(report, key).0
 }
 
 #[test]
@@ -615,24 +552,8 @@ fn the_doctor_on_socketcan_down_silent_and_with_the_simulated_titan() {
 
     // The simulated TITAN on the bus: heard, a TITAN's frames, in standby until chassisd asks.
     let bus = format!("can:{iface}");
-    env.chassisd(
-        "sim",
-        &[
-            "sim",
-            "--robot",
-            "titan",
-            "--name",
-            &name("vy"),
-            "--bus",
-            &bus,
-        ],
-    );
-    let mut report = String::new();
-    let heard = wait_for(UP, || {
-        let (code, text) = doctor(&env, &n, "titan");
-        report = text;
-        code == Some(0)
-    });
+    env.sim("sim", "titan", &[], &name("vy"), &bus);
+    let (heard, report) = until_passes(UP, || doctor(&env, &n, "titan"));
     assert!(heard.is_some(), "{report}\n{}", env.logs());
     assert_eq!(verdict_of(&report, "frames"), "ok", "{report}");
     assert_eq!(verdict_of(&report, "robot"), "ok", "{report}");
@@ -647,22 +568,7 @@ fn the_doctor_on_socketcan_down_silent_and_with_the_simulated_titan() {
 #[test]
 #[ignore = "needs kernel CAN (vcan) and root: scripts/vm-tests runs it in a VM"]
 fn error_frames_on_the_socket_are_published_as_bus_off_and_restart_and_the_doctor_fails() {
-    let mut env = Env::new("vcan-busoff");
-    let n = name("vb");
-    let bus = format!("can:{}", iface());
-    env.chassisd(
-        "chassisd",
-        &[
-            "--robot",
-            "titan",
-            "--name",
-            &n,
-            "--bus",
-            &bus,
-            "--no-safety-monitor",
-        ],
-    );
-    let mut robot = env.robot(&n, UP);
+    let (env, n, mut robot) = service_on_vcan("vcan-busoff", "vb");
 
     // can_bus_off(): CAN_ERR_BUSOFF, no data.
     send_raw(CAN_ERR | 0x040, [0; 8]);

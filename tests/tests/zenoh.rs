@@ -5,12 +5,7 @@
 //!
 //! Needs root (`ip netns`, veth pairs) and iproute2; fails loudly without them. Each test makes
 //! its own namespaces (unique names) and removes them, whatever happens.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::disallowed_methods
-)]
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -27,134 +22,68 @@ const PORT: u16 = 7447;
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
 
-fn name(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
-}
-
-/// Two network namespaces joined by a veth pair; removed on drop.
-struct Link {
-    robot_ns: String,
-    operator_ns: String,
-    robot_if: String,
-}
-
-impl Link {
-    fn new() -> Self {
-        let id = format!(
-            "{}{}",
-            std::process::id() % 100_000,
-            NEXT.fetch_add(1, Ordering::Relaxed)
-        );
-        let link = Link {
-            robot_ns: format!("czr{id}"),
-            operator_ns: format!("czo{id}"),
-            robot_if: format!("czr{id}"),
-        };
-        let operator_if = format!("czo{id}");
-        ip(&["netns", "add", &link.robot_ns]);
-        ip(&["netns", "add", &link.operator_ns]);
-        ip(&[
-            "link",
-            "add",
-            &link.robot_if,
-            "type",
-            "veth",
-            "peer",
-            "name",
-            &operator_if,
-        ]);
-        ip(&["link", "set", &link.robot_if, "netns", &link.robot_ns]);
-        ip(&["link", "set", &operator_if, "netns", &link.operator_ns]);
-        for (ns, dev, addr) in [
-            (&link.robot_ns, &link.robot_if, ROBOT_ADDR),
-            (&link.operator_ns, &operator_if, OPERATOR_ADDR),
-        ] {
-            ip(&["-n", ns, "addr", "add", &format!("{addr}/24"), "dev", dev]);
-            ip(&["-n", ns, "link", "set", dev, "up"]);
-            ip(&["-n", ns, "link", "set", "lo", "up"]);
-        }
-        link
-    }
-
-    /// Takes the robot's end of the link down (`up = false`) or up again.
-    fn set(&self, up: bool) {
-        ip(&[
-            "-n",
-            &self.robot_ns,
-            "link",
-            "set",
-            &self.robot_if,
-            if up { "up" } else { "down" },
-        ]);
-    }
-}
-
-impl Drop for Link {
-    fn drop(&mut self) {
-        // Removing a namespace removes its end of the veth pair, and so the pair.
-        for ns in [&self.robot_ns, &self.operator_ns] {
-            let _ = Command::new("ip").args(["netns", "del", ns]).status();
-        }
-    }
-}
-
-/// Starts `chassis-zenoh args…` inside `ns`, under `prefix`.
-fn zenoh_in(env: &mut Env, label: &str, ns: &str, prefix: &str, args: &[&str]) -> usize {
-    zenoh_logging(env, label, ns, prefix, args, "info,zenoh=warn")
-}
-
-/// [`zenoh_in`] with the log filter `log`.
-fn zenoh_logging(
-    env: &mut Env,
-    label: &str,
-    ns: &str,
-    prefix: &str,
-    args: &[&str],
-    log: &str,
-) -> usize {
-    let bin = bin("chassis-zenoh");
-    let mut all = vec!["netns", "exec", ns, bin.to_str().unwrap()];
-    all.extend_from_slice(args);
-    env.spawn_program(
-        label,
-        Path::new("ip"),
-        &all,
-        &[(IPC_PREFIX_ENV, prefix), ("RUST_LOG", log)],
-    )
+/// The robot's computer and the operator's, in namespaces unique to the test.
+fn link() -> VethPair {
+    let id = format!(
+        "{}{}",
+        std::process::id() % 100_000,
+        NEXT.fetch_add(1, Ordering::Relaxed)
+    );
+    let robot = (format!("czr{id}"), ROBOT_ADDR);
+    let operator = (format!("czo{id}"), OPERATOR_ADDR);
+    VethPair::new((&robot.0, robot.1), (&operator.0, operator.1), false)
 }
 
 fn endpoint(proto: &str) -> String {
     format!("{proto}/{ROBOT_ADDR}:{PORT}")
 }
 
+/// A test (`test` names its environment) between two namespaces, with chassisd and the robot
+/// side running for robot NAME (`tag` and the pid): the namespaces, the environment, NAME and
+/// the connection to chassisd.
+fn robot_over_link(test: &str, tag: &str) -> (VethPair, Env, String, Robot) {
+    let link = link();
+    let mut env = Env::new(test);
+    let n = name(tag);
+    let robot = robot_side(&mut env, &link, &n);
+    (link, env, n, robot)
+}
+
 /// chassisd (with its required safety monitor running) and the robot side, plain TCP.
-fn robot_side(env: &mut Env, link: &Link, n: &str) -> Robot {
-    env.chassisd("chassisd", &["--robot", "titan", "--name", n]);
+fn robot_side(env: &mut Env, link: &VethPair, n: &str) -> Robot {
+    robot_side_with(env, link, n, "tcp", &["--insecure"])
+}
+
+/// chassisd (with its required safety monitor running) and the robot side listening on
+/// `scheme` (`tcp`, `tls`), with `extra` arguments.
+fn robot_side_with(env: &mut Env, link: &VethPair, n: &str, scheme: &str, extra: &[&str]) -> Robot {
+    env.serve("titan", n, &[]);
     env.spawn("safety", "chassis-safety", &["--name", n]);
     let robot = env.robot(n, UP);
     let prefix = env.prefix.clone();
-    let listen = endpoint("tcp");
-    zenoh_in(
-        env,
-        "zenoh-robot",
-        &link.robot_ns,
-        &prefix,
-        &["--name", n, "--listen", &listen, "--insecure"],
-    );
+    let listen = endpoint(scheme);
+    let mut args = vec!["--name", n, "--listen", &listen];
+    args.extend_from_slice(extra);
+    zenoh_in(env, "zenoh-robot", &link.robot_ns, &prefix, &args);
     robot
 }
 
 /// The operator side's mirror and a connection to it.
-fn mirror(env: &mut Env, link: &Link, n: &str, extra: &[&str]) -> Robot {
-    let prefix = operator_prefix(env);
+fn mirror(env: &mut Env, link: &VethPair, n: &str, extra: &[&str]) -> Robot {
     let connect = endpoint(if extra.contains(&"--certs") {
         "tls"
     } else {
         "tcp"
     });
-    let mut args = vec!["--name", n, "--connect", &connect, "--mirror"];
+    mirror_at(env, link, n, &connect, extra)
+}
+
+/// The operator side's mirror connecting to `connect`, and a connection to it.
+fn mirror_at(env: &mut Env, link: &VethPair, n: &str, connect: &str, extra: &[&str]) -> Robot {
+    let prefix = operator_prefix(env);
+    let mut args = vec!["--name", n, "--connect", connect, "--mirror"];
     args.extend_from_slice(extra);
-    zenoh_in(env, "zenoh-operator", &link.operator_ns, &prefix, &args);
+    zenoh_in(env, "zenoh-operator", &link.peer_ns, &prefix, &args);
     operator_robot(env, n, &prefix, UP)
 }
 
@@ -190,10 +119,7 @@ fn drive_until_moving(
 
 #[test]
 fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeout() {
-    let link = Link::new();
-    let mut env = Env::new("zenoh-drive");
-    let n = name("zdr");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-drive", "zdr");
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
     let mut remote = remote_source(&env, &mut operator, UP);
 
@@ -296,9 +222,7 @@ fn an_operator_drives_over_zenoh_and_a_cut_link_stops_the_robot_within_the_timeo
         !safety_stale,
         "the safety monitor went stale during the cut"
     );
-    let halted = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).motion.linear_mps.abs() < 0.02
-    });
+    let halted = comes_to_rest(&mut robot, Duration::from_secs(3), 0.02);
     assert!(halted.is_some(), "the robot did not come to a halt");
 
     // Link back: the same processes drive again.
@@ -334,7 +258,7 @@ fn gen_certs(env: &Env, dir: &Path) {
 
 #[test]
 fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused() {
-    let link = Link::new();
+    let link = link();
     let mut env = Env::new("zenoh-tls");
     let n = name("ztl");
     let certs = env.dir.join("certs");
@@ -352,31 +276,15 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
     assert!(!out.status.success(), "{stderr}");
     assert!(stderr.contains("refusing plain TCP"), "{stderr}");
 
-    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
-    env.spawn("safety", "chassis-safety", &["--name", &n]);
-    let mut robot = env.robot(&n, UP);
-    let prefix = env.prefix.clone();
+    let certs_arg = ["--certs", certs.to_str().unwrap()];
+    let mut robot = robot_side_with(&mut env, &link, &n, "tls", &certs_arg);
     let listen = endpoint("tls");
-    zenoh_in(
-        &mut env,
-        "zenoh-robot",
-        &link.robot_ns,
-        &prefix,
-        &[
-            "--name",
-            &n,
-            "--listen",
-            &listen,
-            "--certs",
-            certs.to_str().unwrap(),
-        ],
-    );
     // A mirror holding certificates of another authority, under a prefix of its own.
     let stranger_prefix = format!("{}st_", env.prefix);
     zenoh_logging(
         &mut env,
         "zenoh-stranger",
-        &link.operator_ns,
+        &link.peer_ns,
         &stranger_prefix,
         &[
             "--name",
@@ -389,7 +297,7 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
         ],
         "info,zenoh=debug",
     );
-    let mut operator = mirror(&mut env, &link, &n, &["--certs", certs.to_str().unwrap()]);
+    let mut operator = mirror(&mut env, &link, &n, &certs_arg);
     let mut remote = remote_source(&env, &mut operator, UP);
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("the robot never moved under TLS\n{}", env.logs()));
@@ -443,21 +351,13 @@ fn under_tls_the_operator_with_its_certificate_drives_and_a_stranger_is_refused(
 /// The Python with `eclipse-zenoh` and the `chassis` package (scripts/zenoh-tests prepares
 /// target/python-venv), or `CHASSIS_ZENOH_PYTHON`.
 fn python() -> PathBuf {
-    let python = std::env::var_os("CHASSIS_ZENOH_PYTHON").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/python-venv/bin/python"),
-        PathBuf::from,
-    );
-    let ready = Command::new(&python)
-        .args(["-c", "import zenoh, chassis"])
-        .status()
-        .is_ok_and(|s| s.success());
-    assert!(
-        ready,
-        "{} cannot import zenoh and chassis: run scripts/zenoh-tests --prepare (it installs \
-         eclipse-zenoh and clients/python into target/python-venv)",
-        python.display()
-    );
-    python
+    venv_python(
+        "CHASSIS_ZENOH_PYTHON",
+        "python-venv",
+        ("zenoh, chassis", "zenoh and chassis"),
+        "run scripts/zenoh-tests --prepare (it installs eclipse-zenoh and clients/python into \
+         target/python-venv)",
+    )
 }
 
 /// Runs tests/zenoh/read_state.py in the operator's namespace (it publishes on `cmd/safety`
@@ -465,7 +365,7 @@ fn python() -> PathBuf {
 fn read_state(
     python: &Path,
     env: &Env,
-    link: &Link,
+    link: &VethPair,
     robot: &mut Robot,
     connect: &str,
     extra: &[&str],
@@ -478,7 +378,7 @@ fn read_state(
         .to_string();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("zenoh/read_state.py");
     let out = Command::new("ip")
-        .args(["netns", "exec", &link.operator_ns])
+        .args(["netns", "exec", &link.peer_ns])
         .arg(python)
         .arg(&script)
         .args([
@@ -496,23 +396,13 @@ fn read_state(
         .args(extra)
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "read_state.py failed: {}\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
-    );
-    stdout
+    env.succeeded("read_state.py failed", &out)
 }
 
 #[test]
 fn an_independent_python_zenoh_client_reads_the_state_and_cannot_drive_safety() {
     let python = python();
-    let link = Link::new();
-    let mut env = Env::new("zenoh-python");
-    let n = name("zpy");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, env, n, mut robot) = robot_over_link("zenoh-python", "zpy");
     let stdout = read_state(&python, &env, &link, &mut robot, &endpoint("tcp"), &[]);
     let summary: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     eprintln!("Python eclipse-zenoh reader: {summary}");
@@ -540,14 +430,14 @@ const LOSS_PERCENT: u32 = 5;
 const RELAY_PORT: u16 = 7448;
 
 impl Impairment {
-    fn apply(link: &Link) -> Self {
+    fn apply(link: &VethPair) -> Self {
         let delay = format!("{}ms", DELAY.as_millis());
         let loss = format!("{LOSS_PERCENT}%");
-        let operator_if = link.robot_if.replacen("czr", "czo", 1);
+        let operator_if = &link.peer_if;
         let mut netem = true;
         for (ns, dev) in [
             (&link.robot_ns, &link.robot_if),
-            (&link.operator_ns, &operator_if),
+            (&link.peer_ns, operator_if),
         ] {
             let out = run_in(
                 ns,
@@ -572,28 +462,24 @@ impl Impairment {
             "this kernel has no netem qdisc: {LOSS_PERCENT} % loss from nftables, {delay} each way \
              from a relay in the operator's namespace"
         );
-        let ns = &link.operator_ns;
-        let nft = |rule: &str| {
-            let out = run_in(ns, "nft", &[rule]);
-            assert!(
-                out.status.success(),
-                "nft {rule}: {} (install nftables)",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        };
-        nft("add table inet impair");
+        let ns = &link.peer_ns;
+        nft(ns, "add table inet impair");
         for hook in ["input", "output"] {
-            nft(&format!(
-                "add chain inet impair {hook} {{ type filter hook {hook} priority 0; }}"
-            ));
+            nft(
+                ns,
+                &format!("add chain inet impair {hook} {{ type filter hook {hook} priority 0; }}"),
+            );
             let dir = if hook == "input" {
                 "iifname"
             } else {
                 "oifname"
             };
-            nft(&format!(
-                "add rule inet impair {hook} {dir} \"{operator_if}\" numgen random mod 100 < {LOSS_PERCENT} drop"
-            ));
+            nft(
+                ns,
+                &format!(
+                    "add rule inet impair {hook} {dir} \"{operator_if}\" numgen random mod 100 < {LOSS_PERCENT} drop"
+                ),
+            );
         }
         Impairment::Emulated {
             _relay: DelayRelay::start(ns, DELAY),
@@ -651,7 +537,7 @@ impl DelayRelay {
         });
         ready_rx
             .recv_timeout(Duration::from_secs(5))
-            .expect("the relay did not start");
+            .unwrap_or_else(|e| panic!("the relay did not start: {e}"));
         DelayRelay { stop }
     }
 }
@@ -692,28 +578,10 @@ impl Drop for DelayRelay {
 
 #[test]
 fn a_slow_lossy_link_still_drives() {
-    let link = Link::new();
-    let mut env = Env::new("zenoh-lossy");
-    let n = name("zls");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-lossy", "zls");
     let impairment = Impairment::apply(&link);
-    let prefix = operator_prefix(&env);
     let connect = impairment.endpoint();
-    zenoh_in(
-        &mut env,
-        "zenoh-operator",
-        &link.operator_ns,
-        &prefix,
-        &[
-            "--name",
-            &n,
-            "--connect",
-            &connect,
-            "--mirror",
-            "--insecure",
-        ],
-    );
-    let mut operator = operator_robot(&env, &n, &prefix, UP);
+    let mut operator = mirror_at(&mut env, &link, &n, &connect, &["--insecure"]);
     let mut remote = remote_source(&env, &mut operator, UP);
     let first = drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
         .unwrap_or_else(|| panic!("the robot never moved over the slow link\n{}", env.logs()));
@@ -772,10 +640,7 @@ fn chassis_teleop_on_the_operators_computer_drives_the_robot() {
         eprintln!("SKIPPED: tmux is not installed; the terminal test of chassis-teleop needs it");
         return;
     }
-    let link = Link::new();
-    let mut env = Env::new("zenoh-teleop");
-    let n = name("ztp");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-teleop", "ztp");
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
     // The mirror offers the remote source once it has the robot's mux.
     drop(remote_source(&env, &mut operator, UP));
@@ -834,10 +699,7 @@ fn peak_while_asking(
 
 #[test]
 fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_starts_no_motion() {
-    let link = Link::new();
-    let mut env = Env::new("zenoh-release");
-    let n = name("zrl");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-release", "zrl");
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
 
     // What the robot is, read on the operator's computer as beside chassisd: the same bytes.
@@ -863,12 +725,9 @@ fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_st
         .args(["-c", &script])
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "the Python client read no description through the mirror: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.logs()
+    let stdout = env.succeeded(
+        "the Python client read no description through the mirror",
+        &out,
     );
     let py: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     assert_eq!(
@@ -957,38 +816,29 @@ fn the_operator_reads_the_robots_description_and_a_release_through_the_mirror_st
 /// Cuts the link with nftables (every packet dropped both ways on the operator's end) or
 /// restores it. Unlike taking the veth down, the TCP connection outlives the cut, so what the
 /// operator side wrote meanwhile is retransmitted when the link returns.
-fn nft_cut(link: &Link, cut: bool) {
-    let ns = &link.operator_ns;
-    let operator_if = link.robot_if.replacen("czr", "czo", 1);
-    let nft = |rule: &str| {
-        let out = run_in(ns, "nft", &[rule]);
-        assert!(
-            out.status.success(),
-            "nft {rule}: {} (install nftables)",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
+fn nft_cut(link: &VethPair, cut: bool) {
+    let ns = &link.peer_ns;
+    let operator_if = &link.peer_if;
     if !cut {
-        nft("delete table inet cut");
+        nft(ns, "delete table inet cut");
         return;
     }
-    nft("add table inet cut");
+    nft(ns, "add table inet cut");
     for (hook, dir) in [("input", "iifname"), ("output", "oifname")] {
-        nft(&format!(
-            "add chain inet cut {hook} {{ type filter hook {hook} priority 0; }}"
-        ));
-        nft(&format!(
-            "add rule inet cut {hook} {dir} \"{operator_if}\" drop"
-        ));
+        nft(
+            ns,
+            &format!("add chain inet cut {hook} {{ type filter hook {hook} priority 0; }}"),
+        );
+        nft(
+            ns,
+            &format!("add rule inet cut {hook} {dir} \"{operator_if}\" drop"),
+        );
     }
 }
 
 #[test]
 fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
-    let link = Link::new();
-    let mut env = Env::new("zenoh-stale");
-    let n = name("zst");
-    let mut robot = robot_side(&mut env, &link, &n);
+    let (link, mut env, n, mut robot) = robot_over_link("zenoh-stale", "zst");
     let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
     let mut remote = remote_source(&env, &mut operator, UP);
     drive_until_moving(&mut robot, &mut remote, 0.4, 0.2, UP)
@@ -1004,9 +854,7 @@ fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
         asked += 1;
         pause(Duration::from_millis(20));
     }
-    let halted = wait_for(Duration::from_secs(3), || {
-        state(&mut robot).motion.linear_mps.abs() < 0.001
-    });
+    let halted = comes_to_rest(&mut robot, Duration::from_secs(3), 0.001);
     assert!(
         halted.is_some(),
         "the robot kept moving through the outage\n{}",
