@@ -296,18 +296,23 @@ fn locks_text(m: &MuxStatus) -> String {
             if l.held == 0 {
                 format!("{} free", l.name())
             } else {
-                let holder = match l.holder {
-                    LockStatus::HOLDER_OPERATOR => "operator".to_string(),
-                    i => m
-                        .sources()
-                        .get(usize::from(i))
-                        .map_or("?".to_string(), |s| s.name().to_string()),
-                };
-                format!("{} HELD by {holder}", l.name())
+                format!("{} HELD by {}", l.name(), lock_holder(m, l))
             }
         })
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// Who holds `lock`: `operator` (a control request), the source's name, or `?` for an index
+/// `m` has no source at.
+pub(crate) fn lock_holder(m: &MuxStatus, lock: &LockStatus) -> String {
+    match lock.holder {
+        LockStatus::HOLDER_OPERATOR => "operator".to_string(),
+        i => m
+            .sources()
+            .get(usize::from(i))
+            .map_or("?".to_string(), |s| s.name().to_string()),
+    }
 }
 
 fn direction(frame: &BusFrame) -> &'static str {
