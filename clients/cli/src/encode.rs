@@ -50,3 +50,33 @@ pub fn spaced_hex(bytes: &[u8]) -> String {
         .collect::<Vec<_>>()
         .join(" ")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassis_protocols::{RobotKind, Turn};
+
+    /// `chassis encode --robot KIND velocity --vx 0.3 --wz 0`.
+    fn forward(kind: RobotKind) -> Vec<String> {
+        let profile = Profile::from_table(kind, None, &toml::Table::new()).unwrap();
+        let command = Command::Velocity {
+            linear_x_mps: 0.3,
+            linear_y_mps: 0.0,
+            turn: Turn::YawRate(0.0),
+        };
+        let (lines, clamp_flags) = encode(&profile, &command).unwrap();
+        assert_eq!(clamp_flags, 0);
+        lines
+    }
+
+    #[test]
+    fn a_forward_command_becomes_each_robots_motion_frame() {
+        assert_eq!(forward(RobotKind::Titan), ["111#012C000000000000"]);
+        // SCOUT MINI (v1): the frame counter (b6) starts at 0.
+        assert_eq!(forward(RobotKind::ScoutMini), ["130#0100060000000040"]);
+        assert_eq!(
+            forward(RobotKind::Xbot),
+            ["AA 55 0D 03 9A 99 99 3E 00 00 00 00 00 00 00 00 AA"]
+        );
+    }
+}
