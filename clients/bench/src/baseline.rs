@@ -313,6 +313,26 @@ impl Endpoint for IceoryxEndpoint {
     }
 }
 
+/// The ping `recv` reads into a buffer, stamped on arrival; `None` when the socket's read timeout
+/// passes first or the datagram is not a ping.
+fn datagram(
+    recv: impl FnOnce(&mut [u8]) -> std::io::Result<usize>,
+) -> anyhow::Result<Option<(Ping, u64)>> {
+    let mut buf = vec![0u8; 2048];
+    match recv(&mut buf) {
+        Ok(n) => Ok(Ping::from_bytes(&buf[..n]).map(|p| (p, now_ns()))),
+        Err(e)
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+            ) =>
+        {
+            Ok(None)
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
 struct UdsEndpoint {
     socket: UnixDatagram,
     peer: std::path::PathBuf,
@@ -326,19 +346,7 @@ impl Endpoint for UdsEndpoint {
 
     fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>> {
         self.socket.set_read_timeout(Some(timeout))?;
-        let mut buf = vec![0u8; 2048];
-        match self.socket.recv(&mut buf) {
-            Ok(n) => Ok(Ping::from_bytes(&buf[..n]).map(|p| (p, now_ns()))),
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) =>
-            {
-                Ok(None)
-            }
-            Err(e) => Err(e.into()),
-        }
+        datagram(|buf| self.socket.recv(buf))
     }
 }
 
@@ -354,19 +362,7 @@ impl Endpoint for UdpEndpoint {
 
     fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>> {
         self.socket.set_read_timeout(Some(timeout))?;
-        let mut buf = vec![0u8; 2048];
-        match self.socket.recv(&mut buf) {
-            Ok(n) => Ok(Ping::from_bytes(&buf[..n]).map(|p| (p, now_ns()))),
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) =>
-            {
-                Ok(None)
-            }
-            Err(e) => Err(e.into()),
-        }
+        datagram(|buf| self.socket.recv(buf))
     }
 }
 

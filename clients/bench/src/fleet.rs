@@ -117,13 +117,8 @@ impl Children {
 
 impl Drop for Children {
     fn drop(&mut self) {
-        for child in self.0.iter_mut().rev() {
-            if let Ok(pid) = i32::try_from(child.id()) {
-                let _ = nix::sys::signal::kill(
-                    nix::unistd::Pid::from_raw(pid),
-                    nix::sys::signal::Signal::SIGTERM,
-                );
-            }
+        for child in self.0.iter().rev() {
+            paths::terminate(child);
         }
         for child in self.0.iter_mut().rev() {
             let _ = child.wait();

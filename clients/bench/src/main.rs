@@ -240,33 +240,6 @@ fn path_runs(quick: bool, robots: &[RobotKind]) -> Vec<PathRun> {
     runs
 }
 
-fn row(
-    path: &str,
-    what: String,
-    mode: &str,
-    placement: &str,
-    latencies: Latencies,
-    missed: u64,
-) -> Row {
-    Row {
-        path: path.into(),
-        what,
-        mode: mode.into(),
-        placement: placement.into(),
-        summary: latencies.summary(),
-        missed,
-        dropped: 0,
-        contains: Vec::new(),
-        conditions: None,
-        baseline: None,
-        ratio_p50: None,
-        ratio_p99: None,
-        inconsistent: None,
-        below_sum_only: false,
-        latencies,
-    }
-}
-
 /// The default-configuration command row's `what`: the TITAN on the simulated bus with
 /// chassisd's defaults (no [`paths::BENCH_CONFIG`]), a sample ending at the first frame that
 /// moves toward the request (the mux ramps the change).
@@ -502,7 +475,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             };
             let l =
                 baseline::run(transport, placement, rounds, pace, None, &prefix, &dir)?.all_pings();
-            let mut r = row("baseline", what, "-", placement.label(), l, 0);
+            let mut r = Row::new("baseline", what, "-", placement.label(), l, 0);
             r.conditions = Some(match pace {
                 Some(p) => format!(
                     "one ping every {} ms, receiver otherwise idle (cold)",
@@ -639,19 +612,22 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 &dir,
             )?;
             let placement = r.placement.label();
+            // This run's rows, at its mode and placement; its baselines', at its placement.
+            let run_row = |path: &str, what: String, latencies: Latencies, missed: u64| {
+                Row::new(path, what, r.mode.arg(), placement, latencies, missed)
+            };
+            let baseline_row = |what: String, latencies: Latencies| {
+                Row::new("baseline", what, "-", placement, latencies, 0)
+            };
             let conditions = format!(
                 "receiver woken {feed_per_s:.0}/s by another process (the feedback rate \
                  measured in the {label} run) and by its own {} ms tick",
                 tick.as_millis()
             );
             let paced_what = format!("{} paced, loaded as {label}", transport.label());
-            let mut paced_row = row(
-                "baseline",
+            let mut paced_row = baseline_row(
                 paced_what.clone(),
-                "-",
-                placement,
                 baseline::last_of(&measured.pings, pings_wanted),
-                0,
             );
             paced_row.conditions = Some(format!(
                 "one ping every {} ms, the last {pings_wanted} of {rounds}; {conditions}",
@@ -665,7 +641,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             if let Some(feed) = measured.feed {
                 // As many hops as the state row has samples: the last ones, the receiver warm.
                 let hops = baseline::last_of(&feed, state.latencies.count());
-                let mut feed_row = row("baseline", feed_what.clone(), "-", placement, hops, 0);
+                let mut feed_row = baseline_row(feed_what.clone(), hops);
                 feed_row.conditions = Some(format!(
                     "the feed's own hops: {feed_per_s:.0}/s, the last {} of {}; {conditions}",
                     state.latencies.count(),
@@ -692,14 +668,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 &prefix,
                 &dir,
             )?;
-            let mut warm_row = row(
-                "baseline",
-                warm_what.clone(),
-                "-",
-                placement,
-                warm_measured.all_pings(),
-                0,
-            );
+            let mut warm_row = baseline_row(warm_what.clone(), warm_measured.all_pings());
             warm_row.conditions = Some(format!(
                 "{warm_rounds} ping-pongs back to back (both hops), after a warm-up; {conditions}"
             ));
@@ -715,15 +684,13 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 let dds_in = format!("{DDS_IN}, beside {label}");
                 let dds_out = format!("{DDS_OUT}, beside {label}");
                 for (what, latencies) in [(&dds_in, dds.raw_in), (&dds_out, dds.raw_out)] {
-                    let mut r = row("baseline", what.clone(), "-", placement, latencies, 0);
+                    let mut r = baseline_row(what.clone(), latencies);
                     r.conditions = Some(conditions.clone());
                     report.rows.push(r);
                 }
-                let mut command_row = row(
+                let mut command_row = run_row(
                     "ros2",
                     format!("{label}: cmd_vel → frame"),
-                    r.mode.arg(),
-                    placement,
                     dds.command,
                     dds.missed,
                 );
@@ -734,14 +701,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     row_key("command", &label, r.mode.arg(), placement),
                 ];
                 report.rows.push(command_row);
-                let mut state_row = row(
-                    "ros2",
-                    format!("{label}: frame read → odom"),
-                    r.mode.arg(),
-                    placement,
-                    dds.state,
-                    0,
-                );
+                let mut state_row =
+                    run_row("ros2", format!("{label}: frame read → odom"), dds.state, 0);
                 state_row.baseline = reference(&dds_out);
                 // The service's state path, then the DDS hop out.
                 state_row.contains = vec![
@@ -751,21 +712,12 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 report.rows.push(state_row);
             }
             if let Some(py) = python {
-                let mut state_row = row(
-                    "python",
-                    format!("{label}: state"),
-                    r.mode.arg(),
-                    placement,
-                    py.state,
-                    0,
-                );
+                let mut state_row = run_row("python", format!("{label}: state"), py.state, 0);
                 state_row.dropped = py.dropped;
                 report.rows.push(state_row);
-                report.rows.push(row(
+                report.rows.push(run_row(
                     "python",
                     format!("{label}: command"),
-                    r.mode.arg(),
-                    placement,
                     py.command,
                     py.missed,
                 ));
@@ -787,52 +739,28 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 .parts
                 .push(run_parts("state", parts::state(&state.samples, &passes)));
             if let Some(figures) = command {
-                let mut command_row = row(
-                    "command",
-                    label.clone(),
-                    r.mode.arg(),
-                    placement,
-                    figures.latencies,
-                    figures.missed,
-                );
+                let mut command_row =
+                    run_row("command", label.clone(), figures.latencies, figures.missed);
                 command_row.baseline = reference(&paced_what);
                 report.rows.push(command_row);
-                report.rows.push(row(
+                report.rows.push(run_row(
                     "in-service",
                     format!("{label}: command"),
-                    r.mode.arg(),
-                    placement,
                     figures.in_service,
                     0,
                 ));
             }
-            let mut state_row = row(
-                "state",
-                label.clone(),
-                r.mode.arg(),
-                placement,
-                state.latencies,
-                0,
-            );
+            let mut state_row = run_row("state", label.clone(), state.latencies, 0);
             state_row.dropped = state.dropped;
             state_row.baseline = reference(&feed_what);
             report.rows.push(state_row);
-            report.rows.push(row(
+            report.rows.push(run_row(
                 "in-service",
                 format!("{label}: state"),
-                r.mode.arg(),
-                placement,
                 state.in_service,
                 0,
             ));
-            let mut preempt_row = row(
-                "preemption",
-                label,
-                r.mode.arg(),
-                placement,
-                preempt,
-                preempt_missed,
-            );
+            let mut preempt_row = run_row("preemption", label, preempt, preempt_missed);
             // The stop follows a teleop request at once: the loop is awake, as in a
             // back-to-back ping-pong.
             preempt_row.baseline = warm;
@@ -870,7 +798,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         drop(robot);
         drop(service);
         let label = bus_label(RobotKind::Titan, BusKind::Sim);
-        let mut default_row = row(
+        let mut default_row = Row::new(
             "command",
             DEFAULT_CONFIG_ROW.to_string(),
             LoopMode::Event.arg(),
@@ -884,7 +812,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             placement.label()
         ));
         report.rows.push(default_row);
-        report.rows.push(row(
+        report.rows.push(Row::new(
             "in-service",
             format!("{DEFAULT_CONFIG_ROW}: command"),
             LoopMode::Event.arg(),
@@ -907,7 +835,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 &dir,
             )?;
             let l = fanout::run(&mut robot, &service.name, &prefix, n, plan.fanout_seconds)?;
-            report.rows.push(row(
+            report.rows.push(Row::new(
                 "fan-out",
                 format!("titan sim → {n} processes"),
                 "event",
@@ -936,7 +864,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 (zenoh::RAW_COMMAND, command_count),
                 (zenoh::RAW_STATE, state_count),
             ] {
-                let mut raw = row(
+                let mut raw = Row::new(
                     "baseline",
                     what.into(),
                     "-",
@@ -954,7 +882,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 report.rows.push(raw);
             }
             let reference = Some(format!("{}, {placement}", zenoh::RAW_COMMAND));
-            let mut command = row(
+            let mut command = Row::new(
                 "zenoh",
                 zenoh::COMMAND.into(),
                 "event",
@@ -965,10 +893,10 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             command.baseline = reference.clone();
             report.rows.push(command);
             let reference = Some(format!("{}, {placement}", zenoh::RAW_STATE));
-            let mut state = row("zenoh", zenoh::STATE.into(), "event", placement, z.state, 0);
+            let mut state = Row::new("zenoh", zenoh::STATE.into(), "event", placement, z.state, 0);
             state.baseline = reference.clone();
             report.rows.push(state);
-            let mut bridge = row(
+            let mut bridge = Row::new(
                 "zenoh",
                 zenoh::BRIDGE.into(),
                 "event",

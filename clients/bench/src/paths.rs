@@ -127,13 +127,7 @@ impl Service {
 
     fn stop_children(&mut self) {
         for mut child in self.children.drain(..).rev() {
-            if let Ok(pid) = i32::try_from(child.id()) {
-                let _ = nix::sys::signal::kill(
-                    nix::unistd::Pid::from_raw(pid),
-                    nix::sys::signal::Signal::SIGTERM,
-                );
-            }
-            let _ = child.wait();
+            stop(&mut child);
         }
     }
 }
@@ -142,6 +136,22 @@ impl Drop for Service {
     fn drop(&mut self) {
         self.stop_children();
     }
+}
+
+/// Asks `child` to end (SIGTERM).
+pub fn terminate(child: &Child) {
+    if let Ok(pid) = i32::try_from(child.id()) {
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(pid),
+            nix::sys::signal::Signal::SIGTERM,
+        );
+    }
+}
+
+/// Asks `child` to end (SIGTERM) and waits for it.
+pub fn stop(child: &mut Child) {
+    terminate(child);
+    let _ = child.wait();
 }
 
 /// Where the workspace's binaries are (next to this one).

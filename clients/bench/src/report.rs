@@ -148,6 +148,35 @@ fn percentile(value: f64, count: u64, fewest: u64) -> String {
 }
 
 impl Row {
+    /// A measured row with nothing beside it yet: no loss but `missed`, no baseline, no
+    /// conditions.
+    pub fn new(
+        path: &str,
+        what: String,
+        mode: &str,
+        placement: &str,
+        latencies: Latencies,
+        missed: u64,
+    ) -> Self {
+        Self {
+            path: path.into(),
+            what,
+            mode: mode.into(),
+            placement: placement.into(),
+            summary: latencies.summary(),
+            missed,
+            dropped: 0,
+            contains: Vec::new(),
+            conditions: None,
+            baseline: None,
+            ratio_p50: None,
+            ratio_p99: None,
+            inconsistent: None,
+            below_sum_only: false,
+            latencies,
+        }
+    }
+
     /// [`row_key`] of this row.
     pub fn key(&self) -> String {
         row_key(&self.path, &self.what, &self.mode, &self.placement)
@@ -942,23 +971,7 @@ mod tests {
         for _ in 0..n {
             latencies.record(us * 1000);
         }
-        Row {
-            path: path.into(),
-            what: what.into(),
-            mode: mode.into(),
-            placement: "cross CPU".into(),
-            summary: latencies.summary(),
-            missed: 0,
-            dropped: 0,
-            contains: Vec::new(),
-            conditions: None,
-            baseline: None,
-            ratio_p50: None,
-            ratio_p99: None,
-            inconsistent: None,
-            below_sum_only: false,
-            latencies,
-        }
+        Row::new(path, what.into(), mode, "cross CPU", latencies, 0)
     }
 
     /// A ROS 2 row containing a DDS hop and the service's command path, and what the smoke

@@ -215,8 +215,12 @@ mod tests {
             json[0]["driver_status_flags"],
             serde_json::json!(["supply_under_voltage", "enabled"])
         );
-        // 0x362: alarm 1 under-voltage, alarm 2 charge over-current, warning 1 over-temperature.
-        let (json, err, _) = decode(RobotKind::Titan, &["362#04010800"], "");
+        assert_bms_alarms_are_named(RobotKind::Titan);
+    }
+
+    /// 0x362: alarm 1 under-voltage, alarm 2 charge over-current, warning 1 over-temperature.
+    fn assert_bms_alarms_are_named(robot: RobotKind) {
+        let (json, err, _) = decode(robot, &["362#04010800"], "");
         assert_eq!(err, "");
         assert_eq!(
             json[0]["alarms"],
@@ -275,13 +279,7 @@ mod tests {
         let (json, _, _) = decode(RobotKind::Hunter, &["261#00F0001E1E400000"], "");
         assert_eq!(json[0]["driver_status_flags"], serde_json::json!([]));
         assert_eq!(json[0]["driver_enabled"], false);
-        let (json, err, _) = decode(RobotKind::HunterSe, &["362#04010800"], "");
-        assert_eq!(err, "");
-        assert_eq!(
-            json[0]["alarms"],
-            serde_json::json!(["under_voltage", "charge_over_current"])
-        );
-        assert_eq!(json[0]["warnings"], serde_json::json!(["over_temperature"]));
+        assert_bms_alarms_are_named(RobotKind::HunterSe);
     }
 
     #[test]

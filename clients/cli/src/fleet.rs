@@ -23,9 +23,8 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::{
-    ChassisState, ControlMode, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus, Robot,
-    RobotDescription, WireProtocol, ZeroReason, install_signal_handlers, now_ns,
-    termination_requested,
+    ChassisState, ControlMode, FaultFlags, Group, LinkFlags, MuxStatus, Robot, RobotDescription,
+    WireProtocol, ZeroReason, install_signal_handlers, now_ns, termination_requested,
 };
 use clap::Args;
 use serde::Serialize;
@@ -143,16 +142,7 @@ fn estop_of(mux: Option<&MuxStatus>) -> (&'static str, Option<String>) {
         return ("unknown", None);
     };
     match m.locks().iter().find(|l| l.name() == "estop") {
-        Some(l) if l.held != 0 => {
-            let holder = match l.holder {
-                LockStatus::HOLDER_OPERATOR => "operator".to_string(),
-                i => m
-                    .sources()
-                    .get(usize::from(i))
-                    .map_or("?".to_string(), |s| s.name().to_string()),
-            };
-            ("held", Some(holder))
-        }
+        Some(l) if l.held != 0 => ("held", Some(crate::live::lock_holder(m, l))),
         Some(_) => ("free", None),
         None => ("unknown", None),
     }
@@ -422,6 +412,7 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chassis_client::LockStatus;
 
     #[test]
     fn latency_figures_are_the_samples_quantiles() {

@@ -162,27 +162,14 @@ pub fn echo(args: &EchoArgs) -> anyhow::Result<()> {
     let mut last_frame_seq = 0u64;
     let mut lost = 0u64;
     while args.count.is_none_or(|c| printed < c) && !termination_requested() {
-        let mut got = 0;
-        match args.topic {
+        let got = match args.topic {
             Topic::State => {
-                if let Some(state) = robot.wait_state(Duration::from_millis(500))? {
-                    got = 1;
-                    if args.json {
-                        writeln!(out, "{}", serde_json::to_string(&state)?)?;
-                    } else {
-                        writeln!(out, "{}", state_line(&state))?;
-                    }
-                }
+                let state = robot.wait_state(Duration::from_millis(500))?;
+                write_sample(&mut out, args.json, state.as_ref(), state_line)?
             }
             Topic::Mux => {
-                if let Some(mux) = robot.wait_mux(Duration::from_millis(500))? {
-                    got = 1;
-                    if args.json {
-                        writeln!(out, "{}", serde_json::to_string(&mux)?)?;
-                    } else {
-                        writeln!(out, "{}", mux_line(&mux))?;
-                    }
-                }
+                let mux = robot.wait_mux(Duration::from_millis(500))?;
+                write_sample(&mut out, args.json, mux.as_ref(), mux_line)?
             }
             Topic::Frames => {
                 let Some(tap) = &tap else { break };
@@ -201,12 +188,13 @@ pub fn echo(args: &EchoArgs) -> anyhow::Result<()> {
                         });
                     }
                 })?;
-                got = lines.len();
+                let got = lines.len();
                 for line in lines {
                     writeln!(out, "{line}")?;
                 }
+                got
             }
-        }
+        };
         out.flush()?;
         printed += got as u64;
         if got > 0 {
@@ -222,6 +210,24 @@ pub fn echo(args: &EchoArgs) -> anyhow::Result<()> {
         eprintln!("{lost} frames were lost between reads (sequence gaps)");
     }
     Ok(())
+}
+
+/// Writes `sample`, when one came, as JSON or as its text line; how many were written.
+fn write_sample<T: serde::Serialize>(
+    out: &mut impl Write,
+    json: bool,
+    sample: Option<&T>,
+    line: fn(&T) -> String,
+) -> anyhow::Result<usize> {
+    let Some(sample) = sample else {
+        return Ok(0);
+    };
+    if json {
+        writeln!(out, "{}", serde_json::to_string(sample)?)?;
+    } else {
+        writeln!(out, "{}", line(sample))?;
+    }
+    Ok(1)
 }
 
 fn age_text(stamp_ns: u64) -> String {
@@ -296,18 +302,23 @@ fn locks_text(m: &MuxStatus) -> String {
             if l.held == 0 {
                 format!("{} free", l.name())
             } else {
-                let holder = match l.holder {
-                    LockStatus::HOLDER_OPERATOR => "operator".to_string(),
-                    i => m
-                        .sources()
-                        .get(usize::from(i))
-                        .map_or("?".to_string(), |s| s.name().to_string()),
-                };
-                format!("{} HELD by {holder}", l.name())
+                format!("{} HELD by {}", l.name(), lock_holder(m, l))
             }
         })
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// Who holds `lock`: `operator` (a control request), the source's name, or `?` for an index
+/// `m` has no source at.
+pub(crate) fn lock_holder(m: &MuxStatus, lock: &LockStatus) -> String {
+    match lock.holder {
+        LockStatus::HOLDER_OPERATOR => "operator".to_string(),
+        i => m
+            .sources()
+            .get(usize::from(i))
+            .map_or("?".to_string(), |s| s.name().to_string()),
+    }
 }
 
 fn direction(frame: &BusFrame) -> &'static str {

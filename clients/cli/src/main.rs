@@ -1,6 +1,6 @@
 //! `chassis`: the command-line tool of chassisd.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -41,29 +41,15 @@ enum Cmd {
     /// `candump -l` lines), XBot as hex bytes of the serial stream. Reads stdin when no FRAME is
     /// given. Exits 1 if any frame failed.
     Decode {
-        #[arg(long, value_parser = parse_robot)]
-        robot: RobotKind,
-        /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
-        /// the other AgileX robots v2).
-        #[arg(long, value_parser = parse_protocol)]
-        protocol: Option<Protocol>,
-        /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
-        #[arg(long)]
-        profile: Option<PathBuf>,
+        #[command(flatten)]
+        profile: ProfileArgs,
         /// Frames (CAN) or hex chunks (XBot).
         frames: Vec<String>,
     },
     /// Print the frame(s) the service would send for a command (CAN as `ID#HEX`, XBot as hex).
     Encode {
-        #[arg(long, value_parser = parse_robot)]
-        robot: RobotKind,
-        /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
-        /// the other AgileX robots v2).
-        #[arg(long, value_parser = parse_protocol)]
-        protocol: Option<Protocol>,
-        /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
-        #[arg(long)]
-        profile: Option<PathBuf>,
+        #[command(flatten)]
+        profile: ProfileArgs,
         #[command(subcommand)]
         what: EncodeWhat,
     },
@@ -148,6 +134,21 @@ enum PubWhat {
     Velocity(live::PubArgs),
 }
 
+// The robot and its profile, as `decode` and `encode` take them. (A doc comment here would be
+// the flattened subcommands' about text.)
+#[derive(Debug, clap::Args)]
+struct ProfileArgs {
+    #[arg(long, value_parser = parse_robot)]
+    robot: RobotKind,
+    /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
+    /// the other AgileX robots v2).
+    #[arg(long, value_parser = parse_protocol)]
+    protocol: Option<Protocol>,
+    /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
+    #[arg(long)]
+    profile: Option<PathBuf>,
+}
+
 #[derive(Debug, Subcommand)]
 enum EncodeWhat {
     /// Motion: forward speed plus a yaw rate (--wz) or a steering angle (--steer).
@@ -173,37 +174,31 @@ pub(crate) fn parse_protocol(text: &str) -> Result<Protocol, chassis_protocols::
     text.parse()
 }
 
-/// The robot's profile: the defaults for the protocol, overridden by a TOML file when one is
-/// given.
-fn load_profile(
-    robot: RobotKind,
-    protocol: Option<Protocol>,
-    path: Option<&Path>,
-) -> anyhow::Result<Profile> {
-    let table = match path {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading profile {}", path.display()))?;
-            toml::from_str::<toml::Table>(&text)
-                .with_context(|| format!("parsing {} profile {}", robot, path.display()))?
-        }
-        None => toml::Table::new(),
-    };
-    Profile::from_table(robot, protocol, &table).with_context(|| match path {
-        Some(path) => format!("{} profile {}", robot, path.display()),
-        None => format!("{robot} profile"),
-    })
+impl ProfileArgs {
+    /// The robot's profile: the defaults for the protocol, overridden by a TOML file when one
+    /// is given.
+    fn load(&self) -> anyhow::Result<Profile> {
+        let robot = self.robot;
+        let table = match &self.profile {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("reading profile {}", path.display()))?;
+                toml::from_str::<toml::Table>(&text)
+                    .with_context(|| format!("parsing {} profile {}", robot, path.display()))?
+            }
+            None => toml::Table::new(),
+        };
+        Profile::from_table(robot, self.protocol, &table).with_context(|| match &self.profile {
+            Some(path) => format!("{} profile {}", robot, path.display()),
+            None => format!("{robot} profile"),
+        })
+    }
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
-        Cmd::Decode {
-            robot,
-            protocol,
-            profile,
-            frames,
-        } => {
-            let profile = load_profile(robot, protocol, profile.as_deref())?;
+        Cmd::Decode { profile, frames } => {
+            let profile = profile.load()?;
             let stdin = std::io::stdin().lock();
             let summary = decode::run(
                 profile,
@@ -218,13 +213,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 ExitCode::SUCCESS
             })
         }
-        Cmd::Encode {
-            robot,
-            protocol,
-            profile,
-            what,
-        } => {
-            let profile = load_profile(robot, protocol, profile.as_deref())?;
+        Cmd::Encode { profile, what } => {
+            let profile = profile.load()?;
             let command = match &what {
                 EncodeWhat::Velocity(v) => v.to_command(),
                 EncodeWhat::Action(a) => a.to_command().map_err(anyhow::Error::msg)?,

@@ -506,6 +506,14 @@ mod tests {
         Input::Key(Key::Motion(motion), Edge::Press)
     }
 
+    fn repeat(motion: Motion) -> Input {
+        Input::Key(Key::Motion(motion), Edge::Repeat)
+    }
+
+    fn release(motion: Motion) -> Input {
+        Input::Key(Key::Motion(motion), Edge::Release)
+    }
+
     fn drive(linear_mps: f32, angular_radps: f32) -> Option<Action> {
         Some(Action::Drive(Command {
             linear_mps,
@@ -606,15 +614,9 @@ mod tests {
     fn a_release_event_stops_at_once() {
         let mut t = Teleop::new(Settings::default());
         t.handle(0, press(Motion::Forward));
-        t.handle(
-            500 * MS,
-            Input::Key(Key::Motion(Motion::Forward), Edge::Repeat),
-        );
+        t.handle(500 * MS, repeat(Motion::Forward));
         assert_eq!(
-            t.handle(
-                510 * MS,
-                Input::Key(Key::Motion(Motion::Forward), Edge::Release)
-            ),
+            t.handle(510 * MS, release(Motion::Forward)),
             Some(Action::Stop)
         );
         assert_eq!(t.poll(2000 * MS), None, "one stop, then nothing");
@@ -624,10 +626,7 @@ mod tests {
     fn the_window_still_applies_when_release_events_are_lost() {
         let mut t = Teleop::new(Settings::default());
         t.handle(0, press(Motion::Forward));
-        t.handle(
-            100 * MS,
-            Input::Key(Key::Motion(Motion::Forward), Edge::Repeat),
-        );
+        t.handle(100 * MS, repeat(Motion::Forward));
         assert_eq!(t.poll(299 * MS), drive(0.1, 0.0));
         assert_eq!(t.poll(300 * MS), Some(Action::Stop));
     }
@@ -644,10 +643,7 @@ mod tests {
             "holding opposite keys holds the robot still"
         );
         assert_eq!(
-            t.handle(
-                40 * MS,
-                Input::Key(Key::Motion(Motion::Forward), Edge::Release)
-            ),
+            t.handle(40 * MS, release(Motion::Forward)),
             drive(-0.1, 0.0)
         );
     }

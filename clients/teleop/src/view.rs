@@ -416,11 +416,16 @@ fn render_mux(frame: &mut Frame, area: Rect, view: &View) {
             lines.push(Line::from(vec![label("lock"), Span::styled(text, style)]));
         }
     }
+    render_wrapped(frame, area, " mux ", lines);
+}
+
+/// A bordered panel whose long lines wrap.
+fn render_wrapped(frame: &mut Frame, area: Rect, title: &str, lines: Vec<Line<'_>>) {
     frame.render_widget(
         Paragraph::new(lines).wrap(Wrap { trim: false }).block(
             Block::bordered()
                 .padding(Padding::horizontal(1))
-                .title(" mux "),
+                .title(title),
         ),
         area,
     );
@@ -518,14 +523,7 @@ fn render_robot(frame: &mut Frame, area: Rect, view: &View) {
             }
         }
     }
-    frame.render_widget(
-        Paragraph::new(lines).wrap(Wrap { trim: false }).block(
-            Block::bordered()
-                .padding(Padding::horizontal(1))
-                .title(" robot "),
-        ),
-        area,
-    );
+    render_wrapped(frame, area, " robot ", lines);
 }
 
 #[cfg(test)]
@@ -578,6 +576,25 @@ mod tests {
         s
     }
 
+    /// The TITAN seen by our `teleop` source, without a description or a message.
+    fn titan_view<'a>(
+        now_ns: u64,
+        state: Option<&'a ChassisState>,
+        mux: &'a MuxStatus,
+        driving: bool,
+    ) -> View<'a> {
+        View {
+            robot: "titan",
+            source: "teleop",
+            now_ns,
+            description: None,
+            state,
+            mux: Some(mux),
+            keys: keys(driving),
+            message: None,
+        }
+    }
+
     fn keys(driving: bool) -> KeysView {
         let command = Command {
             linear_mps: if driving { 0.1 } else { 0.0 },
@@ -616,16 +633,7 @@ mod tests {
         let mux = mux("teleop");
         let mut state = state();
         state.system.fault_flags = FaultFlags::MOTOR_DRIVER_ERROR | FaultFlags::BATTERY_LOW;
-        let view = View {
-            robot: "titan",
-            source: "teleop",
-            now_ns: 1_100_000_000,
-            description: None,
-            state: Some(&state),
-            mux: Some(&mux),
-            keys: keys(true),
-            message: None,
-        };
+        let view = titan_view(1_100_000_000, Some(&state), &mux, true);
         let text = screen(&view);
         assert!(text.contains("active     teleop"), "{text}");
         assert!(text.contains("DRIVING"), "{text}");
@@ -682,16 +690,7 @@ mod tests {
     fn a_higher_priority_winner_is_highlighted_as_a_safety_override() {
         let mux = mux("safety");
         let state = state();
-        let view = View {
-            robot: "titan",
-            source: "teleop",
-            now_ns: 1_000_000_000,
-            description: None,
-            state: Some(&state),
-            mux: Some(&mux),
-            keys: keys(true),
-            message: None,
-        };
+        let view = titan_view(1_000_000_000, Some(&state), &mux, true);
         let text = screen(&view);
         assert!(text.contains("SAFETY OVERRIDE: safety"), "{text}");
         // The highlight is red.
@@ -710,16 +709,7 @@ mod tests {
     #[test]
     fn a_lower_priority_winner_is_only_information_while_we_are_idle() {
         let mux = mux("planner");
-        let view = View {
-            robot: "titan",
-            source: "teleop",
-            now_ns: 0,
-            description: None,
-            state: None,
-            mux: Some(&mux),
-            keys: keys(false),
-            message: None,
-        };
+        let view = titan_view(0, None, &mux, false);
         let text = screen(&view);
         assert!(text.contains("active    planner (priority 10)"), "{text}");
         assert!(!text.contains("SAFETY"), "{text}");
@@ -741,16 +731,7 @@ mod tests {
         mux.sources[1].flags |= SourceFlags::BLOCKED;
         mux.sources[2].flags |= SourceFlags::BLOCKED;
         let state = state();
-        let view = View {
-            robot: "titan",
-            source: "teleop",
-            now_ns: 3_000_000_000,
-            description: None,
-            state: Some(&state),
-            mux: Some(&mux),
-            keys: keys(false),
-            message: None,
-        };
+        let view = titan_view(3_000_000_000, Some(&state), &mux, false);
         let text = screen(&view);
         assert!(
             text.contains("E-STOP LATCHED — release with `chassis control estop-release`"),

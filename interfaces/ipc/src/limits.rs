@@ -62,6 +62,27 @@ pub struct PubSubLimits {
     pub event: EventLimits,
 }
 
+impl PubSubLimits {
+    /// One publisher to at most `readers` subscribers, each woken by its listener, with a
+    /// buffer of `buffer` samples that drops its oldest when full; `history_size` samples for a
+    /// late joiner.
+    pub const fn broadcast(history_size: usize, buffer: usize, readers: usize) -> Self {
+        Self {
+            history_size,
+            subscriber_max_buffer_size: buffer,
+            max_publishers: 1,
+            max_subscribers: readers,
+            max_nodes: MAX_NODES,
+            safe_overflow: true,
+            event: EventLimits {
+                max_notifiers: PUBLISHER_NOTIFIERS,
+                max_listeners: readers,
+                max_nodes: MAX_NODES,
+            },
+        }
+    }
+}
+
 /// Limits of a request-response service and of its two event services.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct RequestResponseLimits {
@@ -120,65 +141,21 @@ impl<Req> RequestResponse<Req> {
 /// `MAX_READERS` × (`STATE_BUFFER` + 2 borrowed) + 1 history + 2 loaned = 10323 samples of
 /// 948 bytes (896 + iceoryx2's header): 9.3 MiB of shared memory. Freed samples are reused first,
 /// so only the pages of the samples in flight become resident: those the readers' queues hold.
-pub const STATE: PubSub<ChassisState> = PubSub::new(PubSubLimits {
-    history_size: 1,
-    subscriber_max_buffer_size: STATE_BUFFER,
-    max_publishers: 1,
-    max_subscribers: MAX_READERS,
-    max_nodes: MAX_NODES,
-    safe_overflow: true,
-    event: EventLimits {
-        max_notifiers: PUBLISHER_NOTIFIERS,
-        max_listeners: MAX_READERS,
-        max_nodes: MAX_NODES,
-    },
-});
+pub const STATE: PubSub<ChassisState> =
+    PubSub::new(PubSubLimits::broadcast(1, STATE_BUFFER, MAX_READERS));
 
 /// `chassis/<robot>/frames`: every frame on the bus, both directions; no history.
-pub const FRAMES: PubSub<BusFrame> = PubSub::new(PubSubLimits {
-    history_size: 0,
-    subscriber_max_buffer_size: FRAMES_BUFFER,
-    max_publishers: 1,
-    max_subscribers: MAX_FRAME_READERS,
-    max_nodes: MAX_NODES,
-    safe_overflow: true,
-    event: EventLimits {
-        max_notifiers: PUBLISHER_NOTIFIERS,
-        max_listeners: MAX_FRAME_READERS,
-        max_nodes: MAX_NODES,
-    },
-});
+pub const FRAMES: PubSub<BusFrame> =
+    PubSub::new(PubSubLimits::broadcast(0, FRAMES_BUFFER, MAX_FRAME_READERS));
 
 /// `chassis/<robot>/mux`: the mux's decisions, history 1.
-pub const MUX: PubSub<MuxStatus> = PubSub::new(PubSubLimits {
-    history_size: 1,
-    subscriber_max_buffer_size: STATUS_BUFFER,
-    max_publishers: 1,
-    max_subscribers: MAX_READERS,
-    max_nodes: MAX_NODES,
-    safe_overflow: true,
-    event: EventLimits {
-        max_notifiers: PUBLISHER_NOTIFIERS,
-        max_listeners: MAX_READERS,
-        max_nodes: MAX_NODES,
-    },
-});
+pub const MUX: PubSub<MuxStatus> =
+    PubSub::new(PubSubLimits::broadcast(1, STATUS_BUFFER, MAX_READERS));
 
 /// `chassis/<robot>/robot`: the robot's description, history 1 (a client started an hour later
 /// reads it at once). Published at start and when it changes (the protocol once detected).
-pub const DESCRIPTION: PubSub<RobotDescription> = PubSub::new(PubSubLimits {
-    history_size: 1,
-    subscriber_max_buffer_size: 2,
-    max_publishers: 1,
-    max_subscribers: MAX_READERS,
-    max_nodes: MAX_NODES,
-    safe_overflow: true,
-    event: EventLimits {
-        max_notifiers: PUBLISHER_NOTIFIERS,
-        max_listeners: MAX_READERS,
-        max_nodes: MAX_NODES,
-    },
-});
+pub const DESCRIPTION: PubSub<RobotDescription> =
+    PubSub::new(PubSubLimits::broadcast(1, 2, MAX_READERS));
 
 /// `chassis/<robot>/cmd/<source>`: one publisher (one process per source: a second one is
 /// refused), read by `chassisd` with a buffer of `subscriber_max_buffer_size`.
@@ -224,19 +201,7 @@ pub const CONTROL: RequestResponse<ControlRequest> = RequestResponse::new(DESK);
 pub const SIM: RequestResponse<SimRequest> = RequestResponse::new(DESK);
 
 /// Limits of a client's own publication ([`publication`]).
-pub const PUBLICATION: PubSubLimits = PubSubLimits {
-    history_size: 1,
-    subscriber_max_buffer_size: PUBLICATION_BUFFER,
-    max_publishers: 1,
-    max_subscribers: MAX_READERS,
-    max_nodes: MAX_NODES,
-    safe_overflow: true,
-    event: EventLimits {
-        max_notifiers: PUBLISHER_NOTIFIERS,
-        max_listeners: MAX_READERS,
-        max_nodes: MAX_NODES,
-    },
-};
+pub const PUBLICATION: PubSubLimits = PubSubLimits::broadcast(1, PUBLICATION_BUFFER, MAX_READERS);
 
 /// A client's own publish-subscribe service beside the robot's,
 /// `chassis/<robot>/<suffix>` ([`crate::ServiceKind::Publication`]): history 1 (a late reader

@@ -621,8 +621,9 @@ mod tests {
         (state, mux, bus, latency)
     }
 
-    #[test]
-    fn the_text_snapshot_shows_rates_per_id_the_active_source_and_latency() {
+    /// Calls `check` with the TITAN's snapshot at 5 s: 2 s running, teleop active, 0x211 at
+    /// 50 Hz, state 300 µs old.
+    fn with_snapshot<R>(check: impl FnOnce(&Snapshot) -> R) -> R {
         let (state, mux, bus, latency) = snapshot_parts();
         let description = titan();
         let s = Snapshot {
@@ -635,7 +636,12 @@ mod tests {
             bus: &bus,
             latency: &latency,
         };
-        let text = text(&s);
+        check(&s)
+    }
+
+    #[test]
+    fn the_text_snapshot_shows_rates_per_id_the_active_source_and_latency() {
+        let text = with_snapshot(text);
         assert!(text.contains("RX  0x211"), "{text}");
         assert!(text.contains("system_status"), "{text}");
         assert!(text.contains("active teleop (priority 100"), "{text}");
@@ -663,20 +669,10 @@ mod tests {
 
     #[test]
     fn the_dashboard_renders_every_panel() {
-        let (state, mux, bus, latency) = snapshot_parts();
-        let description = titan();
-        let s = Snapshot {
-            name: "titan",
-            now_ns: 5_000_000_000,
-            running_ns: 2_000_000_000,
-            description: Some(&description),
-            state: Some(&state),
-            mux: Some(&mux),
-            bus: &bus,
-            latency: &latency,
-        };
         let mut terminal = Terminal::new(TestBackend::new(160, 40)).unwrap();
-        terminal.draw(|f| render(f, &s)).unwrap();
+        with_snapshot(|s| {
+            terminal.draw(|f| render(f, s)).unwrap();
+        });
         let buffer = terminal.backend().buffer();
         let screen: String = buffer.content.iter().map(|c| c.symbol()).collect();
         for needle in [" robot ", " mux ", " bus ", " latency ", "0x211", "teleop"] {
