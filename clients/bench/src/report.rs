@@ -729,12 +729,7 @@ impl Report {
              frame carries the requested speed itself:\n\n```toml\n{}```\n\n\
              The row *command {}* is measured beside them with chassisd's default configuration: \
              the TITAN on the simulated bus, event loop, cross CPU; one of its samples ends at \
-             the first motion frame that moves the commanded speed toward the request.\n\n\
-             The simulated chassis (the `sim` bus, and `chassisd sim` behind the slcan-pty rows) \
-             runs its thread under `SCHED_BATCH`, as chassisd always runs it: it stands for a \
-             chassis with its own processor, so a frame the service writes leaves the write at \
-             once instead of after the simulator ran on the service's CPU (the kernel never \
-             preempts a running thread for a `SCHED_BATCH` one it wakes).\n\n",
+             the first motion frame that moves the commanded speed toward the request.\n\n",
             crate::paths::BENCH_CONFIG,
             crate::DEFAULT_CONFIG_ROW
         ));

@@ -210,7 +210,6 @@ impl SimHandle {
                     if !cpus.is_empty() {
                         confine(&cpus);
                     }
-                    batch_scheduling();
                     run(firmware, bus, &inbox, &wake)
                 }
             })?;
@@ -303,25 +302,6 @@ impl Drop for SimHandle {
         {
             warn!("simulated chassis ended with: {err}");
         }
-    }
-}
-
-/// Puts the calling thread (the simulated chassis) under `SCHED_BATCH`. The simulator stands
-/// for a chassis of its own, with its own processor: a frame the service writes should leave
-/// the write at once, as it does to a CAN controller. Under the default policy, the write that
-/// wakes the simulator's thread lets the kernel switch to it on the service's CPU before the
-/// write returns (wake-up preemption), and the service's pass waits for the simulated
-/// chassis' work. The kernel never preempts a running thread for a `SCHED_BATCH` one it wakes;
-/// the simulator still runs as soon as a CPU is free, at the same weight.
-fn batch_scheduling() {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: sched_setscheduler reads the parameter struct, which outlives the call; pid 0 is
-    // the calling thread.
-    if unsafe { libc::sched_setscheduler(0, libc::SCHED_BATCH, &param) } != 0 {
-        warn!(
-            "simulated chassis: SCHED_BATCH refused ({}): the service's writes may wait for it",
-            std::io::Error::last_os_error()
-        );
     }
 }
 
@@ -446,39 +426,6 @@ mod tests {
             std::thread::sleep(Duration::from_millis(10));
         }
         false
-    }
-
-    /// The scheduling policy of this process' thread named `name`, if there is one.
-    fn policy_of_thread(name: &str) -> Option<i32> {
-        for task in std::fs::read_dir("/proc/self/task").ok()?.flatten() {
-            let comm = std::fs::read_to_string(task.path().join("comm")).unwrap_or_default();
-            if comm.trim() == name {
-                let tid: i32 = task.file_name().to_str()?.parse().ok()?;
-                // SAFETY: sched_getscheduler only reads the policy of the thread `tid`.
-                return Some(unsafe { libc::sched_getscheduler(tid) });
-            }
-        }
-        None
-    }
-
-    #[test]
-    fn the_simulated_chassis_never_preempts_the_service_it_wakes() {
-        let profile = chassis_protocols::RobotKind::Titan.entry().defaults();
-        let firmware = (RobotKind::Titan.entry().firmware)(&profile, clock::now());
-        let (service_end, chassis_end) = PairCan::pair("sim").unwrap();
-        let _sim = SimHandle::spawn(firmware, Bus::Can(Box::new(chassis_end))).unwrap();
-        let mut service_end = Bus::Can(Box::new(service_end));
-        // Running: it has sent feedback, so its policy is set.
-        assert!(
-            eventually(|| service_end.receive(|_| {}).unwrap() > 0),
-            "no feedback"
-        );
-        // Other tests' simulators share the name; each sets its policy as it starts.
-        assert!(
-            eventually(|| policy_of_thread("sim-titan") == Some(libc::SCHED_BATCH)),
-            "the simulator runs under policy {:?}",
-            policy_of_thread("sim-titan")
-        );
     }
 
     #[test]
