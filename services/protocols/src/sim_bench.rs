@@ -10,6 +10,23 @@ use crate::driver::WireItem;
 use crate::firmware::{Firmware, Injection};
 use crate::time::{Timestamp, earliest};
 
+/// A firmware powered up at `start`, called once then with its output drained, and next only at
+/// `late`: how many items it sends at `late`, and when it asks to be called after that.
+pub(crate) fn late_call(
+    firmware: &mut impl Firmware,
+    start: Timestamp,
+    late: Timestamp,
+) -> (usize, Option<Timestamp>) {
+    firmware.handle_timeout(start);
+    while firmware.poll_transmit(start).is_some() {}
+    firmware.handle_timeout(late);
+    let mut burst = 0;
+    while firmware.poll_transmit(late).is_some() {
+        burst += 1;
+    }
+    (burst, firmware.poll_timeout())
+}
+
 /// What one robot's firmware puts on the wire: CAN frames or serial chunks.
 pub(crate) trait Sent: Sized {
     fn from_wire(item: WireItem) -> Option<Self>;

@@ -837,16 +837,9 @@ fn a_silence_injection_mutes_the_chassis_for_its_duration() {
 #[test]
 fn a_late_call_skips_missed_slots_without_shifting_the_grid() {
     let mut sim = ScoutMiniSim::new(ScoutMiniProfile::default(), T0);
-    sim.handle_timeout(T0);
-    while sim.poll_transmit(T0).is_some() {}
-    let late = T0 + ms(1234);
-    sim.handle_timeout(late);
-    let mut burst = 0;
-    while sim.poll_transmit(late).is_some() {
-        burst += 1;
-    }
+    let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
     assert_eq!(burst, 7, "one slot, no catch-up burst");
-    assert_eq!(sim.poll_timeout(), Some(T0 + ms(1240)));
+    assert_eq!(next, Some(T0 + ms(1240)));
 }
 
 #[test]

@@ -606,16 +606,9 @@ fn malformed_input_is_counted_and_never_obeyed() {
 #[test]
 fn a_late_call_skips_missed_reports_without_a_burst() {
     let mut sim = XbotSim::new(p(), T0);
-    sim.handle_timeout(T0);
-    while sim.poll_transmit(T0).is_some() {}
-    let late = T0 + ms(1234);
-    sim.handle_timeout(late);
-    let mut burst = 0;
-    while sim.poll_transmit(late).is_some() {
-        burst += 1;
-    }
+    let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
     assert_eq!(burst, 1);
-    assert_eq!(sim.poll_timeout(), Some(T0 + ms(1240)));
+    assert_eq!(next, Some(T0 + ms(1240)));
 }
 
 #[test]
