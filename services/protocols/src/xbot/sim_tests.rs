@@ -513,12 +513,7 @@ fn silence_mutes_the_board_but_commands_are_obeyed() {
     let mut b = Bench::powered();
     b.heartbeat(Some(velocity(0.5, 0.0, 0.0)));
     b.run_for(ms(2000));
-    assert!(b.inject(Injection::Silence(ms(200))));
-    let start = b.now;
-    b.run_for(ms(199));
-    assert_eq!(b.sent_since(start), 0);
-    b.run_for(ms(21));
-    assert!(b.sent_since(start) > 0);
+    b.assert_silenced_for(ms(200));
     assert!(close(b.v(), 0.5, 1e-3), "commands were obeyed throughout");
 }
 
