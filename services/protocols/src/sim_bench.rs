@@ -166,6 +166,11 @@ impl<F: BenchFirmware> Bench<F> {
         }
     }
 
+    /// The simulated chassis' forward speed, m/s.
+    pub(crate) fn v(&self) -> f64 {
+        self.sim.truth().linear_mps
+    }
+
     /// Items sent strictly after `since`.
     pub(crate) fn sent_since(&self, since: Timestamp) -> usize {
         self.sent.iter().filter(|(t, _)| *t > since).count()

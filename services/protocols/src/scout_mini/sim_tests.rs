@@ -119,10 +119,6 @@ impl Bench {
         m
     }
 
-    fn v(&self) -> f64 {
-        self.sim.truth().linear_mps
-    }
-
     /// The 0x151 fault word without the RC-disconnected bit (always set with the RC off).
     fn faults(&self) -> u16 {
         self.status().vendor_fault_word & !fault::RC_DISCONNECTED

@@ -93,10 +93,6 @@ impl Bench {
         };
         s
     }
-
-    fn v(&self) -> f64 {
-        self.sim.truth().linear_mps
-    }
 }
 
 #[test]

@@ -89,10 +89,6 @@ impl Bench {
     fn last(&self) -> SensorReport {
         self.reports().last().unwrap().1
     }
-
-    fn v(&self) -> f64 {
-        self.sim.truth().linear_mps
-    }
 }
 
 #[test]
