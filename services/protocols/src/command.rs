@@ -3,6 +3,7 @@
 //! `chassis encode` prints these frames; the drivers send the same ones, so what the CLI shows is
 //! what the service puts on the wire.
 
+use chassis_interfaces::FaultClear;
 use thiserror::Error;
 
 use crate::{EncodeError, RobotKind};
@@ -54,18 +55,29 @@ pub enum Command {
 impl Command {
     /// Short name for messages (`velocity`, `brake`, …).
     pub fn name(&self) -> &'static str {
+        self.names().0
+    }
+
+    /// The robot function the command needs, as an error names it when a robot has none
+    /// (`parking brake`, …).
+    pub fn function(&self) -> &'static str {
+        self.names().1
+    }
+
+    /// The command's short name and the robot function it needs.
+    fn names(&self) -> (&'static str, &'static str) {
         match self {
-            Command::Velocity { .. } => "velocity",
-            Command::Mode { .. } => "mode",
-            Command::Brake { .. } => "brake",
-            Command::ClearFaults { .. } => "clear-fault",
-            Command::Lights { .. } => "lights",
-            Command::OffRoad { .. } => "off-road",
-            Command::Lift { .. } => "lift",
-            Command::Servos { .. } => "servos",
-            Command::Power { .. } => "power",
-            Command::SteeringZero => "steering-zero",
-            Command::Silent { .. } => "silent",
+            Command::Velocity { .. } => ("velocity", "motion"),
+            Command::Mode { .. } => ("mode", "control mode"),
+            Command::Brake { .. } => ("brake", "parking brake"),
+            Command::ClearFaults { .. } => ("clear-fault", "fault-clear command"),
+            Command::Lights { .. } => ("lights", "light control"),
+            Command::OffRoad { .. } => ("off-road", "off-road mode"),
+            Command::Lift { .. } => ("lift", "lift"),
+            Command::Servos { .. } => ("servos", "servos"),
+            Command::Power { .. } => ("power", "drive power switch on the bus"),
+            Command::SteeringZero => ("steering-zero", "steering to zero"),
+            Command::Silent { .. } => ("silent", "silent mode"),
         }
     }
 }
@@ -106,6 +118,19 @@ impl CommandError {
             robot,
             what: what.into(),
         }
+    }
+
+    /// The robot has no function for `command` ([`Command::function`]).
+    pub(crate) fn lacks(robot: RobotKind, command: &Command) -> Self {
+        Self::unsupported(robot, command.function())
+    }
+
+    /// The robot has no clear for the `FaultClear` code `which`.
+    pub(crate) fn no_fault_clear(robot: RobotKind, which: u8) -> Self {
+        Self::unsupported(
+            robot,
+            format!("fault to clear called {}", FaultClear::name(which)),
+        )
     }
 }
 

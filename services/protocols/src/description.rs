@@ -13,6 +13,17 @@ use crate::profile::Profile;
 use crate::registry::{RobotEntry, heartbeat_period};
 use crate::titan;
 
+/// Limits as fast backward as forward; no steering and no acceleration limit.
+fn both_ways(linear_mps: f64, lateral_mps: f64, angular_radps: f64) -> MotionLimits {
+    MotionLimits {
+        forward_mps: linear_mps,
+        reverse_mps: linear_mps,
+        lateral_mps,
+        angular_radps,
+        ..MotionLimits::NONE
+    }
+}
+
 /// The description of `profile`'s robot: kind, model, protocol, the driver's limits, geometry,
 /// battery levels, sensors, joints, odometry variances, the chassis' timeouts.
 pub fn describe(profile: &Profile) -> RobotDescription {
@@ -45,12 +56,8 @@ pub fn describe(profile: &Profile) -> RobotDescription {
     match profile {
         Profile::Titan(p) => {
             d.robot_limits = MotionLimits {
-                forward_mps: p.max_linear_mps,
-                reverse_mps: p.max_linear_mps,
-                lateral_mps: 0.0,
-                angular_radps: nan,
                 steer_rad: p.max_steer_rad,
-                ..MotionLimits::NONE
+                ..both_ways(p.max_linear_mps, 0.0, nan)
             };
             d.geometry.wheelbase_m = p.wheelbase_m;
             d.geometry.track_m = p.track_m;
@@ -69,13 +76,7 @@ pub fn describe(profile: &Profile) -> RobotDescription {
             d.flags |= DescriptionFlags::LIGHTS;
         }
         Profile::ScoutMini(p) => {
-            d.robot_limits = MotionLimits {
-                forward_mps: p.max_linear_mps,
-                reverse_mps: p.max_linear_mps,
-                lateral_mps: 0.0,
-                angular_radps: p.max_angular_rad_s,
-                ..MotionLimits::NONE
-            };
+            d.robot_limits = both_ways(p.max_linear_mps, 0.0, p.max_angular_rad_s);
             d.geometry.wheelbase_m = p.wheelbase_m;
             d.geometry.track_m = p.track_m;
             d.geometry.min_turn_radius_m = 0.0;
@@ -86,13 +87,8 @@ pub fn describe(profile: &Profile) -> RobotDescription {
             d.flags |= DescriptionFlags::LIGHTS;
         }
         Profile::Xbot(p) => {
-            d.robot_limits = MotionLimits {
-                forward_mps: p.max_linear_mps,
-                reverse_mps: p.max_linear_mps,
-                lateral_mps: if p.omni { p.max_linear_mps } else { 0.0 },
-                angular_radps: p.max_angular_rad_s,
-                ..MotionLimits::NONE
-            };
+            let lateral_mps = if p.omni { p.max_linear_mps } else { 0.0 };
+            d.robot_limits = both_ways(p.max_linear_mps, lateral_mps, p.max_angular_rad_s);
             d.geometry.track_m = p.wheel_separation_m.unwrap_or(nan);
             d.geometry.wheel_radius_m = p.wheel_diameter_m / 2.0;
             d.geometry.travel_per_count_m = p.metres_per_count();
@@ -107,12 +103,8 @@ pub fn describe(profile: &Profile) -> RobotDescription {
                 agilex_v2::Kinematics::Ackermann | agilex_v2::Kinematics::FourWheelSteer
             );
             d.robot_limits = MotionLimits {
-                forward_mps: p.max_linear_mps,
-                reverse_mps: p.max_linear_mps,
-                lateral_mps: p.max_lateral_mps,
-                angular_radps: p.max_angular_radps,
                 steer_rad: if steers { p.max_steer_rad } else { nan },
-                ..MotionLimits::NONE
+                ..both_ways(p.max_linear_mps, p.max_lateral_mps, p.max_angular_radps)
             };
             d.geometry.wheelbase_m = p.wheelbase_m;
             d.geometry.track_m = p.track_m;

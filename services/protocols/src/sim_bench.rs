@@ -10,6 +10,23 @@ use crate::driver::WireItem;
 use crate::firmware::{Firmware, Injection};
 use crate::time::{Timestamp, earliest};
 
+/// A firmware powered up at `start`, called once then with its output drained, and next only at
+/// `late`: how many items it sends at `late`, and when it asks to be called after that.
+pub(crate) fn late_call(
+    firmware: &mut impl Firmware,
+    start: Timestamp,
+    late: Timestamp,
+) -> (usize, Option<Timestamp>) {
+    firmware.handle_timeout(start);
+    while firmware.poll_transmit(start).is_some() {}
+    firmware.handle_timeout(late);
+    let mut burst = 0;
+    while firmware.poll_transmit(late).is_some() {
+        burst += 1;
+    }
+    (burst, firmware.poll_timeout())
+}
+
 /// What one robot's firmware puts on the wire: CAN frames or serial chunks.
 pub(crate) trait Sent: Sized {
     fn from_wire(item: WireItem) -> Option<Self>;
@@ -79,6 +96,17 @@ impl<F: BenchFirmware> Bench<F> {
         bench
     }
 
+    /// Silences the firmware for `duration`, checking that it sends nothing until 1 ms before
+    /// the end and sends again within 20 ms after it.
+    pub(crate) fn assert_silenced_for(&mut self, duration: Duration) {
+        assert!(self.inject(Injection::Silence(duration)));
+        let start = self.now;
+        self.run_for(duration - Duration::from_millis(1));
+        assert_eq!(self.sent_since(start), 0, "sent while silenced");
+        self.run_for(Duration::from_millis(21));
+        assert!(self.sent_since(start) > 0, "still silent after the silence");
+    }
+
     pub(crate) fn inject(&mut self, injection: Injection) -> bool {
         let ok = self.sim.inject(self.now, injection);
         self.drain();
@@ -136,6 +164,11 @@ impl<F: BenchFirmware> Bench<F> {
             }
             self.drain();
         }
+    }
+
+    /// The simulated chassis' forward speed, m/s.
+    pub(crate) fn v(&self) -> f64 {
+        self.sim.truth().linear_mps
     }
 
     /// Items sent strictly after `since`.

@@ -12,7 +12,7 @@ use chassis_interfaces::{
     ControlKind, ControlRequest, ControlStatus, ControllerState, LinkFlags, LockStatus,
     VelocityRequest, ZeroReason,
 };
-use chassis_protocols::{Injection, RobotKind, Timestamp, WireItem, titan};
+use chassis_protocols::{Injection, Protocol, RobotKind, Timestamp, WireItem, titan};
 
 use super::rig::{LATENCY, Rig, T0};
 use super::{Device, HeldLock, ListenerChange, Wake, WakeBudget};
@@ -857,14 +857,12 @@ fn an_xbot_drives_and_stops_through_the_engine() {
 
 #[test]
 fn every_agilex_v2_robot_drives_and_stops_through_the_engine() {
-    for robot in [
-        RobotKind::Scout,
-        RobotKind::Hunter,
-        RobotKind::HunterSe,
-        RobotKind::Tracer,
-        RobotKind::Bunker,
-        RobotKind::RangerMini,
-    ] {
+    let v2_robots: Vec<RobotKind> = RobotKind::ALL
+        .into_iter()
+        .filter(|robot| robot.entry().default_protocol == Some(Protocol::V2))
+        .collect();
+    assert_eq!(v2_robots.len(), 6, "{v2_robots:?}");
+    for robot in v2_robots {
         let mut rig = ready_for(robot, unsmoothed(), 60);
         rig.publish_every("teleop", twist(0.3), ms(50), at(2000));
         rig.run_until(at(2000));

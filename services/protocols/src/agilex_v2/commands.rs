@@ -59,17 +59,13 @@ pub fn frames_for(command: &Command, profile: &V2Profile) -> Result<Planned<Fram
         }
         Command::Brake { engage } => {
             if profile.brake_lock_value.is_none() {
-                return Err(CommandError::unsupported(robot, "parking brake"));
+                return Err(CommandError::lacks(robot, command));
             }
             Planned::one(Frame::ParkingBrake(ParkingBrake { engage }))
         }
         Command::ClearFaults { which } => {
-            let code = clear_code_for(which, profile).ok_or_else(|| {
-                CommandError::unsupported(
-                    robot,
-                    format!("fault to clear called {}", FaultClear::name(which)),
-                )
-            })?;
+            let code = clear_code_for(which, profile)
+                .ok_or_else(|| CommandError::no_fault_clear(robot, which))?;
             Planned::one(Frame::ClearFault(ClearFault { code }))
         }
         Command::Lights {
@@ -117,16 +113,11 @@ pub fn frames_for(command: &Command, profile: &V2Profile) -> Result<Planned<Fram
                 return Err(CommandError::unsupported(robot, "steering zero over CAN"));
             }
         },
-        Command::OffRoad { .. } => return Err(CommandError::unsupported(robot, "off-road mode")),
-        Command::Silent { .. } => return Err(CommandError::unsupported(robot, "silent mode")),
-        Command::Lift { .. } => return Err(CommandError::unsupported(robot, "lift")),
-        Command::Servos { .. } => return Err(CommandError::unsupported(robot, "servos")),
-        Command::Power { .. } => {
-            return Err(CommandError::unsupported(
-                robot,
-                "drive power switch on the bus",
-            ));
-        }
+        Command::OffRoad { .. }
+        | Command::Silent { .. }
+        | Command::Lift { .. }
+        | Command::Servos { .. }
+        | Command::Power { .. } => return Err(CommandError::lacks(robot, command)),
     })
 }
 

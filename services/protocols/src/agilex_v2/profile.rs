@@ -31,6 +31,21 @@ pub enum V2Model {
     RangerMiniV1,
 }
 
+impl V2Model {
+    /// Every V2 model.
+    pub const ALL: [V2Model; 9] = [
+        V2Model::Scout,
+        V2Model::ScoutMini,
+        V2Model::ScoutMiniOmni,
+        V2Model::Hunter,
+        V2Model::HunterSe,
+        V2Model::Tracer,
+        V2Model::Bunker,
+        V2Model::RangerMini,
+        V2Model::RangerMiniV1,
+    ];
+}
+
 /// How the twist maps onto 0x111 (`PROTOCOLS-V2` §3.8).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -745,21 +760,9 @@ impl V2Profile {
 mod tests {
     use super::*;
 
-    const ALL: [V2Model; 9] = [
-        V2Model::Scout,
-        V2Model::ScoutMini,
-        V2Model::ScoutMiniOmni,
-        V2Model::Hunter,
-        V2Model::HunterSe,
-        V2Model::Tracer,
-        V2Model::Bunker,
-        V2Model::RangerMini,
-        V2Model::RangerMiniV1,
-    ];
-
     #[test]
     fn every_model_validates_and_names_itself() {
-        for model in ALL {
+        for model in V2Model::ALL {
             let p = V2Profile::for_model(model);
             assert_eq!(p.validate(), Ok(()), "{model:?}");
             assert_eq!(p.model, model);

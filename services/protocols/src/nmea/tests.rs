@@ -51,6 +51,16 @@ const GSA_NMEA_4_11: &str = "$GNGSA,A,3,80,71,73,79,69,,,,,,,,1.83,1.09,1.47,2*0
 const GGA_NO_FIX: &str = "$GPGGA,002153.000,,,,,0,00,,,M,,M,,*7D";
 const RMC_VOID: &str = "$GPRMC,002153.000,V,,,,,,,,,,N*48";
 const GSA_NO_FIX: &str = "$GPGSA,A,1,,,,,,,,,,,,,,,*1E";
+// The XBot manual's example stream, but for its two GGA sentences (their printed checksums do not
+// match).
+const XBOT_MANUAL_STREAM: [&str; 6] = [
+    "$GPRMC,121252.000,A,3958.3032,N,11629.6046,E,15.15,359.95,070306,,,A*54",
+    "$GPVTG,359.95,T,,M,15.15,N,28.0,K,A*04",
+    "$GPGSA,A,3,14,15,05,22,18,26,,,,,,,2.1,1.2,1.7*3D",
+    "$GPGSV,3,1,10,18,84,067,23,09,67,067,27,22,49,312,28,15,47,231,30*70",
+    "$GPGSV,3,2,10,21,32,199,23,14,25,272,24,05,21,140,32,26,14,070,20*7E",
+    "$GPGSV,3,3,10,29,07,074,,30,07,163,28*7D",
+];
 
 #[test]
 fn gga_reads_time_position_quality_and_altitude() {
@@ -191,14 +201,7 @@ fn nmea_4_11_trailing_fields_are_accepted() {
 
 #[test]
 fn the_xbot_manuals_stream_parses_except_two_gga_checksums_that_do_not_match() {
-    for line in [
-        "$GPRMC,121252.000,A,3958.3032,N,11629.6046,E,15.15,359.95,070306,,,A*54",
-        "$GPVTG,359.95,T,,M,15.15,N,28.0,K,A*04",
-        "$GPGSA,A,3,14,15,05,22,18,26,,,,,,,2.1,1.2,1.7*3D",
-        "$GPGSV,3,1,10,18,84,067,23,09,67,067,27,22,49,312,28,15,47,231,30*70",
-        "$GPGSV,3,2,10,21,32,199,23,14,25,272,24,05,21,140,32,26,14,070,20*7E",
-        "$GPGSV,3,3,10,29,07,074,,30,07,163,28*7D",
-    ] {
+    for line in XBOT_MANUAL_STREAM {
         round_trip(line);
     }
     // The manual prints these GGA sentences with *77 and *72; the XOR of their characters is 75

@@ -10,6 +10,15 @@ use crate::description::describe;
 use crate::firmware::Injection;
 use crate::pair::Pair;
 
+/// The robot's defaults, then its default profile in each protocol it speaks.
+fn every_profile(entry: &RobotEntry) -> Vec<Profile> {
+    let mut profiles = vec![entry.defaults()];
+    for &protocol in entry.protocols {
+        profiles.push(entry.default_profile(Some(protocol)).unwrap());
+    }
+    profiles
+}
+
 #[test]
 fn every_kind_has_an_entry_that_names_it_back() {
     let mut names = std::collections::HashSet::new();
@@ -33,8 +42,8 @@ fn every_kind_has_an_entry_that_names_it_back() {
 }
 
 /// Every protocol-V1 and V2 model is some robot's: a model added to its family without a
-/// registry entry fails here (the match below stops compiling when a model is added, so the
-/// list stays whole).
+/// registry entry fails here (the match below stops compiling when a model is added, a reminder
+/// to add it to `V2Model::ALL`).
 #[test]
 fn every_protocol_model_belongs_to_one_robot() {
     use crate::agilex_v2::V2Model;
@@ -51,18 +60,7 @@ fn every_protocol_model_belongs_to_one_robot() {
             | V2Model::RangerMiniV1 => model,
         }
     }
-    let v2 = [
-        V2Model::Scout,
-        V2Model::ScoutMini,
-        V2Model::ScoutMiniOmni,
-        V2Model::Hunter,
-        V2Model::HunterSe,
-        V2Model::Tracer,
-        V2Model::Bunker,
-        V2Model::RangerMini,
-        V2Model::RangerMiniV1,
-    ];
-    for model in v2.map(listed) {
+    for model in V2Model::ALL.map(listed) {
         let owners: Vec<RobotKind> = RobotKind::ALL
             .into_iter()
             .filter(|k| k.entry().v2_models.contains(&model))
@@ -113,11 +111,7 @@ fn every_robot_defaults_to_a_valid_profile_of_its_own_kind_in_each_of_its_protoc
 fn every_robot_drives_its_simulated_firmware_in_each_of_its_protocols() {
     for kind in RobotKind::ALL {
         let entry = kind.entry();
-        let mut profiles = vec![entry.defaults()];
-        for &protocol in entry.protocols {
-            profiles.push(entry.default_profile(Some(protocol)).unwrap());
-        }
-        for profile in profiles {
+        for profile in every_profile(entry) {
             let start = Timestamp::from_millis(1_000);
             let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
             let firmware = (entry.firmware)(&profile, start);
@@ -220,11 +214,7 @@ fn every_robot_describes_the_frames_of_its_own_exchange() {
 fn every_robot_has_a_description_with_limits_geometry_and_a_battery_level() {
     for kind in RobotKind::ALL {
         let entry = kind.entry();
-        let mut profiles = vec![entry.defaults()];
-        for &protocol in entry.protocols {
-            profiles.push(entry.default_profile(Some(protocol)).unwrap());
-        }
-        for profile in profiles {
+        for profile in every_profile(entry) {
             let d = describe(&profile);
             let what = format!("{kind} {:?}", profile.protocol());
             assert_eq!(d.kind, kind.id(), "{what}");

@@ -79,12 +79,8 @@ pub fn frames_for(
             ..standing
         })),
         Command::ClearFaults { which } => {
-            let codes = clear_codes_for(which).ok_or_else(|| {
-                CommandError::unsupported(
-                    robot,
-                    format!("fault to clear called {}", FaultClear::name(which)),
-                )
-            })?;
+            let codes =
+                clear_codes_for(which).ok_or_else(|| CommandError::no_fault_clear(robot, which))?;
             Planned {
                 frames: codes
                     .into_iter()
@@ -107,18 +103,13 @@ pub fn frames_for(
             front_mode: mode,
             front_brightness_pct: brightness_pct,
         })),
-        Command::Brake { .. } => return Err(CommandError::unsupported(robot, "parking brake")),
-        Command::OffRoad { .. } => return Err(CommandError::unsupported(robot, "off-road mode")),
-        Command::Lift { .. } => return Err(CommandError::unsupported(robot, "lift")),
-        Command::Servos { .. } => return Err(CommandError::unsupported(robot, "servos")),
-        Command::Power { .. } => {
-            return Err(CommandError::unsupported(
-                robot,
-                "drive power switch on the bus",
-            ));
-        }
-        Command::SteeringZero => return Err(CommandError::unsupported(robot, "steering to zero")),
-        Command::Silent { .. } => return Err(CommandError::unsupported(robot, "silent mode")),
+        Command::Brake { .. }
+        | Command::OffRoad { .. }
+        | Command::Lift { .. }
+        | Command::Servos { .. }
+        | Command::Power { .. }
+        | Command::SteeringZero
+        | Command::Silent { .. } => return Err(CommandError::lacks(robot, command)),
     })
 }
 

@@ -119,10 +119,6 @@ impl Bench {
         m
     }
 
-    fn v(&self) -> f64 {
-        self.sim.truth().linear_mps
-    }
-
     /// The 0x151 fault word without the RC-disconnected bit (always set with the RC off).
     fn faults(&self) -> u16 {
         self.status().vendor_fault_word & !fault::RC_DISCONNECTED
@@ -825,28 +821,16 @@ fn a_flood_adds_the_requested_extra_frames() {
 #[test]
 fn a_silence_injection_mutes_the_chassis_for_its_duration() {
     let mut b = Bench::driving(0.5, ms(3000));
-    assert!(b.inject(Injection::Silence(ms(200))));
-    let start = b.now;
-    b.run_for(ms(199));
-    assert_eq!(b.sent_since(start), 0);
-    b.run_for(ms(21));
-    assert!(b.sent_since(start) > 0);
+    b.assert_silenced_for(ms(200));
     assert!((b.v() - 0.5).abs() < 1e-3, "commands are still obeyed");
 }
 
 #[test]
 fn a_late_call_skips_missed_slots_without_shifting_the_grid() {
     let mut sim = ScoutMiniSim::new(ScoutMiniProfile::default(), T0);
-    sim.handle_timeout(T0);
-    while sim.poll_transmit(T0).is_some() {}
-    let late = T0 + ms(1234);
-    sim.handle_timeout(late);
-    let mut burst = 0;
-    while sim.poll_transmit(late).is_some() {
-        burst += 1;
-    }
+    let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
     assert_eq!(burst, 7, "one slot, no catch-up burst");
-    assert_eq!(sim.poll_timeout(), Some(T0 + ms(1240)));
+    assert_eq!(next, Some(T0 + ms(1240)));
 }
 
 #[test]

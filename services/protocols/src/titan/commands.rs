@@ -87,12 +87,8 @@ pub fn frames_for(
         })),
         Command::Brake { engage } => Planned::one(Frame::ParkingBrake(ParkingBrake { engage })),
         Command::ClearFaults { which } => {
-            let code = clear_code_for(which).ok_or_else(|| {
-                CommandError::unsupported(
-                    robot,
-                    format!("fault to clear called {}", FaultClear::name(which)),
-                )
-            })?;
+            let code =
+                clear_code_for(which).ok_or_else(|| CommandError::no_fault_clear(robot, which))?;
             Planned::one(Frame::ClearFault(ClearFault { code }))
         }
         Command::OffRoad { enter } => Planned::one(Frame::OffRoad(Switch { enter })),
@@ -101,13 +97,8 @@ pub fn frames_for(
         Command::Lights { .. } => {
             return Err(CommandError::unsupported(robot, "light control on the bus"));
         }
-        Command::Lift { .. } => return Err(CommandError::unsupported(robot, "lift")),
-        Command::Servos { .. } => return Err(CommandError::unsupported(robot, "servos")),
-        Command::Power { .. } => {
-            return Err(CommandError::unsupported(
-                robot,
-                "drive power switch on the bus",
-            ));
+        Command::Lift { .. } | Command::Servos { .. } | Command::Power { .. } => {
+            return Err(CommandError::lacks(robot, command));
         }
     })
 }

@@ -93,10 +93,6 @@ impl Bench {
         };
         s
     }
-
-    fn v(&self) -> f64 {
-        self.sim.truth().linear_mps
-    }
 }
 
 #[test]
@@ -384,17 +380,10 @@ fn feedback_periods_are_exactly_20_100_and_500_ms() {
 #[test]
 fn a_late_call_skips_missed_slots_without_shifting_the_grid() {
     let mut sim = TitanSim::new(TitanProfile::default(), T0);
-    sim.handle_timeout(T0);
-    while sim.poll_transmit(T0).is_some() {}
-    let late = T0 + ms(1234);
-    sim.handle_timeout(late);
-    let mut burst = 0;
-    while sim.poll_transmit(late).is_some() {
-        burst += 1;
-    }
+    let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
     // One slot of each period, no catch-up burst.
     assert_eq!(burst, 9 + 4 + 6);
-    assert_eq!(sim.poll_timeout(), Some(T0 + ms(1240)));
+    assert_eq!(next, Some(T0 + ms(1240)));
 }
 
 #[test]
@@ -419,12 +408,7 @@ fn a_silence_injection_mutes_the_chassis_for_its_duration() {
     let mut b = Bench::driving();
     b.heartbeat(Some(motion(0.5, 0.0)));
     b.run_for(ms(100));
-    assert!(b.inject(Injection::Silence(ms(200))));
-    let start = b.now;
-    b.run_for(ms(199));
-    assert_eq!(b.sent_since(start), 0);
-    b.run_for(ms(21));
-    assert!(b.sent_since(start) > 0);
+    b.assert_silenced_for(ms(200));
     assert_eq!(b.sim.truth().control_mode, ControlMode::COMMAND);
 }
 

@@ -46,36 +46,27 @@ fn motion_command_carries_a_left_positive_steering_angle() {
 
 #[test]
 fn one_byte_commands_decode_and_encode() {
-    assert_eq!(
-        round_trip("421#01"),
-        Frame::Mode(ModeCommand {
-            mode: mode::CAN_COMMAND
-        })
-    );
-    assert_eq!(
-        round_trip("421#00"),
-        Frame::Mode(ModeCommand {
-            mode: mode::STANDBY
-        })
-    );
-    assert_eq!(
-        round_trip("131#01"),
-        Frame::ParkingBrake(ParkingBrake { engage: false })
-    );
-    assert_eq!(
-        round_trip("131#00"),
-        Frame::ParkingBrake(ParkingBrake { engage: true })
-    );
-    assert_eq!(
-        round_trip("422#01"),
-        Frame::SilentMode(Switch { enter: true })
-    );
-    assert_eq!(
-        round_trip("423#00"),
-        Frame::OffRoad(Switch { enter: false })
-    );
-    assert_eq!(round_trip("431#AA"), Frame::SteeringZero);
-    assert_eq!(round_trip("43A#EE"), Frame::SteeringZeroAck);
+    let can_command = ModeCommand {
+        mode: mode::CAN_COMMAND,
+    };
+    let standby = ModeCommand {
+        mode: mode::STANDBY,
+    };
+    for (text, frame) in [
+        ("421#01", Frame::Mode(can_command)),
+        ("421#00", Frame::Mode(standby)),
+        (
+            "131#01",
+            Frame::ParkingBrake(ParkingBrake { engage: false }),
+        ),
+        ("131#00", Frame::ParkingBrake(ParkingBrake { engage: true })),
+        ("422#01", Frame::SilentMode(Switch { enter: true })),
+        ("423#00", Frame::OffRoad(Switch { enter: false })),
+        ("431#AA", Frame::SteeringZero),
+        ("43A#EE", Frame::SteeringZeroAck),
+    ] {
+        assert_eq!(round_trip(text), frame, "{text}");
+    }
     for code in [
         0x00, 0x01, 0x02, 0x03, 0x04, 0x09, 0x0A, 0x0B, 0x0C, 0x0F, 0x10,
     ] {

@@ -123,14 +123,12 @@ pub fn frames_for(
                 "control mode (it obeys the serial link whenever powered)",
             ));
         }
-        Command::Brake { .. } => return Err(CommandError::unsupported(robot, "parking brake")),
-        Command::ClearFaults { .. } => {
-            return Err(CommandError::unsupported(robot, "fault-clear command"));
-        }
-        Command::Lights { .. } => return Err(CommandError::unsupported(robot, "light control")),
-        Command::OffRoad { .. } => return Err(CommandError::unsupported(robot, "off-road mode")),
-        Command::SteeringZero => return Err(CommandError::unsupported(robot, "steering to zero")),
-        Command::Silent { .. } => return Err(CommandError::unsupported(robot, "silent mode")),
+        Command::Brake { .. }
+        | Command::ClearFaults { .. }
+        | Command::Lights { .. }
+        | Command::OffRoad { .. }
+        | Command::SteeringZero
+        | Command::Silent { .. } => return Err(CommandError::lacks(robot, command)),
     })
 }
 

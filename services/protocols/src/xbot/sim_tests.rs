@@ -89,10 +89,6 @@ impl Bench {
     fn last(&self) -> SensorReport {
         self.reports().last().unwrap().1
     }
-
-    fn v(&self) -> f64 {
-        self.sim.truth().linear_mps
-    }
 }
 
 #[test]
@@ -513,12 +509,7 @@ fn silence_mutes_the_board_but_commands_are_obeyed() {
     let mut b = Bench::powered();
     b.heartbeat(Some(velocity(0.5, 0.0, 0.0)));
     b.run_for(ms(2000));
-    assert!(b.inject(Injection::Silence(ms(200))));
-    let start = b.now;
-    b.run_for(ms(199));
-    assert_eq!(b.sent_since(start), 0);
-    b.run_for(ms(21));
-    assert!(b.sent_since(start) > 0);
+    b.assert_silenced_for(ms(200));
     assert!(close(b.v(), 0.5, 1e-3), "commands were obeyed throughout");
 }
 
@@ -606,16 +597,9 @@ fn malformed_input_is_counted_and_never_obeyed() {
 #[test]
 fn a_late_call_skips_missed_reports_without_a_burst() {
     let mut sim = XbotSim::new(p(), T0);
-    sim.handle_timeout(T0);
-    while sim.poll_transmit(T0).is_some() {}
-    let late = T0 + ms(1234);
-    sim.handle_timeout(late);
-    let mut burst = 0;
-    while sim.poll_transmit(late).is_some() {
-        burst += 1;
-    }
+    let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
     assert_eq!(burst, 1);
-    assert_eq!(sim.poll_timeout(), Some(T0 + ms(1240)));
+    assert_eq!(next, Some(T0 + ms(1240)));
 }
 
 #[test]

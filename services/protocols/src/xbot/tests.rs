@@ -36,6 +36,18 @@ fn round_trip(text: &str) -> Frame {
     round_trip_with(text, &p())
 }
 
+/// The velocity command of a manual example, round-tripped.
+fn velocity_with(text: &str, profile: &XbotProfile) -> VelocityCommand {
+    let Frame::Velocity(v) = round_trip_with(text, profile) else {
+        panic!("{text}: not a velocity command")
+    };
+    v
+}
+
+fn velocity(text: &str) -> VelocityCommand {
+    velocity_with(text, &p())
+}
+
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() < 1e-12
 }
@@ -77,18 +89,12 @@ fn manual_power_examples_decode_and_encode_byte_for_byte() {
 
 #[test]
 fn manual_forward_and_backward_examples_carry_the_f32_nearest_to_0_2() {
-    let Frame::Velocity(v) = round_trip("AA 55 0D 03 CD CC 4C 3E 00 00 00 00 00 00 00 00 7D")
-    else {
-        panic!()
-    };
+    let v = velocity("AA 55 0D 03 CD CC 4C 3E 00 00 00 00 00 00 00 00 7D");
     // 0x3E4CCCCD is the f32 nearest 0.2; it widens to f64 exactly, without re-rounding.
     assert_eq!(v.linear_x_mps, f64::from(0.2f32));
     assert!((v.linear_x_mps - 0.2).abs() < 1e-8);
     assert_eq!((v.linear_y_mps, v.angular_z_radps), (0.0, 0.0));
-    let Frame::Velocity(v) = round_trip("AA 55 0D 03 CD CC 4C BE 00 00 00 00 00 00 00 00 FD")
-    else {
-        panic!()
-    };
+    let v = velocity("AA 55 0D 03 CD CC 4C BE 00 00 00 00 00 00 00 00 FD");
     assert_eq!(v.linear_x_mps, -f64::from(0.2f32));
 }
 
@@ -109,21 +115,15 @@ fn manual_lateral_examples_are_0_2_m_s_and_wire_positive_means_right_by_default(
     // The manual labels these "right/left 0.3 m/s" but prints the bytes of 0.2 m/s.
     let right = "AA 55 0D 03 00 00 00 00 CD CC 4C 3E 00 00 00 00 7D";
     let left = "AA 55 0D 03 00 00 00 00 CD CC 4C BE 00 00 00 00 FD";
-    let Frame::Velocity(v) = round_trip(right) else {
-        panic!()
-    };
+    let v = velocity(right);
     assert_eq!(v.linear_y_mps, -f64::from(0.2f32), "ISO: right is negative");
-    let Frame::Velocity(v) = round_trip(left) else {
-        panic!()
-    };
+    let v = velocity(left);
     assert_eq!(v.linear_y_mps, f64::from(0.2f32));
     let flipped = XbotProfile {
         lateral_left_positive: true,
         ..p()
     };
-    let Frame::Velocity(v) = round_trip_with(right, &flipped) else {
-        panic!()
-    };
+    let v = velocity_with(right, &flipped);
     assert_eq!(v.linear_y_mps, f64::from(0.2f32));
 }
 
@@ -132,21 +132,15 @@ fn manual_yaw_examples_follow_note_1_by_default_and_the_labels_when_flipped() {
     // +20 °/s, labelled "turn right" by the examples; note 1 says positive is left.
     let plus_20 = "AA 55 0D 03 00 00 00 00 00 00 00 00 00 00 A0 41 EF";
     let minus_20 = "AA 55 0D 03 00 00 00 00 00 00 00 00 00 00 A0 C1 6F";
-    let Frame::Velocity(v) = round_trip(plus_20) else {
-        panic!()
-    };
+    let v = velocity(plus_20);
     assert!(close(v.angular_z_radps, 20f64.to_radians()));
-    let Frame::Velocity(v) = round_trip(minus_20) else {
-        panic!()
-    };
+    let v = velocity(minus_20);
     assert!(close(v.angular_z_radps, -20f64.to_radians()));
     let labels = XbotProfile {
         yaw_rate_left_positive: false,
         ..p()
     };
-    let Frame::Velocity(v) = round_trip_with(plus_20, &labels) else {
-        panic!()
-    };
+    let v = velocity_with(plus_20, &labels);
     assert!(close(v.angular_z_radps, -20f64.to_radians()));
 }
 
