@@ -18,6 +18,7 @@ use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, PASS_TRACE_ENV, Robot,
     STATE_BUFFER, SimKind, SimRequest, Source, Ticker, VelocityRequest, now_ns,
 };
+pub use chassis_ipc::PassStamps;
 use chassis_protocols::describe::{FrameJson, RobotCodec};
 use chassis_protocols::{CanFrame, RobotKind};
 use serde::Serialize;
@@ -63,19 +64,6 @@ pub struct Service {
     trace: Option<PathBuf>,
 }
 
-/// The stamps chassisd took inside one pass (its pass trace, `CHASSIS_PASS_TRACE`), ns; 0 where
-/// the pass did not do the thing.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct PassStamps {
-    pub woke: u64,
-    pub requests_read: u64,
-    pub write_started: u64,
-    pub written: u64,
-    pub state_handed: u64,
-    pub state_sent: u64,
-    pub state_readers_woken: u64,
-}
-
 impl Service {
     /// Stops the service and returns the passes of its trace (none when it kept no trace).
     pub fn stop(mut self) -> anyhow::Result<Vec<PassStamps>> {
@@ -85,44 +73,7 @@ impl Service {
         };
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("reading chassisd's pass trace {}", path.display()))?;
-        let mut lines = text.lines();
-        let header = lines.next().unwrap_or_default();
-        if header
-            != "woke requests_read write_started written state_handed state_sent \
-                state_readers_woken"
-        {
-            bail!("{}: unknown columns '{header}'", path.display());
-        }
-        lines
-            .map(|line| {
-                let v: Vec<u64> = line
-                    .split_whitespace()
-                    .map(str::parse)
-                    .collect::<Result<_, _>>()
-                    .with_context(|| format!("{}: '{line}'", path.display()))?;
-                let [
-                    woke,
-                    requests_read,
-                    write_started,
-                    written,
-                    state_handed,
-                    state_sent,
-                    state_readers_woken,
-                ] = v[..]
-                else {
-                    bail!("{}: '{line}' has not 7 stamps", path.display());
-                };
-                Ok(PassStamps {
-                    woke,
-                    requests_read,
-                    write_started,
-                    written,
-                    state_handed,
-                    state_sent,
-                    state_readers_woken,
-                })
-            })
-            .collect()
+        PassStamps::parse(&text).with_context(|| format!("{}", path.display()))
     }
 
     fn stop_children(&mut self) {

@@ -166,12 +166,23 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
     finish(&stop, threads, &session, result)
 }
 
-/// Ends a side: raises the stop flag, joins its threads, closes the session, and reports the
-/// loop's own error first, then every thread's.
+/// Ends a side: [`join`]s its threads, closes the session, and reports as `join` does.
 pub fn finish(
     stop: &AtomicBool,
     threads: Vec<std::thread::JoinHandle<anyhow::Result<()>>>,
     session: &zenoh::Session,
+    result: anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let joined = join(stop, threads, result);
+    let _ = session.close().wait();
+    joined
+}
+
+/// Raises the stop flag, joins `threads`, and reports the loop's own error (`result`) first,
+/// then every thread's.
+pub fn join(
+    stop: &AtomicBool,
+    threads: Vec<std::thread::JoinHandle<anyhow::Result<()>>>,
     result: anyhow::Result<()>,
 ) -> anyhow::Result<()> {
     stop.store(true, Ordering::Relaxed);
@@ -183,7 +194,6 @@ pub fn finish(
             Err(_) => failures.push("a thread panicked".into()),
         }
     }
-    let _ = session.close().wait();
     result?;
     if !failures.is_empty() {
         anyhow::bail!("{}", failures.join("; "));

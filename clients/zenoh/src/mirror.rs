@@ -342,7 +342,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
             break;
         }
     }
-    join(stop, threads, result)
+    crate::export::join(stop, threads, result)
 }
 
 fn report_lost(name: &str, lost: &Lost) {
@@ -354,29 +354,6 @@ fn report_lost(name: &str, lost: &Lost) {
             lost.why
         );
     }
-}
-
-/// Ends one robot's mirror: raises its stop flag, joins its threads, and reports the loop's own
-/// error first, then every thread's.
-fn join(
-    stop: &AtomicBool,
-    threads: Vec<std::thread::JoinHandle<anyhow::Result<()>>>,
-    result: anyhow::Result<()>,
-) -> anyhow::Result<()> {
-    stop.store(true, Ordering::Relaxed);
-    let mut failures = Vec::new();
-    for thread in threads {
-        match thread.join() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => failures.push(format!("{e:#}")),
-            Err(_) => failures.push("a thread panicked".into()),
-        }
-    }
-    result?;
-    if !failures.is_empty() {
-        anyhow::bail!("{}", failures.join("; "));
-    }
-    Ok(())
 }
 
 fn send<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(

@@ -32,6 +32,7 @@ mod error;
 mod limits;
 mod names;
 mod ports;
+mod trace;
 
 pub use error::IpcError;
 pub use limits::{
@@ -44,3 +45,4 @@ pub use names::{
     reply_name, robots, service_name,
 };
 pub use ports::{ClientPorts, Exchange, Reader, ServerPorts, Topic, Writer, node};
+pub use trace::{PassStamps, TraceError};

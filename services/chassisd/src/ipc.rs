@@ -263,6 +263,18 @@ fn abandoned_creations(
     now: std::time::SystemTime,
 ) -> Vec<String> {
     use std::os::unix::fs::PermissionsExt;
+    files_of_prefix(dir, prefix)
+        .into_iter()
+        .filter_map(|(file, meta)| {
+            let writable = meta.permissions().mode() & 0o200 != 0;
+            let age = now.duration_since(meta.modified().ok()?).ok()?;
+            (writable && age >= ABANDONED_AFTER).then_some(file)
+        })
+        .collect()
+}
+
+/// The regular files in `dir` of the iceoryx2 `prefix`, with their metadata.
+fn files_of_prefix(dir: &std::path::Path, prefix: &str) -> Vec<(String, std::fs::Metadata)> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Vec::new();
     };
@@ -271,10 +283,7 @@ fn abandoned_creations(
         .filter_map(|entry| {
             let file = entry.file_name().to_str()?.to_string();
             let meta = entry.metadata().ok()?;
-            let writable = meta.permissions().mode() & 0o200 != 0;
-            let age = now.duration_since(meta.modified().ok()?).ok()?;
-            (file.starts_with(prefix) && meta.is_file() && writable && age >= ABANDONED_AFTER)
-                .then_some(file)
+            (file.starts_with(prefix) && meta.is_file()).then_some((file, meta))
         })
         .collect()
 }
@@ -340,18 +349,9 @@ fn unsized_segments(
 ) -> (Vec<String>, Vec<String>) {
     use std::os::unix::fs::PermissionsExt;
     let (mut old, mut young) = (Vec::new(), Vec::new());
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return (old, young);
-    };
-    for entry in entries.flatten() {
-        let Some(file) = entry.file_name().to_str().map(str::to_string) else {
-            continue;
-        };
-        let Ok(meta) = entry.metadata() else {
-            continue;
-        };
+    for (file, meta) in files_of_prefix(dir, prefix) {
         let unreadable = meta.permissions().mode() & 0o400 == 0;
-        if !(file.starts_with(prefix) && meta.is_file() && meta.len() == 0 && unreadable) {
+        if meta.len() != 0 || !unreadable {
             continue;
         }
         let age = meta

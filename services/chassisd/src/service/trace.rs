@@ -16,46 +16,10 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use chassis_ipc::PASS_TRACE_ENV;
+pub(crate) use chassis_ipc::PassStamps;
 
 /// Most passes kept (7 stamps each: about 11 MB).
 pub(crate) const MAX_PASSES: usize = 200_000;
-
-/// The stamps of one pass, ns (0: not taken).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub(crate) struct PassStamps {
-    pub woke: u64,
-    pub requests_read: u64,
-    pub write_started: u64,
-    pub written: u64,
-    pub state_handed: u64,
-    pub state_sent: u64,
-    pub state_readers_woken: u64,
-}
-
-impl PassStamps {
-    const HEADER: &'static str =
-        "woke requests_read write_started written state_handed state_sent state_readers_woken";
-
-    fn line(&self) -> String {
-        format!(
-            "{} {} {} {} {} {} {}",
-            self.woke,
-            self.requests_read,
-            self.write_started,
-            self.written,
-            self.state_handed,
-            self.state_sent,
-            self.state_readers_woken
-        )
-    }
-
-    /// Sets `slot` to `now` unless the pass already took it.
-    pub fn first(slot: &mut u64, now: u64) {
-        if *slot == 0 {
-            *slot = now;
-        }
-    }
-}
 
 /// The passes kept and the one under way.
 #[derive(Debug)]
