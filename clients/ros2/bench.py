@@ -15,12 +15,17 @@ processes involved:
   ``chassis-bench`` applies to every client alike, an odom counts when its stamp is newer than
   every stamp taken before it: one that repeats an older frame's read time (a tick's refresh) is
   left out, and the first only sets the stamp.
-* **raw hops**: the same two DDS implementations with nothing behind them. ``chassis-ros2
-  --bench-echo`` (the bridge's DDS stack) records each ``TwistStamped`` ping written here
-  (Cyclone DDS → RustDDS, the cmd_vel hop) and answers it at once (RustDDS → Cyclone DDS, the
-  odom hop), at the command path's pace, after a warm-up of ``WARMUP`` pings that are not
-  counted, and as many counted as the path each hop divides: ``--commands`` for the cmd_vel hop,
-  ``--state-samples`` for the odom hop.
+* **raw hops**: the same two DDS implementations with nothing behind them, each carrying what
+  its path carries with the same QoS. ``chassis-ros2 --bench-echo`` (the bridge's DDS stack)
+  records each ``TwistStamped`` ping written here (Cyclone DDS → RustDDS, read as the bridge
+  reads ``cmd_vel``) and answers it at once with an ``Odometry`` written as the bridge writes
+  ``odom`` (RustDDS → Cyclone DDS, read here as ``odom`` is read), at the command path's pace,
+  after a warm-up of ``WARMUP`` pings that are not counted, and as many counted as the path each
+  hop divides: ``--commands`` for the cmd_vel hop, ``--state-samples`` for the odom hop.
+* **the odom path's parts**: the bridge runs with ``CHASSIS_ROS2_TRACE`` naming DIR/odom.trace:
+  for each odom it writes the frame's read time, when its state loop woke with the sample, when
+  it handed the odom to RustDDS and when that write returned. DIR/state.pairs holds each counted
+  odom's read time and the time it was taken here; ``chassis-bench`` joins the two.
 
 DDS discovery multicasts: run it only in a network namespace whose only interface is the
 loopback (``chassis-bench`` runs it under ``unshare --net``); it refuses to run elsewhere.
@@ -32,8 +37,8 @@ Command line::
         [--state-samples 2000] [--commands 300] [--interval-ms 4]
 
 Writes DIR/command.ns, DIR/state.ns, DIR/raw-in.ns (Cyclone → RustDDS), DIR/raw-out.ns
-(RustDDS → Cyclone), one latency in ns a line, and DIR/command.missed; prints one JSON line per
-path.
+(RustDDS → Cyclone), one latency in ns a line, DIR/command.missed, DIR/state.pairs and
+DIR/odom.trace; prints one JSON line per path.
 """
 
 from __future__ import annotations
@@ -147,16 +152,18 @@ def command_path(
     return latencies, missed
 
 
-def state_path(dp: DomainParticipant, cmd: DataWriter, odom: DataReader, samples: int) -> list[int]:
-    """Frame read → odom latencies, ns. The bridge runs with ``--monotonic-stamps``: each odom's
-    stamp is the ``CLOCK_MONOTONIC`` read time of the frame that produced it."""
+def state_path(
+    dp: DomainParticipant, cmd: DataWriter, odom: DataReader, samples: int
+) -> list[tuple[int, int]]:
+    """(frame read, odom taken) pairs, ns. The bridge runs with ``--monotonic-stamps``: each
+    odom's stamp is the ``CLOCK_MONOTONIC`` read time of the frame that produced it."""
     ws = waiter(dp, odom)
-    latencies: list[int] = []
+    pairs: list[tuple[int, int]] = []
     drive = m.Twist(linear=m.Vector3(x=STATE_DRIVE[0]), angular=m.Vector3(z=STATE_DRIVE[1]))
     last_request = 0
     newest: int | None = None
     deadline = time.monotonic() + 120
-    while len(latencies) < samples and time.monotonic() < deadline:
+    while len(pairs) < samples and time.monotonic() < deadline:
         if chassis.now_ns() - last_request > 50_000_000:
             cmd.write(drive)
             last_request = chassis.now_ns()
@@ -166,10 +173,10 @@ def state_path(dp: DomainParticipant, cmd: DataWriter, odom: DataReader, samples
         for sample in taken:
             read = nanos(sample.header.stamp)
             if newest is not None and read > newest:
-                latencies.append(woke - read)
+                pairs.append((read, woke))
             newest = read if newest is None else max(newest, read)
     cmd.write(m.Twist())
-    return latencies
+    return pairs
 
 
 def raw_hops(
@@ -215,7 +222,9 @@ def main() -> int:
     interval = args.interval_ms / 1e3
     with (out / "bridge.log").open("wb") as log:
         bridge = subprocess.Popen(
-            [args.bridge, "--name", args.name, "--monotonic-stamps"], env=env, stderr=log
+            [args.bridge, "--name", args.name, "--monotonic-stamps"],
+            env=dict(env, CHASSIS_ROS2_TRACE=str(out / "odom.trace")),
+            stderr=log,
         )
         echo = subprocess.Popen(
             [args.bridge, "--bench-echo", str(out / "raw-in.ns")], env=env, stderr=log
@@ -226,7 +235,7 @@ def main() -> int:
         cmd = DataWriter(dp, Topic(dp, "rt/cmd_vel", m.Twist), qos=reliable())
         odom = DataReader(dp, Topic(dp, "rt/odom", m.Odometry), qos=reliable())
         ping = DataWriter(dp, Topic(dp, "rt/chassis_bench/ping", m.TwistStamped), qos=reliable())
-        pong = DataReader(dp, Topic(dp, "rt/chassis_bench/pong", m.TwistStamped), qos=reliable())
+        pong = DataReader(dp, Topic(dp, "rt/chassis_bench/pong", m.Odometry), qos=reliable())
         wait_matched(cmd, "cmd_vel")
         wait_matched(ping, "the echo's ping")
         frames = client_bench.motion_frames(args.chassis, args.robot)
@@ -238,7 +247,9 @@ def main() -> int:
         raw_out = raw_out[: args.state_samples]
         command, missed = command_path(robot, cmd, frames, args.commands, interval)
         time.sleep(0.6)  # the ros2 source expires: the state path starts from rest
-        state = state_path(dp, cmd, odom, args.state_samples)
+        pairs = state_path(dp, cmd, odom, args.state_samples)
+        state = [taken - read for read, taken in pairs]
+        (out / "state.pairs").write_text("".join(f"{read} {taken}\n" for read, taken in pairs))
     finally:
         for proc in (echo, bridge):
             proc.send_signal(signal.SIGTERM)

@@ -675,17 +675,33 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             report.rows.push(warm_row);
             let warm = reference(&warm_what);
 
+            let mut odom_parts = None;
             if let Some(dds) = ros2 {
-                let conditions = format!(
-                    "one message every {} ms, measured by the ROS 2 run's own script, same run",
-                    interval.as_millis()
-                );
+                odom_parts = Some(dds.odom_parts);
+                let conditions = |carried: &str| {
+                    format!(
+                        "one message every {} ms after 200 uncounted, {carried}, measured by the \
+                         ROS 2 run's own script, same run",
+                        interval.as_millis()
+                    )
+                };
                 // Named after this run: a full run measures the bridge beside more than one.
                 let dds_in = format!("{DDS_IN}, beside {label}");
                 let dds_out = format!("{DDS_OUT}, beside {label}");
-                for (what, latencies) in [(&dds_in, dds.raw_in), (&dds_out, dds.raw_out)] {
+                for (what, latencies, carried) in [
+                    (
+                        &dds_in,
+                        dds.raw_in,
+                        "a TwistStamped read with the bridge's cmd_vel QoS",
+                    ),
+                    (
+                        &dds_out,
+                        dds.raw_out,
+                        "an Odometry written as the bridge writes odom (its writer QoS)",
+                    ),
+                ] {
                     let mut r = baseline_row(what.clone(), latencies);
-                    r.conditions = Some(conditions.clone());
+                    r.conditions = Some(conditions(carried));
                     report.rows.push(r);
                 }
                 let mut command_row = run_row(
@@ -738,6 +754,11 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             report
                 .parts
                 .push(run_parts("state", parts::state(&state.samples, &passes)));
+            if let Some(odom) = odom_parts {
+                report
+                    .parts
+                    .push(run_parts("ros2: frame read → odom", odom));
+            }
             if let Some(figures) = command {
                 let mut command_row =
                     run_row("command", label.clone(), figures.latencies, figures.missed);

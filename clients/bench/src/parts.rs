@@ -91,6 +91,26 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     )
 }
 
+/// Frame read → the bridge's state loop woke with the sample → the odom handed to RustDDS → the
+/// write returned → the peer took it, for each `(frame read, taken)` sample of the ROS 2 row
+/// whose odom is in the bridge's trace (`[read, woke, write begun, written]` a line, joined on
+/// the frame's read time).
+pub fn odom(samples: &[(u64, u64)], trace: &[[u64; 4]]) -> Split {
+    let by_read: HashMap<u64, &[u64; 4]> = trace.iter().map(|t| (t[0], t)).collect();
+    split(
+        &[
+            "frame read → bridge woke (chassisd's state path, iceoryx2)",
+            "bridge woke → odom handed to RustDDS (conversion)",
+            "RustDDS write (serialize, admit, wake its sender)",
+            "written → taken by the peer (RustDDS' sender, UDP, Cyclone DDS)",
+        ],
+        samples.iter().filter_map(|&(read, taken)| {
+            let t = by_read.get(&read)?;
+            Some(vec![read, t[1], t[2], t[3], taken])
+        }),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -111,6 +131,17 @@ mod tests {
             .map(|(_, s)| (s.p50_us as u64, s.count))
             .collect();
         assert_eq!(us, vec![(50, 1), (2, 1), (3, 1), (5, 1)], "{split:?}");
+    }
+
+    #[test]
+    fn an_odom_sample_is_split_at_the_bridges_stamps_and_one_not_in_its_trace_is_left_out() {
+        let trace = [[1_000_000, 1_070_000, 1_085_000, 1_200_000]];
+        let split = odom(&[(1_000_000, 1_500_000), (2_000_000, 2_600_000)], &trace);
+        let us: Vec<(u64, u64)> = split
+            .iter()
+            .map(|(_, s)| (s.p50_us as u64, s.count))
+            .collect();
+        assert_eq!(us, vec![(70, 1), (15, 1), (115, 1), (300, 1)], "{split:?}");
     }
 
     #[test]

@@ -28,6 +28,41 @@ pub struct Ros2Figures {
     pub raw_out: Latencies,
     /// `cmd_vel` messages whose frame did not appear.
     pub missed: u64,
+    /// The state row's samples split at the bridge's stamps.
+    pub odom_parts: crate::parts::Split,
+}
+
+/// `(read, taken)` pairs, ns, one a line (`state.pairs`).
+fn read_pairs(path: &Path) -> anyhow::Result<Vec<(u64, u64)>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    text.lines()
+        .map(|l| {
+            let mut it = l.split_whitespace().map(str::parse::<u64>);
+            match (it.next(), it.next()) {
+                (Some(Ok(a)), Some(Ok(b))) => Ok((a, b)),
+                _ => bail!("{}: not a pair of stamps: {l:?}", path.display()),
+            }
+        })
+        .collect()
+}
+
+/// The bridge's odom trace (`CHASSIS_ROS2_TRACE`): a header, then four stamps a line.
+fn read_trace(path: &Path) -> anyhow::Result<Vec<[u64; 4]>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let stamps: Vec<u64> = l
+                .split_whitespace()
+                .map(str::parse)
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("{}: {l:?}", path.display()))?;
+            <[u64; 4]>::try_from(stamps)
+                .map_err(|_| anyhow::anyhow!("{}: not four stamps: {l:?}", path.display()))
+        })
+        .collect()
 }
 
 /// The interpreter of the ROS 2 bridge's test environment (`scripts/ros2-tests` makes it, with
@@ -89,5 +124,9 @@ pub fn run(
         raw_in: read_latencies(&out.join("raw-in.ns"))?,
         raw_out: read_latencies(&out.join("raw-out.ns"))?,
         missed,
+        odom_parts: crate::parts::odom(
+            &read_pairs(&out.join("state.pairs"))?,
+            &read_trace(&out.join("odom.trace"))?,
+        ),
     })
 }

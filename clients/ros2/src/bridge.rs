@@ -665,6 +665,41 @@ pub fn messages(
     out
 }
 
+/// The environment variable naming a file for the state loop's odom trace ([`OdomTrace`]).
+pub const ODOM_TRACE_ENV: &str = "CHASSIS_ROS2_TRACE";
+
+/// Stamps the state loop takes for each `odom` it publishes, kept in memory and written when the
+/// loop ends (the file `CHASSIS_ROS2_TRACE` names; `chassis-bench` splits its ROS 2 row with
+/// them): the frame read (the state's `stamp_ns`), the loop woken with the sample, the odom
+/// handed to RustDDS and the write returned, `CLOCK_MONOTONIC` ns, one odom a line.
+struct OdomTrace {
+    path: std::path::PathBuf,
+    lines: Vec<[u64; 4]>,
+}
+
+impl OdomTrace {
+    /// The first line of the file.
+    const HEADER: &'static str = "read_ns woke_ns write_begun_ns written_ns";
+
+    fn from_env() -> Option<Self> {
+        let path = std::env::var_os(ODOM_TRACE_ENV)?;
+        Some(Self {
+            path: path.into(),
+            lines: Vec::with_capacity(1 << 16),
+        })
+    }
+
+    fn write(&self) {
+        let mut text = format!("{}\n", Self::HEADER);
+        for l in &self.lines {
+            text.push_str(&format!("{} {} {} {}\n", l[0], l[1], l[2], l[3]));
+        }
+        if let Err(e) = std::fs::write(&self.path, text) {
+            tracing::warn!(error = %e, path = %self.path.display(), "odom trace not written");
+        }
+    }
+}
+
 /// What the state loop keeps between samples.
 struct StateLoop<'a> {
     name: &'a str,
@@ -679,6 +714,9 @@ struct StateLoop<'a> {
     last_diagnostics: Option<(u64, Vec<(u8, String)>)>,
     /// Publications DDS refused, counted and logged.
     failures: u64,
+    /// When the loop woke with the samples it is publishing.
+    woke_ns: u64,
+    trace: Option<OdomTrace>,
 }
 
 impl StateLoop<'_> {
@@ -710,7 +748,14 @@ impl StateLoop<'_> {
         );
         for m in messages {
             match m {
-                Message::Odom(m) => Self::publish(f, "odom", &out.odom, *m),
+                Message::Odom(m) => {
+                    let begun = self.trace.is_some().then(chassis_client::now_ns);
+                    Self::publish(f, "odom", &out.odom, *m);
+                    if let (Some(trace), Some(begun)) = (&mut self.trace, begun) {
+                        let written = chassis_client::now_ns();
+                        trace.lines.push([s.stamp_ns, self.woke_ns, begun, written]);
+                    }
+                }
                 Message::Tf(m) => {
                     if let Some(tf) = &out.tf {
                         Self::publish(f, "tf", tf, m);
@@ -787,6 +832,8 @@ pub fn state_loop(
         mux: None,
         last_diagnostics: None,
         failures: 0,
+        woke_ns: 0,
+        trace: OdomTrace::from_env(),
     };
     tracing::info!(robot = name, "bridging");
     while !termination_requested() {
@@ -798,6 +845,7 @@ pub fn state_loop(
             }
             return Err(e).context("reading state");
         }
+        lp.woke_ns = chassis_client::now_ns();
         for s in &samples {
             lp.on_state(s);
         }
@@ -812,14 +860,19 @@ pub fn state_loop(
         }
         lp.diagnostics(chassis_client::now_ns());
     }
+    if let Some(trace) = &lp.trace {
+        trace.write();
+    }
     Ok(())
 }
 
-/// The far end of `chassis-bench`'s raw DDS hop (`clients/ros2/bench.py`): the bridge's own DDS
-/// stack with nothing behind it. Each `TwistStamped` on `chassis_bench/ping` (its stamp: the
-/// sender's `CLOCK_MONOTONIC` at the write) is recorded as a one-way latency and answered at once
-/// on `chassis_bench/pong`, stamped with this process' `CLOCK_MONOTONIC` at that write. Runs
-/// until SIGINT / SIGTERM, then writes the latencies, ns, one a line, to `out`.
+/// The far end of `chassis-bench`'s raw DDS hops (`clients/ros2/bench.py`): the bridge's own DDS
+/// stack with nothing behind it, each hop carrying what the bridge's path carries, with its QoS.
+/// Each `TwistStamped` on `chassis_bench/ping` (its stamp: the sender's `CLOCK_MONOTONIC` at the
+/// write), read as `cmd_vel` is read, is recorded as a one-way latency and answered at once on
+/// `chassis_bench/pong` by an `Odometry` written as `odom` is written (the same message, the
+/// same writer QoS), stamped with this process' `CLOCK_MONOTONIC` at that write. Runs until
+/// SIGINT / SIGTERM, then writes the latencies, ns, one a line, to `out`.
 pub fn bench_echo(domain_id: u16, out: &std::path::Path) -> anyhow::Result<()> {
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
         .context("joining the DDS domain")?;
@@ -837,11 +890,21 @@ pub fn bench_echo(domain_id: u16, out: &std::path::Path) -> anyhow::Result<()> {
     )?;
     let pong_topic = node.create_topic(
         &topic_name("/", "chassis_bench/pong")?,
-        TwistStamped::type_name(),
+        Odometry::type_name(),
         &reliable_qos(),
     )?;
-    let mut ping: Subscription<TwistStamped> = node.create_subscription(&ping_topic, None)?;
-    let pong: Publisher<TwistStamped> = node.create_publisher(&pong_topic, None)?;
+    let mut ping: Subscription<TwistStamped> =
+        node.create_subscription(&ping_topic, Some(cmd_vel_qos()))?;
+    let pong: Publisher<Odometry> =
+        node.create_publisher(&pong_topic, Some(reliable_writer_qos()))?;
+    // An odom as the bridge writes it for a robot at rest: the same size on the wire.
+    let description = RobotDescription::default();
+    let odom = convert::odometry(
+        &ChassisState::default(),
+        &description.odometry_variance,
+        RosClock::with_offset(0),
+        &Frames::new(""),
+    );
     let mut poll = Poll::new()?;
     poll.registry()
         .register(&mut ping, CMD_VEL, Interest::READABLE)?;
@@ -854,13 +917,14 @@ pub fn bench_echo(domain_id: u16, out: &std::path::Path) -> anyhow::Result<()> {
             }
             return Err(e).context("waiting for DDS");
         }
-        while let Ok(Some((mut m, _))) = ping.take() {
+        while let Ok(Some((m, _))) = ping.take() {
             let now = chassis_client::now_ns();
             let sent = u64::try_from(m.header.stamp.nanos()).unwrap_or(0);
             latencies.push(now.saturating_sub(sent));
-            m.header.stamp =
+            let mut answer = odom.clone();
+            answer.header.stamp =
                 crate::msg::Time::from_nanos(i64::try_from(chassis_client::now_ns()).unwrap_or(0));
-            if let Err(e) = pong.publish(m) {
+            if let Err(e) = pong.publish(answer) {
                 tracing::warn!(error = ?e, "pong not sent");
             }
         }
