@@ -595,23 +595,25 @@ impl Report {
         })
     }
 
-    /// "the largest part at the p99: NAME, X of Y µs" for `row`, from its split, leaving out
-    /// the split's first `skip` parts (those before the row starts).
+    /// "ROW: the largest part at the p99, NAME, p99 X µs (p50 Y), over N of its M samples" for
+    /// `row`, from its split, leaving out the split's first `skip` parts (those before the row
+    /// starts); a split too small for a p99 says so.
     fn largest_part(&self, split: Option<&Parts>, skip: usize, row: &Row) -> Option<String> {
         let (name, part) = split?
             .parts
             .iter()
             .skip(skip)
             .max_by(|a, b| a.1.p99_us.total_cmp(&b.1.p99_us))?;
+        let head = format!("{} {} {}", row.what, row.mode, row.placement);
+        if part.count < MIN_FOR_P99 {
+            return Some(format!(
+                "{head}: its split holds {} of its {} samples, too few for a p99",
+                part.count, row.summary.count
+            ));
+        }
         Some(format!(
-            "{} {} {}: {name}, p99 {:.1} of the row's {:.1} µs (p50 {:.1} of {:.1})",
-            row.what,
-            row.mode,
-            row.placement,
-            part.p99_us,
-            row.summary.p99_us,
-            part.p50_us,
-            row.summary.p50_us
+            "{head}: {name}, p99 {:.1} µs (p50 {:.1}), over {} of its {} samples",
+            part.p99_us, part.p50_us, part.count, row.summary.count
         ))
     }
 
