@@ -27,7 +27,7 @@ mod zenoh;
 use baseline::{Load, Transport};
 use paths::{BusKind, LoopMode};
 use placement::Placement;
-use report::{Report, Row, row_key};
+use report::{Report, Row, path_rows, row_key};
 use stats::Latencies;
 
 #[derive(Debug, Parser)]
@@ -697,27 +697,19 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 .parts
                 .push(run_parts("state", parts::state(&state.samples, &passes)));
             if let Some(figures) = command {
-                let mut command_row =
+                let command_row =
                     run_row("command", label.clone(), figures.latencies, figures.missed);
-                command_row.baseline = reference(&paced_what);
-                report.rows.push(command_row);
-                report.rows.push(run_row(
-                    "in-service",
-                    format!("{label}: command"),
-                    figures.in_service,
-                    0,
-                ));
+                let baseline = reference(&paced_what);
+                report
+                    .rows
+                    .extend(path_rows(command_row, baseline, figures.in_service));
             }
             let mut state_row = run_row("state", label.clone(), state.latencies, 0);
             state_row.dropped = state.dropped;
-            state_row.baseline = reference(&feed_what);
-            report.rows.push(state_row);
-            report.rows.push(run_row(
-                "in-service",
-                format!("{label}: state"),
-                state.in_service,
-                0,
-            ));
+            let baseline = reference(&feed_what);
+            report
+                .rows
+                .extend(path_rows(state_row, baseline, state.in_service));
             let mut preempt_row = run_row("preemption", label, preempt, preempt_missed);
             // The stop follows a teleop request at once: the loop is awake, as in a
             // back-to-back ping-pong.
