@@ -644,8 +644,7 @@ mod tests {
 
     #[test]
     fn a_fleet_process_serves_under_its_prefix_and_logs_to_its_file() {
-        let dir = std::env::temp_dir().join(format!("chassis-bench-start-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::tests::scratch("start");
         let mut child = start(
             Command::new("sh").args(["-c", "echo \"$CHASSIS_IPC_PREFIX $RUST_LOG\" >&2; echo out"]),
             "cfb1_",

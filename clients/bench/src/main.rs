@@ -980,6 +980,14 @@ fn main() -> ExitCode {
 mod tests {
     use super::*;
 
+    /// A new empty directory of the test's own (`tag`) under the system's temporary directory.
+    pub(crate) fn scratch(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("chassis-bench-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
     fn planned(
         quick: bool,
         robots: &[RobotKind],

@@ -140,13 +140,7 @@ pub(crate) fn read_count(file: &Path) -> anyhow::Result<u64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A directory of its own under the system's temporary directory.
-    fn scratch(tag: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("chassis-bench-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        dir
-    }
+    use crate::tests::scratch;
 
     #[test]
     fn a_script_is_told_where_to_write_and_its_stderr_is_kept_in_the_log() {
