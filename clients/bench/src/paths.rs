@@ -16,7 +16,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, PASS_TRACE_ENV, Robot,
-    STATE_BUFFER, SimKind, SimRequest, Source, Ticker, VelocityRequest, now_ns,
+    STATE_BUFFER, Source, Ticker, VelocityRequest, now_ns,
 };
 pub use chassis_ipc::PassStamps;
 use chassis_protocols::describe::{FrameJson, RobotCodec};
@@ -872,15 +872,7 @@ pub fn cost_at(
     let normal =
         (after.link.rx_frames - before.link.rx_frames) as f64 / ((now_ns() - t0) as f64 / 1e9);
     let flood = (capacity - normal).max(0.0);
-    robot.sim(
-        SimRequest {
-            kind: SimKind::FLOOD,
-            flag: 1,
-            value: flood,
-            ..SimRequest::default()
-        },
-        Duration::from_secs(3),
-    )?;
+    robot.sim(chassis_client::flood_request(flood), Duration::from_secs(3))?;
     // Settle, then measure.
     robot.wait_state(Duration::from_millis(500))?;
     let start_frames = robot
@@ -904,15 +896,7 @@ pub fn cost_at(
         .link
         .rx_frames;
     let rss = rss_mib(pid)?;
-    robot.sim(
-        SimRequest {
-            kind: SimKind::FLOOD,
-            flag: 1,
-            value: 0.0,
-            ..SimRequest::default()
-        },
-        Duration::from_secs(3),
-    )?;
+    robot.sim(chassis_client::flood_request(0.0), Duration::from_secs(3))?;
     Ok(Cost {
         bus,
         bitrate,

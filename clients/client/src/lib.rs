@@ -811,6 +811,18 @@ impl StateStream {
 
 static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
+/// The request that makes a simulated chassis send `frames_per_s` extra feedback frames a
+/// second on top of its own ([`SimKind::FLOOD`]; 0 stops): a loaded bus for benchmarks and
+/// tests. Send it with [`Robot::sim`].
+pub fn flood_request(frames_per_s: f64) -> SimRequest {
+    SimRequest {
+        kind: SimKind::FLOOD,
+        flag: 1,
+        value: frames_per_s,
+        ..SimRequest::default()
+    }
+}
+
 /// Installs handlers for SIGINT and SIGTERM (idempotent); [`termination_requested`] then tells
 /// when one arrived. Call it once at start.
 pub fn install_signal_handlers() {
@@ -1030,5 +1042,20 @@ impl Robot {
             events,
             latest: None,
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_flood_request_switches_the_simulators_flood_on_at_its_rate() {
+        let r = flood_request(2000.0);
+        assert_eq!(
+            (r.kind, r.flag, r.index, r.value),
+            (SimKind::FLOOD, 1, 0, 2000.0)
+        );
+        assert_eq!(flood_request(0.0).value, 0.0, "0 stops it");
     }
 }
