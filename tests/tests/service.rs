@@ -414,12 +414,7 @@ fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_
     let drive = VelocityRequest::twist(0.3, 0.0);
     let answer = robot
         .sim(
-            SimRequest {
-                kind: SimKind::FLOOD,
-                flag: 1,
-                value: 2000.0,
-                ..SimRequest::default()
-            },
+            chassis_client::flood_request(2000.0),
             Duration::from_secs(3),
         )
         .unwrap();

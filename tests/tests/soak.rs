@@ -121,15 +121,7 @@ fn a_titan_on_a_full_bus_with_every_client_runs_for_minutes_without_gaps_or_grow
     let capacity = 500_000.0 / 111.0;
     let flood = (capacity - normal).max(0.0).round();
     let answer = robot
-        .sim(
-            SimRequest {
-                kind: SimKind::FLOOD,
-                flag: 1,
-                value: flood,
-                ..SimRequest::default()
-            },
-            Duration::from_secs(3),
-        )
+        .sim(chassis_client::flood_request(flood), Duration::from_secs(3))
         .unwrap();
     assert!(answer.is_ok(), "{}", answer.message());
     let planner = env.spawn(

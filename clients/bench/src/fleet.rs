@@ -165,6 +165,29 @@ fn log_file(dir: &Path, name: &str) -> anyhow::Result<Stdio> {
     ))
 }
 
+/// What the fleet's chassis-zenoh processes log: warnings, Zenoh's own only when errors.
+const ZENOH_LOG: &str = "warn,zenoh=error";
+
+/// Starts `command` as a process of the fleet: serving under the IPC prefix `prefix` and
+/// logging at the `RUST_LOG` level `level` to `<dir>/<log>.log`, its stdout dropped; `what`
+/// names it in the error.
+fn start(
+    command: &mut Command,
+    prefix: &str,
+    level: &str,
+    dir: &Path,
+    log: &str,
+    what: &str,
+) -> anyhow::Result<Child> {
+    command
+        .env("CHASSIS_IPC_PREFIX", prefix)
+        .env("RUST_LOG", level)
+        .stdout(Stdio::null())
+        .stderr(log_file(dir, log)?)
+        .spawn()
+        .with_context(|| format!("starting {what}"))
+}
+
 /// User + system CPU time of a whole process, s.
 fn process_cpu_s(pid: u32) -> anyhow::Result<f64> {
     paths::stat_cpu_seconds(&format!("/proc/{pid}/stat"))
@@ -267,17 +290,16 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         while names.len() < size {
             let k = names.len();
             let (name, kind) = (format!("fb{k}"), KINDS[k % KINDS.len()]);
-            robots.push(
+            robots.push(start(
                 Command::new(&chassisd)
                     .args(["--robot", kind, "--name", &name, "--no-safety-monitor"])
-                    .env("CHASSIS_IPC_PREFIX", &prefix)
-                    .env("XDG_STATE_HOME", dir.join("state"))
-                    .env("RUST_LOG", "warn")
-                    .stdout(Stdio::null())
-                    .stderr(log_file(dir, &format!("chassisd-{name}"))?)
-                    .spawn()
-                    .context("starting chassisd")?,
-            );
+                    .env("XDG_STATE_HOME", dir.join("state")),
+                &prefix,
+                "warn",
+                dir,
+                &format!("chassisd-{name}"),
+                "chassisd",
+            )?);
             wait_until(
                 &format!("chassisd {name} serving"),
                 Duration::from_secs(30),
@@ -285,18 +307,17 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
             )?;
             let listen = format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16);
             robot_side_pids.push(
-                robots.push(
+                robots.push(start(
                     Command::new("ip")
                         .args(["netns", "exec", &netns.0])
                         .arg(&zenoh)
-                        .args(["--name", &name, "--listen", &listen])
-                        .env("CHASSIS_IPC_PREFIX", &prefix)
-                        .env("RUST_LOG", "warn,zenoh=error")
-                        .stdout(Stdio::null())
-                        .stderr(log_file(dir, &format!("zenoh-{name}"))?)
-                        .spawn()
-                        .context("starting chassis-zenoh")?,
-                ),
+                        .args(["--name", &name, "--listen", &listen]),
+                    &prefix,
+                    ZENOH_LOG,
+                    dir,
+                    &format!("zenoh-{name}"),
+                    "chassis-zenoh",
+                )?),
             );
             names.push((name, kind));
         }
@@ -310,16 +331,14 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
                 &format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16),
             ]);
         }
-        let operator_pid = operator.push(
-            command
-                .arg("--mirror-all")
-                .env("CHASSIS_IPC_PREFIX", &operator_prefix)
-                .env("RUST_LOG", "warn,zenoh=error")
-                .stdout(Stdio::null())
-                .stderr(log_file(dir, &format!("operator-{size}"))?)
-                .spawn()
-                .context("starting the operator's chassis-zenoh")?,
-        );
+        let operator_pid = operator.push(start(
+            command.arg("--mirror-all"),
+            &operator_prefix,
+            ZENOH_LOG,
+            dir,
+            &format!("operator-{size}"),
+            "the operator's chassis-zenoh",
+        )?);
         for (name, _) in &names {
             wait_until(
                 &format!("the operator mirroring {name}"),
@@ -622,6 +641,34 @@ pub fn write(report: &FleetReport, args: &FleetArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_fleet_process_serves_under_its_prefix_and_logs_to_its_file() {
+        let dir = crate::tests::scratch("start");
+        let mut child = start(
+            Command::new("sh").args(["-c", "echo \"$CHASSIS_IPC_PREFIX $RUST_LOG\" >&2; echo out"]),
+            "cfb1_",
+            ZENOH_LOG,
+            &dir,
+            "zenoh-fb0",
+            "a stand-in",
+        )
+        .unwrap();
+        assert!(child.wait().unwrap().success());
+        let log = std::fs::read_to_string(dir.join("zenoh-fb0.log")).unwrap();
+        assert_eq!(log, "cfb1_ warn,zenoh=error\n");
+        let err = start(
+            &mut Command::new("/nonexistent/chassisd"),
+            "cfb1_",
+            "warn",
+            &dir,
+            "chassisd-fb0",
+            "chassisd",
+        )
+        .unwrap_err();
+        assert_eq!(err.to_string(), "starting chassisd");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn the_fleet_section_is_replaced_and_the_rest_kept() {

@@ -27,7 +27,7 @@ mod zenoh;
 use baseline::{Load, Transport};
 use paths::{BusKind, LoopMode};
 use placement::Placement;
-use report::{Report, Row, row_key};
+use report::{Report, Row, path_rows, row_key};
 use stats::Latencies;
 
 #[derive(Debug, Parser)]
@@ -181,61 +181,24 @@ fn path_runs(quick: bool, robots: &[RobotKind]) -> Vec<PathRun> {
         mode,
         placement,
     };
+    // The loops and placements compared on one robot and bus: the TITAN on the simulator.
+    let titan_sim = |mode, placement| run(RobotKind::Titan, BusKind::Sim, mode, placement);
     if quick {
         return vec![
-            run(
-                RobotKind::Titan,
-                BusKind::Sim,
-                LoopMode::Event,
-                Placement::SameCpu,
-            ),
-            run(
-                RobotKind::Titan,
-                BusKind::Sim,
-                LoopMode::Event,
-                Placement::CrossCpu,
-            ),
-            run(
-                RobotKind::Titan,
-                BusKind::Sim,
-                LoopMode::Spin,
-                Placement::CrossCpu,
-            ),
+            titan_sim(LoopMode::Event, Placement::SameCpu),
+            titan_sim(LoopMode::Event, Placement::CrossCpu),
+            titan_sim(LoopMode::Spin, Placement::CrossCpu),
         ];
     }
     let mut runs = vec![
-        run(
-            RobotKind::Titan,
-            BusKind::Sim,
-            LoopMode::Event,
-            Placement::SameCpu,
-        ),
-        run(
-            RobotKind::Titan,
-            BusKind::Sim,
-            LoopMode::Spin,
-            Placement::CrossCpu,
-        ),
-        run(
-            RobotKind::Titan,
-            BusKind::Sim,
-            LoopMode::Hybrid,
-            Placement::CrossCpu,
-        ),
+        titan_sim(LoopMode::Event, Placement::SameCpu),
+        titan_sim(LoopMode::Spin, Placement::CrossCpu),
+        titan_sim(LoopMode::Hybrid, Placement::CrossCpu),
     ];
     for &robot in robots {
-        runs.push(run(
-            robot,
-            BusKind::Sim,
-            LoopMode::Event,
-            Placement::CrossCpu,
-        ));
-        runs.push(run(
-            robot,
-            BusKind::Pty,
-            LoopMode::Event,
-            Placement::CrossCpu,
-        ));
+        for bus in [BusKind::Sim, BusKind::Pty] {
+            runs.push(run(robot, bus, LoopMode::Event, Placement::CrossCpu));
+        }
     }
     runs
 }
@@ -250,6 +213,10 @@ pub const DEFAULT_CONFIG_ROW: &str =
 /// The raw DDS hops the ROS 2 rows contain (Cyclone DDS is the peer, RustDDS the bridge's).
 const DDS_IN: &str = "DDS Cyclone DDS → RustDDS";
 const DDS_OUT: &str = "DDS RustDDS → Cyclone DDS";
+
+/// The run (robot, loop) the Python client and the ROS 2 bridge are measured beside: same
+/// service, same placement as the Rust client's rows.
+const SCRIPTS_BESIDE: (RobotKind, LoopMode) = (RobotKind::Titan, LoopMode::Event);
 
 fn transport_of(mode: LoopMode) -> Transport {
     match mode {
@@ -390,7 +357,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 placement,
             ));
             expected.push(row_key("preemption", &label, mode, placement));
-            if (r.robot, r.mode) == (RobotKind::Titan, LoopMode::Event) {
+            if (r.robot, r.mode) == SCRIPTS_BESIDE {
                 if python.is_some() {
                     for p in ["state", "command"] {
                         expected.push(row_key("python", &format!("{label}: {p}"), mode, placement));
@@ -545,36 +512,27 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     plan.preemptions
                 };
                 let preempt = paths::preemption(&mut robot, r.robot, preemptions, interval, spin)?;
-                // The Python client beside the Rust one: same service, same placement.
-                let python = match (&python, r.robot, r.mode) {
-                    (Some(interpreter), RobotKind::Titan, LoopMode::Event) => Some(python::run(
-                        interpreter,
-                        robot.name(),
-                        &prefix,
-                        &paths::sibling("chassis")?,
-                        &dir,
-                        plan.states,
-                        count,
+                // The Python client and the ROS 2 bridge beside the Rust one.
+                let (mut python_figures, mut ros2_figures) = (None, None);
+                if (r.robot, r.mode) == SCRIPTS_BESIDE && (python.is_some() || ros2.is_some()) {
+                    let run = python::ScriptRun {
+                        name: robot.name(),
+                        prefix: &prefix,
+                        chassis_cli: &paths::sibling("chassis")?,
+                        dir: &dir,
+                        states: plan.states,
+                        commands: count,
                         interval,
-                    )?),
-                    _ => None,
-                };
-                // The ROS 2 bridge beside them: same service, same placement.
-                let ros2 = match (&ros2, r.robot, r.mode) {
-                    (Some(interpreter), RobotKind::Titan, LoopMode::Event) => Some(ros2::run(
-                        interpreter,
-                        robot.name(),
-                        &prefix,
-                        &paths::sibling("chassis-ros2")?,
-                        &paths::sibling("chassis")?,
-                        &dir,
-                        plan.states,
-                        count,
-                        interval,
-                    )?),
-                    _ => None,
-                };
-                Ok((command, state, preempt, python, ros2))
+                    };
+                    if let Some(interpreter) = &python {
+                        python_figures = Some(python::run(interpreter, &run)?);
+                    }
+                    if let Some(interpreter) = &ros2 {
+                        let bridge = paths::sibling("chassis-ros2")?;
+                        ros2_figures = Some(ros2::run(interpreter, &bridge, &run)?);
+                    }
+                }
+                Ok((command, state, preempt, python_figures, ros2_figures))
             })??;
             let feed_per_s = feedback.per_second(&mut robot)?;
             drop(robot);
@@ -760,27 +718,19 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     .push(run_parts("ros2: frame read → odom", odom));
             }
             if let Some(figures) = command {
-                let mut command_row =
+                let command_row =
                     run_row("command", label.clone(), figures.latencies, figures.missed);
-                command_row.baseline = reference(&paced_what);
-                report.rows.push(command_row);
-                report.rows.push(run_row(
-                    "in-service",
-                    format!("{label}: command"),
-                    figures.in_service,
-                    0,
-                ));
+                let baseline = reference(&paced_what);
+                report
+                    .rows
+                    .extend(path_rows(command_row, baseline, figures.in_service));
             }
             let mut state_row = run_row("state", label.clone(), state.latencies, 0);
             state_row.dropped = state.dropped;
-            state_row.baseline = reference(&feed_what);
-            report.rows.push(state_row);
-            report.rows.push(run_row(
-                "in-service",
-                format!("{label}: state"),
-                state.in_service,
-                0,
-            ));
+            let baseline = reference(&feed_what);
+            report
+                .rows
+                .extend(path_rows(state_row, baseline, state.in_service));
             let mut preempt_row = run_row("preemption", label, preempt, preempt_missed);
             // The stop follows a teleop request at once: the loop is awake, as in a
             // back-to-back ping-pong.
@@ -1044,5 +994,58 @@ fn main() -> ExitCode {
             eprintln!("chassis-bench: {err:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A new empty directory of the test's own (`tag`) under the system's temporary directory.
+    pub(crate) fn scratch(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("chassis-bench-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    fn planned(
+        quick: bool,
+        robots: &[RobotKind],
+    ) -> Vec<(RobotKind, BusKind, LoopMode, Placement)> {
+        path_runs(quick, robots)
+            .into_iter()
+            .map(|r| (r.robot, r.bus, r.mode, r.placement))
+            .collect()
+    }
+
+    #[test]
+    fn the_quick_plan_compares_the_titans_loops_and_placements_on_the_simulator() {
+        use {BusKind::Sim, LoopMode::*, Placement::*, RobotKind::Titan};
+        assert_eq!(
+            planned(true, &[RobotKind::Xbot]),
+            [
+                (Titan, Sim, Event, SameCpu),
+                (Titan, Sim, Event, CrossCpu),
+                (Titan, Sim, Spin, CrossCpu)
+            ]
+        );
+    }
+
+    #[test]
+    fn the_full_plan_adds_every_robot_on_the_simulator_and_a_pty() {
+        use {BusKind::*, LoopMode::*, Placement::*, RobotKind::*};
+        assert_eq!(
+            planned(false, &[Titan, Xbot]),
+            [
+                (Titan, Sim, Event, SameCpu),
+                (Titan, Sim, Spin, CrossCpu),
+                (Titan, Sim, Hybrid, CrossCpu),
+                (Titan, Sim, Event, CrossCpu),
+                (Titan, Pty, Event, CrossCpu),
+                (Xbot, Sim, Event, CrossCpu),
+                (Xbot, Pty, Event, CrossCpu)
+            ]
+        );
     }
 }

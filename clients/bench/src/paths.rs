@@ -16,7 +16,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, PASS_TRACE_ENV, Robot,
-    STATE_BUFFER, SimKind, SimRequest, Source, Ticker, VelocityRequest, now_ns,
+    STATE_BUFFER, Source, Ticker, VelocityRequest, now_ns,
 };
 pub use chassis_ipc::PassStamps;
 use chassis_protocols::describe::{FrameJson, RobotCodec};
@@ -168,6 +168,30 @@ pub fn start(
     )
 }
 
+/// Starts `command` (chassisd or its simulator) serving under the IPC prefix `prefix`, logging
+/// warnings: its stdout to `<log>.log`, its stderr to `<log>-err.log`; `what` names it in the
+/// error.
+fn spawn_logged(
+    command: &mut Command,
+    prefix: &str,
+    log: &Path,
+    what: &str,
+) -> anyhow::Result<Child> {
+    let file = |suffix: &str| -> anyhow::Result<Stdio> {
+        let path = PathBuf::from(format!("{}{suffix}.log", log.display()));
+        let file =
+            std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?;
+        Ok(Stdio::from(file))
+    };
+    command
+        .env(IPC_PREFIX_ENV, prefix)
+        .env("RUST_LOG", "warn")
+        .stdout(file("")?)
+        .stderr(file("-err")?)
+        .spawn()
+        .with_context(|| format!("starting {what}"))
+}
+
 /// [`start`] with chassisd configured as `config` says, keeping its pass trace with `trace`
 /// ([`Service::stop`] returns it).
 #[allow(clippy::too_many_arguments)]
@@ -186,11 +210,6 @@ pub fn start_configured(
     let chassisd = sibling("chassisd")?;
     let config = write_config(dir, &name, config)?;
     let mut children = Vec::new();
-    let log = |label: &str| -> anyhow::Result<Stdio> {
-        Ok(Stdio::from(std::fs::File::create(
-            dir.join(format!("{name}-{label}.log")),
-        )?))
-    };
     let bus_arg = match bus {
         BusKind::Sim => "sim".to_string(),
         BusKind::Pty => {
@@ -206,23 +225,18 @@ pub fn start_configured(
                     format!("serial:{}", link.display()),
                 )
             };
-            let sim = Command::new(&chassisd)
-                .args([
-                    "sim",
-                    "--robot",
-                    robot.name(),
-                    "--name",
-                    &name,
-                    "--bus",
-                    &sim_bus,
-                ])
-                .env(IPC_PREFIX_ENV, prefix)
-                .env("RUST_LOG", "warn")
-                .stdout(log("sim")?)
-                .stderr(log("sim-err")?)
-                .spawn()
-                .context("starting chassisd sim")?;
-            children.push(sim);
+            let mut sim = Command::new(&chassisd);
+            sim.args([
+                "sim",
+                "--robot",
+                robot.name(),
+                "--name",
+                &name,
+                "--bus",
+                &sim_bus,
+            ]);
+            let log = dir.join(format!("{name}-sim"));
+            children.push(spawn_logged(&mut sim, prefix, &log, "chassisd sim")?);
             let deadline = now_ns() + 10_000_000_000;
             while !link.exists() {
                 if now_ns() > deadline {
@@ -269,14 +283,9 @@ pub fn start_configured(
     if let Some(path) = &trace {
         service.env(PASS_TRACE_ENV, path);
     }
-    let service = service
-        .args(&args)
-        .env(IPC_PREFIX_ENV, prefix)
-        .env("RUST_LOG", "warn")
-        .stdout(log("chassisd")?)
-        .stderr(log("chassisd-err")?)
-        .spawn()
-        .context("starting chassisd")?;
+    service.args(&args);
+    let log = dir.join(format!("{name}-chassisd"));
+    let service = spawn_logged(&mut service, prefix, &log, "chassisd")?;
     let pid = service.id();
     children.push(service);
     let service = Service {
@@ -863,15 +872,7 @@ pub fn cost_at(
     let normal =
         (after.link.rx_frames - before.link.rx_frames) as f64 / ((now_ns() - t0) as f64 / 1e9);
     let flood = (capacity - normal).max(0.0);
-    robot.sim(
-        SimRequest {
-            kind: SimKind::FLOOD,
-            flag: 1,
-            value: flood,
-            ..SimRequest::default()
-        },
-        Duration::from_secs(3),
-    )?;
+    robot.sim(chassis_client::flood_request(flood), Duration::from_secs(3))?;
     // Settle, then measure.
     robot.wait_state(Duration::from_millis(500))?;
     let start_frames = robot
@@ -895,15 +896,7 @@ pub fn cost_at(
         .link
         .rx_frames;
     let rss = rss_mib(pid)?;
-    robot.sim(
-        SimRequest {
-            kind: SimKind::FLOOD,
-            flag: 1,
-            value: 0.0,
-            ..SimRequest::default()
-        },
-        Duration::from_secs(3),
-    )?;
+    robot.sim(chassis_client::flood_request(0.0), Duration::from_secs(3))?;
     Ok(Cost {
         bus,
         bitrate,
@@ -924,6 +917,23 @@ mod tests {
     /// Every robot's driver asked for 0.3 m/s against its simulated firmware: the command path
     /// finds that speed in the motion frames it wrote, as the tap shows them (a serial robot's
     /// frames cut into chunks), by the robot's codec of the registry.
+
+    #[test]
+    fn chassisd_is_started_under_its_prefix_with_both_outputs_logged() {
+        let dir = crate::tests::scratch("spawn");
+        let mut command = Command::new("sh");
+        command.args(["-c", "echo \"$CHASSIS_IPC_PREFIX\"; echo \"$RUST_LOG\" >&2"]);
+        let log = dir.join("bn1-chassisd");
+        let mut child = spawn_logged(&mut command, "bench_3", &log, "a stand-in").unwrap();
+        assert!(child.wait().unwrap().success());
+        let read = |file: &str| std::fs::read_to_string(dir.join(file)).unwrap();
+        assert_eq!(read("bn1-chassisd.log"), "bench_3\n");
+        assert_eq!(read("bn1-chassisd-err.log"), "warn\n");
+        let mut missing = Command::new("/nonexistent/chassisd");
+        let err = spawn_logged(&mut missing, "bench_3", &log, "chassisd sim").unwrap_err();
+        assert_eq!(err.to_string(), "starting chassisd sim");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
     #[test]
     fn every_robots_motion_frames_tell_the_speed_they_command() {
         for kind in RobotKind::ALL {

@@ -46,47 +46,86 @@ pub(crate) fn read_latencies(file: &Path) -> anyhow::Result<Latencies> {
     Ok(latencies)
 }
 
-/// Runs `bench.py` against the robot `name` (TITAN) served under `prefix`.
-#[allow(clippy::too_many_arguments)]
-pub fn run(
-    python: &Path,
-    name: &str,
-    prefix: &str,
-    chassis_cli: &Path,
-    dir: &Path,
-    states: u64,
-    commands: u64,
-    interval: Duration,
-) -> anyhow::Result<PythonFigures> {
-    let out = dir.join(format!("python-{name}"));
-    std::fs::create_dir_all(&out)?;
-    let log = std::fs::File::create(out.join("bench.log"))?;
-    let status = Command::new(python)
-        .arg(repo().join("clients/python/bench.py"))
-        .args(["--name", name, "--robot", "titan", "--prefix", prefix])
-        .args(["--state-samples", &states.to_string()])
-        .args(["--commands", &commands.to_string()])
-        .args(["--interval-ms", &interval.as_millis().to_string()])
-        .arg("--chassis")
-        .arg(chassis_cli)
-        .arg("--latencies-dir")
-        .arg(&out)
-        .stdout(Stdio::null())
-        .stderr(log)
-        .status()
-        .context("starting the Python client's benchmark")?;
-    if !status.success() {
-        bail!(
-            "the Python client's benchmark failed ({status}); see {}",
-            out.join("bench.log").display()
-        );
+/// What a benchmark script (the Python client's or the ROS 2 bridge's `bench.py`) runs against
+/// and how much it measures: both take the same arguments for it.
+#[derive(Debug)]
+pub struct ScriptRun<'a> {
+    /// The robot (a TITAN) served under `prefix`.
+    pub name: &'a str,
+    pub prefix: &'a str,
+    /// The `chassis` CLI the script drives the robot with.
+    pub chassis_cli: &'a Path,
+    /// The run's directory: the script writes into `<its tag>-<name>` below it.
+    pub dir: &'a Path,
+    pub states: u64,
+    pub commands: u64,
+    pub interval: Duration,
+}
+
+impl ScriptRun<'_> {
+    /// The directory of the script tagged `tag` (`python`, `ros2`).
+    pub(crate) fn out(&self, tag: &str) -> PathBuf {
+        self.dir.join(format!("{tag}-{}", self.name))
     }
+
+    /// Appends the arguments every `bench.py` takes.
+    pub(crate) fn args(&self, script: &mut Command) {
+        script
+            .args([
+                "--name",
+                self.name,
+                "--robot",
+                "titan",
+                "--prefix",
+                self.prefix,
+            ])
+            .arg("--chassis")
+            .arg(self.chassis_cli)
+            .args(["--state-samples", &self.states.to_string()])
+            .args(["--commands", &self.commands.to_string()])
+            .args(["--interval-ms", &self.interval.as_millis().to_string()]);
+    }
+}
+
+/// Runs `bench.py` with the interpreter `python`.
+pub fn run(python: &Path, run: &ScriptRun<'_>) -> anyhow::Result<PythonFigures> {
+    let out = run.out("python");
+    let mut script = Command::new(python);
+    script.arg(repo().join("clients/python/bench.py"));
+    run.args(&mut script);
+    run_script(script, &out, "the Python client's benchmark")?;
     Ok(PythonFigures {
         state: read_latencies(&out.join("state.ns"))?,
         command: read_latencies(&out.join("command.ns"))?,
         missed: read_count(&out.join("command.missed"))?,
         dropped: read_count(&out.join("state.dropped"))?,
     })
+}
+
+/// Runs a benchmark script (`bench.py` of the Python package or of the ROS 2 bridge) that
+/// writes its figures into `out` (`--latencies-dir`) and its log into `out/bench.log`; `what`
+/// names it in the errors. Its output is not read: the figures are in the files.
+pub(crate) fn run_script(mut script: Command, out: &Path, what: &str) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let log_path = out.join("bench.log");
+    let log = std::fs::File::create(&log_path)
+        .with_context(|| format!("creating {}", log_path.display()))?;
+    let status = script
+        .arg("--latencies-dir")
+        .arg(out)
+        .stdout(Stdio::null())
+        .stderr(log)
+        .status()
+        .with_context(|| {
+            format!(
+                "starting {what} ({})",
+                script.get_program().to_string_lossy()
+            )
+        })?;
+    if !status.success() {
+        bail!("{what} failed ({status}); see {}", log_path.display());
+    }
+    Ok(())
 }
 
 /// A count the script wrote, one number in a file.
@@ -96,4 +135,86 @@ pub(crate) fn read_count(file: &Path) -> anyhow::Result<u64> {
     text.trim()
         .parse()
         .with_context(|| format!("a count in {}", file.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tests::scratch;
+
+    #[test]
+    fn a_script_is_told_where_to_write_and_its_stderr_is_kept_in_the_log() {
+        let out = scratch("script-ok").join("python-titan");
+        let mut script = Command::new("sh");
+        script.args([
+            "-c",
+            "echo \"$@\" >&2; echo 7 > \"$2/command.missed\"",
+            "bench",
+        ]);
+        run_script(script, &out, "a stand-in benchmark").unwrap();
+        let log = std::fs::read_to_string(out.join("bench.log")).unwrap();
+        assert_eq!(log.trim(), format!("--latencies-dir {}", out.display()));
+        assert_eq!(read_count(&out.join("command.missed")).unwrap(), 7);
+        std::fs::remove_dir_all(out.parent().unwrap()).unwrap();
+    }
+
+    #[test]
+    fn both_scripts_are_given_the_robot_the_cli_and_how_much_to_measure() {
+        let run = ScriptRun {
+            name: "titan-1",
+            prefix: "bench_7",
+            chassis_cli: Path::new("/bin/chassis"),
+            dir: Path::new("/tmp/run"),
+            states: 500,
+            commands: 40,
+            interval: Duration::from_millis(20),
+        };
+        let mut script = Command::new("python");
+        run.args(&mut script);
+        let args: Vec<_> = script.get_args().map(|a| a.to_string_lossy()).collect();
+        assert_eq!(
+            args,
+            [
+                "--name",
+                "titan-1",
+                "--robot",
+                "titan",
+                "--prefix",
+                "bench_7",
+                "--chassis",
+                "/bin/chassis",
+                "--state-samples",
+                "500",
+                "--commands",
+                "40",
+                "--interval-ms",
+                "20"
+            ]
+        );
+        assert_eq!(run.out("ros2"), Path::new("/tmp/run/ros2-titan-1"));
+    }
+
+    #[test]
+    fn a_failing_script_is_an_error_that_points_at_its_log() {
+        let out = scratch("script-fails").join("ros2-titan");
+        let mut script = Command::new("sh");
+        script.args(["-c", "echo broken >&2; exit 3"]);
+        let err = run_script(script, &out, "a stand-in benchmark").unwrap_err();
+        let log = out.join("bench.log");
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "a stand-in benchmark failed (exit status: 3); see {}",
+                log.display()
+            )
+        );
+        assert_eq!(std::fs::read_to_string(&log).unwrap(), "broken\n");
+        let missing = Command::new("/nonexistent/python");
+        let err = run_script(missing, &out, "a stand-in benchmark").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "starting a stand-in benchmark (/nonexistent/python)"
+        );
+        std::fs::remove_dir_all(out.parent().unwrap()).unwrap();
+    }
 }

@@ -138,6 +138,21 @@ pub fn row_key(path: &str, what: &str, mode: &str, placement: &str) -> String {
     format!("{path} {what} ({mode}, {placement})")
 }
 
+/// A service path's row, compared with `baseline`, and its in-service row: the part of each of
+/// its samples spent inside chassisd, named `<what>: <path>` (`titan sim: state`) at the same
+/// mode and placement.
+pub fn path_rows(row: Row, baseline: Option<String>, in_service: Latencies) -> [Row; 2] {
+    let inside = Row::new(
+        "in-service",
+        format!("{}: {}", row.what, row.path),
+        &row.mode,
+        &row.placement,
+        in_service,
+        0,
+    );
+    [Row { baseline, ..row }, inside]
+}
+
 /// A percentile for a table: `—` when the row has too few samples to tell it from the maximum.
 fn percentile(value: f64, count: u64, fewest: u64) -> String {
     if count >= fewest {
@@ -1104,6 +1119,35 @@ mod tests {
             latencies.record(us * 1000);
         }
         Row::new(path, what.into(), mode, "cross CPU", latencies, 0)
+    }
+
+    #[test]
+    fn a_service_paths_rows_are_the_path_against_its_baseline_and_its_in_service_part() {
+        let mut state = measured("state", "titan sim", "event", 60, 10);
+        state.dropped = 2;
+        let inside = measured("in-service", "-", "event", 20, 10).latencies;
+        let [path, in_service] = path_rows(state, Some("iceoryx2 feed, cross CPU".into()), inside);
+        assert_eq!(
+            (
+                row_key(&path.path, &path.what, &path.mode, &path.placement),
+                path.dropped
+            ),
+            ("state titan sim (event, cross CPU)".to_string(), 2)
+        );
+        assert_eq!(path.baseline.as_deref(), Some("iceoryx2 feed, cross CPU"));
+        assert_eq!(path.summary.count, 10);
+        assert_eq!(
+            row_key(
+                &in_service.path,
+                &in_service.what,
+                &in_service.mode,
+                &in_service.placement
+            ),
+            "in-service titan sim: state (event, cross CPU)"
+        );
+        assert_eq!((in_service.baseline, in_service.missed), (None, 0));
+        assert_eq!(in_service.latencies.count(), 10);
+        assert_eq!(in_service.summary.p50_us.round(), 20.0);
     }
 
     /// A ROS 2 row containing a DDS hop and the service's command path, and what the smoke

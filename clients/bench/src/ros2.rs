@@ -7,12 +7,9 @@
 //! no discovery packet leaves the machine (iceoryx2 is shared memory and works across it).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::time::Duration;
+use std::process::Command;
 
-use anyhow::{Context, bail};
-
-use crate::python::{read_latencies, repo};
+use crate::python::{ScriptRun, read_latencies, repo, run_script};
 use crate::stats::Latencies;
 
 /// What the ROS 2 bridge's run measured.
@@ -72,48 +69,20 @@ pub fn interpreter() -> Option<PathBuf> {
     python.exists().then_some(python)
 }
 
-/// Runs `bench.py` against the robot `name` (TITAN) served under `prefix`.
-#[allow(clippy::too_many_arguments)]
-pub fn run(
-    python: &Path,
-    name: &str,
-    prefix: &str,
-    bridge: &Path,
-    chassis_cli: &Path,
-    dir: &Path,
-    states: u64,
-    commands: u64,
-    interval: Duration,
-) -> anyhow::Result<Ros2Figures> {
-    let out = dir.join(format!("ros2-{name}"));
-    std::fs::create_dir_all(&out)?;
-    let log = std::fs::File::create(out.join("bench.log"))?;
-    let status = Command::new("unshare")
+/// Runs `bench.py` with the interpreter `python`, beside the bridge binary `bridge`.
+pub fn run(python: &Path, bridge: &Path, run: &ScriptRun<'_>) -> anyhow::Result<Ros2Figures> {
+    let out = run.out("ros2");
+    let mut script = Command::new("unshare");
+    script
         .args(["--net", "--", "sh", "-c"])
         .arg("ip link set lo up && ip link set lo multicast on && exec \"$@\"")
         .arg("ros2-bench")
         .arg(python)
         .arg(repo().join("clients/ros2/bench.py"))
-        .args(["--name", name, "--robot", "titan", "--prefix", prefix])
         .arg("--bridge")
-        .arg(bridge)
-        .arg("--chassis")
-        .arg(chassis_cli)
-        .args(["--state-samples", &states.to_string()])
-        .args(["--commands", &commands.to_string()])
-        .args(["--interval-ms", &interval.as_millis().to_string()])
-        .arg("--latencies-dir")
-        .arg(&out)
-        .stdout(Stdio::null())
-        .stderr(log)
-        .status()
-        .context("starting the ROS 2 bridge's benchmark (unshare --net)")?;
-    if !status.success() {
-        bail!(
-            "the ROS 2 bridge's benchmark failed ({status}); see {}",
-            out.join("bench.log").display()
-        );
-    }
+        .arg(bridge);
+    run.args(&mut script);
+    run_script(script, &out, "the ROS 2 bridge's benchmark")?;
     let missed = std::fs::read_to_string(out.join("command.missed"))
         .ok()
         .and_then(|t| t.trim().parse().ok())

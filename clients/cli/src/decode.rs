@@ -184,11 +184,18 @@ mod tests {
         (json, String::from_utf8(err).unwrap(), summary)
     }
 
+    /// The JSON lines of `frames` (command-line arguments), which decode without a complaint.
+    #[track_caller]
+    fn decoded(robot: RobotKind, frames: &[&str]) -> Vec<serde_json::Value> {
+        let (json, err, _) = decode(robot, frames, "");
+        assert_eq!(err, "");
+        json
+    }
+
     #[test]
     fn titan_faults_are_named_beside_the_raw_word() {
         // The manual's layout: b5 bit5 bumper, b6 bit1 heartbeat lost, b7 bit0 under-voltage.
-        let (json, err, _) = decode(RobotKind::Titan, &["211#0201019000200201"], "");
-        assert_eq!(err, "");
+        let json = decoded(RobotKind::Titan, &["211#0201019000200201"]);
         assert_eq!(json[0]["vendor_fault_word"], 0x0020_0201);
         assert_eq!(
             json[0]["faults"],
@@ -209,8 +216,7 @@ mod tests {
     #[test]
     fn titan_motor_driver_status_and_bms_alarms_are_named() {
         // 0x261 b5 = 0x41: supply under-voltage, enabled.
-        let (json, err, _) = decode(RobotKind::Titan, &["261#01E0001E1E410000"], "");
-        assert_eq!(err, "");
+        let json = decoded(RobotKind::Titan, &["261#01E0001E1E410000"]);
         assert_eq!(
             json[0]["driver_status_flags"],
             serde_json::json!(["supply_under_voltage", "enabled"])
@@ -220,8 +226,7 @@ mod tests {
 
     /// 0x362: alarm 1 under-voltage, alarm 2 charge over-current, warning 1 over-temperature.
     fn assert_bms_alarms_are_named(robot: RobotKind) {
-        let (json, err, _) = decode(robot, &["362#04010800"], "");
-        assert_eq!(err, "");
+        let json = decoded(robot, &["362#04010800"]);
         assert_eq!(
             json[0]["alarms"],
             serde_json::json!(["under_voltage", "charge_over_current"])
@@ -233,8 +238,7 @@ mod tests {
     fn scout_mini_faults_are_named_beside_the_raw_word() {
         // 0x151: emergency stop body state, 24.0 V, b4 bit0 (CAN command checksum error),
         // count 0, checksum 0x4D.
-        let (json, err, _) = decode(RobotKind::ScoutMini, &["151#010100F00100004D"], "");
-        assert_eq!(err, "");
+        let json = decoded(RobotKind::ScoutMini, &["151#010100F00100004D"]);
         assert_eq!(json[0]["vendor_fault_word"], 0x0100);
         assert_eq!(json[0]["faults"], serde_json::json!(["emergency_stop"]));
         assert_eq!(json[0]["warnings"], serde_json::json!(["command_checksum"]));
@@ -243,8 +247,7 @@ mod tests {
     #[test]
     fn a_v2_bunkers_estop_and_fault_bits_are_named_beside_the_raw_word() {
         // TV8: BUNKER MINI 2.0 with its E-stop pressed, before any 0x421.
-        let (json, err, _) = decode(RobotKind::Bunker, &["211#0100010000800000"], "");
-        assert_eq!(err, "");
+        let json = decoded(RobotKind::Bunker, &["211#0100010000800000"]);
         assert_eq!(json[0]["vehicle_state"], 1);
         assert_eq!(json[0]["vehicle"], "estop");
         assert_eq!(json[0]["control"], "standby");
@@ -253,8 +256,7 @@ mod tests {
         assert_eq!(json[0]["faults"], serde_json::json!(["emergency_stop"]));
         // HUNTER 2.0's own table (H2X): b4 bit4 host communication lost, b5 bit6 driver
         // over-temperature; RC is mode 2 there; b6 is its brake.
-        let (json, err, _) = decode(RobotKind::Hunter, &["211#0002010010400100"], "");
-        assert_eq!(err, "");
+        let json = decoded(RobotKind::Hunter, &["211#0002010010400100"]);
         assert_eq!(json[0]["vehicle"], "normal");
         assert_eq!(json[0]["control"], "rc");
         assert_eq!(

@@ -830,9 +830,7 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
         SimCmd::BadChecksums { frames } => {
             request(SimKind::BAD_CHECKSUMS, true, 0, f64::from(*frames))
         }
-        SimCmd::Flood { frames_per_s } => {
-            request(SimKind::FLOOD, true, 0, f64::from(*frames_per_s))
-        }
+        SimCmd::Flood { frames_per_s } => chassis_client::flood_request(f64::from(*frames_per_s)),
         SimCmd::Truth { injected } => {
             let page = if *injected {
                 SimTruthPage::INJECTED

@@ -532,41 +532,58 @@ impl Robot {
     /// ```
     pub fn control(
         &mut self,
-        mut request: ControlRequest,
+        request: ControlRequest,
         timeout: Duration,
     ) -> Result<ControlResponse, ClientError> {
-        if self.control.is_none() {
-            self.control = Some(self.counter(&CONTROL, ServiceKind::Control)?);
-        }
-        self.control_seq += 1;
-        request.seq = self.control_seq;
-        request.stamp_ns = now_ns();
-        let name = self.name.clone();
-        let counter = self
-            .control
-            .as_ref()
-            .ok_or_else(|| ClientError::Ipc("no control client".into()))?;
-        ask(&name, "control", counter, request, request.seq, timeout)
+        self.ask_service(
+            |r| &mut r.control,
+            &CONTROL,
+            ServiceKind::Control,
+            "control",
+            request,
+            timeout,
+        )
     }
 
     /// Injects a fault into the robot's simulated chassis (only when its bus is the simulator).
     pub fn sim(
         &mut self,
-        mut request: SimRequest,
+        request: SimRequest,
         timeout: Duration,
     ) -> Result<ControlResponse, ClientError> {
-        if self.sim.is_none() {
-            self.sim = Some(self.counter(&SIM, ServiceKind::Sim)?);
+        self.ask_service(
+            |r| &mut r.sim,
+            &SIM,
+            ServiceKind::Sim,
+            "sim",
+            request,
+            timeout,
+        )
+    }
+
+    /// Opens the service `kind` on first use (kept in `slot`), numbers and stamps `request`
+    /// and waits at most `timeout` for its answer. Control and sim requests share one count.
+    fn ask_service<Req: Numbered + std::fmt::Debug + ZeroCopySend + Copy + 'static>(
+        &mut self,
+        slot: fn(&mut Self) -> &mut Option<Counter<Req>>,
+        spec: &RequestResponse<Req>,
+        kind: ServiceKind<'_>,
+        what: &'static str,
+        request: Req,
+        timeout: Duration,
+    ) -> Result<ControlResponse, ClientError> {
+        if slot(self).is_none() {
+            let counter = self.counter(spec, kind)?;
+            *slot(self) = Some(counter);
         }
         self.control_seq += 1;
-        request.seq = self.control_seq;
-        request.stamp_ns = now_ns();
+        let seq = self.control_seq;
+        let request = request.numbered(seq, now_ns());
         let name = self.name.clone();
-        let counter = self
-            .sim
+        let counter = slot(self)
             .as_ref()
-            .ok_or_else(|| ClientError::Ipc("no sim client".into()))?;
-        ask(&name, "sim", counter, request, request.seq, timeout)
+            .ok_or_else(|| ClientError::Ipc(format!("no {what} client")))?;
+        ask(&name, what, counter, request, seq, timeout)
     }
 
     /// A stream of every state sample the service publishes, with its own subscriber and its own
@@ -635,6 +652,32 @@ impl Robot {
             .open(&self.node, &service_name(&self.name, ServiceKind::Frames))?
             .subscriber(buffer.max(1))?;
         Ok(FrameTap { subscriber, events })
+    }
+}
+
+/// A request of a service that answers with a [`ControlResponse`]: the client numbers and
+/// stamps it when it sends it.
+trait Numbered {
+    fn numbered(self, seq: u64, stamp_ns: u64) -> Self;
+}
+
+impl Numbered for ControlRequest {
+    fn numbered(self, seq: u64, stamp_ns: u64) -> Self {
+        Self {
+            seq,
+            stamp_ns,
+            ..self
+        }
+    }
+}
+
+impl Numbered for SimRequest {
+    fn numbered(self, seq: u64, stamp_ns: u64) -> Self {
+        Self {
+            seq,
+            stamp_ns,
+            ..self
+        }
     }
 }
 
@@ -810,6 +853,18 @@ impl StateStream {
 }
 
 static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// The request that makes a simulated chassis send `frames_per_s` extra feedback frames a
+/// second on top of its own ([`SimKind::FLOOD`]; 0 stops): a loaded bus for benchmarks and
+/// tests. Send it with [`Robot::sim`].
+pub fn flood_request(frames_per_s: f64) -> SimRequest {
+    SimRequest {
+        kind: SimKind::FLOOD,
+        flag: 1,
+        value: frames_per_s,
+        ..SimRequest::default()
+    }
+}
 
 /// Installs handlers for SIGINT and SIGTERM (idempotent); [`termination_requested`] then tells
 /// when one arrived. Call it once at start.
@@ -1030,5 +1085,20 @@ impl Robot {
             events,
             latest: None,
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_flood_request_switches_the_simulators_flood_on_at_its_rate() {
+        let r = flood_request(2000.0);
+        assert_eq!(
+            (r.kind, r.flag, r.index, r.value),
+            (SimKind::FLOOD, 1, 0, 2000.0)
+        );
+        assert_eq!(flood_request(0.0).value, 0.0, "0 stops it");
     }
 }

@@ -17,6 +17,8 @@
 //! );
 //! ```
 
+use std::ops::{BitAnd, Not};
+
 use chassis_interfaces::{ChassisState, FaultFlags, LinkFlags, MuxStatus, ZeroReason};
 
 /// How much a change matters.
@@ -41,40 +43,19 @@ pub struct Watch {
 impl Watch {
     /// Log lines for the changes `state` brings.
     pub fn state(&mut self, state: &ChassisState) -> Vec<(Severity, String)> {
-        let mut out = Vec::new();
-        let faults = state.system.fault_flags;
-        let before = self.faults.replace(faults).unwrap_or(0);
-        let raised = faults & !before;
-        let cleared = before & !faults;
-        if raised != 0 {
-            out.push((
-                Severity::Error,
-                format!("fault: {}", FaultFlags::names(raised).join(", ")),
-            ));
-        }
-        if cleared != 0 {
-            out.push((
-                Severity::Info,
-                format!("fault cleared: {}", FaultFlags::names(cleared).join(", ")),
-            ));
-        }
-        let link = state.link_flags;
-        let before = self.link.replace(link).unwrap_or(0);
-        let raised = link & !before;
-        let lowered = before & !link;
-        if raised != 0 {
-            out.push((
-                Severity::Warning,
-                format!("link: {}", LinkFlags::names(raised).join(", ")),
-            ));
-        }
-        if lowered != 0 {
-            out.push((
-                Severity::Info,
-                format!("link: {} no more", LinkFlags::names(lowered).join(", ")),
-            ));
-        }
-        out
+        let (raised, cleared) = edges(&mut self.faults, state.system.fault_flags);
+        let (up, down) = edges(&mut self.link, state.link_flags);
+        let fault = FaultFlags::names;
+        let link = LinkFlags::names;
+        [
+            named(raised, fault).map(|n| (Severity::Error, format!("fault: {n}"))),
+            named(cleared, fault).map(|n| (Severity::Info, format!("fault cleared: {n}"))),
+            named(up, link).map(|n| (Severity::Warning, format!("link: {n}"))),
+            named(down, link).map(|n| (Severity::Info, format!("link: {n} no more"))),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 
     /// A log line when the mux's winner, its reason for zero or the number of held locks
@@ -109,6 +90,24 @@ impl Watch {
     }
 }
 
+/// The bits `now` raises and the bits it lowers against the value `last` holds (none yet: all
+/// clear), which `now` then replaces.
+fn edges<T>(last: &mut Option<T>, now: T) -> (T, T)
+where
+    T: Copy + Default + BitAnd<Output = T> + Not<Output = T>,
+{
+    let before = last.replace(now).unwrap_or_default();
+    (now & !before, before & !now)
+}
+
+/// `names` of the bits set in `bits`, joined, if any is set.
+fn named<T: Copy + Default + PartialEq>(
+    bits: T,
+    names: fn(T) -> Vec<&'static str>,
+) -> Option<String> {
+    (bits != T::default()).then(|| names(bits).join(", "))
+}
+
 /// Names of the locks held.
 pub fn held_locks(mux: &MuxStatus) -> Vec<String> {
     mux.locks()
@@ -136,6 +135,28 @@ mod tests {
         s.system.fault_flags = 0;
         let lines = watch.state(&s);
         assert!(lines[0].1.starts_with("fault cleared"), "{lines:?}");
+    }
+
+    #[test]
+    fn link_flags_log_when_they_rise_and_when_they_fall() {
+        let mut watch = Watch::default();
+        let mut s = ChassisState {
+            link_flags: LinkFlags::BUS_DOWN,
+            ..ChassisState::default()
+        };
+        assert_eq!(
+            watch.state(&s),
+            [(Severity::Warning, "link: bus_down".to_string())]
+        );
+        assert!(watch.state(&s).is_empty(), "unchanged: no line");
+        s.link_flags = LinkFlags::CHASSIS_SILENT;
+        assert_eq!(
+            watch.state(&s),
+            [
+                (Severity::Warning, "link: chassis_silent".to_string()),
+                (Severity::Info, "link: bus_down no more".to_string())
+            ]
+        );
     }
 
     #[test]

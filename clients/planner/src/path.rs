@@ -419,26 +419,23 @@ mod tests {
 
     #[test]
     fn where_the_path_passes_twice_the_earlier_pass_is_kept_unless_far_worse() {
-        // Out along x and back along it 2 cm to the left: two passes of every point.
-        let p = Path::new(vec![
-            Point::new(0.0, 0.0),
-            Point::new(1.0, 0.0),
-            Point::new(1.0, 0.02),
-            Point::new(0.0, 0.02),
-        ])
-        .unwrap();
+        // Out along x and back along it `gap_m` to the left: two passes of every point.
+        let there_and_back = |gap_m: f64| {
+            Path::new(vec![
+                Point::new(0.0, 0.0),
+                Point::new(1.0, 0.0),
+                Point::new(1.0, gap_m),
+                Point::new(0.0, gap_m),
+            ])
+            .unwrap()
+        };
+        let p = there_and_back(0.02);
         // On the way out, 1.5 cm left of it: the way back is nearer, the way out is kept.
         let out = p.project(Point::new(0.5, 0.015), 0.0, p.length_m(), false);
         assert!((out.s - 0.5).abs() < 1e-12, "{out:?}");
         assert!((out.lateral_m - 0.015).abs() < 1e-12);
         // Far nearer the second pass than the first: the second.
-        let p = Path::new(vec![
-            Point::new(0.0, 0.0),
-            Point::new(1.0, 0.0),
-            Point::new(1.0, 0.5),
-            Point::new(0.0, 0.5),
-        ])
-        .unwrap();
+        let p = there_and_back(0.5);
         let back = p.project(Point::new(0.5, 0.45), 0.0, p.length_m(), false);
         assert!((back.s - 2.0).abs() < 1e-12, "{back:?}");
         // Along one pass the nearest point is kept, not an earlier vertex within the slack.

@@ -817,6 +817,19 @@ impl Config {
     }
 }
 
+/// `text` written to a `safety.toml` of its own (in a directory named after `tag`), loaded, and
+/// the file removed again: the configuration and the path it names.
+#[cfg(test)]
+pub(crate) fn loaded(tag: &str, text: &str) -> (Config, std::path::PathBuf) {
+    let dir = std::env::temp_dir().join(format!("chassis-safety-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("safety.toml");
+    std::fs::write(&path, text).unwrap();
+    let config = Config::load(&path).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    (config, path)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -904,16 +917,10 @@ mod tests {
 
     #[test]
     fn a_loaded_file_says_which_keys_it_sets() {
-        let dir = std::env::temp_dir().join(format!("chassis-safety-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("safety.toml");
-        std::fs::write(
-            &path,
+        let (c, path) = loaded(
+            "keys",
             "[rules.speed]\ntrigger_ms = 100\n[rules.battery]\nmin_voltage_v = 23.0\n",
-        )
-        .unwrap();
-        let c = Config::load(&path).unwrap();
-        std::fs::remove_dir_all(&dir).unwrap();
+        );
         let file = c.file.as_ref().unwrap();
         assert_eq!(
             file.keys.iter().map(String::as_str).collect::<Vec<_>>(),

@@ -21,7 +21,7 @@
 use std::fmt;
 use std::path::PathBuf;
 
-use chassis_client::{MotionLimits, RobotDescription};
+use chassis_client::{BatteryLevels, MotionLimits, RobotDescription};
 
 use crate::config::Config;
 
@@ -190,7 +190,9 @@ impl Levels {
 
         // The chassis' warning level first; where a robot states only the level at which it
         // cuts power, that one.
-        let battery_level = |low: f64, low_name: &str, critical: f64, critical_name: &str| {
+        let battery_level = |pick: fn(&BatteryLevels) -> (f64, f64),
+                             [low_name, critical_name]: [&str; 2]| {
+            let (low, critical) = description.map_or((f64::NAN, f64::NAN), |d| pick(&d.battery));
             let usable = |v: f64| v.is_finite() && v > 0.0;
             match description {
                 None => Level::unknown(waiting()),
@@ -204,22 +206,13 @@ impl Levels {
                 )),
             }
         };
-        let b = description.map(|d| d.battery);
-        let nan = f64::NAN;
         let battery_soc_pct = battery_level(
-            b.map_or(nan, |b| b.low_soc_pct),
-            "low_soc_pct",
-            b.map_or(nan, |b| b.critical_soc_pct),
-            "critical_soc_pct",
+            |b| (b.low_soc_pct, b.critical_soc_pct),
+            ["low_soc_pct", "critical_soc_pct"],
         )
         .overridden_by(battery.min_soc_pct, config, "rules.battery.min_soc_pct");
-        let battery_voltage_v = battery_level(
-            b.map_or(nan, |b| b.low_v),
-            "low_v",
-            b.map_or(nan, |b| b.critical_v),
-            "critical_v",
-        )
-        .overridden_by(battery.min_voltage_v, config, "rules.battery.min_voltage_v");
+        let battery_voltage_v = battery_level(|b| (b.low_v, b.critical_v), ["low_v", "critical_v"])
+            .overridden_by(battery.min_voltage_v, config, "rules.battery.min_voltage_v");
 
         Self {
             robot: description.map(|d| DescribedRobot {

@@ -393,18 +393,13 @@ fn report(decision: &Decision, lock: &str, reported: &mut Reported) {
     for e in &decision.events {
         let rule = SafetyRule::name(e.rule);
         match e.kind {
-            SafetyEvent::TRIGGER => info!(
+            // "trigger: …", "release: …", with the value that crossed the threshold.
+            SafetyEvent::TRIGGER | SafetyEvent::RELEASE => info!(
                 rule,
                 value = rounded(e.value),
                 threshold = rounded(e.threshold),
-                "trigger: {}",
-                e.text
-            ),
-            SafetyEvent::RELEASE => info!(
-                rule,
-                value = rounded(e.value),
-                threshold = rounded(e.threshold),
-                "release: {}",
+                "{}: {}",
+                SafetyEvent::name(e.kind),
                 e.text
             ),
             _ => info!(rule, "{}", e.text),

@@ -171,16 +171,10 @@ mod tests {
 
     #[test]
     fn a_value_of_the_file_names_the_file_and_what_the_description_would_give() {
-        let dir = std::env::temp_dir().join(format!("chassis-print-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("safety.toml");
-        std::fs::write(
-            &path,
+        let (config, path) = crate::config::loaded(
+            "print",
             "[rules.battery]\nmin_voltage_v = 23.0\n[rules.speed]\ntrigger_ms = 100\n",
-        )
-        .unwrap();
-        let config = Config::load(&path).unwrap();
-        std::fs::remove_dir_all(&dir).unwrap();
+        );
         let levels = Levels::resolve(&config, Some(&hunter()), "chassis/h1");
         let text = print_config(&config, &levels, &[]).unwrap();
         let file = path.display();
