@@ -9,6 +9,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use anyhow::{Context as _, bail};
+
 use crate::python::{ScriptRun, read_latencies, repo, run_script};
 use crate::stats::Latencies;
 
