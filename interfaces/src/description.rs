@@ -13,6 +13,7 @@ use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::layout::describe_layout;
+use crate::named::named_constants;
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 use crate::{MAX_SOURCES, NAME_LEN};
 
@@ -23,129 +24,92 @@ pub const MAX_JOINTS: usize = 12;
 /// Length of a sensor's or joint's name (also its frame id), NUL-padded UTF-8.
 pub const LABEL_LEN: usize = 32;
 
-/// How the robot's wheels turn a twist into motion (`RobotDescription::kinematics`).
-#[derive(Debug, Clone, Copy)]
-pub struct Kinematics;
-impl Kinematics {
-    /// Two driven wheels (or sides): (v, ω).
-    pub const DIFFERENTIAL: u8 = 1;
-    /// Four wheels, skid-steered: (v, ω), turning by slipping.
-    pub const SKID_STEER: u8 = 2;
-    /// Tracks: (v, ω), turning by slipping.
-    pub const TRACKED: u8 = 3;
-    /// Mecanum or omni wheels: (v, v_y, ω).
-    pub const OMNI: u8 = 4;
-    /// Front-wheel Ackermann: (v, δ); no turn on the spot.
-    pub const ACKERMANN: u8 = 5;
-    /// Front and rear axles steering opposite (TITAN): (v, δ).
-    pub const DUAL_ACKERMANN: u8 = 6;
-    /// Four independently steered wheels (dual Ackermann, crab, spin).
-    pub const FOUR_WHEEL_STEER: u8 = 7;
-
-    pub fn name(kinematics: u8) -> &'static str {
-        match kinematics {
-            Self::DIFFERENTIAL => "differential",
-            Self::SKID_STEER => "skid_steer",
-            Self::TRACKED => "tracked",
-            Self::OMNI => "omni",
-            Self::ACKERMANN => "ackermann",
-            Self::DUAL_ACKERMANN => "dual_ackermann",
-            Self::FOUR_WHEEL_STEER => "four_wheel_steer",
-            _ => "unknown",
-        }
+named_constants! {
+    /// How the robot's wheels turn a twist into motion (`RobotDescription::kinematics`).
+    pub enum Kinematics: u8 {
+        /// Two driven wheels (or sides): (v, ω).
+        DIFFERENTIAL = 1 => "differential",
+        /// Four wheels, skid-steered: (v, ω), turning by slipping.
+        SKID_STEER = 2 => "skid_steer",
+        /// Tracks: (v, ω), turning by slipping.
+        TRACKED = 3 => "tracked",
+        /// Mecanum or omni wheels: (v, v_y, ω).
+        OMNI = 4 => "omni",
+        /// Front-wheel Ackermann: (v, δ); no turn on the spot.
+        ACKERMANN = 5 => "ackermann",
+        /// Front and rear axles steering opposite (TITAN): (v, δ).
+        DUAL_ACKERMANN = 6 => "dual_ackermann",
+        /// Four independently steered wheels (dual Ackermann, crab, spin).
+        FOUR_WHEEL_STEER = 7 => "four_wheel_steer",
     }
+}
 
+impl Kinematics {
     /// True where the robot steers its wheels and cannot turn on the spot by (v = 0, ω).
     pub fn steers(kinematics: u8) -> bool {
         matches!(kinematics, Self::ACKERMANN | Self::DUAL_ACKERMANN)
     }
 }
 
-/// Which bus the robot is on (`RobotDescription::bus`).
-#[derive(Debug, Clone, Copy)]
-pub struct BusKind;
-impl BusKind {
-    /// CAN (SocketCAN, slcan).
-    pub const CAN: u8 = 1;
-    /// RS232 byte stream.
-    pub const RS232: u8 = 2;
-
-    pub fn name(bus: u8) -> &'static str {
-        match bus {
-            Self::CAN => "can",
-            Self::RS232 => "rs232",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Which bus the robot is on (`RobotDescription::bus`).
+    pub enum BusKind: u8 {
+        /// CAN (SocketCAN, slcan).
+        CAN = 1 => "can",
+        /// RS232 byte stream.
+        RS232 = 2 => "rs232",
     }
 }
 
-/// Bits of [`RobotDescription::flags`].
-#[derive(Debug, Clone, Copy)]
-pub struct DescriptionFlags;
-impl DescriptionFlags {
-    /// The bus is the simulated chassis (embedded or `chassisd sim`), not a robot.
-    pub const SIMULATED: u8 = 1 << 0;
-    /// The robot has a parking brake chassisd can lock and release.
-    pub const BRAKE: u8 = 1 << 1;
-    /// The robot has lights chassisd can switch.
-    pub const LIGHTS: u8 = 1 << 2;
-    /// The robot can move sideways (`linear_y`).
-    pub const LATERAL: u8 = 1 << 3;
-    /// The mux requires its safety source (`--no-safety-monitor` not given).
-    pub const SAFETY_REQUIRED: u8 = 1 << 4;
+named_constants! {
+    /// Bits of [`RobotDescription::flags`].
+    pub flags DescriptionFlags: u8 {
+        /// The bus is the simulated chassis (embedded or `chassisd sim`), not a robot.
+        SIMULATED = 1 << 0 => "simulated",
+        /// The robot has a parking brake chassisd can lock and release.
+        BRAKE = 1 << 1 => "brake",
+        /// The robot has lights chassisd can switch.
+        LIGHTS = 1 << 2 => "lights",
+        /// The robot can move sideways (`linear_y`).
+        LATERAL = 1 << 3 => "lateral",
+        /// The mux requires its safety source (`--no-safety-monitor` not given).
+        SAFETY_REQUIRED = 1 << 4 => "safety_required",
+    }
 }
 
-/// What a sensor measures (`SensorDescription::kind`).
-#[derive(Debug, Clone, Copy)]
-pub struct SensorKind;
+named_constants! {
+    /// What a sensor measures (`SensorDescription::kind`).
+    pub enum SensorKind: u8 {
+        /// An ultrasonic range sensor: its reading is `RangesState::ultrasonic_m[index]`.
+        ULTRASONIC = 1 => "ultrasonic",
+        /// An infrared range sensor: `RangesState::ir_m[index]`.
+        INFRARED = 2 => "infrared",
+        /// An inertial unit: `ChassisState::imu`.
+        IMU = 3 => "imu",
+        /// A GNSS receiver: `ChassisState::gps`.
+        GPS = 4 => "gps",
+        /// Bumpers: `FaultFlags::BUMPER`.
+        BUMPER = 5 => "bumper",
+    }
+}
+
 impl SensorKind {
-    /// An ultrasonic range sensor: its reading is `RangesState::ultrasonic_m[index]`.
-    pub const ULTRASONIC: u8 = 1;
-    /// An infrared range sensor: `RangesState::ir_m[index]`.
-    pub const INFRARED: u8 = 2;
-    /// An inertial unit: `ChassisState::imu`.
-    pub const IMU: u8 = 3;
-    /// A GNSS receiver: `ChassisState::gps`.
-    pub const GPS: u8 = 4;
-    /// Bumpers: `FaultFlags::BUMPER`.
-    pub const BUMPER: u8 = 5;
-
-    pub fn name(kind: u8) -> &'static str {
-        match kind {
-            Self::ULTRASONIC => "ultrasonic",
-            Self::INFRARED => "infrared",
-            Self::IMU => "imu",
-            Self::GPS => "gps",
-            Self::BUMPER => "bumper",
-            _ => "unknown",
-        }
-    }
-
     /// True for the range sensors (a cone in a view, a `sensor_msgs/Range` in ROS 2).
     pub fn is_range(kind: u8) -> bool {
         matches!(kind, Self::ULTRASONIC | Self::INFRARED)
     }
 }
 
-/// Which reading of the state a joint's position comes from (`JointDescription::source`).
-#[derive(Debug, Clone, Copy)]
-pub struct JointSource;
-impl JointSource {
-    /// `MotionState::front_steer_rad` (a revolute steering joint).
-    pub const FRONT_STEER: u8 = 1;
-    /// `MotionState::rear_steer_rad`.
-    pub const REAR_STEER: u8 = 2;
-    /// A wheel: `MotionState::wheel_mps[index]` and `MotorState::position_counts` of motor
-    /// `index` (continuous; needs the geometry's wheel radius and travel per count).
-    pub const WHEEL: u8 = 3;
-
-    pub fn name(source: u8) -> &'static str {
-        match source {
-            Self::FRONT_STEER => "front_steer",
-            Self::REAR_STEER => "rear_steer",
-            Self::WHEEL => "wheel",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Which reading of the state a joint's position comes from (`JointDescription::source`).
+    pub enum JointSource: u8 {
+        /// `MotionState::front_steer_rad` (a revolute steering joint).
+        FRONT_STEER = 1 => "front_steer",
+        /// `MotionState::rear_steer_rad`.
+        REAR_STEER = 2 => "rear_steer",
+        /// A wheel: `MotionState::wheel_mps[index]` and `MotorState::position_counts` of motor
+        /// `index` (continuous; needs the geometry's wheel radius and travel per count).
+        WHEEL = 3 => "wheel",
     }
 }
 

@@ -6,27 +6,28 @@ use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::layout::describe_layout;
+use crate::named::named_constants;
 
-/// [`BusFrame::direction`].
-#[derive(Debug, Clone, Copy)]
-pub struct FrameDirection;
-impl FrameDirection {
-    /// Received from the chassis.
-    pub const RX: u8 = 0;
-    /// Sent to the chassis.
-    pub const TX: u8 = 1;
+named_constants! {
+    /// [`BusFrame::direction`].
+    pub enum FrameDirection: u8 {
+        /// Received from the chassis.
+        RX = 0 => "rx",
+        /// Sent to the chassis.
+        TX = 1 => "tx",
+    }
 }
 
-/// [`BusFrame::kind`].
-#[derive(Debug, Clone, Copy)]
-pub struct FrameKind;
-impl FrameKind {
-    /// A CAN frame: `can_id` and up to 8 data bytes.
-    pub const CAN: u8 = 0;
-    /// A chunk of the serial byte stream (XBot), as read or written.
-    pub const SERIAL: u8 = 1;
-    /// A chunk of the GPS receiver's NMEA stream.
-    pub const GPS: u8 = 2;
+named_constants! {
+    /// [`BusFrame::kind`].
+    pub enum FrameKind: u8 {
+        /// A CAN frame: `can_id` and up to 8 data bytes.
+        CAN = 0 => "can",
+        /// A chunk of the serial byte stream (XBot), as read or written.
+        SERIAL = 1 => "serial",
+        /// A chunk of the GPS receiver's NMEA stream.
+        GPS = 2 => "gps",
+    }
 }
 
 /// One CAN frame or one chunk of a serial stream.

@@ -20,6 +20,7 @@ mod description;
 mod frame;
 pub mod layout;
 mod mux;
+mod named;
 mod names;
 pub mod payload;
 mod request;

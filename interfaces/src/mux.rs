@@ -6,6 +6,7 @@ use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::layout::describe_layout;
+use crate::named::named_constants;
 
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 use crate::{MAX_LOCKS, MAX_SOURCES, NAME_LEN};
@@ -66,116 +67,78 @@ impl BodyVelocity {
     }
 }
 
-/// Why a command was changed on its way to the wire (`MuxStatus::clamp_flags`,
-/// `CommandEcho::clamp_flags`).
-#[derive(Debug, Clone, Copy)]
-pub struct ClampFlags;
-impl ClampFlags {
-    /// Linear speed beyond the robot's limit.
-    pub const LINEAR_LIMIT: u32 = 1 << 0;
-    /// Linear speed beyond the robot's limit while steering (TITAN: 1.5 m/s above 0.087 rad).
-    pub const LINEAR_LIMIT_STEERING: u32 = 1 << 1;
-    /// Steering angle beyond the robot's limit.
-    pub const STEER_LIMIT: u32 = 1 << 2;
-    /// Yaw rate beyond the robot's limit.
-    pub const ANGULAR_LIMIT: u32 = 1 << 3;
-    /// Lateral speed requested from a robot that cannot move sideways.
-    pub const LATERAL_UNSUPPORTED: u32 = 1 << 4;
-    /// A turn on the spot (ω with v = 0) requested from an Ackermann robot: unachievable.
-    pub const TURN_IN_PLACE_UNACHIEVABLE: u32 = 1 << 5;
-    /// The yaw rate asked for needs a tighter turn than the robot can make.
-    pub const TURN_RADIUS_LIMIT: u32 = 1 << 6;
-    /// Speed change limited by the configured acceleration (smoothing).
-    pub const ACCELERATION_LIMIT: u32 = 1 << 7;
-    /// Speed beyond the service's configured limit.
-    pub const CONFIG_SPEED_LIMIT: u32 = 1 << 8;
-    /// The wire's resolution changed the value (SCOUT MINI percent steps).
-    pub const QUANTISED: u32 = 1 << 9;
-    /// The chassis cannot move now (standby, brake, RC authority, fault): zero was sent.
-    pub const CHASSIS_NOT_READY: u32 = 1 << 10;
-    /// A limiting source (the safety monitor) clamped the winner's request.
-    pub const SAFETY_LIMIT: u32 = 1 << 11;
-
-    pub const ALL: [(u32, &'static str); 12] = [
-        (Self::LINEAR_LIMIT, "linear_limit"),
-        (Self::LINEAR_LIMIT_STEERING, "linear_limit_steering"),
-        (Self::STEER_LIMIT, "steer_limit"),
-        (Self::ANGULAR_LIMIT, "angular_limit"),
-        (Self::LATERAL_UNSUPPORTED, "lateral_unsupported"),
-        (
-            Self::TURN_IN_PLACE_UNACHIEVABLE,
-            "turn_in_place_unachievable",
-        ),
-        (Self::TURN_RADIUS_LIMIT, "turn_radius_limit"),
-        (Self::ACCELERATION_LIMIT, "acceleration_limit"),
-        (Self::CONFIG_SPEED_LIMIT, "config_speed_limit"),
-        (Self::QUANTISED, "quantised"),
-        (Self::CHASSIS_NOT_READY, "chassis_not_ready"),
-        (Self::SAFETY_LIMIT, "safety_limit"),
-    ];
-
-    pub fn names(bits: u32) -> Vec<&'static str> {
-        Self::ALL
-            .iter()
-            .filter(|(bit, _)| bits & bit != 0)
-            .map(|(_, name)| *name)
-            .collect()
+named_constants! {
+    /// Why a command was changed on its way to the wire (`MuxStatus::clamp_flags`,
+    /// `CommandEcho::clamp_flags`).
+    pub flags ClampFlags: u32 {
+        /// Linear speed beyond the robot's limit.
+        LINEAR_LIMIT = 1 << 0 => "linear_limit",
+        /// Linear speed beyond the robot's limit while steering (TITAN: 1.5 m/s above 0.087 rad).
+        LINEAR_LIMIT_STEERING = 1 << 1 => "linear_limit_steering",
+        /// Steering angle beyond the robot's limit.
+        STEER_LIMIT = 1 << 2 => "steer_limit",
+        /// Yaw rate beyond the robot's limit.
+        ANGULAR_LIMIT = 1 << 3 => "angular_limit",
+        /// Lateral speed requested from a robot that cannot move sideways.
+        LATERAL_UNSUPPORTED = 1 << 4 => "lateral_unsupported",
+        /// A turn on the spot (ω with v = 0) requested from an Ackermann robot: unachievable.
+        TURN_IN_PLACE_UNACHIEVABLE = 1 << 5 => "turn_in_place_unachievable",
+        /// The yaw rate asked for needs a tighter turn than the robot can make.
+        TURN_RADIUS_LIMIT = 1 << 6 => "turn_radius_limit",
+        /// Speed change limited by the configured acceleration (smoothing).
+        ACCELERATION_LIMIT = 1 << 7 => "acceleration_limit",
+        /// Speed beyond the service's configured limit.
+        CONFIG_SPEED_LIMIT = 1 << 8 => "config_speed_limit",
+        /// The wire's resolution changed the value (SCOUT MINI percent steps).
+        QUANTISED = 1 << 9 => "quantised",
+        /// The chassis cannot move now (standby, brake, RC authority, fault): zero was sent.
+        CHASSIS_NOT_READY = 1 << 10 => "chassis_not_ready",
+        /// A limiting source (the safety monitor) clamped the winner's request.
+        SAFETY_LIMIT = 1 << 11 => "safety_limit",
     }
 }
 
-/// Why the mux outputs zero (`MuxStatus::zero_reason`).
-#[derive(Debug, Clone, Copy)]
-pub struct ZeroReason;
-impl ZeroReason {
-    /// A source is active; the output is its (limited) request.
-    pub const NONE: u8 = 0;
-    /// No source has a fresh request.
-    pub const NO_ACTIVE_SOURCE: u8 = 1;
-    /// A required source (the safety monitor) is stale: fail-safe zero.
-    pub const REQUIRED_SOURCE_STALE: u8 = 2;
-    /// A lock blocks every fresh source.
-    pub const LOCKED: u8 = 3;
-    /// The mux has not started yet.
-    pub const STARTING: u8 = 4;
-    /// A lock was released while the source that would win asked for motion: a release never
-    /// starts motion, so the mux waits until that source asks for zero (or stops asking);
-    /// [`MuxStatus::awaiting_source`] names it.
-    pub const AWAITING_ZERO: u8 = 5;
-
-    pub fn name(reason: u8) -> &'static str {
-        match reason {
-            Self::NONE => "none",
-            Self::NO_ACTIVE_SOURCE => "no_active_source",
-            Self::REQUIRED_SOURCE_STALE => "required_source_stale",
-            Self::LOCKED => "locked",
-            Self::STARTING => "starting",
-            Self::AWAITING_ZERO => "awaiting_zero",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Why the mux outputs zero (`MuxStatus::zero_reason`).
+    pub enum ZeroReason: u8 {
+        /// A source is active; the output is its (limited) request.
+        NONE = 0 => "none",
+        /// No source has a fresh request.
+        NO_ACTIVE_SOURCE = 1 => "no_active_source",
+        /// A required source (the safety monitor) is stale: fail-safe zero.
+        REQUIRED_SOURCE_STALE = 2 => "required_source_stale",
+        /// A lock blocks every fresh source.
+        LOCKED = 3 => "locked",
+        /// The mux has not started yet.
+        STARTING = 4 => "starting",
+        /// A lock was released while the source that would win asked for motion: a release
+        /// never starts motion, so the mux waits until that source asks for zero (or stops
+        /// asking); [`MuxStatus::awaiting_source`] names it.
+        AWAITING_ZERO = 5 => "awaiting_zero",
     }
 }
 
-/// Bits of [`SourceStatus::flags`].
-#[derive(Debug, Clone, Copy)]
-pub struct SourceFlags;
-impl SourceFlags {
-    /// The source must be fresh for anything to move.
-    pub const REQUIRED: u8 = 1 << 0;
-    /// Its latest request is younger than its timeout.
-    pub const FRESH: u8 = 1 << 1;
-    /// It is the mux's winner.
-    pub const ACTIVE: u8 = 1 << 2;
-    /// Its latest request is a heartbeat (asks for nothing).
-    pub const HEARTBEAT: u8 = 1 << 3;
-    /// A lock of higher priority blocks it.
-    pub const BLOCKED: u8 = 1 << 4;
-    /// Its latest request is a speed envelope that currently limits the output.
-    pub const LIMITING: u8 = 1 << 5;
-    /// Configured `remote`: a bridge (`chassis-zenoh`) may publish on it for another computer.
-    pub const REMOTE: u8 = 1 << 6;
-    /// It asked for motion when a lock blocking it was released: its motion is not obeyed until
-    /// it asks for zero (or stops asking).
-    pub const AWAITING_ZERO: u8 = 1 << 7;
+named_constants! {
+    /// Bits of [`SourceStatus::flags`].
+    pub flags SourceFlags: u8 {
+        /// The source must be fresh for anything to move.
+        REQUIRED = 1 << 0 => "required",
+        /// Its latest request is younger than its timeout.
+        FRESH = 1 << 1 => "fresh",
+        /// It is the mux's winner.
+        ACTIVE = 1 << 2 => "active",
+        /// Its latest request is a heartbeat (asks for nothing).
+        HEARTBEAT = 1 << 3 => "heartbeat",
+        /// A lock of higher priority blocks it.
+        BLOCKED = 1 << 4 => "blocked",
+        /// Its latest request is a speed envelope that currently limits the output.
+        LIMITING = 1 << 5 => "limiting",
+        /// Configured `remote`: a bridge (`chassis-zenoh`) may publish on it for another computer.
+        REMOTE = 1 << 6 => "remote",
+        /// It asked for motion when a lock blocking it was released: its motion is not obeyed
+        /// until it asks for zero (or stops asking).
+        AWAITING_ZERO = 1 << 7 => "awaiting_zero",
+    }
 }
 
 /// One configured velocity source, as the mux sees it.

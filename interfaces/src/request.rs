@@ -6,21 +6,23 @@ use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::layout::describe_layout;
+use crate::named::named_constants;
 
-/// Bits of [`VelocityRequest::flags`] (and of `BodyVelocity::flags`).
-#[derive(Debug, Clone, Copy)]
-pub struct RequestFlags;
-impl RequestFlags {
-    /// `steer_rad` holds the steering angle to use (Ackermann robots); `angular_z_radps` is
-    /// ignored.
-    pub const STEER: u32 = 1 << 0;
-    /// A heartbeat: the source is alive but asks for nothing (it does not compete in the mux).
-    /// The safety monitor sends these while all is well.
-    pub const HEARTBEAT: u32 = 1 << 1;
-    /// The `limit_*` fields hold a speed envelope: the source does not compete, but clamps the
-    /// output of every source of its priority or lower, per direction (the safety monitor
-    /// slowing down, or blocking only the motion towards an obstacle). Implies a heartbeat.
-    pub const LIMIT: u32 = 1 << 2;
+named_constants! {
+    /// Bits of [`VelocityRequest::flags`] (and of `BodyVelocity::flags`).
+    pub flags RequestFlags: u32 {
+        /// `steer_rad` holds the steering angle to use (Ackermann robots); `angular_z_radps` is
+        /// ignored.
+        STEER = 1 << 0 => "steer",
+        /// A heartbeat: the source is alive but asks for nothing (it does not compete in the
+        /// mux). The safety monitor sends these while all is well.
+        HEARTBEAT = 1 << 1 => "heartbeat",
+        /// The `limit_*` fields hold a speed envelope: the source does not compete, but clamps
+        /// the output of every source of its priority or lower, per direction (the safety
+        /// monitor slowing down, or blocking only the motion towards an obstacle). Implies a
+        /// heartbeat.
+        LIMIT = 1 << 2 => "limit",
+    }
 }
 
 /// A velocity request from one source. Its priority and timeout come from the service's

@@ -11,6 +11,7 @@ use serde::Serialize;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::layout::describe_layout;
+use crate::named::named_constants;
 
 /// Signal groups: the index into [`ChassisState::group_stamp_ns`] and the bit in
 /// [`ChassisState::valid_mask`].
@@ -127,209 +128,132 @@ impl Group {
 pub const GROUP_SLOTS: usize = 24;
 const _: () = assert!(Group::COUNT <= GROUP_SLOTS);
 
-/// Link and authority flags (`ChassisState::link_flags`).
-#[derive(Debug, Clone, Copy)]
-pub struct LinkFlags;
-impl LinkFlags {
-    /// No feedback frame from the chassis for longer than the configured silence limit.
-    pub const CHASSIS_SILENT: u32 = 1 << 0;
-    /// The bus itself is gone (interface down, serial port unplugged); the service retries.
-    pub const BUS_DOWN: u32 = 1 << 1;
-    /// The chassis reports it obeys our motion commands.
-    pub const COMMAND_MODE: u32 = 1 << 2;
-    /// An RC transmitter holds authority; our commands are not obeyed (reported, not fought).
-    pub const RC_AUTHORITY: u32 = 1 << 3;
-    /// A steering-zero calibration was sent and its acknowledgement has not arrived yet.
-    pub const STEERING_ZERO_PENDING: u32 = 1 << 4;
-    /// The GPS receiver's stream is gone.
-    pub const GPS_DOWN: u32 = 1 << 5;
-    /// The chassis was told to stop transmitting (CAN-upgrade silent mode).
-    pub const SILENT_MODE: u32 = 1 << 6;
-    /// The CAN controller is error-passive: an error counter passed 127 (SocketCAN error
-    /// frames; `LinkStats::can_state`). It still sends and receives, but the bus is unhealthy.
-    pub const CAN_ERROR_PASSIVE: u32 = 1 << 7;
-    /// The CAN controller is bus-off: it takes no part in the bus until it is restarted
-    /// (`restart-ms`, or the interface taken down and up); nothing reaches the chassis.
-    pub const CAN_BUS_OFF: u32 = 1 << 8;
-    /// Set by a mirror on another computer (`chassis-zenoh --mirror`), never by chassisd:
-    /// nothing has arrived from the robot over the network for longer than the mirror's loss
-    /// limit (or its liveliness token is gone). The sample is the last one received, published
-    /// again; the robot's own remote sources time out on the robot.
-    pub const REMOTE_LOST: u32 = 1 << 9;
-
-    /// Names of the set bits, for logs and JSON.
-    pub fn names(bits: u32) -> Vec<&'static str> {
-        const NAMES: [(u32, &str); 10] = [
-            (LinkFlags::CHASSIS_SILENT, "chassis_silent"),
-            (LinkFlags::BUS_DOWN, "bus_down"),
-            (LinkFlags::COMMAND_MODE, "command_mode"),
-            (LinkFlags::RC_AUTHORITY, "rc_authority"),
-            (LinkFlags::STEERING_ZERO_PENDING, "steering_zero_pending"),
-            (LinkFlags::GPS_DOWN, "gps_down"),
-            (LinkFlags::SILENT_MODE, "silent_mode"),
-            (LinkFlags::CAN_ERROR_PASSIVE, "can_error_passive"),
-            (LinkFlags::CAN_BUS_OFF, "can_bus_off"),
-            (LinkFlags::REMOTE_LOST, "remote_lost"),
-        ];
-        NAMES
-            .iter()
-            .filter(|(bit, _)| bits & bit != 0)
-            .map(|(_, name)| *name)
-            .collect()
+named_constants! {
+    /// Link and authority flags (`ChassisState::link_flags`).
+    pub flags LinkFlags: u32 {
+        /// No feedback frame from the chassis for longer than the configured silence limit.
+        CHASSIS_SILENT = 1 << 0 => "chassis_silent",
+        /// The bus itself is gone (interface down, serial port unplugged); the service retries.
+        BUS_DOWN = 1 << 1 => "bus_down",
+        /// The chassis reports it obeys our motion commands.
+        COMMAND_MODE = 1 << 2 => "command_mode",
+        /// An RC transmitter holds authority; our commands are not obeyed (reported, not fought).
+        RC_AUTHORITY = 1 << 3 => "rc_authority",
+        /// A steering-zero calibration was sent and its acknowledgement has not arrived yet.
+        STEERING_ZERO_PENDING = 1 << 4 => "steering_zero_pending",
+        /// The GPS receiver's stream is gone.
+        GPS_DOWN = 1 << 5 => "gps_down",
+        /// The chassis was told to stop transmitting (CAN-upgrade silent mode).
+        SILENT_MODE = 1 << 6 => "silent_mode",
+        /// The CAN controller is error-passive: an error counter passed 127 (SocketCAN error
+        /// frames; `LinkStats::can_state`). It still sends and receives, but the bus is unhealthy.
+        CAN_ERROR_PASSIVE = 1 << 7 => "can_error_passive",
+        /// The CAN controller is bus-off: it takes no part in the bus until it is restarted
+        /// (`restart-ms`, or the interface taken down and up); nothing reaches the chassis.
+        CAN_BUS_OFF = 1 << 8 => "can_bus_off",
+        /// Set by a mirror on another computer (`chassis-zenoh --mirror`), never by chassisd:
+        /// nothing has arrived from the robot over the network for longer than the mirror's loss
+        /// limit (or its liveliness token is gone). The sample is the last one received, published
+        /// again; the robot's own remote sources time out on the robot.
+        REMOTE_LOST = 1 << 9 => "remote_lost",
     }
 }
 
-/// The CAN controller's error state (`LinkStats::can_state`), as ISO 11898-1 defines it from
-/// the controller's transmit and receive error counters and SocketCAN reports it.
-#[derive(Debug, Clone, Copy)]
-pub struct ControllerState;
-impl ControllerState {
-    /// Not known: not a CAN bus, or the controller reported nothing (a vcan has no controller).
-    pub const UNKNOWN: u8 = 0;
-    /// Both error counters below 96: all is well.
-    pub const ERROR_ACTIVE: u8 = 1;
-    /// An error counter reached 96.
-    pub const ERROR_WARNING: u8 = 2;
-    /// An error counter passed 127: the controller no longer signals the errors it sees.
-    pub const ERROR_PASSIVE: u8 = 3;
-    /// The transmit error counter passed 255: the controller is off the bus.
-    pub const BUS_OFF: u8 = 4;
-
-    pub fn name(state: u8) -> &'static str {
-        match state {
-            Self::ERROR_ACTIVE => "error-active",
-            Self::ERROR_WARNING => "error-warning",
-            Self::ERROR_PASSIVE => "error-passive",
-            Self::BUS_OFF => "bus-off",
-            _ => "unknown",
-        }
+named_constants! {
+    /// The CAN controller's error state (`LinkStats::can_state`), as ISO 11898-1 defines it from
+    /// the controller's transmit and receive error counters and SocketCAN reports it.
+    pub enum ControllerState: u8 {
+        /// Not known: not a CAN bus, or the controller reported nothing (a vcan has no controller).
+        UNKNOWN = 0 => "unknown",
+        /// Both error counters below 96: all is well.
+        ERROR_ACTIVE = 1 => "error-active",
+        /// An error counter reached 96.
+        ERROR_WARNING = 2 => "error-warning",
+        /// An error counter passed 127: the controller no longer signals the errors it sees.
+        ERROR_PASSIVE = 3 => "error-passive",
+        /// The transmit error counter passed 255: the controller is off the bus.
+        BUS_OFF = 4 => "bus-off",
     }
 }
 
-/// Normalized control mode (`SystemState::control_mode`), the same for every robot.
-#[derive(Debug, Clone, Copy)]
-pub struct ControlMode;
-impl ControlMode {
-    pub const UNKNOWN: u8 = 0;
-    /// Powered up, reacting only to the mode frame (TITAN).
-    pub const STANDBY: u8 = 1;
-    /// Obeying commands from this computer (CAN or serial command mode).
-    pub const COMMAND: u8 = 2;
-    /// An RC transmitter is in control.
-    pub const REMOTE: u8 = 3;
-    /// Serial command mode (commands on another port; CAN commands ignored): SCOUT MINI V1, and
-    /// protocol V2's "UART" / "APP" mode (0x211 b1 = 0x02 where the profile's mode codes say so).
-    pub const SERIAL: u8 = 4;
-
-    pub fn name(mode: u8) -> &'static str {
-        match mode {
-            Self::STANDBY => "standby",
-            Self::COMMAND => "command",
-            Self::REMOTE => "remote",
-            Self::SERIAL => "serial",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Normalized control mode (`SystemState::control_mode`), the same for every robot.
+    pub enum ControlMode: u8 {
+        UNKNOWN = 0 => "unknown",
+        /// Powered up, reacting only to the mode frame (TITAN).
+        STANDBY = 1 => "standby",
+        /// Obeying commands from this computer (CAN or serial command mode).
+        COMMAND = 2 => "command",
+        /// An RC transmitter is in control.
+        REMOTE = 3 => "remote",
+        /// Serial command mode (commands on another port; CAN commands ignored): SCOUT MINI V1,
+        /// and protocol V2's "UART" / "APP" mode (0x211 b1 = 0x02 where the profile's mode codes
+        /// say so).
+        SERIAL = 4 => "serial",
     }
 }
 
-/// Which AgileX wire protocol the driver speaks (`SystemState::wire_protocol`).
-#[derive(Debug, Clone, Copy)]
-pub struct WireProtocol;
-impl WireProtocol {
-    /// The robot has one protocol of its own (TITAN, XBot).
-    pub const OWN: u8 = 0;
-    /// AgileX V1 (count and checksum in every frame).
-    pub const V1: u8 = 1;
-    /// AgileX V2 (the TITAN's layout family).
-    pub const V2: u8 = 2;
-    /// Listening to find out (SCOUT MINI on a real bus): nothing is sent yet.
-    pub const DETECTING: u8 = 3;
-
-    pub fn name(protocol: u8) -> &'static str {
-        match protocol {
-            Self::OWN => "own",
-            Self::V1 => "v1",
-            Self::V2 => "v2",
-            Self::DETECTING => "detecting",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Which AgileX wire protocol the driver speaks (`SystemState::wire_protocol`).
+    pub enum WireProtocol: u8 {
+        /// The robot has one protocol of its own (TITAN, XBot).
+        OWN = 0 => "own",
+        /// AgileX V1 (count and checksum in every frame).
+        V1 = 1 => "v1",
+        /// AgileX V2 (the TITAN's layout family).
+        V2 = 2 => "v2",
+        /// Listening to find out (SCOUT MINI on a real bus): nothing is sent yet.
+        DETECTING = 3 => "detecting",
     }
 }
 
-/// Normalized fault flags (`SystemState::fault_flags`); the vendor's own word is kept beside it in
-/// `SystemState::vendor_fault_word`.
-#[derive(Debug, Clone, Copy)]
-pub struct FaultFlags;
+named_constants! {
+    /// Normalized fault flags (`SystemState::fault_flags`); the vendor's own word is kept beside
+    /// it in `SystemState::vendor_fault_word`.
+    pub flags FaultFlags: u64 {
+        /// The chassis lost our heartbeat (TITAN "upper-computer communication lost").
+        HEARTBEAT_LOST = 1 << 0 => "heartbeat_lost",
+        /// Battery under-voltage failure: drive power cut.
+        BATTERY_UNDER_VOLTAGE = 1 << 1 => "battery_under_voltage",
+        /// Battery under-voltage alarm (warning level).
+        BATTERY_UNDER_VOLTAGE_WARNING = 1 << 2 => "battery_under_voltage_warning",
+        /// Battery over-voltage failure.
+        BATTERY_OVER_VOLTAGE = 1 << 3 => "battery_over_voltage",
+        /// A motor driver reports an error.
+        MOTOR_DRIVER_ERROR = 1 << 4 => "motor_driver_error",
+        /// Motor 1 driver communication lost (motor 2-4: the next three bits).
+        MOTOR_1_COMM_LOST = 1 << 5 => "motor_1_comm_lost",
+        MOTOR_2_COMM_LOST = 1 << 6 => "motor_2_comm_lost",
+        MOTOR_3_COMM_LOST = 1 << 7 => "motor_3_comm_lost",
+        MOTOR_4_COMM_LOST = 1 << 8 => "motor_4_comm_lost",
+        /// Over-temperature protection (drive limited until cleared).
+        OVER_TEMPERATURE = 1 << 9 => "over_temperature",
+        /// Over-temperature alarm (clears itself).
+        OVER_TEMPERATURE_WARNING = 1 << 10 => "over_temperature_warning",
+        /// Over-current protection (until cleared).
+        OVER_CURRENT = 1 << 11 => "over_current",
+        /// Over-current alarm (clears itself).
+        OVER_CURRENT_WARNING = 1 << 12 => "over_current_warning",
+        FRONT_STEERING_ENCODER = 1 << 13 => "front_steering_encoder",
+        REAR_STEERING_ENCODER = 1 << 14 => "rear_steering_encoder",
+        /// The bumper (touch edge) stopped the robot.
+        BUMPER = 1 << 15 => "bumper",
+        /// The RC transmitter link is lost / the transmitter is off.
+        RC_LINK_LOST = 1 << 16 => "rc_link_lost",
+        /// The chassis received a command frame with a wrong checksum (SCOUT MINI).
+        COMMAND_CHECKSUM = 1 << 17 => "command_checksum",
+        /// The chassis reports an emergency stop.
+        EMERGENCY_STOP = 1 << 18 => "emergency_stop",
+        /// The chassis reports an exception body state.
+        BODY_EXCEPTION = 1 << 19 => "body_exception",
+        /// State of charge below the low-battery warning level.
+        BATTERY_LOW = 1 << 20 => "battery_low",
+        /// Any BMS alarm bit is set.
+        BMS_ALARM = 1 << 21 => "bms_alarm",
+    }
+}
+
 impl FaultFlags {
-    /// The chassis lost our heartbeat (TITAN "upper-computer communication lost").
-    pub const HEARTBEAT_LOST: u64 = 1 << 0;
-    /// Battery under-voltage failure: drive power cut.
-    pub const BATTERY_UNDER_VOLTAGE: u64 = 1 << 1;
-    /// Battery under-voltage alarm (warning level).
-    pub const BATTERY_UNDER_VOLTAGE_WARNING: u64 = 1 << 2;
-    /// Battery over-voltage failure.
-    pub const BATTERY_OVER_VOLTAGE: u64 = 1 << 3;
-    /// A motor driver reports an error.
-    pub const MOTOR_DRIVER_ERROR: u64 = 1 << 4;
-    /// Motor 1 driver communication lost (motor 2-4: the next three bits).
-    pub const MOTOR_1_COMM_LOST: u64 = 1 << 5;
-    pub const MOTOR_2_COMM_LOST: u64 = 1 << 6;
-    pub const MOTOR_3_COMM_LOST: u64 = 1 << 7;
-    pub const MOTOR_4_COMM_LOST: u64 = 1 << 8;
-    /// Over-temperature protection (drive limited until cleared).
-    pub const OVER_TEMPERATURE: u64 = 1 << 9;
-    /// Over-temperature alarm (clears itself).
-    pub const OVER_TEMPERATURE_WARNING: u64 = 1 << 10;
-    /// Over-current protection (until cleared).
-    pub const OVER_CURRENT: u64 = 1 << 11;
-    /// Over-current alarm (clears itself).
-    pub const OVER_CURRENT_WARNING: u64 = 1 << 12;
-    pub const FRONT_STEERING_ENCODER: u64 = 1 << 13;
-    pub const REAR_STEERING_ENCODER: u64 = 1 << 14;
-    /// The bumper (touch edge) stopped the robot.
-    pub const BUMPER: u64 = 1 << 15;
-    /// The RC transmitter link is lost / the transmitter is off.
-    pub const RC_LINK_LOST: u64 = 1 << 16;
-    /// The chassis received a command frame with a wrong checksum (SCOUT MINI).
-    pub const COMMAND_CHECKSUM: u64 = 1 << 17;
-    /// The chassis reports an emergency stop.
-    pub const EMERGENCY_STOP: u64 = 1 << 18;
-    /// The chassis reports an exception body state.
-    pub const BODY_EXCEPTION: u64 = 1 << 19;
-    /// State of charge below the low-battery warning level.
-    pub const BATTERY_LOW: u64 = 1 << 20;
-    /// Any BMS alarm bit is set.
-    pub const BMS_ALARM: u64 = 1 << 21;
-
-    /// Every flag with its name, in bit order.
-    pub const ALL: [(u64, &'static str); 22] = [
-        (Self::HEARTBEAT_LOST, "heartbeat_lost"),
-        (Self::BATTERY_UNDER_VOLTAGE, "battery_under_voltage"),
-        (
-            Self::BATTERY_UNDER_VOLTAGE_WARNING,
-            "battery_under_voltage_warning",
-        ),
-        (Self::BATTERY_OVER_VOLTAGE, "battery_over_voltage"),
-        (Self::MOTOR_DRIVER_ERROR, "motor_driver_error"),
-        (Self::MOTOR_1_COMM_LOST, "motor_1_comm_lost"),
-        (Self::MOTOR_2_COMM_LOST, "motor_2_comm_lost"),
-        (Self::MOTOR_3_COMM_LOST, "motor_3_comm_lost"),
-        (Self::MOTOR_4_COMM_LOST, "motor_4_comm_lost"),
-        (Self::OVER_TEMPERATURE, "over_temperature"),
-        (Self::OVER_TEMPERATURE_WARNING, "over_temperature_warning"),
-        (Self::OVER_CURRENT, "over_current"),
-        (Self::OVER_CURRENT_WARNING, "over_current_warning"),
-        (Self::FRONT_STEERING_ENCODER, "front_steering_encoder"),
-        (Self::REAR_STEERING_ENCODER, "rear_steering_encoder"),
-        (Self::BUMPER, "bumper"),
-        (Self::RC_LINK_LOST, "rc_link_lost"),
-        (Self::COMMAND_CHECKSUM, "command_checksum"),
-        (Self::EMERGENCY_STOP, "emergency_stop"),
-        (Self::BODY_EXCEPTION, "body_exception"),
-        (Self::BATTERY_LOW, "battery_low"),
-        (Self::BMS_ALARM, "bms_alarm"),
-    ];
-
     /// Flags that only warn: the chassis still drives.
     pub const WARNINGS: u64 = Self::BATTERY_UNDER_VOLTAGE_WARNING
         | Self::OVER_TEMPERATURE_WARNING
@@ -338,36 +262,19 @@ impl FaultFlags {
         | Self::RC_LINK_LOST
         | Self::BMS_ALARM
         | Self::COMMAND_CHECKSUM;
-
-    /// Names of the set bits.
-    pub fn names(bits: u64) -> Vec<&'static str> {
-        Self::ALL
-            .iter()
-            .filter(|(bit, _)| bits & bit != 0)
-            .map(|(_, name)| *name)
-            .collect()
-    }
-
-    /// The bit with this name, if any.
-    pub fn from_name(name: &str) -> Option<u64> {
-        Self::ALL
-            .iter()
-            .find(|(_, n)| *n == name)
-            .map(|(bit, _)| *bit)
-    }
 }
 
-/// Motor driver status bits (`MotorState::driver_status`), as TITAN's 0x261-0x264 byte 5.
-#[derive(Debug, Clone, Copy)]
-pub struct DriverStatus;
-impl DriverStatus {
-    pub const SUPPLY_UNDER_VOLTAGE: u8 = 1 << 0;
-    pub const MOTOR_OVER_TEMPERATURE: u8 = 1 << 1;
-    pub const DRIVER_OVER_CURRENT: u8 = 1 << 2;
-    pub const DRIVER_OVER_TEMPERATURE: u8 = 1 << 3;
-    pub const SENSOR_FAULT: u8 = 1 << 4;
-    pub const DRIVER_ERROR: u8 = 1 << 5;
-    pub const ENABLED: u8 = 1 << 6;
+named_constants! {
+    /// Motor driver status bits (`MotorState::driver_status`), as TITAN's 0x261-0x264 byte 5.
+    pub flags DriverStatus: u8 {
+        SUPPLY_UNDER_VOLTAGE = 1 << 0 => "supply_under_voltage",
+        MOTOR_OVER_TEMPERATURE = 1 << 1 => "motor_over_temperature",
+        DRIVER_OVER_CURRENT = 1 << 2 => "driver_over_current",
+        DRIVER_OVER_TEMPERATURE = 1 << 3 => "driver_over_temperature",
+        SENSOR_FAULT = 1 << 4 => "sensor_fault",
+        DRIVER_ERROR = 1 << 5 => "driver_error",
+        ENABLED = 1 << 6 => "enabled",
+    }
 }
 
 /// Speeds and steering.
