@@ -1,11 +1,9 @@
 //! The control request/response pair (iceoryx2 request-response service `control`).
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
 use crate::named::named_constants;
 
 use crate::NAME_LEN;
@@ -76,48 +74,25 @@ named_constants! {
     }
 }
 
-/// A control request.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::ControlRequest.v1")]
-pub struct ControlRequest {
-    /// `CLOCK_MONOTONIC` time the request was created, ns.
-    pub stamp_ns: u64,
-    pub seq: u64,
-    /// [`ControlKind`].
-    pub kind: u8,
-    /// Small arguments; meaning per [`ControlKind`].
-    pub arg: [u8; 7],
-    /// Numeric arguments; meaning per [`ControlKind`].
-    pub value: [f32; 2],
-    /// A lock name for the lock requests (NUL-padded UTF-8).
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; NAME_LEN],
-}
-
-describe_layout!(
-    ControlRequest,
-    control_request_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        kind,
-        arg,
-        value,
-        name,
+ipc_type! {
+    /// A control request.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::ControlRequest.v1")]
+    pub struct ControlRequest {
+        /// `CLOCK_MONOTONIC` time the request was created, ns.
+        pub stamp_ns: u64,
+        pub seq: u64,
+        /// [`ControlKind`].
+        pub kind: u8,
+        /// Small arguments; meaning per [`ControlKind`].
+        pub arg: [u8; 7],
+        /// Numeric arguments; meaning per [`ControlKind`].
+        pub value: [f32; 2],
+        /// A lock name for the lock requests (NUL-padded UTF-8).
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; NAME_LEN],
     }
-);
+}
 
 impl ControlRequest {
     pub fn new(kind: u8) -> Self {
@@ -166,45 +141,24 @@ named_constants! {
     }
 }
 
-/// The answer to a control request.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::ControlResponse.v1")]
-pub struct ControlResponse {
-    /// `CLOCK_MONOTONIC` time of the answer, ns.
-    pub stamp_ns: u64,
-    /// `seq` of the request this answers.
-    pub request_seq: u64,
-    /// [`ControlStatus`].
-    pub status: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 7],
-    /// A human-readable result or refusal reason (NUL-padded UTF-8).
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub message: [u8; ControlResponse::MESSAGE_LEN],
-}
-
-describe_layout!(
-    ControlResponse,
-    control_response_description_covers_every_byte {
-        stamp_ns,
-        request_seq,
-        status,
-        _reserved,
-        message,
+ipc_type! {
+    /// The answer to a control request.
+    #[derive(Serialize)]
+    #[type_name("chassis::ControlResponse.v1")]
+    pub struct ControlResponse {
+        /// `CLOCK_MONOTONIC` time of the answer, ns.
+        pub stamp_ns: u64,
+        /// `seq` of the request this answers.
+        pub request_seq: u64,
+        /// [`ControlStatus`].
+        pub status: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 7],
+        /// A human-readable result or refusal reason (NUL-padded UTF-8).
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub message: [u8; ControlResponse::MESSAGE_LEN],
     }
-);
+}
 
 impl Default for ControlResponse {
     fn default() -> Self {
@@ -347,50 +301,26 @@ named_constants! {
     }
 }
 
-/// A fault to inject into a simulated chassis; answered with a [`ControlResponse`].
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SimRequest.v1")]
-pub struct SimRequest {
-    pub stamp_ns: u64,
-    pub seq: u64,
-    /// [`SimKind`].
-    pub kind: u8,
-    /// On/off for the kinds that switch something.
-    pub flag: u8,
-    /// Motor number for [`SimKind::MOTOR_DRIVER_LOSS`]; the page of [`SimKind::TRUTH`]'s answer
-    /// ([`SimTruthPage`]).
-    pub index: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 5],
-    /// Amount for the kinds that take one (%, s, m, bytes, frames, m/s).
-    pub value: f64,
-}
-
-describe_layout!(
-    SimRequest,
-    sim_request_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        kind,
-        flag,
-        index,
-        _reserved,
-        value,
+ipc_type! {
+    /// A fault to inject into a simulated chassis; answered with a [`ControlResponse`].
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SimRequest.v1")]
+    pub struct SimRequest {
+        pub stamp_ns: u64,
+        pub seq: u64,
+        /// [`SimKind`].
+        pub kind: u8,
+        /// On/off for the kinds that switch something.
+        pub flag: u8,
+        /// Motor number for [`SimKind::MOTOR_DRIVER_LOSS`]; the page of [`SimKind::TRUTH`]'s answer
+        /// ([`SimTruthPage`]).
+        pub index: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 5],
+        /// Amount for the kinds that take one (%, s, m, bytes, frames, m/s).
+        pub value: f64,
     }
-);
+}
 
 #[cfg(test)]
 mod sim_tests {

@@ -7,12 +7,10 @@
 //! from a table of their own. Unknown values are NaN (a length the manuals do not give); counts
 //! say how many entries of each fixed array are used.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
 use crate::named::named_constants;
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 use crate::{MAX_SOURCES, NAME_LEN};
@@ -113,51 +111,27 @@ named_constants! {
     }
 }
 
-/// Speed and acceleration limits; NaN where there is none.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::MotionLimits.v1")]
-pub struct MotionLimits {
-    /// Largest forward speed, m/s.
-    pub forward_mps: f64,
-    /// Largest reverse speed (a positive number), m/s.
-    pub reverse_mps: f64,
-    /// Largest |lateral speed|, m/s (0: the robot cannot move sideways).
-    pub lateral_mps: f64,
-    /// Largest |yaw rate|, rad/s.
-    pub angular_radps: f64,
-    /// Largest |steering angle| (inner wheel), rad; NaN where the robot does not steer.
-    pub steer_rad: f64,
-    /// Largest |linear acceleration|, m/s²; NaN: not limited.
-    pub linear_accel_mps2: f64,
-    /// Largest |yaw acceleration|, rad/s²; NaN: not limited.
-    pub angular_accel_radps2: f64,
-}
-
-describe_layout!(
-    MotionLimits,
-    motion_limits_description_covers_every_byte {
-        forward_mps,
-        reverse_mps,
-        lateral_mps,
-        angular_radps,
-        steer_rad,
-        linear_accel_mps2,
-        angular_accel_radps2,
+ipc_type! {
+    /// Speed and acceleration limits; NaN where there is none.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::MotionLimits.v1")]
+    pub struct MotionLimits {
+        /// Largest forward speed, m/s.
+        pub forward_mps: f64,
+        /// Largest reverse speed (a positive number), m/s.
+        pub reverse_mps: f64,
+        /// Largest |lateral speed|, m/s (0: the robot cannot move sideways).
+        pub lateral_mps: f64,
+        /// Largest |yaw rate|, rad/s.
+        pub angular_radps: f64,
+        /// Largest |steering angle| (inner wheel), rad; NaN where the robot does not steer.
+        pub steer_rad: f64,
+        /// Largest |linear acceleration|, m/s²; NaN: not limited.
+        pub linear_accel_mps2: f64,
+        /// Largest |yaw acceleration|, rad/s²; NaN: not limited.
+        pub angular_accel_radps2: f64,
     }
-);
+}
 
 impl MotionLimits {
     /// No limit at all.
@@ -190,186 +164,90 @@ impl MotionLimits {
     }
 }
 
-/// The robot's geometry, m; NaN where the manuals do not give it.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::Geometry.v1")]
-pub struct Geometry {
-    /// Distance between the axles, m.
-    pub wheelbase_m: f64,
-    /// Distance between the left and right wheels (or tracks), m.
-    pub track_m: f64,
-    /// Drive wheel radius, m.
-    pub wheel_radius_m: f64,
-    /// Wheel travel per encoder count, m.
-    pub travel_per_count_m: f64,
-    /// The body's outline, centred on `base_link`: length (x), width (y), height (z), m.
-    pub length_m: f64,
-    pub width_m: f64,
-    pub height_m: f64,
-    /// Smallest radius of `base_link`'s path while driving (robots that steer: the inner
-    /// wheels at full lock), m; 0 where it turns on the spot. A four-wheel-steered robot
-    /// (RANGER MINI) drives dual Ackermann down to this radius and spins on the spot below it.
-    pub min_turn_radius_m: f64,
+ipc_type! {
+    /// The robot's geometry, m; NaN where the manuals do not give it.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::Geometry.v1")]
+    pub struct Geometry {
+        /// Distance between the axles, m.
+        pub wheelbase_m: f64,
+        /// Distance between the left and right wheels (or tracks), m.
+        pub track_m: f64,
+        /// Drive wheel radius, m.
+        pub wheel_radius_m: f64,
+        /// Wheel travel per encoder count, m.
+        pub travel_per_count_m: f64,
+        /// The body's outline, centred on `base_link`: length (x), width (y), height (z), m.
+        pub length_m: f64,
+        pub width_m: f64,
+        pub height_m: f64,
+        /// Smallest radius of `base_link`'s path while driving (robots that steer: the inner
+        /// wheels at full lock), m; 0 where it turns on the spot. A four-wheel-steered robot
+        /// (RANGER MINI) drives dual Ackermann down to this radius and spins on the spot below it.
+        pub min_turn_radius_m: f64,
+    }
 }
 
-describe_layout!(
-    Geometry,
-    geometry_description_covers_every_byte {
-        wheelbase_m,
-        track_m,
-        wheel_radius_m,
-        travel_per_count_m,
-        length_m,
-        width_m,
-        height_m,
-        min_turn_radius_m,
+ipc_type! {
+    /// Battery levels; NaN where the robot reports no such reading or the manual gives no level.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::BatteryLevels.v1")]
+    pub struct BatteryLevels {
+        /// Pack voltage when full, V.
+        pub full_v: f64,
+        /// Below this the chassis warns (its under-voltage alarm), V.
+        pub low_v: f64,
+        /// Below this the chassis cuts drive power (its under-voltage failure), V.
+        pub critical_v: f64,
+        /// State of charge below which the chassis warns, %.
+        pub low_soc_pct: f64,
+        /// State of charge below which the chassis cuts drive power, %.
+        pub critical_soc_pct: f64,
     }
-);
-
-/// Battery levels; NaN where the robot reports no such reading or the manual gives no level.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::BatteryLevels.v1")]
-pub struct BatteryLevels {
-    /// Pack voltage when full, V.
-    pub full_v: f64,
-    /// Below this the chassis warns (its under-voltage alarm), V.
-    pub low_v: f64,
-    /// Below this the chassis cuts drive power (its under-voltage failure), V.
-    pub critical_v: f64,
-    /// State of charge below which the chassis warns, %.
-    pub low_soc_pct: f64,
-    /// State of charge below which the chassis cuts drive power, %.
-    pub critical_soc_pct: f64,
 }
 
-describe_layout!(
-    BatteryLevels,
-    battery_levels_description_covers_every_byte {
-        full_v,
-        low_v,
-        critical_v,
-        low_soc_pct,
-        critical_soc_pct,
+ipc_type! {
+    /// Odometry's stated (not measured) variances, for the bridges' covariance matrices.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::OdometryVariance.v1")]
+    pub struct OdometryVariance {
+        /// Of x and y, m².
+        pub position_m2: f64,
+        /// Of yaw, rad².
+        pub yaw_rad2: f64,
+        /// Of the linear and lateral speed, (m/s)².
+        pub linear_m2ps2: f64,
+        /// Of the yaw rate, (rad/s)².
+        pub angular_rad2ps2: f64,
     }
-);
-
-/// Odometry's stated (not measured) variances, for the bridges' covariance matrices.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::OdometryVariance.v1")]
-pub struct OdometryVariance {
-    /// Of x and y, m².
-    pub position_m2: f64,
-    /// Of yaw, rad².
-    pub yaw_rad2: f64,
-    /// Of the linear and lateral speed, (m/s)².
-    pub linear_m2ps2: f64,
-    /// Of the yaw rate, (rad/s)².
-    pub angular_rad2ps2: f64,
 }
 
-describe_layout!(
-    OdometryVariance,
-    odometry_variance_description_covers_every_byte {
-        position_m2,
-        yaw_rad2,
-        linear_m2ps2,
-        angular_rad2ps2,
+ipc_type! {
+    /// One sensor and where it sits on the body (in `base_link`, REP-103 axes).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SensorDescription.v1")]
+    pub struct SensorDescription {
+        /// The sensor's name, also its frame id (`ultrasonic_front_left`).
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; LABEL_LEN],
+        /// [`SensorKind`].
+        pub kind: u8,
+        /// Index of its reading in the state (e.g. `RangesState::ultrasonic_m[index]`).
+        pub index: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 6],
+        pub x_m: f64,
+        pub y_m: f64,
+        pub z_m: f64,
+        /// Heading of its axis, rad, left of forward positive.
+        pub yaw_rad: f64,
+        /// Full opening angle of a range sensor's cone, rad (NaN otherwise).
+        pub field_of_view_rad: f64,
+        /// Nearest and farthest reading a range sensor gives, m (NaN otherwise).
+        pub min_range_m: f64,
+        pub max_range_m: f64,
     }
-);
-
-/// One sensor and where it sits on the body (in `base_link`, REP-103 axes).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SensorDescription.v1")]
-pub struct SensorDescription {
-    /// The sensor's name, also its frame id (`ultrasonic_front_left`).
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; LABEL_LEN],
-    /// [`SensorKind`].
-    pub kind: u8,
-    /// Index of its reading in the state (e.g. `RangesState::ultrasonic_m[index]`).
-    pub index: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 6],
-    pub x_m: f64,
-    pub y_m: f64,
-    pub z_m: f64,
-    /// Heading of its axis, rad, left of forward positive.
-    pub yaw_rad: f64,
-    /// Full opening angle of a range sensor's cone, rad (NaN otherwise).
-    pub field_of_view_rad: f64,
-    /// Nearest and farthest reading a range sensor gives, m (NaN otherwise).
-    pub min_range_m: f64,
-    pub max_range_m: f64,
 }
-
-describe_layout!(
-    SensorDescription,
-    sensor_description_covers_every_byte {
-        name,
-        kind,
-        index,
-        _reserved,
-        x_m,
-        y_m,
-        z_m,
-        yaw_rad,
-        field_of_view_rad,
-        min_range_m,
-        max_range_m,
-    }
-);
 
 impl SensorDescription {
     pub fn name(&self) -> &str {
@@ -377,43 +255,22 @@ impl SensorDescription {
     }
 }
 
-/// One joint the bridges publish (`sensor_msgs/JointState`).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::JointDescription.v1")]
-pub struct JointDescription {
-    /// The joint's name (`front_steer_joint`, `front_left_wheel_joint`).
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; LABEL_LEN],
-    /// [`JointSource`]: which reading of the state is its position.
-    pub source: u8,
-    /// Which wheel (`MotionState::wheel_mps` order) for a wheel joint.
-    pub index: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 6],
-}
-
-describe_layout!(
-    JointDescription,
-    joint_description_covers_every_byte {
-        name,
-        source,
-        index,
-        _reserved
+ipc_type! {
+    /// One joint the bridges publish (`sensor_msgs/JointState`).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::JointDescription.v1")]
+    pub struct JointDescription {
+        /// The joint's name (`front_steer_joint`, `front_left_wheel_joint`).
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; LABEL_LEN],
+        /// [`JointSource`]: which reading of the state is its position.
+        pub source: u8,
+        /// Which wheel (`MotionState::wheel_mps` order) for a wheel joint.
+        pub index: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 6],
     }
-);
+}
 
 impl JointDescription {
     pub fn name(&self) -> &str {
@@ -421,45 +278,23 @@ impl JointDescription {
     }
 }
 
-/// One velocity source of the mux, as configured.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SourceDescription.v1")]
-pub struct SourceDescription {
-    /// Source name (`teleop`): the service `chassis/<name>/cmd/<source>`.
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; NAME_LEN],
-    /// Its request ends its motion this long after it was made, ms.
-    pub timeout_ms: u32,
-    pub priority: u8,
-    /// `SourceFlags::REQUIRED` and `SourceFlags::REMOTE` as configured.
-    pub flags: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 2],
-}
-
-describe_layout!(
-    SourceDescription,
-    source_description_covers_every_byte {
-        name,
-        timeout_ms,
-        priority,
-        flags,
-        _reserved
+ipc_type! {
+    /// One velocity source of the mux, as configured.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SourceDescription.v1")]
+    pub struct SourceDescription {
+        /// Source name (`teleop`): the service `chassis/<name>/cmd/<source>`.
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; NAME_LEN],
+        /// Its request ends its motion this long after it was made, ms.
+        pub timeout_ms: u32,
+        pub priority: u8,
+        /// `SourceFlags::REQUIRED` and `SourceFlags::REMOTE` as configured.
+        pub flags: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 2],
     }
-);
+}
 
 impl SourceDescription {
     pub fn name(&self) -> &str {
@@ -467,85 +302,53 @@ impl SourceDescription {
     }
 }
 
-/// The robot `chassisd` drives, as it is configured and detected: see the module doc.
-#[repr(C)]
-#[derive(
-    Debug, Clone, Copy, PartialEq, FromBytes, IntoBytes, Immutable, KnownLayout, ZeroCopySend,
-)]
-#[type_name("chassis::RobotDescription.v1")]
-pub struct RobotDescription {
-    /// Bumped at every publication (a change of protocol once detection decides).
-    pub seq: u64,
-    /// `CLOCK_MONOTONIC` when it was published, ns.
-    pub stamp_ns: u64,
-    /// The robot's kind: `chassis_protocols::RobotKind` as a number, as in
-    /// `ChassisState::robot`.
-    pub kind: u8,
-    /// `WireProtocol` in use (`DETECTING` until detection decides).
-    pub protocol: u8,
-    /// [`Kinematics`].
-    pub kinematics: u8,
-    /// [`BusKind`].
-    pub bus: u8,
-    /// [`DescriptionFlags`].
-    pub flags: u8,
-    pub sensor_count: u8,
-    pub joint_count: u8,
-    pub source_count: u8,
-    /// The robot's name (`--name`): its services are `chassis/<name>/…`.
-    pub name: [u8; NAME_LEN],
-    /// The kind's `--robot` spelling (`hunter`).
-    pub kind_name: [u8; NAME_LEN],
-    /// The variant of the kind the profile describes (`scout-mini-omni`, `ranger-mini-v1`, or
-    /// the kind's name).
-    pub model: [u8; LABEL_LEN],
-    /// What people call it (`AgileX HUNTER 2.0`).
-    pub display_name: [u8; LABEL_LEN],
-    /// The limits the driver itself applies: the robot's profile after overrides.
-    pub robot_limits: MotionLimits,
-    /// chassisd's configured speed and acceleration limits (`[mux]`), applied to every source.
-    pub configured_limits: MotionLimits,
-    pub geometry: Geometry,
-    pub battery: BatteryLevels,
-    pub odometry_variance: OdometryVariance,
-    /// The chassis' own command timeout, ms (it stops without a command for this long).
-    pub command_timeout_ms: u32,
-    /// The heartbeat chassisd sends, ms.
-    pub heartbeat_period_ms: u32,
-    pub sensors: [SensorDescription; MAX_SENSORS],
-    pub joints: [JointDescription; MAX_JOINTS],
-    pub sources: [SourceDescription; MAX_SOURCES],
-}
-
-describe_layout!(
-    RobotDescription,
-    robot_description_covers_every_byte {
-        seq,
-        stamp_ns,
-        kind,
-        protocol,
-        kinematics,
-        bus,
-        flags,
-        sensor_count,
-        joint_count,
-        source_count,
-        name,
-        kind_name,
-        model,
-        display_name,
-        robot_limits,
-        configured_limits,
-        geometry,
-        battery,
-        odometry_variance,
-        command_timeout_ms,
-        heartbeat_period_ms,
-        sensors,
-        joints,
-        sources,
+ipc_type! {
+    /// The robot `chassisd` drives, as it is configured and detected: see the module doc.
+    #[type_name("chassis::RobotDescription.v1")]
+    pub struct RobotDescription {
+        /// Bumped at every publication (a change of protocol once detection decides).
+        pub seq: u64,
+        /// `CLOCK_MONOTONIC` when it was published, ns.
+        pub stamp_ns: u64,
+        /// The robot's kind: `chassis_protocols::RobotKind` as a number, as in
+        /// `ChassisState::robot`.
+        pub kind: u8,
+        /// `WireProtocol` in use (`DETECTING` until detection decides).
+        pub protocol: u8,
+        /// [`Kinematics`].
+        pub kinematics: u8,
+        /// [`BusKind`].
+        pub bus: u8,
+        /// [`DescriptionFlags`].
+        pub flags: u8,
+        pub sensor_count: u8,
+        pub joint_count: u8,
+        pub source_count: u8,
+        /// The robot's name (`--name`): its services are `chassis/<name>/…`.
+        pub name: [u8; NAME_LEN],
+        /// The kind's `--robot` spelling (`hunter`).
+        pub kind_name: [u8; NAME_LEN],
+        /// The variant of the kind the profile describes (`scout-mini-omni`, `ranger-mini-v1`, or
+        /// the kind's name).
+        pub model: [u8; LABEL_LEN],
+        /// What people call it (`AgileX HUNTER 2.0`).
+        pub display_name: [u8; LABEL_LEN],
+        /// The limits the driver itself applies: the robot's profile after overrides.
+        pub robot_limits: MotionLimits,
+        /// chassisd's configured speed and acceleration limits (`[mux]`), applied to every source.
+        pub configured_limits: MotionLimits,
+        pub geometry: Geometry,
+        pub battery: BatteryLevels,
+        pub odometry_variance: OdometryVariance,
+        /// The chassis' own command timeout, ms (it stops without a command for this long).
+        pub command_timeout_ms: u32,
+        /// The heartbeat chassisd sends, ms.
+        pub heartbeat_period_ms: u32,
+        pub sensors: [SensorDescription; MAX_SENSORS],
+        pub joints: [JointDescription; MAX_JOINTS],
+        pub sources: [SourceDescription; MAX_SOURCES],
     }
-);
+}
 
 impl Default for RobotDescription {
     fn default() -> Self {

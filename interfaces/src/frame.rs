@@ -1,11 +1,9 @@
 //! `BusFrame`: a tap of every frame on the bus, both directions.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
 use crate::named::named_constants;
 
 named_constants! {
@@ -30,53 +28,29 @@ named_constants! {
     }
 }
 
-/// One CAN frame or one chunk of a serial stream.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::BusFrame.v1")]
-pub struct BusFrame {
-    /// `CLOCK_MONOTONIC` time the frame was read from or written to the bus, ns.
-    pub stamp_ns: u64,
-    /// Incremented for every frame published on the tap (gaps mean the tap dropped frames).
-    pub seq: u64,
-    /// CAN identifier (11-bit standard or 29-bit extended); 0 for serial chunks.
-    pub can_id: u32,
-    /// [`FrameDirection`].
-    pub direction: u8,
-    /// [`FrameKind`].
-    pub kind: u8,
-    /// Number of valid bytes in `data`.
-    pub len: u8,
-    /// [`BusFrame::EXTENDED_ID`], [`BusFrame::REMOTE`].
-    pub flags: u8,
-    #[serde(skip)]
-    pub data: [u8; BusFrame::DATA_LEN],
-}
-
-describe_layout!(
-    BusFrame,
-    bus_frame_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        can_id,
-        direction,
-        kind,
-        len,
-        flags,
-        data,
+ipc_type! {
+    /// One CAN frame or one chunk of a serial stream.
+    #[derive(Serialize)]
+    #[type_name("chassis::BusFrame.v1")]
+    pub struct BusFrame {
+        /// `CLOCK_MONOTONIC` time the frame was read from or written to the bus, ns.
+        pub stamp_ns: u64,
+        /// Incremented for every frame published on the tap (gaps mean the tap dropped frames).
+        pub seq: u64,
+        /// CAN identifier (11-bit standard or 29-bit extended); 0 for serial chunks.
+        pub can_id: u32,
+        /// [`FrameDirection`].
+        pub direction: u8,
+        /// [`FrameKind`].
+        pub kind: u8,
+        /// Number of valid bytes in `data`.
+        pub len: u8,
+        /// [`BusFrame::EXTENDED_ID`], [`BusFrame::REMOTE`].
+        pub flags: u8,
+        #[serde(skip)]
+        pub data: [u8; BusFrame::DATA_LEN],
     }
-);
+}
 
 impl Default for BusFrame {
     fn default() -> Self {

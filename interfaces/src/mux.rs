@@ -1,53 +1,29 @@
 //! `MuxStatus`: every decision of the priority mux, published on change and at 10 Hz.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
 use crate::named::named_constants;
 
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 use crate::{MAX_LOCKS, MAX_SOURCES, NAME_LEN};
 
-/// The velocity asked of the robot's body, in SI units (the same fields as a
-/// `VelocityRequest`): what the mux was asked and what it commands. Not a ROS `Twist`: it
-/// carries a steering angle and flags too.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::BodyVelocity.v1")]
-pub struct BodyVelocity {
-    pub linear_x_mps: f32,
-    pub linear_y_mps: f32,
-    pub angular_z_radps: f32,
-    pub steer_rad: f32,
-    /// `RequestFlags::STEER` when `steer_rad` is the command instead of `angular_z_radps`.
-    pub flags: u32,
-}
-
-describe_layout!(
-    BodyVelocity,
-    twist_description_covers_every_byte {
-        linear_x_mps,
-        linear_y_mps,
-        angular_z_radps,
-        steer_rad,
-        flags,
+ipc_type! {
+    /// The velocity asked of the robot's body, in SI units (the same fields as a
+    /// `VelocityRequest`): what the mux was asked and what it commands. Not a ROS `Twist`: it
+    /// carries a steering angle and flags too.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::BodyVelocity.v1")]
+    pub struct BodyVelocity {
+        pub linear_x_mps: f32,
+        pub linear_y_mps: f32,
+        pub angular_z_radps: f32,
+        pub steer_rad: f32,
+        /// `RequestFlags::STEER` when `steer_rad` is the command instead of `angular_z_radps`.
+        pub flags: u32,
     }
-);
+}
 
 impl BodyVelocity {
     pub const ZERO: BodyVelocity = BodyVelocity {
@@ -141,53 +117,28 @@ named_constants! {
     }
 }
 
-/// One configured velocity source, as the mux sees it.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SourceStatus.v1")]
-pub struct SourceStatus {
-    /// Source name (NUL-padded UTF-8), e.g. `teleop`.
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; NAME_LEN],
-    pub timeout_ms: u32,
-    /// Age of its latest request, ms; `u32::MAX` when it has never sent one.
-    pub age_ms: u32,
-    /// Requests rejected (non-finite values).
-    pub rejected: u32,
-    pub priority: u8,
-    /// [`SourceFlags`].
-    pub flags: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 2],
-    /// `seq` of its latest request.
-    pub last_seq: u64,
-}
-
-describe_layout!(
-    SourceStatus,
-    source_status_description_covers_every_byte {
-        name,
-        timeout_ms,
-        age_ms,
-        rejected,
-        priority,
-        flags,
-        _reserved,
-        last_seq,
+ipc_type! {
+    /// One configured velocity source, as the mux sees it.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SourceStatus.v1")]
+    pub struct SourceStatus {
+        /// Source name (NUL-padded UTF-8), e.g. `teleop`.
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; NAME_LEN],
+        pub timeout_ms: u32,
+        /// Age of its latest request, ms; `u32::MAX` when it has never sent one.
+        pub age_ms: u32,
+        /// Requests rejected (non-finite values).
+        pub rejected: u32,
+        pub priority: u8,
+        /// [`SourceFlags`].
+        pub flags: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 2],
+        /// `seq` of its latest request.
+        pub last_seq: u64,
     }
-);
+}
 
 impl SourceStatus {
     pub fn name(&self) -> &str {
@@ -201,50 +152,27 @@ impl SourceStatus {
     }
 }
 
-/// One configured lock.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::LockStatus.v1")]
-pub struct LockStatus {
-    /// Lock name (NUL-padded UTF-8), e.g. `estop`.
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; NAME_LEN],
-    /// `CLOCK_MONOTONIC` time it was engaged, ns (0 when free).
-    pub since_ns: u64,
-    /// Sources below this priority are blocked while the lock is held.
-    pub priority: u8,
-    /// 1 while held.
-    pub held: u8,
-    /// Index of the holding source, [`LockStatus::HOLDER_OPERATOR`] for a control request, or
-    /// [`LockStatus::HOLDER_NONE`].
-    pub holder: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 5],
-}
-
-describe_layout!(
-    LockStatus,
-    lock_status_description_covers_every_byte {
-        name,
-        since_ns,
-        priority,
-        held,
-        holder,
-        _reserved,
+ipc_type! {
+    /// One configured lock.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::LockStatus.v1")]
+    pub struct LockStatus {
+        /// Lock name (NUL-padded UTF-8), e.g. `estop`.
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; NAME_LEN],
+        /// `CLOCK_MONOTONIC` time it was engaged, ns (0 when free).
+        pub since_ns: u64,
+        /// Sources below this priority are blocked while the lock is held.
+        pub priority: u8,
+        /// 1 while held.
+        pub held: u8,
+        /// Index of the holding source, [`LockStatus::HOLDER_OPERATOR`] for a control request, or
+        /// [`LockStatus::HOLDER_NONE`].
+        pub holder: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 5],
     }
-);
+}
 
 impl LockStatus {
     pub const HOLDER_NONE: u8 = 0xFF;
@@ -258,73 +186,40 @@ impl LockStatus {
     }
 }
 
-/// The mux's decision.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::MuxStatus.v1")]
-pub struct MuxStatus {
-    /// `CLOCK_MONOTONIC` time of the decision, ns.
-    pub stamp_ns: u64,
-    pub seq: u64,
-    /// The winner's request as received (zero when nothing is active).
-    pub requested: BodyVelocity,
-    /// What the mux passed to the driver after limits and smoothing.
-    pub output: BodyVelocity,
-    /// [`ClampFlags`] the mux applied.
-    pub clamp_flags: u32,
-    /// Age of the winner's request, ms (`u32::MAX` when nothing is active).
-    pub active_age_ms: u32,
-    /// Requests rejected by the mux since start (non-finite values, unknown locks).
-    pub rejected_requests: u64,
-    /// Index into `sources` of the winner, or [`MuxStatus::NO_SOURCE`].
-    pub active_source: u8,
-    pub active_priority: u8,
-    /// [`ZeroReason`].
-    pub zero_reason: u8,
-    pub source_count: u8,
-    pub lock_count: u8,
-    /// While `zero_reason` is [`ZeroReason::AWAITING_ZERO`]: index into `sources` of the source
-    /// whose zero command the mux waits for (it would win). Was a reserved byte.
-    pub awaiting_source: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 2],
-    pub sources: [SourceStatus; MAX_SOURCES],
-    pub locks: [LockStatus; MAX_LOCKS],
-}
-
-describe_layout!(
-    MuxStatus,
-    mux_status_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        requested,
-        output,
-        clamp_flags,
-        active_age_ms,
-        rejected_requests,
-        active_source,
-        active_priority,
-        zero_reason,
-        source_count,
-        lock_count,
-        awaiting_source,
-        _reserved,
-        sources,
-        locks,
+ipc_type! {
+    /// The mux's decision.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::MuxStatus.v1")]
+    pub struct MuxStatus {
+        /// `CLOCK_MONOTONIC` time of the decision, ns.
+        pub stamp_ns: u64,
+        pub seq: u64,
+        /// The winner's request as received (zero when nothing is active).
+        pub requested: BodyVelocity,
+        /// What the mux passed to the driver after limits and smoothing.
+        pub output: BodyVelocity,
+        /// [`ClampFlags`] the mux applied.
+        pub clamp_flags: u32,
+        /// Age of the winner's request, ms (`u32::MAX` when nothing is active).
+        pub active_age_ms: u32,
+        /// Requests rejected by the mux since start (non-finite values, unknown locks).
+        pub rejected_requests: u64,
+        /// Index into `sources` of the winner, or [`MuxStatus::NO_SOURCE`].
+        pub active_source: u8,
+        pub active_priority: u8,
+        /// [`ZeroReason`].
+        pub zero_reason: u8,
+        pub source_count: u8,
+        pub lock_count: u8,
+        /// While `zero_reason` is [`ZeroReason::AWAITING_ZERO`]: index into `sources` of the source
+        /// whose zero command the mux waits for (it would win). Was a reserved byte.
+        pub awaiting_source: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 2],
+        pub sources: [SourceStatus; MAX_SOURCES],
+        pub locks: [LockStatus; MAX_LOCKS],
     }
-);
+}
 
 impl MuxStatus {
     pub const NO_SOURCE: u8 = 0xFF;

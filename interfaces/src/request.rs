@@ -1,11 +1,9 @@
 //! `VelocityRequest`: what a client asks the mux for, on its own `cmd/<source>` service.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
 use crate::named::named_constants;
 
 named_constants! {
@@ -25,74 +23,43 @@ named_constants! {
     }
 }
 
-/// A velocity request from one source. Its priority and timeout come from the service's
-/// configuration, never from the request.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::VelocityRequest.v2")]
-pub struct VelocityRequest {
-    /// `CLOCK_MONOTONIC` time the request was created, ns.
-    pub stamp_ns: u64,
-    /// Incremented by the client for every request.
-    pub seq: u64,
-    /// Forward speed, m/s.
-    pub linear_x_mps: f32,
-    /// Lateral speed, m/s, left positive (omni robots only).
-    pub linear_y_mps: f32,
-    /// Yaw rate, rad/s, left turn positive.
-    pub angular_z_radps: f32,
-    /// Steering angle, rad, left turn positive; used when `flags` has [`RequestFlags::STEER`].
-    pub steer_rad: f32,
-    /// [`RequestFlags`].
-    pub flags: u32,
-    /// Lock bits this source engages (bit i = lock i of the mux's configuration, as listed in
-    /// `MuxStatus::locks`).
-    pub lock_engage: u32,
-    /// Lock bits this source releases (only locks it holds itself).
-    pub lock_release: u32,
-    #[serde(skip)]
-    pub _reserved: u32,
-    /// With [`RequestFlags::LIMIT`]: largest forward speed, m/s (≥ 0; 0 blocks forward motion).
-    pub limit_forward_mps: f32,
-    /// With [`RequestFlags::LIMIT`]: largest reverse speed, m/s (≥ 0; 0 blocks reversing).
-    pub limit_reverse_mps: f32,
-    /// With [`RequestFlags::LIMIT`]: largest |lateral speed|, m/s (≥ 0).
-    pub limit_lateral_mps: f32,
-    /// With [`RequestFlags::LIMIT`]: largest |yaw rate|, rad/s (≥ 0).
-    pub limit_angular_radps: f32,
-}
-
-describe_layout!(
-    VelocityRequest,
-    velocity_request_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        linear_x_mps,
-        linear_y_mps,
-        angular_z_radps,
-        steer_rad,
-        flags,
-        lock_engage,
-        lock_release,
-        _reserved,
-        limit_forward_mps,
-        limit_reverse_mps,
-        limit_lateral_mps,
-        limit_angular_radps,
+ipc_type! {
+    /// A velocity request from one source. Its priority and timeout come from the service's
+    /// configuration, never from the request.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::VelocityRequest.v2")]
+    pub struct VelocityRequest {
+        /// `CLOCK_MONOTONIC` time the request was created, ns.
+        pub stamp_ns: u64,
+        /// Incremented by the client for every request.
+        pub seq: u64,
+        /// Forward speed, m/s.
+        pub linear_x_mps: f32,
+        /// Lateral speed, m/s, left positive (omni robots only).
+        pub linear_y_mps: f32,
+        /// Yaw rate, rad/s, left turn positive.
+        pub angular_z_radps: f32,
+        /// Steering angle, rad, left turn positive; used when `flags` has [`RequestFlags::STEER`].
+        pub steer_rad: f32,
+        /// [`RequestFlags`].
+        pub flags: u32,
+        /// Lock bits this source engages (bit i = lock i of the mux's configuration, as listed in
+        /// `MuxStatus::locks`).
+        pub lock_engage: u32,
+        /// Lock bits this source releases (only locks it holds itself).
+        pub lock_release: u32,
+        #[serde(skip)]
+        pub _reserved: u32,
+        /// With [`RequestFlags::LIMIT`]: largest forward speed, m/s (≥ 0; 0 blocks forward motion).
+        pub limit_forward_mps: f32,
+        /// With [`RequestFlags::LIMIT`]: largest reverse speed, m/s (≥ 0; 0 blocks reversing).
+        pub limit_reverse_mps: f32,
+        /// With [`RequestFlags::LIMIT`]: largest |lateral speed|, m/s (≥ 0).
+        pub limit_lateral_mps: f32,
+        /// With [`RequestFlags::LIMIT`]: largest |yaw rate|, rad/s (≥ 0).
+        pub limit_angular_radps: f32,
     }
-);
+}
 
 impl VelocityRequest {
     /// A twist request (v, ω).

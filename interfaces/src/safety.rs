@@ -2,12 +2,10 @@
 //! own service `chassis/<name>/safety` (publish-subscribe, history 1, + event) on every change
 //! and at 10 Hz, so `chassis status` and dashboards can show every trigger and release.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
 use crate::named::named_constants;
 
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
@@ -100,92 +98,56 @@ named_constants! {
     }
 }
 
-/// The safety monitor's decision and its history.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SafetyStatus.v1")]
-pub struct SafetyStatus {
-    /// `CLOCK_MONOTONIC` time of the decision, ns.
-    pub stamp_ns: u64,
-    /// Incremented for every published sample.
-    pub seq: u64,
-    /// `CLOCK_MONOTONIC` time the monitor started, ns.
-    pub started_ns: u64,
-    /// `seq` of the `ChassisState` the decision was made on (0: none yet).
-    pub state_seq: u64,
-    /// Age of that state sample (since its `stamp_ns`) at `stamp_ns`, ms, saturating.
-    pub state_age_ms: u32,
-    /// [`SafetyRule`] bits of the rules in force (triggered and not yet released).
-    pub active_rules: u32,
-    /// [`SafetyRule`] bits of latching rules whose latch the operator released while their
-    /// condition was still present: they act again only once it clears and comes back.
-    pub acknowledged_rules: u32,
-    /// [`SafetyRule`] bits of the rules enabled in the monitor's configuration.
-    pub enabled_rules: u32,
-    /// The envelope in force, m/s and rad/s ([`SafetyStatus::UNLIMITED`]: no limit; all zero
-    /// while stopping).
-    pub limit_forward_mps: f32,
-    pub limit_reverse_mps: f32,
-    pub limit_lateral_mps: f32,
-    pub limit_angular_radps: f32,
-    /// [`SafetyAction`].
-    pub action: u8,
-    /// [`EstopState`].
-    pub estop: u8,
-    /// The [`SafetyRule`] of the last event (0xFF: none yet).
-    pub last_rule: u8,
-    /// [`SafetyEvent`] kind of the last event.
-    pub last_event: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 4],
-    /// Times each rule triggered since the monitor started.
-    pub trigger_counts: [u32; RULE_SLOTS],
-    /// `CLOCK_MONOTONIC` time each rule last triggered, ns (0: never).
-    pub last_trigger_ns: [u64; RULE_SLOTS],
-    /// `CLOCK_MONOTONIC` time of the last event, ns (0: none yet).
-    pub last_event_ns: u64,
-    /// The last event in words (NUL-padded UTF-8), e.g. `ultrasonic: stop zone, 0.30 m < 0.35 m`.
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub last_text: [u8; SafetyStatus::TEXT_LEN],
-}
-
-describe_layout!(
-    SafetyStatus,
-    safety_status_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        started_ns,
-        state_seq,
-        state_age_ms,
-        active_rules,
-        acknowledged_rules,
-        enabled_rules,
-        limit_forward_mps,
-        limit_reverse_mps,
-        limit_lateral_mps,
-        limit_angular_radps,
-        action,
-        estop,
-        last_rule,
-        last_event,
-        _reserved,
-        trigger_counts,
-        last_trigger_ns,
-        last_event_ns,
-        last_text,
+ipc_type! {
+    /// The safety monitor's decision and its history.
+    #[derive(Serialize)]
+    #[type_name("chassis::SafetyStatus.v1")]
+    pub struct SafetyStatus {
+        /// `CLOCK_MONOTONIC` time of the decision, ns.
+        pub stamp_ns: u64,
+        /// Incremented for every published sample.
+        pub seq: u64,
+        /// `CLOCK_MONOTONIC` time the monitor started, ns.
+        pub started_ns: u64,
+        /// `seq` of the `ChassisState` the decision was made on (0: none yet).
+        pub state_seq: u64,
+        /// Age of that state sample (since its `stamp_ns`) at `stamp_ns`, ms, saturating.
+        pub state_age_ms: u32,
+        /// [`SafetyRule`] bits of the rules in force (triggered and not yet released).
+        pub active_rules: u32,
+        /// [`SafetyRule`] bits of latching rules whose latch the operator released while their
+        /// condition was still present: they act again only once it clears and comes back.
+        pub acknowledged_rules: u32,
+        /// [`SafetyRule`] bits of the rules enabled in the monitor's configuration.
+        pub enabled_rules: u32,
+        /// The envelope in force, m/s and rad/s ([`SafetyStatus::UNLIMITED`]: no limit; all zero
+        /// while stopping).
+        pub limit_forward_mps: f32,
+        pub limit_reverse_mps: f32,
+        pub limit_lateral_mps: f32,
+        pub limit_angular_radps: f32,
+        /// [`SafetyAction`].
+        pub action: u8,
+        /// [`EstopState`].
+        pub estop: u8,
+        /// The [`SafetyRule`] of the last event (0xFF: none yet).
+        pub last_rule: u8,
+        /// [`SafetyEvent`] kind of the last event.
+        pub last_event: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 4],
+        /// Times each rule triggered since the monitor started.
+        pub trigger_counts: [u32; RULE_SLOTS],
+        /// `CLOCK_MONOTONIC` time each rule last triggered, ns (0: never).
+        pub last_trigger_ns: [u64; RULE_SLOTS],
+        /// `CLOCK_MONOTONIC` time of the last event, ns (0: none yet).
+        pub last_event_ns: u64,
+        /// The last event in words (NUL-padded UTF-8), e.g.
+        /// `ultrasonic: stop zone, 0.30 m < 0.35 m`.
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub last_text: [u8; SafetyStatus::TEXT_LEN],
     }
-);
+}
 
 impl Default for SafetyStatus {
     fn default() -> Self {

@@ -5,12 +5,10 @@
 //! [`ChassisState::group_stamp_ns`] entry. Readers decide staleness against their own clock
 //! (`CLOCK_MONOTONIC`), so a zero is never mistaken for a reading.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
 use crate::named::named_constants;
 
 /// Signal groups: the index into [`ChassisState::group_stamp_ns`] and the bit in
@@ -277,168 +275,88 @@ named_constants! {
     }
 }
 
-/// Speeds and steering.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::MotionState.v1")]
-pub struct MotionState {
-    /// Forward speed of the body, m/s.
-    pub linear_mps: f32,
-    /// Yaw rate, rad/s, left turn positive.
-    pub angular_radps: f32,
-    /// Lateral speed, m/s, left positive (omni robots).
-    pub lateral_mps: f32,
-    /// Body steering angle (TITAN: inner wheel angle), rad, left turn positive.
-    pub steer_rad: f32,
-    /// Front axle inner steering angle, rad, left turn positive.
-    pub front_steer_rad: f32,
-    /// Rear axle inner steering angle, rad (rear steers opposite the front on TITAN).
-    pub rear_steer_rad: f32,
-    /// Front axle speed (mean of its wheels), m/s.
-    pub front_axle_mps: f32,
-    /// Rear axle speed (mean of its wheels), m/s.
-    pub rear_axle_mps: f32,
-    /// Wheel speeds front-left, front-right, rear-left, rear-right, m/s.
-    pub wheel_mps: [f32; 4],
+ipc_type! {
+    /// Speeds and steering.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::MotionState.v1")]
+    pub struct MotionState {
+        /// Forward speed of the body, m/s.
+        pub linear_mps: f32,
+        /// Yaw rate, rad/s, left turn positive.
+        pub angular_radps: f32,
+        /// Lateral speed, m/s, left positive (omni robots).
+        pub lateral_mps: f32,
+        /// Body steering angle (TITAN: inner wheel angle), rad, left turn positive.
+        pub steer_rad: f32,
+        /// Front axle inner steering angle, rad, left turn positive.
+        pub front_steer_rad: f32,
+        /// Rear axle inner steering angle, rad (rear steers opposite the front on TITAN).
+        pub rear_steer_rad: f32,
+        /// Front axle speed (mean of its wheels), m/s.
+        pub front_axle_mps: f32,
+        /// Rear axle speed (mean of its wheels), m/s.
+        pub rear_axle_mps: f32,
+        /// Wheel speeds front-left, front-right, rear-left, rear-right, m/s.
+        pub wheel_mps: [f32; 4],
+    }
 }
 
-describe_layout!(
-    MotionState,
-    motion_state_description_covers_every_byte {
-        linear_mps,
-        angular_radps,
-        lateral_mps,
-        steer_rad,
-        front_steer_rad,
-        rear_steer_rad,
-        front_axle_mps,
-        rear_axle_mps,
-        wheel_mps,
+ipc_type! {
+    /// Distances and the integrated pose.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::OdometryState.v1")]
+    pub struct OdometryState {
+        /// Front axle odometer, m (TITAN 0x311).
+        pub front_distance_m: f64,
+        /// Rear axle odometer, m.
+        pub rear_distance_m: f64,
+        /// Left side distance, m (from wheel encoders where the robot has them).
+        pub left_distance_m: f64,
+        /// Right side distance, m.
+        pub right_distance_m: f64,
+        /// Pose integrated from the reported speeds, in the frame the robot started in: x, m.
+        pub x_m: f64,
+        /// y, m.
+        pub y_m: f64,
+        /// Heading, rad, wrapped to (-π, π].
+        pub yaw_rad: f64,
     }
-);
-
-/// Distances and the integrated pose.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::OdometryState.v1")]
-pub struct OdometryState {
-    /// Front axle odometer, m (TITAN 0x311).
-    pub front_distance_m: f64,
-    /// Rear axle odometer, m.
-    pub rear_distance_m: f64,
-    /// Left side distance, m (from wheel encoders where the robot has them).
-    pub left_distance_m: f64,
-    /// Right side distance, m.
-    pub right_distance_m: f64,
-    /// Pose integrated from the reported speeds, in the frame the robot started in: x, m.
-    pub x_m: f64,
-    /// y, m.
-    pub y_m: f64,
-    /// Heading, rad, wrapped to (-π, π].
-    pub yaw_rad: f64,
 }
 
-describe_layout!(
-    OdometryState,
-    odometry_state_description_covers_every_byte {
-        front_distance_m,
-        rear_distance_m,
-        left_distance_m,
-        right_distance_m,
-        x_m,
-        y_m,
-        yaw_rad,
+ipc_type! {
+    /// Body status, mode, faults and battery.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SystemState.v1")]
+    pub struct SystemState {
+        /// Normalized [`FaultFlags`].
+        pub fault_flags: u64,
+        /// The vendor's raw fault word (TITAN 0x211 b4-7, SCOUT MINI 0x151 b4-5).
+        pub vendor_fault_word: u32,
+        /// Battery voltage, V.
+        pub battery_voltage_v: f32,
+        /// Battery state of charge, %, from the BMS where there is one.
+        pub battery_soc_pct: f32,
+        /// Battery current, A, from the BMS where there is one (positive = discharge).
+        pub battery_current_a: f32,
+        /// [`SystemState::BODY_NORMAL`], [`SystemState::BODY_EMERGENCY_STOP`] or
+        /// [`SystemState::BODY_EXCEPTION`].
+        pub body_status: u8,
+        /// [`ControlMode`].
+        pub control_mode: u8,
+        /// 1 when the parking brake is engaged (TITAN, as last commanded).
+        pub parking_brake_engaged: u8,
+        /// 1 when off-road mode is on (TITAN, as last commanded and accepted).
+        pub off_road: u8,
+        /// 1 when the chassis was told to enter CAN-upgrade silent mode.
+        pub silent_mode: u8,
+        /// 1 when the steering zero position was set and acknowledged since start.
+        pub steering_zero_done: u8,
+        /// 1 when drive power is enabled (XBot power command; others: always 1 once reported).
+        pub power_enabled: u8,
+        /// [`WireProtocol`] the driver speaks (was a reserved byte: readers that ignore it see 0).
+        pub wire_protocol: u8,
     }
-);
-
-/// Body status, mode, faults and battery.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SystemState.v1")]
-pub struct SystemState {
-    /// Normalized [`FaultFlags`].
-    pub fault_flags: u64,
-    /// The vendor's raw fault word (TITAN 0x211 b4-7, SCOUT MINI 0x151 b4-5).
-    pub vendor_fault_word: u32,
-    /// Battery voltage, V.
-    pub battery_voltage_v: f32,
-    /// Battery state of charge, %, from the BMS where there is one.
-    pub battery_soc_pct: f32,
-    /// Battery current, A, from the BMS where there is one (positive = discharge).
-    pub battery_current_a: f32,
-    /// [`SystemState::BODY_NORMAL`], [`SystemState::BODY_EMERGENCY_STOP`] or
-    /// [`SystemState::BODY_EXCEPTION`].
-    pub body_status: u8,
-    /// [`ControlMode`].
-    pub control_mode: u8,
-    /// 1 when the parking brake is engaged (TITAN, as last commanded).
-    pub parking_brake_engaged: u8,
-    /// 1 when off-road mode is on (TITAN, as last commanded and accepted).
-    pub off_road: u8,
-    /// 1 when the chassis was told to enter CAN-upgrade silent mode.
-    pub silent_mode: u8,
-    /// 1 when the steering zero position was set and acknowledged since start.
-    pub steering_zero_done: u8,
-    /// 1 when drive power is enabled (XBot power command; others: always 1 once reported).
-    pub power_enabled: u8,
-    /// [`WireProtocol`] the driver speaks (was a reserved byte: readers that ignore it see 0).
-    pub wire_protocol: u8,
 }
-
-describe_layout!(
-    SystemState,
-    system_state_description_covers_every_byte {
-        fault_flags,
-        vendor_fault_word,
-        battery_voltage_v,
-        battery_soc_pct,
-        battery_current_a,
-        body_status,
-        control_mode,
-        parking_brake_engaged,
-        off_road,
-        silent_mode,
-        steering_zero_done,
-        power_enabled,
-        wire_protocol,
-    }
-);
 
 impl SystemState {
     pub const BODY_NORMAL: u8 = 0;
@@ -446,381 +364,177 @@ impl SystemState {
     pub const BODY_EXCEPTION: u8 = 2;
 }
 
-/// One drive motor and its driver.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::MotorState.v1")]
-pub struct MotorState {
-    /// Encoder position, counts (unwrapped where the wire value wraps).
-    pub position_counts: i64,
-    /// Shaft speed, rpm.
-    pub rpm: f32,
-    /// Motor current, A.
-    pub current_a: f32,
-    /// Driver supply voltage, V.
-    pub driver_voltage_v: f32,
-    /// Driver temperature, °C.
-    pub driver_temp_c: f32,
-    /// Motor temperature, °C.
-    pub motor_temp_c: f32,
-    /// [`DriverStatus`] bits.
-    pub driver_status: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 3],
-}
-
-describe_layout!(
-    MotorState,
-    motor_state_description_covers_every_byte {
-        position_counts,
-        rpm,
-        current_a,
-        driver_voltage_v,
-        driver_temp_c,
-        motor_temp_c,
-        driver_status,
-        _reserved,
+ipc_type! {
+    /// One drive motor and its driver.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::MotorState.v1")]
+    pub struct MotorState {
+        /// Encoder position, counts (unwrapped where the wire value wraps).
+        pub position_counts: i64,
+        /// Shaft speed, rpm.
+        pub rpm: f32,
+        /// Motor current, A.
+        pub current_a: f32,
+        /// Driver supply voltage, V.
+        pub driver_voltage_v: f32,
+        /// Driver temperature, °C.
+        pub driver_temp_c: f32,
+        /// Motor temperature, °C.
+        pub motor_temp_c: f32,
+        /// [`DriverStatus`] bits.
+        pub driver_status: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 3],
     }
-);
-
-/// One BMS group (0 = pack, 1 = battery 1, 2 = battery 2).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::BmsState.v1")]
-pub struct BmsState {
-    pub soc_pct: f32,
-    pub soh_pct: f32,
-    pub voltage_v: f32,
-    /// Current, A (positive = discharge).
-    pub current_a: f32,
-    pub temperature_c: f32,
-    /// Raw alarm bytes: alarm 1 (bits 0-7), alarm 2 (8-15), warning 1 (16-23), warning 2 (24-31).
-    pub alarm_flags: u32,
 }
 
-describe_layout!(
-    BmsState,
-    bms_state_description_covers_every_byte {
-        soc_pct,
-        soh_pct,
-        voltage_v,
-        current_a,
-        temperature_c,
-        alarm_flags,
+ipc_type! {
+    /// One BMS group (0 = pack, 1 = battery 1, 2 = battery 2).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::BmsState.v1")]
+    pub struct BmsState {
+        pub soc_pct: f32,
+        pub soh_pct: f32,
+        pub voltage_v: f32,
+        /// Current, A (positive = discharge).
+        pub current_a: f32,
+        pub temperature_c: f32,
+        /// Raw alarm bytes: alarm 1 (bits 0-7), alarm 2 (8-15), warning 1 (16-23), warning 2
+        /// (24-31).
+        pub alarm_flags: u32,
     }
-);
-
-/// RC transmitter.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::RcState.v1")]
-pub struct RcState {
-    /// Switch positions as the wire has them: 1 middle, 2 up, 3 down.
-    pub switch_a: u8,
-    pub switch_b: u8,
-    pub switch_c: u8,
-    pub switch_d: u8,
-    /// Stick positions, % of full deflection, [-100, 100].
-    pub right_x_pct: i8,
-    pub right_y_pct: i8,
-    pub left_y_pct: i8,
-    pub left_x_pct: i8,
-    /// Knob VRA, %.
-    pub knob_a_pct: i8,
-    /// Rolling counter of the RC frame.
-    pub counter: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 2],
 }
 
-describe_layout!(
-    RcState,
-    rc_state_description_covers_every_byte {
-        switch_a,
-        switch_b,
-        switch_c,
-        switch_d,
-        right_x_pct,
-        right_y_pct,
-        left_y_pct,
-        left_x_pct,
-        knob_a_pct,
-        counter,
-        _reserved,
+ipc_type! {
+    /// RC transmitter.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::RcState.v1")]
+    pub struct RcState {
+        /// Switch positions as the wire has them: 1 middle, 2 up, 3 down.
+        pub switch_a: u8,
+        pub switch_b: u8,
+        pub switch_c: u8,
+        pub switch_d: u8,
+        /// Stick positions, % of full deflection, [-100, 100].
+        pub right_x_pct: i8,
+        pub right_y_pct: i8,
+        pub left_y_pct: i8,
+        pub left_x_pct: i8,
+        /// Knob VRA, %.
+        pub knob_a_pct: i8,
+        /// Rolling counter of the RC frame.
+        pub counter: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 2],
     }
-);
-
-/// Lights.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::LightsState.v1")]
-pub struct LightsState {
-    /// 1 when light control by command is enabled.
-    pub control_enabled: u8,
-    /// [`crate::LightMode`] of the front light.
-    pub front_mode: u8,
-    /// Custom brightness, % (valid in custom mode).
-    pub front_brightness_pct: u8,
-    #[serde(skip)]
-    pub _reserved: u8,
 }
 
-describe_layout!(
-    LightsState,
-    lights_state_description_covers_every_byte {
-        control_enabled,
-        front_mode,
-        front_brightness_pct,
-        _reserved,
+ipc_type! {
+    /// Lights.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::LightsState.v1")]
+    pub struct LightsState {
+        /// 1 when light control by command is enabled.
+        pub control_enabled: u8,
+        /// [`crate::LightMode`] of the front light.
+        pub front_mode: u8,
+        /// Custom brightness, % (valid in custom mode).
+        pub front_brightness_pct: u8,
+        #[serde(skip)]
+        pub _reserved: u8,
     }
-);
-
-/// Range sensors (XBot).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::RangesState.v1")]
-pub struct RangesState {
-    /// IR cliff/range sensors rear-left, rear-centre, rear-right, m.
-    pub ir_m: [f32; 3],
-    /// Ultrasonic rangers front-left, front-centre, front-right, m.
-    pub ultrasonic_m: [f32; 3],
 }
 
-describe_layout!(
-    RangesState,
-    ranges_state_description_covers_every_byte { ir_m, ultrasonic_m }
-);
-
-/// Inertial measurement unit, in the sensor's axes.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::ImuState.v1")]
-pub struct ImuState {
-    pub accel_mps2: [f32; 3],
-    pub gyro_radps: [f32; 3],
-    pub mag_gauss: [f32; 3],
-    pub roll_rad: f32,
-    pub pitch_rad: f32,
-    pub yaw_rad: f32,
-    pub temperature_c: f32,
-    /// The sensor board's own timestamp, µs (wraps at 65536 on the XBot).
-    pub sensor_stamp_us: u32,
-}
-
-describe_layout!(
-    ImuState,
-    imu_state_description_covers_every_byte {
-        accel_mps2,
-        gyro_radps,
-        mag_gauss,
-        roll_rad,
-        pitch_rad,
-        yaw_rad,
-        temperature_c,
-        sensor_stamp_us,
+ipc_type! {
+    /// Range sensors (XBot).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::RangesState.v1")]
+    pub struct RangesState {
+        /// IR cliff/range sensors rear-left, rear-centre, rear-right, m.
+        pub ir_m: [f32; 3],
+        /// Ultrasonic rangers front-left, front-centre, front-right, m.
+        pub ultrasonic_m: [f32; 3],
     }
-);
-
-/// Lift platform (XBot).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::LiftState.v1")]
-pub struct LiftState {
-    /// Lift encoder, counts (unwrapped).
-    pub encoder_counts: i64,
-    /// Commanded position, % of travel (0 bottom, 100 top).
-    pub target_pct: f32,
-    /// Lift motor current, A.
-    pub current_a: f32,
-    /// 1 when the lift is enabled (as commanded).
-    pub enabled: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 7],
 }
 
-describe_layout!(
-    LiftState,
-    lift_state_description_covers_every_byte {
-        encoder_counts,
-        target_pct,
-        current_a,
-        enabled,
-        _reserved,
+ipc_type! {
+    /// Inertial measurement unit, in the sensor's axes.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::ImuState.v1")]
+    pub struct ImuState {
+        pub accel_mps2: [f32; 3],
+        pub gyro_radps: [f32; 3],
+        pub mag_gauss: [f32; 3],
+        pub roll_rad: f32,
+        pub pitch_rad: f32,
+        pub yaw_rad: f32,
+        pub temperature_c: f32,
+        /// The sensor board's own timestamp, µs (wraps at 65536 on the XBot).
+        pub sensor_stamp_us: u32,
     }
-);
-
-/// Pan and tilt servos (XBot), as commanded.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::PanTiltState.v1")]
-pub struct PanTiltState {
-    /// Pan, rad: 0 ahead, left positive.
-    pub pan_rad: f32,
-    /// Tilt, rad: 0 ahead, up positive.
-    pub tilt_rad: f32,
 }
 
-describe_layout!(
-    PanTiltState,
-    pan_tilt_state_description_covers_every_byte { pan_rad, tilt_rad }
-);
-
-/// GPS fix from the NMEA 0183 stream.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::GpsFix.v1")]
-pub struct GpsFix {
-    /// Latitude, degrees, north positive (0 when there is no fix: check `fix_quality`).
-    pub latitude_deg: f64,
-    /// Longitude, degrees, east positive.
-    pub longitude_deg: f64,
-    /// UTC time of day of the fix, s.
-    pub utc_time_s: f64,
-    /// Altitude above mean sea level, m.
-    pub altitude_m: f32,
-    /// Horizontal dilution of precision.
-    pub hdop: f32,
-    /// Speed over ground, m/s.
-    pub speed_mps: f32,
-    /// Course over ground, rad, clockwise from true north (as NMEA gives it).
-    pub course_rad: f32,
-    /// UTC date as `yyyymmdd`, 0 when unknown.
-    pub utc_date: u32,
-    /// GGA fix quality: 0 = no fix, 1 = GPS, 2 = DGPS, 4 = RTK fixed, 5 = RTK float, …
-    pub fix_quality: u8,
-    /// Satellites used in the fix.
-    pub satellites: u8,
-    /// GSA fix type: 1 = none, 2 = 2D, 3 = 3D, 0 = unknown.
-    pub fix_type: u8,
-    #[serde(skip)]
-    pub _reserved: u8,
-}
-
-describe_layout!(
-    GpsFix,
-    gps_fix_description_covers_every_byte {
-        latitude_deg,
-        longitude_deg,
-        utc_time_s,
-        altitude_m,
-        hdop,
-        speed_mps,
-        course_rad,
-        utc_date,
-        fix_quality,
-        satellites,
-        fix_type,
-        _reserved,
+ipc_type! {
+    /// Lift platform (XBot).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::LiftState.v1")]
+    pub struct LiftState {
+        /// Lift encoder, counts (unwrapped).
+        pub encoder_counts: i64,
+        /// Commanded position, % of travel (0 bottom, 100 top).
+        pub target_pct: f32,
+        /// Lift motor current, A.
+        pub current_a: f32,
+        /// 1 when the lift is enabled (as commanded).
+        pub enabled: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 7],
     }
-);
+}
+
+ipc_type! {
+    /// Pan and tilt servos (XBot), as commanded.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::PanTiltState.v1")]
+    pub struct PanTiltState {
+        /// Pan, rad: 0 ahead, left positive.
+        pub pan_rad: f32,
+        /// Tilt, rad: 0 ahead, up positive.
+        pub tilt_rad: f32,
+    }
+}
+
+ipc_type! {
+    /// GPS fix from the NMEA 0183 stream.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::GpsFix.v1")]
+    pub struct GpsFix {
+        /// Latitude, degrees, north positive (0 when there is no fix: check `fix_quality`).
+        pub latitude_deg: f64,
+        /// Longitude, degrees, east positive.
+        pub longitude_deg: f64,
+        /// UTC time of day of the fix, s.
+        pub utc_time_s: f64,
+        /// Altitude above mean sea level, m.
+        pub altitude_m: f32,
+        /// Horizontal dilution of precision.
+        pub hdop: f32,
+        /// Speed over ground, m/s.
+        pub speed_mps: f32,
+        /// Course over ground, rad, clockwise from true north (as NMEA gives it).
+        pub course_rad: f32,
+        /// UTC date as `yyyymmdd`, 0 when unknown.
+        pub utc_date: u32,
+        /// GGA fix quality: 0 = no fix, 1 = GPS, 2 = DGPS, 4 = RTK fixed, 5 = RTK float, …
+        pub fix_quality: u8,
+        /// Satellites used in the fix.
+        pub satellites: u8,
+        /// GSA fix type: 1 = none, 2 = 2D, 3 = 3D, 0 = unknown.
+        pub fix_type: u8,
+        #[serde(skip)]
+        pub _reserved: u8,
+    }
+}
 
 impl GpsFix {
     /// True when the receiver reports a usable position.
@@ -829,212 +543,114 @@ impl GpsFix {
     }
 }
 
-/// The motion command the driver actually put on the wire, after quantisation and clamping.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::CommandEcho.v1")]
-pub struct CommandEcho {
-    pub linear_mps: f32,
-    pub lateral_mps: f32,
-    pub angular_radps: f32,
-    pub steer_rad: f32,
-    /// [`crate::ClampFlags`] applied by the driver (robot limits, unachievable requests).
-    pub clamp_flags: u32,
-    #[serde(skip)]
-    pub _reserved: u32,
+ipc_type! {
+    /// The motion command the driver actually put on the wire, after quantisation and clamping.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::CommandEcho.v1")]
+    pub struct CommandEcho {
+        pub linear_mps: f32,
+        pub lateral_mps: f32,
+        pub angular_radps: f32,
+        pub steer_rad: f32,
+        /// [`crate::ClampFlags`] applied by the driver (robot limits, unachievable requests).
+        pub clamp_flags: u32,
+        #[serde(skip)]
+        pub _reserved: u32,
+    }
 }
 
-describe_layout!(
-    CommandEcho,
-    command_echo_description_covers_every_byte {
-        linear_mps,
-        lateral_mps,
-        angular_radps,
-        steer_rad,
-        clamp_flags,
-        _reserved,
+ipc_type! {
+    /// Counters of the bus link.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::LinkStats.v3")]
+    pub struct LinkStats {
+        /// Frames received and decoded.
+        pub rx_frames: u64,
+        /// Frames sent.
+        pub tx_frames: u64,
+        /// Received frames dropped for a bad checksum.
+        pub rx_bad_checksum: u64,
+        /// Received frames dropped because they could not be decoded (length, values).
+        pub rx_decode_errors: u64,
+        /// Received frames with an id this robot does not use (ignored).
+        pub rx_unknown_id: u64,
+        /// Serial bytes discarded while resynchronising.
+        pub rx_bytes_discarded: u64,
+        /// Frames that could not be written to the bus.
+        pub tx_errors: u64,
+        /// Times the bus was lost and reopened.
+        pub bus_reconnects: u64,
+        /// Samples, answers and reader wake-ups chassisd could not publish over iceoryx2.
+        pub ipc_failures: u64,
+        /// SocketCAN error frames read: the CAN controller's reports on itself and the bus.
+        pub can_error_frames: u64,
+        /// Times the CAN controller became error-passive.
+        pub can_error_passive: u64,
+        /// Times the CAN controller went bus-off.
+        pub can_bus_off: u64,
+        /// Times the CAN controller was restarted after a bus-off (the kernel's `restart-ms`, or
+        /// `ip link set IFACE type can restart`).
+        pub can_restarts: u64,
+        /// Protocol violations the CAN controller reported (bit, stuff, form, CRC errors): noise,
+        /// a wrong bit rate, missing termination or CAN H and L swapped.
+        pub can_bus_errors: u64,
+        /// Reports of a frame sent that no other node acknowledged: the controller is alone on the
+        /// bus, or hears it at another bit rate.
+        pub can_no_ack: u64,
+        /// [`ControllerState`] of the CAN controller now.
+        pub can_state: u8,
+        /// The controller's transmit and receive error counters, as its last report carrying them.
+        pub can_tx_error_count: u8,
+        pub can_rx_error_count: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 5],
     }
-);
-
-/// Counters of the bus link.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::LinkStats.v3")]
-pub struct LinkStats {
-    /// Frames received and decoded.
-    pub rx_frames: u64,
-    /// Frames sent.
-    pub tx_frames: u64,
-    /// Received frames dropped for a bad checksum.
-    pub rx_bad_checksum: u64,
-    /// Received frames dropped because they could not be decoded (length, values).
-    pub rx_decode_errors: u64,
-    /// Received frames with an id this robot does not use (ignored).
-    pub rx_unknown_id: u64,
-    /// Serial bytes discarded while resynchronising.
-    pub rx_bytes_discarded: u64,
-    /// Frames that could not be written to the bus.
-    pub tx_errors: u64,
-    /// Times the bus was lost and reopened.
-    pub bus_reconnects: u64,
-    /// Samples, answers and reader wake-ups chassisd could not publish over iceoryx2.
-    pub ipc_failures: u64,
-    /// SocketCAN error frames read: the CAN controller's reports on itself and the bus.
-    pub can_error_frames: u64,
-    /// Times the CAN controller became error-passive.
-    pub can_error_passive: u64,
-    /// Times the CAN controller went bus-off.
-    pub can_bus_off: u64,
-    /// Times the CAN controller was restarted after a bus-off (the kernel's `restart-ms`, or
-    /// `ip link set IFACE type can restart`).
-    pub can_restarts: u64,
-    /// Protocol violations the CAN controller reported (bit, stuff, form, CRC errors): noise,
-    /// a wrong bit rate, missing termination or CAN H and L swapped.
-    pub can_bus_errors: u64,
-    /// Reports of a frame sent that no other node acknowledged: the controller is alone on the
-    /// bus, or hears it at another bit rate.
-    pub can_no_ack: u64,
-    /// [`ControllerState`] of the CAN controller now.
-    pub can_state: u8,
-    /// The controller's transmit and receive error counters, as its last report carrying them.
-    pub can_tx_error_count: u8,
-    pub can_rx_error_count: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 5],
 }
 
-describe_layout!(
-    LinkStats,
-    link_stats_description_covers_every_byte {
-        rx_frames,
-        tx_frames,
-        rx_bad_checksum,
-        rx_decode_errors,
-        rx_unknown_id,
-        rx_bytes_discarded,
-        tx_errors,
-        bus_reconnects,
-        ipc_failures,
-        can_error_frames,
-        can_error_passive,
-        can_bus_off,
-        can_restarts,
-        can_bus_errors,
-        can_no_ack,
-        can_state,
-        can_tx_error_count,
-        can_rx_error_count,
-        _reserved,
+ipc_type! {
+    /// One snapshot of everything the chassis reports.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::ChassisState.v3")]
+    pub struct ChassisState {
+        /// Incremented for every published sample.
+        pub seq: u64,
+        /// `CLOCK_MONOTONIC` receive time of the frame that produced this sample, ns.
+        pub stamp_ns: u64,
+        /// [`Group`] bits that have been reported at least once.
+        pub valid_mask: u32,
+        /// [`LinkFlags`].
+        pub link_flags: u32,
+        /// The robot's kind: `chassis_protocols::RobotKind` as a number (its registry's key;
+        /// 0: none), as in `RobotDescription::kind`. What the kind *is* — its names, limits,
+        /// geometry — comes from the description chassisd publishes (`chassis/<name>/robot`),
+        /// never from a table of a client's.
+        pub robot: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 7],
+        /// Last update of each [`Group`], `CLOCK_MONOTONIC` ns, 0 = never.
+        pub group_stamp_ns: [u64; GROUP_SLOTS],
+        pub motion: MotionState,
+        pub odometry: OdometryState,
+        pub system: SystemState,
+        /// Motors 1-4 (TITAN, SCOUT MINI: as numbered by the vendor; XBot: front-left, front-right,
+        /// rear-left, rear-right).
+        pub motors: [MotorState; 4],
+        /// BMS groups: 0 = pack, 1 = battery 1, 2 = battery 2.
+        pub bms: [BmsState; 3],
+        pub rc: RcState,
+        pub lights: LightsState,
+        pub ranges: RangesState,
+        pub imu: ImuState,
+        pub lift: LiftState,
+        pub pan_tilt: PanTiltState,
+        pub gps: GpsFix,
+        pub command: CommandEcho,
+        pub link: LinkStats,
+        /// `CLOCK_MONOTONIC` time `chassisd` handed this sample to iceoryx2, ns: with
+        /// `stamp_ns`, the service's own part of the state path.
+        pub published_ns: u64,
     }
-);
-
-/// One snapshot of everything the chassis reports.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::ChassisState.v3")]
-pub struct ChassisState {
-    /// Incremented for every published sample.
-    pub seq: u64,
-    /// `CLOCK_MONOTONIC` receive time of the frame that produced this sample, ns.
-    pub stamp_ns: u64,
-    /// [`Group`] bits that have been reported at least once.
-    pub valid_mask: u32,
-    /// [`LinkFlags`].
-    pub link_flags: u32,
-    /// The robot's kind: `chassis_protocols::RobotKind` as a number (its registry's key; 0:
-    /// none), as in `RobotDescription::kind`. What the kind *is* — its names, limits, geometry —
-    /// comes from the description chassisd publishes (`chassis/<name>/robot`), never from a
-    /// table of a client's.
-    pub robot: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 7],
-    /// Last update of each [`Group`], `CLOCK_MONOTONIC` ns, 0 = never.
-    pub group_stamp_ns: [u64; GROUP_SLOTS],
-    pub motion: MotionState,
-    pub odometry: OdometryState,
-    pub system: SystemState,
-    /// Motors 1-4 (TITAN, SCOUT MINI: as numbered by the vendor; XBot: front-left, front-right,
-    /// rear-left, rear-right).
-    pub motors: [MotorState; 4],
-    /// BMS groups: 0 = pack, 1 = battery 1, 2 = battery 2.
-    pub bms: [BmsState; 3],
-    pub rc: RcState,
-    pub lights: LightsState,
-    pub ranges: RangesState,
-    pub imu: ImuState,
-    pub lift: LiftState,
-    pub pan_tilt: PanTiltState,
-    pub gps: GpsFix,
-    pub command: CommandEcho,
-    pub link: LinkStats,
-    /// `CLOCK_MONOTONIC` time `chassisd` handed this sample to iceoryx2, ns: with `stamp_ns`, the
-    /// service's own part of the state path.
-    pub published_ns: u64,
 }
-
-describe_layout!(
-    ChassisState,
-    chassis_state_description_covers_every_byte {
-        seq,
-        stamp_ns,
-        valid_mask,
-        link_flags,
-        robot,
-        _reserved,
-        group_stamp_ns,
-        motion,
-        odometry,
-        system,
-        motors,
-        bms,
-        rc,
-        lights,
-        ranges,
-        imu,
-        lift,
-        pan_tilt,
-        gps,
-        command,
-        link,
-        published_ns,
-    }
-);
 
 impl ChassisState {
     /// Marks `group` as updated at `now_ns`.
