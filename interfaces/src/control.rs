@@ -197,21 +197,6 @@ impl ControlResponse {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn control_layouts_are_pinned() {
-        assert_eq!(size_of::<ControlRequest>(), 48);
-        assert_eq!(align_of::<ControlRequest>(), 8);
-        assert_eq!(offset_of!(ControlRequest, kind), 16);
-        assert_eq!(offset_of!(ControlRequest, arg), 17);
-        assert_eq!(offset_of!(ControlRequest, value), 24);
-        assert_eq!(offset_of!(ControlRequest, name), 32);
-        assert_eq!(size_of::<ControlResponse>(), 136);
-        assert_eq!(align_of::<ControlResponse>(), 8);
-        assert_eq!(offset_of!(ControlResponse, status), 16);
-        assert_eq!(offset_of!(ControlResponse, message), 24);
-    }
 
     #[test]
     fn response_carries_its_reason() {
@@ -319,19 +304,5 @@ ipc_type! {
         pub _reserved: [u8; 5],
         /// Amount for the kinds that take one (%, s, m, bytes, frames, m/s).
         pub value: f64,
-    }
-}
-
-#[cfg(test)]
-mod sim_tests {
-    use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn sim_request_layout_is_pinned() {
-        assert_eq!((size_of::<SimRequest>(), align_of::<SimRequest>()), (32, 8));
-        assert_eq!(offset_of!(SimRequest, kind), 16);
-        assert_eq!(offset_of!(SimRequest, index), 18);
-        assert_eq!(offset_of!(SimRequest, value), 24);
     }
 }

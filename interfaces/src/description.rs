@@ -550,22 +550,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn layout_is_pinned() {
-        assert_eq!(core::mem::size_of::<MotionLimits>(), 56);
-        assert_eq!(core::mem::size_of::<Geometry>(), 64);
-        assert_eq!(core::mem::size_of::<BatteryLevels>(), 40);
-        assert_eq!(core::mem::size_of::<OdometryVariance>(), 32);
-        assert_eq!(core::mem::size_of::<SensorDescription>(), 96);
-        assert_eq!(core::mem::size_of::<JointDescription>(), 40);
-        assert_eq!(core::mem::size_of::<SourceDescription>(), 24);
-        assert_eq!(core::mem::size_of::<RobotDescription>(), 2200);
-        assert_eq!(core::mem::align_of::<RobotDescription>(), 8);
-        assert_eq!(core::mem::offset_of!(RobotDescription, name), 24);
-        assert_eq!(core::mem::offset_of!(RobotDescription, robot_limits), 120);
-        assert_eq!(core::mem::offset_of!(RobotDescription, sensors), 376);
-    }
-
-    #[test]
     fn lists_fill_up_and_refuse_more() {
         let mut d = RobotDescription::default();
         assert!(!d.is_known());

@@ -92,19 +92,6 @@ impl BusFrame {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn bus_frame_layout_is_pinned() {
-        assert_eq!(size_of::<BusFrame>(), 104);
-        assert_eq!(align_of::<BusFrame>(), 8);
-        assert_eq!(offset_of!(BusFrame, can_id), 16);
-        assert_eq!(offset_of!(BusFrame, direction), 20);
-        assert_eq!(offset_of!(BusFrame, kind), 21);
-        assert_eq!(offset_of!(BusFrame, len), 22);
-        assert_eq!(offset_of!(BusFrame, flags), 23);
-        assert_eq!(offset_of!(BusFrame, data), 24);
-    }
 
     #[test]
     fn payload_is_cut_to_the_buffer() {

@@ -426,6 +426,23 @@ mod tests {
         assert_eq!(types().len(), declared);
     }
 
+    /// The layouts are pinned by the committed contract, `interfaces/contract.json`: every
+    /// type's name with its version, size, alignment and fields with their offsets, sizes and
+    /// types. A change to any of them fails here until the contract is regenerated (see
+    /// `chassis_ipc::contract`) and its difference reviewed.
+    #[test]
+    fn every_layout_is_the_one_the_committed_contract_pins() {
+        let committed: serde_json::Value =
+            serde_json::from_str(include_str!("../contract.json")).unwrap();
+        let types: std::collections::BTreeMap<_, _> =
+            types().into_iter().map(|t| (t.name, t)).collect();
+        let types = serde_json::to_value(types).unwrap();
+        for (name, layout) in committed["types"].as_object().unwrap() {
+            assert_eq!(&types[name], layout, "{name}");
+        }
+        assert_eq!(types, committed["types"]);
+    }
+
     #[test]
     fn every_type_covers_its_bytes_and_carries_a_versioned_name() {
         for layout in types() {

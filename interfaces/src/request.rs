@@ -139,24 +139,6 @@ impl VelocityRequest {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn velocity_request_layout_is_pinned() {
-        assert_eq!(size_of::<VelocityRequest>(), 64);
-        assert_eq!(align_of::<VelocityRequest>(), 8);
-        assert_eq!(offset_of!(VelocityRequest, stamp_ns), 0);
-        assert_eq!(offset_of!(VelocityRequest, seq), 8);
-        assert_eq!(offset_of!(VelocityRequest, linear_x_mps), 16);
-        assert_eq!(offset_of!(VelocityRequest, linear_y_mps), 20);
-        assert_eq!(offset_of!(VelocityRequest, angular_z_radps), 24);
-        assert_eq!(offset_of!(VelocityRequest, steer_rad), 28);
-        assert_eq!(offset_of!(VelocityRequest, flags), 32);
-        assert_eq!(offset_of!(VelocityRequest, lock_engage), 36);
-        assert_eq!(offset_of!(VelocityRequest, lock_release), 40);
-        assert_eq!(offset_of!(VelocityRequest, limit_forward_mps), 48);
-        assert_eq!(offset_of!(VelocityRequest, limit_angular_radps), 60);
-    }
 
     #[test]
     fn a_limit_is_alive_but_asks_for_nothing_and_must_not_be_negative() {

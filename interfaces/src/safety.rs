@@ -212,33 +212,6 @@ impl SafetyStatus {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn safety_status_layout_is_pinned() {
-        assert_eq!(size_of::<SafetyStatus>(), 288);
-        assert_eq!(align_of::<SafetyStatus>(), 8);
-        assert_eq!(offset_of!(SafetyStatus, seq), 8);
-        assert_eq!(offset_of!(SafetyStatus, state_seq), 24);
-        assert_eq!(offset_of!(SafetyStatus, state_age_ms), 32);
-        assert_eq!(offset_of!(SafetyStatus, active_rules), 36);
-        assert_eq!(offset_of!(SafetyStatus, enabled_rules), 44);
-        assert_eq!(offset_of!(SafetyStatus, limit_forward_mps), 48);
-        assert_eq!(offset_of!(SafetyStatus, limit_angular_radps), 60);
-        assert_eq!(offset_of!(SafetyStatus, action), 64);
-        assert_eq!(offset_of!(SafetyStatus, last_event), 67);
-        assert_eq!(offset_of!(SafetyStatus, trigger_counts), 72);
-        assert_eq!(offset_of!(SafetyStatus, last_trigger_ns), 120);
-        assert_eq!(offset_of!(SafetyStatus, last_event_ns), 216);
-        assert_eq!(offset_of!(SafetyStatus, last_text), 224);
-    }
-
-    #[test]
-    fn safety_status_type_name_carries_a_layout_version() {
-        // SAFETY: type_name only returns the string given to the derive.
-        let name = unsafe { <SafetyStatus as ZeroCopySend>::type_name() };
-        assert_eq!(name, "chassis::SafetyStatus.v1");
-    }
 
     #[test]
     fn rule_names_and_bits_agree() {
