@@ -42,6 +42,28 @@ pub fn node(
         .map_err(|e| IpcError::Node(Box::new(e)))
 }
 
+/// A listener of the event service `events` (called `name` in errors).
+fn listener(
+    events: &event::PortFactory<ipc::Service>,
+    name: &str,
+) -> Result<Listener<ipc::Service>, IpcError> {
+    events
+        .listener_builder()
+        .create()
+        .map_err(IpcError::port(name, "listener"))
+}
+
+/// A notifier of the event service `events` (called `name` in errors).
+fn notifier(
+    events: &event::PortFactory<ipc::Service>,
+    name: &str,
+) -> Result<Notifier<ipc::Service>, IpcError> {
+    events
+        .notifier_builder()
+        .create()
+        .map_err(IpcError::port(name, "notifier"))
+}
+
 /// A publish-subscribe service and the event service of the same name.
 #[derive(Debug)]
 pub struct Topic<T: Debug + ZeroCopySend + 'static> {
@@ -203,11 +225,7 @@ impl<T: Debug + ZeroCopySend + 'static> Topic<T> {
             .buffer_size(buffer)
             .create()
             .map_err(IpcError::port(&self.name, "subscriber"))?;
-        let listener = self
-            .events
-            .listener_builder()
-            .create()
-            .map_err(IpcError::port(&self.name, "listener"))?;
+        let listener = listener(&self.events, &self.name)?;
         Ok(Reader {
             subscriber,
             listener,
@@ -216,10 +234,7 @@ impl<T: Debug + ZeroCopySend + 'static> Topic<T> {
 
     /// A listener alone (a second reader of the same subscriber's events).
     pub fn listener(&self) -> Result<Listener<ipc::Service>, IpcError> {
-        self.events
-            .listener_builder()
-            .create()
-            .map_err(IpcError::port(&self.name, "listener"))
+        listener(&self.events, &self.name)
     }
 
     fn taken(&self, port: &'static str) -> IpcError {
@@ -323,16 +338,8 @@ impl<Req: Debug + ZeroCopySend + 'static> Exchange<Req> {
             },
             other => IpcError::port(&self.name, "server")(other),
         })?;
-        let requests = self
-            .requests
-            .listener_builder()
-            .create()
-            .map_err(IpcError::port(&self.name, "listener"))?;
-        let replies = self
-            .replies
-            .notifier_builder()
-            .create()
-            .map_err(IpcError::port(&reply_name(&self.name), "notifier"))?;
+        let requests = listener(&self.requests, &self.name)?;
+        let replies = notifier(&self.replies, &reply_name(&self.name))?;
         Ok(ServerPorts {
             server,
             requests,
@@ -347,16 +354,8 @@ impl<Req: Debug + ZeroCopySend + 'static> Exchange<Req> {
             .client_builder()
             .create()
             .map_err(IpcError::port(&self.name, "client"))?;
-        let requests = self
-            .requests
-            .notifier_builder()
-            .create()
-            .map_err(IpcError::port(&self.name, "notifier"))?;
-        let replies = self
-            .replies
-            .listener_builder()
-            .create()
-            .map_err(IpcError::port(&reply_name(&self.name), "listener"))?;
+        let requests = notifier(&self.requests, &self.name)?;
+        let replies = listener(&self.replies, &reply_name(&self.name))?;
         Ok(ClientPorts {
             client,
             requests,
