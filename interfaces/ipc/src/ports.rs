@@ -107,12 +107,9 @@ fn open_event(
     node.service_builder(&iceoryx_name(name)?)
         .event()
         .open()
-        .map_err(|e| match e {
-            EventOpenError::DoesNotExist => IpcError::NotFound {
-                service: name.to_string(),
-            },
-            other => IpcError::service(name, "opening the event service")(other),
-        })
+        .map_err(IpcError::opening(name, "opening the event service", |e| {
+            matches!(e, EventOpenError::DoesNotExist)
+        }))
 }
 
 impl<T: Debug + ZeroCopySend + 'static> PubSub<T> {
@@ -167,12 +164,9 @@ impl<T: Debug + ZeroCopySend + 'static> PubSub<T> {
         node.service_builder(&iceoryx_name(name)?)
             .publish_subscribe::<T>()
             .open()
-            .map_err(|e| match e {
-                PublishSubscribeOpenError::DoesNotExist => IpcError::NotFound {
-                    service: name.to_string(),
-                },
-                other => IpcError::service(name, "opening the service")(other),
-            })
+            .map_err(IpcError::opening(name, "opening the service", |e| {
+                matches!(e, PublishSubscribeOpenError::DoesNotExist)
+            }))
     }
 }
 
@@ -307,12 +301,9 @@ impl<Req: Debug + ZeroCopySend + 'static> RequestResponse<Req> {
             .service_builder(&iceoryx_name(name)?)
             .request_response::<Req, ControlResponse>()
             .open()
-            .map_err(|e| match e {
-                RequestResponseOpenError::DoesNotExist => IpcError::NotFound {
-                    service: name.to_string(),
-                },
-                other => IpcError::service(name, "opening the service")(other),
-            })?;
+            .map_err(IpcError::opening(name, "opening the service", |e| {
+                matches!(e, RequestResponseOpenError::DoesNotExist)
+            }))?;
         let requests = open_event(node, name)?;
         let replies = open_event(node, &reply_name(name))?;
         Ok(Exchange {
