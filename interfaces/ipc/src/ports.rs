@@ -366,25 +366,8 @@ mod tests {
 
     impl Drop for Scratch {
         fn drop(&mut self) {
-            for dir in [
-                "/dev/shm",
-                "/tmp/iceoryx2",
-                "/tmp/iceoryx2/services",
-                "/tmp/iceoryx2/nodes",
-            ] {
-                for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-                    if entry.file_name().to_string_lossy().starts_with(&self.0) {
-                        let path = entry.path();
-                        let removed = if path.is_dir() {
-                            std::fs::remove_dir_all(&path)
-                        } else {
-                            std::fs::remove_file(&path)
-                        };
-                        if let Err(e) = removed {
-                            eprintln!("cannot remove {}: {e}", path.display());
-                        }
-                    }
-                }
+            for (path, e) in crate::remove_ipc_files(&self.0) {
+                eprintln!("cannot remove {}: {e}", path.display());
             }
         }
     }
