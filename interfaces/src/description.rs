@@ -7,12 +7,11 @@
 //! from a table of their own. Unknown values are NaN (a length the manuals do not give); counts
 //! say how many entries of each fixed array are used.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
+use crate::named::named_constants;
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 use crate::{MAX_SOURCES, NAME_LEN};
 
@@ -23,177 +22,116 @@ pub const MAX_JOINTS: usize = 12;
 /// Length of a sensor's or joint's name (also its frame id), NUL-padded UTF-8.
 pub const LABEL_LEN: usize = 32;
 
-/// How the robot's wheels turn a twist into motion (`RobotDescription::kinematics`).
-#[derive(Debug, Clone, Copy)]
-pub struct Kinematics;
-impl Kinematics {
-    /// Two driven wheels (or sides): (v, ω).
-    pub const DIFFERENTIAL: u8 = 1;
-    /// Four wheels, skid-steered: (v, ω), turning by slipping.
-    pub const SKID_STEER: u8 = 2;
-    /// Tracks: (v, ω), turning by slipping.
-    pub const TRACKED: u8 = 3;
-    /// Mecanum or omni wheels: (v, v_y, ω).
-    pub const OMNI: u8 = 4;
-    /// Front-wheel Ackermann: (v, δ); no turn on the spot.
-    pub const ACKERMANN: u8 = 5;
-    /// Front and rear axles steering opposite (TITAN): (v, δ).
-    pub const DUAL_ACKERMANN: u8 = 6;
-    /// Four independently steered wheels (dual Ackermann, crab, spin).
-    pub const FOUR_WHEEL_STEER: u8 = 7;
-
-    pub fn name(kinematics: u8) -> &'static str {
-        match kinematics {
-            Self::DIFFERENTIAL => "differential",
-            Self::SKID_STEER => "skid_steer",
-            Self::TRACKED => "tracked",
-            Self::OMNI => "omni",
-            Self::ACKERMANN => "ackermann",
-            Self::DUAL_ACKERMANN => "dual_ackermann",
-            Self::FOUR_WHEEL_STEER => "four_wheel_steer",
-            _ => "unknown",
-        }
+named_constants! {
+    /// How the robot's wheels turn a twist into motion (`RobotDescription::kinematics`).
+    pub enum Kinematics: u8 {
+        /// Two driven wheels (or sides): (v, ω).
+        DIFFERENTIAL = 1 => "differential",
+        /// Four wheels, skid-steered: (v, ω), turning by slipping.
+        SKID_STEER = 2 => "skid_steer",
+        /// Tracks: (v, ω), turning by slipping.
+        TRACKED = 3 => "tracked",
+        /// Mecanum or omni wheels: (v, v_y, ω).
+        OMNI = 4 => "omni",
+        /// Front-wheel Ackermann: (v, δ); no turn on the spot.
+        ACKERMANN = 5 => "ackermann",
+        /// Front and rear axles steering opposite (TITAN): (v, δ).
+        DUAL_ACKERMANN = 6 => "dual_ackermann",
+        /// Four independently steered wheels (dual Ackermann, crab, spin).
+        FOUR_WHEEL_STEER = 7 => "four_wheel_steer",
     }
+}
 
+impl Kinematics {
     /// True where the robot steers its wheels and cannot turn on the spot by (v = 0, ω).
     pub fn steers(kinematics: u8) -> bool {
         matches!(kinematics, Self::ACKERMANN | Self::DUAL_ACKERMANN)
     }
 }
 
-/// Which bus the robot is on (`RobotDescription::bus`).
-#[derive(Debug, Clone, Copy)]
-pub struct BusKind;
-impl BusKind {
-    /// CAN (SocketCAN, slcan).
-    pub const CAN: u8 = 1;
-    /// RS232 byte stream.
-    pub const RS232: u8 = 2;
-
-    pub fn name(bus: u8) -> &'static str {
-        match bus {
-            Self::CAN => "can",
-            Self::RS232 => "rs232",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Which bus the robot is on (`RobotDescription::bus`).
+    pub enum BusKind: u8 {
+        /// CAN (SocketCAN, slcan).
+        CAN = 1 => "can",
+        /// RS232 byte stream.
+        RS232 = 2 => "rs232",
     }
 }
 
-/// Bits of [`RobotDescription::flags`].
-#[derive(Debug, Clone, Copy)]
-pub struct DescriptionFlags;
-impl DescriptionFlags {
-    /// The bus is the simulated chassis (embedded or `chassisd sim`), not a robot.
-    pub const SIMULATED: u8 = 1 << 0;
-    /// The robot has a parking brake chassisd can lock and release.
-    pub const BRAKE: u8 = 1 << 1;
-    /// The robot has lights chassisd can switch.
-    pub const LIGHTS: u8 = 1 << 2;
-    /// The robot can move sideways (`linear_y`).
-    pub const LATERAL: u8 = 1 << 3;
-    /// The mux requires its safety source (`--no-safety-monitor` not given).
-    pub const SAFETY_REQUIRED: u8 = 1 << 4;
+named_constants! {
+    /// Bits of [`RobotDescription::flags`].
+    pub flags DescriptionFlags: u8 {
+        /// The bus is the simulated chassis (embedded or `chassisd sim`), not a robot.
+        SIMULATED = 1 << 0 => "simulated",
+        /// The robot has a parking brake chassisd can lock and release.
+        BRAKE = 1 << 1 => "brake",
+        /// The robot has lights chassisd can switch.
+        LIGHTS = 1 << 2 => "lights",
+        /// The robot can move sideways (`linear_y`).
+        LATERAL = 1 << 3 => "lateral",
+        /// The mux requires its safety source (`--no-safety-monitor` not given).
+        SAFETY_REQUIRED = 1 << 4 => "safety_required",
+    }
 }
 
-/// What a sensor measures (`SensorDescription::kind`).
-#[derive(Debug, Clone, Copy)]
-pub struct SensorKind;
+named_constants! {
+    /// What a sensor measures (`SensorDescription::kind`).
+    pub enum SensorKind: u8 {
+        /// An ultrasonic range sensor: its reading is `RangesState::ultrasonic_m[index]`.
+        ULTRASONIC = 1 => "ultrasonic",
+        /// An infrared range sensor: `RangesState::ir_m[index]`.
+        INFRARED = 2 => "infrared",
+        /// An inertial unit: `ChassisState::imu`.
+        IMU = 3 => "imu",
+        /// A GNSS receiver: `ChassisState::gps`.
+        GPS = 4 => "gps",
+        /// Bumpers: `FaultFlags::BUMPER`.
+        BUMPER = 5 => "bumper",
+    }
+}
+
 impl SensorKind {
-    /// An ultrasonic range sensor: its reading is `RangesState::ultrasonic_m[index]`.
-    pub const ULTRASONIC: u8 = 1;
-    /// An infrared range sensor: `RangesState::ir_m[index]`.
-    pub const INFRARED: u8 = 2;
-    /// An inertial unit: `ChassisState::imu`.
-    pub const IMU: u8 = 3;
-    /// A GNSS receiver: `ChassisState::gps`.
-    pub const GPS: u8 = 4;
-    /// Bumpers: `FaultFlags::BUMPER`.
-    pub const BUMPER: u8 = 5;
-
-    pub fn name(kind: u8) -> &'static str {
-        match kind {
-            Self::ULTRASONIC => "ultrasonic",
-            Self::INFRARED => "infrared",
-            Self::IMU => "imu",
-            Self::GPS => "gps",
-            Self::BUMPER => "bumper",
-            _ => "unknown",
-        }
-    }
-
     /// True for the range sensors (a cone in a view, a `sensor_msgs/Range` in ROS 2).
     pub fn is_range(kind: u8) -> bool {
         matches!(kind, Self::ULTRASONIC | Self::INFRARED)
     }
 }
 
-/// Which reading of the state a joint's position comes from (`JointDescription::source`).
-#[derive(Debug, Clone, Copy)]
-pub struct JointSource;
-impl JointSource {
-    /// `MotionState::front_steer_rad` (a revolute steering joint).
-    pub const FRONT_STEER: u8 = 1;
-    /// `MotionState::rear_steer_rad`.
-    pub const REAR_STEER: u8 = 2;
-    /// A wheel: `MotionState::wheel_mps[index]` and `MotorState::position_counts` of motor
-    /// `index` (continuous; needs the geometry's wheel radius and travel per count).
-    pub const WHEEL: u8 = 3;
-
-    pub fn name(source: u8) -> &'static str {
-        match source {
-            Self::FRONT_STEER => "front_steer",
-            Self::REAR_STEER => "rear_steer",
-            Self::WHEEL => "wheel",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Which reading of the state a joint's position comes from (`JointDescription::source`).
+    pub enum JointSource: u8 {
+        /// `MotionState::front_steer_rad` (a revolute steering joint).
+        FRONT_STEER = 1 => "front_steer",
+        /// `MotionState::rear_steer_rad`.
+        REAR_STEER = 2 => "rear_steer",
+        /// A wheel: `MotionState::wheel_mps[index]` and `MotorState::position_counts` of motor
+        /// `index` (continuous; needs the geometry's wheel radius and travel per count).
+        WHEEL = 3 => "wheel",
     }
 }
 
-/// Speed and acceleration limits; NaN where there is none.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::MotionLimits.v1")]
-pub struct MotionLimits {
-    /// Largest forward speed, m/s.
-    pub forward_mps: f64,
-    /// Largest reverse speed (a positive number), m/s.
-    pub reverse_mps: f64,
-    /// Largest |lateral speed|, m/s (0: the robot cannot move sideways).
-    pub lateral_mps: f64,
-    /// Largest |yaw rate|, rad/s.
-    pub angular_radps: f64,
-    /// Largest |steering angle| (inner wheel), rad; NaN where the robot does not steer.
-    pub steer_rad: f64,
-    /// Largest |linear acceleration|, m/s²; NaN: not limited.
-    pub linear_accel_mps2: f64,
-    /// Largest |yaw acceleration|, rad/s²; NaN: not limited.
-    pub angular_accel_radps2: f64,
-}
-
-describe_layout!(
-    MotionLimits,
-    motion_limits_description_covers_every_byte {
-        forward_mps,
-        reverse_mps,
-        lateral_mps,
-        angular_radps,
-        steer_rad,
-        linear_accel_mps2,
-        angular_accel_radps2,
+ipc_type! {
+    /// Speed and acceleration limits; NaN where there is none.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::MotionLimits.v1")]
+    pub struct MotionLimits {
+        /// Largest forward speed, m/s.
+        pub forward_mps: f64,
+        /// Largest reverse speed (a positive number), m/s.
+        pub reverse_mps: f64,
+        /// Largest |lateral speed|, m/s (0: the robot cannot move sideways).
+        pub lateral_mps: f64,
+        /// Largest |yaw rate|, rad/s.
+        pub angular_radps: f64,
+        /// Largest |steering angle| (inner wheel), rad; NaN where the robot does not steer.
+        pub steer_rad: f64,
+        /// Largest |linear acceleration|, m/s²; NaN: not limited.
+        pub linear_accel_mps2: f64,
+        /// Largest |yaw acceleration|, rad/s²; NaN: not limited.
+        pub angular_accel_radps2: f64,
     }
-);
+}
 
 impl MotionLimits {
     /// No limit at all.
@@ -226,186 +164,90 @@ impl MotionLimits {
     }
 }
 
-/// The robot's geometry, m; NaN where the manuals do not give it.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::Geometry.v1")]
-pub struct Geometry {
-    /// Distance between the axles, m.
-    pub wheelbase_m: f64,
-    /// Distance between the left and right wheels (or tracks), m.
-    pub track_m: f64,
-    /// Drive wheel radius, m.
-    pub wheel_radius_m: f64,
-    /// Wheel travel per encoder count, m.
-    pub travel_per_count_m: f64,
-    /// The body's outline, centred on `base_link`: length (x), width (y), height (z), m.
-    pub length_m: f64,
-    pub width_m: f64,
-    pub height_m: f64,
-    /// Smallest radius of `base_link`'s path while driving (robots that steer: the inner
-    /// wheels at full lock), m; 0 where it turns on the spot. A four-wheel-steered robot
-    /// (RANGER MINI) drives dual Ackermann down to this radius and spins on the spot below it.
-    pub min_turn_radius_m: f64,
+ipc_type! {
+    /// The robot's geometry, m; NaN where the manuals do not give it.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::Geometry.v1")]
+    pub struct Geometry {
+        /// Distance between the axles, m.
+        pub wheelbase_m: f64,
+        /// Distance between the left and right wheels (or tracks), m.
+        pub track_m: f64,
+        /// Drive wheel radius, m.
+        pub wheel_radius_m: f64,
+        /// Wheel travel per encoder count, m.
+        pub travel_per_count_m: f64,
+        /// The body's outline, centred on `base_link`: length (x), width (y), height (z), m.
+        pub length_m: f64,
+        pub width_m: f64,
+        pub height_m: f64,
+        /// Smallest radius of `base_link`'s path while driving (robots that steer: the inner
+        /// wheels at full lock), m; 0 where it turns on the spot. A four-wheel-steered robot
+        /// (RANGER MINI) drives dual Ackermann down to this radius and spins on the spot below it.
+        pub min_turn_radius_m: f64,
+    }
 }
 
-describe_layout!(
-    Geometry,
-    geometry_description_covers_every_byte {
-        wheelbase_m,
-        track_m,
-        wheel_radius_m,
-        travel_per_count_m,
-        length_m,
-        width_m,
-        height_m,
-        min_turn_radius_m,
+ipc_type! {
+    /// Battery levels; NaN where the robot reports no such reading or the manual gives no level.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::BatteryLevels.v1")]
+    pub struct BatteryLevels {
+        /// Pack voltage when full, V.
+        pub full_v: f64,
+        /// Below this the chassis warns (its under-voltage alarm), V.
+        pub low_v: f64,
+        /// Below this the chassis cuts drive power (its under-voltage failure), V.
+        pub critical_v: f64,
+        /// State of charge below which the chassis warns, %.
+        pub low_soc_pct: f64,
+        /// State of charge below which the chassis cuts drive power, %.
+        pub critical_soc_pct: f64,
     }
-);
-
-/// Battery levels; NaN where the robot reports no such reading or the manual gives no level.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::BatteryLevels.v1")]
-pub struct BatteryLevels {
-    /// Pack voltage when full, V.
-    pub full_v: f64,
-    /// Below this the chassis warns (its under-voltage alarm), V.
-    pub low_v: f64,
-    /// Below this the chassis cuts drive power (its under-voltage failure), V.
-    pub critical_v: f64,
-    /// State of charge below which the chassis warns, %.
-    pub low_soc_pct: f64,
-    /// State of charge below which the chassis cuts drive power, %.
-    pub critical_soc_pct: f64,
 }
 
-describe_layout!(
-    BatteryLevels,
-    battery_levels_description_covers_every_byte {
-        full_v,
-        low_v,
-        critical_v,
-        low_soc_pct,
-        critical_soc_pct,
+ipc_type! {
+    /// Odometry's stated (not measured) variances, for the bridges' covariance matrices.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::OdometryVariance.v1")]
+    pub struct OdometryVariance {
+        /// Of x and y, m².
+        pub position_m2: f64,
+        /// Of yaw, rad².
+        pub yaw_rad2: f64,
+        /// Of the linear and lateral speed, (m/s)².
+        pub linear_m2ps2: f64,
+        /// Of the yaw rate, (rad/s)².
+        pub angular_rad2ps2: f64,
     }
-);
-
-/// Odometry's stated (not measured) variances, for the bridges' covariance matrices.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::OdometryVariance.v1")]
-pub struct OdometryVariance {
-    /// Of x and y, m².
-    pub position_m2: f64,
-    /// Of yaw, rad².
-    pub yaw_rad2: f64,
-    /// Of the linear and lateral speed, (m/s)².
-    pub linear_m2ps2: f64,
-    /// Of the yaw rate, (rad/s)².
-    pub angular_rad2ps2: f64,
 }
 
-describe_layout!(
-    OdometryVariance,
-    odometry_variance_description_covers_every_byte {
-        position_m2,
-        yaw_rad2,
-        linear_m2ps2,
-        angular_rad2ps2,
+ipc_type! {
+    /// One sensor and where it sits on the body (in `base_link`, REP-103 axes).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SensorDescription.v1")]
+    pub struct SensorDescription {
+        /// The sensor's name, also its frame id (`ultrasonic_front_left`).
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; LABEL_LEN],
+        /// [`SensorKind`].
+        pub kind: u8,
+        /// Index of its reading in the state (e.g. `RangesState::ultrasonic_m[index]`).
+        pub index: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 6],
+        pub x_m: f64,
+        pub y_m: f64,
+        pub z_m: f64,
+        /// Heading of its axis, rad, left of forward positive.
+        pub yaw_rad: f64,
+        /// Full opening angle of a range sensor's cone, rad (NaN otherwise).
+        pub field_of_view_rad: f64,
+        /// Nearest and farthest reading a range sensor gives, m (NaN otherwise).
+        pub min_range_m: f64,
+        pub max_range_m: f64,
     }
-);
-
-/// One sensor and where it sits on the body (in `base_link`, REP-103 axes).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SensorDescription.v1")]
-pub struct SensorDescription {
-    /// The sensor's name, also its frame id (`ultrasonic_front_left`).
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; LABEL_LEN],
-    /// [`SensorKind`].
-    pub kind: u8,
-    /// Index of its reading in the state (e.g. `RangesState::ultrasonic_m[index]`).
-    pub index: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 6],
-    pub x_m: f64,
-    pub y_m: f64,
-    pub z_m: f64,
-    /// Heading of its axis, rad, left of forward positive.
-    pub yaw_rad: f64,
-    /// Full opening angle of a range sensor's cone, rad (NaN otherwise).
-    pub field_of_view_rad: f64,
-    /// Nearest and farthest reading a range sensor gives, m (NaN otherwise).
-    pub min_range_m: f64,
-    pub max_range_m: f64,
 }
-
-describe_layout!(
-    SensorDescription,
-    sensor_description_covers_every_byte {
-        name,
-        kind,
-        index,
-        _reserved,
-        x_m,
-        y_m,
-        z_m,
-        yaw_rad,
-        field_of_view_rad,
-        min_range_m,
-        max_range_m,
-    }
-);
 
 impl SensorDescription {
     pub fn name(&self) -> &str {
@@ -413,43 +255,22 @@ impl SensorDescription {
     }
 }
 
-/// One joint the bridges publish (`sensor_msgs/JointState`).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::JointDescription.v1")]
-pub struct JointDescription {
-    /// The joint's name (`front_steer_joint`, `front_left_wheel_joint`).
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; LABEL_LEN],
-    /// [`JointSource`]: which reading of the state is its position.
-    pub source: u8,
-    /// Which wheel (`MotionState::wheel_mps` order) for a wheel joint.
-    pub index: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 6],
-}
-
-describe_layout!(
-    JointDescription,
-    joint_description_covers_every_byte {
-        name,
-        source,
-        index,
-        _reserved
+ipc_type! {
+    /// One joint the bridges publish (`sensor_msgs/JointState`).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::JointDescription.v1")]
+    pub struct JointDescription {
+        /// The joint's name (`front_steer_joint`, `front_left_wheel_joint`).
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; LABEL_LEN],
+        /// [`JointSource`]: which reading of the state is its position.
+        pub source: u8,
+        /// Which wheel (`MotionState::wheel_mps` order) for a wheel joint.
+        pub index: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 6],
     }
-);
+}
 
 impl JointDescription {
     pub fn name(&self) -> &str {
@@ -457,45 +278,23 @@ impl JointDescription {
     }
 }
 
-/// One velocity source of the mux, as configured.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SourceDescription.v1")]
-pub struct SourceDescription {
-    /// Source name (`teleop`): the service `chassis/<name>/cmd/<source>`.
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; NAME_LEN],
-    /// Its request ends its motion this long after it was made, ms.
-    pub timeout_ms: u32,
-    pub priority: u8,
-    /// `SourceFlags::REQUIRED` and `SourceFlags::REMOTE` as configured.
-    pub flags: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 2],
-}
-
-describe_layout!(
-    SourceDescription,
-    source_description_covers_every_byte {
-        name,
-        timeout_ms,
-        priority,
-        flags,
-        _reserved
+ipc_type! {
+    /// One velocity source of the mux, as configured.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SourceDescription.v1")]
+    pub struct SourceDescription {
+        /// Source name (`teleop`): the service `chassis/<name>/cmd/<source>`.
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; NAME_LEN],
+        /// Its request ends its motion this long after it was made, ms.
+        pub timeout_ms: u32,
+        pub priority: u8,
+        /// `SourceFlags::REQUIRED` and `SourceFlags::REMOTE` as configured.
+        pub flags: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 2],
     }
-);
+}
 
 impl SourceDescription {
     pub fn name(&self) -> &str {
@@ -503,85 +302,53 @@ impl SourceDescription {
     }
 }
 
-/// The robot `chassisd` drives, as it is configured and detected: see the module doc.
-#[repr(C)]
-#[derive(
-    Debug, Clone, Copy, PartialEq, FromBytes, IntoBytes, Immutable, KnownLayout, ZeroCopySend,
-)]
-#[type_name("chassis::RobotDescription.v1")]
-pub struct RobotDescription {
-    /// Bumped at every publication (a change of protocol once detection decides).
-    pub seq: u64,
-    /// `CLOCK_MONOTONIC` when it was published, ns.
-    pub stamp_ns: u64,
-    /// The robot's kind: `chassis_protocols::RobotKind` as a number, as in
-    /// `ChassisState::robot`.
-    pub kind: u8,
-    /// `WireProtocol` in use (`DETECTING` until detection decides).
-    pub protocol: u8,
-    /// [`Kinematics`].
-    pub kinematics: u8,
-    /// [`BusKind`].
-    pub bus: u8,
-    /// [`DescriptionFlags`].
-    pub flags: u8,
-    pub sensor_count: u8,
-    pub joint_count: u8,
-    pub source_count: u8,
-    /// The robot's name (`--name`): its services are `chassis/<name>/…`.
-    pub name: [u8; NAME_LEN],
-    /// The kind's `--robot` spelling (`hunter`).
-    pub kind_name: [u8; NAME_LEN],
-    /// The variant of the kind the profile describes (`scout-mini-omni`, `ranger-mini-v1`, or
-    /// the kind's name).
-    pub model: [u8; LABEL_LEN],
-    /// What people call it (`AgileX HUNTER 2.0`).
-    pub display_name: [u8; LABEL_LEN],
-    /// The limits the driver itself applies: the robot's profile after overrides.
-    pub robot_limits: MotionLimits,
-    /// chassisd's configured speed and acceleration limits (`[mux]`), applied to every source.
-    pub configured_limits: MotionLimits,
-    pub geometry: Geometry,
-    pub battery: BatteryLevels,
-    pub odometry_variance: OdometryVariance,
-    /// The chassis' own command timeout, ms (it stops without a command for this long).
-    pub command_timeout_ms: u32,
-    /// The heartbeat chassisd sends, ms.
-    pub heartbeat_period_ms: u32,
-    pub sensors: [SensorDescription; MAX_SENSORS],
-    pub joints: [JointDescription; MAX_JOINTS],
-    pub sources: [SourceDescription; MAX_SOURCES],
-}
-
-describe_layout!(
-    RobotDescription,
-    robot_description_covers_every_byte {
-        seq,
-        stamp_ns,
-        kind,
-        protocol,
-        kinematics,
-        bus,
-        flags,
-        sensor_count,
-        joint_count,
-        source_count,
-        name,
-        kind_name,
-        model,
-        display_name,
-        robot_limits,
-        configured_limits,
-        geometry,
-        battery,
-        odometry_variance,
-        command_timeout_ms,
-        heartbeat_period_ms,
-        sensors,
-        joints,
-        sources,
+ipc_type! {
+    /// The robot `chassisd` drives, as it is configured and detected: see the module doc.
+    #[type_name("chassis::RobotDescription.v1")]
+    pub struct RobotDescription {
+        /// Bumped at every publication (a change of protocol once detection decides).
+        pub seq: u64,
+        /// `CLOCK_MONOTONIC` when it was published, ns.
+        pub stamp_ns: u64,
+        /// The robot's kind: `chassis_protocols::RobotKind` as a number, as in
+        /// `ChassisState::robot`.
+        pub kind: u8,
+        /// `WireProtocol` in use (`DETECTING` until detection decides).
+        pub protocol: u8,
+        /// [`Kinematics`].
+        pub kinematics: u8,
+        /// [`BusKind`].
+        pub bus: u8,
+        /// [`DescriptionFlags`].
+        pub flags: u8,
+        pub sensor_count: u8,
+        pub joint_count: u8,
+        pub source_count: u8,
+        /// The robot's name (`--name`): its services are `chassis/<name>/…`.
+        pub name: [u8; NAME_LEN],
+        /// The kind's `--robot` spelling (`hunter`).
+        pub kind_name: [u8; NAME_LEN],
+        /// The variant of the kind the profile describes (`scout-mini-omni`, `ranger-mini-v1`, or
+        /// the kind's name).
+        pub model: [u8; LABEL_LEN],
+        /// What people call it (`AgileX HUNTER 2.0`).
+        pub display_name: [u8; LABEL_LEN],
+        /// The limits the driver itself applies: the robot's profile after overrides.
+        pub robot_limits: MotionLimits,
+        /// chassisd's configured speed and acceleration limits (`[mux]`), applied to every source.
+        pub configured_limits: MotionLimits,
+        pub geometry: Geometry,
+        pub battery: BatteryLevels,
+        pub odometry_variance: OdometryVariance,
+        /// The chassis' own command timeout, ms (it stops without a command for this long).
+        pub command_timeout_ms: u32,
+        /// The heartbeat chassisd sends, ms.
+        pub heartbeat_period_ms: u32,
+        pub sensors: [SensorDescription; MAX_SENSORS],
+        pub joints: [JointDescription; MAX_JOINTS],
+        pub sources: [SourceDescription; MAX_SOURCES],
     }
-);
+}
 
 impl Default for RobotDescription {
     fn default() -> Self {
@@ -781,22 +548,6 @@ impl RobotDescription {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn layout_is_pinned() {
-        assert_eq!(core::mem::size_of::<MotionLimits>(), 56);
-        assert_eq!(core::mem::size_of::<Geometry>(), 64);
-        assert_eq!(core::mem::size_of::<BatteryLevels>(), 40);
-        assert_eq!(core::mem::size_of::<OdometryVariance>(), 32);
-        assert_eq!(core::mem::size_of::<SensorDescription>(), 96);
-        assert_eq!(core::mem::size_of::<JointDescription>(), 40);
-        assert_eq!(core::mem::size_of::<SourceDescription>(), 24);
-        assert_eq!(core::mem::size_of::<RobotDescription>(), 2200);
-        assert_eq!(core::mem::align_of::<RobotDescription>(), 8);
-        assert_eq!(core::mem::offset_of!(RobotDescription, name), 24);
-        assert_eq!(core::mem::offset_of!(RobotDescription, robot_limits), 120);
-        assert_eq!(core::mem::offset_of!(RobotDescription, sensors), 376);
-    }
 
     #[test]
     fn lists_fill_up_and_refuse_more() {

@@ -1,81 +1,56 @@
 //! `BusFrame`: a tap of every frame on the bus, both directions.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
+use crate::named::named_constants;
 
-/// [`BusFrame::direction`].
-#[derive(Debug, Clone, Copy)]
-pub struct FrameDirection;
-impl FrameDirection {
-    /// Received from the chassis.
-    pub const RX: u8 = 0;
-    /// Sent to the chassis.
-    pub const TX: u8 = 1;
-}
-
-/// [`BusFrame::kind`].
-#[derive(Debug, Clone, Copy)]
-pub struct FrameKind;
-impl FrameKind {
-    /// A CAN frame: `can_id` and up to 8 data bytes.
-    pub const CAN: u8 = 0;
-    /// A chunk of the serial byte stream (XBot), as read or written.
-    pub const SERIAL: u8 = 1;
-    /// A chunk of the GPS receiver's NMEA stream.
-    pub const GPS: u8 = 2;
-}
-
-/// One CAN frame or one chunk of a serial stream.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::BusFrame.v1")]
-pub struct BusFrame {
-    /// `CLOCK_MONOTONIC` time the frame was read from or written to the bus, ns.
-    pub stamp_ns: u64,
-    /// Incremented for every frame published on the tap (gaps mean the tap dropped frames).
-    pub seq: u64,
-    /// CAN identifier (11-bit standard or 29-bit extended); 0 for serial chunks.
-    pub can_id: u32,
-    /// [`FrameDirection`].
-    pub direction: u8,
-    /// [`FrameKind`].
-    pub kind: u8,
-    /// Number of valid bytes in `data`.
-    pub len: u8,
-    /// [`BusFrame::EXTENDED_ID`], [`BusFrame::REMOTE`].
-    pub flags: u8,
-    #[serde(skip)]
-    pub data: [u8; BusFrame::DATA_LEN],
-}
-
-describe_layout!(
-    BusFrame,
-    bus_frame_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        can_id,
-        direction,
-        kind,
-        len,
-        flags,
-        data,
+named_constants! {
+    /// [`BusFrame::direction`].
+    pub enum FrameDirection: u8 {
+        /// Received from the chassis.
+        RX = 0 => "rx",
+        /// Sent to the chassis.
+        TX = 1 => "tx",
     }
-);
+}
+
+named_constants! {
+    /// [`BusFrame::kind`].
+    pub enum FrameKind: u8 {
+        /// A CAN frame: `can_id` and up to 8 data bytes.
+        CAN = 0 => "can",
+        /// A chunk of the serial byte stream (XBot), as read or written.
+        SERIAL = 1 => "serial",
+        /// A chunk of the GPS receiver's NMEA stream.
+        GPS = 2 => "gps",
+    }
+}
+
+ipc_type! {
+    /// One CAN frame or one chunk of a serial stream.
+    #[derive(Serialize)]
+    #[type_name("chassis::BusFrame.v1")]
+    pub struct BusFrame {
+        /// `CLOCK_MONOTONIC` time the frame was read from or written to the bus, ns.
+        pub stamp_ns: u64,
+        /// Incremented for every frame published on the tap (gaps mean the tap dropped frames).
+        pub seq: u64,
+        /// CAN identifier (11-bit standard or 29-bit extended); 0 for serial chunks.
+        pub can_id: u32,
+        /// [`FrameDirection`].
+        pub direction: u8,
+        /// [`FrameKind`].
+        pub kind: u8,
+        /// Number of valid bytes in `data`.
+        pub len: u8,
+        /// [`BusFrame::EXTENDED_ID`], [`BusFrame::REMOTE`].
+        pub flags: u8,
+        #[serde(skip)]
+        pub data: [u8; BusFrame::DATA_LEN],
+    }
+}
 
 impl Default for BusFrame {
     fn default() -> Self {
@@ -117,19 +92,6 @@ impl BusFrame {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn bus_frame_layout_is_pinned() {
-        assert_eq!(size_of::<BusFrame>(), 104);
-        assert_eq!(align_of::<BusFrame>(), 8);
-        assert_eq!(offset_of!(BusFrame, can_id), 16);
-        assert_eq!(offset_of!(BusFrame, direction), 20);
-        assert_eq!(offset_of!(BusFrame, kind), 21);
-        assert_eq!(offset_of!(BusFrame, len), 22);
-        assert_eq!(offset_of!(BusFrame, flags), 23);
-        assert_eq!(offset_of!(BusFrame, data), 24);
-    }
 
     #[test]
     fn payload_is_cut_to_the_buffer() {

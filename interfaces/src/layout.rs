@@ -1,11 +1,11 @@
 //! Machine-readable descriptions of every IPC type and of its constant groups.
 //!
 //! Programs in other languages (Python `ctypes` mirrors, ROS 2, Foxglove and Zenoh bridges) read
-//! the layouts from here instead of from the Rust source. Each `#[repr(C)]` type lists its fields
-//! once, by name, in `describe_layout!`: offsets come from `core::mem::offset_of!` and each
-//! field's type and size from the Rust field itself, so only a forgotten or misordered field can
-//! be wrong — and the test each type gets checks that the fields cover every byte, in order
-//! (the types have no padding: zerocopy's `IntoBytes` proves it).
+//! the layouts from here instead of from the Rust source. Each `#[repr(C)]` type is declared
+//! through `ipc_type!`, which describes it from its own field list: offsets come from
+//! `core::mem::offset_of!` and each field's type and size from the Rust field itself — and a test
+//! checks that the fields of every type cover every byte, in order (the types have no padding:
+//! zerocopy's `IntoBytes` proves it).
 
 use serde::Serialize;
 
@@ -120,17 +120,58 @@ impl TypeLayout {
     }
 }
 
-/// A `#[repr(C)]` IPC type described field by field (implemented by the crate's `describe_layout!`).
+/// A `#[repr(C)]` IPC type described field by field (implemented by the crate's `ipc_type!`).
 pub trait Layout: FieldKind {
     /// The Rust name, e.g. `ChassisState`.
     const NAME: &'static str;
     fn layout() -> TypeLayout;
 }
 
-/// Describes a `#[repr(C)]`, `ZeroCopySend` type by listing its fields in order, and adds the
-/// test (named by the caller) that the list covers every byte.
-macro_rules! describe_layout {
-    ($ty:ident, $test:ident { $($field:ident),+ $(,)? }) => {
+/// Declares an IPC type and describes it from the same field list, so that no field can be
+/// left out of the contract or listed out of order.
+///
+/// The struct gets what every IPC type has: `#[repr(C)]`, `Debug, Clone, Copy, PartialEq`,
+/// zerocopy's `FromBytes, IntoBytes, Immutable, KnownLayout` (no padding, any bytes valid) and
+/// iceoryx2's `ZeroCopySend`, whose `#[type_name("chassis::Name.vN")]` the declaration gives;
+/// other derives (`Default`, `Serialize`) come with it. Its [`Layout`] lists every field, in
+/// order, with `core::mem::offset_of!`.
+///
+/// ```text
+/// ipc_type! {
+///     /// Pan and tilt servos (XBot), as commanded.
+///     #[derive(Default, Serialize)]
+///     #[type_name("chassis::PanTiltState.v1")]
+///     pub struct PanTiltState {
+///         /// Pan, rad: 0 ahead, left positive.
+///         pub pan_rad: f32,
+///         pub tilt_rad: f32,
+///     }
+/// }
+/// ```
+macro_rules! ipc_type {
+    (
+        $(#[$meta:meta])*
+        pub struct $ty:ident {
+            $($(#[$field_meta:meta])* $vis:vis $field:ident : $field_ty:ty),+ $(,)?
+        }
+    ) => {
+        #[repr(C)]
+        #[derive(
+            Debug,
+            Clone,
+            Copy,
+            PartialEq,
+            ::zerocopy::FromBytes,
+            ::zerocopy::IntoBytes,
+            ::zerocopy::Immutable,
+            ::zerocopy::KnownLayout,
+            ::iceoryx2_bb_derive_macros::ZeroCopySend,
+        )]
+        $(#[$meta])*
+        pub struct $ty {
+            $($(#[$field_meta])* $vis $field: $field_ty),+
+        }
+
         impl $crate::layout::FieldKind for $ty {
             fn field_type() -> $crate::layout::FieldType {
                 $crate::layout::FieldType::Struct { name: stringify!($ty) }
@@ -161,17 +202,9 @@ macro_rules! describe_layout {
                 }
             }
         }
-
-        #[cfg(test)]
-        #[test]
-        fn $test() {
-            let layout = <$ty as $crate::layout::Layout>::layout();
-            assert_eq!(layout.gap(), None);
-            assert!(layout.type_name.starts_with(concat!("chassis::", stringify!($ty), ".v")));
-        }
     };
 }
-pub(crate) use describe_layout;
+pub(crate) use ipc_type;
 
 /// Named constants of one flag or enumeration field.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -391,6 +424,36 @@ mod tests {
             .map(|s| s.matches("#[type_name(").count())
             .sum();
         assert_eq!(types().len(), declared);
+    }
+
+    /// The layouts are pinned by the committed contract, `interfaces/contract.json`: every
+    /// type's name with its version, size, alignment and fields with their offsets, sizes and
+    /// types. A change to any of them fails here until the contract is regenerated (see
+    /// `chassis_ipc::contract`) and its difference reviewed.
+    #[test]
+    fn every_layout_is_the_one_the_committed_contract_pins() {
+        let committed: serde_json::Value =
+            serde_json::from_str(include_str!("../contract.json")).unwrap();
+        let types: std::collections::BTreeMap<_, _> =
+            types().into_iter().map(|t| (t.name, t)).collect();
+        let types = serde_json::to_value(types).unwrap();
+        for (name, layout) in committed["types"].as_object().unwrap() {
+            assert_eq!(&types[name], layout, "{name}");
+        }
+        assert_eq!(types, committed["types"]);
+    }
+
+    #[test]
+    fn every_type_covers_its_bytes_and_carries_a_versioned_name() {
+        for layout in types() {
+            assert_eq!(layout.gap(), None);
+            let prefix = format!("chassis::{}.v", layout.name);
+            assert!(
+                layout.type_name.starts_with(&prefix),
+                "{}",
+                layout.type_name
+            );
+        }
     }
 
     #[test]

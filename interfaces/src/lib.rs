@@ -5,8 +5,9 @@
 //! (enumerations are a `u8` plus named constants), and names its unit in every field name
 //! (`linear_mps`, `steer_rad`, `voltage_v`, `stamp_ns`). The iceoryx2 type name carries a layout
 //! version (`"chassis::ChassisState.v3"`): iceoryx2 itself compares only name, size and alignment,
-//! so any layout change must bump the version. Layout tests in each module pin size, alignment and
-//! field offsets so such a change is always deliberate.
+//! so any layout change must bump the version. The committed contract (`interfaces/contract.json`)
+//! pins every type's size, alignment and field offsets, and a test compares the code with it, so
+//! such a change is always deliberate.
 //!
 //! Each type also describes itself field by field ([`layout::Layout`]): the machine-readable
 //! contract (`chassis interfaces --json`) that programs in other languages mirror.
@@ -20,6 +21,7 @@ mod description;
 mod frame;
 pub mod layout;
 mod mux;
+mod named;
 mod names;
 pub mod payload;
 mod request;

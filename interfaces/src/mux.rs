@@ -1,52 +1,29 @@
 //! `MuxStatus`: every decision of the priority mux, published on change and at 10 Hz.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
+use crate::named::named_constants;
 
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 use crate::{MAX_LOCKS, MAX_SOURCES, NAME_LEN};
 
-/// The velocity asked of the robot's body, in SI units (the same fields as a
-/// `VelocityRequest`): what the mux was asked and what it commands. Not a ROS `Twist`: it
-/// carries a steering angle and flags too.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::BodyVelocity.v1")]
-pub struct BodyVelocity {
-    pub linear_x_mps: f32,
-    pub linear_y_mps: f32,
-    pub angular_z_radps: f32,
-    pub steer_rad: f32,
-    /// `RequestFlags::STEER` when `steer_rad` is the command instead of `angular_z_radps`.
-    pub flags: u32,
-}
-
-describe_layout!(
-    BodyVelocity,
-    twist_description_covers_every_byte {
-        linear_x_mps,
-        linear_y_mps,
-        angular_z_radps,
-        steer_rad,
-        flags,
+ipc_type! {
+    /// The velocity asked of the robot's body, in SI units (the same fields as a
+    /// `VelocityRequest`): what the mux was asked and what it commands. Not a ROS `Twist`: it
+    /// carries a steering angle and flags too.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::BodyVelocity.v1")]
+    pub struct BodyVelocity {
+        pub linear_x_mps: f32,
+        pub linear_y_mps: f32,
+        pub angular_z_radps: f32,
+        pub steer_rad: f32,
+        /// `RequestFlags::STEER` when `steer_rad` is the command instead of `angular_z_radps`.
+        pub flags: u32,
     }
-);
+}
 
 impl BodyVelocity {
     pub const ZERO: BodyVelocity = BodyVelocity {
@@ -66,165 +43,102 @@ impl BodyVelocity {
     }
 }
 
-/// Why a command was changed on its way to the wire (`MuxStatus::clamp_flags`,
-/// `CommandEcho::clamp_flags`).
-#[derive(Debug, Clone, Copy)]
-pub struct ClampFlags;
-impl ClampFlags {
-    /// Linear speed beyond the robot's limit.
-    pub const LINEAR_LIMIT: u32 = 1 << 0;
-    /// Linear speed beyond the robot's limit while steering (TITAN: 1.5 m/s above 0.087 rad).
-    pub const LINEAR_LIMIT_STEERING: u32 = 1 << 1;
-    /// Steering angle beyond the robot's limit.
-    pub const STEER_LIMIT: u32 = 1 << 2;
-    /// Yaw rate beyond the robot's limit.
-    pub const ANGULAR_LIMIT: u32 = 1 << 3;
-    /// Lateral speed requested from a robot that cannot move sideways.
-    pub const LATERAL_UNSUPPORTED: u32 = 1 << 4;
-    /// A turn on the spot (ω with v = 0) requested from an Ackermann robot: unachievable.
-    pub const TURN_IN_PLACE_UNACHIEVABLE: u32 = 1 << 5;
-    /// The yaw rate asked for needs a tighter turn than the robot can make.
-    pub const TURN_RADIUS_LIMIT: u32 = 1 << 6;
-    /// Speed change limited by the configured acceleration (smoothing).
-    pub const ACCELERATION_LIMIT: u32 = 1 << 7;
-    /// Speed beyond the service's configured limit.
-    pub const CONFIG_SPEED_LIMIT: u32 = 1 << 8;
-    /// The wire's resolution changed the value (SCOUT MINI percent steps).
-    pub const QUANTISED: u32 = 1 << 9;
-    /// The chassis cannot move now (standby, brake, RC authority, fault): zero was sent.
-    pub const CHASSIS_NOT_READY: u32 = 1 << 10;
-    /// A limiting source (the safety monitor) clamped the winner's request.
-    pub const SAFETY_LIMIT: u32 = 1 << 11;
-
-    pub const ALL: [(u32, &'static str); 12] = [
-        (Self::LINEAR_LIMIT, "linear_limit"),
-        (Self::LINEAR_LIMIT_STEERING, "linear_limit_steering"),
-        (Self::STEER_LIMIT, "steer_limit"),
-        (Self::ANGULAR_LIMIT, "angular_limit"),
-        (Self::LATERAL_UNSUPPORTED, "lateral_unsupported"),
-        (
-            Self::TURN_IN_PLACE_UNACHIEVABLE,
-            "turn_in_place_unachievable",
-        ),
-        (Self::TURN_RADIUS_LIMIT, "turn_radius_limit"),
-        (Self::ACCELERATION_LIMIT, "acceleration_limit"),
-        (Self::CONFIG_SPEED_LIMIT, "config_speed_limit"),
-        (Self::QUANTISED, "quantised"),
-        (Self::CHASSIS_NOT_READY, "chassis_not_ready"),
-        (Self::SAFETY_LIMIT, "safety_limit"),
-    ];
-
-    pub fn names(bits: u32) -> Vec<&'static str> {
-        Self::ALL
-            .iter()
-            .filter(|(bit, _)| bits & bit != 0)
-            .map(|(_, name)| *name)
-            .collect()
+named_constants! {
+    /// Why a command was changed on its way to the wire (`MuxStatus::clamp_flags`,
+    /// `CommandEcho::clamp_flags`).
+    pub flags ClampFlags: u32 {
+        /// Linear speed beyond the robot's limit.
+        LINEAR_LIMIT = 1 << 0 => "linear_limit",
+        /// Linear speed beyond the robot's limit while steering (TITAN: 1.5 m/s above 0.087 rad).
+        LINEAR_LIMIT_STEERING = 1 << 1 => "linear_limit_steering",
+        /// Steering angle beyond the robot's limit.
+        STEER_LIMIT = 1 << 2 => "steer_limit",
+        /// Yaw rate beyond the robot's limit.
+        ANGULAR_LIMIT = 1 << 3 => "angular_limit",
+        /// Lateral speed requested from a robot that cannot move sideways.
+        LATERAL_UNSUPPORTED = 1 << 4 => "lateral_unsupported",
+        /// A turn on the spot (ω with v = 0) requested from an Ackermann robot: unachievable.
+        TURN_IN_PLACE_UNACHIEVABLE = 1 << 5 => "turn_in_place_unachievable",
+        /// The yaw rate asked for needs a tighter turn than the robot can make.
+        TURN_RADIUS_LIMIT = 1 << 6 => "turn_radius_limit",
+        /// Speed change limited by the configured acceleration (smoothing).
+        ACCELERATION_LIMIT = 1 << 7 => "acceleration_limit",
+        /// Speed beyond the service's configured limit.
+        CONFIG_SPEED_LIMIT = 1 << 8 => "config_speed_limit",
+        /// The wire's resolution changed the value (SCOUT MINI percent steps).
+        QUANTISED = 1 << 9 => "quantised",
+        /// The chassis cannot move now (standby, brake, RC authority, fault): zero was sent.
+        CHASSIS_NOT_READY = 1 << 10 => "chassis_not_ready",
+        /// A limiting source (the safety monitor) clamped the winner's request.
+        SAFETY_LIMIT = 1 << 11 => "safety_limit",
     }
 }
 
-/// Why the mux outputs zero (`MuxStatus::zero_reason`).
-#[derive(Debug, Clone, Copy)]
-pub struct ZeroReason;
-impl ZeroReason {
-    /// A source is active; the output is its (limited) request.
-    pub const NONE: u8 = 0;
-    /// No source has a fresh request.
-    pub const NO_ACTIVE_SOURCE: u8 = 1;
-    /// A required source (the safety monitor) is stale: fail-safe zero.
-    pub const REQUIRED_SOURCE_STALE: u8 = 2;
-    /// A lock blocks every fresh source.
-    pub const LOCKED: u8 = 3;
-    /// The mux has not started yet.
-    pub const STARTING: u8 = 4;
-    /// A lock was released while the source that would win asked for motion: a release never
-    /// starts motion, so the mux waits until that source asks for zero (or stops asking);
-    /// [`MuxStatus::awaiting_source`] names it.
-    pub const AWAITING_ZERO: u8 = 5;
-
-    pub fn name(reason: u8) -> &'static str {
-        match reason {
-            Self::NONE => "none",
-            Self::NO_ACTIVE_SOURCE => "no_active_source",
-            Self::REQUIRED_SOURCE_STALE => "required_source_stale",
-            Self::LOCKED => "locked",
-            Self::STARTING => "starting",
-            Self::AWAITING_ZERO => "awaiting_zero",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Why the mux outputs zero (`MuxStatus::zero_reason`).
+    pub enum ZeroReason: u8 {
+        /// A source is active; the output is its (limited) request.
+        NONE = 0 => "none",
+        /// No source has a fresh request.
+        NO_ACTIVE_SOURCE = 1 => "no_active_source",
+        /// A required source (the safety monitor) is stale: fail-safe zero.
+        REQUIRED_SOURCE_STALE = 2 => "required_source_stale",
+        /// A lock blocks every fresh source.
+        LOCKED = 3 => "locked",
+        /// The mux has not started yet.
+        STARTING = 4 => "starting",
+        /// A lock was released while the source that would win asked for motion: a release
+        /// never starts motion, so the mux waits until that source asks for zero (or stops
+        /// asking); [`MuxStatus::awaiting_source`] names it.
+        AWAITING_ZERO = 5 => "awaiting_zero",
     }
 }
 
-/// Bits of [`SourceStatus::flags`].
-#[derive(Debug, Clone, Copy)]
-pub struct SourceFlags;
-impl SourceFlags {
-    /// The source must be fresh for anything to move.
-    pub const REQUIRED: u8 = 1 << 0;
-    /// Its latest request is younger than its timeout.
-    pub const FRESH: u8 = 1 << 1;
-    /// It is the mux's winner.
-    pub const ACTIVE: u8 = 1 << 2;
-    /// Its latest request is a heartbeat (asks for nothing).
-    pub const HEARTBEAT: u8 = 1 << 3;
-    /// A lock of higher priority blocks it.
-    pub const BLOCKED: u8 = 1 << 4;
-    /// Its latest request is a speed envelope that currently limits the output.
-    pub const LIMITING: u8 = 1 << 5;
-    /// Configured `remote`: a bridge (`chassis-zenoh`) may publish on it for another computer.
-    pub const REMOTE: u8 = 1 << 6;
-    /// It asked for motion when a lock blocking it was released: its motion is not obeyed until
-    /// it asks for zero (or stops asking).
-    pub const AWAITING_ZERO: u8 = 1 << 7;
-}
-
-/// One configured velocity source, as the mux sees it.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SourceStatus.v1")]
-pub struct SourceStatus {
-    /// Source name (NUL-padded UTF-8), e.g. `teleop`.
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; NAME_LEN],
-    pub timeout_ms: u32,
-    /// Age of its latest request, ms; `u32::MAX` when it has never sent one.
-    pub age_ms: u32,
-    /// Requests rejected (non-finite values).
-    pub rejected: u32,
-    pub priority: u8,
-    /// [`SourceFlags`].
-    pub flags: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 2],
-    /// `seq` of its latest request.
-    pub last_seq: u64,
-}
-
-describe_layout!(
-    SourceStatus,
-    source_status_description_covers_every_byte {
-        name,
-        timeout_ms,
-        age_ms,
-        rejected,
-        priority,
-        flags,
-        _reserved,
-        last_seq,
+named_constants! {
+    /// Bits of [`SourceStatus::flags`].
+    pub flags SourceFlags: u8 {
+        /// The source must be fresh for anything to move.
+        REQUIRED = 1 << 0 => "required",
+        /// Its latest request is younger than its timeout.
+        FRESH = 1 << 1 => "fresh",
+        /// It is the mux's winner.
+        ACTIVE = 1 << 2 => "active",
+        /// Its latest request is a heartbeat (asks for nothing).
+        HEARTBEAT = 1 << 3 => "heartbeat",
+        /// A lock of higher priority blocks it.
+        BLOCKED = 1 << 4 => "blocked",
+        /// Its latest request is a speed envelope that currently limits the output.
+        LIMITING = 1 << 5 => "limiting",
+        /// Configured `remote`: a bridge (`chassis-zenoh`) may publish on it for another computer.
+        REMOTE = 1 << 6 => "remote",
+        /// It asked for motion when a lock blocking it was released: its motion is not obeyed
+        /// until it asks for zero (or stops asking).
+        AWAITING_ZERO = 1 << 7 => "awaiting_zero",
     }
-);
+}
+
+ipc_type! {
+    /// One configured velocity source, as the mux sees it.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SourceStatus.v1")]
+    pub struct SourceStatus {
+        /// Source name (NUL-padded UTF-8), e.g. `teleop`.
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; NAME_LEN],
+        pub timeout_ms: u32,
+        /// Age of its latest request, ms; `u32::MAX` when it has never sent one.
+        pub age_ms: u32,
+        /// Requests rejected (non-finite values).
+        pub rejected: u32,
+        pub priority: u8,
+        /// [`SourceFlags`].
+        pub flags: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 2],
+        /// `seq` of its latest request.
+        pub last_seq: u64,
+    }
+}
 
 impl SourceStatus {
     pub fn name(&self) -> &str {
@@ -238,50 +152,27 @@ impl SourceStatus {
     }
 }
 
-/// One configured lock.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::LockStatus.v1")]
-pub struct LockStatus {
-    /// Lock name (NUL-padded UTF-8), e.g. `estop`.
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub name: [u8; NAME_LEN],
-    /// `CLOCK_MONOTONIC` time it was engaged, ns (0 when free).
-    pub since_ns: u64,
-    /// Sources below this priority are blocked while the lock is held.
-    pub priority: u8,
-    /// 1 while held.
-    pub held: u8,
-    /// Index of the holding source, [`LockStatus::HOLDER_OPERATOR`] for a control request, or
-    /// [`LockStatus::HOLDER_NONE`].
-    pub holder: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 5],
-}
-
-describe_layout!(
-    LockStatus,
-    lock_status_description_covers_every_byte {
-        name,
-        since_ns,
-        priority,
-        held,
-        holder,
-        _reserved,
+ipc_type! {
+    /// One configured lock.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::LockStatus.v1")]
+    pub struct LockStatus {
+        /// Lock name (NUL-padded UTF-8), e.g. `estop`.
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub name: [u8; NAME_LEN],
+        /// `CLOCK_MONOTONIC` time it was engaged, ns (0 when free).
+        pub since_ns: u64,
+        /// Sources below this priority are blocked while the lock is held.
+        pub priority: u8,
+        /// 1 while held.
+        pub held: u8,
+        /// Index of the holding source, [`LockStatus::HOLDER_OPERATOR`] for a control request, or
+        /// [`LockStatus::HOLDER_NONE`].
+        pub holder: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 5],
     }
-);
+}
 
 impl LockStatus {
     pub const HOLDER_NONE: u8 = 0xFF;
@@ -295,73 +186,40 @@ impl LockStatus {
     }
 }
 
-/// The mux's decision.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::MuxStatus.v1")]
-pub struct MuxStatus {
-    /// `CLOCK_MONOTONIC` time of the decision, ns.
-    pub stamp_ns: u64,
-    pub seq: u64,
-    /// The winner's request as received (zero when nothing is active).
-    pub requested: BodyVelocity,
-    /// What the mux passed to the driver after limits and smoothing.
-    pub output: BodyVelocity,
-    /// [`ClampFlags`] the mux applied.
-    pub clamp_flags: u32,
-    /// Age of the winner's request, ms (`u32::MAX` when nothing is active).
-    pub active_age_ms: u32,
-    /// Requests rejected by the mux since start (non-finite values, unknown locks).
-    pub rejected_requests: u64,
-    /// Index into `sources` of the winner, or [`MuxStatus::NO_SOURCE`].
-    pub active_source: u8,
-    pub active_priority: u8,
-    /// [`ZeroReason`].
-    pub zero_reason: u8,
-    pub source_count: u8,
-    pub lock_count: u8,
-    /// While `zero_reason` is [`ZeroReason::AWAITING_ZERO`]: index into `sources` of the source
-    /// whose zero command the mux waits for (it would win). Was a reserved byte.
-    pub awaiting_source: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 2],
-    pub sources: [SourceStatus; MAX_SOURCES],
-    pub locks: [LockStatus; MAX_LOCKS],
-}
-
-describe_layout!(
-    MuxStatus,
-    mux_status_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        requested,
-        output,
-        clamp_flags,
-        active_age_ms,
-        rejected_requests,
-        active_source,
-        active_priority,
-        zero_reason,
-        source_count,
-        lock_count,
-        awaiting_source,
-        _reserved,
-        sources,
-        locks,
+ipc_type! {
+    /// The mux's decision.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::MuxStatus.v1")]
+    pub struct MuxStatus {
+        /// `CLOCK_MONOTONIC` time of the decision, ns.
+        pub stamp_ns: u64,
+        pub seq: u64,
+        /// The winner's request as received (zero when nothing is active).
+        pub requested: BodyVelocity,
+        /// What the mux passed to the driver after limits and smoothing.
+        pub output: BodyVelocity,
+        /// [`ClampFlags`] the mux applied.
+        pub clamp_flags: u32,
+        /// Age of the winner's request, ms (`u32::MAX` when nothing is active).
+        pub active_age_ms: u32,
+        /// Requests rejected by the mux since start (non-finite values, unknown locks).
+        pub rejected_requests: u64,
+        /// Index into `sources` of the winner, or [`MuxStatus::NO_SOURCE`].
+        pub active_source: u8,
+        pub active_priority: u8,
+        /// [`ZeroReason`].
+        pub zero_reason: u8,
+        pub source_count: u8,
+        pub lock_count: u8,
+        /// While `zero_reason` is [`ZeroReason::AWAITING_ZERO`]: index into `sources` of the source
+        /// whose zero command the mux waits for (it would win). Was a reserved byte.
+        pub awaiting_source: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 2],
+        pub sources: [SourceStatus; MAX_SOURCES],
+        pub locks: [LockStatus; MAX_LOCKS],
     }
-);
+}
 
 impl MuxStatus {
     pub const NO_SOURCE: u8 = 0xFF;
@@ -398,37 +256,6 @@ impl MuxStatus {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn mux_status_layout_is_pinned() {
-        assert_eq!(
-            (size_of::<BodyVelocity>(), align_of::<BodyVelocity>()),
-            (20, 4)
-        );
-        assert_eq!(offset_of!(BodyVelocity, flags), 16);
-        assert_eq!(
-            (size_of::<SourceStatus>(), align_of::<SourceStatus>()),
-            (40, 8)
-        );
-        assert_eq!(offset_of!(SourceStatus, timeout_ms), 16);
-        assert_eq!(offset_of!(SourceStatus, priority), 28);
-        assert_eq!(offset_of!(SourceStatus, last_seq), 32);
-        assert_eq!((size_of::<LockStatus>(), align_of::<LockStatus>()), (32, 8));
-        assert_eq!(offset_of!(LockStatus, since_ns), 16);
-        assert_eq!(offset_of!(LockStatus, holder), 26);
-        assert_eq!(size_of::<MuxStatus>(), 528);
-        assert_eq!(align_of::<MuxStatus>(), 8);
-        assert_eq!(offset_of!(MuxStatus, requested), 16);
-        assert_eq!(offset_of!(MuxStatus, output), 36);
-        assert_eq!(offset_of!(MuxStatus, clamp_flags), 56);
-        assert_eq!(offset_of!(MuxStatus, active_age_ms), 60);
-        assert_eq!(offset_of!(MuxStatus, rejected_requests), 64);
-        assert_eq!(offset_of!(MuxStatus, active_source), 72);
-        assert_eq!(offset_of!(MuxStatus, lock_count), 76);
-        assert_eq!(offset_of!(MuxStatus, sources), 80);
-        assert_eq!(offset_of!(MuxStatus, locks), 400);
-    }
 
     #[test]
     fn mux_status_names_its_sources_and_locks() {

@@ -1,96 +1,65 @@
 //! `VelocityRequest`: what a client asks the mux for, on its own `cmd/<source>` service.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
+use crate::named::named_constants;
 
-/// Bits of [`VelocityRequest::flags`] (and of `BodyVelocity::flags`).
-#[derive(Debug, Clone, Copy)]
-pub struct RequestFlags;
-impl RequestFlags {
-    /// `steer_rad` holds the steering angle to use (Ackermann robots); `angular_z_radps` is
-    /// ignored.
-    pub const STEER: u32 = 1 << 0;
-    /// A heartbeat: the source is alive but asks for nothing (it does not compete in the mux).
-    /// The safety monitor sends these while all is well.
-    pub const HEARTBEAT: u32 = 1 << 1;
-    /// The `limit_*` fields hold a speed envelope: the source does not compete, but clamps the
-    /// output of every source of its priority or lower, per direction (the safety monitor
-    /// slowing down, or blocking only the motion towards an obstacle). Implies a heartbeat.
-    pub const LIMIT: u32 = 1 << 2;
-}
-
-/// A velocity request from one source. Its priority and timeout come from the service's
-/// configuration, never from the request.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::VelocityRequest.v2")]
-pub struct VelocityRequest {
-    /// `CLOCK_MONOTONIC` time the request was created, ns.
-    pub stamp_ns: u64,
-    /// Incremented by the client for every request.
-    pub seq: u64,
-    /// Forward speed, m/s.
-    pub linear_x_mps: f32,
-    /// Lateral speed, m/s, left positive (omni robots only).
-    pub linear_y_mps: f32,
-    /// Yaw rate, rad/s, left turn positive.
-    pub angular_z_radps: f32,
-    /// Steering angle, rad, left turn positive; used when `flags` has [`RequestFlags::STEER`].
-    pub steer_rad: f32,
-    /// [`RequestFlags`].
-    pub flags: u32,
-    /// Lock bits this source engages (bit i = lock i of the mux's configuration, as listed in
-    /// `MuxStatus::locks`).
-    pub lock_engage: u32,
-    /// Lock bits this source releases (only locks it holds itself).
-    pub lock_release: u32,
-    #[serde(skip)]
-    pub _reserved: u32,
-    /// With [`RequestFlags::LIMIT`]: largest forward speed, m/s (≥ 0; 0 blocks forward motion).
-    pub limit_forward_mps: f32,
-    /// With [`RequestFlags::LIMIT`]: largest reverse speed, m/s (≥ 0; 0 blocks reversing).
-    pub limit_reverse_mps: f32,
-    /// With [`RequestFlags::LIMIT`]: largest |lateral speed|, m/s (≥ 0).
-    pub limit_lateral_mps: f32,
-    /// With [`RequestFlags::LIMIT`]: largest |yaw rate|, rad/s (≥ 0).
-    pub limit_angular_radps: f32,
-}
-
-describe_layout!(
-    VelocityRequest,
-    velocity_request_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        linear_x_mps,
-        linear_y_mps,
-        angular_z_radps,
-        steer_rad,
-        flags,
-        lock_engage,
-        lock_release,
-        _reserved,
-        limit_forward_mps,
-        limit_reverse_mps,
-        limit_lateral_mps,
-        limit_angular_radps,
+named_constants! {
+    /// Bits of [`VelocityRequest::flags`] (and of `BodyVelocity::flags`).
+    pub flags RequestFlags: u32 {
+        /// `steer_rad` holds the steering angle to use (Ackermann robots); `angular_z_radps` is
+        /// ignored.
+        STEER = 1 << 0 => "steer",
+        /// A heartbeat: the source is alive but asks for nothing (it does not compete in the
+        /// mux). The safety monitor sends these while all is well.
+        HEARTBEAT = 1 << 1 => "heartbeat",
+        /// The `limit_*` fields hold a speed envelope: the source does not compete, but clamps
+        /// the output of every source of its priority or lower, per direction (the safety
+        /// monitor slowing down, or blocking only the motion towards an obstacle). Implies a
+        /// heartbeat.
+        LIMIT = 1 << 2 => "limit",
     }
-);
+}
+
+ipc_type! {
+    /// A velocity request from one source. Its priority and timeout come from the service's
+    /// configuration, never from the request.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::VelocityRequest.v2")]
+    pub struct VelocityRequest {
+        /// `CLOCK_MONOTONIC` time the request was created, ns.
+        pub stamp_ns: u64,
+        /// Incremented by the client for every request.
+        pub seq: u64,
+        /// Forward speed, m/s.
+        pub linear_x_mps: f32,
+        /// Lateral speed, m/s, left positive (omni robots only).
+        pub linear_y_mps: f32,
+        /// Yaw rate, rad/s, left turn positive.
+        pub angular_z_radps: f32,
+        /// Steering angle, rad, left turn positive; used when `flags` has [`RequestFlags::STEER`].
+        pub steer_rad: f32,
+        /// [`RequestFlags`].
+        pub flags: u32,
+        /// Lock bits this source engages (bit i = lock i of the mux's configuration, as listed in
+        /// `MuxStatus::locks`).
+        pub lock_engage: u32,
+        /// Lock bits this source releases (only locks it holds itself).
+        pub lock_release: u32,
+        #[serde(skip)]
+        pub _reserved: u32,
+        /// With [`RequestFlags::LIMIT`]: largest forward speed, m/s (≥ 0; 0 blocks forward motion).
+        pub limit_forward_mps: f32,
+        /// With [`RequestFlags::LIMIT`]: largest reverse speed, m/s (≥ 0; 0 blocks reversing).
+        pub limit_reverse_mps: f32,
+        /// With [`RequestFlags::LIMIT`]: largest |lateral speed|, m/s (≥ 0).
+        pub limit_lateral_mps: f32,
+        /// With [`RequestFlags::LIMIT`]: largest |yaw rate|, rad/s (≥ 0).
+        pub limit_angular_radps: f32,
+    }
+}
 
 impl VelocityRequest {
     /// A twist request (v, ω).
@@ -170,24 +139,6 @@ impl VelocityRequest {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn velocity_request_layout_is_pinned() {
-        assert_eq!(size_of::<VelocityRequest>(), 64);
-        assert_eq!(align_of::<VelocityRequest>(), 8);
-        assert_eq!(offset_of!(VelocityRequest, stamp_ns), 0);
-        assert_eq!(offset_of!(VelocityRequest, seq), 8);
-        assert_eq!(offset_of!(VelocityRequest, linear_x_mps), 16);
-        assert_eq!(offset_of!(VelocityRequest, linear_y_mps), 20);
-        assert_eq!(offset_of!(VelocityRequest, angular_z_radps), 24);
-        assert_eq!(offset_of!(VelocityRequest, steer_rad), 28);
-        assert_eq!(offset_of!(VelocityRequest, flags), 32);
-        assert_eq!(offset_of!(VelocityRequest, lock_engage), 36);
-        assert_eq!(offset_of!(VelocityRequest, lock_release), 40);
-        assert_eq!(offset_of!(VelocityRequest, limit_forward_mps), 48);
-        assert_eq!(offset_of!(VelocityRequest, limit_angular_radps), 60);
-    }
 
     #[test]
     fn a_limit_is_alive_but_asks_for_nothing_and_must_not_be_negative() {

@@ -2,57 +2,40 @@
 //! own service `chassis/<name>/safety` (publish-subscribe, history 1, + event) on every change
 //! and at 10 Hz, so `chassis status` and dashboards can show every trigger and release.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
+use crate::named::named_constants;
 
 use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
 
-/// The monitor's rules: the index into the per-rule arrays of [`SafetyStatus`] and the bit in its
-/// rule masks.
-#[derive(Debug, Clone, Copy)]
-pub struct SafetyRule;
-impl SafetyRule {
-    /// Chassis fault flags that are not warnings.
-    pub const FAULT: u8 = 0;
-    /// Battery state of charge (or voltage where there is no BMS) below a threshold.
-    pub const BATTERY: u8 = 1;
-    /// No fresh state: the service or the chassis is silent, or the bus is down.
-    pub const STALE: u8 = 2;
-    /// The bumper (touch edge) is pressed.
-    pub const BUMPER: u8 = 3;
-    /// Something in front, inside the ultrasonic slow or stop zone (XBot).
-    pub const ULTRASONIC: u8 = 4;
-    /// Something behind, inside the IR slow or stop zone (XBot).
-    pub const IR: u8 = 5;
-    /// Measured speed above the limit.
-    pub const SPEED: u8 = 6;
-    /// The operator's e-stop (SIGUSR1 to the monitor).
-    pub const OPERATOR: u8 = 7;
-    /// Rules in use; the per-rule arrays have room for [`RULE_SLOTS`].
-    pub const COUNT: usize = 8;
-    /// Every rule's name, in index order.
-    pub const NAMES: [&'static str; Self::COUNT] = [
-        "fault",
-        "battery",
-        "stale",
-        "bumper",
-        "ultrasonic",
-        "ir",
-        "speed",
-        "operator",
-    ];
-
-    /// The rule's name (`fault`, `battery`, …), `unknown` for an unused index.
-    pub fn name(rule: u8) -> &'static str {
-        Self::NAMES
-            .get(usize::from(rule))
-            .copied()
-            .unwrap_or("unknown")
+named_constants! {
+    /// The monitor's rules: the index into the per-rule arrays of [`SafetyStatus`] and the bit in
+    /// its rule masks.
+    pub enum SafetyRule: u8 {
+        /// Chassis fault flags that are not warnings.
+        FAULT = 0 => "fault",
+        /// Battery state of charge (or voltage where there is no BMS) below a threshold.
+        BATTERY = 1 => "battery",
+        /// No fresh state: the service or the chassis is silent, or the bus is down.
+        STALE = 2 => "stale",
+        /// The bumper (touch edge) is pressed.
+        BUMPER = 3 => "bumper",
+        /// Something in front, inside the ultrasonic slow or stop zone (XBot).
+        ULTRASONIC = 4 => "ultrasonic",
+        /// Something behind, inside the IR slow or stop zone (XBot).
+        IR = 5 => "ir",
+        /// Measured speed above the limit.
+        SPEED = 6 => "speed",
+        /// The operator's e-stop (SIGUSR1 to the monitor).
+        OPERATOR = 7 => "operator",
     }
+}
+
+impl SafetyRule {
+    /// Rules in use; the per-rule arrays have room for [`RULE_SLOTS`].
+    pub const COUNT: usize = Self::NAMES.len();
 
     /// The rule's bit in the masks of [`SafetyStatus`].
     pub const fn bit(rule: u8) -> u32 {
@@ -63,8 +46,7 @@ impl SafetyRule {
     pub fn names(bits: u32) -> Vec<&'static str> {
         Self::NAMES
             .iter()
-            .enumerate()
-            .filter(|(i, _)| bits & (1 << i) != 0)
+            .filter(|(rule, _)| bits & Self::bit(*rule) != 0)
             .map(|(_, name)| *name)
             .collect()
     }
@@ -74,164 +56,98 @@ impl SafetyRule {
 pub const RULE_SLOTS: usize = 12;
 const _: () = assert!(SafetyRule::COUNT <= RULE_SLOTS);
 
-/// What the monitor publishes on its velocity source (`SafetyStatus::action`), mildest first.
-#[derive(Debug, Clone, Copy)]
-pub struct SafetyAction;
-impl SafetyAction {
-    /// All is well: heartbeats.
-    pub const NONE: u8 = 0;
-    /// A speed envelope (`VelocityRequest::limit`): slower, or no motion towards an obstacle.
-    pub const SLOW: u8 = 1;
-    /// An explicit zero request at the safety source's priority.
-    pub const STOP: u8 = 2;
-    /// A zero request that engages the `estop` lock, released only by the operator.
-    pub const LATCH: u8 = 3;
-
-    pub fn name(action: u8) -> &'static str {
-        match action {
-            Self::NONE => "none",
-            Self::SLOW => "slow",
-            Self::STOP => "stop",
-            Self::LATCH => "latch",
-            _ => "unknown",
-        }
+named_constants! {
+    /// What the monitor publishes on its velocity source (`SafetyStatus::action`), mildest first.
+    pub enum SafetyAction: u8 {
+        /// All is well: heartbeats.
+        NONE = 0 => "none",
+        /// A speed envelope (`VelocityRequest::limit`): slower, or no motion towards an obstacle.
+        SLOW = 1 => "slow",
+        /// An explicit zero request at the safety source's priority.
+        STOP = 2 => "stop",
+        /// A zero request that engages the `estop` lock, released only by the operator.
+        LATCH = 3 => "latch",
     }
 }
 
-/// The `estop` lock as the monitor last saw it in the mux status (`SafetyStatus::estop`).
-#[derive(Debug, Clone, Copy)]
-pub struct EstopState;
-impl EstopState {
-    /// No mux status yet, or the mux has no lock called `estop`.
-    pub const UNKNOWN: u8 = 0;
-    pub const FREE: u8 = 1;
-    /// Held by the monitor's own source.
-    pub const HELD_BY_MONITOR: u8 = 2;
-    /// Engaged by the operator (`chassis control estop`).
-    pub const HELD_BY_OPERATOR: u8 = 3;
-    /// Held by another source.
-    pub const HELD_BY_OTHER: u8 = 4;
-
-    pub fn name(state: u8) -> &'static str {
-        match state {
-            Self::FREE => "free",
-            Self::HELD_BY_MONITOR => "held by the monitor",
-            Self::HELD_BY_OPERATOR => "held by the operator",
-            Self::HELD_BY_OTHER => "held by another source",
-            _ => "unknown",
-        }
+named_constants! {
+    /// The `estop` lock as the monitor last saw it in the mux status (`SafetyStatus::estop`).
+    pub enum EstopState: u8 {
+        /// No mux status yet, or the mux has no lock called `estop`.
+        UNKNOWN = 0 => "unknown",
+        FREE = 1 => "free",
+        /// Held by the monitor's own source.
+        HELD_BY_MONITOR = 2 => "held by the monitor",
+        /// Engaged by the operator (`chassis control estop`).
+        HELD_BY_OPERATOR = 3 => "held by the operator",
+        /// Held by another source.
+        HELD_BY_OTHER = 4 => "held by another source",
     }
 }
 
-/// The kind of the monitor's last event (`SafetyStatus::last_event`).
-#[derive(Debug, Clone, Copy)]
-pub struct SafetyEvent;
-impl SafetyEvent {
-    pub const NONE: u8 = 0;
-    /// A rule triggered, or went to a stricter level (slow zone → stop zone).
-    pub const TRIGGER: u8 = 1;
-    /// A rule released, or went to a milder level.
-    pub const RELEASE: u8 = 2;
-    /// The operator released the `estop` lock a rule had latched.
-    pub const UNLATCH: u8 = 3;
-
-    pub fn name(event: u8) -> &'static str {
-        match event {
-            Self::NONE => "none",
-            Self::TRIGGER => "trigger",
-            Self::RELEASE => "release",
-            Self::UNLATCH => "unlatch",
-            _ => "unknown",
-        }
+named_constants! {
+    /// The kind of the monitor's last event (`SafetyStatus::last_event`).
+    pub enum SafetyEvent: u8 {
+        NONE = 0 => "none",
+        /// A rule triggered, or went to a stricter level (slow zone → stop zone).
+        TRIGGER = 1 => "trigger",
+        /// A rule released, or went to a milder level.
+        RELEASE = 2 => "release",
+        /// The operator released the `estop` lock a rule had latched.
+        UNLATCH = 3 => "unlatch",
     }
 }
 
-/// The safety monitor's decision and its history.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SafetyStatus.v1")]
-pub struct SafetyStatus {
-    /// `CLOCK_MONOTONIC` time of the decision, ns.
-    pub stamp_ns: u64,
-    /// Incremented for every published sample.
-    pub seq: u64,
-    /// `CLOCK_MONOTONIC` time the monitor started, ns.
-    pub started_ns: u64,
-    /// `seq` of the `ChassisState` the decision was made on (0: none yet).
-    pub state_seq: u64,
-    /// Age of that state sample (since its `stamp_ns`) at `stamp_ns`, ms, saturating.
-    pub state_age_ms: u32,
-    /// [`SafetyRule`] bits of the rules in force (triggered and not yet released).
-    pub active_rules: u32,
-    /// [`SafetyRule`] bits of latching rules whose latch the operator released while their
-    /// condition was still present: they act again only once it clears and comes back.
-    pub acknowledged_rules: u32,
-    /// [`SafetyRule`] bits of the rules enabled in the monitor's configuration.
-    pub enabled_rules: u32,
-    /// The envelope in force, m/s and rad/s ([`SafetyStatus::UNLIMITED`]: no limit; all zero
-    /// while stopping).
-    pub limit_forward_mps: f32,
-    pub limit_reverse_mps: f32,
-    pub limit_lateral_mps: f32,
-    pub limit_angular_radps: f32,
-    /// [`SafetyAction`].
-    pub action: u8,
-    /// [`EstopState`].
-    pub estop: u8,
-    /// The [`SafetyRule`] of the last event (0xFF: none yet).
-    pub last_rule: u8,
-    /// [`SafetyEvent`] kind of the last event.
-    pub last_event: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 4],
-    /// Times each rule triggered since the monitor started.
-    pub trigger_counts: [u32; RULE_SLOTS],
-    /// `CLOCK_MONOTONIC` time each rule last triggered, ns (0: never).
-    pub last_trigger_ns: [u64; RULE_SLOTS],
-    /// `CLOCK_MONOTONIC` time of the last event, ns (0: none yet).
-    pub last_event_ns: u64,
-    /// The last event in words (NUL-padded UTF-8), e.g. `ultrasonic: stop zone, 0.30 m < 0.35 m`.
-    #[serde(serialize_with = "serialize_fixed_str")]
-    pub last_text: [u8; SafetyStatus::TEXT_LEN],
-}
-
-describe_layout!(
-    SafetyStatus,
-    safety_status_description_covers_every_byte {
-        stamp_ns,
-        seq,
-        started_ns,
-        state_seq,
-        state_age_ms,
-        active_rules,
-        acknowledged_rules,
-        enabled_rules,
-        limit_forward_mps,
-        limit_reverse_mps,
-        limit_lateral_mps,
-        limit_angular_radps,
-        action,
-        estop,
-        last_rule,
-        last_event,
-        _reserved,
-        trigger_counts,
-        last_trigger_ns,
-        last_event_ns,
-        last_text,
+ipc_type! {
+    /// The safety monitor's decision and its history.
+    #[derive(Serialize)]
+    #[type_name("chassis::SafetyStatus.v1")]
+    pub struct SafetyStatus {
+        /// `CLOCK_MONOTONIC` time of the decision, ns.
+        pub stamp_ns: u64,
+        /// Incremented for every published sample.
+        pub seq: u64,
+        /// `CLOCK_MONOTONIC` time the monitor started, ns.
+        pub started_ns: u64,
+        /// `seq` of the `ChassisState` the decision was made on (0: none yet).
+        pub state_seq: u64,
+        /// Age of that state sample (since its `stamp_ns`) at `stamp_ns`, ms, saturating.
+        pub state_age_ms: u32,
+        /// [`SafetyRule`] bits of the rules in force (triggered and not yet released).
+        pub active_rules: u32,
+        /// [`SafetyRule`] bits of latching rules whose latch the operator released while their
+        /// condition was still present: they act again only once it clears and comes back.
+        pub acknowledged_rules: u32,
+        /// [`SafetyRule`] bits of the rules enabled in the monitor's configuration.
+        pub enabled_rules: u32,
+        /// The envelope in force, m/s and rad/s ([`SafetyStatus::UNLIMITED`]: no limit; all zero
+        /// while stopping).
+        pub limit_forward_mps: f32,
+        pub limit_reverse_mps: f32,
+        pub limit_lateral_mps: f32,
+        pub limit_angular_radps: f32,
+        /// [`SafetyAction`].
+        pub action: u8,
+        /// [`EstopState`].
+        pub estop: u8,
+        /// The [`SafetyRule`] of the last event (0xFF: none yet).
+        pub last_rule: u8,
+        /// [`SafetyEvent`] kind of the last event.
+        pub last_event: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 4],
+        /// Times each rule triggered since the monitor started.
+        pub trigger_counts: [u32; RULE_SLOTS],
+        /// `CLOCK_MONOTONIC` time each rule last triggered, ns (0: never).
+        pub last_trigger_ns: [u64; RULE_SLOTS],
+        /// `CLOCK_MONOTONIC` time of the last event, ns (0: none yet).
+        pub last_event_ns: u64,
+        /// The last event in words (NUL-padded UTF-8), e.g.
+        /// `ultrasonic: stop zone, 0.30 m < 0.35 m`.
+        #[serde(serialize_with = "serialize_fixed_str")]
+        pub last_text: [u8; SafetyStatus::TEXT_LEN],
     }
-);
+}
 
 impl Default for SafetyStatus {
     fn default() -> Self {
@@ -296,33 +212,6 @@ impl SafetyStatus {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn safety_status_layout_is_pinned() {
-        assert_eq!(size_of::<SafetyStatus>(), 288);
-        assert_eq!(align_of::<SafetyStatus>(), 8);
-        assert_eq!(offset_of!(SafetyStatus, seq), 8);
-        assert_eq!(offset_of!(SafetyStatus, state_seq), 24);
-        assert_eq!(offset_of!(SafetyStatus, state_age_ms), 32);
-        assert_eq!(offset_of!(SafetyStatus, active_rules), 36);
-        assert_eq!(offset_of!(SafetyStatus, enabled_rules), 44);
-        assert_eq!(offset_of!(SafetyStatus, limit_forward_mps), 48);
-        assert_eq!(offset_of!(SafetyStatus, limit_angular_radps), 60);
-        assert_eq!(offset_of!(SafetyStatus, action), 64);
-        assert_eq!(offset_of!(SafetyStatus, last_event), 67);
-        assert_eq!(offset_of!(SafetyStatus, trigger_counts), 72);
-        assert_eq!(offset_of!(SafetyStatus, last_trigger_ns), 120);
-        assert_eq!(offset_of!(SafetyStatus, last_event_ns), 216);
-        assert_eq!(offset_of!(SafetyStatus, last_text), 224);
-    }
-
-    #[test]
-    fn safety_status_type_name_carries_a_layout_version() {
-        // SAFETY: type_name only returns the string given to the derive.
-        let name = unsafe { <SafetyStatus as ZeroCopySend>::type_name() };
-        assert_eq!(name, "chassis::SafetyStatus.v1");
-    }
 
     #[test]
     fn rule_names_and_bits_agree() {

@@ -5,12 +5,11 @@
 //! [`ChassisState::group_stamp_ns`] entry. Readers decide staleness against their own clock
 //! (`CLOCK_MONOTONIC`), so a zero is never mistaken for a reading.
 
-use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-use crate::layout::describe_layout;
+use crate::layout::ipc_type;
+use crate::named::named_constants;
 
 /// Signal groups: the index into [`ChassisState::group_stamp_ns`] and the bit in
 /// [`ChassisState::valid_mask`].
@@ -127,209 +126,132 @@ impl Group {
 pub const GROUP_SLOTS: usize = 24;
 const _: () = assert!(Group::COUNT <= GROUP_SLOTS);
 
-/// Link and authority flags (`ChassisState::link_flags`).
-#[derive(Debug, Clone, Copy)]
-pub struct LinkFlags;
-impl LinkFlags {
-    /// No feedback frame from the chassis for longer than the configured silence limit.
-    pub const CHASSIS_SILENT: u32 = 1 << 0;
-    /// The bus itself is gone (interface down, serial port unplugged); the service retries.
-    pub const BUS_DOWN: u32 = 1 << 1;
-    /// The chassis reports it obeys our motion commands.
-    pub const COMMAND_MODE: u32 = 1 << 2;
-    /// An RC transmitter holds authority; our commands are not obeyed (reported, not fought).
-    pub const RC_AUTHORITY: u32 = 1 << 3;
-    /// A steering-zero calibration was sent and its acknowledgement has not arrived yet.
-    pub const STEERING_ZERO_PENDING: u32 = 1 << 4;
-    /// The GPS receiver's stream is gone.
-    pub const GPS_DOWN: u32 = 1 << 5;
-    /// The chassis was told to stop transmitting (CAN-upgrade silent mode).
-    pub const SILENT_MODE: u32 = 1 << 6;
-    /// The CAN controller is error-passive: an error counter passed 127 (SocketCAN error
-    /// frames; `LinkStats::can_state`). It still sends and receives, but the bus is unhealthy.
-    pub const CAN_ERROR_PASSIVE: u32 = 1 << 7;
-    /// The CAN controller is bus-off: it takes no part in the bus until it is restarted
-    /// (`restart-ms`, or the interface taken down and up); nothing reaches the chassis.
-    pub const CAN_BUS_OFF: u32 = 1 << 8;
-    /// Set by a mirror on another computer (`chassis-zenoh --mirror`), never by chassisd:
-    /// nothing has arrived from the robot over the network for longer than the mirror's loss
-    /// limit (or its liveliness token is gone). The sample is the last one received, published
-    /// again; the robot's own remote sources time out on the robot.
-    pub const REMOTE_LOST: u32 = 1 << 9;
-
-    /// Names of the set bits, for logs and JSON.
-    pub fn names(bits: u32) -> Vec<&'static str> {
-        const NAMES: [(u32, &str); 10] = [
-            (LinkFlags::CHASSIS_SILENT, "chassis_silent"),
-            (LinkFlags::BUS_DOWN, "bus_down"),
-            (LinkFlags::COMMAND_MODE, "command_mode"),
-            (LinkFlags::RC_AUTHORITY, "rc_authority"),
-            (LinkFlags::STEERING_ZERO_PENDING, "steering_zero_pending"),
-            (LinkFlags::GPS_DOWN, "gps_down"),
-            (LinkFlags::SILENT_MODE, "silent_mode"),
-            (LinkFlags::CAN_ERROR_PASSIVE, "can_error_passive"),
-            (LinkFlags::CAN_BUS_OFF, "can_bus_off"),
-            (LinkFlags::REMOTE_LOST, "remote_lost"),
-        ];
-        NAMES
-            .iter()
-            .filter(|(bit, _)| bits & bit != 0)
-            .map(|(_, name)| *name)
-            .collect()
+named_constants! {
+    /// Link and authority flags (`ChassisState::link_flags`).
+    pub flags LinkFlags: u32 {
+        /// No feedback frame from the chassis for longer than the configured silence limit.
+        CHASSIS_SILENT = 1 << 0 => "chassis_silent",
+        /// The bus itself is gone (interface down, serial port unplugged); the service retries.
+        BUS_DOWN = 1 << 1 => "bus_down",
+        /// The chassis reports it obeys our motion commands.
+        COMMAND_MODE = 1 << 2 => "command_mode",
+        /// An RC transmitter holds authority; our commands are not obeyed (reported, not fought).
+        RC_AUTHORITY = 1 << 3 => "rc_authority",
+        /// A steering-zero calibration was sent and its acknowledgement has not arrived yet.
+        STEERING_ZERO_PENDING = 1 << 4 => "steering_zero_pending",
+        /// The GPS receiver's stream is gone.
+        GPS_DOWN = 1 << 5 => "gps_down",
+        /// The chassis was told to stop transmitting (CAN-upgrade silent mode).
+        SILENT_MODE = 1 << 6 => "silent_mode",
+        /// The CAN controller is error-passive: an error counter passed 127 (SocketCAN error
+        /// frames; `LinkStats::can_state`). It still sends and receives, but the bus is unhealthy.
+        CAN_ERROR_PASSIVE = 1 << 7 => "can_error_passive",
+        /// The CAN controller is bus-off: it takes no part in the bus until it is restarted
+        /// (`restart-ms`, or the interface taken down and up); nothing reaches the chassis.
+        CAN_BUS_OFF = 1 << 8 => "can_bus_off",
+        /// Set by a mirror on another computer (`chassis-zenoh --mirror`), never by chassisd:
+        /// nothing has arrived from the robot over the network for longer than the mirror's loss
+        /// limit (or its liveliness token is gone). The sample is the last one received, published
+        /// again; the robot's own remote sources time out on the robot.
+        REMOTE_LOST = 1 << 9 => "remote_lost",
     }
 }
 
-/// The CAN controller's error state (`LinkStats::can_state`), as ISO 11898-1 defines it from
-/// the controller's transmit and receive error counters and SocketCAN reports it.
-#[derive(Debug, Clone, Copy)]
-pub struct ControllerState;
-impl ControllerState {
-    /// Not known: not a CAN bus, or the controller reported nothing (a vcan has no controller).
-    pub const UNKNOWN: u8 = 0;
-    /// Both error counters below 96: all is well.
-    pub const ERROR_ACTIVE: u8 = 1;
-    /// An error counter reached 96.
-    pub const ERROR_WARNING: u8 = 2;
-    /// An error counter passed 127: the controller no longer signals the errors it sees.
-    pub const ERROR_PASSIVE: u8 = 3;
-    /// The transmit error counter passed 255: the controller is off the bus.
-    pub const BUS_OFF: u8 = 4;
-
-    pub fn name(state: u8) -> &'static str {
-        match state {
-            Self::ERROR_ACTIVE => "error-active",
-            Self::ERROR_WARNING => "error-warning",
-            Self::ERROR_PASSIVE => "error-passive",
-            Self::BUS_OFF => "bus-off",
-            _ => "unknown",
-        }
+named_constants! {
+    /// The CAN controller's error state (`LinkStats::can_state`), as ISO 11898-1 defines it from
+    /// the controller's transmit and receive error counters and SocketCAN reports it.
+    pub enum ControllerState: u8 {
+        /// Not known: not a CAN bus, or the controller reported nothing (a vcan has no controller).
+        UNKNOWN = 0 => "unknown",
+        /// Both error counters below 96: all is well.
+        ERROR_ACTIVE = 1 => "error-active",
+        /// An error counter reached 96.
+        ERROR_WARNING = 2 => "error-warning",
+        /// An error counter passed 127: the controller no longer signals the errors it sees.
+        ERROR_PASSIVE = 3 => "error-passive",
+        /// The transmit error counter passed 255: the controller is off the bus.
+        BUS_OFF = 4 => "bus-off",
     }
 }
 
-/// Normalized control mode (`SystemState::control_mode`), the same for every robot.
-#[derive(Debug, Clone, Copy)]
-pub struct ControlMode;
-impl ControlMode {
-    pub const UNKNOWN: u8 = 0;
-    /// Powered up, reacting only to the mode frame (TITAN).
-    pub const STANDBY: u8 = 1;
-    /// Obeying commands from this computer (CAN or serial command mode).
-    pub const COMMAND: u8 = 2;
-    /// An RC transmitter is in control.
-    pub const REMOTE: u8 = 3;
-    /// Serial command mode (commands on another port; CAN commands ignored): SCOUT MINI V1, and
-    /// protocol V2's "UART" / "APP" mode (0x211 b1 = 0x02 where the profile's mode codes say so).
-    pub const SERIAL: u8 = 4;
-
-    pub fn name(mode: u8) -> &'static str {
-        match mode {
-            Self::STANDBY => "standby",
-            Self::COMMAND => "command",
-            Self::REMOTE => "remote",
-            Self::SERIAL => "serial",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Normalized control mode (`SystemState::control_mode`), the same for every robot.
+    pub enum ControlMode: u8 {
+        UNKNOWN = 0 => "unknown",
+        /// Powered up, reacting only to the mode frame (TITAN).
+        STANDBY = 1 => "standby",
+        /// Obeying commands from this computer (CAN or serial command mode).
+        COMMAND = 2 => "command",
+        /// An RC transmitter is in control.
+        REMOTE = 3 => "remote",
+        /// Serial command mode (commands on another port; CAN commands ignored): SCOUT MINI V1,
+        /// and protocol V2's "UART" / "APP" mode (0x211 b1 = 0x02 where the profile's mode codes
+        /// say so).
+        SERIAL = 4 => "serial",
     }
 }
 
-/// Which AgileX wire protocol the driver speaks (`SystemState::wire_protocol`).
-#[derive(Debug, Clone, Copy)]
-pub struct WireProtocol;
-impl WireProtocol {
-    /// The robot has one protocol of its own (TITAN, XBot).
-    pub const OWN: u8 = 0;
-    /// AgileX V1 (count and checksum in every frame).
-    pub const V1: u8 = 1;
-    /// AgileX V2 (the TITAN's layout family).
-    pub const V2: u8 = 2;
-    /// Listening to find out (SCOUT MINI on a real bus): nothing is sent yet.
-    pub const DETECTING: u8 = 3;
-
-    pub fn name(protocol: u8) -> &'static str {
-        match protocol {
-            Self::OWN => "own",
-            Self::V1 => "v1",
-            Self::V2 => "v2",
-            Self::DETECTING => "detecting",
-            _ => "unknown",
-        }
+named_constants! {
+    /// Which AgileX wire protocol the driver speaks (`SystemState::wire_protocol`).
+    pub enum WireProtocol: u8 {
+        /// The robot has one protocol of its own (TITAN, XBot).
+        OWN = 0 => "own",
+        /// AgileX V1 (count and checksum in every frame).
+        V1 = 1 => "v1",
+        /// AgileX V2 (the TITAN's layout family).
+        V2 = 2 => "v2",
+        /// Listening to find out (SCOUT MINI on a real bus): nothing is sent yet.
+        DETECTING = 3 => "detecting",
     }
 }
 
-/// Normalized fault flags (`SystemState::fault_flags`); the vendor's own word is kept beside it in
-/// `SystemState::vendor_fault_word`.
-#[derive(Debug, Clone, Copy)]
-pub struct FaultFlags;
+named_constants! {
+    /// Normalized fault flags (`SystemState::fault_flags`); the vendor's own word is kept beside
+    /// it in `SystemState::vendor_fault_word`.
+    pub flags FaultFlags: u64 {
+        /// The chassis lost our heartbeat (TITAN "upper-computer communication lost").
+        HEARTBEAT_LOST = 1 << 0 => "heartbeat_lost",
+        /// Battery under-voltage failure: drive power cut.
+        BATTERY_UNDER_VOLTAGE = 1 << 1 => "battery_under_voltage",
+        /// Battery under-voltage alarm (warning level).
+        BATTERY_UNDER_VOLTAGE_WARNING = 1 << 2 => "battery_under_voltage_warning",
+        /// Battery over-voltage failure.
+        BATTERY_OVER_VOLTAGE = 1 << 3 => "battery_over_voltage",
+        /// A motor driver reports an error.
+        MOTOR_DRIVER_ERROR = 1 << 4 => "motor_driver_error",
+        /// Motor 1 driver communication lost (motor 2-4: the next three bits).
+        MOTOR_1_COMM_LOST = 1 << 5 => "motor_1_comm_lost",
+        MOTOR_2_COMM_LOST = 1 << 6 => "motor_2_comm_lost",
+        MOTOR_3_COMM_LOST = 1 << 7 => "motor_3_comm_lost",
+        MOTOR_4_COMM_LOST = 1 << 8 => "motor_4_comm_lost",
+        /// Over-temperature protection (drive limited until cleared).
+        OVER_TEMPERATURE = 1 << 9 => "over_temperature",
+        /// Over-temperature alarm (clears itself).
+        OVER_TEMPERATURE_WARNING = 1 << 10 => "over_temperature_warning",
+        /// Over-current protection (until cleared).
+        OVER_CURRENT = 1 << 11 => "over_current",
+        /// Over-current alarm (clears itself).
+        OVER_CURRENT_WARNING = 1 << 12 => "over_current_warning",
+        FRONT_STEERING_ENCODER = 1 << 13 => "front_steering_encoder",
+        REAR_STEERING_ENCODER = 1 << 14 => "rear_steering_encoder",
+        /// The bumper (touch edge) stopped the robot.
+        BUMPER = 1 << 15 => "bumper",
+        /// The RC transmitter link is lost / the transmitter is off.
+        RC_LINK_LOST = 1 << 16 => "rc_link_lost",
+        /// The chassis received a command frame with a wrong checksum (SCOUT MINI).
+        COMMAND_CHECKSUM = 1 << 17 => "command_checksum",
+        /// The chassis reports an emergency stop.
+        EMERGENCY_STOP = 1 << 18 => "emergency_stop",
+        /// The chassis reports an exception body state.
+        BODY_EXCEPTION = 1 << 19 => "body_exception",
+        /// State of charge below the low-battery warning level.
+        BATTERY_LOW = 1 << 20 => "battery_low",
+        /// Any BMS alarm bit is set.
+        BMS_ALARM = 1 << 21 => "bms_alarm",
+    }
+}
+
 impl FaultFlags {
-    /// The chassis lost our heartbeat (TITAN "upper-computer communication lost").
-    pub const HEARTBEAT_LOST: u64 = 1 << 0;
-    /// Battery under-voltage failure: drive power cut.
-    pub const BATTERY_UNDER_VOLTAGE: u64 = 1 << 1;
-    /// Battery under-voltage alarm (warning level).
-    pub const BATTERY_UNDER_VOLTAGE_WARNING: u64 = 1 << 2;
-    /// Battery over-voltage failure.
-    pub const BATTERY_OVER_VOLTAGE: u64 = 1 << 3;
-    /// A motor driver reports an error.
-    pub const MOTOR_DRIVER_ERROR: u64 = 1 << 4;
-    /// Motor 1 driver communication lost (motor 2-4: the next three bits).
-    pub const MOTOR_1_COMM_LOST: u64 = 1 << 5;
-    pub const MOTOR_2_COMM_LOST: u64 = 1 << 6;
-    pub const MOTOR_3_COMM_LOST: u64 = 1 << 7;
-    pub const MOTOR_4_COMM_LOST: u64 = 1 << 8;
-    /// Over-temperature protection (drive limited until cleared).
-    pub const OVER_TEMPERATURE: u64 = 1 << 9;
-    /// Over-temperature alarm (clears itself).
-    pub const OVER_TEMPERATURE_WARNING: u64 = 1 << 10;
-    /// Over-current protection (until cleared).
-    pub const OVER_CURRENT: u64 = 1 << 11;
-    /// Over-current alarm (clears itself).
-    pub const OVER_CURRENT_WARNING: u64 = 1 << 12;
-    pub const FRONT_STEERING_ENCODER: u64 = 1 << 13;
-    pub const REAR_STEERING_ENCODER: u64 = 1 << 14;
-    /// The bumper (touch edge) stopped the robot.
-    pub const BUMPER: u64 = 1 << 15;
-    /// The RC transmitter link is lost / the transmitter is off.
-    pub const RC_LINK_LOST: u64 = 1 << 16;
-    /// The chassis received a command frame with a wrong checksum (SCOUT MINI).
-    pub const COMMAND_CHECKSUM: u64 = 1 << 17;
-    /// The chassis reports an emergency stop.
-    pub const EMERGENCY_STOP: u64 = 1 << 18;
-    /// The chassis reports an exception body state.
-    pub const BODY_EXCEPTION: u64 = 1 << 19;
-    /// State of charge below the low-battery warning level.
-    pub const BATTERY_LOW: u64 = 1 << 20;
-    /// Any BMS alarm bit is set.
-    pub const BMS_ALARM: u64 = 1 << 21;
-
-    /// Every flag with its name, in bit order.
-    pub const ALL: [(u64, &'static str); 22] = [
-        (Self::HEARTBEAT_LOST, "heartbeat_lost"),
-        (Self::BATTERY_UNDER_VOLTAGE, "battery_under_voltage"),
-        (
-            Self::BATTERY_UNDER_VOLTAGE_WARNING,
-            "battery_under_voltage_warning",
-        ),
-        (Self::BATTERY_OVER_VOLTAGE, "battery_over_voltage"),
-        (Self::MOTOR_DRIVER_ERROR, "motor_driver_error"),
-        (Self::MOTOR_1_COMM_LOST, "motor_1_comm_lost"),
-        (Self::MOTOR_2_COMM_LOST, "motor_2_comm_lost"),
-        (Self::MOTOR_3_COMM_LOST, "motor_3_comm_lost"),
-        (Self::MOTOR_4_COMM_LOST, "motor_4_comm_lost"),
-        (Self::OVER_TEMPERATURE, "over_temperature"),
-        (Self::OVER_TEMPERATURE_WARNING, "over_temperature_warning"),
-        (Self::OVER_CURRENT, "over_current"),
-        (Self::OVER_CURRENT_WARNING, "over_current_warning"),
-        (Self::FRONT_STEERING_ENCODER, "front_steering_encoder"),
-        (Self::REAR_STEERING_ENCODER, "rear_steering_encoder"),
-        (Self::BUMPER, "bumper"),
-        (Self::RC_LINK_LOST, "rc_link_lost"),
-        (Self::COMMAND_CHECKSUM, "command_checksum"),
-        (Self::EMERGENCY_STOP, "emergency_stop"),
-        (Self::BODY_EXCEPTION, "body_exception"),
-        (Self::BATTERY_LOW, "battery_low"),
-        (Self::BMS_ALARM, "bms_alarm"),
-    ];
-
     /// Flags that only warn: the chassis still drives.
     pub const WARNINGS: u64 = Self::BATTERY_UNDER_VOLTAGE_WARNING
         | Self::OVER_TEMPERATURE_WARNING
@@ -338,200 +260,103 @@ impl FaultFlags {
         | Self::RC_LINK_LOST
         | Self::BMS_ALARM
         | Self::COMMAND_CHECKSUM;
+}
 
-    /// Names of the set bits.
-    pub fn names(bits: u64) -> Vec<&'static str> {
-        Self::ALL
-            .iter()
-            .filter(|(bit, _)| bits & bit != 0)
-            .map(|(_, name)| *name)
-            .collect()
-    }
-
-    /// The bit with this name, if any.
-    pub fn from_name(name: &str) -> Option<u64> {
-        Self::ALL
-            .iter()
-            .find(|(_, n)| *n == name)
-            .map(|(bit, _)| *bit)
+named_constants! {
+    /// Motor driver status bits (`MotorState::driver_status`), as TITAN's 0x261-0x264 byte 5.
+    pub flags DriverStatus: u8 {
+        SUPPLY_UNDER_VOLTAGE = 1 << 0 => "supply_under_voltage",
+        MOTOR_OVER_TEMPERATURE = 1 << 1 => "motor_over_temperature",
+        DRIVER_OVER_CURRENT = 1 << 2 => "driver_over_current",
+        DRIVER_OVER_TEMPERATURE = 1 << 3 => "driver_over_temperature",
+        SENSOR_FAULT = 1 << 4 => "sensor_fault",
+        DRIVER_ERROR = 1 << 5 => "driver_error",
+        ENABLED = 1 << 6 => "enabled",
     }
 }
 
-/// Motor driver status bits (`MotorState::driver_status`), as TITAN's 0x261-0x264 byte 5.
-#[derive(Debug, Clone, Copy)]
-pub struct DriverStatus;
-impl DriverStatus {
-    pub const SUPPLY_UNDER_VOLTAGE: u8 = 1 << 0;
-    pub const MOTOR_OVER_TEMPERATURE: u8 = 1 << 1;
-    pub const DRIVER_OVER_CURRENT: u8 = 1 << 2;
-    pub const DRIVER_OVER_TEMPERATURE: u8 = 1 << 3;
-    pub const SENSOR_FAULT: u8 = 1 << 4;
-    pub const DRIVER_ERROR: u8 = 1 << 5;
-    pub const ENABLED: u8 = 1 << 6;
-}
-
-/// Speeds and steering.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::MotionState.v1")]
-pub struct MotionState {
-    /// Forward speed of the body, m/s.
-    pub linear_mps: f32,
-    /// Yaw rate, rad/s, left turn positive.
-    pub angular_radps: f32,
-    /// Lateral speed, m/s, left positive (omni robots).
-    pub lateral_mps: f32,
-    /// Body steering angle (TITAN: inner wheel angle), rad, left turn positive.
-    pub steer_rad: f32,
-    /// Front axle inner steering angle, rad, left turn positive.
-    pub front_steer_rad: f32,
-    /// Rear axle inner steering angle, rad (rear steers opposite the front on TITAN).
-    pub rear_steer_rad: f32,
-    /// Front axle speed (mean of its wheels), m/s.
-    pub front_axle_mps: f32,
-    /// Rear axle speed (mean of its wheels), m/s.
-    pub rear_axle_mps: f32,
-    /// Wheel speeds front-left, front-right, rear-left, rear-right, m/s.
-    pub wheel_mps: [f32; 4],
-}
-
-describe_layout!(
-    MotionState,
-    motion_state_description_covers_every_byte {
-        linear_mps,
-        angular_radps,
-        lateral_mps,
-        steer_rad,
-        front_steer_rad,
-        rear_steer_rad,
-        front_axle_mps,
-        rear_axle_mps,
-        wheel_mps,
+ipc_type! {
+    /// Speeds and steering.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::MotionState.v1")]
+    pub struct MotionState {
+        /// Forward speed of the body, m/s.
+        pub linear_mps: f32,
+        /// Yaw rate, rad/s, left turn positive.
+        pub angular_radps: f32,
+        /// Lateral speed, m/s, left positive (omni robots).
+        pub lateral_mps: f32,
+        /// Body steering angle (TITAN: inner wheel angle), rad, left turn positive.
+        pub steer_rad: f32,
+        /// Front axle inner steering angle, rad, left turn positive.
+        pub front_steer_rad: f32,
+        /// Rear axle inner steering angle, rad (rear steers opposite the front on TITAN).
+        pub rear_steer_rad: f32,
+        /// Front axle speed (mean of its wheels), m/s.
+        pub front_axle_mps: f32,
+        /// Rear axle speed (mean of its wheels), m/s.
+        pub rear_axle_mps: f32,
+        /// Wheel speeds front-left, front-right, rear-left, rear-right, m/s.
+        pub wheel_mps: [f32; 4],
     }
-);
-
-/// Distances and the integrated pose.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::OdometryState.v1")]
-pub struct OdometryState {
-    /// Front axle odometer, m (TITAN 0x311).
-    pub front_distance_m: f64,
-    /// Rear axle odometer, m.
-    pub rear_distance_m: f64,
-    /// Left side distance, m (from wheel encoders where the robot has them).
-    pub left_distance_m: f64,
-    /// Right side distance, m.
-    pub right_distance_m: f64,
-    /// Pose integrated from the reported speeds, in the frame the robot started in: x, m.
-    pub x_m: f64,
-    /// y, m.
-    pub y_m: f64,
-    /// Heading, rad, wrapped to (-π, π].
-    pub yaw_rad: f64,
 }
 
-describe_layout!(
-    OdometryState,
-    odometry_state_description_covers_every_byte {
-        front_distance_m,
-        rear_distance_m,
-        left_distance_m,
-        right_distance_m,
-        x_m,
-        y_m,
-        yaw_rad,
+ipc_type! {
+    /// Distances and the integrated pose.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::OdometryState.v1")]
+    pub struct OdometryState {
+        /// Front axle odometer, m (TITAN 0x311).
+        pub front_distance_m: f64,
+        /// Rear axle odometer, m.
+        pub rear_distance_m: f64,
+        /// Left side distance, m (from wheel encoders where the robot has them).
+        pub left_distance_m: f64,
+        /// Right side distance, m.
+        pub right_distance_m: f64,
+        /// Pose integrated from the reported speeds, in the frame the robot started in: x, m.
+        pub x_m: f64,
+        /// y, m.
+        pub y_m: f64,
+        /// Heading, rad, wrapped to (-π, π].
+        pub yaw_rad: f64,
     }
-);
-
-/// Body status, mode, faults and battery.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::SystemState.v1")]
-pub struct SystemState {
-    /// Normalized [`FaultFlags`].
-    pub fault_flags: u64,
-    /// The vendor's raw fault word (TITAN 0x211 b4-7, SCOUT MINI 0x151 b4-5).
-    pub vendor_fault_word: u32,
-    /// Battery voltage, V.
-    pub battery_voltage_v: f32,
-    /// Battery state of charge, %, from the BMS where there is one.
-    pub battery_soc_pct: f32,
-    /// Battery current, A, from the BMS where there is one (positive = discharge).
-    pub battery_current_a: f32,
-    /// [`SystemState::BODY_NORMAL`], [`SystemState::BODY_EMERGENCY_STOP`] or
-    /// [`SystemState::BODY_EXCEPTION`].
-    pub body_status: u8,
-    /// [`ControlMode`].
-    pub control_mode: u8,
-    /// 1 when the parking brake is engaged (TITAN, as last commanded).
-    pub parking_brake_engaged: u8,
-    /// 1 when off-road mode is on (TITAN, as last commanded and accepted).
-    pub off_road: u8,
-    /// 1 when the chassis was told to enter CAN-upgrade silent mode.
-    pub silent_mode: u8,
-    /// 1 when the steering zero position was set and acknowledged since start.
-    pub steering_zero_done: u8,
-    /// 1 when drive power is enabled (XBot power command; others: always 1 once reported).
-    pub power_enabled: u8,
-    /// [`WireProtocol`] the driver speaks (was a reserved byte: readers that ignore it see 0).
-    pub wire_protocol: u8,
 }
 
-describe_layout!(
-    SystemState,
-    system_state_description_covers_every_byte {
-        fault_flags,
-        vendor_fault_word,
-        battery_voltage_v,
-        battery_soc_pct,
-        battery_current_a,
-        body_status,
-        control_mode,
-        parking_brake_engaged,
-        off_road,
-        silent_mode,
-        steering_zero_done,
-        power_enabled,
-        wire_protocol,
+ipc_type! {
+    /// Body status, mode, faults and battery.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::SystemState.v1")]
+    pub struct SystemState {
+        /// Normalized [`FaultFlags`].
+        pub fault_flags: u64,
+        /// The vendor's raw fault word (TITAN 0x211 b4-7, SCOUT MINI 0x151 b4-5).
+        pub vendor_fault_word: u32,
+        /// Battery voltage, V.
+        pub battery_voltage_v: f32,
+        /// Battery state of charge, %, from the BMS where there is one.
+        pub battery_soc_pct: f32,
+        /// Battery current, A, from the BMS where there is one (positive = discharge).
+        pub battery_current_a: f32,
+        /// [`SystemState::BODY_NORMAL`], [`SystemState::BODY_EMERGENCY_STOP`] or
+        /// [`SystemState::BODY_EXCEPTION`].
+        pub body_status: u8,
+        /// [`ControlMode`].
+        pub control_mode: u8,
+        /// 1 when the parking brake is engaged (TITAN, as last commanded).
+        pub parking_brake_engaged: u8,
+        /// 1 when off-road mode is on (TITAN, as last commanded and accepted).
+        pub off_road: u8,
+        /// 1 when the chassis was told to enter CAN-upgrade silent mode.
+        pub silent_mode: u8,
+        /// 1 when the steering zero position was set and acknowledged since start.
+        pub steering_zero_done: u8,
+        /// 1 when drive power is enabled (XBot power command; others: always 1 once reported).
+        pub power_enabled: u8,
+        /// [`WireProtocol`] the driver speaks (was a reserved byte: readers that ignore it see 0).
+        pub wire_protocol: u8,
     }
-);
+}
 
 impl SystemState {
     pub const BODY_NORMAL: u8 = 0;
@@ -539,381 +364,177 @@ impl SystemState {
     pub const BODY_EXCEPTION: u8 = 2;
 }
 
-/// One drive motor and its driver.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::MotorState.v1")]
-pub struct MotorState {
-    /// Encoder position, counts (unwrapped where the wire value wraps).
-    pub position_counts: i64,
-    /// Shaft speed, rpm.
-    pub rpm: f32,
-    /// Motor current, A.
-    pub current_a: f32,
-    /// Driver supply voltage, V.
-    pub driver_voltage_v: f32,
-    /// Driver temperature, °C.
-    pub driver_temp_c: f32,
-    /// Motor temperature, °C.
-    pub motor_temp_c: f32,
-    /// [`DriverStatus`] bits.
-    pub driver_status: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 3],
-}
-
-describe_layout!(
-    MotorState,
-    motor_state_description_covers_every_byte {
-        position_counts,
-        rpm,
-        current_a,
-        driver_voltage_v,
-        driver_temp_c,
-        motor_temp_c,
-        driver_status,
-        _reserved,
+ipc_type! {
+    /// One drive motor and its driver.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::MotorState.v1")]
+    pub struct MotorState {
+        /// Encoder position, counts (unwrapped where the wire value wraps).
+        pub position_counts: i64,
+        /// Shaft speed, rpm.
+        pub rpm: f32,
+        /// Motor current, A.
+        pub current_a: f32,
+        /// Driver supply voltage, V.
+        pub driver_voltage_v: f32,
+        /// Driver temperature, °C.
+        pub driver_temp_c: f32,
+        /// Motor temperature, °C.
+        pub motor_temp_c: f32,
+        /// [`DriverStatus`] bits.
+        pub driver_status: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 3],
     }
-);
-
-/// One BMS group (0 = pack, 1 = battery 1, 2 = battery 2).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::BmsState.v1")]
-pub struct BmsState {
-    pub soc_pct: f32,
-    pub soh_pct: f32,
-    pub voltage_v: f32,
-    /// Current, A (positive = discharge).
-    pub current_a: f32,
-    pub temperature_c: f32,
-    /// Raw alarm bytes: alarm 1 (bits 0-7), alarm 2 (8-15), warning 1 (16-23), warning 2 (24-31).
-    pub alarm_flags: u32,
 }
 
-describe_layout!(
-    BmsState,
-    bms_state_description_covers_every_byte {
-        soc_pct,
-        soh_pct,
-        voltage_v,
-        current_a,
-        temperature_c,
-        alarm_flags,
+ipc_type! {
+    /// One BMS group (0 = pack, 1 = battery 1, 2 = battery 2).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::BmsState.v1")]
+    pub struct BmsState {
+        pub soc_pct: f32,
+        pub soh_pct: f32,
+        pub voltage_v: f32,
+        /// Current, A (positive = discharge).
+        pub current_a: f32,
+        pub temperature_c: f32,
+        /// Raw alarm bytes: alarm 1 (bits 0-7), alarm 2 (8-15), warning 1 (16-23), warning 2
+        /// (24-31).
+        pub alarm_flags: u32,
     }
-);
-
-/// RC transmitter.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::RcState.v1")]
-pub struct RcState {
-    /// Switch positions as the wire has them: 1 middle, 2 up, 3 down.
-    pub switch_a: u8,
-    pub switch_b: u8,
-    pub switch_c: u8,
-    pub switch_d: u8,
-    /// Stick positions, % of full deflection, [-100, 100].
-    pub right_x_pct: i8,
-    pub right_y_pct: i8,
-    pub left_y_pct: i8,
-    pub left_x_pct: i8,
-    /// Knob VRA, %.
-    pub knob_a_pct: i8,
-    /// Rolling counter of the RC frame.
-    pub counter: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 2],
 }
 
-describe_layout!(
-    RcState,
-    rc_state_description_covers_every_byte {
-        switch_a,
-        switch_b,
-        switch_c,
-        switch_d,
-        right_x_pct,
-        right_y_pct,
-        left_y_pct,
-        left_x_pct,
-        knob_a_pct,
-        counter,
-        _reserved,
+ipc_type! {
+    /// RC transmitter.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::RcState.v1")]
+    pub struct RcState {
+        /// Switch positions as the wire has them: 1 middle, 2 up, 3 down.
+        pub switch_a: u8,
+        pub switch_b: u8,
+        pub switch_c: u8,
+        pub switch_d: u8,
+        /// Stick positions, % of full deflection, [-100, 100].
+        pub right_x_pct: i8,
+        pub right_y_pct: i8,
+        pub left_y_pct: i8,
+        pub left_x_pct: i8,
+        /// Knob VRA, %.
+        pub knob_a_pct: i8,
+        /// Rolling counter of the RC frame.
+        pub counter: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 2],
     }
-);
-
-/// Lights.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::LightsState.v1")]
-pub struct LightsState {
-    /// 1 when light control by command is enabled.
-    pub control_enabled: u8,
-    /// [`crate::LightMode`] of the front light.
-    pub front_mode: u8,
-    /// Custom brightness, % (valid in custom mode).
-    pub front_brightness_pct: u8,
-    #[serde(skip)]
-    pub _reserved: u8,
 }
 
-describe_layout!(
-    LightsState,
-    lights_state_description_covers_every_byte {
-        control_enabled,
-        front_mode,
-        front_brightness_pct,
-        _reserved,
+ipc_type! {
+    /// Lights.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::LightsState.v1")]
+    pub struct LightsState {
+        /// 1 when light control by command is enabled.
+        pub control_enabled: u8,
+        /// [`crate::LightMode`] of the front light.
+        pub front_mode: u8,
+        /// Custom brightness, % (valid in custom mode).
+        pub front_brightness_pct: u8,
+        #[serde(skip)]
+        pub _reserved: u8,
     }
-);
-
-/// Range sensors (XBot).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::RangesState.v1")]
-pub struct RangesState {
-    /// IR cliff/range sensors rear-left, rear-centre, rear-right, m.
-    pub ir_m: [f32; 3],
-    /// Ultrasonic rangers front-left, front-centre, front-right, m.
-    pub ultrasonic_m: [f32; 3],
 }
 
-describe_layout!(
-    RangesState,
-    ranges_state_description_covers_every_byte { ir_m, ultrasonic_m }
-);
-
-/// Inertial measurement unit, in the sensor's axes.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::ImuState.v1")]
-pub struct ImuState {
-    pub accel_mps2: [f32; 3],
-    pub gyro_radps: [f32; 3],
-    pub mag_gauss: [f32; 3],
-    pub roll_rad: f32,
-    pub pitch_rad: f32,
-    pub yaw_rad: f32,
-    pub temperature_c: f32,
-    /// The sensor board's own timestamp, µs (wraps at 65536 on the XBot).
-    pub sensor_stamp_us: u32,
-}
-
-describe_layout!(
-    ImuState,
-    imu_state_description_covers_every_byte {
-        accel_mps2,
-        gyro_radps,
-        mag_gauss,
-        roll_rad,
-        pitch_rad,
-        yaw_rad,
-        temperature_c,
-        sensor_stamp_us,
+ipc_type! {
+    /// Range sensors (XBot).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::RangesState.v1")]
+    pub struct RangesState {
+        /// IR cliff/range sensors rear-left, rear-centre, rear-right, m.
+        pub ir_m: [f32; 3],
+        /// Ultrasonic rangers front-left, front-centre, front-right, m.
+        pub ultrasonic_m: [f32; 3],
     }
-);
-
-/// Lift platform (XBot).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::LiftState.v1")]
-pub struct LiftState {
-    /// Lift encoder, counts (unwrapped).
-    pub encoder_counts: i64,
-    /// Commanded position, % of travel (0 bottom, 100 top).
-    pub target_pct: f32,
-    /// Lift motor current, A.
-    pub current_a: f32,
-    /// 1 when the lift is enabled (as commanded).
-    pub enabled: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 7],
 }
 
-describe_layout!(
-    LiftState,
-    lift_state_description_covers_every_byte {
-        encoder_counts,
-        target_pct,
-        current_a,
-        enabled,
-        _reserved,
+ipc_type! {
+    /// Inertial measurement unit, in the sensor's axes.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::ImuState.v1")]
+    pub struct ImuState {
+        pub accel_mps2: [f32; 3],
+        pub gyro_radps: [f32; 3],
+        pub mag_gauss: [f32; 3],
+        pub roll_rad: f32,
+        pub pitch_rad: f32,
+        pub yaw_rad: f32,
+        pub temperature_c: f32,
+        /// The sensor board's own timestamp, µs (wraps at 65536 on the XBot).
+        pub sensor_stamp_us: u32,
     }
-);
-
-/// Pan and tilt servos (XBot), as commanded.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::PanTiltState.v1")]
-pub struct PanTiltState {
-    /// Pan, rad: 0 ahead, left positive.
-    pub pan_rad: f32,
-    /// Tilt, rad: 0 ahead, up positive.
-    pub tilt_rad: f32,
 }
 
-describe_layout!(
-    PanTiltState,
-    pan_tilt_state_description_covers_every_byte { pan_rad, tilt_rad }
-);
-
-/// GPS fix from the NMEA 0183 stream.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::GpsFix.v1")]
-pub struct GpsFix {
-    /// Latitude, degrees, north positive (0 when there is no fix: check `fix_quality`).
-    pub latitude_deg: f64,
-    /// Longitude, degrees, east positive.
-    pub longitude_deg: f64,
-    /// UTC time of day of the fix, s.
-    pub utc_time_s: f64,
-    /// Altitude above mean sea level, m.
-    pub altitude_m: f32,
-    /// Horizontal dilution of precision.
-    pub hdop: f32,
-    /// Speed over ground, m/s.
-    pub speed_mps: f32,
-    /// Course over ground, rad, clockwise from true north (as NMEA gives it).
-    pub course_rad: f32,
-    /// UTC date as `yyyymmdd`, 0 when unknown.
-    pub utc_date: u32,
-    /// GGA fix quality: 0 = no fix, 1 = GPS, 2 = DGPS, 4 = RTK fixed, 5 = RTK float, …
-    pub fix_quality: u8,
-    /// Satellites used in the fix.
-    pub satellites: u8,
-    /// GSA fix type: 1 = none, 2 = 2D, 3 = 3D, 0 = unknown.
-    pub fix_type: u8,
-    #[serde(skip)]
-    pub _reserved: u8,
-}
-
-describe_layout!(
-    GpsFix,
-    gps_fix_description_covers_every_byte {
-        latitude_deg,
-        longitude_deg,
-        utc_time_s,
-        altitude_m,
-        hdop,
-        speed_mps,
-        course_rad,
-        utc_date,
-        fix_quality,
-        satellites,
-        fix_type,
-        _reserved,
+ipc_type! {
+    /// Lift platform (XBot).
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::LiftState.v1")]
+    pub struct LiftState {
+        /// Lift encoder, counts (unwrapped).
+        pub encoder_counts: i64,
+        /// Commanded position, % of travel (0 bottom, 100 top).
+        pub target_pct: f32,
+        /// Lift motor current, A.
+        pub current_a: f32,
+        /// 1 when the lift is enabled (as commanded).
+        pub enabled: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 7],
     }
-);
+}
+
+ipc_type! {
+    /// Pan and tilt servos (XBot), as commanded.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::PanTiltState.v1")]
+    pub struct PanTiltState {
+        /// Pan, rad: 0 ahead, left positive.
+        pub pan_rad: f32,
+        /// Tilt, rad: 0 ahead, up positive.
+        pub tilt_rad: f32,
+    }
+}
+
+ipc_type! {
+    /// GPS fix from the NMEA 0183 stream.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::GpsFix.v1")]
+    pub struct GpsFix {
+        /// Latitude, degrees, north positive (0 when there is no fix: check `fix_quality`).
+        pub latitude_deg: f64,
+        /// Longitude, degrees, east positive.
+        pub longitude_deg: f64,
+        /// UTC time of day of the fix, s.
+        pub utc_time_s: f64,
+        /// Altitude above mean sea level, m.
+        pub altitude_m: f32,
+        /// Horizontal dilution of precision.
+        pub hdop: f32,
+        /// Speed over ground, m/s.
+        pub speed_mps: f32,
+        /// Course over ground, rad, clockwise from true north (as NMEA gives it).
+        pub course_rad: f32,
+        /// UTC date as `yyyymmdd`, 0 when unknown.
+        pub utc_date: u32,
+        /// GGA fix quality: 0 = no fix, 1 = GPS, 2 = DGPS, 4 = RTK fixed, 5 = RTK float, …
+        pub fix_quality: u8,
+        /// Satellites used in the fix.
+        pub satellites: u8,
+        /// GSA fix type: 1 = none, 2 = 2D, 3 = 3D, 0 = unknown.
+        pub fix_type: u8,
+        #[serde(skip)]
+        pub _reserved: u8,
+    }
+}
 
 impl GpsFix {
     /// True when the receiver reports a usable position.
@@ -922,212 +543,114 @@ impl GpsFix {
     }
 }
 
-/// The motion command the driver actually put on the wire, after quantisation and clamping.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::CommandEcho.v1")]
-pub struct CommandEcho {
-    pub linear_mps: f32,
-    pub lateral_mps: f32,
-    pub angular_radps: f32,
-    pub steer_rad: f32,
-    /// [`crate::ClampFlags`] applied by the driver (robot limits, unachievable requests).
-    pub clamp_flags: u32,
-    #[serde(skip)]
-    pub _reserved: u32,
+ipc_type! {
+    /// The motion command the driver actually put on the wire, after quantisation and clamping.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::CommandEcho.v1")]
+    pub struct CommandEcho {
+        pub linear_mps: f32,
+        pub lateral_mps: f32,
+        pub angular_radps: f32,
+        pub steer_rad: f32,
+        /// [`crate::ClampFlags`] applied by the driver (robot limits, unachievable requests).
+        pub clamp_flags: u32,
+        #[serde(skip)]
+        pub _reserved: u32,
+    }
 }
 
-describe_layout!(
-    CommandEcho,
-    command_echo_description_covers_every_byte {
-        linear_mps,
-        lateral_mps,
-        angular_radps,
-        steer_rad,
-        clamp_flags,
-        _reserved,
+ipc_type! {
+    /// Counters of the bus link.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::LinkStats.v3")]
+    pub struct LinkStats {
+        /// Frames received and decoded.
+        pub rx_frames: u64,
+        /// Frames sent.
+        pub tx_frames: u64,
+        /// Received frames dropped for a bad checksum.
+        pub rx_bad_checksum: u64,
+        /// Received frames dropped because they could not be decoded (length, values).
+        pub rx_decode_errors: u64,
+        /// Received frames with an id this robot does not use (ignored).
+        pub rx_unknown_id: u64,
+        /// Serial bytes discarded while resynchronising.
+        pub rx_bytes_discarded: u64,
+        /// Frames that could not be written to the bus.
+        pub tx_errors: u64,
+        /// Times the bus was lost and reopened.
+        pub bus_reconnects: u64,
+        /// Samples, answers and reader wake-ups chassisd could not publish over iceoryx2.
+        pub ipc_failures: u64,
+        /// SocketCAN error frames read: the CAN controller's reports on itself and the bus.
+        pub can_error_frames: u64,
+        /// Times the CAN controller became error-passive.
+        pub can_error_passive: u64,
+        /// Times the CAN controller went bus-off.
+        pub can_bus_off: u64,
+        /// Times the CAN controller was restarted after a bus-off (the kernel's `restart-ms`, or
+        /// `ip link set IFACE type can restart`).
+        pub can_restarts: u64,
+        /// Protocol violations the CAN controller reported (bit, stuff, form, CRC errors): noise,
+        /// a wrong bit rate, missing termination or CAN H and L swapped.
+        pub can_bus_errors: u64,
+        /// Reports of a frame sent that no other node acknowledged: the controller is alone on the
+        /// bus, or hears it at another bit rate.
+        pub can_no_ack: u64,
+        /// [`ControllerState`] of the CAN controller now.
+        pub can_state: u8,
+        /// The controller's transmit and receive error counters, as its last report carrying them.
+        pub can_tx_error_count: u8,
+        pub can_rx_error_count: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 5],
     }
-);
-
-/// Counters of the bus link.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::LinkStats.v3")]
-pub struct LinkStats {
-    /// Frames received and decoded.
-    pub rx_frames: u64,
-    /// Frames sent.
-    pub tx_frames: u64,
-    /// Received frames dropped for a bad checksum.
-    pub rx_bad_checksum: u64,
-    /// Received frames dropped because they could not be decoded (length, values).
-    pub rx_decode_errors: u64,
-    /// Received frames with an id this robot does not use (ignored).
-    pub rx_unknown_id: u64,
-    /// Serial bytes discarded while resynchronising.
-    pub rx_bytes_discarded: u64,
-    /// Frames that could not be written to the bus.
-    pub tx_errors: u64,
-    /// Times the bus was lost and reopened.
-    pub bus_reconnects: u64,
-    /// Samples, answers and reader wake-ups chassisd could not publish over iceoryx2.
-    pub ipc_failures: u64,
-    /// SocketCAN error frames read: the CAN controller's reports on itself and the bus.
-    pub can_error_frames: u64,
-    /// Times the CAN controller became error-passive.
-    pub can_error_passive: u64,
-    /// Times the CAN controller went bus-off.
-    pub can_bus_off: u64,
-    /// Times the CAN controller was restarted after a bus-off (the kernel's `restart-ms`, or
-    /// `ip link set IFACE type can restart`).
-    pub can_restarts: u64,
-    /// Protocol violations the CAN controller reported (bit, stuff, form, CRC errors): noise,
-    /// a wrong bit rate, missing termination or CAN H and L swapped.
-    pub can_bus_errors: u64,
-    /// Reports of a frame sent that no other node acknowledged: the controller is alone on the
-    /// bus, or hears it at another bit rate.
-    pub can_no_ack: u64,
-    /// [`ControllerState`] of the CAN controller now.
-    pub can_state: u8,
-    /// The controller's transmit and receive error counters, as its last report carrying them.
-    pub can_tx_error_count: u8,
-    pub can_rx_error_count: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 5],
 }
 
-describe_layout!(
-    LinkStats,
-    link_stats_description_covers_every_byte {
-        rx_frames,
-        tx_frames,
-        rx_bad_checksum,
-        rx_decode_errors,
-        rx_unknown_id,
-        rx_bytes_discarded,
-        tx_errors,
-        bus_reconnects,
-        ipc_failures,
-        can_error_frames,
-        can_error_passive,
-        can_bus_off,
-        can_restarts,
-        can_bus_errors,
-        can_no_ack,
-        can_state,
-        can_tx_error_count,
-        can_rx_error_count,
-        _reserved,
+ipc_type! {
+    /// One snapshot of everything the chassis reports.
+    #[derive(Default, Serialize)]
+    #[type_name("chassis::ChassisState.v3")]
+    pub struct ChassisState {
+        /// Incremented for every published sample.
+        pub seq: u64,
+        /// `CLOCK_MONOTONIC` receive time of the frame that produced this sample, ns.
+        pub stamp_ns: u64,
+        /// [`Group`] bits that have been reported at least once.
+        pub valid_mask: u32,
+        /// [`LinkFlags`].
+        pub link_flags: u32,
+        /// The robot's kind: `chassis_protocols::RobotKind` as a number (its registry's key;
+        /// 0: none), as in `RobotDescription::kind`. What the kind *is* — its names, limits,
+        /// geometry — comes from the description chassisd publishes (`chassis/<name>/robot`),
+        /// never from a table of a client's.
+        pub robot: u8,
+        #[serde(skip)]
+        pub _reserved: [u8; 7],
+        /// Last update of each [`Group`], `CLOCK_MONOTONIC` ns, 0 = never.
+        pub group_stamp_ns: [u64; GROUP_SLOTS],
+        pub motion: MotionState,
+        pub odometry: OdometryState,
+        pub system: SystemState,
+        /// Motors 1-4 (TITAN, SCOUT MINI: as numbered by the vendor; XBot: front-left, front-right,
+        /// rear-left, rear-right).
+        pub motors: [MotorState; 4],
+        /// BMS groups: 0 = pack, 1 = battery 1, 2 = battery 2.
+        pub bms: [BmsState; 3],
+        pub rc: RcState,
+        pub lights: LightsState,
+        pub ranges: RangesState,
+        pub imu: ImuState,
+        pub lift: LiftState,
+        pub pan_tilt: PanTiltState,
+        pub gps: GpsFix,
+        pub command: CommandEcho,
+        pub link: LinkStats,
+        /// `CLOCK_MONOTONIC` time `chassisd` handed this sample to iceoryx2, ns: with
+        /// `stamp_ns`, the service's own part of the state path.
+        pub published_ns: u64,
     }
-);
-
-/// One snapshot of everything the chassis reports.
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Default,
-    FromBytes,
-    IntoBytes,
-    Immutable,
-    KnownLayout,
-    ZeroCopySend,
-    Serialize,
-)]
-#[type_name("chassis::ChassisState.v3")]
-pub struct ChassisState {
-    /// Incremented for every published sample.
-    pub seq: u64,
-    /// `CLOCK_MONOTONIC` receive time of the frame that produced this sample, ns.
-    pub stamp_ns: u64,
-    /// [`Group`] bits that have been reported at least once.
-    pub valid_mask: u32,
-    /// [`LinkFlags`].
-    pub link_flags: u32,
-    /// The robot's kind: `chassis_protocols::RobotKind` as a number (its registry's key; 0:
-    /// none), as in `RobotDescription::kind`. What the kind *is* — its names, limits, geometry —
-    /// comes from the description chassisd publishes (`chassis/<name>/robot`), never from a
-    /// table of a client's.
-    pub robot: u8,
-    #[serde(skip)]
-    pub _reserved: [u8; 7],
-    /// Last update of each [`Group`], `CLOCK_MONOTONIC` ns, 0 = never.
-    pub group_stamp_ns: [u64; GROUP_SLOTS],
-    pub motion: MotionState,
-    pub odometry: OdometryState,
-    pub system: SystemState,
-    /// Motors 1-4 (TITAN, SCOUT MINI: as numbered by the vendor; XBot: front-left, front-right,
-    /// rear-left, rear-right).
-    pub motors: [MotorState; 4],
-    /// BMS groups: 0 = pack, 1 = battery 1, 2 = battery 2.
-    pub bms: [BmsState; 3],
-    pub rc: RcState,
-    pub lights: LightsState,
-    pub ranges: RangesState,
-    pub imu: ImuState,
-    pub lift: LiftState,
-    pub pan_tilt: PanTiltState,
-    pub gps: GpsFix,
-    pub command: CommandEcho,
-    pub link: LinkStats,
-    /// `CLOCK_MONOTONIC` time `chassisd` handed this sample to iceoryx2, ns: with `stamp_ns`, the
-    /// service's own part of the state path.
-    pub published_ns: u64,
 }
-
-describe_layout!(
-    ChassisState,
-    chassis_state_description_covers_every_byte {
-        seq,
-        stamp_ns,
-        valid_mask,
-        link_flags,
-        robot,
-        _reserved,
-        group_stamp_ns,
-        motion,
-        odometry,
-        system,
-        motors,
-        bms,
-        rc,
-        lights,
-        ranges,
-        imu,
-        lift,
-        pan_tilt,
-        gps,
-        command,
-        link,
-        published_ns,
-    }
-);
 
 impl ChassisState {
     /// Marks `group` as updated at `now_ns`.
@@ -1156,100 +679,6 @@ impl ChassisState {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of, size_of};
-
-    #[test]
-    fn chassis_state_layout_is_pinned() {
-        assert_eq!(size_of::<ChassisState>(), 896);
-        assert_eq!(offset_of!(ChassisState, published_ns), 888);
-        assert_eq!(align_of::<ChassisState>(), 8);
-        assert_eq!(offset_of!(ChassisState, seq), 0);
-        assert_eq!(offset_of!(ChassisState, stamp_ns), 8);
-        assert_eq!(offset_of!(ChassisState, valid_mask), 16);
-        assert_eq!(offset_of!(ChassisState, link_flags), 20);
-        assert_eq!(offset_of!(ChassisState, robot), 24);
-        assert_eq!(offset_of!(ChassisState, group_stamp_ns), 32);
-        assert_eq!(offset_of!(ChassisState, motion), 224);
-        assert_eq!(offset_of!(ChassisState, odometry), 272);
-        assert_eq!(offset_of!(ChassisState, system), 328);
-        assert_eq!(offset_of!(ChassisState, motors), 360);
-        assert_eq!(offset_of!(ChassisState, bms), 488);
-        assert_eq!(offset_of!(ChassisState, rc), 560);
-        assert_eq!(offset_of!(ChassisState, lights), 572);
-        assert_eq!(offset_of!(ChassisState, ranges), 576);
-        assert_eq!(offset_of!(ChassisState, imu), 600);
-        assert_eq!(offset_of!(ChassisState, lift), 656);
-        assert_eq!(offset_of!(ChassisState, pan_tilt), 680);
-        assert_eq!(offset_of!(ChassisState, gps), 688);
-        assert_eq!(offset_of!(ChassisState, command), 736);
-        assert_eq!(offset_of!(ChassisState, link), 760);
-    }
-
-    #[test]
-    fn nested_state_layouts_are_pinned() {
-        assert_eq!(
-            (size_of::<MotionState>(), align_of::<MotionState>()),
-            (48, 4)
-        );
-        assert_eq!(offset_of!(MotionState, wheel_mps), 32);
-        assert_eq!(
-            (size_of::<OdometryState>(), align_of::<OdometryState>()),
-            (56, 8)
-        );
-        assert_eq!(offset_of!(OdometryState, yaw_rad), 48);
-        assert_eq!(
-            (size_of::<SystemState>(), align_of::<SystemState>()),
-            (32, 8)
-        );
-        assert_eq!(offset_of!(SystemState, battery_voltage_v), 12);
-        assert_eq!(offset_of!(SystemState, body_status), 24);
-        assert_eq!(offset_of!(SystemState, power_enabled), 30);
-        assert_eq!((size_of::<MotorState>(), align_of::<MotorState>()), (32, 8));
-        assert_eq!(offset_of!(MotorState, driver_status), 28);
-        assert_eq!((size_of::<BmsState>(), align_of::<BmsState>()), (24, 4));
-        assert_eq!(offset_of!(BmsState, alarm_flags), 20);
-        assert_eq!((size_of::<RcState>(), align_of::<RcState>()), (12, 1));
-        assert_eq!(offset_of!(RcState, counter), 9);
-        assert_eq!(
-            (size_of::<LightsState>(), align_of::<LightsState>()),
-            (4, 1)
-        );
-        assert_eq!(
-            (size_of::<RangesState>(), align_of::<RangesState>()),
-            (24, 4)
-        );
-        assert_eq!(offset_of!(RangesState, ultrasonic_m), 12);
-        assert_eq!((size_of::<ImuState>(), align_of::<ImuState>()), (56, 4));
-        assert_eq!(offset_of!(ImuState, roll_rad), 36);
-        assert_eq!(offset_of!(ImuState, sensor_stamp_us), 52);
-        assert_eq!((size_of::<LiftState>(), align_of::<LiftState>()), (24, 8));
-        assert_eq!(offset_of!(LiftState, enabled), 16);
-        assert_eq!(
-            (size_of::<PanTiltState>(), align_of::<PanTiltState>()),
-            (8, 4)
-        );
-        assert_eq!((size_of::<GpsFix>(), align_of::<GpsFix>()), (48, 8));
-        assert_eq!(offset_of!(GpsFix, utc_date), 40);
-        assert_eq!(offset_of!(GpsFix, fix_quality), 44);
-        assert_eq!(
-            (size_of::<CommandEcho>(), align_of::<CommandEcho>()),
-            (24, 4)
-        );
-        assert_eq!((size_of::<LinkStats>(), align_of::<LinkStats>()), (128, 8));
-        assert_eq!(offset_of!(LinkStats, ipc_failures), 64);
-        assert_eq!(offset_of!(LinkStats, can_error_frames), 72);
-        assert_eq!(offset_of!(LinkStats, can_no_ack), 112);
-        assert_eq!(offset_of!(LinkStats, can_state), 120);
-        assert_eq!(offset_of!(LinkStats, can_rx_error_count), 122);
-        assert_eq!(offset_of!(LinkStats, bus_reconnects), 56);
-    }
-
-    #[test]
-    fn type_names_carry_a_layout_version() {
-        // SAFETY: type_name only returns the string given to the derive.
-        let name = unsafe { <ChassisState as ZeroCopySend>::type_name() };
-        assert_eq!(name, "chassis::ChassisState.v3");
-    }
 
     #[test]
     fn group_bits_and_stamps_tell_never_reported_from_zero() {

@@ -20,6 +20,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 pub use chassis_client::*;
+pub use chassis_ipc::{ipc_files, remove_ipc_files};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
@@ -463,12 +464,8 @@ impl Drop for Env {
             eprintln!("{}", self.logs());
         }
         // Shared-memory files of this test's prefix.
-        for path in ipc_files(&self.prefix) {
-            if path.is_dir() {
-                let _ = std::fs::remove_dir_all(path);
-            } else {
-                let _ = std::fs::remove_file(path);
-            }
+        for (path, e) in remove_ipc_files(&self.prefix) {
+            eprintln!("cannot remove {}: {e}", path.display());
         }
         if !std::thread::panicking() {
             let _ = std::fs::remove_dir_all(&self.dir);
@@ -557,28 +554,6 @@ impl Line {
             Self::Slcan => format!("slcan:{}", link.display()),
         }
     }
-}
-
-/// The shared-memory and socket files of the iceoryx2 prefix `prefix`.
-pub fn ipc_files(prefix: &str) -> Vec<PathBuf> {
-    let dirs = [
-        "/dev/shm",
-        "/tmp/iceoryx2",
-        "/tmp/iceoryx2/services",
-        "/tmp/iceoryx2/nodes",
-    ];
-    let mut files = Vec::new();
-    for dir in dirs {
-        if let Ok(entries) = std::fs::read_dir(dir) {
-            files.extend(
-                entries
-                    .flatten()
-                    .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
-                    .map(|e| e.path()),
-            );
-        }
-    }
-    files
 }
 
 /// A hang-up of the pty line to a `chassisd sim` mid-drive, and the row of the reliability

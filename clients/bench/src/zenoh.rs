@@ -332,26 +332,8 @@ pub fn run(
     drop(service);
     drop(netns);
     // The mirror's iceoryx2 files, under the operator's prefix of this run only.
-    for dir in [
-        "/dev/shm",
-        "/tmp/iceoryx2",
-        "/tmp/iceoryx2/services",
-        "/tmp/iceoryx2/nodes",
-    ] {
-        for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-            if entry
-                .file_name()
-                .to_string_lossy()
-                .starts_with(&operator_prefix)
-            {
-                let path = entry.path();
-                let _ = if path.is_dir() {
-                    std::fs::remove_dir_all(&path)
-                } else {
-                    std::fs::remove_file(&path)
-                };
-            }
-        }
+    for (path, e) in chassis_ipc::remove_ipc_files(&operator_prefix) {
+        eprintln!("cannot remove {}: {e}", path.display());
     }
     Ok(ZenohFigures {
         command,

@@ -54,6 +54,24 @@ impl IpcError {
         }
     }
 
+    /// The error of opening `service`: [`IpcError::NotFound`] when `missing` says it does not
+    /// exist, [`IpcError::Service`] otherwise.
+    pub(crate) fn opening<E: std::error::Error + Send + Sync + 'static>(
+        service: &str,
+        what: &'static str,
+        missing: fn(&E) -> bool,
+    ) -> impl FnOnce(E) -> Self {
+        move |e| {
+            if missing(&e) {
+                Self::NotFound {
+                    service: service.to_string(),
+                }
+            } else {
+                Self::service(service, what)(e)
+            }
+        }
+    }
+
     pub(crate) fn port<E: std::error::Error + Send + Sync + 'static>(
         service: &str,
         port: &'static str,

@@ -29,12 +29,14 @@
 
 pub mod contract;
 mod error;
+mod files;
 mod limits;
 mod names;
 mod ports;
 mod trace;
 
 pub use error::IpcError;
+pub use files::{ipc_files, remove_ipc_files};
 pub use limits::{
     CMD, CONTROL, DESCRIPTION, EventLimits, FRAMES, FRAMES_BUFFER, MAX_CLIENTS, MAX_FRAME_READERS,
     MAX_NODES, MAX_READERS, MUX, PUBLICATION, PubSub, PubSubLimits, RequestResponse,

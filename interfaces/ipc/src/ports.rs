@@ -42,6 +42,28 @@ pub fn node(
         .map_err(|e| IpcError::Node(Box::new(e)))
 }
 
+/// A listener of the event service `events` (called `name` in errors).
+fn listener(
+    events: &event::PortFactory<ipc::Service>,
+    name: &str,
+) -> Result<Listener<ipc::Service>, IpcError> {
+    events
+        .listener_builder()
+        .create()
+        .map_err(IpcError::port(name, "listener"))
+}
+
+/// A notifier of the event service `events` (called `name` in errors).
+fn notifier(
+    events: &event::PortFactory<ipc::Service>,
+    name: &str,
+) -> Result<Notifier<ipc::Service>, IpcError> {
+    events
+        .notifier_builder()
+        .create()
+        .map_err(IpcError::port(name, "notifier"))
+}
+
 /// A publish-subscribe service and the event service of the same name.
 #[derive(Debug)]
 pub struct Topic<T: Debug + ZeroCopySend + 'static> {
@@ -85,12 +107,9 @@ fn open_event(
     node.service_builder(&iceoryx_name(name)?)
         .event()
         .open()
-        .map_err(|e| match e {
-            EventOpenError::DoesNotExist => IpcError::NotFound {
-                service: name.to_string(),
-            },
-            other => IpcError::service(name, "opening the event service")(other),
-        })
+        .map_err(IpcError::opening(name, "opening the event service", |e| {
+            matches!(e, EventOpenError::DoesNotExist)
+        }))
 }
 
 impl<T: Debug + ZeroCopySend + 'static> PubSub<T> {
@@ -145,12 +164,9 @@ impl<T: Debug + ZeroCopySend + 'static> PubSub<T> {
         node.service_builder(&iceoryx_name(name)?)
             .publish_subscribe::<T>()
             .open()
-            .map_err(|e| match e {
-                PublishSubscribeOpenError::DoesNotExist => IpcError::NotFound {
-                    service: name.to_string(),
-                },
-                other => IpcError::service(name, "opening the service")(other),
-            })
+            .map_err(IpcError::opening(name, "opening the service", |e| {
+                matches!(e, PublishSubscribeOpenError::DoesNotExist)
+            }))
     }
 }
 
@@ -203,11 +219,7 @@ impl<T: Debug + ZeroCopySend + 'static> Topic<T> {
             .buffer_size(buffer)
             .create()
             .map_err(IpcError::port(&self.name, "subscriber"))?;
-        let listener = self
-            .events
-            .listener_builder()
-            .create()
-            .map_err(IpcError::port(&self.name, "listener"))?;
+        let listener = listener(&self.events, &self.name)?;
         Ok(Reader {
             subscriber,
             listener,
@@ -216,10 +228,7 @@ impl<T: Debug + ZeroCopySend + 'static> Topic<T> {
 
     /// A listener alone (a second reader of the same subscriber's events).
     pub fn listener(&self) -> Result<Listener<ipc::Service>, IpcError> {
-        self.events
-            .listener_builder()
-            .create()
-            .map_err(IpcError::port(&self.name, "listener"))
+        listener(&self.events, &self.name)
     }
 
     fn taken(&self, port: &'static str) -> IpcError {
@@ -292,12 +301,9 @@ impl<Req: Debug + ZeroCopySend + 'static> RequestResponse<Req> {
             .service_builder(&iceoryx_name(name)?)
             .request_response::<Req, ControlResponse>()
             .open()
-            .map_err(|e| match e {
-                RequestResponseOpenError::DoesNotExist => IpcError::NotFound {
-                    service: name.to_string(),
-                },
-                other => IpcError::service(name, "opening the service")(other),
-            })?;
+            .map_err(IpcError::opening(name, "opening the service", |e| {
+                matches!(e, RequestResponseOpenError::DoesNotExist)
+            }))?;
         let requests = open_event(node, name)?;
         let replies = open_event(node, &reply_name(name))?;
         Ok(Exchange {
@@ -323,16 +329,8 @@ impl<Req: Debug + ZeroCopySend + 'static> Exchange<Req> {
             },
             other => IpcError::port(&self.name, "server")(other),
         })?;
-        let requests = self
-            .requests
-            .listener_builder()
-            .create()
-            .map_err(IpcError::port(&self.name, "listener"))?;
-        let replies = self
-            .replies
-            .notifier_builder()
-            .create()
-            .map_err(IpcError::port(&reply_name(&self.name), "notifier"))?;
+        let requests = listener(&self.requests, &self.name)?;
+        let replies = notifier(&self.replies, &reply_name(&self.name))?;
         Ok(ServerPorts {
             server,
             requests,
@@ -347,16 +345,8 @@ impl<Req: Debug + ZeroCopySend + 'static> Exchange<Req> {
             .client_builder()
             .create()
             .map_err(IpcError::port(&self.name, "client"))?;
-        let requests = self
-            .requests
-            .notifier_builder()
-            .create()
-            .map_err(IpcError::port(&self.name, "notifier"))?;
-        let replies = self
-            .replies
-            .listener_builder()
-            .create()
-            .map_err(IpcError::port(&reply_name(&self.name), "listener"))?;
+        let requests = notifier(&self.requests, &self.name)?;
+        let replies = listener(&self.replies, &reply_name(&self.name))?;
         Ok(ClientPorts {
             client,
             requests,
@@ -376,25 +366,8 @@ mod tests {
 
     impl Drop for Scratch {
         fn drop(&mut self) {
-            for dir in [
-                "/dev/shm",
-                "/tmp/iceoryx2",
-                "/tmp/iceoryx2/services",
-                "/tmp/iceoryx2/nodes",
-            ] {
-                for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-                    if entry.file_name().to_string_lossy().starts_with(&self.0) {
-                        let path = entry.path();
-                        let removed = if path.is_dir() {
-                            std::fs::remove_dir_all(&path)
-                        } else {
-                            std::fs::remove_file(&path)
-                        };
-                        if let Err(e) = removed {
-                            eprintln!("cannot remove {}: {e}", path.display());
-                        }
-                    }
-                }
+            for (path, e) in crate::remove_ipc_files(&self.0) {
+                eprintln!("cannot remove {}: {e}", path.display());
             }
         }
     }
