@@ -67,6 +67,7 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import chassis
@@ -180,22 +181,25 @@ def wait_for_frame(tap: chassis.FrameTap, frame: tuple[int, bytes], since: int) 
     return None
 
 
-def command_path(
+def paced_commands(
     robot: chassis.Robot,
-    teleop: chassis.Source,
     frames: dict[float, tuple[int, bytes]],
     count: int,
     interval_s: float,
+    send: Callable[[float], int],
+    warmups: int,
 ) -> tuple[list[int], int]:
-    """Command-path latencies, ns, and the requests whose frame never appeared."""
+    """Command-path latencies, ns, and the requests whose frame never appeared: one request
+    every ``interval_s``, alternating between the two ``SPEEDS`` so that each writes a frame.
+    ``send(speed)`` asks for ``speed`` and returns the stamp the request was made at; up to
+    ``warmups`` first requests wait for the first frame (the TITAN's brake released, its
+    command mode reached) and are not counted."""
     tap = robot.frames(chassis.FRAMES_BUFFER)
-    # Warm up: the first motion releases TITAN's brake and waits for command mode.
     start = chassis.now_ns()
-    teleop.twist(SPEEDS[0], 0.0)
-    for _ in range(6):
+    for _ in range(warmups):
+        send(SPEEDS[0])
         if wait_for_frame(tap, frames[SPEEDS[0]], start) is not None:
             break
-        teleop.twist(SPEEDS[0], 0.0)
     latencies: list[int] = []
     missed = 0
     next_send = time.monotonic()
@@ -204,16 +208,33 @@ def command_path(
         time.sleep(max(0.0, next_send - time.monotonic()))
         tap.drain()
         speed = SPEEDS[1] if i % 2 == 0 else SPEEDS[0]
-        request = chassis.VelocityRequest.twist(speed, 0.0)
-        request.stamp_ns = stamp = chassis.now_ns()
-        teleop.send(request)
+        stamp = send(speed)
         written = wait_for_frame(tap, frames[speed], stamp)
         if written is None:
             missed += 1
         else:
             latencies.append(written - stamp)
-    teleop.stop()
     return latencies, missed
+
+
+def command_path(
+    robot: chassis.Robot,
+    teleop: chassis.Source,
+    frames: dict[float, tuple[int, bytes]],
+    count: int,
+    interval_s: float,
+) -> tuple[list[int], int]:
+    """Command-path latencies, ns, and the requests whose frame never appeared."""
+
+    def send(speed: float) -> int:
+        request = chassis.VelocityRequest.twist(speed, 0.0)
+        request.stamp_ns = stamp = chassis.now_ns()
+        teleop.send(request)
+        return stamp
+
+    result = paced_commands(robot, frames, count, interval_s, send, warmups=7)
+    teleop.stop()
+    return result
 
 
 def main() -> int:

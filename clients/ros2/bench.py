@@ -126,30 +126,14 @@ def command_path(
     count: int,
     interval_s: float,
 ) -> tuple[list[int], int]:
-    tap = robot.frames(chassis.FRAMES_BUFFER)
-    speeds = client_bench.SPEEDS
-    start = chassis.now_ns()
-    for _ in range(20):
-        cmd.write(m.Twist(linear=m.Vector3(x=speeds[0])))
-        if client_bench.wait_for_frame(tap, frames[speeds[0]], start) is not None:
-            break
-    latencies: list[int] = []
-    missed = 0
-    next_send = time.monotonic()
-    for i in range(count):
-        next_send += interval_s
-        time.sleep(max(0.0, next_send - time.monotonic()))
-        tap.drain()
-        speed = speeds[1] if i % 2 == 0 else speeds[0]
+    def send(speed: float) -> int:
         sent = chassis.now_ns()
         cmd.write(m.Twist(linear=m.Vector3(x=speed)))
-        written = client_bench.wait_for_frame(tap, frames[speed], sent)
-        if written is None:
-            missed += 1
-        else:
-            latencies.append(written - sent)
+        return sent
+
+    result = client_bench.paced_commands(robot, frames, count, interval_s, send, warmups=20)
     cmd.write(m.Twist())
-    return latencies, missed
+    return result
 
 
 def state_path(
