@@ -183,11 +183,16 @@ fn path_runs(quick: bool, robots: &[RobotKind]) -> Vec<PathRun> {
     };
     // The loops and placements compared on one robot and bus: the TITAN on the simulator.
     let titan_sim = |mode, placement| run(RobotKind::Titan, BusKind::Sim, mode, placement);
+    // The service's own pass is held to its target on the simulated and the slcan-pty bus, in
+    // both loops.
+    let titan_pty = |mode| run(RobotKind::Titan, BusKind::Pty, mode, Placement::CrossCpu);
     if quick {
         return vec![
             titan_sim(LoopMode::Event, Placement::SameCpu),
             titan_sim(LoopMode::Event, Placement::CrossCpu),
             titan_sim(LoopMode::Spin, Placement::CrossCpu),
+            titan_pty(LoopMode::Event),
+            titan_pty(LoopMode::Spin),
         ];
     }
     let mut runs = vec![
@@ -199,6 +204,9 @@ fn path_runs(quick: bool, robots: &[RobotKind]) -> Vec<PathRun> {
         for bus in [BusKind::Sim, BusKind::Pty] {
             runs.push(run(robot, bus, LoopMode::Event, Placement::CrossCpu));
         }
+    }
+    if robots.contains(&RobotKind::Titan) {
+        runs.push(titan_pty(LoopMode::Spin));
     }
     runs
 }
@@ -1020,14 +1028,16 @@ mod tests {
     }
 
     #[test]
-    fn the_quick_plan_compares_the_titans_loops_and_placements_on_the_simulator() {
-        use {BusKind::Sim, LoopMode::*, Placement::*, RobotKind::Titan};
+    fn the_quick_plan_compares_the_titans_loops_and_placements_on_the_simulator_and_a_pty() {
+        use {BusKind::*, LoopMode::*, Placement::*, RobotKind::Titan};
         assert_eq!(
             planned(true, &[RobotKind::Xbot]),
             [
                 (Titan, Sim, Event, SameCpu),
                 (Titan, Sim, Event, CrossCpu),
-                (Titan, Sim, Spin, CrossCpu)
+                (Titan, Sim, Spin, CrossCpu),
+                (Titan, Pty, Event, CrossCpu),
+                (Titan, Pty, Spin, CrossCpu)
             ]
         );
     }
@@ -1044,7 +1054,8 @@ mod tests {
                 (Titan, Sim, Event, CrossCpu),
                 (Titan, Pty, Event, CrossCpu),
                 (Xbot, Sim, Event, CrossCpu),
-                (Xbot, Pty, Event, CrossCpu)
+                (Xbot, Pty, Event, CrossCpu),
+                (Titan, Pty, Spin, CrossCpu)
             ]
         );
     }
