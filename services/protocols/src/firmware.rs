@@ -447,12 +447,11 @@ impl Flood {
 
     /// When a flood frame is due at `now`: serves it and says whether it is the second kind.
     pub(crate) fn due(&mut self, now: Timestamp) -> Option<bool> {
-        if !self.grid.is_due(now) {
+        if !self.grid.serve_due(now) {
             return None;
         }
         let second = self.toggle;
         self.toggle = !self.toggle;
-        self.grid.served(now);
         Some(second)
     }
 }

@@ -627,29 +627,17 @@ impl Firmware for V2Sim {
         self.expire(now);
         // Nothing is sent, and no rolling count moves, while booting or silenced.
         let quiet = self.chassis.is_quiet(now);
-        if self.status.is_due(now) {
-            self.status.served(now);
-            if !quiet {
-                self.send_status(now);
-            }
+        if self.status.serve_due(now) && !quiet {
+            self.send_status(now);
         }
-        if self.fast.is_due(now) {
-            self.fast.served(now);
-            if !quiet {
-                self.send_fast(now);
-            }
+        if self.fast.serve_due(now) && !quiet {
+            self.send_fast(now);
         }
-        if self.slow.is_due(now) {
-            self.slow.served(now);
-            if !quiet {
-                self.send_slow(now);
-            }
+        if self.slow.serve_due(now) && !quiet {
+            self.send_slow(now);
         }
-        if self.bms.is_due(now) {
-            self.bms.served(now);
-            if !quiet {
-                self.send_bms(now);
-            }
+        if self.bms.serve_due(now) && !quiet {
+            self.send_bms(now);
         }
     }
 

@@ -768,8 +768,7 @@ impl Firmware for ScoutMiniSim {
 
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
-        if self.fast.is_due(now) {
-            self.fast.served(now);
+        if self.fast.serve_due(now) {
             self.send_feedback(now);
         }
         self.send_flood(now);

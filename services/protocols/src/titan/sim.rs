@@ -968,16 +968,13 @@ impl Firmware for TitanSim {
             self.zero_replies.pop_front();
             self.send(now, Frame::SteeringZeroAck);
         }
-        if self.fast.is_due(now) {
-            self.fast.served(now);
+        if self.fast.serve_due(now) {
             self.send_fast(now);
         }
-        if self.slow.is_due(now) {
-            self.slow.served(now);
+        if self.slow.serve_due(now) {
             self.send_slow(now);
         }
-        if self.bms.is_due(now) {
-            self.bms.served(now);
+        if self.bms.serve_due(now) {
             self.send_bms(now);
         }
         self.send_flood(now);

@@ -739,8 +739,7 @@ impl Firmware for XbotSim {
 
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
-        if !self.chassis.is_booting() && self.reports.is_due(now) {
-            self.reports.served(now);
+        if !self.chassis.is_booting() && self.reports.serve_due(now) {
             self.send_report(now, InjectedCounts::default());
         }
         if self.chassis.flood_due(now).is_some() && !self.chassis.is_booting() {
