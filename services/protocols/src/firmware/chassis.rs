@@ -198,7 +198,6 @@ impl<T> Chassis<T> {
         }
     }
 
-    /// Silence after a reboot.
     /// The truth every chassis knows alike: the `pose` its robot integrated, the charge, the
     /// boots and the injected faults that left; the robot fills in the rest (its speeds, mode,
     /// brake, faults and counters) over it.
@@ -214,6 +213,7 @@ impl<T> Chassis<T> {
         }
     }
 
+    /// Silence after a reboot.
     pub(crate) fn set_boot_time(&mut self, boot_time: Duration) {
         self.boot_time = boot_time;
     }
