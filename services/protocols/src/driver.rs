@@ -311,9 +311,7 @@ impl CommandSchedule {
         self.last_sent = Some(now);
         self.pending = false;
         self.urgent = false;
-        if self.heartbeat.is_due(now) {
-            self.heartbeat.served(now);
-        }
+        self.heartbeat.serve_due(now);
     }
 
     /// When the next motion frame is due.

@@ -16,6 +16,7 @@ mod chassis;
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use chassis_interfaces::ControlMode;
 use serde::Serialize;
 
 use crate::driver::{Rx, WireItem, wrap_angle};
@@ -447,14 +448,49 @@ impl Flood {
 
     /// When a flood frame is due at `now`: serves it and says whether it is the second kind.
     pub(crate) fn due(&mut self, now: Timestamp) -> Option<bool> {
-        if !self.grid.is_due(now) {
+        if !self.grid.serve_due(now) {
             return None;
         }
         let second = self.toggle;
         self.toggle = !self.toggle;
-        self.grid.served(now);
         Some(second)
     }
+}
+
+/// Who holds authority over a simulated AgileX chassis (TITAN, protocol V2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Mode {
+    Standby,
+    Command,
+    Remote,
+}
+
+impl Mode {
+    /// The normalized `chassis_interfaces::ControlMode` of the mode.
+    pub(crate) fn control_mode(self) -> u8 {
+        match self {
+            Mode::Standby => ControlMode::STANDBY,
+            Mode::Command => ControlMode::COMMAND,
+            Mode::Remote => ControlMode::REMOTE,
+        }
+    }
+}
+
+/// A frame a simulated CAN chassis received, decoded by `decode`; `None`, counted in
+/// `decode_errors`, for serial bytes (the wrong medium) or a frame that does not decode.
+pub(crate) fn decode_can<F, E>(
+    rx: Rx<'_>,
+    decode_errors: &mut u64,
+    decode: impl FnOnce(&crate::can::CanFrame) -> Result<F, E>,
+) -> Option<F> {
+    let decoded = match rx {
+        Rx::Can(frame) => decode(frame).ok(),
+        Rx::Bytes(_) => None,
+    };
+    if decoded.is_none() {
+        *decode_errors += 1;
+    }
+    decoded
 }
 
 /// An injected or configured state of charge, % (clamped to 0-100); `None` when not a number.

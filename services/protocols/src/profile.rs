@@ -651,31 +651,33 @@ mod tests {
             zero.validate().unwrap_err().to_string(),
             "angular_full_scale_rad_s must be above zero (is 0)"
         );
-        let fast = XbotProfile {
-            heartbeat_hz: 12.0,
-            ..XbotProfile::default()
-        };
-        assert!(
-            fast.validate()
-                .unwrap_err()
-                .to_string()
-                .contains("heartbeat_hz")
-        );
-        let nan = TitanProfile {
-            track_m: f64::NAN,
-            ..TitanProfile::default()
-        };
-        assert!(nan.validate().is_err());
-        let slow = TitanProfile {
-            heartbeat_period_ms: 600,
-            ..TitanProfile::default()
-        };
-        assert!(
-            slow.validate()
-                .unwrap_err()
-                .to_string()
-                .contains("heartbeat_period_ms")
-        );
+        // Nonsense is refused, and the refusal names the parameter.
+        for (nonsense, name) in [
+            (
+                Profile::Xbot(XbotProfile {
+                    heartbeat_hz: 12.0,
+                    ..XbotProfile::default()
+                }),
+                "heartbeat_hz",
+            ),
+            (
+                Profile::Titan(TitanProfile {
+                    track_m: f64::NAN,
+                    ..TitanProfile::default()
+                }),
+                "track_m",
+            ),
+            (
+                Profile::Titan(TitanProfile {
+                    heartbeat_period_ms: 600,
+                    ..TitanProfile::default()
+                }),
+                "heartbeat_period_ms",
+            ),
+        ] {
+            let refusal = nonsense.validate().unwrap_err().to_string();
+            assert!(refusal.contains(name), "{refusal}");
+        }
     }
 
     #[test]

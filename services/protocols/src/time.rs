@@ -100,6 +100,15 @@ impl Grid {
         }
     }
 
+    /// Serves the slot when it has come at `now` ([`Grid::served`]); true when it had.
+    pub fn serve_due(&mut self, now: Timestamp) -> bool {
+        let due = self.is_due(now);
+        if due {
+            self.served(now);
+        }
+        due
+    }
+
     /// Restart the grid at `start`.
     pub fn restart(&mut self, start: Timestamp) {
         self.next = start;

@@ -60,6 +60,19 @@ pub(crate) fn si(raw: impl Into<f64>, scale: f64) -> f64 {
     raw.into() / scale
 }
 
+/// `f` of each of `values`, in order, or the first error: a wire array field converted element by
+/// element.
+pub(crate) fn try_map<A, B: Default, E, const N: usize>(
+    values: [A; N],
+    mut f: impl FnMut(A) -> Result<B, E>,
+) -> Result<[B; N], E> {
+    let mut out: [B; N] = std::array::from_fn(|_| B::default());
+    for (slot, value) in out.iter_mut().zip(values) {
+        *slot = f(value)?;
+    }
+    Ok(out)
+}
+
 /// The bytes of a wire layout as an array of its documented length (`N` = the frame's DLC).
 /// A layout shorter than `N` is zero-padded; the layout tests pin every size to its DLC.
 pub(crate) fn wire_bytes<const N: usize, W: zerocopy::IntoBytes + Immutable>(wire: W) -> [u8; N] {

@@ -485,37 +485,22 @@ pub enum Frame {
 
 /// The name of 0x211 b1 under the profile's ⚠ D-2 codes.
 pub fn control_name(mode: u8, profile: &V2Profile) -> &'static str {
-    let codes = &profile.mode_codes;
-    if mode == codes.can {
-        "can"
-    } else if mode == codes.rc {
-        "rc"
-    } else if Some(mode) == codes.standby {
-        "standby"
-    } else if Some(mode) == codes.uart {
-        "uart"
-    } else {
-        "unknown"
-    }
+    code_name(mode, &profile.mode_codes.names())
 }
 
 /// The name of a 0x141 / 0x291 b0 motion mode under the profile's ⚠ D-12 codes: dual_ackermann,
 /// crab, spin, park, side_slip or unknown.
 pub fn motion_mode_name(mode: u8, profile: &V2Profile) -> &'static str {
-    let codes = &profile.ranger_mode_codes;
-    if mode == codes.dual_ackermann {
-        "dual_ackermann"
-    } else if mode == codes.crab {
-        "crab"
-    } else if mode == codes.spin {
-        "spin"
-    } else if Some(mode) == codes.park {
-        "park"
-    } else if Some(mode) == codes.side_slip {
-        "side_slip"
-    } else {
-        "unknown"
-    }
+    code_name(mode, &profile.ranger_mode_codes.names())
+}
+
+/// The name of the first of `names` whose code (where the profile has one) is `mode`, else
+/// "unknown": the order settles a code two names share.
+fn code_name(mode: u8, names: &[(Option<u8>, &'static str)]) -> &'static str {
+    names
+        .iter()
+        .find(|(code, _)| *code == Some(mode))
+        .map_or("unknown", |(_, name)| *name)
 }
 
 fn lateral_sign(profile: &V2Profile) -> f64 {

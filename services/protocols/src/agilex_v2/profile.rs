@@ -89,6 +89,16 @@ pub struct ModeCodes {
 }
 
 impl ModeCodes {
+    /// Each mode's name with its code under these codes, in the order a shared code is named.
+    pub(crate) fn names(&self) -> [(Option<u8>, &'static str); 4] {
+        [
+            (Some(self.can), "can"),
+            (Some(self.rc), "rc"),
+            (self.standby, "standby"),
+            (self.uart, "uart"),
+        ]
+    }
+
     /// SDK ≥ v0.5.0, SCOUT v1.3.0, HUNTER SE, RANGER MINI, TRACER MINI.
     pub const SDK: ModeCodes = ModeCodes {
         standby: Some(0),
@@ -325,6 +335,18 @@ pub struct RangerModeCodes {
 }
 
 impl RangerModeCodes {
+    /// Each motion mode's name with its code under these codes, in the order a shared code is
+    /// named.
+    pub(crate) fn names(&self) -> [(Option<u8>, &'static str); 5] {
+        [
+            (Some(self.dual_ackermann), "dual_ackermann"),
+            (Some(self.crab), "crab"),
+            (Some(self.spin), "spin"),
+            (self.park, "park"),
+            (self.side_slip, "side_slip"),
+        ]
+    }
+
     /// RANGER MINI 2.0 / 3.0, RANGER (SDK ≥ 50b81529, RR1).
     pub const SDK: RangerModeCodes = RangerModeCodes {
         dual_ackermann: 0,

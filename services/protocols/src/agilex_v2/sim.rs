@@ -35,7 +35,7 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::{ControlMode, FaultFlags};
+use chassis_interfaces::FaultFlags;
 
 use super::codec::{
     Four, Frame, Lights, Motion, MotionMode, Odometer, SteeringZeroOffset, SystemStatus, Version,
@@ -49,20 +49,13 @@ use crate::Direction;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, Injection, Pose, SimTruth,
-    first_order_lag, substeps,
+    Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, Injection, Mode, Pose,
+    SimTruth, decode_can, first_order_lag, substeps,
 };
 use crate::profile::Profile;
 use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Mode {
-    Standby,
-    Command,
-    Remote,
-}
 
 /// The simulated protocol-V2 chassis.
 #[derive(Debug)]
@@ -603,19 +596,13 @@ impl Firmware for V2Sim {
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
-        let Rx::Can(frame) = rx else {
-            self.decode_errors += 1;
-            return;
-        };
-        if self.chassis.is_booting() {
+        // A booting chassis hears no CAN frame (serial bytes still count as decode errors).
+        if self.chassis.is_booting() && matches!(rx, Rx::Can(_)) {
             return;
         }
-        let decoded = match decode(frame, &self.profile) {
-            Ok(decoded) => decoded,
-            Err(_) => {
-                self.decode_errors += 1;
-                return;
-            }
+        let Some(decoded) = decode_can(rx, &mut self.decode_errors, |f| decode(f, &self.profile))
+        else {
+            return;
         };
         match decoded.direction() {
             Direction::ToChassis => self.on_command(now, decoded),
@@ -627,29 +614,17 @@ impl Firmware for V2Sim {
         self.expire(now);
         // Nothing is sent, and no rolling count moves, while booting or silenced.
         let quiet = self.chassis.is_quiet(now);
-        if self.status.is_due(now) {
-            self.status.served(now);
-            if !quiet {
-                self.send_status(now);
-            }
+        if self.status.serve_due(now) && !quiet {
+            self.send_status(now);
         }
-        if self.fast.is_due(now) {
-            self.fast.served(now);
-            if !quiet {
-                self.send_fast(now);
-            }
+        if self.fast.serve_due(now) && !quiet {
+            self.send_fast(now);
         }
-        if self.slow.is_due(now) {
-            self.slow.served(now);
-            if !quiet {
-                self.send_slow(now);
-            }
+        if self.slow.serve_due(now) && !quiet {
+            self.send_slow(now);
         }
-        if self.bms.is_due(now) {
-            self.bms.served(now);
-            if !quiet {
-                self.send_bms(now);
-            }
+        if self.bms.serve_due(now) && !quiet {
+            self.send_bms(now);
         }
     }
 
@@ -713,22 +688,13 @@ impl Firmware for V2Sim {
             lateral_mps: vy,
             angular_radps: w,
             steer_rad: self.applied.steer_rad,
-            x_m: self.pose.x_m,
-            y_m: self.pose.y_m,
-            yaw_rad: self.pose.yaw_rad,
-            control_mode: match self.mode {
-                Mode::Standby => ControlMode::STANDBY,
-                Mode::Command => ControlMode::COMMAND,
-                Mode::Remote => ControlMode::REMOTE,
-            },
+            control_mode: self.mode.control_mode(),
             brake_engaged: self.brake_engaged,
-            soc_pct: self.chassis.soc_pct,
             fault_flags: self.fault_flags(),
             commands_received: self.commands_received,
             bad_checksums_received: 0,
             decode_errors: self.decode_errors,
-            boots: self.chassis.boots,
-            injected: self.chassis.outbox.injected(),
+            ..self.chassis.truth(self.pose)
         }
     }
 }

@@ -8,7 +8,8 @@
 use std::time::Duration;
 
 use super::{
-    Flood, InjectedCounts, Injection, Outbox, motor_index, runaway_speed, state_of_charge,
+    Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, motor_index, runaway_speed,
+    state_of_charge,
 };
 use crate::can::CanFrame;
 use crate::driver::WireItem;
@@ -194,6 +195,21 @@ impl<T> Chassis<T> {
         } else {
             self.booting_until = Some(now + self.boot_time);
             false
+        }
+    }
+
+    /// The truth every chassis knows alike: the `pose` its robot integrated, the charge, the
+    /// boots and the injected faults that left; the robot fills in the rest (its speeds, mode,
+    /// brake, faults and counters) over it.
+    pub(crate) fn truth(&self, pose: Pose) -> SimTruth {
+        SimTruth {
+            x_m: pose.x_m,
+            y_m: pose.y_m,
+            yaw_rad: pose.yaw_rad,
+            soc_pct: self.soc_pct,
+            boots: self.boots,
+            injected: self.outbox.injected(),
+            ..SimTruth::default()
         }
     }
 

@@ -768,8 +768,7 @@ impl Firmware for ScoutMiniSim {
 
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
-        if self.fast.is_due(now) {
-            self.fast.served(now);
+        if self.fast.serve_due(now) {
             self.send_feedback(now);
         }
         self.send_flood(now);
@@ -811,23 +810,18 @@ impl Firmware for ScoutMiniSim {
             lateral_mps: 0.0,
             angular_radps: self.angular_radps,
             steer_rad: 0.0,
-            x_m: self.pose.x_m,
-            y_m: self.pose.y_m,
-            yaw_rad: self.pose.yaw_rad,
             control_mode: if self.rc_on {
                 ControlMode::REMOTE
             } else {
                 ControlMode::COMMAND
             },
             brake_engaged: false,
-            soc_pct: self.chassis.soc_pct,
             fault_flags: normalize_faults(self.fault_word(self.last_update))
                 | body_flags(self.body_status()),
             commands_received: self.commands_received,
             bad_checksums_received: self.bad_checksums,
             decode_errors: self.decode_errors,
-            boots: self.chassis.boots,
-            injected: self.chassis.outbox.injected(),
+            ..self.chassis.truth(self.pose)
         }
     }
 }

@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ControlMode, DriverStatus, FaultFlags};
+use chassis_interfaces::{DriverStatus, FaultFlags};
 
 use super::codec::{
     AxleSpeed, BmsAlarm, BmsData, Frame, MotionFeedback, MotorFast, MotorSlow, Odometer,
@@ -18,19 +18,12 @@ use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
     Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, InjectedCounts, Injection,
-    Pose, SimTruth, clamp_i16, first_order_lag, non_negative, state_of_charge, substeps,
+    Mode, Pose, SimTruth, clamp_i16, decode_can, first_order_lag, non_negative, state_of_charge,
+    substeps,
 };
 use crate::profile::TitanProfile;
 use crate::registry::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
-
-/// Who holds authority over the chassis.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Mode {
-    Standby,
-    Command,
-    Remote,
-}
 
 /// The last accepted motion command.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -944,16 +937,9 @@ impl Firmware for TitanSim {
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
-        let Rx::Can(frame) = rx else {
-            self.decode_errors += 1;
+        let Some(decoded) = decode_can(rx, &mut self.decode_errors, |f| decode(f, &self.profile))
+        else {
             return;
-        };
-        let decoded = match decode(frame, &self.profile) {
-            Ok(decoded) => decoded,
-            Err(_) => {
-                self.decode_errors += 1;
-                return;
-            }
         };
         match decoded.direction() {
             Direction::ToChassis => self.on_command(now, decoded),
@@ -968,16 +954,13 @@ impl Firmware for TitanSim {
             self.zero_replies.pop_front();
             self.send(now, Frame::SteeringZeroAck);
         }
-        if self.fast.is_due(now) {
-            self.fast.served(now);
+        if self.fast.serve_due(now) {
             self.send_fast(now);
         }
-        if self.slow.is_due(now) {
-            self.slow.served(now);
+        if self.slow.serve_due(now) {
             self.send_slow(now);
         }
-        if self.bms.is_due(now) {
-            self.bms.served(now);
+        if self.bms.serve_due(now) {
             self.send_bms(now);
         }
         self.send_flood(now);
@@ -1032,22 +1015,13 @@ impl Firmware for TitanSim {
             lateral_mps: 0.0,
             angular_radps: yaw_rate(self.linear_mps, self.front_steer_rad, &self.profile),
             steer_rad: self.front_steer_rad,
-            x_m: self.pose.x_m,
-            y_m: self.pose.y_m,
-            yaw_rad: self.pose.yaw_rad,
-            control_mode: match self.mode {
-                Mode::Standby => ControlMode::STANDBY,
-                Mode::Command => ControlMode::COMMAND,
-                Mode::Remote => ControlMode::REMOTE,
-            },
+            control_mode: self.mode.control_mode(),
             brake_engaged: self.brake_engaged,
-            soc_pct: self.chassis.soc_pct,
             fault_flags: self.fault_flags(),
             commands_received: self.commands_received,
             bad_checksums_received: 0,
             decode_errors: self.decode_errors,
-            boots: self.chassis.boots,
-            injected: self.chassis.outbox.injected(),
+            ..self.chassis.truth(self.pose)
         }
     }
 }

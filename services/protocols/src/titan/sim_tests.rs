@@ -55,13 +55,24 @@ impl Bench {
         Self::with(TitanSim::new(TitanProfile::default(), T0), T0)
     }
 
+    /// Asks for control mode `mode` (0x421).
+    fn ask_mode(&mut self, mode: u8) {
+        self.send(Frame::Mode(ModeCommand { mode }));
+    }
+
     /// In CAN command mode with the brake released.
     fn driving() -> Self {
         let mut b = Self::new();
-        b.send(Frame::Mode(ModeCommand {
-            mode: mode::CAN_COMMAND,
-        }));
+        b.ask_mode(mode::CAN_COMMAND);
         b.send(Frame::ParkingBrake(ParkingBrake { engage: false }));
+        b
+    }
+
+    /// [`Bench::driving`] with `command` as the 0x111 heartbeat for `warm_up`.
+    fn moving(command: MotionCommand, warm_up: Duration) -> Self {
+        let mut b = Self::driving();
+        b.heartbeat(Some(command));
+        b.run_for(warm_up);
         b
     }
 
@@ -75,6 +86,16 @@ impl Bench {
         self.drain();
     }
 
+    /// The latest frame with id `frame_id` the chassis sent, as it went on the wire.
+    fn last_raw(&self, frame_id: u16) -> CanFrame {
+        self.sent
+            .iter()
+            .rev()
+            .find(|(_, f)| f.id() == u32::from(frame_id))
+            .unwrap()
+            .1
+    }
+
     fn decoded(&self, frame_id: u16) -> Vec<(Timestamp, Frame)> {
         self.sent
             .iter()
@@ -85,6 +106,11 @@ impl Bench {
 
     fn last(&self, frame_id: u16) -> Frame {
         self.decoded(frame_id).last().unwrap().1
+    }
+
+    /// The fault word of the latest 0x211.
+    fn faults(&self) -> u32 {
+        self.status().vendor_fault_word
     }
 
     fn status(&self) -> SystemStatus {
@@ -122,19 +148,13 @@ fn the_chassis_starts_in_standby_and_ignores_motion_commands() {
     assert!(t.brake_engaged, "standby ignores the brake frame");
     assert_eq!(t.commands_received, 0);
     assert!(b.sim.commands_ignored() > 40);
-    assert_eq!(
-        b.status().vendor_fault_word,
-        0,
-        "no heartbeat is expected in standby"
-    );
+    assert_eq!(b.faults(), 0, "no heartbeat is expected in standby");
 }
 
 #[test]
 fn can_command_mode_moves_the_robot_only_after_the_brake_is_released() {
     let mut b = Bench::new();
-    b.send(Frame::Mode(ModeCommand {
-        mode: mode::CAN_COMMAND,
-    }));
+    b.ask_mode(mode::CAN_COMMAND);
     b.heartbeat(Some(motion(0.5, 0.0)));
     b.run_for(ms(1000));
     assert_eq!(b.status().mode, mode::CAN_COMMAND);
@@ -153,9 +173,7 @@ fn can_command_mode_moves_the_robot_only_after_the_brake_is_released() {
 
 #[test]
 fn speed_follows_a_first_order_response_and_the_odometers_advance() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(1.0, 0.0)));
-    b.run_for(ms(300));
+    let mut b = Bench::moving(motion(1.0, 0.0), ms(300));
     // One time constant: 1 - 1/e.
     assert!((b.v() - (1.0 - (-1.0f64).exp())).abs() < 0.01, "{}", b.v());
     b.run_for(ms(3000));
@@ -191,9 +209,7 @@ fn speed_follows_a_first_order_response_and_the_odometers_advance() {
 
 #[test]
 fn a_missing_heartbeat_faults_to_standby_and_command_mode_returns_when_it_resumes() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(0.5, 0.0)));
-    b.run_for(ms(2000));
+    let mut b = Bench::moving(motion(0.5, 0.0), ms(2000));
     b.heartbeat(None);
     let last = b.last_heartbeat.unwrap();
     b.run_for((last + ms(500)).saturating_since(b.now));
@@ -221,40 +237,28 @@ fn a_missing_heartbeat_faults_to_standby_and_command_mode_returns_when_it_resume
     assert_eq!(t.fault_flags & FaultFlags::HEARTBEAT_LOST, 0);
     b.run_for(ms(3000));
     assert!((b.v() - 0.5).abs() < 1e-3);
-    assert_eq!(b.status().vendor_fault_word, 0);
+    assert_eq!(b.faults(), 0);
 }
 
 #[test]
 fn an_explicit_standby_is_not_undone_by_the_heartbeat() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(0.5, 0.0)));
-    b.run_for(ms(1000));
-    b.send(Frame::Mode(ModeCommand {
-        mode: mode::STANDBY,
-    }));
+    let mut b = Bench::moving(motion(0.5, 0.0), ms(1000));
+    b.ask_mode(mode::STANDBY);
     b.run_for(ms(2000));
     assert_eq!(b.sim.truth().control_mode, ControlMode::STANDBY);
     assert!(b.v().abs() < 1e-3);
-    assert_eq!(
-        b.status().vendor_fault_word,
-        0,
-        "standby on request is no fault"
-    );
+    assert_eq!(b.faults(), 0, "standby on request is no fault");
 }
 
 #[test]
 fn an_rc_takeover_reports_remote_mode_and_ignores_can_commands() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(1.0, 0.0)));
-    b.run_for(ms(2000));
+    let mut b = Bench::moving(motion(1.0, 0.0), ms(2000));
     assert!(b.decoded(id::RC).is_empty());
     let received = b.sim.truth().commands_received;
 
     assert!(b.inject(Injection::RcTakeover(true)));
     let since = b.now;
-    b.send(Frame::Mode(ModeCommand {
-        mode: mode::CAN_COMMAND,
-    }));
+    b.ask_mode(mode::CAN_COMMAND);
     b.run_for(ms(1000));
     assert_eq!(b.status().mode, mode::REMOTE);
     assert_eq!(b.sim.truth().control_mode, ControlMode::REMOTE);
@@ -286,9 +290,7 @@ fn an_rc_takeover_reports_remote_mode_and_ignores_can_commands() {
     assert_eq!(b.sim.truth().control_mode, ControlMode::STANDBY);
     assert!(b.decoded(id::RC).iter().all(|(t, _)| *t <= off));
     assert_eq!(b.sim.truth().fault_flags, 0);
-    b.send(Frame::Mode(ModeCommand {
-        mode: mode::CAN_COMMAND,
-    }));
+    b.ask_mode(mode::CAN_COMMAND);
     b.run_for(ms(2000));
     assert_eq!(b.sim.truth().control_mode, ControlMode::COMMAND);
     assert!((b.v() - 1.0).abs() < 0.01, "the brake stayed released");
@@ -296,9 +298,7 @@ fn an_rc_takeover_reports_remote_mode_and_ignores_can_commands() {
 
 #[test]
 fn a_reboot_goes_quiet_then_powers_up_in_standby_with_the_brake_engaged() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(1.0, 0.0)));
-    b.run_for(ms(2000));
+    let mut b = Bench::moving(motion(1.0, 0.0), ms(2000));
     b.heartbeat(Some(motion(0.0, 0.0)));
     b.run_for(ms(2000));
     b.heartbeat(None);
@@ -315,9 +315,7 @@ fn a_reboot_goes_quiet_then_powers_up_in_standby_with_the_brake_engaged() {
         (1, ControlMode::STANDBY, true)
     );
     b.run_for(ms(100));
-    b.send(Frame::Mode(ModeCommand {
-        mode: mode::CAN_COMMAND,
-    }));
+    b.ask_mode(mode::CAN_COMMAND);
     b.run_for(ms(199));
     assert_eq!(b.sent_since(reboot), 0, "silent while booting");
     b.run_for(ms(1));
@@ -388,9 +386,7 @@ fn a_late_call_skips_missed_slots_without_shifting_the_grid() {
 
 #[test]
 fn silent_mode_stops_every_transmission_until_it_is_left() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(0.5, 0.0)));
-    b.run_for(ms(100));
+    let mut b = Bench::moving(motion(0.5, 0.0), ms(100));
     b.send(Frame::SilentMode(Switch { enter: true }));
     let quiet = b.now;
     b.run_for(ms(2000));
@@ -405,9 +401,7 @@ fn silent_mode_stops_every_transmission_until_it_is_left() {
 
 #[test]
 fn a_silence_injection_mutes_the_chassis_for_its_duration() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(0.5, 0.0)));
-    b.run_for(ms(100));
+    let mut b = Bench::moving(motion(0.5, 0.0), ms(100));
     b.assert_silenced_for(ms(200));
     assert_eq!(b.sim.truth().control_mode, ControlMode::COMMAND);
 }
@@ -422,9 +416,7 @@ fn the_steering_zero_request_is_acknowledged_after_50_ms() {
         "standby ignores 0x431"
     );
 
-    b.send(Frame::Mode(ModeCommand {
-        mode: mode::CAN_COMMAND,
-    }));
+    b.ask_mode(mode::CAN_COMMAND);
     b.heartbeat(Some(motion(0.0, 0.0)));
     b.run_for(ms(7));
     let asked = b.now;
@@ -438,9 +430,7 @@ fn the_steering_zero_request_is_acknowledged_after_50_ms() {
 
 #[test]
 fn below_ten_percent_the_chassis_cuts_drive_and_reports_under_voltage() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(1.0, 0.0)));
-    b.run_for(ms(2000));
+    let mut b = Bench::moving(motion(1.0, 0.0), ms(2000));
 
     assert!(b.inject(Injection::Battery { soc_pct: 14.0 }));
     b.run_for(ms(1000));
@@ -460,10 +450,7 @@ fn below_ten_percent_the_chassis_cuts_drive_and_reports_under_voltage() {
     b.inject(Injection::Battery { soc_pct: 9.5 });
     b.run_for(ms(1000));
     assert!(b.v().abs() < 1e-3, "drive cut below 10 %");
-    assert_ne!(
-        b.status().vendor_fault_word & fault::BATTERY_UNDER_VOLTAGE,
-        0
-    );
+    assert_ne!(b.faults() & fault::BATTERY_UNDER_VOLTAGE, 0);
     let Frame::BmsData(d) = b.last(0x361) else {
         panic!()
     };
@@ -487,40 +474,33 @@ fn below_ten_percent_the_chassis_cuts_drive_and_reports_under_voltage() {
     }));
     b.run_for(ms(1000));
     assert!(b.v().abs() < 1e-3);
-    assert_ne!(
-        b.status().vendor_fault_word & fault::BATTERY_UNDER_VOLTAGE,
-        0
-    );
+    assert_ne!(b.faults() & fault::BATTERY_UNDER_VOLTAGE, 0);
 
     b.send(Frame::ClearFault(ClearFault {
         code: clear_code::BATTERY_UNDER_VOLTAGE,
     }));
     b.run_for(ms(3000));
-    assert_eq!(b.status().vendor_fault_word, 0);
+    assert_eq!(b.faults(), 0);
     assert!((b.v() - 1.0).abs() < 0.01, "power restored");
 }
 
 #[test]
 fn the_bumper_stops_the_robot_while_pressed() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(1.0, 0.0)));
-    b.run_for(ms(2000));
+    let mut b = Bench::moving(motion(1.0, 0.0), ms(2000));
     assert!(b.inject(Injection::Bumper(true)));
     b.run_for(ms(1000));
     assert!(b.v().abs() < 1e-3);
-    assert_eq!(b.status().vendor_fault_word, fault::BUMPER);
+    assert_eq!(b.faults(), fault::BUMPER);
     assert_ne!(b.sim.truth().fault_flags & FaultFlags::BUMPER, 0);
     b.inject(Injection::Bumper(false));
     b.run_for(ms(3000));
-    assert_eq!(b.status().vendor_fault_word, 0);
+    assert_eq!(b.faults(), 0);
     assert!((b.v() - 1.0).abs() < 0.01);
 }
 
 #[test]
 fn a_lost_motor_driver_stops_drive_and_its_frames_until_cleared() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(1.0, 0.0)));
-    b.run_for(ms(2000));
+    let mut b = Bench::moving(motion(1.0, 0.0), ms(2000));
     assert!(b.inject(Injection::MotorDriverLoss {
         motor: 2,
         lost: true
@@ -529,7 +509,7 @@ fn a_lost_motor_driver_stops_drive_and_its_frames_until_cleared() {
     b.send(Frame::ClearFault(ClearFault { code: 0x02 }));
     b.run_for(ms(1000));
     assert!(b.v().abs() < 1e-3);
-    assert_eq!(b.status().vendor_fault_word, fault::MOTOR_2_COMM_LOST);
+    assert_eq!(b.faults(), fault::MOTOR_2_COMM_LOST);
     for (frame_id, present) in [(0x251, true), (0x252, false), (0x262, false), (0x263, true)] {
         let any = b.decoded(frame_id).iter().any(|(t, _)| *t > lost);
         assert_eq!(any, present, "0x{frame_id:03X}");
@@ -542,15 +522,11 @@ fn a_lost_motor_driver_stops_drive_and_its_frames_until_cleared() {
     let back = b.now;
     b.run_for(ms(1000));
     assert!(b.decoded(0x252).iter().any(|(t, _)| *t > back));
-    assert_eq!(
-        b.status().vendor_fault_word,
-        fault::MOTOR_2_COMM_LOST,
-        "latched"
-    );
+    assert_eq!(b.faults(), fault::MOTOR_2_COMM_LOST, "latched");
     assert!(b.v().abs() < 1e-3);
     b.send(Frame::ClearFault(ClearFault { code: 0x02 }));
     b.run_for(ms(3000));
-    assert_eq!(b.status().vendor_fault_word, 0);
+    assert_eq!(b.faults(), 0);
     assert!((b.v() - 1.0).abs() < 0.01);
 
     for motor in [0, 5] {
@@ -560,9 +536,7 @@ fn a_lost_motor_driver_stops_drive_and_its_frames_until_cleared() {
 
 #[test]
 fn out_of_range_commands_are_clamped_and_counted() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(5.0, 0.0)));
-    b.run_for(ms(4000));
+    let mut b = Bench::moving(motion(5.0, 0.0), ms(4000));
     assert!((b.v() - 3.0).abs() < 1e-3, "{}", b.v());
     assert!(b.sim.commands_clamped() > 100);
     b.heartbeat(Some(motion(2.5, 0.2)));
@@ -584,9 +558,7 @@ fn out_of_range_commands_are_clamped_and_counted() {
 
 #[test]
 fn off_road_switches_only_while_standing_still() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(1.0, 0.0)));
-    b.run_for(ms(1000));
+    let mut b = Bench::moving(motion(1.0, 0.0), ms(1000));
     b.send(Frame::OffRoad(Switch { enter: true }));
     assert!(!b.sim.off_road(), "ignored while moving");
     b.heartbeat(Some(motion(0.0, 0.0)));
@@ -599,9 +571,7 @@ fn off_road_switches_only_while_standing_still() {
 
 #[test]
 fn steering_slews_and_is_reported_through_the_profile_sign() {
-    let mut b = Bench::driving();
-    b.heartbeat(Some(motion(0.5, 0.2)));
-    b.run_for(ms(100));
+    let mut b = Bench::moving(motion(0.5, 0.2), ms(100));
     assert!((b.sim.truth().steer_rad - 0.1).abs() < 1e-9, "1 rad/s slew");
     b.run_for(ms(2000));
     let t = b.sim.truth();
@@ -624,21 +594,9 @@ fn steering_slews_and_is_reported_through_the_profile_sign() {
         "rear steers opposite"
     );
     // Default profile: the wire reports a left turn negative.
-    let raw = b
-        .sent
-        .iter()
-        .rev()
-        .find(|(_, f)| f.id() == 0x221)
-        .unwrap()
-        .1;
+    let raw = b.last_raw(0x221);
     assert_eq!(&raw.data()[6..8], &(-200i16).to_be_bytes());
-    let raw = b
-        .sent
-        .iter()
-        .rev()
-        .find(|(_, f)| f.id() == 0x271)
-        .unwrap()
-        .1;
+    let raw = b.last_raw(0x271);
     assert_eq!(&raw.data()[0..4], &[0xFF, 0x38, 0x00, 0xC8]);
 
     // The tight-turn inner wheels are slower than the outer ones.
@@ -660,18 +618,10 @@ fn steering_slews_and_is_reported_through_the_profile_sign() {
         ..TitanProfile::default()
     };
     let mut b = Bench::with(TitanSim::new(flipped, T0).with_steer_rate_radps(0.0), T0);
-    b.send(Frame::Mode(ModeCommand {
-        mode: mode::CAN_COMMAND,
-    }));
+    b.ask_mode(mode::CAN_COMMAND);
     b.heartbeat(Some(motion(0.0, 0.2)));
     b.run_for(ms(100));
-    let raw = b
-        .sent
-        .iter()
-        .rev()
-        .find(|(_, f)| f.id() == 0x221)
-        .unwrap()
-        .1;
+    let raw = b.last_raw(0x221);
     assert_eq!(&raw.data()[6..8], &200i16.to_be_bytes());
 }
 

@@ -24,7 +24,7 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 use crate::Direction;
 use crate::error::{DecodeError, EncodeError, to_i16, to_wire};
 use crate::profile::XbotProfile;
-use crate::wire::{read_bool, read_prefix, si};
+use crate::wire::{read_bool, read_prefix, si, try_map};
 
 /// The two bytes that start every frame.
 pub const HEADER: [u8; 2] = [0xAA, 0x55];
@@ -451,17 +451,8 @@ fn decode_sensor(payload: &[u8], profile: &XbotProfile) -> Result<SensorReport, 
             100.0,
         ),
         ir_m: w.ir.map(|r| si(r.get(), 1000.0)),
-        ultrasonic_m: [
-            sonar(w.ultrasonic[0])?,
-            sonar(w.ultrasonic[1])?,
-            sonar(w.ultrasonic[2])?,
-        ],
-        motor_current_a: [
-            amps(w.motor_current[0])?,
-            amps(w.motor_current[1])?,
-            amps(w.motor_current[2])?,
-            amps(w.motor_current[3])?,
-        ],
+        ultrasonic_m: try_map(w.ultrasonic, sonar)?,
+        motor_current_a: try_map(w.motor_current, amps)?,
         lift_current_a: maybe_bcd("lift current", w.lift_current).map(|v| si(v, 10.0))?,
         encoder_counts: [fl, fr, bl, br],
         lift_encoder_counts: w.lift_encoder.get(),
@@ -548,40 +539,19 @@ fn encode_sensor(s: &SensorReport, profile: &XbotProfile) -> Result<SensorWire, 
         // 0..=9999: the cast is exact.
         battery_bcd: U16::new(to_bcd(volts as u16)),
         marker_4: SENSOR_MARKERS[1].1,
-        ir: [ir(s.ir_m[0])?, ir(s.ir_m[1])?, ir(s.ir_m[2])?],
+        ir: try_map(s.ir_m, ir)?,
         marker_11: SENSOR_MARKERS[2].1,
-        motor_current: [
-            amps(s.motor_current_a[0])?,
-            amps(s.motor_current_a[1])?,
-            amps(s.motor_current_a[2])?,
-            amps(s.motor_current_a[3])?,
-        ],
+        motor_current: try_map(s.motor_current_a, amps)?,
         lift_current: to_u16_maybe_bcd("lift_current_a", s.lift_current_a, 10.0, bcd)?,
         marker_22: SENSOR_MARKERS[3].1,
-        ultrasonic: [
-            sonar(s.ultrasonic_m[0])?,
-            sonar(s.ultrasonic_m[1])?,
-            sonar(s.ultrasonic_m[2])?,
-        ],
+        ultrasonic: try_map(s.ultrasonic_m, sonar)?,
         marker_29: SENSOR_MARKERS[4].1,
         encoder: [fl, fr, rr, rl].map(U16::new),
         lift_encoder: U16::new(s.lift_encoder_counts),
         marker_40: SENSOR_MARKERS[5].1,
-        accel: [
-            accel(s.accel_mps2[0])?,
-            accel(s.accel_mps2[1])?,
-            accel(s.accel_mps2[2])?,
-        ],
-        gyro: [
-            gyro(s.gyro_radps[0])?,
-            gyro(s.gyro_radps[1])?,
-            gyro(s.gyro_radps[2])?,
-        ],
-        mag: [
-            mag(s.mag_gauss[0])?,
-            mag(s.mag_gauss[1])?,
-            mag(s.mag_gauss[2])?,
-        ],
+        accel: try_map(s.accel_mps2, accel)?,
+        gyro: try_map(s.gyro_radps, gyro)?,
+        mag: try_map(s.mag_gauss, mag)?,
         temperature_c: temperature,
         yaw: angle("yaw_rad", s.yaw_rad)?,
         pitch: angle("pitch_rad", s.pitch_rad)?,

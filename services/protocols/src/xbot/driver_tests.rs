@@ -11,7 +11,7 @@ use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
 use crate::profile::XbotProfile;
 use crate::time::Timestamp;
-use crate::xbot::test_support::{close, hex, max_per_second, ms, p, pieces, twist};
+use crate::xbot::test_support::{arbitrary_reads, close, hex, max_per_second, ms, p, twist};
 use crate::xbot::{Frame, SensorReport, StreamParser, VelocityCommand, checksum};
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
@@ -113,6 +113,16 @@ impl Bench {
     fn set(&mut self, command: BodyVelocity) {
         self.d.set_command(self.now, &command);
         self.drain();
+    }
+
+    /// 0.8 m/s then standstill, alternating every millisecond for `millis` ms (a stop-and-go
+    /// storm that fills the change window).
+    fn stop_and_go(&mut self, millis: u32) {
+        for i in 0..millis {
+            let vx = if i % 2 == 0 { 0.8 } else { 0.0 };
+            self.set(twist(vx, 0.0, 0.0));
+            self.run_for(ms(1));
+        }
     }
 
     fn control(&mut self, command: Command) -> ControlOutcome {
@@ -333,11 +343,7 @@ fn a_command_changing_every_millisecond_never_puts_more_than_10_frames_in_a_seco
 #[test]
 fn stop_and_go_alternating_every_millisecond_stays_within_the_bound() {
     let mut b = Bench::new();
-    for i in 0..3000u32 {
-        let vx = if i % 2 == 0 { 0.8 } else { 0.0 };
-        b.set(twist(vx, 0.0, 0.0));
-        b.run_for(ms(1));
-    }
+    b.stop_and_go(3000);
     let times: Vec<_> = b.velocities().iter().map(|(t, _)| *t).collect();
     assert_eq!(
         max_per_second(&times),
@@ -1036,11 +1042,7 @@ fn while_the_bus_is_down_nothing_is_sent_and_control_is_retaken_when_it_returns(
 #[test]
 fn shutdown_sends_zero_at_once_even_when_the_window_is_full() {
     let mut b = Bench::new();
-    for i in 0..200u32 {
-        let vx = if i % 2 == 0 { 0.8 } else { 0.0 };
-        b.set(twist(vx, 0.0, 0.0));
-        b.run_for(ms(1));
-    }
+    b.stop_and_go(200);
     b.set(twist(0.7, 0.0, 0.0));
     b.run_for(ms(1));
     let before = b.velocities().len();
@@ -1057,12 +1059,9 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
     #[test]
-    fn arbitrary_bytes_never_panic_and_every_candidate_is_counted(
-        data in proptest::collection::vec(any::<u8>(), 0..2000),
-        cuts in proptest::collection::vec(1usize..300, 1..20),
-    ) {
+    fn arbitrary_bytes_never_panic_and_every_candidate_is_counted(reads in arbitrary_reads()) {
         let mut b = Bench::new();
-        for piece in pieces(&data, &cuts) {
+        for piece in &reads {
             b.bytes(piece);
             b.run_for(ms(3));
         }

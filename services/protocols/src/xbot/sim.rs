@@ -739,8 +739,7 @@ impl Firmware for XbotSim {
 
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
-        if !self.chassis.is_booting() && self.reports.is_due(now) {
-            self.reports.served(now);
+        if !self.chassis.is_booting() && self.reports.serve_due(now) {
             self.send_report(now, InjectedCounts::default());
         }
         if self.chassis.flood_due(now).is_some() && !self.chassis.is_booting() {
@@ -785,22 +784,17 @@ impl Firmware for XbotSim {
             lateral_mps: lateral,
             angular_radps: angular,
             steer_rad: 0.0,
-            x_m: self.pose.x_m,
-            y_m: self.pose.y_m,
-            yaw_rad: self.pose.yaw_rad,
             control_mode: if self.powered && !self.chassis.is_booting() {
                 ControlMode::COMMAND
             } else {
                 ControlMode::STANDBY
             },
             brake_engaged: false,
-            soc_pct: self.chassis.soc_pct,
             fault_flags: 0,
             commands_received: self.commands_received,
             bad_checksums_received: self.bad_checksums_received,
             decode_errors: self.decode_errors,
-            boots: self.chassis.boots,
-            injected: self.chassis.outbox.injected(),
+            ..self.chassis.truth(self.pose)
         }
     }
 }

@@ -11,7 +11,7 @@ use crate::firmware::{Firmware, Injection};
 use crate::profile::XbotProfile;
 use crate::sim_bench::BenchFirmware;
 use crate::time::Timestamp;
-use crate::xbot::test_support::{close, ms, p, pieces};
+use crate::xbot::test_support::{arbitrary_reads, close, ms, p};
 use crate::xbot::{
     Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, StreamParser, VelocityCommand,
 };
@@ -650,12 +650,9 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
     #[test]
-    fn arbitrary_bytes_never_panic_and_every_candidate_is_counted(
-        data in proptest::collection::vec(any::<u8>(), 0..2000),
-        cuts in proptest::collection::vec(1usize..300, 1..20),
-    ) {
+    fn arbitrary_bytes_never_panic_and_every_candidate_is_counted(reads in arbitrary_reads()) {
         let mut b = Bench::new();
-        for piece in pieces(&data, &cuts) {
+        for piece in &reads {
             b.send_raw(piece);
             b.run_for(ms(3));
         }

@@ -3,6 +3,7 @@
 use std::time::Duration;
 
 use chassis_interfaces::BodyVelocity;
+use proptest::prelude::*;
 
 use crate::profile::XbotProfile;
 use crate::time::Timestamp;
@@ -48,6 +49,20 @@ pub(crate) fn max_per_second(times: &[Timestamp]) -> usize {
         })
         .max()
         .unwrap_or(0)
+}
+
+/// Up to 2000 arbitrary bytes as a UART returns them: in reads of 1-299 bytes ([`pieces`]).
+pub(crate) fn arbitrary_reads() -> impl Strategy<Value = Vec<Vec<u8>>> {
+    (
+        proptest::collection::vec(any::<u8>(), 0..2000),
+        proptest::collection::vec(1usize..300, 1..20),
+    )
+        .prop_map(|(data, cuts)| {
+            pieces(&data, &cuts)
+                .into_iter()
+                .map(<[u8]>::to_vec)
+                .collect()
+        })
 }
 
 /// `data` cut into consecutive pieces of the lengths `cuts` gives, in turn (the last piece may
