@@ -910,8 +910,6 @@ pub fn cost_at(
 mod tests {
     use super::*;
     use chassis_client::BodyVelocity;
-    use chassis_protocols::driver::DriverConfig;
-    use chassis_protocols::pair::Pair;
     use chassis_protocols::{Direction, Timestamp, WireItem};
 
     /// Every robot's driver asked for 0.3 m/s against its simulated firmware: the command path
@@ -939,10 +937,7 @@ mod tests {
         for kind in RobotKind::ALL {
             let entry = kind.entry();
             let profile = entry.defaults();
-            let start = Timestamp::from_millis(1_000);
-            let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
-            let firmware = (entry.firmware)(&profile, start);
-            let mut pair = Pair::new(driver, firmware, start);
+            let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
             pair.run_for(Duration::from_secs(2));
             pair.record = true;
             pair.set_command(BodyVelocity {

@@ -849,7 +849,7 @@ fn the_status_reports_the_decision_counts_and_the_last_event() {
 /// for, fails here.
 #[test]
 fn every_robot_of_the_registry_has_a_speed_rule_and_a_battery_rule() {
-    use chassis_protocols::{DriverConfig, Injection, Timestamp, pair::Pair};
+    use chassis_protocols::{Injection, Timestamp, pair::Pair};
     use std::time::Duration;
 
     /// Runs the pair for `ms` in 20 ms steps, evaluating the engine on what the driver reports;
@@ -880,10 +880,7 @@ fn every_robot_of_the_registry_has_a_speed_rule_and_a_battery_rule() {
         let warnings = engine.levels().warnings(engine.config(), "chassis/test");
         assert!(warnings.is_empty(), "{kind}: {warnings:?}");
 
-        let start = Timestamp::from_millis(1_000);
-        let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
-        let firmware = (entry.firmware)(&profile, start);
-        let mut pair = Pair::new(driver, firmware, start);
+        let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
         let (active, texts) = watch(&mut pair, &mut engine, 2000);
         let both = SafetyRule::bit(SafetyRule::SPEED) | SafetyRule::bit(SafetyRule::BATTERY);
         assert_eq!(active & both, 0, "{kind} at rest: {texts:?}");

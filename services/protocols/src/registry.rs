@@ -653,6 +653,18 @@ impl RobotEntry {
         (self.driver)(profile, config, now)
     }
 
+    /// Its driver for `profile` (default configuration, no detection) and its simulated firmware,
+    /// wired back to back from `start` on simulated time: the registry-wide tests' and the
+    /// clients' way to see a robot's exchange without a bus.
+    pub fn simulated_pair(
+        &self,
+        profile: &Profile,
+        start: Timestamp,
+    ) -> crate::pair::Pair<BoxedDriver, BoxedFirmware> {
+        let driver = self.driver(profile, false, &DriverConfig::default(), start);
+        crate::pair::Pair::new(driver, (self.firmware)(profile, start), start)
+    }
+
     /// Its frame describer for the protocol a state sample says the driver speaks
     /// (`SystemState::wire_protocol`): the manuals' profile of V1 or V2 where the robot speaks
     /// that one, its default profile otherwise (its own protocol, or still detecting).

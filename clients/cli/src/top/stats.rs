@@ -456,8 +456,6 @@ mod tests {
 
     use super::*;
     use chassis_client::BodyVelocity;
-    use chassis_protocols::driver::DriverConfig;
-    use chassis_protocols::pair::Pair;
     use chassis_protocols::profile::XbotProfile;
     use chassis_protocols::{Direction, RobotKind, Timestamp, WireItem, xbot};
 
@@ -479,10 +477,7 @@ mod tests {
         for kind in RobotKind::ALL {
             let entry = kind.entry();
             let profile = entry.defaults();
-            let start = Timestamp::from_millis(1_000);
-            let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
-            let firmware = (entry.firmware)(&profile, start);
-            let mut pair = Pair::new(driver, firmware, start);
+            let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
             pair.record = true;
             pair.run_for(Duration::from_secs(2));
             pair.set_command(BodyVelocity {

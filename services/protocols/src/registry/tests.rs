@@ -8,7 +8,6 @@ use super::*;
 use crate::CanFrame;
 use crate::description::describe;
 use crate::firmware::Injection;
-use crate::pair::Pair;
 
 /// The robot's defaults, then its default profile in each protocol it speaks.
 fn every_profile(entry: &RobotEntry) -> Vec<Profile> {
@@ -112,11 +111,8 @@ fn every_robot_drives_its_simulated_firmware_in_each_of_its_protocols() {
     for kind in RobotKind::ALL {
         let entry = kind.entry();
         for profile in every_profile(entry) {
-            let start = Timestamp::from_millis(1_000);
-            let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
-            let firmware = (entry.firmware)(&profile, start);
-            assert_eq!((driver.robot(), firmware.robot()), (kind, kind));
-            let mut pair = Pair::new(driver, firmware, start);
+            let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
+            assert_eq!((pair.driver.robot(), pair.firmware.robot()), (kind, kind));
             pair.run_for(Duration::from_secs(3));
             let forward = BodyVelocity {
                 linear_x_mps: 0.3,
@@ -148,10 +144,7 @@ fn every_robot_runs_away_past_its_limit_when_told_to_and_obeys_again_after() {
         let entry = kind.entry();
         let profile = entry.defaults();
         let limit = describe(&profile).robot_limits.forward_mps;
-        let start = Timestamp::from_millis(1_000);
-        let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
-        let firmware = (entry.firmware)(&profile, start);
-        let mut pair = Pair::new(driver, firmware, start);
+        let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
         pair.run_for(Duration::from_secs(2));
         let runaway = limit + 0.5;
         assert!(pair.inject(Injection::Runaway(Some(runaway))), "{kind}");
@@ -277,10 +270,7 @@ fn every_steered_robot_is_described_with_the_radius_its_driver_turns() {
         steered += 1;
         assert!(radius > 0.0, "{kind}: {radius}");
         let flags_at = |r: f64| {
-            let start = Timestamp::from_millis(1_000);
-            let driver = entry.driver(&profile, false, &DriverConfig::default(), start);
-            let firmware = (entry.firmware)(&profile, start);
-            let mut pair = Pair::new(driver, firmware, start);
+            let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
             pair.run_for(Duration::from_secs(2));
             let twist = BodyVelocity {
                 linear_x_mps: 0.3,
