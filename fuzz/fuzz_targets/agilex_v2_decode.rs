@@ -3,7 +3,6 @@
 //! encodes, and decodes again to the same frame.
 #![no_main]
 
-use chassis_protocols::CanFrame;
 use chassis_protocols::agilex_v2::profile::{BmsAlarmLayout, RcStickOrder};
 use chassis_protocols::agilex_v2::{self, V2Model, V2Profile};
 use libfuzzer_sys::fuzz_target;
@@ -38,16 +37,12 @@ fuzz_target!(|data: &[u8]| {
     let Some((&choice, rest)) = data.split_first() else {
         return;
     };
-    let Some((head, payload)) = rest.split_first_chunk::<2>() else {
-        return;
-    };
-    let id = u32::from(u16::from_le_bytes(*head)) & 0x7FF;
-    let Ok(frame) = CanFrame::new(id, &payload[..payload.len().min(8)]) else {
+    let Some(frame) = chassis_fuzz::standard_frame(rest) else {
         return;
     };
     let profile = profile(choice);
     if let Ok(decoded) = agilex_v2::decode(&frame, &profile) {
-        assert_eq!(u32::from(decoded.id()), id, "{decoded:?}");
+        assert_eq!(u32::from(decoded.id()), frame.id(), "{decoded:?}");
         let encoded = decoded
             .encode(&profile)
             .unwrap_or_else(|e| panic!("{decoded:?} decoded from {frame:?} does not encode: {e}"));

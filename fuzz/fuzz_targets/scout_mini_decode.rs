@@ -3,15 +3,11 @@
 #![no_main]
 
 use chassis_protocols::profile::ScoutMiniProfile;
-use chassis_protocols::{CanFrame, scout_mini};
+use chassis_protocols::scout_mini;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let Some((head, payload)) = data.split_first_chunk::<2>() else {
-        return;
-    };
-    let id = u32::from(u16::from_le_bytes(*head)) & 0x7FF;
-    let Ok(frame) = CanFrame::new(id, &payload[..payload.len().min(8)]) else {
+    let Some(frame) = chassis_fuzz::standard_frame(data) else {
         return;
     };
     let profile = ScoutMiniProfile::default();
