@@ -222,9 +222,10 @@ pub const DEFAULT_CONFIG_ROW: &str =
 const DDS_IN: &str = "DDS Cyclone DDS → RustDDS";
 const DDS_OUT: &str = "DDS RustDDS → Cyclone DDS";
 
-/// The run (robot, loop) the Python client and the ROS 2 bridge are measured beside: same
+/// The runs (robot, bus, loop) the Python client and the ROS 2 bridge are measured beside: same
 /// service, same placement as the Rust client's rows.
-const SCRIPTS_BESIDE: (RobotKind, LoopMode) = (RobotKind::Titan, LoopMode::Event);
+const SCRIPTS_BESIDE: (RobotKind, BusKind, LoopMode) =
+    (RobotKind::Titan, BusKind::Sim, LoopMode::Event);
 
 fn transport_of(mode: LoopMode) -> Transport {
     match mode {
@@ -365,7 +366,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 placement,
             ));
             expected.push(row_key("preemption", &label, mode, placement));
-            if (r.robot, r.mode) == SCRIPTS_BESIDE {
+            if (r.robot, r.bus, r.mode) == SCRIPTS_BESIDE {
                 if python.is_some() {
                     for p in ["state", "command"] {
                         expected.push(row_key("python", &format!("{label}: {p}"), mode, placement));
@@ -522,7 +523,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 let preempt = paths::preemption(&mut robot, r.robot, preemptions, interval, spin)?;
                 // The Python client and the ROS 2 bridge beside the Rust one.
                 let (mut python_figures, mut ros2_figures) = (None, None);
-                if (r.robot, r.mode) == SCRIPTS_BESIDE && (python.is_some() || ros2.is_some()) {
+                if (r.robot, r.bus, r.mode) == SCRIPTS_BESIDE
+                    && (python.is_some() || ros2.is_some())
+                {
                     let run = python::ScriptRun {
                         name: robot.name(),
                         prefix: &prefix,
