@@ -62,6 +62,7 @@ the Rust client's.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import os
 import subprocess
@@ -104,16 +105,30 @@ def row(path: str, robot: str, latencies: list[int], missed: int) -> dict[str, o
     return out
 
 
+def body(state: chassis.ChassisState) -> bytes:
+    """What a sample says, without what every publication changes: its number, its stamps and
+    the link's counters."""
+    copy = chassis.ChassisState.from_buffer_copy(bytes(state))
+    copy.seq = 0
+    copy.stamp_ns = 0
+    copy.published_ns = 0
+    ctypes.memset(ctypes.addressof(copy.group_stamp_ns), 0, ctypes.sizeof(copy.group_stamp_ns))
+    ctypes.memset(ctypes.addressof(copy.link), 0, ctypes.sizeof(copy.link))
+    return bytes(copy)
+
+
 class StateRecorder:
     """The state-path rule every client of ``chassis-bench`` applies alike: a sample counts when
-    its stamp is newer than every stamp received before it; the first sample only sets the
-    stamp; gaps in ``seq`` are dropped samples."""
+    its stamp is newer than every stamp received before it and it says something the sample
+    before it did not (a tick's refresh of a frame that changed nothing is left out); the first
+    sample only sets the stamp; gaps in ``seq`` are dropped samples."""
 
     def __init__(self) -> None:
         self.latencies: list[int] = []
         self.dropped = 0
         self.last_seq: int | None = None
         self.newest_stamp: int | None = None
+        self.last_body: bytes | None = None
 
     def sample(self, state: chassis.ChassisState, received: int) -> None:
         """Takes one received sample."""
@@ -122,12 +137,17 @@ class StateRecorder:
                 return
             self.dropped += state.seq - self.last_seq - 1
         self.last_seq = state.seq
-        if self.newest_stamp is not None and state.stamp_ns <= self.newest_stamp:
+        said = body(state)
+        nothing_new = said == self.last_body
+        self.last_body = said
+        if self.newest_stamp is None:
+            self.newest_stamp = state.stamp_ns
             return
-        first = self.newest_stamp is None
+        if state.stamp_ns <= self.newest_stamp or nothing_new:
+            self.newest_stamp = max(self.newest_stamp, state.stamp_ns)
+            return
         self.newest_stamp = state.stamp_ns
-        if not first:
-            self.latencies.append(received - state.stamp_ns)
+        self.latencies.append(received - state.stamp_ns)
 
 
 def state_path(robot: chassis.Robot, teleop: chassis.Source, samples: int) -> StateRecorder:

@@ -13,7 +13,8 @@ processes involved:
   → the ``nav_msgs/Odometry`` it produced taken by this participant. The bridge runs with
   ``--monotonic-stamps``, so each odom's stamp is that read time itself. By the rule
   ``chassis-bench`` applies to every client alike, an odom counts when its stamp is newer than
-  every stamp taken before it: one that repeats an older frame's read time (a tick's refresh) is
+  every stamp taken before it and its pose or twist differs from the odom before it: one that
+  repeats an older frame's read time, or says what the one before it said (a tick's refresh), is
   left out, and the first only sets the stamp.
 * **raw hops**: the same two DDS implementations with nothing behind them, each carrying what
   its path carries with the same QoS. ``chassis-ros2 --bench-echo`` (the bridge's DDS stack)
@@ -146,6 +147,7 @@ def state_path(
     drive = m.Twist(linear=m.Vector3(x=STATE_DRIVE[0]), angular=m.Vector3(z=STATE_DRIVE[1]))
     last_request = 0
     newest: int | None = None
+    last_said: object = None
     deadline = time.monotonic() + 120
     while len(pairs) < samples and time.monotonic() < deadline:
         if chassis.now_ns() - last_request > 50_000_000:
@@ -156,9 +158,11 @@ def state_path(
         woke = chassis.now_ns()
         for sample in taken:
             read = nanos(sample.header.stamp)
-            if newest is not None and read > newest:
+            said = (sample.pose, sample.twist)
+            if newest is not None and read > newest and said != last_said:
                 pairs.append((read, woke))
             newest = read if newest is None else max(newest, read)
+            last_said = said
     cmd.write(m.Twist())
     return pairs
 

@@ -22,6 +22,7 @@ pub use chassis_ipc::PassStamps;
 use chassis_protocols::describe::{FrameJson, RobotCodec};
 use chassis_protocols::{CanFrame, RobotKind};
 use serde::Serialize;
+use zerocopy::IntoBytes as _;
 
 use crate::placement::{pause, pin_current_thread, unique, unpin_current_thread};
 use crate::stats::Latencies;
@@ -628,14 +629,19 @@ pub fn command_path_via(
 /// Records state-path latencies from the samples a reader receives, by the rule every client
 /// of the benchmark applies alike (the Rust rows here, `clients/python/bench.py`,
 /// `clients/ros2/bench.py`): a sample counts when its stamp (the read time of the frame that
-/// made it) is newer than every stamp received before it. A sample the service's tick merely
-/// refreshed carries an older frame's read time and is left out, as is the first one (the
-/// newest sample published before the reader opened). Gaps in `seq` are samples the reader
-/// lost: counted as dropped, never silently.
+/// made it) is newer than every stamp received before it and it says something the sample
+/// before it did not. A sample the service's tick merely refreshed is left out: it carries an
+/// older frame's read time, or the read time of a frame that changed nothing but stamps and
+/// counters (the service publishes such a frame only with its next tick, so its "latency"
+/// would be the tick's wait); so is the first one (the newest sample published before the
+/// reader opened). Gaps in `seq` are samples the reader lost: counted as dropped, never
+/// silently.
 #[derive(Debug, Default)]
 pub struct StateRecorder {
     last_seq: Option<u64>,
     newest_stamp: Option<u64>,
+    /// What the last sample said ([`StateRecorder::body`]).
+    last_body: Option<ChassisState>,
     /// Gaps in `seq` are by design (behind a bridge that forwards the newest sample of each
     /// read of the bus), not samples lost: not counted as dropped.
     pub gaps_allowed: bool,
@@ -646,7 +652,8 @@ pub struct StateRecorder {
     pub samples: Vec<(u64, u64, u64)>,
     /// Samples published that this reader never received (gaps in `seq`).
     pub dropped: u64,
-    /// Samples received whose stamp was not newer (tick refreshes): not recorded.
+    /// Samples received whose stamp was not newer, or that said nothing new (tick refreshes):
+    /// not recorded.
     pub refreshes: u64,
 }
 
@@ -656,6 +663,19 @@ impl StateRecorder {
         Self {
             gaps_allowed: true,
             ..Self::default()
+        }
+    }
+
+    /// What a sample says, without what every publication changes: its number, its stamps and
+    /// the link's counters.
+    fn body(state: &ChassisState) -> ChassisState {
+        ChassisState {
+            seq: 0,
+            stamp_ns: 0,
+            published_ns: 0,
+            group_stamp_ns: Default::default(),
+            link: Default::default(),
+            ..*state
         }
     }
 
@@ -669,11 +689,17 @@ impl StateRecorder {
             }
         }
         self.last_seq = Some(state.seq);
+        let body = Self::body(state);
+        let said_nothing_new = self
+            .last_body
+            .replace(body)
+            .is_some_and(|last| last.as_bytes() == body.as_bytes());
         let Some(newest) = self.newest_stamp else {
             self.newest_stamp = Some(state.stamp_ns);
             return;
         };
-        if state.stamp_ns <= newest {
+        if state.stamp_ns <= newest || said_nothing_new {
+            self.newest_stamp = Some(newest.max(state.stamp_ns));
             self.refreshes += 1;
             return;
         }
@@ -983,13 +1009,17 @@ mod tests {
 mod state_recorder_tests {
     use super::*;
 
+    /// A sample whose frame, read at `stamp_ns`, moved the robot there (each frame says
+    /// something new).
     fn sample(seq: u64, stamp_ns: u64) -> ChassisState {
-        ChassisState {
+        let mut s = ChassisState {
             seq,
             stamp_ns,
             published_ns: stamp_ns + 10_000,
             ..ChassisState::default()
-        }
+        };
+        s.odometry.x_m = stamp_ns as f64 * 1e-9;
+        s
     }
 
     #[test]
@@ -1003,10 +1033,16 @@ mod state_recorder_tests {
         r.sample(&sample(12, 2_000_000), 3_000_000);
         // The same sample twice (a repeat): nothing.
         r.sample(&sample(12, 2_000_000), 3_000_000);
+        // The tick's refresh after a frame that changed nothing but stamps and counters (read at
+        // 2.5 ms, published with the tick at 22 ms): left out, not a 19.5 ms latency.
+        let mut unchanged = sample(13, 2_500_000);
+        unchanged.odometry = sample(0, 2_000_000).odometry;
+        unchanged.link.rx_frames = 7;
+        r.sample(&unchanged, 22_000_000);
         // Two samples lost, then a new frame: 20 µs.
-        r.sample(&sample(15, 4_000_000), 4_020_000);
+        r.sample(&sample(16, 4_000_000), 4_020_000);
         assert_eq!(r.latencies.count(), 2);
-        assert_eq!((r.refreshes, r.dropped), (1, 2));
+        assert_eq!((r.refreshes, r.dropped), (2, 2));
         let s = r.latencies.summary();
         assert!((s.max_us - 50.0).abs() < 0.1, "{s:?}");
         assert_eq!(r.in_service.count(), 2);

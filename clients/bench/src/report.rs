@@ -1029,9 +1029,11 @@ impl Report {
              that needs every sample does (`Robot::state_stream`, `StateStream` in Python), and \
              applies one rule in Rust, Python and the ROS 2 script alike: a sample counts when \
              its stamp (the read time of the frame that made it) is newer than every stamp \
-             received before it; a sample the service's tick merely refreshed carries an older \
-             read time and is left out, and so is the first (published before the reader \
-             opened). Gaps in `seq` are samples the reader lost: the count column shows them as \
+             received before it and it says something the sample before it did not (the ROS 2 \
+             script: its pose or twist); a sample the service's tick merely refreshed carries \
+             an older read time, or that of a frame that changed nothing but stamps and \
+             counters (published only with the next tick), and is left out, and so is the first \
+             (published before the reader opened). Gaps in `seq` are samples the reader lost: the count column shows them as \
              *dropped*, beside requests *missed* and samples *out of range* of the histogram.\n\
              * **Same samples.** A matched baseline has as many samples as the row it divides: \
              the last ones of a run long enough for both the command row's pings and the state \
