@@ -169,7 +169,7 @@ mod tests {
             commands: 40,
             interval: Duration::from_millis(20),
         };
-        let mut script = Command::new("python");
+        let mut script = Command::new("python3");
         run.args(&mut script);
         let args: Vec<_> = script.get_args().map(|a| a.to_string_lossy()).collect();
         assert_eq!(
