@@ -665,7 +665,8 @@ pub fn messages(
     out
 }
 
-/// The environment variable naming a file for the state loop's odom trace ([`OdomTrace`]).
+/// The environment variable naming a file for the state loop's odom trace: for each odom, the
+/// frame's read time, the loop's wake-up, the odom handed to RustDDS and the write returned.
 pub const ODOM_TRACE_ENV: &str = "CHASSIS_ROS2_TRACE";
 
 /// Stamps the state loop takes for each `odom` it publishes, kept in memory and written when the
