@@ -33,18 +33,22 @@ impl PassStamps {
     pub const HEADER: &'static str =
         "woke requests_read write_started written state_handed state_sent state_readers_woken";
 
-    /// This pass as a line of the trace.
-    pub fn line(&self) -> String {
-        format!(
-            "{} {} {} {} {} {} {}",
+    /// The stamps in the trace's column order ([`PassStamps::HEADER`]).
+    fn columns(&self) -> [u64; 7] {
+        [
             self.woke,
             self.requests_read,
             self.write_started,
             self.written,
             self.state_handed,
             self.state_sent,
-            self.state_readers_woken
-        )
+            self.state_readers_woken,
+        ]
+    }
+
+    /// This pass as a line of the trace.
+    pub fn line(&self) -> String {
+        self.columns().map(|s| s.to_string()).join(" ")
     }
 
     /// Sets `slot` to `now` unless the pass already took it.
@@ -76,10 +80,7 @@ impl PassStamps {
                     state_handed,
                     state_sent,
                     state_readers_woken,
-                ] = v[..]
-                else {
-                    return Err(TraceError::Line(line.to_string()));
-                };
+                ] = <[u64; 7]>::try_from(v).map_err(|_| TraceError::Line(line.to_string()))?;
                 Ok(Self {
                     woke,
                     requests_read,
