@@ -64,6 +64,22 @@ pub struct Load {
     pub tick: Duration,
 }
 
+/// How a baseline run's rounds go.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rounds {
+    /// Ping-pong back to back: both hops of every round count.
+    BackToBack,
+    /// One ping a period: only the ping's hop counts, the one after the pause.
+    Paced(Duration),
+    /// Back to back, each counted ping sent right after a lead ping that wakes the receiver
+    /// (and is not answered): only the counted ping's hop counts. What a request meets when it
+    /// follows another at once, as a safety stop follows a teleop request.
+    AfterWakeUp,
+}
+
+/// Marks a lead ping ([`Rounds::AfterWakeUp`]), which the pong does not answer.
+const LEAD: u64 = 1 << 62;
+
 /// What the transport waits like.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Waiting {
@@ -515,6 +531,9 @@ pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
                     println!("done");
                     return Ok(());
                 }
+                if ping.seq & LEAD != 0 {
+                    continue;
+                }
                 endpoint.send(Ping {
                     stamp_ns: now_ns(),
                     seq: ping.seq,
@@ -564,17 +583,18 @@ pub fn last_of(hops: &[u64], count: u64) -> Latencies {
     latencies
 }
 
-/// Runs `rounds` ping-pongs (after a warm-up) and returns the one-way latencies of both
-/// directions — back to back, or, with `pace`, one ping per period and only the ping's hop: what
-/// a request meets when it comes after a pause, as a controller's requests do (the receiver is
-/// blocked and its CPU may be idle). With `load` (iceoryx2 only), the receiver also lives with a
-/// feed from a third process and a tick of its own, and the feed's hops are measured.
+/// Runs `rounds` ping-pongs (after a warm-up) and returns the counted one-way latencies
+/// ([`Rounds`]): back to back, both directions; paced, one ping per period and only the ping's
+/// hop: what a request meets when it comes after a pause, as a controller's requests do (the
+/// receiver is blocked and its CPU may be idle); after a wake-up, the hop of a ping that follows
+/// another at once. With `load` (iceoryx2 only), the receiver also lives with a feed from a third
+/// process and a tick of its own, and the feed's hops are measured.
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     transport: Transport,
     placement: Placement,
     rounds: u64,
-    pace: Option<Duration>,
+    shape: Rounds,
     load: Option<Load>,
     prefix: &str,
     dir: &std::path::Path,
@@ -636,7 +656,7 @@ pub fn run(
         pin_current_thread(cpu)?;
     }
     let result = open_endpoint(&args, "ping", "pong").and_then(|mut endpoint| {
-        let result = ping_rounds(endpoint.as_mut(), transport, rounds, pace);
+        let result = ping_rounds(endpoint.as_mut(), transport, rounds, shape);
         // Tells the pong to stop (and to write its feed figures).
         let _ = endpoint.send(Ping {
             seq: u64::MAX,
@@ -672,14 +692,23 @@ fn ping_rounds(
     endpoint: &mut dyn Endpoint,
     transport: Transport,
     rounds: u64,
-    pace: Option<Duration>,
+    shape: Rounds,
 ) -> anyhow::Result<Vec<u64>> {
     let mut latencies = Vec::new();
-    let warmup = if pace.is_some() { 20 } else { 200 };
-    let mut ticker = pace.map(chassis_client::Ticker::new);
+    let (warmup, mut ticker) = match shape {
+        Rounds::Paced(period) => (20, Some(chassis_client::Ticker::new(period))),
+        Rounds::BackToBack | Rounds::AfterWakeUp => (200, None),
+    };
     for seq in 0..warmup + rounds {
         if let Some(ticker) = ticker.as_mut() {
             ticker.wait();
+        }
+        if shape == Rounds::AfterWakeUp {
+            endpoint.send(Ping {
+                stamp_ns: now_ns(),
+                seq: seq | LEAD,
+                ..Ping::default()
+            })?;
         }
         let sent = now_ns();
         endpoint.send(Ping {
@@ -690,10 +719,13 @@ fn ping_rounds(
         let Some((pong, arrived)) = endpoint.receive(Duration::from_secs(2))? else {
             bail!("{}: no answer to ping {seq}", transport.label());
         };
+        if pong.seq != seq {
+            bail!("{}: ping {seq} answered as {}", transport.label(), pong.seq);
+        }
         if seq >= warmup {
             latencies.push(pong.measured_ns);
-            // Paced, only the hop after the pause counts: the answer finds both ends awake.
-            if pace.is_none() {
+            // Otherwise only the ping's hop counts: the answer finds both ends awake.
+            if shape == Rounds::BackToBack {
                 latencies.push(arrived.saturating_sub(pong.stamp_ns));
             }
         }

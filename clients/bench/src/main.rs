@@ -314,7 +314,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         // machine's other work (a smoke run is about rows, not figures).
         runs.retain(|r| r.mode == LoopMode::Event);
     }
-    // The warm baseline of the hybrid loop's preemption rows.
+    // The poll-then-block loop's own back-to-back hop, a context row beside the hybrid runs.
     if runs.iter().any(|r| r.mode == LoopMode::Hybrid) {
         baselines.push((Transport::IceoryxHybrid, Placement::CrossCpu, None));
     }
@@ -340,7 +340,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             for what in [
                 format!("{t} paced, loaded as {label}"),
                 format!("{t} at the feedback rate, loaded as {label}"),
-                format!("{t} back to back, loaded as {label}"),
+                format!("{t} after a wake-up ping, loaded as {label}"),
             ] {
                 expected.push(row_key("baseline", &what, "-", placement));
             }
@@ -449,8 +449,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             } else {
                 plan.baseline_rounds
             };
-            let l =
-                baseline::run(transport, placement, rounds, pace, None, &prefix, &dir)?.all_pings();
+            let shape = pace.map_or(baseline::Rounds::BackToBack, baseline::Rounds::Paced);
+            let l = baseline::run(transport, placement, rounds, shape, None, &prefix, &dir)?
+                .all_pings();
             let mut r = Row::new("baseline", what, "-", placement.label(), l, 0);
             r.conditions = Some(match pace {
                 Some(p) => format!(
@@ -575,7 +576,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 transport,
                 r.placement,
                 rounds,
-                Some(interval),
+                baseline::Rounds::Paced(interval),
                 Some(load),
                 &prefix,
                 &dir,
@@ -619,27 +620,31 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 report.rows.push(feed_row);
             }
             let reference = |what: &str| Some(format!("{what}, {placement}"));
-            // The preemption's stop follows a request at once, while the loop is awake: its
-            // baseline is back to back, loaded as the service was, with as many samples (two
-            // hops a round).
+            // The preemption's stop follows a teleop request at once, while the loop is waking
+            // for it: its baseline is a ping right after a lead ping, loaded as the service was,
+            // with as many samples.
             bar.set_message(format!(
-                "baseline as {label}: {} back to back, loaded",
+                "baseline as {label}: {} after a wake-up ping, loaded",
                 transport.label()
             ));
-            let warm_what = format!("{} back to back, loaded as {label}", transport.label());
-            let warm_rounds = preempt.count().div_ceil(2).max(1);
+            let warm_what = format!(
+                "{} after a wake-up ping, loaded as {label}",
+                transport.label()
+            );
+            let warm_rounds = preempt.count().max(1);
             let warm_measured = baseline::run(
                 transport,
                 r.placement,
                 warm_rounds,
-                None,
+                baseline::Rounds::AfterWakeUp,
                 Some(load),
                 &prefix,
                 &dir,
             )?;
             let mut warm_row = baseline_row(warm_what.clone(), warm_measured.all_pings());
             warm_row.conditions = Some(format!(
-                "{warm_rounds} ping-pongs back to back (both hops), after a warm-up; {conditions}"
+                "{warm_rounds} pings, each sent right after a lead ping that wakes the receiver \
+                 (only the second ping's hop counts), back to back after a warm-up; {conditions}"
             ));
             report.rows.push(warm_row);
             let warm = reference(&warm_what);

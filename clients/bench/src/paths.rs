@@ -785,8 +785,11 @@ pub fn preemption(
             missed += 1;
             continue;
         }
-        teleop.send(VelocityRequest::twist(0.5, 0.0))?;
+        // The stop follows a teleop request at once, as a ping follows its wake-up ping in the
+        // row's baseline: nothing between the two sends (the frames before are skipped by their
+        // stamps; draining them here first keeps the wait short).
         tap.drain(|_| {})?;
+        teleop.send(VelocityRequest::twist(0.5, 0.0))?;
         let stamp = now_ns();
         safety.send(VelocityRequest {
             stamp_ns: stamp,

@@ -33,7 +33,7 @@ pub struct Row {
     pub conditions: Option<String>,
     /// The baseline row this path row is compared with (`what, placement` of that row): for a
     /// command or state row, the baseline of the same run whose receiver lived like the
-    /// service's loop; for a preemption row, the warm (back-to-back) one.
+    /// service's loop; for a preemption row, a ping right after a wake-up ping.
     pub baseline: Option<String>,
     /// p50 / baseline p50 and p99 / baseline p99.
     pub ratio_p50: Option<f64>,
@@ -1018,8 +1018,9 @@ impl Report {
              way of waiting (a poll-then-block receiver for the hybrid loop). The command row's \
              baseline is one ping per command period ({} ms; {} ms on the XBot, whose manual \
              caps its command rate); the state row's is the feed's own hops at the feedback \
-             rate. A preemption's stop follows a request at once, while the loop is awake: its \
-             baseline is the back-to-back (warm) ping-pong of the same waiting and placement. \
+             rate. A preemption's stop follows a teleop request at once, while the loop is waking \
+             for it: its baseline is a ping sent right after a lead ping that wakes the \
+             receiver, loaded as the service was, with the same waiting and placement. \
              The cold paced and back-to-back baselines are context rows.\n\
              * **Inconsistent**: a path cannot be faster than a hop it contains; a row whose \
              p50 is below its baseline's, or more than {} % below the sum of the p50s of the \
@@ -1037,8 +1038,7 @@ impl Report {
              *dropped*, beside requests *missed* and samples *out of range* of the histogram.\n\
              * **Same samples.** A matched baseline has as many samples as the row it divides: \
              the last ones of a run long enough for both the command row's pings and the state \
-             row's feed hops; a preemption row's warm baseline runs as many hops, loaded as the \
-             service was. The raw DDS hops are warmed up (200 pings not counted) and count as \
+             row's feed hops; a preemption row's baseline runs as many pings, each after its wake-up ping. The raw DDS hops are warmed up (200 pings not counted) and count as \
              many hops as the ROS 2 row each divides. A p99 is shown from {} samples on, a \
              p99.9 from {} (below, it would be the maximum).\n\n",
             size_of::<chassis_client::ChassisState>(),
