@@ -893,6 +893,13 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             );
             bridge.baseline = reference;
             report.rows.push(bridge);
+            report.parts.push(report::Parts {
+                path: report::ZENOH_PARTS.into(),
+                what: zenoh::STATE.into(),
+                mode: "event".into(),
+                placement: placement.into(),
+                parts: z.state_parts,
+            });
         } else {
             report
                 .notes

@@ -5,6 +5,9 @@
 //! and the parts say how many samples they hold.
 
 use std::collections::HashMap;
+use std::path::Path;
+
+use anyhow::Context as _;
 
 use crate::paths::PassStamps;
 use crate::stats::{Latencies, Summary};
@@ -115,6 +118,49 @@ pub fn odom(samples: &[(u64, u64)], trace: &[[u64; 4]]) -> Split {
     )
 }
 
+/// A bridge's trace of `format` ([`chassis_ipc::StampTrace`]).
+pub fn read_trace<const N: usize>(
+    path: &Path,
+    format: chassis_ipc::TraceFormat,
+) -> anyhow::Result<Vec<[u64; N]>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    chassis_ipc::StampTrace::<N>::parse(&text, format)
+        .with_context(|| format!("{}", path.display()))
+}
+
+/// Frame read → the robot side's export loop woke with the sample → its put began → the
+/// operator side's Zenoh callback had it → the mirror's loop took it → handed to iceoryx2 → the
+/// reader has it, for each `(frame read, received)` sample of the Zenoh state row whose state is
+/// in both sides' traces (chassis-zenoh's `CHASSIS_ZENOH_TRACE`, joined on the frame's read
+/// time: the robot side's `[read, woke, put begun, put returned]`, the operator side's `[read,
+/// callback, taken, handed]`). The put's return is not a boundary, as the odom's write is not.
+pub fn zenoh_state(samples: &[(u64, u64)], export: &[[u64; 4]], mirror: &[[u64; 4]]) -> Split {
+    let first_of = |trace: &[[u64; 4]]| {
+        let mut by_read: HashMap<u64, [u64; 4]> = HashMap::new();
+        for t in trace {
+            by_read.entry(t[0]).or_insert(*t);
+        }
+        by_read
+    };
+    let (export, mirror) = (first_of(export), first_of(mirror));
+    split(
+        &[
+            "frame read → export woke (chassisd's state path, iceoryx2)",
+            "export woke → put begun (the newest of the wake-up)",
+            "put begun → operator's callback (Zenoh: put, TCP over the veth, its runtime)",
+            "callback → mirror's loop took it (channel hand-off)",
+            "taken → handed to iceoryx2 (decode, link watch)",
+            "handed to iceoryx2 → reader has it (iceoryx2)",
+        ],
+        samples.iter().filter_map(|&(read, received)| {
+            let e = export.get(&read)?;
+            let m = mirror.get(&read)?;
+            Some(vec![read, e[1], e[2], m[1], m[2], m[3], received])
+        }),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -175,5 +221,28 @@ mod tests {
         );
         assert!(split.iter().all(|(_, s)| s.count == 2), "{split:?}");
         assert_eq!(split[1].1.max_us, 0.1, "{split:?}");
+    }
+
+    #[test]
+    fn a_zenoh_state_is_split_at_both_sides_stamps_and_one_missing_from_a_side_is_left_out() {
+        let export = [[1_000_000, 1_010_000, 1_012_000, 1_030_000]];
+        let mirror = [
+            [1_000_000, 1_020_000, 1_050_000, 1_051_000],
+            [2_000_000, 2_020_000, 2_050_000, 2_051_000],
+        ];
+        let split = zenoh_state(
+            &[(1_000_000, 1_100_000), (2_000_000, 2_100_000)],
+            &export,
+            &mirror,
+        );
+        let us: Vec<(u64, u64)> = split
+            .iter()
+            .map(|(_, s)| (s.p50_us as u64, s.count))
+            .collect();
+        assert_eq!(
+            us,
+            vec![(10, 1), (2, 1), (8, 1), (30, 1), (1, 1), (49, 1)],
+            "{split:?}"
+        );
     }
 }

@@ -46,24 +46,6 @@ fn read_pairs(path: &Path) -> anyhow::Result<Vec<(u64, u64)>> {
         .collect()
 }
 
-/// The bridge's odom trace (`CHASSIS_ROS2_TRACE`): a header, then four stamps a line.
-fn read_trace(path: &Path) -> anyhow::Result<Vec<[u64; 4]>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    text.lines()
-        .skip(1)
-        .map(|l| {
-            let stamps: Vec<u64> = l
-                .split_whitespace()
-                .map(str::parse)
-                .collect::<Result<_, _>>()
-                .with_context(|| format!("{}: {l:?}", path.display()))?;
-            <[u64; 4]>::try_from(stamps)
-                .map_err(|_| anyhow::anyhow!("{}: not four stamps: {l:?}", path.display()))
-        })
-        .collect()
-}
-
 /// The interpreter of the ROS 2 bridge's test environment (`scripts/ros2-tests` makes it, with
 /// Cyclone DDS and the `chassis` package installed), if there is one.
 pub fn interpreter() -> Option<PathBuf> {
@@ -97,7 +79,7 @@ pub fn run(python: &Path, bridge: &Path, run: &ScriptRun<'_>) -> anyhow::Result<
         missed,
         odom_parts: crate::parts::odom(
             &read_pairs(&out.join("state.pairs"))?,
-            &read_trace(&out.join("odom.trace"))?,
+            &crate::parts::read_trace(&out.join("odom.trace"), chassis_ipc::ODOM_TRACE)?,
         ),
     })
 }

@@ -35,6 +35,8 @@ pub struct ZenohFigures {
     pub bridge: Latencies,
     /// The bare hops after the warm-up, ns, in order.
     pub raw: Vec<u64>,
+    /// The state row split at both sides' stamps.
+    pub state_parts: crate::parts::Split,
 }
 
 /// Two namespaces joined by a veth pair, removed on drop.
@@ -249,6 +251,9 @@ pub fn run(
         .skip(usize::try_from(RAW_WARMUP).unwrap_or(usize::MAX))
         .collect::<anyhow::Result<Vec<u64>>>()?;
 
+    // Each side keeps its stamps of the states it carries and writes them as it stops.
+    let export_trace = dir.join("zenoh-robot.trace");
+    let mirror_trace = dir.join("zenoh-operator.trace");
     children.0.push(
         zenoh_in(
             &netns.robot,
@@ -256,6 +261,7 @@ pub fn run(
             &["--name", &name, "--listen", &bridge, "--insecure"],
             &dir.join("zenoh-robot.log"),
         )?
+        .env(chassis_ipc::ZENOH_EXPORT_TRACE.env, &export_trace)
         .spawn()
         .context("starting chassis-zenoh (robot side)")?,
     );
@@ -273,6 +279,7 @@ pub fn run(
             ],
             &dir.join("zenoh-operator.log"),
         )?
+        .env(chassis_ipc::ZENOH_MIRROR_TRACE.env, &mirror_trace)
         .spawn()
         .context("starting chassis-zenoh --mirror")?,
     );
@@ -335,10 +342,21 @@ pub fn run(
     for (path, e) in chassis_ipc::remove_ipc_files(&operator_prefix) {
         eprintln!("cannot remove {}: {e}", path.display());
     }
+    let samples: Vec<(u64, u64)> = recorder
+        .samples
+        .iter()
+        .map(|&(read, _, received)| (read, received))
+        .collect();
+    let state_parts = crate::parts::zenoh_state(
+        &samples,
+        &crate::parts::read_trace(&export_trace, chassis_ipc::ZENOH_EXPORT_TRACE)?,
+        &crate::parts::read_trace(&mirror_trace, chassis_ipc::ZENOH_MIRROR_TRACE)?,
+    );
     Ok(ZenohFigures {
         command,
         state: recorder.latencies,
         bridge,
         raw: raw_latencies,
+        state_parts,
     })
 }

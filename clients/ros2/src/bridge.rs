@@ -665,41 +665,9 @@ pub fn messages(
     out
 }
 
-/// The environment variable naming a file for the state loop's odom trace: for each odom, the
-/// frame's read time, the loop's wake-up, the odom handed to RustDDS and the write returned.
-pub const ODOM_TRACE_ENV: &str = "CHASSIS_ROS2_TRACE";
-
-/// Stamps the state loop takes for each `odom` it publishes, kept in memory and written when the
-/// loop ends (the file `CHASSIS_ROS2_TRACE` names; `chassis-bench` splits its ROS 2 row with
-/// them): the frame read (the state's `stamp_ns`), the loop woken with the sample, the odom
-/// handed to RustDDS and the write returned, `CLOCK_MONOTONIC` ns, one odom a line.
-struct OdomTrace {
-    path: std::path::PathBuf,
-    lines: Vec<[u64; 4]>,
-}
-
-impl OdomTrace {
-    /// The first line of the file.
-    const HEADER: &'static str = "read_ns woke_ns write_begun_ns written_ns";
-
-    fn from_env() -> Option<Self> {
-        let path = std::env::var_os(ODOM_TRACE_ENV)?;
-        Some(Self {
-            path: path.into(),
-            lines: Vec::with_capacity(1 << 16),
-        })
-    }
-
-    fn write(&self) {
-        let mut text = format!("{}\n", Self::HEADER);
-        for l in &self.lines {
-            text.push_str(&format!("{} {} {} {}\n", l[0], l[1], l[2], l[3]));
-        }
-        if let Err(e) = std::fs::write(&self.path, text) {
-            tracing::warn!(error = %e, path = %self.path.display(), "odom trace not written");
-        }
-    }
-}
+/// The state loop's odom trace ([`chassis_ipc::ODOM_TRACE`], written when the loop ends;
+/// `chassis-bench` splits its ROS 2 row with it).
+type OdomTrace = chassis_ipc::StampTrace<4>;
 
 /// What the state loop keeps between samples.
 struct StateLoop<'a> {
@@ -754,7 +722,7 @@ impl StateLoop<'_> {
                     Self::publish(f, "odom", &out.odom, *m);
                     if let (Some(trace), Some(begun)) = (&mut self.trace, begun) {
                         let written = chassis_client::now_ns();
-                        trace.lines.push([s.stamp_ns, self.woke_ns, begun, written]);
+                        trace.push([s.stamp_ns, self.woke_ns, begun, written]);
                     }
                 }
                 Message::Tf(m) => {
@@ -834,7 +802,7 @@ pub fn state_loop(
         last_diagnostics: None,
         failures: 0,
         woke_ns: 0,
-        trace: OdomTrace::from_env(),
+        trace: OdomTrace::from_env(chassis_ipc::ODOM_TRACE),
     };
     tracing::info!(robot = name, "bridging");
     while !termination_requested() {
@@ -861,8 +829,10 @@ pub fn state_loop(
         }
         lp.diagnostics(chassis_client::now_ns());
     }
-    if let Some(trace) = &lp.trace {
-        trace.write();
+    if let Some(trace) = &lp.trace
+        && let Err(e) = trace.write()
+    {
+        tracing::warn!(error = %e, path = %trace.path().display(), "odom trace not written");
     }
     Ok(())
 }

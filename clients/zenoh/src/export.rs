@@ -30,6 +30,7 @@ use chassis_client::{
     Robot, RobotDescription, STATE_BUFFER, Source, SourceFlags, Ticker, VelocityRequest, now_ns,
     termination_requested,
 };
+use chassis_ipc::StampTrace;
 use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::Sample;
@@ -273,6 +274,8 @@ fn publish(
     let mut next_frames = now_ns();
     let mut next_check = now_ns();
     let mut batch: Vec<u8> = Vec::new();
+    // The bench's split of the state path (`CHASSIS_ZENOH_TRACE`), written as the loop ends.
+    let mut trace = StampTrace::<4>::from_env(chassis_ipc::ZENOH_EXPORT_TRACE);
     let mut failed: u64 = 0;
     let mut report = |what: &str, e: zenoh::Error| {
         failed += 1;
@@ -298,12 +301,28 @@ fn publish(
         // out, so none waits behind the older ones of its read (the state is a latest-value
         // topic; `seq` numbers what was skipped).
         let mut newest = None;
-        states.wait(Duration::from_millis(20), |s| newest = Some(*s))?;
+        let mut woke = 0;
+        let waited = states.wait(Duration::from_millis(20), |s| {
+            if woke == 0 {
+                woke = now_ns();
+            }
+            newest = Some(*s);
+        });
+        match waited {
+            Ok(_) => {}
+            // SIGTERM interrupts the wait: the end asked for, not a failure.
+            Err(_) if termination_requested() => break,
+            Err(e) => return Err(e.into()),
+        }
         if let Some(s) = newest.as_ref() {
-            if state_rate.pass(s.stamp_ns)
-                && let Err(e) = state_pub.put(s.as_bytes()).wait()
-            {
-                report("state", e);
+            if state_rate.pass(s.stamp_ns) {
+                let begun = now_ns();
+                if let Err(e) = state_pub.put(s.as_bytes()).wait() {
+                    report("state", e);
+                }
+                if let Some(trace) = trace.as_mut() {
+                    trace.push([s.stamp_ns, woke, begun, now_ns()]);
+                }
             }
             if state_json_rate.pass(s.stamp_ns)
                 && let Ok(text) = serde_json::to_vec(s)
@@ -343,7 +362,17 @@ fn publish(
             }
         }
     }
+    write_trace(trace.as_ref());
     Ok(())
+}
+
+/// Writes a trace the bench asked for; a failure is logged (the bridge's work is done).
+pub(crate) fn write_trace<const N: usize>(trace: Option<&StampTrace<N>>) {
+    if let Some(trace) = trace
+        && let Err(e) = trace.write()
+    {
+        tracing::warn!(error = %e, path = %trace.path().display(), "trace not written");
+    }
 }
 
 /// Takes velocity requests from the network for the remote sources.

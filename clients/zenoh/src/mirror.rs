@@ -29,7 +29,7 @@ use chassis_client::{
     BusFrame, ChassisState, ControlRequest, ControlResponse, ControlStatus, MuxStatus,
     RobotDescription, ServiceKind, VelocityRequest, now_ns, service_name, termination_requested,
 };
-use chassis_ipc::{CMD, CONTROL, DESCRIPTION, FRAMES, MUX, STATE, Writer};
+use chassis_ipc::{CMD, CONTROL, DESCRIPTION, FRAMES, MUX, STATE, StampTrace, Writer};
 use iceoryx2::port::update_connections::UpdateConnections as _;
 use iceoryx2::prelude::*;
 use zenoh::Wait as _;
@@ -55,7 +55,8 @@ pub struct Config {
 }
 
 enum Incoming {
-    State(Sample),
+    /// A state, and when the subscriber's callback had it.
+    State(Sample, u64),
     Mux(Sample),
     Frames(Sample),
     Description(Sample),
@@ -115,20 +116,23 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
         .publisher()?;
 
     let (tx, rx) = mpsc::channel::<Incoming>();
-    let subscribe = |key: &str, wrap: fn(Sample) -> Incoming| {
+    let subscribe = |key: &str, wrap: fn(Sample, u64) -> Incoming| {
         let tx = tx.clone();
         session
             .declare_subscriber(key.to_string())
             .callback(move |sample| {
-                let _ = tx.send(wrap(sample));
+                let _ = tx.send(wrap(sample, now_ns()));
             })
             .wait()
             .map_err(zerr(key))
     };
     let _state_sub = subscribe(&keys.state, Incoming::State)?;
-    let _mux_sub = subscribe(&keys.mux, Incoming::Mux)?;
-    let _frames_sub = subscribe(&keys.frames, Incoming::Frames)?;
-    let _description_sub = subscribe(&keys.description, Incoming::Description)?;
+    let _mux_sub = subscribe(&keys.mux, |s, _| Incoming::Mux(s))?;
+    let _frames_sub = subscribe(&keys.frames, |s, _| Incoming::Frames(s))?;
+    let _description_sub = subscribe(&keys.description, |s, _| Incoming::Description(s))?;
+    // The bench's split of the state path (`CHASSIS_ZENOH_TRACE`; one robot a process), written
+    // as the loop ends.
+    let mut trace = StampTrace::<4>::from_env(chassis_ipc::ZENOH_MIRROR_TRACE);
     let ask_tx = tx.clone();
     let ask_description = |session: &zenoh::Session| {
         let tx = ask_tx.clone();
@@ -241,11 +245,15 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
             }
         }
         let sent = match incoming {
-            Incoming::State(sample) => {
+            Incoming::State(sample, received) => {
+                let taken = now_ns();
                 match states.decode(sample.encoding(), &sample.payload().to_bytes()) {
                     Ok(s) => {
                         if link.heard(now_ns(), &s) {
                             eprintln!("chassis-zenoh: robot '{name}' heard again");
+                        }
+                        if let Some(trace) = trace.as_mut() {
+                            trace.push([s.stamp_ns, received, taken, now_ns()]);
                         }
                         send(&state, s)
                     }
@@ -342,6 +350,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
             break;
         }
     }
+    crate::export::write_trace(trace.as_ref());
     crate::export::join(stop, threads, result)
 }
 

@@ -47,4 +47,7 @@ pub use names::{
     reply_name, robots, service_name,
 };
 pub use ports::{ClientPorts, Exchange, Reader, ServerPorts, Topic, Writer, node};
-pub use trace::{PassStamps, TraceError};
+pub use trace::{
+    ODOM_TRACE, PassStamps, StampTrace, TraceError, TraceFormat, ZENOH_EXPORT_TRACE,
+    ZENOH_MIRROR_TRACE,
+};

@@ -1,9 +1,12 @@
-//! chassisd's pass trace (`CHASSIS_PASS_TRACE=FILE`, [`crate::PASS_TRACE_ENV`]): the stamps the
-//! service takes inside each pass, written by chassisd as it stops and read by `chassis-bench`
-//! to split its rows. One format, here, for the writer and the reader.
+//! Stamp traces, read by `chassis-bench` to split its rows: chassisd's pass trace
+//! (`CHASSIS_PASS_TRACE=FILE`, [`crate::PASS_TRACE_ENV`]), the stamps the service takes inside
+//! each pass, written by chassisd as it stops, and the bridges' traces ([`StampTrace`]). One
+//! format, here, for the writers and the reader.
 //!
-//! FILE: [`PassStamps::HEADER`], then one [`PassStamps::line`] per pass, `CLOCK_MONOTONIC` ns,
-//! 0 where the pass did not do the thing.
+//! FILE: a header naming the columns ([`PassStamps::HEADER`]), then one line per pass or item,
+//! `CLOCK_MONOTONIC` ns, 0 where the pass did not do the thing.
+
+use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
@@ -24,8 +27,109 @@ pub struct PassStamps {
 pub enum TraceError {
     #[error("unknown columns '{0}'")]
     Columns(String),
-    #[error("'{0}' is not 7 stamps")]
+    #[error("'{0}' is not as many stamps as the header names")]
     Line(String),
+}
+
+/// A bridge trace's file format: the environment variable naming its file, and its header.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TraceFormat {
+    pub env: &'static str,
+    /// The first line, naming the columns.
+    pub header: &'static str,
+}
+
+/// The ROS 2 bridge's odom trace: for each odom, the frame read (the state's `stamp_ns`), the
+/// state loop woken with the sample, the odom handed to RustDDS and the write returned.
+pub const ODOM_TRACE: TraceFormat = TraceFormat {
+    env: "CHASSIS_ROS2_TRACE",
+    header: "read_ns woke_ns write_begun_ns written_ns",
+};
+
+/// chassis-zenoh's robot side: for each state it puts, the frame read, the export loop woken
+/// with the sample, the put begun and the put returned.
+pub const ZENOH_EXPORT_TRACE: TraceFormat = TraceFormat {
+    env: "CHASSIS_ZENOH_TRACE",
+    header: "read_ns woke_ns put_begun_ns put_returned_ns",
+};
+
+/// chassis-zenoh's operator side (`--mirror`): for each state it takes from the robot, the frame
+/// read, the sample in the Zenoh subscriber's callback, taken by the mirror's loop, and handed
+/// to iceoryx2.
+pub const ZENOH_MIRROR_TRACE: TraceFormat = TraceFormat {
+    env: "CHASSIS_ZENOH_TRACE",
+    header: "read_ns received_ns taken_ns handed_ns",
+};
+
+/// A bridge's trace: `N` stamps for each item its loop handles (an odom it publishes, a state it
+/// puts or takes), kept in memory while it runs and written as it stops. `chassis-bench` joins
+/// the traces on their first column, the read time of the frame the item carries.
+#[derive(Debug)]
+pub struct StampTrace<const N: usize> {
+    path: PathBuf,
+    header: &'static str,
+    lines: Vec<[u64; N]>,
+}
+
+impl<const N: usize> StampTrace<N> {
+    /// A trace to the file `format`'s environment variable names, if it names one.
+    pub fn from_env(format: TraceFormat) -> Option<Self> {
+        let path = std::env::var_os(format.env)?;
+        Some(Self {
+            path: path.into(),
+            header: format.header,
+            lines: Vec::with_capacity(1 << 16),
+        })
+    }
+
+    /// Keeps one item's stamps.
+    pub fn push(&mut self, stamps: [u64; N]) {
+        self.lines.push(stamps);
+    }
+
+    /// Where the trace is written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The header and every item kept, one a line.
+    pub fn text(&self) -> String {
+        let mut text = format!("{}\n", self.header);
+        for stamps in &self.lines {
+            text.push_str(&stamps.map(|s| s.to_string()).join(" "));
+            text.push('\n');
+        }
+        text
+    }
+
+    /// The items of a trace of `format`.
+    pub fn parse(text: &str, format: TraceFormat) -> Result<Vec<[u64; N]>, TraceError> {
+        Self::parse_as(text, format.header)
+    }
+
+    /// Writes the trace to its file.
+    pub fn write(&self) -> std::io::Result<()> {
+        std::fs::write(&self.path, self.text())
+    }
+
+    /// The items of a trace whose first line is `header`.
+    pub fn parse_as(text: &str, header: &str) -> Result<Vec<[u64; N]>, TraceError> {
+        let mut lines = text.lines();
+        let first = lines.next().unwrap_or_default();
+        if first != header {
+            return Err(TraceError::Columns(first.to_string()));
+        }
+        lines
+            .map(|line| {
+                let v: Vec<u64> = line
+                    .split_whitespace()
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()
+                    .map_err(|_| TraceError::Line(line.to_string()))?;
+                <[u64; N]>::try_from(v).map_err(|_| TraceError::Line(line.to_string()))
+            })
+            .collect()
+    }
 }
 
 impl PassStamps {
@@ -60,19 +164,10 @@ impl PassStamps {
 
     /// The passes of a whole trace.
     pub fn parse(text: &str) -> Result<Vec<Self>, TraceError> {
-        let mut lines = text.lines();
-        let header = lines.next().unwrap_or_default();
-        if header != Self::HEADER {
-            return Err(TraceError::Columns(header.to_string()));
-        }
-        lines
-            .map(|line| {
-                let v: Vec<u64> = line
-                    .split_whitespace()
-                    .map(str::parse)
-                    .collect::<Result<_, _>>()
-                    .map_err(|_| TraceError::Line(line.to_string()))?;
-                let [
+        Ok(StampTrace::<7>::parse_as(text, Self::HEADER)?
+            .into_iter()
+            .map(
+                |[
                     woke,
                     requests_read,
                     write_started,
@@ -80,8 +175,7 @@ impl PassStamps {
                     state_handed,
                     state_sent,
                     state_readers_woken,
-                ] = <[u64; 7]>::try_from(v).map_err(|_| TraceError::Line(line.to_string()))?;
-                Ok(Self {
+                ]| Self {
                     woke,
                     requests_read,
                     write_started,
@@ -89,9 +183,9 @@ impl PassStamps {
                     state_handed,
                     state_sent,
                     state_readers_woken,
-                })
-            })
-            .collect()
+                },
+            )
+            .collect())
     }
 }
 
@@ -119,6 +213,31 @@ mod tests {
         assert_eq!(
             PassStamps::parse(&format!("{}\n1 2 3\n", PassStamps::HEADER)),
             Err(TraceError::Line("1 2 3".into()))
+        );
+    }
+
+    #[test]
+    fn a_bridge_trace_reads_back_as_written() {
+        let mut trace = StampTrace::<3> {
+            path: PathBuf::new(),
+            header: "a b c",
+            lines: Vec::new(),
+        };
+        trace.push([1, 2, 3]);
+        trace.push([4, 0, 6]);
+        let text = trace.text();
+        assert_eq!(text, "a b c\n1 2 3\n4 0 6\n");
+        assert_eq!(
+            StampTrace::<3>::parse_as(&text, "a b c"),
+            Ok(vec![[1, 2, 3], [4, 0, 6]])
+        );
+        assert!(matches!(
+            StampTrace::<3>::parse_as(&text, "a b"),
+            Err(TraceError::Columns(_))
+        ));
+        assert_eq!(
+            StampTrace::<3>::parse_as("a b c\n1 2\n", "a b c"),
+            Err(TraceError::Line("1 2".into()))
         );
     }
 }
