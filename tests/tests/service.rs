@@ -735,3 +735,55 @@ fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_agai
     let again = drive_for(&mut robot, &mut teleop, None, go, 2000);
     assert!(again > 0.3, "not driving again: {again}\n{}", env.logs());
 }
+
+/// The pass trace (`CHASSIS_PASS_TRACE`) keeps the passes that wrote a frame or published a
+/// state: a polling loop, which flushes its bus every pass, keeps no pass for a flush that
+/// carried nothing (such passes filled the trace within seconds and hid the ones that wrote).
+#[test]
+fn a_polling_loops_pass_trace_keeps_only_passes_that_wrote_or_published() {
+    let mut env = Env::new("pass-trace");
+    let n = name("trace");
+    let trace = env.dir.join("passes.txt");
+    let args = [
+        "--robot",
+        "titan",
+        "--name",
+        &n,
+        "--no-safety-monitor",
+        "--loop",
+        "spin",
+    ];
+    let service = env.spawn_program(
+        "chassisd",
+        &bin("chassisd"),
+        &args,
+        &[(PASS_TRACE_ENV, trace.to_str().unwrap())],
+    );
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = source(&mut robot, "teleop");
+    drive_for(
+        &mut robot,
+        &mut teleop,
+        None,
+        VelocityRequest::twist(0.3, 0.0),
+        500,
+    );
+    env.proc(service).signal(Signal::SIGTERM);
+    assert_eq!(env.proc(service).wait_exit(Duration::from_secs(5)), Some(0));
+    let passes = chassis_ipc::PassStamps::parse(&std::fs::read_to_string(&trace).unwrap()).unwrap();
+    assert!(
+        passes.iter().any(|p| p.write_started != 0),
+        "no pass wrote a frame: {} passes",
+        passes.len()
+    );
+    let idle = passes
+        .iter()
+        .filter(|p| p.write_started == 0 && p.state_handed == 0)
+        .count();
+    assert_eq!(
+        idle,
+        0,
+        "{idle} of {} passes kept neither wrote nor published",
+        passes.len()
+    );
+}

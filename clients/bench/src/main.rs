@@ -722,7 +722,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             if let Some(figures) = &command {
                 report.parts.push(run_parts(
                     "command",
-                    parts::command(&figures.samples, &passes),
+                    parts::command(&figures.samples, &passes, r.mode == LoopMode::Spin),
                 ));
             }
             report

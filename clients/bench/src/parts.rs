@@ -39,29 +39,41 @@ fn split(names: &[&str], samples: impl Iterator<Item = Vec<u64>>) -> Split {
 
 /// Request created → the loop woke → the sources read → the first write began → the frame
 /// written, for each `(request created, frame written)` sample whose frame was its pass's first
-/// write.
-pub fn command(samples: &[(u64, u64)], passes: &[PassStamps]) -> Split {
+/// write. A `polled` loop (spin) does not wake for a request: its pass may have been under way
+/// before the request existed, and the split starts at the read.
+pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> Split {
     let by_written: HashMap<u64, &PassStamps> = passes
         .iter()
         .filter(|p| p.written != 0)
         .map(|p| (p.written, p))
         .collect();
+    let tail = [
+        "request read → write begun (mux, driver, encoding)",
+        "write begun → frame written",
+    ];
+    let names: Vec<&str> = if polled {
+        ["request created → request read (the poll)"]
+            .into_iter()
+            .chain(tail)
+            .collect()
+    } else {
+        ["request created → loop woke", "loop woke → request read"]
+            .into_iter()
+            .chain(tail)
+            .collect()
+    };
     split(
-        &[
-            "request created → loop woke",
-            "loop woke → request read",
-            "request read → write begun (mux, driver, encoding)",
-            "write begun → frame written",
-        ],
+        &names,
         samples.iter().filter_map(|&(created, written)| {
             let p = by_written.get(&written)?;
-            Some(vec![
-                created,
-                p.woke,
-                p.requests_read,
-                p.write_started,
-                written,
-            ])
+            let woke = (!polled).then_some(p.woke);
+            Some(
+                [created]
+                    .into_iter()
+                    .chain(woke)
+                    .chain([p.requests_read, p.write_started, written])
+                    .collect(),
+            )
         }),
     )
 }
@@ -174,13 +186,45 @@ mod tests {
             written: 1_060_000,
             ..PassStamps::default()
         }];
-        let split = command(&[(1_000_000, 1_060_000), (2_000_000, 2_100_000)], &passes);
+        let split = command(
+            &[(1_000_000, 1_060_000), (2_000_000, 2_100_000)],
+            &passes,
+            false,
+        );
         // Whole µs (the histogram keeps 3 significant digits).
         let us: Vec<(u64, u64)> = split
             .iter()
             .map(|(_, s)| (s.p50_us as u64, s.count))
             .collect();
         assert_eq!(us, vec![(50, 1), (2, 1), (3, 1), (5, 1)], "{split:?}");
+    }
+
+    #[test]
+    fn a_polling_loops_pass_under_way_before_the_request_is_split_from_the_read() {
+        let passes = [PassStamps {
+            woke: 990_000,
+            requests_read: 1_052_000,
+            write_started: 1_055_000,
+            written: 1_060_000,
+            ..PassStamps::default()
+        }];
+        let samples = [(1_000_000, 1_060_000)];
+        let counts = |split: Split| -> Vec<(u64, u64)> {
+            split
+                .iter()
+                .map(|(_, s)| (s.p50_us as u64, s.count))
+                .collect()
+        };
+        assert_eq!(
+            counts(command(&samples, &passes, true)),
+            vec![(52, 1), (3, 1), (5, 1)]
+        );
+        // Split as an event loop's, the pass woke before the request: left out.
+        assert!(
+            counts(command(&samples, &passes, false))
+                .iter()
+                .all(|&(_, n)| n == 0)
+        );
     }
 
     #[test]

@@ -213,11 +213,13 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
         let Some(bus) = self.shell.bus.as_mut() else {
             return Err(WriteError::Lost(no_bus()));
         };
+        let held = bus.unflushed() > 0;
         match bus.flush() {
             Ok(()) => {
                 let flushed = clock::now();
-                // A held frame is out when the flush that carried it returned: its tap stamp.
-                if let Some(trace) = &mut self.shell.trace {
+                // A held frame is out when the flush that carried it returned: its tap stamp. A
+                // flush that carried nothing wrote nothing (a polling loop flushes every pass).
+                if held && let Some(trace) = &mut self.shell.trace {
                     PassStamps::first(&mut trace.current.written, flushed.as_nanos());
                 }
                 Ok(flushed)
