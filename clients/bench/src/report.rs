@@ -613,9 +613,9 @@ impl Report {
         })
     }
 
-    /// "ROW: the largest part at the p99, NAME, p99 X µs (p50 Y), over N of its M samples" for
-    /// `row`, from its split, leaving out the split's first `skip` parts (those before the row
-    /// starts); a split too small for a p99 says so.
+    /// "ROW: the largest part at the p99, NAME, p99 X µs (p50 Y), over the N samples of its run's
+    /// split" for `row`, from its split, leaving out the split's first `skip` parts (those before
+    /// the row starts); a split too small for a p99 says so.
     fn largest_part(&self, split: Option<&Parts>, skip: usize, row: &Row) -> Option<String> {
         let (name, part) = split?
             .parts
@@ -625,12 +625,13 @@ impl Report {
         let head = format!("{} {} {}", row.what, row.mode, row.placement);
         if part.count < MIN_FOR_P99 {
             return Some(format!(
-                "{head}: its split holds {} of its {} samples, too few for a p99",
+                "{head}: its run's split holds {} samples (the row {}), too few for a p99",
                 part.count, row.summary.count
             ));
         }
         Some(format!(
-            "{head}: {name}, p99 {:.1} µs (p50 {:.1}), over {} of its {} samples",
+            "{head}: {name}, p99 {:.1} µs (p50 {:.1}), over the {} samples of its run's split \
+             (the row {})",
             part.p99_us, part.p50_us, part.count, row.summary.count
         ))
     }
