@@ -352,8 +352,9 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(enum ControlStatus: u8 { OK, REFUSED, UNSUPPORTED, INVALID, TIMEOUT }),
         describe_constants!(enum SimKind: u8 {
             MOTOR_DRIVER_LOSS, BATTERY, BUMPER, RC_TAKEOVER, REBOOT, SILENCE, GARBAGE,
-            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH, RUNAWAY,
+            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH, RUNAWAY, TRUTH,
         }),
+        describe_constants!(enum SimTruthPage: u8 { MOTION, INJECTED }),
         describe_constants!(enum Kinematics: u8 {
             DIFFERENTIAL, SKID_STEER, TRACKED, OMNI, ACKERMANN, DUAL_ACKERMANN, FOUR_WHEEL_STEER,
         }),
@@ -525,5 +526,62 @@ mod tests {
             .unwrap();
         assert_eq!(faults.values.len(), crate::FaultFlags::ALL.len());
         assert_eq!(faults.values[0].name, "HEARTBEAT_LOST");
+    }
+
+    /// The contract lists each group's constants by hand: one the group names for logs and JSON
+    /// but the contract leaves out is a constant the Python mirror and other languages lack.
+    #[test]
+    fn the_contract_lists_every_constant_a_group_names() {
+        use crate::*;
+        let groups = constants();
+        let values = |group: &str| -> Vec<u64> {
+            let mut v: Vec<u64> = groups
+                .iter()
+                .find(|g| g.name == group)
+                .unwrap_or_else(|| panic!("{group} is not in the contract"))
+                .values
+                .iter()
+                .map(|c| c.value)
+                .collect();
+            v.sort_unstable();
+            v
+        };
+        macro_rules! every {
+            ($($table:ident :: $names:ident),+ $(,)?) => {$({
+                let mut named: Vec<u64> =
+                    $table::$names.iter().map(|&(v, _)| u64::from(v)).collect();
+                named.sort_unstable();
+                assert_eq!(values(stringify!($table)), named, stringify!($table));
+            })+};
+        }
+        every!(
+            BusKind::NAMES,
+            ControlKind::NAMES,
+            ControlMode::NAMES,
+            ControlStatus::NAMES,
+            ControllerState::NAMES,
+            EstopState::NAMES,
+            FaultClear::NAMES,
+            FrameDirection::NAMES,
+            FrameKind::NAMES,
+            JointSource::NAMES,
+            Kinematics::NAMES,
+            LightMode::NAMES,
+            SafetyAction::NAMES,
+            SafetyEvent::NAMES,
+            SafetyRule::NAMES,
+            SensorKind::NAMES,
+            SimKind::NAMES,
+            SimTruthPage::NAMES,
+            WireProtocol::NAMES,
+            ZeroReason::NAMES,
+            ClampFlags::ALL,
+            DescriptionFlags::ALL,
+            DriverStatus::ALL,
+            FaultFlags::ALL,
+            LinkFlags::ALL,
+            RequestFlags::ALL,
+            SourceFlags::ALL,
+        );
     }
 }

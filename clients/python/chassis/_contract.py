@@ -1105,9 +1105,18 @@ class SimKind(Constants):
     OBSTACLE_AHEAD = 9
     OBSTACLE_BEHIND = 10
     FLOOD = 11
+    TRUTH = 12
     ESTOP_SWITCH = 13
     RUNAWAY = 14
-    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 13: 'estop-switch', 14: 'runaway'}
+    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 12: 'truth', 13: 'estop-switch', 14: 'runaway'}
+
+
+class SimTruthPage(Constants):
+    """``SimTruthPage``: enum of u8."""
+
+    MOTION = 0
+    INJECTED = 1
+    NAMES = {0: 'motion', 1: 'injected'}
 
 
 class SourceFlags(Constants):
@@ -1214,6 +1223,7 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'SafetyStatus': SafetyStatus,
     'SensorKind': SensorKind,
     'SimKind': SimKind,
+    'SimTruthPage': SimTruthPage,
     'SourceFlags': SourceFlags,
     'SystemState': SystemState,
     'WireProtocol': WireProtocol,
