@@ -399,6 +399,15 @@ impl Env {
         &mut self.procs[index]
     }
 
+    /// The process started last with `label`.
+    pub fn proc_labelled(&mut self, label: &str) -> &mut Proc {
+        self.procs
+            .iter_mut()
+            .rev()
+            .find(|p| p.name == label)
+            .unwrap_or_else(|| panic!("no process labelled {label}"))
+    }
+
     /// Connects to `name`, retrying until the service is up — its first state sample is out,
     /// which it publishes once every port exists (at most `timeout`).
     pub fn robot(&self, name: &str, timeout: Duration) -> Robot {

@@ -949,46 +949,17 @@ fn requests_buffered_through_an_outage_never_drive_when_the_link_comes_back() {
 /// the interrupted wait as an error.
 #[test]
 fn both_sides_end_with_success_on_sigterm() {
-    let link = link();
-    let mut env = Env::new("zenoh-sigterm");
-    let n = name("term");
-    env.serve("titan", &n, &[]);
-    env.spawn("safety", "chassis-safety", &["--name", &n]);
-    let _robot = env.robot(&n, UP);
-    let prefix = env.prefix.clone();
-    let listen = endpoint("tcp");
-    let robot_side = zenoh_in(
-        &mut env,
-        "zenoh-robot",
-        &link.robot_ns,
-        &prefix,
-        &["--name", &n, "--listen", &listen, "--insecure"],
-    );
-    let operator_prefix = operator_prefix(&env);
-    let connect = endpoint("tcp");
-    let mirror_side = zenoh_in(
-        &mut env,
-        "zenoh-operator",
-        &link.peer_ns,
-        &operator_prefix,
-        &[
-            "--name",
-            &n,
-            "--connect",
-            &connect,
-            "--mirror",
-            "--insecure",
-        ],
-    );
-    let mut operator = operator_robot(&env, &n, &operator_prefix, UP);
+    let (link, mut env, n, _robot) = robot_over_link("zenoh-sigterm", "term");
+    let mut operator = mirror(&mut env, &link, &n, &["--insecure"]);
     assert!(
         operator.wait_state(UP).unwrap().is_some(),
         "no state through the mirror\n{}",
         env.logs()
     );
-    for index in [mirror_side, robot_side] {
-        env.proc(index).signal(nix::sys::signal::Signal::SIGTERM);
-        let code = env.proc(index).wait_exit(Duration::from_secs(10));
-        assert_eq!(code, Some(0), "exit after SIGTERM\n{}", env.logs());
+    for side in ["zenoh-operator", "zenoh-robot"] {
+        env.proc_labelled(side)
+            .signal(nix::sys::signal::Signal::SIGTERM);
+        let code = env.proc_labelled(side).wait_exit(Duration::from_secs(10));
+        assert_eq!(code, Some(0), "{side}'s exit after SIGTERM\n{}", env.logs());
     }
 }

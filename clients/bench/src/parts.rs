@@ -177,54 +177,45 @@ pub fn zenoh_state(samples: &[(u64, u64)], export: &[[u64; 4]], mirror: &[[u64; 
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_command_sample_is_split_at_its_passes_stamps_and_one_without_its_pass_is_left_out() {
-        let passes = [PassStamps {
-            woke: 1_050_000,
+    /// Each part's p50 in whole µs (the histogram keeps 3 significant digits) and its count.
+    fn p50s(split: &Split) -> Vec<(u64, u64)> {
+        split
+            .iter()
+            .map(|(_, s)| (s.p50_us as u64, s.count))
+            .collect()
+    }
+
+    /// A pass that woke at `woke` and read, encoded and wrote a request's frame by 1.06 ms.
+    fn pass_woken_at(woke: u64) -> [PassStamps; 1] {
+        [PassStamps {
+            woke,
             requests_read: 1_052_000,
             write_started: 1_055_000,
             written: 1_060_000,
             ..PassStamps::default()
-        }];
-        let split = command(
-            &[(1_000_000, 1_060_000), (2_000_000, 2_100_000)],
-            &passes,
-            false,
+        }]
+    }
+
+    #[test]
+    fn a_command_sample_is_split_at_its_passes_stamps_and_one_without_its_pass_is_left_out() {
+        let samples = [(1_000_000, 1_060_000), (2_000_000, 2_100_000)];
+        let split = command(&samples, &pass_woken_at(1_050_000), false);
+        assert_eq!(
+            p50s(&split),
+            vec![(50, 1), (2, 1), (3, 1), (5, 1)],
+            "{split:?}"
         );
-        // Whole µs (the histogram keeps 3 significant digits).
-        let us: Vec<(u64, u64)> = split
-            .iter()
-            .map(|(_, s)| (s.p50_us as u64, s.count))
-            .collect();
-        assert_eq!(us, vec![(50, 1), (2, 1), (3, 1), (5, 1)], "{split:?}");
     }
 
     #[test]
     fn a_polling_loops_pass_under_way_before_the_request_is_split_from_the_read() {
-        let passes = [PassStamps {
-            woke: 990_000,
-            requests_read: 1_052_000,
-            write_started: 1_055_000,
-            written: 1_060_000,
-            ..PassStamps::default()
-        }];
+        let passes = pass_woken_at(990_000);
         let samples = [(1_000_000, 1_060_000)];
-        let counts = |split: Split| -> Vec<(u64, u64)> {
-            split
-                .iter()
-                .map(|(_, s)| (s.p50_us as u64, s.count))
-                .collect()
-        };
-        assert_eq!(
-            counts(command(&samples, &passes, true)),
-            vec![(52, 1), (3, 1), (5, 1)]
-        );
+        let polled = command(&samples, &passes, true);
+        assert_eq!(p50s(&polled), vec![(52, 1), (3, 1), (5, 1)], "{polled:?}");
         // Split as an event loop's, the pass woke before the request: left out.
-        assert!(
-            counts(command(&samples, &passes, false))
-                .iter()
-                .all(|&(_, n)| n == 0)
-        );
+        let woken = command(&samples, &passes, false);
+        assert!(woken.iter().all(|(_, s)| s.count == 0), "{woken:?}");
     }
 
     #[test]
@@ -235,12 +226,8 @@ mod tests {
             [1_000_000, 9_000_000, 9_100_000, 9_200_000],
         ];
         let split = odom(&[(1_000_000, 1_500_000), (2_000_000, 2_600_000)], &trace);
-        let us: Vec<(u64, u64)> = split
-            .iter()
-            .map(|(_, s)| (s.p50_us as u64, s.count))
-            .collect();
         // Taken before the write returned (1.6 ms): counted all the same.
-        assert_eq!(us, vec![(70, 1), (15, 1), (415, 1)], "{split:?}");
+        assert_eq!(p50s(&split), vec![(70, 1), (15, 1), (415, 1)], "{split:?}");
     }
 
     #[test]
@@ -279,12 +266,8 @@ mod tests {
             &export,
             &mirror,
         );
-        let us: Vec<(u64, u64)> = split
-            .iter()
-            .map(|(_, s)| (s.p50_us as u64, s.count))
-            .collect();
         assert_eq!(
-            us,
+            p50s(&split),
             vec![(10, 1), (2, 1), (8, 1), (30, 1), (1, 1), (49, 1)],
             "{split:?}"
         );

@@ -166,25 +166,15 @@ impl PassStamps {
     pub fn parse(text: &str) -> Result<Vec<Self>, TraceError> {
         Ok(StampTrace::<7>::parse_as(text, Self::HEADER)?
             .into_iter()
-            .map(
-                |[
-                    woke,
-                    requests_read,
-                    write_started,
-                    written,
-                    state_handed,
-                    state_sent,
-                    state_readers_woken,
-                ]| Self {
-                    woke,
-                    requests_read,
-                    write_started,
-                    written,
-                    state_handed,
-                    state_sent,
-                    state_readers_woken,
-                },
-            )
+            .map(|c| Self {
+                woke: c[0],
+                requests_read: c[1],
+                write_started: c[2],
+                written: c[3],
+                state_handed: c[4],
+                state_sent: c[5],
+                state_readers_woken: c[6],
+            })
             .collect())
     }
 }
