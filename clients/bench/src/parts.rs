@@ -47,23 +47,22 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> S
         .filter(|p| p.written != 0)
         .map(|p| (p.written, p))
         .collect();
-    let tail = [
-        "request read → write begun (mux, driver, encoding)",
-        "write begun → frame written",
-    ];
-    let names: Vec<&str> = if polled {
-        ["request created → request read (the poll)"]
-            .into_iter()
-            .chain(tail)
-            .collect()
+    let names: &[&str] = if polled {
+        &[
+            "request created → request read (the poll)",
+            "request read → write begun (mux, driver, encoding)",
+            "write begun → frame written",
+        ]
     } else {
-        ["request created → loop woke", "loop woke → request read"]
-            .into_iter()
-            .chain(tail)
-            .collect()
+        &[
+            "request created → loop woke",
+            "loop woke → request read",
+            "request read → write begun (mux, driver, encoding)",
+            "write begun → frame written",
+        ]
     };
     split(
-        &names,
+        names,
         samples.iter().filter_map(|&(created, written)| {
             let p = by_written.get(&written)?;
             let woke = (!polled).then_some(p.woke);
@@ -106,6 +105,16 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     )
 }
 
+/// A bridge trace's lines by their first column (the frame's read time), the first line of each:
+/// a later one carries the same frame again (a repeat, or a tick's refresh).
+fn first_by_read(trace: &[[u64; 4]]) -> HashMap<u64, &[u64; 4]> {
+    let mut by_read = HashMap::new();
+    for t in trace {
+        by_read.entry(t[0]).or_insert(t);
+    }
+    by_read
+}
+
 /// Frame read → the bridge's state loop woke with the sample → the odom handed to RustDDS → the
 /// peer took it, for each `(frame read, taken)` sample of the ROS 2 row whose odom is in the
 /// bridge's trace (`[read, woke, write begun, written]` a line, joined on the frame's read time).
@@ -113,10 +122,7 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
 /// write returns (RustDDS' sender and the peer ran in between).
 pub fn odom(samples: &[(u64, u64)], trace: &[[u64; 4]]) -> Split {
     // The first odom of each read time: the one the peer counts (a later one repeats it).
-    let mut by_read: HashMap<u64, &[u64; 4]> = HashMap::new();
-    for t in trace {
-        by_read.entry(t[0]).or_insert(t);
-    }
+    let by_read = first_by_read(trace);
     split(
         &[
             "frame read → bridge woke (chassisd's state path, iceoryx2)",
@@ -148,14 +154,7 @@ pub fn read_trace<const N: usize>(
 /// time: the robot side's `[read, woke, put begun, put returned]`, the operator side's `[read,
 /// callback, taken, handed]`). The put's return is not a boundary, as the odom's write is not.
 pub fn zenoh_state(samples: &[(u64, u64)], export: &[[u64; 4]], mirror: &[[u64; 4]]) -> Split {
-    let first_of = |trace: &[[u64; 4]]| {
-        let mut by_read: HashMap<u64, [u64; 4]> = HashMap::new();
-        for t in trace {
-            by_read.entry(t[0]).or_insert(*t);
-        }
-        by_read
-    };
-    let (export, mirror) = (first_of(export), first_of(mirror));
+    let (export, mirror) = (first_by_read(export), first_by_read(mirror));
     split(
         &[
             "frame read → export woke (chassisd's state path, iceoryx2)",

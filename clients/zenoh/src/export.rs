@@ -303,7 +303,7 @@ fn publish(
         let mut newest = None;
         let mut woke = 0;
         let waited = states.wait(Duration::from_millis(20), |s| {
-            if woke == 0 {
+            if woke == 0 && trace.is_some() {
                 woke = now_ns();
             }
             newest = Some(*s);
@@ -316,7 +316,7 @@ fn publish(
         }
         if let Some(s) = newest.as_ref() {
             if state_rate.pass(s.stamp_ns) {
-                let begun = now_ns();
+                let begun = trace.as_ref().map_or(0, |_| now_ns());
                 if let Err(e) = state_pub.put(s.as_bytes()).wait() {
                     report("state", e);
                 }

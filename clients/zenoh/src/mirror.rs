@@ -246,7 +246,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
         }
         let sent = match incoming {
             Incoming::State(sample, received) => {
-                let taken = now_ns();
+                let taken = trace.as_ref().map_or(0, |_| now_ns());
                 match states.decode(sample.encoding(), &sample.payload().to_bytes()) {
                     Ok(s) => {
                         if link.heard(now_ns(), &s) {
