@@ -35,7 +35,10 @@ use crate::lockfile::{Clocks, LockFile};
 use crate::moderation::RxGate;
 use crate::mux::{Mux, MuxConfigError};
 use crate::notify::Notifier;
-use crate::setup::{Devices, Hardware, PinError, driver_for_config, enter_realtime, pin_to_cpu};
+use crate::setup::{
+    Devices, Hardware, PinError, driver_for_config, enter_realtime, pin_to_cpu,
+    spin_throttle_warning,
+};
 use crate::sim::SimHandle;
 use stall::LoopStall;
 
@@ -237,7 +240,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
     }
     // Threads started before this (the simulated chassis) keep normal scheduling.
     if let Some(priority) = config.realtime {
-        realtime_mode(priority);
+        realtime_mode(priority, config.loop_mode);
     }
     shell.run(&ports, &mut engine)
 }
@@ -396,7 +399,7 @@ impl<D: Devices> Shell<D> {
 
 /// Real-time mode for the loop's thread; what the system refuses is a warning, and the loop
 /// runs with normal scheduling.
-fn realtime_mode(priority: u8) {
+fn realtime_mode(priority: u8, loop_mode: LoopMode) {
     let (granted, refusals) = enter_realtime(priority);
     for refusal in &refusals {
         warn!("--realtime: {refusal}");
@@ -407,6 +410,15 @@ fn realtime_mode(priority: u8) {
             memory_locked = granted.locked,
             "real-time mode: the loop runs at SCHED_FIFO"
         );
+        if loop_mode == LoopMode::Spin {
+            let read = |name| std::fs::read_to_string(format!("/proc/sys/kernel/{name}"));
+            if let (Ok(runtime), Ok(period)) =
+                (read("sched_rt_runtime_us"), read("sched_rt_period_us"))
+                && let Some(warning) = spin_throttle_warning(&runtime, &period)
+            {
+                warn!("{warning}");
+            }
+        }
     } else {
         warn!("--realtime: the loop runs with normal scheduling");
     }

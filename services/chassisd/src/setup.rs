@@ -5,6 +5,8 @@
 //! configuration (and runs the simulated chassis for the `sim` bus). A test hands the shell its
 //! own [`Devices`].
 
+use std::time::Duration;
+
 use chassis_protocols::{BoxedDriver, Profile, Timestamp};
 
 use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
@@ -207,6 +209,37 @@ pub fn enter_realtime(priority: u8) -> (Realtime, Vec<RealtimeError>) {
     (Realtime { fifo, locked }, errors)
 }
 
+/// The kernel's throttling of real-time threads, from the texts of
+/// `/proc/sys/kernel/sched_rt_runtime_us` and `sched_rt_period_us`: how long SCHED_FIFO threads
+/// are stopped in each period once they used their share, and the period. None when the kernel
+/// does not throttle them (`-1`, or the whole period) or the texts are not numbers.
+pub fn rt_throttle(runtime_us: &str, period_us: &str) -> Option<(Duration, Duration)> {
+    let runtime: i64 = runtime_us.trim().parse().ok()?;
+    let period: u64 = period_us.trim().parse().ok()?;
+    let runtime = u64::try_from(runtime).ok()?;
+    (runtime < period).then(|| {
+        (
+            Duration::from_micros(period - runtime),
+            Duration::from_micros(period),
+        )
+    })
+}
+
+/// The warning for a polling loop in real-time mode on a kernel that throttles real-time
+/// threads: the loop never blocks, so it uses its share of every period and is stopped for the
+/// rest of it, motion frames and the heartbeat included.
+pub fn spin_throttle_warning(runtime_us: &str, period_us: &str) -> Option<String> {
+    let (stopped, period) = rt_throttle(runtime_us, period_us)?;
+    Some(format!(
+        "--realtime with the spin loop: the kernel lets SCHED_FIFO threads run {} of every {} \
+         (kernel.sched_rt_runtime_us), so the loop, which never blocks, stops for {stopped:?} of \
+         every {period:?}; give it an isolated CPU (isolcpus=, --cpu) and set \
+         kernel.sched_rt_runtime_us = -1, or use the event or hybrid loop",
+        runtime_us.trim(),
+        period_us.trim()
+    ))
+}
+
 /// The calling thread's scheduling policy is SCHED_FIFO.
 pub fn is_fifo() -> bool {
     // SAFETY: pid 0 is the calling thread.
@@ -221,6 +254,22 @@ mod tests {
 
     /// The robots of either firmware on a real CAN bus detect with the settings of the profile
     /// they are configured with: the SCOUT MINI's V1 one, the SCOUT's and BUNKER's V2 one.
+    /// The kernel's default (950 ms of every second) stops a polling real-time loop for 50 ms a
+    /// second; no throttling, or a share of the whole period, stops it never.
+    #[test]
+    fn a_throttled_kernel_is_named_for_the_spin_loop_in_realtime_mode() {
+        assert_eq!(
+            rt_throttle("950000\n", "1000000\n"),
+            Some((Duration::from_millis(50), Duration::from_secs(1)))
+        );
+        let warning = spin_throttle_warning("950000\n", "1000000\n").unwrap_or_default();
+        assert!(warning.contains("stops for 50ms of every 1s"), "{warning}");
+        assert_eq!(rt_throttle("-1\n", "1000000\n"), None);
+        assert_eq!(rt_throttle("1000000", "1000000"), None);
+        assert_eq!(rt_throttle("", "1000000"), None);
+        assert_eq!(spin_throttle_warning("-1", "1000000"), None);
+    }
+
     #[test]
     fn detection_listens_as_long_as_the_configured_profile_says() {
         let now = Timestamp::from_millis(1000);
