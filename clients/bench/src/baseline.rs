@@ -62,6 +62,9 @@ pub struct Load {
     pub feed_per_s: f64,
     /// The receiver's own periodic wake-up (the service's tick).
     pub tick: Duration,
+    /// The receiver at SCHED_FIFO at this priority, its memory locked: as chassisd's loop in
+    /// real-time mode.
+    pub realtime: Option<u8>,
 }
 
 /// How a baseline run's rounds go.
@@ -147,7 +150,9 @@ struct IceoryxEndpoint {
     publisher: Publisher<ipc::Service, Ping, ()>,
     subscriber: Subscriber<ipc::Service, Ping, ()>,
     notifier: Notifier<ipc::Service>,
-    listener: Listener<ipc::Service>,
+    /// The listener the pings' (and the feed's) notifications wake; taken out by a receiver
+    /// that waits on a WaitSet ([`WaitSetEndpoint`]).
+    listener: Option<Listener<ipc::Service>>,
     waiting: Waiting,
     /// The feed of a loaded receiver: its samples wake the same listener as the pings.
     feed: Option<Subscriber<ipc::Service, Ping, ()>>,
@@ -236,10 +241,12 @@ impl IceoryxEndpoint {
                 .notifier_builder()
                 .create()
                 .map_err(|e| anyhow::anyhow!("notifier: {e:?}"))?,
-            listener: event(&node, &theirs)?
-                .listener_builder()
-                .create()
-                .map_err(|e| anyhow::anyhow!("listener: {e:?}"))?,
+            listener: Some(
+                event(&node, &theirs)?
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| anyhow::anyhow!("listener: {e:?}"))?,
+            ),
             waiting,
             feed,
             feed_ns: Vec::new(),
@@ -288,6 +295,30 @@ impl Endpoint for IceoryxEndpoint {
     }
 
     fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>> {
+        let listener = self
+            .listener
+            .take()
+            .context("the listener is waited on by a WaitSet")?;
+        let result = self.receive_with(timeout, &mut |wait| {
+            listener
+                .timed_wait(|_| {}, wait)
+                .map(drop)
+                .map_err(|e| anyhow::anyhow!("wait: {e:?}"))
+        });
+        self.listener = Some(listener);
+        result
+    }
+}
+
+impl IceoryxEndpoint {
+    /// The next ping (at most `timeout` away), stamped on arrival; between looks, the feed and
+    /// the tick are served and, when the receiver blocks, `wait` waits at most the time given
+    /// for a notification and takes it.
+    fn receive_with(
+        &mut self,
+        timeout: Duration,
+        wait: &mut dyn FnMut(Duration) -> anyhow::Result<()>,
+    ) -> anyhow::Result<Option<(Ping, u64)>> {
         let deadline = now_ns() + nanos(timeout);
         loop {
             if let Some(sample) = self
@@ -321,11 +352,40 @@ impl Endpoint for IceoryxEndpoint {
             };
             if block {
                 let until = self.tick.map_or(deadline, |(_, due)| due.min(deadline));
-                self.listener
-                    .timed_wait(|_| {}, Duration::from_nanos(until.saturating_sub(now)))
-                    .map_err(|e| anyhow::anyhow!("wait: {e:?}"))?;
+                wait(Duration::from_nanos(until.saturating_sub(now)))?;
             }
         }
+    }
+}
+
+/// A receiver that waits as chassisd's loop does: on a WaitSet the listener is attached to,
+/// taking the notifications of the listener that fired before reading the samples.
+struct WaitSetEndpoint<'a> {
+    inner: IceoryxEndpoint,
+    waitset: &'a WaitSet<ipc::Service>,
+    listener: &'a Listener<ipc::Service>,
+}
+
+impl Endpoint for WaitSetEndpoint<'_> {
+    fn feed_latencies(&self) -> &[u64] {
+        self.inner.feed_latencies()
+    }
+
+    fn send(&mut self, ping: Ping) -> anyhow::Result<()> {
+        self.inner.send(ping)
+    }
+
+    fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>> {
+        let (waitset, listener) = (self.waitset, self.listener);
+        self.inner.receive_with(timeout, &mut |wait| {
+            waitset
+                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait)
+                .map_err(|e| anyhow::anyhow!("wait set: {e:?}"))?;
+            listener
+                .try_wait(|_| {})
+                .map(drop)
+                .map_err(|e| anyhow::anyhow!("taking the notifications: {e:?}"))
+        })
     }
 }
 
@@ -402,6 +462,9 @@ pub struct PongArgs {
     /// A loaded receiver: its own tick, µs.
     #[arg(long)]
     pub tick_us: Option<u64>,
+    /// A loaded receiver: at SCHED_FIFO with this priority, its memory locked.
+    #[arg(long)]
+    pub realtime: Option<u8>,
 }
 
 impl PongArgs {
@@ -409,6 +472,7 @@ impl PongArgs {
         Some(Load {
             feed_per_s: self.feed_per_s?,
             tick: Duration::from_micros(self.tick_us?),
+            realtime: self.realtime,
         })
     }
 
@@ -466,24 +530,32 @@ pub fn feed(args: &FeedArgs) -> anyhow::Result<()> {
     }
 }
 
+/// How an iceoryx2 transport's receiver waits; None for the socket transports.
+fn iceoryx_waiting(transport: Transport) -> Option<Waiting> {
+    match transport {
+        Transport::IceoryxEvent => Some(Waiting::Block),
+        Transport::IceoryxSpin => Some(Waiting::Spin),
+        Transport::IceoryxHybrid => Some(Waiting::Hybrid(HYBRID_SPIN)),
+        Transport::Uds | Transport::Udp => None,
+    }
+}
+
+fn open_iceoryx(
+    args: &PongArgs,
+    me: &str,
+    peer: &str,
+    waiting: Waiting,
+) -> anyhow::Result<IceoryxEndpoint> {
+    // Only the pong side lives with the load.
+    let load = if me == "pong" { args.load() } else { None };
+    IceoryxEndpoint::open(&args.prefix, &args.tag, me, peer, waiting, load)
+}
+
 fn open_endpoint(args: &PongArgs, me: &str, peer: &str) -> anyhow::Result<Box<dyn Endpoint>> {
     Ok(match args.transport {
         Transport::IceoryxEvent | Transport::IceoryxSpin | Transport::IceoryxHybrid => {
-            let waiting = match args.transport {
-                Transport::IceoryxSpin => Waiting::Spin,
-                Transport::IceoryxHybrid => Waiting::Hybrid(HYBRID_SPIN),
-                _ => Waiting::Block,
-            };
-            // Only the pong side lives with the load.
-            let load = if me == "pong" { args.load() } else { None };
-            Box::new(IceoryxEndpoint::open(
-                &args.prefix,
-                &args.tag,
-                me,
-                peer,
-                waiting,
-                load,
-            )?)
+            let waiting = iceoryx_waiting(args.transport).unwrap_or(Waiting::Block);
+            Box::new(open_iceoryx(args, me, peer, waiting)?)
         }
         Transport::Uds => {
             let mine = args.dir.join(format!("{}-{me}.sock", args.tag));
@@ -513,7 +585,32 @@ pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
     if let Some(cpu) = args.cpu {
         pin_current_thread(cpu)?;
     }
+    if let Some(priority) = args.realtime {
+        crate::placement::enter_realtime(priority)?;
+    }
+    // An iceoryx2 receiver waits on a WaitSet, as chassisd's loop does.
+    if let Some(waiting) = iceoryx_waiting(args.transport) {
+        let mut inner = open_iceoryx(args, "pong", "ping", waiting)?;
+        let listener = inner.listener.take().context("the pong's listener")?;
+        let waitset = WaitSetBuilder::new()
+            .create::<ipc::Service>()
+            .map_err(|e| anyhow::anyhow!("wait set: {e:?}"))?;
+        let _guard = waitset
+            .attach_notification(&listener)
+            .map_err(|e| anyhow::anyhow!("attaching the listener: {e:?}"))?;
+        let mut endpoint = WaitSetEndpoint {
+            inner,
+            waitset: &waitset,
+            listener: &listener,
+        };
+        return answer(args, &mut endpoint);
+    }
     let mut endpoint = open_endpoint(args, "pong", "ping")?;
+    answer(args, endpoint.as_mut())
+}
+
+/// Answers pings until the last one (`u64::MAX`), writing a loaded receiver's feed figures.
+fn answer(args: &PongArgs, endpoint: &mut dyn Endpoint) -> anyhow::Result<()> {
     println!("ready");
     loop {
         match endpoint.receive(Duration::from_secs(5))? {
@@ -609,6 +706,7 @@ pub fn run(
         dir: dir.to_path_buf(),
         feed_per_s: load.map(|l| l.feed_per_s),
         tick_us: load.map(|l| u64::try_from(l.tick.as_micros()).unwrap_or(u64::MAX)),
+        realtime: load.and_then(|l| l.realtime),
     };
     let exe = std::env::current_exe()?;
     let mut command = Command::new(&exe);
@@ -632,10 +730,19 @@ pub fn run(
             .arg(load.feed_per_s.to_string())
             .arg("--tick-us")
             .arg(load.tick.as_micros().to_string());
+        if let Some(priority) = load.realtime {
+            command.args(["--realtime", &priority.to_string()]);
+        }
     }
     let mut child = command.spawn().context("starting the pong process")?;
     let mut reader = wait_ready(&mut child)?;
-    // The feed runs on the ping side's CPU: the other end of the receiver's wake-ups.
+    // The feed runs where the simulated chassis does: on a CPU other than the receiver's
+    // (chassisd confines its simulated chassis' thread to the CPUs its loop is not pinned to),
+    // the ping side's in a cross-CPU run.
+    let feed_cpu = pong_cpu.map(|cpu| {
+        let cpus = crate::placement::cpu_count();
+        if cpus > 1 { (cpu + 1) % cpus } else { cpu }
+    });
     let mut feeder = match load {
         Some(load) => {
             let mut feed = Command::new(&exe);
@@ -643,7 +750,7 @@ pub fn run(
                 .arg(load.feed_per_s.to_string())
                 .stdout(Stdio::piped())
                 .stderr(Stdio::inherit());
-            if let Some(cpu) = ping_cpu {
+            if let Some(cpu) = feed_cpu {
                 feed.args(["--cpu", &cpu.to_string()]);
             }
             let mut feeder = feed.spawn().context("starting the feed process")?;

@@ -548,6 +548,11 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             })??;
             let feed_per_s = feedback.per_second(&mut robot)?;
             drop(robot);
+            let scheduling = service.scheduling;
+            report.scheduling.push((
+                format!("{label}, {} loop, {}", r.mode.arg(), r.placement.label()),
+                scheduling,
+            ));
             let passes = service.stop()?;
             bar.inc(1);
 
@@ -571,7 +576,11 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 / (feed_per_s * interval.as_secs_f64()).max(1e-9))
             .ceil() as u64;
             let rounds = pings_wanted.max(feed_rounds) + 1;
-            let load = Load { feed_per_s, tick };
+            let load = Load {
+                feed_per_s,
+                tick,
+                realtime: scheduling.fifo(),
+            };
             let measured = baseline::run(
                 transport,
                 r.placement,
@@ -589,9 +598,14 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let baseline_row = |what: String, latencies: Latencies| {
                 Row::new("baseline", what, "-", placement, latencies, 0)
             };
+            let fifo = match scheduling.fifo() {
+                Some(priority) => format!(", at SCHED_FIFO {priority} as the service's loop"),
+                None => String::new(),
+            };
             let conditions = format!(
-                "receiver woken {feed_per_s:.0}/s by another process (the feedback rate \
-                 measured in the {label} run) and by its own {} ms tick",
+                "receiver woken {feed_per_s:.0}/s by another process on the other CPU, as by \
+                 the simulated chassis (the feedback rate measured in the {label} run), and by \
+                 its own {} ms tick{fifo}",
                 tick.as_millis()
             );
             let paced_what = format!("{} paced, loaded as {label}", transport.label());

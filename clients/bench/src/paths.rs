@@ -44,7 +44,23 @@ impl LoopMode {
             LoopMode::Hybrid => "hybrid",
         }
     }
+
+    /// The SCHED_FIFO priority chassisd's loop asks for in the benchmark's runs of this loop:
+    /// [`REALTIME_PRIORITY`] for a loop that blocks, as a robot runs it; none for the polling
+    /// loop, which at SCHED_FIFO holds its CPU and is stopped by the kernel's real-time
+    /// throttling (`kernel.sched_rt_runtime_us`: 50 ms of every second by default) unless its
+    /// CPU is isolated, which this machine's are not.
+    pub fn realtime(self) -> Option<u8> {
+        match self {
+            LoopMode::Event | LoopMode::Hybrid => Some(REALTIME_PRIORITY),
+            LoopMode::Spin => None,
+        }
+    }
 }
+
+/// chassisd's real-time priority in the benchmark: the one `deploy/chassisd@.service` gives a
+/// robot (`--realtime 80`).
+pub const REALTIME_PRIORITY: u8 = 80;
 
 /// Which bus the service uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
@@ -63,6 +79,29 @@ pub struct Service {
     pub pid: u32,
     /// Where chassisd writes its pass trace as it stops, when asked for one.
     trace: Option<PathBuf>,
+    /// How chassisd's loop is scheduled.
+    pub scheduling: Scheduling,
+}
+
+/// How a run's chassisd loop is scheduled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scheduling {
+    /// Normal scheduling, as asked.
+    Normal,
+    /// Real-time mode, granted: SCHED_FIFO at this priority.
+    Fifo(u8),
+    /// Real-time mode asked for at this priority and refused by the system: normal scheduling.
+    Refused(u8),
+}
+
+impl Scheduling {
+    /// The SCHED_FIFO priority the loop runs at, if it does.
+    pub fn fifo(self) -> Option<u8> {
+        match self {
+            Scheduling::Fifo(priority) => Some(priority),
+            Scheduling::Normal | Scheduling::Refused(_) => None,
+        }
+    }
 }
 
 impl Service {
@@ -137,15 +176,49 @@ pub enum ServiceConfig {
     Default,
 }
 
+/// The configuration file of a run: [`BENCH_CONFIG`], in real-time mode when the loop runs so
+/// ([`LoopMode::realtime`]); empty for chassisd's defaults.
+pub fn config_text(config: ServiceConfig, mode: LoopMode) -> String {
+    match (config, mode.realtime()) {
+        (ServiceConfig::Bench, Some(priority)) => {
+            format!("[service]\nrealtime = {priority}\n\n{BENCH_CONFIG}")
+        }
+        (ServiceConfig::Bench, None) => BENCH_CONFIG.to_string(),
+        (ServiceConfig::Default, _) => String::new(),
+    }
+}
+
 /// Writes the configuration file of a run.
-fn write_config(dir: &Path, name: &str, config: ServiceConfig) -> anyhow::Result<PathBuf> {
+fn write_config(
+    dir: &Path,
+    name: &str,
+    config: ServiceConfig,
+    mode: LoopMode,
+) -> anyhow::Result<PathBuf> {
     let path = dir.join(format!("{name}.toml"));
-    let text = match config {
-        ServiceConfig::Bench => BENCH_CONFIG,
-        ServiceConfig::Default => "",
-    };
-    std::fs::write(&path, text)?;
+    std::fs::write(&path, config_text(config, mode))?;
     Ok(path)
+}
+
+/// The SCHED_FIFO priority of the first of `pid`'s threads that runs at SCHED_FIFO, if one does:
+/// whether chassisd's loop got the real-time mode it asked for.
+pub fn fifo_priority(pid: u32) -> Option<u8> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+    tasks.flatten().find_map(|task| {
+        let tid: libc::pid_t = task.file_name().to_str()?.parse().ok()?;
+        // SAFETY: sched_getscheduler and sched_getparam take a thread id and, for the second,
+        // a valid sched_param to fill; a thread that is gone makes them fail, not misbehave.
+        unsafe {
+            if libc::sched_getscheduler(tid) != libc::SCHED_FIFO {
+                return None;
+            }
+            let mut param = libc::sched_param { sched_priority: 0 };
+            if libc::sched_getparam(tid, &mut param) != 0 {
+                return None;
+            }
+            u8::try_from(param.sched_priority).ok()
+        }
+    })
 }
 
 /// Starts `chassisd` (and, for a pty bus, `chassisd sim`) and waits until it publishes.
@@ -209,7 +282,8 @@ pub fn start_configured(
     let name = format!("bn{}", unique());
     let trace = trace.then(|| dir.join(format!("{name}-passes.txt")));
     let chassisd = sibling("chassisd")?;
-    let config = write_config(dir, &name, config)?;
+    let realtime_asked = config == ServiceConfig::Bench && mode.realtime().is_some();
+    let config = write_config(dir, &name, config, mode)?;
     let mut children = Vec::new();
     let bus_arg = match bus {
         BusKind::Sim => "sim".to_string(),
@@ -294,6 +368,7 @@ pub fn start_configured(
         children,
         pid,
         trace,
+        scheduling: Scheduling::Normal,
     };
     let deadline = now_ns() + 15_000_000_000;
     let mut robot_conn = loop {
@@ -318,6 +393,15 @@ pub fn start_configured(
         {
             break;
         }
+    }
+    // chassisd enters real-time mode before its loop's first wait, so by now.
+    let mut service = service;
+    if realtime_asked {
+        let asked = mode.realtime().unwrap_or(REALTIME_PRIORITY);
+        service.scheduling = match fifo_priority(pid) {
+            Some(priority) => Scheduling::Fifo(priority),
+            None => Scheduling::Refused(asked),
+        };
     }
     Ok((service, robot_conn))
 }
@@ -944,6 +1028,44 @@ mod tests {
     /// Every robot's driver asked for 0.3 m/s against its simulated firmware: the command path
     /// finds that speed in the motion frames it wrote, as the tap shows them (a serial robot's
     /// frames cut into chunks), by the robot's codec of the registry.
+
+    /// The benchmark's file asks for real-time mode for a loop that blocks and not for the
+    /// polling one; chassisd's defaults are an empty file.
+    #[test]
+    fn a_loop_that_blocks_runs_in_realtime_mode_and_the_spin_loop_does_not() {
+        for mode in [LoopMode::Event, LoopMode::Hybrid] {
+            let text = config_text(ServiceConfig::Bench, mode);
+            assert!(
+                text.starts_with("[service]\nrealtime = 80\n") && text.ends_with(BENCH_CONFIG),
+                "{mode:?}: {text}"
+            );
+        }
+        assert_eq!(
+            config_text(ServiceConfig::Bench, LoopMode::Spin),
+            BENCH_CONFIG
+        );
+        for mode in [LoopMode::Event, LoopMode::Spin] {
+            assert_eq!(config_text(ServiceConfig::Default, mode), "");
+        }
+    }
+
+    /// A thread of this process at SCHED_FIFO is found with its priority; none while every
+    /// thread has normal scheduling. Where the system refuses SCHED_FIFO (no CAP_SYS_NICE), the
+    /// thread stays normal and none is found.
+    #[test]
+    fn a_thread_at_sched_fifo_is_found_with_its_priority() {
+        let pid = std::process::id();
+        assert_eq!(fifo_priority(pid), None);
+        let (entered, found) = std::thread::spawn(move || {
+            let entered = crate::placement::enter_realtime(7).is_ok();
+            (entered, fifo_priority(pid))
+        })
+        .join()
+        .unwrap();
+        assert_eq!(found, entered.then_some(7));
+        // SAFETY: munlockall takes no arguments; the test's pages need not stay locked.
+        unsafe { libc::munlockall() };
+    }
 
     #[test]
     fn chassisd_is_started_under_its_prefix_with_both_outputs_logged() {

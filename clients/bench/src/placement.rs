@@ -53,6 +53,31 @@ pub fn unpin_current_thread() {
     }
 }
 
+/// The calling thread at SCHED_FIFO `priority` and every page of the process locked, as
+/// chassisd's real-time mode does (`--realtime`): a baseline's receiver living as the service's
+/// loop did. Unlike chassisd, a refusal is an error: the bench asks for it only beside a
+/// chassisd that was granted it.
+pub fn enter_realtime(priority: u8) -> anyhow::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: i32::from(priority),
+    };
+    // SAFETY: pid 0 is the calling thread; `param` is a valid sched_param for the call.
+    if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } != 0 {
+        anyhow::bail!(
+            "SCHED_FIFO {priority} refused: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+    // SAFETY: mlockall takes flags only.
+    if unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } != 0 {
+        anyhow::bail!(
+            "locking memory refused: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+    Ok(())
+}
+
 /// Number of CPUs available.
 pub fn cpu_count() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())

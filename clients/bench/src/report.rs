@@ -62,6 +62,9 @@ pub struct Report {
     /// Where the time of the service paths goes, run by run.
     pub parts: Vec<Parts>,
     pub notes: Vec<String>,
+    /// How chassisd's loop was scheduled in each latency run (the run's label).
+    #[serde(skip)]
+    pub scheduling: Vec<(String, crate::paths::Scheduling)>,
     /// The rows the run planned ([`row_key`]s), for the smoke check.
     #[serde(skip)]
     pub expected: Vec<String>,
@@ -599,6 +602,34 @@ impl Target {
 }
 
 impl Report {
+    /// What the system granted: real-time mode in every run that asked for it, or the runs
+    /// where it was refused (their loops ran with normal scheduling, and so did their
+    /// baselines' receivers).
+    pub fn scheduling_text(&self) -> String {
+        use crate::paths::Scheduling;
+        let asked = self
+            .scheduling
+            .iter()
+            .filter(|(_, s)| *s != Scheduling::Normal)
+            .count();
+        let refused: Vec<&str> = self
+            .scheduling
+            .iter()
+            .filter(|(_, s)| matches!(s, Scheduling::Refused(_)))
+            .map(|(run, _)| run.as_str())
+            .collect();
+        if refused.is_empty() {
+            format!("Real-time mode was granted in each of the {asked} runs that asked for it.")
+        } else {
+            format!(
+                "**Real-time mode was refused** (no CAP_SYS_NICE or RLIMIT_RTPRIO) in {} of the \
+                 {asked} runs that asked for it, which ran with normal scheduling: {}.",
+                refused.len(),
+                refused.join("; ")
+            )
+        }
+    }
+
     /// The rows of `path` in loop `mode`.
     fn rows_of<'a>(&'a self, path: &'a str, mode: &'a str) -> impl Iterator<Item = &'a Row> {
         self.rows
@@ -878,10 +909,22 @@ impl Report {
              no minimum spacing between command frames (default 2 ms), no idle brake, no \
              acceleration smoothing (by default the mux ramps a change), so that a command's \
              frame carries the requested speed itself:\n\n```toml\n{}```\n\n\
-             The row *command {}* is measured beside them with chassisd's default configuration: \
-             the TITAN on the simulated bus, event loop, cross CPU; one of its samples ends at \
-             the first motion frame that moves the commanded speed toward the request.\n\n",
+             The event and hybrid loops also run in real-time mode, as `deploy/chassisd@.service` \
+             runs chassisd on a robot (`--realtime {}`: the loop's thread at SCHED_FIFO, memory \
+             locked), with these lines before the file's:\n\n```toml\n[service]\nrealtime = \
+             {}\n```\n\nThe spin loop keeps normal scheduling: a polling loop at SCHED_FIFO \
+             holds its CPU, and the kernel stops it for the rest of each period once real-time \
+             threads used their share (`kernel.sched_rt_runtime_us`, 950 ms of every second by \
+             default) unless the CPU is isolated; chassisd warns of it. The matched baselines' \
+             receivers are scheduled as the service's loop was. {}\n\n\
+             The row *command {}* is measured beside them with chassisd's default configuration \
+             (normal scheduling too): the TITAN on the simulated bus, event loop, cross CPU; one \
+             of its samples ends at the first motion frame that moves the commanded speed toward \
+             the request.\n\n",
             crate::paths::BENCH_CONFIG,
+            crate::paths::REALTIME_PRIORITY,
+            crate::paths::REALTIME_PRIORITY,
+            self.scheduling_text(),
             crate::DEFAULT_CONFIG_ROW
         ));
         out.push_str("## The table\n\n");
@@ -1021,9 +1064,12 @@ impl Report {
              * **placement**: `same CPU` pins both ends to one CPU, `cross CPU` to two.\n\
              * **Matched baselines.** A command or state row is divided by a baseline measured \
              in the same run, right after it, whose receiver lives as the service's loop did: \
-             woken by another process at the chassis' feedback rate measured in that run, by \
+             woken by another process at the chassis' feedback rate measured in that run (on a \
+             CPU other than the receiver's, as chassisd keeps its simulated chassis off its \
+             loop's CPU), by \
              its own tick (the robot's heartbeat period), with the same placement and the same \
-             way of waiting (a poll-then-block receiver for the hybrid loop). The command row's \
+             way of waiting (a poll-then-block receiver for the hybrid loop) and the same \
+             scheduling (SCHED_FIFO where the loop ran in real-time mode). The command row's \
              baseline is one ping per command period ({} ms; {} ms on the XBot, whose manual \
              caps its command rate); the state row's is the feed's own hops at the feedback \
              rate. A preemption's stop follows a teleop request at once, while the loop is waking \
@@ -1135,6 +1181,34 @@ mod tests {
             latencies.record(us * 1000);
         }
         Row::new(path, what.into(), mode, "cross CPU", latencies, 0)
+    }
+
+    /// The document says whether real-time mode was granted, naming the runs that were refused.
+    #[test]
+    fn the_runs_refused_realtime_mode_are_named() {
+        use crate::paths::Scheduling;
+        let mut report = Report::default();
+        report.scheduling = vec![
+            (
+                "titan sim, event loop, same CPU".into(),
+                Scheduling::Fifo(80),
+            ),
+            ("titan sim, spin loop, cross CPU".into(), Scheduling::Normal),
+        ];
+        assert_eq!(
+            report.scheduling_text(),
+            "Real-time mode was granted in each of the 1 runs that asked for it."
+        );
+        report.scheduling.push((
+            "titan slcan pty, event loop, cross CPU".into(),
+            Scheduling::Refused(80),
+        ));
+        let text = report.scheduling_text();
+        assert!(
+            text.contains("refused** (no CAP_SYS_NICE or RLIMIT_RTPRIO) in 1 of the 2 runs")
+                && text.ends_with(": titan slcan pty, event loop, cross CPU."),
+            "{text}"
+        );
     }
 
     #[test]
