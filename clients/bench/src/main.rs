@@ -493,7 +493,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 r.bus,
                 r.mode,
                 service_cpu,
-                paths::ServiceConfig::Bench,
+                paths::ServiceConfig::BenchRealtime,
                 true,
                 &prefix,
                 &dir,
@@ -549,6 +549,11 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let feed_per_s = feedback.per_second(&mut robot)?;
             drop(robot);
             let scheduling = service.scheduling;
+            if scheduling.fifo().is_some() {
+                // Real-time mode locks every page the process maps.
+                let rss = paths::rss_mib(service.pid)?;
+                report.realtime_rss_mib = Some(report.realtime_rss_mib.map_or(rss, |m| m.max(rss)));
+            }
             report.scheduling.push((
                 format!("{label}, {} loop, {}", r.mode.arg(), r.placement.label()),
                 scheduling,

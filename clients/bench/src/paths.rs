@@ -170,20 +170,23 @@ pub const BENCH_CONFIG: &str = "[driver]\nmin_command_interval_ms = 0\nbrake_idl
 /// Which configuration a run's chassisd has.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ServiceConfig {
-    /// [`BENCH_CONFIG`].
+    /// [`BENCH_CONFIG`], normal scheduling: the cost, memory, fan-out and Zenoh runs.
     Bench,
+    /// [`BENCH_CONFIG`] in real-time mode where the loop blocks ([`LoopMode::realtime`]): the
+    /// latency runs of the service paths.
+    BenchRealtime,
     /// chassisd's defaults.
     Default,
 }
 
-/// The configuration file of a run: [`BENCH_CONFIG`], in real-time mode when the loop runs so
-/// ([`LoopMode::realtime`]); empty for chassisd's defaults.
+/// The configuration file of a run: [`BENCH_CONFIG`], in real-time mode when asked and the loop
+/// runs so ([`LoopMode::realtime`]); empty for chassisd's defaults.
 pub fn config_text(config: ServiceConfig, mode: LoopMode) -> String {
     match (config, mode.realtime()) {
-        (ServiceConfig::Bench, Some(priority)) => {
+        (ServiceConfig::BenchRealtime, Some(priority)) => {
             format!("[service]\nrealtime = {priority}\n\n{BENCH_CONFIG}")
         }
-        (ServiceConfig::Bench, None) => BENCH_CONFIG.to_string(),
+        (ServiceConfig::BenchRealtime | ServiceConfig::Bench, _) => BENCH_CONFIG.to_string(),
         (ServiceConfig::Default, _) => String::new(),
     }
 }
@@ -282,7 +285,7 @@ pub fn start_configured(
     let name = format!("bn{}", unique());
     let trace = trace.then(|| dir.join(format!("{name}-passes.txt")));
     let chassisd = sibling("chassisd")?;
-    let realtime_asked = config == ServiceConfig::Bench && mode.realtime().is_some();
+    let realtime_asked = config == ServiceConfig::BenchRealtime && mode.realtime().is_some();
     let config = write_config(dir, &name, config, mode)?;
     let mut children = Vec::new();
     let bus_arg = match bus {
@@ -1029,19 +1032,20 @@ mod tests {
     /// finds that speed in the motion frames it wrote, as the tap shows them (a serial robot's
     /// frames cut into chunks), by the robot's codec of the registry.
 
-    /// The benchmark's file asks for real-time mode for a loop that blocks and not for the
-    /// polling one; chassisd's defaults are an empty file.
+    /// The latency runs' file asks for real-time mode for a loop that blocks and not for the
+    /// polling one; the other runs' never; chassisd's defaults are an empty file.
     #[test]
     fn a_loop_that_blocks_runs_in_realtime_mode_and_the_spin_loop_does_not() {
         for mode in [LoopMode::Event, LoopMode::Hybrid] {
-            let text = config_text(ServiceConfig::Bench, mode);
+            let text = config_text(ServiceConfig::BenchRealtime, mode);
             assert!(
                 text.starts_with("[service]\nrealtime = 80\n") && text.ends_with(BENCH_CONFIG),
                 "{mode:?}: {text}"
             );
+            assert_eq!(config_text(ServiceConfig::Bench, mode), BENCH_CONFIG);
         }
         assert_eq!(
-            config_text(ServiceConfig::Bench, LoopMode::Spin),
+            config_text(ServiceConfig::BenchRealtime, LoopMode::Spin),
             BENCH_CONFIG
         );
         for mode in [LoopMode::Event, LoopMode::Spin] {

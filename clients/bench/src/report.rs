@@ -65,6 +65,8 @@ pub struct Report {
     /// How chassisd's loop was scheduled in each latency run (the run's label).
     #[serde(skip)]
     pub scheduling: Vec<(String, crate::paths::Scheduling)>,
+    /// chassisd's largest resident memory in a latency run in real-time mode, MiB.
+    pub realtime_rss_mib: Option<f64>,
     /// The rows the run planned ([`row_key`]s), for the smoke check.
     #[serde(skip)]
     pub expected: Vec<String>,
@@ -917,6 +919,9 @@ impl Report {
              threads used their share (`kernel.sched_rt_runtime_us`, 950 ms of every second by \
              default) unless the CPU is isolated; chassisd warns of it. The matched baselines' \
              receivers are scheduled as the service's loop was. {}\n\n\
+             Real-time mode applies to the latency runs of the service paths (the command, \
+             state, preemption, Python and ROS 2 rows); the fan-out, cost, memory and Zenoh runs \
+             start chassisd with this file alone, normal scheduling. \
              The row *command {}* is measured beside them with chassisd's default configuration \
              (normal scheduling too): the TITAN on the simulated bus, event loop, cross CPU; one \
              of its samples ends at the first motion frame that moves the commanded speed toward \
@@ -1023,6 +1028,14 @@ impl Report {
                 c.frames_per_s,
                 c.cpu_pct,
                 c.rss_mib
+            ));
+        }
+        if let Some(rss) = self.realtime_rss_mib {
+            out.push_str(&format!(
+                "* in real-time mode (`--realtime`, the latency runs) chassisd locks every page it \
+                 maps, its whole executable and every iceoryx2 segment it serves included: \
+                 resident memory {rss:.1} MiB at most over those runs (the target below is read on \
+                 the runs with normal scheduling above)\n"
             ));
         }
         out.push_str(
