@@ -1028,10 +1028,6 @@ mod tests {
     use chassis_client::BodyVelocity;
     use chassis_protocols::{Direction, Timestamp, WireItem};
 
-    /// Every robot's driver asked for 0.3 m/s against its simulated firmware: the command path
-    /// finds that speed in the motion frames it wrote, as the tap shows them (a serial robot's
-    /// frames cut into chunks), by the robot's codec of the registry.
-
     /// The latency runs' file asks for real-time mode for a loop that blocks and not for the
     /// polling one; the other runs' never; chassisd's defaults are an empty file.
     #[test]
@@ -1087,6 +1083,10 @@ mod tests {
         assert_eq!(err.to_string(), "starting chassisd sim");
         std::fs::remove_dir_all(&dir).unwrap();
     }
+
+    /// Every robot's driver asked for 0.3 m/s against its simulated firmware: the command path
+    /// finds that speed in the motion frames it wrote, as the tap shows them (a serial robot's
+    /// frames cut into chunks), by the robot's codec of the registry.
     #[test]
     fn every_robots_motion_frames_tell_the_speed_they_command() {
         for kind in RobotKind::ALL {
