@@ -1200,14 +1200,16 @@ mod tests {
     #[test]
     fn the_runs_refused_realtime_mode_are_named() {
         use crate::paths::Scheduling;
-        let mut report = Report::default();
-        report.scheduling = vec![
-            (
-                "titan sim, event loop, same CPU".into(),
-                Scheduling::Fifo(80),
-            ),
-            ("titan sim, spin loop, cross CPU".into(), Scheduling::Normal),
-        ];
+        let mut report = Report {
+            scheduling: vec![
+                (
+                    "titan sim, event loop, same CPU".into(),
+                    Scheduling::Fifo(80),
+                ),
+                ("titan sim, spin loop, cross CPU".into(), Scheduling::Normal),
+            ],
+            ..Report::default()
+        };
         assert_eq!(
             report.scheduling_text(),
             "Real-time mode was granted in each of the 1 runs that asked for it."
