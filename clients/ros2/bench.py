@@ -15,7 +15,10 @@ processes involved:
   ``chassis-bench`` applies to every client alike, an odom counts when its stamp is newer than
   every stamp taken before it and its pose or twist differs from the odom before it: one that
   repeats an older frame's read time, or says what the one before it said (a tick's refresh), is
-  left out, and the first only sets the stamp.
+  left out. The odoms queued in this participant's reader while the other paths ran (its history,
+  waiting for this script rather than for the bridge) are taken first and left out, as the
+  Rust and Python readers leave out the sample published before they opened; the newest of them
+  only sets the stamp.
 * **raw hops**: the same two DDS implementations with nothing behind them, each carrying what
   its path carries with the same QoS. ``chassis-ros2 --bench-echo`` (the bridge's DDS stack)
   records each ``TwistStamped`` ping written here (Cyclone DDS → RustDDS, read as the bridge
@@ -148,6 +151,13 @@ def state_path(
     last_request = 0
     newest: int | None = None
     last_said: object = None
+    # What queued in the reader's history before this path began waited for this script, not
+    # for the bridge: taken and left out.
+    while backlog := odom.take(N=64):
+        for sample in backlog:
+            read = nanos(sample.header.stamp)
+            newest = read if newest is None else max(newest, read)
+            last_said = (sample.pose, sample.twist)
     deadline = time.monotonic() + 120
     while len(pairs) < samples and time.monotonic() < deadline:
         if chassis.now_ns() - last_request > 50_000_000:

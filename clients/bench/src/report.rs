@@ -1101,7 +1101,8 @@ impl Report {
              script: its pose or twist); a sample the service's tick merely refreshed carries \
              an older read time, or that of a frame that changed nothing but stamps and \
              counters (published only with the next tick), and is left out, and so is the first \
-             (published before the reader opened). Gaps in `seq` are samples the reader lost: the count column shows them as \
+             (published before the reader opened; the ROS 2 script's reader exists from its \
+             start, and every odom queued in it before the state path began is left out). Gaps in `seq` are samples the reader lost: the count column shows them as \
              *dropped*, beside requests *missed* and samples *out of range* of the histogram.\n\
              * **Same samples.** A matched baseline has as many samples as the row it divides: \
              the last ones of a run long enough for both the command row's pings and the state \
