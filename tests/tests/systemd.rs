@@ -293,6 +293,24 @@ fn policy(pid: u32) -> (u32, u32) {
     (fields[38].parse().unwrap(), fields[37].parse().unwrap())
 }
 
+/// The CPUs the simulated chassis' thread (`sim-titan`) of `pid` may run on, as proc(5)'s
+/// `Cpus_allowed_list` writes them.
+fn sim_cpus_allowed(pid: u32) -> String {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).unwrap();
+    for task in tasks.flatten() {
+        let comm = std::fs::read_to_string(task.path().join("comm")).unwrap_or_default();
+        if comm.trim() == "sim-titan" {
+            let status = std::fs::read_to_string(task.path().join("status")).unwrap();
+            let line = status
+                .lines()
+                .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
+                .unwrap();
+            return line.trim().to_string();
+        }
+    }
+    panic!("chassisd {pid} has no sim-titan thread");
+}
+
 const SCHED_FIFO: u32 = 1;
 const SCHED_OTHER: u32 = 0;
 
@@ -315,7 +333,11 @@ fn assert_drives(env: &Env, n: &str) {
 fn realtime_mode_runs_the_loop_at_sched_fifo_or_says_why_not() {
     let mut env = Env::new("rt-granted");
     let n = name("rtg");
-    let index = env.serve("titan", &n, &["--no-safety-monitor", "--realtime", "10"]);
+    let index = env.serve(
+        "titan",
+        &n,
+        &["--no-safety-monitor", "--realtime", "10", "--cpu", "0"],
+    );
     assert_drives(&env, &n);
     let pid = env.proc(index).child.id();
     let log = env.proc(index).log_text();
@@ -323,12 +345,15 @@ fn realtime_mode_runs_the_loop_at_sched_fifo_or_says_why_not() {
         // A system without the privilege: the warning and normal scheduling.
         assert!(log.contains("normal scheduling"), "{log}");
         assert_eq!(policy(pid).0, SCHED_OTHER);
+        assert_ne!(sim_cpus_allowed(pid), "0");
     } else {
         assert!(
             log.contains("real-time mode: the loop runs at SCHED_FIFO"),
             "{log}"
         );
         assert_eq!(policy(pid), (SCHED_FIFO, 10));
+        // The simulated chassis shares the pinned real-time loop's CPU.
+        assert_eq!(sim_cpus_allowed(pid), "0");
     }
 }
 
@@ -367,6 +392,8 @@ fn a_refused_realtime_mode_warns_and_runs_with_normal_scheduling() {
         "--no-safety-monitor",
         "--realtime",
         "10",
+        "--cpu",
+        "0",
     ]);
     let index = env.spawn_program("chassisd", Path::new("/usr/bin/prlimit"), &args, &[]);
     assert_drives(&env, &n);
@@ -378,5 +405,8 @@ fn a_refused_realtime_mode_warns_and_runs_with_normal_scheduling() {
         "{log}"
     );
     // prlimit execs setpriv, which execs chassisd: the pid is chassisd's.
-    assert_eq!(policy(env.proc(index).child.id()).0, SCHED_OTHER);
+    let pid = env.proc(index).child.id();
+    assert_eq!(policy(pid).0, SCHED_OTHER);
+    // A loop at normal scheduling leaves the other CPUs to its simulated chassis.
+    assert_ne!(sim_cpus_allowed(pid), "0");
 }

@@ -36,7 +36,7 @@ use crate::moderation::RxGate;
 use crate::mux::{Mux, MuxConfigError};
 use crate::notify::Notifier;
 use crate::setup::{
-    Devices, Hardware, PinError, driver_for_config, enter_realtime, pin_to_cpu,
+    Devices, Hardware, PinError, driver_for_config, enter_realtime, is_fifo, pin_to_cpu, sim_cpus,
     spin_throttle_warning,
 };
 use crate::sim::SimHandle;
@@ -241,6 +241,10 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
     // Threads started before this (the simulated chassis) keep normal scheduling.
     if let Some(priority) = config.realtime {
         realtime_mode(priority, config.loop_mode);
+        // A loop that got SCHED_FIFO takes its simulated chassis onto its CPU (`sim_cpus`).
+        if let Some(sim) = &shell.sim {
+            sim.confine_to(&sim_cpus(&config, is_fifo()));
+        }
     }
     shell.run(&ports, &mut engine)
 }

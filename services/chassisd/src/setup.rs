@@ -98,14 +98,8 @@ pub fn open_bus(
                 let (a, b) = datagram::StreamBytes::pair("sim").map_err(io)?;
                 (Bus::Bytes(Box::new(a)), Bus::Bytes(Box::new(b)))
             };
-            // A pinned loop leaves the other CPUs to its simulated chassis.
-            let others: Vec<usize> = match config.cpu {
-                Some(cpu) => (0..std::thread::available_parallelism().map_or(1, |n| n.get()))
-                    .filter(|&c| c != cpu)
-                    .collect(),
-                None => Vec::new(),
-            };
-            let handle = SimHandle::spawn_on(firmware, theirs, &others).map_err(io)?;
+            let cpus = sim_cpus(config, is_fifo());
+            let handle = SimHandle::spawn_on(firmware, theirs, &cpus).map_err(io)?;
             (ours, Some(handle))
         }
         BusSpec::Can { iface } => (Bus::Can(Box::new(socketcan::SocketCan::open(iface)?)), None),
@@ -147,6 +141,31 @@ pub struct PinError {
     pub cpu: usize,
     #[source]
     pub source: nix::Error,
+}
+
+/// The CPUs of the embedded simulated chassis' thread (all when empty), for a loop that runs at
+/// SCHED_FIFO or not (`fifo`). A loop left unpinned leaves it unpinned. A pinned loop that
+/// blocks at SCHED_FIFO shares its CPU with it: the chassis runs only while the loop waits, and
+/// the loop's write to it wakes no other CPU (a wake-up of an idle CPU costs the write tens of
+/// microseconds on a virtual machine), as a write to a CAN controller wakes none. Any other
+/// pinned loop leaves it the other CPUs: at normal scheduling the chassis would preempt the loop,
+/// and a polling loop would starve it.
+pub fn sim_cpus(config: &Config, fifo: bool) -> Vec<usize> {
+    let Some(cpu) = config.cpu else {
+        return Vec::new();
+    };
+    if fifo && config.loop_mode != crate::config::LoopMode::Spin {
+        return vec![cpu];
+    }
+    (0..online_cpus()).filter(|&c| c != cpu).collect()
+}
+
+/// The CPUs the machine has online. Not `available_parallelism`: that counts the CPUs the calling
+/// thread may use, one once the loop's thread is pinned.
+pub fn online_cpus() -> usize {
+    // SAFETY: sysconf takes a name and reads nothing else.
+    let n = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) };
+    usize::try_from(n).map_or(1, |n| n.max(1))
 }
 
 /// Pins the calling thread to `cpu`.
@@ -249,7 +268,7 @@ pub fn is_fifo() -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{Overrides, RawConfig};
+    use crate::config::{LoopMode, Overrides, RawConfig};
     use chassis_protocols::RobotKind;
 
     /// The robots of either firmware on a real CAN bus detect with the settings of the profile
@@ -268,6 +287,30 @@ mod tests {
         assert_eq!(rt_throttle("1000000", "1000000"), None);
         assert_eq!(rt_throttle("", "1000000"), None);
         assert_eq!(spin_throttle_warning("-1", "1000000"), None);
+    }
+
+    /// The simulated chassis shares a pinned loop's CPU only while the loop blocks at
+    /// SCHED_FIFO; any other pinned loop leaves it the other CPUs, an unpinned one every CPU.
+    #[test]
+    fn the_simulated_chassis_shares_the_cpu_of_a_pinned_real_time_loop_that_blocks() {
+        let config = |cpu: Option<usize>, loop_mode: LoopMode| {
+            let raw: RawConfig = toml::from_str("[service]\nrobot = \"titan\"\n").unwrap();
+            raw.validate(Overrides {
+                cpu,
+                loop_mode: Some(loop_mode),
+                ..Overrides::default()
+            })
+            .unwrap()
+        };
+        let others: Vec<usize> = (1..online_cpus()).collect();
+        for fifo in [false, true] {
+            assert!(sim_cpus(&config(None, LoopMode::Event), fifo).is_empty());
+            assert_eq!(sim_cpus(&config(Some(0), LoopMode::Spin), fifo), others);
+        }
+        for mode in [LoopMode::Event, LoopMode::Hybrid] {
+            assert_eq!(sim_cpus(&config(Some(0), mode), true), vec![0]);
+            assert_eq!(sim_cpus(&config(Some(0), mode), false), others);
+        }
     }
 
     #[test]

@@ -195,7 +195,8 @@ impl SimHandle {
     }
 
     /// Like [`SimHandle::spawn`], with the thread confined to `cpus` (all CPUs when empty), so a
-    /// pinned, spinning service loop does not starve its simulated chassis.
+    /// pinned, spinning service loop does not starve its simulated chassis. The thread runs with
+    /// normal scheduling whoever spawns it (a loop in real-time mode that reopens its bus).
     pub fn spawn_on(firmware: BoxedFirmware, bus: Bus, cpus: &[usize]) -> std::io::Result<Self> {
         let (doorbell, wake) = UnixDatagram::pair()?;
         doorbell.set_nonblocking(true)?;
@@ -204,25 +205,64 @@ impl SimHandle {
         let robot = firmware.robot();
         let thread = std::thread::Builder::new()
             .name(format!("sim-{}", robot.name()))
-            .spawn({
-                let cpus = cpus.to_vec();
-                move || {
-                    if !cpus.is_empty() {
-                        confine(&cpus);
-                    }
-                    run(firmware, bus, &inbox, &wake)
-                }
+            .spawn(move || {
+                normal_scheduling();
+                run(firmware, bus, &inbox, &wake)
             })?;
-        Ok(Self {
+        let handle = Self {
             commands,
             doorbell,
             thread: Some(thread),
             robot,
-        })
+        };
+        // From here, not from the thread: a thread that confines itself can do so after its
+        // spawner moved it (a loop that took it onto its CPU).
+        if !cpus.is_empty() {
+            handle.confine_to(cpus);
+        }
+        Ok(handle)
     }
 
     pub fn robot(&self) -> RobotKind {
         self.robot
+    }
+
+    /// Moves the simulator's thread onto `cpus` (all CPUs when empty).
+    pub fn confine_to(&self, cpus: &[usize]) {
+        use std::os::unix::thread::JoinHandleExt;
+        let Some(thread) = &self.thread else {
+            return;
+        };
+        // SAFETY: an all-zero cpu_set_t is the empty set; CPU_SET writes inside it for a CPU
+        // below CPU_SETSIZE, which the filter ensures.
+        let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+        let wanted: Vec<usize> = if cpus.is_empty() {
+            (0..crate::setup::online_cpus()).collect()
+        } else {
+            cpus.to_vec()
+        };
+        for cpu in wanted
+            .into_iter()
+            .filter(|&c| c < libc::CPU_SETSIZE as usize)
+        {
+            // SAFETY: see above.
+            unsafe { libc::CPU_SET(cpu, &mut set) };
+        }
+        // SAFETY: the thread is alive or joinable (its handle is held), and `set` is a valid
+        // cpu_set_t of the size given.
+        let err = unsafe {
+            libc::pthread_setaffinity_np(
+                thread.as_pthread_t(),
+                std::mem::size_of::<libc::cpu_set_t>(),
+                &set,
+            )
+        };
+        if err != 0 {
+            warn!(
+                "simulated chassis: cannot move to CPUs {cpus:?}: {}",
+                std::io::Error::from_raw_os_error(err)
+            );
+        }
     }
 
     /// Injects a fault; returns whether this robot has such a thing. Waits at most 200 ms for the
@@ -306,16 +346,15 @@ impl Drop for SimHandle {
 }
 
 /// Confines the calling thread to `cpus`.
-fn confine(cpus: &[usize]) {
-    use nix::sched::{CpuSet, sched_setaffinity};
-    let mut set = CpuSet::new();
-    for &cpu in cpus {
-        if let Err(err) = set.set(cpu) {
-            warn!("simulated chassis: CPU {cpu} is not one this machine can name: {err}");
-        }
-    }
-    if let Err(err) = sched_setaffinity(nix::unistd::Pid::from_raw(0), &set) {
-        warn!("simulated chassis: cannot confine to CPUs {cpus:?}: {err}");
+/// The calling thread with normal scheduling (SCHED_OTHER), whatever it inherited.
+fn normal_scheduling() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: pid 0 is the calling thread; `param` is a valid sched_param for SCHED_OTHER.
+    if unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) } != 0 {
+        warn!(
+            "simulated chassis: cannot take normal scheduling: {}",
+            std::io::Error::last_os_error()
+        );
     }
 }
 
