@@ -90,8 +90,8 @@ pub enum Scheduling {
     Normal,
     /// Real-time mode, granted: SCHED_FIFO at this priority.
     Fifo(u8),
-    /// Real-time mode asked for at this priority and refused by the system: normal scheduling.
-    Refused(u8),
+    /// Real-time mode asked for and refused by the system: normal scheduling.
+    Refused,
 }
 
 impl Scheduling {
@@ -99,7 +99,7 @@ impl Scheduling {
     pub fn fifo(self) -> Option<u8> {
         match self {
             Scheduling::Fifo(priority) => Some(priority),
-            Scheduling::Normal | Scheduling::Refused(_) => None,
+            Scheduling::Normal | Scheduling::Refused => None,
         }
     }
 }
@@ -179,15 +179,23 @@ pub enum ServiceConfig {
     Default,
 }
 
-/// The configuration file of a run: [`BENCH_CONFIG`], in real-time mode when asked and the loop
-/// runs so ([`LoopMode::realtime`]); empty for chassisd's defaults.
-pub fn config_text(config: ServiceConfig, mode: LoopMode) -> String {
-    match (config, mode.realtime()) {
-        (ServiceConfig::BenchRealtime, Some(priority)) => {
-            format!("[service]\nrealtime = {priority}\n\n{BENCH_CONFIG}")
+impl ServiceConfig {
+    /// The SCHED_FIFO priority this configuration asks for with the loop `mode`, if any.
+    pub fn realtime(self, mode: LoopMode) -> Option<u8> {
+        match self {
+            ServiceConfig::BenchRealtime => mode.realtime(),
+            ServiceConfig::Bench | ServiceConfig::Default => None,
         }
-        (ServiceConfig::BenchRealtime | ServiceConfig::Bench, _) => BENCH_CONFIG.to_string(),
+    }
+}
+
+/// The configuration file of a run: [`BENCH_CONFIG`], in real-time mode when the configuration
+/// asks for it with this loop ([`ServiceConfig::realtime`]); empty for chassisd's defaults.
+pub fn config_text(config: ServiceConfig, mode: LoopMode) -> String {
+    match (config, config.realtime(mode)) {
         (ServiceConfig::Default, _) => String::new(),
+        (_, Some(priority)) => format!("[service]\nrealtime = {priority}\n\n{BENCH_CONFIG}"),
+        (_, None) => BENCH_CONFIG.to_string(),
     }
 }
 
@@ -285,7 +293,7 @@ pub fn start_configured(
     let name = format!("bn{}", unique());
     let trace = trace.then(|| dir.join(format!("{name}-passes.txt")));
     let chassisd = sibling("chassisd")?;
-    let realtime_asked = config == ServiceConfig::BenchRealtime && mode.realtime().is_some();
+    let realtime = config.realtime(mode);
     let config = write_config(dir, &name, config, mode)?;
     let mut children = Vec::new();
     let bus_arg = match bus {
@@ -366,7 +374,7 @@ pub fn start_configured(
     let service = spawn_logged(&mut service, prefix, &log, "chassisd")?;
     let pid = service.id();
     children.push(service);
-    let service = Service {
+    let mut service = Service {
         name: name.clone(),
         children,
         pid,
@@ -398,13 +406,8 @@ pub fn start_configured(
         }
     }
     // chassisd enters real-time mode before its loop's first wait, so by now.
-    let mut service = service;
-    if realtime_asked {
-        let asked = mode.realtime().unwrap_or(REALTIME_PRIORITY);
-        service.scheduling = match fifo_priority(pid) {
-            Some(priority) => Scheduling::Fifo(priority),
-            None => Scheduling::Refused(asked),
-        };
+    if realtime.is_some() {
+        service.scheduling = fifo_priority(pid).map_or(Scheduling::Refused, Scheduling::Fifo);
     }
     Ok((service, robot_conn))
 }

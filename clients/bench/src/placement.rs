@@ -78,9 +78,12 @@ pub fn enter_realtime(priority: u8) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Number of CPUs available.
+/// Number of CPUs online. Not `available_parallelism`: that counts the CPUs the calling thread
+/// may use, one while it is pinned.
 pub fn cpu_count() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+    // SAFETY: sysconf takes a name and reads nothing else.
+    let n = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) };
+    usize::try_from(n).map_or(1, |n| n.max(1))
 }
 
 static COUNTER: AtomicU64 = AtomicU64::new(0);

@@ -617,7 +617,7 @@ impl Report {
         let refused: Vec<&str> = self
             .scheduling
             .iter()
-            .filter(|(_, s)| matches!(s, Scheduling::Refused(_)))
+            .filter(|(_, s)| matches!(s, Scheduling::Refused))
             .map(|(run, _)| run.as_str())
             .collect();
         if refused.is_empty() {
@@ -912,9 +912,9 @@ impl Report {
              acceleration smoothing (by default the mux ramps a change), so that a command's \
              frame carries the requested speed itself:\n\n```toml\n{}```\n\n\
              The event and hybrid loops also run in real-time mode, as `deploy/chassisd@.service` \
-             runs chassisd on a robot (`--realtime {}`: the loop's thread at SCHED_FIFO, memory \
+             runs chassisd on a robot (`--realtime {priority}`: the loop's thread at SCHED_FIFO, memory \
              locked), with these lines before the file's:\n\n```toml\n[service]\nrealtime = \
-             {}\n```\n\nThe spin loop keeps normal scheduling: a polling loop at SCHED_FIFO \
+             {priority}\n```\n\nThe spin loop keeps normal scheduling: a polling loop at SCHED_FIFO \
              holds its CPU, and the kernel stops it for the rest of each period once real-time \
              threads used their share (`kernel.sched_rt_runtime_us`, 950 ms of every second by \
              default) unless the CPU is isolated; chassisd warns of it. The matched baselines' \
@@ -927,10 +927,9 @@ impl Report {
              of its samples ends at the first motion frame that moves the commanded speed toward \
              the request.\n\n",
             crate::paths::BENCH_CONFIG,
-            crate::paths::REALTIME_PRIORITY,
-            crate::paths::REALTIME_PRIORITY,
             self.scheduling_text(),
-            crate::DEFAULT_CONFIG_ROW
+            crate::DEFAULT_CONFIG_ROW,
+            priority = crate::paths::REALTIME_PRIORITY,
         ));
         out.push_str("## The table\n\n");
         out.push_str(
@@ -1102,8 +1101,9 @@ impl Report {
              an older read time, or that of a frame that changed nothing but stamps and \
              counters (published only with the next tick), and is left out, and so is the first \
              (published before the reader opened; the ROS 2 script's reader exists from its \
-             start, and every odom queued in it before the state path began is left out). Gaps in `seq` are samples the reader lost: the count column shows them as \
-             *dropped*, beside requests *missed* and samples *out of range* of the histogram.\n\
+             start, and every odom queued in it before the state path began is left out). Gaps \
+             in `seq` are samples the reader lost: the count column shows them as *dropped*, \
+             beside requests *missed* and samples *out of range* of the histogram.\n\
              * **Same samples.** A matched baseline has as many samples as the row it divides: \
              the last ones of a run long enough for both the command row's pings and the state \
              row's feed hops; a preemption row's baseline runs as many pings, each after its wake-up ping. The raw DDS hops are warmed up (200 pings not counted) and count as \
@@ -1217,7 +1217,7 @@ mod tests {
         );
         report.scheduling.push((
             "titan slcan pty, event loop, cross CPU".into(),
-            Scheduling::Refused(80),
+            Scheduling::Refused,
         ));
         let text = report.scheduling_text();
         assert!(

@@ -170,11 +170,21 @@ pub fn online_cpus() -> usize {
 
 /// Pins the calling thread to `cpu`.
 pub fn pin_to_cpu(cpu: usize) -> Result<(), PinError> {
-    use nix::sched::{CpuSet, sched_setaffinity};
-    let error = |source| PinError { cpu, source };
-    let mut set = CpuSet::new();
-    set.set(cpu).map_err(error)?;
-    sched_setaffinity(nix::unistd::Pid::from_raw(0), &set).map_err(error)
+    confine(nix::unistd::Pid::from_raw(0), &[cpu]).map_err(|source| PinError { cpu, source })
+}
+
+/// Confines the thread `tid` (0: the calling one) to `cpus`, every online CPU when empty.
+pub fn confine(tid: nix::unistd::Pid, cpus: &[usize]) -> Result<(), nix::Error> {
+    let mut set = nix::sched::CpuSet::new();
+    if cpus.is_empty() {
+        for cpu in 0..online_cpus() {
+            set.set(cpu)?;
+        }
+    }
+    for &cpu in cpus {
+        set.set(cpu)?;
+    }
+    nix::sched::sched_setaffinity(tid, &set)
 }
 
 /// What real-time mode got from the system.
@@ -271,8 +281,6 @@ mod tests {
     use crate::config::{LoopMode, Overrides, RawConfig};
     use chassis_protocols::RobotKind;
 
-    /// The robots of either firmware on a real CAN bus detect with the settings of the profile
-    /// they are configured with: the SCOUT MINI's V1 one, the SCOUT's and BUNKER's V2 one.
     /// The kernel's default (950 ms of every second) stops a polling real-time loop for 50 ms a
     /// second; no throttling, or a share of the whole period, stops it never.
     #[test]
@@ -313,6 +321,8 @@ mod tests {
         }
     }
 
+    /// The robots of either firmware on a real CAN bus detect with the settings of the profile
+    /// they are configured with: the SCOUT MINI's V1 one, the SCOUT's and BUNKER's V2 one.
     #[test]
     fn detection_listens_as_long_as_the_configured_profile_says() {
         let now = Timestamp::from_millis(1000);

@@ -172,6 +172,8 @@ pub struct SimHandle {
     commands: mpsc::Sender<SimCommandBox>,
     doorbell: UnixDatagram,
     thread: Option<JoinHandle<Ended>>,
+    /// The simulator thread's id, to place it on CPUs.
+    tid: nix::unistd::Pid,
     robot: RobotKind,
 }
 
@@ -203,16 +205,23 @@ impl SimHandle {
         wake.set_nonblocking(true)?;
         let (commands, inbox) = mpsc::channel();
         let robot = firmware.robot();
+        let (tell_tid, tid) = mpsc::sync_channel(1);
         let thread = std::thread::Builder::new()
             .name(format!("sim-{}", robot.name()))
             .spawn(move || {
+                // The spawner waits for it; a spawner that is gone needs no answer.
+                tell_tid.send(nix::unistd::gettid()).ok();
                 normal_scheduling();
                 run(firmware, bus, &inbox, &wake)
             })?;
+        let tid = tid
+            .recv()
+            .map_err(|_| std::io::Error::other("the simulator thread ended at its start"))?;
         let handle = Self {
             commands,
             doorbell,
             thread: Some(thread),
+            tid,
             robot,
         };
         // From here, not from the thread: a thread that confines itself can do so after its
@@ -229,39 +238,8 @@ impl SimHandle {
 
     /// Moves the simulator's thread onto `cpus` (all CPUs when empty).
     pub fn confine_to(&self, cpus: &[usize]) {
-        use std::os::unix::thread::JoinHandleExt;
-        let Some(thread) = &self.thread else {
-            return;
-        };
-        // SAFETY: an all-zero cpu_set_t is the empty set; CPU_SET writes inside it for a CPU
-        // below CPU_SETSIZE, which the filter ensures.
-        let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
-        let wanted: Vec<usize> = if cpus.is_empty() {
-            (0..crate::setup::online_cpus()).collect()
-        } else {
-            cpus.to_vec()
-        };
-        for cpu in wanted
-            .into_iter()
-            .filter(|&c| c < libc::CPU_SETSIZE as usize)
-        {
-            // SAFETY: see above.
-            unsafe { libc::CPU_SET(cpu, &mut set) };
-        }
-        // SAFETY: the thread is alive or joinable (its handle is held), and `set` is a valid
-        // cpu_set_t of the size given.
-        let err = unsafe {
-            libc::pthread_setaffinity_np(
-                thread.as_pthread_t(),
-                std::mem::size_of::<libc::cpu_set_t>(),
-                &set,
-            )
-        };
-        if err != 0 {
-            warn!(
-                "simulated chassis: cannot move to CPUs {cpus:?}: {}",
-                std::io::Error::from_raw_os_error(err)
-            );
+        if let Err(err) = crate::setup::confine(self.tid, cpus) {
+            warn!("simulated chassis: cannot move to CPUs {cpus:?}: {err}");
         }
     }
 
@@ -345,7 +323,6 @@ impl Drop for SimHandle {
     }
 }
 
-/// Confines the calling thread to `cpus`.
 /// The calling thread with normal scheduling (SCHED_OTHER), whatever it inherited.
 fn normal_scheduling() {
     let param = libc::sched_param { sched_priority: 0 };
