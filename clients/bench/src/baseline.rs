@@ -736,13 +736,7 @@ pub fn run(
     }
     let mut child = command.spawn().context("starting the pong process")?;
     let mut reader = wait_ready(&mut child)?;
-    // The feed runs where the simulated chassis does: on a CPU other than the receiver's
-    // (chassisd confines its simulated chassis' thread to the CPUs its loop is not pinned to),
-    // the ping side's in a cross-CPU run.
-    let feed_cpu = pong_cpu.map(|cpu| {
-        let cpus = crate::placement::cpu_count();
-        if cpus > 1 { (cpu + 1) % cpus } else { cpu }
-    });
+    let feed_cpu = pong_cpu.map(|cpu| feed_cpu(cpu, transport, load));
     let mut feeder = match load {
         Some(load) => {
             let mut feed = Command::new(&exe);
@@ -793,6 +787,23 @@ pub fn run(
     Ok(Measured { pings, feed })
 }
 
+/// Where the feed of a receiver pinned to `pong_cpu` runs: where chassisd places its simulated
+/// chassis (`setup::sim_cpus`). On the receiver's CPU when the receiver blocks at SCHED_FIFO (the
+/// chassis runs only while the loop waits); otherwise on another CPU, the ping side's in a
+/// cross-CPU run.
+fn feed_cpu(pong_cpu: usize, transport: Transport, load: Option<Load>) -> usize {
+    let fifo = load.is_some_and(|l| l.realtime.is_some());
+    if fifo && transport != Transport::IceoryxSpin {
+        return pong_cpu;
+    }
+    let cpus = crate::placement::cpu_count();
+    if cpus > 1 {
+        (pong_cpu + 1) % cpus
+    } else {
+        pong_cpu
+    }
+}
+
 /// The counted hops, ns (a hop whose clocks disagree, the answer stamped before the ping, is
 /// recorded as 0 ns: it stays counted and shows at the bottom of the distribution).
 fn ping_rounds(
@@ -838,4 +849,27 @@ fn ping_rounds(
         }
     }
     Ok(latencies)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The feed sits where chassisd puts its simulated chassis: beside a receiver that blocks at
+    /// SCHED_FIFO, on the other CPU beside any other.
+    #[test]
+    fn the_feed_runs_where_the_simulated_chassis_would() {
+        let load = |realtime| Load {
+            feed_per_s: 500.0,
+            tick: Duration::from_millis(20),
+            realtime,
+        };
+        let other = if crate::placement::cpu_count() > 1 { 1 } else { 0 };
+        for transport in [Transport::IceoryxEvent, Transport::IceoryxHybrid] {
+            assert_eq!(feed_cpu(0, transport, Some(load(Some(80)))), 0);
+            assert_eq!(feed_cpu(0, transport, Some(load(None))), other);
+        }
+        assert_eq!(feed_cpu(0, Transport::IceoryxSpin, Some(load(None))), other);
+        assert_eq!(feed_cpu(0, Transport::IceoryxEvent, None), other);
+    }
 }

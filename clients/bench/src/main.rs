@@ -603,14 +603,18 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let baseline_row = |what: String, latencies: Latencies| {
                 Row::new("baseline", what, "-", placement, latencies, 0)
             };
-            let fifo = match scheduling.fifo() {
-                Some(priority) => format!(", at SCHED_FIFO {priority} as the service's loop"),
-                None => String::new(),
+            // The feed runs where chassisd put its simulated chassis (`baseline::feed_cpu`).
+            let (feed_where, fifo) = match scheduling.fifo() {
+                Some(priority) => (
+                    "on the receiver's CPU",
+                    format!(", at SCHED_FIFO {priority} as the service's loop"),
+                ),
+                None => ("on the other CPU", String::new()),
             };
             let conditions = format!(
-                "receiver woken {feed_per_s:.0}/s by another process on the other CPU, as by \
-                 the simulated chassis (the feedback rate measured in the {label} run), and by \
-                 its own {} ms tick{fifo}",
+                "receiver woken {feed_per_s:.0}/s by another process {feed_where}, as by the \
+                 simulated chassis (the feedback rate measured in the {label} run), and by its \
+                 own {} ms tick{fifo}",
                 tick.as_millis()
             );
             let paced_what = format!("{} paced, loaded as {label}", transport.label());

@@ -1076,9 +1076,9 @@ impl Report {
              * **placement**: `same CPU` pins both ends to one CPU, `cross CPU` to two.\n\
              * **Matched baselines.** A command or state row is divided by a baseline measured \
              in the same run, right after it, whose receiver lives as the service's loop did: \
-             woken by another process at the chassis' feedback rate measured in that run (on a \
-             CPU other than the receiver's, as chassisd keeps its simulated chassis off its \
-             loop's CPU), by \
+             woken by another process at the chassis' feedback rate measured in that run (where \
+             chassisd puts its simulated chassis: on the loop's CPU when the loop blocks in \
+             real-time mode, on the other CPU otherwise), by \
              its own tick (the robot's heartbeat period), with the same placement and the same \
              way of waiting (a poll-then-block receiver for the hybrid loop) and the same \
              scheduling (SCHED_FIFO where the loop ran in real-time mode). The command row's \
