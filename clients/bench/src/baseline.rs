@@ -864,7 +864,11 @@ mod tests {
             tick: Duration::from_millis(20),
             realtime,
         };
-        let other = if crate::placement::cpu_count() > 1 { 1 } else { 0 };
+        let other = if crate::placement::cpu_count() > 1 {
+            1
+        } else {
+            0
+        };
         for transport in [Transport::IceoryxEvent, Transport::IceoryxHybrid] {
             assert_eq!(feed_cpu(0, transport, Some(load(Some(80)))), 0);
             assert_eq!(feed_cpu(0, transport, Some(load(None))), other);
