@@ -42,11 +42,11 @@ pub struct Row {
     /// sum of the rows it contains: a path cannot be faster than a part of it, so they were not
     /// measured alike.
     pub inconsistent: Option<String>,
-    /// The only flag is the sum of the hops it contains: their medians were each measured in
-    /// their own conditions and add only approximately, so the smoke run reports it without
-    /// failing on it (a row below its own baseline fails it).
+    /// Every flag is one a smoke run reports without failing on it: below the sum of the hops
+    /// it contains (their medians were each measured in their own conditions and add only
+    /// approximately), or below its own baseline by no more than [`SMOKE_BASELINE_TOLERANCE`].
     #[serde(skip)]
-    pub below_sum_only: bool,
+    pub smoke_tolerated: bool,
     #[serde(skip)]
     pub latencies: Latencies,
 }
@@ -136,6 +136,17 @@ pub const PACED: &str = "paced";
 /// ROS 2 row came 1.5 % and 5.9 % below the sum in two runs; the bias this catches was 19 %).
 pub const SUM_TOLERANCE: f64 = 0.10;
 
+/// How far below its own baseline's p50 a row's p50 may be in a smoke run and be reported
+/// without failing it (the document's runs flag every crossing). A smoke run is a debug build
+/// with 100 samples a row, and both a cross-CPU path and its matched hop are mostly the
+/// wake-up of an idle CPU, whose median moves from one identical run to the next: in six smoke
+/// runs of one commit on a 2-core machine, the loaded cross-CPU iceoryx2 hop measured 68.2 to
+/// 82.2 µs p50 (a spread of 19 %) and the command path it divides 79.2 to 86.3 µs (ratio 0.996
+/// to 1.17); a CI run measured 80.7 against 91.1 µs (0.886). What a debug run can still tell
+/// fails it: with a round trip counted for each matched hop, a smoke run failed on the two rows
+/// 44 % below their hops and reported four others 1 to 14 % below theirs.
+pub const SMOKE_BASELINE_TOLERANCE: f64 = 0.20;
+
 /// Fewest samples whose 99th percentile is shown: below it, the p99 is nearly the maximum.
 pub const MIN_FOR_P99: u64 = 100;
 /// Fewest samples whose 99.9th percentile is shown.
@@ -195,7 +206,7 @@ impl Row {
             ratio_p50: None,
             ratio_p99: None,
             inconsistent: None,
-            below_sum_only: false,
+            smoke_tolerated: false,
             latencies,
         }
     }
@@ -247,8 +258,8 @@ impl Report {
             .collect();
         let all: Vec<(String, Summary)> = self.rows.iter().map(|r| (r.key(), r.summary)).collect();
         for row in self.rows.iter_mut().filter(|r| r.path != "baseline") {
-            let mut flags = Vec::new();
-            let mut below_sum = false;
+            // Each flag, and whether a smoke run only reports it.
+            let mut flags: Vec<(String, bool)> = Vec::new();
             if let Some(name) = row.baseline.clone() {
                 let found: Vec<&Summary> = baselines
                     .iter()
@@ -268,11 +279,15 @@ impl Report {
                             && row.summary.count >= MIN_FOR_P99)
                             .then(|| row.summary.p99_us / base.p99_us);
                         if row.summary.count > 0 && row.summary.p50_us < base.p50_us {
-                            flags.push(format!(
-                                "p50 {:.1} µs is below the p50 {:.1} µs of the hop it contains \
-                                 ({name}): the path and its baseline were not measured under the \
-                                 same conditions",
-                                row.summary.p50_us, base.p50_us
+                            flags.push((
+                                format!(
+                                    "p50 {:.1} µs is below the p50 {:.1} µs of the hop it \
+                                     contains ({name}): the path and its baseline were not \
+                                     measured under the same conditions",
+                                    row.summary.p50_us, base.p50_us
+                                ),
+                                row.summary.p50_us
+                                    >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE),
                             ));
                         }
                     }
@@ -291,14 +306,16 @@ impl Report {
                 if parts.iter().all(|p| p.is_some_and(|s| s.count > 0)) {
                     let sum: f64 = parts.iter().flatten().map(|s| s.p50_us).sum();
                     if row.summary.count > 0 && row.summary.p50_us < sum * (1.0 - SUM_TOLERANCE) {
-                        below_sum = true;
-                        flags.push(format!(
-                            "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
-                             p50s of the hops it contains ({}): they were not measured under the \
-                             same conditions",
-                            row.summary.p50_us,
-                            SUM_TOLERANCE * 100.0,
-                            row.contains.join(" + ")
+                        flags.push((
+                            format!(
+                                "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of \
+                                 the p50s of the hops it contains ({}): they were not measured \
+                                 under the same conditions",
+                                row.summary.p50_us,
+                                SUM_TOLERANCE * 100.0,
+                                row.contains.join(" + ")
+                            ),
+                            true,
                         ));
                     }
                 } else {
@@ -309,18 +326,21 @@ impl Report {
                     ));
                 }
             }
-            row.below_sum_only = below_sum && flags.len() == 1;
-            row.inconsistent = (!flags.is_empty()).then(|| flags.join("; "));
+            row.smoke_tolerated =
+                !flags.is_empty() && flags.iter().all(|(_, tolerated)| *tolerated);
+            let texts: Vec<String> = flags.into_iter().map(|(text, _)| text).collect();
+            row.inconsistent = (!texts.is_empty()).then(|| texts.join("; "));
         }
     }
 
     /// What makes a run fail its smoke check (`--smoke`): each of `expected` ([`row_key`]s)
-    /// missing or without a sample, any row below its own baseline (a path faster than a hop
-    /// it contains), any baseline or contained row not measured, two rows of one name. Never a
-    /// target: the figures of a loaded machine are what they are. A row flagged only for being
-    /// below the sum of its hops' medians is a [`Report::smoke_warnings`] line: a smoke run's
-    /// 100 samples of a debug build, its hops measured each in its own conditions, put that
-    /// comparison within its noise (a release run's document still marks the row).
+    /// missing or without a sample, any row more than [`SMOKE_BASELINE_TOLERANCE`] below its own
+    /// baseline (a path faster than a hop it contains), any baseline or contained row not
+    /// measured, two rows of one name. Never a target: the figures of a loaded machine are what
+    /// they are. A row flagged only within the smoke run's noise (below the sum of its hops'
+    /// medians, or less than that tolerance below its baseline) is a [`Report::smoke_warnings`]
+    /// line: a smoke run's 100 samples of a debug build put those comparisons within its noise
+    /// (a release run's document still marks the row).
     pub fn smoke_failures(&self, expected: &[String]) -> Vec<String> {
         let mut failures = Vec::new();
         for key in expected {
@@ -333,7 +353,7 @@ impl Report {
         for r in self
             .rows
             .iter()
-            .filter(|r| r.inconsistent.is_some() && !r.below_sum_only)
+            .filter(|r| r.inconsistent.is_some() && !r.smoke_tolerated)
         {
             failures.push(format!(
                 "flagged row: {}: {}",
@@ -352,14 +372,14 @@ impl Report {
         failures
     }
 
-    /// The rows the smoke run reports without failing on them: below the sum of their hops only.
+    /// The rows the smoke run reports without failing on them: flagged within its noise only.
     pub fn smoke_warnings(&self) -> Vec<String> {
         self.rows
             .iter()
-            .filter(|r| r.below_sum_only)
+            .filter(|r| r.smoke_tolerated)
             .map(|r| {
                 format!(
-                    "below the sum of its hops (not failing a smoke run): {}: {}",
+                    "flagged within a smoke run's noise (not failing it): {}: {}",
                     r.key(),
                     r.inconsistent.as_deref().unwrap_or_default()
                 )
@@ -1302,7 +1322,7 @@ mod tests {
                 .is_some_and(|f| f.contains("sum")),
             "{ros2:?}"
         );
-        assert!(ros2.below_sum_only);
+        assert!(ros2.smoke_tolerated);
         assert_eq!(report.smoke_failures(&expected), Vec::<String>::new());
         let warnings = report.smoke_warnings();
         assert!(
@@ -1312,15 +1332,63 @@ mod tests {
     }
 
     #[test]
-    fn a_row_cheaper_than_its_own_baseline_fails_the_smoke_check() {
-        // Below its DDS hop (300 µs) alone.
-        let (report, expected) = run_with_ros2_row(250);
-        assert!(!report.rows[2].below_sum_only, "{:?}", report.rows[2]);
+    fn a_row_far_cheaper_than_its_own_baseline_fails_the_smoke_check() {
+        // A third below its DDS hop (300 µs) alone.
+        let (report, expected) = run_with_ros2_row(200);
+        assert!(!report.rows[2].smoke_tolerated, "{:?}", report.rows[2]);
         let failures = report.smoke_failures(&expected);
         assert!(
             failures.iter().any(|f| f.starts_with("flagged row: ros2")),
             "{failures:?}"
         );
+    }
+
+    /// A command row and its matched hop, the row `path_us` and the hop `hop_us` at the p50.
+    fn run_with_command_row(path_us: u64, hop_us: u64) -> (Report, Vec<String>) {
+        let mut command = measured("command", "titan sim", "event", path_us, 100);
+        command.baseline = Some("hop, cross CPU".into());
+        let rows = vec![measured("baseline", "hop", "-", hop_us, 100), command];
+        let expected = rows.iter().map(Row::key).collect();
+        let mut report = Report {
+            rows,
+            ..Report::default()
+        };
+        report.compute_ratios();
+        (report, expected)
+    }
+
+    #[test]
+    fn a_row_a_little_below_its_baseline_is_flagged_and_only_warned_of_by_the_smoke_check() {
+        // 80.7 against 91.1 µs: a smoke run's cross-CPU command row on CI.
+        let (report, expected) = run_with_command_row(81, 91);
+        let command = &report.rows[1];
+        assert!(
+            command
+                .inconsistent
+                .as_deref()
+                .is_some_and(|f| f.contains("of the hop it contains (hop, cross CPU)")),
+            "{command:?}"
+        );
+        assert!(command.smoke_tolerated);
+        assert_eq!(report.smoke_failures(&expected), Vec::<String>::new());
+        assert_eq!(report.smoke_warnings().len(), 1);
+    }
+
+    #[test]
+    fn a_row_more_than_the_tolerance_below_its_baseline_fails_the_smoke_check() {
+        // 79 µs is 21 % below 100 µs: past the tolerance of 20 %.
+        let (report, expected) = run_with_command_row(79, 100);
+        assert!(!report.rows[1].smoke_tolerated, "{:?}", report.rows[1]);
+        assert!(report.smoke_warnings().is_empty());
+        let failures = report.smoke_failures(&expected);
+        assert!(
+            failures.len() == 1 && failures[0].starts_with("flagged row: command"),
+            "{failures:?}"
+        );
+        // Within it, reported only.
+        let (report, expected) = run_with_command_row(81, 100);
+        assert!(report.rows[1].smoke_tolerated, "{:?}", report.rows[1]);
+        assert!(report.smoke_failures(&expected).is_empty());
     }
 
     #[test]
