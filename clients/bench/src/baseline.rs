@@ -4,7 +4,9 @@
 //! the whole machine), in both directions of every round trip — or, paced like the service paths'
 //! requests, the first hop after each pause only. A paced run can give the receiving side the
 //! life chassisd's loop has on a robot ([`Load`]): another process waking it at the chassis'
-//! feedback rate, and a periodic tick of its own; those wake-ups' own hops are measured too.
+//! feedback rate, and a periodic tick of its own; those wake-ups' own hops are measured too, and
+//! so are the hops of a sample the receiver publishes after each of them to a reader that lives
+//! as a client does (the state's way: from the loop to a client).
 
 use std::io::{BufRead, BufReader};
 use std::net::UdpSocket;
@@ -160,8 +162,25 @@ struct IceoryxEndpoint {
     feed_ns: Vec<u64>,
     /// The receiver's own tick and when it is next due.
     tick: Option<(Duration, u64)>,
+    /// A loaded receiver's own publication, as chassisd's state.
+    published: Option<Published>,
     last_activity: u64,
     _node: Node<ipc::Service>,
+}
+
+/// What a loaded receiver publishes once per wake-up that took the feed's samples (one feed
+/// sample, at the feed's pace), as chassisd's loop publishes its state after each feedback
+/// frame that changed it: the hop a state reader meets, sent by a process that lives as the
+/// loop does ([`read_published`] reads it).
+struct Published {
+    publisher: Publisher<ipc::Service, Ping, ()>,
+    notifier: Notifier<ipc::Service>,
+    seq: u64,
+}
+
+/// The service of a loaded receiver's publication.
+fn published_service(tag: &str) -> String {
+    format!("bench/{tag}/state")
 }
 
 fn service(name: &str) -> anyhow::Result<ServiceName> {
@@ -251,6 +270,20 @@ impl IceoryxEndpoint {
             feed,
             feed_ns: Vec::new(),
             tick: load.map(|l| (l.tick, now_ns() + nanos(l.tick))),
+            published: match load {
+                Some(_) => Some(Published {
+                    publisher: pubsub(&node, &published_service(tag))?
+                        .publisher_builder()
+                        .create()
+                        .map_err(|e| anyhow::anyhow!("state publisher: {e:?}"))?,
+                    notifier: event(&node, &published_service(tag))?
+                        .notifier_builder()
+                        .create()
+                        .map_err(|e| anyhow::anyhow!("state notifier: {e:?}"))?,
+                    seq: 0,
+                }),
+                None => None,
+            },
             last_activity: now_ns(),
             _node: node,
         })
@@ -268,6 +301,21 @@ impl IceoryxEndpoint {
         {
             self.feed_ns.push(now_ns().saturating_sub(sample.stamp_ns));
             any = true;
+        }
+        if any && let Some(published) = self.published.as_mut() {
+            published.seq += 1;
+            published
+                .publisher
+                .send_copy(Ping {
+                    stamp_ns: now_ns(),
+                    seq: published.seq,
+                    ..Ping::default()
+                })
+                .map_err(|e| anyhow::anyhow!("state send: {e:?}"))?;
+            published
+                .notifier
+                .notify()
+                .map_err(|e| anyhow::anyhow!("state notify: {e:?}"))?;
         }
         Ok(any)
     }
@@ -660,6 +708,9 @@ pub struct Measured {
     /// Every counted hop of the pings, ns, in order.
     pub pings: Vec<u64>,
     pub feed: Option<Vec<u64>>,
+    /// A loaded iceoryx2 receiver's publication, as its reader took it ([`Published`]): every
+    /// hop, ns, in order.
+    pub published: Option<Vec<u64>>,
 }
 
 impl Measured {
@@ -736,6 +787,19 @@ pub fn run(
     }
     let mut child = command.spawn().context("starting the pong process")?;
     let mut reader = wait_ready(&mut child)?;
+    // The loaded receiver's publication is read where the client reads, before the feed
+    // starts it.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let published = match (load, iceoryx_waiting(transport)) {
+        (Some(_), Some(waiting)) => Some(spawn_reader(
+            prefix,
+            &tag,
+            ping_cpu,
+            waiting == Waiting::Spin,
+            &stop,
+        )?),
+        _ => None,
+    };
     let feed_cpu = pong_cpu.map(|cpu| feed_cpu(cpu, transport, load));
     let mut feeder = match load {
         Some(load) => {
@@ -770,6 +834,15 @@ pub fn run(
         let _ = feeder.kill();
         let _ = feeder.wait();
     }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let published = match published {
+        Some(handle) => Some(
+            handle
+                .join()
+                .map_err(|_| anyhow::anyhow!("the state reader panicked"))??,
+        ),
+        None => None,
+    };
     let pings = result?;
     // The pong writes its feed figures before it says "done".
     let mut line = String::new();
@@ -784,7 +857,94 @@ pub fn run(
         }
         None => None,
     };
-    Ok(Measured { pings, feed })
+    Ok(Measured {
+        pings,
+        feed,
+        published,
+    })
+}
+
+/// Starts the reader of a loaded receiver's publication ([`Published`]) on `cpu`, at normal
+/// scheduling, and returns once it is subscribed: it reads as the benchmark's state reader
+/// does, blocked on its listener between drains (polling in a busy-poll run), until `stop`.
+fn spawn_reader(
+    prefix: &str,
+    tag: &str,
+    cpu: Option<usize>,
+    spin: bool,
+    stop: &std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> anyhow::Result<std::thread::JoinHandle<anyhow::Result<Vec<u64>>>> {
+    let (prefix, tag, stop) = (prefix.to_string(), tag.to_string(), stop.clone());
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let handle = std::thread::Builder::new()
+        .name("state-reader".into())
+        .spawn(move || {
+            let opened = (|| -> anyhow::Result<_> {
+                if let Some(cpu) = cpu {
+                    pin_current_thread(cpu)?;
+                }
+                let node = node(&prefix)?;
+                let subscriber = pubsub(&node, &published_service(&tag))?
+                    .subscriber_builder()
+                    .create()
+                    .map_err(|e| anyhow::anyhow!("state subscriber: {e:?}"))?;
+                let listener = event(&node, &published_service(&tag))?
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| anyhow::anyhow!("state listener: {e:?}"))?;
+                Ok((node, subscriber, listener))
+            })();
+            let (_node, subscriber, listener) = match opened {
+                Ok(ports) => {
+                    let _ = ready_tx.send(Ok(()));
+                    ports
+                }
+                Err(e) => {
+                    let text = format!("{e:#}");
+                    let _ = ready_tx.send(Err(e));
+                    bail!("{text}");
+                }
+            };
+            read_published(&subscriber, &listener, spin, &stop)
+        })
+        .context("starting the state reader")?;
+    ready_rx
+        .recv()
+        .map_err(|_| anyhow::anyhow!("the state reader stopped before it subscribed"))??;
+    Ok(handle)
+}
+
+/// Every hop of the publication until `stop`, ns: the notifications pending are spent before
+/// each drain, and the reader waits (at most 20 ms, to look at `stop`) only when a drain took
+/// nothing, as `StateStream::wait` does.
+fn read_published(
+    subscriber: &Subscriber<ipc::Service, Ping, ()>,
+    listener: &Listener<ipc::Service>,
+    spin: bool,
+    stop: &std::sync::atomic::AtomicBool,
+) -> anyhow::Result<Vec<u64>> {
+    let mut hops = Vec::new();
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+        if !spin {
+            listener
+                .try_wait(|_| {})
+                .map_err(|e| anyhow::anyhow!("taking the state's notifications: {e:?}"))?;
+        }
+        let mut took = false;
+        while let Some(sample) = subscriber
+            .receive()
+            .map_err(|e| anyhow::anyhow!("state receive: {e:?}"))?
+        {
+            hops.push(now_ns().saturating_sub(sample.stamp_ns));
+            took = true;
+        }
+        if !took && !spin {
+            listener
+                .timed_wait(|_| {}, Duration::from_millis(20))
+                .map_err(|e| anyhow::anyhow!("waiting for state: {e:?}"))?;
+        }
+    }
+    Ok(hops)
 }
 
 /// Where the feed of a receiver pinned to `pong_cpu` runs: where chassisd places its simulated

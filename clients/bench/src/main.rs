@@ -342,6 +342,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             for what in [
                 format!("{t} paced, loaded as {label}"),
                 format!("{t} at the feedback rate, loaded as {label}"),
+                format!("{t} published, loaded as {label}"),
                 format!("{t} after a wake-up ping, loaded as {label}"),
             ] {
                 expected.push(row_key("baseline", &what, "-", placement));
@@ -578,8 +579,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let pings_wanted = command
                 .as_ref()
                 .map_or(plan.paced_rounds, |c| c.latencies.count());
-            // A tenth more: the feed starts after the receiver and keeps its own pace.
-            let feed_rounds = (1.1 * state.latencies.count() as f64
+            // A quarter more: the feed starts after the receiver and keeps its own pace, and
+            // the receiver publishes once per wake-up, which may take more than one feed sample.
+            let feed_rounds = (1.25 * state.latencies.count() as f64
                 / (feed_per_s * interval.as_secs_f64()).max(1e-9))
             .ceil() as u64;
             let rounds = pings_wanted.max(feed_rounds) + 1;
@@ -643,6 +645,31 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     feed.len()
                 ));
                 report.rows.push(feed_row);
+            }
+            // The state row's hop: from the receiver, which lives as the loop does, to a reader
+            // that lives as the client does.
+            let published_what = format!("{} published, loaded as {label}", transport.label());
+            if let Some(published) = measured.published {
+                let hops = baseline::last_of(&published, state.latencies.count());
+                let mut published_row = baseline_row(published_what.clone(), hops);
+                let reader = match r.placement {
+                    Placement::SameCpu => "on the receiver's CPU",
+                    Placement::CrossCpu => "on the other CPU",
+                };
+                let waiting = if r.mode == LoopMode::Spin {
+                    "polling"
+                } else {
+                    "blocked on its listener between drains"
+                };
+                published_row.conditions = Some(format!(
+                    "one sample published by the receiver each time it took the feed's samples, \
+                     as chassisd publishes its state after each feedback frame that changed it, \
+                     read at normal scheduling {reader}, {waiting}, as the client reads the \
+                     state: the last {} of {}; {conditions}",
+                    state.latencies.count(),
+                    published.len()
+                ));
+                report.rows.push(published_row);
             }
             let reference = |what: &str| Some(format!("{what}, {placement}"));
             // The preemption's stop follows a teleop request at once, while the loop is waking
@@ -768,7 +795,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             }
             let mut state_row = run_row("state", label.clone(), state.latencies, 0);
             state_row.dropped = state.dropped;
-            let baseline = reference(&feed_what);
+            let baseline = reference(&published_what);
             report
                 .rows
                 .extend(path_rows(state_row, baseline, state.in_service));

@@ -1103,9 +1103,13 @@ impl Report {
              way of waiting (a poll-then-block receiver for the hybrid loop) and the same \
              scheduling (SCHED_FIFO where the loop ran in real-time mode). The command row's \
              baseline is one ping per command period ({} ms; {} ms on the XBot, whose manual \
-             caps its command rate); the state row's is the feed's own hops at the feedback \
-             rate. A preemption's stop follows a teleop request at once, while the loop is waking \
-             for it: its baseline is a ping sent right after a lead ping that wakes the \
+             caps its command rate). The state row's hop goes the other way, from the loop to \
+             a client: its baseline is a sample the loaded receiver publishes each time it took \
+             the feed's samples (as chassisd publishes its state after each feedback frame \
+             that changed it), read at normal scheduling where the client reads and waiting as \
+             it does; the feed's own hops at the feedback rate are a context row. A \
+             preemption's stop follows a teleop request at once, while the loop is waking for \
+             it: its baseline is a ping sent right after a lead ping that wakes the \
              receiver, loaded as the service was, with the same waiting and placement. \
              The cold paced and back-to-back baselines are context rows.\n\
              * **Inconsistent**: a path cannot be faster than a hop it contains; a row whose \
