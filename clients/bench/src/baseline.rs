@@ -146,6 +146,13 @@ trait Endpoint {
     fn feed_latencies(&self) -> &[u64] {
         &[]
     }
+
+    /// Looks at what has arrived without waiting, as the command path's client looks at its
+    /// subscriptions (the frame tap, the mux's status) after each pause before it sends; an
+    /// answer found there is one nobody waited for.
+    fn look(&mut self) -> anyhow::Result<()> {
+        Ok(())
+    }
 }
 
 struct IceoryxEndpoint {
@@ -328,6 +335,17 @@ fn nanos(d: Duration) -> u64 {
 impl Endpoint for IceoryxEndpoint {
     fn feed_latencies(&self) -> &[u64] {
         &self.feed_ns
+    }
+
+    fn look(&mut self) -> anyhow::Result<()> {
+        match self
+            .subscriber
+            .receive()
+            .map_err(|e| anyhow::anyhow!("receive: {e:?}"))?
+        {
+            Some(sample) => bail!("an answer nobody waited for: ping {}", sample.seq),
+            None => Ok(()),
+        }
     }
 
     fn send(&mut self, ping: Ping) -> anyhow::Result<()> {
@@ -980,6 +998,7 @@ fn ping_rounds(
     for seq in 0..warmup + rounds {
         if let Some(ticker) = ticker.as_mut() {
             ticker.wait();
+            endpoint.look()?;
         }
         if shape == Rounds::AfterWakeUp {
             endpoint.send(Ping {
