@@ -1289,11 +1289,15 @@ mod tests {
             row_key("baseline", "dds", "-", "cross CPU"),
             row_key("command", "titan sim", "event", "cross CPU"),
         ];
-        let rows = vec![
+        compared(vec![
             measured("baseline", "dds", "-", 300, 200),
             measured("command", "titan sim", "event", 200, 200),
             ros2,
-        ];
+        ])
+    }
+
+    /// A report of `rows`, its ratios and flags computed, and the rows it planned: all of them.
+    fn compared(rows: Vec<Row>) -> (Report, Vec<String>) {
         let expected = rows.iter().map(Row::key).collect();
         let mut report = Report {
             rows,
@@ -1351,14 +1355,7 @@ mod tests {
     fn run_with_command_row(path_us: u64, hop_us: u64) -> (Report, Vec<String>) {
         let mut command = measured("command", "titan sim", "event", path_us, 100);
         command.baseline = Some("hop, cross CPU".into());
-        let rows = vec![measured("baseline", "hop", "-", hop_us, 100), command];
-        let expected = rows.iter().map(Row::key).collect();
-        let mut report = Report {
-            rows,
-            ..Report::default()
-        };
-        report.compute_ratios();
-        (report, expected)
+        compared(vec![measured("baseline", "hop", "-", hop_us, 100), command])
     }
 
     #[test]
