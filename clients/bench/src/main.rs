@@ -579,9 +579,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let pings_wanted = command
                 .as_ref()
                 .map_or(plan.paced_rounds, |c| c.latencies.count());
-            // A quarter more: the feed starts after the receiver and keeps its own pace, and
-            // the receiver publishes once per wake-up, which may take more than one feed sample.
-            let feed_rounds = (1.25 * state.latencies.count() as f64
+            // A tenth more: the feed starts after the receiver and keeps its own pace.
+            let feed_rounds = (1.1 * state.latencies.count() as f64
                 / (feed_per_s * interval.as_secs_f64()).max(1e-9))
             .ceil() as u64;
             let rounds = pings_wanted.max(feed_rounds) + 1;
@@ -595,6 +594,28 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 r.placement,
                 rounds,
                 baseline::Rounds::Paced(interval),
+                Some(load),
+                &prefix,
+                &dir,
+            )?;
+            // The state row's hop, in a run of its own: its client sends a request every
+            // STATE_REQUEST_INTERVAL, not one every command period (pings every 4 ms would keep
+            // the reader's CPU awake, and its wake-up cheaper than the state path's).
+            // A quarter more: the receiver publishes once per wake-up, which may take more than
+            // one feed sample.
+            let state_rounds = (1.25 * state.latencies.count() as f64
+                / (feed_per_s * paths::STATE_REQUEST_INTERVAL.as_secs_f64()).max(1e-9))
+            .ceil() as u64
+                + 1;
+            bar.set_message(format!(
+                "baseline as {label}: {} published, loaded",
+                transport.label()
+            ));
+            let state_measured = baseline::run(
+                transport,
+                r.placement,
+                state_rounds,
+                baseline::Rounds::Paced(paths::STATE_REQUEST_INTERVAL),
                 Some(load),
                 &prefix,
                 &dir,
@@ -649,7 +670,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             // The state row's hop: from the receiver, which lives as the loop does, to a reader
             // that lives as the client does.
             let published_what = format!("{} published, loaded as {label}", transport.label());
-            if let Some(published) = measured.published {
+            if let Some(published) = state_measured.published {
                 let hops = baseline::last_of(&published, state.latencies.count());
                 let mut published_row = baseline_row(published_what.clone(), hops);
                 let reader = match r.placement {
@@ -665,7 +686,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     "one sample published by the receiver each time it took the feed's samples, \
                      as chassisd publishes its state after each feedback frame that changed it, \
                      read at normal scheduling {reader}, {waiting}, as the client reads the \
-                     state: the last {} of {}; {conditions}",
+                     state, while the ping side sends one ping every {} ms as the state path's \
+                     client sends a request: the last {} of {}; {conditions}",
+                    paths::STATE_REQUEST_INTERVAL.as_millis(),
                     state.latencies.count(),
                     published.len()
                 ));

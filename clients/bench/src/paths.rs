@@ -553,6 +553,10 @@ fn wait_for_motion_that(
 /// the same period.
 pub const COMMAND_INTERVAL: Duration = Duration::from_millis(4);
 
+/// How often the state path's client sends a request, to keep the robot driving so that frames
+/// keep changing the state; the state rows' baseline pings at the same period.
+pub const STATE_REQUEST_INTERVAL: Duration = Duration::from_millis(50);
+
 /// How often a request is repeated between two command-path samples further apart (the
 /// `teleop` source's timeout is 300 ms).
 const KEEP_ALIVE: Duration = Duration::from_millis(100);
@@ -811,7 +815,7 @@ pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result
     let mut last_request = 0u64;
     let deadline = now_ns() + 120_000_000_000;
     while recorder.latencies.count() < samples && now_ns() < deadline {
-        if now_ns().saturating_sub(last_request) > 50_000_000 {
+        if u128::from(now_ns().saturating_sub(last_request)) > STATE_REQUEST_INTERVAL.as_nanos() {
             teleop.send(VelocityRequest::twist(0.6, 0.3))?;
             last_request = now_ns();
         }

@@ -906,7 +906,7 @@ impl Report {
     /// The performance document: every figure from this run, nothing typed by hand.
     pub fn markdown(&self) -> String {
         use crate::baseline::HYBRID_SPIN;
-        use crate::paths::{COMMAND_INTERVAL, XBOT_COMMAND_INTERVAL};
+        use crate::paths::{COMMAND_INTERVAL, STATE_REQUEST_INTERVAL, XBOT_COMMAND_INTERVAL};
         let p = &self.provenance;
         let mut out = String::from(
             "# Performance\n\n\
@@ -1107,7 +1107,9 @@ impl Report {
              a client: its baseline is a sample the loaded receiver publishes each time it took \
              the feed's samples (as chassisd publishes its state after each feedback frame \
              that changed it), read at normal scheduling where the client reads and waiting as \
-             it does; the feed's own hops at the feedback rate are a context row. A \
+             it does, in a run of its own whose ping side sends one ping every {} ms as the \
+             state path's client sends a request (pings every command period would keep the \
+             reader's CPU awake); the feed's own hops at the feedback rate are a context row. A \
              preemption's stop follows a teleop request at once, while the loop is waking for \
              it: its baseline is a ping sent right after a lead ping that wakes the \
              receiver, loaded as the service was, with the same waiting and placement. \
@@ -1137,6 +1139,7 @@ impl Report {
             HYBRID_SPIN.as_micros(),
             COMMAND_INTERVAL.as_millis(),
             XBOT_COMMAND_INTERVAL.as_millis(),
+            STATE_REQUEST_INTERVAL.as_millis(),
             SUM_TOLERANCE * 100.0,
             MIN_FOR_P99,
             MIN_FOR_P999
