@@ -309,22 +309,28 @@ impl IceoryxEndpoint {
             self.feed_ns.push(now_ns().saturating_sub(sample.stamp_ns));
             any = true;
         }
-        if any && let Some(published) = self.published.as_mut() {
-            published.seq += 1;
-            published
-                .publisher
-                .send_copy(Ping {
-                    stamp_ns: now_ns(),
-                    seq: published.seq,
-                    ..Ping::default()
-                })
-                .map_err(|e| anyhow::anyhow!("state send: {e:?}"))?;
-            published
-                .notifier
-                .notify()
-                .map_err(|e| anyhow::anyhow!("state notify: {e:?}"))?;
-        }
         Ok(any)
+    }
+
+    /// Publishes one stamped sample of the receiver's own publication, if it has one.
+    fn publish(&mut self) -> anyhow::Result<()> {
+        let Some(published) = self.published.as_mut() else {
+            return Ok(());
+        };
+        published.seq += 1;
+        published
+            .publisher
+            .send_copy(Ping {
+                stamp_ns: now_ns(),
+                seq: published.seq,
+                ..Ping::default()
+            })
+            .map_err(|e| anyhow::anyhow!("state send: {e:?}"))?;
+        published
+            .notifier
+            .notify()
+            .map_err(|e| anyhow::anyhow!("state notify: {e:?}"))?;
+        Ok(())
     }
 }
 
@@ -399,6 +405,7 @@ impl IceoryxEndpoint {
             let mut now = now_ns();
             if self.drain_feed()? {
                 self.last_activity = now;
+                self.publish()?;
             }
             if let Some((period, due)) = self.tick.as_mut()
                 && now >= *due
@@ -897,6 +904,8 @@ fn spawn_reader(
     let handle = std::thread::Builder::new()
         .name("state-reader".into())
         .spawn(move || {
+            // iceoryx2's ports stay on the thread that opens them. An error opening them is the
+            // spawner's to report; the thread then has read nothing.
             let opened = (|| -> anyhow::Result<_> {
                 if let Some(cpu) = cpu {
                     pin_current_thread(cpu)?;
@@ -912,18 +921,16 @@ fn spawn_reader(
                     .map_err(|e| anyhow::anyhow!("state listener: {e:?}"))?;
                 Ok((node, subscriber, listener))
             })();
-            let (_node, subscriber, listener) = match opened {
-                Ok(ports) => {
+            match opened {
+                Ok((_node, subscriber, listener)) => {
                     let _ = ready_tx.send(Ok(()));
-                    ports
+                    read_published(&subscriber, &listener, spin, &stop)
                 }
                 Err(e) => {
-                    let text = format!("{e:#}");
                     let _ = ready_tx.send(Err(e));
-                    bail!("{text}");
+                    Ok(Vec::new())
                 }
-            };
-            read_published(&subscriber, &listener, spin, &stop)
+            }
         })
         .context("starting the state reader")?;
     ready_rx

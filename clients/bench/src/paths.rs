@@ -815,7 +815,7 @@ pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result
     let mut last_request = 0u64;
     let deadline = now_ns() + 120_000_000_000;
     while recorder.latencies.count() < samples && now_ns() < deadline {
-        if u128::from(now_ns().saturating_sub(last_request)) > STATE_REQUEST_INTERVAL.as_nanos() {
+        if Duration::from_nanos(now_ns().saturating_sub(last_request)) > STATE_REQUEST_INTERVAL {
             teleop.send(VelocityRequest::twist(0.6, 0.3))?;
             last_request = now_ns();
         }
