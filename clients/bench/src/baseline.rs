@@ -67,6 +67,10 @@ pub struct Load {
     /// The receiver at SCHED_FIFO at this priority, its memory locked: as chassisd's loop in
     /// real-time mode.
     pub realtime: Option<u8>,
+    /// The receiver publishes after each wake-up by the feed, to a reader where the ping side
+    /// runs ([`Published`]): the state rows' hop. Off for the hops into the loop, whose paths
+    /// have no reader woken at that rate.
+    pub published: bool,
 }
 
 /// How a baseline run's rounds go.
@@ -278,7 +282,9 @@ impl IceoryxEndpoint {
             feed_ns: Vec::new(),
             tick: load.map(|l| (l.tick, now_ns() + nanos(l.tick))),
             published: match load {
-                Some(_) => Some(Published {
+                Some(Load {
+                    published: true, ..
+                }) => Some(Published {
                     publisher: pubsub(&node, &published_service(tag))?
                         .publisher_builder()
                         .create()
@@ -289,7 +295,7 @@ impl IceoryxEndpoint {
                         .map_err(|e| anyhow::anyhow!("state notifier: {e:?}"))?,
                     seq: 0,
                 }),
-                None => None,
+                _ => None,
             },
             last_activity: now_ns(),
             _node: node,
@@ -538,6 +544,9 @@ pub struct PongArgs {
     /// A loaded receiver: at SCHED_FIFO with this priority, its memory locked.
     #[arg(long)]
     pub realtime: Option<u8>,
+    /// A loaded receiver: it publishes after each wake-up by the feed ([`Load::published`]).
+    #[arg(long)]
+    pub publish: bool,
 }
 
 impl PongArgs {
@@ -546,6 +555,7 @@ impl PongArgs {
             feed_per_s: self.feed_per_s?,
             tick: Duration::from_micros(self.tick_us?),
             realtime: self.realtime,
+            published: self.publish,
         })
     }
 
@@ -783,6 +793,7 @@ pub fn run(
         feed_per_s: load.map(|l| l.feed_per_s),
         tick_us: load.map(|l| u64::try_from(l.tick.as_micros()).unwrap_or(u64::MAX)),
         realtime: load.and_then(|l| l.realtime),
+        publish: load.is_some_and(|l| l.published),
     };
     let exe = std::env::current_exe()?;
     let mut command = Command::new(&exe);
@@ -809,6 +820,9 @@ pub fn run(
         if let Some(priority) = load.realtime {
             command.args(["--realtime", &priority.to_string()]);
         }
+        if load.published {
+            command.arg("--publish");
+        }
     }
     let mut child = command.spawn().context("starting the pong process")?;
     let mut reader = wait_ready(&mut child)?;
@@ -816,7 +830,12 @@ pub fn run(
     // starts it.
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let published = match (load, iceoryx_waiting(transport)) {
-        (Some(_), Some(waiting)) => Some(spawn_reader(
+        (
+            Some(Load {
+                published: true, ..
+            }),
+            Some(waiting),
+        ) => Some(spawn_reader(
             prefix,
             &tag,
             ping_cpu,
@@ -1049,6 +1068,7 @@ mod tests {
             feed_per_s: 500.0,
             tick: Duration::from_millis(20),
             realtime,
+            published: false,
         };
         let other = if crate::placement::cpu_count() > 1 {
             1

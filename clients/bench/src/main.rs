@@ -588,6 +588,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 feed_per_s,
                 tick,
                 realtime: scheduling.fifo(),
+                published: false,
             };
             let measured = baseline::run(
                 transport,
@@ -616,7 +617,10 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 r.placement,
                 state_rounds,
                 baseline::Rounds::Paced(paths::STATE_REQUEST_INTERVAL),
-                Some(load),
+                Some(Load {
+                    published: true,
+                    ..load
+                }),
                 &prefix,
                 &dir,
             )?;
