@@ -77,13 +77,13 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> S
     )
 }
 
-/// Frame read → the sample handed to iceoryx2 → the state readers woken at the end of its pass →
-/// the reader has it, for each `(frame read, handed, received)` sample handed within a pass of
+/// Frame read → the sample handed to iceoryx2 → the state readers' notification begun at the
+/// end of its pass → it returned → the reader has it, for each `(frame read, handed, received)` sample handed within a pass of
 /// the trace (from the pass's first state handed to its readers woken).
 pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     let mut with_state: Vec<&PassStamps> = passes
         .iter()
-        .filter(|p| p.state_handed != 0 && p.state_readers_woken != 0)
+        .filter(|p| p.state_handed != 0 && p.state_wake_begun != 0 && p.state_readers_woken != 0)
         .collect();
     with_state.sort_by_key(|p| p.state_handed);
     // The last pass that handed a state at or before the sample: the sample's own when it was
@@ -95,12 +95,19 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     split(
         &[
             "frame read → handed to iceoryx2 (decode, state)",
-            "handed → readers woken (the rest of the pass)",
-            "readers woken → reader has it",
+            "handed → notification begun (the rest of the pass)",
+            "notification begun → returned (iceoryx2's notify: a system call a listener)",
+            "notification returned → reader has it (its wake-up)",
         ],
         samples.iter().filter_map(|&(read, handed, received)| {
             let p = pass_of(handed)?;
-            Some(vec![read, handed, p.state_readers_woken, received])
+            Some(vec![
+                read,
+                handed,
+                p.state_wake_begun,
+                p.state_readers_woken,
+                received,
+            ])
         }),
     )
 }
@@ -235,11 +242,13 @@ mod tests {
             PassStamps {
                 state_handed: 110,
                 state_sent: 120,
+                state_wake_begun: 140,
                 state_readers_woken: 150,
                 ..PassStamps::default()
             },
             PassStamps {
                 state_handed: 300,
+                state_wake_begun: 380,
                 state_readers_woken: 400,
                 ..PassStamps::default()
             },
@@ -250,7 +259,9 @@ mod tests {
             &passes,
         );
         assert!(split.iter().all(|(_, s)| s.count == 2), "{split:?}");
-        assert_eq!(split[1].1.max_us, 0.1, "{split:?}");
+        // The rest of the pass (300 → 380) and the notification (380 → 400) apart.
+        assert_eq!(split[1].1.max_us, 0.08, "{split:?}");
+        assert_eq!(split[2].1.max_us, 0.02, "{split:?}");
     }
 
     #[test]

@@ -1171,7 +1171,7 @@ impl Report {
              the read of the sources that took the request returned, the pass's first write to \
              the bus began and returned (the frame tap's TX stamp); the frame read \
              (`ChassisState::stamp_ns`), the sample handed to iceoryx2 (`published_ns`), the \
-             state readers' notification at the end of its pass returned (a spin run's command \
+             state readers' notification at the end of its pass began and returned (a spin run's command \
              split goes from the request to its read: a polling loop's pass was under way \
              before the request existed, and woke for none). The ROS 2 bridge, run \
              with `CHASSIS_ROS2_TRACE=FILE` (the ROS 2 script sets it), keeps for each odom when \

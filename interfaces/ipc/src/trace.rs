@@ -19,6 +19,8 @@ pub struct PassStamps {
     pub written: u64,
     pub state_handed: u64,
     pub state_sent: u64,
+    /// The state readers' notification began (the pass's other work done).
+    pub state_wake_begun: u64,
     pub state_readers_woken: u64,
 }
 
@@ -134,11 +136,10 @@ impl<const N: usize> StampTrace<N> {
 
 impl PassStamps {
     /// The first line of a trace, naming the columns.
-    pub const HEADER: &'static str =
-        "woke requests_read write_started written state_handed state_sent state_readers_woken";
+    pub const HEADER: &'static str = "woke requests_read write_started written state_handed state_sent state_wake_begun state_readers_woken";
 
     /// The stamps in the trace's column order ([`PassStamps::HEADER`]).
-    fn columns(&self) -> [u64; 7] {
+    fn columns(&self) -> [u64; 8] {
         [
             self.woke,
             self.requests_read,
@@ -146,6 +147,7 @@ impl PassStamps {
             self.written,
             self.state_handed,
             self.state_sent,
+            self.state_wake_begun,
             self.state_readers_woken,
         ]
     }
@@ -164,7 +166,7 @@ impl PassStamps {
 
     /// The passes of a whole trace.
     pub fn parse(text: &str) -> Result<Vec<Self>, TraceError> {
-        Ok(StampTrace::<7>::parse_as(text, Self::HEADER)?
+        Ok(StampTrace::<8>::parse_as(text, Self::HEADER)?
             .into_iter()
             .map(|c| Self {
                 woke: c[0],
@@ -173,7 +175,8 @@ impl PassStamps {
                 written: c[3],
                 state_handed: c[4],
                 state_sent: c[5],
-                state_readers_woken: c[6],
+                state_wake_begun: c[6],
+                state_readers_woken: c[7],
             })
             .collect())
     }
@@ -192,7 +195,8 @@ mod tests {
             written: 4,
             state_handed: 0,
             state_sent: 6,
-            state_readers_woken: 7,
+            state_wake_begun: 7,
+            state_readers_woken: 8,
         };
         let text = format!("{}\n{}\n", PassStamps::HEADER, pass.line());
         assert_eq!(PassStamps::parse(&text), Ok(vec![pass]));

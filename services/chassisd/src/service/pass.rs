@@ -330,6 +330,9 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
             Readers::Description => &ports.description.notifier,
             Readers::Control => &ports.control.notifier,
         };
+        if readers == Readers::State {
+            self.stamp(|p| &mut p.state_wake_begun);
+        }
         notifier.notify()?;
         if readers == Readers::State {
             self.stamp(|p| &mut p.state_readers_woken);

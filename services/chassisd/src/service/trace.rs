@@ -9,8 +9,8 @@
 //! decision's `stamp_ns`), `requests_read` (the read of the sources that took a request returned),
 //! `write_started` and `written` (the pass's first write to the bus began; its frame was out:
 //! the write returned, or the flush that carried a held frame did — the frame tap's TX stamp), `state_handed` (the first state sample loaned: its `published_ns`),
-//! `state_sent` (its send returned), `state_readers_woken` (the state readers' notification
-//! returned).
+//! `state_sent` (its send returned), `state_wake_begun` and `state_readers_woken` (the state
+//! readers' notification began, once the pass's other work was done; it returned).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use chassis_ipc::PASS_TRACE_ENV;
 pub(crate) use chassis_ipc::PassStamps;
 
-/// Most passes kept (7 stamps each: about 11 MB).
+/// Most passes kept (8 stamps each: about 13 MB).
 pub(crate) const MAX_PASSES: usize = 200_000;
 
 /// The passes kept and the one under way.
@@ -85,7 +85,7 @@ mod tests {
         trace.end_pass();
         trace.write_out().unwrap();
         let text = std::fs::read_to_string(trace.path()).unwrap();
-        assert_eq!(text, format!("{}\n20 0 0 25 0 0 0\n", PassStamps::HEADER));
+        assert_eq!(text, format!("{}\n20 0 0 25 0 0 0 0\n", PassStamps::HEADER));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
