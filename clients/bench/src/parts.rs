@@ -8,16 +8,37 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use anyhow::Context as _;
+use serde::Serialize;
 
 use crate::paths::PassStamps;
 use crate::stats::{Latencies, Summary};
 
-/// The parts of one path, in the order a sample passes them: (from → to, distribution).
-pub type Split = Vec<(String, Summary)>;
+/// Whose time a part is: what the targets can take out, and what bounds them on a machine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Whose {
+    /// The code this repository ships: chassisd's pass, a bridge's loop.
+    Code,
+    /// What that code calls or waits on: a wake-up, a system call, the transport, the peer.
+    Outside,
+}
 
-/// Splits `parts.len()` stamps, each later than or at the one before, into the distributions
-/// between consecutive stamps; a sample whose stamps are not in order is left out.
-fn split(names: &[&str], samples: impl Iterator<Item = Vec<u64>>) -> Split {
+/// One part of a path: from → to, whose time it is, its distribution.
+#[derive(Debug, Clone, Serialize)]
+pub struct Part {
+    pub name: String,
+    pub whose: Whose,
+    pub summary: Summary,
+}
+
+/// The parts of one path, in the order a sample passes them.
+pub type Split = Vec<Part>;
+
+use Whose::{Code, Outside};
+
+/// Splits `parts.len() + 1` stamps, each later than or at the one before, into the
+/// distributions between consecutive stamps; a sample whose stamps are not in order is left out.
+fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Split {
     let mut parts: Vec<Latencies> = names.iter().map(|_| Latencies::new()).collect();
     for stamps in samples {
         if stamps.len() != names.len() + 1
@@ -33,46 +54,63 @@ fn split(names: &[&str], samples: impl Iterator<Item = Vec<u64>>) -> Split {
     names
         .iter()
         .zip(parts)
-        .map(|(name, l)| ((*name).to_string(), l.summary()))
+        .map(|(&(name, whose), l)| Part {
+            name: name.to_string(),
+            whose,
+            summary: l.summary(),
+        })
         .collect()
 }
 
-/// Request created → the loop woke → the sources read → the first write began → the frame
-/// written, for each `(request created, frame written)` sample whose frame was its pass's first
-/// write. A `polled` loop (spin) does not wake for a request: its pass may have been under way
-/// before the request existed, and the split starts at the read.
+/// Request created → the loop waiting again (the work of the passes under way when it was
+/// created done) → the loop woke (a polling loop: its pass began) → the sources read → the first
+/// write began → the frame written, for each `(request created, frame written)` sample whose
+/// frame was its pass's first write. A boundary the request came after (the loop was waiting
+/// already; a polling loop's pass was under way) is the request's creation: a part of 0.
 pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> Split {
     let by_written: HashMap<u64, &PassStamps> = passes
         .iter()
-        .filter(|p| p.written != 0)
+        .filter(|p| p.written != 0 && p.waited_since != 0)
         .map(|p| (p.written, p))
         .collect();
-    let names: &[&str] = if polled {
+    let busy = (
+        "request created → loop waiting (the passes under way)",
+        Code,
+    );
+    let write = (
+        "write begun → frame written (the bus' write system call)",
+        Outside,
+    );
+    let mux = ("request read → write begun (mux, driver, encoding)", Code);
+    let names: &[(&str, Whose)] = if polled {
         &[
-            "request created → request read (the poll)",
-            "request read → write begun (mux, driver, encoding)",
-            "write begun → frame written",
+            busy,
+            ("loop polling → pass began (the poll)", Outside),
+            ("pass began → request read", Code),
+            mux,
+            write,
         ]
     } else {
         &[
-            "request created → loop woke",
-            "loop woke → request read",
-            "request read → write begun (mux, driver, encoding)",
-            "write begun → frame written",
+            busy,
+            ("loop waiting → loop woke (the wake-up)", Outside),
+            ("loop woke → request read", Code),
+            mux,
+            write,
         ]
     };
     split(
         names,
         samples.iter().filter_map(|&(created, written)| {
             let p = by_written.get(&written)?;
-            let woke = (!polled).then_some(p.woke);
-            Some(
-                [created]
-                    .into_iter()
-                    .chain(woke)
-                    .chain([p.requests_read, p.write_started, written])
-                    .collect(),
-            )
+            Some(vec![
+                created,
+                created.max(p.waited_since),
+                created.max(p.woke),
+                p.requests_read,
+                p.write_started,
+                written,
+            ])
         }),
     )
 }
@@ -94,10 +132,16 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     };
     split(
         &[
-            "frame read → handed to iceoryx2 (decode, state)",
-            "handed → notification begun (the rest of the pass)",
-            "notification begun → returned (iceoryx2's notify: a system call a listener)",
-            "notification returned → reader has it (its wake-up)",
+            ("frame read → handed to iceoryx2 (decode, state)", Code),
+            ("handed → notification begun (the rest of the pass)", Code),
+            (
+                "notification begun → returned (iceoryx2's notify: a system call a listener)",
+                Outside,
+            ),
+            (
+                "notification returned → reader has it (its wake-up)",
+                Outside,
+            ),
         ],
         samples.iter().filter_map(|&(read, handed, received)| {
             let p = pass_of(handed)?;
@@ -132,9 +176,15 @@ pub fn odom(samples: &[(u64, u64)], trace: &[[u64; 4]]) -> Split {
     let by_read = first_by_read(trace);
     split(
         &[
-            "frame read → bridge woke (chassisd's state path, iceoryx2)",
-            "bridge woke → odom handed to RustDDS (conversion)",
-            "handed to RustDDS → taken by the peer (RustDDS' write and sender, UDP, Cyclone DDS)",
+            (
+                "frame read → bridge woke (chassisd's state path, iceoryx2)",
+                Code,
+            ),
+            ("bridge woke → odom handed to RustDDS (conversion)", Code),
+            (
+                "handed to RustDDS → taken by the peer (RustDDS' write and sender, UDP, Cyclone DDS)",
+                Outside,
+            ),
         ],
         samples.iter().filter_map(|&(read, taken)| {
             let t = by_read.get(&read)?;
@@ -164,12 +214,18 @@ pub fn zenoh_state(samples: &[(u64, u64)], export: &[[u64; 4]], mirror: &[[u64; 
     let (export, mirror) = (first_by_read(export), first_by_read(mirror));
     split(
         &[
-            "frame read → export woke (chassisd's state path, iceoryx2)",
-            "export woke → put begun (the newest of the wake-up)",
-            "put begun → operator's callback (Zenoh: put, TCP over the veth, its runtime)",
-            "callback → mirror's loop took it (channel hand-off)",
-            "taken → handed to iceoryx2 (decode, link watch)",
-            "handed to iceoryx2 → reader has it (iceoryx2)",
+            (
+                "frame read → export woke (chassisd's state path, iceoryx2)",
+                Code,
+            ),
+            ("export woke → put begun (the newest of the wake-up)", Code),
+            (
+                "put begun → operator's callback (Zenoh: put, TCP over the veth, its runtime)",
+                Outside,
+            ),
+            ("callback → mirror's loop took it (channel hand-off)", Code),
+            ("taken → handed to iceoryx2 (decode, link watch)", Code),
+            ("handed to iceoryx2 → reader has it (iceoryx2)", Outside),
         ],
         samples.iter().filter_map(|&(read, received)| {
             let e = export.get(&read)?;
@@ -187,13 +243,15 @@ mod tests {
     fn p50s(split: &Split) -> Vec<(u64, u64)> {
         split
             .iter()
-            .map(|(_, s)| (s.p50_us as u64, s.count))
+            .map(|p| (p.summary.p50_us as u64, p.summary.count))
             .collect()
     }
 
-    /// A pass that woke at `woke` and read, encoded and wrote a request's frame by 1.06 ms.
+    /// A pass whose loop began waiting at 1.04 ms, woke at `woke` and read, encoded and wrote a
+    /// request's frame by 1.06 ms.
     fn pass_woken_at(woke: u64) -> [PassStamps; 1] {
         [PassStamps {
+            waited_since: 1_040_000,
             woke,
             requests_read: 1_052_000,
             write_started: 1_055_000,
@@ -204,24 +262,39 @@ mod tests {
 
     #[test]
     fn a_command_sample_is_split_at_its_passes_stamps_and_one_without_its_pass_is_left_out() {
+        // Created at 1 ms: the loop was busy until 1.04 ms, woke at 1.05.
         let samples = [(1_000_000, 1_060_000), (2_000_000, 2_100_000)];
         let split = command(&samples, &pass_woken_at(1_050_000), false);
         assert_eq!(
             p50s(&split),
-            vec![(50, 1), (2, 1), (3, 1), (5, 1)],
+            vec![(40, 1), (10, 1), (2, 1), (3, 1), (5, 1)],
+            "{split:?}"
+        );
+        assert_eq!(split[0].whose, Whose::Code);
+        assert_eq!(split[1].whose, Whose::Outside);
+        // Created while the loop waited: nothing of it was the loop's previous work.
+        let split = command(&[(1_045_000, 1_060_000)], &pass_woken_at(1_050_000), false);
+        assert_eq!(
+            p50s(&split),
+            vec![(0, 1), (5, 1), (2, 1), (3, 1), (5, 1)],
             "{split:?}"
         );
     }
 
     #[test]
-    fn a_polling_loops_pass_under_way_before_the_request_is_split_from_the_read() {
-        let passes = pass_woken_at(990_000);
-        let samples = [(1_000_000, 1_060_000)];
-        let polled = command(&samples, &passes, true);
-        assert_eq!(p50s(&polled), vec![(52, 1), (3, 1), (5, 1)], "{polled:?}");
-        // Split as an event loop's, the pass woke before the request: left out.
-        let woken = command(&samples, &passes, false);
-        assert!(woken.iter().all(|(_, s)| s.count == 0), "{woken:?}");
+    fn a_polling_loops_pass_under_way_before_the_request_counts_from_the_request() {
+        // The pass began (1.049 ms) before the request (1.05 ms) and read it at 1.052.
+        let split = command(&[(1_050_000, 1_060_000)], &pass_woken_at(1_049_000), true);
+        assert_eq!(
+            p50s(&split),
+            vec![(0, 1), (0, 1), (2, 1), (3, 1), (5, 1)],
+            "{split:?}"
+        );
+        // A pass without the loop's wait (the service's first) is left out.
+        let mut first = pass_woken_at(1_049_000);
+        first[0].waited_since = 0;
+        let split = command(&[(1_050_000, 1_060_000)], &first, true);
+        assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");
     }
 
     #[test]
@@ -258,10 +331,10 @@ mod tests {
             &[(100, 130, 190), (180, 200, 290), (250, 300, 450)],
             &passes,
         );
-        assert!(split.iter().all(|(_, s)| s.count == 2), "{split:?}");
+        assert!(split.iter().all(|p| p.summary.count == 2), "{split:?}");
         // The rest of the pass (300 → 380) and the notification (380 → 400) apart.
-        assert_eq!(split[1].1.max_us, 0.08, "{split:?}");
-        assert_eq!(split[2].1.max_us, 0.02, "{split:?}");
+        assert_eq!(split[1].summary.max_us, 0.08, "{split:?}");
+        assert_eq!(split[2].summary.max_us, 0.02, "{split:?}");
     }
 
     #[test]

@@ -13,6 +13,8 @@ use thiserror::Error;
 /// The stamps of one pass, ns (0: not taken).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct PassStamps {
+    /// The loop began waiting for this pass's wake-up: its previous passes' work was done.
+    pub waited_since: u64,
     pub woke: u64,
     pub requests_read: u64,
     pub write_started: u64,
@@ -136,11 +138,13 @@ impl<const N: usize> StampTrace<N> {
 
 impl PassStamps {
     /// The first line of a trace, naming the columns.
-    pub const HEADER: &'static str = "woke requests_read write_started written state_handed state_sent state_wake_begun state_readers_woken";
+    pub const HEADER: &'static str = "waited_since woke requests_read write_started written state_handed state_sent \
+         state_wake_begun state_readers_woken";
 
     /// The stamps in the trace's column order ([`PassStamps::HEADER`]).
-    fn columns(&self) -> [u64; 8] {
+    fn columns(&self) -> [u64; 9] {
         [
+            self.waited_since,
             self.woke,
             self.requests_read,
             self.write_started,
@@ -166,17 +170,18 @@ impl PassStamps {
 
     /// The passes of a whole trace.
     pub fn parse(text: &str) -> Result<Vec<Self>, TraceError> {
-        Ok(StampTrace::<8>::parse_as(text, Self::HEADER)?
+        Ok(StampTrace::<9>::parse_as(text, Self::HEADER)?
             .into_iter()
             .map(|c| Self {
-                woke: c[0],
-                requests_read: c[1],
-                write_started: c[2],
-                written: c[3],
-                state_handed: c[4],
-                state_sent: c[5],
-                state_wake_begun: c[6],
-                state_readers_woken: c[7],
+                waited_since: c[0],
+                woke: c[1],
+                requests_read: c[2],
+                write_started: c[3],
+                written: c[4],
+                state_handed: c[5],
+                state_sent: c[6],
+                state_wake_begun: c[7],
+                state_readers_woken: c[8],
             })
             .collect())
     }
@@ -189,6 +194,7 @@ mod tests {
     #[test]
     fn a_trace_reads_back_as_written() {
         let pass = PassStamps {
+            waited_since: 9,
             woke: 1,
             requests_read: 2,
             write_started: 3,

@@ -293,7 +293,11 @@ impl<D: Devices> Shell<D> {
                 .transpose()?;
 
             loop {
-                let timeout = self.wait_time(engine, clock::now());
+                let now = clock::now();
+                if let Some(trace) = &mut self.trace {
+                    trace.waiting_since = now.as_nanos();
+                }
+                let timeout = self.wait_time(engine, now);
                 let mut wake = Wake {
                     polled: timeout.is_zero(),
                     ..Wake::default()

@@ -57,7 +57,10 @@ impl<D: Devices> Shell<D> {
         }
         if let Some(trace) = &mut self.trace {
             // What the service did outside a pass (its first publications) is not a pass's.
-            trace.current = PassStamps::default();
+            trace.current = PassStamps {
+                waited_since: trace.waiting_since,
+                ..PassStamps::default()
+            };
         }
         engine.run_pass(&mut self.io(ports), wake);
         if let Some(trace) = &mut self.trace {

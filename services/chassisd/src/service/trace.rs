@@ -5,7 +5,8 @@
 //! no stamp is taken beyond the ones the service takes anyway.
 //!
 //! FILE: a header line naming the columns, then one line per pass, `CLOCK_MONOTONIC` ns, 0 where
-//! the pass did not do the thing: `woke` (the engine's first clock reading of the pass: the mux
+//! the pass did not do the thing: `waited_since` (the loop began waiting for the wake-up that
+//! started this pass, its previous passes' work done; a polling loop polls again), `woke` (the engine's first clock reading of the pass: the mux
 //! decision's `stamp_ns`), `requests_read` (the read of the sources that took a request returned),
 //! `write_started` and `written` (the pass's first write to the bus began; its frame was out:
 //! the write returned, or the flush that carried a held frame did — the frame tap's TX stamp), `state_handed` (the first state sample loaned: its `published_ns`),
@@ -18,7 +19,7 @@ use std::path::PathBuf;
 use chassis_ipc::PASS_TRACE_ENV;
 pub(crate) use chassis_ipc::PassStamps;
 
-/// Most passes kept (8 stamps each: about 13 MB).
+/// Most passes kept (9 stamps each: about 14 MB).
 pub(crate) const MAX_PASSES: usize = 200_000;
 
 /// The passes kept and the one under way.
@@ -28,6 +29,8 @@ pub(crate) struct PassTrace {
     passes: Vec<PassStamps>,
     /// The pass under way.
     pub current: PassStamps,
+    /// When the loop last began waiting for a wake-up (the next pass's `waited_since`).
+    pub waiting_since: u64,
 }
 
 impl PassTrace {
@@ -38,6 +41,7 @@ impl PassTrace {
             path: path.into(),
             passes: Vec::with_capacity(MAX_PASSES),
             current: PassStamps::default(),
+            waiting_since: 0,
         })
     }
 
@@ -76,6 +80,7 @@ mod tests {
             path: dir.join("passes.txt"),
             passes: Vec::new(),
             current: PassStamps::default(),
+            waiting_since: 0,
         };
         PassStamps::first(&mut trace.current.woke, 10);
         trace.end_pass();
@@ -85,7 +90,10 @@ mod tests {
         trace.end_pass();
         trace.write_out().unwrap();
         let text = std::fs::read_to_string(trace.path()).unwrap();
-        assert_eq!(text, format!("{}\n20 0 0 25 0 0 0 0\n", PassStamps::HEADER));
+        assert_eq!(
+            text,
+            format!("{}\n0 20 0 0 25 0 0 0 0\n", PassStamps::HEADER)
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
