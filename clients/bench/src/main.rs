@@ -20,6 +20,7 @@ mod provenance;
 mod python;
 mod report;
 mod ros2;
+mod stalls;
 mod stats;
 mod throughput;
 mod zenoh;
@@ -113,6 +114,8 @@ struct RunArgs {
 /// The sizes of a run.
 struct Plan {
     baseline_rounds: u64,
+    /// Bursts of 200 ms a stall row spins on each CPU.
+    stall_bursts: u32,
     paced_rounds: u64,
     commands: u64,
     xbot_commands: u64,
@@ -128,6 +131,7 @@ impl Plan {
     fn smoke() -> Self {
         Self {
             baseline_rounds: 500,
+            stall_bursts: 2,
             paced_rounds: 100,
             commands: 100,
             xbot_commands: 0,
@@ -143,6 +147,7 @@ impl Plan {
         if quick {
             Self {
                 baseline_rounds: 2000,
+                stall_bursts: 10,
                 paced_rounds: 500,
                 commands: 300,
                 xbot_commands: 0,
@@ -155,6 +160,7 @@ impl Plan {
         } else {
             Self {
                 baseline_rounds: 20_000,
+                stall_bursts: 25,
                 paced_rounds: 2500,
                 commands: 3000,
                 xbot_commands: 40,
@@ -166,6 +172,11 @@ impl Plan {
             }
         }
     }
+}
+
+/// The placement column of CPU `cpu`'s stall row.
+fn stall_placement(cpu: usize) -> String {
+    format!("CPU {cpu}")
 }
 
 /// One service configuration to measure.
@@ -333,6 +344,14 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             };
             expected.push(row_key("baseline", &what, "-", placement.label()));
         }
+        for cpu in 0..placement::cpu_count() {
+            expected.push(row_key(
+                "baseline",
+                report::STALLS,
+                "-",
+                &stall_placement(cpu),
+            ));
+        }
     }
     if !skip("paths") {
         for r in &runs {
@@ -427,7 +446,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     let steps = (if skip("baselines") {
         0
     } else {
-        baselines.len()
+        baselines.len() + placement::cpu_count()
     }) + (if skip("paths") { 0 } else { runs.len() + 1 })
         + (if skip("fanout") { 0 } else { plan.fanout.len() })
         + usize::from(!skip("cost"))
@@ -463,6 +482,27 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 ),
                 None => "back to back (warm)".into(),
             });
+            report.rows.push(r);
+            bar.inc(1);
+        }
+        for cpu in 0..placement::cpu_count() {
+            bar.set_message(format!("stalls on CPU {cpu}"));
+            let stalls = stalls::measure(cpu, plan.stall_bursts, paths::REALTIME_PRIORITY)?;
+            report.stalls.push(report::StallRates {
+                cpu,
+                over_20_us: stalls.per_second(20),
+                over_100_us: stalls.per_second(100),
+            });
+            let conditions = stalls.conditions(cpu);
+            let mut r = Row::new(
+                "baseline",
+                report::STALLS.into(),
+                "-",
+                &stall_placement(cpu),
+                stalls.gaps,
+                0,
+            );
+            r.conditions = Some(conditions);
             report.rows.push(r);
             bar.inc(1);
         }

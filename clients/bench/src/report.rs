@@ -71,6 +71,19 @@ pub struct Report {
     /// The rows the run planned ([`row_key`]s), for the smoke check.
     #[serde(skip)]
     pub expected: Vec<String>,
+    /// How often each CPU stalled a thread that never blocks ([`STALLS`] rows).
+    pub stalls: Vec<StallRates>,
+}
+
+/// The stall rows' name ([`crate::stalls`]).
+pub const STALLS: &str = "stalls of a running thread (gaps in its clock readings)";
+
+/// How often one CPU stalled a thread that never blocks, gaps a second.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct StallRates {
+    pub cpu: usize,
+    pub over_20_us: f64,
+    pub over_100_us: f64,
 }
 
 /// The split of the Zenoh state row ([`Parts::path`]).
@@ -550,7 +563,12 @@ impl Report {
             .fold(10.0f64, f64::max)
             .min(1e6);
         for (area, (kind, title)) in root.split_evenly((4, 2)).iter().zip(PANELS) {
-            let rows: Vec<&Row> = self.rows.iter().filter(|r| r.path == kind).collect();
+            // The stall rows are gaps in one thread, not a hop: the table gives them.
+            let rows: Vec<&Row> = self
+                .rows
+                .iter()
+                .filter(|r| r.path == kind && r.what != STALLS)
+                .collect();
             if rows.is_empty() {
                 continue;
             }
@@ -728,6 +746,36 @@ impl Report {
                 refused.join("; ")
             )
         }
+    }
+
+    /// What the stall rows say of every p99 on this machine, or nothing without them.
+    fn stalls_text(&self) -> String {
+        let range = |f: fn(&StallRates) -> f64| {
+            let values = self.stalls.iter().map(f);
+            let low = values.clone().fold(f64::INFINITY, f64::min);
+            let high = values.fold(0.0, f64::max);
+            (low, high)
+        };
+        if self.stalls.is_empty() {
+            return String::new();
+        }
+        let (low20, high20) = range(|s| s.over_20_us);
+        let (low100, high100) = range(|s| s.over_100_us);
+        // The chance that a window of 100 µs holds the start of a stall over 20 µs.
+        let chance = |rate: f64| 100.0 * rate * 100e-6;
+        format!(
+            " On this machine a thread that never blocks lost more than 20 µs {low20:.0} to \
+             {high20:.0} times a second and more than 100 µs {low100:.2} to {high100:.2} times \
+             a second, by CPU (the stall rows of the table): a path of 100 µs meets a stall of \
+             more than 20 µs in about {:.1} to {:.1} % of its samples on each CPU it runs on{}",
+            chance(low20),
+            chance(high20),
+            if chance(low20) >= 1.0 {
+                ": more than 1 %, so that its p99 carries one, whatever the code does."
+            } else {
+                "."
+            }
+        )
     }
 
     /// The rows of `path` in loop `mode`.
@@ -1128,9 +1176,12 @@ impl Report {
              sample's time is the sum of its parts), so a part outside the code (a wake-up, a \
              system call, the transport, the peer: *outside* in the next section) that misses \
              the target alone puts the target out of reach of anything chassisd or a bridge \
-             does here; otherwise the code's own parts are what miss it.\n\n\
-             | target | measured in this run | met? | where the worst row's time goes | what \
-             bounds it |\n| --- | --- | --- | --- | --- |\n",
+             does here; otherwise the code's own parts are what miss it.",
+        );
+        out.push_str(&self.stalls_text());
+        out.push_str(
+            "\n\n| target | measured in this run | met? | where the worst row's time goes | \
+             what bounds it |\n| --- | --- | --- | --- | --- |\n",
         );
         for t in self.targets() {
             let met = match t.met {
@@ -1204,6 +1255,10 @@ impl Report {
              * **loop**: `event` blocks on an iceoryx2 WaitSet, `spin` polls without blocking, \
              `hybrid` polls for {} µs after each activity, then blocks.\n\
              * **placement**: `same CPU` pins both ends to one CPU, `cross CPU` to two.\n\
+             * **Stall rows** (*stalls of a running thread*, one a CPU): not a hop but the gaps \
+             one thread sees between two readings of the clock while it never blocks (longer \
+             than 1 µs; the count column: how many): what the machine takes from every path and \
+             hop on that CPU.\n\
              * **Matched baselines.** A command or state row is divided by a baseline measured \
              in the same run, right after it, whose receiver lives as the service's loop did: \
              woken by another process at the chassis' feedback rate measured in that run (where \
@@ -1651,6 +1706,46 @@ mod tests {
             t.limit.starts_with("outside the code: write begun → frame written alone takes 26.0 / 26.0 µs (p50 / p99), beyond 5 / 15 µs"),
             "{}",
             t.limit
+        );
+    }
+
+    #[test]
+    fn the_targets_say_how_often_the_machine_stalls_a_running_thread() {
+        let mut report = Report::default();
+        assert_eq!(report.stalls_text(), "");
+        report.stalls = vec![
+            StallRates {
+                cpu: 0,
+                over_20_us: 300.0,
+                over_100_us: 2.5,
+            },
+            StallRates {
+                cpu: 1,
+                over_20_us: 340.0,
+                over_100_us: 0.5,
+            },
+        ];
+        let text = report.stalls_text();
+        assert!(
+            text.contains(
+                "more than 20 µs 300 to 340 times a second and more than 100 µs 0.50 to 2.50"
+            ),
+            "{text}"
+        );
+        assert!(
+            text.contains("in about 3.0 to 3.4 % of its samples"),
+            "{text}"
+        );
+        assert!(
+            text.ends_with("so that its p99 carries one, whatever the code does."),
+            "{text}"
+        );
+        // Rarer stalls say nothing of the p99.
+        report.stalls[0].over_20_us = 50.0;
+        assert!(
+            report
+                .markdown()
+                .contains("0.5 to 3.4 % of its samples on each CPU it runs on.")
         );
     }
 
