@@ -750,27 +750,32 @@ impl Report {
 
     /// What the stall rows say of every p99 on this machine, or nothing without them.
     fn stalls_text(&self) -> String {
-        let range = |f: fn(&StallRates) -> f64| {
-            let values = self.stalls.iter().map(f);
-            let low = values.clone().fold(f64::INFINITY, f64::min);
-            let high = values.fold(0.0, f64::max);
-            (low, high)
-        };
         if self.stalls.is_empty() {
             return String::new();
         }
-        let (low20, high20) = range(|s| s.over_20_us);
-        let (low100, high100) = range(|s| s.over_100_us);
-        // The chance that a window of 100 µs holds the start of a stall over 20 µs.
-        let chance = |rate: f64| 100.0 * rate * 100e-6;
+        // "LOW to HIGH" over the CPUs, one figure when they print alike.
+        let span = |f: &dyn Fn(&StallRates) -> f64, decimals: usize| {
+            let low = self.stalls.iter().map(f).fold(f64::INFINITY, f64::min);
+            let high = self.stalls.iter().map(f).fold(0.0, f64::max);
+            let (low, high) = (format!("{low:.decimals$}"), format!("{high:.decimals$}"));
+            if low == high {
+                low
+            } else {
+                format!("{low} to {high}")
+            }
+        };
+        // The chance that a window of 100 µs holds the start of a stall over 20 µs, %.
+        let chance = |s: &StallRates| 100.0 * s.over_20_us * 100e-6;
+        let least = self.stalls.iter().map(chance).fold(f64::INFINITY, f64::min);
         format!(
-            " On this machine a thread that never blocks lost more than 20 µs {low20:.0} to \
-             {high20:.0} times a second and more than 100 µs {low100:.2} to {high100:.2} times \
-             a second, by CPU (the stall rows of the table): a path of 100 µs meets a stall of \
-             more than 20 µs in about {:.1} to {:.1} % of its samples on each CPU it runs on{}",
-            chance(low20),
-            chance(high20),
-            if chance(low20) >= 1.0 {
+            " On this machine a thread that never blocks lost more than 20 µs {} times a second \
+             and more than 100 µs {} times a second, by CPU (the stall rows of the table): a \
+             path of 100 µs meets a stall of more than 20 µs in about {} % of its samples on \
+             each CPU it runs on{}",
+            span(&|s| s.over_20_us, 0),
+            span(&|s| s.over_100_us, 2),
+            span(&chance, 1),
+            if least >= 1.0 {
                 ": more than 1 %, so that its p99 carries one, whatever the code does."
             } else {
                 "."
