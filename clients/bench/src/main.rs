@@ -300,7 +300,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
 
     // Back to back (each transport at its best), then paced like the command path: what a
     // request after a pause meets, the service paths' reference.
-    let paced = Some(paths::COMMAND_INTERVAL);
+    let paced = Some(paths::off_grid(paths::COMMAND_INTERVAL));
     let mut baselines: Vec<(Transport, Placement, Option<Duration>)> =
         [Placement::SameCpu, Placement::CrossCpu]
             .into_iter()
@@ -477,8 +477,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let mut r = Row::new("baseline", what, "-", placement.label(), l, 0);
             r.conditions = Some(match pace {
                 Some(p) => format!(
-                    "one ping every {} ms, receiver otherwise idle (cold)",
-                    p.as_millis()
+                    "one ping every {}, receiver otherwise idle (cold)",
+                    paths::period_text(p)
                 ),
                 None => "back to back (warm)".into(),
             });
@@ -634,7 +634,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 transport,
                 r.placement,
                 rounds,
-                baseline::Rounds::Paced(interval),
+                baseline::Rounds::Paced(paths::off_grid(interval)),
                 Some(load),
                 &prefix,
                 &dir,
@@ -692,8 +692,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 baseline::last_of(&measured.pings, pings_wanted),
             );
             paced_row.conditions = Some(format!(
-                "one ping every {} ms, the last {pings_wanted} of {rounds}; {conditions}",
-                interval.as_millis()
+                "one ping every {}, the last {pings_wanted} of {rounds}; {conditions}",
+                paths::period_text(paths::off_grid(interval))
             ));
             report.rows.push(paced_row);
             let feed_what = format!(

@@ -549,9 +549,29 @@ fn wait_for_motion_that(
     }
 }
 
-/// How often the command path sends a request (a 250 Hz controller); the paced baselines use
-/// the same period.
+/// How often the command path sends a request (a 250 Hz controller), before [`off_grid`]; the
+/// paced baselines use the same period.
 pub const COMMAND_INTERVAL: Duration = Duration::from_millis(4);
+
+/// The period the command path and its paced baselines keep: `interval` and 1.7 % more (4 ms:
+/// 4.068 ms). A client's timer is not aligned to the chassis': at exactly 4 ms, on the
+/// clock the simulated chassis keeps its 2 ms feedback and 20 ms tick on, a run's requests all
+/// fell at one phase of the feedback (the pass traces put every request of a run about 0.55 ms
+/// after a feedback pass, another run's 0.7 ms), so a run either never or always met the loop
+/// busy with a feedback pass. 1.7 % more sweeps 300 requests across a whole 20 ms tick.
+pub fn off_grid(interval: Duration) -> Duration {
+    interval + interval * 17 / 1000
+}
+
+/// `period` in ms, to the µs when it is not whole.
+pub fn period_text(period: Duration) -> String {
+    let ms = period.as_secs_f64() * 1e3;
+    if period.as_micros().is_multiple_of(1000) {
+        format!("{ms:.0} ms")
+    } else {
+        format!("{ms:.3} ms")
+    }
+}
 
 /// How often the state path's client sends a request, to keep the robot driving so that frames
 /// keep changing the state; the state rows' baseline pings at the same period.
@@ -665,7 +685,7 @@ pub fn command_path_via(
     // repeated as a controller would: the mux output stays, no frame is sent for it.
     let period = interval.min(KEEP_ALIVE);
     let periods = (interval.as_nanos() / period.as_nanos().max(1)).max(1);
-    let mut ticker = Ticker::new(period);
+    let mut ticker = Ticker::new(off_grid(period));
     let mut current = 0.25;
     for i in 0..count {
         for k in 1..=periods {
@@ -1033,6 +1053,18 @@ pub fn cost_at(
 mod tests {
     use super::*;
     use chassis_client::BodyVelocity;
+
+    #[test]
+    fn the_command_period_sweeps_the_chassis_feedback_and_tick() {
+        let period = off_grid(COMMAND_INTERVAL);
+        assert_eq!(period_text(period), "4.068 ms");
+        assert_eq!(period_text(COMMAND_INTERVAL), "4 ms");
+        // 300 requests drift through a whole 20 ms tick against a 2 ms feedback grid, and no
+        // two requests in a row fall at one phase of it.
+        let step = (period - COMMAND_INTERVAL).as_nanos();
+        assert!(300 * step >= 20_000_000, "{period:?}");
+        assert!(step > 0 && step < 2_000_000, "{period:?}");
+    }
     use chassis_protocols::{Direction, Timestamp, WireItem};
 
     /// The latency runs' file asks for real-time mode for a loop that blocks and not for the
