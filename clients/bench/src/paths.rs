@@ -557,8 +557,9 @@ pub const COMMAND_INTERVAL: Duration = Duration::from_millis(4);
 /// 4.068 ms). A client's timer is not aligned to the chassis': at exactly 4 ms, on the
 /// clock the simulated chassis keeps its 2 ms feedback and 20 ms tick on, a run's requests all
 /// fell at one phase of the feedback (the pass traces put every request of a run about 0.55 ms
-/// after a feedback pass, another run's 0.7 ms), so a run either never or always met the loop
-/// busy with a feedback pass. 1.7 % more sweeps 300 requests across a whole 20 ms tick.
+/// after a feedback pass, another run's 0.7 ms), so a run, and its baseline, measured one moment
+/// of the chassis' cycle only, drawn anew each run. 1.7 % more sweeps 300 requests across a
+/// whole 20 ms tick.
 pub fn off_grid(interval: Duration) -> Duration {
     interval + interval * 17 / 1000
 }
