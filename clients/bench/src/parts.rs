@@ -31,10 +31,28 @@ pub struct Part {
     pub summary: Summary,
 }
 
+impl Part {
+    /// The boundary the part starts at: "request read" of "request read → write begun (…)".
+    pub fn from(&self) -> &str {
+        self.name.split(" → ").next().unwrap_or_default()
+    }
+}
+
 /// The parts of one path, in the order a sample passes them.
 pub type Split = Vec<Part>;
 
 use Whose::{Code, Outside};
+
+/// Where the in-service command row starts (`request_read` of the pass trace): the command
+/// split's parts from this boundary on are the in-service row's ([`in_service_command`]).
+const REQUEST_READ: &str = "request read";
+const WRITE_BEGUN: &str = "write begun";
+
+/// Whether `part` of a command split lies within the in-service row (request read → frame
+/// written).
+pub fn in_service_command(part: &Part) -> bool {
+    matches!(part.from(), REQUEST_READ | WRITE_BEGUN)
+}
 
 /// Splits `parts.len() + 1` stamps, each later than or at the one before, into the
 /// distributions between consecutive stamps; a sample whose stamps are not in order is left out.
@@ -116,8 +134,9 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> S
 }
 
 /// Frame read → the sample handed to iceoryx2 → the state readers' notification begun at the
-/// end of its pass → it returned → the reader has it, for each `(frame read, handed, received)` sample handed within a pass of
-/// the trace (from the pass's first state handed to its readers woken).
+/// end of its pass → it returned → the reader has it, for each `(frame read, handed, received)`
+/// sample handed within a pass of the trace (from the pass's first state handed to its readers
+/// woken).
 pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     let mut with_state: Vec<&PassStamps> = passes
         .iter()
@@ -279,6 +298,26 @@ mod tests {
             vec![(0, 1), (5, 1), (2, 1), (3, 1), (5, 1)],
             "{split:?}"
         );
+    }
+
+    #[test]
+    fn the_in_service_row_holds_the_command_splits_parts_from_the_request_read_on() {
+        for polled in [false, true] {
+            let split = command(&[], &pass_woken_at(1_050_000), polled);
+            let within: Vec<&str> = split
+                .iter()
+                .filter(|p| in_service_command(p))
+                .map(|p| p.name.as_str())
+                .collect();
+            assert_eq!(
+                within,
+                [
+                    "request read → write begun (mux, driver, encoding)",
+                    "write begun → frame written (the bus' write system call)"
+                ],
+                "polled: {polled}"
+            );
+        }
     }
 
     #[test]

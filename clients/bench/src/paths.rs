@@ -556,8 +556,8 @@ pub const COMMAND_INTERVAL: Duration = Duration::from_millis(4);
 /// The period the command path and its paced baselines keep: `interval` and 1.7 % more (4 ms:
 /// 4.068 ms). A client's timer is not aligned to the chassis': at exactly 4 ms, on the
 /// clock the simulated chassis keeps its 2 ms feedback and 20 ms tick on, a run's requests all
-/// fell at one phase of the feedback (the pass traces put every request of a run about 0.55 ms
-/// after a feedback pass, another run's 0.7 ms), so a run, and its baseline, measured one moment
+/// fell at one phase of the feedback (the pass traces `--dir` keeps, `bn*-passes.txt`, put every
+/// request of a run about 0.55 ms after a feedback pass, another run's 0.7 ms), so a run, and its baseline, measured one moment
 /// of the chassis' cycle only, drawn anew each run. 1.7 % more sweeps 300 requests across a
 /// whole 20 ms tick.
 pub fn off_grid(interval: Duration) -> Duration {
@@ -1054,6 +1054,7 @@ pub fn cost_at(
 mod tests {
     use super::*;
     use chassis_client::BodyVelocity;
+    use chassis_protocols::{Direction, Timestamp, WireItem};
 
     #[test]
     fn the_command_period_sweeps_the_chassis_feedback_and_tick() {
@@ -1066,7 +1067,6 @@ mod tests {
         assert!(300 * step >= 20_000_000, "{period:?}");
         assert!(step > 0 && step < 2_000_000, "{period:?}");
     }
-    use chassis_protocols::{Direction, Timestamp, WireItem};
 
     /// The latency runs' file asks for real-time mode for a loop that blocks and not for the
     /// polling one; the other runs' never; chassisd's defaults are an empty file.

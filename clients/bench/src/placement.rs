@@ -53,11 +53,8 @@ pub fn unpin_current_thread() {
     }
 }
 
-/// The calling thread at SCHED_FIFO `priority` and every page of the process locked, as
-/// chassisd's real-time mode does (`--realtime`): a baseline's receiver living as the service's
-/// loop did. Unlike chassisd, a refusal is an error: the bench asks for it only beside a
-/// chassisd that was granted it.
-pub fn enter_realtime(priority: u8) -> anyhow::Result<()> {
+/// The calling thread at SCHED_FIFO `priority`, its memory not locked.
+pub fn set_fifo(priority: u8) -> anyhow::Result<()> {
     let param = libc::sched_param {
         sched_priority: i32::from(priority),
     };
@@ -68,6 +65,15 @@ pub fn enter_realtime(priority: u8) -> anyhow::Result<()> {
             std::io::Error::last_os_error()
         );
     }
+    Ok(())
+}
+
+/// The calling thread at SCHED_FIFO `priority` and every page of the process locked, as
+/// chassisd's real-time mode does (`--realtime`): a baseline's receiver living as the service's
+/// loop did. Unlike chassisd, a refusal is an error: the bench asks for it only beside a
+/// chassisd that was granted it.
+pub fn enter_realtime(priority: u8) -> anyhow::Result<()> {
+    set_fifo(priority)?;
     // SAFETY: mlockall takes flags only.
     if unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } != 0 {
         anyhow::bail!(

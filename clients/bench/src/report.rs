@@ -953,7 +953,7 @@ impl Report {
                 &in_service,
                 "command",
                 run_of,
-                |p| p.name.starts_with("request read") || p.name.starts_with("write begun"),
+                crate::parts::in_service_command,
                 Limit::Absolute {
                     p50_us: 5.0,
                     p99_us: 15.0,
@@ -1277,8 +1277,8 @@ impl Report {
              baseline is one ping per command period ({}; {} on the XBot, whose manual caps \
              its command rate), the command path's own: 1.7 % more than the controller's \
              {} ms, so that requests fall at every phase of the chassis' feedback and tick, as \
-             a client's timer is not aligned to the chassis'. The state row's hop goes the other way, from the loop to \
-             a client: its baseline is a sample the loaded receiver publishes each time it took \
+             a client's timer is not aligned to the chassis'. The state row's hop goes the other \
+             way, from the loop to a client: its baseline is a sample the loaded receiver publishes each time it took \
              the feed's samples (as chassisd publishes its state after each feedback frame \
              that changed it), read at normal scheduling where the client reads and waiting as \
              it does, in a run of its own whose ping side sends one ping every {} ms as the \
@@ -1583,26 +1583,16 @@ mod tests {
 
     #[test]
     fn the_microseconds_table_gives_each_part_and_its_share_of_the_p50s() {
-        let part = |us| measured("command", "x", "event", us, 200).summary;
         let report = Report {
-            parts: vec![Parts {
-                path: "command".into(),
-                what: "titan sim".into(),
-                mode: "event".into(),
-                placement: "cross CPU".into(),
-                parts: vec![
-                    crate::parts::Part {
-                        name: "woke".into(),
-                        whose: Whose::Outside,
-                        summary: part(30),
-                    },
-                    crate::parts::Part {
-                        name: "written".into(),
-                        whose: Whose::Code,
-                        summary: part(10),
-                    },
+            parts: vec![split_of(
+                "command",
+                "titan sim",
+                "event",
+                vec![
+                    part("woke", Whose::Outside, 30, 200),
+                    part("written", Whose::Code, 10, 200),
                 ],
-            }],
+            )],
             ..Report::default()
         };
         let md = report.parts_markdown();
@@ -1625,22 +1615,32 @@ mod tests {
         }
     }
 
+    /// The split of the cross-CPU run of `path` on `what`, in loop `mode`.
+    fn split_of(path: &str, what: &str, mode: &str, parts: Vec<Part>) -> Parts {
+        Parts {
+            path: path.into(),
+            what: what.into(),
+            mode: mode.into(),
+            placement: "cross CPU".into(),
+            parts,
+        }
+    }
+
     /// The targets of a run whose cross-CPU state row (p99 `row_us` against its baseline's 100
     /// µs) splits into a decode of `decode_us` and a reader's wake-up of `wake_us`.
     fn state_target(row_us: u64, decode_us: u64, wake_us: u64) -> Target {
         let mut state = measured("state", "titan sim", "event", row_us, 200);
         state.baseline = Some("hop, cross CPU".into());
         let (mut report, _) = compared(vec![measured("baseline", "hop", "-", 100, 200), state]);
-        report.parts.push(Parts {
-            path: "state".into(),
-            what: "titan sim".into(),
-            mode: "event".into(),
-            placement: "cross CPU".into(),
-            parts: vec![
+        report.parts.push(split_of(
+            "state",
+            "titan sim",
+            "event",
+            vec![
                 part("frame read → handed", Whose::Code, decode_us, 200),
                 part("woken → reader has it", Whose::Outside, wake_us, 200),
             ],
-        });
+        ));
         report
             .targets()
             .into_iter()
@@ -1688,12 +1688,11 @@ mod tests {
             30,
             200,
         ));
-        report.parts.push(Parts {
-            path: "command".into(),
-            what: "titan slcan pty".into(),
-            mode: "spin".into(),
-            placement: "cross CPU".into(),
-            parts: vec![
+        report.parts.push(split_of(
+            "command",
+            "titan slcan pty",
+            "spin",
+            vec![
                 // Before the row starts: left out of what bounds it.
                 part(
                     "request created → request read (the poll)",
@@ -1704,7 +1703,7 @@ mod tests {
                 part("request read → write begun", Whose::Code, 2, 200),
                 part("write begun → frame written", Whose::Outside, 26, 200),
             ],
-        });
+        ));
         let t = report.targets().remove(0);
         assert_eq!(t.met, Some(false));
         assert!(

@@ -29,19 +29,12 @@ pub struct Stalls {
     pub spinning: Duration,
     /// The SCHED_FIFO priority the thread ran at; `None`: normal scheduling (refused).
     pub fifo: Option<u8>,
-    /// Gaps longer than 20, 50 and 100 µs.
-    pub over: [(u64, u64); 3],
 }
 
 impl Stalls {
     /// Gaps longer than `us` per second of spinning.
     pub fn per_second(&self, us: u64) -> f64 {
-        let n = self
-            .over
-            .iter()
-            .find(|(at, _)| *at == us)
-            .map_or(0, |(_, n)| *n);
-        n as f64 / self.spinning.as_secs_f64().max(1e-9)
+        self.gaps.count_above(us * 1000) as f64 / self.spinning.as_secs_f64().max(1e-9)
     }
 
     /// The row's conditions.
@@ -71,9 +64,8 @@ pub fn measure(cpu: usize, bursts: u32, priority: u8) -> anyhow::Result<Stalls> 
     std::thread::scope(|s| {
         s.spawn(|| {
             placement::pin_current_thread(cpu)?;
-            let fifo = set_fifo(priority).then_some(priority);
+            let fifo = placement::set_fifo(priority).ok().map(|()| priority);
             let mut gaps = Latencies::new();
-            let mut over = [(20, 0), (50, 0), (100, 0)];
             let mut spinning = Duration::ZERO;
             for _ in 0..bursts {
                 let start = now_ns();
@@ -84,11 +76,6 @@ pub fn measure(cpu: usize, bursts: u32, priority: u8) -> anyhow::Result<Stalls> 
                     let gap = now.saturating_sub(previous);
                     if gap > MIN_GAP_NS {
                         gaps.record(gap);
-                        for (us, n) in &mut over {
-                            if gap > *us * 1000 {
-                                *n += 1;
-                            }
-                        }
                     }
                     previous = now;
                 }
@@ -99,22 +86,11 @@ pub fn measure(cpu: usize, bursts: u32, priority: u8) -> anyhow::Result<Stalls> 
                 gaps,
                 spinning,
                 fifo,
-                over,
             })
         })
         .join()
         .map_err(|_| anyhow::anyhow!("the stall thread panicked"))?
     })
-}
-
-/// The calling thread at SCHED_FIFO `priority`; false when refused (the thread keeps normal
-/// scheduling). Its memory is not locked: the loop touches nothing new.
-fn set_fifo(priority: u8) -> bool {
-    let param = libc::sched_param {
-        sched_priority: i32::from(priority),
-    };
-    // SAFETY: pid 0 is the calling thread; `param` is a valid sched_param for the call.
-    unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0 }
 }
 
 #[cfg(test)]
@@ -126,7 +102,10 @@ mod tests {
         let stalls = measure(0, 1, 80).unwrap();
         assert!(stalls.spinning >= BURST, "{stalls:?}");
         // Every gap over 20 µs is a gap recorded.
-        assert!(stalls.over[0].1 <= stalls.gaps.count(), "{stalls:?}");
+        assert!(
+            stalls.gaps.count_above(20_000) <= stalls.gaps.count(),
+            "{stalls:?}"
+        );
         let text = stalls.conditions(0);
         assert!(text.starts_with("a thread pinned to CPU 0 at "), "{text}");
         assert!(text.contains("a second over 20 µs"), "{text}");

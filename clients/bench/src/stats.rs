@@ -47,6 +47,16 @@ impl Latencies {
         self.histogram.len()
     }
 
+    /// How many latencies recorded are longer than `ns` (to the histogram's 3 significant
+    /// digits).
+    pub fn count_above(&self, ns: u64) -> u64 {
+        let h = &self.histogram;
+        if ns >= h.max() {
+            return 0;
+        }
+        h.count_between(ns.saturating_add(1), h.max())
+    }
+
     pub fn merge(&mut self, other: &Latencies) {
         let _ = self.histogram.add(&other.histogram);
         self.out_of_range += other.out_of_range;
@@ -125,6 +135,17 @@ pub struct Summary {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn latencies_longer_than_a_bound_are_counted() {
+        let mut l = Latencies::new();
+        for ns in [5_000, 25_000, 150_000] {
+            l.record(ns);
+        }
+        assert_eq!(l.count_above(20_000), 2);
+        assert_eq!(l.count_above(100_000), 1);
+        assert_eq!(l.count_above(200_000), 0);
+    }
 
     #[test]
     fn percentiles_of_a_known_distribution() {

@@ -6,12 +6,13 @@
 //!
 //! FILE: a header line naming the columns, then one line per pass, `CLOCK_MONOTONIC` ns, 0 where
 //! the pass did not do the thing: `waited_since` (the loop began waiting for the wake-up that
-//! started this pass, its previous passes' work done; a polling loop polls again), `woke` (the engine's first clock reading of the pass: the mux
-//! decision's `stamp_ns`), `requests_read` (the read of the sources that took a request returned),
-//! `write_started` and `written` (the pass's first write to the bus began; its frame was out:
-//! the write returned, or the flush that carried a held frame did — the frame tap's TX stamp), `state_handed` (the first state sample loaned: its `published_ns`),
-//! `state_sent` (its send returned), `state_wake_begun` and `state_readers_woken` (the state
-//! readers' notification began, once the pass's other work was done; it returned).
+//! started this pass, its previous passes' work done; a polling loop polls again), `woke` (the
+//! engine's first clock reading of the pass: the mux decision's `stamp_ns`), `requests_read` (the
+//! read of the sources that took a request returned), `write_started` and `written` (the pass's
+//! first write to the bus began; its frame was out: the write returned, or the flush that carried a
+//! held frame did — the frame tap's TX stamp), `state_handed` (the first state sample loaned: its
+//! `published_ns`), `state_sent` (its send returned), `state_wake_begun` and `state_readers_woken`
+//! (the state readers' notification began, once the pass's other work was done; it returned).
 
 use std::io::Write;
 use std::path::PathBuf;
