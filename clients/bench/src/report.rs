@@ -912,6 +912,26 @@ impl Report {
         let Some(row) = worst else {
             return Default::default();
         };
+        // Every ratio within the bound: the target was missed on a row flagged inconsistent,
+        // which no part of a split explains.
+        if let Limit::Ratio(bound) = limit
+            && rows.iter().all(|r| r.ratio_p99.is_some_and(|x| x <= bound))
+        {
+            let flagged: Vec<String> = rows
+                .iter()
+                .filter(|r| r.inconsistent.is_some())
+                .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
+                .collect();
+            return (
+                format!(
+                    "every ratio within {bound} ×; flagged inconsistent: {}",
+                    flagged.join("; ")
+                ),
+                "the measurement, not the time: a flagged row's path and baseline were not \
+                 measured under the same conditions (*Inconsistent measurements*, above)"
+                    .into(),
+            );
+        }
         let Some(split) = self.parts_of(split_path, &what_of(row), &row.mode, &row.placement)
         else {
             return Default::default();
@@ -1673,6 +1693,22 @@ mod tests {
         assert_eq!(t.met, Some(false));
         assert!(
             t.limit.starts_with("the code: the parts outside it stay within the target (the largest, woken → reader has it: p99 150.0 µs, 1.50 × the baseline's); the code's largest, frame read → handed, has p99 150.0 µs"),
+            "{}",
+            t.limit
+        );
+    }
+
+    #[test]
+    fn a_target_missed_only_on_a_row_flagged_inconsistent_says_so_not_a_part() {
+        // 90 µs against its hop's 100: within 2 × at the p99, flagged below its hop.
+        let t = state_target(90, 20, 70);
+        assert_eq!(t.met, Some(false));
+        assert_eq!(
+            t.why,
+            "every ratio within 2 ×; flagged inconsistent: titan sim event cross CPU"
+        );
+        assert!(
+            t.limit.starts_with("the measurement, not the time"),
             "{}",
             t.limit
         );
