@@ -16,6 +16,7 @@ import math
 import os
 import re
 import time
+from collections.abc import Iterator
 from typing import Any, TypeVar
 
 import iceoryx2 as iox2
@@ -123,7 +124,8 @@ def _set_fixed_str(array: Any, text: str) -> None:
 
 
 def _copy(sample: Any, kind: type[T]) -> T:
-    return kind.from_buffer_copy(ctypes.string_at(sample.payload_ptr, ctypes.sizeof(kind)))
+    # One copy, straight out of the shared memory (not through an intermediate `bytes`).
+    return kind.from_buffer_copy(kind.from_address(sample.payload_ptr))
 
 
 def _error_name(error: BaseException) -> str:
@@ -246,25 +248,36 @@ class _Reader:
         self.subscriber = service.subscriber_builder().buffer_size(self.buffer).create()
         self.listener = _open_event(node, name).listener_builder().create()
 
+    def _next(self) -> Any | None:
+        """The oldest sample received and not yet read (a copy), or None."""
+        sample = self.subscriber.receive()
+        if sample is None:
+            return None
+        out = _copy(sample, self.payload)
+        sample.delete()
+        return out
+
     def drain(self) -> list[Any]:
         """Every sample received since the last call, oldest first (copies)."""
-        out = []
-        while True:
-            sample = self.subscriber.receive()
-            if sample is None:
-                return out
-            out.append(_copy(sample, self.payload))
-            sample.delete()
+        return list(iter(self._next, None))
+
+    def each(self, timeout: float) -> Iterator[Any]:
+        """Every pending sample, or those that arrive within ``timeout`` seconds, each yielded
+        as soon as it is copied out; the samples that arrive while the caller handles one are
+        yielded too, until none is pending."""
+        # Spend the notifications of the samples pending now: a wait is for later ones.
+        self.listener.try_wait()
+        sample = self._next()
+        if sample is None:
+            self.listener.timed_wait(_seconds(timeout))
+            sample = self._next()
+        while sample is not None:
+            yield sample
+            sample = self._next()
 
     def wait(self, timeout: float) -> list[Any]:
         """Every pending sample, or those that arrive within ``timeout`` seconds."""
-        # Spend the notifications of the samples drained now: the wait is for later ones.
-        self.listener.try_wait()
-        samples = self.drain()
-        if samples:
-            return samples
-        self.listener.timed_wait(_seconds(timeout))
-        return self.drain()
+        return list(self.each(timeout))
 
 
 def _open_pubsub(node: Any, name: str, payload: type[Struct]) -> Any:
@@ -304,6 +317,17 @@ class StateStream:
         """Every pending sample, or else those that arrive within ``timeout`` seconds."""
         return self._reader.wait(timeout)
 
+    def each(self, timeout: float) -> Iterator[ChassisState]:
+        """Every pending sample, or else those that arrive within ``timeout`` seconds, each
+        yielded as soon as it is read: a client acts on the first of a burst before the next
+        is copied out (:meth:`wait` hands the burst over when all of it is). Samples that arrive
+        while the loop body runs are yielded too, until none is pending::
+
+            for state in stream.each(0.1):
+                handle(state)
+        """
+        return self._reader.each(timeout)
+
 
 class FrameTap:
     """Every frame on the bus, both directions (gaps show in ``BusFrame.seq``)."""
@@ -318,6 +342,11 @@ class FrameTap:
     def wait(self, timeout: float) -> list[BusFrame]:
         """Every pending frame, or else those that arrive within ``timeout`` seconds."""
         return self._reader.wait(timeout)
+
+    def each(self, timeout: float) -> Iterator[BusFrame]:
+        """Every pending frame, or else those that arrive within ``timeout`` seconds, each
+        yielded as soon as it is read (see :meth:`StateStream.each`)."""
+        return self._reader.each(timeout)
 
 
 class Source:

@@ -250,7 +250,8 @@ def test_a_killed_python_source_ends_its_motion_at_its_timeout(world: World) -> 
     )
 
 
-def test_a_state_stream_loses_nothing_on_a_flooded_bus(world: World) -> None:
+@pytest.mark.parametrize("read", ["wait", "each"])
+def test_a_state_stream_loses_nothing_on_a_flooded_bus(world: World, read: str) -> None:
     robot = world.chassisd("titan")
     assert robot.state_stream(0).buffer == 1
     stream = robot.state_stream(10**6)
@@ -268,7 +269,7 @@ def test_a_state_stream_loses_nothing_on_a_flooded_bus(world: World) -> None:
     while time.monotonic() - started < 2.0:
         teleop.send(drive_request)
         time.sleep(0.006)
-        batch = stream.wait(0.1)
+        batch = stream.wait(0.1) if read == "wait" else list(stream.each(0.1))
         largest = max(largest, len(batch))
         for state in batch:
             received += 1
@@ -276,6 +277,13 @@ def test_a_state_stream_loses_nothing_on_a_flooded_bus(world: World) -> None:
                 gaps += 1
                 lost += max(0, state.seq - last - 1)
             last = state.seq
+    if read == "each":
+        # A sample is handed over as soon as it is read: the rest of the burst still waits.
+        teleop.send(drive_request)
+        time.sleep(0.006)
+        first = next(stream.each(0.1))
+        rest = stream.drain()
+        assert rest and rest[0].seq == first.seq + 1, (first.seq, [s.seq for s in rest])
     print(f"stream: {received} samples, {gaps} gaps ({lost} lost), up to {largest} per read")
     assert (gaps, lost) == (0, 0), f"lost {lost} samples in {gaps} gaps\n{world.logs()}"
     assert received >= 1000, f"only {received} samples in 2 s"
