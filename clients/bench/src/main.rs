@@ -820,6 +820,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 ];
                 report.rows.push(state_row);
             }
+            let python_parts = python
+                .as_ref()
+                .map(|py| parts::python_state(&py.state_stamps, &passes));
             if let Some(py) = python {
                 let mut state_row = run_row("python", format!("{label}: state"), py.state, 0);
                 state_row.dropped = py.dropped;
@@ -851,6 +854,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 report
                     .parts
                     .push(run_parts("ros2: frame read → odom", odom));
+            }
+            if let Some(python) = python_parts {
+                report.parts.push(run_parts(report::PYTHON_PARTS, python));
             }
             if let Some(figures) = command {
                 let command_row =

@@ -133,37 +133,49 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> S
     )
 }
 
-/// Frame read → the sample handed to iceoryx2 → the state readers' notification begun at the
-/// end of its pass → it returned → the reader has it, for each `(frame read, handed, received)`
-/// sample handed within a pass of the trace (from the pass's first state handed to its readers
-/// woken).
-pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
+/// The passes that handed a state and woke its readers, by the time they handed their first.
+fn state_passes(passes: &[PassStamps]) -> Vec<&PassStamps> {
     let mut with_state: Vec<&PassStamps> = passes
         .iter()
         .filter(|p| p.state_handed != 0 && p.state_wake_begun != 0 && p.state_readers_woken != 0)
         .collect();
     with_state.sort_by_key(|p| p.state_handed);
-    // The last pass that handed a state at or before the sample: the sample's own when it was
-    // handed before that pass woke the readers (else its stamps are out of order: left out).
-    let pass_of = |handed: u64| {
-        let after = with_state.partition_point(|p| p.state_handed <= handed);
-        with_state.get(after.checked_sub(1)?).copied()
-    };
+    with_state
+}
+
+/// The last of `with_state` ([`state_passes`]) that handed a state at or before `handed`: the
+/// sample's own pass when it was handed before that pass woke the readers (else its stamps are
+/// out of order, and the split leaves it out).
+fn pass_of<'a>(with_state: &[&'a PassStamps], handed: u64) -> Option<&'a PassStamps> {
+    let after = with_state.partition_point(|p| p.state_handed <= handed);
+    with_state.get(after.checked_sub(1)?).copied()
+}
+
+/// The parts of a state sample within chassisd's pass, up to its readers' notification.
+const STATE_PASS: [(&str, Whose); 3] = [
+    ("frame read → handed to iceoryx2 (decode, state)", Code),
+    ("handed → notification begun (the rest of the pass)", Code),
+    (
+        "notification begun → returned (iceoryx2's notify: a system call a listener)",
+        Outside,
+    ),
+];
+
+/// Frame read → the sample handed to iceoryx2 → the state readers' notification begun at the
+/// end of its pass → it returned → the reader has it, for each `(frame read, handed, received)`
+/// sample handed within a pass of the trace (from the pass's first state handed to its readers
+/// woken).
+pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
+    let with_state = state_passes(passes);
+    let mut names = STATE_PASS.to_vec();
+    names.push((
+        "notification returned → reader has it (its wake-up)",
+        Outside,
+    ));
     split(
-        &[
-            ("frame read → handed to iceoryx2 (decode, state)", Code),
-            ("handed → notification begun (the rest of the pass)", Code),
-            (
-                "notification begun → returned (iceoryx2's notify: a system call a listener)",
-                Outside,
-            ),
-            (
-                "notification returned → reader has it (its wake-up)",
-                Outside,
-            ),
-        ],
+        &names,
         samples.iter().filter_map(|&(read, handed, received)| {
-            let p = pass_of(handed)?;
+            let p = pass_of(&with_state, handed)?;
             Some(vec![
                 read,
                 handed,
@@ -172,6 +184,44 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
                 received,
             ])
         }),
+    )
+}
+
+/// The Python client's state samples as [`state`] splits the Rust client's, with the reader's
+/// part in two: its wake-up (until the stream's listener returned), then the stream's reading
+/// (iceoryx2's Python binding takes each sample, `ctypes` copies it out; the samples before it
+/// in the same wake-up are read first). Each sample is `[frame read, handed, the stream's
+/// wait returned, in hand]` (`bench.py`'s `state.stamps`). A sample whose notification came
+/// while the stream was reading, or before it looked again, was read without a wake-up: that
+/// part is 0.
+pub fn python_state(samples: &[[u64; 4]], passes: &[PassStamps]) -> Split {
+    let with_state = state_passes(passes);
+    let mut names = STATE_PASS.to_vec();
+    names.extend([
+        (
+            "notification returned → the stream's wait returned (its wake-up)",
+            Outside,
+        ),
+        (
+            "wait returned → sample in hand (the stream reads it and those before it, Python)",
+            Code,
+        ),
+    ]);
+    split(
+        &names,
+        samples
+            .iter()
+            .filter_map(|&[read, handed, returned, received]| {
+                let p = pass_of(&with_state, handed)?;
+                Some(vec![
+                    read,
+                    handed,
+                    p.state_wake_begun,
+                    p.state_readers_woken,
+                    returned.max(p.state_readers_woken),
+                    received,
+                ])
+            }),
     )
 }
 
@@ -374,6 +424,31 @@ mod tests {
         // The rest of the pass (300 → 380) and the notification (380 → 400) apart.
         assert_eq!(split[1].summary.max_us, 0.08, "{split:?}");
         assert_eq!(split[2].summary.max_us, 0.02, "{split:?}");
+    }
+
+    #[test]
+    fn a_python_state_sample_splits_the_readers_part_at_its_waits_return() {
+        let passes = [PassStamps {
+            state_handed: 110,
+            state_wake_begun: 140,
+            state_readers_woken: 150,
+            ..PassStamps::default()
+        }];
+        // Woken at 190; the second sample was read at once after the first, without a wake-up
+        // of its own, its notification having come while the stream read (its wait returned
+        // before the notification: a part of 0).
+        let split = python_state(&[[100, 110, 190, 230], [105, 120, 145, 260]], &passes);
+        let max_ns: Vec<u64> = split
+            .iter()
+            .map(|p| (p.summary.max_us * 1e3).round() as u64)
+            .collect();
+        assert_eq!(max_ns, [15, 30, 10, 40, 110], "{split:?}");
+        assert!(split.iter().all(|p| p.summary.count == 2), "{split:?}");
+        assert_eq!(split[3].whose, Whose::Outside);
+        assert_eq!(split[4].whose, Whose::Code);
+        // A sample handed before every traced pass is left out.
+        let split = python_state(&[[10, 20, 190, 230]], &passes);
+        assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");
     }
 
     #[test]

@@ -22,6 +22,9 @@ pub struct PythonFigures {
     pub missed: u64,
     /// State samples the Python reader never received (gaps in `seq`).
     pub dropped: u64,
+    /// For each state latency, its stamps: `[frame read, handed to iceoryx2, the stream's wait
+    /// returned, the sample in hand]` ([`crate::parts::python_state`]).
+    pub state_stamps: Vec<[u64; 4]>,
 }
 
 /// The repository the benchmark was built from.
@@ -99,7 +102,26 @@ pub fn run(python: &Path, run: &ScriptRun<'_>) -> anyhow::Result<PythonFigures> 
         command: read_latencies(&out.join("command.ns"))?,
         missed: read_count(&out.join("command.missed"))?,
         dropped: read_count(&out.join("state.dropped"))?,
+        state_stamps: read_stamps(&out.join("state.stamps"))?,
     })
+}
+
+/// Lines of four stamps, ns, separated by spaces.
+fn read_stamps(file: &Path) -> anyhow::Result<Vec<[u64; 4]>> {
+    let text =
+        std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+    text.lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|line| {
+            let stamps: Vec<u64> = line
+                .split_whitespace()
+                .map(str::parse)
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("a stamp in '{line}' of {}", file.display()))?;
+            <[u64; 4]>::try_from(stamps)
+                .map_err(|_| anyhow::anyhow!("'{line}' of {} is not four stamps", file.display()))
+        })
+        .collect()
 }
 
 /// Runs a benchmark script (`bench.py` of the Python package or of the ROS 2 bridge) that
@@ -156,6 +178,19 @@ mod tests {
         assert_eq!(log.trim(), format!("--latencies-dir {}", out.display()));
         assert_eq!(read_count(&out.join("command.missed")).unwrap(), 7);
         std::fs::remove_dir_all(out.parent().unwrap()).unwrap();
+    }
+
+    #[test]
+    fn the_state_stamps_are_read_four_a_line_and_a_short_line_is_an_error() {
+        let dir = scratch("script-stamps");
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("state.stamps");
+        std::fs::write(&file, "1 2 3 4\n\n5 6 7 8\n").unwrap();
+        assert_eq!(read_stamps(&file).unwrap(), [[1, 2, 3, 4], [5, 6, 7, 8]]);
+        std::fs::write(&file, "1 2 3 4\n5 6 7\n").unwrap();
+        let error = read_stamps(&file).unwrap_err().to_string();
+        assert!(error.contains("'5 6 7'"), "{error}");
+        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
