@@ -25,9 +25,12 @@ processes involved:
   its path carries with the same QoS. ``chassis-ros2 --bench-echo`` (the bridge's DDS stack)
   records each ``TwistStamped`` ping written here (Cyclone DDS → RustDDS, read as the bridge
   reads ``cmd_vel``) and answers it at once with an ``Odometry`` written as the bridge writes
-  ``odom`` (RustDDS → Cyclone DDS, read here as ``odom`` is read), at the command path's pace,
-  after a warm-up of ``WARMUP`` pings that are not counted, and as many counted as the path each
-  hop divides: ``--commands`` for the cmd_vel hop, ``--state-samples`` for the odom hop.
+  ``odom`` (RustDDS → Cyclone DDS, read here as ``odom`` is read), after a warm-up of
+  ``WARMUP`` pings that are not counted, and as many counted as the path each hop divides:
+  ``--commands`` for the cmd_vel hop, ``--state-samples`` for the odom hop. Each hop keeps the
+  pace of its path, so that neither stack is woken more often than on it: the cmd_vel hop the
+  command path's (``--interval-ms``), the odom hop the period of the odoms the state path
+  counted, 1.7 % more (DIR/raw-out.period_ns).
 * **the odom path's parts**: the bridge runs with ``CHASSIS_ROS2_TRACE`` naming DIR/odom.trace:
   for each odom it writes the frame's read time, when its state loop woke with the sample, when
   it handed the odom to RustDDS and when that write returned. DIR/state.pairs holds each counted
@@ -43,13 +46,14 @@ Command line::
         [--state-samples 2000] [--commands 300] [--interval-ms 4]
 
 Writes DIR/command.ns, DIR/state.ns, DIR/raw-in.ns (Cyclone → RustDDS), DIR/raw-out.ns
-(RustDDS → Cyclone), one latency in ns a line, DIR/command.missed, DIR/state.pairs and
-DIR/odom.trace; prints one JSON line per path.
+(RustDDS → Cyclone), one latency in ns a line, DIR/command.missed, DIR/state.pairs,
+DIR/raw-out.period_ns and DIR/odom.trace; prints one JSON line per path.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import signal
@@ -199,6 +203,17 @@ def state_path(
     return pairs
 
 
+def odom_period(pairs: list[tuple[int, int]]) -> float:
+    """The pace of the odom hop, s: the median period of the counted odoms, and 1.7 % more, as
+    ``chassis-bench`` paces the command path (``paths::off_grid``), so that the pings sweep the
+    phases of the simulated chassis' cycle instead of keeping one. 20 ms when too few odoms
+    were counted to tell."""
+    reads = sorted(read for read, _ in pairs)
+    gaps = sorted(b - a for a, b in itertools.pairwise(reads) if b > a)
+    period = gaps[len(gaps) // 2] / 1e9 if len(gaps) >= 10 else 0.02
+    return period * 1.017
+
+
 def raw_hops(
     dp: DomainParticipant, ping: DataWriter, pong: DataReader, count: int, interval_s: float
 ) -> list[int]:
@@ -261,16 +276,18 @@ def main() -> int:
         wait_matched(ping, "the echo's ping")
         frames = client_bench.motion_frames(args.chassis, args.robot)
 
-        # Warm-up pings first (their hops left out on both sides), then as many as the longer
-        # path needs; each hop keeps as many as the path it divides.
-        counted = max(args.commands, args.state_samples)
-        raw_out = raw_hops(dp, ping, pong, WARMUP + counted, interval)[WARMUP:]
-        raw_out = raw_out[: args.state_samples]
+        # Each hop at the pace of the path it divides, warm-up pings first (their hops left out
+        # on both sides), as many counted as that path: the cmd_vel hop (the echo's record of
+        # the pings) at the command path's, the odom hop (the pongs) at the odom's own period.
+        raw_hops(dp, ping, pong, WARMUP + args.commands, interval)
         command, missed = command_path(robot, cmd, frames, args.commands, interval)
         time.sleep(0.6)  # the ros2 source expires: the state path starts from rest
         pairs = state_path(dp, cmd, odom, args.state_samples)
         state = [taken - read for read, taken in pairs]
         (out / "state.pairs").write_text("".join(f"{read} {taken}\n" for read, taken in pairs))
+        period = odom_period(pairs)
+        raw_out = raw_hops(dp, ping, pong, WARMUP + args.state_samples, period)[WARMUP:]
+        (out / "raw-out.period_ns").write_text(f"{round(period * 1e9)}\n")
     finally:
         for proc in (echo, bridge):
             proc.send_signal(signal.SIGTERM)
@@ -280,7 +297,7 @@ def main() -> int:
             except subprocess.TimeoutExpired:
                 proc.kill()
     raw_in = [int(x) for x in (out / "raw-in.ns").read_text().split()][WARMUP:]
-    raw_in = raw_in[: args.commands]
+    raw_in = raw_in[: args.commands]  # the pings of the odom hop follow
     figures = {
         "command": (command, missed),
         "state": (state, 0),

@@ -771,30 +771,34 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let mut odom_parts = None;
             if let Some(dds) = ros2 {
                 odom_parts = Some(dds.odom_parts);
-                let conditions = |carried: &str| {
+                let conditions = |pace: String, carried: &str| {
                     format!(
-                        "one message every {} ms after 200 uncounted, {carried}, measured by the \
-                         ROS 2 run's own script, same run",
-                        interval.as_millis()
+                        "one message every {pace} after 200 uncounted, {carried}, measured by \
+                         the ROS 2 run's own script, same run"
                     )
                 };
                 // Named after this run: a full run measures the bridge beside more than one.
                 let dds_in = format!("{DDS_IN}, beside {label}");
                 let dds_out = format!("{DDS_OUT}, beside {label}");
-                for (what, latencies, carried) in [
+                for (what, latencies, pace, carried) in [
                     (
                         &dds_in,
                         dds.raw_in,
+                        format!("{} (the cmd_vel path's)", paths::period_text(interval)),
                         "a TwistStamped read with the bridge's cmd_vel QoS",
                     ),
                     (
                         &dds_out,
                         dds.raw_out,
+                        format!(
+                            "{} (the period of the odoms the path counted, 1.7 % more)",
+                            paths::period_text(dds.raw_out_period)
+                        ),
                         "an Odometry written as the bridge writes odom (its writer QoS)",
                     ),
                 ] {
                     let mut r = baseline_row(what.clone(), latencies);
-                    r.conditions = Some(conditions(carried));
+                    r.conditions = Some(conditions(pace, carried));
                     report.rows.push(r);
                 }
                 let mut command_row = run_row(

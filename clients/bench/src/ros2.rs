@@ -8,6 +8,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::Duration;
 
 use anyhow::{Context as _, bail};
 
@@ -25,6 +26,8 @@ pub struct Ros2Figures {
     pub raw_in: Latencies,
     /// Raw DDS hop, the bridge's DDS stack → the peer.
     pub raw_out: Latencies,
+    /// The pace of `raw_out`'s pings: the odoms' own period, 1.7 % more.
+    pub raw_out_period: Duration,
     /// `cmd_vel` messages whose frame did not appear.
     pub missed: u64,
     /// The state row's samples split at the bridge's stamps.
@@ -76,6 +79,9 @@ pub fn run(python: &Path, bridge: &Path, run: &ScriptRun<'_>) -> anyhow::Result<
         state: read_latencies(&out.join("state.ns"))?,
         raw_in: read_latencies(&out.join("raw-in.ns"))?,
         raw_out: read_latencies(&out.join("raw-out.ns"))?,
+        raw_out_period: Duration::from_nanos(crate::python::read_count(
+            &out.join("raw-out.period_ns"),
+        )?),
         missed,
         odom_parts: crate::parts::odom(
             &read_pairs(&out.join("state.pairs"))?,
