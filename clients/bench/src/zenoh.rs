@@ -33,8 +33,12 @@ pub struct ZenohFigures {
     /// chassisd published the sample → the operator's iceoryx2 subscriber has it: the bridge's
     /// own part of the state path.
     pub bridge: Latencies,
-    /// The bare hops after the warm-up, ns, in order.
-    pub raw: Vec<u64>,
+    /// The bare hops after the warm-up, ns, in order, at the command path's pace.
+    pub raw_command: Vec<u64>,
+    /// The same at the state path's pace, [`ZenohFigures::state_period`].
+    pub raw_state: Vec<u64>,
+    /// The period of the states the state path counted, 1.7 % more ([`state_period`]).
+    pub state_period: Duration,
     /// The state row split at both sides' stamps.
     pub state_parts: crate::parts::Split,
 }
@@ -166,6 +170,93 @@ fn wait_until<T>(
     }
 }
 
+/// The pace of the state row's bare hop: the median period of the states the path counted
+/// (`reads`, their frames' read times), 1.7 % more ([`paths::off_grid`]), so that the bare
+/// sessions are woken as often as the bridge's are on its path; 20 ms when too few were
+/// counted to tell.
+fn state_period(reads: &[u64]) -> Duration {
+    let mut reads = reads.to_vec();
+    reads.sort_unstable();
+    let mut gaps: Vec<u64> = reads
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|&g| g > 0)
+        .collect();
+    gaps.sort_unstable();
+    let median = match gaps.len() {
+        n if n >= 10 => Duration::from_nanos(gaps[n / 2]),
+        _ => Duration::from_millis(20),
+    };
+    paths::off_grid(median)
+}
+
+/// The bare Zenoh hop, robot side publishing to the operator's, alone on the link: `count`
+/// samples after [`RAW_WARMUP`], one per `pace`; the counted latencies, ns, in order.
+fn bare_hop(
+    netns: &Netns,
+    prefix: &str,
+    operator_prefix: &str,
+    dir: &Path,
+    count: u64,
+    pace: Duration,
+) -> anyhow::Result<Vec<u64>> {
+    let raw = format!("tcp/{ROBOT_ADDR}:{RAW_PORT}");
+    let tag = pace.as_micros();
+    let raw_file = dir.join(format!("zenoh-raw-{tag}.ns"));
+    let wanted = RAW_WARMUP + count;
+    // Twice the time the samples take at their pace, and discovery.
+    let timeout = (2.0 * wanted as f64 * pace.as_secs_f64() + 30.0)
+        .ceil()
+        .to_string();
+    let sub_log = dir.join(format!("zenoh-raw-sub-{tag}.log"));
+    let mut sub = zenoh_in(
+        &netns.operator,
+        operator_prefix,
+        &[
+            "raw-sub",
+            "--connect",
+            &raw,
+            "--insecure",
+            "--count",
+            &wanted.to_string(),
+            "--timeout",
+            &timeout,
+        ],
+        &sub_log,
+    )?
+    .arg("--out")
+    .arg(&raw_file)
+    .spawn()
+    .context("starting chassis-zenoh raw-sub")?;
+    let mut publisher = zenoh_in(
+        &netns.robot,
+        prefix,
+        &[
+            "raw-pub",
+            "--listen",
+            &raw,
+            "--insecure",
+            "--interval-us",
+            &pace.as_micros().to_string(),
+            "--timeout",
+            &timeout,
+        ],
+        &dir.join(format!("zenoh-raw-pub-{tag}.log")),
+    )?
+    .spawn()
+    .context("starting chassis-zenoh raw-pub")?;
+    let status = sub.wait()?;
+    let _ = publisher.wait();
+    if !status.success() {
+        bail!("the bare Zenoh baseline failed; see {}", sub_log.display());
+    }
+    std::fs::read_to_string(&raw_file)?
+        .lines()
+        .map(|line| line.trim().parse::<u64>().context("a latency in ns"))
+        .skip(usize::try_from(RAW_WARMUP).unwrap_or(usize::MAX))
+        .collect()
+}
+
 /// Runs the Zenoh paths: `commands` requests one per `interval`, `states` state samples,
 /// `raw` bare Zenoh samples.
 pub fn run(
@@ -187,69 +278,11 @@ pub fn run(
     let name = service.name.clone();
     let operator_prefix = format!("{prefix}op_");
     let bridge = format!("tcp/{ROBOT_ADDR}:{BRIDGE_PORT}");
-    let raw = format!("tcp/{ROBOT_ADDR}:{RAW_PORT}");
     let mut children = Children(Vec::new());
 
-    // The bare Zenoh hop first, alone on the link: robot side publishes, operator subscribes.
-    let raw_file = dir.join("zenoh-raw.ns");
-    // A warm-up first (not counted), then as many as the longer of the bridge's paths.
-    let wanted = RAW_WARMUP + commands.max(states);
-    let count = wanted.to_string();
-    // Twice the time the samples take at their pace, and discovery.
-    let timeout = (2.0 * wanted as f64 * interval.as_secs_f64() + 30.0)
-        .ceil()
-        .to_string();
-    let mut sub = zenoh_in(
-        &netns.operator,
-        &operator_prefix,
-        &[
-            "raw-sub",
-            "--connect",
-            &raw,
-            "--insecure",
-            "--count",
-            &count,
-            "--timeout",
-            &timeout,
-        ],
-        &dir.join("zenoh-raw-sub.log"),
-    )?;
-    let mut sub = sub
-        .arg("--out")
-        .arg(&raw_file)
-        .spawn()
-        .context("starting chassis-zenoh raw-sub")?;
-    let interval_ms = interval.as_millis().max(1).to_string();
-    let mut publisher = zenoh_in(
-        &netns.robot,
-        prefix,
-        &[
-            "raw-pub",
-            "--listen",
-            &raw,
-            "--insecure",
-            "--interval-ms",
-            &interval_ms,
-            "--timeout",
-            &timeout,
-        ],
-        &dir.join("zenoh-raw-pub.log"),
-    )?
-    .spawn()
-    .context("starting chassis-zenoh raw-pub")?;
-    let status = sub.wait()?;
-    let _ = publisher.wait();
-    if !status.success() {
-        bail!(
-            "the bare Zenoh baseline failed; see {}",
-            dir.join("zenoh-raw-sub.log").display()
-        );
-    }
-    let raw_latencies = std::fs::read_to_string(&raw_file)?
-        .lines()
-        .map(|line| line.trim().parse::<u64>().context("a latency in ns"))
-        .skip(usize::try_from(RAW_WARMUP).unwrap_or(usize::MAX))
-        .collect::<anyhow::Result<Vec<u64>>>()?;
+    // The command row's bare Zenoh hop first, alone on the link, at the command path's pace;
+    // the state row's after the bridges stop, at the states' own (known then).
+    let raw_command = bare_hop(&netns, prefix, &operator_prefix, dir, commands, interval)?;
 
     // Each side keeps its stamps of the states it carries and writes them as it stops.
     let export_trace = dir.join("zenoh-robot.trace");
@@ -335,6 +368,9 @@ pub fn run(
     drop(remote);
     drop(operator);
     drop(children);
+    let reads: Vec<u64> = recorder.samples.iter().map(|&(read, ..)| read).collect();
+    let state_period = state_period(&reads);
+    let raw_state = bare_hop(&netns, prefix, &operator_prefix, dir, states, state_period)?;
     drop(robot);
     drop(service);
     drop(netns);
@@ -356,7 +392,32 @@ pub fn run(
         command,
         state: recorder.latencies,
         bridge,
-        raw: raw_latencies,
+        raw_command,
+        raw_state,
+        state_period,
         state_parts,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_state_rows_bare_hop_keeps_the_counted_states_period_off_the_chassis_grid() {
+        // A state every 20 ms, two of them not counted (a 40 ms gap each), out of order.
+        let reads: Vec<u64> = (0..30u64)
+            .filter(|i| ![7, 19].contains(i))
+            .map(|i| i * 20_000_000)
+            .rev()
+            .collect();
+        assert_eq!(state_period(&reads), Duration::from_micros(20_340));
+        assert_eq!(state_period(&reads[..5]), Duration::from_micros(20_340));
+        assert_eq!(
+            state_period(&[0, 7_000_000, 14_000_000]),
+            Duration::from_micros(20_340)
+        );
+        let fast: Vec<u64> = (0..50u64).map(|i| i * 2_000_000).collect();
+        assert_eq!(state_period(&fast), Duration::from_micros(2_034));
+    }
 }

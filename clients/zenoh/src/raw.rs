@@ -33,9 +33,9 @@ pub struct RawArgs {
     /// Samples to send (publisher) or to receive (subscriber).
     #[arg(long, default_value_t = 1000)]
     count: u64,
-    /// Publisher: time between two samples, ms.
-    #[arg(long, default_value_t = 4)]
-    interval_ms: u64,
+    /// Publisher: time between two samples, µs (the pace of the path the hop divides).
+    #[arg(long, default_value_t = 4000)]
+    interval_us: u64,
     /// Subscriber: where to write the latencies, one ns figure a line.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -71,7 +71,7 @@ pub fn publish(args: &RawArgs) -> anyhow::Result<()> {
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let deadline = now_ns() + args.timeout * 1_000_000_000;
-    let mut ticker = Ticker::new(Duration::from_millis(args.interval_ms.max(1)));
+    let mut ticker = Ticker::new(Duration::from_micros(args.interval_us.max(1)));
     while !publisher
         .matching_status()
         .wait()
