@@ -164,7 +164,9 @@ const STATE_PASS: [(&str, Whose); 3] = [
 /// Frame read → the sample handed to iceoryx2 → the state readers' notification begun at the
 /// end of its pass → it returned → the reader has it, for each `(frame read, handed, received)`
 /// sample handed within a pass of the trace (from the pass's first state handed to its readers
-/// woken).
+/// woken). A reader that had the sample before the pass notified it (a polling reader, or one
+/// awake already) spent nothing on the notification and a wake-up: those parts are 0, and the
+/// rest of the pass counts until the reader had it.
 pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     let with_state = state_passes(passes);
     let mut names = STATE_PASS.to_vec();
@@ -179,8 +181,8 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
             Some(vec![
                 read,
                 handed,
-                p.state_wake_begun,
-                p.state_readers_woken,
+                p.state_wake_begun.min(received),
+                p.state_readers_woken.min(received),
                 received,
             ])
         }),
@@ -193,7 +195,7 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
 /// in the same wake-up are read first). Each sample is `[frame read, handed, the stream's
 /// wait returned, in hand]` (`bench.py`'s `state.stamps`). A sample whose notification came
 /// while the stream was reading, or before it looked again, was read without a wake-up: that
-/// part is 0.
+/// part is 0 (and, as in [`state`], so are the notification's of one read before it).
 pub fn python_state(samples: &[[u64; 4]], passes: &[PassStamps]) -> Split {
     let with_state = state_passes(passes);
     let mut names = STATE_PASS.to_vec();
@@ -213,12 +215,13 @@ pub fn python_state(samples: &[[u64; 4]], passes: &[PassStamps]) -> Split {
             .iter()
             .filter_map(|&[read, handed, returned, received]| {
                 let p = pass_of(&with_state, handed)?;
+                let woken = p.state_readers_woken.min(received);
                 Some(vec![
                     read,
                     handed,
-                    p.state_wake_begun,
-                    p.state_readers_woken,
-                    returned.max(p.state_readers_woken),
+                    p.state_wake_begun.min(received),
+                    woken,
+                    returned.max(woken),
                     received,
                 ])
             }),
@@ -424,6 +427,15 @@ mod tests {
         // The rest of the pass (300 → 380) and the notification (380 → 400) apart.
         assert_eq!(split[1].summary.max_us, 0.08, "{split:?}");
         assert_eq!(split[2].summary.max_us, 0.02, "{split:?}");
+        // A polling reader had the sample at 350, before the pass notified its readers (380):
+        // no notification, no wake-up; the pass's rest until then.
+        let split = state(&[(250, 300, 350)], &passes);
+        let max_10ns: Vec<u64> = split
+            .iter()
+            .map(|p| (p.summary.max_us * 1e2).round() as u64)
+            .collect();
+        assert_eq!(max_10ns, [5, 5, 0, 0], "{split:?}");
+        assert!(split.iter().all(|p| p.summary.count == 1), "{split:?}");
     }
 
     #[test]
@@ -446,6 +458,14 @@ mod tests {
         assert!(split.iter().all(|p| p.summary.count == 2), "{split:?}");
         assert_eq!(split[3].whose, Whose::Outside);
         assert_eq!(split[4].whose, Whose::Code);
+        // Read at 135, before the pass notified its readers (140): the parts after it are 0
+        // (recorded as 1 ns, the histogram's least value).
+        let split = python_state(&[[105, 120, 125, 135]], &passes);
+        let max_ns: Vec<u64> = split
+            .iter()
+            .map(|p| (p.summary.max_us * 1e3).round() as u64)
+            .collect();
+        assert_eq!(max_ns, [15, 15, 1, 1, 1], "{split:?}");
         // A sample handed before every traced pass is left out.
         let split = python_state(&[[10, 20, 190, 230]], &passes);
         assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");

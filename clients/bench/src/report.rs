@@ -1391,7 +1391,9 @@ impl Report {
              sample handed to iceoryx2 (`published_ns`), the state readers' notification at the \
              end of its pass began and returned. A request created while the loop waited spent \
              nothing on the passes before it, one created while a pass was under way spent \
-             nothing on the wake-up: a part of 0. The Python client's script \
+             nothing on the wake-up: a part of 0; so did a state sample its reader had before \
+             its pass notified the readers (a polling reader, or one awake already) on the \
+             notification and a wake-up. The Python client's script \
              (`clients/python/bench.py`) stamps, beside each sample it has in hand, when the \
              stream's wait for it returned (its listener's; when samples were pending already, \
              the moment it looked): a sample whose notification came while the stream read the \
