@@ -106,8 +106,8 @@ pub fn run(python: &Path, run: &ScriptRun<'_>) -> anyhow::Result<PythonFigures> 
     })
 }
 
-/// Lines of four stamps, ns, separated by spaces.
-fn read_stamps(file: &Path) -> anyhow::Result<Vec<[u64; 4]>> {
+/// Lines of `N` stamps, ns, separated by spaces (a script's `state.stamps`, `state.pairs`).
+pub(crate) fn read_stamps<const N: usize>(file: &Path) -> anyhow::Result<Vec<[u64; N]>> {
     let text =
         std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
     text.lines()
@@ -118,8 +118,8 @@ fn read_stamps(file: &Path) -> anyhow::Result<Vec<[u64; 4]>> {
                 .map(str::parse)
                 .collect::<Result<_, _>>()
                 .with_context(|| format!("a stamp in '{line}' of {}", file.display()))?;
-            <[u64; 4]>::try_from(stamps)
-                .map_err(|_| anyhow::anyhow!("'{line}' of {} is not four stamps", file.display()))
+            <[u64; N]>::try_from(stamps)
+                .map_err(|_| anyhow::anyhow!("'{line}' of {} is not {N} stamps", file.display()))
         })
         .collect()
 }
@@ -186,9 +186,12 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let file = dir.join("state.stamps");
         std::fs::write(&file, "1 2 3 4\n\n5 6 7 8\n").unwrap();
-        assert_eq!(read_stamps(&file).unwrap(), [[1, 2, 3, 4], [5, 6, 7, 8]]);
+        assert_eq!(
+            read_stamps::<4>(&file).unwrap(),
+            [[1, 2, 3, 4], [5, 6, 7, 8]]
+        );
         std::fs::write(&file, "1 2 3 4\n5 6 7\n").unwrap();
-        let error = read_stamps(&file).unwrap_err().to_string();
+        let error = read_stamps::<4>(&file).unwrap_err().to_string();
         assert!(error.contains("'5 6 7'"), "{error}");
         std::fs::remove_dir_all(dir).unwrap();
     }

@@ -687,6 +687,11 @@ impl Limit {
     }
 }
 
+/// The run a path row belongs to: "titan sim" of "titan sim: state" (its split's `what`).
+fn run_of(row: &Row) -> String {
+    row.what.split(": ").next().unwrap_or_default().to_string()
+}
+
 /// A target the benchmark's figures are held to.
 struct Target {
     what: String,
@@ -870,7 +875,6 @@ impl Report {
                 })
                 .collect();
             let rows: Vec<&Row> = rows.iter().collect();
-            let run_of = |r: &Row| r.what.split(": ").next().unwrap_or_default().to_string();
             (why, limit) = self.why(&rows, PYTHON_PARTS, run_of, |_| true, Limit::Ratio(2.0));
         }
         Target {
@@ -963,7 +967,6 @@ impl Report {
     fn targets(&self) -> Vec<Target> {
         let mut targets = Vec::new();
         let label = |r: &Row| r.what.clone();
-        let run_of = |r: &Row| r.what.split(": ").next().unwrap_or_default().to_string();
 
         // The service's own pass.
         let in_service: Vec<&Row> = ["event", "spin"]

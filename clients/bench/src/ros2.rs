@@ -10,9 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use anyhow::{Context as _, bail};
-
-use crate::python::{ScriptRun, read_latencies, repo, run_script};
+use crate::python::{ScriptRun, read_latencies, read_stamps, repo, run_script};
 use crate::stats::Latencies;
 
 /// What the ROS 2 bridge's run measured.
@@ -32,21 +30,6 @@ pub struct Ros2Figures {
     pub missed: u64,
     /// The state row's samples split at the bridge's stamps.
     pub odom_parts: crate::parts::Split,
-}
-
-/// `(read, taken)` pairs, ns, one a line (`state.pairs`).
-fn read_pairs(path: &Path) -> anyhow::Result<Vec<(u64, u64)>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    text.lines()
-        .map(|l| {
-            let mut it = l.split_whitespace().map(str::parse::<u64>);
-            match (it.next(), it.next()) {
-                (Some(Ok(a)), Some(Ok(b))) => Ok((a, b)),
-                _ => bail!("{}: not a pair of stamps: {l:?}", path.display()),
-            }
-        })
-        .collect()
 }
 
 /// The interpreter of the ROS 2 bridge's test environment (`scripts/ros2-tests` makes it, with
@@ -84,7 +67,10 @@ pub fn run(python: &Path, bridge: &Path, run: &ScriptRun<'_>) -> anyhow::Result<
         )?),
         missed,
         odom_parts: crate::parts::odom(
-            &read_pairs(&out.join("state.pairs"))?,
+            &read_stamps::<2>(&out.join("state.pairs"))?
+                .into_iter()
+                .map(|[read, taken]| (read, taken))
+                .collect::<Vec<_>>(),
             &crate::parts::read_trace(&out.join("odom.trace"), chassis_ipc::ODOM_TRACE)?,
         ),
     })
