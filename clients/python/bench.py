@@ -136,7 +136,7 @@ SAID = _said_ranges()
 
 def body(state: chassis.ChassisState) -> bytes:
     """What a sample says, without what every publication changes (:data:`SAID`). Cheap: it
-    runs between two samples of a burst, whose second waits for it."""
+    runs between two bursts, and a sample arriving meanwhile waits for it."""
     raw = bytes(state)
     return b"".join([raw[start:end] for start, end in SAID])
 
