@@ -354,6 +354,9 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
 
     let out = env.chassis_ok(&["control", "--name", &n, "estop-release"]);
     assert!(out.contains("estop released"), "{out}");
+    // A release never starts motion (tests/tests/latch.rs): teleop asks for zero, then drives.
+    // Without it the test passed only when the CLI calls above outlasted teleop's timeout.
+    teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
     let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
     assert!(
         high > 0.2,
