@@ -395,6 +395,87 @@ fn sigterm_commands_zero_and_exits_zero() {
     );
 }
 
+/// A signal that interrupts a client's wait is no failure: `chassis echo` stopped (Ctrl-Z) and
+/// continued (`fg`) three times goes on printing, on each of its topics (the client library's
+/// state, mux and frame waits), and SIGINT then ends it with 0.
+#[test]
+fn a_client_stopped_and_continued_goes_on_and_sigint_ends_it_with_zero() {
+    let (mut env, n, _robot) = Env::serving(
+        "stop-continue",
+        ("stopcont", "titan"),
+        &["--no-safety-monitor"],
+        UP,
+    );
+    fn printed(env: &mut Env, echo: usize) -> usize {
+        env.proc(echo).log_text().lines().count()
+    }
+    for topic in ["state", "mux", "frames"] {
+        let echo = env.spawn(
+            &format!("echo-{topic}"),
+            "chassis",
+            &["echo", topic, "--name", &n],
+        );
+        assert!(
+            wait_for(UP, || printed(&mut env, echo) > 0).is_some(),
+            "echo {topic} printed nothing:\n{}",
+            env.logs()
+        );
+        for _ in 0..3 {
+            env.proc(echo).signal(Signal::SIGSTOP);
+            pause(Duration::from_millis(100));
+            env.proc(echo).signal(Signal::SIGCONT);
+            pause(Duration::from_millis(50));
+        }
+        let before = printed(&mut env, echo);
+        let goes_on = wait_for(Duration::from_secs(3), || {
+            printed(&mut env, echo) > before + 2
+        });
+        assert!(
+            goes_on.is_some() && env.proc(echo).is_running(),
+            "echo {topic} stopped printing after a stop and a continue:\n{}",
+            env.proc(echo).log_text()
+        );
+        env.proc(echo).signal(Signal::SIGINT);
+        assert_eq!(
+            env.proc(echo).wait_exit(Duration::from_secs(5)),
+            Some(0),
+            "echo {topic} after SIGINT:\n{}",
+            env.proc(echo).log_text()
+        );
+    }
+}
+
+/// The same for the simulated chassis of a pty: `chassisd sim` stopped and continued keeps
+/// simulating (chassisd over the pty reads its feedback again); SIGTERM ends it with 0.
+#[test]
+fn a_simulated_chassis_stopped_and_continued_goes_on_and_sigterm_ends_it_with_zero() {
+    let mut env = Env::new("sim-stop-continue");
+    let n = name("simcont");
+    let link = env.dir.join("titan-slcan");
+    let (sim, mut robot) = env.over_pty(("titan", &n), Line::Slcan, &link, &[], UP);
+    for _ in 0..3 {
+        env.proc(sim).signal(Signal::SIGSTOP);
+        pause(Duration::from_millis(100));
+        env.proc(sim).signal(Signal::SIGCONT);
+        pause(Duration::from_millis(50));
+    }
+    let frames = |robot: &mut Robot| state(robot).link.rx_frames;
+    let before = frames(&mut robot);
+    let again = wait_for(Duration::from_secs(3), || frames(&mut robot) > before + 10);
+    assert!(
+        again.is_some() && env.proc(sim).is_running(),
+        "no feedback after the simulator was stopped and continued\n{}",
+        env.logs()
+    );
+    env.proc(sim).signal(Signal::SIGTERM);
+    assert_eq!(
+        env.proc(sim).wait_exit(Duration::from_secs(5)),
+        Some(0),
+        "{}",
+        env.proc(sim).log_text()
+    );
+}
+
 #[test]
 fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_loses() {
     let (env, n, mut robot) =

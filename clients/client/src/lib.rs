@@ -67,7 +67,7 @@ pub use chassis_ipc::{
     IPC_PREFIX_ENV, PASS_TRACE_ENV, STATE_BUFFER, ServiceKind, TEST_LOOP_STALL_ENV, service_name,
 };
 use iceoryx2::pending_response::PendingResponse;
-use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -359,9 +359,7 @@ impl Robot {
             return Ok(self.latest_mux);
         }
         if let Some(events) = &self.mux_events {
-            events
-                .timed_wait(|_| {}, timeout)
-                .map_err(ipc("waiting for mux status"))?;
+            wait_listener(events, timeout).map_err(ipc("waiting for mux status"))?;
         }
         self.drain_mux()?;
         Ok(self.latest_mux)
@@ -412,9 +410,11 @@ impl Robot {
                 });
             }
             // The state is published at least every 100 ms: each sample is a chance to look.
-            self.state_events
-                .timed_wait(|_| {}, Duration::from_nanos(left).min(DESCRIPTION_POLL))
-                .map_err(ipc("waiting for the robot description"))?;
+            wait_listener(
+                &self.state_events,
+                Duration::from_nanos(left).min(DESCRIPTION_POLL),
+            )
+            .map_err(ipc("waiting for the robot description"))?;
             drained = self.drain_description();
             if matches!(drained, Ok(true)) {
                 return self.latest_description.ok_or(ClientError::NoDescription {
@@ -712,13 +712,11 @@ fn ask<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
                 timeout,
             });
         }
-        counter
-            .replies
-            .timed_wait(
-                |_| {},
-                Duration::from_nanos(left).min(Duration::from_millis(50)),
-            )
-            .map_err(ipc("waiting for the answer"))?;
+        wait_listener(
+            &counter.replies,
+            Duration::from_nanos(left).min(Duration::from_millis(50)),
+        )
+        .map_err(ipc("waiting for the answer"))?;
     }
 }
 
@@ -803,9 +801,7 @@ impl FrameTap {
         if n > 0 {
             return Ok(n);
         }
-        self.events
-            .timed_wait(|_| {}, timeout)
-            .map_err(ipc("waiting for frames"))?;
+        wait_listener(&self.events, timeout).map_err(ipc("waiting for frames"))?;
         Ok(0)
     }
 }
@@ -1010,6 +1006,20 @@ fn receive_all<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
     Ok(n)
 }
 
+/// Waits at most `timeout` for a notification on `listener`. A signal that interrupts the wait
+/// ends it early as a wake-up with nothing, like a timeout: SIGTERM and SIGINT are the caller's
+/// to see (its termination flag), and a SIGCONT after a stop (Ctrl-Z, `fg`) or a debugger
+/// attaching is no reason for a client to fail. Only a failure of the listener is an error.
+pub fn wait_listener(
+    listener: &Listener<ipc::Service>,
+    timeout: Duration,
+) -> Result<(), ListenerWaitError> {
+    match listener.timed_wait(|_| {}, timeout) {
+        Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
+        Err(e) => Err(e),
+    }
+}
+
 /// Runs `drain` (it returns how many samples it took); while it takes none, waits on `events`
 /// until `timeout` has passed and drains again after every wake-up. Returns the count of the
 /// drain that took something (0: nothing within `timeout`).
@@ -1029,9 +1039,7 @@ fn drain_or_wait(
         if left == 0 {
             return Ok(0);
         }
-        events
-            .timed_wait(|_| {}, Duration::from_nanos(left))
-            .map_err(ipc(what))?;
+        wait_listener(events, Duration::from_nanos(left)).map_err(ipc(what))?;
         let n = drain()?;
         if n > 0 {
             return Ok(n);

@@ -28,6 +28,7 @@ use anyhow::Context as _;
 use chassis_client::{
     BusFrame, ChassisState, ControlRequest, ControlResponse, ControlStatus, MuxStatus,
     RobotDescription, ServiceKind, VelocityRequest, now_ns, service_name, termination_requested,
+    wait_listener,
 };
 use chassis_ipc::{CMD, CONTROL, DESCRIPTION, FRAMES, MUX, STATE, StampTrace, Writer};
 use iceoryx2::port::update_connections::UpdateConnections as _;
@@ -405,9 +406,7 @@ fn forward(
     eprintln!("chassis-zenoh: source '{source}' of robot '{name}' ready here");
     let mut failed: u64 = 0;
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
-        reader
-            .listener
-            .timed_wait(|_| {}, POLL)
+        wait_listener(&reader.listener, POLL)
             .map_err(|e| anyhow::anyhow!("waiting on {service}: {e}"))?;
         while let Some(sample) = reader
             .subscriber
@@ -441,9 +440,7 @@ fn serve_control(
     let requests = Wire::<ControlRequest>::new();
     let responses = Wire::<ControlResponse>::new();
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
-        ports
-            .requests
-            .timed_wait(|_| {}, POLL)
+        wait_listener(&ports.requests, POLL)
             .map_err(|e| anyhow::anyhow!("waiting on {service}: {e}"))?;
         while let Some(active) = ports
             .server

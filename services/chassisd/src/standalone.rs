@@ -147,13 +147,17 @@ pub fn run(config: &Config) -> Result<(), StandaloneError> {
             Duration::from_millis(100),
         );
         match result {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+            Ok(WaitSetRunResult::TerminationRequest) => {
                 info!("stopping the simulated chassis");
                 return match chassis {
                     Chassis::Running(sim) => sim.stop().map_err(StandaloneError::from),
                     Chassis::Down { .. } => Ok(()),
                 };
             }
+            // A signal interrupted the wait: SIGTERM and SIGINT come back as a termination
+            // request from the next wait; a SIGCONT after a stop or a debugger is no reason to
+            // stop the chassis.
+            Ok(WaitSetRunResult::Interrupt) => continue,
             Ok(_) => {}
             Err(e) => return Err(StandaloneError::WaitSetRun(e)),
         }
