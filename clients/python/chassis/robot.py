@@ -136,6 +136,18 @@ def _seconds(timeout: float) -> iox2.Duration:
     return iox2.Duration.from_secs_f64(max(0.0, timeout))
 
 
+def _wait(listener: Any, timeout: float) -> None:
+    """Waits at most ``timeout`` seconds for a notification on ``listener``. A signal that
+    interrupts the wait ends it early as a wake-up with nothing, like a timeout: a SIGCONT after
+    Ctrl-Z and ``fg`` or a debugger attaching is no reason to fail, and SIGINT is raised as
+    ``KeyboardInterrupt`` by Python itself right after. Only a failure of the listener raises."""
+    try:
+        listener.timed_wait(_seconds(timeout))
+    except iox2.ListenerWaitError as e:
+        if "InterruptSignal" not in str(e):
+            raise
+
+
 class VelocityRequest(_VelocityRequest):
     """``chassis::VelocityRequest``: what a source asks the mux for, with its constructors."""
 
@@ -269,7 +281,7 @@ class _Reader:
         self.listener.try_wait()
         sample = self._next()
         if sample is None:
-            self.listener.timed_wait(_seconds(timeout))
+            _wait(self.listener, timeout)
             sample = self._next()
         while sample is not None:
             yield sample
@@ -425,7 +437,7 @@ class _Counter:
             left = deadline - time.monotonic()
             if left <= 0:
                 raise Timeout(f"no answer from {self.name} within {timeout} s")
-            self.replies.timed_wait(_seconds(min(left, _ANSWER_POLL_S)))
+            _wait(self.replies, min(left, _ANSWER_POLL_S))
 
 
 def _flag(value: Any, what: str) -> int:

@@ -250,6 +250,47 @@ def test_a_killed_python_source_ends_its_motion_at_its_timeout(world: World) -> 
     )
 
 
+READ_STATES = """
+import sys
+import chassis
+robot = chassis.Robot.connect(sys.argv[1])
+stream = robot.state_stream()
+read = 0
+try:
+    while True:
+        for _ in stream.each(0.5):
+            read += 1
+        robot.wait_state(0.05)
+        print(read, flush=True)
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+"""
+
+
+def test_a_reader_stopped_and_continued_goes_on_and_ctrl_c_reaches_it(world: World) -> None:
+    """A signal that interrupts a wait (a SIGCONT after Ctrl-Z and ``fg``) is no failure of the
+    reader; SIGINT still ends it as ``KeyboardInterrupt``."""
+    world.chassisd("titan")
+    reader = world.python("reader", "-c", READ_STATES, "titan")
+    log = world.tmp / "reader.log"
+
+    def lines() -> list[str]:
+        return log.read_text(errors="replace").splitlines()
+
+    wait_until("the reader reads", lambda: len(lines()) > 2, 20.0, world)
+    for _ in range(3):
+        reader.send_signal(signal.SIGSTOP)
+        time.sleep(0.1)
+        reader.send_signal(signal.SIGCONT)
+        time.sleep(0.05)
+    read = len(lines())
+    wait_until("the reader goes on", lambda: len(lines()) > read + 2, 5.0, world)
+    assert reader.poll() is None, world.logs()
+    reader.send_signal(signal.SIGINT)
+    assert reader.wait(timeout=5) == 0, world.logs()
+    assert lines()[-1] == "interrupted", world.logs()
+
+
 @pytest.mark.parametrize("read", ["wait", "each"])
 def test_a_state_stream_loses_nothing_on_a_flooded_bus(world: World, read: str) -> None:
     robot = world.chassisd("titan")
