@@ -213,6 +213,7 @@ const SHELL_BUILTINS: &[&str] = &[
     "hash",
     "if",
     "in",
+    "jobs",
     "kill",
     "let",
     "local",
