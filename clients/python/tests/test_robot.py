@@ -251,8 +251,11 @@ def test_a_killed_python_source_ends_its_motion_at_its_timeout(world: World) -> 
 
 
 READ_STATES = """
+import signal
 import sys
 import chassis
+# Ctrl-C as in a terminal: a runner in the background hands its children SIGINT ignored.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 robot = chassis.Robot.connect(sys.argv[1])
 stream = robot.state_stream()
 read = 0
