@@ -770,7 +770,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
 
             let mut odom_parts = None;
             if let Some(dds) = ros2 {
-                odom_parts = Some(dds.odom_parts);
+                odom_parts = Some(parts::odom(&dds.odom_pairs, &dds.odom_trace, &passes));
                 let conditions = |pace: String, carried: &str| {
                     format!(
                         "one message every {pace} after 200 uncounted, {carried}, measured by \

@@ -238,29 +238,70 @@ fn first_by_read(trace: &[[u64; 4]]) -> HashMap<u64, &[u64; 4]> {
     by_read
 }
 
-/// Frame read → the bridge's state loop woke with the sample → the odom handed to RustDDS → the
-/// peer took it, for each `(frame read, taken)` sample of the ROS 2 row whose odom is in the
-/// bridge's trace (`[read, woke, write begun, written]` a line, joined on the frame's read time).
-/// The write's return is not a boundary: on a shared CPU the peer often has the odom before the
-/// write returns (RustDDS' sender and the peer ran in between).
-pub fn odom(samples: &[(u64, u64)], trace: &[[u64; 4]]) -> Split {
+/// The first of `with_state` ([`state_passes`]) whose readers' notification began at or after
+/// `read`: the notification that follows the frame's read (its own pass's, which publishes the
+/// frame's state before it notifies).
+fn notifying_pass<'a>(with_state: &[&'a PassStamps], read: u64) -> Option<&'a PassStamps> {
+    let before = with_state.partition_point(|p| p.state_wake_begun < read);
+    with_state.get(before).copied()
+}
+
+/// The parts of a bridge's sample from the frame's read until the bridge's loop woke with it,
+/// at the stamps of [`to_bridge`].
+fn to_bridge_parts(bridge: &'static str) -> [(&'static str, Whose); 3] {
+    [
+        (
+            "frame read → notification begun (chassisd: decode, state, the rest of the pass)",
+            Code,
+        ),
+        STATE_PASS[2],
+        (bridge, Outside),
+    ]
+}
+
+/// `[frame read, notification begun, returned, bridge woke]` for a frame read at `read` that a
+/// bridge's loop woke with at `woke`: the notification is the first after the read in
+/// chassisd's pass trace (none: `None`). A bridge awake before the notification (still at the
+/// samples before) spent nothing on it and on a wake-up, as a reader in [`state`].
+fn to_bridge(with_state: &[&PassStamps], read: u64, woke: u64) -> Option<[u64; 4]> {
+    let p = notifying_pass(with_state, read)?;
+    Some([
+        read,
+        p.state_wake_begun.min(woke),
+        p.state_readers_woken.min(woke),
+        woke,
+    ])
+}
+
+/// Frame read → chassisd's pass notified the state readers → the notification returned → the
+/// bridge's state loop woke with the sample → the odom handed to RustDDS → the peer took it,
+/// for each `(frame read, taken)` sample of the ROS 2 row whose odom is in the bridge's trace
+/// (`[read, woke, write begun, written]` a line, joined on the frame's read time) and whose
+/// frame is followed by a notification in chassisd's pass trace. A bridge awake before the
+/// notification (still converting the sample before) spent nothing on it and on a wake-up, as
+/// in [`state`]. The write's return is not a boundary: on a shared CPU the peer often has the
+/// odom before the write returns (RustDDS' sender and the peer ran in between).
+pub fn odom(samples: &[(u64, u64)], trace: &[[u64; 4]], passes: &[PassStamps]) -> Split {
     // The first odom of each read time: the one the peer counts (a later one repeats it).
     let by_read = first_by_read(trace);
+    let with_state = state_passes(passes);
     split(
         &[
-            (
-                "frame read → bridge woke (chassisd's state path, iceoryx2)",
-                Code,
-            ),
-            ("bridge woke → odom handed to RustDDS (conversion)", Code),
-            (
-                "handed to RustDDS → taken by the peer (RustDDS' write and sender, UDP, Cyclone DDS)",
-                Outside,
-            ),
-        ],
+            &to_bridge_parts("notification returned → bridge woke (its wake-up)")[..],
+            &[
+                ("bridge woke → odom handed to RustDDS (conversion)", Code),
+                (
+                    "handed to RustDDS → taken by the peer (RustDDS' write and sender, UDP, Cyclone DDS)",
+                    Outside,
+                ),
+            ],
+        ]
+        .concat(),
         samples.iter().filter_map(|&(read, taken)| {
             let t = by_read.get(&read)?;
-            Some(vec![read, t[1], t[2], taken])
+            let mut stamps = to_bridge(&with_state, read, t[1])?.to_vec();
+            stamps.extend([t[2], taken]);
+            Some(stamps)
         }),
     )
 }
@@ -276,33 +317,43 @@ pub fn read_trace<const N: usize>(
         .with_context(|| format!("{}", path.display()))
 }
 
-/// Frame read → the robot side's export loop woke with the sample → its put began → the
-/// operator side's Zenoh callback had it → the mirror's loop took it → handed to iceoryx2 → the
-/// reader has it, for each `(frame read, received)` sample of the Zenoh state row whose state is
-/// in both sides' traces (chassis-zenoh's `CHASSIS_ZENOH_TRACE`, joined on the frame's read
-/// time: the robot side's `[read, woke, put begun, put returned]`, the operator side's `[read,
-/// callback, taken, handed]`). The put's return is not a boundary, as the odom's write is not.
-pub fn zenoh_state(samples: &[(u64, u64)], export: &[[u64; 4]], mirror: &[[u64; 4]]) -> Split {
+/// Frame read → chassisd's pass notified the state readers → the notification returned → the
+/// robot side's export loop woke with the sample → its put began → the operator side's Zenoh
+/// callback had it → the mirror's loop took it → handed to iceoryx2 → the reader has it, for
+/// each `(frame read, received)` sample of the Zenoh state row whose state is in both sides'
+/// traces (chassis-zenoh's `CHASSIS_ZENOH_TRACE`, joined on the frame's read time: the robot
+/// side's `[read, woke, put begun, put returned]`, the operator side's `[read, callback, taken,
+/// handed]`) and whose frame is followed by a notification in chassisd's pass trace (as in
+/// [`odom`]). The put's return is not a boundary, as the odom's write is not.
+pub fn zenoh_state(
+    samples: &[(u64, u64)],
+    export: &[[u64; 4]],
+    mirror: &[[u64; 4]],
+    passes: &[PassStamps],
+) -> Split {
     let (export, mirror) = (first_by_read(export), first_by_read(mirror));
+    let with_state = state_passes(passes);
     split(
         &[
-            (
-                "frame read → export woke (chassisd's state path, iceoryx2)",
-                Code,
-            ),
-            ("export woke → put begun (the newest of the wake-up)", Code),
-            (
-                "put begun → operator's callback (Zenoh: put, TCP over the veth, its runtime)",
-                Outside,
-            ),
-            ("callback → mirror's loop took it (channel hand-off)", Code),
-            ("taken → handed to iceoryx2 (decode, link watch)", Code),
-            ("handed to iceoryx2 → reader has it (iceoryx2)", Outside),
-        ],
+            &to_bridge_parts("notification returned → export woke (its wake-up)")[..],
+            &[
+                ("export woke → put begun (the newest of the wake-up)", Code),
+                (
+                    "put begun → operator's callback (Zenoh: put, TCP over the veth, its runtime)",
+                    Outside,
+                ),
+                ("callback → mirror's loop took it (channel hand-off)", Code),
+                ("taken → handed to iceoryx2 (decode, link watch)", Code),
+                ("handed to iceoryx2 → reader has it (iceoryx2)", Outside),
+            ],
+        ]
+        .concat(),
         samples.iter().filter_map(|&(read, received)| {
             let e = export.get(&read)?;
             let m = mirror.get(&read)?;
-            Some(vec![read, e[1], e[2], m[1], m[2], m[3], received])
+            let mut stamps = to_bridge(&with_state, read, e[1])?.to_vec();
+            stamps.extend([e[2], m[1], m[2], m[3], received]);
+            Some(stamps)
         }),
     )
 }
@@ -396,9 +447,61 @@ mod tests {
             [1_000_000, 1_070_000, 1_085_000, 1_600_000],
             [1_000_000, 9_000_000, 9_100_000, 9_200_000],
         ];
-        let split = odom(&[(1_000_000, 1_500_000), (2_000_000, 2_600_000)], &trace);
+        // The frame's pass notified at 1.040-1.050 ms; a pass before it (notified at 0.9 ms)
+        // is not the frame's.
+        let passes = [
+            PassStamps {
+                state_handed: 880_000,
+                state_wake_begun: 900_000,
+                state_readers_woken: 910_000,
+                ..PassStamps::default()
+            },
+            PassStamps {
+                state_handed: 1_010_000,
+                state_wake_begun: 1_040_000,
+                state_readers_woken: 1_050_000,
+                ..PassStamps::default()
+            },
+        ];
+        let split = odom(
+            &[(1_000_000, 1_500_000), (2_000_000, 2_600_000)],
+            &trace,
+            &passes,
+        );
         // Taken before the write returned (1.6 ms): counted all the same.
-        assert_eq!(p50s(&split), vec![(70, 1), (15, 1), (415, 1)], "{split:?}");
+        assert_eq!(
+            p50s(&split),
+            vec![(40, 1), (10, 1), (20, 1), (15, 1), (415, 1)],
+            "{split:?}"
+        );
+    }
+
+    #[test]
+    fn an_odom_taken_by_a_bridge_awake_before_the_notification_spent_nothing_on_it() {
+        let trace = [[1_000_000, 1_030_000, 1_045_000, 1_100_000]];
+        let passes = [PassStamps {
+            state_handed: 1_010_000,
+            state_wake_begun: 1_040_000,
+            state_readers_woken: 1_050_000,
+            ..PassStamps::default()
+        }];
+        let split = odom(&[(1_000_000, 1_500_000)], &trace, &passes);
+        assert_eq!(
+            p50s(&split),
+            vec![(30, 1), (0, 1), (0, 1), (15, 1), (455, 1)],
+            "{split:?}"
+        );
+        // A frame read after its pass handed its first state belongs to that pass all the same.
+        let later = [[1_020_000, 1_060_000, 1_075_000, 1_100_000]];
+        let split = odom(&[(1_020_000, 1_500_000)], &later, &passes);
+        assert_eq!(
+            p50s(&split),
+            vec![(20, 1), (10, 1), (10, 1), (15, 1), (425, 1)],
+            "{split:?}"
+        );
+        // No notification after the frame's read: left out.
+        let split = odom(&[(1_000_000, 1_500_000)], &trace, &passes[..0]);
+        assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");
     }
 
     #[test]
@@ -478,15 +581,31 @@ mod tests {
             [1_000_000, 1_020_000, 1_050_000, 1_051_000],
             [2_000_000, 2_020_000, 2_050_000, 2_051_000],
         ];
-        let split = zenoh_state(
-            &[(1_000_000, 1_100_000), (2_000_000, 2_100_000)],
-            &export,
-            &mirror,
-        );
+        // The frame's pass notified at 1.004-1.006 ms.
+        let passes = [PassStamps {
+            state_handed: 1_002_000,
+            state_wake_begun: 1_004_000,
+            state_readers_woken: 1_006_000,
+            ..PassStamps::default()
+        }];
+        let samples = [(1_000_000, 1_100_000), (2_000_000, 2_100_000)];
+        let split = zenoh_state(&samples, &export, &mirror, &passes);
         assert_eq!(
             p50s(&split),
-            vec![(10, 1), (2, 1), (8, 1), (30, 1), (1, 1), (49, 1)],
+            vec![
+                (4, 1),
+                (2, 1),
+                (4, 1),
+                (2, 1),
+                (8, 1),
+                (30, 1),
+                (1, 1),
+                (49, 1)
+            ],
             "{split:?}"
         );
+        // Without a notification after the frame's read in chassisd's trace: left out.
+        let split = zenoh_state(&samples, &export, &mirror, &[]);
+        assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");
     }
 }

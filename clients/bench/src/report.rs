@@ -1407,7 +1407,9 @@ impl Report {
              `CHASSIS_ZENOH_TRACE=FILE` on both sides (the bench sets it), keeps on the robot's \
              side when its export loop woke with a state and when its put began and returned, \
              and on the operator's when the Zenoh callback had the state, when the mirror's \
-             loop took it and when it handed it to iceoryx2. Reproduce: the command \
+             loop took it and when it handed it to iceoryx2. Both bridges' rows take from \
+             chassisd's pass trace the notification that followed the frame's read: the \
+             bridge's wake-up is outside the code, as a reader's. Reproduce: the command \
              at the top of this document; `--skip fanout,cost,throughput,zenoh` keeps the \
              paths and their baselines.\n\n\
              | path | run | loop | placement | part | whose | samples | p50 µs | p99 µs | share \

@@ -28,8 +28,11 @@ pub struct Ros2Figures {
     pub raw_out_period: Duration,
     /// `cmd_vel` messages whose frame did not appear.
     pub missed: u64,
-    /// The state row's samples split at the bridge's stamps.
-    pub odom_parts: crate::parts::Split,
+    /// Each counted odom's `(frame read, taken by the peer)`.
+    pub odom_pairs: Vec<(u64, u64)>,
+    /// The bridge's odom trace (`[read, woke, write begun, written]` a line): with chassisd's
+    /// pass trace, [`crate::parts::odom`] splits the state row.
+    pub odom_trace: Vec<[u64; 4]>,
 }
 
 /// The interpreter of the ROS 2 bridge's test environment (`scripts/ros2-tests` makes it, with
@@ -66,12 +69,10 @@ pub fn run(python: &Path, bridge: &Path, run: &ScriptRun<'_>) -> anyhow::Result<
             &out.join("raw-out.period_ns"),
         )?),
         missed,
-        odom_parts: crate::parts::odom(
-            &read_stamps::<2>(&out.join("state.pairs"))?
-                .into_iter()
-                .map(|[read, taken]| (read, taken))
-                .collect::<Vec<_>>(),
-            &crate::parts::read_trace(&out.join("odom.trace"), chassis_ipc::ODOM_TRACE)?,
-        ),
+        odom_pairs: read_stamps::<2>(&out.join("state.pairs"))?
+            .into_iter()
+            .map(|[read, taken]| (read, taken))
+            .collect(),
+        odom_trace: crate::parts::read_trace(&out.join("odom.trace"), chassis_ipc::ODOM_TRACE)?,
     })
 }

@@ -17,7 +17,7 @@ use anyhow::{Context, bail};
 use chassis_client::{Robot, STATE_BUFFER, Source, now_ns};
 use chassis_protocols::RobotKind;
 
-use crate::paths::{self, BusKind, LoopMode, StateRecorder};
+use crate::paths::{self, BusKind, LoopMode, ServiceConfig, StateRecorder};
 use crate::stats::Latencies;
 
 const ROBOT_ADDR: &str = "10.77.0.1";
@@ -267,11 +267,14 @@ pub fn run(
     states: u64,
 ) -> anyhow::Result<ZenohFigures> {
     let netns = Netns::new()?;
-    let (service, mut robot) = paths::start(
+    // chassisd keeps its pass trace: the state row's split starts with its notification.
+    let (service, mut robot) = paths::start_configured(
         RobotKind::Titan,
         BusKind::Sim,
         LoopMode::Event,
         None,
+        ServiceConfig::Bench,
+        true,
         prefix,
         dir,
     )?;
@@ -372,7 +375,7 @@ pub fn run(
     let state_period = state_period(&reads);
     let raw_state = bare_hop(&netns, prefix, &operator_prefix, dir, states, state_period)?;
     drop(robot);
-    drop(service);
+    let passes = service.stop()?;
     drop(netns);
     // The mirror's iceoryx2 files, under the operator's prefix of this run only.
     for (path, e) in chassis_ipc::remove_ipc_files(&operator_prefix) {
@@ -387,6 +390,7 @@ pub fn run(
         &samples,
         &crate::parts::read_trace(&export_trace, chassis_ipc::ZENOH_EXPORT_TRACE)?,
         &crate::parts::read_trace(&mirror_trace, chassis_ipc::ZENOH_MIRROR_TRACE)?,
+        &passes,
     );
     Ok(ZenohFigures {
         command,
