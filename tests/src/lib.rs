@@ -91,6 +91,17 @@ impl Proc {
         let _ = kill(self.pid(), signal);
     }
 
+    /// Stops the process (SIGSTOP, as Ctrl-Z) and continues it (SIGCONT, as `fg`) `times`
+    /// times: 100 ms stopped, then 50 ms running.
+    pub fn stop_and_continue(&self, times: usize) {
+        for _ in 0..times {
+            self.signal(Signal::SIGSTOP);
+            pause(Duration::from_millis(100));
+            self.signal(Signal::SIGCONT);
+            pause(Duration::from_millis(50));
+        }
+    }
+
     /// Waits at most `timeout` for the process to end; returns its exit code (None: still running
     /// or killed by a signal).
     pub fn wait_exit(&mut self, timeout: Duration) -> Option<i32> {

@@ -420,12 +420,7 @@ fn a_client_stopped_and_continued_goes_on_and_sigint_ends_it_with_zero() {
             "echo {topic} printed nothing:\n{}",
             env.logs()
         );
-        for _ in 0..3 {
-            env.proc(echo).signal(Signal::SIGSTOP);
-            pause(Duration::from_millis(100));
-            env.proc(echo).signal(Signal::SIGCONT);
-            pause(Duration::from_millis(50));
-        }
+        env.proc(echo).stop_and_continue(3);
         let before = printed(&mut env, echo);
         let goes_on = wait_for(Duration::from_secs(3), || {
             printed(&mut env, echo) > before + 2
@@ -453,12 +448,7 @@ fn a_simulated_chassis_stopped_and_continued_goes_on_and_sigterm_ends_it_with_ze
     let n = name("simcont");
     let link = env.dir.join("titan-slcan");
     let (sim, mut robot) = env.over_pty(("titan", &n), Line::Slcan, &link, &[], UP);
-    for _ in 0..3 {
-        env.proc(sim).signal(Signal::SIGSTOP);
-        pause(Duration::from_millis(100));
-        env.proc(sim).signal(Signal::SIGCONT);
-        pause(Duration::from_millis(50));
-    }
+    env.proc(sim).stop_and_continue(3);
     let frames = |robot: &mut Robot| state(robot).link.rx_frames;
     let before = frames(&mut robot);
     let again = wait_for(Duration::from_secs(3), || frames(&mut robot) > before + 10);

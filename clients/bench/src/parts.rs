@@ -151,6 +151,13 @@ fn pass_of<'a>(with_state: &[&'a PassStamps], handed: u64) -> Option<&'a PassSta
     with_state.get(after.checked_sub(1)?).copied()
 }
 
+/// The notification of pass `p` as a reader that had its sample at `had` saw it: `[begun,
+/// returned]`, each at most `had`. A reader that had the sample before the pass notified it (a
+/// polling reader, or one awake already) spent nothing on the notification and a wake-up.
+fn notification(p: &PassStamps, had: u64) -> [u64; 2] {
+    [p.state_wake_begun.min(had), p.state_readers_woken.min(had)]
+}
+
 /// The parts of a state sample within chassisd's pass, up to its readers' notification.
 const STATE_PASS: [(&str, Whose); 3] = [
     ("frame read → handed to iceoryx2 (decode, state)", Code),
@@ -177,14 +184,8 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     split(
         &names,
         samples.iter().filter_map(|&(read, handed, received)| {
-            let p = pass_of(&with_state, handed)?;
-            Some(vec![
-                read,
-                handed,
-                p.state_wake_begun.min(received),
-                p.state_readers_woken.min(received),
-                received,
-            ])
+            let [begun, woken] = notification(pass_of(&with_state, handed)?, received);
+            Some(vec![read, handed, begun, woken, received])
         }),
     )
 }
@@ -214,12 +215,11 @@ pub fn python_state(samples: &[[u64; 4]], passes: &[PassStamps]) -> Split {
         samples
             .iter()
             .filter_map(|&[read, handed, returned, received]| {
-                let p = pass_of(&with_state, handed)?;
-                let woken = p.state_readers_woken.min(received);
+                let [begun, woken] = notification(pass_of(&with_state, handed)?, received);
                 Some(vec![
                     read,
                     handed,
-                    p.state_wake_begun.min(received),
+                    begun,
                     woken,
                     returned.max(woken),
                     received,
@@ -264,13 +264,8 @@ fn to_bridge_parts(bridge: &'static str) -> [(&'static str, Whose); 3] {
 /// chassisd's pass trace (none: `None`). A bridge awake before the notification (still at the
 /// samples before) spent nothing on it and on a wake-up, as a reader in [`state`].
 fn to_bridge(with_state: &[&PassStamps], read: u64, woke: u64) -> Option<[u64; 4]> {
-    let p = notifying_pass(with_state, read)?;
-    Some([
-        read,
-        p.state_wake_begun.min(woke),
-        p.state_readers_woken.min(woke),
-        woke,
-    ])
+    let [begun, woken] = notification(notifying_pass(with_state, read)?, woke);
+    Some([read, begun, woken, woke])
 }
 
 /// Frame read → chassisd's pass notified the state readers → the notification returned → the
@@ -370,6 +365,17 @@ mod tests {
             .collect()
     }
 
+    /// A pass that handed its first state at `handed` and notified the state readers from
+    /// `begun` to `woken`.
+    fn notifying(handed: u64, begun: u64, woken: u64) -> PassStamps {
+        PassStamps {
+            state_handed: handed,
+            state_wake_begun: begun,
+            state_readers_woken: woken,
+            ..PassStamps::default()
+        }
+    }
+
     /// A pass whose loop began waiting at 1.04 ms, woke at `woke` and read, encoded and wrote a
     /// request's frame by 1.06 ms.
     fn pass_woken_at(woke: u64) -> [PassStamps; 1] {
@@ -450,18 +456,8 @@ mod tests {
         // The frame's pass notified at 1.040-1.050 ms; a pass before it (notified at 0.9 ms)
         // is not the frame's.
         let passes = [
-            PassStamps {
-                state_handed: 880_000,
-                state_wake_begun: 900_000,
-                state_readers_woken: 910_000,
-                ..PassStamps::default()
-            },
-            PassStamps {
-                state_handed: 1_010_000,
-                state_wake_begun: 1_040_000,
-                state_readers_woken: 1_050_000,
-                ..PassStamps::default()
-            },
+            notifying(880_000, 900_000, 910_000),
+            notifying(1_010_000, 1_040_000, 1_050_000),
         ];
         let split = odom(
             &[(1_000_000, 1_500_000), (2_000_000, 2_600_000)],
@@ -479,12 +475,7 @@ mod tests {
     #[test]
     fn an_odom_taken_by_a_bridge_awake_before_the_notification_spent_nothing_on_it() {
         let trace = [[1_000_000, 1_030_000, 1_045_000, 1_100_000]];
-        let passes = [PassStamps {
-            state_handed: 1_010_000,
-            state_wake_begun: 1_040_000,
-            state_readers_woken: 1_050_000,
-            ..PassStamps::default()
-        }];
+        let passes = [notifying(1_010_000, 1_040_000, 1_050_000)];
         let split = odom(&[(1_000_000, 1_500_000)], &trace, &passes);
         assert_eq!(
             p50s(&split),
@@ -514,12 +505,7 @@ mod tests {
                 state_readers_woken: 150,
                 ..PassStamps::default()
             },
-            PassStamps {
-                state_handed: 300,
-                state_wake_begun: 380,
-                state_readers_woken: 400,
-                ..PassStamps::default()
-            },
+            notifying(300, 380, 400),
         ];
         // The pass's second sample (handed at 130) counts; one handed at 200 belongs to no pass.
         let split = state(
@@ -543,12 +529,7 @@ mod tests {
 
     #[test]
     fn a_python_state_sample_splits_the_readers_part_at_its_waits_return() {
-        let passes = [PassStamps {
-            state_handed: 110,
-            state_wake_begun: 140,
-            state_readers_woken: 150,
-            ..PassStamps::default()
-        }];
+        let passes = [notifying(110, 140, 150)];
         // Woken at 190; the second sample was read at once after the first, without a wake-up
         // of its own, its notification having come while the stream read (its wait returned
         // before the notification: a part of 0).
@@ -582,12 +563,7 @@ mod tests {
             [2_000_000, 2_020_000, 2_050_000, 2_051_000],
         ];
         // The frame's pass notified at 1.004-1.006 ms.
-        let passes = [PassStamps {
-            state_handed: 1_002_000,
-            state_wake_begun: 1_004_000,
-            state_readers_woken: 1_006_000,
-            ..PassStamps::default()
-        }];
+        let passes = [notifying(1_002_000, 1_004_000, 1_006_000)];
         let samples = [(1_000_000, 1_100_000), (2_000_000, 2_100_000)];
         let split = zenoh_state(&samples, &export, &mirror, &passes);
         assert_eq!(

@@ -144,6 +144,7 @@ def _wait(listener: Any, timeout: float) -> None:
     try:
         listener.timed_wait(_seconds(timeout))
     except iox2.ListenerWaitError as e:
+        # The binding raises one exception type; its text names the variant.
         if "InterruptSignal" not in str(e):
             raise
 
