@@ -838,12 +838,12 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     py.missed,
                 ));
             }
-            let run_parts = |path: &str, parts| report::Parts {
+            let run_parts = |path: &str, split| report::Parts {
                 path: path.into(),
                 what: label.clone(),
                 mode: r.mode.arg().into(),
                 placement: placement.into(),
-                parts,
+                split,
             };
             if let Some(figures) = &command {
                 report.parts.push(run_parts(
@@ -1042,7 +1042,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 what: zenoh::STATE.into(),
                 mode: "event".into(),
                 placement: placement.into(),
-                parts: z.state_parts,
+                split: z.state_parts,
             });
         } else {
             report

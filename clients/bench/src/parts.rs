@@ -38,8 +38,18 @@ impl Part {
     }
 }
 
-/// The parts of one path, in the order a sample passes them.
-pub type Split = Vec<Part>;
+/// The parts of one path, in the order a sample passes them, and each sample's parts of one
+/// kind summed: a row's p99 is not the sum of its parts' p99s, and a few parts together can
+/// miss a target that none of them misses alone.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Split {
+    pub parts: Vec<Part>,
+    /// Each sample's parts outside the code, together: what the sample would have taken had
+    /// the code taken no time.
+    pub outside: Summary,
+    /// Each sample's parts of the code, together.
+    pub code: Summary,
+}
 
 use Whose::{Code, Outside};
 
@@ -58,6 +68,7 @@ pub fn in_service_command(part: &Part) -> bool {
 /// distributions between consecutive stamps; a sample whose stamps are not in order is left out.
 fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Split {
     let mut parts: Vec<Latencies> = names.iter().map(|_| Latencies::new()).collect();
+    let (mut outside, mut code) = (Latencies::new(), Latencies::new());
     for stamps in samples {
         if stamps.len() != names.len() + 1
             || stamps.contains(&0)
@@ -65,19 +76,27 @@ fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Sp
         {
             continue;
         }
-        for (part, w) in parts.iter_mut().zip(stamps.windows(2)) {
+        let mut sums = [0u64; 2];
+        for ((part, w), &(_, whose)) in parts.iter_mut().zip(stamps.windows(2)).zip(names) {
             part.record_between(w[0], w[1]);
+            sums[usize::from(whose == Code)] += w[1] - w[0];
         }
+        outside.record(sums[0]);
+        code.record(sums[1]);
     }
-    names
-        .iter()
-        .zip(parts)
-        .map(|(&(name, whose), l)| Part {
-            name: name.to_string(),
-            whose,
-            summary: l.summary(),
-        })
-        .collect()
+    Split {
+        parts: names
+            .iter()
+            .zip(parts)
+            .map(|(&(name, whose), l)| Part {
+                name: name.to_string(),
+                whose,
+                summary: l.summary(),
+            })
+            .collect(),
+        outside: outside.summary(),
+        code: code.summary(),
+    }
 }
 
 /// Request created → the loop waiting again (the work of the passes under way when it was
@@ -360,6 +379,7 @@ mod tests {
     /// Each part's p50 in whole µs (the histogram keeps 3 significant digits) and its count.
     fn p50s(split: &Split) -> Vec<(u64, u64)> {
         split
+            .parts
             .iter()
             .map(|p| (p.summary.p50_us as u64, p.summary.count))
             .collect()
@@ -399,8 +419,8 @@ mod tests {
             vec![(40, 1), (10, 1), (2, 1), (3, 1), (5, 1)],
             "{split:?}"
         );
-        assert_eq!(split[0].whose, Whose::Code);
-        assert_eq!(split[1].whose, Whose::Outside);
+        assert_eq!(split.parts[0].whose, Whose::Code);
+        assert_eq!(split.parts[1].whose, Whose::Outside);
         // Created while the loop waited: nothing of it was the loop's previous work.
         let split = command(&[(1_045_000, 1_060_000)], &pass_woken_at(1_050_000), false);
         assert_eq!(
@@ -411,10 +431,38 @@ mod tests {
     }
 
     #[test]
+    fn each_samples_parts_outside_the_code_and_in_it_are_summed_together() {
+        // 10 µs of wake-up and 5 of write outside; 40 + 2 + 3 µs of the code.
+        let [first] = pass_woken_at(1_050_000);
+        // Woken 1 µs after the request, written 13 µs after its write began: 14 µs outside.
+        let second = PassStamps {
+            waited_since: 2_040_000,
+            woke: 2_041_000,
+            requests_read: 2_043_000,
+            write_started: 2_044_000,
+            written: 2_057_000,
+            ..PassStamps::default()
+        };
+        let samples = [(1_000_000, 1_060_000), (2_040_000, 2_057_000)];
+        let split = command(&samples, &[first, second], false);
+        let max_us = |s: &Summary| s.max_us.round() as u64;
+        // Alone, the wake-up's longest is 10 µs and the write's 13; no sample had both.
+        assert_eq!(max_us(&split.parts[1].summary), 10, "{split:?}");
+        assert_eq!(max_us(&split.parts[4].summary), 13, "{split:?}");
+        assert_eq!(max_us(&split.outside), 15, "{split:?}");
+        assert_eq!(max_us(&split.code), 45, "{split:?}");
+        assert_eq!((split.outside.count, split.code.count), (2, 2));
+        // A sample left out of the parts is left out of the sums.
+        let split = command(&[(3_000_000, 3_100_000)], &[first], false);
+        assert_eq!((split.outside.count, split.code.count), (0, 0));
+    }
+
+    #[test]
     fn the_in_service_row_holds_the_command_splits_parts_from_the_request_read_on() {
         for polled in [false, true] {
             let split = command(&[], &pass_woken_at(1_050_000), polled);
             let within: Vec<&str> = split
+                .parts
                 .iter()
                 .filter(|p| in_service_command(p))
                 .map(|p| p.name.as_str())
@@ -443,7 +491,10 @@ mod tests {
         let mut first = pass_woken_at(1_049_000);
         first[0].waited_since = 0;
         let split = command(&[(1_050_000, 1_060_000)], &first, true);
-        assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");
+        assert!(
+            split.parts.iter().all(|p| p.summary.count == 0),
+            "{split:?}"
+        );
     }
 
     #[test]
@@ -492,7 +543,10 @@ mod tests {
         );
         // No notification after the frame's read: left out.
         let split = odom(&[(1_000_000, 1_500_000)], &trace, &passes[..0]);
-        assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");
+        assert!(
+            split.parts.iter().all(|p| p.summary.count == 0),
+            "{split:?}"
+        );
     }
 
     #[test]
@@ -512,19 +566,26 @@ mod tests {
             &[(100, 130, 190), (180, 200, 290), (250, 300, 450)],
             &passes,
         );
-        assert!(split.iter().all(|p| p.summary.count == 2), "{split:?}");
+        assert!(
+            split.parts.iter().all(|p| p.summary.count == 2),
+            "{split:?}"
+        );
         // The rest of the pass (300 → 380) and the notification (380 → 400) apart.
-        assert_eq!(split[1].summary.max_us, 0.08, "{split:?}");
-        assert_eq!(split[2].summary.max_us, 0.02, "{split:?}");
+        assert_eq!(split.parts[1].summary.max_us, 0.08, "{split:?}");
+        assert_eq!(split.parts[2].summary.max_us, 0.02, "{split:?}");
         // A polling reader had the sample at 350, before the pass notified its readers (380):
         // no notification, no wake-up; the pass's rest until then.
         let split = state(&[(250, 300, 350)], &passes);
         let max_10ns: Vec<u64> = split
+            .parts
             .iter()
             .map(|p| (p.summary.max_us * 1e2).round() as u64)
             .collect();
         assert_eq!(max_10ns, [5, 5, 0, 0], "{split:?}");
-        assert!(split.iter().all(|p| p.summary.count == 1), "{split:?}");
+        assert!(
+            split.parts.iter().all(|p| p.summary.count == 1),
+            "{split:?}"
+        );
     }
 
     #[test]
@@ -535,24 +596,32 @@ mod tests {
         // before the notification: a part of 0).
         let split = python_state(&[[100, 110, 190, 230], [105, 120, 145, 260]], &passes);
         let max_ns: Vec<u64> = split
+            .parts
             .iter()
             .map(|p| (p.summary.max_us * 1e3).round() as u64)
             .collect();
         assert_eq!(max_ns, [15, 30, 10, 40, 110], "{split:?}");
-        assert!(split.iter().all(|p| p.summary.count == 2), "{split:?}");
-        assert_eq!(split[3].whose, Whose::Outside);
-        assert_eq!(split[4].whose, Whose::Code);
+        assert!(
+            split.parts.iter().all(|p| p.summary.count == 2),
+            "{split:?}"
+        );
+        assert_eq!(split.parts[3].whose, Whose::Outside);
+        assert_eq!(split.parts[4].whose, Whose::Code);
         // Read at 135, before the pass notified its readers (140): the parts after it are 0
         // (recorded as 1 ns, the histogram's least value).
         let split = python_state(&[[105, 120, 125, 135]], &passes);
         let max_ns: Vec<u64> = split
+            .parts
             .iter()
             .map(|p| (p.summary.max_us * 1e3).round() as u64)
             .collect();
         assert_eq!(max_ns, [15, 15, 1, 1, 1], "{split:?}");
         // A sample handed before every traced pass is left out.
         let split = python_state(&[[10, 20, 190, 230]], &passes);
-        assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");
+        assert!(
+            split.parts.iter().all(|p| p.summary.count == 0),
+            "{split:?}"
+        );
     }
 
     #[test]
@@ -582,6 +651,9 @@ mod tests {
         );
         // Without a notification after the frame's read in chassisd's trace: left out.
         let split = zenoh_state(&samples, &export, &mirror, &[]);
-        assert!(split.iter().all(|p| p.summary.count == 0), "{split:?}");
+        assert!(
+            split.parts.iter().all(|p| p.summary.count == 0),
+            "{split:?}"
+        );
     }
 }

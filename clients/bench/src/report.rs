@@ -5,7 +5,7 @@ use std::path::Path;
 use plotters::prelude::*;
 use serde::Serialize;
 
-use crate::parts::{Part, Whose};
+use crate::parts::{Part, Split, Whose};
 use crate::paths::Cost;
 use crate::stats::{Latencies, Summary};
 
@@ -101,8 +101,9 @@ pub struct Parts {
     pub what: String,
     pub mode: String,
     pub placement: String,
-    /// In the order a sample passes them.
-    pub parts: crate::parts::Split,
+    /// Its parts in the order a sample passes them, and their sums.
+    #[serde(flatten)]
+    pub split: crate::parts::Split,
 }
 
 /// Replay of a recorded bus through decode + publish as fast as the service drains it.
@@ -481,6 +482,7 @@ impl Report {
             out.push_str("\nwhere each microsecond goes (p50 / p99 µs, same samples):\n");
             for p in &self.parts {
                 let parts: Vec<String> = p
+                    .split
                     .parts
                     .iter()
                     .map(|part| {
@@ -615,6 +617,10 @@ impl Report {
     }
 }
 
+/// The microseconds table's rows of each sample's parts of the code, and outside it, summed.
+const TOGETHER_CODE: &str = "*together*: the code's parts, each sample's sum";
+const TOGETHER_OUTSIDE: &str = "*together*: the parts outside the code, each sample's sum";
+
 /// The microseconds table's word for whose time a part is.
 fn whose_text(whose: Whose) -> &'static str {
     match whose {
@@ -623,10 +629,12 @@ fn whose_text(whose: Whose) -> &'static str {
     }
 }
 
-/// What a target holds a row to, to tell what bounds a row that misses it. A row's p50 and p99
-/// are at least those of each of its parts (a sample's time is the sum of its parts): a part
-/// outside the code ([`Whose::Outside`]: a wake-up, a system call, the transport, the peer) that
-/// misses the target alone puts it out of reach of anything the code does, on this machine.
+/// What a target holds a row to, to tell what bounds a row that misses it. A sample's time is
+/// the sum of its parts, so a row's p50 and p99 are at least those of each part, and at least
+/// those of its parts outside the code ([`Whose::Outside`]: a wake-up, a system call, the
+/// transport, the peer) summed sample by sample: what the row would take had the code taken no
+/// time. Such a part alone, or those parts together, missing the target put it out of reach of
+/// anything the code does, on this machine.
 #[derive(Debug, Clone, Copy)]
 enum Limit {
     /// The row's p99 at most this many times its baseline's.
@@ -636,8 +644,35 @@ enum Limit {
 }
 
 impl Limit {
-    /// What bounds `row`, from the `parts` of its split that lie within it.
-    fn text(self, parts: &[&Part], row: &Row) -> String {
+    /// Whether `s` (a part, or parts together) misses the limit on its own, with how it
+    /// compares: "N × the baseline's", or "P50 / P99 µs (p50 / p99)".
+    fn missed_by(self, s: &Summary, base_us: f64) -> (bool, String) {
+        match self {
+            Limit::Ratio(bound) => {
+                let times = s.p99_us / base_us;
+                (
+                    times > bound,
+                    format!("p99 {:.1} µs, {times:.2} × the baseline's", s.p99_us),
+                )
+            }
+            Limit::Absolute { p50_us, p99_us } => (
+                s.p50_us > p50_us || s.p99_us > p99_us,
+                format!("{:.1} / {:.1} µs (p50 / p99)", s.p50_us, s.p99_us),
+            ),
+        }
+    }
+
+    /// The target's own words: "2 × the baseline's (B µs)", "5 / 15 µs".
+    fn bound_text(self, base_us: f64) -> String {
+        match self {
+            Limit::Ratio(bound) => format!("{bound} × the baseline's ({base_us:.1} µs)"),
+            Limit::Absolute { p50_us, p99_us } => format!("{p50_us} / {p99_us} µs"),
+        }
+    }
+
+    /// What bounds `row`, from the `parts` of its split that lie within it; `whole`: the split,
+    /// when every part of it does (its parts' sums are the row's).
+    fn text(self, parts: &[&Part], whole: Option<&Split>, row: &Row) -> String {
         let largest = |whose| {
             parts
                 .iter()
@@ -648,41 +683,44 @@ impl Limit {
         let (Some(outside), Some(code)) = (largest(Whose::Outside), largest(Whose::Code)) else {
             return "its run's split is too small for a p99".into();
         };
-        let (o, c) = (&outside.summary, &code.summary);
-        let theirs = match self {
-            Limit::Ratio(bound) => {
-                let Some(base) = row
-                    .ratio_p99
-                    .filter(|r| *r > 0.0)
-                    .map(|r| row.summary.p99_us / r)
-                else {
-                    return String::new();
-                };
-                let times = o.p99_us / base;
-                if times > bound {
-                    return format!(
-                        "outside the code: {} alone has p99 {:.1} µs, {times:.2} × the baseline's \
-                         ({base:.1} µs), beyond {bound} × whatever the code does",
-                        outside.name, o.p99_us
-                    );
-                }
-                format!("p99 {:.1} µs, {times:.2} × the baseline's", o.p99_us)
-            }
-            Limit::Absolute { p50_us, p99_us } => {
-                if o.p50_us > p50_us || o.p99_us > p99_us {
-                    return format!(
-                        "outside the code: {} alone takes {:.1} / {:.1} µs (p50 / p99), beyond \
-                         {p50_us} / {p99_us} µs whatever the code does",
-                        outside.name, o.p50_us, o.p99_us
-                    );
-                }
-                format!("{:.1} / {:.1} µs", o.p50_us, o.p99_us)
-            }
+        let base_us = match self {
+            Limit::Ratio(_) => match row.ratio_p99.filter(|r| *r > 0.0) {
+                Some(r) => row.summary.p99_us / r,
+                None => return String::new(),
+            },
+            Limit::Absolute { .. } => 0.0,
         };
+        let beyond = format!("beyond {} whatever the code does", self.bound_text(base_us));
+        let (alone_missed, alone) = self.missed_by(&outside.summary, base_us);
+        if alone_missed {
+            return format!(
+                "outside the code: {} alone: {alone}, {beyond}",
+                outside.name
+            );
+        }
+        let whole = whole.filter(|w| w.outside.count >= MIN_FOR_P99);
+        let mut stay = format!("the largest, {}: {alone}", outside.name);
+        let mut code_text = String::new();
+        if let Some(w) = whole {
+            let (together_missed, together) = self.missed_by(&w.outside, base_us);
+            let count = parts.iter().filter(|p| p.whose == Whose::Outside).count();
+            if together_missed {
+                return format!(
+                    "outside the code: its {count} parts outside it together (each sample's \
+                     sum): {together}, {beyond}; none alone (the largest, {}: {alone})",
+                    outside.name
+                );
+            }
+            stay = format!("together: {together}; {stay}");
+            code_text = format!(
+                "the code's parts together have p99 {:.1} µs (p50 {:.1}); ",
+                w.code.p99_us, w.code.p50_us
+            );
+        }
         format!(
-            "the code: the parts outside it stay within the target (the largest, {}: {theirs}); \
-             the code's largest, {}, has p99 {:.1} µs (p50 {:.1})",
-            outside.name, code.name, c.p99_us, c.p50_us
+            "the code: the parts outside it stay within the target ({stay}); {code_text}the \
+             code's largest, {}, has p99 {:.1} µs (p50 {:.1})",
+            code.name, code.summary.p99_us, code.summary.p50_us
         )
     }
 }
@@ -957,10 +995,11 @@ impl Report {
         else {
             return Default::default();
         };
-        let parts: Vec<&Part> = split.parts.iter().filter(|p| within(p)).collect();
+        let parts: Vec<&Part> = split.split.parts.iter().filter(|p| within(p)).collect();
+        let whole = (parts.len() == split.split.parts.len()).then_some(&split.split);
         (
             Self::largest_part(&parts, row).unwrap_or_default(),
-            limit.text(&parts, row),
+            limit.text(&parts, whole, row),
         )
     }
 
@@ -1219,11 +1258,13 @@ impl Report {
         out.push_str(
             "## Targets\n\nA target not met names where the time of its worst row goes: the \
              largest part of that row's split (the next section) at the p99. And what bounds \
-             it on this machine: a row's p50 and p99 are at least those of each of its parts (a \
-             sample's time is the sum of its parts), so a part outside the code (a wake-up, a \
-             system call, the transport, the peer: *outside* in the next section) that misses \
-             the target alone puts the target out of reach of anything chassisd or a bridge \
-             does here; otherwise the code's own parts are what miss it.",
+             it on this machine: a sample's time is the sum of its parts, so a row's p50 and p99 \
+             are at least those of each of its parts, and at least those of its parts outside \
+             the code (a wake-up, a system call, the transport, the peer: *outside* in the next \
+             section) summed sample by sample (the row had the code taken no time: *together* \
+             in the next section). Such a part alone, or those parts together, missing the \
+             target put it out of reach of anything chassisd or a bridge does here; otherwise \
+             the code's own parts are what miss it.",
         );
         out.push_str(&self.stalls_text());
         out.push_str(
@@ -1409,33 +1450,43 @@ impl Report {
              and on the operator's when the Zenoh callback had the state, when the mirror's \
              loop took it and when it handed it to iceoryx2. Both bridges' rows take from \
              chassisd's pass trace the notification that followed the frame's read: the \
-             bridge's wake-up is outside the code, as a reader's. Reproduce: the command \
+             bridge's wake-up is outside the code, as a reader's. Under each split, *together*: \
+             each sample's parts of the code summed, and its parts outside it (a row's p99 is \
+             not the sum of its parts' p99s). Reproduce: the command \
              at the top of this document; `--skip fanout,cost,throughput,zenoh` keeps the \
              paths and their baselines.\n\n\
              | path | run | loop | placement | part | whose | samples | p50 µs | p99 µs | share \
              of the p50s |\n| --- | --- | --- | --- | --- | --- | ---: | ---: | ---: | ---: |\n",
         );
         for p in &self.parts {
-            let total: f64 = p.parts.iter().map(|part| part.summary.p50_us).sum();
-            for part in &p.parts {
+            let total: f64 = p.split.parts.iter().map(|part| part.summary.p50_us).sum();
+            let row = |name: &str, whose, s: &Summary, share: String| {
+                format!(
+                    "| {} | {} | {} | {} | {name} | {} | {} | {:.1} | {} | {share} |\n",
+                    p.path,
+                    p.what,
+                    p.mode,
+                    p.placement,
+                    whose_text(whose),
+                    s.count,
+                    s.p50_us,
+                    percentile(s.p99_us, s.count, MIN_FOR_P99)
+                )
+            };
+            for part in &p.split.parts {
                 let s = &part.summary;
                 let share = if total > 0.0 {
                     format!("{:.0} %", 100.0 * s.p50_us / total)
                 } else {
                     String::new()
                 };
-                out.push_str(&format!(
-                    "| {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {share} |\n",
-                    p.path,
-                    p.what,
-                    p.mode,
-                    p.placement,
-                    part.name,
-                    whose_text(part.whose),
-                    s.count,
-                    s.p50_us,
-                    percentile(s.p99_us, s.count, MIN_FOR_P99)
-                ));
+                out.push_str(&row(&part.name, part.whose, s, share));
+            }
+            for (name, whose, s) in [
+                (TOGETHER_CODE, Whose::Code, &p.split.code),
+                (TOGETHER_OUTSIDE, Whose::Outside, &p.split.outside),
+            ] {
+                out.push_str(&row(name, whose, s, String::new()));
             }
         }
         out.push('\n');
@@ -1635,16 +1686,19 @@ mod tests {
 
     #[test]
     fn the_microseconds_table_gives_each_part_and_its_share_of_the_p50s() {
+        let mut split = split_of(
+            "command",
+            "titan sim",
+            "event",
+            vec![
+                part("woke", Whose::Outside, 30, 200),
+                part("written", Whose::Code, 10, 200),
+            ],
+        );
+        split.split.code = part("", Whose::Code, 12, 200).summary;
+        split.split.outside = part("", Whose::Outside, 33, 200).summary;
         let report = Report {
-            parts: vec![split_of(
-                "command",
-                "titan sim",
-                "event",
-                vec![
-                    part("woke", Whose::Outside, 30, 200),
-                    part("written", Whose::Code, 10, 200),
-                ],
-            )],
+            parts: vec![split],
             ..Report::default()
         };
         let md = report.parts_markdown();
@@ -1654,6 +1708,19 @@ mod tests {
         );
         assert!(
             md.contains("| written | the code | 200 | 10.0 | 10.0 | 25 % |"),
+            "{md}"
+        );
+        // The sums of its samples' parts, without a share.
+        assert!(
+            md.contains(&format!(
+                "| {TOGETHER_CODE} | the code | 200 | 12.0 | 12.0 |  |"
+            )),
+            "{md}"
+        );
+        assert!(
+            md.contains(&format!(
+                "| {TOGETHER_OUTSIDE} | outside | 200 | 33.0 | 33.0 |  |"
+            )),
             "{md}"
         );
     }
@@ -1674,30 +1741,90 @@ mod tests {
             what: what.into(),
             mode: mode.into(),
             placement: "cross CPU".into(),
-            parts,
+            split: crate::parts::Split {
+                parts,
+                ..Default::default()
+            },
         }
     }
 
     /// The targets of a run whose cross-CPU state row (p99 `row_us` against its baseline's 100
     /// µs) splits into a decode of `decode_us` and a reader's wake-up of `wake_us`.
     fn state_target(row_us: u64, decode_us: u64, wake_us: u64) -> Target {
-        let mut state = measured("state", "titan sim", "event", row_us, 200);
-        state.baseline = Some("hop, cross CPU".into());
-        let (mut report, _) = compared(vec![measured("baseline", "hop", "-", 100, 200), state]);
-        report.parts.push(split_of(
-            "state",
-            "titan sim",
-            "event",
+        state_target_of(
+            row_us,
             vec![
                 part("frame read → handed", Whose::Code, decode_us, 200),
                 part("woken → reader has it", Whose::Outside, wake_us, 200),
             ],
-        ));
+            None,
+        )
+    }
+
+    /// The state target of a run whose cross-CPU state row (p99 `row_us` against its
+    /// baseline's 100 µs) splits into `parts`, their samples' outside and code sums `sums`
+    /// (p99s, µs; none: too few samples to say).
+    fn state_target_of(row_us: u64, parts: Vec<Part>, sums: Option<(u64, u64)>) -> Target {
+        let mut state = measured("state", "titan sim", "event", row_us, 200);
+        state.baseline = Some("hop, cross CPU".into());
+        let (mut report, _) = compared(vec![measured("baseline", "hop", "-", 100, 200), state]);
+        let mut split = split_of("state", "titan sim", "event", parts);
+        if let Some((outside, code)) = sums {
+            split.split.outside = part("", Whose::Outside, outside, 200).summary;
+            split.split.code = part("", Whose::Code, code, 200).summary;
+        }
+        report.parts.push(split);
         report
             .targets()
             .into_iter()
             .find(|t| t.what.starts_with("state p99"))
             .unwrap()
+    }
+
+    /// A state row of p99 300 µs (3 × its baseline's) whose decode takes 20 µs and whose
+    /// notification and wake-up take 100 and 150 µs, each within 2 × the baseline's.
+    fn three_parts() -> Vec<Part> {
+        vec![
+            part("frame read → handed", Whose::Code, 20, 200),
+            part("notification begun → returned", Whose::Outside, 100, 200),
+            part("returned → reader has it", Whose::Outside, 150, 200),
+        ]
+    }
+
+    #[test]
+    fn a_target_missed_by_the_parts_outside_the_code_together_is_out_of_reach_of_the_code() {
+        // Together, sample by sample, 280 µs: 2.8 × the baseline's.
+        let t = state_target_of(300, three_parts(), Some((280, 20)));
+        assert_eq!(t.met, Some(false));
+        assert!(
+            t.limit.starts_with(
+                "outside the code: its 2 parts outside it together (each sample's sum): p99 280."
+            ) && t.limit.ends_with(
+                "µs, 2.80 × the baseline's, beyond 2 × the baseline's (100.0 µs) whatever the \
+                 code does; none alone (the largest, returned → reader has it: p99 150.0 µs, \
+                 1.50 × the baseline's)"
+            ),
+            "{}",
+            t.limit
+        );
+    }
+
+    #[test]
+    fn a_target_missed_while_the_parts_outside_stay_within_it_together_is_the_codes() {
+        // Together 190 µs (the two parts' longest seldom in one sample); the code's, 110.
+        let t = state_target_of(300, three_parts(), Some((190, 110)));
+        assert_eq!(t.met, Some(false));
+        assert!(
+            t.limit.starts_with(
+                "the code: the parts outside it stay within the target (together: p99 190."
+            ) && t.limit.contains(
+                "µs, 1.90 × the baseline's; the largest, returned → reader has it: p99 150.0 \
+                 µs, 1.50 × the baseline's); the code's parts together have p99 110.0 µs (p50 \
+                 110.0); the code's largest, frame read → handed, has p99 20.0 µs"
+            ),
+            "{}",
+            t.limit
+        );
     }
 
     #[test]
@@ -1711,9 +1838,10 @@ mod tests {
         );
         assert!(
             t.limit
-                .starts_with("outside the code: woken → reader has it alone has p99 280.")
-                && t.limit
-                    .contains("2.80 × the baseline's (100.0 µs), beyond 2 × whatever"),
+                .starts_with("outside the code: woken → reader has it alone: p99 280.")
+                && t.limit.contains(
+                    "2.80 × the baseline's, beyond 2 × the baseline's (100.0 µs) whatever"
+                ),
             "{}",
             t.limit
         );
@@ -1769,9 +1897,9 @@ mod tests {
         );
         assert!(
             t.limit
-                .starts_with("outside the code: returned → wait returned alone has p99 250.")
+                .starts_with("outside the code: returned → wait returned alone: p99 250.")
                 && t.limit
-                    .contains("2.50 × the baseline's (100.0 µs), beyond 2 ×"),
+                    .contains("2.50 × the baseline's, beyond 2 × the baseline's (100.0 µs)"),
             "{}",
             t.limit
         );
@@ -1835,7 +1963,7 @@ mod tests {
             t.why
         );
         assert!(
-            t.limit.starts_with("outside the code: write begun → frame written alone takes 26.0 / 26.0 µs (p50 / p99), beyond 5 / 15 µs"),
+            t.limit.starts_with("outside the code: write begun → frame written alone: 26.0 / 26.0 µs (p50 / p99), beyond 5 / 15 µs"),
             "{}",
             t.limit
         );
