@@ -716,6 +716,16 @@ impl Limit {
                 "the code's parts together have p99 {:.1} µs (p50 {:.1}); ",
                 w.code.p99_us, w.code.p50_us
             );
+            // A row slower than both sums' p99s added: its slowest samples were slow in both.
+            let added = w.code.p99_us + w.outside.p99_us;
+            if row.summary.count == w.code.count && row.summary.p99_us > added {
+                code_text.push_str(&format!(
+                    "the row's p99 ({:.1} µs) is beyond the two sums' p99s added ({added:.1} \
+                     µs): its slowest samples were slow in the code's parts and outside at \
+                     once; ",
+                    row.summary.p99_us
+                ));
+            }
         }
         format!(
             "the code: the parts outside it stay within the target ({stay}); {code_text}the \
@@ -1822,6 +1832,19 @@ mod tests {
                  µs, 1.50 × the baseline's); the code's parts together have p99 110.0 µs (p50 \
                  110.0); the code's largest, frame read → handed, has p99 20.0 µs"
             ),
+            "{}",
+            t.limit
+        );
+        // Its slowest samples slow in both at once: the row's p99 beyond the sums' added.
+        let t = state_target_of(400, three_parts(), Some((190, 110)));
+        assert!(
+            t.limit.contains("the row's p99 (400.")
+                && t.limit
+                    .contains("µs) is beyond the two sums' p99s added (300.")
+                && t.limit.contains(
+                    "µs): its slowest samples were slow in the code's parts and outside at once; \
+                 the code's largest"
+                ),
             "{}",
             t.limit
         );
