@@ -15,7 +15,7 @@ use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use chassis_client::{ChassisState, now_ns};
+use chassis_client::{ChassisState, now_ns, wait_listener};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -377,11 +377,9 @@ impl Endpoint for IceoryxEndpoint {
             .listener
             .take()
             .context("the listener is waited on by a WaitSet")?;
+        // A signal that interrupts the wait is a wake-up with nothing, as in every client.
         let result = self.receive_with(timeout, &mut |wait| {
-            listener
-                .timed_wait(|_| {}, wait)
-                .map(drop)
-                .map_err(|e| anyhow::anyhow!("wait: {e:?}"))
+            wait_listener(&listener, wait).map_err(|e| anyhow::anyhow!("wait: {e:?}"))
         });
         self.listener = Some(listener);
         result
@@ -983,8 +981,7 @@ fn read_published(
             took = true;
         }
         if !took && !spin {
-            listener
-                .timed_wait(|_| {}, Duration::from_millis(20))
+            wait_listener(listener, Duration::from_millis(20))
                 .map_err(|e| anyhow::anyhow!("waiting for state: {e:?}"))?;
         }
     }
