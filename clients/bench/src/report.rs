@@ -59,7 +59,8 @@ pub struct Report {
     pub machine: Machine,
     pub rows: Vec<Row>,
     pub cost: Vec<Cost>,
-    pub throughput: Option<Throughput>,
+    /// The replays, in the order they ran ([`REPLAYS`]).
+    pub throughput: Vec<Throughput>,
     /// Where the time of the service paths goes, run by run.
     pub parts: Vec<Parts>,
     pub notes: Vec<String>,
@@ -112,8 +113,21 @@ pub struct Throughput {
     pub frames: u64,
     pub seconds: f64,
     pub frames_per_s: f64,
-    /// CPU use of the service while replaying, % of one core.
+    /// CPU use of the service's loop thread while replaying, % of one core.
     pub service_cpu_pct: f64,
+    /// Frames per second of the loop thread's CPU time: what one core of the service reads,
+    /// decodes and publishes, whether or not the replay's writer kept it busy.
+    pub frames_per_cpu_s: f64,
+}
+
+/// How many times the recording is replayed, each into a fresh service.
+pub const REPLAYS: usize = 3;
+
+/// The replay whose frames per CPU second are the median of `runs`.
+fn median_replay(runs: &[Throughput]) -> Option<&Throughput> {
+    let mut sorted: Vec<&Throughput> = runs.iter().collect();
+    sorted.sort_by(|a, b| a.frames_per_cpu_s.total_cmp(&b.frames_per_cpu_s));
+    sorted.get(sorted.len() / 2).copied()
 }
 
 #[derive(Debug, Default, Serialize)]
@@ -518,10 +532,10 @@ impl Report {
                 ));
             }
         }
-        if let Some(t) = &self.throughput {
+        for t in &self.throughput {
             out.push_str(&format!(
-                "\nreplay at full speed (read + decode + publish in the service): {} frames in {:.2} s = {:.0} frames/s, service CPU {:.0} %\n",
-                t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct
+                "\nreplay at full speed (read + decode + publish in the service): {} frames in {:.2} s = {:.0} frames/s, service CPU {:.0} %: {:.0} frames per CPU second\n",
+                t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
             ));
         }
         for note in &self.notes {
@@ -1109,11 +1123,23 @@ impl Report {
         targets.push(t);
         targets.push(self.python_target());
 
-        let throughput = self.throughput.map(|t| t.frames_per_s);
+        let median = median_replay(&self.throughput);
         targets.push(Target {
             what: "decode + publish ≥ 1,000,000 frames/s on one core".into(),
-            measured: throughput.map_or("not measured".into(), |f| format!("{f:.0} frames/s")),
-            met: throughput.map(|f| f >= 1e6),
+            measured: median.map_or("not measured".into(), |m| {
+                format!(
+                    "{:.0} frames per second of the service's CPU, the median of {} replays \
+                     ({})",
+                    m.frames_per_cpu_s,
+                    self.throughput.len(),
+                    self.throughput
+                        .iter()
+                        .map(|t| format!("{:.0}", t.frames_per_cpu_s))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }),
+            met: median.map(|m| m.frames_per_cpu_s >= 1e6),
             why: String::new(),
             limit: String::new(),
         });
@@ -1321,12 +1347,26 @@ impl Report {
              emulates its CPU): its backend reads one frame per read(2) system call, like the \
              slcan-pty bus reads each pty chunk, not in batches as the simulated bus does\n",
         );
-        if let Some(t) = &self.throughput {
+        if !self.throughput.is_empty() {
+            let runs: Vec<String> = self
+                .throughput
+                .iter()
+                .map(|t| {
+                    format!(
+                        "{} frames in {:.2} s, {:.0} frames/s, the service's loop busy {:.0} % \
+                         of the time: {:.0} frames per second of its CPU",
+                        t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
+                    )
+                })
+                .collect();
             out.push_str(&format!(
-                "* a recorded TITAN bus replayed at full speed through the service: {} frames in \
-                 {:.2} s, {:.0} frames/s read, decoded and published; the service used {:.0} % \
-                 of a core\n",
-                t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct
+                "* a recorded TITAN bus replayed at full speed through the service, read, decoded \
+                 and published, {} times, each into a fresh service: {}. The replay's writer (a \
+                 thread on the other CPU, one write per frame) does not always keep the service \
+                 busy: the target counts the frames per second of the service's own CPU time, the \
+                 median replay's\n",
+                self.throughput.len(),
+                runs.join("; ")
             ));
         }
         for note in &self.notes {
@@ -1692,6 +1732,47 @@ mod tests {
     fn a_row_within_the_tolerance_of_the_sum_of_its_hops_is_not_flagged() {
         let (report, _) = run_with_ros2_row(460);
         assert_eq!(report.rows[2].inconsistent, None);
+    }
+
+    /// A replay whose service read, decoded and published `per_cpu_s` frames per second of
+    /// its CPU, busy 80 % of the time.
+    fn replay(per_cpu_s: f64) -> Throughput {
+        Throughput {
+            frames: 150_000,
+            seconds: 150_000.0 / (0.8 * per_cpu_s),
+            frames_per_s: 0.8 * per_cpu_s,
+            service_cpu_pct: 80.0,
+            frames_per_cpu_s: per_cpu_s,
+        }
+    }
+
+    fn throughput_target(runs: &[f64]) -> Target {
+        let report = Report {
+            throughput: runs.iter().map(|&r| replay(r)).collect(),
+            ..Report::default()
+        };
+        report
+            .targets()
+            .into_iter()
+            .find(|t| t.what.starts_with("decode + publish"))
+            .unwrap()
+    }
+
+    #[test]
+    fn the_throughput_target_takes_the_median_replays_frames_per_cpu_second() {
+        // Each run's wall-clock rate (80 % of it) is below the target; the median run's CPU
+        // second is not.
+        let t = throughput_target(&[900_000.0, 1_200_000.0, 1_100_000.0]);
+        assert_eq!(t.met, Some(true));
+        assert_eq!(
+            t.measured,
+            "1100000 frames per second of the service's CPU, the median of 3 replays (900000, \
+             1200000, 1100000)"
+        );
+        // One fast replay does not carry the target.
+        let t = throughput_target(&[900_000.0, 1_200_000.0, 950_000.0]);
+        assert_eq!(t.met, Some(false), "{}", t.measured);
+        assert_eq!(throughput_target(&[]).measured, "not measured");
     }
 
     #[test]

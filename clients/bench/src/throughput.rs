@@ -117,10 +117,12 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
     let (t0, f0, c0) = first.context("no frame was replayed")?;
     let seconds = (last.0 - t0) as f64 / 1e9;
     let counted = last.1 - f0;
+    let cpu_seconds = last.2 - c0;
     Ok(Throughput {
         frames: counted,
         seconds,
         frames_per_s: counted as f64 / seconds.max(1e-9),
-        service_cpu_pct: 100.0 * (last.2 - c0) / seconds.max(1e-9),
+        service_cpu_pct: 100.0 * cpu_seconds / seconds.max(1e-9),
+        frames_per_cpu_s: counted as f64 / cpu_seconds.max(1e-9),
     })
 }
