@@ -196,6 +196,25 @@ fn replayed(robot: &mut Robot, env: &Env) -> ChassisState {
     last.unwrap()
 }
 
+/// The odometer (front, rear, m) of the last TITAN odometer frame of `frames` (candump lines
+/// or bare `ID#HEX`): what the chassis reported last, and a replay of them ends on (there must
+/// be one).
+fn last_odometer(frames: impl IntoIterator<Item = String>) -> (f64, f64) {
+    use chassis_protocols::titan::{Frame, decode};
+    let profile = chassis_protocols::profile::TitanProfile::default();
+    frames
+        .into_iter()
+        .filter_map(|line| {
+            let frame = chassis_protocols::CandumpLine::parse(&line).ok()?.frame;
+            match decode(&frame, &profile).ok()? {
+                Frame::Odometer(o) => Some((o.front_distance_m, o.rear_distance_m)),
+                _ => None,
+            }
+        })
+        .last()
+        .unwrap()
+}
+
 /// `text` without its ANSI colour codes (the services log in colour).
 fn plain(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
@@ -380,7 +399,26 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
     assert_eq!(objects, lines.len(), "one JSON object per line");
 
     // Replay the MCAP file as fast as the service takes it: every RX frame arrives and decodes,
-    // and what the chassis reported itself (the odometer) is reproduced exactly.
+    // and what the chassis reported itself (the odometer) is reproduced exactly: the last
+    // odometer frame of the file. The robot stood (below 5 mm/s) when `recorded` was read; it
+    // may creep a few mm until the recorder stops.
+    let mcap_odometer = last_odometer(
+        rec.frames()
+            .iter()
+            .filter(|(_, f)| f["direction"] == "rx")
+            .map(|(_, f)| {
+                format!(
+                    "{:X}#{}",
+                    f["can_id"].as_u64().unwrap(),
+                    f["data"].as_str().unwrap()
+                )
+            }),
+    );
+    assert!(
+        (mcap_odometer.0 - recorded.odometry.front_distance_m).abs() < 0.01,
+        "the MCAP file ends on odometer {mcap_odometer:?}, the robot stood at {:?}",
+        recorded.odometry
+    );
     let (replay_max, mut replay) = replay_at_max(&mut env, ("replay-max", "rpm"), &mcap_text);
     let end = replayed(&mut replay, &env);
     assert_eq!(
@@ -389,13 +427,11 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
         "frames replayed"
     );
     assert_eq!(end.link.rx_decode_errors, 0);
-    assert!(
-        (end.odometry.front_distance_m - recorded.odometry.front_distance_m).abs() < 1e-3,
-        "odometer {} vs recorded {}",
-        end.odometry.front_distance_m,
-        recorded.odometry.front_distance_m
+    assert_eq!(
+        (end.odometry.front_distance_m, end.odometry.rear_distance_m),
+        mcap_odometer,
+        "the replay's odometer against the file's last"
     );
-    assert!((end.odometry.rear_distance_m - recorded.odometry.rear_distance_m).abs() < 1e-3);
     println!(
         "replay at max: {}",
         replay_summary(&env.proc(replay_max).log_text())
@@ -430,10 +466,19 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
     );
     assert!(position_error < 0.05, "pose error {position_error} m");
     assert!(yaw_error < 0.05, "yaw error {yaw_error} rad");
+    let log_odometer = last_odometer(lines.iter().cloned());
     assert!(
-        (json_f64(&last, &["odometry", "front_distance_m"]) - recorded.odometry.front_distance_m)
-            .abs()
-            < 1e-3
+        (log_odometer.0 - recorded.odometry.front_distance_m).abs() < 0.01,
+        "the log ends on odometer {log_odometer:?}, the robot stood at {:?}",
+        recorded.odometry
+    );
+    assert_eq!(
+        (
+            json_f64(&last, &["odometry", "front_distance_m"]),
+            json_f64(&last, &["odometry", "rear_distance_m"])
+        ),
+        log_odometer,
+        "the replay's odometer against the log's last"
     );
 }
 
