@@ -137,6 +137,20 @@ impl McapRecording {
         seqs.windows(2).map(|w| w[1] - w[0] - 1).sum()
     }
 
+    /// The received CAN frames as `ID#HEX`, in order.
+    fn rx_can_lines(&self) -> impl Iterator<Item = String> + '_ {
+        self.frames()
+            .iter()
+            .filter(|(_, f)| f["direction"] == "rx" && f["kind"] == "can")
+            .map(|(_, f)| {
+                format!(
+                    "{:X}#{}",
+                    f["can_id"].as_u64().unwrap(),
+                    f["data"].as_str().unwrap()
+                )
+            })
+    }
+
     fn count_rx_id(&self, id: u64) -> usize {
         self.frames()
             .iter()
@@ -402,18 +416,7 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
     // and what the chassis reported itself (the odometer) is reproduced exactly: the last
     // odometer frame of the file. The robot stood (below 5 mm/s) when `recorded` was read; it
     // may creep a few mm until the recorder stops.
-    let mcap_odometer = last_odometer(
-        rec.frames()
-            .iter()
-            .filter(|(_, f)| f["direction"] == "rx")
-            .map(|(_, f)| {
-                format!(
-                    "{:X}#{}",
-                    f["can_id"].as_u64().unwrap(),
-                    f["data"].as_str().unwrap()
-                )
-            }),
-    );
+    let mcap_odometer = last_odometer(rec.rx_can_lines());
     assert!(
         (mcap_odometer.0 - recorded.odometry.front_distance_m).abs() < 0.01,
         "the MCAP file ends on odometer {mcap_odometer:?}, the robot stood at {:?}",

@@ -76,13 +76,16 @@ fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Sp
         {
             continue;
         }
-        let mut sums = [0u64; 2];
+        let (mut outside_ns, mut code_ns) = (0, 0);
         for ((part, w), &(_, whose)) in parts.iter_mut().zip(stamps.windows(2)).zip(names) {
             part.record_between(w[0], w[1]);
-            sums[usize::from(whose == Code)] += w[1] - w[0];
+            match whose {
+                Code => code_ns += w[1] - w[0],
+                Outside => outside_ns += w[1] - w[0],
+            }
         }
-        outside.record(sums[0]);
-        code.record(sums[1]);
+        outside.record(outside_ns);
+        code.record(code_ns);
     }
     Split {
         parts: names

@@ -657,30 +657,54 @@ enum Limit {
     Absolute { p50_us: f64, p99_us: f64 },
 }
 
-impl Limit {
-    /// Whether `s` (a part, or parts together) misses the limit on its own, with how it
-    /// compares: "N × the baseline's", or "P50 / P99 µs (p50 / p99)".
-    fn missed_by(self, s: &Summary, base_us: f64) -> (bool, String) {
+/// A [`Limit`] held against one row: a ratio's baseline known.
+#[derive(Debug, Clone, Copy)]
+enum Bound {
+    Ratio { bound: f64, base_us: f64 },
+    Absolute { p50_us: f64, p99_us: f64 },
+}
+
+impl Bound {
+    /// Whether `s` (a part, or parts together) misses the bound on its own, with how it
+    /// compares: "p99 X µs, N × the baseline's", or "P50 / P99 µs (p50 / p99)".
+    fn missed_by(self, s: &Summary) -> (bool, String) {
         match self {
-            Limit::Ratio(bound) => {
+            Bound::Ratio { bound, base_us } => {
                 let times = s.p99_us / base_us;
                 (
                     times > bound,
                     format!("p99 {:.1} µs, {times:.2} × the baseline's", s.p99_us),
                 )
             }
-            Limit::Absolute { p50_us, p99_us } => (
+            Bound::Absolute { p50_us, p99_us } => (
                 s.p50_us > p50_us || s.p99_us > p99_us,
                 format!("{:.1} / {:.1} µs (p50 / p99)", s.p50_us, s.p99_us),
             ),
         }
     }
+}
 
+impl std::fmt::Display for Bound {
     /// The target's own words: "2 × the baseline's (B µs)", "5 / 15 µs".
-    fn bound_text(self, base_us: f64) -> String {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Limit::Ratio(bound) => format!("{bound} × the baseline's ({base_us:.1} µs)"),
-            Limit::Absolute { p50_us, p99_us } => format!("{p50_us} / {p99_us} µs"),
+            Bound::Ratio { bound, base_us } => {
+                write!(f, "{bound} × the baseline's ({base_us:.1} µs)")
+            }
+            Bound::Absolute { p50_us, p99_us } => write!(f, "{p50_us} / {p99_us} µs"),
+        }
+    }
+}
+
+impl Limit {
+    /// The limit against `row`; a ratio of a row without a baseline has none.
+    fn against(self, row: &Row) -> Option<Bound> {
+        match self {
+            Limit::Ratio(bound) => row.ratio_p99.filter(|r| *r > 0.0).map(|r| Bound::Ratio {
+                bound,
+                base_us: row.summary.p99_us / r,
+            }),
+            Limit::Absolute { p50_us, p99_us } => Some(Bound::Absolute { p50_us, p99_us }),
         }
     }
 
@@ -697,56 +721,60 @@ impl Limit {
         let (Some(outside), Some(code)) = (largest(Whose::Outside), largest(Whose::Code)) else {
             return "its run's split is too small for a p99".into();
         };
-        let base_us = match self {
-            Limit::Ratio(_) => match row.ratio_p99.filter(|r| *r > 0.0) {
-                Some(r) => row.summary.p99_us / r,
-                None => return String::new(),
-            },
-            Limit::Absolute { .. } => 0.0,
+        let Some(bound) = self.against(row) else {
+            return String::new();
         };
-        let beyond = format!("beyond {} whatever the code does", self.bound_text(base_us));
-        let (alone_missed, alone) = self.missed_by(&outside.summary, base_us);
+        let beyond = format!("beyond {bound} whatever the code does");
+        let (alone_missed, alone) = bound.missed_by(&outside.summary);
         if alone_missed {
             return format!(
                 "outside the code: {} alone: {alone}, {beyond}",
                 outside.name
             );
         }
-        let whole = whole.filter(|w| w.outside.count >= MIN_FOR_P99);
-        let mut stay = format!("the largest, {}: {alone}", outside.name);
-        let mut code_text = String::new();
-        if let Some(w) = whole {
-            let (together_missed, together) = self.missed_by(&w.outside, base_us);
-            let count = parts.iter().filter(|p| p.whose == Whose::Outside).count();
-            if together_missed {
-                return format!(
-                    "outside the code: its {count} parts outside it together (each sample's \
-                     sum): {together}, {beyond}; none alone (the largest, {}: {alone})",
-                    outside.name
-                );
+        let largest_alone = format!("the largest, {}: {alone}", outside.name);
+        let (stay, code_together) = match whole.filter(|w| w.outside.count >= MIN_FOR_P99) {
+            None => (largest_alone, String::new()),
+            Some(w) => {
+                let (together_missed, together) = bound.missed_by(&w.outside);
+                if together_missed {
+                    let count = parts.iter().filter(|p| p.whose == Whose::Outside).count();
+                    return format!(
+                        "outside the code: its {count} parts outside it together (each \
+                         sample's sum): {together}, {beyond}; none alone ({largest_alone})"
+                    );
+                }
+                (
+                    format!("together: {together}; {largest_alone}"),
+                    code_together_text(w, row),
+                )
             }
-            stay = format!("together: {together}; {stay}");
-            code_text = format!(
-                "the code's parts together have p99 {:.1} µs (p50 {:.1}); ",
-                w.code.p99_us, w.code.p50_us
-            );
-            // A row slower than both sums' p99s added: its slowest samples were slow in both.
-            let added = w.code.p99_us + w.outside.p99_us;
-            if row.summary.count == w.code.count && row.summary.p99_us > added {
-                code_text.push_str(&format!(
-                    "the row's p99 ({:.1} µs) is beyond the two sums' p99s added ({added:.1} \
-                     µs): its slowest samples were slow in the code's parts and outside at \
-                     once; ",
-                    row.summary.p99_us
-                ));
-            }
-        }
+        };
         format!(
-            "the code: the parts outside it stay within the target ({stay}); {code_text}the \
+            "the code: the parts outside it stay within the target ({stay}); {code_together}the \
              code's largest, {}, has p99 {:.1} µs (p50 {:.1})",
             code.name, code.summary.p99_us, code.summary.p50_us
         )
     }
+}
+
+/// "The code's parts together …; " of a split `w` whose parts are all of `row`'s, with what its
+/// slowest samples say when the row's p99 is beyond both sums' p99s added: they were slow in
+/// both at once.
+fn code_together_text(w: &Split, row: &Row) -> String {
+    let mut text = format!(
+        "the code's parts together have p99 {:.1} µs (p50 {:.1}); ",
+        w.code.p99_us, w.code.p50_us
+    );
+    let added = w.code.p99_us + w.outside.p99_us;
+    if row.summary.count == w.code.count && row.summary.p99_us > added {
+        text.push_str(&format!(
+            "the row's p99 ({:.1} µs) is beyond the two sums' p99s added ({added:.1} µs): its \
+             slowest samples were slow in the code's parts and outside at once; ",
+            row.summary.p99_us
+        ));
+    }
+    text
 }
 
 /// The run a path row belongs to: "titan sim" of "titan sim: state" (its split's `what`).
@@ -1015,12 +1043,12 @@ impl Report {
                     .into(),
             );
         }
-        let Some(split) = self.parts_of(split_path, &what_of(row), &row.mode, &row.placement)
-        else {
+        let Some(run) = self.parts_of(split_path, &what_of(row), &row.mode, &row.placement) else {
             return Default::default();
         };
-        let parts: Vec<&Part> = split.split.parts.iter().filter(|p| within(p)).collect();
-        let whole = (parts.len() == split.split.parts.len()).then_some(&split.split);
+        let split = &run.split;
+        let parts: Vec<&Part> = split.parts.iter().filter(|p| within(p)).collect();
+        let whole = (parts.len() == split.parts.len()).then_some(split);
         (
             Self::largest_part(&parts, row).unwrap_or_default(),
             limit.text(&parts, whole, row),
