@@ -333,7 +333,11 @@ pub fn constants() -> Vec<ConstantGroup> {
             CONFIG_SPEED_LIMIT, QUANTISED, CHASSIS_NOT_READY, SAFETY_LIMIT,
         }),
         describe_constants!(enum ZeroReason: u8 {
-            NONE, NO_ACTIVE_SOURCE, REQUIRED_SOURCE_STALE, LOCKED, STARTING, AWAITING_ZERO,
+            NONE, NO_ACTIVE_SOURCE, REQUIRED_SOURCE_STALE, LOCKED, STARTING, AWAITING_ZERO, HELD,
+        }),
+        describe_constants!(enum Stop: u8 {
+            NONE, SERVICE_START, LOCK_RELEASED, REQUIRED_SOURCE, BUS, CHASSIS_ESTOP,
+            REMOTE_CONTROL, CHASSIS_FAULT,
         }),
         describe_constants!(flags SourceFlags: u8 {
             REQUIRED, FRESH, ACTIVE, HEARTBEAT, BLOCKED, LIMITING, REMOTE, AWAITING_ZERO,
@@ -573,6 +577,7 @@ mod tests {
             SensorKind::NAMES,
             SimKind::NAMES,
             SimTruthPage::NAMES,
+            Stop::NAMES,
             WireProtocol::NAMES,
             ZeroReason::NAMES,
             ClampFlags::ALL,

@@ -40,7 +40,7 @@ pub use description::{
 };
 pub use frame::{BusFrame, FrameDirection, FrameKind};
 pub use mux::{
-    BodyVelocity, ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, ZeroReason,
+    BodyVelocity, ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Stop, ZeroReason,
 };
 pub use names::valid_robot_name;
 pub use request::{RequestFlags, VelocityRequest};

@@ -87,10 +87,39 @@ named_constants! {
         LOCKED = 3 => "locked",
         /// The mux has not started yet.
         STARTING = 4 => "starting",
-        /// A lock was released while the source that would win asked for motion: a release
-        /// never starts motion, so the mux waits until that source asks for zero (or stops
-        /// asking); [`MuxStatus::awaiting_source`] names it.
+        /// A stop ended ([`MuxStatus::stop`] names which) while the source that would win asked
+        /// for motion: motion starts only from a zero, so the mux waits until that source asks
+        /// for zero; [`MuxStatus::awaiting_source`] names it.
         AWAITING_ZERO = 5 => "awaiting_zero",
+        /// The bus or the chassis stops the robot ([`MuxStatus::stop`] names which): nothing is
+        /// obeyed until it ends, and then only from a zero.
+        HELD = 6 => "held",
+    }
+}
+
+named_constants! {
+    /// A stop the winning source did not ask for itself (`MuxStatus::stop`). When it ends, the
+    /// robot moves again only once the source that would win has sent a zero since: silence, a
+    /// timeout or another source's zero is not a zero (ISO 13850 and IEC 60204-1: a reset shall
+    /// not start motion; ISO 3691-4: no automatic restart after a stop or a power interruption).
+    pub enum Stop: u8 {
+        /// No stop is in force or waited on.
+        NONE = 0 => "none",
+        /// chassisd started: a source that kept asking through a restart is not obeyed until it
+        /// asks for zero (a client process that starts sends one zero as it connects).
+        SERVICE_START = 1 => "service_start",
+        /// A lock (the e-stop, a latch restored after a restart) was released.
+        LOCK_RELEASED = 2 => "lock_released",
+        /// The required source (the safety monitor) was silent and speaks again.
+        REQUIRED_SOURCE = 3 => "required_source",
+        /// The bus was lost, the CAN controller bus-off or the chassis silent (power cut).
+        BUS = 4 => "bus",
+        /// The chassis reports its own E-stop switch.
+        CHASSIS_ESTOP = 5 => "chassis_estop",
+        /// A remote-control transmitter has the chassis.
+        REMOTE_CONTROL = 6 => "remote_control",
+        /// The chassis reports a fault that stops its drive (motor driver, over-current, …).
+        CHASSIS_FAULT = 7 => "chassis_fault",
     }
 }
 
@@ -111,8 +140,8 @@ named_constants! {
         LIMITING = 1 << 5 => "limiting",
         /// Configured `remote`: a bridge (`chassis-zenoh`) may publish on it for another computer.
         REMOTE = 1 << 6 => "remote",
-        /// It asked for motion when a lock blocking it was released: its motion is not obeyed
-        /// until it asks for zero (or stops asking).
+        /// A stop ended while its last word was motion: its motion is not obeyed until it asks
+        /// for zero (silence is not a zero).
         AWAITING_ZERO = 1 << 7 => "awaiting_zero",
     }
 }
@@ -189,7 +218,7 @@ impl LockStatus {
 ipc_type! {
     /// The mux's decision.
     #[derive(Default, Serialize)]
-    #[type_name("chassis::MuxStatus.v1")]
+    #[type_name("chassis::MuxStatus.v2")]
     pub struct MuxStatus {
         /// `CLOCK_MONOTONIC` time of the decision, ns.
         pub stamp_ns: u64,
@@ -212,10 +241,13 @@ ipc_type! {
         pub source_count: u8,
         pub lock_count: u8,
         /// While `zero_reason` is [`ZeroReason::AWAITING_ZERO`]: index into `sources` of the source
-        /// whose zero command the mux waits for (it would win). Was a reserved byte.
+        /// whose zero command the mux waits for (it would win).
         pub awaiting_source: u8,
+        /// [`Stop`]: while `zero_reason` is [`ZeroReason::HELD`], the stop in force; while it is
+        /// [`ZeroReason::AWAITING_ZERO`], the stop whose end waits for the zero.
+        pub stop: u8,
         #[serde(skip)]
-        pub _reserved: [u8; 2],
+        pub _reserved: [u8; 1],
         pub sources: [SourceStatus; MAX_SOURCES],
         pub locks: [LockStatus; MAX_LOCKS],
     }
@@ -239,7 +271,7 @@ impl MuxStatus {
         self.sources().get(usize::from(self.active_source))
     }
 
-    /// The source whose zero command the mux waits for after a release, if it waits.
+    /// The source whose zero command the mux waits for after a stop, if it waits.
     pub fn awaiting(&self) -> Option<&SourceStatus> {
         if self.zero_reason != ZeroReason::AWAITING_ZERO {
             return None;
@@ -250,6 +282,79 @@ impl MuxStatus {
     /// Index of the lock called `name`.
     pub fn lock_index(&self, name: &str) -> Option<usize> {
         self.locks().iter().position(|l| l.name() == name)
+    }
+
+    /// Why the robot moves or stands, in words every view shows the same way: `driving from
+    /// teleop`, `stopped: waiting for a zero from teleop since the bus came back · held: estop`.
+    pub fn why(&self) -> Why<'_> {
+        Why(self)
+    }
+}
+
+/// The one explanation of a mux decision ([`MuxStatus::why`]), rendered by `Display`.
+#[derive(Debug, Clone, Copy)]
+pub struct Why<'a>(&'a MuxStatus);
+
+impl Stop {
+    /// What holds the robot while `stop` is in force (`ZeroReason::HELD`).
+    pub fn holding(stop: u8) -> &'static str {
+        match stop {
+            Stop::BUS => "the bus is lost or the chassis silent",
+            Stop::CHASSIS_ESTOP => "the chassis' E-stop is pressed",
+            Stop::REMOTE_CONTROL => "a remote-control transmitter has the chassis",
+            Stop::CHASSIS_FAULT => "the chassis reports a drive fault",
+            _ => "held",
+        }
+    }
+
+    /// What ended when a source waits for its zero since `stop` (`ZeroReason::AWAITING_ZERO`).
+    pub fn ended(stop: u8) -> &'static str {
+        match stop {
+            Stop::SERVICE_START => "chassisd started",
+            Stop::LOCK_RELEASED => "a lock was released",
+            Stop::REQUIRED_SOURCE => "the required source came back",
+            Stop::BUS => "the bus and the chassis came back",
+            Stop::CHASSIS_ESTOP => "the chassis' E-stop was released",
+            Stop::REMOTE_CONTROL => "remote control handed the chassis back",
+            Stop::CHASSIS_FAULT => "the chassis' fault cleared",
+            _ => "a stop",
+        }
+    }
+}
+
+impl std::fmt::Display for Why<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let m = self.0;
+        match (m.active(), m.zero_reason) {
+            (Some(source), _) => write!(f, "driving from {}", source.name())?,
+            (None, ZeroReason::AWAITING_ZERO) => write!(
+                f,
+                "stopped: waiting for a zero from {} since {}",
+                m.awaiting().map_or("?", SourceStatus::name),
+                Stop::ended(m.stop)
+            )?,
+            (None, ZeroReason::HELD) => write!(f, "stopped: {}", Stop::holding(m.stop))?,
+            (None, ZeroReason::REQUIRED_SOURCE_STALE) => {
+                let silent: Vec<&str> = m
+                    .sources()
+                    .iter()
+                    .filter(|s| s.has(SourceFlags::REQUIRED) && !s.has(SourceFlags::FRESH))
+                    .map(SourceStatus::name)
+                    .collect();
+                write!(f, "stopped: required source {} silent", silent.join(", "))?;
+            }
+            (None, reason) => write!(f, "stopped: {}", ZeroReason::name(reason).replace('_', " "))?,
+        }
+        let held: Vec<&str> = m
+            .locks()
+            .iter()
+            .filter(|l| l.held == 1)
+            .map(LockStatus::name)
+            .collect();
+        if !held.is_empty() {
+            write!(f, " · held: {}", held.join(", "))?;
+        }
+        Ok(())
     }
 }
 
@@ -274,6 +379,44 @@ mod tests {
         let json = serde_json::to_value(status).unwrap();
         assert_eq!(json["sources"][0]["name"], "safety");
         assert_eq!(json["locks"][0]["name"], "estop");
+    }
+
+    #[test]
+    fn the_explanation_names_the_stop_and_the_source_it_waits_for() {
+        let mut status = MuxStatus {
+            source_count: 2,
+            lock_count: 1,
+            active_source: MuxStatus::NO_SOURCE,
+            zero_reason: ZeroReason::AWAITING_ZERO,
+            awaiting_source: 1,
+            stop: Stop::BUS,
+            ..MuxStatus::default()
+        };
+        status.sources[0].set_name("safety");
+        status.sources[0].flags = SourceFlags::REQUIRED;
+        status.sources[1].set_name("teleop");
+        status.locks[0].set_name("estop");
+        assert_eq!(
+            status.why().to_string(),
+            "stopped: waiting for a zero from teleop since the bus and the chassis came back"
+        );
+        status.zero_reason = ZeroReason::HELD;
+        status.stop = Stop::CHASSIS_ESTOP;
+        status.locks[0].held = 1;
+        assert_eq!(
+            status.why().to_string(),
+            "stopped: the chassis' E-stop is pressed · held: estop"
+        );
+        status.zero_reason = ZeroReason::REQUIRED_SOURCE_STALE;
+        assert_eq!(
+            status.why().to_string(),
+            "stopped: required source safety silent · held: estop"
+        );
+        status.active_source = 1;
+        assert_eq!(
+            status.why().to_string(),
+            "driving from teleop · held: estop"
+        );
     }
 
     #[test]

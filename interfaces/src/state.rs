@@ -252,6 +252,22 @@ named_constants! {
 }
 
 impl FaultFlags {
+    /// The faults after which a chassis does not drive: its E-stop aside, those that stop the
+    /// drive (a motor driver in error or unreachable, over-current, over-temperature, a body
+    /// exception, the battery cut). While one is reported the service commands zero, and when
+    /// it clears motion starts again only from a zero.
+    pub const STOPS_DRIVE: u64 = Self::MOTOR_DRIVER_ERROR
+        | Self::MOTOR_1_COMM_LOST
+        | Self::MOTOR_2_COMM_LOST
+        | Self::MOTOR_3_COMM_LOST
+        | Self::MOTOR_4_COMM_LOST
+        | Self::OVER_CURRENT
+        | Self::OVER_TEMPERATURE
+        | Self::BODY_EXCEPTION
+        | Self::BATTERY_UNDER_VOLTAGE;
+}
+
+impl FaultFlags {
     /// Flags that only warn: the chassis still drives.
     pub const WARNINGS: u64 = Self::BATTERY_UNDER_VOLTAGE_WARNING
         | Self::OVER_TEMPERATURE_WARNING

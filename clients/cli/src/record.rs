@@ -77,6 +77,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::Group;
 use chassis_client::foxglove::{self as view, schema_of};
+use chassis_client::layout::Layout;
 use chassis_client::watch::{Severity, Watch};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, LinkFlags, MuxStatus, Robot, STATE_BUFFER,
@@ -398,7 +399,7 @@ impl McapSink {
             "chassis.BusFrame",
             frame_schema(),
             &format!("{prefix}/frames"),
-            "chassis::BusFrame.v1",
+            BusFrame::layout().type_name,
         )?;
         let state = channel(
             "chassis.ChassisState",
@@ -409,7 +410,7 @@ impl McapSink {
                  *_stamp_ns are CLOCK_MONOTONIC ns",
             ),
             &format!("{prefix}/state"),
-            "chassis::ChassisState.v3",
+            ChassisState::layout().type_name,
         )?;
         let mux = channel(
             "chassis.MuxStatus",
@@ -419,7 +420,7 @@ impl McapSink {
                 "A decision of chassisd's velocity mux; stamp_ns is CLOCK_MONOTONIC ns",
             ),
             &format!("{prefix}/mux"),
-            "chassis::MuxStatus.v1",
+            MuxStatus::layout().type_name,
         )?;
         let mut foxglove_channel = |topic: &str,
                                     schema: Option<foxglove::Schema>,

@@ -160,7 +160,14 @@ pub struct Robot {
     control: Option<Counter<ControlRequest>>,
     sim: Option<Counter<SimRequest>>,
     control_seq: u64,
+    /// The iceoryx2 prefix it was opened with (its own or [`IPC_PREFIX_ENV`]'s).
+    prefix: Option<String>,
 }
+
+/// The sources this process has connected to before, by prefix, robot and source: the first
+/// connection of each sends one heartbeat (see [`Robot::source`]); a reconnection sends none.
+static CONNECTED_SOURCES: std::sync::Mutex<Vec<(Option<String>, String, String)>> =
+    std::sync::Mutex::new(Vec::new());
 
 impl Robot {
     /// Connects to the robot served as `chassis/<name>/`: fails with
@@ -228,6 +235,9 @@ impl Robot {
             control: None,
             sim: None,
             control_seq: 0,
+            prefix: prefix
+                .map(str::to_string)
+                .or_else(|| std::env::var(IPC_PREFIX_ENV).ok()),
         })
     }
 
@@ -437,6 +447,15 @@ impl Robot {
     /// source's timeout after it, so a client publishes at a steady rate, and its motion ends
     /// by itself when the client stops or dies.
     ///
+    /// Motion starts only from a zero: after any stop it did not ask for (chassisd starting, a
+    /// lock released, the safety monitor or the bus back, the chassis' E-stop released), the
+    /// service obeys a source's motion only once that source has asked for nothing since.
+    /// Starting a client process is a deliberate act, so the first connection of a source in
+    /// this process sends one heartbeat (asks for nothing). A later connection of the same
+    /// source by the same process (after chassisd restarted) sends none: a client that kept
+    /// asking through a restart must send a zero ([`Source::stop`]) before it drives again, and
+    /// `MuxStatus::why` says so while it waits.
+    ///
     /// ```no_run
     /// use std::time::Duration;
     /// use chassis_client::{Robot, Ticker, VelocityRequest};
@@ -491,12 +510,27 @@ impl Robot {
             },
             other => other.into(),
         })?;
-        Ok(Source {
+        let mut source = Source {
             name: name.to_string(),
             publisher,
             notifier,
             seq: 0,
-        })
+        };
+        let key = (self.prefix.clone(), self.name.clone(), name.to_string());
+        let first = CONNECTED_SOURCES
+            .lock()
+            .map(|mut seen| {
+                let first = !seen.contains(&key);
+                if first {
+                    seen.push(key);
+                }
+                first
+            })
+            .unwrap_or(false);
+        if first {
+            source.heartbeat()?;
+        }
+        Ok(source)
     }
 
     fn counter<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(

@@ -611,9 +611,9 @@ class SourceStatus(Struct):
 
 
 class MuxStatus(Struct):
-    """``chassis::MuxStatus.v1``: 528 bytes, aligned to 8."""
+    """``chassis::MuxStatus.v2``: 528 bytes, aligned to 8."""
 
-    _type_name = 'chassis::MuxStatus.v1'
+    _type_name = 'chassis::MuxStatus.v2'
     _fields_ = [
         ('stamp_ns', ctypes.c_uint64),
         ('seq', ctypes.c_uint64),
@@ -628,7 +628,8 @@ class MuxStatus(Struct):
         ('source_count', ctypes.c_uint8),
         ('lock_count', ctypes.c_uint8),
         ('awaiting_source', ctypes.c_uint8),
-        ('_reserved', (ctypes.c_uint8 * 2)),
+        ('stop', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 1)),
         ('sources', (SourceStatus * 8)),
         ('locks', (LockStatus * 4)),
     ]
@@ -1134,6 +1135,20 @@ class SourceFlags(Constants):
     NAMES = {1: 'required', 2: 'fresh', 4: 'active', 8: 'heartbeat', 16: 'blocked', 32: 'limiting', 64: 'remote', 128: 'awaiting-zero'}
 
 
+class Stop(Constants):
+    """``Stop``: enum of u8."""
+
+    NONE = 0
+    SERVICE_START = 1
+    LOCK_RELEASED = 2
+    REQUIRED_SOURCE = 3
+    BUS = 4
+    CHASSIS_ESTOP = 5
+    REMOTE_CONTROL = 6
+    CHASSIS_FAULT = 7
+    NAMES = {0: 'none', 1: 'service-start', 2: 'lock-released', 3: 'required-source', 4: 'bus', 5: 'chassis-estop', 6: 'remote-control', 7: 'chassis-fault'}
+
+
 class WireProtocol(Constants):
     """``WireProtocol``: enum of u8."""
 
@@ -1153,7 +1168,8 @@ class ZeroReason(Constants):
     LOCKED = 3
     STARTING = 4
     AWAITING_ZERO = 5
-    NAMES = {0: 'none', 1: 'no-active-source', 2: 'required-source-stale', 3: 'locked', 4: 'starting', 5: 'awaiting-zero'}
+    HELD = 6
+    NAMES = {0: 'none', 1: 'no-active-source', 2: 'required-source-stale', 3: 'locked', 4: 'starting', 5: 'awaiting-zero', 6: 'held'}
 
 
 # Every IPC type, by its Rust name.
@@ -1225,6 +1241,7 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'SimKind': SimKind,
     'SimTruthPage': SimTruthPage,
     'SourceFlags': SourceFlags,
+    'Stop': Stop,
     'SystemState': SystemState,
     'WireProtocol': WireProtocol,
     'ZeroReason': ZeroReason,

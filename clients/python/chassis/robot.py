@@ -39,7 +39,9 @@ from ._contract import (
     RobotDescription,
     SimKind,
     SimRequest,
+    Stop,
     Struct,
+    ZeroReason,
 )
 from ._contract import VelocityRequest as _VelocityRequest
 
@@ -220,7 +222,41 @@ def _active_source(mux: MuxStatus) -> str | None:
     return fixed_str(mux.sources[mux.active_source].name)
 
 
+def _why(mux: MuxStatus) -> str:
+    """Why the robot moves or stands (``MuxStatus.why()``), as ``chassis status`` says it:
+    ``driving from teleop``, ``stopped: waiting for a zero from teleop since lock_released``.
+
+    Motion starts only from a zero: after a stop (``mux.stop``, a ``Stop`` name) the source
+    that would win must ask for nothing before its motion is obeyed again.
+    """
+    names = _source_names(mux)
+    active = _active_source(mux)
+    if active is not None:
+        text = f"driving from {active}"
+    elif mux.zero_reason == ZeroReason.AWAITING_ZERO:
+        waiting = names[mux.awaiting_source] if mux.awaiting_source < len(names) else "?"
+        text = (
+            f"stopped: waiting for a zero from {waiting} "
+            f"since {Stop.NAMES.get(mux.stop, mux.stop)}"
+        )
+    elif mux.zero_reason == ZeroReason.HELD:
+        text = f"stopped: held by {Stop.NAMES.get(mux.stop, mux.stop)}"
+    else:
+        text = f"stopped: {ZeroReason.NAMES.get(mux.zero_reason, mux.zero_reason)}"
+    held = [
+        fixed_str(mux.locks[i].name)
+        for i in range(min(mux.lock_count, len(mux.locks)))
+        if mux.locks[i].held
+    ]
+    return f"{text} · held: {', '.join(held)}" if held else text
+
+
 MuxStatus.source_names = _source_names  # type: ignore[attr-defined]
+MuxStatus.why = _why  # type: ignore[attr-defined]
+
+# The sources this process has connected to before (prefix, robot, source): the first
+# connection of each sends one heartbeat (see ``Robot.source``); a reconnection sends none.
+_CONNECTED_SOURCES: set[tuple[str | None, str, str]] = set()
 
 
 def _described(array: Any, count: int) -> list[Any]:
@@ -565,9 +601,10 @@ class Robot:
     the newest samples); a reader that needs every sample opens :meth:`state_stream`.
     """
 
-    def __init__(self, name: str, node: Any) -> None:
+    def __init__(self, name: str, node: Any, prefix: str | None = None) -> None:
         self.name = name
         self._node = node
+        self._prefix = prefix if prefix is not None else os.environ.get(PREFIX_ENV)
         self._state = _Reader(node, service_name(name, "state"), ChassisState, _LATEST_BUFFER)
         self._mux: _Reader | None = None
         self._latest_state: ChassisState | None = None
@@ -598,7 +635,7 @@ class Robot:
             raise NotServed(name) from None
         if state.dynamic_config.number_of_publishers == 0:
             raise NotServed(name)
-        return cls(name, node)
+        return cls(name, node, prefix)
 
     def is_served(self) -> bool:
         """True while ``chassisd`` still publishes this robot's state."""
@@ -707,7 +744,14 @@ class Robot:
     def source(self, name: str) -> Source:
         """Publishes velocity requests as the configured source ``name`` (its priority and
         timeout are the service's). Raises :class:`UnknownSource` when the service has no such
-        source and :class:`SourceTaken` when another process holds it."""
+        source and :class:`SourceTaken` when another process holds it.
+
+        Motion starts only from a zero: after a stop it did not ask for (chassisd starting, a
+        lock released, the safety monitor or the bus back), the service obeys a source's motion
+        only once it has asked for nothing since. Starting a process is a deliberate act, so
+        its first connection of a source sends one heartbeat; a reconnection of the same source
+        by the same process sends none (send :meth:`Source.stop` before driving again).
+        """
         _valid_name(name)
         topic = service_name(self.name, "cmd", name)
         try:
@@ -737,7 +781,12 @@ class Robot:
             if _error_name(e) == "ExceedsMaxSupportedNotifiers":
                 raise taken from None
             raise IpcError(f"notifier of {topic}: {_error_name(e)}") from None
-        return Source(name, publisher, notifier)
+        source = Source(name, publisher, notifier)
+        key = (self._prefix, self.name, name)
+        if key not in _CONNECTED_SOURCES:
+            _CONNECTED_SOURCES.add(key)
+            source.heartbeat()
+        return source
 
     def control(self, action: str, /, timeout: float = 3.0, **args: Any) -> ControlAnswer:
         """Asks for a control action (see :func:`control_request`) and waits at most

@@ -14,13 +14,20 @@
 //! * Configured speed limits, then acceleration smoothing; a stop from a safety-priority source,
 //!   a stale required source, a lock and the timeout of the last active source are never
 //!   smoothed: motion never outlives a dead source's timeout.
-//! * **A release never starts motion** (ISO 13850, IEC 60204-1: resetting a stop shall not
-//!   initiate a restart). When a lock is released — by its holder, the operator, any bridge, or
-//!   after a latch restored at start — every source it blocked that was asking for motion at
-//!   that moment is *awaiting zero*: its motion is not obeyed until it asks for zero (a zero
-//!   request or a heartbeat) or stops asking (its request times out). While the source that
-//!   would win awaits, the output is zero and `MuxStatus` says so (`ZeroReason::AWAITING_ZERO`,
-//!   `awaiting_source`); it does not hand the robot to a lower source either.
+//! * **Motion starts only from a zero** (ISO 13850, IEC 60204-1: resetting a stop shall not
+//!   initiate a restart; ISO 3691-4: no automatic restart after a stop or a power interruption).
+//!   Every [`Stop`] the winning source did not ask for itself ends the same way: each source it
+//!   stopped whose last word was motion is *awaiting zero*, and its motion is not obeyed until
+//!   it asks for zero (a zero request, a heartbeat or an envelope). Silence, a timeout or
+//!   another source's zero is not a zero. The stops: the service's start (every source awaits:
+//!   a client process that starts sends one zero as it connects); a lock released — by its
+//!   holder, the operator, any bridge, or after a latch restored at start (the sources below
+//!   it); the required source stale and fresh again; and the holds the engine reports from the
+//!   bus and the chassis ([`Mux::set_holds`]: bus lost or bus-off, the chassis' E-stop,
+//!   remote-control takeover, a drive fault), while which the output is zero
+//!   (`ZeroReason::HELD`). While the source that would win awaits, the output is zero and
+//!   `MuxStatus` says so (`ZeroReason::AWAITING_ZERO`, `awaiting_source`, `stop`); it does not
+//!   hand the robot to a lower source either.
 //! * A request with a NaN or infinite number, a negative envelope, or a speed no chassis could
 //!   reach (over [`MAX_SANE_SPEED`] or [`MAX_SANE_YAW_RATE`], steering past ±90°) is rejected
 //!   and counted against its source; the source's previous request stands.
@@ -32,7 +39,7 @@ use std::time::Duration;
 
 use chassis_interfaces::{
     BodyVelocity, ClampFlags, LockStatus, MAX_LOCKS, MAX_SOURCES, MuxStatus, RequestFlags,
-    SourceFlags, SourceStatus, VelocityRequest, ZeroReason, valid_robot_name,
+    SourceFlags, SourceStatus, Stop, VelocityRequest, ZeroReason, valid_robot_name,
 };
 use chassis_protocols::Timestamp;
 use serde::{Deserialize, Serialize};
@@ -253,9 +260,9 @@ struct Source {
     /// Latest request and the time its age counts from.
     latest: Option<(Timestamp, VelocityRequest)>,
     rejected: u32,
-    /// It asked for motion when a lock that blocked it was released: its motion waits for a
-    /// zero request (or its timeout).
-    awaiting_zero: bool,
+    /// The [`Stop`] whose end its motion waits on: its last word was motion (or it has not
+    /// spoken since the service started), and only a zero request of its own clears it.
+    awaiting: u8,
 }
 
 impl Source {
@@ -268,14 +275,23 @@ impl Source {
         self.latest.map(|(t, _)| t + self.timeout)
     }
 
-    /// Whether its latest request, fresh at `now`, asks for motion (not a heartbeat, not an
-    /// envelope, not zero).
-    fn asks_for_motion(&self, now: Timestamp) -> bool {
-        self.is_fresh(now)
-            && self
-                .latest
-                .is_some_and(|(_, r)| !r.is_heartbeat() && !twist_of(&r).is_zero())
+    /// Whether its last word, fresh or not, was motion (not a heartbeat, not an envelope, not
+    /// zero).
+    fn last_word_was_motion(&self) -> bool {
+        self.latest.is_some_and(|(_, r)| !asks_nothing(&r))
     }
+
+    /// Awaits a zero since a stop and has spoken (a source that never spoke awaits its first
+    /// zero since the start, which its library sends as it connects).
+    fn is_awaiting(&self) -> bool {
+        self.awaiting != Stop::NONE && self.latest.is_some()
+    }
+}
+
+/// A request that asks for no motion: a zero, a heartbeat or an envelope. This, and only this,
+/// ends a source's wait after a stop.
+fn asks_nothing(request: &VelocityRequest) -> bool {
+    request.is_heartbeat() || request.is_limit() || twist_of(request).is_zero()
 }
 
 #[derive(Debug, Clone)]
@@ -304,6 +320,20 @@ pub struct Mux {
     last_evaluation: Option<Timestamp>,
     status: MuxStatus,
     rejected: u64,
+    /// The holds the engine reported (one bit per [`Stop`]) and the required sources' liveness
+    /// at the last evaluation: their ends are stops.
+    holds: u32,
+    required: Liveness,
+}
+
+/// The required sources, as the last evaluation found them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Liveness {
+    /// Not all fresh yet since the start (the safety monitor starting is not a restart).
+    NeverFresh,
+    Fresh,
+    /// One went stale after all had been fresh: their return is a stop's end.
+    Lost,
 }
 
 impl Mux {
@@ -324,7 +354,9 @@ impl Mux {
                 config: c.clone(),
                 latest: None,
                 rejected: 0,
-                awaiting_zero: false,
+                // The service's start is a stop: a source that kept asking through a restart
+                // must ask for zero first.
+                awaiting: Stop::SERVICE_START,
             })
             .collect();
         let locks: Vec<Lock> = config
@@ -369,6 +401,8 @@ impl Mux {
             last_evaluation: None,
             status,
             rejected: 0,
+            holds: 0,
+            required: Liveness::NeverFresh,
         })
     }
 
@@ -407,8 +441,8 @@ impl Mux {
         }
         let arrival = Timestamp::from_nanos(request.stamp_ns).min(now);
         source.latest = Some((arrival, *request));
-        if request.is_heartbeat() || twist_of(request).is_zero() {
-            source.awaiting_zero = false;
+        if asks_nothing(request) {
+            source.awaiting = Stop::NONE;
         }
         // Index < MAX_SOURCES (8) fits a u8.
         let holder = index as u8;
@@ -424,38 +458,57 @@ impl Mux {
             }
         }
         for priority in released {
-            self.await_zero_below(now, priority);
+            self.stop_ended(Stop::LOCK_RELEASED, Some(priority));
         }
         Ok(())
     }
 
-    /// Releases the lock `name` at `now` whoever holds it (operator). Returns whether it was
-    /// held. The sources it blocked that ask for motion now await a zero request.
-    pub fn release_lock(&mut self, now: Timestamp, name: &str) -> Result<bool, NoSuchLock> {
+    /// Releases the lock `name` whoever holds it (operator). Returns whether it was held. The
+    /// sources it blocked whose last word was motion now await a zero request.
+    pub fn release_lock(&mut self, name: &str) -> Result<bool, NoSuchLock> {
         let lock = self.lock_mut(name)?;
         let priority = lock.config.priority;
         let was_held = lock.held.take().is_some();
         if was_held {
-            self.await_zero_below(now, priority);
+            self.stop_ended(Stop::LOCK_RELEASED, Some(priority));
         }
         Ok(was_held)
     }
 
-    /// The sources whose motion waits for a zero request since a release.
+    /// The sources that have spoken and whose motion waits for a zero request since a stop.
     pub fn awaiting_zero(&self) -> Vec<&str> {
         self.sources
             .iter()
-            .filter(|s| s.awaiting_zero)
+            .filter(|s| s.is_awaiting())
             .map(|s| s.config.name.as_str())
             .collect()
     }
 
-    /// A lock of `priority` was released at `now`: every source it blocked that asks for motion
-    /// awaits a zero request before its motion is obeyed again.
-    fn await_zero_below(&mut self, now: Timestamp, priority: u8) {
+    /// The holds in force, one bit per [`Stop`] ([`hold_bit`]), as the engine reads them from
+    /// the bus and the chassis: while any is held the output is zero ([`ZeroReason::HELD`]);
+    /// each that ends is a stop.
+    pub fn set_holds(&mut self, holds: u32) {
+        let ended = self.holds & !holds;
+        self.holds = holds;
+        for (stop, _) in Stop::NAMES {
+            if ended & hold_bit(stop) != 0 {
+                self.stop_ended(stop, None);
+            }
+        }
+    }
+
+    /// The holds in force (see [`Mux::set_holds`]).
+    pub fn holds(&self) -> u32 {
+        self.holds
+    }
+
+    /// `stop` ended: every source it stopped (those below `below`, or every one) whose last
+    /// word was motion awaits a zero request before its motion is obeyed again. A source that
+    /// has not spoken keeps the wait it has since the start.
+    fn stop_ended(&mut self, stop: u8, below: Option<u8>) {
         for source in &mut self.sources {
-            if source.config.priority < priority && source.asks_for_motion(now) {
-                source.awaiting_zero = true;
+            if below.is_none_or(|p| source.config.priority < p) && source.last_word_was_motion() {
+                source.awaiting = stop;
             }
         }
     }
@@ -518,12 +571,19 @@ impl Mux {
             .sources
             .iter()
             .any(|s| s.config.required && !s.is_fresh(now));
-        // A source that stopped asking awaits nothing any more.
-        for source in &mut self.sources {
-            if source.awaiting_zero && !source.is_fresh(now) {
-                source.awaiting_zero = false;
+        self.required = match (self.required, required_stale) {
+            (Liveness::Lost, false) => {
+                self.stop_ended(Stop::REQUIRED_SOURCE, None);
+                Liveness::Fresh
             }
-        }
+            (_, false) => Liveness::Fresh,
+            (Liveness::NeverFresh, true) => Liveness::NeverFresh,
+            (_, true) => Liveness::Lost,
+        };
+        let held = Stop::NAMES
+            .into_iter()
+            .map(|(stop, _)| stop)
+            .find(|&stop| self.holds & hold_bit(stop) != 0);
 
         // The winner: fresh, asking for something, not blocked; highest priority, then newest.
         let mut winner: Option<usize> = None;
@@ -553,9 +613,11 @@ impl Mux {
             }
         }
 
-        let awaiting = winner.filter(|&w| self.sources[w].awaiting_zero);
+        let awaiting = winner.filter(|&w| self.sources[w].awaiting != Stop::NONE);
         let (requested, reason, winner) = if required_stale {
             (BodyVelocity::ZERO, ZeroReason::REQUIRED_SOURCE_STALE, None)
+        } else if held.is_some() {
+            (BodyVelocity::ZERO, ZeroReason::HELD, None)
         } else if awaiting.is_some() {
             (BodyVelocity::ZERO, ZeroReason::AWAITING_ZERO, None)
         } else if let Some(w) = winner {
@@ -587,6 +649,7 @@ impl Mux {
             || matches!(
                 reason,
                 ZeroReason::REQUIRED_SOURCE_STALE
+                    | ZeroReason::HELD
                     | ZeroReason::LOCKED
                     | ZeroReason::NO_ACTIVE_SOURCE
                     | ZeroReason::AWAITING_ZERO
@@ -602,7 +665,14 @@ impl Mux {
 
         let previous = self.status;
         self.fill_status(now, winner, reason, requested, output, clamp_flags);
-        self.status.awaiting_source = awaiting.map_or(MuxStatus::NO_SOURCE, |w| w as u8);
+        self.status.awaiting_source = awaiting
+            .filter(|_| reason == ZeroReason::AWAITING_ZERO)
+            .map_or(MuxStatus::NO_SOURCE, |w| w as u8);
+        self.status.stop = match reason {
+            ZeroReason::HELD => held.unwrap_or(Stop::NONE),
+            ZeroReason::AWAITING_ZERO => awaiting.map_or(Stop::NONE, |w| self.sources[w].awaiting),
+            _ => Stop::NONE,
+        };
         for &i in &limited_by {
             if let Some(slot) = self.status.sources.get_mut(i) {
                 slot.flags |= SourceFlags::LIMITING;
@@ -613,6 +683,7 @@ impl Mux {
             || previous.output != self.status.output
             || previous.clamp_flags != self.status.clamp_flags
             || previous.awaiting_source != self.status.awaiting_source
+            || previous.stop != self.status.stop
             || previous.locks != self.status.locks;
         Decision { output, changed }
     }
@@ -750,7 +821,7 @@ impl Mux {
             if blocking_priority.is_some_and(|p| source.config.priority < p) {
                 flags |= SourceFlags::BLOCKED;
             }
-            if source.awaiting_zero {
+            if source.is_awaiting() {
                 flags |= SourceFlags::AWAITING_ZERO;
             }
             slot.flags = flags;
@@ -804,6 +875,11 @@ impl Mux {
     }
 }
 
+/// The bit of `stop` in [`Mux::set_holds`]'s set.
+pub fn hold_bit(stop: u8) -> u32 {
+    1u32.checked_shl(u32::from(stop)).unwrap_or(0)
+}
+
 fn twist_of(request: &VelocityRequest) -> BodyVelocity {
     BodyVelocity {
         linear_x_mps: request.linear_x_mps,
@@ -840,12 +916,24 @@ mod tests {
         }
     }
 
-    /// Default sources, no smoothing, so outputs equal requests.
+    /// A mux whose sources have connected as client processes do: each one's library sends one
+    /// heartbeat as it connects (the required sources' heartbeats are the tests' own).
+    fn connected(config: &MuxConfig) -> Mux {
+        let mut m = Mux::new(config).unwrap();
+        for (index, source) in config.sources.iter().enumerate() {
+            if !source.required {
+                m.on_request(ms(0), index, &heartbeat(ms(0))).unwrap();
+            }
+        }
+        m
+    }
+
+    /// Default sources, connected, no smoothing, so outputs equal requests.
     fn mux() -> Mux {
         let mut config = MuxConfig::default();
         config.limits.linear_accel_mps2 = 0.0;
         config.limits.angular_accel_radps2 = 0.0;
-        Mux::new(&config).unwrap()
+        connected(&config)
     }
 
     /// Like [`mux`] but without the required safety monitor.
@@ -853,7 +941,7 @@ mod tests {
         let mut config = MuxConfig::default().without_required_sources();
         config.limits.linear_accel_mps2 = 0.0;
         config.limits.angular_accel_radps2 = 0.0;
-        Mux::new(&config).unwrap()
+        connected(&config)
     }
 
     const SAFETY: usize = 0;
@@ -907,12 +995,14 @@ mod tests {
         let d = m.evaluate(ms(301));
         assert_eq!(d.output, BodyVelocity::ZERO);
         assert_eq!(m.status().zero_reason, ZeroReason::NO_ACTIVE_SOURCE);
-        assert_eq!(m.next_deadline(ms(301)), None);
+        // The planner's heartbeat as it connected expires last, at its 500 ms.
+        assert_eq!(m.next_deadline(ms(301)), Some(ms(500)));
+        assert_eq!(m.next_deadline(ms(500)), None);
     }
 
     #[test]
     fn the_next_deadline_is_the_earliest_source_expiry() {
-        let mut m = mux();
+        let mut m = Mux::new(&MuxConfig::default()).unwrap();
         m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
         m.on_request(ms(50), TELEOP, &request(ms(50), 0.1)).unwrap();
         assert_eq!(m.next_deadline(ms(60)), Some(ms(200)));
@@ -944,7 +1034,7 @@ mod tests {
                 ..LimitsConfig::default()
             },
         };
-        let mut m = Mux::new(&config).unwrap();
+        let mut m = connected(&config);
         m.on_request(ms(0), 0, &request(ms(0), 0.1)).unwrap();
         m.on_request(ms(5), 1, &request(ms(5), 0.2)).unwrap();
         assert_eq!(m.evaluate(ms(6)).output.linear_x_mps, 0.2);
@@ -1094,7 +1184,7 @@ mod tests {
             m.on_request(ms(t), PLANNER, &request(ms(t), 0.3)).unwrap();
             assert_eq!(m.evaluate(ms(t)).output, BodyVelocity::ZERO, "at {t} ms");
         }
-        assert_eq!(m.release_lock(ms(5001), "estop"), Ok(true));
+        assert_eq!(m.release_lock("estop"), Ok(true));
         assert_eq!(
             m.evaluate(ms(5001)).output,
             BodyVelocity::ZERO,
@@ -1105,7 +1195,7 @@ mod tests {
         m.on_request(ms(5040), PLANNER, &request(ms(5040), 0.3))
             .unwrap();
         assert_eq!(m.evaluate(ms(5040)).output.linear_x_mps, 0.3);
-        assert!(m.release_lock(ms(5040), "nope").is_err());
+        assert!(m.release_lock("nope").is_err());
     }
 
     /// ISO 13850 / IEC 60204-1: resetting a stop shall not initiate a restart. Teleop keeps
@@ -1122,8 +1212,10 @@ mod tests {
         m.on_request(ms(20), PLANNER, &request(ms(20), 0.2))
             .unwrap();
         assert_eq!(m.evaluate(ms(20)).output, BodyVelocity::ZERO);
-        assert_eq!(m.release_lock(ms(30), "estop"), Ok(true));
+        assert_eq!(m.release_lock("estop"), Ok(true));
         assert_eq!(m.awaiting_zero(), ["teleop", "planner"]);
+        assert_eq!(m.evaluate(ms(30)).output, BodyVelocity::ZERO);
+        assert_eq!(m.status().stop, Stop::LOCK_RELEASED);
         for t in (30..300).step_by(20) {
             m.on_request(ms(t), TELEOP, &request(ms(t), 0.3)).unwrap();
             m.on_request(ms(t), PLANNER, &request(ms(t), 0.2)).unwrap();
@@ -1159,25 +1251,120 @@ mod tests {
         assert_eq!(m.status().awaiting().map(|s| s.name()), Some("planner"));
     }
 
-    /// A source that stops asking (its request times out) awaits nothing any more: asking again
-    /// later is a new start, not the old request resuming.
+    /// Silence is not a zero: a source that falls silent after a release (a lossy link) and
+    /// asks for motion again still awaits its zero. A source whose last word was zero is free.
     #[test]
-    fn a_source_that_stopped_asking_after_a_release_drives_when_it_asks_again() {
+    fn a_source_that_fell_silent_after_a_release_still_awaits_its_zero() {
         let mut m = mux_unrequired();
         assert_eq!(m.engage_lock(ms(0), "estop"), Ok(true));
         m.on_request(ms(10), TELEOP, &request(ms(10), 0.3)).unwrap();
-        assert_eq!(m.release_lock(ms(20), "estop"), Ok(true));
+        assert_eq!(m.release_lock("estop"), Ok(true));
         assert_eq!(m.evaluate(ms(20)).output, BodyVelocity::ZERO);
         let later = ms(10) + Duration::from_secs(1);
         assert_eq!(m.evaluate(later).output, BodyVelocity::ZERO);
-        assert!(m.awaiting_zero().is_empty());
+        assert_eq!(m.awaiting_zero(), ["teleop"]);
+        m.on_request(later, TELEOP, &request(later, 0.3)).unwrap();
+        assert_eq!(m.evaluate(later).output, BodyVelocity::ZERO);
+        assert_eq!(m.status().zero_reason, ZeroReason::AWAITING_ZERO);
+        m.on_request(later, TELEOP, &request(later, 0.0)).unwrap();
         m.on_request(later, TELEOP, &request(later, 0.3)).unwrap();
         assert_eq!(m.evaluate(later).output.linear_x_mps, 0.3);
-        // A release while nothing asked for motion leaves every source free.
+        // A release while the last word of every source was zero leaves every source free.
+        m.on_request(later, TELEOP, &request(later, 0.0)).unwrap();
         assert_eq!(m.engage_lock(later, "estop"), Ok(true));
-        let quiet = later + Duration::from_secs(1);
-        assert_eq!(m.release_lock(quiet, "estop"), Ok(true));
+        assert_eq!(m.release_lock("estop"), Ok(true));
         assert!(m.awaiting_zero().is_empty());
+        let quiet = later + Duration::from_secs(1);
+        m.on_request(quiet, TELEOP, &request(quiet, 0.3)).unwrap();
+        assert_eq!(m.evaluate(quiet).output.linear_x_mps, 0.3);
+    }
+
+    /// chassisd (re)starting is a stop: a client that kept asking through the restart (it never
+    /// connected anew, so its library sent no heartbeat) is not obeyed until it asks for zero.
+    #[test]
+    fn a_source_that_kept_asking_through_a_restart_awaits_its_zero() {
+        let mut config = MuxConfig::default().without_required_sources();
+        config.limits.linear_accel_mps2 = 0.0;
+        let mut m = Mux::new(&config).unwrap();
+        for t in (0..200).step_by(20) {
+            m.on_request(ms(t), TELEOP, &request(ms(t), 0.3)).unwrap();
+            assert_eq!(m.evaluate(ms(t)).output, BodyVelocity::ZERO, "at {t} ms");
+            assert_eq!(m.status().zero_reason, ZeroReason::AWAITING_ZERO);
+            assert_eq!(m.status().stop, Stop::SERVICE_START);
+            assert_eq!(m.status().awaiting().map(|s| s.name()), Some("teleop"));
+        }
+        m.on_request(ms(200), TELEOP, &heartbeat(ms(200))).unwrap();
+        m.on_request(ms(220), TELEOP, &request(ms(220), 0.3))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(220)).output.linear_x_mps, 0.3);
+        assert_eq!(m.status().stop, Stop::NONE);
+    }
+
+    /// A safety monitor that dies and is started again ends a stop: the source that kept asking
+    /// waits for its own zero, whatever the safety monitor sends. Its first start is no restart.
+    #[test]
+    fn a_restarted_safety_monitor_does_not_restart_the_robot() {
+        let mut m = mux();
+        m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.3)).unwrap();
+        assert_eq!(m.evaluate(ms(0)).output.linear_x_mps, 0.3);
+        for t in (50..1000).step_by(50) {
+            m.on_request(ms(t), TELEOP, &request(ms(t), 0.3)).unwrap();
+            m.evaluate(ms(t));
+        }
+        assert_eq!(m.status().zero_reason, ZeroReason::REQUIRED_SOURCE_STALE);
+        for t in (1000..1500).step_by(50) {
+            m.on_request(ms(t), SAFETY, &heartbeat(ms(t))).unwrap();
+            m.on_request(ms(t), TELEOP, &request(ms(t), 0.3)).unwrap();
+            assert_eq!(m.evaluate(ms(t)).output, BodyVelocity::ZERO, "at {t} ms");
+            assert_eq!(m.status().zero_reason, ZeroReason::AWAITING_ZERO);
+            assert_eq!(m.status().stop, Stop::REQUIRED_SOURCE);
+        }
+        m.on_request(ms(1500), SAFETY, &request(ms(1500), 0.0))
+            .unwrap();
+        m.on_request(ms(1510), TELEOP, &request(ms(1510), 0.3))
+            .unwrap();
+        assert_eq!(
+            m.evaluate(ms(1510)).output,
+            BodyVelocity::ZERO,
+            "another source's zero is not teleop's"
+        );
+        m.on_request(ms(1520), TELEOP, &request(ms(1520), 0.0))
+            .unwrap();
+        m.on_request(ms(1540), SAFETY, &heartbeat(ms(1540)))
+            .unwrap();
+        m.on_request(ms(1540), TELEOP, &request(ms(1540), 0.3))
+            .unwrap();
+        assert_eq!(m.evaluate(ms(1540)).output.linear_x_mps, 0.3);
+    }
+
+    /// A hold (the bus lost, the chassis' E-stop, remote control, a drive fault) zeroes the
+    /// output while it lasts and names itself; its end waits for the winner's zero.
+    #[test]
+    fn a_hold_stops_the_robot_and_its_end_waits_for_a_zero() {
+        let mut m = mux_unrequired();
+        m.on_request(ms(0), TELEOP, &request(ms(0), 0.3)).unwrap();
+        assert_eq!(m.evaluate(ms(0)).output.linear_x_mps, 0.3);
+        for stop in [
+            Stop::BUS,
+            Stop::CHASSIS_ESTOP,
+            Stop::REMOTE_CONTROL,
+            Stop::CHASSIS_FAULT,
+        ] {
+            m.set_holds(hold_bit(stop) | hold_bit(Stop::CHASSIS_FAULT));
+            m.on_request(ms(10), TELEOP, &request(ms(10), 0.3)).unwrap();
+            assert_eq!(m.evaluate(ms(10)).output, BodyVelocity::ZERO);
+            assert_eq!(m.status().zero_reason, ZeroReason::HELD);
+            assert_eq!(m.status().stop, stop.min(Stop::CHASSIS_FAULT));
+            m.set_holds(0);
+            m.on_request(ms(20), TELEOP, &request(ms(20), 0.3)).unwrap();
+            assert_eq!(m.evaluate(ms(20)).output, BodyVelocity::ZERO);
+            assert_eq!(m.status().zero_reason, ZeroReason::AWAITING_ZERO);
+            assert_eq!(m.status().stop, Stop::CHASSIS_FAULT, "the last stop to end");
+            m.on_request(ms(30), TELEOP, &request(ms(30), 0.0)).unwrap();
+            m.on_request(ms(40), TELEOP, &request(ms(40), 0.3)).unwrap();
+            assert_eq!(m.evaluate(ms(40)).output.linear_x_mps, 0.3, "{stop}");
+        }
     }
 
     #[test]
@@ -1207,7 +1394,7 @@ mod tests {
     fn acceleration_is_smoothed_but_a_safety_stop_is_not() {
         let mut config = MuxConfig::default();
         config.limits.linear_accel_mps2 = 1.0;
-        let mut m = Mux::new(&config).unwrap();
+        let mut m = connected(&config);
         m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
         m.on_request(ms(0), TELEOP, &request(ms(0), 1.0)).unwrap();
         m.evaluate(ms(0));
@@ -1231,7 +1418,7 @@ mod tests {
     fn motion_ends_with_the_timeout_of_a_silent_source_without_a_ramp() {
         let mut config = MuxConfig::default().without_required_sources();
         config.limits.linear_accel_mps2 = 0.5;
-        let mut m = Mux::new(&config).unwrap();
+        let mut m = connected(&config);
         m.evaluate(ms(0));
         for t in (0..=2000).step_by(20) {
             m.on_request(ms(t), TELEOP, &request(ms(t), 0.5)).unwrap();
@@ -1247,7 +1434,7 @@ mod tests {
     fn a_stale_safety_monitor_stops_at_once_without_smoothing() {
         let mut config = MuxConfig::default();
         config.limits.linear_accel_mps2 = 0.5;
-        let mut m = Mux::new(&config).unwrap();
+        let mut m = connected(&config);
         m.on_request(ms(0), SAFETY, &heartbeat(ms(0))).unwrap();
         m.on_request(ms(0), TELEOP, &request(ms(0), 0.0)).unwrap();
         m.evaluate(ms(0));
@@ -1268,7 +1455,7 @@ mod tests {
     fn a_safety_envelope_blocks_only_the_direction_towards_the_obstacle_at_once() {
         let mut config = MuxConfig::default();
         config.limits.linear_accel_mps2 = 0.5;
-        let mut m = Mux::new(&config).unwrap();
+        let mut m = connected(&config);
         let ahead_blocked = |t: u64| VelocityRequest {
             stamp_ns: ms(t).as_nanos(),
             ..VelocityRequest::limit(0.0, 1.0, 1.0, 2.0)
@@ -1327,7 +1514,7 @@ mod tests {
             angular_accel_radps2: 0.0,
             ..LimitsConfig::default()
         };
-        let mut m = Mux::new(&config).unwrap();
+        let mut m = connected(&config);
         let fast = VelocityRequest {
             stamp_ns: 0,
             ..VelocityRequest::twist(-2.0, 1.0)

@@ -16,7 +16,7 @@
 use std::os::unix::net::{SocketAddr, UnixDatagram};
 use std::time::Duration;
 
-use chassis_interfaces::{MuxStatus, ZeroReason};
+use chassis_interfaces::MuxStatus;
 use chassis_protocols::Timestamp;
 use tracing::debug;
 
@@ -122,24 +122,7 @@ fn address(text: &str) -> Option<SocketAddr> {
 
 /// The mux's decision in a few words: what drives the robot, or why nothing does.
 pub fn describe(status: &MuxStatus) -> String {
-    let held: Vec<&str> = status
-        .locks()
-        .iter()
-        .filter(|l| l.held == 1)
-        .map(|l| l.name())
-        .collect();
-    let locks = if held.is_empty() {
-        String::new()
-    } else {
-        format!(" · held: {}", held.join(", "))
-    };
-    match status.active() {
-        Some(source) => format!("driving from {}{locks}", source.name()),
-        None => format!(
-            "stopped: {}{locks}",
-            ZeroReason::name(status.zero_reason).replace('_', " ")
-        ),
-    }
+    status.why().to_string()
 }
 
 #[cfg(test)]
@@ -152,13 +135,24 @@ mod tests {
         let t = Timestamp::from_millis;
         let mut mux = Mux::new(&MuxConfig::default()).unwrap();
         mux.evaluate(t(1));
-        assert_eq!(describe(mux.status()), "stopped: required source stale");
+        assert_eq!(
+            describe(mux.status()),
+            "stopped: required source safety silent"
+        );
         let mut mux = Mux::new(&MuxConfig::default().without_required_sources()).unwrap();
         let teleop = chassis_interfaces::VelocityRequest {
             stamp_ns: t(1).as_nanos(),
             ..chassis_interfaces::VelocityRequest::twist(0.3, 0.0)
         };
         mux.on_request(t(1), 1, &teleop).unwrap();
+        mux.evaluate(t(2));
+        assert_eq!(
+            describe(mux.status()),
+            "stopped: waiting for a zero from teleop since chassisd started"
+        );
+        mux.on_request(t(2), 1, &chassis_interfaces::VelocityRequest::heartbeat())
+            .unwrap();
+        mux.on_request(t(2), 1, &teleop).unwrap();
         mux.evaluate(t(2));
         assert_eq!(describe(mux.status()), "driving from teleop");
         mux.engage_lock(t(3), "estop").unwrap();

@@ -75,9 +75,9 @@ use std::time::Duration;
 
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    ControllerState, FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags, LockStatus,
-    MuxStatus, RobotDescription, SourceFlags, SourceStatus, VelocityRequest, WireProtocol,
-    ZeroReason,
+    ControllerState, FaultFlags, FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags,
+    LockStatus, MuxStatus, RobotDescription, SourceFlags, SourceStatus, Stop, VelocityRequest,
+    WireProtocol, ZeroReason,
 };
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
@@ -92,7 +92,7 @@ pub use pass::{PassIo, Readers, WriteError, Written};
 
 use crate::config::{Config, LoopMode};
 use crate::controller::{self, Controller, ControllerReport};
-use crate::mux::{Mux, Rejection};
+use crate::mux::{Mux, Rejection, hold_bit};
 
 /// The robot's driver behind the common contract.
 pub use chassis_protocols::BoxedDriver;
@@ -542,7 +542,7 @@ impl Engine {
             Err(reason) => (ControlStatus::INVALID, reason.to_string()),
             Ok(ControlAction::LockRelease(name)) => {
                 self.undecided = true;
-                match self.mux.release_lock(now, &name) {
+                match self.mux.release_lock(&name) {
                     Ok(true) => match self.mux.awaiting_zero().as_slice() {
                         [] => (ControlStatus::OK, format!("{name} released")),
                         waiting => (
@@ -604,6 +604,7 @@ impl Engine {
             self.publish_state(stamp);
         }
         self.driver.handle_rx(stamp, rx);
+        self.update_holds();
         self.publish_state_if_changed(stamp);
     }
 
@@ -612,6 +613,7 @@ impl Engine {
     pub fn handle_controller(&mut self, stamp: Timestamp, report: &ControllerReport) {
         let change = self.controller.apply(report);
         self.log_controller(stamp, &change);
+        self.update_holds();
         if change.state.is_some() {
             self.publish_state(stamp);
         }
@@ -686,6 +688,7 @@ impl Engine {
         self.bus = Link::Down {
             retry_at: now + self.bus_backoff,
         };
+        self.update_holds();
     }
 
     /// The GPS receiver is gone: it is reopened after a second.
@@ -707,6 +710,7 @@ impl Engine {
                 self.bus_backoff = self.config.reconnect_initial;
                 self.rx_moderation.reset(now);
                 self.driver.set_bus_down(now, false);
+                self.update_holds();
             }
             Device::Gps => {
                 info!(gps = name, "GPS receiver open");
@@ -743,6 +747,7 @@ impl Engine {
         }
         if self.driver.poll_timeout().is_some_and(|t| t <= now) {
             self.driver.handle_timeout(now);
+            self.update_holds();
         }
     }
 
@@ -955,6 +960,53 @@ impl Engine {
     }
 
     // ---- inside -------------------------------------------------------------------------
+
+    /// Hands the mux the stops the bus and the chassis impose now (see `crate::mux`): the bus
+    /// lost, bus-off or the chassis silent (a power cut); the chassis' E-stop; a remote-control
+    /// transmitter in charge; a fault that stops the drive — each as the driver reports it in
+    /// the state it keeps. A change is decided again before the next transmit.
+    fn update_holds(&mut self) {
+        let state = self.driver.state();
+        let faults = state.system.fault_flags;
+        let holds = [
+            (
+                self.bus != Link::Up
+                    || self.controller.state() == ControllerState::BUS_OFF
+                    || state.link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) != 0,
+                Stop::BUS,
+            ),
+            (
+                faults & FaultFlags::EMERGENCY_STOP != 0,
+                Stop::CHASSIS_ESTOP,
+            ),
+            (
+                state.link_flags & LinkFlags::RC_AUTHORITY != 0,
+                Stop::REMOTE_CONTROL,
+            ),
+            (faults & FaultFlags::STOPS_DRIVE != 0, Stop::CHASSIS_FAULT),
+        ]
+        .into_iter()
+        .filter(|&(held, _)| held)
+        .fold(0, |bits, (_, stop)| bits | hold_bit(stop));
+        if holds != self.mux.holds() {
+            for (stop, name) in Stop::NAMES {
+                let bit = hold_bit(stop);
+                if holds & bit != self.mux.holds() & bit {
+                    if holds & bit != 0 {
+                        warn!(stop = name, "stopped: commanding zero until it ends");
+                    } else {
+                        warn!(
+                            stop = name,
+                            "{name} ended: motion starts again only from a zero of the source \
+                             that would win"
+                        );
+                    }
+                }
+            }
+            self.mux.set_holds(holds);
+            self.undecided = true;
+        }
+    }
 
     fn decide(&mut self, now: Timestamp) {
         self.undecided = false;

@@ -160,10 +160,34 @@ impl Rig {
     /// Steps at one instant that make the run a stalled one.
     const STALL: u32 = 10_000;
 
-    /// `robot` with `mux`, and `adjust` applied to the engine's settings. The engine starts
+    /// `robot` with `mux`, and `adjust` applied to the engine's settings, its clients connected
+    /// at [`T0`]: the library of each source but the required ones (whose heartbeats are the
+    /// scenario's) sends one heartbeat as its process connects. The engine starts
     /// ([`Engine::start`]) at the first run, so a scenario can restore locks before it, as the
     /// service does.
     pub fn with(robot: RobotKind, mux: MuxConfig, adjust: impl FnOnce(&mut EngineConfig)) -> Self {
+        let mut rig = Self::unconnected(robot, mux, adjust);
+        let connecting: Vec<String> = rig
+            .world
+            .mux_config
+            .sources
+            .iter()
+            .filter(|s| !s.required)
+            .map(|s| s.name.clone())
+            .collect();
+        for name in connecting {
+            rig.request_at(T0, &name, VelocityRequest::heartbeat());
+        }
+        rig
+    }
+
+    /// Like [`Rig::with`], but no client connects anew: those that publish kept asking through
+    /// a restart of the service.
+    pub fn unconnected(
+        robot: RobotKind,
+        mux: MuxConfig,
+        adjust: impl FnOnce(&mut EngineConfig),
+    ) -> Self {
         let mut profile = robot.entry().defaults();
         if let Profile::Xbot(p) = &mut profile {
             p.wheel_separation_m =

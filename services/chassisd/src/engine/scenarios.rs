@@ -9,7 +9,7 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ControlKind, ControlRequest, ControlStatus, ControllerState, LinkFlags, LockStatus,
+    ControlKind, ControlRequest, ControlStatus, ControllerState, LinkFlags, LockStatus, Stop,
     VelocityRequest, ZeroReason,
 };
 use chassis_protocols::{Injection, Protocol, RobotKind, Timestamp, WireItem, titan};
@@ -536,7 +536,14 @@ fn a_lost_bus_is_reopened_with_doubling_backoff_and_nothing_is_written_meanwhile
         rig.world.wire.iter().find(|s| s.at > lost_at).map(|s| s.at),
         Some(next_attempt)
     );
-    assert!(rig.first_motion(next_attempt, |v| v > 0.0).is_some());
+    // Teleop kept asking through the loss: the bus coming back starts nothing until teleop asks
+    // for zero (motion starts only from a zero).
+    assert_eq!(rig.first_motion(next_attempt, |v| v > 0.0), None);
+    assert_waits_for_zero(&rig, "teleop", BUS_AND_HEARTBEAT);
+    let zero_at = rig.now();
+    rig.request("teleop", twist(0.0));
+    rig.run_for(ms(200));
+    assert!(rig.first_motion(zero_at, |v| v > 0.0).is_some());
     // A second loss starts from the first backoff again.
     rig.cut_bus();
     let second_loss = rig.now();
@@ -555,8 +562,21 @@ fn published_with(rig: &Rig, flag: u32, set: bool, since: Timestamp) -> Option<T
         .find(|&t| t >= since)
 }
 
+/// The latest mux status says the robot stands waiting for `source`'s zero since one of
+/// `stops` ended.
+fn assert_waits_for_zero(rig: &Rig, source: &str, stops: &[u8]) {
+    let m = rig.mux();
+    assert_eq!(m.zero_reason, ZeroReason::AWAITING_ZERO, "{}", m.why());
+    assert_eq!(m.awaiting().map(|s| s.name()), Some(source));
+    assert!(stops.contains(&m.stop), "{}", m.why());
+}
+
+/// A TITAN that lost the heartbeat reports a body exception until it hears it again: when the
+/// bus comes back, the last stop to end is either.
+const BUS_AND_HEARTBEAT: &[u8] = &[Stop::BUS, Stop::CHASSIS_FAULT];
+
 #[test]
-fn a_bus_off_is_published_at_once_and_a_restart_drives_the_robot_again() {
+fn a_bus_off_is_published_at_once_and_a_restart_waits_for_a_zero_to_drive_again() {
     let mut rig = ready();
     rig.publish_every("teleop", twist(0.5), ms(50), at(10_000));
     rig.run_until(at(500));
@@ -599,7 +619,12 @@ fn a_bus_off_is_published_at_once_and_a_restart_drives_the_robot_again() {
         (s.link.can_state, s.link.can_bus_off, s.link.can_restarts),
         (ControllerState::ERROR_ACTIVE, 1, 1)
     );
-    assert!(rig.first_motion(restarted, |v| v > 0.0).is_some());
+    assert_eq!(rig.first_motion(restarted, |v| v > 0.0), None);
+    assert_waits_for_zero(&rig, "teleop", BUS_AND_HEARTBEAT);
+    let zero_at = rig.now();
+    rig.request("teleop", twist(0.0));
+    rig.run_for(ms(200));
+    assert!(rig.first_motion(zero_at, |v| v > 0.0).is_some());
 }
 
 #[test]
@@ -886,6 +911,109 @@ fn every_agilex_v2_robot_drives_and_stops_through_the_engine() {
     }
 }
 
+/// The chassis' own E-stop switch (protocol V2): the engine holds zero while the chassis reports
+/// it and, once released, waits for the zero of the source that kept asking — for every V2
+/// robot, with no rule of the driver's own.
+#[test]
+fn a_chassis_estop_holds_zero_and_its_release_waits_for_a_zero() {
+    for robot in RobotKind::ALL
+        .into_iter()
+        .filter(|robot| robot.entry().default_protocol == Some(Protocol::V2))
+    {
+        let mut rig = ready_for(robot, unsmoothed(), 60);
+        rig.publish_every("teleop", twist(0.3), ms(50), at(6000));
+        rig.run_until(at(1500));
+        assert!(
+            (rig.world.firmware.truth().linear_mps - 0.3).abs() < 0.01,
+            "{robot}"
+        );
+        assert!(rig.inject(Injection::EStop(true)), "{robot}");
+        rig.run_until(at(2500));
+        assert_eq!(rig.mux().zero_reason, ZeroReason::HELD, "{robot}");
+        assert_eq!(rig.mux().stop, Stop::CHASSIS_ESTOP, "{robot}");
+        assert!(rig.inject(Injection::EStop(false)), "{robot}");
+        let released = rig.now();
+        rig.run_until(at(3500));
+        assert_eq!(rig.first_motion(released, |v| v != 0.0), None, "{robot}");
+        assert!(
+            rig.world.firmware.truth().linear_mps.abs() < 1e-3,
+            "{robot}"
+        );
+        assert_waits_for_zero(&rig, "teleop", &[Stop::CHASSIS_ESTOP]);
+        rig.request("teleop", twist(0.0));
+        rig.run_until(at(5000));
+        assert!(
+            (rig.world.firmware.truth().linear_mps - 0.3).abs() < 0.01,
+            "{robot}: {:?}",
+            rig.world.firmware.truth()
+        );
+    }
+}
+
+/// A transmitter that takes the chassis over and hands it back, and a motor driver lost and
+/// its fault cleared by the operator: each holds zero and its end waits for teleop's zero.
+#[test]
+fn remote_control_and_a_drive_fault_end_only_with_a_zero() {
+    let mut rig = ready();
+    rig.publish_every("teleop", twist(0.5), ms(50), at(20_000));
+    rig.run_until(at(1000));
+    assert!(rig.first_motion(at(200), |v| v > 0.4).is_some());
+    assert!(rig.inject(Injection::RcTakeover(true)));
+    rig.run_until(at(2000));
+    assert_eq!(rig.mux().zero_reason, ZeroReason::HELD);
+    assert_eq!(rig.mux().stop, Stop::REMOTE_CONTROL);
+    assert!(rig.inject(Injection::RcTakeover(false)));
+    let handed_back = rig.now();
+    rig.run_until(at(3000));
+    assert_eq!(rig.first_motion(handed_back, |v| v > 0.0), None);
+    assert_waits_for_zero(&rig, "teleop", &[Stop::REMOTE_CONTROL]);
+    rig.request("teleop", twist(0.0));
+    rig.run_until(at(4000));
+    assert!(rig.first_motion(at(3000), |v| v > 0.4).is_some());
+
+    assert!(rig.inject(Injection::MotorDriverLoss {
+        motor: 1,
+        lost: true
+    }));
+    rig.run_until(at(5000));
+    assert_eq!(rig.mux().zero_reason, ZeroReason::HELD);
+    assert_eq!(rig.mux().stop, Stop::CHASSIS_FAULT);
+    assert!(rig.inject(Injection::MotorDriverLoss {
+        motor: 1,
+        lost: false
+    }));
+    // 0x441 code 0x00: every latched fault whose cause is gone.
+    rig.control_at(rig.now(), control(ControlKind::CLEAR_FAULTS));
+    let cleared = rig.now();
+    rig.run_until(at(6500));
+    assert_eq!(
+        rig.mux().zero_reason,
+        ZeroReason::AWAITING_ZERO,
+        "{}",
+        rig.mux().why()
+    );
+    assert_eq!(rig.first_motion(cleared, |v| v > 0.0), None);
+    assert_waits_for_zero(&rig, "teleop", &[Stop::CHASSIS_FAULT]);
+    rig.request("teleop", twist(0.0));
+    rig.run_until(at(7500));
+    assert!(rig.first_motion(at(6500), |v| v > 0.4).is_some());
+}
+
+/// chassisd starting is a stop: a client that kept asking through the restart (it did not
+/// connect anew, so its library sent nothing) is not obeyed until it asks for zero.
+#[test]
+fn a_client_that_kept_asking_through_a_restart_drives_only_after_its_zero() {
+    let mut rig = Rig::unconnected(RobotKind::Titan, unsmoothed(), |_| {});
+    rig.publish_every("safety", VelocityRequest::heartbeat(), ms(50), at(5000));
+    rig.publish_every("teleop", twist(0.5), ms(50), at(5000));
+    rig.run_until(at(1000));
+    assert_eq!(rig.first_motion(T0, |v| v != 0.0), None);
+    assert_waits_for_zero(&rig, "teleop", &[Stop::SERVICE_START]);
+    rig.request("teleop", twist(0.0));
+    rig.run_until(at(1500));
+    assert!(rig.first_motion(at(1000), |v| v > 0.4).is_some());
+}
+
 #[test]
 fn the_engine_waits_for_its_next_deadline() {
     let rig = ready();
@@ -1117,23 +1245,69 @@ impl Dice {
     }
 }
 
-/// What the rig knows of a source, to judge the wire independently of the mux.
-#[derive(Debug, Clone, Copy, Default)]
-struct Seen {
-    /// Arrival of the latest request that asks for something (not a heartbeat).
-    asking: Option<Timestamp>,
-    /// Arrival of the latest request of any kind.
-    any: Option<Timestamp>,
-    /// The speed it asked for last.
-    speed: f32,
-    /// It asked for motion when the e-stop was released and has not asked for zero (nor
-    /// stopped asking) since: a release never starts motion.
-    awaiting_zero: bool,
+/// What a client said, as the rig's model keeps it: when it asked for motion and when for
+/// nothing (a zero, a heartbeat), each list in time order.
+#[derive(Debug, Default)]
+struct Words {
+    motion: Vec<Timestamp>,
+    nothing: Vec<Timestamp>,
 }
 
+impl Words {
+    fn said(&mut self, t: Timestamp, motion: bool) {
+        if motion {
+            self.motion.push(t);
+        } else {
+            self.nothing.push(t);
+        }
+    }
+
+    fn last(list: &[Timestamp], until: Timestamp) -> Option<Timestamp> {
+        list[..list.partition_point(|&x| x <= until)]
+            .last()
+            .copied()
+    }
+
+    /// Motion starts only from a zero: after a stop that ended at `ended`, this source may
+    /// drive at `t` only if it has asked for nothing since its last motion before the end.
+    fn may_drive(&self, ended: Timestamp, t: Timestamp) -> bool {
+        Self::last(&self.nothing, t)
+            .is_some_and(|zero| Self::last(&self.motion, ended).is_none_or(|m| zero > m))
+    }
+
+    /// Its last word at `ended` was motion (or it had not spoken): the stop made it wait.
+    fn was_stopped(&self, ended: Timestamp) -> bool {
+        Self::last(&self.motion, ended)
+            .is_some_and(|m| Self::last(&self.nothing, ended).is_none_or(|z| m > z))
+            || Self::last(&self.nothing, ended).is_none()
+    }
+}
+
+/// The stops of the random run, as the clients and the world caused them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+enum Ended {
+    Start,
+    Release,
+    SafetyBack,
+    BusBack,
+    Reboot,
+    RcHandBack,
+}
+
+/// The robot at T0 with clients that kept asking through a restart (none connects anew); for
+/// 1,000 simulated seconds the safety monitor beats, dies for seconds at a time and latches the
+/// e-stop, which the operator releases; teleop and the planner ask for random speeds (NaN among
+/// them); the bus is cut and restored, the chassis rebooted and taken over by a transmitter.
+/// Every frame written, and every millisecond between, is judged against a model of the rules
+/// built from what the clients and the world did, not from the mux: the safety monitor fresh, a
+/// source asking, the e-stop free, and motion only from a zero after every stop — the service's
+/// start, a release, the safety monitor back, the bus back (the engine's reopen), a reboot over
+/// (its boot time), a transmitter switched off. The run counts the restarts from a zero it saw
+/// after each kind of stop but the start (its own scenario:
+/// `a_client_that_kept_asking_through_a_restart_drives_only_after_its_zero`).
 #[test]
 fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_rule() {
-    let mut rig = Rig::with(RobotKind::Titan, MuxConfig::default(), |_| {});
+    let mut rig = Rig::unconnected(RobotKind::Titan, MuxConfig::default(), |_| {});
     let mut dice = Dice(0x5EED_CAFE_F00D_D00D);
     let (safety, teleop, planner) = (
         rig.source("safety"),
@@ -1141,15 +1315,25 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
         rig.source("planner"),
     );
     let timeouts = [ms(200), ms(300), ms(500)];
-    let mut seen = [Seen::default(); 3];
+    // The last request of each source that asked for something (not a heartbeat), and of any
+    // kind; what each source said.
+    let mut asking: [Option<Timestamp>; 3] = [None; 3];
+    let mut any: [Option<Timestamp>; 3] = [None; 3];
+    let mut words: [Words; 3] = Default::default();
+    // Every stop's end (or a time no later than it) and its kind, in time order.
+    let mut ended: Vec<(Timestamp, Ended)> = vec![(T0, Ended::Start)];
+    let mut restarts: std::collections::BTreeMap<Ended, std::collections::HashSet<(u64, usize)>> =
+        Default::default();
     let mut held = false;
     // When the e-stop was engaged and released, as the clients did it.
     let mut locks: Vec<(Timestamp, Timestamp)> = Vec::new();
+    let mut transmitter: Option<Timestamp> = None;
     let mut moving = 0u64;
     let mut steps = 0u64;
     let end = T0 + Duration::from_secs(LONG_RUN_S);
     let step = ms(10);
     let mut zero_checked = 0u64;
+    let mut opens_seen = 0;
     // The speed the last motion frame commanded (`None` after the bus was cut).
     let mut wire: Option<f64> = None;
     while rig.now() < end {
@@ -1171,7 +1355,11 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
                 held = true;
                 locks.push((now, end + ms(1)));
             }
-            seen[safety].any = Some(now);
+            // Back after a silence the tick surely saw (a stale check falls every 20 ms).
+            if any[safety].is_some_and(|last| now.saturating_since(last) >= ms(240)) {
+                ended.push((now, Ended::SafetyBack));
+            }
+            any[safety] = Some(now);
         }
         for (index, name, percent) in [(teleop, "teleop", 8), (planner, "planner", 12)] {
             if dice.chance(percent) {
@@ -1183,12 +1371,9 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
                 };
                 rig.request(name, request);
                 if request.is_finite() {
-                    seen[index] = Seen {
-                        asking: Some(now),
-                        any: Some(now),
-                        speed: v,
-                        awaiting_zero: seen[index].awaiting_zero && v != 0.0,
-                    };
+                    asking[index] = Some(now);
+                    any[index] = Some(now);
+                    words[index].said(now, v != 0.0);
                 }
             }
         }
@@ -1198,17 +1383,24 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
             if let Some(last) = locks.last_mut() {
                 last.1 = now;
             }
-            for s in [teleop, planner] {
-                let asking = seen[s]
-                    .asking
-                    .is_some_and(|a| now.saturating_since(a) < timeouts[s]);
-                if asking && seen[s].speed != 0.0 {
-                    seen[s].awaiting_zero = true;
-                }
-            }
+            ended.push((now, Ended::Release));
         }
         if dice.below(3000) == 0 {
             rig.inject(Injection::Reboot);
+            // The chassis is silent for its boot time: its end is no earlier.
+            ended.push((now + titan::TitanSim::DEFAULT_BOOT_TIME, Ended::Reboot));
+        }
+        match transmitter {
+            None if dice.below(5000) == 0 => {
+                rig.inject(Injection::RcTakeover(true));
+                transmitter = Some(now);
+            }
+            Some(on) if now.saturating_since(on) >= ms(500) && dice.chance(1) => {
+                rig.inject(Injection::RcTakeover(false));
+                transmitter = None;
+                ended.push((now, Ended::RcHandBack));
+            }
+            _ => {}
         }
         if dice.below(4000) == 0 {
             rig.cut_bus();
@@ -1221,6 +1413,14 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
         }
         rig.run_for(step);
         steps += 1;
+        // The engine reopening the bus ends its loss no later than then.
+        for &(t, device) in &rig.world.opens[opens_seen..] {
+            if device == Device::Bus {
+                ended.push((t, Ended::BusBack));
+            }
+        }
+        opens_seen = rig.world.opens.len();
+        ended.sort_by_key(|&(t, _)| t);
         // The rules hold at every frame written and at every millisecond in between: the
         // command on the wire is the last frame's until the next one.
         let frames: Vec<(Timestamp, f64)> = rig.motion();
@@ -1243,40 +1443,38 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
             let fresh = |s: usize, last: Option<Timestamp>| {
                 last.is_some_and(|a| t.saturating_since(a) < timeouts[s])
             };
-            // A source that stopped asking awaits nothing any more.
-            for s in [teleop, planner] {
-                if !fresh(s, seen[s].asking) {
-                    seen[s].awaiting_zero = false;
-                }
-            }
             let Some(v) = wire.filter(|&v| v != 0.0) else {
                 continue;
             };
-            // The source that would win (teleop outranks the planner) must not be awaiting
-            // its zero since a release.
-            if let Some(winner) = [teleop, planner]
-                .into_iter()
-                .find(|&s| fresh(s, seen[s].asking))
-            {
-                assert!(
-                    !seen[winner].awaiting_zero,
-                    "motion {v} at {t:?} after a release, before source {winner} asked for zero"
-                );
-            }
             assert!(
-                fresh(safety, seen[safety].any),
+                fresh(safety, any[safety]),
                 "motion {v} at {t:?} while the safety monitor is silent"
-            );
-            assert!(
-                [teleop, planner]
-                    .into_iter()
-                    .any(|s| fresh(s, seen[s].asking)),
-                "motion {v} at {t:?} outlives every source"
             );
             assert!(
                 !locks.iter().any(|(from, to)| (*from..*to).contains(&t)),
                 "motion {v} at {t:?} while the e-stop is held"
             );
+            // The source that would win (teleop outranks the planner) asks, and has asked for
+            // zero since its last motion before the latest stop ended.
+            let winner = [teleop, planner].into_iter().find(|&s| fresh(s, asking[s]));
+            let Some(winner) = winner else {
+                panic!("motion {v} at {t:?} outlives every source");
+            };
+            let (stop_end, kind) = ended[..ended.partition_point(|&(e, _)| e <= t)]
+                .last()
+                .copied()
+                .unwrap_or((T0, Ended::Start));
+            assert!(
+                words[winner].may_drive(stop_end, t),
+                "motion {v} at {t:?} from source {winner} without a zero since {kind:?} ended \
+                 at {stop_end:?}"
+            );
+            if words[winner].was_stopped(stop_end) {
+                restarts
+                    .entry(kind)
+                    .or_default()
+                    .insert((stop_end.as_nanos(), winner));
+            }
         }
         rig.forget();
     }
@@ -1285,4 +1483,16 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
     assert!(zero_checked > 10_000);
     assert!(rig.world.opens.len() > 5, "buses were lost and reopened");
     assert!(rig.state().seq > 100_000, "{} states", rig.state().seq);
+    // Every kind of stop was followed by a restart from a zero, several times.
+    let counts: Vec<(Ended, usize)> = restarts.iter().map(|(k, v)| (*k, v.len())).collect();
+    for kind in [
+        Ended::Release,
+        Ended::SafetyBack,
+        Ended::BusBack,
+        Ended::Reboot,
+        Ended::RcHandBack,
+    ] {
+        let n = restarts.get(&kind).map_or(0, |r| r.len());
+        assert!(n >= 3, "{n} restarts after {kind:?}: {counts:?}");
+    }
 }

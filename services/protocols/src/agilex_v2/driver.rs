@@ -8,9 +8,9 @@
 //!   RC hand-back), at most every [`V2Driver::MODE_RETRY`]. An RC transmitter holding authority
 //!   is reported ([`LinkFlags::RC_AUTHORITY`]), never fought. After a reboot or an RC hand-back
 //!   the driver follows the mux's current output, as the TITAN's does.
-//! * **E-stop**: while 0x211 b0 reports it, and after its release until the command has been
-//!   zero once, 0x111 carries zeros ([`ClampFlags::CHASSIS_NOT_READY`]) — the chassis never
-//!   resumes an old twist on its own.
+//! * **E-stop**: 0x211 b0 is reported as [`FaultFlags::EMERGENCY_STOP`]; the service holds
+//!   zero while it lasts and, after its release, until the source that would win asks for zero
+//!   (chassisd's mux: motion starts only from a zero) — the driver keeps no rule of its own.
 //! * **Parking brake** (HUNTER 2.0): released once before motion in CAN command mode, engaged
 //!   after an idle time and on shutdown. Robots without one never see 0x131.
 //! * **RANGER motion mode**: 0x141 before the 0x111 that needs a different mode.
@@ -48,7 +48,7 @@ pub struct V2Driver {
     pose: PoseIntegrator,
     /// What the next 0x111 carries.
     motion: Motion,
-    /// What the mux asked for, before the E-stop hold.
+    /// What the mux asked for.
     requested: Motion,
     requested_flags: u32,
     motion_clamp_flags: u32,
@@ -58,7 +58,6 @@ pub struct V2Driver {
     wanted_mode: Option<RangerMode>,
     last_mode_command: Option<Timestamp>,
     mode: ModeKeeper,
-    estop_hold: bool,
     /// What the driver believes about the parking brake (reported only by HUNTER 2.0, b6).
     brake: BrakeKeeper,
     lights: Option<(Lights, Timestamp)>,
@@ -116,7 +115,6 @@ impl V2Driver {
             ranger_mode: None,
             wanted_mode: None,
             last_mode_command: None,
-            estop_hold: false,
             lights: None,
             other_faults: 0,
             version: VersionQuery::NotAsked,
@@ -139,16 +137,10 @@ impl V2Driver {
         self.mode.requested(now);
     }
 
-    /// Recomputes what the heartbeat carries from the request and the E-stop hold.
+    /// Recomputes what the heartbeat carries from the request.
     fn update_motion(&mut self, now: Timestamp) {
-        let mut motion = self.requested;
-        let mut flags = self.requested_flags;
-        if self.estop_hold {
-            if motion != STOP {
-                flags |= ClampFlags::CHASSIS_NOT_READY;
-            }
-            motion = STOP;
-        }
+        let motion = self.requested;
+        let flags = self.requested_flags;
         let moving = motion != STOP;
         self.brake.planned(now, moving);
         self.core.schedule.update(&mut self.motion, motion, !moving);
@@ -180,14 +172,6 @@ impl V2Driver {
                 self.requested_flags = ClampFlags::CHASSIS_NOT_READY;
             }
         }
-        // Released E-stop: hold zero until the command has been zero once.
-        if self.estop_hold && self.requested == STOP && !self.estop_reported() {
-            self.estop_hold = false;
-            self.core.notice(
-                Level::Info,
-                "E-stop released and command zero: motion allowed",
-            );
-        }
         self.update_motion(now);
     }
 
@@ -216,10 +200,6 @@ impl V2Driver {
         {
             self.send_motion_mode(now, wanted);
         }
-    }
-
-    fn estop_reported(&self) -> bool {
-        self.core.state.system.fault_flags & FaultFlags::EMERGENCY_STOP != 0
     }
 
     fn update_body(&mut self, now: Timestamp) {
@@ -334,14 +314,6 @@ impl V2Driver {
         let new_faults = normalize_faults(s.fault_word, &self.profile)
             | vehicle_state_flags(s.vehicle_state)
             | self.other_faults;
-        if new_faults & FaultFlags::EMERGENCY_STOP != 0 && !self.estop_hold {
-            self.estop_hold = true;
-            self.core.notice(
-                Level::Warn,
-                "chassis E-stop: holding zero until it is released and the command is zero",
-            );
-            self.update_motion(now);
-        }
         let sys = &mut self.core.state.system;
         sys.body_status = match s.vehicle_state {
             vehicle::NORMAL => SystemState::BODY_NORMAL,
@@ -390,15 +362,6 @@ impl V2Driver {
             || (self.profile.mode_codes.standby.is_none() && new_mode == ControlMode::REMOTE);
         if self.mode.ask_again(now, not_ours, self.core.bus_down) {
             self.request_mode(now);
-        }
-        // The E-stop may have been released while the command was already zero.
-        if self.estop_hold && !self.estop_reported() && self.requested == STOP {
-            self.estop_hold = false;
-            self.core.notice(
-                Level::Info,
-                "E-stop released and command zero: motion allowed",
-            );
-            self.update_motion(now);
         }
     }
 
