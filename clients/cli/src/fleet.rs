@@ -24,7 +24,7 @@ use std::time::Duration;
 use anyhow::Context as _;
 use chassis_client::{
     ChassisState, ControlMode, FaultFlags, Group, LinkFlags, MuxStatus, Robot, RobotDescription,
-    WireProtocol, ZeroReason, install_signal_handlers, now_ns, termination_requested,
+    WireProtocol, install_signal_handlers, now_ns, termination_requested,
 };
 use clap::Args;
 use serde::Serialize;
@@ -178,10 +178,8 @@ fn row(name: &str, seen: &Seen, now_ns: u64) -> Row {
     };
     let (estop, estop_holder) = estop_of(seen.mux.as_ref());
     let winner = seen.mux.as_ref().map_or("?".to_string(), |m| {
-        m.active().map_or_else(
-            || format!("none ({})", ZeroReason::name(m.zero_reason)),
-            |a| a.name().to_string(),
-        )
+        m.active()
+            .map_or_else(|| format!("none ({})", m.why()), |a| a.name().to_string())
     });
     Row {
         name: name.to_string(),

@@ -706,13 +706,7 @@ fn mux_summary(m: &MuxStatus) -> String {
             s.priority,
             m.active_age_ms
         ),
-        None => match m.awaiting() {
-            Some(s) => format!(
-                "none — waiting for a zero command from {} (a release never starts motion)",
-                s.name()
-            ),
-            None => format!("none — zero because {}", ZeroReason::name(m.zero_reason)),
-        },
+        None => format!("none — {}", m.why()),
     };
     out.push_str(&format!(
         "mux        active {active}   output vx {:.3} vy {:.3} wz {:.3}\n",

@@ -19,7 +19,7 @@
 
 use std::ops::{BitAnd, Not};
 
-use chassis_interfaces::{ChassisState, FaultFlags, LinkFlags, MuxStatus, ZeroReason};
+use chassis_interfaces::{ChassisState, FaultFlags, LinkFlags, MuxStatus};
 
 /// How much a change matters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -37,7 +37,7 @@ pub enum Severity {
 pub struct Watch {
     faults: Option<u64>,
     link: Option<u32>,
-    mux: Option<(u8, u8, u8)>,
+    mux: Option<(u8, u8, u8, u8, u8)>,
 }
 
 impl Watch {
@@ -65,22 +65,14 @@ impl Watch {
         let key = (
             mux.active_source,
             mux.zero_reason,
+            mux.stop,
+            mux.awaiting_source,
             u8::try_from(locks.len()).unwrap_or(u8::MAX),
         );
         if self.mux.replace(key) == Some(key) {
             return None;
         }
-        let mut text = match mux.active() {
-            Some(source) => format!(
-                "mux: {} drives (priority {})",
-                source.name(),
-                mux.active_priority
-            ),
-            None => format!("mux: zero ({})", ZeroReason::name(mux.zero_reason)),
-        };
-        if !locks.is_empty() {
-            text.push_str(&format!("; locks held: {}", locks.join(", ")));
-        }
+        let text = format!("mux: {}", mux.why());
         let severity = if mux.active().is_some() {
             Severity::Info
         } else {

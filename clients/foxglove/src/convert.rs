@@ -6,7 +6,9 @@
 
 use chassis_client::foxglove::{BASE_LINK, Body, ODOM, RangeKind, pose, stamp, yaw_quaternion};
 use chassis_client::watch;
-use chassis_client::{BusFrame, ChassisState, FrameDirection, FrameKind, MuxStatus, ZeroReason};
+use chassis_client::{
+    BusFrame, ChassisState, FrameDirection, FrameKind, MuxStatus, Stop, ZeroReason,
+};
 use chassis_protocols::CanFrame;
 use chassis_protocols::describe::RobotCodec;
 use foxglove::messages::{
@@ -35,6 +37,12 @@ pub fn mux_json(mux: &MuxStatus) -> serde_json::Result<Value> {
             ZeroReason::name(mux.zero_reason).into(),
         );
         obj.insert("locks_held".into(), watch::held_locks(mux).into());
+        obj.insert("stop_name".into(), Stop::name(mux.stop).into());
+        obj.insert(
+            "awaiting_name".into(),
+            mux.awaiting().map_or("", |s| s.name()).into(),
+        );
+        obj.insert("why".into(), mux.why().to_string().into());
     }
     Ok(value)
 }

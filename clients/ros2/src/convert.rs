@@ -12,7 +12,8 @@
 
 use chassis_client::{
     ChassisState, ClampFlags, ControllerState, FaultFlags, Group, JointSource, LinkFlags,
-    MuxStatus, OdometryVariance, RobotDescription, SensorKind, WallClock, WireProtocol, ZeroReason,
+    MuxStatus, OdometryVariance, RobotDescription, SensorKind, Stop, WallClock, WireProtocol,
+    ZeroReason,
 };
 
 use crate::msg::{
@@ -572,19 +573,18 @@ fn mux_status(
         .map(|l| l.name())
         .collect();
     let clamps = state.map_or(0, |s| s.command.clamp_flags);
-    let (level, message) = if !locks.is_empty() {
-        (
-            DiagnosticStatus::WARN,
-            format!("locked: {}", locks.join(", ")),
-        )
-    } else if mux.zero_reason == ZeroReason::REQUIRED_SOURCE_STALE {
-        (
-            DiagnosticStatus::WARN,
-            "the required source is stale: holding zero".into(),
-        )
+    // A stop that is not the robot at rest: a lock, the safety monitor silent, a hold of the
+    // bus or the chassis, a source that must ask for zero after one.
+    let level = if !locks.is_empty()
+        || matches!(
+            mux.zero_reason,
+            ZeroReason::REQUIRED_SOURCE_STALE | ZeroReason::HELD | ZeroReason::AWAITING_ZERO
+        ) {
+        DiagnosticStatus::WARN
     } else {
-        (DiagnosticStatus::OK, format!("active source: {active}"))
+        DiagnosticStatus::OK
     };
+    let message = mux.why().to_string();
     DiagnosticStatus {
         level,
         name: format!("{prefix}: mux"),
@@ -593,6 +593,8 @@ fn mux_status(
         values: vec![
             KeyValue::new("active", active),
             KeyValue::new("zero_reason", ZeroReason::name(mux.zero_reason)),
+            KeyValue::new("stop", Stop::name(mux.stop)),
+            KeyValue::new("awaiting", mux.awaiting().map_or("", |s| s.name())),
             KeyValue::new("locks_held", locks.join(", ")),
             KeyValue::new("clamps", ClampFlags::names(clamps).join(", ")),
         ],

@@ -118,13 +118,15 @@ pub fn authority(mux: Option<&MuxStatus>, source: &str, driving: bool) -> Author
             by: match mux.zero_reason {
                 ZeroReason::REQUIRED_SOURCE_STALE => "no safety monitor".to_string(),
                 ZeroReason::LOCKED => "a lock".to_string(),
+                ZeroReason::AWAITING_ZERO => "motion only from a zero".to_string(),
+                ZeroReason::HELD => "the chassis".to_string(),
                 _ => "the mux".to_string(),
             },
-            why: format!("output zero: {}", ZeroReason::name(mux.zero_reason)),
+            why: mux.why().to_string(),
         },
         None => Authority::Other {
             active: None,
-            why: ZeroReason::name(mux.zero_reason).to_string(),
+            why: mux.why().to_string(),
         },
     }
 }

@@ -3,7 +3,7 @@
 
 use chassis_client::{
     ChassisState, ClampFlags, ControlMode, ControllerState, FaultFlags, FrameDirection, LinkFlags,
-    LockStatus, MuxStatus, RobotDescription, SourceFlags, ZeroReason,
+    LockStatus, MuxStatus, RobotDescription, SourceFlags,
 };
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout};
@@ -200,13 +200,7 @@ fn mux_panel(s: &Snapshot) -> Panel {
             ),
             bold(Color::Green),
         ),
-        None => Span::styled(
-            match m.awaiting() {
-                Some(s) => format!("active none — waiting for a zero command from {}", s.name()),
-                None => format!("active none — zero: {}", ZeroReason::name(m.zero_reason)),
-            },
-            bold(Color::Yellow),
-        ),
+        None => Span::styled(format!("active none — {}", m.why()), bold(Color::Yellow)),
     };
     lines.push(Line::from(vec![label("decision"), active]));
     lines.push(row(
