@@ -112,7 +112,8 @@ named_constants! {
         LOCK_RELEASED = 2 => "lock_released",
         /// The required source (the safety monitor) was silent and speaks again.
         REQUIRED_SOURCE = 3 => "required_source",
-        /// The bus was lost, the CAN controller bus-off or the chassis silent (power cut).
+        /// The bus was lost (an adapter unplugged, an interface down) or the CAN controller
+        /// went bus-off.
         BUS = 4 => "bus",
         /// The chassis reports its own E-stop switch.
         CHASSIS_ESTOP = 5 => "chassis_estop",
@@ -299,7 +300,7 @@ impl Stop {
     /// What holds the robot while `stop` is in force (`ZeroReason::HELD`).
     pub fn holding(stop: u8) -> &'static str {
         match stop {
-            Stop::BUS => "the bus is lost or the chassis silent",
+            Stop::BUS => "the bus is lost or bus-off",
             Stop::CHASSIS_ESTOP => "the chassis' E-stop is pressed",
             Stop::REMOTE_CONTROL => "a remote-control transmitter has the chassis",
             Stop::CHASSIS_FAULT => "the chassis reports a drive fault",
@@ -313,7 +314,7 @@ impl Stop {
             Stop::SERVICE_START => "chassisd started",
             Stop::LOCK_RELEASED => "a lock was released",
             Stop::REQUIRED_SOURCE => "the required source came back",
-            Stop::BUS => "the bus and the chassis came back",
+            Stop::BUS => "the bus came back",
             Stop::CHASSIS_ESTOP => "the chassis' E-stop was released",
             Stop::REMOTE_CONTROL => "remote control handed the chassis back",
             Stop::CHASSIS_FAULT => "the chassis' fault cleared",
@@ -398,7 +399,7 @@ mod tests {
         status.locks[0].set_name("estop");
         assert_eq!(
             status.why().to_string(),
-            "stopped: waiting for a zero from teleop since the bus and the chassis came back"
+            "stopped: waiting for a zero from teleop since the bus came back"
         );
         status.zero_reason = ZeroReason::HELD;
         status.stop = Stop::CHASSIS_ESTOP;

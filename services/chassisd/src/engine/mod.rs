@@ -962,9 +962,10 @@ impl Engine {
     // ---- inside -------------------------------------------------------------------------
 
     /// Hands the mux the stops the bus and the chassis impose now (see `crate::mux`): the bus
-    /// lost, bus-off or the chassis silent (a power cut); the chassis' E-stop; a remote-control
-    /// transmitter in charge; a fault that stops the drive — each as the driver reports it in
-    /// the state it keeps. A change is decided again before the next transmit.
+    /// lost or bus-off; the chassis' E-stop; a remote-control transmitter in charge; a fault
+    /// that stops the drive — each as the driver reports it in the state it keeps. (A chassis
+    /// that is only silent still obeys what it is sent: no stop.) A change is decided again
+    /// before the next transmit.
     fn update_holds(&mut self) {
         let state = self.driver.state();
         let faults = state.system.fault_flags;
@@ -972,7 +973,7 @@ impl Engine {
             (
                 self.bus != Link::Up
                     || self.controller.state() == ControllerState::BUS_OFF
-                    || state.link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) != 0,
+                    || state.link_flags & LinkFlags::BUS_DOWN != 0,
                 Stop::BUS,
             ),
             (
