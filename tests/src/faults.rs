@@ -10,6 +10,10 @@ use crate::{
     SourceStatus, Spread, Tmux, VelocityRequest, drove_again_after,
 };
 
+/// How long a robot that must stand is watched, the fewest states it must report meanwhile,
+/// and the speed below which it stands.
+pub use crate::{MIN_STOOD_SAMPLES, STANDING_MPS, STOOD_FOR};
+
 /// The tests that measure timing under load take this exclusively; the others share it, so the
 /// heartbeat and the request accounting are measured without a second test beside them (within
 /// one test binary: cargo runs the binaries one after another).
@@ -28,6 +32,15 @@ pub fn exclusive() -> RwLockWriteGuard<'static, ()> {
 pub use crate::name;
 
 /// Nanoseconds as milliseconds.
+/// The largest of `values`: NaN when there are none or one is NaN (`f64::max` would drop it),
+/// so a row whose figure was not measured fails its bound instead of passing on nothing.
+pub fn worst(values: &[f64]) -> f64 {
+    if values.is_empty() || values.iter().any(|v| v.is_nan()) {
+        return f64::NAN;
+    }
+    values.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+}
+
 pub fn ms(ns: i128) -> f64 {
     ns as f64 / 1e6
 }
@@ -124,14 +137,19 @@ impl Wire {
         self.frames.clear();
     }
 
-    /// The last frame that commanded motion, ns (0: none).
-    pub fn last_motion_ns(&self) -> u64 {
+    /// The last frame that commanded motion, ns (`None`: the tap holds none, and a bound on
+    /// it must fail rather than pass on nothing).
+    pub fn last_motion_ns(&self) -> Option<u64> {
         self.frames
             .iter()
             .filter(|f| is_titan_motion(f))
             .map(|f| f.stamp_ns)
             .max()
-            .unwrap_or(0)
+    }
+
+    /// How many frames that commanded motion the tap holds.
+    pub fn motion_frames(&self) -> usize {
+        self.frames.iter().filter(|f| is_titan_motion(f)).count()
     }
 
     /// The stamps of the TX 0x111 frames read, ns.
@@ -209,6 +227,13 @@ impl<'a> Pump<'a> {
             }
         }
         None
+    }
+
+    /// Pumps for `d` and reads every state the chassis reported meanwhile stamped after
+    /// `since_ns`: how many, and the fastest |speed| among them (NaN if any speed was not a
+    /// number). A row that says the robot stood asserts both: samples seen, none moving.
+    pub fn stands(&mut self, robot: &mut Robot, since_ns: u64, d: Duration) -> (usize, f64) {
+        crate::stands(robot, since_ns, d, || self.tick())
     }
 
     /// [`drove_again_after`] `since_ns`, pumping meanwhile.

@@ -576,6 +576,97 @@ impl Line {
     }
 }
 
+/// How long a robot that must stand is watched, the fewest states it must report meanwhile,
+/// and the speed below which it stands.
+pub const STOOD_FOR: Duration = Duration::from_secs(1);
+pub const MIN_STOOD_SAMPLES: usize = 20;
+pub const STANDING_MPS: f64 = 0.01;
+
+/// Reads every state the chassis reports for `d` stamped after `since_ns`, running `between`
+/// on every turn: how many, and the fastest |speed| among them (NaN if one was not a number).
+/// A check that the robot stood asserts both: states seen, none moving.
+pub fn stands(
+    robot: &mut Robot,
+    since_ns: u64,
+    d: Duration,
+    mut between: impl FnMut(),
+) -> (usize, f64) {
+    let end = Instant::now() + d;
+    let (mut samples, mut fastest) = (0usize, 0.0f64);
+    while Instant::now() < end {
+        between();
+        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(5))
+            && s.stamp_ns > since_ns
+        {
+            samples += 1;
+            let speed = f64::from(s.motion.linear_mps).abs();
+            fastest = if speed.is_nan() || fastest.is_nan() {
+                f64::NAN
+            } else {
+                fastest.max(speed)
+            };
+        }
+    }
+    (samples, fastest)
+}
+
+/// How a robot stood after a stop while its client kept asking for motion.
+#[derive(Debug, Clone, Copy)]
+pub struct StoodUntilZero {
+    /// From `since` until the mux said it waits for the source's zero.
+    pub waited: Duration,
+    /// States read over [`STOOD_FOR`] after that, and the fastest of them, m/s.
+    pub samples: usize,
+    pub fastest_mps: f64,
+}
+
+impl StoodUntilZero {
+    /// Enough states, none moving, none NaN.
+    pub fn stood(&self) -> bool {
+        self.samples >= MIN_STOOD_SAMPLES && self.fastest_mps < STANDING_MPS
+    }
+}
+
+/// Motion starts only from a zero: after a stop that ends at or after `since_ns`, while `ask`
+/// keeps asking for motion, waits (up to 15 s) until the mux says it waits for `source`'s zero
+/// since `stop`, then watches the robot for [`STOOD_FOR`]. `Err` names what the mux said
+/// instead.
+pub fn stands_until_zero(
+    robot: &mut Robot,
+    since_ns: u64,
+    (source, stop): (&str, u8),
+    mut ask: impl FnMut(),
+) -> Result<StoodUntilZero, String> {
+    let start = Instant::now();
+    let mut last = String::from("no mux status");
+    let waiting = loop {
+        if start.elapsed() > Duration::from_secs(15) {
+            return Err(format!(
+                "the mux never waited for {source}'s zero since {}: {last}",
+                Stop::name(stop)
+            ));
+        }
+        ask();
+        if let Ok(Some(m)) = robot.wait_mux(Duration::from_millis(20)) {
+            last = m.why().to_string();
+            if m.stamp_ns > since_ns
+                && m.zero_reason == ZeroReason::AWAITING_ZERO
+                && m.stop == stop
+                && m.awaiting().is_some_and(|s| s.name() == source)
+            {
+                break start.elapsed();
+            }
+        }
+    };
+    let from = now_ns();
+    let (samples, fastest_mps) = stands(robot, from, STOOD_FOR, ask);
+    Ok(StoodUntilZero {
+        waited: waiting,
+        samples,
+        fastest_mps,
+    })
+}
+
 /// A hang-up of the pty line to a `chassisd sim` mid-drive, and the row of the reliability
 /// report that says how it went.
 #[derive(Debug)]
@@ -587,6 +678,8 @@ pub struct HangUp<'a> {
     pub end: &'a str,
     /// Above this speed (m/s) the robot drives again.
     pub above_mps: f32,
+    /// The source the test drives as.
+    pub source: &'a str,
     pub suite: &'a str,
     pub test: &'a str,
 }
@@ -594,16 +687,18 @@ pub struct HangUp<'a> {
 impl HangUp<'_> {
     /// SIGKILLs the simulator `sim` (it simulates `kind` as chassis/`name` at the far end of
     /// `line`, linked at `link`); the loss must be reported within 3 s. Then starts it again
-    /// (labelled `sim2`) and waits up to 10 s for a speed above `above_mps` the chassis reported
-    /// after the restart, with the bus up, while `send` keeps asking. Returns the figure (to be
-    /// finished by the test once its asserts passed) and how long after the restart the robot
-    /// drove again.
+    /// (labelled `sim2`): while `send(false)` keeps asking for motion, the bus coming back
+    /// starts nothing — the robot stands and the mux waits for the source's zero — until
+    /// `send(true)` asks for zero; then it waits up to 10 s for a speed above `above_mps`
+    /// reported after that zero, with the bus up. Returns the figure (to be finished by the
+    /// test once its asserts passed) and how long after the zero the robot drove again (`None`
+    /// also when it did not stand first).
     pub fn run(
         &self,
         (env, robot): (&mut Env, &mut Robot),
         (sim, kind, name): (usize, &str, &str),
         (line, link): (Line, &Path),
-        send: impl FnMut(),
+        mut send: impl FnMut(bool),
     ) -> (Figures, Option<Duration>) {
         env.proc(sim).signal(Signal::SIGKILL);
         let killed = Instant::now();
@@ -615,31 +710,55 @@ impl HangUp<'_> {
         let _ = std::fs::remove_file(link);
         let restarted = now_ns();
         env.sim("sim2", kind, &[], name, &line.sim_bus(link));
+        let standing =
+            stands_until_zero(robot, restarted, (self.source, Stop::BUS), || send(false));
+        let stood = standing.as_ref().is_ok_and(StoodUntilZero::stood);
+        send(true);
+        let zero_sent = now_ns();
         // The state keeps the speed from before the hang-up: driving again is a speed the
-        // chassis reported after the line came back.
+        // chassis reported after the zero.
         let above = self.above_mps;
-        let back = drove_again_after(robot, restarted, Duration::from_secs(10), send, |s| {
-            s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > above
-        })
-        .map(|(_, after)| after);
+        let back = drove_again_after(
+            robot,
+            zero_sent,
+            Duration::from_secs(10),
+            || send(false),
+            |s| s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > above,
+        )
+        .map(|(_, after)| after)
+        .filter(|_| stood);
         let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
         let mut figures = Figures::faults();
         figures.add(Figure {
             rank: self.rank,
             fault: self.fault.into(),
             injection: self.injection.into(),
-            behaviour: "the loss was reported (`bus_down` / `chassis_silent`), the port \
-                        reopened with backoff, and the robot drove again on the same client \
-                        connection"
+            behaviour: "the loss was reported (`bus_down` / `chassis_silent`) and the port \
+                        reopened with backoff; motion starts only from a zero: the client kept \
+                        asking on the same connection and the robot stood, its mux waiting for \
+                        the client's zero since the bus came back, until it sent one; then it \
+                        drove"
                 .into(),
             figure: format!(
-                "loss reported {:.0} ms after the hang-up; driving again {:.0} ms after the \
-                 {} came back (the motion stamp of the first sample above {} m/s; restarted \
+                "loss reported {:.0} ms after the hang-up; {}; driving again {:.0} ms after the \
+                 zero (the motion stamp of the first sample above {} m/s; the {} restarted \
                  {:.0} ms after the hang-up)",
                 ms(lost),
+                match &standing {
+                    Ok(s) => format!(
+                        "after the {} came back the robot stood {} ms ({} states, fastest {:.3} \
+                         m/s) waiting for {}'s zero",
+                        self.end,
+                        STOOD_FOR.as_millis(),
+                        s.samples,
+                        s.fastest_mps,
+                        self.source
+                    ),
+                    Err(e) => e.clone(),
+                },
                 ms(back),
-                self.end,
                 self.above_mps,
+                self.end,
                 down_for.as_secs_f64() * 1e3
             ),
             value: ms(back),
@@ -1136,6 +1255,16 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
         suite: "latch",
         test: "an_estop_release_never_restarts_motion_by_itself",
         fault: "the e-stop released while teleop keeps asking for motion",
+    },
+    ExpectedRow {
+        suite: "latch",
+        test: "a_release_followed_by_a_silence_longer_than_the_timeout_still_waits_for_a_zero",
+        fault: "the e-stop released, then teleop silent beyond its timeout and asking again",
+    },
+    ExpectedRow {
+        suite: "service",
+        test: "a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_again",
+        fault: "the chassis' own E-stop switch (HUNTER 2.0, protocol V2) pressed and released",
     },
     ExpectedRow {
         suite: "latch",

@@ -129,23 +129,38 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
         eprintln!("cycle {cycle}: SIGKILL {delay:?} in (starting: {starting}, up: {was_up})");
         service = env.chassisd(&format!("chassisd-{cycle}"), &args);
     }
-    // The last instance: it must serve, the monitor must reconnect and the robot drive.
+    // The last instance: it must serve and the monitor reconnect. Teleop kept asking through
+    // the restart (the same process, its connection reused): chassisd starting is a stop, so
+    // the robot stands, saying it waits for teleop's zero, until teleop sends one.
     let restarted = now_ns();
     let mut pump = Pump::new(&mut teleop, go, &mut wire);
-    // Driving again: a speed the chassis reported after the restart.
+    let waiting = pump.until(&mut robot, Duration::from_secs(15), |m, _| {
+        m.stamp_ns > restarted
+            && source_status(m, "safety").has(SourceFlags::FRESH)
+            && m.zero_reason == ZeroReason::AWAITING_ZERO
+            && m.stop == Stop::SERVICE_START
+            && m.awaiting().is_some_and(|s| s.name() == "teleop")
+    });
+    let (stood_samples, stood_fastest) = pump.stands(&mut robot, restarted, STOOD_FOR);
+    drop(pump);
+    teleop.stop().unwrap();
+    let zero_sent = now_ns();
+    let mut pump = Pump::new(&mut teleop, go, &mut wire);
+    // Driving again: a speed the chassis reported after teleop's zero.
     let back = drove_again_after(
         &mut robot,
-        restarted,
+        zero_sent,
         Duration::from_secs(15),
         || pump.tick(),
         |s| s.motion.linear_mps > 0.3,
     );
-    let guarded = pump.until(&mut robot, UP, |m, _| {
-        m.stamp_ns > restarted && source_status(m, "safety").has(SourceFlags::FRESH)
-    });
+    let guarded = waiting;
+    let stood = stood_samples >= MIN_STOOD_SAMPLES && stood_fastest < STANDING_MPS;
+    let stood_ms = STOOD_FOR.as_millis();
     let files_after = ipc_files(&env.prefix).len();
     let pass = back.is_some()
         && guarded.is_some()
+        && stood
         && env.proc(service).is_running()
         && killed_starting >= 1;
     let back_ms = back.map_or(f64::NAN, |(_, d)| d.as_secs_f64() * 1e3);
@@ -165,12 +180,15 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
             EARLY_KILL.as_millis()
         ),
         "every restart served again with no manual cleanup (iceoryx2 reclaimed the dead \
-         instance's ports); the monitor and the teleop client reconnected by themselves and the \
-         robot drove again (a speed reported after the last restart); the simulated chassis \
-         dies with the service",
+         instance's ports); the monitor and the teleop client reconnected by themselves; \
+         motion starts only from a zero: teleop kept asking through the restart and the robot \
+         stood, its mux waiting for teleop's zero since chassisd started, until teleop sent one; \
+         then it drove; the simulated chassis dies with the service",
         format!(
-            "driving again {back_ms:.0} ms after the last restart (the motion stamp of the first \
-             sample above 0.3 m/s); slowest start {slowest:.0} ms; iceoryx2 files \
+            "{stood_samples} states in the {stood_ms} ms after the last restart, fastest \
+             {stood_fastest:.3} m/s while teleop asked for 0.4; driving again {back_ms:.0} ms \
+             after teleop's zero (the motion stamp of the first sample above 0.3 m/s); slowest \
+             start {slowest:.0} ms; iceoryx2 files \
              {files_before} before the kills, {files_after} after (a kill inside iceoryx2's node \
              creation leaves its 3 node-monitor files; they block nothing)"
         ),
@@ -183,13 +201,19 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
         env.logs()
     );
     assert!(
-        back.is_some(),
-        "no drive after the last restart\n{}",
+        guarded.is_some(),
+        "the monitor did not reconnect, or the mux did not wait for teleop's zero\n{}",
         env.logs()
     );
     assert!(
-        guarded.is_some(),
-        "the monitor did not reconnect\n{}",
+        stood,
+        "the robot moved after the restart by itself ({stood_samples} states, fastest \
+         {stood_fastest} m/s)\n{}",
+        env.logs()
+    );
+    assert!(
+        back.is_some(),
+        "no drive after teleop's zero\n{}",
         env.logs()
     );
     assert!(env.proc(service).is_running(), "{}", env.logs());
@@ -290,6 +314,11 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
     let mut failure = None;
     let mut restarted = now_ns();
     for cycle in 1..=3 {
+        if cycle > 1 {
+            // Teleop kept asking through the restart: it asks for zero before it drives again
+            // (the last cycle's restart checks that the robot waits for it).
+            teleop.stop().unwrap();
+        }
         let mut pump = Pump::new(&mut teleop, go, &mut wire);
         // Driving (again, after the restart of the cycle before): a speed reported since.
         let driving = pump.drove_again(&mut robot, restarted, UP, |s| {
@@ -345,16 +374,26 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
         coasts.push((coasted, speed));
     }
     // At most the 500 ms heartbeat timeout at speed plus the 0.1 s stop lag and a frame period.
-    let worst_ms = coasts
-        .iter()
-        .map(|(d, v)| d / v * 1e3)
-        .fold(0.0f64, f64::max);
+    let worst_ms = worst(&coasts.iter().map(|(d, v)| d / v * 1e3).collect::<Vec<_>>());
     let bound_ms = 500.0 + 3.0 * 100.0 + 20.0;
-    // The last restart drove again: a speed reported after it.
+    // After the last restart teleop keeps asking: the robot stands, waiting for its zero, then
+    // drives (a speed reported after the zero).
     let mut pump = Pump::new(&mut teleop, go, &mut wire);
-    let again = pump.drove_again(&mut robot, restarted, UP, |s| s.motion.linear_mps > 0.4);
+    let standing = stands_until_zero(
+        &mut robot,
+        restarted,
+        ("teleop", Stop::SERVICE_START),
+        || pump.tick(),
+    );
+    drop(pump);
+    let stood = standing.as_ref().is_ok_and(StoodUntilZero::stood);
+    teleop.stop().unwrap();
+    let zero_sent = now_ns();
+    let mut pump = Pump::new(&mut teleop, go, &mut wire);
+    let again = pump.drove_again(&mut robot, zero_sent, UP, |s| s.motion.linear_mps > 0.4);
     let again_ms = again.map_or(f64::NAN, |(_, d)| d.as_secs_f64() * 1e3);
-    let pass = failure.is_none() && coasts.len() == 3 && worst_ms <= bound_ms && again.is_some();
+    let pass =
+        failure.is_none() && coasts.len() == 3 && worst_ms <= bound_ms && stood && again.is_some();
     let mut figures = Figures::faults();
     figures.add(fault_figure(
         SUITE,
@@ -368,13 +407,24 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
         &format!(
             "the TITAN stopped by itself on its 500 ms heartbeat timeout (standby, body \
              exception; the restarted service read `heartbeat_lost` before the chassis cleared \
-             it in {faults_seen}/3) and the restarted service drove it again"
+             it in {faults_seen}/3); after the restart the robot stood while teleop kept asking \
+             (motion starts only from a zero) and drove again after teleop's zero"
         ),
         format!(
             "coasted at most {worst_ms:.0} ms of travel at speed after the kill (bound \
-             {bound_ms:.0} ms; a chassis that kept going: {} ms); driving again {again_ms:.0} ms \
-             after the last restart (the motion stamp of the first sample above 0.4 m/s)",
-            dead.as_millis()
+             {bound_ms:.0} ms; a chassis that kept going: {} ms); after the last restart {}; \
+             driving again {again_ms:.0} ms after teleop's zero (the motion stamp of the first \
+             sample above 0.4 m/s)",
+            dead.as_millis(),
+            match &standing {
+                Ok(s) => format!(
+                    "stood {} ms ({} states, fastest {:.3} m/s)",
+                    STOOD_FOR.as_millis(),
+                    s.samples,
+                    s.fastest_mps
+                ),
+                Err(e) => e.clone(),
+            }
         ),
         worst_ms,
         pass,
@@ -386,8 +436,13 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
         env.logs()
     );
     assert!(
+        stood,
+        "the robot did not stand after the last restart: {standing:?}\n{}",
+        env.logs()
+    );
+    assert!(
         again.is_some(),
-        "no drive after the last restart\n{}",
+        "no drive after the last restart and teleop's zero\n{}",
         env.logs()
     );
     figures.finish();
@@ -406,6 +461,8 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
     let mut detect_ms = Vec::new();
     let mut back_ms = Vec::new();
     let mut tx_while_down = 0usize;
+    let mut tx_before = Vec::new();
+    let mut stood = Vec::new();
     let mut failure = None;
     for cycle in 1..=3 {
         let mut pump = Pump::new(&mut teleop, go, &mut wire);
@@ -417,6 +474,16 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
             break;
         }
         pump.run(&mut robot, a_moment(&mut rng));
+        // The tap sees what is written: "nothing written while down" means something only
+        // if frames were seen before.
+        pump.wire.pump();
+        tx_before.push(
+            pump.wire
+                .frames
+                .iter()
+                .filter(|f| f.direction == FrameDirection::TX)
+                .count(),
+        );
         let killed = Instant::now();
         env.proc(sim).signal(Signal::SIGKILL);
         // The dead simulator's link names a pseudo-terminal number the kernel hands out again:
@@ -444,18 +511,35 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
             .count();
         let restarted = now_ns();
         sim = env.sim(&format!("sim-{cycle}"), "xbot", &[], &n, &sim_bus);
+        // Teleop kept asking: the bus coming back is the end of a stop, and motion starts only
+        // from a zero.
+        let standing =
+            stands_until_zero(&mut robot, restarted, ("teleop", Stop::BUS), || pump.tick());
+        match standing {
+            Ok(s) if s.stood() => stood.push(s),
+            other => {
+                failure = Some(format!(
+                    "cycle {cycle}: the robot did not stand until teleop's zero: {other:?}"
+                ));
+                break;
+            }
+        }
+        if let Some((teleop, _)) = pump.teleop.as_mut() {
+            teleop.stop().unwrap();
+        }
+        let zero_sent = now_ns();
         // The state keeps the speed from before the hang-up: only a speed the chassis reported
-        // after its restart shows that it drives again.
+        // after the zero shows that it drives again.
         let back = drove_again_after(
             &mut robot,
-            restarted,
+            zero_sent,
             Duration::from_secs(10),
             || pump.tick(),
             |s| s.link_flags & LinkFlags::BUS_DOWN == 0 && s.motion.linear_mps > 0.3,
         );
         let Some((_, back)) = back else {
             failure = Some(format!(
-                "cycle {cycle}: no drive after the chassis came back"
+                "cycle {cycle}: no drive after the chassis came back and teleop's zero"
             ));
             break;
         };
@@ -467,9 +551,14 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
         );
     }
     let reconnects = state(&mut robot).link.bus_reconnects;
-    let worst_detect = detect_ms.iter().copied().fold(0.0f64, f64::max);
-    let worst_back = back_ms.iter().copied().fold(0.0f64, f64::max);
-    let pass = failure.is_none() && tx_while_down == 0 && reconnects >= 3;
+    let worst_detect = worst(&detect_ms);
+    let worst_back = worst(&back_ms);
+    let seen_before = tx_before.iter().copied().min().unwrap_or(0);
+    let pass = failure.is_none()
+        && tx_while_down == 0
+        && seen_before > 0
+        && stood.len() == 3
+        && reconnects >= 3;
     let mut figures = Figures::faults();
     figures.add(fault_figure(
         SUITE,
@@ -477,20 +566,29 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
         rank::KILL_SIM,
         "SIGKILL of `chassisd sim` (the XBot's serial link over a pty hangs up)",
         "3 SIGKILLs at random moments while driving at 0.4 m/s; the simulator restarted",
-        "the service reported `bus_down`, wrote nothing while it was down, reopened the port \
-         with backoff and drove again once the chassis was back (a speed reported after its \
-         restart)",
+        "the service reported `bus_down`, wrote nothing while it was down and reopened the \
+         port with backoff; motion starts only from a zero: teleop kept asking and the robot \
+         stood once the chassis was back, its mux waiting for teleop's zero since the bus came \
+         back, until teleop sent one; then it drove (a speed reported after the zero)",
         format!(
-            "hang-up reported after at most {worst_detect:.0} ms; driving again at most \
-             {worst_back:.0} ms after the chassis came back (the motion stamp of the first \
-             sample above 0.3 m/s); {tx_while_down} frames written while down; {reconnects} \
-             reconnections"
+            "hang-up reported after at most {worst_detect:.0} ms; stood {} ms after each \
+             return ({} states at least, fastest {:.3} m/s); driving again at most \
+             {worst_back:.0} ms after teleop's zero (the motion stamp of the first sample above \
+             0.3 m/s); {tx_while_down} frames written while down ({seen_before} at least in \
+             each drive before); {reconnects} reconnections",
+            STOOD_FOR.as_millis(),
+            stood.iter().map(|s| s.samples).min().unwrap_or(0),
+            worst(&stood.iter().map(|s| s.fastest_mps).collect::<Vec<_>>())
         ),
         worst_detect,
         pass,
     ));
     assert!(failure.is_none(), "{failure:?}\n{}", env.logs());
     assert_eq!(tx_while_down, 0, "frames written to a dead bus");
+    assert!(
+        seen_before > 0,
+        "the tap saw no frame written before a kill"
+    );
     assert!(reconnects >= 3, "{reconnects} reconnections");
     figures.finish();
 }
@@ -578,6 +676,8 @@ fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault:
     let mut wire_ms = Vec::new();
     let mut still_ms = Vec::new();
     let mut retake_ms = Vec::new();
+    // After each restart of the monitor: states seen, fastest speed, until the mux waited.
+    let mut stood: Vec<(usize, f64, Duration)> = Vec::new();
     let mut failure = None;
     for cycle in 1..=CYCLES {
         let running = start_client(&mut env, client, &n, cycle);
@@ -593,6 +693,37 @@ fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault:
             last: Instant::now() - Duration::from_secs(1),
         };
         let source = client.source();
+        if client == Client::Safety && cycle > 1 {
+            // The monitor is back, teleop never stopped asking: motion starts only from a zero.
+            let waiting = pump.until(&mut robot, Duration::from_secs(15), |m, _| {
+                m.stamp_ns > started
+                    && source_status(m, source).has(SourceFlags::FRESH)
+                    && m.zero_reason == ZeroReason::AWAITING_ZERO
+                    && m.stop == Stop::REQUIRED_SOURCE
+                    && m.awaiting().is_some_and(|s| s.name() == "teleop")
+            });
+            let Some(waiting) = waiting else {
+                failure = Some(format!(
+                    "cycle {cycle}: the restarted monitor did not leave the robot waiting for \
+                     teleop's zero: {}",
+                    mux(&mut robot).why()
+                ));
+                break;
+            };
+            let back = now_ns();
+            let (samples, fastest) = pump.stands(&mut robot, back, STOOD_FOR);
+            stood.push((samples, fastest, waiting));
+            if samples < MIN_STOOD_SAMPLES || fastest.is_nan() || fastest >= STANDING_MPS {
+                failure = Some(format!(
+                    "cycle {cycle}: the robot moved after the monitor's restart by itself \
+                     ({samples} states, fastest {fastest} m/s)"
+                ));
+                break;
+            }
+            if let Some((teleop, _)) = pump.teleop.as_mut() {
+                teleop.stop().unwrap();
+            }
+        }
         let driving = pump.until(&mut robot, Duration::from_secs(15), |m, s| {
             let me = source_status(m, source);
             m.stamp_ns > started
@@ -638,9 +769,10 @@ fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault:
             s.motion.linear_mps.abs() < 0.01
         });
         pump.run(&mut robot, Duration::from_millis(50));
+        // The drive before the kill put motion frames on the tap: none seen is no figure.
         let last_motion = pump.wire.last_motion_ns();
         zero_ms.push(ms(i128::from(zero_at) - i128::from(killed)));
-        wire_ms.push(ms(i128::from(last_motion) - i128::from(killed)));
+        wire_ms.push(last_motion.map_or(f64::NAN, |t| ms(i128::from(t) - i128::from(killed))));
         still_ms.push(still.map_or(f64::NAN, |_| ms(i128::from(now_ns()) - i128::from(killed))));
         pump.wire.clear();
         eprintln!(
@@ -654,15 +786,22 @@ fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault:
             env.proc(i).wait_exit(Duration::from_secs(3));
         }
     }
-    let worst = |v: &[f64]| v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let (zero, wire_end, still) = (worst(&zero_ms), worst(&wire_ms), worst(&still_ms));
     // The mux acts at the dead source's expiry; the loop may be a few ms late under load.
     let bound = timeout + 40.0;
-    let pass = failure.is_none() && zero <= bound && wire_end <= bound && wire.lost == 0;
+    let restarts_stood = client != Client::Safety || stood.len() == CYCLES - 1;
+    let pass = failure.is_none()
+        && zero <= bound
+        && wire_end <= bound
+        && wire.lost == 0
+        && still.is_finite()
+        && restarts_stood;
     let mut figures = Figures::faults();
     let what = if client == Client::Safety {
         "safe stop: the required source went stale, the mux commanded zero (not smoothed) and \
-         the TITAN braked; each restarted monitor took the source again"
+         the TITAN braked; each restarted monitor took the source again, and the robot stood \
+         while teleop kept asking (motion starts only from a zero: the mux waited for teleop's \
+         zero since the monitor came back) until teleop sent one, then drove"
     } else {
         "the dead source expired after its timeout, the mux commanded zero (not smoothed) and \
          the TITAN braked; each restarted client took the source again and drove"
@@ -680,8 +819,20 @@ fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault:
         format!(
             "zero command at most {zero:.0} ms after the kill, last motion frame on the bus \
              {wire_end:.0} ms (timeout {timeout:.0} ms); robot standing after {still:.0} ms; \
-             source taken again within {:.0} ms",
-            worst(&retake_ms)
+             source taken again within {:.0} ms{}",
+            worst(&retake_ms),
+            if stood.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; after each of {} restarts of the monitor the robot stood {} ms ({} states \
+                     at least, fastest {:.3} m/s) until teleop's zero",
+                    stood.len(),
+                    STOOD_FOR.as_millis(),
+                    stood.iter().map(|s| s.0).min().unwrap_or(0),
+                    worst(&stood.iter().map(|s| s.1).collect::<Vec<_>>())
+                )
+            }
         ),
         zero,
         pass,
@@ -693,6 +844,15 @@ fn kill_a_client_at_random_moments(client: Client, rank: u32, test: &str, fault:
         "motion frame {wire_end:.1} ms after the kill"
     );
     assert_eq!(wire.lost, 0, "the tap lost frames");
+    assert!(
+        still.is_finite(),
+        "the robot was not seen standing after a kill"
+    );
+    assert!(
+        restarts_stood,
+        "{} restarts of the monitor judged",
+        stood.len()
+    );
     figures.finish();
 }
 

@@ -126,7 +126,7 @@ fn assert_release_waits_for_teleop(env: &Env, n: &str, robot: &mut Robot) -> f32
     let status = env.chassis(&["status", "--name", n]);
     let status = String::from_utf8_lossy(&status.stdout).to_string();
     assert!(
-        status.contains("waiting for a zero command from teleop"),
+        status.contains("waiting for a zero from teleop since a lock was released"),
         "{status}"
     );
     peak
@@ -166,13 +166,14 @@ fn an_estop_release_never_restarts_motion_by_itself() {
         rank: 705,
         fault: "the e-stop released while teleop keeps asking for motion".into(),
         injection: "`chassis pub velocity --source teleop --vx 0.3 --rate 20` drives; \
-            `chassis control estop`, then `estop-release` while it keeps asking; then it stops \
-            (its requests time out: a zero) and a new `chassis pub` asks again"
+            `chassis control estop`, then `estop-release` while it keeps asking; then it is \
+            stopped (SIGTERM) and a new `chassis pub` asks again (a process that starts: its \
+            library asks for nothing as it connects)"
             .into(),
         behaviour: "a release never starts motion (ISO 13850): the robot stood, the mux \
             commanded zero awaiting a zero from teleop, the answer and `chassis status` said so \
-            (\"waiting for a zero command from teleop\"); once teleop had let go, asking again \
-            drove"
+            (\"waiting for a zero from teleop since a lock was released\"); the new client's \
+            connection was its zero, and it drove"
             .into(),
         figure: format!(
             "fastest {peak_after_release:.3} m/s over the {} ms after the release (bound \
@@ -189,6 +190,80 @@ fn an_estop_release_never_restarts_motion_by_itself() {
     assert!(
         again.is_some(),
         "no motion once teleop asked again\n{}",
+        env.logs()
+    );
+    figures.finish();
+}
+
+/// Silence is not a zero: teleop asks for motion through an e-stop and its release, then falls
+/// silent for longer than its timeout (a lossy link, a stalled client) and asks again on the
+/// same connection. The robot stands until teleop asks for zero.
+#[test]
+fn a_release_followed_by_a_silence_longer_than_the_timeout_still_waits_for_a_zero() {
+    let (env, n, _first, mut robot) = start_first("latch-gap", "lg");
+    let mut teleop = robot.source("teleop").unwrap();
+    assert!(drive(&mut robot, &mut teleop, Duration::from_millis(800)) > 0.2);
+    assert!(control(&env, &n, "estop").contains("estop engaged"));
+    // The chassis brakes to a stop; then it stands under the e-stop while teleop asks.
+    drive(&mut robot, &mut teleop, Duration::from_millis(1000));
+    let held = drive(&mut robot, &mut teleop, Duration::from_millis(500));
+    let answer = control(&env, &n, "estop-release");
+    assert!(
+        answer.contains("nothing moves until teleop asks for zero"),
+        "{answer}"
+    );
+    // Silent for twice teleop's 300 ms timeout: its request expires.
+    let gap = Duration::from_millis(600);
+    pause(gap);
+    let asked_again = now_ns();
+    let standing = stands_until_zero(
+        &mut robot,
+        asked_again,
+        ("teleop", Stop::LOCK_RELEASED),
+        || teleop.send(VelocityRequest::twist(0.3, 0.0)).unwrap(),
+    );
+    teleop.stop().unwrap();
+    let again = drive(&mut robot, &mut teleop, Duration::from_secs(1));
+    let stood = standing.as_ref().is_ok_and(StoodUntilZero::stood);
+    let mut figures = Figures::faults();
+    figures.add(Figure {
+        rank: 706,
+        fault: "the e-stop released, then teleop silent beyond its timeout and asking again".into(),
+        injection: format!(
+            "teleop (one connection) drives at 0.3 m/s; `chassis control estop`, \
+             `estop-release` while it asks; then it sends nothing for {} ms (its timeout: 300 \
+             ms) and asks for 0.3 m/s again",
+            gap.as_millis()
+        ),
+        behaviour: "silence is not a zero: the robot stood after the gap, the mux waiting for \
+            teleop's zero since the release, until teleop asked for zero; then it drove"
+            .into(),
+        figure: match &standing {
+            Ok(s) => format!(
+                "{} states over {} ms after teleop asked again, fastest {:.3} m/s (bound 0.01); \
+                 {:.3} m/s under the held e-stop; {again:.2} m/s after its zero",
+                s.samples,
+                STOOD_FOR.as_millis(),
+                s.fastest_mps,
+                held
+            ),
+            Err(e) => e.clone(),
+        },
+        value: standing.as_ref().map_or(f64::NAN, |s| s.fastest_mps),
+        pass: stood && held < 0.01 && again > 0.2,
+        suite: "latch".into(),
+        test: "a_release_followed_by_a_silence_longer_than_the_timeout_still_waits_for_a_zero"
+            .into(),
+    });
+    assert!(held < 0.01, "moved at {held} m/s under the e-stop");
+    assert!(
+        stood,
+        "moved after the gap by itself: {standing:?}\n{}",
+        env.logs()
+    );
+    assert!(
+        again > 0.2,
+        "no motion after teleop's zero: {again}\n{}",
         env.logs()
     );
     figures.finish();
@@ -230,11 +305,18 @@ fn a_held_estop_survives_sigkill_and_only_estop_release_frees_it() {
         "{log}"
     );
     assert!(log.contains("held by operator"), "{log}");
-    // The release is kept too: killed again, it comes back free.
+    // The release is kept too: killed again, it comes back free. Teleop kept asking through
+    // the restart: chassisd starting is a stop too, so it drives only after its zero.
     kill(&mut env, again);
     start(&mut env, "third", &n);
     let mut robot = env.robot(&n, UP);
     assert!(!estop_held(&mut robot).0, "{}", env.logs());
+    let peak = drive(&mut robot, &mut teleop, Duration::from_millis(800));
+    assert!(peak < 0.01, "moved at {peak} m/s after a restart by itself");
+    let m = mux(&mut robot);
+    assert_eq!(m.zero_reason, ZeroReason::AWAITING_ZERO, "{}", m.why());
+    assert_eq!(m.stop, Stop::SERVICE_START, "{}", m.why());
+    teleop.stop().unwrap();
     assert!(drive(&mut robot, &mut teleop, Duration::from_secs(1)) > 0.2);
 }
 

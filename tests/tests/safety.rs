@@ -492,6 +492,22 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
     assert!(env.proc(monitor).is_running(), "{}", env.logs());
     let restarted = now_ns();
     env.serve_as("again", ("titan", &n), &[]);
+    // Teleop kept asking through the restart: once the monitor guards again, the robot stands
+    // waiting for teleop's zero (chassisd starting is a stop), and drives after it.
+    let standing = stands_until_zero(
+        &mut robot,
+        restarted,
+        ("teleop", Stop::SERVICE_START),
+        || {
+            teleop.send(go).unwrap();
+        },
+    );
+    assert!(
+        standing.as_ref().is_ok_and(StoodUntilZero::stood),
+        "{standing:?}\n{}",
+        env.logs()
+    );
+    teleop.stop().unwrap();
     // Only samples of the new service count (the last ones of the first are still cached).
     let moving = until_one(&mut robot, (&mut teleop, go), 10000, |m, s| {
         m.stamp_ns > restarted

@@ -121,6 +121,7 @@ fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_han
         injection: "SIGKILL of `chassisd sim --bus pty:…` mid-drive, restarted",
         end: "line",
         above_mps: 0.2,
+        source: "teleop",
         suite: "serial",
         test: "xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_hang_up",
     };
@@ -128,11 +129,15 @@ fn xbot_drives_over_a_serial_pty_against_chassisd_sim_and_reconnects_after_a_han
         (&mut env, &mut robot),
         (sim, "xbot", &n),
         (Line::Serial, &link),
-        || teleop.send(VelocityRequest::twist(0.4, 0.0)).unwrap(),
+        |zero| {
+            let vx = if zero { 0.0 } else { 0.4 };
+            teleop.send(VelocityRequest::twist(vx, 0.0)).unwrap();
+        },
     );
     assert!(
         back.is_some(),
-        "no motion after reconnecting\n{}",
+        "no motion after the zero that followed the reconnection, or the robot did not stand \
+         before it\n{}",
         env.logs()
     );
     assert!(state(&mut robot).link.bus_reconnects >= 1);

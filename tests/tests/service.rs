@@ -228,8 +228,11 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("estop released"));
-    // A release never starts motion (tests/tests/latch.rs): teleop lets go first.
-    teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
+    // A release never starts motion (tests/tests/latch.rs): teleop lets go first, while the
+    // safety source beats again (it was silent while `chassis control` ran: its return is a
+    // stop's end too, and only a zero after it counts).
+    let zero = VelocityRequest::twist(0.0, 0.0);
+    drive_for(&mut robot, &mut teleop, Some(&mut safety), zero, 300);
     let peak = drive_for(&mut robot, &mut teleop, Some(&mut safety), go, 1000);
     assert!(peak > 0.2, "no motion after the release: {peak}");
 }
@@ -339,18 +342,32 @@ fn a_service_killed_with_sigkill_restarts_cleanly_and_clients_reconnect() {
     env.proc(first).wait_exit(Duration::from_secs(3));
     let restarted = now_ns();
     let again = env.serve_as("again", ("titan", &n), &["--no-safety-monitor"]);
-    // The old client keeps its source; the new service reads it: a speed reported after the
-    // restart.
-    let back = drove_again_after(
+    // The old client keeps its source and keeps asking; the new service reads it. chassisd
+    // starting is a stop: the robot stands until teleop asks for zero.
+    let standing = stands_until_zero(
         &mut robot,
         restarted,
+        ("teleop", Stop::SERVICE_START),
+        || teleop.send(go).unwrap(),
+    );
+    assert!(
+        standing.as_ref().is_ok_and(StoodUntilZero::stood),
+        "{standing:?}\n{}",
+        env.logs()
+    );
+    teleop.stop().unwrap();
+    let zero_sent = now_ns();
+    // A speed reported after the zero.
+    let back = drove_again_after(
+        &mut robot,
+        zero_sent,
         Duration::from_secs(10),
-        || teleop.send(VelocityRequest::twist(0.3, 0.0)).unwrap(),
+        || teleop.send(go).unwrap(),
         |s| s.motion.linear_mps > 0.2,
     );
     assert!(
         back.is_some(),
-        "no motion after the restart\n{}",
+        "no motion after the restart and teleop's zero\n{}",
         env.logs()
     );
     assert!(env.proc(again).is_running());
@@ -582,6 +599,7 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
         injection: "SIGKILL of `chassisd sim --bus slcan-pty:…` mid-drive, restarted",
         end: "adapter",
         above_mps: 0.1,
+        source: "teleop",
         suite: "service",
         test: "titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up",
     };
@@ -589,11 +607,19 @@ fn titan_drives_over_slcan_ptys_against_chassisd_sim_and_survives_a_hang_up() {
         (&mut env, &mut robot),
         (sim, "titan", &n),
         (Line::Slcan, &link),
-        || teleop.send(go).unwrap(),
+        |zero| {
+            let request = if zero {
+                VelocityRequest::twist(0.0, 0.0)
+            } else {
+                go
+            };
+            teleop.send(request).unwrap();
+        },
     );
     assert!(
         back.is_some(),
-        "no motion after reconnecting\n{}",
+        "no motion after the zero that followed the reconnection, or the robot did not stand \
+         before it\n{}",
         env.logs()
     );
     let s = state(&mut robot);
@@ -762,9 +788,10 @@ fn a_silent_bunker_is_reported_and_retried_and_decided_once_it_speaks() {
     );
 }
 
-/// A protocol-V2 chassis' own E-stop switch (`chassis sim estop-switch`): the robot stops and
-/// reports it; released, it stays still while the command is the old one, and drives again only
-/// after the command was zero once.
+/// A protocol-V2 chassis' own E-stop switch (`chassis sim estop-switch`): the robot stops, the
+/// mux holds zero naming it; released, the robot stands while teleop keeps asking (motion starts
+/// only from a zero: the mux waits for teleop's zero since the switch was released), and drives
+/// again only after teleop asked for zero.
 #[test]
 fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_again() {
     let (env, _, mut robot) = Env::serving(
@@ -795,16 +822,58 @@ fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_agai
     let s = state(&mut robot);
     assert!(s.motion.linear_mps.abs() < 0.05, "{}", s.motion.linear_mps);
     assert_ne!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
+    let m = mux(&mut robot);
+    assert_eq!(
+        (m.zero_reason, m.stop),
+        (ZeroReason::HELD, Stop::CHASSIS_ESTOP),
+        "{}",
+        m.why()
+    );
+    let released = now_ns();
     switch(&mut robot, false);
-    let held = drive_for(&mut robot, &mut teleop, None, go, 1000);
+    let standing = stands_until_zero(
+        &mut robot,
+        released,
+        ("teleop", Stop::CHASSIS_ESTOP),
+        || teleop.send(go).unwrap(),
+    );
+    assert!(
+        standing.as_ref().is_ok_and(StoodUntilZero::stood),
+        "moved on its own after the release: {standing:?}"
+    );
     let s = state(&mut robot);
-    assert!(held < 0.05, "moved on its own after the release: {held}");
     assert_eq!(s.system.fault_flags & FaultFlags::EMERGENCY_STOP, 0);
-    assert_ne!(s.command.clamp_flags & ClampFlags::CHASSIS_NOT_READY, 0);
     let stop = VelocityRequest::twist(0.0, 0.0);
     drive_for(&mut robot, &mut teleop, None, stop, 300);
     let again = drive_for(&mut robot, &mut teleop, None, go, 2000);
+    let standing = standing.unwrap_or_else(|e| panic!("{e}"));
+    let mut figures = Figures::faults();
+    figures.add(Figure {
+        rank: 707,
+        fault: "the chassis' own E-stop switch (HUNTER 2.0, protocol V2) pressed and released"
+            .into(),
+        injection: "`chassis sim estop-switch on` while teleop drives at 0.4 m/s, then `off` \
+            while it keeps asking"
+            .into(),
+        behaviour: "the chassis reported its E-stop and the mux held zero naming it; released, \
+            the robot stood, the mux waiting for teleop's zero since the E-stop was released \
+            (the driver keeps no rule of its own), until teleop asked for zero; then it drove"
+            .into(),
+        figure: format!(
+            "{} states over {} ms after the release, fastest {:.3} m/s (bound 0.01); {again:.2} \
+             m/s after teleop's zero",
+            standing.samples,
+            STOOD_FOR.as_millis(),
+            standing.fastest_mps
+        ),
+        value: standing.fastest_mps,
+        pass: standing.stood() && again > 0.3,
+        suite: "service".into(),
+        test: "a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_again"
+            .into(),
+    });
     assert!(again > 0.3, "not driving again: {again}\n{}", env.logs());
+    figures.finish();
 }
 
 /// The pass trace (`CHASSIS_PASS_TRACE`) keeps the passes that wrote a frame or published a

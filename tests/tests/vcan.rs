@@ -456,6 +456,7 @@ fn the_interface_going_down_and_up_mid_drive_is_detected_and_survived() {
     // Up again. The simulated chassis ends with its bus (as `chassisd sim` does on any bus loss)
     // and is started again, as a power-cycled chassis would come back.
     let up_at = Instant::now();
+    let up_ns = now_ns();
     ip(&["link", "set", &iface, "up"]);
     let sim_ended = env.proc(sim).wait_exit(Duration::from_secs(2)).is_some();
     if sim_ended {
@@ -467,6 +468,16 @@ fn the_interface_going_down_and_up_mid_drive_is_detected_and_survived() {
     })
     .map(|_| up_at.elapsed());
     let reopened = reopened.unwrap_or_else(|| panic!("the bus was never reopened\n{}", env.logs()));
+    // Teleop kept asking: the bus coming back starts nothing until teleop asks for zero.
+    let standing = stands_until_zero(&mut robot, up_ns, ("teleop", Stop::BUS), || {
+        teleop.send(go).unwrap()
+    });
+    assert!(
+        standing.as_ref().is_ok_and(StoodUntilZero::stood),
+        "moved after the bus came back by itself: {standing:?}\n{}",
+        env.logs()
+    );
+    teleop.stop().unwrap();
     let driving = drive_until(&mut robot, &mut teleop, go, Duration::from_secs(20), |s| {
         s.link_flags & (LinkFlags::BUS_DOWN | LinkFlags::CHASSIS_SILENT) == 0
             && s.motion.linear_mps > 0.1
@@ -478,9 +489,14 @@ fn the_interface_going_down_and_up_mid_drive_is_detected_and_survived() {
     );
     let driving = up_at.elapsed();
     let s = state(&mut robot);
+    let standing = standing.unwrap_or_else(|e| panic!("{e}"));
     figure(format!(
-        "{iface} up → bus reopened after {}, driving again after {} (simulator restarted: {})",
+        "{iface} up → bus reopened after {}; stood {} ({} states, fastest {:.3} m/s) waiting \
+         for teleop's zero; driving again after {} (simulator restarted: {})",
         ms(reopened),
+        ms(STOOD_FOR),
+        standing.samples,
+        standing.fastest_mps,
         ms(driving),
         if sim_ended { "yes" } else { "no" }
     ));
@@ -569,6 +585,17 @@ fn the_doctor_on_socketcan_down_silent_and_with_the_simulated_titan() {
 #[ignore = "needs kernel CAN (vcan) and root: scripts/vm-tests runs it in a VM"]
 fn error_frames_on_the_socket_are_published_as_bus_off_and_restart_and_the_doctor_fails() {
     let (env, n, mut robot) = service_on_vcan("vcan-busoff", "vb");
+    // Teleop asks for 0.3 m/s throughout (no chassis here: the mux's output is what is
+    // commanded).
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(0.3, 0.0);
+    let commanding = |robot: &mut Robot, teleop: &mut Source, v: f32| {
+        wait_for(UP, || {
+            teleop.send(go).unwrap();
+            (mux(robot).output.linear_x_mps - v).abs() < 1e-3
+        })
+    };
+    assert!(commanding(&mut robot, &mut teleop, 0.3).is_some());
 
     // can_bus_off(): CAN_ERR_BUSOFF, no data.
     send_raw(CAN_ERR | 0x040, [0; 8]);
@@ -602,8 +629,17 @@ fn error_frames_on_the_socket_are_published_as_bus_off_and_restart_and_the_docto
         "{}",
         env.logs()
     );
+    // Bus-off holds zero, naming the bus.
+    let m = mux(&mut robot);
+    assert_eq!(
+        (m.zero_reason, m.stop, m.output.linear_x_mps),
+        (ZeroReason::HELD, Stop::BUS, 0.0),
+        "{}",
+        m.why()
+    );
 
     // can_restart(): CAN_ERR_RESTARTED.
+    let restarted = now_ns();
     send_raw(CAN_ERR | 0x100, [0; 8]);
     let back = wait_for(UP, || {
         let s = state(&mut robot);
@@ -611,6 +647,26 @@ fn error_frames_on_the_socket_are_published_as_bus_off_and_restart_and_the_docto
     });
     assert!(back.is_some(), "no restart published\n{}", env.logs());
     assert!(!state(&mut robot).has_link_flag(LinkFlags::CAN_BUS_OFF));
+    // Back on the bus, teleop still asking: motion starts only from a zero.
+    let waiting = wait_for(Duration::from_secs(2), || {
+        teleop.send(go).unwrap();
+        let m = mux(&mut robot);
+        m.stamp_ns > restarted
+            && m.zero_reason == ZeroReason::AWAITING_ZERO
+            && m.stop == Stop::BUS
+            && m.output == BodyVelocity::ZERO
+    });
+    assert!(waiting.is_some(), "{}", mux(&mut robot).why());
+    teleop.stop().unwrap();
+    let driving = commanding(&mut robot, &mut teleop, 0.3);
+    assert!(driving.is_some(), "{}", mux(&mut robot).why());
+    figure(format!(
+        "bus-off then restart on {} → zero held, then waiting for teleop's zero after the \
+         restart ({}), commanding again {} after it",
+        iface(),
+        ms(waiting.unwrap()),
+        ms(driving.unwrap())
+    ));
 
     // can_change_state() to error-passive on the transmit side, counters 128/5.
     send_raw(CAN_ERR | 0x004 | 0x200, [0, 0x20, 0, 0, 0, 0, 128, 5]);
