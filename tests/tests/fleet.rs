@@ -8,7 +8,8 @@
 //! TLS with mutual authentication and each robot's access list are on, as on real robots: the
 //! operator finds the robots through the one wildcard liveliness subscription the access list
 //! allows. A link is cut with nftables in the operator's namespace (both directions of that
-//! robot's interface dropped), the others untouched.
+//! robot's interface dropped), the others untouched, and restored by removing that table: the
+//! fleet e-stop asked while it was cut reaches that robot then.
 //!
 //! Needs root (`ip netns`, veth pairs, nft) and iproute2 and nftables; fails loudly without.
 #![allow(
@@ -30,6 +31,17 @@ const UP: Duration = Duration::from_secs(30);
 const PORT: u16 = 7447;
 /// How soon a cut link must show as lost on the operator's side.
 const LOST_WITHIN: Duration = Duration::from_secs(1);
+/// How soon after its link returns a robot's chassisd must hold the fleet e-stop it missed, and
+/// the fleet view show it held. The mirror delivers it as it hears the robot again (or on its 1 s
+/// retry); what takes the time is Zenoh's reconnection: the operator's side retries every second
+/// at most, but the robot's side closes the session it lost only once its own TCP retransmission
+/// (backing off through the outage) meets the restored link and is reset — until then the new
+/// connection joins the stale session and the robot's publications do not reach the operator.
+/// Measured here: 2.6-3.5 s to the robot's chassisd, up to 9 s to the fleet view.
+const BACK_WITHIN: Duration = Duration::from_secs(20);
+/// How long `chassis fleet` may take to show a robot's e-stop as it is (a second's snapshot,
+/// asked again until it does).
+const SHOWN_WITHIN: Duration = Duration::from_secs(10);
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
 
@@ -116,6 +128,11 @@ impl Net {
             nft(&self.operator_ns, &rule);
         }
     }
+
+    /// Undoes [`Net::cut`].
+    fn restore(&self) {
+        nft(&self.operator_ns, "delete table inet cut");
+    }
 }
 
 impl Drop for Net {
@@ -187,6 +204,23 @@ fn fleet(env: &Env, collect: &str) -> serde_json::Map<String, serde_json::Value>
         .collect()
 }
 
+/// Waits at most `within` until the fleet view shows each robot's e-stop as `estops` says;
+/// returns how long it took, if it did, and the rows last seen.
+fn fleet_estops(
+    env: &Env,
+    estops: &[(&str, &str)],
+    within: Duration,
+) -> (Option<Duration>, serde_json::Map<String, serde_json::Value>) {
+    let mut rows = serde_json::Map::new();
+    let took = wait_for(within, || {
+        rows = fleet(env, "1.0");
+        estops
+            .iter()
+            .all(|(n, estop)| rows.get(*n).is_some_and(|r| r["estop"] == *estop))
+    });
+    (took, rows)
+}
+
 /// Waits until the fleet view shows each of `names` whole — link ok, its mux's e-stop, a
 /// latency measured — and returns the rows.
 fn fleet_shows(env: &Env, names: &[&str]) -> serde_json::Map<String, serde_json::Value> {
@@ -245,7 +279,7 @@ fn drive_until_remote_wins(env: &Env, robots: &mut [&mut Robot], sources: &mut [
 }
 
 #[test]
-fn an_operator_finds_three_robots_sees_one_lost_stops_the_others_and_finds_a_fourth() {
+fn an_operator_finds_three_robots_stops_the_lost_one_when_it_returns_and_finds_a_fourth() {
     let net = Net::new(4);
     let mut env = Env::new("fleet");
     let certs = env.dir.join("certs");
@@ -287,7 +321,7 @@ fn an_operator_finds_three_robots_sees_one_lost_stops_the_others_and_finds_a_fou
     ]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let operator_ns = net.operator_ns.clone();
-    zenoh_in(&mut env, "zenoh-operator", &operator_ns, &prefix, &args);
+    let operator = zenoh_in(&mut env, "zenoh-operator", &operator_ns, &prefix, &args);
 
     // Three kinds, found and shown.
     let rows = fleet_shows(&env, &[a, b, c]);
@@ -419,6 +453,60 @@ fn an_operator_finds_three_robots_sees_one_lost_stops_the_others_and_finds_a_fou
     assert!(
         halted.is_some(),
         "B did not come to a halt under the e-stop"
+    );
+
+    // A's mirror keeps A's e-stop asked: A is named pending, and shown so in the fleet view.
+    assert!(
+        line(a).contains("pending: the mirror keeps the e-stop asked"),
+        "A is not named pending: {stdout}"
+    );
+    for n in [b, c] {
+        assert!(!line(n).contains("pending"), "{n} is stopped: {stdout}");
+    }
+    let (shown, rows) = fleet_estops(
+        &env,
+        &[(a, "pending"), (b, "held"), (c, "held")],
+        SHOWN_WITHIN,
+    );
+    assert!(
+        shown.is_some(),
+        "A not shown pending, B and C held: {rows:#?}"
+    );
+    assert!(!estop_held(&mux(&mut robot_a)), "A is still cut off");
+
+    // A's link returns: A's own chassisd holds the e-stop within the bound, for the operator.
+    net.restore();
+    let restored = Instant::now();
+    let delivered = wait_for(BACK_WITHIN, || {
+        robot_a
+            .wait_mux(Duration::from_millis(50))
+            .ok()
+            .flatten()
+            .is_some_and(|m| estop_held(&m))
+    });
+    eprintln!("link of {a} restored: its chassisd holds the e-stop after {delivered:?}");
+    let m = mux(&mut robot_a);
+    assert!(
+        delivered.is_some(),
+        "A's chassisd did not hold the e-stop within {BACK_WITHIN:?} of its link's return: \
+         {m:?}\n{}",
+        env.logs()
+    );
+    let lock = m.locks().iter().find(|l| l.name() == "estop").unwrap();
+    assert_eq!(lock.holder, LockStatus::HOLDER_OPERATOR, "{m:?}");
+    // And the fleet view shows it held.
+    let (shown, rows) = fleet_estops(&env, &[(a, "held")], BACK_WITHIN);
+    eprintln!(
+        "link of {a} restored: shown held here after {:?}",
+        restored.elapsed()
+    );
+    assert!(shown.is_some(), "A not shown held: {rows:#?}");
+    assert_eq!(rows[a.as_str()]["estop_holder"], "operator", "{rows:#?}");
+    let log = env.proc(operator).log_text();
+    assert!(
+        log.contains(&format!("robot '{a}' did not take the e-stop"))
+            && log.contains(&format!("robot '{a}' has the e-stop now")),
+        "the mirror's log says nothing of A's pending e-stop:\n{log}"
     );
 
     // A robot switched on later is found.

@@ -11,6 +11,9 @@
 //!
 //! Across two computers `published_ns` is the robot's `CLOCK_MONOTONIC` and means nothing here:
 //! a latency outside 0..60 s is shown as `clock?`, not as a number.
+//!
+//! A mirrored robot's e-stop may be `pending`: the operator asked for it, the robot did not
+//! answer, and the mirror keeps it asked until the robot's chassisd has it ([`estop_pending`]).
 
 mod estop;
 mod view;
@@ -23,8 +26,8 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::{
-    ChassisState, ControlMode, FaultFlags, Group, LinkFlags, MuxStatus, Robot, RobotDescription,
-    WireProtocol, install_signal_handlers, now_ns, termination_requested,
+    ChassisState, ControlMode, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus, Robot,
+    RobotDescription, WireProtocol, install_signal_handlers, now_ns, termination_requested,
 };
 use clap::Args;
 use serde::Serialize;
@@ -132,17 +135,35 @@ pub struct Row {
     pub latency: Option<LatencyStats>,
     /// Latency samples that were another computer's clock.
     pub latency_clock_mismatch: u64,
-    /// `held`, `free`, `unknown`; last known when the link is lost.
+    /// `held`, `free`, `unknown`; last known when the link is lost. `pending` while a mirror
+    /// keeps the operator's e-stop asked of a robot that has not received it yet.
     pub estop: &'static str,
     pub estop_holder: Option<String>,
+}
+
+/// The lock the fleet e-stop engages.
+const ESTOP: &str = "estop";
+
+/// Whether the mux, as a mirror (`chassis-zenoh`) publishes it, says the operator's e-stop is
+/// pending: the mirror forwarded it, the robot has not answered, and the mirror keeps it asked
+/// and delivers it when the robot answers again. The mirror shows that with the robot's `estop`
+/// lock not held (`held` 0: the robot's truth) and the operator as its holder
+/// (`LockStatus::HOLDER_OPERATOR`: the operator's control request asked for it); chassisd
+/// publishes a lock that is not held with `HOLDER_NONE`.
+pub(crate) fn estop_pending(m: &MuxStatus) -> bool {
+    m.locks()
+        .iter()
+        .find(|l| l.name() == ESTOP)
+        .is_some_and(|l| l.held == 0 && l.holder == LockStatus::HOLDER_OPERATOR)
 }
 
 fn estop_of(mux: Option<&MuxStatus>) -> (&'static str, Option<String>) {
     let Some(m) = mux else {
         return ("unknown", None);
     };
-    match m.locks().iter().find(|l| l.name() == "estop") {
+    match m.locks().iter().find(|l| l.name() == ESTOP) {
         Some(l) if l.held != 0 => ("held", Some(crate::live::lock_holder(m, l))),
+        Some(_) if estop_pending(m) => ("pending", None),
         Some(_) => ("free", None),
         None => ("unknown", None),
     }
@@ -456,5 +477,38 @@ mod tests {
         assert_eq!(row("r1", &fresh, 3_500_000_000).link, "silent");
         assert_eq!(row("r1", &Seen::default(), 0).link, "waiting");
         assert_eq!(row("r1", &Seen::default(), 0).estop, "unknown");
+    }
+
+    #[test]
+    fn a_mirrors_pending_estop_shows_pending_until_the_robot_holds_it() {
+        let mut mux = MuxStatus {
+            lock_count: 1,
+            ..MuxStatus::default()
+        };
+        mux.locks[0].set_name("estop");
+        mux.locks[0].holder = LockStatus::HOLDER_NONE;
+        let estop = |mux: MuxStatus| {
+            let seen = Seen {
+                mux: Some(mux),
+                ..Seen::default()
+            };
+            row("r2", &seen, 0).estop
+        };
+        assert_eq!(estop(mux), "free");
+        assert!(!estop_pending(&mux));
+        // The mirror keeps the operator's e-stop asked: not held, the operator its holder.
+        mux.locks[0].holder = LockStatus::HOLDER_OPERATOR;
+        assert!(estop_pending(&mux));
+        assert_eq!(estop(mux), "pending");
+        // Delivered: chassisd holds it.
+        mux.locks[0].held = 1;
+        assert!(!estop_pending(&mux));
+        assert_eq!(estop(mux), "held");
+        // Another lock's holder says nothing of the e-stop.
+        let mut other = mux;
+        other.locks[0].set_name("dock");
+        other.locks[0].held = 0;
+        assert!(!estop_pending(&other));
+        assert_eq!(estop(other), "unknown");
     }
 }

@@ -25,12 +25,15 @@
 //! A fleet from one operator's computer: `--connect` each robot's endpoint (repeatable) with
 //! `--mirror-all` (or `--robots titan,scout$*`) instead of `--name … --mirror`: every robot found
 //! through Zenoh's liveliness is mirrored under its name, robots switched on later too, and a
-//! robot whose link is lost is shown so (`LinkFlags::REMOTE_LOST`) within a second.
+//! robot whose link is lost is shown so (`LinkFlags::REMOTE_LOST`) within a second. An e-stop
+//! asked of a robot that does not answer stays asked: the mirror delivers it when the robot is
+//! heard again, and shows it pending meanwhile (see `estop.rs`).
 //!
 //! `chassis-zenoh gen-certs DIR --host 192.168.1.20` makes the certificates (a CA, the robot's,
 //! the operator's). Plain `tcp/` is refused beyond loopback unless `--insecure`.
 
 mod certs;
+mod estop;
 mod export;
 mod fleet;
 mod mirror;

@@ -10,7 +10,10 @@
 //!   `Robot.wait_description`);
 //! * a thread per remote source (learned from the robot's mux) creates `cmd/<source>` and puts
 //!   every request on `chassis/<name>/cmd/<source>`;
-//! * a thread serves `control`, asking the robot's queryable for each request;
+//! * a thread serves `control`, asking the robot's queryable for each request. An `estop`
+//!   LOCK_ENGAGE the robot does not answer stays asked: the thread delivers it again when the
+//!   robot is heard again, until chassisd answers, and the mux published here shows it pending
+//!   meanwhile ([`crate::estop`]);
 //! * a queryable `chassis/<name>/clock` answers the robot side's clock queries with this
 //!   computer's `CLOCK_MONOTONIC`: the robot side measures the offset and delay from them and
 //!   judges each request's age by its stamp (made here by the client that sent it).
@@ -20,7 +23,7 @@
 
 use std::collections::HashSet;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -34,10 +37,13 @@ use chassis_ipc::{CMD, CONTROL, DESCRIPTION, FRAMES, MUX, STATE, StampTrace, Wri
 use iceoryx2::port::update_connections::UpdateConnections as _;
 use iceoryx2::prelude::*;
 use zenoh::Wait as _;
+use zenoh::handlers::FifoChannelHandler;
 use zenoh::qos::{CongestionControl, Priority};
+use zenoh::query::Reply;
 use zenoh::sample::{Sample, SampleKind};
 use zerocopy::IntoBytes as _;
 
+use crate::estop::{self, Asked, Keeper};
 use crate::export::{guard, remote_sources};
 use crate::fleet::{LOST_AFTER, LinkWatch, Lost};
 use crate::net::{self, Net};
@@ -47,6 +53,8 @@ use crate::wire::{Keys, Wire};
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
 /// How often blocked threads look at the stop flag.
 const POLL: Duration = Duration::from_millis(100);
+/// How often the control thread looks for news of its robot while an e-stop is pending.
+const PENDING_POLL: Duration = Duration::from_millis(20);
 
 /// What the operator side needs to know.
 #[derive(Debug, Clone)]
@@ -62,6 +70,8 @@ enum Incoming {
     Frames(Sample),
     Description(Sample),
     Alive(bool),
+    /// The control thread keeps an e-stop pending (`true`) or no longer (`false`).
+    EstopPending(bool),
 }
 
 fn node(name: &str, role: &str) -> anyhow::Result<Node<ipc::Service>> {
@@ -174,10 +184,15 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
         })
         .wait()
         .map_err(zerr(&keys.alive))?;
-    drop(tx);
-
+    // Counts each time the robot is heard again after a silence (its state after a loss, its
+    // liveliness token back): the control thread delivers a pending e-stop then.
+    let heard_again = Arc::new(AtomicU64::new(0));
     let mut threads = Vec::new();
     {
+        let link = ControlLink {
+            heard_again: heard_again.clone(),
+            pending: tx.clone(),
+        };
         let (name, session, keys, stop) = (
             name.to_string(),
             session.clone(),
@@ -187,9 +202,14 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
         threads.push(
             std::thread::Builder::new()
                 .name("control".into())
-                .spawn(move || guard(&stop, || serve_control(&name, &session, &keys, &stop)))?,
+                .spawn(move || {
+                    guard(&stop, || {
+                        serve_control(&name, &session, &keys, &link, &stop)
+                    })
+                })?,
         );
     }
+    drop(tx);
 
     let mut sources_started: HashSet<String> = HashSet::new();
     let states = Wire::<ChassisState>::new();
@@ -209,6 +229,10 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
         }
     };
     let mut link = LinkWatch::new(LOST_AFTER);
+    // The robot's newest mux as it sent it, and whether an e-stop is pending here: what the
+    // mux published here is made of.
+    let mut last_mux: Option<MuxStatus> = None;
+    let mut estop_pending = false;
     let mut result = Ok(());
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
         // The description is kept for late joiners: a reader that connects here gets it once
@@ -252,6 +276,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                     Ok(s) => {
                         if link.heard(now_ns(), &s) {
                             eprintln!("chassis-zenoh: robot '{name}' heard again");
+                            heard_again.fetch_add(1, Ordering::Relaxed);
                         }
                         if let Some(trace) = trace.as_mut() {
                             trace.push([s.stamp_ns, received, taken, now_ns()]);
@@ -286,7 +311,8 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                                 );
                             }
                         }
-                        send(&mux, m)
+                        last_mux = Some(m);
+                        send(&mux, estop::marked(m, estop_pending))
                     }
                     Err(e) => {
                         drop_sample("mux", &e);
@@ -326,6 +352,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
             }
             Incoming::Alive(alive) => {
                 if alive {
+                    heard_again.fetch_add(1, Ordering::Relaxed);
                     ask_description(session);
                 }
                 eprintln!(
@@ -342,6 +369,14 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                         report_lost(name, &lost);
                         send(&state, lost.state)
                     }
+                    None => Ok(()),
+                }
+            }
+            // The robot's last mux again, as it is to be shown now: a lost robot sends none.
+            Incoming::EstopPending(pending) => {
+                estop_pending = pending;
+                match last_mux {
+                    Some(m) => send(&mux, estop::marked(m, pending)),
                     None => Ok(()),
                 }
             }
@@ -424,11 +459,32 @@ fn forward(
     Ok(())
 }
 
-/// Serves the local `control`, asking the robot for each request.
+/// What the control thread shares with the mirror's loop.
+struct ControlLink {
+    /// Counts each time the robot is heard again after a silence.
+    heard_again: Arc<AtomicU64>,
+    /// Tells the loop when an e-stop becomes pending, or no longer is (the mux shows it).
+    pending: mpsc::Sender<Incoming>,
+}
+
+impl ControlLink {
+    fn heard(&self) -> u64 {
+        self.heard_again.load(Ordering::Relaxed)
+    }
+
+    fn show(&self, pending: bool) {
+        let _ = self.pending.send(Incoming::EstopPending(pending));
+    }
+}
+
+/// Serves the local `control`, asking the robot for each request. An `estop` LOCK_ENGAGE is
+/// kept pending from its forward until chassisd answers, and delivered again while pending
+/// ([`crate::estop`]); a release of the e-stop ends that.
 fn serve_control(
     name: &str,
     session: &zenoh::Session,
     keys: &Keys,
+    link: &ControlLink,
     stop: &AtomicBool,
 ) -> anyhow::Result<()> {
     let node = node(name, "control")?;
@@ -439,8 +495,16 @@ fn serve_control(
         .with_context(|| format!("serving {service}"))?;
     let requests = Wire::<ControlRequest>::new();
     let responses = Wire::<ControlResponse>::new();
+    let mut keeper = Keeper::new(link.heard());
+    // Deliveries of the pending e-stop waiting for their answer.
+    let mut deliveries: Vec<FifoChannelHandler<Reply>> = Vec::new();
     while !termination_requested() && !stop.load(Ordering::Relaxed) {
-        wait_listener(&ports.requests, POLL)
+        let wait = if keeper.pending().is_some() {
+            PENDING_POLL
+        } else {
+            POLL
+        };
+        wait_listener(&ports.requests, wait)
             .map_err(|e| anyhow::anyhow!("waiting on {service}: {e}"))?;
         while let Some(active) = ports
             .server
@@ -448,10 +512,46 @@ fn serve_control(
             .map_err(|e| anyhow::anyhow!("receiving on {service}: {e}"))?
         {
             let request = *active.payload();
-            let mut response =
-                ask(session, keys, &requests, &responses, &request).unwrap_or_else(|message| {
-                    ControlResponse::new(request.seq, ControlStatus::TIMEOUT, &message)
-                });
+            let asked = estop::classify(&request);
+            match asked {
+                Asked::EstopEngage => {
+                    if keeper.asked(request, now_ns()) {
+                        link.show(true);
+                    }
+                }
+                Asked::EstopRelease => {
+                    if keeper.released() {
+                        deliveries.clear();
+                        link.show(false);
+                        tracing::info!(robot = name, "the pending e-stop was released here");
+                        eprintln!(
+                            "chassis-zenoh: robot '{name}': the e-stop it had not received yet \
+                             was released by the operator; no longer kept"
+                        );
+                    }
+                }
+                Asked::Other => {}
+            }
+            let mut response = match ask(session, keys, &requests, &responses, &request) {
+                Ok(response) => {
+                    if asked == Asked::EstopEngage {
+                        deliveries.clear();
+                        settle(name, &mut keeper, &response, link);
+                    }
+                    response
+                }
+                Err(why) if asked == Asked::EstopEngage => {
+                    if keeper.unanswered() {
+                        report_kept(name, &why);
+                    }
+                    ControlResponse::new(
+                        request.seq,
+                        ControlStatus::TIMEOUT,
+                        &format!("{why}; kept pending until the robot answers"),
+                    )
+                }
+                Err(why) => ControlResponse::new(request.seq, ControlStatus::TIMEOUT, &why),
+            };
             response.request_seq = request.seq;
             active
                 .send_copy(response)
@@ -461,8 +561,141 @@ fn serve_control(
                 .notify()
                 .map_err(|e| anyhow::anyhow!("waking the clients of {service}: {e}"))?;
         }
+        redeliver(
+            name,
+            session,
+            keys,
+            (&requests, &responses),
+            link,
+            &mut keeper,
+            &mut deliveries,
+        );
     }
     Ok(())
+}
+
+/// The pending e-stop's deliveries: their answers taken, and the next one sent when it is time
+/// (never blocking: a dead link holds up no request asked meanwhile).
+fn redeliver(
+    name: &str,
+    session: &zenoh::Session,
+    keys: &Keys,
+    (requests, responses): (&Wire<ControlRequest>, &Wire<ControlResponse>),
+    link: &ControlLink,
+    keeper: &mut Keeper,
+    deliveries: &mut Vec<FifoChannelHandler<Reply>>,
+) {
+    let mut answered = None;
+    let mut i = 0;
+    while i < deliveries.len() {
+        match deliveries[i].try_recv() {
+            Ok(None) => i += 1,
+            Ok(Some(reply)) => match judge(responses, &reply) {
+                Ok(response) => {
+                    answered = Some(response);
+                    break;
+                }
+                Err(why) => {
+                    tracing::debug!(robot = name, "a delivery of the pending e-stop: {why}");
+                    deliveries.swap_remove(i);
+                }
+            },
+            // Over without an answer: no route to the robot, or no reply in time.
+            Err(_) => {
+                deliveries.swap_remove(i);
+            }
+        }
+    }
+    if let Some(response) = answered {
+        deliveries.clear();
+        settle(name, keeper, &response, link);
+    }
+    if let Some(request) = keeper.due(now_ns(), link.heard(), deliveries.len()) {
+        match query(session, keys, requests, &request) {
+            Ok(replies) => deliveries.push(replies),
+            Err(why) => tracing::debug!(robot = name, "delivering the pending e-stop: {why}"),
+        }
+    }
+}
+
+/// chassisd answered an e-stop: no longer kept, whatever the answer.
+fn settle(name: &str, keeper: &mut Keeper, response: &ControlResponse, link: &ControlLink) {
+    let Some(kept) = keeper.answered() else {
+        return;
+    };
+    link.show(false);
+    let pending_ms = now_ns().saturating_sub(kept.since_ns) / 1_000_000;
+    if response.is_ok() {
+        if kept.unanswered {
+            tracing::info!(
+                robot = name,
+                pending_ms,
+                deliveries = kept.tries,
+                "the pending e-stop reached chassisd: {}",
+                response.message()
+            );
+            eprintln!(
+                "chassis-zenoh: robot '{name}' has the e-stop now: {} (pending {pending_ms} ms, \
+                 {} deliveries)",
+                response.message(),
+                kept.tries
+            );
+        }
+    } else {
+        tracing::warn!(
+            robot = name,
+            status = ControlStatus::name(response.status),
+            "chassisd refused the e-stop: {}; no longer kept",
+            response.message()
+        );
+        eprintln!(
+            "chassis-zenoh: robot '{name}': chassisd refused the e-stop ({}: {}); no longer kept",
+            ControlStatus::name(response.status),
+            response.message()
+        );
+    }
+}
+
+fn report_kept(name: &str, why: &str) {
+    tracing::warn!(
+        robot = name,
+        "e-stop kept pending: {why}; delivered when the robot answers again"
+    );
+    eprintln!(
+        "chassis-zenoh: robot '{name}' did not take the e-stop ({why}): kept pending, delivered \
+         when its link returns"
+    );
+}
+
+/// Sends `request` to the robot's control queryable; its replies arrive on the handler.
+fn query(
+    session: &zenoh::Session,
+    keys: &Keys,
+    requests: &Wire<ControlRequest>,
+    request: &ControlRequest,
+) -> Result<FifoChannelHandler<Reply>, String> {
+    session
+        .get(keys.control.clone())
+        .payload(request.as_bytes())
+        .encoding(requests.encoding())
+        .timeout(ANSWER_TIMEOUT)
+        .wait()
+        .map_err(|e| format!("asking the robot: {e}"))
+}
+
+/// chassisd's answer in a reply, or why it is none.
+fn judge(responses: &Wire<ControlResponse>, reply: &Reply) -> Result<ControlResponse, String> {
+    match reply.result() {
+        Ok(sample) => responses
+            .decode(sample.encoding(), &sample.payload().to_bytes())
+            .map_err(|e| format!("the robot's answer: {e}")),
+        Err(err) => Err(format!(
+            "the robot refused: {}",
+            err.payload()
+                .try_to_string()
+                .map_or_else(|_| "?".into(), |s| s.into_owned())
+        )),
+    }
 }
 
 /// The robot's answer to `request`, or why there is none.
@@ -473,27 +706,10 @@ fn ask(
     responses: &Wire<ControlResponse>,
     request: &ControlRequest,
 ) -> Result<ControlResponse, String> {
-    let replies = session
-        .get(keys.control.clone())
-        .payload(request.as_bytes())
-        .encoding(requests.encoding())
-        .timeout(ANSWER_TIMEOUT)
-        .wait()
-        .map_err(|e| format!("asking the robot: {e}"))?;
-    match replies.recv() {
-        Ok(reply) => match reply.result() {
-            Ok(sample) => responses
-                .decode(sample.encoding(), &sample.payload().to_bytes())
-                .map_err(|e| format!("the robot's answer: {e}")),
-            Err(err) => Err(format!(
-                "the robot refused: {}",
-                err.payload()
-                    .try_to_string()
-                    .map_or_else(|_| "?".into(), |s| s.into_owned())
-            )),
-        },
+    match query(session, keys, requests, request)?.recv() {
+        Ok(reply) => judge(responses, &reply),
         Err(_) => Err(format!(
-            "no answer from the robot over Zenoh within {ANSWER_TIMEOUT:?}"
+            "no answer from the robot over Zenoh (waited at most {ANSWER_TIMEOUT:?})"
         )),
     }
 }

@@ -6,11 +6,23 @@
 //! bound, a refusal, a mirror that could not reach the robot, a robot that cannot be opened: the
 //! robot is named NOT stopped, and the command exits non-zero. A robot whose thread is still
 //! waiting when the bound is over is named NOT stopped too, never left out.
+//!
+//! A mirrored robot that did not answer may have its e-stop *pending*: its mirror
+//! (`chassis-zenoh`) keeps the request asked and delivers it when the link returns. The robot is
+//! still NOT stopped — nothing says it stands now — and is named so, marked pending. Pending is
+//! what the robot's mux shows here ([`super::estop_pending`]), never what an answer's text says.
 
 use std::sync::mpsc;
 use std::time::Duration;
 
 use chassis_client::{ControlKind, ControlRequest, ControlStatus, Robot, now_ns};
+
+/// How long a robot that was not stopped is watched for its mirror's pending mark, which the
+/// mirror publishes as it forwards the request (before any answer).
+const PENDING_LOOK: Duration = Duration::from_millis(200);
+/// What a pending robot's line says.
+const PENDING: &str =
+    "pending: the mirror keeps the e-stop asked and delivers it when the link returns";
 use clap::Args;
 use serde::Serialize;
 
@@ -26,6 +38,9 @@ pub struct EstopArgs {
 pub struct Answer {
     pub name: String,
     pub stopped: bool,
+    /// Not stopped, but the robot's mirror keeps the e-stop asked and delivers it when the
+    /// robot answers again.
+    pub pending: bool,
     /// chassisd's message, or why there is no stop.
     pub message: String,
     pub answer_ms: Option<u64>,
@@ -33,28 +48,50 @@ pub struct Answer {
 
 fn ask(name: &str, timeout: Duration) -> Answer {
     let start = now_ns();
-    let answered = |stopped: bool, message: String| Answer {
+    let answered = |stopped: bool, pending: bool, message: String| Answer {
         name: name.to_string(),
         stopped,
+        pending,
         message,
         answer_ms: Some(now_ns().saturating_sub(start) / 1_000_000),
     };
     let mut robot = match Robot::connect(name) {
         Ok(robot) => robot,
-        Err(e) => return answered(false, format!("cannot reach it: {e}")),
+        Err(e) => return answered(false, false, format!("cannot reach it: {e}")),
     };
     let request = ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("estop");
-    match robot.control(request, timeout) {
-        Ok(response) if response.is_ok() => answered(true, response.message().to_string()),
-        Ok(response) => answered(
-            false,
-            format!(
-                "{}: {}",
-                ControlStatus::name(response.status),
-                response.message()
-            ),
+    let why = match robot.control(request, timeout) {
+        Ok(response) if response.is_ok() => {
+            return answered(true, false, response.message().to_string());
+        }
+        Ok(response) => format!(
+            "{}: {}",
+            ControlStatus::name(response.status),
+            response.message()
         ),
-        Err(e) => answered(false, e.to_string()),
+        Err(e) => e.to_string(),
+    };
+    let pending = kept_pending(&mut robot);
+    answered(false, pending, why)
+}
+
+/// Whether the robot's mux shows its e-stop pending (a mirror keeps it asked), looking for at
+/// most [`PENDING_LOOK`].
+fn kept_pending(robot: &mut Robot) -> bool {
+    let end = now_ns().saturating_add(u64::try_from(PENDING_LOOK.as_nanos()).unwrap_or(u64::MAX));
+    loop {
+        match robot.latest_mux() {
+            Ok(Some(m)) if super::estop_pending(&m) => return true,
+            Ok(_) => {}
+            Err(_) => return false,
+        }
+        let left = end.saturating_sub(now_ns());
+        if left == 0 {
+            return false;
+        }
+        if robot.wait_mux(Duration::from_nanos(left)).is_err() {
+            return false;
+        }
     }
 }
 
@@ -74,6 +111,7 @@ pub fn estop_robots(names: &[String], timeout: Duration) -> Vec<Answer> {
             answers.push(Answer {
                 name: name.clone(),
                 stopped: false,
+                pending: false,
                 message: format!("could not ask: {e}"),
                 answer_ms: None,
             });
@@ -81,7 +119,8 @@ pub fn estop_robots(names: &[String], timeout: Duration) -> Vec<Answer> {
     }
     drop(tx);
     let deadline = now_ns().saturating_add(
-        u64::try_from((timeout + Duration::from_millis(500)).as_nanos()).unwrap_or(u64::MAX),
+        u64::try_from((timeout + PENDING_LOOK + Duration::from_millis(500)).as_nanos())
+            .unwrap_or(u64::MAX),
     );
     while answers.len() < names.len() {
         let left = Duration::from_nanos(deadline.saturating_sub(now_ns()));
@@ -100,6 +139,7 @@ pub fn estop_robots(names: &[String], timeout: Duration) -> Vec<Answer> {
                 .unwrap_or_else(|| Answer {
                     name: name.clone(),
                     stopped: false,
+                    pending: false,
                     message: format!("no answer within {timeout:?}"),
                     answer_ms: None,
                 })
@@ -107,16 +147,22 @@ pub fn estop_robots(names: &[String], timeout: Duration) -> Vec<Answer> {
         .collect()
 }
 
-/// One line per robot, stopped ones first marked `stopped`, the others `NOT STOPPED`.
+/// One line per robot, stopped ones marked `stopped`, the others `NOT STOPPED`; a robot whose
+/// mirror keeps the e-stop asked says so first, then why it is not stopped yet.
 pub fn answer_lines(answers: &[Answer]) -> Vec<String> {
     let width = answers.iter().map(|a| a.name.len()).max().unwrap_or(4);
     answers
         .iter()
         .map(|a| {
             format!(
-                "{:<11} {:<width$}  {}{}",
+                "{:<11} {:<width$}  {}{}{}",
                 if a.stopped { "stopped" } else { "NOT STOPPED" },
                 a.name,
+                if a.pending {
+                    format!("{PENDING} · ")
+                } else {
+                    String::new()
+                },
                 a.message,
                 a.answer_ms
                     .map_or(String::new(), |ms| format!(" ({ms} ms)"))
@@ -138,10 +184,15 @@ pub fn estop_all(args: &EstopArgs, json: bool) -> anyhow::Result<std::process::E
     let timeout = Duration::from_millis(args.timeout_ms.clamp(1, 60_000));
     let answers = estop_robots(&names, timeout);
     let not_stopped = answers.iter().filter(|a| !a.stopped).count();
+    let pending = answers.iter().filter(|a| !a.stopped && a.pending).count();
     if json {
         println!(
             "{}",
-            serde_json::json!({ "answers": answers, "not_stopped": not_stopped })
+            serde_json::json!({
+                "answers": answers,
+                "not_stopped": not_stopped,
+                "pending": pending,
+            })
         );
     } else {
         for line in answer_lines(&answers) {
@@ -155,10 +206,20 @@ pub fn estop_all(args: &EstopArgs, json: bool) -> anyhow::Result<std::process::E
             answers
                 .iter()
                 .filter(|a| !a.stopped)
-                .map(|a| a.name.as_str())
+                .map(|a| if a.pending {
+                    format!("{} (pending)", a.name)
+                } else {
+                    a.name.clone()
+                })
                 .collect::<Vec<_>>()
                 .join(", ")
         );
+        if pending > 0 {
+            eprintln!(
+                "chassis: the mirror keeps the e-stop asked of {pending} of them and delivers it \
+                 when the link returns; until then, stop them by hand"
+            );
+        }
         return Ok(std::process::ExitCode::FAILURE);
     }
     eprintln!("chassis: all {} robots stopped", answers.len());
@@ -176,10 +237,28 @@ mod tests {
         let answers = estop_robots(&names, Duration::from_millis(100));
         assert_eq!(answers.len(), 2);
         assert!(answers.iter().all(|a| !a.stopped), "{answers:?}");
+        assert!(answers.iter().all(|a| !a.pending), "{answers:?}");
         let lines = answer_lines(&answers);
         assert!(
             lines[0].starts_with("NOT STOPPED nosuchrobot1"),
             "{lines:?}"
+        );
+    }
+
+    #[test]
+    fn a_pending_robot_is_not_stopped_and_says_so() {
+        let answer = |name: &str, stopped, pending| Answer {
+            name: name.into(),
+            stopped,
+            pending,
+            message: "timeout: no answer".into(),
+            answer_ms: Some(1500),
+        };
+        let lines = answer_lines(&[answer("r1", true, false), answer("r2", false, true)]);
+        assert!(lines[0].starts_with("stopped     r1  timeout"), "{lines:?}");
+        assert_eq!(
+            lines[1],
+            format!("NOT STOPPED r2  {PENDING} · timeout: no answer (1500 ms)")
         );
     }
 }

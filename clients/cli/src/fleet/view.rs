@@ -149,7 +149,8 @@ fn key(event: &Event) -> Key {
 }
 
 fn row_style(r: &Row) -> Style {
-    if r.link != "ok" {
+    // A pending e-stop: asked, and not yet holding the robot.
+    if r.link != "ok" || r.estop == "pending" {
         Style::default().fg(Color::Red).add_modifier(Modifier::BOLD)
     } else if r.estop == "held" || !r.faults.is_empty() {
         Style::default().fg(Color::Yellow)
@@ -193,8 +194,15 @@ pub fn live(fleet: &mut Fleet, args: &FleetArgs) -> anyhow::Result<()> {
             && let Ok(answers) = rx.try_recv()
         {
             let not_stopped = answers.iter().filter(|a| !a.stopped).count();
+            let kept = answers.iter().filter(|a| !a.stopped && a.pending).count();
             messages = vec![if not_stopped == 0 {
                 format!("E-STOP: all {} robots stopped", answers.len())
+            } else if kept > 0 {
+                format!(
+                    "E-STOP: {not_stopped} of {} robots NOT STOPPED ({kept} pending: delivered \
+                     when the link returns)",
+                    answers.len()
+                )
             } else {
                 format!(
                     "E-STOP: {not_stopped} of {} robots NOT STOPPED",
