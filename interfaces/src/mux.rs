@@ -342,7 +342,10 @@ impl std::fmt::Display for Why<'_> {
                     .filter(|s| s.has(SourceFlags::REQUIRED) && !s.has(SourceFlags::FRESH))
                     .map(SourceStatus::name)
                     .collect();
-                write!(f, "stopped: required source {} silent", silent.join(", "))?;
+                match silent.as_slice() {
+                    [] => write!(f, "stopped: the required source is silent")?,
+                    names => write!(f, "stopped: required source {} silent", names.join(", "))?,
+                }
             }
             (None, reason) => write!(f, "stopped: {}", ZeroReason::name(reason).replace('_', " "))?,
         }

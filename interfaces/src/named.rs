@@ -130,6 +130,7 @@ mod tests {
             DriverStatus,
             ClampFlags,
             ZeroReason,
+            Stop,
             SourceFlags,
             RequestFlags,
             ControlKind,

@@ -52,7 +52,7 @@ fn chassis_demo_drives_figure_eights_under_the_safety_monitor_and_ctrl_c_stops_e
         processes_named(&name)
     );
     let reported = wait_for(Duration::from_secs(5), || {
-        env.proc(demo).log_text().contains("active planner")
+        env.proc(demo).log_text().contains("driving from planner")
     });
     assert!(reported.is_some(), "no status line\n{}", env.logs());
 
@@ -108,7 +108,9 @@ fn chassis_demo_with_foxglove_but_no_bridge_says_how_to_build_it_and_starts_noth
 /// Every AgileX protocol-V2 robot (the SCOUT MINI with V2 firmware included), and the SCOUT
 /// and BUNKER with V1 firmware, run the demo on their simulated chassis: the planner drives each
 /// under the safety monitor, in its protocol, and the demo ends by itself after `--duration`.
-/// All robots at once, to keep the test short.
+/// Three robots at a time: nine at once (27 processes of a debug build on two cores) starve a
+/// safety monitor beyond its 200 ms now and then, and a monitor lost and back is a stop after
+/// which the planner, which keeps asking, rightly never drives again by itself.
 #[test]
 fn chassis_demo_runs_every_agilex_robot_in_each_protocol() {
     const ROBOTS: [(&str, Option<&str>); 9] = [
@@ -124,61 +126,68 @@ fn chassis_demo_runs_every_agilex_robot_in_each_protocol() {
     ];
     let mut env = Env::new("demo-v2");
     let tag = std::process::id() % 10_000;
-    let mut demos = Vec::new();
-    for (k, (robot, protocol)) in ROBOTS.iter().enumerate() {
-        let name = format!("dv{k}{tag}");
-        let mut args = vec![
-            "demo",
-            "--robot",
-            robot,
-            "--name",
-            &name,
-            "--no-dashboard",
-            "--duration",
-            "12",
-        ];
-        if let Some(protocol) = protocol {
-            args.extend(["--protocol", protocol]);
+    for (group, robots) in ROBOTS.chunks(3).enumerate() {
+        let mut demos = Vec::new();
+        for (k, (robot, protocol)) in robots.iter().enumerate() {
+            let name = format!("dv{group}{k}{tag}");
+            let mut args = vec![
+                "demo",
+                "--robot",
+                robot,
+                "--name",
+                &name,
+                "--no-dashboard",
+                "--duration",
+                "8",
+            ];
+            if let Some(protocol) = protocol {
+                args.extend(["--protocol", protocol]);
+            }
+            // One log per demo: SCOUT and BUNKER run twice, once per protocol.
+            let label = format!("demo-{robot}-{}", protocol.unwrap_or("default"));
+            let index = env.spawn(&label, "chassis", &args);
+            demos.push((*robot, *protocol, name, index));
         }
-        // One log per demo: SCOUT and BUNKER run twice, once per protocol.
-        let label = format!("demo-{robot}-{}", protocol.unwrap_or("default"));
-        let index = env.spawn(&label, "chassis", &args);
-        demos.push((*robot, *protocol, name, index));
-    }
-    for (robot, protocol, name, _) in &demos {
-        let mut handle = env.robot(name, Duration::from_secs(20));
-        let driving = wait_for(Duration::from_secs(10), || {
-            let m = mux(&mut handle);
+        for (robot, protocol, name, _) in &demos {
+            let mut handle = env.robot(name, Duration::from_secs(20));
+            let driving = wait_for(Duration::from_secs(15), || {
+                let m = mux(&mut handle);
+                let s = state(&mut handle);
+                m.active().map(SourceStatus::name) == Some("planner")
+                    && m.zero_reason == ZeroReason::NONE
+                    && s.motion.linear_mps.abs() > 0.1
+            });
+            assert!(
+                driving.is_some(),
+                "{robot}: not driving: {}\n{}",
+                mux(&mut handle).why(),
+                env.logs()
+            );
             let s = state(&mut handle);
-            m.active().map(SourceStatus::name) == Some("planner")
-                && m.zero_reason == ZeroReason::NONE
-                && s.motion.linear_mps.abs() > 0.1
-        });
-        assert!(driving.is_some(), "{robot}: not driving\n{}", env.logs());
-        let s = state(&mut handle);
-        let expected = match protocol {
-            Some("v1") => WireProtocol::V1,
-            _ => WireProtocol::V2,
-        };
-        assert_eq!(s.system.wire_protocol, expected, "{robot} {protocol:?}");
-        let described = handle
-            .description(Duration::from_secs(2))
-            .unwrap_or_else(|e| panic!("{robot}: {e}\n{}", env.logs()));
-        assert_eq!(described.kind_name(), *robot);
-        assert_eq!(described.kind, s.robot);
-        assert!(
-            mux(&mut handle).sources()[0].has(SourceFlags::FRESH),
-            "{robot}: safety monitor not alive"
-        );
-    }
-    for (robot, _, _, index) in demos {
-        assert_eq!(
-            env.proc(index).wait_exit(Duration::from_secs(30)),
-            Some(0),
-            "{robot}\n{}",
-            env.logs()
-        );
-        let log = env.proc(index).log_text();
-        assert!(log.contains("active planner"), "{robot}: {log}");
+            let expected = match protocol {
+                Some("v1") => WireProtocol::V1,
+                _ => WireProtocol::V2,
+            };
+            assert_eq!(s.system.wire_protocol, expected, "{robot} {protocol:?}");
+            let described = handle
+                .description(Duration::from_secs(2))
+                .unwrap_or_else(|e| panic!("{robot}: {e}\n{}", env.logs()));
+            assert_eq!(described.kind_name(), *robot);
+            assert_eq!(described.kind, s.robot);
+            assert!(
+                mux(&mut handle).sources()[0].has(SourceFlags::FRESH),
+                "{robot}: safety monitor not alive"
+            );
+        }
+        for (robot, _, _, index) in demos {
+            assert_eq!(
+                env.proc(index).wait_exit(Duration::from_secs(30)),
+                Some(0),
+                "{robot}\n{}",
+                env.logs()
+            );
+            let log = env.proc(index).log_text();
+            assert!(log.contains("driving from planner"), "{robot}: {log}");
+        }
     }
 }

@@ -133,16 +133,18 @@ fn sigkill_of_chassisd_at_random_moments_never_blocks_its_restart_and_clients_re
     // the restart (the same process, its connection reused): chassisd starting is a stop, so
     // the robot stands, saying it waits for teleop's zero, until teleop sends one.
     let restarted = now_ns();
-    let mut pump = Pump::new(&mut teleop, go, &mut wire);
-    let waiting = pump.until(&mut robot, Duration::from_secs(15), |m, _| {
-        m.stamp_ns > restarted
-            && source_status(m, "safety").has(SourceFlags::FRESH)
-            && m.zero_reason == ZeroReason::AWAITING_ZERO
-            && m.stop == Stop::SERVICE_START
-            && m.awaiting().is_some_and(|s| s.name() == "teleop")
-    });
-    let (stood_samples, stood_fastest) = pump.stands(&mut robot, restarted, STOOD_FOR);
-    drop(pump);
+    let (waiting, stood_samples, stood_fastest) = {
+        let mut pump = Pump::new(&mut teleop, go, &mut wire);
+        let waiting = pump.until(&mut robot, Duration::from_secs(15), |m, _| {
+            m.stamp_ns > restarted
+                && source_status(m, "safety").has(SourceFlags::FRESH)
+                && m.zero_reason == ZeroReason::AWAITING_ZERO
+                && m.stop == Stop::SERVICE_START
+                && m.awaiting().is_some_and(|s| s.name() == "teleop")
+        });
+        let (samples, fastest) = pump.stands(&mut robot, restarted, STOOD_FOR);
+        (waiting, samples, fastest)
+    };
     teleop.stop().unwrap();
     let zero_sent = now_ns();
     let mut pump = Pump::new(&mut teleop, go, &mut wire);
@@ -378,14 +380,15 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
     let bound_ms = 500.0 + 3.0 * 100.0 + 20.0;
     // After the last restart teleop keeps asking: the robot stands, waiting for its zero, then
     // drives (a speed reported after the zero).
-    let mut pump = Pump::new(&mut teleop, go, &mut wire);
-    let standing = stands_until_zero(
-        &mut robot,
-        restarted,
-        ("teleop", Stop::SERVICE_START),
-        || pump.tick(),
-    );
-    drop(pump);
+    let standing = {
+        let mut pump = Pump::new(&mut teleop, go, &mut wire);
+        stands_until_zero(
+            &mut robot,
+            restarted,
+            ("teleop", Stop::SERVICE_START),
+            || pump.tick(),
+        )
+    };
     let stood = standing.as_ref().is_ok_and(StoodUntilZero::stood);
     teleop.stop().unwrap();
     let zero_sent = now_ns();

@@ -9,7 +9,9 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use chassis_client::{Robot, Ticker, install_signal_handlers, now_ns, termination_requested};
+use chassis_client::{
+    Robot, SourceFlags, Ticker, install_signal_handlers, now_ns, termination_requested,
+};
 use chassis_protocols::RobotKind;
 use clap::Args;
 
@@ -110,6 +112,10 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         .stderr(log_file(&dir, "chassis-safety")?);
     children.spawn("chassis-safety", safety)?;
     eprintln!("chassis-safety: watching faults, battery, staleness, bumper, ranges, speed");
+    // The planner starts once the monitor guards: a monitor still starting up could fall
+    // silent and come back under the planner's first requests, and after that stop motion
+    // starts only from a zero.
+    guarded(&mut robot, &mut children)?;
 
     let mut planner = Command::new(&programs.planner);
     planner
@@ -178,6 +184,34 @@ fn connect(name: &str, children: &mut Children) -> anyhow::Result<Robot> {
     }
 }
 
+/// Waits until the mux's required sources (the safety monitor) have been fresh for a second.
+fn guarded(robot: &mut Robot, children: &mut Children) -> anyhow::Result<()> {
+    let started = now_ns();
+    let mut fresh_since: Option<u64> = None;
+    loop {
+        if termination_requested() {
+            bail!("interrupted while starting");
+        }
+        if let Some((label, status)) = children.exited() {
+            bail!("{label} exited at start ({status})");
+        }
+        let now = now_ns();
+        let fresh = robot.wait_mux(Duration::from_millis(50))?.is_some_and(|m| {
+            m.sources()
+                .iter()
+                .filter(|s| s.has(SourceFlags::REQUIRED))
+                .all(|s| s.has(SourceFlags::FRESH))
+        });
+        fresh_since = fresh.then(|| fresh_since.unwrap_or(now));
+        if fresh_since.is_some_and(|since| now.saturating_sub(since) >= 1_000_000_000) {
+            return Ok(());
+        }
+        if now.saturating_sub(started) > 30_000_000_000 {
+            bail!("the safety monitor did not guard chassis within 30 s");
+        }
+    }
+}
+
 /// One status line a second until `duration`, Ctrl-C, or a process of the demo ending.
 fn status_lines(
     robot: &mut Robot,
@@ -196,13 +230,11 @@ fn status_lines(
         let state = robot.latest_state()?;
         let mux = robot.latest_mux()?;
         if let (Some(state), Some(mux)) = (state, mux) {
-            let active = mux
-                .active()
-                .map_or("none".to_string(), |s| s.name().to_string());
             println!(
-                "{:>5.1} s  {}  | active {active}",
+                "{:>5.1} s  {}  | {}",
                 (now_ns() - start) as f64 / 1e9,
-                crate::live::state_line(&state)
+                crate::live::state_line(&state),
+                mux.why()
             );
         }
     }

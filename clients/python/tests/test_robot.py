@@ -382,6 +382,8 @@ def test_control_actions_are_answered_with_success_or_a_reason(world: World) -> 
     mux = robot.wait_mux(1.0)
     assert mux is not None and mux.zero_reason == chassis.ZeroReason.AWAITING_ZERO
     assert chassis.fixed_str(mux.sources[mux.awaiting_source].name) == "teleop"
+    assert mux.stop == chassis.Stop.LOCK_RELEASED
+    assert mux.why() == "stopped: waiting for a zero from teleop since lock-released", mux.why()
     teleop.send(chassis.VelocityRequest.twist(0.0, 0.0))
     drive(
         robot,

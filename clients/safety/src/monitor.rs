@@ -141,16 +141,22 @@ fn pause(d: Duration) {
     ticker.wait();
 }
 
-/// The ports of one connection.
+/// The ports of one connection, and the description read as it was made.
 struct Link {
     robot: Robot,
     source: Source,
     status: Option<Publication<SafetyStatus>>,
+    description: Result<RobotDescription, ClientError>,
 }
 
 impl Link {
+    /// Connects, reads the description, then takes the source: its first heartbeat (the
+    /// library's, as the process connects) is followed by the loop's at once. Taken before a
+    /// wait of up to [`DESCRIPTION_WAIT`], the source would go stale and come back — for the
+    /// mux a restarted monitor, after which motion starts only from a zero.
     fn connect(name: &str, source_name: &str) -> Result<Self, ClientError> {
         let mut robot = Robot::connect(name)?;
+        let description = robot.description(DESCRIPTION_WAIT);
         let source = robot.source(source_name)?;
         let status = match robot.publisher::<SafetyStatus>(SafetyStatus::SERVICE) {
             Ok(p) => Some(p),
@@ -167,6 +173,7 @@ impl Link {
             robot,
             source,
             status,
+            description,
         })
     }
 }
@@ -261,9 +268,9 @@ fn serve(
     let mut last_served_check_ns = now_ns();
     let mut reported = Reported::default();
     let name = link.robot.name().to_string();
-    match link.robot.description(DESCRIPTION_WAIT) {
-        Ok(d) => described.apply(engine, &d),
-        Err(e) => described.missing(engine, &name, &e),
+    match &link.description {
+        Ok(d) => described.apply(engine, d),
+        Err(e) => described.missing(engine, &name, e),
     }
     loop {
         if termination_requested() {

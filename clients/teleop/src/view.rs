@@ -532,6 +532,7 @@ fn render_robot(frame: &mut Frame, area: Rect, view: &View) {
 mod tests {
     use super::*;
     use crate::keys::{Settings, Teleop};
+    use chassis_client::Stop;
     use chassis_protocols::RobotKind;
     use chassis_protocols::description::describe;
     use ratatui::Terminal;
@@ -749,11 +750,24 @@ mod tests {
     fn a_stale_safety_monitor_while_driving_is_an_override() {
         let mut mux = mux("none");
         mux.zero_reason = ZeroReason::REQUIRED_SOURCE_STALE;
+        mux.sources[0].flags = SourceFlags::REQUIRED;
         assert_eq!(
             authority(Some(&mux), "teleop", true),
             Authority::Override {
                 by: "no safety monitor".into(),
-                why: "output zero: required_source_stale".into()
+                why: "stopped: required source safety silent".into()
+            }
+        );
+        mux.zero_reason = ZeroReason::AWAITING_ZERO;
+        mux.awaiting_source = 1;
+        mux.stop = Stop::REQUIRED_SOURCE;
+        assert_eq!(
+            authority(Some(&mux), "teleop", true),
+            Authority::Override {
+                by: "motion only from a zero".into(),
+                why: "stopped: waiting for a zero from teleop since the required source came \
+                      back"
+                    .into()
             }
         );
         assert_eq!(authority(None, "teleop", true), Authority::Unknown);
