@@ -236,8 +236,7 @@ def _why(mux: MuxStatus) -> str:
     elif mux.zero_reason == ZeroReason.AWAITING_ZERO:
         waiting = names[mux.awaiting_source] if mux.awaiting_source < len(names) else "?"
         text = (
-            f"stopped: waiting for a zero from {waiting} "
-            f"since {Stop.NAMES.get(mux.stop, mux.stop)}"
+            f"stopped: waiting for a zero from {waiting} since {Stop.NAMES.get(mux.stop, mux.stop)}"
         )
     elif mux.zero_reason == ZeroReason.HELD:
         text = f"stopped: held by {Stop.NAMES.get(mux.stop, mux.stop)}"
