@@ -610,6 +610,10 @@ pub fn stands(
     (samples, fastest)
 }
 
+/// The stops a bus outage ends with: the bus, and a fault the chassis reported meanwhile (a
+/// TITAN that lost its heartbeat reports a body exception until it hears it again).
+pub const BUS_AND_ITS_FAULT: &[u8] = &[Stop::BUS, Stop::CHASSIS_FAULT];
+
 /// How a robot stood after a stop while its client kept asking for motion.
 #[derive(Debug, Clone, Copy)]
 pub struct StoodUntilZero {
@@ -629,21 +633,23 @@ impl StoodUntilZero {
 
 /// Motion starts only from a zero: after a stop that ends at or after `since_ns`, while `ask`
 /// keeps asking for motion, waits (up to 15 s) until the mux says it waits for `source`'s zero
-/// since `stop`, then watches the robot for [`STOOD_FOR`]. `Err` names what the mux said
-/// instead.
+/// since one of `stops` (the last to end, where a fault the chassis reported for the outage
+/// clears after the bus is back), then watches the robot for [`STOOD_FOR`]. `Err` names what
+/// the mux said instead.
 pub fn stands_until_zero(
     robot: &mut Robot,
     since_ns: u64,
-    (source, stop): (&str, u8),
+    (source, stops): (&str, &[u8]),
     mut ask: impl FnMut(),
 ) -> Result<StoodUntilZero, String> {
     let start = Instant::now();
     let mut last = String::from("no mux status");
     let waiting = loop {
         if start.elapsed() > Duration::from_secs(15) {
+            let names: Vec<&str> = stops.iter().map(|&s| Stop::name(s)).collect();
             return Err(format!(
                 "the mux never waited for {source}'s zero since {}: {last}",
-                Stop::name(stop)
+                names.join(" or ")
             ));
         }
         ask();
@@ -651,7 +657,7 @@ pub fn stands_until_zero(
             last = m.why().to_string();
             if m.stamp_ns > since_ns
                 && m.zero_reason == ZeroReason::AWAITING_ZERO
-                && m.stop == stop
+                && stops.contains(&m.stop)
                 && m.awaiting().is_some_and(|s| s.name() == source)
             {
                 break start.elapsed();
@@ -711,7 +717,9 @@ impl HangUp<'_> {
         let restarted = now_ns();
         env.sim("sim2", kind, &[], name, &line.sim_bus(link));
         let standing =
-            stands_until_zero(robot, restarted, (self.source, Stop::BUS), || send(false));
+            stands_until_zero(robot, restarted, (self.source, BUS_AND_ITS_FAULT), || {
+                send(false)
+            });
         let stood = standing.as_ref().is_ok_and(StoodUntilZero::stood);
         send(true);
         let zero_sent = now_ns();

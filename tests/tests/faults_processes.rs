@@ -385,7 +385,7 @@ fn sigkill_of_chassisd_over_slcan_lets_the_titan_stop_on_its_own_heartbeat_timeo
         stands_until_zero(
             &mut robot,
             restarted,
-            ("teleop", Stop::SERVICE_START),
+            ("teleop", &[Stop::SERVICE_START]),
             || pump.tick(),
         )
     };
@@ -517,7 +517,9 @@ fn sigkill_of_chassisd_sim_is_reported_as_a_lost_bus_and_survived() {
         // Teleop kept asking: the bus coming back is the end of a stop, and motion starts only
         // from a zero.
         let standing =
-            stands_until_zero(&mut robot, restarted, ("teleop", Stop::BUS), || pump.tick());
+            stands_until_zero(&mut robot, restarted, ("teleop", BUS_AND_ITS_FAULT), || {
+                pump.tick()
+            });
         match standing {
             Ok(s) if s.stood() => stood.push(s),
             other => {

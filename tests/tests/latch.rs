@@ -219,7 +219,7 @@ fn a_release_followed_by_a_silence_longer_than_the_timeout_still_waits_for_a_zer
     let standing = stands_until_zero(
         &mut robot,
         asked_again,
-        ("teleop", Stop::LOCK_RELEASED),
+        ("teleop", &[Stop::LOCK_RELEASED]),
         || teleop.send(VelocityRequest::twist(0.3, 0.0)).unwrap(),
     );
     teleop.stop().unwrap();

@@ -497,7 +497,7 @@ fn the_monitor_waits_for_the_service_and_keeps_guarding_across_its_restart() {
     let standing = stands_until_zero(
         &mut robot,
         restarted,
-        ("teleop", Stop::SERVICE_START),
+        ("teleop", &[Stop::SERVICE_START]),
         || {
             teleop.send(go).unwrap();
         },

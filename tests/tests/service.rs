@@ -347,7 +347,7 @@ fn a_service_killed_with_sigkill_restarts_cleanly_and_clients_reconnect() {
     let standing = stands_until_zero(
         &mut robot,
         restarted,
-        ("teleop", Stop::SERVICE_START),
+        ("teleop", &[Stop::SERVICE_START]),
         || teleop.send(go).unwrap(),
     );
     assert!(
@@ -834,7 +834,7 @@ fn a_v2_chassis_estop_switch_stops_it_and_only_a_zero_command_lets_it_drive_agai
     let standing = stands_until_zero(
         &mut robot,
         released,
-        ("teleop", Stop::CHASSIS_ESTOP),
+        ("teleop", &[Stop::CHASSIS_ESTOP]),
         || teleop.send(go).unwrap(),
     );
     assert!(

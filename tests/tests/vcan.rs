@@ -469,7 +469,7 @@ fn the_interface_going_down_and_up_mid_drive_is_detected_and_survived() {
     .map(|_| up_at.elapsed());
     let reopened = reopened.unwrap_or_else(|| panic!("the bus was never reopened\n{}", env.logs()));
     // Teleop kept asking: the bus coming back starts nothing until teleop asks for zero.
-    let standing = stands_until_zero(&mut robot, up_ns, ("teleop", Stop::BUS), || {
+    let standing = stands_until_zero(&mut robot, up_ns, ("teleop", BUS_AND_ITS_FAULT), || {
         teleop.send(go).unwrap()
     });
     assert!(
