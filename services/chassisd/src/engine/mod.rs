@@ -989,24 +989,23 @@ impl Engine {
         .into_iter()
         .filter(|&(held, _)| held)
         .fold(0, |bits, (_, stop)| bits | hold_bit(stop));
-        if holds != self.mux.holds() {
-            for (stop, name) in Stop::NAMES {
-                let bit = hold_bit(stop);
-                if holds & bit != self.mux.holds() & bit {
-                    if holds & bit != 0 {
-                        warn!(stop = name, "stopped: commanding zero until it ends");
-                    } else {
-                        warn!(
-                            stop = name,
-                            "{name} ended: motion starts again only from a zero of the source \
-                             that would win"
-                        );
-                    }
-                }
-            }
-            self.mux.set_holds(holds);
-            self.undecided = true;
+        let changed = holds ^ self.mux.holds();
+        if changed == 0 {
+            return;
         }
+        for (stop, name) in Stop::NAMES {
+            match (changed & hold_bit(stop) != 0, holds & hold_bit(stop) != 0) {
+                (false, _) => {}
+                (true, true) => warn!(stop = name, "stopped: commanding zero until it ends"),
+                (true, false) => warn!(
+                    stop = name,
+                    "{name} ended: motion starts again only from a zero of the source that \
+                     would win"
+                ),
+            }
+        }
+        self.mux.set_holds(holds);
+        self.undecided = true;
     }
 
     fn decide(&mut self, now: Timestamp) {
