@@ -24,6 +24,9 @@ pub enum Hold {
     ChassisNotReady,
     /// An RC transmitter has authority over the chassis.
     RcAuthority,
+    /// The bus or the chassis stops the robot, or a stop ended and the mux waits for a zero
+    /// (motion starts only from a zero): the mux's own explanation (`MuxStatus::why`).
+    Stopped(String),
 }
 
 impl std::fmt::Display for Hold {
@@ -39,6 +42,7 @@ impl std::fmt::Display for Hold {
                 f.write_str("held: the chassis is not ready (standby, brake or fault)")
             }
             Hold::RcAuthority => f.write_str("held: an RC transmitter has authority"),
+            Hold::Stopped(why) => write!(f, "held: {why}"),
         }
     }
 }
@@ -215,6 +219,9 @@ impl Watch {
             None => match mux.zero_reason {
                 ZeroReason::REQUIRED_SOURCE_STALE => Some(Hold::RequiredSourceStale),
                 ZeroReason::LOCKED => Some(Hold::Locked),
+                ZeroReason::HELD | ZeroReason::AWAITING_ZERO => {
+                    Some(Hold::Stopped(mux.why().to_string()))
+                }
                 _ => None,
             },
         }
@@ -224,6 +231,7 @@ impl Watch {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chassis_client::Stop;
 
     const S: u64 = 1_000_000_000;
 
@@ -312,6 +320,32 @@ mod tests {
             err.to_string().starts_with("preempted by teleop for 2.0 s"),
             "{err}"
         );
+    }
+
+    /// A stop after which the mux waits for the planner's zero is a hold: the planner, which
+    /// kept asking, gives up after its timeout (its exit sends the zero) rather than driving on
+    /// by itself — motion starts only from a zero.
+    #[test]
+    fn a_wait_for_the_planners_zero_is_a_hold_that_ends_the_run() {
+        let mut w = Watch::new(config(), 0);
+        let mut m = mux(None, S);
+        m.zero_reason = ZeroReason::AWAITING_ZERO;
+        m.awaiting_source = 2;
+        m.stop = Stop::REQUIRED_SOURCE;
+        let held = w.observe(S, Some(&state(1, S)), Some(&m)).unwrap();
+        let Status::Held { hold, .. } = held else {
+            panic!("{held:?}");
+        };
+        assert_eq!(
+            hold.to_string(),
+            "held: stopped: waiting for a zero from planner since the required source came back"
+        );
+        let late = 3 * S + 1;
+        m.stamp_ns = late;
+        let err = w
+            .observe(late, Some(&state(2, late)), Some(&m))
+            .unwrap_err();
+        assert!(matches!(err, Failure::HeldTooLong { .. }), "{err}");
     }
 
     #[test]
