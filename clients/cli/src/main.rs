@@ -21,6 +21,7 @@ mod live;
 mod procs;
 mod record;
 mod top;
+mod urdf;
 
 use action::{Action, VelocityArgs};
 
@@ -117,6 +118,9 @@ enum Cmd {
     /// they are, the robot's control mode and E-stop, chassisd, its state directory and
     /// iceoryx2. Each line gives a verdict and the fix; exits 1 when something blocks driving.
     Doctor(doctor::DoctorArgs),
+    /// The robot as a URDF (for RViz, robot_state_publisher): from a running chassisd's
+    /// description (--name) or a registry robot's (--robot), on standard output.
+    Urdf(urdf::UrdfArgs),
     /// Which AgileX protocol (v1 or v2) a chassis' frames speak, by the rule chassisd applies to
     /// a SCOUT MINI, SCOUT or BUNKER before sending anything. Frames as for decode; stdin when
     /// none. Exits 1 without a decision.
@@ -280,6 +284,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Cmd::Record(args) => record::record(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Replay(args) => record::replay(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Interfaces(args) => interfaces::run(&args).map(|()| ExitCode::SUCCESS),
+        Cmd::Urdf(args) => urdf::run(&args).map(|()| ExitCode::SUCCESS),
     }
 }
 

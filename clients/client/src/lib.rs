@@ -53,6 +53,7 @@ mod clock;
 #[cfg(feature = "foxglove")]
 pub mod foxglove;
 mod rate;
+pub mod urdf;
 pub mod watch;
 
 pub use clock::{PEER_CLOCK_SAMPLES, PeerClock, WallClock};

@@ -8,7 +8,10 @@
 //! * **State** ([`state_loop`], the main thread): each state sample chassisd publishes becomes
 //!   `odom` and `tf` at once; `joint_states`, `battery_state`, `imu/data`, `range/*` and `fix`
 //!   follow the sample when the robot reports them; `diagnostics` goes out every second and on
-//!   every change of a level or message.
+//!   every change of a level or message. The robot's model, `robot_description` (its URDF) and
+//!   `tf_static` (the URDF's fixed frames: `base_footprint`, the sensors, the tracks), goes out
+//!   at start and again when a newer description changes it, transient local: a node that
+//!   starts later (RViz, `robot_state_publisher`) is handed the last one.
 //!
 //! What the robot is comes from the description chassisd publishes (`chassis/<name>/robot`,
 //! read once before the node is created, [`describe`]): a `range/<name>` topic per range sensor
@@ -34,11 +37,11 @@ use ros2_client::{
     service::RmwRequestId,
 };
 
-use crate::convert::{self, Frames, RangeSensor, RosClock};
+use crate::convert::{self, Frames, ModelSent, RangeSensor, RosClock};
 use crate::discovery::Reach;
 use crate::msg::{
-    BatteryState, Bool, DiagnosticArray, Imu, JointState, NavSatFix, Odometry, Range, TfMessage,
-    TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed, trigger_type,
+    BatteryState, Bool, DiagnosticArray, Imu, JointState, NavSatFix, Odometry, Range, StdString,
+    TfMessage, TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed, trigger_type,
 };
 
 /// The mux source the bridge publishes into (chassisd's default configuration has it).
@@ -125,6 +128,15 @@ pub fn tf_qos() -> QosProfile {
     reliable_qos().history(History::KeepLast { depth: 100 })
 }
 
+/// QoS of `robot_description` and `tf_static`: reliable, transient local, the last 1 (what
+/// `robot_state_publisher` and tf2's `StaticBroadcasterQoS` offer): the writer keeps the last
+/// one for every reader that matches later.
+pub fn latched_qos() -> QosProfile {
+    reliable_qos()
+        .durability(Durability::TransientLocal)
+        .history(History::KeepLast { depth: 1 })
+}
+
 /// The node and every DDS entity, before they are handed to the loops.
 pub struct Entities {
     pub node: Node,
@@ -157,6 +169,10 @@ pub struct Outputs {
     ranges: Vec<(RangeSensor, Publisher<Range>)>,
     fix: Publisher<NavSatFix>,
     diagnostics: Publisher<DiagnosticArray>,
+    /// The URDF, transient local.
+    robot_description: Publisher<StdString>,
+    /// The URDF's fixed frames, transient local.
+    tf_static: Publisher<TfMessage>,
 }
 
 macro_rules! opaque_debug {
@@ -220,6 +236,8 @@ impl Entities {
         let imu_topic = topic("imu/data", Imu::type_name(), &sensor_qos())?;
         let fix_topic = topic("fix", NavSatFix::type_name(), &sensor_qos())?;
         let diag_topic = topic("diagnostics", DiagnosticArray::type_name(), &reliable_qos())?;
+        let model_topic = topic("robot_description", StdString::type_name(), &latched_qos())?;
+        let tf_static_topic = topic("tf_static", TfMessage::type_name(), &latched_qos())?;
         let range_topics = convert::range_sensors(description)
             .into_iter()
             .map(|s| {
@@ -272,6 +290,8 @@ impl Entities {
                 .collect::<Result<Vec<_>, _>>()?,
             fix: node.create_publisher(&fix_topic, None)?,
             diagnostics: node.create_publisher(&diag_topic, Some(reliable_writer_qos()))?,
+            robot_description: node.create_publisher(&model_topic, Some(latched_qos()))?,
+            tf_static: node.create_publisher(&tf_static_topic, Some(latched_qos()))?,
         };
         Ok(Self {
             node,
@@ -681,6 +701,8 @@ struct StateLoop<'a> {
     latest: Option<ChassisState>,
     mux: Option<MuxStatus>,
     last_diagnostics: Option<(u64, Vec<(u8, String)>)>,
+    /// The robot model last published.
+    model: ModelSent,
     /// Publications DDS refused, counted and logged.
     failures: u64,
     /// When the loop woke with the samples it is publishing.
@@ -744,7 +766,23 @@ impl StateLoop<'_> {
         self.latest = Some(*s);
     }
 
-    /// Takes a newer description: its joints, wheel geometry and variances.
+    /// Publishes `robot_description` and `tf_static` when the description's model is not the
+    /// one published last.
+    fn publish_model(&mut self) {
+        let stamp = self.clock.ros_time(chassis_client::now_ns());
+        if let Some((urdf, tf)) = self.model.update(&self.description, &self.frames, stamp) {
+            tracing::info!(
+                bytes = urdf.data.len(),
+                frames = tf.transforms.len(),
+                "robot_description and tf_static"
+            );
+            let f = &mut self.failures;
+            Self::publish(f, "robot_description", &self.out.robot_description, urdf);
+            Self::publish(f, "tf_static", &self.out.tf_static, tf);
+        }
+    }
+
+    /// Takes a newer description: its joints, wheel geometry and variances, its model.
     fn describe(&mut self, d: RobotDescription) {
         if (d.seq, d.stamp_ns) == (self.description.seq, self.description.stamp_ns) {
             return;
@@ -757,6 +795,7 @@ impl StateLoop<'_> {
         }
         tracing::info!(model = d.model(), seq = d.seq, "a newer robot description");
         self.description = d;
+        self.publish_model();
     }
 
     fn diagnostics(&mut self, now_ns: u64) {
@@ -800,10 +839,12 @@ pub fn state_loop(
         latest: None,
         mux: None,
         last_diagnostics: None,
+        model: ModelSent::default(),
         failures: 0,
         woke_ns: 0,
         trace: OdomTrace::from_env(chassis_ipc::ODOM_TRACE),
     };
+    lp.publish_model();
     tracing::info!(robot = name, "bridging");
     while !termination_requested() {
         // Every sample the subscriber holds, oldest first: odom keeps the robot's own rate.

@@ -18,9 +18,10 @@ use chassis_client::{
 
 use crate::msg::{
     BatteryState, DiagnosticArray, DiagnosticStatus, Header, Imu, JointState, KeyValue, NavSatFix,
-    NavSatStatus, Odometry, Point, Pose, PoseWithCovariance, Quaternion, Range, TfMessage, Time,
-    Transform, TransformStamped, Twist, TwistWithCovariance, Vector3,
+    NavSatStatus, Odometry, Point, Pose, PoseWithCovariance, Quaternion, Range, StdString,
+    TfMessage, Time, Transform, TransformStamped, Twist, TwistWithCovariance, Vector3,
 };
+use chassis_client::urdf::{self, UrdfError};
 use chassis_protocols::RobotKind;
 
 /// Frame names (`--frame-prefix` is prepended, e.g. `robot1/`).
@@ -44,9 +45,14 @@ impl Frames {
         }
     }
 
-    /// A sensor's frame: `<prefix><name>_link`.
+    /// A sensor's frame: `<prefix><name>_link` (the URDF's link of the sensor).
     pub fn sensor(&self, name: &str) -> String {
-        format!("{}{name}_link", self.prefix)
+        chassis_client::urdf::link_of_sensor(&self.prefix, name)
+    }
+
+    /// The prefix of every frame (`--frame-prefix`).
+    pub fn prefix(&self) -> &str {
+        &self.prefix
     }
 }
 
@@ -179,6 +185,69 @@ pub fn transform(state: &ChassisState, clock: RosClock, frames: &Frames) -> TfMe
                 rotation: Quaternion::from_yaw(o.yaw_rad),
             },
         }],
+    }
+}
+
+/// The robot's model, as ROS 2 publishes a robot's model: `robot_description` (its URDF,
+/// [`chassis_client::urdf`], links under the frame prefix) and `tf_static` (the URDF's fixed
+/// joints: `base_link` → `base_footprint`, → each sensor, → the tracks) stamped `stamp`, all in
+/// one message as tf2's static broadcaster sends them.
+pub fn robot_model(
+    description: &RobotDescription,
+    frames: &Frames,
+    stamp: Time,
+) -> Result<(StdString, TfMessage), UrdfError> {
+    let text = urdf::urdf(description, frames.prefix())?;
+    let transforms = urdf::fixed_frames(description, frames.prefix())?
+        .into_iter()
+        .map(|f| {
+            let [x, y, z] = f.xyz;
+            let [roll, pitch, yaw] = f.rpy;
+            TransformStamped {
+                header: Header::new(stamp, &f.parent),
+                child_frame_id: f.child,
+                transform: Transform {
+                    translation: Vector3 { x, y, z },
+                    rotation: Quaternion::from_rpy(roll, pitch, yaw),
+                },
+            }
+        })
+        .collect();
+    Ok((StdString { data: text }, TfMessage { transforms }))
+}
+
+/// Which robot model was sent last: a description whose model differs sends it anew (a newer
+/// description of the same robot sends nothing).
+#[derive(Debug, Default)]
+pub struct ModelSent {
+    urdf: Option<String>,
+    refused: Option<UrdfError>,
+}
+
+impl ModelSent {
+    /// The model of `description` when it is not the one sent last ([`robot_model`]); `None`
+    /// when it is, or when it cannot be written (logged once per reason).
+    pub fn update(
+        &mut self,
+        description: &RobotDescription,
+        frames: &Frames,
+        stamp: Time,
+    ) -> Option<(StdString, TfMessage)> {
+        match robot_model(description, frames, stamp) {
+            Ok((text, _)) if self.urdf.as_deref() == Some(text.data.as_str()) => None,
+            Ok((text, tf)) => {
+                self.urdf = Some(text.data.clone());
+                self.refused = None;
+                Some((text, tf))
+            }
+            Err(e) => {
+                if self.refused.as_ref() != Some(&e) {
+                    tracing::warn!(error = %e, "no robot_description, no tf_static");
+                    self.refused = Some(e);
+                }
+                None
+            }
+        }
     }
 }
 
@@ -569,7 +638,7 @@ fn mux_status(
     let locks: Vec<&str> = mux
         .locks()
         .iter()
-        .filter(|l| l.holder != chassis_client::LockStatus::HOLDER_NONE)
+        .filter(|l| l.held == 1)
         .map(|l| l.name())
         .collect();
     let clamps = state.map_or(0, |s| s.command.clamp_flags);
@@ -814,6 +883,48 @@ mod tests {
         } else {
             assert_eq!(r.max_range, f32::INFINITY);
         }
+    }
+
+    #[test]
+    fn the_model_is_the_urdf_and_its_fixed_frames_under_the_prefix() {
+        let xbot = described(RobotKind::Xbot);
+        let frames = Frames::new("r1/");
+        let stamp = CLOCK.ros_time(7);
+        let (urdf, tf) = robot_model(&xbot, &frames, stamp).expect("a model");
+        assert!(urdf.data.starts_with("<?xml"), "{}", urdf.data);
+        assert!(urdf.data.contains("<link name=\"r1/base_link\">"));
+        // base_link → base_footprint, then each sensor at its mounting, as the URDF has them.
+        assert_eq!(tf.transforms.len(), 1 + xbot.sensors().len());
+        assert!(
+            tf.transforms
+                .iter()
+                .all(|t| t.header.frame_id == frames.base_link)
+        );
+        assert!(tf.transforms.iter().all(|t| t.header.stamp == stamp));
+        assert_eq!(tf.transforms[0].child_frame_id, "r1/base_footprint");
+        for (t, s) in tf.transforms[1..].iter().zip(xbot.sensors()) {
+            assert_eq!(t.child_frame_id, frames.sensor(s.name()));
+            assert_eq!(
+                (t.transform.translation.x, t.transform.translation.y),
+                (s.x_m, s.y_m)
+            );
+            let q = t.transform.rotation;
+            assert!(
+                (2.0 * q.z.atan2(q.w) - s.yaw_rad).abs() < 1e-9,
+                "{}",
+                s.name()
+            );
+        }
+        // The range topics' and the IMU's frames are links of the model.
+        assert!(tf.transforms.iter().any(|t| t.child_frame_id == frames.imu));
+        // Sent once; again only when the model changes.
+        let mut sent = ModelSent::default();
+        assert!(sent.update(&xbot, &frames, stamp).is_some());
+        let mut newer = xbot;
+        newer.seq += 1;
+        assert!(sent.update(&newer, &frames, stamp).is_none());
+        newer.geometry.track_m = 0.5;
+        assert!(sent.update(&newer, &frames, stamp).is_some());
     }
 
     #[test]

@@ -3,7 +3,8 @@
 //! In: `cmd_vel` (`geometry_msgs/Twist`, or `TwistStamped` with `--stamped`) as the mux source
 //! `ros2`; `e_stop` (`std_msgs/Bool`: true engages the operator e-stop). Services `~/estop`,
 //! `~/estop_release`, `~/clear_faults` (`std_srvs/Trigger`). Out: `odom`, `tf`,
-//! `joint_states`, `battery_state`, `imu/data`, `range/<sensor>`, `fix`, `diagnostics`.
+//! `joint_states`, `battery_state`, `imu/data`, `range/<sensor>`, `fix`, `diagnostics`, and the
+//! robot's model: `robot_description` (its URDF) and `tf_static`, transient local.
 //! See the README's "ROS 2" section.
 //!
 //! `chassis-ros2 --name ROBOT --record run.mcap [--duration S]` joins no DDS domain: it writes

@@ -355,6 +355,13 @@ pub struct Bool {
 }
 typed!(Bool, "std_msgs", "Bool");
 
+/// `std_msgs/msg/String` (`robot_description` carries the URDF in one).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StdString {
+    pub data: String,
+}
+typed!(StdString, "std_msgs", "String");
+
 /// `std_srvs/srv/Trigger` request. ROS 2 gives a message without fields one byte,
 /// `structure_needs_at_least_one_member`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -9,7 +9,9 @@
 //! The messages are the bridge's own ([`crate::bridge::messages`], [`convert::diagnostics`]),
 //! stamped in ROS time, frames per REP 103/105 (`odom` → `base_link`). Log and publish times are
 //! ROS time when the sample was written. The robot's description is the metadata record
-//! `robot_description`.
+//! `robot_description`; its model is on the topics `robot_description` (the URDF) and
+//! `tf_static`, written at the start and again when a newer description changes it, with the
+//! bridge's transient-local QoS (`ros2 bag play` offers them so to late joiners).
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -26,7 +28,7 @@ use ros2_client::qos::{Durability, History, Reliability};
 use serde::Serialize;
 
 use crate::bridge::{self, Message};
-use crate::convert::{self, Frames, RangeSensor, RosClock};
+use crate::convert::{self, Frames, ModelSent, RangeSensor, RosClock};
 
 /// How often `diagnostics` is written when nothing changes (as the bridge publishes it).
 const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
@@ -35,6 +37,7 @@ const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
 /// lines only (as ROS 2 Jazzy defines them).
 const DEFINITIONS: &[(&str, &str)] = &[
     ("builtin_interfaces/Time", "int32 sec\nuint32 nanosec"),
+    ("std_msgs/String", "string data"),
     (
         "std_msgs/Header",
         "builtin_interfaces/Time stamp\nstring frame_id",
@@ -374,6 +377,16 @@ fn topics(ranges: &[RangeSensor]) -> Vec<(String, &'static str, QosProfile)> {
             "diagnostic_msgs/DiagnosticArray",
             bridge::reliable_writer_qos(),
         ),
+        (
+            "robot_description".to_string(),
+            "std_msgs/String",
+            bridge::latched_qos(),
+        ),
+        (
+            "tf_static".to_string(),
+            "tf2_msgs/TFMessage",
+            bridge::latched_qos(),
+        ),
     ];
     for sensor in ranges {
         topics.push((
@@ -459,6 +472,16 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
     let mut latest = None;
     let mut mux: Option<MuxStatus> = None;
     let mut last_diagnostics: Option<(u64, Vec<(u8, String)>)> = None;
+    let mut model = ModelSent::default();
+    let mut description = description;
+    let mut write_model = |bag: &mut Ros2Bag<_>, d: &RobotDescription| -> anyhow::Result<()> {
+        if let Some((urdf, tf)) = model.update(d, &frames, clock.ros_time(now_ns())) {
+            bag.write("robot_description", &urdf, log_time())?;
+            bag.write("tf_static", &tf, log_time())?;
+        }
+        Ok(())
+    };
+    write_model(&mut bag, &description)?;
     tracing::info!(robot = %options.name, path = %path.display(), "recording");
     while !termination_requested() && end.is_none_or(|end| now_ns() < end) {
         let mut samples = Vec::with_capacity(4);
@@ -487,6 +510,14 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
         }
         if let Some(m) = robot.latest_mux().context("reading the mux decision")? {
             mux = Some(m);
+        }
+        if let Some(d) = robot
+            .latest_description()
+            .context("reading the robot description")?
+            && (d.seq, d.stamp_ns) != (description.seq, description.stamp_ns)
+        {
+            write_model(&mut bag, &d)?;
+            description = d;
         }
         let now = now_ns();
         let array = convert::diagnostics(
@@ -538,6 +569,35 @@ mod tests {
         for ty in DEFINITIONS.iter().map(|(t, _)| *t) {
             schema(ty).unwrap();
         }
+    }
+
+    #[test]
+    fn the_model_topics_are_offered_transient_local() {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let mut bag = Ros2Bag::new(&mut out, "/r1", Vec::new()).unwrap();
+        let text = crate::msg::StdString {
+            data: "<robot name=\"r\"/>".into(),
+        };
+        bag.write("robot_description", &text, 1).unwrap();
+        bag.finish().unwrap();
+        let bytes = out.into_inner();
+        let messages: Vec<mcap::Message> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let m = &messages[0];
+        assert_eq!(m.channel.topic, "/r1/robot_description");
+        let qos = &m.channel.metadata["offered_qos_profiles"];
+        assert!(
+            qos.contains("durability: 1") && qos.contains("depth: 1"),
+            "{qos}"
+        );
+        assert_eq!(
+            m.channel.schema.as_ref().unwrap().name,
+            "std_msgs/msg/String"
+        );
+        assert_eq!(&m.data[4..8], &18u32.to_le_bytes());
+        assert_eq!(&m.data[8..26], b"<robot name=\"r\"/>\0");
     }
 
     #[test]

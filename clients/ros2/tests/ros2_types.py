@@ -201,6 +201,11 @@ class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::Diagnosti
 
 
 @dataclass
+class String(IdlStruct, typename="std_msgs::msg::dds_::String_"):
+    data: str = ""
+
+
+@dataclass
 class Bool(IdlStruct, typename="std_msgs::msg::dds_::Bool_"):
     data: bool = False
 

@@ -102,3 +102,16 @@ def test_a_recorded_drive_decodes_as_odometry_tf_and_battery_state(ros: Ros) -> 
     assert description["robot"] == "titan" and description["name"] == "rec"
     assert description["kinematics"] == "dual_ackermann"  # the TITAN steers both axles
     assert "TITAN" in description["display_name"]
+
+    # Its model, as the bridge publishes it: the URDF `chassis urdf` prints, and its fixed
+    # frames, both offered transient local.
+    urdf = ros.chassis("urdf", "--name", "rec")
+    assert urdf.returncode == 0, urdf.stderr
+    assert [s.data for s in messages["/robot_description"]] == [urdf.stdout]
+    (static,) = messages["/tf_static"]
+    assert [(t.header.frame_id, t.child_frame_id) for t in static.transforms] == [
+        ("base_link", "base_footprint")
+    ]
+    for topic in ("/robot_description", "/tf_static"):
+        qos = channels[topic].metadata["offered_qos_profiles"]
+        assert "durability: 1" in qos and "depth: 1" in qos, qos
