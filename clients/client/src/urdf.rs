@@ -171,7 +171,7 @@ struct Joint {
     origin: Origin,
     axis: [f64; 3],
     /// Why it sits where it does, where the description does not say.
-    note: Option<&'static str>,
+    notes: Vec<&'static str>,
 }
 
 /// The materials, by name and colour.
@@ -294,7 +294,7 @@ impl Model {
                 child: link,
                 origin: Origin::at(sx * wheel_x, sy * wheel_y, 0.0),
                 axis: [0.0, 1.0, 0.0],
-                note: x_note.or(y_note),
+                notes: [x_note, y_note].into_iter().flatten().collect(),
             });
         }
 
@@ -331,11 +331,21 @@ impl Model {
                 child: link,
                 origin: Origin::at(x, 0.0, 0.0),
                 axis: [0.0, 0.0, 1.0],
-                note: match (given(g.wheelbase_m), steer) {
-                    (None, _) => Some("wheelbase not described: a quarter of the body's length"),
-                    (_, None) => Some("largest steering angle not described: ±90°"),
-                    _ => None,
-                },
+                notes: [
+                    match (given(g.wheelbase_m), length) {
+                        (Some(_), _) => None,
+                        (None, Some(_)) => {
+                            Some("wheelbase not described: a quarter of the body's length out")
+                        }
+                        (None, None) => Some("wheelbase not described: at the centre"),
+                    },
+                    steer
+                        .is_none()
+                        .then_some("largest steering angle not described: ±90°"),
+                ]
+                .into_iter()
+                .flatten()
+                .collect(),
             });
         }
 
@@ -432,7 +442,7 @@ impl Model {
             child,
             origin,
             axis: [0.0; 3],
-            note,
+            notes: note.into_iter().collect(),
         });
     }
 
@@ -515,7 +525,7 @@ impl Model {
                 JointKind::Continuous => "continuous",
                 JointKind::Revolute { .. } => "revolute",
             };
-            if let Some(note) = j.note {
+            for note in &j.notes {
                 let _ = writeln!(x, "  <!-- {note} -->");
             }
             let _ = writeln!(
@@ -824,7 +834,10 @@ mod tests {
         assert!(!u.contains("NaN") && !u.contains("inf"), "{u}");
         assert!(u.contains("<link name=\"base_link\"/>"), "no body: {u}");
         assert!(u.contains("<link name=\"front_left_wheel_link\"/>"), "{u}");
-        assert!(u.contains("wheelbase not described"));
+        assert!(u.contains("<!-- wheelbase not described: on the centre line -->"));
+        assert!(u.contains("<!-- track not described, nor the body's width -->"));
+        assert!(u.contains("<!-- wheelbase not described: at the centre -->"));
+        assert!(u.contains("<!-- largest steering angle not described: ±90° -->"));
         // Revolute joints need limits: ±90° where none is described.
         assert!(joint(&u, "front_steer_joint").contains("upper=\"1.570796327\""));
     }
