@@ -204,8 +204,12 @@ fn a_release_followed_by_a_silence_longer_than_the_timeout_still_waits_for_a_zer
     let mut teleop = robot.source("teleop").unwrap();
     assert!(drive(&mut robot, &mut teleop, Duration::from_millis(800)) > 0.2);
     assert!(control(&env, &n, "estop").contains("estop engaged"));
-    // The chassis brakes to a stop; then it stands under the e-stop while teleop asks.
-    drive(&mut robot, &mut teleop, Duration::from_millis(1000));
+    // The chassis brakes to a stop (a tail of a few mm/s at the end); then it stands under the
+    // e-stop while teleop asks.
+    let stopped = wait_for(Duration::from_secs(5), || {
+        drive(&mut robot, &mut teleop, Duration::from_millis(100)) < 0.001
+    });
+    assert!(stopped.is_some(), "the e-stop did not stop the chassis");
     let held = drive(&mut robot, &mut teleop, Duration::from_millis(500));
     let answer = control(&env, &n, "estop-release");
     assert!(
