@@ -214,6 +214,22 @@ impl LockStatus {
     pub fn set_name(&mut self, name: &str) {
         write_fixed_str(&mut self.name, name);
     }
+
+    /// Asked for but not held: an operator's engage that the robot has not answered yet, kept
+    /// asked by the fleet's mirror (`chassis-zenoh`) until it is delivered. Shown as the lock not
+    /// held (`held` 0, the robot's truth) with the operator as its holder; chassisd itself
+    /// publishes a free lock with [`LockStatus::HOLDER_NONE`], so only a mirror says this.
+    pub fn is_pending(&self) -> bool {
+        self.held == 0 && self.holder == Self::HOLDER_OPERATOR
+    }
+
+    /// Marks a lock that is not held as pending (see [`LockStatus::is_pending`]); a held lock
+    /// stays as it is.
+    pub fn mark_pending(&mut self) {
+        if self.held == 0 {
+            self.holder = Self::HOLDER_OPERATOR;
+        }
+    }
 }
 
 ipc_type! {

@@ -145,16 +145,13 @@ pub struct Row {
 const ESTOP: &str = "estop";
 
 /// Whether the mux, as a mirror (`chassis-zenoh`) publishes it, says the operator's e-stop is
-/// pending: the mirror forwarded it, the robot has not answered, and the mirror keeps it asked
-/// and delivers it when the robot answers again. The mirror shows that with the robot's `estop`
-/// lock not held (`held` 0: the robot's truth) and the operator as its holder
-/// (`LockStatus::HOLDER_OPERATOR`: the operator's control request asked for it); chassisd
-/// publishes a lock that is not held with `HOLDER_NONE`.
+/// pending: forwarded, not answered by the robot yet, kept asked by the mirror
+/// ([`LockStatus::is_pending`]).
 pub(crate) fn estop_pending(m: &MuxStatus) -> bool {
     m.locks()
         .iter()
         .find(|l| l.name() == ESTOP)
-        .is_some_and(|l| l.held == 0 && l.holder == LockStatus::HOLDER_OPERATOR)
+        .is_some_and(LockStatus::is_pending)
 }
 
 fn estop_of(mux: Option<&MuxStatus>) -> (&'static str, Option<String>) {

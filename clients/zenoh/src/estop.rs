@@ -19,7 +19,7 @@
 //!
 //! Pure: time and the link's news are parameters.
 
-use chassis_client::{ControlKind, ControlRequest, LockStatus, MuxStatus};
+use chassis_client::{ControlKind, ControlRequest, MuxStatus};
 
 /// The lock the fleet e-stop engages (and a lock request without a name names).
 pub const ESTOP: &str = "estop";
@@ -50,13 +50,8 @@ pub fn classify(request: &ControlRequest) -> Asked {
 /// The robot's mux as the mirror publishes it: with an e-stop pending and the robot's `estop`
 /// lock not held, the lock's holder is the operator while `held` stays 0.
 pub fn marked(mut mux: MuxStatus, pending: bool) -> MuxStatus {
-    if pending
-        && let Some(lock) = mux
-            .lock_index(ESTOP)
-            .and_then(|i| mux.locks.get_mut(i))
-            .filter(|l| l.held == 0)
-    {
-        lock.holder = LockStatus::HOLDER_OPERATOR;
+    if pending && let Some(lock) = mux.lock_index(ESTOP).and_then(|i| mux.locks.get_mut(i)) {
+        lock.mark_pending();
     }
     mux
 }
@@ -161,6 +156,7 @@ impl Keeper {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chassis_client::LockStatus;
 
     const MS: u64 = 1_000_000;
 
