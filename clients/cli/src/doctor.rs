@@ -15,6 +15,10 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::Context;
+use chassis_bus::can_controller;
+use chassis_bus::serial::SerialBus;
+use chassis_bus::socketcan::SocketCan;
+use chassis_bus::{BusSpec, ByteBus, CanBus, CanEvent};
 use chassis_client::{
     ChassisState, ControlMode, ControllerState, FaultFlags, LinkFlags, LockStatus, MuxStatus,
     Robot, SourceFlags, WireProtocol, now_ns,
@@ -22,9 +26,6 @@ use chassis_client::{
 use chassis_protocols::agilex_v2::detect::{Detection, Detector};
 use chassis_protocols::registry::Bus as RobotBus;
 use chassis_protocols::{CanFrame, DriverConfig, Protocol, RobotKind, Rx, Timestamp};
-use chassisd::bus::serial::SerialBus;
-use chassisd::bus::socketcan::SocketCan;
-use chassisd::bus::{BusSpec, ByteBus, CanBus, CanEvent};
 use chassisd::config::RawConfig;
 use clap::Args;
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
@@ -421,7 +422,7 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
                 Verdict::Warn,
                 format!("error-passive{counters}: many errors on the bus"),
             )
-            .fix(chassisd::controller::BUS_TROUBLE),
+            .fix(can_controller::BUS_TROUBLE),
         ),
         Some(CanState::BusOff) => emit(
             check(
@@ -429,10 +430,10 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
                 Verdict::Fail,
                 format!(
                     "bus-off{counters}: the controller has left the bus ({})",
-                    chassisd::controller::BUS_TROUBLE
+                    can_controller::BUS_TROUBLE
                 ),
             )
-            .fix(chassisd::controller::bus_off_fix(iface, can.restart_ms)),
+            .fix(can_controller::bus_off_fix(iface, can.restart_ms)),
         ),
         Some(state @ (CanState::Stopped | CanState::Sleeping)) => {
             emit(check("controller", Verdict::Fail, format!("{state:?}")).fix(up_cmd.clone()))
@@ -555,7 +556,7 @@ fn listen_can(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> Opti
                     if bus_off { ", bus-off among them" } else { "" }
                 ),
             )
-            .fix(chassisd::controller::BUS_TROUBLE),
+            .fix(can_controller::BUS_TROUBLE),
         );
     }
     if overflows > 0 {
@@ -887,7 +888,7 @@ fn listen_slcan(
         }
     }
     let bitrate = target.bitrate.unwrap_or(500_000);
-    let mut bus = match chassisd::bus::slcan::SlcanBus::open(port, bitrate) {
+    let mut bus = match chassis_bus::slcan::SlcanBus::open(port, bitrate) {
         Ok(bus) => bus,
         Err(err) => {
             emit(check("bitrate", Verdict::Fail, err.to_string()));
@@ -1133,7 +1134,7 @@ fn from_service(target: &Target, s: &ChassisState, emit: &mut dyn FnMut(Check)) 
                     link.can_bus_off
                 ),
             )
-            .fix(chassisd::controller::bus_off_fix(iface, None)),
+            .fix(can_controller::bus_off_fix(iface, None)),
         );
     } else if s.has_link_flag(LinkFlags::CHASSIS_SILENT) {
         emit(

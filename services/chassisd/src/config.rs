@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use chassis_bus::{BusSpec, BusSpecError};
 use chassis_interfaces::valid_robot_name;
 use chassis_protocols::{
     DriverConfig, Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, RobotKind,
@@ -13,7 +14,6 @@ use chassis_protocols::{
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::bus::{BusSpec, BusSpecError};
 use crate::mux::{MuxConfig, MuxConfigError};
 
 /// How the event loop waits.

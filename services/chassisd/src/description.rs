@@ -4,6 +4,7 @@
 //! configured limits, the mux's sources, whether the bus is simulated and whether the safety
 //! source is required.
 
+use chassis_bus::BusSpec;
 use chassis_interfaces::{
     DescriptionFlags, MotionLimits, RobotDescription, SensorDescription, SensorKind, SourceFlags,
     WireProtocol,
@@ -11,7 +12,6 @@ use chassis_interfaces::{
 use chassis_protocols::description::describe;
 use chassis_protocols::{Profile, Protocol};
 
-use crate::bus::BusSpec;
 use crate::config::Config;
 
 /// The description of the robot `config` drives, speaking `wire_protocol` (the driver's

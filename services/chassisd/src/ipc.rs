@@ -25,8 +25,8 @@ use tracing::{debug, warn};
 
 // The readers of `state` and `frames` are woken once per read of the bus: a reader must find
 // room for a whole read.
-const _: () = assert!(STATE.limits.subscriber_max_buffer_size >= crate::bus::MAX_RX_BATCH);
-const _: () = assert!(FRAMES.limits.subscriber_max_buffer_size >= crate::bus::MAX_RX_BATCH);
+const _: () = assert!(STATE.limits.subscriber_max_buffer_size >= chassis_bus::MAX_RX_BATCH);
+const _: () = assert!(FRAMES.limits.subscriber_max_buffer_size >= chassis_bus::MAX_RX_BATCH);
 
 pub type StatePublisher = Publisher<ipc::Service, ChassisState, ()>;
 pub type FramePublisher = Publisher<ipc::Service, BusFrame, ()>;

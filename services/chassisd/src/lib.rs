@@ -5,10 +5,7 @@
 //! memory, and it drives the chassis from a priority mux over the velocity requests of the
 //! configured sources.
 
-pub mod bus;
-pub mod clock;
 pub mod config;
-pub mod controller;
 pub mod description;
 pub mod engine;
 pub mod ipc;

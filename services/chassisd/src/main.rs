@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use chassis_bus::{BusSpec, BusSpecError};
 use chassis_protocols::{RobotKind, UnknownRobot};
-use chassisd::bus::{BusSpec, BusSpecError};
 use chassisd::config::{Config, ConfigError, LoopMode, Overrides, RawConfig};
 use clap::{Args, Parser, Subcommand};
 use tracing::error;

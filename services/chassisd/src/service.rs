@@ -15,6 +15,8 @@
 use std::collections::HashMap;
 use std::time::Duration;
 
+use chassis_bus::clock;
+use chassis_bus::{Bus, BusSpec};
 use chassis_interfaces::{ControlRequest, ControlResponse};
 use chassis_protocols::Timestamp;
 use iceoryx2::active_request::ActiveRequest;
@@ -26,8 +28,6 @@ use iceoryx2_bb_posix::file_descriptor::{FileDescriptor, FileDescriptorBased};
 use iceoryx2_bb_posix::file_descriptor_set::SynchronousMultiplexing;
 use tracing::{info, info_span, warn};
 
-use crate::bus::{Bus, BusSpec};
-use crate::clock;
 use crate::config::{Config, LoopMode};
 use crate::engine::{Engine, EngineConfig, ListenerChange, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};

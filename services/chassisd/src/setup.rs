@@ -7,9 +7,9 @@
 
 use std::time::Duration;
 
+use chassis_bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use chassis_protocols::{BoxedDriver, Profile, Timestamp};
 
-use crate::bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use crate::config::Config;
 use crate::sim::SimHandle;
 
@@ -124,7 +124,7 @@ pub fn open_bus(
             let bus = slcan::SlcanBus::open(port, config.bus_settings.can_bitrate)?;
             (Bus::Can(Box::new(bus)), None)
         }
-        BusSpec::Replay { path, speed } => (crate::bus::replay::open(path, *speed, robot)?, None),
+        BusSpec::Replay { path, speed } => (chassis_bus::replay::open(path, *speed, robot)?, None),
         BusSpec::Pty { .. } | BusSpec::SlcanPty { .. } => {
             return Err(BusError::Open {
                 name: spec.to_string(),

@@ -12,15 +12,14 @@ use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use chassis_bus::clock;
+use chassis_bus::{Bus, BusError};
 use chassis_interfaces::{ControlStatus, SimKind, SimRequest, SimTruthPage};
 use chassis_protocols::RobotKind;
 use chassis_protocols::{Firmware, Injection, SimTruth};
 use nix::poll::{PollFd, PollFlags};
 use nix::sys::time::TimeSpec;
 use tracing::{debug, warn};
-
-use crate::bus::{Bus, BusError};
-use crate::clock;
 
 pub use chassis_protocols::BoxedFirmware;
 
@@ -430,7 +429,7 @@ fn wait(bus: &Bus, wake: &UnixDatagram, timeout: Option<Duration>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bus::datagram::PairCan;
+    use chassis_bus::datagram::PairCan;
 
     /// Waits (test only) until `condition` holds, at most 5 s.
     #[allow(clippy::disallowed_methods)]

@@ -9,6 +9,8 @@
 use std::path::Path;
 use std::time::Duration;
 
+use chassis_bus::clock;
+use chassis_bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
 use chassis_interfaces::{ControlResponse, ControlStatus};
 use chassis_ipc::{SIM, ServiceKind, service_name};
 use chassis_protocols::Profile;
@@ -19,8 +21,6 @@ use iceoryx2::waitset::{
 use thiserror::Error;
 use tracing::{error, info, warn};
 
-use crate::bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
-use crate::clock;
 use crate::config::Config;
 use crate::ipc::{IpcError, iceoryx_config, open_desk};
 use crate::sim::{SimHandle, carry_out};

@@ -73,6 +73,7 @@ use std::collections::{HashMap, VecDeque};
 use std::fmt::Display;
 use std::time::Duration;
 
+use chassis_bus::can_controller::{self, Controller, ControllerReport};
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
     ControllerState, FaultFlags, FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags,
@@ -91,7 +92,6 @@ pub use budget::{ListenerChange, WakeBudget};
 pub use pass::{PassIo, Readers, WriteError, Written};
 
 use crate::config::{Config, LoopMode};
-use crate::controller::{self, Controller, ControllerReport};
 use crate::mux::{Mux, Rejection, hold_bit};
 
 /// The robot's driver behind the common contract.
@@ -1184,7 +1184,7 @@ impl Engine {
     /// Logs what a report of the CAN controller changed: a new state always (at most once a
     /// second, with the number held back), bus errors and missing acknowledgements at most once
     /// a second with their totals.
-    fn log_controller(&mut self, now: Timestamp, change: &controller::Change) {
+    fn log_controller(&mut self, now: Timestamp, change: &can_controller::Change) {
         let bus = self.config.bus.as_str();
         let iface = bus.strip_prefix("can:").unwrap_or(bus);
         let mut link = Default::default();
@@ -1206,13 +1206,13 @@ impl Engine {
                     bus_off = link.can_bus_off,
                     "{bus}: the CAN controller is bus-off: it has left the bus ({}); nothing \
                      reaches the chassis; {}",
-                    controller::BUS_TROUBLE,
-                    controller::bus_off_fix(iface, self.controller.restart_ms())
+                    can_controller::BUS_TROUBLE,
+                    can_controller::bus_off_fix(iface, self.controller.restart_ms())
                 ),
                 ControllerState::ERROR_PASSIVE => warn!(
                     held_back = held,
                     "{bus}: the CAN controller is error-passive ({counters}): {}",
-                    controller::BUS_TROUBLE
+                    can_controller::BUS_TROUBLE
                 ),
                 ControllerState::ERROR_WARNING => info!(
                     held_back = held,
@@ -1256,7 +1256,7 @@ impl Engine {
                 bus_errors = state.link.can_bus_errors,
                 unacknowledged = state.link.can_no_ack,
                 "{bus}: the CAN controller reports errors on the bus ({})",
-                controller::BUS_TROUBLE
+                can_controller::BUS_TROUBLE
             );
         }
         if change.overflow

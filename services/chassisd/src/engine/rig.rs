@@ -20,6 +20,8 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use chassis_bus::MAX_RX_BATCH;
+use chassis_bus::can_controller::ControllerReport;
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlRequest, ControlResponse, ControllerState, MuxStatus,
     RobotDescription, VelocityRequest,
@@ -32,8 +34,6 @@ use super::{
     BusItem, Device, Engine, EngineConfig, HeldLock, ListenerChange, PassIo, Readers, Ticket,
     ToPublish, Wake, WriteError, Written,
 };
-use crate::bus::MAX_RX_BATCH;
-use crate::controller::ControllerReport;
 use crate::mux::{Mux, MuxConfig};
 use crate::sim::BoxedFirmware;
 

@@ -651,7 +651,7 @@ fn frames_arriving_after_an_unreported_restart_clear_the_bus_off() {
 fn an_error_passive_controller_is_flagged_and_its_bus_errors_counted() {
     let mut rig = ready();
     rig.run_until(at(300));
-    let report = |state, counters| crate::controller::ControllerReport {
+    let report = |state, counters| chassis_bus::can_controller::ControllerReport {
         state,
         counters: Some(counters),
         bus_error: true,

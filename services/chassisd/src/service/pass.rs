@@ -4,6 +4,8 @@
 // The shell owns the clock: it stamps what it reads and writes, and hands the time to the engine.
 #![allow(clippy::disallowed_methods)]
 
+use chassis_bus::clock;
+use chassis_bus::{BusError, MAX_RX_BATCH, Received};
 use chassis_interfaces::{ControlRequest, ControlResponse, ControlStatus, VelocityRequest};
 use chassis_protocols::{Rx, Timestamp, WireItem};
 use iceoryx2::port::notifier::NotifierNotifyError;
@@ -12,8 +14,6 @@ use tracing::{debug, info, warn};
 
 use super::trace::PassStamps;
 use super::{Next, Shell, clocks};
-use crate::bus::{BusError, MAX_RX_BATCH, Received};
-use crate::clock;
 use crate::engine::{
     BusItem, Device, Engine, HeldLock, PassIo, Readers, Ticket, ToPublish, Wake, WriteError,
     Written,

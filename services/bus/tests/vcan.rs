@@ -11,10 +11,10 @@
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use chassis_bus::conformance::{self, check_link};
+use chassis_bus::socketcan::SocketCan;
+use chassis_bus::{BusError, CanBus};
 use chassis_protocols::CanFrame;
-use chassisd::bus::conformance::{self, check_link};
-use chassisd::bus::socketcan::SocketCan;
-use chassisd::bus::{BusError, CanBus};
 
 fn iface() -> String {
     std::env::var("CHASSIS_VCAN").unwrap_or_else(|_| "vcan0".into())

@@ -1,11 +1,14 @@
-//! Bus backends behind two small traits: one for CAN ([`CanBus`]) and one for byte streams
-//! ([`ByteBus`]). A backend knows nothing about robots; it moves frames or bytes and says when the
-//! bus is gone. Every backend is non-blocking and exposes a file descriptor, so one event loop
-//! can wait on the bus and on everything else at once.
+//! chassis-bus: the bus backends of a robot base behind two small traits, one for CAN
+//! ([`CanBus`]) and one for byte streams ([`ByteBus`]), the CAN controller's state as the
+//! service keeps it ([`can_controller`]), and the process's monotonic clock that stamps what they
+//! read ([`clock`]). A backend knows nothing about robots; it moves frames or bytes and says when
+//! the bus is gone. Every backend is non-blocking and exposes a file descriptor, so one event loop
+//! can wait on the bus and on everything else at once. `chassisd`, `chassisd sim` and `chassis
+//! doctor` open their buses here; one conformance suite ([`conformance`]) runs on every backend.
 //!
 //! | spec | backend |
 //! | --- | --- |
-//! | `sim` | the robot's simulated firmware in a thread, over a socket pair |
+//! | `sim` | the robot's simulated firmware in a thread, over a socket pair (opened by `chassisd`) |
 //! | `can:IFACE` | SocketCAN ([`socketcan`]) |
 //! | `serial:PATH[@BAUD]` | a serial port or pty ([`serialport`]), 8N1 |
 //! | `slcan:PATH[@BAUD]` | a Lawicel slcan adapter on a serial port (CAN without kernel CAN) |
@@ -23,8 +26,10 @@ use std::str::FromStr;
 use chassis_protocols::{CanFrame, Rx, WireItem};
 use thiserror::Error;
 
-use crate::controller::ControllerReport;
+use crate::can_controller::ControllerReport;
 
+pub mod can_controller;
+pub mod clock;
 pub mod conformance;
 pub mod datagram;
 pub mod replay;

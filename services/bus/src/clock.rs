@@ -1,8 +1,9 @@
 //! The one clock of the process: `CLOCK_MONOTONIC`, system-wide, in nanoseconds.
 //!
-//! Only the loops that own the clock call [`now`] — the service's shell, the simulator's runner,
-//! `chassisd sim` and the replay player, each opting in where `clippy.toml` forbids it elsewhere;
-//! everything else (the engine, the mux, the drivers) takes time as a parameter. Every sample the service publishes carries this clock, so another
+//! Only the loops that own the clock call [`now`] — chassisd's shell, the simulator's runner,
+//! `chassisd sim`, the replay player and the conformance suite timing a real bus — each opting in
+//! where `clippy.toml` forbids it elsewhere; everything else (the engine, the mux, the drivers)
+//! takes time as a parameter. Every sample the service publishes carries this clock, so another
 //! process on the machine computes one-way latency by reading the same clock.
 
 use chassis_protocols::Timestamp;

@@ -4,7 +4,7 @@
 //! Each check takes the two ends of one link — `from` and `to`, or `a` and `b` — and returns a
 //! [`Violation`] naming the check and what was seen instead. It never panics, so it is plain
 //! library code: the backends' own tests run it on a socket pair and on slcan over a pty
-//! (`cargo test -p chassisd conformance`), and `services/chassisd/tests/vcan.rs` runs it on two
+//! (`cargo test -p chassis-bus conformance`), and `services/bus/tests/vcan.rs` runs it on two
 //! SocketCAN sockets of `vcan0` inside a VM (`scripts/vm-tests`), where the kernel has CAN.
 //!
 //! | check | the contract |
@@ -552,9 +552,9 @@ mod tests {
     //! slcan (host side against the emulated adapter) over a pty.
 
     use super::*;
-    use crate::bus::datagram::PairCan;
-    use crate::bus::serial::{SerialBus, pty_pair};
-    use crate::bus::slcan::{SlcanAdapter, SlcanBus};
+    use crate::datagram::PairCan;
+    use crate::serial::{SerialBus, pty_pair};
+    use crate::slcan::{SlcanAdapter, SlcanBus};
 
     fn socket_pair() -> (PairCan, PairCan) {
         PairCan::pair("sim").unwrap()

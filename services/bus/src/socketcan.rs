@@ -4,10 +4,10 @@
 //! kernel's reports on the controller (error-warning, error-passive, bus-off, restarted, the
 //! error counters) and on the bus (protocol violations, missing acknowledgements). The crate
 //! decodes them ([`socketcan::errors::CanError`], after `linux/can/error.h`); [`report_of`]
-//! turns one into a [`ControllerReport`] for the service ([`crate::controller`]). On a bus-off
-//! the interface's `restart-ms` is read over netlink, so the log can say whether the kernel will
-//! restart the controller or what to run; when the bus is opened, the controller's state is read
-//! the same way (a controller already bus-off or error-passive sends no frame to say so).
+//! turns one into a [`ControllerReport`] for the service ([`crate::can_controller`]). On a
+//! bus-off the interface's `restart-ms` is read over netlink, so the log can say whether the
+//! kernel will restart the controller or what to run; when the bus is opened, the controller's
+//! state is read the same way (a controller already bus-off or error-passive sends no frame to say so).
 
 use std::collections::VecDeque;
 use std::os::fd::{AsRawFd, RawFd};
@@ -21,7 +21,7 @@ use socketcan::{
 };
 
 use super::{BusError, CanBus, CanEvent, classify};
-use crate::controller::ControllerReport;
+use crate::can_controller::ControllerReport;
 
 /// A raw CAN socket bound to one interface, non-blocking, with every error frame asked for.
 /// Remote frames are skipped (these robots use none).
