@@ -16,4 +16,4 @@ pub mod notify;
 pub mod service;
 pub mod setup;
 pub mod sim;
-pub mod standalone;
+pub mod sim_process;

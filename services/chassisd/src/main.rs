@@ -148,7 +148,7 @@ fn main() -> ExitCode {
         };
     }
     let result = if is_sim {
-        chassisd::standalone::run(&config).map_err(|e| e.to_string())
+        chassisd::sim_process::run(&config).map_err(|e| e.to_string())
     } else {
         chassisd::service::run(config).map_err(|e| e.to_string())
     };

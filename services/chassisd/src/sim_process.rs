@@ -27,7 +27,7 @@ use crate::sim::{SimHandle, carry_out};
 
 /// Why the simulated chassis stopped (or never started).
 #[derive(Debug, Error)]
-pub enum StandaloneError {
+pub enum SimProcessError {
     /// The bus could not be opened, or ended in a failure when stopping.
     #[error(transparent)]
     Bus(#[from] BusError),
@@ -109,7 +109,7 @@ const FIRST_RETRY: Duration = Duration::from_millis(100);
 const LAST_RETRY: Duration = Duration::from_secs(2);
 
 /// Runs the simulated chassis until SIGINT/SIGTERM. A lost bus is reopened with backoff.
-pub fn run(config: &Config) -> Result<(), StandaloneError> {
+pub fn run(config: &Config) -> Result<(), SimProcessError> {
     let bus = open_chassis_side(&config.bus, config)?;
     let sim_name = service_name(&config.name, ServiceKind::Sim);
     info!(
@@ -127,7 +127,7 @@ pub fn run(config: &Config) -> Result<(), StandaloneError> {
     )
     .map_err(IpcError::from)?;
     let desk = open_desk(&node, &SIM, &sim_name).map_err(|e| match e {
-        IpcError::AlreadyServed { .. } => StandaloneError::AlreadyServed {
+        IpcError::AlreadyServed { .. } => SimProcessError::AlreadyServed {
             name: config.name.clone(),
         },
         other => other.into(),
@@ -135,11 +135,11 @@ pub fn run(config: &Config) -> Result<(), StandaloneError> {
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(StandaloneError::WaitSetCreate)?;
+        .map_err(SimProcessError::WaitSetCreate)?;
     // Attached for as long as the loop runs.
     let _attached = waitset
         .attach_notification(&desk.listener)
-        .map_err(StandaloneError::WaitSetAttach)?;
+        .map_err(SimProcessError::WaitSetAttach)?;
     let mut notify_failures: u64 = 0;
     loop {
         let result = waitset.wait_and_process_once_with_timeout(
@@ -150,7 +150,7 @@ pub fn run(config: &Config) -> Result<(), StandaloneError> {
             Ok(WaitSetRunResult::TerminationRequest) => {
                 info!("stopping the simulated chassis");
                 return match chassis {
-                    Chassis::Running(sim) => sim.stop().map_err(StandaloneError::from),
+                    Chassis::Running(sim) => sim.stop().map_err(SimProcessError::from),
                     Chassis::Down { .. } => Ok(()),
                 };
             }
@@ -159,7 +159,7 @@ pub fn run(config: &Config) -> Result<(), StandaloneError> {
             // stop the chassis.
             Ok(WaitSetRunResult::Interrupt) => continue,
             Ok(_) => {}
-            Err(e) => return Err(StandaloneError::WaitSetRun(e)),
+            Err(e) => return Err(SimProcessError::WaitSetRun(e)),
         }
         chassis = keep_running(chassis, config)?;
         // The notifications only wake the wait set; every request is read below whether or not
@@ -196,7 +196,7 @@ pub fn run(config: &Config) -> Result<(), StandaloneError> {
 }
 
 /// Notices a lost bus and reopens it with backoff, keeping the same firmware.
-fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, StandaloneError> {
+fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, SimProcessError> {
     match chassis {
         Chassis::Running(sim) if !sim.is_running() => match sim.recover() {
             Some((firmware, err)) => {
@@ -207,7 +207,7 @@ fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, Standalone
                     backoff: FIRST_RETRY,
                 })
             }
-            None => Err(StandaloneError::Stopped),
+            None => Err(SimProcessError::Stopped),
         },
         Chassis::Down {
             firmware,
