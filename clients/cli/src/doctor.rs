@@ -26,7 +26,7 @@ use chassis_client::{
 use chassis_protocols::agilex_v2::detect::{Detection, Detector};
 use chassis_protocols::registry::Bus as RobotBus;
 use chassis_protocols::{CanFrame, DriverConfig, Protocol, RobotKind, Rx, Timestamp};
-use chassisd::config::RawConfig;
+use chassisd_config::RawConfig;
 use clap::Args;
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use serde::Serialize;
@@ -137,7 +137,7 @@ fn target(args: &DoctorArgs) -> anyhow::Result<Target> {
     let bus: BusSpec = bus_text.parse()?;
     let state_dir = service
         .and_then(|s| s.state_dir.clone())
-        .or_else(|| chassisd::config::default_state_dir(&name, |key| std::env::var_os(key)));
+        .or_else(|| chassisd_config::default_state_dir(&name, |key| std::env::var_os(key)));
     let bitrate = match robot.entry().bus {
         RobotBus::Can { bitrate } => Some(bitrate),
         RobotBus::Rs232 => None,

@@ -6,7 +6,8 @@ use std::hint::black_box;
 
 use chassis_interfaces::VelocityRequest;
 use chassis_protocols::Timestamp;
-use chassisd::mux::{Mux, MuxConfig};
+use chassisd::mux::Mux;
+use chassisd_config::mux::MuxConfig;
 use criterion::{Criterion, criterion_group, criterion_main};
 
 fn mux(c: &mut Criterion) {

@@ -13,7 +13,8 @@ use chassisd::engine::{
     BusItem, Device, Engine, EngineConfig, HeldLock, PassIo, Readers, Ticket, ToPublish, Wake,
     WriteError, Written,
 };
-use chassisd::mux::{Mux, MuxConfig};
+use chassisd::mux::Mux;
+use chassisd_config::mux::MuxConfig;
 use criterion::{Criterion, criterion_group, criterion_main};
 
 const T0: Timestamp = Timestamp::from_millis(1_000);

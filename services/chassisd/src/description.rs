@@ -11,8 +11,7 @@ use chassis_interfaces::{
 };
 use chassis_protocols::description::describe;
 use chassis_protocols::{Profile, Protocol};
-
-use crate::config::Config;
+use chassisd_config::Config;
 
 /// The description of the robot `config` drives, speaking `wire_protocol` (the driver's
 /// `SystemState::wire_protocol`: `DETECTING` while it listens).

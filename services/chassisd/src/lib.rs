@@ -5,7 +5,6 @@
 //! memory, and it drives the chassis from a priority mux over the velocity requests of the
 //! configured sources.
 
-pub mod config;
 pub mod description;
 pub mod engine;
 pub mod ipc;

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use chassis_bus::{BusSpec, BusSpecError};
 use chassis_protocols::{RobotKind, UnknownRobot};
-use chassisd::config::{Config, ConfigError, LoopMode, Overrides, RawConfig};
+use chassisd_config::{Config, ConfigError, LoopMode, Overrides, RawConfig};
 use clap::{Args, Parser, Subcommand};
 use tracing::error;
 

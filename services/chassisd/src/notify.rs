@@ -128,7 +128,8 @@ pub fn describe(status: &MuxStatus) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mux::{Mux, MuxConfig};
+    use crate::mux::Mux;
+    use chassisd_config::mux::MuxConfig;
 
     #[test]
     fn the_status_names_the_decision_and_the_held_locks() {

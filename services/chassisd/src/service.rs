@@ -19,6 +19,8 @@ use chassis_bus::clock;
 use chassis_bus::{Bus, BusSpec};
 use chassis_interfaces::{ControlRequest, ControlResponse};
 use chassis_protocols::Timestamp;
+use chassisd_config::mux::MuxConfigError;
+use chassisd_config::{Config, LoopMode};
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{
@@ -28,12 +30,11 @@ use iceoryx2_bb_posix::file_descriptor::{FileDescriptor, FileDescriptorBased};
 use iceoryx2_bb_posix::file_descriptor_set::SynchronousMultiplexing;
 use tracing::{info, info_span, warn};
 
-use crate::config::{Config, LoopMode};
 use crate::engine::{Engine, EngineConfig, ListenerChange, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};
 use crate::lockfile::{Clocks, LockFile};
 use crate::moderation::RxGate;
-use crate::mux::{Mux, MuxConfigError};
+use crate::mux::Mux;
 use crate::notify::Notifier;
 use crate::setup::{
     Devices, Hardware, PinError, driver_for_config, enter_realtime, is_fifo, pin_to_cpu, sim_cpus,

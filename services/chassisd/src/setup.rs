@@ -9,8 +9,8 @@ use std::time::Duration;
 
 use chassis_bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
 use chassis_protocols::{BoxedDriver, Profile, Timestamp};
+use chassisd_config::Config;
 
-use crate::config::Config;
 use crate::sim::SimHandle;
 
 /// The driver for `config`, as the registry makes it: a robot that may speak AgileX protocol V1
@@ -154,7 +154,7 @@ pub fn sim_cpus(config: &Config, fifo: bool) -> Vec<usize> {
     let Some(cpu) = config.cpu else {
         return Vec::new();
     };
-    if fifo && config.loop_mode != crate::config::LoopMode::Spin {
+    if fifo && config.loop_mode != chassisd_config::LoopMode::Spin {
         return vec![cpu];
     }
     (0..online_cpus()).filter(|&c| c != cpu).collect()
@@ -278,8 +278,8 @@ pub fn is_fifo() -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{LoopMode, Overrides, RawConfig};
     use chassis_protocols::RobotKind;
+    use chassisd_config::{LoopMode, Overrides, RawConfig};
 
     /// The kernel's default (950 ms of every second) stops a polling real-time loop for 50 ms a
     /// second; no throttling, or a share of the whole period, stops it never.

@@ -14,6 +14,7 @@ use chassis_bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
 use chassis_interfaces::{ControlResponse, ControlStatus};
 use chassis_ipc::{SIM, ServiceKind, service_name};
 use chassis_protocols::Profile;
+use chassisd_config::Config;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{
     WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError, WaitSetRunResult,
@@ -21,7 +22,6 @@ use iceoryx2::waitset::{
 use thiserror::Error;
 use tracing::{error, info, warn};
 
-use crate::config::Config;
 use crate::ipc::{IpcError, iceoryx_config, open_desk};
 use crate::sim::{SimHandle, carry_out};
 

@@ -85,13 +85,13 @@ use chassis_protocols::{
     ControlAction, ControlOutcome, Driver, DriverEvent, Rx, Timestamp, WireItem, nmea,
     request_to_action, time::Grid,
 };
+use chassisd_config::{Config, LoopMode};
 use tracing::{debug, error, info, warn};
 use zerocopy::IntoBytes;
 
 pub use budget::{ListenerChange, WakeBudget};
 pub use pass::{PassIo, Readers, WriteError, Written};
 
-use crate::config::{Config, LoopMode};
 use crate::mux::{Mux, Rejection, hold_bit};
 
 /// The robot's driver behind the common contract.

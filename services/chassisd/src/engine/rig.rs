@@ -29,12 +29,13 @@ use chassis_interfaces::{
 use chassis_protocols::{
     DriverConfig, Injection, Profile, RobotKind, Timestamp, WireItem, scout_mini, titan,
 };
+use chassisd_config::mux::MuxConfig;
 
 use super::{
     BusItem, Device, Engine, EngineConfig, HeldLock, ListenerChange, PassIo, Readers, Ticket,
     ToPublish, Wake, WriteError, Written,
 };
-use crate::mux::{Mux, MuxConfig};
+use crate::mux::Mux;
 use crate::sim::BoxedFirmware;
 
 /// Where every rig starts.

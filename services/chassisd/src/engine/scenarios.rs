@@ -13,10 +13,10 @@ use chassis_interfaces::{
     VelocityRequest, ZeroReason,
 };
 use chassis_protocols::{Injection, Protocol, RobotKind, Timestamp, WireItem, titan};
+use chassisd_config::mux::MuxConfig;
 
 use super::rig::{LATENCY, Rig, T0};
 use super::{Device, HeldLock, ListenerChange, Wake, WakeBudget};
-use crate::mux::MuxConfig;
 
 fn ms(v: u64) -> Duration {
     Duration::from_millis(v)

@@ -1,4 +1,6 @@
-//! The service's configuration: TOML → raw serde structs → one validated [`Config`].
+//! chassisd's configuration: TOML → raw serde structs ([`RawConfig`]) → one validated
+//! [`Config`]. One definition of the file, read by `chassisd`, `chassisd sim` and `chassis
+//! doctor` (which takes the robot, name, bus and state directory from it).
 //!
 //! Every key has a default, so an empty file (or none) is a working configuration; unknown keys
 //! are errors. Command-line options override the file. `chassisd --print-config` prints the
@@ -15,6 +17,8 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::mux::{MuxConfig, MuxConfigError};
+
+pub mod mux;
 
 /// How the event loop waits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
