@@ -183,7 +183,7 @@ SEEDS = {
         "steering-zero-ack": can(0x43A, "EE"),
         "bms-alarm": can(0x362, "84010200"),
     },
-    "scout_mini_decode": {
+    "agilex_v1_decode": {
         "forward-0.5": can(0x130, "01000A0000000044"),
         "rotate-10pct": can(0x130, "0100000A00000044"),
         "command-mode": can(0x130, "010000000000003A"),

@@ -5,6 +5,8 @@ The contract is what ``chassis interfaces --json`` prints: every IPC type with i
 size, alignment and field offsets, the flag and enum constants, the service names and their
 limits. This script turns it into ctypes classes with the Rust field names, constant classes, and
 the service table, so that the Python package never copies a layout, a name or a limit by hand.
+A field the contract marks ``"text": true`` (a NUL-padded UTF-8 byte array) keeps its bytes in
+the layout and reads and assigns as a ``str`` (``TextField``).
 
 Usage::
 
@@ -51,7 +53,10 @@ changed the contract.
 from __future__ import annotations
 
 import ctypes
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypeVar, overload
+
+_S = TypeVar("_S", bound="type[Struct]")
 
 
 class Struct(ctypes.Structure):
@@ -97,7 +102,73 @@ class Constants:
     def names(cls, value: int) -> list[str]:
         """The names of the flags set in ``value``."""
         return [n for v, n in sorted(cls.NAMES.items()) if v and value & v == v]
+
+
+class TextField:
+    """A text field of the contract: NUL-padded UTF-8 bytes in the sample, a ``str`` in Python.
+
+    Reading gives the bytes up to the first NUL as UTF-8, cut at the first invalid byte (as
+    ``read_fixed_str`` reads them in Rust). Assigning a ``str`` writes it NUL-padded; text longer
+    than the field is refused. ``offset`` and ``size`` are those of the byte array.
+    """
+
+    def __init__(self, field: Any) -> None:
+        self._field = field
+
+    @property
+    def offset(self) -> int:
+        """Bytes from the start of the struct."""
+        return int(self._field.offset)
+
+    @property
+    def size(self) -> int:
+        """Length of the byte array."""
+        return int(self._field.size)
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> TextField: ...
+
+    @overload
+    def __get__(self, obj: Struct, owner: type | None = None) -> str: ...
+
+    def __get__(self, obj: Struct | None, owner: type | None = None) -> TextField | str:
+        if obj is None:
+            return self
+        raw = bytes(self._field.__get__(obj, type(obj))).split(b"\\0", 1)[0]
+        try:
+            return raw.decode()
+        except UnicodeDecodeError as e:
+            return raw[: e.start].decode()
+
+    def __set__(self, obj: Struct, text: str) -> None:
+        if not isinstance(text, str):
+            raise TypeError(f"a text field takes a str, not {type(text).__name__}")
+        raw = text.encode()
+        if len(raw) > self.size:
+            raise ValueError(f"'{text}' is longer than {self.size} bytes")
+        self._field.__get__(obj, type(obj))[:] = raw.ljust(self.size, b"\\0")
+
+
+def _text_fields(*names: str) -> Callable[[_S], _S]:
+    """Makes the byte arrays ``names`` of the decorated class text fields (:class:`TextField`)."""
+
+    def wrap(cls: _S) -> _S:
+        for name in names:
+            setattr(cls, name, TextField(cls.__dict__[name]))
+        return cls
+
+    return wrap
 '''
+
+
+def text_fields(name: str, t: dict) -> list[str]:
+    """The fields of type ``name`` the contract marks as text, each checked to be a byte array."""
+    text = [f for f in t["fields"] if f.get("text")]
+    for field in text:
+        kind = field["type"]
+        if kind["kind"] != "array" or kind["element"] != {"kind": "primitive", "primitive": "u8"}:
+            raise ValueError(f"{name}.{field['name']} is marked text but is not a u8 array")
+    return [f["name"] for f in text]
 
 
 def ctype(t: dict, types: dict) -> str:
@@ -167,8 +238,11 @@ def render(contract: dict) -> str:
     out.append(f"SERVICES: dict[str, dict[str, Any]] = {table}")
     for name in ordered(types):
         t = types[name]
+        text = text_fields(name, t)
         out.append("")
         out.append("")
+        if text:
+            out.append(f"@_text_fields({', '.join(repr(n) for n in text)})")
         out.append(f"class {name}(Struct):")
         out.append(f'    """``{t["type_name"]}``: {t["size"]} bytes, aligned to {t["align"]}."""')
         out.append("")
@@ -177,6 +251,9 @@ def render(contract: dict) -> str:
         for field in t["fields"]:
             out.append(f"        ({field['name']!r}, {ctype(field['type'], types)}),")
         out.append("    ]")
+        if text:
+            out.append("    # Text: read and assigned as str (see TextField).")
+            out.extend(f"    {n}: str" for n in text)
         group = constants.get(name)
         if group:
             out.append("")

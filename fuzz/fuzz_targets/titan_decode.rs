@@ -2,7 +2,7 @@
 //! decodes re-encodes and decodes to the same frame.
 #![no_main]
 
-use chassis_protocols::profile::TitanProfile;
+use chassis_protocols::titan::TitanProfile;
 use chassis_protocols::titan;
 use libfuzzer_sys::fuzz_target;
 

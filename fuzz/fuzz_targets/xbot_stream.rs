@@ -2,7 +2,7 @@
 //! bounded memory, and every byte accounted for.
 #![no_main]
 
-use chassis_protocols::profile::XbotProfile;
+use chassis_protocols::xbot::XbotProfile;
 use chassis_protocols::xbot;
 use libfuzzer_sys::fuzz_target;
 

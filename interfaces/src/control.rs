@@ -90,7 +90,7 @@ ipc_type! {
         pub value: [f32; 2],
         /// A lock name for the lock requests (NUL-padded UTF-8).
         #[serde(serialize_with = "serialize_fixed_str")]
-        pub name: [u8; NAME_LEN],
+        pub name: [u8; NAME_LEN] as text,
     }
 }
 
@@ -156,7 +156,7 @@ ipc_type! {
         pub _reserved: [u8; 7],
         /// A human-readable result or refusal reason (NUL-padded UTF-8).
         #[serde(serialize_with = "serialize_fixed_str")]
-        pub message: [u8; ControlResponse::MESSAGE_LEN],
+        pub message: [u8; ControlResponse::MESSAGE_LEN] as text,
     }
 }
 

@@ -229,7 +229,7 @@ ipc_type! {
     pub struct SensorDescription {
         /// The sensor's name, also its frame id (`ultrasonic_front_left`).
         #[serde(serialize_with = "serialize_fixed_str")]
-        pub name: [u8; LABEL_LEN],
+        pub name: [u8; LABEL_LEN] as text,
         /// [`SensorKind`].
         pub kind: u8,
         /// Index of its reading in the state (e.g. `RangesState::ultrasonic_m[index]`).
@@ -262,7 +262,7 @@ ipc_type! {
     pub struct JointDescription {
         /// The joint's name (`front_steer_joint`, `front_left_wheel_joint`).
         #[serde(serialize_with = "serialize_fixed_str")]
-        pub name: [u8; LABEL_LEN],
+        pub name: [u8; LABEL_LEN] as text,
         /// [`JointSource`]: which reading of the state is its position.
         pub source: u8,
         /// Which wheel (`MotionState::wheel_mps` order) for a wheel joint.
@@ -285,7 +285,7 @@ ipc_type! {
     pub struct SourceDescription {
         /// Source name (`teleop`): the service `chassis/<name>/cmd/<source>`.
         #[serde(serialize_with = "serialize_fixed_str")]
-        pub name: [u8; NAME_LEN],
+        pub name: [u8; NAME_LEN] as text,
         /// Its request ends its motion this long after it was made, ms.
         pub timeout_ms: u32,
         pub priority: u8,
@@ -325,14 +325,14 @@ ipc_type! {
         pub joint_count: u8,
         pub source_count: u8,
         /// The robot's name (`--name`): its services are `chassis/<name>/…`.
-        pub name: [u8; NAME_LEN],
+        pub name: [u8; NAME_LEN] as text,
         /// The kind's `--robot` spelling (`hunter`).
-        pub kind_name: [u8; NAME_LEN],
+        pub kind_name: [u8; NAME_LEN] as text,
         /// The variant of the kind the profile describes (`scout-mini-omni`, `ranger-mini-v1`, or
         /// the kind's name).
-        pub model: [u8; LABEL_LEN],
+        pub model: [u8; LABEL_LEN] as text,
         /// What people call it (`AgileX HUNTER 2.0`).
-        pub display_name: [u8; LABEL_LEN],
+        pub display_name: [u8; LABEL_LEN] as text,
         /// The limits the driver itself applies: the robot's profile after overrides.
         pub robot_limits: MotionLimits,
         /// chassisd's configured speed and acceleration limits (`[mux]`), applied to every source.

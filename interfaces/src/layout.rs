@@ -69,6 +69,10 @@ pub struct Field {
     pub size: usize,
     #[serde(rename = "type")]
     pub ty: FieldType,
+    /// NUL-padded UTF-8 text in a byte array (declared `as text` in `ipc_type!`): mirrors in
+    /// other languages read it as a string. Left out of the contract when false.
+    #[serde(skip_serializing_if = "core::ops::Not::not")]
+    pub text: bool,
 }
 
 impl Field {
@@ -80,7 +84,13 @@ impl Field {
             offset,
             size: core::mem::size_of::<T>(),
             ty: T::field_type(),
+            text: false,
         }
+    }
+
+    /// This field, marked as text.
+    pub fn text(self) -> Self {
+        Self { text: true, ..self }
     }
 }
 
@@ -134,7 +144,8 @@ pub trait Layout: FieldKind {
 /// zerocopy's `FromBytes, IntoBytes, Immutable, KnownLayout` (no padding, any bytes valid) and
 /// iceoryx2's `ZeroCopySend`, whose `#[type_name("chassis::Name.vN")]` the declaration gives;
 /// other derives (`Default`, `Serialize`) come with it. Its [`Layout`] lists every field, in
-/// order, with `core::mem::offset_of!`.
+/// order, with `core::mem::offset_of!`. A byte array that holds NUL-padded UTF-8 text is declared
+/// `pub name: [u8; NAME_LEN] as text`, so that the contract says so.
 ///
 /// ```text
 /// ipc_type! {
@@ -152,7 +163,10 @@ macro_rules! ipc_type {
     (
         $(#[$meta:meta])*
         pub struct $ty:ident {
-            $($(#[$field_meta:meta])* $vis:vis $field:ident : $field_ty:ty),+ $(,)?
+            $(
+                $(#[$field_meta:meta])*
+                $vis:vis $field:ident : $field_ty:ty $(as $marker:ident)?
+            ),+ $(,)?
         }
     ) => {
         #[repr(C)]
@@ -198,6 +212,8 @@ macro_rules! ipc_type {
                             core::mem::offset_of!($ty, $field),
                             |s: &$ty| &s.$field,
                         )
+                        // `as text`: `Field::text`.
+                        $(.$marker())?
                     ),+],
                 }
             }
@@ -509,6 +525,36 @@ mod tests {
         assert_eq!(stamps.ty.rust(), "[u64; 24]");
         let motors = state.fields.iter().find(|f| f.name == "motors").unwrap();
         assert_eq!(motors.ty.rust(), "[MotorState; 4]");
+    }
+
+    #[test]
+    fn text_fields_are_byte_arrays_and_the_texts_are_marked() {
+        let byte_array = |f: &Field| {
+            matches!(&f.ty, FieldType::Array { element, .. }
+                if **element == FieldType::Primitive { primitive: "u8" })
+        };
+        let mut text = Vec::new();
+        for layout in types() {
+            for field in layout.fields.iter().filter(|f| f.text) {
+                assert!(byte_array(field), "{}.{}", layout.name, field.name);
+                text.push(format!("{}.{}", layout.name, field.name));
+            }
+        }
+        for marked in [
+            "RobotDescription.kind_name",
+            "LockStatus.name",
+            "SafetyStatus.last_text",
+        ] {
+            assert!(
+                text.iter().any(|t| t == marked),
+                "{marked} is not marked as text"
+            );
+        }
+        let frame = crate::BusFrame::layout();
+        assert!(
+            frame.fields.iter().all(|f| !f.text),
+            "a frame's data is bytes"
+        );
     }
 
     #[test]

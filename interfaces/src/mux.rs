@@ -154,7 +154,7 @@ ipc_type! {
     pub struct SourceStatus {
         /// Source name (NUL-padded UTF-8), e.g. `teleop`.
         #[serde(serialize_with = "serialize_fixed_str")]
-        pub name: [u8; NAME_LEN],
+        pub name: [u8; NAME_LEN] as text,
         pub timeout_ms: u32,
         /// Age of its latest request, ms; `u32::MAX` when it has never sent one.
         pub age_ms: u32,
@@ -189,7 +189,7 @@ ipc_type! {
     pub struct LockStatus {
         /// Lock name (NUL-padded UTF-8), e.g. `estop`.
         #[serde(serialize_with = "serialize_fixed_str")]
-        pub name: [u8; NAME_LEN],
+        pub name: [u8; NAME_LEN] as text,
         /// `CLOCK_MONOTONIC` time it was engaged, ns (0 when free).
         pub since_ns: u64,
         /// Sources below this priority are blocked while the lock is held.

@@ -145,7 +145,7 @@ ipc_type! {
         /// The last event in words (NUL-padded UTF-8), e.g.
         /// `ultrasonic: stop zone, 0.30 m < 0.35 m`.
         #[serde(serialize_with = "serialize_fixed_str")]
-        pub last_text: [u8; SafetyStatus::TEXT_LEN],
+        pub last_text: [u8; SafetyStatus::TEXT_LEN] as text,
     }
 }
 

@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use chassis_protocols::{Profile, RobotKind};
+use chassis_protocols::{Protocol, RobotKind};
 use chassis_tests::faults::*;
 use chassis_tests::*;
 
@@ -95,10 +95,14 @@ enum StormWire {
 
 impl StormWire {
     fn of(robot: RobotKind) -> Self {
-        match robot.entry().defaults() {
-            Profile::Titan(_) | Profile::V2(_) => StormWire::UnknownIds,
-            Profile::ScoutMini(_) => StormWire::CheckedCan,
-            Profile::Xbot(_) => StormWire::Serial,
+        // AgileX V1 checks a checksum in every frame; the other CAN protocols count an unknown
+        // id; a serial robot's stream parser counts garbage.
+        if !robot.is_can() {
+            StormWire::Serial
+        } else if robot.entry().defaults().protocol() == Some(Protocol::V1) {
+            StormWire::CheckedCan
+        } else {
+            StormWire::UnknownIds
         }
     }
 
@@ -287,7 +291,7 @@ fn storms(robot_kind: RobotKind, who: &str, test: &str, phases: &[Storm]) {
     for (storm, r) in &results {
         let what = match (carrier, storm.kind) {
             (StormWire::UnknownIds, _) => {
-                let v2 = matches!(robot_kind.entry().defaults(), Profile::V2(_));
+                let v2 = robot_kind.entry().defaults().protocol() == Some(Protocol::V2);
                 let protocol = if v2 { " (protocol V2)" } else { "" };
                 format!("garbage CAN frames (id 0x7F0) on the {who} bus{protocol}")
             }

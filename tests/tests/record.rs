@@ -215,7 +215,7 @@ fn replayed(robot: &mut Robot, env: &Env) -> ChassisState {
 /// be one).
 fn last_odometer(frames: impl IntoIterator<Item = String>) -> (f64, f64) {
     use chassis_protocols::titan::{Frame, decode};
-    let profile = chassis_protocols::profile::TitanProfile::default();
+    let profile = chassis_protocols::titan::TitanProfile::default();
     frames
         .into_iter()
         .filter_map(|line| {

@@ -19,7 +19,7 @@ use std::process::{Command, Output};
 /// The targets `scripts/fuzz` runs when it is given none: every target of `fuzz/Cargo.toml`.
 const TARGETS: [&str; 9] = [
     "titan_decode",
-    "scout_mini_decode",
+    "agilex_v1_decode",
     "agilex_v2_decode",
     "xbot_stream",
     "nmea_stream",
@@ -292,15 +292,15 @@ fn fuzzing_passes_when_every_target_runs_without_a_crash() {
 #[test]
 fn a_crashing_fuzz_target_fails_the_run_and_is_named() {
     let sandbox = Sandbox::new("crash");
-    let output = sandbox.fuzz(&["2"], "crash", "scout_mini_decode");
+    let output = sandbox.fuzz(&["2"], "crash", "agilex_v1_decode");
     let (stdout, stderr) = text(&output);
     assert_eq!(output.status.code(), Some(1), "{stdout}\n{stderr}");
     assert!(
-        stderr.contains("scout_mini_decode found a crash (exit 77"),
+        stderr.contains("agilex_v1_decode found a crash (exit 77"),
         "{stderr}"
     );
     assert!(
-        stderr.contains("FAILED: 1 of 9 targets: scout_mini_decode"),
+        stderr.contains("FAILED: 1 of 9 targets: agilex_v1_decode"),
         "{stderr}"
     );
     assert!(!stdout.contains("fuzzing done"), "{stdout}");

@@ -251,7 +251,7 @@ fn transport_of(mode: LoopMode) -> Transport {
 /// The period of `robot`'s heartbeat: the service's tick on that robot (the registry's, of its
 /// default profile).
 fn tick_of(robot: RobotKind) -> Duration {
-    chassis_protocols::registry::heartbeat_period(&robot.entry().defaults())
+    robot.entry().defaults().heartbeat_period()
 }
 
 fn bus_label(robot: RobotKind, bus: BusKind) -> String {

@@ -19,7 +19,7 @@ use chassis_client::{
     STATE_BUFFER, Source, Ticker, VelocityRequest, now_ns,
 };
 pub use chassis_ipc::PassStamps;
-use chassis_protocols::describe::{FrameJson, RobotCodec};
+use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
 use chassis_protocols::{CanFrame, RobotKind};
 use serde::Serialize;
 use zerocopy::IntoBytes as _;
@@ -413,10 +413,10 @@ pub fn start_configured(
 }
 
 /// The linear speed a transmitted motion frame commands, if the frame is one: the frame as the
-/// robot's codec of the registry describes it (`(entry.codec)(profile)`, what `chassis decode`
+/// robot's codec of the registry describes it (`Family::codec`, what `chassis decode`
 /// prints), a serial robot's frames found in its byte stream.
 struct MotionDecoder {
-    codec: RobotCodec,
+    codec: BoxedCodec,
     /// The speed of the last motion frame decoded.
     last: Option<f64>,
 }
@@ -425,7 +425,7 @@ impl MotionDecoder {
     fn new(robot: RobotKind) -> Self {
         let entry = robot.entry();
         Self {
-            codec: (entry.codec)(entry.defaults()),
+            codec: entry.defaults().codec(),
             last: None,
         }
     }

@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use chassis_client::{BodyVelocity, Robot, now_ns};
 use chassis_protocols::driver::{Driver, DriverConfig};
 use chassis_protocols::pair::Pair;
-use chassis_protocols::profile::TitanProfile;
+use chassis_protocols::titan::TitanProfile;
 use chassis_protocols::{CandumpLine, Direction, Timestamp, WireItem, titan};
 
 use crate::paths::{cpu_seconds_of_thread, sibling};

@@ -4,7 +4,7 @@ use std::io::{BufRead, Write};
 
 use chassis_protocols::{CandumpLine, Profile};
 
-use chassis_protocols::describe::RobotCodec;
+use chassis_protocols::frame_json::BoxedCodec;
 
 /// What a decode run saw.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
@@ -22,7 +22,7 @@ pub fn run(
     out: &mut impl Write,
     err: &mut impl Write,
 ) -> std::io::Result<Summary> {
-    let mut codec = RobotCodec::new(profile);
+    let mut codec = profile.codec();
     let mut summary = Summary::default();
     let mut hex = HexStream::default();
     let mut handle = |text: &str, out: &mut dyn Write, err: &mut dyn Write| {
@@ -56,7 +56,7 @@ pub fn run(
 }
 
 fn decode_can_line(
-    codec: &RobotCodec,
+    codec: &BoxedCodec,
     text: &str,
     out: &mut dyn Write,
     err: &mut dyn Write,
@@ -85,7 +85,7 @@ fn decode_can_line(
 }
 
 fn decode_serial_text(
-    codec: &mut RobotCodec,
+    codec: &mut BoxedCodec,
     hex: &mut HexStream,
     text: &str,
     out: &mut dyn Write,

@@ -7,7 +7,7 @@ use chassis_client::{
     BusKind, ChassisState, DescriptionFlags, Group, JointSource, Kinematics, MotionLimits,
     RobotDescription, SensorKind, SourceFlags, WireProtocol,
 };
-use chassis_protocols::{Profile, Protocol, RobotKind};
+use chassis_protocols::{Profile, RobotKind};
 use serde_json::{Value, json};
 
 /// A finite number with `places` decimals, or `—`.
@@ -290,15 +290,6 @@ fn limits_json(l: &MotionLimits) -> Value {
     })
 }
 
-fn protocol_of(wire: u8) -> Option<Protocol> {
-    match wire {
-        WireProtocol::V1 => Some(Protocol::V1),
-        WireProtocol::V2 => Some(Protocol::V2),
-        // Its own protocol, or still listening: the robot's default.
-        _ => None,
-    }
-}
-
 /// The profile the robot's frames are named with: the registry's defaults of the described
 /// robot in its protocol in use, of its model where the model is a profile parameter
 /// (`scout-mini-omni`, `ranger-mini-v1`). Without a description, the state's robot kind and
@@ -309,19 +300,18 @@ pub fn profile_of(d: Option<&RobotDescription>, state: Option<&ChassisState>) ->
         (_, Some(s)) => (s.robot, s.system.wire_protocol, ""),
         _ => return None,
     };
-    let kind = RobotKind::from_id(kind)?;
-    let protocol = protocol_of(wire).filter(|p| kind.protocols().contains(p));
-    let mut table = toml::Table::new();
-    table.insert("model".into(), toml::Value::String(model.into()));
-    match Profile::from_table(kind, protocol, &table) {
-        Ok(profile) if !model.is_empty() => Some(profile),
-        _ => kind.entry().default_profile(protocol).ok(),
-    }
+    Some(
+        RobotKind::from_id(kind)?
+            .entry()
+            .profile_for_model(wire, model),
+    )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chassis_protocols::Protocol;
+    use chassis_protocols::agilex_v2::V2Profile;
     use chassis_protocols::description::describe;
 
     #[test]
@@ -382,9 +372,12 @@ mod tests {
     #[test]
     fn the_profile_follows_the_described_protocol_and_model() {
         let table: toml::Table = toml::from_str("model = \"ranger-mini-v1\"").unwrap();
-        let v1 = Profile::from_table(RobotKind::RangerMini, None, &table).unwrap();
+        let v1 = RobotKind::RangerMini
+            .entry()
+            .profile_from_table(None, &table)
+            .unwrap();
         let d = describe(&v1);
-        let Some(Profile::V2(p)) = profile_of(Some(&d), None) else {
+        let Some(p) = profile_of(Some(&d), None).and_then(|p| p.get::<V2Profile>().cloned()) else {
             panic!("not a V2 profile")
         };
         assert_eq!(p.model, chassis_protocols::agilex_v2::V2Model::RangerMiniV1);
@@ -397,7 +390,7 @@ mod tests {
         d.protocol = WireProtocol::DETECTING;
         assert_eq!(
             profile_of(Some(&d), None).and_then(|p| p.protocol()),
-            scout.default_protocol
+            scout.defaults().protocol()
         );
         // Without a description: the state's kind and protocol.
         let mut state = ChassisState {

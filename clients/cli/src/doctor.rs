@@ -25,6 +25,7 @@ use chassis_client::{
 };
 use chassis_protocols::agilex_v2::detect::{Detection, Detector};
 use chassis_protocols::registry::Bus as RobotBus;
+use chassis_protocols::slcan::ADAPTER_BAUD;
 use chassis_protocols::{CanFrame, DriverConfig, Protocol, RobotKind, Rx, Timestamp};
 use chassisd_config::RawConfig;
 use clap::Args;
@@ -644,7 +645,7 @@ fn can_frames(
             }
         }
     } else {
-        target.robot.entry().default_protocol
+        target.robot.entry().defaults().protocol()
     };
     let names = |list: &[(RobotKind, Option<Protocol>)]| {
         list.iter()
@@ -690,7 +691,7 @@ fn can_frames(
     }
     let entry = target.robot.entry();
     let profile = entry.default_profile(protocol).ok()?;
-    let mut driver = (entry.driver)(&profile, &DriverConfig::default(), Timestamp::ZERO);
+    let mut driver = profile.driver(&DriverConfig::default(), Timestamp::ZERO);
     for f in frames {
         driver.handle_rx(Timestamp::ZERO, Rx::Can(f));
     }
@@ -705,16 +706,9 @@ fn robots_fitting(frames: &[CanFrame]) -> Vec<(RobotKind, Option<Protocol>)> {
         if !robot.is_can() {
             continue;
         }
-        let protocols: Vec<Option<Protocol>> = if entry.protocols.is_empty() {
-            vec![None]
-        } else {
-            entry.protocols.iter().copied().map(Some).collect()
-        };
-        for protocol in protocols {
-            let Ok(profile) = entry.default_profile(protocol) else {
-                continue;
-            };
-            let mut driver = (entry.driver)(&profile, &DriverConfig::default(), Timestamp::ZERO);
+        for profile in entry.profiles() {
+            let protocol = profile.protocol();
+            let mut driver = profile.driver(&DriverConfig::default(), Timestamp::ZERO);
             for f in frames {
                 driver.handle_rx(Timestamp::ZERO, Rx::Can(f));
             }
@@ -724,7 +718,7 @@ fn robots_fitting(frames: &[CanFrame]) -> Vec<(RobotKind, Option<Protocol>)> {
             if link.rx_frames > 0 && bad * 10 <= frames.len() as u64 {
                 fits.push((
                     robot,
-                    if entry.protocols.len() > 1 {
+                    if entry.detects_protocol() {
                         protocol
                     } else {
                         None
@@ -848,7 +842,7 @@ fn listen_slcan(
     baud: Option<u32>,
     emit: &mut dyn FnMut(Check),
 ) -> Option<ChassisState> {
-    let mut port = open_serial(path, baud.unwrap_or(115_200), emit)?;
+    let mut port = open_serial(path, baud.unwrap_or(ADAPTER_BAUD), emit)?;
     // Close the channel (in case it was left open), then ask for the version.
     let asked = port.write_all(b"C\r").and_then(|()| port.write_all(b"V\r"));
     let answer = asked
@@ -925,10 +919,17 @@ fn listen_serial(
 ) -> Option<ChassisState> {
     let entry = target.robot.entry();
     let profile = entry.defaults();
-    let baud = baud.unwrap_or(match &profile {
-        chassis_protocols::Profile::Xbot(p) => p.baud,
-        _ => 115_200,
-    });
+    let Some(baud) = baud.or(profile.serial_baud()) else {
+        emit(check(
+            "frames",
+            Verdict::Fail,
+            format!(
+                "{} has no serial link: use can:IFACE or slcan:PATH",
+                target.robot
+            ),
+        ));
+        return None;
+    };
     let mut port = open_serial(path, baud, emit)?;
     let bytes = match read_for(&mut port, target.listen) {
         Ok(bytes) => bytes,
@@ -952,7 +953,7 @@ fn listen_serial(
         );
         return None;
     }
-    let mut driver = (entry.driver)(&profile, &DriverConfig::default(), Timestamp::ZERO);
+    let mut driver = profile.driver(&DriverConfig::default(), Timestamp::ZERO);
     driver.handle_rx(Timestamp::ZERO, Rx::Bytes(&bytes));
     let state = *driver.state();
     let link = state.link;

@@ -12,7 +12,7 @@ use chassis_client::{
     termination_requested,
 };
 use chassis_protocols::command_to_request;
-use chassis_protocols::describe;
+use chassis_protocols::frame_json::driver_status_names;
 use chassis_protocols::titan::BmsAlarm;
 use clap::{Args, Subcommand, ValueEnum};
 
@@ -589,7 +589,7 @@ fn state_report(
             .enumerate()
             .filter(|(_, m)| m.driver_voltage_v != 0.0 || m.driver_status != 0)
             .map(|(i, m)| {
-                let mut names = describe::driver_status_names(m.driver_status);
+                let mut names = driver_status_names(m.driver_status);
                 let enabled = names.iter().any(|n| n == "enabled");
                 names.retain(|n| n != "enabled");
                 format!(

@@ -14,7 +14,6 @@ mod demo;
 mod described;
 mod detect;
 mod doctor;
-mod encode;
 mod fleet;
 mod interfaces;
 mod live;
@@ -192,10 +191,13 @@ impl ProfileArgs {
             }
             None => toml::Table::new(),
         };
-        Profile::from_table(robot, self.protocol, &table).with_context(|| match &self.profile {
-            Some(path) => format!("{} profile {}", robot, path.display()),
-            None => format!("{robot} profile"),
-        })
+        robot
+            .entry()
+            .profile_from_table(self.protocol, &table)
+            .with_context(|| match &self.profile {
+                Some(path) => format!("{} profile {}", robot, path.display()),
+                None => format!("{robot} profile"),
+            })
     }
 }
 
@@ -223,7 +225,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 EncodeWhat::Velocity(v) => v.to_command(),
                 EncodeWhat::Action(a) => a.to_command().map_err(anyhow::Error::msg)?,
             };
-            let (lines, clamp_flags) = encode::encode(&profile, &command)?;
+            let (lines, clamp_flags) = profile.command_lines(&command)?;
             for line in lines {
                 println!("{line}");
             }

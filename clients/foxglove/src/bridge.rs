@@ -31,7 +31,7 @@ use chassis_client::{
     Ticker, WallClock, termination_requested,
 };
 use chassis_foxglove_messages::{control_request, response_json};
-use chassis_protocols::describe::RobotCodec;
+use chassis_protocols::frame_json::BoxedCodec;
 use foxglove::PartialMetadata;
 use serde_json::{Value, json};
 
@@ -266,7 +266,7 @@ struct Loop<'a> {
     described: Option<(u64, u64)>,
     body: Option<Body>,
     /// The describer of `/frames`, for the robot and protocol of the description.
-    codec: Option<RobotCodec>,
+    codec: Option<BoxedCodec>,
     trail: Trail,
     watch: Watch,
     last_seq: Option<u64>,
@@ -296,7 +296,7 @@ impl Loop<'_> {
         }
         self.described = Some((d.seq, d.stamp_ns));
         self.body = Some(Body::of(d));
-        self.codec = RobotCodec::for_description(d);
+        self.codec = chassis_protocols::registry::profile_for_description(d).map(|p| p.codec());
         if self.codec.is_none() {
             tracing::warn!(
                 kind = d.kind,

@@ -10,7 +10,7 @@ use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, MuxStatus, Stop, ZeroReason,
 };
 use chassis_protocols::CanFrame;
-use chassis_protocols::describe::RobotCodec;
+use chassis_protocols::frame_json::BoxedCodec;
 use foxglove::messages::{
     Color, CubePrimitive, CylinderPrimitive, LinePrimitive, Point3, Quaternion, SceneEntity,
     SceneUpdate, Vector3, line_primitive,
@@ -72,7 +72,7 @@ pub fn frames_schema() -> Value {
 /// described robot's `codec` reads in it (`decoded`, or why not: `error`). A CAN frame is one
 /// entry; a serial read may complete several frames (one entry each) or none (one entry with
 /// its bytes). Without a codec (no description yet) a CAN frame says so.
-pub fn frame_entries(frame: &BusFrame, codec: Option<&mut RobotCodec>) -> Vec<Value> {
+pub fn frame_entries(frame: &BusFrame, codec: Option<&mut BoxedCodec>) -> Vec<Value> {
     let mut entry = Map::new();
     entry.insert("stamp_ns".into(), frame.stamp_ns.into());
     entry.insert("seq".into(), frame.seq.into());
@@ -326,7 +326,9 @@ mod tests {
     #[test]
     fn frames_are_decoded_by_the_described_robots_codec() {
         // TITAN's 0x211 (system status) through the codec of its description.
-        let mut codec = RobotCodec::for_description(&described(RobotKind::Titan));
+        let mut codec =
+            chassis_protocols::registry::profile_for_description(&described(RobotKind::Titan))
+                .map(|p| p.codec());
         let frame = tapped(FrameKind::CAN, 0x211, &[0; 8]);
         let entries = frame_entries(&frame, codec.as_mut());
         assert_eq!(entries.len(), 1);

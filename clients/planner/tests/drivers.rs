@@ -19,7 +19,6 @@ use chassis_protocols::driver::{Driver, DriverConfig};
 use chassis_protocols::firmware::Firmware;
 use chassis_protocols::pair::Pair;
 use chassis_protocols::time::Timestamp;
-use chassis_protocols::xbot::XbotSim;
 use chassis_protocols::{Profile, RobotKind};
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
@@ -104,13 +103,9 @@ fn follow<D: Driver, F: Firmware>(
 /// The robot's profile as chassisd's simulator runs it: the registry's defaults, and the XBot
 /// with its simulated board's wheel separation (its manual gives none, so the pose needs it).
 fn profile_of(kind: RobotKind) -> Profile {
-    match kind.entry().defaults() {
-        Profile::Xbot(p) => Profile::Xbot(chassis_protocols::profile::XbotProfile {
-            wheel_separation_m: Some(XbotSim::DEFAULT_WHEEL_SEPARATION_M),
-            ..p
-        }),
-        other => other,
-    }
+    let mut profile = kind.entry().defaults();
+    profile.fill_for_simulator();
+    profile
 }
 
 fn drive(kind: RobotKind, shape: Shape) -> Outcome {
@@ -119,7 +114,7 @@ fn drive(kind: RobotKind, shape: Shape) -> Outcome {
     let kin = Kinematics::from_description(&describe(&profile)).unwrap();
     let path = shapes::build(shape, shape.default_size_m(&kin), 1, &kin).unwrap();
     let driver = entry.driver(&profile, false, &DriverConfig::default(), T0);
-    let firmware = (entry.firmware)(&profile, T0);
+    let firmware = profile.firmware(T0);
     let mut pair = Pair::new(driver, firmware, T0);
     let outcome = follow(&mut pair, kind, kin, &path);
     eprintln!(

@@ -11,7 +11,8 @@ Five lines that drive a robot and print its odometry::
 
 Every IPC type is a ctypes class with the Rust field names (``state.motion.linear_mps``), and
 every flag and enum group a class of constants, generated from the contract
-(``interfaces/contract.json``) by ``clients/python/generate.py``.
+(``interfaces/contract.json``) by ``clients/python/generate.py``. A text field of the contract
+reads and assigns as a ``str`` (``robot.description.kind_name == "titan"``).
 """
 
 from ._contract import *  # noqa: F403
@@ -33,7 +34,6 @@ from .robot import (
     UnknownSource,
     VelocityRequest,
     control_request,
-    fixed_str,
     now_ns,
     reply_name,
     service_name,
@@ -59,7 +59,6 @@ __all__ = [
     "UnknownSource",
     "VelocityRequest",
     "control_request",
-    "fixed_str",
     "now_ns",
     "reply_name",
     "service_name",

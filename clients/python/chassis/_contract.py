@@ -10,7 +10,10 @@ changed the contract.
 from __future__ import annotations
 
 import ctypes
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypeVar, overload
+
+_S = TypeVar("_S", bound="type[Struct]")
 
 
 class Struct(ctypes.Structure):
@@ -56,6 +59,62 @@ class Constants:
     def names(cls, value: int) -> list[str]:
         """The names of the flags set in ``value``."""
         return [n for v, n in sorted(cls.NAMES.items()) if v and value & v == v]
+
+
+class TextField:
+    """A text field of the contract: NUL-padded UTF-8 bytes in the sample, a ``str`` in Python.
+
+    Reading gives the bytes up to the first NUL as UTF-8, cut at the first invalid byte (as
+    ``read_fixed_str`` reads them in Rust). Assigning a ``str`` writes it NUL-padded; text longer
+    than the field is refused. ``offset`` and ``size`` are those of the byte array.
+    """
+
+    def __init__(self, field: Any) -> None:
+        self._field = field
+
+    @property
+    def offset(self) -> int:
+        """Bytes from the start of the struct."""
+        return int(self._field.offset)
+
+    @property
+    def size(self) -> int:
+        """Length of the byte array."""
+        return int(self._field.size)
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> TextField: ...
+
+    @overload
+    def __get__(self, obj: Struct, owner: type | None = None) -> str: ...
+
+    def __get__(self, obj: Struct | None, owner: type | None = None) -> TextField | str:
+        if obj is None:
+            return self
+        raw = bytes(self._field.__get__(obj, type(obj))).split(b"\0", 1)[0]
+        try:
+            return raw.decode()
+        except UnicodeDecodeError as e:
+            return raw[: e.start].decode()
+
+    def __set__(self, obj: Struct, text: str) -> None:
+        if not isinstance(text, str):
+            raise TypeError(f"a text field takes a str, not {type(text).__name__}")
+        raw = text.encode()
+        if len(raw) > self.size:
+            raise ValueError(f"'{text}' is longer than {self.size} bytes")
+        self._field.__get__(obj, type(obj))[:] = raw.ljust(self.size, b"\0")
+
+
+def _text_fields(*names: str) -> Callable[[_S], _S]:
+    """Makes the byte arrays ``names`` of the decorated class text fields (:class:`TextField`)."""
+
+    def wrap(cls: _S) -> _S:
+        for name in names:
+            setattr(cls, name, TextField(cls.__dict__[name]))
+        return cls
+
+    return wrap
 
 CONTRACT_VERSION = 1
 PREFIX_ENV = 'CHASSIS_IPC_PREFIX'
@@ -506,6 +565,7 @@ class ChassisState(Struct):
     ]
 
 
+@_text_fields('name')
 class ControlRequest(Struct):
     """``chassis::ControlRequest.v1``: 48 bytes, aligned to 8."""
 
@@ -518,8 +578,11 @@ class ControlRequest(Struct):
         ('value', (ctypes.c_float * 2)),
         ('name', (ctypes.c_uint8 * 16)),
     ]
+    # Text: read and assigned as str (see TextField).
+    name: str
 
 
+@_text_fields('message')
 class ControlResponse(Struct):
     """``chassis::ControlResponse.v1``: 136 bytes, aligned to 8."""
 
@@ -531,6 +594,8 @@ class ControlResponse(Struct):
         ('_reserved', (ctypes.c_uint8 * 7)),
         ('message', (ctypes.c_uint8 * 112)),
     ]
+    # Text: read and assigned as str (see TextField).
+    message: str
 
 
 class Geometry(Struct):
@@ -549,6 +614,7 @@ class Geometry(Struct):
     ]
 
 
+@_text_fields('name')
 class JointDescription(Struct):
     """``chassis::JointDescription.v1``: 40 bytes, aligned to 1."""
 
@@ -559,8 +625,11 @@ class JointDescription(Struct):
         ('index', ctypes.c_uint8),
         ('_reserved', (ctypes.c_uint8 * 6)),
     ]
+    # Text: read and assigned as str (see TextField).
+    name: str
 
 
+@_text_fields('name')
 class LockStatus(Struct):
     """``chassis::LockStatus.v1``: 32 bytes, aligned to 8."""
 
@@ -573,6 +642,8 @@ class LockStatus(Struct):
         ('holder', ctypes.c_uint8),
         ('_reserved', (ctypes.c_uint8 * 5)),
     ]
+    # Text: read and assigned as str (see TextField).
+    name: str
 
     HOLDER_OPERATOR = 254
     HOLDER_NONE = 255
@@ -594,6 +665,7 @@ class MotionLimits(Struct):
     ]
 
 
+@_text_fields('name')
 class SourceStatus(Struct):
     """``chassis::SourceStatus.v1``: 40 bytes, aligned to 8."""
 
@@ -608,6 +680,8 @@ class SourceStatus(Struct):
         ('_reserved', (ctypes.c_uint8 * 2)),
         ('last_seq', ctypes.c_uint64),
     ]
+    # Text: read and assigned as str (see TextField).
+    name: str
 
 
 class MuxStatus(Struct):
@@ -650,6 +724,7 @@ class OdometryVariance(Struct):
     ]
 
 
+@_text_fields('name')
 class SensorDescription(Struct):
     """``chassis::SensorDescription.v1``: 96 bytes, aligned to 8."""
 
@@ -667,8 +742,11 @@ class SensorDescription(Struct):
         ('min_range_m', ctypes.c_double),
         ('max_range_m', ctypes.c_double),
     ]
+    # Text: read and assigned as str (see TextField).
+    name: str
 
 
+@_text_fields('name')
 class SourceDescription(Struct):
     """``chassis::SourceDescription.v1``: 24 bytes, aligned to 4."""
 
@@ -680,8 +758,11 @@ class SourceDescription(Struct):
         ('flags', ctypes.c_uint8),
         ('_reserved', (ctypes.c_uint8 * 2)),
     ]
+    # Text: read and assigned as str (see TextField).
+    name: str
 
 
+@_text_fields('name', 'kind_name', 'model', 'display_name')
 class RobotDescription(Struct):
     """``chassis::RobotDescription.v1``: 2200 bytes, aligned to 8."""
 
@@ -712,8 +793,14 @@ class RobotDescription(Struct):
         ('joints', (JointDescription * 12)),
         ('sources', (SourceDescription * 8)),
     ]
+    # Text: read and assigned as str (see TextField).
+    name: str
+    kind_name: str
+    model: str
+    display_name: str
 
 
+@_text_fields('last_text')
 class SafetyStatus(Struct):
     """``chassis::SafetyStatus.v1``: 288 bytes, aligned to 8."""
 
@@ -741,6 +828,8 @@ class SafetyStatus(Struct):
         ('last_event_ns', ctypes.c_uint64),
         ('last_text', (ctypes.c_uint8 * 64)),
     ]
+    # Text: read and assigned as str (see TextField).
+    last_text: str
 
     NO_RULE = 255
     NAMES = {255: 'no-rule'}

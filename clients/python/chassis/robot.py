@@ -111,20 +111,6 @@ def reply_name(service: str) -> str:
     return service + REPLY_SUFFIX
 
 
-def fixed_str(array: Any) -> str:
-    """A NUL-padded UTF-8 byte array of a payload as text."""
-    raw = bytes(array)
-    return raw.split(b"\0", 1)[0].decode("utf-8", "replace")
-
-
-def _set_fixed_str(array: Any, text: str) -> None:
-    raw = text.encode()
-    if len(raw) > len(array):
-        raise BadName(f"'{text}' is longer than {len(array)} bytes")
-    ctypes.memset(ctypes.addressof(array), 0, len(array))
-    ctypes.memmove(ctypes.addressof(array), raw, len(raw))
-
-
 def _copy(sample: Any, kind: type[T]) -> T:
     # One copy, straight out of the shared memory (not through an intermediate `bytes`).
     return kind.from_buffer_copy(kind.from_address(sample.payload_ptr))
@@ -200,26 +186,21 @@ class ControlAnswer(ControlResponse):
         """``ok``, ``refused``, ``unsupported``, ``invalid`` or ``timeout``."""
         return ControlStatus.name(self.status)
 
-    @property
-    def text(self) -> str:
-        """The service's message (the reason of a refusal)."""
-        return fixed_str(self.message)
-
     def __str__(self) -> str:
-        return f"{self.status_name}: {self.text}"
+        return f"{self.status_name}: {self.message}"
 
 
 def _source_names(mux: MuxStatus) -> list[str]:
     """The names of the configured sources, in the mux's order (``MuxStatus.source_names()``)."""
     count = min(mux.source_count, len(mux.sources))
-    return [fixed_str(mux.sources[i].name) for i in range(count)]
+    return [mux.sources[i].name for i in range(count)]
 
 
 def _active_source(mux: MuxStatus) -> str | None:
     """The name of the source the mux follows, or None (``MuxStatus.active_source_name()``)."""
     if mux.active_source == MuxStatus.NO_SOURCE or mux.active_source >= len(mux.sources):
         return None
-    return fixed_str(mux.sources[mux.active_source].name)
+    return mux.sources[mux.active_source].name
 
 
 def _why(mux: MuxStatus) -> str:
@@ -243,9 +224,7 @@ def _why(mux: MuxStatus) -> str:
     else:
         text = f"stopped: {ZeroReason.NAMES.get(mux.zero_reason, mux.zero_reason)}"
     held = [
-        fixed_str(mux.locks[i].name)
-        for i in range(min(mux.lock_count, len(mux.locks)))
-        if mux.locks[i].held
+        mux.locks[i].name for i in range(min(mux.lock_count, len(mux.locks))) if mux.locks[i].held
     ]
     return f"{text} · held: {', '.join(held)}" if held else text
 
@@ -263,19 +242,11 @@ def _described(array: Any, count: int) -> list[Any]:
 
 
 def _description_summary(d: RobotDescription) -> dict[str, Any]:
-    """The description with its texts as strings and only the used list entries."""
+    """The description as a dict with only the used list entries."""
     out = d.to_dict()
-    for key in ("name", "kind_name", "model", "display_name"):
-        out[key] = fixed_str(getattr(d, key))
-    out["sensors"] = [
-        {**s.to_dict(), "name": fixed_str(s.name)} for s in _described(d.sensors, d.sensor_count)
-    ]
-    out["joints"] = [
-        {**j.to_dict(), "name": fixed_str(j.name)} for j in _described(d.joints, d.joint_count)
-    ]
-    out["sources"] = [
-        {**s.to_dict(), "name": fixed_str(s.name)} for s in _described(d.sources, d.source_count)
-    ]
+    out["sensors"] = [s.to_dict() for s in _described(d.sensors, d.sensor_count)]
+    out["joints"] = [j.to_dict() for j in _described(d.joints, d.joint_count)]
+    out["sources"] = [s.to_dict() for s in _described(d.sources, d.source_count)]
     for key in ("sensor_count", "joint_count", "source_count"):
         del out[key]
     return out
@@ -525,10 +496,10 @@ def control_request(action: str, /, **args: Any) -> ControlRequest:
 
     if action in ("estop", "lock-engage"):
         request.kind = ControlKind.LOCK_ENGAGE
-        _set_fixed_str(request.name, "estop" if action == "estop" else take("lock"))
+        _set_lock(request, "estop" if action == "estop" else take("lock"))
     elif action in ("estop-release", "lock-release"):
         request.kind = ControlKind.LOCK_RELEASE
-        _set_fixed_str(request.name, "estop" if action == "estop-release" else take("lock"))
+        _set_lock(request, "estop" if action == "estop-release" else take("lock"))
     elif action == "mode":
         request.kind = ControlKind.MODE
         mode = take("mode")
@@ -577,6 +548,13 @@ def control_request(action: str, /, **args: Any) -> ControlRequest:
     if args:
         raise TypeError(f"control '{action}' takes no {', '.join(sorted(args))}")
     return request
+
+
+def _set_lock(request: ControlRequest, lock: str) -> None:
+    try:
+        request.name = lock
+    except ValueError as e:
+        raise BadName(str(e)) from None
 
 
 def _valid_name(name: str) -> str:

@@ -23,7 +23,7 @@ def lock_mask(mux: chassis.MuxStatus | None, lock: str) -> int:
     if mux is None:
         return 0
     for i in range(min(mux.lock_count, len(mux.locks))):
-        if chassis.fixed_str(mux.locks[i].name) == lock:
+        if mux.locks[i].name == lock:
             return 1 << i
     return 0
 

@@ -10,6 +10,7 @@ import os
 from pathlib import Path
 from types import ModuleType
 
+import pytest
 from conftest import PYTHON_DIR, REPO
 
 import chassis
@@ -89,3 +90,38 @@ def test_names_and_limits_come_from_the_contract() -> None:
     assert chassis.STATE_BUFFER == services["state"]["limits"]["subscriber_max_buffer_size"]
     assert chassis.FRAMES_BUFFER == services["frames"]["limits"]["subscriber_max_buffer_size"]
     assert _contract.PREFIX_ENV == CONTRACT["prefix_env"]
+
+
+def test_every_text_field_reads_and_assigns_as_str_over_unchanged_bytes() -> None:
+    marked = [
+        (name, field)
+        for name, described in CONTRACT["types"].items()
+        for field in described["fields"]
+        if field.get("text")
+    ]
+    assert ("RobotDescription", "kind_name") in [(name, f["name"]) for name, f in marked]
+    for name, field in marked:
+        what = f"{name}.{field['name']}"
+        sample = chassis.TYPES[name]()
+        assert getattr(sample, field["name"]) == "", what
+        text = "é" + "x" * (field["size"] - 2)  # 'é' is two bytes: the field exactly full
+        setattr(sample, field["name"], text)
+        value = getattr(sample, field["name"])
+        assert type(value) is str and value == text, what
+        assert sample.to_dict()[field["name"]] == text, what
+        start, end = field["offset"], field["offset"] + field["size"]
+        assert bytes(sample)[start:end] == text.encode(), what
+        # Bytes as a foreign writer may leave them: text ends at the first NUL, and invalid
+        # UTF-8 is cut where it starts (as the Rust reader reads it).
+        raw = bytearray(bytes(sample))
+        raw[start:end] = b"ok\0ignored".ljust(field["size"], b"\0")
+        assert getattr(type(sample).from_buffer_copy(raw), field["name"]) == "ok", what
+        raw[start:end] = b"ok\xff!".ljust(field["size"], b"\0")
+        assert getattr(type(sample).from_buffer_copy(raw), field["name"]) == "ok", what
+        with pytest.raises(ValueError, match="longer than"):
+            setattr(sample, field["name"], "x" * (field["size"] + 1))
+        with pytest.raises(TypeError):
+            setattr(sample, field["name"], b"ok")
+    # A byte array that is not text stays bytes.
+    assert isinstance(chassis.BusFrame().data, ctypes.Array)
+    assert isinstance(chassis.ControlRequest().arg, ctypes.Array)

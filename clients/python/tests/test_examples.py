@@ -91,7 +91,7 @@ def test_the_python_safety_monitor_holds_the_required_source(world: World) -> No
         mux = robot.wait_mux(0.05)
         if mux is None:
             return False
-        locks = {chassis.fixed_str(lock.name): lock for lock in mux.locks[: mux.lock_count]}
+        locks = {lock.name: lock for lock in mux.locks[: mux.lock_count]}
         return bool(locks["estop"].held)
 
     wait_until("the monitor latches the e-stop", latched, 10.0, world)

@@ -42,7 +42,7 @@ def test_drives_and_reads_back_every_robot(world: World, kind: str) -> None:
     start = robot.latest_state()
     assert start is not None
     described = robot.description
-    assert chassis.fixed_str(described.kind_name) == kind
+    assert described.kind_name == kind
     assert described.kind == start.robot
     teleop = robot.source("teleop")
     moving = drive(
@@ -346,7 +346,7 @@ def test_control_actions_are_answered_with_success_or_a_reason(world: World) -> 
         world,
     )
     refused = robot.control("off-road", state="on")
-    assert refused.status == chassis.ControlStatus.REFUSED and "moving" in refused.text, str(
+    assert refused.status == chassis.ControlStatus.REFUSED and "moving" in refused.message, str(
         refused
     )
     refused = robot.control("brake", action="engage")
@@ -371,7 +371,7 @@ def test_control_actions_are_answered_with_success_or_a_reason(world: World) -> 
     # until it has asked for zero.
     teleop.send(chassis.VelocityRequest.twist(0.3, 0.0))
     released = robot.control("estop-release")
-    assert released.ok and "nothing moves until teleop asks for zero" in released.text, str(
+    assert released.ok and "nothing moves until teleop asks for zero" in released.message, str(
         released
     )
     end = time.monotonic() + 1.0
@@ -381,7 +381,7 @@ def test_control_actions_are_answered_with_success_or_a_reason(world: World) -> 
         assert state is None or abs(state.motion.linear_mps) < 0.01, "moved after the release"
     mux = robot.wait_mux(1.0)
     assert mux is not None and mux.zero_reason == chassis.ZeroReason.AWAITING_ZERO
-    assert chassis.fixed_str(mux.sources[mux.awaiting_source].name) == "teleop"
+    assert mux.sources[mux.awaiting_source].name == "teleop"
     assert mux.stop == chassis.Stop.LOCK_RELEASED
     assert mux.why() == "stopped: waiting for a zero from teleop since lock-released", mux.why()
     teleop.send(chassis.VelocityRequest.twist(0.0, 0.0))

@@ -5,7 +5,7 @@
 //! `~/estop_release`, `~/clear_faults` (`std_srvs/Trigger`). Out: `odom`, `tf`,
 //! `joint_states`, `battery_state`, `imu/data`, `range/<sensor>`, `fix`, `diagnostics`, and the
 //! robot's model: `robot_description` (its URDF) and `tf_static`, transient local.
-//! See the README's "ROS 2" section.
+//! See docs/BRIDGES.md, "ROS 2".
 //!
 //! `chassis-ros2 --name ROBOT --record run.mcap [--duration S]` joins no DDS domain: it writes
 //! the same state topics into a ROS 2 bag (MCAP, CDR) that `ros2 bag play` and Foxglove read

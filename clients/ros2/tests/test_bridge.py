@@ -92,7 +92,7 @@ def active(robot: chassis.Robot) -> str | None:
 def estop_held(robot: chassis.Robot) -> bool:
     mux = latest_mux(robot)
     return mux is not None and any(
-        chassis.fixed_str(lock.name) == "estop" and lock.holder != chassis.LockStatus.HOLDER_NONE
+        lock.name == "estop" and lock.holder != chassis.LockStatus.HOLDER_NONE
         for lock in mux.locks[: mux.lock_count]
     )
 
@@ -355,7 +355,7 @@ def test_a_release_through_the_service_never_starts_motion(ros: Ros) -> None:
         mux = latest_mux(robot)
         assert mux is not None and mux.zero_reason == chassis.ZeroReason.AWAITING_ZERO
         awaited = mux.sources[mux.awaiting_source]
-        assert chassis.fixed_str(awaited.name) == "ros2"
+        assert awaited.name == "ros2"
     # A zero on cmd_vel, then motion is obeyed again.
     drive_until(
         cmd,
@@ -423,7 +423,7 @@ def test_non_finite_velocities_are_dropped(ros: Ros) -> None:
     assert active(robot) is None
     mux = latest_mux(robot)
     assert mux is not None
-    source = next(s for s in mux.sources[: mux.source_count] if chassis.fixed_str(s.name) == "ros2")
+    source = next(s for s in mux.sources[: mux.source_count] if s.name == "ros2")
     assert source.last_seq == 0, "a non-finite request reached the mux"
     # The bridge keeps working.
     drive_until(cmd, twist(0.2), lambda: active(robot) == "ros2", 5.0, ros)

@@ -21,7 +21,7 @@ const T0: Timestamp = Timestamp::from_millis(1_000);
 
 /// Two seconds of a TITAN's feedback, as its simulated firmware sends it.
 fn feedback(profile: &Profile) -> Vec<WireItem> {
-    let mut firmware = (RobotKind::Titan.entry().firmware)(profile, T0);
+    let mut firmware = profile.firmware(T0);
     let mut frames = Vec::new();
     let mut t = T0;
     while t < T0 + Duration::from_secs(2) {
@@ -141,7 +141,7 @@ fn engine(profile: &Profile) -> Engine {
     };
     Engine::new(
         config,
-        (profile.robot().entry().driver)(profile, &DriverConfig::default(), T0),
+        profile.driver(&DriverConfig::default(), T0),
         Mux::new(&MuxConfig::default()).unwrap(),
         T0,
     )

@@ -8,7 +8,8 @@
 use std::time::Duration;
 
 use chassis_bus::{Bus, BusError, BusSpec, datagram, serial, slcan, socketcan};
-use chassis_protocols::{BoxedDriver, Profile, Timestamp};
+use chassis_protocols::slcan::ADAPTER_BAUD;
+use chassis_protocols::{BoxedDriver, Profile, Timestamp, nmea};
 use chassisd_config::Config;
 
 use crate::sim::SimHandle;
@@ -59,14 +60,10 @@ impl Devices for Hardware {
                 reason: "the GPS receiver is a serial port (serial:PATH[@BAUD])".into(),
             });
         };
-        let gps_baud = match &self.config.profile {
-            Profile::Xbot(p) => p.gps_baud,
-            _ => 4800,
-        };
-        Ok(Bus::Bytes(Box::new(serial::SerialBus::open(
-            path,
-            baud.unwrap_or(gps_baud),
-        )?)))
+        let baud = baud
+            .or(self.config.profile.gps_baud())
+            .unwrap_or(nmea::NMEA_0183_BAUD);
+        Ok(Bus::Bytes(Box::new(serial::SerialBus::open(path, baud)?)))
     }
 }
 
@@ -78,15 +75,9 @@ pub fn open_bus(
     now: Timestamp,
 ) -> Result<(Bus, Option<SimHandle>), BusError> {
     let robot = config.robot;
-    let serial_baud = |baud: Option<u32>| {
-        baud.unwrap_or(match &config.profile {
-            Profile::Xbot(p) => p.baud,
-            _ => 115_200,
-        })
-    };
     Ok(match spec {
         BusSpec::Sim => {
-            let firmware = (config.robot.entry().firmware)(&config.profile, now);
+            let firmware = config.profile.firmware(now);
             let io = |e: std::io::Error| BusError::Open {
                 name: "sim".into(),
                 reason: e.to_string(),
@@ -110,7 +101,7 @@ pub fn open_bus(
                     reason: format!("{robot} is a CAN robot: use can:IFACE or slcan:PATH"),
                 });
             }
-            let port = serial::SerialBus::open(path, serial_baud(*baud))?;
+            let port = serial::SerialBus::open(path, serial_baud(spec, *baud, &config.profile)?)?;
             (Bus::Bytes(Box::new(port)), None)
         }
         BusSpec::Slcan { path, baud } => {
@@ -120,7 +111,7 @@ pub fn open_bus(
                     reason: format!("{robot} speaks RS232: use serial:PATH"),
                 });
             }
-            let port = serial::SerialBus::open(path, serial_baud(*baud))?;
+            let port = serial::SerialBus::open(path, baud.unwrap_or(ADAPTER_BAUD))?;
             let bus = slcan::SlcanBus::open(port, config.bus_settings.can_bitrate)?;
             (Bus::Can(Box::new(bus)), None)
         }
@@ -132,6 +123,18 @@ pub fn open_bus(
             });
         }
     })
+}
+
+/// The baud rate of a robot's serial control link: the spec's, else its profile's.
+pub fn serial_baud(spec: &BusSpec, baud: Option<u32>, profile: &Profile) -> Result<u32, BusError> {
+    baud.or(profile.serial_baud())
+        .ok_or_else(|| BusError::Open {
+            name: spec.to_string(),
+            reason: format!(
+                "{} has no serial link: use can:IFACE or slcan:PATH",
+                profile.robot()
+            ),
+        })
 }
 
 /// Why the loop's thread could not be pinned.

@@ -446,7 +446,7 @@ mod tests {
     #[test]
     fn a_simulator_that_loses_its_bus_hands_back_its_firmware_to_run_again() {
         let profile = chassis_protocols::RobotKind::Titan.entry().defaults();
-        let firmware = (RobotKind::Titan.entry().firmware)(&profile, clock::now());
+        let firmware = profile.firmware(clock::now());
         let (service_end, chassis_end) = PairCan::pair("sim").unwrap();
         let sim = SimHandle::spawn(firmware, Bus::Can(Box::new(chassis_end))).unwrap();
         let mut service_end = Bus::Can(Box::new(service_end));

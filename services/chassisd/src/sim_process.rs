@@ -13,7 +13,7 @@ use chassis_bus::clock;
 use chassis_bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
 use chassis_interfaces::{ControlResponse, ControlStatus};
 use chassis_ipc::{SIM, ServiceKind, service_name};
-use chassis_protocols::Profile;
+use chassis_protocols::slcan::ADAPTER_BAUD;
 use chassisd_config::Config;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{
@@ -23,6 +23,7 @@ use thiserror::Error;
 use tracing::{error, info, warn};
 
 use crate::ipc::{IpcError, iceoryx_config, open_desk};
+use crate::setup::serial_baud;
 use crate::sim::{SimHandle, carry_out};
 
 /// Why the simulated chassis stopped (or never started).
@@ -54,12 +55,6 @@ pub enum SimProcessError {
 /// Opens the chassis side of `spec`.
 pub fn open_chassis_side(spec: &BusSpec, config: &Config) -> Result<Bus, BusError> {
     let robot = config.robot;
-    let baud = |b: Option<u32>| {
-        b.unwrap_or(match &config.profile {
-            Profile::Xbot(p) => p.baud,
-            _ => 115_200,
-        })
-    };
     let wrong = |reason: String| BusError::Open {
         name: spec.to_string(),
         reason,
@@ -73,14 +68,14 @@ pub fn open_chassis_side(spec: &BusSpec, config: &Config) -> Result<Bus, BusErro
             slcan::SlcanAdapter::new(serial::PtyLink::create(Path::new(link))?.into_bus()),
         )),
         BusSpec::Slcan { path, baud: b } if robot.is_can() => Bus::Can(Box::new(
-            slcan::SlcanAdapter::new(serial::SerialBus::open(path, baud(*b))?),
+            slcan::SlcanAdapter::new(serial::SerialBus::open(path, b.unwrap_or(ADAPTER_BAUD))?),
         )),
         BusSpec::Pty { link } if !robot.is_can() => Bus::Bytes(Box::new(
             serial::PtyLink::create(Path::new(link))?.into_bus(),
         )),
-        BusSpec::Serial { path, baud: b } if !robot.is_can() => {
-            Bus::Bytes(Box::new(serial::SerialBus::open(path, baud(*b))?))
-        }
+        BusSpec::Serial { path, baud: b } if !robot.is_can() => Bus::Bytes(Box::new(
+            serial::SerialBus::open(path, serial_baud(spec, *b, &config.profile)?)?,
+        )),
         _ if robot.is_can() => {
             return Err(wrong(format!(
                 "{robot} is a CAN robot: use can:IFACE, slcan:PATH or slcan-pty:LINK"
@@ -117,7 +112,7 @@ pub fn run(config: &Config) -> Result<(), SimProcessError> {
         bus = bus.name(),
         "simulated chassis up (faults: {sim_name})"
     );
-    let firmware = (config.robot.entry().firmware)(&config.profile, clock::now());
+    let firmware = config.profile.firmware(clock::now());
     let mut chassis = Chassis::Running(SimHandle::spawn(firmware, bus)?);
 
     let node = chassis_ipc::node(

@@ -294,12 +294,10 @@ impl RawConfig {
         let protocol = overrides.protocol.or(self.service.protocol);
         let mut profile = parse_profile(robot, protocol, self.profile)?;
         profile.validate()?;
-        // The simulated XBot's wheel separation is known; a real one's must be measured.
-        if let (Profile::Xbot(p), BusSpec::Sim) = (&mut profile, &bus)
-            && p.wheel_separation_m.is_none()
-        {
-            p.wheel_separation_m =
-                Some(chassis_protocols::xbot::XbotSim::DEFAULT_WHEEL_SEPARATION_M);
+        // What the simulated chassis knows and a real one's profile must be told (the XBot's
+        // wheel separation).
+        if bus == BusSpec::Sim {
+            profile.fill_for_simulator();
         }
         if self.service.tick_ms == 0 || self.service.tick_ms > 100 {
             return Err(ConfigError::Bad {
@@ -422,25 +420,23 @@ fn parse_profile(
     protocol: Option<Protocol>,
     table: toml::Table,
 ) -> Result<Profile, ConfigError> {
-    Profile::from_table(robot, protocol, &table).map_err(|e| match e {
-        ProfileTableError::Toml(source) => ConfigError::Profile { robot, source },
-        ProfileTableError::Protocol(e) => ConfigError::Protocol(e),
-        other => ConfigError::Bad {
-            key: "profile.model",
-            reason: other.to_string(),
-        },
-    })
+    robot
+        .entry()
+        .profile_from_table(protocol, &table)
+        .map_err(|e| match e {
+            ProfileTableError::Toml(source) => ConfigError::Profile { robot, source },
+            ProfileTableError::Protocol(e) => ConfigError::Protocol(e),
+            other => ConfigError::Bad {
+                key: "profile.model",
+                reason: other.to_string(),
+            },
+        })
 }
 
 impl Config {
     /// The configuration with everything filled in, in the file's format.
     pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
-        let profile = match &self.profile {
-            Profile::Titan(p) => toml::Table::try_from(p)?,
-            Profile::ScoutMini(p) => toml::Table::try_from(p)?,
-            Profile::Xbot(p) => toml::Table::try_from(p)?,
-            Profile::V2(p) => toml::Table::try_from(p)?,
-        };
+        let profile = self.profile.table()?;
         let raw = RawConfig {
             service: ServiceConfig {
                 robot: Some(self.robot),
@@ -468,6 +464,9 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chassis_protocols::agilex_v1::V1Profile;
+    use chassis_protocols::agilex_v2::V2Profile;
+    use chassis_protocols::xbot::XbotProfile;
 
     fn titan() -> Overrides {
         Overrides {
@@ -660,7 +659,7 @@ mod tests {
                 .unwrap()
                 .profile
         };
-        let Profile::Xbot(sim) = xbot(None) else {
+        let Some(sim) = xbot(None).get::<XbotProfile>().cloned() else {
             panic!()
         };
         assert!(sim.wheel_separation_m.is_some());
@@ -668,7 +667,7 @@ mod tests {
             path: "/dev/ttyUSB0".into(),
             baud: None,
         });
-        let Profile::Xbot(real) = xbot(real) else {
+        let Some(real) = xbot(real).get::<XbotProfile>().cloned() else {
             panic!()
         };
         assert_eq!(
@@ -686,7 +685,7 @@ mod tests {
         .unwrap();
         let c = raw.validate(Overrides::default()).unwrap();
         assert_eq!(c.protocol, Some(Protocol::V2));
-        let Profile::V2(p) = &c.profile else {
+        let Some(p) = c.profile.get::<V2Profile>() else {
             panic!("not V2: {:?}", c.profile)
         };
         assert_eq!(p.max_lateral_mps, 2.0);
@@ -726,7 +725,7 @@ mod tests {
                 ..Overrides::default()
             })
             .unwrap();
-        let Profile::ScoutMini(p) = c.profile else {
+        let Some(p) = c.profile.get::<V1Profile>() else {
             panic!()
         };
         assert_eq!(p.angular_full_scale_rad_s, 0.7853);

@@ -5,9 +5,11 @@
 use std::hint::black_box;
 
 use chassis_interfaces::GpsFix;
+use chassis_protocols::agilex_v1::V1Profile;
 use chassis_protocols::driver::{Driver, DriverConfig, Rx};
-use chassis_protocols::profile::{ScoutMiniProfile, TitanProfile, XbotProfile};
-use chassis_protocols::{CanFrame, Timestamp, nmea, scout_mini, titan, xbot};
+use chassis_protocols::titan::TitanProfile;
+use chassis_protocols::xbot::XbotProfile;
+use chassis_protocols::{CanFrame, Timestamp, agilex_v1, nmea, titan, xbot};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
 const XBOT_SENSOR: &str = "AA5547100162260302000100000005 0A0006000000000000060003000000000000050000000000000000E80301000000000000000000000000000000000000000000000000000000000002DC2F";
@@ -35,10 +37,10 @@ fn codecs(c: &mut Criterion) {
     g.bench_function("titan 0x221 motion feedback", |b| {
         b.iter(|| titan::decode(black_box(&motion), &titan_profile))
     });
-    let scout_profile = ScoutMiniProfile::default();
+    let scout_profile = V1Profile::default();
     let scout = CanFrame::from_candump("130#01000A0000000044").unwrap();
     g.bench_function("scout-mini 0x130 with checksum", |b| {
-        b.iter(|| scout_mini::decode(black_box(&scout), &scout_profile))
+        b.iter(|| agilex_v1::decode(black_box(&scout), &scout_profile))
     });
     let xbot_profile = XbotProfile::default();
     let sensor = hex(XBOT_SENSOR);
@@ -85,8 +87,7 @@ fn codecs(c: &mut Criterion) {
     g.bench_function("titan 0x111", |b| {
         b.iter(|| black_box(&command).encode(&titan_profile))
     });
-    let scout_command =
-        scout_mini::Frame::MotionCommand(scout_mini::MotionCommand::drive(0.5, 0.1));
+    let scout_command = agilex_v1::Frame::MotionCommand(agilex_v1::MotionCommand::drive(0.5, 0.1));
     g.bench_function("scout-mini 0x130", |b| {
         b.iter(|| black_box(&scout_command).encode(7, &scout_profile))
     });

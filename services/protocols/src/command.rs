@@ -274,6 +274,36 @@ pub fn request_to_action(
     }))
 }
 
+impl<F> Planned<F> {
+    /// The planned frames one text line each, by `line(frame, count)` (`count` from 0: the
+    /// AgileX V1 counter; a plan is a few frames), and what was clamped. Stops at the first
+    /// frame that does not encode.
+    pub(crate) fn lines<E>(
+        &self,
+        line: impl Fn(&F, u8) -> Result<String, E>,
+    ) -> Result<(Vec<String>, u32), CommandError>
+    where
+        CommandError: From<E>,
+    {
+        let lines = self
+            .frames
+            .iter()
+            .zip(0u8..)
+            .map(|(f, count)| line(f, count))
+            .collect::<Result<_, _>>()?;
+        Ok((lines, self.clamp_flags))
+    }
+}
+
+/// Serial bytes as spaced hex (`AA 55 02 01 01 02`).
+pub fn spaced_hex(bytes: &[u8]) -> String {
+    bytes
+        .iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

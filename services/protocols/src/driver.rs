@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::DecodeError;
 use crate::can::CanFrame;
 use crate::command::{Command, Turn};
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 
 /// What arrived from the bus.

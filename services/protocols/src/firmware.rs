@@ -20,7 +20,7 @@ use chassis_interfaces::ControlMode;
 use serde::Serialize;
 
 use crate::driver::{Rx, WireItem, wrap_angle};
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp};
 
 pub(crate) use chassis::{Applied, Chassis, GARBAGE_ID, Injectable};

@@ -4,11 +4,12 @@
 //! parameter. No socket, serial port, IPC or clock is touched, so the same code runs on a real
 //! bus, against the simulated firmware and in unit tests (the `Cargo.toml` carries no I/O crate).
 //!
-//! * [`titan`], [`scout_mini`], [`xbot`]: one module per robot, each with its wire layouts (zerocopy
-//!   structs with big- or little-endian fields), a typed frame enum, and `decode`/`encode` for
-//!   every frame of the manual in both directions.
+//! * [`titan`], [`agilex_v1`], [`agilex_v2`], [`xbot`]: one folder per protocol family, each with
+//!   its wire layouts (zerocopy structs with big- or little-endian fields), a typed frame enum,
+//!   `decode`/`encode` for every frame of the manual in both directions, its driver, its
+//!   simulated firmware and its profile, behind the one trait [`family::Family`].
+//! * [`registry`]: the robots, as data: each one's bus, body, sensors and profiles.
 //! * [`nmea`]: the NMEA 0183 sentences of the XBot's GPS receiver.
-//! * [`profile`]: every physical constant and every doubtful (⚠) choice of the manuals.
 //! * [`can`]: the CAN frame type and the can-utils text forms; [`slcan`]: a serial CAN
 //!   adapter's text.
 //!
@@ -16,19 +17,21 @@
 //! codec is the only place that knows its vendor's units and signs.
 
 mod agilex;
+pub mod agilex_v1;
 pub mod agilex_v2;
 pub mod can;
 pub mod command;
-pub mod describe;
 pub mod description;
 pub mod driver;
 mod error;
+pub mod family;
 pub mod firmware;
+pub mod frame_json;
+pub mod kind;
 pub mod nmea;
 pub mod pair;
 pub mod profile;
 pub mod registry;
-pub mod scout_mini;
 #[cfg(test)]
 mod sim_bench;
 pub mod slcan;
@@ -44,11 +47,12 @@ pub use command::{
 };
 pub use driver::{BoxedDriver, ControlOutcome, Driver, DriverConfig, DriverEvent, Rx, WireItem};
 pub use error::{DecodeError, EncodeError};
+pub use family::{Family, Profile};
 pub use firmware::{BoxedFirmware, Firmware, InjectedCounts, Injection, SimTruth};
-pub use profile::{
-    Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, V1Model, V1Profile,
-};
-pub use registry::{RobotEntry, RobotKind, UnknownRobot};
+pub use frame_json::Codec;
+pub use kind::{RobotKind, UnknownRobot};
+pub use profile::{ProfileError, ProfileTableError, Protocol, ProtocolError};
+pub use registry::RobotEntry;
 pub use time::Timestamp;
 
 /// Who sends a frame.

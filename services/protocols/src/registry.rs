@@ -1,57 +1,31 @@
-//! The robot registry: one entry per robot, the one place that knows what each robot *is*.
+//! The robot registry: one entry per robot, the one place that knows what each robot *is* — as
+//! data. An entry names the robot's bus, its body's outline, the sensors with their mounting, the
+//! joints the bridges publish, the odometry's stated variances and its profiles: the manuals'
+//! profile of each protocol it may speak, its default first. Everything a protocol does (driver,
+//! firmware, codec, the profile's part of the description) comes from the profile's family
+//! ([`crate::family::Family`]); the registry knows no driver. [`describe`](crate::description::describe)
+//! turns an entry and an effective profile into the `RobotDescription` chassisd publishes;
+//! clients read that, never a table of their own.
 //!
-//! An entry names the robot (`--robot` spelling, display name), its bus, the wire protocols it
-//! may speak and how the choice is made (listening on a real CAN bus when it may speak AgileX V1
-//! or V2), how its profile's defaults are made, and the constructors of its driver, of its
-//! simulated firmware and of its frame describer, with the facts no profile parameter holds:
-//! the body's outline, the sensors with their mounting, the joints the bridges publish and the
-//! odometry's stated variances. [`describe`](crate::description::describe) turns an entry and an
-//! effective profile into the `RobotDescription` chassisd publishes; clients read that, never a
-//! table of their own.
-//!
-//! Adding a robot: a variant of [`RobotKind`] (its number is what `ChassisState::robot`
-//! carries), its [`RobotEntry`] in [`RobotKind::entry`], and its folder (codec, driver,
-//! simulated firmware, profile) if it speaks a protocol of its own. The registry-wide tests
-//! (`registry::tests`) walk every entry: a robot missing anywhere fails a test.
-
-use std::time::Duration;
+//! Adding a robot of an existing family: a variant of [`RobotKind`] (`kind.rs`; its number is
+//! what `ChassisState::robot` carries, its name the `--robot` spelling), its entry here, and its
+//! model in the family's profile where the family has models. The registry-wide tests
+//! (`registry::tests`) and the family conformance suite walk every entry.
 
 use chassis_interfaces::{
-    BusKind, JointSource, Kinematics, OdometryVariance, SensorKind, WireProtocol,
+    BusKind, JointSource, Kinematics, OdometryVariance, RobotDescription, SensorKind, WireProtocol,
 };
-use serde::{Deserialize, Serialize};
 
-use crate::agilex_v2::{self, V2Model, V2Profile, detect::DetectSettings};
-use crate::describe::RobotCodec;
+use crate::agilex_v1::{V1Model, V1Profile};
+use crate::agilex_v2::{V2Model, V2Profile};
 use crate::driver::{BoxedDriver, DriverConfig};
+use crate::family::Profile;
 use crate::firmware::BoxedFirmware;
-use crate::profile::{
-    Profile, Protocol, ProtocolError, TitanProfile, V1Model, V1Profile, XbotProfile,
-};
-use crate::{Timestamp, scout_mini, titan, xbot};
-
-/// Which kind of robot. The number is the kind's id on the wire (`ChassisState::robot`,
-/// `RobotDescription::kind`); 0 means none.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-#[repr(u8)]
-pub enum RobotKind {
-    Titan = 1,
-    ScoutMini = 2,
-    Xbot = 3,
-    /// SCOUT 2.0.
-    Scout = 4,
-    /// HUNTER 2.0.
-    Hunter = 5,
-    /// HUNTER SE.
-    HunterSe = 6,
-    /// TRACER.
-    Tracer = 7,
-    /// BUNKER / BUNKER MINI.
-    Bunker = 8,
-    /// RANGER MINI 2.0 / 3.0 (1.0 by its profile's `model`).
-    RangerMini = 9,
-}
+use crate::kind::RobotKind;
+use crate::profile::{ProfileTableError, Protocol, ProtocolError};
+use crate::time::Timestamp;
+use crate::titan::TitanProfile;
+use crate::xbot::XbotProfile;
 
 /// A bus a robot is on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -115,36 +89,19 @@ pub struct Joint {
 #[derive(Debug)]
 pub struct RobotEntry {
     pub kind: RobotKind,
-    /// The `--robot` spelling, also the default robot name (`hunter-se`).
-    pub name: &'static str,
     /// What people call it (`AgileX HUNTER SE`).
     pub display_name: &'static str,
     pub bus: Bus,
-    /// The AgileX protocols it may speak (V1 and V2: listened for on a real CAN bus unless one
-    /// is asked for); empty for a robot with a protocol of its own.
-    pub protocols: &'static [Protocol],
-    /// Its protocol when none is asked for and there is no listening (the simulator, a replay).
-    pub default_protocol: Option<Protocol>,
-    /// Its protocol-V1 model, where it may speak V1.
-    pub v1_model: Option<V1Model>,
-    /// Its protocol-V2 models, where it may speak V2: the first is its plain model, the others
-    /// variants a profile's `model` may name (`scout-mini-omni`, `ranger-mini-v1`).
-    pub v2_models: &'static [V2Model],
     /// `chassis_interfaces::Kinematics` of its plain model (a profile's `model` or `omni` may
-    /// name a mecanum variant).
+    /// name a variant that differs).
     pub kinematics: u8,
     pub outline: Outline,
     pub sensors: &'static [Sensor],
     pub joints: &'static [Joint],
     pub odometry_variance: OdometryVariance,
-    /// Its profile in its default protocol, with the manuals' values ([`RobotEntry::defaults`]).
-    pub profile: fn() -> Profile,
-    /// Its driver for an effective profile.
-    pub driver: fn(&Profile, &DriverConfig, Timestamp) -> BoxedDriver,
-    /// Its simulated firmware for an effective profile, powered up at the given time.
-    pub firmware: fn(&Profile, Timestamp) -> BoxedFirmware,
-    /// Its frame describer (`chassis decode`, the Foxglove `/frames` topic).
-    pub codec: fn(Profile) -> RobotCodec,
+    /// The manuals' profile of each protocol it may speak, its default one first (a robot that
+    /// may speak AgileX V1 or V2 has both, and tells which by listening on a real CAN bus).
+    pub profiles: &'static [fn() -> Profile],
 }
 
 impl PartialEq for RobotEntry {
@@ -286,68 +243,24 @@ const fn around_wheels(wheelbase_m: f64, track_m: f64, height_m: f64) -> Outline
     }
 }
 
-/// The manuals' profiles of each robot's default protocol.
-fn titan_defaults() -> Profile {
-    Profile::Titan(TitanProfile::default())
+/// The manuals' profiles of each protocol of each robot.
+fn titan() -> Profile {
+    TitanProfile::default().into()
 }
-fn scout_mini_defaults() -> Profile {
-    Profile::ScoutMini(V1Profile::for_model(V1Model::ScoutMini))
+fn xbot() -> Profile {
+    XbotProfile::default().into()
 }
-fn xbot_defaults() -> Profile {
-    Profile::Xbot(XbotProfile::default())
+fn v1(model: V1Model) -> Profile {
+    V1Profile::for_model(model).into()
 }
-fn scout_defaults() -> Profile {
-    Profile::V2(V2Profile::for_model(V2Model::Scout))
-}
-fn hunter_defaults() -> Profile {
-    Profile::V2(V2Profile::for_model(V2Model::Hunter))
-}
-fn hunter_se_defaults() -> Profile {
-    Profile::V2(V2Profile::for_model(V2Model::HunterSe))
-}
-fn tracer_defaults() -> Profile {
-    Profile::V2(V2Profile::for_model(V2Model::Tracer))
-}
-fn bunker_defaults() -> Profile {
-    Profile::V2(V2Profile::for_model(V2Model::Bunker))
-}
-fn ranger_mini_defaults() -> Profile {
-    Profile::V2(V2Profile::for_model(V2Model::RangerMini))
-}
-
-/// The driver of a profile: each protocol family has one.
-fn driver_of(profile: &Profile, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
-    match profile {
-        Profile::Titan(p) => Box::new(titan::TitanDriver::new(p.clone(), config.clone(), now)),
-        Profile::ScoutMini(p) => Box::new(scout_mini::ScoutMiniDriver::new(
-            p.clone(),
-            config.clone(),
-            now,
-        )),
-        Profile::Xbot(p) => Box::new(xbot::XbotDriver::new(p.clone(), config.clone(), now)),
-        Profile::V2(p) => Box::new(agilex_v2::V2Driver::new(p.clone(), config.clone(), now)),
-    }
-}
-
-/// The simulated firmware of a profile.
-fn firmware_of(profile: &Profile, now: Timestamp) -> BoxedFirmware {
-    match profile {
-        Profile::Titan(p) => Box::new(titan::TitanSim::new(p.clone(), now)),
-        Profile::ScoutMini(p) => Box::new(scout_mini::ScoutMiniSim::new(p.clone(), now)),
-        Profile::Xbot(p) => Box::new(xbot::XbotSim::new(p.clone(), now)),
-        Profile::V2(p) => Box::new(agilex_v2::V2Sim::new(p.clone(), now)),
-    }
+fn v2(model: V2Model) -> Profile {
+    V2Profile::for_model(model).into()
 }
 
 static TITAN: RobotEntry = RobotEntry {
     kind: RobotKind::Titan,
-    name: "titan",
     display_name: "AgileX TITAN",
     bus: AGILEX_CAN,
-    protocols: &[],
-    default_protocol: None,
-    v1_model: None,
-    v2_models: &[],
     kinematics: Kinematics::DUAL_ACKERMANN,
     outline: Outline {
         length_m: 1.640,
@@ -358,21 +271,13 @@ static TITAN: RobotEntry = RobotEntry {
     sensors: &[],
     joints: STEERING_JOINTS,
     odometry_variance: STATED_VARIANCE,
-    profile: titan_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[titan],
 };
 
 static SCOUT_MINI: RobotEntry = RobotEntry {
     kind: RobotKind::ScoutMini,
-    name: "scout-mini",
     display_name: "AgileX SCOUT MINI",
     bus: AGILEX_CAN,
-    protocols: &[Protocol::V1, Protocol::V2],
-    default_protocol: Some(Protocol::V1),
-    v1_model: Some(V1Model::ScoutMini),
-    v2_models: &[V2Model::ScoutMini, V2Model::ScoutMiniOmni],
     kinematics: Kinematics::SKID_STEER,
     outline: Outline {
         length_m: 0.627,
@@ -383,101 +288,61 @@ static SCOUT_MINI: RobotEntry = RobotEntry {
     sensors: &[],
     joints: &[],
     odometry_variance: STATED_VARIANCE,
-    profile: scout_mini_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[|| v1(V1Model::ScoutMini), || v2(V2Model::ScoutMini)],
 };
 
 static XBOT: RobotEntry = RobotEntry {
     kind: RobotKind::Xbot,
-    name: "xbot",
     display_name: "XBot",
     bus: Bus::Rs232,
-    protocols: &[],
-    default_protocol: None,
-    v1_model: None,
-    v2_models: &[],
     kinematics: Kinematics::DIFFERENTIAL,
     outline: XBOT_OUTLINE,
     sensors: XBOT_SENSORS,
     joints: XBOT_WHEELS,
     odometry_variance: STATED_VARIANCE,
-    profile: xbot_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[xbot],
 };
 
 static SCOUT: RobotEntry = RobotEntry {
     kind: RobotKind::Scout,
-    name: "scout",
     display_name: "AgileX SCOUT 2.0",
     bus: AGILEX_CAN,
-    protocols: &[Protocol::V1, Protocol::V2],
-    default_protocol: Some(Protocol::V2),
-    v1_model: Some(V1Model::Scout),
-    v2_models: &[V2Model::Scout],
     kinematics: Kinematics::SKID_STEER,
     outline: around_wheels(0.498, 0.583, 0.35),
     sensors: &[],
     joints: &[],
     odometry_variance: STATED_VARIANCE,
-    profile: scout_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[|| v2(V2Model::Scout), || v1(V1Model::Scout)],
 };
 
 static HUNTER: RobotEntry = RobotEntry {
     kind: RobotKind::Hunter,
-    name: "hunter",
     display_name: "AgileX HUNTER 2.0",
     bus: AGILEX_CAN,
-    protocols: &[Protocol::V2],
-    default_protocol: Some(Protocol::V2),
-    v1_model: None,
-    v2_models: &[V2Model::Hunter],
     kinematics: Kinematics::ACKERMANN,
     outline: around_wheels(0.650, 0.605, 0.38),
     sensors: &[],
     joints: FRONT_STEERING_JOINT,
     odometry_variance: STATED_VARIANCE,
-    profile: hunter_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[|| v2(V2Model::Hunter)],
 };
 
 static HUNTER_SE: RobotEntry = RobotEntry {
     kind: RobotKind::HunterSe,
-    name: "hunter-se",
     display_name: "AgileX HUNTER SE",
     bus: AGILEX_CAN,
-    protocols: &[Protocol::V2],
-    default_protocol: Some(Protocol::V2),
-    v1_model: None,
-    v2_models: &[V2Model::HunterSe],
     kinematics: Kinematics::ACKERMANN,
     outline: around_wheels(0.657, 0.550, 0.33),
     sensors: &[],
     joints: FRONT_STEERING_JOINT,
     odometry_variance: STATED_VARIANCE,
-    profile: hunter_se_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[|| v2(V2Model::HunterSe)],
 };
 
 static TRACER: RobotEntry = RobotEntry {
     kind: RobotKind::Tracer,
-    name: "tracer",
     display_name: "AgileX TRACER",
     bus: AGILEX_CAN,
-    protocols: &[Protocol::V2],
-    default_protocol: Some(Protocol::V2),
-    v1_model: None,
-    v2_models: &[V2Model::Tracer],
     kinematics: Kinematics::DIFFERENTIAL,
     outline: Outline {
         length_m: 0.700,
@@ -488,66 +353,34 @@ static TRACER: RobotEntry = RobotEntry {
     sensors: &[],
     joints: &[],
     odometry_variance: STATED_VARIANCE,
-    profile: tracer_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[|| v2(V2Model::Tracer)],
 };
 
 static BUNKER: RobotEntry = RobotEntry {
     kind: RobotKind::Bunker,
-    name: "bunker",
     display_name: "AgileX BUNKER",
     bus: AGILEX_CAN,
-    protocols: &[Protocol::V1, Protocol::V2],
-    default_protocol: Some(Protocol::V2),
-    v1_model: Some(V1Model::Bunker),
-    v2_models: &[V2Model::Bunker],
     kinematics: Kinematics::TRACKED,
     outline: around_wheels(0.5, 0.5, 0.30),
     sensors: &[],
     joints: &[],
     odometry_variance: STATED_VARIANCE,
-    profile: bunker_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[|| v2(V2Model::Bunker), || v1(V1Model::Bunker)],
 };
 
 static RANGER_MINI: RobotEntry = RobotEntry {
     kind: RobotKind::RangerMini,
-    name: "ranger-mini",
     display_name: "AgileX RANGER MINI",
     bus: AGILEX_CAN,
-    protocols: &[Protocol::V2],
-    default_protocol: Some(Protocol::V2),
-    v1_model: None,
-    v2_models: &[V2Model::RangerMini, V2Model::RangerMiniV1],
     kinematics: Kinematics::FOUR_WHEEL_STEER,
     outline: around_wheels(0.494, 0.364, 0.34),
     sensors: &[],
     joints: STEERING_JOINTS,
     odometry_variance: STATED_VARIANCE,
-    profile: ranger_mini_defaults,
-    driver: driver_of,
-    firmware: firmware_of,
-    codec: RobotCodec::new,
+    profiles: &[|| v2(V2Model::RangerMini)],
 };
 
 impl RobotKind {
-    /// Every robot of the registry.
-    pub const ALL: [RobotKind; 9] = [
-        RobotKind::Titan,
-        RobotKind::ScoutMini,
-        RobotKind::Xbot,
-        RobotKind::Scout,
-        RobotKind::Hunter,
-        RobotKind::HunterSe,
-        RobotKind::Tracer,
-        RobotKind::Bunker,
-        RobotKind::RangerMini,
-    ];
-
     /// The robot's registry entry.
     pub fn entry(self) -> &'static RobotEntry {
         match self {
@@ -563,58 +396,35 @@ impl RobotKind {
         }
     }
 
-    /// The kind's id on the wire (`ChassisState::robot`).
-    pub fn id(self) -> u8 {
-        self as u8
-    }
-
-    /// The kind of a `ChassisState::robot` id.
-    pub fn from_id(id: u8) -> Option<RobotKind> {
-        RobotKind::ALL.into_iter().find(|k| k.id() == id)
-    }
-
-    /// The command-line spelling (`titan`, `scout-mini`, `hunter`, …), also the default robot
-    /// name.
-    pub fn name(self) -> &'static str {
-        self.entry().name
-    }
-
     /// True for the robots on a CAN bus.
     pub fn is_can(self) -> bool {
         matches!(self.entry().bus, Bus::Can { .. })
     }
 
     /// The AgileX protocols the robot may speak (empty: a protocol of its own).
-    pub fn protocols(self) -> &'static [Protocol] {
-        self.entry().protocols
-    }
-
-    /// The protocol-V1 model of this robot, if it may speak V1.
-    pub fn v1_model(self) -> Option<V1Model> {
-        self.entry().v1_model
-    }
-
-    /// The plain protocol-V2 model of this robot, if it speaks V2.
-    pub fn v2_model(self) -> Option<V2Model> {
-        self.entry().v2_models.first().copied()
-    }
-
-    /// The robot a protocol-V1 model is.
-    pub fn of_v1(model: V1Model) -> Option<RobotKind> {
-        RobotKind::ALL
-            .into_iter()
-            .find(|k| k.v1_model() == Some(model))
-    }
-
-    /// The robot a protocol-V2 model (or variant) is.
-    pub fn of_v2(model: V2Model) -> Option<RobotKind> {
-        RobotKind::ALL
-            .into_iter()
-            .find(|k| k.entry().v2_models.contains(&model))
+    pub fn protocols(self) -> Vec<Protocol> {
+        self.entry()
+            .profiles()
+            .filter_map(|p| p.protocol())
+            .collect()
     }
 }
 
+/// The manuals' profile of the robot a description (as chassisd publishes it) describes, of
+/// its model, in the protocol it says is in use: how a client that knows the robot only from its
+/// description (the Foxglove view's `/frames`, `chassis top`) reads its bus. `None` for a kind
+/// the registry does not know.
+pub fn profile_for_description(description: &RobotDescription) -> Option<Profile> {
+    let entry = RobotKind::from_id(description.kind)?.entry();
+    Some(entry.profile_for_model(description.protocol, description.model()))
+}
+
 impl RobotEntry {
+    /// The manuals' profile of each protocol it may speak, its default one first.
+    pub fn profiles(&self) -> impl Iterator<Item = Profile> {
+        self.profiles.iter().map(|profile| profile())
+    }
+
     /// The driver for `profile`, this robot's effective profile. A robot that may speak V1 or
     /// V2, with `detect` (a real CAN bus and no protocol asked for), listens first and drives in
     /// the protocol it hears: `profile` stands for the protocol it is of, the other one gets its
@@ -626,31 +436,14 @@ impl RobotEntry {
         config: &DriverConfig,
         now: Timestamp,
     ) -> BoxedDriver {
-        if detect {
-            let pair = match (profile, self.v1_model, self.v2_models.first().copied()) {
-                (Profile::ScoutMini(v1), _, Some(model)) => Some((
-                    v1.clone(),
-                    V2Profile::for_model(model),
-                    DetectSettings::from(v1),
-                )),
-                (Profile::V2(v2), Some(model), _) => Some((
-                    V1Profile::for_model(model),
-                    v2.clone(),
-                    DetectSettings::from(v2),
-                )),
-                _ => None,
-            };
-            if let Some((v1, v2, settings)) = pair {
-                return Box::new(agilex_v2::AutoDriver::new(
-                    v1,
-                    v2,
-                    settings,
-                    config.clone(),
-                    now,
-                ));
-            }
-        }
-        (self.driver)(profile, config, now)
+        let other = self
+            .profiles()
+            .find(|p| p.protocol().is_some() && p.protocol() != profile.protocol());
+        detect
+            .then_some(other)
+            .flatten()
+            .and_then(|other| profile.detecting_driver(&other, config, now))
+            .unwrap_or_else(|| profile.driver(config, now))
     }
 
     /// Its driver for `profile` (default configuration, no detection) and its simulated firmware,
@@ -662,99 +455,76 @@ impl RobotEntry {
         start: Timestamp,
     ) -> crate::pair::Pair<BoxedDriver, BoxedFirmware> {
         let driver = self.driver(profile, false, &DriverConfig::default(), start);
-        crate::pair::Pair::new(driver, (self.firmware)(profile, start), start)
+        crate::pair::Pair::new(driver, profile.firmware(start), start)
     }
 
-    /// Its frame describer for the protocol a state sample says the driver speaks
-    /// (`SystemState::wire_protocol`): the manuals' profile of V1 or V2 where the robot speaks
-    /// that one, its default profile otherwise (its own protocol, or still detecting).
-    pub fn codec_for_wire(&self, wire_protocol: u8) -> RobotCodec {
+    /// The manuals' profile of the protocol a state sample says the driver speaks
+    /// (`SystemState::wire_protocol`) where the robot speaks it, its default profile otherwise
+    /// (its own protocol, or still detecting): how a client reads its frames.
+    pub fn profile_for_wire(&self, wire_protocol: u8) -> Profile {
         let protocol = match wire_protocol {
             WireProtocol::V1 => Some(Protocol::V1),
             WireProtocol::V2 => Some(Protocol::V2),
             _ => None,
         };
-        let profile = protocol
+        protocol
             .and_then(|p| self.default_profile(Some(p)).ok())
-            .unwrap_or_else(|| self.defaults());
-        (self.codec)(profile)
+            .unwrap_or_else(|| self.defaults())
     }
 
     /// The manuals' profile of its default protocol.
     pub fn defaults(&self) -> Profile {
-        (self.profile)()
+        // Every entry has a profile (`registry::tests`); TITAN's stands in for an empty list.
+        self.profiles().next().unwrap_or_else(titan)
     }
 
     /// The manuals' profile of one of its protocols (`None`: its default one).
     pub fn default_profile(&self, protocol: Option<Protocol>) -> Result<Profile, ProtocolError> {
-        let not_spoken = |p: Protocol| ProtocolError::NotSpoken {
-            robot: self.kind,
-            protocol: p.name(),
+        let Some(protocol) = protocol else {
+            return Ok(self.defaults());
         };
-        match protocol {
-            None => Ok(self.defaults()),
-            Some(p) if Some(p) == self.default_protocol => Ok(self.defaults()),
-            Some(p) if !self.protocols.contains(&p) => Err(not_spoken(p)),
-            Some(Protocol::V1) => self
-                .v1_model
-                .map(|m| Profile::ScoutMini(V1Profile::for_model(m)))
-                .ok_or(not_spoken(Protocol::V1)),
-            Some(Protocol::V2) => self
-                .v2_models
-                .first()
-                .map(|&m| Profile::V2(V2Profile::for_model(m)))
-                .ok_or(not_spoken(Protocol::V2)),
+        self.profiles()
+            .find(|p| p.protocol() == Some(protocol))
+            .ok_or(ProtocolError::NotSpoken {
+                robot: self.kind,
+                protocol: protocol.name(),
+            })
+    }
+
+    /// Its profile in `protocol` (`None`: its default one) with the keys of `table` (the
+    /// `[profile]` table of the service's config) set over the manuals' values. A table may
+    /// name a variant with `model` (e.g. `scout-mini-omni`): its keys are then set over that
+    /// variant's defaults; a model of another robot is refused.
+    pub fn profile_from_table(
+        &self,
+        protocol: Option<Protocol>,
+        table: &toml::Table,
+    ) -> Result<Profile, ProfileTableError> {
+        let profile = self.default_profile(protocol)?.with_table(table)?;
+        if profile.robot() != self.kind {
+            return Err(ProfileTableError::WrongModel {
+                owner: profile.robot(),
+                robot: self.kind,
+            });
+        }
+        Ok(profile)
+    }
+
+    /// The manuals' profile of the model a description names, in the protocol it says is in
+    /// use, where the model is this robot's; the profile for that protocol otherwise.
+    pub fn profile_for_model(&self, wire_protocol: u8, model: &str) -> Profile {
+        let base = self.profile_for_wire(wire_protocol);
+        let mut table = toml::Table::new();
+        table.insert("model".into(), model.into());
+        match self.profile_from_table(base.protocol(), &table) {
+            Ok(named) if named.protocol() == base.protocol() => named,
+            _ => base,
         }
     }
 
     /// True when the robot may speak AgileX V1 or V2 and tells which by listening.
     pub fn detects_protocol(&self) -> bool {
-        self.protocols.len() > 1
-    }
-}
-
-/// The robot spelled `name` (`--robot`).
-pub fn find(name: &str) -> Option<&'static RobotEntry> {
-    RobotKind::ALL
-        .into_iter()
-        .map(RobotKind::entry)
-        .find(|e| e.name == name)
-}
-
-/// The `--robot` spellings, for messages and help.
-pub fn names() -> Vec<&'static str> {
-    RobotKind::ALL.into_iter().map(RobotKind::name).collect()
-}
-
-/// A robot name that is none of the registry's.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown robot '{name}' (expected one of {})", names().join(", "))]
-pub struct UnknownRobot {
-    pub name: String,
-}
-
-impl std::str::FromStr for RobotKind {
-    type Err = UnknownRobot;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        find(s)
-            .map(|e| e.kind)
-            .ok_or_else(|| UnknownRobot { name: s.into() })
-    }
-}
-
-impl std::fmt::Display for RobotKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// The heartbeat period a profile's driver keeps.
-pub fn heartbeat_period(profile: &Profile) -> Duration {
-    match profile {
-        Profile::Titan(p) => Duration::from_millis(p.heartbeat_period_ms),
-        Profile::ScoutMini(p) => Duration::from_millis(p.heartbeat_period_ms),
-        Profile::Xbot(p) => Duration::from_secs_f64(1.0 / p.heartbeat_hz),
-        Profile::V2(p) => Duration::from_millis(p.heartbeat_period_ms),
+        self.profiles.len() > 1
     }
 }
 

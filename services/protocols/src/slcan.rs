@@ -11,6 +11,9 @@ use crate::can::CanFrame;
 
 /// Ends every slcan message.
 pub const CR: u8 = b'\r';
+/// The serial line rate an slcan adapter is opened at unless its spec names one (a USB adapter
+/// ignores it).
+pub const ADAPTER_BAUD: u32 = 115_200;
 /// The adapter's "command failed".
 pub const BEL: u8 = 0x07;
 /// Longest line worth keeping: `T` + 8 id + 1 dlc + 16 data + 4 timestamp.

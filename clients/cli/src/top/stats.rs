@@ -28,7 +28,7 @@ use std::collections::{HashMap, VecDeque};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, GROUP_SLOTS, LinkStats, MuxStatus,
 };
-use chassis_protocols::describe::{FrameJson, RobotCodec};
+use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
 use chassis_protocols::{CanFrame, Profile};
 
 /// Frame rates are counted over this sliding window.
@@ -102,20 +102,20 @@ fn name_and_id(json: &FrameJson) -> (Option<String>, Option<u32>) {
     (name, id)
 }
 
-/// Names frames by decoding them with the robot's codec (the registry's, `(entry.codec)` of the
+/// Names frames by decoding them with the robot's codec (its family's, `Family::codec` of the
 /// described robot's profile): one per direction, as a serial robot's stream parser keeps the
 /// part of a frame that ends in the next read.
 #[derive(Debug, Default)]
 struct Namer {
-    rx: Option<RobotCodec>,
-    tx: Option<RobotCodec>,
+    rx: Option<BoxedCodec>,
+    tx: Option<BoxedCodec>,
     /// The robot is on a serial line (its codec reads a byte stream).
     serial: bool,
 }
 
 impl Namer {
     fn of(profile: Option<&Profile>) -> Self {
-        let codec = || profile.map(|p| (p.robot().entry().codec)(p.clone()));
+        let codec = || profile.map(|p| p.codec());
         Self {
             rx: codec(),
             tx: codec(),
@@ -131,7 +131,7 @@ impl Namer {
 
     /// The codec that finds frames in a serial stream read in `direction` (`None` for a robot
     /// on a CAN bus, or none described).
-    fn serial_codec(&mut self, direction: u8) -> Option<&mut RobotCodec> {
+    fn serial_codec(&mut self, direction: u8) -> Option<&mut BoxedCodec> {
         if !self.serial {
             return None;
         }
@@ -456,7 +456,7 @@ mod tests {
 
     use super::*;
     use chassis_client::BodyVelocity;
-    use chassis_protocols::profile::XbotProfile;
+    use chassis_protocols::xbot::XbotProfile;
     use chassis_protocols::{Direction, RobotKind, Timestamp, WireItem, xbot};
 
     const MS: u64 = 1_000_000;

@@ -7,7 +7,7 @@
 
 use chassis_client::{Kinematics as KinematicsKind, RobotDescription};
 use chassis_protocols::description::describe;
-use chassis_protocols::profile::XbotProfile;
+use chassis_protocols::xbot::XbotProfile;
 use chassis_protocols::{Profile, RobotKind};
 use proptest::prelude::*;
 
@@ -365,7 +365,7 @@ fn a_sideways_miss_is_corrected_by_a_robot_that_turns_on_the_spot_but_fails_for_
 
 #[test]
 fn a_robot_that_moves_sideways_corrects_a_sideways_miss_without_turning() {
-    let omni = describe(&Profile::Xbot(XbotProfile {
+    let omni = describe(&Profile::from(XbotProfile {
         omni: true,
         ..XbotProfile::default()
     }));

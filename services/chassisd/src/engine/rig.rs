@@ -27,7 +27,7 @@ use chassis_interfaces::{
     RobotDescription, VelocityRequest,
 };
 use chassis_protocols::{
-    DriverConfig, Injection, Profile, RobotKind, Timestamp, WireItem, scout_mini, titan,
+    DriverConfig, Injection, Profile, RobotKind, Timestamp, WireItem, agilex_v1, agilex_v2, titan,
 };
 use chassisd_config::mux::MuxConfig;
 
@@ -190,10 +190,7 @@ impl Rig {
         adjust: impl FnOnce(&mut EngineConfig),
     ) -> Self {
         let mut profile = robot.entry().defaults();
-        if let Profile::Xbot(p) = &mut profile {
-            p.wheel_separation_m =
-                Some(chassis_protocols::xbot::XbotSim::DEFAULT_WHEEL_SEPARATION_M);
-        }
+        profile.fill_for_simulator();
         let mut config = EngineConfig {
             tick: Duration::from_millis(20),
             mux_status_period: Duration::from_millis(100),
@@ -205,8 +202,7 @@ impl Rig {
             descriptions: Vec::new(),
         };
         adjust(&mut config);
-        let entry = robot.entry();
-        let driver = (entry.driver)(&profile, &DriverConfig::default(), T0);
+        let driver = profile.driver(&DriverConfig::default(), T0);
         let engine = Engine::new(
             config,
             driver,
@@ -214,7 +210,7 @@ impl Rig {
             T0,
         );
         let world = World {
-            firmware: (entry.firmware)(&profile, T0),
+            firmware: profile.firmware(T0),
             profile,
             mux_config: mux,
             now: T0,
@@ -588,23 +584,27 @@ impl Rig {
     /// V1 0x130).
     pub fn commanded_speed(&self, item: &WireItem) -> Option<f64> {
         let frame = item.as_can()?;
-        match &self.world.profile {
-            Profile::Titan(p) => match titan::decode(frame, p) {
+        let profile = &self.world.profile;
+        if let Some(p) = profile.get::<titan::TitanProfile>() {
+            match titan::decode(frame, p) {
                 Ok(titan::Frame::MotionCommand(c)) => Some(c.linear_mps),
                 _ => None,
-            },
-            Profile::ScoutMini(p) => match scout_mini::decode(frame, p) {
-                Ok(scout_mini::Decoded {
-                    frame: scout_mini::Frame::MotionCommand(c),
+            }
+        } else if let Some(p) = profile.get::<agilex_v1::V1Profile>() {
+            match agilex_v1::decode(frame, p) {
+                Ok(agilex_v1::Decoded {
+                    frame: agilex_v1::Frame::MotionCommand(c),
                     ..
                 }) => Some(c.linear_mps),
                 _ => None,
-            },
-            Profile::V2(p) => match chassis_protocols::agilex_v2::decode(frame, p) {
-                Ok(chassis_protocols::agilex_v2::Frame::MotionCommand(c)) => Some(c.linear_mps),
+            }
+        } else if let Some(p) = profile.get::<agilex_v2::V2Profile>() {
+            match agilex_v2::decode(frame, p) {
+                Ok(agilex_v2::Frame::MotionCommand(c)) => Some(c.linear_mps),
                 _ => None,
-            },
-            Profile::Xbot(_) => None,
+            }
+        } else {
+            None
         }
     }
 

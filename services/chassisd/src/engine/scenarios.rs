@@ -117,7 +117,7 @@ fn the_heartbeat_repeats_the_command_on_its_20_ms_grid() {
 fn a_command_is_decided_before_the_bus_is_drained() {
     let mut rig = ready();
     let t = at(231);
-    let titan_profile = chassis_protocols::profile::TitanProfile::default();
+    let titan_profile = chassis_protocols::titan::TitanProfile::default();
     let feedback = WireItem::Can(
         titan::Frame::MotionFeedback(titan::MotionFeedback::default())
             .encode(&titan_profile)
@@ -884,7 +884,7 @@ fn an_xbot_drives_and_stops_through_the_engine() {
 fn every_agilex_v2_robot_drives_and_stops_through_the_engine() {
     let v2_robots: Vec<RobotKind> = RobotKind::ALL
         .into_iter()
-        .filter(|robot| robot.entry().default_protocol == Some(Protocol::V2))
+        .filter(|robot| robot.entry().defaults().protocol() == Some(Protocol::V2))
         .collect();
     assert_eq!(v2_robots.len(), 6, "{v2_robots:?}");
     for robot in v2_robots {
@@ -918,7 +918,7 @@ fn every_agilex_v2_robot_drives_and_stops_through_the_engine() {
 fn a_chassis_estop_holds_zero_and_its_release_waits_for_a_zero() {
     for robot in RobotKind::ALL
         .into_iter()
-        .filter(|robot| robot.entry().default_protocol == Some(Protocol::V2))
+        .filter(|robot| robot.entry().defaults().protocol() == Some(Protocol::V2))
     {
         let mut rig = ready_for(robot, unsmoothed(), 60);
         rig.publish_every("teleop", twist(0.3), ms(50), at(6000));

@@ -2,7 +2,7 @@
 //! protocol it speaks.
 //!
 //! [`AutoDriver`] transmits nothing until the [`Detector`] has decided (`PROTOCOLS-V2` §4.3); then
-//! it builds the V1 driver ([`ScoutMiniDriver`]) or the V2 one ([`V2Driver`]) at that instant and
+//! it builds the V1 driver ([`V1Driver`]) or the V2 one ([`V2Driver`]) at that instant and
 //! hands everything to it, so not one frame of the wrong protocol is ever sent. Without a decision
 //! by the deadline (or with both kinds of evidence) it sets [`LinkFlags::CHASSIS_SILENT`], logs
 //! what it heard and listens again. After the link is lost for longer than the deadline the
@@ -15,18 +15,19 @@ use chassis_interfaces::{BodyVelocity, ChassisState, LinkFlags, WireProtocol};
 
 use super::detect::{DetectSettings, Detection, Detector};
 use super::{V2Driver, V2Profile};
+use crate::agilex_v1::V1Driver;
+use crate::agilex_v1::V1Profile;
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
-use crate::profile::{Protocol, ScoutMiniProfile};
-use crate::registry::RobotKind;
-use crate::scout_mini::ScoutMiniDriver;
+use crate::kind::RobotKind;
+use crate::profile::Protocol;
 use crate::time::Timestamp;
 
 /// A driver for a robot that may speak V1 or V2 (SCOUT MINI, SCOUT 2.0, BUNKER) that detects
 /// the protocol before sending anything.
 pub struct AutoDriver {
     robot: RobotKind,
-    v1: ScoutMiniProfile,
+    v1: V1Profile,
     v2: V2Profile,
     detect: DetectSettings,
     config: DriverConfig,
@@ -51,7 +52,7 @@ impl AutoDriver {
     /// Listening from `now` as `detect` says, for the robot of `v1` (its V1 `model`; `v2` is
     /// that robot's V2 profile).
     pub fn new(
-        v1: ScoutMiniProfile,
+        v1: V1Profile,
         v2: V2Profile,
         detect: DetectSettings,
         config: DriverConfig,
@@ -112,11 +113,9 @@ impl AutoDriver {
             Detection::Listening => {}
             Detection::Decided(protocol) => {
                 let mut driver: Box<dyn Driver + Send> = match protocol {
-                    Protocol::V1 => Box::new(ScoutMiniDriver::new(
-                        self.v1.clone(),
-                        self.config.clone(),
-                        now,
-                    )),
+                    Protocol::V1 => {
+                        Box::new(V1Driver::new(self.v1.clone(), self.config.clone(), now))
+                    }
                     Protocol::V2 => {
                         Box::new(V2Driver::new(self.v2.clone(), self.config.clone(), now))
                     }
@@ -247,17 +246,17 @@ impl Driver for AutoDriver {
 mod tests {
     use super::*;
     use crate::Direction;
+    use crate::agilex_v1::V1Model;
+    use crate::agilex_v1::V1Sim;
     use crate::agilex_v2::{V2Model, V2Sim};
     use crate::firmware::Firmware;
     use crate::pair::Pair;
-    use crate::profile::V1Model;
-    use crate::scout_mini::ScoutMiniSim;
     use chassis_interfaces::ControlMode;
 
     const T0: Timestamp = Timestamp::from_millis(1000);
 
     fn auto() -> AutoDriver {
-        let v1 = ScoutMiniProfile::default();
+        let v1 = V1Profile::default();
         let detect = DetectSettings::from(&v1);
         AutoDriver::new(
             v1,
@@ -291,18 +290,18 @@ mod tests {
     }
 
     /// The robots with V1 and V2 firmware, each with its V1 and V2 profile.
-    fn robots() -> [(ScoutMiniProfile, V2Profile); 3] {
+    fn robots() -> [(V1Profile, V2Profile); 3] {
         [
             (
-                ScoutMiniProfile::default(),
+                V1Profile::default(),
                 V2Profile::for_model(V2Model::ScoutMini),
             ),
             (
-                ScoutMiniProfile::for_model(V1Model::Scout),
+                V1Profile::for_model(V1Model::Scout),
                 V2Profile::for_model(V2Model::Scout),
             ),
             (
-                ScoutMiniProfile::for_model(V1Model::Bunker),
+                V1Profile::for_model(V1Model::Bunker),
                 V2Profile::for_model(V2Model::Bunker),
             ),
         ]
@@ -316,7 +315,7 @@ mod tests {
             let driver = AutoDriver::new(v1.clone(), v2, detect, DriverConfig::default(), T0);
             assert_eq!(driver.robot(), robot);
             assert_eq!(driver.state().robot, robot.id());
-            let mut pair = Pair::new(driver, ScoutMiniSim::new(v1, T0), T0);
+            let mut pair = Pair::new(driver, V1Sim::new(v1, T0), T0);
             let (ids, first) = drive(&mut pair);
             assert_eq!(pair.driver.protocol(), Some(Protocol::V1), "{robot}");
             assert_eq!(pair.driver.state().system.wire_protocol, WireProtocol::V1);

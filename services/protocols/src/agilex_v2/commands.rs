@@ -6,7 +6,6 @@ use super::codec::{ClearFault, Frame, Lights, ModeCommand, Motion, MotionMode, P
 use super::kinematics::plan;
 use super::profile::{FaultMap, SteeringZero, V2Profile};
 use crate::command::{Command, CommandError, Planned};
-use crate::profile::Profile;
 
 /// The 0x441 code for a normalized [`FaultClear`] code under the profile (§2.3.4).
 pub fn clear_code_for(which: u8, profile: &V2Profile) -> Option<u8> {
@@ -27,8 +26,8 @@ pub fn clear_code_for(which: u8, profile: &V2Profile) -> Option<u8> {
     })
 }
 
-fn robot(profile: &V2Profile) -> crate::RobotKind {
-    Profile::V2(profile.clone()).robot()
+fn robot(profile: &V2Profile) -> crate::kind::RobotKind {
+    profile.model.robot()
 }
 
 /// The frames `command` needs under `profile` (a velocity: the RANGER mode first when it has one).

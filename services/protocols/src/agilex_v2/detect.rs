@@ -14,9 +14,9 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use crate::agilex_v1::checksum;
 use crate::can::CanFrame;
 use crate::profile::Protocol;
-use crate::scout_mini::checksum;
 use crate::time::Timestamp;
 
 /// The detector's answer.
@@ -78,8 +78,8 @@ impl From<&crate::agilex_v2::V2Profile> for DetectSettings {
     }
 }
 
-impl From<&crate::profile::ScoutMiniProfile> for DetectSettings {
-    fn from(p: &crate::profile::ScoutMiniProfile) -> Self {
+impl From<&crate::agilex_v1::V1Profile> for DetectSettings {
+    fn from(p: &crate::agilex_v1::V1Profile) -> Self {
         Self {
             timeout_ms: p.detect_timeout_ms,
             min_frames: p.detect_min_frames,

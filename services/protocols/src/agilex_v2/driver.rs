@@ -34,8 +34,7 @@ use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
     requested_turn,
 };
-use crate::profile::Profile;
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
 
 /// The protocol-V2 driver.
@@ -86,7 +85,7 @@ impl V2Driver {
 
     /// A driver starting at `now`. With `config.take_control` it asks for CAN command mode at once.
     pub fn new(profile: V2Profile, config: DriverConfig, now: Timestamp) -> Self {
-        let robot = Profile::V2(profile.clone()).robot();
+        let robot = profile.model.robot();
         let mut core = DriverCore::new(
             robot.id(),
             Duration::from_millis(profile.heartbeat_period_ms),

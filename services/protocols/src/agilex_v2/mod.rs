@@ -8,6 +8,7 @@ mod codec;
 mod commands;
 pub mod detect;
 mod driver;
+mod family;
 pub mod kinematics;
 pub mod profile;
 mod sim;

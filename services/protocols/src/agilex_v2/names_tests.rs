@@ -10,10 +10,10 @@ use serde_json::{Value, json};
 
 use super::*;
 use crate::can::CanFrame;
-use crate::describe::{FrameJson, RobotCodec};
 use crate::driver::{Driver, DriverConfig, Rx};
-use crate::profile::Profile;
-use crate::registry::RobotKind;
+use crate::family::Profile;
+use crate::frame_json::FrameJson;
+use crate::kind::RobotKind;
 use crate::time::Timestamp;
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
@@ -128,7 +128,10 @@ const HUNTER_SE: &[Row] = &[
 fn v2_robots() -> Vec<(RobotKind, V2Profile)> {
     let robots: Vec<_> = RobotKind::ALL
         .iter()
-        .filter_map(|r| r.v2_model().map(|m| (*r, V2Profile::for_model(m))))
+        .filter_map(|r| {
+            let profile = r.entry().default_profile(Some(crate::Protocol::V2)).ok()?;
+            Some((*r, profile.get::<V2Profile>()?.clone()))
+        })
         .collect();
     assert_eq!(
         robots.len(),
@@ -150,7 +153,8 @@ fn table_of(robot: RobotKind) -> &'static [Row] {
 }
 
 fn describe(profile: &V2Profile, text: &str) -> FrameJson {
-    RobotCodec::new(Profile::V2(profile.clone()))
+    Profile::from(profile.clone())
+        .codec()
         .decode_can(&CanFrame::from_candump(text).unwrap())
         .unwrap()
 }

@@ -5,6 +5,7 @@
 use chassis_interfaces::FaultFlags as F;
 use serde::{Deserialize, Serialize};
 
+use crate::kind::RobotKind;
 use crate::profile::ProfileError;
 
 /// Which V2 robot (and variant) a profile describes.
@@ -44,6 +45,19 @@ impl V2Model {
         V2Model::RangerMini,
         V2Model::RangerMiniV1,
     ];
+
+    /// The robot of this model (a variant is its robot's).
+    pub fn robot(self) -> RobotKind {
+        match self {
+            V2Model::Scout => RobotKind::Scout,
+            V2Model::ScoutMini | V2Model::ScoutMiniOmni => RobotKind::ScoutMini,
+            V2Model::Hunter => RobotKind::Hunter,
+            V2Model::HunterSe => RobotKind::HunterSe,
+            V2Model::Tracer => RobotKind::Tracer,
+            V2Model::Bunker => RobotKind::Bunker,
+            V2Model::RangerMini | V2Model::RangerMiniV1 => RobotKind::RangerMini,
+        }
+    }
 }
 
 /// How the twist maps onto 0x111 (`PROTOCOLS-V2` §3.8).

@@ -52,8 +52,7 @@ use crate::firmware::{
     Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, Injection, Mode, Pose,
     SimTruth, decode_can, first_order_lag, substeps,
 };
-use crate::profile::Profile;
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
 
@@ -117,7 +116,7 @@ impl V2Sim {
 
     /// A chassis that has just finished booting at `now`.
     pub fn new(profile: V2Profile, now: Timestamp) -> Self {
-        let robot = Profile::V2(profile.clone()).robot();
+        let robot = profile.model.robot();
         let status = Duration::from_millis(profile.status_period_ms.max(1));
         let mut sim = Self {
             robot,

@@ -33,6 +33,9 @@
 //! `tests/crosscheck.rs` pins every case: a crate update that closes one fails there. Parsing
 //! costs the same (`cargo bench -p chassis-protocols --bench codecs -- nmea`).
 
+/// NMEA 0183's standard line rate: a GPS receiver's unless its profile or spec says otherwise.
+pub const NMEA_0183_BAUD: u32 = 4800;
+
 mod fix;
 mod reader;
 mod sentence;

@@ -8,14 +8,11 @@ use super::*;
 use crate::CanFrame;
 use crate::description::describe;
 use crate::firmware::Injection;
+use crate::profile::ProfileError;
 
-/// The robot's defaults, then its default profile in each protocol it speaks.
+/// The robot's default profile in each protocol it speaks, its default one first.
 fn every_profile(entry: &RobotEntry) -> Vec<Profile> {
-    let mut profiles = vec![entry.defaults()];
-    for &protocol in entry.protocols {
-        profiles.push(entry.default_profile(Some(protocol)).unwrap());
-    }
-    profiles
+    entry.profiles().collect()
 }
 
 #[test]
@@ -26,8 +23,8 @@ fn every_kind_has_an_entry_that_names_it_back() {
         assert_eq!(entry.kind, kind);
         assert_eq!(RobotKind::from_id(kind.id()), Some(kind));
         assert_eq!(kind.name().parse::<RobotKind>(), Ok(kind));
-        assert_eq!(find(entry.name).map(|e| e.kind), Some(kind));
-        assert!(names.insert(entry.name), "{} named twice", entry.name);
+        assert!(names.insert(kind.name()), "{kind} named twice");
+        assert!(!entry.profiles.is_empty(), "{kind} has no profile");
         assert!(!entry.display_name.is_empty(), "{kind}");
         assert!(entry.sensors.len() <= MAX_SENSORS, "{kind}");
         assert!(entry.joints.len() <= MAX_JOINTS, "{kind}");
@@ -60,20 +57,22 @@ fn every_protocol_model_belongs_to_one_robot() {
         }
     }
     for model in V2Model::ALL.map(listed) {
-        let owners: Vec<RobotKind> = RobotKind::ALL
-            .into_iter()
-            .filter(|k| k.entry().v2_models.contains(&model))
-            .collect();
-        assert_eq!(owners.len(), 1, "{model:?}: {owners:?}");
-        assert_eq!(
-            Profile::V2(V2Profile::for_model(model)).robot(),
-            owners[0],
-            "{model:?}"
-        );
+        let robot = model.robot();
+        let mut table = toml::Table::new();
+        table.insert("model".into(), crate::family::kebab(&model).into());
+        let profile = robot
+            .entry()
+            .profile_from_table(Some(Protocol::V2), &table)
+            .unwrap_or_else(|e| panic!("{model:?}: {e}"));
+        assert_eq!(profile.get::<V2Profile>().map(|p| p.model), Some(model));
     }
     for model in [V1Model::ScoutMini, V1Model::Scout, V1Model::Bunker] {
-        let kind = RobotKind::of_v1(model).unwrap_or_else(|| panic!("{model:?} has no robot"));
-        assert_eq!(kind.v1_model(), Some(model));
+        let profile = model
+            .robot()
+            .entry()
+            .default_profile(Some(Protocol::V1))
+            .unwrap_or_else(|e| panic!("{model:?}: {e}"));
+        assert_eq!(profile.get::<V1Profile>().map(|p| p.model), Some(model));
     }
 }
 
@@ -84,8 +83,9 @@ fn every_robot_defaults_to_a_valid_profile_of_its_own_kind_in_each_of_its_protoc
         let defaults = entry.defaults();
         assert_eq!(defaults.robot(), kind);
         assert_eq!(defaults.validate(), Ok(()), "{kind}");
-        assert_eq!(defaults.protocol(), entry.default_protocol, "{kind}");
-        for &protocol in entry.protocols {
+        let protocols = kind.protocols();
+        assert_eq!(entry.detects_protocol(), protocols.len() == 2, "{kind}");
+        for &protocol in &protocols {
             let profile = entry.default_profile(Some(protocol)).unwrap();
             assert_eq!(
                 (profile.robot(), profile.protocol()),
@@ -94,7 +94,7 @@ fn every_robot_defaults_to_a_valid_profile_of_its_own_kind_in_each_of_its_protoc
             assert_eq!(profile.validate(), Ok(()), "{kind} {protocol}");
         }
         for protocol in [Protocol::V1, Protocol::V2] {
-            if !entry.protocols.contains(&protocol) {
+            if !protocols.contains(&protocol) {
                 assert!(
                     entry.default_profile(Some(protocol)).is_err(),
                     "{kind} {protocol}"
@@ -173,8 +173,8 @@ fn every_robot_describes_the_frames_of_its_own_exchange() {
         let entry = kind.entry();
         let profile = entry.defaults();
         let start = Timestamp::from_millis(1_000);
-        let mut firmware = (entry.firmware)(&profile, start);
-        let mut codec = (entry.codec)(profile.clone());
+        let mut firmware = profile.firmware(start);
+        let mut codec = profile.codec();
         let mut decoded = 0;
         let mut now = start;
         for _ in 0..50 {
@@ -301,10 +301,16 @@ fn every_steered_robot_is_described_with_the_radius_its_driver_turns() {
 #[test]
 fn an_override_of_a_limit_reaches_the_description() {
     let table: toml::Table = toml::from_str("max_linear_mps = 0.4").unwrap();
-    let profile = Profile::from_table(RobotKind::Hunter, None, &table).unwrap();
+    let profile = RobotKind::Hunter
+        .entry()
+        .profile_from_table(None, &table)
+        .unwrap();
     assert_eq!(describe(&profile).robot_limits.forward_mps, 0.4);
     let table: toml::Table = toml::from_str("model = \"scout-mini-omni\"").unwrap();
-    let omni = Profile::from_table(RobotKind::ScoutMini, Some(Protocol::V2), &table).unwrap();
+    let omni = RobotKind::ScoutMini
+        .entry()
+        .profile_from_table(Some(Protocol::V2), &table)
+        .unwrap();
     let d = describe(&omni);
     assert_eq!(d.model(), "scout-mini-omni");
     assert_eq!(d.kinematics, Kinematics::OMNI);
@@ -335,7 +341,8 @@ fn the_frame_describer_follows_the_protocol_the_state_reports() {
     for robot in [RobotKind::ScoutMini, RobotKind::Scout, RobotKind::Bunker] {
         let json = robot
             .entry()
-            .codec_for_wire(WireProtocol::V2)
+            .profile_for_wire(WireProtocol::V2)
+            .codec()
             .decode_can(&tv8)
             .unwrap();
         assert_eq!(json["protocol"], "v2", "{robot:?}");
@@ -345,7 +352,7 @@ fn the_frame_describer_follows_the_protocol_the_state_reports() {
             serde_json::json!(["emergency_stop"]),
             "{robot:?}"
         );
-        let v1 = robot.entry().codec_for_wire(WireProtocol::V1);
+        let v1 = robot.entry().profile_for_wire(WireProtocol::V1).codec();
         assert_eq!(v1.robot(), robot);
         assert!(
             v1.decode_can(&tv8).is_err(),
@@ -355,9 +362,261 @@ fn the_frame_describer_follows_the_protocol_the_state_reports() {
     // Still detecting: the robot's default protocol (SCOUT MINI: V1).
     let detecting = RobotKind::ScoutMini
         .entry()
-        .codec_for_wire(WireProtocol::DETECTING);
+        .profile_for_wire(WireProtocol::DETECTING)
+        .codec();
     assert!(detecting.decode_can(&tv8).is_err());
     // A robot with one protocol of its own keeps it.
-    let titan = RobotKind::Titan.entry().codec_for_wire(WireProtocol::V2);
+    let titan = RobotKind::Titan
+        .entry()
+        .profile_for_wire(WireProtocol::V2)
+        .codec();
     assert_eq!(titan.robot(), RobotKind::Titan);
+}
+
+// The profiles: the manuals' choices, a `[profile]` table over them, and what is refused.
+#[test]
+#[allow(clippy::approx_constant)] // 0.5235 is the manual's value
+fn defaults_are_the_manuals_choices() {
+    let t = TitanProfile::default();
+    assert!(!t.steering_feedback_left_positive);
+    assert_eq!((t.max_linear_mps, t.max_steer_rad), (3.0, 0.367));
+    let s = V1Profile::default();
+    assert_eq!(s.angular_full_scale_rad_s, 0.5235);
+    assert_eq!(s.linear_full_scale_mps, 5.0);
+    let x = XbotProfile::default();
+    assert!(x.yaw_rate_left_positive && !x.lateral_left_positive);
+    assert!(!x.bcd_currents_and_ranges);
+    assert_eq!(x.encoder_counts_per_rev, 8000.0);
+    assert_eq!(x.wheel_separation_m, None);
+    assert!(x.heartbeat_hz > 5.0 && x.heartbeat_hz < 10.0);
+}
+
+#[test]
+#[allow(clippy::approx_constant)] // 0.5235 is the sources' value
+fn scout_and_bunker_speak_v1_with_their_own_scales_and_hunter_does_not() {
+    for (robot, scales) in [
+        (RobotKind::ScoutMini, (5.0, 0.5235)),
+        (RobotKind::Scout, (1.5, 0.5235)),
+        (RobotKind::Bunker, (3.0, 2.5235)),
+    ] {
+        assert!(robot.protocols().contains(&Protocol::V1), "{robot}");
+        let profile = robot.entry().default_profile(Some(Protocol::V1)).unwrap();
+        assert_eq!(profile.robot(), robot);
+        assert_eq!(profile.protocol(), Some(Protocol::V1));
+        let Some(p) = profile.get::<V1Profile>() else {
+            panic!("{robot}: {profile:?}");
+        };
+        assert_eq!(
+            (p.linear_full_scale_mps, p.angular_full_scale_rad_s),
+            scales
+        );
+        assert_eq!(profile.validate(), Ok(()), "{robot}");
+    }
+    // Their default protocol stays what it was: SCOUT MINI V1, SCOUT and BUNKER V2.
+    assert_eq!(
+        RobotKind::Scout.entry().defaults().protocol(),
+        Some(Protocol::V2)
+    );
+    assert_eq!(
+        RobotKind::Hunter
+            .entry()
+            .default_profile(Some(Protocol::V1)),
+        Err(ProtocolError::NotSpoken {
+            robot: RobotKind::Hunter,
+            protocol: "v1"
+        })
+    );
+    // A `[profile]` table of a V1 BUNKER starts from the BUNKER's values.
+    let table: toml::Table = toml::from_str("max_linear_mps = 1.0").unwrap();
+    let Some(p) = RobotKind::Bunker
+        .entry()
+        .profile_from_table(Some(Protocol::V1), &table)
+        .unwrap()
+        .get::<V1Profile>()
+        .cloned()
+    else {
+        panic!("not V1");
+    };
+    assert_eq!((p.model, p.max_linear_mps), (V1Model::Bunker, 1.0));
+    assert_eq!(p.linear_full_scale_mps, 3.0);
+    let scout: toml::Table = toml::from_str("model = \"scout\"").unwrap();
+    assert_eq!(
+        RobotKind::Bunker
+            .entry()
+            .profile_from_table(Some(Protocol::V1), &scout),
+        Err(ProfileTableError::WrongModel {
+            owner: RobotKind::Scout,
+            robot: RobotKind::Bunker
+        })
+    );
+}
+
+#[test]
+fn a_profile_flips_one_parameter_from_toml() {
+    let t: TitanProfile = toml::from_str("steering_feedback_left_positive = true").unwrap();
+    assert!(t.steering_feedback_left_positive);
+    assert_eq!(t.max_linear_mps, 3.0);
+    let err = toml::from_str::<TitanProfile>("max_speed = 4").unwrap_err();
+    assert!(err.to_string().contains("unknown field"), "{err}");
+}
+
+#[test]
+fn the_defaults_validate_and_nonsense_does_not() {
+    for r in RobotKind::ALL {
+        assert_eq!(r.entry().defaults().validate(), Ok(()), "{r}");
+    }
+    let zero = V1Profile {
+        angular_full_scale_rad_s: 0.0,
+        ..V1Profile::default()
+    };
+    assert_eq!(
+        zero.validate(),
+        Err(ProfileError::NotPositive {
+            name: "angular_full_scale_rad_s",
+            value: 0.0
+        })
+    );
+    assert_eq!(
+        zero.validate().unwrap_err().to_string(),
+        "angular_full_scale_rad_s must be above zero (is 0)"
+    );
+    // Nonsense is refused, and the refusal names the parameter.
+    for (nonsense, name) in [
+        (
+            Profile::from(XbotProfile {
+                heartbeat_hz: 12.0,
+                ..XbotProfile::default()
+            }),
+            "heartbeat_hz",
+        ),
+        (
+            Profile::from(TitanProfile {
+                track_m: f64::NAN,
+                ..TitanProfile::default()
+            }),
+            "track_m",
+        ),
+        (
+            Profile::from(TitanProfile {
+                heartbeat_period_ms: 600,
+                ..TitanProfile::default()
+            }),
+            "heartbeat_period_ms",
+        ),
+    ] {
+        let refusal = nonsense.validate().unwrap_err().to_string();
+        assert!(refusal.contains(name), "{refusal}");
+    }
+}
+
+#[test]
+fn every_id_is_one_robot_and_back() {
+    for id in 0..=u8::MAX {
+        if let Some(kind) = RobotKind::from_id(id) {
+            assert_eq!(kind.id(), id);
+        }
+    }
+    assert_eq!(RobotKind::from_id(0), None);
+    assert_eq!(RobotKind::from_id(5), Some(RobotKind::Hunter));
+}
+
+#[test]
+fn robot_names_parse() {
+    for r in RobotKind::ALL {
+        assert_eq!(r.name().parse::<RobotKind>(), Ok(r));
+        assert_eq!(r.entry().defaults().robot(), r);
+        assert_eq!(RobotKind::from_id(r.id()), Some(r));
+    }
+    let v2 = RobotKind::ScoutMini
+        .entry()
+        .default_profile(Some(Protocol::V2))
+        .unwrap();
+    assert_eq!(
+        (v2.robot(), v2.protocol()),
+        (RobotKind::ScoutMini, Some(Protocol::V2))
+    );
+    let err = RobotKind::Hunter
+        .entry()
+        .default_profile(Some(Protocol::V1))
+        .unwrap_err();
+    assert_eq!(err.to_string(), "hunter does not speak protocol v1 here");
+    assert!("v3".parse::<Protocol>().is_err());
+    let omni: toml::Table = toml::from_str("model = \"scout-mini-omni\"").unwrap();
+    let Some(p) = RobotKind::ScoutMini
+        .entry()
+        .profile_from_table(Some(Protocol::V2), &omni)
+        .unwrap()
+        .get::<V2Profile>()
+        .cloned()
+    else {
+        panic!("not V2")
+    };
+    assert_eq!(p.max_lateral_mps, 2.0);
+    let err = RobotKind::Hunter
+        .entry()
+        .profile_from_table(None, &omni)
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "profile.model: a scout-mini model is not a hunter"
+    );
+    assert!("husky".parse::<RobotKind>().is_err());
+}
+
+#[test]
+fn xbot_travel_per_count_follows_the_profile() {
+    let x = XbotProfile::default();
+    assert!((x.metres_per_count() - std::f64::consts::PI * 0.2 / 8000.0).abs() < 1e-12);
+}
+
+#[test]
+fn a_description_gives_the_profile_of_its_robot_in_the_protocol_in_use() {
+    for kind in RobotKind::ALL {
+        let d = describe(&kind.entry().defaults());
+        let profile = profile_for_description(&d).expect("a profile");
+        assert_eq!((profile.robot(), profile.codec().robot()), (kind, kind));
+    }
+    // A SCOUT MINI described in V1, then (detection decided) in V2 with its omni model.
+    let v1 = describe(&RobotKind::ScoutMini.entry().defaults());
+    let profile = profile_for_description(&v1).expect("a profile");
+    assert_eq!(profile.protocol(), Some(Protocol::V1));
+    let mut v2 = describe(&Profile::from(V2Profile::for_model(V2Model::ScoutMiniOmni)));
+    v2.protocol = WireProtocol::V2;
+    let profile = profile_for_description(&v2).expect("a profile");
+    assert_eq!(
+        (profile.get::<V2Profile>().map(|p| p.model), profile.robot()),
+        (Some(V2Model::ScoutMiniOmni), RobotKind::ScoutMini)
+    );
+    // A model of another robot is not taken: the kind's own V2 profile is.
+    let mut hunter = describe(&RobotKind::Hunter.entry().defaults());
+    hunter.set_model("scout-mini-omni");
+    let profile = profile_for_description(&hunter).expect("a profile");
+    assert_eq!(
+        profile.get::<V2Profile>().map(|p| p.model),
+        Some(V2Model::Hunter)
+    );
+    assert!(profile_for_description(&RobotDescription::default()).is_none());
+}
+
+/// `chassis encode --robot KIND velocity --vx 0.3 --wz 0`: each family's motion frame, as text.
+#[test]
+fn a_forward_command_becomes_each_familys_motion_frame() {
+    let forward = |kind: RobotKind| {
+        let command = crate::Command::Velocity {
+            linear_x_mps: 0.3,
+            linear_y_mps: 0.0,
+            turn: crate::Turn::YawRate(0.0),
+        };
+        let (lines, clamp_flags) = kind.entry().defaults().command_lines(&command).unwrap();
+        assert_eq!(clamp_flags, 0);
+        lines
+    };
+    assert_eq!(forward(RobotKind::Titan), ["111#012C000000000000"]);
+    // AgileX V1: the frame counter (b6) starts at 0.
+    assert_eq!(forward(RobotKind::ScoutMini), ["130#0100060000000040"]);
+    assert_eq!(forward(RobotKind::Hunter), ["111#012C000000000000"]);
+    assert_eq!(
+        forward(RobotKind::Xbot),
+        ["AA 55 0D 03 9A 99 99 3E 00 00 00 00 00 00 00 00 AA"]
+    );
 }

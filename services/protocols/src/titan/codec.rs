@@ -14,7 +14,7 @@ use crate::can::CanFrame;
 use crate::error::{
     DecodeError, EncodeError, check_range, check_u8, to_i8, to_i16, to_i32, to_u8, to_u16,
 };
-use crate::profile::TitanProfile;
+use crate::titan::TitanProfile;
 use crate::wire::{first_byte, index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
 /// Frame identifiers.

@@ -8,7 +8,7 @@ use super::codec::{
 use super::kinematics::{steer_command, twist_to_command};
 use crate::RobotKind;
 use crate::command::{Command, CommandError, Planned, Turn};
-use crate::profile::TitanProfile;
+use crate::titan::TitanProfile;
 
 /// The TITAN 0x441 code for a normalized [`FaultClear`] code.
 pub fn clear_code_for(which: u8) -> Option<u8> {

@@ -25,9 +25,9 @@ use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
     flags_of, requested_turn,
 };
-use crate::profile::TitanProfile;
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
+use crate::titan::TitanProfile;
 
 /// Speed below which the robot counts as standing still, m/s.
 const STANDING_MPS: f64 = 0.01;

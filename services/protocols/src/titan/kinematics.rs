@@ -7,7 +7,7 @@
 
 use chassis_interfaces::ClampFlags;
 
-use crate::profile::TitanProfile;
+use crate::titan::TitanProfile;
 
 /// A speed and steering angle ready for 0x111, with what was clamped on the way.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -3,12 +3,15 @@
 mod codec;
 mod commands;
 mod driver;
+mod family;
 pub mod kinematics;
+mod profile;
 mod sim;
 
 pub use codec::*;
 pub use commands::{clear_code_for, frames_for, motion_command};
 pub use driver::{TitanDriver, normalize_faults};
+pub use profile::TitanProfile;
 pub use sim::TitanSim;
 
 #[cfg(test)]

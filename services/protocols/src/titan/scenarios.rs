@@ -21,8 +21,8 @@ use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, wrap_angle};
 use crate::firmware::{Firmware, Injection, SimTruth};
 use crate::pair::{Pair, notices};
-use crate::profile::TitanProfile;
 use crate::time::Timestamp;
+use crate::titan::TitanProfile;
 
 type TitanPair = Pair<TitanDriver, TitanSim>;
 

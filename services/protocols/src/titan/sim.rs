@@ -21,9 +21,9 @@ use crate::firmware::{
     Mode, Pose, SimTruth, clamp_i16, decode_can, first_order_lag, non_negative, state_of_charge,
     substeps,
 };
-use crate::profile::TitanProfile;
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
+use crate::titan::TitanProfile;
 
 /// The last accepted motion command.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

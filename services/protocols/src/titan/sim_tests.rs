@@ -10,10 +10,10 @@ use super::TitanSim;
 use crate::can::CanFrame;
 use crate::driver::Rx;
 use crate::firmware::{Firmware, Injection};
-use crate::profile::TitanProfile;
 use crate::sim_bench::BenchFirmware;
 use crate::time::Timestamp;
 use crate::titan::BmsData;
+use crate::titan::TitanProfile;
 use crate::titan::{
     ClearFault, Frame, ModeCommand, MotionCommand, ParkingBrake, Switch, SystemStatus, clear_code,
     decode, fault, id, mode,

@@ -3,7 +3,7 @@
 use proptest::prelude::*;
 
 use super::*;
-use crate::profile::TitanProfile;
+use crate::titan::TitanProfile;
 use crate::{CanFrame, DecodeError, Direction};
 
 fn p() -> TitanProfile {

@@ -23,8 +23,8 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use crate::Direction;
 use crate::error::{DecodeError, EncodeError, to_i16, to_wire};
-use crate::profile::XbotProfile;
 use crate::wire::{read_bool, read_prefix, si, try_map};
+use crate::xbot::XbotProfile;
 
 /// The two bytes that start every frame.
 pub const HEADER: [u8; 2] = [0xAA, 0x55];

@@ -5,7 +5,7 @@ use chassis_interfaces::ClampFlags;
 use super::codec::{Frame, LiftCommand, PowerCommand, ServoCommand, VelocityCommand};
 use crate::RobotKind;
 use crate::command::{Command, CommandError, Planned, Turn};
-use crate::profile::XbotProfile;
+use crate::xbot::XbotProfile;
 
 /// A velocity within the profile's limits: speeds above `max_linear_mps` (and yaw rates above
 /// `max_angular_rad_s`) are clamped, speeds below the board's `min_linear_mps` are sent as 0,

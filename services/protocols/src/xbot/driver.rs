@@ -15,9 +15,9 @@ use crate::command::{Command, Turn};
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, Rx, Unwrap16, WireItem, wrap_angle,
 };
-use crate::profile::XbotProfile;
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
+use crate::xbot::XbotProfile;
 
 /// The manual's bound on the 0x03 rate ("more than 5 Hz and less than 10 Hz"): at most this many
 /// velocity frames in any one-second window, heartbeats and command changes together.

@@ -9,8 +9,8 @@ use proptest::prelude::*;
 use super::*;
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
-use crate::profile::XbotProfile;
 use crate::time::Timestamp;
+use crate::xbot::XbotProfile;
 use crate::xbot::test_support::{arbitrary_reads, close, hex, max_per_second, ms, p, twist};
 use crate::xbot::{Frame, SensorReport, StreamParser, VelocityCommand, checksum};
 

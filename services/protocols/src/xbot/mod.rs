@@ -8,12 +8,15 @@
 mod codec;
 mod commands;
 mod driver;
+mod family;
+mod profile;
 mod sim;
 mod stream;
 
 pub use codec::*;
 pub use commands::{frames_for, velocity_command};
 pub use driver::{MAX_VELOCITY_FRAMES_PER_S, XbotDriver};
+pub use profile::XbotProfile;
 pub use sim::XbotSim;
 pub use stream::*;
 

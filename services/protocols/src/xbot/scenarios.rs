@@ -14,8 +14,8 @@ use crate::command::Command;
 use crate::driver::{Driver, DriverConfig, DriverEvent, Level, WireItem};
 use crate::firmware::{Firmware, Injection};
 use crate::pair::Pair;
-use crate::profile::XbotProfile;
 use crate::time::Timestamp;
+use crate::xbot::XbotProfile;
 use crate::xbot::test_support::{close, max_per_second, ms, p, twist};
 
 type XbotPair = Pair<XbotDriver, XbotSim>;

@@ -14,9 +14,9 @@ use crate::firmware::{
     Applied, BatteryModel, Chassis, Firmware, Injectable, InjectedCounts, Injection, Pose,
     SimTruth, first_order_lag, non_negative, state_of_charge, substeps,
 };
-use crate::profile::XbotProfile;
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
+use crate::xbot::XbotProfile;
 
 /// The simulated XBot board: the chassis side of the RS232 link, built on the XBot codec.
 ///

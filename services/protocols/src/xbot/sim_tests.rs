@@ -8,9 +8,9 @@ use proptest::prelude::*;
 use super::XbotSim;
 use crate::driver::Rx;
 use crate::firmware::{Firmware, Injection};
-use crate::profile::XbotProfile;
 use crate::sim_bench::BenchFirmware;
 use crate::time::Timestamp;
+use crate::xbot::XbotProfile;
 use crate::xbot::test_support::{arbitrary_reads, close, ms, p};
 use crate::xbot::{
     Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, StreamParser, VelocityCommand,

@@ -23,7 +23,7 @@ use super::codec::{
     id, payload_len,
 };
 use crate::DecodeError;
-use crate::profile::XbotProfile;
+use crate::xbot::XbotProfile;
 
 /// Most bytes a [`StreamParser`] holds (about 55 sensor reports, 0.35 s at 115200 baud).
 pub const STREAM_CAPACITY: usize = 4096;

@@ -5,8 +5,8 @@ use std::time::Duration;
 use chassis_interfaces::BodyVelocity;
 use proptest::prelude::*;
 
-use crate::profile::XbotProfile;
 use crate::time::Timestamp;
+use crate::xbot::XbotProfile;
 
 pub(crate) fn ms(v: u64) -> Duration {
     Duration::from_millis(v)

@@ -6,7 +6,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use proptest::prelude::*;
 
 use super::*;
-use crate::profile::XbotProfile;
+use crate::xbot::XbotProfile;
 use crate::xbot::test_support::{hex, p};
 use crate::{DecodeError, Direction, EncodeError};
 

@@ -7,11 +7,11 @@
 use proptest::prelude::*;
 
 use super::*;
-use crate::profile::ScoutMiniProfile;
+use crate::agilex_v1::V1Profile;
 use crate::{CanFrame, DecodeError, Direction, EncodeError};
 
-fn p() -> ScoutMiniProfile {
-    ScoutMiniProfile::default()
+fn p() -> V1Profile {
+    V1Profile::default()
 }
 
 fn frame(text: &str) -> CanFrame {
@@ -90,7 +90,7 @@ fn manual_example_rotate_ten_percent_of_full_scale_round_trips() {
     // ⚠ 10 % of the table's 0.5235 rad/s (the default profile).
     assert_close(m.angular_radps, 0.05235);
     // The example's own reading: 10 % = 0.07853 rad/s, a full scale of 0.7853 rad/s.
-    let example_reading = ScoutMiniProfile {
+    let example_reading = V1Profile {
         angular_full_scale_rad_s: 0.7853,
         ..p()
     };
@@ -521,7 +521,7 @@ fn encoding_refuses_values_the_wire_cannot_carry() {
         })
         .is_err()
     );
-    let zero_scale = ScoutMiniProfile {
+    let zero_scale = V1Profile {
         linear_full_scale_mps: 0.0,
         ..p()
     };
@@ -684,20 +684,20 @@ fn wire_layouts_have_their_documented_sizes() {
 // Properties.
 
 /// The three readings of each full scale (PROTOCOLS.md §2).
-fn arb_profile() -> impl Strategy<Value = ScoutMiniProfile> {
+fn arb_profile() -> impl Strategy<Value = V1Profile> {
     (
         prop::sample::select(vec![5.0, 3.0]),
         prop::sample::select(vec![0.5235, 0.7853, 2.5235]),
     )
-        .prop_map(|(linear, angular)| ScoutMiniProfile {
+        .prop_map(|(linear, angular)| V1Profile {
             linear_full_scale_mps: linear,
             angular_full_scale_rad_s: angular,
-            ..ScoutMiniProfile::default()
+            ..V1Profile::default()
         })
 }
 
 /// Any frame the wire can carry, with values on the wire's grid.
-fn arb_frame(profile: ScoutMiniProfile) -> impl Strategy<Value = Frame> {
+fn arb_frame(profile: V1Profile) -> impl Strategy<Value = Frame> {
     let lights = (any::<bool>(), 0u8..=3, 0u8..=100).prop_map(|(e, m, b)| Lights {
         control_enabled: e,
         front_mode: m,
@@ -747,7 +747,7 @@ fn arb_frame(profile: ScoutMiniProfile) -> impl Strategy<Value = Frame> {
     ]
 }
 
-fn arb_profile_and_frame() -> impl Strategy<Value = (ScoutMiniProfile, Frame)> {
+fn arb_profile_and_frame() -> impl Strategy<Value = (V1Profile, Frame)> {
     arb_profile().prop_flat_map(|profile| (Just(profile.clone()), arb_frame(profile)))
 }
 

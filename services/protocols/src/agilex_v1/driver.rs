@@ -1,6 +1,6 @@
 //! The SCOUT MINI driver: a pure state machine over the SCOUT MINI codec.
 //!
-//! Everything about its behaviour is documented on [`ScoutMiniDriver`].
+//! Everything about its behaviour is documented on [`V1Driver`].
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -12,13 +12,13 @@ use chassis_interfaces::{
 use super::codec::{self, Frame, Lights, MotionCommand, body, clear_code, fault, mode};
 use super::commands::{frames_for, velocity_command};
 use super::kinematics::SkidCommand;
+use crate::agilex_v1::V1Profile;
 use crate::command::Command;
 use crate::driver::{
     CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx,
     WireItem, flags_of, requested_turn,
 };
-use crate::profile::ScoutMiniProfile;
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
 
 /// What the driver wants of the front light (0x140).
@@ -26,7 +26,7 @@ use crate::time::{Timestamp, earliest};
 enum LightRequest {
     /// Never asked for: no 0x140 is ever sent.
     Untouched,
-    /// Light control by command: this 0x140 is repeated every [`ScoutMiniDriver::LIGHT_PERIOD`].
+    /// Light control by command: this 0x140 is repeated every [`V1Driver::LIGHT_PERIOD`].
     Hold(Lights),
     /// Hand the light back to the chassis: a 0x140 with the enable flag clear is repeated until
     /// 0x141 reports light control off (`sent` once at least one went out).
@@ -96,8 +96,8 @@ enum LightRequest {
 /// faults set and cleared, the chassis turning silent and talking again, and the bus going down
 /// and coming back.
 #[derive(Debug)]
-pub struct ScoutMiniDriver {
-    profile: ScoutMiniProfile,
+pub struct V1Driver {
+    profile: V1Profile,
     core: DriverCore,
     pose: PoseIntegrator,
     /// The latest request, limited and quantised.
@@ -124,13 +124,13 @@ const STANDING: SkidCommand = SkidCommand {
     clamp_flags: 0,
 };
 
-impl ScoutMiniDriver {
+impl V1Driver {
     /// Period of the light command while it is used (the manual's 25 ms).
     pub const LIGHT_PERIOD: Duration = Duration::from_millis(25);
 
     /// A driver starting at `now`: the first 0x130 is due at once (mode 0x01 with
     /// `config.take_control`, else 0x00).
-    pub fn new(profile: ScoutMiniProfile, config: DriverConfig, now: Timestamp) -> Self {
+    pub fn new(profile: V1Profile, config: DriverConfig, now: Timestamp) -> Self {
         let mut core = DriverCore::new(
             profile.model.robot().id(),
             Duration::from_millis(profile.heartbeat_period_ms),
@@ -157,7 +157,7 @@ impl ScoutMiniDriver {
         }
     }
 
-    pub fn profile(&self) -> &ScoutMiniProfile {
+    pub fn profile(&self) -> &V1Profile {
         &self.profile
     }
 
@@ -430,7 +430,7 @@ pub fn normalize_faults(word: u16) -> u64 {
     flags_of(word, &MAP)
 }
 
-impl Driver for ScoutMiniDriver {
+impl Driver for V1Driver {
     fn robot(&self) -> RobotKind {
         self.profile.model.robot()
     }

@@ -10,7 +10,7 @@
 use chassis_interfaces::ClampFlags;
 
 use super::codec::{MotionCommand, quantise_percent};
-use crate::profile::ScoutMiniProfile;
+use crate::agilex_v1::V1Profile;
 
 /// A speed and yaw rate as sent in 0x130, with what was clamped or rounded on the way.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -35,12 +35,12 @@ impl SkidCommand {
 }
 
 /// Largest linear speed the driver commands: the profile's limit, capped by the full scale.
-pub fn linear_limit_mps(profile: &ScoutMiniProfile) -> f64 {
+pub fn linear_limit_mps(profile: &V1Profile) -> f64 {
     profile.max_linear_mps.min(profile.linear_full_scale_mps)
 }
 
 /// Largest yaw rate the driver commands: the profile's limit, capped by the ⚠ full scale.
-pub fn angular_limit_radps(profile: &ScoutMiniProfile) -> f64 {
+pub fn angular_limit_radps(profile: &V1Profile) -> f64 {
     profile
         .max_angular_rad_s
         .min(profile.angular_full_scale_rad_s)
@@ -50,11 +50,7 @@ pub fn angular_limit_radps(profile: &ScoutMiniProfile) -> f64 {
 /// and rounds it to whole percents ([`ClampFlags::QUANTISED`] when that changed it by more than
 /// 1e-9). The skid steer turns on the spot, so every direction is achievable. Non-finite values
 /// (which the mux never passes on) are sent as 0.
-pub fn twist_to_command(
-    linear_mps: f64,
-    angular_radps: f64,
-    profile: &ScoutMiniProfile,
-) -> SkidCommand {
+pub fn twist_to_command(linear_mps: f64, angular_radps: f64, profile: &V1Profile) -> SkidCommand {
     let mut flags = 0;
     let mut limit = |value: f64, max: f64, flag: u32| {
         if value.abs() > max {
@@ -91,7 +87,7 @@ pub fn twist_to_command(
 }
 
 /// Left and right side speeds, m/s, of a twist (ISO axes: a left turn speeds up the right side).
-pub fn side_speeds(linear_mps: f64, angular_radps: f64, profile: &ScoutMiniProfile) -> (f64, f64) {
+pub fn side_speeds(linear_mps: f64, angular_radps: f64, profile: &V1Profile) -> (f64, f64) {
     let half_track = profile.track_m / 2.0;
     (
         linear_mps - angular_radps * half_track,
@@ -100,11 +96,7 @@ pub fn side_speeds(linear_mps: f64, angular_radps: f64, profile: &ScoutMiniProfi
 }
 
 /// The twist (v, ω) of left and right side speeds, m/s: the inverse of [`side_speeds`].
-pub fn twist_from_side_speeds(
-    left_mps: f64,
-    right_mps: f64,
-    profile: &ScoutMiniProfile,
-) -> (f64, f64) {
+pub fn twist_from_side_speeds(left_mps: f64, right_mps: f64, profile: &V1Profile) -> (f64, f64) {
     (
         (left_mps + right_mps) / 2.0,
         (right_mps - left_mps) / profile.track_m,
@@ -115,8 +107,8 @@ pub fn twist_from_side_speeds(
 mod tests {
     use super::*;
 
-    fn p() -> ScoutMiniProfile {
-        ScoutMiniProfile::default()
+    fn p() -> V1Profile {
+        V1Profile::default()
     }
 
     #[test]
@@ -149,7 +141,7 @@ mod tests {
             ClampFlags::LINEAR_LIMIT | ClampFlags::ANGULAR_LIMIT
         );
         // A profile limit below the full scale wins.
-        let slow = ScoutMiniProfile {
+        let slow = V1Profile {
             max_linear_mps: 1.0,
             ..p()
         };

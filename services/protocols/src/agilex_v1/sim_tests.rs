@@ -9,16 +9,16 @@ use std::time::Duration;
 use chassis_interfaces::{ControlMode, FaultFlags};
 use proptest::prelude::*;
 
-use super::ScoutMiniSim;
+use super::V1Sim;
 use crate::DecodeError;
-use crate::can::CanFrame;
-use crate::driver::Rx;
-use crate::firmware::{Firmware, Injection};
-use crate::profile::ScoutMiniProfile;
-use crate::scout_mini::{
+use crate::agilex_v1::V1Profile;
+use crate::agilex_v1::{
     Decoded, Frame, Lights, MotionCommand, MotionFeedback, MotorFeedback, SystemStatus, body,
     checksum, clear_code, decode, fault, id, light_mode, mode,
 };
+use crate::can::CanFrame;
+use crate::driver::Rx;
+use crate::firmware::{Firmware, Injection};
 use crate::sim_bench::BenchFirmware;
 use crate::time::Timestamp;
 
@@ -47,15 +47,15 @@ fn corrupted(frame: &CanFrame) -> CanFrame {
 }
 
 /// The firmware on simulated time, with an optional 20 ms 0x130 heartbeat from "the computer".
-type Bench = crate::sim_bench::Bench<ScoutMiniSim>;
+type Bench = crate::sim_bench::Bench<V1Sim>;
 
-impl BenchFirmware for ScoutMiniSim {
+impl BenchFirmware for V1Sim {
     type Item = CanFrame;
     type Command = MotionCommand;
-    type Profile = ScoutMiniProfile;
+    type Profile = V1Profile;
     const HEARTBEAT_PERIOD: Duration = Duration::from_millis(20);
 
-    fn bench_profile(&self) -> &ScoutMiniProfile {
+    fn bench_profile(&self) -> &V1Profile {
         self.profile()
     }
 
@@ -66,7 +66,7 @@ impl BenchFirmware for ScoutMiniSim {
 
 impl Bench {
     fn new() -> Self {
-        Self::with(ScoutMiniSim::new(ScoutMiniProfile::default(), T0), T0)
+        Self::with(V1Sim::new(V1Profile::default(), T0), T0)
     }
 
     /// Driving at `linear_mps` for `warm_up`, 0x130 every 20 ms.
@@ -257,7 +257,7 @@ fn speed_follows_a_first_order_response_and_the_pose_integrates() {
     b.run_for(ms(4000));
     let t = b.sim.truth();
     assert!(t.linear_mps.abs() < 1e-3 && (t.angular_radps - 0.26175).abs() < 1e-4);
-    let side = 0.26175 * 0.225 / (std::f64::consts::TAU * ScoutMiniSim::WHEEL_RADIUS_M) * 60.0;
+    let side = 0.26175 * 0.225 / (std::f64::consts::TAU * V1Sim::WHEEL_RADIUS_M) * 60.0;
     assert_eq!(b.motor(1).rpm, -side.round());
     assert_eq!(b.motor(2).rpm, side.round());
     assert_eq!(b.motor(3).rpm, -side.round());
@@ -319,7 +319,7 @@ fn a_bad_checksum_is_dropped_and_sets_the_checksum_fault_for_500_ms() {
 
     // The hold is an option.
     let mut b = Bench::with(
-        ScoutMiniSim::new(ScoutMiniProfile::default(), T0).with_checksum_fault_hold(ms(50)),
+        V1Sim::new(V1Profile::default(), T0).with_checksum_fault_hold(ms(50)),
         T0,
     );
     let bad = corrupted(&b.encode(Frame::MotionCommand(drive(0.0, 0.0))));
@@ -376,7 +376,7 @@ fn a_reboot_goes_quiet_for_300_ms_then_powers_up_with_every_count_at_zero() {
     assert!(!b.sim.is_booting());
     b.run_for(ms(19));
     let first = b.sent.iter().find(|(t, _)| *t > reboot).unwrap().0;
-    assert_eq!(first, reboot + ScoutMiniSim::DEFAULT_BOOT_TIME);
+    assert_eq!(first, reboot + V1Sim::DEFAULT_BOOT_TIME);
     for frame_id in [0x151, 0x131, 0x200, 0x201, 0x202, 0x203, 0x141] {
         let after: Vec<_> = b
             .decoded(frame_id)
@@ -827,7 +827,7 @@ fn a_silence_injection_mutes_the_chassis_for_its_duration() {
 
 #[test]
 fn a_late_call_skips_missed_slots_without_shifting_the_grid() {
-    let mut sim = ScoutMiniSim::new(ScoutMiniProfile::default(), T0);
+    let mut sim = V1Sim::new(V1Profile::default(), T0);
     let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
     assert_eq!(burst, 7, "one slot, no catch-up burst");
     assert_eq!(next, Some(T0 + ms(1240)));
@@ -846,7 +846,7 @@ fn the_battery_drains_with_the_current_and_its_voltage_dips_under_load() {
     let load = b.status().battery_voltage_v;
     // 21 + 8.2 · 0.937 − 0.03 · 5.6 = 28.51 V.
     assert_eq!((idle, load), (29.2, 28.5));
-    let sim = ScoutMiniSim::new(ScoutMiniProfile::default(), T0).with_soc_pct(5.0);
+    let sim = V1Sim::new(V1Profile::default(), T0).with_soc_pct(5.0);
     assert_ne!(
         sim.truth().fault_flags & FaultFlags::BATTERY_UNDER_VOLTAGE,
         0
@@ -855,14 +855,11 @@ fn the_battery_drains_with_the_current_and_its_voltage_dips_under_load() {
 
 #[test]
 fn the_true_full_scale_is_the_profile_the_firmware_is_built_with() {
-    let example = ScoutMiniProfile {
+    let example = V1Profile {
         angular_full_scale_rad_s: 0.7853,
-        ..ScoutMiniProfile::default()
+        ..V1Profile::default()
     };
-    let mut b = Bench::with(
-        ScoutMiniSim::new(example, T0).with_speed_time_constant_s(0.0),
-        T0,
-    );
+    let mut b = Bench::with(V1Sim::new(example, T0).with_speed_time_constant_s(0.0), T0);
     // The manual's second example frame: 10 % of the angular full scale.
     b.send_raw(CanFrame::from_candump("130#0100000A00000044").unwrap());
     b.run_for(ms(20));
@@ -888,7 +885,7 @@ proptest! {
         frames in proptest::collection::vec(arbitrary_frame(), 1..60),
         injections in proptest::collection::vec((0u8..8, any::<u8>()), 0..6),
     ) {
-        let mut sim = ScoutMiniSim::new(ScoutMiniProfile::default(), T0);
+        let mut sim = V1Sim::new(V1Profile::default(), T0);
         let mut now = T0;
         for (i, (extended, frame_id, mut data, gap_ms)) in frames.into_iter().enumerate() {
             let arrival = now + Duration::from_millis(gap_ms);

@@ -1,6 +1,6 @@
 //! The simulated SCOUT MINI firmware: the chassis side of the wire, built on the SCOUT MINI codec.
 //!
-//! Everything about its behaviour is documented on [`ScoutMiniSim`].
+//! Everything about its behaviour is documented on [`V1Sim`].
 
 use std::time::Duration;
 
@@ -13,14 +13,14 @@ use super::codec::{
 use super::driver::{body_flags, normalize_faults};
 use super::kinematics::side_speeds;
 use crate::DecodeError;
+use crate::agilex_v1::V1Profile;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
     Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, InjectedCounts, Injection,
     Pose, SimTruth, clamp_i16, first_order_lag, non_negative, state_of_charge, substeps,
 };
-use crate::profile::ScoutMiniProfile;
-use crate::registry::RobotKind;
+use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 
 /// The last obeyed motion command.
@@ -59,7 +59,7 @@ const FEEDBACK_IDS: [u16; 7] = [
 
 /// The simulated SCOUT MINI chassis: the chassis side of the wire, built on the SCOUT MINI codec.
 ///
-/// [`ScoutMiniSim`] is sans-IO like the driver: frames from the computer go in with their time
+/// [`V1Sim`] is sans-IO like the driver: frames from the computer go in with their time
 /// ([`Firmware::handle_rx`]), feedback comes out every 20 ms ([`Firmware::poll_transmit`]), and
 /// [`Firmware::poll_timeout`] names the next deadline. It never reads a clock. Every frame in
 /// either direction goes through [`decode`] / [`Frame::encode`], so the profile's ⚠ full scales
@@ -82,7 +82,7 @@ const FEEDBACK_IDS: [u16; 7] = [
 /// * **Checksums.** Every received frame's checksum is checked ([`decode`]). A frame with a wrong
 ///   one is dropped, counted ([`SimTruth::bad_checksums_received`]) and sets 0x151 b4 bit0 (CAN
 ///   command checksum error). The manual does not say when the bit clears: here it clears itself
-///   [`ScoutMiniSim::DEFAULT_CHECKSUM_FAULT_HOLD`] (500 ms) after the last bad frame, like the
+///   [`V1Sim::DEFAULT_CHECKSUM_FAULT_HOLD`] (500 ms) after the last bad frame, like the
 ///   other b4 alarms, so a host sees it in at least 25 consecutive 0x151 frames even when only
 ///   one frame was corrupt; a steady stream of bad frames keeps it set.
 /// * **Fault-clear codes** (0x130 b1) are honoured in every valid 0x130, whatever its mode byte
@@ -96,7 +96,7 @@ const FEEDBACK_IDS: [u16; 7] = [
 /// * **Malformed input** (unknown or extended ids, wrong length, undefined values, serial bytes
 ///   on this CAN robot) is counted in [`SimTruth::decode_errors`] and ignored. Valid frames that
 ///   only the chassis sends (feedback ids from another node) are counted by
-///   [`ScoutMiniSim::frames_ignored`].
+///   [`V1Sim::frames_ignored`].
 ///
 /// # Faults (0x151 b4-b5)
 ///
@@ -126,24 +126,24 @@ const FEEDBACK_IDS: [u16; 7] = [
 /// # Choices where the manual is silent
 ///
 /// * **Physics.** Linear and angular speed each follow a first-order lag toward the command with
-///   time constant [`ScoutMiniSim::DEFAULT_SPEED_TIME_CONSTANT_S`] (0.3 s); the same lag brings
+///   time constant [`V1Sim::DEFAULT_SPEED_TIME_CONSTANT_S`] (0.3 s); the same lag brings
 ///   the robot to a stop after the command timeout, an RC takeover or a mode-0x00 release. A
 ///   power cut (under-voltage, a lost motor driver, a reboot) stops it with
-///   [`ScoutMiniSim::DEFAULT_STOP_TIME_CONSTANT_S`] (0.1 s); a protection "limits the drive
-///   output, the vehicle slowly stops" with [`ScoutMiniSim::PROTECTION_STOP_TIME_CONSTANT_S`]
+///   [`V1Sim::DEFAULT_STOP_TIME_CONSTANT_S`] (0.1 s); a protection "limits the drive
+///   output, the vehicle slowly stops" with [`V1Sim::PROTECTION_STOP_TIME_CONSTANT_S`]
 ///   (1 s). The true pose integrates the speeds by the midpoint rule in 5 ms sub-steps. 0x131
 ///   reports the true body speeds rounded to the wire's 1 mm/s and 1 mrad/s, so a driver
 ///   integrating 0x131 reproduces the true pose up to its 20 ms sampling and that rounding.
 /// * **Motors** 1-4 are front-left, front-right, rear-left, rear-right (the manual's figure was
 ///   lost in the text extraction). Hub motors, so the shaft speed is the wheel's: rpm =
-///   side speed / (2π · [`ScoutMiniSim::WHEEL_RADIUS_M`] (0.0875 m)) · 60, signed positive when the
+///   side speed / (2π · [`V1Sim::WHEEL_RADIUS_M`] (0.0875 m)) · 60, signed positive when the
 ///   wheel drives the robot forward; the side speeds come from
 ///   [`super::kinematics::side_speeds`]. Current (0x200 b0-1 is unsigned: the magnitude) =
 ///   |1.2 A per m/s of wheel speed + 1.0 A per m/s² of wheel acceleration| + any extra load
-///   ([`ScoutMiniSim::set_extra_load_a`]), limited to 40 A, and zero while the drive output is
+///   ([`V1Sim::set_extra_load_a`]), limited to 40 A, and zero while the drive output is
 ///   cut. The "rms" current the alarms use is the square root of a 1 s moving mean of its square.
 ///   The driver temperature follows 25 °C + 0.1 °C/A² · I_rms² with a 60 s time constant
-///   ([`ScoutMiniSim::set_driver_temperature_c`] heats a driver at once); the motor temperature
+///   ([`V1Sim::set_driver_temperature_c`] heats a driver at once); the motor temperature
 ///   reads 25 °C + 0.6 × the driver's rise.
 /// * **Battery**: 24 V 15 Ah lithium pack (7 cells), open-circuit voltage linear from 21.0 V
 ///   (0 %) to 29.2 V (100 %, the manual's "fully recharged"), internal resistance 0.03 Ω. Pack
@@ -151,26 +151,26 @@ const FEEDBACK_IDS: [u16; 7] = [
 ///   manual's 10 km range is about 1.9 h at 1.5 m/s. 0x151 reports the voltage under load; the
 ///   alarms and the failure compare that same voltage (22.5 V ≈ 18 %, 22 V ≈ 12 % at rest).
 ///   [`Injection::Battery`] sets the SOC.
-/// * **Reboot**: for [`ScoutMiniSim::DEFAULT_BOOT_TIME`] (300 ms) the chassis sends nothing and
+/// * **Reboot**: for [`V1Sim::DEFAULT_BOOT_TIME`] (300 ms) the chassis sends nothing and
 ///   ignores every frame, and the drive output is cut. Then power-up state: command mode (or RC
 ///   with a transmitter on), no command, latched faults cleared (persisting causes latch again),
 ///   light control off, every rolling count back to 0. The true pose, the battery and the
 ///   temperatures are physical and survive; the [`SimTruth`] counters are the observer's and keep
-///   counting. [`ScoutMiniSim::new`] starts already booted (feedback at once).
+///   counting. [`V1Sim::new`] starts already booted (feedback at once).
 /// * **Injections**: `Silence(d)` transmits nothing for `d`; `Flood { frames_per_s }` adds that
 ///   many extra feedback frames per second (copies of 0x131 and 0x200, alternating, each with its
-///   id's next count; at most [`ScoutMiniSim::MAX_FLOOD_FRAMES_PER_S`]; 0 stops it);
+///   id's next count; at most [`V1Sim::MAX_FLOOD_FRAMES_PER_S`]; 0 stops it);
 ///   `BadChecksums(n)` corrupts the checksum byte (inverted) of the next `n` frames sent, flood
 ///   copies included (a second injection adds to what the first has not corrupted yet) — all
 ///   three survive a reboot. [`SimTruth::injected`] counts the corrupted, flood and garbage
 ///   frames as they leave. `Garbage(bytes)` puts frames with id
-///   [`ScoutMiniSim::GARBAGE_ID`] (0x7F0, unused by SCOUT MINI) carrying the bytes 8 at a time on
+///   [`V1Sim::GARBAGE_ID`] (0x7F0, unused by SCOUT MINI) carrying the bytes 8 at a time on
 ///   the bus at once — another node's noise, so even during silence. `Bumper`, `ObstacleAhead`
 ///   and `ObstacleBehind` return `false` (the SCOUT MINI's anti-collision tube is no switch and
 ///   it has no range sensors); so do a motor number outside 1-4 and a non-finite SOC.
 #[derive(Debug, Clone)]
-pub struct ScoutMiniSim {
-    profile: ScoutMiniProfile,
+pub struct V1Sim {
+    profile: V1Profile,
     // Options.
     speed_time_constant_s: f64,
     stop_time_constant_s: f64,
@@ -214,7 +214,7 @@ pub struct ScoutMiniSim {
     frames_ignored: u64,
 }
 
-impl ScoutMiniSim {
+impl V1Sim {
     /// Period of every feedback frame.
     pub const FEEDBACK_PERIOD: Duration = Duration::from_millis(20);
     /// Wheel radius, m (not in the manual).
@@ -269,7 +269,7 @@ impl ScoutMiniSim {
 
     /// A chassis that has just finished booting at `now`: command mode (no RC transmitter),
     /// standing, SOC 100 %.
-    pub fn new(profile: ScoutMiniProfile, now: Timestamp) -> Self {
+    pub fn new(profile: V1Profile, now: Timestamp) -> Self {
         Self {
             profile,
             speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
@@ -342,7 +342,7 @@ impl ScoutMiniSim {
         self
     }
 
-    pub fn profile(&self) -> &ScoutMiniProfile {
+    pub fn profile(&self) -> &V1Profile {
         &self.profile
     }
 
@@ -655,7 +655,7 @@ impl ScoutMiniSim {
         self.send_injected(now, frame, InjectedCounts::default());
     }
 
-    /// Like [`ScoutMiniSim::send`], for a frame that carries an injected fault (a flood's); a
+    /// Like [`V1Sim::send`], for a frame that carries an injected fault (a flood's); a
     /// pending [`Injection::BadChecksums`] corrupts it as it would any frame.
     fn send_injected(&mut self, now: Timestamp, frame: Frame, mut injected: InjectedCounts) {
         if self.is_quiet(now) {
@@ -734,7 +734,7 @@ impl ScoutMiniSim {
     }
 }
 
-impl Firmware for ScoutMiniSim {
+impl Firmware for V1Sim {
     fn robot(&self) -> RobotKind {
         self.profile.model.robot()
     }

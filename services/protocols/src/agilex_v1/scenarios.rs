@@ -1,4 +1,4 @@
-//! SCOUT MINI scenarios: [`ScoutMiniDriver`] against [`ScoutMiniSim`] through
+//! SCOUT MINI scenarios: [`V1Driver`] against [`V1Sim`] through
 //! [`crate::pair::Pair`], on simulated time. Deterministic; every number asserted is derived in
 //! the comment beside it.
 
@@ -11,17 +11,17 @@ use chassis_interfaces::{
     BodyVelocity, ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LightMode, LinkFlags,
 };
 
-use super::{Frame, Lights, MotionCommand, ScoutMiniDriver, ScoutMiniSim, decode, light_mode};
+use super::{Frame, Lights, MotionCommand, V1Driver, V1Sim, decode, light_mode};
 use crate::Direction;
+use crate::agilex_v1::V1Profile;
 use crate::can::CanFrame;
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, WireItem};
 use crate::firmware::{Firmware, Injection};
 use crate::pair::{Pair, notices};
-use crate::profile::ScoutMiniProfile;
 use crate::time::Timestamp;
 
-type ScoutPair = Pair<ScoutMiniDriver, ScoutMiniSim>;
+type ScoutPair = Pair<V1Driver, V1Sim>;
 
 const T0: Timestamp = Timestamp::from_millis(10_000);
 
@@ -34,14 +34,11 @@ fn secs(v: u64) -> Duration {
 }
 
 fn pair() -> ScoutPair {
-    pair_with(
-        ScoutMiniProfile::default(),
-        ScoutMiniSim::new(ScoutMiniProfile::default(), T0),
-    )
+    pair_with(V1Profile::default(), V1Sim::new(V1Profile::default(), T0))
 }
 
-fn pair_with(driver_profile: ScoutMiniProfile, sim: ScoutMiniSim) -> ScoutPair {
-    let driver = ScoutMiniDriver::new(driver_profile, DriverConfig::default(), T0);
+fn pair_with(driver_profile: V1Profile, sim: V1Sim) -> ScoutPair {
+    let driver = V1Driver::new(driver_profile, DriverConfig::default(), T0);
     Pair::new(driver, sim, T0)
 }
 
@@ -246,7 +243,7 @@ fn after_a_chassis_reboot_mid_drive_the_driver_has_control_within_100_ms_of_read
         reboot + Duration::from_nanos(1),
     );
     let ready = after_reboot[0].0;
-    let first = decode(&after_reboot[0].1, &ScoutMiniProfile::default()).unwrap();
+    let first = decode(&after_reboot[0].1, &V1Profile::default()).unwrap();
     let Frame::SystemStatus(status) = first.frame else {
         panic!()
     };
@@ -255,7 +252,7 @@ fn after_a_chassis_reboot_mid_drive_the_driver_has_control_within_100_ms_of_read
         (0x01, 0),
         "powered up in command mode"
     );
-    assert_eq!(ready, reboot + ScoutMiniSim::DEFAULT_BOOT_TIME);
+    assert_eq!(ready, reboot + V1Sim::DEFAULT_BOOT_TIME);
     // The heartbeat of the same 20 ms slot arrives 0.25 ms later and is obeyed.
     assert!(
         obeyed.saturating_since(ready) <= ms(100),
@@ -402,7 +399,7 @@ fn corrupt_frames_from_the_computer_are_dropped_and_raise_the_chassis_checksum_f
     p.set_command(twist(0.5, 0.0));
     p.run_for(secs(3));
     p.take_events();
-    let profile = ScoutMiniProfile::default();
+    let profile = V1Profile::default();
     // Ten 0x130 asking for 2 m/s, each with a wrong checksum, put on the wire by hand.
     for count in 0..10u8 {
         let frame = Frame::MotionCommand(MotionCommand::drive(2.0, 0.0))
@@ -565,17 +562,14 @@ fn limits_and_quantisation_reach_the_wire_and_the_echo() {
     p.run_for(secs(3));
 
     // ⚠ angular full scale: the "real" chassis here uses the manual's example reading, 0.7853.
-    let example = ScoutMiniProfile {
+    let example = V1Profile {
         angular_full_scale_rad_s: 0.7853,
         max_angular_rad_s: 0.7853,
-        ..ScoutMiniProfile::default()
+        ..V1Profile::default()
     };
     // A driver on the default (table) profile sends 0.5 rad/s as 96 %: the robot turns at
     // 0.96 · 0.7853 = 0.754 rad/s, which 0x131 reveals beside the echo's 0.503.
-    let mut wrong = pair_with(
-        ScoutMiniProfile::default(),
-        ScoutMiniSim::new(example.clone(), T0),
-    );
+    let mut wrong = pair_with(V1Profile::default(), V1Sim::new(example.clone(), T0));
     wrong.record = true;
     wrong.set_command(twist(0.0, 0.5));
     assert_eq!(commands_sent(&wrong, T0)[0].1, [1, 0, 0, 96]);
@@ -585,7 +579,7 @@ fn limits_and_quantisation_reach_the_wire_and_the_echo() {
     assert!((wrong.firmware.truth().angular_radps - 0.753_888).abs() < 1e-5);
     assert_eq!(s.motion.angular_radps, 0.754);
     // With the matching profile it sends 64 % and the robot turns at 0.5026 rad/s.
-    let mut right = pair_with(example.clone(), ScoutMiniSim::new(example, T0));
+    let mut right = pair_with(example.clone(), V1Sim::new(example, T0));
     right.record = true;
     right.set_command(twist(0.0, 0.5));
     assert_eq!(commands_sent(&right, T0)[0].1, [1, 0, 0, 64]);

@@ -12,16 +12,16 @@ use chassis_interfaces::{
 };
 use proptest::prelude::*;
 
-use super::{ScoutMiniDriver, normalize_faults};
-use crate::can::CanFrame;
-use crate::command::{Command, Turn};
-use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
-use crate::profile::ScoutMiniProfile;
-use crate::registry::RobotKind;
-use crate::scout_mini::{
+use super::{V1Driver, normalize_faults};
+use crate::agilex_v1::V1Profile;
+use crate::agilex_v1::{
     Frame, Lights, MotionCommand, MotionFeedback, MotorFeedback, SystemStatus, body, checksum,
     fault, light_mode, mode,
 };
+use crate::can::CanFrame;
+use crate::command::{Command, Turn};
+use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
+use crate::kind::RobotKind;
 use crate::time::Timestamp;
 
 const T0: Timestamp = Timestamp::from_millis(1_000);
@@ -34,12 +34,12 @@ fn at_us(us: u64) -> Timestamp {
     T0 + Duration::from_micros(us)
 }
 
-fn p() -> ScoutMiniProfile {
-    ScoutMiniProfile::default()
+fn p() -> V1Profile {
+    V1Profile::default()
 }
 
-fn driver() -> ScoutMiniDriver {
-    ScoutMiniDriver::new(p(), DriverConfig::default(), T0)
+fn driver() -> V1Driver {
+    V1Driver::new(p(), DriverConfig::default(), T0)
 }
 
 fn twist(linear_x_mps: f32, angular_z_radps: f32) -> BodyVelocity {
@@ -55,7 +55,7 @@ fn can(text: &str) -> CanFrame {
 }
 
 /// Everything the driver wants to send at `now`.
-fn drain(d: &mut ScoutMiniDriver, now: Timestamp) -> Vec<CanFrame> {
+fn drain(d: &mut V1Driver, now: Timestamp) -> Vec<CanFrame> {
     let mut out = Vec::new();
     while let Some(item) = d.poll_transmit(now) {
         let WireItem::Can(frame) = item else {
@@ -67,7 +67,7 @@ fn drain(d: &mut ScoutMiniDriver, now: Timestamp) -> Vec<CanFrame> {
 }
 
 /// Runs the driver alone from its deadlines until `until`; returns what it sent, with times.
-fn run(d: &mut ScoutMiniDriver, until: Timestamp) -> Vec<(Timestamp, CanFrame)> {
+fn run(d: &mut V1Driver, until: Timestamp) -> Vec<(Timestamp, CanFrame)> {
     let mut sent = Vec::new();
     while let Some(t) = d.poll_timeout().filter(|t| *t <= until) {
         d.handle_timeout(t);
@@ -95,7 +95,7 @@ fn chassis(frame: Frame, count: u8) -> CanFrame {
     frame.encode(count, &p()).unwrap()
 }
 
-fn feed(d: &mut ScoutMiniDriver, now: Timestamp, frame: Frame) {
+fn feed(d: &mut V1Driver, now: Timestamp, frame: Frame) {
     let f = chassis(frame, 0);
     d.handle_rx(now, Rx::Can(&f));
 }
@@ -109,11 +109,11 @@ fn status(mode: u8, word: u16) -> Frame {
     })
 }
 
-fn events(d: &mut ScoutMiniDriver) -> Vec<DriverEvent> {
+fn events(d: &mut V1Driver) -> Vec<DriverEvent> {
     std::iter::from_fn(|| d.poll_event()).collect()
 }
 
-fn notices(d: &mut ScoutMiniDriver) -> Vec<(Level, String)> {
+fn notices(d: &mut V1Driver) -> Vec<(Level, String)> {
     events(d)
         .into_iter()
         .filter_map(|e| match e {
@@ -142,7 +142,7 @@ fn the_first_heartbeat_is_the_manuals_command_mode_frame() {
         take_control: false,
         ..DriverConfig::default()
     };
-    let mut d = ScoutMiniDriver::new(p(), config, T0);
+    let mut d = V1Driver::new(p(), config, T0);
     assert_eq!(drain(&mut d, T0), vec![can("130#0000000000000039")]);
 }
 
@@ -238,12 +238,12 @@ fn limits_and_quantisation_are_echoed_with_their_flags() {
     assert_eq!(echo.clamp_flags, ClampFlags::QUANTISED);
 
     // The ⚠ full scale changes what is sent: 0.5 rad/s is 64 % of the example's 0.7853 rad/s.
-    let example = ScoutMiniProfile {
+    let example = V1Profile {
         angular_full_scale_rad_s: 0.7853,
         max_angular_rad_s: 0.7853,
         ..p()
     };
-    let mut d = ScoutMiniDriver::new(example, DriverConfig::default(), T0);
+    let mut d = V1Driver::new(example, DriverConfig::default(), T0);
     drain(&mut d, T0);
     d.set_command(at(5), &twist(0.0, 0.5));
     assert_eq!(motion_bytes(&drain(&mut d, at(5))[0]).0, [1, 0, 0, 64]);

@@ -22,7 +22,7 @@
 //!
 //! The motion command's speeds are signed percentages of full scales the manual contradicts
 //! itself about (⚠ angular: 0.5235 rad/s by the table, 0.7853 by the example); the
-//! [`ScoutMiniProfile`] holds both full scales. Percent commands have 1 % resolution: use
+//! [`V1Profile`] holds both full scales. Percent commands have 1 % resolution: use
 //! [`quantise_percent`] (or [`super::kinematics::twist_to_command`]) to learn the command the
 //! wire actually carries. Frame structs hold SI values in ISO 8855 axes (left turn positive).
 
@@ -31,9 +31,9 @@ use zerocopy::byteorder::big_endian::{I16, U16};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use crate::Direction;
+use crate::agilex_v1::V1Profile;
 use crate::can::CanFrame;
 use crate::error::{DecodeError, EncodeError, check_u8, to_i8, to_i16, to_u16, to_wire};
-use crate::profile::ScoutMiniProfile;
 use crate::wire::{index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
 /// Frame identifiers.
@@ -417,7 +417,7 @@ fn read_percent(id: u32, field: &'static str, percent: i8) -> Result<i8, DecodeE
 ///
 /// Checks, in order: standard id, known id, 8 data bytes, checksum, then the payload's values
 /// (commands only: feedback keeps undefined status and mode bytes as sent).
-pub fn decode(frame: &CanFrame, profile: &ScoutMiniProfile) -> Result<Decoded, DecodeError> {
+pub fn decode(frame: &CanFrame, profile: &V1Profile) -> Result<Decoded, DecodeError> {
     let raw_id = frame.id();
     if frame.is_extended() {
         return Err(DecodeError::ExtendedId { id: raw_id });
@@ -559,7 +559,7 @@ impl Frame {
     /// are sent as zero. Values outside what the wire can carry are an error, never silently
     /// saturated; motion-command speeds are rounded to the nearest percent first (see
     /// [`quantise_percent`]).
-    pub fn encode(&self, count: u8, profile: &ScoutMiniProfile) -> Result<CanFrame, EncodeError> {
+    pub fn encode(&self, count: u8, profile: &V1Profile) -> Result<CanFrame, EncodeError> {
         let payload: [u8; PAYLOAD_LEN] = match self {
             Frame::MotionCommand(c) => {
                 check_u8("mode", c.mode, mode::RC, mode::SERIAL)?;

@@ -4,8 +4,8 @@ use chassis_interfaces::{ClampFlags, FaultClear};
 
 use super::codec::{Frame, Lights, MotionCommand, clear_code, mode};
 use super::kinematics::{SkidCommand, twist_to_command};
+use crate::agilex_v1::V1Profile;
 use crate::command::{Command, CommandError, Planned, Turn};
-use crate::profile::ScoutMiniProfile;
 
 /// The 0x130 fault-clear codes for a normalized [`FaultClear`] code (every code for `ALL`: the
 /// chassis has no single "clear all").
@@ -32,7 +32,7 @@ pub fn velocity_command(
     linear_x_mps: f64,
     linear_y_mps: f64,
     turn: Turn,
-    profile: &ScoutMiniProfile,
+    profile: &V1Profile,
 ) -> Result<SkidCommand, CommandError> {
     let angular = match turn {
         Turn::YawRate(w) => w,
@@ -52,10 +52,7 @@ pub fn velocity_command(
 
 /// The frames SCOUT MINI needs for `command`. Counters are the caller's (the driver numbers every
 /// frame it sends).
-pub fn frames_for(
-    command: &Command,
-    profile: &ScoutMiniProfile,
-) -> Result<Planned<Frame>, CommandError> {
+pub fn frames_for(command: &Command, profile: &V1Profile) -> Result<Planned<Frame>, CommandError> {
     let robot = profile.model.robot();
     let standing = MotionCommand::drive(0.0, 0.0);
     Ok(match *command {
@@ -117,8 +114,8 @@ pub fn frames_for(
 mod tests {
     use super::*;
 
-    fn p() -> ScoutMiniProfile {
-        ScoutMiniProfile::default()
+    fn p() -> V1Profile {
+        V1Profile::default()
     }
 
     #[test]

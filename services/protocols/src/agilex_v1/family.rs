@@ -1,0 +1,126 @@
+//! The AgileX V1 family behind [`Family`]: its driver (listening for V1 or V2 first where the
+//! robot may speak either), firmware, frame describer and its part of the robot's description.
+
+use std::time::Duration;
+
+use chassis_interfaces::{DescriptionFlags, RobotDescription, WireProtocol};
+
+use crate::agilex_v2::AutoDriver;
+use crate::agilex_v2::V2Profile;
+use crate::agilex_v2::detect::DetectSettings;
+use crate::can::CanFrame;
+use crate::command::{Command, CommandError};
+use crate::driver::{BoxedDriver, DriverConfig};
+use crate::error::DecodeError;
+use crate::family::{Family, Profile, both_ways, kebab, millis};
+use crate::firmware::BoxedFirmware;
+use crate::frame_json::{BoxedCodec, Codec, FrameJson, frame_json, insert_faults};
+use crate::kind::RobotKind;
+use crate::profile::{ProfileError, ProfileTableError, Protocol, with_model_and_overrides};
+use crate::time::Timestamp;
+
+use super::{Frame, V1Driver, V1Profile, V1Sim, body_flags, decode, frames_for, normalize_faults};
+
+impl Family for V1Profile {
+    fn family(&self) -> &'static str {
+        "agilex-v1"
+    }
+
+    fn robot(&self) -> RobotKind {
+        self.model.robot()
+    }
+
+    fn protocol(&self) -> Option<Protocol> {
+        Some(Protocol::V1)
+    }
+
+    fn validate(&self) -> Result<(), ProfileError> {
+        V1Profile::validate(self)
+    }
+
+    fn table(&self) -> Result<toml::Table, toml::ser::Error> {
+        toml::Table::try_from(self)
+    }
+
+    fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {
+        Ok(with_model_and_overrides(self, table, V1Profile::for_model)?.into())
+    }
+
+    fn heartbeat_period(&self) -> Duration {
+        Duration::from_millis(self.heartbeat_period_ms)
+    }
+
+    fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
+        Box::new(V1Driver::new(self.clone(), config.clone(), now))
+    }
+
+    fn detecting_driver(
+        &self,
+        other: &Profile,
+        config: &DriverConfig,
+        now: Timestamp,
+    ) -> Option<BoxedDriver> {
+        let v2 = other.get::<V2Profile>()?;
+        Some(Box::new(AutoDriver::new(
+            self.clone(),
+            v2.clone(),
+            DetectSettings::from(self),
+            config.clone(),
+            now,
+        )))
+    }
+
+    fn firmware(&self, now: Timestamp) -> BoxedFirmware {
+        Box::new(V1Sim::new(self.clone(), now))
+    }
+
+    fn codec(&self) -> BoxedCodec {
+        Box::new(V1Codec(self.clone()))
+    }
+
+    fn describe(&self, d: &mut RobotDescription) {
+        d.protocol = WireProtocol::V1;
+        d.set_model(&kebab(&self.model));
+        d.robot_limits = both_ways(self.max_linear_mps, 0.0, self.max_angular_rad_s);
+        d.geometry.wheelbase_m = self.wheelbase_m;
+        d.geometry.track_m = self.track_m;
+        d.geometry.min_turn_radius_m = 0.0;
+        d.battery.low_v = self.under_voltage_alarm_v;
+        d.battery.critical_v = self.under_voltage_failure_v;
+        d.battery.full_v = self.battery_full_v;
+        d.command_timeout_ms = millis(self.command_timeout_ms);
+        d.flags |= DescriptionFlags::LIGHTS;
+    }
+
+    fn command_lines(&self, command: &Command) -> Result<(Vec<String>, u32), CommandError> {
+        frames_for(command, self)?.lines(|f, count| f.encode(count, self).map(|c| c.to_candump()))
+    }
+}
+
+/// The V1 frames as JSON, with the count and the fault word by name.
+#[derive(Debug)]
+struct V1Codec(V1Profile);
+
+impl Codec for V1Codec {
+    fn robot(&self) -> RobotKind {
+        self.0.model.robot()
+    }
+
+    fn decode_can(&self, frame: &CanFrame) -> Result<FrameJson, DecodeError> {
+        let decoded = decode(frame, &self.0)?;
+        let mut json = frame_json(
+            self.0.model.robot(),
+            (decoded.frame.id().into(), 3),
+            decoded.frame.direction(),
+            Some(decoded.count),
+            &decoded.frame,
+        );
+        if let Frame::SystemStatus(s) = &decoded.frame {
+            insert_faults(
+                &mut json,
+                normalize_faults(s.vendor_fault_word) | body_flags(s.body_status),
+            );
+        }
+        Ok(json)
+    }
+}

@@ -1,0 +1,135 @@
+//! The TITAN family behind [`Family`]: its driver, firmware, frame describer and its part of
+//! the robot's description.
+
+use std::time::Duration;
+
+use chassis_interfaces::{
+    BatteryLevels, DescriptionFlags, FaultFlags, MotionLimits, RobotDescription, WireProtocol,
+};
+
+use crate::CanFrame;
+use crate::command::{Command, CommandError};
+use crate::driver::{BoxedDriver, DriverConfig};
+use crate::error::DecodeError;
+use crate::family::{Family, Profile, both_ways, millis};
+use crate::firmware::BoxedFirmware;
+use crate::frame_json::{
+    BoxedCodec, Codec, FrameJson, driver_status_names, frame_json, insert_bms_alarms,
+    insert_faults, insert_switches,
+};
+use crate::kind::RobotKind;
+use crate::profile::{ProfileError, ProfileTableError, with_overrides};
+use crate::time::Timestamp;
+
+use super::{Frame, TitanDriver, TitanProfile, TitanSim, body, decode, frames_for, kinematics};
+
+impl Family for TitanProfile {
+    fn family(&self) -> &'static str {
+        "titan"
+    }
+
+    fn robot(&self) -> RobotKind {
+        RobotKind::Titan
+    }
+
+    fn validate(&self) -> Result<(), ProfileError> {
+        TitanProfile::validate(self)
+    }
+
+    fn table(&self) -> Result<toml::Table, toml::ser::Error> {
+        toml::Table::try_from(self)
+    }
+
+    fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {
+        Ok(with_overrides(self, table)?.into())
+    }
+
+    fn heartbeat_period(&self) -> Duration {
+        Duration::from_millis(self.heartbeat_period_ms)
+    }
+
+    fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
+        Box::new(TitanDriver::new(self.clone(), config.clone(), now))
+    }
+
+    fn firmware(&self, now: Timestamp) -> BoxedFirmware {
+        Box::new(TitanSim::new(self.clone(), now))
+    }
+
+    fn codec(&self) -> BoxedCodec {
+        Box::new(TitanCodec(self.clone()))
+    }
+
+    fn describe(&self, d: &mut RobotDescription) {
+        d.protocol = WireProtocol::OWN;
+        d.set_model("titan");
+        d.robot_limits = MotionLimits {
+            steer_rad: self.max_steer_rad,
+            ..both_ways(self.max_linear_mps, 0.0, f64::NAN)
+        };
+        d.geometry.wheelbase_m = self.wheelbase_m;
+        d.geometry.track_m = self.track_m;
+        // Both axles steer: the turn centre lies on the line half way between them, and the
+        // body's centre runs half a track outside the inner wheels.
+        d.geometry.min_turn_radius_m = kinematics::min_turn_radius_m(self);
+        d.battery = BatteryLevels {
+            // The TITAN manual: charge when the remote shows less than 15 % or the tail display
+            // less than 45 V; below 10 % the chassis cuts drive power.
+            low_v: 45.0,
+            low_soc_pct: self.low_battery_warning_soc_pct,
+            critical_soc_pct: self.low_battery_cutoff_soc_pct,
+            ..d.battery
+        };
+        d.command_timeout_ms = millis(self.command_timeout_ms);
+        d.flags |= DescriptionFlags::LIGHTS;
+    }
+
+    fn command_lines(&self, command: &Command) -> Result<(Vec<String>, u32), CommandError> {
+        frames_for(command, self)?.lines(|f, _| f.encode(self).map(|c| c.to_candump()))
+    }
+}
+
+/// The TITAN's frames as JSON, with its fault word, driver status, BMS alarms and RC levers by
+/// name.
+#[derive(Debug)]
+struct TitanCodec(TitanProfile);
+
+impl Codec for TitanCodec {
+    fn robot(&self) -> RobotKind {
+        RobotKind::Titan
+    }
+
+    fn decode_can(&self, frame: &CanFrame) -> Result<FrameJson, DecodeError> {
+        let decoded = decode(frame, &self.0)?;
+        let mut json = frame_json(
+            RobotKind::Titan,
+            (decoded.id().into(), 3),
+            decoded.direction(),
+            None,
+            &decoded,
+        );
+        match &decoded {
+            Frame::SystemStatus(s) => {
+                let body = if s.body_status == body::EXCEPTION {
+                    FaultFlags::BODY_EXCEPTION
+                } else {
+                    0
+                };
+                insert_faults(
+                    &mut json,
+                    super::normalize_faults(s.vendor_fault_word) | body,
+                );
+            }
+            Frame::MotorSlow(m) => {
+                json.insert(
+                    "driver_status_flags".into(),
+                    driver_status_names(m.driver_status).into(),
+                );
+            }
+            Frame::BmsAlarm(b) => insert_bms_alarms(&mut json, b),
+            Frame::Rc(r) => insert_switches(&mut json, r),
+            _ => {}
+        }
+        Ok(json)
+    }
+}
