@@ -989,7 +989,7 @@ fn read_published(
 }
 
 /// Where the feed of a receiver pinned to `pong_cpu` runs: where chassisd places its simulated
-/// chassis (`setup::sim_cpus`). On the receiver's CPU when the receiver blocks at SCHED_FIFO (the
+/// chassis (`realtime::sim_cpus`). On the receiver's CPU when the receiver blocks at SCHED_FIFO (the
 /// chassis runs only while the loop waits); otherwise on another CPU, the ping side's in a
 /// cross-CPU run.
 fn feed_cpu(pong_cpu: usize, transport: Transport, load: Option<Load>) -> usize {

@@ -224,12 +224,6 @@ fn path_runs(quick: bool, robots: &[RobotKind]) -> Vec<PathRun> {
     runs
 }
 
-/// The default-configuration command row's `what`: the TITAN on the simulated bus with
-/// chassisd's defaults (no [`paths::BENCH_CONFIG`]), a sample ending at the first frame that
-/// moves toward the request (the mux ramps the change).
-pub const DEFAULT_CONFIG_ROW: &str =
-    "titan sim, chassisd's default configuration, request → first frame toward it";
-
 /// The baseline transport that waits like a service loop in `mode`.
 /// The raw DDS hops the ROS 2 rows contain (Cyclone DDS is the peer, RustDDS the bridge's).
 const DDS_IN: &str = "DDS Cyclone DDS → RustDDS";
@@ -414,10 +408,15 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             }
         }
         let cross = Placement::CrossCpu.label();
-        expected.push(row_key("command", DEFAULT_CONFIG_ROW, "event", cross));
+        expected.push(row_key(
+            "command",
+            report::DEFAULT_CONFIG_ROW,
+            "event",
+            cross,
+        ));
         expected.push(row_key(
             "in-service",
-            &format!("{DEFAULT_CONFIG_ROW}: command"),
+            &format!("{}: command", report::DEFAULT_CONFIG_ROW),
             "event",
             cross,
         ));
@@ -916,7 +915,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         let label = bus_label(RobotKind::Titan, BusKind::Sim);
         let mut default_row = Row::new(
             "command",
-            DEFAULT_CONFIG_ROW.to_string(),
+            report::DEFAULT_CONFIG_ROW.to_string(),
             LoopMode::Event.arg(),
             placement.label(),
             figures.latencies,
@@ -930,7 +929,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         report.rows.push(default_row);
         report.rows.push(Row::new(
             "in-service",
-            format!("{DEFAULT_CONFIG_ROW}: command"),
+            format!("{}: command", report::DEFAULT_CONFIG_ROW),
             LoopMode::Event.arg(),
             placement.label(),
             figures.in_service,

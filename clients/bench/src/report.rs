@@ -9,6 +9,11 @@ use crate::parts::{Part, Split, Whose};
 use crate::paths::Cost;
 use crate::stats::{Latencies, Summary};
 
+/// The default-configuration command row's `what`: the TITAN on the simulated bus with
+/// chassisd's defaults (no [`crate::paths::BENCH_CONFIG`]), a sample ending at the first frame that
+/// moves toward the request (the mux ramps the change).
+pub const DEFAULT_CONFIG_ROW: &str =
+    "titan sim, chassisd's default configuration, request → first frame toward it";
 /// One measured distribution.
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
@@ -1000,7 +1005,7 @@ impl Report {
     /// else: the first frame of a ramp).
     fn path_rows<'a>(&'a self, path: &'a str, mode: &'a str) -> Vec<&'a Row> {
         self.rows_of(path, mode)
-            .filter(|r| !r.what.starts_with(crate::DEFAULT_CONFIG_ROW))
+            .filter(|r| !r.what.starts_with(DEFAULT_CONFIG_ROW))
             .collect()
     }
 
@@ -1251,7 +1256,7 @@ impl Report {
              the request.\n\n",
             crate::paths::BENCH_CONFIG,
             self.scheduling_text(),
-            crate::DEFAULT_CONFIG_ROW,
+            DEFAULT_CONFIG_ROW,
             priority = crate::paths::REALTIME_PRIORITY,
         ));
         out.push_str("## The table\n\n");

@@ -37,7 +37,7 @@ use serde_json::{Value, json};
 
 use crate::convert::{self, Trail, frame_entries, mux_json};
 use crate::naming::Naming;
-use crate::server::{self, Channels, Inbox, Route};
+use crate::server::{self, Channels, Config, Inbox, Route};
 
 /// Frames a `/frames` batch carries at most.
 pub const MAX_FRAMES_PER_BATCH: usize = 1000;
@@ -52,21 +52,6 @@ const FRAMES_PERIOD_NS: u64 = 100_000_000;
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
 /// How long a new connection waits for the robot's description before drawing without it.
 const DESCRIPTION_WAIT: Duration = Duration::from_secs(2);
-
-/// What the bridge is told.
-#[derive(Debug, Clone)]
-pub struct Config {
-    /// chassisd's robot names (`chassis/<name>/…`): one, or several each under its own prefix.
-    pub names: Vec<String>,
-    /// Address and TCP port of the WebSocket server (port 0: any free port).
-    pub bind: String,
-    pub port: u16,
-    /// Shortest time between two published state samples.
-    pub state_period: Duration,
-    /// Take client channels (the Teleop panel) as the `foxglove` source and offer every
-    /// service; off: only `/estop`.
-    pub drive: bool,
-}
 
 /// One robot's side of the bridge.
 struct Served {

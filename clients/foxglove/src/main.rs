@@ -77,7 +77,7 @@ fn is_loopback(bind: &str) -> bool {
 
 impl Cli {
     /// The bridge's configuration, checked; warns when the server reaches beyond this machine.
-    fn config(self) -> anyhow::Result<bridge::Config> {
+    fn config(self) -> anyhow::Result<server::Config> {
         if !(self.state_hz > 0.0 && self.state_hz <= MAX_STATE_HZ) {
             anyhow::bail!("--state-hz must be in (0, {MAX_STATE_HZ}]");
         }
@@ -96,7 +96,7 @@ impl Cli {
                 self.name.join(", ")
             );
         }
-        Ok(bridge::Config {
+        Ok(server::Config {
             names: self.name,
             bind: self.bind,
             port: self.port,

@@ -4,6 +4,7 @@
 
 use std::sync::Arc;
 use std::sync::mpsc::Sender;
+use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::foxglove::schema_of;
@@ -15,7 +16,6 @@ use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener, Sta
 use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServer, WebSocketServerHandle};
 use serde_json::Value;
 
-use crate::bridge::Config;
 use crate::convert::{frames_schema, mux_json};
 use crate::naming::Naming;
 
@@ -68,6 +68,21 @@ impl Channels {
 pub struct Route {
     pub naming: Naming,
     pub inbox: Sender<Inbox>,
+}
+
+/// What the bridge is told.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// chassisd's robot names (`chassis/<name>/…`): one, or several each under its own prefix.
+    pub names: Vec<String>,
+    /// Address and TCP port of the WebSocket server (port 0: any free port).
+    pub bind: String,
+    pub port: u16,
+    /// Shortest time between two published state samples.
+    pub state_period: Duration,
+    /// Take client channels (the Teleop panel) as the `foxglove` source and offer every
+    /// service; off: only `/estop`.
+    pub drive: bool,
 }
 
 /// Starts the WebSocket server of `ctx` on `config.bind:config.port`: each robot's services and

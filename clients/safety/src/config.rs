@@ -14,6 +14,7 @@
 //! monitor runs for.
 
 use std::collections::BTreeSet;
+use std::fmt;
 use std::path::{Path, PathBuf};
 
 use chassis_client::{FaultFlags, valid_robot_name};
@@ -809,16 +810,40 @@ impl Config {
 
     /// Where the value of `key` (dotted) comes from when not from the description: the file
     /// that sets it, or the default.
-    pub fn origin_of(&self, key: &str) -> crate::levels::Origin {
+    pub fn origin_of(&self, key: &str) -> Origin {
         match &self.file {
-            Some(file) if file.sets(key) => crate::levels::Origin::Config(file.path.clone()),
-            _ => crate::levels::Origin::Default,
+            Some(file) if file.sets(key) => Origin::Config(file.path.clone()),
+            _ => Origin::Default,
         }
     }
 }
 
 /// `text` written to a `safety.toml` of its own (in a directory named after `tag`), loaded, and
 /// the file removed again: the configuration and the path it names.
+/// Where a value a rule uses comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Origin {
+    /// The monitor's own default.
+    Default,
+    /// The monitor's configuration file.
+    Config(PathBuf),
+    /// The robot's description: whose (`chassis/h1`), and which of its values.
+    Description { robot: String, from: String },
+    /// Nothing gives it, and why.
+    Unknown(String),
+}
+
+impl fmt::Display for Origin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Origin::Default => f.write_str("default"),
+            Origin::Config(path) => write!(f, "config ({})", path.display()),
+            Origin::Description { robot, from } => write!(f, "description ({robot}: {from})"),
+            Origin::Unknown(why) => write!(f, "unknown: {why}"),
+        }
+    }
+}
+
 #[cfg(test)]
 pub(crate) fn loaded(tag: &str, text: &str) -> (Config, std::path::PathBuf) {
     let dir = std::env::temp_dir().join(format!("chassis-safety-{tag}-{}", std::process::id()));
@@ -928,12 +953,9 @@ mod tests {
         );
         assert_eq!(
             c.origin_of("rules.speed.trigger_ms"),
-            crate::levels::Origin::Config(path.clone())
+            Origin::Config(path.clone())
         );
-        assert_eq!(
-            c.origin_of("rules.speed.release_ms"),
-            crate::levels::Origin::Default
-        );
+        assert_eq!(c.origin_of("rules.speed.release_ms"), Origin::Default);
         assert_eq!(c.speed.unwrap().timing.trigger_ns, 100_000_000);
     }
 

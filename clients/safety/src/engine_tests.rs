@@ -1,8 +1,8 @@
 //! The rule engine on simulated time.
 
 use super::*;
+use crate::config::Origin;
 use crate::config::RawConfig;
-use crate::levels::Origin;
 use chassis_protocols::RobotKind;
 use chassis_protocols::description::describe;
 

@@ -18,36 +18,11 @@
 //! [`Origin::Unknown`], and [`Levels::warnings`] says so, naming the rule and the robot: a rule
 //! is never silently absent.
 
-use std::fmt;
 use std::path::PathBuf;
 
 use chassis_client::{BatteryLevels, MotionLimits, RobotDescription};
 
-use crate::config::Config;
-
-/// Where a value a rule uses comes from.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Origin {
-    /// The monitor's own default.
-    Default,
-    /// The monitor's configuration file.
-    Config(PathBuf),
-    /// The robot's description: whose (`chassis/h1`), and which of its values.
-    Description { robot: String, from: String },
-    /// Nothing gives it, and why.
-    Unknown(String),
-}
-
-impl fmt::Display for Origin {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Origin::Default => f.write_str("default"),
-            Origin::Config(path) => write!(f, "config ({})", path.display()),
-            Origin::Description { robot, from } => write!(f, "description ({robot}: {from})"),
-            Origin::Unknown(why) => write!(f, "unknown: {why}"),
-        }
-    }
-}
+use crate::config::{Config, Origin};
 
 /// A level a rule triggers at.
 #[derive(Debug, Clone, PartialEq)]

@@ -7,7 +7,8 @@
 //! description was read the levels say they are unknown, and why.
 
 use crate::config::Config;
-use crate::levels::{Level, Levels, Origin, number};
+use crate::config::Origin;
+use crate::levels::{Level, Levels, number};
 
 /// The configuration `config` with the levels `levels`, annotated; `about` are comment lines
 /// saying which robot the levels are for.

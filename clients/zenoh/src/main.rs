@@ -36,6 +36,7 @@ mod certs;
 mod estop;
 mod export;
 mod fleet;
+mod link_watch;
 mod mirror;
 mod net;
 mod raw;

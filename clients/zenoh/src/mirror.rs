@@ -45,7 +45,7 @@ use zerocopy::IntoBytes as _;
 
 use crate::estop::{self, Asked, Keeper};
 use crate::export::{guard, remote_sources};
-use crate::fleet::{LOST_AFTER, LinkWatch, Lost};
+use crate::link_watch::{LOST_AFTER, LinkWatch, Lost};
 use crate::net::{self, Net};
 use crate::wire::{Keys, Wire};
 

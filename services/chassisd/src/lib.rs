@@ -12,6 +12,7 @@ pub mod lockfile;
 pub mod moderation;
 pub mod mux;
 pub mod notify;
+pub mod realtime;
 pub mod service;
 pub mod setup;
 pub mod sim;

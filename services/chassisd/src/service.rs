@@ -36,10 +36,10 @@ use crate::lockfile::{Clocks, LockFile};
 use crate::moderation::RxGate;
 use crate::mux::Mux;
 use crate::notify::Notifier;
-use crate::setup::{
-    Devices, Hardware, PinError, driver_for_config, enter_realtime, is_fifo, pin_to_cpu, sim_cpus,
-    spin_throttle_warning,
+use crate::realtime::{
+    PinError, enter_realtime, is_fifo, pin_to_cpu, sim_cpus, spin_throttle_warning,
 };
+use crate::setup::{Devices, Hardware, driver_for_config};
 use crate::sim::SimHandle;
 use stall::LoopStall;
 

@@ -237,7 +237,7 @@ impl SimHandle {
 
     /// Moves the simulator's thread onto `cpus` (all CPUs when empty).
     pub fn confine_to(&self, cpus: &[usize]) {
-        if let Err(err) = crate::setup::confine(self.tid, cpus) {
+        if let Err(err) = crate::realtime::confine(self.tid, cpus) {
             warn!("simulated chassis: cannot move to CPUs {cpus:?}: {err}");
         }
     }
