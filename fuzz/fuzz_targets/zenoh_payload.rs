@@ -1,17 +1,18 @@
 //! Any payload, under any media type, into the decoder chassis-zenoh applies to what another
 //! computer sends (`chassis_interfaces::payload`), for every type it carries: no panic; taken
 //! exactly when the media type names the type, the length is a whole number of values and no
-//! velocity request carries a NaN, an infinity or a negative envelope and no robot description
-//! counts more sensors, joints or sources than its lists hold (judged here from the contract's
-//! layout, not from the decoder's own check); what is taken is the bytes that came,
-//! and reads back (names, JSON, control requests as chassisd reads them) without a panic.
+//! robot description counts more sensors, joints or sources than its lists hold; a velocity
+//! request taken is parsed into a `ValidRequest` exactly when it carries no NaN, no infinity
+//! and no negative envelope (both judged here from the contract's layout, not from the code's
+//! own checks); what is taken is the bytes that came, and reads back (names, JSON, control
+//! requests as chassisd reads them) without a panic.
 #![no_main]
 
 use chassis_interfaces::layout::{FieldType, Layout};
 use chassis_interfaces::payload::{Payload, PayloadError, PayloadType};
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, RequestFlags,
-    RobotDescription, VelocityRequest,
+    RobotDescription, ValidRequest, VelocityRequest,
 };
 use chassis_protocols::{ControlAction, command_to_request, request_to_action};
 use libfuzzer_sys::fuzz_target;
@@ -124,8 +125,9 @@ fuzz_target!(|data: &[u8]| {
         (media_type(usize::from(choice)), rest)
     };
     match usize::from(choice & 0x07) % MEDIA_TYPES {
-        0 => check::<VelocityRequest>(&media, bytes, must_refuse_velocity, |r| {
-            assert!(r.is_finite());
+        0 => check::<VelocityRequest>(&media, bytes, |_| false, |r| {
+            let refused = ValidRequest::try_from(*r).is_err();
+            assert_eq!(refused, must_refuse_velocity(r.as_bytes()), "{r:?}");
         }),
         1 => check::<ControlRequest>(&media, bytes, |_| false, |r| {
             let _ = r.name();

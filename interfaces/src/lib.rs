@@ -12,6 +12,10 @@
 //! Each type also describes itself field by field ([`layout::Layout`]): the machine-readable
 //! contract (`chassis interfaces --json`) that programs in other languages mirror.
 //!
+//! Beside them, and never in shared memory: [`ValidRequest`] and [`Velocity`], a velocity request
+//! parsed where it enters a process into types that cannot hold a NaN or an infinity, which the
+//! mux and the drivers take.
+//!
 //! Axes follow ISO 8855 / REP 103 for every robot: x forward, y left, z up, counter-clockwise
 //! (left turn) positive. Timestamps are `CLOCK_MONOTONIC` nanoseconds, system-wide, so a reader in
 //! another process can compute one-way latencies without clock synchronisation.
@@ -28,6 +32,7 @@ mod request;
 mod safety;
 mod state;
 mod text;
+mod velocity;
 
 pub use control::{
     ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, LightMode, SimKind,
@@ -52,6 +57,7 @@ pub use state::{
     WireProtocol,
 };
 pub use text::{read_fixed_str, write_fixed_str};
+pub use velocity::{Envelope, InvalidVelocity, ValidRequest, Velocity};
 
 /// Size of a fixed-length, NUL-padded UTF-8 name (source and lock names).
 pub const NAME_LEN: usize = 16;

@@ -25,7 +25,8 @@ named_constants! {
 
 ipc_type! {
     /// A velocity request from one source. Its priority and timeout come from the service's
-    /// configuration, never from the request.
+    /// configuration, never from the request. Plain bytes that may hold anything: where one
+    /// enters a process it is parsed into a [`crate::ValidRequest`].
     #[derive(Default, Serialize)]
     #[type_name("chassis::VelocityRequest.v2")]
     pub struct VelocityRequest {
@@ -113,47 +114,11 @@ impl VelocityRequest {
     pub fn uses_steer(&self) -> bool {
         self.flags & RequestFlags::STEER != 0
     }
-
-    /// True when every number in the request is finite (NaN and ±inf are rejected by the mux),
-    /// and a limit's envelope is not negative.
-    pub fn is_finite(&self) -> bool {
-        let limits = [
-            self.limit_forward_mps,
-            self.limit_reverse_mps,
-            self.limit_lateral_mps,
-            self.limit_angular_radps,
-        ];
-        [
-            self.linear_x_mps,
-            self.linear_y_mps,
-            self.angular_z_radps,
-            self.steer_rad,
-        ]
-        .iter()
-        .chain(&limits)
-        .all(|v| v.is_finite())
-            && (!self.is_limit() || limits.iter().all(|v| *v >= 0.0))
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_limit_is_alive_but_asks_for_nothing_and_must_not_be_negative() {
-        let l = VelocityRequest::limit(0.0, 0.5, 0.0, 1.0);
-        assert!(l.is_heartbeat() && l.is_limit() && l.is_finite());
-        assert!(!VelocityRequest::limit(-0.1, 0.5, 0.0, 1.0).is_finite());
-        assert!(!VelocityRequest::limit(f32::INFINITY, 0.5, 0.0, 1.0).is_finite());
-    }
-
-    #[test]
-    fn non_finite_requests_are_recognised() {
-        assert!(VelocityRequest::twist(0.3, -0.2).is_finite());
-        assert!(!VelocityRequest::twist(f32::NAN, 0.0).is_finite());
-        assert!(!VelocityRequest::steer(0.0, f32::INFINITY).is_finite());
-    }
 
     #[test]
     fn constructors_set_their_flags() {

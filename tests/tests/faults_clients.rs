@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use chassis_tests::faults::*;
 use chassis_tests::*;
+use iceoryx2::prelude::{Node, SignalHandlingMode, ipc};
 
 const UP: Duration = Duration::from_secs(10);
 const SUITE: &str = "faults_clients";
@@ -385,6 +386,42 @@ fn a_rogue_client_above_the_driving_priority_wins_by_design_and_shakes_nothing()
 
 // ----- Non-finite and absurd requests -----
 
+/// What a foreign process may do: write requests into a source's shared memory as they are,
+/// past every check of the client library.
+struct Foreign {
+    writer: chassis_ipc::Writer<VelocityRequest>,
+    seq: u64,
+    /// Dropped after the ports it made.
+    _node: Node<ipc::Service>,
+}
+
+impl Foreign {
+    /// The one publisher of `source` of robot `robot`, numbering its requests after `seq`.
+    fn open(env: &Env, robot: &str, source: &str, seq: u64) -> Self {
+        let config = chassis_ipc::config(Some(&env.prefix)).unwrap();
+        let node = chassis_ipc::node(None, &config, SignalHandlingMode::Disabled).unwrap();
+        let name = service_name(robot, ServiceKind::Cmd(source));
+        let writer = chassis_ipc::CMD
+            .open(&node, &name)
+            .unwrap()
+            .publisher()
+            .unwrap();
+        Self {
+            writer,
+            seq,
+            _node: node,
+        }
+    }
+
+    fn send(&mut self, mut request: VelocityRequest) {
+        self.seq += 1;
+        request.seq = self.seq;
+        request.stamp_ns = now_ns();
+        self.writer.publisher.send_copy(request).unwrap();
+        self.writer.notifier.notify().unwrap();
+    }
+}
+
 #[test]
 fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second() {
     let _machine = exclusive();
@@ -408,6 +445,16 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
         .matches("request rejected")
         .count();
     wire.clear();
+    // The client library does not send a NaN: nothing leaves the process…
+    let last_sent = teleop.last_seq();
+    assert!(matches!(
+        teleop.send(VelocityRequest::twist(f32::NAN, 0.0)),
+        Err(ClientError::InvalidRequest(_))
+    ));
+    assert_eq!(teleop.last_seq(), last_sent, "sent all the same");
+    // … so a foreign process writes the bad requests into teleop's shared memory.
+    drop(teleop);
+    let mut foreign = Foreign::open(&env, &n, "teleop", last_sent);
 
     let bad = [
         VelocityRequest::twist(f32::NAN, 0.0),
@@ -433,9 +480,7 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
     let mut outputs_finite = true;
     let mut max_output = 0.0f32;
     while start.elapsed() < duration {
-        teleop
-            .send(bad[(sent % bad.len() as u64) as usize])
-            .unwrap();
+        foreign.send(bad[(sent % bad.len() as u64) as usize]);
         sent += 1;
         next = (next + PERIOD).max(Instant::now());
         if let Some(wait) = next.checked_duration_since(Instant::now()) {
@@ -516,7 +561,9 @@ fn non_finite_and_absurd_requests_are_rejected_counted_and_logged_once_a_second(
         rank::ABSURD,
         "NaN, ±inf and absurd requests (1000 m/s, -100 rad/s, 3 rad steering)",
         &format!(
-            "{sent} bad requests as teleop at 500/s for {:.1} s, right after a valid 0.3 m/s",
+            "{sent} bad requests written into teleop's shared memory by a foreign process (the \
+             client library refuses the non-finite ones) at 500/s for {:.1} s, right after a \
+             valid 0.3 m/s",
             flooded.as_secs_f64()
         ),
         &format!(

@@ -1053,7 +1053,7 @@ pub fn cost_at(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chassis_client::BodyVelocity;
+    use chassis_client::Velocity;
     use chassis_protocols::{Direction, Timestamp, WireItem};
 
     #[test]
@@ -1135,10 +1135,7 @@ mod tests {
             let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
             pair.run_for(Duration::from_secs(2));
             pair.record = true;
-            pair.set_command(BodyVelocity {
-                linear_x_mps: 0.3,
-                ..BodyVelocity::ZERO
-            });
+            pair.set_command(Velocity::twist(0.3, 0.0).unwrap());
             pair.run_for(Duration::from_millis(500));
             let mut decoder = MotionDecoder::new(kind);
             let mut speeds = Vec::new();

@@ -7,7 +7,7 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use chassis_client::{BodyVelocity, Robot, now_ns};
+use chassis_client::{Robot, Velocity, now_ns};
 use chassis_protocols::driver::{Driver, DriverConfig};
 use chassis_protocols::pair::Pair;
 use chassis_protocols::titan::TitanProfile;
@@ -30,11 +30,7 @@ pub fn record_titan(path: &Path, seconds: u64) -> anyhow::Result<u64> {
     let mut frames = 0u64;
     for second in 0..seconds {
         let turn = if second % 20 < 10 { 0.3 } else { -0.3 };
-        pair.set_command(BodyVelocity {
-            linear_x_mps: 1.0,
-            angular_z_radps: turn,
-            ..BodyVelocity::ZERO
-        });
+        pair.set_command(Velocity::twist(1.0, turn)?);
         pair.run_for(Duration::from_secs(1));
         for record in pair.log() {
             if let (Direction::FromChassis, WireItem::Can(frame)) = (record.direction, &record.item)

@@ -1,8 +1,8 @@
 //! The chassis functions one can ask for, shared by `chassis encode` (which prints the frames)
 //! and `chassis control` (which asks the running service).
 
-use chassis_interfaces::{FaultClear, LightMode};
-use chassis_protocols::{Command, Turn};
+use chassis_interfaces::{FaultClear, InvalidVelocity, LightMode, ValidRequest, VelocityRequest};
+use chassis_protocols::Command;
 use clap::{Args, Subcommand, ValueEnum};
 use thiserror::Error;
 
@@ -61,19 +61,24 @@ pub struct VelocityArgs {
 }
 
 impl VelocityArgs {
-    pub fn turn(&self) -> Turn {
-        match self.steer {
-            Some(steer) => Turn::Steer(steer),
-            None => Turn::YawRate(self.wz.unwrap_or(0.0)),
+    /// The request the arguments ask for: a steering angle with `--steer`, else a yaw rate.
+    pub fn request(&self) -> VelocityRequest {
+        let turning = match self.steer {
+            Some(steer) => VelocityRequest::steer(self.vx as f32, steer as f32),
+            None => VelocityRequest::twist(self.vx as f32, self.wz.unwrap_or(0.0) as f32),
+        };
+        VelocityRequest {
+            linear_y_mps: self.vy as f32,
+            ..turning
         }
     }
 
-    pub fn to_command(self) -> Command {
-        Command::Velocity {
-            linear_x_mps: self.vx,
-            linear_y_mps: self.vy,
-            turn: self.turn(),
-        }
+    /// The command `chassis encode` prints: the request parsed as chassisd parses it (a NaN or
+    /// an infinity is refused), so the frames are those the service would send.
+    pub fn to_command(self) -> Result<Command, InvalidVelocity> {
+        Ok(Command::Velocity(
+            ValidRequest::try_from(self.request())?.velocity(),
+        ))
     }
 }
 

@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, ClampFlags, ControlKind, ControlMode, ControlRequest, ControlStatus,
     ControllerState, FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus,
-    Robot, RobotDescription, SimKind, SimRequest, SimTruthPage, SourceFlags, Ticker,
+    Robot, RobotDescription, SimKind, SimRequest, SimTruthPage, SourceFlags, Ticker, ValidRequest,
     VelocityRequest, WireProtocol, ZeroReason, install_signal_handlers, now_ns,
     termination_requested,
 };
@@ -379,22 +379,14 @@ pub fn publish(args: &PubArgs) -> anyhow::Result<()> {
     if !(args.rate > 0.0 && args.rate <= 10_000.0) {
         bail!("--rate must be above 0 and at most 10000 Hz");
     }
-    let mut robot = connect(&args.name)?;
-    let mut source = robot.source(&args.source)?;
-    let request = if args.heartbeat {
+    // Parsed once: a NaN or an infinity is refused before anything is sent.
+    let request = ValidRequest::try_from(if args.heartbeat {
         VelocityRequest::heartbeat()
     } else {
-        let v = args.velocity;
-        let mut r = VelocityRequest::twist(v.vx as f32, v.wz.unwrap_or(0.0) as f32);
-        r.linear_y_mps = v.vy as f32;
-        if let Some(steer) = v.steer {
-            r = VelocityRequest {
-                linear_y_mps: v.vy as f32,
-                ..VelocityRequest::steer(v.vx as f32, steer as f32)
-            };
-        }
-        r
-    };
+        args.velocity.request()
+    })?;
+    let mut robot = connect(&args.name)?;
+    let mut source = robot.source(&args.source)?;
     let start = now_ns();
     let end = (args.duration > 0.0).then(|| start + (args.duration * 1e9) as u64);
     let mut ticker = Ticker::new(Duration::from_secs_f64(1.0 / args.rate));

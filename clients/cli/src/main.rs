@@ -222,7 +222,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Cmd::Encode { profile, what } => {
             let profile = profile.load()?;
             let command = match &what {
-                EncodeWhat::Velocity(v) => v.to_command(),
+                EncodeWhat::Velocity(v) => v.to_command()?,
                 EncodeWhat::Action(a) => a.to_command().map_err(anyhow::Error::msg)?,
             };
             let (lines, clamp_flags) = profile.command_lines(&command)?;

@@ -10,7 +10,9 @@
 //!   [`Robot::state_stream`];
 //! * [`Robot::source`]: publish [`VelocityRequest`]s as one of the service's configured sources
 //!   (`safety`, `teleop`, `planner` by default). The source's priority and timeout are the
-//!   service's: a client cannot raise its own priority. One process per source;
+//!   service's: a client cannot raise its own priority. One process per source. A request is
+//!   parsed into a [`ValidRequest`] before it is sent: one with a NaN or an infinity never
+//!   leaves the process;
 //! * [`Robot::control`]: mode, brake, lights, lift, … answered with success or a reason;
 //! * [`Robot::latest_mux`]: which source the mux chose and why.
 //!
@@ -36,10 +38,10 @@
 //! same bytes in every process and language, on services named after the robot:
 //!
 //! ```
-//! use chassis_client::{ServiceKind, VelocityRequest, service_name};
+//! use chassis_client::{ServiceKind, ValidRequest, VelocityRequest, service_name};
 //!
 //! let request = VelocityRequest::twist(0.3, 0.1); // m/s forward, rad/s left
-//! assert!(request.is_finite() && !request.is_heartbeat());
+//! assert!(ValidRequest::try_from(request).is_ok() && !request.is_heartbeat());
 //! assert_eq!(std::mem::size_of::<VelocityRequest>(), 64);
 //! assert_eq!(
 //!     service_name("titan", ServiceKind::Cmd("teleop")),
@@ -106,12 +108,22 @@ pub enum ClientError {
     NoDescription { name: String },
     #[error("'{0}' is not a valid robot or source name (1-16 of a-z 0-9 - _)")]
     BadName(String),
+    /// A velocity request that is no [`ValidRequest`]: nothing was sent.
+    #[error("request not sent: {0}")]
+    InvalidRequest(#[from] InvalidVelocity),
     #[error("iceoryx2: {0}")]
     Ipc(String),
 }
 
 fn ipc<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> ClientError + '_ {
     move |e| ClientError::Ipc(format!("{what}: {e}"))
+}
+
+/// A [`ValidRequest`] is sent as it is: its parse cannot fail.
+impl From<std::convert::Infallible> for ClientError {
+    fn from(never: std::convert::Infallible) -> Self {
+        match never {}
+    }
 }
 
 impl From<IpcError> for ClientError {
@@ -775,9 +787,17 @@ impl Source {
         self.seq
     }
 
-    /// Sends a request now: stamps it with the current `CLOCK_MONOTONIC` time (unless a stamp is
-    /// set) and the next sequence number, and wakes the service.
-    pub fn send(&mut self, mut request: VelocityRequest) -> Result<(), ClientError> {
+    /// Sends a request now: parses a [`VelocityRequest`] into a [`ValidRequest`] (one that is not
+    /// is refused with [`ClientError::InvalidRequest`] and nothing is sent; a bridge that parsed
+    /// what it received hands over the `ValidRequest` itself), stamps it with the current
+    /// `CLOCK_MONOTONIC` time (unless a stamp is set) and the next sequence number, and wakes
+    /// the service.
+    pub fn send<R>(&mut self, request: R) -> Result<(), ClientError>
+    where
+        R: TryInto<ValidRequest>,
+        ClientError: From<R::Error>,
+    {
+        let mut request: VelocityRequest = *request.try_into()?;
         self.seq += 1;
         request.seq = self.seq;
         if request.stamp_ns == 0 {

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::foxglove::schema_of;
-use chassis_client::{ChassisState, MuxStatus, VelocityRequest};
+use chassis_client::{ChassisState, MuxStatus, ValidRequest};
 use chassis_foxglove_messages::{self as messages, ServiceAction, TwistError, response_schema};
 use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame, SceneUpdate};
 use foxglove::websocket::service::{Handler, Request, Responder, Service, ServiceSchema};
@@ -123,8 +123,8 @@ pub fn start(
 /// What the server's callbacks ask of the robot loop.
 #[derive(Debug)]
 pub enum Inbox {
-    /// A velocity from a client's Twist channel.
-    Twist(VelocityRequest),
+    /// A velocity from a client's Twist channel, parsed.
+    Twist(ValidRequest),
     /// The client stopped publishing its Twist channel (unadvertised or disconnected).
     TwistEnded,
     /// A service call, answered through the responder once chassisd answered.

@@ -8,7 +8,7 @@
 
 use std::time::Duration;
 
-use chassis_client::BodyVelocity;
+use chassis_client::Velocity;
 use chassis_planner::geometry::{Point, Pose};
 use chassis_planner::kinematics::Kinematics;
 use chassis_planner::path::Path;
@@ -73,16 +73,18 @@ fn follow<D: Driver, F: Firmware>(
             step.command.linear_mps <= kin.max_linear_mps + 1e-12,
             "{kind} asked for {step:?}"
         );
-        pair.set_command(BodyVelocity {
-            linear_x_mps: step.command.linear_mps as f32,
-            linear_y_mps: step.command.lateral_mps as f32,
-            angular_z_radps: step.command.angular_radps as f32,
-            ..BodyVelocity::ZERO
-        });
+        pair.set_command(
+            Velocity::new(
+                step.command.linear_mps as f32,
+                step.command.lateral_mps as f32,
+                step.command.angular_radps as f32,
+            )
+            .unwrap(),
+        );
         pair.run_for(PERIOD);
         time_s += PERIOD.as_secs_f64();
     }
-    pair.set_command(BodyVelocity::ZERO);
+    pair.set_command(Velocity::ZERO);
     pair.run_for(Duration::from_millis(300));
     let s = pair.driver.state();
     let odometry = Point::new(s.odometry.x_m, s.odometry.y_m);

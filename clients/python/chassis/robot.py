@@ -379,7 +379,11 @@ class Source:
 
     def send(self, request: _VelocityRequest) -> None:
         """Sends ``request`` now with the next sequence number and, unless it has one, the
-        current ``CLOCK_MONOTONIC`` stamp, and wakes the service."""
+        current ``CLOCK_MONOTONIC`` stamp, and wakes the service. A request with a NaN or an
+        infinity in any of its numbers is refused with ``ValueError`` and nothing is sent."""
+        for name, kind in request._fields_:
+            if kind is ctypes.c_float and not math.isfinite(getattr(request, name)):
+                raise ValueError(f"request not sent: {name} is not a finite number")
         self._seq += 1
         sample = self._publisher.loan_uninit()
         payload = sample.payload().contents

@@ -36,6 +36,16 @@ def drive(
             )
 
 
+def test_a_request_with_a_nan_or_an_infinity_is_refused_before_anything_is_sent() -> None:
+    # No port is touched: the refusal comes first.
+    source = chassis.Source("teleop", publisher=None, notifier=None)
+    for bad in (float("nan"), float("inf"), float("-inf")):
+        with pytest.raises(ValueError, match="linear_x_mps is not a finite number"):
+            source.send(chassis.VelocityRequest.twist(bad))
+        with pytest.raises(ValueError, match="limit_reverse_mps is not a finite number"):
+            source.send(chassis.VelocityRequest.limit(0.0, bad, 0.0, 0.0))
+
+
 @pytest.mark.parametrize("kind", ["titan", "scout-mini", "xbot"])
 def test_drives_and_reads_back_every_robot(world: World, kind: str) -> None:
     robot = world.chassisd(kind)

@@ -27,7 +27,8 @@ use std::time::Duration;
 use anyhow::Context as _;
 use chassis_client::{
     ChassisState, ClientError, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    FaultClear, MuxStatus, Robot, RobotDescription, Source, VelocityRequest, termination_requested,
+    FaultClear, InvalidVelocity, MuxStatus, Robot, RobotDescription, Source, ValidRequest,
+    VelocityRequest, termination_requested,
 };
 use mio::{Events, Interest, Poll, Token};
 use ros2_client::{
@@ -344,7 +345,7 @@ pub fn describe(name: &str) -> Option<(Robot, RobotDescription)> {
 /// Counts of what the commands loop refused, logged as they happen.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub struct Drops {
-    /// Velocities with a NaN or infinite component.
+    /// Velocities with a NaN or infinite component (or one beyond `f32`).
     pub non_finite: u64,
     /// Velocities chassisd's source did not take (source held by another process, IPC error).
     pub unsent: u64,
@@ -385,15 +386,12 @@ pub fn stamp_age_check(
     Ok(made.min(now_ns))
 }
 
-/// A `cmd_vel` twist as a velocity request, or `None` when a component the robot uses is not a
-/// finite number. linear.x, linear.y and angular.z are used; the rest has no meaning for a
-/// ground robot and is ignored.
-pub fn twist_request(twist: &Twist) -> Option<VelocityRequest> {
-    let used = [twist.linear.x, twist.linear.y, twist.angular.z];
-    if used.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    Some(VelocityRequest {
+/// A `cmd_vel` twist parsed into a velocity request: where a ROS 2 velocity enters. linear.x,
+/// linear.y and angular.z are used, as `f32`: one that is not a finite number there (a NaN, an
+/// infinity, or beyond `f32`) refuses the twist. The rest has no meaning for a ground robot and
+/// is ignored.
+pub fn twist_request(twist: &Twist) -> Result<ValidRequest, InvalidVelocity> {
+    ValidRequest::try_from(VelocityRequest {
         linear_y_mps: twist.linear.y as f32,
         ..VelocityRequest::twist(twist.linear.x as f32, twist.angular.z as f32)
     })
@@ -516,19 +514,23 @@ fn drain_cmd_vel(
                 continue;
             }
         };
-        let Some(mut request) = twist_request(&twist) else {
-            drops.non_finite += 1;
-            tracing::warn!(
-                ?twist,
-                count = drops.non_finite,
-                "cmd_vel with a non-finite component dropped"
-            );
-            continue;
+        let mut request = match twist_request(&twist) {
+            Ok(request) => request,
+            Err(error) => {
+                drops.non_finite += 1;
+                tracing::warn!(
+                    ?twist,
+                    %error,
+                    count = drops.non_finite,
+                    "cmd_vel with a non-finite component dropped"
+                );
+                continue;
+            }
         };
         if let Some(stamp) = stamp {
             match stamp_age_check(stamp, clock, chassis_client::now_ns(), max_age_ns) {
                 // Its timeout runs from when it was made.
-                Ok(made) => request.stamp_ns = made,
+                Ok(made) => request = request.with_stamp_ns(made),
                 Err(why) => {
                     drops.stale += 1;
                     tracing::warn!(count = drops.stale, "cmd_vel dropped as stale: {why}");
@@ -542,7 +544,7 @@ fn drain_cmd_vel(
 
 /// Sends `request` as the `ros2` source, opening it when needed (chassisd may have restarted).
 fn forward(
-    request: VelocityRequest,
+    request: ValidRequest,
     robot: &mut Robot,
     source: &mut Option<Source>,
     drops: &mut Drops,
@@ -976,19 +978,19 @@ mod tests {
             r.stamp_ns, 0,
             "stamped on arrival by the source, not by the sender"
         );
-        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300] {
             let mut t = t;
             t.angular.z = bad;
-            assert!(twist_request(&t).is_none());
+            assert!(twist_request(&t).is_err());
             let mut t2 = t;
             t2.angular.z = 0.0;
             t2.linear.x = bad;
-            assert!(twist_request(&t2).is_none());
+            assert!(twist_request(&t2).is_err());
         }
         // What a ground robot ignores may be anything.
         let mut t3 = t;
         t3.linear.z = f64::NAN;
-        assert!(twist_request(&t3).is_some());
+        assert!(twist_request(&t3).is_ok());
     }
 
     #[test]

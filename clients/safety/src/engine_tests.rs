@@ -333,7 +333,7 @@ fn an_obstacle_ahead_in_the_stop_zone_blocks_forward_motion_but_lets_the_robot_r
     assert_eq!(texts(&d), ["ultrasonic: stop zone, 0.30 m < 0.35 m"]);
     // A real request through this envelope: forward clamps to 0, reverse passes.
     let r = d.command.request();
-    assert!(r.is_limit() && r.is_finite());
+    assert!(r.is_limit() && chassis_client::ValidRequest::try_from(r).is_ok());
     assert_eq!(0.3f32.clamp(-r.limit_reverse_mps, r.limit_forward_mps), 0.0);
     assert_eq!(
         (-0.2f32).clamp(-r.limit_reverse_mps, r.limit_forward_mps),

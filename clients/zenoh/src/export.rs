@@ -33,10 +33,7 @@ use chassis_client::{
 use chassis_ipc::StampTrace;
 use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
-use zenoh::sample::Sample;
 use zerocopy::IntoBytes as _;
-
-use chassis_client::payload::{Payload, PayloadError};
 
 use crate::net::{self, Net};
 use crate::wire::{Keys, Wire};
@@ -459,13 +456,10 @@ fn drive(
             );
             continue;
         };
-        match decode(&wire, &sample) {
-            Ok(mut request) => match judge(&peer, request.stamp_ns, arrived, max_age_ns) {
-                Ok(made) => {
-                    // Its timeout runs from when it was made, in this computer's clock.
-                    request.stamp_ns = made;
-                    source.send(request)?;
-                }
+        match wire.decode_request(sample.encoding(), &sample.payload().to_bytes()) {
+            Ok(request) => match judge(&peer, request.stamp_ns, arrived, max_age_ns) {
+                // Its timeout runs from when it was made, in this computer's clock.
+                Ok(made) => source.send(request.with_stamp_ns(made))?,
                 Err(why) => {
                     stale += 1;
                     tracing::warn!(key, stale, "dropped a velocity request: {why}");
@@ -517,10 +511,6 @@ pub fn judge(
         });
     }
     Ok(made.min(arrived_ns))
-}
-
-fn decode<T: Payload>(wire: &Wire<T>, sample: &Sample) -> Result<T, PayloadError> {
-    wire.decode(sample.encoding(), &sample.payload().to_bytes())
 }
 
 /// Answers `chassis/<name>/control` with chassisd's responses.

@@ -4,10 +4,11 @@
 //! encoding `application/octet-stream;<type name>`, e.g.
 //! `application/octet-stream;chassis::ChassisState.v3`. The bytes and the check of what arrives
 //! from another computer are [`chassis_client::payload`]'s (sans-IO, fuzzed); [`Wire`] only
-//! carries them in Zenoh's [`Encoding`].
+//! carries them in Zenoh's [`Encoding`]. A velocity request from another computer is parsed
+//! into a [`ValidRequest`] where it arrives ([`Wire::decode_request`]).
 
 use chassis_client::payload::{Payload, PayloadError, PayloadType};
-use chassis_client::{ServiceKind, service_name};
+use chassis_client::{InvalidVelocity, ServiceKind, ValidRequest, VelocityRequest, service_name};
 use zenoh::bytes::Encoding;
 
 /// The encoding of a payload carrying `T` (one or several, back to back).
@@ -42,6 +43,29 @@ impl<T: Payload> Wire<T> {
     /// The one value a payload carries.
     pub fn decode(&self, encoding: &Encoding, bytes: &[u8]) -> Result<T, PayloadError> {
         self.payload.decode(&encoding.to_string(), bytes)
+    }
+}
+
+/// Why a velocity request from another computer is not passed on.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RequestError {
+    /// Not the type, or cut.
+    #[error(transparent)]
+    Payload(#[from] PayloadError),
+    /// A NaN, an infinity or a negative envelope.
+    #[error(transparent)]
+    Invalid(#[from] InvalidVelocity),
+}
+
+impl Wire<VelocityRequest> {
+    /// The one request a payload carries, parsed: where a velocity from another computer
+    /// enters this one.
+    pub fn decode_request(
+        &self,
+        encoding: &Encoding,
+        bytes: &[u8],
+    ) -> Result<ValidRequest, RequestError> {
+        Ok(ValidRequest::try_from(self.decode(encoding, bytes)?)?)
     }
 }
 
@@ -124,7 +148,6 @@ mod tests {
     use super::*;
     use chassis_client::{
         BusFrame, ChassisState, ControlRequest, ControlResponse, MuxStatus, RobotDescription,
-        VelocityRequest,
     };
     use zerocopy::IntoBytes as _;
 
@@ -153,10 +176,14 @@ mod tests {
             wire.decode(&Wire::<ChassisState>::new().encoding(), request.as_bytes()),
             Err(PayloadError::MediaType { .. })
         ));
+        assert_eq!(
+            wire.decode_request(&wire.encoding(), request.as_bytes()),
+            Ok(ValidRequest::try_from(request).unwrap())
+        );
         let nan = VelocityRequest::twist(f32::NAN, 0.0);
         assert!(matches!(
-            wire.decode(&wire.encoding(), nan.as_bytes()),
-            Err(PayloadError::Refused { .. })
+            wire.decode_request(&wire.encoding(), nan.as_bytes()),
+            Err(RequestError::Invalid(_))
         ));
     }
 

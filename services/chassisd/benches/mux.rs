@@ -1,10 +1,10 @@
-//! Cost of one mux decision: `cargo bench -p chassisd`.
+//! Cost of one mux decision, with the parse of its requests: `cargo bench -p chassisd`.
 // Benchmark setup: a failed unwrap is a broken benchmark, reported by its panic.
 #![allow(clippy::unwrap_used)]
 
 use std::hint::black_box;
 
-use chassis_interfaces::VelocityRequest;
+use chassis_interfaces::{ValidRequest, VelocityRequest};
 use chassis_protocols::Timestamp;
 use chassisd::mux::Mux;
 use chassisd_config::mux::MuxConfig;
@@ -19,14 +19,17 @@ fn mux(c: &mut Criterion) {
             b.iter(|| {
                 t += 1_000_000;
                 let now = Timestamp::from_nanos(t);
-                let heartbeat = VelocityRequest {
+                // Each parsed as the engine parses what a source wrote.
+                let heartbeat = ValidRequest::try_from(VelocityRequest {
                     stamp_ns: t,
                     ..VelocityRequest::heartbeat()
-                };
-                let drive = VelocityRequest {
+                })
+                .unwrap();
+                let drive = ValidRequest::try_from(black_box(VelocityRequest {
                     stamp_ns: t,
                     ..VelocityRequest::twist(0.5, 0.1)
-                };
+                }))
+                .unwrap();
                 let _ = mux.on_request(now, 0, &heartbeat);
                 let _ = mux.on_request(now, 1, black_box(&drive));
                 mux.evaluate(now)

@@ -141,18 +141,23 @@ mod tests {
             "stopped: required source safety silent"
         );
         let mut mux = Mux::new(&MuxConfig::default().without_required_sources()).unwrap();
-        let teleop = chassis_interfaces::VelocityRequest {
+        let valid = |r| chassis_interfaces::ValidRequest::try_from(r).unwrap();
+        let teleop = valid(chassis_interfaces::VelocityRequest {
             stamp_ns: t(1).as_nanos(),
             ..chassis_interfaces::VelocityRequest::twist(0.3, 0.0)
-        };
+        });
         mux.on_request(t(1), 1, &teleop).unwrap();
         mux.evaluate(t(2));
         assert_eq!(
             describe(mux.status()),
             "stopped: waiting for a zero from teleop since chassisd started"
         );
-        mux.on_request(t(2), 1, &chassis_interfaces::VelocityRequest::heartbeat())
-            .unwrap();
+        mux.on_request(
+            t(2),
+            1,
+            &valid(chassis_interfaces::VelocityRequest::heartbeat()),
+        )
+        .unwrap();
         mux.on_request(t(2), 1, &teleop).unwrap();
         mux.evaluate(t(2));
         assert_eq!(describe(mux.status()), "driving from teleop");

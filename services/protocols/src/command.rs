@@ -3,7 +3,7 @@
 //! `chassis encode` prints these frames; the drivers send the same ones, so what the CLI shows is
 //! what the service puts on the wire.
 
-use chassis_interfaces::FaultClear;
+use chassis_interfaces::{FaultClear, Velocity};
 use thiserror::Error;
 
 use crate::{EncodeError, RobotKind};
@@ -17,15 +17,22 @@ pub enum Turn {
     Steer(f64),
 }
 
+impl Turn {
+    /// How `velocity` asks to turn: by a steering angle or by a yaw rate.
+    pub fn of(velocity: &Velocity) -> Turn {
+        if velocity.uses_steer() {
+            Turn::Steer(velocity.steer_rad().into())
+        } else {
+            Turn::YawRate(velocity.angular_z_radps().into())
+        }
+    }
+}
+
 /// Something to ask of a chassis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Command {
-    /// Move: forward speed, lateral speed (omni robots), and a turn.
-    Velocity {
-        linear_x_mps: f64,
-        linear_y_mps: f64,
-        turn: Turn,
-    },
+    /// Move: forward speed, lateral speed (omni robots), and a turn; finite by its type.
+    Velocity(Velocity),
     /// Take control (`true`: command mode) or let go (`false`: standby).
     Mode { take_control: bool },
     /// Engage or release the parking brake.
@@ -67,7 +74,7 @@ impl Command {
     /// The command's short name and the robot function it needs.
     fn names(&self) -> (&'static str, &'static str) {
         match self {
-            Command::Velocity { .. } => ("velocity", "motion"),
+            Command::Velocity(_) => ("velocity", "motion"),
             Command::Mode { .. } => ("mode", "control mode"),
             Command::Brake { .. } => ("brake", "parking brake"),
             Command::ClearFaults { .. } => ("clear-fault", "fault-clear command"),
@@ -151,7 +158,7 @@ pub fn command_to_request(command: &Command) -> Option<chassis_interfaces::Contr
     use chassis_interfaces::{ControlKind, ControlMode, ControlRequest};
     let on = |b: bool| u8::from(b);
     Some(match *command {
-        Command::Velocity { .. } => return None,
+        Command::Velocity(_) => return None,
         Command::Mode { take_control } => ControlRequest::new(ControlKind::MODE).with_arg(
             0,
             if take_control {
@@ -347,11 +354,7 @@ mod tests {
 
     #[test]
     fn velocity_is_not_a_control_request() {
-        let v = Command::Velocity {
-            linear_x_mps: 1.0,
-            linear_y_mps: 0.0,
-            turn: Turn::YawRate(0.0),
-        };
+        let v = Command::Velocity(Velocity::twist(1.0, 0.0).unwrap());
         assert_eq!(command_to_request(&v), None);
     }
 

@@ -12,13 +12,13 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    BodyVelocity, ChassisState, ControlStatus, FaultFlags, LinkFlags, OdometryState, RequestFlags,
+    ChassisState, ControlStatus, FaultFlags, LinkFlags, OdometryState, Velocity,
 };
 use serde::{Deserialize, Serialize};
 
 use crate::DecodeError;
 use crate::can::CanFrame;
-use crate::command::{Command, Turn};
+use crate::command::Command;
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
 
@@ -143,10 +143,10 @@ pub trait Driver {
     /// Feeds what arrived from the bus at `now`.
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>);
 
-    /// The mux's output: the motion to command from now on (SI units, ISO axes). A changed command
-    /// is sent at once (subject to [`DriverConfig::min_command_interval_ms`]); the heartbeat
-    /// repeats the latest one.
-    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity);
+    /// The mux's output: the motion to command from now on (SI units, ISO axes), finite by its
+    /// type. A changed command is sent at once (subject to
+    /// [`DriverConfig::min_command_interval_ms`]); the heartbeat repeats the latest one.
+    fn set_command(&mut self, now: Timestamp, command: &Velocity);
 
     /// A control action (mode, brake, lights, …). Motion commands go through
     /// [`Driver::set_command`]; a [`Command::Velocity`] here is `Invalid`.
@@ -184,7 +184,7 @@ impl<D: Driver + ?Sized> Driver for Box<D> {
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         (**self).handle_rx(now, rx);
     }
-    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
+    fn set_command(&mut self, now: Timestamp, command: &Velocity) {
         (**self).set_command(now, command);
     }
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
@@ -541,7 +541,7 @@ impl DriverCore {
                 "the bus is down; nothing can be sent".into(),
             ));
         }
-        if let Command::Velocity { .. } = command {
+        if let Command::Velocity(_) = command {
             return Err(ControlOutcome::Invalid(
                 "motion goes through the mux, not a control request".into(),
             ));
@@ -601,16 +601,6 @@ where
     map.iter()
         .filter(|(bit, _)| word & *bit != W::default())
         .fold(0, |acc, (_, flag)| acc | flag)
-}
-
-/// How a twist asks to turn: a steering angle when it carries `RequestFlags::STEER`, else a
-/// yaw rate.
-pub(crate) fn requested_turn(command: &BodyVelocity) -> Turn {
-    if command.flags & RequestFlags::STEER != 0 {
-        Turn::Steer(command.steer_rad.into())
-    } else {
-        Turn::YawRate(command.angular_z_radps.into())
-    }
 }
 
 /// "Chassis silent": no feedback for longer than a timeout.

@@ -8,7 +8,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::BodyVelocity;
+use chassis_interfaces::Velocity;
 
 use crate::Direction;
 use crate::command::Command;
@@ -193,7 +193,7 @@ impl<D: Driver, F: Firmware> Pair<D, F> {
     }
 
     /// Gives the driver a new command.
-    pub fn set_command(&mut self, command: BodyVelocity) {
+    pub fn set_command(&mut self, command: Velocity) {
         let now = self.now;
         self.driver.set_command(now, &command);
         self.flush();

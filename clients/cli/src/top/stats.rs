@@ -455,7 +455,7 @@ mod tests {
     use std::time::Duration;
 
     use super::*;
-    use chassis_client::BodyVelocity;
+    use chassis_client::Velocity;
     use chassis_protocols::xbot::XbotProfile;
     use chassis_protocols::{Direction, RobotKind, Timestamp, WireItem, xbot};
 
@@ -480,10 +480,7 @@ mod tests {
             let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
             pair.record = true;
             pair.run_for(Duration::from_secs(2));
-            pair.set_command(BodyVelocity {
-                linear_x_mps: 0.3,
-                ..BodyVelocity::ZERO
-            });
+            pair.set_command(Velocity::twist(0.3, 0.0).unwrap());
             pair.run_for(Duration::from_secs(1));
             let mut stats = BusStats::new(Some(&profile));
             for (seq, record) in pair.log().iter().enumerate() {

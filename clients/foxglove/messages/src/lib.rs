@@ -5,7 +5,7 @@
 //!
 //! * the message data of a channel the client advertised ([`twist_request`]): on a
 //!   `geometry_msgs/Twist` channel in `json` ([`check_twist_channel`]) — the Teleop panel's, or
-//!   any client's — a Twist becomes a [`VelocityRequest`] of the `foxglove` source; anything
+//!   any client's — a Twist is parsed into a [`ValidRequest`] of the `foxglove` source; anything
 //!   that is not a Twist, or that asks for a NaN or an infinity, is refused here and never
 //!   reaches the mux;
 //! * the request of a service call ([`control_request`]): JSON fields with defaults (`{}` or
@@ -19,8 +19,8 @@
 //! crate without the WebSocket and iceoryx2 stacks.
 
 use chassis_interfaces::{
-    ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, LightMode,
-    VelocityRequest,
+    ControlKind, ControlRequest, ControlResponse, ControlStatus, FaultClear, InvalidVelocity,
+    LightMode, ValidRequest, VelocityRequest,
 };
 use chassis_protocols::{Command, command_to_request};
 use serde::de::{self, MapAccess, Visitor};
@@ -122,8 +122,11 @@ pub enum TwistError {
         topic: String,
         source: serde_json::Error,
     },
-    #[error("topic {topic}: the Twist asks for a speed that is not a finite number")]
-    NonFinite { topic: String },
+    #[error("topic {topic}: the Twist is no velocity: {source}")]
+    NonFinite {
+        topic: String,
+        source: InvalidVelocity,
+    },
 }
 
 /// Checks a client channel carries Twists as JSON.
@@ -147,24 +150,22 @@ pub fn check_twist_channel(
     Ok(())
 }
 
-/// The velocity request a Twist asks for: `linear.x`, `linear.y` (omni robots), `angular.z`,
-/// as `f32`. A value that is not finite there (JSON has no NaN, but 1e39 is no `f32`) is
-/// refused. What is finite but absurd is the mux's to refuse and count.
-pub fn twist_request(topic: &str, payload: &[u8]) -> Result<VelocityRequest, TwistError> {
+/// The velocity request a Twist asks for, parsed: `linear.x`, `linear.y` (omni robots),
+/// `angular.z`, as `f32`. A value that is not finite there (JSON has no NaN, but 1e39 is no
+/// `f32`) is refused. What is finite but absurd is the mux's to refuse and count.
+pub fn twist_request(topic: &str, payload: &[u8]) -> Result<ValidRequest, TwistError> {
     let twist: Twist = serde_json::from_slice(payload).map_err(|source| TwistError::Json {
         topic: topic.into(),
         source,
     })?;
-    let request = VelocityRequest {
+    ValidRequest::try_from(VelocityRequest {
         linear_y_mps: twist.linear.y as f32,
         ..VelocityRequest::twist(twist.linear.x as f32, twist.angular.z as f32)
-    };
-    if !request.is_finite() {
-        return Err(TwistError::NonFinite {
-            topic: topic.into(),
-        });
-    }
-    Ok(request)
+    })
+    .map_err(|source| TwistError::NonFinite {
+        topic: topic.into(),
+        source,
+    })
 }
 
 /// A service the bridge offers: the e-stop lock, and the chassis functions of `chassis

@@ -77,8 +77,8 @@ use chassis_bus::can_controller::{self, Controller, ControllerReport};
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
     ControllerState, FaultFlags, FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags,
-    LockStatus, MuxStatus, RobotDescription, SourceFlags, SourceStatus, Stop, VelocityRequest,
-    WireProtocol, ZeroReason,
+    LockStatus, MuxStatus, RobotDescription, SourceFlags, SourceStatus, Stop, ValidRequest,
+    VelocityRequest, WireProtocol, ZeroReason,
 };
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
@@ -506,9 +506,11 @@ impl Engine {
         }
     }
 
-    /// A request of source `source` (its index in the configuration), read at `now`. A
-    /// rejected one (non-finite, absurd, unknown lock bits) is counted against its source and
-    /// logged at most once a second; the source's previous request stands.
+    /// A request of source `source` (its index in the configuration), read at `now`: whatever
+    /// its process wrote into shared memory, parsed here, once, into the [`ValidRequest`] the
+    /// mux takes. A rejected one (a NaN or an infinity, a negative envelope, an absurd speed,
+    /// unknown lock bits) is counted against its source and logged at most once a second; the
+    /// source's previous request stands.
     pub fn handle_request(
         &mut self,
         now: Timestamp,
@@ -517,7 +519,10 @@ impl Engine {
     ) -> Result<(), Rejection> {
         self.requests = true;
         self.undecided = true;
-        let result = self.mux.on_request(now, source, request);
+        let result = match ValidRequest::try_from(*request) {
+            Ok(request) => self.mux.on_request(now, source, &request),
+            Err(invalid) => Err(self.mux.refuse(source, invalid.into())),
+        };
         if let Err(rejection) = &result
             && let Some(held) = self.throttles.rejected.allow(now)
         {

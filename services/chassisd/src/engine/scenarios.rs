@@ -130,7 +130,7 @@ fn a_command_is_decided_before_the_bus_is_drained() {
         .handle_request(t, rig.source("teleop"), &stamped(twist(0.7), t))
         .unwrap();
     rig.engine.handle_rx(t, feedback.as_rx());
-    assert!((rig.engine.mux().output().linear_x_mps - 0.7).abs() < 1e-6);
+    assert!((rig.engine.mux().output().linear_x_mps() - 0.7).abs() < 1e-6);
     assert_eq!(rig.engine.mux().status().stamp_ns, t.as_nanos());
     assert_eq!(first_motion_polled(&mut rig, t), Some(0.7));
 }
@@ -376,6 +376,47 @@ fn a_request_naming_an_unknown_lock_is_rejected_and_the_previous_one_stands() {
     let status = rig.engine.mux().status();
     assert_eq!(status.rejected_requests, 2);
     assert_eq!(status.sources()[rig.source("teleop")].rejected, 2);
+}
+
+/// What a source's process wrote into shared memory is parsed once, here: a NaN, an infinity
+/// or a negative envelope never reaches the mux or the driver. Each is counted against its
+/// source, and the source's previous request stands.
+#[test]
+fn non_finite_requests_are_rejected_counted_and_the_previous_one_stands() {
+    let mut rig = ready();
+    rig.request_at(at(207), "teleop", twist(0.5));
+    for (t, bad) in [
+        (217, f32::NAN),
+        (227, f32::INFINITY),
+        (237, f32::NEG_INFINITY),
+    ] {
+        rig.request_at(at(t), "teleop", twist(bad));
+    }
+    let lateral = VelocityRequest {
+        linear_y_mps: f32::NAN,
+        ..twist(0.5)
+    };
+    rig.request_at(at(247), "teleop", lateral);
+    rig.request_at(
+        at(257),
+        "safety",
+        VelocityRequest::limit(-1.0, 1.0, 1.0, 1.0),
+    );
+    rig.request_at(
+        at(267),
+        "safety",
+        VelocityRequest::limit(1.0, 1.0, -0.5, 1.0),
+    );
+    rig.run_until(at(300));
+    assert!(rig.motion().iter().all(|&(t, v)| t < at(207) || v == 0.5));
+    assert!(
+        rig.motion().iter().any(|&(t, _)| t > at(280)),
+        "the heartbeat kept the valid request on the wire"
+    );
+    let status = rig.engine.mux().status();
+    assert_eq!(status.rejected_requests, 6);
+    assert_eq!(status.sources()[rig.source("teleop")].rejected, 4);
+    assert_eq!(status.sources()[rig.source("safety")].rejected, 2);
 }
 
 #[test]
@@ -1363,13 +1404,9 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
         for (index, name, percent) in [(teleop, "teleop", 8), (planner, "planner", 12)] {
             if dice.chance(percent) {
                 let v = (dice.below(21) as f32 - 10.0) / 10.0;
-                let request = if dice.chance(10) {
-                    twist(f32::NAN)
-                } else {
-                    twist(v)
-                };
-                rig.request(name, request);
-                if request.is_finite() {
+                let nan = dice.chance(10);
+                rig.request(name, twist(if nan { f32::NAN } else { v }));
+                if !nan {
                     asking[index] = Some(now);
                     any[index] = Some(now);
                     words[index].said(now, v != 0.0);

@@ -1,6 +1,6 @@
 //! The SCOUT MINI frames for each robot-independent [`Command`].
 
-use chassis_interfaces::{ClampFlags, FaultClear};
+use chassis_interfaces::{ClampFlags, FaultClear, Velocity};
 
 use super::codec::{Frame, Lights, MotionCommand, clear_code, mode};
 use super::kinematics::{SkidCommand, twist_to_command};
@@ -28,26 +28,17 @@ pub fn clear_codes_for(which: u8) -> Option<Vec<u8>> {
 /// The speed and yaw rate for a velocity within the profile's limits, quantised to the wire's
 /// percent steps. A steering angle is turned into the yaw rate of a bicycle with the robot's
 /// wheelbase (ω = v·tan δ / L); a lateral speed is dropped and flagged.
-pub fn velocity_command(
-    linear_x_mps: f64,
-    linear_y_mps: f64,
-    turn: Turn,
-    profile: &V1Profile,
-) -> Result<SkidCommand, CommandError> {
-    let angular = match turn {
+pub fn velocity_command(velocity: &Velocity, profile: &V1Profile) -> SkidCommand {
+    let linear_x_mps = f64::from(velocity.linear_x_mps());
+    let angular = match Turn::of(velocity) {
         Turn::YawRate(w) => w,
         Turn::Steer(steer) => linear_x_mps * steer.tan() / profile.wheelbase_m,
     };
-    if !(linear_x_mps.is_finite() && linear_y_mps.is_finite() && angular.is_finite()) {
-        return Err(CommandError::Invalid(format!(
-            "velocity must be finite (vx={linear_x_mps}, vy={linear_y_mps}, turn={turn:?})"
-        )));
-    }
     let mut command = twist_to_command(linear_x_mps, angular, profile);
-    if linear_y_mps != 0.0 {
+    if velocity.linear_y_mps() != 0.0 {
         command.clamp_flags |= ClampFlags::LATERAL_UNSUPPORTED;
     }
-    Ok(command)
+    command
 }
 
 /// The frames SCOUT MINI needs for `command`. Counters are the caller's (the driver numbers every
@@ -56,12 +47,8 @@ pub fn frames_for(command: &Command, profile: &V1Profile) -> Result<Planned<Fram
     let robot = profile.model.robot();
     let standing = MotionCommand::drive(0.0, 0.0);
     Ok(match *command {
-        Command::Velocity {
-            linear_x_mps,
-            linear_y_mps,
-            turn,
-        } => {
-            let c = velocity_command(linear_x_mps, linear_y_mps, turn, profile)?;
+        Command::Velocity(velocity) => {
+            let c = velocity_command(&velocity, profile);
             Planned {
                 frames: vec![Frame::MotionCommand(c.motion_command())],
                 clamp_flags: c.clamp_flags,
@@ -141,7 +128,7 @@ mod tests {
 
     #[test]
     fn velocity_is_quantised_to_whole_percents_and_flagged() {
-        let c = velocity_command(0.52, 0.0, Turn::YawRate(0.0), &p()).unwrap();
+        let c = velocity_command(&Velocity::twist(0.52, 0.0).unwrap(), &p());
         assert_eq!(c.linear_pct, 10);
         assert!((c.linear_mps - 0.5).abs() < 1e-12);
         assert_ne!(c.clamp_flags & ClampFlags::QUANTISED, 0);
@@ -150,9 +137,9 @@ mod tests {
     #[test]
     fn a_steering_angle_becomes_the_bicycle_yaw_rate() {
         // ω = 0.5 · tan(0.02) / 0.452 = 0.0221 rad/s = 4.2 % of 0.5235 rad/s → 4 %.
-        let c = velocity_command(0.5, 0.0, Turn::Steer(0.02), &p()).unwrap();
+        let c = velocity_command(&Velocity::steer(0.5, 0.02).unwrap(), &p());
         assert_eq!(c.angular_pct, 4);
-        let c = velocity_command(-0.5, 0.0, Turn::Steer(0.02), &p()).unwrap();
+        let c = velocity_command(&Velocity::steer(-0.5, 0.02).unwrap(), &p());
         assert_eq!(c.angular_pct, -4, "reversing with left steer yaws right");
     }
 
@@ -160,10 +147,5 @@ mod tests {
     fn functions_the_scout_mini_lacks_are_clear_errors() {
         let err = frames_for(&Command::Brake { engage: true }, &p()).unwrap_err();
         assert_eq!(err.to_string(), "scout-mini has no parking brake");
-    }
-
-    #[test]
-    fn non_finite_velocities_are_refused() {
-        assert!(velocity_command(f64::NAN, 0.0, Turn::YawRate(0.0), &p()).is_err());
     }
 }

@@ -6,7 +6,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    BodyVelocity, ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, SystemState,
+    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, SystemState, Velocity,
 };
 
 use super::codec::{self, Frame, Lights, MotionCommand, body, clear_code, fault, mode};
@@ -16,7 +16,7 @@ use crate::agilex_v1::V1Profile;
 use crate::command::Command;
 use crate::driver::{
     CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx,
-    WireItem, flags_of, requested_turn,
+    WireItem, flags_of,
 };
 use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
@@ -172,18 +172,8 @@ impl V1Driver {
     }
 
     /// Recomputes the request from a twist.
-    fn plan(&mut self, command: &BodyVelocity) {
-        self.requested = velocity_command(
-            command.linear_x_mps.into(),
-            command.linear_y_mps.into(),
-            requested_turn(command),
-            &self.profile,
-        )
-        // Non-finite input: the mux rejects it first; a stop is the only safe answer here.
-        .unwrap_or(SkidCommand {
-            clamp_flags: ClampFlags::CHASSIS_NOT_READY,
-            ..STANDING
-        });
+    fn plan(&mut self, command: &Velocity) {
+        self.requested = velocity_command(command, &self.profile);
         self.update_motion();
     }
 
@@ -444,7 +434,7 @@ impl Driver for V1Driver {
         }
     }
 
-    fn set_command(&mut self, _now: Timestamp, command: &BodyVelocity) {
+    fn set_command(&mut self, _now: Timestamp, command: &Velocity) {
         self.plan(command);
     }
 
@@ -575,7 +565,7 @@ impl Driver for V1Driver {
     }
 
     fn shutdown(&mut self, _now: Timestamp) {
-        self.plan(&BodyVelocity::ZERO);
+        self.plan(&Velocity::ZERO);
         // Due at once even when the command was already zero.
         self.core.schedule.command_changed(true);
     }

@@ -8,7 +8,7 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    BodyVelocity, ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LightMode, LinkFlags,
+    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LightMode, LinkFlags, Velocity,
 };
 
 use super::{Frame, Lights, MotionCommand, V1Driver, V1Sim, decode, light_mode};
@@ -42,12 +42,8 @@ fn pair_with(driver_profile: V1Profile, sim: V1Sim) -> ScoutPair {
     Pair::new(driver, sim, T0)
 }
 
-fn twist(linear_x_mps: f32, angular_z_radps: f32) -> BodyVelocity {
-    BodyVelocity {
-        linear_x_mps,
-        angular_z_radps,
-        ..BodyVelocity::ZERO
-    }
+fn twist(linear_x_mps: f32, angular_z_radps: f32) -> Velocity {
+    Velocity::twist(linear_x_mps, angular_z_radps).unwrap()
 }
 
 /// The harness has `send_to_driver` but no way to put a frame on the wire towards the firmware:
@@ -143,7 +139,7 @@ fn power_up_drive_half_a_metre_per_second_for_five_seconds_and_stop() {
     assert!(p.firmware.truth().commands_received >= 250);
     assert!(p.now().saturating_since(start) >= secs(5));
 
-    p.set_command(BodyVelocity::ZERO);
+    p.set_command(Velocity::ZERO);
     p.run_for(secs(3));
     let truth = p.firmware.truth();
     let s = *p.driver.state();
@@ -558,7 +554,7 @@ fn limits_and_quantisation_reach_the_wire_and_the_echo() {
     p.run_for(secs(5));
     assert!((p.firmware.truth().linear_mps - 5.0).abs() < 1e-3);
     assert_eq!(p.driver.state().motion.linear_mps, 5.0);
-    p.set_command(BodyVelocity::ZERO);
+    p.set_command(Velocity::ZERO);
     p.run_for(secs(3));
 
     // ⚠ angular full scale: the "real" chassis here uses the manual's example reading, 0.7853.
@@ -596,7 +592,7 @@ fn the_heartbeat_is_exactly_20_ms_for_10_s_apart_from_command_changes() {
         (ms(1_007), twist(0.5, 0.0)),
         (ms(3_013), twist(0.5, 0.2)),
         (ms(4_999), twist(1.0, 0.0)),
-        (ms(7_331), BodyVelocity::ZERO),
+        (ms(7_331), Velocity::ZERO),
     ];
     let mut change_times = Vec::new();
     for (offset, command) in changes {
@@ -860,7 +856,7 @@ fn two_thousand_simulated_seconds_of_a_driving_pattern_stay_consistent() {
     let mut curves = 0usize;
     for step in 0..200u64 {
         let command = if step % 10 == 9 {
-            BodyVelocity::ZERO
+            Velocity::ZERO
         } else {
             curves += 1;
             pattern[curves % 2]

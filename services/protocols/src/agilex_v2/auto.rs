@@ -11,7 +11,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{BodyVelocity, ChassisState, LinkFlags, WireProtocol};
+use chassis_interfaces::{ChassisState, LinkFlags, Velocity, WireProtocol};
 
 use super::detect::{DetectSettings, Detection, Detector};
 use super::{V2Driver, V2Profile};
@@ -35,7 +35,7 @@ pub struct AutoDriver {
     inner: Option<(Protocol, Box<dyn Driver + Send>)>,
     state: ChassisState,
     events: VecDeque<DriverEvent>,
-    command: BodyVelocity,
+    command: Velocity,
     bus_down: bool,
 }
 
@@ -77,7 +77,7 @@ impl AutoDriver {
                 state
             },
             events: VecDeque::new(),
-            command: BodyVelocity::ZERO,
+            command: Velocity::ZERO,
             bus_down: false,
         }
     }
@@ -167,7 +167,7 @@ impl Driver for AutoDriver {
         self.check(now);
     }
 
-    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
+    fn set_command(&mut self, now: Timestamp, command: &Velocity) {
         self.command = *command;
         if let Some((_, driver)) = &mut self.inner {
             driver.set_command(now, command);
@@ -267,11 +267,8 @@ mod tests {
         )
     }
 
-    fn forward() -> BodyVelocity {
-        BodyVelocity {
-            linear_x_mps: 0.5,
-            ..BodyVelocity::ZERO
-        }
+    fn forward() -> Velocity {
+        Velocity::twist(0.5, 0.0).unwrap()
     }
 
     /// Drives `pair` forward and returns the ids the driver sent, and when it first sent.

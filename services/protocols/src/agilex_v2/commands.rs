@@ -5,7 +5,7 @@ use chassis_interfaces::FaultClear;
 use super::codec::{ClearFault, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake};
 use super::kinematics::plan;
 use super::profile::{FaultMap, SteeringZero, V2Profile};
-use crate::command::{Command, CommandError, Planned};
+use crate::command::{Command, CommandError, Planned, Turn};
 
 /// The 0x441 code for a normalized [`FaultClear`] code under the profile (§2.3.4).
 pub fn clear_code_for(which: u8, profile: &V2Profile) -> Option<u8> {
@@ -34,12 +34,13 @@ fn robot(profile: &V2Profile) -> crate::kind::RobotKind {
 pub fn frames_for(command: &Command, profile: &V2Profile) -> Result<Planned<Frame>, CommandError> {
     let robot = robot(profile);
     Ok(match *command {
-        Command::Velocity {
-            linear_x_mps,
-            linear_y_mps,
-            turn,
-        } => {
-            let planned = plan(linear_x_mps, linear_y_mps, turn, profile)?;
+        Command::Velocity(v) => {
+            let planned = plan(
+                v.linear_x_mps().into(),
+                v.linear_y_mps().into(),
+                Turn::of(&v),
+                profile,
+            );
             let mut frames = Vec::new();
             if let Some(code) = planned.mode.and_then(|m| m.code(profile)) {
                 frames.push(Frame::MotionModeCommand(MotionMode {
@@ -132,7 +133,7 @@ pub const STOP: Motion = Motion {
 mod tests {
     use super::*;
     use crate::agilex_v2::V2Model;
-    use crate::command::Turn;
+    use chassis_interfaces::Velocity;
 
     #[test]
     fn clear_codes_per_robot() {
@@ -148,15 +149,8 @@ mod tests {
     #[test]
     fn ranger_velocity_sends_its_mode_first() {
         let r = V2Profile::for_model(V2Model::RangerMini);
-        let planned = frames_for(
-            &Command::Velocity {
-                linear_x_mps: 0.0,
-                linear_y_mps: 0.0,
-                turn: Turn::YawRate(1.0),
-            },
-            &r,
-        )
-        .unwrap();
+        let planned =
+            frames_for(&Command::Velocity(Velocity::twist(0.0, 1.0).unwrap()), &r).unwrap();
         let lines: Vec<String> = planned
             .frames
             .iter()

@@ -20,19 +20,16 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{
-    BodyVelocity, ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState,
-};
+use chassis_interfaces::{ControlMode, FaultFlags, Group, LinkFlags, SystemState, Velocity};
 
 use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake, vehicle};
 use super::commands::{STOP, frames_for};
 use super::kinematics::{RangerMode, body_twist, plan};
 use super::profile::{self, V2Profile};
 use crate::agilex::{self, BrakeKeeper, ModeKeeper, Next, SteeringZero};
-use crate::command::Command;
+use crate::command::{Command, Turn};
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
-    requested_turn,
 };
 use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
@@ -146,31 +143,23 @@ impl V2Driver {
         self.motion_clamp_flags = flags;
     }
 
-    fn plan(&mut self, now: Timestamp, command: &BodyVelocity) {
-        match plan(
-            command.linear_x_mps.into(),
-            command.linear_y_mps.into(),
-            requested_turn(command),
+    fn plan(&mut self, now: Timestamp, command: &Velocity) {
+        let planned = plan(
+            command.linear_x_mps().into(),
+            command.linear_y_mps().into(),
+            Turn::of(command),
             &self.profile,
-        ) {
-            Ok(planned) => {
-                if planned.mode.is_some() {
-                    self.wanted_mode = planned.mode;
-                }
-                if let Some(mode) = planned.mode
-                    && self.ranger_mode != Some(mode)
-                {
-                    self.send_motion_mode(now, mode);
-                }
-                self.requested = planned.motion;
-                self.requested_flags = planned.clamp_flags;
-            }
-            // Non-finite input: the mux rejects it first; a stop is the only safe answer here.
-            Err(_) => {
-                self.requested = STOP;
-                self.requested_flags = ClampFlags::CHASSIS_NOT_READY;
-            }
+        );
+        if planned.mode.is_some() {
+            self.wanted_mode = planned.mode;
         }
+        if let Some(mode) = planned.mode
+            && self.ranger_mode != Some(mode)
+        {
+            self.send_motion_mode(now, mode);
+        }
+        self.requested = planned.motion;
+        self.requested_flags = planned.clamp_flags;
         self.update_motion(now);
     }
 
@@ -429,7 +418,7 @@ impl Driver for V2Driver {
         }
     }
 
-    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
+    fn set_command(&mut self, now: Timestamp, command: &Velocity) {
         self.plan(now, command);
     }
 

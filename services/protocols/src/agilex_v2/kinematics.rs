@@ -1,4 +1,4 @@
-//! BodyVelocity ↔ 0x111 / 0x221 per kinematic kind (`PROTOCOLS-V2` §2.4, §3.3, §3.6, §3.8).
+//! Velocity ↔ 0x111 / 0x221 per kinematic kind (`PROTOCOLS-V2` §2.4, §3.3, §3.6, §3.8).
 //!
 //! * Differential / skid / tracked: (v, ω); v_y is unachievable.
 //! * Omni (mecanum SCOUT MINI): (v, ω, v_y).
@@ -14,7 +14,7 @@ use chassis_interfaces::ClampFlags;
 
 use super::codec::Motion;
 use super::profile::{Kinematics, SpinField, V2Profile};
-use crate::command::{CommandError, Turn};
+use crate::command::Turn;
 
 /// RANGER motion modes (their wire numbers are the profile's ⚠ D-12 codes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -85,21 +85,9 @@ fn dual_ackermann_inner(radius: f64, profile: &V2Profile) -> Option<f64> {
     (denominator > 0.0).then(|| (profile.wheelbase_m / 2.0 / denominator).atan())
 }
 
-/// Maps a twist onto 0x111 for the profile's kinematics, within its limits.
-pub fn plan(
-    linear_x_mps: f64,
-    linear_y_mps: f64,
-    turn: Turn,
-    profile: &V2Profile,
-) -> Result<Planned, CommandError> {
-    let turn_value = match turn {
-        Turn::YawRate(w) | Turn::Steer(w) => w,
-    };
-    if !(linear_x_mps.is_finite() && linear_y_mps.is_finite() && turn_value.is_finite()) {
-        return Err(CommandError::Invalid(format!(
-            "velocity must be finite (vx={linear_x_mps}, vy={linear_y_mps}, turn={turn_value})"
-        )));
-    }
+/// Maps a twist onto 0x111 for the profile's kinematics, within its limits. The numbers are a
+/// `Velocity`'s: finite.
+pub fn plan(linear_x_mps: f64, linear_y_mps: f64, turn: Turn, profile: &V2Profile) -> Planned {
     let mut flags = 0;
     let v = clamp(
         linear_x_mps,
@@ -229,11 +217,11 @@ pub fn plan(
             }
         }
     }
-    Ok(Planned {
+    Planned {
         motion,
         mode,
         clamp_flags: flags,
-    })
+    }
 }
 
 /// The body twist (v, v_y, ω) of a 0x221 report, given the RANGER mode in force.
@@ -291,7 +279,7 @@ mod tests {
     #[test]
     fn differential_drops_and_flags_lateral_and_clamps() {
         let t = p(V2Model::Bunker);
-        let out = plan(3.0, 0.2, Turn::YawRate(0.2), &t).unwrap();
+        let out = plan(3.0, 0.2, Turn::YawRate(0.2), &t);
         assert_eq!(out.motion.linear_mps, 1.5);
         assert_eq!(out.motion.angular_radps, 0.2);
         assert_eq!(out.motion.lateral_mps, 0.0);
@@ -301,7 +289,7 @@ mod tests {
 
     #[test]
     fn omni_sends_lateral() {
-        let out = plan(0.0, 0.3, Turn::YawRate(0.0), &p(V2Model::ScoutMiniOmni)).unwrap();
+        let out = plan(0.0, 0.3, Turn::YawRate(0.0), &p(V2Model::ScoutMiniOmni));
         assert_eq!(out.motion.lateral_mps, 0.3);
         assert_eq!(out.clamp_flags, 0);
     }
@@ -310,12 +298,12 @@ mod tests {
     fn hunter_steers_and_its_feedback_gives_the_yaw_rate_back() {
         let h = p(V2Model::Hunter);
         for (v, w) in [(1.0, 0.5), (-1.0, 0.5), (0.5, -0.3)] {
-            let out = plan(v, 0.0, Turn::YawRate(w), &h).unwrap();
+            let out = plan(v, 0.0, Turn::YawRate(w), &h);
             assert_eq!(out.clamp_flags, 0, "{v} {w}");
             let (_, _, back) = body_twist(&out.motion, None, &h);
             assert!((back - w).abs() < 1e-9, "{v} {w}: {back}");
         }
-        let spot = plan(0.0, 0.0, Turn::YawRate(0.5), &h).unwrap();
+        let spot = plan(0.0, 0.0, Turn::YawRate(0.5), &h);
         assert_ne!(spot.clamp_flags & ClampFlags::TURN_IN_PLACE_UNACHIEVABLE, 0);
         assert_eq!(spot.motion.linear_mps, 0.0);
     }
@@ -323,22 +311,22 @@ mod tests {
     #[test]
     fn ranger_chooses_its_mode_from_the_twist() {
         let r = p(V2Model::RangerMini);
-        let crab = plan(0.5, 0.5, Turn::YawRate(0.0), &r).unwrap();
+        let crab = plan(0.5, 0.5, Turn::YawRate(0.0), &r);
         assert_eq!(crab.mode, Some(RangerMode::Crab));
         assert!((crab.motion.steer_rad - std::f64::consts::FRAC_PI_4).abs() < 1e-9);
         let (vx, vy, _) = body_twist(&crab.motion, crab.mode, &r);
         assert!((vx - 0.5).abs() < 1e-9 && (vy - 0.5).abs() < 1e-9);
-        let spin = plan(0.0, 0.0, Turn::YawRate(1.0), &r).unwrap();
+        let spin = plan(0.0, 0.0, Turn::YawRate(1.0), &r);
         assert_eq!(spin.mode, Some(RangerMode::Spin));
         assert_eq!(spin.motion.angular_radps, 1.0);
-        let arc = plan(1.0, 0.0, Turn::YawRate(0.5), &r).unwrap();
+        let arc = plan(1.0, 0.0, Turn::YawRate(0.5), &r);
         assert_eq!(arc.mode, Some(RangerMode::DualAckermann));
         let (_, _, w) = body_twist(&arc.motion, arc.mode, &r);
         assert!((w - 0.5).abs() < 1e-9, "{w}");
-        assert_eq!(plan(0.0, 0.0, Turn::YawRate(0.0), &r).unwrap().mode, None);
+        assert_eq!(plan(0.0, 0.0, Turn::YawRate(0.0), &r).mode, None);
         // RANGER MINI 1.0: the spin speed goes into b4-5 as a wheel speed.
         let v1 = p(V2Model::RangerMiniV1);
-        let spin = plan(0.0, 0.0, Turn::YawRate(0.2), &v1).unwrap();
+        let spin = plan(0.0, 0.0, Turn::YawRate(0.2), &v1);
         assert!((spin.motion.lateral_mps - 0.2 * 0.254558).abs() < 1e-9);
         assert_eq!(spin.motion.angular_radps, 0.0);
     }

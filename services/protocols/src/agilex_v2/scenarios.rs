@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::{BodyVelocity, ControlMode, FaultFlags, LinkFlags};
+use chassis_interfaces::{ControlMode, FaultFlags, LinkFlags, Velocity};
 
 use super::{Frame, V2Driver, V2Model, V2Profile, V2Sim, decode, id};
 use crate::Direction;
@@ -22,13 +22,8 @@ fn ms(v: u64) -> Duration {
     Duration::from_millis(v)
 }
 
-fn twist(vx: f64, vy: f64, w: f64) -> BodyVelocity {
-    BodyVelocity {
-        linear_x_mps: vx as f32,
-        linear_y_mps: vy as f32,
-        angular_z_radps: w as f32,
-        ..BodyVelocity::ZERO
-    }
+fn twist(vx: f64, vy: f64, w: f64) -> Velocity {
+    Velocity::new(vx as f32, vy as f32, w as f32).unwrap()
 }
 
 fn pair(model: V2Model) -> V2Pair {
@@ -116,7 +111,7 @@ fn power_up_enable_drive_stop_for_every_kinematic_kind() {
             t.x_m,
             t.y_m
         );
-        p.set_command(BodyVelocity::ZERO);
+        p.set_command(Velocity::ZERO);
         p.run_for(ms(2000));
         assert!(close(p.firmware.truth().linear_mps, 0.0, 1e-3), "{model:?}");
         // Only V2 command ids ever went out, and 0x111 at the heartbeat period.

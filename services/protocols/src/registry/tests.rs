@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::{BodyVelocity, Kinematics, MAX_JOINTS, MAX_SENSORS, WireProtocol};
+use chassis_interfaces::{Kinematics, MAX_JOINTS, MAX_SENSORS, Velocity, WireProtocol};
 
 use super::*;
 use crate::CanFrame;
@@ -114,10 +114,7 @@ fn every_robot_drives_its_simulated_firmware_in_each_of_its_protocols() {
             let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
             assert_eq!((pair.driver.robot(), pair.firmware.robot()), (kind, kind));
             pair.run_for(Duration::from_secs(3));
-            let forward = BodyVelocity {
-                linear_x_mps: 0.3,
-                ..BodyVelocity::ZERO
-            };
+            let forward = Velocity::twist(0.3, 0.0).unwrap();
             let now = pair.now();
             pair.driver.set_command(now, &forward);
             pair.run_for(Duration::from_secs(3));
@@ -149,7 +146,7 @@ fn every_robot_runs_away_past_its_limit_when_told_to_and_obeys_again_after() {
         let runaway = limit + 0.5;
         assert!(pair.inject(Injection::Runaway(Some(runaway))), "{kind}");
         let now = pair.now();
-        pair.driver.set_command(now, &BodyVelocity::ZERO);
+        pair.driver.set_command(now, &Velocity::ZERO);
         pair.run_for(Duration::from_secs(3));
         let truth = pair.firmware.truth().linear_mps;
         let measured = f64::from(pair.driver.state().motion.linear_mps);
@@ -272,11 +269,7 @@ fn every_steered_robot_is_described_with_the_radius_its_driver_turns() {
         let flags_at = |r: f64| {
             let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
             pair.run_for(Duration::from_secs(2));
-            let twist = BodyVelocity {
-                linear_x_mps: 0.3,
-                angular_z_radps: (0.3 / r) as f32,
-                ..BodyVelocity::ZERO
-            };
+            let twist = Velocity::twist(0.3, (0.3 / r) as f32).unwrap();
             let now = pair.now();
             pair.driver.set_command(now, &twist);
             pair.run_for(Duration::from_millis(200));
@@ -602,11 +595,7 @@ fn a_description_gives_the_profile_of_its_robot_in_the_protocol_in_use() {
 #[test]
 fn a_forward_command_becomes_each_familys_motion_frame() {
     let forward = |kind: RobotKind| {
-        let command = crate::Command::Velocity {
-            linear_x_mps: 0.3,
-            linear_y_mps: 0.0,
-            turn: crate::Turn::YawRate(0.0),
-        };
+        let command = crate::Command::Velocity(Velocity::twist(0.3, 0.0).unwrap());
         let (lines, clamp_flags) = kind.entry().defaults().command_lines(&command).unwrap();
         assert_eq!(clamp_flags, 0);
         lines

@@ -1,6 +1,6 @@
 //! The TITAN frames for each robot-independent [`Command`].
 
-use chassis_interfaces::{ClampFlags, FaultClear};
+use chassis_interfaces::{ClampFlags, FaultClear, Velocity};
 
 use super::codec::{
     ClearFault, Frame, ModeCommand, MotionCommand, ParkingBrake, Switch, clear_code, mode,
@@ -29,35 +29,23 @@ pub fn clear_code_for(which: u8) -> Option<u8> {
 
 /// The 0x111 motion command for a velocity, within the profile's limits. Lateral speed is
 /// dropped and flagged (TITAN cannot move sideways).
-pub fn motion_command(
-    linear_x_mps: f64,
-    linear_y_mps: f64,
-    turn: Turn,
-    profile: &TitanProfile,
-) -> Result<(MotionCommand, u32), CommandError> {
-    let turn_value = match turn {
-        Turn::YawRate(w) | Turn::Steer(w) => w,
-    };
-    if !(linear_x_mps.is_finite() && linear_y_mps.is_finite() && turn_value.is_finite()) {
-        return Err(CommandError::Invalid(format!(
-            "velocity must be finite (vx={linear_x_mps}, vy={linear_y_mps}, turn={turn_value})"
-        )));
-    }
-    let planned = match turn {
+pub fn motion_command(velocity: &Velocity, profile: &TitanProfile) -> (MotionCommand, u32) {
+    let linear_x_mps = velocity.linear_x_mps().into();
+    let planned = match Turn::of(velocity) {
         Turn::YawRate(w) => twist_to_command(linear_x_mps, w, profile),
         Turn::Steer(s) => steer_command(linear_x_mps, s, profile),
     };
     let mut flags = planned.clamp_flags;
-    if linear_y_mps != 0.0 {
+    if velocity.linear_y_mps() != 0.0 {
         flags |= ClampFlags::LATERAL_UNSUPPORTED;
     }
-    Ok((
+    (
         MotionCommand {
             linear_mps: planned.linear_mps,
             steer_rad: planned.steer_rad,
         },
         flags,
-    ))
+    )
 }
 
 /// The frames TITAN needs for `command`.
@@ -67,12 +55,8 @@ pub fn frames_for(
 ) -> Result<Planned<Frame>, CommandError> {
     let robot = RobotKind::Titan;
     Ok(match *command {
-        Command::Velocity {
-            linear_x_mps,
-            linear_y_mps,
-            turn,
-        } => {
-            let (motion, clamp_flags) = motion_command(linear_x_mps, linear_y_mps, turn, profile)?;
+        Command::Velocity(velocity) => {
+            let (motion, clamp_flags) = motion_command(&velocity, profile);
             Planned {
                 frames: vec![Frame::MotionCommand(motion)],
                 clamp_flags,
@@ -120,17 +104,10 @@ mod tests {
 
     #[test]
     fn lateral_speed_is_flagged_not_sent() {
-        let (m, flags) =
-            motion_command(0.5, 0.2, Turn::YawRate(0.0), &TitanProfile::default()).unwrap();
+        let lateral = Velocity::new(0.5, 0.2, 0.0).unwrap();
+        let (m, flags) = motion_command(&lateral, &TitanProfile::default());
         assert_eq!(m.linear_mps, 0.5);
         assert_ne!(flags & ClampFlags::LATERAL_UNSUPPORTED, 0);
-    }
-
-    #[test]
-    fn non_finite_velocities_are_refused() {
-        let p = TitanProfile::default();
-        assert!(motion_command(f64::NAN, 0.0, Turn::YawRate(0.0), &p).is_err());
-        assert!(motion_command(0.0, 0.0, Turn::Steer(f64::INFINITY), &p).is_err());
     }
 
     #[test]

@@ -13,7 +13,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    BodyVelocity, ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState,
+    ClampFlags, ControlMode, FaultFlags, Group, LinkFlags, SystemState, Velocity,
 };
 
 use super::codec::{self, Frame, MotionCommand, ParkingBrake, fault, mode};
@@ -22,8 +22,7 @@ use super::kinematics::yaw_rate;
 use crate::agilex::{self, BrakeKeeper, ModeKeeper, Next, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
-    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
-    flags_of, requested_turn,
+    ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem, flags_of,
 };
 use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
@@ -96,17 +95,8 @@ impl TitanDriver {
     }
 
     /// Recomputes the motion to send from the latest command.
-    fn plan(&mut self, now: Timestamp, command: &BodyVelocity) {
-        let (mut motion, mut flags) = match motion_command(
-            command.linear_x_mps.into(),
-            command.linear_y_mps.into(),
-            requested_turn(command),
-            &self.profile,
-        ) {
-            Ok(planned) => planned,
-            // Non-finite input: the mux rejects it first; a stop is the only safe answer here.
-            Err(_) => (MotionCommand::default(), ClampFlags::CHASSIS_NOT_READY),
-        };
+    fn plan(&mut self, now: Timestamp, command: &Velocity) {
+        let (mut motion, mut flags) = motion_command(command, &self.profile);
         if self.brake.held() && motion.linear_mps != 0.0 {
             motion = MotionCommand {
                 linear_mps: 0.0,
@@ -277,7 +267,7 @@ impl Driver for TitanDriver {
         }
     }
 
-    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
+    fn set_command(&mut self, now: Timestamp, command: &Velocity) {
         self.plan(now, command);
     }
 
@@ -418,7 +408,7 @@ impl Driver for TitanDriver {
     }
 
     fn shutdown(&mut self, now: Timestamp) {
-        self.plan(now, &BodyVelocity::ZERO);
+        self.plan(now, &Velocity::ZERO);
         self.queue.clear();
         self.queue.push_back(Frame::MotionCommand(self.motion));
         self.queue

@@ -10,8 +10,7 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    BodyVelocity, ClampFlags, ControlMode, ControlStatus, FaultClear, FaultFlags, LinkFlags,
-    RequestFlags,
+    ClampFlags, ControlMode, ControlStatus, FaultClear, FaultFlags, LinkFlags, Velocity,
 };
 
 use super::{Frame, MotionCommand, TitanDriver, TitanSim, decode, id, mode};
@@ -37,21 +36,12 @@ fn ms(v: u64) -> Duration {
     Duration::from_millis(v)
 }
 
-fn twist(linear_mps: f64, angular_radps: f64) -> BodyVelocity {
-    BodyVelocity {
-        linear_x_mps: linear_mps as f32,
-        angular_z_radps: angular_radps as f32,
-        ..BodyVelocity::ZERO
-    }
+fn twist(linear_mps: f64, angular_radps: f64) -> Velocity {
+    Velocity::twist(linear_mps as f32, angular_radps as f32).unwrap()
 }
 
-fn steer(linear_mps: f64, steer_rad: f64) -> BodyVelocity {
-    BodyVelocity {
-        linear_x_mps: linear_mps as f32,
-        steer_rad: steer_rad as f32,
-        flags: RequestFlags::STEER,
-        ..BodyVelocity::ZERO
-    }
+fn steer(linear_mps: f64, steer_rad: f64) -> Velocity {
+    Velocity::steer(linear_mps as f32, steer_rad as f32).unwrap()
 }
 
 fn pair_with(config: DriverConfig) -> TitanPair {
@@ -69,7 +59,7 @@ fn pair() -> TitanPair {
 }
 
 /// Powered up, 100 ms for the chassis to enter CAN command mode, then `command` for `settle`.
-fn driving(command: BodyVelocity, settle: Duration) -> TitanPair {
+fn driving(command: Velocity, settle: Duration) -> TitanPair {
     let mut p = pair();
     p.run_for(ms(100));
     assert_eq!(p.firmware.truth().control_mode, ControlMode::COMMAND);
@@ -225,7 +215,7 @@ fn power_up_takes_command_mode_releases_the_brake_once_drives_true_and_brakes_on
     // 100 ms; during the first 5 s it alternates with 0.9 m/s (50 changes), then it holds.
     let drive_start = p.now();
     let mut changes = 0;
-    let mut previous = BodyVelocity::ZERO;
+    let mut previous = Velocity::ZERO;
     for i in 0..100 {
         let command = if i < 50 && i % 2 == 1 {
             twist(0.9, 0.3)
@@ -298,7 +288,7 @@ fn power_up_takes_command_mode_releases_the_brake_once_drives_true_and_brakes_on
     assert!(front_m > 9.0 && front_m < 10.0, "odometer {front_m}");
 
     // Stop: the zero goes out at once; the brake engages once, exactly 5 s later.
-    p.set_command(BodyVelocity::ZERO);
+    p.set_command(Velocity::ZERO);
     let stop_at = p.now();
     let (_, zero_at, zero) = *motion_sent(&p, stop_at).first().unwrap();
     assert_eq!((zero_at, zero), (stop_at, MotionCommand::default()));
@@ -668,7 +658,7 @@ fn an_rc_takeover_is_reported_not_fought_and_control_returns_when_the_transmitte
 #[test]
 fn a_brake_engaged_before_an_rc_session_is_not_released_behind_the_transmitters_back() {
     let mut p = driving(twist(1.0, 0.0), ms(2000));
-    p.set_command(BodyVelocity::ZERO);
+    p.set_command(Velocity::ZERO);
     p.run_for(ms(6000));
     assert!(truth(&p).brake_engaged, "the idle brake engaged");
     assert_eq!(p.driver.state().system.parking_brake_engaged, 1);
@@ -812,7 +802,7 @@ fn commands_beyond_the_limits_are_clamped_on_the_wire_and_flagged_in_the_echo() 
     p.run_for(ms(100));
     // Sets the command and returns the data of the 0x111 that carried it: the first one after
     // the call, within the 2 ms minimum interval (the change may follow a heartbeat at once).
-    let command = |p: &mut TitanPair, twist: BodyVelocity| {
+    let command = |p: &mut TitanPair, twist: Velocity| {
         let at = p.now();
         let logged = p.log().len();
         p.set_command(twist);
@@ -889,11 +879,7 @@ fn commands_beyond_the_limits_are_clamped_on_the_wire_and_flagged_in_the_echo() 
         t.steer_rad
     );
 
-    let lateral = BodyVelocity {
-        linear_x_mps: 0.5,
-        linear_y_mps: 0.3,
-        ..BodyVelocity::ZERO
-    };
+    let lateral = Velocity::new(0.5, 0.3, 0.0).unwrap();
     assert_eq!(
         command(&mut p, lateral),
         [0x01, 0xF4, 0, 0, 0, 0, 0, 0],
@@ -987,7 +973,7 @@ fn off_road_mode_is_refused_while_moving_and_accepted_while_standing() {
     );
     assert!(sent(&p, id::OFF_ROAD, at).is_empty());
 
-    p.set_command(BodyVelocity::ZERO);
+    p.set_command(Velocity::ZERO);
     p.run_for(ms(3000));
     let at = p.now();
     let outcome = p.control(&Command::OffRoad { enter: true });
@@ -1223,7 +1209,7 @@ fn three_thousand_simulated_seconds_of_driving_run_without_stalls_and_the_pose_t
     let mut last_odometer = 0.0;
     for second in 0..3000 {
         let command = if second % 17 == 16 {
-            BodyVelocity::ZERO
+            Velocity::ZERO
         } else {
             twist(rng.next() * 2.4 - 1.2, rng.next() * 1.0 - 0.5)
         };
@@ -1237,7 +1223,7 @@ fn three_thousand_simulated_seconds_of_driving_run_without_stalls_and_the_pose_t
         distance += (odometer - last_odometer).abs();
         last_odometer = odometer;
     }
-    p.set_command(BodyVelocity::ZERO);
+    p.set_command(Velocity::ZERO);
     p.run_for(ms(2000));
     let t = truth(&p);
     let s = p.driver.state();

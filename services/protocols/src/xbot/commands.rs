@@ -1,6 +1,6 @@
 //! The XBot frames for each robot-independent [`Command`].
 
-use chassis_interfaces::ClampFlags;
+use chassis_interfaces::{ClampFlags, Velocity};
 
 use super::codec::{Frame, LiftCommand, PowerCommand, ServoCommand, VelocityCommand};
 use crate::RobotKind;
@@ -12,21 +12,29 @@ use crate::xbot::XbotProfile;
 /// a lateral speed is kept only on omni variants. The XBot has no steering: a steering angle is
 /// refused.
 pub fn velocity_command(
-    linear_x_mps: f64,
-    linear_y_mps: f64,
-    turn: Turn,
+    velocity: &Velocity,
     profile: &XbotProfile,
 ) -> Result<(VelocityCommand, u32), CommandError> {
-    let Turn::YawRate(angular) = turn else {
+    let Turn::YawRate(angular) = Turn::of(velocity) else {
         return Err(CommandError::Invalid(
             "the XBot turns by yaw rate; it has no steering angle".into(),
         ));
     };
-    if !(linear_x_mps.is_finite() && linear_y_mps.is_finite() && angular.is_finite()) {
-        return Err(CommandError::Invalid(format!(
-            "velocity must be finite (vx={linear_x_mps}, vy={linear_y_mps}, wz={angular})"
-        )));
-    }
+    Ok(twist_command(
+        velocity.linear_x_mps().into(),
+        velocity.linear_y_mps().into(),
+        angular,
+        profile,
+    ))
+}
+
+/// [`velocity_command`] of a twist (v, v_y, ω) whose numbers are a `Velocity`'s: finite.
+pub(super) fn twist_command(
+    linear_x_mps: f64,
+    linear_y_mps: f64,
+    angular: f64,
+    profile: &XbotProfile,
+) -> (VelocityCommand, u32) {
     let mut flags = 0;
     let mut speed = |value: f64, max: f64, flag: u32| {
         if value.abs() > max {
@@ -62,14 +70,14 @@ pub fn velocity_command(
     } else {
         angular
     };
-    Ok((
+    (
         VelocityCommand {
             linear_x_mps: vx,
             linear_y_mps: vy,
             angular_z_radps: wz,
         },
         flags,
-    ))
+    )
 }
 
 /// The frames the XBot needs for `command`.
@@ -79,13 +87,8 @@ pub fn frames_for(
 ) -> Result<Planned<Frame>, CommandError> {
     let robot = RobotKind::Xbot;
     Ok(match *command {
-        Command::Velocity {
-            linear_x_mps,
-            linear_y_mps,
-            turn,
-        } => {
-            let (velocity, clamp_flags) =
-                velocity_command(linear_x_mps, linear_y_mps, turn, profile)?;
+        Command::Velocity(velocity) => {
+            let (velocity, clamp_flags) = velocity_command(&velocity, profile)?;
             Planned {
                 frames: vec![Frame::Velocity(velocity)],
                 clamp_flags,
@@ -140,24 +143,28 @@ mod tests {
         XbotProfile::default()
     }
 
+    fn twist(vx: f32, vy: f32, wz: f32) -> Velocity {
+        Velocity::new(vx, vy, wz).unwrap()
+    }
+
     #[test]
     fn speeds_are_limited_and_tiny_ones_are_zero() {
-        let (v, flags) = velocity_command(2.0, 0.0, Turn::YawRate(0.0), &p()).unwrap();
+        let (v, flags) = velocity_command(&twist(2.0, 0.0, 0.0), &p()).unwrap();
         assert_eq!(v.linear_x_mps, 1.5);
         assert_ne!(flags & ClampFlags::LINEAR_LIMIT, 0);
-        let (v, flags) = velocity_command(0.005, 0.0, Turn::YawRate(0.0), &p()).unwrap();
+        let (v, flags) = velocity_command(&twist(0.005, 0.0, 0.0), &p()).unwrap();
         assert_eq!(v.linear_x_mps, 0.0);
         assert_ne!(flags & ClampFlags::QUANTISED, 0);
     }
 
     #[test]
     fn lateral_speed_needs_an_omni_robot() {
-        let (v, flags) = velocity_command(0.0, 0.3, Turn::YawRate(0.0), &p()).unwrap();
+        let (v, flags) = velocity_command(&twist(0.0, 0.3, 0.0), &p()).unwrap();
         assert_eq!(v.linear_y_mps, 0.0);
         assert_ne!(flags & ClampFlags::LATERAL_UNSUPPORTED, 0);
         let omni = XbotProfile { omni: true, ..p() };
-        let (v, flags) = velocity_command(0.0, 0.3, Turn::YawRate(0.0), &omni).unwrap();
-        assert_eq!((v.linear_y_mps, flags), (0.3, 0));
+        let (v, flags) = velocity_command(&twist(0.0, 0.3, 0.0), &omni).unwrap();
+        assert_eq!((v.linear_y_mps, flags), (f64::from(0.3f32), 0));
     }
 
     #[test]
@@ -171,7 +178,7 @@ mod tests {
 
     #[test]
     fn steering_angles_and_missing_functions_are_refused() {
-        assert!(velocity_command(0.3, 0.0, Turn::Steer(0.1), &p()).is_err());
+        assert!(velocity_command(&Velocity::steer(0.3, 0.1).unwrap(), &p()).is_err());
         let err = frames_for(&Command::SteeringZero, &p()).unwrap_err();
         assert_eq!(err.to_string(), "xbot has no steering to zero");
         assert!(

@@ -5,10 +5,10 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{BodyVelocity, ClampFlags, ControlMode, Group, LinkFlags, RequestFlags};
+use chassis_interfaces::{ClampFlags, ControlMode, Group, LinkFlags, Velocity};
 
 use super::codec::{Frame, LiftCommand, PowerCommand, SensorReport, ServoCommand, VelocityCommand};
-use super::commands::{frames_for, velocity_command};
+use super::commands::{frames_for, twist_command};
 use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::command::{Command, Turn};
@@ -200,11 +200,10 @@ struct SpeedRef {
 ///
 /// # Commands
 ///
-/// * Velocity: [`velocity_command`] applies the profile's limits; `state.command` echoes what
-///   went on the wire with its clamp flags (`LINEAR_LIMIT`, `ANGULAR_LIMIT`,
+/// * Velocity: [`super::velocity_command`] applies the profile's limits; `state.command` echoes
+///   what went on the wire with its clamp flags (`LINEAR_LIMIT`, `ANGULAR_LIMIT`,
 ///   `LATERAL_UNSUPPORTED`, `QUANTISED`). A steering request (`RequestFlags::STEER` with a non-zero
-///   angle) cannot be driven by a robot without steering: zero is sent with `STEER_LIMIT`; a
-///   non-finite request sends zero with `CHASSIS_NOT_READY`.
+///   angle) cannot be driven by a robot without steering: zero is sent with `STEER_LIMIT`.
 /// * [`Driver::control`]: `Power`, `Lift` (0x04; `state.lift.target_pct`/`enabled`, `Lift`) and
 ///   `Servos` (0x05; `state.pan_tilt` as the wire carries it, whole degrees, `PanTilt`); every
 ///   other action is `Unsupported`; `Velocity` and out-of-range arguments are `Invalid`; nothing is
@@ -226,7 +225,7 @@ pub struct XbotDriver {
 
     // Velocity.
     /// The latest command from the mux.
-    twist: BodyVelocity,
+    twist: Velocity,
     /// What the next 0x03 carries.
     desired: VelocityCommand,
     desired_flags: u32,
@@ -270,7 +269,7 @@ impl XbotDriver {
             core: DriverCore::new(RobotKind::Xbot.id(), period, &config, now),
             parser: StreamParser::new(),
             queue: VecDeque::new(),
-            twist: BodyVelocity::ZERO,
+            twist: Velocity::ZERO,
             desired: VelocityCommand::default(),
             desired_flags: 0,
             on_wire: None,
@@ -378,24 +377,20 @@ impl XbotDriver {
     /// Recomputes the velocity to send from the latest command.
     fn plan(&mut self, now: Timestamp) {
         let c = self.twist;
-        let steering = c.flags & RequestFlags::STEER != 0 && c.steer_rad != 0.0;
-        let (mut velocity, mut flags) = if steering {
-            (VelocityCommand::default(), ClampFlags::STEER_LIMIT)
-        } else {
-            match velocity_command(
-                c.linear_x_mps.into(),
-                c.linear_y_mps.into(),
-                Turn::YawRate(if c.flags & RequestFlags::STEER != 0 {
-                    0.0
-                } else {
-                    c.angular_z_radps.into()
-                }),
+        let twist = |angular: f64| {
+            twist_command(
+                c.linear_x_mps().into(),
+                c.linear_y_mps().into(),
+                angular,
                 &self.profile,
-            ) {
-                Ok(planned) => planned,
-                // Non-finite input: the mux rejects it first; a stop is the only safe answer.
-                Err(_) => (VelocityCommand::default(), ClampFlags::CHASSIS_NOT_READY),
+            )
+        };
+        let (mut velocity, mut flags) = match Turn::of(&c) {
+            Turn::Steer(steer) if steer != 0.0 => {
+                (VelocityCommand::default(), ClampFlags::STEER_LIMIT)
             }
+            Turn::Steer(_) => twist(0.0),
+            Turn::YawRate(angular) => twist(angular),
         };
         if self.power == Some(false) && velocity != VelocityCommand::default() {
             velocity = VelocityCommand::default();
@@ -695,7 +690,7 @@ impl Driver for XbotDriver {
         self.core.state.link.rx_bytes_discarded = self.parser.bytes_discarded();
     }
 
-    fn set_command(&mut self, now: Timestamp, command: &BodyVelocity) {
+    fn set_command(&mut self, now: Timestamp, command: &Velocity) {
         self.twist = *command;
         self.plan(now);
     }
@@ -810,7 +805,7 @@ impl Driver for XbotDriver {
     }
 
     fn shutdown(&mut self, now: Timestamp) {
-        self.twist = BodyVelocity::ZERO;
+        self.twist = Velocity::ZERO;
         self.plan(now);
         self.queue.clear();
         // The one frame exempt from the rate bound: a final stop is never held back.

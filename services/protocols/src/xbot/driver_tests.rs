@@ -3,7 +3,9 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::time::Duration;
 
-use chassis_interfaces::{BodyVelocity, ClampFlags, ControlMode, Group, LinkFlags, RequestFlags};
+use chassis_interfaces::{
+    ClampFlags, ControlMode, Group, LinkFlags, ValidRequest, Velocity, VelocityRequest,
+};
 use proptest::prelude::*;
 
 use super::*;
@@ -110,7 +112,7 @@ impl Bench {
         self.run_until(self.now + duration);
     }
 
-    fn set(&mut self, command: BodyVelocity) {
+    fn set(&mut self, command: Velocity) {
         self.d.set_command(self.now, &command);
         self.drain();
     }
@@ -361,7 +363,7 @@ fn a_stop_after_a_flood_of_changes_still_goes_out_at_once() {
     }
     b.run_for(ms(3));
     let frames_before = b.velocities().len();
-    b.set(BodyVelocity::ZERO);
+    b.set(Velocity::ZERO);
     let (t, v) = *b.velocities().last().unwrap();
     assert_eq!(b.velocities().len(), frames_before + 1);
     assert_eq!((t, v), (b.now, VelocityCommand::default()));
@@ -378,7 +380,7 @@ fn a_stop_after_a_flood_of_changes_still_goes_out_at_once() {
 
 #[test]
 fn limits_and_clamp_flags_are_echoed_with_what_went_on_the_wire() {
-    let cases: [(BodyVelocity, f64, f64, f64, u32); 6] = [
+    let cases: [(Velocity, f64, f64, f64, u32); 5] = [
         (
             twist(2.0, 0.0, 0.0),
             1.5,
@@ -408,22 +410,11 @@ fn limits_and_clamp_flags_are_echoed_with_what_went_on_the_wire() {
             ClampFlags::ANGULAR_LIMIT,
         ),
         (
-            BodyVelocity {
-                steer_rad: 0.2,
-                flags: RequestFlags::STEER,
-                ..twist(0.5, 0.0, 0.0)
-            },
+            Velocity::steer(0.5, 0.2).unwrap(),
             0.0,
             0.0,
             0.0,
             ClampFlags::STEER_LIMIT,
-        ),
-        (
-            twist(f32::NAN, 0.0, 0.0),
-            0.0,
-            0.0,
-            0.0,
-            ClampFlags::CHASSIS_NOT_READY,
         ),
     ];
     for (command, vx, vy, wz, flags) in cases {
@@ -447,11 +438,12 @@ fn limits_and_clamp_flags_are_echoed_with_what_went_on_the_wire() {
 fn a_steering_request_with_a_zero_angle_drives_straight() {
     let mut b = Bench::new();
     b.run_for(ms(10));
-    b.set(BodyVelocity {
-        flags: RequestFlags::STEER,
+    // A request may carry a yaw rate beside its steering angle: the angle is what counts.
+    let request = VelocityRequest {
         angular_z_radps: 0.7,
-        ..twist(0.5, 0.0, 0.7)
-    });
+        ..VelocityRequest::steer(0.5, 0.0)
+    };
+    b.set(ValidRequest::try_from(request).unwrap().velocity());
     let (_, v) = *b.velocities().last().unwrap();
     assert_eq!((v.linear_x_mps, v.angular_z_radps), (0.5, 0.0));
     assert_eq!(b.state().command.clamp_flags, 0);
@@ -589,11 +581,7 @@ fn unsupported_invalid_and_refused_requests_send_nothing() {
         );
     }
     for command in [
-        Command::Velocity {
-            linear_x_mps: 0.1,
-            linear_y_mps: 0.0,
-            turn: crate::command::Turn::YawRate(0.0),
-        },
+        Command::Velocity(twist(0.1, 0.0, 0.0)),
         Command::Lift {
             enable: true,
             position_pct: 120.0,

@@ -6,7 +6,7 @@
 use std::f64::consts::PI;
 use std::time::Duration;
 
-use chassis_interfaces::{BodyVelocity, ClampFlags, Group, LinkFlags};
+use chassis_interfaces::{ClampFlags, Group, LinkFlags, Velocity};
 
 use super::{Frame, StreamParser, XbotDriver, XbotSim};
 use crate::Direction;
@@ -159,7 +159,7 @@ fn power_up_enable_drive_and_stop_agree_between_the_board_and_the_driver() {
         s.motors
     );
 
-    pair.set_command(BodyVelocity::ZERO);
+    pair.set_command(Velocity::ZERO);
     pair.run_for(ms(2000));
     let t = pair.firmware.truth();
     assert!(

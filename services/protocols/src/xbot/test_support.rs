@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::BodyVelocity;
+use chassis_interfaces::Velocity;
 use proptest::prelude::*;
 
 use crate::time::Timestamp;
@@ -17,13 +17,8 @@ pub(crate) fn p() -> XbotProfile {
     XbotProfile::default()
 }
 
-pub(crate) fn twist(vx: f32, vy: f32, wz: f32) -> BodyVelocity {
-    BodyVelocity {
-        linear_x_mps: vx,
-        linear_y_mps: vy,
-        angular_z_radps: wz,
-        ..BodyVelocity::ZERO
-    }
+pub(crate) fn twist(vx: f32, vy: f32, wz: f32) -> Velocity {
+    Velocity::new(vx, vy, wz).unwrap()
 }
 
 /// `"AA 55 02 01 01 02"` → bytes.
