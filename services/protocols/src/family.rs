@@ -28,9 +28,6 @@ use crate::time::Timestamp;
 /// A protocol family, implemented by the family's profile type: what a robot of the family
 /// needs beyond its registry entry.
 pub trait Family: FamilyValue + fmt::Debug + Send + Sync + 'static {
-    /// The family's name (`titan`, `agilex-v1`, `agilex-v2`, `xbot`).
-    fn family(&self) -> &'static str;
-
     /// The robot the profile is of (a V1 or V2 `model` names it).
     fn robot(&self) -> RobotKind;
 
@@ -42,9 +39,6 @@ pub trait Family: FamilyValue + fmt::Debug + Send + Sync + 'static {
 
     /// Checks the values make a drivable robot.
     fn validate(&self) -> Result<(), ProfileError>;
-
-    /// The profile as the `[profile]` table of the service's config.
-    fn table(&self) -> Result<toml::Table, toml::ser::Error>;
 
     /// This profile with the keys of `table` (a `[profile]` table) set over it; a `model` key
     /// starts from that model's defaults. Unknown keys and wrong types are errors.
@@ -103,16 +97,21 @@ pub trait Family: FamilyValue + fmt::Debug + Send + Sync + 'static {
     fn fill_for_simulator(&mut self) {}
 }
 
-/// What makes a family's profile a value behind the trait: cloned, compared and looked at as
-/// its own type. Implemented for every `Clone + PartialEq` family.
+/// What makes a family's profile a value behind the trait: cloned, compared, written as the
+/// `[profile]` table of the service's config and looked at as its own type. Implemented for
+/// every family that is `Clone + PartialEq + Serialize`.
 pub trait FamilyValue {
+    fn table(&self) -> Result<toml::Table, toml::ser::Error>;
     fn clone_box(&self) -> Box<dyn Family>;
     fn eq_dyn(&self, other: &dyn Family) -> bool;
     fn as_any(&self) -> &dyn Any;
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
 
-impl<F: Family + Clone + PartialEq> FamilyValue for F {
+impl<F: Family + Clone + PartialEq + serde::Serialize> FamilyValue for F {
+    fn table(&self) -> Result<toml::Table, toml::ser::Error> {
+        toml::Table::try_from(self)
+    }
     fn clone_box(&self) -> Box<dyn Family> {
         Box::new(self.clone())
     }

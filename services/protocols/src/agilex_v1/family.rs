@@ -22,10 +22,6 @@ use crate::time::Timestamp;
 use super::{Frame, V1Driver, V1Profile, V1Sim, body_flags, decode, frames_for, normalize_faults};
 
 impl Family for V1Profile {
-    fn family(&self) -> &'static str {
-        "agilex-v1"
-    }
-
     fn robot(&self) -> RobotKind {
         self.model.robot()
     }
@@ -36,10 +32,6 @@ impl Family for V1Profile {
 
     fn validate(&self) -> Result<(), ProfileError> {
         V1Profile::validate(self)
-    }
-
-    fn table(&self) -> Result<toml::Table, toml::ser::Error> {
-        toml::Table::try_from(self)
     }
 
     fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {

@@ -30,10 +30,6 @@ use super::{
 };
 
 impl Family for V2Profile {
-    fn family(&self) -> &'static str {
-        "agilex-v2"
-    }
-
     fn robot(&self) -> RobotKind {
         self.model.robot()
     }
@@ -44,10 +40,6 @@ impl Family for V2Profile {
 
     fn validate(&self) -> Result<(), ProfileError> {
         V2Profile::validate(self)
-    }
-
-    fn table(&self) -> Result<toml::Table, toml::ser::Error> {
-        toml::Table::try_from(self)
     }
 
     fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {

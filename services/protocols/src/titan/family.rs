@@ -24,20 +24,12 @@ use crate::time::Timestamp;
 use super::{Frame, TitanDriver, TitanProfile, TitanSim, body, decode, frames_for, kinematics};
 
 impl Family for TitanProfile {
-    fn family(&self) -> &'static str {
-        "titan"
-    }
-
     fn robot(&self) -> RobotKind {
         RobotKind::Titan
     }
 
     fn validate(&self) -> Result<(), ProfileError> {
         TitanProfile::validate(self)
-    }
-
-    fn table(&self) -> Result<toml::Table, toml::ser::Error> {
-        toml::Table::try_from(self)
     }
 
     fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {

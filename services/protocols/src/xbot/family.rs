@@ -17,20 +17,12 @@ use crate::time::Timestamp;
 use super::{StreamParser, XbotDriver, XbotProfile, XbotSim, frames_for};
 
 impl Family for XbotProfile {
-    fn family(&self) -> &'static str {
-        "xbot"
-    }
-
     fn robot(&self) -> RobotKind {
         RobotKind::Xbot
     }
 
     fn validate(&self) -> Result<(), ProfileError> {
         XbotProfile::validate(self)
-    }
-
-    fn table(&self) -> Result<toml::Table, toml::ser::Error> {
-        toml::Table::try_from(self)
     }
 
     fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {
