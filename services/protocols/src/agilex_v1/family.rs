@@ -16,7 +16,10 @@ use crate::family::{Family, Profile, both_ways, kebab, millis};
 use crate::firmware::BoxedFirmware;
 use crate::frame_json::{BoxedCodec, Codec, FrameJson, frame_json, insert_faults};
 use crate::kind::RobotKind;
-use crate::profile::{ProfileError, ProfileTableError, Protocol, with_model_and_overrides};
+use crate::profile::{
+    ProfileError, ProfileTableError, Protocol, detection, positive, timeouts,
+    with_model_and_overrides,
+};
 use crate::time::Timestamp;
 
 use super::{Frame, V1Driver, V1Profile, V1Sim, body_flags, decode, frames_for, normalize_faults};
@@ -30,8 +33,17 @@ impl Family for V1Profile {
         Some(Protocol::V1)
     }
 
+    /// Checks the values make a drivable robot (a zero full scale would make every command
+    /// unencodable).
     fn validate(&self) -> Result<(), ProfileError> {
-        V1Profile::validate(self)
+        positive("wheelbase_m", self.wheelbase_m)?;
+        positive("track_m", self.track_m)?;
+        positive("linear_full_scale_mps", self.linear_full_scale_mps)?;
+        positive("angular_full_scale_rad_s", self.angular_full_scale_rad_s)?;
+        positive("max_linear_mps", self.max_linear_mps)?;
+        positive("max_angular_rad_s", self.max_angular_rad_s)?;
+        detection(self.detect_timeout_ms, self.detect_min_frames)?;
+        timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
     }
 
     fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {

@@ -4,7 +4,6 @@
 use serde::{Deserialize, Serialize};
 
 use crate::kind::RobotKind;
-use crate::profile::{ProfileError, detection, positive, timeouts};
 
 /// Which robot speaks the AgileX protocol V1 (0x130 / 0x131 / 0x151 / 0x200-0x203, count and
 /// checksum in every frame). The three share the frame set and differ in the percent full
@@ -136,20 +135,5 @@ impl V1Profile {
                 ..base
             },
         }
-    }
-}
-
-impl V1Profile {
-    /// Checks the values make a drivable robot (a zero full scale would make every command
-    /// unencodable).
-    pub fn validate(&self) -> Result<(), ProfileError> {
-        positive("wheelbase_m", self.wheelbase_m)?;
-        positive("track_m", self.track_m)?;
-        positive("linear_full_scale_mps", self.linear_full_scale_mps)?;
-        positive("angular_full_scale_rad_s", self.angular_full_scale_rad_s)?;
-        positive("max_linear_mps", self.max_linear_mps)?;
-        positive("max_angular_rad_s", self.max_angular_rad_s)?;
-        detection(self.detect_timeout_ms, self.detect_min_frames)?;
-        timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
     }
 }

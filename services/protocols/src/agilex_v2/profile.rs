@@ -6,7 +6,6 @@ use chassis_interfaces::FaultFlags as F;
 use serde::{Deserialize, Serialize};
 
 use crate::kind::RobotKind;
-use crate::profile::ProfileError;
 
 /// Which V2 robot (and variant) a profile describes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -737,64 +736,12 @@ impl V2Profile {
     pub fn with_overrides(&self, overrides: &toml::Table) -> Result<Self, toml::de::Error> {
         crate::profile::with_overrides(self, overrides)
     }
-
-    /// Checks the values make a drivable robot.
-    pub fn validate(&self) -> Result<(), ProfileError> {
-        let positive = |name: &'static str, value: f64| {
-            if value.is_finite() && value > 0.0 {
-                Ok(())
-            } else {
-                Err(ProfileError::NotPositive { name, value })
-            }
-        };
-        positive("wheelbase_m", self.wheelbase_m)?;
-        positive("track_m", self.track_m)?;
-        positive("max_linear_mps", self.max_linear_mps)?;
-        positive("bms_voltage_lsb_v", self.bms_voltage_lsb_v)?;
-        positive("odometer_lsb_m", self.odometer_lsb_m)?;
-        match self.kinematics {
-            Kinematics::Differential | Kinematics::Omni => {
-                positive("max_angular_radps", self.max_angular_radps)?;
-            }
-            Kinematics::Ackermann => positive("max_steer_rad", self.max_steer_rad)?,
-            Kinematics::FourWheelSteer => {
-                positive("max_angular_radps", self.max_angular_radps)?;
-                positive("max_steer_rad", self.max_steer_rad)?;
-                positive("max_crab_rad", self.max_crab_rad)?;
-                positive("spin_radius_m", self.spin_radius_m)?;
-            }
-        }
-        if self.kinematics == Kinematics::Omni {
-            positive("max_lateral_mps", self.max_lateral_mps)?;
-        }
-        if self.max_steer_rad >= std::f64::consts::FRAC_PI_2 {
-            return Err(ProfileError::SteerBeyondRightAngle);
-        }
-        if !(1..=8).contains(&self.actuators) {
-            return Err(ProfileError::NotPositive {
-                name: "actuators (1-8)",
-                value: self.actuators.into(),
-            });
-        }
-        if self.short_commands_dlc != 1 && self.short_commands_dlc != 8 {
-            return Err(ProfileError::NotPositive {
-                name: "short_commands_dlc (1 or 8)",
-                value: self.short_commands_dlc.into(),
-            });
-        }
-        if self.heartbeat_period_ms == 0 || self.heartbeat_period_ms >= self.command_timeout_ms {
-            return Err(ProfileError::Heartbeat {
-                heartbeat_ms: self.heartbeat_period_ms,
-                timeout_ms: self.command_timeout_ms,
-            });
-        }
-        crate::profile::detection(self.detect_timeout_ms, self.detect_min_frames)
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::family::Family;
 
     #[test]
     fn every_model_validates_and_names_itself() {

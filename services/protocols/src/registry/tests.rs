@@ -7,6 +7,7 @@ use chassis_interfaces::{Kinematics, MAX_JOINTS, MAX_SENSORS, Velocity, WireProt
 use super::*;
 use crate::CanFrame;
 use crate::description::describe;
+use crate::family::Family;
 use crate::firmware::Injection;
 use crate::profile::ProfileError;
 

@@ -18,7 +18,7 @@ use crate::frame_json::{
     insert_faults, insert_switches,
 };
 use crate::kind::RobotKind;
-use crate::profile::{ProfileError, ProfileTableError, with_overrides};
+use crate::profile::{ProfileError, ProfileTableError, positive, timeouts, with_overrides};
 use crate::time::Timestamp;
 
 use super::{Frame, TitanDriver, TitanProfile, TitanSim, body, decode, frames_for, kinematics};
@@ -28,8 +28,20 @@ impl Family for TitanProfile {
         RobotKind::Titan
     }
 
+    /// Checks the values make a drivable robot.
     fn validate(&self) -> Result<(), ProfileError> {
-        TitanProfile::validate(self)
+        positive("wheelbase_m", self.wheelbase_m)?;
+        positive("track_m", self.track_m)?;
+        positive("max_linear_mps", self.max_linear_mps)?;
+        positive("max_linear_steering_mps", self.max_linear_steering_mps)?;
+        positive("max_steer_rad", self.max_steer_rad)?;
+        if self.max_steer_rad >= std::f64::consts::FRAC_PI_2 {
+            return Err(ProfileError::SteerBeyondRightAngle);
+        }
+        if self.steer_speed_limit_above_rad.is_nan() || self.steer_speed_limit_above_rad < 0.0 {
+            return Err(ProfileError::NegativeSteerSpeedLimit);
+        }
+        timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
     }
 
     fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {

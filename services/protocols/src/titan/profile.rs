@@ -2,8 +2,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::profile::{ProfileError, positive, timeouts};
-
 /// AgileX TITAN: front/rear dual Ackermann, CAN 500 kbit/s.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -49,23 +47,5 @@ impl Default for TitanProfile {
             low_battery_warning_soc_pct: 15.0,
             low_battery_cutoff_soc_pct: 10.0,
         }
-    }
-}
-
-impl TitanProfile {
-    /// Checks the values make a drivable robot.
-    pub fn validate(&self) -> Result<(), ProfileError> {
-        positive("wheelbase_m", self.wheelbase_m)?;
-        positive("track_m", self.track_m)?;
-        positive("max_linear_mps", self.max_linear_mps)?;
-        positive("max_linear_steering_mps", self.max_linear_steering_mps)?;
-        positive("max_steer_rad", self.max_steer_rad)?;
-        if self.max_steer_rad >= std::f64::consts::FRAC_PI_2 {
-            return Err(ProfileError::SteerBeyondRightAngle);
-        }
-        if self.steer_speed_limit_above_rad.is_nan() || self.steer_speed_limit_above_rad < 0.0 {
-            return Err(ProfileError::NegativeSteerSpeedLimit);
-        }
-        timeouts(self.heartbeat_period_ms, self.command_timeout_ms)
     }
 }

@@ -11,7 +11,7 @@ use crate::family::{Family, Profile, both_ways, millis};
 use crate::firmware::BoxedFirmware;
 use crate::frame_json::{BoxedCodec, Codec, FrameJson, SerialError, frame_json};
 use crate::kind::RobotKind;
-use crate::profile::{ProfileError, ProfileTableError, with_overrides};
+use crate::profile::{ProfileError, ProfileTableError, positive, with_overrides};
 use crate::time::Timestamp;
 
 use super::{StreamParser, XbotDriver, XbotProfile, XbotSim, frames_for};
@@ -21,8 +21,33 @@ impl Family for XbotProfile {
         RobotKind::Xbot
     }
 
+    /// Checks the values make a drivable robot, and the heartbeat rate the manual asks for.
     fn validate(&self) -> Result<(), ProfileError> {
-        XbotProfile::validate(self)
+        if self.baud == 0 || self.gps_baud == 0 {
+            return Err(ProfileError::ZeroBaud);
+        }
+        positive("wheel_diameter_m", self.wheel_diameter_m)?;
+        positive("encoder_counts_per_rev", self.encoder_counts_per_rev)?;
+        if let Some(separation) = self.wheel_separation_m {
+            positive("wheel_separation_m", separation)?;
+        }
+        positive("max_linear_mps", self.max_linear_mps)?;
+        positive("max_angular_rad_s", self.max_angular_rad_s)?;
+        if self.min_linear_mps.is_nan()
+            || self.min_linear_mps < 0.0
+            || self.min_linear_mps >= self.max_linear_mps
+        {
+            return Err(ProfileError::MinLinear);
+        }
+        if self.heartbeat_hz.is_nan() || self.heartbeat_hz <= 5.0 || self.heartbeat_hz >= 10.0 {
+            return Err(ProfileError::HeartbeatRate {
+                hz: self.heartbeat_hz,
+            });
+        }
+        if self.command_timeout_ms == 0 {
+            return Err(ProfileError::ZeroCommandTimeout);
+        }
+        Ok(())
     }
 
     fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {

@@ -2,8 +2,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::profile::{ProfileError, positive};
-
 /// XBot: differential (optionally omni) drive, RS232, little-endian.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -74,36 +72,5 @@ impl XbotProfile {
     /// Wheel travel per encoder count, m.
     pub fn metres_per_count(&self) -> f64 {
         std::f64::consts::PI * self.wheel_diameter_m / self.encoder_counts_per_rev
-    }
-}
-
-impl XbotProfile {
-    /// Checks the values make a drivable robot, and the heartbeat rate the manual asks for.
-    pub fn validate(&self) -> Result<(), ProfileError> {
-        if self.baud == 0 || self.gps_baud == 0 {
-            return Err(ProfileError::ZeroBaud);
-        }
-        positive("wheel_diameter_m", self.wheel_diameter_m)?;
-        positive("encoder_counts_per_rev", self.encoder_counts_per_rev)?;
-        if let Some(separation) = self.wheel_separation_m {
-            positive("wheel_separation_m", separation)?;
-        }
-        positive("max_linear_mps", self.max_linear_mps)?;
-        positive("max_angular_rad_s", self.max_angular_rad_s)?;
-        if self.min_linear_mps.is_nan()
-            || self.min_linear_mps < 0.0
-            || self.min_linear_mps >= self.max_linear_mps
-        {
-            return Err(ProfileError::MinLinear);
-        }
-        if self.heartbeat_hz.is_nan() || self.heartbeat_hz <= 5.0 || self.heartbeat_hz >= 10.0 {
-            return Err(ProfileError::HeartbeatRate {
-                hz: self.heartbeat_hz,
-            });
-        }
-        if self.command_timeout_ms == 0 {
-            return Err(ProfileError::ZeroCommandTimeout);
-        }
-        Ok(())
     }
 }
