@@ -33,12 +33,12 @@ use tracing::{info, info_span, warn};
 use crate::engine::{Engine, EngineConfig, ListenerChange, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};
 use crate::lockfile::{Clocks, LockFile};
-use crate::moderation::RxGate;
 use crate::mux::Mux;
 use crate::notify::Notifier;
 use crate::realtime::{
     PinError, enter_realtime, is_fifo, pin_to_cpu, sim_cpus, spin_throttle_warning,
 };
+use crate::rx_moderation::RxGate;
 use crate::setup::{Devices, Hardware, driver_for_config};
 use crate::sim::SimHandle;
 use stall::LoopStall;

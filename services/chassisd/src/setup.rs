@@ -140,7 +140,7 @@ pub fn serial_baud(spec: &BusSpec, baud: Option<u32>, profile: &Profile) -> Resu
 mod tests {
     use super::*;
     use chassis_protocols::RobotKind;
-    use chassisd_config::{LoopMode, Overrides, RawConfig};
+    use chassisd_config::{Overrides, RawConfig};
 
     /// The robots of either firmware on a real CAN bus detect with the settings of the profile
     /// they are configured with: the SCOUT MINI's V1 one, the SCOUT's and BUNKER's V2 one.

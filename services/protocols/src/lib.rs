@@ -16,7 +16,7 @@
 //! Frame structs hold SI values in ISO 8855 axes (x forward, y left, left turn positive); each
 //! codec is the only place that knows its vendor's units and signs.
 
-mod agilex;
+mod agilex_driver;
 pub mod agilex_v1;
 pub mod agilex_v2;
 pub mod can;
@@ -37,7 +37,7 @@ mod sim_bench;
 pub mod slcan;
 pub mod time;
 pub mod titan;
-mod wire;
+mod wire_layout;
 pub mod xbot;
 
 pub use can::{CanFrame, CanFrameError, CandumpLine};

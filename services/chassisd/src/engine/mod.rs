@@ -27,7 +27,7 @@
 //! 4. A changed held set is kept (see below) before anything of the pass is published.
 //! 5. The bus is drained: [`Engine::handle_rx`] per item, its publications out before the next
 //!    item, then [`Engine::handle_bus_read`] (moderation, weighing each item with
-//!    [`crate::moderation::weight`]), or [`Engine::handle_bus_lost`]; GPS bytes with
+//!    [`crate::rx_moderation::weight`]), or [`Engine::handle_bus_lost`]; GPS bytes with
 //!    [`Engine::handle_gps`].
 //! 6. [`Engine::handle_timeout`] (driver deadlines: the heartbeat, the chassis' silence), and
 //!    transmit again.
@@ -62,12 +62,12 @@
 //! frame is decided before that frame reaches the driver ([`Engine::handle_rx`] decides first), so
 //! a command is never queued behind the bus.
 
-mod budget;
 mod pass;
 #[cfg(test)]
 mod rig;
 #[cfg(test)]
 mod scenarios;
+mod wake_budget;
 
 use std::collections::{HashMap, VecDeque};
 use std::fmt::Display;
@@ -89,8 +89,8 @@ use chassisd_config::{Config, LoopMode};
 use tracing::{debug, error, info, warn};
 use zerocopy::IntoBytes;
 
-pub use budget::{ListenerChange, WakeBudget};
 pub use pass::{PassIo, Readers, WriteError, Written};
+pub use wake_budget::{ListenerChange, WakeBudget};
 
 use crate::mux::{Mux, Rejection, hold_bit};
 
@@ -305,7 +305,7 @@ pub struct Engine {
     gps_fix: GpsFix,
     gps_stamp_ns: u64,
     tick: Grid,
-    rx_moderation: crate::moderation::RxModeration,
+    rx_moderation: crate::rx_moderation::RxModeration,
     budget: WakeBudget,
     /// The mux must decide before the next transmit (new input since the last decision).
     undecided: bool,
@@ -384,7 +384,7 @@ impl Engine {
             gps_stamp_ns: 0,
             budget: WakeBudget::new(sources, tick.next(), safety),
             tick,
-            rx_moderation: crate::moderation::RxModeration::new(config.rx_moderation, now),
+            rx_moderation: crate::rx_moderation::RxModeration::new(config.rx_moderation, now),
             undecided: true,
             decided_at: now,
             mux_changed: false,

@@ -294,7 +294,7 @@ impl Engine {
         for (stamp, item) in &received {
             match item {
                 BusItem::Rx(item) => {
-                    weight += crate::moderation::weight(item.as_rx());
+                    weight += crate::rx_moderation::weight(item.as_rx());
                     self.handle_rx(*stamp, item.as_rx());
                 }
                 BusItem::Controller(report) => {

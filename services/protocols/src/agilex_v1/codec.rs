@@ -34,7 +34,7 @@ use crate::Direction;
 use crate::agilex_v1::V1Profile;
 use crate::can::CanFrame;
 use crate::error::{DecodeError, EncodeError, check_u8, to_i8, to_i16, to_u16, to_wire};
-use crate::wire::{index_in, invalid, read_bool, read_prefix, si, wire_bytes};
+use crate::wire_layout::{index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
 /// Frame identifiers.
 pub mod id {

@@ -26,7 +26,7 @@ use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, Parking
 use super::commands::{STOP, frames_for};
 use super::kinematics::{RangerMode, body_twist, plan};
 use super::profile::{self, V2Profile};
-use crate::agilex::{self, BrakeKeeper, ModeKeeper, Next, SteeringZero};
+use crate::agilex_driver::{self, BrakeKeeper, ModeKeeper, Next, SteeringZero};
 use crate::command::{Command, Turn};
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem,
@@ -234,12 +234,12 @@ impl V2Driver {
                 odometry.right_distance_m = o.right_m;
                 self.core.state.touch(Group::Odometry, t);
             }
-            Frame::MotorFast(m) => agilex::apply_motor_fast(&mut self.core.state, &m, t),
+            Frame::MotorFast(m) => agilex_driver::apply_motor_fast(&mut self.core.state, &m, t),
             Frame::MotorSlow(m) => {
                 let status = normalize_driver_status(m.driver_status, &self.profile);
-                agilex::apply_motor_slow(&mut self.core.state, &m, status, t);
+                agilex_driver::apply_motor_slow(&mut self.core.state, &m, status, t);
             }
-            Frame::Rc(r) => agilex::apply_rc(&mut self.core.state, &r, t),
+            Frame::Rc(r) => agilex_driver::apply_rc(&mut self.core.state, &r, t),
             Frame::LightState(l) => {
                 let lights = &mut self.core.state.lights;
                 lights.control_enabled = u8::from(l.enabled);
@@ -247,14 +247,14 @@ impl V2Driver {
                 lights.front_brightness_pct = l.front_brightness_pct;
                 self.core.state.touch(Group::Lights, t);
             }
-            Frame::BmsData(b) => agilex::apply_bms_data(&mut self.core.state, &b, t),
+            Frame::BmsData(b) => agilex_driver::apply_bms_data(&mut self.core.state, &b, t),
             Frame::BmsAlarm(b) => {
-                let any_alarm = agilex::apply_bms_alarm(&mut self.core.state, &b, t);
-                agilex::set_bits(&mut self.other_faults, FaultFlags::BMS_ALARM, any_alarm);
+                let any_alarm = agilex_driver::apply_bms_alarm(&mut self.core.state, &b, t);
+                agilex_driver::set_bits(&mut self.other_faults, FaultFlags::BMS_ALARM, any_alarm);
             }
             // ⚠ D-6, the older layout: a protection bit is an alarm; its codes are not alarm
             // and warning bytes, so `BmsState::alarm_flags` is left alone.
-            Frame::BmsProtection(p) => agilex::set_bits(
+            Frame::BmsProtection(p) => agilex_driver::set_bits(
                 &mut self.other_faults,
                 FaultFlags::BMS_ALARM,
                 p.any_protection(),
@@ -338,7 +338,7 @@ impl V2Driver {
             // may be in another motion mode than the one last sent.
             self.send_motion_mode(now, wanted);
         }
-        agilex::mode_changed(&mut self.core, old_mode, new_mode);
+        agilex_driver::mode_changed(&mut self.core, old_mode, new_mode);
         if new_mode != old_mode && new_mode != ControlMode::COMMAND && self.brake.fitted() {
             self.brake.forget();
             self.update_body(now);
@@ -496,7 +496,7 @@ impl Driver for V2Driver {
 
     fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         let moving = self.motion != STOP;
-        let next = agilex::next_frame(
+        let next = agilex_driver::next_frame(
             &mut self.core,
             &mut self.queue,
             &mut self.brake,

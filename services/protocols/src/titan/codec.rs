@@ -15,7 +15,7 @@ use crate::error::{
     DecodeError, EncodeError, check_range, check_u8, to_i8, to_i16, to_i32, to_u8, to_u16,
 };
 use crate::titan::TitanProfile;
-use crate::wire::{first_byte, index_in, invalid, read_bool, read_prefix, si, wire_bytes};
+use crate::wire_layout::{first_byte, index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
 /// Frame identifiers.
 pub mod id {

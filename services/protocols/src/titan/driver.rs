@@ -19,7 +19,7 @@ use chassis_interfaces::{
 use super::codec::{self, Frame, MotionCommand, ParkingBrake, fault, mode};
 use super::commands::{frames_for, motion_command};
 use super::kinematics::yaw_rate;
-use crate::agilex::{self, BrakeKeeper, ModeKeeper, Next, SteeringZero};
+use crate::agilex_driver::{self, BrakeKeeper, ModeKeeper, Next, SteeringZero};
 use crate::command::Command;
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx, WireItem, flags_of,
@@ -145,21 +145,21 @@ impl TitanDriver {
                 self.core.state.odometry.rear_distance_m = o.rear_distance_m;
                 self.core.state.touch(Group::Odometry, t);
             }
-            Frame::MotorFast(m) => agilex::apply_motor_fast(&mut self.core.state, &m, t),
+            Frame::MotorFast(m) => agilex_driver::apply_motor_fast(&mut self.core.state, &m, t),
             Frame::MotorSlow(m) => {
-                agilex::apply_motor_slow(&mut self.core.state, &m, m.driver_status, t);
+                agilex_driver::apply_motor_slow(&mut self.core.state, &m, m.driver_status, t);
             }
-            Frame::Rc(r) => agilex::apply_rc(&mut self.core.state, &r, t),
+            Frame::Rc(r) => agilex_driver::apply_rc(&mut self.core.state, &r, t),
             Frame::BmsData(b) => {
-                agilex::apply_bms_data(&mut self.core.state, &b, t);
+                agilex_driver::apply_bms_data(&mut self.core.state, &b, t);
                 if b.group == 0 {
                     let low = b.soc_pct < self.profile.low_battery_warning_soc_pct;
-                    agilex::set_bits(&mut self.other_faults, FaultFlags::BATTERY_LOW, low);
+                    agilex_driver::set_bits(&mut self.other_faults, FaultFlags::BATTERY_LOW, low);
                 }
             }
             Frame::BmsAlarm(b) => {
-                let any_alarm = agilex::apply_bms_alarm(&mut self.core.state, &b, t);
-                agilex::set_bits(&mut self.other_faults, FaultFlags::BMS_ALARM, any_alarm);
+                let any_alarm = agilex_driver::apply_bms_alarm(&mut self.core.state, &b, t);
+                agilex_driver::set_bits(&mut self.other_faults, FaultFlags::BMS_ALARM, any_alarm);
             }
             Frame::SteeringZeroAck => {
                 self.steering_zero.answered(&mut self.core, true);
@@ -204,7 +204,7 @@ impl TitanDriver {
         self.core
             .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
 
-        agilex::mode_changed(&mut self.core, old_mode, new_mode);
+        agilex_driver::mode_changed(&mut self.core, old_mode, new_mode);
         if new_mode != old_mode
             && (new_mode == ControlMode::STANDBY || new_mode == ControlMode::REMOTE)
         {
@@ -352,7 +352,7 @@ impl Driver for TitanDriver {
 
     fn poll_transmit(&mut self, now: Timestamp) -> Option<WireItem> {
         let moving = self.motion.linear_mps != 0.0;
-        let next = agilex::next_frame(
+        let next = agilex_driver::next_frame(
             &mut self.core,
             &mut self.queue,
             &mut self.brake,

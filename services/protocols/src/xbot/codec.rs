@@ -23,7 +23,7 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use crate::Direction;
 use crate::error::{DecodeError, EncodeError, to_i16, to_wire};
-use crate::wire::{read_bool, read_prefix, si, try_map};
+use crate::wire_layout::{read_bool, read_prefix, si, try_map};
 use crate::xbot::XbotProfile;
 
 /// The two bytes that start every frame.
