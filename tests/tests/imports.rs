@@ -8,6 +8,8 @@
 //! Test modules inside a file (`#[cfg(test)] mod tests { … }`) are left out; test files
 //! (`tests.rs`, `*_tests.rs`, `scenarios.rs`) count like any other.
 
+#![allow(clippy::panic)]
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -20,13 +22,14 @@ struct Crate {
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
-        .expect("the workspace")
+        .unwrap_or_else(|| panic!("the workspace"))
         .to_path_buf()
 }
 
 /// The workspace members' source roots (`src/lib.rs` and `src/main.rs` each make a crate).
 fn crate_roots() -> Vec<PathBuf> {
-    let manifest = std::fs::read_to_string(workspace().join("Cargo.toml")).expect("Cargo.toml");
+    let manifest = std::fs::read_to_string(workspace().join("Cargo.toml"))
+        .unwrap_or_else(|e| panic!("Cargo.toml: {e}"));
     let members: Vec<String> = manifest
         .split_once("members = [")
         .and_then(|(_, rest)| rest.split_once(']'))
@@ -36,7 +39,7 @@ fn crate_roots() -> Vec<PathBuf> {
                 .filter(|m| !m.is_empty())
                 .collect()
         })
-        .expect("the workspace members");
+        .unwrap_or_else(|| panic!("the workspace members"));
     assert!(members.len() > 10, "{members:?}");
     let mut roots = Vec::new();
     for member in members {
@@ -52,7 +55,7 @@ fn crate_roots() -> Vec<PathBuf> {
 
 /// The text of a file without its inline test modules and comments.
 fn code_of(path: &Path) -> String {
-    let text = std::fs::read_to_string(path).expect("a source file");
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut code = String::new();
     let mut lines = text.lines().peekable();
     while let Some(line) = lines.next() {
@@ -96,7 +99,9 @@ fn load(root: &Path) -> Crate {
     while let Some((module, path)) = queue.pop() {
         let code = code_of(&path);
         let dir = if module.is_empty() || path.ends_with("mod.rs") {
-            path.parent().expect("a folder").to_path_buf()
+            path.parent()
+                .unwrap_or_else(|| panic!("a folder"))
+                .to_path_buf()
         } else {
             path.with_extension("")
         };
@@ -207,7 +212,7 @@ impl Crate {
             }
             _ => return None,
         };
-        let mut rest = &path[..];
+        let mut rest = path;
         if first == "crate" || first == "self" {
             rest = &path[1..];
         }
