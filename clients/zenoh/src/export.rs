@@ -35,8 +35,8 @@ use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
 use zerocopy::IntoBytes as _;
 
+use crate::convert::{Keys, Wire};
 use crate::net::{self, Net};
-use crate::wire::{Keys, Wire};
 
 /// How long a control request waits for chassisd.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
@@ -412,7 +412,7 @@ fn drive(
                 .callback(move |reply| {
                     let received = now_ns();
                     if let Ok(sample) = reply.result()
-                        && let Some(peer_ns) = crate::wire::clock_reading(
+                        && let Some(peer_ns) = crate::convert::clock_reading(
                             sample.encoding(),
                             &sample.payload().to_bytes(),
                         )

@@ -33,6 +33,7 @@
 //! the operator's). Plain `tcp/` is refused beyond loopback unless `--insecure`.
 
 mod certs;
+mod convert;
 mod estop;
 mod export;
 mod fleet;
@@ -40,7 +41,6 @@ mod link_watch;
 mod mirror;
 mod net;
 mod raw;
-mod wire;
 
 use std::path::PathBuf;
 use std::process::ExitCode;

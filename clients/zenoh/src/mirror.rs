@@ -43,11 +43,11 @@ use zenoh::query::Reply;
 use zenoh::sample::{Sample, SampleKind};
 use zerocopy::IntoBytes as _;
 
+use crate::convert::{Keys, Wire};
 use crate::estop::{self, Asked, Keeper};
 use crate::export::{guard, remote_sources};
 use crate::link_watch::{LOST_AFTER, LinkWatch, Lost};
 use crate::net::{self, Net};
-use crate::wire::{Keys, Wire};
 
 /// How long a control request waits for the robot's answer.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
@@ -167,7 +167,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
             let now = now_ns();
             if let Err(e) = query
                 .reply(query.key_expr().clone(), now.to_le_bytes().to_vec())
-                .encoding(crate::wire::clock_encoding())
+                .encoding(crate::convert::clock_encoding())
                 .wait()
             {
                 tracing::debug!("answering a clock query: {e}");
