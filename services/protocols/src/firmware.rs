@@ -7,9 +7,9 @@
 //! own process on a real bus.
 //!
 //! Below the contract are the pieces every simulated chassis shares: the sub-stepped physics
-//! clock, the first-order speed lag, the true pose, the battery model, the bounded transmit queue
-//! with its silence window, the feedback flood of load tests, and `Chassis` — the state and the
-//! fault injection every simulated firmware embeds.
+//! clock, the first-order speed lag, the true pose, the battery and motor models, the bounded
+//! transmit queue with its silence window, the feedback flood of load tests, and `Chassis` — the
+//! state, the counters and the fault injection every simulated firmware embeds.
 
 mod chassis;
 
@@ -23,7 +23,7 @@ use crate::driver::{Rx, WireItem, wrap_angle};
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp};
 
-pub(crate) use chassis::{Applied, Chassis, GARBAGE_ID, Injectable};
+pub(crate) use chassis::{Applied, Chassis, ChassisSpec};
 
 /// A fault or event to inject into a simulated chassis.
 #[derive(Debug, Clone, PartialEq)]
@@ -328,6 +328,33 @@ impl BatteryModel {
     }
 }
 
+/// A simulated drive motor's current: so many amperes per m/s of its wheel's speed and per m/s²
+/// of its acceleration, up to its driver's limit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotorModel {
+    /// Current per m/s of wheel speed, A.
+    pub a_per_mps: f64,
+    /// Current per m/s² of acceleration, A.
+    pub a_per_mps2: f64,
+    /// The motor driver's current limit, A.
+    pub limit_a: f64,
+}
+
+impl MotorModel {
+    /// The current signed like the torque, within ±the limit, A.
+    pub fn signed_a(&self, speed_mps: f64, accel_mps2: f64) -> f64 {
+        (self.a_per_mps * speed_mps + self.a_per_mps2 * accel_mps2)
+            .clamp(-self.limit_a, self.limit_a)
+    }
+
+    /// The current's magnitude plus `load_a` that does not depend on the motion (holding, an
+    /// extra load), up to the limit, A.
+    pub fn magnitude_a(&self, speed_mps: f64, accel_mps2: f64, load_a: f64) -> f64 {
+        ((self.a_per_mps * speed_mps + self.a_per_mps2 * accel_mps2).abs() + load_a)
+            .min(self.limit_a)
+    }
+}
+
 /// What a simulated chassis has for transmission: a bounded queue (the oldest item goes first
 /// when nobody polls), the window of an injected silence, and the injected faults that left.
 #[derive(Debug, Clone)]
@@ -335,7 +362,6 @@ pub(crate) struct Outbox<T> {
     /// Each item with the injected faults it carries.
     queue: VecDeque<(T, InjectedCounts)>,
     silent_until: Option<Timestamp>,
-    dropped: u64,
     sent: InjectedCounts,
 }
 
@@ -344,7 +370,6 @@ impl<T> Outbox<T> {
         Self {
             queue: VecDeque::new(),
             silent_until: None,
-            dropped: 0,
             sent: InjectedCounts::default(),
         }
     }
@@ -359,9 +384,16 @@ impl<T> Outbox<T> {
     pub(crate) fn push_injected(&mut self, item: T, injected: InjectedCounts) {
         if self.queue.len() >= TX_QUEUE_LIMIT {
             self.queue.pop_front();
-            self.dropped += 1;
         }
         self.queue.push_back((item, injected));
+    }
+
+    /// Queues an encoded item carrying `injected` faults; one that did not encode (a value its
+    /// wire field cannot carry) is not sent.
+    pub(crate) fn push_encoded<E>(&mut self, encoded: Result<T, E>, injected: InjectedCounts) {
+        if let Ok(item) = encoded {
+            self.push_injected(item, injected);
+        }
     }
 
     /// The next item to send; the faults it carries count as injected from now.
@@ -380,16 +412,6 @@ impl<T> Outbox<T> {
 
     pub(crate) fn clear(&mut self) {
         self.queue.clear();
-    }
-
-    /// Counts an item that was never queued (it did not fit its wire format).
-    pub(crate) fn count_dropped(&mut self) {
-        self.dropped += 1;
-    }
-
-    /// Items dropped: pushed out of a full queue or never queued.
-    pub(crate) fn dropped(&self) -> u64 {
-        self.dropped
     }
 
     /// [`Injection::Silence`]: nothing is sent for `duration` from `now` (overlapping silences
@@ -476,23 +498,6 @@ impl Mode {
     }
 }
 
-/// A frame a simulated CAN chassis received, decoded by `decode`; `None`, counted in
-/// `decode_errors`, for serial bytes (the wrong medium) or a frame that does not decode.
-pub(crate) fn decode_can<F, E>(
-    rx: Rx<'_>,
-    decode_errors: &mut u64,
-    decode: impl FnOnce(&crate::can::CanFrame) -> Result<F, E>,
-) -> Option<F> {
-    let decoded = match rx {
-        Rx::Can(frame) => decode(frame).ok(),
-        Rx::Bytes(_) => None,
-    };
-    if decoded.is_none() {
-        *decode_errors += 1;
-    }
-    decoded
-}
-
 /// An injected or configured state of charge, % (clamped to 0-100); `None` when not a number.
 pub(crate) fn state_of_charge(soc_pct: f64) -> Option<f64> {
     soc_pct.is_finite().then(|| soc_pct.clamp(0.0, 100.0))
@@ -524,6 +529,19 @@ pub(crate) fn non_negative(value: f64) -> f64 {
     } else {
         0.0
     }
+}
+
+/// The instant a command received at `last` has timed out: just past `timeout_ms` after it (a
+/// command that arrives exactly at the timeout is still in time).
+pub(crate) fn past_timeout(last: Timestamp, timeout_ms: u64) -> Timestamp {
+    last + Duration::from_millis(timeout_ms) + Duration::from_nanos(1)
+}
+
+/// A distance as a signed 32-bit millimetre counter reports it (wrapping), back in m.
+pub(crate) fn wrap_mm(distance_m: f64) -> f64 {
+    let mm = (distance_m * 1000.0).round() as i64;
+    // Truncation to 32 bits is the counter's wrap.
+    f64::from(mm as i32) / 1000.0
 }
 
 /// Keeps an SI value inside a signed 16-bit wire field of `scale` units per SI unit.

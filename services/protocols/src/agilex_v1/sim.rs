@@ -17,8 +17,8 @@ use crate::agilex_v1::V1Profile;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, InjectedCounts, Injection,
-    Pose, SimTruth, clamp_i16, first_order_lag, non_negative, state_of_charge, substeps,
+    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, MotorModel,
+    SimTruth, clamp_i16, first_order_lag, non_negative, past_timeout, state_of_charge,
 };
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
@@ -163,9 +163,9 @@ const FEEDBACK_IDS: [u16; 7] = [
 ///   `BadChecksums(n)` corrupts the checksum byte (inverted) of the next `n` frames sent, flood
 ///   copies included (a second injection adds to what the first has not corrupted yet) — all
 ///   three survive a reboot. [`SimTruth::injected`] counts the corrupted, flood and garbage
-///   frames as they leave. `Garbage(bytes)` puts frames with id
-///   [`V1Sim::GARBAGE_ID`] (0x7F0, unused by SCOUT MINI) carrying the bytes 8 at a time on
-///   the bus at once — another node's noise, so even during silence. `Bumper`, `ObstacleAhead`
+///   frames as they leave. `Garbage(bytes)` puts frames with id 0x7F0 (unused by SCOUT MINI)
+///   carrying the bytes 8 at a time on the bus at once — another node's noise, so even during
+///   silence. `Bumper`, `ObstacleAhead`
 ///   and `ObstacleBehind` return `false` (the SCOUT MINI's anti-collision tube is no switch and
 ///   it has no range sensors); so do a motor number outside 1-4 and a non-finite SOC.
 #[derive(Debug, Clone)]
@@ -173,7 +173,6 @@ pub struct V1Sim {
     profile: V1Profile,
     // Options.
     speed_time_constant_s: f64,
-    stop_time_constant_s: f64,
     checksum_fault_hold: Duration,
 
     // Control state.
@@ -188,30 +187,20 @@ pub struct V1Sim {
     lights: Lights,
 
     // Physics.
-    last_update: Timestamp,
     linear_mps: f64,
     angular_radps: f64,
-    pose: Pose,
     wheel_mps: [f64; 4],
     motor_current_a: [f64; 4],
     /// Moving mean of the squared motor currents, A².
     current_sq_a2: [f64; 4],
     driver_temp_c: [f64; 4],
-    pack_current_a: f64,
 
     // Output.
     fast: Grid,
     counts: [u8; FEEDBACK_IDS.len()],
-    /// What every simulated chassis shares: the outbox, the boot, the battery's charge and the
-    /// injected faults.
+    /// What every simulated chassis shares: the outbox, the boot, the battery, the pose, the
+    /// injected faults and the counts of what it received.
     chassis: Chassis<CanFrame>,
-
-    // Counters.
-    commands_received: u64,
-    commands_ignored: u64,
-    decode_errors: u64,
-    bad_checksums: u64,
-    frames_ignored: u64,
 }
 
 impl V1Sim {
@@ -230,7 +219,6 @@ impl V1Sim {
     /// How long 0x151 b4 bit0 stays set after the last frame with a bad checksum.
     pub const DEFAULT_CHECKSUM_FAULT_HOLD: Duration = Duration::from_millis(500);
     /// CAN id of injected garbage frames (unused by SCOUT MINI).
-    pub const GARBAGE_ID: u16 = GARBAGE_ID;
     /// The battery.
     pub const BATTERY: BatteryModel = BatteryModel {
         capacity_ah: 15.0,
@@ -240,12 +228,13 @@ impl V1Sim {
     };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 0.8;
-    /// Motor current per m/s of wheel speed, A.
-    pub const MOTOR_A_PER_MPS: f64 = 1.2;
-    /// Motor current per m/s² of wheel acceleration, A.
-    pub const MOTOR_A_PER_MPS2: f64 = 1.0;
-    /// Motor driver current limit, A.
-    pub const MOTOR_CURRENT_LIMIT_A: f64 = 40.0;
+    /// Motor current: 1.2 A per m/s of wheel speed, 1.0 A per m/s² of wheel acceleration, at
+    /// most 40 A.
+    pub const MOTOR: MotorModel = MotorModel {
+        a_per_mps: 1.2,
+        a_per_mps2: 1.0,
+        limit_a: 40.0,
+    };
     /// Time constant of the moving mean behind the rms current, s.
     pub const CURRENT_RMS_TIME_CONSTANT_S: f64 = 1.0;
     /// Motor over-current alarm (b4 bit2), A rms.
@@ -264,8 +253,6 @@ impl V1Sim {
     pub const THERMAL_TIME_CONSTANT_S: f64 = 60.0;
     /// Most extra frames per second [`Injection::Flood`] adds.
     pub const MAX_FLOOD_FRAMES_PER_S: u32 = 100_000;
-    /// Longest time integrated at once; a longer gap between calls is not bridged.
-    pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
 
     /// A chassis that has just finished booting at `now`: command mode (no RC transmitter),
     /// standing, SOC 100 %.
@@ -273,7 +260,6 @@ impl V1Sim {
         Self {
             profile,
             speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
-            stop_time_constant_s: Self::DEFAULT_STOP_TIME_CONSTANT_S,
             checksum_fault_hold: Self::DEFAULT_CHECKSUM_FAULT_HOLD,
             rc_on: false,
             command: Motion::default(),
@@ -282,48 +268,31 @@ impl V1Sim {
             extra_load_a: 0.0,
             latched: 0,
             lights: Lights::default(),
-            last_update: now,
             linear_mps: 0.0,
             angular_radps: 0.0,
-            pose: Pose::default(),
             wheel_mps: [0.0; 4],
             motor_current_a: [0.0; 4],
             current_sq_a2: [0.0; 4],
             driver_temp_c: [Self::AMBIENT_C; 4],
-            pack_current_a: Self::IDLE_CURRENT_A,
             fast: Grid::new(Self::FEEDBACK_PERIOD, now),
             counts: [0; FEEDBACK_IDS.len()],
             chassis: Chassis::new(
-                Injectable {
+                ChassisSpec {
                     motors: 4,
                     max_flood_per_s: Self::MAX_FLOOD_FRAMES_PER_S,
                     checksums: true,
+                    boot_time: Self::DEFAULT_BOOT_TIME,
+                    battery: Self::BATTERY,
+                    idle_current_a: Self::IDLE_CURRENT_A,
                 },
-                Self::DEFAULT_BOOT_TIME,
+                now,
             ),
-            commands_received: 0,
-            commands_ignored: 0,
-            decode_errors: 0,
-            bad_checksums: 0,
-            frames_ignored: 0,
         }
     }
 
     /// Time constant of the first-order speed response, s (0 = instantaneous).
     pub fn with_speed_time_constant_s(mut self, seconds: f64) -> Self {
         self.speed_time_constant_s = non_negative(seconds);
-        self
-    }
-
-    /// Time constant of the stop when the drive power is cut, s (0 = instantaneous).
-    pub fn with_stop_time_constant_s(mut self, seconds: f64) -> Self {
-        self.stop_time_constant_s = non_negative(seconds);
-        self
-    }
-
-    /// Silence after a reboot.
-    pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
-        self.chassis.set_boot_time(boot_time);
         self
     }
 
@@ -348,22 +317,17 @@ impl V1Sim {
 
     /// Valid command frames ignored (mode byte not 0x01, RC authority, booting).
     pub fn commands_ignored(&self) -> u64 {
-        self.commands_ignored
+        self.chassis.received.ignored
     }
 
     /// Valid feedback frames sent by another node, ignored.
     pub fn frames_ignored(&self) -> u64 {
-        self.frames_ignored
-    }
-
-    /// Frames dropped because nobody polled the transmit queue.
-    pub fn frames_dropped(&self) -> u64 {
-        self.chassis.outbox.dropped()
+        self.chassis.received.not_for_it
     }
 
     /// The 0x151 fault word the chassis reports at its latest time.
     pub fn vendor_fault_word(&self) -> u16 {
-        self.fault_word(self.last_update)
+        self.fault_word(self.chassis.last_update())
     }
 
     /// The light state 0x141 reports.
@@ -376,14 +340,9 @@ impl V1Sim {
         self.chassis.is_booting()
     }
 
-    /// Battery voltage under the present load, V (what 0x151 reports).
-    pub fn battery_voltage_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.chassis.soc_pct, self.pack_current_a)
-    }
-
     /// Pack current, A (positive = discharging).
     pub fn battery_current_a(&self) -> f64 {
-        self.pack_current_a
+        self.chassis.pack_current_a
     }
 
     /// Motor driver temperatures, °C, motors 1-4.
@@ -448,7 +407,7 @@ impl V1Sim {
         {
             word |= fault::MOTOR_OVER_CURRENT_ALARM;
         }
-        if self.battery_voltage_v() < self.profile.under_voltage_alarm_v {
+        if self.chassis.battery_voltage_v() < self.profile.under_voltage_alarm_v {
             word |= fault::BATTERY_UNDER_VOLTAGE_ALARM;
         }
         if !self.rc_on {
@@ -475,7 +434,7 @@ impl V1Sim {
                 self.latched |= bit;
             }
         }
-        if self.battery_voltage_v() < self.profile.under_voltage_failure_v {
+        if self.chassis.battery_voltage_v() < self.profile.under_voltage_failure_v {
             self.latched |= fault::BATTERY_UNDER_VOLTAGE;
         }
         if self
@@ -496,7 +455,7 @@ impl V1Sim {
 
     /// Physics and the deadlines that change what the chassis does (boot end, command timeout).
     fn expire(&mut self, now: Timestamp) {
-        for dt in substeps(&mut self.last_update, now) {
+        for dt in self.chassis.substeps(now) {
             self.step(dt);
         }
         if self.chassis.expire(now).is_some() {
@@ -522,16 +481,13 @@ impl V1Sim {
                 linear_mps: c.linear_mps,
                 angular_radps: c.angular_radps,
             };
-            self.command_until = Some(
-                now + Duration::from_millis(self.profile.command_timeout_ms)
-                    + Duration::from_nanos(1),
-            );
+            self.command_until = Some(past_timeout(now, self.profile.command_timeout_ms));
             acted = true;
         }
         if acted {
-            self.commands_received += 1;
+            self.chassis.received.commands += 1;
         } else {
-            self.commands_ignored += 1;
+            self.chassis.received.ignored += 1;
         }
     }
 
@@ -541,7 +497,7 @@ impl V1Sim {
         } else {
             Lights::default()
         };
-        self.commands_received += 1;
+        self.chassis.received.commands += 1;
     }
 
     fn clear_fault(&mut self, code: u8) {
@@ -579,7 +535,7 @@ impl V1Sim {
     /// Target speeds and the time constant toward them.
     fn target(&self) -> (Motion, f64) {
         if self.chassis.is_booting() || self.latched & POWER_FAULTS != 0 {
-            (Motion::default(), self.stop_time_constant_s)
+            (Motion::default(), Self::DEFAULT_STOP_TIME_CONSTANT_S)
         } else if self.latched & PROTECTIONS != 0 {
             (Motion::default(), Self::PROTECTION_STOP_TIME_CONSTANT_S)
         } else if self.rc_on {
@@ -606,7 +562,7 @@ impl V1Sim {
         // Midpoint rule for the pose.
         let v_mid = 0.5 * (v0 + v1);
         let w_mid = 0.5 * (w0 + w1);
-        self.pose.advance(v_mid, 0.0, w_mid, dt);
+        self.chassis.pose.advance(v_mid, 0.0, w_mid, dt);
         self.linear_mps = v1;
         self.angular_radps = w1;
 
@@ -619,11 +575,7 @@ impl V1Sim {
         let heat_keep = (-dt / Self::THERMAL_TIME_CONSTANT_S).exp();
         let currents: [f64; 4] = std::array::from_fn(|motor| {
             if output_on && !self.chassis.motor_lost[motor] {
-                ((Self::MOTOR_A_PER_MPS * self.wheel_mps[motor]
-                    + Self::MOTOR_A_PER_MPS2 * accel[motor])
-                    .abs()
-                    + self.extra_load_a)
-                    .min(Self::MOTOR_CURRENT_LIMIT_A)
+                Self::MOTOR.magnitude_a(self.wheel_mps[motor], accel[motor], self.extra_load_a)
             } else {
                 0.0
             }
@@ -639,9 +591,8 @@ impl V1Sim {
             let steady = Self::AMBIENT_C + Self::DRIVER_C_PER_A2 * *sq;
             *temp = steady + (*temp - steady) * heat_keep;
         }
-        self.pack_current_a = Self::IDLE_CURRENT_A + self.motor_current_a.iter().sum::<f64>();
-        self.chassis.soc_pct =
-            Self::BATTERY.drain(self.chassis.soc_pct, self.pack_current_a, dt, 1.0);
+        let motors_a = self.motor_current_a.iter().sum::<f64>();
+        self.chassis.draw(Self::IDLE_CURRENT_A + motors_a, dt);
     }
 
     // -----------------------------------------------------------------------------------------
@@ -663,13 +614,11 @@ impl V1Sim {
         }
         let Some(index) = FEEDBACK_IDS.iter().position(|i| *i == frame.id()) else {
             // Only feedback ids are sent by the chassis.
-            self.chassis.outbox.count_dropped();
             return;
         };
         let count = self.counts[index];
-        // Every value is kept inside its wire range; a frame that still does not fit is dropped.
+        // Every value is kept inside its wire range; a frame that still does not fit is not sent.
         let Ok(mut can) = frame.encode(count, &self.profile) else {
-            self.chassis.outbox.count_dropped();
             return;
         };
         self.counts[index] = count.wrapping_add(1);
@@ -708,7 +657,7 @@ impl V1Sim {
             Frame::SystemStatus(SystemStatus {
                 body_status: self.body_status(),
                 mode: self.mode(),
-                battery_voltage_v: self.battery_voltage_v().min(6553.5),
+                battery_voltage_v: self.chassis.battery_voltage_v().min(6553.5),
                 vendor_fault_word: self.fault_word(now),
             }),
         );
@@ -720,18 +669,6 @@ impl V1Sim {
         }
         self.send(now, Frame::LightState(self.lights));
     }
-
-    fn send_flood(&mut self, now: Timestamp) {
-        let Some(second) = self.chassis.flood_due(now) else {
-            return;
-        };
-        let frame = if second && !self.chassis.motor_lost[0] {
-            self.motor_feedback(0)
-        } else {
-            self.motion_feedback()
-        };
-        self.send_injected(now, frame, InjectedCounts::FLOOD);
-    }
 }
 
 impl Firmware for V1Sim {
@@ -742,11 +679,11 @@ impl Firmware for V1Sim {
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
         if self.chassis.is_booting() {
-            self.commands_ignored += 1;
+            self.chassis.received.ignored += 1;
             return;
         }
         let Rx::Can(frame) = rx else {
-            self.decode_errors += 1;
+            self.chassis.received.decode_errors += 1;
             return;
         };
         match decode(frame, &self.profile) {
@@ -756,13 +693,13 @@ impl Firmware for V1Sim {
                 Frame::SystemStatus(_)
                 | Frame::MotionFeedback(_)
                 | Frame::Motor(_)
-                | Frame::LightState(_) => self.frames_ignored += 1,
+                | Frame::LightState(_) => self.chassis.received.not_for_it += 1,
             },
             Err(DecodeError::BadChecksum { .. }) => {
-                self.bad_checksums += 1;
+                self.chassis.received.bad_checksums += 1;
                 self.checksum_fault_until = Some(now + self.checksum_fault_hold);
             }
-            Err(_) => self.decode_errors += 1,
+            Err(_) => self.chassis.received.decode_errors += 1,
         }
     }
 
@@ -771,7 +708,14 @@ impl Firmware for V1Sim {
         if self.fast.serve_due(now) {
             self.send_feedback(now);
         }
-        self.send_flood(now);
+        if let Some(motor) = self.chassis.flood_due(now) {
+            let copy = if motor {
+                self.motor_feedback(0)
+            } else {
+                self.motion_feedback()
+            };
+            self.send_injected(now, copy, InjectedCounts::FLOOD);
+        }
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
@@ -807,21 +751,15 @@ impl Firmware for V1Sim {
     fn truth(&self) -> SimTruth {
         SimTruth {
             linear_mps: self.linear_mps,
-            lateral_mps: 0.0,
             angular_radps: self.angular_radps,
-            steer_rad: 0.0,
             control_mode: if self.rc_on {
                 ControlMode::REMOTE
             } else {
                 ControlMode::COMMAND
             },
-            brake_engaged: false,
-            fault_flags: normalize_faults(self.fault_word(self.last_update))
+            fault_flags: normalize_faults(self.fault_word(self.chassis.last_update()))
                 | body_flags(self.body_status()),
-            commands_received: self.commands_received,
-            bad_checksums_received: self.bad_checksums,
-            decode_errors: self.decode_errors,
-            ..self.chassis.truth(self.pose)
+            ..self.chassis.truth()
         }
     }
 }

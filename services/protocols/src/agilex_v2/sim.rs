@@ -45,12 +45,11 @@ use super::commands::STOP;
 use super::driver::normalize_faults;
 use super::kinematics::{RangerMode, body_twist};
 use super::profile::{Kinematics, SpinField, V2Profile};
-use crate::Direction;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, Injection, Mode, Pose,
-    SimTruth, decode_can, first_order_lag, substeps,
+    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, Mode,
+    SimTruth, first_order_lag, wrap_mm,
 };
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
@@ -72,23 +71,16 @@ pub struct V2Sim {
     ranger_mode: RangerMode,
     lights: Lights,
     steering_offset: i16,
-    pose: Pose,
     odometer_m: [f64; 2],
-    last_update: Timestamp,
-    speed_time_constant_s: f64,
-    /// What every simulated chassis shares: the outbox, the boot, the battery's charge and the
-    /// injected faults.
+    /// What every simulated chassis shares: the outbox, the boot, the battery, the pose, the
+    /// injected faults and the counts of what it received.
     chassis: Chassis<CanFrame>,
     status: Grid,
     fast: Grid,
     slow: Grid,
     bms: Grid,
     count: u8,
-    commands_received: u64,
-    commands_ignored: u64,
     commands_clamped: u64,
-    frames_ignored: u64,
-    decode_errors: u64,
 }
 
 impl V2Sim {
@@ -100,9 +92,10 @@ impl V2Sim {
     /// Time constant of the speed response, s.
     pub const DEFAULT_SPEED_TIME_CONSTANT_S: f64 = 0.2;
     /// CAN id of injected garbage frames (unused by protocol V2).
-    pub const GARBAGE_ID: u16 = GARBAGE_ID;
     /// Wheel radius for the actuator rpm, m (not in any source).
     pub const WHEEL_RADIUS_M: f64 = 0.08;
+    /// What the electronics draw, A; the motors add 4 A per m/s.
+    pub const IDLE_CURRENT_A: f64 = 1.0;
     /// 24 V-class pack.
     pub const BATTERY: BatteryModel = BatteryModel {
         capacity_ah: 30.0,
@@ -131,28 +124,24 @@ impl V2Sim {
             ranger_mode: RangerMode::DualAckermann,
             lights: Lights::default(),
             steering_offset: 22000,
-            pose: Pose::default(),
             odometer_m: [0.0; 2],
-            last_update: now,
-            speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
             chassis: Chassis::new(
-                Injectable {
+                ChassisSpec {
                     motors: 0,
                     max_flood_per_s: 0,
                     checksums: false,
+                    boot_time: Self::DEFAULT_BOOT_TIME,
+                    battery: Self::BATTERY,
+                    idle_current_a: Self::IDLE_CURRENT_A,
                 },
-                Self::DEFAULT_BOOT_TIME,
+                now,
             ),
             status: Grid::new(status, now),
             fast: Grid::new(Self::FAST_PERIOD, now),
             slow: Grid::new(Self::SLOW_PERIOD, now),
             bms: Grid::new(Self::BMS_PERIOD, now),
             count: 0,
-            commands_received: 0,
-            commands_ignored: 0,
             commands_clamped: 0,
-            frames_ignored: 0,
-            decode_errors: 0,
             profile,
         };
         // Power-up counts as the first boot.
@@ -161,25 +150,13 @@ impl V2Sim {
         sim
     }
 
-    /// Silence after a reboot.
-    pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
-        self.chassis.set_boot_time(boot_time);
-        self
-    }
-
-    /// Time constant of the speed response, s (0: instantaneous).
-    pub fn with_speed_time_constant_s(mut self, seconds: f64) -> Self {
-        self.speed_time_constant_s = seconds.max(0.0);
-        self
-    }
-
     pub fn profile(&self) -> &V2Profile {
         &self.profile
     }
 
     /// Commands ignored because of the mode, the brake or the E-stop.
     pub fn commands_ignored(&self) -> u64 {
-        self.commands_ignored
+        self.chassis.received.ignored
     }
 
     /// 0x111 frames beyond the profile's limits.
@@ -189,7 +166,7 @@ impl V2Sim {
 
     /// Feedback frames from another node.
     pub fn frames_ignored(&self) -> u64 {
-        self.frames_ignored
+        self.chassis.received.not_for_it
     }
 
     /// The RANGER motion mode in force.
@@ -219,7 +196,7 @@ impl V2Sim {
 
     fn expire(&mut self, now: Timestamp) {
         self.chassis.expire(now);
-        for dt in substeps(&mut self.last_update, now) {
+        for dt in self.chassis.substeps(now) {
             self.step(dt);
         }
         if self.mode == Mode::Command
@@ -249,7 +226,7 @@ impl V2Sim {
         if let Some(runaway) = self.chassis.runaway_mps {
             target.linear_mps = runaway;
         }
-        let tau = self.speed_time_constant_s;
+        let tau = Self::DEFAULT_SPEED_TIME_CONSTANT_S;
         self.applied = Motion {
             linear_mps: first_order_lag(self.applied.linear_mps, target.linear_mps, tau, dt),
             angular_radps: first_order_lag(
@@ -262,7 +239,7 @@ impl V2Sim {
             steer_rad: target.steer_rad,
         };
         let (vx, vy, w) = self.body();
-        self.pose.advance(vx, vy, w, dt);
+        self.chassis.pose.advance(vx, vy, w, dt);
         // Left and right wheel travel of a differential body; the centre on the others.
         let half_track = self.profile.track_m / 2.0;
         let (left, right) = match self.profile.kinematics {
@@ -273,9 +250,7 @@ impl V2Sim {
         };
         self.odometer_m[0] += left * dt;
         self.odometer_m[1] += right * dt;
-        // Electronics 1 A plus 4 A per m/s.
-        let current = 1.0 + 4.0 * vx.abs();
-        self.chassis.soc_pct = Self::BATTERY.drain(self.chassis.soc_pct, current, dt, 1.0);
+        self.chassis.draw(Self::IDLE_CURRENT_A + 4.0 * vx.abs(), dt);
     }
 
     /// The true body twist (v, v_y, ω).
@@ -316,7 +291,7 @@ impl V2Sim {
     }
 
     fn on_command(&mut self, now: Timestamp, frame: Frame) {
-        self.commands_received += 1;
+        self.chassis.received.commands += 1;
         let command_mode = self.mode == Mode::Command;
         match frame {
             Frame::Mode(m) if self.mode != Mode::Remote => {
@@ -330,7 +305,7 @@ impl V2Sim {
                 self.heartbeat_lost = false;
                 if self.estop || self.brake_engaged {
                     self.command = STOP;
-                    self.commands_ignored += 1;
+                    self.chassis.received.ignored += 1;
                 } else {
                     self.command = self.limited(m);
                 }
@@ -352,7 +327,7 @@ impl V2Sim {
                         }
                         self.ranger_mode = mode;
                     }
-                    None => self.commands_ignored += 1,
+                    None => self.chassis.received.ignored += 1,
                 }
             }
             Frame::LightCommand(l) if command_mode && self.profile.front_light => {
@@ -387,7 +362,7 @@ impl V2Sim {
                     }),
                 );
             }
-            _ => self.commands_ignored += 1,
+            _ => self.chassis.received.ignored += 1,
         }
     }
 
@@ -395,11 +370,11 @@ impl V2Sim {
         if self.chassis.is_quiet(now) {
             return;
         }
-        match frame.encode(&self.profile) {
-            Ok(can) => self.chassis.outbox.push(can),
-            // A value the wire cannot carry (a speed beyond ±32 m/s): nothing to send.
-            Err(_) => self.chassis.outbox.count_dropped(),
-        }
+        // A value the wire cannot carry (a speed beyond ±32 m/s): nothing to send.
+        let encoded = frame.encode(&self.profile);
+        self.chassis
+            .outbox
+            .push_encoded(encoded, InjectedCounts::default());
     }
 
     fn next_count(&mut self) -> u8 {
@@ -437,8 +412,9 @@ impl V2Sim {
         word
     }
 
+    /// The battery's voltage as the electronics alone would load it, V.
     fn battery_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.chassis.soc_pct, 1.0)
+        Self::BATTERY.voltage_v(self.chassis.soc_pct, Self::IDLE_CURRENT_A)
     }
 
     fn send_status(&mut self, now: Timestamp) {
@@ -581,13 +557,6 @@ impl V2Sim {
     }
 }
 
-/// A distance as the `s32` mm counter reports it (wrapping), back in m.
-fn wrap_mm(distance_m: f64) -> f64 {
-    let mm = (distance_m * 1000.0).round() as i64;
-    // Truncation to 32 bits is the counter's wrap.
-    f64::from(mm as i32) / 1000.0
-}
-
 impl Firmware for V2Sim {
     fn robot(&self) -> RobotKind {
         self.robot
@@ -599,13 +568,12 @@ impl Firmware for V2Sim {
         if self.chassis.is_booting() && matches!(rx, Rx::Can(_)) {
             return;
         }
-        let Some(decoded) = decode_can(rx, &mut self.decode_errors, |f| decode(f, &self.profile))
-        else {
-            return;
-        };
-        match decoded.direction() {
-            Direction::ToChassis => self.on_command(now, decoded),
-            Direction::FromChassis => self.frames_ignored += 1,
+        let profile = &self.profile;
+        if let Some(command) = self
+            .chassis
+            .command(rx, |f| decode(f, profile), Frame::direction)
+        {
+            self.on_command(now, command);
         }
     }
 
@@ -690,10 +658,7 @@ impl Firmware for V2Sim {
             control_mode: self.mode.control_mode(),
             brake_engaged: self.brake_engaged,
             fault_flags: self.fault_flags(),
-            commands_received: self.commands_received,
-            bad_checksums_received: 0,
-            decode_errors: self.decode_errors,
-            ..self.chassis.truth(self.pose)
+            ..self.chassis.truth()
         }
     }
 }

@@ -1,5 +1,6 @@
 //! What every simulated chassis has alike, whatever its robot: the outbox and the storms
-//! injected into it, the boot, the battery's charge, a runaway speed loop and lost motor drivers.
+//! injected into it, the boot, the battery and its charge, the physics clock and the true pose, a
+//! runaway speed loop, lost motor drivers, and the counts of what it received.
 //!
 //! Each simulated firmware embeds one [`Chassis`] and hands it every [`Injection`] first
 //! ([`Chassis::inject`]); what only one robot has (its RC authority, bumper, E-stop switch,
@@ -8,11 +9,12 @@
 use std::time::Duration;
 
 use super::{
-    Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, motor_index, runaway_speed,
-    state_of_charge,
+    BatteryModel, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, Substeps, motor_index,
+    runaway_speed, state_of_charge, substeps,
 };
+use crate::Direction;
 use crate::can::CanFrame;
-use crate::driver::WireItem;
+use crate::driver::{Rx, WireItem};
 use crate::time::{Timestamp, earliest};
 
 /// CAN id of the frames that carry injected garbage on every simulated CAN chassis (0x7F0, an id
@@ -60,15 +62,22 @@ impl Item for Vec<u8> {
     }
 }
 
-/// Which of the shared injections a robot has.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Injectable {
+/// What one robot's simulated chassis is, in the terms every chassis shares: which of the shared
+/// injections it takes, how long it boots, its battery and what its electronics draw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct ChassisSpec {
     /// Motor drivers [`Injection::MotorDriverLoss`] may take away, numbered from 1 (0: none).
     pub(crate) motors: usize,
     /// Most extra frames a second [`Injection::Flood`] adds (0: the robot takes no flood).
     pub(crate) max_flood_per_s: u32,
     /// The robot's frames carry a checksum that [`Injection::BadChecksums`] corrupts.
     pub(crate) checksums: bool,
+    /// Silence after a reboot.
+    pub(crate) boot_time: Duration,
+    /// One battery pack.
+    pub(crate) battery: BatteryModel,
+    /// What the electronics draw, A: the battery current before the physics first runs.
+    pub(crate) idle_current_a: f64,
 }
 
 /// What [`Chassis::inject`] made of an injection.
@@ -85,43 +94,77 @@ pub(crate) enum Applied {
     Robot(Injection),
 }
 
+/// What a simulated chassis made of what it received, counted for the observer
+/// ([`SimTruth`] and each robot's accessors).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Received {
+    /// Command frames obeyed ([`SimTruth::commands_received`]).
+    pub(crate) commands: u64,
+    /// Valid command frames not obeyed: the mode, the authority, a boot.
+    pub(crate) ignored: u64,
+    /// Frames dropped for a bad checksum ([`SimTruth::bad_checksums_received`]).
+    pub(crate) bad_checksums: u64,
+    /// Frames that do not decode, or came on the other medium ([`SimTruth::decode_errors`]).
+    pub(crate) decode_errors: u64,
+    /// Valid frames only a chassis sends, put on the bus by another node: not for it.
+    pub(crate) not_for_it: u64,
+}
+
 /// The part of a simulated chassis every robot shares. Silence, floods, pending corruptions, a
-/// runaway and lost motor drivers are test conditions: they survive a reboot.
+/// runaway and lost motor drivers are test conditions: they survive a reboot; the pose and the
+/// battery are physical and survive it too; the counts are the observer's and keep counting.
 #[derive(Debug, Clone)]
 pub(crate) struct Chassis<T> {
     /// What the chassis has for transmission, with the silence window and the injected faults
     /// that left.
     pub(crate) outbox: Outbox<T>,
-    /// State of charge, %: set by [`Injection::Battery`], drained by the robot's physics.
+    /// State of charge, %: set by [`Injection::Battery`], drained by the robot's physics
+    /// ([`Chassis::draw`]).
     pub(crate) soc_pct: f64,
+    /// The current drawn from the battery now, A (positive = discharging).
+    pub(crate) pack_current_a: f64,
+    /// The true pose, in the frame the chassis started in, as the robot's physics moves it.
+    pub(crate) pose: Pose,
     /// [`Injection::Runaway`]: the forward speed the chassis drives at whatever it is told.
     pub(crate) runaway_mps: Option<f64>,
     /// [`Injection::MotorDriverLoss`]: motor drivers 1-4 that do not answer.
     pub(crate) motor_lost: [bool; 4],
     /// Boots since the observer started counting ([`crate::SimTruth::boots`]).
     pub(crate) boots: u32,
+    /// What it made of what it received.
+    pub(crate) received: Received,
+    /// How far the physics has been integrated.
+    last_update: Timestamp,
+    /// Batteries fitted side by side.
+    packs: u8,
     boot_time: Duration,
     booting_until: Option<Timestamp>,
     flood: Option<Flood>,
     /// Frames still to be sent with a corrupted checksum.
     corrupt_next: u32,
-    has: Injectable,
+    spec: ChassisSpec,
 }
 
 impl<T: Item> Chassis<T> {
-    /// A booted chassis with a full battery, nothing injected; reboots take `boot_time`.
-    pub(crate) fn new(has: Injectable, boot_time: Duration) -> Self {
+    /// A chassis booted at `now`, standing at the origin with one full battery, nothing
+    /// injected, nothing received.
+    pub(crate) fn new(spec: ChassisSpec, now: Timestamp) -> Self {
         Self {
             outbox: Outbox::new(),
             soc_pct: 100.0,
+            pack_current_a: spec.idle_current_a,
+            pose: Pose::default(),
             runaway_mps: None,
             motor_lost: [false; 4],
             boots: 0,
-            boot_time,
+            received: Received::default(),
+            last_update: now,
+            packs: 1,
+            boot_time: spec.boot_time,
             booting_until: None,
             flood: None,
             corrupt_next: 0,
-            has,
+            spec,
         }
     }
 
@@ -131,7 +174,7 @@ impl<T: Item> Chassis<T> {
     pub(crate) fn inject(&mut self, now: Timestamp, injection: Injection) -> Applied {
         match injection {
             Injection::MotorDriverLoss { motor, lost } => {
-                let Some(index) = motor_index(motor, self.has.motors.min(4)) else {
+                let Some(index) = motor_index(motor, self.spec.motors.min(4)) else {
                     return Applied::Refused;
                 };
                 self.motor_lost[index] = lost;
@@ -164,12 +207,12 @@ impl<T: Item> Chassis<T> {
             }
             // Injections add up: one that comes before the last one's frames have all gone out
             // takes nothing away from it.
-            Injection::BadChecksums(n) if self.has.checksums => {
+            Injection::BadChecksums(n) if self.spec.checksums => {
                 self.corrupt_next = self.corrupt_next.saturating_add(n);
                 Applied::Done
             }
-            Injection::Flood { frames_per_s } if self.has.max_flood_per_s > 0 => {
-                self.flood = Flood::new(now, frames_per_s, self.has.max_flood_per_s);
+            Injection::Flood { frames_per_s } if self.spec.max_flood_per_s > 0 => {
+                self.flood = Flood::new(now, frames_per_s, self.spec.max_flood_per_s);
                 Applied::Done
             }
             Injection::BadChecksums(_) | Injection::Flood { .. } => Applied::Refused,
@@ -180,6 +223,32 @@ impl<T: Item> Chassis<T> {
     /// The next item the chassis sends.
     pub(crate) fn poll_transmit(&mut self) -> Option<WireItem> {
         self.outbox.pop().map(Item::into_wire)
+    }
+}
+
+impl Chassis<CanFrame> {
+    /// A command frame a simulated CAN chassis received, decoded by `decode`. Serial bytes (the
+    /// wrong medium) and frames that do not decode count as decode errors; a valid frame that
+    /// `direction` says only a chassis sends (another node's feedback) counts as not for it.
+    pub(crate) fn command<F, E>(
+        &mut self,
+        rx: Rx<'_>,
+        decode: impl FnOnce(&CanFrame) -> Result<F, E>,
+        direction: impl FnOnce(&F) -> Direction,
+    ) -> Option<F> {
+        let decoded = match rx {
+            Rx::Can(frame) => decode(frame).ok(),
+            Rx::Bytes(_) => None,
+        };
+        let Some(frame) = decoded else {
+            self.received.decode_errors += 1;
+            return None;
+        };
+        if direction(&frame) == Direction::FromChassis {
+            self.received.not_for_it += 1;
+            return None;
+        }
+        Some(frame)
     }
 }
 
@@ -198,19 +267,53 @@ impl<T> Chassis<T> {
         }
     }
 
-    /// The truth every chassis knows alike: the `pose` its robot integrated, the charge, the
-    /// boots and the injected faults that left; the robot fills in the rest (its speeds, mode,
-    /// brake, faults and counters) over it.
-    pub(crate) fn truth(&self, pose: Pose) -> SimTruth {
+    /// The truth every chassis knows alike: the pose, the charge, the boots, what it received
+    /// and the injected faults that left; the robot fills in the rest (its speeds, mode, brake
+    /// and faults) over it.
+    pub(crate) fn truth(&self) -> SimTruth {
         SimTruth {
-            x_m: pose.x_m,
-            y_m: pose.y_m,
-            yaw_rad: pose.yaw_rad,
+            x_m: self.pose.x_m,
+            y_m: self.pose.y_m,
+            yaw_rad: self.pose.yaw_rad,
             soc_pct: self.soc_pct,
+            commands_received: self.received.commands,
+            bad_checksums_received: self.received.bad_checksums,
+            decode_errors: self.received.decode_errors,
             boots: self.boots,
             injected: self.outbox.injected(),
             ..SimTruth::default()
         }
+    }
+
+    /// The integration steps of the physics up to `now`, s ([`substeps`]).
+    pub(crate) fn substeps(&mut self, now: Timestamp) -> Substeps {
+        substeps(&mut self.last_update, now)
+    }
+
+    /// How far the physics has been integrated: the chassis' latest time.
+    pub(crate) fn last_update(&self) -> Timestamp {
+        self.last_update
+    }
+
+    /// Draws `current_a` from the battery for `dt` seconds (one step of the robot's physics).
+    pub(crate) fn draw(&mut self, current_a: f64, dt: f64) {
+        self.pack_current_a = current_a;
+        self.soc_pct = self
+            .spec
+            .battery
+            .drain(self.soc_pct, current_a, dt, f64::from(self.packs));
+    }
+
+    /// The battery's voltage under the current drawn now, V.
+    pub(crate) fn battery_voltage_v(&self) -> f64 {
+        self.spec
+            .battery
+            .voltage_v(self.soc_pct, self.pack_current_a)
+    }
+
+    /// Batteries fitted side by side (their capacities add up).
+    pub(crate) fn set_packs(&mut self, packs: u8) {
+        self.packs = packs;
     }
 
     /// Silence after a reboot.
@@ -245,9 +348,12 @@ impl<T> Chassis<T> {
         corrupt
     }
 
-    /// When a flood frame is due at `now`: serves it and says whether it is the second kind.
+    /// When a flood frame is due at `now`: serves it and says whether it is a copy of motor 1's
+    /// feedback (`true`: every second one, while motor driver 1 answers) or of the motion
+    /// feedback.
     pub(crate) fn flood_due(&mut self, now: Timestamp) -> Option<bool> {
-        self.flood.as_mut().and_then(|flood| flood.due(now))
+        let second = self.flood.as_mut().and_then(|flood| flood.due(now))?;
+        Some(second && !self.motor_lost[0])
     }
 
     /// The chassis' own deadlines: the end of a boot, of a silence, the next flood frame.
@@ -269,28 +375,39 @@ mod tests {
 
     const T0: Timestamp = Timestamp::from_millis(1_000);
 
-    fn ms(v: u64) -> Duration {
+    const fn ms(v: u64) -> Duration {
         Duration::from_millis(v)
     }
 
-    const CAN: Injectable = Injectable {
+    const BATTERY: BatteryModel = BatteryModel {
+        capacity_ah: 10.0,
+        full_v: 25.0,
+        empty_v: 20.0,
+        resistance_ohm: 0.1,
+    };
+
+    const CAN: ChassisSpec = ChassisSpec {
         motors: 4,
         max_flood_per_s: 1000,
         checksums: false,
+        boot_time: ms(300),
+        battery: BATTERY,
+        idle_current_a: 1.0,
     };
 
-    const SERIAL: Injectable = Injectable {
+    const SERIAL: ChassisSpec = ChassisSpec {
         motors: 2,
         max_flood_per_s: 100,
         checksums: true,
+        ..CAN
     };
 
     fn can() -> Chassis<CanFrame> {
-        Chassis::new(CAN, ms(300))
+        Chassis::new(CAN, T0)
     }
 
     fn serial() -> Chassis<Vec<u8>> {
-        Chassis::new(SERIAL, ms(300))
+        Chassis::new(SERIAL, T0)
     }
 
     fn sent<T: Item>(chassis: &mut Chassis<T>) -> Vec<WireItem> {
@@ -358,12 +475,12 @@ mod tests {
         let runaway = Injection::Runaway(Some(MAX_RUNAWAY_MPS + 1.0));
         assert_eq!(s.inject(T0, runaway), Applied::Refused);
         let mut none = Chassis::<CanFrame>::new(
-            Injectable {
+            ChassisSpec {
                 motors: 0,
                 max_flood_per_s: 0,
-                checksums: false,
+                ..CAN
             },
-            ms(300),
+            T0,
         );
         let flood = Injection::Flood { frames_per_s: 10 };
         assert_eq!(none.inject(T0, flood), Applied::Refused);
@@ -446,6 +563,69 @@ mod tests {
         assert!(c.reboot(T0 + ms(400)), "no boot time: booted at once");
         assert_eq!(c.boots, 2);
         assert!(!c.is_booting());
+    }
+
+    #[test]
+    fn the_battery_drains_by_the_current_drawn_and_two_packs_last_twice_as_long() {
+        let mut one = can();
+        assert_eq!(one.battery_voltage_v(), 25.0 - 0.1 * 1.0, "idle current");
+        // 10 A for an hour from 10 Ah: empty.
+        for _ in 0..3600 {
+            one.draw(10.0, 1.0);
+        }
+        assert!(one.soc_pct.abs() < 1e-9, "{}", one.soc_pct);
+        assert!((one.battery_voltage_v() - (20.0 - 0.1 * 10.0)).abs() < 1e-9);
+        let mut two = can();
+        two.set_packs(2);
+        for _ in 0..3600 {
+            two.draw(10.0, 1.0);
+        }
+        assert!((two.soc_pct - 50.0).abs() < 1e-9, "{}", two.soc_pct);
+    }
+
+    #[test]
+    fn a_flood_copies_the_motion_feedback_in_place_of_a_lost_motor_1s() {
+        let mut c = can();
+        let flood = Injection::Flood { frames_per_s: 1000 };
+        assert_eq!(c.inject(T0, flood), Applied::Done);
+        let kinds = |c: &mut Chassis<CanFrame>, from: u64| {
+            (from..from + 4)
+                .map(|t| c.flood_due(T0 + ms(t)))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(
+            kinds(&mut c, 1),
+            [Some(false), Some(true), Some(false), Some(true)]
+        );
+        let loss = Injection::MotorDriverLoss {
+            motor: 1,
+            lost: true,
+        };
+        assert_eq!(c.inject(T0, loss), Applied::Condition);
+        assert_eq!(kinds(&mut c, 5), [Some(false); 4]);
+    }
+
+    #[test]
+    fn a_command_is_decoded_and_what_is_none_is_counted() {
+        let mut c = can();
+        let decode = |f: &CanFrame| match f.id() {
+            0x100 => Ok(Direction::ToChassis),
+            0x200 => Ok(Direction::FromChassis),
+            _ => Err(()),
+        };
+        let frame = |id| CanFrame::new(id, &[0]).unwrap();
+        let command = c.command(Rx::Can(&frame(0x100)), decode, |d| *d);
+        assert_eq!(command, Some(Direction::ToChassis));
+        assert_eq!(c.command(Rx::Can(&frame(0x200)), decode, |d| *d), None);
+        assert_eq!(c.command(Rx::Can(&frame(0x300)), decode, |d| *d), None);
+        assert_eq!(c.command(Rx::Bytes(&[0xAA]), decode, |d| *d), None);
+        assert_eq!(
+            (c.received.not_for_it, c.received.decode_errors),
+            (1, 2),
+            "another node's feedback, an unknown frame and serial bytes"
+        );
+        let truth = c.truth();
+        assert_eq!((truth.decode_errors, truth.commands_received), (2, 0));
     }
 
     #[test]

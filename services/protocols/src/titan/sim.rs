@@ -13,13 +13,11 @@ use super::codec::{
 };
 use super::driver::normalize_faults;
 use super::kinematics::{steer_command, yaw_rate};
-use crate::Direction;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, Firmware, GARBAGE_ID, Injectable, InjectedCounts, Injection,
-    Mode, Pose, SimTruth, clamp_i16, decode_can, first_order_lag, non_negative, state_of_charge,
-    substeps,
+    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, Mode,
+    MotorModel, SimTruth, clamp_i16, first_order_lag, past_timeout, wrap_mm,
 };
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
@@ -169,18 +167,14 @@ const BMS_UNDER_VOLTAGE: u8 = 1 << 2;
 /// * **Injections**: `Silence(d)` transmits nothing for `d`; `Flood { frames_per_s }` adds that
 ///   many extra feedback frames per second (copies of 0x221 and 0x251, alternating; at most
 ///   [`TitanSim::MAX_FLOOD_FRAMES_PER_S`]; 0 stops it) — both are test conditions and survive a
-///   reboot. `Garbage(bytes)` puts frames with id [`TitanSim::GARBAGE_ID`] (0x7F0, unused by
-///   TITAN) carrying the bytes 8 at a time on the bus at once — another node's noise, so even
-///   during silence. `BadChecksums`, `ObstacleAhead` and `ObstacleBehind` return `false` (TITAN
+///   reboot. `Garbage(bytes)` puts frames with id 0x7F0 (unused by TITAN) carrying the bytes 8
+///   at a time on the bus at once — another node's noise, so even during silence. `BadChecksums`, `ObstacleAhead` and `ObstacleBehind` return `false` (TITAN
 ///   has no checksum and no range sensors); so do a motor number outside 1-4 and a non-finite SOC.
 #[derive(Debug, Clone)]
 pub struct TitanSim {
     profile: TitanProfile,
     // Options.
-    speed_time_constant_s: f64,
-    stop_time_constant_s: f64,
     steer_rate_radps: f64,
-    steering_zero_delay: Duration,
     batteries: u8,
 
     // Control state.
@@ -199,34 +193,26 @@ pub struct TitanSim {
     faults: u32,
 
     // Physics.
-    last_update: Timestamp,
     linear_mps: f64,
     accel_mps2: f64,
     front_steer_rad: f64,
-    pose: Pose,
     front_odometer_m: f64,
     rear_odometer_m: f64,
     wheel_mps: [f64; 4],
     motor_current_a: [f64; 4],
     /// Encoder positions, counts, kept in [0, 2³²).
     encoder_counts: [f64; 4],
-    pack_current_a: f64,
 
     // Output.
     fast: Grid,
     slow: Grid,
     bms: Grid,
     zero_replies: VecDeque<Timestamp>,
-    /// What every simulated chassis shares: the outbox, the boot, the battery's charge and the
-    /// injected faults.
+    /// What every simulated chassis shares: the outbox, the boot, the battery, the pose, the
+    /// injected faults and the counts of what it received.
     chassis: Chassis<CanFrame>,
-
-    // Counters.
-    commands_received: u64,
-    commands_ignored: u64,
+    /// Motion frames clamped to the valid range.
     commands_clamped: u64,
-    decode_errors: u64,
-    frames_ignored: u64,
 }
 
 impl TitanSim {
@@ -255,7 +241,6 @@ impl TitanSim {
     /// Speed below which the robot stands still (off-road switching), m/s.
     pub const STANDING_STILL_MPS: f64 = 0.01;
     /// CAN id of injected garbage frames (unused by TITAN).
-    pub const GARBAGE_ID: u16 = GARBAGE_ID;
     /// The pack (one battery; [`Self::with_batteries`] doubles the capacity).
     pub const BATTERY: BatteryModel = BatteryModel {
         capacity_ah: 24.0,
@@ -265,26 +250,21 @@ impl TitanSim {
     };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 1.0;
-    /// Motor current per m/s of wheel speed, A.
-    pub const MOTOR_A_PER_MPS: f64 = 2.75;
-    /// Motor current per m/s² of acceleration, A.
-    pub const MOTOR_A_PER_MPS2: f64 = 1.5;
-    /// Motor driver current limit, A.
-    pub const MOTOR_CURRENT_LIMIT_A: f64 = 60.0;
+    /// Motor current: 2.75 A per m/s of wheel speed, 1.5 A per m/s² of acceleration, ±60 A.
+    pub const MOTOR: MotorModel = MotorModel {
+        a_per_mps: 2.75,
+        a_per_mps2: 1.5,
+        limit_a: 60.0,
+    };
     /// Most extra frames per second [`Injection::Flood`] adds.
     pub const MAX_FLOOD_FRAMES_PER_S: u32 = 100_000;
-    /// Longest time integrated at once; a longer gap between calls is not bridged.
-    pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
     const AMBIENT_C: f64 = 25.0;
 
     /// A chassis that has just finished booting at `now`: standby, brake engaged, SOC 100 %.
     pub fn new(profile: TitanProfile, now: Timestamp) -> Self {
         Self {
             profile,
-            speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
-            stop_time_constant_s: Self::DEFAULT_STOP_TIME_CONSTANT_S,
             steer_rate_radps: Self::DEFAULT_STEER_RATE_RADPS,
-            steering_zero_delay: Self::DEFAULT_STEERING_ZERO_DELAY,
             batteries: 1,
             mode: Mode::Standby,
             resume_on_heartbeat: false,
@@ -297,47 +277,31 @@ impl TitanSim {
             rc_counter: 0,
             bumper: false,
             faults: 0,
-            last_update: now,
             linear_mps: 0.0,
             accel_mps2: 0.0,
             front_steer_rad: 0.0,
-            pose: Pose::default(),
             front_odometer_m: 0.0,
             rear_odometer_m: 0.0,
             wheel_mps: [0.0; 4],
             motor_current_a: [0.0; 4],
             encoder_counts: [0.0; 4],
-            pack_current_a: Self::IDLE_CURRENT_A,
             fast: Grid::new(Self::FAST_PERIOD, now),
             slow: Grid::new(Self::SLOW_PERIOD, now),
             bms: Grid::new(Self::BMS_PERIOD, now),
             zero_replies: VecDeque::new(),
             chassis: Chassis::new(
-                Injectable {
+                ChassisSpec {
                     motors: 4,
                     max_flood_per_s: Self::MAX_FLOOD_FRAMES_PER_S,
                     checksums: false,
+                    boot_time: Self::DEFAULT_BOOT_TIME,
+                    battery: Self::BATTERY,
+                    idle_current_a: Self::IDLE_CURRENT_A,
                 },
-                Self::DEFAULT_BOOT_TIME,
+                now,
             ),
-            commands_received: 0,
-            commands_ignored: 0,
             commands_clamped: 0,
-            decode_errors: 0,
-            frames_ignored: 0,
         }
-    }
-
-    /// Time constant of the first-order speed response, s (0 = instantaneous).
-    pub fn with_speed_time_constant_s(mut self, seconds: f64) -> Self {
-        self.speed_time_constant_s = non_negative(seconds);
-        self
-    }
-
-    /// Time constant of the speed response while drive is blocked, s (0 = instantaneous).
-    pub fn with_stop_time_constant_s(mut self, seconds: f64) -> Self {
-        self.stop_time_constant_s = non_negative(seconds);
-        self
     }
 
     /// Steering slew rate, rad/s (0 or less = instantaneous).
@@ -350,30 +314,10 @@ impl TitanSim {
         self
     }
 
-    /// Silence after a reboot.
-    pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
-        self.chassis.set_boot_time(boot_time);
-        self
-    }
-
-    /// Delay of the steering-zero acknowledgement.
-    pub fn with_steering_zero_delay(mut self, delay: Duration) -> Self {
-        self.steering_zero_delay = delay;
-        self
-    }
-
     /// Batteries fitted, 1 or 2 (clamped).
     pub fn with_batteries(mut self, batteries: u8) -> Self {
         self.batteries = batteries.clamp(1, 2);
-        self
-    }
-
-    /// Starting state of charge, % (clamped to 0-100).
-    pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
-        if let Some(soc_pct) = state_of_charge(soc_pct) {
-            self.chassis.soc_pct = soc_pct;
-            self.refresh_conditions();
-        }
+        self.chassis.set_packs(self.batteries);
         self
     }
 
@@ -388,22 +332,12 @@ impl TitanSim {
 
     /// Valid command frames ignored (wrong mode, booting, off-road while moving).
     pub fn commands_ignored(&self) -> u64 {
-        self.commands_ignored
+        self.chassis.received.ignored
     }
 
     /// Valid feedback frames sent by another node, ignored.
     pub fn frames_ignored(&self) -> u64 {
-        self.frames_ignored
-    }
-
-    /// Frames dropped because nobody polled the transmit queue.
-    pub fn frames_dropped(&self) -> u64 {
-        self.chassis.outbox.dropped()
-    }
-
-    /// The 0x211 fault word the chassis reports.
-    pub fn vendor_fault_word(&self) -> u32 {
-        self.faults
+        self.chassis.received.not_for_it
     }
 
     pub fn off_road(&self) -> bool {
@@ -414,24 +348,9 @@ impl TitanSim {
         self.silent_mode
     }
 
-    /// True while the chassis boots after a reboot.
-    pub fn is_booting(&self) -> bool {
-        self.chassis.is_booting()
-    }
-
     /// Front and rear odometers, m (unwrapped).
     pub fn odometers_m(&self) -> (f64, f64) {
         (self.front_odometer_m, self.rear_odometer_m)
-    }
-
-    /// Pack voltage under the present load, V.
-    pub fn battery_voltage_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.chassis.soc_pct, self.pack_current_a)
-    }
-
-    /// Pack current, A (positive = discharging).
-    pub fn battery_current_a(&self) -> f64 {
-        self.pack_current_a
     }
 
     // -----------------------------------------------------------------------------------------
@@ -474,11 +393,8 @@ impl TitanSim {
     }
 
     fn heartbeat_deadline(&self) -> Option<Timestamp> {
-        (self.mode == Mode::Command && !self.chassis.is_booting()).then(|| {
-            self.last_motion_rx
-                + Duration::from_millis(self.profile.command_timeout_ms)
-                + Duration::from_nanos(1)
-        })
+        (self.mode == Mode::Command && !self.chassis.is_booting())
+            .then(|| past_timeout(self.last_motion_rx, self.profile.command_timeout_ms))
     }
 
     fn enter_command_mode(&mut self, now: Timestamp) {
@@ -498,7 +414,7 @@ impl TitanSim {
 
     /// Physics and the deadlines that change what the chassis obeys (boot end, heartbeat).
     fn expire(&mut self, now: Timestamp) {
-        for dt in substeps(&mut self.last_update, now) {
+        for dt in self.chassis.substeps(now) {
             self.step(dt);
         }
         if self.chassis.expire(now).is_some() {
@@ -523,7 +439,7 @@ impl TitanSim {
 
     fn on_command(&mut self, now: Timestamp, frame: Frame) {
         if self.chassis.is_booting() || !self.accepts(frame.id()) {
-            self.commands_ignored += 1;
+            self.chassis.received.ignored += 1;
             return;
         }
         match frame {
@@ -568,17 +484,19 @@ impl TitanSim {
             }
             Frame::OffRoad(s) => {
                 if self.linear_mps.abs() >= Self::STANDING_STILL_MPS {
-                    self.commands_ignored += 1;
+                    self.chassis.received.ignored += 1;
                     return;
                 }
                 self.off_road = s.enter;
             }
-            Frame::SteeringZero => self.zero_replies.push_back(now + self.steering_zero_delay),
+            Frame::SteeringZero => self
+                .zero_replies
+                .push_back(now + Self::DEFAULT_STEERING_ZERO_DELAY),
             Frame::ClearFault(c) => self.clear_faults(c.code),
             // Not commands: `handle_rx` filters them out.
             _ => return,
         }
-        self.commands_received += 1;
+        self.chassis.received.commands += 1;
     }
 
     fn clear_faults(&mut self, code: u8) {
@@ -649,9 +567,9 @@ impl TitanSim {
         self.refresh_conditions();
         let blocked = self.drive_blocked();
         let (target, tau) = match self.chassis.runaway_mps {
-            Some(runaway) => (runaway, self.speed_time_constant_s),
-            None if blocked => (0.0, self.stop_time_constant_s),
-            None => (self.command.linear_mps, self.speed_time_constant_s),
+            Some(runaway) => (runaway, Self::DEFAULT_SPEED_TIME_CONSTANT_S),
+            None if blocked => (0.0, Self::DEFAULT_STOP_TIME_CONSTANT_S),
+            None => (self.command.linear_mps, Self::DEFAULT_SPEED_TIME_CONSTANT_S),
         };
         let v0 = self.linear_mps;
         let v1 = first_order_lag(v0, target, tau, dt);
@@ -669,7 +587,7 @@ impl TitanSim {
         let v_mid = 0.5 * (v0 + v1);
         let s_mid = 0.5 * (s0 + s1);
         let w_mid = yaw_rate(v_mid, s_mid, &self.profile);
-        self.pose.advance(v_mid, 0.0, w_mid, dt);
+        self.chassis.pose.advance(v_mid, 0.0, w_mid, dt);
         if !self.chassis.is_booting() {
             self.front_odometer_m += v_mid * dt;
             self.rear_odometer_m += v_mid * dt;
@@ -685,19 +603,11 @@ impl TitanSim {
         self.front_steer_rad = s1;
         self.accel_mps2 = (v1 - v0) / dt;
         self.wheel_mps = self.wheel_speeds(v1, s1);
-        let limit = Self::MOTOR_CURRENT_LIMIT_A;
         for (current, wheel) in self.motor_current_a.iter_mut().zip(self.wheel_mps) {
-            *current = (Self::MOTOR_A_PER_MPS * wheel + Self::MOTOR_A_PER_MPS2 * self.accel_mps2)
-                .clamp(-limit, limit);
+            *current = Self::MOTOR.signed_a(wheel, self.accel_mps2);
         }
-        self.pack_current_a =
-            Self::IDLE_CURRENT_A + self.motor_current_a.iter().map(|c| c.abs()).sum::<f64>();
-        self.chassis.soc_pct = Self::BATTERY.drain(
-            self.chassis.soc_pct,
-            self.pack_current_a,
-            dt,
-            f64::from(self.batteries),
-        );
+        let motors_a = self.motor_current_a.iter().map(|c| c.abs()).sum::<f64>();
+        self.chassis.draw(Self::IDLE_CURRENT_A + motors_a, dt);
     }
 
     /// Wheel speeds front-left, front-right, rear-left, rear-right, m/s, for body-centre speed `v`
@@ -736,12 +646,9 @@ impl TitanSim {
         if self.is_quiet(now) {
             return;
         }
-        // Every value is kept inside its wire range; a frame that still does not fit is dropped.
-        if let Ok(can) = frame.encode(&self.profile) {
-            self.chassis.outbox.push_injected(can, injected);
-        } else {
-            self.chassis.outbox.count_dropped();
-        }
+        // Every value is kept inside its wire range; a frame that still does not fit is not sent.
+        let encoded = frame.encode(&self.profile);
+        self.chassis.outbox.push_encoded(encoded, injected);
     }
 
     fn wire_mode(&self) -> u8 {
@@ -787,7 +694,7 @@ impl TitanSim {
             Frame::SystemStatus(SystemStatus {
                 body_status,
                 mode: self.wire_mode(),
-                battery_voltage_v: self.battery_voltage_v().min(6553.5),
+                battery_voltage_v: self.chassis.battery_voltage_v().min(6553.5),
                 vendor_fault_word: self.faults,
             }),
         );
@@ -838,7 +745,7 @@ impl TitanSim {
     }
 
     fn send_slow(&mut self, now: Timestamp) {
-        let voltage = self.battery_voltage_v().min(6553.5);
+        let voltage = self.chassis.battery_voltage_v().min(6553.5);
         let mut status = 0;
         if !self.drive_blocked() {
             status |= DriverStatus::ENABLED;
@@ -866,8 +773,8 @@ impl TitanSim {
 
     fn send_bms(&mut self, now: Timestamp) {
         let soc = self.chassis.soc_pct.floor().clamp(0.0, 100.0);
-        let voltage = self.battery_voltage_v().min(655.35);
-        let current = clamp_i16(self.pack_current_a, 10.0);
+        let voltage = self.chassis.battery_voltage_v().min(655.35);
+        let current = clamp_i16(self.chassis.pack_current_a, 10.0);
         let mut alarm = BmsAlarm::default();
         if self.chassis.soc_pct < self.profile.low_battery_warning_soc_pct {
             alarm.warning_1 |= BMS_UNDER_VOLTAGE;
@@ -902,18 +809,6 @@ impl TitanSim {
         }
     }
 
-    fn send_flood(&mut self, now: Timestamp) {
-        let Some(second) = self.chassis.flood_due(now) else {
-            return;
-        };
-        let frame = if second && !self.chassis.motor_lost[0] {
-            self.motor_fast(0)
-        } else {
-            self.motion_feedback()
-        };
-        self.send_injected(now, frame, InjectedCounts::FLOOD);
-    }
-
     /// The normalized flags of what the chassis reports (0x211 word, body state, BMS).
     fn fault_flags(&self) -> u64 {
         let mut flags = normalize_faults(self.faults);
@@ -937,14 +832,12 @@ impl Firmware for TitanSim {
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
-        let Some(decoded) = decode_can(rx, &mut self.decode_errors, |f| decode(f, &self.profile))
-        else {
-            return;
-        };
-        match decoded.direction() {
-            Direction::ToChassis => self.on_command(now, decoded),
-            // Feedback ids put on the bus by another node.
-            Direction::FromChassis => self.frames_ignored += 1,
+        let profile = &self.profile;
+        if let Some(command) = self
+            .chassis
+            .command(rx, |f| decode(f, profile), Frame::direction)
+        {
+            self.on_command(now, command);
         }
     }
 
@@ -963,7 +856,14 @@ impl Firmware for TitanSim {
         if self.bms.serve_due(now) {
             self.send_bms(now);
         }
-        self.send_flood(now);
+        if let Some(motor) = self.chassis.flood_due(now) {
+            let copy = if motor {
+                self.motor_fast(0)
+            } else {
+                self.motion_feedback()
+            };
+            self.send_injected(now, copy, InjectedCounts::FLOOD);
+        }
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
@@ -1012,16 +912,12 @@ impl Firmware for TitanSim {
     fn truth(&self) -> SimTruth {
         SimTruth {
             linear_mps: self.linear_mps,
-            lateral_mps: 0.0,
             angular_radps: yaw_rate(self.linear_mps, self.front_steer_rad, &self.profile),
             steer_rad: self.front_steer_rad,
             control_mode: self.mode.control_mode(),
             brake_engaged: self.brake_engaged,
             fault_flags: self.fault_flags(),
-            commands_received: self.commands_received,
-            bad_checksums_received: 0,
-            decode_errors: self.decode_errors,
-            ..self.chassis.truth(self.pose)
+            ..self.chassis.truth()
         }
     }
 }
@@ -1030,13 +926,6 @@ impl Firmware for TitanSim {
 fn motor_number(index: usize) -> u8 {
     // index < 4.
     (index.min(3) + 1) as u8
-}
-
-/// A distance in m as the `s32` mm counter reports it (wrapping), back in m.
-fn wrap_mm(distance_m: f64) -> f64 {
-    let mm = (distance_m * 1000.0).round() as i64;
-    // Truncation to 32 bits is the counter's wrap.
-    f64::from(mm as i32) / 1000.0
 }
 
 #[cfg(test)]

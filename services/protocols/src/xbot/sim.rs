@@ -11,8 +11,8 @@ use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, Firmware, Injectable, InjectedCounts, Injection, Pose,
-    SimTruth, first_order_lag, non_negative, state_of_charge, substeps,
+    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, MotorModel,
+    SimTruth, first_order_lag, past_timeout,
 };
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
@@ -93,8 +93,6 @@ pub struct XbotSim {
     profile: XbotProfile,
     // Options.
     wheel_separation_m: f64,
-    speed_time_constant_s: f64,
-    stop_time_constant_s: f64,
     tx_chunk_len: usize,
 
     // Control state.
@@ -114,11 +112,9 @@ pub struct XbotSim {
     tilt_rad: f64,
 
     // Physics.
-    last_update: Timestamp,
     /// Wheel speeds FL, FR, RL, RR, m/s (two-wheel robots: only FL, FR).
     wheel_mps: [f64; 4],
     forward_accel_mps2: f64,
-    pose: Pose,
     /// Wheel travel since the last boot, m.
     wheel_travel_m: [f64; 4],
     lift_pct: f64,
@@ -126,20 +122,14 @@ pub struct XbotSim {
     lift_moving: bool,
     motor_current_a: [f64; 4],
     lift_current_a: f64,
-    pack_current_a: f64,
 
     // Output.
     reports: Grid,
-    /// What every simulated chassis shares: the outbox, the boot, the battery's charge and the
-    /// injected faults.
+    /// What every simulated chassis shares: the outbox, the boot, the battery, the pose, the
+    /// injected faults and the counts of what it received.
     chassis: Chassis<Vec<u8>>,
 
     // Counters.
-    commands_received: u64,
-    commands_ignored: u64,
-    bad_checksums_received: u64,
-    decode_errors: u64,
-    frames_ignored: u64,
     reports_sent: u64,
     reports_corrupted: u64,
     heartbeat_timeouts: u64,
@@ -177,14 +167,15 @@ impl XbotSim {
     };
     /// Current of the electronics, A.
     pub const IDLE_CURRENT_A: f64 = 1.0;
-    /// Motor current per m/s of wheel speed, A.
-    pub const MOTOR_A_PER_MPS: f64 = 1.5;
-    /// Motor current per m/s² of wheel acceleration, A.
-    pub const MOTOR_A_PER_MPS2: f64 = 3.0;
+    /// Motor current: 1.5 A per m/s of wheel speed, 3 A per m/s² of wheel acceleration, at most
+    /// 15 A (the spec sheet's largest working current).
+    pub const MOTOR: MotorModel = MotorModel {
+        a_per_mps: 1.5,
+        a_per_mps2: 3.0,
+        limit_a: 15.0,
+    };
     /// Motor current while powered and standing, A.
     pub const MOTOR_HOLD_A: f64 = 0.3;
-    /// Motor current limit, A (the spec sheet's largest working current).
-    pub const MOTOR_CURRENT_LIMIT_A: f64 = 15.0;
     /// Lift motor current while moving, A (the manual's example report).
     pub const LIFT_MOVING_A: f64 = 0.6;
     /// Lift motor current while enabled and holding, A.
@@ -194,8 +185,6 @@ impl XbotSim {
     /// Horizontal and vertical components of the simulated Earth field, gauss.
     const MAG_HORIZONTAL_GAUSS: f64 = 0.3;
     const MAG_VERTICAL_GAUSS: f64 = -0.4;
-    /// Longest time integrated at once; a longer gap between calls is not bridged.
-    pub const MAX_STEP: Duration = crate::firmware::MAX_STEP;
     /// Bytes of one sensor report on the wire.
     const REPORT_LEN: u32 = 75;
 
@@ -206,18 +195,19 @@ impl XbotSim {
             .filter(|s| s.is_finite() && *s > 0.0)
             .unwrap_or(Self::DEFAULT_WHEEL_SEPARATION_M);
         let chassis = Chassis::new(
-            Injectable {
+            ChassisSpec {
                 motors: wheel_count(&profile),
                 max_flood_per_s: line_reports_per_s(&profile),
                 checksums: true,
+                boot_time: Self::DEFAULT_BOOT_TIME,
+                battery: Self::BATTERY,
+                idle_current_a: Self::IDLE_CURRENT_A,
             },
-            Self::DEFAULT_BOOT_TIME,
+            now,
         );
         Self {
             profile,
             wheel_separation_m,
-            speed_time_constant_s: Self::DEFAULT_SPEED_TIME_CONSTANT_S,
-            stop_time_constant_s: Self::DEFAULT_STOP_TIME_CONSTANT_S,
             tx_chunk_len: 0,
             parser: StreamParser::new(),
             powered: false,
@@ -231,53 +221,25 @@ impl XbotSim {
             lift_target_pct: 0.0,
             pan_rad: 0.0,
             tilt_rad: 0.0,
-            last_update: now,
             wheel_mps: [0.0; 4],
             forward_accel_mps2: 0.0,
-            pose: Pose::default(),
             wheel_travel_m: [0.0; 4],
             lift_pct: 0.0,
             lift_pct_at_boot: 0.0,
             lift_moving: false,
             motor_current_a: [0.0; 4],
             lift_current_a: 0.0,
-            pack_current_a: Self::IDLE_CURRENT_A,
             reports: Grid::new(Self::REPORT_PERIOD, now),
             chassis,
-            commands_received: 0,
-            commands_ignored: 0,
-            bad_checksums_received: 0,
-            decode_errors: 0,
-            frames_ignored: 0,
             reports_sent: 0,
             reports_corrupted: 0,
             heartbeat_timeouts: 0,
         }
     }
 
-    /// Time constant of the wheel speed response, s (0 = instantaneous).
-    pub fn with_speed_time_constant_s(mut self, seconds: f64) -> Self {
-        self.speed_time_constant_s = non_negative(seconds);
-        self
-    }
-
-    /// Time constant of the wheel speed response while drive is blocked, s (0 = instantaneous).
-    pub fn with_stop_time_constant_s(mut self, seconds: f64) -> Self {
-        self.stop_time_constant_s = non_negative(seconds);
-        self
-    }
-
     /// Silence after a reboot (zero: the board answers at once).
     pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
         self.chassis.set_boot_time(boot_time);
-        self
-    }
-
-    /// Starting state of charge, % (clamped to 0-100).
-    pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
-        if let Some(soc_pct) = state_of_charge(soc_pct) {
-            self.chassis.soc_pct = soc_pct;
-        }
         self
     }
 
@@ -348,27 +310,17 @@ impl XbotSim {
 
     /// Valid frames ignored while booting.
     pub fn commands_ignored(&self) -> u64 {
-        self.commands_ignored
+        self.chassis.received.ignored
     }
 
     /// Valid sensor reports sent *to* the board, ignored.
     pub fn frames_ignored(&self) -> u64 {
-        self.frames_ignored
-    }
-
-    /// Chunks dropped because nobody polled the transmit queue (or a report did not encode).
-    pub fn frames_dropped(&self) -> u64 {
-        self.chassis.outbox.dropped()
+        self.chassis.received.not_for_it
     }
 
     /// Times the 500 ms heartbeat timeout set the speed to 0.
     pub fn heartbeat_timeouts(&self) -> u64 {
         self.heartbeat_timeouts
-    }
-
-    /// Pack voltage under the present load, V.
-    pub fn battery_voltage_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.chassis.soc_pct, self.pack_current_a)
     }
 
     // -----------------------------------------------------------------------------------------
@@ -391,16 +343,13 @@ impl XbotSim {
     }
 
     fn heartbeat_deadline(&self) -> Option<Timestamp> {
-        self.heartbeat_alive.then(|| {
-            self.last_velocity_rx
-                + Duration::from_millis(self.profile.command_timeout_ms)
-                + Duration::from_nanos(1)
-        })
+        self.heartbeat_alive
+            .then(|| past_timeout(self.last_velocity_rx, self.profile.command_timeout_ms))
     }
 
     /// Physics and the deadlines that change what the board does (boot end, silence, heartbeat).
     fn expire(&mut self, now: Timestamp) {
-        for dt in substeps(&mut self.last_update, now) {
+        for dt in self.chassis.substeps(now) {
             self.step(dt);
         }
         if let Some(until) = self.chassis.expire(now) {
@@ -432,7 +381,7 @@ impl XbotSim {
 
     fn on_frame(&mut self, now: Timestamp, frame: Frame) {
         if self.chassis.is_booting() {
-            self.commands_ignored += 1;
+            self.chassis.received.ignored += 1;
             return;
         }
         match frame {
@@ -462,17 +411,17 @@ impl XbotSim {
                 self.tilt_rad = s.tilt_rad;
             }
             Frame::Sensor(_) => {
-                self.frames_ignored += 1;
+                self.chassis.received.not_for_it += 1;
                 return;
             }
         }
-        self.commands_received += 1;
+        self.chassis.received.commands += 1;
     }
 
     fn on_error(&mut self, error: &DecodeError) {
         match error {
-            DecodeError::BadChecksum { .. } => self.bad_checksums_received += 1,
-            _ => self.decode_errors += 1,
+            DecodeError::BadChecksum { .. } => self.chassis.received.bad_checksums += 1,
+            _ => self.chassis.received.decode_errors += 1,
         }
     }
 
@@ -542,19 +491,19 @@ impl XbotSim {
             // Every driven wheel at the runaway speed: straight ahead, past every limit.
             Some(runaway) => (
                 std::array::from_fn(|i| if i < wheels { runaway } else { 0.0 }),
-                self.speed_time_constant_s,
+                Self::DEFAULT_SPEED_TIME_CONSTANT_S,
             ),
-            None if blocked => ([0.0; 4], self.stop_time_constant_s),
+            None if blocked => ([0.0; 4], Self::DEFAULT_STOP_TIME_CONSTANT_S),
             None => (
                 self.wheel_targets(&self.command),
-                self.speed_time_constant_s,
+                Self::DEFAULT_SPEED_TIME_CONSTANT_S,
             ),
         };
         let w0 = self.wheel_mps;
         let w1: [f64; 4] = std::array::from_fn(|i| first_order_lag(w0[i], targets[i], tau, dt));
         let mid = [0, 1, 2, 3].map(|i| 0.5 * (w0[i] + w1[i]));
         let (v, vy, w) = self.body(&mid);
-        self.pose.advance(v, vy, w, dt);
+        self.chassis.pose.advance(v, vy, w, dt);
         if !self.chassis.is_booting() {
             for (travel, speed) in self.wheel_travel_m.iter_mut().zip(mid) {
                 *travel += speed * dt;
@@ -567,9 +516,7 @@ impl XbotSim {
             let driving = i < wheels && self.powered && !self.chassis.motor_lost[i];
             let accel = (w1[i] - w0[i]) / dt;
             self.motor_current_a[i] = if driving {
-                ((Self::MOTOR_A_PER_MPS * w1[i] + Self::MOTOR_A_PER_MPS2 * accel).abs()
-                    + Self::MOTOR_HOLD_A)
-                    .min(Self::MOTOR_CURRENT_LIMIT_A)
+                Self::MOTOR.magnitude_a(w1[i], accel, Self::MOTOR_HOLD_A)
             } else {
                 0.0
             };
@@ -597,10 +544,9 @@ impl XbotSim {
         };
 
         // Battery.
-        self.pack_current_a =
-            Self::IDLE_CURRENT_A + self.motor_current_a.iter().sum::<f64>() + self.lift_current_a;
-        self.chassis.soc_pct =
-            Self::BATTERY.drain(self.chassis.soc_pct, self.pack_current_a, dt, 1.0);
+        let motors_a = self.motor_current_a.iter().sum::<f64>();
+        self.chassis
+            .draw(Self::IDLE_CURRENT_A + motors_a + self.lift_current_a, dt);
     }
 
     // -----------------------------------------------------------------------------------------
@@ -666,7 +612,7 @@ impl XbotSim {
         let gyro_limit = (498.0f64).to_radians();
         let stamp_us = now.saturating_since(self.booted_at).as_micros() % 65_536;
         SensorReport {
-            battery_voltage_v: self.battery_voltage_v().min(99.99),
+            battery_voltage_v: self.chassis.battery_voltage_v().min(99.99),
             ir_m: Self::ranges(self.obstacle_behind_m, Self::NOTHING_SEEN_IR_M),
             ultrasonic_m: Self::ranges(self.obstacle_ahead_m, self.nothing_seen_ultrasonic_m()),
             motor_current_a: self.motor_current_a,
@@ -680,14 +626,14 @@ impl XbotSim {
             ],
             gyro_radps: [0.0, 0.0, w.clamp(-gyro_limit, gyro_limit)],
             mag_gauss: [
-                Self::MAG_HORIZONTAL_GAUSS * self.pose.yaw_rad.cos(),
-                -Self::MAG_HORIZONTAL_GAUSS * self.pose.yaw_rad.sin(),
+                Self::MAG_HORIZONTAL_GAUSS * self.chassis.pose.yaw_rad.cos(),
+                -Self::MAG_HORIZONTAL_GAUSS * self.chassis.pose.yaw_rad.sin(),
                 Self::MAG_VERTICAL_GAUSS,
             ],
             temperature_c: Self::IMU_TEMPERATURE_C,
             roll_rad: 0.0,
             pitch_rad: 0.0,
-            yaw_rad: self.pose.yaw_rad,
+            yaw_rad: self.chassis.pose.yaw_rad,
             // Below 65536: the cast is exact.
             sensor_stamp_us: stamp_us as u16,
         }
@@ -700,7 +646,6 @@ impl XbotSim {
         }
         let Ok(mut bytes) = Frame::Sensor(self.report(now)).encode(&self.profile) else {
             // Every value is kept inside its wire range; this is a bug guard.
-            self.chassis.outbox.count_dropped();
             return;
         };
         if self.chassis.take_corruption() {
@@ -723,7 +668,7 @@ impl Firmware for XbotSim {
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
         let Rx::Bytes(bytes) = rx else {
-            self.decode_errors += 1;
+            self.chassis.received.decode_errors += 1;
             return;
         };
         // A booting board obeys nothing: `on_frame` counts what it ignores.
@@ -783,18 +728,12 @@ impl Firmware for XbotSim {
             linear_mps: linear,
             lateral_mps: lateral,
             angular_radps: angular,
-            steer_rad: 0.0,
             control_mode: if self.powered && !self.chassis.is_booting() {
                 ControlMode::COMMAND
             } else {
                 ControlMode::STANDBY
             },
-            brake_engaged: false,
-            fault_flags: 0,
-            commands_received: self.commands_received,
-            bad_checksums_received: self.bad_checksums_received,
-            decode_errors: self.decode_errors,
-            ..self.chassis.truth(self.pose)
+            ..self.chassis.truth()
         }
     }
 }
