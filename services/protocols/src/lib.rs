@@ -21,6 +21,8 @@ pub mod agilex_v1;
 pub mod agilex_v2;
 pub mod can;
 pub mod command;
+#[cfg(test)]
+mod conformance;
 pub mod description;
 pub mod driver;
 mod error;
@@ -28,6 +30,8 @@ pub mod family;
 pub mod firmware;
 pub mod frame_json;
 pub mod kind;
+#[cfg(test)]
+mod loopback;
 pub mod nmea;
 pub mod pair;
 pub mod profile;

@@ -96,17 +96,6 @@ impl<F: BenchFirmware> Bench<F> {
         bench
     }
 
-    /// Silences the firmware for `duration`, checking that it sends nothing until 1 ms before
-    /// the end and sends again within 20 ms after it.
-    pub(crate) fn assert_silenced_for(&mut self, duration: Duration) {
-        assert!(self.inject(Injection::Silence(duration)));
-        let start = self.now;
-        self.run_for(duration - Duration::from_millis(1));
-        assert_eq!(self.sent_since(start), 0, "sent while silenced");
-        self.run_for(Duration::from_millis(21));
-        assert!(self.sent_since(start) > 0, "still silent after the silence");
-    }
-
     pub(crate) fn inject(&mut self, injection: Injection) -> bool {
         let ok = self.sim.inject(self.now, injection);
         self.drain();

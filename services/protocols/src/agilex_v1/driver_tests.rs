@@ -587,35 +587,6 @@ fn the_pose_integrates_the_reported_speeds() {
 }
 
 #[test]
-fn silence_sets_chassis_silent_with_a_notice_and_the_next_frame_clears_it() {
-    let mut d = driver();
-    drain(&mut d, T0);
-    feed(&mut d, at(10), status(mode::CAN_COMMAND, 0));
-    notices(&mut d);
-    let silent_at = at(110) + Duration::from_nanos(1);
-    assert_eq!(d.poll_timeout(), Some(at(20)));
-    run(&mut d, at(110));
-    assert!(!d.state().has_link_flag(LinkFlags::CHASSIS_SILENT));
-    run(&mut d, silent_at);
-    assert!(d.state().has_link_flag(LinkFlags::CHASSIS_SILENT));
-    assert_eq!(
-        notices(&mut d),
-        vec![(
-            Level::Warn,
-            "chassis silent: no valid feedback for 100 ms".to_string()
-        )]
-    );
-    // The heartbeat goes on regardless.
-    assert_eq!(run(&mut d, at(200)).len(), 5);
-    feed(&mut d, at(205), status(mode::CAN_COMMAND, 0));
-    assert!(!d.state().has_link_flag(LinkFlags::CHASSIS_SILENT));
-    assert_eq!(
-        notices(&mut d),
-        vec![(Level::Info, "chassis is talking again".to_string())]
-    );
-}
-
-#[test]
 fn clear_codes_ride_the_next_0x130s_one_each_keeping_the_motion() {
     let mut d = driver();
     drain(&mut d, T0);

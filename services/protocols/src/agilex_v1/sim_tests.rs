@@ -679,7 +679,7 @@ fn bad_checksums_corrupt_exactly_the_next_n_frames() {
 }
 
 #[test]
-fn garbage_and_unknown_frames_are_counted_and_ignored() {
+fn malformed_frames_and_another_nodes_feedback_are_counted_and_ignored() {
     let mut b = Bench::new();
     let good = b.encode(Frame::MotionCommand(drive(1.0, 0.0)));
     let mut undefined_mode = good.data().to_vec();
@@ -693,25 +693,14 @@ fn garbage_and_unknown_frames_are_counted_and_ignored() {
     ] {
         b.send_raw(frame);
     }
-    b.sim.handle_rx(b.now, Rx::Bytes(&[0xAA, 0x55]));
     let t = b.sim.truth();
-    assert_eq!((t.decode_errors, t.bad_checksums_received), (5, 0));
+    assert_eq!((t.decode_errors, t.bad_checksums_received), (4, 0));
     assert_eq!(t.commands_received, 0);
 
     // Another node's feedback is valid but not for the chassis.
     b.send(Frame::SystemStatus(SystemStatus::default()));
     assert_eq!(b.sim.frames_ignored(), 1);
-    assert_eq!(b.sim.truth().decode_errors, 5);
-
-    b.run_for(ms(100));
-    assert!(b.inject(Injection::Garbage((0u8..20).collect())));
-    let garbage: Vec<_> = b.sent.iter().filter(|(_, f)| f.id() == 0x7F0).collect();
-    assert_eq!(garbage.len(), 3);
-    assert_eq!(garbage[2].1.data(), &[16, 17, 18, 19]);
-    assert!(matches!(
-        decode(&garbage[0].1, &b.profile),
-        Err(DecodeError::UnknownId { id: 0x7F0 })
-    ));
+    assert_eq!(b.sim.truth().decode_errors, 4);
     assert_eq!(b.v(), 0.0);
 }
 
@@ -784,8 +773,6 @@ fn injections_the_scout_mini_lacks_are_refused() {
     assert!(!b.inject(Injection::Bumper(true)));
     assert!(!b.inject(Injection::ObstacleAhead(Some(0.5))));
     assert!(!b.inject(Injection::ObstacleBehind(None)));
-    assert!(!b.inject(Injection::Battery { soc_pct: f64::NAN }));
-    assert_eq!(b.sim.truth().soc_pct, 100.0);
     assert_eq!(b.sim.truth().fault_flags, FaultFlags::RC_LINK_LOST);
 }
 
@@ -816,21 +803,6 @@ fn a_flood_adds_the_requested_extra_frames() {
     let start = b.now;
     b.run_for(ms(1000));
     assert_eq!(b.sent_since(start), normal);
-}
-
-#[test]
-fn a_silence_injection_mutes_the_chassis_for_its_duration() {
-    let mut b = Bench::driving(0.5, ms(3000));
-    b.assert_silenced_for(ms(200));
-    assert!((b.v() - 0.5).abs() < 1e-3, "commands are still obeyed");
-}
-
-#[test]
-fn a_late_call_skips_missed_slots_without_shifting_the_grid() {
-    let mut sim = V1Sim::new(V1Profile::default(), T0);
-    let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
-    assert_eq!(burst, 7, "one slot, no catch-up burst");
-    assert_eq!(next, Some(T0 + ms(1240)));
 }
 
 #[test]

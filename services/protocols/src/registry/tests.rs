@@ -8,7 +8,6 @@ use super::*;
 use crate::CanFrame;
 use crate::description::describe;
 use crate::family::Family;
-use crate::firmware::Injection;
 use crate::profile::ProfileError;
 
 /// The robot's default profile in each protocol it speaks, its default one first.
@@ -102,102 +101,6 @@ fn every_robot_defaults_to_a_valid_profile_of_its_own_kind_in_each_of_its_protoc
                 );
             }
         }
-    }
-}
-
-/// The driver against the robot's simulated firmware, on simulated time: after power-up a
-/// forward command moves the simulated chassis forward, and the driver reports it.
-#[test]
-fn every_robot_drives_its_simulated_firmware_in_each_of_its_protocols() {
-    for kind in RobotKind::ALL {
-        let entry = kind.entry();
-        for profile in every_profile(entry) {
-            let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
-            assert_eq!((pair.driver.robot(), pair.firmware.robot()), (kind, kind));
-            pair.run_for(Duration::from_secs(3));
-            let forward = Velocity::twist(0.3, 0.0).unwrap();
-            let now = pair.now();
-            pair.driver.set_command(now, &forward);
-            pair.run_for(Duration::from_secs(3));
-            let truth = pair.firmware.truth();
-            assert!(
-                truth.x_m > 0.2,
-                "{kind} ({:?}): the simulated chassis moved {:.3} m",
-                profile.protocol(),
-                truth.x_m
-            );
-            let state = pair.driver.state();
-            assert_eq!(state.robot, kind.id());
-            assert!(state.motion.linear_mps > 0.2, "{kind}: {:?}", state.motion);
-        }
-    }
-}
-
-/// A runaway (the speed loop fails, the robot rolls downhill) drives every simulated chassis
-/// past its limit whatever the driver commands, the driver reports the speed it measures, and
-/// clearing it gives the control back: what the safety monitor's speed rule is tested with.
-#[test]
-fn every_robot_runs_away_past_its_limit_when_told_to_and_obeys_again_after() {
-    for kind in RobotKind::ALL {
-        let entry = kind.entry();
-        let profile = entry.defaults();
-        let limit = describe(&profile).robot_limits.forward_mps;
-        let mut pair = entry.simulated_pair(&profile, Timestamp::from_millis(1_000));
-        pair.run_for(Duration::from_secs(2));
-        let runaway = limit + 0.5;
-        assert!(pair.inject(Injection::Runaway(Some(runaway))), "{kind}");
-        let now = pair.now();
-        pair.driver.set_command(now, &Velocity::ZERO);
-        pair.run_for(Duration::from_secs(3));
-        let truth = pair.firmware.truth().linear_mps;
-        let measured = f64::from(pair.driver.state().motion.linear_mps);
-        assert!(
-            truth > limit + 0.4 && measured > limit + 0.4,
-            "{kind}: limit {limit} m/s, runaway {runaway}: true {truth:.3}, measured {measured:.3}"
-        );
-        assert!(pair.inject(Injection::Runaway(None)), "{kind}");
-        pair.run_for(Duration::from_secs(3));
-        let measured = pair.driver.state().motion.linear_mps;
-        assert!(measured.abs() < 0.05, "{kind}: still {measured} m/s");
-        assert!(!pair.inject(Injection::Runaway(Some(f64::NAN))), "{kind}");
-    }
-}
-
-/// Every frame the simulated firmware and the driver exchange decodes with the robot's frame
-/// describer, and each CAN frame's JSON names the robot.
-#[test]
-fn every_robot_describes_the_frames_of_its_own_exchange() {
-    for kind in RobotKind::ALL {
-        let entry = kind.entry();
-        let profile = entry.defaults();
-        let start = Timestamp::from_millis(1_000);
-        let mut firmware = profile.firmware(start);
-        let mut codec = profile.codec();
-        let mut decoded = 0;
-        let mut now = start;
-        for _ in 0..50 {
-            now += Duration::from_millis(20);
-            firmware.handle_timeout(now);
-            while let Some(out) = firmware.poll_transmit(now) {
-                let jsons: Vec<_> = match &out {
-                    crate::WireItem::Can(frame) => vec![
-                        codec
-                            .decode_can(frame)
-                            .unwrap_or_else(|e| panic!("{kind}: {frame:?}: {e}")),
-                    ],
-                    crate::WireItem::Bytes(bytes) => codec
-                        .push_serial(bytes)
-                        .into_iter()
-                        .map(|r| r.unwrap_or_else(|e| panic!("{kind}: {e}")))
-                        .collect(),
-                };
-                for json in jsons {
-                    assert_eq!(json["robot"], kind.name(), "{kind}: {json:?}");
-                    decoded += 1;
-                }
-            }
-        }
-        assert!(decoded > 10, "{kind}: only {decoded} frames described");
     }
 }
 

@@ -4,7 +4,6 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use chassis_interfaces::{ControlMode, FaultFlags};
-use proptest::prelude::*;
 
 use super::TitanSim;
 use crate::can::CanFrame;
@@ -376,15 +375,6 @@ fn feedback_periods_are_exactly_20_100_and_500_ms() {
 }
 
 #[test]
-fn a_late_call_skips_missed_slots_without_shifting_the_grid() {
-    let mut sim = TitanSim::new(TitanProfile::default(), T0);
-    let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
-    // One slot of each period, no catch-up burst.
-    assert_eq!(burst, 9 + 4 + 6);
-    assert_eq!(next, Some(T0 + ms(1240)));
-}
-
-#[test]
 fn silent_mode_stops_every_transmission_until_it_is_left() {
     let mut b = Bench::moving(motion(0.5, 0.0), ms(100));
     b.send(Frame::SilentMode(Switch { enter: true }));
@@ -397,13 +387,6 @@ fn silent_mode_stops_every_transmission_until_it_is_left() {
     let back = b.now;
     b.run_for(ms(20));
     assert!(b.decoded(id::SYSTEM_STATUS).iter().any(|(t, _)| *t > back));
-}
-
-#[test]
-fn a_silence_injection_mutes_the_chassis_for_its_duration() {
-    let mut b = Bench::moving(motion(0.5, 0.0), ms(100));
-    b.assert_silenced_for(ms(200));
-    assert_eq!(b.sim.truth().control_mode, ControlMode::COMMAND);
 }
 
 #[test]
@@ -626,30 +609,20 @@ fn steering_slews_and_is_reported_through_the_profile_sign() {
 }
 
 #[test]
-fn garbage_and_unknown_frames_are_counted_and_ignored() {
+fn malformed_frames_and_another_nodes_feedback_are_counted_and_ignored() {
     let mut b = Bench::new();
     for text in ["7F0#0102", "421#05", "111#01", "441#07", "131#"] {
         b.send_raw(CanFrame::from_candump(text).unwrap());
     }
     b.send_raw(CanFrame::new_extended(0x111, &[0; 8]).unwrap());
-    b.sim.handle_rx(b.now, Rx::Bytes(&[0xAA, 0x55]));
     let t = b.sim.truth();
-    assert_eq!(t.decode_errors, 7);
+    assert_eq!(t.decode_errors, 6);
     assert_eq!(t.commands_received, 0);
 
     // Another node's feedback is valid but not for the chassis.
     b.send(Frame::SystemStatus(SystemStatus::default()));
     assert_eq!(b.sim.frames_ignored(), 1);
-    assert_eq!(b.sim.truth().decode_errors, 7);
-
-    b.run_for(ms(100));
-    assert!(b.inject(Injection::Garbage((0u8..20).collect())));
-    let garbage: Vec<_> = b.sent.iter().filter(|(_, f)| f.id() == 0x7F0).collect();
-    assert_eq!(garbage.len(), 3);
-    let injected = b.sim.truth().injected;
-    assert_eq!((injected.garbage_frames, injected.garbage_bytes), (3, 20));
-    assert_eq!(garbage[2].1.data(), &[16, 17, 18, 19]);
-    assert!(decode(&garbage[0].1, &b.profile).is_err());
+    assert_eq!(b.sim.truth().decode_errors, 6);
     b.run_for(ms(100));
     assert_eq!(b.sim.truth().control_mode, ControlMode::STANDBY);
 }
@@ -660,27 +633,6 @@ fn injections_titan_lacks_are_refused() {
     assert!(!b.inject(Injection::BadChecksums(3)));
     assert!(!b.inject(Injection::ObstacleAhead(Some(0.5))));
     assert!(!b.inject(Injection::ObstacleBehind(None)));
-    assert!(!b.inject(Injection::Battery { soc_pct: f64::NAN }));
-    assert_eq!(b.sim.truth().soc_pct, 100.0);
-}
-
-#[test]
-fn a_flood_adds_the_requested_extra_frames() {
-    let mut b = Bench::new();
-    b.run_for(ms(1000));
-    let start = b.now;
-    b.run_for(ms(1000));
-    let normal = b.sent_since(start);
-    assert!(b.inject(Injection::Flood { frames_per_s: 1000 }));
-    let start = b.now;
-    b.run_for(ms(1000));
-    assert_eq!(b.sent_since(start), normal + 1000);
-    assert_eq!(b.sim.truth().injected.flood_frames, 1000);
-    b.inject(Injection::Flood { frames_per_s: 0 });
-    let start = b.now;
-    b.run_for(ms(1000));
-    assert_eq!(b.sent_since(start), normal);
-    assert_eq!(b.sim.truth().injected.flood_frames, 1000);
 }
 
 #[test]
@@ -719,73 +671,4 @@ fn the_battery_drains_visibly_and_its_voltage_dips_under_load() {
     };
     assert!((second.current_a - pack.current_a / 2.0).abs() < 0.06);
     assert_eq!(second.soc_pct, pack.soc_pct);
-}
-
-fn arbitrary_frame() -> impl Strategy<Value = (bool, u32, Vec<u8>, u64)> {
-    (
-        any::<bool>(),
-        prop_oneof![
-            0u32..0x800,
-            Just(0x111u32),
-            Just(0x421),
-            Just(0x131),
-            Just(0x441),
-            Just(0x422),
-            Just(0x423),
-            Just(0x431),
-        ],
-        proptest::collection::vec(any::<u8>(), 0..=8),
-        0u64..700,
-    )
-}
-
-proptest! {
-    #[test]
-    fn arbitrary_can_frames_never_panic_the_firmware(
-        frames in proptest::collection::vec(arbitrary_frame(), 1..60),
-        injections in proptest::collection::vec((0u8..8, any::<u8>()), 0..6),
-    ) {
-        let mut sim = TitanSim::new(TitanProfile::default(), T0);
-        let mut now = T0;
-        for (i, (extended, frame_id, data, gap_ms)) in frames.into_iter().enumerate() {
-            let arrival = now + Duration::from_millis(gap_ms);
-            // Serve every deadline up to the frame's arrival, each at its own time.
-            while let Some(t) = sim.poll_timeout().filter(|t| *t <= arrival) {
-                prop_assert!(t >= now, "deadline in the past");
-                now = t;
-                sim.handle_timeout(now);
-                prop_assert!(sim.poll_timeout().is_some_and(|next| next > now));
-                while sim.poll_transmit(now).is_some() {}
-            }
-            now = arrival;
-            let frame = if extended {
-                CanFrame::new_extended(frame_id, &data).unwrap()
-            } else {
-                CanFrame::new(frame_id, &data).unwrap()
-            };
-            sim.handle_rx(now, Rx::Can(&frame));
-            if let Some((kind, value)) = injections.get(i).copied() {
-                let injection = match kind {
-                    0 => Injection::MotorDriverLoss { motor: value % 6, lost: value % 2 == 0 },
-                    1 => Injection::Battery { soc_pct: f64::from(value) },
-                    2 => Injection::Bumper(value % 2 == 0),
-                    3 => Injection::RcTakeover(value % 2 == 0),
-                    4 => Injection::Reboot,
-                    5 => Injection::Silence(Duration::from_millis(u64::from(value))),
-                    6 => Injection::Garbage(vec![value; usize::from(value % 20)]),
-                    _ => Injection::Flood { frames_per_s: u32::from(value % 10) * 10 },
-                };
-                sim.inject(now, injection);
-            }
-            if sim.poll_timeout().is_some_and(|t| t <= now) {
-                sim.handle_timeout(now);
-            }
-            prop_assert!(sim.poll_timeout().is_some_and(|next| next > now));
-            while sim.poll_transmit(now).is_some() {}
-            let truth = sim.truth();
-            prop_assert!(truth.linear_mps.abs() <= 3.0 + 1e-9);
-            prop_assert!(truth.steer_rad.abs() <= 0.367 + 1e-9);
-            prop_assert!((0.0..=100.0).contains(&truth.soc_pct));
-        }
-    }
 }

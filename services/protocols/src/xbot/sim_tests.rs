@@ -447,7 +447,6 @@ fn the_battery_reads_in_bcd_and_drains_while_driving() {
     // About 1 A + 2 × 1.8 A for a minute out of 26 Ah.
     let used = 100.0 - b.sim.truth().soc_pct;
     assert!(close(used, 4.6 / 60.0 / 26.0 * 100.0, 0.01), "{used}");
-    assert!(!b.inject(Injection::Battery { soc_pct: f64::NAN }));
 }
 
 #[test]
@@ -505,55 +504,6 @@ fn a_reboot_goes_quiet_for_300_ms_then_powers_up_with_drive_off_and_counters_at_
 }
 
 #[test]
-fn silence_mutes_the_board_but_commands_are_obeyed() {
-    let mut b = Bench::powered();
-    b.heartbeat(Some(velocity(0.5, 0.0, 0.0)));
-    b.run_for(ms(2000));
-    b.assert_silenced_for(ms(200));
-    assert!(close(b.v(), 0.5, 1e-3), "commands were obeyed throughout");
-}
-
-#[test]
-fn garbage_goes_on_the_wire_as_is_even_while_silent() {
-    let mut b = Bench::new();
-    b.inject(Injection::Silence(ms(100)));
-    assert!(b.inject(Injection::Garbage(vec![0xAA, 0x55, 0x47, 0x10, 0x00])));
-    assert_eq!(b.sent, vec![(T0, vec![0xAA, 0x55, 0x47, 0x10, 0x00])]);
-    let injected = b.sim.truth().injected;
-    assert_eq!((injected.garbage_frames, injected.garbage_bytes), (1, 5));
-}
-
-#[test]
-fn bad_checksums_corrupt_exactly_the_next_n_reports() {
-    let mut b = Bench::new();
-    b.run_for(ms(10));
-    assert!(b.inject(Injection::BadChecksums(3)));
-    b.run_for(ms(200));
-    let (reports, errors) = b.decoded();
-    assert_eq!(b.sim.reports_sent(), 11);
-    assert_eq!(b.sim.reports_corrupted(), 3);
-    assert_eq!(errors, 3);
-    assert_eq!(b.sim.truth().injected.bad_checksum_frames, 3);
-    let times: Vec<_> = reports
-        .iter()
-        .map(|(t, _)| t.saturating_since(T0))
-        .collect();
-    assert_eq!(
-        times,
-        vec![
-            ms(0),
-            ms(80),
-            ms(100),
-            ms(120),
-            ms(140),
-            ms(160),
-            ms(180),
-            ms(200)
-        ]
-    );
-}
-
-#[test]
 fn a_flood_adds_reports_up_to_what_the_line_carries() {
     let mut b = Bench::new();
     assert!(b.inject(Injection::Flood { frames_per_s: 100 }));
@@ -592,14 +542,6 @@ fn malformed_input_is_counted_and_never_obeyed() {
     assert_eq!(t.commands_received, 0);
     assert_eq!(b.sim.frames_ignored(), 1, "a report sent to the board");
     assert!(!b.sim.is_powered());
-}
-
-#[test]
-fn a_late_call_skips_missed_reports_without_a_burst() {
-    let mut sim = XbotSim::new(p(), T0);
-    let (burst, next) = crate::sim_bench::late_call(&mut sim, T0, T0 + ms(1234));
-    assert_eq!(burst, 1);
-    assert_eq!(next, Some(T0 + ms(1240)));
 }
 
 #[test]
