@@ -7,8 +7,9 @@
 //! were there first count — names each robot the moment its robot side declares its token; a
 //! mirror ([`crate::mirror::serve`]) starts for each new name on its own threads and the shared
 //! session. A robot that leaves keeps its mirror: its last state is published again marked
-//! [`LinkFlags::REMOTE_LOST`] (see [`crate::link_watch::LinkWatch`]), and it resumes by itself when the robot is
-//! back. Each robot's TLS certificate and access list apply to its own link, as with one robot.
+//! [`LinkFlags::REMOTE_LOST`](chassis_client::LinkFlags::REMOTE_LOST) (see
+//! [`crate::link_watch::LinkWatch`]), and it resumes by itself when the robot is back. Each
+//! robot's TLS certificate and access list apply to its own link, as with one robot.
 //!
 //! Nothing here is a registry: which robots exist is what Zenoh's liveliness says.
 
