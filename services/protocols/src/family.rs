@@ -105,7 +105,6 @@ pub trait FamilyValue {
     fn clone_box(&self) -> Box<dyn Family>;
     fn eq_dyn(&self, other: &dyn Family) -> bool;
     fn as_any(&self) -> &dyn Any;
-    fn as_any_mut(&mut self) -> &mut dyn Any;
 }
 
 impl<F: Family + Clone + PartialEq + serde::Serialize> FamilyValue for F {
@@ -121,9 +120,6 @@ impl<F: Family + Clone + PartialEq + serde::Serialize> FamilyValue for F {
     fn as_any(&self) -> &dyn Any {
         self
     }
-    fn as_any_mut(&mut self) -> &mut dyn Any {
-        self
-    }
 }
 
 /// One robot's effective profile: its family's profile (the manuals' values with every
@@ -134,11 +130,6 @@ impl Profile {
     /// The profile as its family's own type (`None` for another family's).
     pub fn get<F: Family>(&self) -> Option<&F> {
         self.0.as_any().downcast_ref()
-    }
-
-    /// The profile as its family's own type, to change it.
-    pub fn get_mut<F: Family>(&mut self) -> Option<&mut F> {
-        self.0.as_any_mut().downcast_mut()
     }
 }
 

@@ -400,14 +400,6 @@ impl RobotKind {
     pub fn is_can(self) -> bool {
         matches!(self.entry().bus, Bus::Can { .. })
     }
-
-    /// The AgileX protocols the robot may speak (empty: a protocol of its own).
-    pub fn protocols(self) -> Vec<Protocol> {
-        self.entry()
-            .profiles()
-            .filter_map(|p| p.protocol())
-            .collect()
-    }
 }
 
 /// The manuals' profile of the robot a description (as chassisd publishes it) describes, of

@@ -83,7 +83,7 @@ fn every_robot_defaults_to_a_valid_profile_of_its_own_kind_in_each_of_its_protoc
         let defaults = entry.defaults();
         assert_eq!(defaults.robot(), kind);
         assert_eq!(defaults.validate(), Ok(()), "{kind}");
-        let protocols = kind.protocols();
+        let protocols: Vec<Protocol> = entry.profiles().filter_map(|p| p.protocol()).collect();
         assert_eq!(entry.detects_protocol(), protocols.len() == 2, "{kind}");
         for &protocol in &protocols {
             let profile = entry.default_profile(Some(protocol)).unwrap();
@@ -296,7 +296,10 @@ fn scout_and_bunker_speak_v1_with_their_own_scales_and_hunter_does_not() {
         (RobotKind::Scout, (1.5, 0.5235)),
         (RobotKind::Bunker, (3.0, 2.5235)),
     ] {
-        assert!(robot.protocols().contains(&Protocol::V1), "{robot}");
+        assert!(
+            robot.entry().default_profile(Some(Protocol::V1)).is_ok(),
+            "{robot}"
+        );
         let profile = robot.entry().default_profile(Some(Protocol::V1)).unwrap();
         assert_eq!(profile.robot(), robot);
         assert_eq!(profile.protocol(), Some(Protocol::V1));
