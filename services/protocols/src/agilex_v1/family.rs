@@ -6,8 +6,6 @@ use std::time::Duration;
 use chassis_interfaces::{DescriptionFlags, RobotDescription, WireProtocol};
 
 use crate::agilex_v2::AutoDriver;
-use crate::agilex_v2::V2Profile;
-use crate::agilex_v2::detect::DetectSettings;
 use crate::can::CanFrame;
 use crate::command::{Command, CommandError};
 use crate::driver::{BoxedDriver, DriverConfig};
@@ -64,14 +62,7 @@ impl Family for V1Profile {
         config: &DriverConfig,
         now: Timestamp,
     ) -> Option<BoxedDriver> {
-        let v2 = other.get::<V2Profile>()?;
-        Some(Box::new(AutoDriver::new(
-            self.clone(),
-            v2.clone(),
-            DetectSettings::from(self),
-            config.clone(),
-            now,
-        )))
+        AutoDriver::boxed(&self.clone().into(), other, config, now)
     }
 
     fn firmware(&self, now: Timestamp) -> BoxedFirmware {

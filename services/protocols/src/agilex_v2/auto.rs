@@ -18,7 +18,10 @@ use super::{V2Driver, V2Profile};
 use crate::agilex_v1::V1Driver;
 use crate::agilex_v1::V1Profile;
 use crate::command::Command;
-use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
+use crate::driver::{
+    BoxedDriver, ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem,
+};
+use crate::family::Profile;
 use crate::kind::RobotKind;
 use crate::profile::Protocol;
 use crate::time::Timestamp;
@@ -49,6 +52,23 @@ impl std::fmt::Debug for AutoDriver {
 }
 
 impl AutoDriver {
+    /// The listening driver of a robot whose profile in one protocol is `profile` (its
+    /// detection settings apply) and in the other `other`: `None` unless one is V1, the other V2.
+    pub(crate) fn boxed(
+        profile: &Profile,
+        other: &Profile,
+        config: &DriverConfig,
+        now: Timestamp,
+    ) -> Option<BoxedDriver> {
+        let (v1, v2, detect) = match (profile.get::<V1Profile>(), profile.get::<V2Profile>()) {
+            (Some(v1), _) => (v1, other.get::<V2Profile>()?, DetectSettings::from(v1)),
+            (_, Some(v2)) => (other.get::<V1Profile>()?, v2, DetectSettings::from(v2)),
+            _ => return None,
+        };
+        let driver = Self::new(v1.clone(), v2.clone(), detect, config.clone(), now);
+        Some(Box::new(driver))
+    }
+
     /// Listening from `now` as `detect` says, for the robot of `v1` (its V1 `model`; `v2` is
     /// that robot's V2 profile).
     pub fn new(

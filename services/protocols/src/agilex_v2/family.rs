@@ -8,7 +8,6 @@ use chassis_interfaces::{
     RobotDescription, WireProtocol,
 };
 
-use crate::agilex_v1::V1Profile;
 use crate::can::CanFrame;
 use crate::command::{Command, CommandError};
 use crate::driver::{BoxedDriver, DriverConfig};
@@ -23,7 +22,6 @@ use crate::kind::RobotKind;
 use crate::profile::{ProfileError, ProfileTableError, Protocol, with_model_and_overrides};
 use crate::time::Timestamp;
 
-use super::detect::DetectSettings;
 use super::{
     AutoDriver, Frame, Kinematics, V2Driver, V2Model, V2Profile, V2Sim, decode, frames_for,
     motion_mode_name, normalize_driver_status, normalize_faults, vehicle_state_flags,
@@ -109,14 +107,7 @@ impl Family for V2Profile {
         config: &DriverConfig,
         now: Timestamp,
     ) -> Option<BoxedDriver> {
-        let v1 = other.get::<V1Profile>()?;
-        Some(Box::new(AutoDriver::new(
-            v1.clone(),
-            self.clone(),
-            DetectSettings::from(self),
-            config.clone(),
-            now,
-        )))
+        AutoDriver::boxed(&self.clone().into(), other, config, now)
     }
 
     fn firmware(&self, now: Timestamp) -> BoxedFirmware {
