@@ -69,17 +69,43 @@ pub struct Report {
     /// Where the time of the service paths goes, run by run.
     pub parts: Vec<Parts>,
     pub notes: Vec<String>,
+    /// What makes the run's rows unfit to compare: a named baseline or contained row that was
+    /// not measured, two rows of one name. A smoke run fails on each; the document lists them
+    /// with the notes.
+    pub problems: Vec<String>,
     /// How chassisd's loop was scheduled in each latency run (the run's label).
     #[serde(skip)]
     pub scheduling: Vec<(String, crate::paths::Scheduling)>,
     /// chassisd's largest resident memory in a latency run in real-time mode, MiB.
     pub realtime_rss_mib: Option<f64>,
-    /// The rows the run planned ([`row_key`]s), for the smoke check.
+    /// The rows the run planned, for the smoke check.
     #[serde(skip)]
-    pub expected: Vec<String>,
+    pub expected: Vec<Planned>,
     /// How often each CPU stalled a thread that never blocks ([`STALLS`] rows).
     pub stalls: Vec<StallRates>,
 }
+
+/// A row a run plans: its [`row_key`] and how many samples it asks for, where the plan fixes
+/// that (a row measured for a time, the fan-out's and the stalls', asks for none).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Planned {
+    pub key: String,
+    pub asked: Option<u64>,
+}
+
+impl Planned {
+    pub fn new(key: String, asked: impl Into<Option<u64>>) -> Self {
+        Self {
+            key,
+            asked: asked.into(),
+        }
+    }
+}
+
+/// The share of the samples it asked for a row must bring for a smoke run to pass: a request
+/// the service dropped, a state sample a reader lost, a hop that timed out all cost one, and a
+/// path that loses more than a tenth is broken, whatever its latency.
+pub const MIN_SHARE_OF_ASKED: f64 = 0.9;
 
 /// The stall rows' name ([`crate::stalls`]).
 pub const STALLS: &str = "stalls of a running thread (gaps in its clock readings)";
@@ -283,7 +309,7 @@ impl Report {
             *seen.entry(r.key()).or_default() += 1;
         }
         for (key, n) in seen.into_iter().filter(|(_, n)| *n > 1) {
-            self.notes
+            self.problems
                 .push(format!("two rows are named '{key}' ({n} of them)"));
         }
         let baselines: Vec<(String, Summary)> = self
@@ -303,7 +329,7 @@ impl Report {
                     .map(|(_, s)| s)
                     .collect();
                 match found[..] {
-                    [] => self.notes.push(format!(
+                    [] => self.problems.push(format!(
                         "{}: its baseline '{name}' was not measured",
                         row.key()
                     )),
@@ -327,7 +353,7 @@ impl Report {
                             ));
                         }
                     }
-                    _ => self.notes.push(format!(
+                    _ => self.problems.push(format!(
                         "{}: more than one baseline is named '{name}'",
                         row.key()
                     )),
@@ -355,7 +381,7 @@ impl Report {
                         ));
                     }
                 } else {
-                    self.notes.push(format!(
+                    self.problems.push(format!(
                         "{}: a row it contains was not measured ({})",
                         row.key(),
                         row.contains.join(", ")
@@ -369,21 +395,32 @@ impl Report {
         }
     }
 
-    /// What makes a run fail its smoke check (`--smoke`): each of `expected` ([`row_key`]s)
-    /// missing or without a sample, any row more than [`SMOKE_BASELINE_TOLERANCE`] below its own
-    /// baseline (a path faster than a hop it contains), any baseline or contained row not
-    /// measured, two rows of one name. Never a target: the figures of a loaded machine are what
-    /// they are. A row flagged only within the smoke run's noise (below the sum of its hops'
-    /// medians, or less than that tolerance below its baseline) is a [`Report::smoke_warnings`]
-    /// line: a smoke run's 100 samples of a debug build put those comparisons within its noise
-    /// (a release run's document still marks the row).
-    pub fn smoke_failures(&self, expected: &[String]) -> Vec<String> {
+    /// What makes a run fail its smoke check (`--smoke`): a row of `expected` missing, or
+    /// bringing less than [`MIN_SHARE_OF_ASKED`] of the samples it asked for (none, where it
+    /// asked for no number), any row more than [`SMOKE_BASELINE_TOLERANCE`] below its own
+    /// baseline (a path faster than a hop it contains), and every [`Report::problems`] (a
+    /// baseline or contained row not measured, two rows of one name). Never a target: the
+    /// figures of a loaded machine are what they are. A row flagged only within the smoke run's
+    /// noise (below the sum of its hops' medians, or less than that tolerance below its
+    /// baseline) is a [`Report::smoke_warnings`] line: a smoke run's 100 samples of a debug
+    /// build put those comparisons within its noise (a release run's document still marks the
+    /// row).
+    pub fn smoke_failures(&self, expected: &[Planned]) -> Vec<String> {
         let mut failures = Vec::new();
-        for key in expected {
-            match self.rows.iter().find(|r| r.key() == *key) {
-                None => failures.push(format!("missing row: {key}")),
-                Some(r) if r.summary.count == 0 => failures.push(format!("no sample: {key}")),
-                Some(_) => {}
+        for Planned { key, asked } in expected {
+            let Some(r) = self.rows.iter().find(|r| r.key() == *key) else {
+                failures.push(format!("missing row: {key}"));
+                continue;
+            };
+            let count = r.summary.count;
+            match asked {
+                None if count == 0 => failures.push(format!("no sample: {key}")),
+                Some(asked) if (count as f64) < MIN_SHARE_OF_ASKED * *asked as f64 => failures
+                    .push(format!(
+                        "too few samples: {key}: {} of the {asked} asked for",
+                        r.count_text()
+                    )),
+                _ => {}
             }
         }
         for r in self
@@ -397,14 +434,7 @@ impl Report {
                 r.inconsistent.as_deref().unwrap_or_default()
             ));
         }
-        for note in &self.notes {
-            if note.contains("was not measured")
-                || note.starts_with("two rows")
-                || note.contains("more than one baseline")
-            {
-                failures.push(note.clone());
-            }
-        }
+        failures.extend(self.problems.iter().cloned());
         failures
     }
 
@@ -543,7 +573,7 @@ impl Report {
                 t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
             ));
         }
-        for note in &self.notes {
+        for note in self.notes.iter().chain(&self.problems) {
             out.push_str(&format!("note: {note}\n"));
         }
         out
@@ -1402,7 +1432,7 @@ impl Report {
                 runs.join("; ")
             ));
         }
-        for note in &self.notes {
+        for note in self.notes.iter().chain(&self.problems) {
             out.push_str(&format!("* note: {note}\n"));
         }
         out.push('\n');
@@ -1651,7 +1681,7 @@ mod tests {
 
     /// A ROS 2 row containing a DDS hop and the service's command path, and what the smoke
     /// check expects of the run.
-    fn run_with_ros2_row(ros2_us: u64) -> (Report, Vec<String>) {
+    fn run_with_ros2_row(ros2_us: u64) -> (Report, Vec<Planned>) {
         let mut ros2 = measured("ros2", "cmd_vel → frame", "event", ros2_us, 200);
         ros2.baseline = Some("dds, cross CPU".into());
         ros2.contains = vec![
@@ -1666,8 +1696,11 @@ mod tests {
     }
 
     /// A report of `rows`, its ratios and flags computed, and the rows it planned: all of them.
-    fn compared(rows: Vec<Row>) -> (Report, Vec<String>) {
-        let expected = rows.iter().map(Row::key).collect();
+    fn compared(rows: Vec<Row>) -> (Report, Vec<Planned>) {
+        let expected = rows
+            .iter()
+            .map(|r| Planned::new(r.key(), r.summary.count))
+            .collect();
         let mut report = Report {
             rows,
             ..Report::default()
@@ -1721,7 +1754,7 @@ mod tests {
     }
 
     /// A command row and its matched hop, the row `path_us` and the hop `hop_us` at the p50.
-    fn run_with_command_row(path_us: u64, hop_us: u64) -> (Report, Vec<String>) {
+    fn run_with_command_row(path_us: u64, hop_us: u64) -> (Report, Vec<Planned>) {
         let mut command = measured("command", "titan sim", "event", path_us, 100);
         command.baseline = Some("hop, cross CPU".into());
         compared(vec![measured("baseline", "hop", "-", hop_us, 100), command])
@@ -2152,8 +2185,29 @@ mod tests {
         report.rows.remove(1);
         let failures = report.smoke_failures(&expected);
         assert!(
-            failures.contains(&format!("missing row: {}", expected[1])),
+            failures.contains(&format!("missing row: {}", expected[1].key)),
             "{failures:?}"
+        );
+    }
+
+    #[test]
+    fn a_row_that_lost_more_than_a_tenth_of_what_it_asked_for_fails_the_smoke_check() {
+        let (mut report, mut expected) = run_with_ros2_row(600);
+        // The command row asked for 200 and brought 200; a run that asked for 230 got 87 %.
+        expected[1].asked = Some(230);
+        assert_eq!(
+            report.smoke_failures(&expected),
+            ["too few samples: command titan sim (event, cross CPU): 200 of the 230 asked for"]
+        );
+        // 222 asked: 200 is 90.1 %, within what a run may lose.
+        expected[1].asked = Some(222);
+        assert_eq!(report.smoke_failures(&expected), Vec::<String>::new());
+        // A row that asked for no number fails only without a sample.
+        expected[1].asked = None;
+        report.rows[1] = measured("command", "titan sim", "event", 200, 0);
+        assert_eq!(
+            report.smoke_failures(&expected),
+            ["no sample: command titan sim (event, cross CPU)"]
         );
     }
 
@@ -2166,7 +2220,7 @@ mod tests {
         let mut orphan = measured("state", "titan sim", "event", 200, 200);
         orphan.baseline = Some("feed, cross CPU".into());
         report.rows.push(orphan);
-        report.notes.clear();
+        report.problems.clear();
         report.compute_ratios();
         let failures = report.smoke_failures(&expected);
         assert!(
