@@ -91,7 +91,7 @@ pub fn open_chassis_side(spec: &BusSpec, config: &Config) -> Result<Bus, BusErro
 
 /// The simulated chassis: running on its bus, or waiting for the bus to come back with the same
 /// firmware (a real chassis keeps running while its cable is out).
-enum Chassis {
+enum Simulator {
     Running(SimHandle),
     Down {
         firmware: crate::sim::BoxedFirmware,
@@ -113,7 +113,7 @@ pub fn run(config: &Config) -> Result<(), SimProcessError> {
         "simulated chassis up (faults: {sim_name})"
     );
     let firmware = config.profile.firmware(clock::now());
-    let mut chassis = Chassis::Running(SimHandle::spawn(firmware, bus)?);
+    let mut simulator = Simulator::Running(SimHandle::spawn(firmware, bus)?);
 
     let node = chassis_ipc::node(
         None,
@@ -144,9 +144,9 @@ pub fn run(config: &Config) -> Result<(), SimProcessError> {
         match result {
             Ok(WaitSetRunResult::TerminationRequest) => {
                 info!("stopping the simulated chassis");
-                return match chassis {
-                    Chassis::Running(sim) => sim.stop().map_err(SimProcessError::from),
-                    Chassis::Down { .. } => Ok(()),
+                return match simulator {
+                    Simulator::Running(sim) => sim.stop().map_err(SimProcessError::from),
+                    Simulator::Down { .. } => Ok(()),
                 };
             }
             // A signal interrupted the wait: SIGTERM and SIGINT come back as a termination
@@ -156,15 +156,15 @@ pub fn run(config: &Config) -> Result<(), SimProcessError> {
             Ok(_) => {}
             Err(e) => return Err(SimProcessError::WaitSetRun(e)),
         }
-        chassis = keep_running(chassis, config)?;
+        simulator = keep_running(simulator, config)?;
         // The notifications only wake the wait set; every request is read below whether or not
         // they could be drained.
         desk.listener.try_wait(|_| {}).ok();
         while let Ok(Some(active)) = desk.server.receive() {
             let request = *active.payload();
-            let running = match &chassis {
-                Chassis::Running(sim) => Some(sim),
-                Chassis::Down { .. } => None,
+            let running = match &simulator {
+                Simulator::Running(sim) => Some(sim),
+                Simulator::Down { .. } => None,
             };
             let (status, message) = carry_out(
                 &request,
@@ -191,12 +191,12 @@ pub fn run(config: &Config) -> Result<(), SimProcessError> {
 }
 
 /// Notices a lost bus and reopens it with backoff, keeping the same firmware.
-fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, SimProcessError> {
-    match chassis {
-        Chassis::Running(sim) if !sim.is_running() => match sim.recover() {
+fn keep_running(simulator: Simulator, config: &Config) -> Result<Simulator, SimProcessError> {
+    match simulator {
+        Simulator::Running(sim) if !sim.is_running() => match sim.recover() {
             Some((firmware, err)) => {
                 error!("the simulated chassis lost its bus ({err}); reopening it");
-                Ok(Chassis::Down {
+                Ok(Simulator::Down {
                     firmware,
                     retry_at: clock::now() + FIRST_RETRY,
                     backoff: FIRST_RETRY,
@@ -204,19 +204,19 @@ fn keep_running(chassis: Chassis, config: &Config) -> Result<Chassis, SimProcess
             }
             None => Err(SimProcessError::Stopped),
         },
-        Chassis::Down {
+        Simulator::Down {
             firmware,
             retry_at,
             backoff,
         } if clock::now() >= retry_at => match open_chassis_side(&config.bus, config) {
             Ok(bus) => {
                 info!(bus = bus.name(), "the simulated chassis has its bus back");
-                Ok(Chassis::Running(SimHandle::spawn(firmware, bus)?))
+                Ok(Simulator::Running(SimHandle::spawn(firmware, bus)?))
             }
             Err(err) => {
                 let backoff = (backoff * 2).min(LAST_RETRY);
                 tracing::debug!("reopening the bus: {err}");
-                Ok(Chassis::Down {
+                Ok(Simulator::Down {
                     firmware,
                     retry_at: clock::now() + backoff,
                     backoff,

@@ -8,10 +8,10 @@
 //!
 //! Below the contract are the pieces every simulated chassis shares: the sub-stepped physics
 //! clock, the first-order speed lag, the true pose, the battery and motor models, the bounded
-//! transmit queue with its silence window, the feedback flood of load tests, and `Chassis` — the
+//! transmit queue with its silence window, the feedback flood of load tests, and `SimBody` — the
 //! state, the counters and the fault injection every simulated firmware embeds.
 
-mod chassis;
+mod body;
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -23,7 +23,7 @@ use crate::driver::{Rx, WireItem, wrap_angle};
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp};
 
-pub(crate) use chassis::{Applied, Chassis, ChassisSpec};
+pub(crate) use body::{Applied, SimBody, SimBodySpec};
 
 /// A fault or event to inject into a simulated chassis.
 #[derive(Debug, Clone, PartialEq)]

@@ -17,7 +17,7 @@ use crate::agilex_v1::V1Profile;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, MotorModel,
+    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, MotorModel,
     SimTruth, clamp_i16, first_order_lag, non_negative, past_timeout, state_of_charge,
 };
 use crate::kind::RobotKind;
@@ -200,7 +200,7 @@ pub struct V1Sim {
     counts: [u8; FEEDBACK_IDS.len()],
     /// What every simulated chassis shares: the outbox, the boot, the battery, the pose, the
     /// injected faults and the counts of what it received.
-    chassis: Chassis<CanFrame>,
+    body: SimBody<CanFrame>,
 }
 
 impl V1Sim {
@@ -276,8 +276,8 @@ impl V1Sim {
             driver_temp_c: [Self::AMBIENT_C; 4],
             fast: Grid::new(Self::FEEDBACK_PERIOD, now),
             counts: [0; FEEDBACK_IDS.len()],
-            chassis: Chassis::new(
-                ChassisSpec {
+            body: SimBody::new(
+                SimBodySpec {
                     motors: 4,
                     max_flood_per_s: Self::MAX_FLOOD_FRAMES_PER_S,
                     checksums: true,
@@ -305,7 +305,7 @@ impl V1Sim {
     /// Starting state of charge, % (clamped to 0-100).
     pub fn with_soc_pct(mut self, soc_pct: f64) -> Self {
         if let Some(soc_pct) = state_of_charge(soc_pct) {
-            self.chassis.soc_pct = soc_pct;
+            self.body.soc_pct = soc_pct;
             self.refresh_conditions();
         }
         self
@@ -317,17 +317,17 @@ impl V1Sim {
 
     /// Valid command frames ignored (mode byte not 0x01, RC authority, booting).
     pub fn commands_ignored(&self) -> u64 {
-        self.chassis.received.ignored
+        self.body.received.ignored
     }
 
     /// Valid feedback frames sent by another node, ignored.
     pub fn frames_ignored(&self) -> u64 {
-        self.chassis.received.not_for_it
+        self.body.received.not_for_it
     }
 
     /// The 0x151 fault word the chassis reports at its latest time.
     pub fn vendor_fault_word(&self) -> u16 {
-        self.fault_word(self.chassis.last_update())
+        self.fault_word(self.body.last_update())
     }
 
     /// The light state 0x141 reports.
@@ -337,12 +337,12 @@ impl V1Sim {
 
     /// True while the chassis boots after a reboot.
     pub fn is_booting(&self) -> bool {
-        self.chassis.is_booting()
+        self.body.is_booting()
     }
 
     /// Pack current, A (positive = discharging).
     pub fn battery_current_a(&self) -> f64 {
-        self.chassis.pack_current_a
+        self.body.pack_current_a
     }
 
     /// Motor driver temperatures, °C, motors 1-4.
@@ -385,7 +385,7 @@ impl V1Sim {
 
     /// The drive output is off (booting, power cut, protection).
     fn output_cut(&self) -> bool {
-        self.chassis.is_booting() || self.latched != 0
+        self.body.is_booting() || self.latched != 0
     }
 
     fn fault_word(&self, now: Timestamp) -> u16 {
@@ -407,7 +407,7 @@ impl V1Sim {
         {
             word |= fault::MOTOR_OVER_CURRENT_ALARM;
         }
-        if self.chassis.battery_voltage_v() < self.profile.under_voltage_alarm_v {
+        if self.body.battery_voltage_v() < self.profile.under_voltage_alarm_v {
             word |= fault::BATTERY_UNDER_VOLTAGE_ALARM;
         }
         if !self.rc_on {
@@ -426,15 +426,15 @@ impl V1Sim {
 
     /// Latches the faults whose cause is present (lost drivers, flat battery, heat, current).
     fn refresh_conditions(&mut self) {
-        if self.chassis.is_booting() {
+        if self.body.is_booting() {
             return;
         }
-        for (lost, bit) in self.chassis.motor_lost.iter().zip(MOTOR_COMM) {
+        for (lost, bit) in self.body.motor_lost.iter().zip(MOTOR_COMM) {
             if *lost {
                 self.latched |= bit;
             }
         }
-        if self.chassis.battery_voltage_v() < self.profile.under_voltage_failure_v {
+        if self.body.battery_voltage_v() < self.profile.under_voltage_failure_v {
             self.latched |= fault::BATTERY_UNDER_VOLTAGE;
         }
         if self
@@ -455,10 +455,10 @@ impl V1Sim {
 
     /// Physics and the deadlines that change what the chassis does (boot end, command timeout).
     fn expire(&mut self, now: Timestamp) {
-        for dt in self.chassis.substeps(now) {
+        for dt in self.body.substeps(now) {
             self.step(dt);
         }
-        if self.chassis.expire(now).is_some() {
+        if self.body.expire(now).is_some() {
             self.refresh_conditions();
         }
         if self.command_until.is_some_and(|t| now >= t) {
@@ -485,9 +485,9 @@ impl V1Sim {
             acted = true;
         }
         if acted {
-            self.chassis.received.commands += 1;
+            self.body.received.commands += 1;
         } else {
-            self.chassis.received.ignored += 1;
+            self.body.received.ignored += 1;
         }
     }
 
@@ -497,7 +497,7 @@ impl V1Sim {
         } else {
             Lights::default()
         };
-        self.chassis.received.commands += 1;
+        self.body.received.commands += 1;
     }
 
     fn clear_fault(&mut self, code: u8) {
@@ -524,7 +524,7 @@ impl V1Sim {
         self.latched = 0;
         self.lights = Lights::default();
         self.counts = [0; FEEDBACK_IDS.len()];
-        if self.chassis.reboot(now) {
+        if self.body.reboot(now) {
             self.refresh_conditions();
         }
     }
@@ -534,7 +534,7 @@ impl V1Sim {
 
     /// Target speeds and the time constant toward them.
     fn target(&self) -> (Motion, f64) {
-        if self.chassis.is_booting() || self.latched & POWER_FAULTS != 0 {
+        if self.body.is_booting() || self.latched & POWER_FAULTS != 0 {
             (Motion::default(), Self::DEFAULT_STOP_TIME_CONSTANT_S)
         } else if self.latched & PROTECTIONS != 0 {
             (Motion::default(), Self::PROTECTION_STOP_TIME_CONSTANT_S)
@@ -550,7 +550,7 @@ impl V1Sim {
     fn step(&mut self, dt: f64) {
         self.refresh_conditions();
         let (mut target, mut tau) = self.target();
-        if let Some(runaway) = self.chassis.runaway_mps {
+        if let Some(runaway) = self.body.runaway_mps {
             target.linear_mps = runaway;
             tau = self.speed_time_constant_s;
         }
@@ -562,7 +562,7 @@ impl V1Sim {
         // Midpoint rule for the pose.
         let v_mid = 0.5 * (v0 + v1);
         let w_mid = 0.5 * (w0 + w1);
-        self.chassis.pose.advance(v_mid, 0.0, w_mid, dt);
+        self.body.pose.advance(v_mid, 0.0, w_mid, dt);
         self.linear_mps = v1;
         self.angular_radps = w1;
 
@@ -574,7 +574,7 @@ impl V1Sim {
         let rms_keep = (-dt / Self::CURRENT_RMS_TIME_CONSTANT_S).exp();
         let heat_keep = (-dt / Self::THERMAL_TIME_CONSTANT_S).exp();
         let currents: [f64; 4] = std::array::from_fn(|motor| {
-            if output_on && !self.chassis.motor_lost[motor] {
+            if output_on && !self.body.motor_lost[motor] {
                 Self::MOTOR.magnitude_a(self.wheel_mps[motor], accel[motor], self.extra_load_a)
             } else {
                 0.0
@@ -592,14 +592,14 @@ impl V1Sim {
             *temp = steady + (*temp - steady) * heat_keep;
         }
         let motors_a = self.motor_current_a.iter().sum::<f64>();
-        self.chassis.draw(Self::IDLE_CURRENT_A + motors_a, dt);
+        self.body.draw(Self::IDLE_CURRENT_A + motors_a, dt);
     }
 
     // -----------------------------------------------------------------------------------------
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.chassis.is_quiet(now)
+        self.body.is_quiet(now)
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
@@ -622,11 +622,11 @@ impl V1Sim {
             return;
         };
         self.counts[index] = count.wrapping_add(1);
-        if self.chassis.take_corruption() {
+        if self.body.take_corruption() {
             can = corrupt_checksum(&can);
             injected = injected + InjectedCounts::BAD_CHECKSUM;
         }
-        self.chassis.outbox.push_injected(can, injected);
+        self.body.outbox.push_injected(can, injected);
     }
 
     fn motion_feedback(&self) -> Frame {
@@ -657,13 +657,13 @@ impl V1Sim {
             Frame::SystemStatus(SystemStatus {
                 body_status: self.body_status(),
                 mode: self.mode(),
-                battery_voltage_v: self.chassis.battery_voltage_v().min(6553.5),
+                battery_voltage_v: self.body.battery_voltage_v().min(6553.5),
                 vendor_fault_word: self.fault_word(now),
             }),
         );
         self.send(now, self.motion_feedback());
         for motor in 0..4 {
-            if !self.chassis.motor_lost[motor] {
+            if !self.body.motor_lost[motor] {
                 self.send(now, self.motor_feedback(motor));
             }
         }
@@ -678,12 +678,12 @@ impl Firmware for V1Sim {
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
-        if self.chassis.is_booting() {
-            self.chassis.received.ignored += 1;
+        if self.body.is_booting() {
+            self.body.received.ignored += 1;
             return;
         }
         let Rx::Can(frame) = rx else {
-            self.chassis.received.decode_errors += 1;
+            self.body.received.decode_errors += 1;
             return;
         };
         match decode(frame, &self.profile) {
@@ -693,13 +693,13 @@ impl Firmware for V1Sim {
                 Frame::SystemStatus(_)
                 | Frame::MotionFeedback(_)
                 | Frame::Motor(_)
-                | Frame::LightState(_) => self.chassis.received.not_for_it += 1,
+                | Frame::LightState(_) => self.body.received.not_for_it += 1,
             },
             Err(DecodeError::BadChecksum { .. }) => {
-                self.chassis.received.bad_checksums += 1;
+                self.body.received.bad_checksums += 1;
                 self.checksum_fault_until = Some(now + self.checksum_fault_hold);
             }
-            Err(_) => self.chassis.received.decode_errors += 1,
+            Err(_) => self.body.received.decode_errors += 1,
         }
     }
 
@@ -708,7 +708,7 @@ impl Firmware for V1Sim {
         if self.fast.serve_due(now) {
             self.send_feedback(now);
         }
-        if let Some(motor) = self.chassis.flood_due(now) {
+        if let Some(motor) = self.body.flood_due(now) {
             let copy = if motor {
                 self.motor_feedback(0)
             } else {
@@ -719,18 +719,18 @@ impl Firmware for V1Sim {
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
-        self.chassis.poll_transmit()
+        self.body.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        [self.command_until, self.chassis.poll_timeout()]
+        [self.command_until, self.body.poll_timeout()]
             .into_iter()
             .fold(Some(self.fast.next()), earliest)
     }
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match self.chassis.inject(now, injection) {
+        match self.body.inject(now, injection) {
             Applied::Condition => self.refresh_conditions(),
             Applied::Done => {}
             Applied::Refused => return false,
@@ -757,9 +757,9 @@ impl Firmware for V1Sim {
             } else {
                 ControlMode::COMMAND
             },
-            fault_flags: normalize_faults(self.fault_word(self.chassis.last_update()))
+            fault_flags: normalize_faults(self.fault_word(self.body.last_update()))
                 | body_flags(self.body_status()),
-            ..self.chassis.truth()
+            ..self.body.truth()
         }
     }
 }

@@ -48,7 +48,7 @@ use super::profile::{Kinematics, SpinField, V2Profile};
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, Mode,
+    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, Mode,
     SimTruth, first_order_lag, wrap_mm,
 };
 use crate::kind::RobotKind;
@@ -74,7 +74,7 @@ pub struct V2Sim {
     odometer_m: [f64; 2],
     /// What every simulated chassis shares: the outbox, the boot, the battery, the pose, the
     /// injected faults and the counts of what it received.
-    chassis: Chassis<CanFrame>,
+    body: SimBody<CanFrame>,
     status: Grid,
     fast: Grid,
     slow: Grid,
@@ -125,8 +125,8 @@ impl V2Sim {
             lights: Lights::default(),
             steering_offset: 22000,
             odometer_m: [0.0; 2],
-            chassis: Chassis::new(
-                ChassisSpec {
+            body: SimBody::new(
+                SimBodySpec {
                     motors: 0,
                     max_flood_per_s: 0,
                     checksums: false,
@@ -145,7 +145,7 @@ impl V2Sim {
             profile,
         };
         // Power-up counts as the first boot.
-        sim.chassis.boots = 1;
+        sim.body.boots = 1;
         sim.power_up();
         sim
     }
@@ -156,7 +156,7 @@ impl V2Sim {
 
     /// Commands ignored because of the mode, the brake or the E-stop.
     pub fn commands_ignored(&self) -> u64 {
-        self.chassis.received.ignored
+        self.body.received.ignored
     }
 
     /// 0x111 frames beyond the profile's limits.
@@ -166,7 +166,7 @@ impl V2Sim {
 
     /// Feedback frames from another node.
     pub fn frames_ignored(&self) -> u64 {
-        self.chassis.received.not_for_it
+        self.body.received.not_for_it
     }
 
     /// The RANGER motion mode in force.
@@ -195,8 +195,8 @@ impl V2Sim {
     }
 
     fn expire(&mut self, now: Timestamp) {
-        self.chassis.expire(now);
-        for dt in self.chassis.substeps(now) {
+        self.body.expire(now);
+        for dt in self.body.substeps(now) {
             self.step(dt);
         }
         if self.mode == Mode::Command
@@ -223,7 +223,7 @@ impl V2Sim {
         } else {
             self.command
         };
-        if let Some(runaway) = self.chassis.runaway_mps {
+        if let Some(runaway) = self.body.runaway_mps {
             target.linear_mps = runaway;
         }
         let tau = Self::DEFAULT_SPEED_TIME_CONSTANT_S;
@@ -239,7 +239,7 @@ impl V2Sim {
             steer_rad: target.steer_rad,
         };
         let (vx, vy, w) = self.body();
-        self.chassis.pose.advance(vx, vy, w, dt);
+        self.body.pose.advance(vx, vy, w, dt);
         // Left and right wheel travel of a differential body; the centre on the others.
         let half_track = self.profile.track_m / 2.0;
         let (left, right) = match self.profile.kinematics {
@@ -250,7 +250,7 @@ impl V2Sim {
         };
         self.odometer_m[0] += left * dt;
         self.odometer_m[1] += right * dt;
-        self.chassis.draw(Self::IDLE_CURRENT_A + 4.0 * vx.abs(), dt);
+        self.body.draw(Self::IDLE_CURRENT_A + 4.0 * vx.abs(), dt);
     }
 
     /// The true body twist (v, v_y, ω).
@@ -291,7 +291,7 @@ impl V2Sim {
     }
 
     fn on_command(&mut self, now: Timestamp, frame: Frame) {
-        self.chassis.received.commands += 1;
+        self.body.received.commands += 1;
         let command_mode = self.mode == Mode::Command;
         match frame {
             Frame::Mode(m) if self.mode != Mode::Remote => {
@@ -305,7 +305,7 @@ impl V2Sim {
                 self.heartbeat_lost = false;
                 if self.estop || self.brake_engaged {
                     self.command = STOP;
-                    self.chassis.received.ignored += 1;
+                    self.body.received.ignored += 1;
                 } else {
                     self.command = self.limited(m);
                 }
@@ -327,7 +327,7 @@ impl V2Sim {
                         }
                         self.ranger_mode = mode;
                     }
-                    None => self.chassis.received.ignored += 1,
+                    None => self.body.received.ignored += 1,
                 }
             }
             Frame::LightCommand(l) if command_mode && self.profile.front_light => {
@@ -362,17 +362,17 @@ impl V2Sim {
                     }),
                 );
             }
-            _ => self.chassis.received.ignored += 1,
+            _ => self.body.received.ignored += 1,
         }
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
-        if self.chassis.is_quiet(now) {
+        if self.body.is_quiet(now) {
             return;
         }
         // A value the wire cannot carry (a speed beyond ±32 m/s): nothing to send.
         let encoded = frame.encode(&self.profile);
-        self.chassis
+        self.body
             .outbox
             .push_encoded(encoded, InjectedCounts::default());
     }
@@ -414,7 +414,7 @@ impl V2Sim {
 
     /// The battery's voltage as the electronics alone would load it, V.
     fn battery_v(&self) -> f64 {
-        Self::BATTERY.voltage_v(self.chassis.soc_pct, Self::IDLE_CURRENT_A)
+        Self::BATTERY.voltage_v(self.body.soc_pct, Self::IDLE_CURRENT_A)
     }
 
     fn send_status(&mut self, now: Timestamp) {
@@ -538,7 +538,7 @@ impl V2Sim {
             now,
             Frame::BmsData(BmsData {
                 group: 0,
-                soc_pct: self.chassis.soc_pct.round().clamp(0.0, 100.0),
+                soc_pct: self.body.soc_pct.round().clamp(0.0, 100.0),
                 soh_pct: 100.0,
                 voltage_v: (self.battery_v() / lsb).round() * lsb,
                 current_a: 1.0,
@@ -565,12 +565,12 @@ impl Firmware for V2Sim {
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
         // A booting chassis hears no CAN frame (serial bytes still count as decode errors).
-        if self.chassis.is_booting() && matches!(rx, Rx::Can(_)) {
+        if self.body.is_booting() && matches!(rx, Rx::Can(_)) {
             return;
         }
         let profile = &self.profile;
         if let Some(command) = self
-            .chassis
+            .body
             .command(rx, |f| decode(f, profile), Frame::direction)
         {
             self.on_command(now, command);
@@ -580,7 +580,7 @@ impl Firmware for V2Sim {
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
         // Nothing is sent, and no rolling count moves, while booting or silenced.
-        let quiet = self.chassis.is_quiet(now);
+        let quiet = self.body.is_quiet(now);
         if self.status.serve_due(now) && !quiet {
             self.send_status(now);
         }
@@ -596,7 +596,7 @@ impl Firmware for V2Sim {
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
-        self.chassis.poll_transmit()
+        self.body.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
@@ -612,14 +612,14 @@ impl Firmware for V2Sim {
                     .map(|t| t + Duration::from_millis(self.profile.command_timeout_ms + 1))
             })
             .flatten();
-        [heartbeat, self.chassis.poll_timeout()]
+        [heartbeat, self.body.poll_timeout()]
             .into_iter()
             .fold(Some(grids), earliest)
     }
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match self.chassis.inject(now, injection) {
+        match self.body.inject(now, injection) {
             Applied::Condition | Applied::Done => {}
             Applied::Refused => return false,
             Applied::Robot(Injection::EStop(pressed)) => {
@@ -640,7 +640,7 @@ impl Firmware for V2Sim {
             }
             Applied::Robot(Injection::Reboot) => {
                 self.power_up();
-                self.chassis.reboot(now);
+                self.body.reboot(now);
             }
             // No bumper, no range sensors.
             Applied::Robot(_) => return false,
@@ -658,7 +658,7 @@ impl Firmware for V2Sim {
             control_mode: self.mode.control_mode(),
             brake_engaged: self.brake_engaged,
             fault_flags: self.fault_flags(),
-            ..self.chassis.truth()
+            ..self.body.truth()
         }
     }
 }

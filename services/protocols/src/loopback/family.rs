@@ -55,7 +55,7 @@ impl Family for LoopbackProfile {
         d.set_model("loopback");
         d.robot_limits = both_ways(self.max_linear_mps, 0.0, self.max_angular_radps);
         d.geometry.min_turn_radius_m = 0.0;
-        d.battery.full_v = LoopbackSim::CHASSIS.battery.full_v;
+        d.battery.full_v = LoopbackSim::BODY.battery.full_v;
         d.battery.low_v = 22.0;
         d.command_timeout_ms = millis(self.command_timeout_ms);
     }

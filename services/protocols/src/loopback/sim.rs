@@ -1,4 +1,4 @@
-//! The simulated loopback chassis, built on the shared simulator pieces ([`Chassis`]): it obeys
+//! The simulated loopback chassis, built on the shared simulator pieces ([`SimBody`]): it obeys
 //! 0x010 (within the profile's limits) until its command timeout, answers with 0x020 every
 //! 20 ms, and takes the injections
 //! every chassis shares (silence, garbage, reboot, battery, runaway); it has no motor drivers
@@ -13,7 +13,7 @@ use super::profile::LoopbackProfile;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, SimTruth,
+    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, SimTruth,
     clamp_i16, first_order_lag, past_timeout,
 };
 use crate::kind::RobotKind;
@@ -29,7 +29,7 @@ pub struct LoopbackSim {
     linear_mps: f64,
     angular_radps: f64,
     feedback: Grid,
-    chassis: Chassis<CanFrame>,
+    body: SimBody<CanFrame>,
 }
 
 impl LoopbackSim {
@@ -39,7 +39,7 @@ impl LoopbackSim {
     pub const SPEED_TIME_CONSTANT_S: f64 = 0.2;
     /// No motor drivers to lose, no flood, no checksum; a 300 ms boot; a 24 V pack; 0.5 A for
     /// the electronics (the motors add 2 A per m/s).
-    pub(crate) const CHASSIS: ChassisSpec = ChassisSpec {
+    pub(crate) const BODY: SimBodySpec = SimBodySpec {
         motors: 0,
         max_flood_per_s: 0,
         checksums: false,
@@ -62,16 +62,16 @@ impl LoopbackSim {
             linear_mps: 0.0,
             angular_radps: 0.0,
             feedback: Grid::new(Self::FEEDBACK_PERIOD, now),
-            chassis: Chassis::new(Self::CHASSIS, now),
+            body: SimBody::new(Self::BODY, now),
         }
     }
 
     /// Physics and the deadlines that change what the chassis does (boot end, command timeout).
     fn expire(&mut self, now: Timestamp) {
-        for dt in self.chassis.substeps(now) {
+        for dt in self.body.substeps(now) {
             self.step(dt);
         }
-        self.chassis.expire(now);
+        self.body.expire(now);
         if self.command_until.is_some_and(|t| now >= t) {
             self.command_until = None;
             self.command = Twist::default();
@@ -81,7 +81,7 @@ impl LoopbackSim {
     /// Integrates `dt` seconds.
     fn step(&mut self, dt: f64) {
         let mut target = self.command;
-        if let Some(runaway) = self.chassis.runaway_mps {
+        if let Some(runaway) = self.body.runaway_mps {
             target.linear_mps = runaway;
         }
         let lag = |from, to| first_order_lag(from, to, Self::SPEED_TIME_CONSTANT_S, dt);
@@ -90,9 +90,9 @@ impl LoopbackSim {
         self.angular_radps = lag(w0, target.angular_radps);
         let v_mid = 0.5 * (v0 + self.linear_mps);
         let w_mid = 0.5 * (w0 + self.angular_radps);
-        self.chassis.pose.advance(v_mid, 0.0, w_mid, dt);
-        let current = Self::CHASSIS.idle_current_a + 2.0 * self.linear_mps.abs();
-        self.chassis.draw(current, dt);
+        self.body.pose.advance(v_mid, 0.0, w_mid, dt);
+        let current = Self::BODY.idle_current_a + 2.0 * self.linear_mps.abs();
+        self.body.draw(current, dt);
     }
 
     fn obeying(&self) -> bool {
@@ -102,7 +102,7 @@ impl LoopbackSim {
     fn reboot(&mut self, now: Timestamp) {
         self.command = Twist::default();
         self.command_until = None;
-        self.chassis.reboot(now);
+        self.body.reboot(now);
     }
 }
 
@@ -113,12 +113,12 @@ impl Firmware for LoopbackSim {
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
-        let Some(Frame::Command(command)) = self.chassis.command(rx, decode, Frame::direction)
+        let Some(Frame::Command(command)) = self.body.command(rx, decode, Frame::direction)
         else {
             return;
         };
-        if self.chassis.is_booting() {
-            self.chassis.received.ignored += 1;
+        if self.body.is_booting() {
+            self.body.received.ignored += 1;
             return;
         }
         // Beyond the profile's limits a command is clamped to them.
@@ -128,38 +128,38 @@ impl Firmware for LoopbackSim {
             angular_radps: command.angular_radps.clamp(-angular, angular),
         };
         self.command_until = Some(past_timeout(now, self.profile.command_timeout_ms));
-        self.chassis.received.commands += 1;
+        self.body.received.commands += 1;
     }
 
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
-        if self.feedback.serve_due(now) && !self.chassis.is_quiet(now) {
+        if self.feedback.serve_due(now) && !self.body.is_quiet(now) {
             let feedback = Frame::Feedback(Feedback {
                 linear_mps: clamp_i16(self.linear_mps, 1000.0),
                 angular_radps: clamp_i16(self.angular_radps, 1000.0),
-                battery_voltage_v: self.chassis.battery_voltage_v().min(655.35),
+                battery_voltage_v: self.body.battery_voltage_v().min(655.35),
                 obeying: self.obeying(),
             });
             let encoded = feedback.encode();
-            self.chassis
+            self.body
                 .outbox
                 .push_encoded(encoded, InjectedCounts::default());
         }
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
-        self.chassis.poll_transmit()
+        self.body.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        [self.command_until, self.chassis.poll_timeout()]
+        [self.command_until, self.body.poll_timeout()]
             .into_iter()
             .fold(Some(self.feedback.next()), earliest)
     }
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match self.chassis.inject(now, injection) {
+        match self.body.inject(now, injection) {
             Applied::Condition | Applied::Done => true,
             Applied::Robot(Injection::Reboot) => {
                 self.reboot(now);
@@ -178,7 +178,7 @@ impl Firmware for LoopbackSim {
             } else {
                 ControlMode::STANDBY
             },
-            ..self.chassis.truth()
+            ..self.body.truth()
         }
     }
 }

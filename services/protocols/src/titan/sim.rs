@@ -16,7 +16,7 @@ use super::kinematics::{steer_command, yaw_rate};
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, Mode,
+    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, Mode,
     MotorModel, SimTruth, clamp_i16, first_order_lag, past_timeout, wrap_mm,
 };
 use crate::kind::RobotKind;
@@ -210,7 +210,7 @@ pub struct TitanSim {
     zero_replies: VecDeque<Timestamp>,
     /// What every simulated chassis shares: the outbox, the boot, the battery, the pose, the
     /// injected faults and the counts of what it received.
-    chassis: Chassis<CanFrame>,
+    body: SimBody<CanFrame>,
     /// Motion frames clamped to the valid range.
     commands_clamped: u64,
 }
@@ -289,8 +289,8 @@ impl TitanSim {
             slow: Grid::new(Self::SLOW_PERIOD, now),
             bms: Grid::new(Self::BMS_PERIOD, now),
             zero_replies: VecDeque::new(),
-            chassis: Chassis::new(
-                ChassisSpec {
+            body: SimBody::new(
+                SimBodySpec {
                     motors: 4,
                     max_flood_per_s: Self::MAX_FLOOD_FRAMES_PER_S,
                     checksums: false,
@@ -317,7 +317,7 @@ impl TitanSim {
     /// Batteries fitted, 1 or 2 (clamped).
     pub fn with_batteries(mut self, batteries: u8) -> Self {
         self.batteries = batteries.clamp(1, 2);
-        self.chassis.set_packs(self.batteries);
+        self.body.set_packs(self.batteries);
         self
     }
 
@@ -332,12 +332,12 @@ impl TitanSim {
 
     /// Valid command frames ignored (wrong mode, booting, off-road while moving).
     pub fn commands_ignored(&self) -> u64 {
-        self.chassis.received.ignored
+        self.body.received.ignored
     }
 
     /// Valid feedback frames sent by another node, ignored.
     pub fn frames_ignored(&self) -> u64 {
-        self.chassis.received.not_for_it
+        self.body.received.not_for_it
     }
 
     pub fn off_road(&self) -> bool {
@@ -357,7 +357,7 @@ impl TitanSim {
     // Rules.
 
     fn is_powered(&self) -> bool {
-        !self.chassis.is_booting() && self.faults & fault::BATTERY_UNDER_VOLTAGE == 0
+        !self.body.is_booting() && self.faults & fault::BATTERY_UNDER_VOLTAGE == 0
     }
 
     /// Why the wheels may not turn right now, if they may not.
@@ -366,15 +366,15 @@ impl TitanSim {
             || self.mode != Mode::Command
             || self.brake_engaged
             || self.faults & STOP_FAULTS != 0
-            || self.chassis.soc_pct < self.profile.low_battery_cutoff_soc_pct
+            || self.body.soc_pct < self.profile.low_battery_cutoff_soc_pct
     }
 
     /// Re-raises the faults whose cause persists (lost drivers, bumper, flat battery).
     fn refresh_conditions(&mut self) {
-        if self.chassis.is_booting() {
+        if self.body.is_booting() {
             return;
         }
-        for (lost, bit) in self.chassis.motor_lost.iter().zip(MOTOR_COMM_LOST) {
+        for (lost, bit) in self.body.motor_lost.iter().zip(MOTOR_COMM_LOST) {
             if *lost {
                 self.faults |= bit;
             }
@@ -384,7 +384,7 @@ impl TitanSim {
         } else {
             self.faults &= !fault::BUMPER;
         }
-        if self.chassis.soc_pct < self.profile.low_battery_cutoff_soc_pct {
+        if self.body.soc_pct < self.profile.low_battery_cutoff_soc_pct {
             self.faults |= fault::BATTERY_UNDER_VOLTAGE;
         }
         if self.drive_blocked() {
@@ -393,7 +393,7 @@ impl TitanSim {
     }
 
     fn heartbeat_deadline(&self) -> Option<Timestamp> {
-        (self.mode == Mode::Command && !self.chassis.is_booting())
+        (self.mode == Mode::Command && !self.body.is_booting())
             .then(|| past_timeout(self.last_motion_rx, self.profile.command_timeout_ms))
     }
 
@@ -414,10 +414,10 @@ impl TitanSim {
 
     /// Physics and the deadlines that change what the chassis obeys (boot end, heartbeat).
     fn expire(&mut self, now: Timestamp) {
-        for dt in self.chassis.substeps(now) {
+        for dt in self.body.substeps(now) {
             self.step(dt);
         }
-        if self.chassis.expire(now).is_some() {
+        if self.body.expire(now).is_some() {
             self.refresh_conditions();
         }
         if self.heartbeat_deadline().is_some_and(|t| now >= t) {
@@ -438,8 +438,8 @@ impl TitanSim {
     }
 
     fn on_command(&mut self, now: Timestamp, frame: Frame) {
-        if self.chassis.is_booting() || !self.accepts(frame.id()) {
-            self.chassis.received.ignored += 1;
+        if self.body.is_booting() || !self.accepts(frame.id()) {
+            self.body.received.ignored += 1;
             return;
         }
         match frame {
@@ -479,12 +479,12 @@ impl TitanSim {
             Frame::SilentMode(s) => {
                 self.silent_mode = s.enter;
                 if s.enter {
-                    self.chassis.outbox.clear();
+                    self.body.outbox.clear();
                 }
             }
             Frame::OffRoad(s) => {
                 if self.linear_mps.abs() >= Self::STANDING_STILL_MPS {
-                    self.chassis.received.ignored += 1;
+                    self.body.received.ignored += 1;
                     return;
                 }
                 self.off_road = s.enter;
@@ -496,12 +496,12 @@ impl TitanSim {
             // Not commands: `handle_rx` filters them out.
             _ => return,
         }
-        self.chassis.received.commands += 1;
+        self.body.received.commands += 1;
     }
 
     fn clear_faults(&mut self, code: u8) {
         let motor_bit = |m: usize| {
-            if self.chassis.motor_lost[m] {
+            if self.body.motor_lost[m] {
                 0
             } else {
                 MOTOR_COMM_LOST[m]
@@ -522,7 +522,7 @@ impl TitanSim {
             }
             // Power is restored only from a battery above the cut-off.
             clear_code::BATTERY_UNDER_VOLTAGE
-                if self.chassis.soc_pct >= self.profile.low_battery_cutoff_soc_pct =>
+                if self.body.soc_pct >= self.profile.low_battery_cutoff_soc_pct =>
             {
                 fault::BATTERY_UNDER_VOLTAGE
             }
@@ -554,7 +554,7 @@ impl TitanSim {
         self.rc_counter = 0;
         self.zero_replies.clear();
         self.last_motion_rx = now;
-        if self.chassis.reboot(now) {
+        if self.body.reboot(now) {
             self.refresh_conditions();
         }
     }
@@ -566,7 +566,7 @@ impl TitanSim {
     fn step(&mut self, dt: f64) {
         self.refresh_conditions();
         let blocked = self.drive_blocked();
-        let (target, tau) = match self.chassis.runaway_mps {
+        let (target, tau) = match self.body.runaway_mps {
             Some(runaway) => (runaway, Self::DEFAULT_SPEED_TIME_CONSTANT_S),
             None if blocked => (0.0, Self::DEFAULT_STOP_TIME_CONSTANT_S),
             None => (self.command.linear_mps, Self::DEFAULT_SPEED_TIME_CONSTANT_S),
@@ -587,8 +587,8 @@ impl TitanSim {
         let v_mid = 0.5 * (v0 + v1);
         let s_mid = 0.5 * (s0 + s1);
         let w_mid = yaw_rate(v_mid, s_mid, &self.profile);
-        self.chassis.pose.advance(v_mid, 0.0, w_mid, dt);
-        if !self.chassis.is_booting() {
+        self.body.pose.advance(v_mid, 0.0, w_mid, dt);
+        if !self.body.is_booting() {
             self.front_odometer_m += v_mid * dt;
             self.rear_odometer_m += v_mid * dt;
             let counts_per_m = Self::GEAR_RATIO * Self::ENCODER_PULSES_PER_REV
@@ -607,7 +607,7 @@ impl TitanSim {
             *current = Self::MOTOR.signed_a(wheel, self.accel_mps2);
         }
         let motors_a = self.motor_current_a.iter().map(|c| c.abs()).sum::<f64>();
-        self.chassis.draw(Self::IDLE_CURRENT_A + motors_a, dt);
+        self.body.draw(Self::IDLE_CURRENT_A + motors_a, dt);
     }
 
     /// Wheel speeds front-left, front-right, rear-left, rear-right, m/s, for body-centre speed `v`
@@ -634,7 +634,7 @@ impl TitanSim {
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.chassis.is_quiet(now) || self.silent_mode
+        self.body.is_quiet(now) || self.silent_mode
     }
 
     fn send(&mut self, now: Timestamp, frame: Frame) {
@@ -648,7 +648,7 @@ impl TitanSim {
         }
         // Every value is kept inside its wire range; a frame that still does not fit is not sent.
         let encoded = frame.encode(&self.profile);
-        self.chassis.outbox.push_encoded(encoded, injected);
+        self.body.outbox.push_encoded(encoded, injected);
     }
 
     fn wire_mode(&self) -> u8 {
@@ -694,7 +694,7 @@ impl TitanSim {
             Frame::SystemStatus(SystemStatus {
                 body_status,
                 mode: self.wire_mode(),
-                battery_voltage_v: self.chassis.battery_voltage_v().min(6553.5),
+                battery_voltage_v: self.body.battery_voltage_v().min(6553.5),
                 vendor_fault_word: self.faults,
             }),
         );
@@ -715,7 +715,7 @@ impl TitanSim {
             );
         }
         for motor in 0..4 {
-            if !self.chassis.motor_lost[motor] {
+            if !self.body.motor_lost[motor] {
                 self.send(now, self.motor_fast(motor));
             }
         }
@@ -745,7 +745,7 @@ impl TitanSim {
     }
 
     fn send_slow(&mut self, now: Timestamp) {
-        let voltage = self.chassis.battery_voltage_v().min(6553.5);
+        let voltage = self.body.battery_voltage_v().min(6553.5);
         let mut status = 0;
         if !self.drive_blocked() {
             status |= DriverStatus::ENABLED;
@@ -754,7 +754,7 @@ impl TitanSim {
             status |= DriverStatus::SUPPLY_UNDER_VOLTAGE;
         }
         for motor in 0..4 {
-            if self.chassis.motor_lost[motor] {
+            if self.body.motor_lost[motor] {
                 continue;
             }
             let current = self.motor_current_a[motor].abs();
@@ -772,14 +772,14 @@ impl TitanSim {
     }
 
     fn send_bms(&mut self, now: Timestamp) {
-        let soc = self.chassis.soc_pct.floor().clamp(0.0, 100.0);
-        let voltage = self.chassis.battery_voltage_v().min(655.35);
-        let current = clamp_i16(self.chassis.pack_current_a, 10.0);
+        let soc = self.body.soc_pct.floor().clamp(0.0, 100.0);
+        let voltage = self.body.battery_voltage_v().min(655.35);
+        let current = clamp_i16(self.body.pack_current_a, 10.0);
         let mut alarm = BmsAlarm::default();
-        if self.chassis.soc_pct < self.profile.low_battery_warning_soc_pct {
+        if self.body.soc_pct < self.profile.low_battery_warning_soc_pct {
             alarm.warning_1 |= BMS_UNDER_VOLTAGE;
         }
-        if self.chassis.soc_pct < self.profile.low_battery_cutoff_soc_pct {
+        if self.body.soc_pct < self.profile.low_battery_cutoff_soc_pct {
             alarm.alarm_1 |= BMS_UNDER_VOLTAGE;
         }
         let data = BmsData {
@@ -815,10 +815,10 @@ impl TitanSim {
         if self.faults != 0 {
             flags |= FaultFlags::BODY_EXCEPTION;
         }
-        if self.chassis.soc_pct < self.profile.low_battery_warning_soc_pct {
+        if self.body.soc_pct < self.profile.low_battery_warning_soc_pct {
             flags |= FaultFlags::BATTERY_LOW;
         }
-        if self.chassis.soc_pct < self.profile.low_battery_cutoff_soc_pct {
+        if self.body.soc_pct < self.profile.low_battery_cutoff_soc_pct {
             flags |= FaultFlags::BMS_ALARM;
         }
         flags
@@ -834,7 +834,7 @@ impl Firmware for TitanSim {
         self.expire(now);
         let profile = &self.profile;
         if let Some(command) = self
-            .chassis
+            .body
             .command(rx, |f| decode(f, profile), Frame::direction)
         {
             self.on_command(now, command);
@@ -856,7 +856,7 @@ impl Firmware for TitanSim {
         if self.bms.serve_due(now) {
             self.send_bms(now);
         }
-        if let Some(motor) = self.chassis.flood_due(now) {
+        if let Some(motor) = self.body.flood_due(now) {
             let copy = if motor {
                 self.motor_fast(0)
             } else {
@@ -867,7 +867,7 @@ impl Firmware for TitanSim {
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
-        self.chassis.poll_transmit()
+        self.body.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
@@ -875,7 +875,7 @@ impl Firmware for TitanSim {
         [
             self.heartbeat_deadline(),
             self.zero_replies.front().copied(),
-            self.chassis.poll_timeout(),
+            self.body.poll_timeout(),
         ]
         .into_iter()
         .fold(Some(grids), earliest)
@@ -883,7 +883,7 @@ impl Firmware for TitanSim {
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match self.chassis.inject(now, injection) {
+        match self.body.inject(now, injection) {
             Applied::Condition => self.refresh_conditions(),
             Applied::Done => {}
             Applied::Refused => return false,
@@ -917,7 +917,7 @@ impl Firmware for TitanSim {
             control_mode: self.mode.control_mode(),
             brake_engaged: self.brake_engaged,
             fault_flags: self.fault_flags(),
-            ..self.chassis.truth()
+            ..self.body.truth()
         }
     }
 }

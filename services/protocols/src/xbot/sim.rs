@@ -11,7 +11,7 @@ use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, Chassis, ChassisSpec, Firmware, InjectedCounts, Injection, MotorModel,
+    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, MotorModel,
     SimTruth, first_order_lag, past_timeout,
 };
 use crate::kind::RobotKind;
@@ -127,7 +127,7 @@ pub struct XbotSim {
     reports: Grid,
     /// What every simulated chassis shares: the outbox, the boot, the battery, the pose, the
     /// injected faults and the counts of what it received.
-    chassis: Chassis<Vec<u8>>,
+    body: SimBody<Vec<u8>>,
 
     // Counters.
     reports_sent: u64,
@@ -194,8 +194,8 @@ impl XbotSim {
             .wheel_separation_m
             .filter(|s| s.is_finite() && *s > 0.0)
             .unwrap_or(Self::DEFAULT_WHEEL_SEPARATION_M);
-        let chassis = Chassis::new(
-            ChassisSpec {
+        let body = SimBody::new(
+            SimBodySpec {
                 motors: wheel_count(&profile),
                 max_flood_per_s: line_reports_per_s(&profile),
                 checksums: true,
@@ -230,7 +230,7 @@ impl XbotSim {
             motor_current_a: [0.0; 4],
             lift_current_a: 0.0,
             reports: Grid::new(Self::REPORT_PERIOD, now),
-            chassis,
+            body,
             reports_sent: 0,
             reports_corrupted: 0,
             heartbeat_timeouts: 0,
@@ -239,7 +239,7 @@ impl XbotSim {
 
     /// Silence after a reboot (zero: the board answers at once).
     pub fn with_boot_time(mut self, boot_time: Duration) -> Self {
-        self.chassis.set_boot_time(boot_time);
+        self.body.set_boot_time(boot_time);
         self
     }
 
@@ -266,7 +266,7 @@ impl XbotSim {
 
     /// True while the board boots after a reboot.
     pub fn is_booting(&self) -> bool {
-        self.chassis.is_booting()
+        self.body.is_booting()
     }
 
     /// The lift's position and target, % of travel.
@@ -310,12 +310,12 @@ impl XbotSim {
 
     /// Valid frames ignored while booting.
     pub fn commands_ignored(&self) -> u64 {
-        self.chassis.received.ignored
+        self.body.received.ignored
     }
 
     /// Valid sensor reports sent *to* the board, ignored.
     pub fn frames_ignored(&self) -> u64 {
-        self.chassis.received.not_for_it
+        self.body.received.not_for_it
     }
 
     /// Times the 500 ms heartbeat timeout set the speed to 0.
@@ -333,9 +333,9 @@ impl XbotSim {
 
     fn drive_blocked(&self) -> bool {
         !self.powered
-            || self.chassis.is_booting()
+            || self.body.is_booting()
             || self
-                .chassis
+                .body
                 .motor_lost
                 .iter()
                 .take(self.wheels())
@@ -349,10 +349,10 @@ impl XbotSim {
 
     /// Physics and the deadlines that change what the board does (boot end, silence, heartbeat).
     fn expire(&mut self, now: Timestamp) {
-        for dt in self.chassis.substeps(now) {
+        for dt in self.body.substeps(now) {
             self.step(dt);
         }
-        if let Some(until) = self.chassis.expire(now) {
+        if let Some(until) = self.body.expire(now) {
             self.booted_at = until;
             self.reports = Grid::new(Self::REPORT_PERIOD, until);
         }
@@ -380,8 +380,8 @@ impl XbotSim {
     }
 
     fn on_frame(&mut self, now: Timestamp, frame: Frame) {
-        if self.chassis.is_booting() {
-            self.chassis.received.ignored += 1;
+        if self.body.is_booting() {
+            self.body.received.ignored += 1;
             return;
         }
         match frame {
@@ -411,17 +411,17 @@ impl XbotSim {
                 self.tilt_rad = s.tilt_rad;
             }
             Frame::Sensor(_) => {
-                self.chassis.received.not_for_it += 1;
+                self.body.received.not_for_it += 1;
                 return;
             }
         }
-        self.chassis.received.commands += 1;
+        self.body.received.commands += 1;
     }
 
     fn on_error(&mut self, error: &DecodeError) {
         match error {
-            DecodeError::BadChecksum { .. } => self.chassis.received.bad_checksums += 1,
-            _ => self.chassis.received.decode_errors += 1,
+            DecodeError::BadChecksum { .. } => self.body.received.bad_checksums += 1,
+            _ => self.body.received.decode_errors += 1,
         }
     }
 
@@ -434,7 +434,7 @@ impl XbotSim {
         self.pan_rad = 0.0;
         self.tilt_rad = 0.0;
         self.parser.clear();
-        if self.chassis.reboot(now) {
+        if self.body.reboot(now) {
             self.booted_at = now;
             self.reports = Grid::new(Self::REPORT_PERIOD, now);
         }
@@ -487,7 +487,7 @@ impl XbotSim {
     fn step(&mut self, dt: f64) {
         let blocked = self.drive_blocked();
         let wheels = self.wheels();
-        let (targets, tau) = match self.chassis.runaway_mps {
+        let (targets, tau) = match self.body.runaway_mps {
             // Every driven wheel at the runaway speed: straight ahead, past every limit.
             Some(runaway) => (
                 std::array::from_fn(|i| if i < wheels { runaway } else { 0.0 }),
@@ -503,8 +503,8 @@ impl XbotSim {
         let w1: [f64; 4] = std::array::from_fn(|i| first_order_lag(w0[i], targets[i], tau, dt));
         let mid = [0, 1, 2, 3].map(|i| 0.5 * (w0[i] + w1[i]));
         let (v, vy, w) = self.body(&mid);
-        self.chassis.pose.advance(v, vy, w, dt);
-        if !self.chassis.is_booting() {
+        self.body.pose.advance(v, vy, w, dt);
+        if !self.body.is_booting() {
             for (travel, speed) in self.wheel_travel_m.iter_mut().zip(mid) {
                 *travel += speed * dt;
             }
@@ -513,7 +513,7 @@ impl XbotSim {
         let (v1, _, _) = self.body(&w1);
         self.forward_accel_mps2 = (v1 - v0) / dt;
         for i in 0..4 {
-            let driving = i < wheels && self.powered && !self.chassis.motor_lost[i];
+            let driving = i < wheels && self.powered && !self.body.motor_lost[i];
             let accel = (w1[i] - w0[i]) / dt;
             self.motor_current_a[i] = if driving {
                 Self::MOTOR.magnitude_a(w1[i], accel, Self::MOTOR_HOLD_A)
@@ -524,7 +524,7 @@ impl XbotSim {
         self.wheel_mps = w1;
 
         // Lift.
-        let booted = !self.chassis.is_booting();
+        let booted = !self.body.is_booting();
         let gap = self.lift_target_pct - self.lift_pct;
         self.lift_moving = booted && self.lift_enabled && gap != 0.0;
         if self.lift_moving {
@@ -545,7 +545,7 @@ impl XbotSim {
 
         // Battery.
         let motors_a = self.motor_current_a.iter().sum::<f64>();
-        self.chassis
+        self.body
             .draw(Self::IDLE_CURRENT_A + motors_a + self.lift_current_a, dt);
     }
 
@@ -553,7 +553,7 @@ impl XbotSim {
     // Output.
 
     fn is_quiet(&self, now: Timestamp) -> bool {
-        self.chassis.is_quiet(now)
+        self.body.is_quiet(now)
     }
 
     /// Queues a report in chunks; the injected faults it carries count when its last chunk
@@ -569,10 +569,10 @@ impl XbotSim {
         };
         let last = chunks.pop();
         for chunk in chunks {
-            self.chassis.outbox.push(chunk);
+            self.body.outbox.push(chunk);
         }
         if let Some(chunk) = last {
-            self.chassis.outbox.push_injected(chunk, injected);
+            self.body.outbox.push_injected(chunk, injected);
         }
     }
 
@@ -612,7 +612,7 @@ impl XbotSim {
         let gyro_limit = (498.0f64).to_radians();
         let stamp_us = now.saturating_since(self.booted_at).as_micros() % 65_536;
         SensorReport {
-            battery_voltage_v: self.chassis.battery_voltage_v().min(99.99),
+            battery_voltage_v: self.body.battery_voltage_v().min(99.99),
             ir_m: Self::ranges(self.obstacle_behind_m, Self::NOTHING_SEEN_IR_M),
             ultrasonic_m: Self::ranges(self.obstacle_ahead_m, self.nothing_seen_ultrasonic_m()),
             motor_current_a: self.motor_current_a,
@@ -626,14 +626,14 @@ impl XbotSim {
             ],
             gyro_radps: [0.0, 0.0, w.clamp(-gyro_limit, gyro_limit)],
             mag_gauss: [
-                Self::MAG_HORIZONTAL_GAUSS * self.chassis.pose.yaw_rad.cos(),
-                -Self::MAG_HORIZONTAL_GAUSS * self.chassis.pose.yaw_rad.sin(),
+                Self::MAG_HORIZONTAL_GAUSS * self.body.pose.yaw_rad.cos(),
+                -Self::MAG_HORIZONTAL_GAUSS * self.body.pose.yaw_rad.sin(),
                 Self::MAG_VERTICAL_GAUSS,
             ],
             temperature_c: Self::IMU_TEMPERATURE_C,
             roll_rad: 0.0,
             pitch_rad: 0.0,
-            yaw_rad: self.chassis.pose.yaw_rad,
+            yaw_rad: self.body.pose.yaw_rad,
             // Below 65536: the cast is exact.
             sensor_stamp_us: stamp_us as u16,
         }
@@ -648,7 +648,7 @@ impl XbotSim {
             // Every value is kept inside its wire range; this is a bug guard.
             return;
         };
-        if self.chassis.take_corruption() {
+        if self.body.take_corruption() {
             self.reports_corrupted += 1;
             if let Some(checksum) = bytes.last_mut() {
                 *checksum ^= 0xFF;
@@ -668,7 +668,7 @@ impl Firmware for XbotSim {
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
         let Rx::Bytes(bytes) = rx else {
-            self.chassis.received.decode_errors += 1;
+            self.body.received.decode_errors += 1;
             return;
         };
         // A booting board obeys nothing: `on_frame` counts what it ignores.
@@ -684,28 +684,28 @@ impl Firmware for XbotSim {
 
     fn handle_timeout(&mut self, now: Timestamp) {
         self.expire(now);
-        if !self.chassis.is_booting() && self.reports.serve_due(now) {
+        if !self.body.is_booting() && self.reports.serve_due(now) {
             self.send_report(now, InjectedCounts::default());
         }
-        if self.chassis.flood_due(now).is_some() && !self.chassis.is_booting() {
+        if self.body.flood_due(now).is_some() && !self.body.is_booting() {
             self.send_report(now, InjectedCounts::FLOOD);
         }
     }
 
     fn poll_transmit(&mut self, _now: Timestamp) -> Option<WireItem> {
-        self.chassis.poll_transmit()
+        self.body.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
-        let reports = (!self.chassis.is_booting()).then_some(self.reports.next());
-        [self.heartbeat_deadline(), self.chassis.poll_timeout()]
+        let reports = (!self.body.is_booting()).then_some(self.reports.next());
+        [self.heartbeat_deadline(), self.body.poll_timeout()]
             .into_iter()
             .fold(reports, earliest)
     }
 
     fn inject(&mut self, now: Timestamp, injection: Injection) -> bool {
         self.expire(now);
-        match self.chassis.inject(now, injection) {
+        match self.body.inject(now, injection) {
             Applied::Condition | Applied::Done => {}
             Applied::Refused => return false,
             Applied::Robot(Injection::Reboot) => self.reboot(now),
@@ -728,12 +728,12 @@ impl Firmware for XbotSim {
             linear_mps: linear,
             lateral_mps: lateral,
             angular_radps: angular,
-            control_mode: if self.powered && !self.chassis.is_booting() {
+            control_mode: if self.powered && !self.body.is_booting() {
                 ControlMode::COMMAND
             } else {
                 ControlMode::STANDBY
             },
-            ..self.chassis.truth()
+            ..self.body.truth()
         }
     }
 }

@@ -2,8 +2,8 @@
 //! injected into it, the boot, the battery and its charge, the physics clock and the true pose, a
 //! runaway speed loop, lost motor drivers, and the counts of what it received.
 //!
-//! Each simulated firmware embeds one [`Chassis`] and hands it every [`Injection`] first
-//! ([`Chassis::inject`]); what only one robot has (its RC authority, bumper, E-stop switch,
+//! Each simulated firmware embeds one [`SimBody`] and hands it every [`Injection`] first
+//! ([`SimBody::inject`]); what only one robot has (its RC authority, bumper, E-stop switch,
 //! range sensors, what a reboot resets) comes back to the robot ([`Applied::Robot`]).
 
 use std::time::Duration;
@@ -65,7 +65,7 @@ impl Item for Vec<u8> {
 /// What one robot's simulated chassis is, in the terms every chassis shares: which of the shared
 /// injections it takes, how long it boots, its battery and what its electronics draw.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct ChassisSpec {
+pub(crate) struct SimBodySpec {
     /// Motor drivers [`Injection::MotorDriverLoss`] may take away, numbered from 1 (0: none).
     pub(crate) motors: usize,
     /// Most extra frames a second [`Injection::Flood`] adds (0: the robot takes no flood).
@@ -80,7 +80,7 @@ pub(crate) struct ChassisSpec {
     pub(crate) idle_current_a: f64,
 }
 
-/// What [`Chassis::inject`] made of an injection.
+/// What [`SimBody::inject`] made of an injection.
 #[derive(Debug, Clone, PartialEq)]
 #[must_use]
 pub(crate) enum Applied {
@@ -114,12 +114,12 @@ pub(crate) struct Received {
 /// runaway and lost motor drivers are test conditions: they survive a reboot; the pose and the
 /// battery are physical and survive it too; the counts are the observer's and keep counting.
 #[derive(Debug, Clone)]
-pub(crate) struct Chassis<T> {
+pub(crate) struct SimBody<T> {
     /// What the chassis has for transmission, with the silence window and the injected faults
     /// that left.
     pub(crate) outbox: Outbox<T>,
     /// State of charge, %: set by [`Injection::Battery`], drained by the robot's physics
-    /// ([`Chassis::draw`]).
+    /// ([`SimBody::draw`]).
     pub(crate) soc_pct: f64,
     /// The current drawn from the battery now, A (positive = discharging).
     pub(crate) pack_current_a: f64,
@@ -142,13 +142,13 @@ pub(crate) struct Chassis<T> {
     flood: Option<Flood>,
     /// Frames still to be sent with a corrupted checksum.
     corrupt_next: u32,
-    spec: ChassisSpec,
+    spec: SimBodySpec,
 }
 
-impl<T: Item> Chassis<T> {
+impl<T: Item> SimBody<T> {
     /// A chassis booted at `now`, standing at the origin with one full battery, nothing
     /// injected, nothing received.
-    pub(crate) fn new(spec: ChassisSpec, now: Timestamp) -> Self {
+    pub(crate) fn new(spec: SimBodySpec, now: Timestamp) -> Self {
         Self {
             outbox: Outbox::new(),
             soc_pct: 100.0,
@@ -226,7 +226,7 @@ impl<T: Item> Chassis<T> {
     }
 }
 
-impl Chassis<CanFrame> {
+impl SimBody<CanFrame> {
     /// A command frame a simulated CAN chassis received, decoded by `decode`. Serial bytes (the
     /// wrong medium) and frames that do not decode count as decode errors; a valid frame that
     /// `direction` says only a chassis sends (another node's feedback) counts as not for it.
@@ -252,7 +252,7 @@ impl Chassis<CanFrame> {
     }
 }
 
-impl<T> Chassis<T> {
+impl<T> SimBody<T> {
     /// Starts a reboot at `now`: counted, and what is queued is dropped. True when the boot is
     /// over at once (no boot time).
     pub(crate) fn reboot(&mut self, now: Timestamp) -> bool {
@@ -386,7 +386,7 @@ mod tests {
         resistance_ohm: 0.1,
     };
 
-    const CAN: ChassisSpec = ChassisSpec {
+    const CAN: SimBodySpec = SimBodySpec {
         motors: 4,
         max_flood_per_s: 1000,
         checksums: false,
@@ -395,23 +395,23 @@ mod tests {
         idle_current_a: 1.0,
     };
 
-    const SERIAL: ChassisSpec = ChassisSpec {
+    const SERIAL: SimBodySpec = SimBodySpec {
         motors: 2,
         max_flood_per_s: 100,
         checksums: true,
         ..CAN
     };
 
-    fn can() -> Chassis<CanFrame> {
-        Chassis::new(CAN, T0)
+    fn can() -> SimBody<CanFrame> {
+        SimBody::new(CAN, T0)
     }
 
-    fn serial() -> Chassis<Vec<u8>> {
-        Chassis::new(SERIAL, T0)
+    fn serial() -> SimBody<Vec<u8>> {
+        SimBody::new(SERIAL, T0)
     }
 
-    fn sent<T: Item>(chassis: &mut Chassis<T>) -> Vec<WireItem> {
-        std::iter::from_fn(|| chassis.poll_transmit()).collect()
+    fn sent<T: Item>(body: &mut SimBody<T>) -> Vec<WireItem> {
+        std::iter::from_fn(|| body.poll_transmit()).collect()
     }
 
     #[test]
@@ -474,8 +474,8 @@ mod tests {
         assert_eq!(s.inject(T0, soc), Applied::Refused);
         let runaway = Injection::Runaway(Some(MAX_RUNAWAY_MPS + 1.0));
         assert_eq!(s.inject(T0, runaway), Applied::Refused);
-        let mut none = Chassis::<CanFrame>::new(
-            ChassisSpec {
+        let mut none = SimBody::<CanFrame>::new(
+            SimBodySpec {
                 motors: 0,
                 max_flood_per_s: 0,
                 ..CAN
@@ -588,7 +588,7 @@ mod tests {
         let mut c = can();
         let flood = Injection::Flood { frames_per_s: 1000 };
         assert_eq!(c.inject(T0, flood), Applied::Done);
-        let kinds = |c: &mut Chassis<CanFrame>, from: u64| {
+        let kinds = |c: &mut SimBody<CanFrame>, from: u64| {
             (from..from + 4)
                 .map(|t| c.flood_due(T0 + ms(t)))
                 .collect::<Vec<_>>()
