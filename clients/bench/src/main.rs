@@ -28,7 +28,7 @@ mod zenoh;
 use baseline::{Load, Transport};
 use paths::{BusKind, LoopMode};
 use placement::Placement;
-use report::{Planned, Report, Row, path_rows, row_key};
+use report::{Leg, PathKind, Planned, Report, Row, path_rows, row_key};
 use stats::Latencies;
 
 #[derive(Debug, Parser)]
@@ -331,9 +331,10 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     let python = python::interpreter();
     let ros2 = ros2::interpreter();
     let mut expected: Vec<Planned> = Vec::new();
-    let mut plan_row = |path: &str, what: &str, mode: &str, placement: &str, asked: Option<u64>| {
-        expected.push(Planned::new(row_key(path, what, mode, placement), asked));
-    };
+    let mut plan_row =
+        |path: PathKind, what: &str, mode: &str, placement: &str, asked: Option<u64>| {
+            expected.push(Planned::new(row_key(path, what, mode, placement), asked));
+        };
     if !skip("baselines") {
         for (transport, placement, pace) in &baselines {
             // Back to back, both hops of a round count; paced, the ping's alone.
@@ -344,10 +345,22 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 ),
                 None => (transport.label().to_string(), 2 * plan.baseline_rounds),
             };
-            plan_row("baseline", &what, "-", placement.label(), Some(asked));
+            plan_row(
+                PathKind::Baseline,
+                &what,
+                "-",
+                placement.label(),
+                Some(asked),
+            );
         }
         for cpu in 0..placement::cpu_count() {
-            plan_row("baseline", report::STALLS, "-", &stall_placement(cpu), None);
+            plan_row(
+                PathKind::Baseline,
+                report::STALLS,
+                "-",
+                &stall_placement(cpu),
+                None,
+            );
         }
     }
     if !skip("paths") {
@@ -378,22 +391,34 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     preemptions,
                 ),
             ] {
-                plan_row("baseline", &what, "-", placement, Some(asked));
+                plan_row(PathKind::Baseline, &what, "-", placement, Some(asked));
             }
             if commands > 0 {
-                plan_row("command", &label, mode, placement, Some(commands));
+                plan_row(PathKind::Command, &label, mode, placement, Some(commands));
                 let what = format!("{label}: command");
-                plan_row("in-service", &what, mode, placement, Some(commands));
+                plan_row(PathKind::InService, &what, mode, placement, Some(commands));
             }
-            plan_row("state", &label, mode, placement, Some(plan.states));
+            plan_row(PathKind::State, &label, mode, placement, Some(plan.states));
             let what = format!("{label}: state");
-            plan_row("in-service", &what, mode, placement, Some(plan.states));
-            plan_row("preemption", &label, mode, placement, Some(preemptions));
+            plan_row(
+                PathKind::InService,
+                &what,
+                mode,
+                placement,
+                Some(plan.states),
+            );
+            plan_row(
+                PathKind::Preemption,
+                &label,
+                mode,
+                placement,
+                Some(preemptions),
+            );
             if (r.robot, r.bus, r.mode) == SCRIPTS_BESIDE {
                 if python.is_some() {
                     for (p, asked) in [("state", plan.states), ("command", commands)] {
                         let what = format!("{label}: {p}");
-                        plan_row("python", &what, mode, placement, Some(asked));
+                        plan_row(PathKind::Python, &what, mode, placement, Some(asked));
                     }
                 }
                 if ros2.is_some() {
@@ -402,23 +427,29 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                         ("frame read → odom", DDS_OUT, plan.states),
                     ] {
                         let what = format!("{label}: {what}");
-                        plan_row("ros2", &what, mode, placement, Some(asked));
+                        plan_row(PathKind::Ros2, &what, mode, placement, Some(asked));
                         let hop = format!("{dds}, beside {label}");
-                        plan_row("baseline", &hop, "-", placement, Some(asked));
+                        plan_row(PathKind::Baseline, &hop, "-", placement, Some(asked));
                     }
                 }
             }
         }
         let cross = Placement::CrossCpu.label();
         let asked = Some(plan.commands);
-        plan_row("command", report::DEFAULT_CONFIG_ROW, "event", cross, asked);
+        plan_row(
+            PathKind::Command,
+            report::DEFAULT_CONFIG_ROW,
+            "event",
+            cross,
+            asked,
+        );
         let what = format!("{}: command", report::DEFAULT_CONFIG_ROW);
-        plan_row("in-service", &what, "event", cross, asked);
+        plan_row(PathKind::InService, &what, "event", cross, asked);
     }
     if !skip("fanout") {
         for n in &plan.fanout {
             let what = format!("titan sim → {n} processes");
-            plan_row("fan-out", &what, "event", "unpinned", None);
+            plan_row(PathKind::FanOut, &what, "event", "unpinned", None);
         }
     }
     if !skip("zenoh") && zenoh::possible() {
@@ -427,14 +458,14 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             (zenoh::RAW_COMMAND, plan.commands),
             (zenoh::RAW_STATE, plan.states),
         ] {
-            plan_row("baseline", what, "-", placement, Some(asked));
+            plan_row(PathKind::Baseline, what, "-", placement, Some(asked));
         }
         for (what, asked) in [
             (zenoh::COMMAND, plan.commands),
             (zenoh::STATE, plan.states),
             (zenoh::BRIDGE, plan.states),
         ] {
-            plan_row("zenoh", what, "event", placement, Some(asked));
+            plan_row(PathKind::Zenoh, what, "event", placement, Some(asked));
         }
     }
     report.expected = expected;
@@ -470,7 +501,16 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             let shape = pace.map_or(baseline::Rounds::BackToBack, baseline::Rounds::Paced);
             let l = baseline::run(transport, placement, rounds, shape, None, &prefix, &dir)?
                 .all_pings();
-            let mut r = Row::new("baseline", what, "-", placement.label(), l, 0);
+            let mut r = Row::new(
+                PathKind::Baseline,
+                Leg::Hop,
+                "",
+                what,
+                "-",
+                placement.label(),
+                l,
+                0,
+            );
             r.conditions = Some(match pace {
                 Some(p) => format!(
                     "one ping every {}, receiver otherwise idle (cold)",
@@ -491,7 +531,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             });
             let conditions = stalls.conditions(cpu);
             let mut r = Row::new(
-                "baseline",
+                PathKind::Baseline,
+                Leg::Stalls,
+                "",
                 report::STALLS.into(),
                 "-",
                 &stall_placement(cpu),
@@ -662,11 +704,29 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             )?;
             let placement = r.placement.label();
             // This run's rows, at its mode and placement; its baselines', at its placement.
-            let run_row = |path: &str, what: String, latencies: Latencies, missed: u64| {
-                Row::new(path, what, r.mode.arg(), placement, latencies, missed)
+            let run_row = |path, leg, what: String, latencies: Latencies, missed: u64| {
+                Row::new(
+                    path,
+                    leg,
+                    &label,
+                    what,
+                    r.mode.arg(),
+                    placement,
+                    latencies,
+                    missed,
+                )
             };
             let baseline_row = |what: String, latencies: Latencies| {
-                Row::new("baseline", what, "-", placement, latencies, 0)
+                Row::new(
+                    PathKind::Baseline,
+                    Leg::Hop,
+                    &label,
+                    what,
+                    "-",
+                    placement,
+                    latencies,
+                    0,
+                )
             };
             // The feed runs where chassisd put its simulated chassis (`baseline::feed_cpu`).
             let (feed_where, fifo) = match scheduling.fifo() {
@@ -798,7 +858,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                     report.rows.push(r);
                 }
                 let mut command_row = run_row(
-                    "ros2",
+                    PathKind::Ros2,
+                    Leg::CmdVel,
                     format!("{label}: cmd_vel → frame"),
                     dds.command,
                     dds.missed,
@@ -806,17 +867,17 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 command_row.baseline = reference(&dds_in);
                 // The DDS hop in, then the service's command path.
                 command_row.contains = vec![
-                    row_key("baseline", &dds_in, "-", placement),
-                    row_key("command", &label, r.mode.arg(), placement),
+                    row_key(PathKind::Baseline, &dds_in, "-", placement),
+                    row_key(PathKind::Command, &label, r.mode.arg(), placement),
                 ];
                 report.rows.push(command_row);
-                let mut state_row =
-                    run_row("ros2", format!("{label}: frame read → odom"), dds.state, 0);
+                let what = format!("{label}: frame read → odom");
+                let mut state_row = run_row(PathKind::Ros2, Leg::Odom, what, dds.state, 0);
                 state_row.baseline = reference(&dds_out);
                 // The service's state path, then the DDS hop out.
                 state_row.contains = vec![
-                    row_key("state", &label, r.mode.arg(), placement),
-                    row_key("baseline", &dds_out, "-", placement),
+                    row_key(PathKind::State, &label, r.mode.arg(), placement),
+                    row_key(PathKind::Baseline, &dds_out, "-", placement),
                 ];
                 report.rows.push(state_row);
             }
@@ -824,18 +885,22 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 .as_ref()
                 .map(|py| parts::python_state(&py.state_stamps, &passes));
             if let Some(py) = python {
-                let mut state_row = run_row("python", format!("{label}: state"), py.state, 0);
+                let what = format!("{label}: state");
+                let mut state_row = run_row(PathKind::Python, Leg::State, what, py.state, 0);
                 state_row.dropped = py.dropped;
                 report.rows.push(state_row);
                 report.rows.push(run_row(
-                    "python",
+                    PathKind::Python,
+                    Leg::Command,
                     format!("{label}: command"),
                     py.command,
                     py.missed,
                 ));
             }
-            let run_parts = |path: &str, split| report::Parts {
+            let run_parts = |path: &str, of, split| report::Parts {
                 path: path.into(),
+                of,
+                run: label.clone(),
                 what: label.clone(),
                 mode: r.mode.arg().into(),
                 placement: placement.into(),
@@ -844,35 +909,61 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             if let Some(figures) = &command {
                 report.parts.push(run_parts(
                     "command",
+                    (PathKind::Command, Leg::Command),
                     parts::command(&figures.samples, &passes, r.mode == LoopMode::Spin),
                 ));
             }
-            report
-                .parts
-                .push(run_parts("state", parts::state(&state.samples, &passes)));
+            report.parts.push(run_parts(
+                "state",
+                (PathKind::State, Leg::State),
+                parts::state(&state.samples, &passes),
+            ));
             if let Some(odom) = odom_parts {
-                report
-                    .parts
-                    .push(run_parts("ros2: frame read → odom", odom));
+                report.parts.push(run_parts(
+                    "ros2: frame read → odom",
+                    (PathKind::Ros2, Leg::Odom),
+                    odom,
+                ));
             }
             if let Some(python) = python_parts {
-                report.parts.push(run_parts(report::PYTHON_PARTS, python));
+                report.parts.push(run_parts(
+                    report::PYTHON_PARTS,
+                    (PathKind::Python, Leg::State),
+                    python,
+                ));
             }
             if let Some(figures) = command {
-                let command_row =
-                    run_row("command", label.clone(), figures.latencies, figures.missed);
+                let command_row = run_row(
+                    PathKind::Command,
+                    Leg::Command,
+                    label.clone(),
+                    figures.latencies,
+                    figures.missed,
+                );
                 let baseline = reference(&paced_what);
                 report
                     .rows
                     .extend(path_rows(command_row, baseline, figures.in_service));
             }
-            let mut state_row = run_row("state", label.clone(), state.latencies, 0);
+            let mut state_row = run_row(
+                PathKind::State,
+                Leg::State,
+                label.clone(),
+                state.latencies,
+                0,
+            );
             state_row.dropped = state.dropped;
             let baseline = reference(&published_what);
             report
                 .rows
                 .extend(path_rows(state_row, baseline, state.in_service));
-            let mut preempt_row = run_row("preemption", label, preempt, preempt_missed);
+            let mut preempt_row = run_row(
+                PathKind::Preemption,
+                Leg::Stop,
+                label.clone(),
+                preempt,
+                preempt_missed,
+            );
             // The stop follows a teleop request at once: the loop is awake, as in a
             // back-to-back ping-pong.
             preempt_row.baseline = warm;
@@ -911,7 +1002,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         drop(service);
         let label = bus_label(RobotKind::Titan, BusKind::Sim);
         let mut default_row = Row::new(
-            "command",
+            PathKind::Command,
+            Leg::FirstFrameToward,
+            &label,
             report::DEFAULT_CONFIG_ROW.to_string(),
             LoopMode::Event.arg(),
             placement.label(),
@@ -925,7 +1018,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         ));
         report.rows.push(default_row);
         report.rows.push(Row::new(
-            "in-service",
+            PathKind::InService,
+            Leg::FirstFrameToward,
+            &label,
             format!("{}: command", report::DEFAULT_CONFIG_ROW),
             LoopMode::Event.arg(),
             placement.label(),
@@ -948,7 +1043,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             )?;
             let l = fanout::run(&mut robot, &service.name, &prefix, n, plan.fanout_seconds)?;
             report.rows.push(Row::new(
-                "fan-out",
+                PathKind::FanOut,
+                Leg::FanOut,
+                &bus_label(RobotKind::Titan, BusKind::Sim),
                 format!("titan sim → {n} processes"),
                 "event",
                 "unpinned",
@@ -970,6 +1067,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 plan.states,
             )?;
             let placement = "2 netns, veth";
+            // chassis-zenoh bridges the TITAN on the simulated bus.
+            let run = bus_label(RobotKind::Titan, BusKind::Sim);
             let command_count = z.command.latencies.count();
             let state_count = z.state.count();
             for (what, count, hops, pace) in [
@@ -993,7 +1092,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
                 ),
             ] {
                 let mut raw = Row::new(
-                    "baseline",
+                    PathKind::Baseline,
+                    Leg::Hop,
+                    &run,
                     what.into(),
                     "-",
                     placement,
@@ -1010,7 +1111,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             }
             let reference = Some(format!("{}, {placement}", zenoh::RAW_COMMAND));
             let mut command = Row::new(
-                "zenoh",
+                PathKind::Zenoh,
+                Leg::RemoteCommand,
+                &run,
                 zenoh::COMMAND.into(),
                 "event",
                 placement,
@@ -1020,11 +1123,22 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             command.baseline = reference.clone();
             report.rows.push(command);
             let reference = Some(format!("{}, {placement}", zenoh::RAW_STATE));
-            let mut state = Row::new("zenoh", zenoh::STATE.into(), "event", placement, z.state, 0);
+            let mut state = Row::new(
+                PathKind::Zenoh,
+                Leg::RemoteState,
+                &run,
+                zenoh::STATE.into(),
+                "event",
+                placement,
+                z.state,
+                0,
+            );
             state.baseline = reference.clone();
             report.rows.push(state);
             let mut bridge = Row::new(
-                "zenoh",
+                PathKind::Zenoh,
+                Leg::RemoteBridge,
+                &run,
                 zenoh::BRIDGE.into(),
                 "event",
                 placement,
@@ -1035,6 +1149,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             report.rows.push(bridge);
             report.parts.push(report::Parts {
                 path: report::ZENOH_PARTS.into(),
+                of: (PathKind::Zenoh, Leg::RemoteState),
+                run,
                 what: zenoh::STATE.into(),
                 mode: "event".into(),
                 placement: placement.into(),
