@@ -41,6 +41,7 @@ V2_MODELS = [
     "bunker",
     "ranger-mini",
     "ranger-mini-v1",
+    "tracer-mini",
 ]
 
 

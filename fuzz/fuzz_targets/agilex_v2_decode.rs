@@ -7,7 +7,7 @@ use chassis_protocols::agilex_v2::profile::{BmsAlarmLayout, RcStickOrder};
 use chassis_protocols::agilex_v2::{self, V2Model, V2Profile};
 use libfuzzer_sys::fuzz_target;
 
-const MODELS: [V2Model; 9] = V2Model::ALL;
+const MODELS: &[V2Model] = &V2Model::ALL;
 
 /// Low nibble: the model; high bits flip one doubtful choice each.
 fn profile(choice: u8) -> V2Profile {

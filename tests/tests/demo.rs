@@ -5,6 +5,7 @@
 
 use std::time::{Duration, Instant};
 
+use chassis_protocols::{Protocol, RobotKind};
 use chassis_tests::*;
 use nix::sys::signal::Signal;
 
@@ -113,7 +114,7 @@ fn chassis_demo_with_foxglove_but_no_bridge_says_how_to_build_it_and_starts_noth
 /// which the planner, which keeps asking, rightly never drives again by itself.
 #[test]
 fn chassis_demo_runs_every_agilex_robot_in_each_protocol() {
-    const ROBOTS: [(&str, Option<&str>); 9] = [
+    const ROBOTS: [(&str, Option<&str>); 10] = [
         ("scout", None),
         ("scout-mini", Some("v2")),
         ("hunter", None),
@@ -123,7 +124,19 @@ fn chassis_demo_runs_every_agilex_robot_in_each_protocol() {
         ("ranger-mini", None),
         ("scout", Some("v1")),
         ("bunker", Some("v1")),
+        ("tracer-mini", None),
     ];
+    // Every robot of the registry that speaks V2 is in the list: a new one is not left out.
+    for kind in RobotKind::ALL {
+        let v2 = kind
+            .entry()
+            .profiles()
+            .any(|p| p.protocol() == Some(Protocol::V2));
+        assert!(
+            !v2 || ROBOTS.iter().any(|(robot, _)| *robot == kind.name()),
+            "{kind} speaks V2 and is not in ROBOTS"
+        );
+    }
     let mut env = Env::new("demo-v2");
     let tag = std::process::id() % 10_000;
     for (group, robots) in ROBOTS.chunks(3).enumerate() {

@@ -3,7 +3,20 @@
 //! `chassis encode` prints exactly the vector's bytes for the commands it can express. The V1
 //! SCOUT MINI example still decodes as V1 (count and checksum) without `--protocol`.
 
+use chassis_protocols::RobotKind;
 use chassis_tests::Env;
+
+/// Each AgileX protocol (`v1`, `v2`) each robot of the registry speaks, by the robot's name.
+fn registry_protocols() -> Vec<(&'static str, &'static str)> {
+    RobotKind::ALL
+        .into_iter()
+        .flat_map(|kind| {
+            kind.entry()
+                .profiles()
+                .filter_map(move |p| Some((kind.name(), p.protocol()?.name())))
+        })
+        .collect()
+}
 
 /// One vector: robot (and protocol flag), frame, fields `chassis decode` must report, and the
 /// `chassis encode` arguments that print the same frame (empty: a report, or no such command).
@@ -256,15 +269,23 @@ fn chassis_detect_classifies_the_v1_example_as_v1_and_the_v2_capture_as_v2() {
 #[test]
 fn every_v2_robot_names_the_estop_and_its_own_fault_bits() {
     let env = Env::new("protocol-v2-names");
-    let cases: [(&str, &str, &str); 7] = [
+    let cases: [(&str, &str, &str); 8] = [
         ("scout", "211#0001010000040000", "rc_signal_lost"),
         ("scout-mini", "211#0001010000040000", "rc_signal_lost"),
         ("bunker", "211#0001010000040000", "rc_signal_lost"),
         ("ranger-mini", "211#0001010000040000", "rc_signal_lost"),
         ("tracer", "211#0001010000040000", "rc_link_lost"),
+        ("tracer-mini", "211#0001010000040000", "rc_link_lost"),
         ("hunter-se", "211#0001010000040000", "rc_link_lost"),
         ("hunter", "211#0001010004000000", "rc_link_lost"),
     ];
+    // Every robot of the registry that speaks V2 has its case: a new one is not left out.
+    for (robot, protocol) in registry_protocols() {
+        assert!(
+            protocol != "v2" || cases.iter().any(|(r, _, _)| *r == robot),
+            "{robot} speaks V2 and has no case"
+        );
+    }
     for (robot, rc_lost, name) in cases {
         let decode = |frame: &str| {
             env.chassis_ok(&["decode", "--robot", robot, "--protocol", "v2", frame])
@@ -297,7 +318,7 @@ fn every_v2_robot_names_the_estop_and_its_own_fault_bits() {
 #[test]
 fn every_agilex_robot_encodes_and_decodes_in_each_of_its_protocols() {
     let env = Env::new("protocol-each");
-    let cases: [(&str, &str, &[&str], &str); 12] = [
+    let cases: [(&str, &str, &[&str], &str); 13] = [
         ("scout-mini", "v1", &["--vx", "0.5"], r#""linear_mps":0.5"#),
         (
             "scout-mini",
@@ -337,6 +358,12 @@ fn every_agilex_robot_encodes_and_decodes_in_each_of_its_protocols() {
             &["--vx", "0.5", "--wz", "0.2"],
             r#""angular_radps":0.2"#,
         ),
+        (
+            "tracer-mini",
+            "v2",
+            &["--vx", "0.5", "--wz", "0.2"],
+            r#""angular_radps":0.2"#,
+        ),
         ("ranger-mini", "v2", &["--vx", "0.5"], r#""linear_mps":0.5"#),
         ("ranger-mini", "v2", &["--vy", "0.3"], r#""linear_mps":0.3"#),
         (
@@ -346,6 +373,15 @@ fn every_agilex_robot_encodes_and_decodes_in_each_of_its_protocols() {
             r#""angular_radps":0.5"#,
         ),
     ];
+    // Every protocol of every AgileX robot of the registry has its case.
+    for (robot, protocol) in registry_protocols() {
+        assert!(
+            cases
+                .iter()
+                .any(|(r, p, _, _)| (*r, *p) == (robot, protocol)),
+            "{robot} speaks {protocol} and has no case"
+        );
+    }
     for (robot, protocol, velocity, expected) in cases {
         let mut args = vec![
             "encode",

@@ -31,6 +31,7 @@ REGISTRY = [
     "tracer",
     "bunker",
     "ranger-mini",
+    "tracer-mini",
 ]
 
 # What robot_state_publisher offers and RViz's RobotModel asks for; tf2's static QoS.

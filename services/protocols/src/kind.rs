@@ -27,11 +27,13 @@ pub enum RobotKind {
     Bunker = 8,
     /// AgileX RANGER MINI 2.0 / 3.0 (1.0 by its profile's `model`).
     RangerMini = 9,
+    /// AgileX TRACER MINI.
+    TracerMini = 10,
 }
 
 impl RobotKind {
     /// Every robot of the registry.
-    pub const ALL: [RobotKind; 9] = [
+    pub const ALL: [RobotKind; 10] = [
         RobotKind::Titan,
         RobotKind::ScoutMini,
         RobotKind::Xbot,
@@ -41,6 +43,7 @@ impl RobotKind {
         RobotKind::Tracer,
         RobotKind::Bunker,
         RobotKind::RangerMini,
+        RobotKind::TracerMini,
     ];
 
     /// The kind's id on the wire (`ChassisState::robot`).
@@ -66,6 +69,7 @@ impl RobotKind {
             RobotKind::Tracer => "tracer",
             RobotKind::Bunker => "bunker",
             RobotKind::RangerMini => "ranger-mini",
+            RobotKind::TracerMini => "tracer-mini",
         }
     }
 }

@@ -10,7 +10,9 @@
 //! Adding a robot of an existing family: a variant of [`RobotKind`] (`kind.rs`; its number is
 //! what `ChassisState::robot` carries, its name the `--robot` spelling), its entry here, and its
 //! model in the family's profile where the family has models. The registry-wide tests
-//! (`registry::tests`) and the family conformance suite walk every entry.
+//! (`registry::tests`) and the family conformance suite walk every entry; the whole recipe, with
+//! the tests that ask for a new robot by name, is `docs/ARCHITECTURE.md`'s "Adding a robot,
+//! adding a family".
 
 use chassis_interfaces::{
     BusKind, JointSource, Kinematics, OdometryVariance, RobotDescription, SensorKind, WireProtocol,
@@ -380,6 +382,23 @@ static RANGER_MINI: RobotEntry = RobotEntry {
     profiles: &[|| v2(V2Model::RangerMini)],
 };
 
+/// The TRACER MINI, on the V2 family's bus (`PROTOCOLS-V2` §1: CAN 500 kbit/s). Its manual's CAN
+/// pages (TMM, §3.5) give no outside dimensions and no wheel figures, so its outline is drawn
+/// around the 0.5 × 0.5 m wheelbase and track its profile takes from the TRACER's (placeholders
+/// no manual gives), at the TRACER's height (TRM §1.2, 163 mm): a stated guess until a TRACER
+/// MINI specification table is at hand.
+static TRACER_MINI: RobotEntry = RobotEntry {
+    kind: RobotKind::TracerMini,
+    display_name: "AgileX TRACER MINI",
+    bus: AGILEX_CAN,
+    kinematics: Kinematics::DIFFERENTIAL,
+    outline: around_wheels(0.5, 0.5, 0.163),
+    sensors: &[],
+    joints: &[],
+    odometry_variance: STATED_VARIANCE,
+    profiles: &[|| v2(V2Model::TracerMini)],
+};
+
 impl RobotKind {
     /// The robot's registry entry.
     pub fn entry(self) -> &'static RobotEntry {
@@ -393,6 +412,7 @@ impl RobotKind {
             RobotKind::Tracer => &TRACER,
             RobotKind::Bunker => &BUNKER,
             RobotKind::RangerMini => &RANGER_MINI,
+            RobotKind::TracerMini => &TRACER_MINI,
         }
     }
 

@@ -927,7 +927,7 @@ fn every_agilex_v2_robot_drives_and_stops_through_the_engine() {
         .into_iter()
         .filter(|robot| robot.entry().defaults().protocol() == Some(Protocol::V2))
         .collect();
-    assert_eq!(v2_robots.len(), 6, "{v2_robots:?}");
+    assert_eq!(v2_robots.len(), 7, "{v2_robots:?}");
     for robot in v2_robots {
         let mut rig = ready_for(robot, unsmoothed(), 60);
         rig.publish_every("teleop", twist(0.3), ms(50), at(2000));

@@ -50,6 +50,7 @@ const SCOUT_V13: &[Row] = &[
     (0x0400, "rc_link_lost", F::RC_LINK_LOST),
 ];
 
+/// TRACER MINI (TMM p18), which the TRACER follows too.
 const TRACER_MINI: &[Row] = &[
     (0x0200, "accessory_12v_over_current", F::OVER_CURRENT),
     (0x8000, "anti_collision_strip", F::BUMPER),
@@ -135,8 +136,8 @@ fn v2_robots() -> Vec<(RobotKind, V2Profile)> {
         .collect();
     assert_eq!(
         robots.len(),
-        7,
-        "HUNTER 2.0, HUNTER SE, TRACER, BUNKER, RANGER MINI, SCOUT 2.0, SCOUT MINI V2"
+        8,
+        "HUNTER 2.0, HUNTER SE, TRACER, TRACER MINI, BUNKER, RANGER MINI, SCOUT 2.0, SCOUT MINI V2"
     );
     robots
 }
@@ -147,7 +148,7 @@ fn table_of(robot: RobotKind) -> &'static [Row] {
         RobotKind::Scout | RobotKind::ScoutMini | RobotKind::Bunker | RobotKind::RangerMini => SDK,
         RobotKind::Hunter => HUNTER_2,
         RobotKind::HunterSe => HUNTER_SE,
-        RobotKind::Tracer => TRACER_MINI,
+        RobotKind::Tracer | RobotKind::TracerMini => TRACER_MINI,
         other => panic!("{other:?} does not speak V2"),
     }
 }

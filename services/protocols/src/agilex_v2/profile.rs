@@ -23,6 +23,8 @@ pub enum V2Model {
     HunterSe,
     /// TRACER: two-wheel differential.
     Tracer,
+    /// TRACER MINI: differential, (v, ω) in 0x111 like the TRACER (`PROTOCOLS-V2` §3.5, TMM).
+    TracerMini,
     /// BUNKER / BUNKER MINI: tracked, differential.
     Bunker,
     /// RANGER MINI 2.0 / 3.0: four-wheel independent steering (dual Ackermann, crab, spin, park).
@@ -32,8 +34,9 @@ pub enum V2Model {
 }
 
 impl V2Model {
-    /// Every V2 model.
-    pub const ALL: [V2Model; 9] = [
+    /// Every V2 model (a new one last: the fuzz target's leading byte picks a model by its place
+    /// here).
+    pub const ALL: [V2Model; 10] = [
         V2Model::Scout,
         V2Model::ScoutMini,
         V2Model::ScoutMiniOmni,
@@ -43,6 +46,7 @@ impl V2Model {
         V2Model::Bunker,
         V2Model::RangerMini,
         V2Model::RangerMiniV1,
+        V2Model::TracerMini,
     ];
 
     /// The robot of this model (a variant is its robot's).
@@ -53,6 +57,7 @@ impl V2Model {
             V2Model::Hunter => RobotKind::Hunter,
             V2Model::HunterSe => RobotKind::HunterSe,
             V2Model::Tracer => RobotKind::Tracer,
+            V2Model::TracerMini => RobotKind::TracerMini,
             V2Model::Bunker => RobotKind::Bunker,
             V2Model::RangerMini | V2Model::RangerMiniV1 => RobotKind::RangerMini,
         }
@@ -643,6 +648,25 @@ impl V2Profile {
                 rear_light: false,
                 under_voltage_alarm_v: 22.5,
                 ..base
+            },
+            // TRACER MINI. From TMM (the manual's CAN pages 17-22, as `PROTOCOLS-V2` §3.5 reads
+            // them): 0x111 valid ±1800 mm/s and ±1000 × 0.001 rad/s; 0x211 b1 0 standby /
+            // 1 command / 2 APP / 3 RC (⚠ D-2, `ModeCodes::SDK`); its own fault table (§2.3.2,
+            // TMM p18, ⚠ D-3); standby at power-up (§1, TMM p22, ⚠ D-22); 0x211 every 20 ms
+            // (⚠ D-8). Those pages give no dimensions, drives, lights or battery levels, so the
+            // TRACER's values stand for them: two drives, the front light only, no motor
+            // position (⚠ D-21), the 22.5 V alarm (TRM table 3.2), the family's 22 V failure
+            // level, and the 0.5 × 0.5 m wheelbase and track, a placeholder no manual gives.
+            V2Model::TracerMini => V2Profile {
+                model,
+                kinematics: Kinematics::Differential,
+                max_linear_mps: 1.8,
+                max_angular_radps: 1.0,
+                status_period_ms: 20,
+                mode_codes: ModeCodes::SDK,
+                fault_map: FaultMap::TracerMini,
+                starts_in_standby: true,
+                ..V2Profile::for_model(V2Model::Tracer)
             },
             V2Model::Bunker => V2Profile {
                 wheelbase_m: 0.5,

@@ -53,7 +53,8 @@ fn every_protocol_model_belongs_to_one_robot() {
             | V2Model::Tracer
             | V2Model::Bunker
             | V2Model::RangerMini
-            | V2Model::RangerMiniV1 => model,
+            | V2Model::RangerMiniV1
+            | V2Model::TracerMini => model,
         }
     }
     for model in V2Model::ALL.map(listed) {
