@@ -19,9 +19,13 @@ use crate::procs::{Children, sibling};
 
 #[derive(Debug, Args)]
 pub struct DemoArgs {
-    /// The simulated robot: titan, scout-mini, xbot, scout, hunter, hunter-se, tracer, bunker or
-    /// ranger-mini.
-    #[arg(long, default_value = "titan", value_parser = crate::parse_robot)]
+    // The simulated robot, one of the registry's.
+    #[arg(
+        long,
+        default_value = "titan",
+        value_parser = crate::parse_robot,
+        help = format!("The simulated robot: {}.", chassis_protocols::kind::names().join(", "))
+    )]
     pub robot: RobotKind,
     /// AgileX wire protocol of the simulated chassis, v1 or v2 (default: the robot's own; SCOUT
     /// MINI: v1).

@@ -34,8 +34,12 @@ enum Cmd {
 
 #[derive(Debug, Args)]
 struct ServiceArgs {
-    /// titan, scout-mini, xbot, scout, hunter, hunter-se, tracer, bunker or ranger-mini.
-    #[arg(long, value_parser = parse_robot)]
+    // The registry's robots, listed by the registry.
+    #[arg(
+        long,
+        value_parser = parse_robot,
+        help = format!("{}.", chassis_protocols::kind::names().join(", "))
+    )]
     robot: Option<RobotKind>,
     /// AgileX wire protocol: v1 or v2 (default on a real CAN bus: detected for scout-mini, scout
     /// and bunker; on the simulator: the robot's own, SCOUT MINI v1, the others v2).

@@ -37,8 +37,8 @@ pub enum LoopMode {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ServiceConfig {
-    /// Robot: `titan`, `scout-mini`, `xbot`, `scout`, `hunter`, `hunter-se`, `tracer`, `bunker`
-    /// or `ranger-mini` (`--robot`).
+    /// Robot: one of the registry's, by its `--robot` name (`titan`, `scout-mini`, …;
+    /// `chassis_protocols::kind::names`).
     pub robot: Option<RobotKind>,
     /// AgileX wire protocol, `v1` or `v2` (`--protocol`); default: the robot's own (SCOUT MINI:
     /// v1; the other AgileX robots here: v2). SCOUT MINI, SCOUT and BUNKER on a real CAN bus
@@ -161,7 +161,8 @@ pub enum ConfigError {
         source: toml::de::Error,
     },
     #[error(
-        "no robot given: pass --robot titan|scout-mini|xbot|scout|hunter|hunter-se|tracer|bunker|ranger-mini (or set service.robot)"
+        "no robot given: pass --robot {} (or set service.robot)",
+        chassis_protocols::kind::names().join("|")
     )]
     NoRobot,
     #[error("'{0}' is not a valid robot name (1-16 of a-z 0-9 - _)")]
