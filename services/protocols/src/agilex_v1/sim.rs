@@ -17,7 +17,7 @@ use crate::agilex_v1::V1Profile;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, MotorModel,
+    Applied, BatteryModel, Firmware, InjectedCounts, Injection, MotorModel, SimBody, SimBodySpec,
     SimTruth, clamp_i16, first_order_lag, non_negative, past_timeout, state_of_charge,
 };
 use crate::kind::RobotKind;

@@ -48,7 +48,7 @@ use super::profile::{Kinematics, SpinField, V2Profile};
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, Mode,
+    Applied, BatteryModel, Firmware, InjectedCounts, Injection, Mode, SimBody, SimBodySpec,
     SimTruth, first_order_lag, wrap_mm,
 };
 use crate::kind::RobotKind;

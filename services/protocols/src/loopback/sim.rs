@@ -13,7 +13,7 @@ use super::profile::LoopbackProfile;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, SimTruth,
+    Applied, BatteryModel, Firmware, InjectedCounts, Injection, SimBody, SimBodySpec, SimTruth,
     clamp_i16, first_order_lag, past_timeout,
 };
 use crate::kind::RobotKind;
@@ -113,8 +113,7 @@ impl Firmware for LoopbackSim {
 
     fn handle_rx(&mut self, now: Timestamp, rx: Rx<'_>) {
         self.expire(now);
-        let Some(Frame::Command(command)) = self.body.command(rx, decode, Frame::direction)
-        else {
+        let Some(Frame::Command(command)) = self.body.command(rx, decode, Frame::direction) else {
             return;
         };
         if self.body.is_booting() {

@@ -16,8 +16,8 @@ use super::kinematics::{steer_command, yaw_rate};
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, Mode,
-    MotorModel, SimTruth, clamp_i16, first_order_lag, past_timeout, wrap_mm,
+    Applied, BatteryModel, Firmware, InjectedCounts, Injection, Mode, MotorModel, SimBody,
+    SimBodySpec, SimTruth, clamp_i16, first_order_lag, past_timeout, wrap_mm,
 };
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};

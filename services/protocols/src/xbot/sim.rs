@@ -11,7 +11,7 @@ use super::stream::StreamParser;
 use crate::DecodeError;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
-    Applied, BatteryModel, SimBody, SimBodySpec, Firmware, InjectedCounts, Injection, MotorModel,
+    Applied, BatteryModel, Firmware, InjectedCounts, Injection, MotorModel, SimBody, SimBodySpec,
     SimTruth, first_order_lag, past_timeout,
 };
 use crate::kind::RobotKind;
@@ -334,12 +334,7 @@ impl XbotSim {
     fn drive_blocked(&self) -> bool {
         !self.powered
             || self.body.is_booting()
-            || self
-                .body
-                .motor_lost
-                .iter()
-                .take(self.wheels())
-                .any(|l| *l)
+            || self.body.motor_lost.iter().take(self.wheels()).any(|l| *l)
     }
 
     fn heartbeat_deadline(&self) -> Option<Timestamp> {
