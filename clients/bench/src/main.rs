@@ -47,6 +47,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum RoleCmd {
+    /// The table, the document and the plots of a run again, from its samples alone (what
+    /// `--samples` wrote): the same samples give the same bytes.
+    Render(RenderArgs),
     /// One operator mirroring 1, 5, 10, 20 simulated robots over Zenoh (root): its CPU and
     /// memory, each robot's state latency; `--doc` writes the `## Fleet` section.
     Fleet(fleet::FleetArgs),
@@ -87,16 +90,17 @@ struct RunArgs {
     /// target: the figures of a shared machine are what they are.
     #[arg(long)]
     smoke: bool,
-    /// Write every figure as JSON.
+    /// Write the run's samples (JSON lines: every row with its histogram and typed identity,
+    /// every split, the run's conditions), from which `chassis-bench render` renders it again.
     #[arg(long)]
-    json: Option<PathBuf>,
+    samples: Option<PathBuf>,
     /// Write latency CDFs of every path as SVG.
     #[arg(long)]
     plot: Option<PathBuf>,
     /// Write the performance document (markdown, e.g. docs/PERFORMANCE.md) from this run.
     #[arg(long)]
     doc: Option<PathBuf>,
-    /// Write files (--json, --plot, --doc) from a tree with uncommitted changes; they then say
+    /// Write files (--samples, --plot, --doc) from a tree with uncommitted changes; they then say
     /// DIRTY. Without it such a run is refused: figures written down must belong to a commit.
     #[arg(long)]
     allow_dirty: bool,
@@ -110,6 +114,34 @@ struct RunArgs {
     /// removed at the end)
     #[arg(long)]
     dir: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+struct RenderArgs {
+    /// The samples file a run wrote (`--samples`).
+    samples: PathBuf,
+    /// Write latency CDFs of every path as SVG.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Write the performance document (markdown).
+    #[arg(long)]
+    doc: Option<PathBuf>,
+}
+
+/// Writes the plot and the document of `report` ([`Report::document`]).
+fn render(
+    report: &Report,
+    doc: Option<&std::path::Path>,
+    plot: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    if let Some(path) = plot {
+        report.plot(path)?;
+    }
+    if let Some(path) = doc {
+        let text = report.document(std::fs::read_to_string(path).ok().as_deref());
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
 }
 
 /// The sizes of a run.
@@ -280,7 +312,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         .iter()
         .map(|r| r.parse::<RobotKind>().map_err(anyhow::Error::msg))
         .collect::<anyhow::Result<_>>()?;
-    let strict = args.json.is_some() || args.plot.is_some() || args.doc.is_some();
+    let strict = args.samples.is_some() || args.plot.is_some() || args.doc.is_some();
     let provenance = provenance::Provenance::begin(strict, args.allow_dirty)?;
     let mut report = Report {
         machine: report::Machine::probe(),
@@ -1224,29 +1256,27 @@ fn main() -> ExitCode {
         }) => throughput::record_titan(&out, seconds).map(|frames| {
             eprintln!("{frames} frames written to {}", out.display());
         }),
+        Some(RoleCmd::Render(args)) => std::fs::read_to_string(&args.samples)
+            .with_context(|| format!("reading {}", args.samples.display()))
+            .and_then(|text| Report::from_samples(&text))
+            .and_then(|report| {
+                print!("{}", report.table());
+                render(&report, args.doc.as_deref(), args.plot.as_deref())
+            }),
         Some(RoleCmd::Fleet(args)) => {
             fleet::run(&args).and_then(|report| fleet::write(&report, &args))
         }
         None => run(&cli.run).and_then(|report| {
             print!("{}", report.table());
-            if let Some(path) = &cli.run.json {
-                std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            let samples = report.samples()?;
+            if let Some(path) = &cli.run.samples {
+                std::fs::write(path, &samples)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
-            if let Some(path) = &cli.run.plot {
-                report.plot(path)?;
-            }
-            if let Some(path) = &cli.run.doc {
-                // The fleet section comes from `chassis-bench fleet`: kept as it is.
-                let kept = std::fs::read_to_string(path)
-                    .ok()
-                    .and_then(|text| fleet::section_of(&text));
-                let text = match kept {
-                    Some(section) => fleet::splice(&report.markdown(), &section),
-                    None => report.markdown(),
-                };
-                std::fs::write(path, text)
-                    .with_context(|| format!("writing {}", path.display()))?;
+            // Rendered from the samples alone, as `render` renders them.
+            let (doc, plot) = (cli.run.doc.as_deref(), cli.run.plot.as_deref());
+            if doc.is_some() || plot.is_some() {
+                render(&Report::from_samples(&samples)?, doc, plot)?;
             }
             if cli.run.smoke {
                 for warning in report.smoke_warnings() {

@@ -8,13 +8,13 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use anyhow::Context as _;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::paths::PassStamps;
 use crate::stats::{Latencies, Summary};
 
 /// Whose time a part is: what the targets can take out, and what bounds them on a machine.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Whose {
     /// The code this repository ships: chassisd's pass, a bridge's loop.
@@ -24,7 +24,7 @@ pub enum Whose {
 }
 
 /// One part of a path: from → to, whose time it is, its distribution.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Part {
     pub name: String,
     pub whose: Whose,
@@ -41,7 +41,7 @@ impl Part {
 /// The parts of one path, in the order a sample passes them, and each sample's parts of one
 /// kind summed: a row's p99 is not the sum of its parts' p99s, and a few parts together can
 /// miss a target that none of them misses alone.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Split {
     pub parts: Vec<Part>,
     /// Each sample's parts outside the code, together: what the sample would have taken had

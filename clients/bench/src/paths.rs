@@ -21,7 +21,7 @@ use chassis_client::{
 pub use chassis_ipc::PassStamps;
 use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
 use chassis_protocols::{CanFrame, RobotKind};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use zerocopy::IntoBytes as _;
 
 use crate::placement::{pause, pin_current_thread, unique, unpin_current_thread};
@@ -84,7 +84,8 @@ pub struct Service {
 }
 
 /// How a run's chassisd loop is scheduled.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Scheduling {
     /// Normal scheduling, as asked.
     Normal,
@@ -983,11 +984,11 @@ pub fn rss_mib(pid: u32) -> anyhow::Result<f64> {
 }
 
 /// CPU use and memory of the service at a given bus load.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Cost {
     /// The bus the service read: `sim` (a socket pair, up to 256 frames per read) or `slcan-pty`
     /// (`chassisd sim` behind an emulated slcan adapter on a pty: text lines, as a USB adapter).
-    pub bus: &'static str,
+    pub bus: String,
     pub bitrate: u32,
     pub frames_per_s: f64,
     pub cpu_pct: f64,
@@ -1042,7 +1043,7 @@ pub fn cost_at(
     let rss = rss_mib(pid)?;
     robot.sim(chassis_client::flood_request(0.0), Duration::from_secs(3))?;
     Ok(Cost {
-        bus,
+        bus: bus.into(),
         bitrate,
         frames_per_s: (frames - start_frames) as f64 / elapsed,
         cpu_pct: 100.0 * cpu / elapsed,

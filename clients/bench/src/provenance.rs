@@ -5,10 +5,10 @@
 use anyhow::bail;
 use chassis_provenance::GitState;
 pub use chassis_provenance::{CpuTimes, Steal};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Commit, date, command and steal time of one run.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Provenance {
     pub commit: String,
     /// The tree had uncommitted changes (allowed with `--allow-dirty`).

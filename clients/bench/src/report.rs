@@ -1,9 +1,10 @@
-//! The results: a table on stdout, JSON for machines, CDF plots as SVG.
+//! The results: the samples of a run (JSON lines, [`Report::samples`]), and what is rendered
+//! from them alone: a table on stdout, the performance document and CDF plots as SVG.
 
 use std::path::Path;
 
 use plotters::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::parts::{Part, Split, Whose};
 use crate::paths::Cost;
@@ -15,7 +16,7 @@ use crate::stats::{Latencies, Summary};
 pub const DEFAULT_CONFIG_ROW: &str =
     "titan sim, chassisd's default configuration, request → first frame toward it";
 /// Which path a row measures, the table's first column.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PathKind {
     Baseline,
@@ -47,7 +48,7 @@ impl std::fmt::Display for PathKind {
 
 /// Where a row's samples start and end, as the targets and the splits find a row (its `what`
 /// is only shown).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Leg {
     /// A raw transport's hop.
@@ -78,7 +79,7 @@ pub enum Leg {
 }
 
 /// One measured distribution.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Row {
     pub path: PathKind,
     pub leg: Leg,
@@ -118,22 +119,24 @@ pub struct Row {
     /// Every flag is one a smoke run reports without failing on it: below the sum of the hops
     /// it contains (their medians were each measured in their own conditions and add only
     /// approximately), or below its own baseline by no more than [`SMOKE_BASELINE_TOLERANCE`].
-    #[serde(skip)]
     pub smoke_tolerated: bool,
-    #[serde(skip)]
     pub latencies: Latencies,
 }
 
 /// Everything one run measured.
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 pub struct Report {
     pub provenance: crate::provenance::Provenance,
     pub machine: Machine,
+    /// Each its own line of the samples file.
+    #[serde(skip)]
     pub rows: Vec<Row>,
     pub cost: Vec<Cost>,
     /// The replays, in the order they ran ([`REPLAYS`]).
     pub throughput: Vec<Throughput>,
-    /// Where the time of the service paths goes, run by run.
+    /// Where the time of the service paths goes, run by run; each its own line of the samples
+    /// file.
+    #[serde(skip)]
     pub parts: Vec<Parts>,
     pub notes: Vec<String>,
     /// What makes the run's rows unfit to compare: a named baseline or contained row that was
@@ -141,7 +144,6 @@ pub struct Report {
     /// with the notes.
     pub problems: Vec<String>,
     /// How chassisd's loop was scheduled in each latency run (the run's label).
-    #[serde(skip)]
     pub scheduling: Vec<(String, crate::paths::Scheduling)>,
     /// chassisd's largest resident memory in a latency run in real-time mode, MiB.
     pub realtime_rss_mib: Option<f64>,
@@ -150,6 +152,69 @@ pub struct Report {
     pub expected: Vec<Planned>,
     /// How often each CPU stalled a thread that never blocks ([`STALLS`] rows).
     pub stalls: Vec<StallRates>,
+}
+
+/// One line of a samples file: the run (what it measured on, its costs, notes), a row with its
+/// histogram, or a path's split.
+#[derive(Serialize)]
+#[serde(rename_all = "snake_case")]
+enum Line<'a> {
+    Run(&'a Report),
+    Row(&'a Row),
+    Split(&'a Parts),
+}
+
+/// [`Line`], read back.
+#[derive(Deserialize)]
+#[serde(rename_all = "snake_case")]
+enum ReadLine {
+    Run(Box<Report>),
+    Row(Box<Row>),
+    Split(Box<Parts>),
+}
+
+impl Report {
+    /// The performance document: [`Report::markdown`], with the fleet section of `existing` (the
+    /// file as it is: `chassis-bench fleet` writes that section) kept.
+    pub fn document(&self, existing: Option<&str>) -> String {
+        match existing.and_then(crate::fleet::section_of) {
+            Some(section) => crate::fleet::splice(&self.markdown(), &section),
+            None => self.markdown(),
+        }
+    }
+
+    /// The run's samples, one JSON line each: the run first, then its rows and splits in order.
+    /// Everything the table, the document and the plots are rendered from.
+    pub fn samples(&self) -> Result<String, serde_json::Error> {
+        let lines = std::iter::once(Line::Run(self))
+            .chain(self.rows.iter().map(Line::Row))
+            .chain(self.parts.iter().map(Line::Split));
+        let mut out = String::new();
+        for line in lines {
+            out.push_str(&serde_json::to_string(&line)?);
+            out.push('\n');
+        }
+        Ok(out)
+    }
+
+    /// A run read back from its [`Report::samples`].
+    pub fn from_samples(text: &str) -> anyhow::Result<Report> {
+        let mut report: Option<Report> = None;
+        for (n, line) in text.lines().enumerate().filter(|(_, l)| !l.is_empty()) {
+            let read: ReadLine = serde_json::from_str(line)
+                .map_err(|e| anyhow::anyhow!("samples line {}: {e}", n + 1))?;
+            match (read, report.as_mut()) {
+                (ReadLine::Run(run), None) => report = Some(*run),
+                (ReadLine::Row(row), Some(r)) => r.rows.push(*row),
+                (ReadLine::Split(split), Some(r)) => r.parts.push(*split),
+                _ => anyhow::bail!(
+                    "samples line {}: the run's line must come first, once",
+                    n + 1
+                ),
+            }
+        }
+        report.ok_or_else(|| anyhow::anyhow!("no run in the samples"))
+    }
 }
 
 /// A row a run plans: its [`row_key`] and how many samples it asks for, where the plan fixes
@@ -178,7 +243,7 @@ pub const MIN_SHARE_OF_ASKED: f64 = 0.9;
 pub const STALLS: &str = "stalls of a running thread (gaps in its clock readings)";
 
 /// How often one CPU stalled a thread that never blocks, gaps a second.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct StallRates {
     pub cpu: usize,
     pub over_20_us: f64,
@@ -192,7 +257,7 @@ pub const PYTHON_PARTS: &str = "python: state";
 
 /// One path of one run split at the stamps the code takes: each part's distribution over the
 /// same samples (a sample counts in every part or in none).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Parts {
     /// `command`, `state`, `ros2: frame read → odom`, [`ZENOH_PARTS`] or [`PYTHON_PARTS`], as
     /// the document shows it.
@@ -211,7 +276,7 @@ pub struct Parts {
 }
 
 /// Replay of a recorded bus through decode + publish as fast as the service drains it.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct Throughput {
     pub frames: u64,
     pub seconds: f64,
@@ -233,7 +298,7 @@ fn median_replay(runs: &[Throughput]) -> Option<&Throughput> {
     sorted.get(sorted.len() / 2).copied()
 }
 
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 pub struct Machine {
     pub cpus: usize,
     pub kernel: String,
@@ -1340,7 +1405,11 @@ impl Report {
         );
         out.push_str(&format!(
             "Measured {} on {}; machine: {}, {} cores, Linux {}; the host's steal time over the \
-             run: {}.\n\nReproduce: `cargo build --release --workspace && target/release/{}`\n\n",
+             run: {}.\n\nReproduce: `cargo build --release --workspace && target/release/{}`\n\n\
+             Rendered from the run's samples alone, [bench.jsonl](bench.jsonl) (every row's \
+             histogram and identity, every split, the run's conditions): `chassis-bench render \
+             docs/bench.jsonl --doc docs/PERFORMANCE.md --plot docs/bench.svg` writes this file \
+             again, byte for byte.\n\n",
             p.date,
             p.commit_text(),
             self.machine.cpu_model,
@@ -2366,6 +2435,67 @@ mod tests {
             failures.iter().any(|f| f.contains("was not measured")),
             "{failures:?}"
         );
+    }
+
+    #[test]
+    fn a_run_rendered_from_its_samples_is_the_run_rendered() {
+        use crate::paths::Scheduling;
+        let (mut report, _) = run_with_ros2_row(600);
+        report.rows[1].latencies.record_between(5, 1);
+        report.parts.push(split_of(
+            "command",
+            "titan sim",
+            "event",
+            vec![part("woke", Whose::Outside, 30, 200)],
+        ));
+        report.cost.push(Cost {
+            bus: "sim".into(),
+            bitrate: 500_000,
+            frames_per_s: 4504.5,
+            cpu_pct: 1.25,
+            rss_mib: 7.1,
+        });
+        report.throughput.push(replay(1.5e6));
+        report.scheduling = vec![(
+            "titan sim, event loop, same CPU".into(),
+            Scheduling::Refused,
+        )];
+        report.stalls.push(StallRates {
+            cpu: 1,
+            over_20_us: 340.0,
+            over_100_us: 0.5,
+        });
+        report.notes.push("one CPU only".into());
+        report
+            .problems
+            .push("two rows are named 'x' (2 of them)".into());
+        report.realtime_rss_mib = Some(12.25);
+
+        let samples = report.samples().unwrap();
+        let again = Report::from_samples(&samples).unwrap();
+        assert_eq!(again.markdown(), report.markdown());
+        assert_eq!(again.table(), report.table());
+        assert_eq!(again.samples().unwrap(), samples);
+        assert_eq!(
+            again.rows[1].latencies.cdf(),
+            report.rows[1].latencies.cdf()
+        );
+        assert_eq!(again.rows[1].latencies.out_of_range, 1);
+    }
+
+    #[test]
+    fn samples_without_their_run_first_are_refused() {
+        let (report, _) = run_with_ros2_row(600);
+        let samples = report.samples().unwrap();
+        let (run, rows) = samples.split_once('\n').unwrap();
+        let error = Report::from_samples(&format!("{rows}{run}\n")).unwrap_err();
+        assert!(
+            error
+                .to_string()
+                .contains("line 1: the run's line must come first"),
+            "{error}"
+        );
+        assert!(Report::from_samples("{\"row\": 3}").is_err());
     }
 
     #[test]

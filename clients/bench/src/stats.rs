@@ -2,9 +2,10 @@
 
 use hdrhistogram::Histogram;
 use hdrhistogram::serialization::{Deserializer, Serializer, V2Serializer};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-/// One-way latencies of one path, ns.
+/// One-way latencies of one path, ns. In a samples file: the histogram in HdrHistogram's V2
+/// format as hex, and the count out of its range.
 #[derive(Debug, Clone)]
 pub struct Latencies {
     histogram: Histogram<u64>,
@@ -110,6 +111,45 @@ impl Latencies {
     }
 }
 
+/// How [`Latencies`] is written in a samples file.
+#[derive(Serialize, Deserialize)]
+struct Stored {
+    v2_hex: String,
+    out_of_range: u64,
+}
+
+impl Serialize for Latencies {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let v2_hex = self.to_bytes().iter().map(|b| format!("{b:02x}")).collect();
+        Stored {
+            v2_hex,
+            out_of_range: self.out_of_range,
+        }
+        .serialize(serializer)
+    }
+}
+
+impl<'de> Deserialize<'de> for Latencies {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let stored = Stored::deserialize(deserializer)?;
+        let bytes = (0..stored.v2_hex.len())
+            .step_by(2)
+            .map(|i| {
+                stored
+                    .v2_hex
+                    .get(i..i + 2)
+                    .and_then(|h| u8::from_str_radix(h, 16).ok())
+            })
+            .collect::<Option<Vec<u8>>>()
+            .ok_or_else(|| D::Error::custom("a histogram that is not hex"))?;
+        let mut latencies = Latencies::from_bytes(&bytes)
+            .ok_or_else(|| D::Error::custom("a histogram that is not HdrHistogram V2"))?;
+        latencies.out_of_range = stored.out_of_range;
+        Ok(latencies)
+    }
+}
+
 /// A histogram that cannot fail to exist (3 significant digits are always valid).
 fn unreachable_histogram() -> Histogram<u64> {
     // `Histogram::new(3)` only fails for more than 5 significant digits.
@@ -120,7 +160,7 @@ fn unreachable_histogram() -> Histogram<u64> {
 }
 
 /// Percentiles of one path, µs.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct Summary {
     pub count: u64,
     pub mean_us: f64,
