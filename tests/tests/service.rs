@@ -897,7 +897,7 @@ fn a_polling_loops_pass_trace_keeps_only_passes_that_wrote_or_published() {
         "chassisd",
         &bin("chassisd"),
         &args,
-        &[(PASS_TRACE_ENV, trace.to_str().unwrap())],
+        &[(chassis_ipc::Trace::Pass.env(), trace.to_str().unwrap())],
     );
     let mut robot = env.robot(&n, UP);
     let mut teleop = source(&mut robot, "teleop");

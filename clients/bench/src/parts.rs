@@ -326,7 +326,7 @@ pub fn odom(samples: &[(u64, u64)], trace: &[[u64; 4]], passes: &[PassStamps]) -
 /// A bridge's trace of `format` ([`chassis_ipc::StampTrace`]).
 pub fn read_trace<const N: usize>(
     path: &Path,
-    format: chassis_ipc::TraceFormat,
+    format: chassis_ipc::Trace,
 ) -> anyhow::Result<Vec<[u64; N]>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;

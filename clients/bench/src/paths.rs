@@ -15,8 +15,8 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::{
-    BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, PASS_TRACE_ENV, Robot,
-    STATE_BUFFER, Source, Ticker, VelocityRequest, now_ns,
+    BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, Robot, STATE_BUFFER, Source,
+    Ticker, VelocityRequest, now_ns,
 };
 pub use chassis_ipc::PassStamps;
 use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
@@ -368,7 +368,7 @@ pub fn start_configured(
     }
     let mut service = Command::new(&chassisd);
     if let Some(path) = &trace {
-        service.env(PASS_TRACE_ENV, path);
+        service.env(chassis_ipc::Trace::Pass.env(), path);
     }
     service.args(&args);
     let log = dir.join(format!("{name}-chassisd"));

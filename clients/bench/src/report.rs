@@ -1692,8 +1692,10 @@ impl Report {
              split at the stamps the code takes, over \
              the same samples (the count column: the samples whose pass took every stamp; a \
              frame that was not its pass's first write, a state sample handed outside a traced \
-             pass, are left out). The client stamps the \
-             request it creates and the sample it receives; chassisd, run with \
+             pass, are left out). The stamps are traces a build keeps only with chassis-ipc's \
+             `trace` feature, which chassis-bench turns on in the workspace's build (the command \
+             at the top); the package's programs, built on their own, keep none. The client \
+             stamps the request it creates and the sample it receives; chassisd, run with \
              `CHASSIS_PASS_TRACE=FILE` (the bench sets it), keeps the stamps it takes inside each \
              pass and writes them as it stops: the loop began waiting for the pass's wake-up \
              (the work of the passes before it done; a polling loop polls again), the loop woke \

@@ -73,6 +73,6 @@ pub fn run(python: &Path, bridge: &Path, run: &ScriptRun<'_>) -> anyhow::Result<
             .into_iter()
             .map(|[read, taken]| (read, taken))
             .collect(),
-        odom_trace: crate::parts::read_trace(&out.join("odom.trace"), chassis_ipc::ODOM_TRACE)?,
+        odom_trace: crate::parts::read_trace(&out.join("odom.trace"), chassis_ipc::Trace::Odom)?,
     })
 }

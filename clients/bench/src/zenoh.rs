@@ -297,7 +297,7 @@ pub fn run(
             &["--name", &name, "--listen", &bridge, "--insecure"],
             &dir.join("zenoh-robot.log"),
         )?
-        .env(chassis_ipc::ZENOH_EXPORT_TRACE.env, &export_trace)
+        .env(chassis_ipc::Trace::ZenohExport.env(), &export_trace)
         .spawn()
         .context("starting chassis-zenoh (robot side)")?,
     );
@@ -315,7 +315,7 @@ pub fn run(
             ],
             &dir.join("zenoh-operator.log"),
         )?
-        .env(chassis_ipc::ZENOH_MIRROR_TRACE.env, &mirror_trace)
+        .env(chassis_ipc::Trace::ZenohMirror.env(), &mirror_trace)
         .spawn()
         .context("starting chassis-zenoh --mirror")?,
     );
@@ -388,8 +388,8 @@ pub fn run(
         .collect();
     let state_parts = crate::parts::zenoh_state(
         &samples,
-        &crate::parts::read_trace(&export_trace, chassis_ipc::ZENOH_EXPORT_TRACE)?,
-        &crate::parts::read_trace(&mirror_trace, chassis_ipc::ZENOH_MIRROR_TRACE)?,
+        &crate::parts::read_trace(&export_trace, chassis_ipc::Trace::ZenohExport)?,
+        &crate::parts::read_trace(&mirror_trace, chassis_ipc::Trace::ZenohMirror)?,
         &passes,
     );
     Ok(ZenohFigures {

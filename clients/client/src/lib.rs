@@ -67,7 +67,7 @@ use chassis_ipc::{
     RequestResponse, SIM, STATE, Writer, publication,
 };
 pub use chassis_ipc::{
-    IPC_PREFIX_ENV, PASS_TRACE_ENV, STATE_BUFFER, ServiceKind, TEST_LOOP_STALL_ENV, service_name,
+    IPC_PREFIX_ENV, STATE_BUFFER, ServiceKind, TEST_LOOP_STALL_ENV, service_name,
 };
 use iceoryx2::pending_response::PendingResponse;
 use iceoryx2::port::listener::{Listener, ListenerWaitError};

@@ -844,7 +844,7 @@ pub fn state_loop(
         model: ModelSent::default(),
         failures: 0,
         woke_ns: 0,
-        trace: OdomTrace::from_env(chassis_ipc::ODOM_TRACE),
+        trace: OdomTrace::from_env(chassis_ipc::Trace::Odom),
     };
     lp.publish_model();
     tracing::info!(robot = name, "bridging");

@@ -272,7 +272,7 @@ fn publish(
     let mut next_check = now_ns();
     let mut batch: Vec<u8> = Vec::new();
     // The bench's split of the state path (`CHASSIS_ZENOH_TRACE`), written as the loop ends.
-    let mut trace = StampTrace::<4>::from_env(chassis_ipc::ZENOH_EXPORT_TRACE);
+    let mut trace = StampTrace::<4>::from_env(chassis_ipc::Trace::ZenohExport);
     let mut failed: u64 = 0;
     let mut report = |what: &str, e: zenoh::Error| {
         failed += 1;

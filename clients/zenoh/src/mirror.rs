@@ -143,7 +143,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
     let _description_sub = subscribe(&keys.description, |s, _| Incoming::Description(s))?;
     // The bench's split of the state path (`CHASSIS_ZENOH_TRACE`; one robot a process), written
     // as the loop ends.
-    let mut trace = StampTrace::<4>::from_env(chassis_ipc::ZENOH_MIRROR_TRACE);
+    let mut trace = StampTrace::<4>::from_env(chassis_ipc::Trace::ZenohMirror);
     let ask_tx = tx.clone();
     let ask_description = |session: &zenoh::Session| {
         let tx = ask_tx.clone();

@@ -43,11 +43,8 @@ pub use limits::{
     RequestResponseLimits, SIM, STATE, STATE_BUFFER, publication,
 };
 pub use names::{
-    IPC_PREFIX_ENV, PASS_TRACE_ENV, REPLY_SUFFIX, ServiceKind, TEST_LOOP_STALL_ENV, config,
-    reply_name, robots, service_name,
+    IPC_PREFIX_ENV, REPLY_SUFFIX, ServiceKind, TEST_LOOP_STALL_ENV, config, reply_name, robots,
+    service_name,
 };
 pub use ports::{ClientPorts, Exchange, Reader, ServerPorts, Topic, Writer, node};
-pub use trace::{
-    ODOM_TRACE, PassStamps, StampTrace, TraceError, TraceFormat, ZENOH_EXPORT_TRACE,
-    ZENOH_MIRROR_TRACE,
-};
+pub use trace::{PassStamps, StampTrace, Trace, TraceError};

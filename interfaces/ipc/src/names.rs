@@ -15,10 +15,6 @@ pub const IPC_PREFIX_ENV: &str = "CHASSIS_IPC_PREFIX";
 /// chassisd warns at start when it is set. The watchdog test uses it to show that the watchdog's
 /// pings come from the loop itself.
 pub const TEST_LOOP_STALL_ENV: &str = "CHASSISD_TEST_LOOP_STALL_FILE";
-/// Environment variable asking `chassisd` for its pass trace: the stamps it takes inside each
-/// pass that wrote a frame or published a state, written to the file it names as the service
-/// stops (`chassis-bench`'s table of where each microsecond goes).
-pub const PASS_TRACE_ENV: &str = "CHASSIS_PASS_TRACE";
 
 /// What [`reply_name`] appends to a request-response service's name.
 pub const REPLY_SUFFIX: &str = "/reply";

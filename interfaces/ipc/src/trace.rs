@@ -1,7 +1,8 @@
 //! Stamp traces, read by `chassis-bench` to split its rows: chassisd's pass trace
-//! (`CHASSIS_PASS_TRACE=FILE`, [`crate::PASS_TRACE_ENV`]), the stamps the service takes inside
-//! each pass, written by chassisd as it stops, and the bridges' traces ([`StampTrace`]). One
-//! format, here, for the writers and the reader.
+//! (`CHASSIS_PASS_TRACE=FILE`, [`Trace::Pass`]), the stamps the service takes inside each pass,
+//! written by chassisd as it stops, and the bridges' traces ([`StampTrace`]). One format, here,
+//! for the writers and the reader. Only a build with the `trace` feature keeps them (the
+//! workspace's, which the bench needs); without it [`Trace::file`] is never a file.
 //!
 //! FILE: a header naming the columns ([`PassStamps::HEADER`]), then one line per pass or item,
 //! `CLOCK_MONOTONIC` ns, 0 where the pass did not do the thing.
@@ -35,35 +36,55 @@ pub enum TraceError {
     Line(String),
 }
 
-/// A bridge trace's file format: the environment variable naming its file, and its header.
+/// Which stamp trace: chassisd's pass trace and the bridges' (their file formats, and the
+/// environment variable naming each one's file).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct TraceFormat {
-    pub env: &'static str,
-    /// The first line, naming the columns.
-    pub header: &'static str,
+pub enum Trace {
+    /// chassisd's passes ([`PassStamps`]).
+    Pass,
+    /// The ROS 2 bridge's odoms: the frame read (the state's `stamp_ns`), the state loop woken
+    /// with the sample, the odom handed to RustDDS and the write returned.
+    Odom,
+    /// chassis-zenoh's robot side: for each state it puts, the frame read, the export loop woken
+    /// with the sample, the put begun and the put returned.
+    ZenohExport,
+    /// chassis-zenoh's operator side (`--mirror`): for each state it takes from the robot, the
+    /// frame read, the sample in the Zenoh subscriber's callback, taken by the mirror's loop, and
+    /// handed to iceoryx2.
+    ZenohMirror,
 }
 
-/// The ROS 2 bridge's odom trace: for each odom, the frame read (the state's `stamp_ns`), the
-/// state loop woken with the sample, the odom handed to RustDDS and the write returned.
-pub const ODOM_TRACE: TraceFormat = TraceFormat {
-    env: "CHASSIS_ROS2_TRACE",
-    header: "read_ns woke_ns write_begun_ns written_ns",
-};
+impl Trace {
+    /// The environment variable naming the trace's file (this build keeps traces: the `trace`
+    /// feature).
+    #[cfg(feature = "trace")]
+    pub const fn env(self) -> &'static str {
+        match self {
+            Trace::Pass => "CHASSIS_PASS_TRACE",
+            Trace::Odom => "CHASSIS_ROS2_TRACE",
+            Trace::ZenohExport | Trace::ZenohMirror => "CHASSIS_ZENOH_TRACE",
+        }
+    }
 
-/// chassis-zenoh's robot side: for each state it puts, the frame read, the export loop woken
-/// with the sample, the put begun and the put returned.
-pub const ZENOH_EXPORT_TRACE: TraceFormat = TraceFormat {
-    env: "CHASSIS_ZENOH_TRACE",
-    header: "read_ns woke_ns put_begun_ns put_returned_ns",
-};
+    /// The first line of the trace, naming its columns.
+    pub const fn header(self) -> &'static str {
+        match self {
+            Trace::Pass => PassStamps::HEADER,
+            Trace::Odom => "read_ns woke_ns write_begun_ns written_ns",
+            Trace::ZenohExport => "read_ns woke_ns put_begun_ns put_returned_ns",
+            Trace::ZenohMirror => "read_ns received_ns taken_ns handed_ns",
+        }
+    }
 
-/// chassis-zenoh's operator side (`--mirror`): for each state it takes from the robot, the frame
-/// read, the sample in the Zenoh subscriber's callback, taken by the mirror's loop, and handed
-/// to iceoryx2.
-pub const ZENOH_MIRROR_TRACE: TraceFormat = TraceFormat {
-    env: "CHASSIS_ZENOH_TRACE",
-    header: "read_ns received_ns taken_ns handed_ns",
-};
+    /// The file the environment asks this trace to be written to; never one in a build without
+    /// the `trace` feature.
+    pub fn file(self) -> Option<PathBuf> {
+        #[cfg(feature = "trace")]
+        return std::env::var_os(self.env()).map(PathBuf::from);
+        #[cfg(not(feature = "trace"))]
+        None
+    }
+}
 
 /// A bridge's trace: `N` stamps for each item its loop handles (an odom it publishes, a state it
 /// puts or takes), kept in memory while it runs and written as it stops. `chassis-bench` joins
@@ -76,12 +97,12 @@ pub struct StampTrace<const N: usize> {
 }
 
 impl<const N: usize> StampTrace<N> {
-    /// A trace to the file `format`'s environment variable names, if it names one.
-    pub fn from_env(format: TraceFormat) -> Option<Self> {
-        let path = std::env::var_os(format.env)?;
+    /// A trace to the file the environment names for `trace`, if it names one
+    /// ([`Trace::file`]).
+    pub fn from_env(trace: Trace) -> Option<Self> {
         Some(Self {
-            path: path.into(),
-            header: format.header,
+            path: trace.file()?,
+            header: trace.header(),
             lines: Vec::with_capacity(1 << 16),
         })
     }
@@ -106,9 +127,9 @@ impl<const N: usize> StampTrace<N> {
         text
     }
 
-    /// The items of a trace of `format`.
-    pub fn parse(text: &str, format: TraceFormat) -> Result<Vec<[u64; N]>, TraceError> {
-        Self::parse_as(text, format.header)
+    /// The items of a trace of `trace`.
+    pub fn parse(text: &str, trace: Trace) -> Result<Vec<[u64; N]>, TraceError> {
+        Self::parse_as(text, trace.header())
     }
 
     /// Writes the trace to its file.
@@ -154,6 +175,26 @@ impl PassStamps {
             self.state_wake_begun,
             self.state_readers_woken,
         ]
+    }
+
+    /// Writes `passes` as a trace to `path`; a build without the `trace` feature writes nothing
+    /// (and holds neither the header nor the format).
+    pub fn write_trace(path: &Path, passes: &[PassStamps]) -> std::io::Result<()> {
+        #[cfg(feature = "trace")]
+        {
+            use std::io::Write as _;
+            let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+            writeln!(out, "{}", Self::HEADER)?;
+            for pass in passes {
+                writeln!(out, "{}", pass.line())?;
+            }
+            out.flush()
+        }
+        #[cfg(not(feature = "trace"))]
+        {
+            let _ = (path, passes);
+            Ok(())
+        }
     }
 
     /// This pass as a line of the trace.

@@ -14,11 +14,10 @@
 //! `published_ns`), `state_sent` (its send returned), `state_wake_begun` and `state_readers_woken`
 //! (the state readers' notification began, once the pass's other work was done; it returned).
 
-use std::io::Write;
 use std::path::PathBuf;
 
-use chassis_ipc::PASS_TRACE_ENV;
 pub(crate) use chassis_ipc::PassStamps;
+use chassis_ipc::Trace;
 
 /// Most passes kept (9 stamps each: about 14 MB).
 pub(crate) const MAX_PASSES: usize = 200_000;
@@ -35,11 +34,11 @@ pub(crate) struct PassTrace {
 }
 
 impl PassTrace {
-    /// The trace `CHASSIS_PASS_TRACE` asks for, if it does.
+    /// The trace `CHASSIS_PASS_TRACE` asks for, if it does and this build keeps traces
+    /// ([`Trace::file`]).
     pub fn from_env() -> Option<Self> {
-        let path = std::env::var_os(PASS_TRACE_ENV)?;
         Some(Self {
-            path: path.into(),
+            path: Trace::Pass.file()?,
             passes: Vec::with_capacity(MAX_PASSES),
             current: PassStamps::default(),
             waiting_since: 0,
@@ -56,12 +55,7 @@ impl PassTrace {
 
     /// Writes the passes kept to the file.
     pub fn write_out(&self) -> std::io::Result<()> {
-        let mut out = std::io::BufWriter::new(std::fs::File::create(&self.path)?);
-        writeln!(out, "{}", PassStamps::HEADER)?;
-        for pass in &self.passes {
-            writeln!(out, "{}", pass.line())?;
-        }
-        out.flush()
+        PassStamps::write_trace(&self.path, &self.passes)
     }
 
     pub fn path(&self) -> &std::path::Path {
