@@ -84,6 +84,10 @@ pub enum Rounds {
     /// (and is not answered): only the counted ping's hop counts. What a request meets when it
     /// follows another at once, as a safety stop follows a teleop request.
     AfterWakeUp,
+    /// A controller's loop ([`crate::control_loop::Periods`]): one ping at the start of each
+    /// period, the answers looked for without waiting; what counts is each period's start →
+    /// its ping in the other process, and the periods the loop missed.
+    Loop(Duration),
 }
 
 /// Marks a lead ping ([`Rounds::AfterWakeUp`]), which the pong does not answer.
@@ -740,6 +744,8 @@ fn wait_ready(child: &mut Child) -> anyhow::Result<BufReader<ChildStdout>> {
 pub struct Measured {
     /// Every counted hop of the pings, ns, in order.
     pub pings: Vec<u64>,
+    /// [`Rounds::Loop`]: the periods whose ping went out after the period had ended.
+    pub missed_periods: u64,
     pub feed: Option<Vec<u64>>,
     /// A loaded iceoryx2 receiver's publication, as its reader took it ([`Published`]): every
     /// hop, ns, in order.
@@ -863,7 +869,10 @@ pub fn run(
         pin_current_thread(cpu)?;
     }
     let result = open_endpoint(&args, "ping", "pong").and_then(|mut endpoint| {
-        let result = ping_rounds(endpoint.as_mut(), transport, rounds, shape);
+        let result = match shape {
+            Rounds::Loop(period) => loop_rounds(endpoint.as_mut(), transport, rounds, period),
+            _ => ping_rounds(endpoint.as_mut(), transport, rounds, shape).map(|p| (p, 0)),
+        };
         // Tells the pong to stop (and to write its feed figures).
         let _ = endpoint.send(Ping {
             seq: u64::MAX,
@@ -885,7 +894,7 @@ pub fn run(
         ),
         None => None,
     };
-    let pings = result?;
+    let (pings, missed_periods) = result?;
     // The pong writes its feed figures before it says "done".
     let mut line = String::new();
     let _ = reader.read_line(&mut line);
@@ -901,6 +910,7 @@ pub fn run(
     };
     Ok(Measured {
         pings,
+        missed_periods,
         feed,
         published,
     })
@@ -1016,7 +1026,7 @@ fn ping_rounds(
     let mut latencies = Vec::new();
     let (warmup, mut ticker) = match shape {
         Rounds::Paced(period) => (20, Some(chassis_client::Ticker::new(period))),
-        Rounds::BackToBack | Rounds::AfterWakeUp => (200, None),
+        Rounds::BackToBack | Rounds::AfterWakeUp | Rounds::Loop(_) => (200, None),
     };
     for seq in 0..warmup + rounds {
         if let Some(ticker) = ticker.as_mut() {
@@ -1051,6 +1061,57 @@ fn ping_rounds(
         }
     }
     Ok(latencies)
+}
+
+/// [`Rounds::Loop`]: `rounds` periods (after 200 of warm-up) of a loop that sends a ping at the
+/// start of each and looks for the answers without waiting. Each counted hop: the period's
+/// start → its ping in the pong process; and the counted periods missed.
+fn loop_rounds(
+    endpoint: &mut dyn Endpoint,
+    transport: Transport,
+    rounds: u64,
+    period: Duration,
+) -> anyhow::Result<(Vec<u64>, u64)> {
+    const WARMUP: u64 = 200;
+    let mut periods = crate::control_loop::Periods::new(period);
+    // Each ping's period start and send stamp.
+    let mut started: Vec<(u64, u64)> = Vec::new();
+    let mut hops = Vec::new();
+    // Takes one answer, if there is one within `timeout`: its hop, counted past the warm-up.
+    let take =
+        |endpoint: &mut dyn Endpoint, timeout, started: &[(u64, u64)], hops: &mut Vec<u64>| {
+            let answer = endpoint.receive(timeout)?;
+            if let Some((pong, _)) = answer
+                && pong.seq >= WARMUP
+                && let Some(&(start, sent)) =
+                    usize::try_from(pong.seq).ok().and_then(|i| started.get(i))
+            {
+                hops.push((sent + pong.measured_ns).saturating_sub(start));
+            }
+            anyhow::Ok(answer.is_some())
+        };
+    for seq in 0..WARMUP + rounds {
+        let start = periods.next();
+        while take(endpoint, Duration::ZERO, &started, &mut hops)? {}
+        let sent = now_ns();
+        started.push((start, sent));
+        endpoint.send(Ping {
+            stamp_ns: sent,
+            seq,
+            ..Ping::default()
+        })?;
+        periods.end(start, seq >= WARMUP);
+    }
+    while (hops.len() as u64) < rounds {
+        if !take(endpoint, Duration::from_secs(2), &started, &mut hops)? {
+            bail!(
+                "{}: {} of {rounds} loop pings unanswered",
+                transport.label(),
+                rounds - hops.len() as u64
+            );
+        }
+    }
+    Ok((hops, periods.misses))
 }
 
 #[cfg(test)]

@@ -11,6 +11,7 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 mod baseline;
+mod control_loop;
 mod fanout;
 mod fleet;
 mod parts;
@@ -107,7 +108,7 @@ struct RunArgs {
     /// Robots for the service paths (full run).
     #[arg(long, value_delimiter = ',', default_values_t = ["titan".to_string(), "scout-mini".to_string(), "xbot".to_string()])]
     robots: Vec<String>,
-    /// Skip parts: baselines, paths, fanout, cost, throughput, zenoh.
+    /// Skip parts: baselines, paths, loops, fanout, cost, throughput, zenoh.
     #[arg(long, value_delimiter = ',')]
     skip: Vec<String>,
     /// Scratch directory for logs and sockets, kept afterwards (default: a new one under /tmp,
@@ -157,6 +158,8 @@ struct Plan {
     fanout: Vec<usize>,
     fanout_seconds: f64,
     cost_seconds: f64,
+    /// How long each control loop runs.
+    loop_seconds: f64,
 }
 
 impl Plan {
@@ -173,6 +176,7 @@ impl Plan {
             fanout: vec![2],
             fanout_seconds: 1.0,
             cost_seconds: 1.0,
+            loop_seconds: 2.0,
         }
     }
 
@@ -189,6 +193,7 @@ impl Plan {
                 fanout: vec![1, 4],
                 fanout_seconds: 1.5,
                 cost_seconds: 1.5,
+                loop_seconds: 10.0,
             }
         } else {
             Self {
@@ -202,6 +207,7 @@ impl Plan {
                 fanout: vec![1, 4, 16],
                 fanout_seconds: 5.0,
                 cost_seconds: 5.0,
+                loop_seconds: 150.0,
             }
         }
     }
@@ -478,6 +484,24 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         let what = format!("{}: command", report::DEFAULT_CONFIG_ROW);
         plan_row(PathKind::InService, &what, "event", cross, asked);
     }
+    // The control loops over chassisd's event loop and, but in a smoke run, its polling loop.
+    let loops = control_loop::plan(if args.smoke {
+        &[LoopMode::Event]
+    } else {
+        &[LoopMode::Event, LoopMode::Spin]
+    });
+    if !skip("loops") {
+        let cross = Placement::CrossCpu.label();
+        for &(period, mode) in &loops {
+            let periods = Some(control_loop::periods(period, plan.loop_seconds));
+            let run = bus_label(RobotKind::Titan, BusKind::Sim);
+            let [frame, age, hop] = control_loop::row_names(&run, period, transport_of(mode));
+            // A command the next period's superseded is what the row measures, not a loss.
+            plan_row(PathKind::Loop, &frame, mode.arg(), cross, None);
+            plan_row(PathKind::Loop, &age, mode.arg(), cross, periods);
+            plan_row(PathKind::Baseline, &hop, "-", cross, periods);
+        }
+    }
     if !skip("fanout") {
         for n in &plan.fanout {
             let what = format!("titan sim → {n} processes");
@@ -508,6 +532,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         baselines.len() + placement::cpu_count()
     }) + (if skip("paths") { 0 } else { runs.len() + 1 })
         + (if skip("fanout") { 0 } else { plan.fanout.len() })
+        + usize::from(!skip("loops"))
         + usize::from(!skip("cost"))
         + usize::from(!skip("zenoh"))
         + usize::from(!skip("throughput"));
@@ -1059,6 +1084,19 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             figures.in_service,
             0,
         ));
+        bar.inc(1);
+    }
+
+    if !skip("loops") {
+        bar.set_message("control loops at 1 kHz and 100 Hz");
+        control_loop::run(
+            &loops,
+            plan.loop_seconds,
+            transport_of,
+            &prefix,
+            &dir,
+            &mut report,
+        )?;
         bar.inc(1);
     }
 

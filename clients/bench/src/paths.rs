@@ -416,14 +416,14 @@ pub fn start_configured(
 /// The linear speed a transmitted motion frame commands, if the frame is one: the frame as the
 /// robot's codec of the registry describes it (`Family::codec`, what `chassis decode`
 /// prints), a serial robot's frames found in its byte stream.
-struct MotionDecoder {
+pub(crate) struct MotionDecoder {
     codec: BoxedCodec,
     /// The speed of the last motion frame decoded.
     last: Option<f64>,
 }
 
 impl MotionDecoder {
-    fn new(robot: RobotKind) -> Self {
+    pub(crate) fn new(robot: RobotKind) -> Self {
         let entry = robot.entry();
         Self {
             codec: entry.defaults().codec(),
@@ -431,7 +431,7 @@ impl MotionDecoder {
         }
     }
 
-    fn linear(&mut self, frame: &BusFrame) -> Option<f64> {
+    pub(crate) fn linear(&mut self, frame: &BusFrame) -> Option<f64> {
         if frame.direction != FrameDirection::TX {
             return None;
         }
@@ -589,6 +589,26 @@ const KEEP_ALIVE: Duration = Duration::from_millis(100);
 /// and the figure is the manual's rate bound, not the service's latency.
 pub const XBOT_COMMAND_INTERVAL: Duration = Duration::from_millis(1100);
 
+/// Drives at 0.25 m/s until a frame commands it (at most 3 s): the first motion releases
+/// TITAN's brake and waits for command mode (and, ramped, reaches the speed).
+pub(crate) fn warm_up(
+    tap: &chassis_client::FrameTap,
+    teleop: &mut Source,
+    decoder: &mut MotionDecoder,
+    spin: bool,
+) -> anyhow::Result<()> {
+    let warm_until = now_ns() + 3_000_000_000;
+    let mut ticker = Ticker::new(COMMAND_INTERVAL);
+    while now_ns() < warm_until {
+        teleop.send(VelocityRequest::twist(0.25, 0.0))?;
+        if wait_for_motion(tap, decoder, 0.25, now_ns(), spin, Duration::ZERO)?.is_some() {
+            break;
+        }
+        ticker.wait();
+    }
+    Ok(())
+}
+
 /// What the command path measured.
 #[derive(Debug)]
 pub struct CommandFigures {
@@ -667,17 +687,7 @@ pub fn command_path_via(
     let mut decoder = MotionDecoder::new(kind);
     // Exact on every wire: whole mm/s, whole percent of 5 m/s, exact in f32.
     let speeds = [0.25, 0.5];
-    // Warm up: the first motion releases TITAN's brake and waits for command mode (and, ramped,
-    // reaches the first speed).
-    let warm_until = now_ns() + 3_000_000_000;
-    let mut ticker = Ticker::new(COMMAND_INTERVAL);
-    while now_ns() < warm_until {
-        teleop.send(VelocityRequest::twist(0.25, 0.0))?;
-        if wait_for_motion(&tap, &mut decoder, 0.25, now_ns(), spin, Duration::ZERO)?.is_some() {
-            break;
-        }
-        ticker.wait();
-    }
+    warm_up(&tap, teleop, &mut decoder, spin)?;
 
     let mut latencies = Latencies::new();
     let mut in_service = Latencies::new();

@@ -28,6 +28,7 @@ pub enum PathKind {
     Python,
     Ros2,
     Zenoh,
+    Loop,
 }
 
 impl std::fmt::Display for PathKind {
@@ -42,6 +43,7 @@ impl std::fmt::Display for PathKind {
             PathKind::Python => "python",
             PathKind::Ros2 => "ros2",
             PathKind::Zenoh => "zenoh",
+            PathKind::Loop => "control loop",
         })
     }
 }
@@ -76,6 +78,10 @@ pub enum Leg {
     RemoteState,
     /// The robot's state published → in the operator's iceoryx2.
     RemoteBridge,
+    /// A control loop's period started → the frame of the command it wrote.
+    PeriodToFrame,
+    /// The frame read → a control loop read the state it made.
+    StateAge,
 }
 
 /// One measured distribution.
@@ -152,6 +158,36 @@ pub struct Report {
     pub expected: Vec<Planned>,
     /// How often each CPU stalled a thread that never blocks ([`STALLS`] rows).
     pub stalls: Vec<StallRates>,
+    /// The control loops' periods and misses ([`crate::control_loop`]).
+    #[serde(default)]
+    pub loops: Vec<LoopRun>,
+}
+
+/// One control loop's periods: the loop over chassisd and the same loop over the raw hop.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LoopRun {
+    /// Robot and bus.
+    pub run: String,
+    /// `1 kHz`, `100 Hz`.
+    pub rate: String,
+    /// chassisd's loop.
+    pub mode: String,
+    pub placement: String,
+    pub periods: u64,
+    /// Periods that ended after the next one was due.
+    pub misses: u64,
+    /// Periods whose command no frame carried (the next period's reached chassisd first).
+    pub superseded: u64,
+    pub raw_transport: String,
+    pub raw_periods: u64,
+    pub raw_misses: u64,
+}
+
+impl LoopRun {
+    /// Misses per million periods.
+    fn per_million(misses: u64, periods: u64) -> f64 {
+        1e6 * misses as f64 / periods.max(1) as f64
+    }
 }
 
 /// One line of a samples file: the run (what it measured on, its costs, notes), a row with its
@@ -719,6 +755,12 @@ impl Report {
             out.push_str(&format!(
                 "\nreplay at full speed (read + decode + publish in the service): {} frames in {:.2} s = {:.0} frames/s, service CPU {:.0} %: {:.0} frames per CPU second\n",
                 t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
+            ));
+        }
+        for l in &self.loops {
+            out.push_str(&format!(
+                "\ncontrol loop {}, {} ({} loop, {}): {} of {} periods missed; the raw loop {} of {}; {} commands no frame carried\n",
+                l.run, l.rate, l.mode, l.placement, l.misses, l.periods, l.raw_misses, l.raw_periods, l.superseded
             ));
         }
         for note in self.notes.iter().chain(&self.problems) {
@@ -1337,6 +1379,36 @@ impl Report {
         targets.push(t);
         targets.push(self.python_target());
 
+        targets.push(Target {
+            what: "a control loop over chassisd misses no more periods than the same loop over \
+                   the raw iceoryx2 hop (same run, 1 kHz and 100 Hz)"
+                .into(),
+            measured: if self.loops.is_empty() {
+                "not measured".into()
+            } else {
+                self.loops
+                    .iter()
+                    .map(|l| {
+                        format!(
+                            "{} {}: {} vs {} of a million",
+                            l.rate,
+                            l.mode,
+                            LoopRun::per_million(l.misses, l.periods).round(),
+                            LoopRun::per_million(l.raw_misses, l.raw_periods).round()
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            },
+            met: (!self.loops.is_empty()).then(|| {
+                self.loops.iter().all(|l| {
+                    LoopRun::per_million(l.misses, l.periods)
+                        <= LoopRun::per_million(l.raw_misses, l.raw_periods)
+                })
+            }),
+            why: String::new(),
+            limit: String::new(),
+        });
         let median = median_replay(&self.throughput);
         targets.push(Target {
             what: "decode + publish ≥ 1,000,000 frames/s on one core".into(),
@@ -1540,6 +1612,7 @@ impl Report {
 
         out.push_str(&self.parts_markdown());
 
+        out.push_str(&self.loops_markdown());
         out.push_str("## Cost under a full bus, throughput, memory\n\n");
         for c in &self.cost {
             out.push_str(&format!(
@@ -1683,6 +1756,48 @@ impl Report {
 }
 
 impl Report {
+    /// The section *The control loop*: each loop's periods and misses beside the raw loop's.
+    fn loops_markdown(&self) -> String {
+        if self.loops.is_empty() {
+            return String::new();
+        }
+        let mut out = String::from(
+            "## The control loop\n\n\
+             A controller as robot software runs one against a chassis (a ros2_control hardware \
+             interface, say): on absolute deadlines, each period reads the newest state \
+             (`Robot::latest_state`) and writes a command (`Source::send`), each period's a new \
+             speed, so that its frame tells which period it carries. A period that ends after \
+             the next one was due is a miss; a late period runs at once, none is skipped. Beside \
+             it, the same loop over the raw iceoryx2 hop, waiting as chassisd's loop does: one \
+             ping at the start of each period, the answers looked for without waiting. The \
+             table's *control loop* rows give each period's start → its command's frame (a \
+             command no frame carried, because the next period's reached chassisd first, is \
+             *missed*) and the state's age when read (its frame read → the loop has it); their \
+             baseline, each period's start → its ping received.\n\n\
+             | loop | chassisd's loop | placement | periods | missed (per million) | the raw loop's \
+             missed (per million) | commands no frame carried |\n| --- | --- | --- | ---: | ---: \
+             | ---: | ---: |\n",
+        );
+        for l in &self.loops {
+            out.push_str(&format!(
+                "| {}, {} | {} | {} | {} | {} ({:.0}) | {} of {} ({:.0}) | {} |\n",
+                l.run,
+                l.rate,
+                l.mode,
+                l.placement,
+                l.periods,
+                l.misses,
+                LoopRun::per_million(l.misses, l.periods),
+                l.raw_misses,
+                l.raw_periods,
+                LoopRun::per_million(l.raw_misses, l.raw_periods),
+                l.superseded
+            ));
+        }
+        out.push('\n');
+        out
+    }
+
     /// The section *Where each microsecond goes*: each part's p50 and p99 over the same
     /// samples, and the part's share of the sum of the p50s.
     fn parts_markdown(&self) -> String {
@@ -2472,6 +2587,7 @@ mod tests {
             .problems
             .push("two rows are named 'x' (2 of them)".into());
         report.realtime_rss_mib = Some(12.25);
+        report.loops.push(loop_run(3, 1));
 
         let samples = report.samples().unwrap();
         let again = Report::from_samples(&samples).unwrap();
@@ -2483,6 +2599,58 @@ mod tests {
             report.rows[1].latencies.cdf()
         );
         assert_eq!(again.rows[1].latencies.out_of_range, 1);
+    }
+
+    /// A 1 kHz loop of 100,000 periods beside a raw loop of as many.
+    fn loop_run(misses: u64, raw_misses: u64) -> LoopRun {
+        LoopRun {
+            run: "titan sim".into(),
+            rate: "1 kHz".into(),
+            mode: "event".into(),
+            placement: "cross CPU".into(),
+            periods: 100_000,
+            misses,
+            superseded: 0,
+            raw_transport: "iceoryx2 event".into(),
+            raw_periods: 100_000,
+            raw_misses,
+        }
+    }
+
+    #[test]
+    fn a_control_loop_may_miss_no_more_periods_than_the_raw_loop() {
+        let target = |loops: Vec<LoopRun>| {
+            let report = Report {
+                loops,
+                ..Report::default()
+            };
+            report
+                .targets()
+                .into_iter()
+                .find(|t| t.what.starts_with("a control loop"))
+                .unwrap()
+        };
+        assert_eq!(target(vec![]).met, None);
+        let t = target(vec![loop_run(2, 2)]);
+        assert_eq!(
+            (t.met, t.measured.as_str()),
+            (Some(true), "1 kHz event: 20 vs 20 of a million")
+        );
+        assert_eq!(
+            target(vec![loop_run(2, 2), loop_run(3, 2)]).met,
+            Some(false)
+        );
+        let section = Report {
+            loops: vec![loop_run(3, 1)],
+            ..Report::default()
+        }
+        .loops_markdown();
+        assert!(
+            section.contains(
+                "| titan sim, 1 kHz | event | cross CPU | 100000 | 3 (30) | 1 of 100000 (10) | 0 |"
+            ),
+            "{section}"
+        );
     }
 
     #[test]

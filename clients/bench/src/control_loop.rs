@@ -1,0 +1,354 @@
+//! The loop robot software runs against a chassis: a controller (a ros2_control hardware
+//! interface, say) that on each period of its clock reads the newest state and writes a command,
+//! here over the client library. How often it misses its period, how late each period's
+//! command reaches the bus, and how old the state it reads is — beside the same loop over the
+//! raw iceoryx2 hop ([`crate::baseline::Rounds::Loop`]).
+
+use std::time::Duration;
+
+use chassis_client::{Robot, VelocityRequest, now_ns};
+use chassis_protocols::RobotKind;
+
+use crate::baseline::{self, Transport};
+use crate::paths::{self, LoopMode, MotionDecoder, ServiceConfig, warm_up};
+use crate::placement::Placement;
+use crate::report::{Leg, LoopRun, PathKind, Report, Row};
+use crate::stats::Latencies;
+
+/// A periodic loop on absolute deadlines, as a controller's: period `k` starts at
+/// `start + k·period`; a late period runs at once (none is skipped), and a period whose work ends
+/// after the next one was due is a deadline miss.
+pub struct Periods {
+    next: u64,
+    period: u64,
+    /// The counted periods that ended late.
+    pub misses: u64,
+}
+
+impl Periods {
+    pub fn new(period: Duration) -> Self {
+        let period = u64::try_from(period.as_nanos())
+            .unwrap_or(u64::MAX / 4)
+            .max(1);
+        Self {
+            next: now_ns() + period,
+            period,
+            misses: 0,
+        }
+    }
+
+    /// Sleeps until the next period is due; returns when it was due.
+    pub fn next(&mut self) -> u64 {
+        use nix::sys::time::TimeSpec;
+        use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
+        let due = self.next;
+        let deadline = TimeSpec::from_duration(Duration::from_nanos(due));
+        let _ = clock_nanosleep(
+            ClockId::CLOCK_MONOTONIC,
+            ClockNanosleepFlags::TIMER_ABSTIME,
+            &deadline,
+        );
+        self.next += self.period;
+        due
+    }
+
+    /// Ends the period due at `due`: a miss, if `counted`, when it ends after the next one was
+    /// due.
+    pub fn end(&mut self, due: u64, counted: bool) {
+        if counted && now_ns() > due + self.period {
+            self.misses += 1;
+        }
+    }
+}
+
+/// What one run of the loop measured.
+#[derive(Debug)]
+pub struct LoopFigures {
+    pub periods: u64,
+    /// Periods that ended after the next one was due.
+    pub misses: u64,
+    /// Each period's start → the frame carrying its command written.
+    pub command: Latencies,
+    /// Periods whose command no frame carried: the next period's reached the loop first.
+    pub superseded: u64,
+    /// The newest state's frame read → the loop read it, each period.
+    pub state_age: Latencies,
+}
+
+/// Speeds exact on every wire (whole mm/s, whole percent of 5 m/s), each period's the next of
+/// them, so that every command is a change and its frame tells which period it carries.
+const SPEEDS: [f32; 20] = [
+    0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85,
+    0.9, 0.95, 1.0,
+];
+
+/// Runs the loop for `periods` periods of `period` on `robot` (after a warm-up): each period, the
+/// newest state read ([`Robot::latest_state`]) and a command written on `teleop`, the frame tap
+/// drained without waiting.
+pub fn measure(
+    robot: &mut Robot,
+    kind: RobotKind,
+    period: Duration,
+    periods: u64,
+    spin: bool,
+) -> anyhow::Result<LoopFigures> {
+    let tap = robot.frames(2048)?;
+    let mut teleop = robot.source("teleop")?;
+    let mut decoder = MotionDecoder::new(kind);
+    warm_up(&tap, &mut teleop, &mut decoder, spin)?;
+    let mut frames: Vec<(u64, f64)> = Vec::new();
+    let mut sent: Vec<(u64, u64, f64)> = Vec::with_capacity(usize::try_from(periods)?);
+    let mut state_age = Latencies::new();
+    let mut clock = Periods::new(period);
+    for k in 0..periods {
+        let due = clock.next();
+        if let Some(state) = robot.latest_state()? {
+            state_age.record_between(state.stamp_ns, now_ns());
+        }
+        let speed = SPEEDS[usize::try_from(k % 20)?];
+        let stamp = now_ns();
+        teleop.send(VelocityRequest {
+            stamp_ns: stamp,
+            ..VelocityRequest::twist(speed, 0.0)
+        })?;
+        tap.drain(|f| {
+            if let Some(v) = decoder.linear(f) {
+                frames.push((f.stamp_ns, v));
+            }
+        })?;
+        sent.push((due, stamp, f64::from(speed)));
+        clock.end(due, true);
+    }
+    // The last periods' frames.
+    let until = now_ns() + 100_000_000;
+    while now_ns() < until {
+        tap.wait(Duration::from_millis(10), |f| {
+            if let Some(v) = decoder.linear(f) {
+                frames.push((f.stamp_ns, v));
+            }
+        })?;
+    }
+    teleop.stop()?;
+    let (command, superseded) = match_frames(&sent, &frames);
+    Ok(LoopFigures {
+        periods,
+        misses: clock.misses,
+        command,
+        superseded,
+        state_age,
+    })
+}
+
+/// Each period's command (its start, when it was sent, its speed) matched to the first frame
+/// written after it that commands its speed, before a frame commands another period's; frames
+/// repeating the previous command (the service's tick) are passed over.
+fn match_frames(sent: &[(u64, u64, f64)], frames: &[(u64, f64)]) -> (Latencies, u64) {
+    let same = |a: f64, b: f64| (a - b).abs() < 1e-6;
+    let mut latencies = Latencies::new();
+    let mut superseded = 0;
+    let mut i = 0;
+    for (k, &(due, stamp, speed)) in sent.iter().enumerate() {
+        let previous = k.checked_sub(1).map(|p| sent[p].2);
+        while frames.get(i).is_some_and(|&(at, v)| {
+            at < stamp || previous.is_some_and(|p| same(v, p) && !same(v, speed))
+        }) {
+            i += 1;
+        }
+        match frames.get(i) {
+            Some(&(at, v)) if same(v, speed) => {
+                latencies.record_between(due, at);
+                i += 1;
+            }
+            _ => superseded += 1,
+        }
+    }
+    (latencies, superseded)
+}
+
+/// The loops a run measures: 1 kHz and 100 Hz, over the TITAN on the simulated bus, cross CPU,
+/// with chassisd's loop in each of `modes`.
+pub fn plan(modes: &[LoopMode]) -> Vec<(Duration, LoopMode)> {
+    modes
+        .iter()
+        .flat_map(|&mode| {
+            [Duration::from_millis(1), Duration::from_millis(10)].map(|period| (period, mode))
+        })
+        .collect()
+}
+
+/// `1 kHz`, `100 Hz`.
+fn rate(period: Duration) -> String {
+    let hz = 1.0 / period.as_secs_f64();
+    if hz >= 1000.0 {
+        format!("{} kHz", hz / 1000.0)
+    } else {
+        format!("{hz} Hz")
+    }
+}
+
+/// The rows of a loop of `period` over `run` (robot and bus) whose raw hop is `transport`:
+/// (its period → frame, its state's age, the raw loop's period → ping).
+pub fn row_names(run: &str, period: Duration, transport: Transport) -> [String; 3] {
+    let rate = rate(period);
+    [
+        format!("{run}, a loop at {rate}: period → its command's frame"),
+        format!("{run}, a loop at {rate}: the state's age when read"),
+        format!(
+            "{}, a loop at {rate}: period → its ping received",
+            transport.label()
+        ),
+    ]
+}
+
+/// How many periods of `period` a loop of `seconds` runs.
+pub fn periods(period: Duration, seconds: f64) -> u64 {
+    (seconds / period.as_secs_f64()).round() as u64
+}
+
+/// Runs each loop of `loops` for `seconds` over a chassisd of its own (the TITAN on the simulated
+/// bus, the latency runs' configuration, cross CPU), then the same loop over the raw iceoryx2
+/// hop that waits as chassisd's loop does, and adds their rows and figures to `report`.
+pub fn run(
+    loops: &[(Duration, LoopMode)],
+    seconds: f64,
+    transport_of: impl Fn(LoopMode) -> Transport,
+    prefix: &str,
+    dir: &std::path::Path,
+    report: &mut Report,
+) -> anyhow::Result<()> {
+    let (kind, placement) = (RobotKind::Titan, Placement::CrossCpu);
+    let run = format!("{kind} sim");
+    for &(period, mode) in loops {
+        let (client_cpu, service_cpu) = placement.cpus();
+        let (service, mut robot) = paths::start_configured(
+            kind,
+            paths::BusKind::Sim,
+            mode,
+            service_cpu,
+            ServiceConfig::BenchRealtime,
+            false,
+            prefix,
+            dir,
+        )?;
+        let count = periods(period, seconds);
+        let spin = mode == LoopMode::Spin;
+        let figures = paths::pinned(client_cpu, || {
+            measure(&mut robot, kind, period, count, spin)
+        })??;
+        drop(robot);
+        drop(service);
+        let transport = transport_of(mode);
+        let raw = baseline::run(
+            transport,
+            placement,
+            count,
+            baseline::Rounds::Loop(period),
+            None,
+            prefix,
+            dir,
+        )?;
+        let [frame, age, hop] = row_names(&run, period, transport);
+        let row = |path, leg, what, latencies, missed| {
+            Row::new(
+                path,
+                leg,
+                &run,
+                what,
+                mode.arg(),
+                placement.label(),
+                latencies,
+                missed,
+            )
+        };
+        let mut frame_row = row(
+            PathKind::Loop,
+            Leg::PeriodToFrame,
+            frame,
+            figures.command,
+            figures.superseded,
+        );
+        frame_row.baseline = Some(format!("{hop}, {}", placement.label()));
+        report.rows.push(frame_row);
+        report.rows.push(row(
+            PathKind::Loop,
+            Leg::StateAge,
+            age,
+            figures.state_age,
+            0,
+        ));
+        let mut raw_row = Row::new(
+            PathKind::Baseline,
+            Leg::Hop,
+            &run,
+            hop,
+            "-",
+            placement.label(),
+            baseline::last_of(&raw.pings, u64::MAX),
+            0,
+        );
+        raw_row.conditions = Some(format!(
+            "a loop on absolute deadlines sending one ping at the start of each period, \
+             looking for the answers without waiting, the receiver otherwise idle; {} periods \
+             after 200 of warm-up",
+            count
+        ));
+        report.rows.push(raw_row);
+        report.loops.push(LoopRun {
+            run: run.clone(),
+            rate: rate(period),
+            mode: mode.arg().into(),
+            placement: placement.label().into(),
+            periods: figures.periods,
+            misses: figures.misses,
+            superseded: figures.superseded,
+            raw_transport: transport.label().into(),
+            raw_periods: count,
+            raw_misses: raw.missed_periods,
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_period_is_matched_to_the_frame_of_its_command() {
+        // Periods of 1 ms sent 10 µs after they started, speeds 0.05, 0.1, 0.15, 0.2.
+        let sent: Vec<(u64, u64, f64)> = (0..4u64)
+            .map(|k| (k * 1000, k * 1000 + 10, 0.05 * (k + 1) as f64))
+            .collect();
+        let frames = [
+            (80, 0.05),
+            // The tick repeats the first command before the second's frame.
+            (1005, 0.05),
+            (1090, 0.1),
+            // The third period's command was superseded by the fourth's.
+            (3200, 0.2),
+            (3300, 0.2),
+        ];
+        let (latencies, superseded) = match_frames(&sent, &frames);
+        assert_eq!((latencies.count(), superseded), (3, 1));
+        let s = latencies.summary();
+        assert_eq!((s.p50_us, s.max_us), (0.09, 0.2));
+    }
+
+    #[test]
+    fn a_period_that_ends_after_the_next_one_was_due_is_a_miss() {
+        // Periods long enough that a loaded machine ends the first one in time.
+        let mut periods = Periods::new(Duration::from_millis(50));
+        let due = periods.next();
+        periods.end(due, true);
+        assert_eq!(periods.misses, 0);
+        // Periods whose work lasted into the next one.
+        let due = periods.next();
+        periods.next();
+        periods.end(due, false);
+        assert_eq!(periods.misses, 0, "a warm-up period is not counted");
+        let due = periods.next();
+        periods.next();
+        periods.end(due, true);
+        assert_eq!(periods.misses, 1);
+    }
+}
