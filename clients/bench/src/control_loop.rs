@@ -232,18 +232,29 @@ pub fn run(
         )?;
         let count = periods(period, seconds);
         let spin = mode == LoopMode::Spin;
+        let feedback = paths::FeedbackRate::start(&mut robot)?;
         let figures = paths::pinned(client_cpu, || {
             measure(&mut robot, kind, period, count, spin)
         })??;
+        let feed_per_s = feedback.per_second(&mut robot)?;
+        let realtime = service.scheduling.fifo();
         drop(robot);
         drop(service);
+        // The raw loop's receiver lives as chassisd's loop did: woken by another process at
+        // the chassis' feedback rate, by its own tick, scheduled alike.
+        let load = baseline::Load {
+            feed_per_s,
+            tick: kind.entry().defaults().heartbeat_period(),
+            realtime,
+            published: false,
+        };
         let transport = transport_of(mode);
         let raw = baseline::run(
             transport,
             placement,
             count,
             baseline::Rounds::Loop(period),
-            None,
+            Some(load),
             prefix,
             dir,
         )?;
@@ -288,9 +299,13 @@ pub fn run(
         );
         raw_row.conditions = Some(format!(
             "a loop on absolute deadlines sending one ping at the start of each period, \
-             looking for the answers without waiting, the receiver otherwise idle; {} periods \
-             after 200 of warm-up",
-            count
+             looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s by \
+             another process, as by the simulated chassis, and by its own {} ms tick{}; {count} \
+             periods after 200 of warm-up",
+            load.tick.as_millis(),
+            realtime.map_or(String::new(), |p| format!(
+                ", at SCHED_FIFO {p} as the service's loop"
+            )),
         ));
         report.rows.push(raw_row);
         report.loops.push(LoopRun {
