@@ -2653,6 +2653,21 @@ mod tests {
         );
     }
 
+    /// docs/PERFORMANCE.md is its samples, docs/bench.jsonl, rendered: byte for byte (its fleet
+    /// section is `chassis-bench fleet`'s, kept as the file has it).
+    #[test]
+    fn the_performance_document_is_its_samples_rendered() {
+        let docs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs");
+        let samples = std::fs::read_to_string(docs.join("bench.jsonl")).unwrap();
+        let doc = std::fs::read_to_string(docs.join("PERFORMANCE.md")).unwrap();
+        let rendered = Report::from_samples(&samples).unwrap().document(Some(&doc));
+        assert!(
+            rendered == doc,
+            "docs/PERFORMANCE.md is not docs/bench.jsonl rendered: measure again, or run \
+             `chassis-bench render docs/bench.jsonl --doc docs/PERFORMANCE.md`"
+        );
+    }
+
     #[test]
     fn samples_without_their_run_first_are_refused() {
         let (report, _) = run_with_ros2_row(600);
