@@ -84,7 +84,7 @@ pub enum Rounds {
     /// (and is not answered): only the counted ping's hop counts. What a request meets when it
     /// follows another at once, as a safety stop follows a teleop request.
     AfterWakeUp,
-    /// A controller's loop ([`crate::control_loop::Periods`]): one ping at the start of each
+    /// A controller's loop ([`crate::periods::Periods`]): one ping at the start of each
     /// period, the answers looked for without waiting; what counts is each period's start →
     /// its ping in the other process, and the periods the loop missed.
     Loop(Duration),
@@ -1073,7 +1073,7 @@ fn loop_rounds(
     period: Duration,
 ) -> anyhow::Result<(Vec<u64>, u64)> {
     const WARMUP: u64 = 200;
-    let mut periods = crate::control_loop::Periods::new(period);
+    let mut periods = crate::periods::Periods::new(period);
     // Each ping's period start and send stamp.
     let mut started: Vec<(u64, u64)> = Vec::new();
     let mut hops = Vec::new();

@@ -31,7 +31,7 @@ use serde::Serialize;
 
 use crate::paths;
 use crate::provenance::{CpuTimes, Provenance};
-use crate::report::Machine;
+use crate::report::{Machine, Report};
 
 /// The heading of the section this writes.
 pub const HEADING: &str = "## Fleet";
@@ -453,6 +453,15 @@ pub fn splice(text: &str, section: &str) -> String {
         + "\n"
 }
 
+/// The performance document: `report`'s [`Report::markdown`], with the fleet section of
+/// `existing` (the file as it is: `chassis-bench fleet` writes that section) kept.
+pub fn document(report: &Report, existing: Option<&str>) -> String {
+    match existing.and_then(section_of) {
+        Some(section) => splice(&report.markdown(), &section),
+        None => report.markdown(),
+    }
+}
+
 /// The `## Fleet` section of `text`, if it has one.
 pub fn section_of(text: &str) -> Option<String> {
     let start = find_heading(text)?;
@@ -641,6 +650,21 @@ pub fn write(report: &FleetReport, args: &FleetArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// docs/PERFORMANCE.md is its samples, docs/bench.jsonl, rendered: byte for byte (its fleet
+    /// section is `chassis-bench fleet`'s, kept as the file has it).
+    #[test]
+    fn the_performance_document_is_its_samples_rendered() {
+        let docs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs");
+        let samples = std::fs::read_to_string(docs.join("bench.jsonl")).unwrap();
+        let doc = std::fs::read_to_string(docs.join("PERFORMANCE.md")).unwrap();
+        let rendered = document(&Report::from_samples(&samples).unwrap(), Some(&doc));
+        assert!(
+            rendered == doc,
+            "docs/PERFORMANCE.md is not docs/bench.jsonl rendered: measure again, or run \
+             `chassis-bench render docs/bench.jsonl --doc docs/PERFORMANCE.md`"
+        );
+    }
 
     #[test]
     fn a_fleet_process_serves_under_its_prefix_and_logs_to_its_file() {

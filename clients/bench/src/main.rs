@@ -16,6 +16,7 @@ mod fanout;
 mod fleet;
 mod parts;
 mod paths;
+mod periods;
 mod placement;
 mod provenance;
 mod python;
@@ -139,7 +140,7 @@ fn render(
         report.plot(path)?;
     }
     if let Some(path) = doc {
-        let text = report.document(std::fs::read_to_string(path).ok().as_deref());
+        let text = fleet::document(report, std::fs::read_to_string(path).ok().as_deref());
         std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())

@@ -158,7 +158,7 @@ pub struct Report {
     pub expected: Vec<Planned>,
     /// How often each CPU stalled a thread that never blocks ([`STALLS`] rows).
     pub stalls: Vec<StallRates>,
-    /// The control loops' periods and misses ([`crate::control_loop`]).
+    /// The control loops' periods and misses.
     #[serde(default)]
     pub loops: Vec<LoopRun>,
 }
@@ -210,15 +210,6 @@ enum ReadLine {
 }
 
 impl Report {
-    /// The performance document: [`Report::markdown`], with the fleet section of `existing` (the
-    /// file as it is: `chassis-bench fleet` writes that section) kept.
-    pub fn document(&self, existing: Option<&str>) -> String {
-        match existing.and_then(crate::fleet::section_of) {
-            Some(section) => crate::fleet::splice(&self.markdown(), &section),
-            None => self.markdown(),
-        }
-    }
-
     /// The run's samples, one JSON line each: the run first, then its rows and splits in order.
     /// Everything the table, the document and the plots are rendered from.
     pub fn samples(&self) -> Result<String, serde_json::Error> {
@@ -2650,21 +2641,6 @@ mod tests {
                 "| titan sim, 1 kHz | event | cross CPU | 100000 | 3 (30) | 1 of 100000 (10) | 0 |"
             ),
             "{section}"
-        );
-    }
-
-    /// docs/PERFORMANCE.md is its samples, docs/bench.jsonl, rendered: byte for byte (its fleet
-    /// section is `chassis-bench fleet`'s, kept as the file has it).
-    #[test]
-    fn the_performance_document_is_its_samples_rendered() {
-        let docs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs");
-        let samples = std::fs::read_to_string(docs.join("bench.jsonl")).unwrap();
-        let doc = std::fs::read_to_string(docs.join("PERFORMANCE.md")).unwrap();
-        let rendered = Report::from_samples(&samples).unwrap().document(Some(&doc));
-        assert!(
-            rendered == doc,
-            "docs/PERFORMANCE.md is not docs/bench.jsonl rendered: measure again, or run \
-             `chassis-bench render docs/bench.jsonl --doc docs/PERFORMANCE.md`"
         );
     }
 
