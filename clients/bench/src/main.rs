@@ -130,7 +130,7 @@ struct RenderArgs {
     doc: Option<PathBuf>,
 }
 
-/// Writes the plot and the document of `report` ([`Report::document`]).
+/// Writes the plot and the document of `report` ([`fleet::document`]).
 fn render(
     report: &Report,
     doc: Option<&std::path::Path>,
