@@ -120,13 +120,21 @@ fn match_frames(sent: &[(u64, u64, f64)], frames: &[(u64, f64)]) -> (Latencies, 
     (latencies, superseded)
 }
 
-/// The loops a run measures: 1 kHz and 100 Hz, over the TITAN on the simulated bus, cross CPU,
-/// with chassisd's loop in each of `modes`.
-pub fn plan(modes: &[LoopMode]) -> Vec<(Duration, LoopMode)> {
+/// The loops a run measures: 1 kHz and, but in a smoke run, 100 Hz, over the TITAN on the
+/// simulated bus, cross CPU, with chassisd's event loop and, but in a smoke run, its polling
+/// loop (a smoke run checks the rows, and the 1 kHz event loop has every kind of them).
+pub fn plan(smoke: bool) -> Vec<(Duration, LoopMode)> {
+    let (periods, modes): (&[u64], &[LoopMode]) = if smoke {
+        (&[1], &[LoopMode::Event])
+    } else {
+        (&[1, 10], &[LoopMode::Event, LoopMode::Spin])
+    };
     modes
         .iter()
         .flat_map(|&mode| {
-            [Duration::from_millis(1), Duration::from_millis(10)].map(|period| (period, mode))
+            periods
+                .iter()
+                .map(move |&ms| (Duration::from_millis(ms), mode))
         })
         .collect()
 }

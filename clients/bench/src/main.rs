@@ -177,7 +177,7 @@ impl Plan {
             fanout: vec![2],
             fanout_seconds: 1.0,
             cost_seconds: 1.0,
-            loop_seconds: 2.0,
+            loop_seconds: 1.0,
         }
     }
 
@@ -485,12 +485,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         let what = format!("{}: command", report::DEFAULT_CONFIG_ROW);
         plan_row(PathKind::InService, &what, "event", cross, asked);
     }
-    // The control loops over chassisd's event loop and, but in a smoke run, its polling loop.
-    let loops = control_loop::plan(if args.smoke {
-        &[LoopMode::Event]
-    } else {
-        &[LoopMode::Event, LoopMode::Spin]
-    });
+    let loops = control_loop::plan(args.smoke);
     if !skip("loops") {
         let cross = Placement::CrossCpu.label();
         for &(period, mode) in &loops {
