@@ -1068,10 +1068,31 @@ pub fn mux(robot: &mut Robot) -> MuxStatus {
 /// (`faults.jsonl`, one [`Figure`] a line); unset, [`Figures`] only prints them.
 pub const RELIABILITY_DIR_ENV: &str = "CHASSIS_RELIABILITY_DIR";
 
+/// The test files that are test binaries of their own: the fault matrix (its machine lock,
+/// [`faults::exclusive`], keeps timing measurements apart within one binary), the soak and the
+/// VM tests. Every other file is a module of the `system` binary (`tests/tests/system/`).
+pub const OWN_BINARIES: &[&str] = &[
+    "faults_bus",
+    "faults_clients",
+    "faults_processes",
+    "soak",
+    "vcan",
+    "sja1000",
+];
+
+/// The command that runs test `test` of test file `suite` alone.
+pub fn rerun_command(suite: &str, test: &str) -> String {
+    if OWN_BINARIES.contains(&suite) {
+        format!("cargo test -p chassis-tests --test {suite} {test}")
+    } else {
+        format!("cargo test -p chassis-tests --test system {suite}::{test}")
+    }
+}
+
 /// One row of the reliability table: a fault, how the test injected it, what the system did,
 /// and the figure measured. `rank` groups the rows in the JSON lines (the table's order is
-/// [`FAULT_ROWS`]'s); `suite` and `test` name the test that reproduces it
-/// (`cargo test -p chassis-tests --test SUITE TEST`).
+/// [`FAULT_ROWS`]'s); `suite` (the test file) and `test` name the test that reproduces it
+/// ([`rerun_command`]).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Figure {
     pub rank: u32,
@@ -1105,10 +1126,7 @@ impl ExpectedRow {
 
     /// The command that reproduces the row.
     pub fn command(&self) -> String {
-        format!(
-            "cargo test -p chassis-tests --test {} {}",
-            self.suite, self.test
-        )
+        rerun_command(self.suite, self.test)
     }
 }
 

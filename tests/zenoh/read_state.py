@@ -1,7 +1,7 @@
 """An independent Zenoh client (the ``eclipse-zenoh`` package) reads a robot's state from
 ``chassis-zenoh`` and checks every sample against the Python package's ``ChassisState``.
 
-Started by tests/tests/zenoh.rs inside the operator's network namespace::
+Started by tests/tests/system/zenoh.rs inside the operator's network namespace::
 
     python read_state.py --connect tcp/10.77.0.1:7447 --name titan --kind 1 --count 50 \
         [--put-source safety]
@@ -79,7 +79,7 @@ def main() -> None:
     parser.add_argument("--certs", help="directory of chassis-zenoh gen-certs (tls/ endpoints)")
     args = parser.parse_args()
     if not in_a_test_namespace():
-        fail("run me only inside the network namespace tests/tests/zenoh.rs builds (ip netns)")
+        fail("run me only inside the network namespace tests/tests/system/zenoh.rs builds (ip netns)")
 
     key = f"chassis/{args.name}/state"
     expected_encoding = f"application/octet-stream;{chassis.ChassisState.type_name()}"

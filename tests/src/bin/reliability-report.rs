@@ -23,7 +23,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use chassis_provenance::{CpuTimes, GitState, Steal, output};
-use chassis_tests::{ExpectedRow, FAULT_ROWS, Figure, SOAK_ROWS, STATE_BUFFER};
+use chassis_tests::{ExpectedRow, FAULT_ROWS, Figure, SOAK_ROWS, STATE_BUFFER, rerun_command};
 use serde::{Deserialize, Serialize};
 
 /// When, where and how a set of figures was measured.
@@ -151,8 +151,9 @@ enum Outcome {
 }
 
 /// Every test's outcome in the output of `cargo test` (stdout and stderr together), by
-/// (suite, test): the suite is the integration test file cargo names in its `Running
-/// tests/SUITE.rs (…)` line. Read from what libtest prints whatever the capture mode:
+/// (suite, test): the suite is the integration test file, the one cargo names in its `Running
+/// tests/SUITE.rs (…)` line or, in a binary of modules (`Running tests/system/main.rs`), the
+/// first part of the test's path (`SUITE::test`). Read from what libtest prints whatever the capture mode:
 /// `test NAME ... ok|FAILED|ignored` (with `--nocapture` the verdict may come lines later, after
 /// the test's own output), the names under the second `failures:` heading, and the binary's
 /// `test result:` line — a test named in a binary that never printed its result (it crashed) is
@@ -163,19 +164,20 @@ struct Outcomes(BTreeMap<(String, String), Outcome>);
 impl Outcomes {
     fn parse(text: &str) -> Self {
         let mut outcomes = BTreeMap::new();
-        let mut suite: Option<String> = None;
+        // The binary's file, and whether its tests are named `SUITE::test`.
+        let mut suite: Option<(String, bool)> = None;
         // Per binary: names started, verdicts on their line, the failures list, its summary.
         let mut started: Vec<String> = Vec::new();
         let mut verdicts: BTreeMap<String, Outcome> = BTreeMap::new();
         let mut failed: Vec<String> = Vec::new();
         let mut summary = false;
         let mut failures_headings = 0;
-        let mut flush = |suite: &Option<String>,
+        let mut flush = |suite: &Option<(String, bool)>,
                          started: &mut Vec<String>,
                          verdicts: &mut BTreeMap<String, Outcome>,
                          failed: &mut Vec<String>,
                          summary: bool| {
-            if let Some(suite) = suite {
+            if let Some((file, modules)) = suite {
                 for name in started.drain(..) {
                     let outcome = if failed.contains(&name) {
                         Outcome::Failed
@@ -186,7 +188,11 @@ impl Outcomes {
                             None => Outcome::Unknown,
                         }
                     };
-                    outcomes.insert((suite.clone(), name), outcome);
+                    let key = match name.split_once("::") {
+                        Some((module, test)) if *modules => (module.to_string(), test.to_string()),
+                        _ => (file.clone(), name),
+                    };
+                    outcomes.insert(key, outcome);
                 }
             }
             started.clear();
@@ -204,7 +210,10 @@ impl Outcomes {
                     .next()
                     .and_then(|path| path.strip_prefix("tests/"))
                     .and_then(|file| file.strip_suffix(".rs"))
-                    .map(str::to_string);
+                    .map(|file| match file.strip_suffix("/main") {
+                        Some(binary) => (binary.to_string(), true),
+                        None => (file.to_string(), false),
+                    });
                 continue;
             }
             if trimmed.starts_with("test result:") {
@@ -397,7 +406,7 @@ fn rows<'a>(
         if !expected.iter().any(|e| e.matches(f)) {
             rows.push(Row {
                 fault: &f.fault,
-                command: format!("cargo test -p chassis-tests --test {} {}", f.suite, f.test),
+                command: rerun_command(&f.suite, &f.test),
                 figure: Some(f),
                 expected: false,
                 outcome: outcomes.of(&f.suite, &f.test),
@@ -603,6 +612,7 @@ fn main() -> ExitCode {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chassis_tests::OWN_BINARIES;
 
     /// The outcomes of a run in which every expected test passed.
     fn all_passed() -> Outcomes {
@@ -648,12 +658,13 @@ ok
 
 test result: ok. 1 passed; 0 failed; 0 ignored; 0 measured; 0 filtered out; finished in 60.00s
 
-     Running tests/systemd.rs (target/debug/deps/systemd-77)
+     Running tests/system/main.rs (target/debug/deps/system-77)
 
-running 2 tests
-test ready_first ... ok
-test the_watchdog_test ... 
-error: test failed, to rerun pass `-p chassis-tests --test systemd`
+running 3 tests
+test service::a_stop ... ok
+test systemd::ready_first ... ok
+test systemd::the_watchdog_test ... 
+error: test failed, to rerun pass `-p chassis-tests --test system`
 ";
 
     #[test]
@@ -669,6 +680,9 @@ error: test failed, to rerun pass `-p chassis-tests --test systemd`
         assert_eq!(outcomes.of("soak", "a_titan_soak"), Outcome::Passed);
         // Its binary ended without a summary: the test that was running is not known to pass,
         // the one that said ok did.
+        // In the binary of modules, the module is the suite.
+        assert_eq!(outcomes.of("service", "a_stop"), Outcome::Passed);
+        assert_eq!(outcomes.of("system", "service::a_stop"), Outcome::Unknown);
         assert_eq!(outcomes.of("systemd", "ready_first"), Outcome::Passed);
         assert_eq!(
             outcomes.of("systemd", "the_watchdog_test"),
@@ -726,8 +740,13 @@ error: test failed, to rerun pass `-p chassis-tests --test systemd`
         let mut suites: Vec<&str> = FAULT_ROWS.iter().map(|r| r.suite).collect();
         suites.dedup();
         for suite in suites {
+            let (file, prefix) = if OWN_BINARIES.contains(&suite) {
+                (suite.to_string(), String::new())
+            } else {
+                ("system/main".to_string(), format!("{suite}::"))
+            };
             log.push_str(&format!(
-                "     Running tests/{suite}.rs (target/debug/deps/x)\n"
+                "     Running tests/{file}.rs (target/debug/deps/x)\n"
             ));
             for row in FAULT_ROWS.iter().filter(|r| r.suite == suite) {
                 let verdict = if row == &FAULT_ROWS[0] {
@@ -735,7 +754,7 @@ error: test failed, to rerun pass `-p chassis-tests --test systemd`
                 } else {
                     "ok"
                 };
-                log.push_str(&format!("test {} ... {verdict}\n", row.test));
+                log.push_str(&format!("test {prefix}{} ... {verdict}\n", row.test));
             }
             log.push_str("test result: ok. 1 passed\n");
         }

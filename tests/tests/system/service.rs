@@ -228,7 +228,7 @@ fn a_latched_estop_holds_until_the_operator_releases_it() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("estop released"));
-    // A release never starts motion (tests/tests/latch.rs): teleop lets go first, while the
+    // A release never starts motion (tests/tests/system/latch.rs): teleop lets go first, while the
     // safety source beats again (it was silent while `chassis control` ran: its return is a
     // stop's end too, and only a zero after it counts).
     let zero = VelocityRequest::twist(0.0, 0.0);

@@ -354,7 +354,7 @@ fn the_bumper_latches_the_estop_which_holds_until_the_operator_releases_it() {
 
     let out = env.chassis_ok(&["control", "--name", &n, "estop-release"]);
     assert!(out.contains("estop released"), "{out}");
-    // A release never starts motion (tests/tests/latch.rs): teleop asks for zero, then drives.
+    // A release never starts motion (tests/tests/system/latch.rs): teleop asks for zero, then drives.
     // Without it the test passed only when the CLI calls above outlasted teleop's timeout.
     teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
     let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
@@ -392,7 +392,7 @@ fn sigusr1_to_the_monitor_latches_the_operator_estop_until_it_is_released() {
         "peak {high}"
     );
     env.chassis_ok(&["control", "--name", &n, "estop-release"]);
-    // A release never starts motion (tests/tests/latch.rs): teleop asks for zero, then drives.
+    // A release never starts motion (tests/tests/system/latch.rs): teleop asks for zero, then drives.
     teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
     let high = drive_one(&mut robot, &mut teleop, go, Duration::from_millis(1500));
     assert!(

@@ -606,7 +606,7 @@ fn runs_in_vm(path: &Path) -> bool {
 fn executed_programs() -> BTreeMap<String, BTreeSet<(PathBuf, bool)>> {
     let mut all: BTreeMap<String, BTreeSet<(PathBuf, bool)>> = BTreeMap::new();
     for path in tracked_files() {
-        if path == Path::new("tests/tests/host_programs.rs") {
+        if path == Path::new("tests/tests/system/host_programs.rs") {
             // This file's examples are data.
             continue;
         }
