@@ -1683,7 +1683,12 @@ mod tests {
     fn every_expected_reliability_row_names_an_existing_test() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
         for (i, row) in FAULT_ROWS.iter().chain(SOAK_ROWS).enumerate() {
-            let source = std::fs::read_to_string(dir.join(format!("{}.rs", row.suite)))
+            let file = if OWN_BINARIES.contains(&row.suite) {
+                format!("{}.rs", row.suite)
+            } else {
+                format!("system/{}.rs", row.suite)
+            };
+            let source = std::fs::read_to_string(dir.join(file))
                 .unwrap_or_else(|e| panic!("{}: {e}", row.suite));
             assert!(
                 source.contains(&format!("fn {}()", row.test)),
