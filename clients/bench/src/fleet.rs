@@ -453,13 +453,14 @@ pub fn splice(text: &str, section: &str) -> String {
         + "\n"
 }
 
-/// The performance document: `report`'s [`Report::markdown`], with the fleet section of
-/// `existing` (the file as it is: `chassis-bench fleet` writes that section) kept.
-pub fn document(report: &Report, existing: Option<&str>) -> String {
-    match existing.and_then(section_of) {
-        Some(section) => splice(&report.markdown(), &section),
-        None => report.markdown(),
-    }
+/// The performance document: `report`'s ([`crate::render::document`]), with the fleet section
+/// of `existing` (the file as it is: `chassis-bench fleet` writes that section) kept.
+pub fn document(report: &Report, existing: Option<&str>) -> anyhow::Result<String> {
+    let text = crate::render::document(report)?;
+    Ok(match existing.and_then(section_of) {
+        Some(section) => splice(&text, &section),
+        None => text,
+    })
 }
 
 /// The `## Fleet` section of `text`, if it has one.
@@ -658,7 +659,7 @@ mod tests {
         let docs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs");
         let samples = std::fs::read_to_string(docs.join("bench.jsonl")).unwrap();
         let doc = std::fs::read_to_string(docs.join("PERFORMANCE.md")).unwrap();
-        let rendered = document(&Report::from_samples(&samples).unwrap(), Some(&doc));
+        let rendered = document(&Report::from_samples(&samples).unwrap(), Some(&doc)).unwrap();
         assert!(
             rendered == doc,
             "docs/PERFORMANCE.md is not docs/bench.jsonl rendered: measure again, or run \

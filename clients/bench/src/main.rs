@@ -20,11 +20,13 @@ mod periods;
 mod placement;
 mod provenance;
 mod python;
+mod render;
 mod report;
 mod ros2;
 mod stalls;
 mod stats;
 mod throughput;
+mod verdict;
 mod zenoh;
 
 use baseline::{Load, Transport};
@@ -140,7 +142,7 @@ fn render(
         report.plot(path)?;
     }
     if let Some(path) = doc {
-        let text = fleet::document(report, std::fs::read_to_string(path).ok().as_deref());
+        let text = fleet::document(report, std::fs::read_to_string(path).ok().as_deref())?;
         std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
