@@ -22,7 +22,7 @@ processes involved:
   Rust and Python readers leave out the sample published before they opened; the newest of them
   only sets the stamp.
 * **raw hops**: the same two DDS implementations with nothing behind them, each carrying what
-  its path carries with the same QoS. ``chassis-ros2 --bench-echo`` (the bridge's DDS stack)
+  its path carries with the same QoS. ``chassis-bench role dds-echo`` (the bridge's DDS stack)
   records each ``TwistStamped`` ping written here (Cyclone DDS → RustDDS, read as the bridge
   reads ``cmd_vel``) and answers it at once with an ``Odometry`` written as the bridge writes
   ``odom`` (RustDDS → Cyclone DDS, read here as ``odom`` is read), after a warm-up of
@@ -41,8 +41,8 @@ loopback (``chassis-bench`` runs it under ``unshare --net``); it refuses to run 
 
 Command line::
 
-    python3 clients/ros2/bench.py --name titan --prefix P --bridge target/release/chassis-ros2
-        --chassis target/release/chassis --latencies-dir DIR
+    python3 clients/ros2/bench.py --name titan --prefix P --bridge target/release/chassis-ros2 \
+        --echo target/release/chassis-bench --chassis target/release/chassis --latencies-dir DIR
         [--state-samples 2000] [--commands 300] [--interval-ms 4]
 
 Writes DIR/command.ns, DIR/state.ns, DIR/raw-in.ns (Cyclone → RustDDS), DIR/raw-out.ns
@@ -243,6 +243,7 @@ def main() -> int:
     parser.add_argument("--robot", default="titan")
     parser.add_argument("--prefix", default=os.environ.get("CHASSIS_IPC_PREFIX"))
     parser.add_argument("--bridge", required=True)
+    parser.add_argument("--echo", required=True, help="chassis-bench, the raw hops' far end")
     parser.add_argument("--chassis", required=True)
     parser.add_argument("--latencies-dir", type=Path, required=True)
     parser.add_argument("--state-samples", type=int, default=2000)
@@ -264,7 +265,7 @@ def main() -> int:
             stderr=log,
         )
         echo = subprocess.Popen(
-            [args.bridge, "--bench-echo", str(out / "raw-in.ns")], env=env, stderr=log
+            [args.echo, "role", "dds-echo", "--out", str(out / "raw-in.ns")], env=env, stderr=log
         )
     try:
         robot = chassis.Robot.connect(args.name, prefix=args.prefix)

@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 mod baseline;
 mod control_loop;
+mod dds_echo;
 mod fanout;
 mod fleet;
 mod parts;
@@ -70,6 +71,7 @@ enum Role {
     Pong(baseline::PongArgs),
     Feed(baseline::FeedArgs),
     Subscribe(fanout::SubscribeArgs),
+    DdsEcho(dds_echo::EchoArgs),
     /// Write the candump log the throughput run replays (for profiling the service by hand).
     RecordTitan {
         #[arg(long)]
@@ -1287,6 +1289,9 @@ fn main() -> ExitCode {
         Some(RoleCmd::Role {
             role: Role::Feed(args),
         }) => baseline::feed(&args),
+        Some(RoleCmd::Role {
+            role: Role::DdsEcho(args),
+        }) => dds_echo::run(&args),
         Some(RoleCmd::Role {
             role: Role::RecordTitan { out, seconds },
         }) => throughput::record_titan(&out, seconds).map(|frames| {

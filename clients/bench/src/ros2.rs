@@ -10,6 +10,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
+use anyhow::Context as _;
+
 use crate::python::{ScriptRun, read_latencies, read_stamps, repo, run_script};
 use crate::stats::Latencies;
 
@@ -53,7 +55,9 @@ pub fn run(python: &Path, bridge: &Path, run: &ScriptRun<'_>) -> anyhow::Result<
         .arg(python)
         .arg(repo().join("clients/ros2/bench.py"))
         .arg("--bridge")
-        .arg(bridge);
+        .arg(bridge)
+        .arg("--echo")
+        .arg(std::env::current_exe().context("finding chassis-bench itself")?);
     run.args(&mut script);
     run_script(script, &out, "the ROS 2 bridge's benchmark")?;
     let missed = std::fs::read_to_string(out.join("command.missed"))

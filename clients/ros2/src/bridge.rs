@@ -32,8 +32,8 @@ use chassis_client::{
 };
 use mio::{Events, Interest, Poll, Token};
 use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher,
-    QosProfile, Server, ServiceMapping, Subscription,
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Server,
+    ServiceMapping, Subscription,
     qos::{Durability, History, WhenFull},
     service::RmwRequestId,
 };
@@ -187,7 +187,8 @@ macro_rules! opaque_debug {
 }
 opaque_debug!(Entities, Commands, Outputs);
 
-fn topic_name(namespace: &str, path: &str) -> anyhow::Result<Name> {
+/// `path` under ROS namespace `namespace`, as a topic's name.
+pub fn topic_name(namespace: &str, path: &str) -> anyhow::Result<Name> {
     let full = if namespace == "/" {
         format!("/{path}")
     } else {
@@ -877,76 +878,6 @@ pub fn state_loop(
     {
         tracing::warn!(error = %e, path = %trace.path().display(), "odom trace not written");
     }
-    Ok(())
-}
-
-/// The far end of `chassis-bench`'s raw DDS hops (`clients/ros2/bench.py`): the bridge's own DDS
-/// stack with nothing behind it, each hop carrying what the bridge's path carries, with its QoS.
-/// Each `TwistStamped` on `chassis_bench/ping` (its stamp: the sender's `CLOCK_MONOTONIC` at the
-/// write), read as `cmd_vel` is read, is recorded as a one-way latency and answered at once on
-/// `chassis_bench/pong` by an `Odometry` written as `odom` is written (the same message, the
-/// same writer QoS), stamped with this process' `CLOCK_MONOTONIC` at that write. Runs until
-/// SIGINT / SIGTERM, then writes the latencies, ns, one a line, to `out`.
-pub fn bench_echo(domain_id: u16, out: &std::path::Path) -> anyhow::Result<()> {
-    let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
-        .context("joining the DDS domain")?;
-    let mut node = context
-        .new_node(
-            NodeName::new("/", "chassis_bench_echo")
-                .map_err(|e| anyhow::anyhow!("node name: {e:?}"))?,
-            NodeOptions::new(),
-        )
-        .context("creating the node")?;
-    let ping_topic = node.create_topic(
-        &topic_name("/", "chassis_bench/ping")?,
-        TwistStamped::type_name(),
-        &reliable_qos(),
-    )?;
-    let pong_topic = node.create_topic(
-        &topic_name("/", "chassis_bench/pong")?,
-        Odometry::type_name(),
-        &reliable_qos(),
-    )?;
-    let mut ping: Subscription<TwistStamped> =
-        node.create_subscription(&ping_topic, Some(cmd_vel_qos()))?;
-    let pong: Publisher<Odometry> =
-        node.create_publisher(&pong_topic, Some(reliable_writer_qos()))?;
-    // An odom as the bridge writes it for a robot at rest: the same size on the wire.
-    let description = RobotDescription::default();
-    let odom = convert::odometry(
-        &ChassisState::default(),
-        &description.odometry_variance,
-        RosClock::with_offset(0),
-        &Frames::new(""),
-    );
-    let mut poll = Poll::new()?;
-    poll.registry()
-        .register(&mut ping, CMD_VEL, Interest::READABLE)?;
-    let mut events = Events::with_capacity(4);
-    let mut latencies = Vec::new();
-    while !termination_requested() {
-        if let Err(e) = poll.poll(&mut events, Some(Duration::from_millis(100))) {
-            if e.kind() == std::io::ErrorKind::Interrupted {
-                continue;
-            }
-            return Err(e).context("waiting for DDS");
-        }
-        while let Ok(Some((m, _))) = ping.take() {
-            let now = chassis_client::now_ns();
-            let sent = u64::try_from(m.header.stamp.nanos()).unwrap_or(0);
-            latencies.push(now.saturating_sub(sent));
-            let mut answer = odom.clone();
-            answer.header.stamp =
-                crate::msg::Time::from_nanos(i64::try_from(chassis_client::now_ns()).unwrap_or(0));
-            if let Err(e) = pong.publish(answer) {
-                tracing::warn!(error = ?e, "pong not sent");
-            }
-        }
-    }
-    let text: String = latencies.iter().map(|l| format!("{l}\n")).collect();
-    std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
-    drop(pong);
-    drop(ping);
     Ok(())
 }
 

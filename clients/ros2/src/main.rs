@@ -34,8 +34,8 @@ enum Mapping {
 )]
 struct Cli {
     /// The robot's name in chassisd (`chassisd --name`, default its robot).
-    #[arg(long, required_unless_present = "bench_echo")]
-    name: Option<String>,
+    #[arg(long)]
+    name: String,
     /// ROS namespace of the node and every topic (`/robot1`); several robots on one computer
     /// each get their own.
     #[arg(long, default_value = "/")]
@@ -72,9 +72,6 @@ struct Cli {
     /// dropped and counted.
     #[arg(long, default_value_t = 250)]
     max_age_ms: u64,
-    /// (internal) Be the far end of chassis-bench's raw DDS hop; write its latencies here.
-    #[arg(long, hide = true)]
-    bench_echo: Option<std::path::PathBuf>,
 }
 
 fn namespace(ns: &str) -> String {
@@ -89,12 +86,7 @@ fn namespace(ns: &str) -> String {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    if let Some(out) = &cli.bench_echo {
-        return bridge::bench_echo(cli.domain_id, out);
-    }
-    let Some(name) = cli.name else {
-        anyhow::bail!("--name is required");
-    };
+    let name = cli.name;
     if let Some(path) = &cli.record {
         let options = chassis_ros2::record::RecordOptions {
             name,
