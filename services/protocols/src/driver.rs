@@ -12,7 +12,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ControlStatus, FaultFlags, LinkFlags, OdometryState, Velocity,
+    ChassisState, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags, OdometryState, Velocity,
 };
 use serde::{Deserialize, Serialize};
 
@@ -398,6 +398,22 @@ impl DriverCore {
         } else {
             self.state.link_flags &= !flag;
         }
+    }
+
+    /// Takes a status frame's control mode and normalized faults into `state.system` and the
+    /// link flags. A battery under-voltage fault means the drive power is off; command mode counts
+    /// as the driver's only while it is `ours` (not after the driver let go of control).
+    pub(crate) fn system_status(&mut self, now: Timestamp, mode: u8, faults: u64, ours: bool) {
+        let sys = &mut self.state.system;
+        sys.control_mode = mode;
+        sys.fault_flags = faults;
+        sys.power_enabled = u8::from(faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
+        self.state.touch(Group::System, now.as_nanos());
+        self.set_flag(
+            LinkFlags::COMMAND_MODE,
+            ours && mode == ControlMode::COMMAND,
+        );
+        self.set_flag(LinkFlags::RC_AUTHORITY, mode == ControlMode::REMOTE);
     }
 
     /// Something arrived on the wrong kind of bus (serial bytes on CAN, a CAN frame on serial).

@@ -20,7 +20,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ControlMode, FaultFlags, Group, LinkFlags, SystemState, Velocity};
+use chassis_interfaces::{ControlMode, FaultFlags, Group, SystemState, Velocity};
 
 use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake, vehicle};
 use super::commands::{STOP, frames_for};
@@ -308,20 +308,13 @@ impl V2Driver {
             vehicle::ESTOP => SystemState::BODY_EMERGENCY_STOP,
             _ => SystemState::BODY_EXCEPTION,
         };
-        sys.control_mode = new_mode;
         sys.battery_voltage_v = s.battery_voltage_v as f32;
         sys.vendor_fault_word = s.fault_word.into();
-        sys.fault_flags = new_faults;
-        sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
         if self.profile.reports_brake_in_b6() {
             // HUNTER 2.0 reports its brake in b6.
             sys.parking_brake_engaged = u8::from(s.b6 == 0x01);
         }
-        self.core.state.touch(Group::System, now.as_nanos());
-        self.core
-            .set_flag(LinkFlags::COMMAND_MODE, new_mode == ControlMode::COMMAND);
-        self.core
-            .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
+        self.core.system_status(now, new_mode, new_faults, true);
         if new_mode == ControlMode::COMMAND && self.version == VersionQuery::NotAsked {
             self.ask_version(now);
         }

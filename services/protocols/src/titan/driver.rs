@@ -193,17 +193,9 @@ impl TitanDriver {
             codec::body::NORMAL => SystemState::BODY_NORMAL,
             _ => SystemState::BODY_EXCEPTION,
         };
-        sys.control_mode = new_mode;
         sys.battery_voltage_v = s.battery_voltage_v as f32;
         sys.vendor_fault_word = s.vendor_fault_word;
-        sys.fault_flags = new_faults;
-        sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
-        self.core.state.touch(Group::System, now.as_nanos());
-        self.core
-            .set_flag(LinkFlags::COMMAND_MODE, new_mode == ControlMode::COMMAND);
-        self.core
-            .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
-
+        self.core.system_status(now, new_mode, new_faults, true);
         agilex_driver::mode_changed(&mut self.core, old_mode, new_mode);
         if new_mode != old_mode
             && (new_mode == ControlMode::STANDBY || new_mode == ControlMode::REMOTE)
