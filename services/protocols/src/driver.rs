@@ -608,6 +608,18 @@ macro_rules! core_accessors {
 }
 pub(crate) use core_accessors;
 
+/// The frames `plan` makes of an admitted control action ([`DriverCore::admit_control`]), or
+/// else a return from the enclosing [`Driver::control`] with the outcome that refused it.
+macro_rules! admit {
+    ($core:expr, $command:expr, $plan:expr) => {
+        match $core.admit_control($command, $plan) {
+            Ok(planned) => planned,
+            Err(outcome) => return outcome,
+        }
+    };
+}
+pub(crate) use admit;
+
 /// The normalized flags (`chassis_interfaces::FaultFlags`) of a vendor fault word: the union of
 /// the flags in `map` whose vendor bit is set in `word`.
 pub(crate) fn flags_of<W>(word: W, map: &[(W, u64)]) -> u64

@@ -430,13 +430,7 @@ impl Driver for V1Driver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        let planned = match self
-            .core
-            .admit_control(command, |c| frames_for(c, &self.profile))
-        {
-            Ok(planned) => planned,
-            Err(outcome) => return outcome,
-        };
+        let planned = crate::driver::admit!(self.core, command, |c| frames_for(c, &self.profile));
         match *command {
             Command::Mode { take_control } => {
                 let releasing = self.want_control && !take_control;

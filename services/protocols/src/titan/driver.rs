@@ -264,13 +264,7 @@ impl Driver for TitanDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        let planned = match self
-            .core
-            .admit_control(command, |c| frames_for(c, &self.profile))
-        {
-            Ok(planned) => planned,
-            Err(outcome) => return outcome,
-        };
+        let planned = crate::driver::admit!(self.core, command, |c| frames_for(c, &self.profile));
         let t = now.as_nanos();
         let outcome = match *command {
             Command::Mode { take_control } => self.mode.command(take_control),
