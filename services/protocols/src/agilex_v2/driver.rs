@@ -190,11 +190,6 @@ impl V2Driver {
         }
     }
 
-    fn update_body(&mut self, now: Timestamp) {
-        self.core.state.system.parking_brake_engaged = u8::from(self.brake.engaged());
-        self.core.state.touch(Group::Body, now.as_nanos());
-    }
-
     fn apply(&mut self, now: Timestamp, frame: Frame) {
         let t = now.as_nanos();
         match frame {
@@ -334,7 +329,7 @@ impl V2Driver {
         agilex_driver::mode_changed(&mut self.core, old_mode, new_mode);
         if new_mode != old_mode && new_mode != ControlMode::COMMAND && self.brake.fitted() {
             self.brake.forget();
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         self.core
             .fault_notices(old_faults, new_faults, FaultFlags::WARNINGS);
@@ -421,7 +416,7 @@ impl Driver for V2Driver {
             Command::Mode { take_control } => self.mode.command(take_control),
             Command::Brake { engage } => {
                 self.brake.set(engage, false);
-                self.update_body(now);
+                self.brake.report(&mut self.core, now);
                 ControlOutcome::Done(format!(
                     "parking brake {}",
                     if engage { "engaged" } else { "released" }
@@ -476,7 +471,7 @@ impl Driver for V2Driver {
         if self.brake.idle_engage_due(now, self.core.bus_down) {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         self.steering_zero.expire(&mut self.core, now);
     }
@@ -493,10 +488,7 @@ impl Driver for V2Driver {
         let frame = match next? {
             Next::Queued(frame) => frame,
             // HUNTER 2.0 ignores speed while braked.
-            Next::ReleaseBrake => {
-                self.update_body(now);
-                Frame::ParkingBrake(ParkingBrake { engage: false })
-            }
+            Next::ReleaseBrake => Frame::ParkingBrake(ParkingBrake { engage: false }),
             Next::Motion => {
                 let (vx, vy, w) = body_twist(&self.motion, self.ranger_mode, &self.profile);
                 let echo = &mut self.core.state.command;
@@ -555,7 +547,7 @@ impl Driver for V2Driver {
         if self.brake.engage() {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         if self.lights.take().is_some() {
             self.queue.push_back(Frame::LightCommand(Lights::default()));

@@ -110,11 +110,6 @@ impl TitanDriver {
         self.motion_clamp_flags = flags;
     }
 
-    fn update_body(&mut self, now: Timestamp) {
-        self.core.state.system.parking_brake_engaged = u8::from(self.brake.engaged());
-        self.core.state.touch(Group::Body, now.as_nanos());
-    }
-
     fn apply(&mut self, now: Timestamp, frame: Frame) {
         let t = now.as_nanos();
         match frame {
@@ -202,7 +197,7 @@ impl TitanDriver {
         {
             // After a reboot or an RC session the brake may be engaged again.
             self.brake.forget();
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         self.core
             .fault_notices(old_faults, new_faults, FaultFlags::WARNINGS);
@@ -276,7 +271,7 @@ impl Driver for TitanDriver {
                     ));
                 }
                 self.brake.set(engage, true);
-                self.update_body(now);
+                self.brake.report(&mut self.core, now);
                 ControlOutcome::Done(if engage {
                     "parking brake engaged; motion waits until it is released".into()
                 } else {
@@ -331,7 +326,7 @@ impl Driver for TitanDriver {
         if self.brake.idle_engage_due(now, self.core.bus_down) {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         self.steering_zero.expire(&mut self.core, now);
     }
@@ -349,10 +344,7 @@ impl Driver for TitanDriver {
             Next::Queued(frame) => frame,
             // The brake is released only once command mode is reported; until then the
             // heartbeat carries the command alone (a braked chassis does not move on it).
-            Next::ReleaseBrake => {
-                self.update_body(now);
-                Frame::ParkingBrake(ParkingBrake { engage: false })
-            }
+            Next::ReleaseBrake => Frame::ParkingBrake(ParkingBrake { engage: false }),
             Next::Motion => {
                 let echo = &mut self.core.state.command;
                 echo.linear_mps = self.motion.linear_mps as f32;
@@ -400,6 +392,6 @@ impl Driver for TitanDriver {
         self.queue
             .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
         self.brake.engage();
-        self.update_body(now);
+        self.brake.report(&mut self.core, now);
     }
 }
