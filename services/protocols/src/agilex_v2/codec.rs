@@ -552,12 +552,8 @@ fn sticks_swapped(profile: &V2Profile) -> bool {
 /// Decodes one protocol-V2 frame (either direction).
 pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeError> {
     let raw_id = frame.id();
-    if frame.is_extended() {
-        return Err(DecodeError::ExtendedId { id: raw_id });
-    }
+    let id16 = frame.standard_id()?;
     let data = frame.data();
-    // Standard ids are at most 0x7FF: the cast keeps every bit.
-    let id16 = raw_id as u16;
     let decoded = match id16 {
         id::MOTION_COMMAND => Frame::MotionCommand(decode_motion(raw_id, data, profile)?),
         id::MOTION_FEEDBACK => Frame::MotionFeedback(decode_motion(raw_id, data, profile)?),

@@ -462,12 +462,8 @@ fn bms_group(id: u16, first: u16) -> Option<u8> {
 /// Decodes one TITAN frame (either direction).
 pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeError> {
     let raw_id = frame.id();
-    if frame.is_extended() {
-        return Err(DecodeError::ExtendedId { id: raw_id });
-    }
+    let id16 = frame.standard_id()?;
     let data = frame.data();
-    // Standard ids are at most 0x7FF: the cast keeps every bit.
-    let id16 = raw_id as u16;
     let frame = match id16 {
         id::MOTION_COMMAND => {
             let w: MotionCommandWire = read_prefix(raw_id, data)?;
