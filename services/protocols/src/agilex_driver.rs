@@ -189,7 +189,8 @@ impl BrakeKeeper {
         self.fitted && self.belief != BrakeBelief::Released
     }
 
-    /// Puts what the driver believes of the brake into the state at `now`.
+    /// Shows the belief in the state at `now`: most chassis never report their brake, so the
+    /// belief is all the state can hold.
     pub(crate) fn report(&self, core: &mut DriverCore, now: Timestamp) {
         core.state.system.parking_brake_engaged = u8::from(self.engaged());
         core.state.touch(Group::Body, now.as_nanos());
