@@ -29,8 +29,8 @@ pub(crate) enum Next<F> {
     /// A queued frame: a mode request, a brake, a light or a clear-fault command.
     Queued(F),
     /// At the heartbeat deadline, the parking brake's release before the motion it would hold
-    /// back (after power-up, a chassis reboot or an idle engagement); the same deadline sends
-    /// the motion next.
+    /// back (after power-up, a chassis reboot or an idle engagement), already reported released;
+    /// the same deadline sends the motion next.
     ReleaseBrake,
     /// The heartbeat's motion frame (0x111), counted as sent.
     Motion,
@@ -58,6 +58,7 @@ pub(crate) fn next_frame<F>(
     }
     let command_mode = core.state.system.control_mode == ControlMode::COMMAND;
     if brake.release_before(moving, command_mode) {
+        brake.report(core, now);
         return Some(Next::ReleaseBrake);
     }
     core.schedule.sent(now);
@@ -186,6 +187,13 @@ impl BrakeKeeper {
     /// What the state reports: engaged unless known released (never, without a brake).
     pub(crate) fn engaged(&self) -> bool {
         self.fitted && self.belief != BrakeBelief::Released
+    }
+
+    /// Shows the belief in the state at `now`: most chassis never report their brake, so the
+    /// belief is all the state can hold.
+    pub(crate) fn report(&self, core: &mut DriverCore, now: Timestamp) {
+        core.state.system.parking_brake_engaged = u8::from(self.engaged());
+        core.state.touch(Group::Body, now.as_nanos());
     }
 
     /// Engaged on request and not released since: motion must wait.

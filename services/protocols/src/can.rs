@@ -88,6 +88,16 @@ impl CanFrame {
         self.extended
     }
 
+    /// The 11-bit id, for the codecs: every robot here speaks standard frames only, so an
+    /// extended one is [`crate::DecodeError::ExtendedId`].
+    pub(crate) fn standard_id(&self) -> Result<u16, crate::DecodeError> {
+        if self.extended {
+            return Err(crate::DecodeError::ExtendedId { id: self.id });
+        }
+        // Standard ids are at most 0x7FF: the cast keeps every bit.
+        Ok(self.id as u16)
+    }
+
     /// The data bytes (length = DLC).
     pub fn data(&self) -> &[u8] {
         &self.data[..usize::from(self.len)]

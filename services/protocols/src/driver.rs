@@ -12,7 +12,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ControlStatus, FaultFlags, LinkFlags, OdometryState, Velocity,
+    ChassisState, ControlMode, ControlStatus, FaultFlags, Group, LinkFlags, OdometryState, Velocity,
 };
 use serde::{Deserialize, Serialize};
 
@@ -400,6 +400,22 @@ impl DriverCore {
         }
     }
 
+    /// Takes a status frame's control mode and normalized faults into `state.system` and the
+    /// link flags. A battery under-voltage fault means the drive power is off; command mode counts
+    /// as the driver's only while it is `ours` (not after the driver let go of control).
+    pub(crate) fn system_status(&mut self, now: Timestamp, mode: u8, faults: u64, ours: bool) {
+        let sys = &mut self.state.system;
+        sys.control_mode = mode;
+        sys.fault_flags = faults;
+        sys.power_enabled = u8::from(faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
+        self.state.touch(Group::System, now.as_nanos());
+        self.set_flag(
+            LinkFlags::COMMAND_MODE,
+            ours && mode == ControlMode::COMMAND,
+        );
+        self.set_flag(LinkFlags::RC_AUTHORITY, mode == ControlMode::REMOTE);
+    }
+
     /// Something arrived on the wrong kind of bus (serial bytes on CAN, a CAN frame on serial).
     pub(crate) fn wrong_medium(&mut self, reason: &str) {
         self.state.link.rx_decode_errors += 1;
@@ -591,6 +607,18 @@ macro_rules! core_accessors {
     };
 }
 pub(crate) use core_accessors;
+
+/// The frames `plan` makes of an admitted control action ([`DriverCore::admit_control`]), or
+/// else a return from the enclosing [`Driver::control`] with the outcome that refused it.
+macro_rules! admit {
+    ($core:expr, $command:expr, $plan:expr) => {
+        match $core.admit_control($command, $plan) {
+            Ok(planned) => planned,
+            Err(outcome) => return outcome,
+        }
+    };
+}
+pub(crate) use admit;
 
 /// The normalized flags (`chassis_interfaces::FaultFlags`) of a vendor fault word: the union of
 /// the flags in `map` whose vendor bit is set in `word`.

@@ -419,11 +419,7 @@ fn read_percent(id: u32, field: &'static str, percent: i8) -> Result<i8, DecodeE
 /// (commands only: feedback keeps undefined status and mode bytes as sent).
 pub fn decode(frame: &CanFrame, profile: &V1Profile) -> Result<Decoded, DecodeError> {
     let raw_id = frame.id();
-    if frame.is_extended() {
-        return Err(DecodeError::ExtendedId { id: raw_id });
-    }
-    // Standard ids are at most 0x7FF: the cast keeps every bit.
-    let id16 = raw_id as u16;
+    let id16 = frame.standard_id()?;
     if !id::ALL.contains(&id16) {
         return Err(DecodeError::UnknownId { id: raw_id });
     }

@@ -306,19 +306,10 @@ impl V1Driver {
             body::EMERGENCY_STOP => SystemState::BODY_EMERGENCY_STOP,
             _ => SystemState::BODY_EXCEPTION,
         };
-        sys.control_mode = new_mode;
         sys.battery_voltage_v = s.battery_voltage_v as f32;
         sys.vendor_fault_word = s.vendor_fault_word.into();
-        sys.fault_flags = new_faults;
-        sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
-        self.core.state.touch(Group::System, now.as_nanos());
-        self.core.set_flag(
-            LinkFlags::COMMAND_MODE,
-            new_mode == ControlMode::COMMAND && self.want_control,
-        );
         self.core
-            .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
-
+            .system_status(now, new_mode, new_faults, self.want_control);
         if new_mode != old_mode {
             let level = if new_mode == ControlMode::COMMAND {
                 Level::Info
@@ -439,13 +430,7 @@ impl Driver for V1Driver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        let planned = match self
-            .core
-            .admit_control(command, |c| frames_for(c, &self.profile))
-        {
-            Ok(planned) => planned,
-            Err(outcome) => return outcome,
-        };
+        let planned = crate::driver::admit!(self.core, command, |c| frames_for(c, &self.profile));
         match *command {
             Command::Mode { take_control } => {
                 let releasing = self.want_control && !take_control;

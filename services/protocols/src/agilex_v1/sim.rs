@@ -218,7 +218,6 @@ impl V1Sim {
     pub const DEFAULT_BOOT_TIME: Duration = Duration::from_millis(300);
     /// How long 0x151 b4 bit0 stays set after the last frame with a bad checksum.
     pub const DEFAULT_CHECKSUM_FAULT_HOLD: Duration = Duration::from_millis(500);
-    /// CAN id of injected garbage frames (unused by SCOUT MINI).
     /// The battery.
     pub const BATTERY: BatteryModel = BatteryModel {
         capacity_ah: 15.0,

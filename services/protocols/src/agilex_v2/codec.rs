@@ -16,7 +16,7 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 use super::profile::{BmsAlarmLayout, RcStickOrder, V2Profile};
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::error::{DecodeError, EncodeError, check_u8, to_i16, to_i32, to_u8, to_u16};
+use crate::error::{DecodeError, EncodeError, check_u8, to_i16, to_i32, to_u16};
 use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
 use crate::wire_layout::{first_byte, index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
@@ -143,19 +143,6 @@ struct SystemStatusWire {
 
 #[repr(C)]
 #[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct RcWire {
-    switches: u8,
-    b1: i8,
-    b2: i8,
-    left_y: i8,
-    left_x: i8,
-    knob_a: i8,
-    reserved: u8,
-    count: u8,
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
 struct FourI16Wire {
     values: [I16; 4],
 }
@@ -182,25 +169,6 @@ struct UwbWire {
     angle: I16,
     valid: u8,
     channels: [i8; 3],
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct BmsDataWire {
-    soc_pct: u8,
-    soh_pct: u8,
-    voltage: U16,
-    current_da: I16,
-    temperature_dc: I16,
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct BmsAlarmWire {
-    alarm_1: u8,
-    alarm_2: u8,
-    warning_1: u8,
-    warning_2: u8,
 }
 
 #[repr(C)]
@@ -576,23 +544,16 @@ fn encode_four(field: &'static str, f: &Four, scale: f64) -> Result<[u8; 8], Enc
     Ok(wire_bytes::<8, _>(FourI16Wire { values }))
 }
 
-/// The `(right_x, right_y)` of 0x241 b1-2 under the profile's ⚠ D-11 order.
-fn sticks(b1: i8, b2: i8, profile: &V2Profile) -> (i8, i8) {
-    match profile.rc_stick_order {
-        RcStickOrder::Sdk => (b1, b2),
-        RcStickOrder::Pya => (b2, b1),
-    }
+/// True when 0x241 b1-2 carry the right stick vertical first (⚠ D-11).
+fn sticks_swapped(profile: &V2Profile) -> bool {
+    matches!(profile.rc_stick_order, RcStickOrder::Pya)
 }
 
 /// Decodes one protocol-V2 frame (either direction).
 pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeError> {
     let raw_id = frame.id();
-    if frame.is_extended() {
-        return Err(DecodeError::ExtendedId { id: raw_id });
-    }
+    let id16 = frame.standard_id()?;
     let data = frame.data();
-    // Standard ids are at most 0x7FF: the cast keeps every bit.
-    let id16 = raw_id as u16;
     let decoded = match id16 {
         id::MOTION_COMMAND => Frame::MotionCommand(decode_motion(raw_id, data, profile)?),
         id::MOTION_FEEDBACK => Frame::MotionFeedback(decode_motion(raw_id, data, profile)?),
@@ -679,22 +640,11 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
                 count: w.count,
             })
         }
-        id::RC => {
-            let w: RcWire = read_prefix(raw_id, data)?;
-            let (right_x_pct, right_y_pct) = sticks(w.b1, w.b2, profile);
-            Frame::Rc(RcFeedback {
-                switch_a: w.switches & 0b11,
-                switch_b: (w.switches >> 2) & 0b11,
-                switch_c: (w.switches >> 4) & 0b11,
-                switch_d: (w.switches >> 6) & 0b11,
-                right_x_pct,
-                right_y_pct,
-                left_y_pct: w.left_y,
-                left_x_pct: w.left_x,
-                knob_a_pct: w.knob_a,
-                counter: w.count,
-            })
-        }
+        id::RC => Frame::Rc(RcFeedback::from_wire(
+            raw_id,
+            data,
+            sticks_swapped(profile),
+        )?),
         id::STEERING_ANGLES => {
             Frame::SteeringAngles(decode_four(raw_id, data, profile.steer_unit.scale())?)
         }
@@ -709,28 +659,11 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
         id::BUMPER => Frame::Bumper {
             state: first_byte(raw_id, data)?,
         },
-        id::BMS_DATA => {
-            let w: BmsDataWire = read_prefix(raw_id, data)?;
-            Frame::BmsData(BmsData {
-                group: 0,
-                soc_pct: w.soc_pct.into(),
-                soh_pct: w.soh_pct.into(),
-                voltage_v: f64::from(w.voltage.get()) * profile.bms_voltage_lsb_v,
-                current_a: si(w.current_da.get(), 10.0),
-                temperature_c: si(w.temperature_dc.get(), 10.0),
-            })
-        }
+        id::BMS_DATA => Frame::BmsData(BmsData::from_wire(0, raw_id, data, |v| {
+            f64::from(v) * profile.bms_voltage_lsb_v
+        })?),
         id::BMS_ALARM => match profile.bms_alarm_layout {
-            BmsAlarmLayout::AlarmWarning => {
-                let w: BmsAlarmWire = read_prefix(raw_id, data)?;
-                Frame::BmsAlarm(BmsAlarm {
-                    group: 0,
-                    alarm_1: w.alarm_1,
-                    alarm_2: w.alarm_2,
-                    warning_1: w.warning_1,
-                    warning_2: w.warning_2,
-                })
-            }
+            BmsAlarmLayout::AlarmWarning => Frame::BmsAlarm(BmsAlarm::from_wire(0, raw_id, data)?),
             BmsAlarmLayout::ProtectionCodes => {
                 let b: [u8; 8] = read_prefix(raw_id, data)?;
                 Frame::BmsProtection(BmsProtection {
@@ -910,36 +843,7 @@ impl Frame {
                     count: s.count,
                 }),
             ),
-            Frame::Rc(r) => {
-                for (field, v) in [
-                    ("switch_a", r.switch_a),
-                    ("switch_b", r.switch_b),
-                    ("switch_c", r.switch_c),
-                    ("switch_d", r.switch_d),
-                ] {
-                    check_u8(field, v, 0, 3)?;
-                }
-                let (b1, b2) = match profile.rc_stick_order {
-                    RcStickOrder::Sdk => (r.right_x_pct, r.right_y_pct),
-                    RcStickOrder::Pya => (r.right_y_pct, r.right_x_pct),
-                };
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(RcWire {
-                        switches: r.switch_a
-                            | (r.switch_b << 2)
-                            | (r.switch_c << 4)
-                            | (r.switch_d << 6),
-                        b1,
-                        b2,
-                        left_y: r.left_y_pct,
-                        left_x: r.left_x_pct,
-                        knob_a: r.knob_a_pct,
-                        reserved: 0,
-                        count: r.counter,
-                    }),
-                )
-            }
+            Frame::Rc(r) => CanFrame::from_parts(id, r.wire(sticks_swapped(profile))?),
             Frame::MotorFast(m) => CanFrame::from_parts(id, m.wire(8)?),
             Frame::MotorSlow(m) => CanFrame::from_parts(id, m.wire(8)?),
             Frame::SteeringAngles(f) => {
@@ -986,26 +890,8 @@ impl Frame {
                     }),
                 )
             }
-            Frame::BmsData(b) => CanFrame::from_parts(
-                id,
-                wire_bytes::<8, _>(BmsDataWire {
-                    soc_pct: to_u8("soc_pct", b.soc_pct, 1.0)?,
-                    soh_pct: to_u8("soh_pct", b.soh_pct, 1.0)?,
-                    voltage: to_u16("voltage_v", b.voltage_v, 1.0 / profile.bms_voltage_lsb_v)?
-                        .into(),
-                    current_da: to_i16("current_a", b.current_a, 10.0)?.into(),
-                    temperature_dc: to_i16("temperature_c", b.temperature_c, 10.0)?.into(),
-                }),
-            ),
-            Frame::BmsAlarm(b) => CanFrame::from_parts(
-                id,
-                wire_bytes::<4, _>(BmsAlarmWire {
-                    alarm_1: b.alarm_1,
-                    alarm_2: b.alarm_2,
-                    warning_1: b.warning_1,
-                    warning_2: b.warning_2,
-                }),
-            ),
+            Frame::BmsData(b) => CanFrame::from_parts(id, b.wire(1.0 / profile.bms_voltage_lsb_v)?),
+            Frame::BmsAlarm(b) => CanFrame::from_parts(id, b.alarm_flags().to_le_bytes()),
             Frame::BmsProtection(p) => CanFrame::from_parts(
                 id,
                 [

@@ -20,7 +20,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ControlMode, FaultFlags, Group, LinkFlags, SystemState, Velocity};
+use chassis_interfaces::{ControlMode, FaultFlags, Group, SystemState, Velocity};
 
 use super::codec::{self, Frame, Lights, ModeCommand, Motion, MotionMode, ParkingBrake, vehicle};
 use super::commands::{STOP, frames_for};
@@ -190,11 +190,6 @@ impl V2Driver {
         }
     }
 
-    fn update_body(&mut self, now: Timestamp) {
-        self.core.state.system.parking_brake_engaged = u8::from(self.brake.engaged());
-        self.core.state.touch(Group::Body, now.as_nanos());
-    }
-
     fn apply(&mut self, now: Timestamp, frame: Frame) {
         let t = now.as_nanos();
         match frame {
@@ -308,20 +303,13 @@ impl V2Driver {
             vehicle::ESTOP => SystemState::BODY_EMERGENCY_STOP,
             _ => SystemState::BODY_EXCEPTION,
         };
-        sys.control_mode = new_mode;
         sys.battery_voltage_v = s.battery_voltage_v as f32;
         sys.vendor_fault_word = s.fault_word.into();
-        sys.fault_flags = new_faults;
-        sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
         if self.profile.reports_brake_in_b6() {
             // HUNTER 2.0 reports its brake in b6.
             sys.parking_brake_engaged = u8::from(s.b6 == 0x01);
         }
-        self.core.state.touch(Group::System, now.as_nanos());
-        self.core
-            .set_flag(LinkFlags::COMMAND_MODE, new_mode == ControlMode::COMMAND);
-        self.core
-            .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
+        self.core.system_status(now, new_mode, new_faults, true);
         if new_mode == ControlMode::COMMAND && self.version == VersionQuery::NotAsked {
             self.ask_version(now);
         }
@@ -341,7 +329,7 @@ impl V2Driver {
         agilex_driver::mode_changed(&mut self.core, old_mode, new_mode);
         if new_mode != old_mode && new_mode != ControlMode::COMMAND && self.brake.fitted() {
             self.brake.forget();
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         self.core
             .fault_notices(old_faults, new_faults, FaultFlags::WARNINGS);
@@ -423,18 +411,12 @@ impl Driver for V2Driver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        let planned = match self
-            .core
-            .admit_control(command, |c| frames_for(c, &self.profile))
-        {
-            Ok(planned) => planned,
-            Err(outcome) => return outcome,
-        };
+        let planned = crate::driver::admit!(self.core, command, |c| frames_for(c, &self.profile));
         let outcome = match *command {
             Command::Mode { take_control } => self.mode.command(take_control),
             Command::Brake { engage } => {
                 self.brake.set(engage, false);
-                self.update_body(now);
+                self.brake.report(&mut self.core, now);
                 ControlOutcome::Done(format!(
                     "parking brake {}",
                     if engage { "engaged" } else { "released" }
@@ -489,7 +471,7 @@ impl Driver for V2Driver {
         if self.brake.idle_engage_due(now, self.core.bus_down) {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         self.steering_zero.expire(&mut self.core, now);
     }
@@ -506,10 +488,7 @@ impl Driver for V2Driver {
         let frame = match next? {
             Next::Queued(frame) => frame,
             // HUNTER 2.0 ignores speed while braked.
-            Next::ReleaseBrake => {
-                self.update_body(now);
-                Frame::ParkingBrake(ParkingBrake { engage: false })
-            }
+            Next::ReleaseBrake => Frame::ParkingBrake(ParkingBrake { engage: false }),
             Next::Motion => {
                 let (vx, vy, w) = body_twist(&self.motion, self.ranger_mode, &self.profile);
                 let echo = &mut self.core.state.command;
@@ -568,7 +547,7 @@ impl Driver for V2Driver {
         if self.brake.engage() {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         if self.lights.take().is_some() {
             self.queue.push_back(Frame::LightCommand(Lights::default()));

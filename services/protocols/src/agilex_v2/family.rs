@@ -19,7 +19,10 @@ use crate::frame_json::{
     insert_faults, insert_switches,
 };
 use crate::kind::RobotKind;
-use crate::profile::{ProfileError, ProfileTableError, Protocol, with_model_and_overrides};
+use crate::profile::{
+    ProfileError, ProfileTableError, Protocol, detection, positive, timeouts,
+    with_model_and_overrides,
+};
 use crate::time::Timestamp;
 
 use super::{
@@ -38,13 +41,6 @@ impl Family for V2Profile {
 
     /// Checks the values make a drivable robot.
     fn validate(&self) -> Result<(), ProfileError> {
-        let positive = |name: &'static str, value: f64| {
-            if value.is_finite() && value > 0.0 {
-                Ok(())
-            } else {
-                Err(ProfileError::NotPositive { name, value })
-            }
-        };
         positive("wheelbase_m", self.wheelbase_m)?;
         positive("track_m", self.track_m)?;
         positive("max_linear_mps", self.max_linear_mps)?;
@@ -80,13 +76,8 @@ impl Family for V2Profile {
                 value: self.short_commands_dlc.into(),
             });
         }
-        if self.heartbeat_period_ms == 0 || self.heartbeat_period_ms >= self.command_timeout_ms {
-            return Err(ProfileError::Heartbeat {
-                heartbeat_ms: self.heartbeat_period_ms,
-                timeout_ms: self.command_timeout_ms,
-            });
-        }
-        crate::profile::detection(self.detect_timeout_ms, self.detect_min_frames)
+        timeouts(self.heartbeat_period_ms, self.command_timeout_ms)?;
+        detection(self.detect_timeout_ms, self.detect_min_frames)
     }
 
     fn with_table(&self, table: &toml::Table) -> Result<Profile, ProfileTableError> {

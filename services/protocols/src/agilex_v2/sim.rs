@@ -91,7 +91,6 @@ impl V2Sim {
     pub const DEFAULT_BOOT_TIME: Duration = Duration::from_millis(300);
     /// Time constant of the speed response, s.
     pub const DEFAULT_SPEED_TIME_CONSTANT_S: f64 = 0.2;
-    /// CAN id of injected garbage frames (unused by protocol V2).
     /// Wheel radius for the actuator rpm, m (not in any source).
     pub const WHEEL_RADIUS_M: f64 = 0.08;
     /// What the electronics draw, A; the motors add 4 A per m/s.

@@ -98,11 +98,7 @@ impl Frame {
 /// Decodes one CAN frame of the protocol.
 pub fn decode(frame: &CanFrame) -> Result<Frame, DecodeError> {
     let raw_id = frame.id();
-    if frame.is_extended() {
-        return Err(DecodeError::ExtendedId { id: raw_id });
-    }
-    // Standard ids are at most 0x7FF: the cast keeps every bit.
-    match raw_id as u16 {
+    match frame.standard_id()? {
         id::COMMAND => {
             let w: CommandWire = read_prefix(raw_id, frame.data())?;
             Ok(Frame::Command(Twist {

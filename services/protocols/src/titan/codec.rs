@@ -188,8 +188,8 @@ struct OdometerWire {
 #[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
 struct RcWire {
     switches: u8,
-    right_x: i8,
-    right_y: i8,
+    b1: i8,
+    b2: i8,
     left_y: i8,
     left_x: i8,
     knob_a: i8,
@@ -202,18 +202,9 @@ struct RcWire {
 struct BmsDataWire {
     soc_pct: u8,
     soh_pct: u8,
-    voltage_cv: U16,
+    voltage: U16,
     current_da: I16,
     temperature_dc: I16,
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct BmsAlarmWire {
-    alarm_1: u8,
-    alarm_2: u8,
-    warning_1: u8,
-    warning_2: u8,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -415,6 +406,13 @@ impl BmsAlarm {
         }
     }
 
+    /// Decodes the 0x362 layout shared by the TITAN and the protocol-V2 robots: alarm 1, alarm
+    /// 2, warning 1, warning 2, the bytes `BmsState::alarm_flags` holds.
+    pub(crate) fn from_wire(group: u8, raw_id: u32, data: &[u8]) -> Result<Self, DecodeError> {
+        let bytes: [u8; 4] = read_prefix(raw_id, data)?;
+        Ok(Self::from_alarm_flags(group, u32::from_le_bytes(bytes)))
+    }
+
     /// The four bytes as `BmsState::alarm_flags` holds them.
     pub fn alarm_flags(&self) -> u32 {
         u32::from_le_bytes([self.alarm_1, self.alarm_2, self.warning_1, self.warning_2])
@@ -464,12 +462,8 @@ fn bms_group(id: u16, first: u16) -> Option<u8> {
 /// Decodes one TITAN frame (either direction).
 pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeError> {
     let raw_id = frame.id();
-    if frame.is_extended() {
-        return Err(DecodeError::ExtendedId { id: raw_id });
-    }
+    let id16 = frame.standard_id()?;
     let data = frame.data();
-    // Standard ids are at most 0x7FF: the cast keeps every bit.
-    let id16 = raw_id as u16;
     let frame = match id16 {
         id::MOTION_COMMAND => {
             let w: MotionCommandWire = read_prefix(raw_id, data)?;
@@ -531,21 +525,7 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
                 steer_rad: steer_feedback_sign(profile) * si(w.steer_mrad.get(), 1000.0),
             })
         }
-        id::RC => {
-            let w: RcWire = read_prefix(raw_id, data)?;
-            Frame::Rc(RcFeedback {
-                switch_a: w.switches & 0b11,
-                switch_b: (w.switches >> 2) & 0b11,
-                switch_c: (w.switches >> 4) & 0b11,
-                switch_d: (w.switches >> 6) & 0b11,
-                right_x_pct: w.right_x,
-                right_y_pct: w.right_y,
-                left_y_pct: w.left_y,
-                left_x_pct: w.left_x,
-                knob_a_pct: w.knob_a,
-                counter: w.counter,
-            })
-        }
+        id::RC => Frame::Rc(RcFeedback::from_wire(raw_id, data, false)?),
         id::STEERING_FEEDBACK => {
             let w: SteeringFeedbackWire = read_prefix(raw_id, data)?;
             let sign = steer_feedback_sign(profile);
@@ -574,30 +554,107 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
             } else if let Some(motor) = index_in(other, id::MOTOR_SLOW_1, 4) {
                 Frame::MotorSlow(MotorSlow::from_wire(motor, raw_id, data)?)
             } else if let Some(group) = bms_group(other, id::BMS_DATA_0) {
-                let w: BmsDataWire = read_prefix(raw_id, data)?;
-                Frame::BmsData(BmsData {
-                    group,
-                    soc_pct: w.soc_pct.into(),
-                    soh_pct: w.soh_pct.into(),
-                    voltage_v: si(w.voltage_cv.get(), 100.0),
-                    current_a: si(w.current_da.get(), 10.0),
-                    temperature_c: si(w.temperature_dc.get(), 10.0),
-                })
+                Frame::BmsData(BmsData::from_wire(group, raw_id, data, |v| si(v, 100.0))?)
             } else if let Some(group) = bms_group(other, id::BMS_ALARM_0) {
-                let w: BmsAlarmWire = read_prefix(raw_id, data)?;
-                Frame::BmsAlarm(BmsAlarm {
-                    group,
-                    alarm_1: w.alarm_1,
-                    alarm_2: w.alarm_2,
-                    warning_1: w.warning_1,
-                    warning_2: w.warning_2,
-                })
+                Frame::BmsAlarm(BmsAlarm::from_wire(group, raw_id, data)?)
             } else {
                 return Err(DecodeError::UnknownId { id: raw_id });
             }
         }
     };
     Ok(frame)
+}
+
+impl RcFeedback {
+    /// Decodes the 0x241 layout shared by the TITAN and the protocol-V2 robots. `swap_right`
+    /// reads b1 as the right stick's vertical axis and b2 as its horizontal one, the order some
+    /// V2 firmware uses.
+    pub(crate) fn from_wire(
+        raw_id: u32,
+        data: &[u8],
+        swap_right: bool,
+    ) -> Result<Self, DecodeError> {
+        let w: RcWire = read_prefix(raw_id, data)?;
+        let (right_x_pct, right_y_pct) = if swap_right {
+            (w.b2, w.b1)
+        } else {
+            (w.b1, w.b2)
+        };
+        Ok(RcFeedback {
+            switch_a: w.switches & 0b11,
+            switch_b: (w.switches >> 2) & 0b11,
+            switch_c: (w.switches >> 4) & 0b11,
+            switch_d: (w.switches >> 6) & 0b11,
+            right_x_pct,
+            right_y_pct,
+            left_y_pct: w.left_y,
+            left_x_pct: w.left_x,
+            knob_a_pct: w.knob_a,
+            counter: w.counter,
+        })
+    }
+
+    /// The 8 wire bytes, the right stick's axes in the order [`Self::from_wire`] reads them.
+    pub(crate) fn wire(&self, swap_right: bool) -> Result<[u8; 8], EncodeError> {
+        for (field, v) in [
+            ("switch_a", self.switch_a),
+            ("switch_b", self.switch_b),
+            ("switch_c", self.switch_c),
+            ("switch_d", self.switch_d),
+        ] {
+            check_u8(field, v, 0, 3)?;
+        }
+        let (b1, b2) = if swap_right {
+            (self.right_y_pct, self.right_x_pct)
+        } else {
+            (self.right_x_pct, self.right_y_pct)
+        };
+        Ok(wire_bytes::<8, _>(RcWire {
+            switches: self.switch_a
+                | (self.switch_b << 2)
+                | (self.switch_c << 4)
+                | (self.switch_d << 6),
+            b1,
+            b2,
+            left_y: self.left_y_pct,
+            left_x: self.left_x_pct,
+            knob_a: self.knob_a_pct,
+            reserved: 0,
+            counter: self.counter,
+        }))
+    }
+}
+
+impl BmsData {
+    /// Decodes the 0x361 layout shared by the TITAN and the protocol-V2 robots. The unit of the
+    /// voltage field differs between them, so `volts` reads it.
+    pub(crate) fn from_wire(
+        group: u8,
+        raw_id: u32,
+        data: &[u8],
+        volts: impl FnOnce(u16) -> f64,
+    ) -> Result<Self, DecodeError> {
+        let w: BmsDataWire = read_prefix(raw_id, data)?;
+        Ok(BmsData {
+            group,
+            soc_pct: w.soc_pct.into(),
+            soh_pct: w.soh_pct.into(),
+            voltage_v: volts(w.voltage.get()),
+            current_a: si(w.current_da.get(), 10.0),
+            temperature_c: si(w.temperature_dc.get(), 10.0),
+        })
+    }
+
+    /// The 8 wire bytes, the voltage in units of `1 / per_volt` V.
+    pub(crate) fn wire(&self, per_volt: f64) -> Result<[u8; 8], EncodeError> {
+        Ok(wire_bytes::<8, _>(BmsDataWire {
+            soc_pct: to_u8("soc_pct", self.soc_pct, 1.0)?,
+            soh_pct: to_u8("soh_pct", self.soh_pct, 1.0)?,
+            voltage: to_u16("voltage_v", self.voltage_v, per_volt)?.into(),
+            current_da: to_i16("current_a", self.current_a, 10.0)?.into(),
+            temperature_dc: to_i16("temperature_c", self.temperature_c, 10.0)?.into(),
+        }))
+    }
 }
 
 impl MotorFast {
@@ -749,32 +806,7 @@ impl Frame {
                     }),
                 )
             }
-            Frame::Rc(r) => {
-                for (field, v) in [
-                    ("switch_a", r.switch_a),
-                    ("switch_b", r.switch_b),
-                    ("switch_c", r.switch_c),
-                    ("switch_d", r.switch_d),
-                ] {
-                    check_u8(field, v, 0, 3)?;
-                }
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(RcWire {
-                        switches: r.switch_a
-                            | (r.switch_b << 2)
-                            | (r.switch_c << 4)
-                            | (r.switch_d << 6),
-                        right_x: r.right_x_pct,
-                        right_y: r.right_y_pct,
-                        left_y: r.left_y_pct,
-                        left_x: r.left_x_pct,
-                        knob_a: r.knob_a_pct,
-                        reserved: 0,
-                        counter: r.counter,
-                    }),
-                )
-            }
+            Frame::Rc(r) => CanFrame::from_parts(id, r.wire(false)?),
             Frame::MotorFast(m) => CanFrame::from_parts(id, m.wire(4)?),
             Frame::MotorSlow(m) => CanFrame::from_parts(id, m.wire(4)?),
             Frame::SteeringFeedback(s) => {
@@ -807,28 +839,11 @@ impl Frame {
             ),
             Frame::BmsData(b) => {
                 check_u8("group", b.group, 0, 2)?;
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(BmsDataWire {
-                        soc_pct: to_u8("soc_pct", b.soc_pct, 1.0)?,
-                        soh_pct: to_u8("soh_pct", b.soh_pct, 1.0)?,
-                        voltage_cv: to_u16("voltage_v", b.voltage_v, 100.0)?.into(),
-                        current_da: to_i16("current_a", b.current_a, 10.0)?.into(),
-                        temperature_dc: to_i16("temperature_c", b.temperature_c, 10.0)?.into(),
-                    }),
-                )
+                CanFrame::from_parts(id, b.wire(100.0)?)
             }
             Frame::BmsAlarm(b) => {
                 check_u8("group", b.group, 0, 2)?;
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<4, _>(BmsAlarmWire {
-                        alarm_1: b.alarm_1,
-                        alarm_2: b.alarm_2,
-                        warning_1: b.warning_1,
-                        warning_2: b.warning_2,
-                    }),
-                )
+                CanFrame::from_parts(id, b.alarm_flags().to_le_bytes())
             }
         };
         Ok(frame)

@@ -110,11 +110,6 @@ impl TitanDriver {
         self.motion_clamp_flags = flags;
     }
 
-    fn update_body(&mut self, now: Timestamp) {
-        self.core.state.system.parking_brake_engaged = u8::from(self.brake.engaged());
-        self.core.state.touch(Group::Body, now.as_nanos());
-    }
-
     fn apply(&mut self, now: Timestamp, frame: Frame) {
         let t = now.as_nanos();
         match frame {
@@ -193,24 +188,16 @@ impl TitanDriver {
             codec::body::NORMAL => SystemState::BODY_NORMAL,
             _ => SystemState::BODY_EXCEPTION,
         };
-        sys.control_mode = new_mode;
         sys.battery_voltage_v = s.battery_voltage_v as f32;
         sys.vendor_fault_word = s.vendor_fault_word;
-        sys.fault_flags = new_faults;
-        sys.power_enabled = u8::from(new_faults & FaultFlags::BATTERY_UNDER_VOLTAGE == 0);
-        self.core.state.touch(Group::System, now.as_nanos());
-        self.core
-            .set_flag(LinkFlags::COMMAND_MODE, new_mode == ControlMode::COMMAND);
-        self.core
-            .set_flag(LinkFlags::RC_AUTHORITY, new_mode == ControlMode::REMOTE);
-
+        self.core.system_status(now, new_mode, new_faults, true);
         agilex_driver::mode_changed(&mut self.core, old_mode, new_mode);
         if new_mode != old_mode
             && (new_mode == ControlMode::STANDBY || new_mode == ControlMode::REMOTE)
         {
             // After a reboot or an RC session the brake may be engaged again.
             self.brake.forget();
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         self.core
             .fault_notices(old_faults, new_faults, FaultFlags::WARNINGS);
@@ -272,13 +259,7 @@ impl Driver for TitanDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        let planned = match self
-            .core
-            .admit_control(command, |c| frames_for(c, &self.profile))
-        {
-            Ok(planned) => planned,
-            Err(outcome) => return outcome,
-        };
+        let planned = crate::driver::admit!(self.core, command, |c| frames_for(c, &self.profile));
         let t = now.as_nanos();
         let outcome = match *command {
             Command::Mode { take_control } => self.mode.command(take_control),
@@ -290,7 +271,7 @@ impl Driver for TitanDriver {
                     ));
                 }
                 self.brake.set(engage, true);
-                self.update_body(now);
+                self.brake.report(&mut self.core, now);
                 ControlOutcome::Done(if engage {
                     "parking brake engaged; motion waits until it is released".into()
                 } else {
@@ -345,7 +326,7 @@ impl Driver for TitanDriver {
         if self.brake.idle_engage_due(now, self.core.bus_down) {
             self.queue
                 .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
-            self.update_body(now);
+            self.brake.report(&mut self.core, now);
         }
         self.steering_zero.expire(&mut self.core, now);
     }
@@ -363,10 +344,7 @@ impl Driver for TitanDriver {
             Next::Queued(frame) => frame,
             // The brake is released only once command mode is reported; until then the
             // heartbeat carries the command alone (a braked chassis does not move on it).
-            Next::ReleaseBrake => {
-                self.update_body(now);
-                Frame::ParkingBrake(ParkingBrake { engage: false })
-            }
+            Next::ReleaseBrake => Frame::ParkingBrake(ParkingBrake { engage: false }),
             Next::Motion => {
                 let echo = &mut self.core.state.command;
                 echo.linear_mps = self.motion.linear_mps as f32;
@@ -414,6 +392,6 @@ impl Driver for TitanDriver {
         self.queue
             .push_back(Frame::ParkingBrake(ParkingBrake { engage: true }));
         self.brake.engage();
-        self.update_body(now);
+        self.brake.report(&mut self.core, now);
     }
 }

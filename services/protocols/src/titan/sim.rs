@@ -240,7 +240,6 @@ impl TitanSim {
     pub const DEFAULT_STEERING_ZERO_DELAY: Duration = Duration::from_millis(50);
     /// Speed below which the robot stands still (off-road switching), m/s.
     pub const STANDING_STILL_MPS: f64 = 0.01;
-    /// CAN id of injected garbage frames (unused by TITAN).
     /// The pack (one battery; [`Self::with_batteries`] doubles the capacity).
     pub const BATTERY: BatteryModel = BatteryModel {
         capacity_ah: 24.0,

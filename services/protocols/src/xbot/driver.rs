@@ -696,13 +696,7 @@ impl Driver for XbotDriver {
     }
 
     fn control(&mut self, now: Timestamp, command: &Command) -> ControlOutcome {
-        let planned = match self
-            .core
-            .admit_control(command, |c| frames_for(c, &self.profile))
-        {
-            Ok(planned) => planned,
-            Err(outcome) => return outcome,
-        };
+        let planned = crate::driver::admit!(self.core, command, |c| frames_for(c, &self.profile));
         let t = now.as_nanos();
         let mut outcome = ControlOutcome::Done(format!("{} sent", command.name()));
         for frame in planned.frames {
