@@ -29,6 +29,7 @@ mod stats;
 mod throughput;
 mod verdict;
 mod zenoh;
+mod zenoh_raw;
 
 use baseline::{Load, Transport};
 use paths::{BusKind, LoopMode};
@@ -72,6 +73,10 @@ enum Role {
     Feed(baseline::FeedArgs),
     Subscribe(fanout::SubscribeArgs),
     DdsEcho(dds_echo::EchoArgs),
+    /// Publish stamped samples on a bare Zenoh session configured as chassis-zenoh's.
+    ZenohPub(zenoh_raw::RawArgs),
+    /// Receive them and write their latencies.
+    ZenohSub(zenoh_raw::RawArgs),
     /// Write the candump log the throughput run replays (for profiling the service by hand).
     RecordTitan {
         #[arg(long)]
@@ -1292,6 +1297,15 @@ fn main() -> ExitCode {
         Some(RoleCmd::Role {
             role: Role::DdsEcho(args),
         }) => dds_echo::run(&args),
+        Some(RoleCmd::Role {
+            role: Role::ZenohPub(args),
+        }) => {
+            chassis_client::install_signal_handlers();
+            zenoh_raw::publish(&args)
+        }
+        Some(RoleCmd::Role {
+            role: Role::ZenohSub(args),
+        }) => zenoh_raw::subscribe(&args),
         Some(RoleCmd::Role {
             role: Role::RecordTitan { out, seconds },
         }) => throughput::record_titan(&out, seconds).map(|frames| {

@@ -120,10 +120,17 @@ impl Drop for Children {
     }
 }
 
-fn zenoh_in(ns: &str, prefix: &str, args: &[&str], log: &Path) -> anyhow::Result<Command> {
+/// `program args…` in network namespace `ns`.
+fn zenoh_in(
+    ns: &str,
+    prefix: &str,
+    program: &Path,
+    args: &[&str],
+    log: &Path,
+) -> anyhow::Result<Command> {
     let mut cmd = Command::new("ip");
     cmd.args(["netns", "exec", ns])
-        .arg(paths::sibling("chassis-zenoh")?)
+        .arg(program)
         .args(args)
         .env(chassis_client::IPC_PREFIX_ENV, prefix)
         .env("RUST_LOG", "warn,zenoh=error")
@@ -209,11 +216,14 @@ fn bare_hop(
         .ceil()
         .to_string();
     let sub_log = dir.join(format!("zenoh-raw-sub-{tag}.log"));
+    let bench = std::env::current_exe().context("finding chassis-bench itself")?;
     let mut sub = zenoh_in(
         &netns.operator,
         operator_prefix,
+        &bench,
         &[
-            "raw-sub",
+            "role",
+            "zenoh-sub",
             "--connect",
             &raw,
             "--insecure",
@@ -227,12 +237,14 @@ fn bare_hop(
     .arg("--out")
     .arg(&raw_file)
     .spawn()
-    .context("starting chassis-zenoh raw-sub")?;
+    .context("starting the bare hop's subscriber")?;
     let mut publisher = zenoh_in(
         &netns.robot,
         prefix,
+        &bench,
         &[
-            "raw-pub",
+            "role",
+            "zenoh-pub",
             "--listen",
             &raw,
             "--insecure",
@@ -244,7 +256,7 @@ fn bare_hop(
         &dir.join(format!("zenoh-raw-pub-{tag}.log")),
     )?
     .spawn()
-    .context("starting chassis-zenoh raw-pub")?;
+    .context("starting the bare hop's publisher")?;
     let status = sub.wait()?;
     let _ = publisher.wait();
     if !status.success() {
@@ -289,11 +301,13 @@ pub fn run(
 
     // Each side keeps its stamps of the states it carries and writes them as it stops.
     let export_trace = dir.join("zenoh-robot.trace");
+    let bridge_program = paths::sibling("chassis-zenoh")?;
     let mirror_trace = dir.join("zenoh-operator.trace");
     children.0.push(
         zenoh_in(
             &netns.robot,
             prefix,
+            &bridge_program,
             &["--name", &name, "--listen", &bridge, "--insecure"],
             &dir.join("zenoh-robot.log"),
         )?
@@ -305,6 +319,7 @@ pub fn run(
         zenoh_in(
             &netns.operator,
             &operator_prefix,
+            &bridge_program,
             &[
                 "--name",
                 &name,

@@ -39,8 +39,8 @@ mod export;
 mod fleet;
 mod link_watch;
 mod mirror;
-mod net;
-mod raw;
+
+use chassis_zenoh::net;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -112,23 +112,9 @@ enum Command {
         #[arg(long)]
         host: Vec<String>,
     },
-    /// (benchmark baseline) publish stamped samples on a bare Zenoh session.
-    #[command(hide = true)]
-    RawPub(raw::RawArgs),
-    /// (benchmark baseline) receive them and write their latencies.
-    #[command(hide = true)]
-    RawSub(raw::RawArgs),
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    match &cli.command {
-        Some(Command::RawPub(args)) => {
-            chassis_client::install_signal_handlers();
-            return raw::publish(args);
-        }
-        Some(Command::RawSub(args)) => return raw::subscribe(args),
-        _ => {}
-    }
     if let Some(Command::GenCerts { dir, host }) = cli.command {
         certs::generate(&dir, &host)?;
         eprintln!(

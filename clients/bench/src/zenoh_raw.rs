@@ -1,5 +1,5 @@
-//! The benchmark's baseline (hidden commands `raw-pub` and `raw-sub`): a bare Zenoh put → a
-//! subscriber's callback, with the same session configuration as the bridge, payloads the size
+//! The bare Zenoh hop (`chassis-bench role zenoh-pub` and `zenoh-sub`): a put → a subscriber's
+//! callback, with the same session configuration as the bridge, payloads the size
 //! of a `ChassisState`, stamped with `CLOCK_MONOTONIC` (both ends on one machine, in two
 //! network namespaces).
 
@@ -14,7 +14,7 @@ use clap::Args;
 use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
 
-use crate::net::{self, Net, Role};
+use chassis_zenoh::net::{self, Net, Role};
 
 /// The key the baseline runs on.
 const KEY: &str = "chassis-bench/raw";
