@@ -273,16 +273,19 @@ fn path_runs(quick: bool, robots: &[RobotKind]) -> Vec<PathRun> {
     runs
 }
 
-/// The baseline transport that waits like a service loop in `mode`.
 /// The raw DDS hops the ROS 2 rows contain (Cyclone DDS is the peer, RustDDS the bridge's).
 const DDS_IN: &str = "DDS Cyclone DDS → RustDDS";
 const DDS_OUT: &str = "DDS RustDDS → Cyclone DDS";
+/// The ROS 2 bridge's rows, after their run's name.
+const CMD_VEL: &str = "cmd_vel → frame";
+const ODOM: &str = "frame read → odom";
 
 /// The runs (robot, bus, loop) the Python client and the ROS 2 bridge are measured beside: same
 /// service, same placement as the Rust client's rows.
 const SCRIPTS_BESIDE: (RobotKind, BusKind, LoopMode) =
     (RobotKind::Titan, BusKind::Sim, LoopMode::Event);
 
+/// The baseline transport that waits like a service loop in `mode`.
 fn transport_of(mode: LoopMode) -> Transport {
     match mode {
         LoopMode::Event => Transport::IceoryxEvent,
@@ -306,6 +309,47 @@ fn bus_label(robot: RobotKind, bus: BusKind) -> String {
     format!("{robot} {bus}")
 }
 
+fn baseline_key(what: &str, placement: &str) -> String {
+    row_key(PathKind::Baseline, what, "-", placement)
+}
+
+fn hop_row(run: &str, what: String, placement: &str, l: Latencies, conditions: String) -> Row {
+    Row {
+        conditions: Some(conditions),
+        ..Row::new(
+            PathKind::Baseline,
+            Leg::Hop,
+            run,
+            what,
+            "-",
+            placement,
+            l,
+            0,
+        )
+    }
+}
+
+struct Ctx {
+    plan: Plan,
+    quick: bool,
+    prefix: String,
+    dir: PathBuf,
+    python: Option<PathBuf>,
+    ros2: Option<PathBuf>,
+    bar: ProgressBar,
+}
+
+/// A part of a run: the rows it plans, declared beside the code that measures them.
+trait Step {
+    /// Every row the step measures, named as it names them, with the samples it asks for: a
+    /// smoke run fails when one of them did not come, or brought too few.
+    fn planned(&self, _: &Ctx) -> Vec<Planned> {
+        Vec::new()
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()>;
+}
+
 fn run(args: &RunArgs) -> anyhow::Result<Report> {
     let quick = args.quick || args.smoke;
     let plan = if args.smoke {
@@ -322,7 +366,6 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         None => std::env::temp_dir().join(format!("chassis-bench-{}", std::process::id())),
     };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let prefix = format!("cb{}_", std::process::id());
     let robots: Vec<RobotKind> = args
         .robots
         .iter()
@@ -340,721 +383,671 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
             .notes
             .push("one CPU only: cross-CPU runs share it".into());
     }
-
-    // Back to back (each transport at its best), then paced like the command path: what a
-    // request after a pause meets, the service paths' reference.
-    let paced = Some(paths::off_grid(paths::COMMAND_INTERVAL));
-    let mut baselines: Vec<(Transport, Placement, Option<Duration>)> =
-        [Placement::SameCpu, Placement::CrossCpu]
-            .into_iter()
-            .flat_map(|p| {
-                let mut t = vec![
-                    (Transport::IceoryxEvent, p, None),
-                    (Transport::Uds, p, None),
-                    (Transport::Udp, p, None),
-                ];
-                if p == Placement::CrossCpu {
-                    t.insert(1, (Transport::IceoryxSpin, p, None));
-                }
-                t
-            })
-            .collect();
-    baselines.extend([
-        (Transport::IceoryxEvent, Placement::SameCpu, paced),
-        (Transport::IceoryxEvent, Placement::CrossCpu, paced),
-        (Transport::IceoryxSpin, Placement::CrossCpu, paced),
-    ]);
-    let mut runs = path_runs(quick, &robots);
-    if args.smoke {
-        // The event loop only: a busy-polling loop on a shared 2-core machine measures the
-        // machine's other work (a smoke run is about rows, not figures).
-        runs.retain(|r| r.mode == LoopMode::Event);
-    }
-    // The poll-then-block loop's own back-to-back hop, a context row beside the hybrid runs.
-    if runs.iter().any(|r| r.mode == LoopMode::Hybrid) {
-        baselines.push((Transport::IceoryxHybrid, Placement::CrossCpu, None));
-    }
-    // Every row this run plans, named as the code below names them, with the samples it asks
-    // for: a smoke run fails when one of them did not come, or brought too few.
-    let python = python::interpreter();
-    let ros2 = ros2::interpreter();
-    let mut expected: Vec<Planned> = Vec::new();
-    let mut plan_row =
-        |path: PathKind, what: &str, mode: &str, placement: &str, asked: Option<u64>| {
-            expected.push(Planned::new(row_key(path, what, mode, placement), asked));
-        };
-    if !skip("baselines") {
-        for (transport, placement, pace) in &baselines {
-            // Back to back, both hops of a round count; paced, the ping's alone.
-            let (what, asked) = match pace {
-                Some(_) => (
-                    format!("{} {}", transport.label(), report::PACED),
-                    plan.paced_rounds,
-                ),
-                None => (transport.label().to_string(), 2 * plan.baseline_rounds),
-            };
-            plan_row(
-                PathKind::Baseline,
-                &what,
-                "-",
-                placement.label(),
-                Some(asked),
-            );
-        }
-        for cpu in 0..placement::cpu_count() {
-            plan_row(
-                PathKind::Baseline,
-                report::STALLS,
-                "-",
-                &stall_placement(cpu),
-                None,
-            );
-        }
-    }
-    if !skip("paths") {
-        for r in &runs {
-            let label = bus_label(r.robot, r.bus);
-            let (mode, placement) = (r.mode.arg(), r.placement.label());
-            let t = transport_of(r.mode).label();
-            let (commands, preemptions) = if r.robot == RobotKind::Xbot {
-                (plan.xbot_commands, plan.preemptions / 15)
-            } else {
-                (plan.commands, plan.preemptions)
-            };
-            // A matched baseline has as many samples as the row it divides.
-            let pings = if commands > 0 {
-                commands
-            } else {
-                plan.paced_rounds
-            };
-            for (what, asked) in [
-                (format!("{t} paced, loaded as {label}"), pings),
-                (
-                    format!("{t} at the feedback rate, loaded as {label}"),
-                    plan.states,
-                ),
-                (format!("{t} published, loaded as {label}"), plan.states),
-                (
-                    format!("{t} after a wake-up ping, loaded as {label}"),
-                    preemptions,
-                ),
-            ] {
-                plan_row(PathKind::Baseline, &what, "-", placement, Some(asked));
-            }
-            if commands > 0 {
-                plan_row(PathKind::Command, &label, mode, placement, Some(commands));
-                let what = format!("{label}: command");
-                plan_row(PathKind::InService, &what, mode, placement, Some(commands));
-            }
-            plan_row(PathKind::State, &label, mode, placement, Some(plan.states));
-            let what = format!("{label}: state");
-            plan_row(
-                PathKind::InService,
-                &what,
-                mode,
-                placement,
-                Some(plan.states),
-            );
-            plan_row(
-                PathKind::Preemption,
-                &label,
-                mode,
-                placement,
-                Some(preemptions),
-            );
-            if (r.robot, r.bus, r.mode) == SCRIPTS_BESIDE {
-                if python.is_some() {
-                    for (p, asked) in [("state", plan.states), ("command", commands)] {
-                        let what = format!("{label}: {p}");
-                        plan_row(PathKind::Python, &what, mode, placement, Some(asked));
-                    }
-                }
-                if ros2.is_some() {
-                    for (what, dds, asked) in [
-                        ("cmd_vel → frame", DDS_IN, commands),
-                        ("frame read → odom", DDS_OUT, plan.states),
-                    ] {
-                        let what = format!("{label}: {what}");
-                        plan_row(PathKind::Ros2, &what, mode, placement, Some(asked));
-                        let hop = format!("{dds}, beside {label}");
-                        plan_row(PathKind::Baseline, &hop, "-", placement, Some(asked));
-                    }
-                }
-            }
-        }
-        let cross = Placement::CrossCpu.label();
-        let asked = Some(plan.commands);
-        plan_row(
-            PathKind::Command,
-            report::DEFAULT_CONFIG_ROW,
-            "event",
-            cross,
-            asked,
-        );
-        let what = format!("{}: command", report::DEFAULT_CONFIG_ROW);
-        plan_row(PathKind::InService, &what, "event", cross, asked);
-    }
-    let loops = control_loop::plan(args.smoke);
-    if !skip("loops") {
-        let cross = Placement::CrossCpu.label();
-        for &(period, mode) in &loops {
-            let periods = Some(control_loop::periods(period, plan.loop_seconds));
-            let run = bus_label(RobotKind::Titan, BusKind::Sim);
-            let [frame, age, hop] = control_loop::row_names(&run, period, transport_of(mode));
-            // A command the next period's superseded is what the row measures, not a loss.
-            plan_row(PathKind::Loop, &frame, mode.arg(), cross, None);
-            plan_row(PathKind::Loop, &age, mode.arg(), cross, periods);
-            plan_row(PathKind::Baseline, &hop, "-", cross, periods);
-        }
-    }
-    if !skip("fanout") {
-        for n in &plan.fanout {
-            let what = format!("titan sim → {n} processes");
-            plan_row(PathKind::FanOut, &what, "event", "unpinned", None);
-        }
-    }
-    if !skip("zenoh") && zenoh::possible() {
-        let placement = "2 netns, veth";
-        for (what, asked) in [
-            (zenoh::RAW_COMMAND, plan.commands),
-            (zenoh::RAW_STATE, plan.states),
-        ] {
-            plan_row(PathKind::Baseline, what, "-", placement, Some(asked));
-        }
-        for (what, asked) in [
-            (zenoh::COMMAND, plan.commands),
-            (zenoh::STATE, plan.states),
-            (zenoh::BRIDGE, plan.states),
-        ] {
-            plan_row(PathKind::Zenoh, what, "event", placement, Some(asked));
-        }
-    }
-    report.expected = expected;
-
-    let steps = (if skip("baselines") {
-        0
-    } else {
-        baselines.len() + placement::cpu_count()
-    }) + (if skip("paths") { 0 } else { runs.len() + 1 })
-        + (if skip("fanout") { 0 } else { plan.fanout.len() })
-        + usize::from(!skip("loops"))
-        + usize::from(!skip("cost"))
-        + usize::from(!skip("zenoh"))
-        + usize::from(!skip("throughput"));
-    let bar = ProgressBar::new(steps as u64);
+    let steps = steps(args, &robots, &plan, skip);
+    let bar = ProgressBar::new(steps.len() as u64);
     bar.set_style(
         ProgressStyle::with_template("{elapsed:>4} [{bar:30}] {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
+    let ctx = Ctx {
+        plan,
+        quick,
+        prefix: format!("cb{}_", std::process::id()),
+        dir,
+        python: python::interpreter(),
+        ros2: ros2::interpreter(),
+        bar,
+    };
+    if !skip("paths") {
+        for (missing, what, name) in [
+            (ctx.python.is_none(), "the Python client", "python"),
+            (ctx.ros2.is_none(), "the ROS 2 bridge", "ros2"),
+        ] {
+            if missing {
+                report.notes.push(format!(
+                    "{what} was not measured: target/{name}-venv is missing \
+                     (scripts/{name}-tests makes it)"
+                ));
+            }
+        }
+    }
+    // All of them before any is measured: a step that fails to bring a row is caught too.
+    report.expected = steps.iter().flat_map(|s| s.planned(&ctx)).collect();
+    for step in &steps {
+        step.measure(&ctx, &mut report)?;
+        ctx.bar.inc(1);
+    }
+    ctx.bar.finish_and_clear();
+    report.compute_ratios();
+    report.provenance.end()?;
+    // A directory named on the command line keeps its logs.
+    if args.dir.is_none() {
+        let _ = std::fs::remove_dir_all(&ctx.dir);
+    }
+    Ok(report)
+}
 
-    if !skip("baselines") {
-        for (transport, placement, pace) in baselines {
-            let what = match pace {
-                Some(_) => format!("{} {}", transport.label(), report::PACED),
-                None => transport.label().to_string(),
-            };
-            bar.set_message(format!("baseline {what} ({})", placement.label()));
-            let rounds = if pace.is_some() {
-                plan.paced_rounds
-            } else {
-                plan.baseline_rounds
-            };
-            let shape = pace.map_or(baseline::Rounds::BackToBack, baseline::Rounds::Paced);
-            let l = baseline::run(transport, placement, rounds, shape, None, &prefix, &dir)?
-                .all_pings();
-            let mut r = Row::new(
-                PathKind::Baseline,
-                Leg::Hop,
-                "",
-                what,
-                "-",
-                placement.label(),
-                l,
-                0,
-            );
-            r.conditions = Some(match pace {
-                Some(p) => format!(
+/// The steps of a run, in the order it measures them.
+fn steps(
+    args: &RunArgs,
+    robots: &[RobotKind],
+    plan: &Plan,
+    skip: impl Fn(&str) -> bool,
+) -> Vec<Box<dyn Step>> {
+    fn boxed<S: Step + 'static>(steps: impl IntoIterator<Item = S>) -> Vec<Box<dyn Step>> {
+        steps
+            .into_iter()
+            .map(|s| Box::new(s) as Box<dyn Step>)
+            .collect()
+    }
+    let mut runs = path_runs(args.quick || args.smoke, robots);
+    if args.smoke {
+        // The event loop only: a busy-polling loop on a shared 2-core machine measures the
+        // machine's other work (a smoke run is about rows, not figures).
+        runs.retain(|r| r.mode == LoopMode::Event);
+    }
+    let hybrid = runs.iter().any(|r| r.mode == LoopMode::Hybrid);
+    let mut baselines = boxed(Baseline::all(hybrid));
+    baselines.extend(boxed((0..placement::cpu_count()).map(Stalls)));
+    let mut paths = boxed(runs);
+    paths.extend(boxed([DefaultConfig]));
+    [
+        ("baselines", baselines),
+        ("paths", paths),
+        ("loops", boxed([Loops(control_loop::plan(args.smoke))])),
+        ("fanout", boxed(plan.fanout.iter().copied().map(FanOut))),
+        ("zenoh", boxed([Zenoh])),
+        ("cost", boxed([Cost])),
+        ("throughput", boxed([Throughput])),
+    ]
+    .into_iter()
+    .filter(|(part, _)| !skip(part))
+    .flat_map(|(_, steps)| steps)
+    .collect()
+}
+
+/// A raw transport's round trips: back to back (each transport at its best), or paced like the
+/// command path: what a request after a pause meets, the service paths' reference.
+#[derive(Clone, Copy)]
+struct Baseline(Transport, Placement, Option<Duration>);
+
+impl Baseline {
+    fn all(hybrid: bool) -> Vec<Self> {
+        use Transport::{IceoryxEvent, IceoryxSpin, Udp, Uds};
+        let paced = Some(paths::off_grid(paths::COMMAND_INTERVAL));
+        let (same, cross) = (Placement::SameCpu, Placement::CrossCpu);
+        let mut all = vec![
+            Self(IceoryxEvent, same, None),
+            Self(Uds, same, None),
+            Self(Udp, same, None),
+            Self(IceoryxEvent, cross, None),
+            Self(IceoryxSpin, cross, None),
+            Self(Uds, cross, None),
+            Self(Udp, cross, None),
+            Self(IceoryxEvent, same, paced),
+            Self(IceoryxEvent, cross, paced),
+            Self(IceoryxSpin, cross, paced),
+        ];
+        // The poll-then-block loop's own back-to-back hop, a context row beside the hybrid runs.
+        if hybrid {
+            all.push(Self(Transport::IceoryxHybrid, cross, None));
+        }
+        all
+    }
+
+    fn what(&self) -> String {
+        match self.2 {
+            Some(_) => format!("{} {}", self.0.label(), report::PACED),
+            None => self.0.label().to_string(),
+        }
+    }
+}
+
+impl Step for Baseline {
+    fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
+        // Back to back, both hops of a round count; paced, the ping's alone.
+        let asked = match self.2 {
+            Some(_) => ctx.plan.paced_rounds,
+            None => 2 * ctx.plan.baseline_rounds,
+        };
+        let key = baseline_key(&self.what(), self.1.label());
+        vec![Planned::new(key, asked)]
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        let (what, Self(transport, placement, pace)) = (self.what(), *self);
+        ctx.bar
+            .set_message(format!("baseline {what} ({})", placement.label()));
+        let (rounds, shape, conditions) = match pace {
+            Some(p) => (
+                ctx.plan.paced_rounds,
+                baseline::Rounds::Paced(p),
+                format!(
                     "one ping every {}, receiver otherwise idle (cold)",
                     paths::period_text(p)
                 ),
-                None => "back to back (warm)".into(),
-            });
-            report.rows.push(r);
-            bar.inc(1);
-        }
-        for cpu in 0..placement::cpu_count() {
-            bar.set_message(format!("stalls on CPU {cpu}"));
-            let stalls = stalls::measure(cpu, plan.stall_bursts, paths::REALTIME_PRIORITY)?;
-            report.stalls.push(report::StallRates {
-                cpu,
-                over_20_us: stalls.per_second(20),
-                over_100_us: stalls.per_second(100),
-            });
-            let conditions = stalls.conditions(cpu);
-            let mut r = Row::new(
-                PathKind::Baseline,
-                Leg::Stalls,
-                "",
-                report::STALLS.into(),
-                "-",
-                &stall_placement(cpu),
-                stalls.gaps,
-                0,
-            );
-            r.conditions = Some(conditions);
-            report.rows.push(r);
-            bar.inc(1);
+            ),
+            None => (
+                ctx.plan.baseline_rounds,
+                baseline::Rounds::BackToBack,
+                "back to back (warm)".into(),
+            ),
+        };
+        let (prefix, dir) = (&ctx.prefix, &ctx.dir);
+        let l = baseline::run(transport, placement, rounds, shape, None, prefix, dir)?;
+        let row = hop_row("", what, placement.label(), l.all_pings(), conditions);
+        report.rows.push(row);
+        Ok(())
+    }
+}
+
+/// How often CPU `.0` stalls a thread that never blocks.
+struct Stalls(usize);
+
+impl Step for Stalls {
+    fn planned(&self, _: &Ctx) -> Vec<Planned> {
+        let key = baseline_key(report::STALLS, &stall_placement(self.0));
+        vec![Planned::new(key, None)]
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        let cpu = self.0;
+        ctx.bar.set_message(format!("stalls on CPU {cpu}"));
+        let stalls = stalls::measure(cpu, ctx.plan.stall_bursts, paths::REALTIME_PRIORITY)?;
+        report.stalls.push(report::StallRates {
+            cpu,
+            over_20_us: stalls.per_second(20),
+            over_100_us: stalls.per_second(100),
+        });
+        let conditions = stalls.conditions(cpu);
+        let mut r = Row::new(
+            PathKind::Baseline,
+            Leg::Stalls,
+            "",
+            report::STALLS.into(),
+            "-",
+            &stall_placement(cpu),
+            stalls.gaps,
+            0,
+        );
+        r.conditions = Some(conditions);
+        report.rows.push(r);
+        Ok(())
+    }
+}
+
+/// What a run's service measured, with the Python client and the ROS 2 bridge beside it.
+struct ServiceRun {
+    command: Option<paths::CommandFigures>,
+    state: paths::StateRecorder,
+    preempt: (Latencies, u64),
+    python: Option<python::PythonFigures>,
+    ros2: Option<ros2::Ros2Figures>,
+    feed_per_s: f64,
+    realtime: Option<u8>,
+    passes: Vec<paths::PassStamps>,
+}
+
+impl PathRun {
+    fn label(&self) -> String {
+        bus_label(self.robot, self.bus)
+    }
+
+    /// (commands, preemptions, the interval between commands).
+    fn sizes(&self, plan: &Plan) -> (u64, u64, Duration) {
+        if self.robot == RobotKind::Xbot {
+            // The XBot's manual caps the command rate below 10 Hz: a change goes out at once
+            // only while the last second holds a free slot.
+            let interval = paths::XBOT_COMMAND_INTERVAL;
+            (plan.xbot_commands, plan.preemptions / 15, interval)
+        } else {
+            (plan.commands, plan.preemptions, paths::COMMAND_INTERVAL)
         }
     }
 
-    if !skip("paths") {
-        if python.is_none() {
-            report.notes.push(
-                "the Python client was not measured: target/python-venv is missing \
-                 (scripts/python-tests makes it)"
-                    .into(),
-            );
+    fn key(&self, path: PathKind, what: &str) -> String {
+        row_key(path, what, self.mode.arg(), self.placement.label())
+    }
+
+    fn plan(&self, path: PathKind, what: &str, asked: u64) -> Planned {
+        Planned::new(self.key(path, what), asked)
+    }
+
+    /// The row and its in-service row, as [`path_rows`] names them.
+    fn plan_path(&self, path: PathKind, what: &str, asked: u64) -> [Planned; 2] {
+        let inside = format!("{what}: {path}");
+        [
+            self.plan(path, what, asked),
+            self.plan(PathKind::InService, &inside, asked),
+        ]
+    }
+
+    /// `<run>: <what>`: the Python client's and the ROS 2 bridge's rows.
+    fn of(&self, what: &str) -> String {
+        format!("{}: {what}", self.label())
+    }
+
+    /// The raw DDS hop `dds`, named after this run: a full run measures the bridge beside more
+    /// than one.
+    fn beside(&self, dds: &str) -> String {
+        format!("{dds}, beside {}", self.label())
+    }
+
+    /// The baselines loaded as this run's service was: paced, the feed's own hops, published,
+    /// after a wake-up ping.
+    fn loaded(&self) -> [String; 4] {
+        let t = transport_of(self.mode).label();
+        [
+            "paced",
+            "at the feedback rate",
+            "published",
+            "after a wake-up ping",
+        ]
+        .map(|what| format!("{t} {what}, loaded as {}", self.label()))
+    }
+
+    fn reference(&self, what: &str) -> Option<String> {
+        Some(format!("{what}, {}", self.placement.label()))
+    }
+
+    /// This run's rows, at its mode and placement; its baselines', at its placement.
+    fn row(&self, path: PathKind, leg: Leg, what: String, l: Latencies, missed: u64) -> Row {
+        let (mode, placement) = (self.mode.arg(), self.placement.label());
+        Row::new(path, leg, &self.label(), what, mode, placement, l, missed)
+    }
+
+    fn hop_row(&self, what: String, l: Latencies, conditions: String) -> Row {
+        hop_row(&self.label(), what, self.placement.label(), l, conditions)
+    }
+
+    /// Starts the service and measures its paths, the scripts' beside them.
+    fn service(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<ServiceRun> {
+        let (label, mode) = (self.label(), self.mode.arg());
+        let title = format!("{label}, {mode} loop, {}", self.placement.label());
+        ctx.bar.set_message(title.clone());
+        let (client_cpu, service_cpu) = self.placement.cpus();
+        let (service, mut robot) = paths::start_configured(
+            self.robot,
+            self.bus,
+            self.mode,
+            service_cpu,
+            paths::ServiceConfig::BenchRealtime,
+            true,
+            &ctx.prefix,
+            &ctx.dir,
+        )?;
+        let spin = self.mode == LoopMode::Spin;
+        let (count, preemptions, interval) = self.sizes(&ctx.plan);
+        let feedback = paths::FeedbackRate::start(&mut robot)?;
+        let result = paths::pinned(client_cpu, || -> anyhow::Result<_> {
+            let command = (count > 0)
+                .then(|| paths::command_path(&mut robot, self.robot, count, interval, spin))
+                .transpose()?;
+            let state = paths::state_path(&mut robot, ctx.plan.states, spin)?;
+            let preempt = paths::preemption(&mut robot, self.robot, preemptions, interval, spin)?;
+            // The Python client and the ROS 2 bridge beside the Rust one.
+            let (mut python_figures, mut ros2_figures) = (None, None);
+            if (self.robot, self.bus, self.mode) == SCRIPTS_BESIDE
+                && (ctx.python.is_some() || ctx.ros2.is_some())
+            {
+                let run = python::ScriptRun {
+                    name: robot.name(),
+                    prefix: &ctx.prefix,
+                    chassis_cli: &paths::sibling("chassis")?,
+                    dir: &ctx.dir,
+                    states: ctx.plan.states,
+                    commands: count,
+                    interval,
+                };
+                if let Some(interpreter) = &ctx.python {
+                    python_figures = Some(python::run(interpreter, &run)?);
+                }
+                if let Some(interpreter) = &ctx.ros2 {
+                    let bridge = paths::sibling("chassis-ros2")?;
+                    ros2_figures = Some(ros2::run(interpreter, &bridge, &run)?);
+                }
+            }
+            Ok((command, state, preempt, python_figures, ros2_figures))
+        })??;
+        let (command, state, preempt, python, ros2) = result;
+        let feed_per_s = feedback.per_second(&mut robot)?;
+        drop(robot);
+        let scheduling = service.scheduling;
+        if scheduling.fifo().is_some() {
+            // Real-time mode locks every page the process maps.
+            let rss = paths::rss_mib(service.pid)?;
+            report.realtime_rss_mib = Some(report.realtime_rss_mib.map_or(rss, |m| m.max(rss)));
         }
-        if ros2.is_none() {
-            report.notes.push(
-                "the ROS 2 bridge was not measured: target/ros2-venv is missing \
-                 (scripts/ros2-tests makes it)"
-                    .into(),
+        report.scheduling.push((title, scheduling));
+        let passes = service.stop()?;
+        Ok(ServiceRun {
+            command,
+            state,
+            preempt,
+            python,
+            ros2,
+            feed_per_s,
+            realtime: scheduling.fifo(),
+            passes,
+        })
+    }
+
+    /// The baselines of this run's rows: their receiver lives like the service's loop did —
+    /// woken by another process at the chassis' feedback rate, its own tick, the same placement
+    /// and the same way of waiting.
+    fn baselines(&self, ctx: &Ctx, run: &ServiceRun, rows: &mut Vec<Row>) -> anyhow::Result<()> {
+        let (label, transport) = (self.label(), transport_of(self.mode));
+        let (feed_per_s, states) = (run.feed_per_s, run.state.latencies.count());
+        let (_, _, interval) = self.sizes(&ctx.plan);
+        let load = Load {
+            feed_per_s,
+            tick: tick_of(self.robot),
+            realtime: run.realtime,
+            published: false,
+        };
+        // The feed runs where chassisd put its simulated chassis (`baseline::feed_cpu`).
+        let (feed_where, fifo) = match run.realtime {
+            Some(priority) => (
+                "on the receiver's CPU",
+                format!(", at SCHED_FIFO {priority} as the service's loop"),
+            ),
+            None => ("on the other CPU", String::new()),
+        };
+        let conditions = format!(
+            "receiver woken {feed_per_s:.0}/s by another process {feed_where}, as by the \
+             simulated chassis (the feedback rate measured in the {label} run), and by its \
+             own {} ms tick{fifo}",
+            load.tick.as_millis()
+        );
+        let [paced, feed_what, published, warm] = self.loaded();
+        let measure = |what: &str, rounds, shape, load| {
+            ctx.bar.set_message(format!("baseline as {label}: {what}"));
+            let (placement, prefix, dir) = (self.placement, &ctx.prefix, &ctx.dir);
+            baseline::run(transport, placement, rounds, shape, Some(load), prefix, dir)
+        };
+        // As many samples as the rows each part divides: the command row's pings, the state
+        // row's feed hops (the run lasts until the feed made that many).
+        let pings_wanted =
+            (run.command.as_ref()).map_or(ctx.plan.paced_rounds, |c| c.latencies.count());
+        // A tenth more: the feed starts after the receiver and keeps its own pace.
+        let feed_rounds =
+            (1.1 * states as f64 / (feed_per_s * interval.as_secs_f64()).max(1e-9)).ceil() as u64;
+        let rounds = pings_wanted.max(feed_rounds) + 1;
+        let pace = paths::off_grid(interval);
+        let woken = format!("{} woken {feed_per_s:.0}/s", transport.label());
+        let measured = measure(&woken, rounds, baseline::Rounds::Paced(pace), load)?;
+        let pings = baseline::last_of(&measured.pings, pings_wanted);
+        let text = format!(
+            "one ping every {}, the last {pings_wanted} of {rounds}; {conditions}",
+            paths::period_text(pace)
+        );
+        rows.push(self.hop_row(paced, pings, text));
+        if let Some(feed) = measured.feed {
+            // As many hops as the state row has samples: the last ones, the receiver warm.
+            let hops = baseline::last_of(&feed, states);
+            let text = format!(
+                "the feed's own hops: {feed_per_s:.0}/s, the last {states} of {}; {conditions}",
+                feed.len()
             );
+            rows.push(self.hop_row(feed_what, hops, text));
         }
-        for r in &runs {
-            let label = bus_label(r.robot, r.bus);
-            bar.set_message(format!(
-                "{label}, {} loop, {}",
-                r.mode.arg(),
-                r.placement.label()
-            ));
-            let (client_cpu, service_cpu) = r.placement.cpus();
-            let (service, mut robot) = paths::start_configured(
-                r.robot,
-                r.bus,
-                r.mode,
-                service_cpu,
-                paths::ServiceConfig::BenchRealtime,
-                true,
-                &prefix,
-                &dir,
-            )?;
-            let spin = r.mode == LoopMode::Spin;
-            let (count, interval) = if r.robot == RobotKind::Xbot {
-                // The XBot's manual caps the command rate below 10 Hz: a change goes out at once
-                // only while the last second holds a free slot.
-                (plan.xbot_commands, paths::XBOT_COMMAND_INTERVAL)
+        // The state row's hop, in a run of its own: its client sends a request every
+        // STATE_REQUEST_INTERVAL, not one every command period (pings every 4 ms would keep
+        // the reader's CPU awake, and its wake-up cheaper than the state path's).
+        // A quarter more: the receiver publishes once per wake-up, which may take more than
+        // one feed sample.
+        let state_rounds = (1.25 * states as f64
+            / (feed_per_s * paths::STATE_REQUEST_INTERVAL.as_secs_f64()).max(1e-9))
+        .ceil() as u64
+            + 1;
+        let shape = baseline::Rounds::Paced(paths::STATE_REQUEST_INTERVAL);
+        let what = format!("{} published, loaded", transport.label());
+        let state_load = Load {
+            published: true,
+            ..load
+        };
+        let state_measured = measure(&what, state_rounds, shape, state_load)?;
+        // The state row's hop: from the receiver, which lives as the loop does, to a reader
+        // that lives as the client does.
+        if let Some(hops) = state_measured.published {
+            let reader = match self.placement {
+                Placement::SameCpu => "on the receiver's CPU",
+                Placement::CrossCpu => "on the other CPU",
+            };
+            let waiting = if self.mode == LoopMode::Spin {
+                "polling"
             } else {
-                (plan.commands, paths::COMMAND_INTERVAL)
+                "blocked on its listener between drains"
             };
-            let feedback = paths::FeedbackRate::start(&mut robot)?;
-            let result = paths::pinned(client_cpu, || -> anyhow::Result<_> {
-                let command = if count > 0 {
-                    Some(paths::command_path(
-                        &mut robot, r.robot, count, interval, spin,
-                    )?)
-                } else {
-                    None
-                };
-                let state = paths::state_path(&mut robot, plan.states, spin)?;
-                let preemptions = if r.robot == RobotKind::Xbot {
-                    plan.preemptions / 15
-                } else {
-                    plan.preemptions
-                };
-                let preempt = paths::preemption(&mut robot, r.robot, preemptions, interval, spin)?;
-                // The Python client and the ROS 2 bridge beside the Rust one.
-                let (mut python_figures, mut ros2_figures) = (None, None);
-                if (r.robot, r.bus, r.mode) == SCRIPTS_BESIDE
-                    && (python.is_some() || ros2.is_some())
-                {
-                    let run = python::ScriptRun {
-                        name: robot.name(),
-                        prefix: &prefix,
-                        chassis_cli: &paths::sibling("chassis")?,
-                        dir: &dir,
-                        states: plan.states,
-                        commands: count,
-                        interval,
-                    };
-                    if let Some(interpreter) = &python {
-                        python_figures = Some(python::run(interpreter, &run)?);
-                    }
-                    if let Some(interpreter) = &ros2 {
-                        let bridge = paths::sibling("chassis-ros2")?;
-                        ros2_figures = Some(ros2::run(interpreter, &bridge, &run)?);
-                    }
-                }
-                Ok((command, state, preempt, python_figures, ros2_figures))
-            })??;
-            let feed_per_s = feedback.per_second(&mut robot)?;
-            drop(robot);
-            let scheduling = service.scheduling;
-            if scheduling.fifo().is_some() {
-                // Real-time mode locks every page the process maps.
-                let rss = paths::rss_mib(service.pid)?;
-                report.realtime_rss_mib = Some(report.realtime_rss_mib.map_or(rss, |m| m.max(rss)));
-            }
-            report.scheduling.push((
-                format!("{label}, {} loop, {}", r.mode.arg(), r.placement.label()),
-                scheduling,
-            ));
-            let passes = service.stop()?;
-            bar.inc(1);
+            let text = format!(
+                "one sample published by the receiver each time it took the feed's samples, \
+                 as chassisd publishes its state after each feedback frame that changed it, \
+                 read at normal scheduling {reader}, {waiting}, as the client reads the \
+                 state, while the ping side sends one ping every {} ms as the state path's \
+                 client sends a request: the last {states} of {}; {conditions}",
+                paths::STATE_REQUEST_INTERVAL.as_millis(),
+                hops.len()
+            );
+            let hops_kept = baseline::last_of(&hops, states);
+            rows.push(self.hop_row(published, hops_kept, text));
+        }
+        // The preemption's stop follows a teleop request at once, while the loop is waking
+        // for it: its baseline is a ping right after a lead ping, loaded as the service was,
+        // with as many samples.
+        let warm_rounds = run.preempt.0.count().max(1);
+        let what = format!("{} after a wake-up ping, loaded", transport.label());
+        let warm_measured = measure(&what, warm_rounds, baseline::Rounds::AfterWakeUp, load)?;
+        let text = format!(
+            "{warm_rounds} pings, each sent right after a lead ping that wakes the receiver \
+             (only the second ping's hop counts), back to back after a warm-up; {conditions}"
+        );
+        rows.push(self.hop_row(warm, warm_measured.all_pings(), text));
+        Ok(())
+    }
 
-            // The baseline of this run's command and state rows: its receiver lives like the
-            // service's loop did — woken by another process at the chassis' feedback rate, its
-            // own tick, the same placement and the same way of waiting.
-            let transport = transport_of(r.mode);
-            let tick = tick_of(r.robot);
-            bar.set_message(format!(
-                "baseline as {label}: {} woken {feed_per_s:.0}/s",
-                transport.label()
-            ));
-            let (command, state, (preempt, preempt_missed), python, ros2) = result;
-            // As many samples as the rows each part divides: the command row's pings, the state
-            // row's feed hops (the run lasts until the feed made that many).
-            let pings_wanted = command
-                .as_ref()
-                .map_or(plan.paced_rounds, |c| c.latencies.count());
-            // A tenth more: the feed starts after the receiver and keeps its own pace.
-            let feed_rounds = (1.1 * state.latencies.count() as f64
-                / (feed_per_s * interval.as_secs_f64()).max(1e-9))
-            .ceil() as u64;
-            let rounds = pings_wanted.max(feed_rounds) + 1;
-            let load = Load {
-                feed_per_s,
-                tick,
-                realtime: scheduling.fifo(),
-                published: false,
-            };
-            let measured = baseline::run(
-                transport,
-                r.placement,
-                rounds,
-                baseline::Rounds::Paced(paths::off_grid(interval)),
-                Some(load),
-                &prefix,
-                &dir,
-            )?;
-            // The state row's hop, in a run of its own: its client sends a request every
-            // STATE_REQUEST_INTERVAL, not one every command period (pings every 4 ms would keep
-            // the reader's CPU awake, and its wake-up cheaper than the state path's).
-            // A quarter more: the receiver publishes once per wake-up, which may take more than
-            // one feed sample.
-            let state_rounds = (1.25 * state.latencies.count() as f64
-                / (feed_per_s * paths::STATE_REQUEST_INTERVAL.as_secs_f64()).max(1e-9))
-            .ceil() as u64
-                + 1;
-            bar.set_message(format!(
-                "baseline as {label}: {} published, loaded",
-                transport.label()
-            ));
-            let state_measured = baseline::run(
-                transport,
-                r.placement,
-                state_rounds,
-                baseline::Rounds::Paced(paths::STATE_REQUEST_INTERVAL),
-                Some(Load {
-                    published: true,
-                    ..load
-                }),
-                &prefix,
-                &dir,
-            )?;
-            let placement = r.placement.label();
-            // This run's rows, at its mode and placement; its baselines', at its placement.
-            let run_row = |path, leg, what: String, latencies: Latencies, missed: u64| {
-                Row::new(
-                    path,
-                    leg,
-                    &label,
-                    what,
-                    r.mode.arg(),
-                    placement,
-                    latencies,
-                    missed,
-                )
-            };
-            let baseline_row = |what: String, latencies: Latencies| {
-                Row::new(
-                    PathKind::Baseline,
-                    Leg::Hop,
-                    &label,
-                    what,
-                    "-",
-                    placement,
-                    latencies,
-                    0,
-                )
-            };
-            // The feed runs where chassisd put its simulated chassis (`baseline::feed_cpu`).
-            let (feed_where, fifo) = match scheduling.fifo() {
-                Some(priority) => (
-                    "on the receiver's CPU",
-                    format!(", at SCHED_FIFO {priority} as the service's loop"),
-                ),
-                None => ("on the other CPU", String::new()),
-            };
-            let conditions = format!(
-                "receiver woken {feed_per_s:.0}/s by another process {feed_where}, as by the \
-                 simulated chassis (the feedback rate measured in the {label} run), and by its \
-                 own {} ms tick{fifo}",
-                tick.as_millis()
-            );
-            let paced_what = format!("{} paced, loaded as {label}", transport.label());
-            let mut paced_row = baseline_row(
-                paced_what.clone(),
-                baseline::last_of(&measured.pings, pings_wanted),
-            );
-            paced_row.conditions = Some(format!(
-                "one ping every {}, the last {pings_wanted} of {rounds}; {conditions}",
-                paths::period_text(paths::off_grid(interval))
-            ));
-            report.rows.push(paced_row);
-            let feed_what = format!(
-                "{} at the feedback rate, loaded as {label}",
-                transport.label()
-            );
-            if let Some(feed) = measured.feed {
-                // As many hops as the state row has samples: the last ones, the receiver warm.
-                let hops = baseline::last_of(&feed, state.latencies.count());
-                let mut feed_row = baseline_row(feed_what.clone(), hops);
-                feed_row.conditions = Some(format!(
-                    "the feed's own hops: {feed_per_s:.0}/s, the last {} of {}; {conditions}",
-                    state.latencies.count(),
-                    feed.len()
-                ));
-                report.rows.push(feed_row);
-            }
-            // The state row's hop: from the receiver, which lives as the loop does, to a reader
-            // that lives as the client does.
-            let published_what = format!("{} published, loaded as {label}", transport.label());
-            if let Some(published) = state_measured.published {
-                let hops = baseline::last_of(&published, state.latencies.count());
-                let mut published_row = baseline_row(published_what.clone(), hops);
-                let reader = match r.placement {
-                    Placement::SameCpu => "on the receiver's CPU",
-                    Placement::CrossCpu => "on the other CPU",
-                };
-                let waiting = if r.mode == LoopMode::Spin {
-                    "polling"
-                } else {
-                    "blocked on its listener between drains"
-                };
-                published_row.conditions = Some(format!(
-                    "one sample published by the receiver each time it took the feed's samples, \
-                     as chassisd publishes its state after each feedback frame that changed it, \
-                     read at normal scheduling {reader}, {waiting}, as the client reads the \
-                     state, while the ping side sends one ping every {} ms as the state path's \
-                     client sends a request: the last {} of {}; {conditions}",
-                    paths::STATE_REQUEST_INTERVAL.as_millis(),
-                    state.latencies.count(),
-                    published.len()
-                ));
-                report.rows.push(published_row);
-            }
-            let reference = |what: &str| Some(format!("{what}, {placement}"));
-            // The preemption's stop follows a teleop request at once, while the loop is waking
-            // for it: its baseline is a ping right after a lead ping, loaded as the service was,
-            // with as many samples.
-            bar.set_message(format!(
-                "baseline as {label}: {} after a wake-up ping, loaded",
-                transport.label()
-            ));
-            let warm_what = format!(
-                "{} after a wake-up ping, loaded as {label}",
-                transport.label()
-            );
-            let warm_rounds = preempt.count().max(1);
-            let warm_measured = baseline::run(
-                transport,
-                r.placement,
-                warm_rounds,
-                baseline::Rounds::AfterWakeUp,
-                Some(load),
-                &prefix,
-                &dir,
-            )?;
-            let mut warm_row = baseline_row(warm_what.clone(), warm_measured.all_pings());
-            warm_row.conditions = Some(format!(
-                "{warm_rounds} pings, each sent right after a lead ping that wakes the receiver \
-                 (only the second ping's hop counts), back to back after a warm-up; {conditions}"
-            ));
-            report.rows.push(warm_row);
-            let warm = reference(&warm_what);
-
-            let mut odom_parts = None;
-            if let Some(dds) = ros2 {
-                odom_parts = Some(parts::odom(&dds.odom_pairs, &dds.odom_trace, &passes));
-                let conditions = |pace: String, carried: &str| {
-                    format!(
-                        "one message every {pace} after 200 uncounted, {carried}, measured by \
-                         the ROS 2 run's own script, same run"
-                    )
-                };
-                // Named after this run: a full run measures the bridge beside more than one.
-                let dds_in = format!("{DDS_IN}, beside {label}");
-                let dds_out = format!("{DDS_OUT}, beside {label}");
-                for (what, latencies, pace, carried) in [
-                    (
-                        &dds_in,
-                        dds.raw_in,
-                        format!("{} (the cmd_vel path's)", paths::period_text(interval)),
-                        "a TwistStamped read with the bridge's cmd_vel QoS",
-                    ),
-                    (
-                        &dds_out,
-                        dds.raw_out,
-                        format!(
-                            "{} (the period of the odoms the path counted, 1.7 % more)",
-                            paths::period_text(dds.raw_out_period)
-                        ),
-                        "an Odometry written as the bridge writes odom (its writer QoS)",
-                    ),
-                ] {
-                    let mut r = baseline_row(what.clone(), latencies);
-                    r.conditions = Some(conditions(pace, carried));
-                    report.rows.push(r);
-                }
-                let mut command_row = run_row(
-                    PathKind::Ros2,
-                    Leg::CmdVel,
-                    format!("{label}: cmd_vel → frame"),
-                    dds.command,
-                    dds.missed,
-                );
-                command_row.baseline = reference(&dds_in);
-                // The DDS hop in, then the service's command path.
-                command_row.contains = vec![
-                    row_key(PathKind::Baseline, &dds_in, "-", placement),
-                    row_key(PathKind::Command, &label, r.mode.arg(), placement),
-                ];
-                report.rows.push(command_row);
-                let what = format!("{label}: frame read → odom");
-                let mut state_row = run_row(PathKind::Ros2, Leg::Odom, what, dds.state, 0);
-                state_row.baseline = reference(&dds_out);
-                // The service's state path, then the DDS hop out.
-                state_row.contains = vec![
-                    row_key(PathKind::State, &label, r.mode.arg(), placement),
-                    row_key(PathKind::Baseline, &dds_out, "-", placement),
-                ];
-                report.rows.push(state_row);
-            }
-            let python_parts = python
-                .as_ref()
-                .map(|py| parts::python_state(&py.state_stamps, &passes));
-            if let Some(py) = python {
-                let what = format!("{label}: state");
-                let mut state_row = run_row(PathKind::Python, Leg::State, what, py.state, 0);
-                state_row.dropped = py.dropped;
-                report.rows.push(state_row);
-                report.rows.push(run_row(
-                    PathKind::Python,
-                    Leg::Command,
-                    format!("{label}: command"),
-                    py.command,
-                    py.missed,
-                ));
-            }
-            let run_parts = |path: &str, of, split| report::Parts {
+    /// Where the time of this run's paths goes.
+    fn parts(&self, run: &ServiceRun, out: &mut Vec<report::Parts>) {
+        let label = self.label();
+        let mut push = |path: &str, of, split| {
+            out.push(report::Parts {
                 path: path.into(),
                 of,
                 run: label.clone(),
                 what: label.clone(),
-                mode: r.mode.arg().into(),
-                placement: placement.into(),
+                mode: self.mode.arg().into(),
+                placement: self.placement.label().into(),
                 split,
-            };
-            if let Some(figures) = &command {
-                report.parts.push(run_parts(
-                    "command",
-                    (PathKind::Command, Leg::Command),
-                    parts::command(&figures.samples, &passes, r.mode == LoopMode::Spin),
-                ));
-            }
-            report.parts.push(run_parts(
-                "state",
-                (PathKind::State, Leg::State),
-                parts::state(&state.samples, &passes),
-            ));
-            if let Some(odom) = odom_parts {
-                report.parts.push(run_parts(
-                    "ros2: frame read → odom",
-                    (PathKind::Ros2, Leg::Odom),
-                    odom,
-                ));
-            }
-            if let Some(python) = python_parts {
-                report.parts.push(run_parts(
-                    report::PYTHON_PARTS,
-                    (PathKind::Python, Leg::State),
-                    python,
-                ));
-            }
-            if let Some(figures) = command {
-                let command_row = run_row(
-                    PathKind::Command,
-                    Leg::Command,
-                    label.clone(),
-                    figures.latencies,
-                    figures.missed,
-                );
-                let baseline = reference(&paced_what);
-                report
-                    .rows
-                    .extend(path_rows(command_row, baseline, figures.in_service));
-            }
-            let mut state_row = run_row(
-                PathKind::State,
-                Leg::State,
-                label.clone(),
-                state.latencies,
-                0,
-            );
-            state_row.dropped = state.dropped;
-            let baseline = reference(&published_what);
-            report
-                .rows
-                .extend(path_rows(state_row, baseline, state.in_service));
-            let mut preempt_row = run_row(
-                PathKind::Preemption,
-                Leg::Stop,
-                label.clone(),
-                preempt,
-                preempt_missed,
-            );
-            // The stop follows a teleop request at once: the loop is awake, as in a
-            // back-to-back ping-pong.
-            preempt_row.baseline = warm;
-            report.rows.push(preempt_row);
-            bar.inc(1);
+            })
+        };
+        let passes = &run.passes;
+        if let Some(figures) = &run.command {
+            let split = parts::command(&figures.samples, passes, self.mode == LoopMode::Spin);
+            push("command", (PathKind::Command, Leg::Command), split);
         }
+        let split = parts::state(&run.state.samples, passes);
+        push("state", (PathKind::State, Leg::State), split);
+        if let Some(dds) = &run.ros2 {
+            let split = parts::odom(&dds.odom_pairs, &dds.odom_trace, passes);
+            let of = (PathKind::Ros2, Leg::Odom);
+            push("ros2: frame read → odom", of, split);
+        }
+        if let Some(py) = &run.python {
+            let split = parts::python_state(&py.state_stamps, passes);
+            push(report::PYTHON_PARTS, (PathKind::Python, Leg::State), split);
+        }
+    }
 
-        // chassisd as it ships beside the benchmark's configuration: the TITAN on the simulated
-        // bus, event loop, cross CPU, against the same matched baseline as that run's row.
-        bar.set_message("titan sim in chassisd's default configuration");
-        let placement = Placement::CrossCpu;
-        let (client_cpu, service_cpu) = placement.cpus();
+    /// The ROS 2 bridge's rows, and the raw DDS hops they contain.
+    fn ros2_rows(&self, dds: ros2::Ros2Figures, interval: Duration, rows: &mut Vec<Row>) {
+        let conditions = |pace: String, carried: &str| {
+            format!(
+                "one message every {pace} after 200 uncounted, {carried}, measured by the ROS 2 \
+                 run's own script, same run"
+            )
+        };
+        let (dds_in, dds_out) = (self.beside(DDS_IN), self.beside(DDS_OUT));
+        for (what, latencies, pace, carried) in [
+            (
+                &dds_in,
+                dds.raw_in,
+                format!("{} (the cmd_vel path's)", paths::period_text(interval)),
+                "a TwistStamped read with the bridge's cmd_vel QoS",
+            ),
+            (
+                &dds_out,
+                dds.raw_out,
+                format!(
+                    "{} (the period of the odoms the path counted, 1.7 % more)",
+                    paths::period_text(dds.raw_out_period)
+                ),
+                "an Odometry written as the bridge writes odom (its writer QoS)",
+            ),
+        ] {
+            rows.push(self.hop_row(what.clone(), latencies, conditions(pace, carried)));
+        }
+        let (label, placement) = (self.label(), self.placement.label());
+        let mut command = self.row(
+            PathKind::Ros2,
+            Leg::CmdVel,
+            self.of(CMD_VEL),
+            dds.command,
+            dds.missed,
+        );
+        command.baseline = self.reference(&dds_in);
+        // The DDS hop in, then the service's command path.
+        command.contains = vec![
+            baseline_key(&dds_in, placement),
+            self.key(PathKind::Command, &label),
+        ];
+        rows.push(command);
+        let mut state = self.row(PathKind::Ros2, Leg::Odom, self.of(ODOM), dds.state, 0);
+        state.baseline = self.reference(&dds_out);
+        // The service's state path, then the DDS hop out.
+        state.contains = vec![
+            self.key(PathKind::State, &label),
+            baseline_key(&dds_out, placement),
+        ];
+        rows.push(state);
+    }
+}
+
+impl Step for PathRun {
+    fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
+        let (plan, label, placement) = (&ctx.plan, self.label(), self.placement.label());
+        let (commands, preemptions, _) = self.sizes(plan);
+        // A matched baseline has as many samples as the row it divides.
+        let pings = if commands > 0 {
+            commands
+        } else {
+            plan.paced_rounds
+        };
+        let asked = [pings, plan.states, plan.states, preemptions];
+        let mut rows: Vec<Planned> = (self.loaded().iter().zip(asked))
+            .map(|(what, asked)| Planned::new(baseline_key(what, placement), asked))
+            .collect();
+        if commands > 0 {
+            rows.extend(self.plan_path(PathKind::Command, &label, commands));
+        }
+        rows.extend(self.plan_path(PathKind::State, &label, plan.states));
+        rows.push(self.plan(PathKind::Preemption, &label, preemptions));
+        if (self.robot, self.bus, self.mode) == SCRIPTS_BESIDE {
+            if ctx.python.is_some() {
+                for (what, asked) in [("state", plan.states), ("command", commands)] {
+                    rows.push(self.plan(PathKind::Python, &self.of(what), asked));
+                }
+            }
+            if ctx.ros2.is_some() {
+                for (what, dds, asked) in
+                    [(CMD_VEL, DDS_IN, commands), (ODOM, DDS_OUT, plan.states)]
+                {
+                    rows.push(self.plan(PathKind::Ros2, &self.of(what), asked));
+                    rows.push(Planned::new(
+                        baseline_key(&self.beside(dds), placement),
+                        asked,
+                    ));
+                }
+            }
+        }
+        rows
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        let run = self.service(ctx, report)?;
+        let rows = &mut report.rows;
+        self.baselines(ctx, &run, rows)?;
+        self.parts(&run, &mut report.parts);
+        if let Some(dds) = run.ros2 {
+            self.ros2_rows(dds, self.sizes(&ctx.plan).2, rows);
+        }
+        if let Some(py) = run.python {
+            let mut state = self.row(PathKind::Python, Leg::State, self.of("state"), py.state, 0);
+            state.dropped = py.dropped;
+            rows.push(state);
+            let what = self.of("command");
+            rows.push(self.row(PathKind::Python, Leg::Command, what, py.command, py.missed));
+        }
+        let (label, [paced, _, published, warm]) = (self.label(), self.loaded());
+        if let Some(figures) = run.command {
+            let (l, missed) = (figures.latencies, figures.missed);
+            let row = self.row(PathKind::Command, Leg::Command, label.clone(), l, missed);
+            rows.extend(path_rows(row, self.reference(&paced), figures.in_service));
+        }
+        let (state, leg) = (run.state, Leg::State);
+        let mut row = self.row(PathKind::State, leg, label.clone(), state.latencies, 0);
+        row.dropped = state.dropped;
+        rows.extend(path_rows(row, self.reference(&published), state.in_service));
+        let (preempt, missed) = run.preempt;
+        let mut row = self.row(PathKind::Preemption, Leg::Stop, label, preempt, missed);
+        // The stop follows a teleop request at once: the loop is awake, as in a
+        // back-to-back ping-pong.
+        row.baseline = self.reference(&warm);
+        rows.push(row);
+        Ok(())
+    }
+}
+
+/// chassisd as it ships beside the benchmark's configuration: the TITAN on the simulated bus,
+/// event loop, cross CPU, against the same matched baseline as that run's row.
+struct DefaultConfig;
+
+const DEFAULT_CONFIG: PathRun = PathRun {
+    robot: RobotKind::Titan,
+    bus: BusKind::Sim,
+    mode: LoopMode::Event,
+    placement: Placement::CrossCpu,
+};
+
+impl Step for DefaultConfig {
+    fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
+        let (what, commands) = (report::DEFAULT_CONFIG_ROW, ctx.plan.commands);
+        DEFAULT_CONFIG
+            .plan_path(PathKind::Command, what, commands)
+            .into()
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        let run = DEFAULT_CONFIG;
+        ctx.bar
+            .set_message("titan sim in chassisd's default configuration");
+        let (client_cpu, service_cpu) = run.placement.cpus();
         let (service, mut robot) = paths::start_configured(
-            RobotKind::Titan,
-            BusKind::Sim,
-            LoopMode::Event,
+            run.robot,
+            run.bus,
+            run.mode,
             service_cpu,
             paths::ServiceConfig::Default,
             false,
-            &prefix,
-            &dir,
+            &ctx.prefix,
+            &ctx.dir,
         )?;
         let figures = paths::pinned(client_cpu, || -> anyhow::Result<_> {
             let mut teleop = robot.source("teleop")?;
             paths::command_path_via(
                 &mut robot,
                 &mut teleop,
-                RobotKind::Titan,
-                plan.commands,
+                run.robot,
+                ctx.plan.commands,
                 paths::COMMAND_INTERVAL,
                 false,
                 paths::Reach::Toward,
@@ -1062,224 +1055,241 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         })??;
         drop(robot);
         drop(service);
-        let label = bus_label(RobotKind::Titan, BusKind::Sim);
-        let mut default_row = Row::new(
-            PathKind::Command,
-            Leg::FirstFrameToward,
-            &label,
-            report::DEFAULT_CONFIG_ROW.to_string(),
-            LoopMode::Event.arg(),
-            placement.label(),
-            figures.latencies,
-            figures.missed,
-        );
-        default_row.baseline = Some(format!(
-            "{} paced, loaded as {label}, {}",
-            Transport::IceoryxEvent.label(),
-            placement.label()
-        ));
-        report.rows.push(default_row);
+        let (l, missed) = (figures.latencies, figures.missed);
+        let what = report::DEFAULT_CONFIG_ROW.to_string();
+        let row = run.row(PathKind::Command, Leg::FirstFrameToward, what, l, missed);
+        let [paced, ..] = run.loaded();
+        report
+            .rows
+            .extend(path_rows(row, run.reference(&paced), figures.in_service));
+        Ok(())
+    }
+}
+
+/// The control loops of [`control_loop::plan`].
+struct Loops(Vec<(Duration, LoopMode)>);
+
+impl Step for Loops {
+    fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
+        let cross = Placement::CrossCpu.label();
+        let run = bus_label(RobotKind::Titan, BusKind::Sim);
+        let mut rows = Vec::new();
+        for &(period, mode) in &self.0 {
+            let periods = Some(control_loop::periods(period, ctx.plan.loop_seconds));
+            let [frame, age, hop] = control_loop::row_names(&run, period, transport_of(mode));
+            // A command the next period's superseded is what the row measures, not a loss.
+            rows.extend([
+                Planned::new(row_key(PathKind::Loop, &frame, mode.arg(), cross), None),
+                Planned::new(row_key(PathKind::Loop, &age, mode.arg(), cross), periods),
+                Planned::new(baseline_key(&hop, cross), periods),
+            ]);
+        }
+        rows
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        ctx.bar.set_message("control loops at 1 kHz and 100 Hz");
+        control_loop::run(
+            &self.0,
+            ctx.plan.loop_seconds,
+            transport_of,
+            &ctx.prefix,
+            &ctx.dir,
+            report,
+        )
+    }
+}
+
+/// The TITAN's state on the simulated bus in `.0` subscriber processes.
+struct FanOut(usize);
+
+impl FanOut {
+    fn what(&self) -> String {
+        format!("titan sim → {} processes", self.0)
+    }
+}
+
+impl Step for FanOut {
+    fn planned(&self, _: &Ctx) -> Vec<Planned> {
+        let key = row_key(PathKind::FanOut, &self.what(), "event", "unpinned");
+        vec![Planned::new(key, None)]
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        let n = self.0;
+        ctx.bar
+            .set_message(format!("fan-out to {n} subscriber processes"));
+        let (service, mut robot) = paths::start(
+            RobotKind::Titan,
+            BusKind::Sim,
+            LoopMode::Event,
+            None,
+            &ctx.prefix,
+            &ctx.dir,
+        )?;
+        let seconds = ctx.plan.fanout_seconds;
+        let l = fanout::run(&mut robot, &service.name, &ctx.prefix, n, seconds)?;
         report.rows.push(Row::new(
-            PathKind::InService,
-            Leg::FirstFrameToward,
-            &label,
-            format!("{}: command", report::DEFAULT_CONFIG_ROW),
-            LoopMode::Event.arg(),
-            placement.label(),
-            figures.in_service,
+            PathKind::FanOut,
+            Leg::FanOut,
+            &bus_label(RobotKind::Titan, BusKind::Sim),
+            self.what(),
+            "event",
+            "unpinned",
+            l,
             0,
         ));
-        bar.inc(1);
+        Ok(())
     }
+}
 
-    if !skip("loops") {
-        bar.set_message("control loops at 1 kHz and 100 Hz");
-        control_loop::run(
-            &loops,
-            plan.loop_seconds,
-            transport_of,
-            &prefix,
-            &dir,
-            &mut report,
-        )?;
-        bar.inc(1);
-    }
+/// chassis-zenoh between two network namespaces, beside bare Zenoh hops.
+struct Zenoh;
 
-    if !skip("fanout") {
-        for &n in &plan.fanout {
-            bar.set_message(format!("fan-out to {n} subscriber processes"));
-            let (service, mut robot) = paths::start(
-                RobotKind::Titan,
-                BusKind::Sim,
-                LoopMode::Event,
-                None,
-                &prefix,
-                &dir,
-            )?;
-            let l = fanout::run(&mut robot, &service.name, &prefix, n, plan.fanout_seconds)?;
-            report.rows.push(Row::new(
-                PathKind::FanOut,
-                Leg::FanOut,
-                &bus_label(RobotKind::Titan, BusKind::Sim),
-                format!("titan sim → {n} processes"),
-                "event",
-                "unpinned",
-                l,
-                0,
-            ));
-            bar.inc(1);
+const ZENOH_PLACEMENT: &str = "2 netns, veth";
+
+impl Step for Zenoh {
+    fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
+        if !zenoh::possible() {
+            return Vec::new();
         }
+        let (commands, states, at) = (ctx.plan.commands, ctx.plan.states, ZENOH_PLACEMENT);
+        let zenoh = |what| row_key(PathKind::Zenoh, what, "event", at);
+        vec![
+            Planned::new(baseline_key(zenoh::RAW_COMMAND, at), commands),
+            Planned::new(baseline_key(zenoh::RAW_STATE, at), states),
+            Planned::new(zenoh(zenoh::COMMAND), commands),
+            Planned::new(zenoh(zenoh::STATE), states),
+            Planned::new(zenoh(zenoh::BRIDGE), states),
+        ]
     }
 
-    if !skip("zenoh") {
-        if zenoh::possible() {
-            bar.set_message("chassis-zenoh between two network namespaces");
-            let z = zenoh::run(
-                &prefix,
-                &dir,
-                plan.commands,
-                paths::COMMAND_INTERVAL,
-                plan.states,
-            )?;
-            let placement = "2 netns, veth";
-            // chassis-zenoh bridges the TITAN on the simulated bus.
-            let run = bus_label(RobotKind::Titan, BusKind::Sim);
-            let command_count = z.command.latencies.count();
-            let state_count = z.state.count();
-            for (what, count, hops, pace) in [
-                (
-                    zenoh::RAW_COMMAND,
-                    command_count,
-                    &z.raw_command,
-                    format!(
-                        "{} (the command path's)",
-                        paths::period_text(paths::COMMAND_INTERVAL)
-                    ),
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        if !zenoh::possible() {
+            let note = "chassis-zenoh was not measured: its network namespaces need root";
+            report.notes.push(note.into());
+            return Ok(());
+        }
+        ctx.bar
+            .set_message("chassis-zenoh between two network namespaces");
+        let (commands, states) = (ctx.plan.commands, ctx.plan.states);
+        let interval = paths::COMMAND_INTERVAL;
+        let z = zenoh::run(&ctx.prefix, &ctx.dir, commands, interval, states)?;
+        let placement = ZENOH_PLACEMENT;
+        // chassis-zenoh bridges the TITAN on the simulated bus.
+        let run = bus_label(RobotKind::Titan, BusKind::Sim);
+        for (what, count, hops, pace) in [
+            (
+                zenoh::RAW_COMMAND,
+                z.command.latencies.count(),
+                &z.raw_command,
+                format!("{} (the command path's)", paths::period_text(interval)),
+            ),
+            (
+                zenoh::RAW_STATE,
+                z.state.count(),
+                &z.raw_state,
+                format!(
+                    "{} (the period of the states the path counted, 1.7 % more)",
+                    paths::period_text(z.state_period)
                 ),
-                (
-                    zenoh::RAW_STATE,
-                    state_count,
-                    &z.raw_state,
-                    format!(
-                        "{} (the period of the states the path counted, 1.7 % more)",
-                        paths::period_text(z.state_period)
-                    ),
-                ),
-            ] {
-                let mut raw = Row::new(
-                    PathKind::Baseline,
-                    Leg::Hop,
-                    &run,
-                    what.into(),
-                    "-",
-                    placement,
-                    baseline::last_of(hops, count),
-                    0,
-                );
-                raw.conditions = Some(format!(
-                    "one sample every {pace} from the robot's namespace to the operator's, bare \
-                     sessions configured as chassis-zenoh's, same run, chassisd running, the \
-                     bridges not; the last {count} of {} after a warm-up",
-                    hops.len()
-                ));
-                report.rows.push(raw);
-            }
-            let reference = Some(format!("{}, {placement}", zenoh::RAW_COMMAND));
-            let mut command = Row::new(
-                PathKind::Zenoh,
+            ),
+        ] {
+            let conditions = format!(
+                "one sample every {pace} from the robot's namespace to the operator's, bare \
+                 sessions configured as chassis-zenoh's, same run, chassisd running, the \
+                 bridges not; the last {count} of {} after a warm-up",
+                hops.len()
+            );
+            let l = baseline::last_of(hops, count);
+            report
+                .rows
+                .push(hop_row(&run, what.into(), placement, l, conditions));
+        }
+        for (leg, what, l, missed, raw) in [
+            (
                 Leg::RemoteCommand,
-                &run,
-                zenoh::COMMAND.into(),
-                "event",
-                placement,
+                zenoh::COMMAND,
                 z.command.latencies,
                 z.command.missed,
-            );
-            command.baseline = reference.clone();
-            report.rows.push(command);
-            let reference = Some(format!("{}, {placement}", zenoh::RAW_STATE));
-            let mut state = Row::new(
-                PathKind::Zenoh,
-                Leg::RemoteState,
-                &run,
-                zenoh::STATE.into(),
-                "event",
-                placement,
-                z.state,
-                0,
-            );
-            state.baseline = reference.clone();
-            report.rows.push(state);
-            let mut bridge = Row::new(
-                PathKind::Zenoh,
+                zenoh::RAW_COMMAND,
+            ),
+            (Leg::RemoteState, zenoh::STATE, z.state, 0, zenoh::RAW_STATE),
+            (
                 Leg::RemoteBridge,
-                &run,
-                zenoh::BRIDGE.into(),
-                "event",
-                placement,
+                zenoh::BRIDGE,
                 z.bridge,
                 0,
+                zenoh::RAW_STATE,
+            ),
+        ] {
+            let row = Row::new(
+                PathKind::Zenoh,
+                leg,
+                &run,
+                what.into(),
+                "event",
+                placement,
+                l,
+                missed,
             );
-            bridge.baseline = reference;
-            report.rows.push(bridge);
-            report.parts.push(report::Parts {
-                path: report::ZENOH_PARTS.into(),
-                of: (PathKind::Zenoh, Leg::RemoteState),
-                run,
-                what: zenoh::STATE.into(),
-                mode: "event".into(),
-                placement: placement.into(),
-                split: z.state_parts,
-            });
-        } else {
-            report
-                .notes
-                .push("chassis-zenoh was not measured: its network namespaces need root".into());
+            let baseline = Some(format!("{raw}, {placement}"));
+            report.rows.push(Row { baseline, ..row });
         }
-        bar.inc(1);
+        report.parts.push(report::Parts {
+            path: report::ZENOH_PARTS.into(),
+            of: (PathKind::Zenoh, Leg::RemoteState),
+            run,
+            what: zenoh::STATE.into(),
+            mode: "event".into(),
+            placement: placement.into(),
+            split: z.state_parts,
+        });
+        Ok(())
     }
+}
 
-    if !skip("cost") {
+/// The service's cost at full load of a bus.
+struct Cost;
+
+impl Step for Cost {
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
         // The simulated bus reads up to 256 frames per system call; an slcan adapter on a pty is
         // read as a byte stream, as a USB adapter on a robot is: the target is judged on the
         // worse of the two.
         for (bus, label) in [(BusKind::Sim, "sim"), (BusKind::Pty, "slcan-pty")] {
-            bar.set_message(format!("service cost at 100 % load of the {label} bus"));
+            ctx.bar
+                .set_message(format!("service cost at 100 % load of the {label} bus"));
+            let (prefix, dir) = (&ctx.prefix, &ctx.dir);
             let (service, mut robot) =
-                paths::start(RobotKind::Titan, bus, LoopMode::Event, None, &prefix, &dir)?;
+                paths::start(RobotKind::Titan, bus, LoopMode::Event, None, prefix, dir)?;
             for bitrate in [500_000, 1_000_000] {
-                report.cost.push(paths::cost_at(
-                    &mut robot,
-                    label,
-                    service.pid,
-                    bitrate,
-                    plan.cost_seconds,
-                )?);
+                let seconds = ctx.plan.cost_seconds;
+                let cost = paths::cost_at(&mut robot, label, service.pid, bitrate, seconds)?;
+                report.cost.push(cost);
             }
             drop(service);
         }
-        bar.inc(1);
+        Ok(())
     }
-    if !skip("throughput") {
-        bar.set_message("replaying a recorded bus at full speed");
-        let file = dir.join("titan.log");
-        let seconds = if quick { 300 } else { 1500 };
+}
+
+/// A recorded bus replayed at full speed.
+struct Throughput;
+
+impl Step for Throughput {
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        ctx.bar
+            .set_message("replaying a recorded bus at full speed");
+        let file = ctx.dir.join("titan.log");
+        let seconds = if ctx.quick { 300 } else { 1500 };
         let frames = throughput::record_titan(&file, seconds)?;
         for _ in 0..report::REPLAYS {
-            report
-                .throughput
-                .push(throughput::replay(&file, frames, &prefix, &dir)?);
+            let replay = throughput::replay(&file, frames, &ctx.prefix, &ctx.dir)?;
+            report.throughput.push(replay);
         }
-        bar.inc(1);
+        Ok(())
     }
-    bar.finish_and_clear();
-    report.compute_ratios();
-    report.provenance.end()?;
-    // A directory named on the command line keeps its logs.
-    if args.dir.is_none() {
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-    Ok(report)
 }
 
 fn main() -> ExitCode {
