@@ -1,5 +1,14 @@
 //! `chassis-bench`: end-to-end latency of chassisd's real paths against raw-transport baselines,
 //! measured in one run so every figure is a ratio that holds on any machine.
+//!
+//! Four stages, typed data between them:
+//! * **measure** ([`run`]: its steps, each planning the rows it measures; `paths.rs`,
+//!   `baseline.rs`, `control_loop.rs`, the bridges' scripts) → a [`Report`];
+//! * **samples** (`--samples FILE`, [`Report::samples`]): every row's histogram and typed
+//!   identity, every split, the run's conditions, as JSON lines;
+//! * **verdict** (`verdict.rs`): the targets of `targets.toml`, judged by one comparator;
+//! * **render** (`render.rs`, the words in `performance.md`; the table and plot in `report.rs`),
+//!   from the samples and the verdict alone: `chassis-bench render SAMPLES` gives the same bytes.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
