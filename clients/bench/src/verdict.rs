@@ -218,58 +218,7 @@ impl Check {
                 rows,
                 p99_times,
                 against,
-            } => {
-                // Each row with its ratio: to its baseline, or to the row `against` selects.
-                let judged: Vec<Row> = rows
-                    .rows(report)
-                    .into_iter()
-                    .filter_map(|r| match against {
-                        None => Some(r.clone()),
-                        Some(a) => {
-                            let base = report.rows.iter().find(|b| {
-                                (b.path, b.leg) == (a.path, a.leg)
-                                    && (&b.run, &b.mode, &b.placement)
-                                        == (&r.run, &r.mode, &r.placement)
-                            })?;
-                            Some(Row {
-                                ratio_p99: Some(r.summary.p99_us / base.summary.p99_us),
-                                ..r.clone()
-                            })
-                        }
-                    })
-                    .collect();
-                let rows: Vec<&Row> = judged.iter().collect();
-                let measured = figures(rows.iter().map(|r| match (r.ratio_p99, against) {
-                    (Some(x), Some(_)) => format!(
-                        "{} {}: {:.1} vs {:.1} µs, {x:.2} ×",
-                        r.mode,
-                        r.placement,
-                        r.summary.p99_us,
-                        r.summary.p99_us / x
-                    ),
-                    (Some(x), None) => format!("{} {}: {x:.2} ×", r.what, r.placement),
-                    (None, _) => format!("{} {}: no baseline", r.what, r.placement),
-                }));
-                let within_bound = |r: &&Row| r.ratio_p99.is_some_and(|x| x <= *p99_times);
-                let outcome = if rows.is_empty() {
-                    Outcome::NotMeasured
-                } else if !rows.iter().all(within_bound) {
-                    let split = rows.first().map(|r| (r.path, r.leg));
-                    missed(report, &rows, split, |_| true, Limit::Ratio(*p99_times))
-                } else {
-                    let flagged: Vec<String> = rows
-                        .iter()
-                        .filter(|r| r.inconsistent.is_some())
-                        .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
-                        .collect();
-                    if flagged.is_empty() {
-                        Outcome::Met
-                    } else {
-                        Outcome::Inconsistent { rows: flagged }
-                    }
-                };
-                (measured, outcome)
-            }
+            } => ratio(report, rows, *p99_times, *against),
             Check::LoopMisses => {
                 let loops = &report.loops;
                 let measured = figures(loops.iter().map(|l| {
@@ -331,6 +280,66 @@ impl Check {
             }
         }
     }
+}
+
+/// Every row of `rows` with p99 at most `p99_times` × its baseline's, or, with `against`, the
+/// p99 of the row of the same run, loop and placement that `against` selects; none flagged
+/// inconsistent.
+fn ratio(
+    report: &Report,
+    rows: &Select,
+    p99_times: f64,
+    against: Option<SplitOf>,
+) -> (String, Outcome) {
+    // Each row with its ratio: to its baseline, or to the row `against` selects.
+    let judged: Vec<Row> = rows
+        .rows(report)
+        .into_iter()
+        .filter_map(|r| match against {
+            None => Some(r.clone()),
+            Some(a) => {
+                let base = report.rows.iter().find(|b| {
+                    (b.path, b.leg) == (a.path, a.leg)
+                        && (&b.run, &b.mode, &b.placement) == (&r.run, &r.mode, &r.placement)
+                })?;
+                Some(Row {
+                    ratio_p99: Some(r.summary.p99_us / base.summary.p99_us),
+                    ..r.clone()
+                })
+            }
+        })
+        .collect();
+    let rows: Vec<&Row> = judged.iter().collect();
+    let measured = figures(rows.iter().map(|r| match (r.ratio_p99, against) {
+        (Some(x), Some(_)) => format!(
+            "{} {}: {:.1} vs {:.1} µs, {x:.2} ×",
+            r.mode,
+            r.placement,
+            r.summary.p99_us,
+            r.summary.p99_us / x
+        ),
+        (Some(x), None) => format!("{} {}: {x:.2} ×", r.what, r.placement),
+        (None, _) => format!("{} {}: no baseline", r.what, r.placement),
+    }));
+    let within_bound = |r: &&Row| r.ratio_p99.is_some_and(|x| x <= p99_times);
+    let outcome = if rows.is_empty() {
+        Outcome::NotMeasured
+    } else if !rows.iter().all(within_bound) {
+        let split = rows.first().map(|r| (r.path, r.leg));
+        missed(report, &rows, split, |_| true, Limit::Ratio(p99_times))
+    } else {
+        let flagged: Vec<String> = rows
+            .iter()
+            .filter(|r| r.inconsistent.is_some())
+            .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
+            .collect();
+        if flagged.is_empty() {
+            Outcome::Met
+        } else {
+            Outcome::Inconsistent { rows: flagged }
+        }
+    };
+    (measured, outcome)
 }
 
 /// A target missed on `rows`: where the time of the worst of them goes (its split's largest
