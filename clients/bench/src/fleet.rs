@@ -273,6 +273,34 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<FleetReport> {
     })
 }
 
+/// Each robot's state latency from `chassis fleet --once --json` (`json`) over `seconds`, and
+/// the robots of `names` it had no sample of.
+fn robot_figures(
+    json: &[u8],
+    names: &[(String, &str)],
+    seconds: f64,
+) -> anyhow::Result<(Vec<RobotFigures>, Vec<String>)> {
+    let doc: serde_json::Value = serde_json::from_slice(json).context("chassis fleet --json")?;
+    let rows = doc["robots"].as_array().context("no robots")?;
+    let mut per_robot = Vec::new();
+    let mut missing = Vec::new();
+    for (name, kind) in names {
+        let row = rows.iter().find(|r| r["name"] == name.as_str());
+        match row.map(|r| &r["latency"]) {
+            Some(l) if l["count"].as_u64().is_some_and(|c| c > 0) => per_robot.push(RobotFigures {
+                name: name.clone(),
+                kind: (*kind).to_string(),
+                samples_per_s: l["count"].as_f64().unwrap_or(0.0) / seconds,
+                p50_ms: l["p50_ms"].as_f64().unwrap_or(f64::NAN),
+                p99_ms: l["p99_ms"].as_f64().unwrap_or(f64::NAN),
+                max_ms: l["max_ms"].as_f64().unwrap_or(f64::NAN),
+            }),
+            _ => missing.push(name.clone()),
+        }
+    }
+    Ok((per_robot, missing))
+}
+
 fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
     let netns = Netns::new()?;
     let prefix = format!("cfb{}_", std::process::id() % 100_000);
@@ -379,27 +407,7 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
                 String::from_utf8_lossy(&out.stderr)
             );
         }
-        let doc: serde_json::Value =
-            serde_json::from_slice(&out.stdout).context("chassis fleet --json")?;
-        let rows = doc["robots"].as_array().context("no robots")?;
-        let mut per_robot = Vec::new();
-        let mut missing = Vec::new();
-        for (name, kind) in &names {
-            let row = rows.iter().find(|r| r["name"] == name.as_str());
-            match row.map(|r| &r["latency"]) {
-                Some(l) if l["count"].as_u64().is_some_and(|c| c > 0) => {
-                    per_robot.push(RobotFigures {
-                        name: name.clone(),
-                        kind: (*kind).to_string(),
-                        samples_per_s: l["count"].as_f64().unwrap_or(0.0) / args.seconds,
-                        p50_ms: l["p50_ms"].as_f64().unwrap_or(f64::NAN),
-                        p99_ms: l["p99_ms"].as_f64().unwrap_or(f64::NAN),
-                        max_ms: l["max_ms"].as_f64().unwrap_or(f64::NAN),
-                    })
-                }
-                _ => missing.push(name.clone()),
-            }
-        }
+        let (per_robot, missing) = robot_figures(&out.stdout, &names, args.seconds)?;
         let mut p50s: Vec<f64> = per_robot.iter().map(|r| r.p50_ms).collect();
         p50s.sort_by(f64::total_cmp);
         let size_figures = SizeFigures {
