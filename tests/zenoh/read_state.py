@@ -79,7 +79,7 @@ def main() -> None:
     parser.add_argument("--certs", help="directory of chassis-zenoh gen-certs (tls/ endpoints)")
     args = parser.parse_args()
     if not in_a_test_namespace():
-        fail("run me only inside the network namespace tests/tests/system/zenoh.rs builds (ip netns)")
+        fail("run me only inside the network namespace tests/tests/system/zenoh.rs builds")
 
     key = f"chassis/{args.name}/state"
     expected_encoding = f"application/octet-stream;{chassis.ChassisState.type_name()}"
