@@ -1,7 +1,7 @@
 """A Cyclone DDS participant standing in for a ROS 2 node on another computer: publishes
 ``geometry_msgs/Twist`` on ``cmd_vel`` (reliable, as rclcpp's default) at 20 Hz for a while, then
-prints how many readers it matched, as JSON. Run by tests/tests/system/ros2_reach.rs inside a network
-namespace of its own; the ROS 2 types are clients/ros2/tests/ros2_types.py's."""
+prints how many readers it matched, as JSON. Run by tests/tests/system/ros2_reach.rs inside a
+network namespace of its own; the ROS 2 types are clients/ros2/tests/ros2_types.py's."""
 
 from __future__ import annotations
 
