@@ -115,7 +115,6 @@ fn table(report: &Report) -> String {
         .rows
         .iter()
         .map(|r| {
-            let s = &r.summary;
             let ratio = match (r.ratio_p50, r.ratio_p99) {
                 (Some(x), Some(y)) => format!("{x:.2}, {y:.2}"),
                 (Some(x), None) => format!("{x:.2}, —"),
@@ -127,17 +126,12 @@ fn table(report: &Report) -> String {
                 ""
             };
             format!(
-                "| {} | {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {:.1} | {ratio}{flag} | {} |",
+                "| {} | {} | {} | {} | {} | {ratio}{flag} | {} |",
                 r.path,
                 r.what,
                 r.mode,
                 r.placement,
-                r.count_text(),
-                s.p50_us,
-                s.p90_us,
-                percentile(s.p99_us, s.count, MIN_FOR_P99),
-                percentile(s.p999_us, s.count, MIN_FOR_P999),
-                s.max_us,
+                r.figures().join(" | "),
                 r.baseline.as_deref().unwrap_or("")
             )
         })

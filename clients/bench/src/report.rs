@@ -450,7 +450,21 @@ impl Row {
     }
 
     /// The row's count with what it lost beside it: `1000`, `998 (+2 dropped, 1 out of range)`.
-    pub(crate) fn count_text(&self) -> String {
+    /// The figures every table shows of the row: count, p50, p90, p99, p99.9 and max, µs (a
+    /// percentile its count cannot give is a dash).
+    pub(crate) fn figures(&self) -> [String; 6] {
+        let s = &self.summary;
+        [
+            self.count_text(),
+            format!("{:.1}", s.p50_us),
+            format!("{:.1}", s.p90_us),
+            percentile(s.p99_us, s.count, MIN_FOR_P99),
+            percentile(s.p999_us, s.count, MIN_FOR_P999),
+            format!("{:.1}", s.max_us),
+        ]
+    }
+
+    fn count_text(&self) -> String {
         let mut lost = Vec::new();
         if self.missed > 0 {
             lost.push(format!("{} missed", self.missed));
@@ -655,25 +669,16 @@ impl Report {
             "÷ baseline p50, p99"
         ));
         for r in &self.rows {
-            let s = &r.summary;
             let ratio = match (r.ratio_p50, r.ratio_p99, &r.baseline) {
                 (Some(x), Some(y), Some(b)) => format!("{x:.2}, {y:.2} ({b})"),
                 (Some(x), None, Some(b)) => format!("{x:.2}, — ({b})"),
                 _ => String::new(),
             };
+            let [count, p50, p90, p99, p999, max] = r.figures();
             out.push_str(&format!(
-                "{:<11} {:<60} {:<7} {:<10} {:>7} {:>9.1} {:>9.1} {:>9} {:>9} {:>9.1}  {}\n",
-                r.path,
-                r.what,
-                r.mode,
-                r.placement,
-                r.count_text(),
-                s.p50_us,
-                s.p90_us,
-                percentile(s.p99_us, s.count, MIN_FOR_P99),
-                percentile(s.p999_us, s.count, MIN_FOR_P999),
-                s.max_us,
-                ratio,
+                "{:<11} {:<60} {:<7} {:<10} {count:>7} {p50:>9} {p90:>9} {p99:>9} {p999:>9} {max:>9}  \
+                 {ratio}\n",
+                r.path, r.what, r.mode, r.placement,
             ));
         }
         let baselines: Vec<&Row> = self
