@@ -61,17 +61,6 @@ pub trait Family: FamilyValue + fmt::Debug + Send + Sync + 'static {
     /// The family's driver for this profile.
     fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver;
 
-    /// A driver that listens for which protocol the chassis speaks before it drives, `other`
-    /// being the robot's profile in the other protocol (AgileX V1 and V2 only).
-    fn detecting_driver(
-        &self,
-        _other: &Profile,
-        _config: &DriverConfig,
-        _now: Timestamp,
-    ) -> Option<BoxedDriver> {
-        None
-    }
-
     /// The family's simulated firmware for this profile, powered up at `now`.
     fn firmware(&self, now: Timestamp) -> BoxedFirmware;
 

@@ -19,7 +19,7 @@ use chassis_interfaces::{
 };
 
 use crate::agilex_v1::{V1Model, V1Profile};
-use crate::agilex_v2::{V2Model, V2Profile};
+use crate::agilex_v2::{AutoDriver, V2Model, V2Profile};
 use crate::driver::{BoxedDriver, DriverConfig};
 use crate::family::Profile;
 use crate::firmware::BoxedFirmware;
@@ -454,7 +454,7 @@ impl RobotEntry {
         detect
             .then_some(other)
             .flatten()
-            .and_then(|other| profile.detecting_driver(&other, config, now))
+            .and_then(|other| AutoDriver::boxed(profile, &other, config, now))
             .unwrap_or_else(|| profile.driver(config, now))
     }
 

@@ -5,7 +5,6 @@ use std::time::Duration;
 
 use chassis_interfaces::{DescriptionFlags, RobotDescription, WireProtocol};
 
-use crate::agilex_v2::AutoDriver;
 use crate::can::CanFrame;
 use crate::command::{Command, CommandError};
 use crate::driver::{BoxedDriver, DriverConfig};
@@ -54,15 +53,6 @@ impl Family for V1Profile {
 
     fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
         Box::new(V1Driver::new(self.clone(), config.clone(), now))
-    }
-
-    fn detecting_driver(
-        &self,
-        other: &Profile,
-        config: &DriverConfig,
-        now: Timestamp,
-    ) -> Option<BoxedDriver> {
-        AutoDriver::boxed(&self.clone().into(), other, config, now)
     }
 
     fn firmware(&self, now: Timestamp) -> BoxedFirmware {

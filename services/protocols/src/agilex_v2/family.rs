@@ -26,8 +26,8 @@ use crate::profile::{
 use crate::time::Timestamp;
 
 use super::{
-    AutoDriver, Frame, Kinematics, V2Driver, V2Model, V2Profile, V2Sim, decode, frames_for,
-    motion_mode_name, normalize_driver_status, normalize_faults, vehicle_state_flags,
+    Frame, Kinematics, V2Driver, V2Model, V2Profile, V2Sim, decode, frames_for, motion_mode_name,
+    normalize_driver_status, normalize_faults, vehicle_state_flags,
 };
 
 impl Family for V2Profile {
@@ -90,15 +90,6 @@ impl Family for V2Profile {
 
     fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
         Box::new(V2Driver::new(self.clone(), config.clone(), now))
-    }
-
-    fn detecting_driver(
-        &self,
-        other: &Profile,
-        config: &DriverConfig,
-        now: Timestamp,
-    ) -> Option<BoxedDriver> {
-        AutoDriver::boxed(&self.clone().into(), other, config, now)
     }
 
     fn firmware(&self, now: Timestamp) -> BoxedFirmware {
