@@ -17,11 +17,11 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{ChassisState, ControlMode, ControlStatus, Group, LinkFlags};
+use chassis_interfaces::{ChassisState, ControlMode, ControlStatus, Group, LinkFlags, RcState};
 
 use crate::driver::{ControlOutcome, DriverCore, DriverEvent, Level};
 use crate::time::Timestamp;
-use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
+use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow};
 
 /// What an AgileX driver sends next ([`next_frame`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -379,18 +379,8 @@ pub(crate) fn apply_motor_slow(state: &mut ChassisState, m: &MotorSlow, driver_s
 }
 
 /// 0x241: the RC transmitter's levers, sticks and knob.
-pub(crate) fn apply_rc(state: &mut ChassisState, r: &RcFeedback, t: u64) {
-    let rc = &mut state.rc;
-    rc.switch_a = r.switch_a;
-    rc.switch_b = r.switch_b;
-    rc.switch_c = r.switch_c;
-    rc.switch_d = r.switch_d;
-    rc.right_x_pct = r.right_x_pct;
-    rc.right_y_pct = r.right_y_pct;
-    rc.left_y_pct = r.left_y_pct;
-    rc.left_x_pct = r.left_x_pct;
-    rc.knob_a_pct = r.knob_a_pct;
-    rc.counter = r.counter;
+pub(crate) fn apply_rc(state: &mut ChassisState, r: &RcState, t: u64) {
+    state.rc = *r;
     state.touch(Group::Rc, t);
 }
 

@@ -2,14 +2,14 @@
 //! fields as `chassis decode` prints them (and the Foxglove bridge shows them); each family's
 //! `family.rs` implements it, with the helpers here for what the families' frames share.
 
-use chassis_interfaces::FaultFlags;
+use chassis_interfaces::{FaultFlags, RcState};
 use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::can::CanFrame;
 use crate::error::DecodeError;
 use crate::kind::RobotKind;
-use crate::titan::{BmsAlarm, RcFeedback};
+use crate::titan::BmsAlarm;
 use crate::xbot::StreamError;
 
 /// A decoded frame as one JSON object: `robot`, `id`, `frame`, `direction`, then the frame's
@@ -62,7 +62,7 @@ pub(crate) fn insert_bms_alarms(json: &mut FrameJson, b: &BmsAlarm) {
 
 /// 0x241's lever positions by name (`PROTOCOLS-V2` §2.3.3): SWA and SWD have two positions,
 /// SWB and SWC three; 0b00 reads `none` (no RC data).
-pub(crate) fn insert_switches(json: &mut FrameJson, r: &RcFeedback) {
+pub(crate) fn insert_switches(json: &mut FrameJson, r: &RcState) {
     let position = |value: u8, three: bool| match value {
         2 => "up",
         1 if three => "middle",

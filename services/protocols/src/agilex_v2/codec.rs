@@ -9,6 +9,7 @@
 //! Encoding rounds to the nearest wire unit (the SDK truncates toward zero: 0.1999 m/s is 200
 //! here, 199 there); every cited test vector is an exact wire value, so both agree on them.
 
+use chassis_interfaces::RcState;
 use serde::Serialize;
 use zerocopy::byteorder::big_endian::{I16, I32, U16};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
@@ -17,7 +18,7 @@ use super::profile::{BmsAlarmLayout, RcStickOrder, V2Profile};
 use crate::Direction;
 use crate::can::CanFrame;
 use crate::error::{DecodeError, EncodeError, check_u8, to_i16, to_i32, to_u16};
-use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
+use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, rc_from_wire, rc_wire};
 use crate::wire_layout::{first_byte, index_in, invalid, read_bool, read_prefix, si, wire_bytes};
 
 /// Frame identifiers.
@@ -426,7 +427,7 @@ pub enum Frame {
     SystemStatus(SystemStatus),
     MotionFeedback(Motion),
     LightState(Lights),
-    Rc(RcFeedback),
+    Rc(RcState),
     MotorFast(MotorFast),
     MotorSlow(MotorSlow),
     SteeringAngles(Four),
@@ -640,11 +641,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
                 count: w.count,
             })
         }
-        id::RC => Frame::Rc(RcFeedback::from_wire(
-            raw_id,
-            data,
-            sticks_swapped(profile),
-        )?),
+        id::RC => Frame::Rc(rc_from_wire(raw_id, data, sticks_swapped(profile))?),
         id::STEERING_ANGLES => {
             Frame::SteeringAngles(decode_four(raw_id, data, profile.steer_unit.scale())?)
         }
@@ -843,7 +840,7 @@ impl Frame {
                     count: s.count,
                 }),
             ),
-            Frame::Rc(r) => CanFrame::from_parts(id, r.wire(sticks_swapped(profile))?),
+            Frame::Rc(r) => CanFrame::from_parts(id, rc_wire(r, sticks_swapped(profile))?),
             Frame::MotorFast(m) => CanFrame::from_parts(id, m.wire(8)?),
             Frame::MotorSlow(m) => CanFrame::from_parts(id, m.wire(8)?),
             Frame::SteeringAngles(f) => {

@@ -35,7 +35,7 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::FaultFlags;
+use chassis_interfaces::{FaultFlags, RcState};
 
 use super::codec::{
     Four, Frame, Lights, Motion, MotionMode, Odometer, SteeringZeroOffset, SystemStatus, Version,
@@ -53,7 +53,7 @@ use crate::firmware::{
 };
 use crate::kind::RobotKind;
 use crate::time::{Grid, Timestamp, earliest};
-use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow, RcFeedback};
+use crate::titan::{BmsAlarm, BmsData, MotorFast, MotorSlow};
 
 /// The simulated protocol-V2 chassis.
 #[derive(Debug)]
@@ -441,13 +441,13 @@ impl V2Sim {
             let count = self.next_count();
             self.send(
                 now,
-                Frame::Rc(RcFeedback {
+                Frame::Rc(RcState {
                     switch_a: 2,
                     switch_b: 1,
                     switch_c: 2,
                     switch_d: 2,
                     counter: count,
-                    ..RcFeedback::default()
+                    ..RcState::default()
                 }),
             );
         }

@@ -4,7 +4,7 @@ use super::*;
 use crate::DecodeError;
 use crate::Direction;
 use crate::can::CanFrame;
-use crate::titan::RcFeedback;
+use chassis_interfaces::RcState;
 
 fn frame(text: &str) -> CanFrame {
     CanFrame::from_candump(text).unwrap()
@@ -114,13 +114,13 @@ fn tv9_tv10_tv11_idle_feedback() {
     vector(
         "241#AA00000000000061",
         &bunker(),
-        Frame::Rc(RcFeedback {
+        Frame::Rc(RcState {
             switch_a: 2,
             switch_b: 2,
             switch_c: 2,
             switch_d: 2,
             counter: 0x61,
-            ..RcFeedback::default()
+            ..RcState::default()
         }),
     );
     vector(

@@ -5,6 +5,7 @@
 //! that knows the vendor's units and signs. Where the manual contradicts itself the
 //! [`TitanProfile`] decides (⚠ steering feedback sign).
 
+use chassis_interfaces::RcState;
 use serde::Serialize;
 use zerocopy::byteorder::big_endian::{I16, I32, U16, U32};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
@@ -314,23 +315,6 @@ pub struct Odometer {
     pub rear_distance_m: f64,
 }
 
-/// 0x241: RC transmitter.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct RcFeedback {
-    /// 2 up, 3 down.
-    pub switch_a: u8,
-    /// 2 up, 1 middle, 3 down: the SWB lever selects the mode.
-    pub switch_b: u8,
-    pub switch_c: u8,
-    pub switch_d: u8,
-    pub right_x_pct: i8,
-    pub right_y_pct: i8,
-    pub left_y_pct: i8,
-    pub left_x_pct: i8,
-    pub knob_a_pct: i8,
-    pub counter: u8,
-}
-
 /// 0x361, 0x363, 0x365: BMS data.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct BmsData {
@@ -433,7 +417,8 @@ pub enum Frame {
     ClearFault(ClearFault),
     SystemStatus(SystemStatus),
     MotionFeedback(MotionFeedback),
-    Rc(RcFeedback),
+    /// 0x241: the RC transmitter, as the state holds it (the SWB lever selects the mode).
+    Rc(RcState),
     MotorFast(MotorFast),
     MotorSlow(MotorSlow),
     SteeringFeedback(SteeringFeedback),
@@ -525,7 +510,7 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
                 steer_rad: steer_feedback_sign(profile) * si(w.steer_mrad.get(), 1000.0),
             })
         }
-        id::RC => Frame::Rc(RcFeedback::from_wire(raw_id, data, false)?),
+        id::RC => Frame::Rc(rc_from_wire(raw_id, data, false)?),
         id::STEERING_FEEDBACK => {
             let w: SteeringFeedbackWire = read_prefix(raw_id, data)?;
             let sign = steer_feedback_sign(profile);
@@ -565,64 +550,60 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
     Ok(frame)
 }
 
-impl RcFeedback {
-    /// Decodes the 0x241 layout shared by the TITAN and the protocol-V2 robots. `swap_right`
-    /// reads b1 as the right stick's vertical axis and b2 as its horizontal one, the order some
-    /// V2 firmware uses.
-    pub(crate) fn from_wire(
-        raw_id: u32,
-        data: &[u8],
-        swap_right: bool,
-    ) -> Result<Self, DecodeError> {
-        let w: RcWire = read_prefix(raw_id, data)?;
-        let (right_x_pct, right_y_pct) = if swap_right {
-            (w.b2, w.b1)
-        } else {
-            (w.b1, w.b2)
-        };
-        Ok(RcFeedback {
-            switch_a: w.switches & 0b11,
-            switch_b: (w.switches >> 2) & 0b11,
-            switch_c: (w.switches >> 4) & 0b11,
-            switch_d: (w.switches >> 6) & 0b11,
-            right_x_pct,
-            right_y_pct,
-            left_y_pct: w.left_y,
-            left_x_pct: w.left_x,
-            knob_a_pct: w.knob_a,
-            counter: w.counter,
-        })
-    }
+/// Decodes the 0x241 layout shared by the TITAN and the protocol-V2 robots. `swap_right` reads
+/// b1 as the right stick's vertical axis and b2 as its horizontal one, the order some V2
+/// firmware uses.
+pub(crate) fn rc_from_wire(
+    raw_id: u32,
+    data: &[u8],
+    swap_right: bool,
+) -> Result<RcState, DecodeError> {
+    let w: RcWire = read_prefix(raw_id, data)?;
+    let (right_x_pct, right_y_pct) = if swap_right {
+        (w.b2, w.b1)
+    } else {
+        (w.b1, w.b2)
+    };
+    Ok(RcState {
+        switch_a: w.switches & 0b11,
+        switch_b: (w.switches >> 2) & 0b11,
+        switch_c: (w.switches >> 4) & 0b11,
+        switch_d: (w.switches >> 6) & 0b11,
+        right_x_pct,
+        right_y_pct,
+        left_y_pct: w.left_y,
+        left_x_pct: w.left_x,
+        knob_a_pct: w.knob_a,
+        counter: w.counter,
+        ..RcState::default()
+    })
+}
 
-    /// The 8 wire bytes, the right stick's axes in the order [`Self::from_wire`] reads them.
-    pub(crate) fn wire(&self, swap_right: bool) -> Result<[u8; 8], EncodeError> {
-        for (field, v) in [
-            ("switch_a", self.switch_a),
-            ("switch_b", self.switch_b),
-            ("switch_c", self.switch_c),
-            ("switch_d", self.switch_d),
-        ] {
-            check_u8(field, v, 0, 3)?;
-        }
-        let (b1, b2) = if swap_right {
-            (self.right_y_pct, self.right_x_pct)
-        } else {
-            (self.right_x_pct, self.right_y_pct)
-        };
-        Ok(wire_bytes::<8, _>(RcWire {
-            switches: self.switch_a
-                | (self.switch_b << 2)
-                | (self.switch_c << 4)
-                | (self.switch_d << 6),
-            b1,
-            b2,
-            left_y: self.left_y_pct,
-            left_x: self.left_x_pct,
-            knob_a: self.knob_a_pct,
-            reserved: 0,
-            counter: self.counter,
-        }))
+/// The 8 wire bytes of 0x241, the right stick's axes in the order [`rc_from_wire`] reads them.
+pub(crate) fn rc_wire(rc: &RcState, swap_right: bool) -> Result<[u8; 8], EncodeError> {
+    for (field, v) in [
+        ("switch_a", rc.switch_a),
+        ("switch_b", rc.switch_b),
+        ("switch_c", rc.switch_c),
+        ("switch_d", rc.switch_d),
+    ] {
+        check_u8(field, v, 0, 3)?;
     }
+    let (b1, b2) = if swap_right {
+        (rc.right_y_pct, rc.right_x_pct)
+    } else {
+        (rc.right_x_pct, rc.right_y_pct)
+    };
+    Ok(wire_bytes::<8, _>(RcWire {
+        switches: rc.switch_a | (rc.switch_b << 2) | (rc.switch_c << 4) | (rc.switch_d << 6),
+        b1,
+        b2,
+        left_y: rc.left_y_pct,
+        left_x: rc.left_x_pct,
+        knob_a: rc.knob_a_pct,
+        reserved: 0,
+        counter: rc.counter,
+    }))
 }
 
 impl BmsData {
@@ -806,7 +787,7 @@ impl Frame {
                     }),
                 )
             }
-            Frame::Rc(r) => CanFrame::from_parts(id, r.wire(false)?),
+            Frame::Rc(r) => CanFrame::from_parts(id, rc_wire(r, false)?),
             Frame::MotorFast(m) => CanFrame::from_parts(id, m.wire(4)?),
             Frame::MotorSlow(m) => CanFrame::from_parts(id, m.wire(4)?),
             Frame::SteeringFeedback(s) => {

@@ -5,11 +5,11 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use chassis_interfaces::{DriverStatus, FaultFlags};
+use chassis_interfaces::{DriverStatus, FaultFlags, RcState};
 
 use super::codec::{
     AxleSpeed, BmsAlarm, BmsData, Frame, MotionFeedback, MotorFast, MotorSlow, Odometer,
-    RcFeedback, SteeringFeedback, SystemStatus, body, clear_code, decode, fault, id, mode,
+    SteeringFeedback, SystemStatus, body, clear_code, decode, fault, id, mode,
 };
 use super::driver::normalize_faults;
 use super::kinematics::{steer_command, yaw_rate};
@@ -703,13 +703,13 @@ impl TitanSim {
             self.rc_counter = self.rc_counter.wrapping_add(1);
             self.send(
                 now,
-                Frame::Rc(RcFeedback {
+                Frame::Rc(RcState {
                     switch_a: 2,
                     switch_b: 1,
                     switch_c: 3,
                     switch_d: 2,
                     counter,
-                    ..RcFeedback::default()
+                    ..RcState::default()
                 }),
             );
         }
