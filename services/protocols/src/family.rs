@@ -86,6 +86,32 @@ pub trait Family: FamilyValue + fmt::Debug + Send + Sync + 'static {
     fn fill_for_simulator(&mut self) {}
 }
 
+/// The [`Family`] methods every family writes alike: its driver and its simulated firmware, each
+/// made from a clone of the profile (`new(profile, config, now)`, `new(profile, now)`), and, with
+/// `heartbeat_period_ms`, the heartbeat period that profile field holds.
+macro_rules! family_parts {
+    ($driver:ty, $firmware:ty $(, $heartbeat_ms:ident)?) => {
+        fn driver(
+            &self,
+            config: &$crate::driver::DriverConfig,
+            now: $crate::time::Timestamp,
+        ) -> $crate::driver::BoxedDriver {
+            Box::new(<$driver>::new(self.clone(), config.clone(), now))
+        }
+
+        fn firmware(&self, now: $crate::time::Timestamp) -> $crate::firmware::BoxedFirmware {
+            Box::new(<$firmware>::new(self.clone(), now))
+        }
+
+        $(
+            fn heartbeat_period(&self) -> std::time::Duration {
+                std::time::Duration::from_millis(self.$heartbeat_ms)
+            }
+        )?
+    };
+}
+pub(crate) use family_parts;
+
 /// What makes a family's profile a value behind the trait: cloned, compared, written as the
 /// `[profile]` table of the service's config and looked at as its own type. Implemented for
 /// every family that is `Clone + PartialEq + Serialize`.

@@ -1,23 +1,18 @@
 //! The AgileX V1 family behind [`Family`]: its driver (listening for V1 or V2 first where the
 //! robot may speak either), firmware, frame describer and its part of the robot's description.
 
-use std::time::Duration;
-
 use chassis_interfaces::{DescriptionFlags, RobotDescription, WireProtocol};
 
 use crate::can::CanFrame;
 use crate::command::{Command, CommandError};
-use crate::driver::{BoxedDriver, DriverConfig};
 use crate::error::DecodeError;
-use crate::family::{Family, Profile, both_ways, kebab, millis};
-use crate::firmware::BoxedFirmware;
+use crate::family::{Family, Profile, both_ways, family_parts, kebab, millis};
 use crate::frame_json::{BoxedCodec, Codec, FrameJson, frame_json, insert_faults};
 use crate::kind::RobotKind;
 use crate::profile::{
     ProfileError, ProfileTableError, Protocol, detection, positive, timeouts,
     with_model_and_overrides,
 };
-use crate::time::Timestamp;
 
 use super::{Frame, V1Driver, V1Profile, V1Sim, body_flags, decode, frames_for, normalize_faults};
 
@@ -47,17 +42,7 @@ impl Family for V1Profile {
         Ok(with_model_and_overrides(self, table, V1Profile::for_model)?.into())
     }
 
-    fn heartbeat_period(&self) -> Duration {
-        Duration::from_millis(self.heartbeat_period_ms)
-    }
-
-    fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
-        Box::new(V1Driver::new(self.clone(), config.clone(), now))
-    }
-
-    fn firmware(&self, now: Timestamp) -> BoxedFirmware {
-        Box::new(V1Sim::new(self.clone(), now))
-    }
+    family_parts!(V1Driver, V1Sim, heartbeat_period_ms);
 
     fn codec(&self) -> BoxedCodec {
         Box::new(V1Codec(self.clone()))

@@ -1,8 +1,6 @@
 //! The AgileX V2 family behind [`Family`]: its driver (listening for V1 or V2 first where the
 //! robot may speak either), firmware, frame describer and its part of the robot's description.
 
-use std::time::Duration;
-
 use chassis_interfaces::{
     DescriptionFlags, DriverStatus, Kinematics as KinematicsId, LightMode, MotionLimits,
     RobotDescription, WireProtocol,
@@ -10,10 +8,8 @@ use chassis_interfaces::{
 
 use crate::can::CanFrame;
 use crate::command::{Command, CommandError};
-use crate::driver::{BoxedDriver, DriverConfig};
 use crate::error::DecodeError;
-use crate::family::{Family, Profile, both_ways, kebab, millis};
-use crate::firmware::BoxedFirmware;
+use crate::family::{Family, Profile, both_ways, family_parts, kebab, millis};
 use crate::frame_json::{
     BoxedCodec, Codec, FrameJson, driver_status_names, frame_json, insert_bms_alarms,
     insert_faults, insert_switches,
@@ -23,7 +19,6 @@ use crate::profile::{
     ProfileError, ProfileTableError, Protocol, detection, positive, timeouts,
     with_model_and_overrides,
 };
-use crate::time::Timestamp;
 
 use super::{
     Frame, Kinematics, V2Driver, V2Model, V2Profile, V2Sim, decode, frames_for, motion_mode_name,
@@ -84,17 +79,7 @@ impl Family for V2Profile {
         Ok(with_model_and_overrides(self, table, V2Profile::for_model)?.into())
     }
 
-    fn heartbeat_period(&self) -> Duration {
-        Duration::from_millis(self.heartbeat_period_ms)
-    }
-
-    fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
-        Box::new(V2Driver::new(self.clone(), config.clone(), now))
-    }
-
-    fn firmware(&self, now: Timestamp) -> BoxedFirmware {
-        Box::new(V2Sim::new(self.clone(), now))
-    }
+    family_parts!(V2Driver, V2Sim, heartbeat_period_ms);
 
     fn codec(&self) -> BoxedCodec {
         Box::new(V2Codec(self.clone()))

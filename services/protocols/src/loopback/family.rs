@@ -1,20 +1,15 @@
 //! The loopback family behind [`Family`]: its driver, firmware, frame describer and its part of
 //! the robot's description.
 
-use std::time::Duration;
-
 use chassis_interfaces::{RobotDescription, WireProtocol};
 
 use crate::CanFrame;
 use crate::command::{Command, CommandError};
-use crate::driver::{BoxedDriver, DriverConfig};
 use crate::error::DecodeError;
-use crate::family::{Family, Profile, both_ways, millis};
-use crate::firmware::BoxedFirmware;
+use crate::family::{Family, Profile, both_ways, family_parts, millis};
 use crate::frame_json::{BoxedCodec, Codec, FrameJson, frame_json};
 use crate::kind::RobotKind;
 use crate::profile::{ProfileError, ProfileTableError, positive, timeouts, with_overrides};
-use crate::time::Timestamp;
 
 use super::driver::motion_command;
 use super::{Frame, LoopbackDriver, LoopbackProfile, LoopbackSim, decode};
@@ -34,17 +29,7 @@ impl Family for LoopbackProfile {
         Ok(with_overrides(self, table)?.into())
     }
 
-    fn heartbeat_period(&self) -> Duration {
-        Duration::from_millis(self.heartbeat_period_ms)
-    }
-
-    fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
-        Box::new(LoopbackDriver::new(self.clone(), config.clone(), now))
-    }
-
-    fn firmware(&self, now: Timestamp) -> BoxedFirmware {
-        Box::new(LoopbackSim::new(self.clone(), now))
-    }
+    family_parts!(LoopbackDriver, LoopbackSim, heartbeat_period_ms);
 
     fn codec(&self) -> BoxedCodec {
         Box::new(LoopbackCodec(self.robot))

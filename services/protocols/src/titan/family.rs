@@ -1,25 +1,20 @@
 //! The TITAN family behind [`Family`]: its driver, firmware, frame describer and its part of
 //! the robot's description.
 
-use std::time::Duration;
-
 use chassis_interfaces::{
     BatteryLevels, DescriptionFlags, FaultFlags, MotionLimits, RobotDescription, WireProtocol,
 };
 
 use crate::CanFrame;
 use crate::command::{Command, CommandError};
-use crate::driver::{BoxedDriver, DriverConfig};
 use crate::error::DecodeError;
-use crate::family::{Family, Profile, both_ways, millis};
-use crate::firmware::BoxedFirmware;
+use crate::family::{Family, Profile, both_ways, family_parts, millis};
 use crate::frame_json::{
     BoxedCodec, Codec, FrameJson, driver_status_names, frame_json, insert_bms_alarms,
     insert_faults, insert_switches,
 };
 use crate::kind::RobotKind;
 use crate::profile::{ProfileError, ProfileTableError, positive, timeouts, with_overrides};
-use crate::time::Timestamp;
 
 use super::{Frame, TitanDriver, TitanProfile, TitanSim, body, decode, frames_for, kinematics};
 
@@ -48,17 +43,7 @@ impl Family for TitanProfile {
         Ok(with_overrides(self, table)?.into())
     }
 
-    fn heartbeat_period(&self) -> Duration {
-        Duration::from_millis(self.heartbeat_period_ms)
-    }
-
-    fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
-        Box::new(TitanDriver::new(self.clone(), config.clone(), now))
-    }
-
-    fn firmware(&self, now: Timestamp) -> BoxedFirmware {
-        Box::new(TitanSim::new(self.clone(), now))
-    }
+    family_parts!(TitanDriver, TitanSim, heartbeat_period_ms);
 
     fn codec(&self) -> BoxedCodec {
         Box::new(TitanCodec(self.clone()))

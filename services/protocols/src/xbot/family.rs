@@ -6,13 +6,10 @@ use std::time::Duration;
 use chassis_interfaces::{Kinematics, RobotDescription, WireProtocol};
 
 use crate::command::{Command, CommandError, spaced_hex};
-use crate::driver::{BoxedDriver, DriverConfig};
-use crate::family::{Family, Profile, both_ways, millis};
-use crate::firmware::BoxedFirmware;
+use crate::family::{Family, Profile, both_ways, family_parts, millis};
 use crate::frame_json::{BoxedCodec, Codec, FrameJson, SerialError, frame_json};
 use crate::kind::RobotKind;
 use crate::profile::{ProfileError, ProfileTableError, positive, with_overrides};
-use crate::time::Timestamp;
 
 use super::{StreamParser, XbotDriver, XbotProfile, XbotSim, frames_for};
 
@@ -66,13 +63,7 @@ impl Family for XbotProfile {
         Some(self.gps_baud)
     }
 
-    fn driver(&self, config: &DriverConfig, now: Timestamp) -> BoxedDriver {
-        Box::new(XbotDriver::new(self.clone(), config.clone(), now))
-    }
-
-    fn firmware(&self, now: Timestamp) -> BoxedFirmware {
-        Box::new(XbotSim::new(self.clone(), now))
-    }
+    family_parts!(XbotDriver, XbotSim);
 
     fn codec(&self) -> BoxedCodec {
         Box::new(XbotCodec {
