@@ -6,13 +6,14 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, SystemState, Velocity,
+    ClampFlags, ControlMode, FaultClear, FaultFlags, Group, LinkFlags, Velocity,
 };
 
-use super::codec::{self, Frame, Lights, MotionCommand, body, clear_code, fault, mode};
+use super::codec::{self, Frame, Lights, MotionCommand, clear_code, fault, mode};
 use super::commands::{frames_for, velocity_command};
 use super::kinematics::SkidCommand;
 use crate::agilex_v1::V1Profile;
+use crate::agilex_v2::{body_status, vehicle_state_flags};
 use crate::command::Command;
 use crate::driver::{
     CommandSchedule, ControlOutcome, Driver, DriverConfig, DriverCore, Level, PoseIntegrator, Rx,
@@ -299,13 +300,9 @@ impl V1Driver {
         let old_mode = self.core.state.system.control_mode;
         let new_mode = normalize_mode(s.mode);
         let old_faults = self.core.state.system.fault_flags;
-        let new_faults = normalize_faults(s.vendor_fault_word) | body_flags(s.body_status);
+        let new_faults = normalize_faults(s.vendor_fault_word) | vehicle_state_flags(s.body_status);
         let sys = &mut self.core.state.system;
-        sys.body_status = match s.body_status {
-            body::NORMAL => SystemState::BODY_NORMAL,
-            body::EMERGENCY_STOP => SystemState::BODY_EMERGENCY_STOP,
-            _ => SystemState::BODY_EXCEPTION,
-        };
+        sys.body_status = body_status(s.body_status);
         sys.battery_voltage_v = s.battery_voltage_v as f32;
         sys.vendor_fault_word = s.vendor_fault_word.into();
         self.core
@@ -357,16 +354,6 @@ pub(crate) fn normalize_mode(wire_mode: u8) -> u8 {
         mode::CAN_COMMAND => ControlMode::COMMAND,
         mode::SERIAL => ControlMode::SERIAL,
         _ => ControlMode::UNKNOWN,
-    }
-}
-
-/// The normalized `FaultFlags` of a 0x151 body status byte (emergency stop, exception).
-/// The normalized `FaultFlags` of a 0x151 body status (b0).
-pub fn body_flags(body_status: u8) -> u64 {
-    match body_status {
-        body::NORMAL => 0,
-        body::EMERGENCY_STOP => FaultFlags::EMERGENCY_STOP,
-        _ => FaultFlags::BODY_EXCEPTION,
     }
 }
 

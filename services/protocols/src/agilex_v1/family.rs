@@ -3,6 +3,7 @@
 
 use chassis_interfaces::{DescriptionFlags, RobotDescription, WireProtocol};
 
+use crate::agilex_v2::vehicle_state_flags;
 use crate::can::CanFrame;
 use crate::command::{Command, CommandError};
 use crate::error::DecodeError;
@@ -14,7 +15,7 @@ use crate::profile::{
     with_model_and_overrides,
 };
 
-use super::{Frame, V1Driver, V1Profile, V1Sim, body_flags, decode, frames_for, normalize_faults};
+use super::{Frame, V1Driver, V1Profile, V1Sim, decode, frames_for, normalize_faults};
 
 impl Family for V1Profile {
     fn robot(&self) -> RobotKind {
@@ -88,7 +89,7 @@ impl Codec for V1Codec {
         if let Frame::SystemStatus(s) = &decoded.frame {
             insert_faults(
                 &mut json,
-                normalize_faults(s.vendor_fault_word) | body_flags(s.body_status),
+                normalize_faults(s.vendor_fault_word) | vehicle_state_flags(s.body_status),
             );
         }
         Ok(json)

@@ -11,7 +11,7 @@ mod sim;
 
 pub use codec::*;
 pub use commands::{clear_codes_for, frames_for, velocity_command};
-pub use driver::{V1Driver, body_flags, normalize_faults};
+pub use driver::{V1Driver, normalize_faults};
 pub use profile::{V1Model, V1Profile};
 pub use sim::V1Sim;
 

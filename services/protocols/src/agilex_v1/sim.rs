@@ -10,10 +10,11 @@ use super::codec::{
     Frame, Lights, MotionCommand, MotionFeedback, MotorFeedback, SystemStatus, body, clear_code,
     decode, fault, id, mode,
 };
-use super::driver::{body_flags, normalize_faults};
+use super::driver::normalize_faults;
 use super::kinematics::side_speeds;
 use crate::DecodeError;
 use crate::agilex_v1::V1Profile;
+use crate::agilex_v2::vehicle_state_flags;
 use crate::can::CanFrame;
 use crate::driver::{Rx, WireItem};
 use crate::firmware::{
@@ -757,7 +758,7 @@ impl Firmware for V1Sim {
                 ControlMode::COMMAND
             },
             fault_flags: normalize_faults(self.fault_word(self.body.last_update()))
-                | body_flags(self.body_status()),
+                | vehicle_state_flags(self.body_status()),
             ..self.body.truth()
         }
     }

@@ -298,11 +298,7 @@ impl V2Driver {
             | vehicle_state_flags(s.vehicle_state)
             | self.other_faults;
         let sys = &mut self.core.state.system;
-        sys.body_status = match s.vehicle_state {
-            vehicle::NORMAL => SystemState::BODY_NORMAL,
-            vehicle::ESTOP => SystemState::BODY_EMERGENCY_STOP,
-            _ => SystemState::BODY_EXCEPTION,
-        };
+        sys.body_status = body_status(s.vehicle_state);
         sys.battery_voltage_v = s.battery_voltage_v as f32;
         sys.vendor_fault_word = s.fault_word.into();
         if self.profile.reports_brake_in_b6() {
@@ -374,12 +370,21 @@ pub fn normalize_faults(word: u16, profile: &V2Profile) -> u64 {
 }
 
 /// The normalized `FaultFlags` of 0x211 b0: E-stop (0x01), exception (0x02 and anything else
-/// not normal).
+/// not normal). The V1 manual gives the SCOUT MINI's 0x151 b0 the same values.
 pub fn vehicle_state_flags(vehicle_state: u8) -> u64 {
     match vehicle_state {
         vehicle::NORMAL => 0,
         vehicle::ESTOP => FaultFlags::EMERGENCY_STOP,
         _ => FaultFlags::BODY_EXCEPTION,
+    }
+}
+
+/// `SystemState::body_status` of 0x211 b0 (and of 0x151 b0, as [`vehicle_state_flags`]).
+pub(crate) fn body_status(vehicle_state: u8) -> u8 {
+    match vehicle_state {
+        vehicle::NORMAL => SystemState::BODY_NORMAL,
+        vehicle::ESTOP => SystemState::BODY_EMERGENCY_STOP,
+        _ => SystemState::BODY_EXCEPTION,
     }
 }
 

@@ -16,6 +16,7 @@ mod sim;
 pub use auto::AutoDriver;
 pub use codec::*;
 pub use commands::{STOP, clear_code_for, frames_for};
+pub(crate) use driver::body_status;
 pub use driver::{V2Driver, normalize_driver_status, normalize_faults, vehicle_state_flags};
 pub use profile::{Kinematics, V2Model, V2Profile};
 pub use sim::V2Sim;
