@@ -527,7 +527,7 @@ impl DriverCore {
     /// notice naming the frame, and nothing is sent.
     pub(crate) fn transmit<T, E: std::fmt::Display>(
         &mut self,
-        name: &str,
+        frame: &impl serde::Serialize,
         encoded: Result<T, E>,
         wrap: impl FnOnce(T) -> WireItem,
     ) -> Option<WireItem> {
@@ -538,6 +538,7 @@ impl DriverCore {
             }
             Err(err) => {
                 self.state.link.tx_errors += 1;
+                let name = crate::frame_json::frame_name(frame);
                 self.notice(Level::Error, format!("cannot encode {name}: {err}"));
                 None
             }

@@ -116,6 +116,18 @@ pub fn driver_status_names(bits: u8) -> Vec<String> {
         .collect()
 }
 
+/// A frame's name, as its JSON `frame` tag spells it (`motion_command`).
+pub fn frame_name(frame: &impl Serialize) -> String {
+    match serde_json::to_value(frame) {
+        Ok(Value::Object(fields)) => fields
+            .get("frame")
+            .and_then(Value::as_str)
+            .unwrap_or_default()
+            .to_owned(),
+        _ => String::new(),
+    }
+}
+
 /// A decoded frame as JSON: the robot, its id (`0x111` for a CAN identifier, `0x03` for a
 /// serial command id, as `id_digits` says), the count where the protocol has one, the frame's
 /// name, its direction and its fields.

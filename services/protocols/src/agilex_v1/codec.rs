@@ -539,18 +539,6 @@ impl Frame {
         }
     }
 
-    /// Snake-case frame name, as in JSON.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Frame::MotionCommand(_) => "motion_command",
-            Frame::LightCommand(_) => "light_command",
-            Frame::SystemStatus(_) => "system_status",
-            Frame::MotionFeedback(_) => "motion_feedback",
-            Frame::Motor(_) => "motor",
-            Frame::LightState(_) => "light_state",
-        }
-    }
-
     /// Encodes the frame with rolling count `count` (b6) and its checksum (b7). Reserved bytes
     /// are sent as zero. Values outside what the wire can carry are an error, never silently
     /// saturated; motion-command speeds are rounded to the nearest percent first (see

@@ -211,7 +211,7 @@ impl V1Driver {
         }
         // Quantisation keeps every planned value on the wire's range; a failure is a bug guard
         // (or a profile with a full scale that is not positive).
-        self.core.transmit(frame.name(), encoded, WireItem::Can)
+        self.core.transmit(&frame, encoded, WireItem::Can)
     }
 
     fn motion_frame(&mut self, now: Timestamp) -> Frame {

@@ -8,6 +8,7 @@ use proptest::prelude::*;
 
 use super::*;
 use crate::agilex_v1::V1Profile;
+use crate::frame_json::frame_name;
 use crate::{CanFrame, DecodeError, Direction, EncodeError};
 
 fn p() -> V1Profile {
@@ -646,7 +647,10 @@ fn ids_directions_and_names_cover_every_frame() {
         ),
     ];
     for (f, id, name, direction) in frames {
-        assert_eq!((f.id(), f.name(), f.direction()), (id, name, direction));
+        assert_eq!(
+            (f.id(), frame_name(&f), f.direction()),
+            (id, name.into(), direction)
+        );
         assert!(id::ALL.contains(&f.id()));
         let json = serde_json::to_value(f).unwrap();
         assert_eq!(json["frame"], name);

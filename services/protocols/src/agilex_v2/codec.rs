@@ -919,42 +919,4 @@ impl Frame {
         };
         Ok(frame)
     }
-
-    /// Snake-case frame name, as in JSON.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Frame::MotionCommand(_) => "motion_command",
-            Frame::LightCommand(_) => "light_command",
-            Frame::ParkingBrake(_) => "parking_brake",
-            Frame::MotionModeCommand(_) => "motion_mode_command",
-            Frame::VersionRequest => "version_request",
-            Frame::SdkVersionRequest => "sdk_version_request",
-            Frame::Mode(_) => "mode",
-            Frame::SteeringZero => "steering_zero",
-            Frame::SteeringZeroOffset(_) => "steering_zero_offset",
-            Frame::SteeringZeroQuery => "steering_zero_query",
-            Frame::ClearFault(_) => "clear_fault",
-            Frame::SystemStatus(_) => "system_status",
-            Frame::MotionFeedback(_) => "motion_feedback",
-            Frame::LightState(_) => "light_state",
-            Frame::Rc(_) => "rc",
-            Frame::MotorFast(_) => "motor_fast",
-            Frame::MotorSlow(_) => "motor_slow",
-            Frame::SteeringAngles(_) => "steering_angles",
-            Frame::WheelSpeeds(_) => "wheel_speeds",
-            Frame::MotionModeState(_) => "motion_mode_state",
-            Frame::Odometer(_) => "odometer",
-            Frame::Imu(_) => "imu",
-            Frame::Bumper { .. } => "bumper",
-            Frame::Ultrasonic(_) => "ultrasonic",
-            Frame::Uwb(_) => "uwb",
-            Frame::BmsData(_) => "bms_data",
-            Frame::BmsAlarm(_) => "bms_alarm",
-            Frame::BmsProtection(_) => "bms_protection",
-            Frame::Version(_) => "version",
-            Frame::VersionText(_) => "version_text",
-            Frame::SteeringZeroAck { .. } => "steering_zero_ack",
-            Frame::SteeringZeroOffsetReply(_) => "steering_zero_offset_reply",
-        }
-    }
 }

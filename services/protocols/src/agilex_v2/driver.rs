@@ -507,7 +507,7 @@ impl Driver for V2Driver {
             }
         };
         self.core
-            .transmit(frame.name(), frame.encode(&self.profile), WireItem::Can)
+            .transmit(&frame, frame.encode(&self.profile), WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

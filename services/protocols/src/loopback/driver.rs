@@ -144,7 +144,7 @@ impl Driver for LoopbackDriver {
         echo.clamp_flags = self.clamp_flags;
         self.core.state.touch(Group::Command, now.as_nanos());
         let frame = Frame::Command(self.motion);
-        self.core.transmit("0x010", frame.encode(), WireItem::Can)
+        self.core.transmit(&frame, frame.encode(), WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

@@ -829,28 +829,4 @@ impl Frame {
         };
         Ok(frame)
     }
-
-    /// Snake-case frame name, as in JSON.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Frame::MotionCommand(_) => "motion_command",
-            Frame::ParkingBrake(_) => "parking_brake",
-            Frame::Mode(_) => "mode",
-            Frame::SilentMode(_) => "silent_mode",
-            Frame::OffRoad(_) => "off_road",
-            Frame::SteeringZero => "steering_zero",
-            Frame::SteeringZeroAck => "steering_zero_ack",
-            Frame::ClearFault(_) => "clear_fault",
-            Frame::SystemStatus(_) => "system_status",
-            Frame::MotionFeedback(_) => "motion_feedback",
-            Frame::Rc(_) => "rc",
-            Frame::MotorFast(_) => "motor_fast",
-            Frame::MotorSlow(_) => "motor_slow",
-            Frame::SteeringFeedback(_) => "steering_feedback",
-            Frame::AxleSpeed(_) => "axle_speed",
-            Frame::Odometer(_) => "odometer",
-            Frame::BmsData(_) => "bms_data",
-            Frame::BmsAlarm(_) => "bms_alarm",
-        }
-    }
 }

@@ -358,7 +358,7 @@ impl Driver for TitanDriver {
             }
         };
         self.core
-            .transmit(frame.name(), frame.encode(&self.profile), WireItem::Can)
+            .transmit(&frame, frame.encode(&self.profile), WireItem::Can)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

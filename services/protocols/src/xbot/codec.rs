@@ -572,17 +572,6 @@ impl Frame {
         }
     }
 
-    /// Snake-case frame name, as in JSON.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Frame::Power(_) => "power",
-            Frame::Velocity(_) => "velocity",
-            Frame::Lift(_) => "lift",
-            Frame::Servos(_) => "servos",
-            Frame::Sensor(_) => "sensor",
-        }
-    }
-
     /// Who sends it.
     pub fn direction(&self) -> Direction {
         match self {

@@ -15,6 +15,7 @@ use crate::command::{Command, Turn};
 use crate::driver::{
     ControlOutcome, Driver, DriverConfig, DriverCore, Level, Rx, Unwrap16, WireItem, wrap_angle,
 };
+use crate::frame_json::frame_name;
 use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
 use crate::xbot::XbotProfile;
@@ -492,7 +493,7 @@ impl XbotDriver {
             self.core.state.link.rx_unknown_id += 1;
             self.core.dropped(format!(
                 "a {} command (0x{:02X}) from the chassis side: loopback?",
-                frame.name(),
+                frame_name(&frame),
                 frame.command_id()
             ));
             return;
@@ -773,7 +774,7 @@ impl Driver for XbotDriver {
             return None;
         };
         self.core
-            .transmit(frame.name(), frame.encode(&self.profile), WireItem::Bytes)
+            .transmit(&frame, frame.encode(&self.profile), WireItem::Bytes)
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {

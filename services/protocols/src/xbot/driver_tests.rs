@@ -11,6 +11,7 @@ use proptest::prelude::*;
 use super::*;
 use crate::command::Command;
 use crate::driver::{ControlOutcome, Driver, DriverConfig, DriverEvent, Level, Rx, WireItem};
+use crate::frame_json::frame_name;
 use crate::time::Timestamp;
 use crate::xbot::XbotProfile;
 use crate::xbot::test_support::{arbitrary_reads, close, hex, max_per_second, ms, p, twist};
@@ -979,7 +980,10 @@ fn the_lift_and_servos_are_restored_after_a_reboot() {
     b.run_for(ms(500));
     let before = b.sent.len();
     b.reports(1, [0; 4], [0; 4]);
-    let names: Vec<_> = b.sent[before..].iter().map(|(_, f)| f.name()).collect();
+    let names: Vec<_> = b.sent[before..]
+        .iter()
+        .map(|(_, f)| frame_name(f))
+        .collect();
     assert_eq!(names, vec!["power", "lift", "servos", "velocity"]);
 }
 
