@@ -99,6 +99,10 @@ pub struct SimTruth {
     pub fault_flags: u64,
     /// Command frames accepted.
     pub commands_received: u64,
+    /// Valid command frames not obeyed (the mode, the authority, a boot).
+    pub commands_ignored: u64,
+    /// Valid frames only a chassis sends, put on the bus by another node: not for it.
+    pub frames_ignored: u64,
     /// Frames dropped for a bad checksum.
     pub bad_checksums_received: u64,
     /// Frames that could not be decoded.

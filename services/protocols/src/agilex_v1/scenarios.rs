@@ -798,7 +798,7 @@ fn letting_go_stops_the_robot_at_once_and_taking_control_back_resumes() {
     assert!(truth.linear_mps.abs() < 1e-3, "{truth:?}");
     // 3.02 s … 4.98 s; the one of 5 s is still on the wire.
     assert_eq!(
-        p.firmware.commands_ignored(),
+        p.firmware.truth().commands_ignored,
         99,
         "mode-0x00 frames are not obeyed"
     );

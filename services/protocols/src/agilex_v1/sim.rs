@@ -97,7 +97,7 @@ const FEEDBACK_IDS: [u16; 7] = [
 /// * **Malformed input** (unknown or extended ids, wrong length, undefined values, serial bytes
 ///   on this CAN robot) is counted in [`SimTruth::decode_errors`] and ignored. Valid frames that
 ///   only the chassis sends (feedback ids from another node) are counted by
-///   [`V1Sim::frames_ignored`].
+///   [`SimTruth::frames_ignored`].
 ///
 /// # Faults (0x151 b4-b5)
 ///
@@ -313,16 +313,6 @@ impl V1Sim {
 
     pub fn profile(&self) -> &V1Profile {
         &self.profile
-    }
-
-    /// Valid command frames ignored (mode byte not 0x01, RC authority, booting).
-    pub fn commands_ignored(&self) -> u64 {
-        self.body.received.ignored
-    }
-
-    /// Valid feedback frames sent by another node, ignored.
-    pub fn frames_ignored(&self) -> u64 {
-        self.body.received.not_for_it
     }
 
     /// The 0x151 fault word the chassis reports at its latest time.

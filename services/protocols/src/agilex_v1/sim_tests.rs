@@ -206,7 +206,7 @@ fn a_motion_command_is_obeyed_only_with_mode_0x01() {
     }
     assert_eq!(b.sim.truth().commands_received, 0);
     // 0x130 at T0, T0 + 20 ms, …, T0 + 2000 ms.
-    assert_eq!(b.sim.commands_ignored(), 101);
+    assert_eq!(b.sim.truth().commands_ignored, 101);
     assert_eq!(
         b.status().mode,
         mode::CAN_COMMAND,
@@ -344,7 +344,7 @@ fn an_rc_takeover_reports_mode_rc_and_ignores_speeds_until_hand_back() {
     assert_eq!(t.fault_flags, 0);
     assert!(b.v().abs() < 1e-3, "sticks centred: the robot stops");
     assert_eq!(t.commands_received, received, "0x130 speeds are shielded");
-    assert_eq!(b.sim.commands_ignored(), 150);
+    assert_eq!(b.sim.truth().commands_ignored, 150);
 
     // Hand back: command mode at once, the next heartbeat is obeyed, no handshake.
     assert!(b.inject(Injection::RcTakeover(false)));
@@ -699,7 +699,7 @@ fn malformed_frames_and_another_nodes_feedback_are_counted_and_ignored() {
 
     // Another node's feedback is valid but not for the chassis.
     b.send(Frame::SystemStatus(SystemStatus::default()));
-    assert_eq!(b.sim.frames_ignored(), 1);
+    assert_eq!(b.sim.truth().frames_ignored, 1);
     assert_eq!(b.sim.truth().decode_errors, 4);
     assert_eq!(b.v(), 0.0);
 }

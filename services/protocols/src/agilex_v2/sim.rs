@@ -153,19 +153,9 @@ impl V2Sim {
         &self.profile
     }
 
-    /// Commands ignored because of the mode, the brake or the E-stop.
-    pub fn commands_ignored(&self) -> u64 {
-        self.body.received.ignored
-    }
-
     /// 0x111 frames beyond the profile's limits.
     pub fn commands_clamped(&self) -> u64 {
         self.commands_clamped
-    }
-
-    /// Feedback frames from another node.
-    pub fn frames_ignored(&self) -> u64 {
-        self.body.received.not_for_it
     }
 
     /// The RANGER motion mode in force.

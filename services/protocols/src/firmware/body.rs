@@ -95,18 +95,18 @@ pub(crate) enum Applied {
 }
 
 /// What a simulated chassis made of what it received, counted for the observer
-/// ([`SimTruth`] and each robot's accessors).
+/// ([`SimTruth`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub(crate) struct Received {
     /// Command frames obeyed ([`SimTruth::commands_received`]).
     pub(crate) commands: u64,
-    /// Valid command frames not obeyed: the mode, the authority, a boot.
+    /// Valid command frames not obeyed ([`SimTruth::commands_ignored`]).
     pub(crate) ignored: u64,
     /// Frames dropped for a bad checksum ([`SimTruth::bad_checksums_received`]).
     pub(crate) bad_checksums: u64,
     /// Frames that do not decode, or came on the other medium ([`SimTruth::decode_errors`]).
     pub(crate) decode_errors: u64,
-    /// Valid frames only a chassis sends, put on the bus by another node: not for it.
+    /// Valid frames only a chassis sends, from another node ([`SimTruth::frames_ignored`]).
     pub(crate) not_for_it: u64,
 }
 
@@ -277,6 +277,8 @@ impl<T> SimBody<T> {
             yaw_rad: self.pose.yaw_rad,
             soc_pct: self.soc_pct,
             commands_received: self.received.commands,
+            commands_ignored: self.received.ignored,
+            frames_ignored: self.received.not_for_it,
             bad_checksums_received: self.received.bad_checksums,
             decode_errors: self.received.decode_errors,
             boots: self.boots,

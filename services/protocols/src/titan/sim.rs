@@ -53,7 +53,7 @@ const BMS_UNDER_VOLTAGE: u8 = 1 << 2;
 ///
 /// * **Power-up**: standby (0x211 mode 0x00), no RC transmitter, parking brake engaged, SOC as
 ///   configured (100 %). Standby obeys only 0x421; everything else is ignored (counted by
-///   [`TitanSim::commands_ignored`]).
+///   [`SimTruth::commands_ignored`]).
 /// * **Authority by mode**: CAN command mode obeys every command. Standby obeys 0x421, and 0x111
 ///   only while it waits for the heartbeat to resume (below). While an RC transmitter holds
 ///   authority (mode 0x03) only 0x441 (clear faults) and 0x422 (silent mode, a bus function) are
@@ -92,7 +92,7 @@ const BMS_UNDER_VOLTAGE: u8 = 1 << 2;
 /// * **Malformed input** (undecodable frames, unknown ids, serial bytes on this CAN robot) is
 ///   counted in [`SimTruth::decode_errors`] and ignored. Valid frames that only the chassis sends
 ///   (feedback ids put on the bus by another node) are ignored and counted by
-///   [`TitanSim::frames_ignored`].
+///   [`SimTruth::frames_ignored`].
 ///
 /// # Feedback
 ///
@@ -327,16 +327,6 @@ impl TitanSim {
     /// Motion frames clamped to the valid range.
     pub fn commands_clamped(&self) -> u64 {
         self.commands_clamped
-    }
-
-    /// Valid command frames ignored (wrong mode, booting, off-road while moving).
-    pub fn commands_ignored(&self) -> u64 {
-        self.body.received.ignored
-    }
-
-    /// Valid feedback frames sent by another node, ignored.
-    pub fn frames_ignored(&self) -> u64 {
-        self.body.received.not_for_it
     }
 
     pub fn off_road(&self) -> bool {

@@ -41,7 +41,7 @@ use crate::xbot::XbotProfile;
 ///   at once (the board reports neither back).
 /// * **Malformed input** (bad checksum, bad length or value, unknown id, a CAN frame) is counted
 ///   in [`SimTruth::bad_checksums_received`] / [`SimTruth::decode_errors`] and ignored, never a
-///   panic; a sensor report sent *to* the board is ignored ([`XbotSim::frames_ignored`]).
+///   panic; a sensor report sent *to* the board is ignored ([`SimTruth::frames_ignored`]).
 ///
 /// # Sensor report (0x10)
 ///
@@ -306,16 +306,6 @@ impl XbotSim {
     /// Reports sent with a flipped checksum ([`Injection::BadChecksums`]).
     pub fn reports_corrupted(&self) -> u64 {
         self.reports_corrupted
-    }
-
-    /// Valid frames ignored while booting.
-    pub fn commands_ignored(&self) -> u64 {
-        self.body.received.ignored
-    }
-
-    /// Valid sensor reports sent *to* the board, ignored.
-    pub fn frames_ignored(&self) -> u64 {
-        self.body.received.not_for_it
     }
 
     /// Times the 500 ms heartbeat timeout set the speed to 0.
