@@ -68,7 +68,7 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
 
 /// `template` with each `{{name}}` replaced by its value in `values`: a name with no value is
 /// an error, and so is a value the template never names.
-fn fill(template: &str, values: &[(&str, String)]) -> anyhow::Result<String> {
+pub(crate) fn fill(template: &str, values: &[(&str, String)]) -> anyhow::Result<String> {
     let value = |name: &str| {
         values
             .iter()
