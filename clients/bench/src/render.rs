@@ -319,6 +319,50 @@ fn throughput_and_notes(report: &Report) -> String {
     lines.join("\n")
 }
 
+impl Report {
+    /// The run on a terminal: the document's tables and lists, without its words.
+    pub fn table(&self) -> String {
+        let (p, m) = (&self.provenance, &self.machine);
+        let blocks = [
+            format!(
+                "{}, {}; machine: {}, {} cores, kernel {}; host steal time over the run: {}",
+                p.date,
+                p.commit_text().replace('`', ""),
+                m.cpu_model,
+                m.cpus,
+                m.kernel,
+                p.steal_text()
+            ),
+            with_head("table", table(self)),
+            inconsistent(self),
+            conditions(self),
+            with_head("parts", parts(self)),
+            with_head("loops", loops(self)),
+            cost(self),
+            throughput_and_notes(self),
+        ];
+        let blocks: Vec<String> = blocks
+            .iter()
+            .filter(|b| !b.is_empty())
+            .map(|b| format!("{}\n", b.trim_end()))
+            .collect();
+        blocks.join("\n")
+    }
+}
+
+/// `block` under the table head the template puts above `{{name}}` (nothing when empty).
+fn with_head(name: &str, block: String) -> String {
+    let above = TEMPLATE
+        .split(&format!("\n{{{{{name}}}}}\n"))
+        .next()
+        .unwrap_or_default();
+    let mut lines = above.rsplitn(3, '\n');
+    match (lines.next(), lines.next()) {
+        (Some(rule), Some(head)) if !block.is_empty() => format!("{head}\n{rule}\n{block}"),
+        _ => block,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

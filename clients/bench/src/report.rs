@@ -642,129 +642,6 @@ impl Report {
             .collect()
     }
 
-    /// The table.
-    pub fn table(&self) -> String {
-        let mut out = String::new();
-        out.push_str(&format!(
-            "{}, {}; machine: {}, {} cores, kernel {}; host steal time over the run: {}\n\n",
-            self.provenance.date,
-            self.provenance.commit_text().replace('`', ""),
-            self.machine.cpu_model,
-            self.machine.cpus,
-            self.machine.kernel,
-            self.provenance.steal_text()
-        ));
-        out.push_str(&format!(
-            "{:<11} {:<60} {:<7} {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}  {}\n",
-            "path",
-            "what",
-            "loop",
-            "placement",
-            "count",
-            "p50 µs",
-            "p90 µs",
-            "p99 µs",
-            "p99.9 µs",
-            "max µs",
-            "÷ baseline p50, p99"
-        ));
-        for r in &self.rows {
-            let ratio = match (r.ratio_p50, r.ratio_p99, &r.baseline) {
-                (Some(x), Some(y), Some(b)) => format!("{x:.2}, {y:.2} ({b})"),
-                (Some(x), None, Some(b)) => format!("{x:.2}, — ({b})"),
-                _ => String::new(),
-            };
-            let [count, p50, p90, p99, p999, max] = r.figures();
-            out.push_str(&format!(
-                "{:<11} {:<60} {:<7} {:<10} {count:>7} {p50:>9} {p90:>9} {p99:>9} {p999:>9} {max:>9}  \
-                 {ratio}\n",
-                r.path, r.what, r.mode, r.placement,
-            ));
-        }
-        let baselines: Vec<&Row> = self
-            .rows
-            .iter()
-            .filter(|r| r.conditions.is_some())
-            .collect();
-        if !baselines.is_empty() {
-            out.push_str("\nbaseline conditions:\n");
-            for r in baselines {
-                out.push_str(&format!(
-                    "  {}, {}: {}\n",
-                    r.what,
-                    r.placement,
-                    r.conditions.as_deref().unwrap_or_default()
-                ));
-            }
-        }
-        for r in self.rows.iter().filter(|r| r.inconsistent.is_some()) {
-            out.push_str(&format!(
-                "INCONSISTENT MEASUREMENT: {} {} ({} loop, {}): {}\n",
-                r.path,
-                r.what,
-                r.mode,
-                r.placement,
-                r.inconsistent.as_deref().unwrap_or_default()
-            ));
-        }
-        if !self.parts.is_empty() {
-            out.push_str("\nwhere each microsecond goes (p50 / p99 µs, same samples):\n");
-            for p in &self.parts {
-                let parts: Vec<String> = p
-                    .split
-                    .parts
-                    .iter()
-                    .map(|part| {
-                        let s = &part.summary;
-                        format!(
-                            "{} {:.1} / {}",
-                            part.name,
-                            s.p50_us,
-                            percentile(s.p99_us, s.count, MIN_FOR_P99)
-                        )
-                    })
-                    .collect();
-                out.push_str(&format!(
-                    "  {} {} ({}, {}): {}\n",
-                    p.path,
-                    p.what,
-                    p.mode,
-                    p.placement,
-                    parts.join("; ")
-                ));
-            }
-        }
-        if !self.cost.is_empty() {
-            out.push_str("\nservice cost under a fully loaded bus (simulated chassis flooding):\n");
-            for c in &self.cost {
-                out.push_str(&format!(
-                    "  {:>9} {:>5} kbit/s: {:>6.0} frames/s received, CPU {:>5.2} % of one core, RSS {:.1} MiB\n",
-                    c.bus,
-                    c.bitrate / 1000,
-                    c.frames_per_s,
-                    c.cpu_pct,
-                    c.rss_mib
-                ));
-            }
-        }
-        for t in &self.throughput {
-            out.push_str(&format!(
-                "\nreplay at full speed (read + decode + publish in the service): {} frames in {:.2} s = {:.0} frames/s, service CPU {:.0} %: {:.0} frames per CPU second\n",
-                t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
-            ));
-        }
-        for l in &self.loops {
-            out.push_str(&format!(
-                "\ncontrol loop {}, {} ({} loop, {}): {} of {} periods missed; the raw loop {} of {}; {} commands no frame carried\n",
-                l.run, l.rate, l.mode, l.placement, l.misses, l.periods, l.raw_misses, l.raw_periods, l.superseded
-            ));
-        }
-        for note in self.notes.iter().chain(&self.problems) {
-            out.push_str(&format!("note: {note}\n"));
-        }
-        out
-    }
-
     /// Latency CDFs of every row, log latency axis: one panel per kind of path (baselines,
     /// command, state, preemption, fan-out), all on the same axes so panels compare.
     pub fn plot(&self, path: &Path) -> anyhow::Result<()> {
@@ -1785,7 +1662,7 @@ mod tests {
             "—"
         );
         assert!(
-            report.table().contains("2.50, — (warm, cross CPU)"),
+            report.table().contains("2.50, — | warm, cross CPU |"),
             "{}",
             report.table()
         );
