@@ -96,15 +96,16 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> S
         .filter(|p| p.written != 0 && p.waited_since != 0)
         .map(|p| (p.written, p))
         .collect();
-    let (woke, read) = match polled {
-        true => (
+    let (woke, read) = if polled {
+        (
             "loop polling → pass began (the poll)",
             "pass began → request read",
-        ),
-        false => (
+        )
+    } else {
+        (
             "loop waiting → loop woke (the wake-up)",
             "loop woke → request read",
-        ),
+        )
     };
     let names = [
         (

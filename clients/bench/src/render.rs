@@ -114,9 +114,10 @@ fn lines<T>(items: impl IntoIterator<Item = T>, line: impl FnMut(T) -> String) -
 
 /// A percentile for a table: `—` when the row has too few samples to tell it from the maximum.
 pub(crate) fn percentile(value: f64, count: u64, fewest: u64) -> String {
-    match count >= fewest {
-        true => format!("{value:.1}"),
-        false => "—".into(),
+    if count >= fewest {
+        format!("{value:.1}")
+    } else {
+        "—".into()
     }
 }
 
@@ -157,12 +158,10 @@ fn inconsistent(report: &Report) -> String {
         ))
     });
     let flagged = lines(flagged, |f| f);
-    match flagged.is_empty() {
-        true => flagged,
-        false => {
-            format!("**Inconsistent measurements** (flagged by the benchmark):\n\n{flagged}\n")
-        }
+    if flagged.is_empty() {
+        return flagged;
     }
+    format!("**Inconsistent measurements** (flagged by the benchmark):\n\n{flagged}\n")
 }
 
 /// Each baseline's conditions.
@@ -200,9 +199,9 @@ pub fn parts(report: &Report) -> String {
                 p.path, p.what, p.mode, p.placement, s.count, s.p50_us
             )
         };
-        let share = |s: &Summary| match total > 0.0 {
-            true => format!("{:.0} %", 100.0 * s.p50_us / total),
-            false => String::new(),
+        let share = |s: &Summary| {
+            let share = (total > 0.0).then(|| format!("{:.0} %", 100.0 * s.p50_us / total));
+            share.unwrap_or_default()
         };
         let mut rows = lines(&p.split.parts, |part| {
             row(&part.name, part.whose, &part.summary, share(&part.summary))
@@ -338,9 +337,10 @@ impl Report {
             let low = self.stalls.iter().map(f).fold(f64::INFINITY, f64::min);
             let high = self.stalls.iter().map(f).fold(0.0, f64::max);
             let (low, high) = (format!("{low:.decimals$}"), format!("{high:.decimals$}"));
-            match low == high {
-                true => low,
-                false => format!("{low} to {high}"),
+            if low == high {
+                low
+            } else {
+                format!("{low} to {high}")
             }
         };
         // The chance that a window of 100 µs holds the start of a stall over 20 µs, %.
@@ -354,9 +354,10 @@ impl Report {
             span(&|s| s.over_20_us, 0),
             span(&|s| s.over_100_us, 2),
             span(&chance, 1),
-            match least >= 1.0 {
-                true => ": more than 1 %, so that its p99 carries one, whatever the code does.",
-                false => ".",
+            if least >= 1.0 {
+                ": more than 1 %, so that its p99 carries one, whatever the code does."
+            } else {
+                "."
             }
         )
     }

@@ -430,10 +430,10 @@ impl Row {
             .filter(|(n, _)| *n > 0)
             .map(|(n, what)| format!("{n} {what}"))
             .collect();
-        match lost.is_empty() {
-            true => self.summary.count.to_string(),
-            false => format!("{} ({})", self.summary.count, lost.join(", ")),
+        if lost.is_empty() {
+            return self.summary.count.to_string();
         }
+        format!("{} ({})", self.summary.count, lost.join(", "))
     }
 }
 

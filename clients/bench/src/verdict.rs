@@ -197,7 +197,12 @@ impl Check {
                     Within::InService => crate::parts::in_service_command,
                 };
                 let split = split.map(|s| (s.path, s.leg));
-                let bound = |_: &Row| Some(Bound::Absolute(*p50_us, *p99_us));
+                let bound = |_: &Row| {
+                    Some(Bound::Absolute {
+                        p50_us: *p50_us,
+                        p99_us: *p99_us,
+                    })
+                };
                 (measured, missed(report, &rows, split, within, bound))
             }
             Check::Ratio {
@@ -308,7 +313,10 @@ fn ratio(
             |_| true,
             |row| {
                 let ratio = row.ratio_p99.filter(|r| *r > 0.0)?;
-                Some(Bound::Ratio(times, row.summary.p99_us / ratio))
+                Some(Bound::Ratio {
+                    times,
+                    base_us: row.summary.p99_us / ratio,
+                })
             },
         ),
         Some(true) => {
@@ -316,9 +324,10 @@ fn ratio(
             let flagged: Vec<String> = flagged
                 .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
                 .collect();
-            match flagged.is_empty() {
-                true => Outcome::Met,
-                false => Outcome::Inconsistent { rows: flagged },
+            if flagged.is_empty() {
+                Outcome::Met
+            } else {
+                Outcome::Inconsistent { rows: flagged }
             }
         }
         None => Outcome::NotMeasured,
@@ -381,8 +390,8 @@ fn largest_part(parts: &[&Part], row: &Row) -> Option<String> {
     })
 }
 
-/// What a target holds one row to: its p99 at most this many times its baseline's (B µs), or
-/// its p50 and p99 at most these, µs. A sample's time is the sum of its parts, so a row's p50
+/// What a target holds one row to: its p99 at most `times` its baseline's, or its p50 and p99 at
+/// most these. A sample's time is the sum of its parts, so a row's p50
 /// and p99 are at least those of each part, and at least those of its parts outside the code
 /// ([`Whose::Outside`]: a wake-up, a system call, the transport, the peer) summed sample by
 /// sample: what the row would take had the code taken no time. Such a part alone, or those
@@ -390,8 +399,8 @@ fn largest_part(parts: &[&Part], row: &Row) -> Option<String> {
 /// machine.
 #[derive(Debug, Clone, Copy)]
 enum Bound {
-    Ratio(f64, f64),
-    Absolute(f64, f64),
+    Ratio { times: f64, base_us: f64 },
+    Absolute { p50_us: f64, p99_us: f64 },
 }
 
 impl Bound {
@@ -399,12 +408,12 @@ impl Bound {
     /// compares: "p99 X µs, N × the baseline's", or "P50 / P99 µs (p50 / p99)".
     fn missed_by(self, s: &Summary) -> (bool, String) {
         match self {
-            Bound::Ratio(bound, base_us) => {
-                let times = s.p99_us / base_us;
-                let text = format!("p99 {:.1} µs, {times:.2} × the baseline's", s.p99_us);
-                (times > bound, text)
+            Bound::Ratio { times, base_us } => {
+                let of = s.p99_us / base_us;
+                let text = format!("p99 {:.1} µs, {of:.2} × the baseline's", s.p99_us);
+                (of > times, text)
             }
-            Bound::Absolute(p50_us, p99_us) => (
+            Bound::Absolute { p50_us, p99_us } => (
                 s.p50_us > p50_us || s.p99_us > p99_us,
                 format!("{:.1} / {:.1} µs (p50 / p99)", s.p50_us, s.p99_us),
             ),
@@ -416,8 +425,10 @@ impl std::fmt::Display for Bound {
     /// The target's own words: "2 × the baseline's (B µs)", "5 / 15 µs".
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Bound::Ratio(bound, base_us) => write!(f, "{bound} × the baseline's ({base_us:.1} µs)"),
-            Bound::Absolute(p50_us, p99_us) => write!(f, "{p50_us} / {p99_us} µs"),
+            Bound::Ratio { times, base_us } => {
+                write!(f, "{times} × the baseline's ({base_us:.1} µs)")
+            }
+            Bound::Absolute { p50_us, p99_us } => write!(f, "{p50_us} / {p99_us} µs"),
         }
     }
 }
