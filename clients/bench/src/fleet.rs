@@ -30,6 +30,7 @@ use serde::Serialize;
 
 use crate::paths;
 use crate::provenance::{CpuTimes, Provenance};
+use crate::render::{fill, lines};
 use crate::report::{Machine, Report};
 
 /// The heading of the section this writes.
@@ -462,7 +463,7 @@ impl FleetReport {
     /// for a larger fleet (`clients/bench/fleet-growth.md`) when it grew.
     pub fn markdown(&self) -> anyhow::Result<String> {
         let (p, m) = (&self.provenance, &self.machine);
-        let sizes = self.sizes.iter().map(|s| {
+        let sizes = lines(&self.sizes, |s| {
             format!(
                 "| {} | {:.1} | {:.1} ({:.1}) | {} | {:.0} | {:.2} | {:.2} | {:.1} | {:.1} | {:.0} |",
                 s.robots,
@@ -478,21 +479,16 @@ impl FleetReport {
                 s.machine_busy_pct
             )
         });
-        let missing = self
-            .sizes
-            .iter()
-            .filter(|s| !s.missing.is_empty())
-            .map(|s| {
-                format!(
-                    "* **{} robots: no fresh samples from {}** (counted as missing, not as fast)",
-                    s.robots,
-                    s.missing.join(", ")
-                )
-            });
+        let missing = lines(self.sizes.iter().filter(|s| !s.missing.is_empty()), |s| {
+            let (n, names) = (s.robots, s.missing.join(", "));
+            format!(
+                "* **{n} robots: no fresh samples from {names}** (counted as missing, not as fast)"
+            )
+        });
         let (Some(first), Some(last)) = (self.sizes.first(), self.sizes.last()) else {
             bail!("no fleet size measured");
         };
-        let robots = last.per_robot.iter().map(|r| {
+        let robots = lines(&last.per_robot, |r| {
             format!(
                 "| {} | {} | {:.0} | {:.2} | {:.2} | {:.1} |",
                 r.name, r.kind, r.samples_per_s, r.p50_ms, r.p99_ms, r.max_ms
@@ -507,13 +503,13 @@ impl FleetReport {
             ("build", self.build.clone()),
             ("command", p.command.clone()),
             ("seconds", format!("{:.0}", self.seconds)),
-            ("sizes", sizes.collect::<Vec<_>>().join("\n")),
-            ("missing", missing.collect::<Vec<_>>().join("\n")),
+            ("sizes", sizes),
+            ("missing", missing),
             ("largest", last.robots.to_string()),
-            ("robots", robots.collect::<Vec<_>>().join("\n")),
+            ("robots", robots),
             ("growth", growth(first, last)?),
         ];
-        crate::render::fill(include_str!("../fleet.md"), &values)
+        fill(include_str!("../fleet.md"), &values)
     }
 }
 
@@ -560,11 +556,9 @@ fn growth(first: &SizeFigures, last: &SizeFigures) -> anyhow::Result<String> {
         ),
         ("cores", format!("{:.0}", 10.0 * cpu_per_robot)),
     ];
-    Ok(
-        crate::render::fill(include_str!("../fleet-growth.md"), &values)?
-            .trim_end()
-            .to_string(),
-    )
+    Ok(fill(include_str!("../fleet-growth.md"), &values)?
+        .trim_end()
+        .to_string())
 }
 
 /// Writes the report's files.

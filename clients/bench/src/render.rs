@@ -108,7 +108,10 @@ pub(crate) fn fill(template: &str, values: &[(&str, String)]) -> anyhow::Result<
 }
 
 /// `items` one a line.
-fn lines<T>(items: impl IntoIterator<Item = T>, line: impl FnMut(T) -> String) -> String {
+pub(crate) fn lines<T>(
+    items: impl IntoIterator<Item = T>,
+    line: impl FnMut(T) -> String,
+) -> String {
     items.into_iter().map(line).collect::<Vec<_>>().join("\n")
 }
 
