@@ -161,18 +161,16 @@ impl Drop for Netns {
 /// What the fleet's chassis-zenoh processes log: warnings, Zenoh's own only when errors.
 const ZENOH_LOG: &str = "warn,zenoh=error";
 
-/// Starts `command` as a process of the fleet: serving under the IPC prefix `prefix` and
-/// logging at the `RUST_LOG` level `level` to `<dir>/<log>.log`, its stdout dropped; `what`
-/// names it in the error.
+/// Starts `command` as the fleet's process `name`: serving under the IPC prefix `prefix` and
+/// logging at the `RUST_LOG` level `level` to `<dir>/<name>.log`, its stdout dropped.
 fn start(
     command: &mut Command,
     prefix: &str,
     level: &str,
     dir: &Path,
-    log: &str,
-    what: &str,
+    name: &str,
 ) -> anyhow::Result<Child> {
-    let path = dir.join(format!("{log}.log"));
+    let path = dir.join(format!("{name}.log"));
     let file = std::fs::File::create(&path).with_context(|| format!("{}", path.display()))?;
     command
         .env("CHASSIS_IPC_PREFIX", prefix)
@@ -180,7 +178,7 @@ fn start(
         .stdout(Stdio::null())
         .stderr(file)
         .spawn()
-        .with_context(|| format!("starting {what}"))
+        .with_context(|| format!("starting {name}"))
 }
 
 /// User + system CPU time of a whole process, s.
@@ -313,15 +311,15 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         while names.len() < size {
             let k = names.len();
             let (name, kind) = (format!("fb{k}"), KINDS[k % KINDS.len()]);
+            let mut robot = Command::new(&chassisd);
+            robot.args(["--robot", kind, "--name", &name, "--no-safety-monitor"]);
+            robot.env("XDG_STATE_HOME", dir.join("state"));
             robots.push(start(
-                Command::new(&chassisd)
-                    .args(["--robot", kind, "--name", &name, "--no-safety-monitor"])
-                    .env("XDG_STATE_HOME", dir.join("state")),
+                &mut robot,
                 &prefix,
                 "warn",
                 dir,
                 &format!("chassisd-{name}"),
-                "chassisd",
             )?);
             wait_until(
                 &format!("chassisd {name} serving"),
@@ -329,19 +327,11 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
                 || serves(&name, &prefix),
             )?;
             let listen = format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16);
-            robot_side_pids.push(
-                robots.push(start(
-                    Command::new("ip")
-                        .args(["netns", "exec", &netns.0])
-                        .arg(&zenoh)
-                        .args(["--name", &name, "--listen", &listen]),
-                    &prefix,
-                    ZENOH_LOG,
-                    dir,
-                    &format!("zenoh-{name}"),
-                    "chassis-zenoh",
-                )?),
-            );
+            let mut side = Command::new("ip");
+            side.args(["netns", "exec", &netns.0]).arg(&zenoh);
+            side.args(["--name", &name, "--listen", &listen]);
+            let log = format!("zenoh-{name}");
+            robot_side_pids.push(robots.push(start(&mut side, &prefix, ZENOH_LOG, dir, &log)?));
             names.push((name, kind));
         }
         eprintln!("fleet of {size}: starting the operator");
@@ -354,14 +344,10 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
                 &format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16),
             ]);
         }
-        let operator_pid = operator.push(start(
-            command.arg("--mirror-all"),
-            &operator_prefix,
-            ZENOH_LOG,
-            dir,
-            &format!("operator-{size}"),
-            "the operator's chassis-zenoh",
-        )?);
+        command.arg("--mirror-all");
+        let log = format!("operator-{size}");
+        let operator_pid =
+            operator.push(start(&mut command, &operator_prefix, ZENOH_LOG, dir, &log)?);
         for (name, _) in &names {
             wait_until(
                 &format!("the operator mirroring {name}"),
@@ -605,7 +591,6 @@ mod tests {
             ZENOH_LOG,
             &dir,
             "zenoh-fb0",
-            "a stand-in",
         )
         .unwrap();
         assert!(child.wait().unwrap().success());
@@ -617,10 +602,9 @@ mod tests {
             "warn",
             &dir,
             "chassisd-fb0",
-            "chassisd",
         )
         .unwrap_err();
-        assert_eq!(err.to_string(), "starting chassisd");
+        assert_eq!(err.to_string(), "starting chassisd-fb0");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
