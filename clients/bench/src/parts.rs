@@ -92,7 +92,8 @@ fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Sp
 /// frame was its pass's first write. A boundary the request came after (the loop was waiting
 /// already; a polling loop's pass was under way) is the request's creation: a part of 0.
 pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> Split {
-    let by_written: HashMap<u64, &PassStamps> = (passes.iter())
+    let by_written: HashMap<u64, &PassStamps> = passes
+        .iter()
         .filter(|p| p.written != 0 && p.waited_since != 0)
         .map(|p| (p.written, p))
         .collect();
@@ -137,7 +138,8 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> S
 
 /// The passes that handed a state and woke its readers, by the time they handed their first.
 fn state_passes(passes: &[PassStamps]) -> Vec<&PassStamps> {
-    let mut with_state: Vec<&PassStamps> = (passes.iter())
+    let mut with_state: Vec<&PassStamps> = passes
+        .iter()
         .filter(|p| p.state_handed != 0 && p.state_wake_begun != 0 && p.state_readers_woken != 0)
         .collect();
     with_state.sort_by_key(|p| p.state_handed);

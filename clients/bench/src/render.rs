@@ -1,6 +1,7 @@
 //! The performance document: its words are `clients/bench/performance.md`, whose `{{name}}`s this
 //! fills from a run's samples (a [`Report`]) and its verdict, nothing typed by hand. A
-//! `{{name}}` alone on its line stands for a block of lines, none when the block is empty.
+//! `{{name}}` alone on its line stands for a block of lines, none when the block is empty. The
+//! terminal's table is the document's tables and lists.
 
 use crate::baseline::HYBRID_SPIN;
 use crate::parts::Whose;

@@ -452,7 +452,9 @@ impl Report {
                 .push(format!("two rows are named '{key}' ({n} of them)"));
         }
         // Each row's names as a baseline and as a contained row.
-        let all: Vec<(Option<String>, String, Summary)> = (self.rows.iter())
+        let all: Vec<(Option<String>, String, Summary)> = self
+            .rows
+            .iter()
             .map(|r| {
                 let as_baseline =
                     (r.path == PathKind::Baseline).then(|| format!("{}, {}", r.what, r.placement));
@@ -470,8 +472,10 @@ impl Report {
             if let Some(name) = &row.baseline {
                 let named = all.iter().filter(|(b, ..)| b.as_ref() == Some(name));
                 match named.map(|(.., s)| s).collect::<Vec<_>>()[..] {
-                    [] => (self.problems)
-                        .push(format!("{key}: its baseline '{name}' was not measured")),
+                    [] => {
+                        let problem = format!("{key}: its baseline '{name}' was not measured");
+                        self.problems.push(problem);
+                    }
                     [base] => {
                         row.ratio_p50 = (base.p50_us > 0.0).then(|| s.p50_us / base.p50_us);
                         let enough = base.count.min(s.count) >= MIN_FOR_P99;
@@ -488,8 +492,10 @@ impl Report {
                             flags.push((text, near));
                         }
                     }
-                    _ => (self.problems)
-                        .push(format!("{key}: more than one baseline is named '{name}'")),
+                    _ => {
+                        let problem = format!("{key}: more than one baseline is named '{name}'");
+                        self.problems.push(problem);
+                    }
                 }
             }
             let contained = row.contains.iter().map(|k| {
@@ -628,7 +634,9 @@ impl Report {
                 .x_label_area_size(35)
                 .y_label_area_size(45)
                 .build_cartesian_2d((0.5f64..max_us * 1.2).log_scale(), 0.0f64..1.0)?;
-            (chart.configure_mesh().x_desc("latency, µs"))
+            chart
+                .configure_mesh()
+                .x_desc("latency, µs")
                 .y_desc("fraction of samples")
                 .draw()?;
             for (i, row) in rows.iter().enumerate() {
