@@ -32,19 +32,12 @@ pub enum PathKind {
 }
 
 impl std::fmt::Display for PathKind {
+    /// The kind's name in the samples (`in-service`), but `control loop` for [`PathKind::Loop`].
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            PathKind::Baseline => "baseline",
-            PathKind::Command => "command",
-            PathKind::InService => "in-service",
-            PathKind::State => "state",
-            PathKind::Preemption => "preemption",
-            PathKind::FanOut => "fan-out",
-            PathKind::Python => "python",
-            PathKind::Ros2 => "ros2",
-            PathKind::Zenoh => "zenoh",
-            PathKind::Loop => "control loop",
-        })
+        match self {
+            PathKind::Loop => f.write_str("control loop"),
+            kind => kind.serialize(f),
+        }
     }
 }
 
