@@ -1,23 +1,8 @@
-//! `chassis-bench fleet`: one operator, many simulated robots, on this machine.
-//!
-//! In one network namespace of its own (loopback only: nothing reaches a real interface), N
-//! robots run as on their computers — `chassisd --robot KIND` on its simulated chassis and
-//! `chassis-zenoh --listen tcp/127.0.0.1:PORT`, under one iceoryx2 prefix — and one operator's
-//! `chassis-zenoh --connect … --mirror-all` mirrors them under another prefix. Robots are added
-//! (1, 5, 10, 20 by default; the kinds in turn: TITAN, SCOUT MINI, HUNTER), and for each size
-//! a fresh operator is started and measured once it mirrors every robot:
-//!
-//! * the operator's CPU (its process' user + system time over the window, % of one core) and
-//!   resident memory (`VmRSS` at the end, `VmHWM` its peak);
-//! * each robot's state latency to the operator as `chassis fleet --once --json` measures it:
-//!   chassisd handed the sample to iceoryx2 on the robot (`published_ns`) → a reader on the
-//!   operator's side woken by the mirrored sample (both stamps from this machine's
-//!   `CLOCK_MONOTONIC`), and the state samples per second that arrived;
-//! * the robot sides' CPU, and the whole machine's busy share over the window (the robots'
-//!   own load shares the operator's two cores here).
-//!
-//! `--doc FILE` writes the section `## Fleet` of that document (the rest is kept); the main
-//! run's `--doc` keeps this section as it is.
+//! `chassis-bench fleet`: one operator, many simulated robots, on this machine, in a network
+//! namespace of its own (loopback only: nothing reaches a real interface). What it runs and
+//! measures is the method of the section it writes (`clients/bench/fleet.md`): `--doc FILE`
+//! writes the section `## Fleet` of that document (the rest is kept); the main run's `--doc`
+//! keeps this section as it is.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
