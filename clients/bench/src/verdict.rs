@@ -170,10 +170,6 @@ fn plain((measured, met): (String, Option<bool>)) -> (String, Outcome) {
 
 impl Check {
     fn judge(&self, report: &Report) -> (String, Outcome) {
-        let per_million = |l: &LoopRun| {
-            let own = LoopRun::per_million(l.misses, l.periods);
-            (own, LoopRun::per_million(l.raw_misses, l.raw_periods))
-        };
         match self {
             Check::Latency {
                 rows,
@@ -211,7 +207,8 @@ impl Check {
                 against,
             } => ratio(report, rows, *p99_times, *against),
             Check::LoopMisses => plain(tally(report.loops.iter().map(|l| {
-                let (own, raw) = per_million(l);
+                let own = LoopRun::per_million(l.misses, l.periods);
+                let raw = LoopRun::per_million(l.raw_misses, l.raw_periods);
                 let (own_text, raw_text) = (own.round(), raw.round());
                 let text = format!(
                     "{} {}: {own_text} vs {raw_text} of a million",
