@@ -31,13 +31,6 @@ pub struct Part {
     pub summary: Summary,
 }
 
-impl Part {
-    /// The boundary the part starts at: "request read" of "request read → write begun (…)".
-    pub fn from(&self) -> &str {
-        self.name.split(" → ").next().unwrap_or_default()
-    }
-}
-
 /// The parts of one path, in the order a sample passes them, and each sample's parts of one
 /// kind summed: a row's p99 is not the sum of its parts' p99s, and a few parts together can
 /// miss a target that none of them misses alone.
@@ -53,27 +46,21 @@ pub struct Split {
 
 use Whose::{Code, Outside};
 
-/// Where the in-service command row starts (`request_read` of the pass trace): the command
-/// split's parts from this boundary on are the in-service row's ([`in_service_command`]).
-const REQUEST_READ: &str = "request read";
-const WRITE_BEGUN: &str = "write begun";
-
 /// Whether `part` of a command split lies within the in-service row (request read → frame
-/// written).
+/// written): it starts at the request read (`request_read` of the pass trace) or after.
 pub fn in_service_command(part: &Part) -> bool {
-    matches!(part.from(), REQUEST_READ | WRITE_BEGUN)
+    let from = part.name.split(" → ").next().unwrap_or_default();
+    matches!(from, "request read" | "write begun")
 }
 
-/// Splits `parts.len() + 1` stamps, each later than or at the one before, into the
+/// Splits `names.len() + 1` stamps, each later than or at the one before, into the
 /// distributions between consecutive stamps; a sample whose stamps are not in order is left out.
 fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Split {
     let mut parts: Vec<Latencies> = names.iter().map(|_| Latencies::new()).collect();
     let (mut outside, mut code) = (Latencies::new(), Latencies::new());
     for stamps in samples {
-        if stamps.len() != names.len() + 1
-            || stamps.contains(&0)
-            || stamps.windows(2).any(|w| w[1] < w[0])
-        {
+        let in_order = stamps.windows(2).all(|w| w[0] <= w[1]);
+        if stamps.len() != names.len() + 1 || stamps.contains(&0) || !in_order {
             continue;
         }
         let (mut outside_ns, mut code_ns) = (0, 0);
@@ -87,16 +74,13 @@ fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Sp
         outside.record(outside_ns);
         code.record(code_ns);
     }
+    let parts = names.iter().zip(parts).map(|(&(name, whose), l)| Part {
+        name: name.to_string(),
+        whose,
+        summary: l.summary(),
+    });
     Split {
-        parts: names
-            .iter()
-            .zip(parts)
-            .map(|(&(name, whose), l)| Part {
-                name: name.to_string(),
-                whose,
-                summary: l.summary(),
-            })
-            .collect(),
+        parts: parts.collect(),
         outside: outside.summary(),
         code: code.summary(),
     }
@@ -113,46 +97,43 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> S
         .filter(|p| p.written != 0 && p.waited_since != 0)
         .map(|p| (p.written, p))
         .collect();
-    let busy = (
-        "request created → loop waiting (the passes under way)",
-        Code,
-    );
-    let write = (
-        "write begun → frame written (the bus' write system call)",
-        Outside,
-    );
-    let mux = ("request read → write begun (mux, driver, encoding)", Code);
-    let names: &[(&str, Whose)] = if polled {
-        &[
-            busy,
-            ("loop polling → pass began (the poll)", Outside),
-            ("pass began → request read", Code),
-            mux,
-            write,
-        ]
+    let (woke, read) = if polled {
+        (
+            "loop polling → pass began (the poll)",
+            "pass began → request read",
+        )
     } else {
-        &[
-            busy,
-            ("loop waiting → loop woke (the wake-up)", Outside),
-            ("loop woke → request read", Code),
-            mux,
-            write,
-        ]
+        (
+            "loop waiting → loop woke (the wake-up)",
+            "loop woke → request read",
+        )
     };
-    split(
-        names,
-        samples.iter().filter_map(|&(created, written)| {
-            let p = by_written.get(&written)?;
-            Some(vec![
-                created,
-                created.max(p.waited_since),
-                created.max(p.woke),
-                p.requests_read,
-                p.write_started,
-                written,
-            ])
-        }),
-    )
+    let names = [
+        (
+            "request created → loop waiting (the passes under way)",
+            Code,
+        ),
+        (woke, Outside),
+        (read, Code),
+        ("request read → write begun (mux, driver, encoding)", Code),
+        (
+            "write begun → frame written (the bus' write system call)",
+            Outside,
+        ),
+    ];
+    let stamps = samples.iter().filter_map(|&(created, written)| {
+        let p = by_written.get(&written)?;
+        let (waiting, woke) = (created.max(p.waited_since), created.max(p.woke));
+        Some(vec![
+            created,
+            waiting,
+            woke,
+            p.requests_read,
+            p.write_started,
+            written,
+        ])
+    });
+    split(&names, stamps)
 }
 
 /// The passes that handed a state and woke its readers, by the time they handed their first.
@@ -193,9 +174,8 @@ const STATE_PASS: [(&str, Whose); 3] = [
 /// Frame read → the sample handed to iceoryx2 → the state readers' notification begun at the
 /// end of its pass → it returned → the reader has it, for each `(frame read, handed, received)`
 /// sample handed within a pass of the trace (from the pass's first state handed to its readers
-/// woken). A reader that had the sample before the pass notified it (a polling reader, or one
-/// awake already) spent nothing on the notification and a wake-up: those parts are 0, and the
-/// rest of the pass counts until the reader had it.
+/// woken). A reader that had the sample before the pass notified it ([`notification`]): those
+/// parts are 0, and the rest of the pass counts until the reader had it.
 pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
     let with_state = state_passes(passes);
     let mut names = STATE_PASS.to_vec();
@@ -203,13 +183,11 @@ pub fn state(samples: &[(u64, u64, u64)], passes: &[PassStamps]) -> Split {
         "notification returned → reader has it (its wake-up)",
         Outside,
     ));
-    split(
-        &names,
-        samples.iter().filter_map(|&(read, handed, received)| {
-            let [begun, woken] = notification(pass_of(&with_state, handed)?, received);
-            Some(vec![read, handed, begun, woken, received])
-        }),
-    )
+    let stamps = samples.iter().filter_map(|&(read, handed, received)| {
+        let [begun, woken] = notification(pass_of(&with_state, handed)?, received);
+        Some(vec![read, handed, begun, woken, received])
+    });
+    split(&names, stamps)
 }
 
 /// The Python client's state samples as [`state`] splits the Rust client's, with the reader's
@@ -232,22 +210,20 @@ pub fn python_state(samples: &[[u64; 4]], passes: &[PassStamps]) -> Split {
             Code,
         ),
     ]);
-    split(
-        &names,
-        samples
-            .iter()
-            .filter_map(|&[read, handed, returned, received]| {
-                let [begun, woken] = notification(pass_of(&with_state, handed)?, received);
-                Some(vec![
-                    read,
-                    handed,
-                    begun,
-                    woken,
-                    returned.max(woken),
-                    received,
-                ])
-            }),
-    )
+    let stamps = samples
+        .iter()
+        .filter_map(|&[read, handed, returned, received]| {
+            let [begun, woken] = notification(pass_of(&with_state, handed)?, received);
+            Some(vec![
+                read,
+                handed,
+                begun,
+                woken,
+                returned.max(woken),
+                received,
+            ])
+        });
+    split(&names, stamps)
 }
 
 /// A bridge trace's lines by their first column (the frame's read time), the first line of each:
@@ -260,33 +236,21 @@ fn first_by_read(trace: &[[u64; 4]]) -> HashMap<u64, &[u64; 4]> {
     by_read
 }
 
-/// The first of `with_state` ([`state_passes`]) whose readers' notification began at or after
-/// `read`: the notification that follows the frame's read (its own pass's, which publishes the
-/// frame's state before it notifies).
-fn notifying_pass<'a>(with_state: &[&'a PassStamps], read: u64) -> Option<&'a PassStamps> {
-    let before = with_state.partition_point(|p| p.state_wake_begun < read);
-    with_state.get(before).copied()
-}
-
-/// The parts of a bridge's sample from the frame's read until the bridge's loop woke with it,
-/// at the stamps of [`to_bridge`].
-fn to_bridge_parts(bridge: &'static str) -> [(&'static str, Whose); 3] {
-    [
-        (
-            "frame read → notification begun (chassisd: decode, state, the rest of the pass)",
-            Code,
-        ),
-        STATE_PASS[2],
-        (bridge, Outside),
-    ]
+/// The parts of a bridge's sample from the frame's read until the bridge's loop woke with it
+/// (`bridge`), then `rest`.
+fn bridge_parts<'a>(bridge: &'a str, rest: &[(&'a str, Whose)]) -> Vec<(&'a str, Whose)> {
+    let pass = "frame read → notification begun (chassisd: decode, state, the rest of the pass)";
+    [&[(pass, Code), STATE_PASS[2], (bridge, Outside)], rest].concat()
 }
 
 /// `[frame read, notification begun, returned, bridge woke]` for a frame read at `read` that a
-/// bridge's loop woke with at `woke`: the notification is the first after the read in
-/// chassisd's pass trace (none: `None`). A bridge awake before the notification (still at the
-/// samples before) spent nothing on it and on a wake-up, as a reader in [`state`].
+/// bridge's loop woke with at `woke`. The notification is the first of `with_state`
+/// ([`state_passes`]) that began at or after the read: its own pass's, which publishes the
+/// frame's state before it notifies (none: `None`). A bridge awake before the notification
+/// (still at the samples before) spent nothing on it and on a wake-up, as a reader in [`state`].
 fn to_bridge(with_state: &[&PassStamps], read: u64, woke: u64) -> Option<[u64; 4]> {
-    let [begun, woken] = notification(notifying_pass(with_state, read)?, woke);
+    let notifying = with_state.get(with_state.partition_point(|p| p.state_wake_begun < read))?;
+    let [begun, woken] = notification(notifying, woke);
     Some([read, begun, woken, woke])
 }
 
@@ -294,33 +258,28 @@ fn to_bridge(with_state: &[&PassStamps], read: u64, woke: u64) -> Option<[u64; 4
 /// bridge's state loop woke with the sample → the odom handed to RustDDS → the peer took it,
 /// for each `(frame read, taken)` sample of the ROS 2 row whose odom is in the bridge's trace
 /// (`[read, woke, write begun, written]` a line, joined on the frame's read time) and whose
-/// frame is followed by a notification in chassisd's pass trace. A bridge awake before the
-/// notification (still converting the sample before) spent nothing on it and on a wake-up, as
-/// in [`state`]. The write's return is not a boundary: on a shared CPU the peer often has the
-/// odom before the write returns (RustDDS' sender and the peer ran in between).
+/// frame is followed by a notification in chassisd's pass trace ([`to_bridge`]). The write's
+/// return is not a boundary: on a shared CPU the peer often has the odom before the write
+/// returns (RustDDS' sender and the peer ran in between).
 pub fn odom(samples: &[(u64, u64)], trace: &[[u64; 4]], passes: &[PassStamps]) -> Split {
-    // The first odom of each read time: the one the peer counts (a later one repeats it).
-    let by_read = first_by_read(trace);
-    let with_state = state_passes(passes);
-    split(
+    let (by_read, with_state) = (first_by_read(trace), state_passes(passes));
+    let names = bridge_parts(
+        "notification returned → bridge woke (its wake-up)",
         &[
-            &to_bridge_parts("notification returned → bridge woke (its wake-up)")[..],
-            &[
-                ("bridge woke → odom handed to RustDDS (conversion)", Code),
-                (
-                    "handed to RustDDS → taken by the peer (RustDDS' write and sender, UDP, Cyclone DDS)",
-                    Outside,
-                ),
-            ],
-        ]
-        .concat(),
-        samples.iter().filter_map(|&(read, taken)| {
-            let t = by_read.get(&read)?;
-            let mut stamps = to_bridge(&with_state, read, t[1])?.to_vec();
-            stamps.extend([t[2], taken]);
-            Some(stamps)
-        }),
-    )
+            ("bridge woke → odom handed to RustDDS (conversion)", Code),
+            (
+                "handed to RustDDS → taken by the peer (RustDDS' write and sender, UDP, Cyclone DDS)",
+                Outside,
+            ),
+        ],
+    );
+    let stamps = samples.iter().filter_map(|&(read, taken)| {
+        let t = by_read.get(&read)?;
+        let mut stamps = to_bridge(&with_state, read, t[1])?.to_vec();
+        stamps.extend([t[2], taken]);
+        Some(stamps)
+    });
+    split(&names, stamps)
 }
 
 /// A bridge's trace of `format` ([`chassis_ipc::StampTrace`]).
@@ -350,29 +309,26 @@ pub fn zenoh_state(
 ) -> Split {
     let (export, mirror) = (first_by_read(export), first_by_read(mirror));
     let with_state = state_passes(passes);
-    split(
+    let names = bridge_parts(
+        "notification returned → export woke (its wake-up)",
         &[
-            &to_bridge_parts("notification returned → export woke (its wake-up)")[..],
-            &[
-                ("export woke → put begun (the newest of the wake-up)", Code),
-                (
-                    "put begun → operator's callback (Zenoh: put, TCP over the veth, its runtime)",
-                    Outside,
-                ),
-                ("callback → mirror's loop took it (channel hand-off)", Code),
-                ("taken → handed to iceoryx2 (decode, link watch)", Code),
-                ("handed to iceoryx2 → reader has it (iceoryx2)", Outside),
-            ],
-        ]
-        .concat(),
-        samples.iter().filter_map(|&(read, received)| {
-            let e = export.get(&read)?;
-            let m = mirror.get(&read)?;
-            let mut stamps = to_bridge(&with_state, read, e[1])?.to_vec();
-            stamps.extend([e[2], m[1], m[2], m[3], received]);
-            Some(stamps)
-        }),
-    )
+            ("export woke → put begun (the newest of the wake-up)", Code),
+            (
+                "put begun → operator's callback (Zenoh: put, TCP over the veth, its runtime)",
+                Outside,
+            ),
+            ("callback → mirror's loop took it (channel hand-off)", Code),
+            ("taken → handed to iceoryx2 (decode, link watch)", Code),
+            ("handed to iceoryx2 → reader has it (iceoryx2)", Outside),
+        ],
+    );
+    let stamps = samples.iter().filter_map(|&(read, received)| {
+        let (e, m) = (export.get(&read)?, mirror.get(&read)?);
+        let mut stamps = to_bridge(&with_state, read, e[1])?.to_vec();
+        stamps.extend([e[2], m[1], m[2], m[3], received]);
+        Some(stamps)
+    });
+    split(&names, stamps)
 }
 
 #[cfg(test)]

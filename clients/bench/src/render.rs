@@ -1,6 +1,7 @@
 //! The performance document: its words are `clients/bench/performance.md`, whose `{{name}}`s this
 //! fills from a run's samples (a [`Report`]) and its verdict, nothing typed by hand. A
-//! `{{name}}` alone on its line stands for a block of lines, none when the block is empty.
+//! `{{name}}` alone on its line stands for a block of lines, none when the block is empty. The
+//! terminal's table is the document's tables and lists.
 
 use crate::baseline::HYBRID_SPIN;
 use crate::parts::Whose;
@@ -9,17 +10,21 @@ use crate::paths::{
     XBOT_COMMAND_INTERVAL, off_grid, period_text,
 };
 use crate::report::{
-    DEFAULT_CONFIG_ROW, LoopRun, MIN_FOR_P99, MIN_FOR_P999, Report, SUM_TOLERANCE, TOGETHER_CODE,
-    TOGETHER_OUTSIDE, percentile, whose_text,
+    DEFAULT_CONFIG_ROW, LoopRun, MIN_FOR_P99, MIN_FOR_P999, Report, SUM_TOLERANCE, StallRates,
 };
 use crate::stats::Summary;
 
 const TEMPLATE: &str = include_str!("../performance.md");
 
+/// The microseconds table's rows of each sample's parts of the code, and outside it, summed.
+pub(crate) const TOGETHER_CODE: &str = "*together*: the code's parts, each sample's sum";
+pub(crate) const TOGETHER_OUTSIDE: &str =
+    "*together*: the parts outside the code, each sample's sum";
+
 /// The performance document of `report`.
 pub fn document(report: &Report) -> anyhow::Result<String> {
-    let p = &report.provenance;
-    let m = &report.machine;
+    let (p, m) = (&report.provenance, &report.machine);
+    let period = |interval| period_text(off_grid(interval));
     let values = [
         ("date", p.date.clone()),
         ("commit", p.commit_text()),
@@ -46,11 +51,8 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
             size_of::<chassis_client::ChassisState>().to_string(),
         ),
         ("hybrid_spin_us", HYBRID_SPIN.as_micros().to_string()),
-        ("command_period", period_text(off_grid(COMMAND_INTERVAL))),
-        (
-            "xbot_command_period",
-            period_text(off_grid(XBOT_COMMAND_INTERVAL)),
-        ),
+        ("command_period", period(COMMAND_INTERVAL)),
+        ("xbot_command_period", period(XBOT_COMMAND_INTERVAL)),
         (
             "command_interval_ms",
             COMMAND_INTERVAL.as_millis().to_string(),
@@ -68,255 +70,339 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
 
 /// `template` with each `{{name}}` replaced by its value in `values`: a name with no value is
 /// an error, and so is a value the template never names.
-fn fill(template: &str, values: &[(&str, String)]) -> anyhow::Result<String> {
+pub(crate) fn fill(template: &str, values: &[(&str, String)]) -> anyhow::Result<String> {
     let value = |name: &str| {
-        values
+        let found = values
             .iter()
             .find(|(n, _)| *n == name)
-            .map(|(_, v)| v.as_str())
+            .map(|(_, v)| v.as_str());
+        found
             .ok_or_else(|| anyhow::anyhow!("the document names {{{{{name}}}}}, which has no value"))
     };
     let mut out = String::new();
     for line in template.lines() {
-        if let Some(name) = line.strip_prefix("{{").and_then(|l| l.strip_suffix("}}"))
-            && !name.contains("{{")
-        {
+        let block = line.strip_prefix("{{").and_then(|l| l.strip_suffix("}}"));
+        if let Some(name) = block.filter(|name| !name.contains("{{")) {
             let block = value(name)?;
             if !block.is_empty() {
-                out.push_str(block);
-                out.push('\n');
+                out.push_str(&format!("{block}\n"));
             }
             continue;
         }
         let mut rest = line;
         while let Some(start) = rest.find("{{") {
-            let end = rest[start..]
-                .find("}}")
-                .ok_or_else(|| anyhow::anyhow!("an unclosed {{{{ in the document: {line}"))?;
+            let unclosed = || anyhow::anyhow!("an unclosed {{{{ in the document: {line}");
+            let end = start + rest[start..].find("}}").ok_or_else(unclosed)?;
             out.push_str(&rest[..start]);
-            out.push_str(value(&rest[start + 2..start + end])?);
-            rest = &rest[start + end + 2..];
+            out.push_str(value(&rest[start + 2..end])?);
+            rest = &rest[end + 2..];
         }
-        out.push_str(rest);
-        out.push('\n');
+        out.push_str(&format!("{rest}\n"));
     }
-    if let Some((name, _)) = values
+    let unnamed = values
         .iter()
-        .find(|(name, _)| !template.contains(&format!("{{{{{name}}}}}")))
-    {
+        .find(|(n, _)| !template.contains(&format!("{{{{{n}}}}}")));
+    if let Some((name, _)) = unnamed {
         anyhow::bail!("the document never names {{{{{name}}}}}");
     }
     Ok(out)
 }
 
-/// The table's rows.
+/// `items` one a line.
+pub(crate) fn lines<T>(
+    items: impl IntoIterator<Item = T>,
+    line: impl FnMut(T) -> String,
+) -> String {
+    items.into_iter().map(line).collect::<Vec<_>>().join("\n")
+}
+
+/// A percentile for a table: `—` when the row has too few samples to tell it from the maximum.
+pub(crate) fn percentile(value: f64, count: u64, fewest: u64) -> String {
+    if count >= fewest {
+        format!("{value:.1}")
+    } else {
+        "—".into()
+    }
+}
+
+/// The table's rows: each row's count with what it lost beside it, its percentiles (a dash
+/// where its count cannot give one), its ratios to its baseline.
 fn table(report: &Report) -> String {
-    let rows: Vec<String> = report
-        .rows
-        .iter()
-        .map(|r| {
-            let ratio = match (r.ratio_p50, r.ratio_p99) {
-                (Some(x), Some(y)) => format!("{x:.2}, {y:.2}"),
-                (Some(x), None) => format!("{x:.2}, —"),
-                _ => String::new(),
-            };
-            let flag = if r.inconsistent.is_some() {
-                " **inconsistent**"
-            } else {
-                ""
-            };
-            format!(
-                "| {} | {} | {} | {} | {} | {ratio}{flag} | {} |",
-                r.path,
-                r.what,
-                r.mode,
-                r.placement,
-                r.figures().join(" | "),
-                r.baseline.as_deref().unwrap_or("")
-            )
-        })
-        .collect();
-    rows.join("\n")
+    lines(&report.rows, |r| {
+        let s = &r.summary;
+        let ratio = match (r.ratio_p50, r.ratio_p99) {
+            (Some(x), Some(y)) => format!("{x:.2}, {y:.2}"),
+            (Some(x), None) => format!("{x:.2}, —"),
+            _ => String::new(),
+        };
+        let flag = r.inconsistent.as_ref().map_or("", |_| " **inconsistent**");
+        let (what, mode, placement) = (&r.what, &r.mode, &r.placement);
+        format!(
+            "| {} | {what} | {mode} | {placement} | {} | {:.1} | {:.1} | {} | {} | {:.1} | \
+             {ratio}{flag} | {} |",
+            r.path,
+            r.count_text(),
+            s.p50_us,
+            s.p90_us,
+            percentile(s.p99_us, s.count, MIN_FOR_P99),
+            percentile(s.p999_us, s.count, MIN_FOR_P999),
+            s.max_us,
+            r.baseline.as_deref().unwrap_or("")
+        )
+    })
 }
 
 /// The rows flagged inconsistent, with why, or nothing.
 fn inconsistent(report: &Report) -> String {
-    let flagged: Vec<String> = report
-        .rows
-        .iter()
-        .filter_map(|r| {
-            let why = r.inconsistent.as_deref()?;
-            Some(format!(
-                "* {} {} ({} loop, {}): {why}",
-                r.path, r.what, r.mode, r.placement
-            ))
-        })
-        .collect();
+    let flagged = report.rows.iter().filter_map(|r| {
+        let why = r.inconsistent.as_deref()?;
+        Some(format!(
+            "* {} {} ({} loop, {}): {why}",
+            r.path, r.what, r.mode, r.placement
+        ))
+    });
+    let flagged = lines(flagged, |f| f);
     if flagged.is_empty() {
-        return String::new();
+        return flagged;
     }
-    format!(
-        "**Inconsistent measurements** (flagged by the benchmark):\n\n{}\n",
-        flagged.join("\n")
-    )
+    format!("**Inconsistent measurements** (flagged by the benchmark):\n\n{flagged}\n")
 }
 
 /// Each baseline's conditions.
 fn conditions(report: &Report) -> String {
-    let lines: Vec<String> = report
+    let baselines = report
         .rows
         .iter()
-        .filter_map(|r| {
-            Some(format!(
-                "* {}, {}: {}",
-                r.what,
-                r.placement,
-                r.conditions.as_ref()?
-            ))
-        })
-        .collect();
-    lines.join("\n")
+        .filter_map(|r| Some((r, r.conditions.as_ref()?)));
+    lines(baselines, |(r, c)| {
+        format!("* {}, {}: {c}", r.what, r.placement)
+    })
 }
 
 /// The targets' rows: each target, what this run measured, and its outcome.
 fn targets(report: &Report) -> anyhow::Result<String> {
-    let rows: Vec<String> = crate::verdict::judge(report)?
-        .into_iter()
-        .map(|v| format!("| {} | {} | {} |", v.text, v.measured, v.outcome))
-        .collect();
-    Ok(rows.join("\n"))
+    let verdicts = crate::verdict::judge(report)?;
+    Ok(lines(verdicts, |v| {
+        format!("| {} | {} | {} |", v.text, v.measured, v.outcome)
+    }))
 }
 
 /// The microseconds table's rows: each part's p50 and p99 over the same samples and its share
 /// of the sum of the p50s, then each sample's parts of the code summed, and those outside it.
 pub fn parts(report: &Report) -> String {
-    let mut rows = Vec::new();
-    for p in &report.parts {
+    lines(&report.parts, |p| {
         let total: f64 = p.split.parts.iter().map(|part| part.summary.p50_us).sum();
         let row = |name: &str, whose: Whose, s: &Summary, share: String| {
+            let whose = match whose {
+                Whose::Code => "the code",
+                Whose::Outside => "outside",
+            };
+            let p99 = percentile(s.p99_us, s.count, MIN_FOR_P99);
             format!(
-                "| {} | {} | {} | {} | {name} | {} | {} | {:.1} | {} | {share} |",
-                p.path,
-                p.what,
-                p.mode,
-                p.placement,
-                whose_text(whose),
-                s.count,
-                s.p50_us,
-                percentile(s.p99_us, s.count, MIN_FOR_P99)
+                "| {} | {} | {} | {} | {name} | {whose} | {} | {:.1} | {p99} | {share} |",
+                p.path, p.what, p.mode, p.placement, s.count, s.p50_us
             )
         };
-        for part in &p.split.parts {
-            let s = &part.summary;
-            let share = if total > 0.0 {
-                format!("{:.0} %", 100.0 * s.p50_us / total)
-            } else {
-                String::new()
-            };
-            rows.push(row(&part.name, part.whose, s, share));
+        let share = |s: &Summary| {
+            let share = (total > 0.0).then(|| format!("{:.0} %", 100.0 * s.p50_us / total));
+            share.unwrap_or_default()
+        };
+        let mut rows = lines(&p.split.parts, |part| {
+            row(&part.name, part.whose, &part.summary, share(&part.summary))
+        });
+        for (name, whose, s) in [
+            (TOGETHER_CODE, Whose::Code, &p.split.code),
+            (TOGETHER_OUTSIDE, Whose::Outside, &p.split.outside),
+        ] {
+            rows.push_str(&format!("\n{}", row(name, whose, s, String::new())));
         }
-        rows.push(row(
-            TOGETHER_CODE,
-            Whose::Code,
-            &p.split.code,
-            String::new(),
-        ));
-        rows.push(row(
-            TOGETHER_OUTSIDE,
-            Whose::Outside,
-            &p.split.outside,
-            String::new(),
-        ));
-    }
-    rows.join("\n")
+        rows
+    })
 }
 
 /// The control loops' rows: each loop's periods and misses beside the raw loop's.
 pub fn loops(report: &Report) -> String {
-    let rows: Vec<String> = report
-        .loops
-        .iter()
-        .map(|l| {
-            format!(
-                "| {}, {} | {} | {} | {} | {} ({:.0}) | {} of {} ({:.0}) | {} |",
-                l.run,
-                l.rate,
-                l.mode,
-                l.placement,
-                l.periods,
-                l.misses,
-                LoopRun::per_million(l.misses, l.periods),
-                l.raw_misses,
-                l.raw_periods,
-                LoopRun::per_million(l.raw_misses, l.raw_periods),
-                l.superseded
-            )
-        })
-        .collect();
-    if rows.is_empty() {
+    if report.loops.is_empty() {
         return "| not measured in this run | | | | | | |".into();
     }
-    rows.join("\n")
+    lines(&report.loops, |l| {
+        let own = LoopRun::per_million(l.misses, l.periods);
+        let raw = LoopRun::per_million(l.raw_misses, l.raw_periods);
+        format!(
+            "| {}, {} | {} | {} | {} | {} ({own:.0}) | {} of {} ({raw:.0}) | {} |",
+            l.run,
+            l.rate,
+            l.mode,
+            l.placement,
+            l.periods,
+            l.misses,
+            l.raw_misses,
+            l.raw_periods,
+            l.superseded
+        )
+    })
 }
 
 /// The cost under a full bus of each bus and bit rate, and the memory real-time mode locks.
 fn cost(report: &Report) -> String {
-    let mut lines: Vec<String> = report
-        .cost
-        .iter()
-        .map(|c| {
-            format!(
-                "* {} bus, {} kbit/s (the simulated chassis flooding it): {:.0} frames/s \
-                 received; the service's loop thread used {:.2} % of one core; resident memory \
-                 {:.1} MiB",
-                c.bus,
-                c.bitrate / 1000,
-                c.frames_per_s,
-                c.cpu_pct,
-                c.rss_mib
-            )
-        })
-        .collect();
-    if let Some(rss) = report.realtime_rss_mib {
-        lines.push(format!(
+    let buses = lines(&report.cost, |c| {
+        format!(
+            "* {} bus, {} kbit/s (the simulated chassis flooding it): {:.0} frames/s received; the \
+             service's loop thread used {:.2} % of one core; resident memory {:.1} MiB",
+            c.bus,
+            c.bitrate / 1000,
+            c.frames_per_s,
+            c.cpu_pct,
+            c.rss_mib
+        )
+    });
+    let realtime = report.realtime_rss_mib.map(|rss| {
+        format!(
             "* in real-time mode (`--realtime`, the latency runs) chassisd locks every page it \
              maps, its whole executable and every iceoryx2 segment it serves included: resident \
              memory {rss:.1} MiB at most over those runs (the target below is read on the runs \
              with normal scheduling above)"
-        ));
-    }
-    lines.join("\n")
+        )
+    });
+    lines(
+        [buses]
+            .into_iter()
+            .chain(realtime)
+            .filter(|l| !l.is_empty()),
+        |l| l,
+    )
 }
 
 /// The replays of a recorded bus, and the run's notes.
 fn throughput_and_notes(report: &Report) -> String {
-    let mut lines = Vec::new();
-    if !report.throughput.is_empty() {
-        let runs: Vec<String> = report
-            .throughput
-            .iter()
-            .map(|t| {
-                format!(
-                    "{} frames in {:.2} s, {:.0} frames/s, the service's loop busy {:.0} % of \
-                     the time: {:.0} frames per second of its CPU",
-                    t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
-                )
-            })
-            .collect();
-        lines.push(format!(
+    let runs = lines(&report.throughput, |t| {
+        format!(
+            "{} frames in {:.2} s, {:.0} frames/s, the service's loop busy {:.0} % of the time: \
+             {:.0} frames per second of its CPU",
+            t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
+        )
+    });
+    let replays = (!runs.is_empty()).then(|| {
+        format!(
             "* a recorded TITAN bus replayed at full speed through the service, read, decoded \
              and published, {} times, each into a fresh service: {}. The replay's writer (a \
              thread on the other CPU, one write per frame) does not always keep the service \
              busy: the target counts the frames per second of the service's own CPU time, the \
              median replay's",
             report.throughput.len(),
-            runs.join("; ")
-        ));
+            runs.replace('\n', "; ")
+        )
+    });
+    let notes = report.notes.iter().chain(&report.problems);
+    lines(
+        replays
+            .into_iter()
+            .chain(notes.map(|n| format!("* note: {n}"))),
+        |l| l,
+    )
+}
+
+impl Report {
+    /// What the system granted: real-time mode in every run that asked for it, or the runs
+    /// where it was refused (their loops ran with normal scheduling, and so did their
+    /// baselines' receivers).
+    pub fn scheduling_text(&self) -> String {
+        use crate::paths::Scheduling;
+        let asked = self
+            .scheduling
+            .iter()
+            .filter(|(_, s)| *s != Scheduling::Normal)
+            .count();
+        let refused = self
+            .scheduling
+            .iter()
+            .filter(|(_, s)| *s == Scheduling::Refused);
+        let refused: Vec<&str> = refused.map(|(run, _)| run.as_str()).collect();
+        if refused.is_empty() {
+            return format!(
+                "Real-time mode was granted in each of the {asked} runs that asked for it."
+            );
+        }
+        format!(
+            "**Real-time mode was refused** (no CAP_SYS_NICE or RLIMIT_RTPRIO) in {} of the \
+             {asked} runs that asked for it, which ran with normal scheduling: {}.",
+            refused.len(),
+            refused.join("; ")
+        )
     }
-    for note in report.notes.iter().chain(&report.problems) {
-        lines.push(format!("* note: {note}"));
+
+    /// What the stall rows say of every p99 on this machine, or nothing without them.
+    pub(crate) fn stalls_text(&self) -> String {
+        if self.stalls.is_empty() {
+            return String::new();
+        }
+        // "LOW to HIGH" over the CPUs, one figure when they print alike.
+        let span = |f: &dyn Fn(&StallRates) -> f64, decimals: usize| {
+            let low = self.stalls.iter().map(f).fold(f64::INFINITY, f64::min);
+            let high = self.stalls.iter().map(f).fold(0.0, f64::max);
+            let (low, high) = (format!("{low:.decimals$}"), format!("{high:.decimals$}"));
+            if low == high {
+                low
+            } else {
+                format!("{low} to {high}")
+            }
+        };
+        // The chance that a window of 100 µs holds the start of a stall over 20 µs, %.
+        let chance = |s: &StallRates| 100.0 * s.over_20_us * 100e-6;
+        let least = self.stalls.iter().map(chance).fold(f64::INFINITY, f64::min);
+        format!(
+            " On this machine a thread that never blocks lost more than 20 µs {} times a second \
+             and more than 100 µs {} times a second, by CPU (the stall rows of the table): a \
+             path of 100 µs meets a stall of more than 20 µs in about {} % of its samples on \
+             each CPU it runs on{}",
+            span(&|s| s.over_20_us, 0),
+            span(&|s| s.over_100_us, 2),
+            span(&chance, 1),
+            if least >= 1.0 {
+                ": more than 1 %, so that its p99 carries one, whatever the code does."
+            } else {
+                "."
+            }
+        )
     }
-    lines.join("\n")
+
+    /// The run on a terminal: the document's tables and lists, without its words.
+    pub fn table(&self) -> String {
+        let (p, m) = (&self.provenance, &self.machine);
+        let blocks = [
+            format!(
+                "{}, {}; machine: {}, {} cores, kernel {}; host steal time over the run: {}",
+                p.date,
+                p.commit_text().replace('`', ""),
+                m.cpu_model,
+                m.cpus,
+                m.kernel,
+                p.steal_text()
+            ),
+            with_head("table", table(self)),
+            inconsistent(self),
+            conditions(self),
+            with_head("parts", parts(self)),
+            with_head("loops", loops(self)),
+            cost(self),
+            throughput_and_notes(self),
+        ];
+        let blocks = blocks.iter().filter(|b| !b.is_empty());
+        lines(blocks, |b| format!("{}\n", b.trim_end()))
+    }
+}
+
+/// `block` under the table head the template puts above `{{name}}` (nothing when empty).
+fn with_head(name: &str, block: String) -> String {
+    let above = TEMPLATE
+        .split(&format!("\n{{{{{name}}}}}\n"))
+        .next()
+        .unwrap_or_default();
+    let mut lines = above.rsplitn(3, '\n');
+    match (lines.next(), lines.next()) {
+        (Some(rule), Some(head)) if !block.is_empty() => format!("{head}\n{rule}\n{block}"),
+        _ => block,
+    }
 }
 
 #[cfg(test)]

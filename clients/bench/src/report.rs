@@ -6,7 +6,6 @@ use std::path::Path;
 use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::parts::Whose;
 use crate::paths::Cost;
 use crate::stats::{Latencies, Summary};
 
@@ -15,6 +14,7 @@ use crate::stats::{Latencies, Summary};
 /// moves toward the request (the mux ramps the change).
 pub const DEFAULT_CONFIG_ROW: &str =
     "titan sim, chassisd's default configuration, request → first frame toward it";
+
 /// Which path a row measures, the table's first column.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -32,19 +32,12 @@ pub enum PathKind {
 }
 
 impl std::fmt::Display for PathKind {
+    /// The kind's name in the samples (`in-service`), but `control loop` for [`PathKind::Loop`].
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            PathKind::Baseline => "baseline",
-            PathKind::Command => "command",
-            PathKind::InService => "in-service",
-            PathKind::State => "state",
-            PathKind::Preemption => "preemption",
-            PathKind::FanOut => "fan-out",
-            PathKind::Python => "python",
-            PathKind::Ros2 => "ros2",
-            PathKind::Zenoh => "zenoh",
-            PathKind::Loop => "control loop",
-        })
+        match self {
+            PathKind::Loop => f.write_str("control loop"),
+            kind => kind.serialize(f),
+        }
     }
 }
 
@@ -59,8 +52,7 @@ pub enum Leg {
     Stalls,
     /// A request created → its frame written.
     Command,
-    /// A request → the first frame toward it, chassisd's default configuration
-    /// ([`DEFAULT_CONFIG_ROW`]).
+    /// A request → the first frame toward it ([`DEFAULT_CONFIG_ROW`]).
     FirstFrameToward,
     /// A frame read → the state it changed in a reader.
     State,
@@ -89,25 +81,20 @@ pub enum Leg {
 pub struct Row {
     pub path: PathKind,
     pub leg: Leg,
-    /// The service run it belongs to, robot and bus (`titan sim`); empty for a baseline of no
-    /// run.
+    /// The service run it belongs to (`titan sim`); empty for a baseline of no run.
     pub run: String,
-    /// What ran, as the table shows it: the transport of a baseline, or robot and bus of a
-    /// service path.
+    /// What ran: the transport of a baseline, or robot and bus of a service path.
     pub what: String,
     /// Service loop mode (`event`, `spin`, `hybrid`), or `-` for baselines.
     pub mode: String,
-    /// Where the two ends ran.
     pub placement: String,
     pub summary: Summary,
     /// Requests that produced no frame within the wait (0 expected).
     pub missed: u64,
-    /// Samples published that the reader never received (gaps in `seq` of a lossless stream;
-    /// 0 expected). Samples out of the histogram's range are `summary.out_of_range`.
+    /// Samples of a lossless stream the reader never received (gaps in `seq`; 0 expected).
     pub dropped: u64,
     /// The rows whose hops this row contains, one after the other ([`row_key`] of each): the
-    /// ROS 2 bridge's rows contain a DDS hop and the service's own path. A row whose p50 is
-    /// below the sum of theirs is flagged as one below its baseline is.
+    /// ROS 2 bridge's rows contain a DDS hop and the service's own path.
     pub contains: Vec<String>,
     /// A baseline's conditions: how it was paced and what its receiver lived with.
     pub conditions: Option<String>,
@@ -118,9 +105,8 @@ pub struct Row {
     /// p50 / baseline p50 and p99 / baseline p99.
     pub ratio_p50: Option<f64>,
     pub ratio_p99: Option<f64>,
-    /// Set when the row's p50 is below its baseline's, the hop the path contains, or below the
-    /// sum of the rows it contains: a path cannot be faster than a part of it, so they were not
-    /// measured alike.
+    /// Why the row is below its baseline, or below the sum of the rows it contains: a path
+    /// cannot be faster than a part of it, so they were not measured alike.
     pub inconsistent: Option<String>,
     /// Every flag is one a smoke run reports without failing on it: below the sum of the hops
     /// it contains (their medians were each measured in their own conditions and add only
@@ -134,14 +120,13 @@ pub struct Row {
 pub struct Report {
     pub provenance: crate::provenance::Provenance,
     pub machine: Machine,
-    /// Each its own line of the samples file.
+    /// Each its own line of the samples file, as are `parts`.
     #[serde(skip)]
     pub rows: Vec<Row>,
     pub cost: Vec<Cost>,
     /// The replays, in the order they ran ([`REPLAYS`]).
     pub throughput: Vec<Throughput>,
-    /// Where the time of the service paths goes, run by run; each its own line of the samples
-    /// file.
+    /// Where the time of the service paths goes, run by run.
     #[serde(skip)]
     pub parts: Vec<Parts>,
     pub notes: Vec<String>,
@@ -158,19 +143,17 @@ pub struct Report {
     pub expected: Vec<Planned>,
     /// How often each CPU stalled a thread that never blocks ([`STALLS`] rows).
     pub stalls: Vec<StallRates>,
-    /// The control loops' periods and misses.
     #[serde(default)]
     pub loops: Vec<LoopRun>,
 }
 
-/// One control loop's periods: the loop over chassisd and the same loop over the raw hop.
+/// One control loop's periods over chassisd (`mode`), and the same loop over the raw hop.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LoopRun {
     /// Robot and bus.
     pub run: String,
     /// `1 kHz`, `100 Hz`.
     pub rate: String,
-    /// chassisd's loop.
     pub mode: String,
     pub placement: String,
     pub periods: u64,
@@ -184,7 +167,6 @@ pub struct LoopRun {
 }
 
 impl LoopRun {
-    /// Misses per million periods.
     pub(crate) fn per_million(misses: u64, periods: u64) -> f64 {
         1e6 * misses as f64 / periods.max(1) as f64
     }
@@ -228,16 +210,14 @@ impl Report {
     pub fn from_samples(text: &str) -> anyhow::Result<Report> {
         let mut report: Option<Report> = None;
         for (n, line) in text.lines().enumerate().filter(|(_, l)| !l.is_empty()) {
-            let read: ReadLine = serde_json::from_str(line)
-                .map_err(|e| anyhow::anyhow!("samples line {}: {e}", n + 1))?;
+            let n = n + 1;
+            let read: ReadLine =
+                serde_json::from_str(line).map_err(|e| anyhow::anyhow!("samples line {n}: {e}"))?;
             match (read, report.as_mut()) {
                 (ReadLine::Run(run), None) => report = Some(*run),
                 (ReadLine::Row(row), Some(r)) => r.rows.push(*row),
                 (ReadLine::Split(split), Some(r)) => r.parts.push(*split),
-                _ => anyhow::bail!(
-                    "samples line {}: the run's line must come first, once",
-                    n + 1
-                ),
+                _ => anyhow::bail!("samples line {n}: the run's line must come first, once"),
             }
         }
         report.ok_or_else(|| anyhow::anyhow!("no run in the samples"))
@@ -254,10 +234,8 @@ pub struct Planned {
 
 impl Planned {
     pub fn new(key: String, asked: impl Into<Option<u64>>) -> Self {
-        Self {
-            key,
-            asked: asked.into(),
-        }
+        let asked = asked.into();
+        Self { key, asked }
     }
 }
 
@@ -277,9 +255,8 @@ pub struct StallRates {
     pub over_100_us: f64,
 }
 
-/// The split of the Zenoh state row ([`Parts::path`]).
+/// The splits of the Zenoh and the Python client's state rows ([`Parts::path`]).
 pub const ZENOH_PARTS: &str = "zenoh: frame read → operator's state";
-/// The split of the Python client's state row ([`Parts::path`]).
 pub const PYTHON_PARTS: &str = "python: state";
 
 /// One path of one run split at the stamps the code takes: each part's distribution over the
@@ -289,15 +266,12 @@ pub struct Parts {
     /// `command`, `state`, `ros2: frame read → odom`, [`ZENOH_PARTS`] or [`PYTHON_PARTS`], as
     /// the document shows it.
     pub path: String,
-    /// The rows it splits: their path and leg, and its run (in-service rows are split with
-    /// their path's).
+    /// The path and leg of the rows it splits (in-service rows are split with their path's).
     pub of: (PathKind, Leg),
     pub run: String,
-    /// The run: robot and bus, loop, placement.
     pub what: String,
     pub mode: String,
     pub placement: String,
-    /// Its parts in the order a sample passes them, and their sums.
     #[serde(flatten)]
     pub split: crate::parts::Split,
 }
@@ -334,22 +308,17 @@ pub struct Machine {
 
 impl Machine {
     pub fn probe() -> Self {
-        let kernel = std::fs::read_to_string("/proc/sys/kernel/osrelease")
-            .unwrap_or_default()
-            .trim()
-            .to_string();
-        let cpu_model = std::fs::read_to_string("/proc/cpuinfo")
-            .unwrap_or_default()
-            .lines()
-            .find_map(|l| l.strip_prefix("model name"))
-            .and_then(|l| l.split(':').nth(1))
-            .unwrap_or("")
-            .trim()
-            .to_string();
+        let read = |path| std::fs::read_to_string(path).unwrap_or_default();
+        let cpuinfo = read("/proc/cpuinfo");
+        let model = cpuinfo.lines().find_map(|l| l.strip_prefix("model name"));
         Self {
             cpus: crate::placement::cpu_count(),
-            kernel,
-            cpu_model,
+            kernel: read("/proc/sys/kernel/osrelease").trim().to_string(),
+            cpu_model: model
+                .and_then(|l| l.split(':').nth(1))
+                .unwrap_or("")
+                .trim()
+                .into(),
         }
     }
 }
@@ -387,26 +356,19 @@ pub fn row_key(path: PathKind, what: &str, mode: &str, placement: &str) -> Strin
 /// its samples spent inside chassisd, named `<what>: <path>` (`titan sim: state`) at the same
 /// mode and placement.
 pub fn path_rows(row: Row, baseline: Option<String>, in_service: Latencies) -> [Row; 2] {
+    let what = format!("{}: {}", row.what, row.path);
+    let (run, mode, placement) = (&row.run, &row.mode, &row.placement);
     let inside = Row::new(
         PathKind::InService,
         row.leg,
-        &row.run,
-        format!("{}: {}", row.what, row.path),
-        &row.mode,
-        &row.placement,
+        run,
+        what,
+        mode,
+        placement,
         in_service,
         0,
     );
     [Row { baseline, ..row }, inside]
-}
-
-/// A percentile for a table: `—` when the row has too few samples to tell it from the maximum.
-pub(crate) fn percentile(value: f64, count: u64, fewest: u64) -> String {
-    if count >= fewest {
-        format!("{value:.1}")
-    } else {
-        "—".into()
-    }
 }
 
 impl Row {
@@ -449,37 +411,22 @@ impl Row {
         row_key(self.path, &self.what, &self.mode, &self.placement)
     }
 
-    /// The row's count with what it lost beside it: `1000`, `998 (+2 dropped, 1 out of range)`.
-    /// The figures every table shows of the row: count, p50, p90, p99, p99.9 and max, µs (a
-    /// percentile its count cannot give is a dash).
-    pub(crate) fn figures(&self) -> [String; 6] {
-        let s = &self.summary;
-        [
-            self.count_text(),
-            format!("{:.1}", s.p50_us),
-            format!("{:.1}", s.p90_us),
-            percentile(s.p99_us, s.count, MIN_FOR_P99),
-            percentile(s.p999_us, s.count, MIN_FOR_P999),
-            format!("{:.1}", s.max_us),
-        ]
-    }
-
-    fn count_text(&self) -> String {
-        let mut lost = Vec::new();
-        if self.missed > 0 {
-            lost.push(format!("{} missed", self.missed));
-        }
-        if self.dropped > 0 {
-            lost.push(format!("{} dropped", self.dropped));
-        }
-        if self.summary.out_of_range > 0 {
-            lost.push(format!("{} out of range", self.summary.out_of_range));
-        }
+    /// The row's count with what it lost beside it: `1000`, `998 (2 dropped, 1 out of range)`.
+    pub(crate) fn count_text(&self) -> String {
+        let lost = [
+            (self.missed, "missed"),
+            (self.dropped, "dropped"),
+            (self.summary.out_of_range, "out of range"),
+        ];
+        let lost: Vec<String> = lost
+            .iter()
+            .filter(|(n, _)| *n > 0)
+            .map(|(n, what)| format!("{n} {what}"))
+            .collect();
         if lost.is_empty() {
-            self.summary.count.to_string()
-        } else {
-            format!("{} ({})", self.summary.count, lost.join(", "))
+            return self.summary.count.to_string();
         }
+        format!("{} ({})", self.summary.count, lost.join(", "))
     }
 }
 
@@ -487,98 +434,90 @@ impl Report {
     /// Fills in the ratios of every row that names its baseline (the p99 ratio only where both
     /// have [`MIN_FOR_P99`] samples), and flags a row whose p50 is below its baseline's or below
     /// the sum of the rows it contains; a named baseline or contained row that is missing, and
-    /// two rows of the same name, are notes.
+    /// two rows of the same name, are problems.
     pub fn compute_ratios(&mut self) {
-        let mut seen = std::collections::BTreeMap::<String, usize>::new();
+        let mut named = std::collections::BTreeMap::<String, usize>::new();
         for r in &self.rows {
-            *seen.entry(r.key()).or_default() += 1;
+            *named.entry(r.key()).or_default() += 1;
         }
-        for (key, n) in seen.into_iter().filter(|(_, n)| *n > 1) {
+        for (key, n) in named.into_iter().filter(|(_, n)| *n > 1) {
             self.problems
                 .push(format!("two rows are named '{key}' ({n} of them)"));
         }
-        let baselines: Vec<(String, Summary)> = self
+        // Each row's names as a baseline and as a contained row.
+        let all: Vec<(Option<String>, String, Summary)> = self
             .rows
             .iter()
-            .filter(|r| r.path == PathKind::Baseline)
-            .map(|r| (format!("{}, {}", r.what, r.placement), r.summary))
+            .map(|r| {
+                let as_baseline =
+                    (r.path == PathKind::Baseline).then(|| format!("{}, {}", r.what, r.placement));
+                (as_baseline, r.key(), r.summary)
+            })
             .collect();
-        let all: Vec<(String, Summary)> = self.rows.iter().map(|r| (r.key(), r.summary)).collect();
         for row in self
             .rows
             .iter_mut()
             .filter(|r| r.path != PathKind::Baseline)
         {
+            let (s, key) = (row.summary, row.key());
             // Each flag, and whether a smoke run only reports it.
             let mut flags: Vec<(String, bool)> = Vec::new();
-            if let Some(name) = row.baseline.clone() {
-                let found: Vec<&Summary> = baselines
-                    .iter()
-                    .filter(|(n, _)| *n == name)
-                    .map(|(_, s)| s)
-                    .collect();
-                match found[..] {
-                    [] => self.problems.push(format!(
-                        "{}: its baseline '{name}' was not measured",
-                        row.key()
-                    )),
+            if let Some(name) = &row.baseline {
+                let named = all.iter().filter(|(b, ..)| b.as_ref() == Some(name));
+                match named.map(|(.., s)| s).collect::<Vec<_>>()[..] {
+                    [] => {
+                        let problem = format!("{key}: its baseline '{name}' was not measured");
+                        self.problems.push(problem);
+                    }
                     [base] => {
-                        row.ratio_p50 =
-                            (base.p50_us > 0.0).then(|| row.summary.p50_us / base.p50_us);
-                        row.ratio_p99 = (base.p99_us > 0.0
-                            && base.count >= MIN_FOR_P99
-                            && row.summary.count >= MIN_FOR_P99)
-                            .then(|| row.summary.p99_us / base.p99_us);
-                        if row.summary.count > 0 && row.summary.p50_us < base.p50_us {
-                            flags.push((
-                                format!(
-                                    "p50 {:.1} µs is below the p50 {:.1} µs of the hop it \
-                                     contains ({name}): the path and its baseline were not \
-                                     measured under the same conditions",
-                                    row.summary.p50_us, base.p50_us
-                                ),
-                                row.summary.p50_us
-                                    >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE),
-                            ));
+                        row.ratio_p50 = (base.p50_us > 0.0).then(|| s.p50_us / base.p50_us);
+                        let enough = base.count.min(s.count) >= MIN_FOR_P99;
+                        row.ratio_p99 =
+                            (base.p99_us > 0.0 && enough).then(|| s.p99_us / base.p99_us);
+                        if s.count > 0 && s.p50_us < base.p50_us {
+                            let text = format!(
+                                "p50 {:.1} µs is below the p50 {:.1} µs of the hop it contains \
+                                 ({name}): the path and its baseline were not measured under \
+                                 the same conditions",
+                                s.p50_us, base.p50_us
+                            );
+                            let near = s.p50_us >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE);
+                            flags.push((text, near));
                         }
                     }
-                    _ => self.problems.push(format!(
-                        "{}: more than one baseline is named '{name}'",
-                        row.key()
-                    )),
-                }
-            }
-            if !row.contains.is_empty() {
-                let parts: Vec<Option<&Summary>> = row
-                    .contains
-                    .iter()
-                    .map(|k| all.iter().find(|(n, _)| n == k).map(|(_, s)| s))
-                    .collect();
-                if parts.iter().all(|p| p.is_some_and(|s| s.count > 0)) {
-                    let sum: f64 = parts.iter().flatten().map(|s| s.p50_us).sum();
-                    if row.summary.count > 0 && row.summary.p50_us < sum * (1.0 - SUM_TOLERANCE) {
-                        flags.push((
-                            format!(
-                                "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of \
-                                 the p50s of the hops it contains ({}): they were not measured \
-                                 under the same conditions",
-                                row.summary.p50_us,
-                                SUM_TOLERANCE * 100.0,
-                                row.contains.join(" + ")
-                            ),
-                            true,
-                        ));
+                    _ => {
+                        let problem = format!("{key}: more than one baseline is named '{name}'");
+                        self.problems.push(problem);
                     }
-                } else {
-                    self.problems.push(format!(
-                        "{}: a row it contains was not measured ({})",
-                        row.key(),
-                        row.contains.join(", ")
-                    ));
                 }
             }
-            row.smoke_tolerated =
-                !flags.is_empty() && flags.iter().all(|(_, tolerated)| *tolerated);
+            let contained = row.contains.iter().map(|k| {
+                let found = all.iter().find(|(_, n, _)| n == k);
+                found.map(|(.., s)| s).filter(|s| s.count > 0)
+            });
+            let sums: Option<Vec<&Summary>> = contained.collect();
+            match sums {
+                _ if row.contains.is_empty() => {}
+                None => self.problems.push(format!(
+                    "{key}: a row it contains was not measured ({})",
+                    row.contains.join(", ")
+                )),
+                Some(sums) => {
+                    let sum: f64 = sums.iter().map(|s| s.p50_us).sum();
+                    if s.count > 0 && s.p50_us < sum * (1.0 - SUM_TOLERANCE) {
+                        let text = format!(
+                            "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
+                             p50s of the hops it contains ({}): they were not measured under \
+                             the same conditions",
+                            s.p50_us,
+                            SUM_TOLERANCE * 100.0,
+                            row.contains.join(" + ")
+                        );
+                        flags.push((text, true));
+                    }
+                }
+            }
+            row.smoke_tolerated = !flags.is_empty() && flags.iter().all(|(_, near)| *near);
             let texts: Vec<String> = flags.into_iter().map(|(text, _)| text).collect();
             row.inconsistent = (!texts.is_empty()).then(|| texts.join("; "));
         }
@@ -587,13 +526,10 @@ impl Report {
     /// What makes a run fail its smoke check (`--smoke`): a row of `expected` missing, or
     /// bringing less than [`MIN_SHARE_OF_ASKED`] of the samples it asked for (none, where it
     /// asked for no number), any row more than [`SMOKE_BASELINE_TOLERANCE`] below its own
-    /// baseline (a path faster than a hop it contains), and every [`Report::problems`] (a
-    /// baseline or contained row not measured, two rows of one name). Never a target: the
-    /// figures of a loaded machine are what they are. A row flagged only within the smoke run's
-    /// noise (below the sum of its hops' medians, or less than that tolerance below its
-    /// baseline) is a [`Report::smoke_warnings`] line: a smoke run's 100 samples of a debug
-    /// build put those comparisons within its noise (a release run's document still marks the
-    /// row).
+    /// baseline (a path faster than a hop it contains), and every [`Report::problems`]. Never a
+    /// target: the figures of a loaded machine are what they are. A row flagged only within the
+    /// smoke run's noise is a [`Report::smoke_warnings`] line instead (a release run's document
+    /// still marks the row).
     pub fn smoke_failures(&self, expected: &[Planned]) -> Vec<String> {
         let mut failures = Vec::new();
         for Planned { key, asked } in expected {
@@ -604,169 +540,39 @@ impl Report {
             let count = r.summary.count;
             match asked {
                 None if count == 0 => failures.push(format!("no sample: {key}")),
-                Some(asked) if (count as f64) < MIN_SHARE_OF_ASKED * *asked as f64 => failures
-                    .push(format!(
-                        "too few samples: {key}: {} of the {asked} asked for",
-                        r.count_text()
-                    )),
+                Some(asked) if (count as f64) < MIN_SHARE_OF_ASKED * *asked as f64 => {
+                    let count = r.count_text();
+                    failures.push(format!(
+                        "too few samples: {key}: {count} of the {asked} asked for"
+                    ))
+                }
                 _ => {}
             }
         }
-        for r in self
-            .rows
-            .iter()
-            .filter(|r| r.inconsistent.is_some() && !r.smoke_tolerated)
-        {
-            failures.push(format!(
-                "flagged row: {}: {}",
-                r.key(),
-                r.inconsistent.as_deref().unwrap_or_default()
-            ));
-        }
+        failures.extend(self.flagged(false).map(|f| format!("flagged row: {f}")));
         failures.extend(self.problems.iter().cloned());
         failures
     }
 
     /// The rows the smoke run reports without failing on them: flagged within its noise only.
     pub fn smoke_warnings(&self) -> Vec<String> {
-        self.rows
-            .iter()
-            .filter(|r| r.smoke_tolerated)
-            .map(|r| {
-                format!(
-                    "flagged within a smoke run's noise (not failing it): {}: {}",
-                    r.key(),
-                    r.inconsistent.as_deref().unwrap_or_default()
-                )
-            })
+        let flagged = self.flagged(true);
+        flagged
+            .map(|f| format!("flagged within a smoke run's noise (not failing it): {f}"))
             .collect()
     }
 
-    /// The table.
-    pub fn table(&self) -> String {
-        let mut out = String::new();
-        out.push_str(&format!(
-            "{}, {}; machine: {}, {} cores, kernel {}; host steal time over the run: {}\n\n",
-            self.provenance.date,
-            self.provenance.commit_text().replace('`', ""),
-            self.machine.cpu_model,
-            self.machine.cpus,
-            self.machine.kernel,
-            self.provenance.steal_text()
-        ));
-        out.push_str(&format!(
-            "{:<11} {:<60} {:<7} {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}  {}\n",
-            "path",
-            "what",
-            "loop",
-            "placement",
-            "count",
-            "p50 µs",
-            "p90 µs",
-            "p99 µs",
-            "p99.9 µs",
-            "max µs",
-            "÷ baseline p50, p99"
-        ));
-        for r in &self.rows {
-            let ratio = match (r.ratio_p50, r.ratio_p99, &r.baseline) {
-                (Some(x), Some(y), Some(b)) => format!("{x:.2}, {y:.2} ({b})"),
-                (Some(x), None, Some(b)) => format!("{x:.2}, — ({b})"),
-                _ => String::new(),
-            };
-            let [count, p50, p90, p99, p999, max] = r.figures();
-            out.push_str(&format!(
-                "{:<11} {:<60} {:<7} {:<10} {count:>7} {p50:>9} {p90:>9} {p99:>9} {p999:>9} {max:>9}  \
-                 {ratio}\n",
-                r.path, r.what, r.mode, r.placement,
-            ));
-        }
-        let baselines: Vec<&Row> = self
+    /// "KEY: WHY" of each row flagged inconsistent whose flags a smoke run only reports, or not.
+    fn flagged(&self, tolerated: bool) -> impl Iterator<Item = String> + '_ {
+        let rows = self
             .rows
             .iter()
-            .filter(|r| r.conditions.is_some())
-            .collect();
-        if !baselines.is_empty() {
-            out.push_str("\nbaseline conditions:\n");
-            for r in baselines {
-                out.push_str(&format!(
-                    "  {}, {}: {}\n",
-                    r.what,
-                    r.placement,
-                    r.conditions.as_deref().unwrap_or_default()
-                ));
-            }
-        }
-        for r in self.rows.iter().filter(|r| r.inconsistent.is_some()) {
-            out.push_str(&format!(
-                "INCONSISTENT MEASUREMENT: {} {} ({} loop, {}): {}\n",
-                r.path,
-                r.what,
-                r.mode,
-                r.placement,
-                r.inconsistent.as_deref().unwrap_or_default()
-            ));
-        }
-        if !self.parts.is_empty() {
-            out.push_str("\nwhere each microsecond goes (p50 / p99 µs, same samples):\n");
-            for p in &self.parts {
-                let parts: Vec<String> = p
-                    .split
-                    .parts
-                    .iter()
-                    .map(|part| {
-                        let s = &part.summary;
-                        format!(
-                            "{} {:.1} / {}",
-                            part.name,
-                            s.p50_us,
-                            percentile(s.p99_us, s.count, MIN_FOR_P99)
-                        )
-                    })
-                    .collect();
-                out.push_str(&format!(
-                    "  {} {} ({}, {}): {}\n",
-                    p.path,
-                    p.what,
-                    p.mode,
-                    p.placement,
-                    parts.join("; ")
-                ));
-            }
-        }
-        if !self.cost.is_empty() {
-            out.push_str("\nservice cost under a fully loaded bus (simulated chassis flooding):\n");
-            for c in &self.cost {
-                out.push_str(&format!(
-                    "  {:>9} {:>5} kbit/s: {:>6.0} frames/s received, CPU {:>5.2} % of one core, RSS {:.1} MiB\n",
-                    c.bus,
-                    c.bitrate / 1000,
-                    c.frames_per_s,
-                    c.cpu_pct,
-                    c.rss_mib
-                ));
-            }
-        }
-        for t in &self.throughput {
-            out.push_str(&format!(
-                "\nreplay at full speed (read + decode + publish in the service): {} frames in {:.2} s = {:.0} frames/s, service CPU {:.0} %: {:.0} frames per CPU second\n",
-                t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
-            ));
-        }
-        for l in &self.loops {
-            out.push_str(&format!(
-                "\ncontrol loop {}, {} ({} loop, {}): {} of {} periods missed; the raw loop {} of {}; {} commands no frame carried\n",
-                l.run, l.rate, l.mode, l.placement, l.misses, l.periods, l.raw_misses, l.raw_periods, l.superseded
-            ));
-        }
-        for note in self.notes.iter().chain(&self.problems) {
-            out.push_str(&format!("note: {note}\n"));
-        }
-        out
+            .filter(move |r| r.smoke_tolerated == tolerated);
+        rows.filter_map(|r| Some(format!("{}: {}", r.key(), r.inconsistent.as_deref()?)))
     }
 
-    /// Latency CDFs of every row, log latency axis: one panel per kind of path (baselines,
-    /// command, state, preemption, fan-out), all on the same axes so panels compare.
+    /// Latency CDFs of every row, log latency axis: one panel per kind of path, all on the same
+    /// axes so panels compare.
     pub fn plot(&self, path: &Path) -> anyhow::Result<()> {
         const PANELS: [(PathKind, &str); 8] = [
             (PathKind::Baseline, "raw transports (ping-pong, one way)"),
@@ -794,13 +600,11 @@ impl Report {
             ),
         ];
         let root = SVGBackend::new(path, (1600, 2000)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let root = root
-            .titled(
-                "one-way latency, CDF (log latency axis)",
-                ("sans-serif", 26),
-            )
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        root.fill(&WHITE)?;
+        let root = root.titled(
+            "one-way latency, CDF (log latency axis)",
+            ("sans-serif", 26),
+        )?;
         let max_us = self
             .rows
             .iter()
@@ -809,11 +613,11 @@ impl Report {
             .min(1e6);
         for (area, (kind, title)) in root.split_evenly((4, 2)).iter().zip(PANELS) {
             // The stall rows are gaps in one thread, not a hop: the table gives them.
-            let rows: Vec<&Row> = self
+            let rows = self
                 .rows
                 .iter()
-                .filter(|r| r.path == kind && r.leg != Leg::Stalls)
-                .collect();
+                .filter(|r| r.path == kind && r.leg != Leg::Stalls);
+            let rows: Vec<&Row> = rows.collect();
             if rows.is_empty() {
                 continue;
             }
@@ -822,27 +626,22 @@ impl Report {
                 .margin(12)
                 .x_label_area_size(35)
                 .y_label_area_size(45)
-                .build_cartesian_2d((0.5f64..max_us * 1.2).log_scale(), 0.0f64..1.0)
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+                .build_cartesian_2d((0.5f64..max_us * 1.2).log_scale(), 0.0f64..1.0)?;
             chart
                 .configure_mesh()
                 .x_desc("latency, µs")
                 .y_desc("fraction of samples")
-                .draw()
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+                .draw()?;
             for (i, row) in rows.iter().enumerate() {
                 let color = Palette99::pick(i).to_rgba();
                 let label = match row.mode.as_str() {
                     "-" => format!("{}, {}", row.what, row.placement),
                     mode => format!("{}, {mode}, {}", row.what, row.placement),
                 };
-                chart
-                    .draw_series(LineSeries::new(row.latencies.cdf(), color.stroke_width(2)))
-                    .map_err(|e| anyhow::anyhow!("{e}"))?
-                    .label(label)
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                    });
+                let line = LineSeries::new(row.latencies.cdf(), color.stroke_width(2));
+                chart.draw_series(line)?.label(label).legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
             }
             chart
                 .configure_series_labels()
@@ -850,96 +649,16 @@ impl Report {
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
                 .label_font(("sans-serif", 12))
-                .draw()
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+                .draw()?;
         }
-        root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
-        Ok(())
-    }
-}
-
-/// The microseconds table's rows of each sample's parts of the code, and outside it, summed.
-pub(crate) const TOGETHER_CODE: &str = "*together*: the code's parts, each sample's sum";
-pub(crate) const TOGETHER_OUTSIDE: &str =
-    "*together*: the parts outside the code, each sample's sum";
-
-/// The microseconds table's word for whose time a part is.
-pub(crate) fn whose_text(whose: Whose) -> &'static str {
-    match whose {
-        Whose::Code => "the code",
-        Whose::Outside => "outside",
-    }
-}
-
-impl Report {
-    /// What the system granted: real-time mode in every run that asked for it, or the runs
-    /// where it was refused (their loops ran with normal scheduling, and so did their
-    /// baselines' receivers).
-    pub fn scheduling_text(&self) -> String {
-        use crate::paths::Scheduling;
-        let asked = self
-            .scheduling
-            .iter()
-            .filter(|(_, s)| *s != Scheduling::Normal)
-            .count();
-        let refused: Vec<&str> = self
-            .scheduling
-            .iter()
-            .filter(|(_, s)| matches!(s, Scheduling::Refused))
-            .map(|(run, _)| run.as_str())
-            .collect();
-        if refused.is_empty() {
-            format!("Real-time mode was granted in each of the {asked} runs that asked for it.")
-        } else {
-            format!(
-                "**Real-time mode was refused** (no CAP_SYS_NICE or RLIMIT_RTPRIO) in {} of the \
-                 {asked} runs that asked for it, which ran with normal scheduling: {}.",
-                refused.len(),
-                refused.join("; ")
-            )
-        }
-    }
-
-    /// What the stall rows say of every p99 on this machine, or nothing without them.
-    pub(crate) fn stalls_text(&self) -> String {
-        if self.stalls.is_empty() {
-            return String::new();
-        }
-        // "LOW to HIGH" over the CPUs, one figure when they print alike.
-        let span = |f: &dyn Fn(&StallRates) -> f64, decimals: usize| {
-            let low = self.stalls.iter().map(f).fold(f64::INFINITY, f64::min);
-            let high = self.stalls.iter().map(f).fold(0.0, f64::max);
-            let (low, high) = (format!("{low:.decimals$}"), format!("{high:.decimals$}"));
-            if low == high {
-                low
-            } else {
-                format!("{low} to {high}")
-            }
-        };
-        // The chance that a window of 100 µs holds the start of a stall over 20 µs, %.
-        let chance = |s: &StallRates| 100.0 * s.over_20_us * 100e-6;
-        let least = self.stalls.iter().map(chance).fold(f64::INFINITY, f64::min);
-        format!(
-            " On this machine a thread that never blocks lost more than 20 µs {} times a second \
-             and more than 100 µs {} times a second, by CPU (the stall rows of the table): a \
-             path of 100 µs meets a stall of more than 20 µs in about {} % of its samples on \
-             each CPU it runs on{}",
-            span(&|s| s.over_20_us, 0),
-            span(&|s| s.over_100_us, 2),
-            span(&chance, 1),
-            if least >= 1.0 {
-                ": more than 1 %, so that its p99 carries one, whatever the code does."
-            } else {
-                "."
-            }
-        )
+        Ok(root.present()?)
     }
 
     /// The split of the rows `of` in `row`'s run, loop and placement, if it was split.
     pub(crate) fn split_of(&self, of: (PathKind, Leg), row: &Row) -> Option<&Parts> {
-        self.parts.iter().find(|p| {
-            p.of == of && p.run == row.run && p.mode == row.mode && p.placement == row.placement
-        })
+        let run =
+            |p: &&Parts| (&p.run, &p.mode, &p.placement) == (&row.run, &row.mode, &row.placement);
+        self.parts.iter().filter(run).find(|p| p.of == of)
     }
 }
 
@@ -947,6 +666,8 @@ impl Report {
 mod tests {
     use super::*;
     use crate::parts::Part;
+    use crate::parts::Whose;
+    use crate::render::{TOGETHER_CODE, TOGETHER_OUTSIDE, percentile};
 
     /// A target judged, as these tests read it: met (none: not measured), where the worst
     /// row's time goes, what bounds it.
@@ -1785,7 +1506,7 @@ mod tests {
             "—"
         );
         assert!(
-            report.table().contains("2.50, — (warm, cross CPU)"),
+            report.table().contains("2.50, — | warm, cross CPU |"),
             "{}",
             report.table()
         );
