@@ -79,7 +79,7 @@ enum RoleCmd {
 #[derive(Debug, Subcommand)]
 enum Role {
     Pong(baseline::PongArgs),
-    Feed(baseline::FeedArgs),
+    Feed(baseline::PongArgs),
     Subscribe(fanout::SubscribeArgs),
     DdsEcho(dds_echo::EchoArgs),
     /// Publish stamped samples on a bare Zenoh session configured as chassis-zenoh's.
