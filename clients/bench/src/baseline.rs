@@ -25,6 +25,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
+use crate::paths::LoopMode;
 use crate::placement::{Placement, pin_current_thread};
 use crate::stats::Latencies;
 
@@ -52,6 +53,15 @@ impl Transport {
             Transport::IceoryxHybrid => "iceoryx2 poll-then-block",
             Transport::Uds => "unix socket",
             Transport::Udp => "udp loopback",
+        }
+    }
+
+    /// The transport that waits like a service loop in `mode`.
+    pub fn like(mode: LoopMode) -> Self {
+        match mode {
+            LoopMode::Event => Transport::IceoryxEvent,
+            LoopMode::Spin => Transport::IceoryxSpin,
+            LoopMode::Hybrid => Transport::IceoryxHybrid,
         }
     }
 

@@ -10,7 +10,7 @@ use chassis_client::{Robot, VelocityRequest, now_ns};
 use chassis_protocols::RobotKind;
 
 use crate::baseline::{self, Transport};
-use crate::paths::{self, LoopMode, MotionDecoder, ServiceConfig, warm_up};
+use crate::paths::{self, LoopMode, Motion, ServiceConfig};
 use crate::periods::Periods;
 use crate::placement::Placement;
 use crate::report::{Leg, LoopRun, PathKind, Report, Row};
@@ -47,11 +47,22 @@ pub fn measure(
     periods: u64,
     spin: bool,
 ) -> anyhow::Result<LoopFigures> {
-    let tap = robot.frames(2048)?;
+    let mut motion = Motion::open(robot, kind, spin)?;
     let mut teleop = robot.source("teleop")?;
-    let mut decoder = MotionDecoder::new(kind);
-    warm_up(&tap, &mut teleop, &mut decoder, spin)?;
+    motion.warm_up(&mut teleop)?;
     let mut frames: Vec<(u64, f64)> = Vec::new();
+    let mut take = |motion: &mut Motion, wait: bool| {
+        let decoder = &mut motion.decoder;
+        let each = |f: &chassis_client::BusFrame| {
+            if let Some(v) = decoder.linear(f) {
+                frames.push((f.stamp_ns, v));
+            }
+        };
+        match wait {
+            true => motion.tap.wait(Duration::from_millis(10), each),
+            false => motion.tap.drain(each),
+        }
+    };
     let mut sent: Vec<(u64, u64, f64)> = Vec::with_capacity(usize::try_from(periods)?);
     let mut state_age = Latencies::new();
     let mut clock = Periods::new(period);
@@ -66,22 +77,14 @@ pub fn measure(
             stamp_ns: stamp,
             ..VelocityRequest::twist(speed, 0.0)
         })?;
-        tap.drain(|f| {
-            if let Some(v) = decoder.linear(f) {
-                frames.push((f.stamp_ns, v));
-            }
-        })?;
+        take(&mut motion, false)?;
         sent.push((due, stamp, f64::from(speed)));
         clock.end(due, true);
     }
     // The last periods' frames.
     let until = now_ns() + 100_000_000;
     while now_ns() < until {
-        tap.wait(Duration::from_millis(10), |f| {
-            if let Some(v) = decoder.linear(f) {
-                frames.push((f.stamp_ns, v));
-            }
-        })?;
+        take(&mut motion, true)?;
     }
     teleop.stop()?;
     let (command, superseded) = match_frames(&sent, &frames);
@@ -174,25 +177,17 @@ pub fn periods(period: Duration, seconds: f64) -> u64 {
 pub fn run(
     loops: &[(Duration, LoopMode)],
     seconds: f64,
-    transport_of: impl Fn(LoopMode) -> Transport,
     prefix: &str,
     dir: &std::path::Path,
     report: &mut Report,
 ) -> anyhow::Result<()> {
     let (kind, placement) = (RobotKind::Titan, Placement::CrossCpu);
-    let run = format!("{kind} sim");
+    let (run, at) = (format!("{kind} sim"), placement.label());
     for &(period, mode) in loops {
         let (client_cpu, service_cpu) = placement.cpus();
-        let (service, mut robot) = paths::start_configured(
-            kind,
-            paths::BusKind::Sim,
-            mode,
-            service_cpu,
-            ServiceConfig::BenchRealtime,
-            false,
-            prefix,
-            dir,
-        )?;
+        let config = ServiceConfig::BenchRealtime;
+        let spec = (kind, paths::BusKind::Sim, mode);
+        let (service, mut robot) = paths::start(spec, service_cpu, config, false, prefix, dir)?;
         let count = periods(period, seconds);
         let spin = mode == LoopMode::Spin;
         let feedback = paths::FeedbackRate::start(&mut robot)?;
@@ -205,77 +200,59 @@ pub fn run(
         drop(service);
         // The raw loop's receiver lives as chassisd's loop did: woken by another process at
         // the chassis' feedback rate, by its own tick, scheduled alike.
+        let tick = kind.entry().defaults().heartbeat_period();
         let load = baseline::Load {
             feed_per_s,
-            tick: kind.entry().defaults().heartbeat_period(),
+            tick,
             realtime,
             published: false,
         };
-        let transport = transport_of(mode);
-        let raw = baseline::run(
-            transport,
-            placement,
-            count,
-            baseline::Rounds::Loop(period),
-            Some(load),
-            prefix,
-            dir,
-        )?;
+        let transport = Transport::like(mode);
+        let shape = baseline::Rounds::Loop(period);
+        let raw = baseline::run(transport, placement, count, shape, Some(load), prefix, dir)?;
         let [frame, age, hop] = row_names(&run, period, transport);
         let row = |path, leg, what, latencies, missed| {
-            Row::new(
-                path,
-                leg,
-                &run,
-                what,
-                mode.arg(),
-                placement.label(),
-                latencies,
-                missed,
-            )
+            Row::new(path, leg, &run, what, mode.arg(), at, latencies, missed)
         };
-        let mut frame_row = row(
-            PathKind::Loop,
-            Leg::PeriodToFrame,
-            frame,
-            figures.command,
-            figures.superseded,
-        );
-        frame_row.baseline = Some(format!("{hop}, {}", placement.label()));
+        let (l, superseded) = (figures.command, figures.superseded);
+        let mut frame_row = row(PathKind::Loop, Leg::PeriodToFrame, frame, l, superseded);
+        frame_row.baseline = Some(format!("{hop}, {at}"));
         report.rows.push(frame_row);
-        report.rows.push(row(
+        (report.rows).push(row(
             PathKind::Loop,
             Leg::StateAge,
             age,
             figures.state_age,
             0,
         ));
-        let mut raw_row = Row::new(
-            PathKind::Baseline,
-            Leg::Hop,
-            &run,
-            hop,
-            "-",
-            placement.label(),
-            baseline::last_of(&raw.pings, u64::MAX),
-            0,
-        );
-        raw_row.conditions = Some(format!(
-            "a loop on absolute deadlines sending one ping at the start of each period, \
-             looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s by \
-             another process, as by the simulated chassis, and by its own {} ms tick{}; {count} \
-             periods after 200 of warm-up",
-            load.tick.as_millis(),
-            realtime.map_or(String::new(), |p| format!(
-                ", at SCHED_FIFO {p} as the service's loop"
+        let fifo = realtime.map_or(String::new(), |p| {
+            format!(", at SCHED_FIFO {p} as the service's loop")
+        });
+        let raw_row = Row {
+            conditions: Some(format!(
+                "a loop on absolute deadlines sending one ping at the start of each period, \
+                 looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s \
+                 by another process, as by the simulated chassis, and by its own {} ms \
+                 tick{fifo}; {count} periods after 200 of warm-up",
+                tick.as_millis(),
             )),
-        ));
+            ..Row::new(
+                PathKind::Baseline,
+                Leg::Hop,
+                &run,
+                hop,
+                "-",
+                at,
+                raw.all_pings(),
+                0,
+            )
+        };
         report.rows.push(raw_row);
         report.loops.push(LoopRun {
             run: run.clone(),
             rate: rate(period),
             mode: mode.arg().into(),
-            placement: placement.label().into(),
+            placement: at.into(),
             periods: figures.periods,
             misses: figures.misses,
             superseded: figures.superseded,

@@ -20,8 +20,8 @@ pub struct SubscribeArgs {
     pub seconds: f64,
 }
 
-/// The subscriber role: records state latencies for `seconds`, then prints its histogram (hex
-/// of the HdrHistogram V2 encoding) on stdout.
+/// The subscriber role: records state latencies for `seconds`, then prints them on stdout (as a
+/// samples file holds them).
 pub fn subscribe(args: &SubscribeArgs) -> anyhow::Result<()> {
     let robot = Robot::connect_with_prefix(&args.name, Some(&args.prefix))?;
     // Every sample, as a client that needs them all reads them.
@@ -31,22 +31,8 @@ pub fn subscribe(args: &SubscribeArgs) -> anyhow::Result<()> {
     while now_ns() < end {
         stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
     }
-    let hex: String = recorder
-        .latencies
-        .to_bytes()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
-    println!("{hex}");
+    println!("{}", serde_json::to_string(&recorder.latencies)?);
     Ok(())
-}
-
-fn from_hex(text: &str) -> Option<Vec<u8>> {
-    let text = text.trim();
-    (0..text.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(text.get(i..i + 2)?, 16).ok())
-        .collect()
 }
 
 /// Runs `subscribers` subscriber processes for `seconds` while this process drives the robot,
@@ -84,9 +70,9 @@ pub fn run(
         if !out.status.success() {
             bail!("a subscriber failed");
         }
-        let text = String::from_utf8_lossy(&out.stdout);
-        let bytes = from_hex(&text).context("a subscriber's histogram is not hex")?;
-        merged.merge(&Latencies::from_bytes(&bytes).context("a subscriber's histogram")?);
+        let latencies: Latencies =
+            serde_json::from_slice(&out.stdout).context("a subscriber's histogram")?;
+        merged.merge(&latencies);
     }
     Ok(merged)
 }

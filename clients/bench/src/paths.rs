@@ -200,18 +200,6 @@ pub fn config_text(config: ServiceConfig, mode: LoopMode) -> String {
     }
 }
 
-/// Writes the configuration file of a run.
-fn write_config(
-    dir: &Path,
-    name: &str,
-    config: ServiceConfig,
-    mode: LoopMode,
-) -> anyhow::Result<PathBuf> {
-    let path = dir.join(format!("{name}.toml"));
-    std::fs::write(&path, config_text(config, mode))?;
-    Ok(path)
-}
-
 /// The SCHED_FIFO priority of the first of `pid`'s threads that runs at SCHED_FIFO, if one does:
 /// whether chassisd's loop got the real-time mode it asked for.
 pub fn fifo_priority(pid: u32) -> Option<u8> {
@@ -233,31 +221,10 @@ pub fn fifo_priority(pid: u32) -> Option<u8> {
     })
 }
 
-/// Starts `chassisd` (and, for a pty bus, `chassisd sim`) and waits until it publishes.
-pub fn start(
-    robot: RobotKind,
-    bus: BusKind,
-    mode: LoopMode,
-    service_cpu: Option<usize>,
-    prefix: &str,
-    dir: &Path,
-) -> anyhow::Result<(Service, Robot)> {
-    start_configured(
-        robot,
-        bus,
-        mode,
-        service_cpu,
-        ServiceConfig::Bench,
-        false,
-        prefix,
-        dir,
-    )
-}
-
 /// Starts `command` (chassisd or its simulator) serving under the IPC prefix `prefix`, logging
 /// warnings: its stdout to `<log>.log`, its stderr to `<log>-err.log`; `what` names it in the
 /// error.
-fn spawn_logged(
+pub(crate) fn spawn_logged(
     command: &mut Command,
     prefix: &str,
     log: &Path,
@@ -278,39 +245,39 @@ fn spawn_logged(
         .with_context(|| format!("starting {what}"))
 }
 
-/// [`start`] with chassisd configured as `config` says, keeping its pass trace with `trace`
-/// ([`Service::stop`] returns it).
-#[allow(clippy::too_many_arguments)]
-pub fn start_configured(
-    robot: RobotKind,
-    bus: BusKind,
-    mode: LoopMode,
-    service_cpu: Option<usize>,
+/// A started service and a client of it.
+pub type Started = (Service, Robot);
+
+/// Starts `chassisd` (and, for a pty bus, `chassisd sim`) for `robot` on `bus` with the loop
+/// `mode`, configured as `config` says, keeping its pass trace with `trace` ([`Service::stop`]
+/// returns it), and waits until it publishes and the chassis is in command mode.
+pub fn start(
+    (robot, bus, mode): (RobotKind, BusKind, LoopMode),
+    cpu: Option<usize>,
     config: ServiceConfig,
     trace: bool,
     prefix: &str,
     dir: &Path,
-) -> anyhow::Result<(Service, Robot)> {
+) -> anyhow::Result<Started> {
     let name = format!("bn{}", unique());
     let trace = trace.then(|| dir.join(format!("{name}-passes.txt")));
     let chassisd = sibling("chassisd")?;
     let realtime = config.realtime(mode);
-    let config = write_config(dir, &name, config, mode)?;
+    let config_file = dir.join(format!("{name}.toml"));
+    let mut text = config_text(config, mode);
+    if robot == RobotKind::Xbot {
+        // The benchmark's simulated board has a known wheel separation.
+        text.push_str("\n[profile]\nwheel_separation_m = 0.45\n");
+    }
+    std::fs::write(&config_file, text)?;
     let mut children = Vec::new();
     let bus_arg = match bus {
         BusKind::Sim => "sim".to_string(),
         BusKind::Pty => {
-            let link = dir.join(format!("{name}-link"));
-            let (sim_bus, service_bus) = if robot.is_can() {
-                (
-                    format!("slcan-pty:{}", link.display()),
-                    format!("slcan:{}", link.display()),
-                )
-            } else {
-                (
-                    format!("pty:{}", link.display()),
-                    format!("serial:{}", link.display()),
-                )
+            let link = dir.join(format!("{name}-link")).display().to_string();
+            let (sim_bus, service_bus) = match robot.is_can() {
+                true => (format!("slcan-pty:{link}"), format!("slcan:{link}")),
+                false => (format!("pty:{link}"), format!("serial:{link}")),
             };
             let mut sim = Command::new(&chassisd);
             sim.args([
@@ -325,7 +292,7 @@ pub fn start_configured(
             let log = dir.join(format!("{name}-sim"));
             children.push(spawn_logged(&mut sim, prefix, &log, "chassisd sim")?);
             let deadline = now_ns() + 10_000_000_000;
-            while !link.exists() {
+            while !Path::new(&link).exists() {
                 if now_ns() > deadline {
                     bail!("chassisd sim made no pty link");
                 }
@@ -334,43 +301,23 @@ pub fn start_configured(
             service_bus
         }
     };
-    let mut args = vec![
-        "--robot".to_string(),
-        robot.name().to_string(),
-        "--name".into(),
-        name.clone(),
-        "--bus".into(),
-        bus_arg,
-        "--no-safety-monitor".into(),
-        "--config".into(),
-        config.display().to_string(),
-        "--loop".into(),
-        mode.arg().into(),
-    ];
-    if robot == RobotKind::Xbot {
-        // The benchmark's simulated board has a known wheel separation.
-        std::fs::write(
-            &config,
-            format!(
-                "{}\n[profile]\nwheel_separation_m = 0.45\n",
-                std::fs::read_to_string(&config)?
-            ),
-        )?;
-    }
-    if let Some(cpu) = service_cpu {
-        args.push("--cpu".into());
-        args.push(cpu.to_string());
+    let mut service = Command::new(&chassisd);
+    service
+        .args(["--robot", robot.name(), "--name", &name, "--bus", &bus_arg])
+        .args(["--no-safety-monitor", "--config"])
+        .arg(&config_file)
+        .args(["--loop", mode.arg()]);
+    if let Some(cpu) = cpu {
+        service.args(["--cpu", &cpu.to_string()]);
     }
     if mode == LoopMode::Hybrid {
         // The same window as the poll-then-block baseline's.
-        args.push("--spin-us".into());
-        args.push(crate::baseline::HYBRID_SPIN.as_micros().to_string());
+        let window = crate::baseline::HYBRID_SPIN.as_micros().to_string();
+        service.args(["--spin-us", &window]);
     }
-    let mut service = Command::new(&chassisd);
     if let Some(path) = &trace {
         service.env(chassis_ipc::Trace::Pass.env(), path);
     }
-    service.args(&args);
     let log = dir.join(format!("{name}-chassisd"));
     let service = spawn_logged(&mut service, prefix, &log, "chassisd")?;
     let pid = service.id();
@@ -495,58 +442,70 @@ impl FeedbackRate {
     }
 }
 
-/// Drains the tap until a TX motion frame commanding `speed`, stamped at or after `since`,
-/// appears; returns its stamp.
-fn wait_for_motion(
-    tap: &chassis_client::FrameTap,
-    decoder: &mut MotionDecoder,
-    speed: f64,
-    since: u64,
-    spin: bool,
-    timeout: Duration,
-) -> anyhow::Result<Option<u64>> {
-    wait_for_motion_that(
-        tap,
-        decoder,
-        |v| (v - speed).abs() < 1e-6,
-        since,
-        spin,
-        timeout,
-    )
+/// The motion frames the service writes, as the frame tap shows them, decoded.
+pub(crate) struct Motion {
+    pub tap: chassis_client::FrameTap,
+    pub decoder: MotionDecoder,
+    /// The tap polled (a busy-polling run), not waited on.
+    pub spin: bool,
 }
 
-/// Drains the tap until a TX motion frame whose commanded speed `accept`s, stamped at or after
-/// `since`, appears; returns its stamp.
-fn wait_for_motion_that(
-    tap: &chassis_client::FrameTap,
-    decoder: &mut MotionDecoder,
-    accept: impl Fn(f64) -> bool,
-    since: u64,
-    spin: bool,
-    timeout: Duration,
-) -> anyhow::Result<Option<u64>> {
-    let deadline = since + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
-    loop {
-        let mut found = None;
-        let each = |frame: &BusFrame| {
-            if found.is_none()
-                && frame.stamp_ns >= since
-                && decoder.linear(frame).is_some_and(&accept)
-            {
-                found = Some(frame.stamp_ns);
+/// A commanded speed that is `speed`.
+fn at(speed: f64) -> impl Fn(f64) -> bool {
+    move |v| (v - speed).abs() < 1e-6
+}
+
+impl Motion {
+    pub fn open(robot: &mut Robot, kind: RobotKind, spin: bool) -> anyhow::Result<Self> {
+        let tap = robot.frames(2048)?;
+        let decoder = MotionDecoder::new(kind);
+        Ok(Self { tap, decoder, spin })
+    }
+
+    /// Drains the tap until a TX motion frame whose commanded speed `accept`s, stamped at or
+    /// after `since`, appears; returns its stamp.
+    fn wait(
+        &mut self,
+        accept: impl Fn(f64) -> bool,
+        since: u64,
+        timeout: Duration,
+    ) -> anyhow::Result<Option<u64>> {
+        let deadline = since + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
+        loop {
+            let mut found = None;
+            let decoder = &mut self.decoder;
+            let each = |frame: &BusFrame| {
+                if found.is_none()
+                    && frame.stamp_ns >= since
+                    && decoder.linear(frame).is_some_and(&accept)
+                {
+                    found = Some(frame.stamp_ns);
+                }
+            };
+            if self.spin {
+                self.tap.drain(each)?;
+            } else {
+                self.tap.wait(Duration::from_millis(5), each)?;
             }
-        };
-        if spin {
-            tap.drain(each)?;
-        } else {
-            tap.wait(Duration::from_millis(5), each)?;
+            if found.is_some() || now_ns() > deadline {
+                return Ok(found);
+            }
         }
-        if found.is_some() {
-            return Ok(found);
+    }
+
+    /// Drives at 0.25 m/s until a frame commands it (at most 3 s): the first motion releases
+    /// TITAN's brake and waits for command mode (and, ramped, reaches the speed).
+    pub(crate) fn warm_up(&mut self, teleop: &mut Source) -> anyhow::Result<()> {
+        let warm_until = now_ns() + 3_000_000_000;
+        let mut ticker = Ticker::new(COMMAND_INTERVAL);
+        while now_ns() < warm_until {
+            teleop.send(VelocityRequest::twist(0.25, 0.0))?;
+            if self.wait(at(0.25), now_ns(), Duration::ZERO)?.is_some() {
+                break;
+            }
+            ticker.wait();
         }
-        if now_ns() > deadline {
-            return Ok(None);
-        }
+        Ok(())
     }
 }
 
@@ -555,12 +514,12 @@ fn wait_for_motion_that(
 pub const COMMAND_INTERVAL: Duration = Duration::from_millis(4);
 
 /// The period the command path and its paced baselines keep: `interval` and 1.7 % more (4 ms:
-/// 4.068 ms). A client's timer is not aligned to the chassis': at exactly 4 ms, on the
-/// clock the simulated chassis keeps its 2 ms feedback and 20 ms tick on, a run's requests all
-/// fell at one phase of the feedback (the pass traces `--dir` keeps, `bn*-passes.txt`, put every
-/// request of a run about 0.55 ms after a feedback pass, another run's 0.7 ms), so a run, and its baseline, measured one moment
-/// of the chassis' cycle only, drawn anew each run. 1.7 % more sweeps 300 requests across a
-/// whole 20 ms tick.
+/// 4.068 ms). A client's timer is not aligned to the chassis': at exactly 4 ms, on the clock the
+/// simulated chassis keeps its 2 ms feedback and 20 ms tick on, a run's requests all fell at one
+/// phase of the feedback (the pass traces `--dir` keeps, `bn*-passes.txt`, put every request of
+/// a run about 0.55 ms after a feedback pass, another run's 0.7 ms), so a run, and its baseline,
+/// measured one moment of the chassis' cycle only, drawn anew each run. 1.7 % more sweeps 300
+/// requests across a whole 20 ms tick.
 pub fn off_grid(interval: Duration) -> Duration {
     interval + interval * 17 / 1000
 }
@@ -588,26 +547,6 @@ const KEEP_ALIVE: Duration = Duration::from_millis(100);
 /// preemption rounds measure one change per 1.1 s: faster, a change rides the next heartbeat
 /// and the figure is the manual's rate bound, not the service's latency.
 pub const XBOT_COMMAND_INTERVAL: Duration = Duration::from_millis(1100);
-
-/// Drives at 0.25 m/s until a frame commands it (at most 3 s): the first motion releases
-/// TITAN's brake and waits for command mode (and, ramped, reaches the speed).
-pub(crate) fn warm_up(
-    tap: &chassis_client::FrameTap,
-    teleop: &mut Source,
-    decoder: &mut MotionDecoder,
-    spin: bool,
-) -> anyhow::Result<()> {
-    let warm_until = now_ns() + 3_000_000_000;
-    let mut ticker = Ticker::new(COMMAND_INTERVAL);
-    while now_ns() < warm_until {
-        teleop.send(VelocityRequest::twist(0.25, 0.0))?;
-        if wait_for_motion(tap, decoder, 0.25, now_ns(), spin, Duration::ZERO)?.is_some() {
-            break;
-        }
-        ticker.wait();
-    }
-    Ok(())
-}
 
 /// What the command path measured.
 #[derive(Debug)]
@@ -645,30 +584,10 @@ pub enum Reach {
     Toward,
 }
 
-/// Command-path latencies: `count` requests alternating between two speeds, one every
-/// `interval`.
+/// Command-path latencies: `count` requests from `teleop`, a source opened anywhere (through a
+/// bridge from another computer too), alternating between two speeds, one every `interval`;
+/// the frames and the mux are read from `robot`.
 pub fn command_path(
-    robot: &mut Robot,
-    kind: RobotKind,
-    count: u64,
-    interval: Duration,
-    spin: bool,
-) -> anyhow::Result<CommandFigures> {
-    let mut teleop = robot.source("teleop")?;
-    command_path_via(
-        robot,
-        &mut teleop,
-        kind,
-        count,
-        interval,
-        spin,
-        Reach::Exact,
-    )
-}
-
-/// [`command_path`] with requests from `teleop`, a source opened anywhere (through a bridge
-/// from another computer too): the frames and the mux are read from `robot`.
-pub fn command_path_via(
     robot: &mut Robot,
     teleop: &mut Source,
     kind: RobotKind,
@@ -677,22 +596,18 @@ pub fn command_path_via(
     spin: bool,
     reach: Reach,
 ) -> anyhow::Result<CommandFigures> {
-    let tap = robot.frames(2048)?;
+    let mut motion = Motion::open(robot, kind, spin)?;
     // A new reader gets the latest decision with the service's next publication (10 Hz).
     let source = teleop.name().to_string();
     let teleop_index = robot
         .wait_mux(Duration::from_secs(2))?
         .and_then(|m| m.sources().iter().position(|s| s.name() == source))
         .ok_or_else(|| anyhow::anyhow!("the mux reports no {source} source"))?;
-    let mut decoder = MotionDecoder::new(kind);
     // Exact on every wire: whole mm/s, whole percent of 5 m/s, exact in f32.
     let speeds = [0.25, 0.5];
-    warm_up(&tap, teleop, &mut decoder, spin)?;
-
-    let mut latencies = Latencies::new();
-    let mut in_service = Latencies::new();
-    let mut samples = Vec::new();
-    let mut missed = 0;
+    motion.warm_up(teleop)?;
+    let (mut latencies, mut in_service) = (Latencies::new(), Latencies::new());
+    let (mut samples, mut missed) = (Vec::new(), 0);
     // Between two samples further apart than the source's timeout, the current request is
     // repeated as a controller would: the mux output stays, no frame is sent for it.
     let period = interval.min(KEEP_ALIVE);
@@ -706,14 +621,14 @@ pub fn command_path_via(
                 teleop.send(VelocityRequest::twist(current, 0.0))?;
             }
         }
-        tap.drain(|f| {
-            decoder.linear(f);
+        motion.tap.drain(|f| {
+            motion.decoder.linear(f);
         })?;
         robot.poll_mux(|_| {})?;
         // The first sample differs from the warm-up's 0.25: every sample is a change.
         let speed = speeds[usize::from(i % 2 == 0)];
         current = speed as f32;
-        let from = decoder.last.unwrap_or(0.25);
+        let from = motion.decoder.last.unwrap_or(0.25);
         let accept = move |v: f64| match reach {
             Reach::Exact => (v - speed).abs() < 1e-6,
             Reach::Toward => {
@@ -723,24 +638,16 @@ pub fn command_path_via(
         let stamp = now_ns();
         teleop.send(VelocityRequest {
             stamp_ns: stamp,
-            ..VelocityRequest::twist(speed as f32, 0.0)
+            ..VelocityRequest::twist(current, 0.0)
         })?;
-        match wait_for_motion_that(
-            &tap,
-            &mut decoder,
-            accept,
-            stamp,
-            spin,
-            Duration::from_millis(500),
-        )? {
-            Some(written) => {
-                latencies.record_between(stamp, written);
-                samples.push((stamp, written));
-                if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
-                    in_service.record_between(decided, written);
-                }
-            }
-            None => missed += 1,
+        let Some(written) = motion.wait(accept, stamp, Duration::from_millis(500))? else {
+            missed += 1;
+            continue;
+        };
+        latencies.record_between(stamp, written);
+        samples.push((stamp, written));
+        if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
+            in_service.record_between(decided, written);
         }
     }
     teleop.stop()?;
@@ -870,12 +777,10 @@ pub fn preemption(
     interval: Duration,
     spin: bool,
 ) -> anyhow::Result<(Latencies, u64)> {
-    let tap = robot.frames(2048)?;
+    let mut motion = Motion::open(robot, kind, spin)?;
     let mut teleop = robot.source("teleop")?;
     let mut safety: Source = robot.source("safety")?;
-    let mut decoder = MotionDecoder::new(kind);
-    let mut latencies = Latencies::new();
-    let mut missed = 0;
+    let (mut latencies, mut missed) = (Latencies::new(), 0);
     // Rounds and requests at a controller's pace: a client waking the service more than 1,000
     // times a second is read on the service's tick only (and a round takes well under 1 ms).
     let pace = COMMAND_INTERVAL.as_nanos() as u64;
@@ -887,25 +792,13 @@ pub fn preemption(
         safety.heartbeat()?;
         let start = now_ns();
         let mut driving = false;
-        while now_ns() - start < 2_000_000_000 {
+        while !driving && now_ns() - start < 2_000_000_000 {
             if now_ns() - sent >= pace {
                 sent = now_ns();
                 teleop.send(VelocityRequest::twist(0.5, 0.0))?;
                 safety.heartbeat()?;
             }
-            if wait_for_motion(
-                &tap,
-                &mut decoder,
-                0.5,
-                start,
-                spin,
-                Duration::from_millis(20),
-            )?
-            .is_some()
-            {
-                driving = true;
-                break;
-            }
+            driving = (motion.wait(at(0.5), start, Duration::from_millis(20))?).is_some();
         }
         if !driving {
             missed += 1;
@@ -914,21 +807,14 @@ pub fn preemption(
         // The stop follows a teleop request at once, as a ping follows its wake-up ping in the
         // row's baseline: nothing between the two sends (the frames before are skipped by their
         // stamps; draining them here first keeps the wait short).
-        tap.drain(|_| {})?;
+        motion.tap.drain(|_| {})?;
         teleop.send(VelocityRequest::twist(0.5, 0.0))?;
         let stamp = now_ns();
         safety.send(VelocityRequest {
             stamp_ns: stamp,
             ..VelocityRequest::twist(0.0, 0.0)
         })?;
-        match wait_for_motion(
-            &tap,
-            &mut decoder,
-            0.0,
-            stamp,
-            spin,
-            Duration::from_millis(500),
-        )? {
+        match motion.wait(at(0.0), stamp, Duration::from_millis(500))? {
             Some(written) => latencies.record_between(stamp, written),
             None => missed += 1,
         }

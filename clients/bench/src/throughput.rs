@@ -3,7 +3,7 @@
 
 use std::io::Write;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
@@ -13,7 +13,7 @@ use chassis_protocols::pair::Pair;
 use chassis_protocols::titan::TitanProfile;
 use chassis_protocols::{CandumpLine, Direction, Timestamp, WireItem, titan};
 
-use crate::paths::{cpu_seconds_of_thread, sibling};
+use crate::paths::{cpu_seconds_of_thread, sibling, spawn_logged, stop};
 use crate::placement::{pause, unique};
 use crate::report::Throughput;
 
@@ -54,8 +54,8 @@ pub fn record_titan(path: &Path, seconds: u64) -> anyhow::Result<u64> {
 /// Replays `file` (of `frames` frames) at full speed into a service pinned to CPU 0.
 pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Result<Throughput> {
     let name = format!("tp{}", unique());
-    let log = std::fs::File::create(dir.join(format!("{name}.log")))?;
-    let mut child = Command::new(sibling("chassisd")?)
+    let mut chassisd = Command::new(sibling("chassisd")?);
+    chassisd
         .args([
             "--robot",
             "titan",
@@ -66,13 +66,9 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
             "0",
         ])
         .arg("--bus")
-        .arg(format!("replay:{}@max", file.display()))
-        .env(chassis_client::IPC_PREFIX_ENV, prefix)
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::null())
-        .stderr(Stdio::from(log))
-        .spawn()
-        .context("starting chassisd on the replay bus")?;
+        .arg(format!("replay:{}@max", file.display()));
+    let log = dir.join(&name);
+    let mut child = spawn_logged(&mut chassisd, prefix, &log, "chassisd on the replay bus")?;
     let pid = child.id();
     let deadline = now_ns() + 20_000_000_000;
     let mut robot = loop {
@@ -105,11 +101,7 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
             }
         }
     }
-    let _ = nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(i32::try_from(pid).unwrap_or(0)),
-        nix::sys::signal::Signal::SIGTERM,
-    );
-    let _ = child.wait();
+    stop(&mut child);
     let (t0, f0, c0) = first.context("no frame was replayed")?;
     let seconds = (last.0 - t0) as f64 / 1e9;
     let counted = last.1 - f0;
