@@ -106,7 +106,7 @@ pub enum Rounds {
     /// (and is not answered): what a request meets when it follows another at once, as a
     /// safety stop follows a teleop request.
     AfterWakeUp,
-    /// A controller's loop ([`crate::periods::Periods`]): one ping at the start of each
+    /// A controller's loop ([`crate::control_loop::Periods`]): one ping at the start of each
     /// period, the answers looked for without waiting; what counts is each period's start →
     /// its ping in the other process, and the periods the loop missed.
     Loop(Duration),
@@ -710,10 +710,7 @@ pub fn run(
         Some(load) => Some(args.start("feed", pong_cpu.map(|c| feed_cpu(c, transport, load)))?),
         None => None,
     };
-    if let Some(cpu) = ping_cpu {
-        pin_current_thread(cpu)?;
-    }
-    let result = (|| {
+    let result = crate::paths::pinned(ping_cpu, || {
         let mut endpoint: Box<dyn Endpoint> = match transport.waiting() {
             Some(waiting) => Box::new(IceoryxEndpoint::open(&args, "ping", "pong", waiting)?),
             None => Box::new(Socket::open(&args, "ping", "pong")?),
@@ -725,8 +722,7 @@ pub fn run(
         // Tells the pong to stop (and to write its feed figures).
         let _ = endpoint.send(Ping::new(0, u64::MAX, 0));
         result
-    })();
-    crate::placement::unpin_current_thread();
+    })?;
     if let Some(feeder) = feeder.as_mut() {
         let _ = feeder.child.kill();
         let _ = feeder.child.wait();
@@ -880,7 +876,7 @@ fn loop_rounds(
     period: Duration,
 ) -> anyhow::Result<(Vec<u64>, u64)> {
     const WARMUP: u64 = 200;
-    let mut periods = crate::periods::Periods::new(period);
+    let mut periods = crate::control_loop::Periods::new(period);
     // Each ping's period start and send stamp.
     let mut started: Vec<(u64, u64)> = Vec::new();
     let mut hops = Vec::new();

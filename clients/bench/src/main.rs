@@ -22,11 +22,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 mod baseline;
 mod control_loop;
 mod dds_echo;
-mod fanout;
 mod fleet;
 mod parts;
 mod paths;
-mod periods;
 mod placement;
 mod provenance;
 mod python;
@@ -34,7 +32,6 @@ mod render;
 mod report;
 mod stalls;
 mod stats;
-mod throughput;
 mod verdict;
 mod zenoh;
 
@@ -78,7 +75,7 @@ enum RoleCmd {
 enum Role {
     Pong(baseline::PongArgs),
     Feed(baseline::PongArgs),
-    Subscribe(fanout::SubscribeArgs),
+    Subscribe(paths::SubscribeArgs),
     DdsEcho(dds_echo::EchoArgs),
     /// Publish stamped samples on a bare Zenoh session configured as chassis-zenoh's.
     ZenohPub(zenoh::RawArgs),
@@ -278,18 +275,19 @@ fn baseline_key(what: &str, placement: &str) -> String {
 }
 
 fn hop_row(run: &str, what: String, placement: &str, l: Latencies, conditions: String) -> Row {
+    let row = Row::new(
+        PathKind::Baseline,
+        Leg::Hop,
+        run,
+        what,
+        "-",
+        placement,
+        l,
+        0,
+    );
     Row {
         conditions: Some(conditions),
-        ..Row::new(
-            PathKind::Baseline,
-            Leg::Hop,
-            run,
-            what,
-            "-",
-            placement,
-            l,
-            0,
-        )
+        ..row
     }
 }
 
@@ -306,14 +304,8 @@ struct Ctx {
 impl Ctx {
     /// Starts chassisd for `run` in the benchmark's configuration, unpinned, without a trace.
     fn start(&self, run: (RobotKind, BusKind, LoopMode)) -> anyhow::Result<Started> {
-        paths::start(
-            run,
-            None,
-            ServiceConfig::Bench,
-            false,
-            &self.prefix,
-            &self.dir,
-        )
+        let (prefix, dir) = (&self.prefix, &self.dir);
+        paths::start(run, None, ServiceConfig::Bench, false, prefix, dir)
     }
 }
 
@@ -340,11 +332,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         None => std::env::temp_dir().join(format!("chassis-bench-{}", std::process::id())),
     };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let robots: Vec<RobotKind> = args
-        .robots
-        .iter()
+    let robots = (args.robots.iter())
         .map(|r| r.parse::<RobotKind>().map_err(anyhow::Error::msg))
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let strict = args.samples.is_some() || args.plot.is_some() || args.doc.is_some();
     let provenance = provenance::Provenance::begin(strict, args.allow_dirty)?;
     let mut report = Report {
@@ -353,9 +343,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         ..Report::default()
     };
     if report.machine.cpus < 2 {
-        report
-            .notes
-            .push("one CPU only: cross-CPU runs share it".into());
+        let note = "one CPU only: cross-CPU runs share it";
+        report.notes.push(note.into());
     }
     let steps = steps(args, &robots, &plan, skip);
     let bar = ProgressBar::new(steps.len() as u64);
@@ -373,17 +362,15 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         ros2: python::interpreter("ros2"),
         bar,
     };
-    if !skip("paths") {
-        for (missing, what, name) in [
-            (ctx.python.is_none(), "the Python client", "python"),
-            (ctx.ros2.is_none(), "the ROS 2 bridge", "ros2"),
-        ] {
-            if missing {
-                report.notes.push(format!(
-                    "{what} was not measured: target/{name}-venv is missing \
-                     (scripts/{name}-tests makes it)"
-                ));
-            }
+    for (missing, what, name) in [
+        (ctx.python.is_none(), "the Python client", "python"),
+        (ctx.ros2.is_none(), "the ROS 2 bridge", "ros2"),
+    ] {
+        if missing && !skip("paths") {
+            report.notes.push(format!(
+                "{what} was not measured: target/{name}-venv is missing \
+                 (scripts/{name}-tests makes it)"
+            ));
         }
     }
     // All of them before any is measured: a step that fails to bring a row is caught too.
@@ -410,10 +397,7 @@ fn steps(
     skip: impl Fn(&str) -> bool,
 ) -> Vec<Box<dyn Step>> {
     fn boxed<S: Step + 'static>(steps: impl IntoIterator<Item = S>) -> Vec<Box<dyn Step>> {
-        steps
-            .into_iter()
-            .map(|s| Box::new(s) as Box<dyn Step>)
-            .collect()
+        steps.into_iter().map(|s| Box::new(s) as _).collect()
     }
     let mut runs = path_runs(args.quick || args.smoke, robots);
     if args.smoke {
@@ -491,27 +475,24 @@ impl Step for Baseline {
 
     fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
         let (what, Self(transport, placement, pace)) = (self.what(), *self);
-        ctx.bar
-            .set_message(format!("baseline {what} ({})", placement.label()));
+        let at = placement.label();
+        ctx.bar.set_message(format!("baseline {what} ({at})"));
         let (rounds, shape, conditions) = match pace {
-            Some(p) => (
-                ctx.plan.paced_rounds,
-                baseline::Rounds::Paced(p),
-                format!(
-                    "one ping every {}, receiver otherwise idle (cold)",
-                    paths::period_text(p)
-                ),
-            ),
-            None => (
-                ctx.plan.baseline_rounds,
-                baseline::Rounds::BackToBack,
-                "back to back (warm)".into(),
-            ),
+            Some(p) => {
+                let text = paths::period_text(p);
+                let conditions = format!("one ping every {text}, receiver otherwise idle (cold)");
+                (ctx.plan.paced_rounds, Rounds::Paced(p), conditions)
+            }
+            None => {
+                let conditions = "back to back (warm)".into();
+                (ctx.plan.baseline_rounds, Rounds::BackToBack, conditions)
+            }
         };
         let (prefix, dir) = (&ctx.prefix, &ctx.dir);
         let l = baseline::run(transport, placement, rounds, shape, None, prefix, dir)?;
-        let row = hop_row("", what, placement.label(), l.all_pings(), conditions);
-        report.rows.push(row);
+        report
+            .rows
+            .push(hop_row("", what, at, l.all_pings(), conditions));
         Ok(())
     }
 }
@@ -534,19 +515,14 @@ impl Step for Stalls {
             over_20_us: stalls.per_second(20),
             over_100_us: stalls.per_second(100),
         });
-        let conditions = stalls.conditions(cpu);
-        let mut r = Row::new(
-            PathKind::Baseline,
-            Leg::Stalls,
-            "",
+        let (what, at, conditions) = (
             report::STALLS.into(),
-            "-",
-            &stall_placement(cpu),
-            stalls.gaps,
-            0,
+            stall_placement(cpu),
+            stalls.conditions(cpu),
         );
-        r.conditions = Some(conditions);
-        report.rows.push(r);
+        let mut row = hop_row("", what, &at, stalls.gaps, conditions);
+        row.leg = Leg::Stalls;
+        report.rows.push(row);
         Ok(())
     }
 }
@@ -651,21 +627,19 @@ impl PathRun {
         let (count, preemptions, interval) = self.sizes(&ctx.plan);
         let feedback = paths::FeedbackRate::start(&mut robot)?;
         let result = paths::pinned(self.placement.cpus().0, || -> anyhow::Result<_> {
-            let command = (count > 0)
-                .then(|| {
-                    let mut teleop = robot.source("teleop")?;
-                    let reach = paths::Reach::Exact;
-                    paths::command_path(
-                        &mut robot,
-                        &mut teleop,
-                        self.robot,
-                        count,
-                        interval,
-                        spin,
-                        reach,
-                    )
-                })
-                .transpose()?;
+            let mut command = None;
+            if count > 0 {
+                let (t, exact) = (&mut robot.source("teleop")?, paths::Reach::Exact);
+                let mut motion = paths::Motion::open(&mut robot, self.robot, spin)?;
+                let sizes = (count, interval);
+                command = Some(paths::command_path(
+                    &mut motion,
+                    &mut robot,
+                    t,
+                    sizes,
+                    exact,
+                )?);
+            }
             let state = paths::state_path(&mut robot, ctx.plan.states, spin)?;
             let preempt = paths::preemption(&mut robot, self.robot, preemptions, interval, spin)?;
             // The Python client and the ROS 2 bridge beside the Rust one.
@@ -681,14 +655,12 @@ impl PathRun {
                     commands: count,
                     interval,
                 };
-                python = ctx
-                    .python
-                    .as_ref()
-                    .map(|i| python::run(i, &run))
-                    .transpose()?;
-                ros2 = (ctx.ros2.as_ref())
-                    .map(|i| python::run_ros2(i, &run))
-                    .transpose()?;
+                if let Some(interpreter) = &ctx.python {
+                    python = Some(python::run(interpreter, &run)?);
+                }
+                if let Some(interpreter) = &ctx.ros2 {
+                    ros2 = Some(python::run_ros2(interpreter, &run)?);
+                }
             }
             Ok((command, state, preempt, python, ros2))
         })??;
@@ -996,22 +968,14 @@ impl Step for DefaultConfig {
 
     fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
         let run = DEFAULT_CONFIG;
-        ctx.bar
-            .set_message("titan sim in chassisd's default configuration");
+        let message = "titan sim in chassisd's default configuration";
+        ctx.bar.set_message(message);
         let (service, mut robot) = run.start(ctx, ServiceConfig::Default, false)?;
         let figures = paths::pinned(run.placement.cpus().0, || -> anyhow::Result<_> {
-            let (count, interval) = (ctx.plan.commands, paths::COMMAND_INTERVAL);
-            let mut teleop = robot.source("teleop")?;
-            let reach = paths::Reach::Toward;
-            paths::command_path(
-                &mut robot,
-                &mut teleop,
-                run.robot,
-                count,
-                interval,
-                false,
-                reach,
-            )
+            let sizes = (ctx.plan.commands, paths::COMMAND_INTERVAL);
+            let (t, toward) = (&mut robot.source("teleop")?, paths::Reach::Toward);
+            let mut motion = paths::Motion::open(&mut robot, run.robot, false)?;
+            paths::command_path(&mut motion, &mut robot, t, sizes, toward)
         })??;
         drop(robot);
         drop(service);
@@ -1075,7 +1039,7 @@ impl Step for FanOut {
             .set_message(format!("fan-out to {n} subscriber processes"));
         let (service, mut robot) = ctx.start(TITAN_SIM)?;
         let seconds = ctx.plan.fanout_seconds;
-        let l = fanout::run(&mut robot, &service.name, &ctx.prefix, n, seconds)?;
+        let l = paths::fan_out(&mut robot, &service.name, &ctx.prefix, n, seconds)?;
         let run = bus_label(RobotKind::Titan, BusKind::Sim);
         let (path, leg, what) = (PathKind::FanOut, Leg::FanOut, self.what());
         (report.rows).push(Row::new(path, leg, &run, what, "event", "unpinned", l, 0));
@@ -1146,9 +1110,9 @@ impl Step for Throughput {
             .set_message("replaying a recorded bus at full speed");
         let file = ctx.dir.join("titan.log");
         let seconds = if ctx.quick { 300 } else { 1500 };
-        let frames = throughput::record_titan(&file, seconds)?;
+        let frames = paths::record_titan(&file, seconds)?;
         for _ in 0..report::REPLAYS {
-            let replay = throughput::replay(&file, frames, &ctx.prefix, &ctx.dir)?;
+            let replay = paths::replay(&file, frames, &ctx.prefix, &ctx.dir)?;
             report.throughput.push(replay);
         }
         Ok(())
@@ -1161,11 +1125,11 @@ fn main() -> ExitCode {
         Some(RoleCmd::Role { role }) => match role {
             Role::Pong(args) => baseline::pong(&args),
             Role::Feed(args) => baseline::feed(&args),
-            Role::Subscribe(args) => fanout::subscribe(&args),
+            Role::Subscribe(args) => paths::subscribe(&args),
             Role::DdsEcho(args) => dds_echo::run(&args),
             Role::ZenohPub(args) => zenoh::publish(&args),
             Role::ZenohSub(args) => zenoh::subscribe(&args),
-            Role::RecordTitan { out, seconds } => throughput::record_titan(&out, seconds)
+            Role::RecordTitan { out, seconds } => paths::record_titan(&out, seconds)
                 .map(|frames| eprintln!("{frames} frames written to {}", out.display())),
         },
         Some(RoleCmd::Render(args)) => std::fs::read_to_string(&args.samples)

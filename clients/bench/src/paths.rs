@@ -9,6 +9,7 @@
 //!
 //! Every figure is one-way, from `CLOCK_MONOTONIC` stamps taken in two processes.
 
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -16,15 +17,19 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, Robot, STATE_BUFFER, Source,
-    Ticker, VelocityRequest, now_ns,
+    Ticker, Velocity, VelocityRequest, now_ns,
 };
 pub use chassis_ipc::PassStamps;
+use chassis_protocols::driver::{Driver, DriverConfig};
 use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
-use chassis_protocols::{CanFrame, RobotKind};
+use chassis_protocols::pair::Pair;
+use chassis_protocols::titan::{self, TitanProfile};
+use chassis_protocols::{CanFrame, CandumpLine, Direction, RobotKind, Timestamp, WireItem};
 use serde::{Deserialize, Serialize};
 use zerocopy::IntoBytes as _;
 
 use crate::placement::{pause, pin_current_thread, unique, unpin_current_thread};
+use crate::report::Throughput;
 use crate::stats::Latencies;
 
 /// How the service's loop waits.
@@ -42,18 +47,6 @@ impl LoopMode {
             LoopMode::Event => "event",
             LoopMode::Spin => "spin",
             LoopMode::Hybrid => "hybrid",
-        }
-    }
-
-    /// The SCHED_FIFO priority chassisd's loop asks for in the benchmark's runs of this loop:
-    /// [`REALTIME_PRIORITY`] for a loop that blocks, as a robot runs it; none for the polling
-    /// loop, which at SCHED_FIFO holds its CPU and is stopped by the kernel's real-time
-    /// throttling (`kernel.sched_rt_runtime_us`: 50 ms of every second by default) unless its
-    /// CPU is isolated, which this machine's are not.
-    pub fn realtime(self) -> Option<u8> {
-        match self {
-            LoopMode::Event | LoopMode::Hybrid => Some(REALTIME_PRIORITY),
-            LoopMode::Spin => None,
         }
     }
 }
@@ -132,11 +125,9 @@ impl Drop for Service {
 
 /// Asks `child` to end (SIGTERM).
 pub fn terminate(child: &Child) {
+    use nix::sys::signal::{Signal, kill};
     if let Ok(pid) = i32::try_from(child.id()) {
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(pid),
-            nix::sys::signal::Signal::SIGTERM,
-        );
+        let _ = kill(nix::unistd::Pid::from_raw(pid), Signal::SIGTERM);
     }
 }
 
@@ -148,12 +139,11 @@ pub fn stop(child: &mut Child) {
 
 /// Where the workspace's binaries are (next to this one).
 pub fn sibling(binary: &str) -> anyhow::Result<PathBuf> {
-    let exe = std::env::current_exe()?;
-    let path = exe.with_file_name(binary);
+    let path = std::env::current_exe()?.with_file_name(binary);
     if !path.exists() {
+        let path = path.display();
         bail!(
-            "{} not found next to chassis-bench: build the whole workspace (`cargo build --release --workspace`)",
-            path.display()
+            "{path} not found next to chassis-bench: build the whole workspace (`cargo build --workspace`)"
         );
     }
     Ok(path)
@@ -173,20 +163,22 @@ pub const BENCH_CONFIG: &str = "[driver]\nmin_command_interval_ms = 0\nbrake_idl
 pub enum ServiceConfig {
     /// [`BENCH_CONFIG`], normal scheduling: the cost, memory, fan-out and Zenoh runs.
     Bench,
-    /// [`BENCH_CONFIG`] in real-time mode where the loop blocks ([`LoopMode::realtime`]): the
-    /// latency runs of the service paths.
+    /// [`BENCH_CONFIG`] in real-time mode where the loop blocks: the latency runs of the service
+    /// paths.
     BenchRealtime,
     /// chassisd's defaults.
     Default,
 }
 
 impl ServiceConfig {
-    /// The SCHED_FIFO priority this configuration asks for with the loop `mode`, if any.
+    /// The SCHED_FIFO priority this configuration asks for with the loop `mode`, if any:
+    /// [`REALTIME_PRIORITY`] for a loop that blocks, as a robot runs it; none for the polling
+    /// loop, which at SCHED_FIFO holds its CPU and is stopped by the kernel's real-time
+    /// throttling (`kernel.sched_rt_runtime_us`: 50 ms of every second by default) unless its
+    /// CPU is isolated, which this machine's are not.
     pub fn realtime(self, mode: LoopMode) -> Option<u8> {
-        match self {
-            ServiceConfig::BenchRealtime => mode.realtime(),
-            ServiceConfig::Bench | ServiceConfig::Default => None,
-        }
+        let blocks = mode != LoopMode::Spin;
+        (self == ServiceConfig::BenchRealtime && blocks).then_some(REALTIME_PRIORITY)
     }
 }
 
@@ -411,6 +403,13 @@ fn commanded_speed(json: &FrameJson) -> Option<f64> {
     }
 }
 
+/// The state `robot` publishes next (at most a second away).
+fn state(robot: &mut Robot) -> anyhow::Result<ChassisState> {
+    robot
+        .wait_state(Duration::from_secs(1))?
+        .context("no state")
+}
+
 /// The frames a second the service reads from the chassis over a stretch of a run: the rate at
 /// which the chassis' feedback wakes the service's loop.
 pub struct FeedbackRate {
@@ -420,9 +419,7 @@ pub struct FeedbackRate {
 
 impl FeedbackRate {
     pub fn start(robot: &mut Robot) -> anyhow::Result<Self> {
-        let s = robot
-            .wait_state(Duration::from_secs(1))?
-            .context("no state")?;
+        let s = state(robot)?;
         Ok(Self {
             frames: s.link.rx_frames,
             at: now_ns(),
@@ -431,9 +428,7 @@ impl FeedbackRate {
 
     /// Frames read a second since [`FeedbackRate::start`].
     pub fn per_second(&self, robot: &mut Robot) -> anyhow::Result<f64> {
-        let s = robot
-            .wait_state(Duration::from_secs(1))?
-            .context("no state")?;
+        let s = state(robot)?;
         let seconds = now_ns().saturating_sub(self.at) as f64 / 1e9;
         if seconds <= 0.0 || s.link.rx_frames <= self.frames {
             bail!("the chassis sent no feedback during the run");
@@ -586,17 +581,14 @@ pub enum Reach {
 
 /// Command-path latencies: `count` requests from `teleop`, a source opened anywhere (through a
 /// bridge from another computer too), alternating between two speeds, one every `interval`;
-/// the frames and the mux are read from `robot`.
+/// the frames (`motion`) and the mux are read from `robot`.
 pub fn command_path(
+    motion: &mut Motion,
     robot: &mut Robot,
     teleop: &mut Source,
-    kind: RobotKind,
-    count: u64,
-    interval: Duration,
-    spin: bool,
+    (count, interval): (u64, Duration),
     reach: Reach,
 ) -> anyhow::Result<CommandFigures> {
-    let mut motion = Motion::open(robot, kind, spin)?;
     // A new reader gets the latest decision with the service's next publication (10 Hz).
     let source = teleop.name().to_string();
     let teleop_index = robot
@@ -902,25 +894,13 @@ pub fn cost_at(
 ) -> anyhow::Result<Cost> {
     let capacity = f64::from(bitrate) / 111.0;
     // The feedback the chassis sends anyway.
-    let before = robot
-        .wait_state(Duration::from_secs(1))?
-        .context("no state")?;
-    let t0 = now_ns();
+    let feedback = FeedbackRate::start(robot)?;
     pause(Duration::from_secs(1));
-    let after = robot
-        .wait_state(Duration::from_secs(1))?
-        .context("no state")?;
-    let normal =
-        (after.link.rx_frames - before.link.rx_frames) as f64 / ((now_ns() - t0) as f64 / 1e9);
-    let flood = (capacity - normal).max(0.0);
+    let flood = (capacity - feedback.per_second(robot)?).max(0.0);
     robot.sim(chassis_client::flood_request(flood), Duration::from_secs(3))?;
     // Settle, then measure.
     robot.wait_state(Duration::from_millis(500))?;
-    let start_frames = robot
-        .wait_state(Duration::from_secs(1))?
-        .context("no state")?
-        .link
-        .rx_frames;
+    let start_frames = state(robot)?.link.rx_frames;
     // The service's loop thread (its main thread) only: the simulated chassis flooding the bus
     // runs in a thread of the same process and is not part of the service's cost.
     let start_cpu = cpu_seconds_of_thread(pid, pid)?;
@@ -931,19 +911,170 @@ pub fn cost_at(
     }
     let elapsed = (now_ns() - start) as f64 / 1e9;
     let cpu = cpu_seconds_of_thread(pid, pid)? - start_cpu;
-    let frames = robot
-        .wait_state(Duration::from_secs(1))?
-        .context("no state")?
-        .link
-        .rx_frames;
-    let rss = rss_mib(pid)?;
+    let frames = state(robot)?.link.rx_frames;
+    let rss_mib = rss_mib(pid)?;
     robot.sim(chassis_client::flood_request(0.0), Duration::from_secs(3))?;
     Ok(Cost {
         bus: bus.into(),
         bitrate,
         frames_per_s: (frames - start_frames) as f64 / elapsed,
         cpu_pct: 100.0 * cpu / elapsed,
-        rss_mib: rss,
+        rss_mib,
+    })
+}
+
+/// Arguments of a subscriber process (a hidden role of this binary).
+#[derive(Debug, Clone, clap::Args)]
+pub struct SubscribeArgs {
+    #[arg(long)]
+    pub name: String,
+    #[arg(long)]
+    pub prefix: String,
+    #[arg(long)]
+    pub seconds: f64,
+}
+
+/// The subscriber role: records state latencies for `seconds`, then prints them on stdout (as a
+/// samples file holds them).
+pub fn subscribe(args: &SubscribeArgs) -> anyhow::Result<()> {
+    let robot = Robot::connect_with_prefix(&args.name, Some(&args.prefix))?;
+    // Every sample, as a client that needs them all reads them.
+    let stream = robot.state_stream(STATE_BUFFER)?;
+    let mut recorder = StateRecorder::default();
+    let end = now_ns() + (args.seconds * 1e9) as u64;
+    while now_ns() < end {
+        stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
+    }
+    println!("{}", serde_json::to_string(&recorder.latencies)?);
+    Ok(())
+}
+
+/// State fan-out: the state path measured in `subscribers` subscriber processes at once for
+/// `seconds` while this process drives the robot; their latencies merged.
+pub fn fan_out(
+    robot: &mut Robot,
+    name: &str,
+    prefix: &str,
+    subscribers: usize,
+    seconds: f64,
+) -> anyhow::Result<Latencies> {
+    let exe = std::env::current_exe()?;
+    let mut children = Vec::new();
+    for _ in 0..subscribers {
+        children.push(
+            Command::new(&exe)
+                .args(["role", "subscribe", "--name", name, "--prefix", prefix])
+                .args(["--seconds", &seconds.to_string()])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::inherit())
+                .spawn()
+                .context("starting a subscriber")?,
+        );
+    }
+    let mut teleop = robot.source("teleop")?;
+    let end = now_ns() + ((seconds + 0.5) * 1e9) as u64;
+    while now_ns() < end {
+        teleop.send(VelocityRequest::twist(0.6, 0.3))?;
+        robot.wait_state(Duration::from_millis(50))?;
+    }
+    teleop.stop()?;
+    let mut merged = Latencies::new();
+    for child in children {
+        let out = child.wait_with_output()?;
+        if !out.status.success() {
+            bail!("a subscriber failed");
+        }
+        let latencies: Latencies =
+            serde_json::from_slice(&out.stdout).context("a subscriber's histogram")?;
+        merged.merge(&latencies);
+    }
+    Ok(merged)
+}
+
+/// Writes a candump log of a TITAN driving figure-eights for `seconds` of simulated time: what
+/// its bus carries from the chassis (about 650 frames a second).
+pub fn record_titan(path: &Path, seconds: u64) -> anyhow::Result<u64> {
+    let profile = TitanProfile::default();
+    let start = Timestamp::from_millis(1);
+    let driver = titan::TitanDriver::new(profile.clone(), DriverConfig::default(), start);
+    let firmware = titan::TitanSim::new(profile, start);
+    let mut pair = Pair::new(driver, firmware, start);
+    pair.record = true;
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut frames = 0u64;
+    for second in 0..seconds {
+        let turn = if second % 20 < 10 { 0.3 } else { -0.3 };
+        pair.set_command(Velocity::twist(1.0, turn)?);
+        pair.run_for(Duration::from_secs(1));
+        for record in pair.log() {
+            if let (Direction::FromChassis, WireItem::Can(frame)) = (record.direction, &record.item)
+            {
+                let line = CandumpLine {
+                    time_s: record.at.as_nanos() as f64 / 1e9,
+                    interface: "can0".into(),
+                    frame: *frame,
+                };
+                writeln!(out, "{}", line.format())?;
+                frames += 1;
+            }
+        }
+        pair.clear_log();
+    }
+    let _ = pair.driver.state();
+    out.flush()?;
+    Ok(frames)
+}
+
+/// Throughput: `file` (of `frames` frames) replayed into the service as fast as it drains it —
+/// read, decode, publish — its loop pinned to CPU 0 (the replay thread runs on the other).
+pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Result<Throughput> {
+    let name = format!("tp{}", unique());
+    let mut chassisd = Command::new(sibling("chassisd")?);
+    let bus = format!("replay:{}@max", file.display());
+    let args = format!("--robot titan --name {name} --no-safety-monitor --cpu 0 --bus");
+    chassisd.args(args.split(' ')).arg(bus);
+    let log = dir.join(&name);
+    let mut child = spawn_logged(&mut chassisd, prefix, &log, "chassisd on the replay bus")?;
+    let pid = child.id();
+    let deadline = now_ns() + 20_000_000_000;
+    let mut robot = loop {
+        if let Ok(robot) = Robot::connect_with_prefix(&name, Some(prefix)) {
+            break robot;
+        }
+        if now_ns() > deadline {
+            let _ = child.kill();
+            bail!("chassisd on the replay bus did not come up");
+        }
+        pause(Duration::from_millis(5));
+    };
+    // From the first frame counted to the last: the loop thread's CPU over that span.
+    let mut first: Option<(u64, u64, f64)> = None;
+    let mut last = (0u64, 0u64, 0.0f64);
+    let end = now_ns() + 120_000_000_000;
+    while now_ns() < end {
+        if let Some(state) = robot.wait_state(Duration::from_millis(20))? {
+            let cpu = cpu_seconds_of_thread(pid, pid)?;
+            let sample = (now_ns(), state.link.rx_frames, cpu);
+            if first.is_none() && state.link.rx_frames > 0 {
+                first = Some(sample);
+            }
+            last = sample;
+            if state.link.rx_frames >= frames {
+                break;
+            }
+        }
+    }
+    stop(&mut child);
+    let (t0, f0, c0) = first.context("no frame was replayed")?;
+    let seconds = (last.0 - t0) as f64 / 1e9;
+    let counted = last.1 - f0;
+    let cpu_seconds = last.2 - c0;
+    Ok(Throughput {
+        frames: counted,
+        seconds,
+        frames_per_s: counted as f64 / seconds.max(1e-9),
+        service_cpu_pct: 100.0 * cpu_seconds / seconds.max(1e-9),
+        frames_per_cpu_s: counted as f64 / cpu_seconds.max(1e-9),
     })
 }
 

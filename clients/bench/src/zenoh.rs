@@ -264,15 +264,9 @@ pub fn run(
         operator.source("remote").ok()
     })?;
     let (kind, reach) = (RobotKind::Titan, paths::Reach::Exact);
-    let command = paths::command_path(
-        &mut robot,
-        &mut remote,
-        kind,
-        commands,
-        interval,
-        false,
-        reach,
-    )?;
+    let mut motion = paths::Motion::open(&mut robot, kind, false)?;
+    let sizes = (commands, interval);
+    let command = paths::command_path(&mut motion, &mut robot, &mut remote, sizes, reach)?;
 
     // Robot state → the operator's iceoryx2 subscriber, while the robot drives (so frames keep
     // changing the state).
