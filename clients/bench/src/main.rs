@@ -199,11 +199,6 @@ impl Plan {
     }
 }
 
-/// The placement column of CPU `cpu`'s stall row.
-fn stall_placement(cpu: usize) -> String {
-    format!("CPU {cpu}")
-}
-
 /// One service configuration to measure.
 struct PathRun {
     robot: RobotKind,
@@ -502,7 +497,7 @@ struct Stalls(usize);
 
 impl Step for Stalls {
     fn planned(&self, _: &Ctx) -> Vec<Planned> {
-        let key = baseline_key(report::STALLS, &stall_placement(self.0));
+        let key = baseline_key(report::STALLS, &format!("CPU {}", self.0));
         vec![Planned::new(key, None)]
     }
 
@@ -517,7 +512,7 @@ impl Step for Stalls {
         });
         let (what, at, conditions) = (
             report::STALLS.into(),
-            stall_placement(cpu),
+            format!("CPU {cpu}"),
             stalls.conditions(cpu),
         );
         let mut row = hop_row("", what, &at, stalls.gaps, conditions);
@@ -640,7 +635,12 @@ impl PathRun {
                     exact,
                 )?);
             }
-            let state = paths::state_path(&mut robot, ctx.plan.states, spin)?;
+            let (mut state, mut teleop) =
+                (paths::StateRecorder::default(), robot.source("teleop")?);
+            let sizes = (ctx.plan.states, spin);
+            paths::state_path(&robot, &mut teleop, &mut state, sizes, |_, _| {})?;
+            // The preemption opens a teleop source of its own.
+            drop(teleop);
             let preempt = paths::preemption(&mut robot, self.robot, preemptions, interval, spin)?;
             // The Python client and the ROS 2 bridge beside the Rust one.
             let (mut python, mut ros2) = (None, None);
@@ -847,30 +847,21 @@ impl PathRun {
             paths::period_text(dds.raw_out_period)
         );
         let carried_out = "an Odometry written as the bridge writes odom (its writer QoS)";
-        rows.push(self.hop_row(
-            dds_out.clone(),
-            dds.raw_out,
-            conditions(pace_out, carried_out),
-        ));
-        let (label, placement) = (self.label(), self.placement.label());
+        let conditions_out = conditions(pace_out, carried_out);
+        rows.push(self.hop_row(dds_out.clone(), dds.raw_out, conditions_out));
+        let (label, at) = (self.label(), self.placement.label());
         let (what, l) = (self.of(CMD_VEL), dds.command);
         let mut command = self.row(PathKind::Ros2, Leg::CmdVel, what, l, dds.missed);
         command.baseline = self.reference(&dds_in);
         // The DDS hop in, then the service's command path.
-        let (hop, path) = (
-            baseline_key(&dds_in, placement),
-            self.key(PathKind::Command, &label),
-        );
-        command.contains = vec![hop, path];
+        let path = self.key(PathKind::Command, &label);
+        command.contains = vec![baseline_key(&dds_in, at), path];
         rows.push(command);
         let mut state = self.row(PathKind::Ros2, Leg::Odom, self.of(ODOM), dds.state, 0);
         state.baseline = self.reference(&dds_out);
         // The service's state path, then the DDS hop out.
-        let (path, hop) = (
-            self.key(PathKind::State, &label),
-            baseline_key(&dds_out, placement),
-        );
-        state.contains = vec![path, hop];
+        let path = self.key(PathKind::State, &label);
+        state.contains = vec![path, baseline_key(&dds_out, at)];
         rows.push(state);
     }
 }

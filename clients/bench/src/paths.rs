@@ -737,27 +737,40 @@ impl StateRecorder {
     }
 }
 
-/// State-path latencies while the robot drives (so frames keep changing the state), read as a
-/// client that needs every sample reads them: a lossless [`chassis_client::StateStream`].
-pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result<StateRecorder> {
-    let mut teleop = robot.source("teleop")?;
+/// State-path latencies while `driver` keeps the robot driving (so frames keep changing the
+/// state), read from `robot` as a client that needs every sample reads them: a lossless
+/// [`chassis_client::StateStream`], until `recorder` counted `samples` (at most 120 s);
+/// `counted` is given each sample that counted and when it was received.
+pub fn state_path(
+    robot: &Robot,
+    driver: &mut Source,
+    recorder: &mut StateRecorder,
+    (samples, spin): (u64, bool),
+    mut counted: impl FnMut(&ChassisState, u64),
+) -> anyhow::Result<()> {
     let stream = robot.state_stream(STATE_BUFFER)?;
-    let mut recorder = StateRecorder::default();
     let mut last_request = 0u64;
     let deadline = now_ns() + 120_000_000_000;
     while recorder.latencies.count() < samples && now_ns() < deadline {
         if Duration::from_nanos(now_ns().saturating_sub(last_request)) > STATE_REQUEST_INTERVAL {
-            teleop.send(VelocityRequest::twist(0.6, 0.3))?;
+            driver.send(VelocityRequest::twist(0.6, 0.3))?;
             last_request = now_ns();
         }
+        let mut each = |s: &ChassisState| {
+            let (received, before) = (now_ns(), recorder.latencies.count());
+            recorder.sample(s, received);
+            if recorder.latencies.count() > before {
+                counted(s, received);
+            }
+        };
         if spin {
-            stream.drain(|s| recorder.sample(s, now_ns()))?;
+            stream.drain(&mut each)?;
         } else {
-            stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
+            stream.wait(Duration::from_millis(20), &mut each)?;
         }
     }
-    teleop.stop()?;
-    Ok(recorder)
+    driver.stop()?;
+    Ok(())
 }
 
 /// Preemption latencies: teleop drives; `safety` publishes a stop → the zero frame written.

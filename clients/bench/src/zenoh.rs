@@ -17,9 +17,7 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use chassis_client::{
-    ChassisState, Robot, STATE_BUFFER, Source, Ticker, now_ns, termination_requested,
-};
+use chassis_client::{ChassisState, Robot, Source, Ticker, now_ns, termination_requested};
 use chassis_protocols::RobotKind;
 use chassis_zenoh::net::{self, Net, Role};
 use clap::Args;
@@ -268,30 +266,13 @@ pub fn run(
     let sizes = (commands, interval);
     let command = paths::command_path(&mut motion, &mut robot, &mut remote, sizes, reach)?;
 
-    // Robot state → the operator's iceoryx2 subscriber, while the robot drives (so frames keep
-    // changing the state).
-    let stream = operator.state_stream(STATE_BUFFER)?;
-    // The robot side forwards the newest sample of each read of the bus: `seq` has gaps.
+    // Robot state → the operator's iceoryx2 subscriber. The robot side forwards the newest
+    // sample of each read of the bus: `seq` has gaps.
     let mut recorder = StateRecorder::with_gaps();
     let mut bridged = Latencies::new();
-    let mut last_request = 0u64;
-    let deadline = now_ns() + 120_000_000_000;
-    while recorder.latencies.count() < states && now_ns() < deadline {
-        if now_ns().saturating_sub(last_request) > 50_000_000 {
-            remote.send(chassis_client::VelocityRequest::twist(0.6, 0.3))?;
-            last_request = now_ns();
-        }
-        stream.wait(Duration::from_millis(20), |s| {
-            let received = now_ns();
-            let fresh = recorder.latencies.count();
-            recorder.sample(s, received);
-            if recorder.latencies.count() > fresh {
-                bridged.record_between(s.published_ns, received);
-            }
-        })?;
-    }
-    remote.stop()?;
-    drop((stream, remote, operator, children));
+    let each = |s: &ChassisState, received| bridged.record_between(s.published_ns, received);
+    paths::state_path(&operator, &mut remote, &mut recorder, (states, false), each)?;
+    drop((remote, operator, children));
     let reads: Vec<u64> = recorder.samples.iter().map(|&(read, ..)| read).collect();
     let state_period = state_period(&reads);
     let raw_state = bare_hop(&netns, prefixes, dir, states, state_period)?;
