@@ -501,8 +501,13 @@ impl PongArgs {
         self.dir.join(format!("{}-feed.txt", self.tag))
     }
 
-    /// Starts this binary as `role` with these arguments (on `cpu`) and waits until it is ready.
-    fn start(&self, role: &str, cpu: Option<usize>) -> anyhow::Result<Running> {
+    /// Starts this binary as `role` with these arguments (on `cpu`) and waits until it is ready;
+    /// the process and its stdout.
+    fn start(
+        &self,
+        role: &str,
+        cpu: Option<usize>,
+    ) -> anyhow::Result<(Child, BufReader<ChildStdout>)> {
         let transport = clap::ValueEnum::to_possible_value(&self.transport)
             .map(|v| v.get_name().to_string())
             .unwrap_or_default();
@@ -536,14 +541,8 @@ impl PongArgs {
         if line.trim() != "ready" {
             bail!("{what} did not start: {line:?}");
         }
-        Ok(Running { child, reader })
+        Ok((child, reader))
     }
-}
-
-/// A role process that said it is ready, and its stdout.
-struct Running {
-    child: Child,
-    reader: BufReader<ChildStdout>,
 }
 
 /// The feed role: a stamped sample and a wake-up of the receiver's listener `--feed-per-s`
@@ -695,7 +694,7 @@ pub fn run(
         realtime: load.and_then(|l| l.realtime),
         publish: load.is_some_and(|l| l.published),
     };
-    let mut pong = args.start("pong", pong_cpu)?;
+    let (mut pong, mut pong_out) = args.start("pong", pong_cpu)?;
     // The loaded receiver's publication is read where the client reads, before the feed
     // starts it.
     let stop = Arc::new(AtomicBool::new(false));
@@ -723,9 +722,9 @@ pub fn run(
         let _ = endpoint.send(Ping::new(0, u64::MAX, 0));
         result
     })?;
-    if let Some(feeder) = feeder.as_mut() {
-        let _ = feeder.child.kill();
-        let _ = feeder.child.wait();
+    if let Some((feeder, _)) = feeder.as_mut() {
+        let _ = feeder.kill();
+        let _ = feeder.wait();
     }
     stop.store(true, Ordering::Relaxed);
     let published = match published {
@@ -736,8 +735,8 @@ pub fn run(
     };
     let (pings, missed_periods) = result?;
     // The pong writes its feed figures before it says "done".
-    let _ = pong.reader.read_line(&mut String::new());
-    let _ = pong.child.wait();
+    let _ = pong_out.read_line(&mut String::new());
+    let _ = pong.wait();
     let feed = match load {
         Some(_) => {
             let path = args.feed_file();

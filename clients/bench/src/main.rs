@@ -174,6 +174,8 @@ struct Plan {
     cost_seconds: f64,
     /// How long each control loop runs.
     loop_seconds: f64,
+    /// Simulated seconds of the recorded bus the throughput run replays.
+    replay_seconds: u64,
 }
 
 impl Plan {
@@ -195,6 +197,7 @@ impl Plan {
             fanout_seconds: s([1.0, 1.5, 5.0]),
             cost_seconds: s([1.0, 1.5, 5.0]),
             loop_seconds: s([1.0, 10.0, 150.0]),
+            replay_seconds: n([300, 300, 1500]),
         }
     }
 }
@@ -288,7 +291,6 @@ fn hop_row(run: &str, what: String, placement: &str, l: Latencies, conditions: S
 
 struct Ctx {
     plan: Plan,
-    quick: bool,
     prefix: String,
     dir: PathBuf,
     python: Option<PathBuf>,
@@ -316,8 +318,7 @@ trait Step {
 }
 
 fn run(args: &RunArgs) -> anyhow::Result<Report> {
-    let quick = args.quick || args.smoke;
-    let plan = Plan::new(args.smoke, quick);
+    let plan = Plan::new(args.smoke, args.quick);
     // The smoke run checks rows: the bus-load cost and the replay make none.
     let skip = |part: &str| {
         args.skip.iter().any(|s| s == part) || (args.smoke && matches!(part, "cost" | "throughput"))
@@ -350,7 +351,6 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     );
     let ctx = Ctx {
         plan,
-        quick,
         prefix: format!("cb{}_", std::process::id()),
         dir,
         python: python::interpreter("python"),
@@ -1100,8 +1100,7 @@ impl Step for Throughput {
         ctx.bar
             .set_message("replaying a recorded bus at full speed");
         let file = ctx.dir.join("titan.log");
-        let seconds = if ctx.quick { 300 } else { 1500 };
-        let frames = paths::record_titan(&file, seconds)?;
+        let frames = paths::record_titan(&file, ctx.plan.replay_seconds)?;
         for _ in 0..report::REPLAYS {
             let replay = paths::replay(&file, frames, &ctx.prefix, &ctx.dir)?;
             report.throughput.push(replay);
