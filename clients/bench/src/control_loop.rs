@@ -126,19 +126,11 @@ fn match_frames(sent: &[(u64, u64, f64)], frames: &[(u64, f64)]) -> (Latencies, 
 /// simulated bus, cross CPU, with chassisd's event loop and, but in a smoke run, its polling
 /// loop (a smoke run checks the rows, and the 1 kHz event loop has every kind of them).
 pub fn plan(smoke: bool) -> Vec<(Duration, LoopMode)> {
-    let (periods, modes): (&[u64], &[LoopMode]) = if smoke {
-        (&[1], &[LoopMode::Event])
-    } else {
-        (&[1, 10], &[LoopMode::Event, LoopMode::Spin])
-    };
-    modes
-        .iter()
-        .flat_map(|&mode| {
-            periods
-                .iter()
-                .map(move |&ms| (Duration::from_millis(ms), mode))
-        })
-        .collect()
+    let (ms, modes) = (Duration::from_millis, [LoopMode::Event, LoopMode::Spin]);
+    let all = modes
+        .into_iter()
+        .flat_map(|mode| [(ms(1), mode), (ms(10), mode)]);
+    all.take(if smoke { 1 } else { 4 }).collect()
 }
 
 /// `1 kHz`, `100 Hz`.

@@ -427,24 +427,20 @@ struct Baseline(Transport, Placement, Option<Duration>);
 
 impl Baseline {
     fn all(hybrid: bool) -> Vec<Self> {
-        use Transport::{IceoryxEvent, IceoryxSpin, Udp, Uds};
+        use Transport::{IceoryxEvent, IceoryxHybrid, IceoryxSpin, Udp, Uds};
         let paced = Some(paths::off_grid(paths::COMMAND_INTERVAL));
         let (same, cross) = (Placement::SameCpu, Placement::CrossCpu);
-        let mut all = vec![
-            Self(IceoryxEvent, same, None),
-            Self(Uds, same, None),
-            Self(Udp, same, None),
-            Self(IceoryxEvent, cross, None),
-            Self(IceoryxSpin, cross, None),
-            Self(Uds, cross, None),
-            Self(Udp, cross, None),
-            Self(IceoryxEvent, same, paced),
-            Self(IceoryxEvent, cross, paced),
-            Self(IceoryxSpin, cross, paced),
+        let mut all: Vec<Self> = [IceoryxEvent, Uds, Udp].map(|t| Self(t, same, None)).into();
+        all.extend([IceoryxEvent, IceoryxSpin, Uds, Udp].map(|t| Self(t, cross, None)));
+        let paced_runs = [
+            (IceoryxEvent, same),
+            (IceoryxEvent, cross),
+            (IceoryxSpin, cross),
         ];
+        all.extend(paced_runs.map(|(t, at)| Self(t, at, paced)));
         // The poll-then-block loop's own back-to-back hop, a context row beside the hybrid runs.
         if hybrid {
-            all.push(Self(Transport::IceoryxHybrid, cross, None));
+            all.push(Self(IceoryxHybrid, cross, None));
         }
         all
     }

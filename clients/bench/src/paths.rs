@@ -972,18 +972,12 @@ pub fn fan_out(
     seconds: f64,
 ) -> anyhow::Result<Latencies> {
     let exe = std::env::current_exe()?;
-    let mut children = Vec::new();
-    for _ in 0..subscribers {
-        children.push(
-            Command::new(&exe)
-                .args(["role", "subscribe", "--name", name, "--prefix", prefix])
-                .args(["--seconds", &seconds.to_string()])
-                .stdout(Stdio::piped())
-                .stderr(Stdio::inherit())
-                .spawn()
-                .context("starting a subscriber")?,
-        );
-    }
+    let args = format!("role subscribe --name {name} --prefix {prefix} --seconds {seconds}");
+    let mut subscriber = Command::new(&exe);
+    (subscriber.args(args.split(' '))).stdout(Stdio::piped());
+    let children = (0..subscribers)
+        .map(|_| subscriber.spawn().context("starting a subscriber"))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let mut teleop = robot.source("teleop")?;
     let end = now_ns() + ((seconds + 0.5) * 1e9) as u64;
     while now_ns() < end {
