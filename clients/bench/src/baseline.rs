@@ -65,14 +65,8 @@ impl Transport {
         }
     }
 
-    /// How an iceoryx2 transport's receiver waits; None for the sockets.
-    fn waiting(self) -> Option<Waiting> {
-        match self {
-            Transport::IceoryxEvent => Some(Waiting::Block),
-            Transport::IceoryxSpin => Some(Waiting::Spin),
-            Transport::IceoryxHybrid => Some(Waiting::Hybrid(HYBRID_SPIN)),
-            Transport::Uds | Transport::Udp => None,
-        }
+    fn is_iceoryx(self) -> bool {
+        !matches!(self, Transport::Uds | Transport::Udp)
     }
 }
 
@@ -114,14 +108,6 @@ pub enum Rounds {
 
 /// Marks a lead ping ([`Rounds::AfterWakeUp`]), which the pong does not answer.
 const LEAD: u64 = 1 << 62;
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Waiting {
-    Block,
-    Spin,
-    /// Poll for this long after each activity, then block.
-    Hybrid(Duration),
-}
 
 const PADDING: usize = size_of::<ChassisState>() - 24;
 
@@ -261,7 +247,8 @@ struct IceoryxEndpoint {
     /// The listener the pings' (and the feed's) notifications wake (a pong's WaitSet holds it
     /// too).
     listener: Rc<Listener<ipc::Service>>,
-    waiting: Waiting,
+    /// How the receiver waits.
+    transport: Transport,
     /// The feed of a loaded receiver: its samples wake the same listener as the pings.
     feed: Option<Sub>,
     /// The feed's one-way latencies, ns.
@@ -276,7 +263,7 @@ struct IceoryxEndpoint {
 }
 
 impl IceoryxEndpoint {
-    fn open(args: &PongArgs, me: &str, peer: &str, waiting: Waiting) -> anyhow::Result<Self> {
+    fn open(args: &PongArgs, me: &str, peer: &str) -> anyhow::Result<Self> {
         let ports = Ports::new(&args.prefix, &args.tag)?;
         // Only the pong side lives with the load.
         let load = if me == "pong" { args.load() } else { None };
@@ -301,7 +288,7 @@ impl IceoryxEndpoint {
             notifier,
             subscriber,
             listener: Rc::new(listener),
-            waiting,
+            transport: args.transport,
             feed,
             feed_ns: Vec::new(),
             tick: load.map(|l| (l.tick, now_ns() + nanos(l.tick))),
@@ -359,10 +346,12 @@ impl IceoryxEndpoint {
             if now >= deadline {
                 return Ok(None);
             }
-            let block = match self.waiting {
-                Waiting::Spin => false,
-                Waiting::Block => true,
-                Waiting::Hybrid(window) => now.saturating_sub(self.last_activity) >= nanos(window),
+            let block = match self.transport {
+                Transport::IceoryxSpin => false,
+                Transport::IceoryxHybrid => {
+                    now.saturating_sub(self.last_activity) >= nanos(HYBRID_SPIN)
+                }
+                _ => true,
             };
             if block {
                 let until = self.tick.map_or(deadline, |(_, due)| due.min(deadline));
@@ -389,7 +378,7 @@ impl Endpoint for IceoryxEndpoint {
 
     fn send(&mut self, ping: Ping) -> anyhow::Result<()> {
         self.publisher.send_copy(ping).named("send")?;
-        if self.waiting != Waiting::Spin {
+        if self.transport != Transport::IceoryxSpin {
             self.notifier.notify().named("notify")?;
         }
         Ok(())
@@ -581,13 +570,13 @@ pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
     if let Some(priority) = args.realtime {
         crate::placement::enter_realtime(priority)?;
     }
-    let Some(waiting) = args.transport.waiting() else {
+    if !args.transport.is_iceoryx() {
         let mut socket = Socket::open(args, "pong", "ping")?;
         return answer(&mut socket, |s, timeout| s.receive(timeout));
-    };
+    }
     // An iceoryx2 receiver waits on a WaitSet, as chassisd's loop does, taking the
     // notifications of the listener that fired before reading the samples.
-    let mut endpoint = IceoryxEndpoint::open(args, "pong", "ping", waiting)?;
+    let mut endpoint = IceoryxEndpoint::open(args, "pong", "ping")?;
     let waitset = WaitSetBuilder::new().create::<ipc::Service>();
     let waitset = waitset.named("wait set")?;
     let listener = endpoint.listener.clone();
@@ -698,21 +687,21 @@ pub fn run(
     // The loaded receiver's publication is read where the client reads, before the feed
     // starts it.
     let stop = Arc::new(AtomicBool::new(false));
-    let published = match transport.waiting() {
-        Some(waiting) if args.publish => {
-            let spin = waiting == Waiting::Spin;
+    let published = match args.publish && transport.is_iceoryx() {
+        true => {
+            let spin = transport == Transport::IceoryxSpin;
             Some(spawn_reader(prefix, &tag, ping_cpu, spin, &stop)?)
         }
-        _ => None,
+        false => None,
     };
     let mut feeder = match load {
         Some(load) => Some(args.start("feed", pong_cpu.map(|c| feed_cpu(c, transport, load)))?),
         None => None,
     };
     let result = crate::paths::pinned(ping_cpu, || {
-        let mut endpoint: Box<dyn Endpoint> = match transport.waiting() {
-            Some(waiting) => Box::new(IceoryxEndpoint::open(&args, "ping", "pong", waiting)?),
-            None => Box::new(Socket::open(&args, "ping", "pong")?),
+        let mut endpoint: Box<dyn Endpoint> = match transport.is_iceoryx() {
+            true => Box::new(IceoryxEndpoint::open(&args, "ping", "pong")?),
+            false => Box::new(Socket::open(&args, "ping", "pong")?),
         };
         let result = match shape {
             Rounds::Loop(period) => loop_rounds(endpoint.as_mut(), transport, rounds, period),
