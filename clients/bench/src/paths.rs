@@ -237,6 +237,25 @@ pub(crate) fn spawn_logged(
         .with_context(|| format!("starting {what}"))
 }
 
+/// What `f` brings, once it brings something (at most `seconds` away): `what` fails otherwise.
+pub(crate) fn wait_until<T>(
+    what: &str,
+    seconds: u64,
+    mut f: impl FnMut() -> Option<T>,
+) -> anyhow::Result<T> {
+    let deadline = now_ns() + seconds * 1_000_000_000;
+    let mut ticker = Ticker::new(Duration::from_millis(50));
+    loop {
+        if let Some(v) = f() {
+            return Ok(v);
+        }
+        if now_ns() > deadline {
+            bail!("{what} within {seconds}s");
+        }
+        ticker.wait();
+    }
+}
+
 /// A started service and a client of it.
 pub type Started = (Service, Robot);
 
@@ -283,13 +302,8 @@ pub fn start(
             ]);
             let log = dir.join(format!("{name}-sim"));
             children.push(spawn_logged(&mut sim, prefix, &log, "chassisd sim")?);
-            let deadline = now_ns() + 10_000_000_000;
-            while !Path::new(&link).exists() {
-                if now_ns() > deadline {
-                    bail!("chassisd sim made no pty link");
-                }
-                pause(Duration::from_millis(20));
-            }
+            let linked = || Path::new(&link).exists().then_some(());
+            wait_until("chassisd sim made no pty link", 10, linked)?;
             service_bus
         }
     };
@@ -321,21 +335,15 @@ pub fn start(
         trace,
         scheduling: Scheduling::Normal,
     };
-    let deadline = now_ns() + 15_000_000_000;
-    let mut robot_conn = loop {
-        if let Ok(mut r) = Robot::connect_with_prefix(&name, Some(prefix))
-            && r.wait_state(Duration::from_millis(200))?.is_some()
-        {
-            break r;
-        }
-        if now_ns() > deadline {
-            bail!(
-                "chassisd for {robot} did not come up (logs in {})",
-                dir.display()
-            );
-        }
-        pause(Duration::from_millis(50));
-    };
+    let up = format!(
+        "chassisd for {robot} did not come up (logs in {})",
+        dir.display()
+    );
+    let mut robot_conn = wait_until(&up, 15, || {
+        let mut r = Robot::connect_with_prefix(&name, Some(prefix)).ok()?;
+        r.wait_state(Duration::from_millis(200)).ok()??;
+        Some(r)
+    })?;
     // Let the chassis reach command mode.
     let ready_by = now_ns() + 5_000_000_000;
     while now_ns() < ready_by {

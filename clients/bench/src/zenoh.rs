@@ -25,7 +25,9 @@ use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
 
 use crate::baseline::{Named, last_of};
-use crate::paths::{self, BusKind, LoopMode, ServiceConfig, StateRecorder, period_text};
+use crate::paths::{
+    self, BusKind, LoopMode, ServiceConfig, StateRecorder, period_text, wait_until,
+};
 use crate::report::{Leg, PathKind, Report, Row};
 use crate::stats::Latencies;
 
@@ -130,20 +132,6 @@ pub fn possible() -> bool {
     use std::os::unix::fs::MetadataExt as _;
     // /proc/self belongs to the process's effective user.
     std::fs::metadata("/proc/self").is_ok_and(|m| m.uid() == 0)
-}
-
-fn wait_until<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> anyhow::Result<T> {
-    let deadline = now_ns() + 20_000_000_000;
-    let mut ticker = Ticker::new(Duration::from_millis(50));
-    loop {
-        if let Some(v) = f() {
-            return Ok(v);
-        }
-        if now_ns() > deadline {
-            bail!("{what} within 20s");
-        }
-        ticker.wait();
-    }
 }
 
 /// The pace of the state row's bare hop: the median period of the states the path counted
@@ -253,12 +241,12 @@ pub fn run(
             .context("starting chassis-zenoh (robot side)")?,
         mirror.spawn().context("starting chassis-zenoh --mirror")?,
     ]);
-    let mut operator = wait_until("the mirror served no state", || {
+    let mut operator = wait_until("the mirror served no state", 20, || {
         let mut r = Robot::connect_with_prefix(&name, Some(&operator_prefix)).ok()?;
         r.wait_state(Duration::from_millis(100)).ok().flatten()?;
         Some(r)
     })?;
-    let mut remote: Source = wait_until("the mirror offered no remote source", || {
+    let mut remote: Source = wait_until("the mirror offered no remote source", 20, || {
         operator.source("remote").ok()
     })?;
     let (kind, reach) = (RobotKind::Titan, paths::Reach::Exact);
