@@ -10,8 +10,7 @@ use chassis_client::{Robot, VelocityRequest, now_ns};
 use chassis_protocols::RobotKind;
 
 use crate::baseline::{self, Transport};
-use crate::paths::{self, LoopMode, MotionDecoder, ServiceConfig, warm_up};
-use crate::periods::Periods;
+use crate::paths::{self, LoopMode, Motion, ServiceConfig};
 use crate::placement::Placement;
 use crate::report::{Leg, LoopRun, PathKind, Report, Row};
 use crate::stats::Latencies;
@@ -47,11 +46,22 @@ pub fn measure(
     periods: u64,
     spin: bool,
 ) -> anyhow::Result<LoopFigures> {
-    let tap = robot.frames(2048)?;
+    let mut motion = Motion::open(robot, kind, spin)?;
     let mut teleop = robot.source("teleop")?;
-    let mut decoder = MotionDecoder::new(kind);
-    warm_up(&tap, &mut teleop, &mut decoder, spin)?;
+    motion.warm_up(&mut teleop)?;
     let mut frames: Vec<(u64, f64)> = Vec::new();
+    let mut take = |motion: &mut Motion, wait: bool| {
+        let decoder = &mut motion.decoder;
+        let each = |f: &chassis_client::BusFrame| {
+            if let Some(v) = decoder.linear(f) {
+                frames.push((f.stamp_ns, v));
+            }
+        };
+        match wait {
+            true => motion.tap.wait(Duration::from_millis(10), each),
+            false => motion.tap.drain(each),
+        }
+    };
     let mut sent: Vec<(u64, u64, f64)> = Vec::with_capacity(usize::try_from(periods)?);
     let mut state_age = Latencies::new();
     let mut clock = Periods::new(period);
@@ -66,22 +76,14 @@ pub fn measure(
             stamp_ns: stamp,
             ..VelocityRequest::twist(speed, 0.0)
         })?;
-        tap.drain(|f| {
-            if let Some(v) = decoder.linear(f) {
-                frames.push((f.stamp_ns, v));
-            }
-        })?;
+        take(&mut motion, false)?;
         sent.push((due, stamp, f64::from(speed)));
         clock.end(due, true);
     }
     // The last periods' frames.
     let until = now_ns() + 100_000_000;
     while now_ns() < until {
-        tap.wait(Duration::from_millis(10), |f| {
-            if let Some(v) = decoder.linear(f) {
-                frames.push((f.stamp_ns, v));
-            }
-        })?;
+        take(&mut motion, true)?;
     }
     teleop.stop()?;
     let (command, superseded) = match_frames(&sent, &frames);
@@ -124,19 +126,11 @@ fn match_frames(sent: &[(u64, u64, f64)], frames: &[(u64, f64)]) -> (Latencies, 
 /// simulated bus, cross CPU, with chassisd's event loop and, but in a smoke run, its polling
 /// loop (a smoke run checks the rows, and the 1 kHz event loop has every kind of them).
 pub fn plan(smoke: bool) -> Vec<(Duration, LoopMode)> {
-    let (periods, modes): (&[u64], &[LoopMode]) = if smoke {
-        (&[1], &[LoopMode::Event])
-    } else {
-        (&[1, 10], &[LoopMode::Event, LoopMode::Spin])
-    };
-    modes
-        .iter()
-        .flat_map(|&mode| {
-            periods
-                .iter()
-                .map(move |&ms| (Duration::from_millis(ms), mode))
-        })
-        .collect()
+    let (ms, modes) = (Duration::from_millis, [LoopMode::Event, LoopMode::Spin]);
+    let all = modes
+        .into_iter()
+        .flat_map(|mode| [(ms(1), mode), (ms(10), mode)]);
+    all.take(if smoke { 1 } else { 4 }).collect()
 }
 
 /// `1 kHz`, `100 Hz`.
@@ -174,25 +168,17 @@ pub fn periods(period: Duration, seconds: f64) -> u64 {
 pub fn run(
     loops: &[(Duration, LoopMode)],
     seconds: f64,
-    transport_of: impl Fn(LoopMode) -> Transport,
     prefix: &str,
     dir: &std::path::Path,
     report: &mut Report,
 ) -> anyhow::Result<()> {
     let (kind, placement) = (RobotKind::Titan, Placement::CrossCpu);
-    let run = format!("{kind} sim");
+    let (run, at) = (format!("{kind} sim"), placement.label());
     for &(period, mode) in loops {
         let (client_cpu, service_cpu) = placement.cpus();
-        let (service, mut robot) = paths::start_configured(
-            kind,
-            paths::BusKind::Sim,
-            mode,
-            service_cpu,
-            ServiceConfig::BenchRealtime,
-            false,
-            prefix,
-            dir,
-        )?;
+        let config = ServiceConfig::BenchRealtime;
+        let spec = (kind, paths::BusKind::Sim, mode);
+        let (service, mut robot) = paths::start(spec, service_cpu, config, false, prefix, dir)?;
         let count = periods(period, seconds);
         let spin = mode == LoopMode::Spin;
         let feedback = paths::FeedbackRate::start(&mut robot)?;
@@ -205,77 +191,59 @@ pub fn run(
         drop(service);
         // The raw loop's receiver lives as chassisd's loop did: woken by another process at
         // the chassis' feedback rate, by its own tick, scheduled alike.
+        let tick = kind.entry().defaults().heartbeat_period();
         let load = baseline::Load {
             feed_per_s,
-            tick: kind.entry().defaults().heartbeat_period(),
+            tick,
             realtime,
             published: false,
         };
-        let transport = transport_of(mode);
-        let raw = baseline::run(
-            transport,
-            placement,
-            count,
-            baseline::Rounds::Loop(period),
-            Some(load),
-            prefix,
-            dir,
-        )?;
+        let transport = Transport::like(mode);
+        let shape = baseline::Rounds::Loop(period);
+        let raw = baseline::run(transport, placement, count, shape, Some(load), prefix, dir)?;
         let [frame, age, hop] = row_names(&run, period, transport);
         let row = |path, leg, what, latencies, missed| {
-            Row::new(
-                path,
-                leg,
-                &run,
-                what,
-                mode.arg(),
-                placement.label(),
-                latencies,
-                missed,
-            )
+            Row::new(path, leg, &run, what, mode.arg(), at, latencies, missed)
         };
-        let mut frame_row = row(
-            PathKind::Loop,
-            Leg::PeriodToFrame,
-            frame,
-            figures.command,
-            figures.superseded,
-        );
-        frame_row.baseline = Some(format!("{hop}, {}", placement.label()));
+        let (l, superseded) = (figures.command, figures.superseded);
+        let mut frame_row = row(PathKind::Loop, Leg::PeriodToFrame, frame, l, superseded);
+        frame_row.baseline = Some(format!("{hop}, {at}"));
         report.rows.push(frame_row);
-        report.rows.push(row(
+        (report.rows).push(row(
             PathKind::Loop,
             Leg::StateAge,
             age,
             figures.state_age,
             0,
         ));
-        let mut raw_row = Row::new(
-            PathKind::Baseline,
-            Leg::Hop,
-            &run,
-            hop,
-            "-",
-            placement.label(),
-            baseline::last_of(&raw.pings, u64::MAX),
-            0,
-        );
-        raw_row.conditions = Some(format!(
-            "a loop on absolute deadlines sending one ping at the start of each period, \
-             looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s by \
-             another process, as by the simulated chassis, and by its own {} ms tick{}; {count} \
-             periods after 200 of warm-up",
-            load.tick.as_millis(),
-            realtime.map_or(String::new(), |p| format!(
-                ", at SCHED_FIFO {p} as the service's loop"
+        let fifo = realtime.map_or(String::new(), |p| {
+            format!(", at SCHED_FIFO {p} as the service's loop")
+        });
+        let raw_row = Row {
+            conditions: Some(format!(
+                "a loop on absolute deadlines sending one ping at the start of each period, \
+                 looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s \
+                 by another process, as by the simulated chassis, and by its own {} ms \
+                 tick{fifo}; {count} periods after 200 of warm-up",
+                tick.as_millis(),
             )),
-        ));
+            ..Row::new(
+                PathKind::Baseline,
+                Leg::Hop,
+                &run,
+                hop,
+                "-",
+                at,
+                raw.all_pings(),
+                0,
+            )
+        };
         report.rows.push(raw_row);
         report.loops.push(LoopRun {
             run: run.clone(),
             rate: rate(period),
             mode: mode.arg().into(),
-            placement: placement.label().into(),
+            placement: at.into(),
             periods: figures.periods,
             misses: figures.misses,
             superseded: figures.superseded,
@@ -285,6 +253,52 @@ pub fn run(
         });
     }
     Ok(())
+}
+
+/// A periodic loop on absolute deadlines, as a controller's: period `k` starts at
+/// `start + k·period`; a late period runs at once (none is skipped), and a period whose work ends
+/// after the next one was due is a deadline miss.
+pub struct Periods {
+    next: u64,
+    period: u64,
+    /// The counted periods that ended late.
+    pub misses: u64,
+}
+
+impl Periods {
+    pub fn new(period: Duration) -> Self {
+        let period = u64::try_from(period.as_nanos())
+            .unwrap_or(u64::MAX / 4)
+            .max(1);
+        Self {
+            next: now_ns() + period,
+            period,
+            misses: 0,
+        }
+    }
+
+    /// Sleeps until the next period is due; returns when it was due.
+    pub fn next(&mut self) -> u64 {
+        use nix::sys::time::TimeSpec;
+        use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
+        let due = self.next;
+        let deadline = TimeSpec::from_duration(Duration::from_nanos(due));
+        let _ = clock_nanosleep(
+            ClockId::CLOCK_MONOTONIC,
+            ClockNanosleepFlags::TIMER_ABSTIME,
+            &deadline,
+        );
+        self.next += self.period;
+        due
+    }
+
+    /// Ends the period due at `due`: a miss, if `counted`, when it ends after the next one was
+    /// due.
+    pub fn end(&mut self, due: u64, counted: bool) {
+        if counted && now_ns() > due + self.period {
+            self.misses += 1;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -310,5 +324,28 @@ mod tests {
         assert_eq!((latencies.count(), superseded), (3, 1));
         let s = latencies.summary();
         assert_eq!((s.p50_us, s.max_us), (0.09, 0.2));
+    }
+}
+
+#[cfg(test)]
+mod periods_tests {
+    use super::*;
+
+    #[test]
+    fn a_period_that_ends_after_the_next_one_was_due_is_a_miss() {
+        // Periods long enough that a loaded machine ends the first one in time.
+        let mut periods = Periods::new(Duration::from_millis(50));
+        let due = periods.next();
+        periods.end(due, true);
+        assert_eq!(periods.misses, 0);
+        // Periods whose work lasted into the next one.
+        let due = periods.next();
+        periods.next();
+        periods.end(due, false);
+        assert_eq!(periods.misses, 0, "a warm-up period is not counted");
+        let due = periods.next();
+        periods.next();
+        periods.end(due, true);
+        assert_eq!(periods.misses, 1);
     }
 }

@@ -22,26 +22,21 @@ use indicatif::{ProgressBar, ProgressStyle};
 mod baseline;
 mod control_loop;
 mod dds_echo;
-mod fanout;
 mod fleet;
 mod parts;
 mod paths;
-mod periods;
 mod placement;
 mod provenance;
 mod python;
 mod render;
 mod report;
-mod ros2;
 mod stalls;
 mod stats;
-mod throughput;
 mod verdict;
 mod zenoh;
-mod zenoh_raw;
 
-use baseline::{Load, Transport};
-use paths::{BusKind, LoopMode};
+use baseline::{Load, Rounds, Transport};
+use paths::{BusKind, LoopMode, ServiceConfig, Started};
 use placement::Placement;
 use report::{Leg, PathKind, Planned, Report, Row, path_rows, row_key};
 use stats::Latencies;
@@ -79,13 +74,13 @@ enum RoleCmd {
 #[derive(Debug, Subcommand)]
 enum Role {
     Pong(baseline::PongArgs),
-    Feed(baseline::FeedArgs),
-    Subscribe(fanout::SubscribeArgs),
+    Feed(baseline::PongArgs),
+    Subscribe(paths::SubscribeArgs),
     DdsEcho(dds_echo::EchoArgs),
     /// Publish stamped samples on a bare Zenoh session configured as chassis-zenoh's.
-    ZenohPub(zenoh_raw::RawArgs),
+    ZenohPub(zenoh::RawArgs),
     /// Receive them and write their latencies.
-    ZenohSub(zenoh_raw::RawArgs),
+    ZenohSub(zenoh::RawArgs),
     /// Write the candump log the throughput run replays (for profiling the service by hand).
     RecordTitan {
         #[arg(long)]
@@ -168,7 +163,7 @@ fn render(
 struct Plan {
     baseline_rounds: u64,
     /// Bursts of 200 ms a stall row spins on each CPU.
-    stall_bursts: u32,
+    stall_bursts: u64,
     paced_rounds: u64,
     commands: u64,
     xbot_commands: u64,
@@ -179,62 +174,32 @@ struct Plan {
     cost_seconds: f64,
     /// How long each control loop runs.
     loop_seconds: f64,
+    /// Simulated seconds of the recorded bus the throughput run replays.
+    replay_seconds: u64,
 }
 
 impl Plan {
-    /// The smoke run's: enough samples for every row to exist and its p99 to be shown, no more.
-    fn smoke() -> Self {
+    /// A smoke run's (enough samples for every row to exist and its p99 to be shown, no more),
+    /// a quick run's or a full run's.
+    fn new(smoke: bool, quick: bool) -> Self {
+        let size = usize::from(!smoke) + usize::from(!smoke && !quick);
+        let n = |sizes: [u64; 3]| sizes[size];
+        let s = |seconds: [f64; 3]| seconds[size];
         Self {
-            baseline_rounds: 500,
-            stall_bursts: 2,
-            paced_rounds: 100,
-            commands: 100,
-            xbot_commands: 0,
-            states: 300,
-            preemptions: 100,
-            fanout: vec![2],
-            fanout_seconds: 1.0,
-            cost_seconds: 1.0,
-            loop_seconds: 1.0,
+            baseline_rounds: n([500, 2000, 20_000]),
+            stall_bursts: n([2, 10, 25]),
+            paced_rounds: n([100, 500, 2500]),
+            commands: n([100, 300, 3000]),
+            xbot_commands: n([0, 0, 40]),
+            states: n([300, 1000, 10_000]),
+            preemptions: n([100, 100, 300]),
+            fanout: [vec![2], vec![1, 4], vec![1, 4, 16]][size].clone(),
+            fanout_seconds: s([1.0, 1.5, 5.0]),
+            cost_seconds: s([1.0, 1.5, 5.0]),
+            loop_seconds: s([1.0, 10.0, 150.0]),
+            replay_seconds: n([300, 300, 1500]),
         }
     }
-
-    fn new(quick: bool) -> Self {
-        if quick {
-            Self {
-                baseline_rounds: 2000,
-                stall_bursts: 10,
-                paced_rounds: 500,
-                commands: 300,
-                xbot_commands: 0,
-                states: 1000,
-                preemptions: 100,
-                fanout: vec![1, 4],
-                fanout_seconds: 1.5,
-                cost_seconds: 1.5,
-                loop_seconds: 10.0,
-            }
-        } else {
-            Self {
-                baseline_rounds: 20_000,
-                stall_bursts: 25,
-                paced_rounds: 2500,
-                commands: 3000,
-                xbot_commands: 40,
-                states: 10_000,
-                preemptions: 300,
-                fanout: vec![1, 4, 16],
-                fanout_seconds: 5.0,
-                cost_seconds: 5.0,
-                loop_seconds: 150.0,
-            }
-        }
-    }
-}
-
-/// The placement column of CPU `cpu`'s stall row.
-fn stall_placement(cpu: usize) -> String {
-    format!("CPU {cpu}")
 }
 
 /// One service configuration to measure.
@@ -289,25 +254,10 @@ const DDS_OUT: &str = "DDS RustDDS → Cyclone DDS";
 const CMD_VEL: &str = "cmd_vel → frame";
 const ODOM: &str = "frame read → odom";
 
-/// The runs (robot, bus, loop) the Python client and the ROS 2 bridge are measured beside: same
-/// service, same placement as the Rust client's rows.
-const SCRIPTS_BESIDE: (RobotKind, BusKind, LoopMode) =
-    (RobotKind::Titan, BusKind::Sim, LoopMode::Event);
-
-/// The baseline transport that waits like a service loop in `mode`.
-fn transport_of(mode: LoopMode) -> Transport {
-    match mode {
-        LoopMode::Event => Transport::IceoryxEvent,
-        LoopMode::Spin => Transport::IceoryxSpin,
-        LoopMode::Hybrid => Transport::IceoryxHybrid,
-    }
-}
-
-/// The period of `robot`'s heartbeat: the service's tick on that robot (the registry's, of its
-/// default profile).
-fn tick_of(robot: RobotKind) -> Duration {
-    robot.entry().defaults().heartbeat_period()
-}
+/// The TITAN on the simulated bus with the event loop: the fan-out's service, and the runs the
+/// Python client and the ROS 2 bridge are measured beside (same service, same placement as the
+/// Rust client's rows).
+const TITAN_SIM: (RobotKind, BusKind, LoopMode) = (RobotKind::Titan, BusKind::Sim, LoopMode::Event);
 
 fn bus_label(robot: RobotKind, bus: BusKind) -> String {
     let bus = match (bus, robot.is_can()) {
@@ -323,29 +273,37 @@ fn baseline_key(what: &str, placement: &str) -> String {
 }
 
 fn hop_row(run: &str, what: String, placement: &str, l: Latencies, conditions: String) -> Row {
+    let row = Row::new(
+        PathKind::Baseline,
+        Leg::Hop,
+        run,
+        what,
+        "-",
+        placement,
+        l,
+        0,
+    );
     Row {
         conditions: Some(conditions),
-        ..Row::new(
-            PathKind::Baseline,
-            Leg::Hop,
-            run,
-            what,
-            "-",
-            placement,
-            l,
-            0,
-        )
+        ..row
     }
 }
 
 struct Ctx {
     plan: Plan,
-    quick: bool,
     prefix: String,
     dir: PathBuf,
     python: Option<PathBuf>,
     ros2: Option<PathBuf>,
     bar: ProgressBar,
+}
+
+impl Ctx {
+    /// Starts chassisd for `run` in the benchmark's configuration, unpinned, without a trace.
+    fn start(&self, run: (RobotKind, BusKind, LoopMode)) -> anyhow::Result<Started> {
+        let (prefix, dir) = (&self.prefix, &self.dir);
+        paths::start(run, None, ServiceConfig::Bench, false, prefix, dir)
+    }
 }
 
 /// A part of a run: the rows it plans, declared beside the code that measures them.
@@ -360,12 +318,7 @@ trait Step {
 }
 
 fn run(args: &RunArgs) -> anyhow::Result<Report> {
-    let quick = args.quick || args.smoke;
-    let plan = if args.smoke {
-        Plan::smoke()
-    } else {
-        Plan::new(quick)
-    };
+    let plan = Plan::new(args.smoke, args.quick);
     // The smoke run checks rows: the bus-load cost and the replay make none.
     let skip = |part: &str| {
         args.skip.iter().any(|s| s == part) || (args.smoke && matches!(part, "cost" | "throughput"))
@@ -375,11 +328,9 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         None => std::env::temp_dir().join(format!("chassis-bench-{}", std::process::id())),
     };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let robots: Vec<RobotKind> = args
-        .robots
-        .iter()
+    let robots = (args.robots.iter())
         .map(|r| r.parse::<RobotKind>().map_err(anyhow::Error::msg))
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let strict = args.samples.is_some() || args.plot.is_some() || args.doc.is_some();
     let provenance = provenance::Provenance::begin(strict, args.allow_dirty)?;
     let mut report = Report {
@@ -388,9 +339,8 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         ..Report::default()
     };
     if report.machine.cpus < 2 {
-        report
-            .notes
-            .push("one CPU only: cross-CPU runs share it".into());
+        let note = "one CPU only: cross-CPU runs share it";
+        report.notes.push(note.into());
     }
     let steps = steps(args, &robots, &plan, skip);
     let bar = ProgressBar::new(steps.len() as u64);
@@ -401,24 +351,21 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     );
     let ctx = Ctx {
         plan,
-        quick,
         prefix: format!("cb{}_", std::process::id()),
         dir,
-        python: python::interpreter(),
-        ros2: ros2::interpreter(),
+        python: python::interpreter("python"),
+        ros2: python::interpreter("ros2"),
         bar,
     };
-    if !skip("paths") {
-        for (missing, what, name) in [
-            (ctx.python.is_none(), "the Python client", "python"),
-            (ctx.ros2.is_none(), "the ROS 2 bridge", "ros2"),
-        ] {
-            if missing {
-                report.notes.push(format!(
-                    "{what} was not measured: target/{name}-venv is missing \
-                     (scripts/{name}-tests makes it)"
-                ));
-            }
+    for (missing, what, name) in [
+        (ctx.python.is_none(), "the Python client", "python"),
+        (ctx.ros2.is_none(), "the ROS 2 bridge", "ros2"),
+    ] {
+        if missing && !skip("paths") {
+            report.notes.push(format!(
+                "{what} was not measured: target/{name}-venv is missing \
+                 (scripts/{name}-tests makes it)"
+            ));
         }
     }
     // All of them before any is measured: a step that fails to bring a row is caught too.
@@ -445,10 +392,7 @@ fn steps(
     skip: impl Fn(&str) -> bool,
 ) -> Vec<Box<dyn Step>> {
     fn boxed<S: Step + 'static>(steps: impl IntoIterator<Item = S>) -> Vec<Box<dyn Step>> {
-        steps
-            .into_iter()
-            .map(|s| Box::new(s) as Box<dyn Step>)
-            .collect()
+        steps.into_iter().map(|s| Box::new(s) as _).collect()
     }
     let mut runs = path_runs(args.quick || args.smoke, robots);
     if args.smoke {
@@ -483,24 +427,20 @@ struct Baseline(Transport, Placement, Option<Duration>);
 
 impl Baseline {
     fn all(hybrid: bool) -> Vec<Self> {
-        use Transport::{IceoryxEvent, IceoryxSpin, Udp, Uds};
+        use Transport::{IceoryxEvent, IceoryxHybrid, IceoryxSpin, Udp, Uds};
         let paced = Some(paths::off_grid(paths::COMMAND_INTERVAL));
         let (same, cross) = (Placement::SameCpu, Placement::CrossCpu);
-        let mut all = vec![
-            Self(IceoryxEvent, same, None),
-            Self(Uds, same, None),
-            Self(Udp, same, None),
-            Self(IceoryxEvent, cross, None),
-            Self(IceoryxSpin, cross, None),
-            Self(Uds, cross, None),
-            Self(Udp, cross, None),
-            Self(IceoryxEvent, same, paced),
-            Self(IceoryxEvent, cross, paced),
-            Self(IceoryxSpin, cross, paced),
+        let mut all: Vec<Self> = [IceoryxEvent, Uds, Udp].map(|t| Self(t, same, None)).into();
+        all.extend([IceoryxEvent, IceoryxSpin, Uds, Udp].map(|t| Self(t, cross, None)));
+        let paced_runs = [
+            (IceoryxEvent, same),
+            (IceoryxEvent, cross),
+            (IceoryxSpin, cross),
         ];
+        all.extend(paced_runs.map(|(t, at)| Self(t, at, paced)));
         // The poll-then-block loop's own back-to-back hop, a context row beside the hybrid runs.
         if hybrid {
-            all.push(Self(Transport::IceoryxHybrid, cross, None));
+            all.push(Self(IceoryxHybrid, cross, None));
         }
         all
     }
@@ -526,27 +466,24 @@ impl Step for Baseline {
 
     fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
         let (what, Self(transport, placement, pace)) = (self.what(), *self);
-        ctx.bar
-            .set_message(format!("baseline {what} ({})", placement.label()));
+        let at = placement.label();
+        ctx.bar.set_message(format!("baseline {what} ({at})"));
         let (rounds, shape, conditions) = match pace {
-            Some(p) => (
-                ctx.plan.paced_rounds,
-                baseline::Rounds::Paced(p),
-                format!(
-                    "one ping every {}, receiver otherwise idle (cold)",
-                    paths::period_text(p)
-                ),
-            ),
-            None => (
-                ctx.plan.baseline_rounds,
-                baseline::Rounds::BackToBack,
-                "back to back (warm)".into(),
-            ),
+            Some(p) => {
+                let text = paths::period_text(p);
+                let conditions = format!("one ping every {text}, receiver otherwise idle (cold)");
+                (ctx.plan.paced_rounds, Rounds::Paced(p), conditions)
+            }
+            None => {
+                let conditions = "back to back (warm)".into();
+                (ctx.plan.baseline_rounds, Rounds::BackToBack, conditions)
+            }
         };
         let (prefix, dir) = (&ctx.prefix, &ctx.dir);
         let l = baseline::run(transport, placement, rounds, shape, None, prefix, dir)?;
-        let row = hop_row("", what, placement.label(), l.all_pings(), conditions);
-        report.rows.push(row);
+        report
+            .rows
+            .push(hop_row("", what, at, l.all_pings(), conditions));
         Ok(())
     }
 }
@@ -556,7 +493,7 @@ struct Stalls(usize);
 
 impl Step for Stalls {
     fn planned(&self, _: &Ctx) -> Vec<Planned> {
-        let key = baseline_key(report::STALLS, &stall_placement(self.0));
+        let key = baseline_key(report::STALLS, &format!("CPU {}", self.0));
         vec![Planned::new(key, None)]
     }
 
@@ -569,19 +506,14 @@ impl Step for Stalls {
             over_20_us: stalls.per_second(20),
             over_100_us: stalls.per_second(100),
         });
-        let conditions = stalls.conditions(cpu);
-        let mut r = Row::new(
-            PathKind::Baseline,
-            Leg::Stalls,
-            "",
+        let (what, at, conditions) = (
             report::STALLS.into(),
-            "-",
-            &stall_placement(cpu),
-            stalls.gaps,
-            0,
+            format!("CPU {cpu}"),
+            stalls.conditions(cpu),
         );
-        r.conditions = Some(conditions);
-        report.rows.push(r);
+        let mut row = hop_row("", what, &at, stalls.gaps, conditions);
+        row.leg = Leg::Stalls;
+        report.rows.push(row);
         Ok(())
     }
 }
@@ -592,7 +524,7 @@ struct ServiceRun {
     state: paths::StateRecorder,
     preempt: (Latencies, u64),
     python: Option<python::PythonFigures>,
-    ros2: Option<ros2::Ros2Figures>,
+    ros2: Option<python::Ros2Figures>,
     feed_per_s: f64,
     realtime: Option<u8>,
     passes: Vec<paths::PassStamps>,
@@ -646,14 +578,14 @@ impl PathRun {
     /// The baselines loaded as this run's service was: paced, the feed's own hops, published,
     /// after a wake-up ping.
     fn loaded(&self) -> [String; 4] {
-        let t = transport_of(self.mode).label();
-        [
+        let t = Transport::like(self.mode).label();
+        let whats = [
             "paced",
             "at the feedback rate",
             "published",
             "after a wake-up ping",
-        ]
-        .map(|what| format!("{t} {what}, loaded as {}", self.label()))
+        ];
+        whats.map(|what| format!("{t} {what}, loaded as {}", self.label()))
     }
 
     fn reference(&self, what: &str) -> Option<String> {
@@ -670,36 +602,46 @@ impl PathRun {
         hop_row(&self.label(), what, self.placement.label(), l, conditions)
     }
 
+    /// Starts chassisd for this run, configured as `config` says, on the service's CPU.
+    fn start(&self, ctx: &Ctx, config: ServiceConfig, trace: bool) -> anyhow::Result<Started> {
+        let (run, cpu) = ((self.robot, self.bus, self.mode), self.placement.cpus().1);
+        paths::start(run, cpu, config, trace, &ctx.prefix, &ctx.dir)
+    }
+
     /// Starts the service and measures its paths, the scripts' beside them.
     fn service(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<ServiceRun> {
         let (label, mode) = (self.label(), self.mode.arg());
         let title = format!("{label}, {mode} loop, {}", self.placement.label());
         ctx.bar.set_message(title.clone());
-        let (client_cpu, service_cpu) = self.placement.cpus();
-        let (service, mut robot) = paths::start_configured(
-            self.robot,
-            self.bus,
-            self.mode,
-            service_cpu,
-            paths::ServiceConfig::BenchRealtime,
-            true,
-            &ctx.prefix,
-            &ctx.dir,
-        )?;
+        let (service, mut robot) = self.start(ctx, ServiceConfig::BenchRealtime, true)?;
         let spin = self.mode == LoopMode::Spin;
         let (count, preemptions, interval) = self.sizes(&ctx.plan);
         let feedback = paths::FeedbackRate::start(&mut robot)?;
-        let result = paths::pinned(client_cpu, || -> anyhow::Result<_> {
-            let command = (count > 0)
-                .then(|| paths::command_path(&mut robot, self.robot, count, interval, spin))
-                .transpose()?;
-            let state = paths::state_path(&mut robot, ctx.plan.states, spin)?;
+        let result = paths::pinned(self.placement.cpus().0, || -> anyhow::Result<_> {
+            let mut command = None;
+            if count > 0 {
+                let (t, exact) = (&mut robot.source("teleop")?, paths::Reach::Exact);
+                let mut motion = paths::Motion::open(&mut robot, self.robot, spin)?;
+                let sizes = (count, interval);
+                command = Some(paths::command_path(
+                    &mut motion,
+                    &mut robot,
+                    t,
+                    sizes,
+                    exact,
+                )?);
+            }
+            let (mut state, mut teleop) =
+                (paths::StateRecorder::default(), robot.source("teleop")?);
+            let sizes = (ctx.plan.states, spin);
+            paths::state_path(&robot, &mut teleop, &mut state, sizes, |_, _| {})?;
+            // The preemption opens a teleop source of its own.
+            drop(teleop);
             let preempt = paths::preemption(&mut robot, self.robot, preemptions, interval, spin)?;
             // The Python client and the ROS 2 bridge beside the Rust one.
-            let (mut python_figures, mut ros2_figures) = (None, None);
-            if (self.robot, self.bus, self.mode) == SCRIPTS_BESIDE
-                && (ctx.python.is_some() || ctx.ros2.is_some())
-            {
+            let (mut python, mut ros2) = (None, None);
+            let beside = (self.robot, self.bus, self.mode) == TITAN_SIM;
+            if beside && (ctx.python.is_some() || ctx.ros2.is_some()) {
                 let run = python::ScriptRun {
                     name: robot.name(),
                     prefix: &ctx.prefix,
@@ -710,14 +652,13 @@ impl PathRun {
                     interval,
                 };
                 if let Some(interpreter) = &ctx.python {
-                    python_figures = Some(python::run(interpreter, &run)?);
+                    python = Some(python::run(interpreter, &run)?);
                 }
                 if let Some(interpreter) = &ctx.ros2 {
-                    let bridge = paths::sibling("chassis-ros2")?;
-                    ros2_figures = Some(ros2::run(interpreter, &bridge, &run)?);
+                    ros2 = Some(python::run_ros2(interpreter, &run)?);
                 }
             }
-            Ok((command, state, preempt, python_figures, ros2_figures))
+            Ok((command, state, preempt, python, ros2))
         })??;
         let (command, state, preempt, python, ros2) = result;
         let feed_per_s = feedback.per_second(&mut robot)?;
@@ -746,14 +687,16 @@ impl PathRun {
     /// woken by another process at the chassis' feedback rate, its own tick, the same placement
     /// and the same way of waiting.
     fn baselines(&self, ctx: &Ctx, run: &ServiceRun, rows: &mut Vec<Row>) -> anyhow::Result<()> {
-        let (label, transport) = (self.label(), transport_of(self.mode));
+        let (label, transport) = (self.label(), Transport::like(self.mode));
         let (feed_per_s, states) = (run.feed_per_s, run.state.latencies.count());
         let (_, _, interval) = self.sizes(&ctx.plan);
+        let tick = self.robot.entry().defaults().heartbeat_period();
+        let (realtime, published) = (run.realtime, false);
         let load = Load {
             feed_per_s,
-            tick: tick_of(self.robot),
-            realtime: run.realtime,
-            published: false,
+            tick,
+            realtime,
+            published,
         };
         // The feed runs where chassisd put its simulated chassis (`baseline::feed_cpu`).
         let (feed_where, fifo) = match run.realtime {
@@ -767,25 +710,27 @@ impl PathRun {
             "receiver woken {feed_per_s:.0}/s by another process {feed_where}, as by the \
              simulated chassis (the feedback rate measured in the {label} run), and by its \
              own {} ms tick{fifo}",
-            load.tick.as_millis()
+            tick.as_millis()
         );
         let [paced, feed_what, published, warm] = self.loaded();
-        let measure = |what: &str, rounds, shape, load| {
+        let measure = |what: String, rounds, shape, load| {
             ctx.bar.set_message(format!("baseline as {label}: {what}"));
             let (placement, prefix, dir) = (self.placement, &ctx.prefix, &ctx.dir);
             baseline::run(transport, placement, rounds, shape, Some(load), prefix, dir)
         };
+        // The rounds of `period` in which the feed brings `more` times `wanted` samples.
+        let rounds_for = |wanted: u64, period: Duration, more: f64| {
+            (more * wanted as f64 / (feed_per_s * period.as_secs_f64()).max(1e-9)).ceil() as u64
+        };
         // As many samples as the rows each part divides: the command row's pings, the state
-        // row's feed hops (the run lasts until the feed made that many).
+        // row's feed hops (the run lasts until the feed made that many). A tenth more: the
+        // feed starts after the receiver and keeps its own pace.
         let pings_wanted =
             (run.command.as_ref()).map_or(ctx.plan.paced_rounds, |c| c.latencies.count());
-        // A tenth more: the feed starts after the receiver and keeps its own pace.
-        let feed_rounds =
-            (1.1 * states as f64 / (feed_per_s * interval.as_secs_f64()).max(1e-9)).ceil() as u64;
-        let rounds = pings_wanted.max(feed_rounds) + 1;
+        let rounds = pings_wanted.max(rounds_for(states, interval, 1.1)) + 1;
         let pace = paths::off_grid(interval);
         let woken = format!("{} woken {feed_per_s:.0}/s", transport.label());
-        let measured = measure(&woken, rounds, baseline::Rounds::Paced(pace), load)?;
+        let measured = measure(woken, rounds, Rounds::Paced(pace), load)?;
         let pings = baseline::last_of(&measured.pings, pings_wanted);
         let text = format!(
             "one ping every {}, the last {pings_wanted} of {rounds}; {conditions}",
@@ -803,31 +748,26 @@ impl PathRun {
         }
         // The state row's hop, in a run of its own: its client sends a request every
         // STATE_REQUEST_INTERVAL, not one every command period (pings every 4 ms would keep
-        // the reader's CPU awake, and its wake-up cheaper than the state path's).
-        // A quarter more: the receiver publishes once per wake-up, which may take more than
-        // one feed sample.
-        let state_rounds = (1.25 * states as f64
-            / (feed_per_s * paths::STATE_REQUEST_INTERVAL.as_secs_f64()).max(1e-9))
-        .ceil() as u64
-            + 1;
-        let shape = baseline::Rounds::Paced(paths::STATE_REQUEST_INTERVAL);
+        // the reader's CPU awake, and its wake-up cheaper than the state path's). A quarter
+        // more: the receiver publishes once per wake-up, which may take more than one feed
+        // sample.
+        let state_rounds = rounds_for(states, paths::STATE_REQUEST_INTERVAL, 1.25) + 1;
+        let shape = Rounds::Paced(paths::STATE_REQUEST_INTERVAL);
         let what = format!("{} published, loaded", transport.label());
         let state_load = Load {
             published: true,
             ..load
         };
-        let state_measured = measure(&what, state_rounds, shape, state_load)?;
-        // The state row's hop: from the receiver, which lives as the loop does, to a reader
-        // that lives as the client does.
-        if let Some(hops) = state_measured.published {
+        // From the receiver, which lives as the loop does, to a reader that lives as the client
+        // does.
+        if let Some(hops) = measure(what, state_rounds, shape, state_load)?.published {
             let reader = match self.placement {
                 Placement::SameCpu => "on the receiver's CPU",
                 Placement::CrossCpu => "on the other CPU",
             };
-            let waiting = if self.mode == LoopMode::Spin {
-                "polling"
-            } else {
-                "blocked on its listener between drains"
+            let waiting = match self.mode {
+                LoopMode::Spin => "polling",
+                LoopMode::Event | LoopMode::Hybrid => "blocked on its listener between drains",
             };
             let text = format!(
                 "one sample published by the receiver each time it took the feed's samples, \
@@ -838,15 +778,14 @@ impl PathRun {
                 paths::STATE_REQUEST_INTERVAL.as_millis(),
                 hops.len()
             );
-            let hops_kept = baseline::last_of(&hops, states);
-            rows.push(self.hop_row(published, hops_kept, text));
+            rows.push(self.hop_row(published, baseline::last_of(&hops, states), text));
         }
         // The preemption's stop follows a teleop request at once, while the loop is waking
         // for it: its baseline is a ping right after a lead ping, loaded as the service was,
         // with as many samples.
         let warm_rounds = run.preempt.0.count().max(1);
         let what = format!("{} after a wake-up ping, loaded", transport.label());
-        let warm_measured = measure(&what, warm_rounds, baseline::Rounds::AfterWakeUp, load)?;
+        let warm_measured = measure(what, warm_rounds, Rounds::AfterWakeUp, load)?;
         let text = format!(
             "{warm_rounds} pings, each sent right after a lead ping that wakes the receiver \
              (only the second ping's hop counts), back to back after a warm-up; {conditions}"
@@ -888,7 +827,7 @@ impl PathRun {
     }
 
     /// The ROS 2 bridge's rows, and the raw DDS hops they contain.
-    fn ros2_rows(&self, dds: ros2::Ros2Figures, interval: Duration, rows: &mut Vec<Row>) {
+    fn ros2_rows(&self, dds: python::Ros2Figures, interval: Duration, rows: &mut Vec<Row>) {
         let conditions = |pace: String, carried: &str| {
             format!(
                 "one message every {pace} after 200 uncounted, {carried}, measured by the ROS 2 \
@@ -896,47 +835,29 @@ impl PathRun {
             )
         };
         let (dds_in, dds_out) = (self.beside(DDS_IN), self.beside(DDS_OUT));
-        for (what, latencies, pace, carried) in [
-            (
-                &dds_in,
-                dds.raw_in,
-                format!("{} (the cmd_vel path's)", paths::period_text(interval)),
-                "a TwistStamped read with the bridge's cmd_vel QoS",
-            ),
-            (
-                &dds_out,
-                dds.raw_out,
-                format!(
-                    "{} (the period of the odoms the path counted, 1.7 % more)",
-                    paths::period_text(dds.raw_out_period)
-                ),
-                "an Odometry written as the bridge writes odom (its writer QoS)",
-            ),
-        ] {
-            rows.push(self.hop_row(what.clone(), latencies, conditions(pace, carried)));
-        }
-        let (label, placement) = (self.label(), self.placement.label());
-        let mut command = self.row(
-            PathKind::Ros2,
-            Leg::CmdVel,
-            self.of(CMD_VEL),
-            dds.command,
-            dds.missed,
+        let pace_in = format!("{} (the cmd_vel path's)", paths::period_text(interval));
+        let carried_in = "a TwistStamped read with the bridge's cmd_vel QoS";
+        rows.push(self.hop_row(dds_in.clone(), dds.raw_in, conditions(pace_in, carried_in)));
+        let pace_out = format!(
+            "{} (the period of the odoms the path counted, 1.7 % more)",
+            paths::period_text(dds.raw_out_period)
         );
+        let carried_out = "an Odometry written as the bridge writes odom (its writer QoS)";
+        let conditions_out = conditions(pace_out, carried_out);
+        rows.push(self.hop_row(dds_out.clone(), dds.raw_out, conditions_out));
+        let (label, at) = (self.label(), self.placement.label());
+        let (what, l) = (self.of(CMD_VEL), dds.command);
+        let mut command = self.row(PathKind::Ros2, Leg::CmdVel, what, l, dds.missed);
         command.baseline = self.reference(&dds_in);
         // The DDS hop in, then the service's command path.
-        command.contains = vec![
-            baseline_key(&dds_in, placement),
-            self.key(PathKind::Command, &label),
-        ];
+        let path = self.key(PathKind::Command, &label);
+        command.contains = vec![baseline_key(&dds_in, at), path];
         rows.push(command);
         let mut state = self.row(PathKind::Ros2, Leg::Odom, self.of(ODOM), dds.state, 0);
         state.baseline = self.reference(&dds_out);
         // The service's state path, then the DDS hop out.
-        state.contains = vec![
-            self.key(PathKind::State, &label),
-            baseline_key(&dds_out, placement),
-        ];
+        let path = self.key(PathKind::State, &label);
+        state.contains = vec![path, baseline_key(&dds_out, at)];
         rows.push(state);
     }
 }
@@ -960,22 +881,19 @@ impl Step for PathRun {
         }
         rows.extend(self.plan_path(PathKind::State, &label, plan.states));
         rows.push(self.plan(PathKind::Preemption, &label, preemptions));
-        if (self.robot, self.bus, self.mode) == SCRIPTS_BESIDE {
-            if ctx.python.is_some() {
-                for (what, asked) in [("state", plan.states), ("command", commands)] {
-                    rows.push(self.plan(PathKind::Python, &self.of(what), asked));
-                }
+        if (self.robot, self.bus, self.mode) != TITAN_SIM {
+            return rows;
+        }
+        if ctx.python.is_some() {
+            for (what, asked) in [("state", plan.states), ("command", commands)] {
+                rows.push(self.plan(PathKind::Python, &self.of(what), asked));
             }
-            if ctx.ros2.is_some() {
-                for (what, dds, asked) in
-                    [(CMD_VEL, DDS_IN, commands), (ODOM, DDS_OUT, plan.states)]
-                {
-                    rows.push(self.plan(PathKind::Ros2, &self.of(what), asked));
-                    rows.push(Planned::new(
-                        baseline_key(&self.beside(dds), placement),
-                        asked,
-                    ));
-                }
+        }
+        if ctx.ros2.is_some() {
+            for (what, dds, asked) in [(CMD_VEL, DDS_IN, commands), (ODOM, DDS_OUT, plan.states)] {
+                rows.push(self.plan(PathKind::Ros2, &self.of(what), asked));
+                let hop = baseline_key(&self.beside(dds), placement);
+                rows.push(Planned::new(hop, asked));
             }
         }
         rows
@@ -1037,30 +955,14 @@ impl Step for DefaultConfig {
 
     fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
         let run = DEFAULT_CONFIG;
-        ctx.bar
-            .set_message("titan sim in chassisd's default configuration");
-        let (client_cpu, service_cpu) = run.placement.cpus();
-        let (service, mut robot) = paths::start_configured(
-            run.robot,
-            run.bus,
-            run.mode,
-            service_cpu,
-            paths::ServiceConfig::Default,
-            false,
-            &ctx.prefix,
-            &ctx.dir,
-        )?;
-        let figures = paths::pinned(client_cpu, || -> anyhow::Result<_> {
-            let mut teleop = robot.source("teleop")?;
-            paths::command_path_via(
-                &mut robot,
-                &mut teleop,
-                run.robot,
-                ctx.plan.commands,
-                paths::COMMAND_INTERVAL,
-                false,
-                paths::Reach::Toward,
-            )
+        let message = "titan sim in chassisd's default configuration";
+        ctx.bar.set_message(message);
+        let (service, mut robot) = run.start(ctx, ServiceConfig::Default, false)?;
+        let figures = paths::pinned(run.placement.cpus().0, || -> anyhow::Result<_> {
+            let sizes = (ctx.plan.commands, paths::COMMAND_INTERVAL);
+            let (t, toward) = (&mut robot.source("teleop")?, paths::Reach::Toward);
+            let mut motion = paths::Motion::open(&mut robot, run.robot, false)?;
+            paths::command_path(&mut motion, &mut robot, t, sizes, toward)
         })??;
         drop(robot);
         drop(service);
@@ -1085,7 +987,7 @@ impl Step for Loops {
         let mut rows = Vec::new();
         for &(period, mode) in &self.0 {
             let periods = Some(control_loop::periods(period, ctx.plan.loop_seconds));
-            let [frame, age, hop] = control_loop::row_names(&run, period, transport_of(mode));
+            let [frame, age, hop] = control_loop::row_names(&run, period, Transport::like(mode));
             // A command the next period's superseded is what the row measures, not a loss.
             rows.extend([
                 Planned::new(row_key(PathKind::Loop, &frame, mode.arg(), cross), None),
@@ -1098,14 +1000,8 @@ impl Step for Loops {
 
     fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
         ctx.bar.set_message("control loops at 1 kHz and 100 Hz");
-        control_loop::run(
-            &self.0,
-            ctx.plan.loop_seconds,
-            transport_of,
-            &ctx.prefix,
-            &ctx.dir,
-            report,
-        )
+        let seconds = ctx.plan.loop_seconds;
+        control_loop::run(&self.0, seconds, &ctx.prefix, &ctx.dir, report)
     }
 }
 
@@ -1128,26 +1024,12 @@ impl Step for FanOut {
         let n = self.0;
         ctx.bar
             .set_message(format!("fan-out to {n} subscriber processes"));
-        let (service, mut robot) = paths::start(
-            RobotKind::Titan,
-            BusKind::Sim,
-            LoopMode::Event,
-            None,
-            &ctx.prefix,
-            &ctx.dir,
-        )?;
+        let (service, mut robot) = ctx.start(TITAN_SIM)?;
         let seconds = ctx.plan.fanout_seconds;
-        let l = fanout::run(&mut robot, &service.name, &ctx.prefix, n, seconds)?;
-        report.rows.push(Row::new(
-            PathKind::FanOut,
-            Leg::FanOut,
-            &bus_label(RobotKind::Titan, BusKind::Sim),
-            self.what(),
-            "event",
-            "unpinned",
-            l,
-            0,
-        ));
+        let l = paths::fan_out(&mut robot, &service.name, &ctx.prefix, n, seconds)?;
+        let run = bus_label(RobotKind::Titan, BusKind::Sim);
+        let (path, leg, what) = (PathKind::FanOut, Leg::FanOut, self.what());
+        (report.rows).push(Row::new(path, leg, &run, what, "event", "unpinned", l, 0));
         Ok(())
     }
 }
@@ -1155,14 +1037,12 @@ impl Step for FanOut {
 /// chassis-zenoh between two network namespaces, beside bare Zenoh hops.
 struct Zenoh;
 
-const ZENOH_PLACEMENT: &str = "2 netns, veth";
-
 impl Step for Zenoh {
     fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
         if !zenoh::possible() {
             return Vec::new();
         }
-        let (commands, states, at) = (ctx.plan.commands, ctx.plan.states, ZENOH_PLACEMENT);
+        let (commands, states, at) = (ctx.plan.commands, ctx.plan.states, zenoh::PLACEMENT);
         let zenoh = |what| row_key(PathKind::Zenoh, what, "event", at);
         vec![
             Planned::new(baseline_key(zenoh::RAW_COMMAND, at), commands),
@@ -1182,79 +1062,7 @@ impl Step for Zenoh {
         ctx.bar
             .set_message("chassis-zenoh between two network namespaces");
         let (commands, states) = (ctx.plan.commands, ctx.plan.states);
-        let interval = paths::COMMAND_INTERVAL;
-        let z = zenoh::run(&ctx.prefix, &ctx.dir, commands, interval, states)?;
-        let placement = ZENOH_PLACEMENT;
-        // chassis-zenoh bridges the TITAN on the simulated bus.
-        let run = bus_label(RobotKind::Titan, BusKind::Sim);
-        for (what, count, hops, pace) in [
-            (
-                zenoh::RAW_COMMAND,
-                z.command.latencies.count(),
-                &z.raw_command,
-                format!("{} (the command path's)", paths::period_text(interval)),
-            ),
-            (
-                zenoh::RAW_STATE,
-                z.state.count(),
-                &z.raw_state,
-                format!(
-                    "{} (the period of the states the path counted, 1.7 % more)",
-                    paths::period_text(z.state_period)
-                ),
-            ),
-        ] {
-            let conditions = format!(
-                "one sample every {pace} from the robot's namespace to the operator's, bare \
-                 sessions configured as chassis-zenoh's, same run, chassisd running, the \
-                 bridges not; the last {count} of {} after a warm-up",
-                hops.len()
-            );
-            let l = baseline::last_of(hops, count);
-            report
-                .rows
-                .push(hop_row(&run, what.into(), placement, l, conditions));
-        }
-        for (leg, what, l, missed, raw) in [
-            (
-                Leg::RemoteCommand,
-                zenoh::COMMAND,
-                z.command.latencies,
-                z.command.missed,
-                zenoh::RAW_COMMAND,
-            ),
-            (Leg::RemoteState, zenoh::STATE, z.state, 0, zenoh::RAW_STATE),
-            (
-                Leg::RemoteBridge,
-                zenoh::BRIDGE,
-                z.bridge,
-                0,
-                zenoh::RAW_STATE,
-            ),
-        ] {
-            let row = Row::new(
-                PathKind::Zenoh,
-                leg,
-                &run,
-                what.into(),
-                "event",
-                placement,
-                l,
-                missed,
-            );
-            let baseline = Some(format!("{raw}, {placement}"));
-            report.rows.push(Row { baseline, ..row });
-        }
-        report.parts.push(report::Parts {
-            path: report::ZENOH_PARTS.into(),
-            of: (PathKind::Zenoh, Leg::RemoteState),
-            run,
-            what: zenoh::STATE.into(),
-            mode: "event".into(),
-            placement: placement.into(),
-            split: z.state_parts,
-        });
-        Ok(())
+        zenoh::run(&ctx.prefix, &ctx.dir, commands, states, report)
     }
 }
 
@@ -1267,17 +1075,14 @@ impl Step for Cost {
         // read as a byte stream, as a USB adapter on a robot is: the target is judged on the
         // worse of the two.
         for (bus, label) in [(BusKind::Sim, "sim"), (BusKind::Pty, "slcan-pty")] {
-            ctx.bar
-                .set_message(format!("service cost at 100 % load of the {label} bus"));
-            let (prefix, dir) = (&ctx.prefix, &ctx.dir);
-            let (service, mut robot) =
-                paths::start(RobotKind::Titan, bus, LoopMode::Event, None, prefix, dir)?;
+            let message = format!("service cost at 100 % load of the {label} bus");
+            ctx.bar.set_message(message);
+            let (service, mut robot) = ctx.start((RobotKind::Titan, bus, LoopMode::Event))?;
             for bitrate in [500_000, 1_000_000] {
                 let seconds = ctx.plan.cost_seconds;
                 let cost = paths::cost_at(&mut robot, label, service.pid, bitrate, seconds)?;
                 report.cost.push(cost);
             }
-            drop(service);
         }
         Ok(())
     }
@@ -1291,10 +1096,9 @@ impl Step for Throughput {
         ctx.bar
             .set_message("replaying a recorded bus at full speed");
         let file = ctx.dir.join("titan.log");
-        let seconds = if ctx.quick { 300 } else { 1500 };
-        let frames = throughput::record_titan(&file, seconds)?;
+        let frames = paths::record_titan(&file, ctx.plan.replay_seconds)?;
         for _ in 0..report::REPLAYS {
-            let replay = throughput::replay(&file, frames, &ctx.prefix, &ctx.dir)?;
+            let replay = paths::replay(&file, frames, &ctx.prefix, &ctx.dir)?;
             report.throughput.push(replay);
         }
         Ok(())
@@ -1304,32 +1108,16 @@ impl Step for Throughput {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.role {
-        Some(RoleCmd::Role {
-            role: Role::Pong(args),
-        }) => baseline::pong(&args),
-        Some(RoleCmd::Role {
-            role: Role::Subscribe(args),
-        }) => fanout::subscribe(&args),
-        Some(RoleCmd::Role {
-            role: Role::Feed(args),
-        }) => baseline::feed(&args),
-        Some(RoleCmd::Role {
-            role: Role::DdsEcho(args),
-        }) => dds_echo::run(&args),
-        Some(RoleCmd::Role {
-            role: Role::ZenohPub(args),
-        }) => {
-            chassis_client::install_signal_handlers();
-            zenoh_raw::publish(&args)
-        }
-        Some(RoleCmd::Role {
-            role: Role::ZenohSub(args),
-        }) => zenoh_raw::subscribe(&args),
-        Some(RoleCmd::Role {
-            role: Role::RecordTitan { out, seconds },
-        }) => throughput::record_titan(&out, seconds).map(|frames| {
-            eprintln!("{frames} frames written to {}", out.display());
-        }),
+        Some(RoleCmd::Role { role }) => match role {
+            Role::Pong(args) => baseline::pong(&args),
+            Role::Feed(args) => baseline::feed(&args),
+            Role::Subscribe(args) => paths::subscribe(&args),
+            Role::DdsEcho(args) => dds_echo::run(&args),
+            Role::ZenohPub(args) => zenoh::publish(&args),
+            Role::ZenohSub(args) => zenoh::subscribe(&args),
+            Role::RecordTitan { out, seconds } => paths::record_titan(&out, seconds)
+                .map(|frames| eprintln!("{frames} frames written to {}", out.display())),
+        },
         Some(RoleCmd::Render(args)) => std::fs::read_to_string(&args.samples)
             .with_context(|| format!("reading {}", args.samples.display()))
             .and_then(|text| Report::from_samples(&text))
@@ -1340,42 +1128,7 @@ fn main() -> ExitCode {
         Some(RoleCmd::Fleet(args)) => {
             fleet::run(&args).and_then(|report| fleet::write(&report, &args))
         }
-        None => run(&cli.run).and_then(|report| {
-            print!("{}", report.table());
-            let samples = report.samples()?;
-            if let Some(path) = &cli.run.samples {
-                std::fs::write(path, &samples)
-                    .with_context(|| format!("writing {}", path.display()))?;
-            }
-            // Rendered from the samples alone, as `render` renders them.
-            let (doc, plot) = (cli.run.doc.as_deref(), cli.run.plot.as_deref());
-            if doc.is_some() || plot.is_some() {
-                render(&Report::from_samples(&samples)?, doc, plot)?;
-            }
-            if cli.run.smoke {
-                for warning in report.smoke_warnings() {
-                    eprintln!("smoke: {warning}");
-                }
-                let failures = report.smoke_failures(&report.expected);
-                for failure in &failures {
-                    eprintln!("smoke: {failure}");
-                }
-                if !failures.is_empty() {
-                    anyhow::bail!(
-                        "the smoke run failed: {} failure(s), {} rows planned",
-                        failures.len(),
-                        report.expected.len()
-                    );
-                }
-                eprintln!(
-                    "smoke: all {} planned rows measured, none flagged beyond the smoke run's \
-                     noise ({} within it, above)",
-                    report.expected.len(),
-                    report.smoke_warnings().len()
-                );
-            }
-            Ok(())
-        }),
+        None => run(&cli.run).and_then(|report| write(&cli.run, &report)),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -1384,6 +1137,39 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Prints a run's table, writes its files, and judges a smoke run.
+fn write(args: &RunArgs, report: &Report) -> anyhow::Result<()> {
+    print!("{}", report.table());
+    let samples = report.samples()?;
+    if let Some(path) = &args.samples {
+        std::fs::write(path, &samples).with_context(|| format!("writing {}", path.display()))?;
+    }
+    // Rendered from the samples alone, as `render` renders them.
+    let (doc, plot) = (args.doc.as_deref(), args.plot.as_deref());
+    if doc.is_some() || plot.is_some() {
+        render(&Report::from_samples(&samples)?, doc, plot)?;
+    }
+    if !args.smoke {
+        return Ok(());
+    }
+    let warnings = report.smoke_warnings();
+    let failures = report.smoke_failures(&report.expected);
+    for line in warnings.iter().chain(&failures) {
+        eprintln!("smoke: {line}");
+    }
+    let planned = report.expected.len();
+    if !failures.is_empty() {
+        let failed = failures.len();
+        anyhow::bail!("the smoke run failed: {failed} failure(s), {planned} rows planned");
+    }
+    eprintln!(
+        "smoke: all {planned} planned rows measured, none flagged beyond the smoke run's noise \
+         ({} within it, above)",
+        warnings.len()
+    );
+    Ok(())
 }
 
 #[cfg(test)]

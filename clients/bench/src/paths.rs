@@ -9,6 +9,7 @@
 //!
 //! Every figure is one-way, from `CLOCK_MONOTONIC` stamps taken in two processes.
 
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -16,15 +17,19 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use chassis_client::{
     BusFrame, ChassisState, FrameDirection, FrameKind, IPC_PREFIX_ENV, Robot, STATE_BUFFER, Source,
-    Ticker, VelocityRequest, now_ns,
+    Ticker, Velocity, VelocityRequest, now_ns,
 };
 pub use chassis_ipc::PassStamps;
+use chassis_protocols::driver::{Driver, DriverConfig};
 use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
-use chassis_protocols::{CanFrame, RobotKind};
+use chassis_protocols::pair::Pair;
+use chassis_protocols::titan::{self, TitanProfile};
+use chassis_protocols::{CanFrame, CandumpLine, Direction, RobotKind, Timestamp, WireItem};
 use serde::{Deserialize, Serialize};
 use zerocopy::IntoBytes as _;
 
 use crate::placement::{pause, pin_current_thread, unique, unpin_current_thread};
+use crate::report::Throughput;
 use crate::stats::Latencies;
 
 /// How the service's loop waits.
@@ -42,18 +47,6 @@ impl LoopMode {
             LoopMode::Event => "event",
             LoopMode::Spin => "spin",
             LoopMode::Hybrid => "hybrid",
-        }
-    }
-
-    /// The SCHED_FIFO priority chassisd's loop asks for in the benchmark's runs of this loop:
-    /// [`REALTIME_PRIORITY`] for a loop that blocks, as a robot runs it; none for the polling
-    /// loop, which at SCHED_FIFO holds its CPU and is stopped by the kernel's real-time
-    /// throttling (`kernel.sched_rt_runtime_us`: 50 ms of every second by default) unless its
-    /// CPU is isolated, which this machine's are not.
-    pub fn realtime(self) -> Option<u8> {
-        match self {
-            LoopMode::Event | LoopMode::Hybrid => Some(REALTIME_PRIORITY),
-            LoopMode::Spin => None,
         }
     }
 }
@@ -132,11 +125,9 @@ impl Drop for Service {
 
 /// Asks `child` to end (SIGTERM).
 pub fn terminate(child: &Child) {
+    use nix::sys::signal::{Signal, kill};
     if let Ok(pid) = i32::try_from(child.id()) {
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(pid),
-            nix::sys::signal::Signal::SIGTERM,
-        );
+        let _ = kill(nix::unistd::Pid::from_raw(pid), Signal::SIGTERM);
     }
 }
 
@@ -148,12 +139,11 @@ pub fn stop(child: &mut Child) {
 
 /// Where the workspace's binaries are (next to this one).
 pub fn sibling(binary: &str) -> anyhow::Result<PathBuf> {
-    let exe = std::env::current_exe()?;
-    let path = exe.with_file_name(binary);
+    let path = std::env::current_exe()?.with_file_name(binary);
     if !path.exists() {
+        let path = path.display();
         bail!(
-            "{} not found next to chassis-bench: build the whole workspace (`cargo build --release --workspace`)",
-            path.display()
+            "{path} not found next to chassis-bench: build the whole workspace (`cargo build --workspace`)"
         );
     }
     Ok(path)
@@ -173,20 +163,22 @@ pub const BENCH_CONFIG: &str = "[driver]\nmin_command_interval_ms = 0\nbrake_idl
 pub enum ServiceConfig {
     /// [`BENCH_CONFIG`], normal scheduling: the cost, memory, fan-out and Zenoh runs.
     Bench,
-    /// [`BENCH_CONFIG`] in real-time mode where the loop blocks ([`LoopMode::realtime`]): the
-    /// latency runs of the service paths.
+    /// [`BENCH_CONFIG`] in real-time mode where the loop blocks: the latency runs of the service
+    /// paths.
     BenchRealtime,
     /// chassisd's defaults.
     Default,
 }
 
 impl ServiceConfig {
-    /// The SCHED_FIFO priority this configuration asks for with the loop `mode`, if any.
+    /// The SCHED_FIFO priority this configuration asks for with the loop `mode`, if any:
+    /// [`REALTIME_PRIORITY`] for a loop that blocks, as a robot runs it; none for the polling
+    /// loop, which at SCHED_FIFO holds its CPU and is stopped by the kernel's real-time
+    /// throttling (`kernel.sched_rt_runtime_us`: 50 ms of every second by default) unless its
+    /// CPU is isolated, which this machine's are not.
     pub fn realtime(self, mode: LoopMode) -> Option<u8> {
-        match self {
-            ServiceConfig::BenchRealtime => mode.realtime(),
-            ServiceConfig::Bench | ServiceConfig::Default => None,
-        }
+        let blocks = mode != LoopMode::Spin;
+        (self == ServiceConfig::BenchRealtime && blocks).then_some(REALTIME_PRIORITY)
     }
 }
 
@@ -198,18 +190,6 @@ pub fn config_text(config: ServiceConfig, mode: LoopMode) -> String {
         (_, Some(priority)) => format!("[service]\nrealtime = {priority}\n\n{BENCH_CONFIG}"),
         (_, None) => BENCH_CONFIG.to_string(),
     }
-}
-
-/// Writes the configuration file of a run.
-fn write_config(
-    dir: &Path,
-    name: &str,
-    config: ServiceConfig,
-    mode: LoopMode,
-) -> anyhow::Result<PathBuf> {
-    let path = dir.join(format!("{name}.toml"));
-    std::fs::write(&path, config_text(config, mode))?;
-    Ok(path)
 }
 
 /// The SCHED_FIFO priority of the first of `pid`'s threads that runs at SCHED_FIFO, if one does:
@@ -233,31 +213,10 @@ pub fn fifo_priority(pid: u32) -> Option<u8> {
     })
 }
 
-/// Starts `chassisd` (and, for a pty bus, `chassisd sim`) and waits until it publishes.
-pub fn start(
-    robot: RobotKind,
-    bus: BusKind,
-    mode: LoopMode,
-    service_cpu: Option<usize>,
-    prefix: &str,
-    dir: &Path,
-) -> anyhow::Result<(Service, Robot)> {
-    start_configured(
-        robot,
-        bus,
-        mode,
-        service_cpu,
-        ServiceConfig::Bench,
-        false,
-        prefix,
-        dir,
-    )
-}
-
 /// Starts `command` (chassisd or its simulator) serving under the IPC prefix `prefix`, logging
 /// warnings: its stdout to `<log>.log`, its stderr to `<log>-err.log`; `what` names it in the
 /// error.
-fn spawn_logged(
+pub(crate) fn spawn_logged(
     command: &mut Command,
     prefix: &str,
     log: &Path,
@@ -278,39 +237,58 @@ fn spawn_logged(
         .with_context(|| format!("starting {what}"))
 }
 
-/// [`start`] with chassisd configured as `config` says, keeping its pass trace with `trace`
-/// ([`Service::stop`] returns it).
-#[allow(clippy::too_many_arguments)]
-pub fn start_configured(
-    robot: RobotKind,
-    bus: BusKind,
-    mode: LoopMode,
-    service_cpu: Option<usize>,
+/// What `f` brings, once it brings something (at most `seconds` away): `what` fails otherwise.
+pub(crate) fn wait_until<T>(
+    what: &str,
+    seconds: u64,
+    mut f: impl FnMut() -> Option<T>,
+) -> anyhow::Result<T> {
+    let deadline = now_ns() + seconds * 1_000_000_000;
+    let mut ticker = Ticker::new(Duration::from_millis(50));
+    loop {
+        if let Some(v) = f() {
+            return Ok(v);
+        }
+        if now_ns() > deadline {
+            bail!("{what} within {seconds}s");
+        }
+        ticker.wait();
+    }
+}
+
+/// A started service and a client of it.
+pub type Started = (Service, Robot);
+
+/// Starts `chassisd` (and, for a pty bus, `chassisd sim`) for `robot` on `bus` with the loop
+/// `mode`, configured as `config` says, keeping its pass trace with `trace` ([`Service::stop`]
+/// returns it), and waits until it publishes and the chassis is in command mode.
+pub fn start(
+    (robot, bus, mode): (RobotKind, BusKind, LoopMode),
+    cpu: Option<usize>,
     config: ServiceConfig,
     trace: bool,
     prefix: &str,
     dir: &Path,
-) -> anyhow::Result<(Service, Robot)> {
+) -> anyhow::Result<Started> {
     let name = format!("bn{}", unique());
     let trace = trace.then(|| dir.join(format!("{name}-passes.txt")));
     let chassisd = sibling("chassisd")?;
     let realtime = config.realtime(mode);
-    let config = write_config(dir, &name, config, mode)?;
+    let config_file = dir.join(format!("{name}.toml"));
+    let mut text = config_text(config, mode);
+    if robot == RobotKind::Xbot {
+        // The benchmark's simulated board has a known wheel separation.
+        text.push_str("\n[profile]\nwheel_separation_m = 0.45\n");
+    }
+    std::fs::write(&config_file, text)?;
     let mut children = Vec::new();
     let bus_arg = match bus {
         BusKind::Sim => "sim".to_string(),
         BusKind::Pty => {
-            let link = dir.join(format!("{name}-link"));
-            let (sim_bus, service_bus) = if robot.is_can() {
-                (
-                    format!("slcan-pty:{}", link.display()),
-                    format!("slcan:{}", link.display()),
-                )
-            } else {
-                (
-                    format!("pty:{}", link.display()),
-                    format!("serial:{}", link.display()),
-                )
+            let link = dir.join(format!("{name}-link")).display().to_string();
+            let (sim_bus, service_bus) = match robot.is_can() {
+                true => (format!("slcan-pty:{link}"), format!("slcan:{link}")),
+                false => (format!("pty:{link}"), format!("serial:{link}")),
             };
             let mut sim = Command::new(&chassisd);
             sim.args([
@@ -324,53 +302,28 @@ pub fn start_configured(
             ]);
             let log = dir.join(format!("{name}-sim"));
             children.push(spawn_logged(&mut sim, prefix, &log, "chassisd sim")?);
-            let deadline = now_ns() + 10_000_000_000;
-            while !link.exists() {
-                if now_ns() > deadline {
-                    bail!("chassisd sim made no pty link");
-                }
-                pause(Duration::from_millis(20));
-            }
+            let linked = || Path::new(&link).exists().then_some(());
+            wait_until("chassisd sim made no pty link", 10, linked)?;
             service_bus
         }
     };
-    let mut args = vec![
-        "--robot".to_string(),
-        robot.name().to_string(),
-        "--name".into(),
-        name.clone(),
-        "--bus".into(),
-        bus_arg,
-        "--no-safety-monitor".into(),
-        "--config".into(),
-        config.display().to_string(),
-        "--loop".into(),
-        mode.arg().into(),
-    ];
-    if robot == RobotKind::Xbot {
-        // The benchmark's simulated board has a known wheel separation.
-        std::fs::write(
-            &config,
-            format!(
-                "{}\n[profile]\nwheel_separation_m = 0.45\n",
-                std::fs::read_to_string(&config)?
-            ),
-        )?;
-    }
-    if let Some(cpu) = service_cpu {
-        args.push("--cpu".into());
-        args.push(cpu.to_string());
+    let mut service = Command::new(&chassisd);
+    service
+        .args(["--robot", robot.name(), "--name", &name, "--bus", &bus_arg])
+        .args(["--no-safety-monitor", "--config"])
+        .arg(&config_file)
+        .args(["--loop", mode.arg()]);
+    if let Some(cpu) = cpu {
+        service.args(["--cpu", &cpu.to_string()]);
     }
     if mode == LoopMode::Hybrid {
         // The same window as the poll-then-block baseline's.
-        args.push("--spin-us".into());
-        args.push(crate::baseline::HYBRID_SPIN.as_micros().to_string());
+        let window = crate::baseline::HYBRID_SPIN.as_micros().to_string();
+        service.args(["--spin-us", &window]);
     }
-    let mut service = Command::new(&chassisd);
     if let Some(path) = &trace {
         service.env(chassis_ipc::Trace::Pass.env(), path);
     }
-    service.args(&args);
     let log = dir.join(format!("{name}-chassisd"));
     let service = spawn_logged(&mut service, prefix, &log, "chassisd")?;
     let pid = service.id();
@@ -382,21 +335,15 @@ pub fn start_configured(
         trace,
         scheduling: Scheduling::Normal,
     };
-    let deadline = now_ns() + 15_000_000_000;
-    let mut robot_conn = loop {
-        if let Ok(mut r) = Robot::connect_with_prefix(&name, Some(prefix))
-            && r.wait_state(Duration::from_millis(200))?.is_some()
-        {
-            break r;
-        }
-        if now_ns() > deadline {
-            bail!(
-                "chassisd for {robot} did not come up (logs in {})",
-                dir.display()
-            );
-        }
-        pause(Duration::from_millis(50));
-    };
+    let up = format!(
+        "chassisd for {robot} did not come up (logs in {})",
+        dir.display()
+    );
+    let mut robot_conn = wait_until(&up, 15, || {
+        let mut r = Robot::connect_with_prefix(&name, Some(prefix)).ok()?;
+        r.wait_state(Duration::from_millis(200)).ok()??;
+        Some(r)
+    })?;
     // Let the chassis reach command mode.
     let ready_by = now_ns() + 5_000_000_000;
     while now_ns() < ready_by {
@@ -464,6 +411,13 @@ fn commanded_speed(json: &FrameJson) -> Option<f64> {
     }
 }
 
+/// The state `robot` publishes next (at most a second away).
+fn state(robot: &mut Robot) -> anyhow::Result<ChassisState> {
+    robot
+        .wait_state(Duration::from_secs(1))?
+        .context("no state")
+}
+
 /// The frames a second the service reads from the chassis over a stretch of a run: the rate at
 /// which the chassis' feedback wakes the service's loop.
 pub struct FeedbackRate {
@@ -473,9 +427,7 @@ pub struct FeedbackRate {
 
 impl FeedbackRate {
     pub fn start(robot: &mut Robot) -> anyhow::Result<Self> {
-        let s = robot
-            .wait_state(Duration::from_secs(1))?
-            .context("no state")?;
+        let s = state(robot)?;
         Ok(Self {
             frames: s.link.rx_frames,
             at: now_ns(),
@@ -484,9 +436,7 @@ impl FeedbackRate {
 
     /// Frames read a second since [`FeedbackRate::start`].
     pub fn per_second(&self, robot: &mut Robot) -> anyhow::Result<f64> {
-        let s = robot
-            .wait_state(Duration::from_secs(1))?
-            .context("no state")?;
+        let s = state(robot)?;
         let seconds = now_ns().saturating_sub(self.at) as f64 / 1e9;
         if seconds <= 0.0 || s.link.rx_frames <= self.frames {
             bail!("the chassis sent no feedback during the run");
@@ -495,58 +445,70 @@ impl FeedbackRate {
     }
 }
 
-/// Drains the tap until a TX motion frame commanding `speed`, stamped at or after `since`,
-/// appears; returns its stamp.
-fn wait_for_motion(
-    tap: &chassis_client::FrameTap,
-    decoder: &mut MotionDecoder,
-    speed: f64,
-    since: u64,
-    spin: bool,
-    timeout: Duration,
-) -> anyhow::Result<Option<u64>> {
-    wait_for_motion_that(
-        tap,
-        decoder,
-        |v| (v - speed).abs() < 1e-6,
-        since,
-        spin,
-        timeout,
-    )
+/// The motion frames the service writes, as the frame tap shows them, decoded.
+pub(crate) struct Motion {
+    pub tap: chassis_client::FrameTap,
+    pub decoder: MotionDecoder,
+    /// The tap polled (a busy-polling run), not waited on.
+    pub spin: bool,
 }
 
-/// Drains the tap until a TX motion frame whose commanded speed `accept`s, stamped at or after
-/// `since`, appears; returns its stamp.
-fn wait_for_motion_that(
-    tap: &chassis_client::FrameTap,
-    decoder: &mut MotionDecoder,
-    accept: impl Fn(f64) -> bool,
-    since: u64,
-    spin: bool,
-    timeout: Duration,
-) -> anyhow::Result<Option<u64>> {
-    let deadline = since + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
-    loop {
-        let mut found = None;
-        let each = |frame: &BusFrame| {
-            if found.is_none()
-                && frame.stamp_ns >= since
-                && decoder.linear(frame).is_some_and(&accept)
-            {
-                found = Some(frame.stamp_ns);
+/// A commanded speed that is `speed`.
+fn at(speed: f64) -> impl Fn(f64) -> bool {
+    move |v| (v - speed).abs() < 1e-6
+}
+
+impl Motion {
+    pub fn open(robot: &mut Robot, kind: RobotKind, spin: bool) -> anyhow::Result<Self> {
+        let tap = robot.frames(2048)?;
+        let decoder = MotionDecoder::new(kind);
+        Ok(Self { tap, decoder, spin })
+    }
+
+    /// Drains the tap until a TX motion frame whose commanded speed `accept`s, stamped at or
+    /// after `since`, appears; returns its stamp.
+    fn wait(
+        &mut self,
+        accept: impl Fn(f64) -> bool,
+        since: u64,
+        timeout: Duration,
+    ) -> anyhow::Result<Option<u64>> {
+        let deadline = since + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
+        loop {
+            let mut found = None;
+            let decoder = &mut self.decoder;
+            let each = |frame: &BusFrame| {
+                if found.is_none()
+                    && frame.stamp_ns >= since
+                    && decoder.linear(frame).is_some_and(&accept)
+                {
+                    found = Some(frame.stamp_ns);
+                }
+            };
+            if self.spin {
+                self.tap.drain(each)?;
+            } else {
+                self.tap.wait(Duration::from_millis(5), each)?;
             }
-        };
-        if spin {
-            tap.drain(each)?;
-        } else {
-            tap.wait(Duration::from_millis(5), each)?;
+            if found.is_some() || now_ns() > deadline {
+                return Ok(found);
+            }
         }
-        if found.is_some() {
-            return Ok(found);
+    }
+
+    /// Drives at 0.25 m/s until a frame commands it (at most 3 s): the first motion releases
+    /// TITAN's brake and waits for command mode (and, ramped, reaches the speed).
+    pub(crate) fn warm_up(&mut self, teleop: &mut Source) -> anyhow::Result<()> {
+        let warm_until = now_ns() + 3_000_000_000;
+        let mut ticker = Ticker::new(COMMAND_INTERVAL);
+        while now_ns() < warm_until {
+            teleop.send(VelocityRequest::twist(0.25, 0.0))?;
+            if self.wait(at(0.25), now_ns(), Duration::ZERO)?.is_some() {
+                break;
+            }
+            ticker.wait();
         }
-        if now_ns() > deadline {
-            return Ok(None);
-        }
+        Ok(())
     }
 }
 
@@ -555,12 +517,12 @@ fn wait_for_motion_that(
 pub const COMMAND_INTERVAL: Duration = Duration::from_millis(4);
 
 /// The period the command path and its paced baselines keep: `interval` and 1.7 % more (4 ms:
-/// 4.068 ms). A client's timer is not aligned to the chassis': at exactly 4 ms, on the
-/// clock the simulated chassis keeps its 2 ms feedback and 20 ms tick on, a run's requests all
-/// fell at one phase of the feedback (the pass traces `--dir` keeps, `bn*-passes.txt`, put every
-/// request of a run about 0.55 ms after a feedback pass, another run's 0.7 ms), so a run, and its baseline, measured one moment
-/// of the chassis' cycle only, drawn anew each run. 1.7 % more sweeps 300 requests across a
-/// whole 20 ms tick.
+/// 4.068 ms). A client's timer is not aligned to the chassis': at exactly 4 ms, on the clock the
+/// simulated chassis keeps its 2 ms feedback and 20 ms tick on, a run's requests all fell at one
+/// phase of the feedback (the pass traces `--dir` keeps, `bn*-passes.txt`, put every request of
+/// a run about 0.55 ms after a feedback pass, another run's 0.7 ms), so a run, and its baseline,
+/// measured one moment of the chassis' cycle only, drawn anew each run. 1.7 % more sweeps 300
+/// requests across a whole 20 ms tick.
 pub fn off_grid(interval: Duration) -> Duration {
     interval + interval * 17 / 1000
 }
@@ -588,26 +550,6 @@ const KEEP_ALIVE: Duration = Duration::from_millis(100);
 /// preemption rounds measure one change per 1.1 s: faster, a change rides the next heartbeat
 /// and the figure is the manual's rate bound, not the service's latency.
 pub const XBOT_COMMAND_INTERVAL: Duration = Duration::from_millis(1100);
-
-/// Drives at 0.25 m/s until a frame commands it (at most 3 s): the first motion releases
-/// TITAN's brake and waits for command mode (and, ramped, reaches the speed).
-pub(crate) fn warm_up(
-    tap: &chassis_client::FrameTap,
-    teleop: &mut Source,
-    decoder: &mut MotionDecoder,
-    spin: bool,
-) -> anyhow::Result<()> {
-    let warm_until = now_ns() + 3_000_000_000;
-    let mut ticker = Ticker::new(COMMAND_INTERVAL);
-    while now_ns() < warm_until {
-        teleop.send(VelocityRequest::twist(0.25, 0.0))?;
-        if wait_for_motion(tap, decoder, 0.25, now_ns(), spin, Duration::ZERO)?.is_some() {
-            break;
-        }
-        ticker.wait();
-    }
-    Ok(())
-}
 
 /// What the command path measured.
 #[derive(Debug)]
@@ -645,54 +587,27 @@ pub enum Reach {
     Toward,
 }
 
-/// Command-path latencies: `count` requests alternating between two speeds, one every
-/// `interval`.
+/// Command-path latencies: `count` requests from `teleop`, a source opened anywhere (through a
+/// bridge from another computer too), alternating between two speeds, one every `interval`;
+/// the frames (`motion`) and the mux are read from `robot`.
 pub fn command_path(
-    robot: &mut Robot,
-    kind: RobotKind,
-    count: u64,
-    interval: Duration,
-    spin: bool,
-) -> anyhow::Result<CommandFigures> {
-    let mut teleop = robot.source("teleop")?;
-    command_path_via(
-        robot,
-        &mut teleop,
-        kind,
-        count,
-        interval,
-        spin,
-        Reach::Exact,
-    )
-}
-
-/// [`command_path`] with requests from `teleop`, a source opened anywhere (through a bridge
-/// from another computer too): the frames and the mux are read from `robot`.
-pub fn command_path_via(
+    motion: &mut Motion,
     robot: &mut Robot,
     teleop: &mut Source,
-    kind: RobotKind,
-    count: u64,
-    interval: Duration,
-    spin: bool,
+    (count, interval): (u64, Duration),
     reach: Reach,
 ) -> anyhow::Result<CommandFigures> {
-    let tap = robot.frames(2048)?;
     // A new reader gets the latest decision with the service's next publication (10 Hz).
     let source = teleop.name().to_string();
     let teleop_index = robot
         .wait_mux(Duration::from_secs(2))?
         .and_then(|m| m.sources().iter().position(|s| s.name() == source))
         .ok_or_else(|| anyhow::anyhow!("the mux reports no {source} source"))?;
-    let mut decoder = MotionDecoder::new(kind);
     // Exact on every wire: whole mm/s, whole percent of 5 m/s, exact in f32.
     let speeds = [0.25, 0.5];
-    warm_up(&tap, teleop, &mut decoder, spin)?;
-
-    let mut latencies = Latencies::new();
-    let mut in_service = Latencies::new();
-    let mut samples = Vec::new();
-    let mut missed = 0;
+    motion.warm_up(teleop)?;
+    let (mut latencies, mut in_service) = (Latencies::new(), Latencies::new());
+    let (mut samples, mut missed) = (Vec::new(), 0);
     // Between two samples further apart than the source's timeout, the current request is
     // repeated as a controller would: the mux output stays, no frame is sent for it.
     let period = interval.min(KEEP_ALIVE);
@@ -706,14 +621,14 @@ pub fn command_path_via(
                 teleop.send(VelocityRequest::twist(current, 0.0))?;
             }
         }
-        tap.drain(|f| {
-            decoder.linear(f);
+        motion.tap.drain(|f| {
+            motion.decoder.linear(f);
         })?;
         robot.poll_mux(|_| {})?;
         // The first sample differs from the warm-up's 0.25: every sample is a change.
         let speed = speeds[usize::from(i % 2 == 0)];
         current = speed as f32;
-        let from = decoder.last.unwrap_or(0.25);
+        let from = motion.decoder.last.unwrap_or(0.25);
         let accept = move |v: f64| match reach {
             Reach::Exact => (v - speed).abs() < 1e-6,
             Reach::Toward => {
@@ -723,24 +638,16 @@ pub fn command_path_via(
         let stamp = now_ns();
         teleop.send(VelocityRequest {
             stamp_ns: stamp,
-            ..VelocityRequest::twist(speed as f32, 0.0)
+            ..VelocityRequest::twist(current, 0.0)
         })?;
-        match wait_for_motion_that(
-            &tap,
-            &mut decoder,
-            accept,
-            stamp,
-            spin,
-            Duration::from_millis(500),
-        )? {
-            Some(written) => {
-                latencies.record_between(stamp, written);
-                samples.push((stamp, written));
-                if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
-                    in_service.record_between(decided, written);
-                }
-            }
-            None => missed += 1,
+        let Some(written) = motion.wait(accept, stamp, Duration::from_millis(500))? else {
+            missed += 1;
+            continue;
+        };
+        latencies.record_between(stamp, written);
+        samples.push((stamp, written));
+        if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
+            in_service.record_between(decided, written);
         }
     }
     teleop.stop()?;
@@ -838,27 +745,40 @@ impl StateRecorder {
     }
 }
 
-/// State-path latencies while the robot drives (so frames keep changing the state), read as a
-/// client that needs every sample reads them: a lossless [`chassis_client::StateStream`].
-pub fn state_path(robot: &mut Robot, samples: u64, spin: bool) -> anyhow::Result<StateRecorder> {
-    let mut teleop = robot.source("teleop")?;
+/// State-path latencies while `driver` keeps the robot driving (so frames keep changing the
+/// state), read from `robot` as a client that needs every sample reads them: a lossless
+/// [`chassis_client::StateStream`], until `recorder` counted `samples` (at most 120 s);
+/// `counted` is given each sample that counted and when it was received.
+pub fn state_path(
+    robot: &Robot,
+    driver: &mut Source,
+    recorder: &mut StateRecorder,
+    (samples, spin): (u64, bool),
+    mut counted: impl FnMut(&ChassisState, u64),
+) -> anyhow::Result<()> {
     let stream = robot.state_stream(STATE_BUFFER)?;
-    let mut recorder = StateRecorder::default();
     let mut last_request = 0u64;
     let deadline = now_ns() + 120_000_000_000;
     while recorder.latencies.count() < samples && now_ns() < deadline {
         if Duration::from_nanos(now_ns().saturating_sub(last_request)) > STATE_REQUEST_INTERVAL {
-            teleop.send(VelocityRequest::twist(0.6, 0.3))?;
+            driver.send(VelocityRequest::twist(0.6, 0.3))?;
             last_request = now_ns();
         }
+        let mut each = |s: &ChassisState| {
+            let (received, before) = (now_ns(), recorder.latencies.count());
+            recorder.sample(s, received);
+            if recorder.latencies.count() > before {
+                counted(s, received);
+            }
+        };
         if spin {
-            stream.drain(|s| recorder.sample(s, now_ns()))?;
+            stream.drain(&mut each)?;
         } else {
-            stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
+            stream.wait(Duration::from_millis(20), &mut each)?;
         }
     }
-    teleop.stop()?;
-    Ok(recorder)
+    driver.stop()?;
+    Ok(())
 }
 
 /// Preemption latencies: teleop drives; `safety` publishes a stop → the zero frame written.
@@ -870,12 +790,10 @@ pub fn preemption(
     interval: Duration,
     spin: bool,
 ) -> anyhow::Result<(Latencies, u64)> {
-    let tap = robot.frames(2048)?;
+    let mut motion = Motion::open(robot, kind, spin)?;
     let mut teleop = robot.source("teleop")?;
     let mut safety: Source = robot.source("safety")?;
-    let mut decoder = MotionDecoder::new(kind);
-    let mut latencies = Latencies::new();
-    let mut missed = 0;
+    let (mut latencies, mut missed) = (Latencies::new(), 0);
     // Rounds and requests at a controller's pace: a client waking the service more than 1,000
     // times a second is read on the service's tick only (and a round takes well under 1 ms).
     let pace = COMMAND_INTERVAL.as_nanos() as u64;
@@ -887,25 +805,13 @@ pub fn preemption(
         safety.heartbeat()?;
         let start = now_ns();
         let mut driving = false;
-        while now_ns() - start < 2_000_000_000 {
+        while !driving && now_ns() - start < 2_000_000_000 {
             if now_ns() - sent >= pace {
                 sent = now_ns();
                 teleop.send(VelocityRequest::twist(0.5, 0.0))?;
                 safety.heartbeat()?;
             }
-            if wait_for_motion(
-                &tap,
-                &mut decoder,
-                0.5,
-                start,
-                spin,
-                Duration::from_millis(20),
-            )?
-            .is_some()
-            {
-                driving = true;
-                break;
-            }
+            driving = (motion.wait(at(0.5), start, Duration::from_millis(20))?).is_some();
         }
         if !driving {
             missed += 1;
@@ -914,21 +820,14 @@ pub fn preemption(
         // The stop follows a teleop request at once, as a ping follows its wake-up ping in the
         // row's baseline: nothing between the two sends (the frames before are skipped by their
         // stamps; draining them here first keeps the wait short).
-        tap.drain(|_| {})?;
+        motion.tap.drain(|_| {})?;
         teleop.send(VelocityRequest::twist(0.5, 0.0))?;
         let stamp = now_ns();
         safety.send(VelocityRequest {
             stamp_ns: stamp,
             ..VelocityRequest::twist(0.0, 0.0)
         })?;
-        match wait_for_motion(
-            &tap,
-            &mut decoder,
-            0.0,
-            stamp,
-            spin,
-            Duration::from_millis(500),
-        )? {
+        match motion.wait(at(0.0), stamp, Duration::from_millis(500))? {
             Some(written) => latencies.record_between(stamp, written),
             None => missed += 1,
         }
@@ -1016,25 +915,13 @@ pub fn cost_at(
 ) -> anyhow::Result<Cost> {
     let capacity = f64::from(bitrate) / 111.0;
     // The feedback the chassis sends anyway.
-    let before = robot
-        .wait_state(Duration::from_secs(1))?
-        .context("no state")?;
-    let t0 = now_ns();
+    let feedback = FeedbackRate::start(robot)?;
     pause(Duration::from_secs(1));
-    let after = robot
-        .wait_state(Duration::from_secs(1))?
-        .context("no state")?;
-    let normal =
-        (after.link.rx_frames - before.link.rx_frames) as f64 / ((now_ns() - t0) as f64 / 1e9);
-    let flood = (capacity - normal).max(0.0);
+    let flood = (capacity - feedback.per_second(robot)?).max(0.0);
     robot.sim(chassis_client::flood_request(flood), Duration::from_secs(3))?;
     // Settle, then measure.
     robot.wait_state(Duration::from_millis(500))?;
-    let start_frames = robot
-        .wait_state(Duration::from_secs(1))?
-        .context("no state")?
-        .link
-        .rx_frames;
+    let start_frames = state(robot)?.link.rx_frames;
     // The service's loop thread (its main thread) only: the simulated chassis flooding the bus
     // runs in a thread of the same process and is not part of the service's cost.
     let start_cpu = cpu_seconds_of_thread(pid, pid)?;
@@ -1045,19 +932,164 @@ pub fn cost_at(
     }
     let elapsed = (now_ns() - start) as f64 / 1e9;
     let cpu = cpu_seconds_of_thread(pid, pid)? - start_cpu;
-    let frames = robot
-        .wait_state(Duration::from_secs(1))?
-        .context("no state")?
-        .link
-        .rx_frames;
-    let rss = rss_mib(pid)?;
+    let frames = state(robot)?.link.rx_frames;
+    let rss_mib = rss_mib(pid)?;
     robot.sim(chassis_client::flood_request(0.0), Duration::from_secs(3))?;
     Ok(Cost {
         bus: bus.into(),
         bitrate,
         frames_per_s: (frames - start_frames) as f64 / elapsed,
         cpu_pct: 100.0 * cpu / elapsed,
-        rss_mib: rss,
+        rss_mib,
+    })
+}
+
+/// Arguments of a subscriber process (a hidden role of this binary).
+#[derive(Debug, Clone, clap::Args)]
+pub struct SubscribeArgs {
+    #[arg(long)]
+    pub name: String,
+    #[arg(long)]
+    pub prefix: String,
+    #[arg(long)]
+    pub seconds: f64,
+}
+
+/// The subscriber role: records state latencies for `seconds`, then prints them on stdout (as a
+/// samples file holds them).
+pub fn subscribe(args: &SubscribeArgs) -> anyhow::Result<()> {
+    let robot = Robot::connect_with_prefix(&args.name, Some(&args.prefix))?;
+    // Every sample, as a client that needs them all reads them.
+    let stream = robot.state_stream(STATE_BUFFER)?;
+    let mut recorder = StateRecorder::default();
+    let end = now_ns() + (args.seconds * 1e9) as u64;
+    while now_ns() < end {
+        stream.wait(Duration::from_millis(20), |s| recorder.sample(s, now_ns()))?;
+    }
+    println!("{}", serde_json::to_string(&recorder.latencies)?);
+    Ok(())
+}
+
+/// State fan-out: the state path measured in `subscribers` subscriber processes at once for
+/// `seconds` while this process drives the robot; their latencies merged.
+pub fn fan_out(
+    robot: &mut Robot,
+    name: &str,
+    prefix: &str,
+    subscribers: usize,
+    seconds: f64,
+) -> anyhow::Result<Latencies> {
+    let exe = std::env::current_exe()?;
+    let args = format!("role subscribe --name {name} --prefix {prefix} --seconds {seconds}");
+    let mut subscriber = Command::new(&exe);
+    (subscriber.args(args.split(' '))).stdout(Stdio::piped());
+    let children = (0..subscribers)
+        .map(|_| subscriber.spawn().context("starting a subscriber"))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut teleop = robot.source("teleop")?;
+    let end = now_ns() + ((seconds + 0.5) * 1e9) as u64;
+    while now_ns() < end {
+        teleop.send(VelocityRequest::twist(0.6, 0.3))?;
+        robot.wait_state(Duration::from_millis(50))?;
+    }
+    teleop.stop()?;
+    let mut merged = Latencies::new();
+    for child in children {
+        let out = child.wait_with_output()?;
+        if !out.status.success() {
+            bail!("a subscriber failed");
+        }
+        let latencies: Latencies =
+            serde_json::from_slice(&out.stdout).context("a subscriber's histogram")?;
+        merged.merge(&latencies);
+    }
+    Ok(merged)
+}
+
+/// Writes a candump log of a TITAN driving figure-eights for `seconds` of simulated time: what
+/// its bus carries from the chassis (about 650 frames a second).
+pub fn record_titan(path: &Path, seconds: u64) -> anyhow::Result<u64> {
+    let profile = TitanProfile::default();
+    let start = Timestamp::from_millis(1);
+    let driver = titan::TitanDriver::new(profile.clone(), DriverConfig::default(), start);
+    let firmware = titan::TitanSim::new(profile, start);
+    let mut pair = Pair::new(driver, firmware, start);
+    pair.record = true;
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut frames = 0u64;
+    for second in 0..seconds {
+        let turn = if second % 20 < 10 { 0.3 } else { -0.3 };
+        pair.set_command(Velocity::twist(1.0, turn)?);
+        pair.run_for(Duration::from_secs(1));
+        for record in pair.log() {
+            if let (Direction::FromChassis, WireItem::Can(frame)) = (record.direction, &record.item)
+            {
+                let line = CandumpLine {
+                    time_s: record.at.as_nanos() as f64 / 1e9,
+                    interface: "can0".into(),
+                    frame: *frame,
+                };
+                writeln!(out, "{}", line.format())?;
+                frames += 1;
+            }
+        }
+        pair.clear_log();
+    }
+    let _ = pair.driver.state();
+    out.flush()?;
+    Ok(frames)
+}
+
+/// Throughput: `file` (of `frames` frames) replayed into the service as fast as it drains it —
+/// read, decode, publish — its loop pinned to CPU 0 (the replay thread runs on the other).
+pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Result<Throughput> {
+    let name = format!("tp{}", unique());
+    let mut chassisd = Command::new(sibling("chassisd")?);
+    let bus = format!("replay:{}@max", file.display());
+    let args = format!("--robot titan --name {name} --no-safety-monitor --cpu 0 --bus");
+    chassisd.args(args.split(' ')).arg(bus);
+    let log = dir.join(&name);
+    let mut child = spawn_logged(&mut chassisd, prefix, &log, "chassisd on the replay bus")?;
+    let pid = child.id();
+    let deadline = now_ns() + 20_000_000_000;
+    let mut robot = loop {
+        if let Ok(robot) = Robot::connect_with_prefix(&name, Some(prefix)) {
+            break robot;
+        }
+        if now_ns() > deadline {
+            let _ = child.kill();
+            bail!("chassisd on the replay bus did not come up");
+        }
+        pause(Duration::from_millis(5));
+    };
+    // From the first frame counted to the last: the loop thread's CPU over that span.
+    let mut first: Option<(u64, u64, f64)> = None;
+    let mut last = (0u64, 0u64, 0.0f64);
+    let end = now_ns() + 120_000_000_000;
+    while now_ns() < end {
+        if let Some(state) = robot.wait_state(Duration::from_millis(20))? {
+            let cpu = cpu_seconds_of_thread(pid, pid)?;
+            let sample = (now_ns(), state.link.rx_frames, cpu);
+            if first.is_none() && state.link.rx_frames > 0 {
+                first = Some(sample);
+            }
+            last = sample;
+            if state.link.rx_frames >= frames {
+                break;
+            }
+        }
+    }
+    stop(&mut child);
+    let (t0, f0, c0) = first.context("no frame was replayed")?;
+    let seconds = (last.0 - t0) as f64 / 1e9;
+    let counted = last.1 - f0;
+    let cpu_seconds = last.2 - c0;
+    Ok(Throughput {
+        frames: counted,
+        seconds,
+        frames_per_s: counted as f64 / seconds.max(1e-9),
+        service_cpu_pct: 100.0 * cpu_seconds / seconds.max(1e-9),
+        frames_per_cpu_s: counted as f64 / cpu_seconds.max(1e-9),
     })
 }
 

@@ -1,7 +1,13 @@
-//! The Python client's paths (`clients/python/bench.py`) on the same service as the Rust client's
-//! rows beside them, in the same run and placement: the process inherits the pinned CPU of the
-//! thread that starts it. Its raw latencies come back as files, one ns figure a line, so its rows
-//! are summarised exactly as the Rust client's are.
+//! The Python client's and the ROS 2 bridge's paths (`clients/python/bench.py`,
+//! `clients/ros2/bench.py`) on the same service as the Rust client's rows beside them, in the
+//! same run and placement: a script inherits the pinned CPU of the thread that starts it. Its
+//! raw latencies come back as files, one ns figure a line, so its rows are summarised exactly as
+//! the Rust client's are.
+//!
+//! The ROS 2 script is a Cyclone DDS participant standing in for a ROS 2 node; it measures the
+//! raw DDS hops between the same two implementations (Cyclone DDS ↔ the bridge's RustDDS) in the
+//! same run. DDS discovery multicasts: it runs under `unshare --net` with only the loopback up,
+//! so no discovery packet leaves the machine (iceoryx2 is shared memory and works across it).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -27,26 +33,72 @@ pub struct PythonFigures {
     pub state_stamps: Vec<[u64; 4]>,
 }
 
+/// What the ROS 2 bridge's run measured.
+#[derive(Debug)]
+pub struct Ros2Figures {
+    /// `cmd_vel` written by the peer → the motion frame written to the bus.
+    pub command: Latencies,
+    /// Frame read by chassisd → the `odom` carrying its pose taken by the peer.
+    pub state: Latencies,
+    /// Raw DDS hop, peer (Cyclone DDS) → the bridge's DDS stack (RustDDS).
+    pub raw_in: Latencies,
+    /// Raw DDS hop, the bridge's DDS stack → the peer.
+    pub raw_out: Latencies,
+    /// The pace of `raw_out`'s pings: the odoms' own period, 1.7 % more.
+    pub raw_out_period: Duration,
+    /// `cmd_vel` messages whose frame did not appear.
+    pub missed: u64,
+    /// Each counted odom's `(frame read, taken by the peer)`.
+    pub odom_pairs: Vec<(u64, u64)>,
+    /// The bridge's odom trace (`[read, woke, write begun, written]` a line): with chassisd's
+    /// pass trace, [`crate::parts::odom`] splits the state row.
+    pub odom_trace: Vec<[u64; 4]>,
+}
+
 /// The repository the benchmark was built from.
-pub(crate) fn repo() -> PathBuf {
+fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// The interpreter of the Python package's test environment (`scripts/python-tests` makes it,
-/// with the `chassis` package installed), if there is one.
-pub fn interpreter() -> Option<PathBuf> {
-    let python = repo().join("target/python-venv/bin/python");
+/// The interpreter of the test environment `target/<name>-venv` (`scripts/python-tests` and
+/// `scripts/ros2-tests` make them, with the `chassis` package installed), if there is one.
+pub fn interpreter(name: &str) -> Option<PathBuf> {
+    let python = repo().join(format!("target/{name}-venv/bin/python"));
     python.exists().then_some(python)
 }
 
-pub(crate) fn read_latencies(file: &Path) -> anyhow::Result<Latencies> {
-    let mut latencies = Latencies::new();
+/// Lines of `N` numbers, ns, separated by spaces (a script's `*.ns`, `state.stamps`,
+/// `state.pairs`, counts).
+fn read_stamps<const N: usize>(file: &Path) -> anyhow::Result<Vec<[u64; N]>> {
     let text =
         std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
-    for line in text.lines().filter(|l| !l.trim().is_empty()) {
-        latencies.record(line.trim().parse().context("a latency in ns")?);
+    text.lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|line| {
+            let stamps: Vec<u64> = line
+                .split_whitespace()
+                .map(str::parse)
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("a number in '{line}' of {}", file.display()))?;
+            <[u64; N]>::try_from(stamps)
+                .map_err(|_| anyhow::anyhow!("'{line}' of {} is not {N} numbers", file.display()))
+        })
+        .collect()
+}
+
+fn read_latencies(file: &Path) -> anyhow::Result<Latencies> {
+    let mut latencies = Latencies::new();
+    for [ns] in read_stamps(file)? {
+        latencies.record(ns);
     }
     Ok(latencies)
+}
+
+/// A count the script wrote, one number in a file.
+fn read_count(file: &Path) -> anyhow::Result<u64> {
+    let [[count]] = <[[u64; 1]; 1]>::try_from(read_stamps(file)?)
+        .map_err(|_| anyhow::anyhow!("{} does not hold one count", file.display()))?;
+    Ok(count)
 }
 
 /// What a benchmark script (the Python client's or the ROS 2 bridge's `bench.py`) runs against
@@ -67,12 +119,12 @@ pub struct ScriptRun<'a> {
 
 impl ScriptRun<'_> {
     /// The directory of the script tagged `tag` (`python`, `ros2`).
-    pub(crate) fn out(&self, tag: &str) -> PathBuf {
+    fn out(&self, tag: &str) -> PathBuf {
         self.dir.join(format!("{tag}-{}", self.name))
     }
 
     /// Appends the arguments every `bench.py` takes.
-    pub(crate) fn args(&self, script: &mut Command) {
+    fn args(&self, script: &mut Command) {
         script
             .args([
                 "--name",
@@ -88,15 +140,40 @@ impl ScriptRun<'_> {
             .args(["--commands", &self.commands.to_string()])
             .args(["--interval-ms", &self.interval.as_millis().to_string()]);
     }
+
+    /// Runs the script `script`, tagged `tag`, with its arguments: it writes its figures into
+    /// its directory (`--latencies-dir`) and its log into `bench.log` there; `what` names it in
+    /// the errors. Its output is not read: the figures are in the files.
+    fn script(&self, mut script: Command, tag: &str, what: &str) -> anyhow::Result<PathBuf> {
+        let out = self.out(tag);
+        self.args(&mut script);
+        run_script(script, &out, what)?;
+        Ok(out)
+    }
 }
 
-/// Runs `bench.py` with the interpreter `python`.
+fn run_script(mut script: Command, out: &Path, what: &str) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let log_path = out.join("bench.log");
+    let log = std::fs::File::create(&log_path)
+        .with_context(|| format!("creating {}", log_path.display()))?;
+    let program = script.get_program().to_string_lossy().into_owned();
+    let status = (script.arg("--latencies-dir").arg(out))
+        .stdout(Stdio::null())
+        .stderr(log)
+        .status()
+        .with_context(|| format!("starting {what} ({program})"))?;
+    if !status.success() {
+        bail!("{what} failed ({status}); see {}", log_path.display());
+    }
+    Ok(())
+}
+
+/// Runs the Python client's `bench.py` with the interpreter `python`.
 pub fn run(python: &Path, run: &ScriptRun<'_>) -> anyhow::Result<PythonFigures> {
-    let out = run.out("python");
     let mut script = Command::new(python);
     script.arg(repo().join("clients/python/bench.py"));
-    run.args(&mut script);
-    run_script(script, &out, "the Python client's benchmark")?;
+    let out = run.script(script, "python", "the Python client's benchmark")?;
     Ok(PythonFigures {
         state: read_latencies(&out.join("state.ns"))?,
         command: read_latencies(&out.join("command.ns"))?,
@@ -106,57 +183,33 @@ pub fn run(python: &Path, run: &ScriptRun<'_>) -> anyhow::Result<PythonFigures> 
     })
 }
 
-/// Lines of `N` stamps, ns, separated by spaces (a script's `state.stamps`, `state.pairs`).
-pub(crate) fn read_stamps<const N: usize>(file: &Path) -> anyhow::Result<Vec<[u64; N]>> {
-    let text =
-        std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
-    text.lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|line| {
-            let stamps: Vec<u64> = line
-                .split_whitespace()
-                .map(str::parse)
-                .collect::<Result<_, _>>()
-                .with_context(|| format!("a stamp in '{line}' of {}", file.display()))?;
-            <[u64; N]>::try_from(stamps)
-                .map_err(|_| anyhow::anyhow!("'{line}' of {} is not {N} stamps", file.display()))
-        })
-        .collect()
-}
-
-/// Runs a benchmark script (`bench.py` of the Python package or of the ROS 2 bridge) that
-/// writes its figures into `out` (`--latencies-dir`) and its log into `out/bench.log`; `what`
-/// names it in the errors. Its output is not read: the figures are in the files.
-pub(crate) fn run_script(mut script: Command, out: &Path, what: &str) -> anyhow::Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let log_path = out.join("bench.log");
-    let log = std::fs::File::create(&log_path)
-        .with_context(|| format!("creating {}", log_path.display()))?;
-    let status = script
-        .arg("--latencies-dir")
-        .arg(out)
-        .stdout(Stdio::null())
-        .stderr(log)
-        .status()
-        .with_context(|| {
-            format!(
-                "starting {what} ({})",
-                script.get_program().to_string_lossy()
-            )
-        })?;
-    if !status.success() {
-        bail!("{what} failed ({status}); see {}", log_path.display());
-    }
-    Ok(())
-}
-
-/// A count the script wrote, one number in a file.
-pub(crate) fn read_count(file: &Path) -> anyhow::Result<u64> {
-    let text =
-        std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
-    text.trim()
-        .parse()
-        .with_context(|| format!("a count in {}", file.display()))
+/// Runs the ROS 2 bridge's `bench.py` with the interpreter `python`, beside the bridge binary.
+pub fn run_ros2(python: &Path, run: &ScriptRun<'_>) -> anyhow::Result<Ros2Figures> {
+    let mut script = Command::new("unshare");
+    script
+        .args(["--net", "--", "sh", "-c"])
+        .arg("ip link set lo up && ip link set lo multicast on && exec \"$@\"")
+        .arg("ros2-bench")
+        .arg(python)
+        .arg(repo().join("clients/ros2/bench.py"))
+        .arg("--bridge")
+        .arg(crate::paths::sibling("chassis-ros2")?)
+        .arg("--echo")
+        .arg(std::env::current_exe().context("finding chassis-bench itself")?);
+    let out = run.script(script, "ros2", "the ROS 2 bridge's benchmark")?;
+    let file = |name: &str| out.join(name);
+    Ok(Ros2Figures {
+        command: read_latencies(&file("command.ns"))?,
+        state: read_latencies(&file("state.ns"))?,
+        raw_in: read_latencies(&file("raw-in.ns"))?,
+        raw_out: read_latencies(&file("raw-out.ns"))?,
+        raw_out_period: Duration::from_nanos(read_count(&file("raw-out.period_ns"))?),
+        missed: read_count(&file("command.missed")).unwrap_or(0),
+        odom_pairs: (read_stamps(&file("state.pairs"))?.into_iter())
+            .map(|[read, taken]| (read, taken))
+            .collect(),
+        odom_trace: crate::parts::read_trace(&file("odom.trace"), chassis_ipc::Trace::Odom)?,
+    })
 }
 
 #[cfg(test)]

@@ -60,7 +60,7 @@ impl Stalls {
 
 /// Spins `bursts` bursts on `cpu` in a thread of its own, at SCHED_FIFO `priority` when the
 /// system grants it.
-pub fn measure(cpu: usize, bursts: u32, priority: u8) -> anyhow::Result<Stalls> {
+pub fn measure(cpu: usize, bursts: u64, priority: u8) -> anyhow::Result<Stalls> {
     std::thread::scope(|s| {
         s.spawn(|| {
             placement::pin_current_thread(cpu)?;

@@ -20,12 +20,11 @@ impl Default for Latencies {
 }
 
 impl Latencies {
-    /// 1 ns to 60 s with 3 significant digits.
+    /// 1 ns to 60 s with 3 significant digits (bounds the histogram always takes).
     pub fn new() -> Self {
-        let histogram = Histogram::new_with_bounds(1, 60_000_000_000, 3)
-            .unwrap_or_else(|_| Histogram::new(3).unwrap_or_else(|_| unreachable_histogram()));
+        let histogram = Histogram::new_with_bounds(1, 60_000_000_000, 3);
         Self {
-            histogram,
+            histogram: histogram.unwrap_or_else(|_| std::process::abort()),
             out_of_range: 0,
         }
     }
@@ -147,15 +146,6 @@ impl<'de> Deserialize<'de> for Latencies {
             .ok_or_else(|| D::Error::custom("a histogram that is not HdrHistogram V2"))?;
         latencies.out_of_range = stored.out_of_range;
         Ok(latencies)
-    }
-}
-
-/// A histogram that cannot fail to exist (3 significant digits are always valid).
-fn unreachable_histogram() -> Histogram<u64> {
-    // `Histogram::new(3)` only fails for more than 5 significant digits.
-    match Histogram::new(2) {
-        Ok(h) => h,
-        Err(_) => std::process::abort(),
     }
 }
 

@@ -1,6 +1,7 @@
 //! `chassis-zenoh` paths between two network namespaces joined by a veth pair (the robot's
 //! computer and an operator's), beside a bare Zenoh put → subscriber over the same veth in the
-//! same run:
+//! same run (`chassis-bench role zenoh-pub` and `zenoh-sub`: the bridge's session
+//! configuration, payloads the size of a `ChassisState`, stamped with `CLOCK_MONOTONIC`):
 //!
 //! * operator request → frame on the robot's bus: the operator side's `remote` source (its
 //!   own iceoryx2 prefix) → mirror → Zenoh → robot side → chassisd → the frame written;
@@ -9,15 +10,25 @@
 //!
 //! Needs root (`ip netns`); without it the rows are left out with a note.
 
-use std::path::Path;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use chassis_client::{Robot, STATE_BUFFER, Source, now_ns};
+use chassis_client::{ChassisState, Robot, Source, Ticker, now_ns, termination_requested};
 use chassis_protocols::RobotKind;
+use chassis_zenoh::net::{self, Net, Role};
+use clap::Args;
+use zenoh::Wait as _;
+use zenoh::qos::{CongestionControl, Priority};
 
-use crate::paths::{self, BusKind, LoopMode, ServiceConfig, StateRecorder};
+use crate::baseline::{Named, last_of};
+use crate::paths::{
+    self, BusKind, LoopMode, ServiceConfig, StateRecorder, period_text, wait_until,
+};
+use crate::report::{Leg, PathKind, Report, Row};
 use crate::stats::Latencies;
 
 const ROBOT_ADDR: &str = "10.77.0.1";
@@ -25,22 +36,26 @@ const OPERATOR_ADDR: &str = "10.77.0.2";
 const BRIDGE_PORT: u16 = 7447;
 const RAW_PORT: u16 = 7449;
 
-/// What the Zenoh run measured.
-#[derive(Debug)]
-pub struct ZenohFigures {
-    pub command: paths::CommandFigures,
-    pub state: Latencies,
-    /// chassisd published the sample → the operator's iceoryx2 subscriber has it: the bridge's
-    /// own part of the state path.
-    pub bridge: Latencies,
-    /// The bare hops after the warm-up, ns, in order, at the command path's pace.
-    pub raw_command: Vec<u64>,
-    /// The same at the state path's pace, [`ZenohFigures::state_period`].
-    pub raw_state: Vec<u64>,
-    /// The period of the states the state path counted, 1.7 % more ([`state_period`]).
-    pub state_period: Duration,
-    /// The state row split at both sides' stamps.
-    pub state_parts: crate::parts::Split,
+/// The rows' placement.
+pub const PLACEMENT: &str = "2 netns, veth";
+/// The rows' names: the bare Zenoh hop (one row as many samples as the command row, one as the
+/// state rows) and the bridge's three paths.
+pub const RAW_COMMAND: &str = "Zenoh put → subscriber, 840 B, as many as the command row";
+pub const RAW_STATE: &str = "Zenoh put → subscriber, 840 B, as many as the state rows";
+pub const COMMAND: &str = "operator's remote source → robot's frame written (titan sim)";
+pub const STATE: &str = "robot's frame read → state in the operator's iceoryx2 (titan sim)";
+pub const BRIDGE: &str = "robot's state published → in the operator's iceoryx2 (the bridge's part)";
+
+/// Runs `ip` with `args` (split at spaces).
+fn ip(args: &str) -> anyhow::Result<()> {
+    let out = Command::new("ip")
+        .args(args.split(' '))
+        .output()
+        .with_context(|| format!("running ip {args} (install iproute2)"))?;
+    if !out.status.success() {
+        bail!("ip {args}: {}", String::from_utf8_lossy(&out.stderr).trim());
+    }
+    Ok(())
 }
 
 /// Two namespaces joined by a veth pair, removed on drop.
@@ -49,53 +64,22 @@ struct Netns {
     operator: String,
 }
 
-fn ip(args: &[&str]) -> anyhow::Result<()> {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .with_context(|| format!("running ip {} (install iproute2)", args.join(" ")))?;
-    if !out.status.success() {
-        bail!(
-            "ip {}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
-    }
-    Ok(())
-}
-
 impl Netns {
     fn new() -> anyhow::Result<Self> {
         let id = std::process::id() % 100_000;
-        let ns = Netns {
-            robot: format!("cbr{id}"),
-            operator: format!("cbo{id}"),
-        };
-        ip(&["netns", "add", &ns.robot])?;
-        ip(&["netns", "add", &ns.operator])?;
-        ip(&[
-            "link",
-            "add",
-            &ns.robot,
-            "type",
-            "veth",
-            "peer",
-            "name",
-            &ns.operator,
-        ])?;
+        let (robot, operator) = (format!("cbr{id}"), format!("cbo{id}"));
+        let ns = Netns { robot, operator };
+        ip(&format!("netns add {}", ns.robot))?;
+        ip(&format!("netns add {}", ns.operator))?;
+        ip(&format!(
+            "link add {} type veth peer name {}",
+            ns.robot, ns.operator
+        ))?;
         for (name, addr) in [(&ns.robot, ROBOT_ADDR), (&ns.operator, OPERATOR_ADDR)] {
-            ip(&["link", "set", name, "netns", name])?;
-            ip(&[
-                "-n",
-                name,
-                "addr",
-                "add",
-                &format!("{addr}/24"),
-                "dev",
-                name,
-            ])?;
-            ip(&["-n", name, "link", "set", name, "up"])?;
-            ip(&["-n", name, "link", "set", "lo", "up"])?;
+            ip(&format!("link set {name} netns {name}"))?;
+            ip(&format!("-n {name} addr add {addr}/24 dev {name}"))?;
+            ip(&format!("-n {name} link set {name} up"))?;
+            ip(&format!("-n {name} link set lo up"))?;
         }
         Ok(ns)
     }
@@ -120,61 +104,34 @@ impl Drop for Children {
     }
 }
 
-/// `program args…` in network namespace `ns`.
+/// `program args…` (split at spaces) in network namespace `ns`, its stderr to `log`.
 fn zenoh_in(
     ns: &str,
     prefix: &str,
     program: &Path,
-    args: &[&str],
+    args: &str,
     log: &Path,
 ) -> anyhow::Result<Command> {
+    let log = std::fs::File::create(log).with_context(|| format!("{}", log.display()))?;
     let mut cmd = Command::new("ip");
     cmd.args(["netns", "exec", ns])
         .arg(program)
-        .args(args)
+        .args(args.split(' '))
         .env(chassis_client::IPC_PREFIX_ENV, prefix)
         .env("RUST_LOG", "warn,zenoh=error")
         .stdout(Stdio::null())
-        .stderr(Stdio::from(
-            std::fs::File::create(log).with_context(|| format!("{}", log.display()))?,
-        ));
+        .stderr(Stdio::from(log));
     Ok(cmd)
 }
 
 /// Bare Zenoh samples received before the counted ones (sessions, routes, allocations warm).
 const RAW_WARMUP: u64 = 200;
 
-/// The rows' names: the bare Zenoh hop (one row as many samples as the command row, one as the
-/// state rows) and the bridge's three paths.
-pub const RAW_COMMAND: &str = "Zenoh put → subscriber, 840 B, as many as the command row";
-pub const RAW_STATE: &str = "Zenoh put → subscriber, 840 B, as many as the state rows";
-pub const COMMAND: &str = "operator's remote source → robot's frame written (titan sim)";
-pub const STATE: &str = "robot's frame read → state in the operator's iceoryx2 (titan sim)";
-pub const BRIDGE: &str = "robot's state published → in the operator's iceoryx2 (the bridge's part)";
-
 /// True when this process may make network namespaces.
 pub fn possible() -> bool {
     use std::os::unix::fs::MetadataExt as _;
     // /proc/self belongs to the process's effective user.
     std::fs::metadata("/proc/self").is_ok_and(|m| m.uid() == 0)
-}
-
-fn wait_until<T>(
-    what: &str,
-    timeout: Duration,
-    mut f: impl FnMut() -> Option<T>,
-) -> anyhow::Result<T> {
-    let deadline = now_ns() + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
-    let mut ticker = chassis_client::Ticker::new(Duration::from_millis(50));
-    loop {
-        if let Some(v) = f() {
-            return Ok(v);
-        }
-        if now_ns() > deadline {
-            bail!("{what} within {timeout:?}");
-        }
-        ticker.wait();
-    }
 }
 
 /// The pace of the state row's bare hop: the median period of the states the path counted
@@ -201,8 +158,7 @@ fn state_period(reads: &[u64]) -> Duration {
 /// samples after [`RAW_WARMUP`], one per `pace`; the counted latencies, ns, in order.
 fn bare_hop(
     netns: &Netns,
-    prefix: &str,
-    operator_prefix: &str,
+    (prefix, operator_prefix): (&str, &str),
     dir: &Path,
     count: u64,
     pace: Duration,
@@ -212,51 +168,20 @@ fn bare_hop(
     let raw_file = dir.join(format!("zenoh-raw-{tag}.ns"));
     let wanted = RAW_WARMUP + count;
     // Twice the time the samples take at their pace, and discovery.
-    let timeout = (2.0 * wanted as f64 * pace.as_secs_f64() + 30.0)
-        .ceil()
-        .to_string();
+    let timeout = (2.0 * wanted as f64 * pace.as_secs_f64() + 30.0).ceil();
     let sub_log = dir.join(format!("zenoh-raw-sub-{tag}.log"));
     let bench = std::env::current_exe().context("finding chassis-bench itself")?;
-    let mut sub = zenoh_in(
-        &netns.operator,
-        operator_prefix,
-        &bench,
-        &[
-            "role",
-            "zenoh-sub",
-            "--connect",
-            &raw,
-            "--insecure",
-            "--count",
-            &wanted.to_string(),
-            "--timeout",
-            &timeout,
-        ],
-        &sub_log,
-    )?
-    .arg("--out")
-    .arg(&raw_file)
-    .spawn()
-    .context("starting the bare hop's subscriber")?;
-    let mut publisher = zenoh_in(
-        &netns.robot,
-        prefix,
-        &bench,
-        &[
-            "role",
-            "zenoh-pub",
-            "--listen",
-            &raw,
-            "--insecure",
-            "--interval-us",
-            &pace.as_micros().to_string(),
-            "--timeout",
-            &timeout,
-        ],
-        &dir.join(format!("zenoh-raw-pub-{tag}.log")),
-    )?
-    .spawn()
-    .context("starting the bare hop's publisher")?;
+    let (operator, robot) = (&netns.operator, &netns.robot);
+    let args =
+        format!("role zenoh-sub --connect {raw} --insecure --count {wanted} --timeout {timeout}");
+    let mut sub = zenoh_in(operator, operator_prefix, &bench, &args, &sub_log)?;
+    let mut sub =
+        (sub.arg("--out").arg(&raw_file).spawn()).context("starting the bare hop's subscriber")?;
+    let args =
+        format!("role zenoh-pub --listen {raw} --insecure --interval-us {tag} --timeout {timeout}");
+    let pub_log = dir.join(format!("zenoh-raw-pub-{tag}.log"));
+    let publisher = zenoh_in(robot, prefix, &bench, &args, &pub_log)?.spawn();
+    let mut publisher = publisher.context("starting the bare hop's publisher")?;
     let status = sub.wait()?;
     let _ = publisher.wait();
     if !status.success() {
@@ -269,126 +194,76 @@ fn bare_hop(
         .collect()
 }
 
-/// Runs the Zenoh paths: `commands` requests one per `interval`, `states` state samples,
-/// `raw` bare Zenoh samples.
+/// Runs the Zenoh paths — `commands` requests one per [`paths::COMMAND_INTERVAL`], `states`
+/// state samples — and their bare hops, and adds their rows to `report`.
 pub fn run(
     prefix: &str,
     dir: &Path,
     commands: u64,
-    interval: Duration,
     states: u64,
-) -> anyhow::Result<ZenohFigures> {
+    report: &mut Report,
+) -> anyhow::Result<()> {
+    let interval = paths::COMMAND_INTERVAL;
     let netns = Netns::new()?;
     // chassisd keeps its pass trace: the state row's split starts with its notification.
-    let (service, mut robot) = paths::start_configured(
-        RobotKind::Titan,
-        BusKind::Sim,
-        LoopMode::Event,
-        None,
-        ServiceConfig::Bench,
-        true,
-        prefix,
-        dir,
-    )?;
+    let titan_sim = (RobotKind::Titan, BusKind::Sim, LoopMode::Event);
+    let (service, mut robot) =
+        paths::start(titan_sim, None, ServiceConfig::Bench, true, prefix, dir)?;
     let name = service.name.clone();
     let operator_prefix = format!("{prefix}op_");
+    let prefixes = (prefix, operator_prefix.as_str());
     let bridge = format!("tcp/{ROBOT_ADDR}:{BRIDGE_PORT}");
-    let mut children = Children(Vec::new());
 
     // The command row's bare Zenoh hop first, alone on the link, at the command path's pace;
     // the state row's after the bridges stop, at the states' own (known then).
-    let raw_command = bare_hop(&netns, prefix, &operator_prefix, dir, commands, interval)?;
+    let raw_command = bare_hop(&netns, prefixes, dir, commands, interval)?;
 
     // Each side keeps its stamps of the states it carries and writes them as it stops.
     let export_trace = dir.join("zenoh-robot.trace");
-    let bridge_program = paths::sibling("chassis-zenoh")?;
     let mirror_trace = dir.join("zenoh-operator.trace");
-    children.0.push(
-        zenoh_in(
-            &netns.robot,
-            prefix,
-            &bridge_program,
-            &["--name", &name, "--listen", &bridge, "--insecure"],
-            &dir.join("zenoh-robot.log"),
-        )?
-        .env(chassis_ipc::Trace::ZenohExport.env(), &export_trace)
-        .spawn()
-        .context("starting chassis-zenoh (robot side)")?,
-    );
-    children.0.push(
-        zenoh_in(
-            &netns.operator,
-            &operator_prefix,
-            &bridge_program,
-            &[
-                "--name",
-                &name,
-                "--connect",
-                &bridge,
-                "--insecure",
-                "--mirror",
-            ],
-            &dir.join("zenoh-operator.log"),
-        )?
-        .env(chassis_ipc::Trace::ZenohMirror.env(), &mirror_trace)
-        .spawn()
-        .context("starting chassis-zenoh --mirror")?,
-    );
-    let mut operator = wait_until(
-        "the mirror served no state",
-        Duration::from_secs(20),
-        || {
-            let mut r = Robot::connect_with_prefix(&name, Some(&operator_prefix)).ok()?;
-            r.wait_state(Duration::from_millis(100)).ok().flatten()?;
-            Some(r)
-        },
+    let program = paths::sibling("chassis-zenoh")?;
+    let args = format!("--name {name} --listen {bridge} --insecure");
+    let mut robot_side = zenoh_in(
+        &netns.robot,
+        prefix,
+        &program,
+        &args,
+        &dir.join("zenoh-robot.log"),
     )?;
-    let mut remote: Source = wait_until(
-        "the mirror offered no remote source",
-        Duration::from_secs(20),
-        || operator.source("remote").ok(),
-    )?;
+    robot_side.env(chassis_ipc::Trace::ZenohExport.env(), &export_trace);
+    let args = format!("--name {name} --connect {bridge} --insecure --mirror");
+    let log = dir.join("zenoh-operator.log");
+    let mut mirror = zenoh_in(&netns.operator, &operator_prefix, &program, &args, &log)?;
+    mirror.env(chassis_ipc::Trace::ZenohMirror.env(), &mirror_trace);
+    let children = Children(vec![
+        robot_side
+            .spawn()
+            .context("starting chassis-zenoh (robot side)")?,
+        mirror.spawn().context("starting chassis-zenoh --mirror")?,
+    ]);
+    let mut operator = wait_until("the mirror served no state", 20, || {
+        let mut r = Robot::connect_with_prefix(&name, Some(&operator_prefix)).ok()?;
+        r.wait_state(Duration::from_millis(100)).ok().flatten()?;
+        Some(r)
+    })?;
+    let mut remote: Source = wait_until("the mirror offered no remote source", 20, || {
+        operator.source("remote").ok()
+    })?;
+    let (kind, reach) = (RobotKind::Titan, paths::Reach::Exact);
+    let mut motion = paths::Motion::open(&mut robot, kind, false)?;
+    let sizes = (commands, interval);
+    let command = paths::command_path(&mut motion, &mut robot, &mut remote, sizes, reach)?;
 
-    let command = paths::command_path_via(
-        &mut robot,
-        &mut remote,
-        RobotKind::Titan,
-        commands,
-        interval,
-        false,
-        paths::Reach::Exact,
-    )?;
-
-    // Robot state → the operator's iceoryx2 subscriber, while the robot drives (so frames keep
-    // changing the state).
-    let stream = operator.state_stream(STATE_BUFFER)?;
-    // The robot side forwards the newest sample of each read of the bus: `seq` has gaps.
+    // Robot state → the operator's iceoryx2 subscriber. The robot side forwards the newest
+    // sample of each read of the bus: `seq` has gaps.
     let mut recorder = StateRecorder::with_gaps();
-    let mut bridge = Latencies::new();
-    let mut last_request = 0u64;
-    let deadline = now_ns() + 120_000_000_000;
-    while recorder.latencies.count() < states && now_ns() < deadline {
-        if now_ns().saturating_sub(last_request) > 50_000_000 {
-            remote.send(chassis_client::VelocityRequest::twist(0.6, 0.3))?;
-            last_request = now_ns();
-        }
-        stream.wait(Duration::from_millis(20), |s| {
-            let received = now_ns();
-            let fresh = recorder.latencies.count();
-            recorder.sample(s, received);
-            if recorder.latencies.count() > fresh {
-                bridge.record_between(s.published_ns, received);
-            }
-        })?;
-    }
-    remote.stop()?;
-    drop(stream);
-    drop(remote);
-    drop(operator);
-    drop(children);
+    let mut bridged = Latencies::new();
+    let each = |s: &ChassisState, received| bridged.record_between(s.published_ns, received);
+    paths::state_path(&operator, &mut remote, &mut recorder, (states, false), each)?;
+    drop((remote, operator, children));
     let reads: Vec<u64> = recorder.samples.iter().map(|&(read, ..)| read).collect();
     let state_period = state_period(&reads);
-    let raw_state = bare_hop(&netns, prefix, &operator_prefix, dir, states, state_period)?;
+    let raw_state = bare_hop(&netns, prefixes, dir, states, state_period)?;
     drop(robot);
     let passes = service.stop()?;
     drop(netns);
@@ -401,21 +276,202 @@ pub fn run(
         .iter()
         .map(|&(read, _, received)| (read, received))
         .collect();
-    let state_parts = crate::parts::zenoh_state(
+    let read_trace = crate::parts::read_trace;
+    let split = crate::parts::zenoh_state(
         &samples,
-        &crate::parts::read_trace(&export_trace, chassis_ipc::Trace::ZenohExport)?,
-        &crate::parts::read_trace(&mirror_trace, chassis_ipc::Trace::ZenohMirror)?,
+        &read_trace(&export_trace, chassis_ipc::Trace::ZenohExport)?,
+        &read_trace(&mirror_trace, chassis_ipc::Trace::ZenohMirror)?,
         &passes,
     );
-    Ok(ZenohFigures {
-        command,
-        state: recorder.latencies,
-        bridge,
-        raw_command,
-        raw_state,
-        state_period,
-        state_parts,
-    })
+
+    // chassis-zenoh bridges the TITAN on the simulated bus.
+    let run = "titan sim".to_string();
+    let pace_command = format!("{} (the command path's)", period_text(interval));
+    let pace_state = format!(
+        "{} (the period of the states the path counted, 1.7 % more)",
+        period_text(state_period)
+    );
+    let (command_count, state_count) = (command.latencies.count(), recorder.latencies.count());
+    for (what, count, hops, pace) in [
+        (RAW_COMMAND, command_count, &raw_command, pace_command),
+        (RAW_STATE, state_count, &raw_state, pace_state),
+    ] {
+        let conditions = format!(
+            "one sample every {pace} from the robot's namespace to the operator's, bare \
+             sessions configured as chassis-zenoh's, same run, chassisd running, the \
+             bridges not; the last {count} of {} after a warm-up",
+            hops.len()
+        );
+        let l = last_of(hops, count);
+        let row = Row::new(
+            PathKind::Baseline,
+            Leg::Hop,
+            &run,
+            what.into(),
+            "-",
+            PLACEMENT,
+            l,
+            0,
+        );
+        let conditions = Some(conditions);
+        report.rows.push(Row { conditions, ..row });
+    }
+    for (leg, what, l, missed, raw) in [
+        (
+            Leg::RemoteCommand,
+            COMMAND,
+            command.latencies,
+            command.missed,
+            RAW_COMMAND,
+        ),
+        (Leg::RemoteState, STATE, recorder.latencies, 0, RAW_STATE),
+        (Leg::RemoteBridge, BRIDGE, bridged, 0, RAW_STATE),
+    ] {
+        let row = Row::new(
+            PathKind::Zenoh,
+            leg,
+            &run,
+            what.into(),
+            "event",
+            PLACEMENT,
+            l,
+            missed,
+        );
+        let baseline = Some(format!("{raw}, {PLACEMENT}"));
+        report.rows.push(Row { baseline, ..row });
+    }
+    report.parts.push(crate::report::Parts {
+        path: crate::report::ZENOH_PARTS.into(),
+        of: (PathKind::Zenoh, Leg::RemoteState),
+        run,
+        what: STATE.into(),
+        mode: "event".into(),
+        placement: PLACEMENT.into(),
+        split,
+    });
+    Ok(())
+}
+
+/// The key the bare hop runs on.
+const KEY: &str = "chassis-bench/raw";
+
+#[derive(Debug, Args)]
+pub struct RawArgs {
+    /// Serve on this endpoint (the publisher's side, like the robot side).
+    #[arg(long)]
+    listen: Vec<String>,
+    /// Connect to this endpoint (the subscriber's side, like the mirror).
+    #[arg(long)]
+    connect: Vec<String>,
+    /// Allow plain TCP beyond loopback.
+    #[arg(long)]
+    insecure: bool,
+    /// Samples to receive (subscriber).
+    #[arg(long, default_value_t = 1000)]
+    count: u64,
+    /// Publisher: time between two samples, µs (the pace of the path the hop divides).
+    #[arg(long, default_value_t = 4000)]
+    interval_us: u64,
+    /// Subscriber: where to write the latencies, one ns figure a line.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Give up after this long, s.
+    #[arg(long, default_value_t = 60)]
+    timeout: u64,
+}
+
+fn session(args: &RawArgs) -> anyhow::Result<zenoh::Session> {
+    let (role, endpoints) = if args.listen.is_empty() {
+        (Role::Operator, args.connect.clone())
+    } else {
+        (Role::Robot, args.listen.clone())
+    };
+    let insecure = args.insecure;
+    let net = Net {
+        role,
+        endpoints,
+        certs: None,
+        insecure,
+        lease_ms: 3000,
+    };
+    net::open(net::config(&net, "bench", &[])?)
+}
+
+/// Publishes stamped samples once a subscriber is there, until it has had its count (it leaves)
+/// or the time is up: a few samples may be lost to the link.
+pub fn publish(args: &RawArgs) -> anyhow::Result<()> {
+    chassis_client::install_signal_handlers();
+    let session = session(args)?;
+    let publisher = session
+        .declare_publisher(KEY)
+        .congestion_control(CongestionControl::Drop)
+        .priority(Priority::DataHigh)
+        .express(true)
+        .wait()
+        .named("publisher")?;
+    let deadline = now_ns() + args.timeout * 1_000_000_000;
+    let mut ticker = Ticker::new(Duration::from_micros(args.interval_us.max(1)));
+    let matching = || {
+        anyhow::Ok(
+            publisher
+                .matching_status()
+                .wait()
+                .named("matching")?
+                .matching(),
+        )
+    };
+    while !matching()? {
+        if now_ns() > deadline || termination_requested() {
+            bail!("no subscriber within {} s", args.timeout);
+        }
+        ticker.wait();
+    }
+    let mut payload = vec![0u8; size_of::<ChassisState>()];
+    while now_ns() < deadline && !termination_requested() && matching()? {
+        ticker.wait();
+        payload[..8].copy_from_slice(&now_ns().to_ne_bytes());
+        publisher.put(payload.clone()).wait().named("put")?;
+    }
+    let _ = session.close().wait();
+    Ok(())
+}
+
+/// Receives `count` samples and writes their put → callback latencies.
+pub fn subscribe(args: &RawArgs) -> anyhow::Result<()> {
+    let session = session(args)?;
+    let (tx, rx) = mpsc::channel::<u64>();
+    let subscriber = session
+        .declare_subscriber(KEY)
+        .callback(move |sample| {
+            let received = now_ns();
+            let bytes = sample.payload().to_bytes();
+            if let Some(stamp) = bytes.get(..8).and_then(|b| <[u8; 8]>::try_from(b).ok()) {
+                let _ = tx.send(received.saturating_sub(u64::from_ne_bytes(stamp)));
+            }
+        })
+        .wait()
+        .named("subscriber")?;
+    let mut latencies = Vec::new();
+    let timeout = Duration::from_secs(args.timeout);
+    while (latencies.len() as u64) < args.count {
+        match rx.recv_timeout(timeout) {
+            Ok(ns) => latencies.push(ns),
+            Err(_) => bail!(
+                "{} of {} samples within {timeout:?}",
+                latencies.len(),
+                args.count
+            ),
+        }
+    }
+    drop(subscriber);
+    let _ = session.close().wait();
+    let path = args.out.clone().context("--out FILE is needed")?;
+    let mut file =
+        std::fs::File::create(&path).with_context(|| format!("writing {}", path.display()))?;
+    for ns in latencies {
+        writeln!(file, "{ns}")?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
