@@ -13,10 +13,11 @@ use chassis_client::{ChassisState, Robot, now_ns};
 use clap::Args;
 use serde::Serialize;
 
-use crate::paths;
+use crate::paths::{self, Children, wait_until};
 use crate::provenance::{CpuTimes, Provenance};
 use crate::render::{fill, lines};
 use crate::report::{Machine, Report};
+use crate::zenoh::Netns;
 
 /// The heading of the section this writes.
 pub const HEADING: &str = "## Fleet";
@@ -88,61 +89,6 @@ pub struct FleetReport {
     pub sizes: Vec<SizeFigures>,
 }
 
-/// Processes stopped (SIGTERM, then waited for) on drop, newest first.
-#[derive(Default)]
-struct Children(Vec<Child>);
-
-impl Children {
-    fn push(&mut self, child: Child) -> u32 {
-        let pid = child.id();
-        self.0.push(child);
-        pid
-    }
-}
-
-impl Drop for Children {
-    fn drop(&mut self) {
-        for child in self.0.iter().rev() {
-            paths::terminate(child);
-        }
-        for child in self.0.iter_mut().rev() {
-            let _ = child.wait();
-        }
-    }
-}
-
-/// A network namespace with loopback only, removed on drop.
-struct Netns(String);
-
-impl Netns {
-    fn new() -> anyhow::Result<Self> {
-        let name = format!("cfb{}", std::process::id() % 100_000);
-        for args in [
-            vec!["netns", "add", name.as_str()],
-            vec!["-n", name.as_str(), "link", "set", "lo", "up"],
-        ] {
-            let out = Command::new("ip")
-                .args(&args)
-                .output()
-                .context("running ip (install iproute2)")?;
-            if !out.status.success() {
-                bail!(
-                    "ip {}: {}",
-                    args.join(" "),
-                    String::from_utf8_lossy(&out.stderr).trim()
-                );
-            }
-        }
-        Ok(Self(name))
-    }
-}
-
-impl Drop for Netns {
-    fn drop(&mut self) {
-        let _ = Command::new("ip").args(["netns", "del", &self.0]).status();
-    }
-}
-
 /// What the fleet's chassis-zenoh processes log: warnings, Zenoh's own only when errors.
 const ZENOH_LOG: &str = "warn,zenoh=error";
 
@@ -180,17 +126,6 @@ fn status_field(pid: u32, field: &str) -> anyhow::Result<f64> {
         .with_context(|| format!("no {field}"))?
         .parse::<f64>()
         .context(field.to_string())
-}
-
-fn wait_until(what: &str, timeout: Duration, mut ok: impl FnMut() -> bool) -> anyhow::Result<()> {
-    let end = now_ns() + timeout.as_nanos() as u64;
-    while !ok() {
-        if now_ns() > end {
-            bail!("{what} within {timeout:?}");
-        }
-        crate::placement::pause(Duration::from_millis(100));
-    }
-    Ok(())
 }
 
 /// A robot served under `prefix` whose state arrives.
@@ -280,7 +215,7 @@ fn robot_figures(
 }
 
 fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
-    let netns = Netns::new()?;
+    let netns = Netns::new(&[format!("cfb{}", std::process::id() % 100_000)])?;
     let prefix = format!("cfb{}_", std::process::id() % 100_000);
     let operator_prefix = format!("{prefix}op_");
     let (chassisd, zenoh, chassis) = (
@@ -306,14 +241,12 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
                 dir,
                 &format!("chassisd-{name}"),
             )?);
-            wait_until(
-                &format!("chassisd {name} serving"),
-                Duration::from_secs(30),
-                || serves(&name, &prefix),
-            )?;
+            wait_until(&format!("chassisd {name} serving"), 30, || {
+                serves(&name, &prefix).then_some(())
+            })?;
             let listen = format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16);
             let mut side = Command::new("ip");
-            side.args(["netns", "exec", &netns.0]).arg(&zenoh);
+            side.args(["netns", "exec", netns.robot()]).arg(&zenoh);
             side.args(["--name", &name, "--listen", &listen]);
             let log = format!("zenoh-{name}");
             robot_side_pids.push(robots.push(start(&mut side, &prefix, ZENOH_LOG, dir, &log)?));
@@ -322,7 +255,7 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         eprintln!("fleet of {size}: starting the operator");
         let mut operator = Children::default();
         let mut command = Command::new("ip");
-        command.args(["netns", "exec", &netns.0]).arg(&zenoh);
+        command.args(["netns", "exec", netns.robot()]).arg(&zenoh);
         for k in 0..size {
             command.args([
                 "--connect",
@@ -334,11 +267,9 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         let operator_pid =
             operator.push(start(&mut command, &operator_prefix, ZENOH_LOG, dir, &log)?);
         for (name, _) in &names {
-            wait_until(
-                &format!("the operator mirroring {name}"),
-                Duration::from_secs(60),
-                || serves(name, &operator_prefix),
-            )?;
+            wait_until(&format!("the operator mirroring {name}"), 60, || {
+                serves(name, &operator_prefix).then_some(())
+            })?;
         }
         crate::placement::pause(Duration::from_secs(2));
 

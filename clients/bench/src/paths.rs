@@ -131,6 +131,30 @@ pub fn terminate(child: &Child) {
     }
 }
 
+/// Processes stopped on drop, newest first: each asked to end (SIGTERM), then each waited for.
+#[derive(Default)]
+pub struct Children(pub Vec<Child>);
+
+impl Children {
+    /// Keeps `child`; its pid.
+    pub fn push(&mut self, child: Child) -> u32 {
+        let pid = child.id();
+        self.0.push(child);
+        pid
+    }
+}
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for child in self.0.iter().rev() {
+            terminate(child);
+        }
+        for child in self.0.iter_mut().rev() {
+            let _ = child.wait();
+        }
+    }
+}
+
 /// Asks `child` to end (SIGTERM) and waits for it.
 pub fn stop(child: &mut Child) {
     terminate(child);

@@ -12,7 +12,7 @@
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -26,7 +26,7 @@ use zenoh::qos::{CongestionControl, Priority};
 
 use crate::baseline::{Named, last_of};
 use crate::paths::{
-    self, BusKind, LoopMode, ServiceConfig, StateRecorder, period_text, wait_until,
+    self, BusKind, Children, LoopMode, ServiceConfig, StateRecorder, period_text, wait_until,
 };
 use crate::report::{Leg, PathKind, Report, Row};
 use crate::stats::Latencies;
@@ -58,48 +58,48 @@ fn ip(args: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Two namespaces joined by a veth pair, removed on drop.
-struct Netns {
-    robot: String,
-    operator: String,
-}
+/// Network namespaces, each with its loopback up, removed on drop.
+pub(crate) struct Netns(Vec<String>);
 
 impl Netns {
-    fn new() -> anyhow::Result<Self> {
+    pub fn new(names: &[String]) -> anyhow::Result<Self> {
+        let mut made = Netns(Vec::new());
+        for name in names {
+            ip(&format!("netns add {name}"))?;
+            made.0.push(name.clone());
+            ip(&format!("-n {name} link set lo up"))?;
+        }
+        Ok(made)
+    }
+
+    /// The robot's and the operator's namespaces, joined by a veth pair.
+    fn pair() -> anyhow::Result<Self> {
         let id = std::process::id() % 100_000;
-        let (robot, operator) = (format!("cbr{id}"), format!("cbo{id}"));
-        let ns = Netns { robot, operator };
-        ip(&format!("netns add {}", ns.robot))?;
-        ip(&format!("netns add {}", ns.operator))?;
-        ip(&format!(
-            "link add {} type veth peer name {}",
-            ns.robot, ns.operator
-        ))?;
-        for (name, addr) in [(&ns.robot, ROBOT_ADDR), (&ns.operator, OPERATOR_ADDR)] {
+        let ns = Netns::new(&[format!("cbr{id}"), format!("cbo{id}")])?;
+        let (robot, operator) = (ns.robot(), ns.operator());
+        ip(&format!("link add {robot} type veth peer name {operator}"))?;
+        for (name, addr) in [(robot, ROBOT_ADDR), (operator, OPERATOR_ADDR)] {
             ip(&format!("link set {name} netns {name}"))?;
             ip(&format!("-n {name} addr add {addr}/24 dev {name}"))?;
             ip(&format!("-n {name} link set {name} up"))?;
-            ip(&format!("-n {name} link set lo up"))?;
         }
         Ok(ns)
+    }
+
+    /// The first namespace.
+    pub fn robot(&self) -> &str {
+        &self.0[0]
+    }
+
+    fn operator(&self) -> &str {
+        &self.0[1]
     }
 }
 
 impl Drop for Netns {
     fn drop(&mut self) {
-        for ns in [&self.robot, &self.operator] {
+        for ns in &self.0 {
             let _ = Command::new("ip").args(["netns", "del", ns]).status();
-        }
-    }
-}
-
-/// Processes stopped on drop.
-struct Children(Vec<Child>);
-
-impl Drop for Children {
-    fn drop(&mut self) {
-        for child in self.0.iter_mut().rev() {
-            paths::stop(child);
         }
     }
 }
@@ -171,7 +171,7 @@ fn bare_hop(
     let timeout = (2.0 * wanted as f64 * pace.as_secs_f64() + 30.0).ceil();
     let sub_log = dir.join(format!("zenoh-raw-sub-{tag}.log"));
     let bench = std::env::current_exe().context("finding chassis-bench itself")?;
-    let (operator, robot) = (&netns.operator, &netns.robot);
+    let (operator, robot) = (netns.operator(), netns.robot());
     let args =
         format!("role zenoh-sub --connect {raw} --insecure --count {wanted} --timeout {timeout}");
     let mut sub = zenoh_in(operator, operator_prefix, &bench, &args, &sub_log)?;
@@ -204,7 +204,7 @@ pub fn run(
     report: &mut Report,
 ) -> anyhow::Result<()> {
     let interval = paths::COMMAND_INTERVAL;
-    let netns = Netns::new()?;
+    let netns = Netns::pair()?;
     // chassisd keeps its pass trace: the state row's split starts with its notification.
     let titan_sim = (RobotKind::Titan, BusKind::Sim, LoopMode::Event);
     let (service, mut robot) =
@@ -224,7 +224,7 @@ pub fn run(
     let program = paths::sibling("chassis-zenoh")?;
     let args = format!("--name {name} --listen {bridge} --insecure");
     let mut robot_side = zenoh_in(
-        &netns.robot,
+        netns.robot(),
         prefix,
         &program,
         &args,
@@ -233,7 +233,7 @@ pub fn run(
     robot_side.env(chassis_ipc::Trace::ZenohExport.env(), &export_trace);
     let args = format!("--name {name} --connect {bridge} --insecure --mirror");
     let log = dir.join("zenoh-operator.log");
-    let mut mirror = zenoh_in(&netns.operator, &operator_prefix, &program, &args, &log)?;
+    let mut mirror = zenoh_in(netns.operator(), &operator_prefix, &program, &args, &log)?;
     mirror.env(chassis_ipc::Trace::ZenohMirror.env(), &mirror_trace);
     let children = Children(vec![
         robot_side
