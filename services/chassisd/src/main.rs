@@ -120,12 +120,10 @@ fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), ConfigErro
 }
 
 fn main() -> ExitCode {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env();
     tracing_subscriber::fmt()
+        .with_env_filter(filter.unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
         .init();
     let cli = Cli::parse();
     let (is_sim, args) = match cli.command {
