@@ -180,6 +180,14 @@ impl SourceStatus {
     pub fn has(&self, flag: u8) -> bool {
         self.flags & flag != 0
     }
+    /// The age of its latest request as read: `never` or `N ms`.
+    pub fn age_text(&self) -> String {
+        if self.age_ms == u32::MAX {
+            "never".into()
+        } else {
+            format!("{} ms", self.age_ms)
+        }
+    }
 }
 
 ipc_type! {

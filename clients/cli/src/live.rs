@@ -321,24 +321,10 @@ pub(crate) fn lock_holder(m: &MuxStatus, lock: &LockStatus) -> String {
     }
 }
 
-fn direction(frame: &BusFrame) -> &'static str {
-    if frame.direction == FrameDirection::TX {
-        "TX"
-    } else {
-        "RX"
-    }
-}
-
 /// `  12.345678 RX 111#0096000000000000` (CAN) or `RX AA 55 02 01 01 02` (serial).
 pub fn frame_line(frame: &BusFrame) -> String {
     let t = frame.stamp_ns as f64 / 1e9;
-    let hex = |bytes: &[u8], sep: &str| {
-        bytes
-            .iter()
-            .map(|b| format!("{b:02X}"))
-            .collect::<Vec<_>>()
-            .join(sep)
-    };
+    let dir = FrameDirection::name(frame.direction).to_uppercase();
     match frame.kind {
         FrameKind::CAN => {
             let id = if frame.flags & BusFrame::EXTENDED_ID != 0 {
@@ -347,9 +333,8 @@ pub fn frame_line(frame: &BusFrame) -> String {
                 format!("{:03X}", frame.can_id)
             };
             format!(
-                "{t:>14.6} {} {id}#{}",
-                direction(frame),
-                hex(frame.payload(), "")
+                "{t:>14.6} {dir} {id}#{}",
+                crate::record::hex(frame.payload())
             )
         }
         FrameKind::GPS => format!(
@@ -357,9 +342,13 @@ pub fn frame_line(frame: &BusFrame) -> String {
             String::from_utf8_lossy(frame.payload()).trim_end()
         ),
         _ => format!(
-            "{t:>14.6} {} {}",
-            direction(frame),
-            hex(frame.payload(), " ")
+            "{t:>14.6} {dir} {}",
+            frame
+                .payload()
+                .iter()
+                .map(|b| format!("{b:02X}"))
+                .collect::<Vec<_>>()
+                .join(" ")
         ),
     }
 }
@@ -367,8 +356,7 @@ pub fn frame_line(frame: &BusFrame) -> String {
 fn frame_json(frame: &BusFrame) -> serde_json::Value {
     let mut value = serde_json::to_value(frame).unwrap_or(serde_json::Value::Null);
     if let Some(obj) = value.as_object_mut() {
-        let hex: String = frame.payload().iter().map(|b| format!("{b:02X}")).collect();
-        obj.insert("data".into(), hex.into());
+        obj.insert("data".into(), crate::record::hex(frame.payload()).into());
     }
     value
 }

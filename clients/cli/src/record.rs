@@ -151,14 +151,6 @@ fn parse_model(text: &str) -> Result<RobotKind, chassis_protocols::UnknownRobot>
     text.parse()
 }
 
-/// `CLOCK_REALTIME` now, ns since the Unix epoch.
-fn wall_ns() -> i128 {
-    use nix::time::{ClockId, clock_gettime};
-    clock_gettime(ClockId::CLOCK_REALTIME).map_or(0, |t| {
-        i128::from(t.tv_sec()) * 1_000_000_000 + i128::from(t.tv_nsec())
-    })
-}
-
 /// Upper-case hex of `bytes`, no separators.
 pub fn hex(bytes: &[u8]) -> String {
     const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
@@ -196,24 +188,6 @@ impl GapCounter {
     }
 }
 
-/// `rx`/`tx`.
-fn direction_name(frame: &BusFrame) -> &'static str {
-    if frame.direction == FrameDirection::TX {
-        "tx"
-    } else {
-        "rx"
-    }
-}
-
-fn kind_name(frame: &BusFrame) -> &'static str {
-    match frame.kind {
-        FrameKind::CAN => "can",
-        FrameKind::SERIAL => "serial",
-        FrameKind::GPS => "gps",
-        _ => "unknown",
-    }
-}
-
 /// A frame as the MCAP frames channel has it.
 #[derive(Debug, Serialize)]
 pub struct FrameRecord {
@@ -232,8 +206,8 @@ impl FrameRecord {
         Self {
             stamp_ns: frame.stamp_ns,
             seq: frame.seq,
-            direction: direction_name(frame),
-            kind: kind_name(frame),
+            direction: FrameDirection::name(frame.direction),
+            kind: FrameKind::name(frame.kind),
             can_id: frame.can_id,
             extended: frame.flags & BusFrame::EXTENDED_ID != 0,
             len: frame.len,
@@ -827,7 +801,7 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
         robot: RobotKind::from_id(kind).map_or("unknown", RobotKind::name),
         name: args.name.clone(),
         monotonic_ns: now_ns(),
-        wall_ns: wall_ns(),
+        wall_ns: i128::from(chassis_bus::clock::unix_ns()),
     };
     let sink: Box<dyn Sink> = if args.candump {
         let iface = args.iface.clone().unwrap_or_else(|| args.name.clone());
