@@ -76,7 +76,7 @@ pub fn remote_sources(mux: &MuxStatus) -> Vec<String> {
 }
 
 fn connect(name: &str, wait: Duration) -> anyhow::Result<Robot> {
-    let deadline = now_ns().saturating_add(u64::try_from(wait.as_nanos()).unwrap_or(u64::MAX));
+    let deadline = chassis_client::deadline(wait);
     let mut retry = Ticker::new(Duration::from_millis(100));
     loop {
         match Robot::connect(name) {
@@ -90,7 +90,7 @@ fn connect(name: &str, wait: Duration) -> anyhow::Result<Robot> {
 }
 
 fn first_mux(robot: &mut Robot, wait: Duration) -> anyhow::Result<MuxStatus> {
-    let deadline = now_ns().saturating_add(u64::try_from(wait.as_nanos()).unwrap_or(u64::MAX));
+    let deadline = chassis_client::deadline(wait);
     loop {
         if let Some(mux) = robot.wait_mux(Duration::from_millis(100))? {
             return Ok(mux);
