@@ -216,6 +216,21 @@ impl FrameRecord {
     }
 }
 
+/// Adds the channel `topic` with the Foxglove schema of `T`.
+fn foxglove_channel<T: Encode>(
+    writer: &mut mcap::Writer<BufWriter<File>>,
+    topic: &str,
+) -> anyhow::Result<u16> {
+    let schema = T::get_schema().with_context(|| format!("no schema for {topic}"))?;
+    let schema_id = writer.add_schema(&schema.name, &schema.encoding, &schema.data)?;
+    Ok(writer.add_channel(
+        schema_id,
+        topic,
+        &T::get_message_encoding(),
+        &BTreeMap::new(),
+    )?)
+}
+
 /// The JSON Schema of the frames channel.
 fn frame_schema() -> Value {
     json!({
@@ -396,31 +411,11 @@ impl McapSink {
             &format!("{prefix}/mux"),
             MuxStatus::layout().type_name,
         )?;
-        let mut foxglove_channel = |topic: &str,
-                                    schema: Option<foxglove::Schema>,
-                                    encoding: String|
-         -> anyhow::Result<u16> {
-            let schema = schema.with_context(|| format!("no schema for {topic}"))?;
-            let schema_id = writer.add_schema(&schema.name, &schema.encoding, &schema.data)?;
-            Ok(writer.add_channel(schema_id, topic, &encoding, &BTreeMap::new())?)
-        };
         let fox = FoxgloveChannels {
-            tf: foxglove_channel(
-                "/tf",
-                FrameTransforms::get_schema(),
-                FrameTransforms::get_message_encoding(),
-            )?,
-            pose: foxglove_channel(
-                "/pose",
-                PoseInFrame::get_schema(),
-                PoseInFrame::get_message_encoding(),
-            )?,
-            gps: foxglove_channel(
-                "/gps",
-                LocationFix::get_schema(),
-                LocationFix::get_message_encoding(),
-            )?,
-            log: foxglove_channel("/log", Log::get_schema(), Log::get_message_encoding())?,
+            tf: foxglove_channel::<FrameTransforms>(&mut writer, "/tf")?,
+            pose: foxglove_channel::<PoseInFrame>(&mut writer, "/pose")?,
+            gps: foxglove_channel::<LocationFix>(&mut writer, "/gps")?,
+            log: foxglove_channel::<Log>(&mut writer, "/log")?,
             body: None,
             watch: Watch::default(),
             last_tf_ns: None,
