@@ -23,13 +23,12 @@ pub struct DemoArgs {
     #[arg(
         long,
         default_value = "titan",
-        value_parser = crate::parse_robot,
         help = format!("The simulated robot: {}.", chassis_protocols::kind::names().join(", "))
     )]
     pub robot: RobotKind,
     /// AgileX wire protocol of the simulated chassis, v1 or v2 (default: the robot's own; SCOUT
     /// MINI: v1).
-    #[arg(long, value_parser = crate::parse_protocol)]
+    #[arg(long)]
     pub protocol: Option<chassis_protocols::Protocol>,
     /// Name of the demo robot's services (default: demo-ROBOT).
     #[arg(long)]

@@ -39,7 +39,7 @@ pub struct DoctorArgs {
     #[arg(long)]
     pub name: Option<String>,
     /// The robot (default: the config's, else titan).
-    #[arg(long, value_parser = crate::parse_robot)]
+    #[arg(long)]
     pub robot: Option<RobotKind>,
     /// The bus, as for chassisd: `can:IFACE`, `slcan:PATH[@BAUD]`, `serial:PATH[@BAUD]` or `sim`
     /// (default: the config's).

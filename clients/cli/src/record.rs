@@ -125,7 +125,7 @@ pub struct ReplayArgs {
     /// A recording: MCAP or a candump log.
     pub file: PathBuf,
     /// The robot (default: the one the MCAP recording names; required for a candump log).
-    #[arg(long, value_parser = parse_model)]
+    #[arg(long)]
     pub robot: Option<RobotKind>,
     /// The replayed robot's name (chassis/NAME/…); keep it apart from a live robot's.
     #[arg(long, default_value = "replay")]
@@ -145,10 +145,6 @@ pub struct ReplayArgs {
     /// Print only the final state.
     #[arg(long)]
     pub quiet: bool,
-}
-
-fn parse_model(text: &str) -> Result<RobotKind, chassis_protocols::UnknownRobot> {
-    text.parse()
 }
 
 /// Upper-case hex of `bytes`, no separators.
