@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use crate::layout::ipc_type;
 use crate::named::named_constants;
-use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
+use crate::text::{serialize_fixed_str, write_fixed_str};
 use crate::{MAX_SOURCES, NAME_LEN};
 
 /// Most sensors a description lists.
@@ -249,12 +249,6 @@ ipc_type! {
     }
 }
 
-impl SensorDescription {
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
-}
-
 ipc_type! {
     /// One joint the bridges publish (`sensor_msgs/JointState`).
     #[derive(Default, Serialize)]
@@ -269,12 +263,6 @@ ipc_type! {
         pub index: u8,
         #[serde(skip)]
         pub _reserved: [u8; 6],
-    }
-}
-
-impl JointDescription {
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
     }
 }
 
@@ -293,12 +281,6 @@ ipc_type! {
         pub flags: u8,
         #[serde(skip)]
         pub _reserved: [u8; 2],
-    }
-}
-
-impl SourceDescription {
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
     }
 }
 
@@ -416,24 +398,6 @@ impl core::fmt::Display for DescriptionFull {
 impl std::error::Error for DescriptionFull {}
 
 impl RobotDescription {
-    /// The robot's name (`--name`).
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
-
-    /// The kind's `--robot` spelling.
-    pub fn kind_name(&self) -> &str {
-        read_fixed_str(&self.kind_name)
-    }
-
-    pub fn model(&self) -> &str {
-        read_fixed_str(&self.model)
-    }
-
-    pub fn display_name(&self) -> &str {
-        read_fixed_str(&self.display_name)
-    }
-
     pub fn set_name(&mut self, name: &str) {
         write_fixed_str(&mut self.name, name);
     }

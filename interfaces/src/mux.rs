@@ -6,7 +6,7 @@ use serde::Serialize;
 use crate::layout::ipc_type;
 use crate::named::named_constants;
 
-use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
+use crate::text::{serialize_fixed_str, write_fixed_str};
 use crate::{MAX_LOCKS, MAX_SOURCES, NAME_LEN};
 
 ipc_type! {
@@ -171,9 +171,6 @@ ipc_type! {
 }
 
 impl SourceStatus {
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
     pub fn set_name(&mut self, name: &str) {
         write_fixed_str(&mut self.name, name);
     }
@@ -216,9 +213,6 @@ impl LockStatus {
     pub const HOLDER_NONE: u8 = 0xFF;
     pub const HOLDER_OPERATOR: u8 = 0xFE;
 
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
     pub fn set_name(&mut self, name: &str) {
         write_fixed_str(&mut self.name, name);
     }

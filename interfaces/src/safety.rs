@@ -8,7 +8,7 @@ use serde::Serialize;
 use crate::layout::ipc_type;
 use crate::named::named_constants;
 
-use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
+use crate::text::{serialize_fixed_str, write_fixed_str};
 
 named_constants! {
     /// The monitor's rules: the index into the per-rule arrays of [`SafetyStatus`] and the bit in
@@ -185,11 +185,6 @@ impl SafetyStatus {
     pub const UNLIMITED: f32 = f32::MAX;
     /// [`SafetyStatus::last_rule`] before the first event.
     pub const NO_RULE: u8 = 0xFF;
-
-    /// The last event in words.
-    pub fn last_text(&self) -> &str {
-        read_fixed_str(&self.last_text)
-    }
 
     pub fn set_last_text(&mut self, text: &str) {
         write_fixed_str(&mut self.last_text, text);
