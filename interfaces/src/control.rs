@@ -159,11 +159,8 @@ ipc_type! {
 impl Default for ControlResponse {
     fn default() -> Self {
         Self {
-            stamp_ns: 0,
-            request_seq: 0,
             status: ControlStatus::OK,
-            _reserved: [0; 7],
-            message: [0; Self::MESSAGE_LEN],
+            ..zerocopy::FromZeros::new_zeroed()
         }
     }
 }

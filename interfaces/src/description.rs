@@ -335,20 +335,6 @@ ipc_type! {
 impl Default for RobotDescription {
     fn default() -> Self {
         Self {
-            seq: 0,
-            stamp_ns: 0,
-            kind: 0,
-            protocol: 0,
-            kinematics: 0,
-            bus: 0,
-            flags: 0,
-            sensor_count: 0,
-            joint_count: 0,
-            source_count: 0,
-            name: [0; NAME_LEN],
-            kind_name: [0; NAME_LEN],
-            model: [0; LABEL_LEN],
-            display_name: [0; LABEL_LEN],
             robot_limits: MotionLimits::NONE,
             configured_limits: MotionLimits::NONE,
             geometry: Geometry {
@@ -368,12 +354,8 @@ impl Default for RobotDescription {
                 low_soc_pct: f64::NAN,
                 critical_soc_pct: f64::NAN,
             },
-            odometry_variance: OdometryVariance::default(),
-            command_timeout_ms: 0,
-            heartbeat_period_ms: 0,
-            sensors: [SensorDescription::default(); MAX_SENSORS],
-            joints: [JointDescription::default(); MAX_JOINTS],
-            sources: [SourceDescription::default(); MAX_SOURCES],
+            // Every other field zero: no name, no sensor, joint or source.
+            ..zerocopy::FromZeros::new_zeroed()
         }
     }
 }

@@ -152,14 +152,6 @@ ipc_type! {
 impl Default for SafetyStatus {
     fn default() -> Self {
         Self {
-            stamp_ns: 0,
-            seq: 0,
-            started_ns: 0,
-            state_seq: 0,
-            state_age_ms: 0,
-            active_rules: 0,
-            acknowledged_rules: 0,
-            enabled_rules: 0,
             limit_forward_mps: Self::UNLIMITED,
             limit_reverse_mps: Self::UNLIMITED,
             limit_lateral_mps: Self::UNLIMITED,
@@ -168,11 +160,7 @@ impl Default for SafetyStatus {
             estop: EstopState::UNKNOWN,
             last_rule: Self::NO_RULE,
             last_event: SafetyEvent::NONE,
-            _reserved: [0; 4],
-            trigger_counts: [0; RULE_SLOTS],
-            last_trigger_ns: [0; RULE_SLOTS],
-            last_event_ns: 0,
-            last_text: [0; Self::TEXT_LEN],
+            ..zerocopy::FromZeros::new_zeroed()
         }
     }
 }
