@@ -669,6 +669,18 @@ ipc_type! {
 }
 
 impl ChassisState {
+    /// The part of the sample that changes only when the chassis reports something new: without
+    /// its numbering, its stamps and the link's counters.
+    pub fn body(&self) -> ChassisState {
+        ChassisState {
+            seq: 0,
+            stamp_ns: 0,
+            group_stamp_ns: [0; GROUP_SLOTS],
+            link: LinkStats::default(),
+            ..*self
+        }
+    }
+
     /// Marks `group` as updated at `now_ns`.
     pub fn touch(&mut self, group: Group, now_ns: u64) {
         self.valid_mask |= group.bit();
