@@ -90,7 +90,7 @@ use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame};
 use serde::Serialize;
 use serde_json::{Value, json};
 
-use crate::live::state_line;
+use crate::live::{hex, state_line};
 
 /// Frames the tap may hold between two drains.
 const TAP_BUFFER: usize = 2048;
@@ -145,17 +145,6 @@ pub struct ReplayArgs {
     /// Print only the final state.
     #[arg(long)]
     pub quiet: bool,
-}
-
-/// Upper-case hex of `bytes`, no separators.
-pub fn hex(bytes: &[u8]) -> String {
-    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
-    let mut out = String::with_capacity(bytes.len() * 2);
-    for b in bytes {
-        out.push(char::from(DIGITS[usize::from(b >> 4)]));
-        out.push(char::from(DIGITS[usize::from(b & 0xF)]));
-    }
-    out
 }
 
 /// Counts `BusFrame::seq` gaps: frames the tap dropped between two drains.
