@@ -385,6 +385,17 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_source_never_heard_reads_never_and_a_heard_one_its_age() {
+        let mut source = SourceStatus {
+            age_ms: u32::MAX,
+            ..SourceStatus::default()
+        };
+        assert_eq!(source.age_text(), "never");
+        source.age_ms = 42;
+        assert_eq!(source.age_text(), "42 ms");
+    }
+
+    #[test]
     fn mux_status_names_its_sources_and_locks() {
         let mut status = MuxStatus {
             source_count: 2,

@@ -709,6 +709,19 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_body_leaves_out_the_numbering_the_stamps_and_the_link_counters() {
+        let mut a = ChassisState::default();
+        a.touch(Group::System, 5);
+        a.system.battery_voltage_v = 24.0;
+        let mut b = a;
+        (b.seq, b.stamp_ns, b.link.rx_frames) = (9, 7, 3);
+        b.touch(Group::System, 6);
+        assert_eq!(a.body(), b.body());
+        b.system.battery_voltage_v = 23.9;
+        assert_ne!(a.body(), b.body());
+    }
+
+    #[test]
     fn group_bits_and_stamps_tell_never_reported_from_zero() {
         let mut state = ChassisState::default();
         assert!(!state.is_valid(Group::Imu));
