@@ -144,14 +144,10 @@ pub enum SimCmd {
     },
 }
 
-fn connect(name: &str) -> anyhow::Result<Robot> {
-    Ok(Robot::connect(name)?)
-}
-
 /// `chassis echo`.
 pub fn echo(args: &EchoArgs) -> anyhow::Result<()> {
     install_signal_handlers();
-    let mut robot = connect(&args.name)?;
+    let mut robot = Robot::connect(&args.name)?;
     let mut out = std::io::stdout().lock();
     let mut printed = 0u64;
     let mut quiet_since = now_ns();
@@ -381,7 +377,7 @@ pub fn publish(args: &PubArgs) -> anyhow::Result<()> {
     } else {
         args.velocity.request()
     })?;
-    let mut robot = connect(&args.name)?;
+    let mut robot = Robot::connect(&args.name)?;
     let mut source = robot.source(&args.source)?;
     let start = now_ns();
     let end = (args.duration > 0.0).then(|| start + (args.duration * 1e9) as u64);
@@ -406,7 +402,7 @@ pub fn publish(args: &PubArgs) -> anyhow::Result<()> {
 
 /// `chassis status`: a human summary.
 pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
-    let mut robot = connect(name)?;
+    let mut robot = Robot::connect(name)?;
     let mux = match robot.latest_mux()? {
         Some(m) => Some(m),
         None => robot.wait_mux(Duration::from_secs(1))?,
@@ -769,7 +765,7 @@ pub fn control(name: &str, command: &ControlCmd) -> anyhow::Result<()> {
             ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name(lock)
         }
     };
-    let mut robot = connect(name)?;
+    let mut robot = Robot::connect(name)?;
     let response = robot.control(request, ANSWER_TIMEOUT)?;
     print_answer(&response)
 }
@@ -827,7 +823,7 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
             _ => bail!("give a speed in m/s, or --clear"),
         },
     };
-    let mut robot = connect(name)?;
+    let mut robot = Robot::connect(name)?;
     let response = robot.sim(r, ANSWER_TIMEOUT)?;
     print_answer(&response)
 }
