@@ -7,7 +7,7 @@ use crate::layout::ipc_type;
 use crate::named::named_constants;
 
 use crate::NAME_LEN;
-use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
+use crate::text::{serialize_fixed_str, write_fixed_str};
 
 named_constants! {
     /// [`ControlRequest::kind`] and the meaning of its arguments.
@@ -120,10 +120,6 @@ impl ControlRequest {
         write_fixed_str(&mut self.name, name);
         self
     }
-
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
 }
 
 named_constants! {
@@ -163,11 +159,8 @@ ipc_type! {
 impl Default for ControlResponse {
     fn default() -> Self {
         Self {
-            stamp_ns: 0,
-            request_seq: 0,
             status: ControlStatus::OK,
-            _reserved: [0; 7],
-            message: [0; Self::MESSAGE_LEN],
+            ..zerocopy::FromZeros::new_zeroed()
         }
     }
 }
@@ -183,10 +176,6 @@ impl ControlResponse {
         };
         write_fixed_str(&mut response.message, message);
         response
-    }
-
-    pub fn message(&self) -> &str {
-        read_fixed_str(&self.message)
     }
 
     pub fn is_ok(&self) -> bool {

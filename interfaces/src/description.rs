@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use crate::layout::ipc_type;
 use crate::named::named_constants;
-use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
+use crate::text::{serialize_fixed_str, write_fixed_str};
 use crate::{MAX_SOURCES, NAME_LEN};
 
 /// Most sensors a description lists.
@@ -249,12 +249,6 @@ ipc_type! {
     }
 }
 
-impl SensorDescription {
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
-}
-
 ipc_type! {
     /// One joint the bridges publish (`sensor_msgs/JointState`).
     #[derive(Default, Serialize)]
@@ -269,12 +263,6 @@ ipc_type! {
         pub index: u8,
         #[serde(skip)]
         pub _reserved: [u8; 6],
-    }
-}
-
-impl JointDescription {
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
     }
 }
 
@@ -293,12 +281,6 @@ ipc_type! {
         pub flags: u8,
         #[serde(skip)]
         pub _reserved: [u8; 2],
-    }
-}
-
-impl SourceDescription {
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
     }
 }
 
@@ -353,20 +335,6 @@ ipc_type! {
 impl Default for RobotDescription {
     fn default() -> Self {
         Self {
-            seq: 0,
-            stamp_ns: 0,
-            kind: 0,
-            protocol: 0,
-            kinematics: 0,
-            bus: 0,
-            flags: 0,
-            sensor_count: 0,
-            joint_count: 0,
-            source_count: 0,
-            name: [0; NAME_LEN],
-            kind_name: [0; NAME_LEN],
-            model: [0; LABEL_LEN],
-            display_name: [0; LABEL_LEN],
             robot_limits: MotionLimits::NONE,
             configured_limits: MotionLimits::NONE,
             geometry: Geometry {
@@ -386,12 +354,8 @@ impl Default for RobotDescription {
                 low_soc_pct: f64::NAN,
                 critical_soc_pct: f64::NAN,
             },
-            odometry_variance: OdometryVariance::default(),
-            command_timeout_ms: 0,
-            heartbeat_period_ms: 0,
-            sensors: [SensorDescription::default(); MAX_SENSORS],
-            joints: [JointDescription::default(); MAX_JOINTS],
-            sources: [SourceDescription::default(); MAX_SOURCES],
+            // Every other field zero: no name, no sensor, joint or source.
+            ..zerocopy::FromZeros::new_zeroed()
         }
     }
 }
@@ -416,24 +380,6 @@ impl core::fmt::Display for DescriptionFull {
 impl std::error::Error for DescriptionFull {}
 
 impl RobotDescription {
-    /// The robot's name (`--name`).
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
-
-    /// The kind's `--robot` spelling.
-    pub fn kind_name(&self) -> &str {
-        read_fixed_str(&self.kind_name)
-    }
-
-    pub fn model(&self) -> &str {
-        read_fixed_str(&self.model)
-    }
-
-    pub fn display_name(&self) -> &str {
-        read_fixed_str(&self.display_name)
-    }
-
     pub fn set_name(&mut self, name: &str) {
         write_fixed_str(&mut self.name, name);
     }

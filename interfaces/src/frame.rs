@@ -55,14 +55,9 @@ ipc_type! {
 impl Default for BusFrame {
     fn default() -> Self {
         Self {
-            stamp_ns: 0,
-            seq: 0,
-            can_id: 0,
             direction: FrameDirection::RX,
             kind: FrameKind::CAN,
-            len: 0,
-            flags: 0,
-            data: [0; Self::DATA_LEN],
+            ..zerocopy::FromZeros::new_zeroed()
         }
     }
 }

@@ -145,7 +145,8 @@ pub trait Layout: FieldKind {
 /// iceoryx2's `ZeroCopySend`, whose `#[type_name("chassis::Name.vN")]` the declaration gives;
 /// other derives (`Default`, `Serialize`) come with it. Its [`Layout`] lists every field, in
 /// order, with `core::mem::offset_of!`. A byte array that holds NUL-padded UTF-8 text is declared
-/// `pub name: [u8; NAME_LEN] as text`, so that the contract says so.
+/// `pub name: [u8; NAME_LEN] as text`, so that the contract says so, and gets a getter of the
+/// field's name that reads the text.
 ///
 /// ```text
 /// ipc_type! {
@@ -160,6 +161,11 @@ pub trait Layout: FieldKind {
 /// }
 /// ```
 macro_rules! ipc_type {
+    (@text $field:ident) => {
+        pub fn $field(&self) -> &str {
+            $crate::text::read_fixed_str(&self.$field)
+        }
+    };
     (
         $(#[$meta:meta])*
         pub struct $ty:ident {
@@ -217,6 +223,10 @@ macro_rules! ipc_type {
                     ),+],
                 }
             }
+        }
+
+        impl $ty {
+            $($($crate::layout::ipc_type!(@$marker $field);)?)+
         }
     };
 }

@@ -6,7 +6,7 @@ use serde::Serialize;
 use crate::layout::ipc_type;
 use crate::named::named_constants;
 
-use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
+use crate::text::{serialize_fixed_str, write_fixed_str};
 use crate::{MAX_LOCKS, MAX_SOURCES, NAME_LEN};
 
 ipc_type! {
@@ -171,14 +171,19 @@ ipc_type! {
 }
 
 impl SourceStatus {
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
     pub fn set_name(&mut self, name: &str) {
         write_fixed_str(&mut self.name, name);
     }
     pub fn has(&self, flag: u8) -> bool {
         self.flags & flag != 0
+    }
+    /// The age of its latest request as read: `never` or `N ms`.
+    pub fn age_text(&self) -> String {
+        if self.age_ms == u32::MAX {
+            "never".into()
+        } else {
+            format!("{} ms", self.age_ms)
+        }
     }
 }
 
@@ -208,9 +213,6 @@ impl LockStatus {
     pub const HOLDER_NONE: u8 = 0xFF;
     pub const HOLDER_OPERATOR: u8 = 0xFE;
 
-    pub fn name(&self) -> &str {
-        read_fixed_str(&self.name)
-    }
     pub fn set_name(&mut self, name: &str) {
         write_fixed_str(&mut self.name, name);
     }
@@ -381,6 +383,17 @@ impl std::fmt::Display for Why<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_source_never_heard_reads_never_and_a_heard_one_its_age() {
+        let mut source = SourceStatus {
+            age_ms: u32::MAX,
+            ..SourceStatus::default()
+        };
+        assert_eq!(source.age_text(), "never");
+        source.age_ms = 42;
+        assert_eq!(source.age_text(), "42 ms");
+    }
 
     #[test]
     fn mux_status_names_its_sources_and_locks() {

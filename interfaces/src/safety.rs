@@ -8,7 +8,7 @@ use serde::Serialize;
 use crate::layout::ipc_type;
 use crate::named::named_constants;
 
-use crate::text::{read_fixed_str, serialize_fixed_str, write_fixed_str};
+use crate::text::{serialize_fixed_str, write_fixed_str};
 
 named_constants! {
     /// The monitor's rules: the index into the per-rule arrays of [`SafetyStatus`] and the bit in
@@ -152,14 +152,6 @@ ipc_type! {
 impl Default for SafetyStatus {
     fn default() -> Self {
         Self {
-            stamp_ns: 0,
-            seq: 0,
-            started_ns: 0,
-            state_seq: 0,
-            state_age_ms: 0,
-            active_rules: 0,
-            acknowledged_rules: 0,
-            enabled_rules: 0,
             limit_forward_mps: Self::UNLIMITED,
             limit_reverse_mps: Self::UNLIMITED,
             limit_lateral_mps: Self::UNLIMITED,
@@ -168,11 +160,7 @@ impl Default for SafetyStatus {
             estop: EstopState::UNKNOWN,
             last_rule: Self::NO_RULE,
             last_event: SafetyEvent::NONE,
-            _reserved: [0; 4],
-            trigger_counts: [0; RULE_SLOTS],
-            last_trigger_ns: [0; RULE_SLOTS],
-            last_event_ns: 0,
-            last_text: [0; Self::TEXT_LEN],
+            ..zerocopy::FromZeros::new_zeroed()
         }
     }
 }
@@ -185,11 +173,6 @@ impl SafetyStatus {
     pub const UNLIMITED: f32 = f32::MAX;
     /// [`SafetyStatus::last_rule`] before the first event.
     pub const NO_RULE: u8 = 0xFF;
-
-    /// The last event in words.
-    pub fn last_text(&self) -> &str {
-        read_fixed_str(&self.last_text)
-    }
 
     pub fn set_last_text(&mut self, text: &str) {
         write_fixed_str(&mut self.last_text, text);

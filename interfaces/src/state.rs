@@ -669,6 +669,18 @@ ipc_type! {
 }
 
 impl ChassisState {
+    /// The part of the sample that changes only when the chassis reports something new: without
+    /// its numbering, its stamps and the link's counters.
+    pub fn body(&self) -> ChassisState {
+        ChassisState {
+            seq: 0,
+            stamp_ns: 0,
+            group_stamp_ns: [0; GROUP_SLOTS],
+            link: LinkStats::default(),
+            ..*self
+        }
+    }
+
     /// Marks `group` as updated at `now_ns`.
     pub fn touch(&mut self, group: Group, now_ns: u64) {
         self.valid_mask |= group.bit();
@@ -695,6 +707,19 @@ impl ChassisState {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_body_leaves_out_the_numbering_the_stamps_and_the_link_counters() {
+        let mut a = ChassisState::default();
+        a.touch(Group::System, 5);
+        a.system.battery_voltage_v = 24.0;
+        let mut b = a;
+        (b.seq, b.stamp_ns, b.link.rx_frames) = (9, 7, 3);
+        b.touch(Group::System, 6);
+        assert_eq!(a.body(), b.body());
+        b.system.battery_voltage_v = 23.9;
+        assert_ne!(a.body(), b.body());
+    }
 
     #[test]
     fn group_bits_and_stamps_tell_never_reported_from_zero() {

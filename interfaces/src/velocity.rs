@@ -185,13 +185,30 @@ pub struct Envelope {
 }
 
 impl Envelope {
-    /// Bounds nothing.
-    pub const NONE: Envelope = Envelope {
-        forward_mps: f32::INFINITY,
-        reverse_mps: f32::INFINITY,
-        lateral_mps: f32::INFINITY,
-        angular_radps: f32::INFINITY,
+    /// Bounds nothing ([`SafetyStatus::UNLIMITED`](crate::SafetyStatus::UNLIMITED) each way).
+    pub const UNLIMITED: Envelope = Envelope {
+        forward_mps: crate::SafetyStatus::UNLIMITED,
+        reverse_mps: crate::SafetyStatus::UNLIMITED,
+        lateral_mps: crate::SafetyStatus::UNLIMITED,
+        angular_radps: crate::SafetyStatus::UNLIMITED,
     };
+    /// Allows no motion.
+    pub const ZERO: Envelope = Envelope {
+        forward_mps: 0.0,
+        reverse_mps: 0.0,
+        lateral_mps: 0.0,
+        angular_radps: 0.0,
+    };
+
+    /// The tighter of two envelopes, per direction.
+    pub fn min(self, other: Envelope) -> Envelope {
+        Envelope {
+            forward_mps: self.forward_mps.min(other.forward_mps),
+            reverse_mps: self.reverse_mps.min(other.reverse_mps),
+            lateral_mps: self.lateral_mps.min(other.lateral_mps),
+            angular_radps: self.angular_radps.min(other.angular_radps),
+        }
+    }
 }
 
 /// A [`VelocityRequest`] whose every number is finite and whose envelope, when it is a limit,
@@ -360,7 +377,7 @@ mod tests {
             Velocity::ZERO,
             "reverse 0 blocks reversing"
         );
-        assert_eq!(v.bounded(&Envelope::NONE), v);
+        assert_eq!(v.bounded(&Envelope::UNLIMITED), v);
         // A NaN or negative bound bounds nothing; nothing comes out that is not finite.
         let odd = Envelope {
             forward_mps: f32::NAN,

@@ -23,13 +23,12 @@ pub struct DemoArgs {
     #[arg(
         long,
         default_value = "titan",
-        value_parser = crate::parse_robot,
         help = format!("The simulated robot: {}.", chassis_protocols::kind::names().join(", "))
     )]
     pub robot: RobotKind,
     /// AgileX wire protocol of the simulated chassis, v1 or v2 (default: the robot's own; SCOUT
     /// MINI: v1).
-    #[arg(long, value_parser = crate::parse_protocol)]
+    #[arg(long)]
     pub protocol: Option<chassis_protocols::Protocol>,
     /// Name of the demo robot's services (default: demo-ROBOT).
     #[arg(long)]
@@ -170,12 +169,7 @@ fn connect(name: &str, children: &mut Children) -> anyhow::Result<Robot> {
     let started = now_ns();
     let mut ticker = Ticker::new(Duration::from_millis(50));
     loop {
-        if termination_requested() {
-            bail!("interrupted while starting");
-        }
-        if let Some((label, status)) = children.exited() {
-            bail!("{label} exited at start ({status})");
-        }
+        starting(children)?;
         if let Ok(mut robot) = Robot::connect(name)
             && robot.wait_state(Duration::from_millis(200))?.is_some()
         {
@@ -188,17 +182,23 @@ fn connect(name: &str, children: &mut Children) -> anyhow::Result<Robot> {
     }
 }
 
+/// Fails when asked to stop, or when a process of the demo ended while it starts.
+fn starting(children: &mut Children) -> anyhow::Result<()> {
+    if termination_requested() {
+        bail!("interrupted while starting");
+    }
+    if let Some((label, status)) = children.exited() {
+        bail!("{label} exited at start ({status})");
+    }
+    Ok(())
+}
+
 /// Waits until the mux's required sources (the safety monitor) have been fresh for a second.
 fn guarded(robot: &mut Robot, children: &mut Children) -> anyhow::Result<()> {
     let started = now_ns();
     let mut fresh_since: Option<u64> = None;
     loop {
-        if termination_requested() {
-            bail!("interrupted while starting");
-        }
-        if let Some((label, status)) = children.exited() {
-            bail!("{label} exited at start ({status})");
-        }
+        starting(children)?;
         let now = now_ns();
         let fresh = robot.wait_mux(Duration::from_millis(50))?.is_some_and(|m| {
             m.sources()

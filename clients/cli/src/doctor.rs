@@ -21,7 +21,7 @@ use chassis_bus::socketcan::SocketCan;
 use chassis_bus::{BusSpec, ByteBus, CanBus, CanEvent};
 use chassis_client::{
     ChassisState, ControlMode, ControllerState, FaultFlags, LinkFlags, LockStatus, MuxStatus,
-    Robot, SourceFlags, WireProtocol, now_ns,
+    Robot, SourceFlags, WireProtocol, deadline, now_ns,
 };
 use chassis_protocols::agilex_v2::detect::{Detection, Detector};
 use chassis_protocols::registry::Bus as RobotBus;
@@ -39,7 +39,7 @@ pub struct DoctorArgs {
     #[arg(long)]
     pub name: Option<String>,
     /// The robot (default: the config's, else titan).
-    #[arg(long, value_parser = crate::parse_robot)]
+    #[arg(long)]
     pub robot: Option<RobotKind>,
     /// The bus, as for chassisd: `can:IFACE`, `slcan:PATH[@BAUD]`, `serial:PATH[@BAUD]` or `sim`
     /// (default: the config's).
@@ -462,11 +462,6 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
         }
     }
     true
-}
-
-/// `after` from now, CLOCK_MONOTONIC ns.
-fn deadline(after: Duration) -> u64 {
-    now_ns().saturating_add(u64::try_from(after.as_nanos()).unwrap_or(u64::MAX))
 }
 
 /// Waits until `fd` is readable (true) or the deadline `end_ns` passes (false).

@@ -144,14 +144,10 @@ pub enum SimCmd {
     },
 }
 
-fn connect(name: &str) -> anyhow::Result<Robot> {
-    Ok(Robot::connect(name)?)
-}
-
 /// `chassis echo`.
 pub fn echo(args: &EchoArgs) -> anyhow::Result<()> {
     install_signal_handlers();
-    let mut robot = connect(&args.name)?;
+    let mut robot = Robot::connect(&args.name)?;
     let mut out = std::io::stdout().lock();
     let mut printed = 0u64;
     let mut quiet_since = now_ns();
@@ -321,24 +317,21 @@ pub(crate) fn lock_holder(m: &MuxStatus, lock: &LockStatus) -> String {
     }
 }
 
-fn direction(frame: &BusFrame) -> &'static str {
-    if frame.direction == FrameDirection::TX {
-        "TX"
-    } else {
-        "RX"
+/// Upper-case hex of `bytes`, no separators.
+pub fn hex(bytes: &[u8]) -> String {
+    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
+    let mut out = String::with_capacity(bytes.len() * 2);
+    for b in bytes {
+        out.push(char::from(DIGITS[usize::from(b >> 4)]));
+        out.push(char::from(DIGITS[usize::from(b & 0xF)]));
     }
+    out
 }
 
 /// `  12.345678 RX 111#0096000000000000` (CAN) or `RX AA 55 02 01 01 02` (serial).
 pub fn frame_line(frame: &BusFrame) -> String {
     let t = frame.stamp_ns as f64 / 1e9;
-    let hex = |bytes: &[u8], sep: &str| {
-        bytes
-            .iter()
-            .map(|b| format!("{b:02X}"))
-            .collect::<Vec<_>>()
-            .join(sep)
-    };
+    let dir = FrameDirection::name(frame.direction).to_uppercase();
     match frame.kind {
         FrameKind::CAN => {
             let id = if frame.flags & BusFrame::EXTENDED_ID != 0 {
@@ -346,20 +339,20 @@ pub fn frame_line(frame: &BusFrame) -> String {
             } else {
                 format!("{:03X}", frame.can_id)
             };
-            format!(
-                "{t:>14.6} {} {id}#{}",
-                direction(frame),
-                hex(frame.payload(), "")
-            )
+            format!("{t:>14.6} {dir} {id}#{}", hex(frame.payload()))
         }
         FrameKind::GPS => format!(
             "{t:>14.6} GPS {}",
             String::from_utf8_lossy(frame.payload()).trim_end()
         ),
         _ => format!(
-            "{t:>14.6} {} {}",
-            direction(frame),
-            hex(frame.payload(), " ")
+            "{t:>14.6} {dir} {}",
+            frame
+                .payload()
+                .iter()
+                .map(|b| format!("{b:02X}"))
+                .collect::<Vec<_>>()
+                .join(" ")
         ),
     }
 }
@@ -367,8 +360,7 @@ pub fn frame_line(frame: &BusFrame) -> String {
 fn frame_json(frame: &BusFrame) -> serde_json::Value {
     let mut value = serde_json::to_value(frame).unwrap_or(serde_json::Value::Null);
     if let Some(obj) = value.as_object_mut() {
-        let hex: String = frame.payload().iter().map(|b| format!("{b:02X}")).collect();
-        obj.insert("data".into(), hex.into());
+        obj.insert("data".into(), hex(frame.payload()).into());
     }
     value
 }
@@ -385,7 +377,7 @@ pub fn publish(args: &PubArgs) -> anyhow::Result<()> {
     } else {
         args.velocity.request()
     })?;
-    let mut robot = connect(&args.name)?;
+    let mut robot = Robot::connect(&args.name)?;
     let mut source = robot.source(&args.source)?;
     let start = now_ns();
     let end = (args.duration > 0.0).then(|| start + (args.duration * 1e9) as u64);
@@ -410,7 +402,7 @@ pub fn publish(args: &PubArgs) -> anyhow::Result<()> {
 
 /// `chassis status`: a human summary.
 pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
-    let mut robot = connect(name)?;
+    let mut robot = Robot::connect(name)?;
     let mux = match robot.latest_mux()? {
         Some(m) => Some(m),
         None => robot.wait_mux(Duration::from_secs(1))?,
@@ -773,7 +765,7 @@ pub fn control(name: &str, command: &ControlCmd) -> anyhow::Result<()> {
             ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name(lock)
         }
     };
-    let mut robot = connect(name)?;
+    let mut robot = Robot::connect(name)?;
     let response = robot.control(request, ANSWER_TIMEOUT)?;
     print_answer(&response)
 }
@@ -831,7 +823,7 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
             _ => bail!("give a speed in m/s, or --clear"),
         },
     };
-    let mut robot = connect(name)?;
+    let mut robot = Robot::connect(name)?;
     let response = robot.sim(r, ANSWER_TIMEOUT)?;
     print_answer(&response)
 }

@@ -141,11 +141,11 @@ enum PubWhat {
 // the flattened subcommands' about text.)
 #[derive(Debug, clap::Args)]
 struct ProfileArgs {
-    #[arg(long, value_parser = parse_robot)]
+    #[arg(long)]
     robot: RobotKind,
     /// AgileX wire protocol, v1 (scout-mini, scout, bunker) or v2 (default: SCOUT MINI v1,
     /// the other AgileX robots v2).
-    #[arg(long, value_parser = parse_protocol)]
+    #[arg(long)]
     protocol: Option<Protocol>,
     /// A TOML file of profile parameters (the `[profile]` table of chassisd's config).
     #[arg(long)]
@@ -167,14 +167,6 @@ fn restore_sigpipe() {
     // SAFETY: called first thing in main, before any thread exists; SIG_DFL installs no handler
     // code of ours.
     let _ = unsafe { signal(Signal::SIGPIPE, SigHandler::SigDfl) };
-}
-
-pub(crate) fn parse_robot(text: &str) -> Result<RobotKind, chassis_protocols::UnknownRobot> {
-    text.parse()
-}
-
-pub(crate) fn parse_protocol(text: &str) -> Result<Protocol, chassis_protocols::ProtocolError> {
-    text.parse()
 }
 
 impl ProfileArgs {

@@ -90,7 +90,7 @@ use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame};
 use serde::Serialize;
 use serde_json::{Value, json};
 
-use crate::live::state_line;
+use crate::live::{hex, state_line};
 
 /// Frames the tap may hold between two drains.
 const TAP_BUFFER: usize = 2048;
@@ -125,7 +125,7 @@ pub struct ReplayArgs {
     /// A recording: MCAP or a candump log.
     pub file: PathBuf,
     /// The robot (default: the one the MCAP recording names; required for a candump log).
-    #[arg(long, value_parser = parse_model)]
+    #[arg(long)]
     pub robot: Option<RobotKind>,
     /// The replayed robot's name (chassis/NAME/…); keep it apart from a live robot's.
     #[arg(long, default_value = "replay")]
@@ -145,29 +145,6 @@ pub struct ReplayArgs {
     /// Print only the final state.
     #[arg(long)]
     pub quiet: bool,
-}
-
-fn parse_model(text: &str) -> Result<RobotKind, chassis_protocols::UnknownRobot> {
-    text.parse()
-}
-
-/// `CLOCK_REALTIME` now, ns since the Unix epoch.
-fn wall_ns() -> i128 {
-    use nix::time::{ClockId, clock_gettime};
-    clock_gettime(ClockId::CLOCK_REALTIME).map_or(0, |t| {
-        i128::from(t.tv_sec()) * 1_000_000_000 + i128::from(t.tv_nsec())
-    })
-}
-
-/// Upper-case hex of `bytes`, no separators.
-pub fn hex(bytes: &[u8]) -> String {
-    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
-    let mut out = String::with_capacity(bytes.len() * 2);
-    for b in bytes {
-        out.push(char::from(DIGITS[usize::from(b >> 4)]));
-        out.push(char::from(DIGITS[usize::from(b & 0xF)]));
-    }
-    out
 }
 
 /// Counts `BusFrame::seq` gaps: frames the tap dropped between two drains.
@@ -196,24 +173,6 @@ impl GapCounter {
     }
 }
 
-/// `rx`/`tx`.
-fn direction_name(frame: &BusFrame) -> &'static str {
-    if frame.direction == FrameDirection::TX {
-        "tx"
-    } else {
-        "rx"
-    }
-}
-
-fn kind_name(frame: &BusFrame) -> &'static str {
-    match frame.kind {
-        FrameKind::CAN => "can",
-        FrameKind::SERIAL => "serial",
-        FrameKind::GPS => "gps",
-        _ => "unknown",
-    }
-}
-
 /// A frame as the MCAP frames channel has it.
 #[derive(Debug, Serialize)]
 pub struct FrameRecord {
@@ -232,14 +191,29 @@ impl FrameRecord {
         Self {
             stamp_ns: frame.stamp_ns,
             seq: frame.seq,
-            direction: direction_name(frame),
-            kind: kind_name(frame),
+            direction: FrameDirection::name(frame.direction),
+            kind: FrameKind::name(frame.kind),
             can_id: frame.can_id,
             extended: frame.flags & BusFrame::EXTENDED_ID != 0,
             len: frame.len,
             data: hex(frame.payload()),
         }
     }
+}
+
+/// Adds the channel `topic` with the Foxglove schema of `T`.
+fn foxglove_channel<T: Encode>(
+    writer: &mut mcap::Writer<BufWriter<File>>,
+    topic: &str,
+) -> anyhow::Result<u16> {
+    let schema = T::get_schema().with_context(|| format!("no schema for {topic}"))?;
+    let schema_id = writer.add_schema(&schema.name, &schema.encoding, &schema.data)?;
+    Ok(writer.add_channel(
+        schema_id,
+        topic,
+        &T::get_message_encoding(),
+        &BTreeMap::new(),
+    )?)
 }
 
 /// The JSON Schema of the frames channel.
@@ -422,31 +396,11 @@ impl McapSink {
             &format!("{prefix}/mux"),
             MuxStatus::layout().type_name,
         )?;
-        let mut foxglove_channel = |topic: &str,
-                                    schema: Option<foxglove::Schema>,
-                                    encoding: String|
-         -> anyhow::Result<u16> {
-            let schema = schema.with_context(|| format!("no schema for {topic}"))?;
-            let schema_id = writer.add_schema(&schema.name, &schema.encoding, &schema.data)?;
-            Ok(writer.add_channel(schema_id, topic, &encoding, &BTreeMap::new())?)
-        };
         let fox = FoxgloveChannels {
-            tf: foxglove_channel(
-                "/tf",
-                FrameTransforms::get_schema(),
-                FrameTransforms::get_message_encoding(),
-            )?,
-            pose: foxglove_channel(
-                "/pose",
-                PoseInFrame::get_schema(),
-                PoseInFrame::get_message_encoding(),
-            )?,
-            gps: foxglove_channel(
-                "/gps",
-                LocationFix::get_schema(),
-                LocationFix::get_message_encoding(),
-            )?,
-            log: foxglove_channel("/log", Log::get_schema(), Log::get_message_encoding())?,
+            tf: foxglove_channel::<FrameTransforms>(&mut writer, "/tf")?,
+            pose: foxglove_channel::<PoseInFrame>(&mut writer, "/pose")?,
+            gps: foxglove_channel::<LocationFix>(&mut writer, "/gps")?,
+            log: foxglove_channel::<Log>(&mut writer, "/log")?,
             body: None,
             watch: Watch::default(),
             last_tf_ns: None,
@@ -827,7 +781,7 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
         robot: RobotKind::from_id(kind).map_or("unknown", RobotKind::name),
         name: args.name.clone(),
         monotonic_ns: now_ns(),
-        wall_ns: wall_ns(),
+        wall_ns: i128::from(chassis_bus::clock::unix_ns()),
     };
     let sink: Box<dyn Sink> = if args.candump {
         let iface = args.iface.clone().unwrap_or_else(|| args.name.clone());

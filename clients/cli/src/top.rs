@@ -155,7 +155,15 @@ pub fn run(args: &TopArgs) -> anyhow::Result<()> {
 }
 
 /// Restores the terminal when dropped (errors included; ratatui's panic hook covers panics).
-struct Screen(ratatui::DefaultTerminal);
+pub(crate) struct Screen(pub(crate) ratatui::DefaultTerminal);
+
+impl Screen {
+    pub(crate) fn open() -> anyhow::Result<Screen> {
+        Ok(Screen(
+            ratatui::try_init().context("setting up the terminal")?,
+        ))
+    }
+}
 
 impl Drop for Screen {
     fn drop(&mut self) {
@@ -163,7 +171,8 @@ impl Drop for Screen {
     }
 }
 
-fn quit_key(event: &Event) -> bool {
+/// q, Esc or Ctrl-C.
+pub(crate) fn quit_key(event: &Event) -> bool {
     let Event::Key(key) = event else {
         return false;
     };
@@ -180,7 +189,7 @@ fn live(
     args: &TopArgs,
 ) -> anyhow::Result<()> {
     let interval_ns = args.interval_ms.clamp(20, 10_000) * 1_000_000;
-    let mut screen = Screen(ratatui::try_init().context("setting up the terminal")?);
+    let mut screen = Screen::open()?;
     let mut next_draw = now_ns();
     while !termination_requested() {
         let wait = Duration::from_nanos(next_draw.saturating_sub(now_ns())).min(MAX_WAIT);

@@ -19,10 +19,10 @@ pub struct UrdfArgs {
     pub name: Option<String>,
     /// A registry robot (titan, scout-mini, xbot, hunter, …) described without chassisd: its
     /// profile's defaults, or --protocol and --profile as for `decode`.
-    #[arg(long, value_parser = crate::parse_robot)]
+    #[arg(long)]
     pub robot: Option<RobotKind>,
     /// With --robot: AgileX wire protocol, v1 or v2.
-    #[arg(long, value_parser = crate::parse_protocol, conflicts_with = "name")]
+    #[arg(long, conflicts_with = "name")]
     pub protocol: Option<Protocol>,
     /// With --robot: a TOML file of profile parameters (the `[profile]` table of chassisd's
     /// config).

@@ -141,6 +141,11 @@ pub fn now_ns() -> u64 {
     })
 }
 
+/// `after` from now on `CLOCK_MONOTONIC`, ns (one too far to count is never).
+pub fn deadline(after: Duration) -> u64 {
+    now_ns().saturating_add(u64::try_from(after.as_nanos()).unwrap_or(u64::MAX))
+}
+
 /// A request-response client answered with `ControlResponse`, with its paired events.
 type Counter<Req> = ClientPorts<Req>;
 
@@ -416,8 +421,7 @@ impl Robot {
     /// it to a new reader within one tick of its loop). Later calls return at once, with any
     /// newer description (the protocol once detection decides).
     pub fn description(&mut self, timeout: Duration) -> Result<RobotDescription, ClientError> {
-        let deadline =
-            now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+        let end = deadline(timeout);
         // A service that is starting (chassisd, or a mirror of another computer's robot) may
         // not have created the description's service yet: it counts as no description yet.
         let mut drained = self.drain_description();
@@ -425,7 +429,7 @@ impl Robot {
             return Ok(description);
         }
         loop {
-            let left = deadline.saturating_sub(now_ns());
+            let left = end.saturating_sub(now_ns());
             if left == 0 {
                 drained?;
                 return Err(ClientError::NoDescription {
@@ -744,14 +748,14 @@ fn ask<Req: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
         .requests
         .notify()
         .map_err(ipc("notifying the service"))?;
-    let deadline = now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+    let end = deadline(timeout);
     loop {
         while let Some(response) = pending.receive().map_err(ipc("receiving the answer"))? {
             if response.payload().request_seq == seq {
                 return Ok(*response.payload());
             }
         }
-        let left = deadline.saturating_sub(now_ns());
+        let left = end.saturating_sub(now_ns());
         if left == 0 {
             return Err(ClientError::Timeout {
                 name: name.to_string(),
@@ -1088,9 +1092,9 @@ fn drain_or_wait(
     if n > 0 {
         return Ok(n);
     }
-    let deadline = now_ns().saturating_add(u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX));
+    let end = deadline(timeout);
     loop {
-        let left = deadline.saturating_sub(now_ns());
+        let left = end.saturating_sub(now_ns());
         if left == 0 {
             return Ok(0);
         }

@@ -449,23 +449,15 @@ impl Model {
     /// Every name is non-empty, writable in XML and unique among its links or joints.
     fn check(&self) -> Result<(), UrdfError> {
         check_name("robot", &self.name)?;
-        let mut links = BTreeSet::new();
-        for l in &self.links {
-            check_name("link", &l.name)?;
-            if !links.insert(l.name.as_str()) {
+        let links = self.links.iter().map(|l| ("link", &l.name));
+        let joints = self.joints.iter().map(|j| ("joint", &j.name));
+        let mut seen = BTreeSet::new();
+        for (what, name) in links.chain(joints) {
+            check_name(what, name)?;
+            if !seen.insert((what, name.as_str())) {
                 return Err(UrdfError::Duplicate {
-                    what: "link",
-                    name: l.name.clone(),
-                });
-            }
-        }
-        let mut joints = BTreeSet::new();
-        for j in &self.joints {
-            check_name("joint", &j.name)?;
-            if !joints.insert(j.name.as_str()) {
-                return Err(UrdfError::Duplicate {
-                    what: "joint",
-                    name: j.name.clone(),
+                    what,
+                    name: name.clone(),
                 });
             }
         }

@@ -76,11 +76,7 @@ pub fn frame_entries(frame: &BusFrame, codec: Option<&mut BoxedCodec>) -> Vec<Va
     let mut entry = Map::new();
     entry.insert("stamp_ns".into(), frame.stamp_ns.into());
     entry.insert("seq".into(), frame.seq.into());
-    let direction = if frame.direction == FrameDirection::TX {
-        "tx"
-    } else {
-        "rx"
-    };
+    let direction = FrameDirection::name(frame.direction);
     entry.insert("direction".into(), direction.into());
     let hex: String = frame.payload().iter().map(|b| format!("{b:02X}")).collect();
     match frame.kind {

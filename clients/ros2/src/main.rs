@@ -183,11 +183,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env();
     tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| "info,rustdds=error,ros2_client=warn".into()),
-        )
+        .with_env_filter(filter.unwrap_or_else(|_| "info,rustdds=error,ros2_client=warn".into()))
         .with_writer(std::io::stderr)
         .init();
     chassis_client::install_signal_handlers();

@@ -21,7 +21,8 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::{
-    BusKind, Kinematics, MuxStatus, RobotDescription, WireProtocol, now_ns, termination_requested,
+    BusKind, Kinematics, MuxStatus, RobotDescription, WireProtocol, deadline, now_ns,
+    termination_requested,
 };
 use ros2_client::QosProfile;
 use ros2_client::qos::{Durability, History, Reliability};
@@ -466,9 +467,7 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
         RosClock::measure()
     };
     let log_time = || u64::try_from(clock.ros_time(now_ns()).nanos()).unwrap_or(0);
-    let end = options
-        .duration
-        .map(|d| now_ns().saturating_add(u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)));
+    let end = options.duration.map(deadline);
     let mut latest = None;
     let mut mux: Option<MuxStatus> = None;
     let mut last_diagnostics: Option<(u64, Vec<(u8, String)>)> = None;

@@ -280,21 +280,21 @@ macro_rules! range_rule {
 
         impl $name {
             fn to_zones(&self, key: &'static str) -> Result<Option<RangeZones>, ConfigError> {
-                let bad = |reason: &str| ConfigError::Bad {
-                    key: key.into(),
-                    reason: reason.into(),
-                };
+                check_timing(key, self.trigger_ms, self.release_ms)?;
                 if !(self.stop_m.is_finite() && self.slow_m.is_finite() && self.stop_m >= 0.0) {
-                    return Err(bad("stop_m and slow_m must be finite and not negative"));
+                    return Err(bad(
+                        key,
+                        "stop_m and slow_m must be finite and not negative",
+                    ));
                 }
                 if self.slow_m < self.stop_m {
-                    return Err(bad("slow_m must be at least stop_m"));
+                    return Err(bad(key, "slow_m must be at least stop_m"));
                 }
                 if !(self.hysteresis_m.is_finite() && self.hysteresis_m >= 0.0) {
-                    return Err(bad("hysteresis_m must be finite and not negative"));
+                    return Err(bad(key, "hysteresis_m must be finite and not negative"));
                 }
                 if self.max_age_ms == 0 {
-                    return Err(bad("max_age_ms must be above 0"));
+                    return Err(bad(key, "max_age_ms must be above 0"));
                 }
                 Ok(self.enabled.then(|| RangeZones {
                     timing: Timing::new(self.action, self.trigger_ms, self.release_ms),
@@ -716,13 +716,7 @@ impl RawConfig {
             .enabled
             .then(|| Timing::new(bu.action, bu.trigger_ms, bu.release_ms));
 
-        check_timing(
-            "rules.ultrasonic",
-            r.ultrasonic.trigger_ms,
-            r.ultrasonic.release_ms,
-        )?;
         let ultrasonic = r.ultrasonic.to_zones("rules.ultrasonic")?;
-        check_timing("rules.ir", r.ir.trigger_ms, r.ir.release_ms)?;
         let ir = r.ir.to_zones("rules.ir")?;
 
         let sp = &r.speed;

@@ -32,72 +32,40 @@
 //! latching rule acts as a stop rule.
 
 use chassis_client::{
-    ChassisState, EstopState, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus, RULE_SLOTS,
-    RobotDescription, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus, VelocityRequest,
+    ChassisState, Envelope, EstopState, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus,
+    RULE_SLOTS, RobotDescription, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus,
+    VelocityRequest,
 };
 
 use crate::config::{Action, Config, RangeZones, SlowSpeeds, Timing};
 use crate::levels::{BatteryBasis, Levels, number};
 
-/// A speed envelope, m/s and rad/s; [`SafetyStatus::UNLIMITED`] limits nothing.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Envelope {
-    pub forward_mps: f32,
-    pub reverse_mps: f32,
-    pub lateral_mps: f32,
-    pub angular_radps: f32,
+/// The envelope of the slow zone: every direction at its slow speed.
+fn slow_envelope(slow: SlowSpeeds) -> Envelope {
+    Envelope {
+        forward_mps: slow.linear_mps,
+        reverse_mps: slow.linear_mps,
+        lateral_mps: slow.lateral_mps,
+        angular_radps: slow.angular_radps,
+    }
 }
 
-impl Envelope {
-    pub const UNLIMITED: Envelope = Envelope {
-        forward_mps: SafetyStatus::UNLIMITED,
-        reverse_mps: SafetyStatus::UNLIMITED,
-        lateral_mps: SafetyStatus::UNLIMITED,
-        angular_radps: SafetyStatus::UNLIMITED,
+/// Near an obstacle in front (`front`) or behind: motion towards it slowed (level 1) or
+/// blocked (level 2), away from it free; turning and strafing slowed (the corners sweep
+/// towards it).
+fn towards(front: bool, level: u8, slow: SlowSpeeds) -> Envelope {
+    let toward = if level >= 2 { 0.0 } else { slow.linear_mps };
+    let mut e = Envelope {
+        lateral_mps: slow.lateral_mps,
+        angular_radps: slow.angular_radps,
+        ..Envelope::UNLIMITED
     };
-    pub const ZERO: Envelope = Envelope {
-        forward_mps: 0.0,
-        reverse_mps: 0.0,
-        lateral_mps: 0.0,
-        angular_radps: 0.0,
-    };
-
-    /// The tighter of two envelopes, per direction.
-    pub fn min(self, other: Envelope) -> Envelope {
-        Envelope {
-            forward_mps: self.forward_mps.min(other.forward_mps),
-            reverse_mps: self.reverse_mps.min(other.reverse_mps),
-            lateral_mps: self.lateral_mps.min(other.lateral_mps),
-            angular_radps: self.angular_radps.min(other.angular_radps),
-        }
+    if front {
+        e.forward_mps = toward;
+    } else {
+        e.reverse_mps = toward;
     }
-
-    fn slow(slow: SlowSpeeds) -> Envelope {
-        Envelope {
-            forward_mps: slow.linear_mps,
-            reverse_mps: slow.linear_mps,
-            lateral_mps: slow.lateral_mps,
-            angular_radps: slow.angular_radps,
-        }
-    }
-
-    /// Near an obstacle in front (`front`) or behind: motion towards it slowed (level 1) or
-    /// blocked (level 2), away from it free; turning and strafing slowed (the corners sweep
-    /// towards it).
-    fn towards(front: bool, level: u8, slow: SlowSpeeds) -> Envelope {
-        let toward = if level >= 2 { 0.0 } else { slow.linear_mps };
-        let mut e = Envelope {
-            lateral_mps: slow.lateral_mps,
-            angular_radps: slow.angular_radps,
-            ..Envelope::UNLIMITED
-        };
-        if front {
-            e.forward_mps = toward;
-        } else {
-            e.reverse_mps = toward;
-        }
-        e
-    }
+    e
 }
 
 /// What the monitor publishes on its source.
@@ -683,14 +651,10 @@ impl Engine {
                 Action::Latch => !lock.available && !acknowledged,
             };
             if RANGE_RULES.contains(&rule) {
-                envelope = envelope.min(Envelope::towards(
-                    rule == SafetyRule::ULTRASONIC,
-                    level,
-                    slow,
-                ));
+                envelope = envelope.min(towards(rule == SafetyRule::ULTRASONIC, level, slow));
                 stop |= level >= 2 && stops;
             } else if timing.action == Action::Slow {
-                envelope = envelope.min(Envelope::slow(slow));
+                envelope = envelope.min(slow_envelope(slow));
             } else {
                 stop |= stops;
             }

@@ -24,15 +24,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use chassis_client::{
-    ClientError, Publication, Robot, RobotDescription, SafetyAction, SafetyEvent, SafetyRule,
-    SafetyStatus, Source, Ticker, WireProtocol, install_signal_handlers, now_ns,
+    ClientError, Envelope, Publication, Robot, RobotDescription, SafetyAction, SafetyEvent,
+    SafetyRule, SafetyStatus, Source, Ticker, WireProtocol, install_signal_handlers, now_ns,
     termination_requested,
 };
 use thiserror::Error;
 use tracing::{debug, error, info, info_span, warn};
 
 use crate::config::Config;
-use crate::engine::{Command, Decision, Engine, Envelope};
+use crate::engine::{Command, Decision, Engine};
 
 /// Why the monitor gave up (it never gives up on a lost service).
 #[derive(Debug, Error)]

@@ -379,23 +379,13 @@ fn render_mux(frame: &mut Frame, area: Rect, view: &View) {
             },
         ]));
         for s in mux.sources() {
-            let age = if s.age_ms == u32::MAX {
-                "never".to_string()
-            } else {
-                format!("{} ms", s.age_ms)
-            };
-            let mut words = vec![format!("{:<8} {:>3}  {age:>8}", s.name(), s.priority)];
-            for (flag, word) in [
-                (SourceFlags::ACTIVE, "ACTIVE"),
-                (SourceFlags::FRESH, "fresh"),
-                (SourceFlags::HEARTBEAT, "heartbeat"),
-                (SourceFlags::LIMITING, "limiting"),
-                (SourceFlags::BLOCKED, "blocked"),
-            ] {
-                if s.has(flag) {
-                    words.push(word.to_string());
-                }
-            }
+            let mut words = vec![format!(
+                "{:<8} {:>3}  {:>8}",
+                s.name(),
+                s.priority,
+                s.age_text()
+            )];
+            words.extend(SourceFlags::names(s.flags).into_iter().map(String::from));
             let style = if s.has(SourceFlags::ACTIVE) {
                 bold(Color::Green)
             } else {

@@ -76,7 +76,7 @@ pub fn remote_sources(mux: &MuxStatus) -> Vec<String> {
 }
 
 fn connect(name: &str, wait: Duration) -> anyhow::Result<Robot> {
-    let deadline = now_ns().saturating_add(u64::try_from(wait.as_nanos()).unwrap_or(u64::MAX));
+    let deadline = chassis_client::deadline(wait);
     let mut retry = Ticker::new(Duration::from_millis(100));
     loop {
         match Robot::connect(name) {
@@ -90,7 +90,7 @@ fn connect(name: &str, wait: Duration) -> anyhow::Result<Robot> {
 }
 
 fn first_mux(robot: &mut Robot, wait: Duration) -> anyhow::Result<MuxStatus> {
-    let deadline = now_ns().saturating_add(u64::try_from(wait.as_nanos()).unwrap_or(u64::MAX));
+    let deadline = chassis_client::deadline(wait);
     loop {
         if let Some(mux) = robot.wait_mux(Duration::from_millis(100))? {
             return Ok(mux);
@@ -129,36 +129,17 @@ pub fn run(config: &Config) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
     if !remote.is_empty() {
-        let (name, session, keys, stop) = (
-            config.name.clone(),
-            session.clone(),
-            keys.clone(),
-            stop.clone(),
-        );
-        let remote = remote.clone();
-        let max_age = config.max_age;
-        threads.push(
-            std::thread::Builder::new()
-                .name("cmd".into())
-                .spawn(move || {
-                    guard(&stop, || {
-                        drive(&name, &session, &keys, &remote, max_age, &stop)
-                    })
-                })?,
-        );
+        let (name, session, keys) = (config.name.clone(), session.clone(), keys.clone());
+        let (remote, max_age) = (remote.clone(), config.max_age);
+        threads.push(spawn("cmd".into(), &stop, move |stop| {
+            drive(&name, &session, &keys, &remote, max_age, stop)
+        })?);
     }
     {
-        let (name, session, keys, stop) = (
-            config.name.clone(),
-            session.clone(),
-            keys.clone(),
-            stop.clone(),
-        );
-        threads.push(
-            std::thread::Builder::new()
-                .name("control".into())
-                .spawn(move || guard(&stop, || control(&name, &session, &keys, &stop)))?,
-        );
+        let (name, session, keys) = (config.name.clone(), session.clone(), keys.clone());
+        threads.push(spawn("control".into(), &stop, move |stop| {
+            control(&name, &session, &keys, stop)
+        })?);
     }
     let result = publish(config, &session, &keys, &mut robot, mux, &stop);
     finish(&stop, threads, &session, result)
@@ -199,11 +180,19 @@ pub fn join(
     Ok(())
 }
 
-/// Runs `f`, raising the stop flag when it ends (so that the others end too).
-pub fn guard(stop: &AtomicBool, f: impl FnOnce() -> anyhow::Result<()>) -> anyhow::Result<()> {
-    let result = f();
-    stop.store(true, Ordering::Relaxed);
-    result
+/// Starts the thread `name` running `f`, which raises the stop flag when it ends (so that the
+/// others end too).
+pub fn spawn(
+    name: String,
+    stop: &Arc<AtomicBool>,
+    f: impl FnOnce(&AtomicBool) -> anyhow::Result<()> + Send + 'static,
+) -> std::io::Result<std::thread::JoinHandle<anyhow::Result<()>>> {
+    let stop = stop.clone();
+    std::thread::Builder::new().name(name).spawn(move || {
+        let result = f(&stop);
+        stop.store(true, Ordering::Relaxed);
+        result
+    })
 }
 
 fn zerr(what: &str) -> impl FnOnce(zenoh::Error) -> anyhow::Error + '_ {

@@ -191,11 +191,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env();
     tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn,zenoh=error")),
-        )
+        .with_env_filter(filter.unwrap_or_else(|_| "warn,zenoh=error".into()))
         .with_writer(std::io::stderr)
         .init();
     match run(Cli::parse()) {

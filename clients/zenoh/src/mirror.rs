@@ -45,7 +45,7 @@ use zerocopy::IntoBytes as _;
 
 use crate::convert::{Keys, Wire};
 use crate::estop::{self, Asked, Keeper};
-use crate::export::{guard, remote_sources};
+use crate::export::{remote_sources, spawn};
 use crate::link_watch::{LOST_AFTER, LinkWatch, Lost};
 use crate::net::{self, Net};
 
@@ -193,21 +193,10 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
             heard_again: heard_again.clone(),
             pending: tx.clone(),
         };
-        let (name, session, keys, stop) = (
-            name.to_string(),
-            session.clone(),
-            keys.clone(),
-            stop.clone(),
-        );
-        threads.push(
-            std::thread::Builder::new()
-                .name("control".into())
-                .spawn(move || {
-                    guard(&stop, || {
-                        serve_control(&name, &session, &keys, &link, &stop)
-                    })
-                })?,
-        );
+        let (name, session, keys) = (name.to_string(), session.clone(), keys.clone());
+        threads.push(spawn("control".into(), stop, move |stop| {
+            serve_control(&name, &session, &keys, &link, stop)
+        })?);
     }
     drop(tx);
 
@@ -294,21 +283,11 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                     Ok(m) => {
                         for source in remote_sources(&m) {
                             if sources_started.insert(source.clone()) {
-                                let (name, session, keys, stop) = (
-                                    name.to_string(),
-                                    session.clone(),
-                                    keys.clone(),
-                                    stop.clone(),
-                                );
-                                threads.push(
-                                    std::thread::Builder::new()
-                                        .name(format!("cmd/{source}"))
-                                        .spawn(move || {
-                                            guard(&stop, || {
-                                                forward(&name, &session, &keys, &source, &stop)
-                                            })
-                                        })?,
-                                );
+                                let (name, session, keys) =
+                                    (name.to_string(), session.clone(), keys.clone());
+                                threads.push(spawn(format!("cmd/{source}"), stop, move |stop| {
+                                    forward(&name, &session, &keys, &source, stop)
+                                })?);
                             }
                         }
                         last_mux = Some(m);

@@ -72,14 +72,8 @@ impl<B: ByteBus> SlcanBus<B> {
 
 impl<B: ByteBus> CanBus for SlcanBus<B> {
     fn recv(&mut self) -> Result<Option<CanFrame>, BusError> {
-        loop {
-            if let Some(frame) = self.pending.pop_front() {
-                return Ok(Some(frame));
-            }
-            if !self.fill()? {
-                return Ok(None);
-            }
-        }
+        while self.pending.is_empty() && self.fill()? {}
+        Ok(self.pending.pop_front())
     }
 
     fn send(&mut self, frame: &CanFrame) -> Result<(), BusError> {
@@ -174,14 +168,8 @@ impl<B: ByteBus> SlcanAdapter<B> {
 
 impl<B: ByteBus> CanBus for SlcanAdapter<B> {
     fn recv(&mut self) -> Result<Option<CanFrame>, BusError> {
-        loop {
-            if let Some(frame) = self.pending.pop_front() {
-                return Ok(Some(frame));
-            }
-            if !self.fill()? {
-                return Ok(None);
-            }
-        }
+        while self.pending.is_empty() && self.fill()? {}
+        Ok(self.pending.pop_front())
     }
 
     fn send(&mut self, frame: &CanFrame) -> Result<(), BusError> {

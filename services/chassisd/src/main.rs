@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use chassis_bus::{BusSpec, BusSpecError};
-use chassis_protocols::{RobotKind, UnknownRobot};
+use chassis_bus::BusSpec;
+use chassis_protocols::RobotKind;
 use chassisd_config::{Config, ConfigError, LoopMode, Overrides, RawConfig};
 use clap::{Args, Parser, Subcommand};
 use tracing::error;
@@ -37,16 +37,15 @@ struct ServiceArgs {
     // The registry's robots, listed by the registry.
     #[arg(
         long,
-        value_parser = parse_robot,
         help = format!("{}.", chassis_protocols::kind::names().join(", "))
     )]
     robot: Option<RobotKind>,
     /// AgileX wire protocol: v1 or v2 (default on a real CAN bus: detected for scout-mini, scout
     /// and bunker; on the simulator: the robot's own, SCOUT MINI v1, the others v2).
-    #[arg(long, value_parser = parse_protocol)]
+    #[arg(long)]
     protocol: Option<chassis_protocols::Protocol>,
     /// sim (default), can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD].
-    #[arg(long, value_parser = parse_bus)]
+    #[arg(long)]
     bus: Option<BusSpec>,
     /// Namespace of the robot's services, chassis/<NAME>/… (default: the robot).
     #[arg(long)]
@@ -55,7 +54,7 @@ struct ServiceArgs {
     #[arg(long)]
     config: Option<PathBuf>,
     /// The XBot's GPS receiver: serial:PATH[@BAUD] (NMEA 0183, default 4800 8N1).
-    #[arg(long, value_parser = parse_bus)]
+    #[arg(long)]
     gps: Option<BusSpec>,
     /// Drive without a safety monitor: lift the rule that the required source must be alive.
     #[arg(long)]
@@ -83,20 +82,6 @@ struct ServiceArgs {
     state_dir: Option<PathBuf>,
 }
 
-fn parse_robot(text: &str) -> Result<RobotKind, UnknownRobot> {
-    text.parse()
-}
-
-fn parse_protocol(
-    text: &str,
-) -> Result<chassis_protocols::Protocol, chassis_protocols::ProtocolError> {
-    text.parse()
-}
-
-fn parse_bus(text: &str) -> Result<BusSpec, BusSpecError> {
-    text.parse()
-}
-
 fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), ConfigError> {
     let raw = match &args.config {
         Some(path) => RawConfig::load(path)?,
@@ -120,12 +105,10 @@ fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), ConfigErro
 }
 
 fn main() -> ExitCode {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env();
     tracing_subscriber::fmt()
+        .with_env_filter(filter.unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
         .init();
     let cli = Cli::parse();
     let (is_sim, args) = match cli.command {

@@ -246,24 +246,22 @@ impl SimHandle {
     /// simulator's answer.
     pub fn inject(&self, injection: Injection) -> Result<bool, SimError> {
         let (reply, answer) = mpsc::channel();
-        self.commands
-            .send(SimCommandBox(SimCommand::Inject(injection, reply)))
-            .map_err(|_| SimError::Stopped)?;
-        // The doorbell only wakes the thread early: a full or closed socket means it is awake
-        // already or has ended, and the answer (or its absence) below says which.
-        self.doorbell.send(&[1]).ok();
-        answer
-            .recv_timeout(Duration::from_millis(200))
-            .map_err(|_| SimError::NoAnswer)
+        self.ask(SimCommand::Inject(injection, reply), &answer)
     }
 
     /// What the simulated chassis really does. Waits at most 200 ms for the simulator.
     pub fn truth(&self) -> Result<SimTruth, SimError> {
         let (reply, answer) = mpsc::channel();
+        self.ask(SimCommand::Truth(reply), &answer)
+    }
+
+    /// Sends `command` and waits at most 200 ms for its `answer`.
+    fn ask<T>(&self, command: SimCommand, answer: &mpsc::Receiver<T>) -> Result<T, SimError> {
         self.commands
-            .send(SimCommandBox(SimCommand::Truth(reply)))
+            .send(SimCommandBox(command))
             .map_err(|_| SimError::Stopped)?;
-        // As for an injection: the doorbell only wakes the thread early.
+        // The doorbell only wakes the thread early: a full or closed socket means it is awake
+        // already or has ended, and the answer (or its absence) below says which.
         self.doorbell.send(&[1]).ok();
         answer
             .recv_timeout(Duration::from_millis(200))

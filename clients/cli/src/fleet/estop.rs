@@ -15,7 +15,7 @@
 use std::sync::mpsc;
 use std::time::Duration;
 
-use chassis_client::{ControlKind, ControlRequest, ControlStatus, Robot, now_ns};
+use chassis_client::{ControlKind, ControlRequest, ControlStatus, Robot, deadline, now_ns};
 
 /// How long a robot that was not stopped is watched for its mirror's pending mark, which the
 /// mirror publishes as it forwards the request (before any answer).
@@ -78,7 +78,7 @@ fn ask(name: &str, timeout: Duration) -> Answer {
 /// Whether the robot's mux shows its e-stop pending (a mirror keeps it asked), looking for at
 /// most [`PENDING_LOOK`].
 fn kept_pending(robot: &mut Robot) -> bool {
-    let end = now_ns().saturating_add(u64::try_from(PENDING_LOOK.as_nanos()).unwrap_or(u64::MAX));
+    let end = deadline(PENDING_LOOK);
     loop {
         match robot.latest_mux() {
             Ok(Some(m)) if super::estop_pending(&m) => return true,
@@ -118,12 +118,9 @@ pub fn estop_robots(names: &[String], timeout: Duration) -> Vec<Answer> {
         }
     }
     drop(tx);
-    let deadline = now_ns().saturating_add(
-        u64::try_from((timeout + PENDING_LOOK + Duration::from_millis(500)).as_nanos())
-            .unwrap_or(u64::MAX),
-    );
+    let end = deadline(timeout + PENDING_LOOK + Duration::from_millis(500));
     while answers.len() < names.len() {
-        let left = Duration::from_nanos(deadline.saturating_sub(now_ns()));
+        let left = Duration::from_nanos(end.saturating_sub(now_ns()));
         match rx.recv_timeout(left) {
             Ok(answer) => answers.push(answer),
             Err(_) => break,

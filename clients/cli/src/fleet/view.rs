@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::{now_ns, termination_requested};
-use crossterm::event::{self, Event, KeyCode, KeyEventKind, KeyModifiers};
+use crossterm::event::{self, Event, KeyCode, KeyEventKind};
 use ratatui::layout::{Constraint, Layout};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::Line;
@@ -13,6 +13,7 @@ use ratatui::widgets::{Block, Cell, Paragraph, Row as TableRow, Table};
 
 use super::estop::{Answer, answer_lines, estop_robots};
 use super::{Fleet, FleetArgs, Row};
+use crate::top::{Screen, quit_key};
 
 const HEADER: [&str; 12] = [
     "robot", "kind", "proto", "mode", "battery", "faults", "winner", "out m/s", "speed", "link",
@@ -114,15 +115,6 @@ pub fn text(rows: &[Row]) -> String {
     out
 }
 
-/// Restores the terminal when dropped.
-struct Screen(ratatui::DefaultTerminal);
-
-impl Drop for Screen {
-    fn drop(&mut self) {
-        ratatui::restore();
-    }
-}
-
 enum Key {
     Quit,
     Estop,
@@ -130,22 +122,16 @@ enum Key {
 }
 
 fn key(event: &Event) -> Key {
-    let Event::Key(key) = event else {
-        return Key::Other;
-    };
-    if key.kind == KeyEventKind::Release {
-        return Key::Other;
+    match event {
+        _ if quit_key(event) => Key::Quit,
+        Event::Key(key)
+            if key.kind != KeyEventKind::Release
+                && matches!(key.code, KeyCode::Char('e' | 'E')) =>
+        {
+            Key::Estop
+        }
+        _ => Key::Other,
     }
-    if matches!(key.code, KeyCode::Char('q' | 'Q') | KeyCode::Esc)
-        || key.modifiers.contains(KeyModifiers::CONTROL)
-            && matches!(key.code, KeyCode::Char('c' | 'C'))
-    {
-        return Key::Quit;
-    }
-    if matches!(key.code, KeyCode::Char('e' | 'E')) {
-        return Key::Estop;
-    }
-    Key::Other
 }
 
 fn row_style(r: &Row) -> Style {
@@ -163,7 +149,7 @@ fn row_style(r: &Row) -> Style {
 pub fn live(fleet: &mut Fleet, args: &FleetArgs) -> anyhow::Result<()> {
     let interval_ns = args.interval_ms.clamp(20, 10_000) * 1_000_000;
     let timeout = Duration::from_millis(args.estop_timeout_ms.clamp(1, 60_000));
-    let mut screen = Screen(ratatui::try_init().context("setting up the terminal")?);
+    let mut screen = Screen::open()?;
     let mut next_draw = now_ns();
     let mut messages: Vec<String> = vec!["e: e-stop every robot · q: quit".into()];
     let mut pending: Option<mpsc::Receiver<Vec<Answer>>> = None;

@@ -25,9 +25,7 @@
 
 use std::collections::{HashMap, VecDeque};
 
-use chassis_client::{
-    BusFrame, ChassisState, FrameDirection, FrameKind, GROUP_SLOTS, LinkStats, MuxStatus,
-};
+use chassis_client::{BusFrame, ChassisState, FrameDirection, FrameKind, MuxStatus};
 use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
 use chassis_protocols::{CanFrame, Profile};
 
@@ -350,17 +348,6 @@ impl Samples {
     }
 }
 
-/// The content of a state sample, without what changes on every publish.
-fn body(state: &ChassisState) -> ChassisState {
-    ChassisState {
-        seq: 0,
-        stamp_ns: 0,
-        group_stamp_ns: [0; GROUP_SLOTS],
-        link: LinkStats::default(),
-        ..*state
-    }
-}
-
 /// A mux decision that changed the output, waiting for its motion frame.
 #[derive(Debug, Clone, Copy)]
 struct Decision {
@@ -398,7 +385,7 @@ impl Latency {
             let frame_made_it = self
                 .last_state
                 .as_ref()
-                .is_some_and(|last| state.stamp_ns > last.stamp_ns && body(state) != body(last));
+                .is_some_and(|last| state.stamp_ns > last.stamp_ns && state.body() != last.body());
             if frame_made_it {
                 self.frame_to_state.push(age);
             }

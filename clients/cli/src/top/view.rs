@@ -229,26 +229,7 @@ fn mux_panel(s: &Snapshot) -> Panel {
         "", "source", "prio", "timeout", "age"
     ))));
     for src in m.sources() {
-        let age = if src.age_ms == u32::MAX {
-            "never".to_string()
-        } else {
-            format!("{} ms", src.age_ms)
-        };
-        let mut flags = Vec::new();
-        for (flag, word) in [
-            (SourceFlags::ACTIVE, "ACTIVE"),
-            (SourceFlags::REQUIRED, "required"),
-            (SourceFlags::REMOTE, "remote"),
-            (SourceFlags::FRESH, "fresh"),
-            (SourceFlags::HEARTBEAT, "heartbeat"),
-            (SourceFlags::LIMITING, "limiting"),
-            (SourceFlags::BLOCKED, "blocked"),
-            (SourceFlags::AWAITING_ZERO, "awaiting zero"),
-        ] {
-            if src.has(flag) {
-                flags.push(word);
-            }
-        }
+        let mut flags = SourceFlags::names(src.flags);
         if !src.has(SourceFlags::FRESH) && src.age_ms != u32::MAX {
             flags.push("stale");
         }
@@ -270,7 +251,7 @@ fn mux_panel(s: &Snapshot) -> Panel {
                     src.name(),
                     src.priority,
                     format!("{} ms", src.timeout_ms),
-                    age,
+                    src.age_text(),
                     flags.join(" ")
                 ),
                 style,
@@ -391,14 +372,9 @@ fn bus_panel(s: &Snapshot) -> Panel {
         }
     ))));
     for k in s.bus.keys() {
-        let dir = if k.direction == FrameDirection::TX {
-            "TX"
-        } else {
-            "RX"
-        };
         lines.push(Line::from(vec![
             Span::styled(
-                format!("{dir:<4}"),
+                format!("{:<4}", FrameDirection::name(k.direction).to_uppercase()),
                 if k.direction == FrameDirection::TX {
                     bold(Color::Magenta)
                 } else {

@@ -76,9 +76,9 @@ use std::time::Duration;
 use chassis_bus::can_controller::{self, Controller, ControllerReport};
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    ControllerState, FaultFlags, FrameDirection, FrameKind, GROUP_SLOTS, GpsFix, Group, LinkFlags,
-    LockStatus, MuxStatus, RobotDescription, SourceFlags, SourceStatus, Stop, ValidRequest,
-    VelocityRequest, WireProtocol, ZeroReason,
+    ControllerState, FaultFlags, FrameDirection, FrameKind, GpsFix, Group, LinkFlags, LockStatus,
+    MuxStatus, RobotDescription, SourceFlags, SourceStatus, Stop, ValidRequest, VelocityRequest,
+    WireProtocol, ZeroReason,
 };
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
@@ -280,17 +280,6 @@ struct Throttles {
     publish: Throttle,
     controller: Throttle,
     bus_errors: Throttle,
-}
-
-/// The part of a state sample that changes only when the chassis reports something new.
-fn state_body(state: &ChassisState) -> ChassisState {
-    ChassisState {
-        seq: 0,
-        stamp_ns: 0,
-        group_stamp_ns: [0; GROUP_SLOTS],
-        link: Default::default(),
-        ..*state
-    }
 }
 
 /// The service's decisions: see the module documentation.
@@ -1094,14 +1083,14 @@ impl Engine {
         state.seq = self.state_seq;
         self.last_rx_frames = state.link.rx_frames;
         self.last_gps_stamp_ns = self.gps_stamp_ns;
-        self.last_state_body = Some(state_body(&state));
+        self.last_state_body = Some(state.body());
         self.last_state_publish = now;
         self.publications
             .push_back(ToPublish::State(Box::new(state)));
     }
 
     fn publish_state_if_changed(&mut self, now: Timestamp) {
-        let body = state_body(self.driver.state());
+        let body = self.driver.state().body();
         if self
             .last_state_body
             .is_none_or(|last| last.as_bytes() != body.as_bytes())
