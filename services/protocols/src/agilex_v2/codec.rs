@@ -172,18 +172,6 @@ struct UwbWire {
     channels: [i8; 3],
 }
 
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct VersionWire {
-    versions: [[u8; 2]; 4],
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct OffsetWire {
-    pulses: I16,
-}
-
 // ---------------------------------------------------------------------------------------------
 // Frames.
 
@@ -480,6 +468,14 @@ fn lateral_sign(profile: &V2Profile) -> f64 {
     }
 }
 
+/// 0x432 / 0x43B b0-1.
+fn zero_offset(raw_id: u32, data: &[u8]) -> Result<SteeringZeroOffset, DecodeError> {
+    let pulses: I16 = read_prefix(raw_id, data)?;
+    Ok(SteeringZeroOffset {
+        pulses: pulses.get(),
+    })
+}
+
 fn decode_motion(raw_id: u32, data: &[u8], profile: &V2Profile) -> Result<Motion, DecodeError> {
     let w: MotionWire = read_prefix(raw_id, data)?;
     Ok(Motion {
@@ -604,12 +600,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
             }
             Frame::SteeringZero
         }
-        id::STEERING_ZERO_OFFSET => {
-            let w: OffsetWire = read_prefix(raw_id, data)?;
-            Frame::SteeringZeroOffset(SteeringZeroOffset {
-                pulses: w.pulses.get(),
-            })
-        }
+        id::STEERING_ZERO_OFFSET => Frame::SteeringZeroOffset(zero_offset(raw_id, data)?),
         id::STEERING_ZERO_QUERY => match first_byte(raw_id, data)? {
             0xAA => Frame::SteeringZeroQuery,
             other => return Err(invalid(raw_id, "steering zero query", other)),
@@ -620,10 +611,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
             other => return Err(invalid(raw_id, "steering zero acknowledgement", other)),
         },
         id::STEERING_ZERO_OFFSET_REPLY => {
-            let w: OffsetWire = read_prefix(raw_id, data)?;
-            Frame::SteeringZeroOffsetReply(SteeringZeroOffset {
-                pulses: w.pulses.get(),
-            })
+            Frame::SteeringZeroOffsetReply(zero_offset(raw_id, data)?)
         }
         id::CLEAR_FAULT => Frame::ClearFault(ClearFault {
             code: first_byte(raw_id, data)?,
@@ -672,8 +660,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
             }
         },
         id::VERSION => {
-            let w: VersionWire = read_prefix(raw_id, data)?;
-            let [controller_hw, driver_hw, controller_sw, driver_sw] = w.versions;
+            let [controller_hw, driver_hw, controller_sw, driver_sw] = read_prefix(raw_id, data)?;
             Frame::Version(Version {
                 controller_hw,
                 driver_hw,
@@ -792,14 +779,22 @@ impl Frame {
                 CanFrame::from_parts(id, encode_motion(m, profile)?)
             }
             Frame::LightCommand(l) | Frame::LightState(l) => {
-                for (field, v) in [
-                    ("front_brightness_pct", l.front_brightness_pct),
-                    ("rear_brightness_pct", l.rear_brightness_pct),
+                for (field, v, max) in [
+                    (
+                        "front_brightness_pct",
+                        l.front_brightness_pct,
+                        MAX_BRIGHTNESS_PCT,
+                    ),
+                    (
+                        "rear_brightness_pct",
+                        l.rear_brightness_pct,
+                        MAX_BRIGHTNESS_PCT,
+                    ),
+                    ("front_mode", l.front_mode, MAX_LIGHT_MODE),
+                    ("rear_mode", l.rear_mode, MAX_LIGHT_MODE),
                 ] {
-                    check_u8(field, v, 0, MAX_BRIGHTNESS_PCT)?;
+                    check_u8(field, v, 0, max)?;
                 }
-                check_u8("front_mode", l.front_mode, 0, MAX_LIGHT_MODE)?;
-                check_u8("rear_mode", l.rear_mode, 0, MAX_LIGHT_MODE)?;
                 CanFrame::from_parts(
                     id,
                     wire_bytes::<8, _>(LightWire {
@@ -904,9 +899,7 @@ impl Frame {
             ),
             Frame::Version(v) => CanFrame::from_parts(
                 id,
-                wire_bytes::<8, _>(VersionWire {
-                    versions: [v.controller_hw, v.driver_hw, v.controller_sw, v.driver_sw],
-                }),
+                wire_bytes::<8, _>([v.controller_hw, v.driver_hw, v.controller_sw, v.driver_sw]),
             ),
             Frame::SteeringZeroAck { done } => CanFrame::from_parts(
                 id,
