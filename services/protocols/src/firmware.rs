@@ -428,11 +428,6 @@ impl<T> Outbox<T> {
         }
     }
 
-    /// True while an injected silence lasts.
-    pub(crate) fn is_silenced(&self, now: Timestamp) -> bool {
-        self.silent_until.is_some_and(|t| now < t)
-    }
-
     /// When the injected silence ends, if one is pending.
     pub(crate) fn silent_until(&self) -> Option<Timestamp> {
         self.silent_until

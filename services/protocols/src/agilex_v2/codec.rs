@@ -390,11 +390,6 @@ impl BmsProtection {
             })
             .collect()
     }
-
-    /// Any protection bit is set.
-    pub fn any_protection(&self) -> bool {
-        !self.names(true).is_empty()
-    }
 }
 
 /// Every protocol-V2 frame.
@@ -438,11 +433,6 @@ pub enum Frame {
         done: bool,
     },
     SteeringZeroOffsetReply(SteeringZeroOffset),
-}
-
-/// The name of 0x211 b1 under the profile's ⚠ D-2 codes.
-pub fn control_name(mode: u8, profile: &V2Profile) -> &'static str {
-    code_name(mode, &profile.mode_codes.names())
 }
 
 /// The name of a 0x141 / 0x291 b0 motion mode under the profile's ⚠ D-12 codes: dual_ackermann,
@@ -622,7 +612,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
                 vehicle_state: w.vehicle_state,
                 vehicle: vehicle::name(w.vehicle_state),
                 mode: w.mode,
-                control: control_name(w.mode, profile),
+                control: code_name(w.mode, &profile.mode_codes.names()),
                 battery_voltage_v: si(w.battery_dv.get(), 10.0),
                 fault_word: w.fault_word.get(),
                 b6: w.b6,

@@ -252,7 +252,7 @@ impl V2Driver {
             Frame::BmsProtection(p) => agilex_driver::set_bits(
                 &mut self.other_faults,
                 FaultFlags::BMS_ALARM,
-                p.any_protection(),
+                !p.names(true).is_empty(),
             ),
             Frame::VersionText(t) => self.core.notice(
                 Level::Info,
