@@ -177,11 +177,11 @@ impl std::ops::Add for InjectedCounts {
     }
 }
 
-/// The contract every simulated firmware fulfils.
 /// A simulated firmware of any robot, as the registry makes them; it may run on a thread of its
 /// own.
 pub type BoxedFirmware = Box<dyn Firmware + Send>;
 
+/// The contract every simulated firmware fulfils.
 pub trait Firmware {
     fn robot(&self) -> RobotKind;
 
