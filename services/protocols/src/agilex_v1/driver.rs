@@ -359,41 +359,24 @@ pub(crate) fn normalize_mode(wire_mode: u8) -> u8 {
 
 /// The normalized `FaultFlags` of a 0x151 fault word (b4-b5 read big-endian).
 pub fn normalize_faults(word: u16) -> u64 {
+    use chassis_interfaces::FaultFlags as F;
     const MAP: [(u16, u64); 13] = [
-        (fault::COMMAND_CHECKSUM, FaultFlags::COMMAND_CHECKSUM),
-        (
-            fault::DRIVE_OVER_TEMP_ALARM,
-            FaultFlags::OVER_TEMPERATURE_WARNING,
-        ),
-        (
-            fault::MOTOR_OVER_CURRENT_ALARM,
-            FaultFlags::OVER_CURRENT_WARNING,
-        ),
+        (fault::COMMAND_CHECKSUM, F::COMMAND_CHECKSUM),
+        (fault::DRIVE_OVER_TEMP_ALARM, F::OVER_TEMPERATURE_WARNING),
+        (fault::MOTOR_OVER_CURRENT_ALARM, F::OVER_CURRENT_WARNING),
         (
             fault::BATTERY_UNDER_VOLTAGE_ALARM,
-            FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING,
+            F::BATTERY_UNDER_VOLTAGE_WARNING,
         ),
-        (fault::RC_DISCONNECTED, FaultFlags::RC_LINK_LOST),
-        (
-            fault::BATTERY_UNDER_VOLTAGE,
-            FaultFlags::BATTERY_UNDER_VOLTAGE,
-        ),
-        (
-            fault::BATTERY_OVER_VOLTAGE,
-            FaultFlags::BATTERY_OVER_VOLTAGE,
-        ),
-        (fault::MOTOR_1_COMM, FaultFlags::MOTOR_1_COMM_LOST),
-        (fault::MOTOR_2_COMM, FaultFlags::MOTOR_2_COMM_LOST),
-        (fault::MOTOR_3_COMM, FaultFlags::MOTOR_3_COMM_LOST),
-        (fault::MOTOR_4_COMM, FaultFlags::MOTOR_4_COMM_LOST),
-        (
-            fault::DRIVE_OVER_TEMP_PROTECTION,
-            FaultFlags::OVER_TEMPERATURE,
-        ),
-        (
-            fault::MOTOR_OVER_CURRENT_PROTECTION,
-            FaultFlags::OVER_CURRENT,
-        ),
+        (fault::RC_DISCONNECTED, F::RC_LINK_LOST),
+        (fault::BATTERY_UNDER_VOLTAGE, F::BATTERY_UNDER_VOLTAGE),
+        (fault::BATTERY_OVER_VOLTAGE, F::BATTERY_OVER_VOLTAGE),
+        (fault::MOTOR_1_COMM, F::MOTOR_1_COMM_LOST),
+        (fault::MOTOR_2_COMM, F::MOTOR_2_COMM_LOST),
+        (fault::MOTOR_3_COMM, F::MOTOR_3_COMM_LOST),
+        (fault::MOTOR_4_COMM, F::MOTOR_4_COMM_LOST),
+        (fault::DRIVE_OVER_TEMP_PROTECTION, F::OVER_TEMPERATURE),
+        (fault::MOTOR_OVER_CURRENT_PROTECTION, F::OVER_CURRENT),
     ];
     flags_of(word, &MAP)
 }
