@@ -253,33 +253,25 @@ impl V1Driver {
         match frame {
             Frame::SystemStatus(s) => self.apply_system(now, s),
             Frame::MotionFeedback(m) => {
-                self.core.state.motion.linear_mps = m.linear_mps as f32;
-                self.core.state.motion.angular_radps = m.angular_radps as f32;
+                let (v, w) = (m.linear_mps, m.angular_radps);
+                self.core.state.motion.linear_mps = v as f32;
+                self.core.state.motion.angular_radps = w as f32;
                 self.core.state.motion.lateral_mps = 0.0;
                 self.core.state.touch(Group::Motion, t);
-                self.pose.update(
-                    now,
-                    m.linear_mps,
-                    0.0,
-                    m.angular_radps,
-                    &mut self.core.state.odometry,
-                );
+                self.pose
+                    .update(now, v, 0.0, w, &mut self.core.state.odometry);
                 self.core.state.touch(Group::Pose, t);
             }
             Frame::Motor(m) => {
-                if let Some(motor) = self
-                    .core
-                    .state
-                    .motors
-                    .get_mut(usize::from(m.motor.clamp(1, 4) - 1))
-                {
+                let state = &mut self.core.state;
+                if let Some(motor) = state.motors.get_mut(usize::from(m.motor.clamp(1, 4) - 1)) {
                     motor.current_a = m.current_a as f32;
                     motor.rpm = m.rpm as f32;
                     motor.driver_temp_c = m.driver_temp_c as f32;
                     motor.motor_temp_c = m.motor_temp_c as f32;
                 }
-                self.core.state.touch(Group::MotorDrive, t);
-                self.core.state.touch(Group::MotorDriver, t);
+                state.touch(Group::MotorDrive, t);
+                state.touch(Group::MotorDriver, t);
             }
             Frame::LightState(l) => {
                 let lights = &mut self.core.state.lights;
