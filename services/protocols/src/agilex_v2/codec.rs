@@ -874,19 +874,11 @@ impl Frame {
             }
             Frame::BmsData(b) => CanFrame::from_parts(id, b.wire(1.0 / profile.bms_voltage_lsb_v)?),
             Frame::BmsAlarm(b) => CanFrame::from_parts(id, b.alarm_flags().to_le_bytes()),
-            Frame::BmsProtection(p) => CanFrame::from_parts(
-                id,
-                [
-                    p.codes[0],
-                    p.codes[1],
-                    p.codes[2],
-                    p.codes[3],
-                    p.max_cell_temp_c.to_be_bytes()[0],
-                    p.min_cell_temp_c.to_be_bytes()[0],
-                    0,
-                    p.count,
-                ],
-            ),
+            Frame::BmsProtection(p) => {
+                let [c1, c2, c3, c4] = p.codes;
+                let [max, min] = [p.max_cell_temp_c, p.min_cell_temp_c].map(|t| t.to_be_bytes()[0]);
+                CanFrame::from_parts(id, [c1, c2, c3, c4, max, min, 0, p.count])
+            }
             Frame::Version(v) => CanFrame::from_parts(
                 id,
                 wire_bytes::<8, _>([v.controller_hw, v.driver_hw, v.controller_sw, v.driver_sw]),
