@@ -236,7 +236,8 @@ impl BrakeKeeper {
         self.fitted
     }
 
-    fn idle_engage_at(&self) -> Option<Timestamp> {
+    /// When [`BrakeKeeper::idle_engage_due`] turns true, if ever.
+    pub(crate) fn deadline(&self) -> Option<Timestamp> {
         if !self.fitted
             || self.idle_engage.is_zero()
             || self.belief != BrakeBelief::Released
@@ -250,16 +251,11 @@ impl BrakeKeeper {
     /// True (and believed engaged from now) when a released brake has been idle long enough to
     /// be engaged at `now`: the caller sends the engagement.
     pub(crate) fn idle_engage_due(&mut self, now: Timestamp, bus_down: bool) -> bool {
-        if bus_down || self.idle_engage_at().is_none_or(|due| now < due) {
+        if bus_down || self.deadline().is_none_or(|due| now < due) {
             return false;
         }
         self.belief = BrakeBelief::Engaged;
         true
-    }
-
-    /// When [`BrakeKeeper::idle_engage_due`] turns true, if ever.
-    pub(crate) fn deadline(&self) -> Option<Timestamp> {
-        self.idle_engage_at()
     }
 
     /// True (and believed released from now) when motion must be preceded by a release: a
@@ -333,12 +329,9 @@ impl SteeringZero {
 
     /// Answers a request still waiting at its deadline with a timeout.
     pub(crate) fn expire(&mut self, core: &mut DriverCore, now: Timestamp) {
-        let Some((token, deadline)) = self.pending else {
+        let Some((token, _)) = self.pending.filter(|(_, deadline)| now >= *deadline) else {
             return;
         };
-        if now < deadline {
-            return;
-        }
         self.pending = None;
         core.set_flag(LinkFlags::STEERING_ZERO_PENDING, false);
         core.events.push_back(DriverEvent::ControlDone {

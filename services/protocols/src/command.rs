@@ -156,7 +156,7 @@ pub enum ControlAction {
 /// mux).
 pub fn command_to_request(command: &Command) -> Option<chassis_interfaces::ControlRequest> {
     use chassis_interfaces::{ControlKind, ControlMode, ControlRequest};
-    let on = |b: bool| u8::from(b);
+    let flag = |kind, on: bool| ControlRequest::new(kind).with_arg(0, u8::from(on));
     Some(match *command {
         Command::Velocity(_) => return None,
         Command::Mode { take_control } => ControlRequest::new(ControlKind::MODE).with_arg(
@@ -167,9 +167,7 @@ pub fn command_to_request(command: &Command) -> Option<chassis_interfaces::Contr
                 ControlMode::STANDBY
             },
         ),
-        Command::Brake { engage } => {
-            ControlRequest::new(ControlKind::BRAKE).with_arg(0, on(engage))
-        }
+        Command::Brake { engage } => flag(ControlKind::BRAKE, engage),
         Command::ClearFaults { which } => {
             ControlRequest::new(ControlKind::CLEAR_FAULTS).with_arg(0, which)
         }
@@ -180,26 +178,18 @@ pub fn command_to_request(command: &Command) -> Option<chassis_interfaces::Contr
         } => ControlRequest::new(ControlKind::LIGHTS)
             .with_arg(0, mode)
             .with_arg(1, brightness_pct)
-            .with_arg(2, on(enable)),
-        Command::OffRoad { enter } => {
-            ControlRequest::new(ControlKind::OFF_ROAD).with_arg(0, on(enter))
-        }
+            .with_arg(2, u8::from(enable)),
+        Command::OffRoad { enter } => flag(ControlKind::OFF_ROAD, enter),
         Command::Lift {
             enable,
             position_pct,
-        } => ControlRequest::new(ControlKind::LIFT)
-            .with_arg(0, on(enable))
-            .with_value(0, position_pct as f32),
+        } => flag(ControlKind::LIFT, enable).with_value(0, position_pct as f32),
         Command::Servos { pan_rad, tilt_rad } => ControlRequest::new(ControlKind::SERVOS)
             .with_value(0, pan_rad as f32)
             .with_value(1, tilt_rad as f32),
-        Command::Power { enable } => {
-            ControlRequest::new(ControlKind::POWER).with_arg(0, on(enable))
-        }
+        Command::Power { enable } => flag(ControlKind::POWER, enable),
         Command::SteeringZero => ControlRequest::new(ControlKind::STEERING_ZERO),
-        Command::Silent { enter } => {
-            ControlRequest::new(ControlKind::SILENT).with_arg(0, on(enter))
-        }
+        Command::Silent { enter } => flag(ControlKind::SILENT, enter),
     })
 }
 

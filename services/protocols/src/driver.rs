@@ -291,13 +291,10 @@ impl CommandSchedule {
     }
 
     fn pending_due(&self) -> Option<Timestamp> {
-        if !self.pending {
-            return None;
-        }
-        match self.last_sent {
-            Some(last) if !self.urgent => Some(last + self.min_interval),
-            _ => Some(Timestamp::ZERO),
-        }
+        self.pending.then(|| match self.last_sent {
+            Some(last) if !self.urgent => last + self.min_interval,
+            _ => Timestamp::ZERO,
+        })
     }
 
     /// The heartbeat slot a motion frame sent at `now` serves (its grid time, at or before
@@ -316,10 +313,8 @@ impl CommandSchedule {
 
     /// When the next motion frame is due.
     pub fn deadline(&self) -> Timestamp {
-        match self.pending_due() {
-            Some(t) => t.min(self.heartbeat.next()),
-            None => self.heartbeat.next(),
-        }
+        let heartbeat = self.heartbeat.next();
+        self.pending_due().map_or(heartbeat, |t| t.min(heartbeat))
     }
 
     /// Restart the grid at `now` (after the bus came back).
@@ -494,12 +489,8 @@ impl DriverCore {
         if self.bus_down {
             return None;
         }
-        let next = Some(self.schedule.deadline());
-        if self.was_silent {
-            next
-        } else {
-            earliest(next, Some(self.link.deadline()))
-        }
+        let silence = (!self.was_silent).then(|| self.link.deadline());
+        earliest(Some(self.schedule.deadline()), silence)
     }
 
     /// The bus went down or came back. Returns false when nothing changed. Going down raises

@@ -177,11 +177,11 @@ impl std::ops::Add for InjectedCounts {
     }
 }
 
-/// The contract every simulated firmware fulfils.
 /// A simulated firmware of any robot, as the registry makes them; it may run on a thread of its
 /// own.
 pub type BoxedFirmware = Box<dyn Firmware + Send>;
 
+/// The contract every simulated firmware fulfils.
 pub trait Firmware {
     fn robot(&self) -> RobotKind;
 
@@ -426,11 +426,6 @@ impl<T> Outbox<T> {
         if !duration.is_zero() {
             self.queue.clear();
         }
-    }
-
-    /// True while an injected silence lasts.
-    pub(crate) fn is_silenced(&self, now: Timestamp) -> bool {
-        self.silent_until.is_some_and(|t| now < t)
     }
 
     /// When the injected silence ends, if one is pending.

@@ -30,15 +30,11 @@ pub(crate) fn read_bool(id: u32, field: &'static str, byte: u8) -> Result<bool, 
 
 /// The first data byte of frame `id` (one-byte commands); none is [`DecodeError::TooShort`].
 pub(crate) fn first_byte(id: u32, data: &[u8]) -> Result<u8, DecodeError> {
-    data.first().copied().ok_or(DecodeError::TooShort {
-        id,
-        len: 0,
-        need: 1,
-    })
+    read_prefix(id, data)
 }
 
-/// [`DecodeError::InvalidValue`] for a byte-sized field of frame `id`.
-pub(crate) fn invalid(id: u32, field: &'static str, value: u8) -> DecodeError {
+/// [`DecodeError::InvalidValue`] for a field of frame `id`.
+pub(crate) fn invalid(id: u32, field: &'static str, value: impl Into<u32>) -> DecodeError {
     DecodeError::InvalidValue {
         id,
         field,

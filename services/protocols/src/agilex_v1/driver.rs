@@ -253,33 +253,25 @@ impl V1Driver {
         match frame {
             Frame::SystemStatus(s) => self.apply_system(now, s),
             Frame::MotionFeedback(m) => {
-                self.core.state.motion.linear_mps = m.linear_mps as f32;
-                self.core.state.motion.angular_radps = m.angular_radps as f32;
+                let (v, w) = (m.linear_mps, m.angular_radps);
+                self.core.state.motion.linear_mps = v as f32;
+                self.core.state.motion.angular_radps = w as f32;
                 self.core.state.motion.lateral_mps = 0.0;
                 self.core.state.touch(Group::Motion, t);
-                self.pose.update(
-                    now,
-                    m.linear_mps,
-                    0.0,
-                    m.angular_radps,
-                    &mut self.core.state.odometry,
-                );
+                self.pose
+                    .update(now, v, 0.0, w, &mut self.core.state.odometry);
                 self.core.state.touch(Group::Pose, t);
             }
             Frame::Motor(m) => {
-                if let Some(motor) = self
-                    .core
-                    .state
-                    .motors
-                    .get_mut(usize::from(m.motor.clamp(1, 4) - 1))
-                {
+                let state = &mut self.core.state;
+                if let Some(motor) = state.motors.get_mut(usize::from(m.motor.clamp(1, 4) - 1)) {
                     motor.current_a = m.current_a as f32;
                     motor.rpm = m.rpm as f32;
                     motor.driver_temp_c = m.driver_temp_c as f32;
                     motor.motor_temp_c = m.motor_temp_c as f32;
                 }
-                self.core.state.touch(Group::MotorDrive, t);
-                self.core.state.touch(Group::MotorDriver, t);
+                state.touch(Group::MotorDrive, t);
+                state.touch(Group::MotorDriver, t);
             }
             Frame::LightState(l) => {
                 let lights = &mut self.core.state.lights;
@@ -359,41 +351,24 @@ pub(crate) fn normalize_mode(wire_mode: u8) -> u8 {
 
 /// The normalized `FaultFlags` of a 0x151 fault word (b4-b5 read big-endian).
 pub fn normalize_faults(word: u16) -> u64 {
+    use chassis_interfaces::FaultFlags as F;
     const MAP: [(u16, u64); 13] = [
-        (fault::COMMAND_CHECKSUM, FaultFlags::COMMAND_CHECKSUM),
-        (
-            fault::DRIVE_OVER_TEMP_ALARM,
-            FaultFlags::OVER_TEMPERATURE_WARNING,
-        ),
-        (
-            fault::MOTOR_OVER_CURRENT_ALARM,
-            FaultFlags::OVER_CURRENT_WARNING,
-        ),
+        (fault::COMMAND_CHECKSUM, F::COMMAND_CHECKSUM),
+        (fault::DRIVE_OVER_TEMP_ALARM, F::OVER_TEMPERATURE_WARNING),
+        (fault::MOTOR_OVER_CURRENT_ALARM, F::OVER_CURRENT_WARNING),
         (
             fault::BATTERY_UNDER_VOLTAGE_ALARM,
-            FaultFlags::BATTERY_UNDER_VOLTAGE_WARNING,
+            F::BATTERY_UNDER_VOLTAGE_WARNING,
         ),
-        (fault::RC_DISCONNECTED, FaultFlags::RC_LINK_LOST),
-        (
-            fault::BATTERY_UNDER_VOLTAGE,
-            FaultFlags::BATTERY_UNDER_VOLTAGE,
-        ),
-        (
-            fault::BATTERY_OVER_VOLTAGE,
-            FaultFlags::BATTERY_OVER_VOLTAGE,
-        ),
-        (fault::MOTOR_1_COMM, FaultFlags::MOTOR_1_COMM_LOST),
-        (fault::MOTOR_2_COMM, FaultFlags::MOTOR_2_COMM_LOST),
-        (fault::MOTOR_3_COMM, FaultFlags::MOTOR_3_COMM_LOST),
-        (fault::MOTOR_4_COMM, FaultFlags::MOTOR_4_COMM_LOST),
-        (
-            fault::DRIVE_OVER_TEMP_PROTECTION,
-            FaultFlags::OVER_TEMPERATURE,
-        ),
-        (
-            fault::MOTOR_OVER_CURRENT_PROTECTION,
-            FaultFlags::OVER_CURRENT,
-        ),
+        (fault::RC_DISCONNECTED, F::RC_LINK_LOST),
+        (fault::BATTERY_UNDER_VOLTAGE, F::BATTERY_UNDER_VOLTAGE),
+        (fault::BATTERY_OVER_VOLTAGE, F::BATTERY_OVER_VOLTAGE),
+        (fault::MOTOR_1_COMM, F::MOTOR_1_COMM_LOST),
+        (fault::MOTOR_2_COMM, F::MOTOR_2_COMM_LOST),
+        (fault::MOTOR_3_COMM, F::MOTOR_3_COMM_LOST),
+        (fault::MOTOR_4_COMM, F::MOTOR_4_COMM_LOST),
+        (fault::DRIVE_OVER_TEMP_PROTECTION, F::OVER_TEMPERATURE),
+        (fault::MOTOR_OVER_CURRENT_PROTECTION, F::OVER_CURRENT),
     ];
     flags_of(word, &MAP)
 }

@@ -34,19 +34,8 @@ impl SkidCommand {
     }
 }
 
-/// Largest linear speed the driver commands: the profile's limit, capped by the full scale.
-pub fn linear_limit_mps(profile: &V1Profile) -> f64 {
-    profile.max_linear_mps.min(profile.linear_full_scale_mps)
-}
-
-/// Largest yaw rate the driver commands: the profile's limit, capped by the ⚠ full scale.
-pub fn angular_limit_radps(profile: &V1Profile) -> f64 {
-    profile
-        .max_angular_rad_s
-        .min(profile.angular_full_scale_rad_s)
-}
-
-/// Limits a twist to the profile ([`ClampFlags::LINEAR_LIMIT`], [`ClampFlags::ANGULAR_LIMIT`])
+/// Limits a twist to the profile's limits, each capped by the (⚠ angular) full scale
+/// ([`ClampFlags::LINEAR_LIMIT`], [`ClampFlags::ANGULAR_LIMIT`])
 /// and rounds it to whole percents ([`ClampFlags::QUANTISED`] when that changed it at the `f32`
 /// resolution a velocity is asked in). The skid steer turns on the spot, so every direction is
 /// achievable.
@@ -60,16 +49,12 @@ pub fn twist_to_command(linear_mps: f64, angular_radps: f64, profile: &V1Profile
             value
         }
     };
-    let linear = limit(
-        linear_mps,
-        linear_limit_mps(profile),
-        ClampFlags::LINEAR_LIMIT,
-    );
-    let angular = limit(
-        angular_radps,
-        angular_limit_radps(profile),
-        ClampFlags::ANGULAR_LIMIT,
-    );
+    let linear_max = profile.max_linear_mps.min(profile.linear_full_scale_mps);
+    let angular_max = profile
+        .max_angular_rad_s
+        .min(profile.angular_full_scale_rad_s);
+    let linear = limit(linear_mps, linear_max, ClampFlags::LINEAR_LIMIT);
+    let angular = limit(angular_radps, angular_max, ClampFlags::ANGULAR_LIMIT);
     let (linear_pct, linear_sent) = quantise_percent(linear, profile.linear_full_scale_mps);
     let (angular_pct, angular_sent) = quantise_percent(angular, profile.angular_full_scale_rad_s);
     let changed = |asked: f64, sent: f64| asked as f32 != sent as f32;
@@ -94,17 +79,17 @@ pub fn side_speeds(linear_mps: f64, angular_radps: f64, profile: &V1Profile) -> 
     )
 }
 
-/// The twist (v, ω) of left and right side speeds, m/s: the inverse of [`side_speeds`].
-pub fn twist_from_side_speeds(left_mps: f64, right_mps: f64, profile: &V1Profile) -> (f64, f64) {
-    (
-        (left_mps + right_mps) / 2.0,
-        (right_mps - left_mps) / profile.track_m,
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The twist (v, ω) of left and right side speeds, m/s: the inverse of [`side_speeds`].
+    fn twist_from_side_speeds(left_mps: f64, right_mps: f64, profile: &V1Profile) -> (f64, f64) {
+        (
+            (left_mps + right_mps) / 2.0,
+            (right_mps - left_mps) / profile.track_m,
+        )
+    }
 
     fn p() -> V1Profile {
         V1Profile::default()

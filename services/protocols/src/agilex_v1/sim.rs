@@ -378,23 +378,22 @@ impl V1Sim {
         self.body.is_booting() || self.latched != 0
     }
 
+    /// The hottest motor driver, °C, and the largest rms motor current, A.
+    fn peaks(&self) -> (f64, f64) {
+        let max = |v: [f64; 4]| v.into_iter().fold(f64::NEG_INFINITY, f64::max);
+        (max(self.driver_temp_c), max(self.motor_currents_rms_a()))
+    }
+
     fn fault_word(&self, now: Timestamp) -> u16 {
+        let (hottest_c, rms_a) = self.peaks();
         let mut word = self.latched;
         if self.checksum_fault_until.is_some_and(|t| now < t) {
             word |= fault::COMMAND_CHECKSUM;
         }
-        if self
-            .driver_temp_c
-            .iter()
-            .any(|t| *t > Self::OVER_TEMPERATURE_ALARM_C)
-        {
+        if hottest_c > Self::OVER_TEMPERATURE_ALARM_C {
             word |= fault::DRIVE_OVER_TEMP_ALARM;
         }
-        if self
-            .motor_currents_rms_a()
-            .iter()
-            .any(|i| *i > Self::OVER_CURRENT_ALARM_A)
-        {
+        if rms_a > Self::OVER_CURRENT_ALARM_A {
             word |= fault::MOTOR_OVER_CURRENT_ALARM;
         }
         if self.body.battery_voltage_v() < self.profile.under_voltage_alarm_v {
@@ -427,18 +426,11 @@ impl V1Sim {
         if self.body.battery_voltage_v() < self.profile.under_voltage_failure_v {
             self.latched |= fault::BATTERY_UNDER_VOLTAGE;
         }
-        if self
-            .driver_temp_c
-            .iter()
-            .any(|t| *t > Self::OVER_TEMPERATURE_PROTECTION_C)
-        {
+        let (hottest_c, rms_a) = self.peaks();
+        if hottest_c > Self::OVER_TEMPERATURE_PROTECTION_C {
             self.latched |= fault::DRIVE_OVER_TEMP_PROTECTION;
         }
-        if self
-            .motor_currents_rms_a()
-            .iter()
-            .any(|i| *i > Self::OVER_CURRENT_PROTECTION_A)
-        {
+        if rms_a > Self::OVER_CURRENT_PROTECTION_A {
             self.latched |= fault::MOTOR_OVER_CURRENT_PROTECTION;
         }
     }
@@ -588,10 +580,6 @@ impl V1Sim {
     // -----------------------------------------------------------------------------------------
     // Output.
 
-    fn is_quiet(&self, now: Timestamp) -> bool {
-        self.body.is_quiet(now)
-    }
-
     fn send(&mut self, now: Timestamp, frame: Frame) {
         self.send_injected(now, frame, InjectedCounts::default());
     }
@@ -599,7 +587,7 @@ impl V1Sim {
     /// Like [`V1Sim::send`], for a frame that carries an injected fault (a flood's); a
     /// pending [`Injection::BadChecksums`] corrupts it as it would any frame.
     fn send_injected(&mut self, now: Timestamp, frame: Frame, mut injected: InjectedCounts) {
-        if self.is_quiet(now) {
+        if self.body.is_quiet(now) {
             return;
         }
         let Some(index) = FEEDBACK_IDS.iter().position(|i| *i == frame.id()) else {

@@ -172,18 +172,6 @@ struct UwbWire {
     channels: [i8; 3],
 }
 
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct VersionWire {
-    versions: [[u8; 2]; 4],
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct OffsetWire {
-    pulses: I16,
-}
-
 // ---------------------------------------------------------------------------------------------
 // Frames.
 
@@ -402,11 +390,6 @@ impl BmsProtection {
             })
             .collect()
     }
-
-    /// Any protection bit is set.
-    pub fn any_protection(&self) -> bool {
-        !self.names(true).is_empty()
-    }
 }
 
 /// Every protocol-V2 frame.
@@ -452,11 +435,6 @@ pub enum Frame {
     SteeringZeroOffsetReply(SteeringZeroOffset),
 }
 
-/// The name of 0x211 b1 under the profile's ⚠ D-2 codes.
-pub fn control_name(mode: u8, profile: &V2Profile) -> &'static str {
-    code_name(mode, &profile.mode_codes.names())
-}
-
 /// The name of a 0x141 / 0x291 b0 motion mode under the profile's ⚠ D-12 codes: dual_ackermann,
 /// crab, spin, park, side_slip or unknown.
 pub fn motion_mode_name(mode: u8, profile: &V2Profile) -> &'static str {
@@ -478,6 +456,14 @@ fn lateral_sign(profile: &V2Profile) -> f64 {
     } else {
         -1.0
     }
+}
+
+/// 0x432 / 0x43B b0-1.
+fn zero_offset(raw_id: u32, data: &[u8]) -> Result<SteeringZeroOffset, DecodeError> {
+    let pulses: I16 = read_prefix(raw_id, data)?;
+    Ok(SteeringZeroOffset {
+        pulses: pulses.get(),
+    })
 }
 
 fn decode_motion(raw_id: u32, data: &[u8], profile: &V2Profile) -> Result<Motion, DecodeError> {
@@ -604,12 +590,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
             }
             Frame::SteeringZero
         }
-        id::STEERING_ZERO_OFFSET => {
-            let w: OffsetWire = read_prefix(raw_id, data)?;
-            Frame::SteeringZeroOffset(SteeringZeroOffset {
-                pulses: w.pulses.get(),
-            })
-        }
+        id::STEERING_ZERO_OFFSET => Frame::SteeringZeroOffset(zero_offset(raw_id, data)?),
         id::STEERING_ZERO_QUERY => match first_byte(raw_id, data)? {
             0xAA => Frame::SteeringZeroQuery,
             other => return Err(invalid(raw_id, "steering zero query", other)),
@@ -620,10 +601,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
             other => return Err(invalid(raw_id, "steering zero acknowledgement", other)),
         },
         id::STEERING_ZERO_OFFSET_REPLY => {
-            let w: OffsetWire = read_prefix(raw_id, data)?;
-            Frame::SteeringZeroOffsetReply(SteeringZeroOffset {
-                pulses: w.pulses.get(),
-            })
+            Frame::SteeringZeroOffsetReply(zero_offset(raw_id, data)?)
         }
         id::CLEAR_FAULT => Frame::ClearFault(ClearFault {
             code: first_byte(raw_id, data)?,
@@ -634,7 +612,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
                 vehicle_state: w.vehicle_state,
                 vehicle: vehicle::name(w.vehicle_state),
                 mode: w.mode,
-                control: control_name(w.mode, profile),
+                control: code_name(w.mode, &profile.mode_codes.names()),
                 battery_voltage_v: si(w.battery_dv.get(), 10.0),
                 fault_word: w.fault_word.get(),
                 b6: w.b6,
@@ -672,8 +650,7 @@ pub fn decode(frame: &CanFrame, profile: &V2Profile) -> Result<Frame, DecodeErro
             }
         },
         id::VERSION => {
-            let w: VersionWire = read_prefix(raw_id, data)?;
-            let [controller_hw, driver_hw, controller_sw, driver_sw] = w.versions;
+            let [controller_hw, driver_hw, controller_sw, driver_sw] = read_prefix(raw_id, data)?;
             Frame::Version(Version {
                 controller_hw,
                 driver_hw,
@@ -792,14 +769,22 @@ impl Frame {
                 CanFrame::from_parts(id, encode_motion(m, profile)?)
             }
             Frame::LightCommand(l) | Frame::LightState(l) => {
-                for (field, v) in [
-                    ("front_brightness_pct", l.front_brightness_pct),
-                    ("rear_brightness_pct", l.rear_brightness_pct),
+                for (field, v, max) in [
+                    (
+                        "front_brightness_pct",
+                        l.front_brightness_pct,
+                        MAX_BRIGHTNESS_PCT,
+                    ),
+                    (
+                        "rear_brightness_pct",
+                        l.rear_brightness_pct,
+                        MAX_BRIGHTNESS_PCT,
+                    ),
+                    ("front_mode", l.front_mode, MAX_LIGHT_MODE),
+                    ("rear_mode", l.rear_mode, MAX_LIGHT_MODE),
                 ] {
-                    check_u8(field, v, 0, MAX_BRIGHTNESS_PCT)?;
+                    check_u8(field, v, 0, max)?;
                 }
-                check_u8("front_mode", l.front_mode, 0, MAX_LIGHT_MODE)?;
-                check_u8("rear_mode", l.rear_mode, 0, MAX_LIGHT_MODE)?;
                 CanFrame::from_parts(
                     id,
                     wire_bytes::<8, _>(LightWire {
@@ -889,24 +874,14 @@ impl Frame {
             }
             Frame::BmsData(b) => CanFrame::from_parts(id, b.wire(1.0 / profile.bms_voltage_lsb_v)?),
             Frame::BmsAlarm(b) => CanFrame::from_parts(id, b.alarm_flags().to_le_bytes()),
-            Frame::BmsProtection(p) => CanFrame::from_parts(
-                id,
-                [
-                    p.codes[0],
-                    p.codes[1],
-                    p.codes[2],
-                    p.codes[3],
-                    p.max_cell_temp_c.to_be_bytes()[0],
-                    p.min_cell_temp_c.to_be_bytes()[0],
-                    0,
-                    p.count,
-                ],
-            ),
+            Frame::BmsProtection(p) => {
+                let [c1, c2, c3, c4] = p.codes;
+                let [max, min] = [p.max_cell_temp_c, p.min_cell_temp_c].map(|t| t.to_be_bytes()[0]);
+                CanFrame::from_parts(id, [c1, c2, c3, c4, max, min, 0, p.count])
+            }
             Frame::Version(v) => CanFrame::from_parts(
                 id,
-                wire_bytes::<8, _>(VersionWire {
-                    versions: [v.controller_hw, v.driver_hw, v.controller_sw, v.driver_sw],
-                }),
+                wire_bytes::<8, _>([v.controller_hw, v.driver_hw, v.controller_sw, v.driver_sw]),
             ),
             Frame::SteeringZeroAck { done } => CanFrame::from_parts(
                 id,

@@ -150,13 +150,11 @@ impl V2Driver {
             Turn::of(command),
             &self.profile,
         );
-        if planned.mode.is_some() {
-            self.wanted_mode = planned.mode;
-        }
-        if let Some(mode) = planned.mode
-            && self.ranger_mode != Some(mode)
-        {
-            self.send_motion_mode(now, mode);
+        if let Some(mode) = planned.mode {
+            self.wanted_mode = Some(mode);
+            if self.ranger_mode != Some(mode) {
+                self.send_motion_mode(now, mode);
+            }
         }
         self.requested = planned.motion;
         self.requested_flags = planned.clamp_flags;
@@ -252,7 +250,7 @@ impl V2Driver {
             Frame::BmsProtection(p) => agilex_driver::set_bits(
                 &mut self.other_faults,
                 FaultFlags::BMS_ALARM,
-                p.any_protection(),
+                !p.names(true).is_empty(),
             ),
             Frame::VersionText(t) => self.core.notice(
                 Level::Info,
@@ -260,19 +258,11 @@ impl V2Driver {
             ),
             Frame::Version(v) => {
                 self.version = VersionQuery::Done;
+                let [ch, cs, dh, ds] = [v.controller_hw, v.controller_sw, v.driver_hw, v.driver_sw]
+                    .map(|[major, minor]| format!("{major}.{minor}"));
                 self.core.notice(
                     Level::Info,
-                    format!(
-                        "chassis versions: controller hw {}.{} sw {}.{}, driver hw {}.{} sw {}.{}",
-                        v.controller_hw[0],
-                        v.controller_hw[1],
-                        v.controller_sw[0],
-                        v.controller_sw[1],
-                        v.driver_hw[0],
-                        v.driver_hw[1],
-                        v.driver_sw[0],
-                        v.driver_sw[1]
-                    ),
+                    format!("chassis versions: controller hw {ch} sw {cs}, driver hw {dh} sw {ds}"),
                 );
             }
             Frame::SteeringZeroAck { done } => {
@@ -306,10 +296,10 @@ impl V2Driver {
             sys.parking_brake_engaged = u8::from(s.b6 == 0x01);
         }
         self.core.system_status(now, new_mode, new_faults, true);
-        if new_mode == ControlMode::COMMAND && self.version == VersionQuery::NotAsked {
-            self.ask_version(now);
-        }
         if new_mode == ControlMode::COMMAND {
+            if self.version == VersionQuery::NotAsked {
+                self.ask_version(now);
+            }
             // The retry limit is for a chassis that keeps reporting standby: a standby after CAN
             // mode (a reboot, a hand-back) is answered at once.
             self.mode.obeyed();

@@ -302,11 +302,6 @@ impl FaultMap {
             FaultMap::HunterSe => HUNTER_SE_FAULTS,
         }
     }
-
-    /// Whether b5 bit7 is left to ⚠ D-20 (the SDK and HUNTER SE tables).
-    pub fn leaves_0080_to_d20(self) -> bool {
-        matches!(self, FaultMap::Sdk | FaultMap::HunterSe)
-    }
 }
 
 /// ⚠ D-6: layout of 0x362.
@@ -719,7 +714,7 @@ impl V2Profile {
     /// Every named bit of 0x211's fault word on this robot: the ⚠ D-3 table, with b5 bit7 as
     /// ⚠ D-20 reads it where the table leaves it open.
     pub fn fault_bits(&self) -> impl Iterator<Item = FaultBit> + '_ {
-        let d20 = self.fault_map.leaves_0080_to_d20().then(|| {
+        let d20 = matches!(self.fault_map, FaultMap::Sdk | FaultMap::HunterSe).then(|| {
             if self.fault_0080_is_estop {
                 bit(FAULT_0080, "estop", F::EMERGENCY_STOP)
             } else {

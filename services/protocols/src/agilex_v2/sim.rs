@@ -385,20 +385,9 @@ impl V2Sim {
     /// bit1, HUNTER 2.0 b4 bit4; the TRACER MINI and HUNTER SE tables have no such bit) and the
     /// E-stop bit where ⚠ D-20 reads b5 bit7 so.
     fn fault_word(&self) -> u16 {
-        let mut word = 0;
-        if self.heartbeat_lost {
-            word |= self
-                .profile
-                .fault_bit_for(FaultFlags::HEARTBEAT_LOST)
-                .unwrap_or(0);
-        }
-        if self.estop {
-            word |= self
-                .profile
-                .fault_bit_for(FaultFlags::EMERGENCY_STOP)
-                .unwrap_or(0);
-        }
-        word
+        let bit = |set: bool, flag| set.then(|| self.profile.fault_bit_for(flag)).flatten();
+        bit(self.heartbeat_lost, FaultFlags::HEARTBEAT_LOST).unwrap_or(0)
+            | bit(self.estop, FaultFlags::EMERGENCY_STOP).unwrap_or(0)
     }
 
     /// The battery's voltage as the electronics alone would load it, V.
@@ -595,12 +584,10 @@ impl Firmware for V2Sim {
             .min(self.fast.next())
             .min(self.slow.next())
             .min(self.bms.next());
-        let heartbeat = (self.mode == Mode::Command && !self.heartbeat_lost)
-            .then(|| {
-                self.last_command
-                    .map(|t| t + Duration::from_millis(self.profile.command_timeout_ms + 1))
-            })
-            .flatten();
+        let heartbeat = self
+            .last_command
+            .filter(|_| self.mode == Mode::Command && !self.heartbeat_lost)
+            .map(|t| t + Duration::from_millis(self.profile.command_timeout_ms + 1));
         [heartbeat, self.body.poll_timeout()]
             .into_iter()
             .fold(Some(grids), earliest)

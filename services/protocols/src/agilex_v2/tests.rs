@@ -309,6 +309,11 @@ fn bms_voltage_unit_follows_the_profile() {
         decoded("362#0100000023FB0007", &old),
         Frame::BmsProtection(p) if p.max_cell_temp_c == 35 && p.min_cell_temp_c == -5
     ));
+    let protection = decoded("362#0100000023FB0007", &old);
+    assert_eq!(
+        protection.encode(&old).unwrap(),
+        frame("362#0100000023FB0007")
+    );
 }
 
 #[test]

@@ -339,7 +339,7 @@ impl<T> SimBody<T> {
 
     /// True while nothing may be sent: booting, or an injected silence.
     pub(crate) fn is_quiet(&self, now: Timestamp) -> bool {
-        self.is_booting() || self.outbox.is_silenced(now)
+        self.is_booting() || self.outbox.silent_until().is_some_and(|t| now < t)
     }
 
     /// True when the next frame sent must carry a corrupted checksum ([`Injection::BadChecksums`]);

@@ -119,9 +119,10 @@ pub const STEERING_ZERO_ACK_MAGIC: u8 = 0xEE;
 // ---------------------------------------------------------------------------------------------
 // Wire layouts (big-endian).
 
+/// 0x111 and 0x221.
 #[repr(C)]
 #[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct MotionCommandWire {
+struct MotionWire {
     linear_mm_s: I16,
     reserved: [u8; 4],
     steer_mrad: I16,
@@ -134,14 +135,6 @@ struct SystemStatusWire {
     mode: u8,
     battery_dv: U16,
     fault_word: U32,
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct MotionFeedbackWire {
-    linear_mm_s: I16,
-    reserved: [u8; 4],
-    steer_mrad: I16,
 }
 
 #[repr(C)]
@@ -162,19 +155,11 @@ struct MotorSlowWire {
     reserved: [u8; 2],
 }
 
+/// 0x271 (front, rear steering, 0.001 rad) and 0x281 (front, rear axle speed, mm/s).
 #[repr(C)]
 #[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct SteeringFeedbackWire {
-    front_mrad: I16,
-    rear_mrad: I16,
-    reserved: [u8; 4],
-}
-
-#[repr(C)]
-#[derive(FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-struct AxleSpeedWire {
-    front_mm_s: I16,
-    rear_mm_s: I16,
+struct FrontRearWire {
+    milli: [I16; 2],
     reserved: [u8; 4],
 }
 
@@ -437,6 +422,31 @@ fn steer_feedback_sign(profile: &TitanProfile) -> f64 {
     }
 }
 
+/// The two values of a 0x271 / 0x281 layout (wire: ×1000), each multiplied by `sign`.
+fn front_rear(raw_id: u32, data: &[u8], sign: f64) -> Result<[f64; 2], DecodeError> {
+    let w: FrontRearWire = read_prefix(raw_id, data)?;
+    Ok(w.milli.map(|v| sign * si(v.get(), 1000.0)))
+}
+
+fn front_rear_wire(fields: [(&'static str, f64); 2], sign: f64) -> Result<[u8; 8], EncodeError> {
+    let [(f0, v0), (f1, v1)] = fields;
+    Ok(wire_bytes::<8, _>(FrontRearWire {
+        milli: [
+            to_i16(f0, sign * v0, 1000.0)?.into(),
+            to_i16(f1, sign * v1, 1000.0)?.into(),
+        ],
+        reserved: [0; 4],
+    }))
+}
+
+fn motion_wire(linear_mps: f64, steer_rad: f64) -> Result<[u8; 8], EncodeError> {
+    Ok(wire_bytes::<8, _>(MotionWire {
+        linear_mm_s: to_i16("linear_mps", linear_mps, 1000.0)?.into(),
+        reserved: [0; 4],
+        steer_mrad: to_i16("steer_rad", steer_rad, 1000.0)?.into(),
+    }))
+}
+
 fn bms_group(id: u16, first: u16) -> Option<u8> {
     [first, first + 2, first + 4]
         .iter()
@@ -451,7 +461,7 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
     let data = frame.data();
     let frame = match id16 {
         id::MOTION_COMMAND => {
-            let w: MotionCommandWire = read_prefix(raw_id, data)?;
+            let w: MotionWire = read_prefix(raw_id, data)?;
             Frame::MotionCommand(MotionCommand {
                 linear_mps: si(w.linear_mm_s.get(), 1000.0),
                 steer_rad: si(w.steer_mrad.get(), 1000.0),
@@ -504,7 +514,7 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
             })
         }
         id::MOTION_FEEDBACK => {
-            let w: MotionFeedbackWire = read_prefix(raw_id, data)?;
+            let w: MotionWire = read_prefix(raw_id, data)?;
             Frame::MotionFeedback(MotionFeedback {
                 linear_mps: si(w.linear_mm_s.get(), 1000.0),
                 steer_rad: steer_feedback_sign(profile) * si(w.steer_mrad.get(), 1000.0),
@@ -512,18 +522,18 @@ pub fn decode(frame: &CanFrame, profile: &TitanProfile) -> Result<Frame, DecodeE
         }
         id::RC => Frame::Rc(rc_from_wire(raw_id, data, false)?),
         id::STEERING_FEEDBACK => {
-            let w: SteeringFeedbackWire = read_prefix(raw_id, data)?;
-            let sign = steer_feedback_sign(profile);
+            let [front_steer_rad, rear_steer_rad] =
+                front_rear(raw_id, data, steer_feedback_sign(profile))?;
             Frame::SteeringFeedback(SteeringFeedback {
-                front_steer_rad: sign * si(w.front_mrad.get(), 1000.0),
-                rear_steer_rad: sign * si(w.rear_mrad.get(), 1000.0),
+                front_steer_rad,
+                rear_steer_rad,
             })
         }
         id::AXLE_SPEED => {
-            let w: AxleSpeedWire = read_prefix(raw_id, data)?;
+            let [front_axle_mps, rear_axle_mps] = front_rear(raw_id, data, 1.0)?;
             Frame::AxleSpeed(AxleSpeed {
-                front_axle_mps: si(w.front_mm_s.get(), 1000.0),
-                rear_axle_mps: si(w.rear_mm_s.get(), 1000.0),
+                front_axle_mps,
+                rear_axle_mps,
             })
         }
         id::ODOMETER => {
@@ -731,24 +741,12 @@ impl Frame {
     pub fn encode(&self, profile: &TitanProfile) -> Result<CanFrame, EncodeError> {
         let id = self.id();
         let frame = match self {
-            Frame::MotionCommand(c) => CanFrame::from_parts(
-                id,
-                wire_bytes::<8, _>(MotionCommandWire {
-                    linear_mm_s: to_i16("linear_mps", c.linear_mps, 1000.0)?.into(),
-                    reserved: [0; 4],
-                    steer_mrad: to_i16("steer_rad", c.steer_rad, 1000.0)?.into(),
-                }),
-            ),
+            Frame::MotionCommand(c) => {
+                CanFrame::from_parts(id, motion_wire(c.linear_mps, c.steer_rad)?)
+            }
             Frame::ParkingBrake(b) => CanFrame::from_parts(id, [u8::from(!b.engage)]),
             Frame::Mode(m) => {
-                if m.mode != mode::STANDBY && m.mode != mode::CAN_COMMAND {
-                    return Err(EncodeError::OutOfRange {
-                        field: "mode",
-                        value: m.mode.into(),
-                        min: 0.0,
-                        max: 1.0,
-                    });
-                }
+                check_u8("mode", m.mode, mode::STANDBY, mode::CAN_COMMAND)?;
                 CanFrame::from_parts(id, [m.mode])
             }
             Frame::SilentMode(s) | Frame::OffRoad(s) => {
@@ -776,40 +774,32 @@ impl Frame {
                     fault_word: s.vendor_fault_word.into(),
                 }),
             ),
-            Frame::MotionFeedback(m) => {
-                let sign = steer_feedback_sign(profile);
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(MotionFeedbackWire {
-                        linear_mm_s: to_i16("linear_mps", m.linear_mps, 1000.0)?.into(),
-                        reserved: [0; 4],
-                        steer_mrad: to_i16("steer_rad", sign * m.steer_rad, 1000.0)?.into(),
-                    }),
-                )
-            }
+            Frame::MotionFeedback(m) => CanFrame::from_parts(
+                id,
+                motion_wire(m.linear_mps, steer_feedback_sign(profile) * m.steer_rad)?,
+            ),
             Frame::Rc(r) => CanFrame::from_parts(id, rc_wire(r, false)?),
             Frame::MotorFast(m) => CanFrame::from_parts(id, m.wire(4)?),
             Frame::MotorSlow(m) => CanFrame::from_parts(id, m.wire(4)?),
-            Frame::SteeringFeedback(s) => {
-                let sign = steer_feedback_sign(profile);
-                CanFrame::from_parts(
-                    id,
-                    wire_bytes::<8, _>(SteeringFeedbackWire {
-                        front_mrad: to_i16("front_steer_rad", sign * s.front_steer_rad, 1000.0)?
-                            .into(),
-                        rear_mrad: to_i16("rear_steer_rad", sign * s.rear_steer_rad, 1000.0)?
-                            .into(),
-                        reserved: [0; 4],
-                    }),
-                )
-            }
+            Frame::SteeringFeedback(s) => CanFrame::from_parts(
+                id,
+                front_rear_wire(
+                    [
+                        ("front_steer_rad", s.front_steer_rad),
+                        ("rear_steer_rad", s.rear_steer_rad),
+                    ],
+                    steer_feedback_sign(profile),
+                )?,
+            ),
             Frame::AxleSpeed(a) => CanFrame::from_parts(
                 id,
-                wire_bytes::<8, _>(AxleSpeedWire {
-                    front_mm_s: to_i16("front_axle_mps", a.front_axle_mps, 1000.0)?.into(),
-                    rear_mm_s: to_i16("rear_axle_mps", a.rear_axle_mps, 1000.0)?.into(),
-                    reserved: [0; 4],
-                }),
+                front_rear_wire(
+                    [
+                        ("front_axle_mps", a.front_axle_mps),
+                        ("rear_axle_mps", a.rear_axle_mps),
+                    ],
+                    1.0,
+                )?,
             ),
             Frame::Odometer(o) => CanFrame::from_parts(
                 id,

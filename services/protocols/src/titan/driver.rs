@@ -213,29 +213,21 @@ impl TitanDriver {
 
 /// The normalized `FaultFlags` of a 0x211 fault word.
 pub fn normalize_faults(word: u32) -> u64 {
+    use chassis_interfaces::FaultFlags as F;
     const MAP: [(u32, u64); 13] = [
-        (
-            fault::FRONT_STEERING_ENCODER,
-            FaultFlags::FRONT_STEERING_ENCODER,
-        ),
-        (
-            fault::REAR_STEERING_ENCODER,
-            FaultFlags::REAR_STEERING_ENCODER,
-        ),
-        (fault::BUMPER, FaultFlags::BUMPER),
-        (fault::MOTOR_DRIVER_ERROR, FaultFlags::MOTOR_DRIVER_ERROR),
-        (fault::HEARTBEAT_LOST, FaultFlags::HEARTBEAT_LOST),
-        (fault::OVER_TEMPERATURE, FaultFlags::OVER_TEMPERATURE),
-        (fault::OVER_CURRENT, FaultFlags::OVER_CURRENT),
-        (
-            fault::BATTERY_UNDER_VOLTAGE,
-            FaultFlags::BATTERY_UNDER_VOLTAGE,
-        ),
-        (fault::RC_LINK_LOST, FaultFlags::RC_LINK_LOST),
-        (fault::MOTOR_1_COMM_LOST, FaultFlags::MOTOR_1_COMM_LOST),
-        (fault::MOTOR_2_COMM_LOST, FaultFlags::MOTOR_2_COMM_LOST),
-        (fault::MOTOR_3_COMM_LOST, FaultFlags::MOTOR_3_COMM_LOST),
-        (fault::MOTOR_4_COMM_LOST, FaultFlags::MOTOR_4_COMM_LOST),
+        (fault::FRONT_STEERING_ENCODER, F::FRONT_STEERING_ENCODER),
+        (fault::REAR_STEERING_ENCODER, F::REAR_STEERING_ENCODER),
+        (fault::BUMPER, F::BUMPER),
+        (fault::MOTOR_DRIVER_ERROR, F::MOTOR_DRIVER_ERROR),
+        (fault::HEARTBEAT_LOST, F::HEARTBEAT_LOST),
+        (fault::OVER_TEMPERATURE, F::OVER_TEMPERATURE),
+        (fault::OVER_CURRENT, F::OVER_CURRENT),
+        (fault::BATTERY_UNDER_VOLTAGE, F::BATTERY_UNDER_VOLTAGE),
+        (fault::RC_LINK_LOST, F::RC_LINK_LOST),
+        (fault::MOTOR_1_COMM_LOST, F::MOTOR_1_COMM_LOST),
+        (fault::MOTOR_2_COMM_LOST, F::MOTOR_2_COMM_LOST),
+        (fault::MOTOR_3_COMM_LOST, F::MOTOR_3_COMM_LOST),
+        (fault::MOTOR_4_COMM_LOST, F::MOTOR_4_COMM_LOST),
     ];
     flags_of(word, &MAP)
 }

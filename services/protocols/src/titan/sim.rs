@@ -622,17 +622,13 @@ impl TitanSim {
     // -----------------------------------------------------------------------------------------
     // Output.
 
-    fn is_quiet(&self, now: Timestamp) -> bool {
-        self.body.is_quiet(now) || self.silent_mode
-    }
-
     fn send(&mut self, now: Timestamp, frame: Frame) {
         self.send_injected(now, frame, InjectedCounts::default());
     }
 
     /// Like [`TitanSim::send`], for a frame that carries an injected fault.
     fn send_injected(&mut self, now: Timestamp, frame: Frame, injected: InjectedCounts) {
-        if self.is_quiet(now) {
+        if self.body.is_quiet(now) || self.silent_mode {
             return;
         }
         // Every value is kept inside its wire range; a frame that still does not fit is not sent.

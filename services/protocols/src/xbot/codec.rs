@@ -23,7 +23,7 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use crate::Direction;
 use crate::error::{DecodeError, EncodeError, to_i16, to_wire};
-use crate::wire_layout::{read_bool, read_prefix, si, try_map};
+use crate::wire_layout::{first_byte, invalid, read_bool, read_prefix, si, try_map};
 use crate::xbot::XbotProfile;
 
 /// The two bytes that start every frame.
@@ -298,11 +298,7 @@ fn finite_f32(id: u32, field: &'static str, raw: F32) -> Result<f64, DecodeError
     if value.is_finite() {
         Ok(value.into())
     } else {
-        Err(DecodeError::InvalidValue {
-            id,
-            field,
-            value: value.to_bits(),
-        })
+        Err(invalid(id, field, value.to_bits()))
     }
 }
 
@@ -312,11 +308,7 @@ fn from_bcd(id: u32, field: &'static str, raw: u16) -> Result<u16, DecodeError> 
     for shift in [12, 8, 4, 0] {
         let digit = (raw >> shift) & 0xF;
         if digit > 9 {
-            return Err(DecodeError::InvalidValue {
-                id,
-                field,
-                value: raw.into(),
-            });
+            return Err(invalid(id, field, raw));
         }
         value = value * 10 + digit;
     }
@@ -336,24 +328,14 @@ fn to_bcd(value: u16) -> u16 {
 
 fn servo_from_wire(id: u32, field: &'static str, deg: u8) -> Result<f64, DecodeError> {
     if deg > 180 {
-        return Err(DecodeError::InvalidValue {
-            id,
-            field,
-            value: deg.into(),
-        });
+        return Err(invalid(id, field, deg));
     }
     Ok(f64::from(deg))
 }
 
 /// Decodes one payload (command id and data; without header, length byte and checksum).
 pub fn decode_payload(payload: &[u8], profile: &XbotProfile) -> Result<Frame, DecodeError> {
-    let Some(&command) = payload.first() else {
-        return Err(DecodeError::TooShort {
-            id: 0,
-            len: 0,
-            need: 1,
-        });
-    };
+    let command = first_byte(0, payload)?;
     let cid = u32::from(command);
     let expected = payload_len(command).ok_or(DecodeError::UnknownId { id: cid })?;
     if payload.len() != expected {
@@ -385,11 +367,7 @@ pub fn decode_payload(payload: &[u8], profile: &XbotProfile) -> Result<Frame, De
         id::LIFT => {
             let w: LiftWire = read_prefix(cid, payload)?;
             if w.position_pct > 100 {
-                return Err(DecodeError::InvalidValue {
-                    id: cid,
-                    field: "lift position",
-                    value: w.position_pct.into(),
-                });
+                return Err(invalid(cid, "lift position", w.position_pct));
             }
             Frame::Lift(LiftCommand {
                 enable: read_bool(cid, "lift enable", w.enable)?,
@@ -416,13 +394,7 @@ pub fn decode_payload(payload: &[u8], profile: &XbotProfile) -> Result<Frame, De
 pub(crate) fn check_sensor_markers(payload: &[u8]) -> Result<(), DecodeError> {
     for (offset, value, field) in SENSOR_MARKERS {
         match payload.get(offset) {
-            Some(&got) if got != value => {
-                return Err(DecodeError::InvalidValue {
-                    id: id::SENSOR.into(),
-                    field,
-                    value: got.into(),
-                });
-            }
+            Some(&got) if got != value => return Err(invalid(id::SENSOR.into(), field, got)),
             _ => {}
         }
     }

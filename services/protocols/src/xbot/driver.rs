@@ -342,23 +342,22 @@ impl XbotDriver {
 
     /// The board may have rebooted: take it back as after power-up.
     fn resync(&mut self, now: Timestamp, why: &str) {
-        if self.want_power {
-            if self
+        if self.want_power
+            && self
                 .last_power_enable
                 .is_none_or(|t| now.saturating_since(t) >= POWER_RETRY)
-            {
-                self.send_power(now, true);
-            }
-            self.core.notice(
-                Level::Warn,
-                format!("{why}: the board may have rebooted; drive power re-enabled"),
-            );
-        } else {
-            self.core.notice(
-                Level::Warn,
-                format!("{why}: the board may have rebooted; drive power left as requested"),
-            );
+        {
+            self.send_power(now, true);
         }
+        let power = if self.want_power {
+            "re-enabled"
+        } else {
+            "left as requested"
+        };
+        self.core.notice(
+            Level::Warn,
+            format!("{why}: the board may have rebooted; drive power {power}"),
+        );
         if let Some(lift) = self.last_lift {
             self.queue.push_back(Frame::Lift(lift));
         }
@@ -571,10 +570,10 @@ impl XbotDriver {
         self.core.state.touch(Group::Lift, t);
 
         let metres = self.profile.metres_per_count();
-        let travel = [0, 1, 2, 3].map(|i| delta[i] as f64 * metres);
+        let [left, right] = [0, 1].map(|i| delta[i] as f64 * metres);
         let odometry = &mut self.core.state.odometry;
-        odometry.left_distance_m += travel[0];
-        odometry.right_distance_m += travel[1];
+        odometry.left_distance_m += left;
+        odometry.right_distance_m += right;
         self.core.state.touch(Group::Odometry, t);
 
         let position = [0, 1, 2, 3].map(|i| self.counters.position[i]);
@@ -596,12 +595,7 @@ impl XbotDriver {
             None => self.speed_ref = Some(here),
         }
         if continuous && let Some(separation) = self.separation() {
-            integrate_arc(
-                travel[0],
-                travel[1],
-                separation,
-                &mut self.core.state.odometry,
-            );
+            integrate_arc(left, right, separation, &mut self.core.state.odometry);
         }
         if self.separation().is_some() {
             self.core.state.touch(Group::Pose, t);

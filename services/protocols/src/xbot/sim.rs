@@ -537,10 +537,6 @@ impl XbotSim {
     // -----------------------------------------------------------------------------------------
     // Output.
 
-    fn is_quiet(&self, now: Timestamp) -> bool {
-        self.body.is_quiet(now)
-    }
-
     /// Queues a report in chunks; the injected faults it carries count when its last chunk
     /// leaves.
     fn enqueue(&mut self, bytes: Vec<u8>, injected: InjectedCounts) {
@@ -626,7 +622,7 @@ impl XbotSim {
 
     /// Sends a status report; `injected` says whether a flood asked for it.
     fn send_report(&mut self, now: Timestamp, mut injected: InjectedCounts) {
-        if self.is_quiet(now) {
+        if self.body.is_quiet(now) {
             return;
         }
         let Ok(mut bytes) = Frame::Sensor(self.report(now)).encode(&self.profile) else {
