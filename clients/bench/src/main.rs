@@ -272,23 +272,6 @@ fn baseline_key(what: &str, placement: &str) -> String {
     row_key(PathKind::Baseline, what, "-", placement)
 }
 
-fn hop_row(run: &str, what: String, placement: &str, l: Latencies, conditions: String) -> Row {
-    let row = Row::new(
-        PathKind::Baseline,
-        Leg::Hop,
-        run,
-        what,
-        "-",
-        placement,
-        l,
-        0,
-    );
-    Row {
-        conditions: Some(conditions),
-        ..row
-    }
-}
-
 struct Ctx {
     plan: Plan,
     prefix: String,
@@ -481,9 +464,7 @@ impl Step for Baseline {
         };
         let (prefix, dir) = (&ctx.prefix, &ctx.dir);
         let l = baseline::run(transport, placement, rounds, shape, None, prefix, dir)?;
-        report
-            .rows
-            .push(hop_row("", what, at, l.all_pings(), conditions));
+        (report.rows).push(Row::hop("", what, at, l.all_pings(), conditions));
         Ok(())
     }
 }
@@ -511,7 +492,7 @@ impl Step for Stalls {
             format!("CPU {cpu}"),
             stalls.conditions(cpu),
         );
-        let mut row = hop_row("", what, &at, stalls.gaps, conditions);
+        let mut row = Row::hop("", what, &at, stalls.gaps, conditions);
         row.leg = Leg::Stalls;
         report.rows.push(row);
         Ok(())
@@ -599,7 +580,7 @@ impl PathRun {
     }
 
     fn hop_row(&self, what: String, l: Latencies, conditions: String) -> Row {
-        hop_row(&self.label(), what, self.placement.label(), l, conditions)
+        Row::hop(&self.label(), what, self.placement.label(), l, conditions)
     }
 
     /// Starts chassisd for this run, configured as `config` says, on the service's CPU.

@@ -68,7 +68,7 @@ pub enum BusKind {
 /// The service under test, stopped on drop.
 pub struct Service {
     pub name: String,
-    children: Vec<Child>,
+    children: Children,
     pub pid: u32,
     /// Where chassisd writes its pass trace as it stops, when asked for one.
     trace: Option<PathBuf>,
@@ -101,33 +101,13 @@ impl Scheduling {
 impl Service {
     /// Stops the service and returns the passes of its trace (none when it kept no trace).
     pub fn stop(mut self) -> anyhow::Result<Vec<PassStamps>> {
-        self.stop_children();
+        drop(std::mem::take(&mut self.children));
         let Some(path) = &self.trace else {
             return Ok(Vec::new());
         };
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("reading chassisd's pass trace {}", path.display()))?;
         PassStamps::parse(&text).with_context(|| format!("{}", path.display()))
-    }
-
-    fn stop_children(&mut self) {
-        for mut child in self.children.drain(..).rev() {
-            stop(&mut child);
-        }
-    }
-}
-
-impl Drop for Service {
-    fn drop(&mut self) {
-        self.stop_children();
-    }
-}
-
-/// Asks `child` to end (SIGTERM).
-pub fn terminate(child: &Child) {
-    use nix::sys::signal::{Signal, kill};
-    if let Ok(pid) = i32::try_from(child.id()) {
-        let _ = kill(nix::unistd::Pid::from_raw(pid), Signal::SIGTERM);
     }
 }
 
@@ -146,19 +126,16 @@ impl Children {
 
 impl Drop for Children {
     fn drop(&mut self) {
+        use nix::sys::signal::{Signal, kill};
         for child in self.0.iter().rev() {
-            terminate(child);
+            if let Ok(pid) = i32::try_from(child.id()) {
+                let _ = kill(nix::unistd::Pid::from_raw(pid), Signal::SIGTERM);
+            }
         }
         for child in self.0.iter_mut().rev() {
             let _ = child.wait();
         }
     }
-}
-
-/// Asks `child` to end (SIGTERM) and waits for it.
-pub fn stop(child: &mut Child) {
-    terminate(child);
-    let _ = child.wait();
 }
 
 /// Where the workspace's binaries are (next to this one).
@@ -305,7 +282,7 @@ pub fn start(
         text.push_str("\n[profile]\nwheel_separation_m = 0.45\n");
     }
     std::fs::write(&config_file, text)?;
-    let mut children = Vec::new();
+    let mut children = Children::default();
     let bus_arg = match bus {
         BusKind::Sim => "sim".to_string(),
         BusKind::Pty => {
@@ -349,9 +326,7 @@ pub fn start(
         service.env(chassis_ipc::Trace::Pass.env(), path);
     }
     let log = dir.join(format!("{name}-chassisd"));
-    let service = spawn_logged(&mut service, prefix, &log, "chassisd")?;
-    let pid = service.id();
-    children.push(service);
+    let pid = children.push(spawn_logged(&mut service, prefix, &log, "chassisd")?);
     let mut service = Service {
         name: name.clone(),
         children,
@@ -1073,19 +1048,10 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
     let args = format!("--robot titan --name {name} --no-safety-monitor --cpu 0 --bus");
     chassisd.args(args.split(' ')).arg(bus);
     let log = dir.join(&name);
-    let mut child = spawn_logged(&mut chassisd, prefix, &log, "chassisd on the replay bus")?;
-    let pid = child.id();
-    let deadline = now_ns() + 20_000_000_000;
-    let mut robot = loop {
-        if let Ok(robot) = Robot::connect_with_prefix(&name, Some(prefix)) {
-            break robot;
-        }
-        if now_ns() > deadline {
-            let _ = child.kill();
-            bail!("chassisd on the replay bus did not come up");
-        }
-        pause(Duration::from_millis(5));
-    };
+    let (mut child, what) = (Children::default(), "chassisd on the replay bus");
+    let pid = child.push(spawn_logged(&mut chassisd, prefix, &log, what)?);
+    let connect = || Robot::connect_with_prefix(&name, Some(prefix)).ok();
+    let mut robot = wait_until(&format!("{what} did not come up"), 20, connect)?;
     // From the first frame counted to the last: the loop thread's CPU over that span.
     let mut first: Option<(u64, u64, f64)> = None;
     let mut last = (0u64, 0u64, 0.0f64);
@@ -1103,7 +1069,7 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
             }
         }
     }
-    stop(&mut child);
+    drop(child);
     let (t0, f0, c0) = first.context("no frame was replayed")?;
     let seconds = (last.0 - t0) as f64 / 1e9;
     let counted = last.1 - f0;

@@ -406,6 +406,13 @@ impl Row {
         }
     }
 
+    /// A raw transport's hop measured under `conditions`.
+    pub fn hop(run: &str, what: String, at: &str, l: Latencies, conditions: String) -> Self {
+        let row = Self::new(PathKind::Baseline, Leg::Hop, run, what, "-", at, l, 0);
+        let conditions = Some(conditions);
+        Self { conditions, ..row }
+    }
+
     /// [`row_key`] of this row.
     pub fn key(&self) -> String {
         row_key(self.path, &self.what, &self.mode, &self.placement)

@@ -303,18 +303,7 @@ pub fn run(
             hops.len()
         );
         let l = last_of(hops, count);
-        let row = Row::new(
-            PathKind::Baseline,
-            Leg::Hop,
-            &run,
-            what.into(),
-            "-",
-            PLACEMENT,
-            l,
-            0,
-        );
-        let conditions = Some(conditions);
-        report.rows.push(Row { conditions, ..row });
+        (report.rows).push(Row::hop(&run, what.into(), PLACEMENT, l, conditions));
     }
     for (leg, what, l, missed, raw) in [
         (
