@@ -602,15 +602,8 @@ impl PathRun {
             let mut command = None;
             if count > 0 {
                 let (t, exact) = (&mut robot.source("teleop")?, paths::Reach::Exact);
-                let mut motion = paths::Motion::open(&mut robot, self.robot, spin)?;
-                let sizes = (count, interval);
-                command = Some(paths::command_path(
-                    &mut motion,
-                    &mut robot,
-                    t,
-                    sizes,
-                    exact,
-                )?);
+                let (kind, sizes) = ((self.robot, spin), (count, interval));
+                command = Some(paths::command_path(&mut robot, kind, t, sizes, exact)?);
             }
             let (mut state, mut teleop) =
                 (paths::StateRecorder::default(), robot.source("teleop")?);
@@ -942,8 +935,7 @@ impl Step for DefaultConfig {
         let figures = paths::pinned(run.placement.cpus().0, || -> anyhow::Result<_> {
             let sizes = (ctx.plan.commands, paths::COMMAND_INTERVAL);
             let (t, toward) = (&mut robot.source("teleop")?, paths::Reach::Toward);
-            let mut motion = paths::Motion::open(&mut robot, run.robot, false)?;
-            paths::command_path(&mut motion, &mut robot, t, sizes, toward)
+            paths::command_path(&mut robot, (run.robot, false), t, sizes, toward)
         })??;
         drop(robot);
         drop(service);

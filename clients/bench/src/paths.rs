@@ -214,12 +214,12 @@ pub fn fifo_priority(pid: u32) -> Option<u8> {
     })
 }
 
-/// Starts `command` (chassisd or its simulator) serving under the IPC prefix `prefix`, logging
-/// warnings: its stdout to `<log>.log`, its stderr to `<log>-err.log`; `what` names it in the
-/// error.
+/// Starts `command` (chassisd, its simulator, chassis-zenoh) serving under the IPC prefix
+/// `prefix`, logging at the `RUST_LOG` level `level`: its stdout to `<log>.log`, its stderr to
+/// `<log>-err.log`; `what` names it in the error.
 pub(crate) fn spawn_logged(
     command: &mut Command,
-    prefix: &str,
+    (prefix, level): (&str, &str),
     log: &Path,
     what: &str,
 ) -> anyhow::Result<Child> {
@@ -231,7 +231,7 @@ pub(crate) fn spawn_logged(
     };
     command
         .env(IPC_PREFIX_ENV, prefix)
-        .env("RUST_LOG", "warn")
+        .env("RUST_LOG", level)
         .stdout(file("")?)
         .stderr(file("-err")?)
         .spawn()
@@ -282,7 +282,7 @@ pub fn start(
         text.push_str("\n[profile]\nwheel_separation_m = 0.45\n");
     }
     std::fs::write(&config_file, text)?;
-    let mut children = Children::default();
+    let (mut children, logged) = (Children::default(), (prefix, "warn"));
     let bus_arg = match bus {
         BusKind::Sim => "sim".to_string(),
         BusKind::Pty => {
@@ -302,7 +302,7 @@ pub fn start(
                 &sim_bus,
             ]);
             let log = dir.join(format!("{name}-sim"));
-            children.push(spawn_logged(&mut sim, prefix, &log, "chassisd sim")?);
+            children.push(spawn_logged(&mut sim, logged, &log, "chassisd sim")?);
             let linked = || Path::new(&link).exists().then_some(());
             wait_until("chassisd sim made no pty link", 10, linked)?;
             service_bus
@@ -326,7 +326,7 @@ pub fn start(
         service.env(chassis_ipc::Trace::Pass.env(), path);
     }
     let log = dir.join(format!("{name}-chassisd"));
-    let pid = children.push(spawn_logged(&mut service, prefix, &log, "chassisd")?);
+    let pid = children.push(spawn_logged(&mut service, logged, &log, "chassisd")?);
     let mut service = Service {
         name: name.clone(),
         children,
@@ -588,14 +588,15 @@ pub enum Reach {
 
 /// Command-path latencies: `count` requests from `teleop`, a source opened anywhere (through a
 /// bridge from another computer too), alternating between two speeds, one every `interval`;
-/// the frames (`motion`) and the mux are read from `robot`.
+/// the frames (a [`Motion`] of `kind`, polled with `spin`) and the mux are read from `robot`.
 pub fn command_path(
-    motion: &mut Motion,
     robot: &mut Robot,
+    (kind, spin): (RobotKind, bool),
     teleop: &mut Source,
     (count, interval): (u64, Duration),
     reach: Reach,
 ) -> anyhow::Result<CommandFigures> {
+    let motion = &mut Motion::open(robot, kind, spin)?;
     // A new reader gets the latest decision with the service's next publication (10 Hz).
     let source = teleop.name().to_string();
     let teleop_index = robot
@@ -1049,7 +1050,7 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
     chassisd.args(args.split(' ')).arg(bus);
     let log = dir.join(&name);
     let (mut child, what) = (Children::default(), "chassisd on the replay bus");
-    let pid = child.push(spawn_logged(&mut chassisd, prefix, &log, what)?);
+    let pid = child.push(spawn_logged(&mut chassisd, (prefix, "warn"), &log, what)?);
     let connect = || Robot::connect_with_prefix(&name, Some(prefix)).ok();
     let mut robot = wait_until(&format!("{what} did not come up"), 20, connect)?;
     // From the first frame counted to the last: the loop thread's CPU over that span.
@@ -1146,13 +1147,14 @@ mod tests {
         let mut command = Command::new("sh");
         command.args(["-c", "echo \"$CHASSIS_IPC_PREFIX\"; echo \"$RUST_LOG\" >&2"]);
         let log = dir.join("bn1-chassisd");
-        let mut child = spawn_logged(&mut command, "bench_3", &log, "a stand-in").unwrap();
+        let level = ("bench_3", crate::zenoh::ZENOH_LOG);
+        let mut child = spawn_logged(&mut command, level, &log, "a stand-in").unwrap();
         assert!(child.wait().unwrap().success());
         let read = |file: &str| std::fs::read_to_string(dir.join(file)).unwrap();
         assert_eq!(read("bn1-chassisd.log"), "bench_3\n");
-        assert_eq!(read("bn1-chassisd-err.log"), "warn\n");
+        assert_eq!(read("bn1-chassisd-err.log"), "warn,zenoh=error\n");
         let mut missing = Command::new("/nonexistent/chassisd");
-        let err = spawn_logged(&mut missing, "bench_3", &log, "chassisd sim").unwrap_err();
+        let err = spawn_logged(&mut missing, level, &log, "chassisd sim").unwrap_err();
         assert_eq!(err.to_string(), "starting chassisd sim");
         std::fs::remove_dir_all(&dir).unwrap();
     }
