@@ -195,11 +195,9 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
     let netns = Netns::new(&[format!("cfb{}", std::process::id() % 100_000)])?;
     let prefix = format!("cfb{}_", std::process::id() % 100_000);
     let operator_prefix = format!("{prefix}op_");
-    let (chassisd, zenoh, chassis) = (
-        paths::sibling("chassisd")?,
-        paths::sibling("chassis-zenoh")?,
-        paths::sibling("chassis")?,
-    );
+    let chassisd = paths::sibling("chassisd")?;
+    let zenoh = paths::sibling("chassis-zenoh")?;
+    let chassis = paths::sibling("chassis")?;
     // The fleet's process `name`, logging to `<dir>/<name>.log` and `<name>-err.log`.
     let start = |command: &mut Command, prefix: &str, level: &str, name: &str| {
         paths::spawn_logged(command, (prefix, level), &dir.join(name), name)
@@ -237,10 +235,8 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         let mut command = Command::new("ip");
         command.args(["netns", "exec", netns.robot()]).arg(&zenoh);
         for k in 0..size {
-            command.args([
-                "--connect",
-                &format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16),
-            ]);
+            let port = BASE_PORT + k as u16;
+            command.args(["--connect", &format!("tcp/127.0.0.1:{port}")]);
         }
         command.arg("--mirror-all");
         let log = format!("operator-{size}");
@@ -261,13 +257,8 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         let sides0 = sides();
         let start = now_ns();
         let out = Command::new(&chassis)
-            .args([
-                "fleet",
-                "--once",
-                "--json",
-                "--collect",
-                &args.seconds.to_string(),
-            ])
+            .args(["fleet", "--once", "--json", "--collect"])
+            .arg(args.seconds.to_string())
             .env("CHASSIS_IPC_PREFIX", &operator_prefix)
             .output()
             .context("running chassis fleet")?;

@@ -487,12 +487,8 @@ impl Step for Stalls {
             over_20_us: stalls.per_second(20),
             over_100_us: stalls.per_second(100),
         });
-        let (what, at, conditions) = (
-            report::STALLS.into(),
-            format!("CPU {cpu}"),
-            stalls.conditions(cpu),
-        );
-        let mut row = Row::hop("", what, &at, stalls.gaps, conditions);
+        let (at, conditions) = (format!("CPU {cpu}"), stalls.conditions(cpu));
+        let mut row = Row::hop("", report::STALLS.into(), &at, stalls.gaps, conditions);
         row.leg = Leg::Stalls;
         report.rows.push(row);
         Ok(())

@@ -292,15 +292,8 @@ pub fn start(
                 false => (format!("pty:{link}"), format!("serial:{link}")),
             };
             let mut sim = Command::new(&chassisd);
-            sim.args([
-                "sim",
-                "--robot",
-                robot.name(),
-                "--name",
-                &name,
-                "--bus",
-                &sim_bus,
-            ]);
+            let args = format!("sim --robot {} --name {name} --bus", robot.name());
+            sim.args(args.split(' ')).arg(&sim_bus);
             let log = dir.join(format!("{name}-sim"));
             children.push(spawn_logged(&mut sim, logged, &log, "chassisd sim")?);
             let linked = || Path::new(&link).exists().then_some(());

@@ -171,11 +171,11 @@ fn bare_hop(
     let mut sub = paths::spawn_logged(sub.arg("--out").arg(&raw_file), sub_prefix, &sub_log, what)?;
     let args =
         format!("role zenoh-pub --listen {raw} --insecure --interval-us {tag} --timeout {timeout}");
-    let (pub_log, what) = (
-        dir.join(format!("zenoh-raw-pub-{tag}")),
+    let pub_log = dir.join(format!("zenoh-raw-pub-{tag}"));
+    let (publisher, what) = (
+        &mut zenoh_in(robot, &bench, &args),
         "the bare hop's publisher",
     );
-    let publisher = &mut zenoh_in(robot, &bench, &args);
     let mut publisher = paths::spawn_logged(publisher, (prefix, ZENOH_LOG), &pub_log, what)?;
     let status = sub.wait()?;
     let _ = publisher.wait();
@@ -227,19 +227,11 @@ pub fn run(
     let mut mirror = zenoh_in(netns.operator(), &program, &args);
     mirror.env(chassis_ipc::Trace::ZenohMirror.env(), &mirror_trace);
     let (robot_log, mirror_log) = (dir.join("zenoh-robot"), dir.join("zenoh-operator"));
+    let (robot_what, mirror_what) = ("chassis-zenoh (robot side)", "chassis-zenoh --mirror");
+    let (robot_logged, mirror_logged) = ((prefix, ZENOH_LOG), (&*operator_prefix, ZENOH_LOG));
     let children = Children(vec![
-        paths::spawn_logged(
-            &mut robot_side,
-            (prefix, ZENOH_LOG),
-            &robot_log,
-            "chassis-zenoh (robot side)",
-        )?,
-        paths::spawn_logged(
-            &mut mirror,
-            (&operator_prefix, ZENOH_LOG),
-            &mirror_log,
-            "chassis-zenoh --mirror",
-        )?,
+        paths::spawn_logged(&mut robot_side, robot_logged, &robot_log, robot_what)?,
+        paths::spawn_logged(&mut mirror, mirror_logged, &mirror_log, mirror_what)?,
     ]);
     let mut operator = wait_until("the mirror served no state", 20, || {
         let mut r = Robot::connect_with_prefix(&name, Some(&operator_prefix)).ok()?;
