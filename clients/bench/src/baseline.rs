@@ -687,17 +687,12 @@ pub fn run(
     // The loaded receiver's publication is read where the client reads, before the feed
     // starts it.
     let stop = Arc::new(AtomicBool::new(false));
-    let published = match args.publish && transport.is_iceoryx() {
-        true => {
-            let spin = transport == Transport::IceoryxSpin;
-            Some(spawn_reader(prefix, &tag, ping_cpu, spin, &stop)?)
-        }
-        false => None,
-    };
-    let mut feeder = match load {
-        Some(load) => Some(args.start("feed", pong_cpu.map(|c| feed_cpu(c, transport, load)))?),
-        None => None,
-    };
+    let spin = transport == Transport::IceoryxSpin;
+    let published = (args.publish && transport.is_iceoryx())
+        .then(|| spawn_reader(prefix, &tag, ping_cpu, spin, &stop))
+        .transpose()?;
+    let feed_at = |load| pong_cpu.map(|c| feed_cpu(c, transport, load));
+    let mut feeder = load.map(|l| args.start("feed", feed_at(l))).transpose()?;
     let result = crate::paths::pinned(ping_cpu, || {
         let mut endpoint: Box<dyn Endpoint> = match transport.is_iceoryx() {
             true => Box::new(IceoryxEndpoint::open(&args, "ping", "pong")?),
@@ -716,25 +711,19 @@ pub fn run(
         let _ = feeder.wait();
     }
     stop.store(true, Ordering::Relaxed);
-    let published = match published {
-        Some(handle) => {
-            Some((handle.join()).map_err(|_| anyhow::anyhow!("the state reader panicked"))??)
-        }
-        None => None,
-    };
+    let panicked = |_| anyhow::anyhow!("the state reader panicked");
+    let published = published.map(|h| h.join().map_err(panicked)?).transpose()?;
     let (pings, missed_periods) = result?;
     // The pong writes its feed figures before it says "done".
     let _ = pong_out.read_line(&mut String::new());
     let _ = pong.wait();
-    let feed = match load {
-        Some(_) => {
-            let path = args.feed_file();
-            let text = std::fs::read_to_string(&path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            Some(text.lines().filter_map(|l| l.parse::<u64>().ok()).collect())
-        }
-        None => None,
-    };
+    let feed = load.map(|_| -> anyhow::Result<Vec<u64>> {
+        let path = args.feed_file();
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        Ok(text.lines().filter_map(|l| l.parse::<u64>().ok()).collect())
+    });
+    let feed = feed.transpose()?;
     Ok(Measured {
         pings,
         missed_periods,

@@ -219,26 +219,14 @@ pub fn run(
         let fifo = realtime.map_or(String::new(), |p| {
             format!(", at SCHED_FIFO {p} as the service's loop")
         });
-        let raw_row = Row {
-            conditions: Some(format!(
-                "a loop on absolute deadlines sending one ping at the start of each period, \
-                 looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s \
-                 by another process, as by the simulated chassis, and by its own {} ms \
-                 tick{fifo}; {count} periods after 200 of warm-up",
-                tick.as_millis(),
-            )),
-            ..Row::new(
-                PathKind::Baseline,
-                Leg::Hop,
-                &run,
-                hop,
-                "-",
-                at,
-                raw.all_pings(),
-                0,
-            )
-        };
-        report.rows.push(raw_row);
+        let conditions = format!(
+            "a loop on absolute deadlines sending one ping at the start of each period, \
+             looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s \
+             by another process, as by the simulated chassis, and by its own {} ms \
+             tick{fifo}; {count} periods after 200 of warm-up",
+            tick.as_millis(),
+        );
+        (report.rows).push(Row::hop(&run, hop, at, raw.all_pings(), conditions));
         report.loops.push(LoopRun {
             run: run.clone(),
             rate: rate(period),

@@ -5,7 +5,7 @@
 //! keeps this section as it is.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
@@ -17,7 +17,7 @@ use crate::paths::{self, Children, wait_until};
 use crate::provenance::{CpuTimes, Provenance};
 use crate::render::{fill, lines};
 use crate::report::{Machine, Report};
-use crate::zenoh::Netns;
+use crate::zenoh::{Netns, ZENOH_LOG};
 
 /// The heading of the section this writes.
 pub const HEADING: &str = "## Fleet";
@@ -87,29 +87,6 @@ pub struct FleetReport {
     pub machine: Machine,
     pub seconds: f64,
     pub sizes: Vec<SizeFigures>,
-}
-
-/// What the fleet's chassis-zenoh processes log: warnings, Zenoh's own only when errors.
-const ZENOH_LOG: &str = "warn,zenoh=error";
-
-/// Starts `command` as the fleet's process `name`: serving under the IPC prefix `prefix` and
-/// logging at the `RUST_LOG` level `level` to `<dir>/<name>.log`, its stdout dropped.
-fn start(
-    command: &mut Command,
-    prefix: &str,
-    level: &str,
-    dir: &Path,
-    name: &str,
-) -> anyhow::Result<Child> {
-    let path = dir.join(format!("{name}.log"));
-    let file = std::fs::File::create(&path).with_context(|| format!("{}", path.display()))?;
-    command
-        .env("CHASSIS_IPC_PREFIX", prefix)
-        .env("RUST_LOG", level)
-        .stdout(Stdio::null())
-        .stderr(file)
-        .spawn()
-        .with_context(|| format!("starting {name}"))
 }
 
 /// User + system CPU time of a whole process, s.
@@ -218,11 +195,13 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
     let netns = Netns::new(&[format!("cfb{}", std::process::id() % 100_000)])?;
     let prefix = format!("cfb{}_", std::process::id() % 100_000);
     let operator_prefix = format!("{prefix}op_");
-    let (chassisd, zenoh, chassis) = (
-        paths::sibling("chassisd")?,
-        paths::sibling("chassis-zenoh")?,
-        paths::sibling("chassis")?,
-    );
+    let chassisd = paths::sibling("chassisd")?;
+    let zenoh = paths::sibling("chassis-zenoh")?;
+    let chassis = paths::sibling("chassis")?;
+    // The fleet's process `name`, logging to `<dir>/<name>.log` and `<name>-err.log`.
+    let start = |command: &mut Command, prefix: &str, level: &str, name: &str| {
+        paths::spawn_logged(command, (prefix, level), &dir.join(name), name)
+    };
     let mut robots = Children::default();
     let mut robot_side_pids = Vec::new();
     let mut names: Vec<(String, &str)> = Vec::new();
@@ -238,7 +217,6 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
                 &mut robot,
                 &prefix,
                 "warn",
-                dir,
                 &format!("chassisd-{name}"),
             )?);
             wait_until(&format!("chassisd {name} serving"), 30, || {
@@ -249,7 +227,7 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
             side.args(["netns", "exec", netns.robot()]).arg(&zenoh);
             side.args(["--name", &name, "--listen", &listen]);
             let log = format!("zenoh-{name}");
-            robot_side_pids.push(robots.push(start(&mut side, &prefix, ZENOH_LOG, dir, &log)?));
+            robot_side_pids.push(robots.push(start(&mut side, &prefix, ZENOH_LOG, &log)?));
             names.push((name, kind));
         }
         eprintln!("fleet of {size}: starting the operator");
@@ -257,15 +235,12 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         let mut command = Command::new("ip");
         command.args(["netns", "exec", netns.robot()]).arg(&zenoh);
         for k in 0..size {
-            command.args([
-                "--connect",
-                &format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16),
-            ]);
+            let port = BASE_PORT + k as u16;
+            command.args(["--connect", &format!("tcp/127.0.0.1:{port}")]);
         }
         command.arg("--mirror-all");
         let log = format!("operator-{size}");
-        let operator_pid =
-            operator.push(start(&mut command, &operator_prefix, ZENOH_LOG, dir, &log)?);
+        let operator_pid = operator.push(start(&mut command, &operator_prefix, ZENOH_LOG, &log)?);
         for (name, _) in &names {
             wait_until(&format!("the operator mirroring {name}"), 60, || {
                 serves(name, &operator_prefix).then_some(())
@@ -282,13 +257,8 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         let sides0 = sides();
         let start = now_ns();
         let out = Command::new(&chassis)
-            .args([
-                "fleet",
-                "--once",
-                "--json",
-                "--collect",
-                &args.seconds.to_string(),
-            ])
+            .args(["fleet", "--once", "--json", "--collect"])
+            .arg(args.seconds.to_string())
             .env("CHASSIS_IPC_PREFIX", &operator_prefix)
             .output()
             .context("running chassis fleet")?;
@@ -496,32 +466,6 @@ mod tests {
             "docs/PERFORMANCE.md is not docs/bench.jsonl rendered: measure again, or run \
              `chassis-bench render docs/bench.jsonl --doc docs/PERFORMANCE.md`"
         );
-    }
-
-    #[test]
-    fn a_fleet_process_serves_under_its_prefix_and_logs_to_its_file() {
-        let dir = crate::tests::scratch("start");
-        let mut child = start(
-            Command::new("sh").args(["-c", "echo \"$CHASSIS_IPC_PREFIX $RUST_LOG\" >&2; echo out"]),
-            "cfb1_",
-            ZENOH_LOG,
-            &dir,
-            "zenoh-fb0",
-        )
-        .unwrap();
-        assert!(child.wait().unwrap().success());
-        let log = std::fs::read_to_string(dir.join("zenoh-fb0.log")).unwrap();
-        assert_eq!(log, "cfb1_ warn,zenoh=error\n");
-        let err = start(
-            &mut Command::new("/nonexistent/chassisd"),
-            "cfb1_",
-            "warn",
-            &dir,
-            "chassisd-fb0",
-        )
-        .unwrap_err();
-        assert_eq!(err.to_string(), "starting chassisd-fb0");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -272,23 +272,6 @@ fn baseline_key(what: &str, placement: &str) -> String {
     row_key(PathKind::Baseline, what, "-", placement)
 }
 
-fn hop_row(run: &str, what: String, placement: &str, l: Latencies, conditions: String) -> Row {
-    let row = Row::new(
-        PathKind::Baseline,
-        Leg::Hop,
-        run,
-        what,
-        "-",
-        placement,
-        l,
-        0,
-    );
-    Row {
-        conditions: Some(conditions),
-        ..row
-    }
-}
-
 struct Ctx {
     plan: Plan,
     prefix: String,
@@ -481,9 +464,7 @@ impl Step for Baseline {
         };
         let (prefix, dir) = (&ctx.prefix, &ctx.dir);
         let l = baseline::run(transport, placement, rounds, shape, None, prefix, dir)?;
-        report
-            .rows
-            .push(hop_row("", what, at, l.all_pings(), conditions));
+        (report.rows).push(Row::hop("", what, at, l.all_pings(), conditions));
         Ok(())
     }
 }
@@ -506,12 +487,8 @@ impl Step for Stalls {
             over_20_us: stalls.per_second(20),
             over_100_us: stalls.per_second(100),
         });
-        let (what, at, conditions) = (
-            report::STALLS.into(),
-            format!("CPU {cpu}"),
-            stalls.conditions(cpu),
-        );
-        let mut row = hop_row("", what, &at, stalls.gaps, conditions);
+        let (at, conditions) = (format!("CPU {cpu}"), stalls.conditions(cpu));
+        let mut row = Row::hop("", report::STALLS.into(), &at, stalls.gaps, conditions);
         row.leg = Leg::Stalls;
         report.rows.push(row);
         Ok(())
@@ -599,7 +576,7 @@ impl PathRun {
     }
 
     fn hop_row(&self, what: String, l: Latencies, conditions: String) -> Row {
-        hop_row(&self.label(), what, self.placement.label(), l, conditions)
+        Row::hop(&self.label(), what, self.placement.label(), l, conditions)
     }
 
     /// Starts chassisd for this run, configured as `config` says, on the service's CPU.
@@ -621,15 +598,8 @@ impl PathRun {
             let mut command = None;
             if count > 0 {
                 let (t, exact) = (&mut robot.source("teleop")?, paths::Reach::Exact);
-                let mut motion = paths::Motion::open(&mut robot, self.robot, spin)?;
-                let sizes = (count, interval);
-                command = Some(paths::command_path(
-                    &mut motion,
-                    &mut robot,
-                    t,
-                    sizes,
-                    exact,
-                )?);
+                let (kind, sizes) = ((self.robot, spin), (count, interval));
+                command = Some(paths::command_path(&mut robot, kind, t, sizes, exact)?);
             }
             let (mut state, mut teleop) =
                 (paths::StateRecorder::default(), robot.source("teleop")?);
@@ -961,8 +931,7 @@ impl Step for DefaultConfig {
         let figures = paths::pinned(run.placement.cpus().0, || -> anyhow::Result<_> {
             let sizes = (ctx.plan.commands, paths::COMMAND_INTERVAL);
             let (t, toward) = (&mut robot.source("teleop")?, paths::Reach::Toward);
-            let mut motion = paths::Motion::open(&mut robot, run.robot, false)?;
-            paths::command_path(&mut motion, &mut robot, t, sizes, toward)
+            paths::command_path(&mut robot, (run.robot, false), t, sizes, toward)
         })??;
         drop(robot);
         drop(service);

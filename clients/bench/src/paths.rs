@@ -68,7 +68,7 @@ pub enum BusKind {
 /// The service under test, stopped on drop.
 pub struct Service {
     pub name: String,
-    children: Vec<Child>,
+    children: Children,
     pub pid: u32,
     /// Where chassisd writes its pass trace as it stops, when asked for one.
     trace: Option<PathBuf>,
@@ -101,33 +101,13 @@ impl Scheduling {
 impl Service {
     /// Stops the service and returns the passes of its trace (none when it kept no trace).
     pub fn stop(mut self) -> anyhow::Result<Vec<PassStamps>> {
-        self.stop_children();
+        drop(std::mem::take(&mut self.children));
         let Some(path) = &self.trace else {
             return Ok(Vec::new());
         };
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("reading chassisd's pass trace {}", path.display()))?;
         PassStamps::parse(&text).with_context(|| format!("{}", path.display()))
-    }
-
-    fn stop_children(&mut self) {
-        for mut child in self.children.drain(..).rev() {
-            stop(&mut child);
-        }
-    }
-}
-
-impl Drop for Service {
-    fn drop(&mut self) {
-        self.stop_children();
-    }
-}
-
-/// Asks `child` to end (SIGTERM).
-pub fn terminate(child: &Child) {
-    use nix::sys::signal::{Signal, kill};
-    if let Ok(pid) = i32::try_from(child.id()) {
-        let _ = kill(nix::unistd::Pid::from_raw(pid), Signal::SIGTERM);
     }
 }
 
@@ -146,19 +126,16 @@ impl Children {
 
 impl Drop for Children {
     fn drop(&mut self) {
+        use nix::sys::signal::{Signal, kill};
         for child in self.0.iter().rev() {
-            terminate(child);
+            if let Ok(pid) = i32::try_from(child.id()) {
+                let _ = kill(nix::unistd::Pid::from_raw(pid), Signal::SIGTERM);
+            }
         }
         for child in self.0.iter_mut().rev() {
             let _ = child.wait();
         }
     }
-}
-
-/// Asks `child` to end (SIGTERM) and waits for it.
-pub fn stop(child: &mut Child) {
-    terminate(child);
-    let _ = child.wait();
 }
 
 /// Where the workspace's binaries are (next to this one).
@@ -237,12 +214,12 @@ pub fn fifo_priority(pid: u32) -> Option<u8> {
     })
 }
 
-/// Starts `command` (chassisd or its simulator) serving under the IPC prefix `prefix`, logging
-/// warnings: its stdout to `<log>.log`, its stderr to `<log>-err.log`; `what` names it in the
-/// error.
+/// Starts `command` (chassisd, its simulator, chassis-zenoh) serving under the IPC prefix
+/// `prefix`, logging at the `RUST_LOG` level `level`: its stdout to `<log>.log`, its stderr to
+/// `<log>-err.log`; `what` names it in the error.
 pub(crate) fn spawn_logged(
     command: &mut Command,
-    prefix: &str,
+    (prefix, level): (&str, &str),
     log: &Path,
     what: &str,
 ) -> anyhow::Result<Child> {
@@ -254,7 +231,7 @@ pub(crate) fn spawn_logged(
     };
     command
         .env(IPC_PREFIX_ENV, prefix)
-        .env("RUST_LOG", "warn")
+        .env("RUST_LOG", level)
         .stdout(file("")?)
         .stderr(file("-err")?)
         .spawn()
@@ -305,7 +282,7 @@ pub fn start(
         text.push_str("\n[profile]\nwheel_separation_m = 0.45\n");
     }
     std::fs::write(&config_file, text)?;
-    let mut children = Vec::new();
+    let (mut children, logged) = (Children::default(), (prefix, "warn"));
     let bus_arg = match bus {
         BusKind::Sim => "sim".to_string(),
         BusKind::Pty => {
@@ -315,17 +292,10 @@ pub fn start(
                 false => (format!("pty:{link}"), format!("serial:{link}")),
             };
             let mut sim = Command::new(&chassisd);
-            sim.args([
-                "sim",
-                "--robot",
-                robot.name(),
-                "--name",
-                &name,
-                "--bus",
-                &sim_bus,
-            ]);
+            let args = format!("sim --robot {} --name {name} --bus", robot.name());
+            sim.args(args.split(' ')).arg(&sim_bus);
             let log = dir.join(format!("{name}-sim"));
-            children.push(spawn_logged(&mut sim, prefix, &log, "chassisd sim")?);
+            children.push(spawn_logged(&mut sim, logged, &log, "chassisd sim")?);
             let linked = || Path::new(&link).exists().then_some(());
             wait_until("chassisd sim made no pty link", 10, linked)?;
             service_bus
@@ -349,9 +319,7 @@ pub fn start(
         service.env(chassis_ipc::Trace::Pass.env(), path);
     }
     let log = dir.join(format!("{name}-chassisd"));
-    let service = spawn_logged(&mut service, prefix, &log, "chassisd")?;
-    let pid = service.id();
-    children.push(service);
+    let pid = children.push(spawn_logged(&mut service, logged, &log, "chassisd")?);
     let mut service = Service {
         name: name.clone(),
         children,
@@ -613,14 +581,15 @@ pub enum Reach {
 
 /// Command-path latencies: `count` requests from `teleop`, a source opened anywhere (through a
 /// bridge from another computer too), alternating between two speeds, one every `interval`;
-/// the frames (`motion`) and the mux are read from `robot`.
+/// the frames (a [`Motion`] of `kind`, polled with `spin`) and the mux are read from `robot`.
 pub fn command_path(
-    motion: &mut Motion,
     robot: &mut Robot,
+    (kind, spin): (RobotKind, bool),
     teleop: &mut Source,
     (count, interval): (u64, Duration),
     reach: Reach,
 ) -> anyhow::Result<CommandFigures> {
+    let motion = &mut Motion::open(robot, kind, spin)?;
     // A new reader gets the latest decision with the service's next publication (10 Hz).
     let source = teleop.name().to_string();
     let teleop_index = robot
@@ -1073,19 +1042,10 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
     let args = format!("--robot titan --name {name} --no-safety-monitor --cpu 0 --bus");
     chassisd.args(args.split(' ')).arg(bus);
     let log = dir.join(&name);
-    let mut child = spawn_logged(&mut chassisd, prefix, &log, "chassisd on the replay bus")?;
-    let pid = child.id();
-    let deadline = now_ns() + 20_000_000_000;
-    let mut robot = loop {
-        if let Ok(robot) = Robot::connect_with_prefix(&name, Some(prefix)) {
-            break robot;
-        }
-        if now_ns() > deadline {
-            let _ = child.kill();
-            bail!("chassisd on the replay bus did not come up");
-        }
-        pause(Duration::from_millis(5));
-    };
+    let (mut child, what) = (Children::default(), "chassisd on the replay bus");
+    let pid = child.push(spawn_logged(&mut chassisd, (prefix, "warn"), &log, what)?);
+    let connect = || Robot::connect_with_prefix(&name, Some(prefix)).ok();
+    let mut robot = wait_until(&format!("{what} did not come up"), 20, connect)?;
     // From the first frame counted to the last: the loop thread's CPU over that span.
     let mut first: Option<(u64, u64, f64)> = None;
     let mut last = (0u64, 0u64, 0.0f64);
@@ -1103,7 +1063,7 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
             }
         }
     }
-    stop(&mut child);
+    drop(child);
     let (t0, f0, c0) = first.context("no frame was replayed")?;
     let seconds = (last.0 - t0) as f64 / 1e9;
     let counted = last.1 - f0;
@@ -1180,13 +1140,14 @@ mod tests {
         let mut command = Command::new("sh");
         command.args(["-c", "echo \"$CHASSIS_IPC_PREFIX\"; echo \"$RUST_LOG\" >&2"]);
         let log = dir.join("bn1-chassisd");
-        let mut child = spawn_logged(&mut command, "bench_3", &log, "a stand-in").unwrap();
+        let level = ("bench_3", crate::zenoh::ZENOH_LOG);
+        let mut child = spawn_logged(&mut command, level, &log, "a stand-in").unwrap();
         assert!(child.wait().unwrap().success());
         let read = |file: &str| std::fs::read_to_string(dir.join(file)).unwrap();
         assert_eq!(read("bn1-chassisd.log"), "bench_3\n");
-        assert_eq!(read("bn1-chassisd-err.log"), "warn\n");
+        assert_eq!(read("bn1-chassisd-err.log"), "warn,zenoh=error\n");
         let mut missing = Command::new("/nonexistent/chassisd");
-        let err = spawn_logged(&mut missing, "bench_3", &log, "chassisd sim").unwrap_err();
+        let err = spawn_logged(&mut missing, level, &log, "chassisd sim").unwrap_err();
         assert_eq!(err.to_string(), "starting chassisd sim");
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -28,29 +28,22 @@ impl Provenance {
     /// (or none at all) is an error unless `allow_dirty`.
     pub fn begin(strict: bool, allow_dirty: bool) -> anyhow::Result<Self> {
         let git = GitState::read();
-        let commit = git.as_ref().map(|g| g.commit.clone()).unwrap_or_default();
-        let changed = git.map(|g| g.changed).unwrap_or_default();
-        let dirty = commit.is_empty() || !changed.is_empty();
-        if strict && dirty && !allow_dirty {
-            if commit.is_empty() {
-                bail!(
-                    "not in a git checkout: figures written to files must name their commit \
-                     (run from the workspace, or pass --allow-dirty)"
-                );
-            }
-            bail!(
+        let dirty = git.as_ref().is_none_or(|g| !g.changed.is_empty());
+        match &git {
+            _ if !strict || !dirty || allow_dirty => {}
+            None => bail!(
+                "not in a git checkout: figures written to files must name their commit \
+                 (run from the workspace, or pass --allow-dirty)"
+            ),
+            Some(g) => bail!(
                 "the git tree has uncommitted changes ({}): figures written to files must come \
                  from a commit. Commit them, or pass --allow-dirty for a local run (the files \
                  then say DIRTY)",
-                changed.join(", ")
-            );
+                g.changed.join(", ")
+            ),
         }
         Ok(Self {
-            commit: if commit.is_empty() {
-                "unknown".into()
-            } else {
-                commit
-            },
+            commit: git.map_or_else(|| "unknown".into(), |g| g.commit),
             dirty,
             date: chassis_provenance::utc_date(),
             command: std::env::args()

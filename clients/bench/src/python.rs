@@ -126,14 +126,8 @@ impl ScriptRun<'_> {
     /// Appends the arguments every `bench.py` takes.
     fn args(&self, script: &mut Command) {
         script
-            .args([
-                "--name",
-                self.name,
-                "--robot",
-                "titan",
-                "--prefix",
-                self.prefix,
-            ])
+            .args(["--name", self.name, "--robot", "titan"])
+            .args(["--prefix", self.prefix])
             .arg("--chassis")
             .arg(self.chassis_cli)
             .args(["--state-samples", &self.states.to_string()])

@@ -173,29 +173,22 @@ impl LoopRun {
 }
 
 /// One line of a samples file: the run (what it measured on, its costs, notes), a row with its
-/// histogram, or a path's split.
-#[derive(Serialize)]
+/// histogram, or a path's split; written from references, read back into boxes.
+#[derive(Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-enum Line<'a> {
-    Run(&'a Report),
-    Row(&'a Row),
-    Split(&'a Parts),
+enum Line<R, W, S> {
+    Run(R),
+    Row(W),
+    Split(S),
 }
 
-/// [`Line`], read back.
-#[derive(Deserialize)]
-#[serde(rename_all = "snake_case")]
-enum ReadLine {
-    Run(Box<Report>),
-    Row(Box<Row>),
-    Split(Box<Parts>),
-}
+type ReadLine = Line<Box<Report>, Box<Row>, Box<Parts>>;
 
 impl Report {
     /// The run's samples, one JSON line each: the run first, then its rows and splits in order.
     /// Everything the table, the document and the plots are rendered from.
     pub fn samples(&self) -> Result<String, serde_json::Error> {
-        let lines = std::iter::once(Line::Run(self))
+        let lines = std::iter::once(Line::<_, &Row, &Parts>::Run(self))
             .chain(self.rows.iter().map(Line::Row))
             .chain(self.parts.iter().map(Line::Split));
         let mut out = String::new();
@@ -214,9 +207,9 @@ impl Report {
             let read: ReadLine =
                 serde_json::from_str(line).map_err(|e| anyhow::anyhow!("samples line {n}: {e}"))?;
             match (read, report.as_mut()) {
-                (ReadLine::Run(run), None) => report = Some(*run),
-                (ReadLine::Row(row), Some(r)) => r.rows.push(*row),
-                (ReadLine::Split(split), Some(r)) => r.parts.push(*split),
+                (Line::Run(run), None) => report = Some(*run),
+                (Line::Row(row), Some(r)) => r.rows.push(*row),
+                (Line::Split(split), Some(r)) => r.parts.push(*split),
                 _ => anyhow::bail!("samples line {n}: the run's line must come first, once"),
             }
         }
@@ -310,15 +303,11 @@ impl Machine {
     pub fn probe() -> Self {
         let read = |path| std::fs::read_to_string(path).unwrap_or_default();
         let cpuinfo = read("/proc/cpuinfo");
-        let model = cpuinfo.lines().find_map(|l| l.strip_prefix("model name"));
+        let model = (cpuinfo.lines()).find_map(|l| l.strip_prefix("model name")?.split(':').nth(1));
         Self {
             cpus: crate::placement::cpu_count(),
             kernel: read("/proc/sys/kernel/osrelease").trim().to_string(),
-            cpu_model: model
-                .and_then(|l| l.split(':').nth(1))
-                .unwrap_or("")
-                .trim()
-                .into(),
+            cpu_model: model.unwrap_or("").trim().into(),
         }
     }
 }
@@ -404,6 +393,13 @@ impl Row {
             smoke_tolerated: false,
             latencies,
         }
+    }
+
+    /// A raw transport's hop measured under `conditions`.
+    pub fn hop(run: &str, what: String, at: &str, l: Latencies, conditions: String) -> Self {
+        let row = Self::new(PathKind::Baseline, Leg::Hop, run, what, "-", at, l, 0);
+        let conditions = Some(conditions);
+        Self { conditions, ..row }
     }
 
     /// [`row_key`] of this row.

@@ -369,10 +369,8 @@ fn largest_part(parts: &[&Part], row: &Row) -> Option<String> {
     let part = parts
         .iter()
         .max_by(|a, b| a.summary.p99_us.total_cmp(&b.summary.p99_us))?;
-    let (head, s) = (
-        format!("{} {} {}", row.what, row.mode, row.placement),
-        &part.summary,
-    );
+    let head = format!("{} {} {}", row.what, row.mode, row.placement);
+    let s = &part.summary;
     Some(if s.count < MIN_FOR_P99 {
         format!(
             "{head}: its run's split holds {} samples (the row {}), too few for a p99",

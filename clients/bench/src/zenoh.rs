@@ -12,7 +12,7 @@
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -104,24 +104,16 @@ impl Drop for Netns {
     }
 }
 
-/// `program args…` (split at spaces) in network namespace `ns`, its stderr to `log`.
-fn zenoh_in(
-    ns: &str,
-    prefix: &str,
-    program: &Path,
-    args: &str,
-    log: &Path,
-) -> anyhow::Result<Command> {
-    let log = std::fs::File::create(log).with_context(|| format!("{}", log.display()))?;
+/// What the chassis-zenoh processes log: warnings, Zenoh's own only when errors.
+pub const ZENOH_LOG: &str = "warn,zenoh=error";
+
+/// `program args…` (split at spaces) in network namespace `ns`.
+fn zenoh_in(ns: &str, program: &Path, args: &str) -> Command {
     let mut cmd = Command::new("ip");
     cmd.args(["netns", "exec", ns])
         .arg(program)
-        .args(args.split(' '))
-        .env(chassis_client::IPC_PREFIX_ENV, prefix)
-        .env("RUST_LOG", "warn,zenoh=error")
-        .stdout(Stdio::null())
-        .stderr(Stdio::from(log));
-    Ok(cmd)
+        .args(args.split(' '));
+    cmd
 }
 
 /// Bare Zenoh samples received before the counted ones (sessions, routes, allocations warm).
@@ -169,23 +161,29 @@ fn bare_hop(
     let wanted = RAW_WARMUP + count;
     // Twice the time the samples take at their pace, and discovery.
     let timeout = (2.0 * wanted as f64 * pace.as_secs_f64() + 30.0).ceil();
-    let sub_log = dir.join(format!("zenoh-raw-sub-{tag}.log"));
+    let sub_log = dir.join(format!("zenoh-raw-sub-{tag}"));
     let bench = std::env::current_exe().context("finding chassis-bench itself")?;
     let (operator, robot) = (netns.operator(), netns.robot());
     let args =
         format!("role zenoh-sub --connect {raw} --insecure --count {wanted} --timeout {timeout}");
-    let mut sub = zenoh_in(operator, operator_prefix, &bench, &args, &sub_log)?;
-    let mut sub =
-        (sub.arg("--out").arg(&raw_file).spawn()).context("starting the bare hop's subscriber")?;
+    let mut sub = zenoh_in(operator, &bench, &args);
+    let (sub_prefix, what) = ((operator_prefix, ZENOH_LOG), "the bare hop's subscriber");
+    let mut sub = paths::spawn_logged(sub.arg("--out").arg(&raw_file), sub_prefix, &sub_log, what)?;
     let args =
         format!("role zenoh-pub --listen {raw} --insecure --interval-us {tag} --timeout {timeout}");
-    let pub_log = dir.join(format!("zenoh-raw-pub-{tag}.log"));
-    let publisher = zenoh_in(robot, prefix, &bench, &args, &pub_log)?.spawn();
-    let mut publisher = publisher.context("starting the bare hop's publisher")?;
+    let pub_log = dir.join(format!("zenoh-raw-pub-{tag}"));
+    let (publisher, what) = (
+        &mut zenoh_in(robot, &bench, &args),
+        "the bare hop's publisher",
+    );
+    let mut publisher = paths::spawn_logged(publisher, (prefix, ZENOH_LOG), &pub_log, what)?;
     let status = sub.wait()?;
     let _ = publisher.wait();
     if !status.success() {
-        bail!("the bare Zenoh baseline failed; see {}", sub_log.display());
+        bail!(
+            "the bare Zenoh baseline failed; see {}-err.log",
+            sub_log.display()
+        );
     }
     std::fs::read_to_string(&raw_file)?
         .lines()
@@ -223,23 +221,17 @@ pub fn run(
     let mirror_trace = dir.join("zenoh-operator.trace");
     let program = paths::sibling("chassis-zenoh")?;
     let args = format!("--name {name} --listen {bridge} --insecure");
-    let mut robot_side = zenoh_in(
-        netns.robot(),
-        prefix,
-        &program,
-        &args,
-        &dir.join("zenoh-robot.log"),
-    )?;
+    let mut robot_side = zenoh_in(netns.robot(), &program, &args);
     robot_side.env(chassis_ipc::Trace::ZenohExport.env(), &export_trace);
     let args = format!("--name {name} --connect {bridge} --insecure --mirror");
-    let log = dir.join("zenoh-operator.log");
-    let mut mirror = zenoh_in(netns.operator(), &operator_prefix, &program, &args, &log)?;
+    let mut mirror = zenoh_in(netns.operator(), &program, &args);
     mirror.env(chassis_ipc::Trace::ZenohMirror.env(), &mirror_trace);
+    let (robot_log, mirror_log) = (dir.join("zenoh-robot"), dir.join("zenoh-operator"));
+    let (robot_what, mirror_what) = ("chassis-zenoh (robot side)", "chassis-zenoh --mirror");
+    let (robot_logged, mirror_logged) = ((prefix, ZENOH_LOG), (&*operator_prefix, ZENOH_LOG));
     let children = Children(vec![
-        robot_side
-            .spawn()
-            .context("starting chassis-zenoh (robot side)")?,
-        mirror.spawn().context("starting chassis-zenoh --mirror")?,
+        paths::spawn_logged(&mut robot_side, robot_logged, &robot_log, robot_what)?,
+        paths::spawn_logged(&mut mirror, mirror_logged, &mirror_log, mirror_what)?,
     ]);
     let mut operator = wait_until("the mirror served no state", 20, || {
         let mut r = Robot::connect_with_prefix(&name, Some(&operator_prefix)).ok()?;
@@ -249,10 +241,8 @@ pub fn run(
     let mut remote: Source = wait_until("the mirror offered no remote source", 20, || {
         operator.source("remote").ok()
     })?;
-    let (kind, reach) = (RobotKind::Titan, paths::Reach::Exact);
-    let mut motion = paths::Motion::open(&mut robot, kind, false)?;
-    let sizes = (commands, interval);
-    let command = paths::command_path(&mut motion, &mut robot, &mut remote, sizes, reach)?;
+    let (titan, sizes) = ((RobotKind::Titan, false), (commands, interval));
+    let command = paths::command_path(&mut robot, titan, &mut remote, sizes, paths::Reach::Exact)?;
 
     // Robot state → the operator's iceoryx2 subscriber. The robot side forwards the newest
     // sample of each read of the bus: `seq` has gaps.
@@ -303,18 +293,7 @@ pub fn run(
             hops.len()
         );
         let l = last_of(hops, count);
-        let row = Row::new(
-            PathKind::Baseline,
-            Leg::Hop,
-            &run,
-            what.into(),
-            "-",
-            PLACEMENT,
-            l,
-            0,
-        );
-        let conditions = Some(conditions);
-        report.rows.push(Row { conditions, ..row });
+        (report.rows).push(Row::hop(&run, what.into(), PLACEMENT, l, conditions));
     }
     for (leg, what, l, missed, raw) in [
         (
