@@ -25,7 +25,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
-use crate::paths::LoopMode;
+use crate::paths::{HYBRID_SPIN, LoopMode};
 use crate::placement::{Placement, pin_current_thread};
 use crate::stats::Latencies;
 
@@ -70,10 +70,6 @@ impl Transport {
     }
 }
 
-/// How long a hybrid receiver keeps polling after each activity: chassisd's `--spin-us` in the
-/// benchmark's hybrid runs, and the poll-then-block baseline's window.
-pub const HYBRID_SPIN: Duration = Duration::from_micros(200);
-
 /// What the receiving side lives with besides the measured pings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Load {
@@ -100,7 +96,7 @@ pub enum Rounds {
     /// (and is not answered): what a request meets when it follows another at once, as a
     /// safety stop follows a teleop request.
     AfterWakeUp,
-    /// A controller's loop ([`crate::control_loop::Periods`]): one ping at the start of each
+    /// A controller's loop ([`crate::placement::Periods`]): one ping at the start of each
     /// period, the answers looked for without waiting; what counts is each period's start →
     /// its ping in the other process, and the periods the loop missed.
     Loop(Duration),
@@ -853,7 +849,7 @@ fn loop_rounds(
     period: Duration,
 ) -> anyhow::Result<(Vec<u64>, u64)> {
     const WARMUP: u64 = 200;
-    let mut periods = crate::control_loop::Periods::new(period);
+    let mut periods = crate::placement::Periods::new(period);
     // Each ping's period start and send stamp.
     let mut started: Vec<(u64, u64)> = Vec::new();
     let mut hops = Vec::new();

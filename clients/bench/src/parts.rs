@@ -10,8 +10,8 @@ use std::path::Path;
 use anyhow::Context as _;
 use serde::{Deserialize, Serialize};
 
-use crate::paths::PassStamps;
 use crate::stats::{Latencies, Summary};
+use chassis_ipc::PassStamps;
 
 /// Whose time a part is: what the targets can take out, and what bounds them on a machine.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

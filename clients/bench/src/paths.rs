@@ -25,12 +25,16 @@ use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
 use chassis_protocols::pair::Pair;
 use chassis_protocols::titan::{self, TitanProfile};
 use chassis_protocols::{CanFrame, CandumpLine, Direction, RobotKind, Timestamp, WireItem};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use zerocopy::IntoBytes as _;
 
 use crate::placement::{pause, pin_current_thread, unique, unpin_current_thread};
-use crate::report::Throughput;
+use crate::report::{Cost, Scheduling, Throughput};
 use crate::stats::Latencies;
+
+/// How long a hybrid receiver keeps polling after each activity: chassisd's `--spin-us` in the
+/// benchmark's hybrid runs, and the poll-then-block baseline's window.
+pub const HYBRID_SPIN: Duration = Duration::from_micros(200);
 
 /// How the service's loop waits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, clap::ValueEnum)]
@@ -74,28 +78,6 @@ pub struct Service {
     trace: Option<PathBuf>,
     /// How chassisd's loop is scheduled.
     pub scheduling: Scheduling,
-}
-
-/// How a run's chassisd loop is scheduled.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Scheduling {
-    /// Normal scheduling, as asked.
-    Normal,
-    /// Real-time mode, granted: SCHED_FIFO at this priority.
-    Fifo(u8),
-    /// Real-time mode asked for and refused by the system: normal scheduling.
-    Refused,
-}
-
-impl Scheduling {
-    /// The SCHED_FIFO priority the loop runs at, if it does.
-    pub fn fifo(self) -> Option<u8> {
-        match self {
-            Scheduling::Fifo(priority) => Some(priority),
-            Scheduling::Normal | Scheduling::Refused => None,
-        }
-    }
 }
 
 impl Service {
@@ -312,7 +294,7 @@ pub fn start(
     }
     if mode == LoopMode::Hybrid {
         // The same window as the poll-then-block baseline's.
-        let window = crate::baseline::HYBRID_SPIN.as_micros().to_string();
+        let window = HYBRID_SPIN.as_micros().to_string();
         service.args(["--spin-us", &window]);
     }
     if let Some(path) = &trace {
@@ -883,18 +865,6 @@ pub fn rss_mib(pid: u32) -> anyhow::Result<f64> {
         .context("no VmRSS")?
         .parse()?;
     Ok(kib / 1024.0)
-}
-
-/// CPU use and memory of the service at a given bus load.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Cost {
-    /// The bus the service read: `sim` (a socket pair, up to 256 frames per read) or `slcan-pty`
-    /// (`chassisd sim` behind an emulated slcan adapter on a pty: text lines, as a USB adapter).
-    pub bus: String,
-    pub bitrate: u32,
-    pub frames_per_s: f64,
-    pub cpu_pct: f64,
-    pub rss_mib: f64,
 }
 
 /// Loads the simulated bus to `bitrate`'s capacity (8-byte standard frames, no stuffing:

@@ -3,8 +3,8 @@
 //! `{{name}}` alone on its line stands for a block of lines, none when the block is empty. The
 //! terminal's table is the document's tables and lists.
 
-use crate::baseline::HYBRID_SPIN;
 use crate::parts::Whose;
+use crate::paths::HYBRID_SPIN;
 use crate::paths::{
     BENCH_CONFIG, COMMAND_INTERVAL, REALTIME_PRIORITY, STATE_REQUEST_INTERVAL,
     XBOT_COMMAND_INTERVAL, off_grid, period_text,
@@ -307,7 +307,7 @@ impl Report {
     /// where it was refused (their loops ran with normal scheduling, and so did their
     /// baselines' receivers).
     pub fn scheduling_text(&self) -> String {
-        use crate::paths::Scheduling;
+        use crate::report::Scheduling;
         let asked = self
             .scheduling
             .iter()

@@ -6,7 +6,6 @@ use std::path::Path;
 use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::paths::Cost;
 use crate::stats::{Latencies, Summary};
 
 /// The default-configuration command row's `what`: the TITAN on the simulated bus with
@@ -135,7 +134,7 @@ pub struct Report {
     /// with the notes.
     pub problems: Vec<String>,
     /// How chassisd's loop was scheduled in each latency run (the run's label).
-    pub scheduling: Vec<(String, crate::paths::Scheduling)>,
+    pub scheduling: Vec<(String, Scheduling)>,
     /// chassisd's largest resident memory in a latency run in real-time mode, MiB.
     pub realtime_rss_mib: Option<f64>,
     /// The rows the run planned, for the smoke check.
@@ -658,6 +657,40 @@ impl Report {
     }
 }
 
+/// How a run's chassisd loop is scheduled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scheduling {
+    /// Normal scheduling, as asked.
+    Normal,
+    /// Real-time mode, granted: SCHED_FIFO at this priority.
+    Fifo(u8),
+    /// Real-time mode asked for and refused by the system: normal scheduling.
+    Refused,
+}
+
+impl Scheduling {
+    /// The SCHED_FIFO priority the loop runs at, if it does.
+    pub fn fifo(self) -> Option<u8> {
+        match self {
+            Scheduling::Fifo(priority) => Some(priority),
+            Scheduling::Normal | Scheduling::Refused => None,
+        }
+    }
+}
+
+/// CPU use and memory of the service at a given bus load.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Cost {
+    /// The bus the service read: `sim` (a socket pair, up to 256 frames per read) or `slcan-pty`
+    /// (`chassisd sim` behind an emulated slcan adapter on a pty: text lines, as a USB adapter).
+    pub bus: String,
+    pub bitrate: u32,
+    pub frames_per_s: f64,
+    pub cpu_pct: f64,
+    pub rss_mib: f64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -740,7 +773,7 @@ mod tests {
     /// The document says whether real-time mode was granted, naming the runs that were refused.
     #[test]
     fn the_runs_refused_realtime_mode_are_named() {
-        use crate::paths::Scheduling;
+        use Scheduling;
         let mut report = Report {
             scheduling: vec![
                 (
@@ -1374,7 +1407,7 @@ mod tests {
 
     #[test]
     fn a_run_rendered_from_its_samples_is_the_run_rendered() {
-        use crate::paths::Scheduling;
+        use Scheduling;
         let (mut report, _) = run_with_ros2_row(600);
         report.rows[1].latencies.record_between(5, 1);
         report.parts.push(split_of(
