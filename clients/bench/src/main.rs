@@ -1195,4 +1195,38 @@ mod tests {
             ]
         );
     }
+
+    #[test]
+    fn the_quick_plan_plans_every_row_of_the_committed_document_and_no_other() {
+        use std::collections::BTreeSet;
+        let args = Cli::parse_from(["chassis-bench", "--quick"]).run;
+        let plan = Plan::new(false, true);
+        let steps = steps(&args, &[RobotKind::Titan], &plan, |_| false);
+        let ctx = Ctx {
+            plan,
+            prefix: String::new(),
+            dir: PathBuf::new(),
+            python: Some(PathBuf::from("python")),
+            ros2: Some(PathBuf::from("python")),
+            bar: ProgressBar::hidden(),
+        };
+        let planned: BTreeSet<String> = steps
+            .iter()
+            .flat_map(|s| s.planned(&ctx))
+            .map(|p| p.key)
+            .collect();
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/bench.jsonl");
+        let samples = std::fs::read_to_string(root).unwrap();
+        let measured: BTreeSet<String> = Report::from_samples(&samples)
+            .unwrap()
+            .rows
+            .iter()
+            .map(Row::key)
+            .collect();
+        assert_eq!(
+            planned.symmetric_difference(&measured).collect::<Vec<_>>(),
+            Vec::<&String>::new(),
+            "planned by --quick but not in docs/bench.jsonl, or the other way round"
+        );
+    }
 }
