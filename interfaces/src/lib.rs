@@ -54,7 +54,7 @@ pub use state::{
     BmsState, ChassisState, CommandEcho, ControlMode, ControllerState, DriverStatus, FaultFlags,
     GROUP_SLOTS, GpsFix, Group, ImuState, LiftState, LightsState, LinkFlags, LinkStats,
     MotionState, MotorState, OdometryState, PanTiltState, RangesState, RcState, SystemState,
-    WireProtocol,
+    WireProtocol, wrap_angle,
 };
 pub use text::{read_fixed_str, write_fixed_str};
 pub use velocity::{Envelope, InvalidVelocity, ValidRequest, Velocity};

@@ -339,6 +339,22 @@ ipc_type! {
     }
 }
 
+/// Wraps an angle to (-π, π] (the range of [`OdometryState::yaw_rad`]); a non-finite angle
+/// reads as 0.
+pub fn wrap_angle(angle: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    if !angle.is_finite() {
+        return 0.0;
+    }
+    let mut a = angle % TAU;
+    if a <= -PI {
+        a += TAU;
+    } else if a > PI {
+        a -= TAU;
+    }
+    a
+}
+
 ipc_type! {
     /// Body status, mode, faults and battery.
     #[derive(Default, Serialize)]
@@ -760,5 +776,14 @@ mod tests {
         assert!(json["motion"]["linear_mps"].is_number());
         assert!(json["system"]["battery_voltage_v"].is_number());
         assert!(json.get("_reserved").is_none());
+    }
+
+    #[test]
+    fn angles_wrap_into_the_half_open_interval() {
+        use std::f64::consts::PI;
+        assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(-0.5) + 0.5).abs() < 1e-12);
+        assert_eq!(wrap_angle(f64::NAN), 0.0);
     }
 }

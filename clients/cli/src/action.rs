@@ -165,11 +165,6 @@ fn fault_names() -> Vec<&'static str> {
     FaultClear::NAMES.iter().map(|(_, n)| *n).collect()
 }
 
-/// The normalized fault-clear code for a name.
-pub fn fault_clear_code(name: &str) -> Result<u8, ActionError> {
-    FaultClear::from_name(name).ok_or_else(|| ActionError::UnknownFault { name: name.into() })
-}
-
 impl Action {
     /// The robot-independent command.
     pub fn to_command(&self) -> Result<Command, ActionError> {
@@ -181,7 +176,8 @@ impl Action {
                 engage: *action == BrakeArg::Engage,
             },
             Action::ClearFault { which } => Command::ClearFaults {
-                which: fault_clear_code(which)?,
+                which: FaultClear::from_name(which)
+                    .ok_or_else(|| ActionError::UnknownFault { name: which.into() })?,
             },
             Action::Lights { mode, brightness } => {
                 if *brightness > 100 {

@@ -409,10 +409,7 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     };
     // A fresh sample, not the one the subscription inherited (it is as old as our start-up).
     let inherited = robot.latest_state()?;
-    let state = match robot.wait_state(Duration::from_millis(500))? {
-        Some(s) => Some(s),
-        None => inherited,
-    };
+    let state = robot.wait_state(Duration::from_millis(500))?.or(inherited);
     let age = state.map_or(String::new(), |s| age_text(s.stamp_ns));
     // What the robot is (published with history 1: a new reader has it within a tick).
     let description = match robot.description(Duration::from_millis(500)) {

@@ -937,20 +937,18 @@ pub fn termination_requested() -> bool {
 }
 
 /// Connects to the robot `name` once chassisd serves it — its state and its mux decision (the
-/// service opens the state before the mux) — trying every `retry`. `waiting` hears each failed
-/// attempt, with `true` for the first (to say once that the process waits). `None` when SIGINT
-/// or SIGTERM arrives first.
-pub fn wait_for_robot(
-    name: &str,
-    retry: Duration,
-    mut waiting: impl FnMut(&ClientError, bool),
-) -> Option<Robot> {
-    let mut ticker = Ticker::new(retry);
+/// service opens the state before the mux) — trying every 250 ms and saying once (a warning)
+/// that the process waits. `None` when SIGINT or SIGTERM arrives first.
+pub fn wait_for_robot(name: &str) -> Option<Robot> {
+    let mut ticker = Ticker::new(Duration::from_millis(250));
     let mut first = true;
     while !termination_requested() {
         match Robot::connect(name).and_then(|mut robot| robot.latest_mux().map(|_| robot)) {
             Ok(robot) => return Some(robot),
-            Err(e) => waiting(&e, std::mem::take(&mut first)),
+            Err(e) if std::mem::take(&mut first) => {
+                tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
+            }
+            Err(e) => tracing::debug!(error = %e, "connecting"),
         }
         ticker.wait();
     }

@@ -128,7 +128,7 @@ fn robot_loop(config: &Config, served: &Served) -> anyhow::Result<()> {
         channels,
         inbox,
     } = served;
-    let Some(mut robot) = connect(&naming.robot) else {
+    let Some(mut robot) = chassis_client::wait_for_robot(&naming.robot) else {
         return Ok(());
     };
     let tap = robot.frames(TAP_BUFFER).context("opening the frame tap")?;
@@ -200,17 +200,6 @@ fn robot_loop(config: &Config, served: &Served) -> anyhow::Result<()> {
         tracing::debug!(error = %e, "stopping the foxglove source");
     }
     Ok(())
-}
-
-/// Connects to the robot, waiting for chassisd to serve it; `None` when asked to stop first.
-fn connect(name: &str) -> Option<Robot> {
-    chassis_client::wait_for_robot(name, Duration::from_millis(250), |e, first| {
-        if first {
-            tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
-        } else {
-            tracing::debug!(error = %e, "connecting");
-        }
-    })
 }
 
 /// The `foxglove` velocity source, opened when the first velocity arrives (chassisd may start

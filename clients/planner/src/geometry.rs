@@ -1,6 +1,6 @@
 //! Points, poses and angles in the plane (metres, radians, left turn positive).
 
-use std::f64::consts::{PI, TAU};
+pub use chassis_client::wrap_angle;
 
 /// A point in the plane, m.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -68,20 +68,6 @@ impl Pose {
     }
 }
 
-/// Wraps an angle to (-π, π]; a non-finite angle reads as 0.
-pub fn wrap_angle(angle: f64) -> f64 {
-    if !angle.is_finite() {
-        return 0.0;
-    }
-    let mut a = angle % TAU;
-    if a <= -PI {
-        a += TAU;
-    } else if a > PI {
-        a -= TAU;
-    }
-    a
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,15 +79,7 @@ mod tests {
         let back = pose.to_local(pose.to_world(p));
         assert!(back.distance(p) < 1e-12);
         // Ahead of a robot facing +y is +y.
-        let ahead = Pose::new(0.0, 0.0, PI / 2.0).to_world(Point::new(1.0, 0.0));
+        let ahead = Pose::new(0.0, 0.0, std::f64::consts::FRAC_PI_2).to_world(Point::new(1.0, 0.0));
         assert!(ahead.distance(Point::new(0.0, 1.0)) < 1e-12);
-    }
-
-    #[test]
-    fn angles_wrap_into_the_half_open_interval() {
-        assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
-        assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
-        assert!((wrap_angle(-0.5) + 0.5).abs() < 1e-12);
-        assert_eq!(wrap_angle(f64::NAN), 0.0);
     }
 }

@@ -303,22 +303,10 @@ impl Entities {
     }
 }
 
-/// Connects to chassisd, waiting for it to serve `name` (the bridge may start first). `None`
-/// when the process is asked to stop while waiting.
-pub fn connect(name: &str) -> Option<Robot> {
-    chassis_client::wait_for_robot(name, Duration::from_millis(250), |e, first| {
-        if first {
-            tracing::warn!(error = %e, "waiting for chassisd to serve robot '{name}'");
-        } else {
-            tracing::debug!(error = %e, "connecting");
-        }
-    })
-}
-
 /// Connects to chassisd and reads the robot's description, waiting for both (the bridge may
 /// start first). `None` when the process is asked to stop while waiting.
 pub fn describe(name: &str) -> Option<(Robot, RobotDescription)> {
-    let mut robot = connect(name)?;
+    let mut robot = chassis_client::wait_for_robot(name)?;
     let mut warned = false;
     while !termination_requested() {
         match robot.description(Duration::from_secs(1)) {
@@ -453,7 +441,7 @@ pub fn commands(
     max_age: Duration,
 ) -> anyhow::Result<Drops> {
     let max_age_ns = u64::try_from(max_age.as_nanos()).unwrap_or(u64::MAX);
-    let Some(mut robot) = connect(name) else {
+    let Some(mut robot) = chassis_client::wait_for_robot(name) else {
         return Ok(Drops::default());
     };
     let mut poll = Poll::new().context("creating the poll")?;

@@ -62,9 +62,14 @@ impl Frames {
 pub struct RosClock(WallClock);
 
 impl RosClock {
-    /// Reads both clocks once ([`WallClock::measure`]).
-    pub fn measure() -> Self {
-        Self(WallClock::measure())
+    /// Reads both clocks once ([`WallClock::measure`]); with `monotonic_stamps` the stamps are
+    /// `CLOCK_MONOTONIC` itself.
+    pub fn new(monotonic_stamps: bool) -> Self {
+        if monotonic_stamps {
+            Self::with_offset(0)
+        } else {
+            Self(WallClock::measure())
+        }
     }
 
     /// A clock `offset_ns` ahead of `CLOCK_MONOTONIC` (0: stamps are monotonic time).

@@ -158,11 +158,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         .context("starting the spinner thread")?;
 
     let frames = Frames::new(&options.frame_prefix);
-    let clock = if options.monotonic_stamps {
-        RosClock::with_offset(0)
-    } else {
-        RosClock::measure()
-    };
+    let clock = RosClock::new(options.monotonic_stamps);
     let name = options.name.clone();
     let max_age = std::time::Duration::from_millis(cli.max_age_ms);
     let commands = std::thread::Builder::new()

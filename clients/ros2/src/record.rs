@@ -461,11 +461,7 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
     )?;
     bag.metadata("robot_description", description_metadata(&description))?;
     let frames = Frames::new(&options.frame_prefix);
-    let clock = if options.monotonic_stamps {
-        RosClock::with_offset(0)
-    } else {
-        RosClock::measure()
-    };
+    let clock = RosClock::new(options.monotonic_stamps);
     let log_time = || u64::try_from(clock.ros_time(now_ns()).nanos()).unwrap_or(0);
     let end = options.duration.map(deadline);
     let mut latest = None;

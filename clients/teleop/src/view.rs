@@ -146,12 +146,6 @@ fn lock_holder(mux: &MuxStatus, lock: &LockStatus) -> String {
     }
 }
 
-/// True when the `estop` lock is held.
-pub fn estop_latched(mux: Option<&MuxStatus>) -> bool {
-    mux.and_then(|m| m.locks().iter().find(|l| l.name() == "estop"))
-        .is_some_and(|l| l.held != 0)
-}
-
 fn bold(color: Color) -> Style {
     Style::default().fg(color).add_modifier(Modifier::BOLD)
 }
@@ -162,7 +156,9 @@ fn label(text: &str) -> Span<'static> {
 
 /// Draws the whole screen.
 pub fn render(frame: &mut Frame, view: &View) {
-    let latched = estop_latched(view.mux);
+    let latched = (view.mux)
+        .and_then(|m| m.locks().iter().find(|l| l.name() == "estop"))
+        .is_some_and(|l| l.held != 0);
     let [top, middle, banner, help] = Layout::vertical([
         Constraint::Length(4),
         Constraint::Min(9),

@@ -208,7 +208,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
     let mut described: Option<(u64, u64)> = None;
     let mut next_connections = now_ns();
     let mut dropped: u64 = 0;
-    let mut drop_sample = |what: &str, e: &dyn std::fmt::Display| {
+    let mut drop_sample = |what: &str, e: &dyn std::fmt::Display| -> anyhow::Result<()> {
         dropped += 1;
         if dropped.is_power_of_two() {
             tracing::warn!(dropped, "dropped a {what} sample from the robot: {e}");
@@ -216,6 +216,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                 "chassis-zenoh: dropped a {what} sample from the robot: {e} ({dropped} dropped)"
             );
         }
+        Ok(())
     };
     let mut link = LinkWatch::new(LOST_AFTER);
     // The robot's newest mux as it sent it, and whether an e-stop is pending here: what the
@@ -272,10 +273,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                         }
                         send(&state, s)
                     }
-                    Err(e) => {
-                        drop_sample("state", &e);
-                        Ok(())
-                    }
+                    Err(e) => drop_sample("state", &e),
                 }
             }
             Incoming::Mux(sample) => {
@@ -293,19 +291,13 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                         last_mux = Some(m);
                         send(&mux, estop::marked(m, estop_pending))
                     }
-                    Err(e) => {
-                        drop_sample("mux", &e);
-                        Ok(())
-                    }
+                    Err(e) => drop_sample("mux", &e),
                 }
             }
             Incoming::Frames(sample) => {
                 match bus.decode_all(sample.encoding(), &sample.payload().to_bytes()) {
                     Ok(batch) => batch.into_iter().try_for_each(|f| send(&frames, f)),
-                    Err(e) => {
-                        drop_sample("frames", &e);
-                        Ok(())
-                    }
+                    Err(e) => drop_sample("frames", &e),
                 }
             }
             Incoming::Description(sample) => {
@@ -323,10 +315,7 @@ pub fn serve(name: &str, session: &zenoh::Session, stop: &Arc<AtomicBool>) -> an
                         send(&description, d)
                     }
                     Ok(_) => Ok(()),
-                    Err(e) => {
-                        drop_sample("robot", &e);
-                        Ok(())
-                    }
+                    Err(e) => drop_sample("robot", &e),
                 }
             }
             Incoming::Alive(alive) => {
