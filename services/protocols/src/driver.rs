@@ -697,20 +697,8 @@ impl PoseIntegrator {
     }
 }
 
-/// Wraps an angle to (-π, π].
-pub fn wrap_angle(angle: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    if !angle.is_finite() {
-        return 0.0;
-    }
-    let mut a = angle % TAU;
-    if a <= -PI {
-        a += TAU;
-    } else if a > PI {
-        a -= TAU;
-    }
-    a
-}
+/// Wraps an angle to (-π, π], as the odometry keeps it.
+pub use chassis_interfaces::wrap_angle;
 
 /// Unwraps a wrapping 16-bit counter (encoders) into a running 64-bit count.
 #[derive(Debug, Clone, Copy, Default)]
@@ -813,15 +801,6 @@ mod tests {
         assert!(odo.x_m.abs() < 1e-3, "{odo:?}");
         assert!((odo.y_m - 4.0).abs() < 1e-3, "{odo:?}");
         assert!((odo.yaw_rad.abs() - std::f64::consts::PI).abs() < 1e-3);
-    }
-
-    #[test]
-    fn angles_wrap_into_minus_pi_to_pi() {
-        use std::f64::consts::PI;
-        assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
-        assert!((wrap_angle(-3.0 * PI) - PI).abs() < 1e-12);
-        assert_eq!(wrap_angle(0.5), 0.5);
-        assert_eq!(wrap_angle(f64::NAN), 0.0);
     }
 
     #[test]
