@@ -209,13 +209,8 @@ pub fn run(
         let mut frame_row = row(PathKind::Loop, Leg::PeriodToFrame, frame, l, superseded);
         frame_row.baseline = Some(format!("{hop}, {at}"));
         report.rows.push(frame_row);
-        (report.rows).push(row(
-            PathKind::Loop,
-            Leg::StateAge,
-            age,
-            figures.state_age,
-            0,
-        ));
+        let age_row = row(PathKind::Loop, Leg::StateAge, age, figures.state_age, 0);
+        report.rows.push(age_row);
         let fifo = realtime.map_or(String::new(), |p| {
             format!(", at SCHED_FIFO {p} as the service's loop")
         });

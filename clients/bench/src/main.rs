@@ -918,9 +918,8 @@ const DEFAULT_CONFIG: PathRun = PathRun {
 impl Step for DefaultConfig {
     fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
         let (what, commands) = (report::DEFAULT_CONFIG_ROW, ctx.plan.commands);
-        DEFAULT_CONFIG
-            .plan_path(PathKind::Command, what, commands)
-            .into()
+        let rows = DEFAULT_CONFIG.plan_path(PathKind::Command, what, commands);
+        rows.into()
     }
 
     fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
@@ -939,9 +938,8 @@ impl Step for DefaultConfig {
         let what = report::DEFAULT_CONFIG_ROW.to_string();
         let row = run.row(PathKind::Command, Leg::FirstFrameToward, what, l, missed);
         let [paced, ..] = run.loaded();
-        report
-            .rows
-            .extend(path_rows(row, run.reference(&paced), figures.in_service));
+        let rows = path_rows(row, run.reference(&paced), figures.in_service);
+        report.rows.extend(rows);
         Ok(())
     }
 }

@@ -345,17 +345,8 @@ pub fn row_key(path: PathKind, what: &str, mode: &str, placement: &str) -> Strin
 /// mode and placement.
 pub fn path_rows(row: Row, baseline: Option<String>, in_service: Latencies) -> [Row; 2] {
     let what = format!("{}: {}", row.what, row.path);
-    let (run, mode, placement) = (&row.run, &row.mode, &row.placement);
-    let inside = Row::new(
-        PathKind::InService,
-        row.leg,
-        run,
-        what,
-        mode,
-        placement,
-        in_service,
-        0,
-    );
+    let (run, mode, at, l) = (&row.run, &row.mode, &row.placement, in_service);
+    let inside = Row::new(PathKind::InService, row.leg, run, what, mode, at, l, 0);
     [Row { baseline, ..row }, inside]
 }
 

@@ -295,28 +295,15 @@ pub fn run(
         let l = last_of(hops, count);
         (report.rows).push(Row::hop(&run, what.into(), PLACEMENT, l, conditions));
     }
+    let (sent, lost, at) = (command.latencies, command.missed, PLACEMENT);
     for (leg, what, l, missed, raw) in [
-        (
-            Leg::RemoteCommand,
-            COMMAND,
-            command.latencies,
-            command.missed,
-            RAW_COMMAND,
-        ),
+        (Leg::RemoteCommand, COMMAND, sent, lost, RAW_COMMAND),
         (Leg::RemoteState, STATE, recorder.latencies, 0, RAW_STATE),
         (Leg::RemoteBridge, BRIDGE, bridged, 0, RAW_STATE),
     ] {
-        let row = Row::new(
-            PathKind::Zenoh,
-            leg,
-            &run,
-            what.into(),
-            "event",
-            PLACEMENT,
-            l,
-            missed,
-        );
-        let baseline = Some(format!("{raw}, {PLACEMENT}"));
+        let what = what.to_string();
+        let row = Row::new(PathKind::Zenoh, leg, &run, what, "event", at, l, missed);
+        let baseline = Some(format!("{raw}, {at}"));
         report.rows.push(Row { baseline, ..row });
     }
     report.parts.push(crate::report::Parts {
