@@ -124,14 +124,8 @@ pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> S
     let stamps = samples.iter().filter_map(|&(created, written)| {
         let p = by_written.get(&written)?;
         let (waiting, woke) = (created.max(p.waited_since), created.max(p.woke));
-        Some(vec![
-            created,
-            waiting,
-            woke,
-            p.requests_read,
-            p.write_started,
-            written,
-        ])
+        let (read, begun) = (p.requests_read, p.write_started);
+        Some(vec![created, waiting, woke, read, begun, written])
     });
     split(&names, stamps)
 }
@@ -214,14 +208,8 @@ pub fn python_state(samples: &[[u64; 4]], passes: &[PassStamps]) -> Split {
         .iter()
         .filter_map(|&[read, handed, returned, received]| {
             let [begun, woken] = notification(pass_of(&with_state, handed)?, received);
-            Some(vec![
-                read,
-                handed,
-                begun,
-                woken,
-                returned.max(woken),
-                received,
-            ])
+            let returned = returned.max(woken);
+            Some(vec![read, handed, begun, woken, returned, received])
         });
     split(&names, stamps)
 }
