@@ -305,9 +305,8 @@ impl IceoryxEndpoint {
             any = true;
         }
         if let Some((publisher, notifier)) = self.published.as_ref().filter(|_| any) {
-            publisher
-                .send_copy(Ping::new(now_ns(), 0, 0))
-                .named("state send")?;
+            let ping = Ping::new(now_ns(), 0, 0);
+            publisher.send_copy(ping).named("state send")?;
             notifier.notify().named("state notify")?;
         }
         Ok(any)
@@ -550,9 +549,8 @@ pub fn feed(args: &PongArgs) -> anyhow::Result<()> {
     println!("ready");
     loop {
         ticker.wait();
-        publisher
-            .send_copy(Ping::new(now_ns(), 0, 0))
-            .named("feed send")?;
+        let ping = Ping::new(now_ns(), 0, 0);
+        publisher.send_copy(ping).named("feed send")?;
         notifier.notify().named("feed notify")?;
     }
 }
@@ -589,11 +587,8 @@ pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
         })
     })?;
     if args.load().is_some() {
-        let text: String = endpoint
-            .feed_ns
-            .iter()
-            .map(|ns| format!("{ns}\n"))
-            .collect();
+        let feed = &endpoint.feed_ns;
+        let text: String = feed.iter().map(|ns| format!("{ns}\n")).collect();
         let path = args.feed_file();
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
     }

@@ -439,10 +439,8 @@ impl Baseline {
 impl Step for Baseline {
     fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
         // Back to back, both hops of a round count; paced, the ping's alone.
-        let asked = match self.2 {
-            Some(_) => ctx.plan.paced_rounds,
-            None => 2 * ctx.plan.baseline_rounds,
-        };
+        let (paced, back_to_back) = (ctx.plan.paced_rounds, 2 * ctx.plan.baseline_rounds);
+        let asked = self.2.map_or(back_to_back, |_| paced);
         let key = baseline_key(&self.what(), self.1.label());
         vec![Planned::new(key, asked)]
     }
@@ -837,11 +835,8 @@ impl Step for PathRun {
         let (plan, label, placement) = (&ctx.plan, self.label(), self.placement.label());
         let (commands, preemptions, _) = self.sizes(plan);
         // A matched baseline has as many samples as the row it divides.
-        let pings = if commands > 0 {
-            commands
-        } else {
-            plan.paced_rounds
-        };
+        let paced = plan.paced_rounds;
+        let pings = if commands > 0 { commands } else { paced };
         let asked = [pings, plan.states, plan.states, preemptions];
         let mut rows: Vec<Planned> = (self.loaded().iter().zip(asked))
             .map(|(what, asked)| Planned::new(baseline_key(what, placement), asked))
