@@ -107,13 +107,10 @@ fn status_field(pid: u32, field: &str) -> anyhow::Result<f64> {
 
 /// A robot served under `prefix` whose state arrives.
 fn serves(name: &str, prefix: &str) -> bool {
+    let lost = chassis_client::LinkFlags::REMOTE_LOST;
     Robot::connect_with_prefix(name, Some(prefix)).is_ok_and(|mut r| {
-        r.wait_state(Duration::from_millis(300))
-            .ok()
-            .flatten()
-            .is_some_and(|s: ChassisState| {
-                s.link_flags & chassis_client::LinkFlags::REMOTE_LOST == 0
-            })
+        let state = r.wait_state(Duration::from_millis(300)).ok().flatten();
+        state.is_some_and(|s: ChassisState| s.link_flags & lost == 0)
     })
 }
 

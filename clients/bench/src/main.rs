@@ -10,7 +10,7 @@
 //! * **render** (`render.rs`, the words in `performance.md`; the table and plot in `report.rs`),
 //!   from the samples and the verdict alone: `chassis-bench render SAMPLES` gives the same bytes.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -144,11 +144,7 @@ struct RenderArgs {
 }
 
 /// Writes the plot and the document of `report` ([`fleet::document`]).
-fn render(
-    report: &Report,
-    doc: Option<&std::path::Path>,
-    plot: Option<&std::path::Path>,
-) -> anyhow::Result<()> {
+fn render(report: &Report, doc: Option<&Path>, plot: Option<&Path>) -> anyhow::Result<()> {
     if let Some(path) = plot {
         report.plot(path)?;
     }
