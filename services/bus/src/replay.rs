@@ -229,13 +229,10 @@ impl Recording {
         };
         if head[..n] == *MCAP_MAGIC {
             let bytes = std::fs::read(path).map_err(|e| open_error(path, e))?;
-            let robot = match mcap_metadata(&bytes) {
-                Some(meta) => match meta.get("robot") {
-                    Some(name) => Some(name.parse::<RobotKind>().map_err(|e| open_error(path, e))?),
-                    None => None,
-                },
-                None => None,
-            };
+            let robot = mcap_metadata(&bytes)
+                .and_then(|meta| meta.get("robot").map(|name| name.parse::<RobotKind>()))
+                .transpose()
+                .map_err(|e| open_error(path, e))?;
             Ok(Recording::Mcap { bytes, robot })
         } else {
             Ok(Recording::Candump {
@@ -419,10 +416,8 @@ pub fn candump_step(line: &str) -> Option<Step> {
 /// `SECS[.FRACTION]` to ns, exactly (an `f64` loses the microseconds of an epoch time).
 pub fn decimal_ns(text: &str) -> Option<u64> {
     let (secs, fraction) = text.split_once('.').unwrap_or((text, ""));
-    if secs.is_empty() || !secs.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    if !fraction.bytes().all(|b| b.is_ascii_digit()) {
+    let digits = |text: &str| text.bytes().all(|b| b.is_ascii_digit());
+    if secs.is_empty() || !digits(secs) || !digits(fraction) {
         return None;
     }
     let mut nanos = 0u64;
@@ -640,11 +635,8 @@ fn discard(bus: &mut Bus) -> Result<u64, BusError> {
         }
         Bus::Bytes(bytes) => {
             let mut buf = [0u8; 4096];
-            loop {
-                match bytes.read(&mut buf)? {
-                    0 => break,
-                    k => n += k as u64,
-                }
+            while let k @ 1.. = bytes.read(&mut buf)? {
+                n += k as u64;
             }
         }
     }
@@ -687,8 +679,7 @@ fn play(
                 pending = loop {
                     match steps.next() {
                         Some(Step::Rx(entry)) => {
-                            let wrong_kind = is_can != matches!(entry.item, WireItem::Can(_));
-                            if wrong_kind {
+                            if is_can != matches!(entry.item, WireItem::Can(_)) {
                                 stats.bad += 1;
                                 continue;
                             }
