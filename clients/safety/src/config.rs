@@ -806,8 +806,6 @@ impl Config {
     }
 }
 
-/// `text` written to a `safety.toml` of its own (in a directory named after `tag`), loaded, and
-/// the file removed again: the configuration and the path it names.
 /// Where a value a rule uses comes from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Origin {
