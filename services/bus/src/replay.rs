@@ -1,8 +1,8 @@
 //! The replay bus (`--bus replay:FILE[@SPEED|@max]`): a recording played back at the far end of
 //! a socket pair, so a field recording reproduces a bug at the desk.
 //!
-//! Like the embedded simulator, a thread sits at the chassis side of a socket pair — datagrams
-//! ([`PairCan`]) for the CAN robots, a stream ([`StreamBytes`]) for the XBot — and the
+//! Like the embedded simulator, a thread sits at the chassis side of a socket pair
+//! ([`bus_pair`]): datagrams for the CAN robots, a stream for the XBot — and the
 //! service talks to it exactly as to a real bus. The thread writes the *received* frames of the
 //! recording into the pair and reads and discards (counting them) whatever the service
 //! transmits: the service's commands reach no chassis, and the recorded chassis goes on as it
@@ -61,7 +61,7 @@ use nix::sys::time::TimeSpec;
 use serde::Deserialize;
 use tracing::{debug, error, info, info_span, warn};
 
-use super::datagram::{PairCan, StreamBytes};
+use super::datagram::bus_pair;
 use super::{Bus, BusError};
 use crate::clock;
 
@@ -486,15 +486,8 @@ pub fn open(path: &str, speed: ReplaySpeed, robot: RobotKind) -> Result<Bus, Bus
     }
     let recording = Recording::open(path)?;
     recording.check(path, robot)?;
-    let name = format!("replay:{path}");
     let io = |e: std::io::Error| open_error(path, e);
-    let (ours, theirs) = if robot.is_can() {
-        let (a, b) = PairCan::pair(&name).map_err(io)?;
-        (Bus::Can(Box::new(a)), Bus::Can(Box::new(b)))
-    } else {
-        let (a, b) = StreamBytes::pair(&name).map_err(io)?;
-        (Bus::Bytes(Box::new(a)), Bus::Bytes(Box::new(b)))
-    };
+    let (ours, theirs) = bus_pair(&format!("replay:{path}"), robot.is_can()).map_err(io)?;
     let file = path.to_string();
     std::thread::Builder::new()
         .name("replay".into())
