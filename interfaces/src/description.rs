@@ -361,23 +361,18 @@ impl Default for RobotDescription {
 }
 
 /// A list of the description is full.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("a robot description holds at most {max} {what}")]
 pub struct DescriptionFull {
     pub what: &'static str,
     pub max: usize,
 }
 
-impl core::fmt::Display for DescriptionFull {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(
-            f,
-            "a robot description holds at most {} {}",
-            self.max, self.what
-        )
+impl DescriptionFull {
+    const fn of(what: &'static str, max: usize) -> Self {
+        Self { what, max }
     }
 }
-
-impl std::error::Error for DescriptionFull {}
 
 impl RobotDescription {
     pub fn set_name(&mut self, name: &str) {
@@ -420,10 +415,7 @@ impl RobotDescription {
         let slot = self
             .sensors
             .get_mut(usize::from(self.sensor_count))
-            .ok_or(DescriptionFull {
-                what: "sensors",
-                max: MAX_SENSORS,
-            })?;
+            .ok_or(DescriptionFull::of("sensors", MAX_SENSORS))?;
         write_fixed_str(&mut sensor.name, name);
         *slot = sensor;
         self.sensor_count += 1;
@@ -435,10 +427,7 @@ impl RobotDescription {
         let slot = self
             .joints
             .get_mut(usize::from(self.joint_count))
-            .ok_or(DescriptionFull {
-                what: "joints",
-                max: MAX_JOINTS,
-            })?;
+            .ok_or(DescriptionFull::of("joints", MAX_JOINTS))?;
         *slot = JointDescription {
             source,
             index,
@@ -460,10 +449,7 @@ impl RobotDescription {
         let slot = self
             .sources
             .get_mut(usize::from(self.source_count))
-            .ok_or(DescriptionFull {
-                what: "sources",
-                max: MAX_SOURCES,
-            })?;
+            .ok_or(DescriptionFull::of("sources", MAX_SOURCES))?;
         *slot = SourceDescription {
             timeout_ms,
             priority,

@@ -176,17 +176,9 @@ macro_rules! ipc_type {
         }
     ) => {
         #[repr(C)]
-        #[derive(
-            Debug,
-            Clone,
-            Copy,
-            PartialEq,
-            ::zerocopy::FromBytes,
-            ::zerocopy::IntoBytes,
-            ::zerocopy::Immutable,
-            ::zerocopy::KnownLayout,
-            ::iceoryx2_bb_derive_macros::ZeroCopySend,
-        )]
+        #[derive(Debug, Clone, Copy, PartialEq, ::zerocopy::FromBytes, ::zerocopy::IntoBytes)]
+        #[derive(::zerocopy::Immutable, ::zerocopy::KnownLayout)]
+        #[derive(::iceoryx2_bb_derive_macros::ZeroCopySend)]
         $(#[$meta])*
         pub struct $ty {
             $($(#[$field_meta])* $vis $field: $field_ty),+
@@ -297,41 +289,17 @@ impl ConstantGroup {
 /// Every IPC type, by Rust name.
 pub fn types() -> Vec<TypeLayout> {
     use crate::*;
-    let mut all = vec![
-        ChassisState::layout(),
-        MotionState::layout(),
-        OdometryState::layout(),
-        SystemState::layout(),
-        MotorState::layout(),
-        BmsState::layout(),
-        RcState::layout(),
-        LightsState::layout(),
-        RangesState::layout(),
-        ImuState::layout(),
-        LiftState::layout(),
-        PanTiltState::layout(),
-        GpsFix::layout(),
-        CommandEcho::layout(),
-        LinkStats::layout(),
-        VelocityRequest::layout(),
-        BodyVelocity::layout(),
-        SourceStatus::layout(),
-        LockStatus::layout(),
-        MuxStatus::layout(),
-        BusFrame::layout(),
-        ControlRequest::layout(),
-        ControlResponse::layout(),
-        SimRequest::layout(),
-        SafetyStatus::layout(),
-        RobotDescription::layout(),
-        MotionLimits::layout(),
-        Geometry::layout(),
-        BatteryLevels::layout(),
-        OdometryVariance::layout(),
-        SensorDescription::layout(),
-        JointDescription::layout(),
-        SourceDescription::layout(),
-    ];
+    macro_rules! layouts {
+        ($($ty:ident),+ $(,)?) => { vec![$($ty::layout()),+] };
+    }
+    let mut all = layouts! {
+        ChassisState, MotionState, OdometryState, SystemState, MotorState, BmsState, RcState,
+        LightsState, RangesState, ImuState, LiftState, PanTiltState, GpsFix, CommandEcho,
+        LinkStats, VelocityRequest, BodyVelocity, SourceStatus, LockStatus, MuxStatus, BusFrame,
+        ControlRequest, ControlResponse, SimRequest, SafetyStatus, RobotDescription, MotionLimits,
+        Geometry, BatteryLevels, OdometryVariance, SensorDescription, JointDescription,
+        SourceDescription,
+    };
     all.sort_by_key(|t| t.name);
     all
 }

@@ -72,11 +72,7 @@ fn pose_json(pose: Pose) -> Value {
 
 /// A finite number, or null (JSON has no infinity).
 fn finite(value: f64, places: i32) -> Value {
-    if value.is_finite() {
-        json!(round(value, places))
-    } else {
-        Value::Null
-    }
+    json!(value.is_finite().then(|| round(value, places)))
 }
 
 fn limits_json(k: &Kinematics) -> Value {

@@ -237,17 +237,11 @@ pub fn plan(options: &Options, kin: &Kinematics) -> Result<Plan, RunError> {
                     points.insert(0, origin);
                 }
                 let outline = Path::new(points)?.repeated(loops, options.goal_tolerance_m)?;
-                let path = round_for(&outline, kin)?;
-                let text = format!(
-                    "{count} waypoints of {}{}",
-                    file.display(),
-                    if from_robot {
-                        ", from the robot's position"
-                    } else {
-                        ""
-                    }
-                );
-                Ok((path, text))
+                let mut text = format!("{count} waypoints of {}", file.display());
+                if from_robot {
+                    text += ", from the robot's position";
+                }
+                Ok((round_for(&outline, kin)?, text))
             }
         }
     };
@@ -284,18 +278,14 @@ fn round_for(path: &Path, kin: &Kinematics) -> Result<Path, RunError> {
     if radius <= 0.0 {
         return Ok(path.clone());
     }
-    match path.rounded(radius * CORNER_RADIUS_MARGIN, SAMPLE_STEP_M) {
-        Ok(p) => Ok(p),
-        Err(_) => Ok(path.rounded(radius, SAMPLE_STEP_M)?),
-    }
+    Ok(path
+        .rounded(radius * CORNER_RADIUS_MARGIN, SAMPLE_STEP_M)
+        .or_else(|_| path.rounded(radius, SAMPLE_STEP_M))?)
 }
 
 fn pose_of(state: &ChassisState) -> Pose {
-    Pose::new(
-        state.odometry.x_m,
-        state.odometry.y_m,
-        state.odometry.yaw_rad,
-    )
+    let odometry = &state.odometry;
+    Pose::new(odometry.x_m, odometry.y_m, odometry.yaw_rad)
 }
 
 fn measured(state: &ChassisState) -> Measured {

@@ -151,19 +151,15 @@ pub struct BatteryRule {
     pub action: Action,
     /// Triggers below this state of charge, %. Absent: the description's
     /// `battery.low_soc_pct` (the chassis' low-battery warning), else its `critical_soc_pct`.
-    #[serde(
-        deserialize_with = "plain_number",
-        skip_serializing_if = "Option::is_none"
-    )]
+    #[serde(deserialize_with = "plain_number")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub min_soc_pct: Option<f64>,
     /// Releases at or above the state-of-charge level + this, %.
     pub release_margin_pct: f64,
     /// Triggers below this voltage where the state of charge is not judged, V. Absent: the
     /// description's `battery.low_v` (the chassis' under-voltage alarm), else its `critical_v`.
-    #[serde(
-        deserialize_with = "plain_number",
-        skip_serializing_if = "Option::is_none"
-    )]
+    #[serde(deserialize_with = "plain_number")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub min_voltage_v: Option<f64>,
     /// Releases at or above the voltage level + this, V.
     pub release_margin_v: f64,
@@ -337,10 +333,8 @@ pub struct SpeedRule {
     /// Triggers above this measured |linear speed|, m/s, either way. Absent: the description's
     /// effective limits (the tighter of the driver's and chassisd's `[mux.limits]`), forward and
     /// reverse, × `limit_factor` + `limit_margin_mps`.
-    #[serde(
-        deserialize_with = "plain_number",
-        skip_serializing_if = "Option::is_none"
-    )]
+    #[serde(deserialize_with = "plain_number")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub max_linear_mps: Option<f64>,
     /// How far past the description's limit a measured speed may go, as a factor (≥ 1)…
     pub limit_factor: f64,
@@ -812,8 +806,6 @@ impl Config {
     }
 }
 
-/// `text` written to a `safety.toml` of its own (in a directory named after `tag`), loaded, and
-/// the file removed again: the configuration and the path it names.
 /// Where a value a rule uses comes from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Origin {

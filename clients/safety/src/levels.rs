@@ -151,17 +151,11 @@ impl Levels {
                 }
             }
         };
-        let key = "rules.speed.max_linear_mps";
-        let speed_forward_mps = speed_level(|l| l.forward_mps, "forward").overridden_by(
-            speed.max_linear_mps,
-            config,
-            key,
-        );
-        let speed_reverse_mps = speed_level(|l| l.reverse_mps, "reverse").overridden_by(
-            speed.max_linear_mps,
-            config,
-            key,
-        );
+        let (max, key) = (speed.max_linear_mps, "rules.speed.max_linear_mps");
+        let speed_forward_mps =
+            speed_level(|l| l.forward_mps, "forward").overridden_by(max, config, key);
+        let speed_reverse_mps =
+            speed_level(|l| l.reverse_mps, "reverse").overridden_by(max, config, key);
 
         // The chassis' warning level first; where a robot states only the level at which it
         // cuts power, that one.

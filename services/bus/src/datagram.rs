@@ -11,7 +11,7 @@ use std::os::unix::net::UnixStream;
 
 use chassis_protocols::CanFrame;
 
-use super::{BusError, ByteBus, CanBus, classify};
+use super::{Bus, BusError, ByteBus, CanBus, classify};
 
 /// Wire form of one CAN frame on the pair: id (u32 LE), length, flags (bit 0: extended id), two
 /// spare bytes, eight data bytes.
@@ -198,6 +198,17 @@ impl StreamBytes {
             },
         ))
     }
+}
+
+/// A pair for a robot on CAN (`can`) or on a byte stream: the service's end, the chassis' end.
+pub fn bus_pair(name: &str, can: bool) -> io::Result<(Bus, Bus)> {
+    Ok(if can {
+        let (a, b) = PairCan::pair(name)?;
+        (Bus::Can(Box::new(a)), Bus::Can(Box::new(b)))
+    } else {
+        let (a, b) = StreamBytes::pair(name)?;
+        (Bus::Bytes(Box::new(a)), Bus::Bytes(Box::new(b)))
+    })
 }
 
 impl ByteBus for StreamBytes {

@@ -1,8 +1,8 @@
 //! The replay bus (`--bus replay:FILE[@SPEED|@max]`): a recording played back at the far end of
 //! a socket pair, so a field recording reproduces a bug at the desk.
 //!
-//! Like the embedded simulator, a thread sits at the chassis side of a socket pair — datagrams
-//! ([`PairCan`]) for the CAN robots, a stream ([`StreamBytes`]) for the XBot — and the
+//! Like the embedded simulator, a thread sits at the chassis side of a socket pair
+//! ([`bus_pair`]): datagrams for the CAN robots, a stream for the XBot — and the
 //! service talks to it exactly as to a real bus. The thread writes the *received* frames of the
 //! recording into the pair and reads and discards (counting them) whatever the service
 //! transmits: the service's commands reach no chassis, and the recorded chassis goes on as it
@@ -61,7 +61,7 @@ use nix::sys::time::TimeSpec;
 use serde::Deserialize;
 use tracing::{debug, error, info, info_span, warn};
 
-use super::datagram::{PairCan, StreamBytes};
+use super::datagram::bus_pair;
 use super::{Bus, BusError};
 use crate::clock;
 
@@ -229,13 +229,10 @@ impl Recording {
         };
         if head[..n] == *MCAP_MAGIC {
             let bytes = std::fs::read(path).map_err(|e| open_error(path, e))?;
-            let robot = match mcap_metadata(&bytes) {
-                Some(meta) => match meta.get("robot") {
-                    Some(name) => Some(name.parse::<RobotKind>().map_err(|e| open_error(path, e))?),
-                    None => None,
-                },
-                None => None,
-            };
+            let robot = mcap_metadata(&bytes)
+                .and_then(|meta| meta.get("robot").map(|name| name.parse::<RobotKind>()))
+                .transpose()
+                .map_err(|e| open_error(path, e))?;
             Ok(Recording::Mcap { bytes, robot })
         } else {
             Ok(Recording::Candump {
@@ -419,10 +416,8 @@ pub fn candump_step(line: &str) -> Option<Step> {
 /// `SECS[.FRACTION]` to ns, exactly (an `f64` loses the microseconds of an epoch time).
 pub fn decimal_ns(text: &str) -> Option<u64> {
     let (secs, fraction) = text.split_once('.').unwrap_or((text, ""));
-    if secs.is_empty() || !secs.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    if !fraction.bytes().all(|b| b.is_ascii_digit()) {
+    let digits = |text: &str| text.bytes().all(|b| b.is_ascii_digit());
+    if secs.is_empty() || !digits(secs) || !digits(fraction) {
         return None;
     }
     let mut nanos = 0u64;
@@ -491,15 +486,8 @@ pub fn open(path: &str, speed: ReplaySpeed, robot: RobotKind) -> Result<Bus, Bus
     }
     let recording = Recording::open(path)?;
     recording.check(path, robot)?;
-    let name = format!("replay:{path}");
     let io = |e: std::io::Error| open_error(path, e);
-    let (ours, theirs) = if robot.is_can() {
-        let (a, b) = PairCan::pair(&name).map_err(io)?;
-        (Bus::Can(Box::new(a)), Bus::Can(Box::new(b)))
-    } else {
-        let (a, b) = StreamBytes::pair(&name).map_err(io)?;
-        (Bus::Bytes(Box::new(a)), Bus::Bytes(Box::new(b)))
-    };
+    let (ours, theirs) = bus_pair(&format!("replay:{path}"), robot.is_can()).map_err(io)?;
     let file = path.to_string();
     std::thread::Builder::new()
         .name("replay".into())
@@ -640,11 +628,8 @@ fn discard(bus: &mut Bus) -> Result<u64, BusError> {
         }
         Bus::Bytes(bytes) => {
             let mut buf = [0u8; 4096];
-            loop {
-                match bytes.read(&mut buf)? {
-                    0 => break,
-                    k => n += k as u64,
-                }
+            while let k @ 1.. = bytes.read(&mut buf)? {
+                n += k as u64;
             }
         }
     }
@@ -687,8 +672,7 @@ fn play(
                 pending = loop {
                     match steps.next() {
                         Some(Step::Rx(entry)) => {
-                            let wrong_kind = is_can != matches!(entry.item, WireItem::Can(_));
-                            if wrong_kind {
+                            if is_can != matches!(entry.item, WireItem::Can(_)) {
                                 stats.bad += 1;
                                 continue;
                             }

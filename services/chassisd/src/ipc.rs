@@ -114,8 +114,9 @@ impl Ports {
             SignalHandlingMode::HandleTerminationRequests,
         )?;
 
+        let name = |kind: ServiceKind<'_>| service_name(robot_name, kind);
         // Ownership first: the state service admits one publisher.
-        let state_name = service_name(robot_name, ServiceKind::State);
+        let state_name = name(ServiceKind::State);
         let state = match STATE.create(&node, &state_name)?.publisher() {
             Ok(writer) => writer,
             Err(chassis_ipc::IpcError::Taken { .. }) => {
@@ -127,13 +128,11 @@ impl Ports {
             Err(e) => return Err(e.into()),
         };
         let frames = FRAMES
-            .create(&node, &service_name(robot_name, ServiceKind::Frames))?
+            .create(&node, &name(ServiceKind::Frames))?
             .publisher()?;
-        let mux = MUX
-            .create(&node, &service_name(robot_name, ServiceKind::Mux))?
-            .publisher()?;
+        let mux = MUX.create(&node, &name(ServiceKind::Mux))?.publisher()?;
         let description = DESCRIPTION
-            .create(&node, &service_name(robot_name, ServiceKind::Description))?
+            .create(&node, &name(ServiceKind::Description))?
             .publisher()?;
 
         let mut inlets = Vec::with_capacity(sources.len());
@@ -142,7 +141,7 @@ impl Ports {
                 subscriber,
                 listener,
             } = CMD
-                .create(&node, &service_name(robot_name, ServiceKind::Cmd(source)))?
+                .create(&node, &name(ServiceKind::Cmd(source)))?
                 .subscriber(CMD.limits.subscriber_max_buffer_size)?;
             inlets.push(Inlet {
                 name: source.clone(),
@@ -151,20 +150,10 @@ impl Ports {
             });
         }
 
-        let control = open_desk(
-            &node,
-            &CONTROL,
-            &service_name(robot_name, ServiceKind::Control),
-        )?;
-        let sim = if with_sim {
-            Some(open_desk(
-                &node,
-                &SIM,
-                &service_name(robot_name, ServiceKind::Sim),
-            )?)
-        } else {
-            None
-        };
+        let control = open_desk(&node, &CONTROL, &name(ServiceKind::Control))?;
+        let sim = with_sim
+            .then(|| open_desk(&node, &SIM, &name(ServiceKind::Sim)))
+            .transpose()?;
 
         Ok(Self {
             node,

@@ -81,13 +81,7 @@ pub fn open_bus(
                 name: "sim".into(),
                 reason: e.to_string(),
             };
-            let (ours, theirs) = if robot.is_can() {
-                let (a, b) = datagram::PairCan::pair("sim").map_err(io)?;
-                (Bus::Can(Box::new(a)), Bus::Can(Box::new(b)))
-            } else {
-                let (a, b) = datagram::StreamBytes::pair("sim").map_err(io)?;
-                (Bus::Bytes(Box::new(a)), Bus::Bytes(Box::new(b)))
-            };
+            let (ours, theirs) = datagram::bus_pair("sim", robot.is_can()).map_err(io)?;
             let cpus = sim_cpus(config, is_fifo());
             let handle = SimHandle::spawn_on(firmware, theirs, &cpus).map_err(io)?;
             (ours, Some(handle))

@@ -211,7 +211,9 @@ impl SimHandle {
                 // The spawner waits for it; a spawner that is gone needs no answer.
                 tell_tid.send(nix::unistd::gettid()).ok();
                 normal_scheduling();
-                run(firmware, bus, &inbox, &wake)
+                let (mut firmware, mut bus) = (firmware, bus);
+                let lost = drive(&mut firmware, &mut bus, &inbox, &wake).err();
+                Ended { firmware, lost }
             })?;
         let tid = tid
             .recv()
@@ -333,16 +335,6 @@ fn normal_scheduling() {
 }
 
 /// The simulator's event loop: bus readiness, injections and the firmware's own deadlines.
-fn run(
-    mut firmware: BoxedFirmware,
-    mut bus: Bus,
-    inbox: &mpsc::Receiver<SimCommandBox>,
-    wake: &UnixDatagram,
-) -> Ended {
-    let lost = drive(&mut firmware, &mut bus, inbox, wake).err();
-    Ended { firmware, lost }
-}
-
 fn drive(
     firmware: &mut BoxedFirmware,
     bus: &mut Bus,

@@ -129,21 +129,51 @@ pub struct RawConfig {
     pub profile: toml::Table,
 }
 
-/// Command-line choices that override the file.
-#[derive(Debug, Clone, Default)]
+/// Command-line choices that override the file (`chassisd`'s options).
+#[derive(Debug, Clone, Default, clap::Args)]
 pub struct Overrides {
+    // The registry's robots, listed by the registry.
+    #[arg(
+        long,
+        help = format!("{}.", chassis_protocols::kind::names().join(", "))
+    )]
     pub robot: Option<RobotKind>,
+    /// AgileX wire protocol: v1 or v2 (default on a real CAN bus: detected for scout-mini, scout
+    /// and bunker; on the simulator: the robot's own, SCOUT MINI v1, the others v2).
+    #[arg(long)]
     pub protocol: Option<Protocol>,
-    pub name: Option<String>,
+    /// sim (default), can:IFACE, serial:PATH[@BAUD], slcan:PATH[@BAUD].
+    #[arg(long)]
     pub bus: Option<BusSpec>,
+    /// Namespace of the robot's services, chassis/<NAME>/… (default: the robot).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// The XBot's GPS receiver: serial:PATH[@BAUD] (NMEA 0183, default 4800 8N1).
+    #[arg(long)]
     pub gps: Option<BusSpec>,
+    /// Drive without a safety monitor: lift the rule that the required source must be alive.
+    #[arg(long)]
     pub no_safety_monitor: bool,
     /// The configuration is for `chassisd sim` (the chassis side of a bus).
+    #[arg(skip)]
     pub simulator: bool,
+    /// How the loop waits: event (block; default), spin (poll continuously), hybrid (poll
+    /// for --spin-us after each activity, then block).
+    #[arg(long = "loop", value_enum)]
     pub loop_mode: Option<LoopMode>,
+    /// Hybrid loop: microseconds to keep polling after each activity.
+    #[arg(long)]
     pub spin_us: Option<u64>,
+    /// Pin the loop's thread to this CPU.
+    #[arg(long)]
     pub cpu: Option<usize>,
+    /// Real-time mode: the loop's thread at SCHED_FIFO with priority PRIO (1-99), memory
+    /// locked; when the system refuses, a warning and normal scheduling.
+    #[arg(long, value_name = "PRIO")]
     pub realtime: Option<u8>,
+    /// Where the held locks are kept across restarts (default: $STATE_DIRECTORY, else
+    /// $XDG_STATE_HOME/chassisd/NAME, else ~/.local/state/chassisd/NAME).
+    #[arg(long, value_name = "DIR")]
     pub state_dir: Option<PathBuf>,
 }
 
