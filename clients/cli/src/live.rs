@@ -209,7 +209,7 @@ pub fn echo(args: &EchoArgs) -> anyhow::Result<()> {
 }
 
 /// Writes `sample`, when one came, as JSON or as its text line; how many were written.
-fn write_sample<T: serde::Serialize>(
+pub(crate) fn write_sample<T: serde::Serialize>(
     out: &mut impl Write,
     json: bool,
     sample: Option<&T>,

@@ -90,7 +90,7 @@ use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame};
 use serde::Serialize;
 use serde_json::{Value, json};
 
-use crate::live::{hex, state_line};
+use crate::live::{hex, state_line, write_sample};
 
 /// Frames the tap may hold between two drains.
 const TAP_BUFFER: usize = 2048;
@@ -958,17 +958,6 @@ impl Drop for Service {
     }
 }
 
-fn print_state(state: &ChassisState, json: bool) -> anyhow::Result<()> {
-    let mut out = std::io::stdout().lock();
-    if json {
-        writeln!(out, "{}", serde_json::to_string(state)?)?;
-    } else {
-        writeln!(out, "{}", state_line(state))?;
-    }
-    out.flush()?;
-    Ok(())
-}
-
 /// `chassis replay`.
 pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     install_signal_handlers();
@@ -1073,7 +1062,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         let now = now_ns();
         if !args.quiet && now.saturating_sub(last_print) >= 100_000_000 {
             last_print = now;
-            print_state(&state, args.json)?;
+            write_sample(&mut std::io::stdout(), args.json, Some(&state), state_line)?;
         }
         if state.link_flags & LinkFlags::BUS_DOWN != 0 {
             if state.link.rx_frames > 0 {
@@ -1089,7 +1078,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     };
     let status = service.stop();
     if let Some(state) = last {
-        print_state(&state, args.json)?;
+        write_sample(&mut std::io::stdout(), args.json, Some(&state), state_line)?;
         eprintln!(
             "{}: {} frames replayed and decoded ({} decode errors, {} bad checksums, {} unknown ids)",
             if ended {
