@@ -675,14 +675,7 @@ fn robots_fitting(frames: &[CanFrame]) -> Vec<(RobotKind, Option<Protocol>)> {
             let bad = link.rx_unknown_id + link.rx_decode_errors + link.rx_bad_checksum;
             // Nine in ten: a frame of another device now and then does not hide the robot.
             if link.rx_frames > 0 && bad * 10 <= frames.len() as u64 {
-                fits.push((
-                    robot,
-                    if entry.detects_protocol() {
-                        protocol
-                    } else {
-                        None
-                    },
-                ));
+                fits.push((robot, protocol.filter(|_| entry.detects_protocol())));
             }
         }
     }
