@@ -97,6 +97,22 @@ fn check(check: &'static str, verdict: Verdict, what: impl Into<String>) -> Chec
     }
 }
 
+fn ok(key: &'static str, what: impl Into<String>) -> Check {
+    check(key, Verdict::Ok, what)
+}
+
+fn warn(key: &'static str, what: impl Into<String>) -> Check {
+    check(key, Verdict::Warn, what)
+}
+
+fn fail(key: &'static str, what: impl Into<String>) -> Check {
+    check(key, Verdict::Fail, what)
+}
+
+fn skip(key: &'static str, what: impl Into<String>) -> Check {
+    check(key, Verdict::Skip, what)
+}
+
 impl Check {
     fn fix(mut self, fix: impl Into<String>) -> Self {
         self.fix = Some(fix.into());
@@ -235,14 +251,12 @@ pub fn diagnose(target: &Target, emit: &mut dyn FnMut(Check)) {
                 });
             }
         }
-        BusSpec::Sim => emit(check(
+        BusSpec::Sim => emit(ok(
             "bus",
-            Verdict::Ok,
             "the simulated chassis (inside chassisd): no device to check",
         )),
-        other => emit(check(
+        other => emit(skip(
             "bus",
-            Verdict::Skip,
             format!("{other}: not a robot's bus (chassis doctor checks sim, can, slcan, serial)"),
         )),
     }
@@ -267,9 +281,8 @@ fn wrong_bus_kind(target: &Target, slcan: bool, emit: &mut dyn FnMut(Check)) {
             "serial:PATH"
         };
         emit(
-            check(
+            fail(
                 "bus",
-                Verdict::Fail,
                 format!(
                     "{} is not on this kind of bus",
                     target.robot.entry().display_name
@@ -291,12 +304,7 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
     if !sys.exists() {
         let others = can_interfaces();
         emit(
-            check(
-                "interface",
-                Verdict::Fail,
-                format!("no network interface {iface}"),
-            )
-            .fix(format!(
+            fail("interface", format!("no network interface {iface}")).fix(format!(
                 "plug the adapter in and look for it with `ip -details link show type can` \
                      (CAN interfaces here: {}); a gs_usb/candleLight adapter needs the module \
                      gs_usb, a PEAK one peak_usb (`sudo modprobe gs_usb`); docs/HARDWARE.md",
@@ -313,9 +321,8 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
     // ARPHRD_CAN.
     if link_type.trim() != "280" {
         emit(
-            check(
+            fail(
                 "interface",
-                Verdict::Fail,
                 format!(
                     "{iface} is not a CAN interface (link type {})",
                     link_type.trim()
@@ -329,9 +336,8 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
         .ok()
         .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()));
     let virtual_ = driver.is_none();
-    emit(check(
+    emit(ok(
         "interface",
-        Verdict::Ok,
         match &driver {
             Some(d) => format!("{iface} is a CAN interface (driver {d})"),
             None => format!("{iface} is a CAN interface (virtual: no controller, no bit rate)"),
@@ -341,43 +347,37 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
     let details = match details {
         Ok(d) => d,
         Err(err) => {
-            emit(check(
+            emit(warn(
                 "interface",
-                Verdict::Warn,
                 format!("{iface}: its settings cannot be read over netlink ({err})"),
             ));
             return true;
         }
     };
     if !details.is_up {
-        emit(
-            check("up", Verdict::Fail, format!("{iface} is down")).fix(if virtual_ {
-                format!("sudo ip link set {iface} up")
-            } else {
-                up_cmd.clone()
-            }),
-        );
+        emit(fail("up", format!("{iface} is down")).fix(if virtual_ {
+            format!("sudo ip link set {iface} up")
+        } else {
+            up_cmd.clone()
+        }));
         return false;
     }
-    emit(check("up", Verdict::Ok, format!("{iface} is up")));
+    emit(ok("up", format!("{iface} is up")));
     let can = &details.can;
     if virtual_ {
-        emit(check(
+        emit(skip(
             "bitrate",
-            Verdict::Skip,
             format!("{iface} is virtual: it has no bit rate"),
         ));
     } else {
         match can.bit_timing.map(|t| t.bitrate) {
-            Some(rate) if rate == bitrate => emit(check(
+            Some(rate) if rate == bitrate => emit(ok(
                 "bitrate",
-                Verdict::Ok,
                 format!("{rate} bit/s, the {}'s", target.robot.entry().display_name),
             )),
             Some(rate) => emit(
-                check(
+                fail(
                     "bitrate",
-                    Verdict::Fail,
                     format!(
                         "{rate} bit/s; the {} speaks {bitrate} bit/s",
                         target.robot.entry().display_name
@@ -388,11 +388,7 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
                      {bitrate} restart-ms 100 && sudo ip link set {iface} up"
                 )),
             ),
-            None => emit(check(
-                "bitrate",
-                Verdict::Warn,
-                format!("{iface} reports no bit rate"),
-            )),
+            None => emit(warn("bitrate", format!("{iface} reports no bit rate"))),
         }
     }
     let counters = can
@@ -402,33 +398,25 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
     match can.state {
         // A vcan has no controller: the bit rate line said it is virtual.
         None if virtual_ => {}
-        None => emit(check(
+        None => emit(skip(
             "controller",
-            Verdict::Skip,
             format!("{iface} reports no controller state"),
         )),
-        Some(CanState::ErrorActive) => emit(check(
+        Some(CanState::ErrorActive) => emit(ok("controller", format!("error-active{counters}"))),
+        Some(CanState::ErrorWarning) => emit(warn(
             "controller",
-            Verdict::Ok,
-            format!("error-active{counters}"),
-        )),
-        Some(CanState::ErrorWarning) => emit(check(
-            "controller",
-            Verdict::Warn,
             format!("error-warning{counters}: errors on the bus"),
         )),
         Some(CanState::ErrorPassive) => emit(
-            check(
+            warn(
                 "controller",
-                Verdict::Warn,
                 format!("error-passive{counters}: many errors on the bus"),
             )
             .fix(can_controller::BUS_TROUBLE),
         ),
         Some(CanState::BusOff) => emit(
-            check(
+            fail(
                 "controller",
-                Verdict::Fail,
                 format!(
                     "bus-off{counters}: the controller has left the bus ({})",
                     can_controller::BUS_TROUBLE
@@ -437,20 +425,18 @@ fn can_interface(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> b
             .fix(can_controller::bus_off_fix(iface, can.restart_ms)),
         ),
         Some(state @ (CanState::Stopped | CanState::Sleeping)) => {
-            emit(check("controller", Verdict::Fail, format!("{state:?}")).fix(up_cmd.clone()))
+            emit(fail("controller", format!("{state:?}")).fix(up_cmd.clone()))
         }
     }
     if !virtual_ {
         match can.restart_ms {
-            Some(ms) if ms > 0 => emit(check(
+            Some(ms) if ms > 0 => emit(ok(
                 "restart-ms",
-                Verdict::Ok,
                 format!("{ms} ms: the kernel restarts the controller after a bus-off"),
             )),
             _ => emit(
-                check(
+                warn(
                     "restart-ms",
-                    Verdict::Warn,
                     "0: after a bus-off the controller stays off the bus until restarted by hand",
                 )
                 .fix(format!(
@@ -497,11 +483,7 @@ fn listen_can(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> Opti
     let mut bus = match SocketCan::open(iface) {
         Ok(bus) => bus,
         Err(err) => {
-            emit(check(
-                "frames",
-                Verdict::Fail,
-                format!("cannot listen: {err}"),
-            ));
+            emit(fail("frames", format!("cannot listen: {err}")));
             return None;
         }
     };
@@ -528,11 +510,7 @@ fn listen_can(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> Opti
             Ok(None) if readable_before(bus.raw_fd(), end) => {}
             Ok(None) => break,
             Err(err) => {
-                emit(check(
-                    "frames",
-                    Verdict::Fail,
-                    format!("reading {iface}: {err}"),
-                ));
+                emit(fail("frames", format!("reading {iface}: {err}")));
                 return None;
             }
         }
@@ -557,9 +535,8 @@ fn listen_can(target: &Target, iface: &str, emit: &mut dyn FnMut(Check)) -> Opti
     }
     if overflows > 0 {
         emit(
-            check(
+            warn(
                 "overflow",
-                Verdict::Warn,
                 format!(
                     "the controller's buffer overflowed {overflows} time(s) in {:.1} s: frames \
                      were lost before this computer read them",
@@ -585,12 +562,7 @@ fn can_frames(
     let secs = target.listen.as_secs_f64();
     if frames.is_empty() {
         emit(
-            check(
-                "frames",
-                Verdict::Fail,
-                format!("nothing heard in {secs:.1} s"),
-            )
-            .fix(format!(
+            fail("frames", format!("nothing heard in {secs:.1} s")).fix(format!(
                 "is the chassis on (key switch) and its CAN connector plugged? CAN H to H, L to L \
                  (swapped wires give silence or bus-off), 120 Ω termination at each end (about \
                  60 Ω between H and L with the power off), the bit rate {} bit/s",
@@ -608,9 +580,8 @@ fn can_frames(
         .take(12)
         .map(|id| format!("0x{id:03X}"))
         .collect();
-    emit(check(
+    emit(ok(
         "frames",
-        Verdict::Ok,
         format!(
             "{} frames in {secs:.1} s, {} ids ({}{})",
             frames.len(),
@@ -627,15 +598,14 @@ fn can_frames(
         }
         match detector.poll(Timestamp::ZERO) {
             Detection::Decided(p) => {
-                emit(check(
+                emit(ok(
                     "protocol",
-                    Verdict::Ok,
                     format!("AgileX {p} (the V1/V2 rule chassisd applies)"),
                 ));
                 Some(p)
             }
             other => {
-                emit(check("protocol", Verdict::Warn, other.describe()));
+                emit(warn("protocol", other.describe()));
                 None
             }
         }
@@ -652,9 +622,8 @@ fn can_frames(
             .join(", ")
     };
     if fits.iter().any(|(r, _)| *r == target.robot) {
-        emit(check(
+        emit(ok(
             "robot",
-            Verdict::Ok,
             format!(
                 "the frames fit a {}; robots they fit: {}",
                 target.robot,
@@ -663,18 +632,13 @@ fn can_frames(
         ));
     } else if fits.is_empty() {
         emit(
-            check(
-                "robot",
-                Verdict::Fail,
-                "the frames are no robot's chassisd knows",
-            )
-            .fix("another device on this bus? `candump` it and compare with docs/PROTOCOLS.md"),
+            fail("robot", "the frames are no robot's chassisd knows")
+                .fix("another device on this bus? `candump` it and compare with docs/PROTOCOLS.md"),
         );
     } else {
         emit(
-            check(
+            fail(
                 "robot",
-                Verdict::Fail,
                 format!(
                     "the frames are not a {}'s; robots they fit: {}",
                     target.robot,
@@ -711,14 +675,7 @@ fn robots_fitting(frames: &[CanFrame]) -> Vec<(RobotKind, Option<Protocol>)> {
             let bad = link.rx_unknown_id + link.rx_decode_errors + link.rx_bad_checksum;
             // Nine in ten: a frame of another device now and then does not hide the robot.
             if link.rx_frames > 0 && bad * 10 <= frames.len() as u64 {
-                fits.push((
-                    robot,
-                    if entry.detects_protocol() {
-                        protocol
-                    } else {
-                        None
-                    },
-                ));
+                fits.push((robot, protocol.filter(|_| entry.detects_protocol())));
             }
         }
     }
@@ -732,38 +689,28 @@ fn serial_device(path: &str, emit: &mut dyn FnMut(Check)) -> bool {
     let meta = match std::fs::metadata(path) {
         Ok(m) => m,
         Err(err) => {
-            emit(
-                check("device", Verdict::Fail, format!("{path}: {err}")).fix(
-                    "plug the adapter in; `ls -l /dev/serial/by-id/` names USB serial \
+            emit(fail("device", format!("{path}: {err}")).fix(
+                "plug the adapter in; `ls -l /dev/serial/by-id/` names USB serial \
                      adapters by serial number (a udev rule gives a stable name: docs/HARDWARE.md)",
-                ),
-            );
+            ));
             return false;
         }
     };
     if !meta.file_type().is_char_device() {
         emit(
-            check(
-                "device",
-                Verdict::Fail,
-                format!("{path} is not a character device"),
-            )
-            .fix("name the serial port (/dev/ttyUSB0, /dev/ttyACM0, /dev/serial/by-id/…)"),
+            fail("device", format!("{path} is not a character device"))
+                .fix("name the serial port (/dev/ttyUSB0, /dev/ttyACM0, /dev/serial/by-id/…)"),
         );
         return false;
     }
-    emit(check("device", Verdict::Ok, format!("{path} exists")));
+    emit(ok("device", format!("{path} exists")));
     let access = nix::unistd::access(
         Path::new(path),
         nix::unistd::AccessFlags::R_OK | nix::unistd::AccessFlags::W_OK,
     );
     match access {
         Ok(()) => {
-            emit(check(
-                "permission",
-                Verdict::Ok,
-                "this user may read and write it",
-            ));
+            emit(ok("permission", "this user may read and write it"));
             true
         }
         Err(err) => {
@@ -786,9 +733,8 @@ fn serial_device(path: &str, emit: &mut dyn FnMut(Check)) -> bool {
                 format!("sudo usermod -aG {group} {user}, then log out and in again")
             };
             emit(
-                check(
+                fail(
                     "permission",
-                    Verdict::Fail,
                     format!(
                         "{user} may not read and write {path} ({err}; owner group {group}, mode \
                          {mode:o})"
@@ -805,7 +751,7 @@ fn open_serial(path: &str, baud: u32, emit: &mut dyn FnMut(Check)) -> Option<Ser
     match SerialBus::open(path, baud) {
         Ok(port) => Some(port),
         Err(err) => {
-            emit(check("open", Verdict::Fail, format!("{err}")).fix(
+            emit(fail("open", format!("{err}")).fix(
                 "another program holds the port (`fuser -v PATH` names it): stop it, or \
                      let the running chassisd serve",
             ));
@@ -851,17 +797,15 @@ fn listen_slcan(
                 .find(|l| l.starts_with(['V', 'v']))
                 .unwrap_or("")
                 .to_string();
-            emit(check(
+            emit(ok(
                 "adapter",
-                Verdict::Ok,
                 format!("the slcan adapter answers (version {version})"),
             ));
         }
         Ok(bytes) => {
             emit(
-                check(
+                fail(
                     "adapter",
-                    Verdict::Fail,
                     format!("no slcan answer to `V` ({} bytes back)", bytes.len()),
                 )
                 .fix(
@@ -872,7 +816,7 @@ fn listen_slcan(
             return None;
         }
         Err(err) => {
-            emit(check("adapter", Verdict::Fail, err));
+            emit(fail("adapter", err));
             return None;
         }
     }
@@ -880,15 +824,11 @@ fn listen_slcan(
     let mut bus = match chassis_bus::slcan::SlcanBus::open(port, bitrate) {
         Ok(bus) => bus,
         Err(err) => {
-            emit(check("bitrate", Verdict::Fail, err.to_string()));
+            emit(fail("bitrate", err.to_string()));
             return None;
         }
     };
-    emit(check(
-        "bitrate",
-        Verdict::Ok,
-        format!("channel opened at {bitrate} bit/s"),
-    ));
+    emit(ok("bitrate", format!("channel opened at {bitrate} bit/s")));
     let mut frames = Vec::new();
     let end = deadline(target.listen);
     while now_ns() < end {
@@ -897,7 +837,7 @@ fn listen_slcan(
             Ok(None) if readable_before(bus.raw_fd(), end) => {}
             Ok(None) => break,
             Err(err) => {
-                emit(check("frames", Verdict::Fail, err.to_string()));
+                emit(fail("frames", err.to_string()));
                 return None;
             }
         }
@@ -915,9 +855,8 @@ fn listen_serial(
     let entry = target.robot.entry();
     let profile = entry.defaults();
     let Some(baud) = baud.or(profile.serial_baud()) else {
-        emit(check(
+        emit(fail(
             "frames",
-            Verdict::Fail,
             format!(
                 "{} has no serial link: use can:IFACE or slcan:PATH",
                 target.robot
@@ -929,19 +868,14 @@ fn listen_serial(
     let bytes = match read_for(&mut port, target.listen) {
         Ok(bytes) => bytes,
         Err(err) => {
-            emit(check("frames", Verdict::Fail, err));
+            emit(fail("frames", err));
             return None;
         }
     };
     let secs = target.listen.as_secs_f64();
     if bytes.is_empty() {
         emit(
-            check(
-                "frames",
-                Verdict::Fail,
-                format!("no byte in {secs:.1} s at {baud} baud"),
-            )
-            .fix(
+            fail("frames", format!("no byte in {secs:.1} s at {baud} baud")).fix(
                 "is the chassis on and the cable's TX to the robot's RX (a null-modem \
                       cable or adapter where both ends are DTE)?",
             ),
@@ -954,9 +888,8 @@ fn listen_serial(
     let link = state.link;
     if link.rx_frames == 0 {
         emit(
-            check(
+            fail(
                 "frames",
-                Verdict::Fail,
                 format!(
                     "{} bytes in {secs:.1} s, none of them a {} report ({} bad checksums, {} \
                      bytes discarded)",
@@ -970,9 +903,8 @@ fn listen_serial(
         );
         return None;
     }
-    emit(check(
+    emit(ok(
         "frames",
-        Verdict::Ok,
         format!(
             "{} {} reports in {secs:.1} s ({} bytes, {} bad checksums)",
             link.rx_frames,
@@ -991,9 +923,8 @@ fn robot_mode(state: &ChassisState, emit: &mut dyn FnMut(Check)) {
     let mode = state.system.control_mode;
     if mode == ControlMode::REMOTE || state.has_link_flag(LinkFlags::RC_AUTHORITY) {
         emit(
-            check(
+            fail(
                 "mode",
-                Verdict::Fail,
                 "the RC transmitter holds the robot (remote control mode)",
             )
             .fix(
@@ -1002,15 +933,10 @@ fn robot_mode(state: &ChassisState, emit: &mut dyn FnMut(Check)) {
             ),
         );
     } else if mode == ControlMode::UNKNOWN {
-        emit(check(
-            "mode",
-            Verdict::Warn,
-            "no status frame heard: control mode unknown",
-        ));
+        emit(warn("mode", "no status frame heard: control mode unknown"));
     } else {
-        emit(check(
+        emit(ok(
             "mode",
-            Verdict::Ok,
             format!(
                 "{} (chassisd asks for command mode)",
                 ControlMode::name(mode)
@@ -1018,12 +944,12 @@ fn robot_mode(state: &ChassisState, emit: &mut dyn FnMut(Check)) {
         ));
     }
     if state.system.fault_flags & FaultFlags::EMERGENCY_STOP != 0 {
-        emit(check("e-stop", Verdict::Fail, "the E-stop is pressed").fix(
+        emit(fail("e-stop", "the E-stop is pressed").fix(
             "release the chassis' E-stop button (turn it); chassisd then holds zero until \
                      the winning source has asked for zero once",
         ));
     } else {
-        emit(check("e-stop", Verdict::Ok, "released"));
+        emit(ok("e-stop", "released"));
     }
 }
 
@@ -1035,9 +961,8 @@ fn chassisd_serving(target: &Target) -> (Option<(ChassisState, Option<MuxStatus>
         Err(chassis_client::ClientError::NotRunning { .. }) => {
             return (
                 None,
-                check(
+                ok(
                     "chassisd",
-                    Verdict::Ok,
                     format!("no chassisd serves {name} yet: the bus is free for it"),
                 )
                 .fix(format!(
@@ -1050,11 +975,7 @@ fn chassisd_serving(target: &Target) -> (Option<(ChassisState, Option<MuxStatus>
         Err(err) => {
             return (
                 None,
-                check(
-                    "chassisd",
-                    Verdict::Warn,
-                    format!("asking for chassis/{name}: {err}"),
-                ),
+                warn("chassisd", format!("asking for chassis/{name}: {err}")),
             );
         }
     };
@@ -1066,9 +987,8 @@ fn chassisd_serving(target: &Target) -> (Option<(ChassisState, Option<MuxStatus>
     match state {
         Some(s) if s.robot != target.robot.id() => (
             None,
-            check(
+            fail(
                 "chassisd",
-                Verdict::Fail,
                 format!(
                     "a chassisd already serves {name}, as a {}",
                     chassis_protocols::RobotKind::from_id(s.robot).map_or(
@@ -1081,9 +1001,8 @@ fn chassisd_serving(target: &Target) -> (Option<(ChassisState, Option<MuxStatus>
         ),
         Some(s) => (
             Some((s, mux)),
-            check(
+            ok(
                 "chassisd",
-                Verdict::Ok,
                 format!(
                     "chassisd serves chassis/{name} and owns the bus (state #{})",
                     s.seq
@@ -1092,9 +1011,8 @@ fn chassisd_serving(target: &Target) -> (Option<(ChassisState, Option<MuxStatus>
         ),
         None => (
             None,
-            check(
+            fail(
                 "chassisd",
-                Verdict::Fail,
                 format!("a chassisd holds chassis/{name} but publishes no state"),
             )
             .fix(format!(
@@ -1109,12 +1027,8 @@ fn from_service(target: &Target, s: &ChassisState, emit: &mut dyn FnMut(Check)) 
     let link = s.link;
     if s.has_link_flag(LinkFlags::BUS_DOWN) {
         emit(
-            check(
-                "frames",
-                Verdict::Fail,
-                "chassisd has lost the bus (bus_down)",
-            )
-            .fix("see the checks above, and `journalctl -u chassisd@NAME`"),
+            fail("frames", "chassisd has lost the bus (bus_down)")
+                .fix("see the checks above, and `journalctl -u chassisd@NAME`"),
         );
     } else if s.has_link_flag(LinkFlags::CAN_BUS_OFF) {
         let iface = match &target.bus {
@@ -1122,9 +1036,8 @@ fn from_service(target: &Target, s: &ChassisState, emit: &mut dyn FnMut(Check)) 
             _ => "IFACE",
         };
         emit(
-            check(
+            fail(
                 "frames",
-                Verdict::Fail,
                 format!(
                     "chassisd reports the CAN controller bus-off ({} bus-offs)",
                     link.can_bus_off
@@ -1134,9 +1047,8 @@ fn from_service(target: &Target, s: &ChassisState, emit: &mut dyn FnMut(Check)) 
         );
     } else if s.has_link_flag(LinkFlags::CHASSIS_SILENT) {
         emit(
-            check(
+            fail(
                 "frames",
-                Verdict::Fail,
                 format!(
                     "chassisd hears nothing from the chassis ({} frames so far)",
                     link.rx_frames
@@ -1145,9 +1057,8 @@ fn from_service(target: &Target, s: &ChassisState, emit: &mut dyn FnMut(Check)) 
             .fix("is the chassis on, its connector plugged, the bit rate the robot's?"),
         );
     } else {
-        emit(check(
+        emit(ok(
             "frames",
-            Verdict::Ok,
             format!(
                 "chassisd hears the chassis: {} frames, {} decode errors, {} unknown ids",
                 link.rx_frames, link.rx_decode_errors, link.rx_unknown_id
@@ -1192,11 +1103,7 @@ fn from_service(target: &Target, s: &ChassisState, emit: &mut dyn FnMut(Check)) 
 fn mux_check(target: &Target, mux: Option<&MuxStatus>, emit: &mut dyn FnMut(Check)) {
     let name = &target.name;
     let Some(m) = mux else {
-        emit(check(
-            "mux",
-            Verdict::Warn,
-            "chassisd published no mux decision",
-        ));
+        emit(warn("mux", "chassisd published no mux decision"));
         return;
     };
     let mut blocked = false;
@@ -1205,9 +1112,8 @@ fn mux_check(target: &Target, mux: Option<&MuxStatus>, emit: &mut dyn FnMut(Chec
         if s.flags & SourceFlags::REQUIRED != 0 && s.flags & SourceFlags::FRESH == 0 {
             blocked = true;
             emit(
-                check(
+                fail(
                     "mux",
-                    Verdict::Fail,
                     format!(
                         "the required source {} is silent: nothing moves without it",
                         s.name()
@@ -1236,9 +1142,8 @@ fn mux_check(target: &Target, mux: Option<&MuxStatus>, emit: &mut dyn FnMut(Chec
             ),
         };
         emit(
-            check(
+            fail(
                 "mux",
-                Verdict::Fail,
                 format!(
                     "the lock {} (priority {}) is held by {holder}: sources below it do not move \
                      the robot",
@@ -1250,11 +1155,7 @@ fn mux_check(target: &Target, mux: Option<&MuxStatus>, emit: &mut dyn FnMut(Chec
         );
     }
     if !blocked {
-        emit(check(
-            "mux",
-            Verdict::Ok,
-            "no lock held, every required source alive",
-        ));
+        emit(ok("mux", "no lock held, every required source alive"));
     }
 }
 
@@ -1282,9 +1183,8 @@ fn writable(dir: &Path) -> Result<PathBuf, String> {
 fn state_directory(target: &Target, emit: &mut dyn FnMut(Check)) {
     let Some(dir) = &target.state_dir else {
         emit(
-            check(
+            warn(
                 "state-dir",
-                Verdict::Warn,
                 "no state directory (neither STATE_DIRECTORY, XDG_STATE_HOME nor HOME is set)",
             )
             .fix("set state_dir in chassisd's config"),
@@ -1292,18 +1192,16 @@ fn state_directory(target: &Target, emit: &mut dyn FnMut(Check)) {
         return;
     };
     match writable(dir) {
-        Ok(_) => emit(check(
+        Ok(_) => emit(ok(
             "state-dir",
-            Verdict::Ok,
             format!(
                 "{} is writable (held locks survive a restart)",
                 dir.display()
             ),
         )),
         Err(err) => emit(
-            check(
+            fail(
                 "state-dir",
-                Verdict::Fail,
                 format!("{} is not writable ({err})", dir.display()),
             )
             .fix("give chassisd's user the directory, or set state_dir in its config"),
@@ -1319,13 +1217,9 @@ fn iceoryx2_directories(emit: &mut dyn FnMut(Check)) {
         }
     }
     if bad.is_empty() {
-        emit(check(
-            "iceoryx2",
-            Verdict::Ok,
-            "/dev/shm and /tmp/iceoryx2 are writable",
-        ));
+        emit(ok("iceoryx2", "/dev/shm and /tmp/iceoryx2 are writable"));
     } else {
-        emit(check("iceoryx2", Verdict::Fail, bad.join("; ")).fix(
+        emit(fail("iceoryx2", bad.join("; ")).fix(
             "every program of the robot must share /dev/shm and /tmp/iceoryx2 with write \
                  access: run them as the same user or group (a systemd unit with PrivateTmp= \
                  does not see the others' /tmp)",
@@ -1437,7 +1331,7 @@ mod tests {
 
     #[test]
     fn a_line_and_its_fix_are_aligned() {
-        let c = check("up", Verdict::Fail, "can0 is down").fix("sudo ip link set can0 up");
+        let c = fail("up", "can0 is down").fix("sudo ip link set can0 up");
         assert_eq!(
             render(&c),
             "FAIL  up          can0 is down\n                  fix: sudo ip link set can0 up"

@@ -209,7 +209,7 @@ pub fn echo(args: &EchoArgs) -> anyhow::Result<()> {
 }
 
 /// Writes `sample`, when one came, as JSON or as its text line; how many were written.
-fn write_sample<T: serde::Serialize>(
+pub(crate) fn write_sample<T: serde::Serialize>(
     out: &mut impl Write,
     json: bool,
     sample: Option<&T>,
@@ -419,12 +419,10 @@ pub fn status(name: &str, json: bool) -> anyhow::Result<()> {
     };
     // The safety monitor's status, when one has made its service (a new reader gets the latest
     // sample with the monitor's next publication, at least every 100 ms).
-    let safety = match robot
+    let safety = robot
         .subscriber::<chassis_client::SafetyStatus>(chassis_client::SafetyStatus::SERVICE)?
-    {
-        Some(mut subscription) => Some(subscription.wait(Duration::from_millis(300))?),
-        None => None,
-    };
+        .map(|mut subscription| subscription.wait(Duration::from_millis(300)))
+        .transpose()?;
     if json {
         println!(
             "{}",

@@ -205,11 +205,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 &mut std::io::stdout().lock(),
                 &mut std::io::stderr().lock(),
             )?;
-            Ok(if summary.failed > 0 {
-                ExitCode::FAILURE
-            } else {
-                ExitCode::SUCCESS
-            })
+            // 1 when a line failed to decode.
+            Ok(ExitCode::from(u8::from(summary.failed > 0)))
         }
         Cmd::Encode { profile, what } => {
             let profile = profile.load()?;
@@ -245,11 +242,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 }
             })
         }
-        Cmd::Doctor(args) => Ok(if doctor::run(&args)? {
-            ExitCode::SUCCESS
-        } else {
-            ExitCode::FAILURE
-        }),
+        // 1 when a check failed.
+        Cmd::Doctor(args) => Ok(ExitCode::from(u8::from(!doctor::run(&args)?))),
         Cmd::Echo(args) => live::echo(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Pub {
             what: PubWhat::Velocity(args),

@@ -90,7 +90,7 @@ use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame};
 use serde::Serialize;
 use serde_json::{Value, json};
 
-use crate::live::{hex, state_line};
+use crate::live::{hex, state_line, write_sample};
 
 /// Frames the tap may hold between two drains.
 const TAP_BUFFER: usize = 2048;
@@ -800,15 +800,10 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
         if args.candump { " (candump)" } else { "" }
     );
 
-    let states = if args.candump {
-        None
-    } else {
-        Some(
-            robot
-                .state_stream(STATE_BUFFER)
-                .with_context(|| format!("opening the state stream of chassis/{}", args.name))?,
-        )
-    };
+    let states = (!args.candump)
+        .then(|| robot.state_stream(STATE_BUFFER))
+        .transpose()
+        .with_context(|| format!("opening the state stream of chassis/{}", args.name))?;
     let mut recorder = Recorder {
         sink,
         counts: Counts::default(),
@@ -963,17 +958,6 @@ impl Drop for Service {
     }
 }
 
-fn print_state(state: &ChassisState, json: bool) -> anyhow::Result<()> {
-    let mut out = std::io::stdout().lock();
-    if json {
-        writeln!(out, "{}", serde_json::to_string(state)?)?;
-    } else {
-        writeln!(out, "{}", state_line(state))?;
-    }
-    out.flush()?;
-    Ok(())
-}
-
 /// `chassis replay`.
 pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     install_signal_handlers();
@@ -982,18 +966,11 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     let Some(path_text) = path.to_str() else {
         bail!("{} is not a UTF-8 path", path.display());
     };
-    let recorded = match recording_metadata(&path)? {
-        Some(meta) => match meta.get("robot") {
-            Some(robot) => Some(
-                robot
-                    .parse::<RobotKind>()
-                    .map_err(anyhow::Error::msg)
-                    .with_context(|| format!("the robot {} names", path.display()))?,
-            ),
-            None => None,
-        },
-        None => None,
-    };
+    let recorded = recording_metadata(&path)?
+        .and_then(|meta| meta.get("robot").map(|robot| robot.parse::<RobotKind>()))
+        .transpose()
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("the robot {} names", path.display()))?;
     let robot = match (args.robot, recorded) {
         (Some(given), Some(rec)) if given != rec => {
             bail!(
@@ -1052,8 +1029,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     // Connect once the service is up.
     let started = now_ns();
     let mut ticker = chassis_client::Ticker::new(Duration::from_millis(50));
-    let mut connection = None;
-    while connection.is_none() {
+    let mut connection = loop {
         if termination_requested() {
             return Ok(());
         }
@@ -1061,15 +1037,12 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
             bail!("chassisd exited at start ({status}); see its log above");
         }
         match Robot::connect(&args.name) {
-            Ok(robot) => connection = Some(robot),
+            Ok(robot) => break robot,
             Err(err) if now_ns().saturating_sub(started) > 10_000_000_000 => {
                 bail!("chassis/{} did not come up: {err}", args.name)
             }
             Err(_) => ticker.wait(),
         }
-    }
-    let Some(mut connection) = connection else {
-        bail!("chassis/{} did not come up", args.name);
     };
 
     let mut last: Option<ChassisState> = None;
@@ -1089,7 +1062,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         let now = now_ns();
         if !args.quiet && now.saturating_sub(last_print) >= 100_000_000 {
             last_print = now;
-            print_state(&state, args.json)?;
+            write_sample(&mut std::io::stdout(), args.json, Some(&state), state_line)?;
         }
         if state.link_flags & LinkFlags::BUS_DOWN != 0 {
             if state.link.rx_frames > 0 {
@@ -1105,7 +1078,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     };
     let status = service.stop();
     if let Some(state) = last {
-        print_state(&state, args.json)?;
+        write_sample(&mut std::io::stdout(), args.json, Some(&state), state_line)?;
         eprintln!(
             "{}: {} frames replayed and decoded ({} decode errors, {} bad checksums, {} unknown ids)",
             if ended {

@@ -210,20 +210,10 @@ pub fn live(fleet: &mut Fleet, args: &FleetArgs) -> anyhow::Result<()> {
                         Constraint::Length(messages.len() as u16 + 2),
                     ])
                     .areas(frame.area());
-                    let widths = [
-                        Constraint::Length(12),
-                        Constraint::Length(11),
-                        Constraint::Length(5),
-                        Constraint::Length(8),
-                        Constraint::Length(12),
-                        Constraint::Length(14),
-                        Constraint::Length(14),
-                        Constraint::Length(7),
-                        Constraint::Length(6),
-                        Constraint::Length(14),
-                        Constraint::Length(15),
-                        Constraint::Min(8),
-                    ];
+                    let widths = [12, 11, 5, 8, 12, 14, 14, 7, 6, 14, 15]
+                        .map(Constraint::Length)
+                        .into_iter()
+                        .chain([Constraint::Min(8)]);
                     let table = Table::new(
                         rows.iter()
                             .map(|r| TableRow::new(cells(r).map(Cell::from)).style(row_style(r))),

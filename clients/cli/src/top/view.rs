@@ -66,17 +66,20 @@ pub fn duration_text(ns: u64) -> String {
 
 /// The four panels: robot, mux, bus, latency.
 pub fn panels(s: &Snapshot) -> [Panel; 4] {
-    [robot_panel(s), mux_panel(s), bus_panel(s), latency_panel(s)]
+    [
+        ("robot", robot_panel(s)),
+        ("mux", mux_panel(s)),
+        ("bus", bus_panel(s)),
+        ("latency", latency_panel(s)),
+    ]
+    .map(|(title, lines)| Panel { title, lines })
 }
 
-fn robot_panel(s: &Snapshot) -> Panel {
+fn robot_panel(s: &Snapshot) -> Vec<Line<'static>> {
     let mut lines = Vec::new();
     let Some(st) = s.state else {
         lines.push(Line::from(format!("no state from chassis/{} yet", s.name)));
-        return Panel {
-            title: "robot",
-            lines,
-        };
+        return lines;
     };
     let age = s.now_ns.saturating_sub(st.stamp_ns);
     let title = s.description.map_or_else(
@@ -164,10 +167,7 @@ fn robot_panel(s: &Snapshot) -> Panel {
             st.odometry.yaw_rad.to_degrees()
         ),
     ));
-    Panel {
-        title: "robot",
-        lines,
-    }
+    lines
 }
 
 fn holder(mux: &MuxStatus, lock: &LockStatus) -> String {
@@ -181,14 +181,11 @@ fn holder(mux: &MuxStatus, lock: &LockStatus) -> String {
     }
 }
 
-fn mux_panel(s: &Snapshot) -> Panel {
+fn mux_panel(s: &Snapshot) -> Vec<Line<'static>> {
     let mut lines = Vec::new();
     let Some(m) = s.mux else {
         lines.push(Line::from("no mux status yet"));
-        return Panel {
-            title: "mux",
-            lines,
-        };
+        return lines;
     };
     let active = match m.active() {
         Some(a) => Span::styled(
@@ -274,13 +271,10 @@ fn mux_panel(s: &Snapshot) -> Panel {
         };
         lines.push(Line::from(vec![label("lock"), Span::styled(text, style)]));
     }
-    Panel {
-        title: "mux",
-        lines,
-    }
+    lines
 }
 
-fn bus_panel(s: &Snapshot) -> Panel {
+fn bus_panel(s: &Snapshot) -> Vec<Line<'static>> {
     let mut lines = Vec::new();
     if let Some(st) = s.state {
         let l = &st.link;
@@ -390,10 +384,7 @@ fn bus_panel(s: &Snapshot) -> Panel {
             )),
         ]));
     }
-    Panel {
-        title: "bus",
-        lines,
-    }
+    lines
 }
 
 /// A row of percentiles; values below `resolution_ns` (the figure's resolution) read `<1 ms`.
@@ -429,7 +420,7 @@ fn latency_row(
     ]
 }
 
-fn latency_panel(s: &Snapshot) -> Panel {
+fn latency_panel(s: &Snapshot) -> Vec<Line<'static>> {
     let l = s.latency;
     let mut lines = vec![Line::from(dim(format!(
         "{:<18}{:>10}{:>10}{:>10}{:>8}",
@@ -469,10 +460,7 @@ fn latency_panel(s: &Snapshot) -> Panel {
         "all CLOCK_MONOTONIC; percentiles over the last {} samples",
         super::stats::SAMPLES
     ))));
-    Panel {
-        title: "latency",
-        lines,
-    }
+    lines
 }
 
 fn plain(line: &Line) -> String {
