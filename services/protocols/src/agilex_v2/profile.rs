@@ -168,123 +168,108 @@ pub struct FaultBit {
     pub flag: u64,
 }
 
-const fn bit(mask: u16, name: &'static str, flag: u64) -> FaultBit {
-    FaultBit { mask, name, flag }
-}
-
 /// b4 bit `n` of 0x211 (the high byte of the fault word).
-const fn b4(n: u16) -> u16 {
-    1 << (8 + n)
+const fn b4(n: u16, name: &'static str, flag: u64) -> FaultBit {
+    b5(8 + n, name, flag)
 }
 
-/// b5 bit `n` of 0x211 (the low byte of the fault word).
-const fn b5(n: u16) -> u16 {
-    1 << n
+/// b5 bit `n` of 0x211 (the low byte of the fault word; `n` 8-15 reach b4).
+const fn b5(n: u16, name: &'static str, flag: u64) -> FaultBit {
+    FaultBit {
+        mask: 1 << n,
+        name,
+        flag,
+    }
 }
-
-/// The bit ⚠ D-20 decides: SDK "steering encoder", HUNTER SE and the BUNKER MINI capture "E-stop".
-pub const FAULT_0080: u16 = b5(7);
 
 /// §2.3.2, SDK generic masks (`agilex_message.h`), SCOUT 2.0 / MINI later firmware; ROAS agrees
 /// on b5 bits 0-6. b5 bit7 is ⚠ D-20's.
 const SDK_FAULTS: &[FaultBit] = &[
-    bit(b4(0), "motor_driver_error", F::MOTOR_DRIVER_ERROR),
-    bit(b4(1), "host_communication_lost", F::HEARTBEAT_LOST),
-    bit(b5(0), "battery_failure", F::BATTERY_UNDER_VOLTAGE),
-    bit(b5(1), "battery_warning", F::BATTERY_UNDER_VOLTAGE_WARNING),
-    bit(b5(2), "rc_signal_lost", F::RC_LINK_LOST),
-    bit(b5(3), "motor_1_communication_lost", F::MOTOR_1_COMM_LOST),
-    bit(b5(4), "motor_2_communication_lost", F::MOTOR_2_COMM_LOST),
-    bit(b5(5), "motor_3_communication_lost", F::MOTOR_3_COMM_LOST),
-    bit(b5(6), "motor_4_communication_lost", F::MOTOR_4_COMM_LOST),
+    b4(0, "motor_driver_error", F::MOTOR_DRIVER_ERROR),
+    b4(1, "host_communication_lost", F::HEARTBEAT_LOST),
+    b5(0, "battery_failure", F::BATTERY_UNDER_VOLTAGE),
+    b5(1, "battery_warning", F::BATTERY_UNDER_VOLTAGE_WARNING),
+    b5(2, "rc_signal_lost", F::RC_LINK_LOST),
+    b5(3, "motor_1_communication_lost", F::MOTOR_1_COMM_LOST),
+    b5(4, "motor_2_communication_lost", F::MOTOR_2_COMM_LOST),
+    b5(5, "motor_3_communication_lost", F::MOTOR_3_COMM_LOST),
+    b5(6, "motor_4_communication_lost", F::MOTOR_4_COMM_LOST),
 ];
 
 /// §2.3.2, SCOUT v1.3.0 (S2D table 3.2), TRACER v1.2 (TRM table 3.2): b4 only.
 const SCOUT_V13_FAULTS: &[FaultBit] = &[
-    bit(
-        b4(0),
-        "battery_under_voltage_failure",
-        F::BATTERY_UNDER_VOLTAGE,
-    ),
-    bit(
-        b4(1),
+    b4(0, "battery_under_voltage_failure", F::BATTERY_UNDER_VOLTAGE),
+    b4(
+        1,
         "battery_under_voltage_warning",
         F::BATTERY_UNDER_VOLTAGE_WARNING,
     ),
-    bit(b4(2), "rc_link_lost", F::RC_LINK_LOST),
+    b4(2, "rc_link_lost", F::RC_LINK_LOST),
 ];
 
 /// §2.3.2, TRACER MINI (TMM p18).
 const TRACER_MINI_FAULTS: &[FaultBit] = &[
-    bit(b4(1), "accessory_12v_over_current", F::OVER_CURRENT),
-    bit(b4(7), "anti_collision_strip", F::BUMPER),
-    bit(
-        b5(0),
-        "battery_under_voltage_failure",
-        F::BATTERY_UNDER_VOLTAGE,
-    ),
-    bit(
-        b5(1),
+    b4(1, "accessory_12v_over_current", F::OVER_CURRENT),
+    b4(7, "anti_collision_strip", F::BUMPER),
+    b5(0, "battery_under_voltage_failure", F::BATTERY_UNDER_VOLTAGE),
+    b5(
+        1,
         "battery_under_voltage_warning",
         F::BATTERY_UNDER_VOLTAGE_WARNING,
     ),
-    bit(b5(2), "rc_link_lost", F::RC_LINK_LOST),
+    b5(2, "rc_link_lost", F::RC_LINK_LOST),
 ];
 
 /// §2.3.2, HUNTER 2.0 (H2X table 1).
 const HUNTER_2_FAULTS: &[FaultBit] = &[
-    bit(
-        b4(1),
+    b4(
+        1,
         "front_steering_encoder_offline",
         F::FRONT_STEERING_ENCODER,
     ),
-    bit(b4(2), "rc_link_lost", F::RC_LINK_LOST),
-    bit(b4(4), "host_communication_lost", F::HEARTBEAT_LOST),
-    bit(b4(6), "driver_state_error", F::MOTOR_DRIVER_ERROR),
-    bit(b5(0), "battery_under_voltage", F::BATTERY_UNDER_VOLTAGE),
-    bit(
-        b5(3),
+    b4(2, "rc_link_lost", F::RC_LINK_LOST),
+    b4(4, "host_communication_lost", F::HEARTBEAT_LOST),
+    b4(6, "driver_state_error", F::MOTOR_DRIVER_ERROR),
+    b5(0, "battery_under_voltage", F::BATTERY_UNDER_VOLTAGE),
+    b5(
+        3,
         "steering_driver_communication_lost",
         F::MOTOR_1_COMM_LOST,
     ),
-    bit(
-        b5(4),
+    b5(
+        4,
         "rear_right_driver_communication_lost",
         F::MOTOR_2_COMM_LOST,
     ),
-    bit(
-        b5(5),
+    b5(
+        5,
         "rear_left_driver_communication_lost",
         F::MOTOR_3_COMM_LOST,
     ),
-    bit(b5(6), "driver_over_temperature", F::OVER_TEMPERATURE),
-    bit(b5(7), "motor_over_current", F::OVER_CURRENT),
+    b5(6, "driver_over_temperature", F::OVER_TEMPERATURE),
+    b5(7, "motor_over_current", F::OVER_CURRENT),
 ];
 
 /// §2.3.2, HUNTER SE (HSE table 3.1); b5 bit7 is ⚠ D-20's.
 const HUNTER_SE_FAULTS: &[FaultBit] = &[
-    bit(b4(0), "motor_over_temperature", F::OVER_TEMPERATURE),
-    bit(b4(1), "driver_over_current", F::OVER_CURRENT),
-    bit(b4(2), "driver_status_error", F::MOTOR_DRIVER_ERROR),
-    bit(b5(0), "battery_under_voltage", F::BATTERY_UNDER_VOLTAGE),
-    bit(
-        b5(1),
-        "steering_zero_setting_error",
-        F::FRONT_STEERING_ENCODER,
-    ),
-    bit(b5(2), "rc_link_lost", F::RC_LINK_LOST),
-    bit(
-        b5(3),
+    b4(0, "motor_over_temperature", F::OVER_TEMPERATURE),
+    b4(1, "driver_over_current", F::OVER_CURRENT),
+    b4(2, "driver_status_error", F::MOTOR_DRIVER_ERROR),
+    b5(0, "battery_under_voltage", F::BATTERY_UNDER_VOLTAGE),
+    b5(1, "steering_zero_setting_error", F::FRONT_STEERING_ENCODER),
+    b5(2, "rc_link_lost", F::RC_LINK_LOST),
+    b5(
+        3,
         "steering_driver_communication_lost",
         F::MOTOR_1_COMM_LOST,
     ),
-    bit(
-        b5(4),
+    b5(
+        4,
         "rear_right_driver_communication_lost",
         F::MOTOR_2_COMM_LOST,
     ),
-    bit(
-        b5(5),
+    b5(
+        5,
         "rear_left_driver_communication_lost",
         F::MOTOR_3_COMM_LOST,
     ),
@@ -292,7 +277,7 @@ const HUNTER_SE_FAULTS: &[FaultBit] = &[
 
 impl FaultMap {
     /// The table's bits, as §2.3.2 names them. On the SDK and HUNTER SE tables b5 bit7
-    /// ([`FAULT_0080`]) is left to ⚠ D-20 ([`V2Profile::fault_bits`] adds it).
+    /// (0x0080) is left to ⚠ D-20 ([`V2Profile::fault_bits`] adds it).
     pub fn bits(self) -> &'static [FaultBit] {
         match self {
             FaultMap::Sdk => SDK_FAULTS,
@@ -712,13 +697,14 @@ impl V2Profile {
     }
 
     /// Every named bit of 0x211's fault word on this robot: the ⚠ D-3 table, with b5 bit7 as
-    /// ⚠ D-20 reads it where the table leaves it open.
+    /// ⚠ D-20 reads it where the table leaves it open (SDK "steering encoder", HUNTER SE and the
+    /// BUNKER MINI capture "E-stop").
     pub fn fault_bits(&self) -> impl Iterator<Item = FaultBit> + '_ {
         let d20 = matches!(self.fault_map, FaultMap::Sdk | FaultMap::HunterSe).then(|| {
             if self.fault_0080_is_estop {
-                bit(FAULT_0080, "estop", F::EMERGENCY_STOP)
+                b5(7, "estop", F::EMERGENCY_STOP)
             } else {
-                bit(FAULT_0080, "steering_encoder", F::FRONT_STEERING_ENCODER)
+                b5(7, "steering_encoder", F::FRONT_STEERING_ENCODER)
             }
         });
         self.fault_map.bits().iter().copied().chain(d20)
