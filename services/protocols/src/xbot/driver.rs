@@ -358,12 +358,8 @@ impl XbotDriver {
             Level::Warn,
             format!("{why}: the board may have rebooted; drive power {power}"),
         );
-        if let Some(lift) = self.last_lift {
-            self.queue.push_back(Frame::Lift(lift));
-        }
-        if let Some(servos) = self.last_servos {
-            self.queue.push_back(Frame::Servos(servos));
-        }
+        self.queue.extend(self.last_lift.map(Frame::Lift));
+        self.queue.extend(self.last_servos.map(Frame::Servos));
         // A rebooted board has no command: send ours again at once. It saw none of the frames
         // sent before it came back, so the one-second count starts afresh.
         self.sent_log.clear();
