@@ -491,11 +491,7 @@ impl V2Sim {
     fn send_slow(&mut self, now: Timestamp) {
         let voltage = (self.battery_v() * 10.0).round() / 10.0;
         let enabled = !self.drive_blocked();
-        let bit6 = if enabled == self.profile.driver_bit6_means_enabled {
-            1 << 6
-        } else {
-            0
-        };
+        let bit6 = u8::from(enabled == self.profile.driver_bit6_means_enabled) << 6;
         for motor in 1..=self.profile.actuators.min(8) {
             self.send(
                 now,
