@@ -120,23 +120,11 @@ impl Velocity {
                 v
             }
         };
-        let mut out = self.0;
-        out.linear_x_mps = within(
-            out.linear_x_mps,
-            -envelope.reverse_mps,
-            envelope.forward_mps,
-        );
-        out.linear_y_mps = within(
-            out.linear_y_mps,
-            -envelope.lateral_mps,
-            envelope.lateral_mps,
-        );
-        out.angular_z_radps = within(
-            out.angular_z_radps,
-            -envelope.angular_radps,
-            envelope.angular_radps,
-        );
-        Velocity(out)
+        let (mut v, e) = (self.0, envelope);
+        v.linear_x_mps = within(v.linear_x_mps, -e.reverse_mps, e.forward_mps);
+        v.linear_y_mps = within(v.linear_y_mps, -e.lateral_mps, e.lateral_mps);
+        v.angular_z_radps = within(v.angular_z_radps, -e.angular_radps, e.angular_radps);
+        Velocity(v)
     }
 
     /// One step from this velocity towards `target`: each speed moves by at most `linear_step`
@@ -151,15 +139,12 @@ impl Velocity {
                 to
             }
         };
+        let (from, to) = (self.0, target.0);
         Velocity(BodyVelocity {
-            linear_x_mps: step(self.0.linear_x_mps, target.0.linear_x_mps, linear_step),
-            linear_y_mps: step(self.0.linear_y_mps, target.0.linear_y_mps, linear_step),
-            angular_z_radps: step(
-                self.0.angular_z_radps,
-                target.0.angular_z_radps,
-                angular_step,
-            ),
-            ..target.0
+            linear_x_mps: step(from.linear_x_mps, to.linear_x_mps, linear_step),
+            linear_y_mps: step(from.linear_y_mps, to.linear_y_mps, linear_step),
+            angular_z_radps: step(from.angular_z_radps, to.angular_z_radps, angular_step),
+            ..to
         })
     }
 }
