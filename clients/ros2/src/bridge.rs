@@ -124,11 +124,6 @@ pub fn reliable_writer_qos() -> QosProfile {
         .history(History::KeepLast { depth: 100 })
 }
 
-/// QoS of `tf`: reliable, the last 100 (tf2_ros' `DynamicBroadcasterQoS`).
-pub fn tf_qos() -> QosProfile {
-    reliable_qos().history(History::KeepLast { depth: 100 })
-}
-
 /// QoS of `robot_description` and `tf_static`: reliable, transient local, the last 1 (what
 /// `robot_state_publisher` and tf2's `StaticBroadcasterQoS` offer): the writer keeps the last
 /// one for every reader that matches later.
@@ -232,7 +227,9 @@ impl Entities {
         };
         let e_stop_topic = topic("e_stop", Bool::type_name(), &reliable_qos())?;
         let odom_topic = topic("odom", Odometry::type_name(), &reliable_qos())?;
-        let tf_topic = topic("tf", TfMessage::type_name(), &tf_qos())?;
+        // Reliable, the last 100 (tf2_ros' `DynamicBroadcasterQoS`).
+        let tf_qos = reliable_qos().history(History::KeepLast { depth: 100 });
+        let tf_topic = topic("tf", TfMessage::type_name(), &tf_qos)?;
         let joints_topic = topic("joint_states", JointState::type_name(), &reliable_qos())?;
         let battery_topic = topic("battery_state", BatteryState::type_name(), &sensor_qos())?;
         let imu_topic = topic("imu/data", Imu::type_name(), &sensor_qos())?;

@@ -49,11 +49,6 @@ impl Frames {
     pub fn sensor(&self, name: &str) -> String {
         chassis_client::urdf::link_of_sensor(&self.prefix, name)
     }
-
-    /// The prefix of every frame (`--frame-prefix`).
-    pub fn prefix(&self) -> &str {
-        &self.prefix
-    }
 }
 
 /// `CLOCK_MONOTONIC` → ROS time (the system clock): the client library's [`WallClock`] in ROS'
@@ -202,8 +197,8 @@ pub fn robot_model(
     frames: &Frames,
     stamp: Time,
 ) -> Result<(StdString, TfMessage), UrdfError> {
-    let text = urdf::urdf(description, frames.prefix())?;
-    let transforms = urdf::fixed_frames(description, frames.prefix())?
+    let text = urdf::urdf(description, &frames.prefix)?;
+    let transforms = urdf::fixed_frames(description, &frames.prefix)?
         .into_iter()
         .map(|f| {
             let [x, y, z] = f.xyz;
@@ -258,24 +253,14 @@ impl ModelSent {
 
 /// The wheel geometry wheel joints need: radius and travel per encoder count, m, from the
 /// description's geometry; `None` where it does not give both (the AgileX manuals give no wheel
-/// radius: their wheel joints are not published).
-pub fn wheel_geometry(description: &RobotDescription) -> Option<WheelGeometry> {
+/// radius: their wheel joints are not published). `(radius_m, metres_per_count)`.
+pub fn wheel_geometry(description: &RobotDescription) -> Option<(f64, f64)> {
     let g = &description.geometry;
     (g.wheel_radius_m.is_finite()
         && g.wheel_radius_m > 0.0
         && g.travel_per_count_m.is_finite()
         && g.travel_per_count_m > 0.0)
-        .then_some(WheelGeometry {
-            radius_m: g.wheel_radius_m,
-            metres_per_count: g.travel_per_count_m,
-        })
-}
-
-/// See [`wheel_geometry`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct WheelGeometry {
-    pub radius_m: f64,
-    pub metres_per_count: f64,
+        .then_some((g.wheel_radius_m, g.travel_per_count_m))
 }
 
 /// `joint_states`: the description's joints, in its order — steering joints where the robot
@@ -300,13 +285,13 @@ pub fn joint_states(
             JointSource::REAR_STEER if steering => (finite(state.motion.rear_steer_rad), f64::NAN),
             JointSource::WHEEL => {
                 let i = usize::from(joint.index);
-                let (Some(w), Some(motor), Some(speed)) =
+                let (Some((radius_m, metres_per_count)), Some(motor), Some(speed)) =
                     (wheels, state.motors.get(i), state.motion.wheel_mps.get(i))
                 else {
                     continue;
                 };
-                let travel_m = motor.position_counts as f64 * w.metres_per_count;
-                (travel_m / w.radius_m, finite(*speed) / w.radius_m)
+                let travel_m = motor.position_counts as f64 * metres_per_count;
+                (travel_m / radius_m, finite(*speed) / radius_m)
             }
             _ => continue,
         };
@@ -830,13 +815,13 @@ mod tests {
         s.motion.wheel_mps = [0.1, 0.2, 0.3, 0.4];
         s.motors[0].position_counts = 1000;
         let xbot = described(RobotKind::Xbot);
-        let w = wheel_geometry(&xbot).expect("xbot geometry");
+        let (radius_m, metres_per_count) = wheel_geometry(&xbot).expect("xbot geometry");
         let j = joint_states(&s, &xbot, CLOCK).expect("joints");
         let names: Vec<&str> = xbot.joints().iter().map(|j| j.name()).collect();
         assert_eq!(j.name, names, "the description's joints, in its order");
         assert_eq!(j.name[0], "front_left_wheel_joint");
-        assert!((j.velocity[0] - 0.1 / w.radius_m).abs() < 1e-6);
-        assert!((j.position[0] - 1000.0 * w.metres_per_count / w.radius_m).abs() < 1e-9);
+        assert!((j.velocity[0] - 0.1 / radius_m).abs() < 1e-6);
+        assert!((j.position[0] - 1000.0 * metres_per_count / radius_m).abs() < 1e-9);
         // Its two-wheel base describes the front pair only.
         assert_eq!(j.position.len(), 2);
         // Without a wheel radius (as the AgileX manuals give none): no wheel joints.

@@ -202,40 +202,31 @@ impl ServiceAction {
         ServiceAction::Silent,
     ];
 
+    /// Each action's service name and the [`ControlKind`] of the request a call becomes, in the
+    /// order the actions are declared.
+    const SERVICES: [(&'static str, u8); 12] = [
+        ("/estop", ControlKind::LOCK_ENGAGE),
+        ("/estop_release", ControlKind::LOCK_RELEASE),
+        ("/clear_faults", ControlKind::CLEAR_FAULTS),
+        ("/mode", ControlKind::MODE),
+        ("/brake", ControlKind::BRAKE),
+        ("/lights", ControlKind::LIGHTS),
+        ("/off_road", ControlKind::OFF_ROAD),
+        ("/lift", ControlKind::LIFT),
+        ("/servos", ControlKind::SERVOS),
+        ("/power", ControlKind::POWER),
+        ("/steering_zero", ControlKind::STEERING_ZERO),
+        ("/silent", ControlKind::SILENT),
+    ];
+
     /// The service's name.
     pub fn name(self) -> &'static str {
-        match self {
-            ServiceAction::Estop => "/estop",
-            ServiceAction::EstopRelease => "/estop_release",
-            ServiceAction::ClearFaults => "/clear_faults",
-            ServiceAction::Mode => "/mode",
-            ServiceAction::Brake => "/brake",
-            ServiceAction::Lights => "/lights",
-            ServiceAction::OffRoad => "/off_road",
-            ServiceAction::Lift => "/lift",
-            ServiceAction::Servos => "/servos",
-            ServiceAction::Power => "/power",
-            ServiceAction::SteeringZero => "/steering_zero",
-            ServiceAction::Silent => "/silent",
-        }
+        Self::SERVICES[self as usize].0
     }
 
     /// The [`ControlKind`] of the request a call becomes.
     pub fn kind(self) -> u8 {
-        match self {
-            ServiceAction::Estop => ControlKind::LOCK_ENGAGE,
-            ServiceAction::EstopRelease => ControlKind::LOCK_RELEASE,
-            ServiceAction::ClearFaults => ControlKind::CLEAR_FAULTS,
-            ServiceAction::Mode => ControlKind::MODE,
-            ServiceAction::Brake => ControlKind::BRAKE,
-            ServiceAction::Lights => ControlKind::LIGHTS,
-            ServiceAction::OffRoad => ControlKind::OFF_ROAD,
-            ServiceAction::Lift => ControlKind::LIFT,
-            ServiceAction::Servos => ControlKind::SERVOS,
-            ServiceAction::Power => ControlKind::POWER,
-            ServiceAction::SteeringZero => ControlKind::STEERING_ZERO,
-            ServiceAction::Silent => ControlKind::SILENT,
-        }
+        Self::SERVICES[self as usize].1
     }
 
     /// The JSON Schema of the request's fields (every field has a default: `{}` is a request).
