@@ -4,7 +4,7 @@ use std::io::{BufRead, Write};
 
 use chassis_protocols::{CandumpLine, Profile};
 
-use chassis_protocols::frame_json::BoxedCodec;
+use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
 
 /// What a decode run saw.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
@@ -66,9 +66,22 @@ fn decode_can_line(
     if text.is_empty() || text.starts_with('#') {
         return Ok(());
     }
-    let result = CandumpLine::parse(text)
-        .map_err(|e| e.to_string())
-        .and_then(|line| codec.decode_can(&line.frame).map_err(|e| e.to_string()));
+    let result = match CandumpLine::parse(text) {
+        Ok(line) => codec
+            .decode_can(&line.frame)
+            .map_err(|e| format!("{}: {e}", line.frame.to_candump())),
+        Err(e) => Err(format!("{text}: {e}")),
+    };
+    emit(result, out, err, summary)
+}
+
+/// Writes a decoded frame to `out`, or why a frame did not decode to `err`, and counts it.
+fn emit(
+    result: Result<FrameJson, String>,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+    summary: &mut Summary,
+) -> std::io::Result<()> {
     match result {
         Ok(json) => {
             summary.decoded += 1;
@@ -76,10 +89,7 @@ fn decode_can_line(
         }
         Err(reason) => {
             summary.failed += 1;
-            let shown = CandumpLine::parse(text)
-                .map(|l| l.frame.to_candump())
-                .unwrap_or_else(|_| text.to_string());
-            writeln!(err, "{shown}: {reason}")
+            writeln!(err, "{reason}")
         }
     }
 }
@@ -92,26 +102,13 @@ fn decode_serial_text(
     err: &mut dyn Write,
     summary: &mut Summary,
 ) -> std::io::Result<()> {
-    let bytes = match hex.push(text) {
-        Ok(bytes) => bytes,
-        Err(reason) => {
-            summary.failed += 1;
-            return writeln!(err, "{reason}");
-        }
-    };
-    for item in codec.push_serial(&bytes) {
-        match item {
-            Ok(json) => {
-                summary.decoded += 1;
-                writeln!(out, "{}", serde_json::Value::Object(json))?;
-            }
-            Err(reason) => {
-                summary.failed += 1;
-                writeln!(err, "{reason}")?;
-            }
-        }
+    match hex.push(text) {
+        Ok(bytes) => codec
+            .push_serial(&bytes)
+            .into_iter()
+            .try_for_each(|item| emit(item.map_err(|e| e.to_string()), out, err, summary)),
+        Err(reason) => emit(Err(reason.to_string()), out, err, summary),
     }
-    Ok(())
 }
 
 /// Hex text in any chunking (`AA 55 02`, `AA5502`, `aa55` + `02`) → bytes. `0x` prefixes, spaces,

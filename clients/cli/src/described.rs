@@ -48,16 +48,14 @@ pub fn model_line(d: &RobotDescription) -> String {
     if d.flags & DescriptionFlags::SIMULATED != 0 {
         words.push("simulated".into());
     }
-    let mut has = Vec::new();
-    for (flag, word) in [
+    let has: Vec<&str> = [
         (DescriptionFlags::BRAKE, "brake"),
         (DescriptionFlags::LIGHTS, "lights"),
         (DescriptionFlags::LATERAL, "moves sideways"),
-    ] {
-        if d.flags & flag != 0 {
-            has.push(word);
-        }
-    }
+    ]
+    .into_iter()
+    .filter_map(|(flag, word)| (d.flags & flag != 0).then_some(word))
+    .collect();
     if !has.is_empty() {
         words.push(has.join(", "));
     }

@@ -231,16 +231,13 @@ fn row(name: &str, seen: &Seen, now_ns: u64) -> Row {
 
 /// One robot's reader: its own thread, reporting what it has seen every [`REPORT_NS`].
 fn watch(name: &str, stop: &AtomicBool, tx: &mpsc::Sender<(String, Seen)>) {
-    let mut robot = match Robot::connect(name) {
-        Ok(robot) => robot,
-        Err(_) => {
-            let seen = Seen {
-                gone: true,
-                ..Seen::default()
-            };
-            let _ = tx.send((name.to_string(), seen));
-            return;
-        }
+    let Ok(mut robot) = Robot::connect(name) else {
+        let gone = Seen {
+            gone: true,
+            ..Seen::default()
+        };
+        let _ = tx.send((name.to_string(), gone));
+        return;
     };
     let mut seen = Seen::default();
     let mut last_seq = 0u64;
