@@ -270,11 +270,6 @@ impl Robot {
             .is_ok_and(|n| n > 0)
     }
 
-    /// Takes every pending state sample; true if there was one.
-    fn drain_state(&mut self) -> Result<bool, ClientError> {
-        Ok(self.drain_state_each(|_| {})? > 0)
-    }
-
     /// Takes every pending state sample, oldest first, handing each to `each`.
     fn drain_state_each(
         &mut self,
@@ -335,7 +330,7 @@ impl Robot {
     /// # Ok::<(), chassis_client::ClientError>(())
     /// ```
     pub fn latest_state(&mut self) -> Result<Option<ChassisState>, ClientError> {
-        self.drain_state()?;
+        self.drain_state_each(|_| {})?;
         Ok(self.latest_state)
     }
 

@@ -15,6 +15,8 @@
 //! is refused with the smallest that works, and the default size is the smallest multiple of
 //! 0.5 m from 2 m up that fits.
 
+use std::f64::consts::{FRAC_PI_2, TAU};
+
 use thiserror::Error;
 
 use crate::geometry::Point;
@@ -111,17 +113,17 @@ pub fn outline(shape: Shape, size_m: f64) -> Result<Path, ShapeError> {
         ],
         Shape::FigureEight => {
             let r = s / 4.0;
-            let n = circle_samples(r);
+            // At least 16 samples a circle (r is positive and finite: the cast is exact enough).
+            let n = ((TAU * r / SAMPLE_STEP_M).ceil() as usize).max(16);
             let mut points = Vec::with_capacity(2 * n + 1);
             // Left circle (centre (0, r)) counter-clockwise from its bottom, then the right one
             // (centre (0, −r)) clockwise from its top: both pass the origin heading +x.
             for k in 0..n {
-                let phi =
-                    -std::f64::consts::FRAC_PI_2 + std::f64::consts::TAU * k as f64 / n as f64;
+                let phi = -FRAC_PI_2 + TAU * k as f64 / n as f64;
                 points.push(Point::new(r * phi.cos(), r + r * phi.sin()));
             }
             for k in 0..n {
-                let phi = std::f64::consts::FRAC_PI_2 - std::f64::consts::TAU * k as f64 / n as f64;
+                let phi = FRAC_PI_2 - TAU * k as f64 / n as f64;
                 points.push(Point::new(r * phi.cos(), -r + r * phi.sin()));
             }
             points.push(Point::new(0.0, 0.0));
@@ -129,11 +131,6 @@ pub fn outline(shape: Shape, size_m: f64) -> Result<Path, ShapeError> {
         }
     };
     Ok(Path::new(points)?)
-}
-
-fn circle_samples(radius_m: f64) -> usize {
-    // Positive and finite: the cast is exact enough; at least 16 samples a circle.
-    ((std::f64::consts::TAU * radius_m / SAMPLE_STEP_M).ceil() as usize).max(16)
 }
 
 /// The shape of `size_m` for `kinematics`, driven `loops` times: corners rounded to the robot's

@@ -33,7 +33,7 @@ use chassis_client::{
 use mio::{Events, Interest, Poll, Token};
 use ros2_client::{
     Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Server,
-    ServiceMapping, Subscription,
+    ServiceMapping, ServiceTypeName, Subscription,
     qos::{Durability, History, WhenFull},
     service::RmwRequestId,
 };
@@ -42,7 +42,7 @@ use crate::convert::{self, Frames, ModelSent, RangeSensor, RosClock};
 use crate::discovery::Reach;
 use crate::msg::{
     BatteryState, Bool, DiagnosticArray, Imu, JointState, NavSatFix, Odometry, Range, StdString,
-    TfMessage, TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed, trigger_type,
+    TfMessage, TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed,
 };
 
 /// The mux source the bridge publishes into (chassisd's default configuration has it).
@@ -260,7 +260,7 @@ impl Entities {
             node.create_server(
                 options.service_mapping,
                 &name,
-                &trigger_type(),
+                &ServiceTypeName::new("std_srvs", "Trigger"),
                 reliable_qos(),
                 reliable_qos(),
             )

@@ -7,7 +7,7 @@
 //! generate them are built against older `ros2-client` releases, and this bridge needs only the
 //! twenty-odd types below.
 
-use ros2_client::{Message, MessageTypeName, ServiceTypeName};
+use ros2_client::{Message, MessageTypeName};
 use serde::{Deserialize, Serialize};
 use serde_big_array::BigArray;
 
@@ -377,11 +377,6 @@ pub struct TriggerResponse {
     pub message: String,
 }
 impl Message for TriggerResponse {}
-
-/// `std_srvs/srv/Trigger`.
-pub fn trigger_type() -> ServiceTypeName {
-    ServiceTypeName::new("std_srvs", "Trigger")
-}
 
 #[cfg(test)]
 mod tests {

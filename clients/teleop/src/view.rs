@@ -82,7 +82,7 @@ pub fn authority(mux: Option<&MuxStatus>, source: &str, driving: bool) -> Author
     };
     let ours = mux.sources().iter().find(|s| s.name() == source);
     let our_priority = ours.map_or(0, |s| s.priority);
-    if let Some(lock) = held_lock(mux)
+    if let Some(lock) = mux.locks().iter().find(|l| l.held != 0)
         && ours.is_some_and(|s| s.has(SourceFlags::BLOCKED))
     {
         return Authority::Override {
@@ -129,10 +129,6 @@ pub fn authority(mux: Option<&MuxStatus>, source: &str, driving: bool) -> Author
             why: mux.why().to_string(),
         },
     }
-}
-
-fn held_lock(mux: &MuxStatus) -> Option<&LockStatus> {
-    mux.locks().iter().find(|l| l.held != 0)
 }
 
 fn lock_holder(mux: &MuxStatus, lock: &LockStatus) -> String {

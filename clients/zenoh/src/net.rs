@@ -41,16 +41,12 @@ pub struct Net {
     pub lease_ms: u64,
 }
 
-/// The host part of an endpoint (`tcp/10.0.0.1:7447` → `10.0.0.1`, `tcp/[::1]:7447` → `::1`).
-fn host_of(address: &str) -> &str {
-    let address = address.split(['?', '#']).next().unwrap_or(address);
-    let host = address.rsplit_once(':').map_or(address, |(h, _)| h);
-    host.trim_start_matches('[').trim_end_matches(']')
-}
-
 /// True when the endpoint's host is on this machine only.
 pub fn is_loopback(address: &str) -> bool {
-    let host = host_of(address);
+    // The host part: `tcp/10.0.0.1:7447` → `10.0.0.1`, `tcp/[::1]:7447` → `::1`.
+    let address = address.split(['?', '#']).next().unwrap_or(address);
+    let host = address.rsplit_once(':').map_or(address, |(h, _)| h);
+    let host = host.trim_start_matches('[').trim_end_matches(']');
     host == "localhost" || host.parse::<IpAddr>().is_ok_and(|ip| ip.is_loopback())
 }
 
