@@ -119,9 +119,8 @@ struct Stored {
 
 impl Serialize for Latencies {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        let v2_hex = self.to_bytes().iter().map(|b| format!("{b:02x}")).collect();
         Stored {
-            v2_hex,
+            v2_hex: hex::encode(self.to_bytes()),
             out_of_range: self.out_of_range,
         }
         .serialize(serializer)
@@ -132,16 +131,8 @@ impl<'de> Deserialize<'de> for Latencies {
     fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
         use serde::de::Error;
         let stored = Stored::deserialize(deserializer)?;
-        let bytes = (0..stored.v2_hex.len())
-            .step_by(2)
-            .map(|i| {
-                stored
-                    .v2_hex
-                    .get(i..i + 2)
-                    .and_then(|h| u8::from_str_radix(h, 16).ok())
-            })
-            .collect::<Option<Vec<u8>>>()
-            .ok_or_else(|| D::Error::custom("a histogram that is not hex"))?;
+        let bytes = hex::decode(&stored.v2_hex)
+            .map_err(|_| D::Error::custom("a histogram that is not hex"))?;
         let mut latencies = Latencies::from_bytes(&bytes)
             .ok_or_else(|| D::Error::custom("a histogram that is not HdrHistogram V2"))?;
         latencies.out_of_range = stored.out_of_range;

@@ -317,17 +317,6 @@ pub(crate) fn lock_holder(m: &MuxStatus, lock: &LockStatus) -> String {
     }
 }
 
-/// Upper-case hex of `bytes`, no separators.
-pub fn hex(bytes: &[u8]) -> String {
-    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
-    let mut out = String::with_capacity(bytes.len() * 2);
-    for b in bytes {
-        out.push(char::from(DIGITS[usize::from(b >> 4)]));
-        out.push(char::from(DIGITS[usize::from(b & 0xF)]));
-    }
-    out
-}
-
 /// `  12.345678 RX 111#0096000000000000` (CAN) or `RX AA 55 02 01 01 02` (serial).
 pub fn frame_line(frame: &BusFrame) -> String {
     let t = frame.stamp_ns as f64 / 1e9;
@@ -339,7 +328,10 @@ pub fn frame_line(frame: &BusFrame) -> String {
             } else {
                 format!("{:03X}", frame.can_id)
             };
-            format!("{t:>14.6} {dir} {id}#{}", hex(frame.payload()))
+            format!(
+                "{t:>14.6} {dir} {id}#{}",
+                hex::encode_upper(frame.payload())
+            )
         }
         FrameKind::GPS => format!(
             "{t:>14.6} GPS {}",
@@ -360,7 +352,7 @@ pub fn frame_line(frame: &BusFrame) -> String {
 fn frame_json(frame: &BusFrame) -> serde_json::Value {
     let mut value = serde_json::to_value(frame).unwrap_or(serde_json::Value::Null);
     if let Some(obj) = value.as_object_mut() {
-        obj.insert("data".into(), hex(frame.payload()).into());
+        obj.insert("data".into(), hex::encode_upper(frame.payload()).into());
     }
     value
 }

@@ -90,7 +90,7 @@ use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame};
 use serde::Serialize;
 use serde_json::{Value, json};
 
-use crate::live::{hex, state_line, write_sample};
+use crate::live::{state_line, write_sample};
 
 /// Frames the tap may hold between two drains.
 const TAP_BUFFER: usize = 2048;
@@ -196,7 +196,7 @@ impl FrameRecord {
             can_id: frame.can_id,
             extended: frame.flags & BusFrame::EXTENDED_ID != 0,
             len: frame.len,
-            data: hex(frame.payload()),
+            data: hex::encode_upper(frame.payload()),
         }
     }
 }

@@ -335,20 +335,6 @@ struct FrameRecord {
     data: String,
 }
 
-/// Hex text (`0096AB`) to bytes.
-pub fn from_hex(text: &str) -> Option<Vec<u8>> {
-    if !text.len().is_multiple_of(2) {
-        return None;
-    }
-    (0..text.len())
-        .step_by(2)
-        .map(|i| {
-            text.get(i..i + 2)
-                .and_then(|b| u8::from_str_radix(b, 16).ok())
-        })
-        .collect()
-}
-
 /// The step of one frames-channel message.
 pub fn frame_step(log_time: u64, data: &[u8]) -> Step {
     let record: FrameRecord = match serde_json::from_slice(data) {
@@ -358,7 +344,7 @@ pub fn frame_step(log_time: u64, data: &[u8]) -> Step {
     if record.direction != "rx" {
         return Step::Tx;
     }
-    let Some(bytes) = from_hex(&record.data) else {
+    let Ok(bytes) = hex::decode(&record.data) else {
         return Step::Bad(format!("'{}' is not hex", record.data));
     };
     let item = match record.kind.as_str() {
