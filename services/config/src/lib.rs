@@ -130,6 +130,9 @@ pub struct RawConfig {
 }
 
 /// Command-line choices that override the file (`chassisd`'s options).
+// The fields' doc comments are `chassisd --help`, written for a terminal (`chassis/<NAME>/…`,
+// `serial:PATH[@BAUD]`), not links or HTML.
+#[allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct Overrides {
     // The registry's robots, listed by the registry.
