@@ -21,20 +21,14 @@ struct Target {
     check: Check,
 }
 
-/// Rows by their typed identity: a path, a leg, and the loop modes (any when none is given).
+/// Rows by their typed identity: a path, a leg, and the loop modes (any when none is given). As
+/// a split or the rows a ratio is taken against, its modes are the judged row's.
 #[derive(Debug, Clone, Deserialize)]
 struct Select {
     path: PathKind,
     leg: Leg,
     #[serde(default)]
     modes: Vec<String>,
-}
-
-/// A split by the rows it divides.
-#[derive(Debug, Clone, Copy, Deserialize)]
-struct SplitOf {
-    path: PathKind,
-    leg: Leg,
 }
 
 /// Which parts of a split lie within a row: all, or from the request read on
@@ -54,14 +48,14 @@ enum Check {
         rows: Select,
         p50_us: f64,
         p99_us: f64,
-        split: Option<SplitOf>,
+        split: Option<Select>,
         #[serde(default)]
         within: Within,
     },
     Ratio {
         rows: Select,
         p99_times: f64,
-        against: Option<SplitOf>,
+        against: Option<Select>,
     },
     LoopMisses,
     FramesPerCpuSecond {
@@ -178,34 +172,28 @@ impl Check {
                 split,
                 within,
             } => {
-                let rows = rows.rows(report);
-                let (measured, met) = tally(rows.iter().map(|r| {
-                    let s = &r.summary;
-                    let figures = format!("{:.1} / {:.1} µs", s.p50_us, s.p99_us);
-                    let text = format!("{} {} {}: {figures}", r.what, r.mode, r.placement);
-                    (text, s.p50_us <= *p50_us && s.p99_us <= *p99_us)
-                }));
-                if met != Some(false) {
-                    return plain((measured, met));
-                }
+                let bound = Bound::Absolute {
+                    p50_us: *p50_us,
+                    p99_us: *p99_us,
+                };
                 let within: fn(&Part) -> bool = match within {
                     Within::All => |_| true,
                     Within::InService => crate::parts::in_service_command,
                 };
-                let split = split.map(|s| (s.path, s.leg));
-                let bound = |_: &Row| {
-                    Some(Bound::Absolute {
-                        p50_us: *p50_us,
-                        p99_us: *p99_us,
-                    })
+                let rows: Vec<Row> = rows.rows(report).into_iter().cloned().collect();
+                let figures = |r: &Row| {
+                    let s = &r.summary;
+                    let at = format!("{} {} {}", r.what, r.mode, r.placement);
+                    format!("{at}: {:.1} / {:.1} µs", s.p50_us, s.p99_us)
                 };
-                (measured, missed(report, &rows, split, within, bound))
+                let split = split.as_ref().map(|s| (s.path, s.leg));
+                compare(report, &rows, figures, |_| Some(bound), split, within)
             }
             Check::Ratio {
                 rows,
                 p99_times,
                 against,
-            } => ratio(report, rows, *p99_times, *against),
+            } => ratio(report, rows, *p99_times, against.as_ref()),
             Check::LoopMisses => plain(tally(report.loops.iter().map(|l| {
                 let own = LoopRun::per_million(l.misses, l.periods);
                 let raw = LoopRun::per_million(l.raw_misses, l.raw_periods);
@@ -258,76 +246,75 @@ impl Check {
     }
 }
 
-/// Every row of `rows` with p99 at most `p99_times` × its baseline's, or, with `against`, the
-/// p99 of the row of the same run, loop and placement that `against` selects; none flagged
-/// inconsistent.
+/// Every row of `rows` with p99 at most `times` × its baseline's, or, with `against`, the p99
+/// of the row of the same run, loop and placement that `against` selects.
 fn ratio(
     report: &Report,
     rows: &Select,
     times: f64,
-    against: Option<SplitOf>,
+    against: Option<&Select>,
 ) -> (String, Outcome) {
     // Each row with its ratio: to its baseline, or to the row `against` selects.
-    let judged: Vec<Row> = rows
-        .rows(report)
-        .into_iter()
-        .filter_map(|r| {
-            let Some(a) = against else {
-                return Some(r.clone());
-            };
-            let base = report.rows.iter().find(|b| {
-                (b.path, b.leg) == (a.path, a.leg)
-                    && (&b.run, &b.mode, &b.placement) == (&r.run, &r.mode, &r.placement)
-            })?;
-            let ratio_p99 = Some(r.summary.p99_us / base.summary.p99_us);
-            Some(Row {
-                ratio_p99,
-                ..r.clone()
-            })
-        })
-        .collect();
-    let rows: Vec<&Row> = judged.iter().collect();
-    let (measured, met) = tally(rows.iter().map(|r| {
-        let text = match (r.ratio_p99, against) {
-            (Some(x), Some(_)) => {
-                let p99 = r.summary.p99_us;
-                let base = p99 / x;
-                format!(
-                    "{} {}: {p99:.1} vs {base:.1} µs, {x:.2} ×",
-                    r.mode, r.placement
-                )
-            }
-            (Some(x), None) => format!("{} {}: {x:.2} ×", r.what, r.placement),
-            (None, _) => format!("{} {}: no baseline", r.what, r.placement),
+    let judged = rows.rows(report).into_iter().filter_map(|r| {
+        let Some(a) = against else {
+            return Some(r.clone());
         };
-        (text, r.ratio_p99.is_some_and(|x| x <= times))
-    }));
-    let outcome = match met {
-        Some(false) => missed(
-            report,
-            &rows,
-            None,
-            |_| true,
-            |row| {
-                let ratio = row.ratio_p99.filter(|r| *r > 0.0)?;
-                Some(Bound::Ratio {
-                    times,
-                    base_us: row.summary.p99_us / ratio,
-                })
-            },
-        ),
-        Some(true) => {
-            let flagged = rows.iter().filter(|r| r.inconsistent.is_some());
-            let flagged: Vec<String> = flagged
-                .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
-                .collect();
-            if flagged.is_empty() {
-                Outcome::Met
-            } else {
-                Outcome::Inconsistent { rows: flagged }
-            }
+        let base = report.rows.iter().find(|b| {
+            (b.path, b.leg) == (a.path, a.leg)
+                && (&b.run, &b.mode, &b.placement) == (&r.run, &r.mode, &r.placement)
+        })?;
+        let ratio_p99 = Some(r.summary.p99_us / base.summary.p99_us);
+        Some(Row {
+            ratio_p99,
+            ..r.clone()
+        })
+    });
+    let figures = |r: &Row| match (r.ratio_p99, against) {
+        (Some(x), Some(_)) => {
+            let (p99, at) = (r.summary.p99_us, format!("{} {}", r.mode, r.placement));
+            format!("{at}: {p99:.1} vs {:.1} µs, {x:.2} ×", p99 / x)
         }
+        (Some(x), None) => format!("{} {}: {x:.2} ×", r.what, r.placement),
+        (None, _) => format!("{} {}: no baseline", r.what, r.placement),
+    };
+    let bound = |row: &Row| {
+        let ratio = row.ratio_p99?;
+        let base_us = row.summary.p99_us / ratio;
+        Some(Bound::Ratio { times, base_us })
+    };
+    compare(
+        report,
+        &judged.collect::<Vec<_>>(),
+        figures,
+        bound,
+        None,
+        |_| true,
+    )
+}
+
+/// The one comparator: each of `rows` with its `figures`, held to its `bound` (none: it cannot
+/// be judged, and is not within). All within: met, or inconsistent where a row is flagged; one
+/// out: missed, where the time of the worst goes in the split of `split` (the rows' own by
+/// default) over its parts `within` the row, and what bounds it.
+fn compare(
+    report: &Report,
+    rows: &[Row],
+    figures: impl Fn(&Row) -> String,
+    bound: impl Fn(&Row) -> Option<Bound>,
+    split: Option<(PathKind, Leg)>,
+    within: impl Fn(&Part) -> bool,
+) -> (String, Outcome) {
+    let holds = |r: &Row| bound(r).is_some_and(|b| b.holds(r));
+    let (measured, met) = tally(rows.iter().map(|r| (figures(r), holds(r))));
+    let flagged = rows.iter().filter(|r| r.inconsistent.is_some());
+    let flagged: Vec<String> = flagged
+        .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
+        .collect();
+    let outcome = match met {
         None => Outcome::NotMeasured,
+        Some(true) if flagged.is_empty() => Outcome::Met,
+        Some(true) => Outcome::Inconsistent { rows: flagged },
+        Some(false) => missed(report, rows, split, within, bound),
     };
     (measured, outcome)
 }
@@ -337,12 +324,12 @@ fn ratio(
 /// what bounds it against the target's `bound` for that row.
 fn missed(
     report: &Report,
-    rows: &[&Row],
+    rows: &[Row],
     split: Option<(PathKind, Leg)>,
     within: impl Fn(&Part) -> bool,
     bound: impl Fn(&Row) -> Option<Bound>,
 ) -> Outcome {
-    let p99 = |r: &&&Row| r.ratio_p99.unwrap_or(r.summary.p99_us);
+    let p99 = |r: &&Row| r.ratio_p99.unwrap_or(r.summary.p99_us);
     let worst = rows.iter().max_by(|a, b| p99(a).total_cmp(&p99(b)));
     let run = worst.and_then(|row| {
         let split = split.unwrap_or((row.path, row.leg));
@@ -399,6 +386,16 @@ enum Bound {
 }
 
 impl Bound {
+    /// Whether `row` is within the bound: its ratio at most `times`, or its p50 and p99 at most
+    /// these.
+    fn holds(self, row: &Row) -> bool {
+        let s = &row.summary;
+        match self {
+            Bound::Ratio { times, .. } => row.ratio_p99.is_some_and(|x| x <= times),
+            Bound::Absolute { p50_us, p99_us } => s.p50_us <= p50_us && s.p99_us <= p99_us,
+        }
+    }
+
     /// Whether `s` (a part, or parts together) misses the bound on its own, with how it
     /// compares: "p99 X µs, N × the baseline's", or "P50 / P99 µs (p50 / p99)".
     fn missed_by(self, s: &Summary) -> (bool, String) {
