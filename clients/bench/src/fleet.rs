@@ -331,7 +331,6 @@ impl FleetReport {
     /// The `## Fleet` section (`clients/bench/fleet.md`): method, figures, and the arithmetic
     /// for a larger fleet (`clients/bench/fleet-growth.md`) when it grew.
     pub fn markdown(&self) -> anyhow::Result<String> {
-        let (p, m) = (&self.provenance, &self.machine);
         let sizes = lines(&self.sizes, |s| {
             format!(
                 "| {} | {:.1} | {:.1} ({:.1}) | {} | {:.0} | {:.2} | {:.2} | {:.1} | {:.1} | {:.0} |",
@@ -363,21 +362,16 @@ impl FleetReport {
                 r.name, r.kind, r.samples_per_s, r.p50_ms, r.p99_ms, r.max_ms
             )
         });
-        let values = [
-            ("date", p.date.clone()),
-            ("commit", p.commit_text()),
-            ("cpu_model", m.cpu_model.clone()),
-            ("cpus", m.cpus.to_string()),
-            ("kernel", m.kernel.clone()),
+        let mut values = crate::render::provenance_values(&self.provenance, &self.machine);
+        values.extend([
             ("build", self.build.clone()),
-            ("command", p.command.clone()),
             ("seconds", format!("{:.0}", self.seconds)),
             ("sizes", sizes),
             ("missing", missing),
             ("largest", last.robots.to_string()),
             ("robots", robots),
             ("growth", growth(first, last)?),
-        ];
+        ]);
         fill(include_str!("../fleet.md"), &values)
     }
 }

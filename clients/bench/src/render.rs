@@ -9,8 +9,10 @@ use crate::paths::{
     BENCH_CONFIG, COMMAND_INTERVAL, REALTIME_PRIORITY, STATE_REQUEST_INTERVAL,
     XBOT_COMMAND_INTERVAL, off_grid, period_text,
 };
+use crate::provenance::Provenance;
 use crate::report::{
-    DEFAULT_CONFIG_ROW, LoopRun, MIN_FOR_P99, MIN_FOR_P999, Report, SUM_TOLERANCE, StallRates,
+    DEFAULT_CONFIG_ROW, LoopRun, MIN_FOR_P99, MIN_FOR_P999, Machine, Report, SUM_TOLERANCE,
+    StallRates,
 };
 use crate::stats::Summary;
 
@@ -23,16 +25,11 @@ pub(crate) const TOGETHER_OUTSIDE: &str =
 
 /// The performance document of `report`.
 pub fn document(report: &Report) -> anyhow::Result<String> {
-    let (p, m) = (&report.provenance, &report.machine);
     let period = |interval| period_text(off_grid(interval));
-    let values = [
-        ("date", p.date.clone()),
-        ("commit", p.commit_text()),
-        ("cpu_model", m.cpu_model.clone()),
-        ("cpus", m.cpus.to_string()),
-        ("kernel", m.kernel.clone()),
-        ("steal", p.steal_text()),
-        ("command", p.command.clone()),
+    let payload_bytes = size_of::<chassis_client::ChassisState>();
+    let mut values = provenance_values(&report.provenance, &report.machine);
+    values.extend([
+        ("steal", report.provenance.steal_text()),
         ("bench_config", BENCH_CONFIG.trim_end().to_string()),
         ("priority", REALTIME_PRIORITY.to_string()),
         ("scheduling", report.scheduling_text()),
@@ -46,10 +43,7 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
         ("loops", loops(report)),
         ("cost", cost(report)),
         ("throughput", throughput_and_notes(report)),
-        (
-            "payload_bytes",
-            size_of::<chassis_client::ChassisState>().to_string(),
-        ),
+        ("payload_bytes", payload_bytes.to_string()),
         ("hybrid_spin_us", HYBRID_SPIN.as_micros().to_string()),
         ("command_period", period(COMMAND_INTERVAL)),
         ("xbot_command_period", period(XBOT_COMMAND_INTERVAL)),
@@ -64,8 +58,20 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
         ("sum_tolerance_pct", format!("{}", SUM_TOLERANCE * 100.0)),
         ("min_for_p99", MIN_FOR_P99.to_string()),
         ("min_for_p999", MIN_FOR_P999.to_string()),
-    ];
+    ]);
     fill(TEMPLATE, &values)
+}
+
+/// Where a document's figures come from: its run's date and commit, the command, the machine.
+pub(crate) fn provenance_values(p: &Provenance, m: &Machine) -> Vec<(&'static str, String)> {
+    vec![
+        ("date", p.date.clone()),
+        ("commit", p.commit_text()),
+        ("command", p.command.clone()),
+        ("cpu_model", m.cpu_model.clone()),
+        ("cpus", m.cpus.to_string()),
+        ("kernel", m.kernel.clone()),
+    ]
 }
 
 /// `template` with each `{{name}}` replaced by its value in `values`: a name with no value is

@@ -30,6 +30,25 @@ pub enum PathKind {
     Loop,
 }
 
+impl PathKind {
+    /// The title of the kind's panel in the plot.
+    fn panel(self) -> &'static str {
+        match self {
+            PathKind::Baseline => "raw transports (ping-pong, one way)",
+            PathKind::Command => "command: request created → frame written",
+            PathKind::State => "state: frame read → state received",
+            PathKind::Preemption => "preemption: safety stop → zero frame written",
+            PathKind::FanOut => "fan-out: state to 1, 4, 16 processes",
+            PathKind::Python => "Python client: frame read → state in Python; request → frame",
+            PathKind::InService => {
+                "in-service: chassisd's own part (woke → frame written, frame read → state published)"
+            }
+            PathKind::Ros2 => "ROS 2 bridge: cmd_vel → frame; frame read → odom (Cyclone DDS peer)",
+            PathKind::Zenoh | PathKind::Loop => "",
+        }
+    }
+}
+
 impl std::fmt::Display for PathKind {
     /// The kind's name in the samples (`in-service`), but `control loop` for [`PathKind::Loop`].
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -431,77 +450,74 @@ impl Report {
                 .push(format!("two rows are named '{key}' ({n} of them)"));
         }
         // Each row's names as a baseline and as a contained row.
-        let all: Vec<(Option<String>, String, Summary)> = self
-            .rows
-            .iter()
+        let all: Vec<(Option<String>, String, Summary)> = (self.rows.iter())
             .map(|r| {
                 let as_baseline =
                     (r.path == PathKind::Baseline).then(|| format!("{}, {}", r.what, r.placement));
                 (as_baseline, r.key(), r.summary)
             })
             .collect();
-        for row in self
+        let rows = self
             .rows
             .iter_mut()
-            .filter(|r| r.path != PathKind::Baseline)
-        {
+            .filter(|r| r.path != PathKind::Baseline);
+        for row in rows {
             let (s, key) = (row.summary, row.key());
             // Each flag, and whether a smoke run only reports it.
             let mut flags: Vec<(String, bool)> = Vec::new();
-            if let Some(name) = &row.baseline {
-                let named = all.iter().filter(|(b, ..)| b.as_ref() == Some(name));
-                match named.map(|(.., s)| s).collect::<Vec<_>>()[..] {
-                    [] => {
-                        let problem = format!("{key}: its baseline '{name}' was not measured");
-                        self.problems.push(problem);
+            let named = all
+                .iter()
+                .filter(|(b, ..)| b.is_some() && *b == row.baseline);
+            let bases: Vec<&Summary> = named.map(|(.., s)| s).collect();
+            match (&row.baseline, &bases[..]) {
+                (None, _) => {}
+                (Some(name), []) => {
+                    (self.problems).push(format!("{key}: its baseline '{name}' was not measured"))
+                }
+                (Some(name), [base]) => {
+                    row.ratio_p50 = (base.p50_us > 0.0).then(|| s.p50_us / base.p50_us);
+                    let enough = base.count.min(s.count) >= MIN_FOR_P99;
+                    row.ratio_p99 = (base.p99_us > 0.0 && enough).then(|| s.p99_us / base.p99_us);
+                    if s.count > 0 && s.p50_us < base.p50_us {
+                        let text = format!(
+                            "p50 {:.1} µs is below the p50 {:.1} µs of the hop it contains \
+                             ({name}): the path and its baseline were not measured under \
+                             the same conditions",
+                            s.p50_us, base.p50_us
+                        );
+                        let near = s.p50_us >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE);
+                        flags.push((text, near));
                     }
-                    [base] => {
-                        row.ratio_p50 = (base.p50_us > 0.0).then(|| s.p50_us / base.p50_us);
-                        let enough = base.count.min(s.count) >= MIN_FOR_P99;
-                        row.ratio_p99 =
-                            (base.p99_us > 0.0 && enough).then(|| s.p99_us / base.p99_us);
-                        if s.count > 0 && s.p50_us < base.p50_us {
-                            let text = format!(
-                                "p50 {:.1} µs is below the p50 {:.1} µs of the hop it contains \
-                                 ({name}): the path and its baseline were not measured under \
-                                 the same conditions",
-                                s.p50_us, base.p50_us
-                            );
-                            let near = s.p50_us >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE);
-                            flags.push((text, near));
-                        }
-                    }
-                    _ => {
-                        let problem = format!("{key}: more than one baseline is named '{name}'");
-                        self.problems.push(problem);
-                    }
+                }
+                (Some(name), _) => {
+                    (self.problems).push(format!("{key}: more than one baseline is named '{name}'"))
                 }
             }
             let contained = row.contains.iter().map(|k| {
                 let found = all.iter().find(|(_, n, _)| n == k);
-                found.map(|(.., s)| s).filter(|s| s.count > 0)
+                found
+                    .map(|(.., s)| s)
+                    .filter(|s| s.count > 0)
+                    .map(|s| s.p50_us)
             });
-            let sums: Option<Vec<&Summary>> = contained.collect();
-            match sums {
+            match contained.sum::<Option<f64>>() {
                 _ if row.contains.is_empty() => {}
                 None => self.problems.push(format!(
                     "{key}: a row it contains was not measured ({})",
                     row.contains.join(", ")
                 )),
-                Some(sums) => {
-                    let sum: f64 = sums.iter().map(|s| s.p50_us).sum();
-                    if s.count > 0 && s.p50_us < sum * (1.0 - SUM_TOLERANCE) {
-                        let text = format!(
-                            "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
-                             p50s of the hops it contains ({}): they were not measured under \
-                             the same conditions",
-                            s.p50_us,
-                            SUM_TOLERANCE * 100.0,
-                            row.contains.join(" + ")
-                        );
-                        flags.push((text, true));
-                    }
+                Some(sum) if s.count > 0 && s.p50_us < sum * (1.0 - SUM_TOLERANCE) => {
+                    let text = format!(
+                        "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
+                         p50s of the hops it contains ({}): they were not measured under \
+                         the same conditions",
+                        s.p50_us,
+                        SUM_TOLERANCE * 100.0,
+                        row.contains.join(" + ")
+                    );
+                    flags.push((text, true));
                 }
+                Some(_) => {}
             }
             row.smoke_tolerated = !flags.is_empty() && flags.iter().all(|(_, near)| *near);
             let texts: Vec<String> = flags.into_iter().map(|(text, _)| text).collect();
@@ -560,30 +576,9 @@ impl Report {
     /// Latency CDFs of every row, log latency axis: one panel per kind of path, all on the same
     /// axes so panels compare.
     pub fn plot(&self, path: &Path) -> anyhow::Result<()> {
-        const PANELS: [(PathKind, &str); 8] = [
-            (PathKind::Baseline, "raw transports (ping-pong, one way)"),
-            (
-                PathKind::Command,
-                "command: request created → frame written",
-            ),
-            (PathKind::State, "state: frame read → state received"),
-            (
-                PathKind::Preemption,
-                "preemption: safety stop → zero frame written",
-            ),
-            (PathKind::FanOut, "fan-out: state to 1, 4, 16 processes"),
-            (
-                PathKind::Python,
-                "Python client: frame read → state in Python; request → frame",
-            ),
-            (
-                PathKind::InService,
-                "in-service: chassisd's own part (woke → frame written, frame read → state published)",
-            ),
-            (
-                PathKind::Ros2,
-                "ROS 2 bridge: cmd_vel → frame; frame read → odom (Cyclone DDS peer)",
-            ),
+        use PathKind::*;
+        let panels = [
+            Baseline, Command, State, Preemption, FanOut, Python, InService, Ros2,
         ];
         let root = SVGBackend::new(path, (1600, 2000)).into_drawing_area();
         root.fill(&WHITE)?;
@@ -597,7 +592,7 @@ impl Report {
             .map(|r| r.summary.max_us)
             .fold(10.0f64, f64::max)
             .min(1e6);
-        for (area, (kind, title)) in root.split_evenly((4, 2)).iter().zip(PANELS) {
+        for (area, kind) in root.split_evenly((4, 2)).iter().zip(panels) {
             // The stall rows are gaps in one thread, not a hop: the table gives them.
             let rows = self
                 .rows
@@ -608,7 +603,7 @@ impl Report {
                 continue;
             }
             let mut chart = ChartBuilder::on(area)
-                .caption(title, ("sans-serif", 18))
+                .caption(kind.panel(), ("sans-serif", 18))
                 .margin(12)
                 .x_label_area_size(35)
                 .y_label_area_size(45)
