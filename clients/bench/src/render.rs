@@ -124,11 +124,8 @@ pub(crate) fn lines<T>(
 
 /// A percentile for a table: `—` when the row has too few samples to tell it from the maximum.
 pub(crate) fn percentile(value: f64, count: u64, fewest: u64) -> String {
-    if count >= fewest {
-        format!("{value:.1}")
-    } else {
-        "—".into()
-    }
+    let shown = (count >= fewest).then(|| format!("{value:.1}"));
+    shown.unwrap_or_else(|| "—".into())
 }
 
 /// The table's rows: each row's count with what it lost beside it, its percentiles (a dash
@@ -251,7 +248,7 @@ pub fn loops(report: &Report) -> String {
 
 /// The cost under a full bus of each bus and bit rate, and the memory real-time mode locks.
 fn cost(report: &Report) -> String {
-    let buses = lines(&report.cost, |c| {
+    let buses = report.cost.iter().map(|c| {
         format!(
             "* {} bus, {} kbit/s (the simulated chassis flooding it): {:.0} frames/s received; the \
              service's loop thread used {:.2} % of one core; resident memory {:.1} MiB",
@@ -270,13 +267,7 @@ fn cost(report: &Report) -> String {
              with normal scheduling above)"
         )
     });
-    lines(
-        [buses]
-            .into_iter()
-            .chain(realtime)
-            .filter(|l| !l.is_empty()),
-        |l| l,
-    )
+    lines(buses.chain(realtime), |l| l)
 }
 
 /// The replays of a recorded bus, and the run's notes.
@@ -300,12 +291,8 @@ fn throughput_and_notes(report: &Report) -> String {
         )
     });
     let notes = report.notes.iter().chain(&report.problems);
-    lines(
-        replays
-            .into_iter()
-            .chain(notes.map(|n| format!("* note: {n}"))),
-        |l| l,
-    )
+    let notes = notes.map(|n| format!("* note: {n}"));
+    lines(replays.into_iter().chain(notes), |l| l)
 }
 
 impl Report {

@@ -303,13 +303,6 @@ pub struct Throughput {
 /// How many times the recording is replayed, each into a fresh service.
 pub const REPLAYS: usize = 3;
 
-/// The replay whose frames per CPU second are the median of `runs`.
-pub(crate) fn median_replay(runs: &[Throughput]) -> Option<&Throughput> {
-    let mut sorted: Vec<&Throughput> = runs.iter().collect();
-    sorted.sort_by(|a, b| a.frames_per_cpu_s.total_cmp(&b.frames_per_cpu_s));
-    sorted.get(sorted.len() / 2).copied()
-}
-
 #[derive(Debug, Default, Serialize, Deserialize)]
 pub struct Machine {
     pub cpus: usize,

@@ -5,7 +5,7 @@
 use serde::Deserialize;
 
 use crate::parts::{Part, Split, Whose};
-use crate::report::{Leg, LoopRun, MIN_FOR_P99, PathKind, Report, Row, median_replay};
+use crate::report::{Leg, LoopRun, MIN_FOR_P99, PathKind, Report, Row};
 use crate::stats::Summary;
 
 #[derive(Debug, Deserialize)]
@@ -149,8 +149,9 @@ fn tally(items: impl Iterator<Item = (String, bool)>) -> (String, Option<bool>) 
     (figures.join("; "), Some(within.iter().all(|w| *w)))
 }
 
-/// Met or missed (without a split to say why), or not measured.
-fn plain((measured, met): (String, Option<bool>)) -> (String, Outcome) {
+/// Met or missed (without a split to say why), or not measured: `items` [`tally`]ed.
+fn plain(items: impl Iterator<Item = (String, bool)>) -> (String, Outcome) {
+    let (measured, met) = tally(items);
     let outcome = match met {
         None => Outcome::NotMeasured,
         Some(true) => Outcome::Met,
@@ -194,32 +195,32 @@ impl Check {
                 p99_times,
                 against,
             } => ratio(report, rows, *p99_times, against.as_ref()),
-            Check::LoopMisses => plain(tally(report.loops.iter().map(|l| {
+            Check::LoopMisses => plain(report.loops.iter().map(|l| {
                 let own = LoopRun::per_million(l.misses, l.periods);
                 let raw = LoopRun::per_million(l.raw_misses, l.raw_periods);
-                let (own_text, raw_text) = (own.round(), raw.round());
-                let text = format!(
-                    "{} {}: {own_text} vs {raw_text} of a million",
-                    l.rate, l.mode
-                );
-                (text, own <= raw)
-            }))),
+                let (rate, mode, own_n, raw_n) = (&l.rate, &l.mode, own.round(), raw.round());
+                (
+                    format!("{rate} {mode}: {own_n} vs {raw_n} of a million"),
+                    own <= raw,
+                )
+            })),
             Check::FramesPerCpuSecond { min } => {
-                let all = &report.throughput;
-                plain(tally(median_replay(all).into_iter().map(|m| {
-                    let each: Vec<String> = all
-                        .iter()
-                        .map(|t| format!("{:.0}", t.frames_per_cpu_s))
-                        .collect();
+                // The replay whose frames per CPU second are the median.
+                let mut runs: Vec<f64> = report
+                    .throughput
+                    .iter()
+                    .map(|t| t.frames_per_cpu_s)
+                    .collect();
+                let each: Vec<String> = runs.iter().map(|f| format!("{f:.0}")).collect();
+                runs.sort_by(f64::total_cmp);
+                let (n, each) = (runs.len(), each.join(", "));
+                plain(runs.get(n / 2).into_iter().map(|&median| {
                     let text = format!(
-                        "{:.0} frames per second of the service's CPU, the median of {} \
-                         replays ({})",
-                        m.frames_per_cpu_s,
-                        all.len(),
-                        each.join(", ")
+                        "{median:.0} frames per second of the service's CPU, the median of {n} \
+                         replays ({each})"
                     );
-                    (text, m.frames_per_cpu_s >= *min)
-                })))
+                    (text, median >= *min)
+                }))
             }
             Check::BusCpu {
                 bitrate,
@@ -227,20 +228,18 @@ impl Check {
             } => {
                 let at = report.cost.iter().filter(|c| c.bitrate == *bitrate);
                 let worst = at.max_by(|a, b| a.cpu_pct.total_cmp(&b.cpu_pct));
-                plain(tally(worst.into_iter().map(|c| {
-                    let text = format!(
-                        "{:.2} % at {:.0} frames/s ({})",
-                        c.cpu_pct, c.frames_per_s, c.bus
-                    );
-                    (text, c.cpu_pct < *max_percent)
-                })))
+                plain(worst.into_iter().map(|c| {
+                    let (pct, rate, bus) = (c.cpu_pct, c.frames_per_s, &c.bus);
+                    let text = format!("{pct:.2} % at {rate:.0} frames/s ({bus})");
+                    (text, pct < *max_percent)
+                }))
             }
             Check::ResidentMemory { max_mib } => {
                 let rss = report.cost.iter().map(|c| c.rss_mib).reduce(f64::max);
-                plain(tally(
+                plain(
                     rss.into_iter()
                         .map(|r| (format!("{r:.1} MiB"), r < *max_mib)),
-                ))
+                )
             }
         }
     }
