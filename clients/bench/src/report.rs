@@ -15,9 +15,10 @@ pub const DEFAULT_CONFIG_ROW: &str =
     "titan sim, chassisd's default configuration, request → first frame toward it";
 
 /// Which path a row measures, the table's first column.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PathKind {
+    #[default]
     Baseline,
     Command,
     InService,
@@ -61,10 +62,11 @@ impl std::fmt::Display for PathKind {
 
 /// Where a row's samples start and end, as the targets and the splits find a row (its `what`
 /// is only shown).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Leg {
     /// A raw transport's hop.
+    #[default]
     Hop,
     /// Gaps in a running thread's clock readings ([`STALLS`]).
     Stalls,
@@ -95,7 +97,7 @@ pub enum Leg {
 }
 
 /// One measured distribution.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Row {
     pub path: PathKind,
     pub leg: Leg,
@@ -385,15 +387,8 @@ impl Row {
             placement: placement.into(),
             summary: latencies.summary(),
             missed,
-            dropped: 0,
-            contains: Vec::new(),
-            conditions: None,
-            baseline: None,
-            ratio_p50: None,
-            ratio_p99: None,
-            inconsistent: None,
-            smoke_tolerated: false,
             latencies,
+            ..Self::default()
         }
     }
 
