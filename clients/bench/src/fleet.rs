@@ -127,19 +127,14 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<FleetReport> {
     }
     let strict = args.doc.is_some() || args.json.is_some();
     let mut provenance = Provenance::begin(strict, args.allow_dirty)?;
-    let (dir, remove_dir) = match &args.dir {
-        Some(dir) => (dir.clone(), false),
-        None => (
-            std::env::temp_dir().join(format!("chassis-bench-fleet-{}", std::process::id())),
-            true,
-        ),
-    };
+    let scratch =
+        || std::env::temp_dir().join(format!("chassis-bench-fleet-{}", std::process::id()));
+    let dir = args.dir.clone().unwrap_or_else(scratch);
     std::fs::create_dir_all(&dir)?;
     let result = measure(args, &dir);
-    if remove_dir && result.is_ok() {
-        let _ = std::fs::remove_dir_all(&dir);
-    } else {
-        eprintln!("logs in {}", dir.display());
+    match &result {
+        Ok(_) if args.dir.is_none() => drop(std::fs::remove_dir_all(&dir)),
+        _ => eprintln!("logs in {}", dir.display()),
     }
     let sizes = result?;
     provenance.end()?;

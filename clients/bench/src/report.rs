@@ -211,12 +211,9 @@ impl Report {
         let lines = std::iter::once(Line::<_, &Row, &Parts>::Run(self))
             .chain(self.rows.iter().map(Line::Row))
             .chain(self.parts.iter().map(Line::Split));
-        let mut out = String::new();
-        for line in lines {
-            out.push_str(&serde_json::to_string(&line)?);
-            out.push('\n');
-        }
-        Ok(out)
+        lines
+            .map(|line| Ok(serde_json::to_string(&line)? + "\n"))
+            .collect()
     }
 
     /// A run read back from its [`Report::samples`].
