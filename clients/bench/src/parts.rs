@@ -46,12 +46,9 @@ pub struct Split {
 
 use Whose::{Code, Outside};
 
-/// Whether `part` of a command split lies within the in-service row (request read → frame
-/// written): it starts at the request read (`request_read` of the pass trace) or after.
-pub fn in_service_command(part: &Part) -> bool {
-    let from = part.name.split(" → ").next().unwrap_or_default();
-    matches!(from, "request read" | "write begun")
-}
+/// How many of a command split's parts, its last ([`command`]), lie within the in-service row
+/// (request read → frame written): from the request read on.
+pub const IN_SERVICE_COMMAND_PARTS: usize = 2;
 
 /// Splits `names.len() + 1` stamps, each later than or at the one before, into the
 /// distributions between consecutive stamps; a sample whose stamps are not in order is left out.
@@ -408,10 +405,9 @@ mod tests {
     fn the_in_service_row_holds_the_command_splits_parts_from_the_request_read_on() {
         for polled in [false, true] {
             let split = command(&[], &pass_woken_at(1_050_000), polled);
-            let within: Vec<&str> = split
-                .parts
+            let from = split.parts.len() - IN_SERVICE_COMMAND_PARTS;
+            let within: Vec<&str> = split.parts[from..]
                 .iter()
-                .filter(|p| in_service_command(p))
                 .map(|p| p.name.as_str())
                 .collect();
             assert_eq!(

@@ -4,7 +4,7 @@
 
 use serde::Deserialize;
 
-use crate::parts::{Part, Split, Whose};
+use crate::parts::{IN_SERVICE_COMMAND_PARTS, Part, Split, Whose};
 use crate::report::{Leg, LoopRun, MIN_FOR_P99, PathKind, Report, Row};
 use crate::stats::Summary;
 
@@ -32,7 +32,7 @@ struct Select {
 }
 
 /// Which parts of a split lie within a row: all, or from the request read on
-/// ([`crate::parts::in_service_command`]).
+/// ([`crate::parts::IN_SERVICE_COMMAND_PARTS`]).
 #[derive(Debug, Clone, Copy, Default, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 enum Within {
@@ -177,10 +177,6 @@ impl Check {
                     p50_us: *p50_us,
                     p99_us: *p99_us,
                 };
-                let within: fn(&Part) -> bool = match within {
-                    Within::All => |_| true,
-                    Within::InService => crate::parts::in_service_command,
-                };
                 let rows: Vec<Row> = rows.rows(report).into_iter().cloned().collect();
                 let figures = |r: &Row| {
                     let s = &r.summary;
@@ -188,7 +184,7 @@ impl Check {
                     format!("{at}: {:.1} / {:.1} µs", s.p50_us, s.p99_us)
                 };
                 let split = split.as_ref().map(|s| (s.path, s.leg));
-                compare(report, &rows, figures, |_| Some(bound), split, within)
+                compare(report, &rows, figures, |_| Some(bound), split, *within)
             }
             Check::Ratio {
                 rows,
@@ -281,14 +277,8 @@ fn ratio(
         let base_us = row.summary.p99_us / ratio;
         Some(Bound::Ratio { times, base_us })
     };
-    compare(
-        report,
-        &judged.collect::<Vec<_>>(),
-        figures,
-        bound,
-        None,
-        |_| true,
-    )
+    let judged: Vec<Row> = judged.collect();
+    compare(report, &judged, figures, bound, None, Within::All)
 }
 
 /// The one comparator: each of `rows` with its `figures`, held to its `bound` (none: it cannot
@@ -301,7 +291,7 @@ fn compare(
     figures: impl Fn(&Row) -> String,
     bound: impl Fn(&Row) -> Option<Bound>,
     split: Option<(PathKind, Leg)>,
-    within: impl Fn(&Part) -> bool,
+    within: Within,
 ) -> (String, Outcome) {
     let holds = |r: &Row| bound(r).is_some_and(|b| b.holds(r));
     let (measured, met) = tally(rows.iter().map(|r| (figures(r), holds(r))));
@@ -325,7 +315,7 @@ fn missed(
     report: &Report,
     rows: &[Row],
     split: Option<(PathKind, Leg)>,
-    within: impl Fn(&Part) -> bool,
+    within: Within,
     bound: impl Fn(&Row) -> Option<Bound>,
 ) -> Outcome {
     let p99 = |r: &&Row| r.ratio_p99.unwrap_or(r.summary.p99_us);
@@ -340,7 +330,11 @@ fn missed(
             bound: String::new(),
         };
     };
-    let parts: Vec<&Part> = split.parts.iter().filter(|p| within(p)).collect();
+    let from = match within {
+        Within::All => 0,
+        Within::InService => (split.parts.len()).saturating_sub(IN_SERVICE_COMMAND_PARTS),
+    };
+    let parts: Vec<&Part> = split.parts[from..].iter().collect();
     let whole = (parts.len() == split.parts.len()).then_some(split);
     Outcome::Missed {
         worst: largest_part(&parts, row).unwrap_or_default(),
