@@ -301,26 +301,22 @@ impl Report {
     /// baselines' receivers).
     pub fn scheduling_text(&self) -> String {
         use crate::report::Scheduling;
-        let asked = self
-            .scheduling
-            .iter()
+        let runs = self.scheduling.iter();
+        let asked = runs
+            .clone()
             .filter(|(_, s)| *s != Scheduling::Normal)
             .count();
-        let refused = self
-            .scheduling
-            .iter()
-            .filter(|(_, s)| *s == Scheduling::Refused);
+        let refused = runs.filter(|(_, s)| *s == Scheduling::Refused);
         let refused: Vec<&str> = refused.map(|(run, _)| run.as_str()).collect();
+        let (n, runs) = (refused.len(), refused.join("; "));
         if refused.is_empty() {
             return format!(
                 "Real-time mode was granted in each of the {asked} runs that asked for it."
             );
         }
         format!(
-            "**Real-time mode was refused** (no CAP_SYS_NICE or RLIMIT_RTPRIO) in {} of the \
-             {asked} runs that asked for it, which ran with normal scheduling: {}.",
-            refused.len(),
-            refused.join("; ")
+            "**Real-time mode was refused** (no CAP_SYS_NICE or RLIMIT_RTPRIO) in {n} of the \
+             {asked} runs that asked for it, which ran with normal scheduling: {runs}."
         )
     }
 

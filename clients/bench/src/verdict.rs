@@ -350,18 +350,16 @@ fn largest_part(parts: &[&Part], row: &Row) -> Option<String> {
         .iter()
         .max_by(|a, b| a.summary.p99_us.total_cmp(&b.summary.p99_us))?;
     let head = format!("{} {} {}", row.what, row.mode, row.placement);
-    let s = &part.summary;
-    Some(if s.count < MIN_FOR_P99 {
-        format!(
-            "{head}: its run's split holds {} samples (the row {}), too few for a p99",
-            s.count, row.summary.count
-        )
-    } else {
-        format!(
-            "{head}: {}, p99 {:.1} µs (p50 {:.1}), over the {} samples of its run's split (the \
-             row {})",
-            part.name, s.p99_us, s.p50_us, s.count, row.summary.count
-        )
+    let (name, s, of) = (&part.name, &part.summary, row.summary.count);
+    let (n, p99, p50) = (s.count, s.p99_us, s.p50_us);
+    Some(match n < MIN_FOR_P99 {
+        true => {
+            format!("{head}: its run's split holds {n} samples (the row {of}), too few for a p99")
+        }
+        false => format!(
+            "{head}: {name}, p99 {p99:.1} µs (p50 {p50:.1}), over the {n} samples of its run's \
+             split (the row {of})"
+        ),
     })
 }
 
@@ -423,9 +421,8 @@ impl std::fmt::Display for Bound {
 /// parts' sums are the row's).
 fn bound_text(bound: Option<Bound>, parts: &[&Part], whole: Option<&Split>, row: &Row) -> String {
     let largest = |whose| {
-        let of = parts
-            .iter()
-            .filter(|p| p.whose == whose && p.summary.count >= MIN_FOR_P99);
+        let of = parts.iter().filter(|p| p.whose == whose);
+        let of = of.filter(|p| p.summary.count >= MIN_FOR_P99);
         of.max_by(|a, b| a.summary.p99_us.total_cmp(&b.summary.p99_us))
     };
     let (Some(outside), Some(code)) = (largest(Whose::Outside), largest(Whose::Code)) else {
@@ -436,13 +433,11 @@ fn bound_text(bound: Option<Bound>, parts: &[&Part], whole: Option<&Split>, row:
     };
     let beyond = format!("beyond {bound} whatever the code does");
     let (alone_missed, alone) = bound.missed_by(&outside.summary);
+    let name = &outside.name;
     if alone_missed {
-        return format!(
-            "outside the code: {} alone: {alone}, {beyond}",
-            outside.name
-        );
+        return format!("outside the code: {name} alone: {alone}, {beyond}");
     }
-    let largest_alone = format!("the largest, {}: {alone}", outside.name);
+    let largest_alone = format!("the largest, {name}: {alone}");
     let mut stay = largest_alone.clone();
     let mut code_together = String::new();
     if let Some(w) = whole.filter(|w| w.outside.count >= MIN_FOR_P99) {
@@ -455,24 +450,21 @@ fn bound_text(bound: Option<Bound>, parts: &[&Part], whole: Option<&Split>, row:
             );
         }
         stay = format!("together: {together}; {largest_alone}");
-        code_together = format!(
-            "the code's parts together have p99 {:.1} µs (p50 {:.1}); ",
-            w.code.p99_us, w.code.p50_us
-        );
+        let (p99, p50) = (w.code.p99_us, w.code.p50_us);
+        code_together = format!("the code's parts together have p99 {p99:.1} µs (p50 {p50:.1}); ");
         // Its slowest samples slow in both at once: the row's p99 beyond both sums' added.
-        let added = w.code.p99_us + w.outside.p99_us;
-        if row.summary.count == w.code.count && row.summary.p99_us > added {
+        let (added, row_p99) = (p99 + w.outside.p99_us, row.summary.p99_us);
+        if row.summary.count == w.code.count && row_p99 > added {
             code_together.push_str(&format!(
-                "the row's p99 ({:.1} µs) is beyond the two sums' p99s added ({added:.1} µs): \
-                 its slowest samples were slow in the code's parts and outside at once; ",
-                row.summary.p99_us
+                "the row's p99 ({row_p99:.1} µs) is beyond the two sums' p99s added ({added:.1} \
+                 µs): its slowest samples were slow in the code's parts and outside at once; "
             ));
         }
     }
+    let (name, p99, p50) = (&code.name, code.summary.p99_us, code.summary.p50_us);
     format!(
         "the code: the parts outside it stay within the target ({stay}); {code_together}the \
-         code's largest, {}, has p99 {:.1} µs (p50 {:.1})",
-        code.name, code.summary.p99_us, code.summary.p50_us
+         code's largest, {name}, has p99 {p99:.1} µs (p50 {p50:.1})"
     )
 }
 
