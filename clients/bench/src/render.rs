@@ -139,18 +139,14 @@ fn table(report: &Report) -> String {
             _ => String::new(),
         };
         let flag = r.inconsistent.as_ref().map_or("", |_| " **inconsistent**");
-        let (what, mode, placement) = (&r.what, &r.mode, &r.placement);
+        let (path, what, mode, placement) = (r.path, &r.what, &r.mode, &r.placement);
+        let (n, p50, p90, max) = (r.count_text(), s.p50_us, s.p90_us, s.max_us);
+        let p99 = percentile(s.p99_us, s.count, MIN_FOR_P99);
+        let p999 = percentile(s.p999_us, s.count, MIN_FOR_P999);
+        let baseline = r.baseline.as_deref().unwrap_or("");
         format!(
-            "| {} | {what} | {mode} | {placement} | {} | {:.1} | {:.1} | {} | {} | {:.1} | \
-             {ratio}{flag} | {} |",
-            r.path,
-            r.count_text(),
-            s.p50_us,
-            s.p90_us,
-            percentile(s.p99_us, s.count, MIN_FOR_P99),
-            percentile(s.p999_us, s.count, MIN_FOR_P999),
-            s.max_us,
-            r.baseline.as_deref().unwrap_or("")
+            "| {path} | {what} | {mode} | {placement} | {n} | {p50:.1} | {p90:.1} | {p99} | {p999} \
+             | {max:.1} | {ratio}{flag} | {baseline} |"
         )
     })
 }
@@ -159,10 +155,8 @@ fn table(report: &Report) -> String {
 fn inconsistent(report: &Report) -> String {
     let flagged = report.rows.iter().filter_map(|r| {
         let why = r.inconsistent.as_deref()?;
-        Some(format!(
-            "* {} {} ({} loop, {}): {why}",
-            r.path, r.what, r.mode, r.placement
-        ))
+        let (path, what, mode, placement) = (r.path, &r.what, &r.mode, &r.placement);
+        Some(format!("* {path} {what} ({mode} loop, {placement}): {why}"))
     });
     let flagged = lines(flagged, |f| f);
     if flagged.is_empty() {
@@ -173,13 +167,11 @@ fn inconsistent(report: &Report) -> String {
 
 /// Each baseline's conditions.
 fn conditions(report: &Report) -> String {
-    let baselines = report
-        .rows
-        .iter()
-        .filter_map(|r| Some((r, r.conditions.as_ref()?)));
-    lines(baselines, |(r, c)| {
-        format!("* {}, {}: {c}", r.what, r.placement)
-    })
+    let baselines = report.rows.iter().filter_map(|r| {
+        let (what, placement, c) = (&r.what, &r.placement, r.conditions.as_ref()?);
+        Some(format!("* {what}, {placement}: {c}"))
+    });
+    lines(baselines, |l| l)
 }
 
 /// The targets' rows: each target, what this run measured, and its outcome.
@@ -231,17 +223,12 @@ pub fn loops(report: &Report) -> String {
     lines(&report.loops, |l| {
         let own = LoopRun::per_million(l.misses, l.periods);
         let raw = LoopRun::per_million(l.raw_misses, l.raw_periods);
+        let (run, rate, mode, placement) = (&l.run, &l.rate, &l.mode, &l.placement);
+        let (periods, misses, raw_misses) = (l.periods, l.misses, l.raw_misses);
+        let (raw_periods, superseded) = (l.raw_periods, l.superseded);
         format!(
-            "| {}, {} | {} | {} | {} | {} ({own:.0}) | {} of {} ({raw:.0}) | {} |",
-            l.run,
-            l.rate,
-            l.mode,
-            l.placement,
-            l.periods,
-            l.misses,
-            l.raw_misses,
-            l.raw_periods,
-            l.superseded
+            "| {run}, {rate} | {mode} | {placement} | {periods} | {misses} ({own:.0}) | \
+             {raw_misses} of {raw_periods} ({raw:.0}) | {superseded} |"
         )
     })
 }
@@ -249,14 +236,12 @@ pub fn loops(report: &Report) -> String {
 /// The cost under a full bus of each bus and bit rate, and the memory real-time mode locks.
 fn cost(report: &Report) -> String {
     let buses = report.cost.iter().map(|c| {
+        let (bus, kbit, rate) = (&c.bus, c.bitrate / 1000, c.frames_per_s);
+        let (cpu, rss) = (c.cpu_pct, c.rss_mib);
         format!(
-            "* {} bus, {} kbit/s (the simulated chassis flooding it): {:.0} frames/s received; the \
-             service's loop thread used {:.2} % of one core; resident memory {:.1} MiB",
-            c.bus,
-            c.bitrate / 1000,
-            c.frames_per_s,
-            c.cpu_pct,
-            c.rss_mib
+            "* {bus} bus, {kbit} kbit/s (the simulated chassis flooding it): {rate:.0} frames/s \
+             received; the service's loop thread used {cpu:.2} % of one core; resident memory \
+             {rss:.1} MiB"
         )
     });
     let realtime = report.realtime_rss_mib.map(|rss| {
@@ -279,15 +264,14 @@ fn throughput_and_notes(report: &Report) -> String {
             t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
         )
     });
-    let replays = (!runs.is_empty()).then(|| {
+    let (n, runs) = (report.throughput.len(), runs.replace('\n', "; "));
+    let replays = (n > 0).then(|| {
         format!(
             "* a recorded TITAN bus replayed at full speed through the service, read, decoded \
-             and published, {} times, each into a fresh service: {}. The replay's writer (a \
+             and published, {n} times, each into a fresh service: {runs}. The replay's writer (a \
              thread on the other CPU, one write per frame) does not always keep the service \
              busy: the target counts the frames per second of the service's own CPU time, the \
-             median replay's",
-            report.throughput.len(),
-            runs.replace('\n', "; ")
+             median replay's"
         )
     });
     let notes = report.notes.iter().chain(&report.problems);
