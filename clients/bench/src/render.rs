@@ -187,31 +187,30 @@ fn targets(report: &Report) -> anyhow::Result<String> {
 pub fn parts(report: &Report) -> String {
     lines(&report.parts, |p| {
         let total: f64 = p.split.parts.iter().map(|part| part.summary.p50_us).sum();
-        let row = |name: &str, whose: Whose, s: &Summary, share: String| {
+        let (path, what, mode, placement) = (&p.path, &p.what, &p.mode, &p.placement);
+        // A part, or a sum of parts (no share of the p50s).
+        let row = |name: &str, whose: Whose, s: &Summary, part: bool| {
             let whose = match whose {
                 Whose::Code => "the code",
                 Whose::Outside => "outside",
             };
-            let p99 = percentile(s.p99_us, s.count, MIN_FOR_P99);
+            let (n, p50, p99) = (
+                s.count,
+                s.p50_us,
+                percentile(s.p99_us, s.count, MIN_FOR_P99),
+            );
+            let share = (part && total > 0.0).then(|| format!("{:.0} %", 100.0 * p50 / total));
+            let share = share.unwrap_or_default();
             format!(
-                "| {} | {} | {} | {} | {name} | {whose} | {} | {:.1} | {p99} | {share} |",
-                p.path, p.what, p.mode, p.placement, s.count, s.p50_us
+                "| {path} | {what} | {mode} | {placement} | {name} | {whose} | {n} | {p50:.1} | \
+                 {p99} | {share} |"
             )
         };
-        let share = |s: &Summary| {
-            let share = (total > 0.0).then(|| format!("{:.0} %", 100.0 * s.p50_us / total));
-            share.unwrap_or_default()
-        };
-        let mut rows = lines(&p.split.parts, |part| {
-            row(&part.name, part.whose, &part.summary, share(&part.summary))
-        });
-        for (name, whose, s) in [
-            (TOGETHER_CODE, Whose::Code, &p.split.code),
-            (TOGETHER_OUTSIDE, Whose::Outside, &p.split.outside),
-        ] {
-            rows.push_str(&format!("\n{}", row(name, whose, s, String::new())));
-        }
-        rows
+        let parts = p.split.parts.iter();
+        let parts = parts.map(|part| row(&part.name, part.whose, &part.summary, true));
+        let code = row(TOGETHER_CODE, Whose::Code, &p.split.code, false);
+        let outside = row(TOGETHER_OUTSIDE, Whose::Outside, &p.split.outside, false);
+        lines(parts.chain([code, outside]), |l| l)
     })
 }
 
@@ -323,34 +322,29 @@ impl Report {
         // The chance that a window of 100 µs holds the start of a stall over 20 µs, %.
         let chance = |s: &StallRates| 100.0 * s.over_20_us * 100e-6;
         let least = self.stalls.iter().map(chance).fold(f64::INFINITY, f64::min);
+        let (over_20, over_100) = (span(&|s| s.over_20_us, 0), span(&|s| s.over_100_us, 2));
+        let chances = span(&chance, 1);
+        let end = match least >= 1.0 {
+            true => ": more than 1 %, so that its p99 carries one, whatever the code does.",
+            false => ".",
+        };
         format!(
-            " On this machine a thread that never blocks lost more than 20 µs {} times a second \
-             and more than 100 µs {} times a second, by CPU (the stall rows of the table): a \
-             path of 100 µs meets a stall of more than 20 µs in about {} % of its samples on \
-             each CPU it runs on{}",
-            span(&|s| s.over_20_us, 0),
-            span(&|s| s.over_100_us, 2),
-            span(&chance, 1),
-            if least >= 1.0 {
-                ": more than 1 %, so that its p99 carries one, whatever the code does."
-            } else {
-                "."
-            }
+            " On this machine a thread that never blocks lost more than 20 µs {over_20} times a \
+             second and more than 100 µs {over_100} times a second, by CPU (the stall rows of \
+             the table): a path of 100 µs meets a stall of more than 20 µs in about {chances} % \
+             of its samples on each CPU it runs on{end}"
         )
     }
 
     /// The run on a terminal: the document's tables and lists, without its words.
     pub fn table(&self) -> String {
         let (p, m) = (&self.provenance, &self.machine);
+        let (date, commit, steal) = (&p.date, p.commit_text().replace('`', ""), p.steal_text());
+        let (model, cpus, kernel) = (&m.cpu_model, m.cpus, &m.kernel);
         let blocks = [
             format!(
-                "{}, {}; machine: {}, {} cores, kernel {}; host steal time over the run: {}",
-                p.date,
-                p.commit_text().replace('`', ""),
-                m.cpu_model,
-                m.cpus,
-                m.kernel,
-                p.steal_text()
+                "{date}, {commit}; machine: {model}, {cpus} cores, kernel {kernel}; host steal \
+                 time over the run: {steal}"
             ),
             with_head("table", table(self)),
             inconsistent(self),
