@@ -279,13 +279,12 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
             per_robot,
             missing,
         };
+        let s = &size_figures;
+        let (cpu, rss) = (s.operator_cpu_pct, s.operator_rss_mib);
+        let (rate, p50, p99) = (s.samples_per_s, s.median_p50_ms, s.worst_p99_ms);
         eprintln!(
-            "fleet of {size}: operator {:.1} % of a core, {:.1} MiB; {:.0} states/s; p50 {:.2} ms, worst p99 {:.2} ms",
-            size_figures.operator_cpu_pct,
-            size_figures.operator_rss_mib,
-            size_figures.samples_per_s,
-            size_figures.median_p50_ms,
-            size_figures.worst_p99_ms
+            "fleet of {size}: operator {cpu:.1} % of a core, {rss:.1} MiB; {rate:.0} states/s; \
+             p50 {p50:.2} ms, worst p99 {p99:.2} ms"
         );
         figures.push(size_figures);
         drop(operator);

@@ -464,11 +464,11 @@ impl Report {
                     let enough = base.count.min(s.count) >= MIN_FOR_P99;
                     row.ratio_p99 = (base.p99_us > 0.0 && enough).then(|| s.p99_us / base.p99_us);
                     if s.count > 0 && s.p50_us < base.p50_us {
+                        let (p50, base_p50) = (s.p50_us, base.p50_us);
                         let text = format!(
-                            "p50 {:.1} µs is below the p50 {:.1} µs of the hop it contains \
-                             ({name}): the path and its baseline were not measured under \
-                             the same conditions",
-                            s.p50_us, base.p50_us
+                            "p50 {p50:.1} µs is below the p50 {base_p50:.1} µs of the hop it \
+                             contains ({name}): the path and its baseline were not measured \
+                             under the same conditions"
                         );
                         let near = s.p50_us >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE);
                         flags.push((text, near));
@@ -492,13 +492,12 @@ impl Report {
                     row.contains.join(", ")
                 )),
                 Some(sum) if s.count > 0 && s.p50_us < sum * (1.0 - SUM_TOLERANCE) => {
+                    let (p50, hops) = (s.p50_us, row.contains.join(" + "));
                     let text = format!(
-                        "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
-                         p50s of the hops it contains ({}): they were not measured under \
-                         the same conditions",
-                        s.p50_us,
-                        SUM_TOLERANCE * 100.0,
-                        row.contains.join(" + ")
+                        "p50 {p50:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
+                         p50s of the hops it contains ({hops}): they were not measured under the \
+                         same conditions",
+                        SUM_TOLERANCE * 100.0
                     );
                     flags.push((text, true));
                 }
