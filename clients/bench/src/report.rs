@@ -408,15 +408,13 @@ impl Row {
             (self.dropped, "dropped"),
             (self.summary.out_of_range, "out of range"),
         ];
-        let lost: Vec<String> = lost
-            .iter()
-            .filter(|(n, _)| *n > 0)
-            .map(|(n, what)| format!("{n} {what}"))
-            .collect();
-        if lost.is_empty() {
-            return self.summary.count.to_string();
+        let lost = lost.iter().filter(|(n, _)| *n > 0);
+        let lost: Vec<String> = lost.map(|(n, what)| format!("{n} {what}")).collect();
+        let count = self.summary.count;
+        match lost.is_empty() {
+            true => count.to_string(),
+            false => format!("{count} ({})", lost.join(", ")),
         }
-        format!("{} ({})", self.summary.count, lost.join(", "))
     }
 }
 
