@@ -131,11 +131,13 @@ pub fn judge(report: &Report) -> anyhow::Result<Vec<Verdict>> {
 }
 
 impl Select {
-    fn rows<'r>(&self, report: &'r Report) -> Vec<&'r Row> {
+    fn rows(&self, report: &Report) -> Vec<Row> {
         let mode = |r: &Row| self.modes.is_empty() || self.modes.contains(&r.mode);
-        let rows = report.rows.iter();
-        rows.filter(|r| (r.path, r.leg) == (self.path, self.leg) && mode(r))
-            .collect()
+        let rows = report
+            .rows
+            .iter()
+            .filter(|r| (r.path, r.leg) == (self.path, self.leg));
+        rows.filter(|r| mode(r)).cloned().collect()
     }
 }
 
@@ -177,7 +179,7 @@ impl Check {
                     p50_us: *p50_us,
                     p99_us: *p99_us,
                 };
-                let rows: Vec<Row> = rows.rows(report).into_iter().cloned().collect();
+                let rows = rows.rows(report);
                 let figures = |r: &Row| {
                     let s = &r.summary;
                     let at = format!("{} {} {}", r.what, r.mode, r.placement);
@@ -252,17 +254,14 @@ fn ratio(
     // Each row with its ratio: to its baseline, or to the row `against` selects.
     let judged = rows.rows(report).into_iter().filter_map(|r| {
         let Some(a) = against else {
-            return Some(r.clone());
+            return Some(r);
         };
         let base = report.rows.iter().find(|b| {
             (b.path, b.leg) == (a.path, a.leg)
                 && (&b.run, &b.mode, &b.placement) == (&r.run, &r.mode, &r.placement)
         })?;
         let ratio_p99 = Some(r.summary.p99_us / base.summary.p99_us);
-        Some(Row {
-            ratio_p99,
-            ..r.clone()
-        })
+        Some(Row { ratio_p99, ..r })
     });
     let figures = |r: &Row| match (r.ratio_p99, against) {
         (Some(x), Some(_)) => {
