@@ -564,23 +564,14 @@ impl Report {
         ];
         let root = SVGBackend::new(path, (1600, 2000)).into_drawing_area();
         root.fill(&WHITE)?;
-        let root = root.titled(
-            "one-way latency, CDF (log latency axis)",
-            ("sans-serif", 26),
-        )?;
-        let max_us = self
-            .rows
-            .iter()
-            .map(|r| r.summary.max_us)
-            .fold(10.0f64, f64::max)
-            .min(1e6);
+        let title = "one-way latency, CDF (log latency axis)";
+        let root = root.titled(title, ("sans-serif", 26))?;
+        let max_us = self.rows.iter().map(|r| r.summary.max_us);
+        let max_us = max_us.fold(10.0f64, f64::max).min(1e6);
         for (area, kind) in root.split_evenly((4, 2)).iter().zip(panels) {
             // The stall rows are gaps in one thread, not a hop: the table gives them.
-            let rows = self
-                .rows
-                .iter()
-                .filter(|r| r.path == kind && r.leg != Leg::Stalls);
-            let rows: Vec<&Row> = rows.collect();
+            let rows = self.rows.iter().filter(|r| r.path == kind);
+            let rows: Vec<&Row> = rows.filter(|r| r.leg != Leg::Stalls).collect();
             if rows.is_empty() {
                 continue;
             }
@@ -597,9 +588,10 @@ impl Report {
                 .draw()?;
             for (i, row) in rows.iter().enumerate() {
                 let color = Palette99::pick(i).to_rgba();
+                let (what, placement) = (&row.what, &row.placement);
                 let label = match row.mode.as_str() {
-                    "-" => format!("{}, {}", row.what, row.placement),
-                    mode => format!("{}, {mode}, {}", row.what, row.placement),
+                    "-" => format!("{what}, {placement}"),
+                    mode => format!("{what}, {mode}, {placement}"),
                 };
                 let line = LineSeries::new(row.latencies.cdf(), color.stroke_width(2));
                 chart.draw_series(line)?.label(label).legend(move |(x, y)| {
