@@ -89,21 +89,17 @@ fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Sp
 /// frame was its pass's first write. A boundary the request came after (the loop was waiting
 /// already; a polling loop's pass was under way) is the request's creation: a part of 0.
 pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> Split {
-    let by_written: HashMap<u64, &PassStamps> = passes
+    let traced = passes
         .iter()
-        .filter(|p| p.written != 0 && p.waited_since != 0)
-        .map(|p| (p.written, p))
-        .collect();
-    let (woke, read) = if polled {
-        (
-            "loop polling → pass began (the poll)",
-            "pass began → request read",
-        )
-    } else {
-        (
-            "loop waiting → loop woke (the wake-up)",
-            "loop woke → request read",
-        )
+        .filter(|p| p.written != 0 && p.waited_since != 0);
+    let by_written: HashMap<u64, &PassStamps> = traced.map(|p| (p.written, p)).collect();
+    let woke = match polled {
+        true => "loop polling → pass began (the poll)",
+        false => "loop waiting → loop woke (the wake-up)",
+    };
+    let read = match polled {
+        true => "pass began → request read",
+        false => "loop woke → request read",
     };
     let names = [
         (
