@@ -127,33 +127,25 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<FleetReport> {
     }
     let strict = args.doc.is_some() || args.json.is_some();
     let mut provenance = Provenance::begin(strict, args.allow_dirty)?;
-    let (dir, remove_dir) = match &args.dir {
-        Some(dir) => (dir.clone(), false),
-        None => (
-            std::env::temp_dir().join(format!("chassis-bench-fleet-{}", std::process::id())),
-            true,
-        ),
-    };
+    let scratch =
+        || std::env::temp_dir().join(format!("chassis-bench-fleet-{}", std::process::id()));
+    let dir = args.dir.clone().unwrap_or_else(scratch);
     std::fs::create_dir_all(&dir)?;
     let result = measure(args, &dir);
-    if remove_dir && result.is_ok() {
-        let _ = std::fs::remove_dir_all(&dir);
-    } else {
-        eprintln!("logs in {}", dir.display());
+    match &result {
+        Ok(_) if args.dir.is_none() => drop(std::fs::remove_dir_all(&dir)),
+        _ => eprintln!("logs in {}", dir.display()),
     }
     let sizes = result?;
     provenance.end()?;
-    let build = if std::env::current_exe()?
-        .to_string_lossy()
-        .contains("/debug/")
-    {
-        "**a debug build** (unoptimised: every figure is higher than a release build's)".into()
-    } else {
-        "release build".into()
+    // The binaries measured are built with chassis-bench, in its profile.
+    let build = match cfg!(debug_assertions) {
+        true => "**a debug build** (unoptimised: every figure is higher than a release build's)",
+        false => "release build",
     };
     Ok(FleetReport {
         provenance,
-        build,
+        build: build.into(),
         machine: Machine::probe(),
         seconds: args.seconds,
         sizes,
@@ -287,13 +279,12 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
             per_robot,
             missing,
         };
+        let s = &size_figures;
+        let (cpu, rss) = (s.operator_cpu_pct, s.operator_rss_mib);
+        let (rate, p50, p99) = (s.samples_per_s, s.median_p50_ms, s.worst_p99_ms);
         eprintln!(
-            "fleet of {size}: operator {:.1} % of a core, {:.1} MiB; {:.0} states/s; p50 {:.2} ms, worst p99 {:.2} ms",
-            size_figures.operator_cpu_pct,
-            size_figures.operator_rss_mib,
-            size_figures.samples_per_s,
-            size_figures.median_p50_ms,
-            size_figures.worst_p99_ms
+            "fleet of {size}: operator {cpu:.1} % of a core, {rss:.1} MiB; {rate:.0} states/s; \
+             p50 {p50:.2} ms, worst p99 {p99:.2} ms"
         );
         figures.push(size_figures);
         drop(operator);
@@ -331,21 +322,14 @@ impl FleetReport {
     /// The `## Fleet` section (`clients/bench/fleet.md`): method, figures, and the arithmetic
     /// for a larger fleet (`clients/bench/fleet-growth.md`) when it grew.
     pub fn markdown(&self) -> anyhow::Result<String> {
-        let (p, m) = (&self.provenance, &self.machine);
         let sizes = lines(&self.sizes, |s| {
+            let (n, cpu, threads) = (s.robots, s.operator_cpu_pct, s.operator_threads);
+            let (rss, peak) = (s.operator_rss_mib, s.operator_peak_rss_mib);
+            let (rate, p50, p99) = (s.samples_per_s, s.median_p50_ms, s.worst_p99_ms);
+            let (max, sides, busy) = (s.worst_max_ms, s.robot_sides_cpu_pct, s.machine_busy_pct);
             format!(
-                "| {} | {:.1} | {:.1} ({:.1}) | {} | {:.0} | {:.2} | {:.2} | {:.1} | {:.1} | {:.0} |",
-                s.robots,
-                s.operator_cpu_pct,
-                s.operator_rss_mib,
-                s.operator_peak_rss_mib,
-                s.operator_threads,
-                s.samples_per_s,
-                s.median_p50_ms,
-                s.worst_p99_ms,
-                s.worst_max_ms,
-                s.robot_sides_cpu_pct,
-                s.machine_busy_pct
+                "| {n} | {cpu:.1} | {rss:.1} ({peak:.1}) | {threads} | {rate:.0} | {p50:.2} | \
+                 {p99:.2} | {max:.1} | {sides:.1} | {busy:.0} |"
             )
         });
         let missing = lines(self.sizes.iter().filter(|s| !s.missing.is_empty()), |s| {
@@ -358,26 +342,20 @@ impl FleetReport {
             bail!("no fleet size measured");
         };
         let robots = lines(&last.per_robot, |r| {
-            format!(
-                "| {} | {} | {:.0} | {:.2} | {:.2} | {:.1} |",
-                r.name, r.kind, r.samples_per_s, r.p50_ms, r.p99_ms, r.max_ms
-            )
+            let (name, kind, rate) = (&r.name, &r.kind, r.samples_per_s);
+            let (p50, p99, max) = (r.p50_ms, r.p99_ms, r.max_ms);
+            format!("| {name} | {kind} | {rate:.0} | {p50:.2} | {p99:.2} | {max:.1} |")
         });
-        let values = [
-            ("date", p.date.clone()),
-            ("commit", p.commit_text()),
-            ("cpu_model", m.cpu_model.clone()),
-            ("cpus", m.cpus.to_string()),
-            ("kernel", m.kernel.clone()),
+        let mut values = crate::render::provenance_values(&self.provenance, &self.machine);
+        values.extend([
             ("build", self.build.clone()),
-            ("command", p.command.clone()),
             ("seconds", format!("{:.0}", self.seconds)),
             ("sizes", sizes),
             ("missing", missing),
             ("largest", last.robots.to_string()),
             ("robots", robots),
             ("growth", growth(first, last)?),
-        ];
+        ]);
         fill(include_str!("../fleet.md"), &values)
     }
 }
@@ -394,35 +372,26 @@ fn growth(first: &SizeFigures, last: &SizeFigures) -> anyhow::Result<String> {
     let rate = first.samples_per_s / first.robots as f64;
     let last_rate = last.samples_per_s / last.robots as f64;
     let state_bytes = size_of::<ChassisState>() as f64;
-    let kept_up = if last_rate < 0.8 * rate {
+    let (robots, busy) = (last.robots, last.machine_busy_pct);
+    let kept_up = (last_rate < 0.8 * rate).then(|| {
         format!(
-            " At {} robots this machine no longer kept up (busy {:.0} %): each robot's states \
-             arrived at {last_rate:.0}/s, and the latency there is mostly time spent waiting for \
-             a CPU; the operator's CPU per robot above is understated by as much.",
-            last.robots, last.machine_busy_pct
+            " At {robots} robots this machine no longer kept up (busy {busy:.0} %): each robot's \
+             states arrived at {last_rate:.0}/s, and the latency there is mostly time spent \
+             waiting for a CPU; the operator's CPU per robot above is understated by as much."
         )
-    } else {
-        String::new()
-    };
+    });
+    let mib_per_robot = (last.operator_rss_mib - first.operator_rss_mib) / added;
+    let (kb_per_s, mb_per_s) = (rate * state_bytes / 1e3, 1000.0 * rate * state_bytes / 1e6);
     let values = [
         ("first", first.robots.to_string()),
         ("last", last.robots.to_string()),
         ("cpu_per_robot", format!("{cpu_per_robot:.2}")),
-        (
-            "mib_per_robot",
-            format!(
-                "{:.2}",
-                (last.operator_rss_mib - first.operator_rss_mib) / added
-            ),
-        ),
+        ("mib_per_robot", format!("{mib_per_robot:.2}")),
         ("rate", format!("{rate:.0}")),
-        ("kb_per_s", format!("{:.0}", rate * state_bytes / 1e3)),
+        ("kb_per_s", format!("{kb_per_s:.0}")),
         ("state_bytes", state_bytes.to_string()),
-        ("kept_up", kept_up),
-        (
-            "mb_per_s",
-            format!("{:.0}", 1000.0 * rate * state_bytes / 1e6),
-        ),
+        ("kept_up", kept_up.unwrap_or_default()),
+        ("mb_per_s", format!("{mb_per_s:.0}")),
         ("cores", format!("{:.0}", 10.0 * cpu_per_robot)),
     ];
     Ok(fill(include_str!("../fleet-growth.md"), &values)?

@@ -46,12 +46,9 @@ pub struct Split {
 
 use Whose::{Code, Outside};
 
-/// Whether `part` of a command split lies within the in-service row (request read → frame
-/// written): it starts at the request read (`request_read` of the pass trace) or after.
-pub fn in_service_command(part: &Part) -> bool {
-    let from = part.name.split(" → ").next().unwrap_or_default();
-    matches!(from, "request read" | "write begun")
-}
+/// How many of a command split's parts, its last ([`command`]), lie within the in-service row
+/// (request read → frame written): from the request read on.
+pub const IN_SERVICE_COMMAND_PARTS: usize = 2;
 
 /// Splits `names.len() + 1` stamps, each later than or at the one before, into the
 /// distributions between consecutive stamps; a sample whose stamps are not in order is left out.
@@ -92,21 +89,17 @@ fn split(names: &[(&str, Whose)], samples: impl Iterator<Item = Vec<u64>>) -> Sp
 /// frame was its pass's first write. A boundary the request came after (the loop was waiting
 /// already; a polling loop's pass was under way) is the request's creation: a part of 0.
 pub fn command(samples: &[(u64, u64)], passes: &[PassStamps], polled: bool) -> Split {
-    let by_written: HashMap<u64, &PassStamps> = passes
+    let traced = passes
         .iter()
-        .filter(|p| p.written != 0 && p.waited_since != 0)
-        .map(|p| (p.written, p))
-        .collect();
-    let (woke, read) = if polled {
-        (
-            "loop polling → pass began (the poll)",
-            "pass began → request read",
-        )
-    } else {
-        (
-            "loop waiting → loop woke (the wake-up)",
-            "loop woke → request read",
-        )
+        .filter(|p| p.written != 0 && p.waited_since != 0);
+    let by_written: HashMap<u64, &PassStamps> = traced.map(|p| (p.written, p)).collect();
+    let woke = match polled {
+        true => "loop polling → pass began (the poll)",
+        false => "loop waiting → loop woke (the wake-up)",
+    };
+    let read = match polled {
+        true => "pass began → request read",
+        false => "loop woke → request read",
     };
     let names = [
         (
@@ -408,10 +401,9 @@ mod tests {
     fn the_in_service_row_holds_the_command_splits_parts_from_the_request_read_on() {
         for polled in [false, true] {
             let split = command(&[], &pass_woken_at(1_050_000), polled);
-            let within: Vec<&str> = split
-                .parts
+            let from = split.parts.len() - IN_SERVICE_COMMAND_PARTS;
+            let within: Vec<&str> = split.parts[from..]
                 .iter()
-                .filter(|p| in_service_command(p))
                 .map(|p| p.name.as_str())
                 .collect();
             assert_eq!(

@@ -9,8 +9,10 @@ use crate::paths::{
     BENCH_CONFIG, COMMAND_INTERVAL, REALTIME_PRIORITY, STATE_REQUEST_INTERVAL,
     XBOT_COMMAND_INTERVAL, off_grid, period_text,
 };
+use crate::provenance::Provenance;
 use crate::report::{
-    DEFAULT_CONFIG_ROW, LoopRun, MIN_FOR_P99, MIN_FOR_P999, Report, SUM_TOLERANCE, StallRates,
+    DEFAULT_CONFIG_ROW, LoopRun, MIN_FOR_P99, MIN_FOR_P999, Machine, Report, SUM_TOLERANCE,
+    StallRates,
 };
 use crate::stats::Summary;
 
@@ -23,16 +25,11 @@ pub(crate) const TOGETHER_OUTSIDE: &str =
 
 /// The performance document of `report`.
 pub fn document(report: &Report) -> anyhow::Result<String> {
-    let (p, m) = (&report.provenance, &report.machine);
     let period = |interval| period_text(off_grid(interval));
-    let values = [
-        ("date", p.date.clone()),
-        ("commit", p.commit_text()),
-        ("cpu_model", m.cpu_model.clone()),
-        ("cpus", m.cpus.to_string()),
-        ("kernel", m.kernel.clone()),
-        ("steal", p.steal_text()),
-        ("command", p.command.clone()),
+    let payload_bytes = size_of::<chassis_client::ChassisState>();
+    let mut values = provenance_values(&report.provenance, &report.machine);
+    values.extend([
+        ("steal", report.provenance.steal_text()),
         ("bench_config", BENCH_CONFIG.trim_end().to_string()),
         ("priority", REALTIME_PRIORITY.to_string()),
         ("scheduling", report.scheduling_text()),
@@ -46,10 +43,7 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
         ("loops", loops(report)),
         ("cost", cost(report)),
         ("throughput", throughput_and_notes(report)),
-        (
-            "payload_bytes",
-            size_of::<chassis_client::ChassisState>().to_string(),
-        ),
+        ("payload_bytes", payload_bytes.to_string()),
         ("hybrid_spin_us", HYBRID_SPIN.as_micros().to_string()),
         ("command_period", period(COMMAND_INTERVAL)),
         ("xbot_command_period", period(XBOT_COMMAND_INTERVAL)),
@@ -64,8 +58,20 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
         ("sum_tolerance_pct", format!("{}", SUM_TOLERANCE * 100.0)),
         ("min_for_p99", MIN_FOR_P99.to_string()),
         ("min_for_p999", MIN_FOR_P999.to_string()),
-    ];
+    ]);
     fill(TEMPLATE, &values)
+}
+
+/// Where a document's figures come from: its run's date and commit, the command, the machine.
+pub(crate) fn provenance_values(p: &Provenance, m: &Machine) -> Vec<(&'static str, String)> {
+    vec![
+        ("date", p.date.clone()),
+        ("commit", p.commit_text()),
+        ("command", p.command.clone()),
+        ("cpu_model", m.cpu_model.clone()),
+        ("cpus", m.cpus.to_string()),
+        ("kernel", m.kernel.clone()),
+    ]
 }
 
 /// `template` with each `{{name}}` replaced by its value in `values`: a name with no value is
@@ -118,11 +124,8 @@ pub(crate) fn lines<T>(
 
 /// A percentile for a table: `—` when the row has too few samples to tell it from the maximum.
 pub(crate) fn percentile(value: f64, count: u64, fewest: u64) -> String {
-    if count >= fewest {
-        format!("{value:.1}")
-    } else {
-        "—".into()
-    }
+    let shown = (count >= fewest).then(|| format!("{value:.1}"));
+    shown.unwrap_or_else(|| "—".into())
 }
 
 /// The table's rows: each row's count with what it lost beside it, its percentiles (a dash
@@ -136,18 +139,14 @@ fn table(report: &Report) -> String {
             _ => String::new(),
         };
         let flag = r.inconsistent.as_ref().map_or("", |_| " **inconsistent**");
-        let (what, mode, placement) = (&r.what, &r.mode, &r.placement);
+        let (path, what, mode, placement) = (r.path, &r.what, &r.mode, &r.placement);
+        let (n, p50, p90, max) = (r.count_text(), s.p50_us, s.p90_us, s.max_us);
+        let p99 = percentile(s.p99_us, s.count, MIN_FOR_P99);
+        let p999 = percentile(s.p999_us, s.count, MIN_FOR_P999);
+        let baseline = r.baseline.as_deref().unwrap_or("");
         format!(
-            "| {} | {what} | {mode} | {placement} | {} | {:.1} | {:.1} | {} | {} | {:.1} | \
-             {ratio}{flag} | {} |",
-            r.path,
-            r.count_text(),
-            s.p50_us,
-            s.p90_us,
-            percentile(s.p99_us, s.count, MIN_FOR_P99),
-            percentile(s.p999_us, s.count, MIN_FOR_P999),
-            s.max_us,
-            r.baseline.as_deref().unwrap_or("")
+            "| {path} | {what} | {mode} | {placement} | {n} | {p50:.1} | {p90:.1} | {p99} | {p999} \
+             | {max:.1} | {ratio}{flag} | {baseline} |"
         )
     })
 }
@@ -156,10 +155,8 @@ fn table(report: &Report) -> String {
 fn inconsistent(report: &Report) -> String {
     let flagged = report.rows.iter().filter_map(|r| {
         let why = r.inconsistent.as_deref()?;
-        Some(format!(
-            "* {} {} ({} loop, {}): {why}",
-            r.path, r.what, r.mode, r.placement
-        ))
+        let (path, what, mode, placement) = (r.path, &r.what, &r.mode, &r.placement);
+        Some(format!("* {path} {what} ({mode} loop, {placement}): {why}"))
     });
     let flagged = lines(flagged, |f| f);
     if flagged.is_empty() {
@@ -170,13 +167,11 @@ fn inconsistent(report: &Report) -> String {
 
 /// Each baseline's conditions.
 fn conditions(report: &Report) -> String {
-    let baselines = report
-        .rows
-        .iter()
-        .filter_map(|r| Some((r, r.conditions.as_ref()?)));
-    lines(baselines, |(r, c)| {
-        format!("* {}, {}: {c}", r.what, r.placement)
-    })
+    let baselines = report.rows.iter().filter_map(|r| {
+        let (what, placement, c) = (&r.what, &r.placement, r.conditions.as_ref()?);
+        Some(format!("* {what}, {placement}: {c}"))
+    });
+    lines(baselines, |l| l)
 }
 
 /// The targets' rows: each target, what this run measured, and its outcome.
@@ -192,31 +187,30 @@ fn targets(report: &Report) -> anyhow::Result<String> {
 pub fn parts(report: &Report) -> String {
     lines(&report.parts, |p| {
         let total: f64 = p.split.parts.iter().map(|part| part.summary.p50_us).sum();
-        let row = |name: &str, whose: Whose, s: &Summary, share: String| {
+        let (path, what, mode, placement) = (&p.path, &p.what, &p.mode, &p.placement);
+        // A part, or a sum of parts (no share of the p50s).
+        let row = |name: &str, whose: Whose, s: &Summary, part: bool| {
             let whose = match whose {
                 Whose::Code => "the code",
                 Whose::Outside => "outside",
             };
-            let p99 = percentile(s.p99_us, s.count, MIN_FOR_P99);
+            let (n, p50, p99) = (
+                s.count,
+                s.p50_us,
+                percentile(s.p99_us, s.count, MIN_FOR_P99),
+            );
+            let share = (part && total > 0.0).then(|| format!("{:.0} %", 100.0 * p50 / total));
+            let share = share.unwrap_or_default();
             format!(
-                "| {} | {} | {} | {} | {name} | {whose} | {} | {:.1} | {p99} | {share} |",
-                p.path, p.what, p.mode, p.placement, s.count, s.p50_us
+                "| {path} | {what} | {mode} | {placement} | {name} | {whose} | {n} | {p50:.1} | \
+                 {p99} | {share} |"
             )
         };
-        let share = |s: &Summary| {
-            let share = (total > 0.0).then(|| format!("{:.0} %", 100.0 * s.p50_us / total));
-            share.unwrap_or_default()
-        };
-        let mut rows = lines(&p.split.parts, |part| {
-            row(&part.name, part.whose, &part.summary, share(&part.summary))
-        });
-        for (name, whose, s) in [
-            (TOGETHER_CODE, Whose::Code, &p.split.code),
-            (TOGETHER_OUTSIDE, Whose::Outside, &p.split.outside),
-        ] {
-            rows.push_str(&format!("\n{}", row(name, whose, s, String::new())));
-        }
-        rows
+        let parts = p.split.parts.iter();
+        let parts = parts.map(|part| row(&part.name, part.whose, &part.summary, true));
+        let code = row(TOGETHER_CODE, Whose::Code, &p.split.code, false);
+        let outside = row(TOGETHER_OUTSIDE, Whose::Outside, &p.split.outside, false);
+        lines(parts.chain([code, outside]), |l| l)
     })
 }
 
@@ -228,32 +222,25 @@ pub fn loops(report: &Report) -> String {
     lines(&report.loops, |l| {
         let own = LoopRun::per_million(l.misses, l.periods);
         let raw = LoopRun::per_million(l.raw_misses, l.raw_periods);
+        let (run, rate, mode, placement) = (&l.run, &l.rate, &l.mode, &l.placement);
+        let (periods, misses, raw_misses) = (l.periods, l.misses, l.raw_misses);
+        let (raw_periods, superseded) = (l.raw_periods, l.superseded);
         format!(
-            "| {}, {} | {} | {} | {} | {} ({own:.0}) | {} of {} ({raw:.0}) | {} |",
-            l.run,
-            l.rate,
-            l.mode,
-            l.placement,
-            l.periods,
-            l.misses,
-            l.raw_misses,
-            l.raw_periods,
-            l.superseded
+            "| {run}, {rate} | {mode} | {placement} | {periods} | {misses} ({own:.0}) | \
+             {raw_misses} of {raw_periods} ({raw:.0}) | {superseded} |"
         )
     })
 }
 
 /// The cost under a full bus of each bus and bit rate, and the memory real-time mode locks.
 fn cost(report: &Report) -> String {
-    let buses = lines(&report.cost, |c| {
+    let buses = report.cost.iter().map(|c| {
+        let (bus, kbit, rate) = (&c.bus, c.bitrate / 1000, c.frames_per_s);
+        let (cpu, rss) = (c.cpu_pct, c.rss_mib);
         format!(
-            "* {} bus, {} kbit/s (the simulated chassis flooding it): {:.0} frames/s received; the \
-             service's loop thread used {:.2} % of one core; resident memory {:.1} MiB",
-            c.bus,
-            c.bitrate / 1000,
-            c.frames_per_s,
-            c.cpu_pct,
-            c.rss_mib
+            "* {bus} bus, {kbit} kbit/s (the simulated chassis flooding it): {rate:.0} frames/s \
+             received; the service's loop thread used {cpu:.2} % of one core; resident memory \
+             {rss:.1} MiB"
         )
     });
     let realtime = report.realtime_rss_mib.map(|rss| {
@@ -264,13 +251,7 @@ fn cost(report: &Report) -> String {
              with normal scheduling above)"
         )
     });
-    lines(
-        [buses]
-            .into_iter()
-            .chain(realtime)
-            .filter(|l| !l.is_empty()),
-        |l| l,
-    )
+    lines(buses.chain(realtime), |l| l)
 }
 
 /// The replays of a recorded bus, and the run's notes.
@@ -282,24 +263,19 @@ fn throughput_and_notes(report: &Report) -> String {
             t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
         )
     });
-    let replays = (!runs.is_empty()).then(|| {
+    let (n, runs) = (report.throughput.len(), runs.replace('\n', "; "));
+    let replays = (n > 0).then(|| {
         format!(
             "* a recorded TITAN bus replayed at full speed through the service, read, decoded \
-             and published, {} times, each into a fresh service: {}. The replay's writer (a \
+             and published, {n} times, each into a fresh service: {runs}. The replay's writer (a \
              thread on the other CPU, one write per frame) does not always keep the service \
              busy: the target counts the frames per second of the service's own CPU time, the \
-             median replay's",
-            report.throughput.len(),
-            runs.replace('\n', "; ")
+             median replay's"
         )
     });
     let notes = report.notes.iter().chain(&report.problems);
-    lines(
-        replays
-            .into_iter()
-            .chain(notes.map(|n| format!("* note: {n}"))),
-        |l| l,
-    )
+    let notes = notes.map(|n| format!("* note: {n}"));
+    lines(replays.into_iter().chain(notes), |l| l)
 }
 
 impl Report {
@@ -308,26 +284,22 @@ impl Report {
     /// baselines' receivers).
     pub fn scheduling_text(&self) -> String {
         use crate::report::Scheduling;
-        let asked = self
-            .scheduling
-            .iter()
+        let runs = self.scheduling.iter();
+        let asked = runs
+            .clone()
             .filter(|(_, s)| *s != Scheduling::Normal)
             .count();
-        let refused = self
-            .scheduling
-            .iter()
-            .filter(|(_, s)| *s == Scheduling::Refused);
+        let refused = runs.filter(|(_, s)| *s == Scheduling::Refused);
         let refused: Vec<&str> = refused.map(|(run, _)| run.as_str()).collect();
+        let (n, runs) = (refused.len(), refused.join("; "));
         if refused.is_empty() {
             return format!(
                 "Real-time mode was granted in each of the {asked} runs that asked for it."
             );
         }
         format!(
-            "**Real-time mode was refused** (no CAP_SYS_NICE or RLIMIT_RTPRIO) in {} of the \
-             {asked} runs that asked for it, which ran with normal scheduling: {}.",
-            refused.len(),
-            refused.join("; ")
+            "**Real-time mode was refused** (no CAP_SYS_NICE or RLIMIT_RTPRIO) in {n} of the \
+             {asked} runs that asked for it, which ran with normal scheduling: {runs}."
         )
     }
 
@@ -350,34 +322,29 @@ impl Report {
         // The chance that a window of 100 µs holds the start of a stall over 20 µs, %.
         let chance = |s: &StallRates| 100.0 * s.over_20_us * 100e-6;
         let least = self.stalls.iter().map(chance).fold(f64::INFINITY, f64::min);
+        let (over_20, over_100) = (span(&|s| s.over_20_us, 0), span(&|s| s.over_100_us, 2));
+        let chances = span(&chance, 1);
+        let end = match least >= 1.0 {
+            true => ": more than 1 %, so that its p99 carries one, whatever the code does.",
+            false => ".",
+        };
         format!(
-            " On this machine a thread that never blocks lost more than 20 µs {} times a second \
-             and more than 100 µs {} times a second, by CPU (the stall rows of the table): a \
-             path of 100 µs meets a stall of more than 20 µs in about {} % of its samples on \
-             each CPU it runs on{}",
-            span(&|s| s.over_20_us, 0),
-            span(&|s| s.over_100_us, 2),
-            span(&chance, 1),
-            if least >= 1.0 {
-                ": more than 1 %, so that its p99 carries one, whatever the code does."
-            } else {
-                "."
-            }
+            " On this machine a thread that never blocks lost more than 20 µs {over_20} times a \
+             second and more than 100 µs {over_100} times a second, by CPU (the stall rows of \
+             the table): a path of 100 µs meets a stall of more than 20 µs in about {chances} % \
+             of its samples on each CPU it runs on{end}"
         )
     }
 
     /// The run on a terminal: the document's tables and lists, without its words.
     pub fn table(&self) -> String {
         let (p, m) = (&self.provenance, &self.machine);
+        let (date, commit, steal) = (&p.date, p.commit_text().replace('`', ""), p.steal_text());
+        let (model, cpus, kernel) = (&m.cpu_model, m.cpus, &m.kernel);
         let blocks = [
             format!(
-                "{}, {}; machine: {}, {} cores, kernel {}; host steal time over the run: {}",
-                p.date,
-                p.commit_text().replace('`', ""),
-                m.cpu_model,
-                m.cpus,
-                m.kernel,
-                p.steal_text()
+                "{date}, {commit}; machine: {model}, {cpus} cores, kernel {kernel}; host steal \
+                 time over the run: {steal}"
             ),
             with_head("table", table(self)),
             inconsistent(self),

@@ -15,9 +15,10 @@ pub const DEFAULT_CONFIG_ROW: &str =
     "titan sim, chassisd's default configuration, request → first frame toward it";
 
 /// Which path a row measures, the table's first column.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PathKind {
+    #[default]
     Baseline,
     Command,
     InService,
@@ -28,6 +29,25 @@ pub enum PathKind {
     Ros2,
     Zenoh,
     Loop,
+}
+
+impl PathKind {
+    /// The title of the kind's panel in the plot.
+    fn panel(self) -> &'static str {
+        match self {
+            PathKind::Baseline => "raw transports (ping-pong, one way)",
+            PathKind::Command => "command: request created → frame written",
+            PathKind::State => "state: frame read → state received",
+            PathKind::Preemption => "preemption: safety stop → zero frame written",
+            PathKind::FanOut => "fan-out: state to 1, 4, 16 processes",
+            PathKind::Python => "Python client: frame read → state in Python; request → frame",
+            PathKind::InService => {
+                "in-service: chassisd's own part (woke → frame written, frame read → state published)"
+            }
+            PathKind::Ros2 => "ROS 2 bridge: cmd_vel → frame; frame read → odom (Cyclone DDS peer)",
+            PathKind::Zenoh | PathKind::Loop => "",
+        }
+    }
 }
 
 impl std::fmt::Display for PathKind {
@@ -42,10 +62,11 @@ impl std::fmt::Display for PathKind {
 
 /// Where a row's samples start and end, as the targets and the splits find a row (its `what`
 /// is only shown).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Leg {
     /// A raw transport's hop.
+    #[default]
     Hop,
     /// Gaps in a running thread's clock readings ([`STALLS`]).
     Stalls,
@@ -76,7 +97,7 @@ pub enum Leg {
 }
 
 /// One measured distribution.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Row {
     pub path: PathKind,
     pub leg: Leg,
@@ -190,12 +211,9 @@ impl Report {
         let lines = std::iter::once(Line::<_, &Row, &Parts>::Run(self))
             .chain(self.rows.iter().map(Line::Row))
             .chain(self.parts.iter().map(Line::Split));
-        let mut out = String::new();
-        for line in lines {
-            out.push_str(&serde_json::to_string(&line)?);
-            out.push('\n');
-        }
-        Ok(out)
+        lines
+            .map(|line| Ok(serde_json::to_string(&line)? + "\n"))
+            .collect()
     }
 
     /// A run read back from its [`Report::samples`].
@@ -284,13 +302,6 @@ pub struct Throughput {
 /// How many times the recording is replayed, each into a fresh service.
 pub const REPLAYS: usize = 3;
 
-/// The replay whose frames per CPU second are the median of `runs`.
-pub(crate) fn median_replay(runs: &[Throughput]) -> Option<&Throughput> {
-    let mut sorted: Vec<&Throughput> = runs.iter().collect();
-    sorted.sort_by(|a, b| a.frames_per_cpu_s.total_cmp(&b.frames_per_cpu_s));
-    sorted.get(sorted.len() / 2).copied()
-}
-
 #[derive(Debug, Default, Serialize, Deserialize)]
 pub struct Machine {
     pub cpus: usize,
@@ -373,15 +384,8 @@ impl Row {
             placement: placement.into(),
             summary: latencies.summary(),
             missed,
-            dropped: 0,
-            contains: Vec::new(),
-            conditions: None,
-            baseline: None,
-            ratio_p50: None,
-            ratio_p99: None,
-            inconsistent: None,
-            smoke_tolerated: false,
             latencies,
+            ..Self::default()
         }
     }
 
@@ -404,15 +408,13 @@ impl Row {
             (self.dropped, "dropped"),
             (self.summary.out_of_range, "out of range"),
         ];
-        let lost: Vec<String> = lost
-            .iter()
-            .filter(|(n, _)| *n > 0)
-            .map(|(n, what)| format!("{n} {what}"))
-            .collect();
-        if lost.is_empty() {
-            return self.summary.count.to_string();
+        let lost = lost.iter().filter(|(n, _)| *n > 0);
+        let lost: Vec<String> = lost.map(|(n, what)| format!("{n} {what}")).collect();
+        let count = self.summary.count;
+        match lost.is_empty() {
+            true => count.to_string(),
+            false => format!("{count} ({})", lost.join(", ")),
         }
-        format!("{} ({})", self.summary.count, lost.join(", "))
     }
 }
 
@@ -431,77 +433,73 @@ impl Report {
                 .push(format!("two rows are named '{key}' ({n} of them)"));
         }
         // Each row's names as a baseline and as a contained row.
-        let all: Vec<(Option<String>, String, Summary)> = self
-            .rows
-            .iter()
+        let all: Vec<(Option<String>, String, Summary)> = (self.rows.iter())
             .map(|r| {
                 let as_baseline =
                     (r.path == PathKind::Baseline).then(|| format!("{}, {}", r.what, r.placement));
                 (as_baseline, r.key(), r.summary)
             })
             .collect();
-        for row in self
+        let rows = self
             .rows
             .iter_mut()
-            .filter(|r| r.path != PathKind::Baseline)
-        {
+            .filter(|r| r.path != PathKind::Baseline);
+        for row in rows {
             let (s, key) = (row.summary, row.key());
             // Each flag, and whether a smoke run only reports it.
             let mut flags: Vec<(String, bool)> = Vec::new();
-            if let Some(name) = &row.baseline {
-                let named = all.iter().filter(|(b, ..)| b.as_ref() == Some(name));
-                match named.map(|(.., s)| s).collect::<Vec<_>>()[..] {
-                    [] => {
-                        let problem = format!("{key}: its baseline '{name}' was not measured");
-                        self.problems.push(problem);
+            let named = all
+                .iter()
+                .filter(|(b, ..)| b.is_some() && *b == row.baseline);
+            let bases: Vec<&Summary> = named.map(|(.., s)| s).collect();
+            match (&row.baseline, &bases[..]) {
+                (None, _) => {}
+                (Some(name), []) => {
+                    (self.problems).push(format!("{key}: its baseline '{name}' was not measured"))
+                }
+                (Some(name), [base]) => {
+                    row.ratio_p50 = (base.p50_us > 0.0).then(|| s.p50_us / base.p50_us);
+                    let enough = base.count.min(s.count) >= MIN_FOR_P99;
+                    row.ratio_p99 = (base.p99_us > 0.0 && enough).then(|| s.p99_us / base.p99_us);
+                    if s.count > 0 && s.p50_us < base.p50_us {
+                        let (p50, base_p50) = (s.p50_us, base.p50_us);
+                        let text = format!(
+                            "p50 {p50:.1} µs is below the p50 {base_p50:.1} µs of the hop it \
+                             contains ({name}): the path and its baseline were not measured \
+                             under the same conditions"
+                        );
+                        let near = s.p50_us >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE);
+                        flags.push((text, near));
                     }
-                    [base] => {
-                        row.ratio_p50 = (base.p50_us > 0.0).then(|| s.p50_us / base.p50_us);
-                        let enough = base.count.min(s.count) >= MIN_FOR_P99;
-                        row.ratio_p99 =
-                            (base.p99_us > 0.0 && enough).then(|| s.p99_us / base.p99_us);
-                        if s.count > 0 && s.p50_us < base.p50_us {
-                            let text = format!(
-                                "p50 {:.1} µs is below the p50 {:.1} µs of the hop it contains \
-                                 ({name}): the path and its baseline were not measured under \
-                                 the same conditions",
-                                s.p50_us, base.p50_us
-                            );
-                            let near = s.p50_us >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE);
-                            flags.push((text, near));
-                        }
-                    }
-                    _ => {
-                        let problem = format!("{key}: more than one baseline is named '{name}'");
-                        self.problems.push(problem);
-                    }
+                }
+                (Some(name), _) => {
+                    (self.problems).push(format!("{key}: more than one baseline is named '{name}'"))
                 }
             }
             let contained = row.contains.iter().map(|k| {
                 let found = all.iter().find(|(_, n, _)| n == k);
-                found.map(|(.., s)| s).filter(|s| s.count > 0)
+                found
+                    .map(|(.., s)| s)
+                    .filter(|s| s.count > 0)
+                    .map(|s| s.p50_us)
             });
-            let sums: Option<Vec<&Summary>> = contained.collect();
-            match sums {
+            match contained.sum::<Option<f64>>() {
                 _ if row.contains.is_empty() => {}
                 None => self.problems.push(format!(
                     "{key}: a row it contains was not measured ({})",
                     row.contains.join(", ")
                 )),
-                Some(sums) => {
-                    let sum: f64 = sums.iter().map(|s| s.p50_us).sum();
-                    if s.count > 0 && s.p50_us < sum * (1.0 - SUM_TOLERANCE) {
-                        let text = format!(
-                            "p50 {:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
-                             p50s of the hops it contains ({}): they were not measured under \
-                             the same conditions",
-                            s.p50_us,
-                            SUM_TOLERANCE * 100.0,
-                            row.contains.join(" + ")
-                        );
-                        flags.push((text, true));
-                    }
+                Some(sum) if s.count > 0 && s.p50_us < sum * (1.0 - SUM_TOLERANCE) => {
+                    let (p50, hops) = (s.p50_us, row.contains.join(" + "));
+                    let text = format!(
+                        "p50 {p50:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
+                         p50s of the hops it contains ({hops}): they were not measured under the \
+                         same conditions",
+                        SUM_TOLERANCE * 100.0
+                    );
+                    flags.push((text, true));
                 }
+                Some(_) => {}
             }
             row.smoke_tolerated = !flags.is_empty() && flags.iter().all(|(_, near)| *near);
             let texts: Vec<String> = flags.into_iter().map(|(text, _)| text).collect();
@@ -560,55 +558,25 @@ impl Report {
     /// Latency CDFs of every row, log latency axis: one panel per kind of path, all on the same
     /// axes so panels compare.
     pub fn plot(&self, path: &Path) -> anyhow::Result<()> {
-        const PANELS: [(PathKind, &str); 8] = [
-            (PathKind::Baseline, "raw transports (ping-pong, one way)"),
-            (
-                PathKind::Command,
-                "command: request created → frame written",
-            ),
-            (PathKind::State, "state: frame read → state received"),
-            (
-                PathKind::Preemption,
-                "preemption: safety stop → zero frame written",
-            ),
-            (PathKind::FanOut, "fan-out: state to 1, 4, 16 processes"),
-            (
-                PathKind::Python,
-                "Python client: frame read → state in Python; request → frame",
-            ),
-            (
-                PathKind::InService,
-                "in-service: chassisd's own part (woke → frame written, frame read → state published)",
-            ),
-            (
-                PathKind::Ros2,
-                "ROS 2 bridge: cmd_vel → frame; frame read → odom (Cyclone DDS peer)",
-            ),
+        use PathKind::*;
+        let panels = [
+            Baseline, Command, State, Preemption, FanOut, Python, InService, Ros2,
         ];
         let root = SVGBackend::new(path, (1600, 2000)).into_drawing_area();
         root.fill(&WHITE)?;
-        let root = root.titled(
-            "one-way latency, CDF (log latency axis)",
-            ("sans-serif", 26),
-        )?;
-        let max_us = self
-            .rows
-            .iter()
-            .map(|r| r.summary.max_us)
-            .fold(10.0f64, f64::max)
-            .min(1e6);
-        for (area, (kind, title)) in root.split_evenly((4, 2)).iter().zip(PANELS) {
+        let title = "one-way latency, CDF (log latency axis)";
+        let root = root.titled(title, ("sans-serif", 26))?;
+        let max_us = self.rows.iter().map(|r| r.summary.max_us);
+        let max_us = max_us.fold(10.0f64, f64::max).min(1e6);
+        for (area, kind) in root.split_evenly((4, 2)).iter().zip(panels) {
             // The stall rows are gaps in one thread, not a hop: the table gives them.
-            let rows = self
-                .rows
-                .iter()
-                .filter(|r| r.path == kind && r.leg != Leg::Stalls);
-            let rows: Vec<&Row> = rows.collect();
+            let rows = self.rows.iter().filter(|r| r.path == kind);
+            let rows: Vec<&Row> = rows.filter(|r| r.leg != Leg::Stalls).collect();
             if rows.is_empty() {
                 continue;
             }
             let mut chart = ChartBuilder::on(area)
-                .caption(title, ("sans-serif", 18))
+                .caption(kind.panel(), ("sans-serif", 18))
                 .margin(12)
                 .x_label_area_size(35)
                 .y_label_area_size(45)
@@ -620,9 +588,10 @@ impl Report {
                 .draw()?;
             for (i, row) in rows.iter().enumerate() {
                 let color = Palette99::pick(i).to_rgba();
+                let (what, placement) = (&row.what, &row.placement);
                 let label = match row.mode.as_str() {
-                    "-" => format!("{}, {}", row.what, row.placement),
-                    mode => format!("{}, {mode}, {}", row.what, row.placement),
+                    "-" => format!("{what}, {placement}"),
+                    mode => format!("{what}, {mode}, {placement}"),
                 };
                 let line = LineSeries::new(row.latencies.cdf(), color.stroke_width(2));
                 chart.draw_series(line)?.label(label).legend(move |(x, y)| {

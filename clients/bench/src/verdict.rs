@@ -4,8 +4,8 @@
 
 use serde::Deserialize;
 
-use crate::parts::{Part, Split, Whose};
-use crate::report::{Leg, LoopRun, MIN_FOR_P99, PathKind, Report, Row, median_replay};
+use crate::parts::{IN_SERVICE_COMMAND_PARTS, Part, Split, Whose};
+use crate::report::{Leg, LoopRun, MIN_FOR_P99, PathKind, Report, Row};
 use crate::stats::Summary;
 
 #[derive(Debug, Deserialize)]
@@ -21,7 +21,8 @@ struct Target {
     check: Check,
 }
 
-/// Rows by their typed identity: a path, a leg, and the loop modes (any when none is given).
+/// Rows by their typed identity: a path, a leg, and the loop modes (any when none is given). As
+/// a split or the rows a ratio is taken against, its modes are the judged row's.
 #[derive(Debug, Clone, Deserialize)]
 struct Select {
     path: PathKind,
@@ -30,15 +31,8 @@ struct Select {
     modes: Vec<String>,
 }
 
-/// A split by the rows it divides.
-#[derive(Debug, Clone, Copy, Deserialize)]
-struct SplitOf {
-    path: PathKind,
-    leg: Leg,
-}
-
 /// Which parts of a split lie within a row: all, or from the request read on
-/// ([`crate::parts::in_service_command`]).
+/// ([`crate::parts::IN_SERVICE_COMMAND_PARTS`]).
 #[derive(Debug, Clone, Copy, Default, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 enum Within {
@@ -54,14 +48,14 @@ enum Check {
         rows: Select,
         p50_us: f64,
         p99_us: f64,
-        split: Option<SplitOf>,
+        split: Option<Select>,
         #[serde(default)]
         within: Within,
     },
     Ratio {
         rows: Select,
         p99_times: f64,
-        against: Option<SplitOf>,
+        against: Option<Select>,
     },
     LoopMisses,
     FramesPerCpuSecond {
@@ -137,11 +131,13 @@ pub fn judge(report: &Report) -> anyhow::Result<Vec<Verdict>> {
 }
 
 impl Select {
-    fn rows<'r>(&self, report: &'r Report) -> Vec<&'r Row> {
+    fn rows(&self, report: &Report) -> Vec<Row> {
         let mode = |r: &Row| self.modes.is_empty() || self.modes.contains(&r.mode);
-        let rows = report.rows.iter();
-        rows.filter(|r| (r.path, r.leg) == (self.path, self.leg) && mode(r))
-            .collect()
+        let rows = report
+            .rows
+            .iter()
+            .filter(|r| (r.path, r.leg) == (self.path, self.leg));
+        rows.filter(|r| mode(r)).cloned().collect()
     }
 }
 
@@ -155,8 +151,9 @@ fn tally(items: impl Iterator<Item = (String, bool)>) -> (String, Option<bool>) 
     (figures.join("; "), Some(within.iter().all(|w| *w)))
 }
 
-/// Met or missed (without a split to say why), or not measured.
-fn plain((measured, met): (String, Option<bool>)) -> (String, Outcome) {
+/// Met or missed (without a split to say why), or not measured: `items` [`tally`]ed.
+fn plain(items: impl Iterator<Item = (String, bool)>) -> (String, Outcome) {
+    let (measured, met) = tally(items);
     let outcome = match met {
         None => Outcome::NotMeasured,
         Some(true) => Outcome::Met,
@@ -178,60 +175,50 @@ impl Check {
                 split,
                 within,
             } => {
+                let bound = Bound::Absolute {
+                    p50_us: *p50_us,
+                    p99_us: *p99_us,
+                };
                 let rows = rows.rows(report);
-                let (measured, met) = tally(rows.iter().map(|r| {
+                let figures = |r: &Row| {
                     let s = &r.summary;
-                    let figures = format!("{:.1} / {:.1} µs", s.p50_us, s.p99_us);
-                    let text = format!("{} {} {}: {figures}", r.what, r.mode, r.placement);
-                    (text, s.p50_us <= *p50_us && s.p99_us <= *p99_us)
-                }));
-                if met != Some(false) {
-                    return plain((measured, met));
-                }
-                let within: fn(&Part) -> bool = match within {
-                    Within::All => |_| true,
-                    Within::InService => crate::parts::in_service_command,
+                    let at = format!("{} {} {}", r.what, r.mode, r.placement);
+                    format!("{at}: {:.1} / {:.1} µs", s.p50_us, s.p99_us)
                 };
-                let split = split.map(|s| (s.path, s.leg));
-                let bound = |_: &Row| {
-                    Some(Bound::Absolute {
-                        p50_us: *p50_us,
-                        p99_us: *p99_us,
-                    })
-                };
-                (measured, missed(report, &rows, split, within, bound))
+                let split = split.as_ref().map(|s| (s.path, s.leg));
+                compare(report, &rows, figures, |_| Some(bound), split, *within)
             }
             Check::Ratio {
                 rows,
                 p99_times,
                 against,
-            } => ratio(report, rows, *p99_times, *against),
-            Check::LoopMisses => plain(tally(report.loops.iter().map(|l| {
+            } => ratio(report, rows, *p99_times, against.as_ref()),
+            Check::LoopMisses => plain(report.loops.iter().map(|l| {
                 let own = LoopRun::per_million(l.misses, l.periods);
                 let raw = LoopRun::per_million(l.raw_misses, l.raw_periods);
-                let (own_text, raw_text) = (own.round(), raw.round());
-                let text = format!(
-                    "{} {}: {own_text} vs {raw_text} of a million",
-                    l.rate, l.mode
-                );
-                (text, own <= raw)
-            }))),
+                let (rate, mode, own_n, raw_n) = (&l.rate, &l.mode, own.round(), raw.round());
+                (
+                    format!("{rate} {mode}: {own_n} vs {raw_n} of a million"),
+                    own <= raw,
+                )
+            })),
             Check::FramesPerCpuSecond { min } => {
-                let all = &report.throughput;
-                plain(tally(median_replay(all).into_iter().map(|m| {
-                    let each: Vec<String> = all
-                        .iter()
-                        .map(|t| format!("{:.0}", t.frames_per_cpu_s))
-                        .collect();
+                // The replay whose frames per CPU second are the median.
+                let mut runs: Vec<f64> = report
+                    .throughput
+                    .iter()
+                    .map(|t| t.frames_per_cpu_s)
+                    .collect();
+                let each: Vec<String> = runs.iter().map(|f| format!("{f:.0}")).collect();
+                runs.sort_by(f64::total_cmp);
+                let (n, each) = (runs.len(), each.join(", "));
+                plain(runs.get(n / 2).into_iter().map(|&median| {
                     let text = format!(
-                        "{:.0} frames per second of the service's CPU, the median of {} \
-                         replays ({})",
-                        m.frames_per_cpu_s,
-                        all.len(),
-                        each.join(", ")
+                        "{median:.0} frames per second of the service's CPU, the median of {n} \
+                         replays ({each})"
                     );
-                    (text, m.frames_per_cpu_s >= *min)
-                })))
+                    (text, median >= *min)
+                }))
             }
             Check::BusCpu {
                 bitrate,
@@ -239,95 +226,83 @@ impl Check {
             } => {
                 let at = report.cost.iter().filter(|c| c.bitrate == *bitrate);
                 let worst = at.max_by(|a, b| a.cpu_pct.total_cmp(&b.cpu_pct));
-                plain(tally(worst.into_iter().map(|c| {
-                    let text = format!(
-                        "{:.2} % at {:.0} frames/s ({})",
-                        c.cpu_pct, c.frames_per_s, c.bus
-                    );
-                    (text, c.cpu_pct < *max_percent)
-                })))
+                plain(worst.into_iter().map(|c| {
+                    let (pct, rate, bus) = (c.cpu_pct, c.frames_per_s, &c.bus);
+                    let text = format!("{pct:.2} % at {rate:.0} frames/s ({bus})");
+                    (text, pct < *max_percent)
+                }))
             }
             Check::ResidentMemory { max_mib } => {
                 let rss = report.cost.iter().map(|c| c.rss_mib).reduce(f64::max);
-                plain(tally(
+                plain(
                     rss.into_iter()
                         .map(|r| (format!("{r:.1} MiB"), r < *max_mib)),
-                ))
+                )
             }
         }
     }
 }
 
-/// Every row of `rows` with p99 at most `p99_times` × its baseline's, or, with `against`, the
-/// p99 of the row of the same run, loop and placement that `against` selects; none flagged
-/// inconsistent.
+/// Every row of `rows` with p99 at most `times` × its baseline's, or, with `against`, the p99
+/// of the row of the same run, loop and placement that `against` selects.
 fn ratio(
     report: &Report,
     rows: &Select,
     times: f64,
-    against: Option<SplitOf>,
+    against: Option<&Select>,
 ) -> (String, Outcome) {
     // Each row with its ratio: to its baseline, or to the row `against` selects.
-    let judged: Vec<Row> = rows
-        .rows(report)
-        .into_iter()
-        .filter_map(|r| {
-            let Some(a) = against else {
-                return Some(r.clone());
-            };
-            let base = report.rows.iter().find(|b| {
-                (b.path, b.leg) == (a.path, a.leg)
-                    && (&b.run, &b.mode, &b.placement) == (&r.run, &r.mode, &r.placement)
-            })?;
-            let ratio_p99 = Some(r.summary.p99_us / base.summary.p99_us);
-            Some(Row {
-                ratio_p99,
-                ..r.clone()
-            })
-        })
-        .collect();
-    let rows: Vec<&Row> = judged.iter().collect();
-    let (measured, met) = tally(rows.iter().map(|r| {
-        let text = match (r.ratio_p99, against) {
-            (Some(x), Some(_)) => {
-                let p99 = r.summary.p99_us;
-                let base = p99 / x;
-                format!(
-                    "{} {}: {p99:.1} vs {base:.1} µs, {x:.2} ×",
-                    r.mode, r.placement
-                )
-            }
-            (Some(x), None) => format!("{} {}: {x:.2} ×", r.what, r.placement),
-            (None, _) => format!("{} {}: no baseline", r.what, r.placement),
+    let judged = rows.rows(report).into_iter().filter_map(|r| {
+        let Some(a) = against else {
+            return Some(r);
         };
-        (text, r.ratio_p99.is_some_and(|x| x <= times))
-    }));
-    let outcome = match met {
-        Some(false) => missed(
-            report,
-            &rows,
-            None,
-            |_| true,
-            |row| {
-                let ratio = row.ratio_p99.filter(|r| *r > 0.0)?;
-                Some(Bound::Ratio {
-                    times,
-                    base_us: row.summary.p99_us / ratio,
-                })
-            },
-        ),
-        Some(true) => {
-            let flagged = rows.iter().filter(|r| r.inconsistent.is_some());
-            let flagged: Vec<String> = flagged
-                .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
-                .collect();
-            if flagged.is_empty() {
-                Outcome::Met
-            } else {
-                Outcome::Inconsistent { rows: flagged }
-            }
+        let base = report.rows.iter().find(|b| {
+            (b.path, b.leg) == (a.path, a.leg)
+                && (&b.run, &b.mode, &b.placement) == (&r.run, &r.mode, &r.placement)
+        })?;
+        let ratio_p99 = Some(r.summary.p99_us / base.summary.p99_us);
+        Some(Row { ratio_p99, ..r })
+    });
+    let figures = |r: &Row| match (r.ratio_p99, against) {
+        (Some(x), Some(_)) => {
+            let (p99, at) = (r.summary.p99_us, format!("{} {}", r.mode, r.placement));
+            format!("{at}: {p99:.1} vs {:.1} µs, {x:.2} ×", p99 / x)
         }
+        (Some(x), None) => format!("{} {}: {x:.2} ×", r.what, r.placement),
+        (None, _) => format!("{} {}: no baseline", r.what, r.placement),
+    };
+    let bound = |row: &Row| {
+        let ratio = row.ratio_p99?;
+        let base_us = row.summary.p99_us / ratio;
+        Some(Bound::Ratio { times, base_us })
+    };
+    let judged: Vec<Row> = judged.collect();
+    compare(report, &judged, figures, bound, None, Within::All)
+}
+
+/// The one comparator: each of `rows` with its `figures`, held to its `bound` (none: it cannot
+/// be judged, and is not within). All within: met, or inconsistent where a row is flagged; one
+/// out: missed, where the time of the worst goes in the split of `split` (the rows' own by
+/// default) over its parts `within` the row, and what bounds it.
+fn compare(
+    report: &Report,
+    rows: &[Row],
+    figures: impl Fn(&Row) -> String,
+    bound: impl Fn(&Row) -> Option<Bound>,
+    split: Option<(PathKind, Leg)>,
+    within: Within,
+) -> (String, Outcome) {
+    let holds = |r: &Row| bound(r).is_some_and(|b| b.holds(r));
+    let (measured, met) = tally(rows.iter().map(|r| (figures(r), holds(r))));
+    let flagged = rows.iter().filter(|r| r.inconsistent.is_some());
+    let flagged: Vec<String> = flagged
+        .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
+        .collect();
+    let outcome = match met {
         None => Outcome::NotMeasured,
+        Some(true) if flagged.is_empty() => Outcome::Met,
+        Some(true) => Outcome::Inconsistent { rows: flagged },
+        Some(false) => missed(report, rows, split, within, bound),
     };
     (measured, outcome)
 }
@@ -337,12 +312,12 @@ fn ratio(
 /// what bounds it against the target's `bound` for that row.
 fn missed(
     report: &Report,
-    rows: &[&Row],
+    rows: &[Row],
     split: Option<(PathKind, Leg)>,
-    within: impl Fn(&Part) -> bool,
+    within: Within,
     bound: impl Fn(&Row) -> Option<Bound>,
 ) -> Outcome {
-    let p99 = |r: &&&Row| r.ratio_p99.unwrap_or(r.summary.p99_us);
+    let p99 = |r: &&Row| r.ratio_p99.unwrap_or(r.summary.p99_us);
     let worst = rows.iter().max_by(|a, b| p99(a).total_cmp(&p99(b)));
     let run = worst.and_then(|row| {
         let split = split.unwrap_or((row.path, row.leg));
@@ -354,7 +329,11 @@ fn missed(
             bound: String::new(),
         };
     };
-    let parts: Vec<&Part> = split.parts.iter().filter(|p| within(p)).collect();
+    let from = match within {
+        Within::All => 0,
+        Within::InService => (split.parts.len()).saturating_sub(IN_SERVICE_COMMAND_PARTS),
+    };
+    let parts: Vec<&Part> = split.parts[from..].iter().collect();
     let whole = (parts.len() == split.parts.len()).then_some(split);
     Outcome::Missed {
         worst: largest_part(&parts, row).unwrap_or_default(),
@@ -370,18 +349,16 @@ fn largest_part(parts: &[&Part], row: &Row) -> Option<String> {
         .iter()
         .max_by(|a, b| a.summary.p99_us.total_cmp(&b.summary.p99_us))?;
     let head = format!("{} {} {}", row.what, row.mode, row.placement);
-    let s = &part.summary;
-    Some(if s.count < MIN_FOR_P99 {
-        format!(
-            "{head}: its run's split holds {} samples (the row {}), too few for a p99",
-            s.count, row.summary.count
-        )
-    } else {
-        format!(
-            "{head}: {}, p99 {:.1} µs (p50 {:.1}), over the {} samples of its run's split (the \
-             row {})",
-            part.name, s.p99_us, s.p50_us, s.count, row.summary.count
-        )
+    let (name, s, of) = (&part.name, &part.summary, row.summary.count);
+    let (n, p99, p50) = (s.count, s.p99_us, s.p50_us);
+    Some(match n < MIN_FOR_P99 {
+        true => {
+            format!("{head}: its run's split holds {n} samples (the row {of}), too few for a p99")
+        }
+        false => format!(
+            "{head}: {name}, p99 {p99:.1} µs (p50 {p50:.1}), over the {n} samples of its run's \
+             split (the row {of})"
+        ),
     })
 }
 
@@ -399,6 +376,16 @@ enum Bound {
 }
 
 impl Bound {
+    /// Whether `row` is within the bound: its ratio at most `times`, or its p50 and p99 at most
+    /// these.
+    fn holds(self, row: &Row) -> bool {
+        let s = &row.summary;
+        match self {
+            Bound::Ratio { times, .. } => row.ratio_p99.is_some_and(|x| x <= times),
+            Bound::Absolute { p50_us, p99_us } => s.p50_us <= p50_us && s.p99_us <= p99_us,
+        }
+    }
+
     /// Whether `s` (a part, or parts together) misses the bound on its own, with how it
     /// compares: "p99 X µs, N × the baseline's", or "P50 / P99 µs (p50 / p99)".
     fn missed_by(self, s: &Summary) -> (bool, String) {
@@ -433,9 +420,8 @@ impl std::fmt::Display for Bound {
 /// parts' sums are the row's).
 fn bound_text(bound: Option<Bound>, parts: &[&Part], whole: Option<&Split>, row: &Row) -> String {
     let largest = |whose| {
-        let of = parts
-            .iter()
-            .filter(|p| p.whose == whose && p.summary.count >= MIN_FOR_P99);
+        let of = parts.iter().filter(|p| p.whose == whose);
+        let of = of.filter(|p| p.summary.count >= MIN_FOR_P99);
         of.max_by(|a, b| a.summary.p99_us.total_cmp(&b.summary.p99_us))
     };
     let (Some(outside), Some(code)) = (largest(Whose::Outside), largest(Whose::Code)) else {
@@ -446,13 +432,11 @@ fn bound_text(bound: Option<Bound>, parts: &[&Part], whole: Option<&Split>, row:
     };
     let beyond = format!("beyond {bound} whatever the code does");
     let (alone_missed, alone) = bound.missed_by(&outside.summary);
+    let name = &outside.name;
     if alone_missed {
-        return format!(
-            "outside the code: {} alone: {alone}, {beyond}",
-            outside.name
-        );
+        return format!("outside the code: {name} alone: {alone}, {beyond}");
     }
-    let largest_alone = format!("the largest, {}: {alone}", outside.name);
+    let largest_alone = format!("the largest, {name}: {alone}");
     let mut stay = largest_alone.clone();
     let mut code_together = String::new();
     if let Some(w) = whole.filter(|w| w.outside.count >= MIN_FOR_P99) {
@@ -465,24 +449,21 @@ fn bound_text(bound: Option<Bound>, parts: &[&Part], whole: Option<&Split>, row:
             );
         }
         stay = format!("together: {together}; {largest_alone}");
-        code_together = format!(
-            "the code's parts together have p99 {:.1} µs (p50 {:.1}); ",
-            w.code.p99_us, w.code.p50_us
-        );
+        let (p99, p50) = (w.code.p99_us, w.code.p50_us);
+        code_together = format!("the code's parts together have p99 {p99:.1} µs (p50 {p50:.1}); ");
         // Its slowest samples slow in both at once: the row's p99 beyond both sums' added.
-        let added = w.code.p99_us + w.outside.p99_us;
-        if row.summary.count == w.code.count && row.summary.p99_us > added {
+        let (added, row_p99) = (p99 + w.outside.p99_us, row.summary.p99_us);
+        if row.summary.count == w.code.count && row_p99 > added {
             code_together.push_str(&format!(
-                "the row's p99 ({:.1} µs) is beyond the two sums' p99s added ({added:.1} µs): \
-                 its slowest samples were slow in the code's parts and outside at once; ",
-                row.summary.p99_us
+                "the row's p99 ({row_p99:.1} µs) is beyond the two sums' p99s added ({added:.1} \
+                 µs): its slowest samples were slow in the code's parts and outside at once; "
             ));
         }
     }
+    let (name, p99, p50) = (&code.name, code.summary.p99_us, code.summary.p50_us);
     format!(
         "the code: the parts outside it stay within the target ({stay}); {code_together}the \
-         code's largest, {}, has p99 {:.1} µs (p50 {:.1})",
-        code.name, code.summary.p99_us, code.summary.p50_us
+         code's largest, {name}, has p99 {p99:.1} µs (p50 {p50:.1})"
     )
 }
 
