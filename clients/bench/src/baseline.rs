@@ -26,7 +26,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
 use crate::paths::{HYBRID_SPIN, LoopMode};
-use crate::placement::{Placement, pin_current_thread};
+use crate::placement::pin_current_thread;
 use crate::stats::Latencies;
 
 /// The transports compared.
@@ -654,7 +654,7 @@ pub fn last_of(hops: &[u64], count: u64) -> Latencies {
 /// of its own, and the feed's hops are measured.
 pub fn run(
     transport: Transport,
-    placement: Placement,
+    (ping_cpu, pong_cpu): (Option<usize>, Option<usize>),
     rounds: u64,
     shape: Rounds,
     load: Option<Load>,
@@ -662,7 +662,6 @@ pub fn run(
     dir: &std::path::Path,
 ) -> anyhow::Result<Measured> {
     let tag = format!("{}-{}", std::process::id(), crate::placement::unique());
-    let (ping_cpu, pong_cpu) = placement.cpus();
     let args = PongArgs {
         transport,
         tag: tag.clone(),
@@ -690,7 +689,7 @@ pub fn run(
             false => Box::new(Socket::open(&args, "ping", "pong")?),
         };
         let result = match shape {
-            Rounds::Loop(period) => loop_rounds(endpoint.as_mut(), transport, rounds, period),
+            Rounds::Loop(period) => loop_rounds(endpoint.as_mut(), rounds, period),
             _ => ping_rounds(endpoint.as_mut(), transport, rounds, shape).map(|p| (p, 0)),
         };
         // Tells the pong to stop (and to write its feed figures).
@@ -839,7 +838,6 @@ fn ping_rounds(
 /// start → its ping in the pong process; and the counted periods missed.
 fn loop_rounds(
     endpoint: &mut dyn Endpoint,
-    transport: Transport,
     rounds: u64,
     period: Duration,
 ) -> anyhow::Result<(Vec<u64>, u64)> {
@@ -869,15 +867,10 @@ fn loop_rounds(
         endpoint.send(Ping::new(sent, seq, 0))?;
         periods.end(start, seq >= WARMUP);
     }
-    while (hops.len() as u64) < rounds {
-        if !take(endpoint, Duration::from_secs(2), &started, &mut hops)? {
-            let missing = rounds - hops.len() as u64;
-            bail!(
-                "{}: {missing} of {rounds} loop pings unanswered",
-                transport.label()
-            );
-        }
-    }
+    // An answer 2 s late is lost: a receiver descheduled longer than its buffer of pings lasts.
+    while (hops.len() as u64) < rounds
+        && take(endpoint, Duration::from_secs(2), &started, &mut hops)?
+    {}
     Ok((hops, periods.misses))
 }
 
