@@ -406,13 +406,10 @@ impl Endpoint for Socket {
     /// `None` when the read timeout passes first or the datagram is not a ping.
     fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>> {
         let mut buf = [0u8; 2048];
+        let (timeout, buf_ref) = (Some(timeout), &mut buf);
         let received = match self {
-            Socket::Uds(socket, _) => socket
-                .set_read_timeout(Some(timeout))
-                .and_then(|()| socket.recv(&mut buf)),
-            Socket::Udp(socket) => socket
-                .set_read_timeout(Some(timeout))
-                .and_then(|()| socket.recv(&mut buf)),
+            Socket::Uds(s, _) => s.set_read_timeout(timeout).and_then(|()| s.recv(buf_ref)),
+            Socket::Udp(s) => s.set_read_timeout(timeout).and_then(|()| s.recv(buf_ref)),
         };
         match received {
             Ok(n) => Ok(Ping::from_bytes(&buf[..n]).map(|p| (p, now_ns()))),

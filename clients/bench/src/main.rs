@@ -82,14 +82,6 @@ enum Role {
     ZenohPub(zenoh::RawArgs),
     /// Receive them and write their latencies.
     ZenohSub(zenoh::RawArgs),
-    /// Write the candump log the throughput run replays (for profiling the service by hand).
-    RecordTitan {
-        #[arg(long)]
-        out: PathBuf,
-        /// Simulated seconds (about 650 frames each).
-        #[arg(long, default_value_t = 1500)]
-        seconds: u64,
-    },
 }
 
 #[derive(Debug, Args)]
@@ -1284,8 +1276,6 @@ fn main() -> ExitCode {
             Role::DdsEcho(args) => dds_echo::run(&args),
             Role::ZenohPub(args) => zenoh::publish(&args),
             Role::ZenohSub(args) => zenoh::subscribe(&args),
-            Role::RecordTitan { out, seconds } => paths::record_titan(&out, seconds)
-                .map(|frames| eprintln!("{frames} frames written to {}", out.display())),
         },
         Some(RoleCmd::Render(args)) => std::fs::read_to_string(&args.samples)
             .with_context(|| format!("reading {}", args.samples.display()))
