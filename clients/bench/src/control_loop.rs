@@ -36,80 +36,35 @@ const SPEEDS: [f32; 20] = [
     0.9, 0.95, 1.0,
 ];
 
-/// A loop's commands: written on `teleop`, their frames taken from the tap.
-struct Commands {
-    motion: Motion,
-    teleop: chassis_client::Source,
-    /// Each frame's stamp and commanded speed.
-    frames: Vec<(u64, f64)>,
-    /// Each period's start, when its command was sent, its speed.
-    sent: Vec<(u64, u64, f64)>,
-}
-
-impl Commands {
-    fn open(robot: &mut Robot, kind: RobotKind, spin: bool) -> anyhow::Result<Self> {
-        let mut motion = Motion::open(robot, kind, spin)?;
-        let mut teleop = robot.source("teleop")?;
-        motion.warm_up(&mut teleop)?;
-        let (frames, sent) = (Vec::new(), Vec::new());
-        Ok(Self {
-            motion,
-            teleop,
-            frames,
-            sent,
-        })
-    }
-
-    fn take(&mut self, wait: bool) -> anyhow::Result<()> {
-        let (decoder, frames) = (&mut self.motion.decoder, &mut self.frames);
-        let each = |f: &chassis_client::BusFrame| {
-            if let Some(v) = decoder.linear(f) {
-                frames.push((f.stamp_ns, v));
-            }
-        };
-        match wait {
-            true => self.motion.tap.wait(Duration::from_millis(10), each)?,
-            false => self.motion.tap.drain(each)?,
-        };
-        Ok(())
-    }
-
-    /// Period `k`'s command, its period started at `due`; the tap drained without waiting.
-    fn send(&mut self, k: u64, due: u64) -> anyhow::Result<()> {
-        let speed = SPEEDS[usize::try_from(k % 20)?];
-        let stamp = now_ns();
-        self.teleop.send(VelocityRequest {
-            stamp_ns: stamp,
-            ..VelocityRequest::twist(speed, 0.0)
-        })?;
-        self.take(false)?;
-        self.sent.push((due, stamp, f64::from(speed)));
-        Ok(())
-    }
-
-    /// The last periods' frames taken, each period matched to its frame.
-    fn finish(mut self) -> anyhow::Result<(Latencies, u64)> {
-        let until = now_ns() + 100_000_000;
-        while now_ns() < until {
-            self.take(true)?;
-        }
-        self.teleop.stop()?;
-        Ok(match_frames(&self.sent, &self.frames))
-    }
-}
-
 /// Runs the loop for `periods` periods of `period` on `robot` (after a warm-up): each period, the
-/// newest state read ([`Robot::latest_state`]) and, with `drive` (a [`Motion`] of `kind`,
-/// polled with `spin`), a command written on `teleop`.
+/// newest state read ([`Robot::latest_state`]) and, with `drive`, a command written on `teleop`,
+/// the frame tap (a [`Motion`] of `kind`, polled with `spin`) drained without waiting.
 pub fn measure(
     robot: &mut Robot,
     (kind, spin, drive): (RobotKind, bool, bool),
     period: Duration,
     periods: u64,
 ) -> anyhow::Result<LoopFigures> {
-    let mut commands = drive
-        .then(|| Commands::open(robot, kind, spin))
-        .transpose()?;
+    let mut commands = None;
+    if drive {
+        let (mut motion, mut teleop) = (Motion::open(robot, kind, spin)?, robot.source("teleop")?);
+        motion.warm_up(&mut teleop)?;
+        commands = Some((motion, teleop));
+    }
+    let mut frames: Vec<(u64, f64)> = Vec::new();
+    let mut take = |motion: &mut Motion, wait: bool| {
+        let decoder = &mut motion.decoder;
+        let each = |f: &chassis_client::BusFrame| {
+            if let Some(v) = decoder.linear(f) {
+                frames.push((f.stamp_ns, v));
+            }
+        };
+        match wait {
+            true => motion.tap.wait(Duration::from_millis(10), each),
+            false => motion.tap.drain(each),
+        }
+    };
+    let mut sent: Vec<(u64, u64, f64)> = Vec::with_capacity(usize::try_from(periods)?);
     let mut state_age = Latencies::new();
     let mut clock = Periods::new(period);
     for k in 0..periods {
@@ -117,15 +72,32 @@ pub fn measure(
         if let Some(state) = robot.latest_state()? {
             state_age.record_between(state.stamp_ns, now_ns());
         }
-        if let Some(commands) = commands.as_mut() {
-            commands.send(k, due)?;
+        if let Some((motion, teleop)) = commands.as_mut() {
+            let speed = SPEEDS[usize::try_from(k % 20)?];
+            let stamp = now_ns();
+            teleop.send(VelocityRequest {
+                stamp_ns: stamp,
+                ..VelocityRequest::twist(speed, 0.0)
+            })?;
+            take(motion, false)?;
+            sent.push((due, stamp, f64::from(speed)));
         }
         clock.end(due, true);
+    }
+    let mut command = None;
+    if let Some((mut motion, mut teleop)) = commands {
+        // The last periods' frames.
+        let until = now_ns() + 100_000_000;
+        while now_ns() < until {
+            take(&mut motion, true)?;
+        }
+        teleop.stop()?;
+        command = Some(match_frames(&sent, &frames));
     }
     Ok(LoopFigures {
         periods,
         misses: clock.misses,
-        command: commands.map(Commands::finish).transpose()?,
+        command,
         state_age,
     })
 }

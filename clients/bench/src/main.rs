@@ -9,6 +9,10 @@
 //! * **verdict** (`verdict.rs`): the targets of `targets.toml`, judged by one comparator;
 //! * **render** (`render.rs`, the words in `performance.md`; the table and plot in `report.rs`),
 //!   from the samples and the verdict alone: `chassis-bench render SAMPLES` gives the same bytes.
+//!
+//! `--attach NAME` (or `--bus BUS`, chassisd started on it) measures a user's own robot instead
+//! of the simulator: its state and control-loop rows by reading only, the rows that send
+//! velocity with `--wheels-off-ground` alone.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
