@@ -274,6 +274,13 @@ fn bus_label(robot: RobotKind, bus: BusKind) -> String {
     format!("{robot} {bus}")
 }
 
+/// A path's row and its in-service row at `(mode, at)`, as [`path_rows`] names them.
+fn plan_path(path: PathKind, what: &str, (mode, at): (&str, &str), asked: u64) -> [Planned; 2] {
+    let inside = format!("{what}: {path}");
+    [(path, what), (PathKind::InService, &*inside)]
+        .map(|(path, what)| Planned::new(row_key(path, what, mode, at), asked))
+}
+
 /// The placement of a row whose ends no one pinned.
 pub const UNPINNED: &str = "unpinned";
 
@@ -565,13 +572,8 @@ impl PathRun {
         Planned::new(self.key(path, what), asked)
     }
 
-    /// The row and its in-service row, as [`path_rows`] names them.
     fn plan_path(&self, path: PathKind, what: &str, asked: u64) -> [Planned; 2] {
-        let inside = format!("{what}: {path}");
-        [
-            self.plan(path, what, asked),
-            self.plan(PathKind::InService, &inside, asked),
-        ]
+        plan_path(path, what, (self.mode.arg(), self.placement.label()), asked)
     }
 
     /// `<run>: <what>`: the Python client's and the ROS 2 bridge's rows.
@@ -1039,6 +1041,9 @@ struct Attached {
     loops: Vec<Duration>,
 }
 
+/// An attached run's rows' loop and placement: the client waits for events, unpinned.
+const ATTACHED: (&str, &str) = ("event", UNPINNED);
+
 impl Attached {
     /// The chassisd of `--attach` (its robot read from its description), or chassisd started
     /// for `kind` on `--bus` (returned, stopped on drop).
@@ -1054,38 +1059,33 @@ impl Attached {
             .filter(|l| l.1 == LoopMode::Event)
             .map(|l| l.0)
             .collect();
+        let (name, prefix, kind, run, started) = match bus {
+            Some(bus) => {
+                let name = format!("bn{}", placement::unique());
+                let children = paths::Children::default();
+                let started = paths::launch((kind, &name, bus), &[], &[], children, prefix, dir)?;
+                let run = format!("{kind} {bus}");
+                (name, Some(prefix.to_string()), kind, run, Some(started))
+            }
+            None => {
+                let name = attach.clone().unwrap_or_default();
+                let robot = Robot::connect(&name).with_context(|| format!("attaching to {name}"));
+                let described = robot?.description(Duration::from_secs(5))?;
+                let kind: RobotKind = described.kind_name().parse().map_err(anyhow::Error::msg)?;
+                let run = format!("{kind} attached as {name}");
+                (name, None, kind, run, None)
+            }
+        };
         let drive = args.wheels_off_ground;
-        if let Some(bus) = bus {
-            let name = format!("bn{}", placement::unique());
-            let children = paths::Children::default();
-            let started = paths::launch((kind, &name, bus), &[], &[], children, prefix, dir)?;
-            let (prefix, run) = (Some(prefix.into()), format!("{kind} {bus}"));
-            let attached = Self {
-                name,
-                prefix,
-                kind,
-                run,
-                drive,
-                loops,
-            };
-            return Ok((attached, Some(started)));
-        }
-        let name = attach.clone().unwrap_or_default();
-        let mut robot = Robot::connect(&name).with_context(|| format!("attaching to {name}"))?;
-        let described = robot.description(Duration::from_secs(5))?;
-        let kind: RobotKind = described.kind_name().parse().map_err(anyhow::Error::msg)?;
-        let run = format!("{kind} attached as {name}");
-        Ok((
-            Self {
-                name,
-                prefix: None,
-                kind,
-                run,
-                drive,
-                loops,
-            },
-            None,
-        ))
+        let attached = Self {
+            name,
+            prefix,
+            kind,
+            run,
+            drive,
+            loops,
+        };
+        Ok((attached, started))
     }
 
     fn loop_rows(&self, ctx: &Ctx) -> impl Iterator<Item = [Planned; 3]> {
@@ -1097,27 +1097,23 @@ impl Attached {
     /// → frame.
     fn sending(&self, ctx: &Ctx) -> Vec<Planned> {
         let commands = ctx.plan.commands;
-        let mut rows: Vec<Planned> = self.planned_path(PathKind::Command, commands).into();
+        let mut rows: Vec<Planned> =
+            plan_path(PathKind::Command, &self.run, ATTACHED, commands).into();
         rows.extend(self.loop_rows(ctx).map(|[frame, ..]| frame));
         rows
     }
 
-    /// A path's row and its in-service row, as [`path_rows`] names them.
-    fn planned_path(&self, path: PathKind, asked: u64) -> [Planned; 2] {
-        let inside = format!("{}: {path}", self.run);
-        [(path, &self.run), (PathKind::InService, &inside)]
-            .map(|(path, what)| Planned::new(row_key(path, what, "event", UNPINNED), asked))
-    }
-
     fn row(&self, path: PathKind, leg: Leg, l: Latencies, missed: u64) -> Row {
         let run = &self.run;
-        Row::new(path, leg, run, run.clone(), "event", UNPINNED, l, missed)
+        let (mode, at) = ATTACHED;
+        Row::new(path, leg, run, run.clone(), mode, at, l, missed)
     }
 }
 
 impl Step for Attached {
     fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
-        let mut rows: Vec<Planned> = self.planned_path(PathKind::State, ctx.plan.states).into();
+        let states = ctx.plan.states;
+        let mut rows: Vec<Planned> = plan_path(PathKind::State, &self.run, ATTACHED, states).into();
         rows.extend(self.loop_rows(ctx).flat_map(|[_, age, hop]| [age, hop]));
         if self.drive {
             rows.extend(self.sending(ctx));

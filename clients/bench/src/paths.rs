@@ -889,14 +889,7 @@ pub(crate) fn stat_cpu_seconds(path: &str) -> anyhow::Result<f64> {
 
 /// Resident memory of a process, MiB.
 pub fn rss_mib(pid: u32) -> anyhow::Result<f64> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
-    let kib: f64 = status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))
-        .and_then(|v| v.split_whitespace().next())
-        .context("no VmRSS")?
-        .parse()?;
-    Ok(kib / 1024.0)
+    Ok(crate::fleet::status_field(pid, "VmRSS:")? / 1024.0)
 }
 
 /// Loads the simulated bus to `bitrate`'s capacity (8-byte standard frames, no stuffing:
