@@ -720,16 +720,8 @@ impl PathRun {
         let [paced, feed_what, published, warm] = self.loaded();
         let measure = |what: String, rounds, shape, load| {
             ctx.bar.set_message(format!("baseline as {label}: {what}"));
-            let (placement, prefix, dir) = (self.placement, &ctx.prefix, &ctx.dir);
-            baseline::run(
-                transport,
-                placement.cpus(),
-                rounds,
-                shape,
-                Some(load),
-                prefix,
-                dir,
-            )
+            let (cpus, prefix, dir) = (self.placement.cpus(), &ctx.prefix, &ctx.dir);
+            baseline::run(transport, cpus, rounds, shape, Some(load), prefix, dir)
         };
         // The rounds of `period` in which the feed brings `more` times `wanted` samples.
         let rounds_for = |wanted: u64, period: Duration, more: f64| {
