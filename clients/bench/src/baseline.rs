@@ -85,6 +85,16 @@ pub struct Load {
     pub published: bool,
 }
 
+impl Load {
+    /// How a loaded receiver's conditions end: `, at SCHED_FIFO P as the service's loop`, or
+    /// nothing at normal scheduling.
+    pub fn fifo_text(&self) -> String {
+        (self.realtime).map_or(String::new(), |p| {
+            format!(", at SCHED_FIFO {p} as the service's loop")
+        })
+    }
+}
+
 /// How a baseline run's rounds go.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Rounds {

@@ -279,9 +279,7 @@ impl Over {
         report
             .rows
             .push(row(Leg::StateAge, age, figures.state_age, 0));
-        let fifo = self.realtime.map_or(String::new(), |p| {
-            format!(", at SCHED_FIFO {p} as the service's loop")
-        });
+        let fifo = load.fifo_text();
         let conditions = format!(
             "a loop on absolute deadlines sending one ping at the start of each period, \
              looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s \

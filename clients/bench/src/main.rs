@@ -705,10 +705,7 @@ impl PathRun {
         };
         // The feed runs where chassisd put its simulated chassis (`baseline::feed_cpu`).
         let (feed_where, fifo) = match run.realtime {
-            Some(priority) => (
-                "on the receiver's CPU",
-                format!(", at SCHED_FIFO {priority} as the service's loop"),
-            ),
+            Some(_) => ("on the receiver's CPU", load.fifo_text()),
             None => ("on the other CPU", String::new()),
         };
         let conditions = format!(
