@@ -273,7 +273,9 @@ impl Over {
         let superseded = figures.command.as_ref().map_or(0, |c| c.1);
         if let Some((l, superseded)) = figures.command {
             let mut frame_row = row(Leg::PeriodToFrame, frame, l, superseded);
-            frame_row.baseline = Some(format!("{hop}, {raw_at}"));
+            // Compared with the raw loop only where both ran alike: a chassisd the run did not
+            // place (an attached robot's) is not.
+            frame_row.baseline = self.placement.map(|_| format!("{hop}, {raw_at}"));
             report.rows.push(frame_row);
         }
         report

@@ -66,12 +66,16 @@ fn measured(rows: &[(String, String, u64)], path: &str, leg: &str) -> u64 {
 #[test]
 fn the_bench_attached_to_a_running_robot_reads_it_and_drives_it_only_with_its_wheels_off_the_ground()
  {
-    let (mut env, n, mut robot) = Env::serving(
-        "bench-attach",
-        ("bat", "titan"),
-        &["--no-safety-monitor"],
-        UP,
+    // A robot configured for a 1 kHz controller: every command goes out at once, unramped.
+    let mut env = Env::new("bench-attach");
+    let config = env.write(
+        "chassisd.toml",
+        "[driver]\nmin_command_interval_ms = 0\n\n\
+         [mux.limits]\nlinear_accel_mps2 = 0.0\nangular_accel_radps2 = 0.0\n",
     );
+    let n = name("bat");
+    env.serve("titan", &n, &["--no-safety-monitor", "--config", &config]);
+    let mut robot = env.robot(&n, UP);
     // The robot's own software drives it (a lower priority than the bench's teleop): its
     // feedback keeps changing the state the bench reads.
     let mut planner = source(&mut robot, "planner");
