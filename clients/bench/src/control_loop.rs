@@ -21,10 +21,10 @@ pub struct LoopFigures {
     pub periods: u64,
     /// Periods that ended after the next one was due.
     pub misses: u64,
-    /// Each period's start → the frame carrying its command written.
-    pub command: Latencies,
-    /// Periods whose command no frame carried: the next period's reached the loop first.
-    pub superseded: u64,
+    /// A loop that writes commands: each period's start → the frame carrying its command
+    /// written, and the periods whose command no frame carried (the next period's reached the
+    /// loop first).
+    pub command: Option<(Latencies, u64)>,
     /// The newest state's frame read → the loop read it, each period.
     pub state_age: Latencies,
 }
@@ -37,18 +37,20 @@ const SPEEDS: [f32; 20] = [
 ];
 
 /// Runs the loop for `periods` periods of `period` on `robot` (after a warm-up): each period, the
-/// newest state read ([`Robot::latest_state`]) and a command written on `teleop`, the frame tap
-/// drained without waiting.
+/// newest state read ([`Robot::latest_state`]) and, with `drive`, a command written on `teleop`,
+/// the frame tap (a [`Motion`] of `kind`, polled with `spin`) drained without waiting.
 pub fn measure(
     robot: &mut Robot,
-    kind: RobotKind,
+    (kind, spin, drive): (RobotKind, bool, bool),
     period: Duration,
     periods: u64,
-    spin: bool,
 ) -> anyhow::Result<LoopFigures> {
-    let mut motion = Motion::open(robot, kind, spin)?;
-    let mut teleop = robot.source("teleop")?;
-    motion.warm_up(&mut teleop)?;
+    let mut commands = None;
+    if drive {
+        let (mut motion, mut teleop) = (Motion::open(robot, kind, spin)?, robot.source("teleop")?);
+        motion.warm_up(&mut teleop)?;
+        commands = Some((motion, teleop));
+    }
     let mut frames: Vec<(u64, f64)> = Vec::new();
     let mut take = |motion: &mut Motion, wait: bool| {
         let decoder = &mut motion.decoder;
@@ -70,28 +72,32 @@ pub fn measure(
         if let Some(state) = robot.latest_state()? {
             state_age.record_between(state.stamp_ns, now_ns());
         }
-        let speed = SPEEDS[usize::try_from(k % 20)?];
-        let stamp = now_ns();
-        teleop.send(VelocityRequest {
-            stamp_ns: stamp,
-            ..VelocityRequest::twist(speed, 0.0)
-        })?;
-        take(&mut motion, false)?;
-        sent.push((due, stamp, f64::from(speed)));
+        if let Some((motion, teleop)) = commands.as_mut() {
+            let speed = SPEEDS[usize::try_from(k % 20)?];
+            let stamp = now_ns();
+            teleop.send(VelocityRequest {
+                stamp_ns: stamp,
+                ..VelocityRequest::twist(speed, 0.0)
+            })?;
+            take(motion, false)?;
+            sent.push((due, stamp, f64::from(speed)));
+        }
         clock.end(due, true);
     }
-    // The last periods' frames.
-    let until = now_ns() + 100_000_000;
-    while now_ns() < until {
-        take(&mut motion, true)?;
+    let mut command = None;
+    if let Some((mut motion, mut teleop)) = commands {
+        // The last periods' frames.
+        let until = now_ns() + 100_000_000;
+        while now_ns() < until {
+            take(&mut motion, true)?;
+        }
+        teleop.stop()?;
+        command = Some(match_frames(&sent, &frames));
     }
-    teleop.stop()?;
-    let (command, superseded) = match_frames(&sent, &frames);
     Ok(LoopFigures {
         periods,
         misses: clock.misses,
         command,
-        superseded,
         state_age,
     })
 }
@@ -173,47 +179,109 @@ pub fn run(
     report: &mut Report,
 ) -> anyhow::Result<()> {
     let (kind, placement) = (RobotKind::Titan, Placement::CrossCpu);
-    let (run, at) = (format!("{kind} sim"), placement.label());
     for &(period, mode) in loops {
-        let (client_cpu, service_cpu) = placement.cpus();
+        let service_cpu = placement.cpus().1;
         let config = ServiceConfig::BenchRealtime;
         let spec = (kind, paths::BusKind::Sim, mode);
         let (service, mut robot) = paths::start(spec, service_cpu, config, false, prefix, dir)?;
-        let count = periods(period, seconds);
-        let spin = mode == LoopMode::Spin;
-        let feedback = paths::FeedbackRate::start(&mut robot)?;
-        let figures = paths::pinned(client_cpu, || {
-            measure(&mut robot, kind, period, count, spin)
-        })??;
-        let feed_per_s = feedback.per_second(&mut robot)?;
         let realtime = service.scheduling.fifo();
+        let over = Over {
+            run: format!("{kind} sim"),
+            kind,
+            mode,
+            placement: Some(placement),
+            realtime,
+        };
+        let measured = over.measure(&mut robot, period, seconds, true)?;
+        // The raw loop runs alone.
         drop(robot);
         drop(service);
-        // The raw loop's receiver lives as chassisd's loop did: woken by another process at
-        // the chassis' feedback rate, by its own tick, scheduled alike.
-        let tick = kind.entry().defaults().heartbeat_period();
+        over.record(measured, period, (prefix, dir), report)?;
+    }
+    Ok(())
+}
+
+/// The chassisd a loop runs over: robot and bus (`run`), its loop `mode` and scheduling, where
+/// the loop and chassisd are pinned (none: where the system puts them).
+pub struct Over {
+    pub run: String,
+    pub kind: RobotKind,
+    pub mode: LoopMode,
+    pub placement: Option<Placement>,
+    pub realtime: Option<u8>,
+}
+
+impl Over {
+    pub fn at(&self) -> &'static str {
+        self.placement.map_or(crate::UNPINNED, Placement::label)
+    }
+
+    /// Runs a loop of `period` over `robot` for `seconds`, writing commands with `drive`: what
+    /// it measured and the chassis' feedback rate meanwhile.
+    pub fn measure(
+        &self,
+        robot: &mut Robot,
+        period: Duration,
+        seconds: f64,
+        drive: bool,
+    ) -> anyhow::Result<(LoopFigures, f64)> {
+        let cpu = self.placement.and_then(|p| p.cpus().0);
+        let count = periods(period, seconds);
+        let feedback = paths::FeedbackRate::start(robot)?;
+        let how = (self.kind, self.mode == LoopMode::Spin, drive);
+        let figures = paths::pinned(cpu, || measure(robot, how, period, count))??;
+        Ok((figures, feedback.per_second(robot)?))
+    }
+
+    /// Adds the rows and figures of a loop of `period` to `report`, measuring the same loop over
+    /// the raw iceoryx2 hop, its receiver living as chassisd's loop did: woken by another
+    /// process at the chassis' feedback rate, by its own tick, scheduled alike.
+    pub fn record(
+        &self,
+        (figures, feed_per_s): (LoopFigures, f64),
+        period: Duration,
+        (prefix, dir): (&str, &std::path::Path),
+        report: &mut Report,
+    ) -> anyhow::Result<()> {
+        let (run, at, mode, count) = (&self.run, self.at(), self.mode, figures.periods);
+        // The raw loop is the bench's own pair of processes: across two CPUs, as the service's
+        // and the client's in a simulated run.
+        let (cpus, raw_at) = (Placement::CrossCpu.cpus(), Placement::CrossCpu.label());
+        let tick = self.kind.entry().defaults().heartbeat_period();
         let load = baseline::Load {
             feed_per_s,
             tick,
-            realtime,
+            realtime: self.realtime,
             published: false,
         };
         let transport = Transport::like(mode);
         let shape = baseline::Rounds::Loop(period);
-        let raw = baseline::run(transport, placement, count, shape, Some(load), prefix, dir)?;
-        let [frame, age, hop] = row_names(&run, period, transport);
-        let row = |path, leg, what, latencies, missed| {
-            Row::new(path, leg, &run, what, mode.arg(), at, latencies, missed)
+        let raw = baseline::run(transport, cpus, count, shape, Some(load), prefix, dir)?;
+        let [frame, age, hop] = row_names(run, period, transport);
+        let row = |leg, what, latencies, missed| {
+            Row::new(
+                PathKind::Loop,
+                leg,
+                run,
+                what,
+                mode.arg(),
+                at,
+                latencies,
+                missed,
+            )
         };
-        let (l, superseded) = (figures.command, figures.superseded);
-        let mut frame_row = row(PathKind::Loop, Leg::PeriodToFrame, frame, l, superseded);
-        frame_row.baseline = Some(format!("{hop}, {at}"));
-        report.rows.push(frame_row);
-        let age_row = row(PathKind::Loop, Leg::StateAge, age, figures.state_age, 0);
-        report.rows.push(age_row);
-        let fifo = realtime.map_or(String::new(), |p| {
-            format!(", at SCHED_FIFO {p} as the service's loop")
-        });
+        let superseded = figures.command.as_ref().map_or(0, |c| c.1);
+        if let Some((l, superseded)) = figures.command {
+            let mut frame_row = row(Leg::PeriodToFrame, frame, l, superseded);
+            // Compared with the raw loop only where both ran alike: a chassisd the run did not
+            // place (an attached robot's) is not.
+            frame_row.baseline = self.placement.map(|_| format!("{hop}, {raw_at}"));
+            report.rows.push(frame_row);
+        }
+        report
+            .rows
+            .push(row(Leg::StateAge, age, figures.state_age, 0));
+        let fifo = load.fifo_text();
         let conditions = format!(
             "a loop on absolute deadlines sending one ping at the start of each period, \
              looking for the answers without waiting; the receiver woken {feed_per_s:.0}/s \
@@ -221,7 +289,10 @@ pub fn run(
              tick{fifo}; {count} periods after 200 of warm-up",
             tick.as_millis(),
         );
-        (report.rows).push(Row::hop(&run, hop, at, raw.all_pings(), conditions));
+        let mut hop = Row::hop(run, hop, raw_at, raw.all_pings(), conditions);
+        // The pings the receiver lost.
+        hop.missed = count.saturating_sub(raw.pings.len() as u64);
+        report.rows.push(hop);
         report.loops.push(LoopRun {
             run: run.clone(),
             rate: rate(period),
@@ -229,13 +300,13 @@ pub fn run(
             placement: at.into(),
             periods: figures.periods,
             misses: figures.misses,
-            superseded: figures.superseded,
+            superseded,
             raw_transport: transport.label().into(),
             raw_periods: count,
             raw_misses: raw.missed_periods,
         });
+        Ok(())
     }
-    Ok(())
 }
 
 #[cfg(test)]

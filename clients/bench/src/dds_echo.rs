@@ -25,7 +25,6 @@ pub struct EchoArgs {
     domain_id: u16,
 }
 
-/// The far end of the raw DDS hops: the bridge's own DDS stack with nothing behind it, each hop carrying what the bridge's path carries, with its QoS.
 /// Each `TwistStamped` on `chassis_bench/ping` (its stamp: the sender's `CLOCK_MONOTONIC` at the
 /// write), read as `cmd_vel` is read, is recorded as a one-way latency and answered at once on
 /// `chassis_bench/pong` by an `Odometry` written as `odom` is written (the same message, the

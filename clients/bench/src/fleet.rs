@@ -94,7 +94,7 @@ fn process_cpu_s(pid: u32) -> anyhow::Result<f64> {
     paths::stat_cpu_seconds(&format!("/proc/{pid}/stat"))
 }
 
-fn status_field(pid: u32, field: &str) -> anyhow::Result<f64> {
+pub(crate) fn status_field(pid: u32, field: &str) -> anyhow::Result<f64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
     status
         .lines()

@@ -9,12 +9,17 @@
 //! * **verdict** (`verdict.rs`): the targets of `targets.toml`, judged by one comparator;
 //! * **render** (`render.rs`, the words in `performance.md`; the table and plot in `report.rs`),
 //!   from the samples and the verdict alone: `chassis-bench render SAMPLES` gives the same bytes.
+//!
+//! `--attach NAME` (or `--bus BUS`, chassisd started on it) measures a user's own robot instead
+//! of the simulator: its state and control-loop rows by reading only, the rows that send
+//! velocity with `--wheels-off-ground` alone.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context;
+use chassis_client::Robot;
 use chassis_protocols::RobotKind;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -81,14 +86,6 @@ enum Role {
     ZenohPub(zenoh::RawArgs),
     /// Receive them and write their latencies.
     ZenohSub(zenoh::RawArgs),
-    /// Write the candump log the throughput run replays (for profiling the service by hand).
-    RecordTitan {
-        #[arg(long)]
-        out: PathBuf,
-        /// Simulated seconds (about 650 frames each).
-        #[arg(long, default_value_t = 1500)]
-        seconds: u64,
-    },
 }
 
 #[derive(Debug, Args)]
@@ -125,6 +122,19 @@ struct RunArgs {
     /// Skip parts: baselines, paths, loops, fanout, cost, throughput, zenoh.
     #[arg(long, value_delimiter = ',')]
     skip: Vec<String>,
+    /// Measure the chassisd already running for robot NAME (under `$CHASSIS_IPC_PREFIX`), not the
+    /// simulator: its state rows and the control loops' rows, reading only; the rows that send
+    /// velocity with --wheels-off-ground alone.
+    #[arg(long, value_name = "NAME", conflicts_with = "bus")]
+    attach: Option<String>,
+    /// Start chassisd for the first of --robots on this bus (as chassisd takes it: `can:can0`,
+    /// `slcan:/dev/ttyACM0`) instead of the simulator, and measure it as --attach does.
+    #[arg(long, value_name = "BUS")]
+    bus: Option<String>,
+    /// With --attach or --bus, measure the rows that send velocity too (the command rows, the
+    /// control loops' command → frame): the robot will drive, its wheels must be off the ground.
+    #[arg(long)]
+    wheels_off_ground: bool,
     /// Scratch directory for logs and sockets, kept afterwards (default: a new one under /tmp,
     /// removed at the end)
     #[arg(long)]
@@ -264,6 +274,25 @@ fn bus_label(robot: RobotKind, bus: BusKind) -> String {
     format!("{robot} {bus}")
 }
 
+/// A path's row and its in-service row at `(mode, at)`, as [`path_rows`] names them.
+fn plan_path(path: PathKind, what: &str, (mode, at): (&str, &str), asked: u64) -> [Planned; 2] {
+    let inside = format!("{what}: {path}");
+    [(path, what), (PathKind::InService, &*inside)]
+        .map(|(path, what)| Planned::new(row_key(path, what, mode, at), asked))
+}
+
+/// The placement of a row whose ends no one pinned.
+pub const UNPINNED: &str = "unpinned";
+
+/// Why a planned row was not measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Withheld {
+    /// It sends velocity to a robot the run did not start for itself, and `--wheels-off-ground`
+    /// was not given.
+    WheelsOnGround,
+}
+
 fn baseline_key(what: &str, placement: &str) -> String {
     row_key(PathKind::Baseline, what, "-", placement)
 }
@@ -321,7 +350,16 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         let note = "one CPU only: cross-CPU runs share it";
         report.notes.push(note.into());
     }
-    let steps = steps(args, &robots, &plan, skip);
+    let prefix = format!("cb{}_", std::process::id());
+    // A chassisd started on the user's bus stops at the end of the run.
+    let (steps, _service) = match (&args.attach, &args.bus) {
+        (None, None) => (steps(args, &robots, &plan, skip), None),
+        (attach, bus) => {
+            let kind = robots.first().copied().unwrap_or(RobotKind::Titan);
+            let (attached, service) = Attached::new(args, attach, bus, kind, (&prefix, &dir))?;
+            (vec![Box::new(attached) as Box<dyn Step>], service)
+        }
+    };
     let bar = ProgressBar::new(steps.len() as u64);
     bar.set_style(
         ProgressStyle::with_template("{elapsed:>4} [{bar:30}] {pos}/{len} {msg}")
@@ -330,7 +368,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
     );
     let ctx = Ctx {
         plan,
-        prefix: format!("cb{}_", std::process::id()),
+        prefix,
         dir,
         python: python::interpreter("python"),
         ros2: python::interpreter("ros2"),
@@ -340,7 +378,7 @@ fn run(args: &RunArgs) -> anyhow::Result<Report> {
         (ctx.python.is_none(), "the Python client", "python"),
         (ctx.ros2.is_none(), "the ROS 2 bridge", "ros2"),
     ] {
-        if missing && !skip("paths") {
+        if missing && !skip("paths") && args.attach.is_none() && args.bus.is_none() {
             report.notes.push(format!(
                 "{what} was not measured: target/{name}-venv is missing \
                  (scripts/{name}-tests makes it)"
@@ -457,7 +495,15 @@ impl Step for Baseline {
             }
         };
         let (prefix, dir) = (&ctx.prefix, &ctx.dir);
-        let l = baseline::run(transport, placement, rounds, shape, None, prefix, dir)?;
+        let l = baseline::run(
+            transport,
+            placement.cpus(),
+            rounds,
+            shape,
+            None,
+            prefix,
+            dir,
+        )?;
         (report.rows).push(Row::hop("", what, at, l.all_pings(), conditions));
         Ok(())
     }
@@ -526,13 +572,8 @@ impl PathRun {
         Planned::new(self.key(path, what), asked)
     }
 
-    /// The row and its in-service row, as [`path_rows`] names them.
     fn plan_path(&self, path: PathKind, what: &str, asked: u64) -> [Planned; 2] {
-        let inside = format!("{what}: {path}");
-        [
-            self.plan(path, what, asked),
-            self.plan(PathKind::InService, &inside, asked),
-        ]
+        plan_path(path, what, (self.mode.arg(), self.placement.label()), asked)
     }
 
     /// `<run>: <what>`: the Python client's and the ROS 2 bridge's rows.
@@ -598,7 +639,7 @@ impl PathRun {
             let (mut state, mut teleop) =
                 (paths::StateRecorder::default(), robot.source("teleop")?);
             let sizes = (ctx.plan.states, spin);
-            paths::state_path(&robot, &mut teleop, &mut state, sizes, |_, _| {})?;
+            paths::state_path(&robot, Some(&mut teleop), &mut state, sizes, |_, _| {})?;
             // The preemption opens a teleop source of its own.
             drop(teleop);
             let preempt = paths::preemption(&mut robot, self.robot, preemptions, interval, spin)?;
@@ -664,10 +705,7 @@ impl PathRun {
         };
         // The feed runs where chassisd put its simulated chassis (`baseline::feed_cpu`).
         let (feed_where, fifo) = match run.realtime {
-            Some(priority) => (
-                "on the receiver's CPU",
-                format!(", at SCHED_FIFO {priority} as the service's loop"),
-            ),
+            Some(_) => ("on the receiver's CPU", load.fifo_text()),
             None => ("on the other CPU", String::new()),
         };
         let conditions = format!(
@@ -679,8 +717,8 @@ impl PathRun {
         let [paced, feed_what, published, warm] = self.loaded();
         let measure = |what: String, rounds, shape, load| {
             ctx.bar.set_message(format!("baseline as {label}: {what}"));
-            let (placement, prefix, dir) = (self.placement, &ctx.prefix, &ctx.dir);
-            baseline::run(transport, placement, rounds, shape, Some(load), prefix, dir)
+            let (cpus, prefix, dir) = (self.placement.cpus(), &ctx.prefix, &ctx.dir);
+            baseline::run(transport, cpus, rounds, shape, Some(load), prefix, dir)
         };
         // The rounds of `period` in which the feed brings `more` times `wanted` samples.
         let rounds_for = |wanted: u64, period: Duration, more: f64| {
@@ -935,31 +973,191 @@ impl Step for DefaultConfig {
     }
 }
 
+/// The rows of a control loop of `period` over `run` (robot and bus) at `at` with chassisd's
+/// loop `mode`, lasting `seconds`: the period → frame row (a command the next period's
+/// superseded is what the row measures, not a loss), the state's age, the raw loop's hop (cross
+/// CPU).
+fn loop_rows(
+    run: &str,
+    at: &str,
+    (period, mode): (Duration, LoopMode),
+    seconds: f64,
+) -> [Planned; 3] {
+    let periods = Some(control_loop::periods(period, seconds));
+    let [frame, age, hop] = control_loop::row_names(run, period, Transport::like(mode));
+    [
+        Planned::new(row_key(PathKind::Loop, &frame, mode.arg(), at), None),
+        Planned::new(row_key(PathKind::Loop, &age, mode.arg(), at), periods),
+        Planned::new(baseline_key(&hop, Placement::CrossCpu.label()), periods),
+    ]
+}
+
 /// The control loops of [`control_loop::plan`].
 struct Loops(Vec<(Duration, LoopMode)>);
 
 impl Step for Loops {
     fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
-        let cross = Placement::CrossCpu.label();
-        let run = bus_label(RobotKind::Titan, BusKind::Sim);
-        let mut rows = Vec::new();
-        for &(period, mode) in &self.0 {
-            let periods = Some(control_loop::periods(period, ctx.plan.loop_seconds));
-            let [frame, age, hop] = control_loop::row_names(&run, period, Transport::like(mode));
-            // A command the next period's superseded is what the row measures, not a loss.
-            rows.extend([
-                Planned::new(row_key(PathKind::Loop, &frame, mode.arg(), cross), None),
-                Planned::new(row_key(PathKind::Loop, &age, mode.arg(), cross), periods),
-                Planned::new(baseline_key(&hop, cross), periods),
-            ]);
-        }
-        rows
+        let (run, at) = (
+            bus_label(RobotKind::Titan, BusKind::Sim),
+            Placement::CrossCpu.label(),
+        );
+        let seconds = ctx.plan.loop_seconds;
+        (self.0.iter())
+            .flat_map(|&(period, mode)| loop_rows(&run, at, (period, mode), seconds))
+            .collect()
     }
 
     fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
         ctx.bar.set_message("control loops at 1 kHz and 100 Hz");
         let seconds = ctx.plan.loop_seconds;
         control_loop::run(&self.0, seconds, &ctx.prefix, &ctx.dir, report)
+    }
+}
+
+/// A chassisd the run did not start as one of its configurations: the user's robot
+/// (`--attach NAME`), or chassisd started on the user's bus (`--bus`), at its own loop and
+/// configuration, unpinned. Its state path and the control loops (event-driven, as a client
+/// waits) read it; the rows that send velocity are measured with `--wheels-off-ground` only,
+/// and listed as withheld otherwise.
+struct Attached {
+    name: String,
+    /// The IPC prefix it serves under (none: `$CHASSIS_IPC_PREFIX`).
+    prefix: Option<String>,
+    kind: RobotKind,
+    /// Robot and bus: `titan can:can0`, `titan attached as base`.
+    run: String,
+    drive: bool,
+    loops: Vec<Duration>,
+}
+
+/// An attached run's rows' loop and placement: the client waits for events, unpinned.
+const ATTACHED: (&str, &str) = ("event", UNPINNED);
+
+impl Attached {
+    /// The chassisd of `--attach` (its robot read from its description), or chassisd started
+    /// for `kind` on `--bus` (returned, stopped on drop).
+    fn new(
+        args: &RunArgs,
+        attach: &Option<String>,
+        bus: &Option<String>,
+        kind: RobotKind,
+        (prefix, dir): (&str, &Path),
+    ) -> anyhow::Result<(Self, Option<Started>)> {
+        let loops = control_loop::plan(args.smoke).into_iter();
+        let loops = loops
+            .filter(|l| l.1 == LoopMode::Event)
+            .map(|l| l.0)
+            .collect();
+        let (name, prefix, kind, run, started) = match bus {
+            Some(bus) => {
+                let name = format!("bn{}", placement::unique());
+                let children = paths::Children::default();
+                let started = paths::launch((kind, &name, bus), &[], &[], children, prefix, dir)?;
+                let run = format!("{kind} {bus}");
+                (name, Some(prefix.to_string()), kind, run, Some(started))
+            }
+            None => {
+                let name = attach.clone().unwrap_or_default();
+                let robot = Robot::connect(&name).with_context(|| format!("attaching to {name}"));
+                let described = robot?.description(Duration::from_secs(5))?;
+                let kind: RobotKind = described.kind_name().parse().map_err(anyhow::Error::msg)?;
+                let run = format!("{kind} attached as {name}");
+                (name, None, kind, run, None)
+            }
+        };
+        let drive = args.wheels_off_ground;
+        let attached = Self {
+            name,
+            prefix,
+            kind,
+            run,
+            drive,
+            loops,
+        };
+        Ok((attached, started))
+    }
+
+    fn loop_rows(&self, ctx: &Ctx) -> impl Iterator<Item = [Planned; 3]> {
+        let (run, seconds) = (&self.run, ctx.plan.loop_seconds);
+        (self.loops.iter()).map(move |&p| loop_rows(run, UNPINNED, (p, LoopMode::Event), seconds))
+    }
+
+    /// The rows that send velocity: the command path and its in-service row, the loops' period
+    /// → frame.
+    fn sending(&self, ctx: &Ctx) -> Vec<Planned> {
+        let commands = ctx.plan.commands;
+        let mut rows: Vec<Planned> =
+            plan_path(PathKind::Command, &self.run, ATTACHED, commands).into();
+        rows.extend(self.loop_rows(ctx).map(|[frame, ..]| frame));
+        rows
+    }
+
+    fn row(&self, path: PathKind, leg: Leg, l: Latencies, missed: u64) -> Row {
+        let run = &self.run;
+        let (mode, at) = ATTACHED;
+        Row::new(path, leg, run, run.clone(), mode, at, l, missed)
+    }
+}
+
+impl Step for Attached {
+    fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
+        let states = ctx.plan.states;
+        let mut rows: Vec<Planned> = plan_path(PathKind::State, &self.run, ATTACHED, states).into();
+        // The raw loop runs beside a chassisd it does not control, which may take its receiver's
+        // CPU long enough to lose pings: shown as missed, not failed on.
+        let hop = |hop: Planned| Planned { asked: None, ..hop };
+        rows.extend(
+            self.loop_rows(ctx)
+                .flat_map(|[_, age, raw]| [age, hop(raw)]),
+        );
+        if self.drive {
+            rows.extend(self.sending(ctx));
+        }
+        rows
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        ctx.bar.set_message(self.run.clone());
+        let connect = || Robot::connect_with_prefix(&self.name, self.prefix.as_deref()).ok();
+        let mut robot = paths::wait_until(&format!("no chassisd for {}", self.name), 5, connect)?;
+        if !self.drive {
+            let withheld = self.sending(ctx).into_iter();
+            report
+                .withheld
+                .extend(withheld.map(|p| (p.key, Withheld::WheelsOnGround)));
+        }
+        let mut teleop = self.drive.then(|| robot.source("teleop")).transpose()?;
+        let mut state = paths::StateRecorder::default();
+        let sizes = (ctx.plan.states, false);
+        paths::state_path(&robot, teleop.as_mut(), &mut state, sizes, |_, _| {})?;
+        let mut row = self.row(PathKind::State, Leg::State, state.latencies, 0);
+        row.dropped = state.dropped;
+        report.rows.extend(path_rows(row, None, state.in_service));
+        if let Some(teleop) = teleop.as_mut() {
+            // The robot's own configuration may ramp a change: the first frame toward it.
+            let (kind, sizes) = (
+                (self.kind, false),
+                (ctx.plan.commands, paths::COMMAND_INTERVAL),
+            );
+            let reach = paths::Reach::Toward;
+            let figures = paths::command_path(&mut robot, kind, teleop, sizes, reach)?;
+            let (l, missed) = (figures.latencies, figures.missed);
+            let row = self.row(PathKind::Command, Leg::FirstFrameToward, l, missed);
+            report.rows.extend(path_rows(row, None, figures.in_service));
+        }
+        drop(teleop);
+        let over = control_loop::Over {
+            run: self.run.clone(),
+            kind: self.kind,
+            mode: LoopMode::Event,
+            placement: None,
+            realtime: None,
+        };
+        for &period in &self.loops {
+            let measured = over.measure(&mut robot, period, ctx.plan.loop_seconds, self.drive)?;
+            over.record(measured, period, (&ctx.prefix, &ctx.dir), report)?;
+        }
+        Ok(())
     }
 }
 
@@ -974,7 +1172,7 @@ impl FanOut {
 
 impl Step for FanOut {
     fn planned(&self, _: &Ctx) -> Vec<Planned> {
-        let key = row_key(PathKind::FanOut, &self.what(), "event", "unpinned");
+        let key = row_key(PathKind::FanOut, &self.what(), "event", UNPINNED);
         vec![Planned::new(key, None)]
     }
 
@@ -987,7 +1185,7 @@ impl Step for FanOut {
         let l = paths::fan_out(&mut robot, &service.name, &ctx.prefix, n, seconds)?;
         let run = bus_label(RobotKind::Titan, BusKind::Sim);
         let (path, leg, what) = (PathKind::FanOut, Leg::FanOut, self.what());
-        (report.rows).push(Row::new(path, leg, &run, what, "event", "unpinned", l, 0));
+        (report.rows).push(Row::new(path, leg, &run, what, "event", UNPINNED, l, 0));
         Ok(())
     }
 }
@@ -1073,8 +1271,6 @@ fn main() -> ExitCode {
             Role::DdsEcho(args) => dds_echo::run(&args),
             Role::ZenohPub(args) => zenoh::publish(&args),
             Role::ZenohSub(args) => zenoh::subscribe(&args),
-            Role::RecordTitan { out, seconds } => paths::record_titan(&out, seconds)
-                .map(|frames| eprintln!("{frames} frames written to {}", out.display())),
         },
         Some(RoleCmd::Render(args)) => std::fs::read_to_string(&args.samples)
             .with_context(|| format!("reading {}", args.samples.display()))
@@ -1100,6 +1296,9 @@ fn main() -> ExitCode {
 /// Prints a run's table, writes its files, and judges a smoke run.
 fn write(args: &RunArgs, report: &Report) -> anyhow::Result<()> {
     print!("{}", report.table());
+    for (key, why) in &report.withheld {
+        println!("not measured: {key}: {why:?}");
+    }
     let samples = report.samples()?;
     if let Some(path) = &args.samples {
         std::fs::write(path, &samples).with_context(|| format!("writing {}", path.display()))?;

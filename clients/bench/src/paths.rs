@@ -255,8 +255,6 @@ pub fn start(
 ) -> anyhow::Result<Started> {
     let name = format!("bn{}", unique());
     let trace = trace.then(|| dir.join(format!("{name}-passes.txt")));
-    let chassisd = sibling("chassisd")?;
-    let realtime = config.realtime(mode);
     let config_file = dir.join(format!("{name}.toml"));
     let mut text = config_text(config, mode);
     if robot == RobotKind::Xbot {
@@ -264,7 +262,7 @@ pub fn start(
         text.push_str("\n[profile]\nwheel_separation_m = 0.45\n");
     }
     std::fs::write(&config_file, text)?;
-    let (mut children, logged) = (Children::default(), (prefix, "warn"));
+    let mut children = Children::default();
     let bus_arg = match bus {
         BusKind::Sim => "sim".to_string(),
         BusKind::Pty => {
@@ -273,48 +271,84 @@ pub fn start(
                 true => (format!("slcan-pty:{link}"), format!("slcan:{link}")),
                 false => (format!("pty:{link}"), format!("serial:{link}")),
             };
-            let mut sim = Command::new(&chassisd);
+            let mut sim = Command::new(sibling("chassisd")?);
             let args = format!("sim --robot {} --name {name} --bus", robot.name());
             sim.args(args.split(' ')).arg(&sim_bus);
             let log = dir.join(format!("{name}-sim"));
-            children.push(spawn_logged(&mut sim, logged, &log, "chassisd sim")?);
+            children.push(spawn_logged(
+                &mut sim,
+                (prefix, "warn"),
+                &log,
+                "chassisd sim",
+            )?);
             let linked = || Path::new(&link).exists().then_some(());
             wait_until("chassisd sim made no pty link", 10, linked)?;
             service_bus
         }
     };
-    let mut service = Command::new(&chassisd);
-    service
-        .args(["--robot", robot.name(), "--name", &name, "--bus", &bus_arg])
-        .args(["--no-safety-monitor", "--config"])
-        .arg(&config_file)
-        .args(["--loop", mode.arg()]);
+    let mut args = vec!["--config".into(), config_file.display().to_string()];
+    args.extend(["--loop".into(), mode.arg().into()]);
     if let Some(cpu) = cpu {
-        service.args(["--cpu", &cpu.to_string()]);
+        args.extend(["--cpu".into(), cpu.to_string()]);
     }
     if mode == LoopMode::Hybrid {
         // The same window as the poll-then-block baseline's.
-        let window = HYBRID_SPIN.as_micros().to_string();
-        service.args(["--spin-us", &window]);
+        args.extend(["--spin-us".into(), HYBRID_SPIN.as_micros().to_string()]);
     }
-    if let Some(path) = &trace {
-        service.env(chassis_ipc::Trace::Pass.env(), path);
+    let envs: Vec<_> = (trace.iter())
+        .map(|path| (chassis_ipc::Trace::Pass.env(), path.clone()))
+        .collect();
+    let (mut service, robot_conn) = launch(
+        (robot, &name, &bus_arg),
+        &args,
+        &envs,
+        children,
+        prefix,
+        dir,
+    )?;
+    service.trace = trace;
+    // chassisd enters real-time mode before its loop's first wait, so by now.
+    if config.realtime(mode).is_some() {
+        let fifo = fifo_priority(service.pid);
+        service.scheduling = fifo.map_or(Scheduling::Refused, Scheduling::Fifo);
     }
+    Ok((service, robot_conn))
+}
+
+/// Starts chassisd for `robot` as `name` on the bus `bus` (as its `--bus` takes it: `sim`,
+/// `can:can0`), without its safety monitor (the bench's sources are its only ones), with `args`
+/// and `envs` besides, beside `children`; waits until it publishes and the chassis is in
+/// command mode.
+pub fn launch(
+    (robot, name, bus): (RobotKind, &str, &str),
+    args: &[String],
+    envs: &[(&str, PathBuf)],
+    mut children: Children,
+    prefix: &str,
+    dir: &Path,
+) -> anyhow::Result<Started> {
+    let mut service = Command::new(sibling("chassisd")?);
+    service
+        .args(["--robot", robot.name(), "--name", name, "--bus", bus])
+        .arg("--no-safety-monitor")
+        .args(args)
+        .envs(envs.iter().cloned());
     let log = dir.join(format!("{name}-chassisd"));
+    let logged = (prefix, "warn");
     let pid = children.push(spawn_logged(&mut service, logged, &log, "chassisd")?);
-    let mut service = Service {
-        name: name.clone(),
+    let service = Service {
+        name: name.into(),
         children,
         pid,
-        trace,
+        trace: None,
         scheduling: Scheduling::Normal,
     };
     let up = format!(
-        "chassisd for {robot} did not come up (logs in {})",
+        "chassisd for {robot} on {bus} did not come up (logs in {})",
         dir.display()
     );
     let mut robot_conn = wait_until(&up, 15, || {
-        let mut r = Robot::connect_with_prefix(&name, Some(prefix)).ok()?;
+        let mut r = Robot::connect_with_prefix(name, Some(prefix)).ok()?;
         r.wait_state(Duration::from_millis(200)).ok()??;
         Some(r)
     })?;
@@ -326,10 +360,6 @@ pub fn start(
         {
             break;
         }
-    }
-    // chassisd enters real-time mode before its loop's first wait, so by now.
-    if realtime.is_some() {
-        service.scheduling = fifo_priority(pid).map_or(Scheduling::Refused, Scheduling::Fifo);
     }
     Ok((service, robot_conn))
 }
@@ -720,13 +750,13 @@ impl StateRecorder {
     }
 }
 
-/// State-path latencies while `driver` keeps the robot driving (so frames keep changing the
-/// state), read from `robot` as a client that needs every sample reads them: a lossless
+/// State-path latencies while `driver`, if any, keeps the robot driving (so frames keep changing
+/// the state; without one, what changes it is what the robot does anyway), read from `robot` as a client that needs every sample reads them: a lossless
 /// [`chassis_client::StateStream`], until `recorder` counted `samples` (at most 120 s);
 /// `counted` is given each sample that counted and when it was received.
 pub fn state_path(
     robot: &Robot,
-    driver: &mut Source,
+    mut driver: Option<&mut Source>,
     recorder: &mut StateRecorder,
     (samples, spin): (u64, bool),
     mut counted: impl FnMut(&ChassisState, u64),
@@ -735,7 +765,9 @@ pub fn state_path(
     let mut last_request = 0u64;
     let deadline = now_ns() + 120_000_000_000;
     while recorder.latencies.count() < samples && now_ns() < deadline {
-        if Duration::from_nanos(now_ns().saturating_sub(last_request)) > STATE_REQUEST_INTERVAL {
+        if let Some(driver) = driver.as_mut()
+            && Duration::from_nanos(now_ns().saturating_sub(last_request)) > STATE_REQUEST_INTERVAL
+        {
             driver.send(VelocityRequest::twist(0.6, 0.3))?;
             last_request = now_ns();
         }
@@ -752,7 +784,7 @@ pub fn state_path(
             stream.wait(Duration::from_millis(20), &mut each)?;
         }
     }
-    driver.stop()?;
+    driver.map(Source::stop).transpose()?;
     Ok(())
 }
 
@@ -857,14 +889,7 @@ pub(crate) fn stat_cpu_seconds(path: &str) -> anyhow::Result<f64> {
 
 /// Resident memory of a process, MiB.
 pub fn rss_mib(pid: u32) -> anyhow::Result<f64> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
-    let kib: f64 = status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))
-        .and_then(|v| v.split_whitespace().next())
-        .context("no VmRSS")?
-        .parse()?;
-    Ok(kib / 1024.0)
+    Ok(crate::fleet::status_field(pid, "VmRSS:")? / 1024.0)
 }
 
 /// Loads the simulated bus to `bitrate`'s capacity (8-byte standard frames, no stuffing:

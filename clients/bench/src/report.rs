@@ -165,6 +165,9 @@ pub struct Report {
     pub stalls: Vec<StallRates>,
     #[serde(default)]
     pub loops: Vec<LoopRun>,
+    /// Rows planned and not measured, and why (an attached robot's rows that send velocity).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub withheld: Vec<(String, crate::Withheld)>,
 }
 
 /// One control loop's periods over chassisd (`mode`), and the same loop over the raw hop.

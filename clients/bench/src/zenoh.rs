@@ -249,7 +249,13 @@ pub fn run(
     let mut recorder = StateRecorder::with_gaps();
     let mut bridged = Latencies::new();
     let each = |s: &ChassisState, received| bridged.record_between(s.published_ns, received);
-    paths::state_path(&operator, &mut remote, &mut recorder, (states, false), each)?;
+    paths::state_path(
+        &operator,
+        Some(&mut remote),
+        &mut recorder,
+        (states, false),
+        each,
+    )?;
     drop((remote, operator, children));
     let reads: Vec<u64> = recorder.samples.iter().map(|&(read, ..)| read).collect();
     let state_period = state_period(&reads);
