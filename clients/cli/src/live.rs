@@ -607,7 +607,7 @@ fn listed_names(names: &[&str]) -> String {
 
 /// The safety monitor's `SafetyStatus` (`None`: its service exists but nothing was published).
 fn safety_summary(status: Option<&chassis_client::SafetyStatus>) -> String {
-    use chassis_client::{EstopState, SafetyAction, SafetyRule, SafetyStatus};
+    use chassis_client::{EstopState, SafetyAction, SafetyRule, SafetyStatus, Unfollowed};
     let Some(s) = status else {
         return "safety     no monitor publishing (its service exists, no status within 300 ms)"
             .into();
@@ -645,6 +645,9 @@ fn safety_summary(status: Option<&chassis_client::SafetyStatus>) -> String {
         "safety     {alive} · {action} · estop {}",
         EstopState::name(s.estop)
     );
+    if s.unfollowed != Unfollowed::NONE {
+        out.push_str(&format!(" · {}", Unfollowed::text(s.unfollowed)));
+    }
     if s.acknowledged_rules != 0 {
         out.push_str(&format!(
             " · acknowledged {}",
