@@ -350,7 +350,7 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(enum ControlStatus: u8 { OK, REFUSED, UNSUPPORTED, INVALID, TIMEOUT }),
         describe_constants!(enum SimKind: u8 {
             MOTOR_DRIVER_LOSS, BATTERY, BUMPER, RC_TAKEOVER, REBOOT, SILENCE, GARBAGE,
-            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH, RUNAWAY, TRUTH,
+            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH, RUNAWAY, GAIN, TRUTH,
         }),
         describe_constants!(enum SimTruthPage: u8 { MOTION, INJECTED }),
         describe_constants!(enum Kinematics: u8 {

@@ -142,6 +142,14 @@ pub enum SimCmd {
         #[arg(long)]
         clear: bool,
     },
+    /// The wheels turn at GAIN times the command: 0 ignores it, 0 to 1 slips, negative drives
+    /// against it (at most 2 either way); --clear makes the chassis obey again.
+    Gain {
+        #[arg(allow_negative_numbers = true)]
+        gain: Option<f64>,
+        #[arg(long)]
+        clear: bool,
+    },
 }
 
 /// `chassis echo`.
@@ -811,6 +819,11 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
             (_, true) => request(SimKind::RUNAWAY, false, 0, 0.0),
             (Some(v), false) if v.is_finite() => request(SimKind::RUNAWAY, true, 0, *v),
             _ => bail!("give a speed in m/s, or --clear"),
+        },
+        SimCmd::Gain { gain, clear } => match (gain, clear) {
+            (_, true) => request(SimKind::GAIN, false, 0, 0.0),
+            (Some(g), false) if g.is_finite() => request(SimKind::GAIN, true, 0, *g),
+            _ => bail!("give a gain, or --clear"),
         },
     };
     let mut robot = Robot::connect(name)?;

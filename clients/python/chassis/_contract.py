@@ -1100,7 +1100,8 @@ class SimKind(Constants):
     TRUTH = 12
     ESTOP_SWITCH = 13
     RUNAWAY = 14
-    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 12: 'truth', 13: 'estop-switch', 14: 'runaway'}
+    GAIN = 15
+    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 12: 'truth', 13: 'estop-switch', 14: 'runaway', 15: 'gain'}
 
 
 class SimTruthPage(Constants):
