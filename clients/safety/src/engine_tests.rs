@@ -1053,7 +1053,9 @@ fn a_slipping_chassis_does_not_follow_and_one_that_keeps_up_does() {
 
 #[test]
 fn the_cause_of_not_following_is_what_the_chassis_reports_most_telling_first() {
-    let cases: [(fn(&mut ChassisState), u8); 9] = [
+    /// What the chassis reports, and the cause it names.
+    type Case = (fn(&mut ChassisState), u8);
+    let cases: [Case; 9] = [
         (|_| {}, Unfollowed::UNREPORTED),
         (
             |s| s.link_flags = LinkFlags::CHASSIS_SILENT,
