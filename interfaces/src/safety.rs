@@ -243,6 +243,24 @@ impl SafetyStatus {
         self.active_rules & SafetyRule::bit(rule) != 0
     }
 
+    /// The decision in words, as every view shows it: `all clear`, `SLOW by ultrasonic`,
+    /// `STOP by following: the chassis is in standby`.
+    pub fn why(&self) -> String {
+        if self.action == SafetyAction::NONE {
+            return "all clear".into();
+        }
+        let mut text = format!(
+            "{} by {}",
+            SafetyAction::name(self.action).to_uppercase(),
+            SafetyRule::names(self.active_rules).join(", ")
+        );
+        if self.unfollowed != Unfollowed::NONE {
+            text.push_str(": ");
+            text.push_str(Unfollowed::text(self.unfollowed));
+        }
+        text
+    }
+
     /// How often `rule` triggered (0 for an unknown rule).
     pub fn trigger_count(&self, rule: u8) -> u32 {
         self.trigger_counts
@@ -277,5 +295,18 @@ mod tests {
         let json = serde_json::to_value(s).unwrap();
         assert_eq!(json["last_text"], "battery: 12 % < 15 %");
         assert!(json.get("_reserved").is_none());
+    }
+
+    #[test]
+    fn the_decision_in_words_names_the_rules_and_the_cause() {
+        let mut s = SafetyStatus::default();
+        assert_eq!(s.why(), "all clear");
+        s.action = SafetyAction::STOP;
+        s.active_rules = SafetyRule::bit(SafetyRule::FOLLOWING);
+        s.unfollowed = Unfollowed::STANDBY;
+        assert_eq!(s.why(), "STOP by following: the chassis is in standby");
+        for (cause, _) in Unfollowed::NAMES.into_iter().skip(1) {
+            assert!(!Unfollowed::text(cause).is_empty(), "{cause}");
+        }
     }
 }

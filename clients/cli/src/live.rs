@@ -615,7 +615,7 @@ fn listed_names(names: &[&str]) -> String {
 
 /// The safety monitor's `SafetyStatus` (`None`: its service exists but nothing was published).
 fn safety_summary(status: Option<&chassis_client::SafetyStatus>) -> String {
-    use chassis_client::{EstopState, SafetyAction, SafetyRule, SafetyStatus, Unfollowed};
+    use chassis_client::{EstopState, SafetyAction, SafetyRule, SafetyStatus};
     let Some(s) = status else {
         return "safety     no monitor publishing (its service exists, no status within 300 ms)"
             .into();
@@ -643,19 +643,12 @@ fn safety_summary(status: Option<&chassis_client::SafetyStatus>) -> String {
             limit(s.limit_lateral_mps, "m/s"),
             limit(s.limit_angular_radps, "rad/s")
         ),
-        a => format!(
-            "{} by {}",
-            SafetyAction::name(a).to_uppercase(),
-            SafetyRule::names(s.active_rules).join(", ")
-        ),
+        _ => s.why(),
     };
     let mut out = format!(
         "safety     {alive} · {action} · estop {}",
         EstopState::name(s.estop)
     );
-    if s.unfollowed != Unfollowed::NONE {
-        out.push_str(&format!(" · {}", Unfollowed::text(s.unfollowed)));
-    }
     if s.acknowledged_rules != 0 {
         out.push_str(&format!(
             " · acknowledged {}",
