@@ -272,6 +272,10 @@ named_constants! {
         /// chassis drives at `value` m/s forward (negative: reverse) whatever it is commanded,
         /// until `flag` 0 gives the control back.
         RUNAWAY = 14 => "runaway",
+        /// The wheels turn at `value` times the command (0: the chassis ignores it, 0 to 1: it
+        /// slips, negative: it drives against it; at most 2 either way), until `flag` 0 makes it
+        /// obey again.
+        GAIN = 15 => "gain",
     }
 }
 

@@ -350,7 +350,7 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(enum ControlStatus: u8 { OK, REFUSED, UNSUPPORTED, INVALID, TIMEOUT }),
         describe_constants!(enum SimKind: u8 {
             MOTOR_DRIVER_LOSS, BATTERY, BUMPER, RC_TAKEOVER, REBOOT, SILENCE, GARBAGE,
-            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH, RUNAWAY, TRUTH,
+            BAD_CHECKSUMS, OBSTACLE_AHEAD, OBSTACLE_BEHIND, FLOOD, ESTOP_SWITCH, RUNAWAY, GAIN, TRUTH,
         }),
         describe_constants!(enum SimTruthPage: u8 { MOTION, INJECTED }),
         describe_constants!(enum Kinematics: u8 {
@@ -365,13 +365,18 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(enum FrameDirection: u8 { RX, TX }),
         describe_constants!(enum FrameKind: u8 { CAN, SERIAL, GPS }),
         describe_constants!(enum SafetyRule: u8 {
-            FAULT, BATTERY, STALE, BUMPER, ULTRASONIC, IR, SPEED, OPERATOR,
+            FAULT, BATTERY, STALE, BUMPER, ULTRASONIC, IR, SPEED, OPERATOR, RUNAWAY, DIRECTION,
+            FOLLOWING,
         }),
         describe_constants!(enum SafetyAction: u8 { NONE, SLOW, STOP, LATCH }),
         describe_constants!(enum EstopState: u8 {
             UNKNOWN, FREE, HELD_BY_MONITOR, HELD_BY_OPERATOR, HELD_BY_OTHER,
         }),
         describe_constants!(enum SafetyEvent: u8 { NONE, TRIGGER, RELEASE, UNLATCH }),
+        describe_constants!(enum Unfollowed: u8 {
+            NONE, UNREPORTED, BUS_SILENT, CHASSIS_ESTOP, REMOTE_CONTROL, STANDBY, SERIAL_MODE,
+            DRIVER_FAULT, DRIVERS_DISABLED, PARKING_BRAKE,
+        }),
         // Constants of one struct's fields, named after the struct.
         describe_constants!(enum SystemState: u8 { BODY_NORMAL, BODY_EMERGENCY_STOP, BODY_EXCEPTION }),
         describe_constants!(enum LockStatus: u8 { HOLDER_NONE, HOLDER_OPERATOR }),
@@ -602,6 +607,7 @@ mod tests {
             SimKind::NAMES,
             SimTruthPage::NAMES,
             Stop::NAMES,
+            Unfollowed::NAMES,
             WireProtocol::NAMES,
             ZeroReason::NAMES,
             ClampFlags::ALL,

@@ -49,7 +49,9 @@ pub use mux::{
 };
 pub use names::valid_robot_name;
 pub use request::{RequestFlags, VelocityRequest};
-pub use safety::{EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus};
+pub use safety::{
+    EstopState, RULE_SLOTS, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus, Unfollowed,
+};
 pub use state::{
     BmsState, ChassisState, CommandEcho, ControlMode, ControllerState, DriverStatus, FaultFlags,
     GROUP_SLOTS, GpsFix, Group, ImuState, LiftState, LightsState, LinkFlags, LinkStats,

@@ -148,6 +148,7 @@ mod tests {
             SafetyAction,
             EstopState,
             SafetyEvent,
+            Unfollowed,
             FrameDirection,
             FrameKind,
         ]

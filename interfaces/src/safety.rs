@@ -30,6 +30,13 @@ named_constants! {
         SPEED = 6 => "speed",
         /// The operator's e-stop (SIGUSR1 to the monitor).
         OPERATOR = 7 => "operator",
+        /// Moving while commanded still, or faster than commanded beyond a margin.
+        RUNAWAY = 8 => "runaway",
+        /// Moving against the command beyond a margin.
+        DIRECTION = 9 => "direction",
+        /// Commanded longer than the robot needs to start, measured still
+        /// ([`SafetyStatus::unfollowed`] names the likely cause).
+        FOLLOWING = 10 => "following",
     }
 }
 
@@ -86,6 +93,55 @@ named_constants! {
 }
 
 named_constants! {
+    /// Why the chassis does not follow its command, as far as it reports
+    /// (`SafetyStatus::unfollowed`, while [`SafetyRule::FOLLOWING`] is in force), most telling
+    /// first.
+    pub enum Unfollowed: u8 {
+        /// The rule is not in force.
+        NONE = 0 => "none",
+        /// The chassis reports nothing that explains it: slipping, stalled, or a fault it does
+        /// not report.
+        UNREPORTED = 1 => "unreported",
+        /// Nothing heard from the chassis, or the bus is down.
+        BUS_SILENT = 2 => "bus-silent",
+        /// The chassis' own E-stop is pressed.
+        CHASSIS_ESTOP = 3 => "chassis-estop",
+        /// An RC transmitter has the chassis.
+        REMOTE_CONTROL = 4 => "remote-control",
+        /// The chassis is in standby: it answers, it does not drive.
+        STANDBY = 5 => "standby",
+        /// The chassis takes its commands on another port (serial mode).
+        SERIAL_MODE = 6 => "serial-mode",
+        /// A motor driver is in error or unreachable.
+        DRIVER_FAULT = 7 => "driver-fault",
+        /// Drive power is off.
+        DRIVERS_DISABLED = 8 => "drivers-disabled",
+        /// The parking brake is engaged.
+        PARKING_BRAKE = 9 => "parking-brake",
+    }
+}
+
+impl Unfollowed {
+    /// The cause in words, as every view shows it.
+    pub fn text(cause: u8) -> &'static str {
+        match cause {
+            Self::UNREPORTED => {
+                "the chassis reports no cause (slipping, stalled, or an unreported fault)"
+            }
+            Self::BUS_SILENT => "the chassis is silent or the bus is down",
+            Self::CHASSIS_ESTOP => "the chassis' E-stop is pressed",
+            Self::REMOTE_CONTROL => "a remote-control transmitter has the chassis",
+            Self::STANDBY => "the chassis is in standby",
+            Self::SERIAL_MODE => "the chassis takes commands on its serial port",
+            Self::DRIVER_FAULT => "a motor driver is in error or unreachable",
+            Self::DRIVERS_DISABLED => "drive power is off",
+            Self::PARKING_BRAKE => "the parking brake is engaged",
+            _ => "",
+        }
+    }
+}
+
+named_constants! {
     /// The kind of the monitor's last event (`SafetyStatus::last_event`).
     pub enum SafetyEvent: u8 {
         NONE = 0 => "none",
@@ -134,8 +190,12 @@ ipc_type! {
         pub last_rule: u8,
         /// [`SafetyEvent`] kind of the last event.
         pub last_event: u8,
+        /// [`Unfollowed`]: why the chassis does not follow its command while
+        /// [`SafetyRule::FOLLOWING`] is in force (was a reserved byte: readers that ignore it
+        /// see 0).
+        pub unfollowed: u8,
         #[serde(skip)]
-        pub _reserved: [u8; 4],
+        pub _reserved: [u8; 3],
         /// Times each rule triggered since the monitor started.
         pub trigger_counts: [u32; RULE_SLOTS],
         /// `CLOCK_MONOTONIC` time each rule last triggered, ns (0: never).
@@ -183,6 +243,24 @@ impl SafetyStatus {
         self.active_rules & SafetyRule::bit(rule) != 0
     }
 
+    /// The decision in words, as every view shows it: `all clear`, `SLOW by ultrasonic`,
+    /// `STOP by following: the chassis is in standby`.
+    pub fn why(&self) -> String {
+        if self.action == SafetyAction::NONE {
+            return "all clear".into();
+        }
+        let mut text = format!(
+            "{} by {}",
+            SafetyAction::name(self.action).to_uppercase(),
+            SafetyRule::names(self.active_rules).join(", ")
+        );
+        if self.unfollowed != Unfollowed::NONE {
+            text.push_str(": ");
+            text.push_str(Unfollowed::text(self.unfollowed));
+        }
+        text
+    }
+
     /// How often `rule` triggered (0 for an unknown rule).
     pub fn trigger_count(&self, rule: u8) -> u32 {
         self.trigger_counts
@@ -217,5 +295,18 @@ mod tests {
         let json = serde_json::to_value(s).unwrap();
         assert_eq!(json["last_text"], "battery: 12 % < 15 %");
         assert!(json.get("_reserved").is_none());
+    }
+
+    #[test]
+    fn the_decision_in_words_names_the_rules_and_the_cause() {
+        let mut s = SafetyStatus::default();
+        assert_eq!(s.why(), "all clear");
+        s.action = SafetyAction::STOP;
+        s.active_rules = SafetyRule::bit(SafetyRule::FOLLOWING);
+        s.unfollowed = Unfollowed::STANDBY;
+        assert_eq!(s.why(), "STOP by following: the chassis is in standby");
+        for (cause, _) in Unfollowed::NAMES.into_iter().skip(1) {
+            assert!(!Unfollowed::text(cause).is_empty(), "{cause}");
+        }
     }
 }

@@ -1317,6 +1317,31 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
         test: "a_dds_peer_on_the_robots_network_drives_only_when_the_discovery_range_allows_it",
         fault: "a DDS peer on the robot's network publishes cmd_vel",
     },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "a_chassis_running_away_from_its_command_is_latched",
+        fault: "the chassis runs away: 1.2 m/s while commanded 0.5 m/s (TITAN)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "a_chassis_driving_against_its_command_is_latched",
+        fault: "the chassis drives against its command (TITAN, wheels at −1 × the command)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "a_chassis_ignoring_its_command_is_stopped_and_the_cause_named",
+        fault: "the chassis ignores its command and reports nothing (TITAN, wheels at 0 × the command)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "a_slipping_chassis_is_stopped_and_the_cause_named",
+        fault: "the chassis slips: 10 % of the commanded speed (TITAN)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "a_motor_driver_lost_mid_motion_stops_the_chassis",
+        fault: "a motor driver lost mid-motion (TITAN, driver 1)",
+    },
 ];
 
 /// Every row of the soak's table (`soak.jsonl`), in the order of the table.

@@ -142,6 +142,14 @@ pub enum SimCmd {
         #[arg(long)]
         clear: bool,
     },
+    /// The wheels turn at GAIN times the command: 0 ignores it, 0 to 1 slips, negative drives
+    /// against it (at most 2 either way); --clear makes the chassis obey again.
+    Gain {
+        #[arg(allow_negative_numbers = true)]
+        gain: Option<f64>,
+        #[arg(long)]
+        clear: bool,
+    },
 }
 
 /// `chassis echo`.
@@ -635,11 +643,7 @@ fn safety_summary(status: Option<&chassis_client::SafetyStatus>) -> String {
             limit(s.limit_lateral_mps, "m/s"),
             limit(s.limit_angular_radps, "rad/s")
         ),
-        a => format!(
-            "{} by {}",
-            SafetyAction::name(a).to_uppercase(),
-            SafetyRule::names(s.active_rules).join(", ")
-        ),
+        _ => s.why(),
     };
     let mut out = format!(
         "safety     {alive} · {action} · estop {}",
@@ -808,6 +812,11 @@ pub fn sim(name: &str, command: &SimCmd) -> anyhow::Result<()> {
             (_, true) => request(SimKind::RUNAWAY, false, 0, 0.0),
             (Some(v), false) if v.is_finite() => request(SimKind::RUNAWAY, true, 0, *v),
             _ => bail!("give a speed in m/s, or --clear"),
+        },
+        SimCmd::Gain { gain, clear } => match (gain, clear) {
+            (_, true) => request(SimKind::GAIN, false, 0, 0.0),
+            (Some(g), false) if g.is_finite() => request(SimKind::GAIN, true, 0, *g),
+            _ => bail!("give a gain, or --clear"),
         },
     };
     let mut robot = Robot::connect(name)?;

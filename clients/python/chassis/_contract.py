@@ -720,7 +720,8 @@ class SafetyStatus(Struct):
         ('estop', ctypes.c_uint8),
         ('last_rule', ctypes.c_uint8),
         ('last_event', ctypes.c_uint8),
-        ('_reserved', (ctypes.c_uint8 * 4)),
+        ('unfollowed', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 3)),
         ('trigger_counts', (ctypes.c_uint32 * 12)),
         ('last_trigger_ns', (ctypes.c_uint64 * 12)),
         ('last_event_ns', ctypes.c_uint64),
@@ -1065,7 +1066,10 @@ class SafetyRule(Constants):
     IR = 5
     SPEED = 6
     OPERATOR = 7
-    NAMES = {0: 'fault', 1: 'battery', 2: 'stale', 3: 'bumper', 4: 'ultrasonic', 5: 'ir', 6: 'speed', 7: 'operator'}
+    RUNAWAY = 8
+    DIRECTION = 9
+    FOLLOWING = 10
+    NAMES = {0: 'fault', 1: 'battery', 2: 'stale', 3: 'bumper', 4: 'ultrasonic', 5: 'ir', 6: 'speed', 7: 'operator', 8: 'runaway', 9: 'direction', 10: 'following'}
 
 
 class SensorKind(Constants):
@@ -1096,7 +1100,8 @@ class SimKind(Constants):
     TRUTH = 12
     ESTOP_SWITCH = 13
     RUNAWAY = 14
-    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 12: 'truth', 13: 'estop-switch', 14: 'runaway'}
+    GAIN = 15
+    NAMES = {1: 'motor-driver-loss', 2: 'battery', 3: 'bumper', 4: 'rc-takeover', 5: 'reboot', 6: 'silence', 7: 'garbage', 8: 'bad-checksums', 9: 'obstacle-ahead', 10: 'obstacle-behind', 11: 'flood', 12: 'truth', 13: 'estop-switch', 14: 'runaway', 15: 'gain'}
 
 
 class SimTruthPage(Constants):
@@ -1134,6 +1139,22 @@ class Stop(Constants):
     REMOTE_CONTROL = 6
     CHASSIS_FAULT = 7
     NAMES = {0: 'none', 1: 'service-start', 2: 'lock-released', 3: 'required-source', 4: 'bus', 5: 'chassis-estop', 6: 'remote-control', 7: 'chassis-fault'}
+
+
+class Unfollowed(Constants):
+    """``Unfollowed``: enum of u8."""
+
+    NONE = 0
+    UNREPORTED = 1
+    BUS_SILENT = 2
+    CHASSIS_ESTOP = 3
+    REMOTE_CONTROL = 4
+    STANDBY = 5
+    SERIAL_MODE = 6
+    DRIVER_FAULT = 7
+    DRIVERS_DISABLED = 8
+    PARKING_BRAKE = 9
+    NAMES = {0: 'none', 1: 'unreported', 2: 'bus-silent', 3: 'chassis-estop', 4: 'remote-control', 5: 'standby', 6: 'serial-mode', 7: 'driver-fault', 8: 'drivers-disabled', 9: 'parking-brake'}
 
 
 class WireProtocol(Constants):
@@ -1230,6 +1251,7 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'SourceFlags': SourceFlags,
     'Stop': Stop,
     'SystemState': SystemState,
+    'Unfollowed': Unfollowed,
     'WireProtocol': WireProtocol,
     'ZeroReason': ZeroReason,
 }

@@ -27,8 +27,8 @@ use std::time::Duration;
 use anyhow::Context as _;
 use chassis_client::{
     ChassisState, ClientError, ControlKind, ControlRequest, ControlResponse, ControlStatus,
-    FaultClear, InvalidVelocity, MuxStatus, Robot, RobotDescription, Source, ValidRequest,
-    VelocityRequest, termination_requested,
+    FaultClear, InvalidVelocity, MuxStatus, Robot, RobotDescription, SafetyStatus, Source,
+    ValidRequest, VelocityRequest, termination_requested,
 };
 use mio::{Events, Interest, Poll, Token};
 use ros2_client::{
@@ -688,6 +688,8 @@ struct StateLoop<'a> {
     sensors: Vec<RangeSensor>,
     latest: Option<ChassisState>,
     mux: Option<MuxStatus>,
+    /// The safety monitor's decision, once it publishes one.
+    safety: Option<SafetyStatus>,
     last_diagnostics: Option<(u64, Vec<(u8, String)>)>,
     /// The robot model last published.
     model: ModelSent,
@@ -788,7 +790,13 @@ impl StateLoop<'_> {
 
     fn diagnostics(&mut self, now_ns: u64) {
         let stamp = self.clock.ros_time(now_ns);
-        let array = convert::diagnostics(self.name, self.latest.as_ref(), self.mux.as_ref(), stamp);
+        let array = convert::diagnostics(
+            self.name,
+            self.latest.as_ref(),
+            self.mux.as_ref(),
+            self.safety.as_ref(),
+            stamp,
+        );
         let key = convert::diagnostics_key(&array);
         let due = self.last_diagnostics.as_ref().is_none_or(|(at, last)| {
             u128::from(now_ns.saturating_sub(*at)) >= DIAGNOSTICS_PERIOD.as_nanos() || *last != key
@@ -826,6 +834,7 @@ pub fn state_loop(
             .collect(),
         latest: None,
         mux: None,
+        safety: None,
         last_diagnostics: None,
         model: ModelSent::default(),
         failures: 0,
@@ -833,6 +842,7 @@ pub fn state_loop(
         trace: OdomTrace::from_env(chassis_ipc::Trace::Odom),
     };
     lp.publish_model();
+    let mut safety = None;
     tracing::info!(robot = name, "bridging");
     while !termination_requested() {
         // Every sample the subscriber holds, oldest first: odom keeps the robot's own rate.
@@ -850,6 +860,9 @@ pub fn state_loop(
         if let Some(m) = robot.latest_mux().context("reading the mux decision")? {
             lp.mux = Some(m);
         }
+        if let Some(status) = latest_safety(&robot, &mut safety)? {
+            lp.safety = Some(status);
+        }
         if let Some(d) = robot
             .latest_description()
             .context("reading the robot description")?
@@ -864,6 +877,23 @@ pub fn state_loop(
         tracing::warn!(error = %e, path = %trace.path().display(), "odom trace not written");
     }
     Ok(())
+}
+
+/// The safety monitor's newest decision, if it published one since the last call. The monitor
+/// may start after the bridge: its service is looked for until it exists.
+pub(crate) fn latest_safety(
+    robot: &Robot,
+    subscription: &mut Option<chassis_client::Subscription<SafetyStatus>>,
+) -> anyhow::Result<Option<SafetyStatus>> {
+    if subscription.is_none() {
+        *subscription = robot
+            .subscriber::<SafetyStatus>(SafetyStatus::SERVICE)
+            .context("subscribing to the safety monitor")?;
+    }
+    match subscription.as_mut() {
+        Some(s) => s.latest().context("reading the safety monitor"),
+        None => Ok(None),
+    }
 }
 
 #[cfg(test)]

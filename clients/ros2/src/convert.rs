@@ -12,8 +12,8 @@
 
 use chassis_client::{
     ChassisState, ClampFlags, ControllerState, FaultFlags, Group, JointSource, LinkFlags,
-    MuxStatus, OdometryVariance, RobotDescription, SensorKind, Stop, WallClock, WireProtocol,
-    ZeroReason,
+    MuxStatus, OdometryVariance, RobotDescription, SafetyAction, SafetyRule, SafetyStatus,
+    SensorKind, Stop, Unfollowed, WallClock, WireProtocol, ZeroReason,
 };
 
 use crate::msg::{
@@ -491,11 +491,13 @@ pub fn nav_sat_fix(state: &ChassisState, clock: RosClock, frames: &Frames) -> Op
 }
 
 /// `diagnostics`: the chassis' faults and warnings by name, the bus link, the mux decision with
-/// its clamp reasons. `hardware_id` is the robot's name.
+/// its clamp reasons, the safety monitor's decision with the cause of a chassis that does not
+/// follow. `hardware_id` is the robot's name.
 pub fn diagnostics(
     name: &str,
     state: Option<&ChassisState>,
     mux: Option<&MuxStatus>,
+    safety: Option<&SafetyStatus>,
     stamp: Time,
 ) -> DiagnosticArray {
     let mut status = Vec::new();
@@ -515,6 +517,9 @@ pub fn diagnostics(
     }
     if let Some(mux) = mux {
         status.push(mux_status(name, prefix, mux, state));
+    }
+    if let Some(safety) = safety {
+        status.push(safety_status(name, prefix, safety));
     }
     DiagnosticArray {
         header: Header::new(stamp, ""),
@@ -656,6 +661,28 @@ fn mux_status(
             KeyValue::new("awaiting", mux.awaiting().map_or("", |s| s.name())),
             KeyValue::new("locks_held", locks.join(", ")),
             KeyValue::new("clamps", ClampFlags::names(clamps).join(", ")),
+        ],
+    }
+}
+
+/// The safety monitor's decision ([`SafetyStatus::why`]): a stop is an error, a slow-down a
+/// warning.
+fn safety_status(name: &str, prefix: &str, s: &SafetyStatus) -> DiagnosticStatus {
+    let level = match s.action {
+        SafetyAction::NONE => DiagnosticStatus::OK,
+        SafetyAction::SLOW => DiagnosticStatus::WARN,
+        _ => DiagnosticStatus::ERROR,
+    };
+    DiagnosticStatus {
+        level,
+        name: format!("{prefix}: safety"),
+        message: s.why(),
+        hardware_id: name.into(),
+        values: vec![
+            KeyValue::new("action", SafetyAction::name(s.action)),
+            KeyValue::new("rules", SafetyRule::names(s.active_rules).join(", ")),
+            KeyValue::new("unfollowed", Unfollowed::name(s.unfollowed)),
+            KeyValue::new("last", s.last_text()),
         ],
     }
 }
@@ -926,7 +953,7 @@ mod tests {
         let mut driver = entry.driver(&entry.defaults(), false, &DriverConfig::default(), now);
         let tv8 = CanFrame::from_candump("211#0100010000800000").unwrap();
         driver.handle_rx(now, Rx::Can(&tv8));
-        let d = diagnostics("bunker", Some(driver.state()), None, Time::default());
+        let d = diagnostics("bunker", Some(driver.state()), None, None, Time::default());
         let faults = &d.status[0];
         assert_eq!(faults.name, "chassis: faults");
         assert_eq!(faults.level, DiagnosticStatus::ERROR);
@@ -949,22 +976,51 @@ mod tests {
     fn diagnostics_name_faults_and_rank_errors_above_warnings() {
         let mut s = titan();
         let mux = MuxStatus::default();
-        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        let d = diagnostics("titan", Some(&s), Some(&mux), None, Time::default());
         assert_eq!(d.status[0].level, DiagnosticStatus::OK);
         s.system.fault_flags = FaultFlags::BATTERY_LOW;
-        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        let d = diagnostics("titan", Some(&s), Some(&mux), None, Time::default());
         assert_eq!(d.status[0].level, DiagnosticStatus::WARN);
         s.system.fault_flags |= FaultFlags::MOTOR_DRIVER_ERROR;
-        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        let d = diagnostics("titan", Some(&s), Some(&mux), None, Time::default());
         assert_eq!(d.status[0].level, DiagnosticStatus::ERROR);
         assert!(d.status[0].values.iter().any(|kv| kv.value == "warning"));
         s.link_flags = LinkFlags::BUS_DOWN;
-        let d = diagnostics("titan", Some(&s), Some(&mux), Time::default());
+        let d = diagnostics("titan", Some(&s), Some(&mux), None, Time::default());
         assert_eq!(d.status[1].level, DiagnosticStatus::ERROR);
         assert!(d.status[1].message.contains("bus_down"));
-        let stale = diagnostics("titan", None, None, Time::default());
+        let stale = diagnostics("titan", None, None, None, Time::default());
         assert_eq!(stale.status[0].level, DiagnosticStatus::STALE);
         assert_ne!(diagnostics_key(&d), diagnostics_key(&stale));
+    }
+
+    #[test]
+    fn diagnostics_carry_the_safety_monitors_decision_and_the_cause_it_names() {
+        let s = titan();
+        let mut safety = SafetyStatus::default();
+        let d = diagnostics("titan", Some(&s), None, Some(&safety), Time::default());
+        let status = d.status.last().unwrap();
+        assert_eq!(
+            (status.level, status.message.as_str()),
+            (DiagnosticStatus::OK, "all clear")
+        );
+        safety.action = SafetyAction::STOP;
+        safety.active_rules = SafetyRule::bit(SafetyRule::FOLLOWING);
+        safety.unfollowed = Unfollowed::REMOTE_CONTROL;
+        let d = diagnostics("titan", Some(&s), None, Some(&safety), Time::default());
+        let status = d.status.last().unwrap();
+        assert_eq!(status.name, "chassis: safety");
+        assert_eq!(status.level, DiagnosticStatus::ERROR);
+        assert_eq!(
+            status.message,
+            "STOP by following: a remote-control transmitter has the chassis"
+        );
+        assert!(
+            status
+                .values
+                .iter()
+                .any(|kv| kv.key == "unfollowed" && kv.value == "remote-control")
+        );
     }
 
     #[test]
@@ -981,14 +1037,14 @@ mod tests {
         s.link.can_state = ControllerState::ERROR_PASSIVE;
         s.link.can_tx_error_count = 130;
         s.link_flags = LinkFlags::CAN_ERROR_PASSIVE;
-        let d = diagnostics("titan", Some(&s), None, Time::default());
+        let d = diagnostics("titan", Some(&s), None, None, Time::default());
         assert_eq!(d.status[1].level, DiagnosticStatus::WARN);
         assert_eq!(value(&d, "can_state"), "error-passive");
         assert_eq!(value(&d, "can_tx_error_count"), "130");
         s.link.can_state = ControllerState::BUS_OFF;
         s.link.can_bus_off = 1;
         s.link_flags = LinkFlags::CAN_BUS_OFF | LinkFlags::CHASSIS_SILENT;
-        let d = diagnostics("titan", Some(&s), None, Time::default());
+        let d = diagnostics("titan", Some(&s), None, None, Time::default());
         assert_eq!(d.status[1].level, DiagnosticStatus::ERROR);
         assert!(
             d.status[1].message.contains("can_bus_off"),

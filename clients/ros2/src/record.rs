@@ -466,6 +466,7 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
     let end = options.duration.map(deadline);
     let mut latest = None;
     let mut mux: Option<MuxStatus> = None;
+    let (mut safety, mut safety_subscription) = (None, None);
     let mut last_diagnostics: Option<(u64, Vec<(u8, String)>)> = None;
     let mut model = ModelSent::default();
     let mut description = description;
@@ -506,6 +507,9 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
         if let Some(m) = robot.latest_mux().context("reading the mux decision")? {
             mux = Some(m);
         }
+        if let Some(s) = crate::bridge::latest_safety(&robot, &mut safety_subscription)? {
+            safety = Some(s);
+        }
         if let Some(d) = robot
             .latest_description()
             .context("reading the robot description")?
@@ -519,6 +523,7 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
             &options.name,
             latest.as_ref(),
             mux.as_ref(),
+            safety.as_ref(),
             clock.ros_time(now),
         );
         let key = convert::diagnostics_key(&array);

@@ -18,6 +18,10 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use chassis_client::{FaultFlags, valid_robot_name};
+
+pub use crate::plausibility::{
+    DirectionRule, FollowingRule, Plausibility, PlausibilityThresholds, RunawayRule,
+};
 use serde::{Deserialize, Deserializer, Serialize};
 use thiserror::Error;
 
@@ -125,7 +129,9 @@ impl Default for FaultRule {
 /// A level the file may set as a plain number, overriding the robot's description. Anything
 /// else — the per-robot tables of earlier versions (`[rules.battery.min_voltage_v]` with
 /// `titan = …`) among them — is refused with a word on what replaced them.
-fn plain_number<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Option<f64>, D::Error> {
+pub(crate) fn plain_number<'de, D: Deserializer<'de>>(
+    deserializer: D,
+) -> Result<Option<f64>, D::Error> {
     #[derive(Deserialize)]
     #[serde(untagged)]
     enum Written {
@@ -387,6 +393,10 @@ pub struct RulesConfig {
     pub ir: IrRule,
     pub speed: SpeedRule,
     pub operator: OperatorRule,
+    pub runaway: RunawayRule,
+    pub direction: DirectionRule,
+    pub following: FollowingRule,
+    pub plausibility: PlausibilityThresholds,
 }
 
 /// The file as written.
@@ -424,7 +434,7 @@ pub struct Timing {
 }
 
 impl Timing {
-    fn new(action: Action, trigger_ms: u64, release_ms: u64) -> Self {
+    pub(crate) fn new(action: Action, trigger_ms: u64, release_ms: u64) -> Self {
         Self {
             action,
             trigger_ns: ms_to_ns(trigger_ms),
@@ -507,6 +517,7 @@ pub struct Config {
     pub ir: Option<RangeZones>,
     pub speed: Option<Speed>,
     pub operator: bool,
+    pub plausibility: Plausibility,
     /// The file it was read from (`None`: the defaults).
     pub file: Option<ConfigFile>,
     raw: RawConfig,
@@ -558,14 +569,14 @@ pub(crate) fn ms_to_ns(ms: u64) -> u64 {
 /// Longest `trigger_ms` / `release_ms`.
 const MAX_DELAY_MS: u64 = 60_000;
 
-fn bad(key: &str, reason: impl Into<String>) -> ConfigError {
+pub(crate) fn bad(key: &str, reason: impl Into<String>) -> ConfigError {
     ConfigError::Bad {
         key: key.into(),
         reason: reason.into(),
     }
 }
 
-fn check_timing(key: &str, trigger_ms: u64, release_ms: u64) -> Result<(), ConfigError> {
+pub(crate) fn check_timing(key: &str, trigger_ms: u64, release_ms: u64) -> Result<(), ConfigError> {
     if trigger_ms > MAX_DELAY_MS || release_ms > MAX_DELAY_MS {
         return Err(bad(
             key,
@@ -590,7 +601,7 @@ fn check_positive(key: &str, values: &[(&str, Option<f64>)]) -> Result<(), Confi
     Ok(())
 }
 
-fn check_non_negative(key: &str, values: &[(&str, f64)]) -> Result<(), ConfigError> {
+pub(crate) fn check_non_negative(key: &str, values: &[(&str, f64)]) -> Result<(), ConfigError> {
     for (name, v) in values {
         if !(v.is_finite() && *v >= 0.0) {
             return Err(bad(
@@ -755,6 +766,12 @@ impl RawConfig {
             ir,
             speed,
             operator: r.operator.enabled,
+            plausibility: Plausibility::validate(
+                &r.runaway,
+                &r.direction,
+                &r.following,
+                &r.plausibility,
+            )?,
             file: None,
             raw: self,
         })

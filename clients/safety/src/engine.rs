@@ -33,12 +33,13 @@
 
 use chassis_client::{
     ChassisState, Envelope, EstopState, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus,
-    RULE_SLOTS, RobotDescription, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus,
+    RULE_SLOTS, RobotDescription, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus, Unfollowed,
     VelocityRequest,
 };
 
 use crate::config::{Action, Config, RangeZones, SlowSpeeds, Timing};
 use crate::levels::{BatteryBasis, Levels, number};
+use crate::plausibility::{Finding, Verdict, Watch};
 
 /// The envelope of the slow zone: every direction at its slow speed.
 fn slow_envelope(slow: SlowSpeeds) -> Envelope {
@@ -206,8 +207,12 @@ enum Cause {
     Bumper,
     Range,
     Blind,
-    Speed { reverse: bool },
+    Speed {
+        reverse: bool,
+    },
     Operator,
+    /// A plausibility rule's finding (following: with its [`Unfollowed`] cause).
+    Plausibility(Finding, u8),
 }
 
 /// One rule's measurement.
@@ -280,6 +285,14 @@ pub struct Engine {
     operator_pending: bool,
     warned_no_lock: bool,
     last_event: LastEvent,
+    /// The reach of recent commands, for the plausibility rules.
+    watch: Watch,
+    /// What they found in the newest sample.
+    verdict: Verdict,
+    /// Said that the plausibility rules have no acceleration to judge by.
+    warned_no_accel: bool,
+    /// The [`Unfollowed`] cause the following rule last found.
+    unfollowed: u8,
 }
 
 const RANGE_RULES: [u8; 2] = [SafetyRule::ULTRASONIC, SafetyRule::IR];
@@ -303,6 +316,10 @@ impl Engine {
             operator_pending: false,
             warned_no_lock: false,
             last_event: LastEvent::default(),
+            watch: Watch::default(),
+            verdict: Verdict::default(),
+            warned_no_accel: false,
+            unfollowed: Unfollowed::NONE,
         }
     }
 
@@ -321,6 +338,8 @@ impl Engine {
     pub fn set_description(&mut self, description: &RobotDescription) -> &Levels {
         self.levels = Levels::resolve(&self.config, Some(description), &self.label);
         self.battery_basis = None;
+        self.watch.set_limits(&description.effective_limits());
+        self.warned_no_accel = false;
         &self.levels
     }
 
@@ -355,6 +374,9 @@ impl Engine {
                 trigger_ns: 0,
                 release_ns: 0,
             }),
+            SafetyRule::RUNAWAY => c.plausibility.runaway,
+            SafetyRule::DIRECTION => c.plausibility.direction,
+            SafetyRule::FOLLOWING => c.plausibility.following,
             _ => None,
         }
     }
@@ -380,6 +402,22 @@ impl Engine {
         }
         let lock = self.observe_lock(mux, &mut notices);
         self.observe_battery_basis(state, &mut notices, &mut infos);
+        self.verdict = self.watch.judge(now_ns, state, &self.config.plausibility);
+        let p = &self.config.plausibility;
+        let judging = p.runaway.or(p.direction).or(p.following).is_some();
+        // Said once the driver reports a command the rules would judge.
+        if judging
+            && state.is_valid(Group::Command)
+            && self.watch.accel_mps2(p).is_none()
+            && !self.warned_no_accel
+        {
+            self.warned_no_accel = true;
+            notices.push(format!(
+                "runaway, direction and following rules: no linear acceleration is known for {}: \
+                 they do not judge; set [rules.plausibility] linear_accel_mps2",
+                self.label
+            ));
+        }
 
         for rule in 0..SafetyRule::COUNT as u8 {
             let Some(timing) = self.timing(rule) else {
@@ -817,6 +855,27 @@ impl Engine {
                     },
                 }
             }
+            SafetyRule::RUNAWAY | SafetyRule::DIRECTION | SafetyRule::FOLLOWING => {
+                let v = self.verdict;
+                let found = match rule {
+                    SafetyRule::RUNAWAY => v.runaway.map(|f| (f, Unfollowed::NONE)),
+                    SafetyRule::DIRECTION => v.direction.map(|f| (f, Unfollowed::NONE)),
+                    _ => v.following,
+                };
+                let Some((finding, cause)) = found else {
+                    return Measure::clear();
+                };
+                if rule == SafetyRule::FOLLOWING {
+                    self.unfollowed = cause;
+                }
+                Measure {
+                    target: 1,
+                    value: finding.measured_mps,
+                    threshold: finding.against_mps,
+                    stop_edge: f64::NAN,
+                    cause: Cause::Plausibility(finding, cause),
+                }
+            }
             _ => Measure::clear(),
         }
     }
@@ -834,6 +893,15 @@ impl Engine {
         status.limit_angular_radps = decision.envelope.angular_radps;
         status.action = decision.action;
         status.estop = decision.estop;
+        status.unfollowed = if self.rules[usize::from(SafetyRule::FOLLOWING)]
+            .debounce
+            .level
+            > 0
+        {
+            self.unfollowed
+        } else {
+            Unfollowed::NONE
+        };
         for (i, st) in self.rules.iter().enumerate().take(RULE_SLOTS) {
             status.trigger_counts[i] = st.count;
             status.last_trigger_ns[i] = st.last_trigger_ns;
@@ -948,6 +1016,21 @@ fn describe(rule: u8, from: u8, to: u8, m: &Measure, threshold: f64) -> String {
         (Cause::Speed { .. }, false) => format!(
             "{name}: {:.2} m/s < {:.2} m/s, released",
             m.value, threshold
+        ),
+        (Cause::Plausibility(f, _), _) if rule == SafetyRule::RUNAWAY => format!(
+            "{name}: {:.2} m/s, commands allow {:.2} m/s",
+            f.measured_mps.abs(),
+            f.against_mps
+        ),
+        (Cause::Plausibility(f, _), _) if rule == SafetyRule::DIRECTION => format!(
+            "{name}: {:.2} m/s against a {:.2} m/s command",
+            f.measured_mps, f.against_mps
+        ),
+        (Cause::Plausibility(f, cause), _) => format!(
+            "{name}: {:.2} of {:.2} m/s, {}",
+            f.measured_mps,
+            f.against_mps,
+            Unfollowed::name(cause)
         ),
         (Cause::None, _) if rule == SafetyRule::STALE => format!("{name}: fresh state again"),
         (Cause::None, _) => format!("{name}: {}", if up { "triggered" } else { "released" }),

@@ -3,6 +3,7 @@
 use super::*;
 use crate::config::Origin;
 use crate::config::RawConfig;
+use chassis_client::ControlMode;
 use chassis_protocols::RobotKind;
 use chassis_protocols::description::describe;
 
@@ -22,6 +23,8 @@ struct Rig {
     now_ms: u64,
     /// The state stops refreshing (the service is silent).
     frozen: bool,
+    /// The driver reports the command it puts on the wire.
+    wire: bool,
 }
 
 fn mux_with_estop() -> MuxStatus {
@@ -68,6 +71,7 @@ impl Rig {
             mux: Some(mux_with_estop()),
             now_ms: 0,
             frozen: false,
+            wire: false,
         };
         rig.refresh();
         rig
@@ -87,6 +91,9 @@ impl Rig {
         self.state.stamp_ns = now;
         for group in [Group::Motion, Group::System] {
             self.state.touch(group, now);
+        }
+        if self.wire {
+            self.state.touch(Group::Command, now);
         }
         // What each simulated chassis reports: a state of charge from the TITAN's BMS, ranges
         // from the XBot.
@@ -908,4 +915,227 @@ fn every_robot_of_the_registry_has_a_speed_rule_and_a_battery_rule() {
             pair.driver.state().system.battery_voltage_v
         );
     }
+}
+
+/// An XBot as chassisd describes it (its `[mux.limits]` accelerate at 2 m/s²), its driver
+/// reporting the command on the wire, drive power on, in command mode.
+fn driving(toml: &str) -> Rig {
+    let mut d = description(RobotKind::Xbot);
+    d.configured_limits.linear_accel_mps2 = 2.0;
+    let mut rig = Rig::described(&d, toml);
+    rig.wire = true;
+    rig.state.system.power_enabled = 1;
+    rig.state.system.control_mode = ControlMode::COMMAND;
+    rig
+}
+
+impl Rig {
+    /// `command` m/s on the wire, `measured` m/s measured.
+    fn drive(&mut self, command: f32, measured: f32) {
+        self.state.command.linear_mps = command;
+        self.state.motion.linear_mps = measured;
+    }
+
+    fn status(&self, d: &Decision) -> SafetyStatus {
+        let mut status = SafetyStatus::default();
+        self.engine.fill_status(d, &mut status);
+        status
+    }
+}
+
+#[test]
+fn moving_while_commanded_still_latches_as_a_runaway() {
+    let mut rig = driving("");
+    rig.drive(0.0, 0.0);
+    assert_eq!(rig.run(1000).command, Command::Heartbeat);
+    rig.drive(0.0, 0.3);
+    assert_eq!(
+        rig.run(180).command,
+        Command::Heartbeat,
+        "200 ms trigger time"
+    );
+    let d = rig.run(40);
+    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert_eq!(texts(&d), ["runaway: 0.30 m/s, commands allow 0.05 m/s"]);
+}
+
+#[test]
+fn faster_than_commanded_beyond_the_margin_is_a_runaway_and_within_it_is_not() {
+    let mut rig = driving("");
+    // 0.5 m/s × 1.2 + 0.05 m/s = 0.65 m/s.
+    rig.drive(0.5, 0.64);
+    assert_eq!(rig.run(2000).command, Command::Heartbeat);
+    rig.drive(0.5, 0.7);
+    let d = rig.run(300);
+    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert_eq!(texts(&d), ["runaway: 0.70 m/s, commands allow 0.65 m/s"]);
+}
+
+#[test]
+fn a_robot_that_lags_and_brakes_at_its_acceleration_is_no_runaway() {
+    let mut rig = driving("");
+    rig.drive(1.0, 1.0);
+    rig.run(1000);
+    // The wire drops to zero; the robot keeps its speed 300 ms, then brakes at 2 m/s².
+    let mut events = Vec::new();
+    for step in 0..100u16 {
+        let t = f32::from(step) * 0.02;
+        let measured = if t < 0.3 {
+            1.0
+        } else {
+            (1.0 - 2.0 * (t - 0.3)).max(0.0)
+        };
+        rig.drive(0.0, measured);
+        let d = rig.run(20);
+        assert_eq!(d.command, Command::Heartbeat, "at {t} s: {:?}", texts(&d));
+        events.extend(d.events);
+    }
+    assert!(events.is_empty(), "{events:?}");
+}
+
+#[test]
+fn motion_against_the_command_latches_and_a_lagging_reversal_does_not() {
+    let mut rig = driving("");
+    rig.drive(0.5, 0.5);
+    rig.run(1000);
+    rig.drive(-0.5, 0.5);
+    assert_eq!(rig.run(300).command, Command::Heartbeat, "still reversing");
+    rig.drive(-0.5, -0.5);
+    assert_eq!(rig.run(2000).command, Command::Heartbeat);
+    rig.drive(0.5, 0.5);
+    rig.run(2000);
+    rig.drive(0.5, -0.3);
+    let d = rig.run(300);
+    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert_eq!(
+        texts(&d),
+        ["direction: -0.30 m/s against a 0.50 m/s command"]
+    );
+    assert!(rig.status(&d).is_active(SafetyRule::DIRECTION));
+}
+
+#[test]
+fn a_chassis_that_does_not_follow_stops_after_the_time_it_needs_and_names_the_cause() {
+    let mut rig = driving("");
+    rig.state.system.control_mode = ControlMode::STANDBY;
+    // From 0 to 0.5 m/s and back within reach at 2 m/s², and the 500 ms lag: 1 s.
+    rig.drive(0.5, 0.0);
+    assert_eq!(rig.run(960).command, Command::Heartbeat);
+    let d = rig.run(60);
+    assert_eq!(d.command, Command::Stop);
+    assert_eq!(texts(&d), ["following: 0.00 of 0.50 m/s, standby"]);
+    let status = rig.status(&d);
+    assert!(status.is_active(SafetyRule::FOLLOWING));
+    assert_eq!(status.unfollowed, Unfollowed::STANDBY);
+    // The command drops to zero: released after its release time, the cause with it.
+    rig.drive(0.0, 0.0);
+    assert_eq!(rig.run(960).command, Command::Stop);
+    let d = rig.run(60);
+    assert_eq!(d.command, Command::Heartbeat);
+    assert_eq!(texts(&d), ["following: released"]);
+    assert_eq!(rig.status(&d).unfollowed, Unfollowed::NONE);
+}
+
+#[test]
+fn a_slipping_chassis_does_not_follow_and_one_that_keeps_up_does() {
+    let mut rig = driving("");
+    rig.drive(1.0, 0.3);
+    assert_eq!(
+        rig.run(3000).command,
+        Command::Heartbeat,
+        "30 % of the command"
+    );
+    rig.drive(1.0, 0.2);
+    let d = rig.run(2000);
+    assert_eq!(d.command, Command::Stop);
+    assert_eq!(rig.status(&d).unfollowed, Unfollowed::UNREPORTED);
+}
+
+#[test]
+fn the_cause_of_not_following_is_what_the_chassis_reports_most_telling_first() {
+    /// What the chassis reports, and the cause it names.
+    type Case = (fn(&mut ChassisState), u8);
+    let cases: [Case; 9] = [
+        (|_| {}, Unfollowed::UNREPORTED),
+        (
+            |s| s.link_flags = LinkFlags::CHASSIS_SILENT,
+            Unfollowed::BUS_SILENT,
+        ),
+        (
+            |s| s.system.fault_flags = FaultFlags::EMERGENCY_STOP | FaultFlags::MOTOR_DRIVER_ERROR,
+            Unfollowed::CHASSIS_ESTOP,
+        ),
+        (
+            |s| s.link_flags = LinkFlags::RC_AUTHORITY,
+            Unfollowed::REMOTE_CONTROL,
+        ),
+        (
+            |s| s.system.control_mode = ControlMode::STANDBY,
+            Unfollowed::STANDBY,
+        ),
+        (
+            |s| s.system.control_mode = ControlMode::SERIAL,
+            Unfollowed::SERIAL_MODE,
+        ),
+        (
+            |s| s.system.fault_flags = FaultFlags::MOTOR_2_COMM_LOST,
+            Unfollowed::DRIVER_FAULT,
+        ),
+        (|s| s.system.power_enabled = 0, Unfollowed::DRIVERS_DISABLED),
+        (
+            |s| s.system.parking_brake_engaged = 1,
+            Unfollowed::PARKING_BRAKE,
+        ),
+    ];
+    for (report, cause) in cases {
+        let mut rig = driving("");
+        report(&mut rig.state);
+        rig.drive(0.5, 0.0);
+        let d = rig.run(1100);
+        let status = rig.status(&d);
+        assert!(status.is_active(SafetyRule::FOLLOWING), "{cause}");
+        assert_eq!(
+            Unfollowed::name(status.unfollowed),
+            Unfollowed::name(cause),
+            "{:?}",
+            texts(&d)
+        );
+        assert!(!Unfollowed::text(cause).is_empty());
+    }
+}
+
+#[test]
+fn without_an_acceleration_the_plausibility_rules_say_so_and_do_not_judge() {
+    let mut rig = Rig::new(RobotKind::Xbot);
+    rig.wire = true;
+    rig.drive(0.0, 0.5);
+    let d = rig.run(20);
+    assert_eq!(
+        d.notices,
+        [
+            "runaway, direction and following rules: no linear acceleration is known for \
+             chassis/test: they do not judge; set [rules.plausibility] linear_accel_mps2"
+        ]
+    );
+    let d = rig.run(2000);
+    assert!(d.notices.is_empty());
+    assert_eq!(d.command, Command::Heartbeat);
+    // The file's acceleration: judged.
+    let mut rig = Rig::with_config(
+        RobotKind::Xbot,
+        "[rules.plausibility]\nlinear_accel_mps2 = 1.0\n",
+    );
+    rig.wire = true;
+    rig.drive(0.0, 0.5);
+    assert!(matches!(rig.run(300).command, Command::StopAndLock(_)));
+}
+
+#[test]
+fn disabled_plausibility_rules_do_not_judge() {
+    let mut rig = driving(
+        "[rules.runaway]\nenabled = false\n[rules.direction]\nenabled = false\n\
+         [rules.following]\nenabled = false\n",
+    );
+    rig.drive(0.5, -1.0);
+    assert_eq!(rig.run(3000).command, Command::Heartbeat);
 }

@@ -10,6 +10,7 @@
 //! * [`levels`]: the speed and battery levels, from the robot's description (never from a
 //!   table of robots here) or the file, and where each comes from;
 //! * [`engine`]: the pure rule engine (state and mux status in, a decision out);
+//! * [`plausibility`]: the wheels follow the command (runaway, direction, following);
 //! * [`monitor`]: the loop that connects, reads the description, decides, publishes and
 //!   reconnects;
 //! * [`print`](mod@print): `--print-config`, every value with where it comes from.
@@ -25,4 +26,5 @@ pub mod config;
 pub mod engine;
 pub mod levels;
 pub mod monitor;
+pub mod plausibility;
 pub mod print;

@@ -30,6 +30,8 @@ pub enum BadSimRequest {
     NotFinite(&'static str),
     #[error("a runaway speed must be a number of at most {max} m/s either way")]
     BadRunaway { max: f64 },
+    #[error("a gain must be a number of at most {max} either way")]
+    BadGain { max: f64 },
     #[error("unknown simulator request kind {0}")]
     UnknownKind(u8),
 }
@@ -144,6 +146,13 @@ pub fn injection_of(request: &SimRequest) -> Result<Injection, BadSimRequest> {
                 return Err(BadSimRequest::BadRunaway { max });
             }
             Injection::Runaway(on.then_some(value))
+        }
+        SimKind::GAIN => {
+            let max = chassis_protocols::firmware::MAX_GAIN;
+            if on && !(value.is_finite() && value.abs() <= max) {
+                return Err(BadSimRequest::BadGain { max });
+            }
+            Injection::Gain(on.then_some(value))
         }
         SimKind::FLOOD => Injection::Flood {
             frames_per_s: finite("frame rate")?.min(1e6) as u32,
@@ -525,5 +534,23 @@ mod tests {
         assert!(injection_of(&absurd).is_err());
         let clear = SimRequest { flag: 0, ..absurd };
         assert_eq!(injection_of(&clear), Ok(Injection::Runaway(None)));
+        let backwards = SimRequest {
+            kind: SimKind::GAIN,
+            ..reverse
+        };
+        assert_eq!(injection_of(&backwards), Ok(Injection::Gain(Some(-1.0))));
+        let too_much = SimRequest {
+            value: 2.5,
+            ..backwards
+        };
+        assert_eq!(
+            injection_of(&too_much),
+            Err(BadSimRequest::BadGain { max: 2.0 })
+        );
+        let clear = SimRequest {
+            flag: 0,
+            ..too_much
+        };
+        assert_eq!(injection_of(&clear), Ok(Injection::Gain(None)));
     }
 }

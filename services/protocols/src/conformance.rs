@@ -24,6 +24,7 @@
 //! | [`a_reboot_is_ridden_out`] | `Injection::Reboot`: counted, silent and deaf while booting; the chassis obeys again within 100 ms of its first frame after the boot, and drives |
 //! | [`the_battery_it_reports_follows_the_charge`] | `Injection::Battery`: the charge is the one injected, what the driver reports of the battery follows it; a charge that is no number is refused |
 //! | [`a_runaway_drives_past_the_limit_and_gives_control_back`] | `Injection::Runaway`: past the described limit whatever is commanded, the driver reports the speed measured; cleared, the chassis obeys again; a speed that is no number is refused |
+//! | [`a_gain_turns_the_wheels_off_the_command`] | `Injection::Gain`: at 0 the chassis stands though commanded, at 0.5 it drives at half the command, at −1 against it, the driver reporting each; `None` obeys again; a gain that is no number is refused |
 //! | [`injections_a_firmware_takes_do_what_they_say`] | those not every robot has, where a firmware takes them: a flood adds exactly the frames asked for, bad checksums spoil exactly the next frames and the driver counts each, an RC takeover, the E-stop switch and the bumper stop the chassis and the driver reports each, and it drives again after |
 //! | [`what_is_no_command_is_counted_and_not_obeyed`] | the other medium is a decode error on both sides; the chassis' own frames echoed back to it are neither obeyed nor errors |
 //! | [`every_frame_of_the_exchange_decodes`] | with the family's describer (`Family::codec`), naming the robot and the direction it was sent in |
@@ -723,6 +724,41 @@ pub(crate) fn a_runaway_drives_past_the_limit_and_gives_control_back(sides: &dyn
     Ok(())
 }
 
+/// `Injection::Gain` (a chassis that ignores its command, slips, or is wired backwards): the
+/// wheels turn at the gain times the command, the driver reporting what they do; `None` obeys
+/// again. What the safety monitor's direction and following rules are tested with.
+pub(crate) fn a_gain_turns_the_wheels_off_the_command(sides: &dyn Sides) -> Outcome {
+    let mut pair = driving(sides);
+    for gain in [0.0, 0.5, -1.0] {
+        ensure!(
+            pair.inject(Injection::Gain(Some(gain))),
+            "gain {gain} refused"
+        );
+        pair.run_for(ms(3_000));
+        let (truth, measured) = (true_speed(&pair), reported_speed(&pair));
+        let want = gain * SPEED_MPS;
+        ensure!(
+            (truth - want).abs() < 0.02 && (measured - want).abs() < 0.02,
+            "gain {gain}: {want} m/s wanted, true {truth:.3}, measured {measured:.3}"
+        );
+    }
+    ensure!(
+        pair.inject(Injection::Gain(None)),
+        "clearing the gain was refused"
+    );
+    pair.run_for(ms(3_000));
+    ensure!(
+        moving_forward(&pair),
+        "3 s after the gain was cleared the chassis drives at {:.3} m/s",
+        true_speed(&pair)
+    );
+    ensure!(
+        !pair.inject(Injection::Gain(Some(f64::NAN))),
+        "a gain that is no number was taken"
+    );
+    Ok(())
+}
+
 /// An injection that stops the chassis, the one that ends it, and how the driver reports it.
 type Stop = (Injection, Injection, fn(&ChassisState) -> bool);
 
@@ -992,6 +1028,7 @@ checks!(
     a_reboot_is_ridden_out,
     the_battery_it_reports_follows_the_charge,
     a_runaway_drives_past_the_limit_and_gives_control_back,
+    a_gain_turns_the_wheels_off_the_command,
     injections_a_firmware_takes_do_what_they_say,
     what_is_no_command_is_counted_and_not_obeyed,
     every_frame_of_the_exchange_decodes,
@@ -1306,7 +1343,7 @@ fn item(seeds: &[WireItem], (kind, index, position, byte, bytes, _): &Input) -> 
 /// The injection an input of kind 9 makes.
 fn injection((_, index, position, byte, bytes, _): &Input) -> Injection {
     let value = f64::from(*byte);
-    match index % 13 {
+    match index % 14 {
         0 => Injection::MotorDriverLoss {
             motor: *byte % 6,
             lost: position % 2 == 0,
@@ -1326,7 +1363,8 @@ fn injection((_, index, position, byte, bytes, _): &Input) -> Injection {
             frames_per_s: u32::from(*byte) * 4,
         },
         11 => Injection::EStop(position % 2 == 0),
-        _ => Injection::Runaway((position % 3 != 0).then_some(value / 20.0 - 6.0)),
+        12 => Injection::Runaway((position % 3 != 0).then_some(value / 20.0 - 6.0)),
+        _ => Injection::Gain((position % 3 != 0).then_some(value / 50.0 - 2.5)),
     }
 }
 

@@ -57,6 +57,10 @@ pub enum Injection {
     /// chassis drives at this forward speed, m/s (negative: reverse), whatever it is commanded
     /// and past its own limits; `None` gives the control back. Every simulated chassis has it.
     Runaway(Option<f64>),
+    /// The wheels turn at this multiple of the command (at most [`MAX_GAIN`] either way): 0
+    /// ignores it (a chassis that answers and does not drive), between 0 and 1 it slips, a
+    /// negative gain drives against it; `None` obeys again. Every simulated chassis has it.
+    Gain(Option<f64>),
 }
 
 impl Injection {
@@ -75,6 +79,7 @@ impl Injection {
             Injection::Flood { .. } => "flood",
             Injection::EStop(_) => "estop-switch",
             Injection::Runaway(_) => "runaway",
+            Injection::Gain(_) => "gain",
         }
     }
 }
@@ -512,6 +517,19 @@ pub(crate) fn runaway_speed(speed: Option<f64>) -> Option<Option<f64>> {
     match speed {
         None => Some(None),
         Some(v) if v.is_finite() && v.abs() <= MAX_RUNAWAY_MPS => Some(Some(v)),
+        Some(_) => None,
+    }
+}
+
+/// Largest |gain| an injected [`Injection::Gain`] may have (faster is a runaway).
+pub const MAX_GAIN: f64 = 2.0;
+
+/// An injected gain: `Some(None)` obeys again, `None` when it is not a number or beyond
+/// [`MAX_GAIN`].
+pub(crate) fn gain(gain: Option<f64>) -> Option<Option<f64>> {
+    match gain {
+        None => Some(None),
+        Some(g) if g.is_finite() && g.abs() <= MAX_GAIN => Some(Some(g)),
         Some(_) => None,
     }
 }

@@ -544,7 +544,9 @@ fn chassisd_config(env: &Env, text: &str) -> String {
 /// A HUNTER whose driver is limited to 0.5 m/s by a `[profile]` override: requests beyond the
 /// limit are clamped and the monitor lets it drive; the simulated chassis then runs away at
 /// 1.0 m/s (`chassis sim runaway`) — under the HUNTER's own 1.5 m/s, beyond the configured limit
-/// — and the monitor stops it; once it obeys again it drives again.
+/// — and the monitor stops it (the speed rule) and latches the e-stop (the runaway rule: faster
+/// than the command on the wire); once it obeys again and the operator released the e-stop, it
+/// drives again.
 #[test]
 fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
     let mut env = Env::new("safety-runaway");
@@ -579,19 +581,17 @@ fn a_hunter_running_away_past_its_configured_limit_is_stopped_by_the_monitor() {
     assert!(fastest > 0.6, "measured at most {fastest} m/s");
     let status = safety(&robot);
     assert!(status.is_active(SafetyRule::SPEED), "{status:?}");
-    assert_eq!(status.action, SafetyAction::STOP);
+    assert!(status.is_active(SafetyRule::RUNAWAY), "{status:?}");
+    assert_eq!(status.action, SafetyAction::LATCH);
     assert!(status.trigger_count(SafetyRule::SPEED) >= 1);
-    assert!(
-        status.last_text().starts_with("speed: ") && status.last_text().ends_with("> 0.60 m/s"),
-        "{}",
-        status.last_text()
-    );
     // The mux keeps the output at zero while the chassis still runs away.
     let high = drive_one(&mut robot, &mut teleop, fast, Duration::from_secs(1));
     assert!(high > 0.6, "the runaway went on: {high}");
     assert_eq!(mux(&mut robot).output, BodyVelocity::ZERO);
 
     env.chassis_ok(&["sim", "--name", &n, "runaway", "--clear"]);
+    env.chassis_ok(&["control", "--name", &n, "estop-release"]);
+    teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
     let again = until_one(&mut robot, (&mut teleop, fast), 5000, teleop_above(0.3));
     assert!(
         again.is_some(),
@@ -693,7 +693,8 @@ fn a_profile_override_in_chassisds_config_reaches_the_monitor() {
 /// A SCOUT MINI on a real bus (slcan over a pty) is described as detecting, with its V1
 /// profile's 5 m/s, until chassisd hears it speak V2 (3 m/s): the monitor takes the newer
 /// description, and a runaway at 4 m/s — under the first level (5.55 m/s), over the new one
-/// (3.35 m/s) — stops the robot.
+/// (3.35 m/s) — stops the robot. The runaway rule, which judges the speed against the command
+/// and would stop it first, is off: this is the speed rule's level.
 #[test]
 fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
     let mut env = Env::new("safety-detect");
@@ -703,7 +704,12 @@ fn the_monitor_takes_the_newer_description_when_protocol_detection_decides() {
     // chassisd first: it serves, describes the robot as detecting, and waits for its bus.
     env.serve("scout-mini", &n, &["--bus", &bus]);
     let mut robot = env.robot(&n, UP);
-    let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
+    let config = env.write("safety.toml", "[rules.runaway]\nenabled = false\n");
+    let monitor = env.spawn(
+        "safety",
+        "chassis-safety",
+        &["--name", &n, "--config", &config],
+    );
     let logged = |env: &mut Env, texts: &[&str]| {
         wait_for(Duration::from_secs(10), || {
             let log = env.proc(monitor).log_text();

@@ -532,6 +532,8 @@ impl V1Sim {
     fn step(&mut self, dt: f64) {
         self.refresh_conditions();
         let (mut target, mut tau) = self.target();
+        target.linear_mps *= self.body.gain;
+        target.angular_radps *= self.body.gain;
         if let Some(runaway) = self.body.runaway_mps {
             target.linear_mps = runaway;
             tau = self.speed_time_constant_s;

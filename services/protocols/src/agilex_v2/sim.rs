@@ -212,6 +212,8 @@ impl V2Sim {
         } else {
             self.command
         };
+        target.linear_mps *= self.body.gain;
+        target.angular_radps *= self.body.gain;
         if let Some(runaway) = self.body.runaway_mps {
             target.linear_mps = runaway;
         }

@@ -1,6 +1,6 @@
 //! What every simulated chassis has alike, whatever its robot: the outbox and the storms
 //! injected into it, the boot, the battery and its charge, the physics clock and the true pose, a
-//! runaway speed loop, lost motor drivers, and the counts of what it received.
+//! runaway speed loop, a gain between command and wheels, lost motor drivers, and the counts of what it received.
 //!
 //! Each simulated firmware embeds one [`SimBody`] and hands it every [`Injection`] first
 //! ([`SimBody::inject`]); what only one robot has (its RC authority, bumper, E-stop switch,
@@ -9,8 +9,8 @@
 use std::time::Duration;
 
 use super::{
-    BatteryModel, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, Substeps, motor_index,
-    runaway_speed, state_of_charge, substeps,
+    BatteryModel, Flood, InjectedCounts, Injection, Outbox, Pose, SimTruth, Substeps, gain,
+    motor_index, runaway_speed, state_of_charge, substeps,
 };
 use crate::Direction;
 use crate::can::CanFrame;
@@ -127,6 +127,8 @@ pub(crate) struct SimBody<T> {
     pub(crate) pose: Pose,
     /// [`Injection::Runaway`]: the forward speed the chassis drives at whatever it is told.
     pub(crate) runaway_mps: Option<f64>,
+    /// [`Injection::Gain`]: the multiple of the command the wheels turn at (1: they obey).
+    pub(crate) gain: f64,
     /// [`Injection::MotorDriverLoss`]: motor drivers 1-4 that do not answer.
     pub(crate) motor_lost: [bool; 4],
     /// Boots since the observer started counting ([`crate::SimTruth::boots`]).
@@ -155,6 +157,7 @@ impl<T: Item> SimBody<T> {
             pack_current_a: spec.idle_current_a,
             pose: Pose::default(),
             runaway_mps: None,
+            gain: 1.0,
             motor_lost: [false; 4],
             boots: 0,
             received: Received::default(),
@@ -192,6 +195,13 @@ impl<T: Item> SimBody<T> {
                     return Applied::Refused;
                 };
                 self.runaway_mps = speed;
+                Applied::Done
+            }
+            Injection::Gain(g) => {
+                let Some(g) = gain(g) else {
+                    return Applied::Refused;
+                };
+                self.gain = g.unwrap_or(1.0);
                 Applied::Done
             }
             Injection::Silence(duration) => {

@@ -81,6 +81,8 @@ impl LoopbackSim {
     /// Integrates `dt` seconds.
     fn step(&mut self, dt: f64) {
         let mut target = self.command;
+        target.linear_mps *= self.body.gain;
+        target.angular_radps *= self.body.gain;
         if let Some(runaway) = self.body.runaway_mps {
             target.linear_mps = runaway;
         }

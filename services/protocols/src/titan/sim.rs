@@ -558,7 +558,10 @@ impl TitanSim {
         let (target, tau) = match self.body.runaway_mps {
             Some(runaway) => (runaway, Self::DEFAULT_SPEED_TIME_CONSTANT_S),
             None if blocked => (0.0, Self::DEFAULT_STOP_TIME_CONSTANT_S),
-            None => (self.command.linear_mps, Self::DEFAULT_SPEED_TIME_CONSTANT_S),
+            None => (
+                self.command.linear_mps * self.body.gain,
+                Self::DEFAULT_SPEED_TIME_CONSTANT_S,
+            ),
         };
         let v0 = self.linear_mps;
         let v1 = first_order_lag(v0, target, tau, dt);

@@ -480,7 +480,8 @@ impl XbotSim {
             ),
             None if blocked => ([0.0; 4], Self::DEFAULT_STOP_TIME_CONSTANT_S),
             None => (
-                self.wheel_targets(&self.command),
+                self.wheel_targets(&self.command)
+                    .map(|w| w * self.body.gain),
                 Self::DEFAULT_SPEED_TIME_CONSTANT_S,
             ),
         };

@@ -1,0 +1,251 @@
+//! The fault matrix, the chassis: a simulated TITAN that does not do what it is told — it runs
+//! away, drives against its command, ignores it, slips, or loses a motor driver mid-motion —
+//! while teleop drives it at 0.5 m/s under chassis-safety. Each row records the time from the
+//! injection to the stop (the mux's output zero) and the distance the chassis travelled from
+//! the injection to the stop and to its standstill, by the simulator's truth; a not-following
+//! stop must name its cause in `SafetyStatus` and in `chassis status`. Figures are recorded
+//! with [`Figures`] (`scripts/reliability`).
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::time::{Duration, Instant};
+
+use chassis_tests::faults::*;
+use chassis_tests::*;
+
+const UP: Duration = Duration::from_secs(10);
+const SUITE: &str = "faults_chassis";
+/// The speed teleop asks for, m/s.
+const SPEED_MPS: f32 = 0.5;
+/// The longest a rule may take from the injection to the stop: the following rule's start
+/// time (1 s at 0.5 m/s) and the chassis' lag, with room for a loaded machine.
+const STOP_BOUND: Duration = Duration::from_secs(4);
+
+/// One fault of the chassis and what must stop it.
+struct Case {
+    test: &'static str,
+    tag: &'static str,
+    rank: u32,
+    fault: &'static str,
+    injection: &'static str,
+    behaviour: &'static str,
+    request: SimRequest,
+    /// The rule that must be in force once the robot stopped.
+    rule: u8,
+    /// The cause the following rule must name (`Unfollowed::NONE` for the others).
+    cause: u8,
+    /// The chassis stands once stopped (a runaway keeps going).
+    stands: bool,
+}
+
+fn injected(kind: u8, index: u8, value: f64) -> SimRequest {
+    SimRequest {
+        kind,
+        flag: 1,
+        index,
+        value,
+        ..SimRequest::default()
+    }
+}
+
+/// The forward position of the chassis by its truth, m.
+fn x_m(robot: &mut Robot) -> f64 {
+    sim_truth(robot).get("x_m")
+}
+
+fn chassis_fault(case: &Case) {
+    let _machine = shared();
+    let mut env = Env::new(case.tag);
+    let n = name(case.tag);
+    env.serve("titan", &n, &[]);
+    let mut robot = env.robot(&n, UP);
+    // Long enough a release that the cause is still in force when `chassis status` reads it.
+    let config = env.write("safety.toml", "[rules.following]\nrelease_ms = 5000\n");
+    env.spawn(
+        "safety",
+        "chassis-safety",
+        &["--name", &n, "--config", &config],
+    );
+    // Teleop connects once the monitor drives the mux: its first request, a heartbeat, is the
+    // zero motion starts from.
+    let alive = wait_for(UP, || {
+        source_status(&mux(&mut robot), "safety").has(SourceFlags::FRESH)
+    });
+    assert!(
+        alive.is_some(),
+        "the monitor never reached the mux\n{}",
+        env.logs()
+    );
+    let mut teleop = source(&mut robot, "teleop");
+    let go = VelocityRequest::twist(SPEED_MPS, 0.0);
+    let mut wire = Wire::new(&robot);
+    let mut pump = Pump::new(&mut teleop, go, &mut wire);
+    let steady = pump.until(&mut robot, UP, |m, s| {
+        source_status(m, "safety").has(SourceFlags::FRESH)
+            && m.active().map(SourceStatus::name) == Some("teleop")
+            && s.motion.linear_mps > SPEED_MPS - 0.05
+    });
+    assert!(steady.is_some(), "no steady drive\n{}", env.logs());
+    pump.run(&mut robot, Duration::from_millis(500));
+
+    let x0 = x_m(&mut robot);
+    let injected_at = Instant::now();
+    sim_ok(&mut robot, case.request);
+    let stopped = pump.until(&mut robot, STOP_BOUND, |m, _| {
+        m.output == BodyVelocity::ZERO
+    });
+    let x_stop = x_m(&mut robot);
+    let status_text = env.chassis_ok(&["status", "--name", &n]);
+    let standing = pump
+        .until(&mut robot, STOP_BOUND, |_, s| {
+            s.motion.linear_mps.abs() < 0.02
+        })
+        .is_some();
+    let x_end = x_m(&mut robot);
+    let mut sub = robot
+        .subscriber::<SafetyStatus>(SafetyStatus::SERVICE)
+        .unwrap()
+        .unwrap();
+    let status = sub.wait(Duration::from_secs(1)).unwrap().unwrap();
+
+    let rule_held = status.is_active(case.rule);
+    let named =
+        case.cause == Unfollowed::NONE || status_text.contains(Unfollowed::text(case.cause));
+    let pass = stopped.is_some() && rule_held && named && standing == case.stands;
+    let stop_ms = stopped.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+    let mut figures = Figures::faults();
+    figures.add(fault_figure(
+        SUITE,
+        case.test,
+        case.rank,
+        case.fault,
+        case.injection,
+        case.behaviour,
+        format!(
+            "stopped {stop_ms:.0} ms after the injection ({} in force); {:.2} m travelled to the \
+             stop, {}",
+            SafetyRule::name(case.rule),
+            x_stop - x0,
+            if standing {
+                format!("{:.2} m to the standstill", x_end - x0)
+            } else {
+                "still moving after the stop (the chassis does not obey)".into()
+            }
+        ),
+        stop_ms,
+        pass,
+    ));
+    eprintln!(
+        "{}: stop {stop_ms:.0} ms, {:.3} m → {:.3} m\n{status_text}",
+        case.test,
+        x_stop - x0,
+        x_end - x0
+    );
+    assert!(
+        stopped.is_some(),
+        "no stop within {STOP_BOUND:?} (injected {:?} ago)\n{}",
+        injected_at.elapsed(),
+        env.logs()
+    );
+    assert!(
+        rule_held,
+        "{} not in force: {status:?}",
+        SafetyRule::name(case.rule)
+    );
+    assert_eq!(
+        Unfollowed::name(status.unfollowed),
+        Unfollowed::name(case.cause),
+        "{}",
+        status.last_text()
+    );
+    assert!(
+        named,
+        "chassis status does not name the cause:\n{status_text}"
+    );
+    assert_eq!(standing, case.stands, "standing after the stop");
+    figures.finish();
+}
+
+#[test]
+fn a_chassis_running_away_from_its_command_is_latched() {
+    chassis_fault(&Case {
+        test: "a_chassis_running_away_from_its_command_is_latched",
+        tag: "fcr",
+        rank: 700,
+        fault: "the chassis runs away: 1.2 m/s while commanded 0.5 m/s (TITAN)",
+        injection: "`chassis sim runaway 1.2` while teleop drives at 0.5 m/s",
+        behaviour: "the runaway rule latches the e-stop: the mux outputs zero until the \
+                    operator releases it",
+        request: injected(SimKind::RUNAWAY, 0, 1.2),
+        rule: SafetyRule::RUNAWAY,
+        cause: Unfollowed::NONE,
+        stands: false,
+    });
+}
+
+#[test]
+fn a_chassis_driving_against_its_command_is_latched() {
+    chassis_fault(&Case {
+        test: "a_chassis_driving_against_its_command_is_latched",
+        tag: "fcd",
+        rank: 710,
+        fault: "the chassis drives against its command (TITAN, wheels at −1 × the command)",
+        injection: "`chassis sim gain -1` while teleop drives at 0.5 m/s",
+        behaviour: "the direction rule latches the e-stop; the chassis stands at the zero",
+        request: injected(SimKind::GAIN, 0, -1.0),
+        rule: SafetyRule::DIRECTION,
+        cause: Unfollowed::NONE,
+        stands: true,
+    });
+}
+
+#[test]
+fn a_chassis_ignoring_its_command_is_stopped_and_the_cause_named() {
+    chassis_fault(&Case {
+        test: "a_chassis_ignoring_its_command_is_stopped_and_the_cause_named",
+        tag: "fci",
+        rank: 720,
+        fault: "the chassis ignores its command and reports nothing (TITAN, wheels at 0 × the \
+                command)",
+        injection: "`chassis sim gain 0` while teleop drives at 0.5 m/s",
+        behaviour: "the following rule stops after the time the robot needs to start; \
+                    `chassis status` says the chassis reports no cause",
+        request: injected(SimKind::GAIN, 0, 0.0),
+        rule: SafetyRule::FOLLOWING,
+        cause: Unfollowed::UNREPORTED,
+        stands: true,
+    });
+}
+
+#[test]
+fn a_slipping_chassis_is_stopped_and_the_cause_named() {
+    chassis_fault(&Case {
+        test: "a_slipping_chassis_is_stopped_and_the_cause_named",
+        tag: "fcs",
+        rank: 730,
+        fault: "the chassis slips: 10 % of the commanded speed (TITAN)",
+        injection: "`chassis sim gain 0.1` while teleop drives at 0.5 m/s",
+        behaviour: "the following rule stops after the time the robot needs to start; \
+                    `chassis status` says the chassis reports no cause",
+        request: injected(SimKind::GAIN, 0, 0.1),
+        rule: SafetyRule::FOLLOWING,
+        cause: Unfollowed::UNREPORTED,
+        stands: true,
+    });
+}
+
+#[test]
+fn a_motor_driver_lost_mid_motion_stops_the_chassis() {
+    chassis_fault(&Case {
+        test: "a_motor_driver_lost_mid_motion_stops_the_chassis",
+        tag: "fcm",
+        rank: 740,
+        fault: "a motor driver lost mid-motion (TITAN, driver 1)",
+        injection: "`chassis sim motor-driver-loss 1` while teleop drives at 0.5 m/s",
+        behaviour: "chassisd holds the mux at zero for the drive fault and the fault rule stops",
+        request: injected(SimKind::MOTOR_DRIVER_LOSS, 1, 0.0),
+        rule: SafetyRule::FAULT,
+        cause: Unfollowed::NONE,
+        stands: true,
+    });
+}
