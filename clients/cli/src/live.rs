@@ -79,6 +79,9 @@ pub enum ControlCmd {
     LockRelease { lock: String },
     /// Engage a named lock as the operator.
     LockEngage { lock: String },
+    /// Set the robot's speed limit as the operator, m/s: raise or lower it; 0 lifts it (any
+    /// client may lower it, only the operator raises it).
+    SpeedLimit { mps: f32 },
 }
 
 #[derive(Debug, Subcommand)]
@@ -750,6 +753,9 @@ pub fn control(name: &str, command: &ControlCmd) -> anyhow::Result<()> {
         }
         ControlCmd::LockEngage { lock } => {
             ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name(lock)
+        }
+        ControlCmd::SpeedLimit { mps } => {
+            ControlRequest::new(ControlKind::SPEED_LIMIT).with_value(0, *mps)
         }
     };
     let mut robot = Robot::connect(name)?;
