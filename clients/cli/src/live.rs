@@ -721,6 +721,9 @@ fn mux_summary(m: &MuxStatus) -> String {
         .collect();
     out.push_str(&format!("sources    {}\n", sources.join(" | ")));
     out.push_str(&format!("locks      {}", locks_text(m)));
+    if let Some((mps, holder)) = m.speed_limit() {
+        out.push_str(&format!("\nlimit      {mps} m/s, set by {holder}"));
+    }
     out
 }
 
