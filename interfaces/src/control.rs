@@ -38,6 +38,9 @@ named_constants! {
         SILENT = 11 => "silent",
         /// Engage the lock named in `name` on behalf of the operator.
         LOCK_ENGAGE = 12 => "lock-engage",
+        /// `value[0]`: the robot's standing speed limit, m/s, set by the operator — raised or
+        /// lowered; 0 lifts it. A source can only lower it (`RequestFlags::SPEED_LIMIT`).
+        SPEED_LIMIT = 13 => "speed-limit",
     }
 }
 

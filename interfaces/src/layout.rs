@@ -324,7 +324,7 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(flags ClampFlags: u32 {
             LINEAR_LIMIT, LINEAR_LIMIT_STEERING, STEER_LIMIT, ANGULAR_LIMIT, LATERAL_UNSUPPORTED,
             TURN_IN_PLACE_UNACHIEVABLE, TURN_RADIUS_LIMIT, ACCELERATION_LIMIT,
-            CONFIG_SPEED_LIMIT, QUANTISED, CHASSIS_NOT_READY, SAFETY_LIMIT,
+            CONFIG_SPEED_LIMIT, QUANTISED, CHASSIS_NOT_READY, SAFETY_LIMIT, SPEED_LIMIT,
         }),
         describe_constants!(enum ZeroReason: u8 {
             NONE, NO_ACTIVE_SOURCE, REQUIRED_SOURCE_STALE, LOCKED, STARTING, AWAITING_ZERO, HELD,
@@ -336,10 +336,10 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(flags SourceFlags: u8 {
             REQUIRED, FRESH, ACTIVE, HEARTBEAT, BLOCKED, LIMITING, REMOTE, AWAITING_ZERO,
         }),
-        describe_constants!(flags RequestFlags: u32 { STEER, HEARTBEAT, LIMIT }),
+        describe_constants!(flags RequestFlags: u32 { STEER, HEARTBEAT, LIMIT, SPEED_LIMIT }),
         describe_constants!(enum ControlKind: u8 {
             MODE, BRAKE, CLEAR_FAULTS, LIGHTS, OFF_ROAD, LIFT, SERVOS, POWER, STEERING_ZERO,
-            LOCK_RELEASE, SILENT, LOCK_ENGAGE,
+            LOCK_RELEASE, SILENT, LOCK_ENGAGE, SPEED_LIMIT,
         }),
         describe_constants!(enum FaultClear: u8 {
             ALL, MOTOR_1_COMM, MOTOR_2_COMM, MOTOR_3_COMM, MOTOR_4_COMM, BATTERY_UNDER_VOLTAGE,

@@ -71,6 +71,8 @@ named_constants! {
         CHASSIS_NOT_READY = 1 << 10 => "chassis_not_ready",
         /// A limiting source (the safety monitor) clamped the winner's request.
         SAFETY_LIMIT = 1 << 11 => "safety_limit",
+        /// The robot's standing speed limit ([`MuxStatus::speed_limit_mps`]) capped the speed.
+        SPEED_LIMIT = 1 << 12 => "speed_limit",
     }
 }
 
@@ -237,7 +239,7 @@ impl LockStatus {
 ipc_type! {
     /// The mux's decision.
     #[derive(Default, Serialize)]
-    #[type_name("chassis::MuxStatus.v2")]
+    #[type_name("chassis::MuxStatus.v3")]
     pub struct MuxStatus {
         /// `CLOCK_MONOTONIC` time of the decision, ns.
         pub stamp_ns: u64,
@@ -265,8 +267,14 @@ ipc_type! {
         /// [`Stop`]: while `zero_reason` is [`ZeroReason::HELD`], the stop in force; while it is
         /// [`ZeroReason::AWAITING_ZERO`], the stop whose end waits for the zero.
         pub stop: u8,
+        /// Who set the standing speed limit: an index into `sources` or
+        /// [`LockStatus::HOLDER_OPERATOR`] ([`LockStatus::HOLDER_NONE`] while there is none).
+        pub speed_limit_holder: u8,
+        /// The standing speed limit every source is capped to, m/s; 0 while there is none. Any
+        /// source may lower it; only the operator raises it.
+        pub speed_limit_mps: f32,
         #[serde(skip)]
-        pub _reserved: [u8; 1],
+        pub _reserved: [u8; 4],
         pub sources: [SourceStatus; MAX_SOURCES],
         pub locks: [LockStatus; MAX_LOCKS],
     }
@@ -296,6 +304,21 @@ impl MuxStatus {
             return None;
         }
         self.sources().get(usize::from(self.awaiting_source))
+    }
+
+    /// The standing speed limit, m/s, and the name of who set it (a source or `operator`).
+    pub fn speed_limit(&self) -> Option<(f32, &str)> {
+        if self.speed_limit_mps <= 0.0 {
+            return None;
+        }
+        let holder = match self.speed_limit_holder {
+            LockStatus::HOLDER_OPERATOR => "operator",
+            index => self
+                .sources()
+                .get(usize::from(index))
+                .map_or("?", SourceStatus::name),
+        };
+        Some((self.speed_limit_mps, holder))
     }
 
     /// Index of the lock called `name`.
@@ -376,6 +399,9 @@ impl std::fmt::Display for Why<'_> {
         if !held.is_empty() {
             write!(f, " · held: {}", held.join(", "))?;
         }
+        if let Some((mps, holder)) = m.speed_limit() {
+            write!(f, " · limited to {mps} m/s by {holder}")?;
+        }
         Ok(())
     }
 }
@@ -450,6 +476,14 @@ mod tests {
             status.why().to_string(),
             "driving from teleop · held: estop"
         );
+        status.speed_limit_holder = 1;
+        status.speed_limit_mps = 0.5;
+        assert_eq!(
+            status.why().to_string(),
+            "driving from teleop · held: estop · limited to 0.5 m/s by teleop"
+        );
+        status.speed_limit_holder = LockStatus::HOLDER_OPERATOR;
+        assert_eq!(status.speed_limit(), Some((0.5, "operator")));
     }
 
     #[test]

@@ -171,7 +171,7 @@ mod tests {
         let requests = PayloadType::<VelocityRequest>::new();
         assert_eq!(
             requests.media_type(),
-            "application/octet-stream;chassis::VelocityRequest.v2"
+            "application/octet-stream;chassis::VelocityRequest.v3"
         );
         let request = VelocityRequest::twist(0.5, -0.25);
         let bytes = PayloadType::encode(core::slice::from_ref(&request));
@@ -185,7 +185,7 @@ mod tests {
             requests.decode(requests.media_type(), PayloadType::encode(&two)),
             Err(PayloadError::Count {
                 count: 2,
-                type_name: "chassis::VelocityRequest.v2"
+                type_name: "chassis::VelocityRequest.v3"
             })
         );
         assert_eq!(requests.decode_all(requests.media_type(), &[]), Ok(vec![]));

@@ -20,6 +20,11 @@ named_constants! {
         /// monitor slowing down, or blocking only the motion towards an obstacle). Implies a
         /// heartbeat.
         LIMIT = 1 << 2 => "limit",
+        /// The request only lowers the robot's standing speed limit to `speed_limit_mps` (> 0):
+        /// it asks nothing else and leaves the source's latest request as it was. The limit caps
+        /// every source until the operator raises it (`ControlKind::SPEED_LIMIT`); a larger value
+        /// from a source changes nothing.
+        SPEED_LIMIT = 1 << 3 => "speed_limit",
     }
 }
 
@@ -28,7 +33,7 @@ ipc_type! {
     /// configuration, never from the request. Plain bytes that may hold anything: where one
     /// enters a process it is parsed into a [`crate::ValidRequest`].
     #[derive(Default, Serialize)]
-    #[type_name("chassis::VelocityRequest.v2")]
+    #[type_name("chassis::VelocityRequest.v3")]
     pub struct VelocityRequest {
         /// `CLOCK_MONOTONIC` time the request was created, ns.
         pub stamp_ns: u64,
@@ -49,8 +54,9 @@ ipc_type! {
         pub lock_engage: u32,
         /// Lock bits this source releases (only locks it holds itself).
         pub lock_release: u32,
-        #[serde(skip)]
-        pub _reserved: u32,
+        /// With [`RequestFlags::SPEED_LIMIT`]: the largest linear speed, m/s (> 0), for every
+        /// source from now on.
+        pub speed_limit_mps: f32,
         /// With [`RequestFlags::LIMIT`]: largest forward speed, m/s (≥ 0; 0 blocks forward motion).
         pub limit_forward_mps: f32,
         /// With [`RequestFlags::LIMIT`]: largest reverse speed, m/s (≥ 0; 0 blocks reversing).
@@ -94,6 +100,15 @@ impl VelocityRequest {
         }
     }
 
+    /// Lowers the robot's standing speed limit to `mps` (> 0) for every source.
+    pub fn speed_limit(mps: f32) -> Self {
+        Self {
+            flags: RequestFlags::SPEED_LIMIT,
+            speed_limit_mps: mps,
+            ..Self::default()
+        }
+    }
+
     /// A heartbeat that asks for nothing.
     pub fn heartbeat() -> Self {
         Self {
@@ -109,6 +124,10 @@ impl VelocityRequest {
 
     pub fn is_limit(&self) -> bool {
         self.flags & RequestFlags::LIMIT != 0
+    }
+
+    pub fn is_speed_limit(&self) -> bool {
+        self.flags & RequestFlags::SPEED_LIMIT != 0
     }
 
     pub fn uses_steer(&self) -> bool {

@@ -22,6 +22,10 @@ pub enum InvalidVelocity {
     /// A negative bound of a speed envelope ([`RequestFlags::LIMIT`]).
     #[error("{field} is negative (an envelope bound is 0 or more)")]
     NegativeLimit { field: &'static str },
+    /// A speed limit ([`RequestFlags::SPEED_LIMIT`]) of zero or less: a stop is a lock, and no
+    /// limit is the operator's to restore.
+    #[error("speed_limit_mps is 0 or negative (a speed limit is more than 0 m/s)")]
+    NonPositiveSpeedLimit,
 }
 
 /// `Ok` when every value is finite, else the first field that is not.
@@ -221,6 +225,10 @@ impl TryFrom<VelocityRequest> for ValidRequest {
             ("steer_rad", r.steer_rad),
         ])?;
         finite(&limits)?;
+        finite(&[("speed_limit_mps", r.speed_limit_mps)])?;
+        if r.is_speed_limit() && r.speed_limit_mps <= 0.0 {
+            return Err(InvalidVelocity::NonPositiveSpeedLimit);
+        }
         if r.is_limit()
             && let Some(&(field, _)) = limits.iter().find(|(_, v)| *v < 0.0)
         {
@@ -256,6 +264,11 @@ impl ValidRequest {
             steer_rad: r.steer_rad,
             flags: r.flags & RequestFlags::STEER,
         })
+    }
+
+    /// The speed limit it lowers the robot's to ([`RequestFlags::SPEED_LIMIT`]), m/s.
+    pub fn speed_limit(&self) -> Option<f32> {
+        self.0.is_speed_limit().then_some(self.0.speed_limit_mps)
     }
 
     /// The envelope of a limit ([`RequestFlags::LIMIT`]).
@@ -327,6 +340,25 @@ mod tests {
             ..VelocityRequest::twist(0.1, 0.0)
         };
         assert!(valid(not_a_limit).is_ok_and(|r| r.envelope().is_none()));
+    }
+
+    #[test]
+    fn a_speed_limit_is_a_positive_finite_number() {
+        let l = valid(VelocityRequest::speed_limit(0.4)).unwrap();
+        assert_eq!(l.speed_limit(), Some(0.4));
+        assert!(valid(VelocityRequest::twist(0.4, 0.0)).is_ok_and(|r| r.speed_limit().is_none()));
+        for bad in [0.0, -0.5] {
+            assert_eq!(
+                valid(VelocityRequest::speed_limit(bad)),
+                Err(InvalidVelocity::NonPositiveSpeedLimit)
+            );
+        }
+        assert_eq!(
+            valid(VelocityRequest::speed_limit(f32::NAN)),
+            Err(InvalidVelocity::NotFinite {
+                field: "speed_limit_mps"
+            })
+        );
     }
 
     #[test]

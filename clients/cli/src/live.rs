@@ -79,6 +79,9 @@ pub enum ControlCmd {
     LockRelease { lock: String },
     /// Engage a named lock as the operator.
     LockEngage { lock: String },
+    /// Set the robot's speed limit as the operator, m/s: raise or lower it; 0 lifts it (any
+    /// client may lower it, only the operator raises it).
+    SpeedLimit { mps: f32 },
 }
 
 #[derive(Debug, Subcommand)]
@@ -722,6 +725,9 @@ fn mux_summary(m: &MuxStatus) -> String {
         .collect();
     out.push_str(&format!("sources    {}\n", sources.join(" | ")));
     out.push_str(&format!("locks      {}", locks_text(m)));
+    if let Some((mps, holder)) = m.speed_limit() {
+        out.push_str(&format!("\nlimit      {mps} m/s, set by {holder}"));
+    }
     out
 }
 
@@ -754,6 +760,9 @@ pub fn control(name: &str, command: &ControlCmd) -> anyhow::Result<()> {
         }
         ControlCmd::LockEngage { lock } => {
             ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name(lock)
+        }
+        ControlCmd::SpeedLimit { mps } => {
+            ControlRequest::new(ControlKind::SPEED_LIMIT).with_value(0, *mps)
         }
     };
     let mut robot = Robot::connect(name)?;

@@ -819,6 +819,14 @@ impl Source {
         self.send(VelocityRequest::twist(0.0, 0.0))
     }
 
+    /// Lowers the robot's standing speed limit to `mps` for every source; a limit this source
+    /// asks above the standing one changes nothing (only the operator raises it:
+    /// `ControlKind::SPEED_LIMIT`). Its latest request stands. A limit that is not a positive
+    /// number is refused ([`ClientError::InvalidRequest`]).
+    pub fn limit_speed(&mut self, mps: f32) -> Result<(), ClientError> {
+        self.send(VelocityRequest::speed_limit(mps))
+    }
+
     /// A stop that also engages the locks in `mask` (bit i = lock i of `MuxStatus::locks`).
     pub fn stop_and_lock(&mut self, mask: u32) -> Result<(), ClientError> {
         self.send(VelocityRequest {

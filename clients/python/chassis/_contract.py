@@ -583,9 +583,9 @@ class SourceStatus(Struct):
 
 
 class MuxStatus(Struct):
-    """``chassis::MuxStatus.v2``: 528 bytes, aligned to 8."""
+    """``chassis::MuxStatus.v3``: 536 bytes, aligned to 8."""
 
-    _type_name = 'chassis::MuxStatus.v2'
+    _type_name = 'chassis::MuxStatus.v3'
     _fields_ = [
         ('stamp_ns', ctypes.c_uint64),
         ('seq', ctypes.c_uint64),
@@ -601,7 +601,9 @@ class MuxStatus(Struct):
         ('lock_count', ctypes.c_uint8),
         ('awaiting_source', ctypes.c_uint8),
         ('stop', ctypes.c_uint8),
-        ('_reserved', (ctypes.c_uint8 * 1)),
+        ('speed_limit_holder', ctypes.c_uint8),
+        ('speed_limit_mps', ctypes.c_float),
+        ('_reserved', (ctypes.c_uint8 * 4)),
         ('sources', (SourceStatus * 8)),
         ('locks', (LockStatus * 4)),
     ]
@@ -750,9 +752,9 @@ class SimRequest(Struct):
 
 
 class VelocityRequest(Struct):
-    """``chassis::VelocityRequest.v2``: 64 bytes, aligned to 8."""
+    """``chassis::VelocityRequest.v3``: 64 bytes, aligned to 8."""
 
-    _type_name = 'chassis::VelocityRequest.v2'
+    _type_name = 'chassis::VelocityRequest.v3'
     _fields_ = [
         ('stamp_ns', ctypes.c_uint64),
         ('seq', ctypes.c_uint64),
@@ -763,7 +765,7 @@ class VelocityRequest(Struct):
         ('flags', ctypes.c_uint32),
         ('lock_engage', ctypes.c_uint32),
         ('lock_release', ctypes.c_uint32),
-        ('_reserved', ctypes.c_uint32),
+        ('speed_limit_mps', ctypes.c_float),
         ('limit_forward_mps', ctypes.c_float),
         ('limit_reverse_mps', ctypes.c_float),
         ('limit_lateral_mps', ctypes.c_float),
@@ -795,7 +797,8 @@ class ClampFlags(Constants):
     QUANTISED = 512
     CHASSIS_NOT_READY = 1024
     SAFETY_LIMIT = 2048
-    NAMES = {1: 'linear-limit', 2: 'linear-limit-steering', 4: 'steer-limit', 8: 'angular-limit', 16: 'lateral-unsupported', 32: 'turn-in-place-unachievable', 64: 'turn-radius-limit', 128: 'acceleration-limit', 256: 'config-speed-limit', 512: 'quantised', 1024: 'chassis-not-ready', 2048: 'safety-limit'}
+    SPEED_LIMIT = 4096
+    NAMES = {1: 'linear-limit', 2: 'linear-limit-steering', 4: 'steer-limit', 8: 'angular-limit', 16: 'lateral-unsupported', 32: 'turn-in-place-unachievable', 64: 'turn-radius-limit', 128: 'acceleration-limit', 256: 'config-speed-limit', 512: 'quantised', 1024: 'chassis-not-ready', 2048: 'safety-limit', 4096: 'speed-limit'}
 
 
 class ControlKind(Constants):
@@ -813,7 +816,8 @@ class ControlKind(Constants):
     LOCK_RELEASE = 10
     SILENT = 11
     LOCK_ENGAGE = 12
-    NAMES = {1: 'mode', 2: 'brake', 3: 'clear-faults', 4: 'lights', 5: 'off-road', 6: 'lift', 7: 'servos', 8: 'power', 9: 'steering-zero', 10: 'lock-release', 11: 'silent', 12: 'lock-engage'}
+    SPEED_LIMIT = 13
+    NAMES = {1: 'mode', 2: 'brake', 3: 'clear-faults', 4: 'lights', 5: 'off-road', 6: 'lift', 7: 'servos', 8: 'power', 9: 'steering-zero', 10: 'lock-release', 11: 'silent', 12: 'lock-engage', 13: 'speed-limit'}
 
 
 class ControlMode(Constants):
@@ -1032,7 +1036,8 @@ class RequestFlags(Constants):
     STEER = 1
     HEARTBEAT = 2
     LIMIT = 4
-    NAMES = {1: 'steer', 2: 'heartbeat', 4: 'limit'}
+    SPEED_LIMIT = 8
+    NAMES = {1: 'steer', 2: 'heartbeat', 4: 'limit', 8: 'speed-limit'}
 
 
 class SafetyAction(Constants):

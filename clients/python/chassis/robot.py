@@ -34,6 +34,7 @@ from ._contract import (
     ControlStatus,
     FaultClear,
     LightMode,
+    LockStatus,
     MuxStatus,
     RequestFlags,
     RobotDescription,
@@ -168,6 +169,11 @@ class VelocityRequest(_VelocityRequest):
         )
 
     @classmethod
+    def speed_limit(cls, mps: float) -> VelocityRequest:
+        """Lowers the robot's standing speed limit to ``mps`` (> 0) for every source."""
+        return cls(flags=RequestFlags.SPEED_LIMIT, speed_limit_mps=mps)
+
+    @classmethod
     def heartbeat(cls) -> VelocityRequest:
         """ "Alive, asking for nothing"."""
         return cls(flags=RequestFlags.HEARTBEAT)
@@ -226,7 +232,13 @@ def _why(mux: MuxStatus) -> str:
     held = [
         mux.locks[i].name for i in range(min(mux.lock_count, len(mux.locks))) if mux.locks[i].held
     ]
-    return f"{text} · held: {', '.join(held)}" if held else text
+    if held:
+        text += f" · held: {', '.join(held)}"
+    if mux.speed_limit_mps > 0:
+        holder = mux.speed_limit_holder
+        by = "operator" if holder == LockStatus.HOLDER_OPERATOR else names[holder]
+        text += f" · limited to {mux.speed_limit_mps:g} m/s by {by}"
+    return text
 
 
 MuxStatus.source_names = _source_names  # type: ignore[attr-defined]
@@ -380,10 +392,13 @@ class Source:
     def send(self, request: _VelocityRequest) -> None:
         """Sends ``request`` now with the next sequence number and, unless it has one, the
         current ``CLOCK_MONOTONIC`` stamp, and wakes the service. A request with a NaN or an
-        infinity in any of its numbers is refused with ``ValueError`` and nothing is sent."""
+        infinity in any of its numbers, or a speed limit that is not more than 0, is refused with
+        ``ValueError`` and nothing is sent."""
         for name, kind in request._fields_:
             if kind is ctypes.c_float and not math.isfinite(getattr(request, name)):
                 raise ValueError(f"request not sent: {name} is not a finite number")
+        if request.flags & RequestFlags.SPEED_LIMIT and request.speed_limit_mps <= 0:
+            raise ValueError("request not sent: a speed limit is more than 0 m/s")
         self._seq += 1
         sample = self._publisher.loan_uninit()
         payload = sample.payload().contents
@@ -401,6 +416,12 @@ class Source:
     def steer(self, linear_x_mps: float, steer_rad: float) -> None:
         """Asks for a forward speed and a steering angle (Ackermann robots)."""
         self.send(VelocityRequest.steer(linear_x_mps, steer_rad))
+
+    def limit_speed(self, mps: float) -> None:
+        """Lowers the robot's standing speed limit to ``mps`` m/s for every source. A limit
+        above the standing one changes nothing: only the operator raises it
+        (``Robot.control("speed-limit", mps=…)``). This source's latest request stands."""
+        self.send(VelocityRequest.speed_limit(mps))
 
     def heartbeat(self) -> None:
         """ "Alive, asking for nothing" — a required source's heartbeat."""
@@ -484,7 +505,8 @@ def control_request(action: str, /, **args: Any) -> ControlRequest:
     ``clear-fault`` (``which="all"``, ``"motor-1"``…), ``lights`` (``mode="off"|"on"|
     "breathing"|"custom"|"auto"``, ``brightness=100``), ``off-road`` (``state=``), ``lift``
     (``position=`` %, ``disable=False``), ``servos`` (``pan=``, ``tilt=`` degrees), ``power``
-    (``state=``), ``steering-zero``, ``silent`` (``state=``).
+    (``state=``), ``steering-zero``, ``silent`` (``state=``), ``speed-limit`` (``mps=``: the
+    robot's speed limit, raised or lowered by the operator; 0 lifts it).
     """
     request = ControlRequest()
 
@@ -547,6 +569,9 @@ def control_request(action: str, /, **args: Any) -> ControlRequest:
     elif action == "silent":
         request.kind = ControlKind.SILENT
         arg(0, _flag(take("state"), "silent"))
+    elif action == "speed-limit":
+        request.kind = ControlKind.SPEED_LIMIT
+        request.value[0] = float(take("mps"))
     else:
         raise ValueError(f"unknown control action '{action}'")
     if args:

@@ -46,6 +46,39 @@ def test_a_request_with_a_nan_or_an_infinity_is_refused_before_anything_is_sent(
             source.send(chassis.VelocityRequest.limit(0.0, bad, 0.0, 0.0))
 
 
+def test_a_speed_limit_that_is_not_more_than_zero_is_refused_before_anything_is_sent() -> None:
+    source = chassis.Source("planner", publisher=None, notifier=None)
+    for bad in (0.0, -0.5):
+        with pytest.raises(ValueError, match="a speed limit is more than 0"):
+            source.limit_speed(bad)
+    with pytest.raises(ValueError, match="speed_limit_mps is not a finite number"):
+        source.limit_speed(float("nan"))
+
+
+def test_a_source_lowers_the_speed_limit_and_only_the_operator_raises_it(world: World) -> None:
+    robot = world.chassisd("titan")
+    teleop = robot.source("teleop")
+    planner = robot.source("planner")
+    planner.limit_speed(0.3)
+    fast = chassis.VelocityRequest.twist(0.8, 0.0)
+    drive(robot, teleop, fast, lambda s: s.motion.linear_mps > 0.25, 15.0, world)
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:
+        teleop.send(fast)
+        state = robot.wait_state(0.05)
+        assert state is None or state.motion.linear_mps < 0.33, state.motion.to_dict()
+    planner.limit_speed(1.0)
+    mux = robot.wait_mux(1.0)
+    assert mux is not None and mux.clamp_flags & chassis.ClampFlags.SPEED_LIMIT
+    assert mux.why() == "driving from teleop · limited to 0.3 m/s by planner", mux.why()
+    raised = robot.control("speed-limit", mps=0.6)
+    assert raised.ok and "0.6 m/s" in raised.message, str(raised)
+    drive(robot, teleop, fast, lambda s: s.motion.linear_mps > 0.5, 15.0, world)
+    assert robot.control("speed-limit", mps=-1.0).status == chassis.ControlStatus.INVALID
+    assert robot.control("speed-limit", mps=0.0).ok
+    drive(robot, teleop, fast, lambda s: s.motion.linear_mps > 0.7, 15.0, world)
+
+
 @pytest.mark.parametrize("kind", ["titan", "scout-mini", "xbot"])
 def test_drives_and_reads_back_every_robot(world: World, kind: str) -> None:
     robot = world.chassisd(kind)

@@ -1,10 +1,11 @@
 //! The bridge's ROS 2 node and its two loops.
 //!
-//! * **Commands** ([`commands`], a thread of its own): `cmd_vel` and `e_stop` subscriptions and
-//!   the three services, waited on with mio. A velocity goes into the mux as the source `ros2`
-//!   the moment it is read, re-stamped with this computer's `CLOCK_MONOTONIC` (a ROS stamp is
-//!   another clock), so chassisd's 500 ms timeout runs from its arrival. Service calls and the
-//!   e-stop wait for chassisd's control answer.
+//! * **Commands** ([`commands`], a thread of its own): `cmd_vel`, `e_stop` and `speed_limit`
+//!   subscriptions and the three services, waited on with mio. A velocity goes into the mux as
+//!   the source `ros2` the moment it is read, re-stamped with this computer's `CLOCK_MONOTONIC`
+//!   (a ROS stamp is another clock), so chassisd's 500 ms timeout runs from its arrival. A
+//!   Nav2 speed limit lowers the robot's standing limit as that source ([`speed_limit_request`]).
+//!   Service calls and the e-stop wait for chassisd's control answer.
 //! * **State** ([`state_loop`], the main thread): each state sample chassisd publishes becomes
 //!   `odom` and `tf` at once; `joint_states`, `battery_state`, `imu/data`, `range/*` and `fix`
 //!   follow the sample when the robot reports them; `diagnostics` goes out every second and on
@@ -41,8 +42,8 @@ use ros2_client::{
 use crate::convert::{self, Frames, ModelSent, RangeSensor, RosClock};
 use crate::discovery::Reach;
 use crate::msg::{
-    BatteryState, Bool, DiagnosticArray, Imu, JointState, NavSatFix, Odometry, Range, StdString,
-    TfMessage, TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed,
+    BatteryState, Bool, DiagnosticArray, Imu, JointState, NavSatFix, Odometry, Range, SpeedLimit,
+    StdString, TfMessage, TriggerRequest, TriggerResponse, Twist, TwistStamped, Typed,
 };
 
 /// The mux source the bridge publishes into (chassisd's default configuration has it).
@@ -93,8 +94,9 @@ pub fn sensor_qos() -> QosProfile {
         .history(History::KeepLast { depth: 5 })
 }
 
-/// QoS of `odom`, `joint_states`, `diagnostics`, `e_stop`: reliable, volatile, the last 10
-/// (rclcpp's default).
+/// QoS of `odom`, `joint_states`, `diagnostics`, `e_stop`, `speed_limit`: reliable, volatile,
+/// the last 10 (rclcpp's default, what Nav2's speed filter offers: a limit is sent once per
+/// zone, so none may be lost).
 pub fn reliable_qos() -> QosProfile {
     QosProfile::publisher_default()
         .reliability_reliable(WhenFull::Wait(Duration::from_millis(10)))
@@ -144,6 +146,9 @@ pub struct Entities {
 pub struct Commands {
     cmd_vel: CmdVel,
     e_stop: Subscription<Bool>,
+    speed_limit: Subscription<SpeedLimit>,
+    /// The robot's forward limit, m/s: what a percentage speed limit is a percentage of.
+    max_mps: f64,
     estop: Server<TriggerRequest, TriggerResponse>,
     estop_release: Server<TriggerRequest, TriggerResponse>,
     clear_faults: Server<TriggerRequest, TriggerResponse>,
@@ -226,6 +231,7 @@ impl Entities {
             topic("cmd_vel", Twist::type_name(), &reliable_qos())?
         };
         let e_stop_topic = topic("e_stop", Bool::type_name(), &reliable_qos())?;
+        let speed_limit_topic = topic("speed_limit", SpeedLimit::type_name(), &reliable_qos())?;
         let odom_topic = topic("odom", Odometry::type_name(), &reliable_qos())?;
         // Reliable, the last 100 (tf2_ros' `DynamicBroadcasterQoS`).
         let tf_qos = reliable_qos().history(History::KeepLast { depth: 100 });
@@ -255,6 +261,7 @@ impl Entities {
             CmdVel::Plain(node.create_subscription(&cmd_vel_topic, Some(cmd_vel_qos()))?)
         };
         let e_stop = node.create_subscription(&e_stop_topic, None)?;
+        let speed_limit = node.create_subscription(&speed_limit_topic, None)?;
         let mut server = |base: &str| {
             let name = topic_name(&private, base)?;
             node.create_server(
@@ -269,6 +276,8 @@ impl Entities {
         let commands = Commands {
             cmd_vel,
             e_stop,
+            speed_limit,
+            max_mps: description.effective_limits().forward_mps,
             estop: server("estop")?,
             estop_release: server("estop_release")?,
             clear_faults: server("clear_faults")?,
@@ -339,6 +348,8 @@ pub struct Drops {
     pub undecodable: u64,
     /// `TwistStamped`s older than the bound when they arrived (or unstamped).
     pub stale: u64,
+    /// Speed limits that are not a number or are negative.
+    pub bad_speed_limits: u64,
 }
 
 /// The `CLOCK_MONOTONIC` instant a `TwistStamped` stamped `stamp` (ROS time, the sender's
@@ -381,6 +392,25 @@ pub fn twist_request(twist: &Twist) -> Result<ValidRequest, InvalidVelocity> {
         linear_y_mps: twist.linear.y as f32,
         ..VelocityRequest::twist(twist.linear.x as f32, twist.angular.z as f32)
     })
+}
+
+/// A Nav2 speed limit parsed into the request that lowers the robot's standing limit: where a
+/// ROS 2 speed limit enters. Absolute (m/s) or a percentage of `max_mps`, the robot's forward
+/// limit. 0 (no limit) is `Ok(None)`: only the operator raises a limit (`chassis control
+/// speed-limit`). A NaN, an infinity or a negative value is refused.
+pub fn speed_limit_request(
+    limit: &SpeedLimit,
+    max_mps: f64,
+) -> Result<Option<ValidRequest>, InvalidVelocity> {
+    if limit.speed_limit == 0.0 {
+        return Ok(None);
+    }
+    let mps = if limit.percentage {
+        limit.speed_limit / 100.0 * max_mps
+    } else {
+        limit.speed_limit
+    };
+    ValidRequest::try_from(VelocityRequest::speed_limit(mps as f32)).map(Some)
 }
 
 /// The control request a service asks for.
@@ -428,6 +458,7 @@ const E_STOP: Token = Token(1);
 const ESTOP: Token = Token(2);
 const ESTOP_RELEASE: Token = Token(3);
 const CLEAR_FAULTS: Token = Token(4);
+const SPEED_LIMIT: Token = Token(5);
 
 /// The commands loop: runs until SIGINT / SIGTERM. A `TwistStamped` older than `max_age` when it
 /// arrives is dropped and counted (`clock`: ROS time ↔ `CLOCK_MONOTONIC`).
@@ -448,6 +479,7 @@ pub fn commands(
         CmdVel::Stamped(s) => registry.register(s, CMD_VEL, Interest::READABLE)?,
     }
     registry.register(&mut c.e_stop, E_STOP, Interest::READABLE)?;
+    registry.register(&mut c.speed_limit, SPEED_LIMIT, Interest::READABLE)?;
     registry.register(&mut c.estop, ESTOP, Interest::READABLE)?;
     registry.register(&mut c.estop_release, ESTOP_RELEASE, Interest::READABLE)?;
     registry.register(&mut c.clear_faults, CLEAR_FAULTS, Interest::READABLE)?;
@@ -466,6 +498,7 @@ pub fn commands(
         let age = (clock, max_age_ns);
         drain_cmd_vel(&c.cmd_vel, age, &mut robot, &mut source, &mut drops);
         drain_e_stop(&c.e_stop, &mut robot, &mut drops);
+        drain_speed_limit(&c, &mut robot, &mut source, &mut drops);
         for (server, kind) in [
             (&c.estop, ServiceKind::Estop),
             (&c.estop_release, ServiceKind::EstopRelease),
@@ -551,6 +584,41 @@ fn forward(
         drops.unsent += 1;
         tracing::warn!(error = %e, count = drops.unsent, "cmd_vel dropped");
         *source = None;
+    }
+}
+
+fn drain_speed_limit(
+    c: &Commands,
+    robot: &mut Robot,
+    source: &mut Option<Source>,
+    drops: &mut Drops,
+) {
+    loop {
+        let limit = match c.speed_limit.take() {
+            Ok(Some((limit, _))) => limit,
+            Ok(None) => return,
+            Err(e) => {
+                drops.undecodable += 1;
+                tracing::warn!(error = ?e, count = drops.undecodable, "speed_limit: unreadable message dropped");
+                continue;
+            }
+        };
+        match speed_limit_request(&limit, c.max_mps) {
+            Ok(Some(request)) => forward(request, robot, source, drops),
+            Ok(None) => tracing::info!(
+                "speed_limit: no limit asked; a standing limit stays until the operator raises \
+                 it (chassis control speed-limit)"
+            ),
+            Err(error) => {
+                drops.bad_speed_limits += 1;
+                tracing::warn!(
+                    ?limit,
+                    %error,
+                    count = drops.bad_speed_limits,
+                    "speed_limit refused"
+                );
+            }
+        }
     }
 }
 
@@ -937,6 +1005,29 @@ mod tests {
         let mut t3 = t;
         t3.linear.z = f64::NAN;
         assert!(twist_request(&t3).is_ok());
+    }
+
+    #[test]
+    fn a_nav2_speed_limit_is_absolute_or_a_percentage_and_zero_lifts_nothing() {
+        let limit = |percentage, speed_limit| {
+            speed_limit_request(
+                &SpeedLimit {
+                    percentage,
+                    speed_limit,
+                    ..SpeedLimit::default()
+                },
+                2.0,
+            )
+            .map(|r| r.and_then(|r| r.speed_limit()))
+        };
+        assert_eq!(limit(false, 0.5), Ok(Some(0.5)));
+        assert_eq!(limit(true, 25.0), Ok(Some(0.5)));
+        assert_eq!(limit(true, 0.0), Ok(None));
+        assert_eq!(
+            limit(false, -0.5),
+            Err(InvalidVelocity::NonPositiveSpeedLimit)
+        );
+        assert!(limit(true, f64::NAN).is_err());
     }
 
     #[test]

@@ -355,6 +355,16 @@ pub struct Bool {
 }
 typed!(Bool, "std_msgs", "Bool");
 
+/// `nav2_msgs/msg/SpeedLimit`: Nav2's speed filter's limit, absolute m/s or percent of the
+/// robot's maximum; 0 is no limit.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SpeedLimit {
+    pub header: Header,
+    pub percentage: bool,
+    pub speed_limit: f64,
+}
+typed!(SpeedLimit, "nav2_msgs", "SpeedLimit");
+
 /// `std_msgs/msg/String` (`robot_description` carries the URDF in one).
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct StdString {

@@ -210,6 +210,13 @@ class Bool(IdlStruct, typename="std_msgs::msg::dds_::Bool_"):
     data: bool = False
 
 
+@dataclass
+class SpeedLimit(IdlStruct, typename="nav2_msgs::msg::dds_::SpeedLimit_"):
+    header: Header = field(default_factory=Header)
+    percentage: bool = False
+    speed_limit: float64 = 0.0
+
+
 # std_srvs/srv/Trigger as rmw_cyclonedds_cpp carries it: every request and reply starts with
 # the client's GUID (its last 8 bytes) and a sequence number, then the message's own fields.
 @dataclass

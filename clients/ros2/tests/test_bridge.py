@@ -435,6 +435,54 @@ def test_non_finite_velocities_are_dropped(ros: Ros) -> None:
     )
 
 
+def test_a_nav2_speed_limit_caps_the_measured_speed_until_the_operator_raises_it(
+    ros: Ros,
+) -> None:
+    robot = ros.chassisd("titan")
+    ros.bridge("titan")
+    peer = Peer(ros.domain)
+    cmd = peer.writer("rt/cmd_vel", m.Twist)
+    limits = peer.writer("rt/speed_limit", m.SpeedLimit)
+    wait_matched(limits, ros)
+    wait_matched(cmd, ros)
+
+    def speed() -> float:
+        state = robot.latest_state() or robot.wait_state(0.1)
+        return -1.0 if state is None else state.motion.linear_mps
+
+    def limit() -> float:
+        mux = latest_mux(robot)
+        return -1.0 if mux is None else mux.speed_limit_mps
+
+    limits.write(m.SpeedLimit(percentage=False, speed_limit=0.4))
+    wait_until("the limit stands", lambda: limit() == pytest.approx(0.4), 5.0, ros)
+    with Publishing(cmd, twist(1.0)):
+        wait_until("the robot runs at the limit", lambda: speed() > 0.35, 15.0, ros)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            assert speed() < 0.43, "the measured speed exceeds the limit"
+            time.sleep(0.05)
+        mux = latest_mux(robot)
+        assert mux is not None and mux.clamp_flags & chassis.ClampFlags.SPEED_LIMIT
+        assert mux.why() == "driving from ros2 · limited to 0.4 m/s by ros2", mux.why()
+        # A percentage of the robot's maximum lowers it; neither 0 (no limit) nor a higher one
+        # raise it, and a negative one is refused and logged.
+        low = 0.1 * robot.description.robot_limits.forward_mps
+        assert 0.05 < low < 0.35
+        limits.write(m.SpeedLimit(percentage=True, speed_limit=10.0))
+        wait_until("the percentage lowers it", lambda: limit() == pytest.approx(low), 5.0, ros)
+        wait_until("the robot slows to it", lambda: speed() < low + 0.02, 15.0, ros)
+        limits.write(m.SpeedLimit(percentage=False, speed_limit=0.0))
+        limits.write(m.SpeedLimit(percentage=False, speed_limit=2.0))
+        limits.write(m.SpeedLimit(percentage=False, speed_limit=-1.0))
+        wait_until("the refusal is logged", lambda: "speed_limit refused" in ros.logs(), 5.0, ros)
+        assert limit() == pytest.approx(low)
+        assert speed() < low + 0.02
+        raised = robot.control("speed-limit", mps=0.5)
+        assert raised.ok, str(raised)
+        wait_until("the operator raised it", lambda: speed() > 0.45, 15.0, ros)
+
+
 def nmea(body: str) -> bytes:
     checksum = 0
     for c in body.encode():

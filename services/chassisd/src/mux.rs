@@ -11,6 +11,9 @@
 //! * A source may send a speed envelope instead of a request (`RequestFlags::LIMIT`): it does not
 //!   compete, but clamps the output of every source of its priority or lower, per direction —
 //!   how the safety monitor slows the robot or blocks only the motion towards an obstacle.
+//! * The robot's standing speed limit caps every source's linear speed: any source lowers it
+//!   (`RequestFlags::SPEED_LIMIT`, a request that asks nothing else), only the operator raises or
+//!   lifts it ([`Mux::set_speed_limit`]). `MuxStatus` says the cap and who set it.
 //! * Configured speed limits, then acceleration smoothing; a stop from a safety-priority source,
 //!   a stale required source, a lock and the timeout of the last active source are never
 //!   smoothed: motion never outlives a dead source's timeout.
@@ -152,6 +155,9 @@ pub struct Mux {
     output: Velocity,
     /// The configured speed limits, as bounds.
     speed_limits: Envelope,
+    /// The standing speed limit, m/s, and who set it (a source index or
+    /// [`LockStatus::HOLDER_OPERATOR`]).
+    speed_limit: Option<(f32, u8)>,
     last_evaluation: Option<Timestamp>,
     status: MuxStatus,
     rejected: u64,
@@ -234,6 +240,7 @@ impl Mux {
             limits: config.limits.clone(),
             output: Velocity::ZERO,
             speed_limits: speed_limits(&config.limits),
+            speed_limit: None,
             last_evaluation: None,
             status,
             rejected: 0,
@@ -266,14 +273,20 @@ impl Mux {
         if unknown_locks != 0 {
             return Err(self.refuse(index, Rejection::UnknownLock(unknown_locks)));
         }
+        // Index < MAX_SOURCES (8) fits a u8.
+        let holder = index as u8;
+        if let Some(mps) = request.speed_limit() {
+            if self.speed_limit.is_none_or(|(standing, _)| mps < standing) {
+                self.speed_limit = Some((mps, holder));
+            }
+            return Ok(());
+        }
         let source = &mut self.sources[index];
         let arrival = Timestamp::from_nanos(request.stamp_ns).min(now);
         source.latest = Some((arrival, *request));
         if asks_nothing(request) {
             source.awaiting = Stop::NONE;
         }
-        // Index < MAX_SOURCES (8) fits a u8.
-        let holder = index as u8;
         let mut released = Vec::new();
         for (bit, lock) in self.locks.iter_mut().enumerate() {
             if request.lock_engage & (1 << bit) != 0 && lock.held.is_none() {
@@ -349,6 +362,12 @@ impl Mux {
                 source.awaiting = stop;
             }
         }
+    }
+
+    /// Sets the standing speed limit on behalf of the operator, higher or lower than it was;
+    /// `None` lifts it. The caller has checked that a limit is a positive number.
+    pub fn set_speed_limit(&mut self, mps: Option<f32>) {
+        self.speed_limit = mps.map(|mps| (mps, LockStatus::HOLDER_OPERATOR));
     }
 
     /// Engages the lock `name` on behalf of the operator. Returns whether it was free.
@@ -522,17 +541,32 @@ impl Mux {
             || previous.clamp_flags != self.status.clamp_flags
             || previous.awaiting_source != self.status.awaiting_source
             || previous.stop != self.status.stop
+            || previous.speed_limit_mps != self.status.speed_limit_mps
+            || previous.speed_limit_holder != self.status.speed_limit_holder
             || previous.locks != self.status.locks;
         Decision { output, changed }
     }
 
+    /// The configured limits, then the standing speed limit (linear speeds only).
     fn apply_speed_limits(&self, t: Velocity) -> (Velocity, u32) {
-        let limited = t.bounded(&self.speed_limits);
-        let flags = if limited != t {
+        let configured = t.bounded(&self.speed_limits);
+        let mut flags = if configured != t {
             ClampFlags::CONFIG_SPEED_LIMIT
         } else {
             0
         };
+        let Some((mps, _)) = self.speed_limit else {
+            return (configured, flags);
+        };
+        let limited = configured.bounded(&Envelope {
+            forward_mps: mps,
+            reverse_mps: mps,
+            lateral_mps: mps,
+            angular_radps: f32::INFINITY,
+        });
+        if limited != configured {
+            flags |= ClampFlags::SPEED_LIMIT;
+        }
         (limited, flags)
     }
 
@@ -608,6 +642,8 @@ impl Mux {
         status.clamp_flags = clamp_flags;
         status.zero_reason = reason;
         status.rejected_requests = self.rejected;
+        (status.speed_limit_mps, status.speed_limit_holder) =
+            self.speed_limit.unwrap_or((0.0, LockStatus::HOLDER_NONE));
         // Indices < MAX_SOURCES fit a u8.
         status.active_source = winner.map_or(MuxStatus::NO_SOURCE, |w| w as u8);
         status.active_priority = winner.map_or(0, |w| self.sources[w].config.priority);
@@ -1156,6 +1192,37 @@ mod tests {
             m.on_request(ms(40), TELEOP, &request(ms(40), 0.3)).unwrap();
             assert_eq!(m.evaluate(ms(40)).output.linear_x_mps(), 0.3, "{stop}");
         }
+    }
+
+    /// Any source lowers the standing speed limit, which caps every source's linear speed (not
+    /// its yaw rate); a higher one from a source changes nothing; the operator raises and lifts
+    /// it. The status names the cap and who set it.
+    #[test]
+    fn any_source_lowers_the_speed_limit_and_only_the_operator_raises_it() {
+        let mut m = mux_unrequired();
+        let limit = |mps| valid(VelocityRequest::speed_limit(mps));
+        let fast = valid(VelocityRequest::twist(1.2, 0.8));
+        m.on_request(ms(0), TELEOP, &fast).unwrap();
+        m.on_request(ms(0), PLANNER, &limit(0.5)).unwrap();
+        let d = m.evaluate(ms(0));
+        assert_eq!(
+            (d.output.linear_x_mps(), d.output.angular_z_radps()),
+            (0.5, 0.8)
+        );
+        assert_ne!(m.status().clamp_flags & ClampFlags::SPEED_LIMIT, 0);
+        assert_eq!(m.status().speed_limit(), Some((0.5, "planner")));
+        assert_eq!(m.status().active().map(SourceStatus::name), Some("teleop"));
+        m.on_request(ms(0), SAFETY, &limit(0.3)).unwrap();
+        m.on_request(ms(0), TELEOP, &limit(0.9)).unwrap();
+        assert_eq!(m.evaluate(ms(0)).output.linear_x_mps(), 0.3);
+        assert_eq!(m.status().speed_limit(), Some((0.3, "safety")));
+        m.set_speed_limit(Some(1.0));
+        assert_eq!(m.evaluate(ms(0)).output.linear_x_mps(), 1.0);
+        assert_eq!(m.status().speed_limit(), Some((1.0, "operator")));
+        m.set_speed_limit(None);
+        assert_eq!(m.evaluate(ms(0)).output.linear_x_mps(), 1.2);
+        assert_eq!(m.status().speed_limit(), None);
+        assert_eq!(m.status().clamp_flags & ClampFlags::SPEED_LIMIT, 0);
     }
 
     #[test]

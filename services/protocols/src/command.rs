@@ -150,6 +150,8 @@ pub enum ControlAction {
     LockRelease(String),
     /// Engage the named lock (operator).
     LockEngage(String),
+    /// Set the robot's standing speed limit, m/s, higher or lower (operator); `None` lifts it.
+    SpeedLimit(Option<f32>),
 }
 
 /// The control request for a chassis command. `None` for a velocity (motion goes through the
@@ -204,6 +206,8 @@ pub enum BadControlRequest {
     UnknownMode(u8),
     #[error("unknown control request kind {0}")]
     UnknownKind(u8),
+    #[error("the speed limit is negative (a limit is more than 0 m/s; 0 lifts it)")]
+    NegativeSpeedLimit,
 }
 
 /// What a received control request asks for, or why it makes no sense.
@@ -267,6 +271,14 @@ pub fn request_to_action(
         },
         ControlKind::LOCK_RELEASE => return Ok(ControlAction::LockRelease(lock_name())),
         ControlKind::LOCK_ENGAGE => return Ok(ControlAction::LockEngage(lock_name())),
+        ControlKind::SPEED_LIMIT => {
+            let mps = value(0, "speed limit")? as f32;
+            return match mps {
+                0.0 => Ok(ControlAction::SpeedLimit(None)),
+                mps if mps > 0.0 => Ok(ControlAction::SpeedLimit(Some(mps))),
+                _ => Err(BadControlRequest::NegativeSpeedLimit),
+            };
+        }
         other => return Err(BadControlRequest::UnknownKind(other)),
     }))
 }
@@ -376,5 +388,12 @@ mod tests {
             .with_value(0, f32::NAN);
         assert!(request_to_action(&r).is_err());
         assert!(request_to_action(&ControlRequest::new(200)).is_err());
+        let limit = |mps| {
+            request_to_action(&ControlRequest::new(ControlKind::SPEED_LIMIT).with_value(0, mps))
+        };
+        assert_eq!(limit(0.5), Ok(ControlAction::SpeedLimit(Some(0.5))));
+        assert_eq!(limit(0.0), Ok(ControlAction::SpeedLimit(None)));
+        assert_eq!(limit(-0.5), Err(BadControlRequest::NegativeSpeedLimit));
+        assert!(limit(f32::NAN).is_err());
     }
 }

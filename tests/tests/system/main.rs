@@ -23,6 +23,7 @@ mod safety;
 mod scripts;
 mod serial;
 mod service;
+mod speed_limit;
 mod systemd;
 mod teleop;
 mod zenoh;

@@ -560,6 +560,17 @@ impl Engine {
                     Err(err) => (ControlStatus::INVALID, err.to_string()),
                 }
             }
+            Ok(ControlAction::SpeedLimit(mps)) => {
+                self.undecided = true;
+                self.mux.set_speed_limit(mps);
+                match mps {
+                    Some(mps) => (
+                        ControlStatus::OK,
+                        format!("speed limited to {mps} m/s by the operator"),
+                    ),
+                    None => (ControlStatus::OK, "speed limit lifted".to_string()),
+                }
+            }
             Ok(ControlAction::Chassis(command)) => match self.driver.control(now, &command) {
                 ControlOutcome::Pending(token) => {
                     info!(
