@@ -972,6 +972,15 @@ fn chassisd_serving(target: &Target) -> (Option<(ChassisState, Option<MuxStatus>
                 )),
             );
         }
+        Err(err @ chassis_client::ClientError::OtherUser { .. }) => {
+            return (
+                None,
+                fail("chassisd", err.to_string()).fix(
+                    "every program of the robot runs as chassisd's user (its iceoryx2 files \
+                     are that user's alone)",
+                ),
+            );
+        }
         Err(err) => {
             return (
                 None,

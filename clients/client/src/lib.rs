@@ -54,6 +54,7 @@ use std::time::Duration;
 mod clock;
 #[cfg(feature = "foxglove")]
 pub mod foxglove;
+mod owner;
 mod rate;
 pub mod urdf;
 pub mod watch;
@@ -111,6 +112,10 @@ pub enum ClientError {
     /// A velocity request that is no [`ValidRequest`]: nothing was sent.
     #[error("request not sent: {0}")]
     InvalidRequest(#[from] InvalidVelocity),
+    /// The robot's chassisd runs as another user, whose iceoryx2 files this process cannot
+    /// share: every program of a robot runs as chassisd's user.
+    #[error("chassisd for {name} runs as user {user}; run as that user: sudo -u {user} …")]
+    OtherUser { name: String, user: String },
     #[error("iceoryx2: {0}")]
     Ipc(String),
 }
@@ -218,6 +223,12 @@ impl Robot {
     pub fn connect_with_prefix(name: &str, prefix: Option<&str>) -> Result<Self, ClientError> {
         if !valid_robot_name(name) {
             return Err(ClientError::BadName(name.to_string()));
+        }
+        if let Some(user) = owner::other_users_chassisd(name) {
+            return Err(ClientError::OtherUser {
+                name: name.to_string(),
+                user,
+            });
         }
         let node = chassis_ipc::node(
             None,

@@ -8,7 +8,9 @@
 //! `spawn`/`execFileSync`, and every command of the shell scripts — and fails on a program the
 //! list does not name. Programs run inside the SocketCAN VM (its tests and `scripts/vm/vcan-suite`)
 //! come from the VM's own userland instead: the list names them as `vm:PACKAGE`, and
-//! `scripts/vm/run-in-vm` must unpack that package.
+//! `scripts/vm/run-in-vm` must unpack that package; so do programs run inside the package's
+//! installation test's container (`scripts/package-install-tests-guest`, the maintainer scripts),
+//! whose packages `scripts/package-install-tests` must name.
 // Test code: helpers may unwrap and panic.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
@@ -597,14 +599,24 @@ fn workspace_binaries() -> BTreeSet<String> {
     names
 }
 
-/// Whether `path` runs inside the SocketCAN VM (its PATH is the VM's busybox and can-utils).
-fn runs_in_vm(path: &Path) -> bool {
-    path.file_stem().is_some_and(|s| s == "vcan") || path == Path::new("scripts/vm/vcan-suite")
+/// The script that makes the system `path` runs in, when that is not this machine: the SocketCAN
+/// VM (its PATH is the VM's busybox and can-utils), or the container of the package's installation
+/// test (its Debian system; the package's maintainer scripts run there too).
+fn guest_of(path: &Path) -> Option<&'static str> {
+    if path.file_stem().is_some_and(|s| s == "vcan") || path == Path::new("scripts/vm/vcan-suite") {
+        Some("scripts/vm/run-in-vm")
+    } else if path == Path::new("scripts/package-install-tests-guest")
+        || path.starts_with("deploy/debian")
+    {
+        Some("scripts/package-install-tests")
+    } else {
+        None
+    }
 }
 
 /// Every program executed by the repository's code, with the files that execute it.
-fn executed_programs() -> BTreeMap<String, BTreeSet<(PathBuf, bool)>> {
-    let mut all: BTreeMap<String, BTreeSet<(PathBuf, bool)>> = BTreeMap::new();
+fn executed_programs() -> BTreeMap<String, BTreeSet<(PathBuf, Option<&'static str>)>> {
+    let mut all: BTreeMap<String, BTreeSet<(PathBuf, Option<&'static str>)>> = BTreeMap::new();
     for path in tracked_files() {
         if path == Path::new("tests/tests/system/host_programs.rs") {
             // This file's examples are data.
@@ -632,7 +644,7 @@ fn executed_programs() -> BTreeMap<String, BTreeSet<(PathBuf, bool)>> {
         for program in found {
             all.entry(program)
                 .or_default()
-                .insert((path.clone(), runs_in_vm(&path)));
+                .insert((path.clone(), guest_of(&path)));
         }
     }
     all
@@ -660,23 +672,27 @@ fn scripts_test_installs_or_requires_every_program_the_tests_execute() {
             "the scan missed {known}: {executed:?}"
         );
     }
-    let run_in_vm = std::fs::read_to_string(root().join("scripts/vm/run-in-vm")).unwrap();
     let mut missing = Vec::new();
     for (program, files) in &executed {
         if ours.contains(program) || program == "cargo" {
             continue;
         }
-        for (file, in_vm) in files {
+        for (file, guest) in files {
             let entries = list.get(program).map_or(&[][..], Vec::as_slice);
-            let ok = entries.iter().any(|e| match e.package.strip_prefix("vm:") {
-                None => !in_vm,
-                Some(package) => *in_vm && run_in_vm.contains(package),
-            });
+            let ok = entries
+                .iter()
+                .any(|e| match (e.package.strip_prefix("vm:"), guest) {
+                    (None, None) => true,
+                    (Some(package), Some(maker)) => std::fs::read_to_string(root().join(maker))
+                        .unwrap()
+                        .contains(package),
+                    _ => false,
+                });
             if !ok {
                 missing.push(format!(
                     "{program} (executed by {}{})",
                     file.display(),
-                    if *in_vm { ", inside the VM" } else { "" }
+                    guest.map_or(String::new(), |maker| format!(", inside {maker}'s guest"))
                 ));
             }
         }
