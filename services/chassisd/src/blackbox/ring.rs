@@ -1,0 +1,440 @@
+//! The recording on disk: a bounded ring of segments in the state directory, written by a thread
+//! of its own, and the windows kept as MCAP files (one JSON message per event on
+//! `/chassisd/blackbox`, readable in Foxglove) that survive restarts.
+//!
+//! The loop hands each pass' events over a bounded channel ([`Tape::send`]); when the writer
+//! falls behind (a slow or full disk) the pass' events are dropped and counted, never the pass.
+//! The writer watches the mux decisions go by: a stop that was not asked for
+//! ([`super::is_unasked_stop`]) keeps the window around it, [`KEEP_AFTER`] after it included,
+//! as does [`Tape::keep`] (SIGUSR1). A previous run that ended without its orderly stop (a crash,
+//! `kill -9`, a power cut) is kept when the service starts again.
+// The writer owns its own clock: the window after a keep is wall time of the recorder's thread.
+#![allow(clippy::disallowed_methods)]
+
+use std::collections::{BTreeMap, VecDeque};
+use std::fs::{self, File};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::time::{Duration, Instant};
+
+use chassis_interfaces::MuxStatus;
+use tracing::{info, warn};
+use zerocopy::FromBytes;
+
+use super::replay::{ReplayError, parse};
+use super::{Event, Published, is_unasked_stop};
+
+/// How long after a keep its window goes on.
+pub const KEEP_AFTER: Duration = Duration::from_secs(5);
+/// Passes the channel holds while the writer is busy.
+const CHANNEL: usize = 4096;
+/// Segments of the ring: the oldest is let go of when the budget is spent.
+const SEGMENTS: u64 = 8;
+/// The topic of the kept files.
+pub const TOPIC: &str = "/chassisd/blackbox";
+
+enum Msg {
+    Events(Vec<Event>),
+    Keep(String),
+}
+
+/// The loop's end of the recorder.
+#[derive(Debug)]
+pub struct Tape {
+    tx: SyncSender<Msg>,
+    writer: std::thread::JoinHandle<()>,
+    /// The events of the pass under way.
+    pub events: Vec<Event>,
+    /// Passes dropped since the last one the writer took.
+    dropped: u64,
+    /// Passes dropped since start.
+    pub dropped_total: u64,
+}
+
+impl Tape {
+    /// Starts the writer on `dir` with `budget` bytes of ring and at most `kept` kept files.
+    pub fn start(dir: &Path, budget: u64, kept: usize) -> io::Result<Self> {
+        let mut ring = Ring::open(dir, budget, kept)?;
+        let (tx, rx) = sync_channel(CHANNEL);
+        let writer = std::thread::Builder::new()
+            .name("blackbox".into())
+            .spawn(move || ring.run(&rx))?;
+        Ok(Self {
+            tx,
+            writer,
+            events: Vec::new(),
+            dropped: 0,
+            dropped_total: 0,
+        })
+    }
+
+    /// Hands the events noted since the last call to the writer, or drops them (counted).
+    pub fn send(&mut self) {
+        if self.events.is_empty() {
+            return;
+        }
+        let mut batch = std::mem::take(&mut self.events);
+        if self.dropped > 0 {
+            batch.insert(
+                0,
+                Event::Gap {
+                    dropped: self.dropped,
+                },
+            );
+        }
+        match self.tx.try_send(Msg::Events(batch)) {
+            Ok(()) => self.dropped = 0,
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.dropped += 1;
+                self.dropped_total += 1;
+                if self.dropped_total.is_power_of_two() {
+                    warn!(
+                        dropped = self.dropped_total,
+                        "black box: the recorder falls behind; passes go unrecorded"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Hands over what is left and waits for the writer: a keep asked for is written now.
+    pub fn finish(mut self) {
+        self.send();
+        drop(self.tx);
+        if self.writer.join().is_err() {
+            warn!("black box: the recorder's thread panicked");
+        }
+    }
+
+    /// Keeps the window around now.
+    pub fn keep(&mut self, reason: &str) {
+        if self.tx.try_send(Msg::Keep(reason.to_string())).is_err() {
+            warn!("black box: cannot keep the window ({reason}): the recorder falls behind");
+        }
+    }
+}
+
+/// The writer's side: the ring's files.
+struct Ring {
+    dir: PathBuf,
+    kept_dir: PathBuf,
+    budget: u64,
+    kept: usize,
+    /// The run's first events (the configuration, the restored locks, the first
+    /// publications), kept whatever the ring lets go of.
+    header: Vec<u8>,
+    in_header: bool,
+    segments: VecDeque<(PathBuf, u64)>,
+    current: Option<BufWriter<File>>,
+    next_segment: u64,
+    /// The ring has let go of a segment.
+    cut: bool,
+    last_mux: Option<MuxStatus>,
+    /// A keep waiting for its window's end, and why.
+    due: Option<(Instant, Vec<String>)>,
+}
+
+impl Ring {
+    fn open(dir: &Path, budget: u64, kept: usize) -> io::Result<Self> {
+        let dir = dir.join("blackbox");
+        let kept_dir = dir.join("kept");
+        fs::create_dir_all(&kept_dir)?;
+        let mut ring = Self {
+            dir,
+            kept_dir,
+            budget,
+            kept,
+            header: Vec::new(),
+            in_header: true,
+            segments: VecDeque::new(),
+            current: None,
+            next_segment: 0,
+            cut: false,
+            last_mux: None,
+            due: None,
+        };
+        ring.take_over_previous()?;
+        Ok(ring)
+    }
+
+    fn header_path(&self) -> PathBuf {
+        self.dir.join("header.jsonl")
+    }
+
+    /// The previous run's ring: kept when it ended without its orderly stop, then cleared.
+    fn take_over_previous(&mut self) -> io::Result<()> {
+        let (text, segments) = ring_files(&self.dir)?;
+        if let Some(text) = text {
+            let last = text
+                .split(|&b| b == b'\n')
+                .rev()
+                .find(|l| !l.is_empty())
+                .unwrap_or_default();
+            if !last.starts_with(br#"{"in":"stop""#) {
+                let reason = "the previous run ended without its orderly stop";
+                match self.write_kept(&text, reason) {
+                    Ok(path) => warn!(file = %path.display(), "black box: {reason}: kept"),
+                    Err(e) => warn!("black box: {reason}; not kept: {e}"),
+                }
+            }
+        }
+        for segment in segments {
+            fs::remove_file(segment)?;
+        }
+        fs::write(self.header_path(), b"")
+    }
+
+    fn run(&mut self, rx: &Receiver<Msg>) {
+        loop {
+            let msg = match &self.due {
+                Some((at, _)) => rx.recv_timeout(at.saturating_duration_since(Instant::now())),
+                None => rx.recv().map_err(|_| RecvTimeoutError::Disconnected),
+            };
+            let result = match msg {
+                Ok(Msg::Events(events)) => self.append(&events),
+                Ok(Msg::Keep(reason)) => {
+                    self.schedule(reason);
+                    Ok(())
+                }
+                Err(RecvTimeoutError::Timeout) => Ok(()),
+                Err(RecvTimeoutError::Disconnected) => {
+                    if let Some(current) = &mut self.current
+                        && let Err(e) = current.flush()
+                    {
+                        warn!("black box: writing the ring: {e}");
+                    }
+                    if let Some((_, reasons)) = self.due.take() {
+                        self.keep(&reasons);
+                    }
+                    return;
+                }
+            };
+            if let Err(e) = result {
+                warn!("black box: writing the ring: {e}");
+            }
+            if self
+                .due
+                .as_ref()
+                .is_some_and(|(at, _)| *at <= Instant::now())
+                && let Some((_, reasons)) = self.due.take()
+            {
+                self.keep(&reasons);
+            }
+        }
+    }
+
+    fn schedule(&mut self, reason: String) {
+        match &mut self.due {
+            Some((_, reasons)) => reasons.push(reason),
+            None => self.due = Some((Instant::now() + KEEP_AFTER, vec![reason])),
+        }
+    }
+
+    fn append(&mut self, events: &[Event]) -> io::Result<()> {
+        let mut text = Vec::new();
+        for event in events {
+            if matches!(event, Event::Pass { .. }) {
+                self.in_header = false;
+            }
+            if let Event::Publish {
+                what: Published::Mux(bytes),
+                ..
+            } = event
+                && let Ok(status) = MuxStatus::read_from_bytes(&bytes.0)
+            {
+                if self
+                    .last_mux
+                    .as_ref()
+                    .is_some_and(|before| is_unasked_stop(before, &status))
+                {
+                    self.schedule(format!("stop: {}", status.why()));
+                }
+                self.last_mux = Some(status);
+            }
+            serde_json::to_writer(&mut text, event)?;
+            text.push(b'\n');
+        }
+        if self.in_header {
+            self.header.extend_from_slice(&text);
+            return fs::OpenOptions::new()
+                .append(true)
+                .open(self.header_path())?
+                .write_all(&text);
+        }
+        self.write_segment(&text)
+    }
+
+    fn write_segment(&mut self, text: &[u8]) -> io::Result<()> {
+        let per_segment = (self.budget / SEGMENTS).max(1);
+        let full = self
+            .segments
+            .back()
+            .is_none_or(|(_, len)| *len >= per_segment);
+        if full {
+            if let Some(mut current) = self.current.take() {
+                current.flush()?;
+            }
+            self.next_segment += 1;
+            let path = self
+                .dir
+                .join(format!("ring-{:08}.jsonl", self.next_segment));
+            self.current = Some(BufWriter::new(File::create(&path)?));
+            self.segments.push_back((path, 0));
+            while self.segments.len() as u64 > SEGMENTS {
+                if let Some((old, _)) = self.segments.pop_front() {
+                    fs::remove_file(old)?;
+                    self.cut = true;
+                }
+            }
+        }
+        if let (Some(current), Some((_, len))) = (&mut self.current, self.segments.back_mut()) {
+            current.write_all(text)?;
+            *len += text.len() as u64;
+        }
+        Ok(())
+    }
+
+    /// Writes the window (the header, the ring) as a kept file.
+    fn keep(&mut self, reasons: &[String]) {
+        let reason = reasons.join("; ");
+        let result = self
+            .window()
+            .and_then(|text| self.write_kept(&text, &reason));
+        match result {
+            Ok(path) => info!(file = %path.display(), "black box kept: {reason}"),
+            Err(e) => warn!("black box: keeping the window ({reason}): {e}"),
+        }
+    }
+
+    fn window(&mut self) -> io::Result<Vec<u8>> {
+        if let Some(current) = &mut self.current {
+            current.flush()?;
+        }
+        let mut text = self.header.clone();
+        if self.cut {
+            serde_json::to_writer(&mut text, &Event::Cut)?;
+            text.push(b'\n');
+        }
+        for (segment, _) in &self.segments {
+            text.extend(fs::read(segment)?);
+        }
+        Ok(text)
+    }
+
+    /// Writes `text` (events, one a line) as an MCAP file in the kept directory; the oldest
+    /// kept files beyond the bound go.
+    fn write_kept(&self, text: &[u8], reason: &str) -> io::Result<PathBuf> {
+        let unix = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
+        let path = self.kept_dir.join(format!(
+            "{}.{:03}.mcap",
+            unix.as_secs(),
+            unix.subsec_millis()
+        ));
+        write_mcap(&path, text, reason).map_err(io::Error::other)?;
+        let mut kept: Vec<PathBuf> = fs::read_dir(&self.kept_dir)?
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+            .collect();
+        kept.sort();
+        let excess = kept.len().saturating_sub(self.kept.max(1));
+        for old in kept.iter().take(excess) {
+            fs::remove_file(old)?;
+        }
+        Ok(path)
+    }
+}
+
+fn write_mcap(path: &Path, text: &[u8], reason: &str) -> Result<(), mcap::McapError> {
+    let file = File::create(path)?;
+    let mut writer = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_threads(1)
+        .create(BufWriter::new(file))?;
+    writer.write_metadata(&mcap::records::Metadata {
+        name: "chassisd.blackbox".into(),
+        metadata: BTreeMap::from([("reason".to_string(), reason.to_string())]),
+    })?;
+    let channel = writer.add_channel(0, TOPIC, "json", &BTreeMap::new())?;
+    let mut time = 0;
+    for (sequence, line) in text
+        .split(|&b| b == b'\n')
+        .filter(|l| !l.is_empty())
+        .enumerate()
+    {
+        if let Some(t) = std::str::from_utf8(line)
+            .ok()
+            .and_then(|l| Event::from_line(l).ok())
+            .and_then(|e| e.time())
+        {
+            time = t;
+        }
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: sequence as u32,
+            log_time: time,
+            publish_time: time,
+        };
+        writer.write_to_known_channel(&header, line)?;
+    }
+    writer.finish()?;
+    Ok(())
+}
+
+/// The ring in `dir` (`<state dir>/blackbox`) as one recording, if it holds one, and its
+/// segments' files.
+fn ring_files(dir: &Path) -> io::Result<(Option<Vec<u8>>, Vec<PathBuf>)> {
+    let header = dir.join("header.jsonl");
+    let mut segments: Vec<PathBuf> = fs::read_dir(dir)?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "jsonl") && p != &header)
+        .collect();
+    segments.sort();
+    let Ok(mut text) = fs::read(&header) else {
+        return Ok((None, segments));
+    };
+    for segment in &segments {
+        text.extend(fs::read(segment)?);
+    }
+    Ok((Some(text), segments))
+}
+
+/// The live ring in `dir` (`<state dir>/blackbox`) as one recording.
+pub fn read_ring(dir: &Path) -> io::Result<Vec<u8>> {
+    ring_files(dir)?
+        .0
+        .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "no black box ring here"))
+}
+
+/// Why a kept file cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    #[error("not a black box MCAP file: {0}")]
+    Mcap(#[from] mcap::McapError),
+    #[error("a message of {TOPIC} is not UTF-8")]
+    Utf8,
+    #[error(transparent)]
+    Event(#[from] ReplayError),
+}
+
+/// The events of a kept file (MCAP), or of a ring segment (one JSON event a line).
+pub fn read(bytes: &[u8]) -> Result<Vec<Event>, ReadError> {
+    if !bytes.starts_with(mcap::MAGIC) {
+        let text = std::str::from_utf8(bytes).map_err(|_| ReadError::Utf8)?;
+        return Ok(parse(text)?);
+    }
+    let mut text = String::new();
+    for message in mcap::MessageStream::new(bytes)? {
+        let message = message?;
+        if message.channel.topic != TOPIC {
+            continue;
+        }
+        text.push_str(std::str::from_utf8(&message.data).map_err(|_| ReadError::Utf8)?);
+        text.push('\n');
+    }
+    Ok(parse(&text)?)
+}
