@@ -5,6 +5,7 @@
 //! instead of waiting on each file's slowest test. `cargo test -p chassis-tests --test system
 //! planner::` runs one subject.
 
+mod blackbox;
 mod demo;
 mod description;
 mod doctor;
