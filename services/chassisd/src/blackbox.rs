@@ -516,3 +516,76 @@ impl<I: PassIo> PassIo for Taped<'_, I> {
         result
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn status(zero_reason: u8, stop: u8) -> MuxStatus {
+        MuxStatus {
+            zero_reason,
+            stop,
+            ..MuxStatus::default()
+        }
+    }
+
+    #[test]
+    fn every_event_reads_back_from_its_line() {
+        let events = [
+            Event::Start {
+                version: "0.1.0".into(),
+                config: "[service]\nrobot = \"titan\"\n".into(),
+                now: 5,
+                unix_ns: 7,
+            },
+            Event::pass(Wake {
+                bus: true,
+                sources: 0b101,
+                ..Wake::default()
+            }),
+            Event::Requests {
+                read: vec![(1, Bytes::of(&VelocityRequest::twist(0.3, 0.0)))],
+            },
+            Event::Write {
+                item: Item::Can {
+                    id: 0x111,
+                    extended: false,
+                    data: Bytes(vec![1, 2, 3]),
+                },
+                outcome: Outcome::Held(9),
+            },
+            Event::BusRead {
+                items: vec![(3, Item::Bytes(Bytes(vec![0xA5])))],
+                more: true,
+                lost: None,
+            },
+            Event::Publish {
+                what: Published::Frame(42),
+                failed: Some("loan".into()),
+            },
+            Event::Gap { dropped: 2 },
+        ];
+        for event in events {
+            let line = event.to_line().unwrap();
+            assert!(!line.contains('\n'), "{line}");
+            assert_eq!(Event::from_line(&line).unwrap(), event, "{line}");
+        }
+    }
+
+    #[test]
+    fn a_stop_is_one_nobody_asked_for_when_it_begins() {
+        use chassis_interfaces::Stop;
+        let driving = status(ZeroReason::NONE, Stop::NONE);
+        let locked = status(ZeroReason::LOCKED, Stop::NONE);
+        let bus = status(ZeroReason::HELD, Stop::BUS);
+        let starting = status(ZeroReason::STARTING, Stop::NONE);
+        let stale = status(ZeroReason::REQUIRED_SOURCE_STALE, Stop::NONE);
+        assert!(is_unasked_stop(&driving, &locked));
+        assert!(is_unasked_stop(&locked, &bus));
+        assert!(!is_unasked_stop(&locked, &locked));
+        assert!(!is_unasked_stop(&locked, &driving));
+        assert!(!is_unasked_stop(&starting, &stale));
+        let idle = status(ZeroReason::NO_ACTIVE_SOURCE, Stop::NONE);
+        assert!(is_unasked_stop(&idle, &stale));
+    }
+}

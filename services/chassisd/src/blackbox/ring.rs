@@ -438,3 +438,103 @@ pub fn read(bytes: &[u8]) -> Result<Vec<Event>, ReadError> {
     }
     Ok(parse(&text)?)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(test: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("chassisd-ring-{test}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        dir
+    }
+
+    fn start() -> Event {
+        Event::Start {
+            version: "0.1.0".into(),
+            config: String::new(),
+            now: 1,
+            unix_ns: 1,
+        }
+    }
+
+    fn pass(t: u64) -> Vec<Event> {
+        vec![
+            Event::pass(crate::engine::Wake::default()),
+            Event::Now { t },
+            Event::Publish {
+                what: Published::State(t),
+                failed: None,
+            },
+        ]
+    }
+
+    fn kept(ring: &Ring) -> Vec<PathBuf> {
+        let mut files: Vec<PathBuf> = fs::read_dir(&ring.kept_dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        files.sort();
+        files
+    }
+
+    #[test]
+    fn the_ring_lets_go_of_its_oldest_and_a_kept_window_says_so() {
+        let dir = dir("bounded");
+        let mut ring = Ring::open(&dir, 2_000, 2).unwrap();
+        ring.append(&[start()]).unwrap();
+        for t in 0..200 {
+            ring.append(&pass(t)).unwrap();
+        }
+        assert!(ring.cut);
+        assert_eq!(ring.segments.len() as u64, SEGMENTS);
+        let on_disk: u64 = ring
+            .segments
+            .iter()
+            .map(|(p, _)| fs::metadata(p).unwrap().len())
+            .sum();
+        assert!(on_disk < 2_000 + 2_000 / SEGMENTS + 200, "{on_disk} bytes");
+        for _ in 0..3 {
+            ring.keep(&["operator".into()]);
+        }
+        let files = kept(&ring);
+        assert_eq!(files.len(), 2, "{files:?}");
+        let events = read(&fs::read(&files[1]).unwrap()).unwrap();
+        assert_eq!(events[0], start());
+        assert_eq!(events[1], Event::Cut);
+        assert_eq!(events.last(), pass(199).last());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_run_that_ended_without_its_orderly_stop_is_kept_at_the_next_start() {
+        let dir = dir("crash");
+        let mut ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        ring.append(&[start()]).unwrap();
+        ring.append(&pass(5)).unwrap();
+        drop(ring);
+        let mut ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        let files = kept(&ring);
+        assert_eq!(files.len(), 1);
+        let events = read(&fs::read(&files[0]).unwrap()).unwrap();
+        assert_eq!(events.len(), 4);
+        // An orderly stop leaves nothing to keep.
+        ring.append(&[start()]).unwrap();
+        ring.append(&[Event::Stop { now: 9 }]).unwrap();
+        drop(ring);
+        let ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        assert_eq!(kept(&ring).len(), 1);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn what_is_not_a_recording_is_an_error() {
+        assert!(read(b"").unwrap().is_empty());
+        assert!(read(b"{\"in\":\"now\"}\n").is_err());
+        assert!(read(b"not json").is_err());
+        assert!(read(&[0xff, 0xfe]).is_err());
+        let mut mcap = mcap::MAGIC.to_vec();
+        mcap.extend_from_slice(b"truncated");
+        assert!(read(&mcap).is_err());
+    }
+}
