@@ -118,11 +118,11 @@ fn load(args: ServiceArgs, simulator: bool) -> Result<(Config, bool), ConfigErro
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // The replay's engine logs what the service logged: only what goes wrong, unless asked.
+    // The replayed engine would log what the service logged: nothing, unless RUST_LOG asks.
     let quiet = matches!(cli.command, Some(Cmd::Explain(_)));
     let filter = tracing_subscriber::EnvFilter::try_from_default_env();
     tracing_subscriber::fmt()
-        .with_env_filter(filter.unwrap_or_else(|_| if quiet { "error" } else { "info" }.into()))
+        .with_env_filter(filter.unwrap_or_else(|_| if quiet { "off" } else { "info" }.into()))
         .with_writer(std::io::stderr)
         .init();
     let (is_sim, args) = match cli.command {

@@ -27,6 +27,8 @@ use super::{Event, Published, is_unasked_stop};
 
 /// How long after a keep its window goes on.
 pub const KEEP_AFTER: Duration = Duration::from_secs(5);
+/// The longest a window goes on after its first keep while more keeps join it.
+const KEEP_LONGEST: Duration = Duration::from_secs(30);
 /// Passes the channel holds while the writer is busy.
 const CHANNEL: usize = 4096;
 /// Segments of the ring: the oldest is let go of when the budget is spent.
@@ -131,8 +133,8 @@ struct Ring {
     /// The ring has let go of a segment.
     cut: bool,
     last_mux: Option<MuxStatus>,
-    /// A keep waiting for its window's end, and why.
-    due: Option<(Instant, Vec<String>)>,
+    /// A keep waiting for its window's end, when it was first asked, and why.
+    due: Option<(Instant, Instant, Vec<String>)>,
 }
 
 impl Ring {
@@ -188,7 +190,7 @@ impl Ring {
     fn run(&mut self, rx: &Receiver<Msg>) {
         loop {
             let msg = match &self.due {
-                Some((at, _)) => rx.recv_timeout(at.saturating_duration_since(Instant::now())),
+                Some((at, ..)) => rx.recv_timeout(at.saturating_duration_since(Instant::now())),
                 None => rx.recv().map_err(|_| RecvTimeoutError::Disconnected),
             };
             let result = match msg {
@@ -204,7 +206,7 @@ impl Ring {
                     {
                         warn!("black box: writing the ring: {e}");
                     }
-                    if let Some((_, reasons)) = self.due.take() {
+                    if let Some((.., reasons)) = self.due.take() {
                         self.keep(&reasons);
                     }
                     return;
@@ -216,18 +218,24 @@ impl Ring {
             if self
                 .due
                 .as_ref()
-                .is_some_and(|(at, _)| *at <= Instant::now())
-                && let Some((_, reasons)) = self.due.take()
+                .is_some_and(|(at, ..)| *at <= Instant::now())
+                && let Some((.., reasons)) = self.due.take()
             {
                 self.keep(&reasons);
             }
         }
     }
 
+    /// A keep asked while another waits joins it, and its window goes on [`KEEP_AFTER`] after
+    /// it too, up to [`KEEP_LONGEST`] after the first.
     fn schedule(&mut self, reason: String) {
+        let now = Instant::now();
         match &mut self.due {
-            Some((_, reasons)) => reasons.push(reason),
-            None => self.due = Some((Instant::now() + KEEP_AFTER, vec![reason])),
+            Some((at, first, reasons)) => {
+                *at = (now + KEEP_AFTER).min(*first + KEEP_LONGEST);
+                reasons.push(reason);
+            }
+            None => self.due = Some((now + KEEP_AFTER, now, vec![reason])),
         }
     }
 
