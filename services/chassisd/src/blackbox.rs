@@ -19,317 +19,106 @@ pub mod ring;
 use chassis_bus::can_controller::ControllerReport;
 use chassis_interfaces::{ControlRequest, MuxStatus, VelocityRequest, ZeroReason};
 use chassis_protocols::{CanFrame, Timestamp, WireItem};
-use serde::{Deserialize, Serialize};
+pub use chassisd_blackbox::{Bytes, Event, Item, Lock, Outcome, Published, Report, digest};
 use zerocopy::IntoBytes;
 
 use crate::engine::{
     BusItem, Device, HeldLock, PassIo, Readers, Ticket, ToPublish, Wake, WriteError, Written,
 };
 
-/// Bytes, as hex in the recording.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(transparent)]
-pub struct Bytes(#[serde(with = "hex::serde")] pub Vec<u8>);
+fn bytes_of(value: &(impl IntoBytes + zerocopy::Immutable + ?Sized)) -> Bytes {
+    Bytes(value.as_bytes().to_vec())
+}
 
-impl Bytes {
-    fn of(value: &(impl IntoBytes + zerocopy::Immutable + ?Sized)) -> Self {
-        Self(value.as_bytes().to_vec())
+/// An item written, as recorded.
+pub fn wire_item(item: &WireItem) -> Item {
+    match item {
+        WireItem::Can(frame) => Item::Can {
+            id: frame.id(),
+            extended: frame.is_extended(),
+            data: Bytes(frame.data().to_vec()),
+        },
+        WireItem::Bytes(bytes) => Item::Bytes(Bytes(bytes.clone())),
     }
 }
 
-/// One item on the bus.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Item {
-    Can {
-        id: u32,
-        extended: bool,
-        data: Bytes,
-    },
-    Bytes(Bytes),
-    /// A report of the CAN controller on itself.
-    Controller(Report),
-}
-
-/// [`ControllerReport`], field for field.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Report {
-    pub state: u8,
-    pub restarted: bool,
-    pub bus_error: bool,
-    pub no_ack: bool,
-    pub overflow: bool,
-    pub counters: Option<(u8, u8)>,
-    pub restart_ms: Option<u32>,
-    pub from_frame: bool,
-}
-
-impl Item {
-    fn of_wire(item: &WireItem) -> Self {
-        match item {
-            WireItem::Can(frame) => Item::Can {
-                id: frame.id(),
-                extended: frame.is_extended(),
-                data: Bytes(frame.data().to_vec()),
-            },
-            WireItem::Bytes(bytes) => Item::Bytes(Bytes(bytes.clone())),
-        }
-    }
-
-    fn of_bus(item: &BusItem) -> Self {
-        match item {
-            BusItem::Rx(item) => Self::of_wire(item),
-            BusItem::Controller(r) => Item::Controller(Report {
-                state: r.state,
-                restarted: r.restarted,
-                bus_error: r.bus_error,
-                no_ack: r.no_ack,
-                overflow: r.overflow,
-                counters: r.counters,
-                restart_ms: r.restart_ms,
-                from_frame: r.from_frame,
-            }),
-        }
-    }
-
-    /// The item as the engine takes it; `None` for a CAN frame no bus carries.
-    pub fn to_bus(&self) -> Option<BusItem> {
-        Some(match self {
-            Item::Can { id, extended, data } => BusItem::Rx(WireItem::Can(if *extended {
-                CanFrame::new_extended(*id, &data.0).ok()?
-            } else {
-                CanFrame::new(*id, &data.0).ok()?
-            })),
-            Item::Bytes(bytes) => BusItem::Rx(WireItem::Bytes(bytes.0.clone())),
-            Item::Controller(r) => BusItem::Controller(ControllerReport {
-                state: r.state,
-                restarted: r.restarted,
-                bus_error: r.bus_error,
-                no_ack: r.no_ack,
-                overflow: r.overflow,
-                counters: r.counters,
-                restart_ms: r.restart_ms,
-                from_frame: r.from_frame,
-            }),
-        })
+fn bus_item(item: &BusItem) -> Item {
+    match item {
+        BusItem::Rx(item) => wire_item(item),
+        BusItem::Controller(r) => Item::Controller(Report {
+            state: r.state,
+            restarted: r.restarted,
+            bus_error: r.bus_error,
+            no_ack: r.no_ack,
+            overflow: r.overflow,
+            counters: r.counters,
+            restart_ms: r.restart_ms,
+            from_frame: r.from_frame,
+        }),
     }
 }
 
-/// How a write or a flush of the bus went.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Outcome {
-    Out(u64),
-    Held(u64),
-    Dropped(String),
-    Lost(String),
-}
-
-/// What the engine published, as the replay checks it: the mux status and the control answers
-/// as their bytes, the tap, the state and the description (hundreds of each a second on a busy
-/// bus) as the FNV-1a digest of their bytes.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Published {
-    State(u64),
-    Frame(u64),
-    Mux(Bytes),
-    Description(u64),
-    Response { ticket: Ticket, answer: Bytes },
-}
-
-/// FNV-1a, 64 bits.
-fn digest(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |hash, &b| {
-        (hash ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+/// A recorded item as the engine takes it; `None` for a CAN frame no bus carries.
+pub fn to_bus(item: &Item) -> Option<BusItem> {
+    Some(match item {
+        Item::Can { id, extended, data } => BusItem::Rx(WireItem::Can(if *extended {
+            CanFrame::new_extended(*id, &data.0).ok()?
+        } else {
+            CanFrame::new(*id, &data.0).ok()?
+        })),
+        Item::Bytes(bytes) => BusItem::Rx(WireItem::Bytes(bytes.0.clone())),
+        Item::Controller(r) => BusItem::Controller(ControllerReport {
+            state: r.state,
+            restarted: r.restarted,
+            bus_error: r.bus_error,
+            no_ack: r.no_ack,
+            overflow: r.overflow,
+            counters: r.counters,
+            restart_ms: r.restart_ms,
+            from_frame: r.from_frame,
+        }),
     })
 }
 
-impl Published {
-    fn of(publication: &ToPublish) -> Self {
-        match publication {
-            ToPublish::State(state) => Published::State(digest(state.as_bytes())),
-            ToPublish::Frame(frame) => Published::Frame(digest(frame.as_bytes())),
-            ToPublish::Mux(status) => Published::Mux(Bytes::of(&**status)),
-            ToPublish::Description(d) => Published::Description(digest(d.as_bytes())),
-            ToPublish::Response { ticket, response } => Published::Response {
-                ticket: *ticket,
-                answer: Bytes::of(response),
-            },
-        }
+/// A publication, as recorded: the mux status and the control answers as their bytes, the
+/// tap, the state and the description (hundreds of each a second on a busy bus) as the digest
+/// of their bytes.
+pub fn published(publication: &ToPublish) -> Published {
+    match publication {
+        ToPublish::State(state) => Published::State(digest(state.as_bytes())),
+        ToPublish::Frame(frame) => Published::Frame(digest(frame.as_bytes())),
+        ToPublish::Mux(status) => Published::Mux(bytes_of(&**status)),
+        ToPublish::Description(d) => Published::Description(digest(d.as_bytes())),
+        ToPublish::Response { ticket, response } => Published::Response {
+            ticket: *ticket,
+            answer: bytes_of(response),
+        },
     }
 }
 
-/// A held lock as restored at start.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Lock {
-    pub name: String,
-    pub holder: String,
-    pub since: u64,
+/// The pass of `wake`.
+pub fn pass(wake: Wake) -> Event {
+    Event::Pass {
+        bus: wake.bus,
+        gps: wake.gps,
+        sources: wake.sources,
+        control: wake.control,
+        sim: wake.sim,
+        polled: wake.polled,
+    }
 }
 
-/// One input of the engine, or one thing it wrote or published (checked on replay).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "in", rename_all = "snake_case")]
-pub enum Event {
-    /// The run's first record: the version and the effective configuration (TOML).
-    Start {
-        version: String,
-        config: String,
-        now: u64,
-        unix_ns: u64,
-    },
-    /// The held locks read back at start.
-    Restored {
-        locks: Vec<Lock>,
-    },
-    /// The held locks could not be read back.
-    RestoreFailed {
-        reason: String,
-    },
-    /// The bus could not be opened at start.
-    BusLost {
-        now: u64,
-        reason: String,
-    },
-    /// The service's first publications.
-    Began {
-        now: u64,
-    },
-    /// One pass, and what woke it.
-    Pass {
-        bus: bool,
-        gps: bool,
-        sources: u32,
-        control: bool,
-        sim: bool,
-        polled: bool,
-    },
-    /// The shell asked whether receive moderation pauses the bus.
-    RxPaused {
-        now: u64,
-    },
-    /// The shell spent the wake budget of the listeners that fired.
-    Wakeups {
-        now: u64,
-        fired: u32,
-    },
-    /// The shell rebuilt its wait set.
-    ResetWakeups,
-    /// The orderly stop.
-    Stop {
-        now: u64,
-    },
-    /// The clock, read by the engine.
-    Now {
-        t: u64,
-    },
-    /// Requests read, each with its source's index.
-    Requests {
-        read: Vec<(usize, Bytes)>,
-    },
-    /// Control requests read, each with its ticket.
-    Controls {
-        read: Vec<(Ticket, Bytes)>,
-    },
-    /// An item written, and how the write went.
-    Write {
-        item: Item,
-        outcome: Outcome,
-    },
-    Flush {
-        outcome: Outcome,
-    },
-    /// One read of the bus: the items with their stamps, then whether more was pending (or the
-    /// bus was lost).
-    BusRead {
-        items: Vec<(u64, Item)>,
-        #[serde(default, skip_serializing_if = "is_false")]
-        more: bool,
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        lost: Option<String>,
-    },
-    /// Bytes of the GPS receiver (`failed`: it was lost).
-    Gps {
-        chunks: Vec<Bytes>,
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        failed: Option<String>,
-    },
-    /// A device opened (its name) or not.
-    Open {
-        result: Result<String, String>,
-    },
-    /// The held locks were kept, or the write failed.
-    Keep {
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        failed: Option<String>,
-    },
-    /// A publication, and whether it went out.
-    Publish {
-        what: Published,
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        failed: Option<String>,
-    },
-    /// Readers woken, or not.
-    Woke {
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        failed: Option<String>,
-    },
-    /// The recorder dropped this many passes' events here: the replay stops.
-    Gap {
-        dropped: u64,
-    },
-    /// The ring's oldest part is gone between the start and what follows: the replay stops.
-    Cut,
-}
-
-impl Event {
-    /// The pass of `wake`.
-    pub fn pass(wake: Wake) -> Self {
-        Event::Pass {
-            bus: wake.bus,
-            gps: wake.gps,
-            sources: wake.sources,
-            control: wake.control,
-            sim: wake.sim,
-            polled: wake.polled,
-        }
-    }
-
-    pub fn restored(locks: &[HeldLock]) -> Self {
-        Event::Restored {
-            locks: locks
-                .iter()
-                .map(|l| Lock {
-                    name: l.name.clone(),
-                    holder: l.holder.clone(),
-                    since: l.since.as_nanos(),
-                })
-                .collect(),
-        }
-    }
-
-    /// The instant this event carries, if it carries one.
-    pub fn time(&self) -> Option<u64> {
-        match self {
-            Event::Start { now, .. }
-            | Event::BusLost { now, .. }
-            | Event::Began { now }
-            | Event::RxPaused { now }
-            | Event::Wakeups { now, .. }
-            | Event::Stop { now } => Some(*now),
-            Event::Now { t } => Some(*t),
-            _ => None,
-        }
-    }
-
-    /// One line of the recording.
-    pub fn to_line(&self) -> Result<String, serde_json::Error> {
-        serde_json::to_string(self)
-    }
-
-    pub fn from_line(line: &str) -> Result<Self, serde_json::Error> {
-        serde_json::from_str(line)
+/// The held locks read back at start.
+pub fn restored(locks: &[HeldLock]) -> Event {
+    Event::Restored {
+        locks: locks
+            .iter()
+            .map(|l| Lock {
+                name: l.name.clone(),
+                holder: l.holder.clone(),
+                since: l.since.as_nanos(),
+            })
+            .collect(),
     }
 }
 
@@ -380,10 +169,6 @@ fn failed<E: std::fmt::Display>(result: &Result<(), E>) -> Option<String> {
     result.as_ref().err().map(ToString::to_string)
 }
 
-fn is_false(value: &bool) -> bool {
-    !value
-}
-
 impl<I: PassIo> PassIo for Taped<'_, I> {
     type Error = I::Error;
 
@@ -396,7 +181,7 @@ impl<I: PassIo> PassIo for Taped<'_, I> {
     fn read_requests(&mut self, sources: u32, mut take: impl FnMut(usize, &VelocityRequest)) {
         let mut read = Vec::new();
         self.io.read_requests(sources, |source, request| {
-            read.push((source, Bytes::of(request)));
+            read.push((source, bytes_of(request)));
             take(source, request);
         });
         if !read.is_empty() {
@@ -407,7 +192,7 @@ impl<I: PassIo> PassIo for Taped<'_, I> {
     fn read_control(&mut self, mut take: impl FnMut(Ticket, &ControlRequest)) {
         let mut read = Vec::new();
         self.io.read_control(|ticket, request| {
-            read.push((ticket, Bytes::of(request)));
+            read.push((ticket, bytes_of(request)));
             take(ticket, request);
         });
         if !read.is_empty() {
@@ -426,7 +211,7 @@ impl<I: PassIo> PassIo for Taped<'_, I> {
     fn write(&mut self, item: &WireItem) -> Result<Written, WriteError<Self::Error>> {
         let result = self.io.write(item);
         self.events.push(Event::Write {
-            item: Item::of_wire(item),
+            item: wire_item(item),
             outcome: outcome(&result),
         });
         result
@@ -450,7 +235,7 @@ impl<I: PassIo> PassIo for Taped<'_, I> {
             .get(before..)
             .unwrap_or_default()
             .iter()
-            .map(|(t, item)| (t.as_nanos(), Item::of_bus(item)))
+            .map(|(t, item)| (t.as_nanos(), bus_item(item)))
             .collect();
         self.events.push(Event::BusRead {
             items,
@@ -499,7 +284,7 @@ impl<I: PassIo> PassIo for Taped<'_, I> {
     }
 
     fn publish(&mut self, publication: ToPublish) -> Result<(), Self::Error> {
-        let what = Published::of(&publication);
+        let what = published(&publication);
         let result = self.io.publish(publication);
         self.events.push(Event::Publish {
             what,
@@ -538,13 +323,13 @@ mod tests {
                 now: 5,
                 unix_ns: 7,
             },
-            Event::pass(Wake {
+            pass(Wake {
                 bus: true,
                 sources: 0b101,
                 ..Wake::default()
             }),
             Event::Requests {
-                read: vec![(1, Bytes::of(&VelocityRequest::twist(0.3, 0.0)))],
+                read: vec![(1, bytes_of(&VelocityRequest::twist(0.3, 0.0)))],
             },
             Event::Write {
                 item: Item::Can {

@@ -33,7 +33,7 @@ use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction
 use tracing::{info, info_span, warn};
 
 use crate::blackbox::ring::Tape;
-use crate::blackbox::{Event, Taped};
+use crate::blackbox::{self, Event, Taped};
 use crate::engine::{Engine, EngineConfig, ListenerChange, PassIo, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};
 use crate::lockfile::{Clocks, LockFile};
@@ -157,7 +157,7 @@ impl Step {
             Step::Start(now) => Event::Began {
                 now: now.as_nanos(),
             },
-            Step::Pass(wake) => Event::pass(wake),
+            Step::Pass(wake) => blackbox::pass(wake),
             Step::Stop(now) => Event::Stop {
                 now: now.as_nanos(),
             },
@@ -283,7 +283,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
     let lock_file = LockFile::new(&config.state_dir, &config.name);
     match lock_file.load(clocks(now)) {
         Ok(held) => {
-            note(Event::restored(&held));
+            note(blackbox::restored(&held));
             engine.restore_locks(now, &held);
         }
         Err(err) => {

@@ -8,7 +8,7 @@ use chassisd_config::{Config, ConfigError, Overrides, RawConfig};
 use serde::Serialize;
 use zerocopy::FromBytes;
 
-use super::{Event, Item, Outcome, Published};
+use super::{Event, Outcome, Published, published, to_bus, wire_item};
 use crate::engine::{
     BusItem, Device, Engine, EngineConfig, HeldLock, PassIo, Readers, Ticket, ToPublish, Wake,
     WriteError, Written,
@@ -19,11 +19,6 @@ use crate::setup::driver_for_config;
 /// Why a recording cannot be replayed at all.
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayError {
-    #[error("line {line}: {source}")]
-    Line {
-        line: usize,
-        source: serde_json::Error,
-    },
     #[error("the recording does not begin with its start record")]
     NoStart,
     #[error("the recorded configuration: {0}")]
@@ -32,20 +27,6 @@ pub enum ReplayError {
     Toml(#[from] toml::de::Error),
     #[error("the recorded configuration: [mux]: {0}")]
     Mux(#[from] chassisd_config::mux::MuxConfigError),
-}
-
-/// Reads a recording: one event a line.
-pub fn parse(text: &str) -> Result<Vec<Event>, ReplayError> {
-    text.lines()
-        .enumerate()
-        .filter(|(_, line)| !line.trim().is_empty())
-        .map(|(n, line)| {
-            Event::from_line(line).map_err(|source| ReplayError::Line {
-                line: n + 1,
-                source,
-            })
-        })
-        .collect()
 }
 
 /// Where the replay first did something else than the recorded run.
@@ -201,7 +182,7 @@ impl PassIo for Player<'_> {
     fn acknowledge(&mut self, _: u32) {}
 
     fn write(&mut self, item: &WireItem) -> Result<Written, WriteError<String>> {
-        let ours = Item::of_wire(item);
+        let ours = wire_item(item);
         let recorded = self.take("a write", |e| match e {
             Event::Write { item, outcome } => Some((item.clone(), outcome.clone())),
             _ => None,
@@ -244,7 +225,7 @@ impl PassIo for Player<'_> {
             return Err("the replay diverged".into());
         };
         for (t, item) in items {
-            match item.to_bus() {
+            match to_bus(&item) {
                 Some(item) => into.push((Timestamp::from_nanos(t), item)),
                 None => self.diverge(format!("{item:?}"), "a frame a bus carries".into()),
             }
@@ -286,7 +267,7 @@ impl PassIo for Player<'_> {
     }
 
     fn publish(&mut self, publication: ToPublish) -> Result<(), String> {
-        let ours = Published::of(&publication);
+        let ours = published(&publication);
         let recorded = self.take("a publication", |e| match e {
             Event::Publish { what, failed } => Some((what.clone(), result_of(failed))),
             _ => None,

@@ -11,7 +11,7 @@
 // The writer owns its own clock: the window after a keep is wall time of the recorder's thread.
 #![allow(clippy::disallowed_methods)]
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::VecDeque;
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -22,7 +22,9 @@ use chassis_interfaces::MuxStatus;
 use tracing::{info, warn};
 use zerocopy::FromBytes;
 
-use super::replay::{ReplayError, parse};
+use chassisd_blackbox::write_mcap;
+pub use chassisd_blackbox::{ReadError, TOPIC, read};
+
 use super::{Event, Published, is_unasked_stop};
 
 /// How long after a keep its window goes on.
@@ -33,8 +35,6 @@ const KEEP_LONGEST: Duration = Duration::from_secs(30);
 const CHANNEL: usize = 4096;
 /// Segments of the ring: the oldest is let go of when the budget is spent.
 const SEGMENTS: u64 = 8;
-/// The topic of the kept files.
-pub const TOPIC: &str = "/chassisd/blackbox";
 
 enum Msg {
     Events(Vec<Event>),
@@ -341,7 +341,8 @@ impl Ring {
             unix.as_secs(),
             unix.subsec_millis()
         ));
-        write_mcap(&path, text, reason).map_err(io::Error::other)?;
+        let out = BufWriter::new(File::create(&path)?);
+        write_mcap(out, text, reason).map_err(io::Error::other)?;
         let mut kept: Vec<PathBuf> = fs::read_dir(&self.kept_dir)?
             .filter_map(Result::ok)
             .map(|e| e.path())
@@ -354,42 +355,6 @@ impl Ring {
         }
         Ok(path)
     }
-}
-
-fn write_mcap(path: &Path, text: &[u8], reason: &str) -> Result<(), mcap::McapError> {
-    let file = File::create(path)?;
-    let mut writer = mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Zstd))
-        .compression_threads(1)
-        .create(BufWriter::new(file))?;
-    writer.write_metadata(&mcap::records::Metadata {
-        name: "chassisd.blackbox".into(),
-        metadata: BTreeMap::from([("reason".to_string(), reason.to_string())]),
-    })?;
-    let channel = writer.add_channel(0, TOPIC, "json", &BTreeMap::new())?;
-    let mut time = 0;
-    for (sequence, line) in text
-        .split(|&b| b == b'\n')
-        .filter(|l| !l.is_empty())
-        .enumerate()
-    {
-        if let Some(t) = std::str::from_utf8(line)
-            .ok()
-            .and_then(|l| Event::from_line(l).ok())
-            .and_then(|e| e.time())
-        {
-            time = t;
-        }
-        let header = mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: sequence as u32,
-            log_time: time,
-            publish_time: time,
-        };
-        writer.write_to_known_channel(&header, line)?;
-    }
-    writer.finish()?;
-    Ok(())
 }
 
 /// The ring in `dir` (`<state dir>/blackbox`) as one recording, if it holds one, and its
@@ -418,35 +383,6 @@ pub fn read_ring(dir: &Path) -> io::Result<Vec<u8>> {
         .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "no black box ring here"))
 }
 
-/// Why a kept file cannot be read.
-#[derive(Debug, thiserror::Error)]
-pub enum ReadError {
-    #[error("not a black box MCAP file: {0}")]
-    Mcap(#[from] mcap::McapError),
-    #[error("a message of {TOPIC} is not UTF-8")]
-    Utf8,
-    #[error(transparent)]
-    Event(#[from] ReplayError),
-}
-
-/// The events of a kept file (MCAP), or of a ring segment (one JSON event a line).
-pub fn read(bytes: &[u8]) -> Result<Vec<Event>, ReadError> {
-    if !bytes.starts_with(mcap::MAGIC) {
-        let text = std::str::from_utf8(bytes).map_err(|_| ReadError::Utf8)?;
-        return Ok(parse(text)?);
-    }
-    let mut text = String::new();
-    for message in mcap::MessageStream::new(bytes)? {
-        let message = message?;
-        if message.channel.topic != TOPIC {
-            continue;
-        }
-        text.push_str(std::str::from_utf8(&message.data).map_err(|_| ReadError::Utf8)?);
-        text.push('\n');
-    }
-    Ok(parse(&text)?)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -468,7 +404,7 @@ mod tests {
 
     fn pass(t: u64) -> Vec<Event> {
         vec![
-            Event::pass(crate::engine::Wake::default()),
+            crate::blackbox::pass(crate::engine::Wake::default()),
             Event::Now { t },
             Event::Publish {
                 what: Published::State(t),
