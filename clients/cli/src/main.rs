@@ -101,6 +101,14 @@ enum Cmd {
     Record(record::RecordArgs),
     /// Play a recording back through the simulated bus, at recorded speed or --max-speed.
     Replay(record::ReplayArgs),
+    /// Replay chassisd's black box (a kept `blackbox/kept/*.mcap` of its state directory, or the
+    /// directory `blackbox/` itself) through chassisd's engine: every mux decision and frame
+    /// checked byte for byte, the story told (`--at TIME`: one moment, `--json`); exits 1 when
+    /// the replay diverged. `chassis explain -- --help` for chassisd's options.
+    Explain {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, required = true)]
+        args: Vec<String>,
+    },
     /// Inject a fault into the simulated chassis of a running chassisd (bus sim) or of
     /// `chassisd sim`.
     Sim {
@@ -271,9 +279,25 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Cmd::Demo(args) => demo::run(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Record(args) => record::record(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Replay(args) => record::replay(&args).map(|()| ExitCode::SUCCESS),
+        Cmd::Explain { args } => explain(&args),
         Cmd::Interfaces(args) => interfaces::run(&args).map(|()| ExitCode::SUCCESS),
         Cmd::Urdf(args) => urdf::run(&args).map(|()| ExitCode::SUCCESS),
     }
+}
+
+/// `chassisd explain ARGS…`: the replay runs the service's own engine.
+fn explain(args: &[String]) -> anyhow::Result<ExitCode> {
+    let chassisd = procs::sibling("chassisd")?;
+    let status = std::process::Command::new(&chassisd)
+        .arg("explain")
+        .args(args)
+        .status()
+        .with_context(|| format!("running {}", chassisd.display()))?;
+    Ok(match status.code() {
+        Some(0) => ExitCode::SUCCESS,
+        Some(code) => ExitCode::from(u8::try_from(code).unwrap_or(1)),
+        None => ExitCode::FAILURE,
+    })
 }
 
 fn main() -> ExitCode {

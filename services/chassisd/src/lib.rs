@@ -5,6 +5,7 @@
 //! memory, and it drives the chassis from a priority mux over the velocity requests of the
 //! configured sources.
 
+pub mod blackbox;
 pub mod description;
 pub mod engine;
 pub mod ipc;

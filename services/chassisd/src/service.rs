@@ -13,6 +13,7 @@
 #![allow(clippy::disallowed_methods)]
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use chassis_bus::clock;
@@ -28,9 +29,12 @@ use iceoryx2::waitset::{
 };
 use iceoryx2_bb_posix::file_descriptor::{FileDescriptor, FileDescriptorBased};
 use iceoryx2_bb_posix::file_descriptor_set::SynchronousMultiplexing;
+use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction};
 use tracing::{info, info_span, warn};
 
-use crate::engine::{Engine, EngineConfig, ListenerChange, Ticket, Wake};
+use crate::blackbox::ring::Tape;
+use crate::blackbox::{self, Event, Taped};
+use crate::engine::{Engine, EngineConfig, ListenerChange, PassIo, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};
 use crate::lockfile::{Clocks, LockFile};
 use crate::mux::Mux;
@@ -127,6 +131,84 @@ struct Shell<D> {
     loop_stall: Option<LoopStall>,
     /// The stamps inside each pass, when `CHASSIS_PASS_TRACE` asks for them.
     trace: Option<trace::PassTrace>,
+    /// The black box, when it records.
+    tape: Option<Tape>,
+}
+
+/// A call of the shell that runs on its ports and devices.
+#[derive(Debug, Clone, Copy)]
+enum Step {
+    Start(Timestamp),
+    Pass(Wake),
+    Stop(Timestamp),
+}
+
+impl Step {
+    fn run(self, engine: &mut Engine, io: &mut impl PassIo) {
+        match self {
+            Step::Start(now) => engine.start(io, now),
+            Step::Pass(wake) => engine.run_pass(io, wake),
+            Step::Stop(now) => engine.stop(io, now),
+        }
+    }
+
+    fn event(self) -> Event {
+        match self {
+            Step::Start(now) => Event::Began {
+                now: now.as_nanos(),
+            },
+            Step::Pass(wake) => blackbox::pass(wake),
+            Step::Stop(now) => Event::Stop {
+                now: now.as_nanos(),
+            },
+        }
+    }
+}
+
+/// SIGUSR1 asked the black box to keep the window around now.
+static KEEP_ASKED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn keep_asked(_: libc::c_int) {
+    KEEP_ASKED.store(true, Ordering::Relaxed);
+}
+
+/// The black box, recording into the state directory, with SIGUSR1 keeping its window.
+fn black_box(config: &Config, now: Timestamp) -> Option<Tape> {
+    if config.blackbox_mib == 0 {
+        return None;
+    }
+    let text = config
+        .to_toml()
+        .map_err(|e| warn!("black box off: the configuration as text: {e}"))
+        .ok()?;
+    let mut tape = Tape::start(
+        &config.state_dir,
+        config.blackbox_mib << 20,
+        config.blackbox_kept,
+    )
+    .map_err(|e| warn!("black box off: {}: {e}", config.state_dir.display()))
+    .ok()?;
+    let action = SigAction::new(
+        SigHandler::Handler(keep_asked),
+        SaFlags::SA_RESTART,
+        SigSet::empty(),
+    );
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    if let Err(e) = unsafe { sigaction(Signal::SIGUSR1, &action) } {
+        warn!("black box: SIGUSR1 keeps nothing: {e}");
+    }
+    tape.events.push(Event::Start {
+        version: env!("CARGO_PKG_VERSION").into(),
+        config: text,
+        now: now.as_nanos(),
+        unix_ns: clock::unix_ns(),
+    });
+    info!(
+        dir = %config.state_dir.join("blackbox").display(),
+        mib = config.blackbox_mib,
+        "black box recording"
+    );
+    Some(tape)
 }
 
 /// Opens the service's ports. A predecessor killed while it was creating one of them leaves that
@@ -191,20 +273,37 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         Mux::new(&config.mux)?,
         now,
     );
+    let mut tape = black_box(&config, now);
+    let mut note = |event: Event| {
+        if let Some(tape) = &mut tape {
+            tape.events.push(event);
+        }
+    };
     // The locks held before a restart hold again before anything is decided.
     let lock_file = LockFile::new(&config.state_dir, &config.name);
     match lock_file.load(clocks(now)) {
-        Ok(held) => engine.restore_locks(now, &held),
+        Ok(held) => {
+            note(blackbox::restored(&held));
+            engine.restore_locks(now, &held);
+        }
         Err(err) => {
             let aside = lock_file
                 .set_aside()
                 .map_or_else(String::new, |p| format!(" (set aside as {})", p.display()));
-            engine.restore_failed(now, &format!("{err}{aside}"));
+            let reason = format!("{err}{aside}");
+            note(Event::RestoreFailed {
+                reason: reason.clone(),
+            });
+            engine.restore_failed(now, &reason);
         }
     }
     let (bus, sim) = match devices.open_bus(now) {
         Ok((bus, sim)) => (Some(bus), sim),
         Err(err) => {
+            note(Event::BusLost {
+                now: now.as_nanos(),
+                reason: err.to_string(),
+            });
             engine.handle_bus_lost(now, &err);
             (None, None)
         }
@@ -231,8 +330,9 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         notifier: Notifier::from_env(),
         loop_stall: LoopStall::from_env(),
         trace: trace::PassTrace::from_env(),
+        tape,
     };
-    engine.start(&mut shell.io(&ports), now);
+    shell.step(&ports, &mut engine, Step::Start(now));
     if let Some(notifier) = &mut shell.notifier {
         notifier.ready(engine.mux().status());
         if let Some(every) = notifier.ping_every() {
@@ -285,6 +385,7 @@ impl<D: Devices> Shell<D> {
                 .iter()
                 .map(|inlet| waitset.attach_notification(&inlet.listener).map(Some))
                 .collect::<Result<Vec<_>, _>>()?;
+            self.note(Event::ResetWakeups);
             engine.reset_wakeups();
             let control_guard = waitset.attach_notification(&ports.control.listener)?;
             let sim_guard = ports
@@ -330,7 +431,7 @@ impl<D: Devices> Shell<D> {
                     _ => {}
                 }
                 // A moderation pause that ended: read what queued meanwhile, watch the bus again.
-                if !gate.is_open() && !engine.is_rx_paused(clock::now()) {
+                if !gate.is_open() && !self.is_rx_paused(engine) {
                     set_gate(&mut gate, true);
                     wake.bus = true;
                 }
@@ -345,12 +446,25 @@ impl<D: Devices> Shell<D> {
                     break;
                 }
                 // Close the gate for a pause that began, open it when polling ended.
-                let paused = engine.is_rx_paused(clock::now());
+                let paused = self.is_rx_paused(engine);
                 if gate.is_open() == paused {
                     set_gate(&mut gate, !paused);
                 }
                 // A source that wakes the loop too often is read on the tick only, until the next.
-                for change in engine.spend_wakeups(clock::now(), wake.sources) {
+                let now = clock::now();
+                self.note(Event::Wakeups {
+                    now: now.as_nanos(),
+                    fired: wake.sources,
+                });
+                if KEEP_ASKED.swap(false, Ordering::Relaxed)
+                    && let Some(tape) = &mut self.tape
+                {
+                    tape.keep("SIGUSR1");
+                }
+                if let Some(tape) = &mut self.tape {
+                    tape.send();
+                }
+                for change in engine.spend_wakeups(now, wake.sources) {
                     match change {
                         ListenerChange::Detach(index) => {
                             if let Some(guard) = source_guards.get_mut(index) {
@@ -368,6 +482,35 @@ impl<D: Devices> Shell<D> {
                 }
             }
         }
+    }
+
+    /// Runs `step` on the shell's ports and devices, noted by the black box when it records.
+    fn step(&mut self, ports: &Ports, engine: &mut Engine, step: Step) {
+        let mut tape = self.tape.take();
+        let mut io = self.io(ports);
+        match &mut tape {
+            Some(tape) => {
+                tape.events.push(step.event());
+                step.run(engine, &mut Taped::new(&mut io, &mut tape.events));
+                tape.send();
+            }
+            None => step.run(engine, &mut io),
+        }
+        self.tape = tape;
+    }
+
+    fn note(&mut self, event: Event) {
+        if let Some(tape) = &mut self.tape {
+            tape.events.push(event);
+        }
+    }
+
+    fn is_rx_paused(&mut self, engine: &mut Engine) -> bool {
+        let now = clock::now();
+        self.note(Event::RxPaused {
+            now: now.as_nanos(),
+        });
+        engine.is_rx_paused(now)
     }
 
     /// How long the loop waits, by its mode: event-driven blocks until the engine's next
@@ -396,7 +539,10 @@ impl<D: Devices> Shell<D> {
         if let Some(notifier) = &mut self.notifier {
             notifier.stopping();
         }
-        engine.stop(&mut self.io(ports), clock::now());
+        self.step(ports, engine, Step::Stop(clock::now()));
+        if let Some(tape) = self.tape.take() {
+            tape.finish();
+        }
         if let Some(trace) = &self.trace {
             match trace.write_out() {
                 Ok(()) => info!(file = %trace.path().display(), "pass trace written"),

@@ -69,6 +69,11 @@ pub struct ServiceConfig {
     /// `$STATE_DIRECTORY` under systemd, else `$XDG_STATE_HOME/chassisd/<name>`, else
     /// `~/.local/state/chassisd/<name>`).
     pub state_dir: Option<PathBuf>,
+    /// The black box: the engine's inputs kept in a ring of this many MiB in the state
+    /// directory (`blackbox/`); 0 records nothing.
+    pub blackbox_mib: u64,
+    /// The black box: how many kept windows (`blackbox/kept/*.mcap`) stay; the oldest go.
+    pub blackbox_kept: usize,
 }
 
 impl Default for ServiceConfig {
@@ -86,6 +91,8 @@ impl Default for ServiceConfig {
             cpu: None,
             realtime: None,
             state_dir: None,
+            blackbox_mib: 64,
+            blackbox_kept: 16,
         }
     }
 }
@@ -259,6 +266,9 @@ pub struct Config {
     pub realtime: Option<u8>,
     /// The directory of the held-lock file.
     pub state_dir: PathBuf,
+    /// The black box's ring, MiB (0: off), and how many kept windows stay.
+    pub blackbox_mib: u64,
+    pub blackbox_kept: usize,
     /// The required-source rule was lifted on the command line.
     pub no_safety_monitor: bool,
 }
@@ -382,6 +392,8 @@ impl RawConfig {
             cpu: overrides.cpu.or(self.service.cpu),
             realtime,
             state_dir,
+            blackbox_mib: self.service.blackbox_mib,
+            blackbox_kept: self.service.blackbox_kept,
             no_safety_monitor: overrides.no_safety_monitor,
         })
     }
@@ -485,6 +497,8 @@ impl Config {
                 cpu: self.cpu,
                 realtime: self.realtime,
                 state_dir: Some(self.state_dir.clone()),
+                blackbox_mib: self.blackbox_mib,
+                blackbox_kept: self.blackbox_kept,
             },
             bus: self.bus_settings.clone(),
             driver: self.driver.clone(),

@@ -6,6 +6,7 @@
 //! planner::` runs one subject.
 
 mod bench;
+mod blackbox;
 mod demo;
 mod description;
 mod doctor;

@@ -62,7 +62,7 @@ impl<D: Devices> Shell<D> {
                 ..PassStamps::default()
             };
         }
-        engine.run_pass(&mut self.io(ports), wake);
+        self.step(ports, engine, super::Step::Pass(wake));
         if let Some(trace) = &mut self.trace {
             trace.end_pass();
         }

@@ -1,0 +1,312 @@
+//! The black box's recording: the inputs chassisd's engine was handed and what it wrote and
+//! published, one [`Event`] a JSON line; a kept window is an MCAP file of those lines on
+//! [`TOPIC`] (readable in Foxglove). chassisd records and replays them (`chassisd::blackbox`);
+//! this crate is the format alone, so that its reader can be fuzzed without the service's
+//! iceoryx2 stack.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+
+use serde::{Deserialize, Serialize};
+
+/// The topic of a kept window's events.
+pub const TOPIC: &str = "/chassisd/blackbox";
+
+/// Bytes, as hex in the recording.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Bytes(#[serde(with = "hex::serde")] pub Vec<u8>);
+
+/// One item on the bus.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Item {
+    Can {
+        id: u32,
+        extended: bool,
+        data: Bytes,
+    },
+    Bytes(Bytes),
+    /// A report of the CAN controller on itself.
+    Controller(Report),
+}
+
+/// [`ControllerReport`], field for field.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Report {
+    pub state: u8,
+    pub restarted: bool,
+    pub bus_error: bool,
+    pub no_ack: bool,
+    pub overflow: bool,
+    pub counters: Option<(u8, u8)>,
+    pub restart_ms: Option<u32>,
+    pub from_frame: bool,
+}
+
+/// How a write or a flush of the bus went.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    Out(u64),
+    Held(u64),
+    Dropped(String),
+    Lost(String),
+}
+
+/// What the engine published, as the replay checks it: the mux status and the control answers
+/// as their bytes, the tap, the state and the description (hundreds of each a second on a busy
+/// bus) as the FNV-1a digest of their bytes.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Published {
+    State(u64),
+    Frame(u64),
+    Mux(Bytes),
+    Description(u64),
+    Response { ticket: u64, answer: Bytes },
+}
+
+/// FNV-1a, 64 bits.
+pub fn digest(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |hash, &b| {
+        (hash ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// A held lock as restored at start.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Lock {
+    pub name: String,
+    pub holder: String,
+    pub since: u64,
+}
+
+/// One input of the engine, or one thing it wrote or published (checked on replay).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "in", rename_all = "snake_case")]
+pub enum Event {
+    /// The run's first record: the version and the effective configuration (TOML).
+    Start {
+        version: String,
+        config: String,
+        now: u64,
+        unix_ns: u64,
+    },
+    /// The held locks read back at start.
+    Restored {
+        locks: Vec<Lock>,
+    },
+    /// The held locks could not be read back.
+    RestoreFailed {
+        reason: String,
+    },
+    /// The bus could not be opened at start.
+    BusLost {
+        now: u64,
+        reason: String,
+    },
+    /// The service's first publications.
+    Began {
+        now: u64,
+    },
+    /// One pass, and what woke it.
+    Pass {
+        bus: bool,
+        gps: bool,
+        sources: u32,
+        control: bool,
+        sim: bool,
+        polled: bool,
+    },
+    /// The shell asked whether receive moderation pauses the bus.
+    RxPaused {
+        now: u64,
+    },
+    /// The shell spent the wake budget of the listeners that fired.
+    Wakeups {
+        now: u64,
+        fired: u32,
+    },
+    /// The shell rebuilt its wait set.
+    ResetWakeups,
+    /// The orderly stop.
+    Stop {
+        now: u64,
+    },
+    /// The clock, read by the engine.
+    Now {
+        t: u64,
+    },
+    /// Requests read, each with its source's index.
+    Requests {
+        read: Vec<(usize, Bytes)>,
+    },
+    /// Control requests read, each with its ticket.
+    Controls {
+        read: Vec<(u64, Bytes)>,
+    },
+    /// An item written, and how the write went.
+    Write {
+        item: Item,
+        outcome: Outcome,
+    },
+    Flush {
+        outcome: Outcome,
+    },
+    /// One read of the bus: the items with their stamps, then whether more was pending (or the
+    /// bus was lost).
+    BusRead {
+        items: Vec<(u64, Item)>,
+        #[serde(default, skip_serializing_if = "is_false")]
+        more: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        lost: Option<String>,
+    },
+    /// Bytes of the GPS receiver (`failed`: it was lost).
+    Gps {
+        chunks: Vec<Bytes>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        failed: Option<String>,
+    },
+    /// A device opened (its name) or not.
+    Open {
+        result: Result<String, String>,
+    },
+    /// The held locks were kept, or the write failed.
+    Keep {
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        failed: Option<String>,
+    },
+    /// A publication, and whether it went out.
+    Publish {
+        what: Published,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        failed: Option<String>,
+    },
+    /// Readers woken, or not.
+    Woke {
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        failed: Option<String>,
+    },
+    /// The recorder dropped this many passes' events here: the replay stops.
+    Gap {
+        dropped: u64,
+    },
+    /// The ring's oldest part is gone between the start and what follows: the replay stops.
+    Cut,
+}
+
+impl Event {
+    /// The instant this event carries, if it carries one.
+    pub fn time(&self) -> Option<u64> {
+        match self {
+            Event::Start { now, .. }
+            | Event::BusLost { now, .. }
+            | Event::Began { now }
+            | Event::RxPaused { now }
+            | Event::Wakeups { now, .. }
+            | Event::Stop { now } => Some(*now),
+            Event::Now { t } => Some(*t),
+            _ => None,
+        }
+    }
+
+    /// One line of the recording.
+    pub fn to_line(&self) -> Result<String, serde_json::Error> {
+        serde_json::to_string(self)
+    }
+
+    pub fn from_line(line: &str) -> Result<Self, serde_json::Error> {
+        serde_json::from_str(line)
+    }
+}
+
+fn is_false(value: &bool) -> bool {
+    !value
+}
+
+/// Why bytes are not a recording.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    #[error("not a black box MCAP file: {0}")]
+    Mcap(#[from] mcap::McapError),
+    #[error("a recording is UTF-8 text")]
+    Utf8,
+    #[error("line {line}: {source}")]
+    Line {
+        line: usize,
+        source: serde_json::Error,
+    },
+}
+
+/// Reads a recording's text: one event a line.
+pub fn parse(text: &str) -> Result<Vec<Event>, ReadError> {
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| !line.trim().is_empty())
+        .map(|(n, line)| {
+            Event::from_line(line).map_err(|source| ReadError::Line {
+                line: n + 1,
+                source,
+            })
+        })
+        .collect()
+}
+
+/// The events of a kept window (MCAP), or of the ring's text (one JSON event a line).
+pub fn read(bytes: &[u8]) -> Result<Vec<Event>, ReadError> {
+    if !bytes.starts_with(mcap::MAGIC) {
+        return parse(std::str::from_utf8(bytes).map_err(|_| ReadError::Utf8)?);
+    }
+    let mut text = String::new();
+    for message in mcap::MessageStream::new(bytes)? {
+        let message = message?;
+        if message.channel.topic != TOPIC {
+            continue;
+        }
+        text.push_str(std::str::from_utf8(&message.data).map_err(|_| ReadError::Utf8)?);
+        text.push('\n');
+    }
+    parse(&text)
+}
+
+/// Writes `text` (events, one a line) as an MCAP window into `out`, `reason` in its metadata.
+pub fn write_mcap<W: Write + std::io::Seek>(
+    out: W,
+    text: &[u8],
+    reason: &str,
+) -> Result<(), mcap::McapError> {
+    let mut writer = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_threads(1)
+        .create(out)?;
+    writer.write_metadata(&mcap::records::Metadata {
+        name: "chassisd.blackbox".into(),
+        metadata: BTreeMap::from([("reason".to_string(), reason.to_string())]),
+    })?;
+    let channel = writer.add_channel(0, TOPIC, "json", &BTreeMap::new())?;
+    let mut time = 0;
+    for (sequence, line) in text
+        .split(|&b| b == b'\n')
+        .filter(|l| !l.is_empty())
+        .enumerate()
+    {
+        if let Some(t) = std::str::from_utf8(line)
+            .ok()
+            .and_then(|l| Event::from_line(l).ok())
+            .and_then(|e| e.time())
+        {
+            time = t;
+        }
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: sequence as u32,
+            log_time: time,
+            publish_time: time,
+        };
+        writer.write_to_known_channel(&header, line)?;
+    }
+    writer.finish()?;
+    Ok(())
+}

@@ -1,0 +1,484 @@
+//! The recording on disk: a bounded ring of segments in the state directory, written by a thread
+//! of its own, and the windows kept as MCAP files (one JSON message per event on
+//! `/chassisd/blackbox`, readable in Foxglove) that survive restarts.
+//!
+//! The loop hands each pass' events over a bounded channel ([`Tape::send`]); when the writer
+//! falls behind (a slow or full disk) the pass' events are dropped and counted, never the pass.
+//! The writer watches the mux decisions go by: a stop that was not asked for
+//! ([`super::is_unasked_stop`]) keeps the window around it, [`KEEP_AFTER`] after it included,
+//! as does [`Tape::keep`] (SIGUSR1). A previous run that ended without its orderly stop (a crash,
+//! `kill -9`, a power cut) is kept when the service starts again.
+// The writer owns its own clock: the window after a keep is wall time of the recorder's thread.
+#![allow(clippy::disallowed_methods)]
+
+use std::collections::VecDeque;
+use std::fs::{self, File};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::time::{Duration, Instant};
+
+use chassis_interfaces::MuxStatus;
+use tracing::{info, warn};
+use zerocopy::FromBytes;
+
+use chassisd_blackbox::write_mcap;
+pub use chassisd_blackbox::{ReadError, TOPIC, read};
+
+use super::{Event, Published, is_unasked_stop};
+
+/// How long after a keep its window goes on.
+pub const KEEP_AFTER: Duration = Duration::from_secs(5);
+/// The longest a window goes on after its first keep while more keeps join it.
+const KEEP_LONGEST: Duration = Duration::from_secs(30);
+/// Passes the channel holds while the writer is busy.
+const CHANNEL: usize = 4096;
+/// Segments of the ring: the oldest is let go of when the budget is spent.
+const SEGMENTS: u64 = 8;
+
+enum Msg {
+    Events(Vec<Event>),
+    Keep(String),
+}
+
+/// The loop's end of the recorder.
+#[derive(Debug)]
+pub struct Tape {
+    tx: SyncSender<Msg>,
+    writer: std::thread::JoinHandle<()>,
+    /// The events of the pass under way.
+    pub events: Vec<Event>,
+    /// Passes dropped since the last one the writer took.
+    dropped: u64,
+    /// Passes dropped since start.
+    pub dropped_total: u64,
+}
+
+impl Tape {
+    /// Starts the writer on `dir` with `budget` bytes of ring and at most `kept` kept files.
+    pub fn start(dir: &Path, budget: u64, kept: usize) -> io::Result<Self> {
+        let mut ring = Ring::open(dir, budget, kept)?;
+        let (tx, rx) = sync_channel(CHANNEL);
+        let writer = std::thread::Builder::new()
+            .name("blackbox".into())
+            .spawn(move || ring.run(&rx))?;
+        Ok(Self {
+            tx,
+            writer,
+            events: Vec::new(),
+            dropped: 0,
+            dropped_total: 0,
+        })
+    }
+
+    /// Hands the events noted since the last call to the writer, or drops them (counted).
+    pub fn send(&mut self) {
+        if self.events.is_empty() {
+            return;
+        }
+        let mut batch = std::mem::take(&mut self.events);
+        if self.dropped > 0 {
+            batch.insert(
+                0,
+                Event::Gap {
+                    dropped: self.dropped,
+                },
+            );
+        }
+        match self.tx.try_send(Msg::Events(batch)) {
+            Ok(()) => self.dropped = 0,
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.dropped += 1;
+                self.dropped_total += 1;
+                if self.dropped_total.is_power_of_two() {
+                    warn!(
+                        dropped = self.dropped_total,
+                        "black box: the recorder falls behind; passes go unrecorded"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Hands over what is left and waits for the writer: a keep asked for is written now.
+    pub fn finish(mut self) {
+        self.send();
+        drop(self.tx);
+        if self.writer.join().is_err() {
+            warn!("black box: the recorder's thread panicked");
+        }
+    }
+
+    /// Keeps the window around now.
+    pub fn keep(&mut self, reason: &str) {
+        if self.tx.try_send(Msg::Keep(reason.to_string())).is_err() {
+            warn!("black box: cannot keep the window ({reason}): the recorder falls behind");
+        }
+    }
+}
+
+/// The writer's side: the ring's files.
+struct Ring {
+    dir: PathBuf,
+    kept_dir: PathBuf,
+    budget: u64,
+    kept: usize,
+    /// The run's first events (the configuration, the restored locks, the first
+    /// publications), kept whatever the ring lets go of.
+    header: Vec<u8>,
+    in_header: bool,
+    segments: VecDeque<(PathBuf, u64)>,
+    current: Option<BufWriter<File>>,
+    next_segment: u64,
+    /// The ring has let go of a segment.
+    cut: bool,
+    last_mux: Option<MuxStatus>,
+    /// A keep waiting for its window's end, when it was first asked, and why.
+    due: Option<(Instant, Instant, Vec<String>)>,
+}
+
+impl Ring {
+    fn open(dir: &Path, budget: u64, kept: usize) -> io::Result<Self> {
+        let dir = dir.join("blackbox");
+        let kept_dir = dir.join("kept");
+        fs::create_dir_all(&kept_dir)?;
+        let mut ring = Self {
+            dir,
+            kept_dir,
+            budget,
+            kept,
+            header: Vec::new(),
+            in_header: true,
+            segments: VecDeque::new(),
+            current: None,
+            next_segment: 0,
+            cut: false,
+            last_mux: None,
+            due: None,
+        };
+        ring.take_over_previous()?;
+        Ok(ring)
+    }
+
+    fn header_path(&self) -> PathBuf {
+        self.dir.join("header.jsonl")
+    }
+
+    /// The previous run's ring: kept when it ended without its orderly stop, then cleared.
+    fn take_over_previous(&mut self) -> io::Result<()> {
+        let (text, segments) = ring_files(&self.dir)?;
+        if let Some(text) = text {
+            let last = text
+                .split(|&b| b == b'\n')
+                .rev()
+                .find(|l| !l.is_empty())
+                .unwrap_or_default();
+            if !last.starts_with(br#"{"in":"stop""#) {
+                let reason = "the previous run ended without its orderly stop";
+                match self.write_kept(&text, reason) {
+                    Ok(path) => warn!(file = %path.display(), "black box: {reason}: kept"),
+                    Err(e) => warn!("black box: {reason}; not kept: {e}"),
+                }
+            }
+        }
+        for segment in segments {
+            fs::remove_file(segment)?;
+        }
+        fs::write(self.header_path(), b"")
+    }
+
+    fn run(&mut self, rx: &Receiver<Msg>) {
+        loop {
+            let msg = match &self.due {
+                Some((at, ..)) => rx.recv_timeout(at.saturating_duration_since(Instant::now())),
+                None => rx.recv().map_err(|_| RecvTimeoutError::Disconnected),
+            };
+            let result = match msg {
+                Ok(Msg::Events(events)) => self.append(&events),
+                Ok(Msg::Keep(reason)) => {
+                    self.schedule(reason);
+                    Ok(())
+                }
+                Err(RecvTimeoutError::Timeout) => Ok(()),
+                Err(RecvTimeoutError::Disconnected) => {
+                    if let Some(current) = &mut self.current
+                        && let Err(e) = current.flush()
+                    {
+                        warn!("black box: writing the ring: {e}");
+                    }
+                    if let Some((.., reasons)) = self.due.take() {
+                        self.keep(&reasons);
+                    }
+                    return;
+                }
+            };
+            if let Err(e) = result {
+                warn!("black box: writing the ring: {e}");
+            }
+            if self
+                .due
+                .as_ref()
+                .is_some_and(|(at, ..)| *at <= Instant::now())
+                && let Some((.., reasons)) = self.due.take()
+            {
+                self.keep(&reasons);
+            }
+        }
+    }
+
+    /// A keep asked while another waits joins it, and its window goes on [`KEEP_AFTER`] after
+    /// it too, up to [`KEEP_LONGEST`] after the first.
+    fn schedule(&mut self, reason: String) {
+        let now = Instant::now();
+        match &mut self.due {
+            Some((at, first, reasons)) => {
+                *at = (now + KEEP_AFTER).min(*first + KEEP_LONGEST);
+                reasons.push(reason);
+            }
+            None => self.due = Some((now + KEEP_AFTER, now, vec![reason])),
+        }
+    }
+
+    fn append(&mut self, events: &[Event]) -> io::Result<()> {
+        let mut text = Vec::new();
+        for event in events {
+            if matches!(event, Event::Pass { .. }) {
+                self.in_header = false;
+            }
+            if let Event::Publish {
+                what: Published::Mux(bytes),
+                ..
+            } = event
+                && let Ok(status) = MuxStatus::read_from_bytes(&bytes.0)
+            {
+                if self
+                    .last_mux
+                    .as_ref()
+                    .is_some_and(|before| is_unasked_stop(before, &status))
+                {
+                    self.schedule(format!("stop: {}", status.why()));
+                }
+                self.last_mux = Some(status);
+            }
+            serde_json::to_writer(&mut text, event)?;
+            text.push(b'\n');
+        }
+        if self.in_header {
+            self.header.extend_from_slice(&text);
+            return fs::OpenOptions::new()
+                .append(true)
+                .open(self.header_path())?
+                .write_all(&text);
+        }
+        self.write_segment(&text)
+    }
+
+    fn write_segment(&mut self, text: &[u8]) -> io::Result<()> {
+        let per_segment = (self.budget / SEGMENTS).max(1);
+        let full = self
+            .segments
+            .back()
+            .is_none_or(|(_, len)| *len >= per_segment);
+        if full {
+            if let Some(mut current) = self.current.take() {
+                current.flush()?;
+            }
+            self.next_segment += 1;
+            let path = self
+                .dir
+                .join(format!("ring-{:08}.jsonl", self.next_segment));
+            self.current = Some(BufWriter::new(File::create(&path)?));
+            self.segments.push_back((path, 0));
+            while self.segments.len() as u64 > SEGMENTS {
+                if let Some((old, _)) = self.segments.pop_front() {
+                    fs::remove_file(old)?;
+                    self.cut = true;
+                }
+            }
+        }
+        if let (Some(current), Some((_, len))) = (&mut self.current, self.segments.back_mut()) {
+            current.write_all(text)?;
+            *len += text.len() as u64;
+        }
+        Ok(())
+    }
+
+    /// Writes the window (the header, the ring) as a kept file.
+    fn keep(&mut self, reasons: &[String]) {
+        let reason = reasons.join("; ");
+        let result = self
+            .window()
+            .and_then(|text| self.write_kept(&text, &reason));
+        match result {
+            Ok(path) => info!(file = %path.display(), "black box kept: {reason}"),
+            Err(e) => warn!("black box: keeping the window ({reason}): {e}"),
+        }
+    }
+
+    fn window(&mut self) -> io::Result<Vec<u8>> {
+        if let Some(current) = &mut self.current {
+            current.flush()?;
+        }
+        let mut text = self.header.clone();
+        if self.cut {
+            serde_json::to_writer(&mut text, &Event::Cut)?;
+            text.push(b'\n');
+        }
+        for (segment, _) in &self.segments {
+            text.extend(fs::read(segment)?);
+        }
+        Ok(text)
+    }
+
+    /// Writes `text` (events, one a line) as an MCAP file in the kept directory; the oldest
+    /// kept files beyond the bound go.
+    fn write_kept(&self, text: &[u8], reason: &str) -> io::Result<PathBuf> {
+        let unix = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
+        let path = self.kept_dir.join(format!(
+            "{}.{:03}.mcap",
+            unix.as_secs(),
+            unix.subsec_millis()
+        ));
+        let out = BufWriter::new(File::create(&path)?);
+        write_mcap(out, text, reason).map_err(io::Error::other)?;
+        let mut kept: Vec<PathBuf> = fs::read_dir(&self.kept_dir)?
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+            .collect();
+        kept.sort();
+        let excess = kept.len().saturating_sub(self.kept.max(1));
+        for old in kept.iter().take(excess) {
+            fs::remove_file(old)?;
+        }
+        Ok(path)
+    }
+}
+
+/// The ring in `dir` (`<state dir>/blackbox`) as one recording, if it holds one, and its
+/// segments' files.
+fn ring_files(dir: &Path) -> io::Result<(Option<Vec<u8>>, Vec<PathBuf>)> {
+    let header = dir.join("header.jsonl");
+    let mut segments: Vec<PathBuf> = fs::read_dir(dir)?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "jsonl") && p != &header)
+        .collect();
+    segments.sort();
+    let Ok(mut text) = fs::read(&header) else {
+        return Ok((None, segments));
+    };
+    for segment in &segments {
+        text.extend(fs::read(segment)?);
+    }
+    Ok((Some(text), segments))
+}
+
+/// The live ring in `dir` (`<state dir>/blackbox`) as one recording.
+pub fn read_ring(dir: &Path) -> io::Result<Vec<u8>> {
+    ring_files(dir)?
+        .0
+        .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "no black box ring here"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(test: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("chassisd-ring-{test}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        dir
+    }
+
+    fn start() -> Event {
+        Event::Start {
+            version: "0.1.0".into(),
+            config: String::new(),
+            now: 1,
+            unix_ns: 1,
+        }
+    }
+
+    fn pass(t: u64) -> Vec<Event> {
+        vec![
+            crate::blackbox::pass(crate::engine::Wake::default()),
+            Event::Now { t },
+            Event::Publish {
+                what: Published::State(t),
+                failed: None,
+            },
+        ]
+    }
+
+    fn kept(ring: &Ring) -> Vec<PathBuf> {
+        let mut files: Vec<PathBuf> = fs::read_dir(&ring.kept_dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        files.sort();
+        files
+    }
+
+    #[test]
+    fn the_ring_lets_go_of_its_oldest_and_a_kept_window_says_so() {
+        let dir = dir("bounded");
+        let mut ring = Ring::open(&dir, 2_000, 2).unwrap();
+        ring.append(&[start()]).unwrap();
+        for t in 0..200 {
+            ring.append(&pass(t)).unwrap();
+        }
+        assert!(ring.cut);
+        assert_eq!(ring.segments.len() as u64, SEGMENTS);
+        let on_disk: u64 = ring
+            .segments
+            .iter()
+            .map(|(p, _)| fs::metadata(p).unwrap().len())
+            .sum();
+        assert!(on_disk < 2_000 + 2_000 / SEGMENTS + 200, "{on_disk} bytes");
+        for _ in 0..3 {
+            ring.keep(&["operator".into()]);
+        }
+        let files = kept(&ring);
+        assert_eq!(files.len(), 2, "{files:?}");
+        let events = read(&fs::read(&files[1]).unwrap()).unwrap();
+        assert_eq!(events[0], start());
+        assert_eq!(events[1], Event::Cut);
+        assert_eq!(events.last(), pass(199).last());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_run_that_ended_without_its_orderly_stop_is_kept_at_the_next_start() {
+        let dir = dir("crash");
+        let mut ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        ring.append(&[start()]).unwrap();
+        ring.append(&pass(5)).unwrap();
+        drop(ring);
+        let mut ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        let files = kept(&ring);
+        assert_eq!(files.len(), 1);
+        let events = read(&fs::read(&files[0]).unwrap()).unwrap();
+        assert_eq!(events.len(), 4);
+        // An orderly stop leaves nothing to keep.
+        ring.append(&[start()]).unwrap();
+        ring.append(&[Event::Stop { now: 9 }]).unwrap();
+        drop(ring);
+        let ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        assert_eq!(kept(&ring).len(), 1);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn what_is_not_a_recording_is_an_error() {
+        assert!(read(b"").unwrap().is_empty());
+        assert!(read(b"{\"in\":\"now\"}\n").is_err());
+        assert!(read(b"not json").is_err());
+        assert!(read(&[0xff, 0xfe]).is_err());
+        let mut mcap = mcap::MAGIC.to_vec();
+        mcap.extend_from_slice(b"truncated");
+        assert!(read(&mcap).is_err());
+    }
+}

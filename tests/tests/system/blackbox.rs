@@ -1,0 +1,179 @@
+//! The black box: chassisd on the simulated chassis records its engine's inputs without being
+//! asked, keeps the window around a stop nobody asked for, and `chassis explain` replays the
+//! run through the same engine with every decision and item written identical — and finds the
+//! first decision a changed priority changes.
+// Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::time::{Duration, Instant};
+
+use chassis_tests::*;
+use nix::sys::signal::Signal;
+
+const UP: Duration = Duration::from_secs(10);
+/// A recorded mux decision, in the recording's JSON.
+const MUX: &str = r#""what":{"mux""#;
+
+/// Teleop asks for `vx` every 20 ms for `duration`; the fastest the chassis reported.
+fn drive(robot: &mut Robot, teleop: &mut Source, vx: f32, duration: Duration) -> f32 {
+    let end = Instant::now() + duration;
+    let mut max = 0.0f32;
+    while Instant::now() < end {
+        teleop.send(VelocityRequest::twist(vx, 0.0)).unwrap();
+        if let Ok(Some(state)) = robot.wait_state(Duration::from_millis(20)) {
+            max = max.max(state.motion.linear_mps.abs());
+        }
+    }
+    max
+}
+
+fn monitor_fresh(env: &Env, robot: &mut Robot) {
+    let fresh = wait_for(UP, || {
+        mux(robot)
+            .sources()
+            .iter()
+            .any(|s| s.name() == "safety" && s.has(SourceFlags::FRESH))
+    });
+    assert!(
+        fresh.is_some(),
+        "the monitor never reached the mux\n{}",
+        env.logs()
+    );
+}
+
+fn explain(env: &Env, args: &[&str]) -> (Output, String) {
+    let mut all = vec!["explain"];
+    all.extend_from_slice(args);
+    let out = env.chassis(&all);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out, text)
+}
+
+/// The recorded configuration with teleop's priority one higher.
+fn with_teleop_priority_raised(ring: &Path) -> String {
+    let header = std::fs::read_to_string(ring.join("header.jsonl")).unwrap();
+    let start: serde_json::Value = serde_json::from_str(header.lines().next().unwrap()).unwrap();
+    let mut config: toml::Table = toml::from_str(start["config"].as_str().unwrap()).unwrap();
+    let sources = config["mux"]["source"].as_array_mut().unwrap();
+    let teleop = sources
+        .iter_mut()
+        .find(|s| s["name"].as_str() == Some("teleop"))
+        .unwrap();
+    let priority = teleop["priority"].as_integer().unwrap();
+    teleop["priority"] = toml::Value::Integer(priority + 1);
+    toml::to_string(&config).unwrap()
+}
+
+/// The events of the ring (one a line: the start record first) whose line holds `holding`.
+fn recorded_events(ring: &Path, holding: &str) -> Vec<usize> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(ring)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "jsonl") && !p.ends_with("header.jsonl"))
+        .collect();
+    files.sort();
+    files.insert(0, ring.join("header.jsonl"));
+    let text: String = files
+        .iter()
+        .map(|f| std::fs::read_to_string(f).unwrap())
+        .collect();
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| l.contains(holding))
+        .map(|(i, _)| i)
+        .collect()
+}
+
+#[test]
+fn a_recorded_incident_replays_identically_and_a_changed_priority_diverges_at_once() {
+    let mut env = Env::new("blackbox");
+    let n = name("bbx");
+    let chassisd = env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    let mut robot = env.robot(&n, UP);
+    let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
+    monitor_fresh(&env, &mut robot);
+    let mut teleop = source(&mut robot, "teleop");
+    assert!(drive(&mut robot, &mut teleop, 0.3, Duration::from_secs(1)) > 0.2);
+    // The safety monitor killed: the required source is lost and the robot stops.
+    env.proc(monitor).signal(Signal::SIGKILL);
+    let peak = drive(&mut robot, &mut teleop, 0.3, Duration::from_secs(1));
+    assert_eq!(
+        mux(&mut robot).zero_reason,
+        ZeroReason::REQUIRED_SOURCE_STALE,
+        "{peak}"
+    );
+    env.spawn("safety", "chassis-safety", &["--name", &n]);
+    monitor_fresh(&env, &mut robot);
+    drive(&mut robot, &mut teleop, 0.0, Duration::from_millis(200));
+    assert!(drive(&mut robot, &mut teleop, 0.3, Duration::from_secs(1)) > 0.2);
+    // The operator's e-stop and its release.
+    env.chassis_ok(&["control", "--name", &n, "estop"]);
+    drive(&mut robot, &mut teleop, 0.3, Duration::from_millis(500));
+    env.chassis_ok(&["control", "--name", &n, "estop-release"]);
+    drive(&mut robot, &mut teleop, 0.0, Duration::from_millis(200));
+    assert!(drive(&mut robot, &mut teleop, 0.3, Duration::from_secs(1)) > 0.2);
+    env.proc(chassisd).signal(Signal::SIGTERM);
+    assert_eq!(
+        env.proc(chassisd).wait_exit(Duration::from_secs(10)),
+        Some(0)
+    );
+
+    let ring = env.state_home().join("chassisd").join(&n).join("blackbox");
+    let ring_text = ring.to_str().unwrap();
+    // The whole run, from the ring.
+    let (out, text) = explain(&env, &[ring_text]);
+    assert!(out.status.success(), "{text}\n{}", env.logs());
+    assert!(text.contains("items written: identical"), "{text}");
+    assert!(
+        text.contains("STOP stopped: required source safety silent"),
+        "{text}"
+    );
+    assert!(
+        text.contains("STOP stopped: locked · held: estop"),
+        "{text}"
+    );
+    assert!(text.contains("driving from teleop"), "{text}");
+    // The window kept for the stops, from the MCAP file.
+    let kept: Vec<PathBuf> = std::fs::read_dir(ring.join("kept"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(!kept.is_empty(), "no window kept\n{}", env.logs());
+    for file in &kept {
+        let (out, text) = explain(&env, &[file.to_str().unwrap()]);
+        assert!(out.status.success(), "{}: {text}", file.display());
+        assert!(text.contains("identical"), "{text}");
+    }
+    // One moment, and the verdict for tools.
+    let (_, text) = explain(&env, &[ring_text, "--at", "+2.0"]);
+    assert!(text.starts_with("at "), "{text}");
+    let (out, text) = explain(&env, &[ring_text, "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(json["replay"]["divergence"].is_null(), "{text}");
+    let decisions = json["replay"]["decisions"].as_u64().unwrap();
+    assert_eq!(
+        decisions as usize,
+        recorded_events(&ring, MUX).len(),
+        "{text}"
+    );
+
+    // One priority changed in the replay's configuration: the first publication that shows the
+    // sources' priorities differs, the robot's description (the mux status comes after it).
+    let changed = env.write("changed.toml", &with_teleop_priority_raised(&ring));
+    let (out, text) = explain(&env, &[ring_text, "--config", &changed]);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(text.contains("another configuration"), "{text}");
+    assert!(text.contains("replay DIVERGED"), "{text}");
+    let (out, _) = explain(&env, &[ring_text, "--config", &changed, "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let at = json["replay"]["divergence"]["event"].as_u64().unwrap() as usize;
+    let first_shown = recorded_events(&ring, r#""what":{"description""#)[0];
+    assert!(first_shown < recorded_events(&ring, MUX)[0]);
+    assert_eq!(at, first_shown, "diverged elsewhere: {json}");
+}
