@@ -94,17 +94,6 @@ fn process_cpu_s(pid: u32) -> anyhow::Result<f64> {
     paths::stat_cpu_seconds(&format!("/proc/{pid}/stat"))
 }
 
-pub(crate) fn status_field(pid: u32, field: &str) -> anyhow::Result<f64> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
-    status
-        .lines()
-        .find_map(|l| l.strip_prefix(field))
-        .and_then(|v| v.split_whitespace().next())
-        .with_context(|| format!("no {field}"))?
-        .parse::<f64>()
-        .context(field.to_string())
-}
-
 /// A robot served under `prefix` whose state arrives.
 fn serves(name: &str, prefix: &str) -> bool {
     let lost = chassis_client::LinkFlags::REMOTE_LOST;
@@ -267,9 +256,9 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         let size_figures = SizeFigures {
             robots: size,
             operator_cpu_pct: 100.0 * (cpu1 - cpu0) / elapsed,
-            operator_rss_mib: status_field(operator_pid, "VmRSS:")? / 1024.0,
-            operator_peak_rss_mib: status_field(operator_pid, "VmHWM:")? / 1024.0,
-            operator_threads: status_field(operator_pid, "Threads:")? as u64,
+            operator_rss_mib: paths::status_field(operator_pid, "VmRSS:")? / 1024.0,
+            operator_peak_rss_mib: paths::status_field(operator_pid, "VmHWM:")? / 1024.0,
+            operator_threads: paths::status_field(operator_pid, "Threads:")? as u64,
             robot_sides_cpu_pct: 100.0 * (sides1 - sides0) / elapsed,
             machine_busy_pct: 100.0 * busy as f64 / total.max(1) as f64,
             samples_per_s: per_robot.iter().map(|r| r.samples_per_s).sum(),

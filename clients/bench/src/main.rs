@@ -284,15 +284,6 @@ fn plan_path(path: PathKind, what: &str, (mode, at): (&str, &str), asked: u64) -
 /// The placement of a row whose ends no one pinned.
 pub const UNPINNED: &str = "unpinned";
 
-/// Why a planned row was not measured.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Withheld {
-    /// It sends velocity to a robot the run did not start for itself, and `--wheels-off-ground`
-    /// was not given.
-    WheelsOnGround,
-}
-
 fn baseline_key(what: &str, placement: &str) -> String {
     row_key(PathKind::Baseline, what, "-", placement)
 }
@@ -1124,7 +1115,7 @@ impl Step for Attached {
             let withheld = self.sending(ctx).into_iter();
             report
                 .withheld
-                .extend(withheld.map(|p| (p.key, Withheld::WheelsOnGround)));
+                .extend(withheld.map(|p| (p.key, report::Withheld::WheelsOnGround)));
         }
         let mut teleop = self.drive.then(|| robot.source("teleop")).transpose()?;
         let mut state = paths::StateRecorder::default();

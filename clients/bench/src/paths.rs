@@ -889,7 +889,19 @@ pub(crate) fn stat_cpu_seconds(path: &str) -> anyhow::Result<f64> {
 
 /// Resident memory of a process, MiB.
 pub fn rss_mib(pid: u32) -> anyhow::Result<f64> {
-    Ok(crate::fleet::status_field(pid, "VmRSS:")? / 1024.0)
+    Ok(status_field(pid, "VmRSS:")? / 1024.0)
+}
+
+/// A field of `/proc/PID/status` (`VmRSS:`, `Threads:`…), its first number.
+pub(crate) fn status_field(pid: u32, field: &str) -> anyhow::Result<f64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix(field))
+        .and_then(|v| v.split_whitespace().next())
+        .with_context(|| format!("no {field}"))?
+        .parse::<f64>()
+        .context(field.to_string())
 }
 
 /// Loads the simulated bus to `bitrate`'s capacity (8-byte standard frames, no stuffing:

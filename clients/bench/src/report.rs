@@ -167,7 +167,7 @@ pub struct Report {
     pub loops: Vec<LoopRun>,
     /// Rows planned and not measured, and why (an attached robot's rows that send velocity).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub withheld: Vec<(String, crate::Withheld)>,
+    pub withheld: Vec<(String, Withheld)>,
 }
 
 /// One control loop's periods over chassisd (`mode`), and the same loop over the raw hop.
@@ -652,6 +652,15 @@ pub struct Cost {
     pub frames_per_s: f64,
     pub cpu_pct: f64,
     pub rss_mib: f64,
+}
+
+/// Why a planned row was not measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Withheld {
+    /// It sends velocity to a robot the run did not start for itself, and `--wheels-off-ground`
+    /// was not given.
+    WheelsOnGround,
 }
 
 #[cfg(test)]
