@@ -366,7 +366,7 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(enum FrameKind: u8 { CAN, SERIAL, GPS }),
         describe_constants!(enum SafetyRule: u8 {
             FAULT, BATTERY, STALE, BUMPER, ULTRASONIC, IR, SPEED, OPERATOR, RUNAWAY, DIRECTION,
-            FOLLOWING,
+            FOLLOWING, LIMIT,
         }),
         describe_constants!(enum SafetyAction: u8 { NONE, SLOW, STOP, LATCH }),
         describe_constants!(enum EstopState: u8 {

@@ -37,6 +37,9 @@ named_constants! {
         /// Commanded longer than the robot needs to start, measured still
         /// ([`SafetyStatus::unfollowed`] names the likely cause).
         FOLLOWING = 10 => "following",
+        /// Safely limited speed: measured speed above the mux's standing speed limit
+        /// (`MuxStatus::speed_limit_mps`) beyond a margin for longer than a bound.
+        LIMIT = 11 => "limit",
     }
 }
 

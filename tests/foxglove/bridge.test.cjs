@@ -144,6 +144,7 @@ test("chassis-foxglove serves the simulated robot to a Foxglove client", async (
       "/log": "foxglove.Log",
       "/state": "chassis.ChassisState",
       "/mux": "chassis.MuxStatus",
+      "/safety": "chassis.SafetyStatus",
       "/frames": "chassis.Frames",
     };
     for (const [topic, schemaName] of Object.entries(expected)) {

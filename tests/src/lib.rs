@@ -1342,6 +1342,12 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
         test: "a_motor_driver_lost_mid_motion_stops_the_chassis",
         fault: "a motor driver lost mid-motion (TITAN, driver 1)",
     },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "a_chassis_running_over_its_speed_limit_is_stopped",
+        fault: "the chassis runs over a lowered speed limit: 0.3 m/s set, 1.6 × the command \
+                measured (TITAN)",
+    },
 ];
 
 /// Every row of the soak's table (`soak.jsonl`), in the order of the table.

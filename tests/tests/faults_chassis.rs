@@ -4,7 +4,8 @@
 //! injection to the stop (the mux's output zero) and the distance the chassis travelled from
 //! the injection to the stop and to its standstill, by the simulator's truth; a not-following
 //! stop must name its cause in `SafetyStatus` and in `chassis status`. Figures are recorded
-//! with [`Figures`] (`scripts/reliability`).
+//! with [`Figures`] (`scripts/reliability`). The speed-limit row lowers the limit first (the
+//! operator's `chassis control speed-limit`) and the chassis then runs over it.
 // Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
@@ -36,6 +37,10 @@ struct Case {
     cause: u8,
     /// The chassis stands once stopped (a runaway keeps going).
     stands: bool,
+    /// The monitor's configuration beyond the defaults.
+    config: &'static str,
+    /// The speed limit set before the injection, m/s.
+    speed_limit: Option<&'static str>,
 }
 
 fn injected(kind: u8, index: u8, value: f64) -> SimRequest {
@@ -60,7 +65,10 @@ fn chassis_fault(case: &Case) {
     env.serve("titan", &n, &[]);
     let mut robot = env.robot(&n, UP);
     // Long enough a release that the cause is still in force when `chassis status` reads it.
-    let config = env.write("safety.toml", "[rules.following]\nrelease_ms = 5000\n");
+    let config = env.write(
+        "safety.toml",
+        &format!("[rules.following]\nrelease_ms = 5000\n{}", case.config),
+    );
     env.spawn(
         "safety",
         "chassis-safety",
@@ -87,6 +95,17 @@ fn chassis_fault(case: &Case) {
     });
     assert!(steady.is_some(), "no steady drive\n{}", env.logs());
     pump.run(&mut robot, Duration::from_millis(500));
+    if let Some(limit) = case.speed_limit {
+        env.chassis_ok(&["control", "--name", &n, "speed-limit", limit]);
+        let max: f32 = limit.parse().unwrap();
+        let capped = pump.until(&mut robot, UP, |_, s| s.motion.linear_mps < max + 0.02);
+        assert!(
+            capped.is_some(),
+            "not capped to {limit} m/s\n{}",
+            env.logs()
+        );
+        pump.run(&mut robot, Duration::from_millis(500));
+    }
 
     let x0 = x_m(&mut robot);
     let injected_at = Instant::now();
@@ -180,6 +199,8 @@ fn a_chassis_running_away_from_its_command_is_latched() {
         rule: SafetyRule::RUNAWAY,
         cause: Unfollowed::NONE,
         stands: false,
+        config: "",
+        speed_limit: None,
     });
 }
 
@@ -196,6 +217,8 @@ fn a_chassis_driving_against_its_command_is_latched() {
         rule: SafetyRule::DIRECTION,
         cause: Unfollowed::NONE,
         stands: true,
+        config: "",
+        speed_limit: None,
     });
 }
 
@@ -214,6 +237,8 @@ fn a_chassis_ignoring_its_command_is_stopped_and_the_cause_named() {
         rule: SafetyRule::FOLLOWING,
         cause: Unfollowed::UNREPORTED,
         stands: true,
+        config: "",
+        speed_limit: None,
     });
 }
 
@@ -231,6 +256,8 @@ fn a_slipping_chassis_is_stopped_and_the_cause_named() {
         rule: SafetyRule::FOLLOWING,
         cause: Unfollowed::UNREPORTED,
         stands: true,
+        config: "",
+        speed_limit: None,
     });
 }
 
@@ -247,5 +274,28 @@ fn a_motor_driver_lost_mid_motion_stops_the_chassis() {
         rule: SafetyRule::FAULT,
         cause: Unfollowed::NONE,
         stands: true,
+        config: "",
+        speed_limit: None,
+    });
+}
+
+#[test]
+fn a_chassis_running_over_its_speed_limit_is_stopped() {
+    chassis_fault(&Case {
+        test: "a_chassis_running_over_its_speed_limit_is_stopped",
+        tag: "fcl",
+        rank: 750,
+        fault: "the chassis runs over a lowered speed limit: 0.3 m/s set, 1.6 × the command \
+                measured (TITAN)",
+        injection: "`chassis control speed-limit 0.3`, then `chassis sim gain 1.6` while teleop \
+                    drives at 0.5 m/s; the runaway rule disabled, so the limit rule alone guards",
+        behaviour: "the limit rule (SLS) stops once the measured speed is over the limit + \
+                    0.1 m/s for 1 s; the chassis stands at the zero",
+        request: injected(SimKind::GAIN, 0, 1.6),
+        rule: SafetyRule::LIMIT,
+        cause: Unfollowed::NONE,
+        stands: true,
+        config: "[rules.runaway]\nenabled = false\n[rules.limit]\nrelease_ms = 5000\n",
+        speed_limit: Some("0.3"),
     });
 }

@@ -180,6 +180,7 @@ pub struct Robot {
     latest_mux: Option<MuxStatus>,
     description: Option<Subscriber<ipc::Service, RobotDescription, ()>>,
     latest_description: Option<RobotDescription>,
+    safety: Option<Subscription<SafetyStatus>>,
     control: Option<Counter<ControlRequest>>,
     sim: Option<Counter<SimRequest>>,
     control_seq: u64,
@@ -261,6 +262,7 @@ impl Robot {
             latest_mux: None,
             description: None,
             latest_description: None,
+            safety: None,
             control: None,
             sim: None,
             control_seq: 0,
@@ -461,6 +463,18 @@ impl Robot {
     pub fn latest_description(&mut self) -> Result<Option<RobotDescription>, ClientError> {
         self.drain_description()?;
         Ok(self.latest_description)
+    }
+
+    /// The safety monitor's newest decision (`None` until it published one). The monitor may
+    /// start after the client: its service is looked for at each call until it exists.
+    pub fn latest_safety(&mut self) -> Result<Option<SafetyStatus>, ClientError> {
+        if self.safety.is_none() {
+            self.safety = self.subscriber::<SafetyStatus>(SafetyStatus::SERVICE)?;
+        }
+        match self.safety.as_mut() {
+            Some(s) => s.latest(),
+            None => Ok(None),
+        }
     }
 
     /// Publishes velocity requests as the configured source `name`. Fails if the service has no

@@ -27,15 +27,15 @@ use anyhow::Context as _;
 use chassis_client::foxglove::{self as fox, Body};
 use chassis_client::watch::{self, Severity, Watch};
 use chassis_client::{
-    BusFrame, ChassisState, ControlStatus, Decimator, MuxStatus, Robot, RobotDescription, Source,
-    Ticker, WallClock, termination_requested,
+    BusFrame, ChassisState, ControlStatus, Decimator, MuxStatus, Robot, RobotDescription,
+    SafetyStatus, Source, Ticker, WallClock, termination_requested,
 };
 use chassis_foxglove_messages::{control_request, response_json};
 use chassis_protocols::frame_json::BoxedCodec;
 use foxglove::PartialMetadata;
 use serde_json::{Value, json};
 
-use crate::convert::{self, Trail, frame_entries, mux_json};
+use crate::convert::{self, Trail, frame_entries, mux_json, safety_json};
 use crate::naming::Naming;
 use crate::server::{self, Channels, Config, Inbox, Route};
 
@@ -152,6 +152,8 @@ fn robot_loop(config: &Config, served: &Served) -> anyhow::Result<()> {
         last_gps_ns: 0,
         last_mux: None,
         last_mux_published_ns: 0,
+        last_safety: None,
+        last_safety_published_ns: 0,
         batch: Vec::new(),
         left_out: 0,
         last_batch_ns: 0,
@@ -190,6 +192,9 @@ fn robot_loop(config: &Config, served: &Served) -> anyhow::Result<()> {
         }
         if let Some(mux) = robot.latest_mux()? {
             lp.mux(&mux, now);
+        }
+        if let Some(safety) = robot.latest_safety()? {
+            lp.safety(&safety, now);
         }
         lp.flush_frames(now);
         ticker.wait();
@@ -249,6 +254,8 @@ struct Loop<'a> {
     last_gps_ns: u64,
     last_mux: Option<MuxStatus>,
     last_mux_published_ns: u64,
+    last_safety: Option<SafetyStatus>,
+    last_safety_published_ns: u64,
     batch: Vec<Value>,
     left_out: u64,
     last_batch_ns: u64,
@@ -417,6 +424,31 @@ impl Loop<'_> {
                     PartialMetadata::with_log_time(self.clock.wall_ns(mux.stamp_ns)),
                 ),
                 Err(e) => tracing::debug!(error = %e, "encoding a mux decision"),
+            }
+        }
+    }
+
+    /// `/safety` on every change of the decision, else at the mux's period.
+    fn safety(&mut self, status: &SafetyStatus, now: u64) {
+        let decision = |s: &SafetyStatus| (s.action, s.active_rules, s.unfollowed, s.estop);
+        let changed = self
+            .last_safety
+            .is_none_or(|last| decision(&last) != decision(status));
+        if self.last_safety.is_some_and(|last| last.seq == status.seq) && !changed {
+            return;
+        }
+        if !changed && now.saturating_sub(self.last_safety_published_ns) < MUX_PERIOD_NS {
+            return;
+        }
+        self.last_safety = Some(*status);
+        self.last_safety_published_ns = now;
+        if self.channels.safety.has_sinks() {
+            match safety_json(status).and_then(|v| serde_json::to_vec(&v)) {
+                Ok(bytes) => self.channels.safety.log_with_meta(
+                    &bytes,
+                    PartialMetadata::with_log_time(self.clock.wall_ns(status.stamp_ns)),
+                ),
+                Err(e) => tracing::debug!(error = %e, "encoding a safety decision"),
             }
         }
     }

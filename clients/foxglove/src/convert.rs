@@ -1,13 +1,14 @@
 //! The robot as the live view shows it, as pure functions: the scene (the body and range cones
 //! of the robot's description, the cones sized by their readings, the path just driven), `/mux`
-//! with its names spelled out, and `/frames` decoded by the described robot's codec. `/tf`,
+//! and `/safety` with their names spelled out, and `/frames` decoded by the described robot's codec. `/tf`,
 //! `/pose`, `/gps`, `/log` and the JSON schemas, which a recording carries too, are
 //! `chassis_client::foxglove`'s.
 
 use chassis_client::foxglove::{BASE_LINK, Body, ODOM, RangeKind, pose, stamp, yaw_quaternion};
 use chassis_client::watch;
 use chassis_client::{
-    BusFrame, ChassisState, FrameDirection, FrameKind, MuxStatus, Stop, ZeroReason,
+    BusFrame, ChassisState, EstopState, FrameDirection, FrameKind, MuxStatus, SafetyAction,
+    SafetyRule, SafetyStatus, Stop, Unfollowed, ZeroReason,
 };
 use chassis_protocols::CanFrame;
 use chassis_protocols::frame_json::BoxedCodec;
@@ -43,6 +44,29 @@ pub fn mux_json(mux: &MuxStatus) -> serde_json::Result<Value> {
             mux.awaiting().map_or("", |s| s.name()).into(),
         );
         obj.insert("why".into(), mux.why().to_string().into());
+    }
+    Ok(value)
+}
+
+/// `/safety`: the safety monitor's decision, its rules and the cause of a chassis that does not
+/// follow, named, and in words as every view shows it ([`SafetyStatus::why`]).
+pub fn safety_json(status: &SafetyStatus) -> serde_json::Result<Value> {
+    let mut value = serde_json::to_value(status)?;
+    if let Some(obj) = value.as_object_mut() {
+        obj.insert(
+            "action_name".into(),
+            SafetyAction::name(status.action).into(),
+        );
+        obj.insert(
+            "active_names".into(),
+            SafetyRule::names(status.active_rules).into(),
+        );
+        obj.insert(
+            "unfollowed_name".into(),
+            Unfollowed::name(status.unfollowed).into(),
+        );
+        obj.insert("estop_name".into(), EstopState::name(status.estop).into());
+        obj.insert("why".into(), status.why().into());
     }
     Ok(value)
 }
@@ -344,6 +368,26 @@ mod tests {
         // A GPS chunk is its sentence.
         let gps = frame_entries(&tapped(FrameKind::GPS, 0, b"$GPGGA,1*00\r\n"), None);
         assert_eq!(gps[0]["raw"], "$GPGGA,1*00");
+    }
+
+    #[test]
+    fn the_safety_json_says_the_decision_and_the_cause_in_words() {
+        let mut status = SafetyStatus {
+            action: SafetyAction::STOP,
+            active_rules: SafetyRule::bit(SafetyRule::FOLLOWING),
+            unfollowed: Unfollowed::STANDBY,
+            ..SafetyStatus::default()
+        };
+        let v = safety_json(&status).unwrap();
+        assert_eq!(v["why"], "STOP by following: the chassis is in standby");
+        assert_eq!(v["action_name"], "stop");
+        assert_eq!(v["active_names"], json!(["following"]));
+        assert_eq!(v["unfollowed_name"], "standby");
+        status.active_rules = SafetyRule::bit(SafetyRule::LIMIT);
+        status.unfollowed = Unfollowed::NONE;
+        assert_eq!(safety_json(&status).unwrap()["why"], "STOP by limit");
+        let schema = chassis_client::foxglove::schema_of(&v);
+        assert_eq!(schema["properties"]["why"]["type"], "string");
     }
 
     #[test]

@@ -12,6 +12,7 @@
 //! | `/log` | `foxglove.Log` | faults appearing and clearing, link flags, mux changes, service calls |
 //! | `/state` | `chassis.ChassisState` (JSON) | every field of the state, ≤ 50 Hz |
 //! | `/mux` | `chassis.MuxStatus` (JSON) | every field of the mux decision, names spelled out |
+//! | `/safety` | `chassis.SafetyStatus` (JSON) | the safety monitor's decision, names spelled out, `why` in words (`STOP by following: the chassis is in standby`), once a monitor runs |
 //! | `/frames` | `chassis.Frames` (JSON) | the bus frames, decoded in the described robot's protocol, in batches every 100 ms |
 //!
 //! A client channel of `geometry_msgs/Twist` in JSON (Foxglove's Teleop panel) drives the robot

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use chassis_client::foxglove::schema_of;
-use chassis_client::{ChassisState, MuxStatus, ValidRequest};
+use chassis_client::{ChassisState, MuxStatus, SafetyStatus, ValidRequest};
 use chassis_foxglove_messages::{self as messages, ServiceAction, TwistError, response_schema};
 use foxglove::messages::{FrameTransforms, LocationFix, Log, PoseInFrame, SceneUpdate};
 use foxglove::websocket::service::{Handler, Request, Responder, Service, ServiceSchema};
@@ -16,7 +16,7 @@ use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener, Sta
 use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServer, WebSocketServerHandle};
 use serde_json::Value;
 
-use crate::convert::{frames_schema, mux_json};
+use crate::convert::{frames_schema, mux_json, safety_json};
 use crate::naming::Naming;
 
 /// The channels the bridge logs one robot to.
@@ -29,6 +29,7 @@ pub struct Channels {
     pub log: Channel<Log>,
     pub state: Arc<RawChannel>,
     pub mux: Arc<RawChannel>,
+    pub safety: Arc<RawChannel>,
     pub frames: Arc<RawChannel>,
 }
 
@@ -50,6 +51,7 @@ impl Channels {
         };
         let state_value = serde_json::to_value(ChassisState::default())?;
         let mux_value = mux_json(&MuxStatus::default())?;
+        let safety_value = safety_json(&SafetyStatus::default())?;
         Ok(Self {
             tf: ctx.channel_builder(naming.topic("/tf")).build(),
             pose: ctx.channel_builder(naming.topic("/pose")).build(),
@@ -58,6 +60,7 @@ impl Channels {
             log: ctx.channel_builder(naming.topic("/log")).build(),
             state: json_channel("/state", "chassis.ChassisState", schema_of(&state_value))?,
             mux: json_channel("/mux", "chassis.MuxStatus", schema_of(&mux_value))?,
+            safety: json_channel("/safety", "chassis.SafetyStatus", schema_of(&safety_value))?,
             frames: json_channel("/frames", "chassis.Frames", frames_schema())?,
         })
     }

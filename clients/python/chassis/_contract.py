@@ -1074,7 +1074,8 @@ class SafetyRule(Constants):
     RUNAWAY = 8
     DIRECTION = 9
     FOLLOWING = 10
-    NAMES = {0: 'fault', 1: 'battery', 2: 'stale', 3: 'bumper', 4: 'ultrasonic', 5: 'ir', 6: 'speed', 7: 'operator', 8: 'runaway', 9: 'direction', 10: 'following'}
+    LIMIT = 11
+    NAMES = {0: 'fault', 1: 'battery', 2: 'stale', 3: 'bumper', 4: 'ultrasonic', 5: 'ir', 6: 'speed', 7: 'operator', 8: 'runaway', 9: 'direction', 10: 'following', 11: 'limit'}
 
 
 class SensorKind(Constants):

@@ -910,7 +910,6 @@ pub fn state_loop(
         trace: OdomTrace::from_env(chassis_ipc::Trace::Odom),
     };
     lp.publish_model();
-    let mut safety = None;
     tracing::info!(robot = name, "bridging");
     while !termination_requested() {
         // Every sample the subscriber holds, oldest first: odom keeps the robot's own rate.
@@ -928,7 +927,10 @@ pub fn state_loop(
         if let Some(m) = robot.latest_mux().context("reading the mux decision")? {
             lp.mux = Some(m);
         }
-        if let Some(status) = latest_safety(&robot, &mut safety)? {
+        if let Some(status) = robot
+            .latest_safety()
+            .context("reading the safety monitor")?
+        {
             lp.safety = Some(status);
         }
         if let Some(d) = robot
@@ -945,23 +947,6 @@ pub fn state_loop(
         tracing::warn!(error = %e, path = %trace.path().display(), "odom trace not written");
     }
     Ok(())
-}
-
-/// The safety monitor's newest decision, if it published one since the last call. The monitor
-/// may start after the bridge: its service is looked for until it exists.
-pub(crate) fn latest_safety(
-    robot: &Robot,
-    subscription: &mut Option<chassis_client::Subscription<SafetyStatus>>,
-) -> anyhow::Result<Option<SafetyStatus>> {
-    if subscription.is_none() {
-        *subscription = robot
-            .subscriber::<SafetyStatus>(SafetyStatus::SERVICE)
-            .context("subscribing to the safety monitor")?;
-    }
-    match subscription.as_mut() {
-        Some(s) => s.latest().context("reading the safety monitor"),
-        None => Ok(None),
-    }
 }
 
 #[cfg(test)]

@@ -466,7 +466,7 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
     let end = options.duration.map(deadline);
     let mut latest = None;
     let mut mux: Option<MuxStatus> = None;
-    let (mut safety, mut safety_subscription) = (None, None);
+    let mut safety = None;
     let mut last_diagnostics: Option<(u64, Vec<(u8, String)>)> = None;
     let mut model = ModelSent::default();
     let mut description = description;
@@ -507,7 +507,10 @@ pub fn record(path: &Path, options: &RecordOptions) -> anyhow::Result<BTreeMap<S
         if let Some(m) = robot.latest_mux().context("reading the mux decision")? {
             mux = Some(m);
         }
-        if let Some(s) = crate::bridge::latest_safety(&robot, &mut safety_subscription)? {
+        if let Some(s) = robot
+            .latest_safety()
+            .context("reading the safety monitor")?
+        {
             safety = Some(s);
         }
         if let Some(d) = robot

@@ -367,6 +367,33 @@ impl Default for SpeedRule {
     }
 }
 
+/// `[rules.limit]`: safely limited speed — the measured |linear speed| above the mux's standing
+/// speed limit (`MuxStatus::speed_limit_mps`, set by any client, raised only by the operator) +
+/// `margin_mps`, for longer than `trigger_ms` (the time the robot may take to brake down to a
+/// newly lowered limit).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LimitRule {
+    pub enabled: bool,
+    pub action: Action,
+    /// How far past the limit a measured speed may go, m/s (measurement noise, overshoot).
+    pub margin_mps: f64,
+    pub trigger_ms: u64,
+    pub release_ms: u64,
+}
+
+impl Default for LimitRule {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            action: Action::Stop,
+            margin_mps: 0.1,
+            trigger_ms: 1000,
+            release_ms: 500,
+        }
+    }
+}
+
 /// `[rules.operator]`: SIGUSR1 to the monitor latches the e-stop (`kill -USR1 <pid>`; the
 /// operator's other e-stop, `chassis control estop`, engages the lock in the service directly).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -397,6 +424,7 @@ pub struct RulesConfig {
     pub direction: DirectionRule,
     pub following: FollowingRule,
     pub plausibility: PlausibilityThresholds,
+    pub limit: LimitRule,
 }
 
 /// The file as written.
@@ -493,6 +521,13 @@ pub struct Speed {
     pub release_margin_mps: f64,
 }
 
+/// The validated safely-limited-speed rule.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Limit {
+    pub timing: Timing,
+    pub margin_mps: f64,
+}
+
 /// The slow envelope, m/s and rad/s.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SlowSpeeds {
@@ -518,6 +553,7 @@ pub struct Config {
     pub speed: Option<Speed>,
     pub operator: bool,
     pub plausibility: Plausibility,
+    pub limit: Option<Limit>,
     /// The file it was read from (`None`: the defaults).
     pub file: Option<ConfigFile>,
     raw: RawConfig,
@@ -752,6 +788,14 @@ impl RawConfig {
             release_margin_mps: sp.release_margin_mps,
         });
 
+        let li = &r.limit;
+        check_timing("rules.limit", li.trigger_ms, li.release_ms)?;
+        check_non_negative("rules.limit", &[("margin_mps", li.margin_mps)])?;
+        let limit = li.enabled.then(|| Limit {
+            timing: Timing::new(li.action, li.trigger_ms, li.release_ms),
+            margin_mps: li.margin_mps,
+        });
+
         Ok(Config {
             publish_period_ns: ms_to_ns(m.publish_period_ms),
             evaluate_period_ns: ms_to_ns(m.evaluate_period_ms),
@@ -772,6 +816,7 @@ impl RawConfig {
                 &r.following,
                 &r.plausibility,
             )?,
+            limit,
             file: None,
             raw: self,
         })

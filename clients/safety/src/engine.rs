@@ -211,6 +211,8 @@ enum Cause {
         reverse: bool,
     },
     Operator,
+    /// Over the mux's speed limit.
+    Limit,
     /// A plausibility rule's finding (following: with its [`Unfollowed`] cause).
     Plausibility(Finding, u8),
 }
@@ -293,6 +295,8 @@ pub struct Engine {
     warned_no_accel: bool,
     /// The [`Unfollowed`] cause the following rule last found.
     unfollowed: u8,
+    /// The mux's standing speed limit, m/s (`None`: none, or no mux status yet).
+    speed_limit: Option<f64>,
 }
 
 const RANGE_RULES: [u8; 2] = [SafetyRule::ULTRASONIC, SafetyRule::IR];
@@ -320,6 +324,7 @@ impl Engine {
             verdict: Verdict::default(),
             warned_no_accel: false,
             unfollowed: Unfollowed::NONE,
+            speed_limit: None,
         }
     }
 
@@ -377,6 +382,7 @@ impl Engine {
             SafetyRule::RUNAWAY => c.plausibility.runaway,
             SafetyRule::DIRECTION => c.plausibility.direction,
             SafetyRule::FOLLOWING => c.plausibility.following,
+            SafetyRule::LIMIT => c.limit.as_ref().map(|r| r.timing),
             _ => None,
         }
     }
@@ -401,6 +407,9 @@ impl Engine {
             self.state_arrival_ns = now_ns;
         }
         let lock = self.observe_lock(mux, &mut notices);
+        self.speed_limit = mux
+            .and_then(MuxStatus::speed_limit)
+            .map(|(mps, _)| f64::from(mps));
         self.observe_battery_basis(state, &mut notices, &mut infos);
         self.verdict = self.watch.judge(now_ns, state, &self.config.plausibility);
         let p = &self.config.plausibility;
@@ -855,6 +864,23 @@ impl Engine {
                     },
                 }
             }
+            SafetyRule::LIMIT => {
+                let (Some(l), Some(limit), true) =
+                    (&c.limit, self.speed_limit, state.is_valid(Group::Motion))
+                else {
+                    return Measure::clear();
+                };
+                let value = f64::from(state.motion.linear_mps).abs();
+                let threshold = limit + l.margin_mps;
+                // A speed that is not a number counts as too fast.
+                Measure {
+                    target: u8::from(value.is_nan() || value > threshold),
+                    value,
+                    threshold,
+                    stop_edge: f64::NAN,
+                    cause: Cause::Limit,
+                }
+            }
             SafetyRule::RUNAWAY | SafetyRule::DIRECTION | SafetyRule::FOLLOWING => {
                 let v = self.verdict;
                 let found = match rule {
@@ -1015,6 +1041,14 @@ fn describe(rule: u8, from: u8, to: u8, m: &Measure, threshold: f64) -> String {
         ),
         (Cause::Speed { .. }, false) => format!(
             "{name}: {:.2} m/s < {:.2} m/s, released",
+            m.value, threshold
+        ),
+        (Cause::Limit, true) => format!(
+            "{name}: {:.2} m/s > the speed limit + margin, {:.2} m/s",
+            m.value, threshold
+        ),
+        (Cause::Limit, false) => format!(
+            "{name}: {:.2} m/s ≤ {:.2} m/s, released",
             m.value, threshold
         ),
         (Cause::Plausibility(f, _), _) if rule == SafetyRule::RUNAWAY => format!(

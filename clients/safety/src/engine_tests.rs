@@ -1139,3 +1139,77 @@ fn disabled_plausibility_rules_do_not_judge() {
     rig.drive(0.5, -1.0);
     assert_eq!(rig.run(3000).command, Command::Heartbeat);
 }
+
+impl Rig {
+    /// The mux caps every source to `mps` (a planner's limit).
+    fn speed_limit(&mut self, mps: f32) {
+        let m = self.mux.as_mut().unwrap();
+        m.seq += 1;
+        m.speed_limit_mps = mps;
+        m.speed_limit_holder = 2;
+    }
+}
+
+#[test]
+fn over_the_speed_limit_beyond_the_margin_for_longer_than_the_bound_stops() {
+    let mut rig = Rig::new(RobotKind::Xbot);
+    rig.state.motion.linear_mps = 1.0;
+    assert_eq!(rig.run(2000).command, Command::Heartbeat, "no limit set");
+    // 0.5 m/s + the 0.1 m/s margin.
+    rig.speed_limit(0.5);
+    rig.state.motion.linear_mps = -0.59;
+    assert_eq!(
+        rig.run(3000).command,
+        Command::Heartbeat,
+        "inside the margin"
+    );
+    rig.state.motion.linear_mps = -0.7;
+    assert_eq!(
+        rig.run(980).command,
+        Command::Heartbeat,
+        "the robot has 1000 ms to brake down to a lowered limit"
+    );
+    let d = rig.run(40);
+    assert_eq!(d.command, Command::Stop);
+    assert_eq!(
+        texts(&d),
+        ["limit: 0.70 m/s > the speed limit + margin, 0.60 m/s"]
+    );
+    let status = rig.status(&d);
+    assert_eq!(status.why(), "STOP by limit");
+    assert!(status.is_active(SafetyRule::LIMIT));
+    rig.state.motion.linear_mps = 0.4;
+    let d = rig.run(520);
+    assert_eq!(d.command, Command::Heartbeat);
+    assert_eq!(texts(&d), ["limit: 0.40 m/s ≤ 0.60 m/s, released"]);
+}
+
+#[test]
+fn the_speed_limit_rule_takes_its_margin_and_bound_from_the_file_and_can_be_disabled() {
+    let mut rig = Rig::with_config(
+        RobotKind::Titan,
+        "[rules.limit]\nmargin_mps = 0.0\ntrigger_ms = 200\n",
+    );
+    rig.speed_limit(0.3);
+    rig.state.motion.linear_mps = 0.35;
+    assert_eq!(rig.run(180).command, Command::Heartbeat);
+    assert_eq!(rig.run(40).command, Command::Stop);
+    // The operator raises the limit: the robot is inside it again.
+    rig.speed_limit(1.0);
+    assert_eq!(rig.run(520).command, Command::Heartbeat);
+
+    let mut rig = Rig::with_config(RobotKind::Titan, "[rules.limit]\nenabled = false\n");
+    rig.speed_limit(0.3);
+    rig.state.motion.linear_mps = 1.0;
+    assert_eq!(rig.run(3000).command, Command::Heartbeat);
+    assert_eq!(
+        rig.engine.enabled_rules() & SafetyRule::bit(SafetyRule::LIMIT),
+        0
+    );
+    assert!(
+        RawConfig::parse("[rules.limit]\nmargin_mps = -0.1\n")
+            .unwrap()
+            .validate()
+            .is_err()
+    );
+}
