@@ -935,7 +935,9 @@ impl StateStream {
     }
 }
 
-static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// Set by SIGINT or SIGTERM (through [`install_signal_handlers`]) or by [`request_termination`].
+static STOP: std::sync::LazyLock<std::sync::Arc<std::sync::atomic::AtomicBool>> =
+    std::sync::LazyLock::new(std::sync::Arc::default);
 
 /// The request that makes a simulated chassis send `frames_per_s` extra feedback frames a
 /// second on top of its own ([`SimKind::FLOOD`]; 0 stops): a loaded bus for benchmarks and
@@ -951,17 +953,27 @@ pub fn flood_request(frames_per_s: f64) -> SimRequest {
 
 /// Installs handlers for SIGINT and SIGTERM (idempotent); [`termination_requested`] then tells
 /// when one arrived. Call it once at start.
+///
+/// Each sets a flag of its own. iceoryx2's signal handler keeps only the last signal of any
+/// kind, and systemd follows its SIGTERM with a SIGCONT: read from there, the SIGTERM of
+/// `systemctl stop` was lost and the program ran on until systemd killed it. iceoryx2's handler
+/// is installed first, so that it cannot replace these later; they hand every signal on to it.
 pub fn install_signal_handlers() {
-    let _ = termination_requested();
+    static INSTALLED: std::sync::Once = std::sync::Once::new();
+    INSTALLED.call_once(|| {
+        let _ = iceoryx2_bb_posix::signal::SignalHandler::last_signal();
+        for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            if let Err(e) = signal_hook::flag::register(signal, std::sync::Arc::clone(&STOP)) {
+                tracing::error!("installing the handler of signal {signal}: {e}");
+            }
+        }
+    });
 }
 
 /// True once SIGINT or SIGTERM arrived (and from then on).
 pub fn termination_requested() -> bool {
-    use std::sync::atomic::Ordering;
-    if iceoryx2_bb_posix::signal::SignalHandler::termination_requested() {
-        STOP.store(true, Ordering::Relaxed);
-    }
-    STOP.load(Ordering::Relaxed)
+    install_signal_handlers();
+    STOP.load(std::sync::atomic::Ordering::Relaxed)
 }
 
 /// Connects to the robot `name` once chassisd serves it — its state and its mux decision (the

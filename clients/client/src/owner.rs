@@ -26,8 +26,7 @@ pub(crate) fn other_users_chassisd(robot: &str) -> Option<String> {
             let status = std::fs::read_to_string(entry.path().join("status")).ok()?;
             effective_uid(&status).filter(|&uid| uid != me)
         })?;
-    let passwd = std::fs::read_to_string("/etc/passwd").unwrap_or_default();
-    Some(user_name(&passwd, uid).map_or_else(|| format!("uid {uid}"), str::to_string))
+    Some(chassis_ipc::user_name(uid))
 }
 
 /// A command line (NUL-separated, as /proc/PID/cmdline) of chassisd serving `robot`.
@@ -54,14 +53,6 @@ fn effective_uid(status: &str) -> Option<u32> {
         .and_then(|uid| uid.parse().ok())
 }
 
-/// The name of `uid` in the text of /etc/passwd.
-fn user_name(passwd: &str, uid: u32) -> Option<&str> {
-    passwd.lines().find_map(|line| {
-        let fields: Vec<&str> = line.split(':').collect();
-        (fields.len() > 2 && fields[2].parse() == Ok(uid)).then_some(fields[0])
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -79,13 +70,9 @@ mod tests {
     }
 
     #[test]
-    fn the_user_is_the_effective_one_named_by_passwd() {
+    fn the_user_is_the_effective_one() {
         let status = "Name:\tchassisd\nUid:\t0\t998\t998\t998\nGid:\t0\t998\t998\t998\n";
         assert_eq!(effective_uid(status), Some(998));
         assert_eq!(effective_uid("Name:\tx\n"), None);
-        let passwd =
-            "root:x:0:0:root:/root:/bin/bash\nchassis:x:998:998::/nonexistent:/usr/sbin/nologin\n";
-        assert_eq!(user_name(passwd, 998), Some("chassis"));
-        assert_eq!(user_name(passwd, 1000), None);
     }
 }

@@ -19,6 +19,13 @@ pub enum IpcError {
     /// The iceoryx2 node could not be created.
     #[error("creating the iceoryx2 node: {0}")]
     Node(Cause),
+    /// iceoryx2's folder belongs to another user (whose program ran first).
+    #[error(
+        "{folder} belongs to user {owner}, whose program made it first: iceoryx2 keeps every \
+         other user out of it. Stop that user's programs and remove it (rm -rf /tmp/iceoryx2 \
+         /dev/shm/iox2_*), or run every program of the robot as {owner}"
+    )]
+    ForeignFolder { folder: String, owner: String },
     /// Opening a service nobody has created (its owner is not running).
     #[error("no service {service}")]
     NotFound { service: String },

@@ -36,7 +36,7 @@ mod ports;
 mod trace;
 
 pub use error::IpcError;
-pub use files::{ipc_files, remove_ipc_files};
+pub use files::{foreign_folder, ipc_files, remove_ipc_files, user_name};
 pub use limits::{
     CMD, CONTROL, DESCRIPTION, EventLimits, FRAMES, FRAMES_BUFFER, MAX_CLIENTS, MAX_FRAME_READERS,
     MAX_NODES, MAX_READERS, MUX, PUBLICATION, PubSub, PubSubLimits, RequestResponse,

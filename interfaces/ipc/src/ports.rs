@@ -39,7 +39,13 @@ pub fn node(
     }
     builder
         .create::<ipc::Service>()
-        .map_err(|e| IpcError::Node(Box::new(e)))
+        .map_err(|e| match crate::foreign_folder() {
+            Some((folder, owner)) => IpcError::ForeignFolder {
+                folder: folder.display().to_string(),
+                owner,
+            },
+            None => IpcError::Node(Box::new(e)),
+        })
 }
 
 /// A listener of the event service `events` (called `name` in errors).
