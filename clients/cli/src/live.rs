@@ -5,11 +5,11 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use chassis_client::{
-    BusFrame, ChassisState, ClampFlags, ControlKind, ControlMode, ControlRequest, ControlStatus,
-    ControllerState, FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus, MuxStatus,
-    Robot, RobotDescription, SimKind, SimRequest, SimTruthPage, SourceFlags, Ticker, ValidRequest,
-    VelocityRequest, WireProtocol, ZeroReason, install_signal_handlers, now_ns,
-    termination_requested,
+    BusFrame, ChassisState, ClampFlags, ClientError, ControlKind, ControlMode, ControlRequest,
+    ControlStatus, ControllerState, FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus,
+    MuxStatus, Robot, RobotDescription, SimKind, SimRequest, SimTruthPage, Source, SourceFlags,
+    Ticker, ValidRequest, VelocityRequest, WireProtocol, ZeroReason, install_signal_handlers,
+    now_ns, termination_requested,
 };
 use chassis_protocols::command_to_request;
 use chassis_protocols::frame_json::driver_status_names;
@@ -380,19 +380,36 @@ pub fn publish(args: &PubArgs) -> anyhow::Result<()> {
     } else {
         args.velocity.request()
     })?;
-    let mut robot = Robot::connect(&args.name)?;
-    let mut source = robot.source(&args.source)?;
+    let connect =
+        || -> Result<Source, ClientError> { Robot::connect(&args.name)?.source(&args.source) };
+    // The first connection must work; after it, a chassisd that goes away (restarted by
+    // systemd, say) is waited for, and the stream goes on once it is back. It is the same
+    // process reconnecting, so it sends no zero of its own: the robot moves again only once this
+    // stream asks for a zero (docs/ARCHITECTURE.md, "Motion starts only from a zero").
+    let mut source = Some(connect()?);
     let start = now_ns();
     let end = (args.duration > 0.0).then(|| start + (args.duration * 1e9) as u64);
     let mut ticker = Ticker::new(Duration::from_secs_f64(1.0 / args.rate));
     let mut sent = 0u64;
     while !termination_requested() && end.is_none_or(|e| now_ns() < e) {
-        source.send(request)?;
-        sent += 1;
+        if source.is_none() {
+            source = connect().ok();
+        }
+        if let Some(s) = &mut source {
+            match s.send(request) {
+                Ok(()) => sent += 1,
+                Err(e) => {
+                    eprintln!("chassisd for {} went away ({e}): waiting for it", args.name);
+                    source = None;
+                }
+            }
+        }
         ticker.wait();
     }
-    if !args.heartbeat {
-        source.stop()?;
+    if let Some(s) = &mut source
+        && !args.heartbeat
+    {
+        s.stop()?;
     }
     eprintln!(
         "sent {sent} requests as {} over {:.1} s{}",
