@@ -100,7 +100,7 @@ pub struct TypeLayout {
     /// The Rust name (`ChassisState`): how fields and services refer to it.
     #[serde(skip)]
     pub name: &'static str,
-    /// The iceoryx2 type name, with its layout version (`chassis::ChassisState.v3`).
+    /// The iceoryx2 type name, with its layout version (`chassis::ChassisState.v4`).
     pub type_name: &'static str,
     pub size: usize,
     pub align: usize,

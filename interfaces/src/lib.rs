@@ -4,7 +4,7 @@
 //! `#[repr(C)]`, holds no pointer and no heap memory, uses fixed-width integers and floats only
 //! (enumerations are a `u8` plus named constants), and names its unit in every field name
 //! (`linear_mps`, `steer_rad`, `voltage_v`, `stamp_ns`). The iceoryx2 type name carries a layout
-//! version (`"chassis::ChassisState.v3"`): iceoryx2 itself compares only name, size and alignment,
+//! version (`"chassis::ChassisState.v4"`): iceoryx2 itself compares only name, size and alignment,
 //! so any layout change must bump the version. The committed contract (`interfaces/contract.json`)
 //! pins every type's size, alignment and field offsets, and a test compares the code with it, so
 //! such a change is always deliberate.

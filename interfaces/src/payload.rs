@@ -4,7 +4,7 @@
 //! A payload carries one or several values of one type back to back, each exactly as it lies in
 //! shared memory (native byte order, the layout `interfaces/contract.json` describes), under the
 //! media type `application/octet-stream;<type name>`, e.g.
-//! `application/octet-stream;chassis::ChassisState.v3`: a reader checks the type name (and so the
+//! `application/octet-stream;chassis::ChassisState.v4`: a reader checks the type name (and so the
 //! layout version) before it reads a byte, then the length, then every value.
 //!
 //! Every bit pattern is a value of these types, but not every value may cross: a

@@ -594,7 +594,7 @@ ipc_type! {
 ipc_type! {
     /// Counters of the bus link.
     #[derive(Default, Serialize)]
-    #[type_name("chassis::LinkStats.v3")]
+    #[type_name("chassis::LinkStats.v4")]
     pub struct LinkStats {
         /// Frames received and decoded.
         pub rx_frames: u64,
@@ -629,6 +629,9 @@ ipc_type! {
         /// Reports of a frame sent that no other node acknowledged: the controller is alone on the
         /// bus, or hears it at another bit rate.
         pub can_no_ack: u64,
+        /// Passes whose inputs the black box did not record: its writer fell behind (a slow or
+        /// full disk). The passes themselves ran.
+        pub recorder_dropped: u64,
         /// [`ControllerState`] of the CAN controller now.
         pub can_state: u8,
         /// The controller's transmit and receive error counters, as its last report carrying them.
@@ -642,7 +645,7 @@ ipc_type! {
 ipc_type! {
     /// One snapshot of everything the chassis reports.
     #[derive(Default, Serialize)]
-    #[type_name("chassis::ChassisState.v3")]
+    #[type_name("chassis::ChassisState.v4")]
     pub struct ChassisState {
         /// Incremented for every published sample.
         pub seq: u64,

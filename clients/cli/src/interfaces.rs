@@ -82,8 +82,8 @@ mod tests {
     fn the_json_describes_chassis_state_byte_for_byte() {
         let v: serde_json::Value = serde_json::from_str(&render(true).unwrap()).unwrap();
         let state = &v["types"]["ChassisState"];
-        assert_eq!(state["type_name"], "chassis::ChassisState.v3");
-        assert_eq!(state["size"], 896);
+        assert_eq!(state["type_name"], "chassis::ChassisState.v4");
+        assert_eq!(state["size"], 904);
         let field = |name: &str| {
             state["fields"]
                 .as_array()
@@ -117,7 +117,7 @@ mod tests {
     fn the_table_names_every_service_and_type() {
         let table = render(false).unwrap();
         assert!(table.contains("chassis/{robot}/cmd/{source}"));
-        assert!(table.contains("chassis::ChassisState.v3"));
+        assert!(table.contains("chassis::ChassisState.v4"));
         assert!(table.contains("CHASSIS_IPC_PREFIX"));
     }
 }

@@ -540,6 +540,12 @@ fn state_report(
             link.can_no_ack,
         ));
     }
+    if link.recorder_dropped > 0 {
+        lines.push(format!(
+            "black box  {} passes unrecorded: the recorder fell behind (a slow or full disk)",
+            link.recorder_dropped
+        ));
+    }
     lines.push(format!(
         "mode       {}   protocol {}   flags {}",
         ControlMode::name(s.system.control_mode),
@@ -938,6 +944,19 @@ mod tests {
             line(&report, "can"),
             "can        bus-off   error counters tx 255 rx 3   error frames 4, error-passive 0, \
              bus-off 2, restarts 1, bus errors 0, unacknowledged 0"
+        );
+    }
+
+    #[test]
+    fn status_counts_the_passes_the_black_box_dropped() {
+        let mut s = state_of(RobotKind::Titan, &[]);
+        let report = state_report("titan", &s, None, "5 ms");
+        assert!(!report.contains("\nblack box "), "{report}");
+        s.link.recorder_dropped = 7;
+        let report = state_report("titan", &s, None, "5 ms");
+        assert_eq!(
+            line(&report, "black box"),
+            "black box  7 passes unrecorded: the recorder fell behind (a slow or full disk)"
         );
     }
 

@@ -407,9 +407,9 @@ class CommandEcho(Struct):
 
 
 class LinkStats(Struct):
-    """``chassis::LinkStats.v3``: 128 bytes, aligned to 8."""
+    """``chassis::LinkStats.v4``: 136 bytes, aligned to 8."""
 
-    _type_name = 'chassis::LinkStats.v3'
+    _type_name = 'chassis::LinkStats.v4'
     _fields_ = [
         ('rx_frames', ctypes.c_uint64),
         ('tx_frames', ctypes.c_uint64),
@@ -426,6 +426,7 @@ class LinkStats(Struct):
         ('can_restarts', ctypes.c_uint64),
         ('can_bus_errors', ctypes.c_uint64),
         ('can_no_ack', ctypes.c_uint64),
+        ('recorder_dropped', ctypes.c_uint64),
         ('can_state', ctypes.c_uint8),
         ('can_tx_error_count', ctypes.c_uint8),
         ('can_rx_error_count', ctypes.c_uint8),
@@ -434,9 +435,9 @@ class LinkStats(Struct):
 
 
 class ChassisState(Struct):
-    """``chassis::ChassisState.v3``: 896 bytes, aligned to 8."""
+    """``chassis::ChassisState.v4``: 904 bytes, aligned to 8."""
 
-    _type_name = 'chassis::ChassisState.v3'
+    _type_name = 'chassis::ChassisState.v4'
     _fields_ = [
         ('seq', ctypes.c_uint64),
         ('stamp_ns', ctypes.c_uint64),

@@ -2,7 +2,7 @@
 //!
 //! Every binary payload is the IPC type's bytes exactly as they lie in shared memory, with the
 //! encoding `application/octet-stream;<type name>`, e.g.
-//! `application/octet-stream;chassis::ChassisState.v3`. The bytes and the check of what arrives
+//! `application/octet-stream;chassis::ChassisState.v4`. The bytes and the check of what arrives
 //! from another computer are [`chassis_client::payload`]'s (sans-IO, fuzzed); [`Wire`] only
 //! carries them in Zenoh's [`Encoding`]. A velocity request from another computer is parsed
 //! into a [`ValidRequest`] where it arrives ([`Wire::decode_request`]).

@@ -251,8 +251,8 @@ mod tests {
     fn types_and_constants_are_listed_with_their_layouts() {
         let v = value();
         let state = &v["types"]["ChassisState"];
-        assert_eq!(state["type_name"], "chassis::ChassisState.v3");
-        assert_eq!(state["size"], 896);
+        assert_eq!(state["type_name"], "chassis::ChassisState.v4");
+        assert_eq!(state["size"], 904);
         assert_eq!(state["align"], 8);
         let motion = &state["fields"][7];
         assert_eq!(motion["name"], "motion");

@@ -139,7 +139,7 @@ impl<Req> RequestResponse<Req> {
 ///
 /// The publisher's data segment holds a sample for every buffer slot of every possible reader:
 /// `MAX_READERS` × (`STATE_BUFFER` + 2 borrowed) + 1 history + 2 loaned = 10323 samples of
-/// 948 bytes (896 + iceoryx2's header): 9.3 MiB of shared memory. Freed samples are reused first,
+/// 956 bytes (904 + iceoryx2's header): 9.4 MiB of shared memory. Freed samples are reused first,
 /// so only the pages of the samples in flight become resident: those the readers' queues hold.
 pub const STATE: PubSub<ChassisState> =
     PubSub::new(PubSubLimits::broadcast(1, STATE_BUFFER, MAX_READERS));

@@ -254,13 +254,21 @@ pub fn parse(text: &str) -> Result<Vec<Event>, ReadError> {
         .collect()
 }
 
+/// The longest record a kept window is read with: [`write_mcap`]'s records are one event's line
+/// each (or a chunk of about 1 MiB, mcap's default), far shorter than that.
+const RECORD_CEILING: usize = 64 << 20;
+
 /// The events of a kept window (MCAP), or of the ring's text (one JSON event a line).
 pub fn read(bytes: &[u8]) -> Result<Vec<Event>, ReadError> {
     if !bytes.starts_with(mcap::MAGIC) {
         return parse(std::str::from_utf8(bytes).map_err(|_| ReadError::Utf8)?);
     }
+    // A record's length, in a chunk too, is the file's word: mcap reserves that much before
+    // reading the record, so a corrupt one is refused past the ceiling rather than aborting.
+    let options =
+        mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(RECORD_CEILING);
     let mut text = String::new();
-    for message in mcap::MessageStream::new(bytes)? {
+    for message in mcap::io::MessageReader::new_with_options(bytes, options) {
         let message = message?;
         if message.channel.topic != TOPIC {
             continue;
@@ -309,4 +317,26 @@ pub fn write_mcap<W: Write + std::io::Seek>(
     }
     writer.finish()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A zstd chunk whose one record says it is ~3.7e18 bytes long (what the fuzzer found):
+    /// mcap 0.26's `MessageStream` reserved that much and aborted; the reader refuses it.
+    #[test]
+    fn a_record_longer_than_the_ceiling_is_an_error() {
+        let window = include_bytes!("../../../fuzz/seeds/blackbox_reader/window.mcap");
+        assert!(!read(window).expect("a kept window reads").is_empty());
+        let corrupt = include_bytes!("../testdata/record-of-3.7e18-bytes.mcap");
+        let error = read(corrupt).expect_err("a record beyond the ceiling");
+        assert!(
+            matches!(
+                error,
+                ReadError::Mcap(mcap::McapError::RecordTooLarge { .. })
+            ),
+            "{error}"
+        );
+    }
 }

@@ -133,6 +133,8 @@ struct Shell<D> {
     trace: Option<trace::PassTrace>,
     /// The black box, when it records.
     tape: Option<Tape>,
+    /// Passes the black box dropped, as of the pass under way (published in the state).
+    recorder_dropped: u64,
 }
 
 /// A call of the shell that runs on its ports and devices.
@@ -331,6 +333,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
         loop_stall: LoopStall::from_env(),
         trace: trace::PassTrace::from_env(),
         tape,
+        recorder_dropped: 0,
     };
     shell.step(&ports, &mut engine, Step::Start(now));
     if let Some(notifier) = &mut shell.notifier {
@@ -487,6 +490,9 @@ impl<D: Devices> Shell<D> {
     /// Runs `step` on the shell's ports and devices, noted by the black box when it records.
     fn step(&mut self, ports: &Ports, engine: &mut Engine, step: Step) {
         let mut tape = self.tape.take();
+        if let Some(tape) = &tape {
+            self.recorder_dropped = tape.dropped_total;
+        }
         let mut io = self.io(ports);
         match &mut tape {
             Some(tape) => {

@@ -300,6 +300,7 @@ impl<D: Devices> PassIo for ShellIo<'_, D> {
             ToPublish::State(mut sample) => {
                 let slot = ports.state.publisher.loan_uninit()?;
                 sample.published_ns = clock::now().as_nanos();
+                sample.link.recorder_dropped = self.shell.recorder_dropped;
                 slot.write_payload(*sample).send()?;
                 if let Some(trace) = &mut self.shell.trace {
                     PassStamps::first(&mut trace.current.state_handed, sample.published_ns);
