@@ -94,7 +94,11 @@ fn recorded_events(ring: &Path, holding: &str) -> Vec<usize> {
 fn a_recorded_incident_replays_identically_and_a_changed_priority_diverges_at_once() {
     let mut env = Env::new("blackbox");
     let n = name("bbx");
-    let chassisd = env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    let config = env.write("blackbox.toml", "[service]\nblackbox_mib = 64\n");
+    let chassisd = env.chassisd(
+        "chassisd",
+        &["--robot", "titan", "--name", &n, "--config", &config],
+    );
     let mut robot = env.robot(&n, UP);
     let monitor = env.spawn("safety", "chassis-safety", &["--name", &n]);
     monitor_fresh(&env, &mut robot);
