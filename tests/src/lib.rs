@@ -1075,6 +1075,7 @@ pub const OWN_BINARIES: &[&str] = &[
     "faults_bus",
     "faults_clients",
     "faults_processes",
+    "faults_chassis",
     "soak",
     "vcan",
     "sja1000",
