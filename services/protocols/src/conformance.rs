@@ -1386,6 +1386,7 @@ proptest! {
         let mut firmware = seeds.profile.firmware(START);
         let mut now = START;
         let mut ran_away = false;
+        let mut largest_gain: f64 = 1.0;
         for input in &inputs {
             let arrival = now + ms(input.5);
             while let Some(t) = firmware.poll_timeout().filter(|t| *t <= arrival) {
@@ -1401,7 +1402,15 @@ proptest! {
                 None => {
                     let injection = injection(input);
                     let runaway = matches!(injection, Injection::Runaway(Some(_)));
-                    ran_away |= firmware.inject(now, injection) && runaway;
+                    // A gain above 1 drives past the limit as far as it multiplies the command.
+                    let gain = match injection {
+                        Injection::Gain(Some(g)) => g.abs(),
+                        _ => 1.0,
+                    };
+                    if firmware.inject(now, injection) {
+                        ran_away |= runaway;
+                        largest_gain = largest_gain.max(gain);
+                    }
                 }
             }
             if firmware.poll_timeout().is_some_and(|t| t <= now) {
@@ -1413,7 +1422,7 @@ proptest! {
             let values = [truth.linear_mps, truth.lateral_mps, truth.angular_radps, truth.x_m, truth.y_m, truth.yaw_rad];
             prop_assert!(values.iter().all(|v| v.is_finite()), "{truth:?}");
             prop_assert!((0.0..=100.0).contains(&truth.soc_pct), "{truth:?}");
-            let bound = if ran_away { MAX_RUNAWAY_MPS } else { limit };
+            let bound = if ran_away { MAX_RUNAWAY_MPS } else { limit * largest_gain };
             prop_assert!(truth.linear_mps.abs() <= bound + 1e-9, "{} m/s, limit {bound}", truth.linear_mps);
             prop_assert!(truth.steer_rad.abs() <= steer_limit + 1e-9, "{} rad, limit {steer_limit}", truth.steer_rad);
         }

@@ -487,6 +487,8 @@ fn a_driving_titan_recorded_to_mcap_and_candump_replays_to_the_recorded_odometry
 
 #[test]
 fn a_fully_loaded_bus_is_recorded_without_a_gap_and_replays_at_full_speed() {
+    // Never beside the bench's busy loops (bench.rs), which would starve the flood.
+    let _machine = chassis_tests::faults::shared();
     let (mut env, n, _robot) = Env::serving(
         "record-flood",
         ("fld", "titan"),

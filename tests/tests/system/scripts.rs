@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// The targets `scripts/fuzz` runs when it is given none: every target of `fuzz/Cargo.toml`.
-const TARGETS: [&str; 9] = [
+const TARGETS: [&str; 10] = [
     "titan_decode",
     "agilex_v1_decode",
     "agilex_v2_decode",
@@ -27,6 +27,7 @@ const TARGETS: [&str; 9] = [
     "slcan_stream",
     "zenoh_payload",
     "foxglove_client",
+    "blackbox_reader",
 ];
 
 /// Runs a program the test has just written. A child another test forks while the file is
@@ -268,8 +269,9 @@ fn fuzzing_passes_when_every_target_runs_without_a_crash() {
     let (stdout, stderr) = text(&output);
     assert_eq!(output.status.code(), Some(0), "{stdout}\n{stderr}");
     assert!(
-        stdout
-            .contains("no crash in 9 targets, each executed inputs and reached its coverage floor"),
+        stdout.contains(
+            "no crash in 10 targets, each executed inputs and reached its coverage floor"
+        ),
         "{stdout}\n{stderr}"
     );
     // Each target's executed count is shown, and its final coverage beside its floor.
@@ -301,7 +303,7 @@ fn a_crashing_fuzz_target_fails_the_run_and_is_named() {
         "{stderr}"
     );
     assert!(
-        stderr.contains("FAILED: 1 of 9 targets: agilex_v1_decode"),
+        stderr.contains("FAILED: 1 of 10 targets: agilex_v1_decode"),
         "{stderr}"
     );
     assert!(!stdout.contains("fuzzing done"), "{stdout}");
@@ -334,7 +336,7 @@ fn cargo_fuzz_failing_without_a_crash_fails_the_run_with_its_error() {
     );
     assert!(stderr.contains("could not compile"), "{stderr}");
     assert!(
-        stderr.contains("FAILED: 1 of 9 targets: xbot_stream"),
+        stderr.contains("FAILED: 1 of 10 targets: xbot_stream"),
         "{stderr}"
     );
 }
@@ -350,7 +352,7 @@ fn a_target_that_executes_no_input_fails_the_run_and_is_named() {
         "{stderr}"
     );
     assert!(
-        stderr.contains("FAILED: 1 of 9 targets: slcan_stream"),
+        stderr.contains("FAILED: 1 of 10 targets: slcan_stream"),
         "{stderr}"
     );
     assert!(!stdout.contains("fuzzing done"), "{stdout}");
@@ -419,7 +421,7 @@ fn a_target_below_its_coverage_floor_fails_the_run_and_is_named() {
         "{stdout}"
     );
     assert!(
-        stderr.contains("FAILED: 1 of 9 targets: agilex_v2_decode"),
+        stderr.contains("FAILED: 1 of 10 targets: agilex_v2_decode"),
         "{stderr}"
     );
     assert!(!stdout.contains("fuzzing done"), "{stdout}");
@@ -470,7 +472,7 @@ fn a_target_without_a_coverage_floor_fails_the_run_and_is_named() {
         "{stderr}"
     );
     assert!(
-        stderr.contains("FAILED: 1 of 9 targets: candump_text"),
+        stderr.contains("FAILED: 1 of 10 targets: candump_text"),
         "{stderr}"
     );
     assert!(
@@ -525,7 +527,7 @@ fn a_run_that_reports_no_coverage_fails_the_run_and_is_named() {
     );
     assert!(stdout.contains("coverage: missing"), "{stdout}");
     assert!(
-        stderr.contains("FAILED: 1 of 9 targets: foxglove_client"),
+        stderr.contains("FAILED: 1 of 10 targets: foxglove_client"),
         "{stderr}"
     );
 }

@@ -485,6 +485,8 @@ fn a_simulated_chassis_stopped_and_continued_goes_on_and_sigterm_ends_it_with_ze
 
 #[test]
 fn a_state_stream_sees_every_sample_of_a_flooded_bus_that_a_latest_value_reader_loses() {
+    // Never beside the bench's busy loops (bench.rs), which would starve the flood.
+    let _machine = chassis_tests::faults::shared();
     let (env, n, mut robot) =
         Env::serving("stream", ("strm", "titan"), &["--no-safety-monitor"], UP);
     // The buffer asked for is clamped to 1..=the service's maximum.
