@@ -73,7 +73,9 @@ fn must_refuse_velocity(chunk: &[u8]) -> bool {
         ]
         .iter()
         .any(|name| f32_at(name) < 0.0);
-    non_finite || negative_limit
+    // A standing speed limit is more than 0 m/s.
+    let no_speed_limit = flags & RequestFlags::SPEED_LIMIT != 0 && f32_at("speed_limit_mps") <= 0.0;
+    non_finite || negative_limit || no_speed_limit
 }
 
 /// Decodes `bytes` as `T` and checks the outcome against a model of the rules; `read` reads
