@@ -70,8 +70,7 @@ pub struct ServiceConfig {
     /// `~/.local/state/chassisd/<name>`).
     pub state_dir: Option<PathBuf>,
     /// The black box: the engine's inputs kept in a ring of this many MiB in the state
-    /// directory (`blackbox/`); 0, the default, records nothing: recording every frame read
-    /// doubles the service's CPU at a full bus (docs/PERFORMANCE.md's cost targets).
+    /// directory (`blackbox/`); 0 records nothing.
     pub blackbox_mib: u64,
     /// The black box: how many kept windows (`blackbox/kept/*.mcap`) stay; the oldest go.
     pub blackbox_kept: usize,
@@ -92,7 +91,7 @@ impl Default for ServiceConfig {
             cpu: None,
             realtime: None,
             state_dir: None,
-            blackbox_mib: 0,
+            blackbox_mib: 64,
             blackbox_kept: 16,
         }
     }
