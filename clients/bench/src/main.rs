@@ -1227,7 +1227,11 @@ impl Step for Cost {
             let (service, mut robot) = ctx.start((RobotKind::Titan, bus, LoopMode::Event))?;
             for bitrate in [500_000, 1_000_000] {
                 let seconds = ctx.plan.cost_seconds;
-                let cost = paths::cost_at(&mut robot, label, service.pid, bitrate, seconds)?;
+                let ring = ctx
+                    .dir
+                    .join(format!("state/chassisd/{}/blackbox", service.name));
+                let service = (service.pid, ring.as_path());
+                let cost = paths::cost_at(&mut robot, label, service, bitrate, seconds)?;
                 report.cost.push(cost);
             }
         }
@@ -1244,9 +1248,11 @@ impl Step for Throughput {
             .set_message("replaying a recorded bus at full speed");
         let file = ctx.dir.join("titan.log");
         let frames = paths::record_titan(&file, ctx.plan.replay_seconds)?;
-        for _ in 0..report::REPLAYS {
-            let replay = paths::replay(&file, frames, &ctx.prefix, &ctx.dir)?;
-            report.throughput.push(replay);
+        for recorder in [true, false] {
+            for _ in 0..report::REPLAYS {
+                let replay = paths::replay(&file, frames, recorder, &ctx.prefix, &ctx.dir)?;
+                report.throughput.push(replay);
+            }
         }
         Ok(())
     }

@@ -214,6 +214,8 @@ pub(crate) fn spawn_logged(
     command
         .env(IPC_PREFIX_ENV, prefix)
         .env("RUST_LOG", level)
+        // The held locks and the black box of every robot of the run, in its scratch directory.
+        .env("XDG_STATE_HOME", log.with_file_name("state"))
         .stdout(file("")?)
         .stderr(file("-err")?)
         .spawn()
@@ -909,7 +911,7 @@ pub(crate) fn status_field(pid: u32, field: &str) -> anyhow::Result<f64> {
 pub fn cost_at(
     robot: &mut Robot,
     bus: &'static str,
-    pid: u32,
+    (pid, ring): (u32, &Path),
     bitrate: u32,
     seconds: f64,
 ) -> anyhow::Result<Cost> {
@@ -924,14 +926,33 @@ pub fn cost_at(
     let start_frames = state(robot)?.link.rx_frames;
     // The service's loop thread (its main thread) only: the simulated chassis flooding the bus
     // runs in a thread of the same process and is not part of the service's cost.
-    let start_cpu = cpu_seconds_of_thread(pid, pid)?;
+    // The black box's writer (a thread of its own) is the service's cost too, counted apart.
+    let recorder = thread_named(pid, "blackbox");
+    let recorder_cpu = || recorder.map_or(Ok(0.0), |tid| cpu_seconds_of_thread(pid, tid));
+    // What it writes: the ring's files (its segments and the run's header), kept windows aside.
+    let ring_bytes = || -> u64 {
+        let files = std::fs::read_dir(ring).into_iter().flatten().flatten();
+        files
+            .filter_map(|f| f.metadata().ok())
+            .filter(|m| m.is_file())
+            .map(|m| m.len())
+            .sum()
+    };
+    let start_cpu = (
+        cpu_seconds_of_thread(pid, pid)?,
+        recorder_cpu()?,
+        ring_bytes(),
+    );
     let start = now_ns();
     let end = start + (seconds * 1e9) as u64;
     while now_ns() < end {
         robot.wait_state(Duration::from_millis(100))?;
     }
     let elapsed = (now_ns() - start) as f64 / 1e9;
-    let cpu = cpu_seconds_of_thread(pid, pid)? - start_cpu;
+    let cpu = cpu_seconds_of_thread(pid, pid)? - start_cpu.0;
+    let recorder_cpu_pct = 100.0 * (recorder_cpu()? - start_cpu.1) / elapsed;
+    let recorder_mb_per_min =
+        ring_bytes().saturating_sub(start_cpu.2) as f64 / 1e6 * 60.0 / elapsed;
     let frames = state(robot)?.link.rx_frames;
     let rss_mib = rss_mib(pid)?;
     robot.sim(chassis_client::flood_request(0.0), Duration::from_secs(3))?;
@@ -940,7 +961,18 @@ pub fn cost_at(
         bitrate,
         frames_per_s: (frames - start_frames) as f64 / elapsed,
         cpu_pct: 100.0 * cpu / elapsed,
+        recorder_cpu_pct: recorder.map(|_| recorder_cpu_pct),
+        recorder_mb_per_min: recorder.map(|_| recorder_mb_per_min),
         rss_mib,
+    })
+}
+
+/// The thread of process `pid` named `name`, if it has one.
+fn thread_named(pid: u32, name: &str) -> Option<u32> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+    tasks.flatten().find_map(|task| {
+        let comm = std::fs::read_to_string(task.path().join("comm")).ok()?;
+        (comm.trim_end() == name).then(|| task.file_name().to_str()?.parse().ok())?
     })
 }
 
@@ -1042,12 +1074,28 @@ pub fn record_titan(path: &Path, seconds: u64) -> anyhow::Result<u64> {
 
 /// Throughput: `file` (of `frames` frames) replayed into the service as fast as it drains it —
 /// read, decode, publish — its loop pinned to CPU 0 (the replay thread runs on the other).
-pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Result<Throughput> {
+/// `recorder`: with the black box recording (its ring of 64 MiB) or off.
+pub fn replay(
+    file: &Path,
+    frames: u64,
+    recorder: bool,
+    prefix: &str,
+    dir: &Path,
+) -> anyhow::Result<Throughput> {
     let name = format!("tp{}", unique());
     let mut chassisd = Command::new(sibling("chassisd")?);
     let bus = format!("replay:{}@max", file.display());
     let args = format!("--robot titan --name {name} --no-safety-monitor --cpu 0 --bus");
     chassisd.args(args.split(' ')).arg(bus);
+    let mib = if recorder { 64 } else { 0 };
+    let config = dir.join(format!("{name}.toml"));
+    let state = dir.join(format!("{name}-state"));
+    let text = format!(
+        "[service]\nblackbox_mib = {mib}\nstate_dir = {:?}\n",
+        state.display()
+    );
+    std::fs::write(&config, text).context("the replay's configuration")?;
+    chassisd.arg("--config").arg(&config);
     let log = dir.join(&name);
     let (mut child, what) = (Children::default(), "chassisd on the replay bus");
     let pid = child.push(spawn_logged(&mut chassisd, (prefix, "warn"), &log, what)?);
@@ -1076,6 +1124,7 @@ pub fn replay(file: &Path, frames: u64, prefix: &str, dir: &Path) -> anyhow::Res
     let counted = last.1 - f0;
     let cpu_seconds = last.2 - c0;
     Ok(Throughput {
+        recorder,
         frames: counted,
         seconds,
         frames_per_s: counted as f64 / seconds.max(1e-9),

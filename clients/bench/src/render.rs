@@ -237,10 +237,16 @@ fn cost(report: &Report) -> String {
     let buses = report.cost.iter().map(|c| {
         let (bus, kbit, rate) = (&c.bus, c.bitrate / 1000, c.frames_per_s);
         let (cpu, rss) = (c.cpu_pct, c.rss_mib);
+        let recorder = match (c.recorder_cpu_pct, c.recorder_mb_per_min) {
+            (Some(pct), Some(mb)) => {
+                format!("its black box writer {pct:.2} % ({mb:.1} MB a minute)")
+            }
+            _ => "the black box off".into(),
+        };
         format!(
             "* {bus} bus, {kbit} kbit/s (the simulated chassis flooding it): {rate:.0} frames/s \
-             received; the service's loop thread used {cpu:.2} % of one core; resident memory \
-             {rss:.1} MiB"
+             received; the service's loop thread used {cpu:.2} % of one core, {recorder}; \
+             resident memory {rss:.1} MiB"
         )
     });
     let realtime = report.realtime_rss_mib.map(|rss| {
@@ -256,26 +262,31 @@ fn cost(report: &Report) -> String {
 
 /// The replays of a recorded bus, and the run's notes.
 fn throughput_and_notes(report: &Report) -> String {
-    let runs = lines(&report.throughput, |t| {
-        format!(
-            "{} frames in {:.2} s, {:.0} frames/s, the service's loop busy {:.0} % of the time: \
-             {:.0} frames per second of its CPU",
-            t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
-        )
-    });
-    let (n, runs) = (report.throughput.len(), runs.replace('\n', "; "));
-    let replays = (n > 0).then(|| {
-        format!(
-            "* a recorded TITAN bus replayed at full speed through the service, read, decoded \
-             and published, {n} times, each into a fresh service: {runs}. The replay's writer (a \
-             thread on the other CPU, one write per frame) does not always keep the service \
-             busy: the target counts the frames per second of the service's own CPU time, the \
-             median replay's"
-        )
+    let replays = [true, false].map(|recorder| {
+        let of = report.throughput.iter().filter(|t| t.recorder == recorder);
+        let runs = lines(of.clone(), |t| {
+            format!(
+                "{} frames in {:.2} s, {:.0} frames/s, the service's loop busy {:.0} % of the \
+                 time: {:.0} frames per second of its CPU",
+                t.frames, t.seconds, t.frames_per_s, t.service_cpu_pct, t.frames_per_cpu_s
+            )
+        });
+        let (n, runs) = (of.count(), runs.replace('\n', "; "));
+        let black_box = if recorder { "recording" } else { "off" };
+        (n > 0).then(|| {
+            format!(
+                "* a recorded TITAN bus replayed at full speed through the service, read, \
+                 decoded and published, {n} times with the black box {black_box}, each into a \
+                 fresh service: {runs}. The replay's writer (a thread on the other CPU, one \
+                 write per frame) does not always keep the service busy: the target counts the \
+                 frames per second of the service's own CPU time, the median replay's with the \
+                 black box recording"
+            )
+        })
     });
     let notes = report.notes.iter().chain(&report.problems);
     let notes = notes.map(|n| format!("* note: {n}"));
-    lines(replays.into_iter().chain(notes), |l| l)
+    lines(replays.into_iter().flatten().chain(notes), |l| l)
 }
 
 impl Report {

@@ -292,6 +292,9 @@ pub struct Parts {
 /// Replay of a recorded bus through decode + publish as fast as the service drains it.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct Throughput {
+    /// The black box was recording.
+    #[serde(default)]
+    pub recorder: bool,
     pub frames: u64,
     pub seconds: f64,
     pub frames_per_s: f64,
@@ -650,8 +653,21 @@ pub struct Cost {
     pub bus: String,
     pub bitrate: u32,
     pub frames_per_s: f64,
+    /// The loop thread's CPU, % of one core.
     pub cpu_pct: f64,
+    /// The black box writer's thread's CPU, % of one core (`None`: not recording).
+    #[serde(default)]
+    pub recorder_cpu_pct: Option<f64>,
+    /// What the black box wrote to its ring, MB (10⁶ bytes) a minute.
+    #[serde(default)]
+    pub recorder_mb_per_min: Option<f64>,
     pub rss_mib: f64,
+}
+impl Cost {
+    /// The service's CPU: its loop and its black box writer, % of one core.
+    pub fn service_cpu_pct(&self) -> f64 {
+        self.cpu_pct + self.recorder_cpu_pct.unwrap_or(0.0)
+    }
 }
 
 /// Why a planned row was not measured.
@@ -926,6 +942,7 @@ mod tests {
     /// its CPU, busy 80 % of the time.
     fn replay(per_cpu_s: f64) -> Throughput {
         Throughput {
+            recorder: true,
             frames: 150_000,
             seconds: 150_000.0 / (0.8 * per_cpu_s),
             frames_per_s: 0.8 * per_cpu_s,
@@ -953,9 +970,22 @@ mod tests {
         assert_eq!(t.met, Some(true));
         assert_eq!(
             t.measured,
-            "1100000 frames per second of the service's CPU, the median of 3 replays (900000, \
-             1200000, 1100000)"
+            "1100000 frames per second of the service's CPU, the median of 3 replays with the \
+             black box recording (900000, 1200000, 1100000)"
         );
+        // Replays with the black box off are not the robot as shipped: not judged.
+        let report = Report {
+            throughput: vec![Throughput {
+                recorder: false,
+                ..replay(2_000_000.0)
+            }],
+            ..Report::default()
+        };
+        let judged = targets(&report);
+        let t = judged
+            .iter()
+            .find(|t| t.what.starts_with("decode + publish"));
+        assert_eq!(t.map(|t| t.met), Some(None));
         // One fast replay does not carry the target.
         let t = throughput_target(&[900_000.0, 1_200_000.0, 950_000.0]);
         assert_eq!(t.met, Some(false), "{}", t.measured);
@@ -1393,6 +1423,8 @@ mod tests {
             bitrate: 500_000,
             frames_per_s: 4504.5,
             cpu_pct: 1.25,
+            recorder_cpu_pct: Some(0.25),
+            recorder_mb_per_min: Some(16.0),
             rss_mib: 7.1,
         });
         report.throughput.push(replay(1.5e6));
