@@ -32,6 +32,7 @@ pub mod can_controller;
 pub mod clock;
 pub mod conformance;
 pub mod datagram;
+pub mod mcap_read;
 pub mod replay;
 pub mod serial;
 pub mod slcan;

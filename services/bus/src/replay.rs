@@ -49,6 +49,7 @@ use std::collections::HashMap;
 use std::fmt;
 use std::fs::File;
 use std::io::{BufRead, BufReader};
+use std::ops::ControlFlow;
 use std::os::fd::{BorrowedFd, RawFd};
 use std::str::FromStr;
 use std::sync::{Mutex, PoisonError};
@@ -270,15 +271,7 @@ impl Recording {
     /// Every record in order.
     pub fn steps(&self) -> Result<Box<dyn Iterator<Item = Step> + '_>, BusError> {
         match self {
-            Recording::Mcap { bytes, .. } => {
-                let stream = mcap::read::RawMessageStream::new(bytes)
-                    .map_err(|e| open_error("(mcap)", e))?;
-                Ok(Box::new(McapSteps {
-                    stream,
-                    frames_channels: HashMap::new(),
-                    done: false,
-                }))
-            }
+            Recording::Mcap { bytes, .. } => Ok(Box::new(mcap_steps(bytes).into_iter())),
             Recording::Candump { path } => {
                 let file = File::open(path).map_err(|e| open_error(path, e))?;
                 let mut lines = BufReader::new(file).lines();
@@ -308,17 +301,19 @@ impl Recording {
 /// The key-value pairs of the `chassis` metadata record of an MCAP file (written at the start of
 /// the recording, so even a file whose recorder was killed has it).
 pub fn mcap_metadata(bytes: &[u8]) -> Option<std::collections::BTreeMap<String, String>> {
-    let reader = mcap::read::LinearReader::new(bytes).ok()?;
-    for record in reader {
-        match record {
-            Ok(mcap::records::Record::Metadata(meta)) if meta.name == METADATA_NAME => {
-                return Some(meta.metadata);
-            }
-            Ok(_) => {}
-            Err(_) => return None,
+    use mcap::records::{Record, op};
+    let mut found = None;
+    let walked = crate::mcap_read::each_record(bytes, |opcode, data| {
+        if opcode == op::METADATA
+            && let Record::Metadata(meta) = mcap::parse_record(opcode, data)?
+            && meta.name == METADATA_NAME
+        {
+            found = Some(meta.metadata);
+            return Ok::<_, mcap::McapError>(ControlFlow::Break(()));
         }
-    }
-    None
+        Ok(ControlFlow::Continue(()))
+    });
+    walked.ok().and(found)
 }
 
 /// A `BusFrame` as `chassis record` writes it on the frames channel (the fields the replay
@@ -416,44 +411,34 @@ pub fn decimal_ns(text: &str) -> Option<u64> {
         .checked_add(nanos)
 }
 
-/// The frames channel of an MCAP file, message by message.
-struct McapSteps<'a> {
-    stream: mcap::read::RawMessageStream<'a>,
-    /// Channel id → whether it is a frames channel.
-    frames_channels: HashMap<u16, bool>,
-    done: bool,
-}
-
-impl Iterator for McapSteps<'_> {
-    type Item = Step;
-
-    fn next(&mut self) -> Option<Step> {
-        while !self.done {
-            let message = match self.stream.next() {
-                Some(Ok(message)) => message,
-                Some(Err(err)) => {
-                    // A recorder killed mid-write leaves a truncated file: play what is there.
-                    self.done = true;
-                    return Some(Step::Bad(format!("the recording ends early: {err}")));
+/// The steps of an MCAP file's frames channels: a frame each message, then why the file ended
+/// early when it did (a recorder killed mid-write leaves a truncated file: what is there plays).
+fn mcap_steps(bytes: &[u8]) -> Vec<Step> {
+    use mcap::records::{Record, op};
+    // Channel id → whether it is a frames channel.
+    let mut frames_channels: HashMap<u16, bool> = HashMap::new();
+    let mut steps = Vec::new();
+    let walked = crate::mcap_read::each_record(bytes, |opcode, data| {
+        if matches!(opcode, op::CHANNEL | op::MESSAGE) {
+            match mcap::parse_record(opcode, data)? {
+                Record::Channel(c) => {
+                    let frames = c.topic.ends_with("/frames") && c.message_encoding == "json";
+                    frames_channels.insert(c.id, frames);
                 }
-                None => {
-                    self.done = true;
-                    return None;
+                Record::Message { header, data }
+                    if frames_channels.get(&header.channel_id) == Some(&true) =>
+                {
+                    steps.push(frame_step(header.log_time, &data));
                 }
-            };
-            let id = message.header.channel_id;
-            let stream = &self.stream;
-            let is_frames = *self.frames_channels.entry(id).or_insert_with(|| {
-                stream
-                    .get_channel(id)
-                    .is_some_and(|c| c.topic.ends_with("/frames") && c.message_encoding == "json")
-            });
-            if is_frames {
-                return Some(frame_step(message.header.log_time, &message.data));
+                _ => {}
             }
         }
-        None
+        Ok::<_, mcap::McapError>(ControlFlow::Continue(()))
+    });
+    if let Err(err) = walked {
+        steps.push(Step::Bad(format!("the recording ends early: {err}")));
     }
+    steps
 }
 
 /// Recordings this process has played: a replay plays once (see the module docs).
