@@ -41,6 +41,9 @@ named_constants! {
         /// `value[0]`: the robot's standing speed limit, m/s, set by the operator — raised or
         /// lowered; 0 lifts it. A source can only lower it (`RequestFlags::SPEED_LIMIT`).
         SPEED_LIMIT = 13 => "speed-limit",
+        /// Keep the black box's window around now as a file (`blackbox/kept/`), as a stop
+        /// nobody asked for does; refused when the black box is off.
+        KEEP = 14 => "keep",
     }
 }
 

@@ -339,7 +339,7 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(flags RequestFlags: u32 { STEER, HEARTBEAT, LIMIT, SPEED_LIMIT }),
         describe_constants!(enum ControlKind: u8 {
             MODE, BRAKE, CLEAR_FAULTS, LIGHTS, OFF_ROAD, LIFT, SERVOS, POWER, STEERING_ZERO,
-            LOCK_RELEASE, SILENT, LOCK_ENGAGE, SPEED_LIMIT,
+            LOCK_RELEASE, SILENT, LOCK_ENGAGE, SPEED_LIMIT, KEEP,
         }),
         describe_constants!(enum FaultClear: u8 {
             ALL, MOTOR_1_COMM, MOTOR_2_COMM, MOTOR_3_COMM, MOTOR_4_COMM, BATTERY_UNDER_VOLTAGE,

@@ -82,6 +82,9 @@ pub enum ControlCmd {
     /// Set the robot's speed limit as the operator, m/s: raise or lower it; 0 lifts it (any
     /// client may lower it, only the operator raises it).
     SpeedLimit { mps: f32 },
+    /// Keep the black box's window around now as a file in the state directory's
+    /// `blackbox/kept/` (`chassis explain FILE` tells it).
+    Keep,
 }
 
 #[derive(Debug, Subcommand)]
@@ -787,6 +790,7 @@ pub fn control(name: &str, command: &ControlCmd) -> anyhow::Result<()> {
         ControlCmd::SpeedLimit { mps } => {
             ControlRequest::new(ControlKind::SPEED_LIMIT).with_value(0, *mps)
         }
+        ControlCmd::Keep => ControlRequest::new(ControlKind::KEEP),
     };
     let mut robot = Robot::connect(name)?;
     let response = robot.control(request, ANSWER_TIMEOUT)?;

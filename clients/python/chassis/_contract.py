@@ -818,7 +818,8 @@ class ControlKind(Constants):
     SILENT = 11
     LOCK_ENGAGE = 12
     SPEED_LIMIT = 13
-    NAMES = {1: 'mode', 2: 'brake', 3: 'clear-faults', 4: 'lights', 5: 'off-road', 6: 'lift', 7: 'servos', 8: 'power', 9: 'steering-zero', 10: 'lock-release', 11: 'silent', 12: 'lock-engage', 13: 'speed-limit'}
+    KEEP = 14
+    NAMES = {1: 'mode', 2: 'brake', 3: 'clear-faults', 4: 'lights', 5: 'off-road', 6: 'lift', 7: 'servos', 8: 'power', 9: 'steering-zero', 10: 'lock-release', 11: 'silent', 12: 'lock-engage', 13: 'speed-limit', 14: 'keep'}
 
 
 class ControlMode(Constants):

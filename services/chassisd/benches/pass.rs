@@ -138,6 +138,7 @@ fn engine(profile: &Profile) -> Engine {
         gps: false,
         bus: "can:bench0".into(),
         descriptions: Vec::new(),
+        recording: false,
     };
     Engine::new(
         config,

@@ -459,10 +459,14 @@ impl<D: Devices> Shell<D> {
                     now: now.as_nanos(),
                     fired: wake.sources,
                 });
-                if KEEP_ASKED.swap(false, Ordering::Relaxed)
-                    && let Some(tape) = &mut self.tape
-                {
-                    tape.keep("SIGUSR1");
+                let asked = [
+                    (KEEP_ASKED.swap(false, Ordering::Relaxed), "SIGUSR1"),
+                    (engine.take_keep(), "chassis control keep"),
+                ];
+                for (_, why) in asked.into_iter().filter(|(asked, _)| *asked) {
+                    if let Some(tape) = &mut self.tape {
+                        tape.keep(why);
+                    }
                 }
                 if let Some(tape) = &mut self.tape {
                     tape.send();

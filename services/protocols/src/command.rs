@@ -152,6 +152,8 @@ pub enum ControlAction {
     LockEngage(String),
     /// Set the robot's standing speed limit, m/s, higher or lower (operator); `None` lifts it.
     SpeedLimit(Option<f32>),
+    /// Keep the black box's window (operator).
+    Keep,
 }
 
 /// The control request for a chassis command. `None` for a velocity (motion goes through the
@@ -279,6 +281,7 @@ pub fn request_to_action(
                 _ => Err(BadControlRequest::NegativeSpeedLimit),
             };
         }
+        ControlKind::KEEP => return Ok(ControlAction::Keep),
         other => return Err(BadControlRequest::UnknownKind(other)),
     }))
 }

@@ -181,3 +181,32 @@ fn a_recorded_incident_replays_identically_and_a_changed_priority_diverges_at_on
     assert!(first_shown < recorded_events(&ring, MUX)[0]);
     assert_eq!(at, first_shown, "diverged elsewhere: {json}");
 }
+
+/// With no configuration at all the black box records, and `chassis control keep` keeps its
+/// window: a file that explains identically.
+#[test]
+fn the_black_box_records_by_default_and_keeps_its_window_when_asked() {
+    let mut env = Env::new("blackbox-keep");
+    let n = name("bbk");
+    env.chassisd("chassisd", &["--robot", "titan", "--name", &n]);
+    let mut robot = env.robot(&n, UP);
+    robot.wait_state(UP).unwrap();
+    let answer = env.chassis_ok(&["control", "--name", &n, "keep"]);
+    assert!(answer.contains("keeps the window"), "{answer}");
+    // The window goes on five seconds after the keep, then is written and logged.
+    let logged = wait_for(Duration::from_secs(15), || {
+        env.logs().contains("black box kept: chassis control keep")
+    });
+    assert!(logged.is_some(), "no window kept\n{}", env.logs());
+    let kept_dir = env.state_home().join("chassisd").join(&n);
+    let kept: Vec<PathBuf> = std::fs::read_dir(kept_dir.join("blackbox/kept"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    let [file] = kept.as_slice() else {
+        panic!("one window kept, not {kept:?}")
+    };
+    let (out, text) = explain(&env, &[file.to_str().unwrap()]);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("identical"), "{text}");
+}

@@ -120,6 +120,9 @@ pub struct EngineConfig {
     /// (`SystemState::wire_protocol`): the one matching the driver's is published at start and
     /// again when detection decides. Empty: no description is published.
     pub descriptions: Vec<RobotDescription>,
+    /// The shell's black box records (`service.blackbox_mib` > 0): `chassis control keep` is
+    /// answered, not refused.
+    pub recording: bool,
 }
 
 impl EngineConfig {
@@ -150,6 +153,7 @@ impl EngineConfig {
             .into_iter()
             .map(|protocol| crate::description::for_config(config, protocol))
             .collect(),
+            recording: config.blackbox_mib > 0,
         }
     }
 }
@@ -320,6 +324,8 @@ pub struct Engine {
     last_gps_stamp_ns: u64,
     /// Control requests waiting for the chassis: driver token → (ticket, request seq).
     pending_controls: HashMap<u64, (Ticket, u64)>,
+    /// `chassis control keep` asked the black box to keep its window ([`Engine::take_keep`]).
+    keep_asked: bool,
     last_zero_reason: u8,
     last_active: u8,
     throttles: Throttles,
@@ -391,6 +397,7 @@ impl Engine {
             last_rx_frames: 0,
             last_gps_stamp_ns: 0,
             pending_controls: HashMap::new(),
+            keep_asked: false,
             last_zero_reason: ZeroReason::STARTING,
             last_active: MuxStatus::NO_SOURCE,
             throttles: Throttles::default(),
@@ -528,6 +535,12 @@ impl Engine {
         result
     }
 
+    /// Whether `chassis control keep` was asked since the last call: the shell's black box keeps
+    /// its window.
+    pub fn take_keep(&mut self) -> bool {
+        std::mem::take(&mut self.keep_asked)
+    }
+
     /// A control request, answered now or once the chassis has answered (a
     /// [`ToPublish::Response`] with `ticket`).
     pub fn handle_control(&mut self, now: Timestamp, ticket: Ticket, request: &ControlRequest) {
@@ -571,6 +584,15 @@ impl Engine {
                     None => (ControlStatus::OK, "speed limit lifted".to_string()),
                 }
             }
+            Ok(ControlAction::Keep) if self.config.recording => {
+                self.keep_asked = true;
+                let kept = "the black box keeps the window around now (blackbox/kept/)";
+                (ControlStatus::OK, kept.to_string())
+            }
+            Ok(ControlAction::Keep) => (
+                ControlStatus::UNSUPPORTED,
+                "the black box is off (service.blackbox_mib = 0): nothing to keep".to_string(),
+            ),
             Ok(ControlAction::Chassis(command)) => match self.driver.control(now, &command) {
                 ControlOutcome::Pending(token) => {
                     info!(

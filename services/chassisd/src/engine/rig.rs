@@ -200,6 +200,7 @@ impl Rig {
             gps: false,
             bus: "can:rig0".into(),
             descriptions: Vec::new(),
+            recording: false,
         };
         adjust(&mut config);
         let driver = profile.driver(&DriverConfig::default(), T0);

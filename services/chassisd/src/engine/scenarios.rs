@@ -434,6 +434,31 @@ fn an_unknown_lock_name_is_answered_invalid_at_once() {
 }
 
 #[test]
+fn a_keep_is_answered_and_handed_to_the_black_box_only_while_it_records() {
+    let mut rig = ready();
+    let ticket = rig.control_at(at(255), control(ControlKind::KEEP));
+    rig.run_until(at(300));
+    let (answer, _) = rig.response(ticket).unwrap();
+    assert_eq!(
+        answer.status,
+        ControlStatus::UNSUPPORTED,
+        "{}",
+        answer.message()
+    );
+    assert!(!rig.engine.take_keep());
+
+    let mut rig = Rig::with(RobotKind::Titan, unsmoothed(), |c| c.recording = true);
+    rig.run_until(at(200));
+    let ticket = rig.control_at(at(255), control(ControlKind::KEEP));
+    rig.run_until(at(300));
+    let (answer, when) = rig.response(ticket).unwrap();
+    assert!(answer.is_ok(), "{}", answer.message());
+    assert_eq!(when, at(255));
+    assert!(rig.engine.take_keep());
+    assert!(!rig.engine.take_keep(), "a keep is handed over once");
+}
+
+#[test]
 fn a_control_request_waiting_for_the_chassis_is_answered_when_it_answers() {
     let mut rig = ready();
     let ticket = rig.control_at(at(255), control(ControlKind::STEERING_ZERO));
