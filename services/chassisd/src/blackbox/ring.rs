@@ -260,8 +260,7 @@ impl Ring {
                 }
                 self.last_mux = Some(status);
             }
-            serde_json::to_writer(&mut text, event)?;
-            text.push(b'\n');
+            event.write_line(&mut text)?;
         }
         if self.in_header {
             self.header.extend_from_slice(&text);
@@ -321,8 +320,7 @@ impl Ring {
         }
         let mut text = self.header.clone();
         if self.cut {
-            serde_json::to_writer(&mut text, &Event::Cut)?;
-            text.push(b'\n');
+            Event::Cut.write_line(&mut text)?;
         }
         for (segment, _) in &self.segments {
             text.extend(fs::read(segment)?);
