@@ -495,7 +495,7 @@ impl<D: Devices> Shell<D> {
     fn step(&mut self, ports: &Ports, engine: &mut Engine, step: Step) {
         let mut tape = self.tape.take();
         if let Some(tape) = &tape {
-            self.recorder_dropped = tape.dropped_total;
+            self.recorder_dropped = tape.unrecorded();
         }
         let mut io = self.io(ports);
         match &mut tape {

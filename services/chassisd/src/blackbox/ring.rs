@@ -3,7 +3,8 @@
 //! `/chassisd/blackbox`, readable in Foxglove) that survive restarts.
 //!
 //! The loop hands each pass' events over a bounded channel ([`Tape::send`]); when the writer
-//! falls behind (a slow or full disk) the pass' events are dropped and counted, never the pass.
+//! falls behind (a slow disk) the pass' events are dropped and counted, never the pass, and a
+//! pass the disk refuses (full, failing) is counted by the writer ([`Tape::unrecorded`]).
 //! The writer watches the mux decisions go by: a stop that was not asked for
 //! ([`super::is_unasked_stop`]) keeps the window around it, [`KEEP_AFTER`] after it included,
 //! as does [`Tape::keep`] (SIGUSR1). A previous run that ended without its orderly stop (a crash,
@@ -15,6 +16,8 @@ use std::collections::VecDeque;
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::time::{Duration, Instant};
 
@@ -51,13 +54,16 @@ pub struct Tape {
     /// Passes dropped since the last one the writer took.
     dropped: u64,
     /// Passes dropped since start.
-    pub dropped_total: u64,
+    dropped_total: u64,
+    /// Passes the writer could not write (a full or failing disk), counted by it.
+    unwritten: Arc<AtomicU64>,
 }
 
 impl Tape {
     /// Starts the writer on `dir` with `budget` bytes of ring and at most `kept` kept files.
     pub fn start(dir: &Path, budget: u64, kept: usize) -> io::Result<Self> {
         let mut ring = Ring::open(dir, budget, kept)?;
+        let unwritten = Arc::clone(&ring.unwritten);
         let (tx, rx) = sync_channel(CHANNEL);
         let writer = std::thread::Builder::new()
             .name("blackbox".into())
@@ -68,7 +74,14 @@ impl Tape {
             events: Vec::new(),
             dropped: 0,
             dropped_total: 0,
+            unwritten,
         })
+    }
+
+    /// Passes left unrecorded since start: dropped while the writer fell behind, or not written
+    /// by it (the disk full or failing).
+    pub fn unrecorded(&self) -> u64 {
+        self.dropped_total + self.unwritten.load(Ordering::Relaxed)
     }
 
     /// Hands the events noted since the last call to the writer, or drops them (counted).
@@ -135,6 +148,9 @@ struct Ring {
     last_mux: Option<MuxStatus>,
     /// A keep waiting for its window's end, when it was first asked, and why.
     due: Option<(Instant, Instant, Vec<String>)>,
+    /// Passes not written since start (shared with the [`Tape`]), and since the last written.
+    unwritten: Arc<AtomicU64>,
+    unwritten_since: u64,
 }
 
 impl Ring {
@@ -155,6 +171,8 @@ impl Ring {
             cut: false,
             last_mux: None,
             due: None,
+            unwritten: Arc::new(AtomicU64::new(0)),
+            unwritten_since: 0,
         };
         ring.take_over_previous()?;
         Ok(ring)
@@ -193,13 +211,10 @@ impl Ring {
                 Some((at, ..)) => rx.recv_timeout(at.saturating_duration_since(Instant::now())),
                 None => rx.recv().map_err(|_| RecvTimeoutError::Disconnected),
             };
-            let result = match msg {
-                Ok(Msg::Events(events)) => self.append(&events),
-                Ok(Msg::Keep(reason)) => {
-                    self.schedule(reason);
-                    Ok(())
-                }
-                Err(RecvTimeoutError::Timeout) => Ok(()),
+            match msg {
+                Ok(Msg::Events(events)) => self.record(events),
+                Ok(Msg::Keep(reason)) => self.schedule(reason),
+                Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => {
                     if let Some(current) = &mut self.current
                         && let Err(e) = current.flush()
@@ -211,9 +226,6 @@ impl Ring {
                     }
                     return;
                 }
-            };
-            if let Err(e) = result {
-                warn!("black box: writing the ring: {e}");
             }
             if self
                 .due
@@ -222,6 +234,25 @@ impl Ring {
                 && let Some((.., reasons)) = self.due.take()
             {
                 self.keep(&reasons);
+            }
+        }
+    }
+
+    /// Writes one pass' events; a pass that cannot be written is counted, and the next one
+    /// written begins with a gap (a replay stops there).
+    fn record(&mut self, mut events: Vec<Event>) {
+        if self.unwritten_since > 0 {
+            let dropped = self.unwritten_since;
+            events.insert(0, Event::Gap { dropped });
+        }
+        match self.append(&events) {
+            Ok(()) => self.unwritten_since = 0,
+            Err(e) => {
+                self.unwritten_since += 1;
+                let total = self.unwritten.fetch_add(1, Ordering::Relaxed) + 1;
+                if total.is_power_of_two() {
+                    warn!(unwritten = total, "black box: writing the ring: {e}");
+                }
             }
         }
     }
@@ -445,6 +476,37 @@ mod tests {
         assert_eq!(events[0], start());
         assert_eq!(events[1], Event::Cut);
         assert_eq!(events.last(), pass(199).last());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn passes_a_full_disk_refuses_are_counted_and_the_next_written_begins_with_a_gap() {
+        let dir = dir("full");
+        let mut ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        ring.record(vec![start()]);
+        // The ring's first segment is /dev/full: every write of it fails with ENOSPC.
+        let first = ring.dir.join("ring-00000001.jsonl");
+        std::os::unix::fs::symlink("/dev/full", &first).unwrap();
+        for t in 0..200 {
+            ring.record(pass(t));
+        }
+        let unwritten = ring.unwritten.load(Ordering::Relaxed);
+        assert!(unwritten > 0, "no pass counted unwritten");
+        assert_eq!(
+            ring.unwritten_since, unwritten,
+            "nothing was written after the first failure"
+        );
+        // The disk back (the next segment a real file): the next pass begins with the gap.
+        fs::remove_file(&first).unwrap();
+        ring.current = None;
+        ring.segments.clear();
+        ring.record(pass(200));
+        assert_eq!(ring.unwritten_since, 0);
+        ring.current.as_mut().unwrap().flush().unwrap();
+        let text = fs::read(ring.dir.join("ring-00000002.jsonl")).unwrap();
+        let events = read(&text).unwrap();
+        assert_eq!(events[0], Event::Gap { dropped: unwritten });
+        assert_eq!(events.last(), pass(200).last());
         fs::remove_dir_all(&dir).unwrap();
     }
 
