@@ -32,7 +32,7 @@ use iceoryx2_bb_posix::file_descriptor_set::SynchronousMultiplexing;
 use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction};
 use tracing::{info, info_span, warn};
 
-use crate::blackbox::ring::Tape;
+use crate::blackbox::ring::{Bound, Tape};
 use crate::blackbox::{self, Event, Taped};
 use crate::engine::{Engine, EngineConfig, ListenerChange, PassIo, Ticket, Wake};
 use crate::ipc::{IpcError, Ports};
@@ -183,13 +183,13 @@ fn black_box(config: &Config, now: Timestamp) -> Option<Tape> {
         .to_toml()
         .map_err(|e| warn!("black box off: the configuration as text: {e}"))
         .ok()?;
-    let mut tape = Tape::start(
-        &config.state_dir,
-        config.blackbox_mib << 20,
-        config.blackbox_kept,
-    )
-    .map_err(|e| warn!("black box off: {}: {e}", config.state_dir.display()))
-    .ok()?;
+    let bound = Bound {
+        bytes: config.blackbox_mib << 20,
+        age: Duration::from_secs_f64(config.blackbox_minutes * 60.0),
+    };
+    let mut tape = Tape::start(&config.state_dir, bound, config.blackbox_kept)
+        .map_err(|e| warn!("black box off: {}: {e}", config.state_dir.display()))
+        .ok()?;
     let action = SigAction::new(
         SigHandler::Handler(keep_asked),
         SaFlags::SA_RESTART,
@@ -208,6 +208,7 @@ fn black_box(config: &Config, now: Timestamp) -> Option<Tape> {
     info!(
         dir = %config.state_dir.join("blackbox").display(),
         mib = config.blackbox_mib,
+        minutes = config.blackbox_minutes,
         "black box recording"
     );
     Some(tape)

@@ -70,8 +70,11 @@ pub struct ServiceConfig {
     /// `~/.local/state/chassisd/<name>`).
     pub state_dir: Option<PathBuf>,
     /// The black box: the engine's inputs kept in a ring of this many MiB in the state
-    /// directory (`blackbox/`); 0 records nothing.
+    /// directory (`blackbox/`, compressed); 0 records nothing.
     pub blackbox_mib: u64,
+    /// The black box: the ring's oldest part goes once it is this many minutes old, if the
+    /// MiB have not made it go before.
+    pub blackbox_minutes: f64,
     /// The black box: how many kept windows (`blackbox/kept/*.mcap`) stay; the oldest go.
     pub blackbox_kept: usize,
 }
@@ -92,6 +95,7 @@ impl Default for ServiceConfig {
             realtime: None,
             state_dir: None,
             blackbox_mib: 64,
+            blackbox_minutes: 10.0,
             blackbox_kept: 16,
         }
     }
@@ -266,8 +270,9 @@ pub struct Config {
     pub realtime: Option<u8>,
     /// The directory of the held-lock file.
     pub state_dir: PathBuf,
-    /// The black box's ring, MiB (0: off), and how many kept windows stay.
+    /// The black box's ring, MiB (0: off) and minutes, and how many kept windows stay.
     pub blackbox_mib: u64,
+    pub blackbox_minutes: f64,
     pub blackbox_kept: usize,
     /// The required-source rule was lifted on the command line.
     pub no_safety_monitor: bool,
@@ -355,6 +360,14 @@ impl RawConfig {
                 reason: "must be above 0 and at most 1000 Hz".into(),
             });
         }
+        // Up to a day: a second at least, and what a Duration holds.
+        if !(self.service.blackbox_minutes >= 1.0 / 60.0 && self.service.blackbox_minutes <= 1440.0)
+        {
+            return Err(ConfigError::Bad {
+                key: "service.blackbox_minutes",
+                reason: "must be from 1/60 (a second) to 1440 (a day)".into(),
+            });
+        }
         let mux = if overrides.no_safety_monitor {
             self.mux.without_required_sources()
         } else {
@@ -393,6 +406,7 @@ impl RawConfig {
             realtime,
             state_dir,
             blackbox_mib: self.service.blackbox_mib,
+            blackbox_minutes: self.service.blackbox_minutes,
             blackbox_kept: self.service.blackbox_kept,
             no_safety_monitor: overrides.no_safety_monitor,
         })
@@ -498,6 +512,7 @@ impl Config {
                 realtime: self.realtime,
                 state_dir: Some(self.state_dir.clone()),
                 blackbox_mib: self.blackbox_mib,
+                blackbox_minutes: self.blackbox_minutes,
                 blackbox_kept: self.blackbox_kept,
             },
             bus: self.bus_settings.clone(),

@@ -2,6 +2,10 @@
 //! of its own, and the windows kept as MCAP files (one JSON message per event on
 //! `/chassisd/blackbox`, readable in Foxglove) that survive restarts.
 //!
+//! Each segment is a zstd frame of JSON lines (`ring-N.jsonl.zst`), flushed every
+//! [`FLUSH_EVERY`] so that a crash loses no more; the ring is bounded by the bytes on disk and by
+//! the age of its oldest segment, whichever comes first.
+//!
 //! The loop hands each pass' events over a bounded channel ([`Tape::send`]); when the writer
 //! falls behind (a slow disk) the pass' events are dropped and counted, never the pass, and a
 //! pass the disk refuses (full, failing) is counted by the writer ([`Tape::unrecorded`]).
@@ -36,8 +40,12 @@ pub const KEEP_AFTER: Duration = Duration::from_secs(5);
 const KEEP_LONGEST: Duration = Duration::from_secs(30);
 /// Passes the channel holds while the writer is busy.
 const CHANNEL: usize = 4096;
-/// Segments of the ring: the oldest is let go of when the budget is spent.
+/// Segments of the ring, each an eighth of its bound: the oldest is let go of when a ninth begins.
 const SEGMENTS: u64 = 8;
+/// The longest the end of the ring waits in the compressor before it is on disk.
+const FLUSH_EVERY: Duration = Duration::from_secs(1);
+/// The compression level of the ring's segments (zstd's default).
+const LEVEL: i32 = 3;
 
 enum Msg {
     Events(Vec<Event>),
@@ -60,9 +68,9 @@ pub struct Tape {
 }
 
 impl Tape {
-    /// Starts the writer on `dir` with `budget` bytes of ring and at most `kept` kept files.
-    pub fn start(dir: &Path, budget: u64, kept: usize) -> io::Result<Self> {
-        let mut ring = Ring::open(dir, budget, kept)?;
+    /// Starts the writer on `dir` with `bound` on the ring and at most `kept` kept files.
+    pub fn start(dir: &Path, bound: Bound, kept: usize) -> io::Result<Self> {
+        let mut ring = Ring::open(dir, bound, kept)?;
         let unwritten = Arc::clone(&ring.unwritten);
         let (tx, rx) = sync_channel(CHANNEL);
         let writer = std::thread::Builder::new()
@@ -130,18 +138,81 @@ impl Tape {
     }
 }
 
+/// How much the ring holds: the bytes of its segments on disk, and how old the oldest may be.
+#[derive(Debug, Clone, Copy)]
+pub struct Bound {
+    pub bytes: u64,
+    pub age: Duration,
+}
+
+/// The segment being written: its file behind the compressor, and the bytes that reached it.
+struct Segment {
+    zstd: zstd::stream::write::Encoder<'static, Counted>,
+    opened: Instant,
+    flushed: Instant,
+    /// Bytes and passes handed to the compressor since its last flush.
+    pending: u64,
+    passes: u64,
+}
+
+struct Counted {
+    file: BufWriter<File>,
+    bytes: u64,
+}
+
+impl Write for Counted {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.bytes += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl Segment {
+    fn create(path: &Path) -> io::Result<Self> {
+        let file = BufWriter::new(File::create(path)?);
+        let now = Instant::now();
+        Ok(Self {
+            zstd: zstd::stream::write::Encoder::new(Counted { file, bytes: 0 }, LEVEL)?,
+            opened: now,
+            flushed: now,
+            pending: 0,
+            passes: 0,
+        })
+    }
+
+    /// Everything written so far on disk, readable (the frame is left open).
+    fn flush(&mut self) -> io::Result<()> {
+        self.zstd.flush()?;
+        self.flushed = Instant::now();
+        self.pending = 0;
+        self.passes = 0;
+        Ok(())
+    }
+
+    /// The frame ended and on disk.
+    fn finish(self) -> io::Result<()> {
+        self.zstd.finish()?.flush()
+    }
+}
+
 /// The writer's side: the ring's files.
 struct Ring {
     dir: PathBuf,
     kept_dir: PathBuf,
-    budget: u64,
+    bound: Bound,
     kept: usize,
     /// The run's first events (the configuration, the restored locks, the first
     /// publications), kept whatever the ring lets go of.
     header: Vec<u8>,
     in_header: bool,
+    /// The segments' files, oldest first, and the bytes each holds on disk.
     segments: VecDeque<(PathBuf, u64)>,
-    current: Option<BufWriter<File>>,
+    current: Option<Segment>,
     next_segment: u64,
     /// The ring has let go of a segment.
     cut: bool,
@@ -154,14 +225,14 @@ struct Ring {
 }
 
 impl Ring {
-    fn open(dir: &Path, budget: u64, kept: usize) -> io::Result<Self> {
+    fn open(dir: &Path, bound: Bound, kept: usize) -> io::Result<Self> {
         let dir = dir.join("blackbox");
         let kept_dir = dir.join("kept");
         fs::create_dir_all(&kept_dir)?;
         let mut ring = Self {
             dir,
             kept_dir,
-            budget,
+            bound,
             kept,
             header: Vec::new(),
             in_header: true,
@@ -216,8 +287,8 @@ impl Ring {
                 Ok(Msg::Keep(reason)) => self.schedule(reason),
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => {
-                    if let Some(current) = &mut self.current
-                        && let Err(e) = current.flush()
+                    if let Some(current) = self.current.take()
+                        && let Err(e) = current.finish()
                     {
                         warn!("black box: writing the ring: {e}");
                     }
@@ -238,8 +309,9 @@ impl Ring {
         }
     }
 
-    /// Writes one pass' events; a pass that cannot be written is counted, and the next one
-    /// written begins with a gap (a replay stops there).
+    /// Writes one pass' events. A pass that cannot be written is counted, with the passes the
+    /// segment held since its last flush (lost with it); the segment is let go of, and the next
+    /// pass written begins with a gap (a replay stops there).
     fn record(&mut self, mut events: Vec<Event>) {
         if self.unwritten_since > 0 {
             let dropped = self.unwritten_since;
@@ -248,10 +320,14 @@ impl Ring {
         match self.append(&events) {
             Ok(()) => self.unwritten_since = 0,
             Err(e) => {
-                self.unwritten_since += 1;
-                let total = self.unwritten.fetch_add(1, Ordering::Relaxed) + 1;
-                if total.is_power_of_two() {
-                    warn!(unwritten = total, "black box: writing the ring: {e}");
+                let lost = self.current.take().map_or(1, |s| s.passes.max(1));
+                self.unwritten_since += lost;
+                let before = self.unwritten.fetch_add(lost, Ordering::Relaxed);
+                if before.checked_ilog2() != (before + lost).checked_ilog2() {
+                    warn!(
+                        unwritten = before + lost,
+                        "black box: writing the ring: {e}"
+                    );
                 }
             }
         }
@@ -304,20 +380,27 @@ impl Ring {
     }
 
     fn write_segment(&mut self, text: &[u8]) -> io::Result<()> {
-        let per_segment = (self.budget / SEGMENTS).max(1);
-        let full = self
-            .segments
-            .back()
-            .is_none_or(|(_, len)| *len >= per_segment);
+        let per_segment = (self.bound.bytes / SEGMENTS).max(1);
+        let per_age = self.bound.age / SEGMENTS as u32;
+        let full = match (&self.current, self.segments.back()) {
+            (Some(current), Some((_, len))) => {
+                *len >= per_segment || current.opened.elapsed() >= per_age
+            }
+            _ => true,
+        };
         if full {
-            if let Some(mut current) = self.current.take() {
+            // Flushed first: a failure then counts the passes the segment held.
+            if let Some(current) = &mut self.current {
                 current.flush()?;
+            }
+            if let Some(current) = self.current.take() {
+                current.finish()?;
             }
             self.next_segment += 1;
             let path = self
                 .dir
-                .join(format!("ring-{:08}.jsonl", self.next_segment));
-            self.current = Some(BufWriter::new(File::create(&path)?));
+                .join(format!("ring-{:08}.jsonl.zst", self.next_segment));
+            self.current = Some(Segment::create(&path)?);
             self.segments.push_back((path, 0));
             while self.segments.len() as u64 > SEGMENTS {
                 if let Some((old, _)) = self.segments.pop_front() {
@@ -327,8 +410,15 @@ impl Ring {
             }
         }
         if let (Some(current), Some((_, len))) = (&mut self.current, self.segments.back_mut()) {
-            current.write_all(text)?;
-            *len += text.len() as u64;
+            current.zstd.write_all(text)?;
+            current.passes += 1;
+            // What the compressor holds counts on disk only once flushed: flushed at least once
+            // a segment's worth, so that the bound holds at any rate.
+            current.pending += text.len() as u64;
+            if current.flushed.elapsed() >= FLUSH_EVERY || current.pending >= per_segment {
+                current.flush()?;
+            }
+            *len = current.zstd.get_ref().bytes;
         }
         Ok(())
     }
@@ -354,7 +444,7 @@ impl Ring {
             Event::Cut.write_line(&mut text)?;
         }
         for (segment, _) in &self.segments {
-            text.extend(fs::read(segment)?);
+            text.extend(read_segment(segment)?);
         }
         Ok(text)
     }
@@ -393,16 +483,40 @@ fn ring_files(dir: &Path) -> io::Result<(Option<Vec<u8>>, Vec<PathBuf>)> {
     let mut segments: Vec<PathBuf> = fs::read_dir(dir)?
         .filter_map(Result::ok)
         .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "jsonl") && p != &header)
+        .filter(|p| p.extension().is_some_and(|x| x == "zst" || x == "jsonl") && p != &header)
         .collect();
     segments.sort();
     let Ok(mut text) = fs::read(&header) else {
         return Ok((None, segments));
     };
     for segment in &segments {
-        text.extend(fs::read(segment)?);
+        text.extend(read_segment(segment)?);
     }
     Ok((Some(text), segments))
+}
+
+/// A segment's lines: what its compressed frame holds up to the last whole line (a segment
+/// written until a crash ends where its last flush did), or a plain segment's.
+fn read_segment(path: &Path) -> io::Result<Vec<u8>> {
+    let file = File::open(path)?;
+    if path.extension().is_some_and(|x| x == "jsonl") {
+        return fs::read(path);
+    }
+    let mut zstd = zstd::stream::read::Decoder::new(file)?;
+    let mut text = Vec::new();
+    let mut chunk = [0u8; 1 << 16];
+    loop {
+        match io::Read::read(&mut zstd, &mut chunk) {
+            Ok(0) => break,
+            Ok(n) => text.extend_from_slice(&chunk[..n]),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            // The frame's end not written: the run ended before the segment did.
+            Err(_) => break,
+        }
+    }
+    let whole = text.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+    text.truncate(whole);
+    Ok(text)
 }
 
 /// The live ring in `dir` (`<state dir>/blackbox`) as one recording.
@@ -420,6 +534,13 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("chassisd-ring-{test}-{}", std::process::id()));
         let _ = fs::remove_dir_all(&dir);
         dir
+    }
+
+    fn bound(bytes: u64) -> Bound {
+        Bound {
+            bytes,
+            age: Duration::from_secs(600),
+        }
     }
 
     fn start() -> Event {
@@ -454,7 +575,7 @@ mod tests {
     #[test]
     fn the_ring_lets_go_of_its_oldest_and_a_kept_window_says_so() {
         let dir = dir("bounded");
-        let mut ring = Ring::open(&dir, 2_000, 2).unwrap();
+        let mut ring = Ring::open(&dir, bound(2_000), 2).unwrap();
         ring.append(&[start()]).unwrap();
         for t in 0..200 {
             ring.append(&pass(t)).unwrap();
@@ -482,51 +603,55 @@ mod tests {
     #[test]
     fn passes_a_full_disk_refuses_are_counted_and_the_next_written_begins_with_a_gap() {
         let dir = dir("full");
-        let mut ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        // Segments of 1000 bytes: the compressor is flushed every few passes.
+        let mut ring = Ring::open(&dir, bound(8_000), 4).unwrap();
         ring.record(vec![start()]);
-        // The ring's first segment is /dev/full: every write of it fails with ENOSPC.
-        let first = ring.dir.join("ring-00000001.jsonl");
+        // The ring's first segment is /dev/full: its flush fails with ENOSPC, and every pass it
+        // held since is lost with it.
+        let first = ring.dir.join("ring-00000001.jsonl.zst");
         std::os::unix::fs::symlink("/dev/full", &first).unwrap();
-        for t in 0..200 {
+        let mut t = 0;
+        while ring.unwritten.load(Ordering::Relaxed) == 0 {
+            assert!(t < 200, "no pass counted unwritten");
             ring.record(pass(t));
+            t += 1;
         }
         let unwritten = ring.unwritten.load(Ordering::Relaxed);
-        assert!(unwritten > 0, "no pass counted unwritten");
-        assert_eq!(
-            ring.unwritten_since, unwritten,
-            "nothing was written after the first failure"
-        );
-        // The disk back (the next segment a real file): the next pass begins with the gap.
-        fs::remove_file(&first).unwrap();
-        ring.current = None;
-        ring.segments.clear();
-        ring.record(pass(200));
+        assert_eq!(unwritten, t, "every pass the segment held is counted");
+        assert!(unwritten > 1, "the segment held one pass only");
+        assert_eq!(ring.unwritten_since, unwritten);
+        // The next pass goes to a new segment, and begins with the gap.
+        ring.record(pass(t));
         assert_eq!(ring.unwritten_since, 0);
         ring.current.as_mut().unwrap().flush().unwrap();
-        let text = fs::read(ring.dir.join("ring-00000002.jsonl")).unwrap();
+        let text = read_segment(&ring.dir.join("ring-00000002.jsonl.zst")).unwrap();
         let events = read(&text).unwrap();
         assert_eq!(events[0], Event::Gap { dropped: unwritten });
-        assert_eq!(events.last(), pass(200).last());
+        assert_eq!(events.last(), pass(t).last());
         fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn a_run_that_ended_without_its_orderly_stop_is_kept_at_the_next_start() {
         let dir = dir("crash");
-        let mut ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        let mut ring = Ring::open(&dir, bound(1 << 20), 4).unwrap();
         ring.append(&[start()]).unwrap();
         ring.append(&pass(5)).unwrap();
+        // The flush of every second, then a pass still in the compressor when the run ends.
+        ring.current.as_mut().unwrap().flush().unwrap();
+        ring.append(&pass(6)).unwrap();
         drop(ring);
-        let mut ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        let mut ring = Ring::open(&dir, bound(1 << 20), 4).unwrap();
         let files = kept(&ring);
         assert_eq!(files.len(), 1);
         let events = read(&fs::read(&files[0]).unwrap()).unwrap();
-        assert_eq!(events.len(), 4);
+        assert_eq!(events.len(), 4, "{events:?}");
+        assert_eq!(events.last(), pass(5).last());
         // An orderly stop leaves nothing to keep.
         ring.append(&[start()]).unwrap();
         ring.append(&[Event::Stop { now: 9 }]).unwrap();
         drop(ring);
-        let ring = Ring::open(&dir, 1 << 20, 4).unwrap();
+        let ring = Ring::open(&dir, bound(1 << 20), 4).unwrap();
         assert_eq!(kept(&ring).len(), 1);
         fs::remove_dir_all(&dir).unwrap();
     }
