@@ -1,7 +1,8 @@
 //! The black box: chassisd on the simulated chassis records its engine's inputs without being
 //! asked, keeps the window around a stop nobody asked for, and `chassis explain` replays the
-//! run through the same engine with every decision and item written identical — and finds the
-//! first decision a changed priority changes.
+//! run through the same engine with every decision and item written identical — through a
+//! killed safety monitor, an e-stop, a bus cut and a client flood — and finds the first decision
+//! a changed priority changes.
 // Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
@@ -70,19 +71,20 @@ fn with_teleop_priority_raised(ring: &Path) -> String {
     toml::to_string(&config).unwrap()
 }
 
-/// The events of the ring (one a line: the start record first) whose line holds `holding`.
+/// The events of the ring (its header, then its compressed segments; one a line: the start
+/// record first) whose line holds `holding`.
 fn recorded_events(ring: &Path, holding: &str) -> Vec<usize> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(ring)
+    let mut segments: Vec<PathBuf> = std::fs::read_dir(ring)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "jsonl") && !p.ends_with("header.jsonl"))
+        .filter(|p| p.extension().is_some_and(|x| x == "zst"))
         .collect();
-    files.sort();
-    files.insert(0, ring.join("header.jsonl"));
-    let text: String = files
-        .iter()
-        .map(|f| std::fs::read_to_string(f).unwrap())
-        .collect();
+    segments.sort();
+    let mut text = std::fs::read_to_string(ring.join("header.jsonl")).unwrap();
+    for segment in &segments {
+        let bytes = zstd::decode_all(std::fs::File::open(segment).unwrap()).unwrap();
+        text.push_str(std::str::from_utf8(&bytes).unwrap());
+    }
     text.lines()
         .enumerate()
         .filter(|(_, l)| l.contains(holding))
@@ -180,6 +182,140 @@ fn a_recorded_incident_replays_identically_and_a_changed_priority_diverges_at_on
     let first_shown = recorded_events(&ring, r#""what":{"description""#)[0];
     assert!(first_shown < recorded_events(&ring, MUX)[0]);
     assert_eq!(at, first_shown, "diverged elsewhere: {json}");
+}
+
+/// A bus cut (the simulator at the far end of an slcan line killed and started again) and a
+/// client flooding the mux, recorded and replayed: every decision and item written identical,
+/// and nothing of the flood left unrecorded.
+#[test]
+fn a_bus_cut_and_a_client_flood_replay_identically() {
+    let mut env = Env::new("blackbox-cut");
+    let n = name("bbc");
+    let link = env.dir.join("titan");
+    let (sim, bus) = env.sim_on_pty("titan", &[], &n, Line::Slcan, &link, UP);
+    let chassisd = env.serve("titan", &n, &["--bus", &bus, "--no-safety-monitor"]);
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = source(&mut robot, "teleop");
+    assert!(drive(&mut robot, &mut teleop, 0.3, Duration::from_secs(1)) > 0.2);
+    // The bus cut: the chassis at the far end gone, then back.
+    env.proc(sim).signal(Signal::SIGKILL);
+    let _ = std::fs::remove_file(&link);
+    let lost = wait_for(Duration::from_secs(3), || {
+        drive(&mut robot, &mut teleop, 0.3, Duration::from_millis(20));
+        mux(&mut robot).stop == Stop::BUS
+    });
+    assert!(
+        lost.is_some(),
+        "the bus cut never stopped the mux\n{}",
+        env.logs()
+    );
+    env.sim("sim2", "titan", &[], &n, &Line::Slcan.sim_bus(&link));
+    let back = wait_for(UP, || {
+        drive(&mut robot, &mut teleop, 0.3, Duration::from_millis(20));
+        mux(&mut robot).zero_reason == ZeroReason::AWAITING_ZERO
+    });
+    assert!(back.is_some(), "the bus never came back\n{}", env.logs());
+    drive(&mut robot, &mut teleop, 0.0, Duration::from_millis(200));
+    assert!(drive(&mut robot, &mut teleop, 0.3, Duration::from_secs(1)) > 0.2);
+    // The flood: the planner as fast as one thread sends, for a second.
+    let mut planner = source(&mut robot, "planner");
+    let end = Instant::now() + Duration::from_secs(1);
+    let mut sent = 0u64;
+    while Instant::now() < end {
+        let vx = if sent.is_multiple_of(2) { 0.1 } else { -0.1 };
+        planner.send(VelocityRequest::twist(vx, 0.0)).unwrap();
+        sent += 1;
+    }
+    drive(&mut robot, &mut teleop, 0.0, Duration::from_millis(300));
+    env.proc(chassisd).signal(Signal::SIGTERM);
+    assert_eq!(
+        env.proc(chassisd).wait_exit(Duration::from_secs(10)),
+        Some(0)
+    );
+
+    let ring = env.state_home().join("chassisd").join(&n).join("blackbox");
+    let (out, text) = explain(&env, &[ring.to_str().unwrap()]);
+    assert!(out.status.success(), "{text}\n{}", env.logs());
+    assert!(text.contains("items written: identical"), "{text}");
+    assert!(!text.contains("replay stopped"), "{text}");
+    assert!(
+        text.contains("STOP stopped: the bus is lost or bus-off"),
+        "{text}"
+    );
+    assert!(
+        text.contains("waiting for a zero from teleop since the bus came back"),
+        "{text}"
+    );
+    assert!(text.contains("driving from planner"), "{sent} sent: {text}");
+    let (out, _) = explain(&env, &[ring.to_str().unwrap(), "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let events = json["replay"]["events"].as_u64().unwrap();
+    assert_eq!(json["replay"]["checked"].as_u64(), Some(events), "{json}");
+    // The window kept for the bus cut, from its MCAP file.
+    let kept: Vec<PathBuf> = std::fs::read_dir(ring.join("kept"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(!kept.is_empty(), "no window kept\n{}", env.logs());
+    for file in &kept {
+        let (out, text) = explain(&env, &[file.to_str().unwrap()]);
+        assert!(out.status.success(), "{}: {text}", file.display());
+        assert!(text.contains("identical"), "{text}");
+    }
+}
+
+/// A ring of six seconds, on a run longer than that: the kept window has lost the run's
+/// beginning, so the engine's state at its start is unknown — `chassis explain` says so and
+/// tells the story on from the recorded decisions, marked as not replayed.
+#[test]
+fn a_window_whose_beginning_the_ring_let_go_of_is_told_as_recorded() {
+    let mut env = Env::new("blackbox-wrap");
+    let n = name("bbw");
+    let config = env.write("wrap.toml", "[service]\nblackbox_minutes = 0.1\n");
+    env.chassisd(
+        "chassisd",
+        &[
+            "--robot",
+            "titan",
+            "--name",
+            &n,
+            "--config",
+            &config,
+            "--no-safety-monitor",
+        ],
+    );
+    let mut robot = env.robot(&n, UP);
+    let mut teleop = source(&mut robot, "teleop");
+    assert!(drive(&mut robot, &mut teleop, 0.3, Duration::from_secs(8)) > 0.2);
+    env.chassis_ok(&["control", "--name", &n, "estop"]);
+    let logged = wait_for(Duration::from_secs(15), || {
+        env.logs().contains("black box kept: stop: stopped: locked")
+    });
+    assert!(logged.is_some(), "no window kept\n{}", env.logs());
+    let kept_dir = env
+        .state_home()
+        .join("chassisd")
+        .join(&n)
+        .join("blackbox/kept");
+    let kept: Vec<PathBuf> = std::fs::read_dir(kept_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    let [file] = kept.as_slice() else {
+        panic!("one window kept, not {kept:?}")
+    };
+    let (out, text) = explain(&env, &[file.to_str().unwrap()]);
+    assert!(out.status.success(), "{text}");
+    assert!(
+        text.contains("replay stopped at event") && text.contains("let go of the run's beginning"),
+        "{text}"
+    );
+    assert!(text.contains("as recorded, not replayed"), "{text}");
+    assert!(text.contains("driving from teleop"), "{text}");
+    assert!(
+        text.contains("STOP stopped: locked · held: estop"),
+        "{text}"
+    );
 }
 
 /// With no configuration at all the black box records, and `chassis control keep` keeps its

@@ -57,6 +57,9 @@ pub struct Replay {
     pub divergence: Option<Divergence>,
     /// Why the replay stopped before the end (a gap in the recording, a cut ring).
     pub incomplete: Option<String>,
+    /// The mux decisions recorded after the replay stopped: read from the recording, not
+    /// decided again (the story goes on with them).
+    pub unreplayed_decisions: usize,
     /// The recorded run's start: monotonic and wall clock, ns.
     pub start_ns: u64,
     pub start_unix_ns: u64,
@@ -416,13 +419,22 @@ pub fn replay(events: &[Event], config: Option<&str>) -> Result<Replay, ReplayEr
         }
     }
     let checked = player.divergence.as_ref().map_or(player.next, |d| d.event);
+    let decisions = player.muxes.len();
+    if incomplete.is_some() {
+        read_on(
+            &events[player.next..],
+            &mut player.muxes,
+            &mut player.writes,
+        );
+    }
     Ok(Replay {
         recorded_version: version.clone(),
         version_differs: version != env!("CARGO_PKG_VERSION"),
         config_differs: text != recorded,
         checked,
         events: events.len(),
-        decisions: player.muxes.len(),
+        decisions,
+        unreplayed_decisions: player.muxes.len() - decisions,
         frames_written: player.writes.len(),
         divergence: player.divergence,
         incomplete,
@@ -431,6 +443,24 @@ pub fn replay(events: &[Event], config: Option<&str>) -> Result<Replay, ReplayEr
         muxes: player.muxes,
         writes: player.writes,
     })
+}
+
+/// The mux decisions and the writes of `events` as they were recorded, for a story that goes on
+/// where the replay cannot (the engine's state after a gap or a cut is unknown).
+fn read_on(events: &[Event], muxes: &mut Vec<MuxStatus>, writes: &mut Vec<u64>) {
+    for event in events {
+        match event {
+            Event::Publish {
+                what: Published::Mux(bytes),
+                ..
+            } => muxes.extend(MuxStatus::read_from_bytes(&bytes.0).ok()),
+            Event::Write {
+                outcome: Outcome::Out(t) | Outcome::Held(t),
+                ..
+            } => writes.push(*t),
+            _ => {}
+        }
+    }
 }
 
 /// One stretch of the run under one decision.
@@ -447,6 +477,8 @@ pub struct Chapter {
     pub stop: bool,
     /// From the decision to the first command written after it, ms.
     pub to_first_write_ms: Option<f64>,
+    /// Decided again by the replay (else read from the recording).
+    pub replayed: bool,
 }
 
 /// The wall-clock time of `ns` (`HH:MM:SS.mmm` UTC).
@@ -461,9 +493,13 @@ pub fn wall(replay: &Replay, ns: u64) -> String {
 pub fn story(replay: &Replay) -> Vec<Chapter> {
     let mut chapters: Vec<Chapter> = Vec::new();
     let mut before: Option<&MuxStatus> = None;
-    for status in &replay.muxes {
+    for (index, status) in replay.muxes.iter().enumerate() {
         let why = status.why().to_string();
-        if chapters.last().is_some_and(|c| c.why == why) {
+        let replayed = index < replay.decisions;
+        if chapters
+            .last()
+            .is_some_and(|c| c.why == why && c.replayed == replayed)
+        {
             before = Some(status);
             continue;
         }
@@ -481,6 +517,7 @@ pub fn story(replay: &Replay) -> Vec<Chapter> {
                 .flatten(),
             stop,
             to_first_write_ms,
+            replayed,
         });
         before = Some(status);
     }
@@ -540,8 +577,16 @@ pub fn render(replay: &Replay, chapters: &[Chapter]) -> String {
     let _ = match &replay.divergence {
         None => writeln!(
             out,
-            "replay: {} of {} events, {} mux decisions and {} items written: identical",
-            replay.checked, replay.events, replay.decisions, replay.frames_written
+            "replay: {} of {} events, {} mux decisions and {} items written: identical{}",
+            replay.checked,
+            replay.events,
+            replay.decisions,
+            replay.frames_written,
+            if replay.incomplete.is_some() {
+                " as far as the replay went"
+            } else {
+                ""
+            }
         ),
         Some(d) => writeln!(
             out,
@@ -558,7 +603,14 @@ pub fn render(replay: &Replay, chapters: &[Chapter]) -> String {
         let _ = writeln!(out, "replay stopped at event {}: {why}", replay.checked);
     }
     let _ = writeln!(out, "story:");
-    for c in chapters {
+    for (i, c) in chapters.iter().enumerate() {
+        if !c.replayed && chapters.get(i.wrapping_sub(1)).is_none_or(|b| b.replayed) {
+            let _ = writeln!(
+                out,
+                "  (from here on as recorded, not replayed: {} mux decisions)",
+                replay.unreplayed_decisions
+            );
+        }
         let mark = if c.stop { "STOP " } else { "" };
         let _ = write!(out, "  {}  {mark}{}", c.at, c.why);
         if let Some(ms) = c.to_first_write_ms {
