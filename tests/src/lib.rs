@@ -1349,6 +1349,56 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
         fault: "the chassis runs over a lowered speed limit: 0.3 m/s set, 1.6 × the command \
                 measured (TITAN)",
     },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_titan",
+        fault: "the operator's e-stop from 1 m/s and from full speed (titan)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_scout_mini",
+        fault: "the operator's e-stop from 1 m/s and from full speed (scout-mini)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_xbot",
+        fault: "the operator's e-stop from 1 m/s and from full speed (xbot)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_scout",
+        fault: "the operator's e-stop from 1 m/s and from full speed (scout)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_hunter",
+        fault: "the operator's e-stop from 1 m/s and from full speed (hunter)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_hunter_se",
+        fault: "the operator's e-stop from 1 m/s and from full speed (hunter-se)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_tracer",
+        fault: "the operator's e-stop from 1 m/s and from full speed (tracer)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_bunker",
+        fault: "the operator's e-stop from 1 m/s and from full speed (bunker)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_ranger_mini",
+        fault: "the operator's e-stop from 1 m/s and from full speed (ranger-mini)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
+        test: "stop_distance_tracer_mini",
+        fault: "the operator's e-stop from 1 m/s and from full speed (tracer-mini)",
+    },
 ];
 
 /// Every row of the soak's table (`soak.jsonl`), in the order of the table.

@@ -6,6 +6,11 @@
 //! stop must name its cause in `SafetyStatus` and in `chassis status`. Figures are recorded
 //! with [`Figures`] (`scripts/reliability`). The speed-limit row lowers the limit first (the
 //! operator's `chassis control speed-limit`) and the chassis then runs over it.
+//!
+//! The stop distances: every robot of the registry, simulated, driven at 1 m/s and at its full
+//! speed, stopped by the operator's e-stop while teleop keeps asking: the time from the e-stop's
+//! answer to the standstill and the distance travelled, by the simulator's truth (its chassis
+//! slows on a first-order lag toward the zero command, as each family's simulator documents).
 // Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
@@ -298,4 +303,150 @@ fn a_chassis_running_over_its_speed_limit_is_stopped() {
         config: "[rules.runaway]\nenabled = false\n[rules.limit]\nrelease_ms = 5000\n",
         speed_limit: Some("0.3"),
     });
+}
+
+// ----- Stop distances -----
+
+/// Up to `v` m/s, then the operator's e-stop: the time from its answer to the simulator's
+/// standstill (ms) and the distance travelled (m), by the simulator's truth; what went wrong
+/// otherwise (the speed never reached, no standstill within [`STOP_BOUND`]).
+fn stop_from(
+    env: &Env,
+    robot: &mut Robot,
+    teleop: &mut Source,
+    n: &str,
+    v: f64,
+) -> Result<(f64, f64), String> {
+    let go = VelocityRequest::twist(v as f32, 0.0);
+    let mut send = |robot: &mut Robot| {
+        teleop.send(go).unwrap();
+        let _ = robot.wait_state(Duration::from_millis(20));
+    };
+    wait_for(Duration::from_secs(20), || {
+        send(robot);
+        sim_truth(robot).get("linear_mps") >= 0.97 * v
+    })
+    .ok_or_else(|| format!("never reached {v:.2} m/s"))?;
+    let x0 = x_m(robot);
+    env.chassis_ok(&["control", "--name", n, "estop"]);
+    // Teleop keeps asking: the e-stop holds against it.
+    let mut x_end = x0;
+    let stood = wait_for(STOP_BOUND, || {
+        send(robot);
+        let truth = sim_truth(robot);
+        x_end = truth.get("x_m");
+        truth.get("linear_mps").abs() < 0.005
+    })
+    .ok_or_else(|| format!("from {v:.2} m/s: no standstill within {STOP_BOUND:?}"))?;
+    env.chassis_ok(&["control", "--name", n, "estop-release"]);
+    // Motion starts only from a zero.
+    for _ in 0..10 {
+        teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
+        let _ = robot.wait_state(Duration::from_millis(20));
+    }
+    Ok((stood.as_secs_f64() * 1e3, x_end - x0))
+}
+
+/// `robot`, simulated, stopped by the operator's e-stop from 1 m/s and from its full speed.
+fn stop_distance(robot_name: &str, test: &str, rank: u32) {
+    let _machine = shared();
+    let mut env = Env::new(test);
+    let n = name("fsd");
+    env.serve(robot_name, &n, &["--no-safety-monitor"]);
+    let mut robot = env.robot(&n, UP);
+    let limits = robot.description(UP).unwrap();
+    let full = limits
+        .robot_limits
+        .forward_mps
+        .min(limits.configured_limits.forward_mps);
+    let mut teleop = source(&mut robot, "teleop");
+    let speeds: Vec<f64> = if full > 1.0 {
+        vec![1.0, full]
+    } else {
+        vec![full]
+    };
+    let mut parts = Vec::new();
+    let mut pass = true;
+    let mut worst_ms = 0.0f64;
+    for &v in &speeds {
+        match stop_from(&env, &mut robot, &mut teleop, &n, v) {
+            Ok((ms, m)) => {
+                worst_ms = worst_ms.max(ms);
+                parts.push(format!(
+                    "from {v:.2} m/s: standstill {ms:.0} ms after the e-stop's answer, {m:.3} m \
+                     travelled"
+                ));
+            }
+            Err(e) => {
+                pass = false;
+                parts.push(e);
+            }
+        }
+    }
+    let mut figures = Figures::faults();
+    figures.add(fault_figure(
+        SUITE,
+        test,
+        rank,
+        &format!("the operator's e-stop from 1 m/s and from full speed ({robot_name})"),
+        "`chassis control estop` while teleop drives straight at 1 m/s, then at the robot's \
+         full speed (its description's forward limit), and keeps asking",
+        "the mux holds zero against teleop and the chassis slows to a standstill within 4 s",
+        parts.join("; "),
+        worst_ms,
+        pass,
+    ));
+    eprintln!("{test}: {}", parts.join("; "));
+    assert!(pass, "{}\n{}", parts.join("\n"), env.logs());
+    figures.finish();
+}
+
+#[test]
+fn stop_distance_titan() {
+    stop_distance("titan", "stop_distance_titan", 800);
+}
+
+#[test]
+fn stop_distance_scout_mini() {
+    stop_distance("scout-mini", "stop_distance_scout_mini", 810);
+}
+
+#[test]
+fn stop_distance_xbot() {
+    stop_distance("xbot", "stop_distance_xbot", 820);
+}
+
+#[test]
+fn stop_distance_scout() {
+    stop_distance("scout", "stop_distance_scout", 830);
+}
+
+#[test]
+fn stop_distance_hunter() {
+    stop_distance("hunter", "stop_distance_hunter", 840);
+}
+
+#[test]
+fn stop_distance_hunter_se() {
+    stop_distance("hunter-se", "stop_distance_hunter_se", 850);
+}
+
+#[test]
+fn stop_distance_tracer() {
+    stop_distance("tracer", "stop_distance_tracer", 860);
+}
+
+#[test]
+fn stop_distance_bunker() {
+    stop_distance("bunker", "stop_distance_bunker", 870);
+}
+
+#[test]
+fn stop_distance_ranger_mini() {
+    stop_distance("ranger-mini", "stop_distance_ranger_mini", 880);
+}
+
+#[test]
+fn stop_distance_tracer_mini() {
+    stop_distance("tracer-mini", "stop_distance_tracer_mini", 890);
 }
