@@ -217,12 +217,13 @@ fn a_bus_cut_and_a_client_flood_replay_identically() {
     assert!(back.is_some(), "the bus never came back\n{}", env.logs());
     drive(&mut robot, &mut teleop, 0.0, Duration::from_millis(200));
     assert!(drive(&mut robot, &mut teleop, 0.3, Duration::from_secs(1)) > 0.2);
-    // The flood: the planner as fast as one thread sends, for a second.
+    // The flood: the planner as fast as one thread sends, for a second; every other request a
+    // zero, which its motion starts from once teleop falls silent.
     let mut planner = source(&mut robot, "planner");
     let end = Instant::now() + Duration::from_secs(1);
-    let mut sent = 0u64;
+    let mut sent = 0usize;
     while Instant::now() < end {
-        let vx = if sent.is_multiple_of(2) { 0.1 } else { -0.1 };
+        let vx = [0.0, 0.1, 0.0, -0.1][sent % 4];
         planner.send(VelocityRequest::twist(vx, 0.0)).unwrap();
         sent += 1;
     }
