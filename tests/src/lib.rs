@@ -1351,6 +1351,12 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
     },
     ExpectedRow {
         suite: "faults_chassis",
+        test: "a_chassis_turning_against_its_command_is_latched",
+        fault: "the chassis turns against its command (SCOUT MINI turning on the spot, wheels \
+                at −1 × the command)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
         test: "stop_distance_titan",
         fault: "the operator's e-stop from 1 m/s and from full speed (titan)",
     },

@@ -1,6 +1,7 @@
 //! The fault matrix, the chassis: a simulated TITAN that does not do what it is told — it runs
 //! away, drives against its command, ignores it, slips, or loses a motor driver mid-motion —
-//! while teleop drives it at 0.5 m/s under chassis-safety. Each row records the time from the
+//! while teleop drives it at 0.5 m/s under chassis-safety, and a SCOUT MINI that turns against
+//! its command on the spot (its yaw rate judged). Each row records the time from the
 //! injection to the stop (the mux's output zero) and the distance the chassis travelled from
 //! the injection to the stop and to its standstill, by the simulator's truth; a not-following
 //! stop must name its cause in `SafetyStatus` and in `chassis status`. Figures are recorded
@@ -46,6 +47,45 @@ struct Case {
     config: &'static str,
     /// The speed limit set before the injection, m/s.
     speed_limit: Option<&'static str>,
+    /// Teleop turns a SCOUT MINI on the spot at [`TURN_RADPS`] instead of driving the TITAN
+    /// straight: the yaw rate is judged.
+    turning: bool,
+}
+
+/// The yaw rate teleop turns at, rad/s.
+const TURN_RADPS: f32 = 0.4;
+
+/// What a case drives and measures: the robot, teleop's request, the speed it reports (m/s or
+/// rad/s), the simulator's truth of the position that speed moves (`x_m` or `yaw_rad`) and its
+/// unit.
+struct Axis {
+    robot: &'static str,
+    go: VelocityRequest,
+    speed: fn(&ChassisState) -> f32,
+    truth: &'static str,
+    unit: &'static str,
+}
+
+impl Case {
+    fn axis(&self) -> Axis {
+        if self.turning {
+            Axis {
+                robot: "scout-mini",
+                go: VelocityRequest::twist(0.0, TURN_RADPS),
+                speed: |s| s.motion.angular_radps,
+                truth: "yaw_rad",
+                unit: "rad",
+            }
+        } else {
+            Axis {
+                robot: "titan",
+                go: VelocityRequest::twist(SPEED_MPS, 0.0),
+                speed: |s| s.motion.linear_mps,
+                truth: "x_m",
+                unit: "m",
+            }
+        }
+    }
 }
 
 fn injected(kind: u8, index: u8, value: f64) -> SimRequest {
@@ -67,7 +107,8 @@ fn chassis_fault(case: &Case) {
     let _machine = shared();
     let mut env = Env::new(case.tag);
     let n = name(case.tag);
-    env.serve("titan", &n, &[]);
+    let axis = case.axis();
+    env.serve(axis.robot, &n, &[]);
     let mut robot = env.robot(&n, UP);
     // Long enough a release that the cause is still in force when `chassis status` reads it.
     let config = env.write(
@@ -90,13 +131,13 @@ fn chassis_fault(case: &Case) {
         env.logs()
     );
     let mut teleop = source(&mut robot, "teleop");
-    let go = VelocityRequest::twist(SPEED_MPS, 0.0);
+    let full = axis.go.linear_x_mps.max(axis.go.angular_z_radps);
     let mut wire = Wire::new(&robot);
-    let mut pump = Pump::new(&mut teleop, go, &mut wire);
+    let mut pump = Pump::new(&mut teleop, axis.go, &mut wire);
     let steady = pump.until(&mut robot, UP, |m, s| {
         source_status(m, "safety").has(SourceFlags::FRESH)
             && m.active().map(SourceStatus::name) == Some("teleop")
-            && s.motion.linear_mps > SPEED_MPS - 0.05
+            && (axis.speed)(s) > full - 0.05
     });
     assert!(steady.is_some(), "no steady drive\n{}", env.logs());
     pump.run(&mut robot, Duration::from_millis(500));
@@ -112,20 +153,20 @@ fn chassis_fault(case: &Case) {
         pump.run(&mut robot, Duration::from_millis(500));
     }
 
-    let x0 = x_m(&mut robot);
+    let position = |robot: &mut Robot| sim_truth(robot).get(axis.truth);
+    let unit = axis.unit;
+    let x0 = position(&mut robot);
     let injected_at = Instant::now();
     sim_ok(&mut robot, case.request);
     let stopped = pump.until(&mut robot, STOP_BOUND, |m, _| {
         m.output == BodyVelocity::ZERO
     });
-    let x_stop = x_m(&mut robot);
+    let x_stop = position(&mut robot);
     let status_text = env.chassis_ok(&["status", "--name", &n]);
     let standing = pump
-        .until(&mut robot, STOP_BOUND, |_, s| {
-            s.motion.linear_mps.abs() < 0.02
-        })
+        .until(&mut robot, STOP_BOUND, |_, s| (axis.speed)(s).abs() < 0.02)
         .is_some();
-    let x_end = x_m(&mut robot);
+    let x_end = position(&mut robot);
     let mut sub = robot
         .subscriber::<SafetyStatus>(SafetyStatus::SERVICE)
         .unwrap()
@@ -146,12 +187,12 @@ fn chassis_fault(case: &Case) {
         case.injection,
         case.behaviour,
         format!(
-            "stopped {stop_ms:.0} ms after the injection ({} in force); {:.2} m travelled to the \
-             stop, {}",
+            "stopped {stop_ms:.0} ms after the injection ({} in force); {:.2} {unit} travelled \
+             to the stop, {}",
             SafetyRule::name(case.rule),
             x_stop - x0,
             if standing {
-                format!("{:.2} m to the standstill", x_end - x0)
+                format!("{:.2} {unit} to the standstill", x_end - x0)
             } else {
                 "still moving after the stop (the chassis does not obey)".into()
             }
@@ -160,7 +201,7 @@ fn chassis_fault(case: &Case) {
         pass,
     ));
     eprintln!(
-        "{}: stop {stop_ms:.0} ms, {:.3} m → {:.3} m\n{status_text}",
+        "{}: stop {stop_ms:.0} ms, {:.3} → {:.3} {unit}\n{status_text}",
         case.test,
         x_stop - x0,
         x_end - x0
@@ -206,6 +247,7 @@ fn a_chassis_running_away_from_its_command_is_latched() {
         stands: false,
         config: "",
         speed_limit: None,
+        turning: false,
     });
 }
 
@@ -224,6 +266,7 @@ fn a_chassis_driving_against_its_command_is_latched() {
         stands: true,
         config: "",
         speed_limit: None,
+        turning: false,
     });
 }
 
@@ -244,6 +287,7 @@ fn a_chassis_ignoring_its_command_is_stopped_and_the_cause_named() {
         stands: true,
         config: "",
         speed_limit: None,
+        turning: false,
     });
 }
 
@@ -263,6 +307,7 @@ fn a_slipping_chassis_is_stopped_and_the_cause_named() {
         stands: true,
         config: "",
         speed_limit: None,
+        turning: false,
     });
 }
 
@@ -281,6 +326,7 @@ fn a_motor_driver_lost_mid_motion_stops_the_chassis() {
         stands: true,
         config: "",
         speed_limit: None,
+        turning: false,
     });
 }
 
@@ -302,6 +348,28 @@ fn a_chassis_running_over_its_speed_limit_is_stopped() {
         stands: true,
         config: "[rules.runaway]\nenabled = false\n[rules.limit]\nrelease_ms = 5000\n",
         speed_limit: Some("0.3"),
+        turning: false,
+    });
+}
+
+#[test]
+fn a_chassis_turning_against_its_command_is_latched() {
+    chassis_fault(&Case {
+        test: "a_chassis_turning_against_its_command_is_latched",
+        tag: "fct",
+        rank: 760,
+        fault: "the chassis turns against its command (SCOUT MINI turning on the spot, wheels \
+                at −1 × the command)",
+        injection: "`chassis sim gain -1` while teleop turns on the spot at 0.4 rad/s",
+        behaviour: "the direction rule, judging the yaw rate (the robot puts one on the wire), \
+                    latches the e-stop; the chassis stands at the zero",
+        request: injected(SimKind::GAIN, 0, -1.0),
+        rule: SafetyRule::DIRECTION,
+        cause: Unfollowed::NONE,
+        stands: true,
+        config: "",
+        speed_limit: None,
+        turning: true,
     });
 }
 

@@ -343,7 +343,8 @@ impl Engine {
     pub fn set_description(&mut self, description: &RobotDescription) -> &Levels {
         self.levels = Levels::resolve(&self.config, Some(description), &self.label);
         self.battery_basis = None;
-        self.watch.set_limits(&description.effective_limits());
+        self.watch
+            .set_limits(&description.effective_limits(), description.kinematics);
         self.warned_no_accel = false;
         &self.levels
     }
@@ -896,8 +897,8 @@ impl Engine {
                 }
                 Measure {
                     target: 1,
-                    value: finding.measured_mps,
-                    threshold: finding.against_mps,
+                    value: finding.measured,
+                    threshold: finding.against,
                     stop_edge: f64::NAN,
                     cause: Cause::Plausibility(finding, cause),
                 }
@@ -1052,18 +1053,22 @@ fn describe(rule: u8, from: u8, to: u8, m: &Measure, threshold: f64) -> String {
             m.value, threshold
         ),
         (Cause::Plausibility(f, _), _) if rule == SafetyRule::RUNAWAY => format!(
-            "{name}: {:.2} m/s, commands allow {:.2} m/s",
-            f.measured_mps.abs(),
-            f.against_mps
+            "{name}: {:.2} {unit}, commands allow {:.2} {unit}",
+            f.measured.abs(),
+            f.against,
+            unit = f.unit
         ),
         (Cause::Plausibility(f, _), _) if rule == SafetyRule::DIRECTION => format!(
-            "{name}: {:.2} m/s against a {:.2} m/s command",
-            f.measured_mps, f.against_mps
+            "{name}: {:.2} {unit} against a {:.2} {unit} command",
+            f.measured,
+            f.against,
+            unit = f.unit
         ),
         (Cause::Plausibility(f, cause), _) => format!(
-            "{name}: {:.2} of {:.2} m/s, {}",
-            f.measured_mps,
-            f.against_mps,
+            "{name}: {:.2} of {:.2} {}, {}",
+            f.measured,
+            f.against,
+            f.unit,
             Unfollowed::name(cause)
         ),
         (Cause::None, _) if rule == SafetyRule::STALE => format!("{name}: fresh state again"),

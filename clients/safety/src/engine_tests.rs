@@ -943,6 +943,62 @@ impl Rig {
     }
 }
 
+/// `kind` as chassisd describes it, yaw accelerating at 3 rad/s², driving straight at 0.3 m/s.
+fn turning(kind: RobotKind) -> Rig {
+    let mut d = description(kind);
+    d.configured_limits.linear_accel_mps2 = 2.0;
+    d.configured_limits.angular_accel_radps2 = 3.0;
+    let mut rig = Rig::described(&d, "");
+    rig.wire = true;
+    rig.state.system.power_enabled = 1;
+    rig.state.system.control_mode = ControlMode::COMMAND;
+    rig.drive(0.3, 0.3);
+    rig
+}
+
+impl Rig {
+    /// `command` rad/s on the wire, `measured` rad/s measured.
+    fn turn(&mut self, command: f32, measured: f32) {
+        self.state.command.angular_radps = command;
+        self.state.motion.angular_radps = measured;
+    }
+}
+
+#[test]
+fn a_yaw_rate_beyond_or_against_the_command_latches_where_the_wire_carries_one() {
+    let mut rig = turning(RobotKind::Xbot);
+    rig.turn(0.5, 0.5);
+    assert_eq!(rig.run(2000).command, Command::Heartbeat);
+    // 0.5 rad/s × 1.2 + 0.1 rad/s = 0.7 rad/s.
+    rig.turn(0.5, 0.9);
+    let d = rig.run(300);
+    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert_eq!(
+        texts(&d),
+        ["runaway: 0.90 rad/s, commands allow 0.70 rad/s"]
+    );
+
+    let mut rig = turning(RobotKind::Xbot);
+    rig.turn(0.5, 0.5);
+    rig.run(2000);
+    rig.turn(0.5, -0.4);
+    let d = rig.run(300);
+    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert_eq!(
+        texts(&d),
+        ["direction: -0.40 rad/s against a 0.50 rad/s command"]
+    );
+}
+
+#[test]
+fn a_steering_robots_yaw_rate_is_not_judged() {
+    // TITAN steers its wheels: the wire carries a steer angle, not a yaw rate.
+    let mut rig = turning(RobotKind::Titan);
+    rig.turn(0.0, 0.9);
+    let d = rig.run(2000);
+    assert_eq!(d.command, Command::Heartbeat, "{:?}", texts(&d));
+}
+
 #[test]
 fn moving_while_commanded_still_latches_as_a_runaway() {
     let mut rig = driving("");

@@ -1,7 +1,9 @@
 //! Plausibility: the wheels follow the command.
 //!
-//! Three rules compare the linear speed on the wire (the mux's output after the driver's clamps,
-//! `ChassisState::command`) with the linear speed measured (`ChassisState::motion`):
+//! Three rules compare the speed on the wire (the mux's output after the driver's clamps,
+//! `ChassisState::command`) with the speed measured (`ChassisState::motion`), on each axis a
+//! robot commands: the linear speed, and the yaw rate where the robot puts one on the wire (it
+//! does not steer its wheels: [`Kinematics::steers`]):
 //!
 //! * **runaway**: faster than any recent command allows, × `runaway_factor` + `still_mps` —
 //!   moving while commanded still among them (latches by default);
@@ -13,13 +15,14 @@
 //! A robot does not follow its command at once: it lags, and it brakes at its acceleration.
 //! Each rule judges against the *reach* of recent commands — the fastest and the slowest speed
 //! commanded, held for `lag_ms`, then closing in on the command at the robot's acceleration
-//! (the description's effective limit, overridden by `[rules.plausibility] linear_accel_mps2`).
-//! Without an acceleration none of the three judges, and the monitor says so once. Rules judge
-//! only once the driver reports the command it put on the wire; a yaw rate is not judged
-//! (steering robots put a steer angle on the wire, not a yaw rate).
+//! (the description's effective limit, overridden by `[rules.plausibility] linear_accel_mps2`
+//! and `angular_accel_radps2`). Without an acceleration an axis is not judged, and the monitor
+//! says so once for the linear one. Rules judge only once the driver reports the command it put
+//! on the wire; a steering robot's yaw rate is not judged (it puts a steer angle on the wire).
 
 use chassis_client::{
-    ChassisState, ControlMode, FaultFlags, Group, LinkFlags, MotionLimits, SystemState, Unfollowed,
+    ChassisState, ControlMode, FaultFlags, Group, Kinematics, LinkFlags, MotionLimits, SystemState,
+    Unfollowed,
 };
 use serde::{Deserialize, Serialize};
 
@@ -91,8 +94,14 @@ pub struct PlausibilityThresholds {
     #[serde(deserialize_with = "crate::config::plain_number")]
     #[serde(skip_serializing_if = "Option::is_none")]
     pub linear_accel_mps2: Option<f64>,
+    /// The robot's yaw acceleration, rad/s². Absent: the description's effective limit.
+    #[serde(deserialize_with = "crate::config::plain_number")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub angular_accel_radps2: Option<f64>,
     /// A measured speed below this is still, m/s (measurement noise, creep).
     pub still_mps: f64,
+    /// A measured yaw rate below this is still, rad/s.
+    pub still_radps: f64,
     /// How long the robot may keep a command's speed after it changed, ms (its response lag).
     pub lag_ms: u64,
     /// A runaway: faster than the reach of recent commands × this (≥ 1) + `still_mps`.
@@ -105,7 +114,9 @@ impl Default for PlausibilityThresholds {
     fn default() -> Self {
         Self {
             linear_accel_mps2: None,
+            angular_accel_radps2: None,
             still_mps: 0.05,
+            still_radps: 0.1,
             lag_ms: 500,
             runaway_factor: 1.2,
             follow_fraction: 0.25,
@@ -119,9 +130,11 @@ pub struct Plausibility {
     pub runaway: Option<Timing>,
     pub direction: Option<Timing>,
     pub following: Option<Timing>,
-    /// The file's acceleration, m/s², overriding the description's.
+    /// The file's accelerations, m/s² and rad/s², overriding the description's.
     pub linear_accel_mps2: Option<f64>,
+    pub angular_accel_radps2: Option<f64>,
     pub still_mps: f64,
+    pub still_radps: f64,
     pub lag_ns: u64,
     pub runaway_factor: f64,
     pub follow_fraction: f64,
@@ -135,14 +148,19 @@ impl Plausibility {
         t: &PlausibilityThresholds,
     ) -> Result<Self, ConfigError> {
         let key = "rules.plausibility";
-        check_non_negative(key, &[("still_mps", t.still_mps)])?;
-        if let Some(a) = t.linear_accel_mps2
-            && !(a.is_finite() && a > 0.0)
-        {
-            return Err(bad(
-                key,
-                format!("linear_accel_mps2 must be above 0 (is {a})"),
-            ));
+        check_non_negative(
+            key,
+            &[("still_mps", t.still_mps), ("still_radps", t.still_radps)],
+        )?;
+        for (name, a) in [
+            ("linear_accel_mps2", t.linear_accel_mps2),
+            ("angular_accel_radps2", t.angular_accel_radps2),
+        ] {
+            if let Some(a) = a
+                && !(a.is_finite() && a > 0.0)
+            {
+                return Err(bad(key, format!("{name} must be above 0 (is {a})")));
+            }
         }
         if !(t.runaway_factor.is_finite() && (1.0..=3.0).contains(&t.runaway_factor)) {
             return Err(bad(key, "runaway_factor must be 1 to 3"));
@@ -158,7 +176,9 @@ impl Plausibility {
             direction: direction.timing("rules.direction")?,
             following: following.timing("rules.following")?,
             linear_accel_mps2: t.linear_accel_mps2,
+            angular_accel_radps2: t.angular_accel_radps2,
             still_mps: t.still_mps,
+            still_radps: t.still_radps,
             lag_ns: ms_to_ns(t.lag_ms),
             runaway_factor: t.runaway_factor,
             follow_fraction: t.follow_fraction,
@@ -197,11 +217,13 @@ pub fn unfollowed(state: &ChassisState) -> u8 {
     }
 }
 
-/// A rule's finding: the measured speed and the speed it is judged against, m/s.
+/// A rule's finding: the measured speed and the speed it is judged against, in `unit` (`m/s`,
+/// or `rad/s` for a yaw rate).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Finding {
-    pub measured_mps: f64,
-    pub against_mps: f64,
+    pub measured: f64,
+    pub against: f64,
+    pub unit: &'static str,
 }
 
 /// What the three rules find in one state sample.
@@ -215,56 +237,36 @@ pub struct Verdict {
     pub following: Option<(Finding, u8)>,
 }
 
-/// The speeds recent commands allow, and since when the robot has not followed.
+/// One axis: the speeds recent commands allow, and since when the robot has not followed.
 #[derive(Debug, Clone, Default)]
-pub struct Watch {
-    /// The description's effective linear acceleration, m/s² (NaN: none).
-    described_accel_mps2: Option<f64>,
-    /// Fastest and slowest speed recent commands allow, m/s, each with when it was last
-    /// commanded.
+struct Reach {
+    /// Fastest and slowest speed recent commands allow, each with when it was last commanded.
     hi: (f64, u64),
     lo: (f64, u64),
-    last_ns: Option<u64>,
     unfollowed_since: Option<u64>,
 }
 
-impl Watch {
-    /// Takes the acceleration from the robot's description.
-    pub fn set_limits(&mut self, limits: &MotionLimits) {
-        let a = limits.linear_accel_mps2;
-        self.described_accel_mps2 = (a.is_finite() && a > 0.0).then_some(a);
-    }
+/// What one axis is judged with: its acceleration, its still band and its unit.
+#[derive(Debug, Clone, Copy)]
+struct Axis {
+    accel: f64,
+    still: f64,
+    unit: &'static str,
+}
 
-    /// The acceleration the rules judge by: the file's, else the description's.
-    pub fn accel_mps2(&self, p: &Plausibility) -> Option<f64> {
-        p.linear_accel_mps2.or(self.described_accel_mps2)
-    }
-
-    /// Judges the newest state at `now`.
-    pub fn judge(&mut self, now: u64, state: &ChassisState, p: &Plausibility) -> Verdict {
-        let command = f64::from(state.command.linear_mps);
-        let measured = f64::from(state.motion.linear_mps);
-        let (Some(accel), true, true, true) = (
-            self.accel_mps2(p),
-            state.is_valid(Group::Command) && state.is_valid(Group::Motion),
-            command.is_finite(),
-            // A speed that is no number is the speed rule's.
-            measured.is_finite(),
-        ) else {
-            *self = Self {
-                described_accel_mps2: self.described_accel_mps2,
-                ..Self::default()
-            };
-            return Verdict::default();
-        };
-        let dt = self
-            .last_ns
-            .map_or(0.0, |last| now.saturating_sub(last) as f64 / 1e9)
-            .min(1.0);
-        self.last_ns = Some(now);
+impl Reach {
+    /// The three rules on one axis at `now`, `dt` s after the previous state: the runaway, the
+    /// direction and the following findings.
+    fn judge(
+        &mut self,
+        (now, dt): (u64, f64),
+        (command, measured): (f64, f64),
+        axis: Axis,
+        p: &Plausibility,
+    ) -> [Option<Finding>; 3] {
         let closing = |at: u64| {
             if now.saturating_sub(at) >= p.lag_ns {
-                accel * dt
+                axis.accel * dt
             } else {
                 0.0
             }
@@ -279,40 +281,121 @@ impl Watch {
         } else {
             ((self.lo.0 + closing(self.lo.1)).min(command), self.lo.1)
         };
-        let (hi, lo, still) = (self.hi.0, self.lo.0, p.still_mps);
+        let (hi, lo, still) = (self.hi.0, self.lo.0, axis.still);
         let reach = hi.abs().max(lo.abs());
-        let mut verdict = Verdict::default();
+        let finding = |against| Finding {
+            measured,
+            against,
+            unit: axis.unit,
+        };
         let allowed = reach * p.runaway_factor + still;
-        if measured.abs() > allowed {
-            verdict.runaway = Some(Finding {
-                measured_mps: measured,
-                against_mps: allowed,
-            });
-        }
+        let runaway = (measured.abs() > allowed).then(|| finding(allowed));
         let against = (command > still && measured < lo.min(0.0) - still)
             || (command < -still && measured > hi.max(0.0) + still);
-        if against {
-            verdict.direction = Some(Finding {
-                measured_mps: measured,
-                against_mps: command,
-            });
-        }
+        let direction = against.then(|| finding(command));
         let behind = command.abs() > still
             && measured * command.signum() < p.follow_fraction * command.abs();
         if !behind {
             self.unfollowed_since = None;
-            return verdict;
+            return [runaway, direction, None];
         }
         let since = *self.unfollowed_since.get_or_insert(now);
         // Time to get from the slowest speed in reach to the command, and the lag.
-        let need_s = (command.abs() + reach) / accel + p.lag_ns as f64 / 1e9;
-        if now.saturating_sub(since) as f64 / 1e9 >= need_s {
-            let finding = Finding {
-                measured_mps: measured,
-                against_mps: command,
+        let need_s = (command.abs() + reach) / axis.accel + p.lag_ns as f64 / 1e9;
+        let following =
+            (now.saturating_sub(since) as f64 / 1e9 >= need_s).then(|| finding(command));
+        [runaway, direction, following]
+    }
+}
+
+/// What the rules judge by, from the robot's description, and each axis' recent commands.
+#[derive(Debug, Clone, Default)]
+pub struct Watch {
+    /// The description's effective accelerations, m/s² and rad/s² (none: not limited).
+    described_accel_mps2: Option<f64>,
+    described_accel_radps2: Option<f64>,
+    /// The robot puts a yaw rate on the wire (it does not steer its wheels).
+    yaw_on_the_wire: bool,
+    linear: Reach,
+    angular: Reach,
+    last_ns: Option<u64>,
+}
+
+fn positive(a: f64) -> Option<f64> {
+    (a.is_finite() && a > 0.0).then_some(a)
+}
+
+impl Watch {
+    /// Takes the accelerations and the kinematics from the robot's description.
+    pub fn set_limits(&mut self, limits: &MotionLimits, kinematics: u8) {
+        self.described_accel_mps2 = positive(limits.linear_accel_mps2);
+        self.described_accel_radps2 = positive(limits.angular_accel_radps2);
+        self.yaw_on_the_wire = kinematics != 0 && !Kinematics::steers(kinematics);
+    }
+
+    /// The acceleration the rules judge by: the file's, else the description's.
+    pub fn accel_mps2(&self, p: &Plausibility) -> Option<f64> {
+        p.linear_accel_mps2.or(self.described_accel_mps2)
+    }
+
+    /// Judges the newest state at `now`.
+    pub fn judge(&mut self, now: u64, state: &ChassisState, p: &Plausibility) -> Verdict {
+        let linear = (
+            f64::from(state.command.linear_mps),
+            f64::from(state.motion.linear_mps),
+        );
+        let (Some(accel), true, true, true) = (
+            self.accel_mps2(p),
+            state.is_valid(Group::Command) && state.is_valid(Group::Motion),
+            linear.0.is_finite(),
+            // A speed that is no number is the speed rule's.
+            linear.1.is_finite(),
+        ) else {
+            *self = Self {
+                linear: Reach::default(),
+                angular: Reach::default(),
+                last_ns: None,
+                ..self.clone()
             };
-            verdict.following = Some((finding, unfollowed(state)));
+            return Verdict::default();
+        };
+        let dt = self
+            .last_ns
+            .map_or(0.0, |last| now.saturating_sub(last) as f64 / 1e9)
+            .min(1.0);
+        self.last_ns = Some(now);
+        let axis = Axis {
+            accel,
+            still: p.still_mps,
+            unit: "m/s",
+        };
+        let mut found = self.linear.judge((now, dt), linear, axis, p);
+        let angular = (
+            f64::from(state.command.angular_radps),
+            f64::from(state.motion.angular_radps),
+        );
+        if let (true, Some(accel), true) = (
+            self.yaw_on_the_wire,
+            p.angular_accel_radps2.or(self.described_accel_radps2),
+            angular.0.is_finite() && angular.1.is_finite(),
+        ) {
+            let axis = Axis {
+                accel,
+                still: p.still_radps,
+                unit: "rad/s",
+            };
+            let yaw = self.angular.judge((now, dt), angular, axis, p);
+            for (linear, yaw) in found.iter_mut().zip(yaw) {
+                *linear = linear.or(yaw);
+            }
+        } else {
+            self.angular = Reach::default();
         }
-        verdict
+        let [runaway, direction, following] = found;
+        Verdict {
+            runaway,
+            direction,
+            following: following.map(|f| (f, unfollowed(state))),
+        }
     }
 }
