@@ -1357,52 +1357,52 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_titan",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (titan)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_scout_mini",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (scout-mini)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_xbot",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (xbot)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_scout",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (scout)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_hunter",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (hunter)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_hunter_se",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (hunter-se)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_tracer",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (tracer)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_bunker",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (bunker)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_ranger_mini",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (ranger-mini)",
     },
     ExpectedRow {
         suite: "faults_chassis",
-        test: "stop_distance_tracer_mini",
+        test: "stop_distances",
         fault: "the operator's e-stop from 1 m/s and from full speed (tracer-mini)",
     },
 ];

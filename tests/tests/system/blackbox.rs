@@ -56,6 +56,20 @@ fn explain(env: &Env, args: &[&str]) -> (Output, String) {
     (out, text)
 }
 
+/// At least one window was kept in `ring`'s `kept/`, and each replays identically.
+fn kept_windows_replay_identically(env: &Env, ring: &Path) {
+    let kept: Vec<PathBuf> = std::fs::read_dir(ring.join("kept"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(!kept.is_empty(), "no window kept\n{}", env.logs());
+    for file in &kept {
+        let (out, text) = explain(env, &[file.to_str().unwrap()]);
+        assert!(out.status.success(), "{}: {text}", file.display());
+        assert!(text.contains("identical"), "{text}");
+    }
+}
+
 /// The recorded configuration with teleop's priority one higher.
 fn with_teleop_priority_raised(ring: &Path) -> String {
     let header = std::fs::read_to_string(ring.join("header.jsonl")).unwrap();
@@ -146,16 +160,7 @@ fn a_recorded_incident_replays_identically_and_a_changed_priority_diverges_at_on
     );
     assert!(text.contains("driving from teleop"), "{text}");
     // The window kept for the stops, from the MCAP file.
-    let kept: Vec<PathBuf> = std::fs::read_dir(ring.join("kept"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    assert!(!kept.is_empty(), "no window kept\n{}", env.logs());
-    for file in &kept {
-        let (out, text) = explain(&env, &[file.to_str().unwrap()]);
-        assert!(out.status.success(), "{}: {text}", file.display());
-        assert!(text.contains("identical"), "{text}");
-    }
+    kept_windows_replay_identically(&env, &ring);
     // One moment, and the verdict for tools.
     let (_, text) = explain(&env, &[ring_text, "--at", "+2.0"]);
     assert!(text.starts_with("at "), "{text}");
@@ -253,16 +258,7 @@ fn a_bus_cut_and_a_client_flood_replay_identically() {
     let events = json["replay"]["events"].as_u64().unwrap();
     assert_eq!(json["replay"]["checked"].as_u64(), Some(events), "{json}");
     // The window kept for the bus cut, from its MCAP file.
-    let kept: Vec<PathBuf> = std::fs::read_dir(ring.join("kept"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    assert!(!kept.is_empty(), "no window kept\n{}", env.logs());
-    for file in &kept {
-        let (out, text) = explain(&env, &[file.to_str().unwrap()]);
-        assert!(out.status.success(), "{}: {text}", file.display());
-        assert!(text.contains("identical"), "{text}");
-    }
+    kept_windows_replay_identically(&env, &ring);
 }
 
 /// A ring of six seconds, on a run longer than that: the kept window has lost the run's
