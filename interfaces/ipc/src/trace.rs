@@ -55,6 +55,9 @@ pub enum Trace {
 }
 
 impl Trace {
+    /// This build keeps traces (the `trace` feature).
+    pub const ENABLED: bool = cfg!(feature = "trace");
+
     /// The environment variable naming the trace's file (this build keeps traces: the `trace`
     /// feature).
     #[cfg(feature = "trace")]

@@ -84,11 +84,16 @@ mod tests {
         PassStamps::first(&mut trace.current.written, 27);
         trace.end_pass();
         trace.write_out().unwrap();
-        let text = std::fs::read_to_string(trace.path()).unwrap();
-        assert_eq!(
-            text,
-            format!("{}\n0 20 0 0 25 0 0 0 0\n", PassStamps::HEADER)
-        );
+        if Trace::ENABLED {
+            let text = std::fs::read_to_string(trace.path()).unwrap();
+            assert_eq!(
+                text,
+                format!("{}\n0 20 0 0 25 0 0 0 0\n", PassStamps::HEADER)
+            );
+        } else {
+            // `cargo test -p chassisd` alone: chassis-ipc without its `trace` feature.
+            assert!(!trace.path().exists(), "a build without traces wrote one");
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
