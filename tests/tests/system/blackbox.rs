@@ -56,12 +56,35 @@ fn explain(env: &Env, args: &[&str]) -> (Output, String) {
     (out, text)
 }
 
-/// At least one window was kept in `ring`'s `kept/`, and each replays identically.
-fn kept_windows_replay_identically(env: &Env, ring: &Path) {
-    let kept: Vec<PathBuf> = std::fs::read_dir(ring.join("kept"))
+/// `chassis explain`'s `text` says each of `lines` somewhere.
+fn says(text: &str, lines: &[&str]) {
+    for line in lines {
+        assert!(text.contains(line), "no '{line}' in:\n{text}");
+    }
+}
+
+/// The windows kept in `ring`'s `kept/`.
+fn kept_windows(ring: &Path) -> Vec<PathBuf> {
+    std::fs::read_dir(ring.join("kept"))
         .unwrap()
         .map(|e| e.unwrap().path())
-        .collect();
+        .collect()
+}
+
+/// The one window kept in `ring`, explained.
+fn the_kept_window_explained(env: &Env, ring: &Path) -> String {
+    let kept = kept_windows(ring);
+    let [file] = kept.as_slice() else {
+        panic!("one window kept, not {kept:?}")
+    };
+    let (out, text) = explain(env, &[file.to_str().unwrap()]);
+    assert!(out.status.success(), "{text}");
+    text
+}
+
+/// At least one window was kept in `ring`'s `kept/`, and each replays identically.
+fn kept_windows_replay_identically(env: &Env, ring: &Path) {
+    let kept = kept_windows(ring);
     assert!(!kept.is_empty(), "no window kept\n{}", env.logs());
     for file in &kept {
         let (out, text) = explain(env, &[file.to_str().unwrap()]);
@@ -149,16 +172,15 @@ fn a_recorded_incident_replays_identically_and_a_changed_priority_diverges_at_on
     // The whole run, from the ring.
     let (out, text) = explain(&env, &[ring_text]);
     assert!(out.status.success(), "{text}\n{}", env.logs());
-    assert!(text.contains("items written: identical"), "{text}");
-    assert!(
-        text.contains("STOP stopped: required source safety silent"),
-        "{text}"
+    says(
+        &text,
+        &[
+            "items written: identical",
+            "STOP stopped: required source safety silent",
+            "STOP stopped: locked · held: estop",
+            "driving from teleop",
+        ],
     );
-    assert!(
-        text.contains("STOP stopped: locked · held: estop"),
-        "{text}"
-    );
-    assert!(text.contains("driving from teleop"), "{text}");
     // The window kept for the stops, from the MCAP file.
     kept_windows_replay_identically(&env, &ring);
     // One moment, and the verdict for tools.
@@ -242,17 +264,16 @@ fn a_bus_cut_and_a_client_flood_replay_identically() {
     let ring = env.state_home().join("chassisd").join(&n).join("blackbox");
     let (out, text) = explain(&env, &[ring.to_str().unwrap()]);
     assert!(out.status.success(), "{text}\n{}", env.logs());
-    assert!(text.contains("items written: identical"), "{text}");
     assert!(!text.contains("replay stopped"), "{text}");
-    assert!(
-        text.contains("STOP stopped: the bus is lost or bus-off"),
-        "{text}"
+    says(
+        &text,
+        &[
+            "items written: identical",
+            "STOP stopped: the bus is lost or bus-off",
+            "waiting for a zero from teleop since the bus came back",
+            "driving from planner",
+        ],
     );
-    assert!(
-        text.contains("waiting for a zero from teleop since the bus came back"),
-        "{text}"
-    );
-    assert!(text.contains("driving from planner"), "{sent} sent: {text}");
     let (out, _) = explain(&env, &[ring.to_str().unwrap(), "--json"]);
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let events = json["replay"]["events"].as_u64().unwrap();
@@ -289,29 +310,17 @@ fn a_window_whose_beginning_the_ring_let_go_of_is_told_as_recorded() {
         env.logs().contains("black box kept: stop: stopped: locked")
     });
     assert!(logged.is_some(), "no window kept\n{}", env.logs());
-    let kept_dir = env
-        .state_home()
-        .join("chassisd")
-        .join(&n)
-        .join("blackbox/kept");
-    let kept: Vec<PathBuf> = std::fs::read_dir(kept_dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    let [file] = kept.as_slice() else {
-        panic!("one window kept, not {kept:?}")
-    };
-    let (out, text) = explain(&env, &[file.to_str().unwrap()]);
-    assert!(out.status.success(), "{text}");
-    assert!(
-        text.contains("replay stopped at event") && text.contains("let go of the run's beginning"),
-        "{text}"
-    );
-    assert!(text.contains("as recorded, not replayed"), "{text}");
-    assert!(text.contains("driving from teleop"), "{text}");
-    assert!(
-        text.contains("STOP stopped: locked · held: estop"),
-        "{text}"
+    let ring = env.state_home().join("chassisd").join(&n).join("blackbox");
+    let text = the_kept_window_explained(&env, &ring);
+    says(
+        &text,
+        &[
+            "replay stopped at event",
+            "let go of the run's beginning",
+            "as recorded, not replayed",
+            "driving from teleop",
+            "STOP stopped: locked · held: estop",
+        ],
     );
 }
 
@@ -331,15 +340,7 @@ fn the_black_box_records_by_default_and_keeps_its_window_when_asked() {
         env.logs().contains("black box kept: chassis control keep")
     });
     assert!(logged.is_some(), "no window kept\n{}", env.logs());
-    let kept_dir = env.state_home().join("chassisd").join(&n);
-    let kept: Vec<PathBuf> = std::fs::read_dir(kept_dir.join("blackbox/kept"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    let [file] = kept.as_slice() else {
-        panic!("one window kept, not {kept:?}")
-    };
-    let (out, text) = explain(&env, &[file.to_str().unwrap()]);
-    assert!(out.status.success(), "{text}");
+    let ring = env.state_home().join("chassisd").join(&n).join("blackbox");
+    let text = the_kept_window_explained(&env, &ring);
     assert!(text.contains("identical"), "{text}");
 }
