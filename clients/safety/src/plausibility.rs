@@ -351,12 +351,9 @@ impl Watch {
             // A speed that is no number is the speed rule's.
             linear.1.is_finite(),
         ) else {
-            *self = Self {
-                linear: Reach::default(),
-                angular: Reach::default(),
-                last_ns: None,
-                ..self.clone()
-            };
+            self.linear = Reach::default();
+            self.angular = Reach::default();
+            self.last_ns = None;
             return Verdict::default();
         };
         let dt = self

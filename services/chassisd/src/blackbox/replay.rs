@@ -603,8 +603,10 @@ pub fn render(replay: &Replay, chapters: &[Chapter]) -> String {
         let _ = writeln!(out, "replay stopped at event {}: {why}", replay.checked);
     }
     let _ = writeln!(out, "story:");
+    // Replayed chapters come first: the rest are read from the recording.
+    let first_unreplayed = chapters.iter().position(|c| !c.replayed);
     for (i, c) in chapters.iter().enumerate() {
-        if !c.replayed && chapters.get(i.wrapping_sub(1)).is_none_or(|b| b.replayed) {
+        if first_unreplayed == Some(i) {
             let _ = writeln!(
                 out,
                 "  (from here on as recorded, not replayed: {} mux decisions)",

@@ -210,8 +210,8 @@ struct Ring {
     /// publications), kept whatever the ring lets go of.
     header: Vec<u8>,
     in_header: bool,
-    /// The segments' files, oldest first, and the bytes each holds on disk.
-    segments: VecDeque<(PathBuf, u64)>,
+    /// The segments' files, oldest first; the last is `current`'s.
+    segments: VecDeque<PathBuf>,
     current: Option<Segment>,
     next_segment: u64,
     /// The ring has let go of a segment.
@@ -382,12 +382,9 @@ impl Ring {
     fn write_segment(&mut self, text: &[u8]) -> io::Result<()> {
         let per_segment = (self.bound.bytes / SEGMENTS).max(1);
         let per_age = self.bound.age / SEGMENTS as u32;
-        let full = match (&self.current, self.segments.back()) {
-            (Some(current), Some((_, len))) => {
-                *len >= per_segment || current.opened.elapsed() >= per_age
-            }
-            _ => true,
-        };
+        let full = self.current.as_ref().is_none_or(|current| {
+            current.zstd.get_ref().bytes >= per_segment || current.opened.elapsed() >= per_age
+        });
         if full {
             // Flushed first: a failure then counts the passes the segment held.
             if let Some(current) = &mut self.current {
@@ -401,15 +398,15 @@ impl Ring {
                 .dir
                 .join(format!("ring-{:08}.jsonl.zst", self.next_segment));
             self.current = Some(Segment::create(&path)?);
-            self.segments.push_back((path, 0));
+            self.segments.push_back(path);
             while self.segments.len() as u64 > SEGMENTS {
-                if let Some((old, _)) = self.segments.pop_front() {
+                if let Some(old) = self.segments.pop_front() {
                     fs::remove_file(old)?;
                     self.cut = true;
                 }
             }
         }
-        if let (Some(current), Some((_, len))) = (&mut self.current, self.segments.back_mut()) {
+        if let Some(current) = &mut self.current {
             current.zstd.write_all(text)?;
             current.passes += 1;
             // What the compressor holds counts on disk only once flushed: flushed at least once
@@ -418,7 +415,6 @@ impl Ring {
             if current.flushed.elapsed() >= FLUSH_EVERY || current.pending >= per_segment {
                 current.flush()?;
             }
-            *len = current.zstd.get_ref().bytes;
         }
         Ok(())
     }
@@ -443,7 +439,7 @@ impl Ring {
         if self.cut {
             Event::Cut.write_line(&mut text)?;
         }
-        for (segment, _) in &self.segments {
+        for segment in &self.segments {
             text.extend(read_segment(segment)?);
         }
         Ok(text)
@@ -498,11 +494,10 @@ fn ring_files(dir: &Path) -> io::Result<(Option<Vec<u8>>, Vec<PathBuf>)> {
 /// A segment's lines: what its compressed frame holds up to the last whole line (a segment
 /// written until a crash ends where its last flush did), or a plain segment's.
 fn read_segment(path: &Path) -> io::Result<Vec<u8>> {
-    let file = File::open(path)?;
     if path.extension().is_some_and(|x| x == "jsonl") {
         return fs::read(path);
     }
-    let mut zstd = zstd::stream::read::Decoder::new(file)?;
+    let mut zstd = zstd::stream::read::Decoder::new(File::open(path)?)?;
     let mut text = Vec::new();
     let mut chunk = [0u8; 1 << 16];
     loop {
@@ -585,7 +580,7 @@ mod tests {
         let on_disk: u64 = ring
             .segments
             .iter()
-            .map(|(p, _)| fs::metadata(p).unwrap().len())
+            .map(|p| fs::metadata(p).unwrap().len())
             .sum();
         assert!(on_disk < 2_000 + 2_000 / SEGMENTS + 200, "{on_disk} bytes");
         for _ in 0..3 {
