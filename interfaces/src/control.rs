@@ -36,7 +36,8 @@ named_constants! {
         LOCK_RELEASE = 10 => "lock-release",
         /// `arg[0]`: 1 enter CAN-upgrade silent mode, 0 leave it.
         SILENT = 11 => "silent",
-        /// Engage the lock named in `name` on behalf of the operator.
+        /// Engage the lock named in `name` on behalf of the operator; `arg[0]`: 0 for the lock's
+        /// configured stop category, 1 + a `StopCategory` for that one.
         LOCK_ENGAGE = 12 => "lock-engage",
         /// `value[0]`: the robot's standing speed limit, m/s, set by the operator — raised or
         /// lowered; 0 lifts it. A source can only lower it (`RequestFlags::SPEED_LIMIT`).

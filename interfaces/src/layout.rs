@@ -336,7 +336,11 @@ pub fn constants() -> Vec<ConstantGroup> {
         describe_constants!(flags SourceFlags: u8 {
             REQUIRED, FRESH, ACTIVE, HEARTBEAT, BLOCKED, LIMITING, REMOTE, AWAITING_ZERO,
         }),
-        describe_constants!(flags RequestFlags: u32 { STEER, HEARTBEAT, LIMIT, SPEED_LIMIT }),
+        describe_constants!(enum StopCategory: u8 { CUT, BRAKE_THEN_CUT, HOLD }),
+        describe_constants!(enum DriveState: u8 { ENABLED, BRAKING, CUT, CANNOT_CUT }),
+        describe_constants!(flags RequestFlags: u32 {
+            STEER, HEARTBEAT, LIMIT, SPEED_LIMIT, CATEGORY_0, CATEGORY_1, CATEGORY_2,
+        }),
         describe_constants!(enum ControlKind: u8 {
             MODE, BRAKE, CLEAR_FAULTS, LIGHTS, OFF_ROAD, LIFT, SERVOS, POWER, STEERING_ZERO,
             LOCK_RELEASE, SILENT, LOCK_ENGAGE, SPEED_LIMIT, KEEP,
@@ -607,6 +611,8 @@ mod tests {
             SimKind::NAMES,
             SimTruthPage::NAMES,
             Stop::NAMES,
+            StopCategory::NAMES,
+            DriveState::NAMES,
             Unfollowed::NAMES,
             WireProtocol::NAMES,
             ZeroReason::NAMES,

@@ -45,7 +45,8 @@ pub use description::{
 };
 pub use frame::{BusFrame, FrameDirection, FrameKind};
 pub use mux::{
-    BodyVelocity, ClampFlags, LockStatus, MuxStatus, SourceFlags, SourceStatus, Stop, ZeroReason,
+    BodyVelocity, ClampFlags, DriveState, LockStatus, MuxStatus, SourceFlags, SourceStatus, Stop,
+    StopCategory, ZeroReason,
 };
 pub use names::valid_robot_name;
 pub use request::{RequestFlags, VelocityRequest};

@@ -206,8 +206,11 @@ ipc_type! {
         /// Index of the holding source, [`LockStatus::HOLDER_OPERATOR`] for a control request, or
         /// [`LockStatus::HOLDER_NONE`].
         pub holder: u8,
+        /// [`StopCategory`] of the stop while held (the one its engage asked for); while free,
+        /// the lock's configured category.
+        pub category: u8,
         #[serde(skip)]
-        pub _reserved: [u8; 5],
+        pub _reserved: [u8; 4],
     }
 }
 
@@ -273,8 +276,10 @@ ipc_type! {
         /// The standing speed limit every source is capped to, m/s; 0 while there is none. Any
         /// source may lower it; only the operator raises it.
         pub speed_limit_mps: f32,
+        /// [`DriveState`]: the drive as the stops of categories 0 and 1 left it.
+        pub drive: u8,
         #[serde(skip)]
-        pub _reserved: [u8; 4],
+        pub _reserved: [u8; 3],
         pub sources: [SourceStatus; MAX_SOURCES],
         pub locks: [LockStatus; MAX_LOCKS],
     }
@@ -337,6 +342,54 @@ impl MuxStatus {
 #[derive(Debug, Clone, Copy)]
 pub struct Why<'a>(&'a MuxStatus);
 
+named_constants! {
+    /// The stop categories of IEC 60204-1, as a held lock stops the robot
+    /// ([`LockStatus::category`]). Every other stop (a source's own zero, a stale required
+    /// source, the bus and the chassis' holds) commands zero and leaves the drive powered.
+    pub enum StopCategory: u8 {
+        /// The drive disabled at once (AgileX: standby, and the parking brake where fitted;
+        /// XBot: drive power off). A robot with no way to disable its drive stops as
+        /// [`StopCategory::HOLD`] and says so ([`DriveState::CANNOT_CUT`]).
+        CUT = 0 => "cut",
+        /// Zero commanded (the chassis brakes under control), then the drive disabled once the
+        /// chassis reports standstill, or after [`StopCategory::CUT_AFTER_MS`] at the latest.
+        BRAKE_THEN_CUT = 1 => "brake_then_cut",
+        /// Zero commanded and held with the drive powered.
+        HOLD = 2 => "hold",
+    }
+}
+
+impl StopCategory {
+    /// The longest a category-1 stop waits for standstill before it disables the drive, ms.
+    pub const CUT_AFTER_MS: u64 = 3000;
+
+    /// `0 (cut the drive at once)`, for views.
+    pub fn text(category: u8) -> String {
+        let what = match category {
+            StopCategory::CUT => "cut the drive at once",
+            StopCategory::BRAKE_THEN_CUT => "brake, then cut the drive",
+            StopCategory::HOLD => "brake and hold",
+            _ => "unknown",
+        };
+        format!("{category} ({what})")
+    }
+}
+
+named_constants! {
+    /// The drive as the stops of categories 0 and 1 leave it (`MuxStatus::drive`).
+    pub enum DriveState: u8 {
+        /// Powered and obeying the command: no stop of category 0 or 1 is in force.
+        ENABLED = 0 => "enabled",
+        /// A category-1 stop waits for the chassis' standstill before it disables the drive.
+        BRAKING = 1 => "braking",
+        /// Disabled by a stop of category 0 or 1; enabled again when that stop is released.
+        CUT = 2 => "cut",
+        /// A stop of category 0 or 1 is in force, but this robot has no way to disable its drive:
+        /// zero is commanded and held (category 2).
+        CANNOT_CUT = 3 => "cannot_cut",
+    }
+}
+
 impl Stop {
     /// What holds the robot while `stop` is in force (`ZeroReason::HELD`).
     pub fn holding(stop: u8) -> &'static str {
@@ -390,14 +443,25 @@ impl std::fmt::Display for Why<'_> {
             }
             (None, reason) => write!(f, "stopped: {}", ZeroReason::name(reason).replace('_', " "))?,
         }
-        let held: Vec<&str> = m
+        let held: Vec<String> = m
             .locks()
             .iter()
             .filter(|l| l.held == 1)
-            .map(LockStatus::name)
+            .map(|l| format!("{} (category {})", l.name(), l.category))
             .collect();
         if !held.is_empty() {
             write!(f, " · held: {}", held.join(", "))?;
+        }
+        match m.drive {
+            DriveState::BRAKING => write!(f, " · braking, then the drive is cut")?,
+            DriveState::CUT => write!(f, " · drive cut")?,
+            DriveState::CANNOT_CUT => {
+                write!(
+                    f,
+                    " · this robot cannot cut its drive: zero is held instead"
+                )?;
+            }
+            _ => {}
         }
         if let Some((mps, holder)) = m.speed_limit() {
             write!(f, " · limited to {mps} m/s by {holder}")?;
@@ -462,25 +526,36 @@ mod tests {
         status.zero_reason = ZeroReason::HELD;
         status.stop = Stop::CHASSIS_ESTOP;
         status.locks[0].held = 1;
+        status.locks[0].category = StopCategory::BRAKE_THEN_CUT;
+        status.drive = DriveState::BRAKING;
         assert_eq!(
             status.why().to_string(),
-            "stopped: the chassis' E-stop is pressed · held: estop"
+            "stopped: the chassis' E-stop is pressed · held: estop (category 1) · braking, then \
+             the drive is cut"
         );
+        status.drive = DriveState::CUT;
+        assert!(
+            status
+                .why()
+                .to_string()
+                .ends_with("(category 1) · drive cut")
+        );
+        status.drive = DriveState::ENABLED;
         status.zero_reason = ZeroReason::REQUIRED_SOURCE_STALE;
         assert_eq!(
             status.why().to_string(),
-            "stopped: required source safety silent · held: estop"
+            "stopped: required source safety silent · held: estop (category 1)"
         );
         status.active_source = 1;
         assert_eq!(
             status.why().to_string(),
-            "driving from teleop · held: estop"
+            "driving from teleop · held: estop (category 1)"
         );
         status.speed_limit_holder = 1;
         status.speed_limit_mps = 0.5;
         assert_eq!(
             status.why().to_string(),
-            "driving from teleop · held: estop · limited to 0.5 m/s by teleop"
+            "driving from teleop · held: estop (category 1) · limited to 0.5 m/s by teleop"
         );
         status.speed_limit_holder = LockStatus::HOLDER_OPERATOR;
         assert_eq!(status.speed_limit(), Some((0.5, "operator")));

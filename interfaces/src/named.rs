@@ -131,6 +131,8 @@ mod tests {
             ClampFlags,
             ZeroReason,
             Stop,
+            StopCategory,
+            DriveState,
             SourceFlags,
             RequestFlags,
             ControlKind,

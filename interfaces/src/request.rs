@@ -25,6 +25,33 @@ named_constants! {
         /// every source until the operator raises it (`ControlKind::SPEED_LIMIT`); a larger value
         /// from a source changes nothing.
         SPEED_LIMIT = 1 << 3 => "speed_limit",
+        /// The locks this request engages stop with `StopCategory::CUT` instead of their
+        /// configured category (the lowest of the category bits set wins).
+        CATEGORY_0 = 1 << 4 => "category_0",
+        /// … with `StopCategory::BRAKE_THEN_CUT`.
+        CATEGORY_1 = 1 << 5 => "category_1",
+        /// … with `StopCategory::HOLD`.
+        CATEGORY_2 = 1 << 6 => "category_2",
+    }
+}
+
+impl RequestFlags {
+    /// The stop category a request's category bits ask for, if any (the lowest set).
+    pub fn category(flags: u32) -> Option<u8> {
+        [Self::CATEGORY_0, Self::CATEGORY_1, Self::CATEGORY_2]
+            .iter()
+            .position(|&bit| flags & bit != 0)
+            .and_then(|c| u8::try_from(c).ok())
+    }
+
+    /// The category bit of `category` (0 for none or an unknown one).
+    pub fn of_category(category: u8) -> u32 {
+        match category {
+            0 => Self::CATEGORY_0,
+            1 => Self::CATEGORY_1,
+            2 => Self::CATEGORY_2,
+            _ => 0,
+        }
     }
 }
 

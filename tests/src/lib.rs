@@ -1358,52 +1358,52 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (titan)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (titan)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (scout-mini)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (scout-mini)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (xbot)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (xbot)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (scout)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (scout)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (hunter)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (hunter)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (hunter-se)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (hunter-se)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (tracer)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (tracer)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (bunker)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (bunker)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (ranger-mini)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (ranger-mini)",
     },
     ExpectedRow {
         suite: "faults_chassis",
         test: "stop_distances",
-        fault: "the operator's e-stop from 1 m/s and from full speed (tracer-mini)",
+        fault: "the operator's e-stop of each stop category from 1 m/s and from full speed (tracer-mini)",
     },
 ];
 

@@ -9,9 +9,12 @@
 //! operator's `chassis control speed-limit`) and the chassis then runs over it.
 //!
 //! The stop distances: every robot of the registry, simulated, driven at 1 m/s and at its full
-//! speed, stopped by the operator's e-stop while teleop keeps asking: the time from the e-stop's
-//! answer to the standstill and the distance travelled, by the simulator's truth (its chassis
-//! slows on a first-order lag toward the zero command, as each family's simulator documents).
+//! speed, stopped by the operator's e-stop of each stop category (0: the drive cut at once, 1:
+//! cut once the chassis stands, 2: zero held with the drive enabled) while teleop keeps asking:
+//! the time from the e-stop's answer to the standstill and the distance travelled, by the
+//! simulator's truth (its chassis slows on a first-order lag toward the zero command, a shorter
+//! one where the simulator documents one for a drive that does not obey), and the drive as the
+//! mux status shows it.
 // Test code: helpers outside #[test] functions may unwrap, panic and read the wall clock.
 #![allow(clippy::unwrap_used, clippy::panic, clippy::disallowed_methods)]
 
@@ -376,16 +379,18 @@ fn a_chassis_turning_against_its_command_is_latched() {
 
 // ----- Stop distances -----
 
-/// Up to `v` m/s, then the operator's e-stop: the time from its answer to the simulator's
-/// standstill (ms) and the distance travelled (m), by the simulator's truth; what went wrong
-/// otherwise (the speed never reached, no standstill within [`STOP_BOUND`]).
+/// Up to `v` m/s, then the operator's e-stop of `category`: the time from its answer to the
+/// simulator's standstill (ms), the distance travelled (m), by the simulator's truth, and the
+/// drive as the mux status shows it once the robot stands; what went wrong otherwise (the speed
+/// never reached, no standstill within [`STOP_BOUND`]).
 fn stop_from(
     env: &Env,
     robot: &mut Robot,
     teleop: &mut Source,
     n: &str,
     v: f64,
-) -> Result<(f64, f64), String> {
+    category: u8,
+) -> Result<(f64, f64, u8), String> {
     let go = VelocityRequest::twist(v as f32, 0.0);
     let mut send = |robot: &mut Robot| {
         teleop.send(go).unwrap();
@@ -398,7 +403,9 @@ fn stop_from(
     .ok_or_else(|| format!("never reached {v:.2} m/s"))?;
     // The operator's e-stop, asked here rather than by a `chassis control estop` process (a
     // program's start-up is no part of the stop); the time and the distance run from its answer.
-    let estop = ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("estop");
+    let estop = ControlRequest::new(ControlKind::LOCK_ENGAGE)
+        .with_name("estop")
+        .with_arg(0, category + 1);
     let answer = robot.control(estop, Duration::from_secs(1)).unwrap();
     assert!(answer.is_ok(), "{}", answer.message());
     let x0 = x_m(robot);
@@ -411,17 +418,33 @@ fn stop_from(
         truth.get("linear_mps").abs() < 0.005
     })
     .ok_or_else(|| format!("from {v:.2} m/s: no standstill within {STOP_BOUND:?}"))?;
+    // A category-1 stop cuts the drive once the chassis reports its standstill.
+    let mut drive = DriveState::ENABLED;
+    wait_for(Duration::from_millis(500), || {
+        send(robot);
+        drive = mux(robot).drive;
+        drive != DriveState::BRAKING
+    });
     env.chassis_ok(&["control", "--name", n, "estop-release"]);
     // Motion starts only from a zero.
     for _ in 0..10 {
         teleop.send(VelocityRequest::twist(0.0, 0.0)).unwrap();
         let _ = robot.wait_state(Duration::from_millis(20));
     }
-    Ok((stood.as_secs_f64() * 1e3, x_end - x0))
+    Ok((stood.as_secs_f64() * 1e3, x_end - x0, drive))
 }
 
-/// `robot`, simulated, stopped by the operator's e-stop from 1 m/s and from its full speed: its
-/// row recorded; true when it stood each time.
+/// The drive a stop of `category` leaves, on a robot that can (`can_cut`) or cannot cut it.
+fn expected_drive(category: u8, can_cut: bool) -> u8 {
+    match category {
+        StopCategory::HOLD => DriveState::ENABLED,
+        _ if can_cut => DriveState::CUT,
+        _ => DriveState::CANNOT_CUT,
+    }
+}
+
+/// `robot`, simulated, stopped by the operator's e-stop of each category from 1 m/s and from its
+/// full speed: its row recorded; true when it stood each time, its drive as the category says.
 fn stop_distance(robot_name: &str, rank: u32) -> bool {
     let test = "stop_distances";
     let _machine = shared();
@@ -434,6 +457,8 @@ fn stop_distance(robot_name: &str, rank: u32) -> bool {
         .robot_limits
         .forward_mps
         .min(limits.configured_limits.forward_mps);
+    // The e-stop's configured category says whether the robot can cut its drive.
+    let can_cut = mux(&mut robot).locks()[0].category == StopCategory::BRAKE_THEN_CUT;
     let mut teleop = source(&mut robot, "teleop");
     let speeds: Vec<f64> = if full > 1.0 {
         vec![1.0, full]
@@ -443,32 +468,49 @@ fn stop_distance(robot_name: &str, rank: u32) -> bool {
     let mut parts = Vec::new();
     let mut pass = true;
     let mut worst_ms = 0.0f64;
-    for &v in &speeds {
-        match stop_from(&env, &mut robot, &mut teleop, &n, v) {
-            Ok((ms, m)) => {
-                worst_ms = worst_ms.max(ms);
-                parts.push(format!(
-                    "from {v:.2} m/s: standstill {ms:.0} ms and {m:.3} m after the e-stop's \
-                     answer"
-                ));
-            }
-            Err(e) => {
-                pass = false;
-                parts.push(e);
+    for category in [
+        StopCategory::CUT,
+        StopCategory::BRAKE_THEN_CUT,
+        StopCategory::HOLD,
+    ] {
+        let mut stops = Vec::new();
+        for &v in &speeds {
+            match stop_from(&env, &mut robot, &mut teleop, &n, v, category) {
+                Ok((ms, m, drive)) => {
+                    worst_ms = worst_ms.max(ms);
+                    let expected = expected_drive(category, can_cut);
+                    pass &= drive == expected;
+                    stops.push(format!(
+                        "from {v:.2} m/s {ms:.0} ms and {m:.3} m, drive {}{}",
+                        DriveState::name(drive),
+                        if drive == expected {
+                            String::new()
+                        } else {
+                            format!(" (EXPECTED {})", DriveState::name(expected))
+                        }
+                    ));
+                }
+                Err(e) => {
+                    pass = false;
+                    stops.push(e);
+                }
             }
         }
+        parts.push(format!("category {category}: {}", stops.join(", ")));
     }
     let mut figures = Figures::faults();
     figures.add(fault_figure(
         SUITE,
         test,
         rank,
-        &format!("the operator's e-stop from 1 m/s and from full speed ({robot_name})"),
-        "the operator's e-stop (the control request `chassis control estop` sends) while \
-         teleop drives straight at 1 m/s, then at the robot's full speed (its description's \
-         forward limit), and keeps asking",
-        "the mux holds zero against teleop and the chassis slows to a standstill within 4 s",
-        parts.join("; "),
+        &format!("the operator's e-stop of each stop category from 1 m/s and from full speed ({robot_name})"),
+        "the operator's e-stop (the control request `chassis control estop --category N` \
+         sends) of category 0, 1 and 2 while teleop drives straight at 1 m/s, then at the \
+         robot's full speed (its description's forward limit), and keeps asking",
+        "the mux holds zero against teleop and the chassis slows to a standstill within 4 s; \
+         category 0 cuts the drive at once, 1 once the chassis stands, 2 leaves it enabled (a \
+         robot that cannot cut its drive says so and holds zero)",
+        format!("time and distance from the e-stop's answer to the standstill: {}", parts.join("; ")),
         worst_ms,
         pass,
     ));
@@ -489,5 +531,8 @@ fn stop_distances() {
         .filter(|&(rank, robot)| !stop_distance(robot, rank))
         .map(|(_, robot)| robot)
         .collect();
-    assert!(failed.is_empty(), "no standstill: {failed:?}");
+    assert!(
+        failed.is_empty(),
+        "no standstill, or the drive not as its category says: {failed:?}"
+    );
 }

@@ -8,8 +8,8 @@ use chassis_client::{
     BusFrame, ChassisState, ClampFlags, ClientError, ControlKind, ControlMode, ControlRequest,
     ControlStatus, ControllerState, FaultFlags, FrameDirection, FrameKind, LinkFlags, LockStatus,
     MuxStatus, Robot, RobotDescription, SimKind, SimRequest, SimTruthPage, Source, SourceFlags,
-    Ticker, ValidRequest, VelocityRequest, WireProtocol, ZeroReason, install_signal_handlers,
-    now_ns, termination_requested,
+    StopCategory, Ticker, ValidRequest, VelocityRequest, WireProtocol, ZeroReason,
+    install_signal_handlers, now_ns, termination_requested,
 };
 use chassis_protocols::command_to_request;
 use chassis_protocols::frame_json::driver_status_names;
@@ -74,11 +74,21 @@ pub enum ControlCmd {
     /// Release the e-stop lock (after a safety latch or an operator e-stop).
     EstopRelease,
     /// Engage the e-stop lock as the operator: nothing below its priority moves.
-    Estop,
+    Estop {
+        /// The stop category (IEC 60204-1): 0 cuts the drive at once, 1 brakes and then cuts
+        /// it, 2 brakes and holds; default: the lock's configured one (`chassis status` shows it).
+        #[arg(long, value_parser = clap::value_parser!(u8).range(0..=2))]
+        category: Option<u8>,
+    },
     /// Release a named lock.
     LockRelease { lock: String },
     /// Engage a named lock as the operator.
-    LockEngage { lock: String },
+    LockEngage {
+        lock: String,
+        /// The stop category (0, 1 or 2); default: the lock's configured one.
+        #[arg(long, value_parser = clap::value_parser!(u8).range(0..=2))]
+        category: Option<u8>,
+    },
     /// Set the robot's speed limit as the operator, m/s: raise or lower it; 0 lifts it (any
     /// client may lower it, only the operator raises it).
     SpeedLimit { mps: f32 },
@@ -310,9 +320,14 @@ fn locks_text(m: &MuxStatus) -> String {
         .iter()
         .map(|l| {
             if l.held == 0 {
-                format!("{} free", l.name())
+                format!("{} free (stops with category {})", l.name(), l.category)
             } else {
-                format!("{} HELD by {}", l.name(), lock_holder(m, l))
+                format!(
+                    "{} HELD by {}, stop category {}",
+                    l.name(),
+                    lock_holder(m, l),
+                    StopCategory::text(l.category)
+                )
             }
         })
         .collect::<Vec<_>>()
@@ -780,13 +795,15 @@ pub fn control(name: &str, command: &ControlCmd) -> anyhow::Result<()> {
         ControlCmd::EstopRelease => {
             ControlRequest::new(ControlKind::LOCK_RELEASE).with_name("estop")
         }
-        ControlCmd::Estop => ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("estop"),
+        ControlCmd::Estop { category } => ControlRequest::new(ControlKind::LOCK_ENGAGE)
+            .with_name("estop")
+            .with_arg(0, category.map_or(0, |c| c + 1)),
         ControlCmd::LockRelease { lock } => {
             ControlRequest::new(ControlKind::LOCK_RELEASE).with_name(lock)
         }
-        ControlCmd::LockEngage { lock } => {
-            ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name(lock)
-        }
+        ControlCmd::LockEngage { lock, category } => ControlRequest::new(ControlKind::LOCK_ENGAGE)
+            .with_name(lock)
+            .with_arg(0, category.map_or(0, |c| c + 1)),
         ControlCmd::SpeedLimit { mps } => {
             ControlRequest::new(ControlKind::SPEED_LIMIT).with_value(0, *mps)
         }

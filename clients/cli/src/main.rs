@@ -264,10 +264,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             command,
             ..
         } => match command {
-            live::ControlCmd::Estop => fleet::estop_all(&estop, json),
+            live::ControlCmd::Estop { category: None } => fleet::estop_all(&estop, json),
             _ => anyhow::bail!(
-                "--all takes estop only: a release (or any other action) is asked of one robot \
-                 at a time (--name NAME)"
+                "--all takes estop only, each robot stopping with its own category: a release, \
+                 a chosen category or any other action is asked of one robot at a time \
+                 (--name NAME)"
             ),
         },
         Cmd::Control { name, command, .. } => {

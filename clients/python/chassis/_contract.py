@@ -539,7 +539,8 @@ class LockStatus(Struct):
         ('priority', ctypes.c_uint8),
         ('held', ctypes.c_uint8),
         ('holder', ctypes.c_uint8),
-        ('_reserved', (ctypes.c_uint8 * 5)),
+        ('category', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 4)),
     ]
     # Text: read and assigned as str (see TextField).
     name: str
@@ -604,7 +605,8 @@ class MuxStatus(Struct):
         ('stop', ctypes.c_uint8),
         ('speed_limit_holder', ctypes.c_uint8),
         ('speed_limit_mps', ctypes.c_float),
-        ('_reserved', (ctypes.c_uint8 * 4)),
+        ('drive', ctypes.c_uint8),
+        ('_reserved', (ctypes.c_uint8 * 3)),
         ('sources', (SourceStatus * 8)),
         ('locks', (LockStatus * 4)),
     ]
@@ -867,6 +869,16 @@ class DescriptionFlags(Constants):
     NAMES = {1: 'simulated', 2: 'brake', 4: 'lights', 8: 'lateral', 16: 'safety-required'}
 
 
+class DriveState(Constants):
+    """``DriveState``: enum of u8."""
+
+    ENABLED = 0
+    BRAKING = 1
+    CUT = 2
+    CANNOT_CUT = 3
+    NAMES = {0: 'enabled', 1: 'braking', 2: 'cut', 3: 'cannot-cut'}
+
+
 class DriverStatus(Constants):
     """``DriverStatus``: flags of u8."""
 
@@ -1039,7 +1051,10 @@ class RequestFlags(Constants):
     HEARTBEAT = 2
     LIMIT = 4
     SPEED_LIMIT = 8
-    NAMES = {1: 'steer', 2: 'heartbeat', 4: 'limit', 8: 'speed-limit'}
+    CATEGORY_0 = 16
+    CATEGORY_1 = 32
+    CATEGORY_2 = 64
+    NAMES = {1: 'steer', 2: 'heartbeat', 4: 'limit', 8: 'speed-limit', 16: 'category-0', 32: 'category-1', 64: 'category-2'}
 
 
 class SafetyAction(Constants):
@@ -1149,6 +1164,15 @@ class Stop(Constants):
     NAMES = {0: 'none', 1: 'service-start', 2: 'lock-released', 3: 'required-source', 4: 'bus', 5: 'chassis-estop', 6: 'remote-control', 7: 'chassis-fault'}
 
 
+class StopCategory(Constants):
+    """``StopCategory``: enum of u8."""
+
+    CUT = 0
+    BRAKE_THEN_CUT = 1
+    HOLD = 2
+    NAMES = {0: 'cut', 1: 'brake-then-cut', 2: 'hold'}
+
+
 class Unfollowed(Constants):
     """``Unfollowed``: enum of u8."""
 
@@ -1235,6 +1259,7 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'ControlStatus': ControlStatus,
     'ControllerState': ControllerState,
     'DescriptionFlags': DescriptionFlags,
+    'DriveState': DriveState,
     'DriverStatus': DriverStatus,
     'EstopState': EstopState,
     'FaultClear': FaultClear,
@@ -1258,6 +1283,7 @@ CONSTANT_GROUPS: dict[str, Any] = {
     'SimTruthPage': SimTruthPage,
     'SourceFlags': SourceFlags,
     'Stop': Stop,
+    'StopCategory': StopCategory,
     'SystemState': SystemState,
     'Unfollowed': Unfollowed,
     'WireProtocol': WireProtocol,

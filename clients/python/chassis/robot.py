@@ -32,6 +32,7 @@ from ._contract import (
     ControlRequest,
     ControlResponse,
     ControlStatus,
+    DriveState,
     FaultClear,
     LightMode,
     LockStatus,
@@ -209,6 +210,15 @@ def _active_source(mux: MuxStatus) -> str | None:
     return mux.sources[mux.active_source].name
 
 
+# What ``MuxStatus.why()`` adds for the drive (``DriveState``) as the stops of category 0 and 1
+# left it.
+_DRIVE = {
+    DriveState.BRAKING: " · braking, then the drive is cut",
+    DriveState.CUT: " · drive cut",
+    DriveState.CANNOT_CUT: " · this robot cannot cut its drive: zero is held instead",
+}
+
+
 def _why(mux: MuxStatus) -> str:
     """Why the robot moves or stands (``MuxStatus.why()``), as ``chassis status`` says it:
     ``driving from teleop``, ``stopped: waiting for a zero from teleop since lock_released``.
@@ -230,10 +240,13 @@ def _why(mux: MuxStatus) -> str:
     else:
         text = f"stopped: {ZeroReason.NAMES.get(mux.zero_reason, mux.zero_reason)}"
     held = [
-        mux.locks[i].name for i in range(min(mux.lock_count, len(mux.locks))) if mux.locks[i].held
+        f"{lock.name} (category {lock.category})"
+        for lock in mux.locks[: min(mux.lock_count, len(mux.locks))]
+        if lock.held
     ]
     if held:
         text += f" · held: {', '.join(held)}"
+    text += _DRIVE.get(mux.drive, "")
     if mux.speed_limit_mps > 0:
         holder = mux.speed_limit_holder
         by = "operator" if holder == LockStatus.HOLDER_OPERATOR else names[holder]

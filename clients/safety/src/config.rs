@@ -13,11 +13,11 @@
 //! (`min_voltage_v = 23.0`, `max_linear_mps = 2.0`) overrides the description's on the robot the
 //! monitor runs for.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use chassis_client::{FaultFlags, valid_robot_name};
+use chassis_client::{FaultFlags, SafetyRule, valid_robot_name};
 
 pub use crate::plausibility::{
     DirectionRule, FollowingRule, Plausibility, PlausibilityThresholds, RunawayRule,
@@ -62,6 +62,11 @@ pub struct MonitorConfig {
     pub status_period_ms: u64,
     /// The mux lock a `latch` engages.
     pub lock: String,
+    /// The stop category (IEC 60204-1: 0 cuts the drive at once, 1 brakes and then cuts it, 2
+    /// brakes and holds) a latching rule engages the lock with, by rule name (`runaway = 0`,
+    /// `operator = 1`); a rule not named stops with the lock's configured category.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub categories: BTreeMap<String, u8>,
 }
 
 impl Default for MonitorConfig {
@@ -71,6 +76,7 @@ impl Default for MonitorConfig {
             evaluate_period_ms: 20,
             status_period_ms: 100,
             lock: "estop".into(),
+            categories: BTreeMap::new(),
         }
     }
 }
@@ -543,6 +549,9 @@ pub struct Config {
     pub evaluate_period_ns: u64,
     pub status_period_ns: u64,
     pub lock: String,
+    /// The stop category each latching rule engages the lock with, by [`SafetyRule`] (`None`:
+    /// the lock's configured one).
+    pub categories: [Option<u8>; SafetyRule::COUNT],
     pub slow: SlowSpeeds,
     pub fault: Option<Faults>,
     pub battery: Option<Battery>,
@@ -796,11 +805,31 @@ impl RawConfig {
             margin_mps: li.margin_mps,
         });
 
-        Ok(Config {
+        let mut categories = [None; SafetyRule::COUNT];
+        for (name, &category) in &m.categories {
+            let rule = SafetyRule::from_name(name).ok_or_else(|| {
+                bad(
+                    "monitor.categories",
+                    format!(
+                        "'{name}' is not a rule ({})",
+                        SafetyRule::NAMES.map(|(_, n)| n).join(", ")
+                    ),
+                )
+            })?;
+            if category > 2 {
+                return Err(bad(
+                    "monitor.categories",
+                    format!("{name} = {category}: a stop category is 0, 1 or 2"),
+                ));
+            }
+            categories[usize::from(rule)] = Some(category);
+        }
+        let config = Config {
             publish_period_ns: ms_to_ns(m.publish_period_ms),
             evaluate_period_ns: ms_to_ns(m.evaluate_period_ms),
             status_period_ns: ms_to_ns(m.status_period_ms),
             lock: m.lock.clone(),
+            categories,
             slow,
             fault,
             battery,
@@ -819,11 +848,51 @@ impl RawConfig {
             limit,
             file: None,
             raw: self,
-        })
+        };
+        // A category is what a latch engages the lock with: a rule that does not latch has none.
+        if let Some(rule) = (0..SafetyRule::COUNT as u8).find(|&rule| {
+            config.categories[usize::from(rule)].is_some()
+                && config
+                    .timing(rule)
+                    .is_none_or(|t| t.action != Action::Latch)
+        }) {
+            return Err(bad(
+                "monitor.categories",
+                format!(
+                    "{}: only a rule whose action is latch (and that is enabled) engages the lock",
+                    SafetyRule::name(rule)
+                ),
+            ));
+        }
+        Ok(config)
     }
 }
 
 impl Config {
+    /// The timing and action of `rule` (a [`SafetyRule`]), `None` while it is disabled.
+    pub fn timing(&self, rule: u8) -> Option<Timing> {
+        let c = self;
+        match rule {
+            SafetyRule::FAULT => c.fault.as_ref().map(|r| r.timing),
+            SafetyRule::BATTERY => c.battery.as_ref().map(|r| r.timing),
+            SafetyRule::STALE => c.stale.as_ref().map(|r| r.timing),
+            SafetyRule::BUMPER => c.bumper,
+            SafetyRule::ULTRASONIC => c.ultrasonic.as_ref().map(|r| r.timing),
+            SafetyRule::IR => c.ir.as_ref().map(|r| r.timing),
+            SafetyRule::SPEED => c.speed.as_ref().map(|r| r.timing),
+            SafetyRule::OPERATOR => c.operator.then_some(Timing {
+                action: Action::Latch,
+                trigger_ns: 0,
+                release_ns: 0,
+            }),
+            SafetyRule::RUNAWAY => c.plausibility.runaway,
+            SafetyRule::DIRECTION => c.plausibility.direction,
+            SafetyRule::FOLLOWING => c.plausibility.following,
+            SafetyRule::LIMIT => c.limit.as_ref().map(|r| r.timing),
+            _ => None,
+        }
+    }
+
     /// Reads, checks and validates a TOML file in the `--print-config` format, remembering
     /// which keys it sets.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {

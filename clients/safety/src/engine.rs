@@ -33,8 +33,8 @@
 
 use chassis_client::{
     ChassisState, Envelope, EstopState, FaultFlags, Group, LinkFlags, LockStatus, MuxStatus,
-    RULE_SLOTS, RobotDescription, SafetyAction, SafetyEvent, SafetyRule, SafetyStatus, Unfollowed,
-    VelocityRequest,
+    RULE_SLOTS, RequestFlags, RobotDescription, SafetyAction, SafetyEvent, SafetyRule,
+    SafetyStatus, Unfollowed, VelocityRequest,
 };
 
 use crate::config::{Action, Config, RangeZones, SlowSpeeds, Timing};
@@ -78,8 +78,9 @@ pub enum Command {
     Limit(Envelope),
     /// A zero request.
     Stop,
-    /// A zero request that engages these lock bits.
-    StopAndLock(u32),
+    /// A zero request that engages these lock bits, with a stop category (`None`: the lock's
+    /// configured one).
+    StopAndLock(u32, Option<u8>),
 }
 
 impl Command {
@@ -91,8 +92,9 @@ impl Command {
                 VelocityRequest::limit(e.forward_mps, e.reverse_mps, e.lateral_mps, e.angular_radps)
             }
             Command::Stop => VelocityRequest::twist(0.0, 0.0),
-            Command::StopAndLock(mask) => VelocityRequest {
+            Command::StopAndLock(mask, category) => VelocityRequest {
                 lock_engage: mask,
+                flags: category.map_or(0, RequestFlags::of_category),
                 ..VelocityRequest::twist(0.0, 0.0)
             },
         }
@@ -366,26 +368,7 @@ impl Engine {
     }
 
     fn timing(&self, rule: u8) -> Option<Timing> {
-        let c = &self.config;
-        match rule {
-            SafetyRule::FAULT => c.fault.as_ref().map(|r| r.timing),
-            SafetyRule::BATTERY => c.battery.as_ref().map(|r| r.timing),
-            SafetyRule::STALE => c.stale.as_ref().map(|r| r.timing),
-            SafetyRule::BUMPER => c.bumper,
-            SafetyRule::ULTRASONIC => c.ultrasonic.as_ref().map(|r| r.timing),
-            SafetyRule::IR => c.ir.as_ref().map(|r| r.timing),
-            SafetyRule::SPEED => c.speed.as_ref().map(|r| r.timing),
-            SafetyRule::OPERATOR => c.operator.then_some(Timing {
-                action: Action::Latch,
-                trigger_ns: 0,
-                release_ns: 0,
-            }),
-            SafetyRule::RUNAWAY => c.plausibility.runaway,
-            SafetyRule::DIRECTION => c.plausibility.direction,
-            SafetyRule::FOLLOWING => c.plausibility.following,
-            SafetyRule::LIMIT => c.limit.as_ref().map(|r| r.timing),
-            _ => None,
-        }
+        self.config.timing(rule)
     }
 
     /// The level at which a latching rule latches.
@@ -666,6 +649,7 @@ impl Engine {
         let mut stop = false;
         let mut latched = false;
         let mut lock_bits = 0u32;
+        let mut category: Option<u8> = None;
         let mut active_rules = 0u32;
         let mut acknowledged_rules = 0u32;
         for rule in 0..SafetyRule::COUNT as u8 {
@@ -679,6 +663,10 @@ impl Engine {
                 active_rules |= SafetyRule::bit(rule);
                 if !seen_held && let Some(i) = lock.index {
                     lock_bits |= 1 << i;
+                    // The lowest category among the rules that engage it.
+                    if let Some(c) = self.config.categories[usize::from(rule)] {
+                        category = Some(category.map_or(c, |k| k.min(c)));
+                    }
                 }
                 continue;
             }
@@ -709,7 +697,7 @@ impl Engine {
         }
         let (command, action, envelope) = if latched {
             let command = if lock_bits != 0 {
-                Command::StopAndLock(lock_bits)
+                Command::StopAndLock(lock_bits, category)
             } else {
                 Command::Stop
             };

@@ -643,17 +643,43 @@ fn the_battery_rule_says_which_reading_it_judges() {
 }
 
 #[test]
+fn a_latch_engages_the_lock_with_its_rules_stop_category() {
+    let mut rig = Rig::with_config(RobotKind::Titan, "[monitor.categories]\nbumper = 0\n");
+    rig.run(100);
+    rig.state.system.fault_flags = FaultFlags::BUMPER;
+    let d = rig.run(20);
+    assert_eq!(d.command, Command::StopAndLock(1, Some(0)));
+    assert_eq!(
+        d.command.request().flags,
+        chassis_client::RequestFlags::CATEGORY_0
+    );
+    // Only a latch engages the lock: a category for a rule that stops is refused.
+    let refused = |toml: &str| {
+        toml::from_str::<crate::config::RawConfig>(toml)
+            .unwrap()
+            .validate()
+            .unwrap_err()
+            .to_string()
+    };
+    assert!(
+        refused("[monitor.categories]\nfault = 1\n").contains("only a rule whose action is latch")
+    );
+    assert!(refused("[monitor.categories]\nbumper = 3\n").contains("0, 1 or 2"));
+    assert!(refused("[monitor.categories]\nwheels = 1\n").contains("is not a rule"));
+}
+
+#[test]
 fn the_bumper_latches_the_estop_until_the_operator_releases_it() {
     let mut rig = Rig::new(RobotKind::Titan);
     rig.run(100);
     rig.state.system.fault_flags = FaultFlags::BUMPER | FaultFlags::BODY_EXCEPTION;
     let d = rig.run(20);
-    assert_eq!(d.command, Command::StopAndLock(1));
+    assert_eq!(d.command, Command::StopAndLock(1, None));
     assert_eq!(d.action, SafetyAction::LATCH);
     // The TITAN reports a body exception with any fault bit: the fault rule stops as well.
     assert_eq!(texts(&d), ["fault: body_exception", "bumper: pressed"]);
     // Until the mux shows the lock held, every request engages it.
-    assert_eq!(rig.run(60).command, Command::StopAndLock(1));
+    assert_eq!(rig.run(60).command, Command::StopAndLock(1, None));
     rig.lock(Some(0));
     let d = rig.run(20);
     assert_eq!(d.command, Command::Stop, "held: no more lock bits");
@@ -673,7 +699,7 @@ fn the_bumper_latches_the_estop_until_the_operator_releases_it() {
     assert_eq!(d.active_rules, 0);
     // The next contact latches again.
     rig.state.system.fault_flags = FaultFlags::BUMPER;
-    assert_eq!(rig.run(20).command, Command::StopAndLock(1));
+    assert_eq!(rig.run(20).command, Command::StopAndLock(1, None));
 }
 
 #[test]
@@ -695,7 +721,7 @@ fn a_release_while_the_bumper_is_still_pressed_does_not_relatch_until_it_is_pres
     assert_eq!(texts(&d), ["bumper: released; latch re-armed"]);
     assert_eq!(d.acknowledged_rules, 0);
     rig.state.system.fault_flags = FaultFlags::BUMPER;
-    assert_eq!(rig.run(20).command, Command::StopAndLock(1));
+    assert_eq!(rig.run(20).command, Command::StopAndLock(1, None));
 }
 
 #[test]
@@ -708,7 +734,7 @@ fn a_latch_without_a_mux_status_stops_until_the_lock_can_be_engaged() {
     assert_eq!(d.action, SafetyAction::LATCH);
     assert_eq!(d.estop, EstopState::UNKNOWN);
     rig.mux = Some(mux_with_estop());
-    assert_eq!(rig.run(20).command, Command::StopAndLock(1));
+    assert_eq!(rig.run(20).command, Command::StopAndLock(1, None));
 }
 
 #[test]
@@ -721,7 +747,7 @@ fn a_restarted_service_gets_the_latched_lock_engaged_again() {
     // A new chassisd: its mux starts again at seq 1 with every lock free.
     rig.mux = Some(mux_with_estop());
     let d = rig.run(20);
-    assert_eq!(d.command, Command::StopAndLock(1));
+    assert_eq!(d.command, Command::StopAndLock(1, None));
     assert_eq!(d.notices.len(), 1, "{:?}", d.notices);
 }
 
@@ -747,7 +773,7 @@ fn the_operator_estop_latches_and_an_operator_lock_is_reported() {
     rig.run(100);
     assert!(rig.engine.request_operator_estop());
     let d = rig.run(20);
-    assert_eq!(d.command, Command::StopAndLock(1));
+    assert_eq!(d.command, Command::StopAndLock(1, None));
     assert_eq!(texts(&d), ["operator: e-stop (SIGUSR1)"]);
     rig.lock(Some(0));
     let d = rig.run(1000);
@@ -972,7 +998,7 @@ fn a_yaw_rate_beyond_or_against_the_command_latches_where_the_wire_carries_one()
     // 0.5 rad/s × 1.2 + 0.1 rad/s = 0.7 rad/s.
     rig.turn(0.5, 0.9);
     let d = rig.run(300);
-    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert!(matches!(d.command, Command::StopAndLock(..)), "{d:?}");
     assert_eq!(
         texts(&d),
         ["runaway: 0.90 rad/s, commands allow 0.70 rad/s"]
@@ -983,7 +1009,7 @@ fn a_yaw_rate_beyond_or_against_the_command_latches_where_the_wire_carries_one()
     rig.run(2000);
     rig.turn(0.5, -0.4);
     let d = rig.run(300);
-    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert!(matches!(d.command, Command::StopAndLock(..)), "{d:?}");
     assert_eq!(
         texts(&d),
         ["direction: -0.40 rad/s against a 0.50 rad/s command"]
@@ -1011,7 +1037,7 @@ fn moving_while_commanded_still_latches_as_a_runaway() {
         "200 ms trigger time"
     );
     let d = rig.run(40);
-    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert!(matches!(d.command, Command::StopAndLock(..)), "{d:?}");
     assert_eq!(texts(&d), ["runaway: 0.30 m/s, commands allow 0.05 m/s"]);
 }
 
@@ -1023,7 +1049,7 @@ fn faster_than_commanded_beyond_the_margin_is_a_runaway_and_within_it_is_not() {
     assert_eq!(rig.run(2000).command, Command::Heartbeat);
     rig.drive(0.5, 0.7);
     let d = rig.run(300);
-    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert!(matches!(d.command, Command::StopAndLock(..)), "{d:?}");
     assert_eq!(texts(&d), ["runaway: 0.70 m/s, commands allow 0.65 m/s"]);
 }
 
@@ -1062,7 +1088,7 @@ fn motion_against_the_command_latches_and_a_lagging_reversal_does_not() {
     rig.run(2000);
     rig.drive(0.5, -0.3);
     let d = rig.run(300);
-    assert!(matches!(d.command, Command::StopAndLock(_)), "{d:?}");
+    assert!(matches!(d.command, Command::StopAndLock(..)), "{d:?}");
     assert_eq!(
         texts(&d),
         ["direction: -0.30 m/s against a 0.50 m/s command"]
@@ -1183,7 +1209,7 @@ fn without_an_acceleration_the_plausibility_rules_say_so_and_do_not_judge() {
     );
     rig.wire = true;
     rig.drive(0.0, 0.5);
-    assert!(matches!(rig.run(300).command, Command::StopAndLock(_)));
+    assert!(matches!(rig.run(300).command, Command::StopAndLock(..)));
 }
 
 #[test]

@@ -139,6 +139,7 @@ fn engine(profile: &Profile) -> Engine {
         bus: "can:bench0".into(),
         descriptions: Vec::new(),
         recording: false,
+        drive_cut: None,
     };
     Engine::new(
         config,

@@ -31,6 +31,9 @@
 //!   (`ZeroReason::HELD`). While the source that would win awaits, the output is zero and
 //!   `MuxStatus` says so (`ZeroReason::AWAITING_ZERO`, `awaiting_source`, `stop`); it does not
 //!   hand the robot to a lower source either.
+//! * A held lock stops with a [`StopCategory`] (IEC 60204-1): its engage's, else its configured
+//!   one. [`Mux::stop_category`] names the lowest in force while the output is zero; the engine
+//!   carries it out on the drive (category 0 and 1 disable it). Every other stop is category 2.
 //! * It takes only a [`ValidRequest`]: a request with a NaN or infinite number or a negative
 //!   envelope is refused where the service parses it, and counted here ([`Mux::refuse`]). One
 //!   asking for a speed no chassis could reach (over [`MAX_SANE_SPEED`] or
@@ -44,8 +47,8 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ClampFlags, Envelope, InvalidVelocity, LockStatus, MuxStatus, SourceFlags, SourceStatus, Stop,
-    ValidRequest, Velocity, ZeroReason,
+    ClampFlags, Envelope, InvalidVelocity, LockStatus, MuxStatus, RequestFlags, SourceFlags,
+    SourceStatus, Stop, StopCategory, ValidRequest, Velocity, ZeroReason,
 };
 use chassis_protocols::Timestamp;
 use chassisd_config::mux::{LimitsConfig, LockConfig, MuxConfig, MuxConfigError, SourceConfig};
@@ -135,6 +138,22 @@ struct Lock {
     config: LockConfig,
     /// Holder (source index or [`LockStatus::HOLDER_OPERATOR`]) and since when.
     held: Option<(u8, Timestamp)>,
+    /// The [`StopCategory`] of the hold: the one its engage asked for, else the configured one.
+    category: u8,
+}
+
+impl Lock {
+    fn configured_category(&self) -> u8 {
+        self.config.category.unwrap_or(StopCategory::HOLD)
+    }
+
+    /// Held from `since` by `holder`, stopping with `category` (the configured one if `None`).
+    fn hold(&mut self, holder: u8, since: Timestamp, category: Option<u8>) {
+        self.held = Some((holder, since));
+        self.category = category
+            .filter(|&c| c <= StopCategory::HOLD)
+            .unwrap_or_else(|| self.configured_category());
+    }
 }
 
 /// The outcome of one evaluation.
@@ -206,6 +225,7 @@ impl Mux {
             .map(|c| Lock {
                 config: c.clone(),
                 held: None,
+                category: c.category.unwrap_or(StopCategory::HOLD),
             })
             .collect();
         let mut status = MuxStatus {
@@ -290,7 +310,7 @@ impl Mux {
         let mut released = Vec::new();
         for (bit, lock) in self.locks.iter_mut().enumerate() {
             if request.lock_engage & (1 << bit) != 0 && lock.held.is_none() {
-                lock.held = Some((holder, now));
+                lock.hold(holder, now, RequestFlags::category(request.flags));
             }
             if request.lock_release & (1 << bit) != 0 && lock.held.is_some_and(|(h, _)| h == holder)
             {
@@ -370,14 +390,44 @@ impl Mux {
         self.speed_limit = mps.map(|mps| (mps, LockStatus::HOLDER_OPERATOR));
     }
 
-    /// Engages the lock `name` on behalf of the operator. Returns whether it was free.
-    pub fn engage_lock(&mut self, now: Timestamp, name: &str) -> Result<bool, NoSuchLock> {
+    /// Engages the lock `name` on behalf of the operator, stopping with `category` (`None`: the
+    /// lock's configured one). Returns whether it was free; a held lock keeps its category.
+    pub fn engage_lock(
+        &mut self,
+        now: Timestamp,
+        name: &str,
+        category: Option<u8>,
+    ) -> Result<bool, NoSuchLock> {
         let lock = self.lock_mut(name)?;
         if lock.held.is_some() {
             return Ok(false);
         }
-        lock.held = Some((LockStatus::HOLDER_OPERATOR, now));
+        lock.hold(LockStatus::HOLDER_OPERATOR, now, category);
         Ok(true)
+    }
+
+    /// The [`StopCategory`] lock `name` stops with: its hold's while held, else its configured
+    /// one.
+    pub fn lock_category(&self, name: &str) -> Option<u8> {
+        let lock = self.locks.iter().find(|l| l.config.name == name)?;
+        Some(if lock.held.is_some() {
+            lock.category
+        } else {
+            lock.configured_category()
+        })
+    }
+
+    /// The lowest [`StopCategory`] among the held locks, while the output is zero: the stop
+    /// the engine carries out on the drive (`None`: no lock stops the robot).
+    pub fn stop_category(&self) -> Option<u8> {
+        if !self.output.is_zero() {
+            return None;
+        }
+        self.locks
+            .iter()
+            .filter(|l| l.held.is_some())
+            .map(|l| l.category)
+            .min()
     }
 
     /// Holds the lock `name` for `holder` (a source index or [`LockStatus::HOLDER_OPERATOR`])
@@ -390,7 +440,7 @@ impl Mux {
         since: Timestamp,
     ) -> Result<(), NoSuchLock> {
         let lock = self.lock_mut(name)?;
-        lock.held = Some((holder, since));
+        lock.hold(holder, since, None);
         Ok(())
     }
 
@@ -698,6 +748,11 @@ impl Mux {
                     slot.since_ns = 0;
                 }
             }
+            slot.category = if lock.held.is_some() {
+                lock.category
+            } else {
+                lock.configured_category()
+            };
         }
     }
 
@@ -1034,7 +1089,7 @@ mod tests {
         let mut m = mux_unrequired();
         m.on_request(ms(0), TELEOP, &request(ms(0), 0.3)).unwrap();
         assert_eq!(m.evaluate(ms(0)).output.linear_x_mps(), 0.3);
-        assert_eq!(m.engage_lock(ms(10), "estop"), Ok(true));
+        assert_eq!(m.engage_lock(ms(10), "estop", None), Ok(true));
         m.on_request(ms(20), TELEOP, &request(ms(20), 0.3)).unwrap();
         m.on_request(ms(20), PLANNER, &request(ms(20), 0.2))
             .unwrap();
@@ -1083,7 +1138,7 @@ mod tests {
     #[test]
     fn a_source_that_fell_silent_after_a_release_still_awaits_its_zero() {
         let mut m = mux_unrequired();
-        assert_eq!(m.engage_lock(ms(0), "estop"), Ok(true));
+        assert_eq!(m.engage_lock(ms(0), "estop", None), Ok(true));
         m.on_request(ms(10), TELEOP, &request(ms(10), 0.3)).unwrap();
         assert_eq!(m.release_lock("estop"), Ok(true));
         assert_eq!(m.evaluate(ms(20)).output, Velocity::ZERO);
@@ -1098,7 +1153,7 @@ mod tests {
         assert_eq!(m.evaluate(later).output.linear_x_mps(), 0.3);
         // A release while the last word of every source was zero leaves every source free.
         m.on_request(later, TELEOP, &request(later, 0.0)).unwrap();
-        assert_eq!(m.engage_lock(later, "estop"), Ok(true));
+        assert_eq!(m.engage_lock(later, "estop", None), Ok(true));
         assert_eq!(m.release_lock("estop"), Ok(true));
         assert!(m.awaiting_zero().is_empty());
         let quiet = later + Duration::from_secs(1);
@@ -1228,8 +1283,8 @@ mod tests {
     #[test]
     fn the_operator_can_engage_a_lock() {
         let mut m = mux_unrequired();
-        assert_eq!(m.engage_lock(ms(0), "estop"), Ok(true));
-        assert_eq!(m.engage_lock(ms(1), "estop"), Ok(false));
+        assert_eq!(m.engage_lock(ms(0), "estop", None), Ok(true));
+        assert_eq!(m.engage_lock(ms(1), "estop", None), Ok(false));
         m.on_request(ms(2), TELEOP, &request(ms(2), 0.3)).unwrap();
         assert_eq!(m.evaluate(ms(2)).output, Velocity::ZERO);
         assert_eq!(m.status().locks[0].holder, LockStatus::HOLDER_OPERATOR);

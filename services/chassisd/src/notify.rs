@@ -161,9 +161,12 @@ mod tests {
         mux.on_request(t(2), 1, &teleop).unwrap();
         mux.evaluate(t(2));
         assert_eq!(describe(mux.status()), "driving from teleop");
-        mux.engage_lock(t(3), "estop").unwrap();
+        mux.engage_lock(t(3), "estop", None).unwrap();
         mux.evaluate(t(4));
-        assert_eq!(describe(mux.status()), "stopped: locked · held: estop");
+        assert_eq!(
+            describe(mux.status()),
+            "stopped: locked · held: estop (category 2)"
+        );
     }
 
     #[test]

@@ -338,7 +338,7 @@ pub fn serve(config: Config, mut devices: impl Devices) -> Result<(), ServiceErr
     };
     shell.step(&ports, &mut engine, Step::Start(now));
     if let Some(notifier) = &mut shell.notifier {
-        notifier.ready(engine.mux().status());
+        notifier.ready(&engine.mux_status());
         if let Some(every) = notifier.ping_every() {
             info!("systemd watchdog: pinging every {every:?}");
         }
@@ -441,7 +441,7 @@ impl<D: Devices> Shell<D> {
                 }
                 let next = self.pass(ports, engine, wake);
                 if let Some(notifier) = &mut self.notifier {
-                    notifier.pass(clock::now(), engine.mux().status());
+                    notifier.pass(clock::now(), &engine.mux_status());
                 }
                 if let Some(stall) = &self.loop_stall {
                     stall.check();

@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use chassis_bus::{BusSpec, BusSpecError};
-use chassis_interfaces::valid_robot_name;
+use chassis_interfaces::{StopCategory, valid_robot_name};
 use chassis_protocols::{
     DriverConfig, Profile, ProfileError, ProfileTableError, Protocol, ProtocolError, RobotKind,
 };
@@ -368,12 +368,21 @@ impl RawConfig {
                 reason: "must be from 1/60 (a second) to 1440 (a day)".into(),
             });
         }
-        let mux = if overrides.no_safety_monitor {
+        let mut mux = if overrides.no_safety_monitor {
             self.mux.without_required_sources()
         } else {
             self.mux
         };
         mux.validate()?;
+        // The e-stop brakes and then disables the drive where the robot can disable it.
+        let estop = if profile.drive_cut(true).is_some() {
+            StopCategory::BRAKE_THEN_CUT
+        } else {
+            StopCategory::HOLD
+        };
+        for lock in mux.locks.iter_mut().filter(|l| l.name == "estop") {
+            lock.category.get_or_insert(estop);
+        }
         let realtime = overrides.realtime.or(self.service.realtime);
         if let Some(priority) = realtime
             && !(1..=99).contains(&priority)
@@ -560,6 +569,28 @@ mod tests {
                 .all(|s| s.remote == (s.name == "remote"))
         );
         assert_eq!(c.profile, RobotKind::Titan.entry().defaults());
+    }
+
+    #[test]
+    fn the_estop_brakes_then_cuts_the_drive_where_the_robot_can_cut_it() {
+        let estop = |robot: &str, file: &str| {
+            let raw: RawConfig =
+                toml::from_str(&format!("[service]\nrobot = \"{robot}\"\n{file}")).unwrap();
+            raw.validate(Overrides::default()).unwrap().mux.locks[0].category
+        };
+        assert_eq!(estop("titan", ""), Some(StopCategory::BRAKE_THEN_CUT));
+        assert_eq!(estop("xbot", ""), Some(StopCategory::BRAKE_THEN_CUT));
+        // A SCOUT MINI speaks V1 unless told otherwise: no way to cut its drive.
+        assert_eq!(estop("scout-mini", ""), Some(StopCategory::HOLD));
+        let chosen = "[[mux.lock]]\nname = \"estop\"\npriority = 255\ncategory = 0\n";
+        assert_eq!(estop("titan", chosen), Some(StopCategory::CUT));
+        let raw: RawConfig = toml::from_str(&chosen.replace("= 0", "= 3")).unwrap();
+        assert!(
+            raw.validate(titan())
+                .unwrap_err()
+                .to_string()
+                .contains("not a stop category")
+        );
     }
 
     #[test]

@@ -27,6 +27,13 @@ pub struct LockConfig {
     pub name: String,
     /// Sources below this priority are blocked while the lock is held.
     pub priority: u8,
+    /// The stop category (IEC 60204-1) of the stop it makes while held and the output is zero:
+    /// 0 disables the drive at once, 1 brakes and then disables it, 2 brakes and holds
+    /// (`chassis_interfaces::StopCategory`). An engage may ask for another. Unset: 2, except
+    /// the lock called `estop`, which stops with category 1 on a robot that can disable its
+    /// drive (the service fills it in from the robot's family).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub category: Option<u8>,
 }
 
 /// Speed and acceleration limits of the service (on top of the robot's own).
@@ -100,6 +107,7 @@ impl Default for MuxConfig {
             locks: vec![LockConfig {
                 name: "estop".into(),
                 priority: 255,
+                category: None,
             }],
             limits: LimitsConfig::default(),
         }
@@ -126,6 +134,8 @@ pub enum MuxConfigError {
          never comes from another computer"
     )]
     RemoteRequired(String),
+    #[error("lock '{0}': category {1} is not a stop category (0, 1 or 2)")]
+    BadCategory(String, u8),
 }
 
 impl MuxConfig {
@@ -163,6 +173,16 @@ impl MuxConfig {
         }
         if let Some(s) = self.sources.iter().find(|s| s.remote && s.required) {
             return Err(MuxConfigError::RemoteRequired(s.name.clone()));
+        }
+        if let Some(l) = self
+            .locks
+            .iter()
+            .find(|l| l.category.is_some_and(|c| c > 2))
+        {
+            return Err(MuxConfigError::BadCategory(
+                l.name.clone(),
+                l.category.unwrap_or_default(),
+            ));
         }
         Ok(())
     }

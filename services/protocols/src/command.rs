@@ -148,8 +148,9 @@ pub enum ControlAction {
     Chassis(Command),
     /// Release the named lock (operator).
     LockRelease(String),
-    /// Engage the named lock (operator).
-    LockEngage(String),
+    /// Engage the named lock (operator), stopping with a `StopCategory` (`None`: the lock's
+    /// configured one).
+    LockEngage(String, Option<u8>),
     /// Set the robot's standing speed limit, m/s, higher or lower (operator); `None` lifts it.
     SpeedLimit(Option<f32>),
     /// Keep the black box's window (operator).
@@ -206,6 +207,8 @@ pub enum BadControlRequest {
     NotFinite { what: &'static str },
     #[error("mode {0} is neither command nor standby")]
     UnknownMode(u8),
+    #[error("stop category argument {0}: 0 for the lock's own, or 1 + a category 0-2")]
+    UnknownCategory(u8),
     #[error("unknown control request kind {0}")]
     UnknownKind(u8),
     #[error("the speed limit is negative (a limit is more than 0 m/s; 0 lifts it)")]
@@ -272,7 +275,14 @@ pub fn request_to_action(
             enter: flag(0, "silent mode")?,
         },
         ControlKind::LOCK_RELEASE => return Ok(ControlAction::LockRelease(lock_name())),
-        ControlKind::LOCK_ENGAGE => return Ok(ControlAction::LockEngage(lock_name())),
+        ControlKind::LOCK_ENGAGE => {
+            let category = match request.arg[0] {
+                0 => None,
+                c @ 1..=3 => Some(c - 1),
+                other => return Err(BadControlRequest::UnknownCategory(other)),
+            };
+            return Ok(ControlAction::LockEngage(lock_name(), category));
+        }
         ControlKind::SPEED_LIMIT => {
             let mps = value(0, "speed limit")? as f32;
             return match mps {
@@ -374,7 +384,7 @@ mod tests {
         let r = ControlRequest::new(ControlKind::LOCK_ENGAGE).with_name("dock");
         assert_eq!(
             request_to_action(&r),
-            Ok(ControlAction::LockEngage("dock".into()))
+            Ok(ControlAction::LockEngage("dock".into(), None))
         );
     }
 

@@ -81,6 +81,13 @@ pub trait Family: FamilyValue + fmt::Debug + Send + Sync + 'static {
     /// serial), and what was clamped on the way (`ClampFlags`); counters start at 0.
     fn command_lines(&self, command: &Command) -> Result<(Vec<String>, u32), CommandError>;
 
+    /// The command that disables (`cut`) or enables again the robot's drive for a stop of
+    /// category 0 or 1 (`chassis_interfaces::StopCategory`); `None` where the protocol has no
+    /// way (a SCOUT MINI on V1: its only other mode hands the chassis to the RC transmitter).
+    fn drive_cut(&self, _cut: bool) -> Option<Command> {
+        None
+    }
+
     /// Fills what a simulated chassis knows and a real one's profile must be told (the XBot's
     /// wheel separation).
     fn fill_for_simulator(&mut self) {}

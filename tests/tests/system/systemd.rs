@@ -85,10 +85,13 @@ fn ready_comes_once_the_state_service_exists_and_status_follows_the_mux() {
         String::from_utf8_lossy(&out.stderr)
     );
     let seen = until(&socket, "held: estop", Duration::from_secs(3), &env);
-    // Nothing asks for motion, so the decision is "no active source", with the lock beside it.
-    assert_eq!(
-        seen.last().unwrap(),
-        "STATUS=stopped: no active source · held: estop"
+    // Nothing asks for motion, so the decision is "no active source", with the lock and its
+    // stop category beside it: the standing TITAN's drive is cut at once.
+    assert!(
+        seen.last()
+            .unwrap()
+            .starts_with("STATUS=stopped: no active source · held: estop (category 1) · drive cut"),
+        "{seen:?}"
     );
     env.proc(index).signal(Signal::SIGTERM);
     let seen = until(&socket, "STOPPING=1", Duration::from_secs(3), &env);

@@ -62,6 +62,7 @@
 //! frame is decided before that frame reaches the driver ([`Engine::handle_rx`] decides first), so
 //! a command is never queued behind the bus.
 
+mod drive;
 mod pass;
 #[cfg(test)]
 mod rig;
@@ -77,9 +78,10 @@ use chassis_bus::can_controller::{self, Controller, ControllerReport};
 use chassis_interfaces::{
     BusFrame, ChassisState, ControlKind, ControlRequest, ControlResponse, ControlStatus,
     ControllerState, FaultFlags, FrameDirection, FrameKind, GpsFix, Group, LinkFlags, LockStatus,
-    MuxStatus, RobotDescription, SourceFlags, SourceStatus, Stop, ValidRequest, VelocityRequest,
-    WireProtocol, ZeroReason,
+    MuxStatus, RobotDescription, SourceFlags, SourceStatus, Stop, StopCategory, ValidRequest,
+    VelocityRequest, WireProtocol, ZeroReason,
 };
+use chassis_protocols::command::Command;
 use chassis_protocols::driver::Level;
 use chassis_protocols::{
     ControlAction, ControlOutcome, Driver, DriverEvent, Rx, Timestamp, WireItem, nmea,
@@ -123,6 +125,9 @@ pub struct EngineConfig {
     /// The shell's black box records (`service.blackbox_mib` > 0): `chassis control keep` is
     /// answered, not refused.
     pub recording: bool,
+    /// The commands that disable and enable the robot's drive for stops of category 0 and 1
+    /// (`Family::drive_cut`); `None` where it has none or the service does not take control.
+    pub drive_cut: Option<(Command, Command)>,
 }
 
 impl EngineConfig {
@@ -154,6 +159,14 @@ impl EngineConfig {
             .map(|protocol| crate::description::for_config(config, protocol))
             .collect(),
             recording: config.blackbox_mib > 0,
+            drive_cut: if config.driver.take_control {
+                config
+                    .profile
+                    .drive_cut(true)
+                    .zip(config.profile.drive_cut(false))
+            } else {
+                None
+            },
         }
     }
 }
@@ -347,6 +360,8 @@ pub struct Engine {
     tx_held: Vec<(Timestamp, WireItem)>,
     /// The readers to wake at the end of the pass, one bit per [`Readers`].
     to_wake: u8,
+    /// The drive as the stops of category 0 and 1 left it.
+    drive: drive::Drive,
 }
 
 impl std::fmt::Debug for Engine {
@@ -411,6 +426,7 @@ impl Engine {
             rx_items: Vec::new(),
             tx_held: Vec::new(),
             to_wake: 0,
+            drive: drive::Drive::new(config.drive_cut),
             config,
             driver,
             mux,
@@ -565,10 +581,13 @@ impl Engine {
                     Err(err) => (ControlStatus::INVALID, err.to_string()),
                 }
             }
-            Ok(ControlAction::LockEngage(name)) => {
+            Ok(ControlAction::LockEngage(name, category)) => {
                 self.undecided = true;
-                match self.mux.engage_lock(now, &name) {
-                    Ok(true) => (ControlStatus::OK, format!("{name} engaged by the operator")),
+                match self.mux.engage_lock(now, &name, category) {
+                    Ok(true) => (
+                        ControlStatus::OK,
+                        format!("{name} engaged by the operator{}", self.cut_note(&name)),
+                    ),
                     Ok(false) => (ControlStatus::OK, format!("{name} was already held")),
                     Err(err) => (ControlStatus::INVALID, err.to_string()),
                 }
@@ -632,6 +651,7 @@ impl Engine {
         }
         self.driver.handle_rx(stamp, rx);
         self.update_holds();
+        self.update_drive(stamp);
         self.publish_state_if_changed(stamp);
     }
 
@@ -776,6 +796,7 @@ impl Engine {
             self.driver.handle_timeout(now);
             self.update_holds();
         }
+        self.update_drive(now);
     }
 
     /// Ends a pass: answers finished control requests, logs the driver's notices, publishes
@@ -1044,6 +1065,33 @@ impl Engine {
             self.mux_changed = true;
             self.log_mux_change();
         }
+        self.update_drive(now);
+    }
+
+    /// Carries out the mux's stop category on the drive (`engine::drive`); a change is
+    /// published with the mux status.
+    fn update_drive(&mut self, now: Timestamp) {
+        if self
+            .drive
+            .update(now, self.mux.stop_category(), &mut self.driver)
+        {
+            self.mux_changed = true;
+        }
+    }
+
+    /// What an operator's engage of `lock` answers beyond "engaged": its stop category and, for
+    /// a robot that cannot cut its drive, that it holds zero instead.
+    fn cut_note(&self, lock: &str) -> String {
+        match self.mux.lock_category(lock) {
+            Some(category) if category < StopCategory::HOLD && self.config.drive_cut.is_none() => {
+                format!(
+                    " (stop category {}: this robot cannot cut its drive, zero is held)",
+                    StopCategory::text(category)
+                )
+            }
+            Some(category) => format!(" (stop category {})", StopCategory::text(category)),
+            None => String::new(),
+        }
     }
 
     /// Holds the e-stop (the lock called `estop`; every lock when none has that name) for the
@@ -1132,10 +1180,17 @@ impl Engine {
         }
     }
 
-    fn publish_mux(&mut self, now: Timestamp) {
+    /// The mux status as published: the mux's decision, the robot's own clamps (applied by the
+    /// driver) and the drive as the stops left it.
+    pub fn mux_status(&self) -> MuxStatus {
         let mut status = *self.mux.status();
-        // The robot's own limits (applied by the driver) are clamps too.
         status.clamp_flags |= self.driver.state().command.clamp_flags;
+        status.drive = self.drive.state();
+        status
+    }
+
+    fn publish_mux(&mut self, now: Timestamp) {
+        let mut status = self.mux_status();
         self.mux_seq += 1;
         status.seq = self.mux_seq;
         self.last_mux_publish = Some(now);

@@ -201,6 +201,7 @@ impl Rig {
             bus: "can:rig0".into(),
             descriptions: Vec::new(),
             recording: false,
+            drive_cut: profile.drive_cut(true).zip(profile.drive_cut(false)),
         };
         adjust(&mut config);
         let driver = profile.driver(&DriverConfig::default(), T0);

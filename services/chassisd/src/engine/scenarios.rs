@@ -9,8 +9,8 @@
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ControlKind, ControlRequest, ControlStatus, ControllerState, LinkFlags, LockStatus, Stop,
-    VelocityRequest, ZeroReason,
+    ControlKind, ControlMode, ControlRequest, ControlStatus, ControllerState, DriveState,
+    LinkFlags, LockStatus, Stop, StopCategory, VelocityRequest, ZeroReason,
 };
 use chassis_protocols::{Injection, Protocol, RobotKind, Timestamp, WireItem, titan};
 use chassisd_config::mux::MuxConfig;
@@ -1555,4 +1555,134 @@ fn a_thousand_seconds_of_random_sources_locks_faults_and_bus_losses_keep_every_r
         let n = restarts.get(&kind).map_or(0, |r| r.len());
         assert!(n >= 3, "{n} restarts after {kind:?}: {counts:?}");
     }
+}
+
+// ----- Stop categories -----
+
+/// The default sources and the e-stop, unsmoothed, the e-stop stopping with `category`.
+fn estop_of_category(category: u8) -> MuxConfig {
+    let mut mux = unsmoothed();
+    mux.locks[0].category = Some(category);
+    mux
+}
+
+/// An operator's engage of the e-stop asking for `category` (`None`: the lock's own).
+fn estop(category: Option<u8>) -> ControlRequest {
+    control(ControlKind::LOCK_ENGAGE)
+        .with_name("estop")
+        .with_arg(0, category.map_or(0, |c| c + 1))
+}
+
+/// Teleop drives `robot` at 1 m/s from 300 ms; at 1.5 s the operator's e-stop asks for
+/// `asked` on a lock configured with `configured`; teleop keeps asking until 6 s.
+fn stopped_at_speed(robot: RobotKind, configured: u8, asked: Option<u8>) -> Rig {
+    let mut rig = ready_for(robot, estop_of_category(configured), 60);
+    rig.publish_every("teleop", twist(1.0), ms(50), at(6000));
+    rig.run_until(at(1500));
+    assert!(rig.world.firmware.truth().linear_mps > 0.9, "at speed");
+    let engage = rig.control_at(at(1500), estop(asked));
+    rig.run_until(at(1501));
+    let (answer, _) = rig.response(engage).expect("answered at once");
+    assert_eq!(answer.status, ControlStatus::OK, "{}", answer.message());
+    rig
+}
+
+#[test]
+fn a_category_1_estop_brakes_to_a_standstill_then_cuts_the_drive_and_its_release_enables_it() {
+    let mut rig = stopped_at_speed(RobotKind::Titan, StopCategory::BRAKE_THEN_CUT, None);
+    assert_eq!(rig.first_motion(at(1500), |v| v == 0.0), Some(at(1500)));
+    assert_eq!(rig.mux().drive, DriveState::BRAKING);
+    assert_eq!(rig.mux().locks[0].category, StopCategory::BRAKE_THEN_CUT);
+    // Braking under control: the chassis is still in command mode until it stands.
+    rig.run_until(at(1700));
+    assert!(rig.world.firmware.truth().linear_mps > 0.05);
+    assert_eq!(rig.mux().drive, DriveState::BRAKING);
+    assert_eq!(rig.state().system.control_mode, ControlMode::COMMAND);
+    rig.run_until(at(4000));
+    assert_eq!(rig.mux().drive, DriveState::CUT);
+    assert_eq!(rig.state().system.control_mode, ControlMode::STANDBY);
+    assert!(rig.world.firmware.truth().linear_mps.abs() < 1e-3);
+    assert!(rig.mux().why().to_string().contains("drive cut"));
+    // The release enables the drive, and starts nothing: teleop kept asking for motion.
+    rig.control_at(
+        at(6500),
+        control(ControlKind::LOCK_RELEASE).with_name("estop"),
+    );
+    rig.run_until(at(7000));
+    assert_eq!(rig.mux().drive, DriveState::ENABLED);
+    assert_eq!(rig.state().system.control_mode, ControlMode::COMMAND);
+    assert_eq!(rig.first_motion(at(6500), |v| v > 0.0), None);
+    rig.request_at(at(7000), "teleop", twist(0.0));
+    rig.publish_every("teleop", twist(0.5), ms(50), at(8000));
+    rig.run_until(at(8000));
+    assert!(rig.world.firmware.truth().linear_mps > 0.4, "drives again");
+}
+
+#[test]
+fn a_category_0_estop_cuts_the_drive_at_once_and_stops_sooner_than_category_2() {
+    let distance = |asked| {
+        let mut rig = stopped_at_speed(RobotKind::Titan, StopCategory::HOLD, Some(asked));
+        let x0 = rig.world.firmware.truth().x_m;
+        let drive = rig.mux().drive;
+        rig.run_until(at(4000));
+        assert!(rig.world.firmware.truth().linear_mps.abs() < 1e-3);
+        (
+            drive,
+            rig.world.firmware.truth().x_m - x0,
+            rig.state().system.control_mode,
+        )
+    };
+    let (drive, cut_m, mode) = distance(StopCategory::CUT);
+    assert_eq!(drive, DriveState::CUT, "at once");
+    assert_eq!(mode, ControlMode::STANDBY);
+    let (drive, hold_m, mode) = distance(StopCategory::HOLD);
+    assert_eq!(drive, DriveState::ENABLED);
+    assert_eq!(mode, ControlMode::COMMAND);
+    // The simulated TITAN stops a cut drive on its 0.1 s lag, a zero command on its 0.3 s one.
+    assert!(cut_m < 0.6 * hold_m, "cut {cut_m:.3} m, held {hold_m:.3} m");
+}
+
+#[test]
+fn an_xbot_category_1_stop_turns_its_drive_power_off_and_on_again() {
+    let mut rig = ready_for(
+        RobotKind::Xbot,
+        estop_of_category(StopCategory::BRAKE_THEN_CUT),
+        60,
+    );
+    rig.publish_every("teleop", twist(0.3), ms(50), at(3000));
+    rig.run_until(at(1500));
+    assert!(rig.world.firmware.truth().linear_mps > 0.2);
+    rig.control_at(at(1500), estop(None));
+    rig.run_until(at(3000));
+    assert_eq!(rig.mux().drive, DriveState::CUT);
+    assert!(rig.world.firmware.truth().linear_mps.abs() < 1e-3);
+    // Power back on at the release; teleop's zero, then its motion, drives again.
+    rig.control_at(
+        at(3000),
+        control(ControlKind::LOCK_RELEASE).with_name("estop"),
+    );
+    rig.run_until(at(3500));
+    assert_eq!(rig.mux().drive, DriveState::ENABLED);
+    rig.request_at(at(3500), "teleop", twist(0.0));
+    rig.publish_every("teleop", twist(0.3), ms(50), at(5000));
+    rig.run_until(at(5000));
+    assert!(rig.world.firmware.truth().linear_mps > 0.2, "powered again");
+}
+
+#[test]
+fn a_robot_that_cannot_cut_its_drive_holds_zero_and_says_so() {
+    // A SCOUT MINI on protocol V1: its only other mode hands the chassis to the RC transmitter.
+    let mut rig = stopped_at_speed(
+        RobotKind::ScoutMini,
+        StopCategory::HOLD,
+        Some(StopCategory::CUT),
+    );
+    assert_eq!(rig.mux().drive, DriveState::CANNOT_CUT);
+    rig.run_until(at(4000));
+    assert!(rig.world.firmware.truth().linear_mps.abs() < 1e-3);
+    assert!(
+        rig.mux().why().to_string().contains("cannot cut its drive"),
+        "{}",
+        rig.mux().why()
+    );
 }

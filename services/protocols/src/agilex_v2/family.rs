@@ -79,6 +79,11 @@ impl Family for V2Profile {
         Ok(with_model_and_overrides(self, table, V2Profile::for_model)?.into())
     }
 
+    /// Standby (0x421 `00`): the chassis obeys no motion frame until CAN command mode is asked again.
+    fn drive_cut(&self, cut: bool) -> Option<Command> {
+        Some(Command::Mode { take_control: !cut })
+    }
+
     family_parts!(V2Driver, V2Sim, heartbeat_period_ms);
 
     fn codec(&self) -> BoxedCodec {

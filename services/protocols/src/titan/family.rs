@@ -43,6 +43,11 @@ impl Family for TitanProfile {
         Ok(with_overrides(self, table)?.into())
     }
 
+    /// Standby (0x421 `00`): the chassis obeys no motion frame until CAN command mode is asked again.
+    fn drive_cut(&self, cut: bool) -> Option<Command> {
+        Some(Command::Mode { take_control: !cut })
+    }
+
     family_parts!(TitanDriver, TitanSim, heartbeat_period_ms);
 
     fn codec(&self) -> BoxedCodec {

@@ -63,6 +63,11 @@ impl Family for XbotProfile {
         Some(self.gps_baud)
     }
 
+    /// Drive power off (0x01 `00`): the wheels stop and the stored command is dropped.
+    fn drive_cut(&self, cut: bool) -> Option<Command> {
+        Some(Command::Power { enable: !cut })
+    }
+
     family_parts!(XbotDriver, XbotSim);
 
     fn codec(&self) -> BoxedCodec {
