@@ -54,6 +54,8 @@ struct Case {
     /// Teleop turns a SCOUT MINI on the spot at [`TURN_RADPS`] instead of driving the TITAN
     /// straight: the yaw rate is judged.
     turning: bool,
+    /// The stop disables the drive at once (the monitor's latch asks for stop category 0).
+    cut: bool,
 }
 
 /// The yaw rate teleop turns at, rad/s.
@@ -162,7 +164,10 @@ fn chassis_fault(case: &Case) {
     let x0 = position(&mut robot);
     let injected_at = Instant::now();
     sim_ok(&mut robot, case.request);
+    // The drive as the first zero output found it: a category-0 latch has cut it already.
+    let mut drive_at_stop = DriveState::ENABLED;
     let stopped = pump.until(&mut robot, STOP_BOUND, |m, _| {
+        drive_at_stop = m.drive;
         m.output == BodyVelocity::ZERO
     });
     let x_stop = position(&mut robot);
@@ -180,7 +185,8 @@ fn chassis_fault(case: &Case) {
     let rule_held = status.is_active(case.rule);
     let named =
         case.cause == Unfollowed::NONE || status_text.contains(Unfollowed::text(case.cause));
-    let pass = stopped.is_some() && rule_held && named && standing == case.stands;
+    let cut = !case.cut || drive_at_stop == DriveState::CUT;
+    let pass = stopped.is_some() && rule_held && named && standing == case.stands && cut;
     let stop_ms = stopped.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
     let mut figures = Figures::faults();
     figures.add(fault_figure(
@@ -199,8 +205,8 @@ fn chassis_fault(case: &Case) {
                 format!("{:.2} {unit} to the standstill", x_end - x0)
             } else {
                 "still moving after the stop (the chassis does not obey)".into()
-            }
-        ),
+            },
+        ) + &format!("; drive {} at the stop", DriveState::name(drive_at_stop)),
         stop_ms,
         pass,
     ));
@@ -232,6 +238,11 @@ fn chassis_fault(case: &Case) {
         "chassis status does not name the cause:\n{status_text}"
     );
     assert_eq!(standing, case.stands, "standing after the stop");
+    assert!(
+        cut,
+        "the drive is {} at a category-0 latch's stop",
+        DriveState::name(drive_at_stop)
+    );
     figures.finish();
 }
 
@@ -252,6 +263,7 @@ fn a_chassis_running_away_from_its_command_is_latched() {
         config: "",
         speed_limit: None,
         turning: false,
+        cut: false,
     });
 }
 
@@ -263,14 +275,16 @@ fn a_chassis_driving_against_its_command_is_latched() {
         rank: 710,
         fault: "the chassis drives against its command (TITAN, wheels at −1 × the command)",
         injection: "`chassis sim gain -1` while teleop drives at 0.5 m/s",
-        behaviour: "the direction rule latches the e-stop; the chassis stands at the zero",
+        behaviour: "the direction rule latches the e-stop with stop category 0 (`[monitor.\
+                    categories] direction = 0`): the drive is cut at once; the chassis stands",
         request: injected(SimKind::GAIN, 0, -1.0),
         rule: SafetyRule::DIRECTION,
         cause: Unfollowed::NONE,
         stands: true,
-        config: "",
+        config: "[monitor.categories]\ndirection = 0\n",
         speed_limit: None,
         turning: false,
+        cut: true,
     });
 }
 
@@ -292,6 +306,7 @@ fn a_chassis_ignoring_its_command_is_stopped_and_the_cause_named() {
         config: "",
         speed_limit: None,
         turning: false,
+        cut: false,
     });
 }
 
@@ -312,6 +327,7 @@ fn a_slipping_chassis_is_stopped_and_the_cause_named() {
         config: "",
         speed_limit: None,
         turning: false,
+        cut: false,
     });
 }
 
@@ -331,6 +347,7 @@ fn a_motor_driver_lost_mid_motion_stops_the_chassis() {
         config: "",
         speed_limit: None,
         turning: false,
+        cut: false,
     });
 }
 
@@ -353,6 +370,7 @@ fn a_chassis_running_over_its_speed_limit_is_stopped() {
         config: "[rules.runaway]\nenabled = false\n[rules.limit]\nrelease_ms = 5000\n",
         speed_limit: Some("0.3"),
         turning: false,
+        cut: false,
     });
 }
 
@@ -374,6 +392,7 @@ fn a_chassis_turning_against_its_command_is_latched() {
         config: "",
         speed_limit: None,
         turning: true,
+        cut: false,
     });
 }
 
