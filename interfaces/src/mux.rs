@@ -452,6 +452,12 @@ impl std::fmt::Display for Why<'_> {
         if !held.is_empty() {
             write!(f, " · held: {}", held.join(", "))?;
         }
+        if m.active().is_some() && m.clamp_flags & ClampFlags::CHASSIS_NOT_READY != 0 {
+            write!(
+                f,
+                " · the chassis cannot move now (standby, brake, RC or a fault): zero sent"
+            )?;
+        }
         match m.drive {
             DriveState::BRAKING => write!(f, " · braking, then the drive is cut")?,
             DriveState::CUT => write!(f, " · drive cut")?,
@@ -559,6 +565,14 @@ mod tests {
         );
         status.speed_limit_holder = LockStatus::HOLDER_OPERATOR;
         assert_eq!(status.speed_limit(), Some((0.5, "operator")));
+        status.clamp_flags = ClampFlags::CHASSIS_NOT_READY;
+        assert!(
+            status.why().to_string().contains(
+                "· the chassis cannot move now (standby, brake, RC or a fault): zero sent"
+            ),
+            "{}",
+            status.why()
+        );
     }
 
     #[test]
