@@ -1085,11 +1085,11 @@ impl Engine {
         match self.mux.lock_category(lock) {
             Some(category) if category < StopCategory::HOLD && self.config.drive_cut.is_none() => {
                 format!(
-                    " (stop category {}: this robot cannot cut its drive, zero is held)",
+                    ", stop category {}: this robot cannot cut its drive, zero is held",
                     StopCategory::text(category)
                 )
             }
-            Some(category) => format!(" (stop category {})", StopCategory::text(category)),
+            Some(category) => format!(", stop category {}", StopCategory::text(category)),
             None => String::new(),
         }
     }
