@@ -1587,6 +1587,23 @@ fn stopped_at_speed(robot: RobotKind, configured: u8, asked: Option<u8>) -> Rig 
     rig
 }
 
+/// The operator releases the e-stop at `t_ms`: the drive is enabled again and nothing moves
+/// until teleop's zero; then teleop drives at `v` m/s again.
+fn released_and_driven_again(rig: &mut Rig, t_ms: u64, v: f32) {
+    rig.control_at(
+        at(t_ms),
+        control(ControlKind::LOCK_RELEASE).with_name("estop"),
+    );
+    rig.run_until(at(t_ms + 500));
+    assert_eq!(rig.mux().drive, DriveState::ENABLED);
+    assert_eq!(rig.first_motion(at(t_ms), |v| v > 0.0), None);
+    rig.request_at(at(t_ms + 500), "teleop", twist(0.0));
+    rig.publish_every("teleop", twist(v), ms(50), at(t_ms + 2000));
+    rig.run_until(at(t_ms + 2000));
+    let speed = rig.world.firmware.truth().linear_mps;
+    assert!(speed > 0.8 * f64::from(v), "drives again: {speed} m/s");
+}
+
 #[test]
 fn a_category_1_estop_brakes_to_a_standstill_then_cuts_the_drive_and_its_release_enables_it() {
     let mut rig = stopped_at_speed(RobotKind::Titan, StopCategory::BRAKE_THEN_CUT, None);
@@ -1604,18 +1621,8 @@ fn a_category_1_estop_brakes_to_a_standstill_then_cuts_the_drive_and_its_release
     assert!(rig.world.firmware.truth().linear_mps.abs() < 1e-3);
     assert!(rig.mux().why().to_string().contains("drive cut"));
     // The release enables the drive, and starts nothing: teleop kept asking for motion.
-    rig.control_at(
-        at(6500),
-        control(ControlKind::LOCK_RELEASE).with_name("estop"),
-    );
-    rig.run_until(at(7000));
-    assert_eq!(rig.mux().drive, DriveState::ENABLED);
+    released_and_driven_again(&mut rig, 6500, 0.5);
     assert_eq!(rig.state().system.control_mode, ControlMode::COMMAND);
-    assert_eq!(rig.first_motion(at(6500), |v| v > 0.0), None);
-    rig.request_at(at(7000), "teleop", twist(0.0));
-    rig.publish_every("teleop", twist(0.5), ms(50), at(8000));
-    rig.run_until(at(8000));
-    assert!(rig.world.firmware.truth().linear_mps > 0.4, "drives again");
 }
 
 #[test]
@@ -1657,16 +1664,7 @@ fn an_xbot_category_1_stop_turns_its_drive_power_off_and_on_again() {
     assert_eq!(rig.mux().drive, DriveState::CUT);
     assert!(rig.world.firmware.truth().linear_mps.abs() < 1e-3);
     // Power back on at the release; teleop's zero, then its motion, drives again.
-    rig.control_at(
-        at(3000),
-        control(ControlKind::LOCK_RELEASE).with_name("estop"),
-    );
-    rig.run_until(at(3500));
-    assert_eq!(rig.mux().drive, DriveState::ENABLED);
-    rig.request_at(at(3500), "teleop", twist(0.0));
-    rig.publish_every("teleop", twist(0.3), ms(50), at(5000));
-    rig.run_until(at(5000));
-    assert!(rig.world.firmware.truth().linear_mps > 0.2, "powered again");
+    released_and_driven_again(&mut rig, 3000, 0.3);
 }
 
 #[test]
