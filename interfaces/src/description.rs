@@ -114,7 +114,7 @@ named_constants! {
 ipc_type! {
     /// Speed and acceleration limits; NaN where there is none.
     #[derive(Default, Serialize)]
-    #[type_name("chassis::MotionLimits.v1")]
+    #[type_name("chassis::MotionLimits.v2")]
     pub struct MotionLimits {
         /// Largest forward speed, m/s.
         pub forward_mps: f64,
@@ -130,6 +130,11 @@ ipc_type! {
         pub linear_accel_mps2: f64,
         /// Largest |yaw acceleration|, rad/s²; NaN: not limited.
         pub angular_accel_radps2: f64,
+        /// The deceleration of a controlled stop, m/s² (a held lock's stop of category 1 or 2
+        /// ramps the command down at it), for a planner sizing its protective field
+        /// (`v ≤ √(2·a·d)`); NaN: unknown (zero is commanded at once and the chassis brakes at
+        /// its own rate).
+        pub braking_mps2: f64,
     }
 }
 
@@ -143,6 +148,7 @@ impl MotionLimits {
         steer_rad: f64::NAN,
         linear_accel_mps2: f64::NAN,
         angular_accel_radps2: f64::NAN,
+        braking_mps2: f64::NAN,
     };
 
     /// The tighter of two limits, field by field (NaN: no limit on that side).
@@ -160,6 +166,7 @@ impl MotionLimits {
             steer_rad: min(self.steer_rad, other.steer_rad),
             linear_accel_mps2: min(self.linear_accel_mps2, other.linear_accel_mps2),
             angular_accel_radps2: min(self.angular_accel_radps2, other.angular_accel_radps2),
+            braking_mps2: min(self.braking_mps2, other.braking_mps2),
         }
     }
 }
@@ -286,7 +293,7 @@ ipc_type! {
 
 ipc_type! {
     /// The robot `chassisd` drives, as it is configured and detected: see the module doc.
-    #[type_name("chassis::RobotDescription.v1")]
+    #[type_name("chassis::RobotDescription.v2")]
     pub struct RobotDescription {
         /// Bumped at every publication (a change of protocol once detection decides).
         pub seq: u64,

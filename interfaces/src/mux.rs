@@ -452,6 +452,9 @@ impl std::fmt::Display for Why<'_> {
         if !held.is_empty() {
             write!(f, " · held: {}", held.join(", "))?;
         }
+        if m.active().is_none() && !m.output.is_zero() {
+            write!(f, " · braking to zero")?;
+        }
         if m.active().is_some() && m.clamp_flags & ClampFlags::CHASSIS_NOT_READY != 0 {
             write!(
                 f,
@@ -565,6 +568,19 @@ mod tests {
         );
         status.speed_limit_holder = LockStatus::HOLDER_OPERATOR;
         assert_eq!(status.speed_limit(), Some((0.5, "operator")));
+        status.active_source = MuxStatus::NO_SOURCE;
+        status.zero_reason = ZeroReason::LOCKED;
+        status.output.linear_x_mps = 0.4;
+        assert!(
+            status
+                .why()
+                .to_string()
+                .contains("stopped: locked · held: estop (category 1) · braking to zero"),
+            "{}",
+            status.why()
+        );
+        status.output = BodyVelocity::ZERO;
+        status.active_source = 1;
         status.clamp_flags = ClampFlags::CHASSIS_NOT_READY;
         assert!(
             status.why().to_string().contains(

@@ -134,6 +134,24 @@ impl Velocity {
     /// One step from this velocity towards `target`: each speed moves by at most `linear_step`
     /// (m/s) or `angular_step` (rad/s), and the steering angle is the target's. A negative or NaN
     /// step limits nothing. Every result lies between this velocity and the target: finite.
+    /// The same motion slowed by `linear_step` m/s (a controlled stop's step): the yaw rate in
+    /// proportion and the steering angle kept, so the robot keeps its path; zero once the
+    /// step reaches the speed (a turn on the spot stops at once).
+    pub fn braked(self, linear_step: f32) -> Velocity {
+        let b = self.0;
+        let speed = b.linear_x_mps.hypot(b.linear_y_mps);
+        if speed <= linear_step || !linear_step.is_finite() {
+            return Velocity::ZERO;
+        }
+        let k = (speed - linear_step) / speed;
+        Velocity(BodyVelocity {
+            linear_x_mps: b.linear_x_mps * k,
+            linear_y_mps: b.linear_y_mps * k,
+            angular_z_radps: b.angular_z_radps * k,
+            ..b
+        })
+    }
+
     pub fn towards(self, target: Velocity, linear_step: f32, angular_step: f32) -> Velocity {
         let step = |from: f32, to: f32, max: f32| {
             let delta = to - from;
@@ -286,6 +304,21 @@ impl ValidRequest {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_braked_motion_keeps_its_path_and_ends_at_zero() {
+        let v = Velocity::steer(1.0, 0.3).unwrap();
+        let b = v.braked(0.25);
+        assert_eq!(
+            (b.linear_x_mps(), b.steer_rad(), b.uses_steer()),
+            (0.75, 0.3, true)
+        );
+        let turn = Velocity::twist(0.5, 0.2).unwrap().braked(0.25);
+        assert_eq!((turn.linear_x_mps(), turn.angular_z_radps()), (0.25, 0.1));
+        assert!(
+            v.braked(1.0).is_zero() && Velocity::twist(0.0, 0.5).unwrap().braked(0.1).is_zero()
+        );
+    }
 
     fn valid(request: VelocityRequest) -> Result<ValidRequest, InvalidVelocity> {
         ValidRequest::try_from(request)

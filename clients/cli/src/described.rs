@@ -90,6 +90,9 @@ fn speeds_text(limits: &MotionLimits) -> Vec<String> {
             limits.angular_accel_radps2
         ));
     }
+    if limits.braking_mps2.is_finite() {
+        words.push(format!("braking {:.2} m/s²", limits.braking_mps2));
+    }
     words
 }
 
@@ -285,6 +288,7 @@ fn limits_json(l: &MotionLimits) -> Value {
         "steer_rad": finite(l.steer_rad),
         "linear_accel_mps2": finite(l.linear_accel_mps2),
         "angular_accel_radps2": finite(l.angular_accel_radps2),
+        "braking_mps2": finite(l.braking_mps2),
     })
 }
 

@@ -551,9 +551,9 @@ class LockStatus(Struct):
 
 
 class MotionLimits(Struct):
-    """``chassis::MotionLimits.v1``: 56 bytes, aligned to 8."""
+    """``chassis::MotionLimits.v2``: 64 bytes, aligned to 8."""
 
-    _type_name = 'chassis::MotionLimits.v1'
+    _type_name = 'chassis::MotionLimits.v2'
     _fields_ = [
         ('forward_mps', ctypes.c_double),
         ('reverse_mps', ctypes.c_double),
@@ -562,6 +562,7 @@ class MotionLimits(Struct):
         ('steer_rad', ctypes.c_double),
         ('linear_accel_mps2', ctypes.c_double),
         ('angular_accel_radps2', ctypes.c_double),
+        ('braking_mps2', ctypes.c_double),
     ]
 
 
@@ -667,9 +668,9 @@ class SourceDescription(Struct):
 
 @_text_fields('name', 'kind_name', 'model', 'display_name')
 class RobotDescription(Struct):
-    """``chassis::RobotDescription.v1``: 2200 bytes, aligned to 8."""
+    """``chassis::RobotDescription.v2``: 2216 bytes, aligned to 8."""
 
-    _type_name = 'chassis::RobotDescription.v1'
+    _type_name = 'chassis::RobotDescription.v2'
     _fields_ = [
         ('seq', ctypes.c_uint64),
         ('stamp_ns', ctypes.c_uint64),

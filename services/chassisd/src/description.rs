@@ -43,6 +43,7 @@ pub fn for_config(config: &Config, wire_protocol: u8) -> RobotDescription {
         steer_rad: f64::NAN,
         linear_accel_mps2: limit(limits.linear_accel_mps2),
         angular_accel_radps2: limit(limits.angular_accel_radps2),
+        braking_mps2: limit(limits.braking_mps2),
     };
     for source in &config.mux.sources {
         let mut flags = 0;

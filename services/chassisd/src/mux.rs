@@ -32,7 +32,9 @@
 //!   `MuxStatus` says so (`ZeroReason::AWAITING_ZERO`, `awaiting_source`, `stop`); it does not
 //!   hand the robot to a lower source either.
 //! * A held lock stops with a [`StopCategory`] (IEC 60204-1): its engage's, else its configured
-//!   one. [`Mux::stop_category`] names the lowest in force while the output is zero; the engine
+//!   one. A stop of category 1 or 2 ramps the output down at `limits.braking_mps2` where one is
+//!   configured (a controlled stop along the same path), one of category 0 does not.
+//!   [`Mux::stop_category`] names the lowest in force once the output is zero; the engine
 //!   carries it out on the drive (category 0 and 1 disable it). Every other stop is category 2.
 //! * It takes only a [`ValidRequest`]: a request with a NaN or infinite number or a negative
 //!   envelope is refused where the service parses it, and counted here ([`Mux::refuse`]). One
@@ -418,11 +420,14 @@ impl Mux {
     }
 
     /// The lowest [`StopCategory`] among the held locks, while the output is zero: the stop
-    /// the engine carries out on the drive (`None`: no lock stops the robot).
+    /// the engine carries out on the drive (`None`: no lock stops the robot). A stop of
+    /// category 1 or 2 reaches zero at `limits.braking_mps2` where one is configured.
     pub fn stop_category(&self) -> Option<u8> {
-        if !self.output.is_zero() {
-            return None;
-        }
+        self.held_category().filter(|_| self.output.is_zero())
+    }
+
+    /// The lowest [`StopCategory`] among the held locks.
+    fn held_category(&self) -> Option<u8> {
         self.locks
             .iter()
             .filter(|l| l.held.is_some())
@@ -561,7 +566,15 @@ impl Mux {
                     | ZeroReason::NO_ACTIVE_SOURCE
                     | ZeroReason::AWAITING_ZERO
             );
-        let output = if unsmoothed {
+        // A held lock's controlled stop (category 1 or 2) ramps down at the braking figure.
+        let braking = reason == ZeroReason::LOCKED
+            && self.limits.braking_mps2 > 0.0
+            && self.held_category() != Some(StopCategory::CUT)
+            && !self.output.is_zero();
+        let output = if braking {
+            clamp_flags |= ClampFlags::ACCELERATION_LIMIT;
+            self.output.braked((self.limits.braking_mps2 * dt) as f32)
+        } else if unsmoothed {
             limited
         } else {
             let (smoothed, smoothing_flags) = self.smooth(limited, dt);

@@ -52,6 +52,11 @@ pub struct LimitsConfig {
     pub angular_accel_radps2: f64,
     /// Stops from sources at or above this priority are never smoothed.
     pub safety_priority: u8,
+    /// The deceleration a held lock's stop of category 1 or 2 commands, m/s²: the output ramps
+    /// down at it (then a category-1 stop cuts the drive), and the robot's description publishes
+    /// it for a planner to size its protective field (`v ≤ √(2·a·d)`). 0: zero is commanded at
+    /// once and the chassis brakes at its own rate, which no manual gives.
+    pub braking_mps2: f64,
 }
 
 impl Default for LimitsConfig {
@@ -63,6 +68,7 @@ impl Default for LimitsConfig {
             linear_accel_mps2: 2.0,
             angular_accel_radps2: 4.0,
             safety_priority: 255,
+            braking_mps2: 0.0,
         }
     }
 }
@@ -115,7 +121,7 @@ impl Default for MuxConfig {
 }
 
 /// Why a mux configuration is not usable.
-#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[derive(Debug, Clone, PartialEq, Error)]
 pub enum MuxConfigError {
     #[error("no velocity source is configured")]
     NoSources,
@@ -134,6 +140,8 @@ pub enum MuxConfigError {
          never comes from another computer"
     )]
     RemoteRequired(String),
+    #[error("limits.braking_mps2 = {0}: a deceleration is a finite number ≥ 0 (0: none)")]
+    BadBraking(f64),
     #[error("lock '{0}': category {1} is not a stop category (0, 1 or 2)")]
     BadCategory(String, u8),
 }

@@ -15,7 +15,7 @@ fn a_late_client_reads_the_description_of_the_configured_robot_with_its_override
     let n = name("dh");
     let config = env.write(
         "hunter.toml",
-        "[profile]\nmax_linear_mps = 0.4\n[mux.limits]\nmax_angular_radps = 0.7\n",
+        "[profile]\nmax_linear_mps = 0.4\n[mux.limits]\nmax_angular_radps = 0.7\nbraking_mps2 = 1.5\n",
     );
     env.serve("hunter", &n, &["--config", &config]);
     let _ = env.robot(&n, UP);
@@ -40,6 +40,10 @@ fn a_late_client_reads_the_description_of_the_configured_robot_with_its_override
         "the [mux.limits] value"
     );
     assert_eq!(d.effective_limits().forward_mps, 0.4);
+    // The braking figure a planner sizes its protective field from: configured, the manuals
+    // giving none.
+    assert!(d.robot_limits.braking_mps2.is_nan());
+    assert_eq!(d.effective_limits().braking_mps2, 1.5);
     assert!(d.flags & DescriptionFlags::SIMULATED != 0);
     assert!(d.flags & DescriptionFlags::SAFETY_REQUIRED != 0);
     let safety = d

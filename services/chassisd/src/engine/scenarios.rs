@@ -1684,3 +1684,35 @@ fn a_robot_that_cannot_cut_its_drive_holds_zero_and_says_so() {
         rig.mux().why()
     );
 }
+
+#[test]
+fn a_controlled_stop_ramps_down_at_the_braking_figure_and_a_category_0_stop_does_not() {
+    let braked = |asked: u8| {
+        let mut mux = estop_of_category(StopCategory::BRAKE_THEN_CUT);
+        mux.limits.braking_mps2 = 1.0;
+        let mut rig = ready_for(RobotKind::Titan, mux, 60);
+        rig.publish_every("teleop", twist(1.0), ms(50), at(6000));
+        rig.run_until(at(1500));
+        let x0 = rig.world.firmware.truth().x_m;
+        rig.control_at(at(1500), estop(Some(asked)));
+        rig.run_until(at(1800));
+        let ramping = speed_at(&rig, at(1800));
+        rig.run_until(at(5000));
+        assert!(rig.world.firmware.truth().linear_mps.abs() < 1e-3);
+        (
+            ramping,
+            rig.world.firmware.truth().x_m - x0,
+            rig.mux().drive,
+        )
+    };
+    // 1 m/s at 1 m/s²: the command is 0.7 m/s 0.3 s in, zero after 1 s; v²/2a = 0.5 m, and the
+    // TITAN's 0.3 s lag on top.
+    let (ramping, m, drive) = braked(StopCategory::BRAKE_THEN_CUT);
+    assert!((0.65..=0.75).contains(&ramping), "{ramping} m/s");
+    assert!((0.5..=0.5 + 0.4).contains(&m), "{m:.3} m");
+    assert_eq!(drive, DriveState::CUT, "cut once stopped");
+    let (ramping, m, drive) = braked(StopCategory::CUT);
+    assert_eq!(ramping, 0.0);
+    assert!(m < 0.2, "{m:.3} m");
+    assert_eq!(drive, DriveState::CUT);
+}
