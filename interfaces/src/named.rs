@@ -26,7 +26,8 @@
 /// - `pub flags Group: u32 { … }` (bits combined with `|`) gives the same table as `Group::ALL`,
 ///   `Group::names(bits)` (the names of the set bits, in table order) and `Group::from_name(name)`.
 ///
-/// The contract (`layout::constants`) lists the constants by their Rust names.
+/// The contract (`layout::constants`) lists the constants by their Rust names
+/// (`Group::constant_group()`).
 macro_rules! named_constants {
     (
         $(#[$meta:meta])*
@@ -39,6 +40,17 @@ macro_rules! named_constants {
         pub struct $group;
         impl $group {
             $($(#[$doc])* pub const $name: $t = $value;)+
+
+            /// The group as the contract lists it (`layout::constants`): every constant by its
+            /// Rust name.
+            pub(crate) fn constant_group() -> $crate::layout::ConstantGroup {
+                $crate::layout::ConstantGroup::new(
+                    stringify!($group),
+                    stringify!($kind),
+                    stringify!($t),
+                    vec![$((stringify!($name).to_string(), u64::from(Self::$name))),+],
+                )
+            }
 
             /// For the tests: every constant's Rust name, value and name.
             #[cfg(test)]
