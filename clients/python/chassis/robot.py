@@ -516,7 +516,8 @@ def _fault_code(which: str) -> int:
 def control_request(action: str, /, **args: Any) -> ControlRequest:
     """The control request for ``action`` with the arguments ``chassis control`` takes.
 
-    Actions: ``estop``, ``estop-release``, ``lock-engage`` / ``lock-release`` (``lock=``),
+    Actions: ``estop``, ``estop-release``, ``lock-engage`` / ``lock-release`` (``lock=``; an
+    engage takes ``category=`` 0, 1 or 2, the stop category, else the lock's configured one),
     ``mode`` (``mode="command"|"standby"``), ``brake`` (``action="engage"|"release"``),
     ``clear-fault`` (``which="all"``, ``"motor-1"``…), ``lights`` (``mode="off"|"on"|
     "breathing"|"custom"|"auto"``, ``brightness=100``), ``off-road`` (``state=``), ``lift``
@@ -539,6 +540,11 @@ def control_request(action: str, /, **args: Any) -> ControlRequest:
     if action in ("estop", "lock-engage"):
         request.kind = ControlKind.LOCK_ENGAGE
         _set_lock(request, "estop" if action == "estop" else take("lock"))
+        category = args.pop("category", None)
+        if category is not None:
+            if category not in (0, 1, 2):
+                raise ValueError(f"stop category {category}: 0, 1 or 2")
+            arg(0, category + 1)
     elif action in ("estop-release", "lock-release"):
         request.kind = ControlKind.LOCK_RELEASE
         _set_lock(request, "estop" if action == "estop-release" else take("lock"))

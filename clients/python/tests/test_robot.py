@@ -397,8 +397,10 @@ def test_control_actions_are_answered_with_success_or_a_reason(world: World) -> 
     unsupported = robot.control("lights", mode="on")
     assert unsupported.status == chassis.ControlStatus.UNSUPPORTED, str(unsupported)
 
-    # The operator's e-stop holds the robot whatever the teleop asks.
-    assert robot.control("estop").ok
+    # The operator's e-stop holds the robot whatever the teleop asks; stop category 0 cuts the
+    # drive at once.
+    engaged = robot.control("estop", category=0)
+    assert engaged.ok and "stop category 0 (cut the drive at once)" in engaged.message, str(engaged)
     stopped = drive(
         robot,
         teleop,
@@ -410,6 +412,8 @@ def test_control_actions_are_answered_with_success_or_a_reason(world: World) -> 
     assert stopped.motion.linear_mps == pytest.approx(0.0, abs=0.01)
     mux = robot.wait_mux(1.0)
     assert mux is not None and mux.zero_reason == chassis.ZeroReason.LOCKED
+    assert mux.locks[0].category == chassis.StopCategory.CUT
+    assert mux.drive == chassis.DriveState.CUT, mux.why()
     # A release never starts motion: the teleop still asks for 0.3 m/s, so nothing moves
     # until it has asked for zero.
     teleop.send(chassis.VelocityRequest.twist(0.3, 0.0))
