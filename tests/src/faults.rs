@@ -250,7 +250,17 @@ impl<'a> Pump<'a> {
 
 /// CPU time of process `pid` so far (user + system), clock ticks.
 pub fn cpu_ticks(pid: i32) -> u64 {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    stat_ticks(&format!("/proc/{pid}/stat"))
+}
+
+/// CPU time of the main thread of process `pid` so far (chassisd's event loop), clock ticks.
+pub fn main_thread_cpu_ticks(pid: i32) -> u64 {
+    stat_ticks(&format!("/proc/{pid}/task/{pid}/stat"))
+}
+
+/// User + system time in a `stat` file of `/proc`, clock ticks.
+fn stat_ticks(path: &str) -> u64 {
+    let stat = std::fs::read_to_string(path).unwrap_or_default();
     // Fields after the command name (which may hold spaces): utime and stime are 14 and 15.
     let fields: Vec<&str> = stat
         .rsplit(')')
