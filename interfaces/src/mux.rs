@@ -67,7 +67,8 @@ named_constants! {
         CONFIG_SPEED_LIMIT = 1 << 8 => "config_speed_limit",
         /// The wire's resolution changed the value (SCOUT MINI percent steps).
         QUANTISED = 1 << 9 => "quantised",
-        /// The chassis cannot move now (standby, brake, RC authority, fault): zero was sent.
+        /// The chassis cannot move now (TITAN: the parking brake held; XBot: drive power off;
+        /// SCOUT MINI V1: not in command mode): zero was sent.
         CHASSIS_NOT_READY = 1 << 10 => "chassis_not_ready",
         /// A limiting source (the safety monitor) clamped the winner's request.
         SAFETY_LIMIT = 1 << 11 => "safety_limit",
@@ -456,10 +457,7 @@ impl std::fmt::Display for Why<'_> {
             write!(f, " · braking to zero")?;
         }
         if m.active().is_some() && m.clamp_flags & ClampFlags::CHASSIS_NOT_READY != 0 {
-            write!(
-                f,
-                " · the chassis cannot move now (standby, brake, RC or a fault): zero sent"
-            )?;
+            write!(f, " · the chassis cannot move now: zero sent")?;
         }
         match m.drive {
             DriveState::BRAKING => write!(f, " · braking, then the drive is cut")?,
@@ -583,9 +581,10 @@ mod tests {
         status.active_source = 1;
         status.clamp_flags = ClampFlags::CHASSIS_NOT_READY;
         assert!(
-            status.why().to_string().contains(
-                "· the chassis cannot move now (standby, brake, RC or a fault): zero sent"
-            ),
+            status
+                .why()
+                .to_string()
+                .contains("· the chassis cannot move now: zero sent"),
             "{}",
             status.why()
         );

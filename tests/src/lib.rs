@@ -1335,6 +1335,11 @@ pub const FAULT_ROWS: &[ExpectedRow] = &[
     },
     ExpectedRow {
         suite: "faults_chassis",
+        test: "a_chassis_in_standby_is_stopped_and_the_cause_named",
+        fault: "the chassis in standby while commanded: it answers and does not drive (TITAN)",
+    },
+    ExpectedRow {
+        suite: "faults_chassis",
         test: "a_slipping_chassis_is_stopped_and_the_cause_named",
         fault: "the chassis slips: 10 % of the commanded speed (TITAN)",
     },

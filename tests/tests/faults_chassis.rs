@@ -40,7 +40,7 @@ struct Case {
     fault: &'static str,
     injection: &'static str,
     behaviour: &'static str,
-    request: SimRequest,
+    request: Injected,
     /// The rule that must be in force once the robot stopped.
     rule: u8,
     /// The cause the following rule must name (`Unfollowed::NONE` for the others).
@@ -94,14 +94,22 @@ impl Case {
     }
 }
 
-fn injected(kind: u8, index: u8, value: f64) -> SimRequest {
-    SimRequest {
+/// How a case makes the fault happen.
+enum Injected {
+    /// A fault injected into the simulated chassis.
+    Sim(SimRequest),
+    /// The operator's `chassis control` action (its arguments after `--name NAME`).
+    Control(&'static [&'static str]),
+}
+
+fn injected(kind: u8, index: u8, value: f64) -> Injected {
+    Injected::Sim(SimRequest {
         kind,
         flag: 1,
         index,
         value,
         ..SimRequest::default()
-    }
+    })
 }
 
 /// The forward position of the chassis by its truth, m.
@@ -163,7 +171,14 @@ fn chassis_fault(case: &Case) {
     let unit = axis.unit;
     let x0 = position(&mut robot);
     let injected_at = Instant::now();
-    sim_ok(&mut robot, case.request);
+    match case.request {
+        Injected::Sim(request) => {
+            sim_ok(&mut robot, request);
+        }
+        Injected::Control(action) => {
+            env.chassis_ok(&[&["control", "--name", n.as_str()], action].concat());
+        }
+    }
     // The drive as the first zero output found it: a category-0 latch has cut it already.
     let mut drive_at_stop = DriveState::ENABLED;
     let stopped = pump.until(&mut robot, STOP_BOUND, |m, _| {
@@ -302,6 +317,28 @@ fn a_chassis_ignoring_its_command_is_stopped_and_the_cause_named() {
         request: injected(SimKind::GAIN, 0, 0.0),
         rule: SafetyRule::FOLLOWING,
         cause: Unfollowed::UNREPORTED,
+        stands: true,
+        config: "",
+        speed_limit: None,
+        turning: false,
+        cut: false,
+    });
+}
+
+#[test]
+fn a_chassis_in_standby_is_stopped_and_the_cause_named() {
+    chassis_fault(&Case {
+        test: "a_chassis_in_standby_is_stopped_and_the_cause_named",
+        tag: "fcb",
+        rank: 725,
+        fault: "the chassis in standby while commanded: it answers and does not drive (TITAN)",
+        injection: "`chassis control mode standby` (the driver lets go of the chassis) while \
+                    teleop drives at 0.5 m/s",
+        behaviour: "the following rule stops after the time the robot needs to start; \
+                    `chassis status` says the chassis is in standby",
+        request: Injected::Control(&["mode", "standby"]),
+        rule: SafetyRule::FOLLOWING,
+        cause: Unfollowed::STANDBY,
         stands: true,
         config: "",
         speed_limit: None,

@@ -248,7 +248,7 @@ def _why(mux: MuxStatus) -> str:
     if held:
         text += f" · held: {', '.join(held)}"
     if active is not None and mux.clamp_flags & ClampFlags.CHASSIS_NOT_READY:
-        text += " · the chassis cannot move now (standby, brake, RC or a fault): zero sent"
+        text += " · the chassis cannot move now: zero sent"
     text += _DRIVE.get(mux.drive, "")
     if mux.speed_limit_mps > 0:
         holder = mux.speed_limit_holder
