@@ -9,6 +9,10 @@
 //! * Category 2, and every stop that is not a lock: zero is commanded and held, the drive stays
 //!   powered.
 //!
+//! A chassis that takes commands again while its drive is cut (a V2 or TITAN firmware returns
+//! to command mode by itself on the first heartbeat after it dropped to standby for a lost one,
+//! say after a bus outage) is cut again, at most every 500 ms.
+//!
 //! When no stop of category 0 or 1 is in force any more (its lock released, or a source above
 //! the lock drives), the drive is enabled again. That starts no motion: the release is a stop
 //! like any other, and the mux waits for a zero from the source that would win. A robot with no
@@ -16,10 +20,13 @@
 
 use std::time::Duration;
 
-use chassis_interfaces::{ChassisState, DriveState, LinkFlags, StopCategory};
+use chassis_interfaces::{ChassisState, ControlMode, DriveState, LinkFlags, StopCategory};
 use chassis_protocols::command::Command;
 use chassis_protocols::{ControlOutcome, Driver, Timestamp};
 use tracing::{info, warn};
+
+/// The shortest time between two cuts of a drive that is cut already.
+const RECUT_AFTER: Duration = Duration::from_millis(500);
 
 /// Below these the chassis stands still, m/s and rad/s.
 const STILL_MPS: f32 = 0.02;
@@ -34,6 +41,8 @@ pub(super) struct Drive {
     state: u8,
     /// When the category-1 stop in force began braking.
     braking_since: Option<Timestamp>,
+    /// When the drive was last cut (the command sent again while the chassis obeys anyway).
+    cut_at: Timestamp,
 }
 
 impl Drive {
@@ -42,6 +51,7 @@ impl Drive {
             commands,
             state: DriveState::ENABLED,
             braking_since: None,
+            cut_at: Timestamp::ZERO,
         }
     }
 
@@ -82,6 +92,20 @@ impl Drive {
             (Some(_), braking) => (braking, None),
         };
         if wanted == self.state {
+            // A chassis that takes commands again while its drive is cut (a heartbeat lost
+            // while the bus was down, and the firmware's automatic return after it) is cut
+            // again, at most every [`RECUT_AFTER`].
+            if let Some(cut) = command
+                && obeys(driver.state(), cut)
+                && now.saturating_since(self.cut_at) >= RECUT_AFTER
+            {
+                self.cut_at = now;
+                let outcome = driver.control(now, cut);
+                warn!(
+                    "the chassis takes commands again while its drive is cut: cut again ({})",
+                    outcome.message()
+                );
+            }
             return false;
         }
         let was = std::mem::replace(&mut self.state, wanted);
@@ -89,6 +113,7 @@ impl Drive {
         match (was, wanted) {
             (_, DriveState::CUT) => {
                 if let Some(cut) = command {
+                    self.cut_at = now;
                     let outcome = driver.control(now, cut);
                     warn!(
                         "stop category {category}: drive cut ({})",
@@ -113,6 +138,15 @@ impl Drive {
             _ => {}
         }
         true
+    }
+}
+
+/// Whether the chassis reports it obeys what `cut` disables (command mode; drive power on).
+fn obeys(state: &ChassisState, cut: &Command) -> bool {
+    match cut {
+        Command::Mode { .. } => state.system.control_mode == ControlMode::COMMAND,
+        Command::Power { .. } => state.system.power_enabled != 0,
+        _ => false,
     }
 }
 

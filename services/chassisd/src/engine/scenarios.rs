@@ -1716,3 +1716,20 @@ fn a_controlled_stop_ramps_down_at_the_braking_figure_and_a_category_0_stop_does
     assert!(m < 0.2, "{m:.3} m");
     assert_eq!(drive, DriveState::CUT);
 }
+
+#[test]
+fn a_cut_drive_whose_chassis_takes_commands_again_after_a_bus_outage_is_cut_again() {
+    let mut rig = ready_for(RobotKind::Titan, estop_of_category(StopCategory::CUT), 60);
+    rig.run_until(at(500));
+    // The bus goes; the operator's e-stop cuts the drive meanwhile: the standby request is lost.
+    rig.cut_bus();
+    rig.control_at(at(600), estop(None));
+    rig.run_until(at(1500));
+    assert_eq!(rig.mux().drive, DriveState::CUT);
+    // The chassis dropped to standby for the lost heartbeat; the first heartbeat after the bus
+    // came back returns it to command mode by itself, and the engine cuts it again.
+    rig.restore_bus();
+    rig.run_until(at(4000));
+    assert_eq!(rig.mux().drive, DriveState::CUT);
+    assert_eq!(rig.state().system.control_mode, ControlMode::STANDBY);
+}
