@@ -55,7 +55,7 @@ fn call(action: ServiceAction, payload: &[u8]) {
     let read = request_to_action(&request)
         .unwrap_or_else(|e| panic!("{action:?}: chassisd refuses {request:?}: {e}"));
     match (action, read) {
-        (ServiceAction::Estop, ControlAction::LockEngage(name))
+        (ServiceAction::Estop, ControlAction::LockEngage(name, None))
         | (ServiceAction::EstopRelease, ControlAction::LockRelease(name)) => {
             assert_eq!(name, "estop");
         }
