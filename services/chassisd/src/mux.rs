@@ -149,6 +149,15 @@ impl Lock {
         self.config.category.unwrap_or(StopCategory::HOLD)
     }
 
+    /// The [`StopCategory`] it stops with: its hold's while held, else its configured one.
+    fn stop_category(&self) -> u8 {
+        if self.held.is_some() {
+            self.category
+        } else {
+            self.configured_category()
+        }
+    }
+
     /// Held from `since` by `holder`, stopping with `category` (the configured one if `None`).
     fn hold(&mut self, holder: u8, since: Timestamp, category: Option<u8>) {
         self.held = Some((holder, since));
@@ -227,7 +236,8 @@ impl Mux {
             .map(|c| Lock {
                 config: c.clone(),
                 held: None,
-                category: c.category.unwrap_or(StopCategory::HOLD),
+                // Set by every hold.
+                category: StopCategory::HOLD,
             })
             .collect();
         let mut status = MuxStatus {
@@ -412,11 +422,7 @@ impl Mux {
     /// one.
     pub fn lock_category(&self, name: &str) -> Option<u8> {
         let lock = self.locks.iter().find(|l| l.config.name == name)?;
-        Some(if lock.held.is_some() {
-            lock.category
-        } else {
-            lock.configured_category()
-        })
+        Some(lock.stop_category())
     }
 
     /// The lowest [`StopCategory`] among the held locks, while the output is zero: the stop
@@ -761,11 +767,7 @@ impl Mux {
                     slot.since_ns = 0;
                 }
             }
-            slot.category = if lock.held.is_some() {
-                lock.category
-            } else {
-                lock.configured_category()
-            };
+            slot.category = lock.stop_category();
         }
     }
 

@@ -25,6 +25,9 @@ use chassis_protocols::command::Command;
 use chassis_protocols::{ControlOutcome, Driver, Timestamp};
 use tracing::{info, warn};
 
+/// The longest a category-1 stop waits for the standstill before it cuts the drive.
+const CUT_AFTER: Duration = Duration::from_millis(StopCategory::CUT_AFTER_MS);
+
 /// The shortest time between two cuts of a drive that is cut already.
 const RECUT_AFTER: Duration = Duration::from_millis(500);
 
@@ -68,13 +71,12 @@ impl Drive {
         category: Option<u8>,
         driver: &mut impl Driver,
     ) -> bool {
-        let cut_after = Duration::from_millis(StopCategory::CUT_AFTER_MS);
         let wanted = match category {
             Some(StopCategory::CUT) => DriveState::CUT,
             Some(StopCategory::BRAKE_THEN_CUT) if self.state == DriveState::CUT => DriveState::CUT,
             Some(StopCategory::BRAKE_THEN_CUT) => {
                 let since = *self.braking_since.get_or_insert(now);
-                if stands(driver.state()) || now.saturating_since(since) >= cut_after {
+                if stands(driver.state()) || now.saturating_since(since) >= CUT_AFTER {
                     DriveState::CUT
                 } else {
                     DriveState::BRAKING
