@@ -353,7 +353,7 @@ named_constants! {
         /// [`StopCategory::HOLD`] and says so ([`DriveState::CANNOT_CUT`]).
         CUT = 0 => "cut",
         /// Zero commanded (the chassis brakes under control), then the drive disabled once the
-        /// chassis reports standstill, or after [`StopCategory::CUT_AFTER_MS`] at the latest.
+        /// chassis reports standstill, or after 3 s at the latest (chassisd's `engine/drive.rs`).
         BRAKE_THEN_CUT = 1 => "brake_then_cut",
         /// Zero commanded and held with the drive powered.
         HOLD = 2 => "hold",
@@ -361,9 +361,6 @@ named_constants! {
 }
 
 impl StopCategory {
-    /// The longest a category-1 stop waits for standstill before it disables the drive, ms.
-    pub const CUT_AFTER_MS: u64 = 3000;
-
     /// `0 (cut the drive at once)`, for views.
     pub fn text(category: u8) -> String {
         let what = match category {

@@ -4,7 +4,7 @@
 //! * Category 0: the drive is disabled at once, with the robot's own command
 //!   (`Family::drive_cut`: standby on AgileX, drive power off on the XBot).
 //! * Category 1: zero is commanded (the chassis brakes under its own control); once the chassis
-//!   reports standstill — or after [`StopCategory::CUT_AFTER_MS`] at the latest — the drive is
+//!   reports standstill — or after [`CUT_AFTER`] at the latest — the drive is
 //!   disabled.
 //! * Category 2, and every stop that is not a lock: zero is commanded and held, the drive stays
 //!   powered.
@@ -26,7 +26,7 @@ use chassis_protocols::{ControlOutcome, Driver, Timestamp};
 use tracing::{info, warn};
 
 /// The longest a category-1 stop waits for the standstill before it cuts the drive.
-const CUT_AFTER: Duration = Duration::from_millis(StopCategory::CUT_AFTER_MS);
+const CUT_AFTER: Duration = Duration::from_secs(3);
 
 /// The shortest time between two cuts of a drive that is cut already.
 const RECUT_AFTER: Duration = Duration::from_millis(500);
