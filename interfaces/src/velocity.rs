@@ -9,7 +9,10 @@
 //! a motion frame) takes these types and checks nothing again. The encoders' range check stays
 //! as the last line before the wire.
 
+use serde::de::Error as _;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use thiserror::Error;
+use zerocopy::{FromBytes, IntoBytes};
 
 use crate::{BodyVelocity, RequestFlags, VelocityRequest};
 
@@ -179,7 +182,7 @@ impl From<Velocity> for BodyVelocity {
 
 /// Bounds on a velocity ([`Velocity::bounded`]), each 0 or more; an infinite one bounds
 /// nothing.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Envelope {
     /// Largest forward speed, m/s.
     pub forward_mps: f32,
@@ -222,6 +225,38 @@ impl Envelope {
 /// is not negative: what the mux takes. Made only by parsing (`ValidRequest::try_from`).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ValidRequest(VelocityRequest);
+
+/// A [`Velocity`] or a [`ValidRequest`] keeps its bytes in a snapshot of the state (bit for
+/// bit), and is read back by parsing them again.
+macro_rules! parsed_bytes {
+    ($type:ty, $raw:ty, $parse:expr) => {
+        impl Serialize for $type {
+            fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                serializer.serialize_bytes(self.0.as_bytes())
+            }
+        }
+
+        impl<'de> Deserialize<'de> for $type {
+            fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+                let bytes: &[u8] = Deserialize::deserialize(deserializer)?;
+                let raw = <$raw>::read_from_bytes(bytes)
+                    .map_err(|_| D::Error::custom(concat!("not a ", stringify!($raw))))?;
+                $parse(raw).map_err(D::Error::custom)
+            }
+        }
+    };
+}
+
+parsed_bytes!(Velocity, BodyVelocity, |v: BodyVelocity| {
+    finite(&[
+        ("linear_x_mps", v.linear_x_mps),
+        ("linear_y_mps", v.linear_y_mps),
+        ("angular_z_radps", v.angular_z_radps),
+        ("steer_rad", v.steer_rad),
+    ])
+    .map(|()| Velocity(v))
+});
+parsed_bytes!(ValidRequest, VelocityRequest, ValidRequest::try_from);
 
 impl TryFrom<VelocityRequest> for ValidRequest {
     type Error = InvalidVelocity;

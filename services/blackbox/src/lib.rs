@@ -191,12 +191,20 @@ pub enum Event {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         failed: Option<String>,
     },
-    /// The recorder dropped this many passes' events here: the replay stops.
+    /// The recorder dropped this many passes' events here: the replay goes on from the next
+    /// [`Event::Snapshot`].
     Gap {
         dropped: u64,
     },
-    /// The ring's oldest part is gone between the start and what follows: the replay stops.
+    /// The ring's oldest part is gone between the start and what follows: the replay goes on
+    /// from the next [`Event::Snapshot`].
     Cut,
+    /// The engine's state between two passes (`Engine::snapshot`), taken as each segment of the
+    /// ring begins: a replay checks that it holds the same, or goes on from it after a cut or a
+    /// gap.
+    Snapshot {
+        state: Bytes,
+    },
 }
 
 impl Event {

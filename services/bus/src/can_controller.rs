@@ -25,6 +25,7 @@
 //! interface taken down and up restarts the controller) starts from unknown too.
 
 use chassis_interfaces::{ChassisState, ControllerState, LinkFlags};
+use serde::{Deserialize, Serialize};
 
 /// One report of the CAN controller: a SocketCAN error frame decoded, or the state the
 /// interface had when the bus was opened.
@@ -93,7 +94,7 @@ impl Change {
 }
 
 /// The controller as the service knows it: its state, counters and what it reported so far.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct Controller {
     state: u8,
     counters: (u8, u8),

@@ -53,7 +53,9 @@ use chassis_interfaces::{
     SourceStatus, Stop, StopCategory, ValidRequest, Velocity, ZeroReason,
 };
 use chassis_protocols::Timestamp;
+use chassis_protocols::snapshot::{SnapshotError, raw};
 use chassisd_config::mux::{LimitsConfig, LockConfig, MuxConfig, MuxConfigError, SourceConfig};
+use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 /// Fastest speed a request may ask for, m/s: far beyond any of these robots; a larger value is
@@ -94,12 +96,14 @@ pub struct NoSuchLock {
     pub configured: String,
 }
 
+/// A source's latest request and the time its age counts from.
+type Latest = Option<(Timestamp, ValidRequest)>;
+
 #[derive(Debug, Clone)]
 struct Source {
     config: SourceConfig,
     timeout: Duration,
-    /// Latest request and the time its age counts from.
-    latest: Option<(Timestamp, ValidRequest)>,
+    latest: Latest,
     rejected: u32,
     /// The [`Stop`] whose end its motion waits on: its last word was motion (or it has not
     /// spoken since the service started), and only a zero request of its own clears it.
@@ -177,7 +181,7 @@ pub struct Decision {
 }
 
 /// The mux.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Mux {
     sources: Vec<Source>,
     locks: Vec<Lock>,
@@ -197,10 +201,30 @@ pub struct Mux {
     required: Liveness,
 }
 
+/// What the mux holds beyond its configuration, as a snapshot of the engine keeps it
+/// ([`Mux::state`]): each source's latest request and wait, each lock's hold, the output and the
+/// standing limit. A replay restores it on the configuration it runs on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MuxState {
+    /// Per source: the latest request and its arrival, the rejections, the stop it awaits.
+    sources: Vec<(Latest, u32, u8)>,
+    /// Per lock: holder and since when, the category of the hold.
+    locks: Vec<(Option<(u8, Timestamp)>, u8)>,
+    output: Velocity,
+    speed_limit: Option<(f32, u8)>,
+    last_evaluation: Option<Timestamp>,
+    #[serde(with = "raw")]
+    status: MuxStatus,
+    rejected: u64,
+    holds: u32,
+    required: Liveness,
+}
+
 /// The required sources, as the last evaluation found them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 enum Liveness {
     /// Not all fresh yet since the start (the safety monitor starting is not a restart).
+    #[default]
     NeverFresh,
     Fresh,
     /// One went stale after all had been fresh: their return is a stop's end.
@@ -279,6 +303,50 @@ impl Mux {
             holds: 0,
             required: Liveness::NeverFresh,
         })
+    }
+
+    /// Its state beyond its configuration.
+    pub fn state(&self) -> MuxState {
+        MuxState {
+            sources: (self.sources.iter())
+                .map(|s| (s.latest, s.rejected, s.awaiting))
+                .collect(),
+            locks: self.locks.iter().map(|l| (l.held, l.category)).collect(),
+            output: self.output,
+            speed_limit: self.speed_limit,
+            last_evaluation: self.last_evaluation,
+            status: self.status,
+            rejected: self.rejected,
+            holds: self.holds,
+            required: self.required,
+        }
+    }
+
+    /// Goes on from `state`, taken of a mux of as many sources and locks.
+    pub fn restore(&mut self, state: MuxState) -> Result<(), SnapshotError> {
+        if state.sources.len() != self.sources.len() || state.locks.len() != self.locks.len() {
+            return Err(SnapshotError::Mismatch(format!(
+                "the mux had {} sources and {} locks, this configuration has {} and {}",
+                state.sources.len(),
+                state.locks.len(),
+                self.sources.len(),
+                self.locks.len()
+            )));
+        }
+        for (source, (latest, rejected, awaiting)) in self.sources.iter_mut().zip(state.sources) {
+            (source.latest, source.rejected, source.awaiting) = (latest, rejected, awaiting);
+        }
+        for (lock, (held, category)) in self.locks.iter_mut().zip(state.locks) {
+            (lock.held, lock.category) = (held, category);
+        }
+        self.output = state.output;
+        self.speed_limit = state.speed_limit;
+        self.last_evaluation = state.last_evaluation;
+        self.status = state.status;
+        self.rejected = state.rejected;
+        self.holds = state.holds;
+        self.required = state.required;
+        Ok(())
     }
 
     /// Takes a request from source `index` received at `now`. An absurd speed and unknown lock

@@ -16,6 +16,7 @@
 //! descriptor: closing and opening the gate is one system call, and the wait set itself never
 //! changes.
 
+use serde::{Deserialize, Serialize};
 use std::os::fd::{AsFd, AsRawFd, BorrowedFd, RawFd};
 use std::time::Duration;
 
@@ -108,7 +109,7 @@ pub const BURST: f64 = 32.0;
 /// ordinary feedback, below a saturated bus.
 pub const SATURATION_FRAMES_PER_S: f64 = 1500.0;
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct RxModeration {
     interval: Duration,
     tokens: f64,

@@ -20,6 +20,7 @@ use chassis_bus::clock;
 use chassis_bus::{Bus, BusSpec};
 use chassis_interfaces::{ControlRequest, ControlResponse};
 use chassis_protocols::Timestamp;
+use chassis_protocols::snapshot::SnapshotError;
 use chassisd_config::mux::MuxConfigError;
 use chassisd_config::{Config, LoopMode};
 use iceoryx2::active_request::ActiveRequest;
@@ -488,6 +489,7 @@ impl<D: Devices> Shell<D> {
                         }
                     }
                 }
+                self.snapshot(engine);
             }
         }
     }
@@ -508,6 +510,23 @@ impl<D: Devices> Shell<D> {
             None => step.run(engine, &mut io),
         }
         self.tape = tape;
+    }
+
+    /// The engine's state, between two passes, when the black box began a segment of its ring.
+    fn snapshot(&mut self, engine: &Engine) {
+        let Some(tape) = &mut self.tape else {
+            return;
+        };
+        if !tape.snapshot_due() {
+            return;
+        }
+        match engine.snapshot() {
+            Ok(state) => tape.events.push(Event::Snapshot {
+                state: blackbox::Bytes(state),
+            }),
+            Err(SnapshotError::Sending) => tape.snapshot_later(),
+            Err(e) => warn!("black box: the engine's state is not kept: {e}"),
+        }
     }
 
     fn note(&mut self, event: Event) {

@@ -14,6 +14,7 @@
 //! * The feedback frames both read with the same layout (0x241 RC, 0x25x / 0x26x motors,
 //!   0x361 / 0x362 battery) go into the state by the `apply_*` functions.
 
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -66,7 +67,7 @@ pub(crate) fn next_frame<F>(
 }
 
 /// Whether the driver wants CAN command mode, and when it last asked (0x421).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub(crate) struct ModeKeeper {
     want_control: bool,
     last_request: Option<Timestamp>,
@@ -141,7 +142,7 @@ pub(crate) fn mode_changed(core: &mut DriverCore, old_mode: u8, new_mode: u8) {
 }
 
 /// What the driver believes about the parking brake.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 enum BrakeBelief {
     /// Not known (power-up, a reboot, an RC session, the bus back): treated as engaged.
     Unknown,
@@ -151,7 +152,7 @@ enum BrakeBelief {
 
 /// A parking brake (0x131) as the driver keeps it. A chassis without one has a brake that is
 /// always released and never asks for a frame.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub(crate) struct BrakeKeeper {
     fitted: bool,
     belief: BrakeBelief,
@@ -271,7 +272,7 @@ impl BrakeKeeper {
 }
 
 /// A steering-zero request waiting for its acknowledgement, and the tokens that name them.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub(crate) struct SteeringZero {
     pending: Option<(u64, Timestamp)>,
     next_token: u64,

@@ -4,10 +4,34 @@
 use std::fmt;
 
 use chassis_interfaces::{BusFrame, FrameKind};
+use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-/// A classic CAN 2.0 data frame (0-8 bytes).
-#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+/// A [`CanFrame`] in a snapshot.
+#[derive(Serialize, Deserialize)]
+struct SavedFrame(u32, bool, Vec<u8>);
+
+impl From<CanFrame> for SavedFrame {
+    fn from(frame: CanFrame) -> Self {
+        Self(frame.id(), frame.is_extended(), frame.data().to_vec())
+    }
+}
+
+impl TryFrom<SavedFrame> for CanFrame {
+    type Error = CanFrameError;
+    fn try_from(SavedFrame(id, extended, data): SavedFrame) -> Result<Self, CanFrameError> {
+        if extended {
+            CanFrame::new_extended(id, &data)
+        } else {
+            CanFrame::new(id, &data)
+        }
+    }
+}
+
+/// A classic CAN 2.0 data frame (0-8 bytes). In a snapshot it is its id, kind and data, read
+/// back through [`CanFrame::new`] (or `new_extended`): an id or a length out of range is refused.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(into = "SavedFrame", try_from = "SavedFrame")]
 pub struct CanFrame {
     id: u32,
     extended: bool,

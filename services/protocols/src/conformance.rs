@@ -41,7 +41,7 @@ use std::sync::LazyLock;
 use std::time::Duration;
 
 use chassis_interfaces::{
-    ChassisState, ControlMode, FaultFlags, LinkFlags, RobotDescription, Velocity,
+    ChassisState, ControlMode, FaultFlags, LinkFlags, RobotDescription, Velocity, WireProtocol,
 };
 use proptest::prelude::*;
 
@@ -276,6 +276,62 @@ pub(crate) fn powers_up_and_takes_control(sides: &dyn Sides) -> Outcome {
     ensure!(
         truth.linear_mps == 0.0 && truth.x_m == 0.0 && truth.yaw_rad == 0.0,
         "the chassis moved without a command: {truth:?}"
+    );
+    Ok(())
+}
+
+/// A driver restored from its snapshot ([`Driver::restore`]) goes on as the driver it was taken
+/// of: through a stop, a turn, and the wire cut and back, the same items at the same instants,
+/// and the same state. (The simulation is deterministic: the two pairs are the same run.)
+pub(crate) fn a_restored_driver_goes_on_as_the_one_it_was_taken_of(sides: &dyn Sides) -> Outcome {
+    let (mut kept, mut restored) = (driving(sides), driving(sides));
+    let snapshot = restored.driver.snapshot().map_err(|e| e.to_string())?;
+    let mut driver = sides.new_driver(START);
+    driver.restore(&snapshot).map_err(|e| e.to_string())?;
+    ensure!(
+        driver.snapshot().ok().as_ref() == Some(&snapshot),
+        "the restored driver's snapshot is not the one it was restored from"
+    );
+    restored.driver = driver;
+    let since = kept.now();
+    for pair in [&mut kept, &mut restored] {
+        pair.set_command(Velocity::ZERO);
+        pair.run_for(ms(500));
+        pair.set_command(Velocity::twist(0.2, 0.3).unwrap_or(Velocity::ZERO));
+        pair.run_for(ms(500));
+        pair.cut = true;
+        pair.run_for(ms(300));
+        pair.cut = false;
+        pair.run_for(ms(1_000));
+    }
+    let after = |pair: &SimPair| -> Vec<(Timestamp, bool, WireItem, bool)> {
+        (pair.log().iter())
+            .filter(|r| r.at >= since)
+            .map(|r| {
+                (
+                    r.at,
+                    r.direction == Direction::ToChassis,
+                    r.item.clone(),
+                    r.lost,
+                )
+            })
+            .collect()
+    };
+    let (theirs, ours) = (after(&kept), after(&restored));
+    let first = theirs.iter().zip(&ours).position(|(a, b)| a != b);
+    ensure!(
+        theirs.len() == ours.len() && first.is_none(),
+        "the restored driver's exchange differs from the one it was taken of ({} items against \
+         {}), first at {first:?}: {:?} against {:?}",
+        ours.len(),
+        theirs.len(),
+        first.and_then(|i| ours.get(i)),
+        first.and_then(|i| theirs.get(i))
+    );
+    ensure!(
+        zerocopy::IntoBytes::as_bytes(kept.driver.state())
+            == zerocopy::IntoBytes::as_bytes(restored.driver.state()),
+        "the restored driver's state differs from the one it was taken of"
     );
     Ok(())
 }
@@ -1033,7 +1089,44 @@ checks!(
     what_is_no_command_is_counted_and_not_obeyed,
     every_frame_of_the_exchange_decodes,
     a_late_call_skips_missed_slots,
+    a_restored_driver_goes_on_as_the_one_it_was_taken_of,
 );
+
+/// A robot that may speak V1 or V2 with its listening driver ([`crate::agilex_v2::AutoDriver`]).
+struct Detecting(Profile);
+
+impl Sides for Detecting {
+    fn profile(&self) -> &Profile {
+        &self.0
+    }
+
+    fn new_driver(&self, now: Timestamp) -> BoxedDriver {
+        let entry = self.0.robot().entry();
+        entry.driver(&self.0, true, &DriverConfig::default(), now)
+    }
+}
+
+#[test]
+fn a_restored_listening_driver_goes_on_as_the_one_it_was_taken_of() {
+    let detecting: Vec<Profile> = (RobotKind::ALL.into_iter())
+        .filter(|kind| kind.entry().detects_protocol())
+        .flat_map(|kind| kind.entry().profiles())
+        .collect();
+    assert!(detecting.len() >= 2, "{detecting:?}");
+    for profile in detecting {
+        let sides = Detecting(profile);
+        let mut pair = pair(&sides);
+        pair.run_for(ms(1_000));
+        assert!(
+            pair.driver.state().system.wire_protocol != WireProtocol::DETECTING,
+            "{}: not detected in 1 s",
+            profile_name(&sides.0)
+        );
+        if let Err(e) = a_restored_driver_goes_on_as_the_one_it_was_taken_of(&sides) {
+            panic!("{}: {e}", profile_name(&sides.0));
+        }
+    }
+}
 
 #[test]
 fn the_suite_runs_on_each_protocol_of_each_robot_and_on_the_loopback() {
@@ -1140,6 +1233,12 @@ impl Driver for Forgetful {
     }
     fn shutdown(&mut self, now: Timestamp) {
         self.inner.shutdown(now);
+    }
+    fn snapshot(&self) -> Result<Vec<u8>, crate::snapshot::SnapshotError> {
+        self.inner.snapshot()
+    }
+    fn restore(&mut self, snapshot: &[u8]) -> Result<(), crate::snapshot::SnapshotError> {
+        self.inner.restore(snapshot)
     }
 }
 

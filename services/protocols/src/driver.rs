@@ -20,6 +20,7 @@ use crate::DecodeError;
 use crate::can::CanFrame;
 use crate::command::Command;
 use crate::kind::RobotKind;
+use crate::snapshot::SnapshotError;
 use crate::time::{Grid, Timestamp, earliest};
 
 /// What arrived from the bus.
@@ -33,7 +34,7 @@ pub enum Rx<'a> {
 
 /// One item on the wire, owned, in either direction: what a driver or a simulated firmware puts
 /// on the bus, and what a bus hands back as received. [`Rx`] is its borrowed form.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum WireItem {
     /// One CAN frame (TITAN, SCOUT MINI, protocol V2).
     Can(CanFrame),
@@ -109,7 +110,7 @@ impl From<crate::command::CommandError> for ControlOutcome {
 }
 
 /// How loud a [`DriverEvent::Notice`] is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Level {
     Info,
     Warn,
@@ -117,7 +118,7 @@ pub enum Level {
 }
 
 /// Things that happened inside the driver that its owner may want to log or answer.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum DriverEvent {
     /// A `Pending` control action finished.
     ControlDone {
@@ -174,6 +175,13 @@ pub trait Driver {
     /// Orderly stop: command zero and, where the robot has one, engage the parking brake. The
     /// owner drains [`Driver::poll_transmit`] afterwards.
     fn shutdown(&mut self, now: Timestamp);
+
+    /// Everything the driver holds, its configuration included, as bytes: the black box keeps
+    /// them so that a replay can go on from there ([`Driver::restore`]).
+    fn snapshot(&self) -> Result<Vec<u8>, SnapshotError>;
+
+    /// Becomes the driver `snapshot` was taken of (a driver of the same robot).
+    fn restore(&mut self, snapshot: &[u8]) -> Result<(), SnapshotError>;
 }
 
 /// A boxed driver is a driver (the registry's drivers run in [`crate::pair::Pair`] and the engine).
@@ -210,6 +218,12 @@ impl<D: Driver + ?Sized> Driver for Box<D> {
     }
     fn shutdown(&mut self, now: Timestamp) {
         (**self).shutdown(now);
+    }
+    fn snapshot(&self) -> Result<Vec<u8>, SnapshotError> {
+        (**self).snapshot()
+    }
+    fn restore(&mut self, snapshot: &[u8]) -> Result<(), SnapshotError> {
+        (**self).restore(snapshot)
     }
 }
 
@@ -248,7 +262,7 @@ impl Default for DriverConfig {
 /// heartbeats and command changes in between never disturb it. A changed command is due at once,
 /// but no sooner than `min_interval` after the previous motion frame — except a stop, which is
 /// always due at once.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CommandSchedule {
     heartbeat: Grid,
     min_interval: Duration,
@@ -336,8 +350,9 @@ impl CommandSchedule {
 /// power); the link-health rules — what counts as a sign of life, when the chassis turns silent,
 /// what the bus going down and coming back resets, how transmit and receive failures are counted —
 /// live here once.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub(crate) struct DriverCore {
+    #[serde(with = "crate::snapshot::raw")]
     pub(crate) state: ChassisState,
     pub(crate) events: VecDeque<DriverEvent>,
     /// The motion frame's heartbeat and the "changed command at once" rule.
@@ -624,7 +639,7 @@ where
 }
 
 /// "Chassis silent": no feedback for longer than a timeout.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LinkMonitor {
     timeout: Duration,
     last_rx: Timestamp,
@@ -659,7 +674,7 @@ impl LinkMonitor {
 }
 
 /// Integrates the pose from body speeds (midpoint rule), in the frame the robot started in.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct PoseIntegrator {
     last: Option<(Timestamp, f64, f64, f64)>,
 }
@@ -701,7 +716,7 @@ impl PoseIntegrator {
 pub use chassis_interfaces::wrap_angle;
 
 /// Unwraps a wrapping 16-bit counter (encoders) into a running 64-bit count.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct Unwrap16 {
     last: Option<u16>,
     total: i64,

@@ -39,6 +39,7 @@ pub mod registry;
 #[cfg(test)]
 mod sim_bench;
 pub mod slcan;
+pub mod snapshot;
 pub mod time;
 pub mod titan;
 mod wire_layout;

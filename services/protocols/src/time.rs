@@ -3,9 +3,13 @@
 use std::ops::{Add, AddAssign, Sub};
 use std::time::Duration;
 
+use serde::{Deserialize, Serialize};
+
 /// A point on the monotonic clock, ns. Drivers and firmware never read a clock: the event loop
 /// (or a test) passes `now` in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize,
+)]
 pub struct Timestamp(u64);
 
 impl Timestamp {
@@ -60,7 +64,7 @@ impl Sub<Duration> for Timestamp {
 
 /// A fixed grid of instants `start + k·period`: periodic work that never drifts. A late
 /// service skips the missed slots instead of bunching them up.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Grid {
     period: Duration,
     next: Timestamp,

@@ -283,10 +283,11 @@ fn a_bus_cut_and_a_client_flood_replay_identically() {
 }
 
 /// A ring of six seconds, on a run longer than that: the kept window has lost the run's
-/// beginning, so the engine's state at its start is unknown — `chassis explain` says so and
-/// tells the story on from the recorded decisions, marked as not replayed.
+/// beginning, and is replayed from the engine's snapshot at the start of its oldest segment —
+/// the drive and the e-stop decided again, identical to the recording; the few events before
+/// the snapshot are told as recorded.
 #[test]
-fn a_window_whose_beginning_the_ring_let_go_of_is_told_as_recorded() {
+fn a_window_whose_beginning_the_ring_let_go_of_replays_from_the_engines_snapshot() {
     let mut env = Env::new("blackbox-wrap");
     let n = name("bbw");
     let config = env.write("wrap.toml", "[service]\nblackbox_minutes = 0.1\n");
@@ -315,13 +316,43 @@ fn a_window_whose_beginning_the_ring_let_go_of_is_told_as_recorded() {
     says(
         &text,
         &[
-            "replay stopped at event",
-            "let go of the run's beginning",
-            "as recorded, not replayed",
+            "from the engine's snapshot: the ring had let go of the run's beginning",
+            "identical",
+            "(the ring had let go of the run's beginning: replayed on from the engine's state at",
             "driving from teleop",
             "STOP stopped: locked · held: estop",
         ],
     );
+    assert!(!text.contains("DIVERGED"), "{text}");
+    let kept = kept_windows(&ring);
+    let (out, text) = explain(&env, &[kept[0].to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{text}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let replay = &json["replay"];
+    assert!(replay["divergence"].is_null(), "{json}");
+    assert!(replay["incomplete"].is_null(), "{json}");
+    assert_eq!(
+        replay["resumed"].as_array().map(Vec::len),
+        Some(1),
+        "{json}"
+    );
+    assert_eq!(replay["checked"], replay["events"], "{json}");
+    // Every snapshot after the one it went on from was compared.
+    let snapshots = replay["snapshots"].as_u64().unwrap();
+    assert!(snapshots >= 2, "{json}");
+    assert_eq!(
+        replay["snapshots_checked"].as_u64(),
+        Some(snapshots - 1),
+        "{json}"
+    );
+    // The stop itself was decided again.
+    let stop = json["story"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["stop"] == true)
+        .unwrap_or_else(|| panic!("no stop in {json}"));
+    assert_eq!(stop["replayed"], true, "{json}");
 }
 
 /// With no configuration at all the black box records, and `chassis control keep` keeps its

@@ -55,16 +55,26 @@ pub struct Replay {
     pub decisions: usize,
     pub frames_written: usize,
     pub divergence: Option<Divergence>,
-    /// Why the replay stopped before the end (a gap in the recording, a cut ring).
+    /// Why a stretch of the run was not replayed (a gap in the recording, a cut ring), when the
+    /// replay found no snapshot of the engine after it to go on from.
     pub incomplete: Option<String>,
-    /// The mux decisions recorded after the replay stopped: read from the recording, not
-    /// decided again (the story goes on with them).
+    /// Where the replay went on from a snapshot of the engine after a cut or a gap: the event's
+    /// index, its instant, and why the stretch before it was not replayed.
+    pub resumed: Vec<(usize, u64, String)>,
+    /// Snapshots of the engine recorded, and those checked against the replayed engine.
+    pub snapshots: usize,
+    pub snapshots_checked: usize,
+    /// The mux decisions read from the recording, not decided again (between a cut and the
+    /// next snapshot): the story tells them as recorded.
     pub unreplayed_decisions: usize,
     /// The recorded run's start: monotonic and wall clock, ns.
     pub start_ns: u64,
     pub start_unix_ns: u64,
     #[serde(skip)]
     pub muxes: Vec<MuxStatus>,
+    /// For each of `muxes`: decided again by the replay (else read from the recording).
+    #[serde(skip)]
+    pub replayed: Vec<bool>,
     /// When each item was written, ns.
     #[serde(skip)]
     pub writes: Vec<u64>,
@@ -78,6 +88,7 @@ struct Player<'a> {
     divergence: Option<Divergence>,
     opened: String,
     muxes: Vec<MuxStatus>,
+    replayed: Vec<bool>,
     writes: Vec<u64>,
 }
 
@@ -289,6 +300,7 @@ impl PassIo for Player<'_> {
         }
         if let ToPublish::Mux(status) = publication {
             self.muxes.push(*status);
+            self.replayed.push(true);
         }
         result
     }
@@ -342,15 +354,33 @@ pub fn replay(events: &[Event], config: Option<&str>) -> Result<Replay, ReplayEr
         divergence: None,
         opened: String::new(),
         muxes: Vec::new(),
+        replayed: Vec::new(),
         writes: Vec::new(),
     };
-    let mut incomplete = None;
+    let config_differs = text != recorded;
+    // Why the events read now are not replayed (after a cut or a gap, until a snapshot).
+    let mut skipping: Option<String> = None;
+    let (mut resumed, mut snapshots, mut snapshots_checked) = (Vec::new(), 0, 0);
     while player.divergence.is_none()
         && let Some(event) = events.get(player.next)
     {
         player.next += 1;
         if let Some(t) = event.time() {
             player.last_ns = t;
+        }
+        if let Some(why) = &skipping {
+            if let Event::Snapshot { state } = event {
+                snapshots += 1;
+                if let Err(e) = engine.restore(&state.0) {
+                    skipping = Some(format!("{why}; the snapshot after it: {e}"));
+                    continue;
+                }
+                resumed.push((player.next - 1, player.last_ns, why.clone()));
+                skipping = None;
+            } else {
+                read_on(std::slice::from_ref(event), &mut player);
+            }
+            continue;
         }
         let at = |now: &u64| Timestamp::from_nanos(*now);
         match event {
@@ -394,20 +424,32 @@ pub fn replay(events: &[Event], config: Option<&str>) -> Result<Replay, ReplayEr
             }
             Event::ResetWakeups => engine.reset_wakeups(),
             Event::Stop { now } => engine.stop(&mut player, at(now)),
+            Event::Snapshot { state } => {
+                snapshots += 1;
+                // Another configuration makes another state: only its decisions are compared.
+                if !config_differs {
+                    snapshots_checked += 1;
+                    let ours = engine.snapshot().map_err(|e| e.to_string());
+                    if ours.as_ref() != Ok(&state.0) {
+                        player.next -= 1;
+                        player.diverge(
+                            format!("the engine's state ({} bytes)", state.0.len()),
+                            match ours {
+                                Ok(ours) => format!("another state ({} bytes)", ours.len()),
+                                Err(e) => format!("no state: {e}"),
+                            },
+                        );
+                    }
+                }
+            }
             Event::Gap { dropped } => {
-                incomplete = Some(format!(
-                    "the recorder dropped the inputs of {dropped} passes here (the disk was \
-                     slow or full)"
+                skipping = Some(format!(
+                    "the recorder dropped the inputs of {dropped} passes (the disk was slow or \
+                     full)"
                 ));
-                break;
             }
             Event::Cut => {
-                incomplete = Some(
-                    "the ring had let go of the run's beginning: the engine's state at the \
-                     window's start is unknown"
-                        .into(),
-                );
-                break;
+                skipping = Some("the ring had let go of the run's beginning".into());
             }
             other => {
                 player.next -= 1;
@@ -418,46 +460,48 @@ pub fn replay(events: &[Event], config: Option<&str>) -> Result<Replay, ReplayEr
             }
         }
     }
-    let checked = player.divergence.as_ref().map_or(player.next, |d| d.event);
-    let decisions = player.muxes.len();
-    if incomplete.is_some() {
-        read_on(
-            &events[player.next..],
-            &mut player.muxes,
-            &mut player.writes,
-        );
-    }
+    let unreplayed_decisions = player.replayed.iter().filter(|&&r| !r).count();
     Ok(Replay {
         recorded_version: version.clone(),
         version_differs: version != env!("CARGO_PKG_VERSION"),
-        config_differs: text != recorded,
-        checked,
+        config_differs,
+        checked: player.divergence.as_ref().map_or(player.next, |d| d.event),
         events: events.len(),
-        decisions,
-        unreplayed_decisions: player.muxes.len() - decisions,
+        decisions: player.muxes.len() - unreplayed_decisions,
+        unreplayed_decisions,
         frames_written: player.writes.len(),
         divergence: player.divergence,
-        incomplete,
+        incomplete: skipping.map(|why| format!("{why}, and no snapshot of the engine follows")),
+        resumed,
+        snapshots,
+        snapshots_checked,
         start_ns: *now,
         start_unix_ns: *unix_ns,
         muxes: player.muxes,
+        replayed: player.replayed,
         writes: player.writes,
     })
 }
 
 /// The mux decisions and the writes of `events` as they were recorded, for a story that goes on
-/// where the replay cannot (the engine's state after a gap or a cut is unknown).
-fn read_on(events: &[Event], muxes: &mut Vec<MuxStatus>, writes: &mut Vec<u64>) {
+/// where the replay cannot (the engine's state after a gap or a cut is unknown until the next
+/// snapshot).
+fn read_on(events: &[Event], player: &mut Player<'_>) {
     for event in events {
         match event {
             Event::Publish {
                 what: Published::Mux(bytes),
                 ..
-            } => muxes.extend(MuxStatus::read_from_bytes(&bytes.0).ok()),
+            } => {
+                if let Ok(status) = MuxStatus::read_from_bytes(&bytes.0) {
+                    player.muxes.push(status);
+                    player.replayed.push(false);
+                }
+            }
             Event::Write {
                 outcome: Outcome::Out(t) | Outcome::Held(t),
                 ..
-            } => writes.push(*t),
+            } => player.writes.push(*t),
             _ => {}
         }
     }
@@ -495,7 +539,7 @@ pub fn story(replay: &Replay) -> Vec<Chapter> {
     let mut before: Option<&MuxStatus> = None;
     for (index, status) in replay.muxes.iter().enumerate() {
         let why = status.why().to_string();
-        let replayed = index < replay.decisions;
+        let replayed = replay.replayed.get(index) == Some(&true);
         if chapters
             .last()
             .is_some_and(|c| c.why == why && c.replayed == replayed)
@@ -599,19 +643,42 @@ pub fn render(replay: &Replay, chapters: &[Chapter]) -> String {
             d.replayed
         ),
     };
+    for (event, ns, why) in &replay.resumed {
+        let _ = writeln!(
+            out,
+            "replay went on at event {event} ({}) from the engine's snapshot: {why} before it",
+            wall(replay, *ns)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "engine state: {} of {} snapshots compared{}",
+        replay.snapshots_checked,
+        replay.snapshots,
+        if replay.divergence.is_none() {
+            ", identical"
+        } else {
+            ""
+        }
+    );
     if let Some(why) = &replay.incomplete {
-        let _ = writeln!(out, "replay stopped at event {}: {why}", replay.checked);
+        let _ = writeln!(out, "replay stopped: {why}");
     }
     let _ = writeln!(out, "story:");
-    // Replayed chapters come first: the rest are read from the recording.
-    let first_unreplayed = chapters.iter().position(|c| !c.replayed);
-    for (i, c) in chapters.iter().enumerate() {
-        if first_unreplayed == Some(i) {
+    let mut resumed = replay.resumed.iter().peekable();
+    let mut replaying = true;
+    for c in chapters {
+        while let Some((_, ns, why)) = resumed.next_if(|(_, ns, _)| *ns <= c.at_ns) {
+            let at = wall(replay, *ns);
             let _ = writeln!(
                 out,
-                "  (from here on as recorded, not replayed: {} mux decisions)",
-                replay.unreplayed_decisions
+                "  ({why}: replayed on from the engine's state at {at})"
             );
+            replaying = true;
+        }
+        if c.replayed != replaying {
+            replaying = c.replayed;
+            let _ = writeln!(out, "  (from here on as recorded, not replayed)");
         }
         let mark = if c.stop { "STOP " } else { "" };
         let _ = write!(out, "  {}  {mark}{}", c.at, c.why);

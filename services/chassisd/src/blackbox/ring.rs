@@ -21,7 +21,7 @@ use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::time::{Duration, Instant};
 
@@ -65,6 +65,8 @@ pub struct Tape {
     dropped_total: u64,
     /// Passes the writer could not write (a full or failing disk), counted by it.
     unwritten: Arc<AtomicU64>,
+    /// The writer began a segment: the engine's state is due ([`Tape::snapshot_due`]).
+    snapshot_due: Arc<AtomicBool>,
 }
 
 impl Tape {
@@ -72,6 +74,7 @@ impl Tape {
     pub fn start(dir: &Path, bound: Bound, kept: usize) -> io::Result<Self> {
         let mut ring = Ring::open(dir, bound, kept)?;
         let unwritten = Arc::clone(&ring.unwritten);
+        let snapshot_due = Arc::clone(&ring.snapshot_due);
         let (tx, rx) = sync_channel(CHANNEL);
         let writer = std::thread::Builder::new()
             .name("blackbox".into())
@@ -83,7 +86,19 @@ impl Tape {
             dropped: 0,
             dropped_total: 0,
             unwritten,
+            snapshot_due,
         })
+    }
+
+    /// True once after the writer began a segment: the engine's state belongs in it, so that a
+    /// window whose beginning the ring let go of is replayed from there. A state that cannot be
+    /// taken now is [`Tape::snapshot_later`].
+    pub fn snapshot_due(&self) -> bool {
+        self.snapshot_due.swap(false, Ordering::Relaxed)
+    }
+
+    pub fn snapshot_later(&self) {
+        self.snapshot_due.store(true, Ordering::Relaxed);
     }
 
     /// Passes left unrecorded since start: dropped while the writer fell behind, or not written
@@ -222,6 +237,8 @@ struct Ring {
     /// Passes not written since start (shared with the [`Tape`]), and since the last written.
     unwritten: Arc<AtomicU64>,
     unwritten_since: u64,
+    /// Set as a segment begins (shared with the [`Tape`]).
+    snapshot_due: Arc<AtomicBool>,
 }
 
 impl Ring {
@@ -244,6 +261,7 @@ impl Ring {
             due: None,
             unwritten: Arc::new(AtomicU64::new(0)),
             unwritten_since: 0,
+            snapshot_due: Arc::new(AtomicBool::new(false)),
         };
         ring.take_over_previous()?;
         Ok(ring)
@@ -399,6 +417,7 @@ impl Ring {
                 .join(format!("ring-{:08}.jsonl.zst", self.next_segment));
             self.current = Some(Segment::create(&path)?);
             self.segments.push_back(path);
+            self.snapshot_due.store(true, Ordering::Relaxed);
             while self.segments.len() as u64 > SEGMENTS {
                 if let Some(old) = self.segments.pop_front() {
                     fs::remove_file(old)?;

@@ -18,6 +18,7 @@
 //! like any other, and the mux waits for a zero from the source that would win. A robot with no
 //! way to disable its drive holds zero instead and says so ([`DriveState::CANNOT_CUT`]).
 
+use serde::{Deserialize, Serialize};
 use std::time::Duration;
 
 use chassis_interfaces::{ChassisState, ControlMode, DriveState, LinkFlags, StopCategory};
@@ -36,10 +37,11 @@ const STILL_MPS: f32 = 0.02;
 const STILL_RADPS: f32 = 0.05;
 
 /// The drive as the stops left it, and how this robot disables and enables it.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub(super) struct Drive {
     /// The commands that disable and enable the drive again; `None`: the robot has none (or
-    /// the service does not take control of it).
+    /// the service does not take control of it). The configuration's: not in a snapshot.
+    #[serde(skip)]
     commands: Option<(Command, Command)>,
     state: u8,
     /// When the category-1 stop in force began braking.
@@ -56,6 +58,11 @@ impl Drive {
             braking_since: None,
             cut_at: Timestamp::ZERO,
         }
+    }
+
+    /// Restored from a snapshot: the commands are the configuration's.
+    pub(super) fn set_commands(&mut self, commands: Option<(Command, Command)>) {
+        self.commands = commands;
     }
 
     /// The [`DriveState`] (`MuxStatus::drive`).

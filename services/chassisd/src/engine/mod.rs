@@ -70,7 +70,7 @@ mod rig;
 mod scenarios;
 mod wake_budget;
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{BTreeMap, VecDeque};
 use std::fmt::Display;
 use std::time::Duration;
 
@@ -83,18 +83,20 @@ use chassis_interfaces::{
 };
 use chassis_protocols::command::Command;
 use chassis_protocols::driver::Level;
+use chassis_protocols::snapshot::{self, SnapshotError};
 use chassis_protocols::{
     ControlAction, ControlOutcome, Driver, DriverEvent, Rx, Timestamp, WireItem, nmea,
     request_to_action, time::Grid,
 };
 use chassisd_config::{Config, LoopMode};
+use serde::{Deserialize, Serialize};
 use tracing::{debug, error, info, warn};
 use zerocopy::IntoBytes;
 
 pub use pass::{PassIo, Readers, WriteError, Written};
 pub use wake_budget::{ListenerChange, WakeBudget};
 
-use crate::mux::{Mux, Rejection, hold_bit};
+use crate::mux::{Mux, MuxState, Rejection, hold_bit};
 
 /// The robot's driver behind the common contract.
 pub use chassis_protocols::BoxedDriver;
@@ -103,7 +105,7 @@ pub use chassis_protocols::BoxedDriver;
 pub type Ticket = u64;
 
 /// The engine's settings, taken from the service's [`Config`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct EngineConfig {
     /// The loop's tick: mux re-evaluation, smoothing, state refresh, reading every input.
     pub tick: Duration,
@@ -240,7 +242,7 @@ pub enum Device {
 }
 
 /// A held lock as it outlives the process: the shell's state file keeps these.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct HeldLock {
     /// The configured lock's name, e.g. `estop`.
     pub name: String,
@@ -258,7 +260,7 @@ impl HeldLock {
 }
 
 /// At most one log line per second per kind, with the number held back.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct Throttle {
     last: Option<Timestamp>,
     held_back: u64,
@@ -281,14 +283,14 @@ impl Throttle {
 }
 
 /// A device that is open, or closed and due to be opened again.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 enum Link {
     Up,
     Down { retry_at: Timestamp },
 }
 
 /// Failures counted instead of dropped silently, with their rate-limited logs.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct Throttles {
     rx: Throttle,
     rejected: Throttle,
@@ -300,14 +302,22 @@ struct Throttles {
 }
 
 /// The service's decisions: see the module documentation.
+///
+/// Between two passes its state is a [`Engine::snapshot`]: every field but the configuration,
+/// the driver and the mux, which keep their own ([`Driver::snapshot`], [`Mux::state`]).
+#[derive(Serialize, Deserialize)]
 pub struct Engine {
+    #[serde(skip)]
     config: EngineConfig,
+    #[serde(skip, default = "stand_in_driver")]
     driver: BoxedDriver,
+    #[serde(skip)]
     mux: Mux,
     bus: Link,
     bus_backoff: Duration,
     gps: Option<Link>,
     gps_reader: nmea::LineReader,
+    #[serde(with = "chassis_protocols::snapshot::raw")]
     gps_fix: GpsFix,
     gps_stamp_ns: u64,
     tick: Grid,
@@ -329,6 +339,7 @@ pub struct Engine {
     /// The protocol the last published description was of, and its sequence number.
     described_protocol: Option<u8>,
     description_seq: u64,
+    #[serde(with = "chassis_protocols::snapshot::raw_option")]
     last_state_body: Option<ChassisState>,
     last_state_publish: Timestamp,
     last_mux_publish: Option<Timestamp>,
@@ -336,7 +347,7 @@ pub struct Engine {
     /// The GPS sentence stamp of the last state published.
     last_gps_stamp_ns: u64,
     /// Control requests waiting for the chassis: driver token → (ticket, request seq).
-    pending_controls: HashMap<u64, (Ticket, u64)>,
+    pending_controls: BTreeMap<u64, (Ticket, u64)>,
     /// `chassis control keep` asked the black box to keep its window ([`Engine::take_keep`]).
     keep_asked: bool,
     last_zero_reason: u8,
@@ -344,6 +355,8 @@ pub struct Engine {
     throttles: Throttles,
     /// Samples, answers and wake-ups the shell could not publish.
     ipc_failures: u64,
+    /// Empty between passes, the only time a snapshot is taken.
+    #[serde(skip)]
     publications: VecDeque<ToPublish>,
     /// Each lock's holder and since when, as the shell was last told to keep it.
     kept_locks: Vec<Option<(u8, Timestamp)>>,
@@ -355,10 +368,12 @@ pub struct Engine {
     /// The CAN controller's state and reports (SocketCAN).
     controller: Controller,
     /// Items read from the bus in a pass, kept to spare an allocation per pass.
+    #[serde(skip)]
     rx_items: Vec<(Timestamp, BusItem)>,
     /// Items written that the backend holds, with the instant their write returned.
     tx_held: Vec<(Timestamp, WireItem)>,
     /// The readers to wake at the end of the pass, one bit per [`Readers`].
+    #[serde(skip)]
     to_wake: u8,
     /// The drive as the stops of category 0 and 1 left it.
     drive: drive::Drive,
@@ -376,7 +391,43 @@ impl std::fmt::Debug for Engine {
     }
 }
 
+/// Stands for the driver while a snapshot is read, until [`Engine::restore`] puts the engine's
+/// own back.
+fn stand_in_driver() -> BoxedDriver {
+    let titan = chassis_protocols::RobotKind::Titan.entry();
+    titan.driver(
+        &titan.defaults(),
+        false,
+        &Default::default(),
+        Timestamp::ZERO,
+    )
+}
+
 impl Engine {
+    /// Its state between two passes, as bytes: the black box keeps one at the start of each
+    /// stretch of its ring, so that a window whose beginning the ring let go of is replayed from
+    /// there ([`Engine::restore`]). Refused while frames or publications wait (the next pass).
+    pub fn snapshot(&self) -> Result<Vec<u8>, SnapshotError> {
+        if !self.publications.is_empty() {
+            return Err(SnapshotError::Sending);
+        }
+        snapshot::save(&(self, self.mux.state(), self.driver.snapshot()?))
+    }
+
+    /// Goes on from `snapshot`, taken of an engine of the same robot: the driver as it was, the
+    /// mux's state on this engine's configuration.
+    pub fn restore(&mut self, snapshot: &[u8]) -> Result<(), SnapshotError> {
+        let (mut engine, mux, driver): (Engine, MuxState, Vec<u8>) = snapshot::load(snapshot)?;
+        self.driver.restore(&driver)?;
+        self.mux.restore(mux)?;
+        std::mem::swap(&mut engine.config, &mut self.config);
+        std::mem::swap(&mut engine.driver, &mut self.driver);
+        std::mem::swap(&mut engine.mux, &mut self.mux);
+        engine.drive.set_commands(engine.config.drive_cut);
+        *self = engine;
+        Ok(())
+    }
+
     /// An engine at `now` around `driver` and `mux`, with the bus open (a shell that could not
     /// open it reports it lost at once: [`Engine::handle_bus_lost`]).
     pub fn new(config: EngineConfig, driver: BoxedDriver, mux: Mux, now: Timestamp) -> Self {
@@ -411,7 +462,7 @@ impl Engine {
             last_mux_publish: None,
             last_rx_frames: 0,
             last_gps_stamp_ns: 0,
-            pending_controls: HashMap::new(),
+            pending_controls: BTreeMap::new(),
             keep_asked: false,
             last_zero_reason: ZeroReason::STARTING,
             last_active: MuxStatus::NO_SOURCE,
@@ -864,7 +915,7 @@ impl Engine {
         info!("stopping: commanding zero and engaging the brake where there is one");
         self.undecided = false;
         self.driver.shutdown(now);
-        let pending: Vec<(Ticket, u64)> = self.pending_controls.drain().map(|(_, v)| v).collect();
+        let pending = std::mem::take(&mut self.pending_controls).into_values();
         for (ticket, seq) in pending {
             self.respond(
                 now,

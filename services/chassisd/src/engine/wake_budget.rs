@@ -11,6 +11,7 @@
 //! process can publish on it).
 
 use chassis_protocols::Timestamp;
+use serde::{Deserialize, Serialize};
 
 /// What the shell does with a source's listener.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -22,7 +23,7 @@ pub enum ListenerChange {
 }
 
 /// Wake-ups counted per source in the current tick.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct WakeBudget {
     spent: Vec<u32>,
     /// One bit per detached source.

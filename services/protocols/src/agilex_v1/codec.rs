@@ -26,7 +26,7 @@
 //! [`quantise_percent`] (or [`super::kinematics::twist_to_command`]) to learn the command the
 //! wire actually carries. Frame structs hold SI values in ISO 8855 axes (left turn positive).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use zerocopy::byteorder::big_endian::{I16, U16};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
@@ -313,7 +313,7 @@ pub(super) const WIRE_SIZES: [(&str, usize); 6] = [
 // Frames.
 
 /// 0x130: control mode, fault clear and speeds. Also the heartbeat.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct MotionCommand {
     /// [`mode`] value; the chassis obeys the speeds only with [`mode::CAN_COMMAND`].
     pub mode: u8,
@@ -338,7 +338,7 @@ impl MotionCommand {
 }
 
 /// 0x140 (command) and 0x141 (state): front light control.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Lights {
     /// Command: obey this frame (false: the chassis ignores it). State: light control by
     /// command is enabled.

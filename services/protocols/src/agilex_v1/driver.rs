@@ -2,6 +2,7 @@
 //!
 //! Everything about its behaviour is documented on [`V1Driver`].
 
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -23,7 +24,7 @@ use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
 
 /// What the driver wants of the front light (0x140).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 enum LightRequest {
     /// Never asked for: no 0x140 is ever sent.
     Untouched,
@@ -96,7 +97,7 @@ enum LightRequest {
 /// ([`DriverEvent::Notice`](crate::driver::DriverEvent::Notice)) report control-mode changes (RC takeover and hand-back included),
 /// faults set and cleared, the chassis turning silent and talking again, and the bus going down
 /// and coming back.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct V1Driver {
     profile: V1Profile,
     core: DriverCore,
@@ -374,6 +375,8 @@ pub fn normalize_faults(word: u16) -> u64 {
 }
 
 impl Driver for V1Driver {
+    crate::snapshot::whole_driver!();
+
     fn robot(&self) -> RobotKind {
         self.profile.model.robot()
     }

@@ -8,12 +8,13 @@
 //! geometric one and these are an idealisation (good for the simulator, not for odometry).
 
 use chassis_interfaces::ClampFlags;
+use serde::{Deserialize, Serialize};
 
 use super::codec::{MotionCommand, quantise_percent};
 use crate::agilex_v1::V1Profile;
 
 /// A speed and yaw rate as sent in 0x130, with what was clamped or rounded on the way.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SkidCommand {
     /// The linear speed the wire carries, m/s (a whole percent of the full scale).
     pub linear_mps: f64,

@@ -12,6 +12,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use chassis_interfaces::{ChassisState, LinkFlags, Velocity, WireProtocol};
+use serde::{Deserialize, Serialize};
 
 use super::detect::{DetectSettings, Detection, Detector};
 use super::{V2Driver, V2Profile};
@@ -28,6 +29,7 @@ use crate::time::Timestamp;
 
 /// A driver for a robot that may speak V1 or V2 (SCOUT MINI, SCOUT 2.0, BUNKER) that detects
 /// the protocol before sending anything.
+#[derive(Serialize, Deserialize)]
 pub struct AutoDriver {
     robot: RobotKind,
     v1: V1Profile,
@@ -35,7 +37,9 @@ pub struct AutoDriver {
     detect: DetectSettings,
     config: DriverConfig,
     detector: Detector,
+    #[serde(with = "detected")]
     inner: Option<(Protocol, Box<dyn Driver + Send>)>,
+    #[serde(with = "crate::snapshot::raw")]
     state: ChassisState,
     events: VecDeque<DriverEvent>,
     command: Velocity,
@@ -170,7 +174,46 @@ impl AutoDriver {
     }
 }
 
+/// The driver of the protocol detected, in a snapshot: the protocol and the driver's own.
+mod detected {
+    use serde::de::Error as _;
+    use serde::ser::Error as _;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    use crate::agilex_v1::V1Driver;
+    use crate::agilex_v2::V2Driver;
+    use crate::driver::Driver;
+    use crate::profile::Protocol;
+    use crate::snapshot::load;
+
+    type Detected = Option<(Protocol, Box<dyn Driver + Send>)>;
+
+    pub fn serialize<S: Serializer>(detected: &Detected, serializer: S) -> Result<S::Ok, S::Error> {
+        let saved = match detected {
+            Some((protocol, driver)) => {
+                Some((*protocol, driver.snapshot().map_err(S::Error::custom)?))
+            }
+            None => None,
+        };
+        saved.serialize(serializer)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Detected, D::Error> {
+        let Some((protocol, bytes)) = Option::<(Protocol, Vec<u8>)>::deserialize(deserializer)?
+        else {
+            return Ok(None);
+        };
+        let driver: Box<dyn Driver + Send> = match protocol {
+            Protocol::V1 => Box::new(load::<V1Driver>(&bytes).map_err(D::Error::custom)?),
+            Protocol::V2 => Box::new(load::<V2Driver>(&bytes).map_err(D::Error::custom)?),
+        };
+        Ok(Some((protocol, driver)))
+    }
+}
+
 impl Driver for AutoDriver {
+    crate::snapshot::whole_driver!();
+
     fn robot(&self) -> RobotKind {
         self.robot
     }

@@ -10,7 +10,7 @@
 //! here, 199 there); every cited test vector is an exact wire value, so both agree on them.
 
 use chassis_interfaces::RcState;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use zerocopy::byteorder::big_endian::{I16, I32, U16};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
@@ -176,7 +176,7 @@ struct UwbWire {
 // Frames.
 
 /// 0x111 (→) and 0x221 (←): the four motion fields. Fields a robot does not use are 0.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Motion {
     /// m/s (wire: mm/s).
     pub linear_mps: f64,
@@ -189,7 +189,7 @@ pub struct Motion {
 }
 
 /// 0x121 (→) and 0x231 (←): lights.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Lights {
     /// b0: the computer commands the lights (false: handed back to the chassis).
     pub enabled: bool,

@@ -11,6 +11,7 @@
 //! * Decided after `min_frames` frames of one kind and none of the other; both kinds → unknown
 //!   (the SDK's rule); nothing by the deadline → silent, with the ids heard.
 
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -61,7 +62,7 @@ impl Detection {
 
 /// How long to listen and how much evidence decides (⚠ D-16): from the profile the robot is
 /// configured with (SCOUT MINI: its V1 profile; SCOUT, BUNKER: their V2 profile).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DetectSettings {
     /// Listen this long for V1/V2 evidence before reporting silence and listening again, ms.
     pub timeout_ms: u64,
@@ -88,7 +89,7 @@ impl From<&crate::agilex_v1::V1Profile> for DetectSettings {
 }
 
 /// The passive V1/V2 detector.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Detector {
     deadline: Timestamp,
     min_frames: u32,

@@ -17,6 +17,7 @@
 //! * **Lights**: 0x121 repeated every `light_refresh_ms` while overridden; handing back sends one
 //!   `enabled = 0` frame.
 
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -35,11 +36,13 @@ use crate::kind::RobotKind;
 use crate::time::{Timestamp, earliest};
 
 /// The protocol-V2 driver.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct V2Driver {
     profile: V2Profile,
     robot: RobotKind,
     core: DriverCore,
+    /// Frames to send: empty between passes, the only time a snapshot is taken.
+    #[serde(skip)]
     queue: VecDeque<Frame>,
     pose: PoseIntegrator,
     /// What the next 0x111 carries.
@@ -64,7 +67,7 @@ pub struct V2Driver {
 }
 
 /// Where the version query stands (⚠ D-1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 enum VersionQuery {
     /// Not asked yet (asked once the chassis first reports CAN mode).
     NotAsked,
@@ -388,6 +391,8 @@ pub fn normalize_driver_status(status: u8, profile: &V2Profile) -> u8 {
 }
 
 impl Driver for V2Driver {
+    crate::snapshot::whole_driver!(queue);
+
     fn robot(&self) -> RobotKind {
         self.robot
     }

@@ -11,13 +11,14 @@
 //!   inverse; AgileX's ROS driver uses ω = 2·v·sin δc / L, which differs by tan vs sin).
 
 use chassis_interfaces::ClampFlags;
+use serde::{Deserialize, Serialize};
 
 use super::codec::Motion;
 use super::profile::{Kinematics, SpinField, V2Profile};
 use crate::command::Turn;
 
 /// RANGER motion modes (their wire numbers are the profile's ⚠ D-12 codes).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum RangerMode {
     DualAckermann,
     Crab,

@@ -1,6 +1,6 @@
 //! The loopback wire codec: its two frames, both directions.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use zerocopy::byteorder::little_endian::{I16, U16};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
@@ -34,7 +34,7 @@ struct FeedbackWire {
 }
 
 /// Forward speed, m/s, and yaw rate, rad/s (ISO: left turn positive).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Twist {
     pub linear_mps: f64,
     pub angular_radps: f64,

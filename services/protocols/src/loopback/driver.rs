@@ -2,6 +2,7 @@
 //! the feedback fills the state. Link health, the heartbeat grid and the bus switch are the
 //! shared [`DriverCore`]'s.
 
+use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
 use std::time::Duration;
 
@@ -17,7 +18,7 @@ use crate::kind::RobotKind;
 use crate::time::Timestamp;
 
 /// The loopback driver.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct LoopbackDriver {
     profile: LoopbackProfile,
     core: DriverCore,
@@ -102,6 +103,8 @@ impl LoopbackDriver {
 }
 
 impl Driver for LoopbackDriver {
+    crate::snapshot::whole_driver!();
+
     fn robot(&self) -> RobotKind {
         self.profile.robot
     }

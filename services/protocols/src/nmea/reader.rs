@@ -1,5 +1,6 @@
 //! Cutting the GPS receiver's byte stream into sentences.
 
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
 /// Longest line kept by default, `$` included, CR LF excluded. NMEA allows 82 characters; the
@@ -17,7 +18,7 @@ pub const MAX_QUEUED_LINES: usize = 1024;
 /// dropped and counted. Lines come out without their terminator; whether they are valid
 /// sentences is [`super::parse_sentence`]'s business. Memory is bounded: one partial line and
 /// at most [`MAX_QUEUED_LINES`] complete ones.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct LineReader {
     max_len: usize,
     /// The line being received, from its `$`; empty outside a line.

@@ -6,7 +6,7 @@
 //! [`TitanProfile`] decides (⚠ steering feedback sign).
 
 use chassis_interfaces::RcState;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use zerocopy::byteorder::big_endian::{I16, I32, U16, U32};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
@@ -197,7 +197,7 @@ struct BmsDataWire {
 // Frames.
 
 /// 0x111: speed and inner steering angle. Also the heartbeat.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct MotionCommand {
     /// m/s (wire: mm/s, valid ±3000).
     pub linear_mps: f64,

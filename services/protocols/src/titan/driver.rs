@@ -9,6 +9,7 @@
 //!   command. A brake engaged by request holds until released by request.
 //! * Limits and twist → inner steering angle from [`super::kinematics`].
 
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -34,10 +35,12 @@ const STANDING_MPS: f64 = 0.01;
 const MODE_RETRY: Duration = Duration::from_millis(50);
 
 /// The TITAN driver.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct TitanDriver {
     profile: TitanProfile,
     core: DriverCore,
+    /// Frames to send: empty between passes, the only time a snapshot is taken.
+    #[serde(skip)]
     queue: VecDeque<Frame>,
     pose: PoseIntegrator,
     /// The motion the next 0x111 carries.
@@ -233,6 +236,8 @@ pub fn normalize_faults(word: u32) -> u64 {
 }
 
 impl Driver for TitanDriver {
+    crate::snapshot::whole_driver!(queue);
+
     fn robot(&self) -> RobotKind {
         RobotKind::Titan
     }

@@ -17,7 +17,7 @@
 //! Where the manual contradicts itself the [`XbotProfile`] decides: the yaw-rate and
 //! lateral-speed signs (⚠) and whether currents and ultrasonic ranges are BCD (⚠).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use zerocopy::byteorder::little_endian::{F32, I16, U16};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
@@ -193,7 +193,7 @@ pub struct PowerCommand {
 }
 
 /// 0x03: body velocity; doubles as the heartbeat.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct VelocityCommand {
     /// Forward speed, m/s (wire: `f32` m/s).
     pub linear_x_mps: f64,
@@ -206,7 +206,7 @@ pub struct VelocityCommand {
 }
 
 /// 0x04: lift platform.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct LiftCommand {
     pub enable: bool,
     /// Target position, % of travel: 0 bottom, 100 top (wire: whole percent).
@@ -214,7 +214,7 @@ pub struct LiftCommand {
 }
 
 /// 0x05: pan ("cloud") and camera tilt servos.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct ServoCommand {
     /// Pan, rad: 0 ahead, left positive, ±π/2 (wire: 0° = left, 90° = ahead, 180° = right,
     /// whole degrees).

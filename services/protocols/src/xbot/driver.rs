@@ -2,6 +2,7 @@
 //!
 //! Everything about its behaviour is documented on [`XbotDriver`].
 
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -45,7 +46,7 @@ const JUMP_SLACK: Duration = Duration::from_millis(20);
 const POWER_RETRY: Duration = Duration::from_millis(50);
 
 /// Wheel encoders FL, FR, RL, RR and the lift encoder as running counts.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 struct Counters {
     unwrap: [Unwrap16; 5],
     offset: [i64; 5],
@@ -77,14 +78,14 @@ impl Counters {
 }
 
 /// The previous sensor report, for deltas.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct Sample {
     at: Timestamp,
     wheels: [u16; 4],
 }
 
 /// The report wheel speeds are measured from.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct SpeedRef {
     at: Timestamp,
     stamp_us: u16,
@@ -216,12 +217,14 @@ struct SpeedRef {
 ///   stops.
 ///
 /// There is no GPS here: the service reads the receiver's NMEA stream separately.
-#[derive(Debug)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct XbotDriver {
     profile: XbotProfile,
     config: DriverConfig,
     core: DriverCore,
     parser: StreamParser,
+    /// Frames to send: empty between passes, the only time a snapshot is taken.
+    #[serde(skip)]
     queue: VecDeque<Frame>,
 
     // Velocity.
@@ -658,6 +661,8 @@ fn integrate_arc(
 }
 
 impl Driver for XbotDriver {
+    crate::snapshot::whole_driver!(queue);
+
     fn robot(&self) -> RobotKind {
         RobotKind::Xbot
     }

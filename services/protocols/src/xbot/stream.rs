@@ -16,6 +16,7 @@
 //!   without draining drops the oldest (counted as discarded). [`StreamParser::feed`] takes
 //!   input of any size without overflowing.
 
+use serde::{Deserialize, Serialize};
 use std::fmt;
 
 use super::codec::{
@@ -50,7 +51,7 @@ impl fmt::Display for StreamError {
 impl std::error::Error for StreamError {}
 
 /// Incremental XBot frame parser; see the module docs for its rules.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 pub struct StreamParser {
     /// Received bytes; those before `start` are consumed (dropped on the next push, so a
     /// rejection costs no copying).
