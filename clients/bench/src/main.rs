@@ -413,6 +413,7 @@ fn steps(
     baselines.extend(boxed((0..placement::cpu_count()).map(Stalls)));
     let mut paths = boxed(runs);
     paths.extend(boxed([DefaultConfig]));
+    paths.extend(boxed([Unrecorded]));
     [
         ("baselines", baselines),
         ("paths", paths),
@@ -960,6 +961,55 @@ impl Step for DefaultConfig {
         let [paced, ..] = run.loaded();
         let rows = path_rows(row, run.reference(&paced), figures.in_service);
         report.rows.extend(rows);
+        Ok(())
+    }
+}
+
+/// The command and the state of the TITAN on the simulated bus, event loop, cross CPU, as the
+/// table's run of it but with the black box off: what recording costs them, each row beside the
+/// recording run's and against the same matched baselines.
+struct Unrecorded;
+
+impl Step for Unrecorded {
+    fn planned(&self, ctx: &Ctx) -> Vec<Planned> {
+        let (what, plan) = (report::UNRECORDED_ROW, &ctx.plan);
+        let run = DEFAULT_CONFIG;
+        let mut rows = Vec::from(run.plan_path(PathKind::Command, what, plan.commands));
+        rows.extend(run.plan_path(PathKind::State, what, plan.states));
+        rows
+    }
+
+    fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
+        let run = DEFAULT_CONFIG;
+        ctx.bar.set_message(report::UNRECORDED_ROW);
+        let config = ServiceConfig::BenchRealtimeUnrecorded;
+        let (service, mut robot) = run.start(ctx, config, false)?;
+        let (command, state) = paths::pinned(run.placement.cpus().0, || -> anyhow::Result<_> {
+            let (count, _, interval) = run.sizes(&ctx.plan);
+            let command = {
+                let (t, exact) = (&mut robot.source("teleop")?, paths::Reach::Exact);
+                let sizes = (count, interval);
+                paths::command_path(&mut robot, (run.robot, false), t, sizes, exact)?
+            };
+            let (mut state, mut teleop) =
+                (paths::StateRecorder::default(), robot.source("teleop")?);
+            let sizes = (ctx.plan.states, false);
+            paths::state_path(&robot, Some(&mut teleop), &mut state, sizes, |_, _| {})?;
+            Ok((command, state))
+        })??;
+        drop(robot);
+        drop(service);
+        let (what, [paced, _, published, _]) = (report::UNRECORDED_ROW.to_string(), run.loaded());
+        let (l, missed) = (command.latencies, command.missed);
+        let row = run.row(PathKind::Command, Leg::Command, what.clone(), l, missed);
+        report
+            .rows
+            .extend(path_rows(row, run.reference(&paced), command.in_service));
+        let mut row = run.row(PathKind::State, Leg::State, what, state.latencies, 0);
+        row.dropped = state.dropped;
+        report
+            .rows
+            .extend(path_rows(row, run.reference(&published), state.in_service));
         Ok(())
     }
 }

@@ -149,6 +149,9 @@ pub enum ServiceConfig {
     /// [`BENCH_CONFIG`] in real-time mode where the loop blocks: the latency runs of the service
     /// paths.
     BenchRealtime,
+    /// [`ServiceConfig::BenchRealtime`] with the black box off (`blackbox_mib = 0`): what its
+    /// recording costs the paths.
+    BenchRealtimeUnrecorded,
     /// chassisd's defaults.
     Default,
 }
@@ -161,15 +164,23 @@ impl ServiceConfig {
     /// CPU is isolated, which this machine's are not.
     pub fn realtime(self, mode: LoopMode) -> Option<u8> {
         let blocks = mode != LoopMode::Spin;
-        (self == ServiceConfig::BenchRealtime && blocks).then_some(REALTIME_PRIORITY)
+        let realtime = matches!(
+            self,
+            ServiceConfig::BenchRealtime | ServiceConfig::BenchRealtimeUnrecorded
+        );
+        (realtime && blocks).then_some(REALTIME_PRIORITY)
     }
 }
 
 /// The configuration file of a run: [`BENCH_CONFIG`], in real-time mode when the configuration
 /// asks for it with this loop ([`ServiceConfig::realtime`]); empty for chassisd's defaults.
 pub fn config_text(config: ServiceConfig, mode: LoopMode) -> String {
+    let unrecorded = config == ServiceConfig::BenchRealtimeUnrecorded;
     match (config, config.realtime(mode)) {
         (ServiceConfig::Default, _) => String::new(),
+        (_, Some(priority)) if unrecorded => {
+            format!("[service]\nrealtime = {priority}\nblackbox_mib = 0\n\n{BENCH_CONFIG}")
+        }
         (_, Some(priority)) => format!("[service]\nrealtime = {priority}\n\n{BENCH_CONFIG}"),
         (_, None) => BENCH_CONFIG.to_string(),
     }

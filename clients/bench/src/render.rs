@@ -12,7 +12,7 @@ use crate::paths::{
 use crate::provenance::Provenance;
 use crate::report::{
     DEFAULT_CONFIG_ROW, LoopRun, MIN_FOR_P99, MIN_FOR_P999, Machine, Report, SUM_TOLERANCE,
-    StallRates,
+    StallRates, UNRECORDED_ROW,
 };
 use crate::stats::Summary;
 
@@ -34,6 +34,7 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
         ("priority", REALTIME_PRIORITY.to_string()),
         ("scheduling", report.scheduling_text()),
         ("default_config_row", DEFAULT_CONFIG_ROW.to_string()),
+        ("unrecorded_row", UNRECORDED_ROW.to_string()),
         ("table", table(report)),
         ("inconsistent", inconsistent(report)),
         ("conditions", conditions(report)),

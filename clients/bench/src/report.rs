@@ -14,6 +14,10 @@ use crate::stats::{Latencies, Summary};
 pub const DEFAULT_CONFIG_ROW: &str =
     "titan sim, chassisd's default configuration, request → first frame toward it";
 
+/// The `what` of the command and state rows of the TITAN on the simulated bus with the black box
+/// off, beside the same run's rows with it recording (as chassisd ships).
+pub const UNRECORDED_ROW: &str = "titan sim, the black box off";
+
 /// Which path a row measures, the table's first column.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
