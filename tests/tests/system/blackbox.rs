@@ -183,12 +183,30 @@ fn a_recorded_incident_replays_identically_and_a_changed_priority_diverges_at_on
     );
     // The window kept for the stops, from the MCAP file.
     kept_windows_replay_identically(&env, &ring);
-    // One moment, and the verdict for tools.
-    let (_, text) = explain(&env, &[ring_text, "--at", "+2.0"]);
-    assert!(text.starts_with("at "), "{text}");
+    // The verdict for tools, and one moment: teleop driving again after the last stop.
     let (out, text) = explain(&env, &[ring_text, "--json"]);
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(json["replay"]["divergence"].is_null(), "{text}");
+    let story = json["story"].as_array().unwrap();
+    let last_stop = story.iter().rposition(|c| c["stop"] == true).unwrap();
+    let again = story[last_stop..]
+        .iter()
+        .find(|c| c["driver"] == "teleop")
+        .unwrap_or_else(|| panic!("teleop never drove after the last stop: {text}"));
+    let since_start =
+        again["at_ns"].as_u64().unwrap() - json["replay"]["start_ns"].as_u64().unwrap();
+    let moment = format!("+{:.3}", since_start as f64 / 1e9 + 0.005);
+    let (_, text) = explain(&env, &[ring_text, "--at", &moment]);
+    says(
+        &text,
+        &[
+            "driving from teleop",
+            "safety fresh",
+            "no lock held",
+            "the last stop at",
+            "teleop drove again at",
+        ],
+    );
     let decisions = json["replay"]["decisions"].as_u64().unwrap();
     assert_eq!(
         decisions as usize,

@@ -2,7 +2,7 @@
 //! written and every publication checked against the recording byte for byte, and the story of
 //! the run told from the mux decisions ([`MuxStatus::why`], the one explanation every view shows).
 
-use chassis_interfaces::{ControlRequest, MuxStatus, VelocityRequest, ZeroReason};
+use chassis_interfaces::{ControlRequest, MuxStatus, SourceFlags, VelocityRequest, ZeroReason};
 use chassis_protocols::{Timestamp, WireItem};
 use chassisd_config::{Config, ConfigError, Overrides, RawConfig};
 use serde::Serialize;
@@ -568,16 +568,60 @@ pub fn story(replay: &Replay) -> Vec<Chapter> {
     chapters
 }
 
-/// The decision in force at `ns`, in words.
+/// The decision in force at `ns`, in words: who won at what speed (or why nothing moves), the
+/// required sources, the locks, and the last stop before it with how it ended.
 pub fn at(replay: &Replay, ns: u64) -> Option<String> {
     let status = replay.muxes.iter().rev().find(|m| m.stamp_ns <= ns)?;
-    let speed = status.output.linear_x_mps;
-    Some(format!(
-        "at {} (decided {}): {} — output {speed:.2} m/s",
+    let mut said = vec![format!(
+        "at {} (decided {}): {} — output {:.2} m/s",
         wall(replay, ns),
         wall(replay, status.stamp_ns),
-        status.why()
-    ))
+        status.why(),
+        status.output.linear_x_mps
+    )];
+    for source in (status.sources().iter()).filter(|s| s.has(SourceFlags::REQUIRED)) {
+        let fresh = source.has(SourceFlags::FRESH);
+        said.push(format!(
+            "{} {}",
+            source.name(),
+            if fresh { "fresh" } else { "silent" }
+        ));
+    }
+    let held: Vec<String> = (status.locks().iter())
+        .filter(|l| l.held != 0)
+        .map(|l| format!("{} held since {}", l.name(), wall(replay, l.since_ns)))
+        .collect();
+    said.push(if held.is_empty() {
+        "no lock held".into()
+    } else {
+        held.join(", ")
+    });
+    let chapters = story(replay);
+    if let Some(stop) = chapters.iter().rev().find(|c| c.stop && c.at_ns <= ns) {
+        let mut ended = format!("the last stop at {} ({})", stop.at, stop.why);
+        let mut after = chapters
+            .iter()
+            .filter(|c| c.at_ns > stop.at_ns && c.at_ns <= ns);
+        let waited = (after.clone()).find(|c| c.why.starts_with("stopped: waiting for a zero"));
+        if let Some(waited) = waited {
+            ended += &format!(
+                ", then {} at {}",
+                waited.why.trim_start_matches("stopped: "),
+                waited.at
+            );
+        }
+        if let Some((driver, again)) = (after.clone()).find_map(|c| Some((c.driver.as_ref()?, c))) {
+            ended += &format!(
+                ", {driver} drove again at {} (its zero ended the wait)",
+                again.at
+            );
+        }
+        // The stop in force is said already.
+        if after.next().is_some() {
+            said.push(ended);
+        }
+    }
+    Some(said.join("; "))
 }
 
 /// `TIME` of `--at`: `HH:MM:SS[.mmm]` (UTC, on the recorded day) or `+SECONDS` since the start;
