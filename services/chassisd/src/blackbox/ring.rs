@@ -6,9 +6,11 @@
 //! [`FLUSH_EVERY`] so that a crash loses no more; the ring is bounded by the bytes on disk and by
 //! the age of its oldest segment, whichever comes first.
 //!
-//! The loop hands each pass' events over a bounded channel ([`Tape::send`]); when the writer
-//! falls behind (a slow disk) the pass' events are dropped and counted, never the pass, and a
-//! pass the disk refuses (full, failing) is counted by the writer ([`Tape::unrecorded`]).
+//! The loop gathers the events of its passes and hands them over a bounded channel every
+//! [`HAND_OVER`] ([`Tape::send`]): one wake-up of the writer for many passes, where one a pass
+//! cost the loop a futex call and the writer a context switch each. When the writer falls behind
+//! (a slow disk) the passes' events are dropped and counted, never a pass, and a pass the disk
+//! refuses (full, failing) is counted by the writer ([`Tape::unrecorded`]).
 //! The writer watches the mux decisions go by: a stop that was not asked for
 //! ([`super::is_unasked_stop`]) keeps the window around it, [`KEEP_AFTER`] after it included,
 //! as does [`Tape::keep`] (SIGUSR1). A previous run that ended without its orderly stop (a crash,
@@ -38,8 +40,10 @@ use super::{Event, Published, is_unasked_stop};
 pub const KEEP_AFTER: Duration = Duration::from_secs(5);
 /// The longest a window goes on after its first keep while more keeps join it.
 const KEEP_LONGEST: Duration = Duration::from_secs(30);
-/// Passes the channel holds while the writer is busy.
-const CHANNEL: usize = 4096;
+/// Hand-overs the channel holds while the writer is busy: seconds of a slow disk.
+const CHANNEL: usize = 64;
+/// The longest the loop keeps the events of its passes before handing them to the writer.
+const HAND_OVER: Duration = Duration::from_millis(100);
 /// Segments of the ring, each an eighth of its bound: the oldest is let go of when a ninth begins.
 const SEGMENTS: u64 = 8;
 /// The longest the end of the ring waits in the compressor before it is on disk.
@@ -48,7 +52,8 @@ const FLUSH_EVERY: Duration = Duration::from_secs(1);
 const LEVEL: i32 = 3;
 
 enum Msg {
-    Events(Vec<Event>),
+    /// The events of this many passes.
+    Events(Vec<Event>, u64),
     Keep(String),
 }
 
@@ -57,9 +62,12 @@ enum Msg {
 pub struct Tape {
     tx: SyncSender<Msg>,
     writer: std::thread::JoinHandle<()>,
-    /// The events of the pass under way.
+    /// The events of the passes not handed over yet, the pass under way last.
     pub events: Vec<Event>,
-    /// Passes dropped since the last one the writer took.
+    /// The passes `events` holds, and since when it holds the first.
+    passes: u64,
+    since: Instant,
+    /// Passes dropped since the last ones the writer took.
     dropped: u64,
     /// Passes dropped since start.
     dropped_total: u64,
@@ -83,6 +91,8 @@ impl Tape {
             tx,
             writer,
             events: Vec::new(),
+            passes: 0,
+            since: Instant::now(),
             dropped: 0,
             dropped_total: 0,
             unwritten,
@@ -107,11 +117,27 @@ impl Tape {
         self.dropped_total + self.unwritten.load(Ordering::Relaxed)
     }
 
-    /// Hands the events noted since the last call to the writer, or drops them (counted).
+    /// A pass ended: its events join the ones to hand over, which go to the writer once they
+    /// are [`HAND_OVER`] old.
     pub fn send(&mut self) {
         if self.events.is_empty() {
             return;
         }
+        if self.passes == 0 {
+            self.since = Instant::now();
+        }
+        self.passes += 1;
+        if self.since.elapsed() >= HAND_OVER {
+            self.hand_over();
+        }
+    }
+
+    /// Hands the events gathered to the writer, or drops them (counted).
+    fn hand_over(&mut self) {
+        if self.events.is_empty() {
+            return;
+        }
+        let passes = std::mem::take(&mut self.passes).max(1);
         let mut batch = std::mem::take(&mut self.events);
         if self.dropped > 0 {
             batch.insert(
@@ -121,12 +147,13 @@ impl Tape {
                 },
             );
         }
-        match self.tx.try_send(Msg::Events(batch)) {
+        match self.tx.try_send(Msg::Events(batch, passes)) {
             Ok(()) => self.dropped = 0,
             Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.dropped += 1;
-                self.dropped_total += 1;
-                if self.dropped_total.is_power_of_two() {
+                let before = self.dropped_total;
+                self.dropped += passes;
+                self.dropped_total += passes;
+                if before.checked_ilog2() != self.dropped_total.checked_ilog2() {
                     warn!(
                         dropped = self.dropped_total,
                         "black box: the recorder falls behind; passes go unrecorded"
@@ -139,6 +166,7 @@ impl Tape {
     /// Hands over what is left and waits for the writer: a keep asked for is written now.
     pub fn finish(mut self) {
         self.send();
+        self.hand_over();
         drop(self.tx);
         if self.writer.join().is_err() {
             warn!("black box: the recorder's thread panicked");
@@ -147,6 +175,7 @@ impl Tape {
 
     /// Keeps the window around now.
     pub fn keep(&mut self, reason: &str) {
+        self.hand_over();
         if self.tx.try_send(Msg::Keep(reason.to_string())).is_err() {
             warn!("black box: cannot keep the window ({reason}): the recorder falls behind");
         }
@@ -301,7 +330,7 @@ impl Ring {
                 None => rx.recv().map_err(|_| RecvTimeoutError::Disconnected),
             };
             match msg {
-                Ok(Msg::Events(events)) => self.record(events),
+                Ok(Msg::Events(events, passes)) => self.record(events, passes),
                 Ok(Msg::Keep(reason)) => self.schedule(reason),
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => {
@@ -330,15 +359,15 @@ impl Ring {
     /// Writes one pass' events. A pass that cannot be written is counted, with the passes the
     /// segment held since its last flush (lost with it); the segment is let go of, and the next
     /// pass written begins with a gap (a replay stops there).
-    fn record(&mut self, mut events: Vec<Event>) {
+    fn record(&mut self, mut events: Vec<Event>, passes: u64) {
         if self.unwritten_since > 0 {
             let dropped = self.unwritten_since;
             events.insert(0, Event::Gap { dropped });
         }
-        match self.append(&events) {
+        match self.append(&events, passes) {
             Ok(()) => self.unwritten_since = 0,
             Err(e) => {
-                let lost = self.current.take().map_or(1, |s| s.passes.max(1));
+                let lost = (self.current.take()).map_or(passes, |s| s.passes.max(passes));
                 self.unwritten_since += lost;
                 let before = self.unwritten.fetch_add(lost, Ordering::Relaxed);
                 if before.checked_ilog2() != (before + lost).checked_ilog2() {
@@ -364,10 +393,13 @@ impl Ring {
         }
     }
 
-    fn append(&mut self, events: &[Event]) -> io::Result<()> {
+    /// Writes `events`, of `passes` passes: the run's first ones (up to its first pass) to the
+    /// header, the others to the ring.
+    fn append(&mut self, events: &[Event], passes: u64) -> io::Result<()> {
         let mut text = Vec::new();
         for event in events {
-            if matches!(event, Event::Pass { .. }) {
+            if self.in_header && matches!(event, Event::Pass { .. }) {
+                self.write_header(&std::mem::take(&mut text))?;
                 self.in_header = false;
             }
             if let Event::Publish {
@@ -388,16 +420,19 @@ impl Ring {
             event.write_line(&mut text)?;
         }
         if self.in_header {
-            self.header.extend_from_slice(&text);
-            return fs::OpenOptions::new()
-                .append(true)
-                .open(self.header_path())?
-                .write_all(&text);
+            return self.write_header(&text);
         }
-        self.write_segment(&text)
+        self.write_segment(&text, passes)
     }
 
-    fn write_segment(&mut self, text: &[u8]) -> io::Result<()> {
+    fn write_header(&mut self, text: &[u8]) -> io::Result<()> {
+        self.header.extend_from_slice(text);
+        (fs::OpenOptions::new().append(true))
+            .open(self.header_path())?
+            .write_all(text)
+    }
+
+    fn write_segment(&mut self, text: &[u8], passes: u64) -> io::Result<()> {
         let per_segment = (self.bound.bytes / SEGMENTS).max(1);
         let per_age = self.bound.age / SEGMENTS as u32;
         let full = self.current.as_ref().is_none_or(|current| {
@@ -427,7 +462,7 @@ impl Ring {
         }
         if let Some(current) = &mut self.current {
             current.zstd.write_all(text)?;
-            current.passes += 1;
+            current.passes += passes;
             // What the compressor holds counts on disk only once flushed: flushed at least once
             // a segment's worth, so that the bound holds at any rate.
             current.pending += text.len() as u64;
@@ -590,9 +625,9 @@ mod tests {
     fn the_ring_lets_go_of_its_oldest_and_a_kept_window_says_so() {
         let dir = dir("bounded");
         let mut ring = Ring::open(&dir, bound(2_000), 2).unwrap();
-        ring.append(&[start()]).unwrap();
+        ring.append(&[start()], 1).unwrap();
         for t in 0..200 {
-            ring.append(&pass(t)).unwrap();
+            ring.append(&pass(t), 1).unwrap();
         }
         assert!(ring.cut);
         assert_eq!(ring.segments.len() as u64, SEGMENTS);
@@ -619,7 +654,7 @@ mod tests {
         let dir = dir("full");
         // Segments of 1000 bytes: the compressor is flushed every few passes.
         let mut ring = Ring::open(&dir, bound(8_000), 4).unwrap();
-        ring.record(vec![start()]);
+        ring.record(vec![start()], 1);
         // The ring's first segment is /dev/full: its flush fails with ENOSPC, and every pass it
         // held since is lost with it.
         let first = ring.dir.join("ring-00000001.jsonl.zst");
@@ -627,7 +662,7 @@ mod tests {
         let mut t = 0;
         while ring.unwritten.load(Ordering::Relaxed) == 0 {
             assert!(t < 200, "no pass counted unwritten");
-            ring.record(pass(t));
+            ring.record(pass(t), 1);
             t += 1;
         }
         let unwritten = ring.unwritten.load(Ordering::Relaxed);
@@ -635,7 +670,7 @@ mod tests {
         assert!(unwritten > 1, "the segment held one pass only");
         assert_eq!(ring.unwritten_since, unwritten);
         // The next pass goes to a new segment, and begins with the gap.
-        ring.record(pass(t));
+        ring.record(pass(t), 1);
         assert_eq!(ring.unwritten_since, 0);
         ring.current.as_mut().unwrap().flush().unwrap();
         let text = read_segment(&ring.dir.join("ring-00000002.jsonl.zst")).unwrap();
@@ -649,11 +684,11 @@ mod tests {
     fn a_run_that_ended_without_its_orderly_stop_is_kept_at_the_next_start() {
         let dir = dir("crash");
         let mut ring = Ring::open(&dir, bound(1 << 20), 4).unwrap();
-        ring.append(&[start()]).unwrap();
-        ring.append(&pass(5)).unwrap();
+        ring.append(&[start()], 1).unwrap();
+        ring.append(&pass(5), 1).unwrap();
         // The flush of every second, then a pass still in the compressor when the run ends.
         ring.current.as_mut().unwrap().flush().unwrap();
-        ring.append(&pass(6)).unwrap();
+        ring.append(&pass(6), 1).unwrap();
         drop(ring);
         let mut ring = Ring::open(&dir, bound(1 << 20), 4).unwrap();
         let files = kept(&ring);
@@ -662,8 +697,8 @@ mod tests {
         assert_eq!(events.len(), 4, "{events:?}");
         assert_eq!(events.last(), pass(5).last());
         // An orderly stop leaves nothing to keep.
-        ring.append(&[start()]).unwrap();
-        ring.append(&[Event::Stop { now: 9 }]).unwrap();
+        ring.append(&[start()], 1).unwrap();
+        ring.append(&[Event::Stop { now: 9 }], 1).unwrap();
         drop(ring);
         let ring = Ring::open(&dir, bound(1 << 20), 4).unwrap();
         assert_eq!(kept(&ring).len(), 1);

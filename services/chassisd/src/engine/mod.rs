@@ -348,7 +348,9 @@ pub struct Engine {
     last_gps_stamp_ns: u64,
     /// Control requests waiting for the chassis: driver token → (ticket, request seq).
     pending_controls: BTreeMap<u64, (Ticket, u64)>,
-    /// `chassis control keep` asked the black box to keep its window ([`Engine::take_keep`]).
+    /// `chassis control keep` asked the black box to keep its window: taken by the shell after
+    /// each pass ([`Engine::take_keep`]), so not in a snapshot.
+    #[serde(skip)]
     keep_asked: bool,
     last_zero_reason: u8,
     last_active: u8,
