@@ -9,9 +9,11 @@
 //! (`blackbox::replay`) must write and publish the same bytes. The recording is one JSON object
 //! per line: a new input of the engine is one more [`Event`] variant.
 //!
-//! The shell hands the events of each pass to a thread that keeps them in a bounded ring on disk
-//! (`blackbox::ring`): a full channel drops the pass' events (counted, and marked in the
-//! recording by a [`Event::Gap`]), never the pass.
+//! The shell hands the events of its passes, every 100 ms, to a thread that keeps them in a
+//! bounded ring on disk (`blackbox::ring`): a full channel drops the passes' events (counted, and
+//! marked in the recording by a [`Event::Gap`]), never a pass. As each segment of the ring
+//! begins, the shell adds the engine's whole state between two passes ([`Event::Snapshot`],
+//! `Engine::snapshot`): the replay of a window whose beginning the ring let go of starts there.
 
 pub mod replay;
 pub mod ring;
