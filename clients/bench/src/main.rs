@@ -982,8 +982,9 @@ impl Step for Unrecorded {
     fn measure(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<()> {
         let run = DEFAULT_CONFIG;
         ctx.bar.set_message(report::UNRECORDED_ROW);
+        // Traced as the recording run is: the same work in the loop but the recording.
         let config = ServiceConfig::BenchRealtimeUnrecorded;
-        let (service, mut robot) = run.start(ctx, config, false)?;
+        let (service, mut robot) = run.start(ctx, config, true)?;
         let (command, state) = paths::pinned(run.placement.cpus().0, || -> anyhow::Result<_> {
             let (count, _, interval) = run.sizes(&ctx.plan);
             let command = {
