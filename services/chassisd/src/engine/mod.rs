@@ -417,7 +417,8 @@ impl Engine {
     }
 
     /// Goes on from `snapshot`, taken of an engine of the same robot: the driver as it was, the
-    /// mux's state on this engine's configuration.
+    /// mux's state on this engine's configuration. After an error the engine is in no state
+    /// anyone recorded: a replay reads on to the next snapshot.
     pub fn restore(&mut self, snapshot: &[u8]) -> Result<(), SnapshotError> {
         let (mut engine, mux, driver): (Engine, MuxState, Vec<u8>) = snapshot::load(snapshot)?;
         self.driver.restore(&driver)?;
