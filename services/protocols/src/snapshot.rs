@@ -14,9 +14,9 @@ pub enum SnapshotError {
     /// It does not fit what reads it (another version's, or another robot's).
     #[error("a snapshot of the state: {0}")]
     Format(#[from] postcard::Error),
-    /// Frames wait to be sent: a snapshot is taken between passes, once the engine has drained
-    /// them (the next pass).
-    #[error("frames wait to be sent")]
+    /// Frames wait to be sent, or publications to be published: a snapshot is taken between
+    /// passes, once the engine has drained them (the next pass).
+    #[error("frames or publications wait to be handed on")]
     Sending,
     /// It was taken of another configuration than the one it is restored on.
     #[error("the snapshot is of another configuration: {0}")]
