@@ -229,9 +229,8 @@ impl<'a> Pump<'a> {
         None
     }
 
-    /// Pumps for `d` and reads every state the chassis reported meanwhile stamped after
-    /// `since_ns`: how many, and the fastest |speed| among them (NaN if any speed was not a
-    /// number). A row that says the robot stood asserts both: samples seen, none moving.
+    /// Pumps for `d` and reads every state the chassis reported meanwhile with a speed measured
+    /// after `since_ns` ([`crate::stands`]).
     pub fn stands(&mut self, robot: &mut Robot, since_ns: u64, d: Duration) -> (usize, f64) {
         crate::stands(robot, since_ns, d, || self.tick())
     }

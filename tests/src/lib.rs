@@ -582,9 +582,11 @@ pub const STOOD_FOR: Duration = Duration::from_secs(1);
 pub const MIN_STOOD_SAMPLES: usize = 20;
 pub const STANDING_MPS: f64 = 0.01;
 
-/// Reads every state the chassis reports for `d` stamped after `since_ns`, running `between`
-/// on every turn: how many, and the fastest |speed| among them (NaN if one was not a number).
-/// A check that the robot stood asserts both: states seen, none moving.
+/// Reads every state the chassis reports for `d` (its last 4 per read) whose speed the chassis measured after
+/// `since_ns`, running `between` on every turn: how many, and the fastest |speed| among them
+/// (NaN if one was not a number). A check that the robot stood asserts both: states seen, none
+/// moving. The motion's own stamp decides, not the state's: after a lost bus the state keeps
+/// the last speed measured until the chassis reports again, which says nothing of now.
 pub fn stands(
     robot: &mut Robot,
     since_ns: u64,
@@ -595,16 +597,20 @@ pub fn stands(
     let (mut samples, mut fastest) = (0usize, 0.0f64);
     while Instant::now() < end {
         between();
-        if let Ok(Some(s)) = robot.wait_state(Duration::from_millis(5))
-            && s.stamp_ns > since_ns
-        {
-            samples += 1;
-            let speed = f64::from(s.motion.linear_mps).abs();
-            fastest = if speed.is_nan() || fastest.is_nan() {
-                f64::NAN
-            } else {
-                fastest.max(speed)
-            };
+        let each = |s: &ChassisState| {
+            if s.group_stamp_ns[Group::Motion as usize] > since_ns {
+                samples += 1;
+                let speed = f64::from(s.motion.linear_mps).abs();
+                fastest = if speed.is_nan() || fastest.is_nan() {
+                    f64::NAN
+                } else {
+                    fastest.max(speed)
+                };
+            }
+        };
+        // A reader that cannot keep up is a failed test, not a robot that stood.
+        if let Err(e) = robot.wait_states(Duration::from_millis(5), each) {
+            panic!("reading states: {e}");
         }
     }
     (samples, fastest)
