@@ -504,7 +504,9 @@ impl<D: Devices> Shell<D> {
         match &mut tape {
             Some(tape) => {
                 tape.events.push(step.event());
-                step.run(engine, &mut Taped::new(&mut io, &mut tape.events));
+                let mut taped = Taped::new(&mut io, &mut tape.events, &mut tape.deferred);
+                step.run(engine, &mut taped);
+                taped.finish();
                 tape.send();
             }
             None => step.run(engine, &mut io),

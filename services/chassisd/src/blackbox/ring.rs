@@ -70,6 +70,8 @@ pub struct Tape {
     writer: std::thread::JoinHandle<()>,
     /// The events of the passes not handed over yet, the pass under way last.
     pub events: Vec<Event>,
+    /// What the pass under way leaves to make into its events ([`super::Taped::finish`]).
+    pub deferred: super::Deferred,
     /// The passes `events` holds, and since when it holds the first.
     passes: u64,
     since: Instant,
@@ -97,6 +99,7 @@ impl Tape {
             tx,
             writer,
             events: Vec::with_capacity(HAND_OVER_EVENTS + HAND_OVER_EVENTS / 2),
+            deferred: super::Deferred::default(),
             passes: 0,
             since: Instant::now(),
             dropped: 0,
