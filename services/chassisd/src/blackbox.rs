@@ -19,9 +19,7 @@ pub mod replay;
 pub mod ring;
 
 use chassis_bus::can_controller::ControllerReport;
-use chassis_interfaces::{
-    BusFrame, ChassisState, ControlRequest, MuxStatus, VelocityRequest, ZeroReason,
-};
+use chassis_interfaces::{ControlRequest, MuxStatus, VelocityRequest, ZeroReason};
 use chassis_protocols::{CanFrame, Timestamp, WireItem};
 pub use chassisd_blackbox::{Bytes, Event, Item, Lock, Outcome, Published, Report, digest};
 use zerocopy::IntoBytes;
@@ -141,30 +139,18 @@ pub fn is_unasked_stop(before: &MuxStatus, now: &MuxStatus) -> bool {
     before.zero_reason != ZeroReason::STARTING && stop(now).is_some() && stop(before) != stop(now)
 }
 
-/// What a pass read from the bus and published, kept as it was until the pass is over: the
-/// items' bytes and the publications' digests are made then ([`Taped::finish`]), so that no
-/// reader of the pass waits for them. A burst of feedback frames is read at once and each
-/// frame's state published in turn: made at once, they held every state of the burst back by
-/// a few microseconds more than the one before. The buffers are kept from pass to pass.
+/// What a pass read from the bus, kept as the engine took it until the pass is over: the
+/// recorded items (their bytes) are made then ([`Taped::finish`]). A burst of feedback frames
+/// is read at once and each frame's state published in turn: made at once, they held every
+/// state of the burst back by the microseconds they take. The buffers are kept from pass to
+/// pass. (A publication's digest is made at once: a copy kept for later costs more, and on a
+/// flooded bus the copies of a batch outgrow the cache.)
 #[derive(Debug, Default)]
 pub struct Deferred {
     /// The items read, as the engine took them.
     items: Vec<(Timestamp, BusItem)>,
-    /// The publications, as the engine made them.
-    states: Vec<ChassisState>,
-    frames: Vec<BusFrame>,
-    muxes: Vec<MuxStatus>,
-    /// Each event still to be made, in the order of the above: its index, and what of.
-    slots: Vec<(usize, Slot)>,
-}
-
-#[derive(Debug)]
-enum Slot {
-    /// Those of [`Deferred::items`] one read took.
-    Read(std::ops::Range<usize>),
-    State,
-    Frame,
-    Mux,
+    /// Each read's event: its index, and its items in [`Deferred::items`].
+    reads: Vec<(usize, std::ops::Range<usize>)>,
 }
 
 /// A [`PassIo`] that notes everything the engine is handed into `events`.
@@ -189,36 +175,12 @@ impl<'a, I> Taped<'a, I> {
 
     /// Makes the events the pass left to make ([`Deferred`]): call it once the pass is over.
     pub fn finish(self) {
-        let Deferred {
-            items,
-            states,
-            frames,
-            muxes,
-            slots,
-        } = self.deferred;
-        let (mut states, mut frames, mut muxes) =
-            (states.drain(..), frames.drain(..), muxes.drain(..));
-        for (index, slot) in slots.drain(..) {
-            let event = self.events.get_mut(index);
-            let made = match slot {
-                Slot::Read(read) => {
-                    if let Some(Event::BusRead { items: noted, .. }) = event {
-                        *noted = (items.get(read).unwrap_or_default().iter())
-                            .map(|(t, item)| (t.as_nanos(), bus_item(item)))
-                            .collect();
-                    }
-                    continue;
-                }
-                Slot::State => states
-                    .next()
-                    .map(|s| Published::State(digest(s.as_bytes()))),
-                Slot::Frame => frames
-                    .next()
-                    .map(|f| Published::Frame(digest(f.as_bytes()))),
-                Slot::Mux => muxes.next().map(|m| Published::Mux(bytes_of(&m))),
-            };
-            if let (Some(Event::Publish { what, .. }), Some(made)) = (event, made) {
-                *what = made;
+        let Deferred { items, reads } = self.deferred;
+        for (index, read) in reads.drain(..) {
+            if let Some(Event::BusRead { items: noted, .. }) = self.events.get_mut(index) {
+                *noted = (items.get(read).unwrap_or_default().iter())
+                    .map(|(t, item)| (t.as_nanos(), bus_item(item)))
+                    .collect();
             }
         }
         items.clear();
@@ -305,8 +267,8 @@ impl<I: PassIo> PassIo for Taped<'_, I> {
         deferred
             .items
             .extend_from_slice(into.get(before..).unwrap_or_default());
-        let read = Slot::Read(from..deferred.items.len());
-        deferred.slots.push((self.events.len(), read));
+        let read = from..deferred.items.len();
+        deferred.reads.push((self.events.len(), read));
         self.events.push(Event::BusRead {
             items: Vec::new(),
             more: result.as_ref().is_ok_and(|more| *more),
@@ -354,30 +316,7 @@ impl<I: PassIo> PassIo for Taped<'_, I> {
     }
 
     fn publish(&mut self, publication: ToPublish) -> Result<(), Self::Error> {
-        // The frequent ones are made into their event once the pass is over.
-        let deferred = &mut *self.deferred;
-        let slot = match &publication {
-            ToPublish::State(state) => {
-                deferred.states.push(**state);
-                Some(Slot::State)
-            }
-            ToPublish::Frame(frame) => {
-                deferred.frames.push(*frame);
-                Some(Slot::Frame)
-            }
-            ToPublish::Mux(status) => {
-                deferred.muxes.push(**status);
-                Some(Slot::Mux)
-            }
-            ToPublish::Description(_) | ToPublish::Response { .. } => None,
-        };
-        let what = match slot {
-            Some(slot) => {
-                deferred.slots.push((self.events.len(), slot));
-                Published::State(0)
-            }
-            None => published(&publication),
-        };
+        let what = published(&publication);
         let result = self.io.publish(publication);
         self.events.push(Event::Publish {
             what,
