@@ -582,11 +582,12 @@ pub const STOOD_FOR: Duration = Duration::from_secs(1);
 pub const MIN_STOOD_SAMPLES: usize = 20;
 pub const STANDING_MPS: f64 = 0.01;
 
-/// Reads every state the chassis reports for `d` (its last 4 per read) whose speed the chassis measured after
-/// `since_ns`, running `between` on every turn: how many, and the fastest |speed| among them
-/// (NaN if one was not a number). A check that the robot stood asserts both: states seen, none
-/// moving. The motion's own stamp decides, not the state's: after a lost bus the state keeps
-/// the last speed measured until the chassis reports again, which says nothing of now.
+/// Reads every state the chassis reports for `d` (the last 4 at each read) whose speed the
+/// chassis measured after `since_ns`, running `between` on every turn: how many, and the fastest
+/// |speed| among them (NaN if one was not a number). A check that the robot stood asserts both:
+/// states seen, none moving. The motion's own stamp decides, not the state's: after a lost bus
+/// the state keeps the last speed measured until the chassis reports again, which says nothing
+/// of now.
 pub fn stands(
     robot: &mut Robot,
     since_ns: u64,
@@ -608,7 +609,7 @@ pub fn stands(
                 };
             }
         };
-        // A reader that cannot keep up is a failed test, not a robot that stood.
+        // A state that cannot be read fails the test: it is no robot that stood.
         if let Err(e) = robot.wait_states(Duration::from_millis(5), each) {
             panic!("reading states: {e}");
         }
