@@ -192,15 +192,22 @@ fn bare_hop(
         .collect()
 }
 
-/// Runs the Zenoh paths — `commands` requests one per [`paths::COMMAND_INTERVAL`], `states`
-/// state samples — and their bare hops, and adds their rows to `report`.
-pub fn run(
-    prefix: &str,
-    dir: &Path,
-    commands: u64,
-    states: u64,
-    report: &mut Report,
-) -> anyhow::Result<()> {
+/// What [`measure`] brings: the bridge's paths and the bare hops beside them.
+struct Measured {
+    command: paths::CommandFigures,
+    state: StateRecorder,
+    /// The bridge's own part of each state: published → in the operator's iceoryx2.
+    bridged: Latencies,
+    raw_command: Vec<u64>,
+    raw_state: Vec<u64>,
+    /// The bare state hop's pace.
+    state_period: Duration,
+    split: crate::parts::Split,
+}
+
+/// Measures the Zenoh paths — `commands` requests one per [`paths::COMMAND_INTERVAL`], `states`
+/// state samples — and their bare hops.
+fn measure(prefix: &str, dir: &Path, commands: u64, states: u64) -> anyhow::Result<Measured> {
     let interval = paths::COMMAND_INTERVAL;
     let netns = Netns::pair()?;
     // chassisd keeps its pass trace: the state row's split starts with its notification.
@@ -210,7 +217,6 @@ pub fn run(
     let name = service.name.clone();
     let operator_prefix = format!("{prefix}op_");
     let prefixes = (prefix, operator_prefix.as_str());
-    let bridge = format!("tcp/{ROBOT_ADDR}:{BRIDGE_PORT}");
 
     // The command row's bare Zenoh hop first, alone on the link, at the command path's pace;
     // the state row's after the bridges stop, at the states' own (known then).
@@ -220,6 +226,7 @@ pub fn run(
     let export_trace = dir.join("zenoh-robot.trace");
     let mirror_trace = dir.join("zenoh-operator.trace");
     let program = paths::sibling("chassis-zenoh")?;
+    let bridge = format!("tcp/{ROBOT_ADDR}:{BRIDGE_PORT}");
     let args = format!("--name {name} --listen {bridge} --insecure");
     let mut robot_side = zenoh_in(netns.robot(), &program, &args);
     robot_side.env(chassis_ipc::Trace::ZenohExport.env(), &export_trace);
@@ -246,18 +253,18 @@ pub fn run(
 
     // Robot state → the operator's iceoryx2 subscriber. The robot side forwards the newest
     // sample of each read of the bus: `seq` has gaps.
-    let mut recorder = StateRecorder::with_gaps();
+    let mut state = StateRecorder::with_gaps();
     let mut bridged = Latencies::new();
     let each = |s: &ChassisState, received| bridged.record_between(s.published_ns, received);
     paths::state_path(
         &operator,
         Some(&mut remote),
-        &mut recorder,
+        &mut state,
         (states, false),
         each,
     )?;
     drop((remote, operator, children));
-    let reads: Vec<u64> = recorder.samples.iter().map(|&(read, ..)| read).collect();
+    let reads: Vec<u64> = state.samples.iter().map(|&(read, ..)| read).collect();
     let state_period = state_period(&reads);
     let raw_state = bare_hop(&netns, prefixes, dir, states, state_period)?;
     drop(robot);
@@ -267,9 +274,7 @@ pub fn run(
     for (path, e) in chassis_ipc::remove_ipc_files(&operator_prefix) {
         eprintln!("cannot remove {}: {e}", path.display());
     }
-    let samples: Vec<(u64, u64)> = recorder
-        .samples
-        .iter()
+    let samples: Vec<(u64, u64)> = (state.samples.iter())
         .map(|&(read, _, received)| (read, received))
         .collect();
     let read_trace = crate::parts::read_trace;
@@ -279,18 +284,40 @@ pub fn run(
         &read_trace(&mirror_trace, chassis_ipc::Trace::ZenohMirror)?,
         &passes,
     );
+    Ok(Measured {
+        command,
+        state,
+        bridged,
+        raw_command,
+        raw_state,
+        state_period,
+        split,
+    })
+}
 
+/// Measures the Zenoh paths and their bare hops ([`measure`]) and adds their rows to `report`.
+pub fn run(
+    prefix: &str,
+    dir: &Path,
+    commands: u64,
+    states: u64,
+    report: &mut Report,
+) -> anyhow::Result<()> {
+    let m = measure(prefix, dir, commands, states)?;
     // chassis-zenoh bridges the TITAN on the simulated bus.
     let run = "titan sim".to_string();
-    let pace_command = format!("{} (the command path's)", period_text(interval));
+    let pace_command = format!(
+        "{} (the command path's)",
+        period_text(paths::COMMAND_INTERVAL)
+    );
     let pace_state = format!(
         "{} (the period of the states the path counted, 1.7 % more)",
-        period_text(state_period)
+        period_text(m.state_period)
     );
-    let (command_count, state_count) = (command.latencies.count(), recorder.latencies.count());
+    let (command_count, state_count) = (m.command.latencies.count(), m.state.latencies.count());
     for (what, count, hops, pace) in [
-        (RAW_COMMAND, command_count, &raw_command, pace_command),
-        (RAW_STATE, state_count, &raw_state, pace_state),
+        (RAW_COMMAND, command_count, &m.raw_command, pace_command),
+        (RAW_STATE, state_count, &m.raw_state, pace_state),
     ] {
         let conditions = format!(
             "one sample every {pace} from the robot's namespace to the operator's, bare \
@@ -301,11 +328,11 @@ pub fn run(
         let l = last_of(hops, count);
         (report.rows).push(Row::hop(&run, what.into(), PLACEMENT, l, conditions));
     }
-    let (sent, lost, at) = (command.latencies, command.missed, PLACEMENT);
+    let (sent, lost, at) = (m.command.latencies, m.command.missed, PLACEMENT);
     for (leg, what, l, missed, raw) in [
         (Leg::RemoteCommand, COMMAND, sent, lost, RAW_COMMAND),
-        (Leg::RemoteState, STATE, recorder.latencies, 0, RAW_STATE),
-        (Leg::RemoteBridge, BRIDGE, bridged, 0, RAW_STATE),
+        (Leg::RemoteState, STATE, m.state.latencies, 0, RAW_STATE),
+        (Leg::RemoteBridge, BRIDGE, m.bridged, 0, RAW_STATE),
     ] {
         let what = what.to_string();
         let row = Row::new(PathKind::Zenoh, leg, &run, what, "event", at, l, missed);
@@ -319,7 +346,7 @@ pub fn run(
         what: STATE.into(),
         mode: "event".into(),
         placement: PLACEMENT.into(),
-        split,
+        split: m.split,
     });
     Ok(())
 }
