@@ -612,6 +612,27 @@ impl PathRun {
         paths::start(run, cpu, config, trace, &ctx.prefix, &ctx.dir)
     }
 
+    /// The command path (when the run sends commands) and the state path of `robot`, each
+    /// from a teleop source of its own.
+    fn command_and_state(
+        &self,
+        ctx: &Ctx,
+        robot: &mut Robot,
+    ) -> anyhow::Result<(Option<paths::CommandFigures>, paths::StateRecorder)> {
+        let (count, _, interval) = self.sizes(&ctx.plan);
+        let spin = self.mode == LoopMode::Spin;
+        let mut command = None;
+        if count > 0 {
+            let (t, exact) = (&mut robot.source("teleop")?, paths::Reach::Exact);
+            let (kind, sizes) = ((self.robot, spin), (count, interval));
+            command = Some(paths::command_path(robot, kind, t, sizes, exact)?);
+        }
+        let (mut state, mut teleop) = (paths::StateRecorder::default(), robot.source("teleop")?);
+        let sizes = (ctx.plan.states, spin);
+        paths::state_path(robot, Some(&mut teleop), &mut state, sizes, |_, _| {})?;
+        Ok((command, state))
+    }
+
     /// Starts the service and measures its paths, the scripts' beside them.
     fn service(&self, ctx: &Ctx, report: &mut Report) -> anyhow::Result<ServiceRun> {
         let (label, mode) = (self.label(), self.mode.arg());
@@ -622,18 +643,7 @@ impl PathRun {
         let (count, preemptions, interval) = self.sizes(&ctx.plan);
         let feedback = paths::FeedbackRate::start(&mut robot)?;
         let result = paths::pinned(self.placement.cpus().0, || -> anyhow::Result<_> {
-            let mut command = None;
-            if count > 0 {
-                let (t, exact) = (&mut robot.source("teleop")?, paths::Reach::Exact);
-                let (kind, sizes) = ((self.robot, spin), (count, interval));
-                command = Some(paths::command_path(&mut robot, kind, t, sizes, exact)?);
-            }
-            let (mut state, mut teleop) =
-                (paths::StateRecorder::default(), robot.source("teleop")?);
-            let sizes = (ctx.plan.states, spin);
-            paths::state_path(&robot, Some(&mut teleop), &mut state, sizes, |_, _| {})?;
-            // The preemption opens a teleop source of its own.
-            drop(teleop);
+            let (command, state) = self.command_and_state(ctx, &mut robot)?;
             let preempt = paths::preemption(&mut robot, self.robot, preemptions, interval, spin)?;
             // The Python client and the ROS 2 bridge beside the Rust one.
             let (mut python, mut ros2) = (None, None);
@@ -985,27 +995,20 @@ impl Step for Unrecorded {
         // Traced as the recording run is: the same work in the loop but the recording.
         let config = ServiceConfig::BenchRealtimeUnrecorded;
         let (service, mut robot) = run.start(ctx, config, true)?;
-        let (command, state) = paths::pinned(run.placement.cpus().0, || -> anyhow::Result<_> {
-            let (count, _, interval) = run.sizes(&ctx.plan);
-            let command = {
-                let (t, exact) = (&mut robot.source("teleop")?, paths::Reach::Exact);
-                let sizes = (count, interval);
-                paths::command_path(&mut robot, (run.robot, false), t, sizes, exact)?
-            };
-            let (mut state, mut teleop) =
-                (paths::StateRecorder::default(), robot.source("teleop")?);
-            let sizes = (ctx.plan.states, false);
-            paths::state_path(&robot, Some(&mut teleop), &mut state, sizes, |_, _| {})?;
-            Ok((command, state))
-        })??;
+        let cpu = run.placement.cpus().0;
+        let measured = paths::pinned(cpu, || run.command_and_state(ctx, &mut robot))??;
         drop(robot);
         drop(service);
         let (what, [paced, _, published, _]) = (report::UNRECORDED_ROW.to_string(), run.loaded());
-        let (l, missed) = (command.latencies, command.missed);
-        let row = run.row(PathKind::Command, Leg::Command, what.clone(), l, missed);
-        report
-            .rows
-            .extend(path_rows(row, run.reference(&paced), command.in_service));
+        let (command, state) = measured;
+        if let Some(command) = command {
+            let (l, missed) = (command.latencies, command.missed);
+            let row = run.row(PathKind::Command, Leg::Command, what.clone(), l, missed);
+            let reference = run.reference(&paced);
+            report
+                .rows
+                .extend(path_rows(row, reference, command.in_service));
+        }
         let mut row = run.row(PathKind::State, Leg::State, what, state.latencies, 0);
         row.dropped = state.dropped;
         report
