@@ -216,10 +216,9 @@ pub(crate) fn spawn_logged(
 ) -> anyhow::Result<Child> {
     let file = |suffix: &str| -> anyhow::Result<Stdio> {
         let path = PathBuf::from(format!("{}{suffix}.log", log.display()));
-        let file = std::fs::File::create(&path);
-        Ok(file
-            .with_context(|| format!("creating {}", path.display()))?
-            .into())
+        let file =
+            std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?;
+        Ok(Stdio::from(file))
     };
     command
         .env(IPC_PREFIX_ENV, prefix)
@@ -287,24 +286,15 @@ pub fn start(
             let args = format!("sim --robot {} --name {name} --bus", robot.name());
             sim.args(args.split(' ')).arg(&sim_bus);
             let log = dir.join(format!("{name}-sim"));
-            children.push(spawn_logged(
-                &mut sim,
-                (prefix, "warn"),
-                &log,
-                "chassisd sim",
-            )?);
+            let spawned = spawn_logged(&mut sim, (prefix, "warn"), &log, "chassisd sim")?;
+            children.push(spawned);
             let linked = || Path::new(&link).exists().then_some(());
             wait_until("chassisd sim made no pty link", 10, linked)?;
             service_bus
         }
     };
-    let config_file = config_file.display().to_string();
-    let mut args = vec![
-        "--config".into(),
-        config_file,
-        "--loop".into(),
-        mode.arg().into(),
-    ];
+    let mut args = vec!["--config".into(), config_file.display().to_string()];
+    args.extend(["--loop".into(), mode.arg().into()]);
     if let Some(cpu) = cpu {
         args.extend(["--cpu".into(), cpu.to_string()]);
     }
@@ -330,15 +320,8 @@ pub fn start(
 /// without its safety monitor: the bench's sources are its only ones.
 fn chassisd(robot: &str, name: &str, bus: &str) -> anyhow::Result<Command> {
     let mut chassisd = Command::new(sibling("chassisd")?);
-    chassisd.args([
-        "--robot",
-        robot,
-        "--name",
-        name,
-        "--bus",
-        bus,
-        "--no-safety-monitor",
-    ]);
+    chassisd.args(["--robot", robot, "--name", name, "--bus", bus]);
+    chassisd.arg("--no-safety-monitor");
     Ok(chassisd)
 }
 
@@ -355,12 +338,8 @@ pub fn launch(
     let mut service = chassisd(robot.name(), name, bus)?;
     service.args(args).envs(envs.iter().cloned());
     let log = dir.join(format!("{name}-chassisd"));
-    let pid = children.push(spawn_logged(
-        &mut service,
-        (prefix, "warn"),
-        &log,
-        "chassisd",
-    )?);
+    let spawned = spawn_logged(&mut service, (prefix, "warn"), &log, "chassisd")?;
+    let pid = children.push(spawned);
     let service = Service {
         name: name.into(),
         children,
@@ -451,11 +430,8 @@ pub struct FeedbackRate {
 
 impl FeedbackRate {
     pub fn start(robot: &mut Robot) -> anyhow::Result<Self> {
-        let frames = state(robot)?.link.rx_frames;
-        Ok(Self {
-            frames,
-            at: now_ns(),
-        })
+        let (frames, at) = (state(robot)?.link.rx_frames, now_ns());
+        Ok(Self { frames, at })
     }
 
     /// Frames read a second since [`FeedbackRate::start`].
