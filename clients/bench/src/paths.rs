@@ -922,21 +922,24 @@ pub fn cost_at(
             .map(|m| m.len())
             .sum()
     };
-    let start_cpu = (
-        cpu_seconds_of_thread(pid, pid)?,
-        recorder_cpu()?,
-        ring_bytes(),
-    );
+    // The loop thread's CPU time, the recorder's, the ring's bytes.
+    let usage = || {
+        anyhow::Ok((
+            cpu_seconds_of_thread(pid, pid)?,
+            recorder_cpu()?,
+            ring_bytes(),
+        ))
+    };
+    let before = usage()?;
     let start = now_ns();
     let end = start + (seconds * 1e9) as u64;
     while now_ns() < end {
         robot.wait_state(Duration::from_millis(100))?;
     }
     let elapsed = (now_ns() - start) as f64 / 1e9;
-    let cpu = cpu_seconds_of_thread(pid, pid)? - start_cpu.0;
-    let recorder_cpu_pct = 100.0 * (recorder_cpu()? - start_cpu.1) / elapsed;
-    let recorder_mb_per_min =
-        ring_bytes().saturating_sub(start_cpu.2) as f64 / 1e6 * 60.0 / elapsed;
+    let after = usage()?;
+    let recorder_cpu_pct = 100.0 * (after.1 - before.1) / elapsed;
+    let recorder_mb_per_min = after.2.saturating_sub(before.2) as f64 / 1e6 * 60.0 / elapsed;
     let frames = state(robot)?.link.rx_frames;
     let rss_mib = rss_mib(pid)?;
     robot.sim(chassis_client::flood_request(0.0), Duration::from_secs(3))?;
@@ -944,7 +947,7 @@ pub fn cost_at(
         bus: bus.into(),
         bitrate,
         frames_per_s: (frames - start_frames) as f64 / elapsed,
-        cpu_pct: 100.0 * cpu / elapsed,
+        cpu_pct: 100.0 * (after.0 - before.0) / elapsed,
         recorder_cpu_pct: recorder.map(|_| recorder_cpu_pct),
         recorder_mb_per_min: recorder.map(|_| recorder_mb_per_min),
         rss_mib,
@@ -953,12 +956,9 @@ pub fn cost_at(
 
 /// The threads of process `pid`: their ids and `/proc` directories.
 fn threads(pid: u32) -> impl Iterator<Item = (u32, PathBuf)> {
-    let tasks = std::fs::read_dir(format!("/proc/{pid}/task"))
-        .into_iter()
-        .flatten();
-    tasks
-        .flatten()
-        .filter_map(|t| Some((t.file_name().to_str()?.parse().ok()?, t.path())))
+    let dir = format!("/proc/{pid}/task");
+    let tasks = std::fs::read_dir(dir).into_iter().flatten().flatten();
+    tasks.filter_map(|t| Some((t.file_name().to_str()?.parse().ok()?, t.path())))
 }
 
 /// The thread of process `pid` named `name`, if it has one.
