@@ -25,6 +25,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use serde::{Deserialize, Serialize};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::paths::{HYBRID_SPIN, LoopMode};
@@ -32,7 +33,7 @@ use crate::placement::{Periods, nanos, pin_current_thread};
 use crate::stats::Latencies;
 
 /// The transports compared.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 pub enum Transport {
     /// iceoryx2 publish-subscribe, the receiver blocked on an event listener.
     IceoryxEvent,
@@ -73,7 +74,7 @@ impl Transport {
 }
 
 /// What the receiving side lives with besides the measured pings.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Load {
     /// Wake-ups a second from a third process (the simulated chassis' feedback frames).
     pub feed_per_s: f64,
@@ -249,10 +250,10 @@ struct IceoryxEndpoint {
 }
 
 impl IceoryxEndpoint {
-    fn open(args: &PongArgs, me: &str, peer: &str) -> anyhow::Result<Self> {
-        let ports = Ports::new(&args.prefix, &args.tag)?;
+    fn open(spec: &Spec, me: &str, peer: &str) -> anyhow::Result<Self> {
+        let ports = Ports::new(&spec.prefix, &spec.tag)?;
         // Only the pong side lives with the load.
-        let load = if me == "pong" { args.load() } else { None };
+        let load = spec.load.filter(|_| me == "pong");
         let (publisher, notifier) = ports.publisher(me)?;
         let (subscriber, listener) = ports.subscriber(peer)?;
         let feed = load.map(|_| {
@@ -271,7 +272,7 @@ impl IceoryxEndpoint {
             notifier,
             subscriber,
             listener: Rc::new(listener),
-            transport: args.transport,
+            transport: spec.transport,
             feed,
             feed_ns: Vec::new(),
             tick: load.map(|l| (l.tick, now_ns() + nanos(l.tick))),
@@ -378,14 +379,14 @@ enum Socket {
 }
 
 impl Socket {
-    fn open(args: &PongArgs, me: &str, peer: &str) -> anyhow::Result<Self> {
-        if args.transport == Transport::Uds {
-            let path = |side| args.dir.join(format!("{}-{side}.sock", args.tag));
+    fn open(spec: &Spec, me: &str, peer: &str) -> anyhow::Result<Self> {
+        if spec.transport == Transport::Uds {
+            let path = |side| spec.dir.join(format!("{}-{side}.sock", spec.tag));
             let _ = std::fs::remove_file(path(me));
             return Ok(Socket::Uds(UnixDatagram::bind(path(me))?, path(peer)));
         }
         // Ports are derived from the tag so both sides know them without talking first.
-        let base = 20_000 + (crate::placement::hash(&args.tag) % 20_000) as u16;
+        let base = 20_000 + (crate::placement::hash(&spec.tag) % 20_000) as u16;
         let (mine, theirs) = if me == "ping" {
             (base, base + 1)
         } else {
@@ -422,77 +423,47 @@ impl Endpoint for Socket {
     }
 }
 
-/// Arguments of the pong and the feed processes (hidden roles of this binary).
+/// Arguments of the pong and the feed processes (hidden roles of this binary): a [`Spec`].
 #[derive(Debug, Clone, clap::Args)]
 pub struct PongArgs {
-    #[arg(long, value_enum)]
-    pub transport: Transport,
-    #[arg(long)]
-    pub tag: String,
-    #[arg(long)]
-    pub prefix: String,
-    #[arg(long)]
-    pub cpu: Option<usize>,
-    /// Scratch directory for Unix socket paths.
-    #[arg(long)]
-    pub dir: PathBuf,
-    /// A loaded receiver: the feed's rate a second (another process wakes it).
-    #[arg(long)]
-    pub feed_per_s: Option<f64>,
-    /// A loaded receiver: its own tick, µs.
-    #[arg(long)]
-    pub tick_us: Option<u64>,
-    /// A loaded receiver: at SCHED_FIFO with this priority, its memory locked.
-    #[arg(long)]
-    pub realtime: Option<u8>,
-    /// A loaded receiver: it publishes after each wake-up by the feed ([`Load::published`]).
-    #[arg(long)]
-    pub publish: bool,
+    /// The [`Spec`], JSON.
+    #[arg(long, value_parser = |s: &str| serde_json::from_str::<Spec>(s))]
+    spec: Spec,
 }
 
-impl PongArgs {
-    fn load(&self) -> Option<Load> {
-        Some(Load {
-            feed_per_s: self.feed_per_s?,
-            tick: Duration::from_micros(self.tick_us?),
-            realtime: self.realtime,
-            published: self.publish,
-        })
-    }
+/// What a pong or a feed process is to do.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Spec {
+    transport: Transport,
+    /// Names the run's iceoryx2 services, sockets and files.
+    tag: String,
+    prefix: String,
+    /// The CPU the process is pinned to.
+    cpu: Option<usize>,
+    /// Scratch directory for Unix socket paths and the feed's figures.
+    dir: PathBuf,
+    /// The receiver's load: the pong lives with it, the feed makes it.
+    load: Option<Load>,
+}
 
+impl Spec {
     fn feed_file(&self) -> PathBuf {
         self.dir.join(format!("{}-feed.txt", self.tag))
     }
 
-    /// Starts this binary as `role` with these arguments (on `cpu`) and waits until it is ready;
-    /// the process and its stdout.
+    /// Starts this binary as `role` with this spec (on `cpu`) and waits until it is ready; the
+    /// process and its stdout.
     fn start(
         &self,
         role: &str,
         cpu: Option<usize>,
     ) -> anyhow::Result<(Child, BufReader<ChildStdout>)> {
-        let transport = clap::ValueEnum::to_possible_value(&self.transport)
-            .map(|v| v.get_name().to_string())
-            .unwrap_or_default();
+        let spec = serde_json::to_string(&Spec {
+            cpu,
+            ..self.clone()
+        })?;
         let mut command = Command::new(std::env::current_exe()?);
-        command
-            .args(["role", role, "--transport", &transport, "--tag", &self.tag])
-            .args(["--prefix", &self.prefix, "--dir"])
-            .arg(&self.dir);
-        let options = [
-            ("--cpu", cpu.map(|c| c.to_string())),
-            ("--feed-per-s", self.feed_per_s.map(|r| r.to_string())),
-            ("--tick-us", self.tick_us.map(|t| t.to_string())),
-            ("--realtime", self.realtime.map(|p| p.to_string())),
-        ];
-        for (name, value) in options {
-            if let Some(value) = value {
-                command.args([name, &value]);
-            }
-        }
-        if self.publish {
-            command.arg("--publish");
-        }
+        command.args(["role", role, "--spec", &spec]);
         let what = format!("the {role} process");
         let mut child = (command.stdout(Stdio::piped()).stderr(Stdio::inherit()))
             .spawn()
@@ -509,15 +480,15 @@ impl PongArgs {
 
 /// The feed role: a stamped sample and a wake-up of the receiver's listener `--feed-per-s`
 /// times a second, until killed.
-pub fn feed(args: &PongArgs) -> anyhow::Result<()> {
-    if let Some(cpu) = args.cpu {
+pub fn feed(PongArgs { spec }: &PongArgs) -> anyhow::Result<()> {
+    if let Some(cpu) = spec.cpu {
         pin_current_thread(cpu)?;
     }
-    let rate = args.feed_per_s.unwrap_or_default();
+    let rate = spec.load.map_or(0.0, |l| l.feed_per_s);
     if !(rate.is_finite() && rate > 0.0) {
         bail!("feed rate {rate} is not a rate");
     }
-    let ports = Ports::new(&args.prefix, &args.tag)?;
+    let ports = Ports::new(&spec.prefix, &spec.tag)?;
     let publisher = ports.pubsub("feed")?.publisher_builder().create();
     let publisher = publisher.named("feed publisher")?;
     // The pings' event: the receiver waits on one listener for both, like chassisd's loop.
@@ -536,20 +507,20 @@ pub fn feed(args: &PongArgs) -> anyhow::Result<()> {
 
 /// The pong role: echo every ping with the one-way latency measured on arrival, until the last
 /// one; then a loaded receiver writes its feed's hops.
-pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
-    if let Some(cpu) = args.cpu {
+pub fn pong(PongArgs { spec }: &PongArgs) -> anyhow::Result<()> {
+    if let Some(cpu) = spec.cpu {
         pin_current_thread(cpu)?;
     }
-    if let Some(priority) = args.realtime {
+    if let Some(priority) = spec.load.and_then(|l| l.realtime) {
         crate::placement::enter_realtime(priority)?;
     }
-    if !args.transport.is_iceoryx() {
-        let mut socket = Socket::open(args, "pong", "ping")?;
+    if !spec.transport.is_iceoryx() {
+        let mut socket = Socket::open(spec, "pong", "ping")?;
         return answer(&mut socket, |s, timeout| s.receive(timeout));
     }
     // An iceoryx2 receiver waits on a WaitSet, as chassisd's loop does, taking the
     // notifications of the listener that fired before reading the samples.
-    let mut endpoint = IceoryxEndpoint::open(args, "pong", "ping")?;
+    let mut endpoint = IceoryxEndpoint::open(spec, "pong", "ping")?;
     let waitset = WaitSetBuilder::new().create::<ipc::Service>();
     let waitset = waitset.named("wait set")?;
     let listener = endpoint.listener.clone();
@@ -563,13 +534,13 @@ pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
             taken.map(drop).named("taking the notifications")
         })
     })?;
-    if args.load().is_some() {
+    if spec.load.is_some() {
         let text: String = endpoint
             .feed_ns
             .iter()
             .map(|ns| format!("{ns}\n"))
             .collect();
-        let path = args.feed_file();
+        let path = spec.feed_file();
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
     }
     println!("done");
@@ -642,31 +613,29 @@ pub fn run(
     dir: &Path,
 ) -> anyhow::Result<Measured> {
     let tag = format!("{}-{}", std::process::id(), crate::placement::unique());
-    let args = PongArgs {
+    let (prefix, dir) = (prefix.to_string(), dir.to_path_buf());
+    let spec = Spec {
         transport,
         tag: tag.clone(),
-        prefix: prefix.to_string(),
+        prefix,
         cpu: pong_cpu,
-        dir: dir.to_path_buf(),
-        feed_per_s: load.map(|l| l.feed_per_s),
-        tick_us: load.map(|l| u64::try_from(l.tick.as_micros()).unwrap_or(u64::MAX)),
-        realtime: load.and_then(|l| l.realtime),
-        publish: load.is_some_and(|l| l.published),
+        dir,
+        load,
     };
-    let (mut pong, mut pong_out) = args.start("pong", pong_cpu)?;
+    let (mut pong, mut pong_out) = spec.start("pong", pong_cpu)?;
     // The loaded receiver's publication is read where the client reads, before the feed
     // starts it.
     let stop = Arc::new(AtomicBool::new(false));
     let spin = transport == Transport::IceoryxSpin;
-    let published = (args.publish && transport.is_iceoryx())
-        .then(|| spawn_reader(prefix, &tag, ping_cpu, spin, &stop))
+    let published = (load.is_some_and(|l| l.published) && transport.is_iceoryx())
+        .then(|| spawn_reader(&spec.prefix, &tag, ping_cpu, spin, &stop))
         .transpose()?;
     let feed_at = |load| pong_cpu.map(|c| feed_cpu(c, transport, load));
-    let mut feeder = load.map(|l| args.start("feed", feed_at(l))).transpose()?;
+    let mut feeder = load.map(|l| spec.start("feed", feed_at(l))).transpose()?;
     let result = crate::paths::pinned(ping_cpu, || {
         let mut endpoint: Box<dyn Endpoint> = match transport.is_iceoryx() {
-            true => Box::new(IceoryxEndpoint::open(&args, "ping", "pong")?),
-            false => Box::new(Socket::open(&args, "ping", "pong")?),
+            true => Box::new(IceoryxEndpoint::open(&spec, "ping", "pong")?),
+            false => Box::new(Socket::open(&spec, "ping", "pong")?),
         };
         let result = match shape {
             Rounds::Loop(period) => loop_rounds(endpoint.as_mut(), rounds, period),
@@ -688,7 +657,7 @@ pub fn run(
     let _ = pong_out.read_line(&mut String::new());
     let _ = pong.wait();
     let feed = load.map(|_| -> anyhow::Result<Vec<u64>> {
-        let path = args.feed_file();
+        let path = spec.feed_file();
         let text = std::fs::read_to_string(&path)
             .with_context(|| format!("reading {}", path.display()))?;
         Ok(text.lines().filter_map(|l| l.parse().ok()).collect())
