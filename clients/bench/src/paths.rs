@@ -745,9 +745,10 @@ impl StateRecorder {
 }
 
 /// State-path latencies while `driver`, if any, keeps the robot driving (so frames keep changing
-/// the state; without one, what changes it is what the robot does anyway), read from `robot` as a client that needs every sample reads them: a lossless
-/// [`chassis_client::StateStream`], until `recorder` counted `samples` (at most 120 s);
-/// `counted` is given each sample that counted and when it was received.
+/// the state; without one, what changes it is what the robot does anyway), read from `robot` as
+/// a client that needs every sample reads them: a lossless [`chassis_client::StateStream`],
+/// until `recorder` counted `samples` (at most 120 s); `counted` is given each sample that
+/// counted and when it was received.
 pub fn state_path(
     robot: &Robot,
     mut driver: Option<&mut Source>,
