@@ -25,6 +25,8 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::Builder;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
 use serde::{Deserialize, Serialize};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
@@ -169,8 +171,7 @@ trait Endpoint {
 
 type Pub = Publisher<ipc::Service, Ping, ()>;
 type Sub = Subscriber<ipc::Service, Ping, ()>;
-type PubSub =
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, Ping, ()>;
+type PubSub = publish_subscribe::PortFactory<ipc::Service, Ping, ()>;
 
 /// iceoryx2 ports on `bench/<tag>/<what>` of one node.
 struct Ports {
@@ -187,10 +188,7 @@ impl Ports {
         Ok(Self { node, tag })
     }
 
-    fn builder(
-        &self,
-        what: &str,
-    ) -> anyhow::Result<iceoryx2::service::builder::Builder<ipc::Service>> {
+    fn builder(&self, what: &str) -> anyhow::Result<Builder<ipc::Service>> {
         let name = format!("bench/{}/{what}", self.tag);
         let name: ServiceName = name.as_str().try_into().named(&name)?;
         Ok(self.node.service_builder(&name))
@@ -207,10 +205,7 @@ impl Ports {
             .named(what)
     }
 
-    fn event(
-        &self,
-        what: &str,
-    ) -> anyhow::Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>> {
+    fn event(&self, what: &str) -> anyhow::Result<event::PortFactory<ipc::Service>> {
         let event = self.builder(what)?.event().max_notifiers(4);
         event.open_or_create().named(what)
     }
@@ -256,24 +251,17 @@ impl IceoryxEndpoint {
         let load = spec.load.filter(|_| me == "pong");
         let (publisher, notifier) = ports.publisher(me)?;
         let (subscriber, listener) = ports.subscriber(peer)?;
-        let feed = load.map(|_| {
-            ports
-                .pubsub("feed")?
-                .subscriber_builder()
-                .create()
-                .named("feed")
-        });
-        let feed = feed.transpose()?;
-        let published = load
-            .filter(|l| l.published)
-            .map(|_| ports.publisher("state"));
+        let feed = load.map(|_| ports.pubsub("feed")).transpose()?;
+        let feed = feed.map(|f| f.subscriber_builder().create().named("feed"));
+        let publishes = load.is_some_and(|l| l.published);
+        let published = publishes.then(|| ports.publisher("state"));
         Ok(Self {
             publisher,
             notifier,
             subscriber,
             listener: Rc::new(listener),
             transport: spec.transport,
-            feed,
+            feed: feed.transpose()?,
             feed_ns: Vec::new(),
             tick: load.map(|l| (l.tick, now_ns() + nanos(l.tick))),
             published: published.transpose()?,
@@ -293,9 +281,8 @@ impl IceoryxEndpoint {
             any = true;
         }
         if let Some((publisher, notifier)) = self.published.as_ref().filter(|_| any) {
-            publisher
-                .send_copy(ping(now_ns(), 0, 0))
-                .named("state send")?;
+            let state = ping(now_ns(), 0, 0);
+            publisher.send_copy(state).named("state send")?;
             notifier.notify().named("state notify")?;
         }
         Ok(any)
@@ -592,9 +579,9 @@ impl Measured {
 pub fn last_of(hops: &[u64], count: u64) -> Latencies {
     let keep = usize::try_from(count).unwrap_or(usize::MAX).min(hops.len());
     let mut latencies = Latencies::new();
-    hops[hops.len() - keep..]
-        .iter()
-        .for_each(|&ns| latencies.record(ns));
+    for &ns in &hops[hops.len() - keep..] {
+        latencies.record(ns);
+    }
     latencies
 }
 
@@ -616,7 +603,7 @@ pub fn run(
     let (prefix, dir) = (prefix.to_string(), dir.to_path_buf());
     let spec = Spec {
         transport,
-        tag: tag.clone(),
+        tag,
         prefix,
         cpu: pong_cpu,
         dir,
@@ -626,9 +613,8 @@ pub fn run(
     // The loaded receiver's publication is read where the client reads, before the feed
     // starts it.
     let stop = Arc::new(AtomicBool::new(false));
-    let spin = transport == Transport::IceoryxSpin;
     let published = (load.is_some_and(|l| l.published) && transport.is_iceoryx())
-        .then(|| spawn_reader(&spec.prefix, &tag, ping_cpu, spin, &stop))
+        .then(|| spawn_reader(&spec, ping_cpu, &stop))
         .transpose()?;
     let feed_at = |load| pong_cpu.map(|c| feed_cpu(c, transport, load));
     let mut feeder = load.map(|l| spec.start("feed", feed_at(l))).transpose()?;
@@ -677,13 +663,12 @@ pub fn run(
 /// most 20 ms, to look at `stop`) only when a drain took nothing, as `StateStream::wait` does;
 /// polling in a busy-poll run.
 fn spawn_reader(
-    prefix: &str,
-    tag: &str,
+    spec: &Spec,
     cpu: Option<usize>,
-    spin: bool,
     stop: &Arc<AtomicBool>,
 ) -> anyhow::Result<JoinHandle<anyhow::Result<Vec<u64>>>> {
-    let (prefix, tag, stop) = (prefix.to_string(), tag.to_string(), stop.clone());
+    let (prefix, tag, stop) = (spec.prefix.clone(), spec.tag.clone(), stop.clone());
+    let spin = spec.transport == Transport::IceoryxSpin;
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     let open = move || -> anyhow::Result<_> {
         if let Some(cpu) = cpu {
