@@ -10,27 +10,32 @@
 use std::io::{BufRead, BufReader, ErrorKind};
 use std::net::UdpSocket;
 use std::os::unix::net::UnixDatagram;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, Stdio};
 use std::rc::Rc;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
 use std::time::Duration;
 
-use anyhow::{Context, bail};
-use chassis_client::{ChassisState, now_ns, wait_listener};
+use anyhow::{Context, anyhow, bail};
+use chassis_client::{ChassisState, Ticker, now_ns, wait_listener};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::Builder;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use serde::{Deserialize, Serialize};
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::paths::{HYBRID_SPIN, LoopMode};
-use crate::placement::pin_current_thread;
+use crate::placement::{Periods, nanos, pin_current_thread};
 use crate::stats::Latencies;
 
 /// The transports compared.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 pub enum Transport {
     /// iceoryx2 publish-subscribe, the receiver blocked on an event listener.
     IceoryxEvent,
@@ -71,7 +76,7 @@ impl Transport {
 }
 
 /// What the receiving side lives with besides the measured pings.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Load {
     /// Wake-ups a second from a third process (the simulated chassis' feedback frames).
     pub feed_per_s: f64,
@@ -86,12 +91,10 @@ pub struct Load {
 }
 
 impl Load {
-    /// How a loaded receiver's conditions end: `, at SCHED_FIFO P as the service's loop`, or
-    /// nothing at normal scheduling.
+    /// `, at SCHED_FIFO P as the service's loop`, or nothing at normal scheduling.
     pub fn fifo_text(&self) -> String {
-        (self.realtime).map_or(String::new(), |p| {
-            format!(", at SCHED_FIFO {p} as the service's loop")
-        })
+        let fifo = |p| format!(", at SCHED_FIFO {p} as the service's loop");
+        self.realtime.map_or(String::new(), fifo)
     }
 }
 
@@ -106,21 +109,23 @@ pub enum Rounds {
     /// (and is not answered): what a request meets when it follows another at once, as a
     /// safety stop follows a teleop request.
     AfterWakeUp,
-    /// A controller's loop ([`crate::placement::Periods`]): one ping at the start of each
-    /// period, the answers looked for without waiting; what counts is each period's start →
-    /// its ping in the other process, and the periods the loop missed.
+    /// A controller's loop ([`Periods`]): one ping at the start of each period, the answers
+    /// looked for without waiting; what counts is each period's start → its ping in the other
+    /// process, and the periods the loop missed.
     Loop(Duration),
 }
 
 /// Marks a lead ping ([`Rounds::AfterWakeUp`]), which the pong does not answer.
 const LEAD: u64 = 1 << 62;
+/// The ping that tells the pong to stop.
+const LAST: u64 = u64::MAX;
 
 const PADDING: usize = size_of::<ChassisState>() - 24;
 
 /// What travels: the size of a `ChassisState`, with the sender's stamp and the latency the
 /// receiver measured for the previous hop.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, ZeroCopySend, FromBytes, IntoBytes, Immutable, KnownLayout)]
 #[type_name("chassis_bench::Ping.v1")]
 pub struct Ping {
     pub stamp_ns: u64,
@@ -129,27 +134,13 @@ pub struct Ping {
     pub padding: [u8; PADDING],
 }
 
-impl Ping {
-    fn new(stamp_ns: u64, seq: u64, measured_ns: u64) -> Self {
-        let padding = [0; PADDING];
-        Self {
-            stamp_ns,
-            seq,
-            measured_ns,
-            padding,
-        }
-    }
-
-    fn to_bytes(self) -> Vec<u8> {
-        let words = [self.stamp_ns, self.seq, self.measured_ns];
-        let mut out: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        out.resize(size_of::<Ping>(), 0);
-        out
-    }
-
-    fn from_bytes(b: &[u8]) -> Option<Self> {
-        let word = |i: usize| Some(u64::from_le_bytes(b.get(i..i + 8)?.try_into().ok()?));
-        Some(Self::new(word(0)?, word(8)?, word(16)?))
+fn ping(stamp_ns: u64, seq: u64, measured_ns: u64) -> Ping {
+    let padding = [0; PADDING];
+    Ping {
+        stamp_ns,
+        seq,
+        measured_ns,
+        padding,
     }
 }
 
@@ -160,7 +151,7 @@ pub(crate) trait Named<T> {
 
 impl<T, E: std::fmt::Debug> Named<T> for Result<T, E> {
     fn named(self, what: &str) -> anyhow::Result<T> {
-        self.map_err(|e| anyhow::anyhow!("{what}: {e:?}"))
+        self.map_err(|e| anyhow!("{what}: {e:?}"))
     }
 }
 
@@ -180,6 +171,7 @@ trait Endpoint {
 
 type Pub = Publisher<ipc::Service, Ping, ()>;
 type Sub = Subscriber<ipc::Service, Ping, ()>;
+type PubSub = publish_subscribe::PortFactory<ipc::Service, Ping, ()>;
 
 /// iceoryx2 ports on `bench/<tag>/<what>` of one node.
 struct Ports {
@@ -192,26 +184,18 @@ impl Ports {
         let mut config = Config::default();
         config.global.prefix = FileName::new(prefix.as_bytes()).named("prefix")?;
         let node = NodeBuilder::new().config(&config).create::<ipc::Service>();
-        let tag = tag.to_string();
-        Ok(Self {
-            node: node.named("node")?,
-            tag,
-        })
+        let (node, tag) = (node.named("node")?, tag.to_string());
+        Ok(Self { node, tag })
     }
 
-    fn name(&self, what: &str) -> anyhow::Result<ServiceName> {
+    fn builder(&self, what: &str) -> anyhow::Result<Builder<ipc::Service>> {
         let name = format!("bench/{}/{what}", self.tag);
-        name.as_str().try_into().named(&name)
+        let name: ServiceName = name.as_str().try_into().named(&name)?;
+        Ok(self.node.service_builder(&name))
     }
 
-    fn pubsub(
-        &self,
-        what: &str,
-    ) -> anyhow::Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, Ping, ()>,
-    > {
-        let builder = self.node.service_builder(&self.name(what)?);
-        (builder.publish_subscribe::<Ping>())
+    fn pubsub(&self, what: &str) -> anyhow::Result<PubSub> {
+        (self.builder(what)?.publish_subscribe::<Ping>())
             .max_publishers(1)
             .max_subscribers(1)
             .history_size(0)
@@ -221,16 +205,9 @@ impl Ports {
             .named(what)
     }
 
-    fn event(
-        &self,
-        what: &str,
-    ) -> anyhow::Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>> {
-        let builder = self.node.service_builder(&self.name(what)?);
-        builder
-            .event()
-            .max_notifiers(4)
-            .open_or_create()
-            .named(what)
+    fn event(&self, what: &str) -> anyhow::Result<event::PortFactory<ipc::Service>> {
+        let event = self.builder(what)?.event().max_notifiers(4);
+        event.open_or_create().named(what)
     }
 
     fn publisher(&self, what: &str) -> anyhow::Result<(Pub, Notifier<ipc::Service>)> {
@@ -253,7 +230,6 @@ struct IceoryxEndpoint {
     /// The listener the pings' (and the feed's) notifications wake (a pong's WaitSet holds it
     /// too).
     listener: Rc<Listener<ipc::Service>>,
-    /// How the receiver waits.
     transport: Transport,
     /// The feed of a loaded receiver: its samples wake the same listener as the pings.
     feed: Option<Sub>,
@@ -269,36 +245,26 @@ struct IceoryxEndpoint {
 }
 
 impl IceoryxEndpoint {
-    fn open(args: &PongArgs, me: &str, peer: &str) -> anyhow::Result<Self> {
-        let ports = Ports::new(&args.prefix, &args.tag)?;
+    fn open(spec: &Spec, me: &str, peer: &str) -> anyhow::Result<Self> {
+        let ports = Ports::new(&spec.prefix, &spec.tag)?;
         // Only the pong side lives with the load.
-        let load = if me == "pong" { args.load() } else { None };
+        let load = spec.load.filter(|_| me == "pong");
         let (publisher, notifier) = ports.publisher(me)?;
         let (subscriber, listener) = ports.subscriber(peer)?;
-        let feed = match load {
-            Some(_) => Some(
-                ports
-                    .pubsub("feed")?
-                    .subscriber_builder()
-                    .create()
-                    .named("feed")?,
-            ),
-            None => None,
-        };
-        let published = match load {
-            Some(l) if l.published => Some(ports.publisher("state")?),
-            _ => None,
-        };
+        let feed = load.map(|_| ports.pubsub("feed")).transpose()?;
+        let feed = feed.map(|f| f.subscriber_builder().create().named("feed"));
+        let publishes = load.is_some_and(|l| l.published);
+        let published = publishes.then(|| ports.publisher("state"));
         Ok(Self {
             publisher,
             notifier,
             subscriber,
             listener: Rc::new(listener),
-            transport: args.transport,
-            feed,
+            transport: spec.transport,
+            feed: feed.transpose()?,
             feed_ns: Vec::new(),
             tick: load.map(|l| (l.tick, now_ns() + nanos(l.tick))),
-            published,
+            published: published.transpose()?,
             last_activity: now_ns(),
             _ports: ports,
         })
@@ -315,8 +281,8 @@ impl IceoryxEndpoint {
             any = true;
         }
         if let Some((publisher, notifier)) = self.published.as_ref().filter(|_| any) {
-            let ping = Ping::new(now_ns(), 0, 0);
-            publisher.send_copy(ping).named("state send")?;
+            let state = ping(now_ns(), 0, 0);
+            publisher.send_copy(state).named("state send")?;
             notifier.notify().named("state notify")?;
         }
         Ok(any)
@@ -369,10 +335,6 @@ impl IceoryxEndpoint {
     }
 }
 
-fn nanos(d: Duration) -> u64 {
-    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX / 2)
-}
-
 impl Endpoint for IceoryxEndpoint {
     fn look(&mut self) -> anyhow::Result<()> {
         match self.subscriber.receive().named("receive")? {
@@ -403,42 +365,15 @@ enum Socket {
     Udp(UdpSocket),
 }
 
-impl Endpoint for Socket {
-    fn send(&mut self, ping: Ping) -> anyhow::Result<()> {
-        let bytes = ping.to_bytes();
-        match self {
-            Socket::Uds(socket, peer) => socket.send_to(&bytes, peer)?,
-            Socket::Udp(socket) => socket.send(&bytes)?,
-        };
-        Ok(())
-    }
-
-    /// `None` when the read timeout passes first or the datagram is not a ping.
-    fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>> {
-        let mut buf = [0u8; 2048];
-        let (timeout, buf_ref) = (Some(timeout), &mut buf);
-        let received = match self {
-            Socket::Uds(s, _) => s.set_read_timeout(timeout).and_then(|()| s.recv(buf_ref)),
-            Socket::Udp(s) => s.set_read_timeout(timeout).and_then(|()| s.recv(buf_ref)),
-        };
-        match received {
-            Ok(n) => Ok(Ping::from_bytes(&buf[..n]).map(|p| (p, now_ns()))),
-            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => Ok(None),
-            Err(e) => Err(e.into()),
-        }
-    }
-}
-
 impl Socket {
-    fn open(args: &PongArgs, me: &str, peer: &str) -> anyhow::Result<Self> {
-        if args.transport == Transport::Uds {
-            let mine = args.dir.join(format!("{}-{me}.sock", args.tag));
-            let _ = std::fs::remove_file(&mine);
-            let peer = args.dir.join(format!("{}-{peer}.sock", args.tag));
-            return Ok(Socket::Uds(UnixDatagram::bind(&mine)?, peer));
+    fn open(spec: &Spec, me: &str, peer: &str) -> anyhow::Result<Self> {
+        if spec.transport == Transport::Uds {
+            let path = |side| spec.dir.join(format!("{}-{side}.sock", spec.tag));
+            let _ = std::fs::remove_file(path(me));
+            return Ok(Socket::Uds(UnixDatagram::bind(path(me))?, path(peer)));
         }
         // Ports are derived from the tag so both sides know them without talking first.
-        let base = 20_000 + (crate::placement::hash(&args.tag) % 20_000) as u16;
+        let base = 20_000 + (crate::placement::hash(&spec.tag) % 20_000) as u16;
         let (mine, theirs) = if me == "ping" {
             (base, base + 1)
         } else {
@@ -450,83 +385,77 @@ impl Socket {
     }
 }
 
-/// Arguments of the pong and the feed processes (hidden roles of this binary).
-#[derive(Debug, Clone, clap::Args)]
-pub struct PongArgs {
-    #[arg(long, value_enum)]
-    pub transport: Transport,
-    #[arg(long)]
-    pub tag: String,
-    #[arg(long)]
-    pub prefix: String,
-    #[arg(long)]
-    pub cpu: Option<usize>,
-    /// Scratch directory for Unix socket paths.
-    #[arg(long)]
-    pub dir: PathBuf,
-    /// A loaded receiver: the feed's rate a second (another process wakes it).
-    #[arg(long)]
-    pub feed_per_s: Option<f64>,
-    /// A loaded receiver: its own tick, µs.
-    #[arg(long)]
-    pub tick_us: Option<u64>,
-    /// A loaded receiver: at SCHED_FIFO with this priority, its memory locked.
-    #[arg(long)]
-    pub realtime: Option<u8>,
-    /// A loaded receiver: it publishes after each wake-up by the feed ([`Load::published`]).
-    #[arg(long)]
-    pub publish: bool,
-}
-
-impl PongArgs {
-    fn load(&self) -> Option<Load> {
-        Some(Load {
-            feed_per_s: self.feed_per_s?,
-            tick: Duration::from_micros(self.tick_us?),
-            realtime: self.realtime,
-            published: self.publish,
-        })
+impl Endpoint for Socket {
+    fn send(&mut self, ping: Ping) -> anyhow::Result<()> {
+        let bytes = ping.as_bytes().to_vec();
+        match self {
+            Socket::Uds(socket, peer) => socket.send_to(&bytes, peer)?,
+            Socket::Udp(socket) => socket.send(&bytes)?,
+        };
+        Ok(())
     }
 
+    /// `None` when the read timeout passes first or the datagram is not a ping.
+    fn receive(&mut self, timeout: Duration) -> anyhow::Result<Option<(Ping, u64)>> {
+        let (mut buf, timeout) = ([0u8; 2048], Some(timeout));
+        let received = match self {
+            Socket::Uds(s, _) => s.set_read_timeout(timeout).and_then(|()| s.recv(&mut buf)),
+            Socket::Udp(s) => s.set_read_timeout(timeout).and_then(|()| s.recv(&mut buf)),
+        };
+        match received {
+            Ok(n) => Ok(Ping::read_from_bytes(&buf[..n]).ok().map(|p| (p, now_ns()))),
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => Ok(None),
+            Err(e) => Err(e.into()),
+        }
+    }
+}
+
+/// Arguments of the pong and the feed processes (hidden roles of this binary): a [`Spec`].
+#[derive(Debug, Clone, clap::Args)]
+pub struct PongArgs {
+    /// The [`Spec`], JSON.
+    #[arg(long, value_parser = |s: &str| serde_json::from_str::<Spec>(s))]
+    spec: Spec,
+}
+
+/// What a pong or a feed process is to do.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Spec {
+    transport: Transport,
+    /// Names the run's iceoryx2 services, sockets and files.
+    tag: String,
+    prefix: String,
+    /// The CPU the process is pinned to.
+    cpu: Option<usize>,
+    /// Scratch directory for Unix socket paths and the feed's figures.
+    dir: PathBuf,
+    /// The receiver's load: the pong lives with it, the feed makes it.
+    load: Option<Load>,
+}
+
+impl Spec {
     fn feed_file(&self) -> PathBuf {
         self.dir.join(format!("{}-feed.txt", self.tag))
     }
 
-    /// Starts this binary as `role` with these arguments (on `cpu`) and waits until it is ready;
-    /// the process and its stdout.
+    /// Starts this binary as `role` with this spec (on `cpu`) and waits until it is ready; the
+    /// process and its stdout.
     fn start(
         &self,
         role: &str,
         cpu: Option<usize>,
     ) -> anyhow::Result<(Child, BufReader<ChildStdout>)> {
-        let transport = clap::ValueEnum::to_possible_value(&self.transport)
-            .map(|v| v.get_name().to_string())
-            .unwrap_or_default();
+        let spec = serde_json::to_string(&Spec {
+            cpu,
+            ..self.clone()
+        })?;
         let mut command = Command::new(std::env::current_exe()?);
-        command
-            .args(["role", role, "--transport", &transport, "--tag", &self.tag])
-            .args(["--prefix", &self.prefix, "--dir"])
-            .arg(&self.dir);
-        let options = [
-            ("--cpu", cpu.map(|c| c.to_string())),
-            ("--feed-per-s", self.feed_per_s.map(|r| r.to_string())),
-            ("--tick-us", self.tick_us.map(|t| t.to_string())),
-            ("--realtime", self.realtime.map(|p| p.to_string())),
-        ];
-        for (name, value) in options {
-            if let Some(value) = value {
-                command.args([name, &value]);
-            }
-        }
-        if self.publish {
-            command.arg("--publish");
-        }
+        command.args(["role", role, "--spec", &spec]);
         let what = format!("the {role} process");
         let mut child = (command.stdout(Stdio::piped()).stderr(Stdio::inherit()))
             .spawn()
             .with_context(|| format!("starting {what}"))?;
-        let stdout = child.stdout.take().context("no stdout")?;
-        let mut reader = BufReader::new(stdout);
+        let mut reader = BufReader::new(child.stdout.take().context("no stdout")?);
         let mut line = String::new();
         reader.read_line(&mut line)?;
         if line.trim() != "ready" {
@@ -538,46 +467,47 @@ impl PongArgs {
 
 /// The feed role: a stamped sample and a wake-up of the receiver's listener `--feed-per-s`
 /// times a second, until killed.
-pub fn feed(args: &PongArgs) -> anyhow::Result<()> {
-    if let Some(cpu) = args.cpu {
+pub fn feed(PongArgs { spec }: &PongArgs) -> anyhow::Result<()> {
+    if let Some(cpu) = spec.cpu {
         pin_current_thread(cpu)?;
     }
-    let rate = args.feed_per_s.unwrap_or_default();
+    let rate = spec.load.map_or(0.0, |l| l.feed_per_s);
     if !(rate.is_finite() && rate > 0.0) {
         bail!("feed rate {rate} is not a rate");
     }
-    let ports = Ports::new(&args.prefix, &args.tag)?;
+    let ports = Ports::new(&spec.prefix, &spec.tag)?;
     let publisher = ports.pubsub("feed")?.publisher_builder().create();
     let publisher = publisher.named("feed publisher")?;
     // The pings' event: the receiver waits on one listener for both, like chassisd's loop.
     let notifier = ports.event("ping")?.notifier_builder().create();
     let notifier = notifier.named("feed notifier")?;
-    let mut ticker = chassis_client::Ticker::new(Duration::from_secs_f64(1.0 / rate));
+    let mut ticker = Ticker::new(Duration::from_secs_f64(1.0 / rate));
     println!("ready");
     loop {
         ticker.wait();
-        let ping = Ping::new(now_ns(), 0, 0);
-        publisher.send_copy(ping).named("feed send")?;
+        publisher
+            .send_copy(ping(now_ns(), 0, 0))
+            .named("feed send")?;
         notifier.notify().named("feed notify")?;
     }
 }
 
 /// The pong role: echo every ping with the one-way latency measured on arrival, until the last
-/// one (`u64::MAX`); then a loaded receiver writes its feed's hops.
-pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
-    if let Some(cpu) = args.cpu {
+/// one; then a loaded receiver writes its feed's hops.
+pub fn pong(PongArgs { spec }: &PongArgs) -> anyhow::Result<()> {
+    if let Some(cpu) = spec.cpu {
         pin_current_thread(cpu)?;
     }
-    if let Some(priority) = args.realtime {
+    if let Some(priority) = spec.load.and_then(|l| l.realtime) {
         crate::placement::enter_realtime(priority)?;
     }
-    if !args.transport.is_iceoryx() {
-        let mut socket = Socket::open(args, "pong", "ping")?;
+    if !spec.transport.is_iceoryx() {
+        let mut socket = Socket::open(spec, "pong", "ping")?;
         return answer(&mut socket, |s, timeout| s.receive(timeout));
     }
     // An iceoryx2 receiver waits on a WaitSet, as chassisd's loop does, taking the
     // notifications of the listener that fired before reading the samples.
-    let mut endpoint = IceoryxEndpoint::open(args, "pong", "ping")?;
+    let mut endpoint = IceoryxEndpoint::open(spec, "pong", "ping")?;
     let waitset = WaitSetBuilder::new().create::<ipc::Service>();
     let waitset = waitset.named("wait set")?;
     let listener = endpoint.listener.clone();
@@ -587,38 +517,39 @@ pub fn pong(args: &PongArgs) -> anyhow::Result<()> {
         endpoint.receive_with(timeout, &mut |listener, wait| {
             let progression = |_| CallbackProgression::Continue;
             (waitset.wait_and_process_once_with_timeout(progression, wait)).named("wait set")?;
-            listener
-                .try_wait(|_| {})
-                .map(drop)
-                .named("taking the notifications")
+            let taken = listener.try_wait(|_| {});
+            taken.map(drop).named("taking the notifications")
         })
     })?;
-    if args.load().is_some() {
-        let feed = &endpoint.feed_ns;
-        let text: String = feed.iter().map(|ns| format!("{ns}\n")).collect();
-        let path = args.feed_file();
+    if spec.load.is_some() {
+        let text: String = endpoint
+            .feed_ns
+            .iter()
+            .map(|ns| format!("{ns}\n"))
+            .collect();
+        let path = spec.feed_file();
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
     }
     println!("done");
     Ok(())
 }
 
-/// Answers pings, each taken by `receive`, until the last one (`u64::MAX`).
+/// Answers pings, each taken by `receive`, until the last one.
 fn answer<E: Endpoint>(
     endpoint: &mut E,
     mut receive: impl FnMut(&mut E, Duration) -> anyhow::Result<Option<(Ping, u64)>>,
 ) -> anyhow::Result<()> {
     println!("ready");
     loop {
-        let Some((ping, arrived)) = receive(endpoint, Duration::from_secs(5))? else {
+        let Some((ping_in, arrived)) = receive(endpoint, Duration::from_secs(5))? else {
             bail!("no ping for 5 s");
         };
-        if ping.seq == u64::MAX {
+        if ping_in.seq == LAST {
             return Ok(());
         }
-        if ping.seq & LEAD == 0 {
-            let measured = arrived.saturating_sub(ping.stamp_ns);
-            endpoint.send(Ping::new(now_ns(), ping.seq, measured))?;
+        if ping_in.seq & LEAD == 0 {
+            let measured = arrived.saturating_sub(ping_in.stamp_ns);
+            endpoint.send(ping(now_ns(), ping_in.seq, measured))?;
         }
     }
 }
@@ -666,41 +597,38 @@ pub fn run(
     shape: Rounds,
     load: Option<Load>,
     prefix: &str,
-    dir: &std::path::Path,
+    dir: &Path,
 ) -> anyhow::Result<Measured> {
     let tag = format!("{}-{}", std::process::id(), crate::placement::unique());
-    let args = PongArgs {
+    let (prefix, dir) = (prefix.to_string(), dir.to_path_buf());
+    let spec = Spec {
         transport,
-        tag: tag.clone(),
-        prefix: prefix.to_string(),
+        tag,
+        prefix,
         cpu: pong_cpu,
-        dir: dir.to_path_buf(),
-        feed_per_s: load.map(|l| l.feed_per_s),
-        tick_us: load.map(|l| u64::try_from(l.tick.as_micros()).unwrap_or(u64::MAX)),
-        realtime: load.and_then(|l| l.realtime),
-        publish: load.is_some_and(|l| l.published),
+        dir,
+        load,
     };
-    let (mut pong, mut pong_out) = args.start("pong", pong_cpu)?;
+    let (mut pong, mut pong_out) = spec.start("pong", pong_cpu)?;
     // The loaded receiver's publication is read where the client reads, before the feed
     // starts it.
     let stop = Arc::new(AtomicBool::new(false));
-    let spin = transport == Transport::IceoryxSpin;
-    let published = (args.publish && transport.is_iceoryx())
-        .then(|| spawn_reader(prefix, &tag, ping_cpu, spin, &stop))
+    let published = (load.is_some_and(|l| l.published) && transport.is_iceoryx())
+        .then(|| spawn_reader(&spec, ping_cpu, &stop))
         .transpose()?;
     let feed_at = |load| pong_cpu.map(|c| feed_cpu(c, transport, load));
-    let mut feeder = load.map(|l| args.start("feed", feed_at(l))).transpose()?;
+    let mut feeder = load.map(|l| spec.start("feed", feed_at(l))).transpose()?;
     let result = crate::paths::pinned(ping_cpu, || {
         let mut endpoint: Box<dyn Endpoint> = match transport.is_iceoryx() {
-            true => Box::new(IceoryxEndpoint::open(&args, "ping", "pong")?),
-            false => Box::new(Socket::open(&args, "ping", "pong")?),
+            true => Box::new(IceoryxEndpoint::open(&spec, "ping", "pong")?),
+            false => Box::new(Socket::open(&spec, "ping", "pong")?),
         };
         let result = match shape {
             Rounds::Loop(period) => loop_rounds(endpoint.as_mut(), rounds, period),
             _ => ping_rounds(endpoint.as_mut(), transport, rounds, shape).map(|p| (p, 0)),
         };
         // Tells the pong to stop (and to write its feed figures).
-        let _ = endpoint.send(Ping::new(0, u64::MAX, 0));
+        let _ = endpoint.send(ping(0, LAST, 0));
         result
     })?;
     if let Some((feeder, _)) = feeder.as_mut() {
@@ -708,17 +636,17 @@ pub fn run(
         let _ = feeder.wait();
     }
     stop.store(true, Ordering::Relaxed);
-    let panicked = |_| anyhow::anyhow!("the state reader panicked");
+    let panicked = |_| anyhow!("the state reader panicked");
     let published = published.map(|h| h.join().map_err(panicked)?).transpose()?;
     let (pings, missed_periods) = result?;
     // The pong writes its feed figures before it says "done".
     let _ = pong_out.read_line(&mut String::new());
     let _ = pong.wait();
     let feed = load.map(|_| -> anyhow::Result<Vec<u64>> {
-        let path = args.feed_file();
+        let path = spec.feed_file();
         let text = std::fs::read_to_string(&path)
             .with_context(|| format!("reading {}", path.display()))?;
-        Ok(text.lines().filter_map(|l| l.parse::<u64>().ok()).collect())
+        Ok(text.lines().filter_map(|l| l.parse().ok()).collect())
     });
     let feed = feed.transpose()?;
     Ok(Measured {
@@ -735,26 +663,25 @@ pub fn run(
 /// most 20 ms, to look at `stop`) only when a drain took nothing, as `StateStream::wait` does;
 /// polling in a busy-poll run.
 fn spawn_reader(
-    prefix: &str,
-    tag: &str,
+    spec: &Spec,
     cpu: Option<usize>,
-    spin: bool,
     stop: &Arc<AtomicBool>,
-) -> anyhow::Result<std::thread::JoinHandle<anyhow::Result<Vec<u64>>>> {
-    let (prefix, tag, stop) = (prefix.to_string(), tag.to_string(), stop.clone());
+) -> anyhow::Result<JoinHandle<anyhow::Result<Vec<u64>>>> {
+    let (prefix, tag, stop) = (spec.prefix.clone(), spec.tag.clone(), stop.clone());
+    let spin = spec.transport == Transport::IceoryxSpin;
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let open = move || -> anyhow::Result<_> {
+        if let Some(cpu) = cpu {
+            pin_current_thread(cpu)?;
+        }
+        let ports = Ports::new(&prefix, &tag)?;
+        let (subscriber, listener) = ports.subscriber("state")?;
+        Ok((ports, subscriber, listener))
+    };
     let reader = move || {
         // iceoryx2's ports stay on the thread that opens them. An error opening them is the
         // spawner's to report; the thread then has read nothing.
-        let opened = (|| -> anyhow::Result<_> {
-            if let Some(cpu) = cpu {
-                pin_current_thread(cpu)?;
-            }
-            let ports = Ports::new(&prefix, &tag)?;
-            let (subscriber, listener) = ports.subscriber("state")?;
-            Ok((ports, subscriber, listener))
-        })();
-        let (_ports, subscriber, listener) = match opened {
+        let (_ports, subscriber, listener) = match open() {
             Ok(opened) => opened,
             Err(e) => {
                 let _ = ready_tx.send(Err(e));
@@ -765,28 +692,23 @@ fn spawn_reader(
         let mut hops = Vec::new();
         while !stop.load(Ordering::Relaxed) {
             if !spin {
-                listener
-                    .try_wait(|_| {})
-                    .named("taking the state's notifications")?;
+                let taken = listener.try_wait(|_| {});
+                taken.named("taking the state's notifications")?;
             }
-            let mut took = false;
+            let before = hops.len();
             while let Some(sample) = subscriber.receive().named("state receive")? {
                 hops.push(now_ns().saturating_sub(sample.stamp_ns));
-                took = true;
             }
-            if !took && !spin {
+            if hops.len() == before && !spin {
                 wait_listener(&listener, Duration::from_millis(20)).named("waiting for state")?;
             }
         }
         Ok(hops)
     };
-    let handle = std::thread::Builder::new()
-        .name("state-reader".into())
-        .spawn(reader);
-    let handle = handle.context("starting the state reader")?;
-    ready_rx
-        .recv()
-        .map_err(|_| anyhow::anyhow!("the state reader stopped before it subscribed"))??;
+    let thread = std::thread::Builder::new().name("state-reader".into());
+    let handle = thread.spawn(reader).context("starting the state reader")?;
+    let stopped = || anyhow!("the state reader stopped before it subscribed");
+    ready_rx.recv().map_err(|_| stopped())??;
     Ok(handle)
 }
 
@@ -811,23 +733,24 @@ fn ping_rounds(
 ) -> anyhow::Result<Vec<u64>> {
     let mut latencies = Vec::new();
     let (warmup, mut ticker) = match shape {
-        Rounds::Paced(period) => (20, Some(chassis_client::Ticker::new(period))),
+        Rounds::Paced(period) => (20, Some(Ticker::new(period))),
         Rounds::BackToBack | Rounds::AfterWakeUp | Rounds::Loop(_) => (200, None),
     };
+    let label = transport.label();
     for seq in 0..warmup + rounds {
         if let Some(ticker) = ticker.as_mut() {
             ticker.wait();
             endpoint.look()?;
         }
         if shape == Rounds::AfterWakeUp {
-            endpoint.send(Ping::new(now_ns(), seq | LEAD, 0))?;
+            endpoint.send(ping(now_ns(), seq | LEAD, 0))?;
         }
-        endpoint.send(Ping::new(now_ns(), seq, 0))?;
+        endpoint.send(ping(now_ns(), seq, 0))?;
         let Some((pong, arrived)) = endpoint.receive(Duration::from_secs(2))? else {
-            bail!("{}: no answer to ping {seq}", transport.label());
+            bail!("{label}: no answer to ping {seq}");
         };
         if pong.seq != seq {
-            bail!("{}: ping {seq} answered as {}", transport.label(), pong.seq);
+            bail!("{label}: ping {seq} answered as {}", pong.seq);
         }
         if seq >= warmup {
             latencies.push(pong.measured_ns);
@@ -849,7 +772,7 @@ fn loop_rounds(
     period: Duration,
 ) -> anyhow::Result<(Vec<u64>, u64)> {
     const WARMUP: u64 = 200;
-    let mut periods = crate::placement::Periods::new(period);
+    let mut periods = Periods::new(period);
     // Each ping's period start and send stamp.
     let mut started: Vec<(u64, u64)> = Vec::new();
     let mut hops = Vec::new();
@@ -871,7 +794,7 @@ fn loop_rounds(
         while take(endpoint, Duration::ZERO, &started, &mut hops)? {}
         let sent = now_ns();
         started.push((start, sent));
-        endpoint.send(Ping::new(sent, seq, 0))?;
+        endpoint.send(ping(sent, seq, 0))?;
         periods.end(start, seq >= WARMUP);
     }
     // An answer 2 s late is lost: a receiver descheduled longer than its buffer of pings lasts.

@@ -4,13 +4,14 @@
 //! command reaches the bus, and how old the state it reads is — beside the same loop over the
 //! raw iceoryx2 hop ([`crate::baseline::Rounds::Loop`]).
 
+use std::path::Path;
 use std::time::Duration;
 
-use chassis_client::{Robot, VelocityRequest, now_ns};
+use chassis_client::{BusFrame, Robot, now_ns};
 use chassis_protocols::RobotKind;
 
 use crate::baseline::{self, Transport};
-use crate::paths::{self, LoopMode, Motion, ServiceConfig};
+use crate::paths::{self, LoopMode, Motion, ServiceConfig, stamped};
 use crate::placement::{Periods, Placement};
 use crate::report::{Leg, LoopRun, PathKind, Report, Row};
 use crate::stats::Latencies;
@@ -29,12 +30,12 @@ pub struct LoopFigures {
     pub state_age: Latencies,
 }
 
-/// Speeds exact on every wire (whole mm/s, whole percent of 5 m/s), each period's the next of
-/// them, so that every command is a change and its frame tells which period it carries.
-const SPEEDS: [f32; 20] = [
-    0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85,
-    0.9, 0.95, 1.0,
-];
+/// The speed period `k` commands: 0.05 to 1 m/s in steps of 0.05, exact on every wire (whole
+/// mm/s, whole percent of 5 m/s), so that every command is a change and its frame tells which
+/// period it carries.
+fn speed(k: u64) -> f32 {
+    (k % 20 + 1) as f32 / 20.0
+}
 
 /// Runs the loop for `periods` periods of `period` on `robot` (after a warm-up): each period, the
 /// newest state read ([`Robot::latest_state`]) and, with `drive`, a command written on `teleop`,
@@ -51,14 +52,11 @@ pub fn measure(
         motion.warm_up(&mut teleop)?;
         commands = Some((motion, teleop));
     }
+    // The motion frames written: their stamps and speeds.
     let mut frames: Vec<(u64, f64)> = Vec::new();
     let mut take = |motion: &mut Motion, wait: bool| {
         let decoder = &mut motion.decoder;
-        let each = |f: &chassis_client::BusFrame| {
-            if let Some(v) = decoder.linear(f) {
-                frames.push((f.stamp_ns, v));
-            }
-        };
+        let each = |f: &BusFrame| frames.extend(decoder.linear(f).map(|v| (f.stamp_ns, v)));
         match wait {
             true => motion.tap.wait(Duration::from_millis(10), each),
             false => motion.tap.drain(each),
@@ -73,12 +71,8 @@ pub fn measure(
             state_age.record_between(state.stamp_ns, now_ns());
         }
         if let Some((motion, teleop)) = commands.as_mut() {
-            let speed = SPEEDS[usize::try_from(k % 20)?];
-            let stamp = now_ns();
-            teleop.send(VelocityRequest {
-                stamp_ns: stamp,
-                ..VelocityRequest::twist(speed, 0.0)
-            })?;
+            let (speed, stamp) = (speed(k), now_ns());
+            teleop.send(stamped(stamp, speed))?;
             take(motion, false)?;
             sent.push((due, stamp, f64::from(speed)));
         }
@@ -94,9 +88,10 @@ pub fn measure(
         teleop.stop()?;
         command = Some(match_frames(&sent, &frames));
     }
+    let misses = clock.misses;
     Ok(LoopFigures {
         periods,
-        misses: clock.misses,
+        misses,
         command,
         state_age,
     })
@@ -152,14 +147,11 @@ fn rate(period: Duration) -> String {
 /// The rows of a loop of `period` over `run` (robot and bus) whose raw hop is `transport`:
 /// (its period → frame, its state's age, the raw loop's period → ping).
 pub fn row_names(run: &str, period: Duration, transport: Transport) -> [String; 3] {
-    let rate = rate(period);
+    let (rate, raw) = (rate(period), transport.label());
     [
         format!("{run}, a loop at {rate}: period → its command's frame"),
         format!("{run}, a loop at {rate}: the state's age when read"),
-        format!(
-            "{}, a loop at {rate}: period → its ping received",
-            transport.label()
-        ),
+        format!("{raw}, a loop at {rate}: period → its ping received"),
     ]
 }
 
@@ -175,18 +167,21 @@ pub fn run(
     loops: &[(Duration, LoopMode)],
     seconds: f64,
     prefix: &str,
-    dir: &std::path::Path,
+    dir: &Path,
     report: &mut Report,
 ) -> anyhow::Result<()> {
     let (kind, placement) = (RobotKind::Titan, Placement::CrossCpu);
     for &(period, mode) in loops {
-        let service_cpu = placement.cpus().1;
-        let config = ServiceConfig::BenchRealtime;
-        let spec = (kind, paths::BusKind::Sim, mode);
-        let (service, mut robot) = paths::start(spec, service_cpu, config, false, prefix, dir)?;
+        let (spec, config) = (
+            (kind, paths::BusKind::Sim, mode),
+            ServiceConfig::BenchRealtime,
+        );
+        let cpu = placement.cpus().1;
+        let (service, mut robot) = paths::start(spec, cpu, config, false, prefix, dir)?;
+        let run = format!("{kind} sim");
         let realtime = service.scheduling.fifo();
         let over = Over {
-            run: format!("{kind} sim"),
+            run,
             kind,
             mode,
             placement: Some(placement),
@@ -194,8 +189,7 @@ pub fn run(
         };
         let measured = over.measure(&mut robot, period, seconds, true)?;
         // The raw loop runs alone.
-        drop(robot);
-        drop(service);
+        drop((robot, service));
         over.record(measured, period, (prefix, dir), report)?;
     }
     Ok(())
@@ -240,36 +234,27 @@ impl Over {
         &self,
         (figures, feed_per_s): (LoopFigures, f64),
         period: Duration,
-        (prefix, dir): (&str, &std::path::Path),
+        (prefix, dir): (&str, &Path),
         report: &mut Report,
     ) -> anyhow::Result<()> {
-        let (run, at, mode, count) = (&self.run, self.at(), self.mode, figures.periods);
+        let (run, at, mode, count) = (&self.run, self.at(), self.mode.arg(), figures.periods);
         // The raw loop is the bench's own pair of processes: across two CPUs, as the service's
         // and the client's in a simulated run.
         let (cpus, raw_at) = (Placement::CrossCpu.cpus(), Placement::CrossCpu.label());
         let tick = self.kind.entry().defaults().heartbeat_period();
+        let realtime = self.realtime;
         let load = baseline::Load {
             feed_per_s,
             tick,
-            realtime: self.realtime,
+            realtime,
             published: false,
         };
-        let transport = Transport::like(mode);
+        let transport = Transport::like(self.mode);
         let shape = baseline::Rounds::Loop(period);
         let raw = baseline::run(transport, cpus, count, shape, Some(load), prefix, dir)?;
         let [frame, age, hop] = row_names(run, period, transport);
-        let row = |leg, what, latencies, missed| {
-            Row::new(
-                PathKind::Loop,
-                leg,
-                run,
-                what,
-                mode.arg(),
-                at,
-                latencies,
-                missed,
-            )
-        };
+        let row =
+            |leg, what, l, missed| Row::new(PathKind::Loop, leg, run, what, mode, at, l, missed);
         let superseded = figures.command.as_ref().map_or(0, |c| c.1);
         if let Some((l, superseded)) = figures.command {
             let mut frame_row = row(Leg::PeriodToFrame, frame, l, superseded);
@@ -296,7 +281,7 @@ impl Over {
         report.loops.push(LoopRun {
             run: run.clone(),
             rate: rate(period),
-            mode: mode.arg().into(),
+            mode: mode.into(),
             placement: at.into(),
             periods: figures.periods,
             misses: figures.misses,
@@ -312,6 +297,21 @@ impl Over {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_periods_speeds_are_the_wires_exact_values() {
+        let wire = [
+            0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8,
+            0.85, 0.9, 0.95, 1.0f32,
+        ];
+        for k in 0..40 {
+            assert_eq!(
+                speed(k).to_bits(),
+                wire[k as usize % 20].to_bits(),
+                "period {k}"
+            );
+        }
+    }
 
     #[test]
     fn each_period_is_matched_to_the_frame_of_its_command() {

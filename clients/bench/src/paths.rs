@@ -20,7 +20,7 @@ use chassis_client::{
     Ticker, Velocity, VelocityRequest, now_ns,
 };
 pub use chassis_ipc::PassStamps;
-use chassis_protocols::driver::{Driver, DriverConfig};
+use chassis_protocols::driver::DriverConfig;
 use chassis_protocols::frame_json::{BoxedCodec, FrameJson};
 use chassis_protocols::pair::Pair;
 use chassis_protocols::titan::{self, TitanProfile};
@@ -28,7 +28,7 @@ use chassis_protocols::{CanFrame, CandumpLine, Direction, RobotKind, Timestamp, 
 use serde::Serialize;
 use zerocopy::IntoBytes as _;
 
-use crate::placement::{pause, pin_current_thread, unique, unpin_current_thread};
+use crate::placement::{nanos, pause, pin_current_thread, unique, unpin_current_thread};
 use crate::report::{Cost, Scheduling, Throughput};
 use crate::stats::Latencies;
 
@@ -189,9 +189,8 @@ pub fn config_text(config: ServiceConfig, mode: LoopMode) -> String {
 /// The SCHED_FIFO priority of the first of `pid`'s threads that runs at SCHED_FIFO, if one does:
 /// whether chassisd's loop got the real-time mode it asked for.
 pub fn fifo_priority(pid: u32) -> Option<u8> {
-    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
-    tasks.flatten().find_map(|task| {
-        let tid: libc::pid_t = task.file_name().to_str()?.parse().ok()?;
+    threads(pid).find_map(|(tid, _)| {
+        let tid = libc::pid_t::try_from(tid).ok()?;
         // SAFETY: sched_getscheduler and sched_getparam take a thread id and, for the second,
         // a valid sched_param to fill; a thread that is gone makes them fail, not misbehave.
         unsafe {
@@ -207,9 +206,8 @@ pub fn fifo_priority(pid: u32) -> Option<u8> {
     })
 }
 
-/// Starts `command` (chassisd, its simulator, chassis-zenoh) serving under the IPC prefix
-/// `prefix`, logging at the `RUST_LOG` level `level`: its stdout to `<log>.log`, its stderr to
-/// `<log>-err.log`; `what` names it in the error.
+/// Starts `command` (chassisd, its simulator, chassis-zenoh) under the IPC prefix `prefix` at
+/// the `RUST_LOG` level `level`, its stdout to `<log>.log`, its stderr to `<log>-err.log`.
 pub(crate) fn spawn_logged(
     command: &mut Command,
     (prefix, level): (&str, &str),
@@ -233,7 +231,7 @@ pub(crate) fn spawn_logged(
         .with_context(|| format!("starting {what}"))
 }
 
-/// What `f` brings, once it brings something (at most `seconds` away): `what` fails otherwise.
+/// What `f` brings, once it brings something (at most `seconds` away); fails with `what`.
 pub(crate) fn wait_until<T>(
     what: &str,
     seconds: u64,
@@ -288,12 +286,8 @@ pub fn start(
             let args = format!("sim --robot {} --name {name} --bus", robot.name());
             sim.args(args.split(' ')).arg(&sim_bus);
             let log = dir.join(format!("{name}-sim"));
-            children.push(spawn_logged(
-                &mut sim,
-                (prefix, "warn"),
-                &log,
-                "chassisd sim",
-            )?);
+            let spawned = spawn_logged(&mut sim, (prefix, "warn"), &log, "chassisd sim")?;
+            children.push(spawned);
             let linked = || Path::new(&link).exists().then_some(());
             wait_until("chassisd sim made no pty link", 10, linked)?;
             service_bus
@@ -311,14 +305,8 @@ pub fn start(
     let envs: Vec<_> = (trace.iter())
         .map(|path| (chassis_ipc::Trace::Pass.env(), path.clone()))
         .collect();
-    let (mut service, robot_conn) = launch(
-        (robot, &name, &bus_arg),
-        &args,
-        &envs,
-        children,
-        prefix,
-        dir,
-    )?;
+    let spec = (robot, name.as_str(), bus_arg.as_str());
+    let (mut service, robot_conn) = launch(spec, &args, &envs, children, prefix, dir)?;
     service.trace = trace;
     // chassisd enters real-time mode before its loop's first wait, so by now.
     if config.realtime(mode).is_some() {
@@ -328,10 +316,17 @@ pub fn start(
     Ok((service, robot_conn))
 }
 
-/// Starts chassisd for `robot` as `name` on the bus `bus` (as its `--bus` takes it: `sim`,
-/// `can:can0`), without its safety monitor (the bench's sources are its only ones), with `args`
-/// and `envs` besides, beside `children`; waits until it publishes and the chassis is in
-/// command mode.
+/// chassisd for `robot` as `name` on the bus `bus` (as its `--bus` takes it: `sim`, `can:can0`),
+/// without its safety monitor: the bench's sources are its only ones.
+fn chassisd(robot: &str, name: &str, bus: &str) -> anyhow::Result<Command> {
+    let mut chassisd = Command::new(sibling("chassisd")?);
+    chassisd.args(["--robot", robot, "--name", name, "--bus", bus]);
+    chassisd.arg("--no-safety-monitor");
+    Ok(chassisd)
+}
+
+/// Starts [`chassisd`] with `args` and `envs` besides, beside `children`; waits until it
+/// publishes and the chassis is in command mode.
 pub fn launch(
     (robot, name, bus): (RobotKind, &str, &str),
     args: &[String],
@@ -340,15 +335,11 @@ pub fn launch(
     prefix: &str,
     dir: &Path,
 ) -> anyhow::Result<Started> {
-    let mut service = Command::new(sibling("chassisd")?);
-    service
-        .args(["--robot", robot.name(), "--name", name, "--bus", bus])
-        .arg("--no-safety-monitor")
-        .args(args)
-        .envs(envs.iter().cloned());
+    let mut service = chassisd(robot.name(), name, bus)?;
+    service.args(args).envs(envs.iter().cloned());
     let log = dir.join(format!("{name}-chassisd"));
-    let logged = (prefix, "warn");
-    let pid = children.push(spawn_logged(&mut service, logged, &log, "chassisd")?);
+    let spawned = spawn_logged(&mut service, (prefix, "warn"), &log, "chassisd")?;
+    let pid = children.push(spawned);
     let service = Service {
         name: name.into(),
         children,
@@ -388,11 +379,8 @@ pub(crate) struct MotionDecoder {
 
 impl MotionDecoder {
     pub(crate) fn new(robot: RobotKind) -> Self {
-        let entry = robot.entry();
-        Self {
-            codec: entry.defaults().codec(),
-            last: None,
-        }
+        let codec = robot.entry().defaults().codec();
+        Self { codec, last: None }
     }
 
     pub(crate) fn linear(&mut self, frame: &BusFrame) -> Option<f64> {
@@ -410,9 +398,7 @@ impl MotionDecoder {
                 .collect()
         };
         let speed = decoded.iter().rev().find_map(commanded_speed);
-        if speed.is_some() {
-            self.last = speed;
-        }
+        self.last = speed.or(self.last);
         speed
     }
 }
@@ -444,11 +430,8 @@ pub struct FeedbackRate {
 
 impl FeedbackRate {
     pub fn start(robot: &mut Robot) -> anyhow::Result<Self> {
-        let s = state(robot)?;
-        Ok(Self {
-            frames: s.link.rx_frames,
-            at: now_ns(),
-        })
+        let (frames, at) = (state(robot)?.link.rx_frames, now_ns());
+        Ok(Self { frames, at })
     }
 
     /// Frames read a second since [`FeedbackRate::start`].
@@ -475,10 +458,17 @@ fn at(speed: f64) -> impl Fn(f64) -> bool {
     move |v| (v - speed).abs() < 1e-6
 }
 
+/// A request for `speed` straight ahead, created at `stamp_ns`: a sample's start.
+pub(crate) fn stamped(stamp_ns: u64, speed: f32) -> VelocityRequest {
+    VelocityRequest {
+        stamp_ns,
+        ..VelocityRequest::twist(speed, 0.0)
+    }
+}
+
 impl Motion {
     pub fn open(robot: &mut Robot, kind: RobotKind, spin: bool) -> anyhow::Result<Self> {
-        let tap = robot.frames(2048)?;
-        let decoder = MotionDecoder::new(kind);
+        let (tap, decoder) = (robot.frames(2048)?, MotionDecoder::new(kind));
         Ok(Self { tap, decoder, spin })
     }
 
@@ -490,7 +480,7 @@ impl Motion {
         since: u64,
         timeout: Duration,
     ) -> anyhow::Result<Option<u64>> {
-        let deadline = since + u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX / 2);
+        let deadline = since + nanos(timeout);
         loop {
             let mut found = None;
             let decoder = &mut self.decoder;
@@ -569,7 +559,7 @@ const KEEP_ALIVE: Duration = Duration::from_millis(100);
 pub const XBOT_COMMAND_INTERVAL: Duration = Duration::from_millis(1100);
 
 /// What the command path measured.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct CommandFigures {
     /// Request created → its frame's write returned.
     pub latencies: Latencies,
@@ -624,8 +614,7 @@ pub fn command_path(
     // Exact on every wire: whole mm/s, whole percent of 5 m/s, exact in f32.
     let speeds = [0.25, 0.5];
     motion.warm_up(teleop)?;
-    let (mut latencies, mut in_service) = (Latencies::new(), Latencies::new());
-    let (mut samples, mut missed) = (Vec::new(), 0);
+    let mut figures = CommandFigures::default();
     // Between two samples further apart than the source's timeout, the current request is
     // repeated as a controller would: the mux output stays, no frame is sent for it.
     let period = interval.min(KEEP_ALIVE);
@@ -648,33 +637,25 @@ pub fn command_path(
         current = speed as f32;
         let from = motion.decoder.last.unwrap_or(0.25);
         let accept = move |v: f64| match reach {
-            Reach::Exact => (v - speed).abs() < 1e-6,
+            Reach::Exact => at(speed)(v),
             Reach::Toward => {
                 (v - from).abs() > 1e-9 && (v - from).signum() == (speed - from).signum()
             }
         };
         let stamp = now_ns();
-        teleop.send(VelocityRequest {
-            stamp_ns: stamp,
-            ..VelocityRequest::twist(current, 0.0)
-        })?;
+        teleop.send(stamped(stamp, current))?;
         let Some(written) = motion.wait(accept, stamp, Duration::from_millis(500))? else {
-            missed += 1;
+            figures.missed += 1;
             continue;
         };
-        latencies.record_between(stamp, written);
-        samples.push((stamp, written));
+        figures.latencies.record_between(stamp, written);
+        figures.samples.push((stamp, written));
         if let Some(decided) = decision_stamp(robot, teleop_index, teleop.last_seq())? {
-            in_service.record_between(decided, written);
+            figures.in_service.record_between(decided, written);
         }
     }
     teleop.stop()?;
-    Ok(CommandFigures {
-        latencies,
-        in_service,
-        samples,
-        missed,
-    })
+    Ok(figures)
 }
 
 /// Records state-path latencies from the samples a reader receives, by the rule every client
@@ -764,9 +745,10 @@ impl StateRecorder {
 }
 
 /// State-path latencies while `driver`, if any, keeps the robot driving (so frames keep changing
-/// the state; without one, what changes it is what the robot does anyway), read from `robot` as a client that needs every sample reads them: a lossless
-/// [`chassis_client::StateStream`], until `recorder` counted `samples` (at most 120 s);
-/// `counted` is given each sample that counted and when it was received.
+/// the state; without one, what changes it is what the robot does anyway), read from `robot` as
+/// a client that needs every sample reads them: a lossless [`chassis_client::StateStream`],
+/// until `recorder` counted `samples` (at most 120 s); `counted` is given each sample that
+/// counted and when it was received.
 pub fn state_path(
     robot: &Robot,
     mut driver: Option<&mut Source>,
@@ -843,10 +825,7 @@ pub fn preemption(
         motion.tap.drain(|_| {})?;
         teleop.send(VelocityRequest::twist(0.5, 0.0))?;
         let stamp = now_ns();
-        safety.send(VelocityRequest {
-            stamp_ns: stamp,
-            ..VelocityRequest::twist(0.0, 0.0)
-        })?;
+        safety.send(stamped(stamp, 0.0))?;
         match motion.wait(at(0.0), stamp, Duration::from_millis(500))? {
             Some(written) => latencies.record_between(stamp, written),
             None => missed += 1,
@@ -886,17 +865,12 @@ pub fn cpu_seconds_of_thread(pid: u32, tid: u32) -> anyhow::Result<f64> {
 pub(crate) fn stat_cpu_seconds(path: &str) -> anyhow::Result<f64> {
     let stat = std::fs::read_to_string(path)?;
     // Fields after the command name (which may contain spaces) start after the last ')'.
-    let rest = stat
-        .rsplit_once(')')
-        .map(|(_, r)| r)
-        .context("malformed stat")?;
+    let (_, rest) = stat.rsplit_once(')').context("malformed stat")?;
     let fields: Vec<&str> = rest.split_whitespace().collect();
     let utime: f64 = fields.get(11).context("no utime")?.parse()?;
     let stime: f64 = fields.get(12).context("no stime")?.parse()?;
-    let ticks = nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK)
-        .ok()
-        .flatten()
-        .unwrap_or(100) as f64;
+    let ticks = nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK);
+    let ticks = ticks.ok().flatten().unwrap_or(100) as f64;
     Ok((utime + stime) / ticks)
 }
 
@@ -949,21 +923,24 @@ pub fn cost_at(
             .map(|m| m.len())
             .sum()
     };
-    let start_cpu = (
-        cpu_seconds_of_thread(pid, pid)?,
-        recorder_cpu()?,
-        ring_bytes(),
-    );
+    // The loop thread's CPU time, the recorder's, the ring's bytes.
+    let usage = || {
+        anyhow::Ok((
+            cpu_seconds_of_thread(pid, pid)?,
+            recorder_cpu()?,
+            ring_bytes(),
+        ))
+    };
+    let before = usage()?;
     let start = now_ns();
     let end = start + (seconds * 1e9) as u64;
     while now_ns() < end {
         robot.wait_state(Duration::from_millis(100))?;
     }
     let elapsed = (now_ns() - start) as f64 / 1e9;
-    let cpu = cpu_seconds_of_thread(pid, pid)? - start_cpu.0;
-    let recorder_cpu_pct = 100.0 * (recorder_cpu()? - start_cpu.1) / elapsed;
-    let recorder_mb_per_min =
-        ring_bytes().saturating_sub(start_cpu.2) as f64 / 1e6 * 60.0 / elapsed;
+    let after = usage()?;
+    let recorder_cpu_pct = 100.0 * (after.1 - before.1) / elapsed;
+    let recorder_mb_per_min = after.2.saturating_sub(before.2) as f64 / 1e6 * 60.0 / elapsed;
     let frames = state(robot)?.link.rx_frames;
     let rss_mib = rss_mib(pid)?;
     robot.sim(chassis_client::flood_request(0.0), Duration::from_secs(3))?;
@@ -971,19 +948,25 @@ pub fn cost_at(
         bus: bus.into(),
         bitrate,
         frames_per_s: (frames - start_frames) as f64 / elapsed,
-        cpu_pct: 100.0 * cpu / elapsed,
+        cpu_pct: 100.0 * (after.0 - before.0) / elapsed,
         recorder_cpu_pct: recorder.map(|_| recorder_cpu_pct),
         recorder_mb_per_min: recorder.map(|_| recorder_mb_per_min),
         rss_mib,
     })
 }
 
+/// The threads of process `pid`: their ids and `/proc` directories.
+fn threads(pid: u32) -> impl Iterator<Item = (u32, PathBuf)> {
+    let dir = format!("/proc/{pid}/task");
+    let tasks = std::fs::read_dir(dir).into_iter().flatten().flatten();
+    tasks.filter_map(|t| Some((t.file_name().to_str()?.parse().ok()?, t.path())))
+}
+
 /// The thread of process `pid` named `name`, if it has one.
 fn thread_named(pid: u32, name: &str) -> Option<u32> {
-    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
-    tasks.flatten().find_map(|task| {
-        let comm = std::fs::read_to_string(task.path().join("comm")).ok()?;
-        (comm.trim_end() == name).then(|| task.file_name().to_str()?.parse().ok())?
+    threads(pid).find_map(|(tid, path)| {
+        let comm = std::fs::read_to_string(path.join("comm")).ok()?;
+        (comm.trim_end() == name).then_some(tid)
     })
 }
 
@@ -1078,7 +1061,6 @@ pub fn record_titan(path: &Path, seconds: u64) -> anyhow::Result<u64> {
         }
         pair.clear_log();
     }
-    let _ = pair.driver.state();
     out.flush()?;
     Ok(frames)
 }
@@ -1094,10 +1076,7 @@ pub fn replay(
     dir: &Path,
 ) -> anyhow::Result<Throughput> {
     let name = format!("tp{}", unique());
-    let mut chassisd = Command::new(sibling("chassisd")?);
-    let bus = format!("replay:{}@max", file.display());
-    let args = format!("--robot titan --name {name} --no-safety-monitor --cpu 0 --bus");
-    chassisd.args(args.split(' ')).arg(bus);
+    let mut command = chassisd("titan", &name, &format!("replay:{}@max", file.display()))?;
     let mib = if recorder { 64 } else { 0 };
     let config = dir.join(format!("{name}.toml"));
     let state = dir.join(format!("{name}-state"));
@@ -1106,10 +1085,10 @@ pub fn replay(
         state.display()
     );
     std::fs::write(&config, text).context("the replay's configuration")?;
-    chassisd.arg("--config").arg(&config);
+    command.args(["--cpu", "0", "--config"]).arg(&config);
     let log = dir.join(&name);
     let (mut child, what) = (Children::default(), "chassisd on the replay bus");
-    let pid = child.push(spawn_logged(&mut chassisd, (prefix, "warn"), &log, what)?);
+    let pid = child.push(spawn_logged(&mut command, (prefix, "warn"), &log, what)?);
     let connect = || Robot::connect_with_prefix(&name, Some(prefix)).ok();
     let mut robot = wait_until(&format!("{what} did not come up"), 20, connect)?;
     // From the first frame counted to the last: the loop thread's CPU over that span.

@@ -1,11 +1,15 @@
 //! Where the two ends of a measurement run: the same CPU or two CPUs. On a virtual machine a
 //! wake-up across CPUs costs tens of microseconds and one on the same CPU a few, so every figure
 //! is reported with its placement and compared only with a baseline of the same placement.
+//! Also the scheduling and the clock the measurements run on.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
+use anyhow::bail;
 use chassis_client::now_ns;
+use nix::sys::time::TimeSpec;
+use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
 use serde::Serialize;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, clap::ValueEnum)]
@@ -34,25 +38,20 @@ impl Placement {
     }
 }
 
-/// Pins the calling thread to `cpu`.
 pub fn pin_current_thread(cpu: usize) -> anyhow::Result<()> {
-    if core_affinity::set_for_current(core_affinity::CoreId { id: cpu }) {
-        Ok(())
-    } else {
-        anyhow::bail!("cannot pin to CPU {cpu}")
+    if !core_affinity::set_for_current(core_affinity::CoreId { id: cpu }) {
+        bail!("cannot pin to CPU {cpu}");
     }
+    Ok(())
 }
 
 /// Lets the calling thread run on every CPU again.
 pub fn unpin_current_thread() {
-    if let Some(cores) = core_affinity::get_core_ids() {
-        use nix::sched::{CpuSet, sched_setaffinity};
-        let mut set = CpuSet::new();
-        for core in cores {
-            let _ = set.set(core.id);
-        }
-        let _ = sched_setaffinity(nix::unistd::Pid::from_raw(0), &set);
+    let mut set = nix::sched::CpuSet::new();
+    for core in core_affinity::get_core_ids().unwrap_or_default() {
+        let _ = set.set(core.id);
     }
+    let _ = nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(0), &set);
 }
 
 /// The calling thread at SCHED_FIFO `priority`, its memory not locked.
@@ -62,10 +61,8 @@ pub fn set_fifo(priority: u8) -> anyhow::Result<()> {
     };
     // SAFETY: pid 0 is the calling thread; `param` is a valid sched_param for the call.
     if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } != 0 {
-        anyhow::bail!(
-            "SCHED_FIFO {priority} refused: {}",
-            std::io::Error::last_os_error()
-        );
+        let error = std::io::Error::last_os_error();
+        bail!("SCHED_FIFO {priority} refused: {error}");
     }
     Ok(())
 }
@@ -78,10 +75,8 @@ pub fn enter_realtime(priority: u8) -> anyhow::Result<()> {
     set_fifo(priority)?;
     // SAFETY: mlockall takes flags only.
     if unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } != 0 {
-        anyhow::bail!(
-            "locking memory refused: {}",
-            std::io::Error::last_os_error()
-        );
+        let error = std::io::Error::last_os_error();
+        bail!("locking memory refused: {error}");
     }
     Ok(())
 }
@@ -94,10 +89,9 @@ pub fn cpu_count() -> usize {
     usize::try_from(n).map_or(1, |n| n.max(1))
 }
 
-static COUNTER: AtomicU64 = AtomicU64::new(0);
-
 /// A number unique within this process.
 pub fn unique() -> u64 {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
     COUNTER.fetch_add(1, Ordering::Relaxed)
 }
 
@@ -108,16 +102,21 @@ pub fn hash(text: &str) -> u64 {
     })
 }
 
-/// Waits `d` (the benchmark's orchestration between measurements; never inside one).
-pub fn pause(d: std::time::Duration) {
-    use nix::sys::time::TimeSpec;
-    use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
-    let _ = clock_nanosleep(
-        ClockId::CLOCK_MONOTONIC,
-        ClockNanosleepFlags::empty(),
-        &TimeSpec::from_duration(d),
-    );
+/// `d` in ns, saturating far beyond any wait of the bench.
+pub fn nanos(d: Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX / 2)
 }
+
+/// Sleeps on `CLOCK_MONOTONIC` for `d`, or until `d` with `TIMER_ABSTIME`.
+fn sleep(d: Duration, flags: ClockNanosleepFlags) {
+    let _ = clock_nanosleep(ClockId::CLOCK_MONOTONIC, flags, &TimeSpec::from_duration(d));
+}
+
+/// Waits `d` (the benchmark's orchestration between measurements; never inside one).
+pub fn pause(d: Duration) {
+    sleep(d, ClockNanosleepFlags::empty());
+}
+
 /// A periodic loop on absolute deadlines, as a controller's: period `k` starts at
 /// `start + k·period`; a late period runs at once (none is skipped), and a period whose work ends
 /// after the next one was due is a deadline miss.
@@ -130,11 +129,10 @@ pub struct Periods {
 
 impl Periods {
     pub fn new(period: Duration) -> Self {
-        let period = u64::try_from(period.as_nanos())
-            .unwrap_or(u64::MAX / 4)
-            .max(1);
+        let period = nanos(period).max(1);
+        let next = now_ns() + period;
         Self {
-            next: now_ns() + period,
+            next,
             period,
             misses: 0,
         }
@@ -142,14 +140,10 @@ impl Periods {
 
     /// Sleeps until the next period is due; returns when it was due.
     pub fn next(&mut self) -> u64 {
-        use nix::sys::time::TimeSpec;
-        use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
         let due = self.next;
-        let deadline = TimeSpec::from_duration(Duration::from_nanos(due));
-        let _ = clock_nanosleep(
-            ClockId::CLOCK_MONOTONIC,
+        sleep(
+            Duration::from_nanos(due),
             ClockNanosleepFlags::TIMER_ABSTIME,
-            &deadline,
         );
         self.next += self.period;
         due

@@ -12,7 +12,7 @@ use crate::placement;
 use crate::stats::Latencies;
 
 /// Shortest gap recorded: a loop of clock readings takes well under 100 ns a turn.
-pub const MIN_GAP_NS: u64 = 1_000;
+const MIN_GAP_NS: u64 = 1_000;
 
 /// A burst of spinning, then a pause: a thread at SCHED_FIFO that never sleeps is stopped by
 /// the kernel's real-time throttling (`kernel.sched_rt_runtime_us`, 950 ms of every second)
@@ -32,7 +32,7 @@ pub struct Stalls {
 }
 
 impl Stalls {
-    /// Gaps longer than `us` per second of spinning.
+    /// Gaps longer than `us` a second of spinning.
     pub fn per_second(&self, us: u64) -> f64 {
         self.gaps.count_above(us * 1000) as f64 / self.spinning.as_secs_f64().max(1e-9)
     }
@@ -61,36 +61,33 @@ impl Stalls {
 /// Spins `bursts` bursts on `cpu` in a thread of its own, at SCHED_FIFO `priority` when the
 /// system grants it.
 pub fn measure(cpu: usize, bursts: u64, priority: u8) -> anyhow::Result<Stalls> {
-    std::thread::scope(|s| {
-        s.spawn(|| {
-            placement::pin_current_thread(cpu)?;
-            let fifo = placement::set_fifo(priority).ok().map(|()| priority);
-            let mut gaps = Latencies::new();
-            let mut spinning = Duration::ZERO;
-            for _ in 0..bursts {
-                let start = now_ns();
-                let end = start + BURST.as_nanos() as u64;
-                let mut previous = start;
-                while previous < end {
-                    let now = now_ns();
-                    let gap = now.saturating_sub(previous);
-                    if gap > MIN_GAP_NS {
-                        gaps.record(gap);
-                    }
-                    previous = now;
+    let spin = move || {
+        placement::pin_current_thread(cpu)?;
+        let fifo = placement::set_fifo(priority).ok().map(|()| priority);
+        let (mut gaps, mut spinning) = (Latencies::new(), Duration::ZERO);
+        for _ in 0..bursts {
+            let start = now_ns();
+            let end = start + placement::nanos(BURST);
+            let mut previous = start;
+            while previous < end {
+                let now = now_ns();
+                let gap = now.saturating_sub(previous);
+                if gap > MIN_GAP_NS {
+                    gaps.record(gap);
                 }
-                spinning += Duration::from_nanos(previous - start);
-                placement::pause(PAUSE);
+                previous = now;
             }
-            Ok(Stalls {
-                gaps,
-                spinning,
-                fifo,
-            })
+            spinning += Duration::from_nanos(previous - start);
+            placement::pause(PAUSE);
+        }
+        Ok(Stalls {
+            gaps,
+            spinning,
+            fifo,
         })
-        .join()
-        .map_err(|_| anyhow::anyhow!("the stall thread panicked"))?
-    })
+    };
+    let thread = std::thread::spawn(spin).join();
+    thread.map_err(|_| anyhow::anyhow!("the stall thread panicked"))?
 }
 
 #[cfg(test)]
