@@ -1,8 +1,6 @@
-//! `chassis-bench fleet`: one operator, many simulated robots, on this machine, in a network
-//! namespace of its own (loopback only: nothing reaches a real interface). What it runs and
-//! measures is the method of the section it writes (`clients/bench/fleet.md`): `--doc FILE`
-//! writes the section `## Fleet` of that document (the rest is kept); the main run's `--doc`
-//! keeps this section as it is.
+//! `chassis-bench fleet`: one operator, many simulated robots on this machine, in a network
+//! namespace of its own (loopback only). Its method is the section it writes (`## Fleet`,
+//! `clients/bench/fleet.md`) into `--doc FILE`, keeping the rest; the main run keeps the section.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -322,15 +322,12 @@ pub const PACED: &str = "paced";
 /// ROS 2 row came 1.5 % and 5.9 % below the sum in two runs; the bias this catches was 19 %).
 pub const SUM_TOLERANCE: f64 = 0.10;
 
-/// How far below its own baseline's p50 a row's p50 may be in a smoke run and be reported
-/// without failing it (the document's runs flag every crossing). A smoke run is a debug build
-/// with 100 samples a row, and both a cross-CPU path and its matched hop are mostly the
-/// wake-up of an idle CPU, whose median moves from one identical run to the next: in six smoke
-/// runs of one commit on a 2-core machine, the loaded cross-CPU iceoryx2 hop measured 68.2 to
-/// 82.2 µs p50 (a spread of 19 %) and the command path it divides 79.2 to 86.3 µs (ratio 0.996
-/// to 1.17); a CI run measured 80.7 against 91.1 µs (0.886). What a debug run can still tell
-/// fails it: with a round trip counted for each matched hop, a smoke run failed on the two rows
-/// 44 % below their hops and reported four others 1 to 14 % below theirs.
+/// How far below its own baseline's p50 a row's p50 may be in a smoke run and only be reported
+/// (the document's runs flag every crossing). A smoke run is a debug build of 100 samples a row,
+/// and a cross-CPU path and its matched hop are mostly an idle CPU's wake-up, whose median moves
+/// between identical runs: in six smoke runs of one commit on a 2-core machine the hop measured
+/// 68.2 to 82.2 µs p50 and the command path's ratio to it 0.996 to 1.17 (a CI run: 0.886), while
+/// rows 44 % below their hops, a round trip counted for each, still fail.
 pub const SMOKE_BASELINE_TOLERANCE: f64 = 0.20;
 
 /// Fewest samples whose 99th percentile is shown: below it, the p99 is nearly the maximum.
