@@ -1,8 +1,6 @@
-//! `chassis-bench fleet`: one operator, many simulated robots, on this machine, in a network
-//! namespace of its own (loopback only: nothing reaches a real interface). What it runs and
-//! measures is the method of the section it writes (`clients/bench/fleet.md`): `--doc FILE`
-//! writes the section `## Fleet` of that document (the rest is kept); the main run's `--doc`
-//! keeps this section as it is.
+//! `chassis-bench fleet`: one operator, many simulated robots on this machine, in a network
+//! namespace of its own (loopback only). Its method is the section it writes (`## Fleet`,
+//! `clients/bench/fleet.md`) into `--doc FILE`, keeping the rest; the main run keeps the section.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -170,15 +168,20 @@ fn robot_figures(
 }
 
 fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
-    let netns = Netns::new(&[format!("cfb{}", std::process::id() % 100_000)])?;
-    let prefix = format!("cfb{}_", std::process::id() % 100_000);
-    let operator_prefix = format!("{prefix}op_");
+    let id = std::process::id() % 100_000;
+    let netns = Netns::new(&[format!("cfb{id}")])?;
+    let (prefix, operator_prefix) = (format!("cfb{id}_"), format!("cfb{id}_op_"));
     let chassisd = paths::sibling("chassisd")?;
-    let zenoh = paths::sibling("chassis-zenoh")?;
-    let chassis = paths::sibling("chassis")?;
+    let (zenoh, chassis) = (paths::sibling("chassis-zenoh")?, paths::sibling("chassis")?);
     // The fleet's process `name`, logging to `<dir>/<name>.log` and `<name>-err.log`.
     let start = |command: &mut Command, prefix: &str, level: &str, name: &str| {
         paths::spawn_logged(command, (prefix, level), &dir.join(name), name)
+    };
+    // A command run in the robots' network namespace.
+    let in_netns = |program: &Path| {
+        let mut command = Command::new("ip");
+        command.args(["netns", "exec", netns.robot()]).arg(program);
+        command
     };
     let mut robots = Children::default();
     let mut robot_side_pids = Vec::new();
@@ -201,8 +204,7 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
                 serves(&name, &prefix).then_some(())
             })?;
             let listen = format!("tcp/127.0.0.1:{}", BASE_PORT + k as u16);
-            let mut side = Command::new("ip");
-            side.args(["netns", "exec", netns.robot()]).arg(&zenoh);
+            let mut side = in_netns(&zenoh);
             side.args(["--name", &name, "--listen", &listen]);
             let log = format!("zenoh-{name}");
             robot_side_pids.push(robots.push(start(&mut side, &prefix, ZENOH_LOG, &log)?));
@@ -210,10 +212,8 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
         }
         eprintln!("fleet of {size}: starting the operator");
         let mut operator = Children::default();
-        let mut command = Command::new("ip");
-        command.args(["netns", "exec", netns.robot()]).arg(&zenoh);
-        for k in 0..size {
-            let port = BASE_PORT + k as u16;
+        let mut command = in_netns(&zenoh);
+        for port in (0..size).map(|k| BASE_PORT + k as u16) {
             command.args(["--connect", &format!("tcp/127.0.0.1:{port}")]);
         }
         command.arg("--mirror-all");
@@ -225,62 +225,77 @@ fn measure(args: &FleetArgs, dir: &Path) -> anyhow::Result<Vec<SizeFigures>> {
             })?;
         }
         crate::placement::pause(Duration::from_secs(2));
-
-        let machine0 = CpuTimes::read()?;
-        let cpu0 = process_cpu_s(operator_pid)?;
-        let sides = || -> f64 {
-            let cpu = |&p: &u32| process_cpu_s(p).unwrap_or(0.0);
-            robot_side_pids.iter().map(cpu).sum()
+        let sides = || {
+            robot_side_pids
+                .iter()
+                .map(|&p| process_cpu_s(p).unwrap_or(0.0))
+                .sum()
         };
-        let sides0 = sides();
-        let start = now_ns();
-        let out = Command::new(&chassis)
-            .args(["fleet", "--once", "--json", "--collect"])
-            .arg(args.seconds.to_string())
-            .env("CHASSIS_IPC_PREFIX", &operator_prefix)
-            .output()
-            .context("running chassis fleet")?;
-        let elapsed = now_ns().saturating_sub(start) as f64 / 1e9;
-        let cpu1 = process_cpu_s(operator_pid)?;
-        let sides1 = sides();
-        let (busy, total) = machine0.busy_since(&CpuTimes::read()?);
-        if !out.status.success() {
-            bail!(
-                "chassis fleet failed: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        }
-        let (per_robot, missing) = robot_figures(&out.stdout, &names, args.seconds)?;
-        let mut p50s: Vec<f64> = per_robot.iter().map(|r| r.p50_ms).collect();
-        p50s.sort_by(f64::total_cmp);
-        let size_figures = SizeFigures {
-            robots: size,
-            operator_cpu_pct: 100.0 * (cpu1 - cpu0) / elapsed,
-            operator_rss_mib: paths::status_field(operator_pid, "VmRSS:")? / 1024.0,
-            operator_peak_rss_mib: paths::status_field(operator_pid, "VmHWM:")? / 1024.0,
-            operator_threads: paths::status_field(operator_pid, "Threads:")? as u64,
-            robot_sides_cpu_pct: 100.0 * (sides1 - sides0) / elapsed,
-            machine_busy_pct: 100.0 * busy as f64 / total.max(1) as f64,
-            samples_per_s: per_robot.iter().map(|r| r.samples_per_s).sum(),
-            median_p50_ms: p50s.get(p50s.len() / 2).copied().unwrap_or(f64::NAN),
-            worst_p99_ms: per_robot.iter().map(|r| r.p99_ms).fold(0.0, f64::max),
-            worst_max_ms: per_robot.iter().map(|r| r.max_ms).fold(0.0, f64::max),
-            per_robot,
-            missing,
-        };
-        let s = &size_figures;
+        let s = window(
+            (&chassis, args.seconds),
+            &operator_prefix,
+            operator_pid,
+            sides,
+            &names,
+        )?;
         let (cpu, rss) = (s.operator_cpu_pct, s.operator_rss_mib);
         let (rate, p50, p99) = (s.samples_per_s, s.median_p50_ms, s.worst_p99_ms);
         eprintln!(
             "fleet of {size}: operator {cpu:.1} % of a core, {rss:.1} MiB; {rate:.0} states/s; \
              p50 {p50:.2} ms, worst p99 {p99:.2} ms"
         );
-        figures.push(size_figures);
+        figures.push(s);
         drop(operator);
     }
     drop(robots);
     drop(netns);
     Ok(figures)
+}
+
+/// The figures of the fleet of `names` over `seconds` of `chassis` (`fleet`) at the operator's
+/// iceoryx2 (`prefix`), `sides` the CPU time of every robot side, s.
+fn window(
+    (chassis, seconds): (&Path, f64),
+    prefix: &str,
+    operator_pid: u32,
+    sides: impl Fn() -> f64,
+    names: &[(String, &str)],
+) -> anyhow::Result<SizeFigures> {
+    let (machine0, cpu0, sides0) = (CpuTimes::read()?, process_cpu_s(operator_pid)?, sides());
+    let start = now_ns();
+    let out = Command::new(chassis)
+        .args(["fleet", "--once", "--json", "--collect"])
+        .arg(seconds.to_string())
+        .env("CHASSIS_IPC_PREFIX", prefix)
+        .output()
+        .context("running chassis fleet")?;
+    let elapsed = now_ns().saturating_sub(start) as f64 / 1e9;
+    let (cpu1, sides1) = (process_cpu_s(operator_pid)?, sides());
+    let (busy, total) = machine0.busy_since(&CpuTimes::read()?);
+    if !out.status.success() {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        bail!("chassis fleet failed: {stderr}");
+    }
+    let (per_robot, missing) = robot_figures(&out.stdout, names, seconds)?;
+    let mut p50s: Vec<f64> = per_robot.iter().map(|r| r.p50_ms).collect();
+    p50s.sort_by(f64::total_cmp);
+    let worst = |ms: fn(&RobotFigures) -> f64| per_robot.iter().map(ms).fold(0.0, f64::max);
+    let status = |field| paths::status_field(operator_pid, field);
+    Ok(SizeFigures {
+        robots: names.len(),
+        operator_cpu_pct: 100.0 * (cpu1 - cpu0) / elapsed,
+        operator_rss_mib: status("VmRSS:")? / 1024.0,
+        operator_peak_rss_mib: status("VmHWM:")? / 1024.0,
+        operator_threads: status("Threads:")? as u64,
+        robot_sides_cpu_pct: 100.0 * (sides1 - sides0) / elapsed,
+        machine_busy_pct: 100.0 * busy as f64 / total.max(1) as f64,
+        samples_per_s: per_robot.iter().map(|r| r.samples_per_s).sum(),
+        median_p50_ms: p50s.get(p50s.len() / 2).copied().unwrap_or(f64::NAN),
+        worst_p99_ms: worst(|r| r.p99_ms),
+        worst_max_ms: worst(|r| r.max_ms),
+        per_robot,
+        missing,
+    })
 }
 
 /// `text` without its `## Fleet` section, and that section: the document's last, where both

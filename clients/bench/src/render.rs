@@ -26,6 +26,7 @@ pub(crate) const TOGETHER_OUTSIDE: &str =
 /// The performance document of `report`.
 pub fn document(report: &Report) -> anyhow::Result<String> {
     let period = |interval| period_text(off_grid(interval));
+    let ms = |interval: std::time::Duration| interval.as_millis().to_string();
     let payload_bytes = size_of::<chassis_client::ChassisState>();
     let mut values = provenance_values(&report.provenance, &report.machine);
     values.extend([
@@ -48,14 +49,8 @@ pub fn document(report: &Report) -> anyhow::Result<String> {
         ("hybrid_spin_us", HYBRID_SPIN.as_micros().to_string()),
         ("command_period", period(COMMAND_INTERVAL)),
         ("xbot_command_period", period(XBOT_COMMAND_INTERVAL)),
-        (
-            "command_interval_ms",
-            COMMAND_INTERVAL.as_millis().to_string(),
-        ),
-        (
-            "state_request_interval_ms",
-            STATE_REQUEST_INTERVAL.as_millis().to_string(),
-        ),
+        ("command_interval_ms", ms(COMMAND_INTERVAL)),
+        ("state_request_interval_ms", ms(STATE_REQUEST_INTERVAL)),
         ("sum_tolerance_pct", format!("{}", SUM_TOLERANCE * 100.0)),
         ("min_for_p99", MIN_FOR_P99.to_string()),
         ("min_for_p999", MIN_FOR_P999.to_string()),
@@ -160,10 +155,12 @@ fn inconsistent(report: &Report) -> String {
         Some(format!("* {path} {what} ({mode} loop, {placement}): {why}"))
     });
     let flagged = lines(flagged, |f| f);
-    if flagged.is_empty() {
-        return flagged;
+    match flagged.is_empty() {
+        true => flagged,
+        false => {
+            format!("**Inconsistent measurements** (flagged by the benchmark):\n\n{flagged}\n")
+        }
     }
-    format!("**Inconsistent measurements** (flagged by the benchmark):\n\n{flagged}\n")
 }
 
 /// Each baseline's conditions.
@@ -325,10 +322,9 @@ impl Report {
             let low = self.stalls.iter().map(f).fold(f64::INFINITY, f64::min);
             let high = self.stalls.iter().map(f).fold(0.0, f64::max);
             let (low, high) = (format!("{low:.decimals$}"), format!("{high:.decimals$}"));
-            if low == high {
-                low
-            } else {
-                format!("{low} to {high}")
+            match low == high {
+                true => low,
+                false => format!("{low} to {high}"),
             }
         };
         // The chance that a window of 100 µs holds the start of a stall over 20 µs, %.
@@ -373,11 +369,8 @@ impl Report {
 
 /// `block` under the table head the template puts above `{{name}}` (nothing when empty).
 fn with_head(name: &str, block: String) -> String {
-    let above = TEMPLATE
-        .split(&format!("\n{{{{{name}}}}}\n"))
-        .next()
-        .unwrap_or_default();
-    let mut lines = above.rsplitn(3, '\n');
+    let above = TEMPLATE.split(&format!("\n{{{{{name}}}}}\n")).next();
+    let mut lines = above.unwrap_or_default().rsplitn(3, '\n');
     match (lines.next(), lines.next()) {
         (Some(rule), Some(head)) if !block.is_empty() => format!("{head}\n{rule}\n{block}"),
         _ => block,

@@ -8,9 +8,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::stats::{Latencies, Summary};
 
-/// The default-configuration command row's `what`: the TITAN on the simulated bus with
-/// chassisd's defaults (no [`crate::paths::BENCH_CONFIG`]), a sample ending at the first frame that
-/// moves toward the request (the mux ramps the change).
+/// The `what` of the TITAN on the simulated bus with chassisd's defaults (no
+/// [`crate::paths::BENCH_CONFIG`]): a sample ends at the first frame toward the request (the mux
+/// ramps the change).
 pub const DEFAULT_CONFIG_ROW: &str =
     "titan sim, chassisd's default configuration, request → first frame toward it";
 
@@ -69,35 +69,21 @@ impl std::fmt::Display for PathKind {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Leg {
-    /// A raw transport's hop.
     #[default]
-    Hop,
-    /// Gaps in a running thread's clock readings ([`STALLS`]).
-    Stalls,
-    /// A request created → its frame written.
-    Command,
-    /// A request → the first frame toward it ([`DEFAULT_CONFIG_ROW`]).
-    FirstFrameToward,
-    /// A frame read → the state it changed in a reader.
-    State,
-    /// A safety stop → its zero frame.
-    Stop,
-    /// A state sample in several readers.
-    FanOut,
-    /// `cmd_vel` → its frame.
-    CmdVel,
-    /// A frame read → the `odom` carrying it.
-    Odom,
-    /// The operator's remote source → the robot's frame.
-    RemoteCommand,
-    /// The robot's frame read → the state in the operator's iceoryx2.
-    RemoteState,
-    /// The robot's state published → in the operator's iceoryx2.
-    RemoteBridge,
-    /// A control loop's period started → the frame of the command it wrote.
-    PeriodToFrame,
-    /// The frame read → a control loop read the state it made.
-    StateAge,
+    Hop, // a raw transport's hop
+    Stalls,           // gaps in a running thread's clock readings ([`STALLS`])
+    Command,          // a request created → its frame written
+    FirstFrameToward, // a request → the first frame toward it ([`DEFAULT_CONFIG_ROW`])
+    State,            // a frame read → the state it changed in a reader
+    Stop,             // a safety stop → its zero frame
+    FanOut,           // a state sample in several readers
+    CmdVel,           // `cmd_vel` → its frame
+    Odom,             // a frame read → the `odom` carrying it
+    RemoteCommand,    // the operator's remote source → the robot's frame
+    RemoteState,      // the robot's frame read → the state in the operator's iceoryx2
+    RemoteBridge,     // the robot's state published → in the operator's iceoryx2
+    PeriodToFrame,    // a control loop's period started → the frame of the command it wrote
+    StateAge,         // the frame read → a control loop read the state it made
 }
 
 /// One measured distribution.
@@ -117,8 +103,7 @@ pub struct Row {
     pub missed: u64,
     /// Samples of a lossless stream the reader never received (gaps in `seq`; 0 expected).
     pub dropped: u64,
-    /// The rows whose hops this row contains, one after the other ([`row_key`] of each): the
-    /// ROS 2 bridge's rows contain a DDS hop and the service's own path.
+    /// The rows ([`row_key`]s) whose hops this row contains in turn: a DDS hop and a path for ROS 2.
     pub contains: Vec<String>,
     /// A baseline's conditions: how it was paced and what its receiver lived with.
     pub conditions: Option<String>,
@@ -126,15 +111,13 @@ pub struct Row {
     /// command or state row, the baseline of the same run whose receiver lived like the
     /// service's loop; for a preemption row, a ping right after a wake-up ping.
     pub baseline: Option<String>,
-    /// p50 / baseline p50 and p99 / baseline p99.
     pub ratio_p50: Option<f64>,
     pub ratio_p99: Option<f64>,
     /// Why the row is below its baseline, or below the sum of the rows it contains: a path
     /// cannot be faster than a part of it, so they were not measured alike.
     pub inconsistent: Option<String>,
-    /// Every flag is one a smoke run reports without failing on it: below the sum of the hops
-    /// it contains (their medians were each measured in their own conditions and add only
-    /// approximately), or below its own baseline by no more than [`SMOKE_BASELINE_TOLERANCE`].
+    /// Every flag is one a smoke run only reports: below the sum of the hops it contains (medians
+    /// add only approximately), or below its baseline by at most [`SMOKE_BASELINE_TOLERANCE`].
     pub smoke_tolerated: bool,
     pub latencies: Latencies,
 }
@@ -154,9 +137,8 @@ pub struct Report {
     #[serde(skip)]
     pub parts: Vec<Parts>,
     pub notes: Vec<String>,
-    /// What makes the run's rows unfit to compare: a named baseline or contained row that was
-    /// not measured, two rows of one name. A smoke run fails on each; the document lists them
-    /// with the notes.
+    /// What makes the rows unfit to compare (a named row not measured, two rows of one name): a
+    /// smoke run fails on each; the document lists them with the notes.
     pub problems: Vec<String>,
     /// How chassisd's loop was scheduled in each latency run (the run's label).
     pub scheduling: Vec<(String, Scheduling)>,
@@ -340,15 +322,12 @@ pub const PACED: &str = "paced";
 /// ROS 2 row came 1.5 % and 5.9 % below the sum in two runs; the bias this catches was 19 %).
 pub const SUM_TOLERANCE: f64 = 0.10;
 
-/// How far below its own baseline's p50 a row's p50 may be in a smoke run and be reported
-/// without failing it (the document's runs flag every crossing). A smoke run is a debug build
-/// with 100 samples a row, and both a cross-CPU path and its matched hop are mostly the
-/// wake-up of an idle CPU, whose median moves from one identical run to the next: in six smoke
-/// runs of one commit on a 2-core machine, the loaded cross-CPU iceoryx2 hop measured 68.2 to
-/// 82.2 µs p50 (a spread of 19 %) and the command path it divides 79.2 to 86.3 µs (ratio 0.996
-/// to 1.17); a CI run measured 80.7 against 91.1 µs (0.886). What a debug run can still tell
-/// fails it: with a round trip counted for each matched hop, a smoke run failed on the two rows
-/// 44 % below their hops and reported four others 1 to 14 % below theirs.
+/// How far below its own baseline's p50 a row's p50 may be in a smoke run and only be reported
+/// (the document's runs flag every crossing). A smoke run is a debug build of 100 samples a row,
+/// and a cross-CPU path and its matched hop are mostly an idle CPU's wake-up, whose median moves
+/// between identical runs: in six smoke runs of one commit on a 2-core machine the hop measured
+/// 68.2 to 82.2 µs p50 and the command path's ratio to it 0.996 to 1.17 (a CI run: 0.886), while
+/// rows 44 % below their hops, a round trip counted for each, still fail.
 pub const SMOKE_BASELINE_TOLERANCE: f64 = 0.20;
 
 /// Fewest samples whose 99th percentile is shown: below it, the p99 is nearly the maximum.
@@ -413,14 +392,15 @@ impl Row {
 
     /// The row's count with what it lost beside it: `1000`, `998 (2 dropped, 1 out of range)`.
     pub(crate) fn count_text(&self) -> String {
+        let (count, out) = (self.summary.count, self.summary.out_of_range);
         let lost = [
             (self.missed, "missed"),
             (self.dropped, "dropped"),
-            (self.summary.out_of_range, "out of range"),
+            (out, "out of range"),
         ];
-        let lost = lost.iter().filter(|(n, _)| *n > 0);
-        let lost: Vec<String> = lost.map(|(n, what)| format!("{n} {what}")).collect();
-        let count = self.summary.count;
+        let lost: Vec<String> = (lost.iter().filter(|(n, _)| *n > 0))
+            .map(|(n, what)| format!("{n} {what}"))
+            .collect();
         match lost.is_empty() {
             true => count.to_string(),
             false => format!("{count} ({})", lost.join(", ")),
@@ -438,11 +418,10 @@ impl Report {
         for r in &self.rows {
             *named.entry(r.key()).or_default() += 1;
         }
-        for (key, n) in named.into_iter().filter(|(_, n)| *n > 1) {
-            self.problems
-                .push(format!("two rows are named '{key}' ({n} of them)"));
-        }
-        // Each row's names as a baseline and as a contained row.
+        let twice = named.into_iter().filter(|(_, n)| *n > 1);
+        (self.problems)
+            .extend(twice.map(|(key, n)| format!("two rows are named '{key}' ({n} of them)")));
+        // Each row by its name as a baseline (`what, placement`; none but a baseline's) and its key.
         let all: Vec<(Option<String>, String, Summary)> = (self.rows.iter())
             .map(|r| {
                 let as_baseline =
@@ -450,49 +429,43 @@ impl Report {
                 (as_baseline, r.key(), r.summary)
             })
             .collect();
-        let rows = self
+        let paths = self
             .rows
             .iter_mut()
             .filter(|r| r.path != PathKind::Baseline);
-        for row in rows {
+        for row in paths {
             let (s, key) = (row.summary, row.key());
             // Each flag, and whether a smoke run only reports it.
             let mut flags: Vec<(String, bool)> = Vec::new();
-            let named = all
-                .iter()
-                .filter(|(b, ..)| b.is_some() && *b == row.baseline);
-            let bases: Vec<&Summary> = named.map(|(.., s)| s).collect();
-            match (&row.baseline, &bases[..]) {
-                (None, _) => {}
-                (Some(name), []) => {
-                    (self.problems).push(format!("{key}: its baseline '{name}' was not measured"))
-                }
-                (Some(name), [base]) => {
-                    row.ratio_p50 = (base.p50_us > 0.0).then(|| s.p50_us / base.p50_us);
-                    let enough = base.count.min(s.count) >= MIN_FOR_P99;
-                    row.ratio_p99 = (base.p99_us > 0.0 && enough).then(|| s.p99_us / base.p99_us);
-                    if s.count > 0 && s.p50_us < base.p50_us {
-                        let (p50, base_p50) = (s.p50_us, base.p50_us);
-                        let text = format!(
-                            "p50 {p50:.1} µs is below the p50 {base_p50:.1} µs of the hop it \
-                             contains ({name}): the path and its baseline were not measured \
-                             under the same conditions"
-                        );
-                        let near = s.p50_us >= base.p50_us * (1.0 - SMOKE_BASELINE_TOLERANCE);
-                        flags.push((text, near));
+            if let Some(name) = &row.baseline {
+                let named = all.iter().filter(|(b, ..)| b.as_ref() == Some(name));
+                match named.map(|(.., s)| s).collect::<Vec<_>>()[..] {
+                    [] => (self.problems)
+                        .push(format!("{key}: its baseline '{name}' was not measured")),
+                    [base] => {
+                        row.ratio_p50 = (base.p50_us > 0.0).then(|| s.p50_us / base.p50_us);
+                        let enough = base.count.min(s.count) >= MIN_FOR_P99;
+                        row.ratio_p99 =
+                            (base.p99_us > 0.0 && enough).then(|| s.p99_us / base.p99_us);
+                        if s.count > 0 && s.p50_us < base.p50_us {
+                            let (p50, base_p50) = (s.p50_us, base.p50_us);
+                            let text = format!(
+                                "p50 {p50:.1} µs is below the p50 {base_p50:.1} µs of the hop it \
+                                 contains ({name}): the path and its baseline were not measured \
+                                 under the same conditions"
+                            );
+                            flags.push((text, p50 >= base_p50 * (1.0 - SMOKE_BASELINE_TOLERANCE)));
+                        }
                     }
-                }
-                (Some(name), _) => {
-                    (self.problems).push(format!("{key}: more than one baseline is named '{name}'"))
+                    _ => (self.problems)
+                        .push(format!("{key}: more than one baseline is named '{name}'")),
                 }
             }
-            let contained = row.contains.iter().map(|k| {
-                let found = all.iter().find(|(_, n, _)| n == k);
-                found
-                    .map(|(.., s)| s)
-                    .filter(|s| s.count > 0)
-                    .map(|s| s.p50_us)
-            });
+            let measured = |k: &String| all.iter().find(|(_, n, s)| n == k && s.count > 0);
+            let contained = row
+                .contains
+                .iter()
+                .map(|k| measured(k).map(|(.., s)| s.p50_us));
             match contained.sum::<Option<f64>>() {
                 _ if row.contains.is_empty() => {}
                 None => self.problems.push(format!(
@@ -500,19 +473,19 @@ impl Report {
                     row.contains.join(", ")
                 )),
                 Some(sum) if s.count > 0 && s.p50_us < sum * (1.0 - SUM_TOLERANCE) => {
-                    let (p50, hops) = (s.p50_us, row.contains.join(" + "));
+                    let (p50, hops, pct) =
+                        (s.p50_us, row.contains.join(" + "), SUM_TOLERANCE * 100.0);
                     let text = format!(
-                        "p50 {p50:.1} µs is more than {:.0} % below {sum:.1} µs, the sum of the \
+                        "p50 {p50:.1} µs is more than {pct:.0} % below {sum:.1} µs, the sum of the \
                          p50s of the hops it contains ({hops}): they were not measured under the \
-                         same conditions",
-                        SUM_TOLERANCE * 100.0
+                         same conditions"
                     );
                     flags.push((text, true));
                 }
                 Some(_) => {}
             }
-            row.smoke_tolerated = !flags.is_empty() && flags.iter().all(|(_, near)| *near);
-            let texts: Vec<String> = flags.into_iter().map(|(text, _)| text).collect();
+            let (texts, near): (Vec<String>, Vec<bool>) = flags.into_iter().unzip();
+            row.smoke_tolerated = !near.is_empty() && near.iter().all(|n| *n);
             row.inconsistent = (!texts.is_empty()).then(|| texts.join("; "));
         }
     }
@@ -550,10 +523,8 @@ impl Report {
 
     /// The rows the smoke run reports without failing on them: flagged within its noise only.
     pub fn smoke_warnings(&self) -> Vec<String> {
-        let flagged = self.flagged(true);
-        flagged
-            .map(|f| format!("flagged within a smoke run's noise (not failing it): {f}"))
-            .collect()
+        let warning = |f| format!("flagged within a smoke run's noise (not failing it): {f}");
+        self.flagged(true).map(warning).collect()
     }
 
     /// "KEY: WHY" of each row flagged inconsistent whose flags a smoke run only reports, or not.
@@ -644,7 +615,7 @@ impl Scheduling {
     pub fn fifo(self) -> Option<u8> {
         match self {
             Scheduling::Fifo(priority) => Some(priority),
-            Scheduling::Normal | Scheduling::Refused => None,
+            _ => None,
         }
     }
 }

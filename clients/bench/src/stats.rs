@@ -4,9 +4,9 @@ use hdrhistogram::Histogram;
 use hdrhistogram::serialization::{Deserializer, Serializer, V2Serializer};
 use serde::{Deserialize, Serialize};
 
-/// One-way latencies of one path, ns. In a samples file: the histogram in HdrHistogram's V2
-/// format as hex, and the count out of its range.
-#[derive(Debug, Clone)]
+/// One-way latencies of one path, ns; in a samples file, a [`Stored`].
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(into = "Stored", try_from = "Stored")]
 pub struct Latencies {
     histogram: Histogram<u64>,
     /// Samples outside the histogram's range (negative or above 60 s): counted, not recorded.
@@ -14,19 +14,20 @@ pub struct Latencies {
 }
 
 impl Default for Latencies {
+    /// 1 ns to 60 s with 3 significant digits (bounds the histogram always takes).
     fn default() -> Self {
-        Self::new()
+        let histogram = Histogram::new_with_bounds(1, 60_000_000_000, 3);
+        let histogram = histogram.unwrap_or_else(|_| std::process::abort());
+        Self {
+            histogram,
+            out_of_range: 0,
+        }
     }
 }
 
 impl Latencies {
-    /// 1 ns to 60 s with 3 significant digits (bounds the histogram always takes).
     pub fn new() -> Self {
-        let histogram = Histogram::new_with_bounds(1, 60_000_000_000, 3);
-        Self {
-            histogram: histogram.unwrap_or_else(|_| std::process::abort()),
-            out_of_range: 0,
-        }
+        Self::default()
     }
 
     /// Records `later − earlier` (both `CLOCK_MONOTONIC` ns).
@@ -51,10 +52,10 @@ impl Latencies {
     /// digits).
     pub fn count_above(&self, ns: u64) -> u64 {
         let h = &self.histogram;
-        if ns >= h.max() {
-            return 0;
+        match ns < h.max() {
+            true => h.count_between(ns + 1, h.max()),
+            false => 0,
         }
-        h.count_between(ns.saturating_add(1), h.max())
     }
 
     pub fn merge(&mut self, other: &Latencies) {
@@ -64,7 +65,8 @@ impl Latencies {
 
     pub fn summary(&self) -> Summary {
         let h = &self.histogram;
-        let q = |q: f64| h.value_at_quantile(q) as f64 / 1000.0;
+        let us = |ns: u64| ns as f64 / 1000.0;
+        let q = |q: f64| us(h.value_at_quantile(q));
         Summary {
             count: h.len(),
             mean_us: h.mean() / 1000.0,
@@ -72,71 +74,55 @@ impl Latencies {
             p90_us: q(0.90),
             p99_us: q(0.99),
             p999_us: q(0.999),
-            max_us: h.max() as f64 / 1000.0,
+            max_us: us(h.max()),
             out_of_range: self.out_of_range,
         }
     }
 
     /// (latency µs, cumulative fraction) points of the distribution, for plots.
     pub fn cdf(&self) -> Vec<(f64, f64)> {
-        let total = self.histogram.len().max(1) as f64;
-        let mut points = Vec::new();
-        let mut seen = 0u64;
-        for v in self.histogram.iter_recorded() {
-            seen += v.count_since_last_iteration();
-            points.push((
-                self.histogram.highest_equivalent(v.value_iterated_to()) as f64 / 1000.0,
-                seen as f64 / total,
-            ));
-        }
-        points
-    }
-
-    /// The histogram in HdrHistogram's V2 format (how fan-out subscribers report back).
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::new();
-        let _ = V2Serializer::new().serialize(&self.histogram, &mut out);
-        out
-    }
-
-    pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
-        let histogram: Histogram<u64> = Deserializer::new()
-            .deserialize(&mut std::io::Cursor::new(bytes))
-            .ok()?;
-        Some(Self {
-            histogram,
-            out_of_range: 0,
-        })
+        let h = &self.histogram;
+        let total = h.len().max(1) as f64;
+        let points = h.iter_recorded().scan(0, |seen, v| {
+            *seen += v.count_since_last_iteration();
+            let us = h.highest_equivalent(v.value_iterated_to()) as f64 / 1000.0;
+            Some((us, *seen as f64 / total))
+        });
+        points.collect()
     }
 }
 
-/// How [`Latencies`] is written in a samples file.
+/// How [`Latencies`] is written in a samples file: the histogram in HdrHistogram's V2 format
+/// as hex, and the count out of its range.
 #[derive(Serialize, Deserialize)]
 struct Stored {
     v2_hex: String,
     out_of_range: u64,
 }
 
-impl Serialize for Latencies {
-    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+impl From<Latencies> for Stored {
+    fn from(l: Latencies) -> Self {
+        let mut bytes = Vec::new();
+        let _ = V2Serializer::new().serialize(&l.histogram, &mut bytes);
+        let (v2_hex, out_of_range) = (hex::encode(bytes), l.out_of_range);
         Stored {
-            v2_hex: hex::encode(self.to_bytes()),
-            out_of_range: self.out_of_range,
+            v2_hex,
+            out_of_range,
         }
-        .serialize(serializer)
     }
 }
 
-impl<'de> Deserialize<'de> for Latencies {
-    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        use serde::de::Error;
-        let stored = Stored::deserialize(deserializer)?;
-        let bytes = hex::decode(&stored.v2_hex)
-            .map_err(|_| D::Error::custom("a histogram that is not hex"))?;
-        let mut latencies = Latencies::from_bytes(&bytes)
-            .ok_or_else(|| D::Error::custom("a histogram that is not HdrHistogram V2"))?;
-        latencies.out_of_range = stored.out_of_range;
-        Ok(latencies)
+impl TryFrom<Stored> for Latencies {
+    type Error = &'static str;
+
+    fn try_from(stored: Stored) -> Result<Self, Self::Error> {
+        let bytes = hex::decode(&stored.v2_hex).map_err(|_| "a histogram that is not hex")?;
+        let histogram = Deserializer::new().deserialize(&mut &bytes[..]);
+        let histogram = histogram.map_err(|_| "a histogram that is not HdrHistogram V2")?;
+        Ok(Self {
+            histogram,
+            out_of_range: stored.out_of_range,
+        })
     }
 }
 
@@ -185,7 +171,8 @@ mod tests {
     fn histograms_survive_serialization_and_merge() {
         let mut a = Latencies::new();
         a.record(5_000);
-        let mut b = Latencies::from_bytes(&a.to_bytes()).unwrap();
+        let json = serde_json::to_string(&a).unwrap();
+        let mut b: Latencies = serde_json::from_str(&json).unwrap();
         b.record(7_000);
         assert_eq!(b.count(), 2);
         a.merge(&b);
