@@ -70,20 +70,34 @@ impl std::fmt::Display for PathKind {
 #[serde(rename_all = "kebab-case")]
 pub enum Leg {
     #[default]
-    Hop, // a raw transport's hop
-    Stalls,           // gaps in a running thread's clock readings ([`STALLS`])
-    Command,          // a request created → its frame written
-    FirstFrameToward, // a request → the first frame toward it ([`DEFAULT_CONFIG_ROW`])
-    State,            // a frame read → the state it changed in a reader
-    Stop,             // a safety stop → its zero frame
-    FanOut,           // a state sample in several readers
-    CmdVel,           // `cmd_vel` → its frame
-    Odom,             // a frame read → the `odom` carrying it
-    RemoteCommand,    // the operator's remote source → the robot's frame
-    RemoteState,      // the robot's frame read → the state in the operator's iceoryx2
-    RemoteBridge,     // the robot's state published → in the operator's iceoryx2
-    PeriodToFrame,    // a control loop's period started → the frame of the command it wrote
-    StateAge,         // the frame read → a control loop read the state it made
+    /// A raw transport's hop.
+    Hop,
+    /// Gaps in a running thread's clock readings ([`STALLS`]).
+    Stalls,
+    /// A request created → its frame written.
+    Command,
+    /// A request → the first frame toward it ([`DEFAULT_CONFIG_ROW`]).
+    FirstFrameToward,
+    /// A frame read → the state it changed in a reader.
+    State,
+    /// A safety stop → its zero frame.
+    Stop,
+    /// A state sample in several readers.
+    FanOut,
+    /// `cmd_vel` → its frame.
+    CmdVel,
+    /// A frame read → the `odom` carrying it.
+    Odom,
+    /// The operator's remote source → the robot's frame.
+    RemoteCommand,
+    /// The robot's frame read → the state in the operator's iceoryx2.
+    RemoteState,
+    /// The robot's state published → in the operator's iceoryx2.
+    RemoteBridge,
+    /// A control loop's period started → the frame of the command it wrote.
+    PeriodToFrame,
+    /// The frame read → a control loop read the state it made.
+    StateAge,
 }
 
 /// One measured distribution.
@@ -615,7 +629,7 @@ impl Scheduling {
     pub fn fifo(self) -> Option<u8> {
         match self {
             Scheduling::Fifo(priority) => Some(priority),
-            _ => None,
+            Scheduling::Normal | Scheduling::Refused => None,
         }
     }
 }
