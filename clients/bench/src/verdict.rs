@@ -41,7 +41,6 @@ enum Within {
     InService,
 }
 
-/// A target's check (`targets.toml` describes each).
 #[derive(Debug, Deserialize)]
 #[serde(tag = "check", rename_all = "kebab-case")]
 enum Check {
@@ -108,11 +107,10 @@ impl std::fmt::Display for Outcome {
     }
 }
 
-/// One target judged.
+/// One target judged: its words, the run's figures it was judged on, its outcome.
 #[derive(Debug, Clone)]
 pub struct Verdict {
     pub text: String,
-    /// The run's figures it was judged on.
     pub measured: String,
     pub outcome: Outcome,
 }
@@ -121,10 +119,10 @@ pub struct Verdict {
 pub fn judge(report: &Report) -> anyhow::Result<Vec<Verdict>> {
     let targets: Targets = toml::from_str(include_str!("../targets.toml"))
         .map_err(|e| anyhow::anyhow!("clients/bench/targets.toml: {e}"))?;
-    let verdicts = targets.target.into_iter().map(|Target { text, check }| {
-        let (measured, outcome) = check.judge(report);
+    let verdicts = targets.target.into_iter().map(|t| {
+        let (measured, outcome) = t.check.judge(report);
         Verdict {
-            text,
+            text: t.text,
             measured,
             outcome,
         }
@@ -134,45 +132,37 @@ pub fn judge(report: &Report) -> anyhow::Result<Vec<Verdict>> {
 
 impl Select {
     fn rows(&self, report: &Report) -> Vec<Row> {
-        let mode = |r: &&Row| self.modes.is_empty() || self.modes.contains(&r.mode);
-        let kind = |r: &&Row| (r.path, r.leg) == (self.path, self.leg);
-        report
+        let mode = |r: &Row| self.modes.is_empty() || self.modes.contains(&r.mode);
+        let rows = report
             .rows
             .iter()
-            .filter(kind)
-            .filter(mode)
-            .cloned()
-            .collect()
+            .filter(|r| (r.path, r.leg) == (self.path, self.leg));
+        rows.filter(|r| mode(r)).cloned().collect()
     }
 }
 
-/// The figures of each judged thing joined, and the outcome: not measured without one, met
-/// when each is within the target and none of `flagged` (rows flagged inconsistent), else
-/// `missed`.
-fn tally(
-    items: impl Iterator<Item = (String, bool)>,
-    flagged: Vec<String>,
-    missed: impl FnOnce() -> Outcome,
-) -> (String, Outcome) {
+/// The figures of each judged thing joined ("not measured" without one), and whether each is
+/// within the target (none: nothing measured).
+fn tally(items: impl Iterator<Item = (String, bool)>) -> (String, Option<bool>) {
     let (figures, within): (Vec<String>, Vec<bool>) = items.unzip();
-    let outcome = match within.iter().all(|w| *w) {
-        _ if figures.is_empty() => return ("not measured".into(), Outcome::NotMeasured),
-        true if flagged.is_empty() => Outcome::Met,
-        true => Outcome::Inconsistent { rows: flagged },
-        false => missed(),
+    if figures.is_empty() {
+        return ("not measured".into(), None);
+    }
+    (figures.join("; "), Some(within.iter().all(|w| *w)))
+}
+
+/// Met or missed (without a split to say why), or not measured: `items` [`tally`]ed.
+fn plain(items: impl Iterator<Item = (String, bool)>) -> (String, Outcome) {
+    let (measured, met) = tally(items);
+    let outcome = match met {
+        None => Outcome::NotMeasured,
+        Some(true) => Outcome::Met,
+        Some(false) => Outcome::Missed {
+            worst: String::new(),
+            bound: String::new(),
+        },
     };
-    (figures.join("; "), outcome)
-}
-
-/// A target missed with no split to say why.
-fn unexplained() -> Outcome {
-    let (worst, bound) = (String::new(), String::new());
-    Outcome::Missed { worst, bound }
-}
-
-/// Met or missed (with no split to say why), or not measured.
-fn plain(items: impl IntoIterator<Item = (String, bool)>) -> (String, Outcome) {
-    tally(items.into_iter(), Vec::new(), unexplained)
+    (measured, outcome)
 }
 
 impl Check {
@@ -189,12 +179,13 @@ impl Check {
                     p50_us: *p50_us,
                     p99_us: *p99_us,
                 };
+                let rows = rows.rows(report);
                 let figures = |r: &Row| {
-                    let (s, at) = (&r.summary, format!("{} {} {}", r.what, r.mode, r.placement));
+                    let s = &r.summary;
+                    let at = format!("{} {} {}", r.what, r.mode, r.placement);
                     format!("{at}: {:.1} / {:.1} µs", s.p50_us, s.p99_us)
                 };
                 let split = split.as_ref().map(|s| (s.path, s.leg));
-                let rows = rows.rows(report);
                 compare(report, &rows, figures, |_| Some(bound), split, *within)
             }
             Check::Ratio {
@@ -212,14 +203,16 @@ impl Check {
                 )
             })),
             Check::FramesPerCpuSecond { min } => {
-                // The median replay's frames per CPU second, of those with the black box
-                // recording (the robot as it is shipped).
-                let recording = report.throughput.iter().filter(|t| t.recorder);
-                let mut runs: Vec<f64> = recording.map(|t| t.frames_per_cpu_s).collect();
+                // The replay whose frames per CPU second are the median, of those with the
+                // black box recording (the robot as it is shipped).
+                let mut runs: Vec<f64> = (report.throughput.iter())
+                    .filter(|t| t.recorder)
+                    .map(|t| t.frames_per_cpu_s)
+                    .collect();
                 let each: Vec<String> = runs.iter().map(|f| format!("{f:.0}")).collect();
                 runs.sort_by(f64::total_cmp);
                 let (n, each) = (runs.len(), each.join(", "));
-                plain(runs.get(n / 2).map(|&median| {
+                plain(runs.get(n / 2).into_iter().map(|&median| {
                     let text = format!(
                         "{median:.0} frames per second of the service's CPU, the median of {n} \
                          replays with the black box recording ({each})"
@@ -233,17 +226,18 @@ impl Check {
             } => {
                 let at = report.cost.iter().filter(|c| c.bitrate == *bitrate);
                 let worst = at.max_by(|a, b| a.service_cpu_pct().total_cmp(&b.service_cpu_pct()));
-                plain(worst.map(|c| {
+                plain(worst.into_iter().map(|c| {
                     let (pct, rate, bus) = (c.service_cpu_pct(), c.frames_per_s, &c.bus);
-                    (
-                        format!("{pct:.2} % at {rate:.0} frames/s ({bus})"),
-                        pct < *max_percent,
-                    )
+                    let text = format!("{pct:.2} % at {rate:.0} frames/s ({bus})");
+                    (text, pct < *max_percent)
                 }))
             }
             Check::ResidentMemory { max_mib } => {
                 let rss = report.cost.iter().map(|c| c.rss_mib).reduce(f64::max);
-                plain(rss.map(|r| (format!("{r:.1} MiB"), r < *max_mib)))
+                plain(
+                    rss.into_iter()
+                        .map(|r| (format!("{r:.1} MiB"), r < *max_mib)),
+                )
             }
         }
     }
@@ -257,6 +251,7 @@ fn ratio(
     times: f64,
     against: Option<&Select>,
 ) -> (String, Outcome) {
+    // Each row with its ratio: to its baseline, or to the row `against` selects.
     let judged = rows.rows(report).into_iter().filter_map(|r| {
         let Some(a) = against else {
             return Some(r);
@@ -277,7 +272,8 @@ fn ratio(
         (None, _) => format!("{} {}: no baseline", r.what, r.placement),
     };
     let bound = |row: &Row| {
-        let base_us = row.summary.p99_us / row.ratio_p99?;
+        let ratio = row.ratio_p99?;
+        let base_us = row.summary.p99_us / ratio;
         Some(Bound::Ratio { times, base_us })
     };
     let judged: Vec<Row> = judged.collect();
@@ -286,8 +282,8 @@ fn ratio(
 
 /// The one comparator: each of `rows` with its `figures`, held to its `bound` (none: it cannot
 /// be judged, and is not within). All within: met, or inconsistent where a row is flagged; one
-/// out: missed, where the time of the worst goes (the largest part at the p99 of the split of
-/// `split`, the rows' own by default, over its parts `within` the row) and what bounds it.
+/// out: missed, where the time of the worst goes in the split of `split` (the rows' own by
+/// default) over its parts `within` the row, and what bounds it.
 fn compare(
     report: &Report,
     rows: &[Row],
@@ -297,37 +293,61 @@ fn compare(
     within: Within,
 ) -> (String, Outcome) {
     let holds = |r: &Row| bound(r).is_some_and(|b| b.holds(r));
+    let (measured, met) = tally(rows.iter().map(|r| (figures(r), holds(r))));
     let flagged = rows.iter().filter(|r| r.inconsistent.is_some());
-    let flagged = flagged.map(|r| format!("{} {} {}", r.what, r.mode, r.placement));
-    let items = rows.iter().map(|r| (figures(r), holds(r)));
-    tally(items, flagged.collect(), || {
-        let p99 = |r: &&Row| r.ratio_p99.unwrap_or(r.summary.p99_us);
-        let worst = rows.iter().max_by(|a, b| p99(a).total_cmp(&p99(b)));
-        let run = worst.and_then(|row| {
-            let split = split.unwrap_or((row.path, row.leg));
-            Some((row, &report.split_of(split, row)?.split))
-        });
-        let Some((row, split)) = run else {
-            return unexplained();
+    let flagged: Vec<String> = flagged
+        .map(|r| format!("{} {} {}", r.what, r.mode, r.placement))
+        .collect();
+    let outcome = match met {
+        None => Outcome::NotMeasured,
+        Some(true) if flagged.is_empty() => Outcome::Met,
+        Some(true) => Outcome::Inconsistent { rows: flagged },
+        Some(false) => missed(report, rows, split, within, bound),
+    };
+    (measured, outcome)
+}
+
+/// A target missed on `rows`: where the time of the worst of them goes (the largest part at the
+/// p99 of the split of `split`, the rows' own by default, over its parts `within` the row) and
+/// what bounds it against the target's `bound` for that row.
+fn missed(
+    report: &Report,
+    rows: &[Row],
+    split: Option<(PathKind, Leg)>,
+    within: Within,
+    bound: impl Fn(&Row) -> Option<Bound>,
+) -> Outcome {
+    let p99 = |r: &&Row| r.ratio_p99.unwrap_or(r.summary.p99_us);
+    let worst = rows.iter().max_by(|a, b| p99(a).total_cmp(&p99(b)));
+    let run = worst.and_then(|row| {
+        let split = split.unwrap_or((row.path, row.leg));
+        Some((row, &report.split_of(split, row)?.split))
+    });
+    let Some((row, split)) = run else {
+        return Outcome::Missed {
+            worst: String::new(),
+            bound: String::new(),
         };
-        let from = match within {
-            Within::All => 0,
-            Within::InService => (split.parts.len()).saturating_sub(IN_SERVICE_COMMAND_PARTS),
-        };
-        let parts: Vec<&Part> = split.parts[from..].iter().collect();
-        let whole = (parts.len() == split.parts.len()).then_some(split);
-        Outcome::Missed {
-            worst: largest_part(&parts, row).unwrap_or_default(),
-            bound: bound_text(bound(row), &parts, whole, row),
-        }
-    })
+    };
+    let from = match within {
+        Within::All => 0,
+        Within::InService => (split.parts.len()).saturating_sub(IN_SERVICE_COMMAND_PARTS),
+    };
+    let parts: Vec<&Part> = split.parts[from..].iter().collect();
+    let whole = (parts.len() == split.parts.len()).then_some(split);
+    Outcome::Missed {
+        worst: largest_part(&parts, row).unwrap_or_default(),
+        bound: bound_text(bound(row), &parts, whole, row),
+    }
 }
 
 /// "ROW: the largest part at the p99, NAME, p99 X µs (p50 Y), over the N samples of its run's
 /// split" for `row`, over the `parts` of its split that lie within the row; a split too small
 /// for a p99 says so.
 fn largest_part(parts: &[&Part], row: &Row) -> Option<String> {
-    let part = (parts.iter()).max_by(|a, b| a.summary.p99_us.total_cmp(&b.summary.p99_us))?;
+    let part = parts
+        .iter()
+        .max_by(|a, b| a.summary.p99_us.total_cmp(&b.summary.p99_us))?;
     let head = format!("{} {} {}", row.what, row.mode, row.placement);
     let (name, s, of) = (&part.name, &part.summary, row.summary.count);
     let (n, p99, p50) = (s.count, s.p99_us, s.p50_us);
@@ -343,11 +363,12 @@ fn largest_part(parts: &[&Part], row: &Row) -> Option<String> {
 }
 
 /// What a target holds one row to: its p99 at most `times` its baseline's, or its p50 and p99 at
-/// most these. A sample's time is the sum of its parts, so a row's p50 and p99 are at least
-/// those of each part, and at least those of its parts outside the code ([`Whose::Outside`]: a
-/// wake-up, a system call, the transport, the peer) summed sample by sample: what the row would
-/// take had the code taken no time. Such a part alone, or those parts together, missing the
-/// target put it out of reach of anything the code does, on this machine.
+/// most these. A sample's time is the sum of its parts, so a row's p50
+/// and p99 are at least those of each part, and at least those of its parts outside the code
+/// ([`Whose::Outside`]: a wake-up, a system call, the transport, the peer) summed sample by
+/// sample: what the row would take had the code taken no time. Such a part alone, or those
+/// parts together, missing the target put it out of reach of anything the code does, on this
+/// machine.
 #[derive(Debug, Clone, Copy)]
 enum Bound {
     Ratio { times: f64, base_us: f64 },
@@ -355,6 +376,8 @@ enum Bound {
 }
 
 impl Bound {
+    /// Whether `row` is within the bound: its ratio at most `times`, or its p50 and p99 at most
+    /// these.
     fn holds(self, row: &Row) -> bool {
         let s = &row.summary;
         match self {
@@ -369,10 +392,8 @@ impl Bound {
         match self {
             Bound::Ratio { times, base_us } => {
                 let of = s.p99_us / base_us;
-                (
-                    of > times,
-                    format!("p99 {:.1} µs, {of:.2} × the baseline's", s.p99_us),
-                )
+                let text = format!("p99 {:.1} µs, {of:.2} × the baseline's", s.p99_us);
+                (of > times, text)
             }
             Bound::Absolute { p50_us, p99_us } => (
                 s.p50_us > p50_us || s.p99_us > p99_us,
