@@ -435,9 +435,10 @@ impl<D: Devices> Shell<D> {
                     WaitSetRunResult::Interrupt => continue,
                     _ => {}
                 }
-                // A moderation pause that ended: read what queued meanwhile, watch the bus again.
+                // A moderation pause that ended: read what queued meanwhile. Only the wait
+                // watches the gate: it opens after the pass, if the read did not pause again
+                // (while the bus stays saturated it stays closed, no system call per poll).
                 if !gate.is_open() && !self.is_rx_paused(engine) {
-                    set_gate(&mut gate, true);
                     wake.bus = true;
                 }
                 let next = self.pass(ports, engine, wake);
@@ -450,7 +451,7 @@ impl<D: Devices> Shell<D> {
                 if next == Next::Rewire {
                     break;
                 }
-                // Close the gate for a pause that began, open it when polling ended.
+                // Close the gate for a pause that began, open it when the pause is over.
                 let paused = self.is_rx_paused(engine);
                 if gate.is_open() == paused {
                     set_gate(&mut gate, !paused);

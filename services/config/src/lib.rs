@@ -113,7 +113,7 @@ pub struct BusConfig {
     /// While the bus is saturated, read it once per this many µs (everything pending at once)
     /// instead of waking per frame; ordinary feedback is always read the moment it arrives.
     /// 0 wakes for every frame whatever the load, as `loop = "spin"` does. See
-    /// `chassisd::moderation`.
+    /// `chassisd::rx_moderation`.
     pub rx_moderation_us: u64,
 }
 
