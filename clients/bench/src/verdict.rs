@@ -57,7 +57,9 @@ enum Check {
         p99_times: f64,
         against: Option<Select>,
     },
-    LoopMisses,
+    LoopMisses {
+        chance: f64,
+    },
     FramesPerCpuSecond {
         min: f64,
     },
@@ -151,6 +153,20 @@ fn tally(items: impl Iterator<Item = (String, bool)>) -> (String, Option<bool>) 
     (figures.join("; "), Some(within.iter().all(|w| *w)))
 }
 
+/// The chance that a loop which misses a period as often as its raw loop misses at least as
+/// many of the misses the two made together as it did: each miss falls in either loop in
+/// proportion to its periods (a binomial tail). Small: the loop misses more than the raw loop,
+/// beyond the noise of the counts.
+fn as_many_by_chance(l: &LoopRun) -> f64 {
+    use statrs::distribution::{Binomial, DiscreteCDF};
+    let (both, periods) = (l.misses + l.raw_misses, l.periods + l.raw_periods);
+    let share = l.periods as f64 / periods.max(1) as f64;
+    match (l.misses.checked_sub(1), Binomial::new(share, both)) {
+        (Some(fewer), Ok(binomial)) => binomial.sf(fewer),
+        _ => 1.0,
+    }
+}
+
 /// Met or missed (without a split to say why), or not measured: `items` [`tally`]ed.
 fn plain(items: impl Iterator<Item = (String, bool)>) -> (String, Outcome) {
     let (measured, met) = tally(items);
@@ -193,14 +209,21 @@ impl Check {
                 p99_times,
                 against,
             } => ratio(report, rows, *p99_times, against.as_ref()),
-            Check::LoopMisses => plain(report.loops.iter().map(|l| {
+            Check::LoopMisses { chance } => plain(report.loops.iter().map(|l| {
                 let own = LoopRun::per_million(l.misses, l.periods);
                 let raw = LoopRun::per_million(l.raw_misses, l.raw_periods);
                 let (rate, mode, own_n, raw_n) = (&l.rate, &l.mode, own.round(), raw.round());
-                (
-                    format!("{rate} {mode}: {own_n} vs {raw_n} of a million"),
-                    own <= raw,
-                )
+                let mut text = format!("{rate} {mode}: {own_n} vs {raw_n} of a million");
+                let by_chance = as_many_by_chance(l);
+                if own > raw {
+                    let (m, r) = (l.misses, l.raw_misses);
+                    let percent = match 100.0 * by_chance {
+                        p if p < 0.05 => "< 0.1".to_string(),
+                        p => format!("{p:.1}"),
+                    };
+                    text += &format!(" ({m} vs {r} misses, as many by chance: {percent} %)");
+                }
+                (text, own <= raw || by_chance >= *chance)
             })),
             Check::FramesPerCpuSecond { min } => {
                 // The replay whose frames per CPU second are the median, of those with the
