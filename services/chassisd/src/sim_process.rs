@@ -14,6 +14,7 @@ use chassis_bus::{Bus, BusError, BusSpec, serial, slcan, socketcan};
 use chassis_interfaces::{ControlResponse, ControlStatus};
 use chassis_ipc::{SIM, ServiceKind, service_name};
 use chassis_protocols::slcan::ADAPTER_BAUD;
+use chassis_protocols::{BoxedFirmware, Firmware, Timestamp};
 use chassisd_config::Config;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{
@@ -90,18 +91,42 @@ pub fn open_chassis_side(spec: &BusSpec, config: &Config) -> Result<Bus, BusErro
 }
 
 /// The simulated chassis: running on its bus, or waiting for the bus to come back with the same
-/// firmware (a real chassis keeps running while its cable is out).
+/// firmware, which keeps running meanwhile ([`run_unplugged`]).
 enum Simulator {
     Running(SimHandle),
     Down {
-        firmware: crate::sim::BoxedFirmware,
-        retry_at: chassis_protocols::Timestamp,
+        firmware: BoxedFirmware,
+        retry_at: Timestamp,
         backoff: Duration,
     },
 }
 
+impl Simulator {
+    /// How long the loop may wait: a firmware without its bus is still due at its deadlines.
+    fn wait(&self) -> Duration {
+        match self {
+            Simulator::Running(_) => CHECK_EVERY,
+            Simulator::Down { firmware, .. } => (firmware.poll_timeout())
+                .map_or(CHECK_EVERY, |t| t.saturating_since(clock::now()))
+                .min(CHECK_EVERY),
+        }
+    }
+}
+
+/// How often the loop looks at the simulator's bus at least.
+const CHECK_EVERY: Duration = Duration::from_millis(100);
 const FIRST_RETRY: Duration = Duration::from_millis(100);
 const LAST_RETRY: Duration = Duration::from_secs(2);
+
+/// A chassis whose cable is out keeps running, as a real one does: its deadlines pass at `now`
+/// (the command timeout that stops it among them) and what it sends is lost. Frozen instead, it
+/// would come back with the speed it had when the bus went, and drive on with nobody asking.
+fn run_unplugged(firmware: &mut BoxedFirmware, now: Timestamp) {
+    if firmware.poll_timeout().is_some_and(|t| t <= now) {
+        firmware.handle_timeout(now);
+    }
+    while firmware.poll_transmit(now).is_some() {}
+}
 
 /// Runs the simulated chassis until SIGINT/SIGTERM. A lost bus is reopened with backoff.
 pub fn run(config: &Config) -> Result<(), SimProcessError> {
@@ -139,7 +164,7 @@ pub fn run(config: &Config) -> Result<(), SimProcessError> {
     loop {
         let result = waitset.wait_and_process_once_with_timeout(
             |_| CallbackProgression::Continue,
-            Duration::from_millis(100),
+            simulator.wait(),
         );
         match result {
             Ok(WaitSetRunResult::TerminationRequest) => {
@@ -205,24 +230,76 @@ fn keep_running(simulator: Simulator, config: &Config) -> Result<Simulator, SimP
             None => Err(SimProcessError::Stopped),
         },
         Simulator::Down {
-            firmware,
+            mut firmware,
             retry_at,
             backoff,
-        } if clock::now() >= retry_at => match open_chassis_side(&config.bus, config) {
-            Ok(bus) => {
-                info!(bus = bus.name(), "the simulated chassis has its bus back");
-                Ok(Simulator::Running(SimHandle::spawn(firmware, bus)?))
-            }
-            Err(err) => {
-                let backoff = (backoff * 2).min(LAST_RETRY);
-                tracing::debug!("reopening the bus: {err}");
-                Ok(Simulator::Down {
+        } => {
+            let now = clock::now();
+            run_unplugged(&mut firmware, now);
+            if now < retry_at {
+                return Ok(Simulator::Down {
                     firmware,
-                    retry_at: clock::now() + backoff,
+                    retry_at,
                     backoff,
-                })
+                });
             }
-        },
+            reopen(firmware, backoff, config)
+        }
         other => Ok(other),
+    }
+}
+
+/// Opens the bus again for `firmware`, or waits twice as long (at most [`LAST_RETRY`]) for the
+/// next try.
+fn reopen(
+    firmware: BoxedFirmware,
+    backoff: Duration,
+    config: &Config,
+) -> Result<Simulator, SimProcessError> {
+    match open_chassis_side(&config.bus, config) {
+        Ok(bus) => {
+            info!(bus = bus.name(), "the simulated chassis has its bus back");
+            Ok(Simulator::Running(SimHandle::spawn(firmware, bus)?))
+        }
+        Err(err) => {
+            let backoff = (backoff * 2).min(LAST_RETRY);
+            tracing::debug!("reopening the bus: {err}");
+            Ok(Simulator::Down {
+                firmware,
+                retry_at: clock::now() + backoff,
+                backoff,
+            })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassis_interfaces::Velocity;
+    use chassis_protocols::RobotKind;
+
+    #[test]
+    fn a_chassis_whose_bus_is_out_keeps_running_and_its_command_timeout_stops_it() {
+        let entry = RobotKind::Titan.entry();
+        let mut pair = entry.simulated_pair(&entry.defaults(), Timestamp::ZERO);
+        pair.run_for(Duration::from_millis(100));
+        pair.set_command(Velocity::twist(0.3, 0.0).unwrap());
+        pair.run_for(Duration::from_secs(2));
+        let speed = pair.firmware.truth().linear_mps;
+        assert!(speed > 0.25, "not driving before the bus went: {speed} m/s");
+        // The bus is out for 3 s; the loop calls the firmware every 10 ms.
+        let (mut now, end) = (pair.now(), pair.now() + Duration::from_secs(3));
+        let mut firmware = pair.firmware;
+        while now < end {
+            now += Duration::from_millis(10);
+            run_unplugged(&mut firmware, now);
+        }
+        let truth = firmware.truth();
+        assert!(
+            truth.linear_mps.abs() < 0.01,
+            "still at {} m/s after 3 s without a command",
+            truth.linear_mps
+        );
     }
 }
