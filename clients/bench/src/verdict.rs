@@ -91,6 +91,14 @@ pub enum Outcome {
     },
 }
 
+impl Outcome {
+    /// Missed, with no split to say where the time goes.
+    fn unexplained() -> Self {
+        let (worst, bound) = (String::new(), String::new());
+        Outcome::Missed { worst, bound }
+    }
+}
+
 impl std::fmt::Display for Outcome {
     /// The document's three cells: met?, where the worst row's time goes, what bounds it.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -173,10 +181,7 @@ fn plain(items: impl Iterator<Item = (String, bool)>) -> (String, Outcome) {
     let outcome = match met {
         None => Outcome::NotMeasured,
         Some(true) => Outcome::Met,
-        Some(false) => Outcome::Missed {
-            worst: String::new(),
-            bound: String::new(),
-        },
+        Some(false) => Outcome::unexplained(),
     };
     (measured, outcome)
 }
@@ -347,10 +352,7 @@ fn missed(
         Some((row, &report.split_of(split, row)?.split))
     });
     let Some((row, split)) = run else {
-        return Outcome::Missed {
-            worst: String::new(),
-            bound: String::new(),
-        };
+        return Outcome::unexplained();
     };
     let from = match within {
         Within::All => 0,
